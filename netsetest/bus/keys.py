@@ -1,0 +1,48 @@
+"""Key expressions — the one place that names them.
+
+    netsetest/<run>/vehicle/input/<i>   NodeInput for node i (measurement, γ, u, Vx, expected neighbours)
+    netsetest/<run>/vehicle/truth       Truth (collector only: the truth, faults, assumption flags, losses)
+    netsetest/<run>/node/<i>/state      NodeState of node i (to its out-neighbours and the collector)
+    netsetest/<run>/control/ready       Ready (nodes and collector, start-up barrier)
+    netsetest/<run>/control/end         End (vehicle → all)
+"""
+
+from __future__ import annotations
+
+ROOT = "netsetest"
+
+
+def node_input(run: str, i: int | str) -> str:
+    return f"{ROOT}/{run}/vehicle/input/{i}"
+
+
+def truth(run: str) -> str:
+    return f"{ROOT}/{run}/vehicle/truth"
+
+
+def node_state(run: str, i: int | str) -> str:
+    return f"{ROOT}/{run}/node/{i}/state"
+
+
+def ready(run: str) -> str:
+    return f"{ROOT}/{run}/control/ready"
+
+
+def end(run: str) -> str:
+    return f"{ROOT}/{run}/control/end"
+
+
+def matches(pattern: str, key: str) -> bool:
+    """Key-expression match for the in-memory bus: ``*`` is one chunk, ``**`` any number of chunks."""
+    p, k = pattern.split("/"), key.split("/")
+
+    def go(i: int, j: int) -> bool:
+        if i == len(p):
+            return j == len(k)
+        if p[i] == "**":
+            return any(go(i + 1, jj) for jj in range(j, len(k) + 1))
+        if j == len(k):
+            return False
+        return (p[i] == "*" or p[i] == k[j]) and go(i + 1, j + 1)
+
+    return go(0, 0)

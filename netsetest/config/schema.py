@@ -1,0 +1,382 @@
+"""Configuration files: node profiles (``nodes/*.toml``) and network topologies (``topologies/*.toml``).
+
+Every file is validated with pydantic.  :func:`load_topology` returns a :class:`Scenario` (plain numpy
+data for the roles) or raises :class:`ConfigError` naming the file, the field and the reason.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from netsetest.models.sensor import Sensor
+from netsetest.models.signals import Fault, NoFault, PiecewiseLinearFault, SpeedProfile, SquareFault
+from netsetest.models.vehicle import KMH, TSModel, VehicleParams
+
+Case = Literal["nsnim", "saim"]
+Variant = Literal["scheduled", "per-rule"]
+
+
+class ConfigError(Exception):
+    """A configuration file is missing, unreadable or invalid; the message says where and why."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+
+
+# ---------------------------------------------------------------- node profile (nodes/*.toml)
+
+
+class SaturationSpec(_Strict):
+    """σ(r) = sign(r) min(r_max, |r|) with sector scalars 0 < h1 < 1 ≤ h2 (used in the SAIM case)."""
+
+    r_max: Positive
+    h1: Annotated[float, Field(gt=0, lt=1)]
+    h2: Annotated[float, Field(ge=1, allow_inf_nan=False)]
+
+
+class AvailabilitySpec(_Strict):
+    """γ_i,k uniform in [gamma_min, gamma_max] ⊂ (0, 1] (used in the SAIM case)."""
+
+    gamma_min: Annotated[float, Field(gt=0, le=1)]
+    gamma_max: Annotated[float, Field(gt=0, le=1)]
+
+    @model_validator(mode="after")
+    def _ordered(self) -> AvailabilitySpec:
+        if self.gamma_min > self.gamma_max:
+            raise ValueError("gamma_min must not exceed gamma_max")
+        return self
+
+
+class FaultSpec(_Strict):
+    """``none``; ``square``: amplitude·sign(sin(2πk/period)) on [start, end); ``piecewise``: through points."""
+
+    kind: Literal["none", "square", "piecewise"] = "none"
+    amplitude: Finite | None = None
+    period: Annotated[int, Field(gt=0)] | None = None
+    start: Annotated[int, Field(ge=0)] | None = None
+    end: Annotated[int, Field(ge=0)] | None = None
+    points: list[tuple[Finite, Finite]] | None = None
+
+    @model_validator(mode="after")
+    def _complete(self) -> FaultSpec:
+        if self.kind == "square":
+            missing = [n for n in ("amplitude", "period", "start", "end") if getattr(self, n) is None]
+            if missing:
+                raise ValueError(f"square fault needs {', '.join(missing)}")
+            if self.end <= self.start:  # type: ignore[operator]
+                raise ValueError("end must be after start")
+        if self.kind == "piecewise":
+            if not self.points or len(self.points) < 2:
+                raise ValueError("piecewise fault needs at least two points [k, value]")
+            ks = [p[0] for p in self.points]
+            if any(b <= a for a, b in zip(ks, ks[1:])):
+                raise ValueError("piecewise fault points must have increasing k")
+        return self
+
+    def build(self) -> Fault:
+        if self.kind == "square":
+            return SquareFault(self.amplitude, self.period, self.start, self.end)  # type: ignore[arg-type]
+        if self.kind == "piecewise":
+            return PiecewiseLinearFault(tuple((float(a), float(b)) for a, b in self.points))  # type: ignore[union-attr]
+        return NoFault()
+
+
+class NodeProfile(_Strict):
+    """One yaw-rate sensor: y = C x + Ds f + Dv v, v² ≤ R, plus its estimator's initial ellipsoid."""
+
+    label: str = ""
+    C: tuple[Finite, Finite]
+    Ds: Finite
+    Dv: Finite
+    R: Positive
+    noise_frequency: Finite = Field(description="f_i of v_i,k = cos(2π f_i (k−1) τs)")
+    x0_hat: tuple[Finite, Finite, Finite]
+    P0: Positive | list[list[Finite]] = Field(description="scalar (× I3) or a 3×3 SPD matrix")
+    rho: Positive = 1.0
+    saturation: SaturationSpec | None = None
+    availability: AvailabilitySpec | None = None
+    fault: FaultSpec = FaultSpec()
+
+    @field_validator("Ds")
+    @classmethod
+    def _ds_nonzero(cls, v: float) -> float:
+        if v == 0:
+            raise ValueError("Ds must be non-zero, else the fault is unobservable")
+        return v
+
+    @field_validator("P0")
+    @classmethod
+    def _p0_spd(cls, v: float | list[list[float]]) -> float | list[list[float]]:
+        if isinstance(v, list):
+            a = np.asarray(v, dtype=float)
+            if a.shape != (3, 3):
+                raise ValueError(f"P0 must be 3×3, got shape {a.shape}")
+            if not np.allclose(a, a.T) or np.linalg.eigvalsh(a).min() <= 0:
+                raise ValueError("P0 must be symmetric positive definite")
+        return v
+
+    def P0_matrix(self) -> np.ndarray:
+        return np.eye(3) * self.P0 if isinstance(self.P0, (int, float)) else np.asarray(self.P0, dtype=float)
+
+
+# ---------------------------------------------------------------- topology (topologies/*.toml)
+
+
+class VehicleSpec(_Strict):
+    m: Positive = 1832.0
+    Jz: Positive = 2488.0
+    lf: Positive = 1.18
+    lr: Positive = 1.77
+    cf: Positive = 96240.0
+    cr: Positive = 107180.0
+    fw: Finite = 1360.0
+    lw: Finite = 0.5
+    vx_min_kmh: Positive = 80.0
+    vx_max_kmh: Positive = 120.0
+    x0: tuple[Finite, Finite] = (0.0, 0.0)
+
+    @model_validator(mode="after")
+    def _range(self) -> VehicleSpec:
+        if self.vx_min_kmh >= self.vx_max_kmh:
+            raise ValueError("vx_min_kmh must be below vx_max_kmh")
+        return self
+
+
+class SpeedSpec(_Strict):
+    mean_kmh: Positive = 100.0
+    amplitude_kmh: Annotated[float, Field(ge=0)] = 18.0
+    period_s: Positive = 8.0
+
+
+class SteeringSpec(_Strict):
+    low: Finite = 0.0175
+    high: Finite = 0.0542
+
+    @model_validator(mode="after")
+    def _ordered(self) -> SteeringSpec:
+        if self.low > self.high:
+            raise ValueError("steering low must not exceed high")
+        return self
+
+
+class NodeRef(_Strict):
+    id: Annotated[int, Field(ge=1)]
+    profile: str = Field(description="file name in the node directory, without .toml")
+
+
+class Edge(_Strict):
+    """a_ij > 0: node ``to`` (i) uses the innovation of node ``from`` (j); i = j is a self-loop."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+    to: Annotated[int, Field(ge=1)]
+    from_: Annotated[int, Field(ge=1, alias="from")]
+    weight: Positive = 1.0
+
+
+class LinkLoss(_Strict):
+    """Scheduled loss of node messages: i.i.d. per link and step, plus bursts on chosen links."""
+
+    probability: Annotated[float, Field(ge=0, le=1)] = 0.0
+    bursts: list[Burst] = []
+
+
+class Burst(_Strict):
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+    to: Annotated[int, Field(ge=1)]
+    from_: Annotated[int, Field(ge=1, alias="from")]
+    start: Annotated[int, Field(ge=0)]
+    length: Annotated[int, Field(ge=1)]
+
+
+LinkLoss.model_rebuild()
+
+
+class TopologyFile(_Strict):
+    name: str
+    node_dir: str = "../nodes"
+    steps: Annotated[int, Field(ge=1)] = 80
+    tau_s: Positive = 0.1
+    case: Case = "nsnim"
+    W: Positive = Field(2.0, description="side-wind bound w² ≤ W")
+    vehicle: VehicleSpec = VehicleSpec()
+    speed: SpeedSpec = SpeedSpec()
+    steering: SteeringSpec = SteeringSpec()
+    nodes: list[NodeRef]
+    edges: list[Edge]
+    loss: LinkLoss = LinkLoss()
+
+    @model_validator(mode="after")
+    def _graph(self) -> TopologyFile:
+        ids = [n.id for n in self.nodes]
+        if not ids:
+            raise ValueError("nodes: at least one node is needed")
+        if len(set(ids)) != len(ids):
+            raise ValueError(f"nodes: duplicate node id in {ids}")
+        seen = set()
+        for e in self.edges:
+            for end in (e.to, e.from_):
+                if end not in ids:
+                    raise ValueError(f"edges: edge {e.from_}→{e.to} names unknown node {end}")
+            if (e.to, e.from_) in seen:
+                raise ValueError(f"edges: edge {e.from_}→{e.to} given twice")
+            seen.add((e.to, e.from_))
+        for b in self.loss.bursts:
+            if (b.to, b.from_) not in seen or b.to == b.from_:
+                raise ValueError(f"loss.bursts: {b.from_}→{b.to} is not an edge between two nodes")
+        lo, hi = self.speed.mean_kmh - self.speed.amplitude_kmh, self.speed.mean_kmh + self.speed.amplitude_kmh
+        if lo < self.vehicle.vx_min_kmh or hi > self.vehicle.vx_max_kmh:
+            raise ValueError(
+                f"speed: profile spans [{lo}, {hi}] km/h, outside the model's "
+                f"[{self.vehicle.vx_min_kmh}, {self.vehicle.vx_max_kmh}] km/h"
+            )
+        return self
+
+
+# ---------------------------------------------------------------- resolved scenario
+
+
+@dataclass(frozen=True)
+class NodeConfig:
+    """Everything about node i that any process needs: sensor, signals, initial ellipsoid, neighbours."""
+
+    id: int
+    label: str
+    sensor: Sensor
+    noise_frequency: float
+    gamma_range: tuple[float, float] | None
+    fault: Fault
+    x0_hat: np.ndarray
+    P0: np.ndarray
+    rho: float
+    in_weights: dict[int, float]  # j → a_ij for j ∈ N_i (i itself when a_ii > 0)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    path: str
+    name: str
+    case: Case
+    steps: int
+    tau_s: float
+    W: float
+    model: TSModel
+    x0: np.ndarray
+    speed: SpeedProfile
+    steer_low: float
+    steer_high: float
+    nodes: list[NodeConfig]
+    loss: LinkLoss = field(default_factory=LinkLoss)
+
+    def node(self, node_id: int) -> NodeConfig:
+        for n in self.nodes:
+            if n.id == node_id:
+                return n
+        raise ConfigError(f"{self.path}: no node with id {node_id} (ids: {[n.id for n in self.nodes]})")
+
+    @property
+    def ids(self) -> list[int]:
+        return [n.id for n in self.nodes]
+
+    def vx(self, k: int) -> float:
+        return self.speed.kmh(k * self.tau_s) * KMH
+
+    def out_neighbours(self, j: int) -> list[int]:
+        """Nodes i ≠ j that use j's message."""
+        return [n.id for n in self.nodes if j in n.in_weights and n.id != j]
+
+
+def _format_errors(path: Path, err: ValidationError) -> str:
+    lines = [f"{path}: invalid configuration"]
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"]) or "(file)"
+        lines.append(f"  {loc}: {e['msg']}")
+    return "\n".join(lines)
+
+
+def _read_toml(path: Path) -> dict:
+    try:
+        with open(path, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: file not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
+
+
+def load_profile(path: Path) -> NodeProfile:
+    try:
+        return NodeProfile.model_validate(_read_toml(path))
+    except ValidationError as exc:
+        raise ConfigError(_format_errors(path, exc)) from None
+
+
+def load_topology(path: str | Path, case: Case | None = None, steps: int | None = None) -> Scenario:
+    """Read and validate a topology and its node profiles; ``case``/``steps`` override the file."""
+    path = Path(path)
+    try:
+        topo = TopologyFile.model_validate(_read_toml(path))
+    except ValidationError as exc:
+        raise ConfigError(_format_errors(path, exc)) from None
+    case = case or topo.case
+    node_dir = (path.parent / topo.node_dir).resolve()
+    v = topo.vehicle
+    params = VehicleParams(
+        m=v.m, Jz=v.Jz, lf=v.lf, lr=v.lr, cf=v.cf, cr=v.cr, fw=v.fw, lw=v.lw,
+        vx_min=v.vx_min_kmh * KMH, vx_max=v.vx_max_kmh * KMH,
+    )  # fmt: skip
+    nodes = []
+    for ref in topo.nodes:
+        ppath = node_dir / f"{ref.profile}.toml"
+        prof = load_profile(ppath)
+        saim = case == "saim"
+        if saim and (prof.saturation is None or prof.availability is None):
+            raise ConfigError(f"{ppath}: the saim case needs [saturation] and [availability] sections")
+        sat = prof.saturation if saim else None
+        sensor = Sensor(
+            C=np.array(prof.C, dtype=float), Ds=prof.Ds, Dv=prof.Dv, R=prof.R,
+            saturated=sat is not None,
+            r_max=sat.r_max if sat else np.inf, h1=sat.h1 if sat else 1.0, h2=sat.h2 if sat else 1.0,
+        )  # fmt: skip
+        in_w = {e.from_: e.weight for e in topo.edges if e.to == ref.id}
+        nodes.append(
+            NodeConfig(
+                id=ref.id,
+                label=prof.label or ref.profile,
+                sensor=sensor,
+                noise_frequency=prof.noise_frequency,
+                gamma_range=(prof.availability.gamma_min, prof.availability.gamma_max) if saim else None,  # type: ignore[union-attr]
+                fault=prof.fault.build(),
+                x0_hat=np.array(prof.x0_hat, dtype=float),
+                P0=prof.P0_matrix(),
+                rho=prof.rho,
+                in_weights=dict(sorted(in_w.items())),
+            )
+        )
+    return Scenario(
+        path=str(path),
+        name=topo.name,
+        case=case,
+        steps=steps if steps is not None else topo.steps,
+        tau_s=topo.tau_s,
+        W=topo.W,
+        model=TSModel.build(params, topo.tau_s),
+        x0=np.array(v.x0, dtype=float),
+        speed=SpeedProfile(topo.speed.mean_kmh, topo.speed.amplitude_kmh, topo.speed.period_s),
+        steer_low=topo.steering.low,
+        steer_high=topo.steering.high,
+        nodes=nodes,
+        loss=topo.loss,
+    )

@@ -1,0 +1,365 @@
+"""Local ellipsoidal set-membership estimator of node i (paper (16), (22), corrected as in DESIGN.md §2).
+
+One step k → k+1 at node i, with everything a real node has:
+
+    x̂⁺ = T Ā x̂ + T B̄ u + G ỹ⁺ + L Σ_j a_ij y̌_j                                                 (16)
+
+where Ā, B̄, D̄ are the α_k-blend of the rule matrices (variant ``scheduled``), or, in the paper's
+variant ``per-rule``, one gain L_ℓ per rule and the estimate blended with α_k.  The error is exactly
+
+    e⁺ = Π(L) η,   η = [1, z_i, s_j (j ∈ N_i∖i), w, v_j (j ∈ N_i), v⁺, φ_j (saturating j), φ⁺]
+
+    Π(L) = Π₀ − L ℓᵀ,  Π₀ η = T Ā ρ_i^½ M_i z_i + T D̄ w − G Dv_i v⁺ − G γ⁺ φ⁺,
+    ℓᵀ η = Σ_j a_ij y̌_j(η),  y̌_j = (γ_j h1_j − 1) C̄_j x̂_j + γ_j h1_j C̄_j ρ_j^½ M_j z_j + γ_j φ_j + Dv_j v_j.
+
+For a neighbour j ≠ i, z_j only enters through the scalar C̄_j M_j z_j = c_j s_j with
+c_j = (C̄_j P_j C̄_jᵀ)^½ and |s_j| ≤ 1 — an exact reduction (DESIGN.md §2).  The truth satisfies the
+quadratic facts ηᵀ Q_m η ≥ 0 (one per constraint):
+
+    1 − z_iᵀz_i;  1 − s_j²;  1 − w²/W;  1 − v_j²/R_j;  1 − v⁺²/R_i;
+    φ_j (h_j r_j − φ_j),  r_j = C̄_j x̂_j + ρ_j^½ C̄_j M_j z_j;
+    φ⁺ (h_i r⁺ − φ⁺),   r⁺ = C̄_i x̄⁺ (the truth, so without L).
+
+S-procedure and Schur complement give the LMI (one per rule in ``per-rule``)
+
+    [[−P, Π(L)], [Π(L)ᵀ, −ρ_i e₁e₁ᵀ + Σ_m τ_m Q_m]] ⪯ 0,   P ≻ 0, τ ≥ 0,   minimise trace(P)
+
+and then (x̄⁺ − x̂⁺)ᵀ P⁻¹ (x̄⁺ − x̂⁺) ≤ ρ_i.  The problem is built once per node from cvxpy Parameters
+and re-solved every step.  Every solution is verified in floating point (:func:`certify`) before it is
+published; if that fails, :func:`fallback_shape` gives a guaranteed (looser) ellipsoid and the step is
+flagged.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Literal
+
+import cvxpy as cp
+import numpy as np
+
+from netsetest.models.sensor import NA, NX, Sensor
+from netsetest.models.vehicle import N_RULES, TSModel
+
+Variant = Literal["scheduled", "per-rule"]
+Status = Literal["ok", "fallback"]
+
+
+@dataclass(frozen=True)
+class NeighbourState:
+    """What node i uses of neighbour j's step-k message (static sensor data comes from the topology)."""
+
+    xhat: np.ndarray  # x̂_j (3,)
+    P: np.ndarray  # P_j (3, 3)
+    rho: float
+    gamma: float  # γ_j,k
+    innov: float  # y̌_j,k = ỹ_j,k − C̄_j x̂_j,k
+
+
+@dataclass
+class StepResult:
+    xhat: np.ndarray
+    P: np.ndarray  # published shape: e⁺ᵀ P⁻¹ e⁺ ≤ ρ_i
+    status: Status
+    rho_cert: float  # ρ' certified for the solver's P (P is published as P_solver·ρ'/ρ_i)
+    solve_ms: float
+    solver_status: str
+    L: np.ndarray = field(default_factory=lambda: np.zeros((NA, 1)))
+
+
+class EtaLayout:
+    """Slot indices of η for node i and its in-neighbours N_i (fixed by the topology)."""
+
+    def __init__(self, node_id: int, neighbours: dict[int, Sensor], own: Sensor) -> None:
+        self.node_id = node_id
+        self.neigh = list(neighbours)  # j ∈ N_i in a fixed order (may include i)
+        idx = 1
+        self.z = list(range(idx, idx + NA))
+        idx += NA
+        self.s: dict[int, int] = {}
+        for j in self.neigh:
+            if j != node_id:
+                self.s[j], idx = idx, idx + 1
+        self.w, idx = idx, idx + 1
+        self.v: dict[int, int] = {}
+        for j in self.neigh:
+            self.v[j], idx = idx, idx + 1
+        self.v_new, idx = idx, idx + 1
+        self.phi: dict[int, int] = {}
+        for j, sens in neighbours.items():
+            if sens.saturated:  # no saturation ⇒ φ_j ≡ 0: no slot (DESIGN.md §2)
+                self.phi[j], idx = idx, idx + 1
+        self.phi_new: int | None = None
+        if own.saturated:
+            self.phi_new, idx = idx, idx + 1
+        self.dim = idx
+        # one quadratic fact per constraint, in this order
+        self.n_facts = 1 + len(self.s) + 1 + len(self.v) + 1 + len(self.phi) + (1 if own.saturated else 0)
+
+
+def _unit(d: int, i: int) -> np.ndarray:
+    e = np.zeros(d)
+    e[i] = 1.0
+    return e
+
+
+def _ball(d: int, slots: list[int], bound: float = 1.0) -> np.ndarray:
+    """Q of the fact 1 − Σ_slots η²/bound ≥ 0."""
+    q = np.zeros((d, d))
+    q[0, 0] = 1.0
+    for s in slots:
+        q[s, s] = -1.0 / bound
+    return q
+
+
+def _sector(d: int, slot: int, g: np.ndarray, h: float) -> np.ndarray:
+    """Q of the fact φ (h gᵀη − φ) ≥ 0 where φ = η[slot]."""
+    e = _unit(d, slot)
+    return 0.5 * h * (np.outer(e, g) + np.outer(g, e)) - np.outer(e, e)
+
+
+def _chol(p: np.ndarray) -> np.ndarray:
+    return np.linalg.cholesky(0.5 * (p + p.T))
+
+
+class LocalEstimator:
+    """The per-node SDP, built once from Parameters, re-solved every step."""
+
+    def __init__(
+        self,
+        node_id: int,
+        own: Sensor,
+        neighbours: dict[int, Sensor],
+        weights: dict[int, float],
+        model: TSModel,
+        W: float,
+        variant: Variant = "scheduled",
+    ) -> None:
+        self.node_id, self.own, self.model, self.W, self.variant = node_id, own, model, W, variant
+        self.sensors = neighbours
+        self.weights = weights
+        self.lay = EtaLayout(node_id, neighbours, own)
+        d, m = self.lay.dim, self.lay.n_facts
+        self.n_lmi = N_RULES if variant == "per-rule" else 1
+        # Parameters (data of step k → k+1)
+        self.p_pi0 = [cp.Parameter((NA, d), name=f"Pi0_{r}") for r in range(self.n_lmi)]
+        self.p_ell = cp.Parameter((1, d), name="ell")
+        self.p_q = [cp.Parameter((d, d), symmetric=True, name=f"Q_{q}") for q in range(m)]
+        self.p_rho = cp.Parameter(nonneg=True, name="rho")
+        # Variables
+        self.v_P = cp.Variable((NA, NA), symmetric=True, name="P")
+        self.v_L = [cp.Variable((NA, 1), name=f"L_{r}") for r in range(self.n_lmi)]
+        self.v_tau = [cp.Variable(m, nonneg=True, name=f"tau_{r}") for r in range(self.n_lmi)]
+        e11 = np.zeros((d, d))
+        e11[0, 0] = 1.0
+        cons = []
+        for r in range(self.n_lmi):
+            pi = self.p_pi0[r] - self.v_L[r] @ self.p_ell
+            mult = -self.p_rho * e11 + sum(self.v_tau[r][q] * self.p_q[q] for q in range(m))
+            lmi = cp.bmat([[-self.v_P, pi], [pi.T, mult]])
+            cons.append(0.5 * (lmi + lmi.T) << 0)
+        self.problem = cp.Problem(cp.Minimize(cp.trace(self.v_P)), cons)
+        assert self.problem.is_dcp(dpp=True)
+
+    # ------------------------------------------------------------------ data of one step
+
+    def step_data(
+        self,
+        xhat: np.ndarray,
+        P: np.ndarray,
+        rho: float,
+        alpha: np.ndarray,
+        u: float,
+        y_new: float,
+        gamma_new: float,
+        neigh: dict[int, NeighbourState],
+    ) -> dict:
+        """Π₀ (per rule), ℓ, the facts Q_m and the L-free part of x̂⁺, as plain arrays."""
+        lay, own, d = self.lay, self.own, self.lay.dim
+        T, G = own.descriptor_gains(gamma_new)
+        g = G[:, 0]
+        Mi = np.sqrt(rho) * _chol(P)  # ρ_i^½ M_i
+
+        def aug(a_: np.ndarray, b_: np.ndarray, dw_: np.ndarray) -> tuple[np.ndarray, ...]:
+            abar = np.zeros((NA, NA))
+            abar[:NX, :NX] = a_
+            return abar, np.r_[b_[:, 0], 0.0], np.r_[dw_[:, 0], 0.0]
+
+        rules = (
+            [aug(*self.model.blend(alpha))]
+            if self.variant == "scheduled"
+            else [aug(self.model.A[r], self.model.B[r], self.model.Dw[r]) for r in range(N_RULES)]
+        )
+        pi0s = []
+        for abar, _, dbar in rules:
+            pi0 = np.zeros((NA, d))
+            pi0[:, lay.z] = T @ abar @ Mi
+            pi0[:, lay.w] = T @ dbar
+            pi0[:, lay.v_new] = -g * own.Dv
+            if lay.phi_new is not None:
+                pi0[:, lay.phi_new] = -g * gamma_new
+            pi0s.append(pi0)
+
+        # ℓᵀη = Σ_j a_ij y̌_j(η); a missing neighbour's slots stay zero (its facts then hold with η-slot 0)
+        ell = np.zeros(d)
+        facts: list[np.ndarray] = [_ball(d, lay.z)]
+        for j in lay.s:
+            facts.append(_ball(d, [lay.s[j]]))
+        facts.append(_ball(d, [lay.w], self.W))
+        for j in lay.v:
+            facts.append(_ball(d, [lay.v[j]], self.sensors[j].R))
+        facts.append(_ball(d, [lay.v_new], own.R))
+        for j in lay.neigh:
+            sj, nb = self.sensors[j], neigh.get(j)
+            g_r = np.zeros(d)  # r_j = gᵀη
+            if nb is not None:
+                a = self.weights[j]
+                cbar = sj.Cbar
+                ell[0] += a * (nb.gamma * sj.h1 - 1.0) * (cbar @ nb.xhat)
+                ell[lay.v[j]] += a * sj.Dv
+                g_r[0] = cbar @ nb.xhat
+                if j == self.node_id:
+                    row = cbar @ Mi  # the node's own z_i
+                    ell[lay.z] += a * nb.gamma * sj.h1 * row
+                    g_r[lay.z] = row
+                else:
+                    c_j = np.sqrt(max(nb.rho * float(cbar @ nb.P @ cbar), 0.0))
+                    ell[lay.s[j]] += a * nb.gamma * sj.h1 * c_j
+                    g_r[lay.s[j]] = c_j
+                if j in lay.phi:
+                    ell[lay.phi[j]] += a * nb.gamma
+            if j in lay.phi:
+                facts.append(_sector(d, lay.phi[j], g_r, sj.h))
+
+        # L-free part of the centre; the blended matrices are exact for the truth in both variants
+        abar_b, bbar_b, dbar_b = aug(*self.model.blend(alpha))
+        x_pred = T @ abar_b @ xhat + T @ bbar_b * u + g * y_new
+        if lay.phi_new is not None:
+            cbar = own.Cbar
+            g_new = np.zeros(d)  # r⁺ = C̄ x̄⁺ of the truth, with the blended model in every rule
+            g_new[0] = cbar @ x_pred
+            g_new[lay.z] = cbar @ T @ abar_b @ Mi
+            g_new[lay.w] = cbar @ T @ dbar_b
+            g_new[lay.v_new] = -(cbar @ g) * own.Dv
+            g_new[lay.phi_new] = -(cbar @ g) * gamma_new
+            facts.append(_sector(d, lay.phi_new, g_new, own.h))
+        ell_sum = sum(self.weights[j] * neigh[j].innov for j in lay.neigh if j in neigh)
+        return {"pi0": pi0s, "ell": ell, "facts": facts, "x_pred": x_pred, "innov_sum": float(ell_sum), "T": T, "G": G, "Mi": Mi}
+
+    # ------------------------------------------------------------------ one step
+
+    def step(
+        self,
+        xhat: np.ndarray,
+        P: np.ndarray,
+        rho: float,
+        alpha: np.ndarray,
+        u: float,
+        y_new: float,
+        gamma_new: float,
+        neigh: dict[int, NeighbourState],
+    ) -> StepResult:
+        data = self.step_data(xhat, P, rho, alpha, u, y_new, gamma_new, neigh)
+        for r in range(self.n_lmi):
+            self.p_pi0[r].value = data["pi0"][r]
+        self.p_ell.value = data["ell"][None, :]
+        for q, Q in enumerate(data["facts"]):
+            self.p_q[q].value = Q
+        self.p_rho.value = rho
+        t0 = time.perf_counter()
+        try:
+            self.problem.solve(solver=cp.CLARABEL)
+            solver_status = str(self.problem.status)
+        except cp.error.SolverError as exc:
+            solver_status = f"error: {exc}"
+        solve_ms = 1e3 * (time.perf_counter() - t0)
+
+        if self.v_P.value is not None and solver_status in ("optimal", "optimal_inaccurate"):
+            if self.n_lmi == 1:
+                L = self.v_L[0].value
+                tau = self.v_tau[0].value
+                pi0 = data["pi0"][0]
+            else:
+                L = sum(a * v.value for a, v in zip(alpha, self.v_L))
+                tau = sum(a * v.value for a, v in zip(alpha, self.v_tau))
+                pi0 = sum(a * p for a, p in zip(alpha, data["pi0"]))
+            pi = pi0 - L @ data["ell"][None, :]
+            rho_c = certify(self.v_P.value, pi, tau, data["facts"])
+            if rho_c is not None:
+                P_pub = 0.5 * (self.v_P.value + self.v_P.value.T) * rho_c / rho
+                xhat_new = data["x_pred"] + L[:, 0] * data["innov_sum"]
+                return StepResult(xhat_new, P_pub, "ok", rho_c, solve_ms, solver_status, L)
+        P_fb = fallback_shape(data, self.own, gamma_new, self.W, alpha, self.model) / rho
+        return StepResult(data["x_pred"].copy(), P_fb, "fallback", np.nan, solve_ms, solver_status)
+
+
+def certify(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: list[np.ndarray]) -> float | None:
+    """Smallest ρ' (up to rounding) with Πᵀ P⁻¹ Π + Σ τ_m Q_m ⪯ ρ' e₁e₁ᵀ, or None if there is none.
+
+    This is the S-procedure condition itself, checked in floating point on the solver's answer: then
+    for the truth eᵀP⁻¹e ≤ ρ' and the published shape P·ρ'/ρ_i satisfies eᵀ(·)⁻¹e ≤ ρ_i.  The
+    multipliers are nudged up by the smallest ε in 1e-10, 1e-9, … (relative) that makes the lower block
+    strictly negative: every η slot other than the first has a strictly negative diagonal in some Q_m,
+    so a solver answer that is feasible up to its tolerance becomes strictly feasible there, at a cost
+    of O(ε) in ρ'.
+    """
+    P = 0.5 * (P + P.T)
+    try:
+        chol = np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        return None
+    if not (np.all(np.isfinite(pi)) and np.all(np.isfinite(tau))):
+        return None
+    x = np.linalg.solve(chol, pi)  # Πᵀ P⁻¹ Π = xᵀx
+    base = x.T @ x
+    tau = np.maximum(tau, 0.0)
+    scale = max(1.0, float(np.max(tau)))
+    for eps in scale * 10.0 ** np.arange(-10.0, -2.0):
+        K = base + sum((t + eps) * q for t, q in zip(tau, facts))
+        K = 0.5 * (K + K.T)
+        k11, k, K22 = K[0, 0], K[1:, 0], K[1:, 1:]
+        try:
+            c22 = np.linalg.cholesky(-K22)
+            break
+        except np.linalg.LinAlgError:
+            continue
+    else:
+        return None
+    y = np.linalg.solve(c22, k)
+    rho_c = float(k11 + y @ y)  # Schur complement: K − ρ' e₁e₁ᵀ ⪯ 0 ⇔ K22 ≺ 0 and ρ' ≥ k11 − kᵀK22⁻¹k
+    rho_c = rho_c * (1 + 1e-9) + 1e-12
+    for _ in range(60):  # confirm with eigenvalues; widen by a hair if rounding says otherwise
+        Kc = K.copy()
+        Kc[0, 0] -= rho_c
+        if np.linalg.eigvalsh(Kc)[-1] <= 0.0:
+            return rho_c if rho_c > 0 else None
+        rho_c *= 1 + 1e-6
+    return None
+
+
+def fallback_shape(data: dict, own: Sensor, gamma_new: float, W: float, alpha: np.ndarray, model: TSModel) -> np.ndarray:
+    """A guaranteed shape without the solver: L = 0 and an outer ellipsoid of a Minkowski sum.
+
+    e⁺ = T Ā ρ^½ M z + T D̄ w − G Dv v⁺ − G γ⁺ φ⁺ with |z| ≤ 1, |w| ≤ √W, |v⁺| ≤ √R and, under the sector
+    assumption |C̄ x̄⁺| ≤ r_max/h1, |φ⁺| ≤ (1 − h1) r_max.  For terms F_k ξ_k with |ξ_k| ≤ 1 the sum lies
+    in {e: eᵀ(Σ F_kF_kᵀ/p_k)⁻¹e ≤ 1} for any p_k > 0 with Σ p_k = 1; p_k ∝ √tr(F_kF_kᵀ) minimises the trace.
+    """
+    T, G, Mi = data["T"], data["G"], data["Mi"]
+    a, _, d = model.blend(alpha)
+    abar = np.zeros((NA, NA))
+    abar[:NX, :NX] = a
+    dbar = np.r_[d[:, 0], 0.0]
+    terms = [T @ abar @ Mi, (T @ dbar * np.sqrt(W))[:, None], G * own.Dv * np.sqrt(own.R)]
+    if own.saturated:
+        terms.append(G * gamma_new * (1.0 - own.h1) * own.r_max)
+    grams = [f @ f.T for f in terms]
+    roots = np.array([np.sqrt(np.trace(q)) for q in grams])
+    keep = roots > 0
+    p = roots[keep] / roots[keep].sum()
+    shape = sum(q / pk for q, pk in zip([q for q, k in zip(grams, keep) if k], p))
+    # a rank-deficient sum is still an outer bound once inflated a little in every direction
+    return shape + 1e-9 * max(1.0, float(np.trace(shape))) * np.eye(NA)
+
+
+__all__ = ["LocalEstimator", "NeighbourState", "StepResult", "certify", "fallback_shape"]

@@ -1,0 +1,139 @@
+"""Every message the roles exchange, defined once: pydantic models, msgpack on the wire.
+
+A payload is a msgpack map with ``v`` (schema version) and ``type``; :func:`decode` validates it
+(types, dimensions, finite numbers, step ≥ 0) and raises :class:`BadMessage` otherwise.  Context checks
+(is the sender a real neighbour, is the step plausible) are the receiving role's job.  Both buses encode
+and decode every message, so the in-memory run exercises the same wire format as the Zenoh run.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal, Union
+
+import msgpack
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
+
+SCHEMA_VERSION = 1
+
+FiniteF = Annotated[float, Field(allow_inf_nan=False, strict=False)]
+Step = Annotated[int, Field(ge=0, strict=True)]
+NodeId = Annotated[int, Field(ge=1, strict=True)]
+Vec3 = Annotated[list[FiniteF], Field(min_length=3, max_length=3)]
+Vec2 = Annotated[list[FiniteF], Field(min_length=2, max_length=2)]
+Mat3 = Annotated[list[FiniteF], Field(min_length=9, max_length=9)]
+
+
+class BadMessage(ValueError):
+    """A payload that failed decoding or validation; ``reason`` is short enough for a counter key."""
+
+    def __init__(self, reason: str, detail: str = "") -> None:
+        super().__init__(f"{reason}: {detail}" if detail else reason)
+        self.reason = reason
+
+
+class _Msg(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    v: Literal[1] = SCHEMA_VERSION
+
+
+class Ready(_Msg):
+    """A role announces it is subscribed and waiting (Zenoh start-up barrier)."""
+
+    type: Literal["ready"] = "ready"
+    role: Literal["node", "collector"]
+    node: NodeId | None = None
+
+
+class NodeInput(_Msg):
+    """Vehicle → node i at step k: ỹ_i,k and γ_i,k; u and Vx of step k−1; which neighbour messages to expect.
+
+    ``expect_from``: in-neighbours j ≠ i whose step k−1 message node i should wait for (alive, not lost);
+    ``lost_from``: in-neighbours whose step k−1 message is lost by the scheduled packet-loss model.
+    """
+
+    type: Literal["input"] = "input"
+    step: Step
+    node: NodeId
+    y: FiniteF
+    gamma: Annotated[float, Field(gt=0, le=1)]
+    u_prev: FiniteF | None = None
+    vx_prev: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    expect_from: list[NodeId] = []
+    lost_from: list[NodeId] = []
+
+
+class NodeState(_Msg):
+    """Node i → neighbours and collector: the ellipsoid {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} of step k and y̌_i,k."""
+
+    type: Literal["state"] = "state"
+    step: Step
+    node: NodeId
+    xhat: Vec3
+    P: Mat3  # row-major 3×3, symmetric positive definite
+    rho: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+    gamma: Annotated[float, Field(gt=0, le=1)]
+    innov: FiniteF
+    status: Literal["init", "ok", "fallback", "rejoin"]
+    rho_cert: FiniteF | None = None
+    solve_ms: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
+    used: list[NodeId] = []  # neighbours j ≠ i whose message entered this step
+    missing: list[NodeId] = []  # expected neighbours whose message did not arrive in time
+    late: bool = False  # real-time clock: finished after the next tick
+
+    def P_matrix(self) -> np.ndarray:
+        return np.asarray(self.P, dtype=float).reshape(3, 3)
+
+
+class Truth(_Msg):
+    """Vehicle → collector only: the truth of step k and which assumptions held."""
+
+    type: Literal["truth"] = "truth"
+    step: Step
+    x: Vec2
+    faults: dict[str, FiniteF]  # node id → f_i,k (msgpack keys are strings)
+    u: FiniteF
+    w: FiniteF
+    vx: FiniteF
+    noise: dict[str, FiniteF]  # v_i,k
+    gamma: dict[str, FiniteF]
+    y: dict[str, FiniteF]
+    y_nofault: dict[str, FiniteF]
+    sector_ok: dict[str, bool]  # |C̄_i x̄_i,k| ≤ r_max/h1
+    noise_ok: dict[str, bool]  # v_i,k² ≤ R_i
+    dist_ok: bool  # w_k² ≤ W
+    lost: list[tuple[NodeId, NodeId]] = []  # (from j, to i): j's step k−1 message to i lost
+    alive: list[NodeId] = []  # nodes the vehicle heard from at step k−1
+
+
+class End(_Msg):
+    """Vehicle → all: the run is over after ``steps`` steps (or aborted with a reason)."""
+
+    type: Literal["end"] = "end"
+    steps: Step
+    reason: str = "done"
+
+
+Message = Union[Ready, NodeInput, NodeState, Truth, End]
+_ADAPTER: TypeAdapter[Message] = TypeAdapter(Annotated[Message, Field(discriminator="type")])
+
+
+def encode(msg: Message) -> bytes:
+    return msgpack.packb(msg.model_dump(mode="python"), use_bin_type=True)
+
+
+def decode(payload: bytes) -> Message:
+    try:
+        raw = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+    except Exception as exc:  # msgpack raises several unrelated types
+        raise BadMessage("undecodable", str(exc)[:120]) from None
+    if not isinstance(raw, dict):
+        raise BadMessage("not-a-map")
+    if raw.get("v") != SCHEMA_VERSION:
+        raise BadMessage("schema-version", f"got {raw.get('v')!r}, expected {SCHEMA_VERSION}")
+    try:
+        return _ADAPTER.validate_python(raw)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        loc = ".".join(str(p) for p in first["loc"])
+        raise BadMessage("invalid", f"{loc}: {first['msg']}") from None

@@ -1,0 +1,71 @@
+"""Yaw-rate sensor i with fault, noise, saturation and incomplete measurement (paper (9)-(15), (18)-(20)).
+
+Augmented state x̄_i = [x; f_i] (n = 3), C̄_i = [C_i, Ds_i].  The measurement is
+
+    ỹ_i = γ_i σ(C̄_i x̄_i) + Dv_i v_i,        v_i² ≤ R_i                                   (12)
+    σ(r) = sign(r)·min(r_max, |r|) = h1·r + φ(r),   φ(r)(φ(r) − h·r) ≤ 0,  h = h2 − h1     (14)-(15)
+
+The sector condition (15) holds exactly while |r| ≤ r_max/h1 (DESIGN.md §1); outside that range the
+estimator's assumption is broken and the collector says so.  A sensor without saturation has
+h1 = h2 = 1, σ = identity and φ ≡ 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+NX = 2  # vehicle state [β, r]
+NA = 3  # augmented state [β, r, f]
+
+E_DESCRIPTOR = np.diag([1.0, 1.0, 0.0])  # E of (11)
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """Static data of one yaw-rate sensor (what a neighbour needs to interpret an innovation)."""
+
+    C: np.ndarray  # (2,)
+    Ds: float
+    Dv: float
+    R: float
+    saturated: bool = False  # model saturation at all (SAIM) or not (NSNIM)
+    r_max: float = np.inf
+    h1: float = 1.0
+    h2: float = 1.0
+
+    @property
+    def Cbar(self) -> np.ndarray:
+        """C̄_i = [C_i, Ds_i] (1×3 as a flat vector)."""
+        return np.array([self.C[0], self.C[1], self.Ds])
+
+    @property
+    def h(self) -> float:
+        """Sector width h = h2 − h1 of φ."""
+        return self.h2 - self.h1
+
+    @property
+    def sector_limit(self) -> float:
+        """|C̄ x̄| up to which the sector condition (15) holds."""
+        return self.r_max / self.h1 if self.saturated else np.inf
+
+    def sigma(self, r: float) -> float:
+        """Saturation σ(r) of (13)."""
+        if not self.saturated:
+            return r
+        return float(np.sign(r) * min(self.r_max, abs(r)))
+
+    def measure(self, xbar: np.ndarray, gamma: float, v: float) -> float:
+        """ỹ = γ σ(C̄ x̄) + Dv v (12)."""
+        return gamma * self.sigma(float(self.Cbar @ xbar)) + self.Dv * v
+
+    def sector_holds(self, xbar: np.ndarray) -> bool:
+        """Whether φ(C̄ x̄) satisfies the sector condition (15) that the estimator assumes."""
+        return abs(float(self.Cbar @ xbar)) <= self.sector_limit
+
+    def descriptor_gains(self, gamma: float) -> tuple[np.ndarray, np.ndarray]:
+        """T, G with T E + G γ h1 C̄ = I, by the pseudo-inverse of Θ = [E; γ h1 C̄] ((18)-(20), S = 0)."""
+        theta = np.vstack([E_DESCRIPTOR, gamma * self.h1 * self.Cbar[None, :]])
+        pinv = np.linalg.pinv(theta)  # (3, 4)
+        return pinv[:, :NA], pinv[:, NA:]

@@ -1,0 +1,144 @@
+"""The node role: one yaw-rate sensing node running its local estimator.
+
+At step k+1 node i needs its :class:`NodeInput` of step k+1 (ỹ_i,k+1, γ_i,k+1, u_k, Vx_k) and the
+step-k states of the in-neighbours the vehicle told it to expect.  A neighbour message that is
+scheduled lost, or has not arrived when the runtime gives up waiting, is left out of the step and its
+η slots are zeroed (the guarantee holds with the neighbours that did arrive).  Node i never sees the
+truth.  Every neighbour message is checked in context (a real in-neighbour, a usable step, a positive
+definite shape) and dropped and counted otherwise.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from netsetest.bus import keys
+from netsetest.bus.base import Bus
+from netsetest.config.schema import Scenario
+from netsetest.estimator.sdp import LocalEstimator, NeighbourState, Variant
+from netsetest.messages import End, Message, NodeInput, NodeState
+from netsetest.models.sensor import NA
+
+
+class Node:
+    def __init__(self, scenario: Scenario, node_id: int, bus: Bus, run_id: str, variant: Variant = "scheduled") -> None:
+        self.sc, self.bus, self.run = scenario, bus, run_id
+        self.cfg = scenario.node(node_id)
+        self.id = node_id
+        self.estimator = LocalEstimator(
+            node_id,
+            self.cfg.sensor,
+            {j: scenario.node(j).sensor for j in self.cfg.in_weights},
+            self.cfg.in_weights,
+            scenario.model,
+            scenario.W,
+            variant,
+        )
+        self.others = [j for j in self.cfg.in_weights if j != node_id]
+        # estimator state, plain arrays: centre, shape, radius, and our own last published message
+        self.xhat = self.cfg.x0_hat.copy()
+        self.P = self.cfg.P0.copy()
+        self.rho = self.cfg.rho
+        self.k = -1  # last published step
+        self.own: NeighbourState | None = None
+        self.inputs: dict[int, NodeInput] = {}
+        self.inbox: dict[int, dict[int, NeighbourState]] = {}  # step → j → state
+        self.waiting_since: float | None = None
+        self.give_up = False  # set by the runtime when the neighbour deadline passed
+        self.ended = False
+        self.rejoin = False
+        bus.subscribe(keys.node_input(run_id, node_id), self.on_message)
+        for j in self.others:
+            bus.subscribe(keys.node_state(run_id, j), self.on_message)
+        bus.subscribe(keys.end(run_id), self.on_message)
+
+    # ------------------------------------------------------------------ receiving
+
+    def on_message(self, key: str, msg: Message) -> None:
+        if isinstance(msg, End):
+            self.ended = True
+        elif isinstance(msg, NodeInput):
+            if msg.node != self.id or msg.step <= self.k:
+                self.bus.drop("node-input-mismatch")
+                return
+            self.inputs[msg.step] = msg
+        elif isinstance(msg, NodeState):
+            self._on_neighbour(key, msg)
+        else:
+            self.bus.drop("unexpected-type")
+
+    def _on_neighbour(self, key: str, msg: NodeState) -> None:
+        if msg.node not in self.others or key != keys.node_state(self.run, msg.node):
+            self.bus.drop("not-a-neighbour")
+            return
+        if msg.step < self.k:  # too late to be used
+            self.bus.drop("stale")
+            return
+        P = msg.P_matrix()
+        if not np.allclose(P, P.T, rtol=1e-9, atol=1e-15) or np.linalg.eigvalsh(0.5 * (P + P.T))[0] <= 0:
+            self.bus.drop("shape-not-spd")
+            return
+        self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(
+            np.asarray(msg.xhat), 0.5 * (P + P.T), msg.rho, msg.gamma, msg.innov
+        )
+
+    # ------------------------------------------------------------------ stepping
+
+    def next_input(self) -> NodeInput | None:
+        return self.inputs.get(self.k + 1) if self.k >= 0 else self.inputs.get(min(self.inputs)) if self.inputs else None
+
+    def missing(self) -> list[int]:
+        """Expected neighbour messages for the next step that have not arrived."""
+        inp = self.next_input()
+        if inp is None or self.k < 0:
+            return []
+        have = self.inbox.get(self.k, {})
+        return [j for j in inp.expect_from if j not in have]
+
+    def try_step(self, now: float | None = None) -> bool:
+        """Compute and publish the next step if its inputs are here (or the runtime gave up waiting)."""
+        inp = self.next_input()
+        if inp is None or self.ended and self.k >= self.sc.steps:
+            return False
+        if self.k < 0:
+            self._start(inp)
+            return True
+        if self.missing() and not self.give_up:
+            if self.waiting_since is None:
+                self.waiting_since = now if now is not None else time.monotonic()
+            return False
+        self._update(inp)
+        return True
+
+    def _start(self, inp: NodeInput) -> None:
+        """Step 0 (or the first step after a rejoin): publish the prior ellipsoid."""
+        self._publish(inp, "init", rho_cert=None, solve_ms=0.0, used=[], missing=[])
+
+    def _update(self, inp: NodeInput) -> None:
+        have = self.inbox.get(self.k, {})
+        neigh = {j: have[j] for j in inp.expect_from if j in have}
+        if self.id in self.cfg.in_weights:
+            neigh[self.id] = self.own  # type: ignore[assignment]
+        alpha = self.sc.model.weights(inp.vx_prev)  # type: ignore[arg-type]
+        res = self.estimator.step(self.xhat, self.P, self.rho, alpha, inp.u_prev, inp.y, inp.gamma, neigh)  # type: ignore[arg-type]
+        self.xhat, self.P = res.xhat, res.P
+        self._publish(
+            inp, res.status, rho_cert=res.rho_cert if np.isfinite(res.rho_cert) else None,
+            solve_ms=res.solve_ms, used=sorted(j for j in neigh if j != self.id), missing=self.missing(),
+        )  # fmt: skip
+
+    def _publish(self, inp: NodeInput, status: str, rho_cert: float | None, solve_ms: float, used: list[int], missing: list[int]) -> None:
+        innov = float(inp.y - self.cfg.sensor.Cbar @ self.xhat)
+        self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, innov)
+        msg = NodeState(
+            step=inp.step, node=self.id, xhat=[float(a) for a in self.xhat], P=[float(a) for a in self.P.reshape(NA * NA)],
+            rho=self.rho, gamma=inp.gamma, innov=innov, status=status, rho_cert=rho_cert,  # type: ignore[arg-type]
+            solve_ms=solve_ms, used=used, missing=missing,
+        )  # fmt: skip
+        self.k = inp.step
+        self.inputs = {s: m for s, m in self.inputs.items() if s > self.k}
+        self.inbox = {s: m for s, m in self.inbox.items() if s >= self.k}
+        self.waiting_since, self.give_up = None, False
+        self.bus.publish(keys.node_state(self.run, self.id), msg)

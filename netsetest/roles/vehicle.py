@@ -1,0 +1,131 @@
+"""The vehicle role: simulates the truth and publishes what each party may see.
+
+Step k: the vehicle draws u_k, w_k, v_i,k, γ_i,k, computes ỹ_i,k and publishes to node i a
+:class:`NodeInput` (ỹ_i,k, γ_i,k, u_{k−1}, Vx_{k−1}, which neighbour messages of step k−1 to expect),
+and to the collector a :class:`Truth` (x_k, f_i,k, assumption flags, scheduled losses).  It then
+advances x_{k+1} = Σ α_ℓ(Vx_k)(A_ℓ x_k + B_ℓ u_k + Dw_ℓ w_k)  (8).
+
+Lockstep: the next step is published once every alive node has published its step-k state (the
+runtime decides what to do with nodes that stay silent).  Real time: the runtime calls
+:meth:`advance` every τs whatever the nodes did.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from netsetest.bus import keys
+from netsetest.bus.base import Bus
+from netsetest.config.schema import Scenario
+from netsetest.messages import End, Message, NodeInput, NodeState, Truth
+from netsetest.models.signals import ExogenousSignals, SignalKind
+
+
+class LossSchedule:
+    """Seeded packet loss of node messages: i.i.d. per link and step plus configured bursts."""
+
+    def __init__(self, scenario: Scenario, seed: int) -> None:
+        self.scenario = scenario
+        self.rng = np.random.default_rng([seed, 0x1055])
+        self.links = [(j, n.id) for n in scenario.nodes for j in n.in_weights if j != n.id]
+
+    def lost_at(self, k: int) -> list[tuple[int, int]]:
+        """Links (j, i) whose step k−1 message to step k is lost; one draw per link per step."""
+        loss = self.scenario.loss
+        draws = self.rng.random(len(self.links))
+        out = []
+        for (j, i), r in zip(self.links, draws):
+            burst = any(b.from_ == j and b.to == i and b.start <= k < b.start + b.length for b in loss.bursts)
+            if burst or r < loss.probability:
+                out.append((j, i))
+        return out
+
+
+class Vehicle:
+    def __init__(self, scenario: Scenario, bus: Bus, run_id: str, signals: SignalKind = "paper", seed: int = 0) -> None:
+        self.sc, self.bus, self.run = scenario, bus, run_id
+        self.signals = ExogenousSignals(
+            signals,
+            seed,
+            scenario.steer_low,
+            scenario.steer_high,
+            scenario.W,
+            [n.sensor.R for n in scenario.nodes],
+            [n.noise_frequency for n in scenario.nodes],
+            [n.gamma_range for n in scenario.nodes] if scenario.case == "saim" else None,
+            scenario.tau_s,
+        )
+        self.losses = LossSchedule(scenario, seed)
+        self.x = scenario.x0.copy()
+        self.k = -1  # last published step
+        self.u = self.w = self.vx = 0.0
+        self.heard: dict[int, set[int]] = {}
+        self.alive = set(scenario.ids)
+        self.done = False
+        bus.subscribe(keys.node_state(run_id, "*"), self.on_message)
+
+    def on_message(self, key: str, msg: Message) -> None:
+        if isinstance(msg, NodeState) and msg.node in self.alive and msg.step <= self.k:
+            self.heard.setdefault(msg.step, set()).add(msg.node)
+
+    def waiting_for(self) -> set[int]:
+        """Alive nodes whose state of the current step has not arrived."""
+        return self.alive - self.heard.get(self.k, set())
+
+    def ready_to_advance(self) -> bool:
+        return self.k >= 0 and not self.done and not self.waiting_for()
+
+    def advance(self) -> None:
+        """Publish step k+1 (or End after the last step).  Nodes not heard at step k count as dead."""
+        if self.done:
+            return
+        if self.k >= 0:
+            self.alive &= self.heard.get(self.k, set())
+            if self.k == self.sc.steps:
+                self.bus.publish(keys.end(self.run), End(steps=self.sc.steps))
+                self.done = True
+                return
+            self.x = self.sc.model.step(self.x, self.u, self.w, self.vx)
+        self.k += 1
+        self._publish_step(self.k)
+
+    def revive(self, node_id: int) -> None:
+        """A restarted node announced itself: expect it again from the next step on."""
+        self.alive.add(node_id)
+
+    def _publish_step(self, k: int) -> None:
+        sc = self.sc
+        u_prev, vx_prev = (self.u, self.vx) if k > 0 else (None, None)
+        self.u, self.w, v, gamma = self.signals.draw(k)
+        self.vx = sc.vx(k)
+        lost = self.losses.lost_at(k) if k > 0 else []
+        y, y0, faults, sector_ok, noise_ok = {}, {}, {}, {}, {}
+        for idx, n in enumerate(sc.nodes):
+            f = n.fault(k)
+            xbar = np.r_[self.x, f]
+            y[n.id] = n.sensor.measure(xbar, gamma[idx], v[idx])
+            y0[n.id] = n.sensor.measure(np.r_[self.x, 0.0], gamma[idx], v[idx])
+            faults[n.id] = f
+            sector_ok[n.id] = n.sensor.sector_holds(xbar)
+            noise_ok[n.id] = bool(v[idx] ** 2 <= n.sensor.R * (1 + 1e-12))
+        for idx, n in enumerate(sc.nodes):
+            lost_from = sorted(j for (j, i) in lost if i == n.id)
+            expect = sorted(j for j in n.in_weights if j != n.id and j in self.alive and j not in lost_from) if k > 0 else []
+            self.bus.publish(
+                keys.node_input(self.run, n.id),
+                NodeInput(
+                    step=k, node=n.id, y=y[n.id], gamma=float(gamma[idx]),
+                    u_prev=u_prev, vx_prev=vx_prev, expect_from=expect, lost_from=lost_from,
+                ),  # fmt: skip
+            )
+        s = lambda d: {str(i): val for i, val in d.items()}  # noqa: E731
+        self.bus.publish(
+            keys.truth(self.run),
+            Truth(
+                step=k, x=list(map(float, self.x)), faults=s(faults), u=self.u, w=self.w, vx=self.vx,
+                noise={str(n.id): float(v[i]) for i, n in enumerate(sc.nodes)},
+                gamma={str(n.id): float(gamma[i]) for i, n in enumerate(sc.nodes)},
+                y=s(y), y_nofault=s(y0), sector_ok=s(sector_ok), noise_ok=s(noise_ok),
+                dist_ok=bool(self.w**2 <= sc.W * (1 + 1e-12)), lost=lost, alive=sorted(self.alive),
+            ),  # fmt: skip
+        )

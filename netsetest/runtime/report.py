@@ -1,0 +1,99 @@
+"""What every run mode shares at its end: the per-node table, the summary JSON, the record, progress."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+from typing import TextIO
+
+from netsetest.records.record import save_record
+
+
+class Progress:
+    """One line per update on a terminal (\\r), a line every 10 % otherwise; always to stderr."""
+
+    def __init__(self, total: int, label: str, stream: TextIO = sys.stderr, enabled: bool = True) -> None:
+        self.total, self.label, self.stream, self.enabled = total, label, stream, enabled
+        self.tty = stream.isatty()
+        self.last_pct = -1
+        self.t0 = time.monotonic()
+
+    def update(self, done: int, extra: str = "") -> None:
+        if not self.enabled:
+            return
+        pct = int(100 * done / max(self.total, 1))
+        if self.tty:
+            self.stream.write(f"\r{self.label}: step {done}/{self.total} ({pct:3d} %) {extra}\033[K")
+            self.stream.flush()
+        elif pct // 10 != self.last_pct // 10 or done == self.total:
+            self.stream.write(f"{self.label}: step {done}/{self.total} ({pct} %, {time.monotonic() - self.t0:.1f} s) {extra}\n")
+            self.stream.flush()
+        self.last_pct = pct
+
+    def close(self) -> None:
+        if self.enabled and self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _fmt(v: object, spec: str) -> str:
+    return "-" if v is None else format(v, spec)
+
+
+def format_table(summary: dict) -> str:
+    head = ["node", "max E", "viol.", "assump.viol", "miss(assump.)", "fault width", "solve ms", "fallbacks", "missing", "deadline"]
+    rows = [
+        [
+            str(r["id"]),
+            _fmt(r["max_E"], ".3f"),
+            str(r["violations"]),
+            str(r["assumption_violations"]),
+            str(r["misses_assumption_broken"]),
+            _fmt(r["fault_bound_mean_width"], ".4f"),
+            _fmt(r["solve_ms_median"], ".2f"),
+            str(r["fallbacks"]),
+            "-" if r["missing_from"] is None else f"from {r['missing_from']}",
+            str(r["deadline_misses"]),
+        ]
+        for r in summary["nodes"]
+    ]
+    widths = [max(len(h), *(len(r[c]) for r in rows)) for c, h in enumerate(head)]
+    line = lambda cells: "  ".join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731
+    out = [line(head), line(["-" * w for w in widths])] + [line(r) for r in rows]
+    verdict = (
+        "every ellipsoid contained the truth on every step where the assumptions held"
+        if summary["violations_total"] == 0
+        else f"CONTAINMENT VIOLATED {summary['violations_total']} time(s) on steps where the assumptions held"
+    )
+    out.append("")
+    out.append(f"{summary.get('mode', '')} run, case {summary.get('case')}, signals {summary.get('signals')}, "
+               f"variant {summary.get('variant')}, {summary.get('steps_completed')} steps: {verdict}.")  # fmt: skip
+    if summary["misses_assumption_broken_total"]:
+        out.append(f"{summary['misses_assumption_broken_total']} miss(es) after a broken assumption (not covered by the guarantee).")
+    if summary.get("nodes_missing"):
+        out.append(f"nodes missing: {summary['nodes_missing']}")
+    if summary.get("losses_total"):
+        out.append(f"scheduled message losses: {summary['losses_total']}")
+    if summary.get("dropped_messages"):
+        out.append(f"dropped messages: {summary['dropped_messages']}")
+    return "\n".join(out)
+
+
+def write_outputs(summary: dict, meta: dict, parts: dict, record: str | None, summary_json: str | None) -> None:
+    if record:
+        save_record(record, meta, parts["truth"], parts["nodes"], summary)
+    if summary_json:
+        Path(summary_json).parent.mkdir(parents=True, exist_ok=True)
+        Path(summary_json).write_text(json.dumps(summary, indent=2) + "\n")
+
+
+EXIT_OK, EXIT_VIOLATION, EXIT_BAD_INPUT, EXIT_NODE_LOST = 0, 1, 2, 3
+
+
+def exit_code(summary: dict) -> int:
+    """0 contained wherever the assumptions held; 1 estimator violation; 3 a node stopped reporting."""
+    if summary["violations_total"]:
+        return EXIT_VIOLATION
+    return EXIT_NODE_LOST if summary.get("nodes_missing") else EXIT_OK
