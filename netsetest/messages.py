@@ -12,11 +12,11 @@ from typing import Annotated, Literal, Union
 
 import msgpack
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
 
 SCHEMA_VERSION = 1
 
-FiniteF = Annotated[float, Field(allow_inf_nan=False, strict=False)]
+FiniteF = Annotated[float, Field(allow_inf_nan=False, strict=True)]  # strict: no "0.1" or True
 Step = Annotated[int, Field(ge=0, strict=True)]
 NodeId = Annotated[int, Field(ge=1, strict=True)]
 Vec3 = Annotated[list[FiniteF], Field(min_length=3, max_length=3)]
@@ -56,9 +56,9 @@ class NodeInput(_Msg):
     step: Step
     node: NodeId
     y: FiniteF
-    gamma: Annotated[float, Field(gt=0, le=1)]
+    gamma: Annotated[float, Field(gt=0, le=1, strict=True)]
     u_prev: FiniteF | None = None
-    vx_prev: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    vx_prev: Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)] | None = None
     expect_from: list[NodeId] = []
     lost_from: list[NodeId] = []
 
@@ -71,15 +71,26 @@ class NodeState(_Msg):
     node: NodeId
     xhat: Vec3
     P: Mat3  # row-major 3×3, symmetric positive definite
-    rho: Annotated[float, Field(gt=0, allow_inf_nan=False)]
-    gamma: Annotated[float, Field(gt=0, le=1)]
+    rho: Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)]
+    gamma: Annotated[float, Field(gt=0, le=1, strict=True)]
     innov: FiniteF
     status: Literal["init", "ok", "fallback", "rejoin"]
     rho_cert: FiniteF | None = None
-    solve_ms: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
+    solve_ms: Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)] = 0.0
     used: list[NodeId] = []  # neighbours j ≠ i whose message entered this step
     missing: list[NodeId] = []  # expected neighbours whose message did not arrive in time
     late: bool = False  # real-time clock: finished after the next tick
+
+    @model_validator(mode="after")
+    def _shape_spd(self) -> NodeState:
+        P = self.P_matrix()
+        if not np.allclose(P, P.T, rtol=1e-9, atol=1e-15):
+            raise ValueError("P is not symmetric")
+        try:
+            np.linalg.cholesky(P)
+        except np.linalg.LinAlgError:
+            raise ValueError("P is not positive definite") from None
+        return self
 
     def P_matrix(self) -> np.ndarray:
         return np.asarray(self.P, dtype=float).reshape(3, 3)

@@ -312,6 +312,8 @@ def _read_toml(path: Path) -> dict:
         raise ConfigError(f"{path}: file not found") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML (not UTF-8: {exc.reason} at byte {exc.start})") from None
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
 
@@ -326,6 +328,10 @@ def load_profile(path: Path) -> NodeProfile:
 def load_topology(path: str | Path, case: Case | None = None, steps: int | None = None) -> Scenario:
     """Read and validate a topology and its node profiles; ``case``/``steps`` override the file."""
     path = Path(path)
+    if case is not None and case not in ("nsnim", "saim"):
+        raise ConfigError(f"{path}: case must be 'nsnim' or 'saim', got {case!r}")
+    if steps is not None and steps < 1:
+        raise ConfigError(f"{path}: steps must be ≥ 1, got {steps}")
     try:
         topo = TopologyFile.model_validate(_read_toml(path))
     except ValidationError as exc:

@@ -33,6 +33,7 @@ flagged.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -269,7 +270,9 @@ class LocalEstimator:
         self.p_rho.value = rho
         t0 = time.perf_counter()
         try:
-            self.problem.solve(solver=cp.CLARABEL)
+            with warnings.catch_warnings():  # "inaccurate" answers are certified below, not trusted
+                warnings.simplefilter("ignore", UserWarning)
+                self.problem.solve(solver=cp.CLARABEL)
             solver_status = str(self.problem.status)
         except cp.error.SolverError as exc:
             solver_status = f"error: {exc}"

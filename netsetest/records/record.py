@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import gzip
 import json
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -80,7 +81,7 @@ class Record:
                     "fault_estimate": float(tr.xhat[n, 2]),
                     "fault_lower": float(lo[n]),
                     "fault_upper": float(hi[n]),
-                    "fault_true": None if t is None else float(t["faults"][str(node)]),
+                    "fault_true": None if t is None or str(node) not in t["faults"] else float(t["faults"][str(node)]),
                     "E": None if np.isnan(tr.E[n]) else float(tr.E[n]),
                     "contained": bool(tr.contained[n]),
                     "status": tr.status[n],
@@ -122,12 +123,15 @@ def load_record(path: str | Path) -> Record:
         doc = json.loads(data)
     except FileNotFoundError:
         raise RecordError(f"{path}: file not found") from None
-    except (OSError, ValueError, EOFError) as exc:
+    except (OSError, ValueError, EOFError, zlib.error) as exc:
         raise RecordError(f"{path}: not a readable record ({exc})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise RecordError(f"{path}: not a netsetest record (format field missing or wrong)")
     if doc.get("version") != VERSION:
         raise RecordError(f"{path}: record version {doc.get('version')!r}, this netsetest reads {VERSION}")
+    for name, kind in (("meta", dict), ("truth", list), ("nodes", dict), ("summary", dict)):
+        if not isinstance(doc.get(name), kind):
+            raise RecordError(f"{path}: malformed record ({name} must be a {kind.__name__})")
     try:
         nodes = {}
         for key, entries in doc["nodes"].items():

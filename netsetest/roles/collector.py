@@ -134,6 +134,8 @@ class Collector:
                     "violations": misses,
                     "misses_assumption_broken": broken_misses,
                     "assumption_violations": sum(1 for k in range(last + 1) if not cones.get((i, k), True)),
+                    "sector_breaks": sum(1 for t in self.truth.values() if not t.sector_ok[str(i)]),
+                    "first_sector_break": min((k for k, t in self.truth.items() if not t.sector_ok[str(i)]), default=None),
                     "fault_bound_mean_width": float(np.mean(widths)) if widths else None,
                     "solve_ms_median": statistics.median(solve) if solve else None,
                     "fallbacks": fallbacks,

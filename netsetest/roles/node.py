@@ -4,8 +4,8 @@ At step k+1 node i needs its :class:`NodeInput` of step k+1 (ỹ_i,k+1, γ_i,k+1
 step-k states of the in-neighbours the vehicle told it to expect.  A neighbour message that is
 scheduled lost, or has not arrived when the runtime gives up waiting, is left out of the step and its
 η slots are zeroed (the guarantee holds with the neighbours that did arrive).  Node i never sees the
-truth.  Every neighbour message is checked in context (a real in-neighbour, a usable step, a positive
-definite shape) and dropped and counted otherwise.
+truth.  Every neighbour message is checked in context (a real in-neighbour on its own key, a usable
+step) and dropped and counted otherwise; decode() has already checked types, sizes and the shape.
 """
 
 from __future__ import annotations
@@ -76,10 +76,7 @@ class Node:
         if msg.step < self.k:  # too late to be used
             self.bus.drop("stale")
             return
-        P = msg.P_matrix()
-        if not np.allclose(P, P.T, rtol=1e-9, atol=1e-15) or np.linalg.eigvalsh(0.5 * (P + P.T))[0] <= 0:
-            self.bus.drop("shape-not-spd")
-            return
+        P = msg.P_matrix()  # symmetric positive definite: checked by decode()
         self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(
             np.asarray(msg.xhat), 0.5 * (P + P.T), msg.rho, msg.gamma, msg.innov
         )

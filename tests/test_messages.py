@@ -1,0 +1,269 @@
+"""Wire format (msgpack + pydantic), the in-memory bus and key expressions (DESIGN.md §4)."""
+
+from __future__ import annotations
+
+import math
+
+import msgpack
+import pytest
+
+from netsetest.bus import keys
+from netsetest.bus.base import MemoryBus
+from netsetest.messages import SCHEMA_VERSION, BadMessage, End, NodeInput, NodeState, Ready, Truth, decode, encode
+
+# floats that a lossy encoding (float32, decimal text) would not preserve
+X = [0.1, 1 / 3, -2.5e-300]
+P = [0.3, 1e-17, -0.1 / 7, 1e-17, 0.3, 2 / 3, -0.1 / 7, 2 / 3, 1.7976931348623157e308]
+
+
+def _state(**kw) -> NodeState:
+    base = dict(
+        step=7, node=3, xhat=X, P=P, rho=1 / 3, gamma=0.8123456789012345, innov=-0.0123456789,
+        status="ok", rho_cert=1.0000000001, solve_ms=24.75, used=[2, 4], missing=[4], late=True,
+    )  # fmt: skip
+    base.update(kw)
+    return NodeState(**base)
+
+
+MESSAGES = [
+    Ready(role="collector"),
+    Ready(role="node", node=5),
+    NodeInput(step=0, node=1, y=0.123456789012345678, gamma=1.0),
+    NodeInput(step=12, node=6, y=-1e-12, gamma=0.7200000000000001, u_prev=0.0175 + 0.0367 * 0.3,
+              vx_prev=100 / 3.6, expect_from=[1, 5], lost_from=[5]),  # fmt: skip
+    _state(),
+    _state(status="init", rho_cert=None, used=[], missing=[], late=False),
+    Truth(
+        step=80, x=[1e-3 / 7, -0.2 / 3], faults={"1": 0.1745, "2": 0.08725, "6": -0.0873}, u=0.03, w=-0.99,
+        vx=27.77777777777778, noise={"1": math.cos(0.2 * math.pi)}, gamma={"1": 0.77}, y={"1": 0.01 / 3},
+        y_nofault={"1": -0.0}, sector_ok={"1": True, "2": False}, noise_ok={"1": True}, dist_ok=False,
+        lost=[(2, 1), (6, 1)], alive=[1, 2, 3],
+    ),  # fmt: skip
+    End(steps=80),
+    End(steps=3, reason="aborted: node 4 silent"),
+]
+
+
+@pytest.mark.parametrize("msg", MESSAGES, ids=lambda m: type(m).__name__)
+def test_round_trip_exact(msg):
+    payload = encode(msg)
+    assert isinstance(payload, bytes)
+    raw = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+    assert raw["v"] == SCHEMA_VERSION and raw["type"] == msg.type
+    back = decode(payload)
+    assert type(back) is type(msg)
+    assert back == msg
+    # exact float equality field by field (== on models would also accept 0.0 == -0.0)
+    for name, val in msg.model_dump().items():
+        got = getattr(back, name)
+        if isinstance(val, float):
+            assert got == val and math.copysign(1, got) == math.copysign(1, val)
+    assert encode(back) == payload
+
+
+def test_round_trip_float_bits():
+    m = _state()
+    back = decode(encode(m))
+    assert [x.hex() for x in back.xhat] == [x.hex() for x in X]
+    assert [x.hex() for x in back.P] == [x.hex() for x in P]
+    assert back.rho.hex() == (1 / 3).hex()
+
+
+# ---------------------------------------------------------------- rejection
+
+
+def _raw(msg) -> dict:
+    return msg.model_dump(mode="python")
+
+
+def _pack(d) -> bytes:
+    return msgpack.packb(d, use_bin_type=True)
+
+
+def _mut(msg, **changes) -> bytes:
+    d = _raw(msg)
+    for k, v in changes.items():
+        if v is _DEL:
+            del d[k]
+        else:
+            d[k] = v
+    return _pack(d)
+
+
+_DEL = object()
+NI = NodeInput(step=3, node=2, y=0.01, gamma=0.9)
+
+BAD = [
+    ("garbage", b"\xc1\xc1\xc1", "undecodable", None),
+    ("truncated", _pack(_raw(_state()))[:-3], "undecodable", None),
+    ("empty", b"", "undecodable", None),
+    ("list", _pack([1, "state", 3]), "not-a-map", None),
+    ("scalar", _pack(42), "not-a-map", None),
+    ("version-2", _mut(_state(), v=2), "schema-version", None),
+    ("version-missing", _mut(_state(), v=_DEL), "schema-version", None),
+    ("version-str", _mut(_state(), v="1"), "schema-version", None),
+    ("unknown-type", _mut(_state(), type="bogus"), "invalid", "bogus"),
+    ("type-missing", _mut(End(steps=1), type=_DEL), "invalid", None),
+    ("P-8", _mut(_state(), P=P[:8]), "invalid", "P"),
+    ("P-10", _mut(_state(), P=P + [0.0]), "invalid", "P"),
+    ("xhat-2", _mut(_state(), xhat=X[:2]), "invalid", "xhat"),
+    ("xhat-nan", _mut(_state(), xhat=[0.0, float("nan"), 0.0]), "invalid", "xhat"),
+    ("xhat-inf", _mut(_state(), xhat=[float("inf"), 0.0, 0.0]), "invalid", "xhat"),
+    ("xhat-neg-inf", _mut(_state(), xhat=[0.0, 0.0, float("-inf")]), "invalid", "xhat"),
+    ("P-nan", _mut(_state(), P=[float("nan")] + P[1:]), "invalid", "P"),
+    ("step-negative", _mut(_state(), step=-1), "invalid", "step"),
+    ("step-float", _mut(_state(), step=1.5), "invalid", "step"),
+    ("end-steps-negative", _mut(End(steps=1), steps=-1), "invalid", "steps"),
+    ("state-gamma-0", _mut(_state(), gamma=0.0), "invalid", "gamma"),
+    ("state-gamma-big", _mut(_state(), gamma=1.0000001), "invalid", "gamma"),
+    ("input-gamma-0", _mut(NI, gamma=0.0), "invalid", "gamma"),
+    ("input-gamma-big", _mut(NI, gamma=1.5), "invalid", "gamma"),
+    ("input-y-nan", _mut(NI, y=float("nan")), "invalid", "y"),
+    ("node-0", _mut(NI, node=0), "invalid", "node"),
+    ("rho-0", _mut(_state(), rho=0.0), "invalid", "rho"),
+    ("status-unknown", _mut(_state(), status="great"), "invalid", "status"),
+    ("extra-field", _mut(_state(), secret=1), "invalid", "secret"),
+    ("extra-field-end", _mut(End(steps=1), zz=0), "invalid", "zz"),
+    ("missing-field", _mut(_state(), xhat=_DEL), "invalid", "xhat"),
+    ("missing-field-input", _mut(NI, node=_DEL), "invalid", "node"),
+    ("truth-faults-nan", _mut(MESSAGES[6], faults={"1": float("nan")}), "invalid", "faults"),
+]
+
+
+@pytest.mark.parametrize("payload,reason,field", [b[1:] for b in BAD], ids=[b[0] for b in BAD])
+def test_decode_rejects(payload, reason, field):
+    with pytest.raises(BadMessage) as exc:
+        decode(payload)
+    assert exc.value.reason == reason
+    assert isinstance(exc.value, ValueError)
+    if field is not None:
+        assert field in str(exc.value), str(exc.value)
+
+
+def test_valid_mutation_baseline():
+    """The mutation helper itself yields decodable payloads when nothing bad is changed."""
+    assert decode(_mut(_state(), innov=0.5)).innov == 0.5
+    assert decode(_mut(NI, gamma=1.0)).gamma == 1.0
+
+
+# ---------------------------------------------------------------- MemoryBus
+
+
+def test_memory_bus_fifo_and_key_filter():
+    bus = MemoryBus()
+    got: list[tuple[str, object]] = []
+    bus.subscribe("netsetest/r1/node/*/state", lambda k, m: got.append((k, m)))
+    sent = []
+    for step in range(5):
+        for node in (3, 1, 2):
+            m = _state(step=step, node=node)
+            bus.publish(keys.node_state("r1", node), m)
+            sent.append((keys.node_state("r1", node), m))
+    bus.publish(keys.node_state("r2", 1), _state())  # other run: not delivered
+    bus.publish(keys.end("r1"), End(steps=5))  # other key: not delivered
+    assert got == []  # nothing before pump
+    n = bus.pump()
+    assert n == len(sent)
+    assert got == sent
+    assert not bus.dropped
+    assert bus.pump() == 0
+
+
+def test_memory_bus_pump_limit():
+    bus = MemoryBus()
+    got = []
+    bus.subscribe("**", lambda k, m: got.append(m.steps))
+    for s in range(4):
+        bus.publish(keys.end("r"), End(steps=s))
+    assert bus.pump(limit=3) == 3 and got == [0, 1, 2]
+    assert bus.pump() == 1 and got == [0, 1, 2, 3]
+
+
+def test_memory_bus_drops_malformed():
+    bus = MemoryBus()
+    got = []
+    bus.subscribe("netsetest/r/**", lambda k, m: got.append(m))
+    good1, good2 = _state(step=1), _state(step=2)
+    bus.publish(keys.node_state("r", 3), good1)
+    bus.inject(keys.node_state("r", 3), b"\xc1garbage")
+    bus.inject(keys.node_state("r", 3), _mut(_state(), P=P[:8]))
+    bus.inject(keys.node_state("r", 3), _mut(_state(), v=99))
+    bus.inject(keys.node_state("r", 3), _pack([1, 2, 3]))
+    bus.publish(keys.node_state("r", 3), good2)
+    assert bus.pump() == 2
+    assert got == [good1, good2]
+    assert bus.dropped == {"undecodable": 1, "invalid": 1, "schema-version": 1, "not-a-map": 1}
+    assert sum(bus.dropped.values()) == 4
+    assert bus.received == 6
+
+
+def test_memory_bus_handler_never_called_for_bad_payload():
+    bus = MemoryBus()
+    calls = []
+    bus.subscribe("netsetest/r/vehicle/input/2", lambda k, m: calls.append(m))
+    bus.inject(keys.node_input("r", 2), _mut(NI, gamma=0.0))
+    bus.inject(keys.node_input("r", 2), _mut(NI, y=float("inf")))
+    assert bus.pump() == 0
+    assert calls == []
+    assert bus.dropped["invalid"] == 2
+
+
+# ---------------------------------------------------------------- key expressions
+
+
+@pytest.mark.parametrize(
+    "pattern,key,ok",
+    [
+        ("netsetest/r/node/*/state", "netsetest/r/node/3/state", True),
+        ("netsetest/r/node/*/state", "netsetest/r/node/12/state", True),
+        ("netsetest/r/node/*/state", "netsetest/r/node/3/x/state", False),
+        ("netsetest/r/node/*/state", "netsetest/r/node/state", False),
+        ("netsetest/r/node/*/state", "netsetest/q/node/3/state", False),
+        ("netsetest/*/vehicle/truth", "netsetest/r/vehicle/truth", True),
+        ("netsetest/*/truth", "netsetest/r/vehicle/truth", False),
+        ("netsetest/r/**", "netsetest/r/node/3/state", True),
+        ("netsetest/r/**", "netsetest/r/control/end", True),
+        ("netsetest/r/**", "netsetest/r", True),  # ** matches zero chunks too
+        ("netsetest/r/**", "netsetest/rr/control/end", False),
+        ("**/state", "netsetest/r/node/3/state", True),
+        ("**/state", "netsetest/r/node/3/status", False),
+        ("netsetest/**/state", "netsetest/r/node/3/state", True),
+        ("netsetest/**/input/*", "netsetest/r/vehicle/input/4", True),
+        ("netsetest/**/input/*", "netsetest/r/vehicle/input", False),
+        ("**", "a/b/c", True),
+        ("*", "a", True),
+        ("*", "a/b", False),
+        ("a/b", "a/b", True),
+        ("a/b", "a/b/c", False),
+        ("a/b/c", "a/b", False),
+    ],
+)
+def test_key_matches(pattern, key, ok):
+    assert keys.matches(pattern, key) is ok
+
+
+def test_key_builders():
+    assert keys.node_input("r", 4) == "netsetest/r/vehicle/input/4"
+    assert keys.truth("r") == "netsetest/r/vehicle/truth"
+    assert keys.node_state("r", 2) == "netsetest/r/node/2/state"
+    assert keys.ready("r") == "netsetest/r/control/ready"
+    assert keys.end("r") == "netsetest/r/control/end"
+    assert keys.matches("netsetest/r/node/*/state", keys.node_state("r", 6))
+    assert not keys.matches("netsetest/r/node/*/state", keys.node_input("r", 6))
+
+
+def test_int_accepted_for_float_fields():
+    """msgpack may carry 1 for 1.0: integers in float fields are fine."""
+    m = decode(_mut(_state(), P=[1, 0, 0, 0, 1, 0, 0, 0, 1], innov=0, gamma=1))
+    assert m.P == [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0] and m.gamma == 1.0
+
+
+@pytest.mark.parametrize(
+    "change",
+    [dict(xhat=["0.1", "0.2", "0.3"]), dict(innov=b"1"), dict(gamma=True)],
+    ids=["str-xhat", "bytes-innov", "bool-gamma"],
+)
+def test_decode_rejects_non_numbers_in_float_fields(change):
+    with pytest.raises(BadMessage) as exc:
+        decode(_mut(_state(), **change))
+    assert exc.value.reason == "invalid"

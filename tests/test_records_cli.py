@@ -1,0 +1,219 @@
+"""The run record, the summary JSON and the ``inspect`` / ``plot`` commands, on short in-memory runs."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from netsetest.cli.main import main
+from netsetest.records.plots import plot_records
+from netsetest.records.record import RecordError, load_record
+
+ROOT = Path(__file__).resolve().parents[1]
+TOPOLOGY = str(ROOT / "topologies" / "paper6.toml")
+PNG = b"\x89PNG\r\n\x1a\n"
+FIGS = ("fig5_measurements.png", "fig6_states.png", "fig7_faults.png", "fig8_E.png")
+
+
+@pytest.fixture(scope="module")
+def nsnim(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("nsnim")
+    rec, summ = d / "run.json", d / "summary.json"
+    rc = main(["run", TOPOLOGY, "--mode", "inmemory", "--steps", "12", "--record", str(rec), "--summary-json", str(summ), "--quiet"])
+    assert rc == 0
+    return {"record": rec, "summary": summ}
+
+
+@pytest.fixture(scope="module")
+def saim(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("saim")
+    rec, summ = d / "run.json.gz", d / "summary.json"
+    rc = main(["run", TOPOLOGY, "--mode", "inmemory", "--case", "saim", "--steps", "8", "--record", str(rec),
+               "--summary-json", str(summ), "--quiet"])  # fmt: skip
+    assert rc == 0
+    return {"record": rec, "summary": summ}
+
+
+# ------------------------------------------------------------------------------------ record
+
+
+def _check_record(path: Path, steps: int, summary_path: Path) -> None:
+    rec = load_record(path)
+    K = steps + 1  # steps 0..steps
+    assert len(rec.truth) == K
+    assert sorted(rec.nodes) == rec.meta["node_ids"] == [1, 2, 3, 4, 5, 6]
+    for i, tr in rec.nodes.items():
+        assert tr.steps.shape == (K,) and list(tr.steps) == list(range(K))
+        assert tr.xhat.shape == (K, 3) and tr.P.shape == (K, 3, 3)
+        for a in (tr.rho, tr.E, tr.contained, tr.assumptions_ok, tr.solve_ms):
+            assert a.shape == (K,)
+        assert len(tr.status) == K
+        assert tr.contained.dtype == bool and tr.assumptions_ok.dtype == bool
+        for n, k in enumerate(tr.steps):
+            t = rec.truth_at(int(k))
+            e = np.r_[t["x"], t["faults"][str(i)]] - tr.xhat[n]
+            E = float(e @ np.linalg.solve(tr.P[n], e))
+            assert abs(E - tr.E[n]) <= 1e-12 * max(1.0, E), (i, k)
+            assert tr.contained[n] == (tr.E[n] <= tr.rho[n])
+    assert rec.summary == json.loads(summary_path.read_text())
+
+
+def test_record_round_trip(nsnim: dict[str, Path]) -> None:
+    _check_record(nsnim["record"], 12, nsnim["summary"])
+
+
+def test_gzip_record_round_trip(saim: dict[str, Path], nsnim: dict[str, Path], tmp_path: Path) -> None:
+    assert saim["record"].read_bytes()[:2] == b"\x1f\x8b"
+    _check_record(saim["record"], 8, saim["summary"])
+    assert load_record(saim["record"]).meta["case"] == "saim"
+    # gzip is detected by content too: a compressed record under a .json name loads the same
+    z = tmp_path / "copy.json"
+    z.write_bytes(gzip.compress(nsnim["record"].read_bytes()))
+    a, b = load_record(z), load_record(nsnim["record"])
+    assert a.summary == b.summary and np.array_equal(a.nodes[2].P, b.nodes[2].P)
+
+
+def test_bad_records_raise(nsnim: dict[str, Path], saim: dict[str, Path], tmp_path: Path) -> None:
+    data = nsnim["record"].read_bytes()
+    cases = {
+        "truncated.json": data[: len(data) // 2],
+        "truncated.json.gz": saim["record"].read_bytes()[:200],
+        "garbage.json": b"\x00\x01 not json",
+        "noformat.json": json.dumps({"version": 1, "meta": {}, "truth": [], "nodes": {}, "summary": {}}).encode(),
+        "list.json": b"[1, 2, 3]",
+    }
+    for name, content in cases.items():
+        p = tmp_path / name
+        p.write_bytes(content)
+        with pytest.raises(RecordError, match=re.escape(str(p))):
+            load_record(p)
+    with pytest.raises(RecordError, match="not found"):
+        load_record(tmp_path / "absent.json")
+
+
+@pytest.mark.parametrize("kind", ["corrupt-gzip", "nodes-not-a-dict"])
+def test_corrupt_gzip_and_malformed_structure_raise_record_error(kind: str, nsnim: dict[str, Path], tmp_path: Path) -> None:
+    p = tmp_path / "bad.json.gz"
+    if kind == "corrupt-gzip":
+        z = bytearray(gzip.compress(nsnim["record"].read_bytes()))
+        z[200:260] = bytes(b ^ 0xFF for b in z[200:260])  # flipped bits inside the deflate stream
+        p.write_bytes(bytes(z))
+    else:
+        p.write_text(json.dumps({"format": "netsetest-record", "version": 1, "meta": {}, "truth": [], "nodes": [], "summary": {}}))
+    with pytest.raises(RecordError, match=re.escape(str(p))):
+        load_record(p)
+
+
+def test_inspect_bad_file_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    p = tmp_path / "bad.json"
+    p.write_text('{"format": "netsetest-rec')
+    assert main(["inspect", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert str(p) in err and "netsetest inspect" in err
+    assert "Traceback" not in err
+
+
+# ------------------------------------------------------------------------------------ summary
+
+
+def test_summary_json_fields(nsnim: dict[str, Path]) -> None:
+    s = json.loads(nsnim["summary"].read_text())
+    assert s["mode"] == "inmemory" and s["variant"] == "scheduled"
+    assert s["case"] == "nsnim" and s["signals"] == "paper" and s["steps"] == 12
+    assert s["violations_total"] == 0
+    assert [n["id"] for n in s["nodes"]] == [1, 2, 3, 4, 5, 6]
+    for n in s["nodes"]:
+        for key in ("id", "max_E", "violations", "assumption_violations", "fault_bound_mean_width", "solve_ms_median", "fallbacks"):
+            assert key in n, key
+        assert 0.0 <= n["max_E"] <= 1.0
+        assert n["violations"] == 0 and n["fault_bound_mean_width"] > 0 and n["solve_ms_median"] > 0
+
+
+# ------------------------------------------------------------------------------------ inspect
+
+
+def test_inspect_table(nsnim: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["inspect", str(nsnim["record"]), "--node", "2"]) == 0
+    out = capsys.readouterr().out
+    rows = [ln.split() for ln in out.splitlines() if re.match(r"^\s*\d+\s", ln)]
+    assert [int(r[0]) for r in rows] == list(range(13))
+    ref = load_record(nsnim["record"]).fault_rows(2)
+    for r, want in zip(rows, ref):
+        f_true, f_est, lo, hi, E = (float(v) for v in r[1:6])
+        assert f_true == pytest.approx(want["fault_true"], abs=6e-5)
+        assert f_est == pytest.approx(want["fault_estimate"], abs=6e-5)
+        assert lo == pytest.approx(want["fault_lower"], abs=6e-5)
+        assert hi == pytest.approx(want["fault_upper"], abs=6e-5)
+        assert E == pytest.approx(want["E"], abs=6e-4)
+        assert r[6] == want["status"]
+
+
+def test_inspect_json(nsnim: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["inspect", str(nsnim["record"]), "--node", "2", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [r["step"] for r in rows] == list(range(13))
+    rec = load_record(nsnim["record"])
+    for r in rows:
+        for key in ("step", "fault_estimate", "fault_lower", "fault_upper", "fault_true", "E", "contained", "status",
+                    "beta_estimate", "beta_lower", "beta_upper", "beta_true", "r_estimate", "r_lower", "r_upper", "r_true"):  # fmt: skip
+            assert key in r, key
+        t = rec.truth_at(r["step"])
+        assert r["beta_true"] == t["x"][0] and r["r_true"] == t["x"][1] and r["fault_true"] == t["faults"]["2"]
+        if r["contained"]:  # inside the ellipsoid ⇒ every coordinate inside x̂ ± √(ρ P_ii)
+            for name in ("beta", "r", "fault"):
+                assert r[f"{name}_lower"] - 1e-12 <= r[f"{name}_true"] <= r[f"{name}_upper"] + 1e-12, (r["step"], name)
+    assert any(r["contained"] for r in rows)
+
+
+def test_inspect_unknown_node(nsnim: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["inspect", str(nsnim["record"]), "--node", "99"]) == 2
+    assert "no node 99" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------------ plot
+
+
+def _assert_pngs(paths: list[Path]) -> None:
+    for p in paths:
+        assert p.is_file(), p
+        data = p.read_bytes()
+        assert len(data) > 1000 and data[:8] == PNG, p
+
+
+def test_plot_one_record(nsnim: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "figs"
+    assert main(["plot", str(nsnim["record"]), "--out", str(out)]) == 0
+    _assert_pngs([out / f for f in FIGS])
+    assert sorted(capsys.readouterr().out.split()) == sorted(str(out / f) for f in FIGS)
+
+
+def test_plot_two_records(nsnim: dict[str, Path], saim: dict[str, Path], tmp_path: Path) -> None:
+    out = tmp_path / "figs"
+    assert main(["plot", str(nsnim["record"]), str(saim["record"]), "--out", str(out)]) == 0
+    expected = [out / "fig8_E.png"] + [out / f"{c}_paper_{f}" for c in ("nsnim", "saim") for f in FIGS[:3]]
+    _assert_pngs(expected)
+    assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in expected)
+
+
+def test_plot_missing_node_nan_E_and_truncation(nsnim: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    doc = json.loads(nsnim["record"].read_bytes())
+    nodes = doc["nodes"]
+    nodes["3"] = nodes["3"][:5]  # node 3 stopped reporting after step 4
+    for e in nodes["2"][2:4]:
+        e["E"] = None  # truth unknown
+    nodes["2"][5].update(E=7.5, contained=False, assumptions_ok=False)  # a miss after a broken assumption
+    nodes["7"] = nodes["1"]  # a node the truth knows nothing about
+    doc["meta"]["node_ids"] = list(range(1, 8))
+    p = tmp_path / "edited.json"
+    p.write_text(json.dumps(doc))
+    rec = load_record(p)
+    assert np.isnan(rec.nodes[2].E[2]) and len(rec.nodes[3].steps) == 5
+    monkeypatch.setattr("netsetest.records.plots.MAX_PANELS", 4)  # 7 nodes > 4 panels: truncated (cheaply)
+    files = plot_records([rec], str(tmp_path / "figs"))
+    assert sorted(Path(f).name for f in files) == sorted(FIGS)
+    _assert_pngs([Path(f) for f in files])
