@@ -38,11 +38,17 @@ class _Msg(BaseModel):
 
 
 class Ready(_Msg):
-    """A role announces it is subscribed and waiting (Zenoh start-up barrier)."""
+    """A role announces it is subscribed (Zenoh start-up barrier, and a node rejoining a running network).
+
+    ``seen_all``: this role has heard Ready from every other role, so its subscriptions are known to
+    them and theirs to it (a Ready travels on the same link after the subscriber declarations).
+    """
 
     type: Literal["ready"] = "ready"
-    role: Literal["node", "collector"]
+    role: Literal["vehicle", "node", "collector"]
     node: NodeId | None = None
+    seen_all: bool = False
+    rejoin: bool = False
 
 
 class NodeInput(_Msg):
@@ -61,6 +67,7 @@ class NodeInput(_Msg):
     vx_prev: Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)] | None = None
     expect_from: list[NodeId] = []
     lost_from: list[NodeId] = []
+    deadline: FiniteF | None = None  # real-time clock: wall-clock time (s since epoch) the step is due
 
 
 class NodeState(_Msg):
@@ -79,7 +86,8 @@ class NodeState(_Msg):
     solve_ms: Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)] = 0.0
     used: list[NodeId] = []  # neighbours j ≠ i whose message entered this step
     missing: list[NodeId] = []  # expected neighbours whose message did not arrive in time
-    late: bool = False  # real-time clock: finished after the next tick
+    late: bool = False  # real-time clock: finished after its deadline
+    dropped: Annotated[int, Field(ge=0, strict=True)] = 0  # messages this node has dropped so far
 
     @model_validator(mode="after")
     def _shape_spd(self) -> NodeState:

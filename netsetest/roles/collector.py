@@ -98,7 +98,7 @@ class Collector:
         for n in self.sc.nodes:
             i = n.id
             entries, E_all, misses, broken_misses, solve, fallbacks, widths = [], [], 0, 0, [], 0, []
-            late = missing_msgs = 0
+            late = missing_msgs = dropped = 0
             for k in sorted(self.states[i]):
                 st = self.states[i][k]
                 ev = self.evaluated.get((i, k))
@@ -116,6 +116,7 @@ class Collector:
                 fallbacks += st.status == "fallback"
                 late += st.late
                 missing_msgs += len(st.missing)
+                dropped = max(dropped, st.dropped)
                 P = st.P_matrix()
                 widths.append(2.0 * np.sqrt(st.rho * P[2, 2]))
                 entries.append(
@@ -143,6 +144,7 @@ class Collector:
                     "missing_steps": len(gone),
                     "missing_from": gone[0] if gone else None,
                     "neighbour_messages_missing": missing_msgs,
+                    "dropped_messages": dropped,
                     "deadline_misses": (deadline_misses or {}).get(i, late),
                 }
             )
@@ -155,7 +157,7 @@ class Collector:
             "nodes_missing": [r["id"] for r in node_rows if r["missing_steps"]],
             "losses": dict(sorted(losses.items())),
             "losses_total": sum(losses.values()),
-            "dropped_messages": dict(self.bus.dropped),
+            "dropped_messages": dict(self.bus.dropped),  # by the collector; per node in nodes[*]
             "nodes": node_rows,
         }
         truth = [self._truth_entry(self.truth[k]) for k in sorted(self.truth)]

@@ -17,13 +17,20 @@ import numpy as np
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import Scenario
+from netsetest.estimator.rejoin import rejoin_ellipsoid
 from netsetest.estimator.sdp import LocalEstimator, NeighbourState, Variant
 from netsetest.messages import End, Message, NodeInput, NodeState
 from netsetest.models.sensor import NA
 
 
+class NodeStartError(RuntimeError):
+    """A node process started into a running network without --rejoin."""
+
+
 class Node:
-    def __init__(self, scenario: Scenario, node_id: int, bus: Bus, run_id: str, variant: Variant = "scheduled") -> None:
+    def __init__(
+        self, scenario: Scenario, node_id: int, bus: Bus, run_id: str, variant: Variant = "scheduled", rejoin: bool = False
+    ) -> None:
         self.sc, self.bus, self.run = scenario, bus, run_id
         self.cfg = scenario.node(node_id)
         self.id = node_id
@@ -48,7 +55,7 @@ class Node:
         self.waiting_since: float | None = None
         self.give_up = False  # set by the runtime when the neighbour deadline passed
         self.ended = False
-        self.rejoin = False
+        self.rejoin = rejoin  # started into a running network: initialise from a neighbour's ellipsoid
         bus.subscribe(keys.node_input(run_id, node_id), self.on_message)
         for j in self.others:
             bus.subscribe(keys.node_state(run_id, j), self.on_message)
@@ -84,7 +91,9 @@ class Node:
     # ------------------------------------------------------------------ stepping
 
     def next_input(self) -> NodeInput | None:
-        return self.inputs.get(self.k + 1) if self.k >= 0 else self.inputs.get(min(self.inputs)) if self.inputs else None
+        if self.k >= 0:
+            return self.inputs.get(self.k + 1)
+        return self.inputs[max(self.inputs)] if self.inputs else None  # a rejoining node takes the newest
 
     def missing(self) -> list[int]:
         """Expected neighbour messages for the next step that have not arrived."""
@@ -100,8 +109,7 @@ class Node:
         if inp is None or self.ended and self.k >= self.sc.steps:
             return False
         if self.k < 0:
-            self._start(inp)
-            return True
+            return self._start(inp)
         if self.missing() and not self.give_up:
             if self.waiting_since is None:
                 self.waiting_since = now if now is not None else time.monotonic()
@@ -109,9 +117,19 @@ class Node:
         self._update(inp)
         return True
 
-    def _start(self, inp: NodeInput) -> None:
-        """Step 0 (or the first step after a rejoin): publish the prior ellipsoid."""
-        self._publish(inp, "init", rho_cert=None, solve_ms=0.0, used=[], missing=[])
+    def _start(self, inp: NodeInput) -> bool:
+        """Step 0: publish the prior ellipsoid (Assumption 1).  Rejoin: see :mod:`netsetest.estimator.rejoin`."""
+        if inp.step == 0:
+            self._publish(inp, "init", rho_cert=None, solve_ms=0.0, used=[], missing=[])
+            return True
+        if not self.rejoin:
+            raise NodeStartError(f"node {self.id}: the run is already at step {inp.step}; start the node with --rejoin")
+        have = self.inbox.get(inp.step, {})
+        if not have:
+            return False  # wait for a neighbour's ellipsoid of this step
+        self.xhat, self.P = rejoin_ellipsoid(self.cfg.sensor, inp.y, inp.gamma, self.rho, list(have.values()))
+        self._publish(inp, "rejoin", rho_cert=None, solve_ms=0.0, used=sorted(have), missing=[])
+        return True
 
     def _update(self, inp: NodeInput) -> None:
         have = self.inbox.get(self.k, {})
@@ -133,6 +151,7 @@ class Node:
             step=inp.step, node=self.id, xhat=[float(a) for a in self.xhat], P=[float(a) for a in self.P.reshape(NA * NA)],
             rho=self.rho, gamma=inp.gamma, innov=innov, status=status, rho_cert=rho_cert,  # type: ignore[arg-type]
             solve_ms=solve_ms, used=used, missing=missing,
+            late=inp.deadline is not None and time.time() > inp.deadline, dropped=sum(self.bus.dropped.values()),
         )  # fmt: skip
         self.k = inp.step
         self.inputs = {s: m for s, m in self.inputs.items() if s > self.k}

@@ -12,6 +12,8 @@ runtime decides what to do with nodes that stay silent).  Real time: the runtime
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from netsetest.bus import keys
@@ -42,8 +44,19 @@ class LossSchedule:
 
 
 class Vehicle:
-    def __init__(self, scenario: Scenario, bus: Bus, run_id: str, signals: SignalKind = "paper", seed: int = 0) -> None:
+    def __init__(
+        self,
+        scenario: Scenario,
+        bus: Bus,
+        run_id: str,
+        signals: SignalKind = "paper",
+        seed: int = 0,
+        realtime: bool = False,
+        dead_after_steps: int = 20,
+    ) -> None:
         self.sc, self.bus, self.run = scenario, bus, run_id
+        # lockstep: a node not heard at step k is dead; real time: not heard for dead_after_steps steps
+        self.realtime, self.dead_after = realtime, dead_after_steps
         self.signals = ExogenousSignals(
             signals,
             seed,
@@ -61,6 +74,7 @@ class Vehicle:
         self.u = self.w = self.vx = 0.0
         self.heard: dict[int, set[int]] = {}
         self.alive = set(scenario.ids)
+        self.revived: set[int] = set()
         self.done = False
         bus.subscribe(keys.node_state(run_id, "*"), self.on_message)
 
@@ -80,7 +94,9 @@ class Vehicle:
         if self.done:
             return
         if self.k >= 0:
-            self.alive &= self.heard.get(self.k, set())
+            window = range(max(0, self.k - self.dead_after + 1), self.k + 1) if self.realtime else [self.k]
+            self.alive = set().union(*(self.heard.get(s, set()) for s in window)) | self.revived
+            self.revived = set()
             if self.k == self.sc.steps:
                 self.bus.publish(keys.end(self.run), End(steps=self.sc.steps))
                 self.done = True
@@ -90,8 +106,9 @@ class Vehicle:
         self._publish_step(self.k)
 
     def revive(self, node_id: int) -> None:
-        """A restarted node announced itself: expect it again from the next step on."""
-        self.alive.add(node_id)
+        """A restarted node announced itself: expect it again from the next published step on."""
+        if node_id in self.sc.ids and node_id not in self.alive:
+            self.revived.add(node_id)
 
     def _publish_step(self, k: int) -> None:
         sc = self.sc
@@ -99,6 +116,7 @@ class Vehicle:
         self.u, self.w, v, gamma = self.signals.draw(k)
         self.vx = sc.vx(k)
         lost = self.losses.lost_at(k) if k > 0 else []
+        deadline = time.time() + sc.tau_s if self.realtime else None
         y, y0, faults, sector_ok, noise_ok = {}, {}, {}, {}, {}
         for idx, n in enumerate(sc.nodes):
             f = n.fault(k)
@@ -115,7 +133,7 @@ class Vehicle:
                 keys.node_input(self.run, n.id),
                 NodeInput(
                     step=k, node=n.id, y=y[n.id], gamma=float(gamma[idx]),
-                    u_prev=u_prev, vx_prev=vx_prev, expect_from=expect, lost_from=lost_from,
+                    u_prev=u_prev, vx_prev=vx_prev, expect_from=expect, lost_from=lost_from, deadline=deadline,
                 ),  # fmt: skip
             )
         s = lambda d: {str(i): val for i, val in d.items()}  # noqa: E731

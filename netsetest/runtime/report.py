@@ -24,10 +24,12 @@ class Progress:
         if not self.enabled:
             return
         pct = int(100 * done / max(self.total, 1))
+        if pct == self.last_pct:
+            return
         if self.tty:
             self.stream.write(f"\r{self.label}: step {done}/{self.total} ({pct:3d} %) {extra}\033[K")
             self.stream.flush()
-        elif pct // 10 != self.last_pct // 10 or done == self.total:
+        elif pct // 10 != self.last_pct // 10 or pct == 100:
             self.stream.write(f"{self.label}: step {done}/{self.total} ({pct} %, {time.monotonic() - self.t0:.1f} s) {extra}\n")
             self.stream.flush()
         self.last_pct = pct

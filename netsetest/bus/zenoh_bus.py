@@ -1,0 +1,88 @@
+"""The Zenoh bus (eclipse-zenoh 1.x): one session per process, msgpack payloads, reliable and blocking.
+
+Session configuration is explicit and short:
+
+- ``peer`` (the embedded default, one host): multicast scouting off, the process listens on its own
+  endpoint and connects to the endpoints of the other processes (a full mesh on loopback, no router);
+- ``client``: connects to one or more routers (several hosts, containers);
+- ``router``: a Python session that routes for clients (``netsetest router``).
+
+Subscribers' callbacks run on Zenoh threads; they only queue the raw bytes.  The role's own thread
+decodes, validates and dispatches them in :meth:`Bus.pump`.  Close the bus explicitly: a process that
+exits with an open session can hang.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from typing import Literal
+
+import zenoh
+
+from netsetest.bus.base import Bus, Handler
+
+ZenohMode = Literal["peer", "client", "router"]
+
+
+class BusError(RuntimeError):
+    """The transport could not be set up (bad endpoint, port in use, router unreachable)."""
+
+
+def zenoh_config(
+    mode: ZenohMode, listen: Sequence[str] = (), connect: Sequence[str] = (), connect_timeout_s: float = 10.0
+) -> zenoh.Config:
+    """A Zenoh configuration with multicast scouting off and explicit endpoints."""
+    cfg = zenoh.Config()
+    cfg.insert_json5("mode", json.dumps(mode))
+    cfg.insert_json5("scouting/multicast/enabled", "false")  # runs on one host must not find each other
+    cfg.insert_json5("scouting/delay", "0")  # else open() blocks 0.5 s while a peer is not up yet
+    cfg.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    cfg.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    # peers start in any order: retry unreachable endpoints quickly (the default backoff starts at 1 s)
+    cfg.insert_json5("connect/retry", '{"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2}')
+    if mode == "client":  # wait for the router rather than fail at once
+        cfg.insert_json5("connect/timeout_ms", str(int(connect_timeout_s * 1000)))
+    return cfg
+
+
+class ZenohBus(Bus):
+    def __init__(self, mode: ZenohMode = "peer", listen: Sequence[str] = (), connect: Sequence[str] = ()) -> None:
+        super().__init__()
+        try:
+            self.session = zenoh.open(zenoh_config(mode, listen, connect))
+        except zenoh.ZError as exc:
+            raise BusError(f"cannot open a Zenoh {mode} session (listen {list(listen)}, connect {list(connect)}): {exc}") from None
+        self._subs: list[zenoh.Subscriber] = []
+        self._pubs: dict[str, zenoh.Publisher] = {}
+        self._closed = False
+
+    def subscribe(self, key_expr: str, handler: Handler) -> None:
+        def on_sample(sample: zenoh.Sample) -> None:
+            self._enqueue(str(sample.key_expr), sample.payload.to_bytes(), handler)
+
+        self._subs.append(self.session.declare_subscriber(key_expr, on_sample))
+
+    def _send(self, key: str, payload: bytes) -> None:
+        pub = self._pubs.get(key)
+        if pub is None:
+            # lockstep needs every message: reliable transport, and block rather than drop when congested
+            pub = self.session.declare_publisher(
+                key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE
+            )
+            self._pubs[key] = pub
+        pub.put(payload)
+
+    def send_raw(self, key: str, payload: bytes) -> None:
+        """Publish arbitrary bytes (tests inject malformed messages with it)."""
+        self._send(key, payload)
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        for sub in self._subs:
+            sub.undeclare()
+        for pub in self._pubs.values():
+            pub.undeclare()
+        self.session.close()
