@@ -23,6 +23,9 @@ from netsetest.messages import End, Message, NodeInput, NodeState
 from netsetest.models.sensor import NA
 
 
+MAX_AHEAD = 50  # steps ahead of our own: more is a corrupt or hostile message (bounds the buffers)
+
+
 class NodeStartError(RuntimeError):
     """A node process started into a running network without --rejoin."""
 
@@ -70,6 +73,9 @@ class Node:
             if msg.node != self.id or msg.step <= self.k:
                 self.bus.drop("node-input-mismatch")
                 return
+            if self.k >= 0 and msg.step > self.k + MAX_AHEAD:
+                self.bus.drop("implausible-step")
+                return
             self.inputs[msg.step] = msg
         elif isinstance(msg, NodeState):
             self._on_neighbour(key, msg)
@@ -82,6 +88,9 @@ class Node:
             return
         if msg.step < self.k:  # too late to be used
             self.bus.drop("stale")
+            return
+        if self.k >= 0 and msg.step > self.k + MAX_AHEAD:
+            self.bus.drop("implausible-step")
             return
         P = msg.P_matrix()  # symmetric positive definite: checked by decode()
         self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(
