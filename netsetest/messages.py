@@ -38,7 +38,7 @@ class _Msg(BaseModel):
 
 
 class Ready(_Msg):
-    """A role announces it is subscribed (Zenoh start-up barrier, and a node rejoining a running network).
+    """A role announces it is subscribed (Zenoh start-up barrier).
 
     ``seen_all``: this role has heard Ready from every other role, so its subscriptions are known to
     them and theirs to it (a Ready travels on the same link after the subscriber declarations).
@@ -48,7 +48,6 @@ class Ready(_Msg):
     role: Literal["vehicle", "node", "collector"]
     node: NodeId | None = None
     seen_all: bool = False
-    rejoin: bool = False
 
 
 class NodeInput(_Msg):

@@ -57,10 +57,21 @@ def _seconds(s: str) -> float:
     return v
 
 
+def _non_negative(s: str) -> float:
+    try:
+        v = float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number of seconds: {s!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be ≥ 0, got {v}")
+    return v
+
+
 def add_run_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("zenoh mode")
     g.add_argument("--node-timeout", type=_seconds, default=10.0, help="lockstep: a node silent this long is declared dead")
     g.add_argument("--neighbour-timeout", type=_seconds, default=5.0, help="lockstep: how long a node waits for a neighbour")
+    g.add_argument("--pace", type=_non_negative, default=0.0, help="lockstep: at least this many seconds per step (default: as fast as possible)")
     g.add_argument("--kill", type=_at, action="append", default=[], metavar="NODE@STEP", help="SIGKILL node NODE once step STEP is checked")
     g.add_argument("--rejoin", type=_at, action="append", default=[], metavar="NODE@STEP", help="restart node NODE with --rejoin at step STEP")
 
@@ -72,6 +83,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep")
     p.add_argument("--node-timeout", type=_seconds, default=10.0)
+    p.add_argument("--pace", type=_non_negative, default=0.0, help="lockstep: at least this many seconds per step")
     p.add_argument("--start-timeout", type=_seconds, default=60.0, help="how long to wait for every role to be ready")
     _zenoh_args(p)
 
@@ -138,7 +150,7 @@ def cmd_vehicle(a: argparse.Namespace) -> int:
     from netsetest.runtime.processes import run_vehicle
 
     return _role("vehicle", a, lambda sc, bus: run_vehicle(
-        sc, bus, a.run_id, a.signals, a.seed, a.clock == "realtime", a.node_timeout, a.start_timeout))  # fmt: skip
+        sc, bus, a.run_id, a.signals, a.seed, a.clock == "realtime", a.node_timeout, a.start_timeout, a.pace))  # fmt: skip
 
 
 def cmd_node(a: argparse.Namespace) -> int:
@@ -260,6 +272,10 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
     sc = load_topology(a.topology, a.case, a.steps)
     for node, _ in a.kill + a.rejoin:
         sc.node(node)
+    if a.neighbour_timeout >= a.node_timeout:
+        # else a node waiting for a dead neighbour is itself declared dead by the vehicle
+        log("run", f"--neighbour-timeout ({a.neighbour_timeout:g} s) must be shorter than --node-timeout ({a.node_timeout:g} s)")
+        return EXIT_BAD_INPUT
     run_id = f"run{os.getpid()}"
     names = ["collector", "vehicle", *(f"node{i}" for i in sc.ids)]
     ports = dict(zip(names, free_ports(len(names))))
@@ -310,7 +326,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         children.start(
             "vehicle",
             ["vehicle", *common, "--signals", a.signals, "--seed", str(a.seed), "--clock", a.clock,
-             "--node-timeout", str(a.node_timeout), *net("vehicle")],
+             "--node-timeout", str(a.node_timeout), "--pace", str(a.pace), *net("vehicle")],
             stdout=subprocess.DEVNULL,
         )  # fmt: skip
         kills, rejoins = sorted(a.kill, key=lambda t: t[1]), sorted(a.rejoin, key=lambda t: t[1])

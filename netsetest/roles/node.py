@@ -24,6 +24,7 @@ from netsetest.models.sensor import NA
 
 
 MAX_AHEAD = 50  # steps ahead of our own: more is a corrupt or hostile message (bounds the buffers)
+LATE_START_EVIDENCE = 3  # inputs of later steps, and none of step 0: the run started without us
 
 
 class NodeStartError(RuntimeError):
@@ -59,6 +60,7 @@ class Node:
         self.give_up = False  # set by the runtime when the neighbour deadline passed
         self.ended = False
         self.rejoin = rejoin  # started into a running network: initialise from a neighbour's ellipsoid
+        self.late_start_evidence = 0
         bus.subscribe(keys.node_input(run_id, node_id), self.on_message)
         for j in self.others:
             bus.subscribe(keys.node_state(run_id, j), self.on_message)
@@ -73,10 +75,17 @@ class Node:
             if msg.node != self.id or msg.step <= self.k:
                 self.bus.drop("node-input-mismatch")
                 return
+            if self.k < 0 and not self.rejoin and msg.step > 0:
+                # a fresh node starts at step 0; later steps mean a hostile message or a run we missed
+                self.bus.drop("implausible-step" if msg.step > MAX_AHEAD else "before-start")
+                self.late_start_evidence += 1
+                return
             if self.k >= 0 and msg.step > self.k + MAX_AHEAD:
                 self.bus.drop("implausible-step")
                 return
             self.inputs[msg.step] = msg
+            if len(self.inputs) > MAX_AHEAD:  # a rejoining node before it re-entered: keep the newest
+                del self.inputs[min(self.inputs)]
         elif isinstance(msg, NodeState):
             self._on_neighbour(key, msg)
         else:
@@ -102,7 +111,9 @@ class Node:
     def next_input(self) -> NodeInput | None:
         if self.k >= 0:
             return self.inputs.get(self.k + 1)
-        return self.inputs[max(self.inputs)] if self.inputs else None  # a rejoining node takes the newest
+        if self.rejoin:
+            return self.inputs[max(self.inputs)] if self.inputs else None  # re-enter at the newest step
+        return self.inputs.get(0)
 
     def missing(self) -> list[int]:
         """Expected neighbour messages for the next step that have not arrived."""
@@ -115,6 +126,8 @@ class Node:
     def try_step(self, now: float | None = None) -> bool:
         """Compute and publish the next step if its inputs are here (or the runtime gave up waiting)."""
         inp = self.next_input()
+        if inp is None and self.k < 0 and self.late_start_evidence >= LATE_START_EVIDENCE:
+            raise NodeStartError(f"node {self.id}: the run is already past step 0; start the node with --rejoin")
         if inp is None or self.ended and self.k >= self.sc.steps:
             return False
         if self.k < 0:
@@ -131,8 +144,6 @@ class Node:
         if inp.step == 0:
             self._publish(inp, "init", rho_cert=None, solve_ms=0.0, used=[], missing=[])
             return True
-        if not self.rejoin:
-            raise NodeStartError(f"node {self.id}: the run is already at step {inp.step}; start the node with --rejoin")
         have = self.inbox.get(inp.step, {})
         if not have:
             return False  # wait for a neighbour's ellipsoid of this step

@@ -74,12 +74,18 @@ class Vehicle:
         self.u = self.w = self.vx = 0.0
         self.heard: dict[int, set[int]] = {}
         self.alive = set(scenario.ids)
-        self.revived: set[int] = set()
         self.done = False
         bus.subscribe(keys.node_state(run_id, "*"), self.on_message)
 
     def on_message(self, key: str, msg: Message) -> None:
-        if isinstance(msg, NodeState) and msg.node in self.alive and msg.step <= self.k:
+        """Record who reported; a node declared dead that reports again (late, or rejoined) is alive
+        from the next step on — the vehicle only waits for the nodes alive at the current step."""
+        if not isinstance(msg, NodeState):
+            return
+        if msg.node not in self.sc.ids or key != keys.node_state(self.run, msg.node):
+            self.bus.drop("state-on-foreign-key")
+            return
+        if msg.step <= self.k:
             self.heard.setdefault(msg.step, set()).add(msg.node)
 
     def waiting_for(self) -> set[int]:
@@ -95,8 +101,7 @@ class Vehicle:
             return
         if self.k >= 0:
             window = range(max(0, self.k - self.dead_after + 1), self.k + 1) if self.realtime else [self.k]
-            self.alive = set().union(*(self.heard.get(s, set()) for s in window)) | self.revived
-            self.revived = set()
+            self.alive = set().union(*(self.heard.get(s, set()) for s in window))
             if self.k == self.sc.steps:
                 self.bus.publish(keys.end(self.run), End(steps=self.sc.steps))
                 self.done = True
@@ -104,11 +109,6 @@ class Vehicle:
             self.x = self.sc.model.step(self.x, self.u, self.w, self.vx)
         self.k += 1
         self._publish_step(self.k)
-
-    def revive(self, node_id: int) -> None:
-        """A restarted node announced itself: expect it again from the next published step on."""
-        if node_id in self.sc.ids and node_id not in self.alive:
-            self.revived.add(node_id)
 
     def _publish_step(self, k: int) -> None:
         sc = self.sc

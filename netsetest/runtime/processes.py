@@ -55,7 +55,6 @@ class Barrier:
         self.bus, self.run, self.me, self.others = bus, run_id, me, others
         self.heard: set[tuple[str, int | None]] = set()
         self.complete: set[tuple[str, int | None]] = set()  # roles that reported seen_all
-        self.rejoins: list[int] = []
         self.last_sent = 0.0
         bus.subscribe(keys.ready(run_id), self.on_message)
 
@@ -63,8 +62,6 @@ class Barrier:
         if not isinstance(msg, Ready):
             return
         who = (msg.role, msg.node)
-        if msg.rejoin and msg.node is not None:
-            self.rejoins.append(msg.node)
         self.heard.add(who)
         if msg.seen_all:
             self.complete.add(who)
@@ -89,6 +86,7 @@ def run_vehicle(
     realtime: bool,
     node_timeout: float,
     start_timeout: float,
+    pace: float = 0.0,
 ) -> int:
     vehicle = Vehicle(sc, bus, run_id, signals, seed, realtime=realtime)
     me = ("vehicle", None)
@@ -111,17 +109,15 @@ def run_vehicle(
             bus.pump(timeout=max(0.0, min(next_tick + sc.tau_s - now, 0.05)))
         else:
             bus.pump(timeout=min(0.05, max(0.0, t_step + node_timeout - now)))
-        for i in barrier.rejoins:
-            vehicle.revive(i)
-        barrier.rejoins.clear()
         now = time.monotonic()
         if realtime:
             if now >= next_tick + sc.tau_s:
                 next_tick += sc.tau_s
                 vehicle.advance()
         elif vehicle.ready_to_advance():
-            vehicle.advance()
-            t_step = now
+            if now - t_step >= pace:  # lockstep paced for watching (or for a restarted node to catch up)
+                vehicle.advance()
+                t_step = now
         elif now - t_step > node_timeout:
             log("vehicle", f"step {vehicle.k}: no state from node(s) {sorted(vehicle.waiting_for())} in {node_timeout:g} s; going on without")
             vehicle.advance()
@@ -142,10 +138,10 @@ def run_node(
 ) -> int:
     node = Node(sc, node_id, bus, run_id, variant, rejoin=rejoin)
     role = f"node {node_id}"
-    barrier = Barrier(bus, run_id, Ready(role="node", node=node_id, rejoin=rejoin), _all_roles(sc) - {("node", node_id)})
+    barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), _all_roles(sc) - {("node", node_id)})
     while not node.ended:
         if node.k < 0:
-            barrier.tick(time.monotonic())  # until started (a rejoining node: until it has re-entered)
+            barrier.tick(time.monotonic())  # until started
         bus.pump(timeout=0.02)
         while True:
             now = time.monotonic()

@@ -1,0 +1,97 @@
+"""Client mode through a router (``netsetest router``), and the generated docker-compose.yml."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+
+import pytest
+from zenoh_helpers import (
+    PAPER6,
+    ROOT,
+    cli,
+    free_ports,
+    launch_clients,
+    new_run_id,
+    procs,  # noqa: F401 (fixture)
+    read_json,
+    wait_port,
+    wait_roles,
+)
+
+pytestmark = pytest.mark.zenoh
+
+
+@pytest.mark.timeout(120)
+def test_zenoh_client_mode_through_router(procs, tmp_path) -> None:  # noqa: ANN001
+    steps = 10
+    (port,) = free_ports(1)
+    router_ep = f"tcp/127.0.0.1:{port}"
+    router = procs.start("router", cli("router", "--listen", router_ep))
+    wait_port("127.0.0.1", port, 30)
+    assert f"listening on {router_ep}" in procs.stderr("router")
+
+    run_id = new_run_id()
+    summary_path = tmp_path / "summary.json"
+    launch_clients(procs, PAPER6, run_id, steps, summary_path, router_ep)
+    codes = wait_roles(procs, 100)
+    assert codes == {n: 0 for n in codes}, f"{codes}\n{procs.logs()}"
+
+    s = read_json(summary_path)
+    assert s["mode"] == "zenoh" and s["steps_completed"] == steps
+    assert s["violations_total"] == 0 and s["nodes_missing"] == []
+    for row in s["nodes"]:
+        assert row["steps_reported"] == steps + 1 and row["violations"] == 0, row
+        assert row["neighbour_messages_missing"] == 0, row
+
+    # the router outlives its clients and stops cleanly on SIGTERM
+    assert router.poll() is None
+    router.send_signal(signal.SIGTERM)
+    assert procs.wait("router", 10) == 0
+
+
+@pytest.mark.timeout(60)
+def test_zenoh_compose_matches_committed_file() -> None:
+    out = subprocess.run(cli("compose", PAPER6), cwd=ROOT, capture_output=True, timeout=50)
+    assert out.returncode == 0, out.stderr.decode()
+    committed = (ROOT / "docker-compose.yml").read_bytes()
+    assert out.stdout == committed, "docker-compose.yml is stale: regenerate it with `netsetest compose topologies/paper6.toml`"
+
+    # pyyaml is not among the [dev] extras (pyproject.toml): skip the structural checks where it is missing
+    yaml = pytest.importorskip("yaml", reason="pyyaml is needed to parse the compose file")
+    doc = yaml.safe_load(out.stdout)
+    services = doc["services"]
+    nodes = [f"node{i}" for i in range(1, 7)]
+    assert set(services) == {"router", "vehicle", "collector", *nodes}
+    assert services["router"]["image"].startswith("eclipse/zenoh")
+    assert "--no-multicast-scouting" in services["router"]["command"]
+
+    from netsetest.cli.main import build_parser
+
+    run_ids = set()
+    for name in ["vehicle", "collector", *nodes]:
+        svc = services[name]
+        cmd = svc["command"]
+        assert isinstance(cmd, list) and cmd[0] == "netsetest", (name, cmd)
+        role = "node" if name.startswith("node") else name
+        assert cmd[1] == role
+        pairs = list(zip(cmd, cmd[1:]))
+        assert ("--zenoh-mode", "client") in pairs, (name, cmd)
+        assert ("--connect", "tcp/router:7447") in pairs, (name, cmd)
+        assert "router" in (svc.get("depends_on") or []), name
+        # the command line is one netsetest accepts
+        a = build_parser().parse_args(cmd[1:])
+        assert a.command == role and a.zenoh_mode == "client" and a.connect == ["tcp/router:7447"]
+        assert a.topology == PAPER6
+        run_ids.add(a.run_id)
+        if role == "node":
+            assert a.id == int(name.removeprefix("node")), (name, cmd)
+            assert cmd.count("--id") == 1
+        else:
+            assert "--id" not in cmd
+    assert len(run_ids) == 1, f"the services do not share one run id: {run_ids}"
+    # the collector writes its record and summary into the ./runs volume
+    col = services["collector"]
+    opts = dict(zip(col["command"], col["command"][1:]))
+    assert opts["--summary-json"].startswith("/runs/") and opts["--record"].startswith("/runs/")
+    assert "./runs:/runs" in col["volumes"]
