@@ -406,3 +406,16 @@ def test_speed_profile_inside_model_range():
     assert max(vxs) - min(vxs) > 0.5 * (p.vx_max - p.vx_min)  # sweeps the rules
     for vx in vxs:
         sc.model.weights(vx)  # must not raise
+
+
+def test_own_expm_matches_scipy():
+    """The numpy expm used by the ZOH (no scipy.linalg in node processes) agrees with scipy's."""
+    from scipy.linalg import expm as scipy_expm
+
+    from netsetest.models.vehicle import expm
+
+    rng = np.random.default_rng(0)
+    for scale in (1e-3, 0.3, 3.0, 30.0):
+        m = rng.normal(size=(4, 4)) * scale
+        ref = scipy_expm(m)
+        assert np.abs(expm(m) - ref).max() <= 1e-10 * np.abs(ref).max()

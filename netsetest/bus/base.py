@@ -70,14 +70,18 @@ class MemoryBus(Bus):
     def __init__(self) -> None:
         super().__init__()
         self._subs: list[tuple[str, Handler]] = []
+        self._routes: dict[str, list[Handler]] = {}  # key → matching handlers (else O(N²) per step)
 
     def subscribe(self, key_expr: str, handler: Handler) -> None:
         self._subs.append((key_expr, handler))
+        self._routes.clear()
 
     def _send(self, key: str, payload: bytes) -> None:
-        for pattern, handler in self._subs:
-            if matches(pattern, key):
-                self._enqueue(key, payload, handler)
+        handlers = self._routes.get(key)
+        if handlers is None:
+            handlers = self._routes[key] = [h for pattern, h in self._subs if matches(pattern, key)]
+        for handler in handlers:
+            self._enqueue(key, payload, handler)
 
     def inject(self, key: str, payload: bytes) -> None:
         """Deliver raw bytes as if from the network (tests of malformed messages)."""

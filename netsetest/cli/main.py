@@ -67,6 +67,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("plot", help="figures like the paper's Figs. 5-8 from a record")
     p.add_argument("record", nargs="+", help="one record, or several (e.g. an nsnim and a saim run) for Fig. 8")
     p.add_argument("--out", required=True, help="output directory for the PNG files")
+
+    p = sub.add_parser("bench", help="benchmark: solve times, scaling, Zenoh overhead, real time, node cost (docs/performance.md)")
+    p.add_argument("--quick", action="store_true", help="fewer steps and samples (a few minutes)")
+    p.add_argument("--json", metavar="PATH", help="write every figure as JSON")
+    p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown")
     return ap
 
 
@@ -124,7 +129,21 @@ def cmd_plot(a: argparse.Namespace) -> int:
     return 0
 
 
-COMMANDS.update(run=cmd_run, inspect=cmd_inspect, plot=cmd_plot)
+def cmd_bench(a: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]  # the benchmark lives next to the package, in bench/
+    if not (root / "bench" / "run.py").exists():
+        print(f"netsetest bench: needs a source checkout ({root / 'bench'} not found)", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if str(root) not in sys.path:
+        sys.path.insert(0, str(root))
+    from bench.run import run_bench
+
+    return run_bench(a.quick, a.json, a.markdown)
+
+
+COMMANDS.update(run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, bench=cmd_bench)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

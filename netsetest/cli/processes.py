@@ -154,16 +154,11 @@ def cmd_vehicle(a: argparse.Namespace) -> int:
 
 
 def cmd_node(a: argparse.Namespace) -> int:
-    from netsetest.roles.node import NodeStartError
-    from netsetest.runtime.processes import log, run_node
+    from netsetest.runtime.processes import run_node
 
     def body(sc, bus) -> int:  # noqa: ANN001
         sc.node(a.id)  # unknown id → ConfigError, exit 2
-        try:
-            return run_node(sc, a.id, bus, a.run_id, a.variant, a.clock == "realtime", a.neighbour_timeout, a.rejoin)
-        except NodeStartError as exc:
-            log(f"node {a.id}", str(exc))
-            return EXIT_BAD_INPUT
+        return run_node(sc, a.id, bus, a.run_id, a.variant, a.clock == "realtime", a.neighbour_timeout, a.rejoin)
 
     return _role(f"node {a.id}", a, body)
 

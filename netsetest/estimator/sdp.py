@@ -24,8 +24,13 @@ S-procedure and Schur complement give the LMI (one per rule in ``per-rule``)
 
     [[−P, Π(L)], [Π(L)ᵀ, −ρ_i e₁e₁ᵀ + Σ_m τ_m Q_m]] ⪯ 0,   P ≻ 0, τ ≥ 0,   minimise trace(P)
 
-and then (x̄⁺ − x̂⁺)ᵀ P⁻¹ (x̄⁺ − x̂⁺) ≤ ρ_i.  The problem is built once per node from cvxpy Parameters
-and re-solved every step.  Every solution is verified in floating point (:func:`certify`) before it is
+and then (x̄⁺ − x̂⁺)ᵀ P⁻¹ (x̄⁺ − x̂⁺) ≤ ρ_i.
+
+Two backends solve it.  ``clarabel`` (the default, :mod:`netsetest.estimator.conic`) assembles an
+exactly equivalent, smaller conic problem for Clarabel directly from the step data (Π₀, ℓ, Q_m) and
+maps its answer back to (P, L, τ) of the LMI above; ``cvxpy`` builds the LMI as written once from cvxpy
+Parameters and re-solves it every step (cvxpy is imported only when this backend is chosen).  Either
+way every answer is verified in floating point against the LMI above (:func:`certify`) before it is
 published; if that fails, :func:`fallback_shape` gives a guaranteed (looser) ellipsoid and the step is
 flagged.
 """
@@ -37,14 +42,15 @@ import warnings
 from dataclasses import dataclass, field
 from typing import Literal
 
-import cvxpy as cp
 import numpy as np
 
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.vehicle import N_RULES, TSModel
 
 Variant = Literal["scheduled", "per-rule"]
+Backend = Literal["clarabel", "cvxpy"]
 Status = Literal["ok", "fallback"]
+BACKENDS = ("clarabel", "cvxpy")
 
 
 @dataclass(frozen=True)
@@ -69,10 +75,24 @@ class StepResult:
     L: np.ndarray = field(default_factory=lambda: np.zeros((NA, 1)))
 
 
+@dataclass(frozen=True)
+class FactInfo:
+    """Structure of one quadratic fact ηᵀQ_m η ≥ 0, in the order of ``step_data()['facts']``.
+
+    ``ball``: 1 − Σ_{k ∈ slots} η_k²/bound (Q[0,0] = 1, Q[k,k] = −1/bound, nothing else).
+    ``sector``: φ (h gᵀη − φ) with φ = η[slots[0]]; ``support`` are the slots where g may be non-zero.
+    """
+
+    kind: Literal["ball", "sector"]
+    slots: tuple[int, ...]
+    bound: float = 1.0
+    support: tuple[int, ...] = ()
+
+
 class EtaLayout:
     """Slot indices of η for node i and its in-neighbours N_i (fixed by the topology)."""
 
-    def __init__(self, node_id: int, neighbours: dict[int, Sensor], own: Sensor) -> None:
+    def __init__(self, node_id: int, neighbours: dict[int, Sensor], own: Sensor, W: float = 1.0) -> None:
         self.node_id = node_id
         self.neigh = list(neighbours)  # j ∈ N_i in a fixed order (may include i)
         idx = 1
@@ -97,12 +117,21 @@ class EtaLayout:
         self.dim = idx
         # one quadratic fact per constraint, in this order
         self.n_facts = 1 + len(self.s) + 1 + len(self.v) + 1 + len(self.phi) + (1 if own.saturated else 0)
-
-
-def _unit(d: int, i: int) -> np.ndarray:
-    e = np.zeros(d)
-    e[i] = 1.0
-    return e
+        facts = [FactInfo("ball", tuple(self.z))]
+        facts += [FactInfo("ball", (self.s[j],)) for j in self.s]
+        facts.append(FactInfo("ball", (self.w,), W))
+        facts += [FactInfo("ball", (self.v[j],), neighbours[j].R) for j in self.v]
+        facts.append(FactInfo("ball", (self.v_new,), own.R))
+        for j in self.neigh:
+            if j in self.phi:
+                r_slots = tuple(self.z) if j == node_id else (self.s[j],)
+                facts.append(FactInfo("sector", (self.phi[j],), support=(0, *r_slots)))
+        if self.phi_new is not None:
+            facts.append(FactInfo("sector", (self.phi_new,), support=(0, *self.z, self.w, self.v_new, self.phi_new)))
+        self.facts = facts
+        assert len(facts) == self.n_facts
+        # slots whose column of Π₀ is zero in every rule: they enter e⁺ only through L ℓᵀη
+        self.pi0_zero = set(self.s.values()) | set(self.v.values()) | set(self.phi.values())
 
 
 def _ball(d: int, slots: list[int], bound: float = 1.0) -> np.ndarray:
@@ -116,8 +145,12 @@ def _ball(d: int, slots: list[int], bound: float = 1.0) -> np.ndarray:
 
 def _sector(d: int, slot: int, g: np.ndarray, h: float) -> np.ndarray:
     """Q of the fact φ (h gᵀη − φ) ≥ 0 where φ = η[slot]."""
-    e = _unit(d, slot)
-    return 0.5 * h * (np.outer(e, g) + np.outer(g, e)) - np.outer(e, e)
+    q = np.zeros((d, d))
+    hg = 0.5 * h * g
+    q[slot, :] = hg
+    q[:, slot] += hg
+    q[slot, slot] -= 1.0
+    return q
 
 
 def _chol(p: np.ndarray) -> np.ndarray:
@@ -125,7 +158,7 @@ def _chol(p: np.ndarray) -> np.ndarray:
 
 
 class LocalEstimator:
-    """The per-node SDP, built once from Parameters, re-solved every step."""
+    """The per-node SDP of one node: static data prepared once, solved every step by a backend."""
 
     def __init__(
         self,
@@ -136,34 +169,51 @@ class LocalEstimator:
         model: TSModel,
         W: float,
         variant: Variant = "scheduled",
+        backend: Backend = "clarabel",
     ) -> None:
+        if variant not in ("scheduled", "per-rule"):
+            raise ValueError(f"variant must be 'scheduled' or 'per-rule', got {variant!r}")
+        if backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
         self.node_id, self.own, self.model, self.W, self.variant = node_id, own, model, W, variant
+        self.backend = backend
         self.sensors = neighbours
         self.weights = weights
-        self.lay = EtaLayout(node_id, neighbours, own)
-        d, m = self.lay.dim, self.lay.n_facts
+        self.lay = EtaLayout(node_id, neighbours, own, W)
         self.n_lmi = N_RULES if variant == "per-rule" else 1
-        # Parameters (data of step k → k+1)
-        self.p_pi0 = [cp.Parameter((NA, d), name=f"Pi0_{r}") for r in range(self.n_lmi)]
-        self.p_ell = cp.Parameter((1, d), name="ell")
-        self.p_q = [cp.Parameter((d, d), symmetric=True, name=f"Q_{q}") for q in range(m)]
-        self.p_rho = cp.Parameter(nonneg=True, name="rho")
-        # Variables
-        self.v_P = cp.Variable((NA, NA), symmetric=True, name="P")
-        self.v_L = [cp.Variable((NA, 1), name=f"L_{r}") for r in range(self.n_lmi)]
-        self.v_tau = [cp.Variable(m, nonneg=True, name=f"tau_{r}") for r in range(self.n_lmi)]
-        e11 = np.zeros((d, d))
-        e11[0, 0] = 1.0
-        cons = []
-        for r in range(self.n_lmi):
-            pi = self.p_pi0[r] - self.v_L[r] @ self.p_ell
-            mult = -self.p_rho * e11 + sum(self.v_tau[r][q] * self.p_q[q] for q in range(m))
-            lmi = cp.bmat([[-self.v_P, pi], [pi.T, mult]])
-            cons.append(0.5 * (lmi + lmi.T) << 0)
-        self.problem = cp.Problem(cp.Minimize(cp.trace(self.v_P)), cons)
-        assert self.problem.is_dcp(dpp=True)
+        d = self.lay.dim
+        # static data, prepared once: augmented rule matrices Ā_ℓ, B̄_ℓ, D̄_ℓ and the ball facts
+        nr = model.A.shape[0]
+        self._abar = np.zeros((nr, NA, NA))
+        self._abar[:, :NX, :NX] = model.A
+        self._bbar = np.zeros((nr, NA))
+        self._bbar[:, :NX] = model.B[:, :, 0]
+        self._dbar = np.zeros((nr, NA))
+        self._dbar[:, :NX] = model.Dw[:, :, 0]
+        self._cbar = {j: s.Cbar for j, s in neighbours.items()}
+        self._own_cbar = own.Cbar
+        self._balls = []
+        for f in self.lay.facts:
+            if f.kind == "ball":
+                q = _ball(d, list(f.slots), f.bound)
+                q.flags.writeable = False
+                self._balls.append(q)
+        self._gains: tuple[float, np.ndarray, np.ndarray] | None = None
+        if backend == "clarabel":
+            from netsetest.estimator.conic import ConicSolver
+
+            self._solver = ConicSolver(self.lay, self.n_lmi)
+        else:
+            self._solver = _CvxpySolver(d, self.lay.n_facts, self.n_lmi)
 
     # ------------------------------------------------------------------ data of one step
+
+    def descriptor_gains(self, gamma: float) -> tuple[np.ndarray, np.ndarray]:
+        """T, G of the own sensor for γ (cached: γ is constant in NSNIM)."""
+        if self._gains is None or self._gains[0] != gamma:
+            T, G = self.own.descriptor_gains(gamma)
+            self._gains = (gamma, T, G)
+        return self._gains[1], self._gains[2]
 
     def step_data(
         self,
@@ -178,48 +228,41 @@ class LocalEstimator:
     ) -> dict:
         """Π₀ (per rule), ℓ, the facts Q_m and the L-free part of x̂⁺, as plain arrays."""
         lay, own, d = self.lay, self.own, self.lay.dim
-        T, G = own.descriptor_gains(gamma_new)
+        T, G = self.descriptor_gains(gamma_new)
         g = G[:, 0]
         Mi = np.sqrt(rho) * _chol(P)  # ρ_i^½ M_i
+        alpha = np.asarray(alpha, dtype=float)
+        ab = np.tensordot(alpha, self._abar, axes=1)  # the blended Ā, B̄, D̄ (exact for the truth)
+        bb = alpha @ self._bbar
+        db = alpha @ self._dbar
+        TA = T @ ab
+        Td = T @ db
 
-        def aug(a_: np.ndarray, b_: np.ndarray, dw_: np.ndarray) -> tuple[np.ndarray, ...]:
-            abar = np.zeros((NA, NA))
-            abar[:NX, :NX] = a_
-            return abar, np.r_[b_[:, 0], 0.0], np.r_[dw_[:, 0], 0.0]
-
-        rules = (
-            [aug(*self.model.blend(alpha))]
-            if self.variant == "scheduled"
-            else [aug(self.model.A[r], self.model.B[r], self.model.Dw[r]) for r in range(N_RULES)]
-        )
-        pi0s = []
-        for abar, _, dbar in rules:
-            pi0 = np.zeros((NA, d))
-            pi0[:, lay.z] = T @ abar @ Mi
-            pi0[:, lay.w] = T @ dbar
-            pi0[:, lay.v_new] = -g * own.Dv
-            if lay.phi_new is not None:
-                pi0[:, lay.phi_new] = -g * gamma_new
-            pi0s.append(pi0)
+        if self.variant == "scheduled":
+            pi0 = np.zeros((1, NA, d))
+            pi0[0][:, lay.z] = TA @ Mi
+            pi0[0][:, lay.w] = Td
+        else:
+            pi0 = np.zeros((N_RULES, NA, d))
+            pi0[:, :, lay.z] = T @ self._abar @ Mi
+            pi0[:, :, lay.w] = self._dbar @ T.T
+        pi0[:, :, lay.v_new] = -g * own.Dv
+        if lay.phi_new is not None:
+            pi0[:, :, lay.phi_new] = -g * gamma_new
 
         # ℓᵀη = Σ_j a_ij y̌_j(η); a missing neighbour's slots stay zero (its facts then hold with η-slot 0)
         ell = np.zeros(d)
-        facts: list[np.ndarray] = [_ball(d, lay.z)]
-        for j in lay.s:
-            facts.append(_ball(d, [lay.s[j]]))
-        facts.append(_ball(d, [lay.w], self.W))
-        for j in lay.v:
-            facts.append(_ball(d, [lay.v[j]], self.sensors[j].R))
-        facts.append(_ball(d, [lay.v_new], own.R))
+        facts: list[np.ndarray] = list(self._balls)
         for j in lay.neigh:
             sj, nb = self.sensors[j], neigh.get(j)
             g_r = np.zeros(d)  # r_j = gᵀη
             if nb is not None:
                 a = self.weights[j]
-                cbar = sj.Cbar
-                ell[0] += a * (nb.gamma * sj.h1 - 1.0) * (cbar @ nb.xhat)
+                cbar = self._cbar[j]
+                cx = float(cbar @ nb.xhat)
+                ell[0] += a * (nb.gamma * sj.h1 - 1.0) * cx
                 ell[lay.v[j]] += a * sj.Dv
-                g_r[0] = cbar @ nb.xhat
+                g_r[0] = cx
                 if j == self.node_id:
                     row = cbar @ Mi  # the node's own z_i
                     ell[lay.z] += a * nb.gamma * sj.h1 * row
@@ -234,19 +277,22 @@ class LocalEstimator:
                 facts.append(_sector(d, lay.phi[j], g_r, sj.h))
 
         # L-free part of the centre; the blended matrices are exact for the truth in both variants
-        abar_b, bbar_b, dbar_b = aug(*self.model.blend(alpha))
-        x_pred = T @ abar_b @ xhat + T @ bbar_b * u + g * y_new
+        x_pred = TA @ xhat + (T @ bb) * u + g * y_new
         if lay.phi_new is not None:
-            cbar = own.Cbar
+            cbar = self._own_cbar
+            cg = float(cbar @ g)
             g_new = np.zeros(d)  # r⁺ = C̄ x̄⁺ of the truth, with the blended model in every rule
             g_new[0] = cbar @ x_pred
-            g_new[lay.z] = cbar @ T @ abar_b @ Mi
-            g_new[lay.w] = cbar @ T @ dbar_b
-            g_new[lay.v_new] = -(cbar @ g) * own.Dv
-            g_new[lay.phi_new] = -(cbar @ g) * gamma_new
+            g_new[lay.z] = cbar @ TA @ Mi
+            g_new[lay.w] = cbar @ Td
+            g_new[lay.v_new] = -cg * own.Dv
+            g_new[lay.phi_new] = -cg * gamma_new
             facts.append(_sector(d, lay.phi_new, g_new, own.h))
-        ell_sum = sum(self.weights[j] * neigh[j].innov for j in lay.neigh if j in neigh)
-        return {"pi0": pi0s, "ell": ell, "facts": facts, "x_pred": x_pred, "innov_sum": float(ell_sum), "T": T, "G": G, "Mi": Mi}
+        ell_sum = 0.0
+        for j in lay.neigh:
+            if j in neigh:
+                ell_sum += self.weights[j] * neigh[j].innov
+        return {"pi0": list(pi0), "ell": ell, "facts": facts, "x_pred": x_pred, "innov_sum": float(ell_sum), "T": T, "G": G, "Mi": Mi}
 
     # ------------------------------------------------------------------ one step
 
@@ -262,39 +308,81 @@ class LocalEstimator:
         neigh: dict[int, NeighbourState],
     ) -> StepResult:
         data = self.step_data(xhat, P, rho, alpha, u, y_new, gamma_new, neigh)
+        t0 = time.perf_counter()
+        sol = self._solver.solve(data, rho)
+        solve_ms = 1e3 * (time.perf_counter() - t0)
+
+        if sol.P is not None:
+            if self.n_lmi == 1:
+                L, tau, pi0 = sol.L[0], sol.tau[0], data["pi0"][0]
+            else:
+                L = sum(a * v for a, v in zip(alpha, sol.L))
+                tau = sum(a * v for a, v in zip(alpha, sol.tau))
+                pi0 = sum(a * p for a, p in zip(alpha, data["pi0"]))
+            pi = pi0 - L @ data["ell"][None, :]
+            rho_c = certify(sol.P, pi, tau, data["facts"])
+            if rho_c is not None:
+                P_pub = 0.5 * (sol.P + sol.P.T) * rho_c / rho
+                xhat_new = data["x_pred"] + L[:, 0] * data["innov_sum"]
+                return StepResult(xhat_new, P_pub, "ok", rho_c, solve_ms, sol.status, L)
+        P_fb = fallback_shape(data, self.own, gamma_new, self.W, alpha, self.model) / rho
+        return StepResult(data["x_pred"].copy(), P_fb, "fallback", np.nan, solve_ms, sol.status)
+
+
+@dataclass
+class Solution:
+    """A backend's answer in the terms of the LMI: P, and per rule L_ℓ (3×1) and τ_ℓ (one per fact)."""
+
+    P: np.ndarray | None
+    L: list[np.ndarray]
+    tau: list[np.ndarray]
+    status: str
+    iterations: int = 0
+
+
+class _CvxpySolver:
+    """The LMI exactly as written, built once from cvxpy Parameters and re-solved with Clarabel."""
+
+    def __init__(self, d: int, m: int, n_lmi: int) -> None:
+        import cvxpy as cp  # only here: importing cvxpy costs ~120 MB and ~1 s
+
+        self.cp, self.n_lmi = cp, n_lmi
+        self.p_pi0 = [cp.Parameter((NA, d), name=f"Pi0_{r}") for r in range(n_lmi)]
+        self.p_ell = cp.Parameter((1, d), name="ell")
+        self.p_q = [cp.Parameter((d, d), symmetric=True, name=f"Q_{q}") for q in range(m)]
+        self.p_rho = cp.Parameter(nonneg=True, name="rho")
+        self.v_P = cp.Variable((NA, NA), symmetric=True, name="P")
+        self.v_L = [cp.Variable((NA, 1), name=f"L_{r}") for r in range(n_lmi)]
+        self.v_tau = [cp.Variable(m, nonneg=True, name=f"tau_{r}") for r in range(n_lmi)]
+        e11 = np.zeros((d, d))
+        e11[0, 0] = 1.0
+        cons = []
+        for r in range(n_lmi):
+            pi = self.p_pi0[r] - self.v_L[r] @ self.p_ell
+            mult = -self.p_rho * e11 + sum(self.v_tau[r][q] * self.p_q[q] for q in range(m))
+            lmi = cp.bmat([[-self.v_P, pi], [pi.T, mult]])
+            cons.append(0.5 * (lmi + lmi.T) << 0)
+        self.problem = cp.Problem(cp.Minimize(cp.trace(self.v_P)), cons)
+        assert self.problem.is_dcp(dpp=True)
+
+    def solve(self, data: dict, rho: float) -> Solution:
+        cp = self.cp
         for r in range(self.n_lmi):
             self.p_pi0[r].value = data["pi0"][r]
         self.p_ell.value = data["ell"][None, :]
         for q, Q in enumerate(data["facts"]):
             self.p_q[q].value = Q
         self.p_rho.value = rho
-        t0 = time.perf_counter()
         try:
             with warnings.catch_warnings():  # "inaccurate" answers are certified below, not trusted
                 warnings.simplefilter("ignore", UserWarning)
                 self.problem.solve(solver=cp.CLARABEL)
-            solver_status = str(self.problem.status)
+            status = str(self.problem.status)
         except cp.error.SolverError as exc:
-            solver_status = f"error: {exc}"
-        solve_ms = 1e3 * (time.perf_counter() - t0)
-
-        if self.v_P.value is not None and solver_status in ("optimal", "optimal_inaccurate"):
-            if self.n_lmi == 1:
-                L = self.v_L[0].value
-                tau = self.v_tau[0].value
-                pi0 = data["pi0"][0]
-            else:
-                L = sum(a * v.value for a, v in zip(alpha, self.v_L))
-                tau = sum(a * v.value for a, v in zip(alpha, self.v_tau))
-                pi0 = sum(a * p for a, p in zip(alpha, data["pi0"]))
-            pi = pi0 - L @ data["ell"][None, :]
-            rho_c = certify(self.v_P.value, pi, tau, data["facts"])
-            if rho_c is not None:
-                P_pub = 0.5 * (self.v_P.value + self.v_P.value.T) * rho_c / rho
-                xhat_new = data["x_pred"] + L[:, 0] * data["innov_sum"]
-                return StepResult(xhat_new, P_pub, "ok", rho_c, solve_ms, solver_status, L)
-        P_fb = fallback_shape(data, self.own, gamma_new, self.W, alpha, self.model) / rho
-        return StepResult(data["x_pred"].copy(), P_fb, "fallback", np.nan, solve_ms, solver_status)
+            return Solution(None, [], [], f"error: {exc}")
+        if self.v_P.value is None or status not in ("optimal", "optimal_inaccurate"):
+            return Solution(None, [], [], status)
+        return Solution(self.v_P.value, [v.value for v in self.v_L], [v.value for v in self.v_tau], status)
 
 
 def certify(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: list[np.ndarray]) -> float | None:
@@ -318,8 +406,11 @@ def certify(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: list[np.ndarr
     base = x.T @ x
     tau = np.maximum(tau, 0.0)
     scale = max(1.0, float(np.max(tau)))
+    Q = np.asarray(facts)
+    K0 = base + np.tensordot(tau, Q, axes=1)
+    Qsum = Q.sum(axis=0)
     for eps in scale * 10.0 ** np.arange(-10.0, -2.0):
-        K = base + sum((t + eps) * q for t, q in zip(tau, facts))
+        K = K0 + eps * Qsum
         K = 0.5 * (K + K.T)
         k11, k, K22 = K[0, 0], K[1:, 0], K[1:, 1:]
         try:
@@ -365,4 +456,4 @@ def fallback_shape(data: dict, own: Sensor, gamma_new: float, W: float, alpha: n
     return shape + 1e-9 * max(1.0, float(np.trace(shape))) * np.eye(NA)
 
 
-__all__ = ["LocalEstimator", "NeighbourState", "StepResult", "certify", "fallback_shape"]
+__all__ = ["LocalEstimator", "NeighbourState", "StepResult", "Solution", "certify", "fallback_shape", "BACKENDS"]

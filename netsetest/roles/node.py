@@ -24,11 +24,7 @@ from netsetest.models.sensor import NA
 
 
 MAX_AHEAD = 50  # steps ahead of our own: more is a corrupt or hostile message (bounds the buffers)
-LATE_START_EVIDENCE = 3  # inputs of later steps, and none of step 0: the run started without us
-
-
-class NodeStartError(RuntimeError):
-    """A node process started into a running network without --rejoin."""
+LATE_START_EVIDENCE = 3  # inputs of later steps and none of step 0: the run started without us, rejoin
 
 
 class Node:
@@ -79,6 +75,8 @@ class Node:
                 # a fresh node starts at step 0; later steps mean a hostile message or a run we missed
                 self.bus.drop("implausible-step" if msg.step > MAX_AHEAD else "before-start")
                 self.late_start_evidence += 1
+                if self.late_start_evidence >= LATE_START_EVIDENCE and 0 not in self.inputs:
+                    self.rejoin = True  # the run started without us (a start-up race): re-enter safely
                 return
             if self.k >= 0 and msg.step > self.k + MAX_AHEAD:
                 self.bus.drop("implausible-step")
@@ -126,8 +124,6 @@ class Node:
     def try_step(self, now: float | None = None) -> bool:
         """Compute and publish the next step if its inputs are here (or the runtime gave up waiting)."""
         inp = self.next_input()
-        if inp is None and self.k < 0 and self.late_start_evidence >= LATE_START_EVIDENCE:
-            raise NodeStartError(f"node {self.id}: the run is already past step 0; start the node with --rejoin")
         if inp is None or self.ended and self.k >= self.sc.steps:
             return False
         if self.k < 0:

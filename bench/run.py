@@ -1,0 +1,325 @@
+"""``netsetest bench``: the whole benchmark in one run (see docs/performance.md for what it means).
+
+Parts, in order: per-node per-step solve times on the paper scenario (NSNIM/SAIM × scheduled/
+per-rule, fast path vs. the previous default, the straightforward and the naive formulations); the
+in-memory cost per node-step for ring-with-chords networks of 6, 24 and 96 nodes; the Zenoh lockstep
+run against the in-memory run of the paper scenario; the largest real-time network without a
+deadline miss; one node process's peak RSS and start-up time.  ``--quick`` uses fewer steps and
+samples (a few minutes); the default takes longer.  Times are wall-clock milliseconds on this
+machine, measured side by side in one run; medians and ratios, not single runs, are the figures.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER6 = ROOT / "topologies" / "paper6.toml"
+
+QUICK = {
+    "steps": 40, "ref_sched": 24, "ref_rule": 8, "naive": 12, "prev_sched": 24, "prev_rule": 8,
+    "scaling_steps": 20, "scaling_sizes": [6, 24, 96], "rt_sizes": [6, 12, 24, 36], "rt_steps": 30, "startup_reps": 3,
+}  # fmt: skip
+FULL = {
+    "steps": 80, "ref_sched": 80, "ref_rule": 24, "naive": 40, "prev_sched": 80, "prev_rule": 24,
+    "scaling_steps": 40, "scaling_sizes": [6, 24, 96], "rt_sizes": [6, 12, 18, 24, 30, 36, 42, 48], "rt_steps": 50,
+    "startup_reps": 5,
+}  # fmt: skip
+
+
+def _log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _med(v: list[float]) -> float | None:
+    v = [x for x in v if x is not None]
+    return statistics.median(v) if v else None
+
+
+def paper_solve_times(cfg: dict) -> dict:
+    from netsetest.config.schema import load_topology
+
+    from bench.solvers import capture, side_by_side
+
+    out = {}
+    for case in ("nsnim", "saim"):
+        for variant in ("scheduled", "per-rule"):
+            sc = load_topology(PAPER6, case, cfg["steps"])
+            cap = capture(sc, variant)
+            sched = variant == "scheduled"
+            n_ref = cfg["ref_sched"] if sched else cfg["ref_rule"]
+            n_prev = cfg["prev_sched"] if sched else cfg["prev_rule"]
+            n_naive = cfg["naive"] if sched else 0
+            t0 = time.perf_counter()
+            res = side_by_side(cap, n_ref, n_naive, n_prev)
+            res["run_summary"] = {
+                "violations_total": cap.summary["violations_total"],
+                "fallbacks": sum(r["fallbacks"] for r in cap.summary["nodes"]),
+                "fault_bound_mean_width": [r["fault_bound_mean_width"] for r in cap.summary["nodes"]],
+            }
+            out[f"{case}/{variant}"] = res
+            _log(
+                f"  {case} {variant}: fast {res['fast_ms']['median']:.2f} ms (p95 {res['fast_ms']['p95']:.2f}), "
+                + ", ".join(f"{k} ×{res[k]['ratio']:.1f}" for k in ("prev", "straightforward", "naive") if k in res)
+                + f"  [{time.perf_counter() - t0:.0f} s]"
+            )
+    return out
+
+
+def _route_cache_patch():  # noqa: ANN202
+    """Diagnostic only: MemoryBus with a per-key route cache (what docs/performance.md proposes)."""
+    from netsetest.bus import base
+    from netsetest.bus.keys import matches
+
+    orig_sub, orig_send = base.MemoryBus.subscribe, base.MemoryBus._send
+
+    def subscribe(self, key_expr, handler):  # noqa: ANN001, ANN202
+        orig_sub(self, key_expr, handler)
+        self.__dict__.setdefault("_bench_routes", {}).clear()
+
+    def _send(self, key, payload):  # noqa: ANN001, ANN202
+        routes = self.__dict__.setdefault("_bench_routes", {})
+        handlers = routes.get(key)
+        if handlers is None:
+            handlers = routes[key] = [h for p, h in self._subs if matches(p, key)]
+        for h in handlers:
+            self._enqueue(key, payload, h)
+
+    base.MemoryBus.subscribe, base.MemoryBus._send = subscribe, _send
+    return lambda: (setattr(base.MemoryBus, "subscribe", orig_sub), setattr(base.MemoryBus, "_send", orig_send))
+
+
+def scaling(cfg: dict, tmp: Path) -> dict:
+    from netsetest.config.schema import load_topology
+
+    from bench.solvers import capture
+    from bench.topologies import degrees, ring_topology, ring_with_chords
+
+    capture(load_topology(PAPER6, "nsnim", 5), "scheduled")  # warm-up
+    rows, diag = [], []
+    for n in cfg["scaling_sizes"]:
+        sc = load_topology(ring_topology(tmp, n, cfg["scaling_steps"]))
+        deg = degrees(ring_with_chords(n))
+        ns = n * sc.steps
+        cap = capture(sc, "scheduled")
+        by_deg: dict[int, list[float]] = {}
+        for c, t in zip(cap.cases, cap.step_ms):
+            by_deg.setdefault(deg[c.node], []).append(t)
+        rows.append({
+            "nodes": n, "node_steps": ns, "ms_per_node_step": 1e3 * cap.wall_s / ns,
+            "estimator_ms_median": statistics.median(cap.step_ms), "estimator_ms_mean": statistics.fmean(cap.step_ms),
+            "estimator_ms_median_by_degree": {d: statistics.median(v) for d, v in sorted(by_deg.items())},
+            "fallbacks": sum(r["fallbacks"] for r in cap.summary["nodes"]), "violations": cap.summary["violations_total"],
+        })  # fmt: skip
+        undo = _route_cache_patch()
+        try:
+            cap2 = capture(sc, "scheduled")
+        finally:
+            undo()
+        diag.append({"nodes": n, "ms_per_node_step": 1e3 * cap2.wall_s / ns})
+        _log(f"  {n} nodes: {rows[-1]['ms_per_node_step']:.2f} ms per node-step (estimator {rows[-1]['estimator_ms_median']:.2f} ms), "
+             f"with a route-cached MemoryBus {diag[-1]['ms_per_node_step']:.2f} ms")  # fmt: skip
+    base = rows[0]["ms_per_node_step"]
+    return {"rows": rows, "spread_vs_smallest": [r["ms_per_node_step"] / base - 1 for r in rows], "diagnostic_route_cache": diag}
+
+
+def zenoh_overhead(cfg: dict) -> dict:
+    from netsetest.config.schema import load_topology
+    from netsetest.runtime.inmemory import run_inmemory
+
+    from bench.zenoh_runs import cli_run, observed_lockstep
+
+    sc = load_topology(PAPER6, "nsnim")
+    mem, zen = [], []
+    obs = None
+    for _ in range(3):  # interleaved, medians of three (the lockstep run shares two cores with everything else)
+        t0 = time.perf_counter()
+        run_inmemory(sc, "paper", "scheduled", 0)
+        mem.append(time.perf_counter() - t0)
+        obs = observed_lockstep(PAPER6)
+        zen.append(obs["stepping_s"])
+    cli_z = cli_run(PAPER6, "zenoh", "lockstep")
+    cli_m = cli_run(PAPER6, "inmemory", "lockstep")
+    res = {
+        "inmemory_s": mem, "zenoh_stepping_s": zen, "ratio": (_med(zen) / _med(mem)) if _med(zen) else None,
+        "zenoh_startup_s": obs["startup_s"] if obs else None,
+        "zenoh_exit_codes": obs["exit_codes"] if obs else None,
+        "zenoh_violations": (obs["summary"] or {}).get("violations_total") if obs else None,
+        "node_peak_rss_mb_in_run": obs["node_peak_rss_mb"] if obs else [],
+        "cli_end_to_end": {"zenoh_s": cli_z["wall_s"], "inmemory_s": cli_m["wall_s"], "zenoh_exit": cli_z["exit_code"],
+                           "inmemory_exit": cli_m["exit_code"], "ratio": cli_z["wall_s"] / cli_m["wall_s"]},
+    }  # fmt: skip
+    _log(f"  in memory {_med(mem):.2f} s, Zenoh lockstep stepping {_med(zen) or float('nan'):.2f} s (ratio {res['ratio'] or float('nan'):.2f}); "
+         f"end to end {cli_z['wall_s']:.1f} s vs {cli_m['wall_s']:.1f} s")  # fmt: skip
+    return res
+
+
+def run_bench(quick: bool = False, json_path: str | None = None, markdown_path: str | None = None) -> int:
+    from bench.zenoh_runs import node_startup, realtime_ladder
+
+    cfg = QUICK if quick else FULL
+    t_all = time.perf_counter()
+    res: dict = {
+        "meta": {
+            "quick": quick, "python": platform.python_version(), "machine": platform.machine(), "cpus": _cpus(),
+            "date": time.strftime("%Y-%m-%d %H:%M:%S"), "config": cfg, "load_before": _load(),
+        }
+    }  # fmt: skip
+    with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
+        tmp = Path(tmpd)
+        _log("paper scenario: per-node per-step times, side by side")
+        res["paper"] = paper_solve_times(cfg)
+        _log("in-memory cost per node-step vs network size")
+        res["inmemory_scaling"] = scaling(cfg, tmp)
+        _log("Zenoh lockstep vs in memory (paper scenario)")
+        res["zenoh"] = zenoh_overhead(cfg)
+        _log("one node process: start-up and peak RSS")
+        res["node"] = node_startup(tmp, cfg["startup_reps"])
+        _log(f"  {res['node']}")
+        _log("real time (τs = 0.1 s, nodes as processes): growing networks")
+        res["realtime"] = realtime_ladder(tmp, cfg["rt_sizes"], cfg["rt_steps"], log=_log)
+    res["meta"]["load_after"] = _load()
+    res["meta"]["duration_s"] = time.perf_counter() - t_all
+    res.update(headline(res))
+    text = json.dumps(res, indent=1, default=_jsonable)
+    if json_path:
+        Path(json_path).write_text(text + "\n")
+    md = markdown(res)
+    if markdown_path:
+        Path(markdown_path).write_text(md)
+    print(md)
+    return 0
+
+
+def headline(res: dict) -> dict:
+    p = res["paper"]
+    ns, sa = p["nsnim/scheduled"], p["saim/scheduled"]
+    node = res["node"]["reps"]
+    return {
+        "solve_ms_median": ns["fast_ms"]["median"],
+        "solve_ms_p95": ns["fast_ms"]["p95"],
+        "solve_ms_median_saim": sa["fast_ms"]["median"],
+        "solve_ms_p95_saim": sa["fast_ms"]["p95"],
+        "solve_ms_median_per_rule": p["nsnim/per-rule"]["fast_ms"]["median"],
+        "solve_ms_median_saim_per_rule": p["saim/per-rule"]["fast_ms"]["median"],
+        "straightforward_ratio": ns["straightforward"]["ratio"],
+        "naive_ratio": ns["naive"]["ratio"],
+        "previous_default_ratio": ns["prev"]["ratio"],
+        "zenoh_overhead_ratio": res["zenoh"]["ratio"],
+        "scaling": [{"nodes": r["nodes"], "ms_per_node_step": r["ms_per_node_step"]} for r in res["inmemory_scaling"]["rows"]],
+        "realtime_max_nodes": res["realtime"]["max_nodes"],
+        "node_rss_mb": _med([r["peak_rss_mb"] for r in node]),
+        "node_startup_s": _med([r["first_state_s"] for r in node]),
+        "node_first_estimate_s": _med([r["first_estimate_s"] for r in node]),
+    }
+
+
+TARGETS = [
+    ("solve_ms_median", "≤ 2 ms", lambda v: v <= 2.0),
+    ("solve_ms_median_saim", "≤ 5 ms", lambda v: v <= 5.0),
+    ("straightforward_ratio", "≥ 10", lambda v: v >= 10),
+    ("naive_ratio", "≥ 20", lambda v: v >= 20),
+    ("zenoh_overhead_ratio", "≤ 1.3", lambda v: v <= 1.3),
+    ("node_rss_mb", "≤ 100 MB", lambda v: v <= 100),
+    ("node_startup_s", "< 1 s", lambda v: v < 1.0),
+]
+
+
+def markdown(res: dict) -> str:
+    f = lambda v, spec=".2f": "—" if v is None else format(v, spec)  # noqa: E731
+    lines = [f"# netsetest bench ({'quick' if res['meta']['quick'] else 'full'}, {res['meta']['date']})", ""]
+    lines += [f"Machine: {res['meta']['cpus']} CPUs, Python {res['meta']['python']}; load average before/after: "
+              f"{res['meta']['load_before']} / {res['meta']['load_after']}; {res['meta']['duration_s']:.0f} s in all.", ""]  # fmt: skip
+    lines += ["## Targets", "", "| figure | value | target | met |", "|---|---|---|---|"]
+    for key, target, ok in TARGETS:
+        v = res.get(key)
+        lines.append(f"| {key} | {f(v)} | {target} | {'—' if v is None else ('yes' if ok(v) else 'no')} |")
+    sc = res["inmemory_scaling"]
+    spread = max(abs(x) for x in sc["spread_vs_smallest"])
+    lines.append(f"| scaling spread 6→96 nodes | {spread * 100:.0f} % | ≤ ±30 % | {'yes' if spread <= 0.3 else 'no'} |")
+    lines.append(f"| realtime_max_nodes | {res.get('realtime_max_nodes')} | (largest without a miss) | |")
+    lines += ["", "## Paper scenario, per node-step (wall ms; whole estimator step incl. certification)", "",
+              "| case / variant | fast median | fast p95 | solve part | CPU median | iters | previous default (cvxpy) | straightforward | naive | fallbacks |",
+              "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for key, r in res["paper"].items():
+        def cell(name: str) -> str:
+            if name not in r:
+                return "—"
+            x = r[name]
+            return f"{f(x['median'])} ms (×{x['ratio']:.1f}, n={x['n']})"
+
+        lines.append(
+            f"| {key} | {f(r['fast_ms']['median'])} | {f(r['fast_ms']['p95'])} | {f(r['fast_solve_ms']['median'])} | "
+            f"{f(r['fast_cpu_ms']['median'])} | {f(r['iterations_median'], '.0f')} | {cell('prev')} | {cell('straightforward')} | "
+            f"{cell('naive')} | {r['fallbacks']} |"
+        )
+    lines += ["", "Fault-bound width of the same step, fast / yardstick − 1 (negative: the fast path is tighter):", ""]
+    for key, r in res["paper"].items():
+        parts = [f"{n} [{f(r[n]['width_rel_diff_min'], '.1e')}, {f(r[n]['width_rel_diff_max'], '.1e')}]" for n in ("prev", "straightforward", "naive") if n in r]
+        lines.append(f"- {key}: " + "; ".join(parts))
+    lines += ["", "## In memory, ring with chords (|N_i| = 3, 4, 5 in equal shares)", "",
+              "| nodes | ms per node-step | estimator median | by degree 3 / 4 / 5 | with route-cached bus (diagnostic) |",
+              "|---|---|---|---|---|"]  # fmt: skip
+    for r, d in zip(sc["rows"], sc["diagnostic_route_cache"]):
+        bd = r["estimator_ms_median_by_degree"]
+        lines.append(f"| {r['nodes']} | {f(r['ms_per_node_step'])} | {f(r['estimator_ms_median'])} | "
+                     f"{' / '.join(f(bd.get(k)) for k in (3, 4, 5))} | {f(d['ms_per_node_step'])} |")  # fmt: skip
+    z = res["zenoh"]
+    lines += ["", "## Zenoh", "",
+              f"- lockstep stepping phase {f(_med(z['zenoh_stepping_s']))} s vs in memory {f(_med(z['inmemory_s']))} s: ratio {f(z['ratio'])} "
+              f"(start-up before step 0: {f(z['zenoh_startup_s'])} s)",
+              f"- end to end through `netsetest run`: {f(z['cli_end_to_end']['zenoh_s'])} s vs {f(z['cli_end_to_end']['inmemory_s'])} s "
+              f"(ratio {f(z['cli_end_to_end']['ratio'])})",
+              f"- node peak RSS in the paper run: {', '.join(f(x, '.0f') for x in z['node_peak_rss_mb_in_run'])} MB",
+              f"- one node launched into a waiting network: " + "; ".join(
+                  f"first state {f(r['first_state_s'])} s, first estimate {f(r['first_estimate_s'])} s, peak RSS {f(r['peak_rss_mb'], '.0f')} MB"
+                  for r in res["node"]["reps"]),
+              "", f"Real time ({res['realtime']['steps']} steps at τs = 0.1 s):", ""]  # fmt: skip
+    for r in res["realtime"]["runs"]:
+        lines.append(f"- {r['nodes']} nodes (attempt {r['attempt']}): exit {r['exit_code']}, deadline misses {r['deadline_misses']}, "
+                     f"nodes missing {r['nodes_missing']}, {f(r['wall_s'], '.0f')} s")  # fmt: skip
+    return "\n".join(lines) + "\n"
+
+
+def _cpus() -> int:
+    import os
+
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 0)
+
+
+def _load() -> str:
+    try:
+        return " ".join(Path("/proc/loadavg").read_text().split()[:3])
+    except OSError:
+        return "?"
+
+
+def _jsonable(o: object) -> object:
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m bench.run")
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--json")
+    ap.add_argument("--markdown")
+    a = ap.parse_args(argv)
+    return run_bench(a.quick, a.json, a.markdown)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

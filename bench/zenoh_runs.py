@@ -1,0 +1,271 @@
+"""The multi-process parts of the benchmark: Zenoh lockstep overhead, real-time capacity, one node's cost.
+
+- ``cli_run``: ``netsetest run TOPOLOGY --mode zenoh|inmemory --clock ...`` end to end, as a user runs it.
+- ``observed_lockstep``: the same role processes ``netsetest run`` starts (``netsetest collector|node|
+  vehicle`` with the same options, all-to-all on loopback), started here so that an observer session
+  can time the run from the vehicle's step-0 input to the last node's final state (the stepping
+  phase, without process start-up), and so that each node's peak RSS (VmHWM) can be read.
+- ``node_startup``: a one-node network whose vehicle and collector are already up and waiting; a
+  node process is launched and timed from ``Popen`` to its first published state (the prior
+  ellipsoid, step 0) and to its first solved estimate (step 1).
+- ``realtime_ladder``: real-time runs (τs = 0.1 s, nodes as processes) of growing ring-with-chords
+  networks until one has a deadline miss or loses a node.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import msgpack
+
+from netsetest.cli.processes import free_ports
+
+PY = [sys.executable, "-m", "netsetest.cli.main"]
+
+
+def _kill(procs: list[subprocess.Popen]) -> None:
+    """SIGKILL the process groups this module started (each child has its own session)."""
+    for p in procs:
+        if p.poll() is None:
+            try:
+                os.killpg(p.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+    for p in procs:
+        try:
+            p.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            pass
+
+
+def cli_run(topology: Path, mode: str, clock: str = "lockstep", steps: int | None = None, timeout: float = 600.0) -> dict:
+    """One ``netsetest run`` as a subprocess: wall time, exit code and the summary JSON."""
+    with tempfile.TemporaryDirectory(prefix="nsbench-") as tmp:
+        summary_path = Path(tmp) / "summary.json"
+        cmd = [*PY, "run", str(topology), "--mode", mode, "--clock", clock, "--quiet", "--summary-json", str(summary_path)]
+        if steps:
+            cmd += ["--steps", str(steps)]
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        try:
+            _, err = proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            _kill([proc])
+            return {"wall_s": timeout, "exit_code": None, "summary": None, "error": "timeout"}
+        wall = time.perf_counter() - t0
+        summary = json.loads(summary_path.read_text()) if summary_path.exists() else None
+    return {"wall_s": wall, "exit_code": proc.returncode, "summary": summary, "stderr_tail": err[-800:] if err else ""}
+
+
+class Observer:
+    """A Zenoh peer that records (arrival time, key, step) of every message of one run."""
+
+    def __init__(self, run_id: str, listen: str, connect: list[str]) -> None:
+        import zenoh
+
+        from netsetest.bus.zenoh_bus import zenoh_config
+
+        self.events: list[tuple[float, str, bytes]] = []
+        self._lock = threading.Lock()
+        self.session = zenoh.open(zenoh_config("peer", [listen], connect))
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            t = time.monotonic()
+            with self._lock:
+                self.events.append((t, str(sample.key_expr), sample.payload.to_bytes()))
+
+        self.sub = self.session.declare_subscriber(f"netsetest/{run_id}/**", on_sample)
+
+    def seen(self, predicate) -> list[tuple[float, str, dict]]:  # noqa: ANN001
+        with self._lock:
+            events = list(self.events)
+        out = []
+        for t, key, payload in events:
+            try:
+                msg = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+            except Exception:  # noqa: BLE001
+                continue
+            if isinstance(msg, dict) and predicate(key, msg):
+                out.append((t, key, msg))
+        return out
+
+    def close(self) -> None:
+        self.sub.undeclare()
+        self.session.close()
+
+
+def _vm_hwm_mb(pid: int) -> float | None:
+    """Peak RSS of the process's current image (VmHWM; reset at exec, unlike ru_maxrss, which would
+    count the pages a child shares with this big benchmark process between fork and exec)."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError):
+        pass
+    return None
+
+
+def _wait_rusage(procs: dict[str, subprocess.Popen], deadline: float) -> dict[str, dict]:
+    """Wait for the children: exit code and peak RSS (last VmHWM read before the exit) of each."""
+    left = dict(procs)
+    out: dict[str, dict] = {}
+    hwm: dict[str, float] = {}
+    while left and time.monotonic() < deadline:
+        for name, p in list(left.items()):
+            v = _vm_hwm_mb(p.pid)
+            if v is not None:
+                hwm[name] = max(v, hwm.get(name, 0.0))
+            if p.poll() is not None:
+                out[name] = {"exit_code": p.returncode, "peak_rss_mb": hwm.get(name)}
+                del left[name]
+        time.sleep(0.01)
+    if left:
+        _kill(list(left.values()))
+        for name in left:
+            out[name] = {"exit_code": None, "peak_rss_mb": hwm.get(name)}
+    return out
+
+
+def _role_argv(topology: Path, run_id: str, steps: int | None, name: str, ports: dict[str, int], clock: str) -> list[str]:
+    endpoint = lambda n: f"tcp/127.0.0.1:{ports[n]}"  # noqa: E731
+    common = [str(topology), "--run-id", run_id, "--zenoh-mode", "peer"] + (["--steps", str(steps)] if steps else [])
+    net = ["--listen", endpoint(name)]
+    for other in ports:
+        if other != name:
+            net += ["--connect", endpoint(other)]
+    if name == "collector":
+        return ["collector", *common, "--clock", clock, *net]
+    if name == "vehicle":
+        return ["vehicle", *common, "--clock", clock, *net]
+    return ["node", *common, "--id", name[4:], "--clock", clock, *net]
+
+
+def observed_lockstep(topology: Path, steps: int | None = None, timeout: float = 300.0) -> dict:
+    """Start the roles of one lockstep Zenoh run; time its stepping phase; peak RSS per process."""
+    from netsetest.config.schema import load_topology
+
+    sc = load_topology(topology, steps=steps)
+    n_steps = sc.steps
+    run_id = f"bench{os.getpid()}x{int(time.time() * 1000) % 100000}"
+    names = ["collector", "vehicle", *(f"node{i}" for i in sc.ids), "observer"]
+    ports = dict(zip(names, free_ports(len(names))))
+    role_ports = {k: v for k, v in ports.items()}
+    obs = Observer(run_id, f"tcp/127.0.0.1:{ports['observer']}", [f"tcp/127.0.0.1:{p}" for n, p in ports.items() if n != "observer"])
+    procs: dict[str, subprocess.Popen] = {}
+    launched: dict[str, float] = {}
+    with tempfile.TemporaryDirectory(prefix="nsbench-") as tmp:
+        summary_path = Path(tmp) / "summary.json"
+        try:
+            t_start = time.monotonic()
+            for name in ["collector", *(f"node{i}" for i in sc.ids), "vehicle"]:
+                argv = _role_argv(topology, run_id, steps, name, role_ports, "lockstep")
+                if name == "collector":
+                    argv += ["--summary-json", str(summary_path)]
+                launched[name] = time.monotonic()
+                procs[name] = subprocess.Popen([*PY, *argv], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                               stdin=subprocess.DEVNULL, start_new_session=True)  # fmt: skip
+            usage = _wait_rusage(procs, time.monotonic() + timeout)
+            t_done = time.monotonic()
+        finally:
+            _kill(list(procs.values()))
+            obs.close()
+        summary = json.loads(summary_path.read_text()) if summary_path.exists() else None
+    inputs0 = [t for t, k, m in obs.seen(lambda k, m: m.get("type") == "input" and m.get("step") == 0)]
+    finals = [t for t, k, m in obs.seen(lambda k, m: m.get("type") == "state" and m.get("step") == n_steps)]
+    first_state = {}
+    for i in sc.ids:
+        ts = [t for t, k, m in obs.seen(lambda k, m, i=i: m.get("type") == "state" and m.get("node") == i and m.get("step") == 0)]
+        if ts:
+            first_state[i] = min(ts) - launched[f"node{i}"]
+    stepping = (max(finals) - min(inputs0)) if inputs0 and len(finals) == len(sc.ids) else None
+    node_rss = [u["peak_rss_mb"] for n, u in usage.items() if n.startswith("node") and u["peak_rss_mb"] is not None]
+    return {
+        "nodes": len(sc.ids), "steps": n_steps, "stepping_s": stepping, "total_s": t_done - t_start,
+        "startup_s": (min(inputs0) - t_start) if inputs0 else None,
+        "node_first_state_s": first_state, "node_peak_rss_mb": node_rss, "usage": usage, "summary": summary,
+        "exit_codes": {n: u["exit_code"] for n, u in usage.items()},
+    }  # fmt: skip
+
+
+def node_startup(directory: Path, reps: int = 3, timeout: float = 120.0) -> dict:
+    """One node process launched into a waiting one-node network: start-up time and peak RSS."""
+    from bench.topologies import single_node_topology
+
+    topo = single_node_topology(directory, steps=3)
+    rows = []
+    for rep in range(reps):
+        run_id = f"bench{os.getpid()}s{rep}"
+        names = ["collector", "vehicle", "node1", "observer"]
+        ports = dict(zip(names, free_ports(len(names))))
+        role_ports = {k: v for k, v in ports.items()}
+        obs = Observer(run_id, f"tcp/127.0.0.1:{ports['observer']}", [f"tcp/127.0.0.1:{p}" for n, p in ports.items() if n != "observer"])
+        procs: dict[str, subprocess.Popen] = {}
+        try:
+            for name in ("collector", "vehicle"):
+                procs[name] = subprocess.Popen([*PY, *_role_argv(topo, run_id, None, name, role_ports, "lockstep")],
+                                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
+                                               start_new_session=True)  # fmt: skip
+            # wait until both announce themselves (they then wait for the node at the start-up barrier)
+            t_wait = time.monotonic()
+            while time.monotonic() - t_wait < timeout:
+                roles = {m.get("role") for _, _, m in obs.seen(lambda k, m: m.get("type") == "ready")}
+                if {"vehicle", "collector"} <= roles:
+                    break
+                time.sleep(0.05)
+            time.sleep(0.3)  # let the machine settle after their start-up
+            t0 = time.monotonic()
+            procs["node1"] = subprocess.Popen([*PY, *_role_argv(topo, run_id, None, "node1", role_ports, "lockstep")],
+                                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
+                                              start_new_session=True)  # fmt: skip
+            usage = _wait_rusage(procs, time.monotonic() + timeout)
+        finally:
+            _kill(list(procs.values()))
+            obs.close()
+        st = {m.get("step"): t for t, _, m in sorted(obs.seen(lambda k, m: m.get("type") == "state" and m.get("node") == 1), reverse=True)}
+        rows.append({
+            "first_state_s": st[0] - t0 if 0 in st else None,
+            "first_estimate_s": st[1] - t0 if 1 in st else None,
+            "peak_rss_mb": usage["node1"]["peak_rss_mb"],
+            "exit_code": usage["node1"]["exit_code"],
+        })  # fmt: skip
+    return {"reps": rows}
+
+
+def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int = 1, log=print) -> dict:  # noqa: ANN001
+    """Real-time runs of ring networks of growing size; the largest without a deadline miss."""
+    from bench.topologies import ring_topology
+
+    runs = []
+    best = None
+    for n in sizes:
+        topo = ring_topology(directory, n, steps)
+        ok = False
+        for attempt in range(retries + 1):
+            r = cli_run(topo, "zenoh", "realtime", timeout=120 + 3 * n + steps * 0.2)
+            s = r["summary"] or {}
+            misses = sum(row.get("deadline_misses") or 0 for row in s.get("nodes", [])) if s else None
+            row = {
+                "nodes": n, "attempt": attempt + 1, "exit_code": r["exit_code"], "wall_s": r["wall_s"], "deadline_misses": misses,
+                "nodes_missing": s.get("nodes_missing") if s else None,
+                "fallbacks": sum(x.get("fallbacks", 0) for x in s.get("nodes", [])) if s else None,
+                "violations": s.get("violations_total") if s else None,
+            }  # fmt: skip
+            runs.append(row)
+            log(f"  real time, {n} nodes (attempt {attempt + 1}): exit {r['exit_code']}, deadline misses {misses}, "
+                f"missing {row['nodes_missing']}, {r['wall_s']:.0f} s")  # fmt: skip
+            ok = r["exit_code"] == 0 and misses == 0 and not row["nodes_missing"]
+            if ok:
+                break
+        if not ok:
+            break
+        best = n
+    return {"max_nodes": best, "runs": runs, "steps": steps}
