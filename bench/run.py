@@ -74,29 +74,6 @@ def paper_solve_times(cfg: dict) -> dict:
     return out
 
 
-def _route_cache_patch():  # noqa: ANN202
-    """Diagnostic only: MemoryBus with a per-key route cache (what docs/performance.md proposes)."""
-    from netsetest.bus import base
-    from netsetest.bus.keys import matches
-
-    orig_sub, orig_send = base.MemoryBus.subscribe, base.MemoryBus._send
-
-    def subscribe(self, key_expr, handler):  # noqa: ANN001, ANN202
-        orig_sub(self, key_expr, handler)
-        self.__dict__.setdefault("_bench_routes", {}).clear()
-
-    def _send(self, key, payload):  # noqa: ANN001, ANN202
-        routes = self.__dict__.setdefault("_bench_routes", {})
-        handlers = routes.get(key)
-        if handlers is None:
-            handlers = routes[key] = [h for p, h in self._subs if matches(p, key)]
-        for h in handlers:
-            self._enqueue(key, payload, h)
-
-    base.MemoryBus.subscribe, base.MemoryBus._send = subscribe, _send
-    return lambda: (setattr(base.MemoryBus, "subscribe", orig_sub), setattr(base.MemoryBus, "_send", orig_send))
-
-
 def scaling(cfg: dict, tmp: Path) -> dict:
     from netsetest.config.schema import load_topology
 
@@ -104,7 +81,7 @@ def scaling(cfg: dict, tmp: Path) -> dict:
     from bench.topologies import degrees, ring_topology, ring_with_chords
 
     capture(load_topology(PAPER6, "nsnim", 5), "scheduled")  # warm-up
-    rows, diag = [], []
+    rows = []
     for n in cfg["scaling_sizes"]:
         sc = load_topology(ring_topology(tmp, n, cfg["scaling_steps"]))
         deg = degrees(ring_with_chords(n))
@@ -119,16 +96,9 @@ def scaling(cfg: dict, tmp: Path) -> dict:
             "estimator_ms_median_by_degree": {d: statistics.median(v) for d, v in sorted(by_deg.items())},
             "fallbacks": sum(r["fallbacks"] for r in cap.summary["nodes"]), "violations": cap.summary["violations_total"],
         })  # fmt: skip
-        undo = _route_cache_patch()
-        try:
-            cap2 = capture(sc, "scheduled")
-        finally:
-            undo()
-        diag.append({"nodes": n, "ms_per_node_step": 1e3 * cap2.wall_s / ns})
-        _log(f"  {n} nodes: {rows[-1]['ms_per_node_step']:.2f} ms per node-step (estimator {rows[-1]['estimator_ms_median']:.2f} ms), "
-             f"with a route-cached MemoryBus {diag[-1]['ms_per_node_step']:.2f} ms")  # fmt: skip
+        _log(f"  {n} nodes: {rows[-1]['ms_per_node_step']:.2f} ms per node-step (estimator {rows[-1]['estimator_ms_median']:.2f} ms)")
     base = rows[0]["ms_per_node_step"]
-    return {"rows": rows, "spread_vs_smallest": [r["ms_per_node_step"] / base - 1 for r in rows], "diagnostic_route_cache": diag}
+    return {"rows": rows, "spread_vs_smallest": [r["ms_per_node_step"] / base - 1 for r in rows]}
 
 
 def zenoh_overhead(cfg: dict) -> dict:
@@ -266,12 +236,12 @@ def markdown(res: dict) -> str:
         parts = [f"{n} [{f(r[n]['width_rel_diff_min'], '.1e')}, {f(r[n]['width_rel_diff_max'], '.1e')}]" for n in ("prev", "straightforward", "naive") if n in r]
         lines.append(f"- {key}: " + "; ".join(parts))
     lines += ["", "## In memory, ring with chords (|N_i| = 3, 4, 5 in equal shares)", "",
-              "| nodes | ms per node-step | estimator median | by degree 3 / 4 / 5 | with route-cached bus (diagnostic) |",
-              "|---|---|---|---|---|"]  # fmt: skip
-    for r, d in zip(sc["rows"], sc["diagnostic_route_cache"]):
+              "| nodes | ms per node-step | estimator median | by degree 3 / 4 / 5 |",
+              "|---|---|---|---|"]  # fmt: skip
+    for r in sc["rows"]:
         bd = r["estimator_ms_median_by_degree"]
         lines.append(f"| {r['nodes']} | {f(r['ms_per_node_step'])} | {f(r['estimator_ms_median'])} | "
-                     f"{' / '.join(f(bd.get(k)) for k in (3, 4, 5))} | {f(d['ms_per_node_step'])} |")  # fmt: skip
+                     f"{' / '.join(f(bd.get(k)) for k in (3, 4, 5))} |")  # fmt: skip
     z = res["zenoh"]
     lines += ["", "## Zenoh", "",
               f"- lockstep stepping phase {f(_med(z['zenoh_stepping_s']))} s vs in memory {f(_med(z['inmemory_s']))} s: ratio {f(z['ratio'])} "
