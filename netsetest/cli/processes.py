@@ -47,24 +47,22 @@ def _at(s: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(f"expected NODE@STEP, e.g. 3@20, got {s!r}") from None
 
 
-def _seconds(s: str) -> float:
-    try:
-        v = float(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number of seconds: {s!r}") from None
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {v}")
-    return v
+def _seconds_type(allow_zero: bool) -> Callable[[str], float]:
+    """argparse type for a duration: > 0, or ≥ 0 with ``allow_zero``."""
+
+    def parse(s: str) -> float:
+        try:
+            v = float(s)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number of seconds: {s!r}") from None
+        if v < 0 or (v == 0 and not allow_zero):
+            raise argparse.ArgumentTypeError(f"must be {'≥' if allow_zero else '>'} 0, got {v}")
+        return v
+
+    return parse
 
 
-def _non_negative(s: str) -> float:
-    try:
-        v = float(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number of seconds: {s!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be ≥ 0, got {v}")
-    return v
+_seconds, _non_negative = _seconds_type(False), _seconds_type(True)
 
 
 def add_run_options(p: argparse.ArgumentParser) -> None:
