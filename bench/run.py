@@ -249,7 +249,7 @@ def markdown(res: dict) -> str:
               f"- end to end through `netsetest run`: {f(z['cli_end_to_end']['zenoh_s'])} s vs {f(z['cli_end_to_end']['inmemory_s'])} s "
               f"(ratio {f(z['cli_end_to_end']['ratio'])})",
               f"- node peak RSS in the paper run: {', '.join(f(x, '.0f') for x in z['node_peak_rss_mb_in_run'])} MB",
-              f"- one node launched into a waiting network: " + "; ".join(
+              "- one node launched into a waiting network: " + "; ".join(
                   f"first state {f(r['first_state_s'])} s, first estimate {f(r['first_estimate_s'])} s, peak RSS {f(r['peak_rss_mb'], '.0f')} MB"
                   for r in res["node"]["reps"]),
               "", f"Real time ({res['realtime']['steps']} steps at τs = 0.1 s):", ""]  # fmt: skip
