@@ -162,11 +162,12 @@ def cmd_node(a: argparse.Namespace) -> int:
 
 
 def cmd_collector(a: argparse.Namespace) -> int:
-    from netsetest.runtime.processes import collector_meta, run_collector
+    from netsetest.runtime.inmemory import run_meta
+    from netsetest.runtime.processes import run_collector
     from netsetest.runtime.report import format_table
 
     def body(sc, bus) -> int:  # noqa: ANN001
-        meta = collector_meta(sc, a.clock, a.signals, a.variant, a.seed, a.run_id)
+        meta = run_meta(sc, "zenoh", a.clock, a.signals, a.variant, a.seed, a.run_id)
         show = None if a.progress else (lambda s: print(format_table(s), flush=True))
         return run_collector(sc, bus, a.run_id, meta, a.record, a.summary_json, a.progress, a.idle_timeout, show)
 

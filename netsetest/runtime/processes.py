@@ -26,7 +26,6 @@ from netsetest.models.signals import SignalKind
 from netsetest.roles.collector import Collector
 from netsetest.roles.node import Node
 from netsetest.roles.vehicle import Vehicle
-from netsetest.runtime.inmemory import run_meta
 from netsetest.runtime.report import EXIT_VIOLATION, exit_code, write_outputs
 
 READY_PERIOD_S = 0.1
@@ -204,8 +203,3 @@ def run_collector(
     if on_summary:
         on_summary(summary)
     return exit_code(summary) if collector.ended is not None else EXIT_VIOLATION
-
-
-def collector_meta(sc: Scenario, clock: str, signals: str, variant: str, seed: int, run_id: str) -> dict:
-    return run_meta(sc, "zenoh", clock, signals, variant, seed, run_id)
-
