@@ -92,6 +92,17 @@ class FaultSpec(_Strict):
         return NoFault()
 
 
+class FaultBoundSpec(_Strict):
+    """Declared physical bounds on the sensor fault: |f_k+1 − f_k| ≤ rate and/or |f_k| ≤ size.
+
+    An assumption like the noise bound: the estimator may rely on it (the adaptive sector of the SAIM
+    case, docs/estimator.md), and the collector checks it against the truth and attributes misses to it.
+    """
+
+    rate: Positive | None = Field(default=None, description="δ_i: largest fault change per step")
+    size: Positive | None = Field(default=None, description="F_i: largest fault magnitude")
+
+
 class NodeProfile(_Strict):
     """One yaw-rate sensor: y = C x + Ds f + Dv v, v² ≤ R, plus its estimator's initial ellipsoid."""
 
@@ -107,6 +118,7 @@ class NodeProfile(_Strict):
     saturation: SaturationSpec | None = None
     availability: AvailabilitySpec | None = None
     fault: FaultSpec = FaultSpec()
+    fault_bound: FaultBoundSpec = FaultBoundSpec()
 
     @field_validator("Ds")
     @classmethod
@@ -260,6 +272,8 @@ class NodeConfig:
     P0: np.ndarray
     rho: float
     in_weights: dict[int, float]  # j → a_ij for j ∈ N_i (i itself when a_ii > 0)
+    fault_rate: float | None = None  # declared δ_i: |f_k+1 − f_k| ≤ δ_i (None: not declared)
+    fault_size: float | None = None  # declared F_i: |f_k| ≤ F_i (None: not declared)
 
 
 @dataclass(frozen=True)
@@ -369,6 +383,8 @@ def load_topology(path: str | Path, case: Case | None = None, steps: int | None 
                 P0=prof.P0_matrix(),
                 rho=prof.rho,
                 in_weights=dict(sorted(in_w.items())),
+                fault_rate=prof.fault_bound.rate,
+                fault_size=prof.fault_bound.size,
             )
         )
     return Scenario(
