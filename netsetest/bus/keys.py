@@ -3,8 +3,11 @@
     netsetest/<run>/vehicle/input/<i>   NodeInput for node i (measurement, γ, u, Vx, expected neighbours)
     netsetest/<run>/vehicle/truth       Truth (collector only: the truth, faults, assumption flags, losses)
     netsetest/<run>/node/<i>/state      NodeState of node i (to its out-neighbours and the collector)
-    netsetest/<run>/control/ready       Ready (nodes and collector, start-up barrier)
+    netsetest/<run>/control/ready/<who> Ready of role <who> (vehicle, collector, node-<i>; start-up barrier)
     netsetest/<run>/control/end         End (vehicle → all)
+
+Every role publishes on its own keys only, which is what the router's access-control rules
+(netsetest/runtime/security.py) are built from.
 """
 
 from __future__ import annotations
@@ -24,8 +27,24 @@ def node_state(run: str, i: int | str) -> str:
     return f"{ROOT}/{run}/node/{i}/state"
 
 
+def run_root(run: str) -> str:
+    """Every key of a run."""
+    return f"{ROOT}/{run}/**"
+
+
+def role_name(role: str, node: int | None = None) -> str:
+    """A role's name in keys and certificates: ``vehicle``, ``collector``, ``node-3``."""
+    return role if node is None else f"{role}-{node}"
+
+
 def ready(run: str) -> str:
+    """The namespace of the start-up barrier; each role publishes on :func:`ready_of` its name."""
     return f"{ROOT}/{run}/control/ready"
+
+
+def ready_of(run: str, who: str) -> str:
+    """Readiness key of role ``who`` (a :func:`role_name`, or ``*`` for every role)."""
+    return f"{ready(run)}/{who}"
 
 
 def end(run: str) -> str:

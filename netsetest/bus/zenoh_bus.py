@@ -5,7 +5,12 @@ Session configuration is explicit and short:
 - ``peer`` (the embedded default, one host): multicast scouting off, the process listens on its own
   endpoint and connects to the endpoints of the other processes (a full mesh on loopback, no router);
 - ``client``: connects to one or more routers (several hosts, containers);
-- ``router``: a Python session that routes for clients (``netsetest router``).
+- ``router``: a Python session that routes for clients (``netsetest router``, and the router a secured
+  ``netsetest run`` hosts in its parent process).
+
+A user's own Zenoh configuration file (JSON5) can be the base; the settings netsetest needs (mode,
+endpoints, scouting, and the security settings of netsetest/runtime/security.py) are inserted on top.
+Shared memory is off: it would move payloads outside the (authenticated, encrypted) links.
 
 Subscribers' callbacks run on Zenoh threads; they only queue the raw bytes.  The role's own thread
 decodes, validates and dispatches them in :meth:`Bus.pump`.  Close the bus explicitly: a process that
@@ -15,7 +20,7 @@ exits with an open session can hang.
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Literal
 
 import zenoh
@@ -30,29 +35,60 @@ class BusError(RuntimeError):
 
 
 def zenoh_config(
-    mode: ZenohMode, listen: Sequence[str] = (), connect: Sequence[str] = (), connect_timeout_s: float = 10.0
+    mode: ZenohMode,
+    listen: Sequence[str] = (),
+    connect: Sequence[str] = (),
+    connect_timeout_s: float = 10.0,
+    base_file: str | None = None,
+    settings: Mapping[str, object] | None = None,
 ) -> zenoh.Config:
-    """A Zenoh configuration with multicast scouting off and explicit endpoints."""
-    cfg = zenoh.Config()
+    """A Zenoh configuration with multicast scouting off, explicit endpoints and ``settings`` (path → value).
+
+    ``base_file``: a user's Zenoh configuration (JSON5) to start from.
+    """
+    try:
+        cfg = zenoh.Config.from_file(base_file) if base_file else zenoh.Config()
+    except zenoh.ZError as exc:
+        raise BusError(f"cannot read the Zenoh configuration {base_file}: {exc}") from None
     cfg.insert_json5("mode", json.dumps(mode))
     cfg.insert_json5("scouting/multicast/enabled", "false")  # runs on one host must not find each other
     cfg.insert_json5("scouting/delay", "0")  # else open() blocks 0.5 s while a peer is not up yet
-    cfg.insert_json5("listen/endpoints", json.dumps(list(listen)))
-    cfg.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    cfg.insert_json5("transport/shared_memory/enabled", "false")
+    if listen or not base_file:
+        cfg.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    if connect or not base_file:
+        cfg.insert_json5("connect/endpoints", json.dumps(list(connect)))
     # peers start in any order: retry unreachable endpoints quickly (the default backoff starts at 1 s)
     cfg.insert_json5("connect/retry", '{"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2}')
     if mode == "client":  # wait for the router rather than fail at once
         cfg.insert_json5("connect/timeout_ms", str(int(connect_timeout_s * 1000)))
+    for path, value in (settings or {}).items():
+        try:
+            cfg.insert_json5(path, json.dumps(value))
+        except zenoh.ZError as exc:
+            raise BusError(f"invalid Zenoh setting {path}: {exc}") from None
     return cfg
 
 
+def open_session(cfg: zenoh.Config, what: str) -> zenoh.Session:
+    try:
+        return zenoh.open(cfg)
+    except zenoh.ZError as exc:
+        raise BusError(f"cannot open a Zenoh {what}: {exc}") from None
+
+
 class ZenohBus(Bus):
-    def __init__(self, mode: ZenohMode = "peer", listen: Sequence[str] = (), connect: Sequence[str] = ()) -> None:
+    def __init__(
+        self,
+        mode: ZenohMode = "peer",
+        listen: Sequence[str] = (),
+        connect: Sequence[str] = (),
+        base_file: str | None = None,
+        settings: Mapping[str, object] | None = None,
+    ) -> None:
         super().__init__()
-        try:
-            self.session = zenoh.open(zenoh_config(mode, listen, connect))
-        except zenoh.ZError as exc:
-            raise BusError(f"cannot open a Zenoh {mode} session (listen {list(listen)}, connect {list(connect)}): {exc}") from None
+        cfg = zenoh_config(mode, listen, connect, base_file=base_file, settings=settings)
+        self.session = open_session(cfg, f"{mode} session (listen {list(listen)}, connect {list(connect)})")
         self._subs: list[zenoh.Subscriber] = []
         self._pubs: dict[str, zenoh.Publisher] = {}
         self._closed = False

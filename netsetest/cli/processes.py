@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import math
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -19,24 +21,68 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
+from netsetest.bus import keys
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 ZENOH_DEFAULT_PORT = 7447
+RUN_ENV_FILE = "run.env"  # written by `netsetest credentials`: the deployment's run id, for compose's env_file
 
 
 # ---------------------------------------------------------------- option groups
 
 
+RUN_ID_ENV = "NETSETEST_RUN_ID"  # default of --run-id (compose services read it from the credentials' run.env)
+RUN_ID_RE = re.compile(r"[A-Za-z0-9_-]{1,64}")
+# proto/host:port with an optional Zenoh suffix (?metadata, #config); host a name, an IPv4 or a [IPv6]
+ENDPOINT_RE = re.compile(r"(tcp|udp|tls|quic)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):(\d{1,5})([?#].*)?")
+MAX_PORT = 65535
+
+
+def _run_id(s: str) -> str:
+    if not RUN_ID_RE.fullmatch(s):
+        raise argparse.ArgumentTypeError(f"{s!r}: only letters, digits, '_' and '-' (1 to 64), it is a key-expression chunk")
+    return s
+
+
+def _endpoint(s: str) -> str:
+    m = ENDPOINT_RE.fullmatch(s)
+    if not m or int(m.group(3)) > MAX_PORT:
+        raise argparse.ArgumentTypeError(f"{s!r}: expected PROTO/HOST:PORT with PROTO tcp, udp, tls or quic, e.g. tls/127.0.0.1:7447")
+    return s
+
+
+def _readable_file(s: str) -> str:
+    if not os.path.isfile(s) or not os.access(s, os.R_OK):
+        raise argparse.ArgumentTypeError(f"{s}: not a readable file")
+    return s
+
+
+def _directory(s: str) -> str:
+    if not os.path.isdir(s):
+        raise argparse.ArgumentTypeError(f"{s}: not a directory")
+    return s
+
+
+def _zenoh_config_arg(g: argparse._ArgumentGroup) -> None:
+    g.add_argument("--zenoh-config", type=_readable_file, metavar="FILE",
+                   help="a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting and security on top")  # fmt: skip
+
+
 def _zenoh_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("zenoh")
-    g.add_argument("--run-id", default="default", help="key-expression namespace of the run (netsetest/<run-id>/...)")
+    g.add_argument("--run-id", type=_run_id, default=os.environ.get(RUN_ID_ENV, "default"),
+                   help=f"key-expression namespace of the run (netsetest/<run-id>/...); default ${RUN_ID_ENV} or 'default'")  # fmt: skip
     g.add_argument("--zenoh-mode", choices=["peer", "client"], default="peer", help="peer (one host) or client of a router")
-    g.add_argument("--listen", action="append", default=[], metavar="ENDPOINT", help="e.g. tcp/127.0.0.1:7450 (repeatable)")
-    g.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="e.g. tcp/10.0.0.1:7447 (repeatable)")
+    g.add_argument("--listen", type=_endpoint, action="append", default=[], metavar="ENDPOINT", help="e.g. tcp/127.0.0.1:7450 (repeatable)")
+    g.add_argument("--connect", type=_endpoint, action="append", default=[], metavar="ENDPOINT", help="e.g. tls/10.0.0.1:7447 (repeatable)")
+    g.add_argument("--credentials", type=_directory, metavar="DIR",
+                   help="mTLS: this role's certificate and key from DIR (`netsetest credentials`); connect on tls/ endpoints")  # fmt: skip
+    _zenoh_config_arg(g)
 
 
 def _at(s: str) -> tuple[int, int]:
@@ -55,6 +101,8 @@ def _seconds_type(allow_zero: bool) -> Callable[[str], float]:
             v = float(s)
         except ValueError:
             raise argparse.ArgumentTypeError(f"not a number of seconds: {s!r}") from None
+        if not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"must be a finite number of seconds, got {s!r}")
         if v < 0 or (v == 0 and not allow_zero):
             raise argparse.ArgumentTypeError(f"must be {'≥' if allow_zero else '>'} 0, got {v}")
         return v
@@ -63,6 +111,17 @@ def _seconds_type(allow_zero: bool) -> Callable[[str], float]:
 
 
 _seconds, _non_negative = _seconds_type(False), _seconds_type(True)
+DEFAULT_VALIDITY_DAYS = 30
+
+
+def _positive_days(s: str) -> int:
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number of days: {s!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {v}")
+    return v
 
 
 def add_run_options(p: argparse.ArgumentParser) -> None:
@@ -72,6 +131,9 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--pace", type=_non_negative, default=0.0, help="lockstep: at least this many seconds per step (default: as fast as possible)")
     g.add_argument("--kill", type=_at, action="append", default=[], metavar="NODE@STEP", help="SIGKILL node NODE once step STEP is checked")
     g.add_argument("--rejoin", type=_at, action="append", default=[], metavar="NODE@STEP", help="restart node NODE with --rejoin at step STEP")
+    g.add_argument("--insecure", action="store_true",
+                   help="no credentials, no access control: an open peer mesh any local process can join (labelled in the summary)")  # fmt: skip
+    _zenoh_config_arg(g)
 
 
 def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, run_args: Callable) -> None:
@@ -83,6 +145,8 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
     p.add_argument("--node-timeout", type=_seconds, default=10.0)
     p.add_argument("--pace", type=_non_negative, default=0.0, help="lockstep: at least this many seconds per step")
     p.add_argument("--start-timeout", type=_seconds, default=60.0, help="how long to wait for every role to be ready")
+    p.add_argument("--await-rejoin", type=_at, action="append", default=[], metavar="NODE@STEP",
+                   help="lockstep: before step STEP+1 wait (at most --node-timeout) for node NODE to come back")  # fmt: skip
     _zenoh_args(p)
 
     p = sub.add_parser("node", help="one sensing-node process of a Zenoh run")
@@ -92,6 +156,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
     p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep")
     p.add_argument("--neighbour-timeout", type=_seconds, default=5.0)
     p.add_argument("--rejoin", action="store_true", help="join a running network (after a crash or restart)")
+    p.add_argument("--crash-after", type=int, metavar="STEP", help="SIGKILL itself right after publishing step STEP (run --kill)")
     _zenoh_args(p)
 
     p = sub.add_parser("collector", help="the collector process: checks containment, writes record and summary")
@@ -105,34 +170,49 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
     _zenoh_args(p)
 
     p = sub.add_parser("router", help="a Zenoh router in Python (for client-mode roles on several hosts)")
-    p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
-                   help=f"default tcp/0.0.0.0:{ZENOH_DEFAULT_PORT}")  # fmt: skip
+    p.add_argument("topology", nargs="?", help="topology whose access-control rules the router enforces (with --credentials)")
+    p.add_argument("--listen", type=_endpoint, action="append", default=[], metavar="ENDPOINT",
+                   help=f"default tcp/0.0.0.0:{ZENOH_DEFAULT_PORT}, or tls/0.0.0.0:{ZENOH_DEFAULT_PORT} with --credentials")  # fmt: skip
+    p.add_argument("--credentials", type=_directory, metavar="DIR", help="mTLS with DIR/router.pem and the run's access-control rules")
+    p.add_argument("--run-id", type=_run_id, default=os.environ.get(RUN_ID_ENV, "default"), help=f"default ${RUN_ID_ENV} or 'default'")
+    _zenoh_config_arg(p)
+
+    p = sub.add_parser("credentials", help="write per-role mTLS credentials (CA, certificates, keys) and run.env for a deployment")
+    p.add_argument("dir", help="output directory (created with mode 0700)")
+    p.add_argument("topology")
+    p.add_argument("--run-id", type=_run_id, help="default: a random one")
+    p.add_argument("--router-host", action="append", default=[], metavar="NAME",
+                   help="a name or address the router is reached at (repeatable; localhost, 127.0.0.1 and router are always included)")  # fmt: skip
+    p.add_argument("--days", type=_positive_days, default=DEFAULT_VALIDITY_DAYS, help="validity of the certificates")
 
     p = sub.add_parser("compose", help="print a docker-compose.yml for a topology (router + one service per role)")
     p.add_argument("topology")
     p.add_argument("--image", default="netsetest:latest", help="image with netsetest installed (built from the Dockerfile)")
-    p.add_argument("--zenoh-image", default="eclipse/zenoh:1.10.2")
 
 
 # ---------------------------------------------------------------- role commands
 
 
-def _open_bus(a: argparse.Namespace):  # noqa: ANN202
+def _open_bus(a: argparse.Namespace, name: str):  # noqa: ANN202
     from netsetest.bus.zenoh_bus import ZenohBus
+    from netsetest.runtime.security import client_settings, identity
 
-    return ZenohBus(a.zenoh_mode, a.listen, a.connect)
+    settings = client_settings(identity(a.credentials, name)) if a.credentials else None
+    return ZenohBus(a.zenoh_mode, a.listen, a.connect, base_file=a.zenoh_config, settings=settings)
 
 
-def _role(name: str, a: argparse.Namespace, body: Callable) -> int:
+def _role(name: str, who: str, a: argparse.Namespace, body: Callable) -> int:
+    """Run a role process: ``name`` for its log lines, ``who`` its certificate name (keys.role_name)."""
     from netsetest.bus.zenoh_bus import BusError
     from netsetest.config.schema import load_topology
     from netsetest.runtime.processes import Stop, install_signal_handlers, log
+    from netsetest.runtime.security import CredentialsError
 
     sc = load_topology(a.topology, a.case, a.steps)
     install_signal_handlers()
     try:
-        bus = _open_bus(a)
-    except BusError as exc:
+        bus = _open_bus(a, who)
+    except (BusError, CredentialsError) as exc:
         log(name, str(exc))
         return EXIT_BAD_INPUT
     try:
@@ -147,8 +227,9 @@ def _role(name: str, a: argparse.Namespace, body: Callable) -> int:
 def cmd_vehicle(a: argparse.Namespace) -> int:
     from netsetest.runtime.processes import run_vehicle
 
-    return _role("vehicle", a, lambda sc, bus: run_vehicle(
-        sc, bus, a.run_id, a.signals, a.seed, a.clock == "realtime", a.node_timeout, a.start_timeout, a.pace))  # fmt: skip
+    return _role("vehicle", keys.role_name("vehicle"), a, lambda sc, bus: run_vehicle(
+        sc, bus, a.run_id, a.signals, a.seed, a.clock == "realtime", a.node_timeout, a.start_timeout, a.pace,
+        a.await_rejoin))  # fmt: skip
 
 
 def cmd_node(a: argparse.Namespace) -> int:
@@ -156,34 +237,59 @@ def cmd_node(a: argparse.Namespace) -> int:
 
     def body(sc, bus) -> int:  # noqa: ANN001
         sc.node(a.id)  # unknown id → ConfigError, exit 2
-        return run_node(sc, a.id, bus, a.run_id, a.variant, a.clock == "realtime", a.neighbour_timeout, a.rejoin)
+        return run_node(sc, a.id, bus, a.run_id, a.variant, a.clock == "realtime", a.neighbour_timeout, a.rejoin,
+                        a.crash_after)
 
-    return _role(f"node {a.id}", a, body)
+    return _role(f"node {a.id}", keys.role_name("node", a.id), a, body)
 
 
 def cmd_collector(a: argparse.Namespace) -> int:
     from netsetest.runtime.inmemory import run_meta
     from netsetest.runtime.processes import run_collector
     from netsetest.runtime.report import format_table
+    from netsetest.runtime.security import SECURITY_INSECURE, SECURITY_MTLS
 
     def body(sc, bus) -> int:  # noqa: ANN001
         meta = run_meta(sc, "zenoh", a.clock, a.signals, a.variant, a.seed, a.run_id)
+        meta["security"] = SECURITY_MTLS if a.credentials else SECURITY_INSECURE
         show = None if a.progress else (lambda s: print(format_table(s), flush=True))
         return run_collector(sc, bus, a.run_id, meta, a.record, a.summary_json, a.progress, a.idle_timeout, show)
 
-    return _role("collector", a, body)
+    return _role("collector", keys.role_name("collector"), a, body)
+
+
+def router_session(listen: list[str], base_file: str | None, security: dict[str, object] | None):  # noqa: ANN201
+    """Open a Zenoh router session (BusError if it cannot listen)."""
+    from netsetest.bus.zenoh_bus import open_session, zenoh_config
+
+    return open_session(zenoh_config("router", listen, base_file=base_file, settings=security), f"router on {', '.join(listen)}")
 
 
 def cmd_router(a: argparse.Namespace) -> int:
-    import zenoh
-
-    from netsetest.bus.zenoh_bus import zenoh_config
+    from netsetest.bus.zenoh_bus import BusError
+    from netsetest.config.schema import load_topology
     from netsetest.runtime.processes import Stop, install_signal_handlers, log
+    from netsetest.runtime.security import ROUTER, CredentialsError, identity, router_settings
 
+    security = None
+    if a.credentials:
+        if not a.topology:
+            log("router", "--credentials needs the TOPOLOGY (the access-control rules are built from it)")
+            return EXIT_BAD_INPUT
+        try:
+            security = router_settings(identity(a.credentials, ROUTER), load_topology(a.topology), a.run_id)
+        except CredentialsError as exc:
+            log("router", f"--credentials: {exc}")
+            return EXIT_BAD_INPUT
+    proto = "tls" if a.credentials else "tcp"
+    listen = a.listen or [f"{proto}/0.0.0.0:{ZENOH_DEFAULT_PORT}"]
     install_signal_handlers()
-    listen = a.listen or [f"tcp/0.0.0.0:{ZENOH_DEFAULT_PORT}"]
-    session = zenoh.open(zenoh_config("router", listen))
-    log("router", f"listening on {', '.join(listen)}")
+    try:
+        session = router_session(listen, a.zenoh_config, security)
+    except BusError as exc:
+        log("router", f"--listen: {exc}")
+        return EXIT_BAD_INPUT
+    log("router", f"listening on {', '.join(listen)}" + (f"; mTLS and access control for run {a.run_id}" if security else ""))
     try:
         while True:
             time.sleep(3600)
@@ -193,14 +299,30 @@ def cmd_router(a: argparse.Namespace) -> int:
         session.close()
 
 
-def cmd_compose(a: argparse.Namespace) -> int:
-    from netsetest.runtime.compose import compose_yaml
+def cmd_credentials(a: argparse.Namespace) -> int:
+    import datetime
+    import secrets
 
-    sys.stdout.write(compose_yaml(a.topology, a.image, a.zenoh_image))
+    from netsetest.config.schema import load_topology
+    from netsetest.runtime.security import ROUTER_HOSTS, role_names, write_credentials
+
+    sc = load_topology(a.topology)
+    run_id = a.run_id or f"run-{secrets.token_hex(8)}"
+    out = write_credentials(a.dir, role_names(sc), [*ROUTER_HOSTS, *a.router_host], datetime.timedelta(days=a.days))
+    (out / RUN_ENV_FILE).write_text(f"{RUN_ID_ENV}={run_id}\n")
+    print(f"credentials for {len(role_names(sc))} roles and the router in {out} (run id {run_id}, valid {a.days} days)")
     return 0
 
 
-COMMANDS.update(vehicle=cmd_vehicle, node=cmd_node, collector=cmd_collector, router=cmd_router, compose=cmd_compose)
+def cmd_compose(a: argparse.Namespace) -> int:
+    from netsetest.runtime.compose import compose_yaml
+
+    sys.stdout.write(compose_yaml(a.topology, a.image))
+    return 0
+
+
+COMMANDS.update(vehicle=cmd_vehicle, node=cmd_node, collector=cmd_collector, router=cmd_router, credentials=cmd_credentials,
+                compose=cmd_compose)
 
 
 # ---------------------------------------------------------------- run --mode zenoh: the parent
@@ -231,7 +353,7 @@ class Children:
 
     def __init__(self) -> None:
         self.procs: dict[str, subprocess.Popen] = {}
-        self.killed: set[str] = set()
+        self.ended: list[subprocess.Popen] = []
 
     def start(self, name: str, argv: list[str], **kw: object) -> subprocess.Popen:
         cmd = [sys.executable, "-m", "netsetest.cli.main", *argv]
@@ -239,14 +361,14 @@ class Children:
         self.procs[name] = proc
         return proc
 
-    def kill(self, name: str) -> None:
-        proc = self.procs[name]
-        self.killed.add(name)
-        proc.send_signal(signal.SIGKILL)
-        proc.wait()
+    def start_again(self, name: str) -> None:
+        """Forget a process that ended (a killed node about to be restarted); it was waited for."""
+        self.procs[name].wait()
+        self.ended.append(self.procs.pop(name))
 
-    def stop_all(self, grace: float = 5.0) -> None:
-        live = [p for p in self.procs.values() if p.poll() is None]
+    def stop_all(self, grace: float, keep: Sequence[str] = ()) -> None:
+        """SIGTERM every live child except ``keep``, SIGKILL those still alive after ``grace`` s."""
+        live = [p for n, p in self.procs.items() if p.poll() is None and n not in keep]
         for p in live:
             p.send_signal(signal.SIGTERM)
         deadline = time.monotonic() + grace
@@ -258,56 +380,116 @@ class Children:
                 p.wait()
 
 
+@dataclass(frozen=True)
+class Schedule:
+    """``--kill`` / ``--rejoin`` per node, checked: kill and rejoin alternate, steps increase, within the run."""
+
+    kills: dict[int, list[int]]
+    rejoins: dict[int, list[int]]
+
+    def next_kill(self, node: int, after: int) -> int | None:
+        """The first kill step of ``node`` at or after step ``after`` (its process' --crash-after)."""
+        return min((k for k in self.kills.get(node, []) if k >= after), default=None)
+
+
+def kill_schedule(kill: list[tuple[int, int]], rejoin: list[tuple[int, int]], steps: int) -> Schedule:
+    """Validate the kill/rejoin options (ValueError naming the option); a kill lands right after its step."""
+    events: dict[int, list[tuple[int, str]]] = {}
+    for opt, pairs in (("kill", kill), ("rejoin", rejoin)):
+        for node, step in pairs:
+            if not 0 <= step < steps:
+                raise ValueError(f"--{opt} {node}@{step}: the step must be in 0..{steps - 1} (the run has {steps} steps)")
+            events.setdefault(node, []).append((step, opt))
+    for node, evs in events.items():
+        evs.sort()
+        for n, (step, opt) in enumerate(evs):
+            want = "kill" if n % 2 == 0 else "rejoin"
+            if opt != want or (n and step <= evs[n - 1][0]):
+                raise ValueError(f"--{opt} {node}@{step}: each node's --kill and --rejoin must alternate, kill first, at increasing steps")
+    by = lambda opt: {i: [s for s, o in evs if o == opt] for i, evs in events.items()}  # noqa: E731
+    return Schedule(by("kill"), by("rejoin"))
+
+
+COLLECTOR_GRACE_S = 10.0  # on Ctrl-C/SIGTERM: how long the collector may take to write its record and summary
+ROLE_GRACE_S = 5.0  # how long a role may take to leave after SIGTERM (or after End)
+
+
 def cmd_run_zenoh(a: argparse.Namespace) -> int:
+    from netsetest.bus.zenoh_bus import BusError
     from netsetest.config.schema import load_topology
     from netsetest.runtime.processes import log
     from netsetest.runtime.report import Progress, format_table
+    from netsetest.runtime.security import (
+        ROUTER, SECURITY_INSECURE, SECURITY_MTLS, identity, role_names, router_settings, write_credentials,
+    )  # fmt: skip
 
     sc = load_topology(a.topology, a.case, a.steps)
     for node, _ in a.kill + a.rejoin:
         sc.node(node)
+    try:
+        schedule = kill_schedule(a.kill, a.rejoin, sc.steps)
+    except ValueError as exc:
+        log("run", str(exc))
+        return EXIT_BAD_INPUT
     if a.neighbour_timeout >= a.node_timeout:
         # else a node waiting for a dead neighbour is itself declared dead by the vehicle
         log("run", f"--neighbour-timeout ({a.neighbour_timeout:g} s) must be shorter than --node-timeout ({a.node_timeout:g} s)")
         return EXIT_BAD_INPUT
+    security = SECURITY_INSECURE if a.insecure else SECURITY_MTLS
     run_id = f"run{os.getpid()}"
-    names = ["collector", "vehicle", *(f"node{i}" for i in sc.ids)]
-    ports = dict(zip(names, free_ports(len(names))))
-    endpoint = lambda name: f"tcp/127.0.0.1:{ports[name]}"  # noqa: E731
-    common = [a.topology, "--run-id", run_id, "--zenoh-mode", "peer"]
+    tmp = tempfile.TemporaryDirectory(prefix="netsetest-")  # mode 0700 (mkdtemp)
+    summary_path = a.summary_json or str(Path(tmp.name) / "summary.json")
+    children = Children()
+    router = None
+    common = [a.topology, "--run-id", run_id, *(["--zenoh-config", a.zenoh_config] if a.zenoh_config else [])]
     if a.case:
         common += ["--case", a.case]
     if a.steps:
         common += ["--steps", str(a.steps)]
+    names = ["collector", "vehicle", *(f"node{i}" for i in sc.ids)]
+    ports = dict(zip(names, free_ports(len(names))))
 
     def net(name: str) -> list[str]:
-        out = ["--listen", endpoint(name)]
+        if router is not None:  # star: every role is an mTLS client of the parent's router
+            return ["--zenoh-mode", "client", "--connect", router_endpoint, "--credentials", creds]
+        endpoint = lambda n: f"tcp/127.0.0.1:{ports[n]}"  # noqa: E731
+        out = ["--zenoh-mode", "peer", "--listen", endpoint(name)]  # insecure: today's full peer mesh
         for other in names:
             if other != name:
                 out += ["--connect", endpoint(other)]
         return out
-
-    tmp = tempfile.TemporaryDirectory(prefix="netsetest-")
-    summary_path = a.summary_json or str(Path(tmp.name) / "summary.json")
-    children = Children()
-    bar = Progress(sc.steps, f"zenoh ({len(sc.ids)} nodes + vehicle + collector)", enabled=not a.quiet)
-    progress = [-1]
-
-    def follow(stream) -> None:  # noqa: ANN001
-        for line in stream:
-            if line.startswith("@progress "):
-                progress[0] = int(line.split()[1])
-
-    def node_argv(i: int, rejoin: bool) -> list[str]:
-        argv = ["node", *common, "--id", str(i), "--variant", a.variant, "--clock", a.clock,
-                "--neighbour-timeout", str(a.neighbour_timeout), *net(f"node{i}")]  # fmt: skip
-        return argv + ["--rejoin"] if rejoin else argv
 
     def on_term(signum: int, frame: object) -> None:
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, on_term)
     try:
+        if not a.insecure:
+            creds = str(Path(tmp.name) / "credentials")
+            write_credentials(creds, role_names(sc))
+            router_endpoint = f"tls/127.0.0.1:{free_ports(1)[0]}"
+            try:
+                router = router_session([router_endpoint], a.zenoh_config, router_settings(identity(creds, ROUTER), sc, run_id))
+            except BusError as exc:
+                log("run", str(exc))
+                return EXIT_BAD_INPUT
+        log("run", f"security: {security}" + (" (mTLS per role, access control at the run's router)" if router is not None
+                                               else " (open peer mesh: any local process can read and forge messages)"))  # fmt: skip
+        bar = Progress(sc.steps, f"zenoh ({len(sc.ids)} nodes + vehicle + collector)", enabled=not a.quiet)
+        progress = [-1]
+
+        def follow(stream) -> None:  # noqa: ANN001
+            for line in stream:
+                if line.startswith("@progress "):
+                    progress[0] = int(line.split()[1])
+
+        def start_node(i: int, rejoin: bool, after: int) -> None:
+            crash = schedule.next_kill(i, after)
+            children.start(f"node{i}", ["node", *common, "--id", str(i), "--variant", a.variant, "--clock", a.clock,
+                                        "--neighbour-timeout", str(a.neighbour_timeout), *net(f"node{i}"),
+                                        *(["--rejoin"] if rejoin else []), *([] if crash is None else ["--crash-after", str(crash)])],
+                           stdout=subprocess.DEVNULL)  # fmt: skip
+
         col = children.start(
             "collector",
             ["collector", *common, "--signals", a.signals, "--variant", a.variant, "--seed", str(a.seed), "--clock", a.clock,
@@ -316,29 +498,28 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         )  # fmt: skip
         threading.Thread(target=follow, args=(col.stdout,), daemon=True).start()
         for i in sc.ids:
-            children.start(f"node{i}", node_argv(i, False), stdout=subprocess.DEVNULL)
+            start_node(i, False, 0)
+        awaits = [f"{i}@{r}" for i, rs in schedule.rejoins.items() for r in rs]
         children.start(
             "vehicle",
             ["vehicle", *common, "--signals", a.signals, "--seed", str(a.seed), "--clock", a.clock,
-             "--node-timeout", str(a.node_timeout), "--pace", str(a.pace), *net("vehicle")],
+             "--node-timeout", str(a.node_timeout), "--pace", str(a.pace), *net("vehicle"),
+             *(x for w in awaits for x in ("--await-rejoin", w))],
             stdout=subprocess.DEVNULL,
         )  # fmt: skip
-        kills, rejoins = sorted(a.kill, key=lambda t: t[1]), sorted(a.rejoin, key=lambda t: t[1])
+        rejoins = sorted((r, i) for i, rs in schedule.rejoins.items() for r in rs)
         reported: set[str] = set()
         while True:
             time.sleep(0.05)
             bar.update(max(progress[0], 0))
-            for node, step in list(kills):
-                if progress[0] >= step:
-                    log("run", f"killing node {node} (SIGKILL) after step {progress[0]}")
-                    children.kill(f"node{node}")
-                    kills.remove((node, step))
-            for node, step in list(rejoins):
+            for step, node in list(rejoins):
                 if progress[0] >= step and children.procs[f"node{node}"].poll() is not None:
                     log("run", f"restarting node {node} with --rejoin at step {progress[0]}")
                     ports[f"node{node}"] = free_ports(1)[0]
-                    children.start(f"node{node}", node_argv(node, True), stdout=subprocess.DEVNULL)
-                    rejoins.remove((node, step))
+                    children.start_again(f"node{node}")
+                    reported.discard(f"node{node}")
+                    start_node(node, True, step)
+                    rejoins.remove((step, node))
             if col.poll() is not None:
                 break
             veh = children.procs["vehicle"].poll()
@@ -346,29 +527,44 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
                 log("run", f"the vehicle process failed (exit {veh}); stopping the run")
                 return EXIT_VIOLATION
             for name, proc in children.procs.items():
-                if name.startswith("node") and name not in children.killed and name not in reported and proc.poll() not in (None, 0):
-                    log("run", f"{name} exited with code {proc.returncode}; the run goes on without it")
-                    reported.add(name)
+                code = proc.poll()
+                if not name.startswith("node") or name in reported or code in (None, 0):
+                    continue
+                reported.add(name)
+                if code == -signal.SIGKILL and schedule.kills.get(int(name.removeprefix("node"))):
+                    log("run", f"{name} killed (SIGKILL) as --kill asked")
+                else:
+                    log("run", f"{name} exited with code {code}; the run goes on without it")
         bar.update(max(progress[0], 0))
         bar.close()
         code = col.returncode
         for p in children.procs.values():  # vehicle and nodes end on End; give them a moment
             try:
-                p.wait(timeout=5)
+                p.wait(timeout=ROLE_GRACE_S)
             except subprocess.TimeoutExpired:
                 pass
-        if not Path(summary_path).exists():
-            log("run", f"the collector exited with code {code} without a summary")
-            return EXIT_VIOLATION
-        import json
-
-        summary = json.loads(Path(summary_path).read_text())
-        print(format_table(summary))
-        return code
+        return _print_summary(summary_path, security, code, format_table)
     except KeyboardInterrupt:
-        bar.close()
-        log("run", "interrupted: stopping every process")
+        log("run", "interrupted: stopping the vehicle and the nodes, then letting the collector write what it has")
+        children.stop_all(ROLE_GRACE_S, keep=["collector"])
+        children.stop_all(COLLECTOR_GRACE_S)
+        if Path(summary_path).exists() and a.summary_json:
+            log("run", f"partial summary written to {summary_path}")
         return 130
     finally:
-        children.stop_all()
+        children.stop_all(ROLE_GRACE_S)
+        if router is not None:
+            router.close()
         tmp.cleanup()
+
+
+def _print_summary(summary_path: str, security: str, code: int, format_table: Callable[[dict], str]) -> int:
+    import json
+
+    if not Path(summary_path).exists():
+        print(f"netsetest run: the collector exited with code {code} without a summary", file=sys.stderr)
+        return EXIT_VIOLATION
+    summary = json.loads(Path(summary_path).read_text())
+    print(format_table(summary))
+    print(f"security: {summary.get('security', security)}")
+    return code

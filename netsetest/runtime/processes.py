@@ -12,10 +12,12 @@ Real time: the vehicle publishes a step every τs; nodes step as soon as their i
 
 from __future__ import annotations
 
+import math
+import os
 import signal
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
@@ -29,6 +31,7 @@ from netsetest.roles.vehicle import Vehicle
 from netsetest.runtime.report import EXIT_VIOLATION, exit_code, write_outputs
 
 READY_PERIOD_S = 0.1
+CRASH_FLUSH_S = 0.2  # --crash-after: time for the last state to leave before SIGKILL
 
 
 class Stop(Exception):
@@ -53,22 +56,27 @@ class Barrier:
     def __init__(self, bus: Bus, run_id: str, me: Ready, others: set[tuple[str, int | None]]) -> None:
         self.bus, self.run, self.me, self.others = bus, run_id, me, others
         self.heard: set[tuple[str, int | None]] = set()
+        self.heard_at: dict[tuple[str, int | None], float] = {}  # last Ready (a restarted node's comes late)
         self.complete: set[tuple[str, int | None]] = set()  # roles that reported seen_all
         self.last_sent = 0.0
-        bus.subscribe(keys.ready(run_id), self.on_message)
+        bus.subscribe(keys.ready_of(run_id, "*"), self.on_message)
 
     def on_message(self, key: str, msg: Message) -> None:
         if not isinstance(msg, Ready):
             return
+        if key != keys.ready_of(self.run, keys.role_name(msg.role, msg.node)):
+            self.bus.drop("ready-wrong-key")  # a role speaks for itself only (the ACL allows its own key)
+            return
         who = (msg.role, msg.node)
         self.heard.add(who)
+        self.heard_at[who] = time.monotonic()
         if msg.seen_all:
             self.complete.add(who)
 
     def tick(self, now: float, **changes: object) -> None:
         if now - self.last_sent >= READY_PERIOD_S:
             seen_all = self.others <= self.heard
-            self.bus.publish(keys.ready(self.run), self.me.model_copy(update={"seen_all": seen_all, **changes}))
+            self.bus.publish(keys.ready_of(self.run, keys.role_name(self.me.role, self.me.node)), self.me.model_copy(update={"seen_all": seen_all, **changes}))
             self.last_sent = now
 
 
@@ -86,8 +94,14 @@ def run_vehicle(
     node_timeout: float,
     start_timeout: float,
     pace: float = 0.0,
+    await_rejoin: Sequence[tuple[int, int]] = (),
 ) -> int:
+    """``await_rejoin``: (node, step) pairs; in lockstep, step+1 waits (at most ``node_timeout``) for the node."""
     vehicle = Vehicle(sc, bus, run_id, signals, seed, realtime=realtime)
+    holds: dict[int, set[int]] = {}
+    for node, step in await_rejoin:
+        holds.setdefault(step, set()).add(node)
+    dead_at: dict[int, float] = {}  # node → when the vehicle went on without it
     me = ("vehicle", None)
     barrier = Barrier(bus, run_id, Ready(role="vehicle"), _all_roles(sc) - {me})
     t0 = time.monotonic()
@@ -113,16 +127,38 @@ def run_vehicle(
             if now >= next_tick + sc.tau_s:
                 next_tick += sc.tau_s
                 vehicle.advance()
+        elif vehicle.ready_to_advance() and _holding(holds, vehicle, barrier, dead_at, now - t_step, node_timeout):
+            pass
         elif vehicle.ready_to_advance():
-            if now - t_step >= pace:  # lockstep paced for watching (or for a restarted node to catch up)
+            if now - t_step >= pace:  # lockstep paced for watching
                 vehicle.advance()
                 t_step = now
         elif now - t_step > node_timeout:
             log("vehicle", f"step {vehicle.k}: no state from node(s) {sorted(vehicle.waiting_for())} in {node_timeout:g} s; going on without")
+            dead_at.update((n, now) for n in vehicle.waiting_for())
             vehicle.advance()
             t_step = now
     time.sleep(0.2)  # let End reach everyone before the session closes
     return 0
+
+
+def _holding(
+    holds: dict[int, set[int]], vehicle: Vehicle, barrier: Barrier, dead_at: dict[int, float], waited: float, node_timeout: float
+) -> bool:
+    """Lockstep: keep step k+1 back while a node due to rejoin after step k has not announced itself
+    (a Ready heard after the vehicle went on without it)."""
+
+    def back(node: int) -> bool:
+        return node in vehicle.alive or barrier.heard_at.get(("node", node), -math.inf) > dead_at.get(node, math.inf)
+
+    pending = sorted(n for n in holds.get(vehicle.k, ()) if not back(n))
+    if not pending:
+        return False
+    if waited > node_timeout:
+        log("vehicle", f"step {vehicle.k}: node(s) {pending} did not come back in {node_timeout:g} s; going on without")
+        del holds[vehicle.k]
+        return False
+    return True
 
 
 def run_node(
@@ -134,7 +170,9 @@ def run_node(
     realtime: bool,
     neighbour_timeout: float,
     rejoin: bool,
+    crash_after: int | None = None,
 ) -> int:
+    """``crash_after``: SIGKILL this process right after publishing that step (``run --kill``: exactly there)."""
     node = Node(sc, node_id, bus, run_id, variant, rejoin=rejoin)
     role = f"node {node_id}"
     barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), _all_roles(sc) - {("node", node_id)})
@@ -151,6 +189,10 @@ def run_node(
                 node.give_up = True
             if not node.try_step(now):
                 break
+            if node.k == crash_after:
+                time.sleep(CRASH_FLUSH_S)  # the state of step k leaves before the crash
+                log(role, f"killing myself (SIGKILL) after step {node.k} as asked")
+                os.kill(os.getpid(), signal.SIGKILL)
     return 0
 
 
@@ -199,6 +241,8 @@ def run_collector(
             log("collector", f"no message for {idle_timeout:g} s: the vehicle is gone; writing what was received")
             break
     summary, parts = collector.finish(meta)
+    if "security" in meta:
+        summary["security"] = meta["security"]
     write_outputs(summary, meta, parts, record, summary_json)
     if on_summary:
         on_summary(summary)

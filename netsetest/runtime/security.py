@@ -1,0 +1,209 @@
+"""Zenoh's own security for a run: per-run mTLS credentials and the access-control rules of each role.
+
+Everything here configures Zenoh mechanisms; nothing is home-made crypto:
+
+- **mutual TLS** (``tls/`` endpoints, ``transport/link/tls``): a per-run certificate authority signs one
+  certificate per role whose common name names the role (``vehicle``, ``collector``, ``node-3``) and one
+  for the router.  A session without a certificate of this CA cannot connect at all.
+- **access control** (``access_control``, enforced by the router): subjects are the certificates'
+  common names; with ``default_permission: deny`` each role may publish only its own keys and receive
+  only what it needs (``acl_config``).  Because every role is a client of one router, the router sees
+  every message and its rules are authoritative.
+
+Credentials are written by :func:`write_credentials` (the ``cryptography`` package): ``ca.pem``,
+``NAME.pem`` and ``NAME.key`` (0600) in a directory of mode 0700.  The CA's private key is never
+written: to add a role, create a new set.
+"""
+
+from __future__ import annotations
+
+import datetime
+import ipaddress
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from cryptography import x509
+from cryptography.hazmat.primitives import hashes, serialization
+from cryptography.hazmat.primitives.asymmetric import ec
+from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
+from netsetest.bus import keys
+from netsetest.bus.keys import role_name
+from netsetest.config.schema import Scenario
+
+SECURITY_MTLS = "mtls+acl"  # the summary's "security" field: Zenoh mTLS + access control at the router
+SECURITY_INSECURE = "insecure"  # open peer mesh: any local process can read and forge messages
+ROUTER = "router"  # common name of the router's certificate
+ROUTER_HOSTS = ("localhost", "127.0.0.1", ROUTER)  # names the router's certificate is valid for
+CA_FILE = "ca.pem"
+DIR_MODE, KEY_MODE = 0o700, 0o600
+RUN_VALIDITY = datetime.timedelta(days=1)
+CLOCK_SKEW = datetime.timedelta(minutes=5)  # not-before in the past: hosts' clocks differ a little
+
+
+class CredentialsError(ValueError):
+    """A credentials directory is missing a file or is readable by others."""
+
+
+def role_names(sc: Scenario) -> list[str]:
+    return [role_name("vehicle"), role_name("collector"), *(role_name("node", i) for i in sc.ids)]
+
+
+@dataclass(frozen=True)
+class Identity:
+    """The files one role needs for mTLS."""
+
+    ca: Path
+    cert: Path
+    key: Path
+
+
+def identity(directory: str | Path, name: str) -> Identity:
+    """The files of role ``name`` in a credentials directory; checks they exist and the key is private."""
+    d = Path(directory)
+    ident = Identity(d / CA_FILE, d / f"{name}.pem", d / f"{name}.key")
+    for f in (ident.ca, ident.cert, ident.key):
+        if not f.is_file():
+            raise CredentialsError(f"{d}: no {f.name} (create the credentials with `netsetest credentials`)")
+    if ident.key.stat().st_mode & 0o077:
+        raise CredentialsError(f"{ident.key}: private key readable by group or others (chmod 600)")
+    return ident
+
+
+def _name(cn: str) -> x509.Name:
+    return x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, cn)])
+
+
+def _write_private(path: Path, data: bytes) -> None:
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, KEY_MODE)
+    with os.fdopen(fd, "wb") as f:
+        f.write(data)
+
+
+def _san(host: str) -> x509.GeneralName:
+    try:
+        return x509.IPAddress(ipaddress.ip_address(host))
+    except ValueError:
+        return x509.DNSName(host)
+
+
+def write_credentials(
+    directory: str | Path, names: Iterable[str], router_hosts: Sequence[str] = ROUTER_HOSTS, validity: datetime.timedelta = RUN_VALIDITY
+) -> Path:
+    """A fresh CA and one certificate + key per name (and the router) in ``directory`` (created 0700)."""
+    d = Path(directory)
+    d.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
+    d.chmod(DIR_MODE)
+    now = datetime.datetime.now(datetime.timezone.utc)
+    start, end = now - CLOCK_SKEW, now + validity
+    ca_key = ec.generate_private_key(ec.SECP256R1())
+    ca_name = _name(f"netsetest CA {now:%Y%m%dT%H%M%S}")
+    ca = (
+        x509.CertificateBuilder().subject_name(ca_name).issuer_name(ca_name).public_key(ca_key.public_key())
+        .serial_number(x509.random_serial_number()).not_valid_before(start).not_valid_after(end)
+        .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
+        .add_extension(x509.KeyUsage(digital_signature=True, key_cert_sign=True, crl_sign=True, content_commitment=False,
+                                     key_encipherment=False, data_encipherment=False, key_agreement=False,
+                                     encipher_only=False, decipher_only=False), critical=True)
+        .add_extension(x509.SubjectKeyIdentifier.from_public_key(ca_key.public_key()), critical=False)
+        .sign(ca_key, hashes.SHA256())
+    )  # fmt: skip
+    (d / CA_FILE).write_bytes(ca.public_bytes(serialization.Encoding.PEM))
+    for name in [ROUTER, *names]:
+        key = ec.generate_private_key(ec.SECP256R1())
+        hosts = list(router_hosts) if name == ROUTER else [name]
+        usage = ExtendedKeyUsageOID.SERVER_AUTH if name == ROUTER else ExtendedKeyUsageOID.CLIENT_AUTH
+        cert = (
+            x509.CertificateBuilder().subject_name(_name(name)).issuer_name(ca_name).public_key(key.public_key())
+            .serial_number(x509.random_serial_number()).not_valid_before(start).not_valid_after(end)
+            .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+            .add_extension(x509.SubjectAlternativeName([_san(h) for h in hosts]), critical=False)
+            .add_extension(x509.ExtendedKeyUsage([usage]), critical=False)
+            .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()), critical=False)
+            .sign(ca_key, hashes.SHA256())
+        )  # fmt: skip
+        (d / f"{name}.pem").write_bytes(cert.public_bytes(serialization.Encoding.PEM))
+        _write_private(
+            d / f"{name}.key",
+            key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()),
+        )
+    return d
+
+
+def tls_settings(ident: Identity, listen: bool) -> dict[str, object]:
+    """``transport/link/tls`` of a session: the router listens, roles connect; both sides authenticate."""
+    side = "listen" if listen else "connect"
+    return {
+        "root_ca_certificate": str(ident.ca),
+        f"{side}_certificate": str(ident.cert),
+        f"{side}_private_key": str(ident.key),
+        "enable_mtls": True,
+    }
+
+
+@dataclass(frozen=True)
+class Grant:
+    """What one role may do: publish on ``publish``, subscribe to and receive ``receive``."""
+
+    publish: tuple[str, ...]
+    receive: tuple[str, ...]
+
+
+def grants(sc: Scenario, run_id: str) -> dict[str, Grant]:
+    """Per role (certificate common name): the key expressions of keys.py it may publish and receive."""
+    control = (keys.ready_of(run_id, "*"), keys.end(run_id))
+    out = {
+        role_name("vehicle"): Grant(
+            (keys.node_input(run_id, "*"), keys.truth(run_id), keys.end(run_id), keys.ready_of(run_id, role_name("vehicle"))),
+            (keys.node_state(run_id, "*"), *control),
+        ),
+        role_name("collector"): Grant(
+            (keys.ready_of(run_id, role_name("collector")),),
+            (keys.truth(run_id), keys.node_state(run_id, "*"), *control),
+        ),
+    }
+    for n in sc.nodes:
+        me = role_name("node", n.id)
+        neighbours = tuple(keys.node_state(run_id, j) for j in sorted(n.in_weights) if j != n.id)
+        out[me] = Grant(
+            (keys.node_state(run_id, n.id), keys.ready_of(run_id, me)),
+            (keys.node_input(run_id, n.id), *neighbours, *control),
+        )
+    return out
+
+
+def acl_config(sc: Scenario, run_id: str) -> dict[str, object]:
+    """The router's ``access_control`` section: deny by default, allow each role's :func:`grants`."""
+    rules: list[dict[str, object]] = [
+        # subscriptions are propagated to publishers (which then send); declarations carry no data
+        {"id": "interest", "messages": ["declare_subscriber"], "flows": ["egress"], "permission": "allow",
+         "key_exprs": [keys.run_root(run_id)]},
+    ]  # fmt: skip
+    subjects, policies = [], []
+    for name, g in grants(sc, run_id).items():
+        rules.append({"id": f"{name}-publish", "messages": ["put"], "flows": ["ingress"], "permission": "allow",
+                      "key_exprs": list(g.publish)})  # fmt: skip
+        rules.append({"id": f"{name}-subscribe", "messages": ["declare_subscriber"], "flows": ["ingress"],
+                      "permission": "allow", "key_exprs": list(g.receive)})  # fmt: skip
+        rules.append({"id": f"{name}-receive", "messages": ["put"], "flows": ["egress"], "permission": "allow",
+                      "key_exprs": list(g.receive)})  # fmt: skip
+        subjects.append({"id": name, "cert_common_names": [name]})
+        policies.append({"id": name, "rules": [f"{name}-publish", f"{name}-subscribe", f"{name}-receive", "interest"],
+                         "subjects": [name]})  # fmt: skip
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}
+
+
+def _tls_paths(ident: Identity, listen: bool) -> dict[str, object]:
+    return {f"transport/link/tls/{k}": v for k, v in tls_settings(ident, listen).items()}
+
+
+def client_settings(ident: Identity) -> dict[str, object]:
+    """Zenoh settings of a role that connects to the router with its certificate (TLS links only)."""
+    return {"transport/link/protocols": ["tls"], **_tls_paths(ident, listen=False)}
+
+
+def router_settings(ident: Identity, sc: Scenario, run_id: str) -> dict[str, object]:
+    """Zenoh settings of the run's router: TLS links only, client certificates required, the run's ACL."""
+    return {"transport/link/protocols": ["tls"], **_tls_paths(ident, listen=True), "access_control": acl_config(sc, run_id)}
