@@ -117,7 +117,7 @@ class Injector:
         self.endpoint = f"tcp/127.0.0.1:{port}"
         self.bus = ZenohBus("peer", listen=[self.endpoint])
         self.heard: set[tuple[str, int | None]] = set()  # Ready of the roles: they are connected to us
-        self.bus.subscribe(keys.ready(run_id), lambda key, m: self.heard.add((m.role, m.node)))  # type: ignore[union-attr]
+        self.bus.subscribe(keys.ready_of(run_id, "*"), lambda key, m: self.heard.add((m.role, m.node)))  # type: ignore[union-attr]
         self.stop = threading.Event()
         self.sent = 0
         self.thread = threading.Thread(target=self._loop, daemon=True)

@@ -338,14 +338,17 @@ def launch_clients(
     summary: Path,
     router: str | dict[str, str],
     prefix: dict[str, list[str]] | None = None,
+    record: Path | None = None,
+    extra: Sequence[str] = (),
 ) -> None:
     """Collector, nodes and vehicle in client mode.  ``router``: one endpoint, or role name → endpoint;
-    ``prefix``: role name → argv prefix (e.g. ``ip netns exec NS``)."""
+    ``prefix``: role name → argv prefix (e.g. ``ip netns exec NS``); ``extra``: options for every role
+    (e.g. ``--credentials DIR``)."""
     guard.markers.add(run_id)
     for name in role_names():
         role = "node" if name.startswith("node") else name
         ep = router if isinstance(router, str) else router[name]
-        argv = role_argv(role, topology, run_id, "client", [], [ep], steps, role_extra(name, summary))
+        argv = role_argv(role, topology, run_id, "client", [], [ep], steps, [*role_extra(name, summary, record=record), *extra])
         guard.start(name, [*(prefix or {}).get(name, []), *cli(*argv)])
 
 

@@ -205,7 +205,7 @@ def _role(name: str, who: str, a: argparse.Namespace, body: Callable) -> int:
     """Run a role process: ``name`` for its log lines, ``who`` its certificate name (keys.role_name)."""
     from netsetest.bus.zenoh_bus import BusError
     from netsetest.config.schema import load_topology
-    from netsetest.runtime.processes import Stop, install_signal_handlers, log
+    from netsetest.runtime.processes import EXIT_STOPPED, Stop, install_signal_handlers, log
     from netsetest.runtime.security import CredentialsError
 
     sc = load_topology(a.topology, a.case, a.steps)
@@ -219,7 +219,7 @@ def _role(name: str, who: str, a: argparse.Namespace, body: Callable) -> int:
         return body(sc, bus)
     except Stop as why:
         log(name, f"stopped by {why}")
-        return 128 + 15
+        return EXIT_STOPPED
     finally:
         bus.close()
 
@@ -473,8 +473,8 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
             except BusError as exc:
                 log("run", str(exc))
                 return EXIT_BAD_INPUT
-        log("run", f"security: {security}" + (" (mTLS per role, access control at the run's router)" if router is not None
-                                               else " (open peer mesh: any local process can read and forge messages)"))  # fmt: skip
+        log("run", f"security: {security}" + (f" (mTLS per role, access control at the run's router {router_endpoint}; credentials in {creds})"
+                                               if router is not None else " (open peer mesh: any local process can read and forge messages)"))  # fmt: skip
         bar = Progress(sc.steps, f"zenoh ({len(sc.ids)} nodes + vehicle + collector)", enabled=not a.quiet)
         progress = [-1]
 

@@ -17,7 +17,7 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
@@ -31,6 +31,7 @@ from netsetest.roles.vehicle import Vehicle
 from netsetest.runtime.report import EXIT_VIOLATION, exit_code, write_outputs
 
 READY_PERIOD_S = 0.1
+EXIT_STOPPED = 128 + signal.SIGTERM  # a role stopped by SIGTERM/SIGINT
 CRASH_FLUSH_S = 0.2  # --crash-after: time for the last state to leave before SIGKILL
 
 
@@ -223,27 +224,53 @@ def run_collector(
     barrier = Barrier(bus, run_id, Ready(role="collector"), _all_roles(sc) - {("collector", None)})
     prog = _CollectorProgress(progress)
     last_msg = time.monotonic()
-    while True:
-        now = time.monotonic()
-        if not collector.truth:
-            barrier.tick(now)
-        if bus.pump(timeout=0.05):
-            last_msg = time.monotonic()
-        prog.update(collector.progress)
-        if collector.ended is not None:
-            # End overtakes the last states on other paths: wait until they are in (or a grace period)
-            t_end = time.monotonic()
-            while collector.progress < collector.ended.steps and time.monotonic() - t_end < 2.0:
-                bus.pump(timeout=0.05)
+    stopped = False
+    try:
+        while True:
+            now = time.monotonic()
+            if not collector.truth:
+                barrier.tick(now)
+            if bus.pump(timeout=0.05):
+                last_msg = time.monotonic()
             prog.update(collector.progress)
-            break
-        if now - last_msg > idle_timeout:
-            log("collector", f"no message for {idle_timeout:g} s: the vehicle is gone; writing what was received")
-            break
+            if collector.ended is not None:
+                # End overtakes the last states on other paths: wait until they are in (or a grace period)
+                t_end = time.monotonic()
+                while collector.progress < collector.ended.steps and time.monotonic() - t_end < 2.0:
+                    bus.pump(timeout=0.05)
+                prog.update(collector.progress)
+                break
+            if now - last_msg > idle_timeout:
+                log("collector", f"no message for {idle_timeout:g} s: the vehicle is gone; writing what was received")
+                break
+    except Stop as why:  # the parent was interrupted: write what was received, then leave
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, signal.SIG_IGN)  # a second signal must not cut the writing short
+        log("collector", f"stopped by {why}; writing what was received")
+        stopped = True
     summary, parts = collector.finish(meta)
+    account_rejoins(summary, {i: collector.states[i].keys() for i in sc.ids})
     if "security" in meta:
         summary["security"] = meta["security"]
     write_outputs(summary, meta, parts, record, summary_json)
     if on_summary:
         on_summary(summary)
+    if stopped:
+        return EXIT_STOPPED
     return exit_code(summary) if collector.ended is not None else EXIT_VIOLATION
+
+
+def account_rejoins(summary: dict, reported: dict[int, Iterable[int]]) -> None:
+    """Per node ``rejoined_at`` (first step reported after ``missing_from``); ``nodes_missing`` lists only the
+    nodes lost for good (silent at the last step), ``nodes_rejoined`` those that came back."""
+    last = summary["steps_completed"]
+    lost, back = [], []
+    for row in summary["nodes"]:
+        steps = sorted(reported[row["id"]])
+        gap = row["missing_from"]
+        row["rejoined_at"] = next((k for k in steps if gap is not None and k > gap), None)
+        if not steps or steps[-1] < last:
+            lost.append(row["id"])
+        elif gap is not None:
+            back.append(row["id"])
+    summary["nodes_missing"], summary["nodes_rejoined"] = lost, back
