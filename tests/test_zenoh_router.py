@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import signal
 import subprocess
+import sys
 
 import pytest
 from zenoh_helpers import (
@@ -63,12 +64,12 @@ def test_zenoh_compose_matches_committed_file() -> None:
     services = doc["services"]
     nodes = [f"node{i}" for i in range(1, 7)]
     assert set(services) == {"router", "vehicle", "collector", *nodes}
-    assert services["router"]["image"].startswith("eclipse/zenoh")
-    assert "--no-multicast-scouting" in services["router"]["command"]
+    router = services["router"]
+    assert router["command"][:2] == ["netsetest", "router"] and ("--credentials", "/credentials") in zip(router["command"], router["command"][1:])
+    assert router["ports"] == ["127.0.0.1:7447:7447"], "the router must not be published on every interface"
 
     from netsetest.cli.main import build_parser
 
-    run_ids = set()
     for name in ["vehicle", "collector", *nodes]:
         svc = services[name]
         cmd = svc["command"]
@@ -77,21 +78,40 @@ def test_zenoh_compose_matches_committed_file() -> None:
         assert cmd[1] == role
         pairs = list(zip(cmd, cmd[1:]))
         assert ("--zenoh-mode", "client") in pairs, (name, cmd)
-        assert ("--connect", "tcp/router:7447") in pairs, (name, cmd)
+        assert ("--connect", "tls/router:7447") in pairs and ("--credentials", "/credentials") in pairs, (name, cmd)
         assert "router" in (svc.get("depends_on") or []), name
+        assert "--run-id" not in cmd, "the run id comes from credentials/run.env, not from the committed file"
+        assert svc["env_file"] == ["./credentials/run.env"] and "./credentials:/credentials:ro" in svc["volumes"], name
         # the command line is one netsetest accepts
         a = build_parser().parse_args(cmd[1:])
-        assert a.command == role and a.zenoh_mode == "client" and a.connect == ["tcp/router:7447"]
+        assert a.command == role and a.zenoh_mode == "client" and a.connect == ["tls/router:7447"]
         assert a.topology == PAPER6
-        run_ids.add(a.run_id)
         if role == "node":
             assert a.id == int(name.removeprefix("node")), (name, cmd)
             assert cmd.count("--id") == 1
         else:
             assert "--id" not in cmd
-    assert len(run_ids) == 1, f"the services do not share one run id: {run_ids}"
     # the collector writes its record and summary into the ./runs volume
     col = services["collector"]
     opts = dict(zip(col["command"], col["command"][1:]))
     assert opts["--summary-json"].startswith("/runs/") and opts["--record"].startswith("/runs/")
     assert "./runs:/runs" in col["volumes"]
+
+
+def test_credentials_command_writes_run_env(tmp_path) -> None:  # noqa: ANN001
+    import os
+    import stat
+
+    out = subprocess.run(cli("credentials", str(tmp_path / "c"), PAPER6), cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    d = tmp_path / "c"
+    assert stat.S_IMODE(d.stat().st_mode) == 0o700
+    (line,) = (d / "run.env").read_text().splitlines()
+    name, run_id = line.split("=")
+    assert name == "NETSETEST_RUN_ID" and run_id.startswith("run-") and len(run_id) == 20
+    # a compose service gets run.env as its environment: --run-id defaults to it
+    probe = "from netsetest.cli.main import build_parser; print(build_parser().parse_args(['vehicle', 'x.toml']).run_id)"
+    got = subprocess.run([sys.executable, "-c", probe], env={**os.environ, name: run_id}, capture_output=True, text=True, timeout=60)
+    assert got.stdout.strip() == run_id, got.stderr
+    for f in ("ca.pem", "router.pem", "vehicle.pem", "collector.pem", *(f"node-{i}.pem" for i in range(1, 7))):
+        assert (d / f).is_file(), f

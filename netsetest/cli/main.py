@@ -83,6 +83,9 @@ def cmd_run(a: argparse.Namespace) -> int:
     if a.clock != "lockstep":
         print("netsetest run: --clock realtime needs --mode zenoh (the in-memory bus is lockstep only)", file=sys.stderr)
         return EXIT_BAD_INPUT
+    if a.kill or a.rejoin:
+        print("netsetest run: --kill and --rejoin need --mode zenoh (the in-memory run is one process)", file=sys.stderr)
+        return EXIT_BAD_INPUT
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
     from netsetest.runtime.report import exit_code, format_table, write_outputs

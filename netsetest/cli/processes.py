@@ -62,12 +62,6 @@ def _readable_file(s: str) -> str:
     return s
 
 
-def _directory(s: str) -> str:
-    if not os.path.isdir(s):
-        raise argparse.ArgumentTypeError(f"{s}: not a directory")
-    return s
-
-
 def _zenoh_config_arg(g: argparse._ArgumentGroup) -> None:
     g.add_argument("--zenoh-config", type=_readable_file, metavar="FILE",
                    help="a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting and security on top")  # fmt: skip
@@ -80,7 +74,7 @@ def _zenoh_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--zenoh-mode", choices=["peer", "client"], default="peer", help="peer (one host) or client of a router")
     g.add_argument("--listen", type=_endpoint, action="append", default=[], metavar="ENDPOINT", help="e.g. tcp/127.0.0.1:7450 (repeatable)")
     g.add_argument("--connect", type=_endpoint, action="append", default=[], metavar="ENDPOINT", help="e.g. tls/10.0.0.1:7447 (repeatable)")
-    g.add_argument("--credentials", type=_directory, metavar="DIR",
+    g.add_argument("--credentials", metavar="DIR",
                    help="mTLS: this role's certificate and key from DIR (`netsetest credentials`); connect on tls/ endpoints")  # fmt: skip
     _zenoh_config_arg(g)
 
@@ -173,7 +167,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
     p.add_argument("topology", nargs="?", help="topology whose access-control rules the router enforces (with --credentials)")
     p.add_argument("--listen", type=_endpoint, action="append", default=[], metavar="ENDPOINT",
                    help=f"default tcp/0.0.0.0:{ZENOH_DEFAULT_PORT}, or tls/0.0.0.0:{ZENOH_DEFAULT_PORT} with --credentials")  # fmt: skip
-    p.add_argument("--credentials", type=_directory, metavar="DIR", help="mTLS with DIR/router.pem and the run's access-control rules")
+    p.add_argument("--credentials", metavar="DIR", help="mTLS with DIR/router.pem and the run's access-control rules")
     p.add_argument("--run-id", type=_run_id, default=os.environ.get(RUN_ID_ENV, "default"), help=f"default ${RUN_ID_ENV} or 'default'")
     _zenoh_config_arg(p)
 
