@@ -1,8 +1,10 @@
-"""Stopping a Zenoh run: Ctrl-C / SIGTERM to the parent stops every child (exit 130), SIGKILL of the parent
+"""Stopping a Zenoh run: Ctrl-C / SIGTERM to the parent stops every child (exit 130) — the vehicle and the
+nodes first, then the collector, which writes its summary and record of what it received — SIGKILL of the parent
 takes the children with it (PR_SET_PDEATHSIG), and a failing vehicle stops the run (exit 1)."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import time
@@ -52,8 +54,9 @@ def _wait_running(guard, proc, min_step: int | None) -> None:  # noqa: ANN001
 
 @pytest.mark.timeout(120)
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-def test_zenoh_signal_to_parent_stops_every_child(procs, sig) -> None:  # noqa: ANN001
-    proc = start_parent(procs, "run", LONG)
+def test_zenoh_signal_to_parent_stops_every_child(procs, sig, tmp_path) -> None:  # noqa: ANN001
+    summary = tmp_path / "summary.json"
+    proc = start_parent(procs, "run", [*LONG, "--summary-json", str(summary)])
     run_id = parent_run_id(proc)
     _wait_running(procs, proc, min_step=2)
     t0 = time.monotonic()
@@ -64,7 +67,12 @@ def test_zenoh_signal_to_parent_stops_every_child(procs, sig) -> None:  # noqa: 
     assert took < 10, f"{sig.name}: the parent took {took:.1f} s to stop"
     left = pids_with_arg(run_id)
     assert not left, f"left after {sig.name}: {describe(left)}"
-    assert "interrupted: stopping every process" in procs.stderr("run")
+    err = procs.stderr("run")
+    assert "interrupted: stopping the vehicle and the nodes, then letting the collector write" in err
+    # the collector was stopped last and wrote what it had received
+    assert "[collector] stopped by SIGTERM; writing what was received" in err, err
+    s = json.loads(summary.read_text())
+    assert 2 < s["steps_completed"] < 400 and s["security"] == "mtls+acl"
 
 
 @pytest.mark.timeout(120)
