@@ -178,7 +178,8 @@ def test_grants_follow_the_topology() -> None:
 @pytest.mark.timeout(240)
 def test_secured_run_shuts_out_an_outsider(procs, tmp_path: Path) -> None:  # noqa: ANN001
     rec_path, summ_path = tmp_path / "record.json", tmp_path / "summary.json"
-    parent = start_parent(procs, "run", [PAPER6, "--steps", str(STEPS), "--pace", "0.1", "--record", str(rec_path),
+    # paced (40 × 0.5 s) so that the run outlasts the outsider's attempts (2 s each)
+    parent = start_parent(procs, "run", [PAPER6, "--steps", str(STEPS), "--pace", "0.5", "--record", str(rec_path),
                                          "--summary-json", str(summ_path)])  # fmt: skip
     m = wait_for(lambda: SECURITY_LINE.search(procs.stderr("run")), 60, what="the parent's security line")
     router, creds = m.group(1), Path(m.group(2))  # type: ignore[union-attr]
@@ -203,6 +204,7 @@ def test_secured_run_shuts_out_an_outsider(procs, tmp_path: Path) -> None:  # no
     assert set(refused) == {"tcp client", "tcp peer", "tls, no certificate", "tls, certificate 'vehicle' of another CA"}
     # control: the same endpoint with a certificate of the run's CA does connect (it neither publishes nor subscribes)
     open_session(zenoh_config("client", connect=[router], settings=client_settings(identity(creds, "node-1"))), "control").close()
+    assert parent.poll() is None, "the run ended before the outsider was done: the refusals prove nothing"
 
     assert procs.wait("run", 180) == EXIT_OK, procs.logs()
     assert not creds.exists() and not creds.parent.exists(), "credentials left behind after the run"

@@ -17,6 +17,8 @@ BAD = [
     (["router", "--listen", "tcp/300.1.2.3:99999"], "--listen"),
     (["router", "--listen", "nonsense"], "--listen"),
     (["router", "--credentials", "/nonexistent"], "--credentials needs the TOPOLOGY"),
+    (["router", "--zenoh-config", "pyproject.toml"], "--zenoh-config"),
+    (["run", PAPER6, "--zenoh-config", "pyproject.toml"], "--zenoh-config"),
     (["vehicle", PAPER6, "--run-id", "a/b*"], "--run-id"),
     (["node", PAPER6, "--id", "1", "--connect", "tcp/127.0.0.1"], "--connect"),
     (["collector", PAPER6, "--listen", "tcp//x:1"], "--listen"),
@@ -43,3 +45,20 @@ def test_router_port_in_use_exits_2() -> None:
         out = subprocess.run(cli("router", "--listen", f"tcp/127.0.0.1:{port}"), cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert out.returncode == EXIT_BAD_INPUT, out.stderr
     assert "--listen" in out.stderr and "Traceback" not in out.stderr
+
+
+@pytest.mark.zenoh
+@pytest.mark.timeout(120)
+def test_run_with_a_user_zenoh_config_stays_secured(tmp_path) -> None:  # noqa: ANN001
+    """--zenoh-config is the base of every role's and the router's configuration; security goes on top."""
+    import json
+
+    cfg = tmp_path / "zenoh.json5"
+    cfg.write_text("// a user's tuning\n{ transport: { unicast: { max_links: 2 } } }\n")
+    summary = tmp_path / "summary.json"
+    out = subprocess.run(cli("run", PAPER6, "--steps", "5", "--quiet", "--zenoh-config", str(cfg), "--summary-json", str(summary)),
+                         cwd=ROOT, capture_output=True, text=True, timeout=110)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    s = json.loads(summary.read_text())
+    assert s["security"] == "mtls+acl" and s["steps_completed"] == 5 and s["violations_total"] == 0
+    assert out.stdout.rstrip().endswith("security: mtls+acl")

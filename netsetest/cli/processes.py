@@ -253,10 +253,17 @@ def cmd_collector(a: argparse.Namespace) -> int:
 
 
 def router_session(listen: list[str], base_file: str | None, security: dict[str, object] | None):  # noqa: ANN201
-    """Open a Zenoh router session (BusError if it cannot listen)."""
-    from netsetest.bus.zenoh_bus import open_session, zenoh_config
+    """Open a Zenoh router session (BusError naming the option: a bad --zenoh-config, or cannot --listen)."""
+    from netsetest.bus.zenoh_bus import BusError, open_session, zenoh_config
 
-    return open_session(zenoh_config("router", listen, base_file=base_file, settings=security), f"router on {', '.join(listen)}")
+    try:
+        cfg = zenoh_config("router", listen, base_file=base_file, settings=security)
+    except BusError as exc:
+        raise BusError(f"--zenoh-config: {exc}") from None
+    try:
+        return open_session(cfg, f"router on {', '.join(listen)}")
+    except BusError as exc:
+        raise BusError(f"--listen: {exc}") from None
 
 
 def cmd_router(a: argparse.Namespace) -> int:
@@ -281,7 +288,7 @@ def cmd_router(a: argparse.Namespace) -> int:
     try:
         session = router_session(listen, a.zenoh_config, security)
     except BusError as exc:
-        log("router", f"--listen: {exc}")
+        log("router", str(exc))
         return EXIT_BAD_INPUT
     log("router", f"listening on {', '.join(listen)}" + (f"; mTLS and access control for run {a.run_id}" if security else ""))
     try:
@@ -409,7 +416,7 @@ ROLE_GRACE_S = 5.0  # how long a role may take to leave after SIGTERM (or after 
 
 
 def cmd_run_zenoh(a: argparse.Namespace) -> int:
-    from netsetest.bus.zenoh_bus import BusError
+    from netsetest.bus.zenoh_bus import BusError, zenoh_config
     from netsetest.config.schema import load_topology
     from netsetest.runtime.processes import log
     from netsetest.runtime.report import Progress, format_table
@@ -429,6 +436,12 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         # else a node waiting for a dead neighbour is itself declared dead by the vehicle
         log("run", f"--neighbour-timeout ({a.neighbour_timeout:g} s) must be shorter than --node-timeout ({a.node_timeout:g} s)")
         return EXIT_BAD_INPUT
+    if a.zenoh_config:
+        try:
+            zenoh_config("peer", base_file=a.zenoh_config)
+        except BusError as exc:
+            log("run", f"--zenoh-config: {exc}")
+            return EXIT_BAD_INPUT
     security = SECURITY_INSECURE if a.insecure else SECURITY_MTLS
     run_id = f"run{os.getpid()}"
     tmp = tempfile.TemporaryDirectory(prefix="netsetest-")  # mode 0700 (mkdtemp)
