@@ -3,8 +3,9 @@ neighbour's ellipsoid, and the run ends with exit code 0 (every killed node came
 good gives exit code 3.
 
 ``--kill N@K`` lands exactly after step K (the node process SIGKILLs itself right after publishing step
-K); in lockstep the vehicle holds step R+1 of ``--rejoin N@R`` until the restarted node announces itself
-(at most ``--node-timeout``), so no ``--pace`` is needed however long the restart takes.
+K); in lockstep the vehicle holds step R+1 of ``--rejoin N@R`` until the restarted node announces itself,
+and step R+2 until its first state is in (each at most ``--node-timeout``), so no ``--pace`` is needed
+however long the restart takes.
 
 The vehicle takes a node back as soon as it publishes again (late, or rejoined); a rejoining node is
 expected by its neighbours only from the step after its first (``rejoin``) state.  The timing cases —

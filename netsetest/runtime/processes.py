@@ -99,9 +99,7 @@ def run_vehicle(
 ) -> int:
     """``await_rejoin``: (node, step) pairs; in lockstep, step+1 waits (at most ``node_timeout``) for the node."""
     vehicle = Vehicle(sc, bus, run_id, signals, seed, realtime=realtime)
-    holds: dict[int, set[int]] = {}
-    for node, step in await_rejoin:
-        holds.setdefault(step, set()).add(node)
+    holds = RejoinHolds(await_rejoin)
     dead_at: dict[int, float] = {}  # node → when the vehicle went on without it
     me = ("vehicle", None)
     barrier = Barrier(bus, run_id, Ready(role="vehicle"), _all_roles(sc) - {me})
@@ -128,7 +126,7 @@ def run_vehicle(
             if now >= next_tick + sc.tau_s:
                 next_tick += sc.tau_s
                 vehicle.advance()
-        elif vehicle.ready_to_advance() and _holding(holds, vehicle, barrier, dead_at, now - t_step, node_timeout):
+        elif vehicle.ready_to_advance() and holds.holding(vehicle, barrier, dead_at, now - t_step, node_timeout):
             pass
         elif vehicle.ready_to_advance():
             if now - t_step >= pace:  # lockstep paced for watching
@@ -143,23 +141,35 @@ def run_vehicle(
     return 0
 
 
-def _holding(
-    holds: dict[int, set[int]], vehicle: Vehicle, barrier: Barrier, dead_at: dict[int, float], waited: float, node_timeout: float
-) -> bool:
-    """Lockstep: keep step k+1 back while a node due to rejoin after step k has not announced itself
-    (a Ready heard after the vehicle went on without it)."""
+class RejoinHolds:
+    """Lockstep ``--await-rejoin NODE@R``: step R+1 waits until the restarted node has announced itself
+    (a Ready heard after the vehicle went on without it), then step R+2 until its first (rejoin) state of
+    step R+1 is in, so that it is expected again at once; each wait at most ``node_timeout``."""
 
-    def back(node: int) -> bool:
-        return node in vehicle.alive or barrier.heard_at.get(("node", node), -math.inf) > dead_at.get(node, math.inf)
+    def __init__(self, pairs: Sequence[tuple[int, int]]) -> None:
+        self.ready: dict[int, set[int]] = {}  # step → nodes whose Ready we wait for
+        self.state: dict[int, set[int]] = {}  # step → nodes whose state of that step we wait for
+        for node, step in pairs:
+            self.ready.setdefault(step, set()).add(node)
 
-    pending = sorted(n for n in holds.get(vehicle.k, ()) if not back(n))
-    if not pending:
-        return False
-    if waited > node_timeout:
-        log("vehicle", f"step {vehicle.k}: node(s) {pending} did not come back in {node_timeout:g} s; going on without")
-        del holds[vehicle.k]
-        return False
-    return True
+    def holding(self, vehicle: Vehicle, barrier: Barrier, dead_at: dict[int, float], waited: float, node_timeout: float) -> bool:
+        k = vehicle.k
+
+        def back(node: int) -> bool:
+            return node in vehicle.alive or barrier.heard_at.get(("node", node), -math.inf) > dead_at.get(node, math.inf)
+
+        pending = sorted({n for n in self.ready.get(k, ()) if not back(n)} | {n for n in self.state.get(k, ()) if n not in vehicle.heard.get(k, set())})
+        if not pending:
+            for node in self.ready.pop(k, ()):
+                self.state.setdefault(k + 1, set()).add(node)
+            self.state.pop(k, None)
+            return False
+        if waited > node_timeout:
+            log("vehicle", f"step {k}: rejoining node(s) {pending} not back in {node_timeout:g} s; going on without")
+            self.ready.pop(k, None)
+            self.state.pop(k, None)
+            return False
+        return True
 
 
 def run_node(
