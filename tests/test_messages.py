@@ -5,11 +5,14 @@ from __future__ import annotations
 import math
 
 import msgpack
+import numpy as np
 import pytest
 
 from netsetest.bus import keys
 from netsetest.bus.base import MemoryBus
-from netsetest.messages import SCHEMA_VERSION, BadMessage, End, NodeInput, NodeState, Ready, Truth, decode, encode
+from netsetest.messages import (
+    SCHEMA_VERSION, SYM_ATOL, SYM_RTOL, BadMessage, End, NodeInput, NodeState, Ready, Truth, decode, encode, spd_problem,
+)
 
 # floats that a lossy encoding (float32, decimal text) would not preserve
 X = [0.1, 1 / 3, -2.5e-300]
@@ -267,3 +270,41 @@ def test_decode_rejects_non_numbers_in_float_fields(change):
     with pytest.raises(BadMessage) as exc:
         decode(_mut(_state(), **change))
     assert exc.value.reason == "invalid"
+
+
+def _numpy_spd_problem(P: np.ndarray) -> str | None:
+    """The check decode() made before spd_problem: numpy's allclose and Cholesky."""
+    if not np.allclose(P, P.T, rtol=SYM_RTOL, atol=SYM_ATOL):
+        return "P is not symmetric"
+    try:
+        np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        return "P is not positive definite"
+    return None
+
+
+def test_spd_problem_agrees_with_numpy():
+    """The plain-float symmetric/positive-definite check accepts and rejects exactly what numpy's did,
+    across scales, near-singular shapes and asymmetries at the tolerance."""
+    rng = np.random.default_rng(7)
+    verdicts: dict[str | None, int] = {}
+    for t in range(20000):
+        A = rng.normal(size=(3, 3)) * 10.0 ** rng.integers(-8, 8)
+        kind = t % 5
+        if kind == 0:
+            P = A @ A.T
+        elif kind == 1:
+            P = A + A.T  # symmetric, often indefinite
+        elif kind == 2:
+            P = A  # generally not symmetric
+        elif kind == 3:  # rank one plus a tiny ±identity: pivots at rounding level
+            v = rng.normal(size=3)
+            P = np.outer(v, v) + rng.choice([-1e-14, 1e-14]) * np.abs(v).max() ** 2 * np.eye(3)
+        else:  # one entry off by a relative 1e-10 … 1e-8 around the symmetry tolerance
+            P = A @ A.T
+            i, j = rng.integers(0, 3, 2)
+            P[i, j] *= 1 + rng.choice([1e-10, 1e-9, 2e-9, 1e-8]) * rng.choice([-1, 1])
+        want = _numpy_spd_problem(P)
+        assert spd_problem([float(x) for x in P.ravel()]) == want, P
+        verdicts[want] = verdicts.get(want, 0) + 1
+    assert min(verdicts.values()) > 2000 and len(verdicts) == 3  # every verdict well represented

@@ -357,8 +357,10 @@ class Children:
         self.ended: list[subprocess.Popen] = []
 
     def start(self, name: str, argv: list[str], **kw: object) -> subprocess.Popen:
+        from netsetest.runtime.processes import role_env
+
         cmd = [sys.executable, "-m", "netsetest.cli.main", *argv]
-        proc = subprocess.Popen(cmd, start_new_session=True, preexec_fn=_die_with_parent, stdin=subprocess.DEVNULL, **kw)  # type: ignore[call-overload]
+        proc = subprocess.Popen(cmd, start_new_session=True, preexec_fn=_die_with_parent, stdin=subprocess.DEVNULL, env=role_env(), **kw)  # type: ignore[call-overload]
         self.procs[name] = proc
         return proc
 

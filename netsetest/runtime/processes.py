@@ -17,7 +17,7 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
@@ -31,8 +31,25 @@ from netsetest.roles.vehicle import Vehicle
 from netsetest.runtime.report import EXIT_VIOLATION, exit_code, write_outputs
 
 READY_PERIOD_S = 0.1
+IDLE_WAIT_S = 1.0  # a started node with nothing due sleeps until a message arrives (or this long)
 EXIT_STOPPED = 128 + signal.SIGTERM  # a role stopped by SIGTERM/SIGINT
 CRASH_FLUSH_S = 0.2  # --crash-after: time for the last state to leave before SIGKILL
+
+
+# The environment of every role process, set by the launchers (``netsetest run``, the benchmark); a
+# value the user already exported wins.  One BLAS thread: a node's algebra is 3×3 to 20×20, and a
+# hundred processes must not each start one BLAS thread per core.  Two malloc arenas instead of one
+# per thread (Zenoh's threads).  Zenoh's rx runtime with one worker thread instead of two (the others
+# have one already); a role handles a few messages per step.  Syntax: zenoh-runtime's ZENOH_RUNTIME (RON).
+ROLE_ENV = {"OPENBLAS_NUM_THREADS": "1", "MALLOC_ARENA_MAX": "2", "ZENOH_RUNTIME": "(rx: (worker_threads: 1))"}
+
+
+def role_env(base: Mapping[str, str] | None = None) -> dict[str, str]:
+    """``base`` (default: this process's environment) with :data:`ROLE_ENV` where it sets nothing."""
+    env = dict(os.environ if base is None else base)
+    for name, value in ROLE_ENV.items():
+        env.setdefault(name, value)
+    return env
 
 
 class Stop(Exception):
@@ -190,7 +207,7 @@ def run_node(
     while not node.ended:
         if node.k < 0:
             barrier.tick(time.monotonic())  # until started
-        bus.pump(timeout=0.02)
+        bus.pump(timeout=_node_wait(node, barrier.last_sent, neighbour_timeout, realtime, time.monotonic()))
         while True:
             now = time.monotonic()
             if realtime:
@@ -205,6 +222,17 @@ def run_node(
                 log(role, f"killing myself (SIGKILL) after step {node.k} as asked")
                 os.kill(os.getpid(), signal.SIGKILL)
     return 0
+
+
+def _node_wait(node: Node, ready_sent: float, neighbour_timeout: float, realtime: bool, now: float) -> float:
+    """How long a node may block for its next message: until its next Ready is due (not started yet),
+    until its neighbour deadline (lockstep, waiting), else :data:`IDLE_WAIT_S`.  Event-driven: a
+    hundred idle nodes polling every few ms would keep two cores busy waking up."""
+    if node.k < 0:
+        return max(0.0, ready_sent + READY_PERIOD_S - now)
+    if not realtime and node.waiting_since is not None:
+        return max(0.0, node.waiting_since + neighbour_timeout - now)
+    return IDLE_WAIT_S
 
 
 class _CollectorProgress:

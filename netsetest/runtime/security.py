@@ -24,11 +24,6 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from cryptography import x509
-from cryptography.hazmat.primitives import hashes, serialization
-from cryptography.hazmat.primitives.asymmetric import ec
-from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
-
 from netsetest.bus import keys
 from netsetest.bus.keys import role_name
 from netsetest.config.schema import Scenario
@@ -72,27 +67,31 @@ def identity(directory: str | Path, name: str) -> Identity:
     return ident
 
 
-def _name(cn: str) -> x509.Name:
-    return x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, cn)])
-
-
 def _write_private(path: Path, data: bytes) -> None:
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, KEY_MODE)
     with os.fdopen(fd, "wb") as f:
         f.write(data)
 
 
-def _san(host: str) -> x509.GeneralName:
-    try:
-        return x509.IPAddress(ipaddress.ip_address(host))
-    except ValueError:
-        return x509.DNSName(host)
-
-
 def write_credentials(
     directory: str | Path, names: Iterable[str], router_hosts: Sequence[str] = ROUTER_HOSTS, validity: datetime.timedelta = RUN_VALIDITY
 ) -> Path:
     """A fresh CA and one certificate + key per name (and the router) in ``directory`` (created 0700)."""
+    # imported here: a role process only reads credentials, and cryptography costs it ~8 MB and 20 ms
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
+    def _name(cn: str) -> x509.Name:
+        return x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, cn)])
+
+    def _san(host: str) -> x509.GeneralName:
+        try:
+            return x509.IPAddress(ipaddress.ip_address(host))
+        except ValueError:
+            return x509.DNSName(host)
+
     d = Path(directory)
     d.mkdir(mode=DIR_MODE, parents=True, exist_ok=True)
     d.chmod(DIR_MODE)

@@ -1,0 +1,52 @@
+"""What a role process costs besides its work: its environment, its imports, its idle wake-ups."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from netsetest.bus.base import MemoryBus
+from netsetest.config.schema import load_topology
+from netsetest.roles.node import Node
+from netsetest.runtime.processes import IDLE_WAIT_S, READY_PERIOD_S, ROLE_ENV, _node_wait, role_env
+
+
+def test_role_env_adds_defaults_and_keeps_the_users():
+    env = role_env({"PATH": "/bin", "MALLOC_ARENA_MAX": "8"})
+    assert env["PATH"] == "/bin" and env["MALLOC_ARENA_MAX"] == "8"  # the user's value wins
+    assert env["OPENBLAS_NUM_THREADS"] == ROLE_ENV["OPENBLAS_NUM_THREADS"] == "1"
+    assert env["ZENOH_RUNTIME"] == ROLE_ENV["ZENOH_RUNTIME"]
+
+
+def test_zenoh_accepts_the_runtime_setting():
+    """A malformed ZENOH_RUNTIME makes zenoh panic at its first session: open one with ours."""
+    code = "import zenoh; c = zenoh.Config(); c.insert_json5('scouting/multicast/enabled', 'false'); zenoh.open(c).close(); print('ok')"
+    out = subprocess.run([sys.executable, "-c", code], env=role_env(), capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-500:]
+
+
+def test_node_process_imports_no_dead_weight():
+    """A node reads its credentials but never writes any: cryptography, scipy and cvxpy stay unimported."""
+    code = (
+        "import sys, netsetest.cli.main, netsetest.cli.processes, netsetest.runtime.security, netsetest.runtime.processes, "
+        "netsetest.bus.zenoh_bus, netsetest.roles.node; "
+        "print(sorted({m.split('.')[0] for m in sys.modules} & {'cryptography', 'scipy', 'cvxpy', 'matplotlib'}))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and out.stdout.strip() == "[]", (out.stdout, out.stderr[-500:])
+
+
+def test_node_blocks_until_something_is_due():
+    sc = load_topology("topologies/paper6.toml", steps=3)
+    node = Node(sc, 1, MemoryBus(), "t")
+    # not started: until its next Ready is due
+    assert _node_wait(node, ready_sent=10.0, neighbour_timeout=5.0, realtime=False, now=10.03) == pytest.approx(READY_PERIOD_S - 0.03)
+    assert _node_wait(node, ready_sent=10.0, neighbour_timeout=5.0, realtime=False, now=10.5) == 0.0
+    node.k = 2
+    assert _node_wait(node, 0.0, 5.0, False, now=100.0) == IDLE_WAIT_S  # started, nothing due: sleep on the queue
+    node.waiting_since = 98.0  # lockstep, waiting for neighbours: until the neighbour deadline
+    assert _node_wait(node, 0.0, 5.0, False, now=100.0) == 3.0
+    assert _node_wait(node, 0.0, 5.0, False, now=104.0) == 0.0
+    assert _node_wait(node, 0.0, 5.0, True, now=100.0) == IDLE_WAIT_S  # real time never waits for neighbours
