@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -27,6 +28,7 @@ from pathlib import Path
 import msgpack
 
 from netsetest.cli.processes import free_ports
+from netsetest.runtime.processes import role_env
 
 PY = [sys.executable, "-m", "netsetest.cli.main"]
 
@@ -46,23 +48,106 @@ def _kill(procs: list[subprocess.Popen]) -> None:
             pass
 
 
-def cli_run(topology: Path, mode: str, clock: str = "lockstep", steps: int | None = None, timeout: float = 600.0) -> dict:
-    """One ``netsetest run`` as a subprocess: wall time, exit code and the summary JSON."""
+def cli_run(
+    topology: Path, mode: str, clock: str = "lockstep", steps: int | None = None, timeout: float = 600.0, sample: bool = False
+) -> dict:
+    """One ``netsetest run`` as a subprocess: wall time, exit code and the summary JSON; with ``sample``,
+    the CPU and memory of its processes (:class:`ProcessSampler`) and its record (lateness per step)."""
     with tempfile.TemporaryDirectory(prefix="nsbench-") as tmp:
-        summary_path = Path(tmp) / "summary.json"
+        summary_path, record_path = Path(tmp) / "summary.json", Path(tmp) / "record.json"
         cmd = [*PY, "run", str(topology), "--mode", mode, "--clock", clock, "--quiet", "--summary-json", str(summary_path)]
         if steps:
             cmd += ["--steps", str(steps)]
+        if sample:
+            cmd += ["--record", str(record_path)]
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        sampler = ProcessSampler(proc.pid) if sample else None
         try:
             _, err = proc.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:
             _kill([proc])
-            return {"wall_s": timeout, "exit_code": None, "summary": None, "error": "timeout"}
+            return {"wall_s": timeout, "exit_code": None, "summary": None, "error": "timeout",
+                    "processes": sampler.stop() if sampler else None}  # fmt: skip
         wall = time.perf_counter() - t0
         summary = json.loads(summary_path.read_text()) if summary_path.exists() else None
-    return {"wall_s": wall, "exit_code": proc.returncode, "summary": summary, "stderr_tail": err[-800:] if err else ""}
+        late = _late_per_step(record_path) if sample else None
+    return {"wall_s": wall, "exit_code": proc.returncode, "summary": summary, "stderr_tail": err[-800:] if err else "",
+            "processes": sampler.stop() if sampler else None, "late_per_step": late}  # fmt: skip
+
+
+def _late_per_step(record_path: Path) -> dict[int, int] | None:
+    """Step → how many nodes published it after its deadline (from the run's record)."""
+    if not record_path.exists():
+        return None
+    late: dict[int, int] = {}
+    for rows in json.loads(record_path.read_text())["nodes"].values():
+        for e in rows:
+            if e["late"]:
+                late[e["step"]] = late.get(e["step"], 0) + 1
+    return dict(sorted(late.items()))
+
+
+CLK_TCK = os.sysconf("SC_CLK_TCK")
+SAMPLE_PERIOD_S = 0.5
+
+
+def _proc_stat(pid: int) -> tuple[int, float, float, str] | None:
+    """(parent pid, CPU seconds, VmHWM MB, role) of a process, from /proc; None once it is gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        hwm = next(int(x.split()[1]) for x in Path(f"/proc/{pid}/status").read_text().splitlines() if x.startswith("VmHWM:"))
+        argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+    except (OSError, StopIteration, IndexError):
+        return None
+    role = argv[3].decode() if len(argv) > 3 and argv[1:3] == [b"-m", b"netsetest.cli.main"] else "?"
+    return int(fields[1]), (int(fields[11]) + int(fields[12])) / CLK_TCK, hwm / 1024.0, role
+
+
+class ProcessSampler:
+    """Samples a run's process tree every 0.5 s: per role the CPU share in the middle third of the run
+    (steady state: after start-up, before shutdown) and the peak RSS of the nodes."""
+
+    def __init__(self, root: int) -> None:
+        self.root = root
+        self.samples: dict[int, list[tuple[float, float, float, str]]] = {}  # pid → (t, cpu s, hwm MB, role)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+        self._thread.start()
+
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            stats = {int(d): st for d in os.listdir("/proc") if d.isdigit() and (st := _proc_stat(int(d)))}
+            tree, todo = set(), [self.root]
+            while todo:
+                pid = todo.pop()
+                tree.add(pid)
+                todo += [c for c, st in stats.items() if st[0] == pid and c not in tree]
+            now = time.monotonic()
+            for pid in tree & stats.keys():
+                _, cpu, hwm, role = stats[pid]
+                self.samples.setdefault(pid, []).append((now, cpu, hwm, "run" if pid == self.root else role))
+            self._stop.wait(SAMPLE_PERIOD_S)
+
+    def stop(self) -> dict:
+        self._stop.set()
+        self._thread.join()
+        shares: dict[str, list[float]] = {}
+        hwm: list[float] = []
+        for rows in self.samples.values():
+            role = rows[-1][3]
+            if role == "node":
+                hwm.append(max(r[2] for r in rows))
+            if len(rows) >= 6:
+                a, b = rows[len(rows) // 3], rows[2 * len(rows) // 3]
+                shares.setdefault(role, []).append(100.0 * (b[1] - a[1]) / (b[0] - a[0]))
+        nodes = shares.pop("node", [])
+        return {
+            "node_cpu_pct_median": statistics.median(nodes) if nodes else None,
+            "nodes_cpu_pct_total": sum(nodes),
+            "role_cpu_pct": {r: sum(v) for r, v in shares.items()},  # run (the parent, with the router), vehicle, collector
+            "node_peak_rss_mb_median": statistics.median(hwm) if hwm else None,
+        }  # fmt: skip
 
 
 class Observer:
@@ -172,7 +257,7 @@ def observed_lockstep(topology: Path, steps: int | None = None, timeout: float =
                     argv += ["--summary-json", str(summary_path)]
                 launched[name] = time.monotonic()
                 procs[name] = subprocess.Popen([*PY, *argv], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                               stdin=subprocess.DEVNULL, start_new_session=True)  # fmt: skip
+                                               stdin=subprocess.DEVNULL, start_new_session=True, env=role_env())  # fmt: skip
             usage = _wait_rusage(procs, time.monotonic() + timeout)
             t_done = time.monotonic()
         finally:
@@ -213,7 +298,7 @@ def node_startup(directory: Path, reps: int = 3, timeout: float = 120.0) -> dict
             for name in ("collector", "vehicle"):
                 procs[name] = subprocess.Popen([*PY, *_role_argv(topo, run_id, None, name, role_ports, "lockstep")],
                                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
-                                               start_new_session=True)  # fmt: skip
+                                               start_new_session=True, env=role_env())  # fmt: skip
             # wait until both announce themselves (they then wait for the node at the start-up barrier)
             t_wait = time.monotonic()
             while time.monotonic() - t_wait < timeout:
@@ -225,7 +310,7 @@ def node_startup(directory: Path, reps: int = 3, timeout: float = 120.0) -> dict
             t0 = time.monotonic()
             procs["node1"] = subprocess.Popen([*PY, *_role_argv(topo, run_id, None, "node1", role_ports, "lockstep")],
                                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
-                                              start_new_session=True)  # fmt: skip
+                                              start_new_session=True, env=role_env())  # fmt: skip
             usage = _wait_rusage(procs, time.monotonic() + timeout)
         finally:
             _kill(list(procs.values()))
@@ -240,6 +325,10 @@ def node_startup(directory: Path, reps: int = 3, timeout: float = 120.0) -> dict
     return {"reps": rows}
 
 
+def _loadavg() -> str:
+    return " ".join(Path("/proc/loadavg").read_text().split()[:3])
+
+
 def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int = 1, log=print) -> dict:  # noqa: ANN001
     """Real-time runs of ring networks of growing size; the largest without a deadline miss."""
     from bench.topologies import ring_topology
@@ -250,18 +339,24 @@ def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int 
         topo = ring_topology(directory, n, steps)
         ok = False
         for attempt in range(retries + 1):
-            r = cli_run(topo, "zenoh", "realtime", timeout=120 + 3 * n + steps * 0.2)
+            load = _loadavg()
+            r = cli_run(topo, "zenoh", "realtime", timeout=120 + 3 * n + steps * 0.2, sample=True)
             s = r["summary"] or {}
             misses = sum(row.get("deadline_misses") or 0 for row in s.get("nodes", [])) if s else None
+            late = r.get("late_per_step") or {}
             row = {
                 "nodes": n, "attempt": attempt + 1, "exit_code": r["exit_code"], "wall_s": r["wall_s"], "deadline_misses": misses,
                 "nodes_missing": s.get("nodes_missing") if s else None,
                 "fallbacks": sum(x.get("fallbacks", 0) for x in s.get("nodes", [])) if s else None,
                 "violations": s.get("violations_total") if s else None,
+                "load_before": load, "late_steps": len(late), "first_late_step": min(late) if late else None,
+                "processes": r["processes"],
             }  # fmt: skip
             runs.append(row)
-            log(f"  real time, {n} nodes (attempt {attempt + 1}): exit {r['exit_code']}, deadline misses {misses}, "
-                f"missing {row['nodes_missing']}, {r['wall_s']:.0f} s")  # fmt: skip
+            pr = r["processes"] or {}
+            log(f"  real time, {n} nodes (attempt {attempt + 1}, load {load}): exit {r['exit_code']}, deadline misses {misses} "
+                f"in {len(late)} steps, missing {row['nodes_missing']}, {r['wall_s']:.0f} s; node CPU {pr.get('node_cpu_pct_median') or 0:.2f} % "
+                f"each, all nodes {pr.get('nodes_cpu_pct_total', 0):.0f} %, others {pr.get('role_cpu_pct')}")  # fmt: skip
             ok = r["exit_code"] == 0 and misses == 0 and not row["nodes_missing"]
             if ok:
                 break
@@ -269,3 +364,36 @@ def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int 
             break
         best = n
     return {"max_nodes": best, "runs": runs, "steps": steps}
+
+
+# What a node process loads, in the order it loads it (netsetest.cli.main → the node's modules).
+NODE_IMPORT_STAGES = ("numpy", "pydantic", "netsetest.messages", "netsetest.config.schema", "zenoh", "clarabel",
+                      "netsetest.estimator.sdp", "netsetest.roles.node", "netsetest.cli.main", "netsetest.cli.processes")  # fmt: skip
+_MEMORY_PROBE = r"""
+import json, sys, time
+def rss():
+    return next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmRSS:")) / 1024.0
+rows = [("python", rss(), 0.0)]
+for name in sys.argv[1:]:
+    t = time.perf_counter(); __import__(name); rows.append((name, rss(), 1e3 * (time.perf_counter() - t)))
+import zenoh
+from netsetest.bus.zenoh_bus import zenoh_config
+t = time.perf_counter(); s = zenoh.open(zenoh_config("peer", ["tcp/127.0.0.1:0"])); time.sleep(0.3)
+rows.append(("zenoh session", rss(), 1e3 * (time.perf_counter() - t) - 300.0))
+s.close()
+print(json.dumps(rows))
+"""
+
+
+def node_memory_profile() -> list[dict]:
+    """RSS and wall time a node process adds per import stage and for its Zenoh session (the
+    environment of :func:`role_env`): where the node's memory and start-up go."""
+    out = subprocess.run([sys.executable, "-c", _MEMORY_PROBE, *NODE_IMPORT_STAGES], capture_output=True, text=True,
+                         timeout=120, env=role_env())  # fmt: skip
+    if out.returncode != 0:
+        return [{"stage": "error", "detail": out.stderr[-300:]}]
+    rows, prev = [], 0.0
+    for name, rss, ms in json.loads(out.stdout):
+        rows.append({"stage": name, "rss_mb": rss, "added_mb": rss - prev, "ms": ms})
+        prev = rss
+    return rows
