@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import statistics
@@ -49,10 +50,13 @@ def _kill(procs: list[subprocess.Popen]) -> None:
 
 
 def cli_run(
-    topology: Path, mode: str, clock: str = "lockstep", steps: int | None = None, timeout: float = 600.0, sample: bool = False
+    topology: Path, mode: str, clock: str = "lockstep", steps: int | None = None, timeout: float = 600.0,
+    sample_stepping_s: float | None = None,
 ) -> dict:
-    """One ``netsetest run`` as a subprocess: wall time, exit code and the summary JSON; with ``sample``,
-    the CPU and memory of its processes (:class:`ProcessSampler`) and its record (lateness per step)."""
+    """One ``netsetest run`` as a subprocess: wall time, exit code and the summary JSON; with
+    ``sample_stepping_s`` (how long its stepping lasts), the CPU and memory of its processes
+    (:class:`ProcessSampler`) and its record (lateness per step)."""
+    sample = sample_stepping_s is not None
     with tempfile.TemporaryDirectory(prefix="nsbench-") as tmp:
         summary_path, record_path = Path(tmp) / "summary.json", Path(tmp) / "record.json"
         cmd = [*PY, "run", str(topology), "--mode", mode, "--clock", clock, "--quiet", "--summary-json", str(summary_path)]
@@ -68,12 +72,12 @@ def cli_run(
         except subprocess.TimeoutExpired:
             _kill([proc])
             return {"wall_s": timeout, "exit_code": None, "summary": None, "error": "timeout",
-                    "processes": sampler.stop() if sampler else None}  # fmt: skip
+                    "processes": sampler.stop(sample_stepping_s) if sampler else None}  # fmt: skip
         wall = time.perf_counter() - t0
         summary = json.loads(summary_path.read_text()) if summary_path.exists() else None
         late = _late_per_step(record_path) if sample else None
     return {"wall_s": wall, "exit_code": proc.returncode, "summary": summary, "stderr_tail": err[-800:] if err else "",
-            "processes": sampler.stop() if sampler else None, "late_per_step": late}  # fmt: skip
+            "processes": sampler.stop(sample_stepping_s) if sampler else None, "late_per_step": late}  # fmt: skip
 
 
 def _late_per_step(record_path: Path) -> dict[int, int] | None:
@@ -89,7 +93,7 @@ def _late_per_step(record_path: Path) -> dict[int, int] | None:
 
 
 CLK_TCK = os.sysconf("SC_CLK_TCK")
-SAMPLE_PERIOD_S = 0.5
+SAMPLE_PERIOD_S = 0.25
 
 
 def _proc_stat(pid: int) -> tuple[int, float, float, str] | None:
@@ -104,13 +108,20 @@ def _proc_stat(pid: int) -> tuple[int, float, float, str] | None:
     return int(fields[1]), (int(fields[11]) + int(fields[12])) / CLK_TCK, hwm / 1024.0, role
 
 
+def _machine_busy_s() -> float:
+    """CPU seconds all cores spent not idle since boot (/proc/stat: user … steal, without idle and iowait)."""
+    fields = [int(x) for x in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:9]]
+    return (sum(fields) - fields[3] - fields[4]) / CLK_TCK
+
+
 class ProcessSampler:
-    """Samples a run's process tree every 0.5 s: per role the CPU share in the middle third of the run
-    (steady state: after start-up, before shutdown) and the peak RSS of the nodes."""
+    """Samples a run's process tree (and the whole machine's CPU) every 0.25 s: per role the CPU share
+    while the run steps, what other work used meanwhile, and the peak RSS of the nodes."""
 
     def __init__(self, root: int) -> None:
         self.root = root
         self.samples: dict[int, list[tuple[float, float, float, str]]] = {}  # pid → (t, cpu s, hwm MB, role)
+        self.machine: list[tuple[float, float]] = []  # (t, busy CPU seconds of the whole machine)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, daemon=True)
         self._thread.start()
@@ -124,25 +135,45 @@ class ProcessSampler:
                 tree.add(pid)
                 todo += [c for c, st in stats.items() if st[0] == pid and c not in tree]
             now = time.monotonic()
+            self.machine.append((now, _machine_busy_s()))
             for pid in tree & stats.keys():
                 _, cpu, hwm, role = stats[pid]
                 self.samples.setdefault(pid, []).append((now, cpu, hwm, "run" if pid == self.root else role))
             self._stop.wait(SAMPLE_PERIOD_S)
 
-    def stop(self) -> dict:
+    def stop(self, stepping_s: float | None = None) -> dict:
+        """Per-role CPU shares over the stepping phase: the ``stepping_s`` seconds before the vehicle
+        exited, without their first and last fifth (whole run if not given or too short to sample)."""
         self._stop.set()
         self._thread.join()
+        vehicle_end = max((rows[-1][0] for rows in self.samples.values() if rows[-1][3] == "vehicle"), default=None)
+        if stepping_s and vehicle_end is not None:
+            lo, hi = vehicle_end - 0.8 * stepping_s, vehicle_end - 0.2 * stepping_s
+        else:
+            lo, hi = -math.inf, math.inf
+
+        def rate(rows: list) -> float | None:
+            inside = [r for r in rows if lo <= r[0] <= hi]
+            if len(inside) < 2 or inside[-1][0] - inside[0][0] < SAMPLE_PERIOD_S:
+                return None
+            return 100.0 * (inside[-1][1] - inside[0][1]) / (inside[-1][0] - inside[0][0])
+
         shares: dict[str, list[float]] = {}
         hwm: list[float] = []
         for rows in self.samples.values():
             role = rows[-1][3]
             if role == "node":
                 hwm.append(max(r[2] for r in rows))
-            if len(rows) >= 6:
-                a, b = rows[len(rows) // 3], rows[2 * len(rows) // 3]
-                shares.setdefault(role, []).append(100.0 * (b[1] - a[1]) / (b[0] - a[0]))
+            r = rate(rows)
+            if r is not None:
+                shares.setdefault(role, []).append(r)
         nodes = shares.pop("node", [])
+        busy = rate([(t, b, 0.0, "") for t, b in self.machine])
+        ours = sum(nodes) + sum(sum(v) for v in shares.values())
         return {
+            "window_s": None if lo == -math.inf else hi - lo,
+            "machine_busy_pct": busy,  # every process on the machine, same window
+            "other_work_pct": None if busy is None else max(0.0, busy - ours),  # what was not this run
             "node_cpu_pct_median": statistics.median(nodes) if nodes else None,
             "nodes_cpu_pct_total": sum(nodes),
             "role_cpu_pct": {r: sum(v) for r, v in shares.items()},  # run (the parent, with the router), vehicle, collector
@@ -331,7 +362,7 @@ def _loadavg() -> str:
 
 def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int = 1, log=print) -> dict:  # noqa: ANN001
     """Real-time runs of ring networks of growing size; the largest without a deadline miss."""
-    from bench.topologies import ring_topology
+    from bench.topologies import RING_TAU_S, ring_topology
 
     runs = []
     best = None
@@ -340,7 +371,7 @@ def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int 
         ok = False
         for attempt in range(retries + 1):
             load = _loadavg()
-            r = cli_run(topo, "zenoh", "realtime", timeout=120 + 3 * n + steps * 0.2, sample=True)
+            r = cli_run(topo, "zenoh", "realtime", timeout=120 + 3 * n + steps * 0.2, sample_stepping_s=steps * RING_TAU_S)
             s = r["summary"] or {}
             misses = sum(row.get("deadline_misses") or 0 for row in s.get("nodes", [])) if s else None
             late = r.get("late_per_step") or {}
@@ -356,7 +387,8 @@ def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int 
             pr = r["processes"] or {}
             log(f"  real time, {n} nodes (attempt {attempt + 1}, load {load}): exit {r['exit_code']}, deadline misses {misses} "
                 f"in {len(late)} steps, missing {row['nodes_missing']}, {r['wall_s']:.0f} s; node CPU {pr.get('node_cpu_pct_median') or 0:.2f} % "
-                f"each, all nodes {pr.get('nodes_cpu_pct_total', 0):.0f} %, others {pr.get('role_cpu_pct')}")  # fmt: skip
+                f"each, all nodes {pr.get('nodes_cpu_pct_total', 0):.0f} %, others {pr.get('role_cpu_pct')}, other work on the machine "
+                f"{pr.get('other_work_pct') or 0:.0f} %")  # fmt: skip
             ok = r["exit_code"] == 0 and misses == 0 and not row["nodes_missing"]
             if ok:
                 break

@@ -10,7 +10,11 @@ import pytest
 from netsetest.bus.base import MemoryBus
 from netsetest.config.schema import load_topology
 from netsetest.roles.node import Node
-from netsetest.runtime.processes import IDLE_WAIT_S, READY_PERIOD_S, ROLE_ENV, _node_wait, role_env
+from netsetest.bus import keys
+from netsetest.messages import Ready
+from netsetest.runtime.processes import (
+    IDLE_WAIT_S, READY_PERIOD_S, ROLE_ENV, Barrier, _all_roles, _node_wait, node_peers, role_env,
+)
 
 
 def test_role_env_adds_defaults_and_keeps_the_users():
@@ -50,3 +54,20 @@ def test_node_blocks_until_something_is_due():
     assert _node_wait(node, 0.0, 5.0, False, now=100.0) == 3.0
     assert _node_wait(node, 0.0, 5.0, False, now=104.0) == 0.0
     assert _node_wait(node, 0.0, 5.0, True, now=100.0) == IDLE_WAIT_S  # real time never waits for neighbours
+
+
+def test_a_node_listens_to_its_peers_ready_only():
+    """Paper ring: node 1 exchanges states with 2 and 6 only; Ready of nodes 3–5 never reaches it, so
+    the start-up barrier costs O(N·degree) messages, not O(N²)."""
+    sc = load_topology("topologies/paper6.toml", steps=3)
+    assert node_peers(sc, 1) == {("vehicle", None), ("collector", None), ("node", 2), ("node", 6)}
+    bus = MemoryBus()
+    node = Barrier(bus, "t", Ready(role="node", node=1), node_peers(sc, 1))
+    vehicle = Barrier(bus, "t", Ready(role="vehicle"), _all_roles(sc) - {("vehicle", None)})
+    for i in sc.ids:
+        bus.publish(keys.ready_of("t", keys.role_name("node", i)), Ready(role="node", node=i, seen_all=True))
+    bus.publish(keys.ready_of("t", "collector"), Ready(role="collector"))
+    bus.pump()
+    assert node.heard == {("collector", None), ("node", 2), ("node", 6)}  # and its own Ready is not for itself
+    assert vehicle.heard == _all_roles(sc) - {("vehicle", None)}  # the vehicle still hears everyone
+    assert ("node", 4) in vehicle.complete
