@@ -9,7 +9,11 @@
   node process is launched and timed from ``Popen`` to its first published state (the prior
   ellipsoid, step 0) and to its first solved estimate (step 1).
 - ``realtime_ladder``: real-time runs (τs = 0.1 s, nodes as processes) of growing ring-with-chords
-  networks until one has a deadline miss or loses a node.
+  networks until one has a deadline miss or loses a node; each run sampled by :class:`ProcessSampler`
+  (CPU per role over the stepping phase, the machine's other work, node RSS) so a failure shows why.
+- ``node_memory_profile``: RSS and import time of a node process, stage by stage.
+
+Every role process is started with the environment ``netsetest run`` gives it (``role_env``).
 """
 
 from __future__ import annotations
