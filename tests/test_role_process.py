@@ -71,3 +71,10 @@ def test_a_node_listens_to_its_peers_ready_only():
     assert node.heard == {("collector", None), ("node", 2), ("node", 6)}  # and its own Ready is not for itself
     assert vehicle.heard == _all_roles(sc) - {("vehicle", None)}  # the vehicle still hears everyone
     assert ("node", 4) in vehicle.complete
+
+
+def test_run_gives_large_networks_longer_to_start():
+    from netsetest.cli.processes import START_S_PER_ROLE, START_TIMEOUT_S, run_start_timeout
+
+    assert run_start_timeout(8) == START_TIMEOUT_S  # the paper run keeps the vehicle's default
+    assert run_start_timeout(130) == 130 * START_S_PER_ROLE > START_TIMEOUT_S  # 128 nodes + vehicle + collector

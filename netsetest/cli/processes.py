@@ -31,6 +31,7 @@ from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 ZENOH_DEFAULT_PORT = 7447
 RUN_ENV_FILE = "run.env"  # written by `netsetest credentials`: the deployment's run id, for compose's env_file
+START_TIMEOUT_S = 60.0  # the vehicle's default wait for every role to be ready
 
 
 # ---------------------------------------------------------------- option groups
@@ -138,7 +139,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
     p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep")
     p.add_argument("--node-timeout", type=_seconds, default=10.0)
     p.add_argument("--pace", type=_non_negative, default=0.0, help="lockstep: at least this many seconds per step")
-    p.add_argument("--start-timeout", type=_seconds, default=60.0, help="how long to wait for every role to be ready")
+    p.add_argument("--start-timeout", type=_seconds, default=START_TIMEOUT_S, help="how long to wait for every role to be ready")
     p.add_argument("--await-rejoin", type=_at, action="append", default=[], metavar="NODE@STEP",
                    help="lockstep: before step STEP+1 wait (at most --node-timeout) for node NODE to come back")  # fmt: skip
     _zenoh_args(p)
@@ -413,6 +414,14 @@ def kill_schedule(kill: list[tuple[int, int]], rejoin: list[tuple[int, int]], st
     return Schedule(by("kill"), by("rejoin"))
 
 
+START_S_PER_ROLE = 1.0  # `run`: each role process imports for ≈0.35 s of CPU; 100 of them share a few cores
+
+
+def run_start_timeout(roles: int) -> float:
+    """The vehicle's start-up timeout in a ``run`` of ``roles`` processes: large networks take longer to start."""
+    return max(START_TIMEOUT_S, START_S_PER_ROLE * roles)
+
+
 COLLECTOR_GRACE_S = 10.0  # on Ctrl-C/SIGTERM: how long the collector may take to write its record and summary
 ROLE_GRACE_S = 5.0  # how long a role may take to leave after SIGTERM (or after End)
 
@@ -512,7 +521,8 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         children.start(
             "vehicle",
             ["vehicle", *common, "--signals", a.signals, "--seed", str(a.seed), "--clock", a.clock,
-             "--node-timeout", str(a.node_timeout), "--pace", str(a.pace), *net("vehicle"),
+             "--node-timeout", str(a.node_timeout), "--pace", str(a.pace), "--start-timeout", str(run_start_timeout(len(names))),
+             *net("vehicle"),
              *(x for w in awaits for x in ("--await-rejoin", w))],
             stdout=subprocess.DEVNULL,
         )  # fmt: skip
