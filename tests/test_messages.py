@@ -34,9 +34,10 @@ MESSAGES = [
     _state(),
     _state(status="init", rho_cert=None, used=[], missing=[], late=False),
     Truth(
-        step=80, x=[1e-3 / 7, -0.2 / 3], faults={"1": 0.1745, "2": 0.08725, "6": -0.0873}, u=0.03, w=-0.99,
-        vx=27.77777777777778, noise={"1": math.cos(0.2 * math.pi)}, gamma={"1": 0.77}, y={"1": 0.01 / 3},
-        y_nofault={"1": -0.0}, sector_ok={"1": True, "2": False}, noise_ok={"1": True}, dist_ok=False,
+        step=80, x=[1e-3 / 7, -0.2 / 3], faults={"1": 0.1745, "2": 0.08725}, u=0.03, w=-0.99,
+        vx=27.77777777777778, noise={"1": math.cos(0.2 * math.pi), "2": 0.5}, gamma={"1": 0.77, "2": 1.0},
+        y={"1": 0.01 / 3, "2": 0.1}, y_nofault={"1": -0.0, "2": 0.0}, sector_ok={"1": True, "2": False},
+        noise_ok={"1": True, "2": True}, dist_ok=False,
         lost=[(2, 1), (6, 1)], alive=[1, 2, 3],
     ),  # fmt: skip
     End(steps=80),

@@ -85,11 +85,11 @@ def cmd_run(a: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
-    from netsetest.runtime.report import exit_code, format_table, write_outputs
+    from netsetest.runtime.report import exit_code, format_table, write_summary
 
     sc = load_topology(a.topology, a.case, a.steps)
-    res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet)
-    write_outputs(res.summary, res.meta, res.parts, a.record, a.summary_json)
+    res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet, record=a.record, keep=False)
+    write_summary(res.summary, a.summary_json)
     print(format_table(res.summary))
     return exit_code(res.summary)
 
