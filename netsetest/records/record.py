@@ -13,9 +13,10 @@ step::
 ``meta``: run settings (topology, case, signals, variant, seed, steps, tau_s, mode, clock, node ids,
 in-neighbour weights {i: {j: a_ij}}, run id).  Truth entry of step k: x = [β, r], faults {i: f_i}, u,
 w, vx, noise {i}, gamma {i}, y {i}, y_nofault {i}, sector_ok {i}, noise_ok {i}, dist_ok, lost [[j, i]],
-alive [i], drops {reason: n}.  State entry: step, xhat [3], P [9, row-major], rho, status, rho_cert,
+alive [i].  State entry: step, xhat [3], P [9, row-major], rho, status, rho_cert,
 solve_ms, used, missing, late, E = eᵀP⁻¹e (null when the truth of the step is unknown), contained
-(E ≤ rho), assumptions_ok (every assumption in the step's dependency cone held).  ``summary``: the
+(E ≤ rho), assumptions_ok (every assumption in the step's dependency cone held), contested (more
+than one copy matched the truth: not judged).  ``summary``: the
 per-node table and totals (the same object ``--summary-json`` writes).
 
 A file without the summary line (the collector, the vehicle or the parent was killed) loads as a

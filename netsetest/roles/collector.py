@@ -13,13 +13,21 @@ every node reported, or the alive ones did and the truth is ``CLOSE_LAG`` steps 
 is ``WINDOW`` steps further whatever arrived; :meth:`finish` closes the rest.  Only running totals per
 node remain for the summary.
 
-Defences (the network may be open, or a credentialed peer may lie): the first copy of a state per
-(node, step) is the one judged and recorded, later copies are dropped as duplicates; a state or truth
-outside the run (:class:`RunScope`), after its step was closed or too far ahead is dropped; a truth must
-follow from the previous one through the vehicle model (x_k = f(x_{k−1}, u_{k−1}, w_{k−1}, Vx_{k−1}),
-faults, speed and assumption flags as the scenario defines them) — when several copies of a step's truth
-pass, the step is judged on none; End counts only when it names the scheduled last step and that
-step's truth is here.  Every drop is counted by reason.
+Defences (the network may be open, or a credentialed peer may lie), each counted by reason:
+
+- a message outside the run (:class:`RunScope`), for a step already closed, or further than ``WINDOW``
+  steps ahead of the newest truth is dropped (nothing is allocated per a step number it names);
+- a repeated copy is a duplicate and dropped; the first copy is the one recorded — a *different* copy
+  for the same (node, step) or step is kept (up to a few) so that the step can be judged honestly;
+- a truth must follow from the previous one through the vehicle model (x_k = f(x_{k−1}, u_{k−1},
+  w_{k−1}, Vx_{k−1}), x_0 of the scenario) with the scenario's faults, speed and assumption flags;
+- a node's state must match the truth of its step where an honest node's must: its γ and its
+  innovation y̌ = ỹ − C̄ x̂ with the true measurement ỹ; at step 0 the profile's prior ellipsoid;
+- when more than one copy passes, the collector cannot tell which one the sender sent: the step (a
+  truth) or node-step (a state) is *contested* and judged on none (``contested`` in the record);
+- End counts only when it names the scheduled last step and that step's truth is here.
+
+A miss the verdict counts therefore comes from a state the node itself computed from its true input.
 """
 
 from __future__ import annotations
@@ -39,8 +47,14 @@ from netsetest.records.record import RecordSink
 
 WINDOW = 50  # steps a step may stay open behind the newest truth (bounds memory against a stalled node)
 CLOSE_LAG = 2  # a step whose alive nodes reported closes this many truths later (late and rejoining states)
-MAX_TRUTH_COPIES = 4  # differing copies of one step's truth kept until the step closes
+MAX_COPIES = 4  # differing copies of one step's truth, or one node-step's state, kept until the step closes
+INNOV_RTOL = 1e-12  # the node computes ỹ − C̄ x̂ with the same numbers: rounding only across machines
 CHAIN_RTOL = 1e-12  # x_k recomputed from x_{k−1}: same code, same inputs — rounding only across machines
+
+
+def _same_set(a: NodeState, b: NodeState) -> bool:
+    """Copies that publish the same ellipsoid are one for judging (bookkeeping fields may differ)."""
+    return a.xhat == b.xhat and a.P == b.P and a.rho == b.rho and a.innov == b.innov and a.gamma == b.gamma
 
 
 @dataclass
@@ -55,6 +69,8 @@ class NodeTotals:
     first_sector_break: int | None = None
     width_sum: float = 0.0
     reported: int = 0
+    rejected: int = 0  # states that did not match the truth (forged, or from a forged input)
+    contested: int = 0  # node-steps with more than one matching copy: judged on none
     evaluated: int = 0
     contained: int = 0
     covered: int = 0
@@ -74,12 +90,13 @@ class Collector:
         self.sink = sink
         self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
         self.truth: dict[int, list[Truth]] = {}  # open steps: the copies received, first first
-        self.states: dict[int, dict[int, NodeState]] = {}  # open steps: node → first copy
+        self.states: dict[int, dict[int, list[NodeState]]] = {}  # open steps: node → copies, first first
+        self._judged: dict[int, NodeState] = {}  # the step being closed: node → the state judged
         self.evaluated: dict[tuple[int, int], tuple[float, bool]] = {}  # open step being closed
         self.closed = -1  # last closed step
         self.head = -1  # newest step with a truth copy
         self.prev_truth: Truth | None = None  # the judged truth of the last closed step
-        self.prev_cone: dict[int, bool] = {}
+        self.prev_cone: dict[int, bool] = {}  # nodes with a judged state at the last closed step
         self.totals = {i: NodeTotals() for i in scenario.ids}
         self.losses: Counter[str] = Counter()
         self.vehicle_drops: dict[str, int] = {}
@@ -115,10 +132,14 @@ class Collector:
         if k > max(self.head, self.closed) + WINDOW:
             self.drops["truth-ahead"] += 1  # never allocate per a step number we were told
             return
+        why = self._inconsistent(msg)  # checked again at close, when the previous truth is surely known
+        if why:
+            self.drops[why] += 1
+            return
         copies = self.truth.setdefault(k, [])
         if msg in copies:
             self.drops["duplicate-truth"] += 1
-        elif len(copies) >= MAX_TRUTH_COPIES:
+        elif len(copies) >= MAX_COPIES:
             self.drops["truth-copies"] += 1
         else:
             copies.append(msg)
@@ -135,11 +156,13 @@ class Collector:
         if k > max(self.head, self.closed) + WINDOW:
             self.drops["state-ahead"] += 1
             return
-        have = self.states.setdefault(k, {})
-        if msg.node in have:
-            self.drops["duplicate-state"] += 1  # the first copy is the one judged and recorded
-            return
-        have[msg.node] = msg
+        copies = self.states.setdefault(k, {}).setdefault(msg.node, [])
+        if any(_same_set(msg, c) for c in copies):
+            self.drops["duplicate-state"] += 1  # the same ellipsoid: the first copy is the one recorded
+        elif len(copies) >= MAX_COPIES:
+            self.drops["state-copies"] += 1
+        else:
+            copies.append(msg)
 
     def _on_end(self, key: str, msg: End) -> None:
         if key != keys.end(self.run) or msg.steps != self.sc.steps:
@@ -229,8 +252,37 @@ class Collector:
             return "truth-flags"
         return None
 
+    def _judge_state(self, i: int, k: int, tr: Truth | None) -> tuple[NodeState | None, bool]:
+        """(the copy to record, whether it is the only one that can be node i's own); None: none can."""
+        copies = self.states.get(k, {}).get(i, [])
+        if tr is None:
+            return (copies[0], len(copies) == 1) if copies else (None, False)
+        good = []
+        for st in copies:
+            why = self._state_mismatch(i, st, tr)
+            if why:
+                self.drops[why] += 1
+            else:
+                good.append(st)
+        if len(good) > 1:
+            self.drops["state-conflict"] += len(good)
+        return (good[0], len(good) == 1) if good else (None, False)
+
+    def _state_mismatch(self, i: int, st: NodeState, tr: Truth) -> str | None:
+        n, s = self.sc.node(i), str(i)
+        if st.gamma != tr.gamma[s]:
+            return "state-not-from-input"
+        innov = float(tr.y[s] - n.sensor.Cbar @ np.asarray(st.xhat))
+        if not np.isclose(st.innov, innov, rtol=INNOV_RTOL, atol=1e-300):
+            return "state-not-from-input"
+        if st.status == "init" and (
+            st.step != 0 or st.rho != n.rho or not np.array_equal(st.xhat, n.x0_hat) or not np.array_equal(st.P_matrix(), n.P0)
+        ):
+            return "state-not-prior"
+        return None
+
     def _evaluate(self, i: int, k: int) -> None:
-        st, tr = self.states.get(k, {}).get(i), self._step_truth
+        st, tr = self._judged.get(i), self._step_truth
         if st is None or tr is None or (i, k) in self.evaluated:
             return
         xbar = np.r_[tr.x, tr.faults[str(i)]]
@@ -253,8 +305,10 @@ class Collector:
                 own = own and (ev is None or ev[1])  # Assumption 1: x̄_0 in the initial ellipsoid
             else:
                 own = own and prev is not None and prev.step == k - 1 and prev.dist_ok
-                deps = set(n.in_weights) | {i}
-                own = own and all(self.prev_cone.get(j, True) for j in deps)
+                # the step relied on the judged states of k−1 it used (own and neighbours'), nothing else
+                st = self._judged.get(i)
+                deps = (set(st.used) if st is not None else set(n.in_weights) - {i}) | {i}
+                own = own and all(self.prev_cone.get(j, False) for j in deps)
             ok[i] = bool(own)
         return ok
 
@@ -277,13 +331,19 @@ class Collector:
     def _close(self, k: int) -> None:
         """Judge step k, stream it to the sink, add it to the totals and forget it."""
         self._step_truth = tr = self._judged_truth(k)
-        states = self.states.get(k, {})
-        for i in sorted(states):
-            self._evaluate(i, k)
+        self._judged, contested = {}, set()
+        for i in self.sc.ids:
+            st, sole = self._judge_state(i, k, tr)
+            if st is not None:
+                self._judged[i] = st
+                if not sole:
+                    contested.add(i)
+                if tr is not None and sole:
+                    self._evaluate(i, k)
         cone = self._cones(k)
         for i in self.sc.ids:
             t = self.totals[i]
-            st = states.get(i)
+            st = self._judged.get(i)
             if tr is not None and not tr.sector_ok[str(i)]:
                 t.sector_breaks += 1
                 if t.first_sector_break is None:
@@ -291,12 +351,16 @@ class Collector:
             if not cone[i]:
                 t.assumption_violations += 1
             if st is None:
-                t.missing_steps += 1
-                if t.missing_from is None:
-                    t.missing_from = k
+                if self.states.get(k, {}).get(i):
+                    t.rejected += 1  # it reported, but nothing it sent can be its own
+                else:
+                    t.missing_steps += 1
+                    if t.missing_from is None:
+                        t.missing_from = k
                 continue
+            t.contested += i in contested
             if self.sink is not None:
-                self.sink.state(i, self._state_entry(i, k, st, cone[i]))
+                self.sink.state(i, self._state_entry(i, k, st, cone[i], i in contested))
             self._add(t, i, k, st, cone[i])
         if tr is not None:
             for j, i in tr.lost:
@@ -307,7 +371,8 @@ class Collector:
         self.states.pop(k, None)
         self.truth.pop(k, None)
         self.evaluated.clear()
-        self.prev_truth, self.prev_cone = tr, cone
+        self.prev_truth = tr
+        self.prev_cone = {i: cone[i] for i in self._judged if i not in contested}
         self.closed = k
 
     def _add(self, t: NodeTotals, i: int, k: int, st: NodeState, cone: bool) -> None:
@@ -336,19 +401,20 @@ class Collector:
         t.drops = dict(st.drops)
         t.width_sum += 2.0 * np.sqrt(st.rho * st.P_matrix()[2, 2])
 
-    def _state_entry(self, i: int, k: int, st: NodeState, cone: bool) -> dict:
+    def _state_entry(self, i: int, k: int, st: NodeState, cone: bool, contested: bool) -> dict:
         ev = self.evaluated.get((i, k))
         E, contained = ev if ev is not None else (None, True)
         return {
             "step": k, "xhat": list(st.xhat), "P": list(st.P), "rho": st.rho, "status": st.status,
             "rho_cert": st.rho_cert, "solve_ms": st.solve_ms, "used": st.used, "missing": st.missing,
             "late": st.late, "E": E, "contained": bool(contained), "assumptions_ok": bool(cone),
+            "contested": contested,
         }  # fmt: skip
 
     @staticmethod
     def _truth_entry(t: Truth) -> dict:
         d = t.model_dump(mode="json")
-        for f in ("v", "type"):
+        for f in ("v", "type", "drops"):  # the vehicle's drop counters go to the summary
             d.pop(f, None)
         return d
 
@@ -379,6 +445,8 @@ class Collector:
                     "solve_ms_median": statistics.median(t.solve) if t.solve else None,
                     "fallbacks": t.fallbacks,
                     "steps_reported": t.reported,
+                    "steps_rejected": t.rejected,
+                    "steps_contested": t.contested,
                     "steps_evaluated": t.evaluated,
                     "steps_contained": t.contained,
                     "steps_covered": t.covered,
@@ -401,6 +469,8 @@ class Collector:
             "misses_assumption_broken_total": sum(r["misses_assumption_broken"] for r in node_rows),
             "steps_completed": last,
             "node_steps_reported": sum(t.reported for t in totals),
+            "node_steps_rejected": sum(t.rejected for t in totals),
+            "node_steps_contested": sum(t.contested for t in totals),
             "node_steps_evaluated": sum(t.evaluated for t in totals),
             "node_steps_contained": sum(t.contained for t in totals),
             "node_steps_covered": sum(t.covered for t in totals),

@@ -91,7 +91,9 @@ def verdict(summary: dict) -> str:
     if causes:
         text += f" (assumption broken on {evaluated - covered}: " + ", ".join(f"{c} {n}" for c, n in causes.items()) + ")"
     if reported > evaluated:
-        text += f"; {reported - evaluated} node-step(s) not judged (their truth is unknown)"
+        text += f"; {reported - evaluated} node-step(s) not judged (truth unknown or copies contested)"
+    if summary.get("node_steps_rejected"):
+        text += f"; {summary['node_steps_rejected']} node-step(s) rejected (no copy matched the truth)"
     return text
 
 
