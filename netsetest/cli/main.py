@@ -13,7 +13,7 @@ import sys
 from collections.abc import Callable, Sequence
 
 from netsetest.config.schema import ConfigError
-from netsetest.records.record import RecordError
+from netsetest.records.record import Record, RecordError
 from netsetest.runtime.report import EXIT_BAD_INPUT
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
@@ -94,10 +94,17 @@ def cmd_run(a: argparse.Namespace) -> int:
     return exit_code(res.summary)
 
 
+def _note_partial(command: str, rec: Record) -> None:
+    if rec.partial:
+        print(f"netsetest {command}: {rec.path}: partial record (the run did not finish; last complete step "
+              f"{rec.last_complete_step})", file=sys.stderr)  # fmt: skip
+
+
 def cmd_inspect(a: argparse.Namespace) -> int:
     from netsetest.records.record import load_record
 
     rec = load_record(a.record)
+    _note_partial("inspect", rec)
     ids = sorted(rec.nodes) if a.node is None else [a.node]
     for i in ids:
         if i not in rec.nodes:
@@ -123,7 +130,10 @@ def cmd_plot(a: argparse.Namespace) -> int:
     from netsetest.records.plots import plot_records
     from netsetest.records.record import load_record
 
-    files = plot_records([load_record(r) for r in a.record], a.out)
+    records = [load_record(r) for r in a.record]
+    for rec in records:
+        _note_partial("plot", rec)
+    files = plot_records(records, a.out)
     for f in files:
         print(f)
     return 0
