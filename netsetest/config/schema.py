@@ -2,6 +2,13 @@
 
 Every file is validated with pydantic.  :func:`load_topology` returns a :class:`Scenario` (plain numpy
 data for the roles) or raises :class:`ConfigError` naming the file, the field and the reason.
+
+Physical ranges.  Every magnitude a node's estimator works with is bounded so that the estimator, its
+certificate and its guaranteed fallback ellipsoid (:func:`netsetest.estimator.sdp.fallback_shape`) stay
+in floating-point range: a profile outside them is rejected at load (exit 2) rather than crashing a node
+mid-run.  The limits (the ``*_MIN``/``*_MAX`` constants below, documented in README.md) are generous for
+a yaw-rate sensor — gains, offsets and signals in rad, rad/s and the sensor's unit are O(1) — and the
+extreme-profile sweep (tests/test_estimator_edges.py) runs the network at their corners.
 """
 
 from __future__ import annotations
@@ -33,6 +40,19 @@ class _Strict(BaseModel):
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
+MAGNITUDE_MAX = 1e3  # |C|, |Ds|, Dv, |x̂0|, r_max, h2, fault values: a sensor gain or signal of 1000 is not a yaw-rate sensor
+DS_MIN = 1e-6  # |Ds|: smaller makes the fault practically unobservable and the descriptor gain G ~ 1/Ds overflow later steps
+DV_MIN = 1e-9  # Dv > 0: every real sensor is noisy; Dv = 0 leaves the estimator's noise slot empty
+R_MIN, R_MAX = 1e-12, 1e6  # noise bound v² ≤ R
+P0_MIN, P0_MAX = 1e-9, 1e6  # eigenvalues of the initial shape P0
+RHO_MIN, RHO_MAX = 1e-6, 1e6  # radius of the initial ellipsoid
+H1_MIN = 1e-3  # sector 0 < h1 < 1: h1 → 0 makes γ h1 C̄ (hence T, G) degenerate
+GAMMA_MIN = 1e-3  # availability γ ∈ [GAMMA_MIN, 1]
+W_MIN, W_MAX = 1e-12, 1e6  # side-wind bound w² ≤ W
+FREQ_MAX = 1e6  # |noise_frequency|
+
+Magnitude = Annotated[float, Field(ge=-MAGNITUDE_MAX, le=MAGNITUDE_MAX, allow_inf_nan=False)]
+
 
 # ---------------------------------------------------------------- node profile (nodes/*.toml)
 
@@ -40,16 +60,16 @@ Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 class SaturationSpec(_Strict):
     """σ(r) = sign(r) min(r_max, |r|) with sector scalars 0 < h1 < 1 ≤ h2 (used in the SAIM case)."""
 
-    r_max: Positive
-    h1: Annotated[float, Field(gt=0, lt=1)]
-    h2: Annotated[float, Field(ge=1, allow_inf_nan=False)]
+    r_max: Annotated[float, Field(gt=0, le=MAGNITUDE_MAX, allow_inf_nan=False)]
+    h1: Annotated[float, Field(ge=H1_MIN, lt=1)]
+    h2: Annotated[float, Field(ge=1, le=MAGNITUDE_MAX, allow_inf_nan=False)]
 
 
 class AvailabilitySpec(_Strict):
     """γ_i,k uniform in [gamma_min, gamma_max] ⊂ (0, 1] (used in the SAIM case)."""
 
-    gamma_min: Annotated[float, Field(gt=0, le=1)]
-    gamma_max: Annotated[float, Field(gt=0, le=1)]
+    gamma_min: Annotated[float, Field(ge=GAMMA_MIN, le=1)]
+    gamma_max: Annotated[float, Field(ge=GAMMA_MIN, le=1)]
 
     @model_validator(mode="after")
     def _ordered(self) -> AvailabilitySpec:
@@ -62,11 +82,11 @@ class FaultSpec(_Strict):
     """``none``; ``square``: amplitude·sign(sin(2πk/period)) on [start, end); ``piecewise``: through points."""
 
     kind: Literal["none", "square", "piecewise"] = "none"
-    amplitude: Finite | None = None
+    amplitude: Magnitude | None = None
     period: Annotated[int, Field(gt=0)] | None = None
     start: Annotated[int, Field(ge=0)] | None = None
     end: Annotated[int, Field(ge=0)] | None = None
-    points: list[tuple[Finite, Finite]] | None = None
+    points: list[tuple[Finite, Magnitude]] | None = None
 
     @model_validator(mode="after")
     def _complete(self) -> FaultSpec:
@@ -106,15 +126,19 @@ class FaultBoundSpec(_Strict):
 class NodeProfile(_Strict):
     """One yaw-rate sensor: y = C x + Ds f + Dv v, v² ≤ R, plus its estimator's initial ellipsoid."""
 
-    label: str = ""
-    C: tuple[Finite, Finite]
-    Ds: Finite
-    Dv: Finite
-    R: Positive
-    noise_frequency: Finite = Field(description="f_i of v_i,k = cos(2π f_i (k−1) τs)")
-    x0_hat: tuple[Finite, Finite, Finite]
-    P0: Positive | list[list[Finite]] = Field(description="scalar (× I3) or a 3×3 SPD matrix")
-    rho: Positive = 1.0
+    label: Annotated[str, Field(max_length=200)] = ""
+    C: tuple[Magnitude, Magnitude]
+    Ds: Magnitude
+    Dv: Annotated[float, Field(ge=DV_MIN, le=MAGNITUDE_MAX, allow_inf_nan=False)]
+    R: Annotated[float, Field(ge=R_MIN, le=R_MAX, allow_inf_nan=False)]
+    noise_frequency: Annotated[float, Field(ge=-FREQ_MAX, le=FREQ_MAX, allow_inf_nan=False)] = Field(
+        description="f_i of v_i,k = cos(2π f_i (k−1) τs)"
+    )
+    x0_hat: tuple[Magnitude, Magnitude, Magnitude]
+    P0: Annotated[float, Field(ge=P0_MIN, le=P0_MAX, allow_inf_nan=False)] | list[list[Finite]] = Field(
+        description="scalar (× I3) or a 3×3 SPD matrix"
+    )
+    rho: Annotated[float, Field(ge=RHO_MIN, le=RHO_MAX, allow_inf_nan=False)] = 1.0
     saturation: SaturationSpec | None = None
     availability: AvailabilitySpec | None = None
     fault: FaultSpec = FaultSpec()
@@ -123,8 +147,8 @@ class NodeProfile(_Strict):
     @field_validator("Ds")
     @classmethod
     def _ds_nonzero(cls, v: float) -> float:
-        if v == 0:
-            raise ValueError("Ds must be non-zero, else the fault is unobservable")
+        if abs(v) < DS_MIN:
+            raise ValueError(f"|Ds| must be at least {DS_MIN:g}, else the fault is (practically) unobservable")
         return v
 
     @field_validator("P0")
@@ -136,6 +160,9 @@ class NodeProfile(_Strict):
                 raise ValueError(f"P0 must be 3×3, got shape {a.shape}")
             if not np.allclose(a, a.T) or np.linalg.eigvalsh(a).min() <= 0:
                 raise ValueError("P0 must be symmetric positive definite")
+            eig = np.linalg.eigvalsh(0.5 * (a + a.T))
+            if eig.min() < P0_MIN or eig.max() > P0_MAX:
+                raise ValueError(f"P0's eigenvalues must lie in [{P0_MIN:g}, {P0_MAX:g}], got [{eig.min():.3g}, {eig.max():.3g}]")
         return v
 
     def P0_matrix(self) -> np.ndarray:
@@ -220,7 +247,7 @@ class TopologyFile(_Strict):
     steps: Annotated[int, Field(ge=1)] = 80
     tau_s: Positive = 0.1
     case: Case = "nsnim"
-    W: Positive = Field(2.0, description="side-wind bound w² ≤ W")
+    W: Annotated[float, Field(ge=W_MIN, le=W_MAX, allow_inf_nan=False)] = Field(2.0, description="side-wind bound w² ≤ W")
     vehicle: VehicleSpec = VehicleSpec()
     speed: SpeedSpec = SpeedSpec()
     steering: SteeringSpec = SteeringSpec()
