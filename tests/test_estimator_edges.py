@@ -129,7 +129,7 @@ def test_fallback_shape_refuses_what_it_cannot_represent() -> None:
     sc = load_topology(ROOT / "topologies" / "paper6.toml", "nsnim", 2)
     est, n, alpha, data = _estimator_data(sc)
     for bad in (np.inf, np.nan):
-        with pytest.raises(FallbackUnavailable):
+        with np.errstate(invalid="ignore"), pytest.raises(FallbackUnavailable):
             fallback_shape(dict(data, Mi=data["Mi"] * bad), n.sensor, 1.0, sc.W, alpha, sc.model)
     with pytest.raises(FallbackUnavailable):  # finite terms whose squares overflow
         fallback_shape(dict(data, Mi=data["Mi"] * 1e200), n.sensor, 1.0, sc.W, alpha, sc.model)
