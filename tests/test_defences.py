@@ -362,7 +362,7 @@ def test_duplicates_never_overwrite() -> None:
 
 @pytest.mark.parametrize("when", ["after", "before"])
 def test_flood_on_one_key(when: str) -> None:
-    """Thousands of forged states on node 3's key per step: the inbox keeps at most MAX_PER_KEY per key,
+    """Hundreds of forged states on node 3's key per step: the inbox keeps at most MAX_PER_KEY per key,
     the run completes and nothing forged is judged."""
     flood = 4 * MAX_PER_KEY
 

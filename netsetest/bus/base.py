@@ -7,9 +7,9 @@ reason), never handed to a role.
 
 The inbox is bounded per key (:class:`Inbox`): at most ``MAX_PER_KEY`` payloads wait on one key and at
 most ``MAX_KEYS`` keys wait at once; beyond that the newest payload is dropped (``inbox-full``,
-``inbox-keys``).  :meth:`Bus.pump` serves the waiting keys in turn, one payload each, and handles at most
-what was queued when it started — so a flood on one key delays nothing else and cannot keep a role
-from stepping.
+``inbox-keys``).  :meth:`Bus.pump` serves the waiting keys in turn, one payload each per round, for at
+most ``MAX_ROUNDS`` rounds and never more than was queued when it started — so a flood on one key costs
+a role at most ``MAX_ROUNDS`` decodes per pump, delays nothing else and cannot keep it from stepping.
 """
 
 from __future__ import annotations
@@ -25,7 +25,8 @@ from netsetest.messages import BadMessage, Message, decode, encode
 Handler = Callable[[str, Message], None]
 
 
-MAX_PER_KEY = 256  # a role handles ~1 message per key per step: this is minutes of backlog, or a flood
+MAX_PER_KEY = 64  # a role handles ~1 message per key per step and pumps many times a step: more is a flood
+MAX_ROUNDS = 16  # payloads per key one pump handles: a flooded key's decoding cost per pump is bounded
 MAX_KEYS = 1024  # distinct (key, subscriber) queues: a wildcard subscription must not allocate per forged key
 
 
@@ -40,6 +41,9 @@ class Inbox:
 
     def put(self, key: str, payload: bytes, handler: Handler) -> str | None:
         """Queue a payload; the drop reason when the inbox is full."""
+        q = self._queues.get((key, handler))
+        if q is not None and len(q) >= self.per_key:
+            return "inbox-full"  # without the lock: under a flood this is the common case, keep it cheap
         with self._cv:
             q = self._queues.get((key, handler))
             if q is None:
@@ -109,8 +113,9 @@ class Bus(ABC):
         if not len(self._inbox) and (timeout is None or timeout > 0):
             self._inbox.wait(timeout)
         budget = len(self._inbox)
-        done = 0
-        while budget > 0 and (limit is None or done < limit):
+        done = rounds = 0
+        while budget > 0 and rounds < MAX_ROUNDS and (limit is None or done < limit):
+            rounds += 1
             batch = self._inbox.take_round(budget if limit is None else min(budget, limit - done))
             if not batch:
                 break
@@ -126,9 +131,9 @@ class Bus(ABC):
                 done += 1
         return done
 
-    def drop(self, reason: str) -> None:
-        """Count a message a role rejected on context (wrong sender, stale step, bad shape matrix)."""
-        self.dropped[reason] += 1
+    def pending(self) -> int:
+        """Payloads queued and not yet handled."""
+        return len(self._inbox)
 
 
 class MemoryBus(Bus):

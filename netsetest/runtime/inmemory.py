@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from netsetest.bus.base import MemoryBus
@@ -42,11 +43,13 @@ def run_inmemory(
     bus: MemoryBus | None = None,
     record: str | None = None,
     keep: bool = True,
+    on_step: Callable[[int], None] | None = None,
 ) -> RunResult:
     """Run vehicle, nodes and collector in lockstep; the same role code as the Zenoh processes.
 
     ``record``: stream the record to this file as the run goes; ``keep``: also keep it in memory
-    (``RunResult.parts``; a long soak turns it off to run in constant memory).
+    (``RunResult.parts``; a long soak turns it off to run in constant memory); ``on_step(k)``: called
+    each time the vehicle publishes step k (the soak benchmark samples memory with it).
     """
     run_id = "mem"
     bus = bus or MemoryBus()
@@ -70,7 +73,9 @@ def run_inmemory(
         if vehicle.ready_to_advance():
             bar.update(vehicle.k)
             vehicle.advance()
-        elif not stepped:
+            if on_step is not None:
+                on_step(vehicle.k)
+        elif not stepped and not bus.pending():
             # in one process a message that has not arrived never will (lost, or dropped as hostile):
             # nodes proceed without the missing neighbours, the vehicle without the silent nodes
             waiting = [n for n in nodes if n.missing()]
