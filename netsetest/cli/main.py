@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Callable, Sequence
 
+from netsetest.cli import checks
 from netsetest.config.schema import ConfigError
 from netsetest.records.record import Record, RecordError
 from netsetest.runtime.report import EXIT_BAD_INPUT
@@ -29,7 +31,7 @@ def _run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--signals", choices=["paper", "worst"], default="paper",
                    help="paper: cos noise and uniform wind; worst: noise and wind at ±bound, random sign")  # fmt: skip
     p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=checks.seed, default=0, help="non-negative integer")
 
 
 def _positive_int(s: str) -> int:
@@ -76,12 +78,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def cmd_run(a: argparse.Namespace) -> int:
+    checks.output_file(a.record, "--record")
+    checks.output_file(a.summary_json, "--summary-json")
     if a.mode == "zenoh":
         from netsetest.cli import processes
 
         return processes.cmd_run_zenoh(a)
     if a.clock != "lockstep":
         print("netsetest run: --clock realtime needs --mode zenoh (the in-memory bus is lockstep only)", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if a.kill or a.rejoin:
+        print("netsetest run: --kill and --rejoin need --mode zenoh (in memory there is no process to kill)", file=sys.stderr)
         return EXIT_BAD_INPUT
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
@@ -130,6 +137,7 @@ def cmd_plot(a: argparse.Namespace) -> int:
     from netsetest.records.plots import plot_records
     from netsetest.records.record import load_record
 
+    checks.output_dir(a.out, "--out")
     records = [load_record(r) for r in a.record]
     for rec in records:
         _note_partial("plot", rec)
@@ -164,9 +172,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     handler = COMMANDS.get(a.command) or processes.COMMANDS[a.command]
     try:
         return handler(a)
-    except (ConfigError, RecordError) as exc:
+    except (ConfigError, RecordError, checks.OutputError) as exc:
         print(f"netsetest {a.command}: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:  # `netsetest inspect R | head`: the reader has gone, which is not an error
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # else the interpreter's final flush raises again
+        return 0
     except KeyboardInterrupt:
         print(f"netsetest {a.command}: interrupted", file=sys.stderr)
         return 130

@@ -13,6 +13,7 @@ extreme-profile sweep (tests/test_estimator_edges.py) runs the network at their 
 
 from __future__ import annotations
 
+import stat
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -211,7 +212,9 @@ class SteeringSpec(_Strict):
 
 class NodeRef(_Strict):
     id: Annotated[int, Field(ge=1)]
-    profile: str = Field(description="file name in the node directory, without .toml")
+    profile: Annotated[str, Field(min_length=1, max_length=200, pattern=r"^[^/\\\x00]+$")] = Field(
+        description="file name in the node directory, without .toml (no path separators, no NUL)"
+    )
 
 
 class Edge(_Strict):
@@ -345,8 +348,17 @@ def _format_errors(path: Path, err: ValidationError) -> str:
     return "\n".join(lines)
 
 
+MAX_CONFIG_BYTES = 1 << 20  # a topology or profile is a few kB: larger is not one
+
+
 def _read_toml(path: Path) -> dict:
     try:
+        st = path.stat()  # a FIFO or a device would block or never end: only regular files are read
+        if not stat.S_ISREG(st.st_mode):
+            kind = "a directory" if stat.S_ISDIR(st.st_mode) else "a FIFO" if stat.S_ISFIFO(st.st_mode) else "a device or socket"
+            raise ConfigError(f"{path}: cannot read: {kind}, not a regular file")
+        if st.st_size > MAX_CONFIG_BYTES:
+            raise ConfigError(f"{path}: too large for a configuration file ({st.st_size} bytes)")
         with open(path, "rb") as fh:
             return tomllib.load(fh)
     except FileNotFoundError:
@@ -355,8 +367,12 @@ def _read_toml(path: Path) -> dict:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML (not UTF-8: {exc.reason} at byte {exc.start})") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: not valid TOML (nested too deeply)") from None
+    except ValueError as exc:  # e.g. an embedded NUL byte in the path
+        raise ConfigError(f"{path!r}: cannot read: {exc}") from None
     except OSError as exc:
-        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
+        raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
 
 
 def load_profile(path: Path) -> NodeProfile:
@@ -378,7 +394,10 @@ def load_topology(path: str | Path, case: Case | None = None, steps: int | None 
     except ValidationError as exc:
         raise ConfigError(_format_errors(path, exc)) from None
     case = case or topo.case
-    node_dir = (path.parent / topo.node_dir).resolve()
+    try:
+        node_dir = (path.parent / topo.node_dir).resolve()
+    except (RuntimeError, OSError, ValueError) as exc:  # a symlink loop, a NUL byte
+        raise ConfigError(f"{path}: node_dir {topo.node_dir!r}: {exc}") from None
     v = topo.vehicle
     params = VehicleParams(
         m=v.m, Jz=v.Jz, lf=v.lf, lr=v.lr, cf=v.cf, cr=v.cr, fw=v.fw, lw=v.lw,
