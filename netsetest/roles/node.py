@@ -164,7 +164,7 @@ class Node:
         if msg.step < self.k:  # too late to be used
             self.drop("stale")
             return
-        if msg.step > max(self.k, 0) + MAX_AHEAD:
+        if self.k >= 0 and msg.step > self.k + MAX_AHEAD:  # not started: any step (kept: the newest few)
             self.drop("implausible-step")
             return
         have = self.inbox.get(msg.step, {})
