@@ -383,3 +383,38 @@ def test_flood_on_one_key(when: str) -> None:
     else:  # the genuine copy came behind a full queue and was lost: node 3 is missing, never forged
         for entries in res.parts["nodes"].values():
             assert all(e["contained"] or not e["assumptions_ok"] for e in entries)
+
+
+# ------------------------------------------------------------------------------ bounded memory
+
+
+def test_vehicle_and_collector_keep_only_open_steps(monkeypatch: pytest.MonkeyPatch) -> None:
+    """What the issue measured growing (vehicle 0.8 MB, collector 20 MB per 1000 steps): per-step maps.
+    During the run they hold a few open steps; the full RSS figure is bench/soak.py."""
+    import netsetest.runtime.inmemory as inmemory
+    from netsetest.roles.collector import CLOSE_LAG, Collector
+    from netsetest.roles.vehicle import Vehicle
+
+    made: dict[str, object] = {}
+
+    def capture(cls):  # noqa: ANN001, ANN202
+        def make(*a, **kw):  # noqa: ANN002, ANN003, ANN202
+            made[cls.__name__] = obj = cls(*a, **kw)
+            return obj
+
+        return make
+
+    monkeypatch.setattr(inmemory, "Vehicle", capture(Vehicle))
+    monkeypatch.setattr(inmemory, "Collector", capture(Collector))
+    sizes: list[tuple[int, int, int]] = []
+
+    def on_step(k: int) -> None:
+        v, c = made["Vehicle"], made["Collector"]
+        sizes.append((len(v.heard), len(c.states), len(c.truth)))  # type: ignore[attr-defined]
+
+    res = run_inmemory(_scenario("nsnim"), keep=False, on_step=on_step)
+    assert res.summary["steps_completed"] == STEPS and res.parts is None
+    assert max(h for h, _, _ in sizes) <= 1
+    assert max(s for _, s, _ in sizes) <= CLOSE_LAG + 1 and max(t for _, _, t in sizes) <= CLOSE_LAG + 1
+    c = made["Collector"]
+    assert c.states == {} and c.truth == {} and c.evaluated == {}  # type: ignore[attr-defined]
