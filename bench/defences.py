@@ -6,15 +6,13 @@
   roles, so the figure includes the attacker's own cost; a flood from another process costs the victim
   only the receiving side.  The per-key bounded inbox and a pump that handles at most what was
   queued when it started keep the run stepping (the issue's bound: at least half the normal rate).
-- ``soak``: :func:`bench.soak.soak` (RSS slope over a long run).
+The RSS slope over a long run is :mod:`bench.soak`.
 """
 
 from __future__ import annotations
 
 import threading
 import time
-
-from bench.soak import soak  # noqa: F401 (re-exported for run.py)
 
 FLOOD_BATCH_S = 0.01  # the flooder publishes a batch every 10 ms
 

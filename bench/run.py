@@ -135,7 +135,8 @@ def zenoh_overhead(cfg: dict) -> dict:
 
 
 def defences(cfg: dict) -> dict:
-    from bench.defences import flood, soak
+    from bench.defences import flood
+    from bench.soak import soak
 
     out: dict = {}
     for target in ("input", "state"):
