@@ -155,3 +155,15 @@ def test_sigkill_of_the_parent_leaves_a_partial_record(procs: ProcessGuard, tmp_
     r = load_record(rec)
     assert r.partial and r.last_complete_step >= 4
     _check_partial(r, complete=False)
+
+
+def test_save_record_writes_the_streamed_layout(finished: dict[str, Path], tmp_path: Path) -> None:
+    """A record kept in memory (the API's) saved as a file loads back equal, in the same line layout."""
+    from netsetest.records.record import save_record
+
+    rec = load_record(finished["run.jsonl"])
+    for name in ("copy.jsonl", "copy.jsonl.gz"):
+        save_record(tmp_path / name, rec.meta, rec.truth, rec.raw_nodes, rec.summary)
+        back = load_record(tmp_path / name)
+        assert not back.partial and back.summary == rec.summary and back.truth == rec.truth and back.raw_nodes == rec.raw_nodes
+    assert (tmp_path / "copy.jsonl").read_bytes() == finished["run.jsonl"].read_bytes()

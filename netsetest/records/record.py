@@ -321,23 +321,56 @@ def _build(path: Path, meta: dict, truth: list, raw_nodes: dict, summary: dict, 
     if not isinstance(summary, dict):
         raise RecordError(f"{path}: malformed record (summary must be a dict)")
     try:
-        nodes = {}
-        for key, entries in raw_nodes.items():
-            nodes[int(key)] = NodeTrack(
-                id=int(key),
-                steps=np.array([e["step"] for e in entries], dtype=int),
-                xhat=np.array([e["xhat"] for e in entries], dtype=float).reshape(-1, 3),
-                P=np.array([e["P"] for e in entries], dtype=float).reshape(-1, 3, 3),
-                rho=np.array([e["rho"] for e in entries], dtype=float),
-                E=np.array([np.nan if e["E"] is None else e["E"] for e in entries], dtype=float),
-                contained=np.array([bool(e["contained"]) for e in entries], dtype=bool),
-                assumptions_ok=np.array([bool(e["assumptions_ok"]) for e in entries], dtype=bool),
-                status=[e["status"] for e in entries],
-                solve_ms=np.array([e["solve_ms"] for e in entries], dtype=float),
-            )
-        for t in truth:
-            if not isinstance(t, dict) or not isinstance(t.get("step"), int):
-                raise ValueError("a truth entry without a step")
-        return Record(str(path), meta, truth, nodes, summary, raw_nodes, partial, last_complete)
+        return record_from_parts(meta, truth, raw_nodes, summary, str(path), partial, last_complete)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise RecordError(f"{path}: malformed record ({type(exc).__name__}: {exc})") from None
+
+
+def record_from_parts(
+    meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: dict, path: str = "",
+    partial: bool = False, last_complete_step: int | None = None,
+) -> Record:  # fmt: skip
+    """A :class:`Record` from the parts a run returns (or a file holds); raises KeyError/TypeError/ValueError
+    on malformed entries.  ``last_complete_step`` defaults to the last step of ``truth``."""
+    tracks = {}
+    for key, entries in nodes.items():
+        tracks[int(key)] = NodeTrack(
+            id=int(key),
+            steps=np.array([e["step"] for e in entries], dtype=int),
+            xhat=np.array([e["xhat"] for e in entries], dtype=float).reshape(-1, 3),
+            P=np.array([e["P"] for e in entries], dtype=float).reshape(-1, 3, 3),
+            rho=np.array([e["rho"] for e in entries], dtype=float),
+            E=np.array([np.nan if e["E"] is None else e["E"] for e in entries], dtype=float),
+            contained=np.array([bool(e["contained"]) for e in entries], dtype=bool),
+            assumptions_ok=np.array([bool(e["assumptions_ok"]) for e in entries], dtype=bool),
+            status=[e["status"] for e in entries],
+            solve_ms=np.array([e["solve_ms"] for e in entries], dtype=float),
+        )
+    for t in truth:
+        if not isinstance(t, dict) or not isinstance(t.get("step"), int):
+            raise ValueError("a truth entry without a step")
+    if last_complete_step is None:
+        last_complete_step = max((t["step"] for t in truth), default=-1)
+    return Record(path, meta, truth, tracks, summary, nodes, partial, last_complete_step)
+
+
+def save_record(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: dict) -> None:
+    """Write a whole record (e.g. one kept in memory) in the streamed layout, step by step."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    by_step: dict[int, list[tuple[int, dict]]] = {}
+    for key, entries in nodes.items():
+        for e in entries:
+            by_step.setdefault(e["step"], []).append((int(key), e))
+    truth_at = {t["step"]: t for t in truth}
+    sink = JsonlSink(path)
+    try:
+        sink.meta(meta)
+        for k in sorted(set(by_step) | set(truth_at)):
+            for node, e in sorted(by_step.get(k, []), key=lambda ne: ne[0]):
+                sink.state(node, e)
+            if k in truth_at:
+                sink.truth(truth_at[k])
+        sink.summary(summary)
+    finally:
+        sink.close()
