@@ -61,12 +61,11 @@ def states_disjoint(x1: np.ndarray, P1: np.ndarray, rho1: float, x2: np.ndarray,
     A1 = rho1 * np.asarray(P1)[:NX, :NX]
     A2 = rho2 * np.asarray(P2)[:NX, :NX]
     d = np.asarray(x2)[:NX] - np.asarray(x1)[:NX]
-    for lam in LAMBDA_GRID:
-        S = A1 / (1.0 - lam) + A2 / lam
-        try:
-            val = float(d @ np.linalg.solve(S, d))
-        except np.linalg.LinAlgError:
-            continue
-        if np.isfinite(val) and val > 1.0 + DISJOINT_MARGIN:
-            return True
-    return False
+    # S(λ) = A₁/(1−λ) + A₂/λ for every λ of the grid at once; dᵀS⁻¹d by the 2×2 adjugate
+    S = A1[None] / (1.0 - LAMBDA_GRID)[:, None, None] + A2[None] / LAMBDA_GRID[:, None, None]
+    det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
+    num = d[0] ** 2 * S[:, 1, 1] - d[0] * d[1] * (S[:, 0, 1] + S[:, 1, 0]) + d[1] ** 2 * S[:, 0, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        val = num / det
+    ok = np.isfinite(val) & (det > 0)
+    return bool(np.any(val[ok] > 1.0 + DISJOINT_MARGIN))
