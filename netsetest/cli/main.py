@@ -12,6 +12,7 @@ import json
 import sys
 from collections.abc import Callable, Sequence
 
+from netsetest import __version__
 from netsetest.config.schema import ConfigError
 from netsetest.records.record import RecordError
 from netsetest.runtime.report import EXIT_BAD_INPUT
@@ -44,6 +45,7 @@ def _positive_int(s: str) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="netsetest", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--version", action="version", version=f"netsetest {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("run", help="run a whole network (in memory, or as Zenoh processes)")
@@ -72,6 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="fewer steps and samples (a few minutes)")
     p.add_argument("--json", metavar="PATH", help="write every figure as JSON")
     p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown")
+    from netsetest.cli import tools
+
+    tools.add_parsers(sub)
     return ap
 
 
@@ -151,7 +156,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     a = ap.parse_args(argv)
     from netsetest.cli import processes
 
-    handler = COMMANDS.get(a.command) or processes.COMMANDS[a.command]
+    from netsetest.cli import tools
+
+    handler = COMMANDS.get(a.command) or tools.COMMANDS.get(a.command) or processes.COMMANDS[a.command]
     try:
         return handler(a)
     except (ConfigError, RecordError) as exc:

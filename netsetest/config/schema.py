@@ -17,6 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from netsetest.models.sensor import Sensor
 from netsetest.models.signals import Fault, NoFault, PiecewiseLinearFault, SpeedProfile, SquareFault
 from netsetest.models.vehicle import KMH, TSModel, VehicleParams
+from netsetest.scenarios import bundled_topologies, resolve_topology
 
 Case = Literal["nsnim", "saim"]
 Variant = Literal["scheduled", "per-rule"]
@@ -340,8 +341,11 @@ def load_profile(path: Path) -> NodeProfile:
 
 
 def load_topology(path: str | Path, case: Case | None = None, steps: int | None = None) -> Scenario:
-    """Read and validate a topology and its node profiles; ``case``/``steps`` override the file."""
-    path = Path(path)
+    """Read and validate a topology (a path, or the name of a bundled one such as ``paper6``) and its node
+    profiles; ``case``/``steps`` override the file."""
+    path = resolve_topology(path)
+    if not path.exists():
+        raise ConfigError(f"{path}: file not found (bundled topologies: {', '.join(bundled_topologies())})")
     if case is not None and case not in ("nsnim", "saim"):
         raise ConfigError(f"{path}: case must be 'nsnim' or 'saim', got {case!r}")
     if steps is not None and steps < 1:

@@ -1,4 +1,5 @@
-"""The run record: one JSON file (optionally gzip-compressed, by a ``.gz`` suffix) per run.
+"""The run record: one JSON file (optionally gzip-compressed, by a ``.gz`` suffix) per run, or the same
+content as MCAP (``.mcap``, :mod:`netsetest.records.mcap_io`, for Foxglove).
 
 Layout (``format = "netsetest-record"``, ``version = 1``)::
 
@@ -26,6 +27,7 @@ import numpy as np
 
 FORMAT = "netsetest-record"
 VERSION = 1
+MCAP_SUFFIX = ".mcap"  # save_record/load_record dispatch on it (netsetest.records.mcap_io)
 
 
 class RecordError(Exception):
@@ -105,6 +107,11 @@ class Record:
 
 
 def save_record(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: dict) -> None:
+    if Path(path).suffix == MCAP_SUFFIX:
+        from netsetest.records.mcap_io import save_mcap
+
+        save_mcap(path, meta, truth, nodes, summary)
+        return
     doc = {"format": FORMAT, "version": VERSION, "meta": meta, "truth": truth, "nodes": nodes, "summary": summary}
     data = json.dumps(doc, separators=(",", ":"), allow_nan=True).encode()
     path = Path(path)
@@ -114,13 +121,26 @@ def save_record(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str
     tmp.replace(path)  # never leave a half-written record behind
 
 
+def _read_json(path: Path) -> object:
+    data = path.read_bytes()
+    if data[:2] == b"\x1f\x8b":
+        data = gzip.decompress(data)
+    return json.loads(data)
+
+
+def _read_mcap(path: Path) -> dict:
+    from netsetest.records.mcap_io import McapReadError, read_mcap
+
+    try:
+        return {"format": FORMAT, "version": VERSION, **read_mcap(path)}
+    except McapReadError as exc:
+        raise RecordError(f"{path}: {exc}") from None
+
+
 def load_record(path: str | Path) -> Record:
     path = Path(path)
     try:
-        data = path.read_bytes()
-        if data[:2] == b"\x1f\x8b":
-            data = gzip.decompress(data)
-        doc = json.loads(data)
+        doc = _read_mcap(path) if path.suffix == MCAP_SUFFIX else _read_json(path)
     except FileNotFoundError:
         raise RecordError(f"{path}: file not found") from None
     except (OSError, ValueError, EOFError, zlib.error) as exc:
