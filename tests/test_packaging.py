@@ -25,7 +25,7 @@ from netsetest.scenarios import bundled_topologies, resolve_topology
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = ("pyproject.toml", "README.md", "LICENSE", "netsetest", "topologies", "nodes")
-OPTIONAL = ("scipy", "cvxpy", "pyarrow", "pandas")  # never a plain dependency
+OPTIONAL = ("scipy", "cvxpy", "pyarrow", "pandas", "matplotlib", "mcap")  # never a plain dependency
 
 
 def _clean_env() -> dict[str, str]:
@@ -83,7 +83,8 @@ def test_wheel_contents_and_dependencies(wheel: Path) -> None:
     for dep in OPTIONAL:
         assert not any(r.lower().startswith(dep) for r in plain), (dep, plain)
     assert any(r.startswith("cvxpy") and 'extra == "cvxpy"' in r for r in requires)
-    assert any(r.startswith("pyarrow") and 'extra == "export"' in r for r in requires)
+    for dep, extra in (("pyarrow", "export"), ("matplotlib", "plot"), ("mcap", "mcap")):
+        assert any(r.startswith(dep) and f'extra == "{extra}"' in r for r in requires), (dep, requires)
 
 
 def test_installed_wheel_runs_bundled_scenario_from_any_directory(venv: Path, tmp_path: Path) -> None:

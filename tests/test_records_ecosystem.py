@@ -178,3 +178,21 @@ def test_export_parquet_without_pyarrow_exits_2(records: dict[str, Path], tmp_pa
     assert main(["export", str(records["json"]), "--parquet", str(tmp_path / "pq")]) == 2
     err = capsys.readouterr().err
     assert "pyarrow" in err and "netsetest[export]" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("missing, argv", [
+    ("mcap", ["run", str(ROOT / "topologies" / "paper6.toml"), "--mode", "inmemory", "--record", "{tmp}/r.mcap", "--quiet"]),
+    ("mcap", ["inspect", "{tmp}/r.mcap"]),
+    ("matplotlib", ["plot", "{tmp}/r.json", "--out", "{tmp}/figs"]),
+])  # fmt: skip
+def test_missing_optional_dependency_exits_2_before_any_work(missing: str, argv: list[str], records: dict[str, Path], tmp_path: Path,
+                                                             monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
+    (tmp_path / "r.mcap").write_bytes(records["mcap"].read_bytes())
+    (tmp_path / "r.json").write_bytes(records["json"].read_bytes())
+    monkeypatch.setitem(sys.modules, missing, None)
+    if missing == "matplotlib":
+        monkeypatch.delitem(sys.modules, "netsetest.records.plots", raising=False)
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert f"needs {missing}" in err and "pip install 'netsetest[" in err and "Traceback" not in err
+    assert not (tmp_path / "figs").exists()

@@ -14,7 +14,8 @@ from collections.abc import Callable, Sequence
 
 from netsetest import __version__
 from netsetest.config.schema import ConfigError
-from netsetest.records.record import RecordError
+from netsetest.extras import MissingExtra, require
+from netsetest.records.record import RecordError, check_record_path
 from netsetest.runtime.report import EXIT_BAD_INPUT
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
@@ -81,6 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def cmd_run(a: argparse.Namespace) -> int:
+    check_record_path(a.record)  # a missing optional dependency fails now, not after the run
     if a.mode == "zenoh":
         from netsetest.cli import processes
 
@@ -125,6 +127,7 @@ def cmd_inspect(a: argparse.Namespace) -> int:
 
 
 def cmd_plot(a: argparse.Namespace) -> int:
+    require("matplotlib", "netsetest plot")
     from netsetest.records.plots import plot_records
     from netsetest.records.record import load_record
 
@@ -161,7 +164,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     handler = COMMANDS.get(a.command) or tools.COMMANDS.get(a.command) or processes.COMMANDS[a.command]
     try:
         return handler(a)
-    except (ConfigError, RecordError) as exc:
+    except (ConfigError, RecordError, MissingExtra) as exc:
         print(f"netsetest {a.command}: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

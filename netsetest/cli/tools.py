@@ -146,16 +146,11 @@ def cmd_watch(a: argparse.Namespace) -> int:
 
 
 def cmd_export(a: argparse.Namespace) -> int:
-    from netsetest.records.export import ExportError, export_record
+    from netsetest.records.export import export_record
     from netsetest.records.record import load_record
 
     fmt, out = ("parquet", a.parquet) if a.parquet else ("csv", a.csv)
-    try:
-        files = export_record(load_record(a.record), out, fmt)
-    except ExportError as exc:
-        print(f"netsetest export: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    for f in files:
+    for f in export_record(load_record(a.record), out, fmt):
         print(f)
     return 0
 

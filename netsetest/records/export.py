@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+from netsetest.extras import require
 from netsetest.records.record import Record
 
 COMPONENTS = ("beta", "r", "fault")
@@ -20,10 +21,6 @@ COLUMNS: tuple[str, ...] = (
     "E", "rho", "contained", "assumptions_ok", "status",
 )  # fmt: skip
 FORMATS = ("parquet", "csv")
-
-
-class ExportError(Exception):
-    """The export cannot run (a missing optional dependency); the message says what to install."""
 
 
 def node_table(rec: Record, node: int) -> dict[str, list]:
@@ -63,11 +60,9 @@ def _write_csv(table: dict[str, list], path: Path) -> None:
 
 
 def _parquet_writer():  # noqa: ANN202 — a callable (table, path) -> None
-    try:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-    except ImportError:
-        raise ExportError("--parquet needs pyarrow: pip install 'netsetest[export]'") from None
+    require("pyarrow", "--parquet")
+    import pyarrow as pa
+    import pyarrow.parquet as pq
 
     def write(table: dict[str, list], path: Path) -> None:
         pq.write_table(pa.table({c: table[c] for c in COLUMNS}), path)

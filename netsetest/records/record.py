@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from netsetest.extras import require
+
 FORMAT = "netsetest-record"
 VERSION = 1
 MCAP_SUFFIX = ".mcap"  # save_record/load_record dispatch on it (netsetest.records.mcap_io)
@@ -106,8 +108,15 @@ class Record:
         return rows
 
 
+def check_record_path(path: str | Path | None) -> None:
+    """Before a run: raise :class:`~netsetest.extras.MissingExtra` if the record's format cannot be written."""
+    if path is not None and Path(path).suffix == MCAP_SUFFIX:
+        require("mcap", "an MCAP record")
+
+
 def save_record(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: dict) -> None:
     if Path(path).suffix == MCAP_SUFFIX:
+        require("mcap", "an MCAP record")
         from netsetest.records.mcap_io import save_mcap
 
         save_mcap(path, meta, truth, nodes, summary)
@@ -129,6 +138,7 @@ def _read_json(path: Path) -> object:
 
 
 def _read_mcap(path: Path) -> dict:
+    require("mcap", "an MCAP record")
     from netsetest.records.mcap_io import McapReadError, read_mcap
 
     try:
