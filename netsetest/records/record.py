@@ -163,20 +163,26 @@ def load_record(path: str | Path) -> Record:
         if not isinstance(doc.get(name), kind):
             raise RecordError(f"{path}: malformed record ({name} must be a {kind.__name__})")
     try:
-        nodes = {}
-        for key, entries in doc["nodes"].items():
-            nodes[int(key)] = NodeTrack(
-                id=int(key),
-                steps=np.array([e["step"] for e in entries], dtype=int),
-                xhat=np.array([e["xhat"] for e in entries], dtype=float).reshape(-1, 3),
-                P=np.array([e["P"] for e in entries], dtype=float).reshape(-1, 3, 3),
-                rho=np.array([e["rho"] for e in entries], dtype=float),
-                E=np.array([np.nan if e["E"] is None else e["E"] for e in entries], dtype=float),
-                contained=np.array([bool(e["contained"]) for e in entries], dtype=bool),
-                assumptions_ok=np.array([bool(e["assumptions_ok"]) for e in entries], dtype=bool),
-                status=[e["status"] for e in entries],
-                solve_ms=np.array([e["solve_ms"] for e in entries], dtype=float),
-            )
-        return Record(str(path), doc["meta"], doc["truth"], nodes, doc["summary"], doc["nodes"])
+        return record_from_parts(doc["meta"], doc["truth"], doc["nodes"], doc["summary"], str(path))
     except (KeyError, TypeError, ValueError) as exc:
         raise RecordError(f"{path}: malformed record ({type(exc).__name__}: {exc})") from None
+
+
+def record_from_parts(meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: dict, path: str = "") -> Record:
+    """A :class:`Record` from the parts a run returns (or a file holds); raises KeyError/TypeError/ValueError
+    on malformed entries."""
+    tracks = {}
+    for key, entries in nodes.items():
+        tracks[int(key)] = NodeTrack(
+            id=int(key),
+            steps=np.array([e["step"] for e in entries], dtype=int),
+            xhat=np.array([e["xhat"] for e in entries], dtype=float).reshape(-1, 3),
+            P=np.array([e["P"] for e in entries], dtype=float).reshape(-1, 3, 3),
+            rho=np.array([e["rho"] for e in entries], dtype=float),
+            E=np.array([np.nan if e["E"] is None else e["E"] for e in entries], dtype=float),
+            contained=np.array([bool(e["contained"]) for e in entries], dtype=bool),
+            assumptions_ok=np.array([bool(e["assumptions_ok"]) for e in entries], dtype=bool),
+            status=[e["status"] for e in entries],
+            solve_ms=np.array([e["solve_ms"] for e in entries], dtype=float),
+        )
+    return Record(path, meta, truth, tracks, summary, nodes)

@@ -14,9 +14,10 @@ from netsetest.records.record import save_record
 class Progress:
     """One line per update on a terminal (\\r), a line every 10 % otherwise; always to stderr."""
 
-    def __init__(self, total: int, label: str, stream: TextIO = sys.stderr, enabled: bool = True) -> None:
+    def __init__(self, total: int, label: str, stream: TextIO | None = None, enabled: bool = True) -> None:
+        stream = stream or sys.stderr  # looked up now: sys.stderr may have been replaced since import
         self.total, self.label, self.stream, self.enabled = total, label, stream, enabled
-        self.tty = stream.isatty()
+        self.tty = enabled and stream.isatty()
         self.last_pct = -1
         self.t0 = time.monotonic()
 
