@@ -12,6 +12,7 @@ from netsetest.runtime.report import EXIT_BAD_INPUT
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 WATCH_REFRESH_HZ = 4.0
+PIPE_WIDTH = 160  # watch's table width when stdout is not a terminal (a log, a test): never truncated
 POLL_S = 0.1  # how often the loops look at the clock while no message arrives
 
 
@@ -107,16 +108,17 @@ def _render(table, title: str):  # noqa: ANN001, ANN202 — LiveTable → rich T
     from rich.table import Table
 
     t = Table(title=title)
-    for col in ("node", "step", "status", "fault lower", "fault upper", "E (step)", "ρ", "dropped", "missing", "deadline"):
+    for col in ("node", "step", "status", "fault lower", "fault upper", "E (step)", "ρ", "lost", "missing", "dropped", "deadline"):
         t.add_column(col, justify="right")
     for r in table.sorted_rows():
         E = "-" if r.E is None else f"{r.E:.3f} ({r.E_step})"
         t.add_row(str(r.id), _fmt(r.step, "d"), r.status, _fmt(r.fault_lower, ".4f"), _fmt(r.fault_upper, ".4f"),
-                  E, _fmt(r.rho, ".3g"), str(r.dropped), str(r.missing), str(r.deadline_misses))  # fmt: skip
+                  E, _fmt(r.rho, ".3g"), str(r.lost), str(r.missing), str(r.dropped), str(r.deadline_misses))  # fmt: skip
     return t
 
 
 def cmd_watch(a: argparse.Namespace) -> int:
+    from rich.console import Console
     from rich.live import Live
 
     from netsetest.runtime.live import LiveTable
@@ -129,7 +131,8 @@ def cmd_watch(a: argparse.Namespace) -> int:
     title = f"netsetest run {a.run_id or '*'}"
     end = None if a.duration is None else time.monotonic() + a.duration
     try:
-        with Live(_render(table, title), refresh_per_second=WATCH_REFRESH_HZ) as live:
+        console = Console(width=None if sys.stdout.isatty() else PIPE_WIDTH)
+        with Live(_render(table, title), console=console, refresh_per_second=WATCH_REFRESH_HZ) as live:
             next_draw = 0.0
             while table.ended is None and (end is None or time.monotonic() < end):
                 got = obs.get(POLL_S)

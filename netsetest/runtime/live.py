@@ -21,7 +21,7 @@ import zenoh
 
 from netsetest.bus import keys
 from netsetest.bus.zenoh_bus import BusError, ZenohMode, zenoh_config
-from netsetest.messages import BadMessage, End, Message, NodeState, Truth, decode
+from netsetest.messages import BadMessage, End, Message, NodeInput, NodeState, Truth, decode
 
 ANY_RUN = "*"
 PENDING_STEPS = 50  # how far back a state still waits for its truth (and a truth for its states)
@@ -40,16 +40,27 @@ def observer_config(mode: ZenohMode, connect: Sequence[str], config_file: str | 
     """The run's configuration file when given (``connect`` endpoints are added to it), else the same
     configuration the roles use, connecting to ``connect``."""
     if config_file is None:
-        return zenoh_config(mode, (), connect)
+        try:
+            return zenoh_config(mode, (), connect)
+        except zenoh.ZError as exc:
+            raise BusError(f"bad --connect endpoint in {list(connect)}: {_short(exc)}") from None
+    if not Path(config_file).is_file():
+        raise BusError(f"{config_file}: file not found")
     try:
         cfg = zenoh.Config.from_file(config_file)
     except (zenoh.ZError, OSError, ValueError) as exc:
-        raise BusError(f"{config_file}: not a usable Zenoh configuration ({exc})") from None
-    if not Path(config_file).is_file():
-        raise BusError(f"{config_file}: file not found")
+        raise BusError(f"{config_file}: not a usable Zenoh configuration ({_short(exc)})") from None
     if connect:
-        cfg.insert_json5("connect/endpoints", json.dumps(list(connect)))
+        try:
+            cfg.insert_json5("connect/endpoints", json.dumps(list(connect)))
+        except zenoh.ZError as exc:
+            raise BusError(f"bad --connect endpoint in {list(connect)}: {_short(exc)}") from None
     return cfg
+
+
+def _short(exc: Exception) -> str:
+    """Zenoh's error text without its source locations, on one line."""
+    return " ".join(str(exc).split(" at /")[0].split())[:300]
 
 
 @dataclass(frozen=True)
@@ -73,7 +84,7 @@ class Observer:
         try:
             self._session = zenoh.open(config)
         except zenoh.ZError as exc:
-            raise BusError(f"cannot open a Zenoh session: {exc}") from None
+            raise BusError(f"cannot open a Zenoh session: {_short(exc)}") from None
         self._samples: queue.Queue[tuple[str, bytes]] = queue.Queue()
         self._sub = self._session.declare_subscriber(
             key_expr, lambda s: self._samples.put((str(s.key_expr), s.payload.to_bytes()))
@@ -113,14 +124,16 @@ class NodeRow:
     E: float | None = None  # eᵀP⁻¹e of step E_step, the latest whose truth is known (None: none seen)
     E_step: int | None = None
     rho: float | None = None
-    dropped: int = 0  # messages this node has dropped (its own counter)
+    lost: int = 0  # in-neighbour messages the loss model dropped on the way to this node (NodeInput.lost_from)
+    dropped: int = 0  # messages this node has dropped as invalid (its own counter)
     missing: int = 0  # expected neighbour messages that did not arrive, summed over steps
     deadline_misses: int = 0  # steps published after their deadline (real-time clock)
 
 
 @dataclass
 class LiveTable:
-    """Per-node rows built from NodeState messages (and Truth, when the observer may see it, for E).
+    """Per-node rows built from NodeState and NodeInput messages (and Truth, when the observer may see it,
+    for E).
 
     Only the last :data:`PENDING_STEPS` steps wait for their counterpart (a state for its truth or the
     other way round), so an observer that never sees the truth (access control) stays small."""
@@ -145,6 +158,8 @@ class LiveTable:
             for k in [k for k in pend if k < msg.step - PENDING_STEPS]:
                 del pend[k]
             self._evaluate(msg.node, msg.step)
+        elif isinstance(msg, NodeInput):
+            self.rows.setdefault(msg.node, NodeRow(msg.node)).lost += len(msg.lost_from)
         elif isinstance(msg, Truth):
             self.truth[msg.step] = msg
             for k in [k for k in self.truth if k < msg.step - PENDING_STEPS]:
