@@ -22,16 +22,17 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 
 
 def _scenario_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("topology", help="topology file, e.g. topologies/paper6.toml")
-    p.add_argument("--case", choices=["nsnim", "saim"], help="override the topology's case")
-    p.add_argument("--steps", type=_positive_int, help="override the number of steps")
+    p.add_argument("topology", help="topology file (e.g. topologies/paper6.toml) or bundled name (paper6, paper6_lossy)")
+    p.add_argument("--case", choices=["nsnim", "saim"], help="override the topology's case (default: the file's)")
+    p.add_argument("--steps", type=_positive_int, metavar="N", help="override the number of steps of τs each (default: the file's)")
 
 
 def _run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--signals", choices=["paper", "worst"], default="paper",
                    help="paper: cos noise and uniform wind; worst: noise and wind at ±bound, random sign")  # fmt: skip
-    p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled",
+                   help="estimator: one SDP with the scheduled model, or one per T-S rule")  # fmt: skip
+    p.add_argument("--seed", type=int, default=0, help="random seed of noise, wind and losses")
 
 
 def _positive_int(s: str) -> int:
@@ -44,18 +45,35 @@ def _positive_int(s: str) -> int:
     return v
 
 
+def has_default(action: argparse.Action) -> bool:
+    """Whether an option has a default worth printing (not unset, not an off flag, not an empty list)."""
+    d = action.default
+    return d is not None and d is not False and d is not argparse.SUPPRESS and d != []
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Appends "(default: X)" to an option's help unless the help names its default or it has none."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if not action.option_strings or "default" in text or not has_default(action):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="netsetest", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(prog="netsetest", description=__doc__, formatter_class=HelpFormatter)
     ap.add_argument("--version", action="version", version=f"netsetest {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("run", help="run a whole network (in memory, or as Zenoh processes)")
     _scenario_args(p)
     _run_args(p)
-    p.add_argument("--mode", choices=["inmemory", "zenoh"], default="zenoh")
-    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep")
-    p.add_argument("--record", metavar="PATH", help="write the run record (JSON; .gz compresses)")
-    p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON")
+    p.add_argument("--mode", choices=["inmemory", "zenoh"], default="zenoh", help="one process, or one process per role over Zenoh")
+    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep",
+                   help="lockstep: the vehicle waits for every node; realtime: one step every τs (zenoh mode)")  # fmt: skip
+    p.add_argument("--record", metavar="PATH", help="write the run record: JSON, .gz compresses, .mcap for Foxglove (default: none)")
+    p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON (default: none)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     from netsetest.cli import processes
 
@@ -63,7 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
     processes.add_role_parsers(sub, _scenario_args, _run_args)
 
     p = sub.add_parser("inspect", help="per-step fault (and state) bounds of one node from a record")
-    p.add_argument("record")
+    p.add_argument("record", help="record file (.json, .json.gz or .mcap)")
     p.add_argument("--node", type=int, help="node id (default: all nodes)")
     p.add_argument("--json", action="store_true", help="JSON rows with state bounds and true values")
 
@@ -73,11 +91,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("bench", help="benchmark: solve times, scaling, Zenoh overhead, real time, node cost (docs/performance.md)")
     p.add_argument("--quick", action="store_true", help="fewer steps and samples (a few minutes)")
-    p.add_argument("--json", metavar="PATH", help="write every figure as JSON")
-    p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown")
+    p.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
+    p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown (default: none)")
     from netsetest.cli import tools
 
     tools.add_parsers(sub)
+    for command in sub.choices.values():
+        command.formatter_class = HelpFormatter
     return ap
 
 
