@@ -65,3 +65,13 @@ def test_simulate_is_deterministic_and_rejects_bad_input() -> None:
         netsetest.simulate("nosuch")
     with pytest.raises(ConfigError, match="mode"):
         netsetest.simulate("paper6", steps=2, mode="bogus")  # type: ignore[arg-type]
+
+
+@pytest.mark.zenoh
+def test_simulate_over_zenoh_equals_in_memory() -> None:
+    """mode="zenoh" runs one process per role; lockstep reproduces the in-memory run bit for bit."""
+    z = netsetest.simulate("paper6", steps=6, mode="zenoh")
+    m = netsetest.simulate("paper6", steps=6)
+    assert z.summary["mode"] == "zenoh" and z.violations == 0
+    for i in m.nodes:
+        assert np.array_equal(z.nodes[i].centre, m.nodes[i].centre) and np.array_equal(z.nodes[i].upper, m.nodes[i].upper)
