@@ -12,7 +12,6 @@ import json
 import sys
 from collections.abc import Callable, Sequence
 
-from netsetest import __version__
 from netsetest.config.schema import ConfigError
 from netsetest.extras import MissingExtra, require
 from netsetest.records.record import RecordError, check_record_path
@@ -61,9 +60,22 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
         return f"{text} (default: %(default)s)"
 
 
+class ShowVersion(argparse.Action):
+    """``--version``: the installed version, looked up only when asked for (it costs ~90 ms)."""
+
+    def __init__(self, option_strings: list[str], dest: str, help: str | None = None) -> None:  # noqa: A002
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object, option_string: str | None = None) -> None:
+        import netsetest
+
+        print(f"netsetest {netsetest.__version__}")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="netsetest", description=__doc__, formatter_class=HelpFormatter)
-    ap.add_argument("--version", action="version", version=f"netsetest {__version__}")
+    ap.add_argument("--version", action=ShowVersion, help="print the version and exit")
     sub = ap.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("run", help="run a whole network (in memory, or as Zenoh processes)")
