@@ -9,7 +9,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from zenoh_helpers import PAPER6, ProcessGuard, cli, free_ports, launch_peer_mesh, new_run_id, procs, wait_port, wait_roles  # noqa: F401
+from zenoh_helpers import (  # noqa: F401
+    PAPER6,
+    ProcessGuard,
+    cli,
+    free_ports,
+    launch_peer_mesh,
+    new_run_id,
+    procs,
+    wait_for,
+    wait_port,
+    wait_roles,
+)
 
 from netsetest.bus.base import MemoryBus
 from netsetest.cli.main import main
@@ -21,6 +32,16 @@ from netsetest.runtime.live import LiveTable, observed_key
 
 ROOT = Path(__file__).resolve().parents[1]
 STEPS = 30
+
+
+def _catches(pid: int, signum: int) -> bool:
+    """Whether process ``pid`` has a handler for ``signum`` (SigCgt in /proc/PID/status)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    mask = int(next(ln.split()[1] for ln in status.splitlines() if ln.startswith("SigCgt:")), 16)
+    return bool(mask >> (signum - 1) & 1)
 
 
 def _listening_config(path: Path, port: int) -> str:
@@ -159,3 +180,19 @@ def test_echo_prints_undecodable_payloads(capsys: pytest.CaptureFixture[str]) ->
     assert Observed("k", None, "invalid: step").as_json() == {"key": "k", "undecodable": "invalid: step"}
     msg = NodeState(step=1, node=1, xhat=[0.0, 0.0, 0.0], P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
     assert Observed("k", msg).as_json()["step"] == 1 and len(encode(msg)) > 0
+
+
+@pytest.mark.zenoh
+@pytest.mark.parametrize("command", ["echo", "watch"])
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
+def test_observer_stops_cleanly_on_signal(command: str, sig: str, procs: ProcessGuard) -> None:  # noqa: F811
+    import signal as _signal
+
+    (port,) = free_ports(1)
+    p = procs.start(command, cli(command, "--run-id", new_run_id("sig"), "--connect", f"tcp/127.0.0.1:{port}"), stdout=True)
+    # the observer catches SIGTERM once its session is open: wait for that (signal mask in /proc)
+    wait_for(lambda: _catches(p.pid, _signal.SIGTERM) or p.poll() is not None, 30, what=f"{command} to open its session")
+    assert p.poll() is None, procs.logs()
+    p.send_signal(getattr(_signal, sig))
+    assert procs.wait(command, 15) == 0, procs.logs()
+    assert "Traceback" not in procs.stderr(command)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import time
 from collections.abc import Callable
@@ -64,14 +65,20 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--csv", metavar="DIR", help="write DIR/node_<i>.csv")
 
 
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt  # SIGTERM ends echo/watch like Ctrl-C: the Zenoh session is closed
+
+
 def _observer(a: argparse.Namespace, key: str | None):  # noqa: ANN202 — (Observer | None, error message)
     from netsetest.bus.zenoh_bus import BusError
     from netsetest.runtime.live import Observer, observed_key, observer_config
 
     try:
-        return Observer(observed_key(a.run_id, key), observer_config(a.zenoh_mode, a.connect, a.zenoh_config)), None
+        obs = Observer(observed_key(a.run_id, key), observer_config(a.zenoh_mode, a.connect, a.zenoh_config))
     except BusError as exc:
         return None, str(exc)
+    signal.signal(signal.SIGTERM, _interrupt)  # from here on the caller's loop closes the session
+    return obs, None
 
 
 def cmd_echo(a: argparse.Namespace) -> int:
