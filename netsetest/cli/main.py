@@ -159,7 +159,7 @@ def cmd_inspect(a: argparse.Namespace) -> int:
 
 
 def cmd_plot(a: argparse.Namespace) -> int:
-    require("matplotlib", "netsetest plot")
+    require("matplotlib", "drawing the figures")
     from netsetest.records.plots import plot_records
     from netsetest.records.record import load_record
 
