@@ -287,6 +287,8 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
                 out += ["--connect", endpoint(other)]
         return out
 
+    if not a.quiet:  # how to look inside the run from another terminal (README: Live views)
+        log("run", f"run id {run_id}; watch it with: netsetest watch --run-id {run_id} --connect {endpoint('collector')}")
     tmp = tempfile.TemporaryDirectory(prefix="netsetest-")
     summary_path = a.summary_json or str(Path(tmp.name) / "summary.json")
     children = Children()
