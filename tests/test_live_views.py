@@ -174,12 +174,38 @@ def test_bad_observer_options_exit_2(command: str, args: list[str], msg: str | N
     assert time.monotonic() - t0 < 10
 
 
-def test_echo_prints_undecodable_payloads(capsys: pytest.CaptureFixture[str]) -> None:
-    from netsetest.runtime.live import Observed
+@pytest.mark.zenoh
+def test_observer_decodes_and_reports_undecodable_payloads(tmp_path: Path) -> None:
+    """Samples from another session: a valid NodeState is decoded, garbage is reported, never repaired."""
+    import zenoh
 
-    assert Observed("k", None, "invalid: step").as_json() == {"key": "k", "undecodable": "invalid: step"}
-    msg = NodeState(step=1, node=1, xhat=[0.0, 0.0, 0.0], P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
-    assert Observed("k", msg).as_json()["step"] == 1 and len(encode(msg)) > 0
+    from netsetest.bus.zenoh_bus import zenoh_config
+    from netsetest.runtime.live import Observer, observer_config
+
+    (port,) = free_ports(1)
+    run = new_run_id("obs")
+    cfg = observer_config("peer", [], _listening_config(tmp_path / "obs.json5", port))
+    obs = Observer(observed_key(run, None), cfg)
+    pub = zenoh.open(zenoh_config("peer", (), [f"tcp/127.0.0.1:{port}"]))
+    msg = NodeState(step=1, node=1, xhat=[0.0, 0.0, 0.1], P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
+    seen: dict[str, object] = {}
+    try:
+        deadline = time.monotonic() + 30
+        while len(seen) < 2 and time.monotonic() < deadline:  # repeat until the subscription has propagated
+            pub.put(f"netsetest/{run}/node/1/state", encode(msg))
+            pub.put(f"netsetest/{run}/node/9/state", b"\x93garbage")
+            got = obs.get(0.2)
+            while got is not None:
+                seen[got.key] = got
+                got = obs.get(0.05)
+    finally:
+        pub.close()
+        obs.close()
+    good, bad = seen.get(f"netsetest/{run}/node/1/state"), seen.get(f"netsetest/{run}/node/9/state")
+    assert good is not None and bad is not None, seen
+    assert good.message == msg and good.as_json()["xhat"] == [0.0, 0.0, 0.1]
+    assert bad.message is None and bad.as_json() == {"key": f"netsetest/{run}/node/9/state", "undecodable": bad.error}
+    assert bad.error.startswith(("not-a-map", "undecodable"))
 
 
 @pytest.mark.zenoh

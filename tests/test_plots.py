@@ -4,7 +4,6 @@ Fig. 6's y axes not dominated by the initial ellipsoid (while every true value s
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -97,7 +96,7 @@ def test_fig6_leaves_out_the_initial_transient_but_shows_every_true_value(gap_re
     plt.close(fig)
 
 
-def test_short_run_keeps_full_limits(tmp_path: Path) -> None:
+def test_short_run_keeps_full_limits() -> None:
     res = netsetest.simulate("paper6", steps=8)  # shorter than 2·TRANSIENT_S: nothing to leave out
     fig = plots._fig6(res.record, "x")
     ax = next(a for a in fig.axes if a.get_ylabel().startswith("node 1"))
