@@ -22,11 +22,14 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader
 from mcap.writer import CompressionType, Writer
+
+if TYPE_CHECKING:
+    from netsetest.records.record import Record
 
 MESSAGE_ENCODING = "json"
 SCHEMA_ENCODING = "jsonschema"
@@ -267,7 +270,7 @@ def save_mcap(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, 
     tmp.replace(path)
 
 
-def write_mcap(record: Any, path: str | Path) -> None:
+def write_mcap(record: Record, path: str | Path) -> None:
     """Convert a loaded :class:`~netsetest.records.record.Record` (any format) to MCAP."""
     save_mcap(path, record.meta, record.truth, record.raw_nodes, record.summary)
 
