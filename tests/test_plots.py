@@ -53,6 +53,8 @@ def test_no_interpolation_across_a_silent_node(gap_record, fig_fn, scale) -> Non
     assert axes
     for ax in axes:
         _assert_no_data_in_gap(ax, scale)
+    legends = [ax.get_legend() for ax in fig.axes if ax.get_legend()] + list(fig.legends)
+    assert len(legends) == 1 and "not reported" in [t.get_text() for t in legends[0].get_texts()]
     plt.close(fig)
 
 

@@ -43,6 +43,7 @@ MAX_PANELS = 12
 TRANSIENT_S = 1.0  # Fig. 6: y limits ignore the bounds of the first second (Sec. VI: they settle within ~1 s)
 Y_PAD = 0.1  # fraction of the data range added above and below
 SILENT_COLOUR, SILENT_ALPHA = "0.6", 0.25
+LEGEND_TOP_IN = 0.4  # Fig. 6: inches from the top edge to its legend (below the title, above the panels)
 _COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:cyan")
 
 
@@ -171,6 +172,16 @@ def _settled_limits(rec: Record, ids: list[int], comp: int, truth: np.ndarray) -
     return a - pad, b + pad
 
 
+def _legend(target: Axes | Figure, fig: Figure, **kw: object) -> None:
+    """One legend on ``target`` (a panel, or the figure) with every label drawn anywhere in ``fig`` (e.g.
+    "not reported" of one node)."""
+    entries: dict[str, object] = {}
+    for a in fig.axes:
+        for h, label in zip(*a.get_legend_handles_labels()):
+            entries.setdefault(label, h)
+    target.legend(list(entries.values()), list(entries), fontsize=7, **kw)
+
+
 def _save(fig: Figure, path: Path) -> str:
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -216,8 +227,8 @@ def _fig6(rec: Record, label: str) -> Figure:
     if clipped:
         fig.text(0.5, 0.005, f"y axes show the bounds from t = {TRANSIENT_S:g} s on (the initial ellipsoid is much wider); "
                  "every true value is inside the axes", ha="center", fontsize=8, color="0.3")  # fmt: skip
-    axes[0, 1].legend(fontsize=7, loc="upper right")
-    fig.tight_layout(rect=(0, 0.02, 1, 1))
+    _legend(fig, fig, loc="upper center", ncol=4, bbox_to_anchor=(0.5, 1.0 - LEGEND_TOP_IN / fig.get_figheight()))
+    fig.tight_layout(rect=(0, 0.02, 1, 1.0 - (LEGEND_TOP_IN + 0.05) / fig.get_figheight()))
     return fig
 
 
@@ -227,7 +238,7 @@ def _fig7(rec: Record, label: str) -> Figure:
         _estimate(ax, rec, i, 2, _truth_series(rec, "faults", i))
         ax.set_title(f"fault f{i}", fontsize=9)
         ax.set_ylabel("f [rad/s]")
-    panels[0][1].legend(fontsize=7)
+    _legend(panels[0][1], fig)
     fig.tight_layout()
     return fig
 
