@@ -184,6 +184,7 @@ def test_export_parquet_without_pyarrow_exits_2(records: dict[str, Path], tmp_pa
     ("mcap", ["run", str(ROOT / "topologies" / "paper6.toml"), "--mode", "inmemory", "--record", "{tmp}/r.mcap", "--quiet"]),
     ("mcap", ["inspect", "{tmp}/r.mcap"]),
     ("matplotlib", ["plot", "{tmp}/r.json", "--out", "{tmp}/figs"]),
+    ("cvxpy", ["bench", "--quick"]),
 ])  # fmt: skip
 def test_missing_optional_dependency_exits_2_before_any_work(missing: str, argv: list[str], records: dict[str, Path], tmp_path: Path,
                                                              monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
@@ -196,3 +197,14 @@ def test_missing_optional_dependency_exits_2_before_any_work(missing: str, argv:
     err = capsys.readouterr().err
     assert f"needs {missing}" in err and "pip install 'netsetest[" in err and "Traceback" not in err
     assert not (tmp_path / "figs").exists()
+
+
+def test_cvxpy_backend_without_cvxpy_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    from netsetest.estimator.sdp import LocalEstimator
+    from netsetest.extras import MissingExtra
+
+    sc = load_topology(ROOT / "topologies" / "paper6.toml", steps=2)
+    n = sc.node(1)
+    monkeypatch.setitem(sys.modules, "cvxpy", None)
+    with pytest.raises(MissingExtra, match=r"netsetest\[cvxpy\]"):
+        LocalEstimator(1, n.sensor, {j: sc.node(j).sensor for j in n.in_weights}, n.in_weights, sc.model, sc.W, "scheduled", "cvxpy")

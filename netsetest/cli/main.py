@@ -176,6 +176,7 @@ def cmd_bench(a: argparse.Namespace) -> int:
     if not (root / "bench" / "run.py").exists():
         print(f"netsetest bench: needs a source checkout ({root / 'bench'} not found)", file=sys.stderr)
         return EXIT_BAD_INPUT
+    require("cvxpy", "netsetest bench (its reference formulations)")
     if str(root) not in sys.path:
         sys.path.insert(0, str(root))
     from bench.run import run_bench

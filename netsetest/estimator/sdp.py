@@ -344,6 +344,9 @@ class _CvxpySolver:
     """The LMI exactly as written, built once from cvxpy Parameters and re-solved with Clarabel."""
 
     def __init__(self, d: int, m: int, n_lmi: int) -> None:
+        from netsetest.extras import require
+
+        require("cvxpy", "the cvxpy estimator backend")
         import cvxpy as cp  # only here: importing cvxpy costs ~120 MB and ~1 s
 
         self.cp, self.n_lmi = cp, n_lmi
