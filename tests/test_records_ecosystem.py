@@ -208,3 +208,16 @@ def test_cvxpy_backend_without_cvxpy_names_the_extra(monkeypatch: pytest.MonkeyP
     monkeypatch.setitem(sys.modules, "cvxpy", None)
     with pytest.raises(MissingExtra, match=r"netsetest\[cvxpy\]"):
         LocalEstimator(1, n.sensor, {j: sc.node(j).sensor for j in n.in_weights}, n.in_weights, sc.model, sc.W, "scheduled", "cvxpy")
+
+
+def test_every_mcap_message_validates_against_its_json_schema(records: dict[str, Path]) -> None:
+    """What Foxglove reads: each schema is valid JSON Schema (2020-12) and every message satisfies it."""
+    jsonschema = pytest.importorskip("jsonschema")
+    n = 0
+    with open(records["mcap"], "rb") as fh:
+        for schema, _, message in make_reader(fh).iter_messages():
+            doc = json.loads(schema.data)
+            jsonschema.Draft202012Validator.check_schema(doc)
+            jsonschema.Draft202012Validator(doc).validate(json.loads(message.data))
+            n += 1
+    assert n > 100
