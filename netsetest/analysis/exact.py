@@ -368,3 +368,123 @@ def exact_bounds(
         steps=np.arange(K1), beta=beta, r=r, fault=fault, fault_bounds=fault_bounds,
         bounded_nodes=bounded, infeasible_steps=tuple(infeasible), witnesses=witnesses,
     )  # fmt: skip
+
+
+# ---------------------------------------------------------------- a record against the exact limit
+
+
+@dataclass(frozen=True)
+class CoordinateRatio:
+    """One node's published intervals of one coordinate against the exact ones.
+
+    ``width_ratio``: mean published width / mean exact width over the steps ≥ FROM_STEP;
+    ``width_ratio_all``: the same over every step; ``rms_radius_rel``: Althoff & Rath's relative RMS
+    radius (their eq. (9)) with the exact limit as the reference observer: √(mean r²_published) /
+    √(mean r²_exact) over every step, r the interval's half-width (1 = exact).  Steps where the exact
+    interval is unbounded or empty are left out and counted in ``left_out``.
+    """
+
+    coordinate: Coordinate
+    width_ratio: float
+    width_ratio_all: float
+    rms_radius_rel: float
+    steps: int
+    left_out: int
+
+
+@dataclass(frozen=True)
+class NodeRatios:
+    node: int
+    ratios: dict[Coordinate, CoordinateRatio]
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Per node and coordinate ratios, their mean over nodes per coordinate, and the overall mean."""
+
+    nodes: tuple[NodeRatios, ...]
+    mean_width_ratio: dict[Coordinate, float]
+    mean_rms_radius_rel: dict[Coordinate, float]
+    overall_width_ratio: float
+    overall_rms_radius_rel: float
+
+
+def _ratio(num: np.ndarray, den: np.ndarray) -> float:
+    return float(num.mean() / den.mean()) if len(num) and den.mean() > 0 else float("nan")
+
+
+def compare_record(record: Record, exact: ExactBounds) -> Comparison:
+    """The record's published intervals against ``exact`` (see :class:`CoordinateRatio`)."""
+    rows = []
+    for i in sorted(record.nodes):
+        if i not in exact.fault:
+            raise ExactError(f"{record.path}: node {i} is not in the exact bounds (nodes {sorted(exact.fault)})")
+        track = record.nodes[i]
+        ratios = {}
+        for idx, coord in enumerate(COORDINATES):
+            lo, hi = track.bounds(idx)
+            ex = exact.interval(coord, i)[track.steps]
+            ok = np.isfinite(ex).all(axis=1)
+            width, ex_width = (hi - lo)[ok], (ex[:, 1] - ex[:, 0])[ok]
+            late = track.steps[ok] >= FROM_STEP
+            ratios[coord] = CoordinateRatio(
+                coordinate=coord,
+                width_ratio=_ratio(width[late], ex_width[late]),
+                width_ratio_all=_ratio(width, ex_width),
+                rms_radius_rel=float(np.sqrt(_ratio((width / 2) ** 2, (ex_width / 2) ** 2))),
+                steps=int(ok.sum()),
+                left_out=int((~ok).sum()),
+            )
+        rows.append(NodeRatios(i, ratios))
+
+    def mean(attr: str, coord: Coordinate) -> float:
+        return float(np.nanmean([getattr(n.ratios[coord], attr) for n in rows]))
+
+    return Comparison(
+        nodes=tuple(rows),
+        mean_width_ratio={c: mean("width_ratio", c) for c in COORDINATES},
+        mean_rms_radius_rel={c: mean("rms_radius_rel", c) for c in COORDINATES},
+        overall_width_ratio=float(np.nanmean([n.ratios[c].width_ratio for n in rows for c in COORDINATES])),
+        overall_rms_radius_rel=float(np.nanmean([n.ratios[c].rms_radius_rel for n in rows for c in COORDINATES])),
+    )
+
+
+def _finite_or_none(v: float) -> float | None:
+    return float(v) if np.isfinite(v) else None
+
+
+def exact_document(record: Record, exact: ExactBounds, comparison: Comparison) -> dict:
+    """The ``--json`` document: per step exact intervals (null: unbounded on that side, or no
+    trajectory at an infeasible step) and the record's ratios."""
+
+    def intervals(a: np.ndarray) -> list[list[float | None]]:
+        return [[_finite_or_none(lo), _finite_or_none(hi)] for lo, hi in a]
+
+    def ratio(c: CoordinateRatio) -> dict:
+        return {
+            "width_ratio": _finite_or_none(c.width_ratio), "width_ratio_all": _finite_or_none(c.width_ratio_all),
+            "rms_radius_rel": _finite_or_none(c.rms_radius_rel), "steps": c.steps, "left_out": c.left_out,
+        }  # fmt: skip
+
+    return {
+        "format": "netsetest-exact",
+        "version": 1,
+        "record": record.path,
+        "fault_bounds": exact.fault_bounds,
+        "bounded_nodes": list(exact.bounded_nodes),
+        "from_step": FROM_STEP,
+        "steps": [int(k) for k in exact.steps],
+        "infeasible_steps": list(exact.infeasible_steps),
+        "exact": {
+            "beta": intervals(exact.beta),
+            "r": intervals(exact.r),
+            "fault": {str(i): intervals(a) for i, a in exact.fault.items()},
+        },
+        "ratios": {
+            "nodes": {str(n.node): {c: ratio(n.ratios[c]) for c in COORDINATES} for n in comparison.nodes},
+            "mean_width_ratio": {c: _finite_or_none(v) for c, v in comparison.mean_width_ratio.items()},
+            "mean_rms_radius_rel": {c: _finite_or_none(v) for c, v in comparison.mean_rms_radius_rel.items()},
+            "overall_width_ratio": _finite_or_none(comparison.overall_width_ratio),
+            "overall_rms_radius_rel": _finite_or_none(comparison.overall_rms_radius_rel),
+        },
+    }

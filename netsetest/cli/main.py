@@ -1,4 +1,4 @@
-"""``netsetest`` command line: run, inspect, plot (and the role processes of the Zenoh runtime).
+"""``netsetest`` command line: run, inspect, plot, exact, bench (and the role processes of the Zenoh runtime).
 
 Exit codes: 0 success (every ellipsoid contained where the assumptions held); 1 containment violated
 on a step where the assumptions held; 2 bad input (file, option); 3 a node stopped reporting;
@@ -12,6 +12,7 @@ import json
 import sys
 from collections.abc import Callable, Sequence
 
+from netsetest.analysis.exact import ExactError
 from netsetest.config.schema import ConfigError
 from netsetest.records.record import RecordError
 from netsetest.runtime.report import EXIT_BAD_INPUT
@@ -67,6 +68,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("plot", help="figures like the paper's Figs. 5-8 from a record")
     p.add_argument("record", nargs="+", help="one record, or several (e.g. an nsnim and a saim run) for Fig. 8")
     p.add_argument("--out", required=True, help="output directory for the PNG files")
+
+    p = sub.add_parser("exact", help="the exact tightest bounds any guaranteed estimator could publish, against a record")
+    p.add_argument("record")
+    p.add_argument("--json", metavar="PATH", help="write the per-step exact intervals and the ratios as JSON")
+    p.add_argument("--topology", metavar="PATH", help="topology file (default: the one named in the record)")
+    p.add_argument("--fault-bounds", choices=["used", "all", "none"], default="used",
+                   help="declared fault bounds: where the estimator relies on them (saturating sensors), "
+                   "everywhere, or nowhere")  # fmt: skip
 
     p = sub.add_parser("bench", help="benchmark: solve times, scaling, Zenoh overhead, real time, node cost (docs/performance.md)")
     p.add_argument("--quick", action="store_true", help="fewer steps and samples (a few minutes)")
@@ -129,6 +138,40 @@ def cmd_plot(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_exact(a: argparse.Namespace) -> int:
+    import time
+
+    from netsetest.analysis.exact import COORDINATES, compare_record, exact_bounds, exact_document
+    from netsetest.config.schema import load_topology
+    from netsetest.records.record import load_record
+
+    rec = load_record(a.record)
+    sc = load_topology(a.topology or rec.meta.get("topology", ""), rec.meta.get("case"), rec.meta.get("steps"))
+    t0 = time.perf_counter()
+    ex = exact_bounds(sc, rec, a.fault_bounds)
+    cmp = compare_record(rec, ex)
+    bounded = ", ".join(map(str, ex.bounded_nodes)) or "none"
+    print(f"exact bounds for {a.record}: case {sc.case}, {len(ex.steps)} steps, fault bounds '{a.fault_bounds}' "
+          f"(applied on nodes: {bounded}), {time.perf_counter() - t0:.1f} s")  # fmt: skip
+    if ex.infeasible_steps:
+        print(f"  no trajectory meets the assumptions at steps {list(ex.infeasible_steps)} (an assumption was broken)")
+    names = {"f": "fault", "r": "yaw rate", "beta": "sideslip"}
+    print("published width / exact width: mean over steps ≥ 10 | all steps; relative-RMS radius (Althoff & Rath (9), exact = 1)")
+    print(f"{'node':>4}  " + "  ".join(f"{names[c]:>22}" for c in COORDINATES))
+    for n in cmp.nodes:
+        cells = [n.ratios[c] for c in COORDINATES]
+        print(f"{n.node:>4}  " + "  ".join(f"{x.width_ratio:6.3f} |{x.width_ratio_all:6.3f}  {x.rms_radius_rel:6.3f}" for x in cells))
+    print(f"{'mean':>4}  " + "  ".join(f"{cmp.mean_width_ratio[c]:6.3f}         {cmp.mean_rms_radius_rel[c]:6.3f}" for c in COORDINATES))
+    print(f"overall: width ratio {cmp.overall_width_ratio:.3f}, relative-RMS radius {cmp.overall_rms_radius_rel:.3f}")
+    left = sum(x.left_out for n in cmp.nodes for x in n.ratios.values())
+    if left:
+        print(f"  {left} node-step intervals left out: the exact interval is unbounded there (inf) or empty")
+    if a.json:
+        with open(a.json, "w") as fh:
+            json.dump(exact_document(rec, ex, cmp), fh, indent=1)
+    return 0
+
+
 def cmd_bench(a: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -143,7 +186,7 @@ def cmd_bench(a: argparse.Namespace) -> int:
     return run_bench(a.quick, a.json, a.markdown)
 
 
-COMMANDS.update(run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, bench=cmd_bench)
+COMMANDS.update(run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, exact=cmd_exact, bench=cmd_bench)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -154,7 +197,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     handler = COMMANDS.get(a.command) or processes.COMMANDS[a.command]
     try:
         return handler(a)
-    except (ConfigError, RecordError) as exc:
+    except (ConfigError, RecordError, ExactError) as exc:
         print(f"netsetest {a.command}: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
