@@ -2,7 +2,7 @@
 
 Parts, in order: per-node per-step solve times on the paper scenario (NSNIM/SAIM × scheduled/
 per-rule, fast path vs. the previous default, the straightforward and the naive formulations); the
-in-memory cost per node-step for ring-with-chords networks of 6, 24 and 96 nodes; the Zenoh lockstep
+published intervals of the paper run against the exact limit (``netsetest exact``); the in-memory cost per node-step for ring-with-chords networks of 6, 24 and 96 nodes; the Zenoh lockstep
 run against the in-memory run of the paper scenario; the largest real-time network without a
 deadline miss; one node process's peak RSS and start-up time.  ``--quick`` uses fewer steps and
 samples (a few minutes); the default takes longer.  Times are wall-clock milliseconds on this
