@@ -28,6 +28,7 @@ import clarabel
 import numpy as np
 from scipy import sparse
 
+from netsetest.analysis.errors import ExactError
 from netsetest.config.schema import NodeConfig, Scenario
 from netsetest.records.record import Record
 
@@ -42,10 +43,6 @@ SOLVER_TOL = 1e-10  # Clarabel gap and feasibility tolerances: witnesses meet ev
 _SOLVED = ("Solved", "AlmostSolved")
 _UNBOUNDED = ("DualInfeasible", "AlmostDualInfeasible")
 _INFEASIBLE = ("PrimalInfeasible", "AlmostPrimalInfeasible")
-
-
-class ExactError(Exception):
-    """A record and topology that cannot be analysed together; the message says why."""
 
 
 @dataclass(frozen=True)
@@ -107,16 +104,19 @@ class ExactBounds:
 def step_data(record: Record) -> list[StepData]:
     """The data of steps 0..K from the record's truth entries (u, Vx, ỹ, γ: what the nodes see)."""
     out = []
-    for k, t in enumerate(sorted(record.truth, key=lambda t: t["step"])):
-        if t["step"] != k:
-            raise ExactError(f"{record.path}: truth entries are not the contiguous steps 0..K (step {k} missing)")
-        out.append(
-            StepData(
-                step=k, u=float(t["u"]), vx=float(t["vx"]),
-                y={int(i): float(v) for i, v in t["y"].items()},
-                gamma={int(i): float(v) for i, v in t["gamma"].items()},
-            )
-        )  # fmt: skip
+    try:
+        for k, t in enumerate(sorted(record.truth, key=lambda t: t["step"])):
+            if t["step"] != k:
+                raise ExactError(f"{record.path}: truth entries are not the contiguous steps 0..K (step {k} missing)")
+            out.append(
+                StepData(
+                    step=k, u=float(t["u"]), vx=float(t["vx"]),
+                    y={int(i): float(v) for i, v in t["y"].items()},
+                    gamma={int(i): float(v) for i, v in t["gamma"].items()},
+                )
+            )  # fmt: skip
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise ExactError(f"{record.path}: malformed truth entry ({type(exc).__name__}: {exc})") from None
     if not out:
         raise ExactError(f"{record.path}: the record has no truth entries")
     return out

@@ -12,7 +12,7 @@ import json
 import sys
 from collections.abc import Callable, Sequence
 
-from netsetest.analysis.exact import ExactError
+from netsetest.analysis.errors import ExactError
 from netsetest.config.schema import ConfigError
 from netsetest.records.record import RecordError
 from netsetest.runtime.report import EXIT_BAD_INPUT
@@ -139,6 +139,7 @@ def cmd_plot(a: argparse.Namespace) -> int:
 
 
 def cmd_exact(a: argparse.Namespace) -> int:
+    import os
     import time
 
     from netsetest.analysis.exact import COORDINATES, compare_record, exact_bounds, exact_document
@@ -146,7 +147,11 @@ def cmd_exact(a: argparse.Namespace) -> int:
     from netsetest.records.record import load_record
 
     rec = load_record(a.record)
-    sc = load_topology(a.topology or rec.meta.get("topology", ""), rec.meta.get("case"), rec.meta.get("steps"))
+    topology = a.topology or rec.meta.get("topology")
+    if not a.topology and not (isinstance(topology, str) and os.path.exists(topology)):
+        print(f"netsetest exact: {a.record} names topology {topology!r}, not found from here (give --topology PATH)", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    sc = load_topology(topology, rec.meta.get("case"), rec.meta.get("steps"))
     t0 = time.perf_counter()
     ex = exact_bounds(sc, rec, a.fault_bounds)
     cmp = compare_record(rec, ex)
