@@ -254,3 +254,18 @@ def test_cli_record_naming_a_missing_topology(tmp: str, capsys: pytest.CaptureFi
     json.dump(doc, open(path, "w"))
     assert main(["exact", path, "--topology", PAPER6]) == 2
     assert "malformed truth entry" in capsys.readouterr().err
+
+
+def test_local_limit_contains_the_centralized_one(tmp: str) -> None:
+    """One node's own data only (a purely local estimator's limit) is never tighter than all nodes'."""
+    sc, rec = _run("nsnim", "worst", 1, tmp)
+    central = _exact("nsnim", "worst", 1, tmp)
+    for i in (1, 4):
+        local = exact_bounds(sc, rec, nodes=[i])
+        assert list(local.fault) == [i]
+        for coord in COORDINATES:
+            lo, ce = local.interval(coord, i), central.interval(coord, i)
+            assert np.all(lo[:, 0] <= ce[:, 0] + 1e-8) and np.all(lo[:, 1] >= ce[:, 1] - 1e-8)
+        assert (local.fault[i][0, 1] - local.fault[i][0, 0]) > 1.01 * (central.fault[i][0, 1] - central.fault[i][0, 0])
+    with pytest.raises(ExactError, match="subset"):
+        exact_bounds(sc, rec, nodes=[99])

@@ -21,7 +21,8 @@ Derivation and measured figures: docs/exact.md.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import clarabel
@@ -311,11 +312,14 @@ def exact_bounds(
     fault_bounds: FaultBoundsMode = "used",
     keep_witnesses: bool = False,
     eliminate_free_faults: bool = True,
+    nodes: Sequence[int] | None = None,
 ) -> ExactBounds:
     """The exact intervals of every step of ``record`` under ``scenario``'s assumptions (module doc).
 
-    ``eliminate_free_faults`` drops the past faults that no declared bound ties (exact, see
-    :meth:`_Program._eliminated`; False keeps the whole program, for checking that).
+    ``nodes``: use only these nodes' priors and measurements (e.g. one node: the limit of a purely
+    local estimator); default every node (centralized).  ``eliminate_free_faults`` drops the past
+    faults that no declared bound ties (exact, see :meth:`_Program._eliminated`; False keeps the
+    whole program, for checking that).
     """
     data = step_data(record)
     for d in data:
@@ -324,6 +328,11 @@ def exact_bounds(
                 f"{record.path}: step {d.step} has measurements of nodes {sorted(d.y)}, "
                 f"the topology has nodes {scenario.ids}"
             )
+    if nodes is not None:
+        unknown = sorted(set(nodes) - set(scenario.ids))
+        if unknown or not nodes:
+            raise ExactError(f"nodes {list(nodes)}: not a non-empty subset of the topology's nodes {scenario.ids}")
+        scenario = replace(scenario, nodes=[n for n in scenario.nodes if n.id in set(nodes)])
     bounded = bounded_nodes(scenario, fault_bounds)
     prog = _Program(scenario, data, bounded)
     K1 = len(data)
