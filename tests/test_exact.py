@@ -16,7 +16,6 @@ from netsetest.analysis.exact import (
     WitnessKey,
     compare_record,
     exact_bounds,
-    measured_interval,
     step_data,
 )
 from netsetest.cli.main import main
@@ -175,7 +174,7 @@ def test_saturation_opens_a_side_without_fault_bounds(tmp: str) -> None:
     data = step_data(rec)
     for n in sc.nodes:
         for k, d in enumerate(data):
-            lo, hi = measured_interval(n, d.y[n.id], d.gamma[n.id])
+            lo, hi = n.sensor.measured_interval(d.y[n.id], d.gamma[n.id])
             f = ex.fault[n.id][k]
             if k > 0:  # past step 0 only the measurement bounds the fault (the prior bounds f_i,0)
                 assert np.isfinite(f[0]) == np.isfinite(lo if n.sensor.Ds > 0 else hi)
@@ -193,7 +192,7 @@ def test_nsnim_fault_interval_is_the_measurement_minus_the_state_set(tmp: str) -
     n = sc.node(3)  # C = [0, c]: only r enters, so the state box gives the exact range of C x
     assert n.sensor.C[0] == 0
     for k in range(1, STEPS + 1):
-        lo, hi = measured_interval(n, data[k].y[n.id], 1.0)
+        lo, hi = n.sensor.measured_interval(data[k].y[n.id], 1.0)
         cr = n.sensor.C[1] * ex.r[k]
         expect = sorted(((lo - cr.max()) / n.sensor.Ds, (hi - cr.min()) / n.sensor.Ds))
         np.testing.assert_allclose(ex.fault[n.id][k], expect, atol=1e-8)

@@ -30,11 +30,9 @@ import numpy as np
 from scipy import sparse
 
 from netsetest.analysis.errors import ExactError
-from netsetest.config.schema import NodeConfig, Scenario
+from netsetest.config.schema import FaultBoundsMode, Scenario
 from netsetest.records.record import Record
 
-FaultBoundsMode = Literal["used", "all", "none"]
-FAULT_BOUNDS_MODES: tuple[FaultBoundsMode, ...] = ("used", "all", "none")
 Coordinate = Literal["beta", "r", "f"]
 COORDINATES: tuple[Coordinate, ...] = ("beta", "r", "f")
 Side = Literal["lo", "hi"]
@@ -123,30 +121,6 @@ def step_data(record: Record) -> list[StepData]:
     return out
 
 
-def measured_interval(node: NodeConfig, y: float, gamma: float) -> tuple[float, float]:
-    """Interval of r = C̄_i x̄_i consistent with ỹ = γ σ(r) + Dv v, v² ≤ R (±inf: open side)."""
-    s = node.sensor
-    half = abs(s.Dv) * np.sqrt(s.R)
-    lo, hi = (y - half) / gamma, (y + half) / gamma
-    if not s.saturated:
-        return lo, hi
-    # σ(r) ≥ lo: any r if lo ≤ −r_max, else r ≥ lo;  σ(r) ≤ hi: any r if hi ≥ r_max, else r ≤ hi
-    return (-np.inf if lo <= -s.r_max else lo), (np.inf if hi >= s.r_max else hi)
-
-
-def bounded_nodes(scenario: Scenario, mode: FaultBoundsMode) -> tuple[int, ...]:
-    """Nodes whose declared fault bounds enter the program: ``used`` — where the estimator relies on
-    them (a saturating sensor); ``all`` — every node that declares one; ``none`` — no node."""
-    if mode not in FAULT_BOUNDS_MODES:
-        raise ExactError(f"fault bounds mode must be one of {', '.join(FAULT_BOUNDS_MODES)}, got {mode!r}")
-    declared = [n for n in scenario.nodes if n.fault_rate is not None or n.fault_size is not None]
-    if mode == "none":
-        return ()
-    if mode == "used":
-        return tuple(n.id for n in declared if n.sensor.saturated)
-    return tuple(n.id for n in declared)
-
-
 # ---------------------------------------------------------------- the program
 
 
@@ -164,7 +138,7 @@ class _Program:
         self.K = K = len(data) - 1
         self.nz = 2 * (K + 1) + K + len(self.ids) * (K + 1)
         self.intervals = {
-            (node.id, j): measured_interval(node, dj.y[node.id], dj.gamma[node.id])
+            (node.id, j): node.sensor.measured_interval(dj.y[node.id], dj.gamma[node.id])
             for node in scenario.nodes for j, dj in enumerate(data)
         }  # fmt: skip
         eq = _Rows()  # x_{j+1} − Ā_j x_j − D̄_j w_j = B̄_j u_j
@@ -333,7 +307,7 @@ def exact_bounds(
         if unknown or not nodes:
             raise ExactError(f"nodes {list(nodes)}: not a non-empty subset of the topology's nodes {scenario.ids}")
         scenario = replace(scenario, nodes=[n for n in scenario.nodes if n.id in set(nodes)])
-    bounded = bounded_nodes(scenario, fault_bounds)
+    bounded = scenario.fault_bounded(fault_bounds)
     prog = _Program(scenario, data, bounded)
     K1 = len(data)
     beta, r = np.full((K1, 2), np.nan), np.full((K1, 2), np.nan)
