@@ -141,6 +141,19 @@ def test_nsnim_record_never_narrower_than_exact(signals: str, seed: int, tmp: st
     _assert_not_narrower(rec, ex)
     cmp = compare_record(rec, ex)
     assert min(n.ratios[c].width_ratio_all for n in cmp.nodes for c in COORDINATES) >= 1.0
+    assert sum(n.ratios[c].narrower for n in cmp.nodes for c in COORDINATES) == 0
+
+
+def test_a_shrunk_record_is_reported_narrower(tmp: str) -> None:
+    """Shrinking every published ellipsoid to a quarter of its width must show up as narrower than exact."""
+    sc, rec = _run("nsnim", "paper", 0, tmp)
+    ex = _exact("nsnim", "paper", 0, tmp)
+    for track in rec.nodes.values():
+        track.P[:] = track.P / 16
+    cmp = compare_record(rec, ex)
+    assert all(n.ratios["f"].narrower > STEPS // 2 for n in cmp.nodes)
+    assert cmp.mean_width_ratio["f"] < 0.5
+    _run.cache_clear()  # the record object was changed in place
 
 
 @pytest.mark.xfail(
