@@ -1,4 +1,4 @@
-"""``netsetest`` command line: run, inspect, plot (and the role processes of the Zenoh runtime).
+"""``netsetest`` command line: run, inspect, plot, exact, bench (and the role processes of the Zenoh runtime).
 
 Exit codes: 0 success (every ellipsoid contained where the assumptions held); 1 containment violated
 on a step where the assumptions held; 2 bad input (file, option); 3 a node stopped reporting;
@@ -12,6 +12,7 @@ import json
 import sys
 from collections.abc import Callable, Sequence
 
+from netsetest.analysis.errors import ExactError
 from netsetest.config.schema import ConfigError
 from netsetest.extras import MissingExtra, require
 from netsetest.records.record import RecordError, check_record_path
@@ -101,6 +102,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("record", nargs="+", help="one record, or several (e.g. an nsnim and a saim run) for Fig. 8")
     p.add_argument("--out", required=True, help="output directory for the PNG files")
 
+    p = sub.add_parser("exact", help="the exact tightest bounds any guaranteed estimator could publish, against a record")
+    p.add_argument("record")
+    p.add_argument("--json", metavar="PATH", help="write the per-step exact intervals and the ratios as JSON")
+    p.add_argument("--topology", metavar="PATH", help="topology file (default: the one named in the record)")
+    p.add_argument("--fault-bounds", choices=["used", "all", "none"], default="used",
+                   help="declared fault bounds: where the estimator relies on them (saturating sensors), "
+                   "everywhere, or nowhere (default: used)")  # fmt: skip
+
     p = sub.add_parser("bench", help="benchmark: solve times, scaling, Zenoh overhead, real time, node cost (docs/performance.md)")
     p.add_argument("--quick", action="store_true", help="fewer steps and samples (a few minutes)")
     p.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
@@ -169,6 +178,49 @@ def cmd_plot(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_exact(a: argparse.Namespace) -> int:
+    import os
+    import time
+
+    from netsetest.analysis.exact import COORDINATES, compare_record, exact_bounds, exact_document
+    from netsetest.config.schema import load_topology
+    from netsetest.records.record import load_record
+
+    rec = load_record(a.record)
+    topology = a.topology or rec.meta.get("topology")
+    if not a.topology and not (isinstance(topology, str) and os.path.exists(topology)):
+        print(f"netsetest exact: {a.record} names topology {topology!r}, not found from here (give --topology PATH)", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    sc = load_topology(topology, rec.meta.get("case"), rec.meta.get("steps"))
+    t0 = time.perf_counter()
+    ex = exact_bounds(sc, rec, a.fault_bounds)
+    cmp = compare_record(rec, ex)
+    bounded = ", ".join(map(str, ex.bounded_nodes)) or "none"
+    print(f"exact bounds for {a.record}: case {sc.case}, {len(ex.steps)} steps, fault bounds '{a.fault_bounds}' "
+          f"(applied on nodes: {bounded}), {time.perf_counter() - t0:.1f} s")  # fmt: skip
+    if ex.infeasible_steps:
+        print(f"  no trajectory meets the assumptions at steps {list(ex.infeasible_steps)} (an assumption was broken)")
+    names = {"f": "fault", "r": "yaw rate", "beta": "sideslip"}
+    print("published width / exact width: mean over steps ≥ 10 | all steps; relative-RMS radius (Althoff & Rath (9), exact = 1)")
+    print(f"{'node':>4}  " + "  ".join(f"{names[c]:>22}" for c in COORDINATES))
+    for n in cmp.nodes:
+        cells = [n.ratios[c] for c in COORDINATES]
+        print(f"{n.node:>4}  " + "  ".join(f"{x.width_ratio:6.3f} |{x.width_ratio_all:6.3f}  {x.rms_radius_rel:6.3f}" for x in cells))
+    print(f"{'mean':>4}  " + "  ".join(f"{cmp.mean_width_ratio[c]:6.3f}         {cmp.mean_rms_radius_rel[c]:6.3f}" for c in COORDINATES))
+    print(f"overall: width ratio {cmp.overall_width_ratio:.3f}, relative-RMS radius {cmp.overall_rms_radius_rel:.3f}")
+    left = sum(x.left_out for n in cmp.nodes for x in n.ratios.values())
+    if left:
+        print(f"  {left} node-step intervals left out: the exact interval is unbounded there (inf) or empty")
+    narrower = sum(x.narrower for n in cmp.nodes for x in n.ratios.values())
+    total = sum(len(rec.nodes[n.node].steps) for n in cmp.nodes) * len(COORDINATES)
+    print(f"published interval narrower than exact on {narrower} of {total} node-step intervals"
+          + (" (the estimator relied on more than these assumptions there, or one of the two is wrong)" if narrower else ""))
+    if a.json:
+        with open(a.json, "w") as fh:
+            json.dump(exact_document(rec, ex, cmp), fh, indent=1)
+    return 0
+
+
 def cmd_bench(a: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -184,7 +236,7 @@ def cmd_bench(a: argparse.Namespace) -> int:
     return run_bench(a.quick, a.json, a.markdown)
 
 
-COMMANDS.update(run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, bench=cmd_bench)
+COMMANDS.update(run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, exact=cmd_exact, bench=cmd_bench)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -197,7 +249,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     handler = COMMANDS.get(a.command) or tools.COMMANDS.get(a.command) or processes.COMMANDS[a.command]
     try:
         return handler(a)
-    except (ConfigError, RecordError, MissingExtra) as exc:
+    except (ConfigError, RecordError, MissingExtra, ExactError) as exc:
         print(f"netsetest {a.command}: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

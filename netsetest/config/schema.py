@@ -21,6 +21,8 @@ from netsetest.scenarios import bundled_topologies, resolve_topology
 
 Case = Literal["nsnim", "saim"]
 Variant = Literal["scheduled", "per-rule"]
+FaultBoundsMode = Literal["used", "all", "none"]  # where declared fault bounds are applied (Scenario.fault_bounded)
+FAULT_BOUNDS_MODES: tuple[FaultBoundsMode, ...] = ("used", "all", "none")
 
 
 class ConfigError(Exception):
@@ -305,6 +307,16 @@ class Scenario:
 
     def vx(self, k: int) -> float:
         return self.speed.kmh(k * self.tau_s) * KMH
+
+    def fault_bounded(self, mode: FaultBoundsMode) -> tuple[int, ...]:
+        """Nodes whose declared fault bounds an analysis applies: ``used`` — where an estimator relies
+        on them (a saturating sensor); ``all`` — every node that declares one; ``none`` — no node."""
+        if mode not in FAULT_BOUNDS_MODES:
+            raise ConfigError(f"fault bounds mode must be one of {', '.join(FAULT_BOUNDS_MODES)}, got {mode!r}")
+        declared = [n for n in self.nodes if n.fault_rate is not None or n.fault_size is not None]
+        if mode == "none":
+            return ()
+        return tuple(n.id for n in declared if mode == "all" or n.sensor.saturated)
 
     def out_neighbours(self, j: int) -> list[int]:
         """Nodes i ≠ j that use j's message."""

@@ -60,6 +60,18 @@ class Sensor:
         """ỹ = γ σ(C̄ x̄) + Dv v (12)."""
         return gamma * self.sigma(float(self.Cbar @ xbar)) + self.Dv * v
 
+    def measured_interval(self, y: float, gamma: float) -> tuple[float, float]:
+        """The interval of r = C̄ x̄ consistent with ỹ = γ σ(r) + Dv v, v² ≤ R; ±inf is an open side.
+
+        σ(r) ∈ [(ỹ − |Dv|√R)/γ, (ỹ + |Dv|√R)/γ] = [a, b]; σ is non-decreasing and the identity on
+        [−r_max, r_max], so σ(r) ≥ a ⇔ r ≥ a unless a ≤ −r_max (then every r), and likewise for b.
+        """
+        half = abs(self.Dv) * np.sqrt(self.R)
+        lo, hi = (y - half) / gamma, (y + half) / gamma
+        if not self.saturated:
+            return lo, hi
+        return (-np.inf if lo <= -self.r_max else lo), (np.inf if hi >= self.r_max else hi)
+
     def sector_holds(self, xbar: np.ndarray) -> bool:
         """Whether φ(C̄ x̄) satisfies the sector condition (15) that the estimator assumes."""
         return abs(float(self.Cbar @ xbar)) <= self.sector_limit
