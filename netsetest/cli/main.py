@@ -103,12 +103,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output directory for the PNG files")
 
     p = sub.add_parser("exact", help="the exact tightest bounds any guaranteed estimator could publish, against a record")
-    p.add_argument("record")
+    p.add_argument("record", help="a run record (JSON, JSON Lines, .gz or .mcap)")
     p.add_argument("--json", metavar="PATH", help="write the per-step exact intervals and the ratios as JSON")
     p.add_argument("--topology", metavar="PATH", help="topology file (default: the one named in the record)")
     p.add_argument("--fault-bounds", choices=["used", "all", "none"], default="used",
                    help="declared fault bounds: where the estimator relies on them (saturating sensors), "
-                   "everywhere, or nowhere (default: used)")  # fmt: skip
+                   "everywhere, or nowhere")  # fmt: skip
 
     p = sub.add_parser("bench", help="benchmark: solve times, scaling, Zenoh overhead, real time, node cost (docs/performance.md)")
     p.add_argument("--quick", action="store_true", help="fewer steps and samples (a few minutes)")
