@@ -13,6 +13,7 @@ import sys
 from collections.abc import Callable, Sequence
 
 from netsetest.config.schema import ConfigError
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVES
 from netsetest.records.record import RecordError
 from netsetest.runtime.report import EXIT_BAD_INPUT
 
@@ -29,6 +30,8 @@ def _run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--signals", choices=["paper", "worst"], default="paper",
                    help="paper: cos noise and uniform wind; worst: noise and wind at ±bound, random sign")  # fmt: skip
     p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled")
+    p.add_argument("--objective", choices=list(OBJECTIVES), default=DEFAULT_OBJECTIVE,
+                   help="trace: the paper's trace(P); fault: trace(diag(1, 1, 10)·P), aimed at the fault bound")  # fmt: skip
     p.add_argument("--seed", type=int, default=0)
 
 
@@ -88,7 +91,7 @@ def cmd_run(a: argparse.Namespace) -> int:
     from netsetest.runtime.report import exit_code, format_table, write_outputs
 
     sc = load_topology(a.topology, a.case, a.steps)
-    res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet)
+    res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet, objective=a.objective)
     write_outputs(res.summary, res.meta, res.parts, a.record, a.summary_json)
     print(format_table(res.summary))
     return exit_code(res.summary)

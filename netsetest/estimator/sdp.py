@@ -45,6 +45,7 @@ from typing import Literal
 
 import numpy as np
 
+from netsetest.estimator.objective import BANK_FAULT_WEIGHT, FAULT_WEIGHT, OBJECTIVES, Objective
 from netsetest.estimator.sector import (
     FaultBound, Sector, derive_sector, measurement_interval, prior_interval, propagated_interval,
 )  # fmt: skip
@@ -53,11 +54,8 @@ from netsetest.models.vehicle import N_RULES, TSModel
 
 Variant = Literal["scheduled", "per-rule"]
 Backend = Literal["clarabel", "cvxpy"]
-Objective = Literal["trace", "fault"]
 Status = Literal["ok", "fallback"]
 BACKENDS = ("clarabel", "cvxpy")
-OBJECTIVES = ("trace", "fault")
-FAULT_WEIGHT = 10.0  # objective "fault": minimise trace(diag(1, 1, FAULT_WEIGHT)·P) (measured in docs/estimator.md)
 
 
 @dataclass(frozen=True)
@@ -110,6 +108,12 @@ class StepResult:
     solver_status: str
     L: np.ndarray = field(default_factory=lambda: np.zeros((NA, 1)))
     sector: Sector | None = None  # the own sensor's sector of this step (None: no saturation modelled)
+    published: StepResult | None = None  # objective ``bank``: the set to publish (None: this one)
+
+    @property
+    def public(self) -> StepResult:
+        """What the node publishes: ``published`` if the bank made one, else this set."""
+        return self.published if self.published is not None else self
 
 
 @dataclass(frozen=True)
@@ -255,6 +259,7 @@ class LocalEstimator:
         self._patterns: dict[tuple, _Pattern] = {}
         # objective weight: trace(D P) is trace(P') for P' = D^½ P D^½ (a congruence of the LMI)
         self._wh = np.sqrt(np.array([1.0, 1.0, FAULT_WEIGHT])) if objective == "fault" else None
+        self._wh_pub = np.sqrt(np.array([1.0, 1.0, BANK_FAULT_WEIGHT])) if objective == "bank" else None
 
     def pattern(self, phi_from: frozenset[int], phi_new: bool, predict: bool = True) -> _Pattern:
         """Layout and solver for the neighbours in ``phi_from`` (and φ⁺ if ``phi_new``) having a φ slot."""
@@ -419,9 +424,10 @@ class LocalEstimator:
     def step(self, prev: Ellipsoid, inp: StepInput) -> StepResult:
         sector = self.own_sector(prev, inp)
         data = self.step_data(prev, inp, sector)
-        res = self._solve_certify(data, prev.rho, np.asarray(inp.alpha, dtype=float))
+        alpha = np.asarray(inp.alpha, dtype=float)
+        res = self._solve_certify(data, prev.rho, alpha, self._wh)
         if res is not None:
-            return res
+            return self._bank(res, data, prev.rho, alpha)
         own = dataclasses.replace(self.own, saturated=sector is not None and sector.has_phi, h1=sector.h1 if sector else self.own.h1)
         P_fb = fallback_shape(data, own, inp.gamma, self.W, inp.alpha, self.model) / prev.rho
         return StepResult(data["x_pred"].copy(), P_fb, "fallback", np.nan, data["solve_ms"], data["solver_status"], sector=sector)
@@ -430,22 +436,35 @@ class LocalEstimator:
         """Step 0: the prior updated by ỹ₀, certified like every step; ``fallback``: the prior itself."""
         sector = self.initial_sector(prior, y, gamma)
         data = self.initial_data(prior, y, gamma, sector)
-        res = self._solve_certify(data, prior.rho, np.ones(1))
+        res = self._solve_certify(data, prior.rho, np.ones(1), self._wh)
         if res is not None:
-            return res
+            return self._bank(res, data, prior.rho, np.ones(1))
         return StepResult(prior.xhat.copy(), prior.P.copy(), "fallback", np.nan, data["solve_ms"], data["solver_status"], sector=sector)
 
-    def _solve_certify(self, data: dict, rho: float, alpha: np.ndarray) -> StepResult | None:
-        """Solve the step's problem and certify the answer; None if there is no certificate."""
+    def _bank(self, res: StepResult, data: dict, rho: float, alpha: np.ndarray) -> StepResult:
+        """Objective ``bank``: add the fault-weighted set of the same step data as the one to publish."""
+        if self._wh_pub is None:
+            return res
+        solve_ms = data["solve_ms"]
+        pub = self._solve_certify(data, rho, alpha, self._wh_pub)
+        res.solve_ms = solve_ms + data["solve_ms"]
+        if pub is not None:
+            pub.solve_ms = res.solve_ms
+            res.published = pub
+        return res
+
+    def _solve_certify(self, data: dict, rho: float, alpha: np.ndarray, wh: np.ndarray | None) -> StepResult | None:
+        """Solve the step's problem for the objective trace(D P), D^½ = diag(wh) (None: trace P), and
+        certify the answer; None if there is no certificate."""
         pat = self._patterns[data["key"]]
         t0 = time.perf_counter()
-        sol = pat.solver.solve(self._weighted(data) if self._wh is not None else data, rho)  # type: ignore[attr-defined]
+        sol = pat.solver.solve(self._weighted(data, wh) if wh is not None else data, rho)  # type: ignore[attr-defined]
         data["solve_ms"] = 1e3 * (time.perf_counter() - t0)
         data["solver_status"] = sol.status
         if sol.P is None:
             return None
-        if self._wh is not None:  # back from P' = D^½ P D^½, L' = D^½ L
-            wi = 1.0 / self._wh
+        if wh is not None:  # back from P' = D^½ P D^½, L' = D^½ L
+            wi = 1.0 / wh
             sol = Solution(wi[:, None] * sol.P * wi[None, :], [wi[:, None] * L for L in sol.L], sol.tau, sol.status, sol.iterations)
         if len(sol.L) == 1:
             L, tau, pi0 = sol.L[0], sol.tau[0], data["pi0"][0]
@@ -461,9 +480,10 @@ class LocalEstimator:
         xhat_new = data["x_pred"] + L[:, 0] * data["innov_sum"]
         return StepResult(xhat_new, P_pub, "ok", rho_c, data["solve_ms"], sol.status, L, data["sector"])
 
-    def _weighted(self, data: dict) -> dict:
-        """The step's data for the objective trace(D P): Π₀ and the P-row scaling by D^½."""
-        wh = self._wh[:, None]  # type: ignore[index]
+    @staticmethod
+    def _weighted(data: dict, wh: np.ndarray) -> dict:
+        """The step's data for the objective trace(D P), D^½ = diag(wh): Π₀ and the P-row scaling by D^½."""
+        wh = wh[:, None]
         return {**data, "pi0": [wh * p for p in data["pi0"]], "Mi": wh * data["Mi"]}
 
 

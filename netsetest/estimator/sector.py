@@ -32,6 +32,7 @@ import numpy as np
 from netsetest.models.sensor import NX, Sensor
 
 SATURATION_UPPER_SLOPE = 1.0  # sup σ(r)/r of a saturation: the exact h2
+ROUNDING_MARGIN = 1e-9  # relative widening of the measurement interval against floating-point rounding
 SectorBasis = Literal["none", "measurement", "fault-bound", "assumed"]
 
 
@@ -78,9 +79,13 @@ UNBOUNDED = Interval(-math.inf, math.inf)
 
 def measurement_interval(sensor: Sensor, y: float, gamma: float) -> Interval:
     """r ∈ this interval for every r with γσ(r) + Dv v = y, v² ≤ R (one-sided where σ is at the limit)."""
-    half = abs(sensor.Dv) * math.sqrt(sensor.R)
+    # widened for rounding: with v at its bound a saturated reading puts s_hi at r_max up to one ulp,
+    # and a one-ulp "below the limit" would wrongly prove that the sensor does not saturate (seen
+    # with worst-case signals)
+    half = abs(sensor.Dv) * math.sqrt(sensor.R) * (1 + ROUNDING_MARGIN) + ROUNDING_MARGIN * abs(y)
     s_lo, s_hi = (y - half) / gamma, (y + half) / gamma
-    return Interval(s_lo if s_lo > -sensor.r_max else -math.inf, s_hi if s_hi < sensor.r_max else math.inf)
+    limit = sensor.r_max * (1 - ROUNDING_MARGIN)
+    return Interval(s_lo if s_lo > -limit else -math.inf, s_hi if s_hi < limit else math.inf)
 
 
 def _support(g: np.ndarray, P: np.ndarray, rho: float) -> float:

@@ -148,16 +148,15 @@ class Node:
         itself if that fails).  Rejoin: see :mod:`netsetest.estimator.rejoin`."""
         if inp.step == 0:
             res = self.estimator.first(Ellipsoid(self.xhat, self.P, self.rho), inp.y, inp.gamma)
-            self.xhat, self.P = res.xhat, res.P
             status = "init" if res.status == "ok" else "init-prior"
             self._publish(inp, status, res, used=[], missing=[])
             return True
         have = self.inbox.get(inp.step, {})
         if not have:
             return False  # wait for a neighbour's ellipsoid of this step
-        self.xhat, self.P = rejoin_ellipsoid(self.cfg.sensor, inp.y, inp.gamma, self.rho, list(have.values()))
+        xhat, P = rejoin_ellipsoid(self.cfg.sensor, inp.y, inp.gamma, self.rho, list(have.values()))
         sector = derive_sector(self.cfg.sensor, FaultBound(), measurement_interval(self.cfg.sensor, inp.y, inp.gamma), None)
-        res = StepResult(self.xhat, self.P, "ok", float("nan"), 0.0, "rejoin", sector=sector)
+        res = StepResult(xhat, P, "ok", float("nan"), 0.0, "rejoin", sector=sector)
         self._publish(inp, "rejoin", res, used=sorted(have), missing=[])
         return True
 
@@ -169,16 +168,19 @@ class Node:
         alpha = self.sc.model.weights(inp.vx_prev)  # type: ignore[arg-type]
         step_in = StepInput(alpha, inp.u_prev, inp.y, inp.gamma, neigh)  # type: ignore[arg-type]
         res = self.estimator.step(Ellipsoid(self.xhat, self.P, self.rho), step_in)
-        self.xhat, self.P = res.xhat, res.P
         self._publish(inp, res.status, res, used=sorted(j for j in neigh if j != self.id), missing=self.missing())
 
     def _publish(self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int]) -> None:
-        innov = float(inp.y - self.cfg.sensor.Cbar @ self.xhat)
+        """Keep ``res`` as the node's own set (its next step starts from it) and publish ``res.public``."""
+        self.xhat, self.P = res.xhat, res.P
         sector = res.sector
-        self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, innov, sector)
-        rho_cert = res.rho_cert if np.isfinite(res.rho_cert) else None
+        cbar = self.cfg.sensor.Cbar
+        self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, float(inp.y - cbar @ self.xhat), sector)
+        pub = res.public
+        innov = float(inp.y - cbar @ pub.xhat)
+        rho_cert = pub.rho_cert if np.isfinite(pub.rho_cert) else None
         msg = NodeState(
-            step=inp.step, node=self.id, xhat=[float(a) for a in self.xhat], P=[float(a) for a in self.P.reshape(NA * NA)],
+            step=inp.step, node=self.id, xhat=[float(a) for a in pub.xhat], P=[float(a) for a in pub.P.reshape(NA * NA)],
             rho=self.rho, gamma=inp.gamma, innov=innov, status=status, rho_cert=rho_cert,  # type: ignore[arg-type]
             solve_ms=res.solve_ms, used=used, missing=missing,
             late=inp.deadline is not None and time.time() > inp.deadline, dropped=sum(self.bus.dropped.values()),
