@@ -257,6 +257,7 @@ class LocalEstimator:
         self._own_cbar = own.Cbar
         self._gains: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
         self._patterns: dict[tuple, _Pattern] = {}
+        self.last_iterations = 0  # of the last solve (bench)
         # objective weight: trace(D P) is trace(P') for P' = D^½ P D^½ (a congruence of the LMI)
         self._wh = np.sqrt(np.array([1.0, 1.0, FAULT_WEIGHT])) if objective == "fault" else None
         self._wh_pub = np.sqrt(np.array([1.0, 1.0, BANK_FAULT_WEIGHT])) if objective == "bank" else None
@@ -461,6 +462,7 @@ class LocalEstimator:
         sol = pat.solver.solve(self._weighted(data, wh) if wh is not None else data, rho)  # type: ignore[attr-defined]
         data["solve_ms"] = 1e3 * (time.perf_counter() - t0)
         data["solver_status"] = sol.status
+        self.last_iterations = sol.iterations
         if sol.P is None:
             return None
         if wh is not None:  # back from P' = D^½ P D^½, L' = D^½ L
