@@ -152,7 +152,10 @@ def derive_sector(sensor: Sensor, bound: FaultBound, meas: Interval, prior: Inte
     if rng.radius <= sensor.r_max:
         return Sector(1.0, 0.0, basis)
     h1 = sensor.r_max / rng.radius
-    return Sector(h1, SATURATION_UPPER_SLOPE - h1, basis)
+    h2 = SATURATION_UPPER_SLOPE
+    if rng.lo > 0.0 or rng.hi < 0.0:  # one sign of r: σ(r)/r ≤ r_max/min|r| (a reading at the limit)
+        h2 = min(h2, sensor.r_max / min(abs(rng.lo), abs(rng.hi)))
+    return Sector(h1, h2 - h1, basis)
 
 
 def sector_ok(sensor: Sensor, sector: Sector | None, r: float) -> bool:
