@@ -189,7 +189,7 @@ class Collector:
             )
             record_nodes[str(i)] = entries
         summary = {
-            **{k: meta[k] for k in ("mode", "variant", "case", "signals", "steps", "seed", "clock") if k in meta},
+            **{k: meta[k] for k in ("mode", "variant", "objective", "case", "signals", "steps", "seed", "clock") if k in meta},
             "violations_total": sum(r["violations"] for r in node_rows),
             "misses_assumption_broken_total": sum(r["misses_assumption_broken"] for r in node_rows),
             "guaranteed_steps_total": sum(r["guaranteed_steps"] for r in node_rows),
