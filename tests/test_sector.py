@@ -247,3 +247,26 @@ def test_bank_recurs_on_the_trace_sets_and_publishes_a_narrower_fault_bound():
         np.testing.assert_allclose(bank.xhat, trace.xhat, rtol=1e-12, atol=1e-15)
         assert bank.published.P[2, 2] < trace.P[2, 2]
         assert np.trace(bank.published.P) >= np.trace(trace.P) * (1 - 1e-6)  # trace-optimal is optimal
+
+
+@pytest.mark.parametrize("case,sector,dropped", [("saim", None, True), ("saim", (0.5, 0.5), False), ("nsnim", (0.5, 0.5), True), ("nsnim", None, False)])
+def test_a_neighbour_sector_that_contradicts_the_topology_is_dropped(case, sector, dropped):
+    """A saturating sensor always publishes its sector, a sensor without saturation never does."""
+    from netsetest.bus import keys
+    from netsetest.bus.base import MemoryBus
+    from netsetest.messages import NodeState
+    from netsetest.roles.node import Node
+
+    sc = load_topology(PAPER6, case)
+    bus = MemoryBus()
+    node = Node(sc, 1, bus, "t")
+    msg = NodeState(
+        step=0, node=2, xhat=[0.0, 0.1, 0.0], P=[0.3, 0, 0, 0, 0.3, 0, 0, 0, 0.3], rho=1.0, gamma=1.0, innov=0.0,
+        status="init", sector=sector, sector_basis="measurement" if sector else "none",
+    )  # fmt: skip
+    bus.publish(keys.node_state("t", 2), msg)
+    bus.pump()
+    assert (bus.dropped["sector-mismatch"] == 1) == dropped
+    assert (2 in node.inbox.get(0, {})) != dropped
+    if not dropped and sector is not None:
+        assert node.inbox[0][2].sector.h1 == 0.5 and node.inbox[0][2].has_phi
