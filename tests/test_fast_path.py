@@ -45,7 +45,14 @@ def _estimator(sc, i, variant="scheduled", backend="clarabel"):
 
 
 def _data(est, args):
-    """The step data of a captured step (prev, inp), with the step's own sector."""
+    """The step data of a captured step (prev, inp) as the node builds it (own reading interval, sectors)."""
+    prev, inp = args
+    return est.step_data(prev, inp, *est._own_range(prev, inp))
+
+
+def _sector_data(est, args):
+    """The same step with the own sensor's sector fact instead of its reading interval (as for an
+    assumed sector): the φ⁺ slot and the clique decomposition."""
     prev, inp = args
     return est.step_data(prev, inp, est.own_sector(prev, inp))
 
@@ -162,7 +169,7 @@ def test_clique_decomposition_sums_to_the_lmi(saim_steps):
     checked = 0
     for node, args in saim_steps[::-1]:
         est = _estimator(sc, node)
-        data = _data(est, args)
+        data = _sector_data(est, args)
         if data["lay"].phi_new is None or checked == 6:
             continue  # decomposed only where the own sensor has a φ slot
         checked += 1

@@ -47,7 +47,7 @@ import numpy as np
 
 from netsetest.estimator.objective import BANK_FAULT_WEIGHT, FAULT_WEIGHT, OBJECTIVES, Objective
 from netsetest.estimator.sector import (
-    FaultBound, Sector, derive_sector, measurement_interval, prior_interval, propagated_interval,
+    FaultBound, Interval, Sector, derive_sector, measurement_interval, prior_interval, propagated_interval,
 )  # fmt: skip
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.vehicle import N_RULES, TSModel
@@ -308,12 +308,20 @@ class LocalEstimator:
 
     def own_sector(self, prev: Ellipsoid, inp: StepInput) -> Sector | None:
         """The own sensor's sector of step k+1 (docs/estimator.md, "Adaptive sector")."""
+        return self._own_range(prev, inp)[0]
+
+    def _own_range(self, prev: Ellipsoid, inp: StepInput) -> tuple[Sector | None, Interval | None]:
+        """The own sector of step k+1 and, where it is derived and the sensor may saturate, the proven
+        interval of r⁺ = C̄ x̄⁺ (the step then uses it as the measurement; see ``step_data``)."""
         if not self.own.saturated:
-            return None
+            return None, None
         a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
         meas = measurement_interval(self.own, inp.y, inp.gamma)
         prop = propagated_interval(self.own, self.fault_bound, prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W)
-        return derive_sector(self.own, self.fault_bound, meas, prop)
+        sector = derive_sector(self.own, self.fault_bound, meas, prop)
+        if sector is None or not sector.has_phi or sector.basis == "assumed":
+            return sector, None
+        return sector, (meas & prop if sector.basis == "fault-bound" else meas)
 
     def initial_sector(self, prior: Ellipsoid, y: float, gamma: float) -> Sector | None:
         """The own sensor's sector of step 0: the prior (Assumption 1), |f₀| ≤ F and the measurement."""
@@ -322,16 +330,24 @@ class LocalEstimator:
         meas = measurement_interval(self.own, y, gamma)
         return derive_sector(self.own, self.fault_bound, meas, prior_interval(self.own, self.fault_bound, prior.xhat, prior.P, prior.rho))
 
-    def step_data(self, prev: Ellipsoid, inp: StepInput, sector: Sector | None) -> dict:
-        """Π₀ (per rule), ℓ, the facts Q_m and the L-free part of x̂⁺, as plain arrays."""
+    def step_data(self, prev: Ellipsoid, inp: StepInput, sector: Sector | None, reading: Interval | None = None) -> dict:
+        """Π₀ (per rule), ℓ, the facts Q_m and the L-free part of x̂⁺, as plain arrays.
+
+        ``reading``: a proven interval [lo, hi] ∋ r⁺ used as the own measurement instead of the sector:
+        r⁺ = m + Dv' v with m its centre, Dv' = (hi − lo)/(2√R) and v² ≤ R (so Θ = [E; C̄], no φ⁺).
+        """
         own = self.own
         neigh = inp.neigh
         phi_from = frozenset(j for j in self.sensors if j in neigh and neigh[j].has_phi)
-        phi_new = sector is not None and sector.has_phi
+        phi_new = sector is not None and sector.has_phi and reading is None
         pat = self.pattern(phi_from, phi_new)
         lay, d = pat.lay, pat.lay.dim
+        y_new, gamma_new, dv_new = inp.y, inp.gamma, own.Dv
         h1_new = sector.h1 if sector is not None else own.h1
-        T, G = self.descriptor_gains(inp.gamma, h1_new)
+        if reading is not None:
+            y_new, gamma_new, h1_new = 0.5 * (reading.lo + reading.hi), 1.0, 1.0
+            dv_new = 0.5 * (reading.hi - reading.lo) / np.sqrt(own.R)
+        T, G = self.descriptor_gains(gamma_new, h1_new)
         g = G[:, 0]
         Mi = np.sqrt(prev.rho) * _chol(prev.P)  # ρ_i^½ M_i
         alpha = np.asarray(inp.alpha, dtype=float)
@@ -349,13 +365,13 @@ class LocalEstimator:
             pi0 = np.zeros((N_RULES, NA, d))
             pi0[:, :, lay.z] = T @ self._abar @ Mi
             pi0[:, :, lay.w] = self._dbar @ T.T
-        pi0[:, :, lay.v_new] = -g * own.Dv
+        pi0[:, :, lay.v_new] = -g * dv_new
         if lay.phi_new is not None:
-            pi0[:, :, lay.phi_new] = -g * inp.gamma
+            pi0[:, :, lay.phi_new] = -g * gamma_new
 
         ell, facts = self._innovations(lay, pat.balls, neigh, Mi)
         # L-free part of the centre; the blended matrices are exact for the truth in both variants
-        x_pred = TA @ prev.xhat + (T @ bb) * inp.u + g * inp.y
+        x_pred = TA @ prev.xhat + (T @ bb) * inp.u + g * y_new
         if lay.phi_new is not None:
             cbar = self._own_cbar
             cg = float(cbar @ g)
@@ -363,12 +379,13 @@ class LocalEstimator:
             g_new[0] = cbar @ x_pred
             g_new[lay.z] = cbar @ TA @ Mi
             g_new[lay.w] = cbar @ Td
-            g_new[lay.v_new] = -cg * own.Dv
-            g_new[lay.phi_new] = -cg * inp.gamma
+            g_new[lay.v_new] = -cg * dv_new
+            g_new[lay.phi_new] = -cg * gamma_new
             facts.append(_sector(d, lay.phi_new, g_new, sector.h))  # type: ignore[union-attr]
         innov_sum = sum(self.weights[j] * neigh[j].innov for j in lay.neigh if j in neigh)
         return {"pi0": list(pi0), "ell": ell, "facts": facts, "x_pred": x_pred, "innov_sum": float(innov_sum),
-                "T": T, "G": G, "Mi": Mi, "lay": lay, "key": (phi_from, phi_new, True), "sector": sector}  # fmt: skip
+                "T": T, "G": G, "Mi": Mi, "lay": lay, "key": (phi_from, phi_new, True), "sector": sector,
+                "own_meas": dataclasses.replace(own, Dv=dv_new, saturated=phi_new, h1=h1_new), "gamma": gamma_new}  # fmt: skip
 
     def _innovations(
         self, lay: EtaLayout, balls: list[np.ndarray], neigh: dict[int, NeighbourState], Mi: np.ndarray, weights: dict[int, float] | None = None
@@ -423,14 +440,13 @@ class LocalEstimator:
     # ------------------------------------------------------------------ one step
 
     def step(self, prev: Ellipsoid, inp: StepInput) -> StepResult:
-        sector = self.own_sector(prev, inp)
-        data = self.step_data(prev, inp, sector)
+        sector, reading = self._own_range(prev, inp)
+        data = self.step_data(prev, inp, sector, reading)
         alpha = np.asarray(inp.alpha, dtype=float)
         res = self._solve_certify(data, prev.rho, alpha, self._wh)
         if res is not None:
             return self._bank(res, data, prev.rho, alpha)
-        own = dataclasses.replace(self.own, saturated=sector is not None and sector.has_phi, h1=sector.h1 if sector else self.own.h1)
-        P_fb = fallback_shape(data, own, inp.gamma, self.W, inp.alpha, self.model) / prev.rho
+        P_fb = fallback_shape(data, data["own_meas"], data["gamma"], self.W, inp.alpha, self.model) / prev.rho
         return StepResult(data["x_pred"].copy(), P_fb, "fallback", np.nan, data["solve_ms"], data["solver_status"], sector=sector)
 
     def first(self, prior: Ellipsoid, y: float, gamma: float) -> StepResult:
