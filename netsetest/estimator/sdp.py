@@ -26,6 +26,14 @@ S-procedure and Schur complement give the LMI (one per rule in ``per-rule``)
 
 and then (x̄⁺ − x̂⁺)ᵀ P⁻¹ (x̄⁺ − x̂⁺) ≤ ρ_i.
 
+Per step (docs/estimator.md): the own sensor's sector is derived from the node's certified set, the
+wind bound, its reading and the declared fault bound (:mod:`netsetest.estimator.sector`); neighbours'
+sectors come with their messages, so which φ slots exist changes per step (one layout and solver per
+pattern).  Where the own sector is derived and the sensor may saturate, the proven interval of r⁺ is
+used as the measurement instead of the φ⁺ sector fact.  Step 0 updates the prior with ỹ₀
+(:meth:`LocalEstimator.first`).  The objective is trace(D P) (a congruence of the LMI); ``bank`` solves
+each step twice and publishes the fault-weighted set while recurring on the trace-optimal one.
+
 Two backends solve it.  ``clarabel`` (the default, :mod:`netsetest.estimator.conic`) assembles an
 exactly equivalent, smaller conic problem for Clarabel directly from the step data (Π₀, ℓ, Q_m) and
 maps its answer back to (P, L, τ) of the LMI above; ``cvxpy`` builds the LMI as written once from cvxpy
