@@ -270,3 +270,21 @@ def test_a_neighbour_sector_that_contradicts_the_topology_is_dropped(case, secto
     assert (2 in node.inbox.get(0, {})) != dropped
     if not dropped and sector is not None:
         assert node.inbox[0][2].sector.h1 == 0.5 and node.inbox[0][2].has_phi
+
+
+# Mean fault width 2√(ρP₃₃) over steps 10–80 per node, paper NSNIM, seed 0, computed with the estimator
+# before this change (commit 1d06549: fixed paper objective, step 0 published the prior).
+PAPER_OBJECTIVE_WIDTHS_FROM_STEP_10 = {1: 0.11532, 2: 0.14868, 3: 0.08519, 4: 0.10658, 5: 0.09697, 6: 0.10223}
+
+
+def test_trace_objective_reproduces_the_previous_numbers():
+    """``--objective trace`` is the paper's objective: from step 10 (when step 0's use of y₀ has no lasting
+    effect: y₀ says almost nothing about x while f is free) the widths are the previous estimator's."""
+    sc = load_topology(PAPER6, "nsnim")
+    res = run_inmemory(sc, "paper", "scheduled", 0, objective="trace")
+    bank = run_inmemory(sc, "paper", "scheduled", 0)  # the default
+    for node, entries in res.parts["nodes"].items():
+        w = np.mean([2 * math.sqrt(e["rho"] * e["P"][8]) for e in entries[10:]])
+        assert w == pytest.approx(PAPER_OBJECTIVE_WIDTHS_FROM_STEP_10[int(node)], rel=2e-4)
+        wb = np.mean([2 * math.sqrt(e["rho"] * e["P"][8]) for e in bank.parts["nodes"][node][10:]])
+        assert wb < 0.9 * w  # the default publishes markedly narrower fault bounds
