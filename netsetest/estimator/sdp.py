@@ -53,7 +53,7 @@ from typing import Literal
 
 import numpy as np
 
-from netsetest.estimator.objective import BANK_FAULT_WEIGHT, FAULT_WEIGHT, OBJECTIVES, Objective
+from netsetest.estimator.objective import BANK_FAULT_WEIGHT, DEFAULT_OBJECTIVE, FAULT_WEIGHT, OBJECTIVES, Objective
 from netsetest.estimator.sector import (
     FaultBound, Interval, Sector, derive_sector, measurement_interval, prior_interval, propagated_interval,
 )  # fmt: skip
@@ -240,7 +240,7 @@ class LocalEstimator:
         variant: Variant = "scheduled",
         backend: Backend = "clarabel",
         fault_bound: FaultBound = FaultBound(),
-        objective: Objective = "trace",
+        objective: Objective = DEFAULT_OBJECTIVE,
     ) -> None:
         if variant not in ("scheduled", "per-rule"):
             raise ValueError(f"variant must be 'scheduled' or 'per-rule', got {variant!r}")

@@ -17,6 +17,7 @@ import numpy as np
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import Scenario
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE
 from netsetest.estimator.rejoin import rejoin_ellipsoid
 from netsetest.estimator.sdp import Ellipsoid, LocalEstimator, NeighbourState, Objective, StepInput, StepResult, Variant
 from netsetest.estimator.sector import FaultBound, Sector, derive_sector, measurement_interval
@@ -31,7 +32,7 @@ LATE_START_EVIDENCE = 3  # inputs of later steps and none of step 0: the run sta
 class Node:
     def __init__(
         self, scenario: Scenario, node_id: int, bus: Bus, run_id: str, variant: Variant = "scheduled", rejoin: bool = False,
-        objective: Objective = "trace",
+        objective: Objective = DEFAULT_OBJECTIVE,
     ) -> None:  # fmt: skip
         self.sc, self.bus, self.run = scenario, bus, run_id
         self.cfg = scenario.node(node_id)
