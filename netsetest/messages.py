@@ -22,6 +22,8 @@ NodeId = Annotated[int, Field(ge=1, strict=True)]
 Vec3 = Annotated[list[FiniteF], Field(min_length=3, max_length=3)]
 Vec2 = Annotated[list[FiniteF], Field(min_length=2, max_length=2)]
 Mat3 = Annotated[list[FiniteF], Field(min_length=9, max_length=9)]
+SectorH1 = Annotated[float, Field(gt=0, le=1, allow_inf_nan=False, strict=True)]
+SectorH = Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)]
 
 
 class BadMessage(ValueError):
@@ -80,13 +82,17 @@ class NodeState(_Msg):
     rho: Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)]
     gamma: Annotated[float, Field(gt=0, le=1, strict=True)]
     innov: FiniteF
-    status: Literal["init", "ok", "fallback", "rejoin"]
+    status: Literal["init", "init-prior", "ok", "fallback", "rejoin"]  # init: prior ⊕ ỹ₀; init-prior: the prior
     rho_cert: FiniteF | None = None
     solve_ms: Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)] = 0.0
     used: list[NodeId] = []  # neighbours j ≠ i whose message entered this step
     missing: list[NodeId] = []  # expected neighbours whose message did not arrive in time
     late: bool = False  # real-time clock: finished after its deadline
     dropped: Annotated[int, Field(ge=0, strict=True)] = 0  # messages this node has dropped so far
+    # the own sensor's sector of this step, (h1_k, h_k): φ = σ(r) − h1·r ∈ [0, h·r]; h = 0: no saturation
+    # at this step; None: the sensor models no saturation.  sector_basis: what it rests on (estimator/sector.py)
+    sector: tuple[SectorH1, SectorH] | None = None
+    sector_basis: Literal["none", "measurement", "fault-bound", "assumed"] = "none"
 
     @model_validator(mode="after")
     def _shape_spd(self) -> NodeState:
@@ -117,7 +123,9 @@ class Truth(_Msg):
     gamma: dict[str, FiniteF]
     y: dict[str, FiniteF]
     y_nofault: dict[str, FiniteF]
-    sector_ok: dict[str, bool]  # |C̄_i x̄_i,k| ≤ r_max/h1
+    sector_ok: dict[str, bool]  # |C̄_i x̄_i,k| ≤ r_max/h1 of the profile (the paper's fixed sector)
+    r: dict[str, FiniteF] = {}  # C̄_i x̄_i,k: the collector checks each node's published sector with it
+    fault_ok: dict[str, bool] = {}  # the declared fault bound held: |f_k − f_k−1| ≤ δ_i, |f_k| ≤ F_i
     noise_ok: dict[str, bool]  # v_i,k² ≤ R_i
     dist_ok: bool  # w_k² ≤ W
     lost: list[tuple[NodeId, NodeId]] = []  # (from j, to i): j's step k−1 message to i lost

@@ -156,12 +156,6 @@ def test_a_shrunk_record_is_reported_narrower(tmp: str) -> None:
     _run.cache_clear()  # the record object was changed in place
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="main's SAIM estimator assumes the fixed sector |C̄x̄| ≤ r_max/h1 instead of the declared fault "
-    "bound (issue 8 item 1), so it can publish narrower than the fault-bound exact set; remove this marker "
-    "when the adaptive sector is merged",
-)
 @pytest.mark.parametrize(("signals", "seed"), [("paper", 0), ("worst", 1)])
 def test_saim_record_never_narrower_than_exact(signals: str, seed: int, tmp: str) -> None:
     sc, rec = _run("saim", signals, seed, tmp)

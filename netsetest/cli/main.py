@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 
 from netsetest.analysis.errors import ExactError
 from netsetest.config.schema import ConfigError
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.extras import MissingExtra, require
 from netsetest.records.record import RecordError, check_record_path
 from netsetest.runtime.report import EXIT_BAD_INPUT
@@ -32,6 +33,7 @@ def _run_args(p: argparse.ArgumentParser) -> None:
                    help="paper: cos noise and uniform wind; worst: noise and wind at ±bound, random sign")  # fmt: skip
     p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled",
                    help="estimator: one SDP with the scheduled model, or one per T-S rule")  # fmt: skip
+    p.add_argument("--objective", choices=list(OBJECTIVES), default=DEFAULT_OBJECTIVE, help=OBJECTIVE_HELP)
     p.add_argument("--seed", type=int, default=0, help="random seed of noise, wind and losses")
 
 
@@ -136,7 +138,7 @@ def cmd_run(a: argparse.Namespace) -> int:
     from netsetest.runtime.report import exit_code, format_table, write_outputs
 
     sc = load_topology(a.topology, a.case, a.steps)
-    res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet)
+    res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet, objective=a.objective)
     write_outputs(res.summary, res.meta, res.parts, a.record, a.summary_json)
     print(format_table(res.summary))
     return exit_code(res.summary)

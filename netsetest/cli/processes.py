@@ -22,6 +22,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
@@ -89,6 +90,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
     scenario_args(p)
     p.add_argument("--id", type=int, required=True, help="node id in the topology")
     p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled", help="estimator: one SDP with the scheduled model, or one per T-S rule")
+    p.add_argument("--objective", choices=list(OBJECTIVES), default=DEFAULT_OBJECTIVE, help=OBJECTIVE_HELP)
     p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep", help="lockstep: wait for neighbours; realtime: step on the vehicle's input")
     p.add_argument("--neighbour-timeout", type=_seconds, default=5.0, metavar="S", help="lockstep: how long [s] to wait for a neighbour's message")
     p.add_argument("--rejoin", action="store_true", help="join a running network (after a crash or restart)")
@@ -156,7 +158,7 @@ def cmd_node(a: argparse.Namespace) -> int:
 
     def body(sc, bus) -> int:  # noqa: ANN001
         sc.node(a.id)  # unknown id → ConfigError, exit 2
-        return run_node(sc, a.id, bus, a.run_id, a.variant, a.clock == "realtime", a.neighbour_timeout, a.rejoin)
+        return run_node(sc, a.id, bus, a.run_id, a.variant, a.clock == "realtime", a.neighbour_timeout, a.rejoin, a.objective)
 
     return _role(f"node {a.id}", a, body)
 
@@ -167,7 +169,7 @@ def cmd_collector(a: argparse.Namespace) -> int:
     from netsetest.runtime.report import format_table
 
     def body(sc, bus) -> int:  # noqa: ANN001
-        meta = run_meta(sc, "zenoh", a.clock, a.signals, a.variant, a.seed, a.run_id)
+        meta = run_meta(sc, "zenoh", a.clock, a.signals, a.variant, a.seed, a.run_id, a.objective)
         show = None if a.progress else (lambda s: print(format_table(s), flush=True))
         return run_collector(sc, bus, a.run_id, meta, a.record, a.summary_json, a.progress, a.idle_timeout, show)
 
@@ -301,7 +303,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
                 progress[0] = int(line.split()[1])
 
     def node_argv(i: int, rejoin: bool) -> list[str]:
-        argv = ["node", *common, "--id", str(i), "--variant", a.variant, "--clock", a.clock,
+        argv = ["node", *common, "--id", str(i), "--variant", a.variant, "--objective", a.objective, "--clock", a.clock,
                 "--neighbour-timeout", str(a.neighbour_timeout), *net(f"node{i}")]  # fmt: skip
         return argv + ["--rejoin"] if rejoin else argv
 
@@ -312,7 +314,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
     try:
         col = children.start(
             "collector",
-            ["collector", *common, "--signals", a.signals, "--variant", a.variant, "--seed", str(a.seed), "--clock", a.clock,
+            ["collector", *common, "--signals", a.signals, "--variant", a.variant, "--objective", a.objective, "--seed", str(a.seed), "--clock", a.clock,
              "--summary-json", summary_path, "--progress", *(["--record", a.record] if a.record else []), *net("collector")],
             stdout=subprocess.PIPE, text=True,
         )  # fmt: skip

@@ -5,7 +5,10 @@ containment when E_i,k ≤ ρ_i.  A miss is attributed by the step's *dependency
 (i, k) relies on its own sector condition and noise bound at k, the disturbance bound at k−1, and on
 every (j, k−1) with j ∈ N_i ∪ {i}; step 0 relies on the initial ellipsoid containing x̄_0
 (Assumption 1).  A miss inside an intact cone is an estimator failure (``violations``); a miss after a
-broken assumption is reported separately (``misses_assumption_broken``).
+broken assumption is reported separately (``misses_assumption_broken``).  A saturating node's sector
+premise is what its published sector rests on (``sector_basis``): the noise bound only, the declared
+fault bound, or — for an assumed sector — the sector itself checked against the truth's C̄ x̄.  A derived
+sector that misses the truth inside an intact cone is counted as a ``sector_failure`` (an estimator bug).
 """
 
 from __future__ import annotations
@@ -17,7 +20,8 @@ import numpy as np
 
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
-from netsetest.config.schema import Scenario
+from netsetest.config.schema import NodeConfig, Scenario
+from netsetest.estimator.sector import Sector, sector_ok
 from netsetest.messages import End, Message, NodeState, Truth
 
 
@@ -68,16 +72,47 @@ class Collector:
 
     # ------------------------------------------------------------------ attribution and summary
 
+    def _published_sector(self, n: NodeConfig, k: int) -> Sector | None:
+        st = self.states[n.id].get(k)
+        if st is None or st.sector is None:
+            return None
+        return Sector(st.sector[0], st.sector[1], st.sector_basis)
+
+    def _sector_premise(self, n: NodeConfig, k: int, tr: Truth) -> bool:
+        """What the node's step-k sector rests on held: nothing more than the noise bound (measurement),
+        the declared fault bound (fault-bound), or the sector itself against the truth (assumed)."""
+        s = str(n.id)
+        st = self.states[n.id].get(k)
+        if not n.sensor.saturated:
+            return True
+        if st is None:
+            return tr.sector_ok[s]
+        if st.sector_basis == "assumed":
+            return sector_ok(n.sensor, self._published_sector(n, k), tr.r[s])
+        if st.sector_basis == "fault-bound":
+            return tr.fault_ok[s]
+        return True
+
+    def _sector_failures(self, n: NodeConfig, cones: dict[tuple[int, int], bool]) -> int:
+        """Steps whose derived sector misses the truth's r although its premises held: an estimator bug."""
+        out = 0
+        for k, st in self.states[n.id].items():
+            tr = self.truth.get(k)
+            if tr is None or not n.sensor.saturated or st.sector_basis in ("none", "assumed") or not cones.get((n.id, k), True):
+                continue
+            out += not sector_ok(n.sensor, self._published_sector(n, k), tr.r[str(n.id)])
+        return out
+
     def _cones(self) -> dict[tuple[int, int], bool]:
         ok: dict[tuple[int, int], bool] = {}
         for k in sorted(self.truth):
             tr = self.truth[k]
             for n in self.sc.nodes:
                 i, s = n.id, str(n.id)
-                own = tr.sector_ok[s] and tr.noise_ok[s]
+                own = tr.noise_ok[s] and self._sector_premise(n, k, tr)
                 if k == 0:
-                    ev = self.evaluated.get((i, 0))
-                    own = own and (ev is None or ev[1])  # Assumption 1: x̄_0 in the initial ellipsoid
+                    e = np.r_[tr.x, tr.faults[s]] - n.x0_hat  # Assumption 1: x̄_0 in the prior ellipsoid
+                    own = own and float(e @ np.linalg.solve(n.P0, e)) <= n.rho
                 else:
                     prev = self.truth.get(k - 1)
                     own = own and prev is not None and prev.dist_ok
@@ -97,6 +132,7 @@ class Collector:
                 losses[f"{j}->{i}"] += 1
         for n in self.sc.nodes:
             i = n.id
+            reported = sorted(self.states[i])
             entries, E_all, misses, broken_misses, solve, fallbacks, widths = [], [], 0, 0, [], 0, []
             late = missing_msgs = dropped = 0
             for k in sorted(self.states[i]):
@@ -124,9 +160,9 @@ class Collector:
                         "step": k, "xhat": list(st.xhat), "P": list(st.P), "rho": st.rho, "status": st.status,
                         "rho_cert": st.rho_cert, "solve_ms": st.solve_ms, "used": st.used, "missing": st.missing,
                         "late": st.late, "E": E, "contained": bool(contained), "assumptions_ok": bool(cone),
+                        "sector": list(st.sector) if st.sector is not None else None, "sector_basis": st.sector_basis,
                     }
                 )  # fmt: skip
-            reported = sorted(self.states[i])
             gone = [k for k in range(last + 1) if k not in self.states[i]]
             node_rows.append(
                 {
@@ -135,6 +171,9 @@ class Collector:
                     "violations": misses,
                     "misses_assumption_broken": broken_misses,
                     "assumption_violations": sum(1 for k in range(last + 1) if not cones.get((i, k), True)),
+                    "guaranteed_steps": sum(1 for k in reported if cones.get((i, k), True)),
+                    "sector_failures": self._sector_failures(n, cones),
+                    "sectors_assumed": sum(1 for st in self.states[i].values() if st.sector_basis == "assumed"),
                     "sector_breaks": sum(1 for t in self.truth.values() if not t.sector_ok[str(i)]),
                     "first_sector_break": min((k for k, t in self.truth.items() if not t.sector_ok[str(i)]), default=None),
                     "fault_bound_mean_width": float(np.mean(widths)) if widths else None,
@@ -150,9 +189,12 @@ class Collector:
             )
             record_nodes[str(i)] = entries
         summary = {
-            **{k: meta[k] for k in ("mode", "variant", "case", "signals", "steps", "seed", "clock") if k in meta},
+            **{k: meta[k] for k in ("mode", "variant", "objective", "case", "signals", "steps", "seed", "clock") if k in meta},
             "violations_total": sum(r["violations"] for r in node_rows),
             "misses_assumption_broken_total": sum(r["misses_assumption_broken"] for r in node_rows),
+            "guaranteed_steps_total": sum(r["guaranteed_steps"] for r in node_rows),
+            "node_steps_total": sum(r["steps_reported"] for r in node_rows),
+            "sector_failures_total": sum(r["sector_failures"] for r in node_rows),
             "steps_completed": last,
             "nodes_missing": [r["id"] for r in node_rows if r["missing_steps"]],
             "losses": dict(sorted(losses.items())),

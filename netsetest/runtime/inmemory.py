@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 from netsetest.bus.base import MemoryBus
 from netsetest.config.schema import Scenario
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.estimator.sdp import Variant
 from netsetest.models.signals import SignalKind
 from netsetest.roles.collector import Collector
@@ -21,10 +22,12 @@ class RunResult:
     parts: dict  # truth and node entries of the record
 
 
-def run_meta(scenario: Scenario, mode: str, clock: str, signals: str, variant: str, seed: int, run_id: str) -> dict:
+def run_meta(
+    scenario: Scenario, mode: str, clock: str, signals: str, variant: str, seed: int, run_id: str, objective: str = DEFAULT_OBJECTIVE
+) -> dict:
     return {
         "topology": scenario.path, "name": scenario.name, "mode": mode, "clock": clock, "case": scenario.case,
-        "signals": signals, "variant": variant, "seed": seed, "steps": scenario.steps, "tau_s": scenario.tau_s,
+        "signals": signals, "variant": variant, "objective": objective, "seed": seed, "steps": scenario.steps, "tau_s": scenario.tau_s,
         "run_id": run_id, "node_ids": scenario.ids,
         "in_weights": {str(n.id): {str(j): a for j, a in n.in_weights.items()} for n in scenario.nodes},
         "r_max": {str(n.id): (n.sensor.r_max if n.sensor.saturated else None) for n in scenario.nodes},
@@ -40,12 +43,13 @@ def run_inmemory(
     seed: int = 0,
     progress: bool = False,
     bus: MemoryBus | None = None,
+    objective: Objective = DEFAULT_OBJECTIVE,
 ) -> RunResult:
     """Run vehicle, nodes and collector in lockstep; the same role code as the Zenoh processes."""
     run_id = "mem"
     bus = bus or MemoryBus()
     vehicle = Vehicle(scenario, bus, run_id, signals, seed)
-    nodes = [Node(scenario, i, bus, run_id, variant) for i in scenario.ids]
+    nodes = [Node(scenario, i, bus, run_id, variant, objective=objective) for i in scenario.ids]
     collector = Collector(scenario, bus, run_id)
     bar = Progress(scenario.steps, "inmemory", enabled=progress)
     vehicle.advance()
@@ -67,6 +71,6 @@ def run_inmemory(
                     n.give_up = True
     bus.pump()
     bar.close()
-    meta = run_meta(scenario, "inmemory", "lockstep", signals, variant, seed, run_id)
+    meta = run_meta(scenario, "inmemory", "lockstep", signals, variant, seed, run_id, objective)
     summary, parts = collector.finish(meta)
     return RunResult(summary, meta, parts)
