@@ -33,6 +33,8 @@ FlagMap = Annotated[dict[str, bool], Field(min_length=1, max_length=MAX_NODES)]
 Drops = Annotated[
     dict[Annotated[str, Field(max_length=MAX_REASON)], Annotated[int, Field(ge=0, strict=True)]], Field(max_length=64)
 ]
+SectorH1 = Annotated[float, Field(gt=0, le=1, allow_inf_nan=False, strict=True)]
+SectorH = Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)]
 
 
 class BadMessage(ValueError):
@@ -91,7 +93,7 @@ class NodeState(_Msg):
     rho: Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)]
     gamma: Annotated[float, Field(gt=0, le=1, strict=True)]
     innov: FiniteF
-    status: Literal["init", "ok", "fallback", "rejoin"]
+    status: Literal["init", "init-prior", "ok", "fallback", "rejoin"]  # init: prior ⊕ ỹ₀; init-prior: the prior
     rho_cert: FiniteF | None = None
     solve_ms: Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)] = 0.0
     used: IdList = []  # neighbours j ≠ i whose message entered this step
@@ -99,6 +101,10 @@ class NodeState(_Msg):
     late: bool = False  # real-time clock: finished after its deadline
     dropped: Annotated[int, Field(ge=0, strict=True)] = 0  # messages this node has dropped so far
     drops: Drops = {}  # the same, by reason (cumulative)
+    # the own sensor's sector of this step, (h1_k, h_k): φ = σ(r) − h1·r ∈ [0, h·r]; h = 0: no saturation
+    # at this step; None: the sensor models no saturation.  sector_basis: what it rests on (estimator/sector.py)
+    sector: tuple[SectorH1, SectorH] | None = None
+    sector_basis: Literal["none", "measurement", "fault-bound", "assumed"] = "none"
 
     @model_validator(mode="after")
     def _shape_spd(self) -> NodeState:
@@ -129,7 +135,9 @@ class Truth(_Msg):
     gamma: NodeMap
     y: NodeMap
     y_nofault: NodeMap
-    sector_ok: FlagMap  # |C̄_i x̄_i,k| ≤ r_max/h1
+    sector_ok: FlagMap  # |C̄_i x̄_i,k| ≤ r_max/h1 of the profile (the paper's fixed sector)
+    r: Annotated[dict[str, FiniteF], Field(max_length=MAX_NODES)] = {}  # C̄_i x̄_i,k: the collector checks each node's published sector with it
+    fault_ok: Annotated[dict[str, bool], Field(max_length=MAX_NODES)] = {}  # the declared fault bound held: |f_k − f_k−1| ≤ δ_i, |f_k| ≤ F_i
     noise_ok: FlagMap  # v_i,k² ≤ R_i
     dist_ok: bool  # w_k² ≤ W
     lost: Annotated[list[tuple[NodeId, NodeId]], Field(max_length=MAX_NODES * MAX_NODES)] = []  # (j, i): j's k−1 message to i lost
@@ -143,6 +151,9 @@ class Truth(_Msg):
             raise ValueError("faults: keys must be node ids (decimal integers ≥ 1)")
         for name in ("noise", "gamma", "y", "y_nofault", "sector_ok", "noise_ok"):
             if set(getattr(self, name)) != ids:
+                raise ValueError(f"{name}: keys differ from the keys of faults")
+        for name in ("r", "fault_ok"):  # absent ({}) in records written before the derived sector
+            if getattr(self, name) and set(getattr(self, name)) != ids:
                 raise ValueError(f"{name}: keys differ from the keys of faults")
         return self
 

@@ -152,6 +152,35 @@ def test_forged_state_with_huge_innovation_is_never_used(case: str, tmp_path: Pa
     assert_record_consistent(tmp_path / "rec.jsonl", STEPS)
 
 
+@pytest.mark.parametrize("case", ["nsnim", "saim"])
+def test_honest_network_drops_nothing(case: str) -> None:
+    """The plausibility tests take each neighbour's published sector of the step (saim: derived per step):
+    no honest state is ever dropped by a node or rejected by the collector."""
+    s = clean(case).summary
+    for role, reasons in s["drops"].items():
+        assert not reasons or role == "bus", (role, reasons)  # the in-memory bus may count deliveries only
+    assert s["node_steps_rejected"] == s["node_steps_contested"] == 0
+    assert s["node_steps_covered"] == s["node_steps_evaluated"] == s["node_steps_reported"]
+
+
+def test_forged_step0_status_is_checked() -> None:
+    """A copy claiming to be the prior (``init-prior``) that is not, and an ``init`` state after step 0,
+    sent after the genuine one: the collector judges the genuine copy and drops the forgeries."""
+
+    def after(key: str, msg: Message) -> list[tuple[str, bytes]]:
+        if key == _state_key(ATTACKED) and isinstance(msg, NodeState):
+            P = [2.0 * p for p in msg.P]  # another ellipsoid, the same centre: γ and innovation still match
+            return [(key, _forged_state(msg, status="init-prior" if msg.step == 0 else "init", P=P))]
+        return []
+
+    res = _run("saim", AttackBus(after=after))
+    assert_no_false_verdict(res)
+    assert_same_estimates(res, clean("saim"))
+    s = res.summary
+    assert s["drops"]["collector"]["state-not-prior"] == STEPS + 1
+    assert s["node_steps_contested"] == 0 and s["node_steps_covered"] == clean("saim").summary["node_steps_covered"]
+
+
 def test_forged_state_far_away_is_dropped_or_harmless_and_never_judged() -> None:
     """Node 3's state moved in β (invisible to its innovation: C3 = [0, 0.18]) with a small shape. Its
     neighbours see a (β, r) set disjoint from their own; the collector sees two copies that both match
@@ -281,7 +310,7 @@ def _raw_truth(msg: Truth, **change: object) -> bytes:
 
 def test_forged_truth_is_checked_against_the_model() -> None:
     """Truths sent first that do not follow from the previous one (moved x, wrong fault, flags that do
-    not match the values), far-future ones (2**62, 1e7, inside the run but far ahead) and absurd ones
+    not match the values, a moved C̄x̄), far-future ones (2**62, 1e7, inside the run but far ahead) and absurd ones
     (empty maps, other nodes): no false violation, nothing allocated per a step it names."""
 
     def before(key: str, msg: Message) -> list[tuple[str, bytes]]:
@@ -297,7 +326,11 @@ def test_forged_truth_is_checked_against_the_model() -> None:
             (key, _raw_truth(msg, faults={}, noise={}, gamma={}, y={}, y_nofault={}, sector_ok={}, noise_ok={})),
             (key, _raw_truth(msg, faults={**s, "7": 0.0})),
             (key, encode(msg.model_copy(update={"faults": {"9": 0.0}, "noise": {"9": 0.0}, "gamma": {"9": 1.0}, "y": {"9": 0.0},
-                                                "y_nofault": {"9": 0.0}, "sector_ok": {"9": True}, "noise_ok": {"9": True}}))),  # fmt: skip
+                                                "y_nofault": {"9": 0.0}, "sector_ok": {"9": True}, "noise_ok": {"9": True},
+                                                "r": {"9": 0.0}, "fault_ok": {"9": True}}))),  # fmt: skip
+            # what the collector's cone reads for a derived sector: C̄x̄ and the fault-bound flag
+            (key, encode(msg.model_copy(update={"r": {**msg.r, "3": msg.r["3"] + 1e-3}}))),
+            (key, encode(msg.model_copy(update={"fault_ok": {**msg.fault_ok, "4": not msg.fault_ok["4"]}}))),
         ]
         if msg.step == 0:
             out.append((key, encode(msg.model_copy(update={"step": STEPS}))))  # in the run, far ahead: x unchecked yet
@@ -309,7 +342,8 @@ def test_forged_truth_is_checked_against_the_model() -> None:
     s, d = res.summary, res.summary["drops"]
     assert s["node_steps_covered"] == clean("nsnim").summary["node_steps_covered"]
     assert d["collector"]["truth-not-from-model"] >= STEPS and d["collector"]["truth-fault"] == STEPS + 1
-    assert d["collector"]["truth-flags"] == STEPS + 1 and d["collector"]["step-beyond-run"] == 2 * (STEPS + 1)
+    assert d["collector"]["truth-flags"] == 2 * (STEPS + 1) and d["collector"]["step-beyond-run"] == 2 * (STEPS + 1)
+    assert d["collector"]["truth-sensor-input"] == STEPS + 1
     assert d["collector"]["truth-wrong-nodes"] == STEPS + 1 and d["bus"]["invalid"] == 2 * (STEPS + 1)
 
 

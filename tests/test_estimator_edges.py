@@ -13,7 +13,7 @@ import pytest
 
 from netsetest.cli.main import main
 from netsetest.config.schema import load_topology
-from netsetest.estimator.sdp import FallbackUnavailable, LocalEstimator, fallback_shape, publishable
+from netsetest.estimator.sdp import Ellipsoid, FallbackUnavailable, LocalEstimator, StepInput, fallback_shape, publishable
 from netsetest.runtime.inmemory import run_inmemory
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -107,7 +107,7 @@ def _estimator_data(sc, node: int = 3):  # noqa: ANN001, ANN202
     n = sc.node(node)
     est = LocalEstimator(node, n.sensor, {j: sc.node(j).sensor for j in n.in_weights}, n.in_weights, sc.model, sc.W)
     alpha = sc.model.weights(sc.vx(0))
-    data = est.step_data(n.x0_hat, n.P0, n.rho, alpha, 0.03, 0.01, 1.0, {})
+    data = est.step_data(Ellipsoid(n.x0_hat, n.P0, n.rho), StepInput(alpha, 0.03, 0.01, 1.0, {}), None)
     return est, n, alpha, data
 
 

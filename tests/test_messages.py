@@ -33,12 +33,14 @@ MESSAGES = [
               vx_prev=100 / 3.6, expect_from=[1, 5], lost_from=[5]),  # fmt: skip
     _state(),
     _state(status="init", rho_cert=None, used=[], missing=[], late=False),
+    _state(sector=(0.123456789, 0.876543211), sector_basis="fault-bound"),
+    _state(status="init-prior", sector=(1.0, 0.0), sector_basis="measurement"),
     Truth(
         step=80, x=[1e-3 / 7, -0.2 / 3], faults={"1": 0.1745, "2": 0.08725}, u=0.03, w=-0.99,
         vx=27.77777777777778, noise={"1": math.cos(0.2 * math.pi), "2": 0.5}, gamma={"1": 0.77, "2": 1.0},
         y={"1": 0.01 / 3, "2": 0.1}, y_nofault={"1": -0.0, "2": 0.0}, sector_ok={"1": True, "2": False},
         noise_ok={"1": True, "2": True}, dist_ok=False,
-        lost=[(2, 1), (6, 1)], alive=[1, 2, 3],
+        lost=[(2, 1), (6, 1)], alive=[1, 2, 3], r={"1": -0.0312345678901, "2": 0.5}, fault_ok={"1": True, "2": False},
     ),  # fmt: skip
     End(steps=80),
     End(steps=3, reason="aborted: node 4 silent"),
@@ -127,7 +129,14 @@ BAD = [
     ("extra-field-end", _mut(End(steps=1), zz=0), "invalid", "zz"),
     ("missing-field", _mut(_state(), xhat=_DEL), "invalid", "xhat"),
     ("missing-field-input", _mut(NI, node=_DEL), "invalid", "node"),
-    ("truth-faults-nan", _mut(MESSAGES[6], faults={"1": float("nan")}), "invalid", "faults"),
+    ("truth-faults-nan", _mut(MESSAGES[8], faults={"1": float("nan")}), "invalid", "faults"),
+    ("truth-r-inf", _mut(MESSAGES[8], r={"1": float("inf")}), "invalid", "r"),
+    ("sector-h1-0", _mut(_state(), sector=[0.0, 0.5]), "invalid", "sector"),
+    ("sector-h1-big", _mut(_state(), sector=[1.5, 0.5]), "invalid", "sector"),
+    ("sector-h-negative", _mut(_state(), sector=[0.5, -0.1]), "invalid", "sector"),
+    ("sector-nan", _mut(_state(), sector=[0.5, float("nan")]), "invalid", "sector"),
+    ("sector-3", _mut(_state(), sector=[0.5, 0.5, 0.5]), "invalid", "sector"),
+    ("sector-basis-unknown", _mut(_state(), sector_basis="hope"), "invalid", "sector_basis"),
 ]
 
 
@@ -317,7 +326,7 @@ def test_run_scope():
     from netsetest.messages import RunScope
 
     scope = RunScope(frozenset({1, 2}), steps=10)
-    t = MESSAGES[6]
+    t = next(m for m in MESSAGES if isinstance(m, Truth))
     assert scope.reject(NodeInput(step=10, node=2, y=0.0, gamma=1.0)) is None
     assert scope.reject(NodeInput(step=11, node=2, y=0.0, gamma=1.0)) == "step-beyond-run"
     assert scope.reject(NodeInput(step=1, node=3, y=0.0, gamma=1.0)) == "unknown-node"

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from netsetest.estimator.sector import Sector
 from netsetest.models.sensor import Sensor
 from netsetest.roles.plausibility import innovation_interval, innovation_possible, states_disjoint
 
@@ -39,7 +40,7 @@ def test_every_honest_innovation_is_possible(saturated: bool) -> None:
         gamma = float(rng.uniform(0.1, 1.0))
         v = float(rng.uniform(-1, 1) * np.sqrt(s.R))
         y = s.measure(x, gamma, v)
-        assert innovation_possible(s, xhat, P, rho, gamma, y - float(s.Cbar @ xhat))
+        assert innovation_possible(s, xhat, P, rho, gamma, None, y - float(s.Cbar @ xhat))
         checked += 1
     assert checked > 1000
 
@@ -51,7 +52,7 @@ def test_interval_is_exactly_what_the_estimator_facts_admit(saturated: bool) -> 
     for _ in range(200):
         s = _sensor(rng, saturated)
         xhat, P, rho, gamma = rng.normal(size=3), _spd(rng), float(rng.uniform(0.2, 2.0)), float(rng.uniform(0.1, 1.0))
-        lo, hi = innovation_interval(s, xhat, P, rho, gamma)
+        lo, hi = innovation_interval(s, xhat, P, rho, gamma, None)
         cx = float(s.Cbar @ xhat)
         c = float(np.sqrt(rho * s.Cbar @ P @ s.Cbar))
         noise = abs(s.Dv) * np.sqrt(s.R)
@@ -64,9 +65,9 @@ def test_interval_is_exactly_what_the_estimator_facts_admit(saturated: bool) -> 
                     cands.append((gamma * s.h1 - 1.0) * cx + gamma * s.h1 * c * sj + gamma * phi + v)
         assert min(cands) == pytest.approx(lo, rel=1e-12, abs=1e-14) and max(cands) == pytest.approx(hi, rel=1e-12, abs=1e-14)
         width = hi - lo
-        assert innovation_possible(s, xhat, P, rho, gamma, lo) and innovation_possible(s, xhat, P, rho, gamma, hi)
-        assert not innovation_possible(s, xhat, P, rho, gamma, hi + 1e-6 * width)
-        assert not innovation_possible(s, xhat, P, rho, gamma, lo - 1e-6 * width)
+        assert innovation_possible(s, xhat, P, rho, gamma, None, lo) and innovation_possible(s, xhat, P, rho, gamma, None, hi)
+        assert not innovation_possible(s, xhat, P, rho, gamma, None, hi + 1e-6 * width)
+        assert not innovation_possible(s, xhat, P, rho, gamma, None, lo - 1e-6 * width)
 
 
 def test_disjoint_only_when_provably_so() -> None:
@@ -92,3 +93,26 @@ def test_disjoint_only_when_provably_so() -> None:
             said_disjoint += 1
             assert not both.any(), "called disjoint, but a common point exists"
     assert said_disjoint > 20
+
+
+def test_interval_uses_the_published_sector_of_the_step() -> None:
+    """With a neighbour's per-step sector (h1_k, h_k) the interval is what the estimator's facts for that
+    sector admit (h2 = h1_k + h_k), not the profile's fixed one; h = 0 (no saturation proven) narrows it."""
+    rng = np.random.default_rng(17)
+    for _ in range(200):
+        s = _sensor(rng, True)
+        sec = Sector(float(rng.uniform(0.3, 1.0)), float(rng.uniform(0.0, 0.8)) if rng.uniform() < 0.7 else 0.0, "measurement")
+        xhat, P, rho, gamma = rng.normal(size=3), _spd(rng), float(rng.uniform(0.2, 2.0)), float(rng.uniform(0.1, 1.0))
+        lo, hi = innovation_interval(s, xhat, P, rho, gamma, sec)
+        cx = float(s.Cbar @ xhat)
+        c = float(np.sqrt(rho * s.Cbar @ P @ s.Cbar))
+        noise = abs(s.Dv) * np.sqrt(s.R)
+        cands = [
+            (gamma * sec.h1 - 1.0) * cx + gamma * sec.h1 * c * sj + gamma * phi + v
+            for sj in (-1.0, 1.0) for phi in (0.0, sec.h * (cx + c * sj)) for v in (-noise, noise)
+        ]  # fmt: skip
+        assert min(cands) == pytest.approx(lo, rel=1e-12, abs=1e-14) and max(cands) == pytest.approx(hi, rel=1e-12, abs=1e-14)
+        assert (lo, hi) != innovation_interval(s, xhat, P, rho, gamma, None)
+        width = hi - lo
+        assert not innovation_possible(s, xhat, P, rho, gamma, sec, hi + 1e-6 * width)
+        assert not innovation_possible(s, xhat, P, rho, gamma, sec, lo - 1e-6 * width)

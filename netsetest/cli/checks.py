@@ -6,6 +6,8 @@ import argparse
 import os
 from pathlib import Path
 
+from netsetest.records.record import check_record_path
+
 SEED_MAX = 2**63 - 1  # numpy's SeedSequence takes any non-negative integer; keep it to 64 bits
 
 
@@ -41,6 +43,12 @@ def output_file(path: str | None, option: str) -> None:
         raise OutputError(f"{option} {path}: cannot create its directory ({exc.strerror or exc})") from None
     if not os.access(p.parent, os.W_OK | os.X_OK) or (p.exists() and not os.access(p, os.W_OK)):
         raise OutputError(f"{option} {path}: not writable")
+
+
+def record_file(path: str | None) -> None:
+    """``--record``: writable, and its format's optional dependency installed (MissingExtra if not)."""
+    output_file(path, "--record")
+    check_record_path(path)
 
 
 def output_dir(path: str, option: str) -> None:

@@ -23,6 +23,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from netsetest.cli import checks
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
@@ -36,8 +37,8 @@ def _zenoh_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("zenoh")
     g.add_argument("--run-id", default="default", help="key-expression namespace of the run (netsetest/<run-id>/...)")
     g.add_argument("--zenoh-mode", choices=["peer", "client"], default="peer", help="peer (one host) or client of a router")
-    g.add_argument("--listen", action="append", default=[], metavar="ENDPOINT", help="e.g. tcp/127.0.0.1:7450 (repeatable)")
-    g.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="e.g. tcp/10.0.0.1:7447 (repeatable)")
+    g.add_argument("--listen", action="append", default=[], metavar="ENDPOINT", help="endpoint to listen on, e.g. tcp/127.0.0.1:7450 (repeatable; default: none)")
+    g.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="endpoint to connect to, e.g. tcp/10.0.0.1:7447 (repeatable; default: none)")
 
 
 def _at(s: str) -> tuple[int, int]:
@@ -68,51 +69,52 @@ _seconds, _non_negative = _seconds_type(False), _seconds_type(True)
 
 def add_run_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("zenoh mode")
-    g.add_argument("--node-timeout", type=_seconds, default=10.0, help="lockstep: a node silent this long is declared dead")
-    g.add_argument("--neighbour-timeout", type=_seconds, default=5.0, help="lockstep: how long a node waits for a neighbour")
-    g.add_argument("--pace", type=_non_negative, default=0.0, help="lockstep: at least this many seconds per step (default: as fast as possible)")
-    g.add_argument("--kill", type=_at, action="append", default=[], metavar="NODE@STEP", help="SIGKILL node NODE once step STEP is checked")
-    g.add_argument("--rejoin", type=_at, action="append", default=[], metavar="NODE@STEP", help="restart node NODE with --rejoin at step STEP")
+    g.add_argument("--node-timeout", type=_seconds, default=10.0, metavar="S", help="lockstep: a node silent this long [s] is declared dead")
+    g.add_argument("--neighbour-timeout", type=_seconds, default=5.0, metavar="S", help="lockstep: how long [s] a node waits for a neighbour's message")
+    g.add_argument("--pace", type=_non_negative, default=0.0, metavar="S", help="lockstep: at least S seconds per step (default: 0, as fast as possible)")
+    g.add_argument("--kill", type=_at, action="append", default=[], metavar="NODE@STEP", help="SIGKILL node NODE once step STEP is checked (repeatable; default: none)")
+    g.add_argument("--rejoin", type=_at, action="append", default=[], metavar="NODE@STEP", help="restart node NODE with --rejoin at step STEP (repeatable; default: none)")
 
 
 def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, run_args: Callable) -> None:
     p = sub.add_parser("vehicle", help="the vehicle process (truth, measurements) of a Zenoh run")
     scenario_args(p)
-    p.add_argument("--signals", choices=["paper", "worst"], default="paper")
-    p.add_argument("--seed", type=checks.seed, default=0)
-    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep")
-    p.add_argument("--node-timeout", type=_seconds, default=10.0)
-    p.add_argument("--pace", type=_non_negative, default=0.0, help="lockstep: at least this many seconds per step")
-    p.add_argument("--start-timeout", type=_seconds, default=60.0, help="how long to wait for every role to be ready")
+    p.add_argument("--signals", choices=["paper", "worst"], default="paper", help="noise and wind: the paper's, or held at ±bound")
+    p.add_argument("--seed", type=checks.seed, default=0, help="random seed of noise, wind and losses")
+    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep", help="lockstep: wait for every node; realtime: one step every τs")
+    p.add_argument("--node-timeout", type=_seconds, default=10.0, metavar="S", help="lockstep: a node silent this long [s] is declared dead")
+    p.add_argument("--pace", type=_non_negative, default=0.0, metavar="S", help="lockstep: at least S seconds per step")
+    p.add_argument("--start-timeout", type=_seconds, default=60.0, metavar="S", help="how long [s] to wait for every role to be ready")
     _zenoh_args(p)
 
     p = sub.add_parser("node", help="one sensing-node process of a Zenoh run")
     scenario_args(p)
     p.add_argument("--id", type=int, required=True, help="node id in the topology")
-    p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled")
-    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep")
-    p.add_argument("--neighbour-timeout", type=_seconds, default=5.0)
+    p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled", help="estimator: one SDP with the scheduled model, or one per T-S rule")
+    p.add_argument("--objective", choices=list(OBJECTIVES), default=DEFAULT_OBJECTIVE, help=OBJECTIVE_HELP)
+    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep", help="lockstep: wait for neighbours; realtime: step on the vehicle's input")
+    p.add_argument("--neighbour-timeout", type=_seconds, default=5.0, metavar="S", help="lockstep: how long [s] to wait for a neighbour's message")
     p.add_argument("--rejoin", action="store_true", help="join a running network (after a crash or restart)")
     _zenoh_args(p)
 
     p = sub.add_parser("collector", help="the collector process: checks containment, writes record and summary")
     scenario_args(p)
     run_args(p)
-    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep")
-    p.add_argument("--record", metavar="PATH")
-    p.add_argument("--summary-json", metavar="PATH")
+    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep", help="the run's clock (recorded in the summary)")
+    p.add_argument("--record", metavar="PATH", help="write the run record (.json, .json.gz or .mcap; default: none)")
+    p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON (default: none)")
     p.add_argument("--progress", action="store_true", help="print '@progress K' lines for a parent process")
-    p.add_argument("--idle-timeout", type=_seconds, default=60.0, help="give up when no message arrives this long")
+    p.add_argument("--idle-timeout", type=_seconds, default=60.0, metavar="S", help="give up when no message arrives for S seconds")
     _zenoh_args(p)
 
     p = sub.add_parser("router", help="a Zenoh router in Python (for client-mode roles on several hosts)")
     p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
-                   help=f"default tcp/0.0.0.0:{ZENOH_DEFAULT_PORT}")  # fmt: skip
+                   help=f"endpoint to listen on (repeatable; default: tcp/0.0.0.0:{ZENOH_DEFAULT_PORT})")  # fmt: skip
 
     p = sub.add_parser("compose", help="print a docker-compose.yml for a topology (router + one service per role)")
-    p.add_argument("topology")
+    p.add_argument("topology", help="topology file or bundled name, e.g. paper6")
     p.add_argument("--image", default="netsetest:latest", help="image with netsetest installed (built from the Dockerfile)")
-    p.add_argument("--zenoh-image", default="eclipse/zenoh:1.10.2")
+    p.add_argument("--zenoh-image", default="eclipse/zenoh:1.10.2", help="image of the Zenoh router")
 
 
 # ---------------------------------------------------------------- role commands
@@ -157,7 +159,7 @@ def cmd_node(a: argparse.Namespace) -> int:
 
     def body(sc, bus) -> int:  # noqa: ANN001
         sc.node(a.id)  # unknown id → ConfigError, exit 2
-        return run_node(sc, a.id, bus, a.run_id, a.variant, a.clock == "realtime", a.neighbour_timeout, a.rejoin)
+        return run_node(sc, a.id, bus, a.run_id, a.variant, a.clock == "realtime", a.neighbour_timeout, a.rejoin, a.objective)
 
     return _role(f"node {a.id}", a, body)
 
@@ -167,11 +169,11 @@ def cmd_collector(a: argparse.Namespace) -> int:
     from netsetest.runtime.processes import run_collector
     from netsetest.runtime.report import format_table
 
-    checks.output_file(a.record, "--record")  # before the run, not after it
+    checks.record_file(a.record)  # before the run, not after it
     checks.output_file(a.summary_json, "--summary-json")
 
     def body(sc, bus) -> int:  # noqa: ANN001
-        meta = run_meta(sc, "zenoh", a.clock, a.signals, a.variant, a.seed, a.run_id)
+        meta = run_meta(sc, "zenoh", a.clock, a.signals, a.variant, a.seed, a.run_id, a.objective)
         show = None if a.progress else (lambda s: print(format_table(s), flush=True))
         return run_collector(sc, bus, a.run_id, meta, a.record, a.summary_json, a.progress, a.idle_timeout, show)
 
@@ -291,6 +293,8 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
                 out += ["--connect", endpoint(other)]
         return out
 
+    if not a.quiet:  # how to look inside the run from another terminal (README: Live views)
+        log("run", f"run id {run_id}; watch it with: netsetest watch --run-id {run_id} --connect {endpoint('collector')}")
     tmp = tempfile.TemporaryDirectory(prefix="netsetest-")
     summary_path = a.summary_json or str(Path(tmp.name) / "summary.json")
     children = Children()
@@ -303,7 +307,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
                 progress[0] = int(line.split()[1])
 
     def node_argv(i: int, rejoin: bool) -> list[str]:
-        argv = ["node", *common, "--id", str(i), "--variant", a.variant, "--clock", a.clock,
+        argv = ["node", *common, "--id", str(i), "--variant", a.variant, "--objective", a.objective, "--clock", a.clock,
                 "--neighbour-timeout", str(a.neighbour_timeout), *net(f"node{i}")]  # fmt: skip
         return argv + ["--rejoin"] if rejoin else argv
 
@@ -314,7 +318,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
     try:
         col = children.start(
             "collector",
-            ["collector", *common, "--signals", a.signals, "--variant", a.variant, "--seed", str(a.seed), "--clock", a.clock,
+            ["collector", *common, "--signals", a.signals, "--variant", a.variant, "--objective", a.objective, "--seed", str(a.seed), "--clock", a.clock,
              "--summary-json", summary_path, "--progress", *(["--record", a.record] if a.record else []), *net("collector")],
             stdout=subprocess.PIPE, text=True,
         )  # fmt: skip

@@ -25,9 +25,12 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from netsetest.models.sensor import Sensor
 from netsetest.models.signals import Fault, NoFault, PiecewiseLinearFault, SpeedProfile, SquareFault
 from netsetest.models.vehicle import KMH, TSModel, VehicleParams
+from netsetest.scenarios import bundled_topologies, resolve_topology
 
 Case = Literal["nsnim", "saim"]
 Variant = Literal["scheduled", "per-rule"]
+FaultBoundsMode = Literal["used", "all", "none"]  # where declared fault bounds are applied (Scenario.fault_bounded)
+FAULT_BOUNDS_MODES: tuple[FaultBoundsMode, ...] = ("used", "all", "none")
 
 
 class ConfigError(Exception):
@@ -335,6 +338,16 @@ class Scenario:
     def vx(self, k: int) -> float:
         return self.speed.kmh(k * self.tau_s) * KMH
 
+    def fault_bounded(self, mode: FaultBoundsMode) -> tuple[int, ...]:
+        """Nodes whose declared fault bounds an analysis applies: ``used`` — where an estimator relies
+        on them (a saturating sensor); ``all`` — every node that declares one; ``none`` — no node."""
+        if mode not in FAULT_BOUNDS_MODES:
+            raise ConfigError(f"fault bounds mode must be one of {', '.join(FAULT_BOUNDS_MODES)}, got {mode!r}")
+        declared = [n for n in self.nodes if n.fault_rate is not None or n.fault_size is not None]
+        if mode == "none":
+            return ()
+        return tuple(n.id for n in declared if mode == "all" or n.sensor.saturated)
+
     def out_neighbours(self, j: int) -> list[int]:
         """Nodes i ≠ j that use j's message."""
         return [n.id for n in self.nodes if j in n.in_weights and n.id != j]
@@ -383,8 +396,11 @@ def load_profile(path: Path) -> NodeProfile:
 
 
 def load_topology(path: str | Path, case: Case | None = None, steps: int | None = None) -> Scenario:
-    """Read and validate a topology and its node profiles; ``case``/``steps`` override the file."""
-    path = Path(path)
+    """Read and validate a topology (a path, or the name of a bundled one such as ``paper6``) and its node
+    profiles; ``case``/``steps`` override the file."""
+    path = resolve_topology(path)
+    if not path.exists():
+        raise ConfigError(f"{path}: file not found (bundled topologies: {', '.join(bundled_topologies())})")
     if case is not None and case not in ("nsnim", "saim"):
         raise ConfigError(f"{path}: case must be 'nsnim' or 'saim', got {case!r}")
     if steps is not None and steps < 1:

@@ -1,4 +1,5 @@
-"""The run record: JSON Lines written as the run goes, so that a crash leaves a loadable partial record.
+"""The run record: JSON Lines written as the run goes, so that a crash leaves a loadable partial record;
+or the same content as MCAP (``.mcap`` suffix, :mod:`netsetest.records.mcap_io`, for Foxglove).
 
 One JSON object per line (``format = "netsetest-record"``, ``version = 2``), gzip-compressed when the
 file name ends in ``.gz``; the collector writes through a :class:`RecordSink` and flushes after every
@@ -12,16 +13,18 @@ step::
 
 ``meta``: run settings (topology, case, signals, variant, seed, steps, tau_s, mode, clock, node ids,
 in-neighbour weights {i: {j: a_ij}}, run id).  Truth entry of step k: x = [β, r], faults {i: f_i}, u,
-w, vx, noise {i}, gamma {i}, y {i}, y_nofault {i}, sector_ok {i}, noise_ok {i}, dist_ok, lost [[j, i]],
-alive [i].  State entry: step, xhat [3], P [9, row-major], rho, status, rho_cert,
-solve_ms, used, missing, late, E = eᵀP⁻¹e (null when the truth of the step is unknown), contained
+w, vx, noise {i}, gamma {i}, y {i}, y_nofault {i}, sector_ok {i}, r {i} = C̄x̄, fault_ok {i}, noise_ok {i},
+dist_ok, lost [[j, i]], alive [i], drops {reason: n}.  State entry: step, xhat [3], P [9, row-major], rho,
+status, rho_cert, solve_ms, used, missing, late, dropped, drops {reason: n}, sector [h1, h] | null,
+sector_basis, E = eᵀP⁻¹e (null when the truth of the step is unknown), contained
 (E ≤ rho), assumptions_ok (every assumption in the step's dependency cone held), contested (more
 than one copy matched the truth: not judged).  ``summary``: the
 per-node table and totals (the same object ``--summary-json`` writes).
 
 A file without the summary line (the collector, the vehicle or the parent was killed) loads as a
 partial record: ``partial`` is true, ``last_complete_step`` the last step whose truth line was written,
-and an incomplete last line is ignored.  :func:`load_record` also reads version 1 records (one JSON
+and an incomplete last line is ignored (an MCAP file loads only complete, with its verdict message).
+:func:`load_record` also reads version 1 records (one JSON
 document with ``meta``, ``truth``, ``nodes``, ``summary``; optionally gzip-compressed).
 :meth:`Record.fault_rows` gives the fault bounds.
 """
@@ -37,14 +40,18 @@ from typing import IO, Protocol
 
 import numpy as np
 
+from netsetest.extras import require
+
 FORMAT = "netsetest-record"
 VERSION = 2
 LEGACY_VERSION = 1  # one JSON document per run, written at the end
 GZIP_MAGIC = b"\x1f\x8b"
+MCAP_SUFFIX = ".mcap"  # open_sink/save_record/load_record dispatch on it (netsetest.records.mcap_io)
 
 
 class RecordSink(Protocol):
-    """Where the collector streams the record; the JSON Lines file here, an MCAP writer elsewhere.
+    """Where the collector streams the record: :class:`JsonlSink`, an MCAP writer (``mcap_io.McapRecordWriter``),
+    :class:`MemorySink`.
 
     Call order: ``meta`` once, then per step the ``state`` entries and the ``truth`` entry (which
     completes the step), ``summary`` once at the end, ``close``.
@@ -152,6 +159,16 @@ class TeeSink:
             s.close()
 
 
+def open_sink(path: str | Path) -> RecordSink:
+    """The streaming writer of a record file, by its suffix: MCAP for ``.mcap``, else JSON Lines."""
+    if Path(path).suffix == MCAP_SUFFIX:
+        require("mcap", "an MCAP record")
+        from netsetest.records.mcap_io import McapRecordWriter
+
+        return McapRecordWriter(path)
+    return JsonlSink(path)
+
+
 class RecordError(Exception):
     """A record file that cannot be read; the message names the file and the reason."""
 
@@ -248,8 +265,33 @@ def _read(path: Path) -> bytes:
     return out
 
 
+def check_record_path(path: str | Path | None) -> None:
+    """Before a run: raise :class:`~netsetest.extras.MissingExtra` if the record's format cannot be written."""
+    if path is not None and Path(path).suffix == MCAP_SUFFIX:
+        require("mcap", "an MCAP record")
+
+
+def _read_mcap(path: Path) -> Record:
+    """An MCAP record (complete only: an MCAP file without its verdict message is not loaded)."""
+    require("mcap", "an MCAP record")
+    from netsetest.records.mcap_io import McapReadError, read_mcap
+
+    try:
+        doc = read_mcap(path)
+    except FileNotFoundError:
+        raise RecordError(f"{path}: file not found") from None
+    except OSError as exc:
+        raise RecordError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    except McapReadError as exc:
+        raise RecordError(f"{path}: {exc}") from None
+    last = max((t["step"] for t in doc["truth"] if isinstance(t, dict) and isinstance(t.get("step"), int)), default=-1)
+    return _build(path, doc["meta"], doc["truth"], doc["nodes"], doc["summary"], partial=False, last_complete=last)
+
+
 def load_record(path: str | Path) -> Record:
     path = Path(path)
+    if path.suffix == MCAP_SUFFIX:
+        return _read_mcap(path)
     data = _read(path)
     head = data.lstrip()[:200]
     if head.startswith(b'{"kind"') or head.startswith(b'{ "kind"'):
@@ -355,8 +397,15 @@ def record_from_parts(
 
 
 def save_record(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: dict) -> None:
-    """Write a whole record (e.g. one kept in memory) in the streamed layout, step by step."""
+    """Write a whole record (e.g. one kept in memory) in the streamed layout, step by step (``.mcap``: an
+    indexed MCAP file)."""
     path = Path(path)
+    if path.suffix == MCAP_SUFFIX:
+        require("mcap", "an MCAP record")
+        from netsetest.records.mcap_io import save_mcap
+
+        save_mcap(path, meta, truth, nodes, summary)
+        return
     path.parent.mkdir(parents=True, exist_ok=True)
     by_step: dict[int, list[tuple[int, dict]]] = {}
     for key, entries in nodes.items():

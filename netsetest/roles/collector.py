@@ -5,7 +5,10 @@ containment when E_i,k ≤ ρ_i.  A miss is attributed by the step's *dependency
 (i, k) relies on its own sector condition and noise bound at k, the disturbance bound at k−1, and on
 every (j, k−1) with j ∈ N_i ∪ {i}; step 0 relies on the initial ellipsoid containing x̄_0
 (Assumption 1).  A miss inside an intact cone is an estimator failure (``violations``); a miss after a
-broken assumption is reported separately (``misses_assumption_broken``).
+broken assumption is reported separately (``misses_assumption_broken``).  A saturating node's sector
+premise is what its published sector rests on (``sector_basis``): the noise bound only, the declared
+fault bound, or — for an assumed sector — the sector itself checked against the truth's C̄ x̄.  A derived
+sector that misses the truth inside an intact cone is counted as a ``sector_failure`` (an estimator bug).
 
 Streaming and bounded: the collector keeps the truth and the states of the steps not yet *closed*.
 Step k is closed (judged, written to the record sink, forgotten) in order, once its truth is here and
@@ -20,9 +23,11 @@ Defences (the network may be open, or a credentialed peer may lie), each counted
 - a repeated copy is a duplicate and dropped; the first copy is the one recorded — a *different* copy
   for the same (node, step) or step is kept (up to a few) so that the step can be judged honestly;
 - a truth must follow from the previous one through the vehicle model (x_k = f(x_{k−1}, u_{k−1},
-  w_{k−1}, Vx_{k−1}), x_0 of the scenario) with the scenario's faults, speed and assumption flags;
+  w_{k−1}, Vx_{k−1}), x_0 of the scenario) with the scenario's faults, speed, sensor inputs C̄ x̄
+  (``r``) and assumption flags (``fault_ok`` included);
 - a node's state must match the truth of its step where an honest node's must: its γ and its
-  innovation y̌ = ỹ − C̄ x̂ with the true measurement ỹ; at step 0 the profile's prior ellipsoid;
+  innovation y̌ = ỹ − C̄ x̂ with the true measurement ỹ; a step-0 ``init-prior`` state the profile's
+  prior ellipsoid (an ``init`` state, the prior updated by ỹ₀, is checked by γ and innovation only);
 - when more than one copy passes, the collector cannot tell which one the sender sent: the step (a
   truth) or node-step (a state) is *contested* and judged on none (``contested`` in the record);
 - End counts only when it names the scheduled last step and that step's truth is here.
@@ -41,9 +46,11 @@ import numpy as np
 
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
-from netsetest.config.schema import Scenario
+from netsetest.config.schema import NodeConfig, Scenario
+from netsetest.estimator.sector import Sector, sector_ok
 from netsetest.messages import End, Message, NodeState, RunScope, Truth
 from netsetest.records.record import RecordSink
+from netsetest.roles.vehicle import fault_bound_holds
 
 WINDOW = 50  # steps a step may stay open behind the newest truth (bounds memory against a stalled node)
 CLOSE_LAG = 2  # a step whose alive nodes reported closes this many truths later (late and rejoining states)
@@ -57,6 +64,16 @@ def _same_set(a: NodeState, b: NodeState) -> bool:
     return a.xhat == b.xhat and a.P == b.P and a.rho == b.rho and a.innov == b.innov and a.gamma == b.gamma
 
 
+def _published_sector(st: NodeState) -> Sector | None:
+    return Sector(st.sector[0], st.sector[1], st.sector_basis) if st.sector is not None else None
+
+
+def _in_prior(n: NodeConfig, tr: Truth) -> bool:
+    """Assumption 1: the true x̄_0 lies in node n's prior ellipsoid."""
+    e = np.r_[tr.x, tr.faults[str(n.id)]] - n.x0_hat
+    return float(e @ np.linalg.solve(n.P0, e)) <= n.rho
+
+
 @dataclass
 class NodeTotals:
     """Running per-node figures of the summary (nothing per step survives a closed step but ``solve``)."""
@@ -66,6 +83,8 @@ class NodeTotals:
     broken_misses: int = 0
     assumption_violations: int = 0
     sector_breaks: int = 0
+    sector_failures: int = 0  # derived sectors that missed C̄ x̄ inside an intact cone
+    sectors_assumed: int = 0
     first_sector_break: int | None = None
     width_sum: float = 0.0
     reported: int = 0
@@ -244,8 +263,11 @@ class Collector:
             f = n.fault(k)
             if t.faults[s] != f:
                 return "truth-fault"
-            if t.sector_ok[s] != n.sensor.sector_holds(np.r_[x, f]):
+            if t.sector_ok[s] != n.sensor.sector_holds(np.r_[x, f]) or t.fault_ok.get(s) != fault_bound_holds(n, k):
                 return "truth-flags"
+            r = t.r.get(s)
+            if r is None or not np.isclose(r, float(n.sensor.Cbar @ np.r_[x, f]), rtol=CHAIN_RTOL, atol=1e-300):
+                return "truth-sensor-input"
             if t.noise_ok[s] != bool(t.noise[s] ** 2 <= n.sensor.R * (1 + 1e-12)):
                 return "truth-flags"
         if t.dist_ok != bool(t.w**2 <= sc.W * (1 + 1e-12)):
@@ -275,8 +297,10 @@ class Collector:
         innov = float(tr.y[s] - n.sensor.Cbar @ np.asarray(st.xhat))
         if not np.isclose(st.innov, innov, rtol=INNOV_RTOL, atol=1e-300):
             return "state-not-from-input"
-        if st.status == "init" and (
-            st.step != 0 or st.rho != n.rho or not np.array_equal(st.xhat, n.x0_hat) or not np.array_equal(st.P_matrix(), n.P0)
+        if (st.step == 0) != (st.status in ("init", "init-prior")):
+            return "state-not-prior"  # step 0 publishes the prior (updated by ỹ₀), no other step does
+        if st.status == "init-prior" and (
+            st.rho != n.rho or not np.array_equal(st.xhat, n.x0_hat) or not np.array_equal(st.P_matrix(), n.P0)
         ):
             return "state-not-prior"
         return None
@@ -290,6 +314,21 @@ class Collector:
         E = float(e @ np.linalg.solve(st.P_matrix(), e))
         self.evaluated[(i, k)] = (E, E <= st.rho)
 
+    def _sector_premise(self, n: NodeConfig, st: NodeState | None, tr: Truth) -> bool:
+        """What the node's step sector rests on held: nothing more than the noise bound (measurement),
+        the declared fault bound (fault-bound), or the sector itself against the truth (assumed); without
+        a judged state, the profile's fixed sector."""
+        s = str(n.id)
+        if not n.sensor.saturated:
+            return True
+        if st is None:
+            return tr.sector_ok[s]
+        if st.sector_basis == "assumed":
+            return sector_ok(n.sensor, _published_sector(st), tr.r[s])
+        if st.sector_basis == "fault-bound":
+            return tr.fault_ok[s]
+        return True
+
     def _cones(self, k: int) -> dict[int, bool]:
         """Whether every assumption in the dependency cone of (i, k) held, per node (False: truth unknown)."""
         tr, prev = self._step_truth, self.prev_truth
@@ -299,14 +338,13 @@ class Collector:
             if tr is None:
                 ok[i] = False
                 continue
-            own = tr.sector_ok[s] and tr.noise_ok[s]
+            st = self._judged.get(i)
+            own = tr.noise_ok[s] and self._sector_premise(n, st, tr)
             if k == 0:
-                ev = self.evaluated.get((i, 0))
-                own = own and (ev is None or ev[1])  # Assumption 1: x̄_0 in the initial ellipsoid
+                own = own and _in_prior(n, tr)  # Assumption 1: x̄_0 in the prior ellipsoid
             else:
                 own = own and prev is not None and prev.step == k - 1 and prev.dist_ok
                 # the step relied on the judged states of k−1 it used (own and neighbours'), nothing else
-                st = self._judged.get(i)
                 deps = (set(st.used) if st is not None else set(n.in_weights) - {i}) | {i}
                 own = own and all(self.prev_cone.get(j, False) for j in deps)
             ok[i] = bool(own)
@@ -316,7 +354,7 @@ class Collector:
         tr, prev, s = self._step_truth, self.prev_truth, str(i)
         if tr is None:
             return "truth unknown"
-        if not tr.sector_ok[s]:
+        if not self._sector_premise(self.sc.node(i), self._judged.get(i), tr):
             return "sector"
         if not tr.noise_ok[s]:
             return "noise"
@@ -359,6 +397,8 @@ class Collector:
                         t.missing_from = k
                 continue
             t.contested += i in contested
+            t.sectors_assumed += st.sector_basis == "assumed"
+            t.sector_failures += self._sector_failed(i, st, tr, cone[i] and i not in contested)
             if self.sink is not None:
                 self.sink.state(i, self._state_entry(i, k, st, cone[i], i in contested))
             self._add(t, i, k, st, cone[i])
@@ -374,6 +414,14 @@ class Collector:
         self.prev_truth = tr
         self.prev_cone = {i: cone[i] for i in self._judged if i not in contested}
         self.closed = k
+
+    def _sector_failed(self, i: int, st: NodeState, tr: Truth | None, cone: bool) -> bool:
+        """A derived sector (measurement or fault-bound basis) missing the truth's C̄ x̄ although its
+        premises held: an estimator bug."""
+        n = self.sc.node(i)
+        if tr is None or not cone or not n.sensor.saturated or st.sector_basis in ("none", "assumed"):
+            return False
+        return not sector_ok(n.sensor, _published_sector(st), tr.r[str(i)])
 
     def _add(self, t: NodeTotals, i: int, k: int, st: NodeState, cone: bool) -> None:
         t.reported += 1
@@ -408,7 +456,8 @@ class Collector:
             "step": k, "xhat": list(st.xhat), "P": list(st.P), "rho": st.rho, "status": st.status,
             "rho_cert": st.rho_cert, "solve_ms": st.solve_ms, "used": st.used, "missing": st.missing,
             "late": st.late, "E": E, "contained": bool(contained), "assumptions_ok": bool(cone),
-            "contested": contested,
+            "contested": contested, "sector": list(st.sector) if st.sector is not None else None,
+            "sector_basis": st.sector_basis,
         }  # fmt: skip
 
     @staticmethod
@@ -439,6 +488,8 @@ class Collector:
                     "violations": t.violations,
                     "misses_assumption_broken": t.broken_misses,
                     "assumption_violations": t.assumption_violations,
+                    "sector_failures": t.sector_failures,
+                    "sectors_assumed": t.sectors_assumed,
                     "sector_breaks": t.sector_breaks,
                     "first_sector_break": t.first_sector_break,
                     "fault_bound_mean_width": t.width_sum / t.reported if t.reported else None,
@@ -464,9 +515,10 @@ class Collector:
         by_role.update(drops or {})
         totals = self.totals.values()
         summary = {
-            **{k: meta[k] for k in ("mode", "variant", "case", "signals", "steps", "seed", "clock") if k in meta},
+            **{k: meta[k] for k in ("mode", "variant", "objective", "case", "signals", "steps", "seed", "clock") if k in meta},
             "violations_total": sum(r["violations"] for r in node_rows),
             "misses_assumption_broken_total": sum(r["misses_assumption_broken"] for r in node_rows),
+            "sector_failures_total": sum(r["sector_failures"] for r in node_rows),
             "steps_completed": last,
             "node_steps_reported": sum(t.reported for t in totals),
             "node_steps_rejected": sum(t.rejected for t in totals),

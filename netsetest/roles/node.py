@@ -30,8 +30,10 @@ import numpy as np
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import Scenario
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE
 from netsetest.estimator.rejoin import rejoin_ellipsoid
-from netsetest.estimator.sdp import LocalEstimator, NeighbourState, Variant
+from netsetest.estimator.sdp import Ellipsoid, LocalEstimator, NeighbourState, Objective, StepInput, StepResult, Variant
+from netsetest.estimator.sector import FaultBound, Sector, derive_sector, measurement_interval
 from netsetest.messages import End, Message, NodeInput, NodeState, RunScope
 from netsetest.models.sensor import NA
 from netsetest.roles.plausibility import innovation_possible, states_disjoint
@@ -44,8 +46,9 @@ LATE_START_EVIDENCE = 3  # inputs of later steps and none of step 0: the run sta
 
 class Node:
     def __init__(
-        self, scenario: Scenario, node_id: int, bus: Bus, run_id: str, variant: Variant = "scheduled", rejoin: bool = False
-    ) -> None:
+        self, scenario: Scenario, node_id: int, bus: Bus, run_id: str, variant: Variant = "scheduled", rejoin: bool = False,
+        objective: Objective = DEFAULT_OBJECTIVE,
+    ) -> None:  # fmt: skip
         self.sc, self.bus, self.run = scenario, bus, run_id
         self.cfg = scenario.node(node_id)
         self.id = node_id
@@ -57,6 +60,8 @@ class Node:
             scenario.model,
             scenario.W,
             variant,
+            fault_bound=FaultBound(self.cfg.fault_rate, self.cfg.fault_size),
+            objective=objective,
         )
         self.others = [j for j in self.cfg.in_weights if j != node_id]
         # estimator state, plain arrays: centre, shape, radius, and our own last published message
@@ -171,14 +176,19 @@ class Node:
         if msg.node in have:
             self.drop("duplicate-state")  # the first copy counts
             return
+        sensor = self.sc.node(msg.node).sensor
+        if (msg.sector is not None) != sensor.saturated:
+            self.drop("sector-mismatch")  # a saturating sensor publishes its sector, no other one does
+            return
         P = msg.P_matrix()  # symmetric positive definite: checked by decode()
         P = 0.5 * (P + P.T)
-        if not innovation_possible(self.sc.node(msg.node).sensor, np.asarray(msg.xhat), P, msg.rho, msg.gamma, msg.innov):
+        sector = Sector(msg.sector[0], msg.sector[1], msg.sector_basis) if msg.sector is not None else None
+        if not innovation_possible(sensor, np.asarray(msg.xhat), P, msg.rho, msg.gamma, sector, msg.innov):
             self.drop("neighbour-innovation")
             return
         if self.k < 0 and len(self.inbox) >= MAX_AHEAD and msg.step not in self.inbox:
             del self.inbox[min(self.inbox)]  # not started (rejoin): keep the newest steps only
-        self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(np.asarray(msg.xhat), P, msg.rho, msg.gamma, msg.innov)
+        self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(np.asarray(msg.xhat), P, msg.rho, msg.gamma, msg.innov, sector)
         self._screen()
 
     def _screen(self) -> None:
@@ -231,15 +241,20 @@ class Node:
         return stepped
 
     def _start(self, inp: NodeInput) -> bool:
-        """Step 0: publish the prior ellipsoid (Assumption 1).  Rejoin: see :mod:`netsetest.estimator.rejoin`."""
+        """Step 0: the prior ellipsoid (Assumption 1) updated by ỹ₀, certified like every step (the prior
+        itself if that fails).  Rejoin: see :mod:`netsetest.estimator.rejoin`."""
         if inp.step == 0:
-            self._publish(inp, "init", rho_cert=None, solve_ms=0.0, used=[], missing=[])
+            res = self.estimator.first(Ellipsoid(self.xhat, self.P, self.rho), inp.y, inp.gamma)
+            status = "init" if res.status == "ok" else "init-prior"
+            self._publish(inp, status, res, used=[], missing=[])
             return True
         have = self.inbox.get(inp.step, {})
         if not have:
             return False  # wait for a neighbour's ellipsoid of this step
-        self.xhat, self.P = rejoin_ellipsoid(self.cfg.sensor, inp.y, inp.gamma, self.rho, list(have.values()))
-        self._publish(inp, "rejoin", rho_cert=None, solve_ms=0.0, used=sorted(have), missing=[])
+        xhat, P = rejoin_ellipsoid(self.cfg.sensor, inp.y, inp.gamma, self.rho, list(have.values()))
+        sector = derive_sector(self.cfg.sensor, FaultBound(), measurement_interval(self.cfg.sensor, inp.y, inp.gamma), None)
+        res = StepResult(xhat, P, "ok", float("nan"), 0.0, "rejoin", sector=sector)
+        self._publish(inp, "rejoin", res, used=sorted(have), missing=[])
         return True
 
     def _update(self, inp: NodeInput) -> None:
@@ -248,22 +263,27 @@ class Node:
         if self.id in self.cfg.in_weights:
             neigh[self.id] = self.own  # type: ignore[assignment]
         alpha = self.sc.model.weights(inp.vx_prev)  # type: ignore[arg-type]
-        res = self.estimator.step(self.xhat, self.P, self.rho, alpha, inp.u_prev, inp.y, inp.gamma, neigh)  # type: ignore[arg-type]
-        self.xhat, self.P = res.xhat, res.P
-        self._publish(
-            inp, res.status, rho_cert=res.rho_cert if np.isfinite(res.rho_cert) else None,
-            solve_ms=res.solve_ms, used=sorted(j for j in neigh if j != self.id), missing=self.missing(),
-        )  # fmt: skip
+        step_in = StepInput(alpha, inp.u_prev, inp.y, inp.gamma, neigh)  # type: ignore[arg-type]
+        res = self.estimator.step(Ellipsoid(self.xhat, self.P, self.rho), step_in)
+        self._publish(inp, res.status, res, used=sorted(j for j in neigh if j != self.id), missing=self.missing())
 
-    def _publish(self, inp: NodeInput, status: str, rho_cert: float | None, solve_ms: float, used: list[int], missing: list[int]) -> None:
-        innov = float(inp.y - self.cfg.sensor.Cbar @ self.xhat)
+    def _publish(self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int]) -> None:
+        """Keep ``res`` as the node's own set (its next step starts from it) and publish ``res.public``."""
+        self.xhat, self.P = res.xhat, res.P
+        sector = res.sector
+        cbar = self.cfg.sensor.Cbar
+        self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, float(inp.y - cbar @ self.xhat), sector)
+        pub = res.public
+        innov = float(inp.y - cbar @ pub.xhat)
+        rho_cert = pub.rho_cert if np.isfinite(pub.rho_cert) else None
         drops = self.drop_report()
-        self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, innov)
         msg = NodeState(
-            step=inp.step, node=self.id, xhat=[float(a) for a in self.xhat], P=[float(a) for a in self.P.reshape(NA * NA)],
+            step=inp.step, node=self.id, xhat=[float(a) for a in pub.xhat], P=[float(a) for a in pub.P.reshape(NA * NA)],
             rho=self.rho, gamma=inp.gamma, innov=innov, status=status, rho_cert=rho_cert,  # type: ignore[arg-type]
-            solve_ms=solve_ms, used=used, missing=missing,
+            solve_ms=res.solve_ms, used=used, missing=missing,
             late=inp.deadline is not None and time.time() > inp.deadline, dropped=sum(drops.values()), drops=drops,
+            sector=(sector.h1, sector.h) if sector is not None else None,
+            sector_basis=sector.basis if sector is not None else "none",
         )  # fmt: skip
         self.k = inp.step
         self.inputs = {s: m for s, m in self.inputs.items() if s > self.k}

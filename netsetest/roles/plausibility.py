@@ -6,7 +6,9 @@ the innovation enters as
     y̌_j = (γ_j h1_j − 1) C̄_j x̂_j + γ_j h1_j c_j s_j + γ_j φ_j + Dv_j v_j,   c_j = (ρ_j C̄_j P_j C̄_jᵀ)^½,
 
 with |s_j| ≤ 1, v_j² ≤ R_j and φ_j in the sector [0, h_j r_j] (h = h2 − h1) of r_j = C̄_j x̂_j + c_j s_j
-(no φ_j for an unsaturated sensor: h1 = h2 = 1).  s_j, v_j and φ_j enter e⁺ only through this sum, so
+(no φ_j for an unsaturated sensor: h1 = h2 = 1).  h1_j and h_j are the sector j published with this
+message (``NodeState.sector``, derived per step: netsetest.estimator.sector), the very numbers node i's
+facts use for j; the test below takes them from there, so it stays exact for a per-step sector.  s_j, v_j and φ_j enter e⁺ only through this sum, so
 node i's guarantee holds for *any* message whose innovation some admissible (s_j, v_j, φ_j) produces —
 honest or not.  Writing r = C̄_j x̂_j + c_j s_j, the sum plus C̄_j x̂_j is γ_j·σ + Dv_j v_j with σ between
 h1 r and h2 r, so the innovations the message can honestly carry form the interval
@@ -27,27 +29,33 @@ from __future__ import annotations
 
 import numpy as np
 
+from netsetest.estimator.sector import Sector
 from netsetest.models.sensor import NX, Sensor
 
 DISJOINT_MARGIN = 1e-9  # relative: call two ellipses disjoint only when clearly so (rounding)
 LAMBDA_GRID = np.linspace(0.005, 0.995, 199)  # any λ ∈ (0, 1) gives a valid separation certificate
 
 
-def innovation_interval(sensor: Sensor, xhat: np.ndarray, P: np.ndarray, rho: float, gamma: float) -> tuple[float, float]:
-    """The innovations y̌ = ỹ − C̄ x̂ a sensor with this published ellipsoid and noise bound can produce."""
+def innovation_interval(
+    sensor: Sensor, xhat: np.ndarray, P: np.ndarray, rho: float, gamma: float, sector: Sector | None
+) -> tuple[float, float]:
+    """The innovations y̌ = ỹ − C̄ x̂ a sensor with this published ellipsoid, sector and noise bound can
+    produce; ``sector`` None: the sensor's fixed h1, h2 (1, 1 for a sensor without saturation)."""
     cbar = sensor.Cbar
     cx = float(cbar @ xhat)
     c = float(np.sqrt(max(rho * float(cbar @ P @ cbar), 0.0)))
     r_lo, r_hi = cx - c, cx + c
-    h1, h2 = sensor.h1, sensor.h2
+    h1, h2 = (sector.h1, sector.h1 + sector.h) if sector is not None else (sensor.h1, sensor.h2)
     noise = abs(sensor.Dv) * float(np.sqrt(sensor.R))
     lo = gamma * min(h1 * r_lo, h2 * r_lo) - noise - cx
     hi = gamma * max(h1 * r_hi, h2 * r_hi) + noise - cx
     return lo, hi
 
 
-def innovation_possible(sensor: Sensor, xhat: np.ndarray, P: np.ndarray, rho: float, gamma: float, innov: float) -> bool:
-    lo, hi = innovation_interval(sensor, xhat, P, rho, gamma)
+def innovation_possible(
+    sensor: Sensor, xhat: np.ndarray, P: np.ndarray, rho: float, gamma: float, sector: Sector | None, innov: float
+) -> bool:
+    lo, hi = innovation_interval(sensor, xhat, P, rho, gamma, sector)
     return bool(lo <= innov <= hi)
 
 

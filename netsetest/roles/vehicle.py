@@ -23,9 +23,18 @@ import numpy as np
 
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
-from netsetest.config.schema import Scenario
+from netsetest.config.schema import NodeConfig, Scenario
 from netsetest.messages import End, Message, NodeInput, NodeState, RunScope, Truth
 from netsetest.models.signals import ExogenousSignals, SignalKind
+
+
+def fault_bound_holds(n: NodeConfig, k: int) -> bool:
+    """The node's declared fault bound at step k: |f_k − f_k−1| ≤ δ (k ≥ 1) and |f_k| ≤ F, where declared."""
+    f = n.fault(k)
+    tol = 1 + 1e-12
+    if n.fault_size is not None and abs(f) > n.fault_size * tol:
+        return False
+    return not (n.fault_rate is not None and k > 0 and abs(f - n.fault(k - 1)) > n.fault_rate * tol)
 
 
 class LossSchedule:
@@ -143,10 +152,12 @@ class Vehicle:
         self.vx = sc.vx(k)
         lost = self.losses.lost_at(k) if k > 0 else []
         deadline = time.time() + sc.tau_s if self.realtime else None
-        y, y0, faults, sector_ok, noise_ok = {}, {}, {}, {}, {}
+        y, y0, faults, sector_ok, noise_ok, r, fault_ok = {}, {}, {}, {}, {}, {}, {}
         for idx, n in enumerate(sc.nodes):
             f = n.fault(k)
             xbar = np.r_[self.x, f]
+            r[n.id] = float(n.sensor.Cbar @ xbar)
+            fault_ok[n.id] = fault_bound_holds(n, k)
             y[n.id] = n.sensor.measure(xbar, gamma[idx], v[idx])
             y0[n.id] = n.sensor.measure(np.r_[self.x, 0.0], gamma[idx], v[idx])
             faults[n.id] = f
@@ -169,7 +180,7 @@ class Vehicle:
                 step=k, x=list(map(float, self.x)), faults=s(faults), u=self.u, w=self.w, vx=self.vx,
                 noise={str(n.id): float(v[i]) for i, n in enumerate(sc.nodes)},
                 gamma={str(n.id): float(gamma[i]) for i, n in enumerate(sc.nodes)},
-                y=s(y), y_nofault=s(y0), sector_ok=s(sector_ok), noise_ok=s(noise_ok),
+                y=s(y), y_nofault=s(y0), sector_ok=s(sector_ok), noise_ok=s(noise_ok), r=s(r), fault_ok=s(fault_ok),
                 dist_ok=bool(self.w**2 <= sc.W * (1 + 1e-12)), lost=lost, alive=sorted(self.alive),
                 drops=self.drop_report(),
             ),  # fmt: skip

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 from netsetest.bus.base import MemoryBus
 from netsetest.config.schema import Scenario
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.estimator.sdp import Variant
 from netsetest.models.signals import SignalKind
 from netsetest.roles.collector import Collector
@@ -22,10 +23,12 @@ class RunResult:
     parts: dict | None  # truth and node entries of the record (None when not kept in memory)
 
 
-def run_meta(scenario: Scenario, mode: str, clock: str, signals: str, variant: str, seed: int, run_id: str) -> dict:
+def run_meta(
+    scenario: Scenario, mode: str, clock: str, signals: str, variant: str, seed: int, run_id: str, objective: str = DEFAULT_OBJECTIVE
+) -> dict:
     return {
         "topology": scenario.path, "name": scenario.name, "mode": mode, "clock": clock, "case": scenario.case,
-        "signals": signals, "variant": variant, "seed": seed, "steps": scenario.steps, "tau_s": scenario.tau_s,
+        "signals": signals, "variant": variant, "objective": objective, "seed": seed, "steps": scenario.steps, "tau_s": scenario.tau_s,
         "run_id": run_id, "node_ids": scenario.ids,
         "in_weights": {str(n.id): {str(j): a for j, a in n.in_weights.items()} for n in scenario.nodes},
         "r_max": {str(n.id): (n.sensor.r_max if n.sensor.saturated else None) for n in scenario.nodes},
@@ -44,6 +47,7 @@ def run_inmemory(
     record: str | None = None,
     keep: bool = True,
     on_step: Callable[[int], None] | None = None,
+    objective: Objective = DEFAULT_OBJECTIVE,
 ) -> RunResult:
     """Run vehicle, nodes and collector in lockstep; the same role code as the Zenoh processes.
 
@@ -53,10 +57,10 @@ def run_inmemory(
     """
     run_id = "mem"
     bus = bus or MemoryBus()
-    meta = run_meta(scenario, "inmemory", "lockstep", signals, variant, seed, run_id)
+    meta = run_meta(scenario, "inmemory", "lockstep", signals, variant, seed, run_id, objective)
     sink, memory = record_sink(record, keep)
     vehicle = Vehicle(scenario, bus, run_id, signals, seed)
-    nodes = [Node(scenario, i, bus, run_id, variant) for i in scenario.ids]
+    nodes = [Node(scenario, i, bus, run_id, variant, objective=objective) for i in scenario.ids]
     collector = Collector(scenario, bus, run_id, sink)
     if sink is not None:
         sink.meta(meta)

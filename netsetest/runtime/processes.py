@@ -20,6 +20,7 @@ from collections.abc import Callable
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import Scenario
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.estimator.sdp import Variant
 from netsetest.messages import Message, Ready
 from netsetest.models.signals import SignalKind
@@ -134,8 +135,9 @@ def run_node(
     realtime: bool,
     neighbour_timeout: float,
     rejoin: bool,
+    objective: Objective = DEFAULT_OBJECTIVE,
 ) -> int:
-    node = Node(sc, node_id, bus, run_id, variant, rejoin=rejoin)
+    node = Node(sc, node_id, bus, run_id, variant, rejoin=rejoin, objective=objective)
     role = f"node {node_id}"
     barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), _all_roles(sc) - {("node", node_id)})
     while not node.ended:

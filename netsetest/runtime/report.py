@@ -8,15 +8,16 @@ import time
 from pathlib import Path
 from typing import TextIO
 
-from netsetest.records.record import JsonlSink, MemorySink, RecordSink, TeeSink
+from netsetest.records.record import MemorySink, RecordSink, TeeSink, open_sink
 
 
 class Progress:
     """One line per update on a terminal (\\r), a line every 10 % otherwise; always to stderr."""
 
-    def __init__(self, total: int, label: str, stream: TextIO = sys.stderr, enabled: bool = True) -> None:
+    def __init__(self, total: int, label: str, stream: TextIO | None = None, enabled: bool = True) -> None:
+        stream = stream or sys.stderr  # looked up now: sys.stderr may have been replaced since import
         self.total, self.label, self.stream, self.enabled = total, label, stream, enabled
-        self.tty = stream.isatty()
+        self.tty = enabled and stream.isatty()
         self.last_pct = -1
         self.t0 = time.monotonic()
 
@@ -100,7 +101,7 @@ def verdict(summary: dict) -> str:
 def record_sink(record: str | None, keep: bool = False) -> tuple[RecordSink | None, MemorySink | None]:
     """The sink a run's collector writes to: the record file (opened now), and/or memory when ``keep``."""
     memory = MemorySink() if keep else None
-    file = JsonlSink(record) if record else None
+    file = open_sink(record) if record else None
     sinks = [s for s in (file, memory) if s is not None]
     return (TeeSink(*sinks) if len(sinks) > 1 else sinks[0] if sinks else None), memory
 
