@@ -11,12 +11,10 @@ from collections.abc import Callable
 from netsetest.config.schema import Scenario
 from netsetest.estimator.base import SetEstimator
 from netsetest.estimator.interval_althoff_rath import IntervalObserver
+from netsetest.estimator.names import SET_ESTIMATOR_NAMES
 from netsetest.estimator.set_propagation_althoff_rath import SetPropagationObserver
 from netsetest.estimator.strip_althoff_rath import StripObserver
 from netsetest.estimator.zonotope_w_radius import ZonotopeEstimator
-
-SDP = "sdp"
-EXACT = "exact"  # the exact limit (analysis/exact.py): a comparison row, not a real-time estimator
 
 SET_ESTIMATORS: dict[str, Callable[[Scenario, int], SetEstimator]] = {
     "zonotope": lambda sc, i: ZonotopeEstimator(sc, i),
@@ -26,4 +24,3 @@ SET_ESTIMATORS: dict[str, Callable[[Scenario, int], SetEstimator]] = {
     "strip": lambda sc, i: StripObserver(sc, i),
     "setprop": lambda sc, i: SetPropagationObserver(sc, i),
 }
-ESTIMATOR_NAMES: tuple[str, ...] = (SDP, *SET_ESTIMATORS, EXACT)
