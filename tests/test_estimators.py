@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 from dataclasses import replace
 from functools import cache
@@ -10,7 +11,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.topologies import ring_topology
 from netsetest.analysis.compare import compare
 from netsetest.analysis.exact import exact_bounds, step_data
 from netsetest.cli.main import main
@@ -23,9 +23,10 @@ from netsetest.models.sensor import Sensor
 from netsetest.records.record import Record, record_from_parts
 from netsetest.runtime.inmemory import run_inmemory
 
-PAPER6 = "topologies/paper6.toml"
+PAPER6 = str(Path(__file__).resolve().parents[1] / "topologies" / "paper6.toml")
 STEPS = 30
 TOL = 1e-8  # the exact ends' solver precision (analysis/exact.NARROWER_TOL)
+ROOT = Path(__file__).resolve().parents[1]
 JSON_FIELDS = ("estimator", "violations", "fault_width_mean", "ratio_exact", "rms_radius_rel", "ms_median")
 
 
@@ -119,8 +120,17 @@ def test_compare_every_row_is_contained_where_its_assumptions_held(case: str, si
     assert by["zonotope"].fault_width_mean <= by["zonotope-q10"].fault_width_mean + TOL  # type: ignore[operator]
 
 
+def _bench_topologies():  # bench/ is not a package of the wheel: load its topology builder by path
+    spec = importlib.util.spec_from_file_location("bench_topologies", ROOT / "bench" / "topologies.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def test_compare_on_a_non_paper_topology(tmp_path: Path) -> None:
-    topo = ring_topology(tmp_path, 8, steps=25, case="saim")
+    """A ring of 8 with chords (bench/topologies.py), SAIM, worst-case signals."""
+    topo = _bench_topologies().ring_topology(tmp_path, 8, steps=25, case="saim")
     c = compare(topo, (SDP, "zonotope", "interval", "strip", EXACT), (None,), ("worst",), (2,), None)
     for r in c.rows:
         assert r.violations == 0 and r.node_steps == 8 * 26, r
