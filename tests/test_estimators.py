@@ -172,3 +172,34 @@ def test_compare_library_rejects_duplicate_and_unknown_names() -> None:
         compare(PAPER6, ("zonotope", "zonotope"))
     with pytest.raises(CompareError, match="unknown estimator"):
         compare(PAPER6, ("kalman",))
+
+
+def test_sets_round_trip_through_the_wire_form_and_malformed_ones_are_refused() -> None:
+    from netsetest.sets import Box, Ellipsoid, SetFormatError, Zonotope, set_from_wire, set_to_wire
+
+    sc, rec = _run("saim", "worst", 0)
+    published = []
+    for name in ("zonotope", "interval", "strip"):
+        est, prev = SET_ESTIMATORS[name](sc, 2), None
+        for d in step_data(rec)[:6]:
+            s = est.step(StepInput(d.step, d.y[2], d.gamma[2], None if prev is None else prev.u, None if prev is None else prev.vx))
+            prev = d
+        published.append(s)
+    published += [Ellipsoid(np.zeros(3), np.eye(3) * 0.2, 1.0), Zonotope(np.ones(3), np.zeros((3, 0)))]
+    for s in published:
+        back = set_from_wire(json.loads(json.dumps(set_to_wire(s))), 3)
+        assert type(back) is type(s)
+        np.testing.assert_allclose(np.array(back.bounds()), np.array(s.bounds()), rtol=0, atol=1e-12)  # SOCP bounds: solver round-off
+        assert set_to_wire(back) == set_to_wire(s)  # the data are exact
+    bad = [
+        None, {"type": "cube"}, {"type": "box", "lo": [0, 0, 1], "hi": [1, 1, 0]}, {"type": "box", "lo": [0, 0], "hi": [1, 1]},
+        {"type": "ellipsoid", "center": [0, 0, 0], "P": [[1, 0, 0], [0, -1, 0], [0, 0, 1]], "rho": 1.0},
+        {"type": "ellipsoid", "center": [0, 0, 0], "P": np.eye(3).tolist(), "rho": float("nan")},
+        {"type": "zonotope", "center": [0, 0, 0], "G": [[1.0, float("inf"), 0.0]]},
+        {"type": "zonotope", "center": [0, 0, 0], "G": [[1.0, 0.0]]},
+        {"type": "sum", "zonotope": {"type": "box", "lo": [0, 0, 0], "hi": [1, 1, 1]}},
+    ]
+    for d in bad:
+        with pytest.raises(SetFormatError):
+            set_from_wire(d, 3)
+    assert isinstance(set_from_wire({"type": "box", "lo": [0, 0, 0], "hi": [0, 1, 2]}, 3), Box)
