@@ -82,6 +82,21 @@ def test_algorithm_1_avoids_wrapping_and_the_classical_observer_wraps() -> None:
     assert np.all(classical[:, :, 0] <= alg1[:, :, 0] + TOL) and np.all(classical[:, :, 1] >= alg1[:, :, 1] - TOL)
     assert np.all(wc[:2] > 2 * w1[:2])
     np.testing.assert_allclose(w1, wz, rtol=0.01)
+    # a short window folds old disturbance sets into a wrapped box: sound, never narrower, still tight
+    folded = _windowed_bounds(sc, rec, 3, window=3)
+    exact_window, _ = _bounds("interval", sc, rec, 3)  # DEFAULT_WINDOW > STEPS: nothing folded
+    assert np.all(folded[:, :, 0] <= exact_window[:, :, 0] + TOL) and np.all(folded[:, :, 1] >= exact_window[:, :, 1] - TOL)
+    assert np.diff(folded, axis=2)[10:].mean() > np.diff(exact_window, axis=2)[10:].mean()
+    assert np.all(np.diff(folded, axis=2)[10:, :, 0].mean(axis=0) < 1.5 * w1)
+
+
+def _windowed_bounds(sc: Scenario, rec: Record, node: int, window: int) -> np.ndarray:
+    est, out, prev = IntervalObserver(sc, node, window=window), [], None
+    for d in step_data(rec):
+        lo, hi = est.step(StepInput(d.step, d.y[node], d.gamma[node], None if prev is None else prev.u, None if prev is None else prev.vx)).bounds()
+        out.append(np.stack([lo, hi], axis=1))
+        prev = d
+    return np.array(out)
 
 
 def test_a_saturated_node_without_fault_bounds_is_refused() -> None:

@@ -10,9 +10,11 @@ The observer's error dynamics are the descriptor step x̄⁺ = Φ x̄ + T_x B̄ 
 interval.  Algorithm 1 keeps the centre x̂, the propagated initial box S_x = Φ_k…Φ_0 X_0 (a linear map
 of a box) and the boxes of the propagated disturbance sets, box(Φ_k…Φ_{j+1} D_j), summed: boxing each
 part separately avoids the wrapping effect.  003's system is time-invariant, so one D_k = Φ^k D_0
-serves every past step; here Φ and D_j change with Vx and γ, so every past D_j is kept and propagated
-(cost O(k) per step; ``wrapping=True`` is the classical interval observer instead, O(1): the box is
-propagated by interval arithmetic, radius |Φ| ρ, and wraps).
+serves every past step; here Φ and D_j change with Vx and γ, so the last ``window`` D_j are kept and
+propagated (O(window) per step) and an older one is folded into a box whose radius is propagated by
+interval arithmetic, |Φ| ρ (sound; it wraps, but only after ``window`` steps of decay by Φ).
+``wrapping=True`` is the classical interval observer instead, O(1): the whole box is propagated by
+interval arithmetic and wraps from the start.
 
 Where a saturated measurement is one-sided (SAIM) the fault is not decoupled at that step: the step
 is the prediction x⁺ = Ā x + B̄u + D̄w, f⁺ = f + δ s (or f⁺ ∈ [−F, F]) with the declared fault bound,
@@ -30,6 +32,7 @@ from netsetest.models.sensor import E_DESCRIPTOR, NA, NX
 from netsetest.sets import Box, Ellipsoid, SlicedEllipsoid, Slab, SumSet, Zonotope
 
 _E3 = np.eye(NA)[2]
+DEFAULT_WINDOW = 40  # steps a disturbance set is propagated exactly (|Φ| contracts by ≈ 0.9 per step: 0.9⁴⁰ ≈ 0.015)
 
 
 def step0_set(node: NodeConfig, lo: float, hi: float, bounded: bool) -> SumSet:
@@ -52,7 +55,7 @@ class IntervalObserver(SetEstimator):
 
     uses_neighbours = False
 
-    def __init__(self, scenario: Scenario, node_id: int, wrapping: bool = False) -> None:
+    def __init__(self, scenario: Scenario, node_id: int, wrapping: bool = False, window: int | None = DEFAULT_WINDOW) -> None:
         self.sc, self.node = scenario, scenario.node(node_id)
         self.name = "interval-classical" if wrapping else "interval"
         self.wrapping = wrapping
@@ -61,8 +64,9 @@ class IntervalObserver(SetEstimator):
         self.center: np.ndarray | None = None
         self.init_map = np.eye(NA)  # Φ_k…Φ_0 applied to the initial box's radius
         self.init_radius = np.zeros(NA)
+        self.window = window
         self.dist: list[np.ndarray] = []  # propagated disturbance generators, one (3, m) block per step
-        self.radius = np.zeros(NA)  # wrapping: the propagated box radius
+        self.radius = np.zeros(NA)  # the box propagated by interval arithmetic: all (wrapping) or the folded tail
 
     @property
     def assumptions(self) -> tuple[Assumption, ...]:
@@ -78,7 +82,8 @@ class IntervalObserver(SetEstimator):
         if self.center is None:
             blo, bhi = step0_set(self.node, lo, hi, self.bounded).bounds()
             self.center, self.init_radius = (blo + bhi) / 2, (bhi - blo) / 2
-            self.radius = self.init_radius.copy()
+            if self.wrapping:
+                self.radius = self.init_radius.copy()
             return self._publish()
         if inp.u_prev is None or inp.vx_prev is None:
             raise EstimatorError("a step after step 0 needs u and Vx of the previous step")
@@ -88,7 +93,10 @@ class IntervalObserver(SetEstimator):
             self.radius = np.abs(phi) @ self.radius + np.abs(gens).sum(axis=1)
         else:
             self.init_map = phi @ self.init_map
+            self.radius = np.abs(phi) @ self.radius
             self.dist = [phi @ d for d in self.dist] + [gens]
+            if self.window is not None and len(self.dist) > self.window:
+                self.radius = self.radius + np.abs(self.dist.pop(0)).sum(axis=1)
         return self._publish()
 
     def _step_matrices(self, u: float, vx: float, lo: float, hi: float, two_sided: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -117,7 +125,7 @@ class IntervalObserver(SetEstimator):
         if self.wrapping:
             radius = self.radius
         else:
-            radius = np.abs(self.init_map) @ self.init_radius
+            radius = np.abs(self.init_map) @ self.init_radius + self.radius
             for d in self.dist:
                 radius = radius + np.abs(d).sum(axis=1)
         lo, hi = self.center - radius, self.center + radius
