@@ -4,7 +4,8 @@ Parts, in order: per-node per-step solve times on the paper scenario (NSNIM/SAIM
 per-rule, fast path vs. the previous default, the straightforward and the naive formulations); the
 published intervals of the paper run against the exact limit (``netsetest exact``); the in-memory cost per node-step for ring-with-chords networks of 6, 24 and 96 nodes; the Zenoh lockstep
 run against the in-memory run of the paper scenario; the largest real-time network without a
-deadline miss; one node process's peak RSS and start-up time.  ``--quick`` uses fewer steps and
+deadline miss; one node process's peak RSS and start-up time; the defences (stepping under a
+30 000 msg/s flood at one node, RSS slope over a long run, bench/defences.py).  ``--quick`` uses fewer steps and
 samples (a few minutes); the default takes longer.  Times are wall-clock milliseconds on this
 machine, measured side by side in one run; medians and ratios, not single runs, are the figures.
 """
@@ -27,11 +28,12 @@ PAPER6 = ROOT / "topologies" / "paper6.toml"
 QUICK = {
     "steps": 40, "ref_sched": 24, "ref_rule": 8, "naive": 12, "prev_sched": 24, "prev_rule": 8,
     "scaling_steps": 20, "scaling_sizes": [6, 24, 96], "rt_sizes": [6, 12, 24, 36], "rt_steps": 30, "startup_reps": 3,
+    "flood_steps": 30, "flood_rate": 30000, "soak_steps": 2000,
 }  # fmt: skip
 FULL = {
     "steps": 80, "ref_sched": 80, "ref_rule": 24, "naive": 40, "prev_sched": 80, "prev_rule": 24,
     "scaling_steps": 40, "scaling_sizes": [6, 24, 96], "rt_sizes": [6, 12, 18, 24, 30, 36, 42, 48], "rt_steps": 50,
-    "startup_reps": 5,
+    "startup_reps": 5, "flood_steps": 80, "flood_rate": 30000, "soak_steps": 20000,
 }  # fmt: skip
 
 
@@ -132,6 +134,22 @@ def zenoh_overhead(cfg: dict) -> dict:
     return res
 
 
+def defences(cfg: dict) -> dict:
+    from bench.defences import flood
+    from bench.soak import soak
+
+    out: dict = {}
+    for target in ("input", "state"):
+        _log(f"flood: {cfg['flood_rate']} forged messages/s on one {target} key, in memory")
+        r = out[f"flood_{target}"] = flood(cfg["flood_steps"], cfg["flood_rate"], str(PAPER6), target)
+        _log(f"  {r['none']['steps_per_s']:.1f} steps/s without, {r['flood']['steps_per_s']:.1f} with ({r['flood']['sent_per_s']:.0f} msg/s): "
+             f"ratio {r['ratio']:.2f}")  # fmt: skip
+    _log(f"soak: {cfg['soak_steps']} steps in memory, RSS sampled every 250 steps")
+    r = out["soak"] = soak(cfg["soak_steps"])
+    _log(f"  RSS {r['rss_start_mb']:.1f} → {r['rss_end_mb']:.1f} MB, slope {r['slope_mb_per_10k_steps']:.2f} MB per 10 000 steps")
+    return out
+
+
 def tightness(cfg: dict, tmp: Path) -> dict:
     """The paper run's published intervals against the exact limit (``netsetest exact``), per case."""
     from netsetest.analysis.exact import COORDINATES, compare_record, exact_bounds
@@ -193,6 +211,7 @@ def run_bench(quick: bool = False, json_path: str | None = None, markdown_path: 
         _log(f"  {res['node']}")
         _log("real time (τs = 0.1 s, nodes as processes): growing networks")
         res["realtime"] = realtime_ladder(tmp, cfg["rt_sizes"], cfg["rt_steps"], log=_log)
+        res["defences"] = defences(cfg)
     res["meta"]["load_after"] = _load()
     res["meta"]["duration_s"] = time.perf_counter() - t_all
     res.update(headline(res))
@@ -228,6 +247,9 @@ def headline(res: dict) -> dict:
         "node_rss_mb": _med([r["peak_rss_mb"] for r in node]),
         "node_startup_s": _med([r["first_state_s"] for r in node]),
         "node_first_estimate_s": _med([r["first_estimate_s"] for r in node]),
+        "flood_step_rate_ratio": res["defences"]["flood_input"]["ratio"],
+        "flood_step_rate_ratio_state_key": res["defences"]["flood_state"]["ratio"],
+        "soak_rss_slope_mb_per_10k_steps": res["defences"]["soak"]["slope_mb_per_10k_steps"],
     }
 
 
@@ -241,6 +263,8 @@ TARGETS = [
     ("fault_width_ratio_exact_saim", "≤ 1.25", lambda v: v <= 1.25),
     ("node_rss_mb", "≤ 100 MB", lambda v: v <= 100),
     ("node_startup_s", "< 1 s", lambda v: v < 1.0),
+    ("flood_step_rate_ratio", "≥ 0.5", lambda v: v >= 0.5),
+    ("soak_rss_slope_mb_per_10k_steps", "< 5 MB", lambda v: v < 5.0),
 ]
 
 
@@ -308,6 +332,15 @@ def markdown(res: dict) -> str:
     for r in res["realtime"]["runs"]:
         lines.append(f"- {r['nodes']} nodes (attempt {r['attempt']}): exit {r['exit_code']}, deadline misses {r['deadline_misses']}, "
                      f"nodes missing {r['nodes_missing']}, {f(r['wall_s'], '.0f')} s")  # fmt: skip
+    d = res["defences"]
+    lines += ["", "## Defences (bench/defences.py)", ""]
+    for target, what in (("input", "node 2's input key (one subscriber)"), ("state", "node 3's state key (four subscribers in one process)")):
+        r = d[f"flood_{target}"]
+        lines.append(f"- flood of {f(r['flood']['sent_per_s'], '.0f')} forged msg/s on {what}: {f(r['flood']['steps_per_s'], '.1f')} steps/s "
+                     f"vs {f(r['none']['steps_per_s'], '.1f')} without (ratio {f(r['ratio'])}); violations {r['flood']['violations']}")  # fmt: skip
+    r = d["soak"]
+    lines.append(f"- soak of {r['steps']} steps in memory: RSS {f(r['rss_start_mb'], '.1f')} → {f(r['rss_end_mb'], '.1f')} MB, "
+                 f"slope {f(r['slope_mb_per_10k_steps'])} MB per 10 000 steps ({f(r['steps_per_s'], '.0f')} steps/s)")  # fmt: skip
     return "\n".join(lines) + "\n"
 
 

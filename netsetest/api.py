@@ -57,7 +57,7 @@ class NodeSeries:
     rho: np.ndarray  # (K,) the radius: contained ⇔ E ≤ ρ
     contained: np.ndarray  # (K,) bool
     assumptions_ok: np.ndarray  # (K,) bool: every assumption in the step's dependency cone held
-    status: tuple[str, ...]  # per step: init, ok, fallback or rejoin
+    status: tuple[str, ...]  # per step: init, init-prior, ok, fallback or rejoin
 
 
 @dataclass(frozen=True)
@@ -75,8 +75,9 @@ class SimulationResult:
 
     @property
     def covered_steps(self) -> dict[int, int]:
-        """Per node: how many of its published steps the guarantee covered (assumptions held)."""
-        return {i: int(s.assumptions_ok.sum()) for i, s in self.nodes.items()}
+        """Per node: how many of its published steps were judged with every assumption held (the summary's
+        ``steps_covered``: the truth known, one copy, the dependency cone intact)."""
+        return {i: int((s.assumptions_ok & np.isfinite(s.E)).sum()) for i, s in self.nodes.items()}
 
     def save(self, path: str | Path) -> None:
         """Write the record (JSON, ``.gz`` compressed, or ``.mcap``)."""

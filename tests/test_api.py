@@ -54,6 +54,7 @@ def test_simulate_arrays_match_the_record(tmp_path: Path) -> None:
         assert np.allclose(s.t, s.steps * 0.1, rtol=0, atol=1e-12)
         # covered steps are counted from the record's flags; with the derived sector SAIM is covered throughout
         assert res.covered_steps[i] == int(tr.assumptions_ok.sum()) == len(s.steps)
+        assert res.covered_steps[i] == next(r["steps_covered"] for r in res.summary["nodes"] if r["id"] == i)
         assert (s.contained == (s.E <= s.rho)).all()
 
 

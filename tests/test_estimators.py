@@ -172,12 +172,17 @@ def test_compare_cli_prints_the_rows_and_writes_json(tmp_path: Path, capsys: pyt
 
 
 @pytest.mark.parametrize(("argv", "what"), [(["--estimators", "nope"], "unknown estimator"), (["--signals", "loud"], "signal kind"),
-                                            (["--seeds", "x"], "integers")])  # fmt: skip
+                                            (["--seeds", "x"], "not an integer"), (["--seeds", "0,-1"], "between 0")])  # fmt: skip
 def test_compare_bad_options_exit_2(argv: list[str], what: str, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exc:
         main(["compare", PAPER6, *argv])
     assert exc.value.code == 2
     assert what in capsys.readouterr().err
+
+
+def test_compare_refuses_an_unwritable_output_before_running(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["compare", PAPER6, "--json", str(tmp_path)]) == 2
+    assert "--json" in capsys.readouterr().err
 
 
 def test_compare_library_rejects_duplicate_and_unknown_names() -> None:

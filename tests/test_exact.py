@@ -249,15 +249,15 @@ def test_record_and_topology_must_match(tmp: str) -> None:
 
 def test_cli_record_naming_a_missing_topology(tmp: str, capsys: pytest.CaptureFixture[str]) -> None:
     sc, rec = _run("nsnim", "paper", 0, tmp)
-    doc = json.load(open(rec.path))
-    doc["meta"]["topology"] = f"{tmp}/moved.toml"
+    meta = {**rec.meta, "topology": f"{tmp}/moved.toml"}
     path = f"{tmp}/moved-record.json"
-    json.dump(doc, open(path, "w"))
+    save_record(path, meta, rec.truth, rec.raw_nodes, rec.summary)
     assert main(["exact", path]) == 2
     err = capsys.readouterr().err
     assert "moved.toml" in err and "--topology" in err and len(err.strip().splitlines()) == 1
-    del doc["truth"][3]["y"]
-    json.dump(doc, open(path, "w"))
+    truth = [dict(t) for t in rec.truth]
+    del truth[3]["y"]
+    save_record(path, meta, truth, rec.raw_nodes, rec.summary)
     assert main(["exact", path, "--topology", PAPER6]) == 2
     assert "malformed truth entry" in capsys.readouterr().err
 

@@ -3,7 +3,6 @@ Fig. 6's y axes not dominated by the initial ellipsoid (while every true value s
 
 from __future__ import annotations
 
-import json
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -11,7 +10,7 @@ import pytest
 
 import netsetest
 from netsetest.records import plots
-from netsetest.records.record import load_record
+from netsetest.records.record import load_record, save_record
 
 SILENT = range(20, 35)  # node 3 published nothing for these steps
 
@@ -20,9 +19,9 @@ SILENT = range(20, 35)  # node 3 published nothing for these steps
 def gap_record(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201
     d = tmp_path_factory.mktemp("plots")
     netsetest.simulate("paper6", steps=60).save(d / "full.json")
-    doc = json.loads((d / "full.json").read_text())
-    doc["nodes"]["3"] = [e for e in doc["nodes"]["3"] if e["step"] not in SILENT]
-    (d / "gap.json").write_text(json.dumps(doc))
+    full = load_record(d / "full.json")
+    nodes = {**full.raw_nodes, "3": [e for e in full.raw_nodes["3"] if e["step"] not in SILENT]}
+    save_record(d / "gap.json", full.meta, full.truth, nodes, full.summary)
     return load_record(d / "gap.json")
 
 

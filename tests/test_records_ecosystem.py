@@ -23,6 +23,14 @@ STEPS = 10
 
 
 @pytest.fixture(scope="module")
+def streamed(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, object]:
+    """The same run streamed by the collector to ``.mcap`` as it goes (and kept in memory)."""
+    path = tmp_path_factory.mktemp("stream") / "streamed.mcap"
+    res = run_inmemory(load_topology(ROOT / "topologies" / "paper6_lossy.toml", steps=STEPS), record=str(path), keep=True)
+    return path, res
+
+
+@pytest.fixture(scope="module")
 def records(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """One in-memory run saved as JSON and as MCAP (the same parts)."""
     res = run_inmemory(load_topology(ROOT / "topologies" / "paper6_lossy.toml", steps=STEPS))
@@ -223,3 +231,21 @@ def test_every_mcap_message_validates_against_its_json_schema(records: dict[str,
             jsonschema.Draft202012Validator(doc).validate(json.loads(message.data))
             n += 1
     assert n > 100
+
+
+def test_streamed_mcap_record_is_the_run_and_validates(streamed: tuple[Path, object]) -> None:
+    """``--record run.mcap`` goes through the collector's sink: the file holds what the run kept in memory
+    (contested, sector and sector_basis in every state, r and fault_ok in every truth), schema-valid."""
+    jsonschema = pytest.importorskip("jsonschema")
+    path, res = streamed
+    rec = load_record(path)
+    assert rec.meta == res.meta and rec.summary == res.summary and rec.truth == res.parts["truth"]  # type: ignore[attr-defined]
+    assert rec.raw_nodes == res.parts["nodes"]  # type: ignore[attr-defined]
+    assert all({"contested", "sector", "sector_basis"} <= set(e) for es in rec.raw_nodes.values() for e in es)
+    assert all({"r", "fault_ok"} <= set(t) for t in rec.truth)
+    with open(path, "rb") as fh:
+        for schema, _, message in make_reader(fh).iter_messages():
+            doc = json.loads(schema.data)
+            jsonschema.Draft202012Validator(doc).validate(json.loads(message.data))
+            if schema.name == "netsetest.NodeState":
+                assert set(json.loads(message.data)) - set(mcap_io.DERIVED_STATE_FIELDS) <= set(doc["properties"])

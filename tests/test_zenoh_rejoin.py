@@ -16,7 +16,7 @@ import re
 from collections import defaultdict
 
 import pytest
-from zenoh_helpers import EXIT_NODE_LOST, PAPER6, RING, ROOT, procs, read_json, run_parent  # noqa: F401 (fixture)
+from zenoh_helpers import EXIT_NODE_LOST, PAPER6, RING, ROOT, procs, read_json, read_record, run_parent  # noqa: F401 (fixture)
 
 pytestmark = pytest.mark.zenoh
 
@@ -39,7 +39,7 @@ def test_zenoh_kill_and_rejoin(procs, tmp_path) -> None:  # noqa: ANN001
     assert f"killing node {KILLED}" in logs and f"restarting node {KILLED} with --rejoin" in logs
 
     s = read_json(summ_path)
-    rec = read_json(rec_path)
+    rec = read_record(rec_path)
     assert s["nodes_missing"] == [KILLED], f"{s['nodes_missing']}\n{logs}"
     assert s["violations_total"] == 0
     assert s["steps_completed"] == STEPS

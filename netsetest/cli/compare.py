@@ -7,6 +7,7 @@ import json
 import sys
 from collections.abc import Callable
 
+from netsetest.cli import checks
 from netsetest.estimator.names import DEFAULT_COMPARE, ESTIMATOR_NAMES
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
@@ -30,10 +31,7 @@ def _signals(s: str) -> tuple[str, ...]:
 
 
 def _seeds(s: str) -> tuple[int, ...]:
-    try:
-        return tuple(int(x) for x in s.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a comma-separated list of integers: {s!r}") from None
+    return tuple(checks.seed(x) for x in s.split(","))
 
 
 def add_parser(sub: argparse._SubParsersAction, scenario_args: Callable[[argparse.ArgumentParser], None]) -> None:
@@ -52,6 +50,10 @@ def add_parser(sub: argparse._SubParsersAction, scenario_args: Callable[[argpars
 def cmd_compare(a: argparse.Namespace) -> int:
     from netsetest.analysis.compare import TABLE_HEADER, compare, comparison_document, markdown_table, plot_fault_bounds, table_rows
 
+    checks.output_file(a.json, "--json")
+    checks.output_file(a.markdown, "--markdown")
+    if a.plot:
+        checks.output_dir(a.plot, "--plot")
     c = compare(a.topology, a.estimators, (a.case,), a.signals, a.seeds, a.steps)
     rows = [TABLE_HEADER, *table_rows(c)]
     widths = [max(len(r[j]) for r in rows) for j in range(len(TABLE_HEADER))]

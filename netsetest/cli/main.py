@@ -9,14 +9,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Callable, Sequence
 
 from netsetest.analysis.errors import CompareError, ExactError
+from netsetest.cli import checks
 from netsetest.config.schema import ConfigError
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.extras import MissingExtra, require
-from netsetest.records.record import RecordError, check_record_path
+from netsetest.records.record import Record, RecordError
 from netsetest.runtime.report import EXIT_BAD_INPUT
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
@@ -34,7 +36,7 @@ def _run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled",
                    help="estimator: one SDP with the scheduled model, or one per T-S rule")  # fmt: skip
     p.add_argument("--objective", choices=list(OBJECTIVES), default=DEFAULT_OBJECTIVE, help=OBJECTIVE_HELP)
-    p.add_argument("--seed", type=int, default=0, help="random seed of noise, wind and losses")
+    p.add_argument("--seed", type=checks.seed, default=0, help="non-negative integer: random seed of noise, wind and losses")
 
 
 def _positive_int(s: str) -> int:
@@ -126,7 +128,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def cmd_run(a: argparse.Namespace) -> int:
-    check_record_path(a.record)  # a missing optional dependency fails now, not after the run
+    checks.record_file(a.record)
+    checks.output_file(a.summary_json, "--summary-json")
     if a.mode == "zenoh":
         from netsetest.cli import processes
 
@@ -134,21 +137,31 @@ def cmd_run(a: argparse.Namespace) -> int:
     if a.clock != "lockstep":
         print("netsetest run: --clock realtime needs --mode zenoh (the in-memory bus is lockstep only)", file=sys.stderr)
         return EXIT_BAD_INPUT
+    if a.kill or a.rejoin:
+        print("netsetest run: --kill and --rejoin need --mode zenoh (in memory there is no process to kill)", file=sys.stderr)
+        return EXIT_BAD_INPUT
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
-    from netsetest.runtime.report import exit_code, format_table, write_outputs
+    from netsetest.runtime.report import exit_code, format_table, write_summary
 
     sc = load_topology(a.topology, a.case, a.steps)
-    res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet, objective=a.objective)
-    write_outputs(res.summary, res.meta, res.parts, a.record, a.summary_json)
+    res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet, record=a.record, keep=False, objective=a.objective)
+    write_summary(res.summary, a.summary_json)
     print(format_table(res.summary))
     return exit_code(res.summary)
+
+
+def _note_partial(command: str, rec: Record) -> None:
+    if rec.partial:
+        print(f"netsetest {command}: {rec.path}: partial record (the run did not finish; last complete step "
+              f"{rec.last_complete_step})", file=sys.stderr)  # fmt: skip
 
 
 def cmd_inspect(a: argparse.Namespace) -> int:
     from netsetest.records.record import load_record
 
     rec = load_record(a.record)
+    _note_partial("inspect", rec)
     ids = sorted(rec.nodes) if a.node is None else [a.node]
     for i in ids:
         if i not in rec.nodes:
@@ -175,7 +188,11 @@ def cmd_plot(a: argparse.Namespace) -> int:
     from netsetest.records.plots import plot_records
     from netsetest.records.record import load_record
 
-    files = plot_records([load_record(r) for r in a.record], a.out)
+    checks.output_dir(a.out, "--out")
+    records = [load_record(r) for r in a.record]
+    for rec in records:
+        _note_partial("plot", rec)
+    files = plot_records(records, a.out)
     for f in files:
         print(f)
     return 0
@@ -189,6 +206,7 @@ def cmd_exact(a: argparse.Namespace) -> int:
     from netsetest.config.schema import load_topology
     from netsetest.records.record import load_record
 
+    checks.output_file(a.json, "--json")
     rec = load_record(a.record)
     topology = a.topology or rec.meta.get("topology")
     if not a.topology and not (isinstance(topology, str) and os.path.exists(topology)):
@@ -252,9 +270,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     handler = COMMANDS.get(a.command) or tools.COMMANDS.get(a.command) or compare.COMMANDS.get(a.command) or processes.COMMANDS[a.command]
     try:
         return handler(a)
-    except (ConfigError, RecordError, MissingExtra, ExactError, CompareError) as exc:
+    except (ConfigError, RecordError, MissingExtra, ExactError, CompareError, checks.OutputError) as exc:
         print(f"netsetest {a.command}: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:  # `netsetest inspect R | head`: the reader has gone, which is not an error
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # else the interpreter's final flush raises again
+        return 0
     except KeyboardInterrupt:
         print(f"netsetest {a.command}: interrupted", file=sys.stderr)
         return 130

@@ -22,6 +22,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from netsetest.cli import checks
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION
 
@@ -79,7 +80,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
     p = sub.add_parser("vehicle", help="the vehicle process (truth, measurements) of a Zenoh run")
     scenario_args(p)
     p.add_argument("--signals", choices=["paper", "worst"], default="paper", help="noise and wind: the paper's, or held at ±bound")
-    p.add_argument("--seed", type=int, default=0, help="random seed of noise, wind and losses")
+    p.add_argument("--seed", type=checks.seed, default=0, help="random seed of noise, wind and losses")
     p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep", help="lockstep: wait for every node; realtime: one step every τs")
     p.add_argument("--node-timeout", type=_seconds, default=10.0, metavar="S", help="lockstep: a node silent this long [s] is declared dead")
     p.add_argument("--pace", type=_non_negative, default=0.0, metavar="S", help="lockstep: at least S seconds per step")
@@ -167,6 +168,9 @@ def cmd_collector(a: argparse.Namespace) -> int:
     from netsetest.runtime.inmemory import run_meta
     from netsetest.runtime.processes import run_collector
     from netsetest.runtime.report import format_table
+
+    checks.record_file(a.record)  # before the run, not after it
+    checks.output_file(a.summary_json, "--summary-json")
 
     def body(sc, bus) -> int:  # noqa: ANN001
         meta = run_meta(sc, "zenoh", a.clock, a.signals, a.variant, a.seed, a.run_id, a.objective)

@@ -458,7 +458,7 @@ class LocalEstimator:
         if res is not None:
             return self._bank(res, data, prev.rho, alpha)
         P_fb = fallback_shape(data, data["own_meas"], data["gamma"], self.W, inp.alpha, self.model) / prev.rho
-        return StepResult(data["x_pred"].copy(), P_fb, "fallback", np.nan, data["solve_ms"], data["solver_status"], sector=sector)
+        return self._fallback(data["x_pred"].copy(), P_fb, data, sector)
 
     def first(self, prior: Ellipsoid, y: float, gamma: float) -> StepResult:
         """Step 0: the prior updated by ỹ₀, certified like every step; ``fallback``: the prior itself."""
@@ -467,7 +467,13 @@ class LocalEstimator:
         res = self._solve_certify(data, prior.rho, np.ones(1), self._wh)
         if res is not None:
             return self._bank(res, data, prior.rho, np.ones(1))
-        return StepResult(prior.xhat.copy(), prior.P.copy(), "fallback", np.nan, data["solve_ms"], data["solver_status"], sector=sector)
+        return self._fallback(prior.xhat.copy(), prior.P.copy(), data, sector)
+
+    def _fallback(self, xhat: np.ndarray, P: np.ndarray, data: dict, sector: Sector | None) -> StepResult:
+        """The guaranteed set when the solver gave no certificate; FallbackUnavailable if even it is not publishable."""
+        if not publishable(xhat, P):
+            raise FallbackUnavailable(f"node {self.node_id}: the fallback ellipsoid is not finite and positive definite")
+        return StepResult(xhat, P, "fallback", np.nan, data["solve_ms"], data["solver_status"], sector=sector)
 
     def _bank(self, res: StepResult, data: dict, rho: float, alpha: np.ndarray) -> StepResult:
         """Objective ``bank``: add the fault-weighted set of the same step data as the one to publish."""
@@ -507,6 +513,8 @@ class LocalEstimator:
             return None
         P_pub = 0.5 * (sol.P + sol.P.T) * rho_c / rho
         xhat_new = data["x_pred"] + L[:, 0] * data["innov_sum"]
+        if not publishable(xhat_new, P_pub):  # a certified set nobody can use: treated as no certificate
+            return None
         return StepResult(xhat_new, P_pub, "ok", rho_c, data["solve_ms"], sol.status, L, data["sector"])
 
     @staticmethod
@@ -582,12 +590,12 @@ def certify(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: list[np.ndarr
     so a solver answer that is feasible up to its tolerance becomes strictly feasible there, at a cost
     of O(ε) in ρ'.
     """
+    if not all(np.all(np.isfinite(v)) for v in (P, pi, tau, *facts)):
+        return None  # a NaN passes Cholesky silently
     P = 0.5 * (P + P.T)
     try:
         chol = np.linalg.cholesky(P)
     except np.linalg.LinAlgError:
-        return None
-    if not (np.all(np.isfinite(pi)) and np.all(np.isfinite(tau))):
         return None
     x = np.linalg.solve(chol, pi)  # Πᵀ P⁻¹ Π = xᵀx
     base = x.T @ x
@@ -619,12 +627,36 @@ def certify(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: list[np.ndarr
     return None
 
 
+COND_MAX = 1e13  # largest eigenvalue ratio of a published shape: beyond it E = eᵀP⁻¹e is rounding noise
+FALLBACK_INFLATE = 1e-9  # relative: makes a rank-deficient Minkowski bound positive definite
+
+
+class FallbackUnavailable(ArithmeticError):
+    """Even the guaranteed fallback ellipsoid is not representable (the profile's magnitudes are out of range)."""
+
+
+def publishable(xhat: np.ndarray, P: np.ndarray) -> bool:
+    """A centre and shape a node may publish: finite, symmetric positive definite, not degenerate."""
+    if not (np.all(np.isfinite(xhat)) and np.all(np.isfinite(P))) or not np.array_equal(P, P.T):
+        return False
+    try:
+        np.linalg.cholesky(P)
+        eig = np.linalg.eigvalsh(P)
+    except np.linalg.LinAlgError:
+        return False
+    return bool(eig[0] > 0 and eig[-1] <= COND_MAX * eig[0])
+
+
 def fallback_shape(data: dict, own: Sensor, gamma_new: float, W: float, alpha: np.ndarray, model: TSModel) -> np.ndarray:
     """A guaranteed shape without the solver: L = 0 and an outer ellipsoid of a Minkowski sum.
 
     e⁺ = T Ā ρ^½ M z + T D̄ w − G Dv v⁺ − G γ⁺ φ⁺ with |z| ≤ 1, |w| ≤ √W, |v⁺| ≤ √R and, under the sector
     assumption |C̄ x̄⁺| ≤ r_max/h1, |φ⁺| ≤ (1 − h1) r_max.  For terms F_k ξ_k with |ξ_k| ≤ 1 the sum lies
-    in {e: eᵀ(Σ F_kF_kᵀ/p_k)⁻¹e ≤ 1} for any p_k > 0 with Σ p_k = 1; p_k ∝ √tr(F_kF_kᵀ) minimises the trace.
+    in {e: eᵀ(Σ F_kF_kᵀ/p_k)⁻¹e ≤ 1} for any p_k > 0 with Σ p_k = 1; p_k ∝ ‖F_k‖_F minimises the trace.
+
+    Computed scale-free (each term divided by its largest entry before squaring) so that magnitudes up to
+    the schema's limits neither overflow nor underflow; raises :class:`FallbackUnavailable` when an input
+    or the result is not finite (a profile outside those limits) — never a silently wrong shape.
     """
     T, G, Mi = data["T"], data["G"], data["Mi"]
     a, _, d = model.blend(alpha)
@@ -634,13 +666,26 @@ def fallback_shape(data: dict, own: Sensor, gamma_new: float, W: float, alpha: n
     terms = [T @ abar @ Mi, (T @ dbar * np.sqrt(W))[:, None], G * own.Dv * np.sqrt(own.R)]
     if own.saturated:
         terms.append(G * gamma_new * (1.0 - own.h1) * own.r_max)
-    grams = [f @ f.T for f in terms]
-    roots = np.array([np.sqrt(np.trace(q)) for q in grams])
-    keep = roots > 0
-    p = roots[keep] / roots[keep].sum()
-    shape = sum(q / pk for q, pk in zip([q for q, k in zip(grams, keep) if k], p))
+    if not all(np.all(np.isfinite(f)) for f in terms):
+        raise FallbackUnavailable("a term of the fallback bound is not finite")
+    scales = [float(np.max(np.abs(f))) for f in terms]
+    live = [(f / s, s) for f, s in zip(terms, scales) if s > 0]
+    if not live:
+        raise FallbackUnavailable("every term of the fallback bound is zero")
+    unit = [(u, s, float(np.linalg.norm(u))) for u, s in live]  # ‖F‖_F = s ‖F/s‖_F, ‖F/s‖_F ∈ [1, √9]
+    total = sum(s * n for _, s, n in unit)
+    # Σ_k F_kF_kᵀ / p_k with p_k = s_k n_k / total:  = total · Σ_k (s_k / n_k) U_k U_kᵀ
+    with np.errstate(over="ignore", invalid="ignore"):  # overflow is detected below, not warned about
+        shape = total * sum((s / n) * (u @ u.T) for u, s, n in unit)
+        shape = 0.5 * (shape + shape.T)
+        trace = float(np.trace(shape))
+    if not (np.all(np.isfinite(shape)) and np.isfinite(trace)):
+        raise FallbackUnavailable("the fallback bound overflows")
     # a rank-deficient sum is still an outer bound once inflated a little in every direction
-    return shape + 1e-9 * max(1.0, float(np.trace(shape))) * np.eye(NA)
+    return shape + FALLBACK_INFLATE * max(trace, np.finfo(float).tiny / FALLBACK_INFLATE) * np.eye(NA)
 
 
-__all__ = ["LocalEstimator", "NeighbourState", "StepInput", "Ellipsoid", "StepResult", "OBJECTIVES", "Objective", "Solution", "certify", "fallback_shape", "BACKENDS"]
+__all__ = [
+    "LocalEstimator", "NeighbourState", "StepInput", "Ellipsoid", "StepResult", "OBJECTIVES", "Objective", "Solution",
+    "certify", "fallback_shape", "publishable", "FallbackUnavailable", "BACKENDS",
+]  # fmt: skip

@@ -6,8 +6,8 @@ Channels (message encoding ``json``, schema encoding ``jsonschema``), log time =
     /vehicle/truth       per step: the record's truth entry (x = [β, r], faults, u, w, Vx, noise, γ, y,
                          assumption flags, lost links, alive nodes)
     /node/<i>/input      per step: what node i measured (y, y without fault, γ) and the vehicle's u, Vx
-    /node/<i>/state      per published step: the record's node entry (x̂, P, ρ, status, E, contained,
-                         assumptions_ok, …) plus the bounds x̂ ∓ √(ρ P_jj) of β, r and f and the time t
+    /node/<i>/state      per published step: the record's node entry (x̂, P, ρ, status, sector, E,
+                         contained, assumptions_ok, contested, …) plus the bounds x̂ ∓ √(ρ P_jj) of β, r and f and the time t
     /node/<i>/drops      per published step: neighbours used, expected but missing, late (real time)
     /run/verdict         once, at the last step: the summary (violations, misses, per-node table)
 
@@ -120,6 +120,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
          "sector_basis": {"type": "string", "description": "none | measurement | fault-bound | assumed"},
          "E": {**_NUM, "description": "eᵀP⁻¹e (contained while ≤ ρ); null if the truth is unknown"},
          "contained": _BOOL, "assumptions_ok": _BOOL,
+         "contested": {**_BOOL, "description": "more than one copy matched the truth: not judged"},
          **{f"{n}_{s}": {"type": "number", "description": f"{s} bound of {n}: x̂ ∓ √(ρ P)"}
             for n, _ in COMPONENTS for s in ("lower", "upper")}},
         ["step", "xhat", "P", "rho", "status"],

@@ -27,7 +27,7 @@ from netsetest.models.signals import SignalKind
 from netsetest.roles.collector import Collector
 from netsetest.roles.node import Node
 from netsetest.roles.vehicle import Vehicle
-from netsetest.runtime.report import EXIT_VIOLATION, exit_code, write_outputs
+from netsetest.runtime.report import EXIT_VIOLATION, exit_code, record_sink, write_summary
 
 READY_PERIOD_S = 0.1
 
@@ -179,13 +179,16 @@ def run_collector(
     idle_timeout: float,
     on_summary: Callable[[dict], None] | None = None,
 ) -> int:
-    collector = Collector(sc, bus, run_id)
+    sink, _ = record_sink(record)  # opened now: the record grows step by step and survives a crash
+    collector = Collector(sc, bus, run_id, sink)
+    if sink is not None:
+        sink.meta(meta)
     barrier = Barrier(bus, run_id, Ready(role="collector"), _all_roles(sc) - {("collector", None)})
     prog = _CollectorProgress(progress)
     last_msg = time.monotonic()
     while True:
         now = time.monotonic()
-        if not collector.truth:
+        if not collector.started:
             barrier.tick(now)
         if bus.pump(timeout=0.05):
             last_msg = time.monotonic()
@@ -200,8 +203,8 @@ def run_collector(
         if now - last_msg > idle_timeout:
             log("collector", f"no message for {idle_timeout:g} s: the vehicle is gone; writing what was received")
             break
-    summary, parts = collector.finish(meta)
-    write_outputs(summary, meta, parts, record, summary_json)
+    summary = collector.finish(meta)
+    write_summary(summary, summary_json)
     if on_summary:
         on_summary(summary)
     return exit_code(summary) if collector.ended is not None else EXIT_VIOLATION
