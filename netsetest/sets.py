@@ -5,6 +5,8 @@ Each offers ``contains(point)`` (membership, with a relative tolerance for point
 comparisons work for every type.  :class:`SlicedEllipsoid` (an ellipsoid cut by slabs) and
 :class:`SumSet` (a zonotope plus a linear image of a sliced ellipsoid) are what the zonotopic
 estimator needs to carry an ellipsoidal prior exactly (docs/estimators/zonotope_w_radius.md).
+:func:`set_to_wire` / :func:`set_from_wire` give every type a checked dict form (with a ``type`` key) for
+messages and records; a malformed one raises :class:`SetFormatError`, so a role can drop it.
 """
 
 from __future__ import annotations
@@ -186,3 +188,106 @@ class SumSet:
         A = sparse.csc_matrix(np.vstack(blocks_A))
         sol = clarabel.DefaultSolver(sparse.csc_matrix((nv, nv)), np.zeros(nv), A, np.concatenate(blocks_b), cones, _settings()).solve()
         return str(sol.status) in ("Solved", "AlmostSolved")
+
+
+# ---------------------------------------------------------------- wire form (issue 9, phase 2 groundwork)
+
+MAX_GENERATORS = 1024  # a published zonotope with more generators is refused (bounded message size)
+
+
+class SetFormatError(ValueError):
+    """A set in wire form that is malformed (wrong type, shape, non-finite, not SPD); drop the message."""
+
+
+def _vec(d: dict, key: str, n: int | None = None) -> np.ndarray:
+    v = np.asarray(d.get(key), dtype=float)
+    if v.ndim != 1 or (n is not None and len(v) != n) or not np.all(np.isfinite(v)):
+        raise SetFormatError(f"{key}: expected a finite vector" + (f" of length {n}" if n is not None else ""))
+    return v
+
+
+def _mat(d: dict, key: str, rows: int) -> np.ndarray:
+    m = np.asarray(d.get(key), dtype=float)
+    if m.ndim != 2 or m.shape[0] != rows or m.shape[1] > MAX_GENERATORS or not np.all(np.isfinite(m)):
+        raise SetFormatError(f"{key}: expected a finite {rows}×m matrix with m ≤ {MAX_GENERATORS}")
+    return m
+
+
+def _generators(d: dict, dim: int) -> np.ndarray:
+    """The (dim, m) generator matrix of a wire zonotope, whose "G" lists the m generators."""
+    g = np.asarray(d.get("G"), dtype=float)
+    if g.size == 0:
+        return np.zeros((dim, 0))
+    if g.ndim != 2 or g.shape[1] != dim or g.shape[0] > MAX_GENERATORS or not np.all(np.isfinite(g)):
+        raise SetFormatError(f"G: expected at most {MAX_GENERATORS} finite generators of length {dim}")
+    return g.T
+
+
+def _spd(P: np.ndarray, key: str) -> np.ndarray:
+    if not np.allclose(P, P.T) or np.linalg.eigvalsh((P + P.T) / 2).min() <= 0:
+        raise SetFormatError(f"{key}: not symmetric positive definite")
+    return P
+
+
+def set_to_wire(s: Ellipsoid | Zonotope | Box | SumSet) -> dict:
+    """A JSON/msgpack-ready dict with a ``type`` key; :func:`set_from_wire` inverts it exactly."""
+    if isinstance(s, Ellipsoid):
+        return {"type": "ellipsoid", "center": s.center.tolist(), "P": s.P.tolist(), "rho": float(s.rho)}
+    if isinstance(s, Zonotope):
+        return {"type": "zonotope", "center": s.center.tolist(), "G": s.generators.T.tolist()}
+    if isinstance(s, Box):
+        return {"type": "box", "lo": s.lo.tolist(), "hi": s.hi.tolist()}
+    out = {"type": "sum", "zonotope": set_to_wire(s.zonotope)}
+    if s.sliced is not None and s.M is not None:
+        out["M"] = s.M.tolist()
+        out["ellipsoid"] = set_to_wire(s.sliced.ellipsoid)
+        out["slabs"] = [[sl.a.tolist(), _inf_to_none(sl.lo), _inf_to_none(sl.hi)] for sl in s.sliced.slabs]
+    return out
+
+
+def _inf_to_none(v: float) -> float | None:
+    return float(v) if np.isfinite(v) else None
+
+
+def set_from_wire(d: object, dim: int) -> Ellipsoid | Zonotope | Box | SumSet:
+    """The set of :func:`set_to_wire`'s dict, checked (dimension ``dim``); SetFormatError if malformed."""
+    if not isinstance(d, dict):
+        raise SetFormatError("a set must be a mapping with a 'type'")
+    kind = d.get("type")
+    try:
+        if kind == "ellipsoid":
+            rho = float(d.get("rho"))  # type: ignore[arg-type]
+            if not (np.isfinite(rho) and rho > 0):
+                raise SetFormatError("rho: expected a finite positive number")
+            return Ellipsoid(_vec(d, "center", dim), _spd(_mat(d, "P", dim), "P"), rho)
+        if kind == "zonotope":
+            return Zonotope(_vec(d, "center", dim), _generators(d, dim))
+        if kind == "box":
+            lo, hi = _vec(d, "lo", dim), _vec(d, "hi", dim)
+            if np.any(lo > hi):
+                raise SetFormatError("box: lo > hi")
+            return Box(lo, hi)
+        if kind == "sum":
+            z = set_from_wire(d.get("zonotope"), dim)
+            if not isinstance(z, Zonotope) or z.generators.shape[0] != dim:
+                raise SetFormatError("sum: 'zonotope' must be a zonotope of the set's dimension")
+            if "M" not in d:
+                return SumSet(z)
+            el = set_from_wire(d.get("ellipsoid"), len(d.get("M")[0]))  # type: ignore[index]
+            if not isinstance(el, Ellipsoid):
+                raise SetFormatError("sum: 'ellipsoid' must be an ellipsoid")
+            M = _mat(d, "M", dim)
+            slabs = []
+            for item in d.get("slabs") or []:
+                a = np.asarray(item[0], dtype=float)
+                lo = -np.inf if item[1] is None else float(item[1])
+                hi = np.inf if item[2] is None else float(item[2])
+                if a.shape != el.center.shape or not np.all(np.isfinite(a)) or np.isnan(lo) or np.isnan(hi) or lo > hi:
+                    raise SetFormatError("sum: a malformed slab")
+                slabs.append(Slab(a, lo, hi))
+            return SumSet(z, M, SlicedEllipsoid(el, tuple(slabs)))
+    except (TypeError, ValueError, IndexError, np.linalg.LinAlgError) as exc:
+        if isinstance(exc, SetFormatError):
+            raise
+        raise SetFormatError(f"{kind}: {type(exc).__name__}: {exc}") from None
+    raise SetFormatError(f"unknown set type {kind!r} (ellipsoid, zonotope, box or sum)")

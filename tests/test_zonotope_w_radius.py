@@ -40,7 +40,7 @@ def _zonotope_bounds(sc: Scenario, rec: Record, node: int, order: int | None, mo
     out = []
     prev = None
     for d in step_data(rec):
-        s = est.step(d.y[node], d.gamma[node]) if prev is None else est.step(d.y[node], d.gamma[node], prev.u, prev.vx)
+        s = est.advance(d.y[node], d.gamma[node]) if prev is None else est.advance(d.y[node], d.gamma[node], prev.u, prev.vx)
         lo, hi = s.bounds()
         out.append(np.stack([lo, hi], axis=1))
         prev = d

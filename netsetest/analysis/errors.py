@@ -3,3 +3,7 @@
 
 class ExactError(Exception):
     """A record and topology that cannot be analysed together; the message says why."""
+
+
+class CompareError(ValueError):
+    """Bad input to ``netsetest compare`` (an unknown estimator name, nothing to compare)."""

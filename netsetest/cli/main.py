@@ -1,4 +1,4 @@
-"""``netsetest`` command line: run, inspect, plot, exact, bench (and the role processes of the Zenoh runtime).
+"""``netsetest`` command line: run, inspect, plot, exact, compare, bench (and the role processes of the Zenoh runtime).
 
 Exit codes: 0 success (every ellipsoid contained where the assumptions held); 1 containment violated
 on a step where the assumptions held; 2 bad input (file, option); 3 a node stopped reporting;
@@ -13,7 +13,7 @@ import os
 import sys
 from collections.abc import Callable, Sequence
 
-from netsetest.analysis.errors import ExactError
+from netsetest.analysis.errors import CompareError, ExactError
 from netsetest.cli import checks
 from netsetest.config.schema import ConfigError
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
@@ -118,9 +118,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="fewer steps and samples (a few minutes)")
     p.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
     p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown (default: none)")
-    from netsetest.cli import tools
+    from netsetest.cli import compare, tools
 
     tools.add_parsers(sub)
+    compare.add_parser(sub, _scenario_args)
     for command in sub.choices.values():
         command.formatter_class = HelpFormatter
     return ap
@@ -264,12 +265,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     a = ap.parse_args(argv)
     from netsetest.cli import processes
 
-    from netsetest.cli import tools
+    from netsetest.cli import compare, tools
 
-    handler = COMMANDS.get(a.command) or tools.COMMANDS.get(a.command) or processes.COMMANDS[a.command]
+    handler = COMMANDS.get(a.command) or tools.COMMANDS.get(a.command) or compare.COMMANDS.get(a.command) or processes.COMMANDS[a.command]
     try:
         return handler(a)
-    except (ConfigError, RecordError, MissingExtra, ExactError, checks.OutputError) as exc:
+    except (ConfigError, RecordError, MissingExtra, ExactError, CompareError, checks.OutputError) as exc:
         print(f"netsetest {a.command}: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except BrokenPipeError:  # `netsetest inspect R | head`: the reader has gone, which is not an error

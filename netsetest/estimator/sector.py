@@ -29,10 +29,9 @@ from typing import Literal
 
 import numpy as np
 
-from netsetest.models.sensor import NX, Sensor
+from netsetest.models.sensor import NX, ROUNDING_MARGIN, Sensor
 
 SATURATION_UPPER_SLOPE = 1.0  # sup σ(r)/r of a saturation: the exact h2
-ROUNDING_MARGIN = 1e-9  # relative widening of the measurement interval against floating-point rounding
 SectorBasis = Literal["none", "measurement", "fault-bound", "assumed"]
 
 

@@ -6,7 +6,8 @@ Congress 2020 (seeds/001): prediction by exact Minkowski sums, a parameterised i
 measurement strip (Theorem 1, gain Λ), W-radius as the size to minimise, order reduction ↓q,W
 (Property 3).  Derivation and the choices made for this problem: docs/estimators/zonotope_w_radius.md.
 
-Offline for now (not wired into the network): :class:`ZonotopeEstimator` steps through one node's
+Implements the estimator interface (estimator/base.py, name ``zonotope``); it ignores the neighbours'
+sets (001 is a single-sensor observer).  :class:`ZonotopeEstimator` steps through one node's
 inputs, using only what that node has (its prior, its measurements, u, Vx), and publishes a
 :class:`~netsetest.sets.SumSet` ⟨c, G⟩ ⊕ M·S, where S is the node's prior ellipsoid cut by its step-0
 slabs (kept exact: an ellipsoid is not a zonotope) and ⟨c, G⟩ collects every later uncertainty.
@@ -39,6 +40,7 @@ from typing import Literal
 import numpy as np
 
 from netsetest.config.schema import FaultBoundsMode, NodeConfig, Scenario
+from netsetest.estimator.base import BASE_ASSUMPTIONS, Assumption, EstimatorError, NeighbourSet, SetEstimator, StepInput
 from netsetest.models.sensor import E_DESCRIPTOR, NA, NX
 from netsetest.sets import Ellipsoid, SlicedEllipsoid, Slab, SumSet, Zonotope
 
@@ -62,7 +64,7 @@ def reduce_order(G: np.ndarray, order: int, W: np.ndarray) -> np.ndarray:
     return np.hstack([keep, np.diag(np.abs(box).sum(axis=1))])
 
 
-def _frobenius_gain(G: np.ndarray, ell: np.ndarray, a: np.ndarray, sigma: float) -> np.ndarray:
+def frobenius_gain(G: np.ndarray, ell: np.ndarray, a: np.ndarray, sigma: float) -> np.ndarray:
     """λ minimising the Frobenius W-radius tr(G'ᵀ W G') of the intersection (any W ≻ 0 gives the same)."""
     gamma_m = G @ G.T + ell @ ell.T
     return gamma_m @ a / (a @ gamma_m @ a + sigma**2)
@@ -82,7 +84,7 @@ def _hull_gain(G: np.ndarray, ell: np.ndarray, a: np.ndarray, sigma: float) -> n
     kink G_ji/(aᵀG)_i, 0, the prior term's minimiser and the Frobenius gain; among near-ties (within
     _TIE) the one nearest the Frobenius gain wins, so a flat row keeps a moderate gain."""
     g, e = a @ G, a @ ell
-    frob = _frobenius_gain(G, ell, a, sigma)
+    frob = frobenius_gain(G, ell, a, sigma)
     cols = [np.zeros(len(a)), frob]
     big = np.abs(g) > _KINK_FLOOR * max(1.0, float(np.abs(g).max(initial=0.0)))
     if big.any():
@@ -97,8 +99,10 @@ def _hull_gain(G: np.ndarray, ell: np.ndarray, a: np.ndarray, sigma: float) -> n
     return cand[np.arange(len(a)), dist.argmin(axis=1)]
 
 
-class ZonotopeEstimator:
+class ZonotopeEstimator(SetEstimator):
     """One node's zonotopic estimator; :meth:`step` takes that step's data and returns the published set."""
+
+    name = "zonotope"
 
     def __init__(
         self,
@@ -120,6 +124,13 @@ class ZonotopeEstimator:
         pinv = np.linalg.pinv(theta)  # T E + G C̄ = I (002 (19)–(20) with γ h1 = 1: r = C̄x̄ is measured)
         self.T_x, self.G_r = pinv[:, :NX], pinv[:, NA]
 
+    @property
+    def assumptions(self) -> tuple[Assumption, ...]:
+        return BASE_ASSUMPTIONS + (("fault_bound",) if self.bounded else ())
+
+    def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> SumSet:
+        return self.advance(inp.y, inp.gamma, inp.u_prev, inp.vx_prev)
+
     def _slabs(self, y: float, gamma: float) -> list[Slab]:
         lo, hi = self.node.sensor.measured_interval(y, gamma)
         slabs = [Slab(self.node.sensor.Cbar, lo, hi)]
@@ -127,7 +138,7 @@ class ZonotopeEstimator:
             slabs.append(Slab(_E3, -self.node.fault_size, self.node.fault_size))
         return slabs
 
-    def step(self, y: float, gamma: float, u_prev: float | None = None, vx_prev: float | None = None) -> SumSet:
+    def advance(self, y: float, gamma: float, u_prev: float | None = None, vx_prev: float | None = None) -> SumSet:
         """Step 0 (``u_prev`` None): the prior cut by the first measurement.  Step k > 0: predict with
         u_{k−1}, Vx_{k−1}, then use ỹ_k (γ_k)."""
         if self.set is None:
@@ -136,7 +147,7 @@ class ZonotopeEstimator:
             self.set = SumSet(Zonotope(np.zeros(NA), np.zeros((NA, 0))), np.eye(NA), prior)
             return self.set
         if u_prev is None or vx_prev is None:
-            raise ValueError("a step after step 0 needs u and Vx of the previous step")
+            raise EstimatorError("a step after step 0 needs u and Vx of the previous step")
         a, b, d = self.sc.model.blend(self.sc.model.weights(vx_prev))
         if self.bounded:
             new = self._bounded_step(a, b[:, 0] * u_prev, d[:, 0], y, gamma)
@@ -151,7 +162,7 @@ class ZonotopeEstimator:
         """x̄⁺ = T_x(Ā [I 0] x̄ + B̄u + D̄w) + G r⁺: exact (module doc)."""
         lo, hi = self.node.sensor.measured_interval(y, gamma)
         if not (np.isfinite(lo) and np.isfinite(hi)):
-            raise ValueError(
+            raise EstimatorError(
                 f"node {self.node.id}: a saturated measurement leaves the fault unbounded; "
                 "a declared fault bound is needed (fault_bounds 'used' or 'all')"
             )
@@ -208,7 +219,7 @@ class ZonotopeEstimator:
         top, bottom = s.support(a), -s.support(-a)
         lo, hi = max(slab.lo, bottom), min(slab.hi, top)
         if hi < lo:
-            raise ValueError(f"node {self.node.id}: the measurement is inconsistent with the set (an assumption broke)")
+            raise EstimatorError(f"node {self.node.id}: the measurement is inconsistent with the set (an assumption broke)")
         if (lo - bottom) + (top - hi) <= _NEGLIGIBLE * max(1.0, top - bottom):
             return s
         mid, sigma = (lo + hi) / 2, (hi - lo) / 2
@@ -218,7 +229,7 @@ class ZonotopeEstimator:
         if s.sliced is not None and s.M is not None:
             el = s.sliced.ellipsoid
             ell = np.sqrt(el.rho) * s.M @ np.linalg.cholesky(el.P)
-        lam = _hull_gain(G, ell, a, sigma) if self.gain == "hull" else _frobenius_gain(G, ell, a, sigma)
+        lam = _hull_gain(G, ell, a, sigma) if self.gain == "hull" else frobenius_gain(G, ell, a, sigma)
         proj = np.eye(len(a)) - np.outer(lam, a)
         c = s.zonotope.center
         center = proj @ c + lam * mid

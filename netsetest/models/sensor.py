@@ -21,6 +21,10 @@ NX = 2  # vehicle state [β, r]
 NA = 3  # augmented state [β, r, f]
 
 E_DESCRIPTOR = np.diag([1.0, 1.0, 0.0])  # E of (11)
+# relative margin against floating-point rounding at the saturation limit: an end of the measured
+# σ-interval this close to ±r_max may be the limit itself rounded (worst-case noise at exactly its
+# bound) and is treated as open, which is always sound (also used by estimator/sector.py)
+ROUNDING_MARGIN = 1e-9
 
 
 @dataclass(frozen=True)
@@ -71,7 +75,8 @@ class Sensor:
         lo, hi = (y - half) / gamma, (y + half) / gamma
         if not self.saturated:
             return lo, hi
-        return (-np.inf if lo <= -self.r_max else lo), (np.inf if hi >= self.r_max else hi)
+        edge = self.r_max * (1 - ROUNDING_MARGIN)
+        return (-np.inf if lo <= -edge else lo), (np.inf if hi >= edge else hi)
 
     def sector_holds(self, xbar: np.ndarray) -> bool:
         """Whether φ(C̄ x̄) satisfies the sector condition (15) that the estimator assumes."""
