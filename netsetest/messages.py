@@ -1,14 +1,17 @@
 """Every message the roles exchange, defined once: pydantic models, msgpack on the wire.
 
 A payload is a msgpack map with ``v`` (schema version) and ``type``; :func:`decode` validates it
-(types, dimensions, finite numbers, step ≥ 0) and raises :class:`BadMessage` otherwise.  Context checks
-(is the sender a real neighbour, is the step plausible) are the receiving role's job.  Both buses encode
-and decode every message, so the in-memory run exercises the same wire format as the Zenoh run.
+(types, dimensions, finite numbers, step ≥ 0, bounded lists and maps, a Truth whose maps are non-empty
+and keyed by the same node ids) and raises :class:`BadMessage` otherwise.  :class:`RunScope` checks a
+decoded message against the run (its node ids, its last step); the receiving role applies it and its
+own context checks (is the sender a real neighbour, is the step plausible).  Both buses encode and
+decode every message, so the in-memory run exercises the same wire format as the Zenoh run.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Annotated, Literal, Union
 
 import msgpack
@@ -23,6 +26,16 @@ NodeId = Annotated[int, Field(ge=1, strict=True)]
 Vec3 = Annotated[list[FiniteF], Field(min_length=3, max_length=3)]
 Vec2 = Annotated[list[FiniteF], Field(min_length=2, max_length=2)]
 Mat3 = Annotated[list[FiniteF], Field(min_length=9, max_length=9)]
+MAX_NODES = 256  # a network larger than this is not a yaw-rate sensor network: bounds every list and map
+MAX_REASON = 64  # characters of a drop-reason key or an End reason
+IdList = Annotated[list[NodeId], Field(max_length=MAX_NODES)]
+NodeMap = Annotated[dict[str, FiniteF], Field(min_length=1, max_length=MAX_NODES)]
+FlagMap = Annotated[dict[str, bool], Field(min_length=1, max_length=MAX_NODES)]
+Drops = Annotated[
+    dict[Annotated[str, Field(max_length=MAX_REASON)], Annotated[int, Field(ge=0, strict=True)]], Field(max_length=64)
+]
+SectorH1 = Annotated[float, Field(gt=0, le=1, allow_inf_nan=False, strict=True)]
+SectorH = Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)]
 
 
 class BadMessage(ValueError):
@@ -65,8 +78,8 @@ class NodeInput(_Msg):
     gamma: Annotated[float, Field(gt=0, le=1, strict=True)]
     u_prev: FiniteF | None = None
     vx_prev: Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)] | None = None
-    expect_from: list[NodeId] = []
-    lost_from: list[NodeId] = []
+    expect_from: IdList = []
+    lost_from: IdList = []
     deadline: FiniteF | None = None  # real-time clock: wall-clock time (s since epoch) the step is due
 
 
@@ -81,13 +94,18 @@ class NodeState(_Msg):
     rho: Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)]
     gamma: Annotated[float, Field(gt=0, le=1, strict=True)]
     innov: FiniteF
-    status: Literal["init", "ok", "fallback", "rejoin"]
+    status: Literal["init", "init-prior", "ok", "fallback", "rejoin"]  # init: prior ⊕ ỹ₀; init-prior: the prior
     rho_cert: FiniteF | None = None
     solve_ms: Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)] = 0.0
-    used: list[NodeId] = []  # neighbours j ≠ i whose message entered this step
-    missing: list[NodeId] = []  # expected neighbours whose message did not arrive in time
+    used: IdList = []  # neighbours j ≠ i whose message entered this step
+    missing: IdList = []  # expected neighbours whose message did not arrive in time
     late: bool = False  # real-time clock: finished after its deadline
     dropped: Annotated[int, Field(ge=0, strict=True)] = 0  # messages this node has dropped so far
+    drops: Drops = {}  # the same, by reason (cumulative)
+    # the own sensor's sector of this step, (h1_k, h_k): φ = σ(r) − h1·r ∈ [0, h·r]; h = 0: no saturation
+    # at this step; None: the sensor models no saturation.  sector_basis: what it rests on (estimator/sector.py)
+    sector: tuple[SectorH1, SectorH] | None = None
+    sector_basis: Literal["none", "measurement", "fault-bound", "assumed"] = "none"
 
     @model_validator(mode="after")
     def _shape_spd(self) -> NodeState:
@@ -132,19 +150,38 @@ class Truth(_Msg):
     type: Literal["truth"] = "truth"
     step: Step
     x: Vec2
-    faults: dict[str, FiniteF]  # node id → f_i,k (msgpack keys are strings)
+    faults: NodeMap  # node id → f_i,k (msgpack keys are strings)
     u: FiniteF
     w: FiniteF
     vx: FiniteF
-    noise: dict[str, FiniteF]  # v_i,k
-    gamma: dict[str, FiniteF]
-    y: dict[str, FiniteF]
-    y_nofault: dict[str, FiniteF]
-    sector_ok: dict[str, bool]  # |C̄_i x̄_i,k| ≤ r_max/h1
-    noise_ok: dict[str, bool]  # v_i,k² ≤ R_i
+    noise: NodeMap  # v_i,k
+    gamma: NodeMap
+    y: NodeMap
+    y_nofault: NodeMap
+    sector_ok: FlagMap  # |C̄_i x̄_i,k| ≤ r_max/h1 of the profile (the paper's fixed sector)
+    r: Annotated[dict[str, FiniteF], Field(max_length=MAX_NODES)] = {}  # C̄_i x̄_i,k: the collector checks each node's published sector with it
+    fault_ok: Annotated[dict[str, bool], Field(max_length=MAX_NODES)] = {}  # the declared fault bound held: |f_k − f_k−1| ≤ δ_i, |f_k| ≤ F_i
+    noise_ok: FlagMap  # v_i,k² ≤ R_i
     dist_ok: bool  # w_k² ≤ W
-    lost: list[tuple[NodeId, NodeId]] = []  # (from j, to i): j's step k−1 message to i lost
-    alive: list[NodeId] = []  # nodes the vehicle heard from at step k−1
+    lost: Annotated[list[tuple[NodeId, NodeId]], Field(max_length=MAX_NODES * MAX_NODES)] = []  # (j, i): j's k−1 message to i lost
+    alive: IdList = []  # nodes the vehicle heard from at step k−1
+    drops: Drops = {}  # messages the vehicle has dropped so far, by reason
+
+    @model_validator(mode="after")
+    def _same_nodes(self) -> Truth:
+        ids = set(self.faults)
+        if not all(k.isdecimal() and int(k) >= 1 for k in ids):
+            raise ValueError("faults: keys must be node ids (decimal integers ≥ 1)")
+        for name in ("noise", "gamma", "y", "y_nofault", "sector_ok", "noise_ok"):
+            if set(getattr(self, name)) != ids:
+                raise ValueError(f"{name}: keys differ from the keys of faults")
+        for name in ("r", "fault_ok"):  # absent ({}) in records written before the derived sector
+            if getattr(self, name) and set(getattr(self, name)) != ids:
+                raise ValueError(f"{name}: keys differ from the keys of faults")
+        return self
+
+    def node_ids(self) -> set[int]:
+        return {int(k) for k in self.faults}
 
 
 class End(_Msg):
@@ -152,10 +189,41 @@ class End(_Msg):
 
     type: Literal["end"] = "end"
     steps: Step
-    reason: str = "done"
+    reason: Annotated[str, Field(max_length=MAX_REASON)] = "done"
 
 
 Message = Union[Ready, NodeInput, NodeState, Truth, End]
+
+
+@dataclass(frozen=True)
+class RunScope:
+    """What a message may name in this run: its node ids and steps 0..``steps``.
+
+    Schema-valid but absurd for the run (a step after the last, a node the topology does not have, a
+    Truth about other nodes) is a corrupt or hostile message: :meth:`reject` names why, the role drops it.
+    """
+
+    ids: frozenset[int]
+    steps: int
+
+    def reject(self, msg: Message) -> str | None:
+        """A drop reason, or None when the message fits the run."""
+        step = msg.steps if isinstance(msg, End) else getattr(msg, "step", None)
+        if step is not None and step > self.steps:
+            return "step-beyond-run"
+        named: set[int] = set()
+        if isinstance(msg, (NodeInput, NodeState, Ready)) and msg.node is not None:
+            named.add(msg.node)
+        if isinstance(msg, NodeInput):
+            named.update(msg.expect_from, msg.lost_from)
+        elif isinstance(msg, NodeState):
+            named.update(msg.used, msg.missing)
+        elif isinstance(msg, Truth):
+            if msg.node_ids() != self.ids:
+                return "truth-wrong-nodes"
+            named.update(msg.alive, *msg.lost)
+        return "unknown-node" if not named <= self.ids else None
+
 _ADAPTER: TypeAdapter[Message] = TypeAdapter(Annotated[Message, Field(discriminator="type")])
 
 

@@ -36,11 +36,14 @@ MESSAGES = [
               vx_prev=100 / 3.6, expect_from=[1, 5], lost_from=[5]),  # fmt: skip
     _state(),
     _state(status="init", rho_cert=None, used=[], missing=[], late=False),
+    _state(sector=(0.123456789, 0.876543211), sector_basis="fault-bound"),
+    _state(status="init-prior", sector=(1.0, 0.0), sector_basis="measurement"),
     Truth(
-        step=80, x=[1e-3 / 7, -0.2 / 3], faults={"1": 0.1745, "2": 0.08725, "6": -0.0873}, u=0.03, w=-0.99,
-        vx=27.77777777777778, noise={"1": math.cos(0.2 * math.pi)}, gamma={"1": 0.77}, y={"1": 0.01 / 3},
-        y_nofault={"1": -0.0}, sector_ok={"1": True, "2": False}, noise_ok={"1": True}, dist_ok=False,
-        lost=[(2, 1), (6, 1)], alive=[1, 2, 3],
+        step=80, x=[1e-3 / 7, -0.2 / 3], faults={"1": 0.1745, "2": 0.08725}, u=0.03, w=-0.99,
+        vx=27.77777777777778, noise={"1": math.cos(0.2 * math.pi), "2": 0.5}, gamma={"1": 0.77, "2": 1.0},
+        y={"1": 0.01 / 3, "2": 0.1}, y_nofault={"1": -0.0, "2": 0.0}, sector_ok={"1": True, "2": False},
+        noise_ok={"1": True, "2": True}, dist_ok=False,
+        lost=[(2, 1), (6, 1)], alive=[1, 2, 3], r={"1": -0.0312345678901, "2": 0.5}, fault_ok={"1": True, "2": False},
     ),  # fmt: skip
     End(steps=80),
     End(steps=3, reason="aborted: node 4 silent"),
@@ -129,7 +132,14 @@ BAD = [
     ("extra-field-end", _mut(End(steps=1), zz=0), "invalid", "zz"),
     ("missing-field", _mut(_state(), xhat=_DEL), "invalid", "xhat"),
     ("missing-field-input", _mut(NI, node=_DEL), "invalid", "node"),
-    ("truth-faults-nan", _mut(MESSAGES[6], faults={"1": float("nan")}), "invalid", "faults"),
+    ("truth-faults-nan", _mut(MESSAGES[8], faults={"1": float("nan")}), "invalid", "faults"),
+    ("truth-r-inf", _mut(MESSAGES[8], r={"1": float("inf")}), "invalid", "r"),
+    ("sector-h1-0", _mut(_state(), sector=[0.0, 0.5]), "invalid", "sector"),
+    ("sector-h1-big", _mut(_state(), sector=[1.5, 0.5]), "invalid", "sector"),
+    ("sector-h-negative", _mut(_state(), sector=[0.5, -0.1]), "invalid", "sector"),
+    ("sector-nan", _mut(_state(), sector=[0.5, float("nan")]), "invalid", "sector"),
+    ("sector-3", _mut(_state(), sector=[0.5, 0.5, 0.5]), "invalid", "sector"),
+    ("sector-basis-unknown", _mut(_state(), sector_basis="hope"), "invalid", "sector_basis"),
 ]
 
 
@@ -308,3 +318,64 @@ def test_spd_problem_agrees_with_numpy():
         assert spd_problem([float(x) for x in P.ravel()]) == want, P
         verdicts[want] = verdicts.get(want, 0) + 1
     assert min(verdicts.values()) > 2000 and len(verdicts) == 3  # every verdict well represented
+
+
+# ---------------------------------------------------------------- bounded inbox
+
+
+def test_inbox_bounded_per_key_and_fair():
+    """A flood on one key: the surplus is dropped at once, and a message on another key is handled in the
+    very next pump, not after the flood."""
+    from netsetest.bus.base import MAX_PER_KEY, MAX_ROUNDS
+
+    bus = MemoryBus()
+    got: list[str] = []
+    bus.subscribe("netsetest/r/**", lambda k, m: got.append(k))
+    flooded, quiet = keys.node_state("r", 3), keys.node_state("r", 4)
+    for _ in range(10 * MAX_PER_KEY):
+        bus.publish(flooded, _state(node=3))
+    bus.publish(quiet, _state(node=4))
+    assert bus.dropped["inbox-full"] == 9 * MAX_PER_KEY
+    assert bus.pending() == MAX_PER_KEY + 1
+    n = bus.pump()
+    assert quiet in got and n == MAX_ROUNDS + 1  # one pump: at most MAX_ROUNDS from the flooded key
+    while bus.pump():
+        pass
+    assert got.count(flooded) == MAX_PER_KEY and bus.pending() == 0
+
+
+def test_inbox_bounded_number_of_keys():
+    from netsetest.bus.base import MAX_KEYS
+
+    bus = MemoryBus()
+    bus.subscribe("netsetest/r/node/*/state", lambda k, m: None)
+    for i in range(MAX_KEYS + 10):  # a wildcard subscription must not allocate per forged key
+        bus.inject(f"netsetest/r/node/x{i}/state", encode(_state()))
+    assert bus.pending() == MAX_KEYS and bus.dropped["inbox-keys"] == 10
+
+
+def test_truth_maps_must_name_the_same_nodes():
+    t = MESSAGES[6]
+    for bad in ({"faults": {}}, {"noise": {"1": 0.0}}, {"faults": {"x": 0.0, "2": 0.0}}, {"faults": {"0": 0.0, "2": 0.0}}):
+        d = _raw(t)
+        d.update(bad)
+        with pytest.raises(BadMessage):
+            decode(_pack(d))
+
+
+def test_run_scope():
+    from netsetest.messages import RunScope
+
+    scope = RunScope(frozenset({1, 2}), steps=10)
+    t = next(m for m in MESSAGES if isinstance(m, Truth))
+    assert scope.reject(NodeInput(step=10, node=2, y=0.0, gamma=1.0)) is None
+    assert scope.reject(NodeInput(step=11, node=2, y=0.0, gamma=1.0)) == "step-beyond-run"
+    assert scope.reject(NodeInput(step=1, node=3, y=0.0, gamma=1.0)) == "unknown-node"
+    assert scope.reject(NodeInput(step=1, node=1, y=0.0, gamma=1.0, expect_from=[7])) == "unknown-node"
+    assert scope.reject(End(steps=2**62)) == "step-beyond-run"
+    t = t.model_copy(update={"step": 3, "lost": [(2, 1)], "alive": [1, 2]})
+    assert scope.reject(t) is None  # its maps, losses and alive list name nodes 1 and 2 only
+    assert scope.reject(t.model_copy(update={"alive": [1, 2, 3]})) == "unknown-node"
+    assert scope.reject(t.model_copy(update={"lost": [(6, 1)]})) == "unknown-node"
+    assert RunScope(frozenset({1, 2, 3}), 99).reject(t) == "truth-wrong-nodes"
+    assert scope.reject(_state(node=2, step=3, used=[1], missing=[5])) == "unknown-node"

@@ -78,14 +78,34 @@ def test_gzip_record_round_trip(saim: dict[str, Path], nsnim: dict[str, Path], t
     assert a.summary == b.summary and np.array_equal(a.nodes[2].P, b.nodes[2].P)
 
 
+def _legacy_doc(path: Path) -> dict:
+    """The same record in the version-1 layout (one JSON document) that older netsetest wrote."""
+    rec = load_record(path)
+    return {"format": "netsetest-record", "version": 1, "meta": rec.meta, "truth": rec.truth, "nodes": rec.raw_nodes, "summary": rec.summary}
+
+
+def test_legacy_document_record_loads(nsnim: dict[str, Path], tmp_path: Path) -> None:
+    new = load_record(nsnim["record"])
+    for name, data in (("old.json", json.dumps(_legacy_doc(nsnim["record"])).encode()),
+                       ("old.json.gz", gzip.compress(json.dumps(_legacy_doc(nsnim["record"])).encode()))):  # fmt: skip
+        p = tmp_path / name
+        p.write_bytes(data)
+        old = load_record(p)
+        assert not old.partial and old.summary == new.summary and old.truth == new.truth
+        assert old.last_complete_step == new.last_complete_step == 12
+        assert np.array_equal(old.nodes[4].P, new.nodes[4].P)
+
+
 def test_bad_records_raise(nsnim: dict[str, Path], saim: dict[str, Path], tmp_path: Path) -> None:
-    data = nsnim["record"].read_bytes()
+    data = json.dumps(_legacy_doc(nsnim["record"])).encode()
     cases = {
-        "truncated.json": data[: len(data) // 2],
+        "truncated.json": data[: len(data) // 2],  # a version-1 document is all or nothing
         "truncated.json.gz": saim["record"].read_bytes()[:200],
         "garbage.json": b"\x00\x01 not json",
         "noformat.json": json.dumps({"version": 1, "meta": {}, "truth": [], "nodes": {}, "summary": {}}).encode(),
         "list.json": b"[1, 2, 3]",
+        "no-meta-line.json": b'{"kind": "truth", "entry": {"step": 0}}\n',
+        "bad-middle-line.json": nsnim["record"].read_bytes().replace(b"\n", b"\nnot json\n", 1),
     }
     for name, content in cases.items():
         p = tmp_path / name
@@ -100,7 +120,7 @@ def test_bad_records_raise(nsnim: dict[str, Path], saim: dict[str, Path], tmp_pa
 def test_corrupt_gzip_and_malformed_structure_raise_record_error(kind: str, nsnim: dict[str, Path], tmp_path: Path) -> None:
     p = tmp_path / "bad.json.gz"
     if kind == "corrupt-gzip":
-        z = bytearray(gzip.compress(nsnim["record"].read_bytes()))
+        z = bytearray(gzip.compress(json.dumps(_legacy_doc(nsnim["record"])).encode()))
         z[200:260] = bytes(b ^ 0xFF for b in z[200:260])  # flipped bits inside the deflate stream
         p.write_bytes(bytes(z))
     else:
@@ -201,7 +221,7 @@ def test_plot_two_records(nsnim: dict[str, Path], saim: dict[str, Path], tmp_pat
 
 
 def test_plot_missing_node_nan_E_and_truncation(nsnim: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    doc = json.loads(nsnim["record"].read_bytes())
+    doc = _legacy_doc(nsnim["record"])
     nodes = doc["nodes"]
     nodes["3"] = nodes["3"][:5]  # node 3 stopped reporting after step 4
     for e in nodes["2"][2:4]:

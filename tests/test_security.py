@@ -31,6 +31,7 @@ from zenoh_helpers import (
     new_run_id,
     procs,  # noqa: F401 (fixture)
     read_json,
+    read_record,
     start_parent,
     wait_for,
     wait_roles,
@@ -211,7 +212,7 @@ def test_secured_run_shuts_out_an_outsider(procs, tmp_path: Path) -> None:  # no
     s = read_json(summ_path)
     assert s["security"] == "mtls+acl" and s["violations_total"] == 0 and s["nodes_missing"] == []
     assert s["steps_completed"] == STEPS
-    _assert_same_as_inmemory(read_json(rec_path), STEPS)
+    _assert_same_as_inmemory(read_record(rec_path), STEPS)
 
 
 # ------------------------------------------------------------------ an insider with node 2's certificate
@@ -264,7 +265,7 @@ def test_insider_with_a_node_certificate_is_confined(procs, tmp_path: Path) -> N
     s = read_json(summary)
     assert s["security"] == "mtls+acl" and s["violations_total"] == 0 and s["nodes_missing"] == []
     assert s["steps_completed"] == STEPS
-    _assert_same_as_inmemory(read_json(record), STEPS)
+    _assert_same_as_inmemory(read_record(record), STEPS)
 
 
 def test_secured_role_needs_its_own_certificate(tmp_path: Path) -> None:

@@ -61,4 +61,7 @@ def test_run_with_a_user_zenoh_config_stays_secured(tmp_path) -> None:  # noqa: 
     assert out.returncode == 0, out.stderr
     s = json.loads(summary.read_text())
     assert s["security"] == "mtls+acl" and s["steps_completed"] == 5 and s["violations_total"] == 0
-    assert out.stdout.rstrip().endswith("security: mtls+acl")
+    last = out.stdout.rstrip().splitlines()[-1]  # the run, its security mode and the coverage verdict
+    n = s["node_steps_evaluated"]
+    assert n == s["node_steps_contained"] == s["node_steps_covered"] > 0
+    assert "(security: mtls+acl)" in last and f"contained on {n} of {n} node-steps; the guarantee applied on {n}" in last, last

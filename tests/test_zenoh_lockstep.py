@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from zenoh_helpers import (
+    read_record,
     PAPER6,
     PAPER6_LOSSY,
     RING,
@@ -56,7 +57,7 @@ class Runs:
                 left = guard.cleanup()
             assert not left, f"processes left behind: {left}"
             assert code == 0, f"netsetest run {name}: exit {code}\n{logs}"
-            self.zenoh[name] = {"record": read_json(rec), "summary": read_json(summ), "logs": logs}
+            self.zenoh[name] = {"record": read_record(rec), "summary": read_json(summ), "logs": logs}
         return self.zenoh[name]
 
     def mem_run(self, name: str):  # noqa: ANN201

@@ -29,6 +29,7 @@ from zenoh_helpers import (  # noqa: F401 (fixture)
     cli,
     procs,
     read_json,
+    read_record,
     run_parent,
 )
 
@@ -54,7 +55,7 @@ def test_zenoh_kill_and_rejoin(procs, tmp_path) -> None:  # noqa: ANN001
     assert f"killing myself (SIGKILL) after step {KILL_AT}" in logs and f"restarting node {KILLED} with --rejoin" in logs
 
     s = read_json(summ_path)
-    rec = read_json(rec_path)
+    rec = read_record(rec_path)
     assert s["nodes_missing"] == [] and s["nodes_rejoined"] == [KILLED], f"{s}\n{logs}"
     assert s["violations_total"] == 0
     assert s["steps_completed"] == STEPS

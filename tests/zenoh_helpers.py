@@ -87,6 +87,14 @@ def read_json(path: str | Path) -> dict:
     return json.loads(Path(path).read_text())
 
 
+def read_record(path: str | Path) -> dict:
+    """A run record as one dict: meta, truth, nodes {i: entries}, summary, partial."""
+    from netsetest.records.record import load_record
+
+    rec = load_record(path)
+    return {"meta": rec.meta, "truth": rec.truth, "nodes": rec.raw_nodes, "summary": rec.summary, "partial": rec.partial}
+
+
 # ------------------------------------------------------------------------------ processes via /proc
 
 

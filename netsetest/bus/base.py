@@ -4,13 +4,19 @@ Delivery is pull-based: a transport queues raw payloads as they arrive (on any t
 :meth:`Bus.pump` decodes and dispatches them in the caller's thread, so a role never runs concurrently
 with itself.  A payload that fails validation is dropped and counted in :attr:`Bus.dropped` (by
 reason), never handed to a role.
+
+The inbox is bounded per key (:class:`Inbox`): at most ``MAX_PER_KEY`` payloads wait on one key and at
+most ``MAX_KEYS`` keys wait at once; beyond that the newest payload is dropped (``inbox-full``,
+``inbox-keys``).  :meth:`Bus.pump` serves the waiting keys in turn, one payload each per round, for at
+most ``MAX_ROUNDS`` rounds and never more than was queued when it started — so a flood on one key costs
+a role at most ``MAX_ROUNDS`` decodes per pump, delays nothing else and cannot keep it from stepping.
 """
 
 from __future__ import annotations
 
-import queue
+import threading
 from abc import ABC, abstractmethod
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
 
 from netsetest.bus.keys import matches
@@ -19,10 +25,65 @@ from netsetest.messages import BadMessage, Message, decode, encode
 Handler = Callable[[str, Message], None]
 
 
+MAX_PER_KEY = 64  # a role handles ~1 message per key per step and pumps many times a step: more is a flood
+MAX_ROUNDS = 16  # payloads per key one pump handles: a flooded key's decoding cost per pump is bounded
+MAX_KEYS = 1024  # distinct (key, subscriber) queues: a wildcard subscription must not allocate per forged key
+
+
+class Inbox:
+    """Raw payloads per (key, handler), FIFO per key, bounded; thread-safe (transport threads put)."""
+
+    def __init__(self, per_key: int = MAX_PER_KEY, max_keys: int = MAX_KEYS) -> None:
+        self.per_key, self.max_keys = per_key, max_keys
+        self._queues: dict[tuple[str, Handler], deque[bytes]] = {}  # insertion order = service order
+        self._size = 0
+        self._cv = threading.Condition()
+
+    def put(self, key: str, payload: bytes, handler: Handler) -> str | None:
+        """Queue a payload; the drop reason when the inbox is full."""
+        q = self._queues.get((key, handler))
+        if q is not None and len(q) >= self.per_key:
+            return "inbox-full"  # without the lock: under a flood this is the common case, keep it cheap
+        with self._cv:
+            q = self._queues.get((key, handler))
+            if q is None:
+                if len(self._queues) >= self.max_keys:
+                    return "inbox-keys"
+                q = self._queues[(key, handler)] = deque()
+            if len(q) >= self.per_key:
+                return "inbox-full"
+            q.append(payload)
+            self._size += 1
+            self._cv.notify()
+        return None
+
+    def __len__(self) -> int:
+        return self._size
+
+    def wait(self, timeout: float | None) -> bool:
+        """Wait until something is queued (``timeout`` None: forever); whether something is."""
+        with self._cv:
+            return self._cv.wait_for(lambda: self._size > 0, timeout)
+
+    def take_round(self, most: int | None = None) -> list[tuple[str, bytes, Handler]]:
+        """One payload from every waiting key (at most ``most`` keys), oldest key first."""
+        with self._cv:
+            out = []
+            for kh in list(self._queues)[:most]:
+                q = self._queues[kh]
+                out.append((kh[0], q.popleft(), kh[1]))
+                if not q:
+                    del self._queues[kh]
+            self._size -= len(out)
+            return out
+
+
 class Bus(ABC):
+    #: a bus that carries several roles (in memory): its drop counters are the run's, not one role's
+    shared = False
+
     def __init__(self) -> None:
-        # SimpleQueue (C): half the CPU per blocking get of queue.Queue and half its wake-up latency
-        self._inbox: queue.SimpleQueue[tuple[str, bytes, Handler]] = queue.SimpleQueue()
+        self._inbox = Inbox()
         self.dropped: Counter[str] = Counter()
         self.received = 0
 
@@ -39,34 +100,46 @@ class Bus(ABC):
         """Release transport resources (sessions, sockets); idempotent."""
 
     def _enqueue(self, key: str, payload: bytes, handler: Handler) -> None:
-        self._inbox.put((key, payload, handler))
+        reason = self._inbox.put(key, payload, handler)
+        if reason is not None:
+            self.dropped[reason] += 1  # Counter += is one bytecode-level dict update: safe from any thread
 
     def pump(self, timeout: float | None = 0.0, limit: int | None = None) -> int:
-        """Dispatch queued messages; wait up to ``timeout`` s for the first one. Returns how many ran."""
-        done = 0
-        block = timeout is None or timeout > 0
-        while limit is None or done < limit:
-            try:
-                key, payload, handler = self._inbox.get(block=block and done == 0, timeout=timeout if done == 0 else None)
-            except queue.Empty:
+        """Dispatch queued messages, the waiting keys in turn; wait up to ``timeout`` s for the first one.
+
+        Handles at most what was queued when it started (and at most ``limit`` valid messages), so a
+        flood cannot keep it from returning.  Returns how many valid messages ran.
+        """
+        if not len(self._inbox) and (timeout is None or timeout > 0):
+            self._inbox.wait(timeout)
+        budget = len(self._inbox)
+        done = rounds = 0
+        while budget > 0 and rounds < MAX_ROUNDS and (limit is None or done < limit):
+            rounds += 1
+            batch = self._inbox.take_round(budget if limit is None else min(budget, limit - done))
+            if not batch:
                 break
-            self.received += 1
-            try:
-                msg = decode(payload)
-            except BadMessage as exc:
-                self.dropped[exc.reason] += 1
-                continue
-            handler(key, msg)
-            done += 1
+            for key, payload, handler in batch:
+                budget -= 1
+                self.received += 1
+                try:
+                    msg = decode(payload)
+                except BadMessage as exc:
+                    self.dropped[exc.reason] += 1
+                    continue
+                handler(key, msg)
+                done += 1
         return done
 
-    def drop(self, reason: str) -> None:
-        """Count a message a role rejected on context (wrong sender, stale step, bad shape matrix)."""
-        self.dropped[reason] += 1
+    def pending(self) -> int:
+        """Payloads queued and not yet handled."""
+        return len(self._inbox)
 
 
 class MemoryBus(Bus):
     """One process, deterministic: publish appends to a FIFO queue; subscribers are matched by key."""
+
+    shared = True
 
     def __init__(self) -> None:
         super().__init__()

@@ -1,4 +1,4 @@
-"""``netsetest`` command line: run, inspect, plot (and the role processes of the Zenoh runtime).
+"""``netsetest`` command line: run, inspect, plot, exact, compare, bench (and the role processes of the Zenoh runtime).
 
 Exit codes: 0 success (every ellipsoid contained where the assumptions held); 1 containment violated
 on a step where the assumptions held; 2 bad input (file, option); 3 a node stopped reporting;
@@ -9,27 +9,34 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Callable, Sequence
 
+from netsetest.analysis.errors import CompareError, ExactError
+from netsetest.cli import checks
 from netsetest.config.schema import ConfigError
-from netsetest.records.record import RecordError
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
+from netsetest.extras import MissingExtra, require
+from netsetest.records.record import Record, RecordError
 from netsetest.runtime.report import EXIT_BAD_INPUT
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 
 
 def _scenario_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("topology", help="topology file, e.g. topologies/paper6.toml")
-    p.add_argument("--case", choices=["nsnim", "saim"], help="override the topology's case")
-    p.add_argument("--steps", type=_positive_int, help="override the number of steps")
+    p.add_argument("topology", help="topology file (e.g. topologies/paper6.toml) or bundled name (paper6, paper6_lossy)")
+    p.add_argument("--case", choices=["nsnim", "saim"], help="override the topology's case (default: the file's)")
+    p.add_argument("--steps", type=_positive_int, metavar="N", help="override the number of steps of τs each (default: the file's)")
 
 
 def _run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--signals", choices=["paper", "worst"], default="paper",
                    help="paper: cos noise and uniform wind; worst: noise and wind at ±bound, random sign")  # fmt: skip
-    p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled",
+                   help="estimator: one SDP with the scheduled model, or one per T-S rule")  # fmt: skip
+    p.add_argument("--objective", choices=list(OBJECTIVES), default=DEFAULT_OBJECTIVE, help=OBJECTIVE_HELP)
+    p.add_argument("--seed", type=checks.seed, default=0, help="non-negative integer: random seed of noise, wind and losses")
 
 
 def _positive_int(s: str) -> int:
@@ -42,17 +49,48 @@ def _positive_int(s: str) -> int:
     return v
 
 
+def has_default(action: argparse.Action) -> bool:
+    """Whether an option has a default worth printing (not unset, not an off flag, not an empty list)."""
+    d = action.default
+    return d is not None and d is not False and d is not argparse.SUPPRESS and d != []
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Appends "(default: X)" to an option's help unless the help names its default or it has none."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if not action.option_strings or "default" in text or not has_default(action):
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+class ShowVersion(argparse.Action):
+    """``--version``: the installed version, looked up only when asked for (it costs ~90 ms)."""
+
+    def __init__(self, option_strings: list[str], dest: str, help: str | None = None) -> None:  # noqa: A002
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object, option_string: str | None = None) -> None:
+        import netsetest
+
+        print(f"netsetest {netsetest.__version__}")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="netsetest", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(prog="netsetest", description=__doc__, formatter_class=HelpFormatter)
+    ap.add_argument("--version", action=ShowVersion, help="print the version and exit")
     sub = ap.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("run", help="run a whole network (in memory, or as Zenoh processes)")
     _scenario_args(p)
     _run_args(p)
-    p.add_argument("--mode", choices=["inmemory", "zenoh"], default="zenoh")
-    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep")
-    p.add_argument("--record", metavar="PATH", help="write the run record (JSON; .gz compresses)")
-    p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON")
+    p.add_argument("--mode", choices=["inmemory", "zenoh"], default="zenoh", help="one process, or one process per role over Zenoh")
+    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep",
+                   help="lockstep: the vehicle waits for every node; realtime: one step every τs (zenoh mode)")  # fmt: skip
+    p.add_argument("--record", metavar="PATH", help="write the run record: JSON, .gz compresses, .mcap for Foxglove (default: none)")
+    p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON (default: none)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     from netsetest.cli import processes
 
@@ -60,7 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
     processes.add_role_parsers(sub, _scenario_args, _run_args)
 
     p = sub.add_parser("inspect", help="per-step fault (and state) bounds of one node from a record")
-    p.add_argument("record")
+    p.add_argument("record", help="record file (.json, .json.gz or .mcap)")
     p.add_argument("--node", type=int, help="node id (default: all nodes)")
     p.add_argument("--json", action="store_true", help="JSON rows with state bounds and true values")
 
@@ -68,14 +106,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("record", nargs="+", help="one record, or several (e.g. an nsnim and a saim run) for Fig. 8")
     p.add_argument("--out", required=True, help="output directory for the PNG files")
 
+    p = sub.add_parser("exact", help="the exact tightest bounds any guaranteed estimator could publish, against a record")
+    p.add_argument("record", help="a run record (JSON, JSON Lines, .gz or .mcap)")
+    p.add_argument("--json", metavar="PATH", help="write the per-step exact intervals and the ratios as JSON")
+    p.add_argument("--topology", metavar="PATH", help="topology file (default: the one named in the record)")
+    p.add_argument("--fault-bounds", choices=["used", "all", "none"], default="used",
+                   help="declared fault bounds: where the estimator relies on them (saturating sensors), "
+                   "everywhere, or nowhere")  # fmt: skip
+
     p = sub.add_parser("bench", help="benchmark: solve times, scaling, Zenoh overhead, real time, node cost (docs/performance.md)")
     p.add_argument("--quick", action="store_true", help="fewer steps and samples (a few minutes)")
-    p.add_argument("--json", metavar="PATH", help="write every figure as JSON")
-    p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown")
+    p.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
+    p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown (default: none)")
+    from netsetest.cli import compare, tools
+
+    tools.add_parsers(sub)
+    compare.add_parser(sub, _scenario_args)
+    for command in sub.choices.values():
+        command.formatter_class = HelpFormatter
     return ap
 
 
 def cmd_run(a: argparse.Namespace) -> int:
+    checks.record_file(a.record)
+    checks.output_file(a.summary_json, "--summary-json")
     if a.mode == "zenoh":
         from netsetest.cli import processes
 
@@ -84,23 +138,30 @@ def cmd_run(a: argparse.Namespace) -> int:
         print("netsetest run: --clock realtime needs --mode zenoh (the in-memory bus is lockstep only)", file=sys.stderr)
         return EXIT_BAD_INPUT
     if a.kill or a.rejoin:
-        print("netsetest run: --kill and --rejoin need --mode zenoh (the in-memory run is one process)", file=sys.stderr)
+        print("netsetest run: --kill and --rejoin need --mode zenoh (in memory there is no process to kill)", file=sys.stderr)
         return EXIT_BAD_INPUT
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
-    from netsetest.runtime.report import exit_code, format_table, write_outputs
+    from netsetest.runtime.report import exit_code, format_table, write_summary
 
     sc = load_topology(a.topology, a.case, a.steps)
-    res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet)
-    write_outputs(res.summary, res.meta, res.parts, a.record, a.summary_json)
+    res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet, record=a.record, keep=False, objective=a.objective)
+    write_summary(res.summary, a.summary_json)
     print(format_table(res.summary))
     return exit_code(res.summary)
+
+
+def _note_partial(command: str, rec: Record) -> None:
+    if rec.partial:
+        print(f"netsetest {command}: {rec.path}: partial record (the run did not finish; last complete step "
+              f"{rec.last_complete_step})", file=sys.stderr)  # fmt: skip
 
 
 def cmd_inspect(a: argparse.Namespace) -> int:
     from netsetest.records.record import load_record
 
     rec = load_record(a.record)
+    _note_partial("inspect", rec)
     ids = sorted(rec.nodes) if a.node is None else [a.node]
     for i in ids:
         if i not in rec.nodes:
@@ -123,12 +184,61 @@ def cmd_inspect(a: argparse.Namespace) -> int:
 
 
 def cmd_plot(a: argparse.Namespace) -> int:
+    require("matplotlib", "drawing the figures")
     from netsetest.records.plots import plot_records
     from netsetest.records.record import load_record
 
-    files = plot_records([load_record(r) for r in a.record], a.out)
+    checks.output_dir(a.out, "--out")
+    records = [load_record(r) for r in a.record]
+    for rec in records:
+        _note_partial("plot", rec)
+    files = plot_records(records, a.out)
     for f in files:
         print(f)
+    return 0
+
+
+def cmd_exact(a: argparse.Namespace) -> int:
+    import os
+    import time
+
+    from netsetest.analysis.exact import COORDINATES, compare_record, exact_bounds, exact_document
+    from netsetest.config.schema import load_topology
+    from netsetest.records.record import load_record
+
+    checks.output_file(a.json, "--json")
+    rec = load_record(a.record)
+    topology = a.topology or rec.meta.get("topology")
+    if not a.topology and not (isinstance(topology, str) and os.path.exists(topology)):
+        print(f"netsetest exact: {a.record} names topology {topology!r}, not found from here (give --topology PATH)", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    sc = load_topology(topology, rec.meta.get("case"), rec.meta.get("steps"))
+    t0 = time.perf_counter()
+    ex = exact_bounds(sc, rec, a.fault_bounds)
+    cmp = compare_record(rec, ex)
+    bounded = ", ".join(map(str, ex.bounded_nodes)) or "none"
+    print(f"exact bounds for {a.record}: case {sc.case}, {len(ex.steps)} steps, fault bounds '{a.fault_bounds}' "
+          f"(applied on nodes: {bounded}), {time.perf_counter() - t0:.1f} s")  # fmt: skip
+    if ex.infeasible_steps:
+        print(f"  no trajectory meets the assumptions at steps {list(ex.infeasible_steps)} (an assumption was broken)")
+    names = {"f": "fault", "r": "yaw rate", "beta": "sideslip"}
+    print("published width / exact width: mean over steps ≥ 10 | all steps; relative-RMS radius (Althoff & Rath (9), exact = 1)")
+    print(f"{'node':>4}  " + "  ".join(f"{names[c]:>22}" for c in COORDINATES))
+    for n in cmp.nodes:
+        cells = [n.ratios[c] for c in COORDINATES]
+        print(f"{n.node:>4}  " + "  ".join(f"{x.width_ratio:6.3f} |{x.width_ratio_all:6.3f}  {x.rms_radius_rel:6.3f}" for x in cells))
+    print(f"{'mean':>4}  " + "  ".join(f"{cmp.mean_width_ratio[c]:6.3f}         {cmp.mean_rms_radius_rel[c]:6.3f}" for c in COORDINATES))
+    print(f"overall: width ratio {cmp.overall_width_ratio:.3f}, relative-RMS radius {cmp.overall_rms_radius_rel:.3f}")
+    left = sum(x.left_out for n in cmp.nodes for x in n.ratios.values())
+    if left:
+        print(f"  {left} node-step intervals left out: the exact interval is unbounded there (inf) or empty")
+    narrower = sum(x.narrower for n in cmp.nodes for x in n.ratios.values())
+    total = sum(len(rec.nodes[n.node].steps) for n in cmp.nodes) * len(COORDINATES)
+    print(f"published interval narrower than exact on {narrower} of {total} node-step intervals"
+          + (" (the estimator relied on more than these assumptions there, or one of the two is wrong)" if narrower else ""))
+    if a.json:
+        with open(a.json, "w") as fh:
+            json.dump(exact_document(rec, ex, cmp), fh, indent=1)
     return 0
 
 
@@ -139,6 +249,7 @@ def cmd_bench(a: argparse.Namespace) -> int:
     if not (root / "bench" / "run.py").exists():
         print(f"netsetest bench: needs a source checkout ({root / 'bench'} not found)", file=sys.stderr)
         return EXIT_BAD_INPUT
+    require("cvxpy", "netsetest bench (its reference formulations)")
     if str(root) not in sys.path:
         sys.path.insert(0, str(root))
     from bench.run import run_bench
@@ -146,7 +257,7 @@ def cmd_bench(a: argparse.Namespace) -> int:
     return run_bench(a.quick, a.json, a.markdown)
 
 
-COMMANDS.update(run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, bench=cmd_bench)
+COMMANDS.update(run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, exact=cmd_exact, bench=cmd_bench)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -154,12 +265,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     a = ap.parse_args(argv)
     from netsetest.cli import processes
 
-    handler = COMMANDS.get(a.command) or processes.COMMANDS[a.command]
+    from netsetest.cli import compare, tools
+
+    handler = COMMANDS.get(a.command) or tools.COMMANDS.get(a.command) or compare.COMMANDS.get(a.command) or processes.COMMANDS[a.command]
     try:
         return handler(a)
-    except (ConfigError, RecordError) as exc:
+    except (ConfigError, RecordError, MissingExtra, ExactError, CompareError, checks.OutputError) as exc:
         print(f"netsetest {a.command}: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:  # `netsetest inspect R | head`: the reader has gone, which is not an error
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # else the interpreter's final flush raises again
+        return 0
     except KeyboardInterrupt:
         print(f"netsetest {a.command}: interrupted", file=sys.stderr)
         return 130

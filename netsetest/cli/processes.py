@@ -26,6 +26,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from netsetest.bus import keys
+from netsetest.cli import checks
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
@@ -65,7 +67,7 @@ def _readable_file(s: str) -> str:
 
 def _zenoh_config_arg(g: argparse._ArgumentGroup) -> None:
     g.add_argument("--zenoh-config", type=_readable_file, metavar="FILE",
-                   help="a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting and security on top")  # fmt: skip
+                   help="a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting and security on top (default: none)")  # fmt: skip
 
 
 def _zenoh_args(p: argparse.ArgumentParser) -> None:
@@ -73,10 +75,12 @@ def _zenoh_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--run-id", type=_run_id, default=os.environ.get(RUN_ID_ENV, "default"),
                    help=f"key-expression namespace of the run (netsetest/<run-id>/...); default ${RUN_ID_ENV} or 'default'")  # fmt: skip
     g.add_argument("--zenoh-mode", choices=["peer", "client"], default="peer", help="peer (one host) or client of a router")
-    g.add_argument("--listen", type=_endpoint, action="append", default=[], metavar="ENDPOINT", help="e.g. tcp/127.0.0.1:7450 (repeatable)")
-    g.add_argument("--connect", type=_endpoint, action="append", default=[], metavar="ENDPOINT", help="e.g. tls/10.0.0.1:7447 (repeatable)")
+    g.add_argument("--listen", type=_endpoint, action="append", default=[], metavar="ENDPOINT",
+                   help="endpoint to listen on, e.g. tcp/127.0.0.1:7450 (repeatable; default: none)")  # fmt: skip
+    g.add_argument("--connect", type=_endpoint, action="append", default=[], metavar="ENDPOINT",
+                   help="endpoint to connect to, e.g. tls/10.0.0.1:7447 (repeatable; default: none)")  # fmt: skip
     g.add_argument("--credentials", metavar="DIR",
-                   help="mTLS: this role's certificate and key from DIR (`netsetest credentials`); connect on tls/ endpoints")  # fmt: skip
+                   help="mTLS: this role's certificate and key from DIR (`netsetest credentials`); connect on tls/ endpoints (default: none, no TLS)")  # fmt: skip
     _zenoh_config_arg(g)
 
 
@@ -121,67 +125,68 @@ def _positive_days(s: str) -> int:
 
 def add_run_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("zenoh mode")
-    g.add_argument("--node-timeout", type=_seconds, default=10.0, help="lockstep: a node silent this long is declared dead")
-    g.add_argument("--neighbour-timeout", type=_seconds, default=5.0, help="lockstep: how long a node waits for a neighbour")
-    g.add_argument("--pace", type=_non_negative, default=0.0, help="lockstep: at least this many seconds per step (default: as fast as possible)")
-    g.add_argument("--kill", type=_at, action="append", default=[], metavar="NODE@STEP", help="SIGKILL node NODE once step STEP is checked")
-    g.add_argument("--rejoin", type=_at, action="append", default=[], metavar="NODE@STEP", help="restart node NODE with --rejoin at step STEP")
+    g.add_argument("--node-timeout", type=_seconds, default=10.0, metavar="S", help="lockstep: a node silent this long [s] is declared dead")
+    g.add_argument("--neighbour-timeout", type=_seconds, default=5.0, metavar="S", help="lockstep: how long [s] a node waits for a neighbour's message")
+    g.add_argument("--pace", type=_non_negative, default=0.0, metavar="S", help="lockstep: at least S seconds per step (default: 0, as fast as possible)")
+    g.add_argument("--kill", type=_at, action="append", default=[], metavar="NODE@STEP", help="SIGKILL node NODE once step STEP is checked (repeatable; default: none)")
+    g.add_argument("--rejoin", type=_at, action="append", default=[], metavar="NODE@STEP", help="restart node NODE with --rejoin at step STEP (repeatable; default: none)")
     g.add_argument("--insecure", action="store_true",
-                   help="no credentials, no access control: an open peer mesh any local process can join (labelled in the summary)")  # fmt: skip
+                   help="no credentials, no access control: an open peer mesh any local process can join (labelled in the summary; default: secured)")  # fmt: skip
     _zenoh_config_arg(g)
 
 
 def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, run_args: Callable) -> None:
     p = sub.add_parser("vehicle", help="the vehicle process (truth, measurements) of a Zenoh run")
     scenario_args(p)
-    p.add_argument("--signals", choices=["paper", "worst"], default="paper")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep")
-    p.add_argument("--node-timeout", type=_seconds, default=10.0)
-    p.add_argument("--pace", type=_non_negative, default=0.0, help="lockstep: at least this many seconds per step")
-    p.add_argument("--start-timeout", type=_seconds, default=START_TIMEOUT_S, help="how long to wait for every role to be ready")
+    p.add_argument("--signals", choices=["paper", "worst"], default="paper", help="noise and wind: the paper's, or held at ±bound")
+    p.add_argument("--seed", type=checks.seed, default=0, help="random seed of noise, wind and losses")
+    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep", help="lockstep: wait for every node; realtime: one step every τs")
+    p.add_argument("--node-timeout", type=_seconds, default=10.0, metavar="S", help="lockstep: a node silent this long [s] is declared dead")
+    p.add_argument("--pace", type=_non_negative, default=0.0, metavar="S", help="lockstep: at least S seconds per step")
+    p.add_argument("--start-timeout", type=_seconds, default=START_TIMEOUT_S, metavar="S", help=f"how long [s] to wait for every role to be ready (default: {START_TIMEOUT_S:g})")
     p.add_argument("--await-rejoin", type=_at, action="append", default=[], metavar="NODE@STEP",
-                   help="lockstep: before step STEP+1 wait (at most --node-timeout) for node NODE to come back")  # fmt: skip
+                   help="lockstep: before step STEP+1 wait (at most --node-timeout) for node NODE to come back (repeatable; default: none)")  # fmt: skip
     _zenoh_args(p)
 
     p = sub.add_parser("node", help="one sensing-node process of a Zenoh run")
     scenario_args(p)
     p.add_argument("--id", type=int, required=True, help="node id in the topology")
-    p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled")
-    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep")
-    p.add_argument("--neighbour-timeout", type=_seconds, default=5.0)
+    p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled", help="estimator: one SDP with the scheduled model, or one per T-S rule")
+    p.add_argument("--objective", choices=list(OBJECTIVES), default=DEFAULT_OBJECTIVE, help=OBJECTIVE_HELP)
+    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep", help="lockstep: wait for neighbours; realtime: step on the vehicle's input")
+    p.add_argument("--neighbour-timeout", type=_seconds, default=5.0, metavar="S", help="lockstep: how long [s] to wait for a neighbour's message")
     p.add_argument("--rejoin", action="store_true", help="join a running network (after a crash or restart)")
-    p.add_argument("--crash-after", type=int, metavar="STEP", help="SIGKILL itself right after publishing step STEP (run --kill)")
+    p.add_argument("--crash-after", type=int, metavar="STEP", help="SIGKILL itself right after publishing step STEP (run --kill; default: never)")
     _zenoh_args(p)
 
     p = sub.add_parser("collector", help="the collector process: checks containment, writes record and summary")
     scenario_args(p)
     run_args(p)
-    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep")
-    p.add_argument("--record", metavar="PATH")
-    p.add_argument("--summary-json", metavar="PATH")
+    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep", help="the run's clock (recorded in the summary)")
+    p.add_argument("--record", metavar="PATH", help="write the run record (.json, .json.gz or .mcap; default: none)")
+    p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON (default: none)")
     p.add_argument("--progress", action="store_true", help="print '@progress K' lines for a parent process")
-    p.add_argument("--idle-timeout", type=_seconds, default=60.0, help="give up when no message arrives this long")
+    p.add_argument("--idle-timeout", type=_seconds, default=60.0, metavar="S", help="give up when no message arrives for S seconds")
     _zenoh_args(p)
 
     p = sub.add_parser("router", help="a Zenoh router in Python (for client-mode roles on several hosts)")
     p.add_argument("topology", nargs="?", help="topology whose access-control rules the router enforces (with --credentials)")
     p.add_argument("--listen", type=_endpoint, action="append", default=[], metavar="ENDPOINT",
-                   help=f"default tcp/0.0.0.0:{ZENOH_DEFAULT_PORT}, or tls/0.0.0.0:{ZENOH_DEFAULT_PORT} with --credentials")  # fmt: skip
-    p.add_argument("--credentials", metavar="DIR", help="mTLS with DIR/router.pem and the run's access-control rules")
-    p.add_argument("--run-id", type=_run_id, default=os.environ.get(RUN_ID_ENV, "default"), help=f"default ${RUN_ID_ENV} or 'default'")
+                   help=f"endpoint to listen on (repeatable; default: tcp/0.0.0.0:{ZENOH_DEFAULT_PORT}, or tls/0.0.0.0:{ZENOH_DEFAULT_PORT} with --credentials)")  # fmt: skip
+    p.add_argument("--credentials", metavar="DIR", help="mTLS with DIR/router.pem and the run's access-control rules (default: none, open router)")
+    p.add_argument("--run-id", type=_run_id, default=os.environ.get(RUN_ID_ENV, "default"), help=f"the run whose keys the access control grants (default: ${RUN_ID_ENV} or 'default')")
     _zenoh_config_arg(p)
 
     p = sub.add_parser("credentials", help="write per-role mTLS credentials (CA, certificates, keys) and run.env for a deployment")
     p.add_argument("dir", help="output directory (created with mode 0700)")
-    p.add_argument("topology")
-    p.add_argument("--run-id", type=_run_id, help="default: a random one")
+    p.add_argument("topology", help="topology file or bundled name, e.g. paper6")
+    p.add_argument("--run-id", type=_run_id, help="the deployment's run id (default: a random one)")
     p.add_argument("--router-host", action="append", default=[], metavar="NAME",
-                   help="a name or address the router is reached at (repeatable; localhost, 127.0.0.1 and router are always included)")  # fmt: skip
-    p.add_argument("--days", type=_positive_days, default=DEFAULT_VALIDITY_DAYS, help="validity of the certificates")
+                   help="a name or address the router is reached at (repeatable; default: localhost, 127.0.0.1 and router, always included)")  # fmt: skip
+    p.add_argument("--days", type=_positive_days, default=DEFAULT_VALIDITY_DAYS, help="validity of the certificates in days")
 
     p = sub.add_parser("compose", help="print a docker-compose.yml for a topology (router + one service per role)")
-    p.add_argument("topology")
+    p.add_argument("topology", help="topology file or bundled name, e.g. paper6")
     p.add_argument("--image", default="netsetest:latest", help="image with netsetest installed (built from the Dockerfile)")
 
 
@@ -233,7 +238,7 @@ def cmd_node(a: argparse.Namespace) -> int:
     def body(sc, bus) -> int:  # noqa: ANN001
         sc.node(a.id)  # unknown id → ConfigError, exit 2
         return run_node(sc, a.id, bus, a.run_id, a.variant, a.clock == "realtime", a.neighbour_timeout, a.rejoin,
-                        a.crash_after)
+                        a.objective, a.crash_after)
 
     return _role(f"node {a.id}", keys.role_name("node", a.id), a, body)
 
@@ -244,8 +249,11 @@ def cmd_collector(a: argparse.Namespace) -> int:
     from netsetest.runtime.report import format_table
     from netsetest.runtime.security import SECURITY_INSECURE, SECURITY_MTLS
 
+    checks.record_file(a.record)  # before the run, not after it
+    checks.output_file(a.summary_json, "--summary-json")
+
     def body(sc, bus) -> int:  # noqa: ANN001
-        meta = run_meta(sc, "zenoh", a.clock, a.signals, a.variant, a.seed, a.run_id)
+        meta = run_meta(sc, "zenoh", a.clock, a.signals, a.variant, a.seed, a.run_id, a.objective)
         meta["security"] = SECURITY_MTLS if a.credentials else SECURITY_INSECURE
         show = None if a.progress else (lambda s: print(format_table(s), flush=True))
         return run_collector(sc, bus, a.run_id, meta, a.record, a.summary_json, a.progress, a.idle_timeout, show)
@@ -493,6 +501,10 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
                 return EXIT_BAD_INPUT
         log("run", f"security: {security}" + (f" (mTLS per role, access control at the run's router {router_endpoint}; credentials in {creds})"
                                                if router is not None else " (open peer mesh: any local process can read and forge messages)"))  # fmt: skip
+        if not a.quiet:  # how to look inside the run from another terminal (README: Live views)
+            log("run", f"run id {run_id}; " + (
+                f"watch it with: netsetest watch --run-id {run_id} --connect tcp/127.0.0.1:{ports['collector']}" if router is None
+                else "outside observers are shut out of a secured run (watch it from another terminal: run with --insecure)"))  # fmt: skip
         bar = Progress(sc.steps, f"zenoh ({len(sc.ids)} nodes + vehicle + collector)", enabled=not a.quiet)
         progress = [-1]
 
@@ -503,14 +515,14 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
 
         def start_node(i: int, rejoin: bool, after: int) -> None:
             crash = schedule.next_kill(i, after)
-            children.start(f"node{i}", ["node", *common, "--id", str(i), "--variant", a.variant, "--clock", a.clock,
+            children.start(f"node{i}", ["node", *common, "--id", str(i), "--variant", a.variant, "--objective", a.objective, "--clock", a.clock,
                                         "--neighbour-timeout", str(a.neighbour_timeout), *net(f"node{i}"),
                                         *(["--rejoin"] if rejoin else []), *([] if crash is None else ["--crash-after", str(crash)])],
                            stdout=subprocess.DEVNULL)  # fmt: skip
 
         col = children.start(
             "collector",
-            ["collector", *common, "--signals", a.signals, "--variant", a.variant, "--seed", str(a.seed), "--clock", a.clock,
+            ["collector", *common, "--signals", a.signals, "--variant", a.variant, "--objective", a.objective, "--seed", str(a.seed), "--clock", a.clock,
              "--summary-json", summary_path, "--progress", *(["--record", a.record] if a.record else []), *net("collector")],
             stdout=subprocess.PIPE, text=True,
         )  # fmt: skip
@@ -562,7 +574,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
                 p.wait(timeout=ROLE_GRACE_S)
             except subprocess.TimeoutExpired:
                 pass
-        return _print_summary(summary_path, security, code, format_table)
+        return _print_summary(summary_path, code, format_table)
     except KeyboardInterrupt:
         log("run", "interrupted: stopping the vehicle and the nodes, then letting the collector write what it has")
         children.stop_all(ROLE_GRACE_S, keep=["collector"])
@@ -577,13 +589,12 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         tmp.cleanup()
 
 
-def _print_summary(summary_path: str, security: str, code: int, format_table: Callable[[dict], str]) -> int:
+def _print_summary(summary_path: str, code: int, format_table: Callable[[dict], str]) -> int:
     import json
 
     if not Path(summary_path).exists():
         print(f"netsetest run: the collector exited with code {code} without a summary", file=sys.stderr)
         return EXIT_VIOLATION
     summary = json.loads(Path(summary_path).read_text())
-    print(format_table(summary))
-    print(f"security: {summary.get('security', security)}")
+    print(format_table(summary))  # its last line names the security mode and the verdict
     return code

@@ -2,10 +2,18 @@
 
 Every file is validated with pydantic.  :func:`load_topology` returns a :class:`Scenario` (plain numpy
 data for the roles) or raises :class:`ConfigError` naming the file, the field and the reason.
+
+Physical ranges.  Every magnitude a node's estimator works with is bounded so that the estimator, its
+certificate and its guaranteed fallback ellipsoid (:func:`netsetest.estimator.sdp.fallback_shape`) stay
+in floating-point range: a profile outside them is rejected at load (exit 2) rather than crashing a node
+mid-run.  The limits (the ``*_MIN``/``*_MAX`` constants below, documented in README.md) are generous for
+a yaw-rate sensor — gains, offsets and signals in rad, rad/s and the sensor's unit are O(1) — and the
+extreme-profile sweep (tests/test_estimator_edges.py) runs the network at their corners.
 """
 
 from __future__ import annotations
 
+import stat
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,9 +25,12 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from netsetest.models.sensor import Sensor
 from netsetest.models.signals import Fault, NoFault, PiecewiseLinearFault, SpeedProfile, SquareFault
 from netsetest.models.vehicle import KMH, TSModel, VehicleParams
+from netsetest.scenarios import bundled_topologies, resolve_topology
 
 Case = Literal["nsnim", "saim"]
 Variant = Literal["scheduled", "per-rule"]
+FaultBoundsMode = Literal["used", "all", "none"]  # where declared fault bounds are applied (Scenario.fault_bounded)
+FAULT_BOUNDS_MODES: tuple[FaultBoundsMode, ...] = ("used", "all", "none")
 
 
 class ConfigError(Exception):
@@ -33,6 +44,19 @@ class _Strict(BaseModel):
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
+MAGNITUDE_MAX = 1e3  # |C|, |Ds|, Dv, |x̂0|, r_max, h2, fault values: a sensor gain or signal of 1000 is not a yaw-rate sensor
+DS_MIN = 1e-6  # |Ds|: smaller makes the fault practically unobservable and the descriptor gain G ~ 1/Ds overflow later steps
+DV_MIN = 1e-9  # Dv > 0: every real sensor is noisy; Dv = 0 leaves the estimator's noise slot empty
+R_MIN, R_MAX = 1e-12, 1e6  # noise bound v² ≤ R
+P0_MIN, P0_MAX = 1e-9, 1e6  # eigenvalues of the initial shape P0
+RHO_MIN, RHO_MAX = 1e-6, 1e6  # radius of the initial ellipsoid
+H1_MIN = 1e-3  # sector 0 < h1 < 1: h1 → 0 makes γ h1 C̄ (hence T, G) degenerate
+GAMMA_MIN = 1e-3  # availability γ ∈ [GAMMA_MIN, 1]
+W_MIN, W_MAX = 1e-12, 1e6  # side-wind bound w² ≤ W
+FREQ_MAX = 1e6  # |noise_frequency|
+
+Magnitude = Annotated[float, Field(ge=-MAGNITUDE_MAX, le=MAGNITUDE_MAX, allow_inf_nan=False)]
+
 
 # ---------------------------------------------------------------- node profile (nodes/*.toml)
 
@@ -40,16 +64,16 @@ Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 class SaturationSpec(_Strict):
     """σ(r) = sign(r) min(r_max, |r|) with sector scalars 0 < h1 < 1 ≤ h2 (used in the SAIM case)."""
 
-    r_max: Positive
-    h1: Annotated[float, Field(gt=0, lt=1)]
-    h2: Annotated[float, Field(ge=1, allow_inf_nan=False)]
+    r_max: Annotated[float, Field(gt=0, le=MAGNITUDE_MAX, allow_inf_nan=False)]
+    h1: Annotated[float, Field(ge=H1_MIN, lt=1)]
+    h2: Annotated[float, Field(ge=1, le=MAGNITUDE_MAX, allow_inf_nan=False)]
 
 
 class AvailabilitySpec(_Strict):
     """γ_i,k uniform in [gamma_min, gamma_max] ⊂ (0, 1] (used in the SAIM case)."""
 
-    gamma_min: Annotated[float, Field(gt=0, le=1)]
-    gamma_max: Annotated[float, Field(gt=0, le=1)]
+    gamma_min: Annotated[float, Field(ge=GAMMA_MIN, le=1)]
+    gamma_max: Annotated[float, Field(ge=GAMMA_MIN, le=1)]
 
     @model_validator(mode="after")
     def _ordered(self) -> AvailabilitySpec:
@@ -62,11 +86,11 @@ class FaultSpec(_Strict):
     """``none``; ``square``: amplitude·sign(sin(2πk/period)) on [start, end); ``piecewise``: through points."""
 
     kind: Literal["none", "square", "piecewise"] = "none"
-    amplitude: Finite | None = None
+    amplitude: Magnitude | None = None
     period: Annotated[int, Field(gt=0)] | None = None
     start: Annotated[int, Field(ge=0)] | None = None
     end: Annotated[int, Field(ge=0)] | None = None
-    points: list[tuple[Finite, Finite]] | None = None
+    points: list[tuple[Finite, Magnitude]] | None = None
 
     @model_validator(mode="after")
     def _complete(self) -> FaultSpec:
@@ -106,15 +130,19 @@ class FaultBoundSpec(_Strict):
 class NodeProfile(_Strict):
     """One yaw-rate sensor: y = C x + Ds f + Dv v, v² ≤ R, plus its estimator's initial ellipsoid."""
 
-    label: str = ""
-    C: tuple[Finite, Finite]
-    Ds: Finite
-    Dv: Finite
-    R: Positive
-    noise_frequency: Finite = Field(description="f_i of v_i,k = cos(2π f_i (k−1) τs)")
-    x0_hat: tuple[Finite, Finite, Finite]
-    P0: Positive | list[list[Finite]] = Field(description="scalar (× I3) or a 3×3 SPD matrix")
-    rho: Positive = 1.0
+    label: Annotated[str, Field(max_length=200)] = ""
+    C: tuple[Magnitude, Magnitude]
+    Ds: Magnitude
+    Dv: Annotated[float, Field(ge=DV_MIN, le=MAGNITUDE_MAX, allow_inf_nan=False)]
+    R: Annotated[float, Field(ge=R_MIN, le=R_MAX, allow_inf_nan=False)]
+    noise_frequency: Annotated[float, Field(ge=-FREQ_MAX, le=FREQ_MAX, allow_inf_nan=False)] = Field(
+        description="f_i of v_i,k = cos(2π f_i (k−1) τs)"
+    )
+    x0_hat: tuple[Magnitude, Magnitude, Magnitude]
+    P0: Annotated[float, Field(ge=P0_MIN, le=P0_MAX, allow_inf_nan=False)] | list[list[Finite]] = Field(
+        description="scalar (× I3) or a 3×3 SPD matrix"
+    )
+    rho: Annotated[float, Field(ge=RHO_MIN, le=RHO_MAX, allow_inf_nan=False)] = 1.0
     saturation: SaturationSpec | None = None
     availability: AvailabilitySpec | None = None
     fault: FaultSpec = FaultSpec()
@@ -123,8 +151,8 @@ class NodeProfile(_Strict):
     @field_validator("Ds")
     @classmethod
     def _ds_nonzero(cls, v: float) -> float:
-        if v == 0:
-            raise ValueError("Ds must be non-zero, else the fault is unobservable")
+        if abs(v) < DS_MIN:
+            raise ValueError(f"|Ds| must be at least {DS_MIN:g}, else the fault is (practically) unobservable")
         return v
 
     @field_validator("P0")
@@ -136,6 +164,9 @@ class NodeProfile(_Strict):
                 raise ValueError(f"P0 must be 3×3, got shape {a.shape}")
             if not np.allclose(a, a.T) or np.linalg.eigvalsh(a).min() <= 0:
                 raise ValueError("P0 must be symmetric positive definite")
+            eig = np.linalg.eigvalsh(0.5 * (a + a.T))
+            if eig.min() < P0_MIN or eig.max() > P0_MAX:
+                raise ValueError(f"P0's eigenvalues must lie in [{P0_MIN:g}, {P0_MAX:g}], got [{eig.min():.3g}, {eig.max():.3g}]")
         return v
 
     def P0_matrix(self) -> np.ndarray:
@@ -184,7 +215,9 @@ class SteeringSpec(_Strict):
 
 class NodeRef(_Strict):
     id: Annotated[int, Field(ge=1)]
-    profile: str = Field(description="file name in the node directory, without .toml")
+    profile: Annotated[str, Field(min_length=1, max_length=200, pattern=r"^[^/\\\x00]+$")] = Field(
+        description="file name in the node directory, without .toml (no path separators, no NUL)"
+    )
 
 
 class Edge(_Strict):
@@ -220,7 +253,7 @@ class TopologyFile(_Strict):
     steps: Annotated[int, Field(ge=1)] = 80
     tau_s: Positive = 0.1
     case: Case = "nsnim"
-    W: Positive = Field(2.0, description="side-wind bound w² ≤ W")
+    W: Annotated[float, Field(ge=W_MIN, le=W_MAX, allow_inf_nan=False)] = Field(2.0, description="side-wind bound w² ≤ W")
     vehicle: VehicleSpec = VehicleSpec()
     speed: SpeedSpec = SpeedSpec()
     steering: SteeringSpec = SteeringSpec()
@@ -305,6 +338,16 @@ class Scenario:
     def vx(self, k: int) -> float:
         return self.speed.kmh(k * self.tau_s) * KMH
 
+    def fault_bounded(self, mode: FaultBoundsMode) -> tuple[int, ...]:
+        """Nodes whose declared fault bounds an analysis applies: ``used`` — where an estimator relies
+        on them (a saturating sensor); ``all`` — every node that declares one; ``none`` — no node."""
+        if mode not in FAULT_BOUNDS_MODES:
+            raise ConfigError(f"fault bounds mode must be one of {', '.join(FAULT_BOUNDS_MODES)}, got {mode!r}")
+        declared = [n for n in self.nodes if n.fault_rate is not None or n.fault_size is not None]
+        if mode == "none":
+            return ()
+        return tuple(n.id for n in declared if mode == "all" or n.sensor.saturated)
+
     def out_neighbours(self, j: int) -> list[int]:
         """Nodes i ≠ j that use j's message."""
         return [n.id for n in self.nodes if j in n.in_weights and n.id != j]
@@ -318,8 +361,17 @@ def _format_errors(path: Path, err: ValidationError) -> str:
     return "\n".join(lines)
 
 
+MAX_CONFIG_BYTES = 1 << 20  # a topology or profile is a few kB: larger is not one
+
+
 def _read_toml(path: Path) -> dict:
     try:
+        st = path.stat()  # a FIFO or a device would block or never end: only regular files are read
+        if not stat.S_ISREG(st.st_mode):
+            kind = "a directory" if stat.S_ISDIR(st.st_mode) else "a FIFO" if stat.S_ISFIFO(st.st_mode) else "a device or socket"
+            raise ConfigError(f"{path}: cannot read: {kind}, not a regular file")
+        if st.st_size > MAX_CONFIG_BYTES:
+            raise ConfigError(f"{path}: too large for a configuration file ({st.st_size} bytes)")
         with open(path, "rb") as fh:
             return tomllib.load(fh)
     except FileNotFoundError:
@@ -328,8 +380,12 @@ def _read_toml(path: Path) -> dict:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML (not UTF-8: {exc.reason} at byte {exc.start})") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: not valid TOML (nested too deeply)") from None
+    except ValueError as exc:  # e.g. an embedded NUL byte in the path
+        raise ConfigError(f"{path!r}: cannot read: {exc}") from None
     except OSError as exc:
-        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
+        raise ConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
 
 
 def load_profile(path: Path) -> NodeProfile:
@@ -340,8 +396,11 @@ def load_profile(path: Path) -> NodeProfile:
 
 
 def load_topology(path: str | Path, case: Case | None = None, steps: int | None = None) -> Scenario:
-    """Read and validate a topology and its node profiles; ``case``/``steps`` override the file."""
-    path = Path(path)
+    """Read and validate a topology (a path, or the name of a bundled one such as ``paper6``) and its node
+    profiles; ``case``/``steps`` override the file."""
+    path = resolve_topology(path)
+    if not path.exists():
+        raise ConfigError(f"{path}: file not found (bundled topologies: {', '.join(bundled_topologies())})")
     if case is not None and case not in ("nsnim", "saim"):
         raise ConfigError(f"{path}: case must be 'nsnim' or 'saim', got {case!r}")
     if steps is not None and steps < 1:
@@ -351,7 +410,10 @@ def load_topology(path: str | Path, case: Case | None = None, steps: int | None 
     except ValidationError as exc:
         raise ConfigError(_format_errors(path, exc)) from None
     case = case or topo.case
-    node_dir = (path.parent / topo.node_dir).resolve()
+    try:
+        node_dir = (path.parent / topo.node_dir).resolve()
+    except (RuntimeError, OSError, ValueError) as exc:  # a symlink loop, a NUL byte
+        raise ConfigError(f"{path}: node_dir {topo.node_dir!r}: {exc}") from None
     v = topo.vehicle
     params = VehicleParams(
         m=v.m, Jz=v.Jz, lf=v.lf, lr=v.lr, cf=v.cf, cr=v.cr, fw=v.fw, lw=v.lw,

@@ -220,7 +220,10 @@ class ConicSolver:
         self.lmi_pos = {s: k for k, s in enumerate(self.lmi_slots)}
         self.sector_lmi = [(c, self.kept[c]) for c in self.lmi_facts if facts[self.kept[c]].kind == "sector"]
         self.ball_compact = [c for c, m in enumerate(self.kept) if facts[m].kind == "ball"]
-        self.cliques = self._cliques() if (decompose and self.socp and self.sector) else None
+        # the clique cones pay off (and were tuned) with the φ⁺ slot; without it (a derived sector proved
+        # that the own sensor does not saturate) the clique problem stalled (InsufficientProgress) on
+        # paper SAIM steps where the one LMI solved in 8-13 iterations
+        self.cliques = self._cliques() if (decompose and self.socp and lay.phi_new is not None) else None
         self._templates: dict[tuple[bool, bool], _Template] = {}
         self.last_iterations = 0
 

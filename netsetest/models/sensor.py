@@ -5,8 +5,9 @@ Augmented state x̄_i = [x; f_i] (n = 3), C̄_i = [C_i, Ds_i].  The measurement 
     ỹ_i = γ_i σ(C̄_i x̄_i) + Dv_i v_i,        v_i² ≤ R_i                                   (12)
     σ(r) = sign(r)·min(r_max, |r|) = h1·r + φ(r),   φ(r)(φ(r) − h·r) ≤ 0,  h = h2 − h1     (14)-(15)
 
-The sector condition (15) holds exactly while |r| ≤ r_max/h1 (DESIGN.md §1); outside that range the
-estimator's assumption is broken and the collector says so.  A sensor without saturation has
+The sector condition (15) holds exactly while |r| ≤ r_max/h1 (DESIGN.md §1).  The profile's fixed h1
+is the paper's; the estimator derives a sector per step instead (netsetest/estimator/sector.py) and
+falls back to the fixed one, marked assumed, only without a declared fault bound.  A sensor without saturation has
 h1 = h2 = 1, σ = identity and φ ≡ 0.
 """
 
@@ -20,6 +21,10 @@ NX = 2  # vehicle state [β, r]
 NA = 3  # augmented state [β, r, f]
 
 E_DESCRIPTOR = np.diag([1.0, 1.0, 0.0])  # E of (11)
+# relative margin against floating-point rounding at the saturation limit: an end of the measured
+# σ-interval this close to ±r_max may be the limit itself rounded (worst-case noise at exactly its
+# bound) and is treated as open, which is always sound (also used by estimator/sector.py)
+ROUNDING_MARGIN = 1e-9
 
 
 @dataclass(frozen=True)
@@ -60,12 +65,29 @@ class Sensor:
         """ỹ = γ σ(C̄ x̄) + Dv v (12)."""
         return gamma * self.sigma(float(self.Cbar @ xbar)) + self.Dv * v
 
+    def measured_interval(self, y: float, gamma: float) -> tuple[float, float]:
+        """The interval of r = C̄ x̄ consistent with ỹ = γ σ(r) + Dv v, v² ≤ R; ±inf is an open side.
+
+        σ(r) ∈ [(ỹ − |Dv|√R)/γ, (ỹ + |Dv|√R)/γ] = [a, b]; σ is non-decreasing and the identity on
+        [−r_max, r_max], so σ(r) ≥ a ⇔ r ≥ a unless a ≤ −r_max (then every r), and likewise for b.
+        """
+        half = abs(self.Dv) * np.sqrt(self.R)
+        lo, hi = (y - half) / gamma, (y + half) / gamma
+        if not self.saturated:
+            return lo, hi
+        edge = self.r_max * (1 - ROUNDING_MARGIN)
+        return (-np.inf if lo <= -edge else lo), (np.inf if hi >= edge else hi)
+
     def sector_holds(self, xbar: np.ndarray) -> bool:
         """Whether φ(C̄ x̄) satisfies the sector condition (15) that the estimator assumes."""
         return abs(float(self.Cbar @ xbar)) <= self.sector_limit
 
-    def descriptor_gains(self, gamma: float) -> tuple[np.ndarray, np.ndarray]:
-        """T, G with T E + G γ h1 C̄ = I, by the pseudo-inverse of Θ = [E; γ h1 C̄] ((18)-(20), S = 0)."""
-        theta = np.vstack([E_DESCRIPTOR, gamma * self.h1 * self.Cbar[None, :]])
+    def descriptor_gains(self, gamma: float, h1: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """T, G with T E + G γ h1 C̄ = I, by the pseudo-inverse of Θ = [E; γ h1 C̄] ((18)-(20), S = 0).
+
+        ``h1``: the step's sector slope (default: the profile's fixed h1).
+        """
+        h1 = self.h1 if h1 is None else h1
+        theta = np.vstack([E_DESCRIPTOR, gamma * h1 * self.Cbar[None, :]])
         pinv = np.linalg.pinv(theta)  # (3, 4)
         return pinv[:, :NA], pinv[:, NA:]

@@ -2,8 +2,10 @@
 
 ``fig5_measurements.png``  per node: the measurement ỹ_i with the fault (``y``) and the same measurement
                            without it (``y_nofault``), against time t = k·τs.
-``fig6_states.png``        top row β, bottom row r, one column per node: the true state, the node's
-                           estimate x̂ and its bounds x̂ ± √(ρ P_kk) (shaded).
+``fig6_states.png``        one row per node, β [rad] left and r [rad/s] right: the true state, the node's
+                           estimate x̂ and its bounds x̂ ± √(ρ P_kk) (shaded).  The y axes leave out the
+                           first :data:`TRANSIENT_S` s of the bounds (the initial ellipsoid is far wider
+                           than everything after it); every true value stays inside, and a note says so.
 ``fig7_faults.png``        per node: the true fault f_i, the estimate f̂_i and its bounds f̂_i ± √(ρ P_33).
 ``fig8_E.png``             per node: E_i,k = eᵀP⁻¹e against the step k with the radius ρ_i (dotted); one
                            curve per record, labelled ``case/signals``; red crosses mark misses (E > ρ) and
@@ -14,9 +16,10 @@ One record: the four files as named above.  Several records (e.g. an nsnim and a
 drawn for every record with the file names prefixed by ``<case>_<signals>_`` (plus ``<n>_``, the record's
 position counted from 0, if two records share case and signals), and one ``fig8_E.png`` overlays all records.
 
-Per-node figures show at most :data:`MAX_PANELS` panels (Fig. 6: ``MAX_PANELS // 2`` node columns); the
-title says so when nodes are left out.  A node that stopped reporting is drawn for the steps it
-published; E is NaN where the truth of a step is unknown and leaves a gap in the curve.
+Per-node figures show at most :data:`MAX_PANELS` panels (Fig. 6: ``MAX_PANELS // 2`` node rows); the
+title says so when nodes are left out.  A node's estimate, bounds and E are drawn only for the steps it
+published: where it did not report (dead, killed, lost) the curves break and the steps are shaded grey
+(never interpolated across).  E is NaN where the truth of a step is unknown and leaves a gap too.
 """
 
 from __future__ import annotations
@@ -37,6 +40,10 @@ from matplotlib.patches import Patch  # noqa: E402
 from netsetest.records.record import Record  # noqa: E402
 
 MAX_PANELS = 12
+TRANSIENT_S = 1.0  # Fig. 6: y limits ignore the bounds of the first second (Sec. VI: they settle within ~1 s)
+Y_PAD = 0.1  # fraction of the data range added above and below
+SILENT_COLOUR, SILENT_ALPHA = "0.6", 0.25
+LEGEND_TOP_IN = 0.4  # Fig. 6: inches from the top edge to its legend (below the title, above the panels)
 _COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:cyan")
 
 
@@ -104,17 +111,75 @@ def _truth_series(rec: Record, field: str, node: int) -> tuple[np.ndarray, np.nd
     return _times(rec), np.array([e.get(field, {}).get(str(node), np.nan) for e in rec.truth], dtype=float)
 
 
+def _gapped(steps: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Steps (as float) and values with a NaN row between published steps that are not consecutive, so
+    lines and bands break where the node did not report instead of being interpolated across."""
+    breaks = np.flatnonzero(np.diff(steps) > 1) + 1
+    gx = np.insert(steps.astype(float), breaks, steps[breaks - 1] + 0.5)
+    return gx, np.insert(values.astype(float), breaks, np.nan, axis=0)
+
+
+def _silent_spans(rec: Record, node: int) -> list[tuple[float, float]]:
+    """Steps (±½) of the run for which ``node`` published nothing."""
+    all_steps = np.array(sorted({int(e["step"]) for e in rec.truth}), dtype=int)
+    tr = rec.nodes.get(node)
+    published = set() if tr is None else {int(k) for k in tr.steps}
+    return _spans(all_steps, np.array([k not in published for k in all_steps], dtype=bool))
+
+
+def _shade_silent(ax: Axes, rec: Record, node: int, scale: float) -> bool:
+    """Grey bands over the steps ``node`` did not report (x in steps × ``scale``); True if any."""
+    spans = _silent_spans(rec, node)
+    for a, b in spans:
+        ax.axvspan(a * scale, b * scale, color=SILENT_COLOUR, alpha=SILENT_ALPHA, lw=0, label="not reported" if a == spans[0][0] else None)
+    return bool(spans)
+
+
 def _estimate(ax: Axes, rec: Record, node: int, comp: int, truth: tuple[np.ndarray, np.ndarray]) -> None:
     ax.plot(*truth, color="k", lw=1.6, label="true")
+    tau = float(rec.meta.get("tau_s", 1.0))
+    _shade_silent(ax, rec, node, tau)
     tr = rec.nodes.get(node)
     if tr is None or len(tr.steps) == 0:
         ax.text(0.5, 0.5, "no ellipsoids published", transform=ax.transAxes, ha="center", color="r")
         return
-    t, (lo, hi) = _times(rec, tr.steps), tr.bounds(comp)
-    ax.fill_between(t, lo, hi, color="tab:blue", alpha=0.2, lw=0, label="bounds")
-    ax.plot(t, tr.xhat[:, comp], color="tab:blue", lw=1.2, ls="--", label="estimate")
-    if tr.steps[-1] < max((e["step"] for e in rec.truth), default=-1):
-        ax.axvline(t[-1], color="r", lw=0.8, ls=":", label="last report")
+    lo, hi = tr.bounds(comp)
+    k, vals = _gapped(tr.steps, np.column_stack([lo, hi, tr.xhat[:, comp]]))
+    t = k * tau
+    ax.fill_between(t, vals[:, 0], vals[:, 1], color="tab:blue", alpha=0.2, lw=0, label="bounds")
+    ax.plot(t, vals[:, 2], color="tab:blue", lw=1.2, ls="--", label="estimate")
+
+
+def _settled_limits(rec: Record, ids: list[int], comp: int, truth: np.ndarray) -> tuple[float, float] | None:
+    """y limits covering every true value and the bounds after :data:`TRANSIENT_S`; None if the run is too
+    short to have a transient worth leaving out."""
+    tau = float(rec.meta.get("tau_s", 1.0))
+    vals = [truth[np.isfinite(truth)]]
+    for i in ids:
+        tr = rec.nodes.get(i)
+        if tr is None or len(tr.steps) == 0:
+            continue
+        late = tr.steps * tau >= TRANSIENT_S
+        if not late.any() or tr.steps[-1] * tau < 2 * TRANSIENT_S:
+            return None
+        lo, hi = tr.bounds(comp)
+        vals += [lo[late], hi[late]]
+    v = np.concatenate(vals)
+    if v.size == 0:
+        return None
+    a, b = float(v.min()), float(v.max())
+    pad = Y_PAD * max(b - a, 1e-12)
+    return a - pad, b + pad
+
+
+def _legend(target: Axes | Figure, fig: Figure, **kw: object) -> None:
+    """One legend on ``target`` (a panel, or the figure) with every label drawn anywhere in ``fig`` (e.g.
+    "not reported" of one node)."""
+    entries: dict[str, object] = {}
+    for a in fig.axes:
+        for h, label in zip(*a.get_legend_handles_labels()):
+            entries.setdefault(label, h)
+    target.legend(list(entries.values()), list(entries), fontsize=7, **kw)
 
 
 def _save(fig: Figure, path: Path) -> str:
@@ -132,7 +197,7 @@ def _fig5(rec: Record, label: str) -> Figure:
         ax.plot(*_truth_series(rec, "y", i), color="tab:red", lw=1.2, label="with fault")
         ax.plot(*_truth_series(rec, "y_nofault", i), color="tab:blue", lw=1.2, ls="--", label="without fault")
         ax.set_title(f"sensor {i}", fontsize=9)
-        ax.set_ylabel("ỹ")
+        ax.set_ylabel("ỹ [rad/s]")
     panels[0][1].legend(fontsize=7)
     fig.tight_layout()
     return fig
@@ -143,19 +208,27 @@ def _fig6(rec: Record, label: str) -> Figure:
     cap = MAX_PANELS // 2
     shown = ids[:cap]
     note = f" (first {cap} of {len(ids)} nodes)" if len(ids) > cap else ""
-    fig, axes = plt.subplots(2, len(shown), figsize=(3.2 * len(shown), 5.2), squeeze=False, sharex=True, sharey="row")
+    fig, axes = plt.subplots(len(shown), 2, figsize=(11, 1.9 * len(shown) + 1.2), squeeze=False, sharex=True)
     fig.suptitle(f"Fig. 6: state estimates and bounds ({label}){note}")
     t = _times(rec)
-    for c, i in enumerate(shown):
-        for comp, name in ((0, "β [rad]"), (1, "r [rad/s]")):
-            ax = axes[comp, c]
-            _estimate(ax, rec, i, comp, (t, np.array([e["x"][comp] for e in rec.truth], dtype=float)))
-            if c == 0:
-                ax.set_ylabel(name)
-        axes[0, c].set_title(f"node {i}", fontsize=9)
-        axes[1, c].set_xlabel("t [s]")
-    axes[0, 0].legend(fontsize=7)
-    fig.tight_layout()
+    clipped = False
+    for comp, name in ((0, "β [rad]"), (1, "r [rad/s]")):
+        truth = np.array([e["x"][comp] for e in rec.truth], dtype=float)
+        limits = _settled_limits(rec, shown, comp, truth)
+        for r, i in enumerate(shown):
+            ax = axes[r, comp]
+            _estimate(ax, rec, i, comp, (t, truth))
+            ax.set_ylabel(f"node {i}\n{name}" if comp == 0 else name, fontsize=9)
+            if limits is not None:
+                ax.set_ylim(*limits)
+                clipped = True
+        axes[0, comp].set_title(name.split()[0], fontsize=10)
+        axes[-1, comp].set_xlabel("t [s]")
+    if clipped:
+        fig.text(0.5, 0.005, f"y axes show the bounds from t = {TRANSIENT_S:g} s on (the initial ellipsoid is much wider); "
+                 "every true value is inside the axes", ha="center", fontsize=8, color="0.3")  # fmt: skip
+    _legend(fig, fig, loc="upper center", ncol=4, bbox_to_anchor=(0.5, 1.0 - LEGEND_TOP_IN / fig.get_figheight()))
+    fig.tight_layout(rect=(0, 0.02, 1, 1.0 - (LEGEND_TOP_IN + 0.05) / fig.get_figheight()))
     return fig
 
 
@@ -164,8 +237,8 @@ def _fig7(rec: Record, label: str) -> Figure:
     for i, ax in panels:
         _estimate(ax, rec, i, 2, _truth_series(rec, "faults", i))
         ax.set_title(f"fault f{i}", fontsize=9)
-        ax.set_ylabel("f")
-    panels[0][1].legend(fontsize=7)
+        ax.set_ylabel("f [rad/s]")
+    _legend(panels[0][1], fig)
     fig.tight_layout()
     return fig
 
@@ -183,7 +256,8 @@ def _spans(steps: np.ndarray, flags: np.ndarray) -> list[tuple[float, float]]:
 
 def _fig8(records: list[Record], labels: list[str]) -> Figure:
     ids = sorted(set().union(*(_node_ids(r) for r in records)))
-    fig, panels = _panels(ids, MAX_PANELS, "Fig. 8: E_i = eᵀP⁻¹e and radius ρ_i", "step k")
+    tau = float(records[0].meta.get("tau_s", 1.0))
+    fig, panels = _panels(ids, MAX_PANELS, "Fig. 8: E_i = eᵀP⁻¹e and radius ρ_i (dimensionless)", f"step k (τs = {tau:g} s)")
     handles: dict[str, object] = {}
     for i, ax in panels:
         top = 0.0
@@ -191,8 +265,11 @@ def _fig8(records: list[Record], labels: list[str]) -> Figure:
             tr, col = rec.nodes.get(i), _COLOURS[n % len(_COLOURS)]
             if tr is None or len(tr.steps) == 0:
                 continue
-            handles[labels[n]] = ax.plot(tr.steps, tr.E, color=col, lw=1.2, marker=".", ms=3)[0]
-            handles["ρ"] = ax.plot(tr.steps, tr.rho, color="k", lw=1.0, ls=":")[0]
+            k, vals = _gapped(tr.steps, np.column_stack([tr.E, tr.rho]))
+            handles[labels[n]] = ax.plot(k, vals[:, 0], color=col, lw=1.2, marker=".", ms=3)[0]
+            handles["ρ"] = ax.plot(k, vals[:, 1], color="k", lw=1.0, ls=":")[0]
+            if _shade_silent(ax, rec, i, 1.0):
+                handles["not reported"] = Patch(color=SILENT_COLOUR, alpha=SILENT_ALPHA)
             miss = ~tr.contained & ~np.isnan(tr.E)
             if miss.any():
                 handles["miss (E > ρ)"] = ax.plot(tr.steps[miss], tr.E[miss], "x", color="red", ms=7, mew=2)[0]
@@ -204,7 +281,7 @@ def _fig8(records: list[Record], labels: list[str]) -> Figure:
         if top > 10.0:
             ax.set_yscale("log")
         ax.set_title(f"node {i}", fontsize=9)
-        ax.set_ylabel("E")
+        ax.set_ylabel("E [–]")
     fig.legend(list(handles.values()), list(handles), loc="lower center", ncol=4, fontsize=8)
     legend_in = 0.15 + 0.22 * math.ceil(len(handles) / 4)  # inches reserved below the panels
     fig.tight_layout(rect=(0, min(0.4, legend_in / fig.get_figheight()), 1, 1))

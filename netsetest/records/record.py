@@ -1,17 +1,32 @@
-"""The run record: one JSON file (optionally gzip-compressed, by a ``.gz`` suffix) per run.
+"""The run record: JSON Lines written as the run goes, so that a crash leaves a loadable partial record;
+or the same content as MCAP (``.mcap`` suffix, :mod:`netsetest.records.mcap_io`, for Foxglove).
 
-Layout (``format = "netsetest-record"``, ``version = 1``)::
+One JSON object per line (``format = "netsetest-record"``, ``version = 2``), gzip-compressed when the
+file name ends in ``.gz``; the collector writes through a :class:`RecordSink` and flushes after every
+step::
 
-    meta     run settings: topology, case, signals, variant, seed, steps, tau_s, mode, clock,
-             node ids, in-neighbour weights {i: {j: a_ij}}, run id
-    truth    one entry per step k: x = [β, r], faults {i: f_i}, u, w, vx, noise {i}, gamma {i}, y {i},
-             y_nofault {i}, sector_ok {i}, noise_ok {i}, dist_ok, lost [[j, i]], alive [i]
-    nodes    {i: [one entry per published step: step, xhat [3], P [9, row-major], rho, status,
-             rho_cert, solve_ms, used, missing, late, E = eᵀP⁻¹e, contained (E ≤ rho),
-             assumptions_ok (every assumption in the step's dependency cone held)]}
-    summary  the per-node table and totals (the same object ``--summary-json`` writes)
+    {"kind": "meta", "format": "netsetest-record", "version": 2, "meta": {...}}      first line
+    {"kind": "state", "node": i, "entry": {...}}     the node-state entries of step k, then
+    {"kind": "truth", "entry": {...}}                the truth of step k: the step is complete
+    ...
+    {"kind": "summary", "summary": {...}}            last line, once the run is over
 
-:func:`load_record` returns it as numpy arrays; :meth:`Record.fault_rows` gives the fault bounds.
+``meta``: run settings (topology, case, signals, variant, seed, steps, tau_s, mode, clock, node ids,
+in-neighbour weights {i: {j: a_ij}}, run id).  Truth entry of step k: x = [β, r], faults {i: f_i}, u,
+w, vx, noise {i}, gamma {i}, y {i}, y_nofault {i}, sector_ok {i}, r {i} = C̄x̄, fault_ok {i}, noise_ok {i},
+dist_ok, lost [[j, i]], alive [i], drops {reason: n}.  State entry: step, xhat [3], P [9, row-major], rho,
+status, rho_cert, solve_ms, used, missing, late, dropped, drops {reason: n}, sector [h1, h] | null,
+sector_basis, E = eᵀP⁻¹e (null when the truth of the step is unknown), contained
+(E ≤ rho), assumptions_ok (every assumption in the step's dependency cone held), contested (more
+than one copy matched the truth: not judged).  ``summary``: the
+per-node table and totals (the same object ``--summary-json`` writes).
+
+A file without the summary line (the collector, the vehicle or the parent was killed) loads as a
+partial record: ``partial`` is true, ``last_complete_step`` the last step whose truth line was written,
+and an incomplete last line is ignored (an MCAP file loads only complete, with its verdict message).
+:func:`load_record` also reads version 1 records (one JSON
+document with ``meta``, ``truth``, ``nodes``, ``summary``; optionally gzip-compressed).
+:meth:`Record.fault_rows` gives the fault bounds.
 """
 
 from __future__ import annotations
@@ -19,13 +34,139 @@ from __future__ import annotations
 import gzip
 import json
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import IO, Protocol
 
 import numpy as np
 
+from netsetest.extras import require
+
 FORMAT = "netsetest-record"
-VERSION = 1
+VERSION = 2
+LEGACY_VERSION = 1  # one JSON document per run, written at the end
+GZIP_MAGIC = b"\x1f\x8b"
+MCAP_SUFFIX = ".mcap"  # open_sink/save_record/load_record dispatch on it (netsetest.records.mcap_io)
+
+
+class RecordSink(Protocol):
+    """Where the collector streams the record: :class:`JsonlSink`, an MCAP writer (``mcap_io.McapRecordWriter``),
+    :class:`MemorySink`.
+
+    Call order: ``meta`` once, then per step the ``state`` entries and the ``truth`` entry (which
+    completes the step), ``summary`` once at the end, ``close``.
+    """
+
+    def meta(self, meta: dict) -> None: ...
+    def truth(self, entry: dict) -> None: ...
+    def state(self, node: int, entry: dict) -> None: ...
+    def summary(self, summary: dict) -> None: ...
+    def close(self) -> None: ...
+
+
+class JsonlSink:
+    """The record file: one JSON object per line, flushed at the end of every step."""
+
+    def __init__(self, path: str | Path) -> None:
+        path = Path(path)
+        raw = open(path, "wb")  # noqa: SIM115 (closed in close())
+        self._fh: IO[bytes] = gzip.GzipFile(fileobj=raw, mode="wb") if path.suffix == ".gz" else raw
+        self._raw = raw
+
+    def _line(self, obj: dict) -> None:
+        self._fh.write(json.dumps(obj, separators=(",", ":"), allow_nan=True).encode() + b"\n")
+
+    def _flush(self) -> None:
+        if isinstance(self._fh, gzip.GzipFile):
+            self._fh.flush(zlib.Z_SYNC_FLUSH)  # a complete deflate block: readable up to here
+        self._fh.flush()
+        self._raw.flush()
+
+    def meta(self, meta: dict) -> None:
+        self._line({"kind": "meta", "format": FORMAT, "version": VERSION, "meta": meta})
+        self._flush()
+
+    def truth(self, entry: dict) -> None:
+        self._line({"kind": "truth", "entry": entry})
+        self._flush()
+
+    def state(self, node: int, entry: dict) -> None:
+        self._line({"kind": "state", "node": node, "entry": entry})
+
+    def summary(self, summary: dict) -> None:
+        self._line({"kind": "summary", "summary": summary})
+        self._flush()
+
+    def close(self) -> None:
+        if not self._raw.closed:
+            self._fh.close()
+            self._raw.close()
+
+
+@dataclass
+class MemorySink:
+    """Keeps the record in memory (in-memory runs and tests): ``parts()`` as the record has them."""
+
+    meta_doc: dict = field(default_factory=dict)
+    truth_entries: list[dict] = field(default_factory=list)
+    node_entries: dict[str, list[dict]] = field(default_factory=dict)
+    summary_doc: dict | None = None
+
+    def meta(self, meta: dict) -> None:
+        self.meta_doc = meta
+        self.node_entries = {str(i): [] for i in meta.get("node_ids", [])}
+
+    def truth(self, entry: dict) -> None:
+        self.truth_entries.append(entry)
+
+    def state(self, node: int, entry: dict) -> None:
+        self.node_entries.setdefault(str(node), []).append(entry)
+
+    def summary(self, summary: dict) -> None:
+        self.summary_doc = summary
+
+    def close(self) -> None:
+        pass
+
+    def parts(self) -> dict:
+        return {"truth": self.truth_entries, "nodes": self.node_entries}
+
+
+class TeeSink:
+    """Writes every call to several sinks."""
+
+    def __init__(self, *sinks: RecordSink) -> None:
+        self.sinks = sinks
+
+    def meta(self, meta: dict) -> None:
+        for s in self.sinks:
+            s.meta(meta)
+
+    def truth(self, entry: dict) -> None:
+        for s in self.sinks:
+            s.truth(entry)
+
+    def state(self, node: int, entry: dict) -> None:
+        for s in self.sinks:
+            s.state(node, entry)
+
+    def summary(self, summary: dict) -> None:
+        for s in self.sinks:
+            s.summary(summary)
+
+    def close(self) -> None:
+        for s in self.sinks:
+            s.close()
+
+
+def open_sink(path: str | Path) -> RecordSink:
+    """The streaming writer of a record file, by its suffix: MCAP for ``.mcap``, else JSON Lines."""
+    if Path(path).suffix == MCAP_SUFFIX:
+        require("mcap", "an MCAP record")
+        from netsetest.records.mcap_io import McapRecordWriter
+
+        return McapRecordWriter(path)
+    return JsonlSink(path)
 
 
 class RecordError(Exception):
@@ -59,8 +200,10 @@ class Record:
     meta: dict
     truth: list[dict]
     nodes: dict[int, NodeTrack]
-    summary: dict
+    summary: dict  # empty in a partial record
     raw_nodes: dict[str, list[dict]]
+    partial: bool = False  # the run did not finish writing it (no summary line)
+    last_complete_step: int = -1  # last step whose truth (and states) were written
 
     def truth_at(self, step: int) -> dict | None:
         return self._truth_by_step.get(step)
@@ -104,49 +247,179 @@ class Record:
         return rows
 
 
-def save_record(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: dict) -> None:
-    doc = {"format": FORMAT, "version": VERSION, "meta": meta, "truth": truth, "nodes": nodes, "summary": summary}
-    data = json.dumps(doc, separators=(",", ":"), allow_nan=True).encode()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".part")
-    tmp.write_bytes(gzip.compress(data) if path.suffix == ".gz" else data)
-    tmp.replace(path)  # never leave a half-written record behind
+def _read(path: Path) -> bytes:
+    """The file's bytes, gunzipped when compressed; a truncated gzip stream gives what it holds."""
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise RecordError(f"{path}: file not found") from None
+    except OSError as exc:
+        raise RecordError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    if data[:2] != GZIP_MAGIC:
+        return data
+    d = zlib.decompressobj(wbits=31)
+    try:
+        out = d.decompress(data)
+    except zlib.error as exc:
+        raise RecordError(f"{path}: not a readable record (corrupt gzip: {exc})") from None
+    return out
+
+
+def check_record_path(path: str | Path | None) -> None:
+    """Before a run: raise :class:`~netsetest.extras.MissingExtra` if the record's format cannot be written."""
+    if path is not None and Path(path).suffix == MCAP_SUFFIX:
+        require("mcap", "an MCAP record")
+
+
+def _read_mcap(path: Path) -> Record:
+    """An MCAP record (complete only: an MCAP file without its verdict message is not loaded)."""
+    require("mcap", "an MCAP record")
+    from netsetest.records.mcap_io import McapReadError, read_mcap
+
+    try:
+        doc = read_mcap(path)
+    except FileNotFoundError:
+        raise RecordError(f"{path}: file not found") from None
+    except OSError as exc:
+        raise RecordError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    except McapReadError as exc:
+        raise RecordError(f"{path}: {exc}") from None
+    last = max((t["step"] for t in doc["truth"] if isinstance(t, dict) and isinstance(t.get("step"), int)), default=-1)
+    return _build(path, doc["meta"], doc["truth"], doc["nodes"], doc["summary"], partial=False, last_complete=last)
 
 
 def load_record(path: str | Path) -> Record:
     path = Path(path)
+    if path.suffix == MCAP_SUFFIX:
+        return _read_mcap(path)
+    data = _read(path)
+    head = data.lstrip()[:200]
+    if head.startswith(b'{"kind"') or head.startswith(b'{ "kind"'):
+        return _load_lines(path, data)
+    return _load_document(path, data)
+
+
+def _load_lines(path: Path, data: bytes) -> Record:
+    """Version 2: JSON Lines; without the summary line a partial record."""
+    lines = data.split(b"\n")
+    if lines and lines[-1] == b"":
+        lines.pop()
+    objs: list[dict] = []
+    for n, line in enumerate(lines):
+        try:
+            obj = json.loads(line)
+        except ValueError:
+            if n == len(lines) - 1:
+                break  # the line being written when the writer died
+            raise RecordError(f"{path}: malformed record (line {n + 1} is not JSON)") from None
+        if not isinstance(obj, dict) or "kind" not in obj:
+            raise RecordError(f"{path}: malformed record (line {n + 1} is not a record entry)")
+        objs.append(obj)
+    if not objs or objs[0].get("kind") != "meta" or objs[0].get("format") != FORMAT:
+        raise RecordError(f"{path}: not a netsetest record (no meta line)")
+    if objs[0].get("version") != VERSION:
+        raise RecordError(f"{path}: record version {objs[0].get('version')!r}, this netsetest reads {VERSION} and {LEGACY_VERSION}")
+    meta = objs[0].get("meta")
+    if not isinstance(meta, dict):
+        raise RecordError(f"{path}: malformed record (meta must be a dict)")
+    truth: list[dict] = []
+    nodes: dict[str, list[dict]] = {str(i): [] for i in meta.get("node_ids", [])}
+    summary: dict | None = None
     try:
-        data = path.read_bytes()
-        if data[:2] == b"\x1f\x8b":
-            data = gzip.decompress(data)
+        for n, obj in enumerate(objs[1:], start=2):
+            kind = obj["kind"]
+            if kind == "truth":
+                truth.append(obj["entry"])
+            elif kind == "state":
+                nodes.setdefault(str(int(obj["node"])), []).append(obj["entry"])
+            elif kind == "summary":
+                summary = obj["summary"]
+            else:
+                raise RecordError(f"{path}: malformed record (line {n}: unknown kind {kind!r})")
+    except (KeyError, TypeError, ValueError) as exc:
+        raise RecordError(f"{path}: malformed record ({type(exc).__name__}: {exc})") from None
+    last = max((t["step"] for t in truth if isinstance(t, dict) and isinstance(t.get("step"), int)), default=-1)
+    return _build(path, meta, truth, nodes, summary or {}, partial=summary is None, last_complete=last)
+
+
+def _load_document(path: Path, data: bytes) -> Record:
+    """Version 1: one JSON document written at the end of the run."""
+    try:
         doc = json.loads(data)
-    except FileNotFoundError:
-        raise RecordError(f"{path}: file not found") from None
-    except (OSError, ValueError, EOFError, zlib.error) as exc:
+    except ValueError as exc:
         raise RecordError(f"{path}: not a readable record ({exc})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise RecordError(f"{path}: not a netsetest record (format field missing or wrong)")
-    if doc.get("version") != VERSION:
-        raise RecordError(f"{path}: record version {doc.get('version')!r}, this netsetest reads {VERSION}")
+    if doc.get("version") != LEGACY_VERSION:
+        raise RecordError(f"{path}: record version {doc.get('version')!r}, this netsetest reads {VERSION} and {LEGACY_VERSION}")
     for name, kind in (("meta", dict), ("truth", list), ("nodes", dict), ("summary", dict)):
         if not isinstance(doc.get(name), kind):
             raise RecordError(f"{path}: malformed record ({name} must be a {kind.__name__})")
+    last = max((t["step"] for t in doc["truth"] if isinstance(t, dict) and isinstance(t.get("step"), int)), default=-1)
+    return _build(path, doc["meta"], doc["truth"], doc["nodes"], doc["summary"], partial=False, last_complete=last)
+
+
+def _build(path: Path, meta: dict, truth: list, raw_nodes: dict, summary: dict, partial: bool, last_complete: int) -> Record:
+    if not isinstance(summary, dict):
+        raise RecordError(f"{path}: malformed record (summary must be a dict)")
     try:
-        nodes = {}
-        for key, entries in doc["nodes"].items():
-            nodes[int(key)] = NodeTrack(
-                id=int(key),
-                steps=np.array([e["step"] for e in entries], dtype=int),
-                xhat=np.array([e["xhat"] for e in entries], dtype=float).reshape(-1, 3),
-                P=np.array([e["P"] for e in entries], dtype=float).reshape(-1, 3, 3),
-                rho=np.array([e["rho"] for e in entries], dtype=float),
-                E=np.array([np.nan if e["E"] is None else e["E"] for e in entries], dtype=float),
-                contained=np.array([bool(e["contained"]) for e in entries], dtype=bool),
-                assumptions_ok=np.array([bool(e["assumptions_ok"]) for e in entries], dtype=bool),
-                status=[e["status"] for e in entries],
-                solve_ms=np.array([e["solve_ms"] for e in entries], dtype=float),
-            )
-        return Record(str(path), doc["meta"], doc["truth"], nodes, doc["summary"], doc["nodes"])
-    except (KeyError, TypeError, ValueError) as exc:
+        return record_from_parts(meta, truth, raw_nodes, summary, str(path), partial, last_complete)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise RecordError(f"{path}: malformed record ({type(exc).__name__}: {exc})") from None
+
+
+def record_from_parts(
+    meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: dict, path: str = "",
+    partial: bool = False, last_complete_step: int | None = None,
+) -> Record:  # fmt: skip
+    """A :class:`Record` from the parts a run returns (or a file holds); raises KeyError/TypeError/ValueError
+    on malformed entries.  ``last_complete_step`` defaults to the last step of ``truth``."""
+    tracks = {}
+    for key, entries in nodes.items():
+        tracks[int(key)] = NodeTrack(
+            id=int(key),
+            steps=np.array([e["step"] for e in entries], dtype=int),
+            xhat=np.array([e["xhat"] for e in entries], dtype=float).reshape(-1, 3),
+            P=np.array([e["P"] for e in entries], dtype=float).reshape(-1, 3, 3),
+            rho=np.array([e["rho"] for e in entries], dtype=float),
+            E=np.array([np.nan if e["E"] is None else e["E"] for e in entries], dtype=float),
+            contained=np.array([bool(e["contained"]) for e in entries], dtype=bool),
+            assumptions_ok=np.array([bool(e["assumptions_ok"]) for e in entries], dtype=bool),
+            status=[e["status"] for e in entries],
+            solve_ms=np.array([e["solve_ms"] for e in entries], dtype=float),
+        )
+    for t in truth:
+        if not isinstance(t, dict) or not isinstance(t.get("step"), int):
+            raise ValueError("a truth entry without a step")
+    if last_complete_step is None:
+        last_complete_step = max((t["step"] for t in truth), default=-1)
+    return Record(path, meta, truth, tracks, summary, nodes, partial, last_complete_step)
+
+
+def save_record(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: dict) -> None:
+    """Write a whole record (e.g. one kept in memory) in the streamed layout, step by step (``.mcap``: an
+    indexed MCAP file)."""
+    path = Path(path)
+    if path.suffix == MCAP_SUFFIX:
+        require("mcap", "an MCAP record")
+        from netsetest.records.mcap_io import save_mcap
+
+        save_mcap(path, meta, truth, nodes, summary)
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    by_step: dict[int, list[tuple[int, dict]]] = {}
+    for key, entries in nodes.items():
+        for e in entries:
+            by_step.setdefault(e["step"], []).append((int(key), e))
+    truth_at = {t["step"]: t for t in truth}
+    sink = JsonlSink(path)
+    try:
+        sink.meta(meta)
+        for k in sorted(set(by_step) | set(truth_at)):
+            for node, e in sorted(by_step.get(k, []), key=lambda ne: ne[0]):
+                sink.state(node, e)
+            if k in truth_at:
+                sink.truth(truth_at[k])
+        sink.summary(summary)
+    finally:
+        sink.close()

@@ -5,49 +5,314 @@ containment when E_i,k ≤ ρ_i.  A miss is attributed by the step's *dependency
 (i, k) relies on its own sector condition and noise bound at k, the disturbance bound at k−1, and on
 every (j, k−1) with j ∈ N_i ∪ {i}; step 0 relies on the initial ellipsoid containing x̄_0
 (Assumption 1).  A miss inside an intact cone is an estimator failure (``violations``); a miss after a
-broken assumption is reported separately (``misses_assumption_broken``).
+broken assumption is reported separately (``misses_assumption_broken``).  A saturating node's sector
+premise is what its published sector rests on (``sector_basis``): the noise bound only, the declared
+fault bound, or — for an assumed sector — the sector itself checked against the truth's C̄ x̄.  A derived
+sector that misses the truth inside an intact cone is counted as a ``sector_failure`` (an estimator bug).
+
+Streaming and bounded: the collector keeps the truth and the states of the steps not yet *closed*.
+Step k is closed (judged, written to the record sink, forgotten) in order, once its truth is here and
+every node reported, or the alive ones did and the truth is ``CLOSE_LAG`` steps further, or the truth
+is ``WINDOW`` steps further whatever arrived; :meth:`finish` closes the rest.  Only running totals per
+node remain for the summary.
+
+Defences (the network may be open, or a credentialed peer may lie), each counted by reason:
+
+- a message outside the run (:class:`RunScope`), for a step already closed, or further than ``WINDOW``
+  steps ahead of the newest truth is dropped (nothing is allocated per a step number it names);
+- a repeated copy is a duplicate and dropped; the first copy is the one recorded — a *different* copy
+  for the same (node, step) or step is kept (up to a few) so that the step can be judged honestly;
+- a truth must follow from the previous one through the vehicle model (x_k = f(x_{k−1}, u_{k−1},
+  w_{k−1}, Vx_{k−1}), x_0 of the scenario) with the scenario's faults, speed, sensor inputs C̄ x̄
+  (``r``) and assumption flags (``fault_ok`` included);
+- a node's state must match the truth of its step where an honest node's must: its γ and its
+  innovation y̌ = ỹ − C̄ x̂ with the true measurement ỹ; a step-0 ``init-prior`` state the profile's
+  prior ellipsoid (an ``init`` state, the prior updated by ỹ₀, is checked by γ and innovation only);
+- when more than one copy passes, the collector cannot tell which one the sender sent: the step (a
+  truth) or node-step (a state) is *contested* and judged on none (``contested`` in the record);
+- End counts only when it names the scheduled last step and that step's truth is here.
+
+A miss the verdict counts therefore comes from a state the node itself computed from its true input.
 """
 
 from __future__ import annotations
 
 import statistics
+from array import array
 from collections import Counter
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
-from netsetest.config.schema import Scenario
-from netsetest.messages import End, Message, NodeState, Truth
+from netsetest.config.schema import NodeConfig, Scenario
+from netsetest.estimator.sector import Sector, sector_ok
+from netsetest.messages import End, Message, NodeState, RunScope, Truth
+from netsetest.records.record import RecordSink
+from netsetest.roles.vehicle import fault_bound_holds
+
+WINDOW = 50  # steps a step may stay open behind the newest truth (bounds memory against a stalled node)
+CLOSE_LAG = 2  # a step whose alive nodes reported closes this many truths later (late and rejoining states)
+MAX_COPIES = 4  # differing copies of one step's truth, or one node-step's state, kept until the step closes
+INNOV_RTOL = 1e-12  # the node computes ỹ − C̄ x̂ with the same numbers: rounding only across machines
+CHAIN_RTOL = 1e-12  # x_k recomputed from x_{k−1}: same code, same inputs — rounding only across machines
+
+
+def _same_set(a: NodeState, b: NodeState) -> bool:
+    """Copies that publish the same ellipsoid are one for judging (bookkeeping fields may differ)."""
+    return a.xhat == b.xhat and a.P == b.P and a.rho == b.rho and a.innov == b.innov and a.gamma == b.gamma
+
+
+def _published_sector(st: NodeState) -> Sector | None:
+    return Sector(st.sector[0], st.sector[1], st.sector_basis) if st.sector is not None else None
+
+
+def _in_prior(n: NodeConfig, tr: Truth) -> bool:
+    """Assumption 1: the true x̄_0 lies in node n's prior ellipsoid."""
+    e = np.r_[tr.x, tr.faults[str(n.id)]] - n.x0_hat
+    return float(e @ np.linalg.solve(n.P0, e)) <= n.rho
+
+
+@dataclass
+class NodeTotals:
+    """Running per-node figures of the summary (nothing per step survives a closed step but ``solve``)."""
+
+    E_max: float | None = None
+    violations: int = 0
+    broken_misses: int = 0
+    assumption_violations: int = 0
+    sector_breaks: int = 0
+    sector_failures: int = 0  # derived sectors that missed C̄ x̄ inside an intact cone
+    sectors_assumed: int = 0
+    first_sector_break: int | None = None
+    width_sum: float = 0.0
+    reported: int = 0
+    rejected: int = 0  # states that did not match the truth (forged, or from a forged input)
+    contested: int = 0  # node-steps with more than one matching copy: judged on none
+    evaluated: int = 0
+    contained: int = 0
+    covered: int = 0
+    missing_steps: int = 0
+    missing_from: int | None = None
+    rejoined_at: int | None = None  # first step heard from again after ``missing_from``
+    last_heard: int | None = None  # newest step with a state from this node (judged or not)
+    fallbacks: int = 0
+    late: int = 0
+    neighbour_missing: int = 0
+    dropped: int = 0
+    drops: dict[str, int] = field(default_factory=dict)
+    solve: array = field(default_factory=lambda: array("d"))  # 8 bytes per step: the median needs them
 
 
 class Collector:
-    def __init__(self, scenario: Scenario, bus: Bus, run_id: str) -> None:
+    def __init__(self, scenario: Scenario, bus: Bus, run_id: str, sink: RecordSink | None = None) -> None:
         self.sc, self.bus, self.run = scenario, bus, run_id
-        self.truth: dict[int, Truth] = {}
-        self.states: dict[int, dict[int, NodeState]] = {i: {} for i in scenario.ids}
-        self.evaluated: dict[tuple[int, int], tuple[float, bool]] = {}
-        self.ended: End | None = None
+        self.sink = sink
+        self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
+        self.truth: dict[int, list[Truth]] = {}  # open steps: the copies received, first first
+        self.states: dict[int, dict[int, list[NodeState]]] = {}  # open steps: node → copies, first first
+        self._judged: dict[int, NodeState] = {}  # the step being closed: node → the state judged
+        self.evaluated: dict[tuple[int, int], tuple[float, bool]] = {}  # open step being closed
+        self.closed = -1  # last closed step
+        self.head = -1  # newest step with a truth copy
+        self.prev_truth: Truth | None = None  # the judged truth of the last closed step
+        self.prev_cone: dict[int, bool] = {}  # nodes with a judged state at the last closed step
+        self.totals = {i: NodeTotals() for i in scenario.ids}
+        self.losses: Counter[str] = Counter()
+        self.vehicle_drops: dict[str, int] = {}
+        self.not_covered: Counter[str] = Counter()  # evaluated node-steps outside the guarantee, by cause
+        self.drops: Counter[str] = Counter()
+        self._end: End | None = None
+        self._step_truth: Truth | None = None  # the judged truth of the step being closed
         bus.subscribe(keys.truth(run_id), self.on_message)
         bus.subscribe(keys.node_state(run_id, "*"), self.on_message)
         bus.subscribe(keys.end(run_id), self.on_message)
 
+    # ------------------------------------------------------------------ receiving
+
     def on_message(self, key: str, msg: Message) -> None:
-        if isinstance(msg, Truth):
-            self.truth[msg.step] = msg
-            for i in self.sc.ids:
-                self._evaluate(i, msg.step)
+        reason = self.scope.reject(msg)
+        if reason is not None:
+            self.drops[reason] += 1
+        elif isinstance(msg, Truth):
+            self._on_truth(msg)
         elif isinstance(msg, NodeState):
-            if msg.node not in self.states or key != keys.node_state(self.run, msg.node):
-                self.bus.drop("unknown-node")
-                return
-            self.states[msg.node][msg.step] = msg
-            self._evaluate(msg.node, msg.step)
+            self._on_state(key, msg)
         elif isinstance(msg, End):
-            self.ended = msg
+            self._on_end(key, msg)
+        else:
+            self.drops["unexpected-type"] += 1
+        self._close_ready()
+
+    def _on_truth(self, msg: Truth) -> None:
+        k = msg.step
+        if k <= self.closed:
+            self.drops["truth-after-close"] += 1
+            return
+        if k > max(self.head, self.closed) + WINDOW:
+            self.drops["truth-ahead"] += 1  # never allocate per a step number we were told
+            return
+        why = self._inconsistent(msg)  # checked again at close, when the previous truth is surely known
+        if why:
+            self.drops[why] += 1
+            return
+        copies = self.truth.setdefault(k, [])
+        if msg in copies:
+            self.drops["duplicate-truth"] += 1
+        elif len(copies) >= MAX_COPIES:
+            self.drops["truth-copies"] += 1
+        else:
+            copies.append(msg)
+            self.head = max(self.head, k)
+
+    def _on_state(self, key: str, msg: NodeState) -> None:
+        if key != keys.node_state(self.run, msg.node):
+            self.drops["state-on-foreign-key"] += 1
+            return
+        k = msg.step
+        if k <= self.closed:
+            self.drops["state-after-close"] += 1
+            return
+        if k > max(self.head, self.closed) + WINDOW:
+            self.drops["state-ahead"] += 1
+            return
+        copies = self.states.setdefault(k, {}).setdefault(msg.node, [])
+        if any(_same_set(msg, c) for c in copies):
+            self.drops["duplicate-state"] += 1  # the same ellipsoid: the first copy is the one recorded
+        elif len(copies) >= MAX_COPIES:
+            self.drops["state-copies"] += 1
+        else:
+            copies.append(msg)
+
+    def _on_end(self, key: str, msg: End) -> None:
+        if key != keys.end(self.run) or msg.steps != self.sc.steps:
+            self.drops["end-not-scheduled"] += 1
+        elif self.sc.steps not in self.truth and self.closed < self.sc.steps:
+            self.drops["end-early"] += 1  # kept: it counts once the last step's truth is here
+            self._end = msg
+        else:
+            self._end = msg
+
+    @property
+    def ended(self) -> End | None:
+        """The vehicle's End, once the scheduled last step's truth has arrived too."""
+        if self._end is None or (self.sc.steps not in self.truth and self.closed < self.sc.steps):
+            return None
+        return self._end
+
+    @property
+    def started(self) -> bool:
+        return self.head >= 0 or self.closed >= 0
+
+    @property
+    def progress(self) -> int:
+        """Last step for which every alive node's ellipsoid has arrived (with its truth)."""
+        k = self.closed
+        while k + 1 in self.truth and self._reported(k + 1, alive_only=True):
+            k += 1
+        return k
+
+    def _reported(self, k: int, alive_only: bool) -> bool:
+        copies = self.truth.get(k)
+        want = set(copies[0].alive) if alive_only and copies and k > 0 else set(self.sc.ids)
+        if alive_only and self.truth.get(k + 1):
+            # the next truth's alive list is who the vehicle heard at k: a node it gave up on (killed, to
+            # rejoin later) is not waited for, else progress stalls until WINDOW and a rejoin waits on it
+            want &= set(self.truth[k + 1][0].alive)
+        return want <= set(self.states.get(k, {}))
+
+    # ------------------------------------------------------------------ closing steps
+
+    def _close_ready(self) -> None:
+        while self.closed < self.sc.steps:
+            k = self.closed + 1
+            here = k in self.truth
+            if not (
+                self.head >= k + WINDOW
+                or here and self._reported(k, alive_only=False)
+                or here and self.head >= k + CLOSE_LAG and self._reported(k, alive_only=True)
+            ):
+                return
+            self._close(k)
+
+    def _judged_truth(self, k: int) -> Truth | None:
+        """The one copy of step k's truth consistent with the scenario and the previous truth, or None."""
+        good = []
+        for t in self.truth.get(k, []):
+            why = self._inconsistent(t)
+            if why:
+                self.drops[why] += 1
+            else:
+                good.append(t)
+        if len(good) > 1:
+            self.drops["truth-conflict"] += len(good)  # cannot tell the vehicle's: judge the step on none
+            return None
+        return good[0] if good else None
+
+    def _inconsistent(self, t: Truth) -> str | None:
+        sc, k = self.sc, t.step
+        x = np.asarray(t.x)
+        prev = self.prev_truth if self.prev_truth is not None and self.prev_truth.step == k - 1 else None
+        if k == 0:
+            expect = sc.x0
+        elif prev is not None:
+            expect = sc.model.step(np.asarray(prev.x), prev.u, prev.w, prev.vx)
+        else:
+            expect = None  # the previous truth is unknown: x cannot be checked, the rest can
+        if expect is not None and not np.allclose(x, expect, rtol=CHAIN_RTOL, atol=1e-300):
+            return "truth-not-from-model"
+        if not np.isclose(t.vx, sc.vx(k), rtol=CHAIN_RTOL, atol=0.0):
+            return "truth-speed"
+        for n in sc.nodes:
+            s = str(n.id)
+            f = n.fault(k)
+            if t.faults[s] != f:
+                return "truth-fault"
+            if t.sector_ok[s] != n.sensor.sector_holds(np.r_[x, f]) or t.fault_ok.get(s) != fault_bound_holds(n, k):
+                return "truth-flags"
+            r = t.r.get(s)
+            if r is None or not np.isclose(r, float(n.sensor.Cbar @ np.r_[x, f]), rtol=CHAIN_RTOL, atol=1e-300):
+                return "truth-sensor-input"
+            if t.noise_ok[s] != bool(t.noise[s] ** 2 <= n.sensor.R * (1 + 1e-12)):
+                return "truth-flags"
+        if t.dist_ok != bool(t.w**2 <= sc.W * (1 + 1e-12)):
+            return "truth-flags"
+        return None
+
+    def _judge_state(self, i: int, k: int, tr: Truth | None) -> tuple[NodeState | None, bool]:
+        """(the copy to record, whether it is the only one that can be node i's own); None: none can."""
+        copies = self.states.get(k, {}).get(i, [])
+        if tr is None:
+            return (copies[0], len(copies) == 1) if copies else (None, False)
+        good = []
+        for st in copies:
+            why = self._state_mismatch(i, st, tr)
+            if why:
+                self.drops[why] += 1
+            else:
+                good.append(st)
+        if len(good) > 1:
+            self.drops["state-conflict"] += len(good)
+        return (good[0], len(good) == 1) if good else (None, False)
+
+    def _state_mismatch(self, i: int, st: NodeState, tr: Truth) -> str | None:
+        n, s = self.sc.node(i), str(i)
+        if st.gamma != tr.gamma[s]:
+            return "state-not-from-input"
+        innov = float(tr.y[s] - n.sensor.Cbar @ np.asarray(st.xhat))
+        if not np.isclose(st.innov, innov, rtol=INNOV_RTOL, atol=1e-300):
+            return "state-not-from-input"
+        if (st.step == 0) != (st.status in ("init", "init-prior")):
+            return "state-not-prior"  # step 0 publishes the prior (updated by ỹ₀), no other step does
+        if st.status == "init-prior" and (
+            st.rho != n.rho or not np.array_equal(st.xhat, n.x0_hat) or not np.array_equal(st.P_matrix(), n.P0)
+        ):
+            return "state-not-prior"
+        return None
 
     def _evaluate(self, i: int, k: int) -> None:
-        st, tr = self.states[i].get(k), self.truth.get(k)
+        st, tr = self._judged.get(i), self._step_truth
         if st is None or tr is None or (i, k) in self.evaluated:
             return
         xbar = np.r_[tr.x, tr.faults[str(i)]]
@@ -55,117 +320,234 @@ class Collector:
         E = float(e @ np.linalg.solve(st.P_matrix(), e))
         self.evaluated[(i, k)] = (E, E <= st.rho)
 
-    @property
-    def progress(self) -> int:
-        """Last step for which every alive node's ellipsoid has been checked."""
-        k = max(self.truth, default=-1)
-        while k >= 0:
-            alive = set(self.truth[k].alive) if k > 0 else set(self.sc.ids)
-            if all((i, k) in self.evaluated for i in alive):
-                return k
-            k -= 1
-        return -1
+    def _sector_premise(self, n: NodeConfig, st: NodeState | None, tr: Truth) -> bool:
+        """What the node's step sector rests on held: nothing more than the noise bound (measurement),
+        the declared fault bound (fault-bound), or the sector itself against the truth (assumed); without
+        a judged state, the profile's fixed sector."""
+        s = str(n.id)
+        if not n.sensor.saturated:
+            return True
+        if st is None:
+            return tr.sector_ok[s]
+        if st.sector_basis == "assumed":
+            return sector_ok(n.sensor, _published_sector(st), tr.r[s])
+        if st.sector_basis == "fault-bound":
+            return tr.fault_ok[s]
+        return True
 
-    # ------------------------------------------------------------------ attribution and summary
-
-    def _cones(self) -> dict[tuple[int, int], bool]:
-        ok: dict[tuple[int, int], bool] = {}
-        for k in sorted(self.truth):
-            tr = self.truth[k]
-            for n in self.sc.nodes:
-                i, s = n.id, str(n.id)
-                own = tr.sector_ok[s] and tr.noise_ok[s]
-                if k == 0:
-                    ev = self.evaluated.get((i, 0))
-                    own = own and (ev is None or ev[1])  # Assumption 1: x̄_0 in the initial ellipsoid
-                else:
-                    prev = self.truth.get(k - 1)
-                    own = own and prev is not None and prev.dist_ok
-                    deps = set(n.in_weights) | {i}
-                    own = own and all(ok.get((j, k - 1), True) for j in deps)
-                ok[(i, k)] = bool(own)
+    def _cones(self, k: int) -> dict[int, bool]:
+        """Whether every assumption in the dependency cone of (i, k) held, per node (False: truth unknown)."""
+        tr, prev = self._step_truth, self.prev_truth
+        ok: dict[int, bool] = {}
+        for n in self.sc.nodes:
+            i, s = n.id, str(n.id)
+            if tr is None:
+                ok[i] = False
+                continue
+            st = self._judged.get(i)
+            own = tr.noise_ok[s] and self._sector_premise(n, st, tr)
+            if k == 0:
+                own = own and _in_prior(n, tr)  # Assumption 1: x̄_0 in the prior ellipsoid
+            else:
+                own = own and prev is not None and prev.step == k - 1 and prev.dist_ok
+                # the step relied on the judged states of k−1 it used (own and neighbours'), nothing else
+                deps = (set(st.used) if st is not None else set(n.in_weights) - {i}) | {i}
+                own = own and all(self.prev_cone.get(j, False) for j in deps)
+            ok[i] = bool(own)
         return ok
 
-    def finish(self, meta: dict, deadline_misses: dict[int, int] | None = None) -> tuple[dict, dict]:
-        """Return (summary, record document parts) once the run is over."""
-        cones = self._cones()
-        last = max(self.truth, default=-1)
-        node_rows, record_nodes = [], {}
-        losses: Counter[str] = Counter()
-        for k, tr in self.truth.items():
+    def _not_covered_cause(self, i: int, k: int) -> str:
+        tr, prev, s = self._step_truth, self.prev_truth, str(i)
+        if tr is None:
+            return "truth unknown"
+        if not self._sector_premise(self.sc.node(i), self._judged.get(i), tr):
+            return "sector"
+        if not tr.noise_ok[s]:
+            return "noise"
+        if k == 0:
+            return "initial set"
+        if prev is None or prev.step != k - 1:
+            return "truth unknown"
+        if not prev.dist_ok:
+            return "disturbance"
+        return "inherited"
+
+    def _close(self, k: int) -> None:
+        """Judge step k, stream it to the sink, add it to the totals and forget it."""
+        self._step_truth = tr = self._judged_truth(k)
+        self._judged, contested = {}, set()
+        for i in self.sc.ids:
+            st, sole = self._judge_state(i, k, tr)
+            if st is not None:
+                self._judged[i] = st
+                if not sole:
+                    contested.add(i)
+                if tr is not None and sole:
+                    self._evaluate(i, k)
+        cone = self._cones(k)
+        for i in self.sc.ids:
+            t = self.totals[i]
+            st = self._judged.get(i)
+            if tr is not None and not tr.sector_ok[str(i)]:
+                t.sector_breaks += 1
+                if t.first_sector_break is None:
+                    t.first_sector_break = k
+            if not cone[i]:
+                t.assumption_violations += 1
+            if self.states.get(k, {}).get(i):
+                t.last_heard = k
+                if t.missing_from is not None and t.rejoined_at is None:
+                    t.rejoined_at = k
+            if st is None:
+                if self.states.get(k, {}).get(i):
+                    t.rejected += 1  # it reported, but nothing it sent can be its own
+                else:
+                    t.missing_steps += 1
+                    if t.missing_from is None:
+                        t.missing_from = k
+                continue
+            t.contested += i in contested
+            t.sectors_assumed += st.sector_basis == "assumed"
+            t.sector_failures += self._sector_failed(i, st, tr, cone[i] and i not in contested)
+            if self.sink is not None:
+                self.sink.state(i, self._state_entry(i, k, st, cone[i], i in contested))
+            self._add(t, i, k, st, cone[i])
+        if tr is not None:
             for j, i in tr.lost:
-                losses[f"{j}->{i}"] += 1
-        for n in self.sc.nodes:
-            i = n.id
-            entries, E_all, misses, broken_misses, solve, fallbacks, widths = [], [], 0, 0, [], 0, []
-            late = missing_msgs = dropped = 0
-            for k in sorted(self.states[i]):
-                st = self.states[i][k]
-                ev = self.evaluated.get((i, k))
-                cone = cones.get((i, k), True)
-                E, contained = (ev if ev is not None else (None, True))
-                if E is not None:
-                    E_all.append(E)
-                    if not contained:
-                        if cone:
-                            misses += 1
-                        else:
-                            broken_misses += 1
-                if st.status in ("ok", "fallback") and k > 0:
-                    solve.append(st.solve_ms)
-                fallbacks += st.status == "fallback"
-                late += st.late
-                missing_msgs += len(st.missing)
-                dropped = max(dropped, st.dropped)
-                P = st.P_matrix()
-                widths.append(2.0 * np.sqrt(st.rho * P[2, 2]))
-                entries.append(
-                    {
-                        "step": k, "xhat": list(st.xhat), "P": list(st.P), "rho": st.rho, "status": st.status,
-                        "rho_cert": st.rho_cert, "solve_ms": st.solve_ms, "used": st.used, "missing": st.missing,
-                        "late": st.late, "E": E, "contained": bool(contained), "assumptions_ok": bool(cone),
-                    }
-                )  # fmt: skip
-            reported = sorted(self.states[i])
-            gone = [k for k in range(last + 1) if k not in self.states[i]]
-            node_rows.append(
-                {
-                    "id": i,
-                    "max_E": max(E_all) if E_all else None,
-                    "violations": misses,
-                    "misses_assumption_broken": broken_misses,
-                    "assumption_violations": sum(1 for k in range(last + 1) if not cones.get((i, k), True)),
-                    "sector_breaks": sum(1 for t in self.truth.values() if not t.sector_ok[str(i)]),
-                    "first_sector_break": min((k for k, t in self.truth.items() if not t.sector_ok[str(i)]), default=None),
-                    "fault_bound_mean_width": float(np.mean(widths)) if widths else None,
-                    "solve_ms_median": statistics.median(solve) if solve else None,
-                    "fallbacks": fallbacks,
-                    "steps_reported": len(reported),
-                    "missing_steps": len(gone),
-                    "missing_from": gone[0] if gone else None,
-                    "neighbour_messages_missing": missing_msgs,
-                    "dropped_messages": dropped,
-                    "deadline_misses": (deadline_misses or {}).get(i, late),
-                }
-            )
-            record_nodes[str(i)] = entries
-        summary = {
-            **{k: meta[k] for k in ("mode", "variant", "case", "signals", "steps", "seed", "clock") if k in meta},
-            "violations_total": sum(r["violations"] for r in node_rows),
-            "misses_assumption_broken_total": sum(r["misses_assumption_broken"] for r in node_rows),
-            "steps_completed": last,
-            "nodes_missing": [r["id"] for r in node_rows if r["missing_steps"]],
-            "losses": dict(sorted(losses.items())),
-            "losses_total": sum(losses.values()),
-            "dropped_messages": dict(self.bus.dropped),  # by the collector; per node in nodes[*]
-            "nodes": node_rows,
-        }
-        truth = [self._truth_entry(self.truth[k]) for k in sorted(self.truth)]
-        return summary, {"truth": truth, "nodes": record_nodes}
+                self.losses[f"{j}->{i}"] += 1
+            self.vehicle_drops = dict(tr.drops)
+            if self.sink is not None:
+                self.sink.truth(self._truth_entry(tr))
+        self.states.pop(k, None)
+        self.truth.pop(k, None)
+        self.evaluated.clear()
+        self.prev_truth = tr
+        self.prev_cone = {i: cone[i] for i in self._judged if i not in contested}
+        self.closed = k
+
+    def _sector_failed(self, i: int, st: NodeState, tr: Truth | None, cone: bool) -> bool:
+        """A derived sector (measurement or fault-bound basis) missing the truth's C̄ x̄ although its
+        premises held: an estimator bug."""
+        n = self.sc.node(i)
+        if tr is None or not cone or not n.sensor.saturated or st.sector_basis in ("none", "assumed"):
+            return False
+        return not sector_ok(n.sensor, _published_sector(st), tr.r[str(i)])
+
+    def _add(self, t: NodeTotals, i: int, k: int, st: NodeState, cone: bool) -> None:
+        t.reported += 1
+        ev = self.evaluated.get((i, k))
+        if ev is not None:
+            E, contained = ev
+            t.evaluated += 1
+            t.E_max = E if t.E_max is None else max(t.E_max, E)
+            t.contained += contained
+            if cone:
+                t.covered += 1
+            else:
+                self.not_covered[self._not_covered_cause(i, k)] += 1
+            if not contained:
+                if cone:
+                    t.violations += 1
+                else:
+                    t.broken_misses += 1
+        if st.status in ("ok", "fallback") and k > 0:
+            t.solve.append(st.solve_ms)
+        t.fallbacks += st.status == "fallback"
+        t.late += st.late
+        t.neighbour_missing += len(st.missing)
+        t.dropped = max(t.dropped, st.dropped)
+        t.drops = dict(st.drops)
+        t.width_sum += 2.0 * np.sqrt(st.rho * st.P_matrix()[2, 2])
+
+    def _state_entry(self, i: int, k: int, st: NodeState, cone: bool, contested: bool) -> dict:
+        ev = self.evaluated.get((i, k))
+        E, contained = ev if ev is not None else (None, True)
+        return {
+            "step": k, "xhat": list(st.xhat), "P": list(st.P), "rho": st.rho, "status": st.status,
+            "rho_cert": st.rho_cert, "solve_ms": st.solve_ms, "used": st.used, "missing": st.missing,
+            "late": st.late, "E": E, "contained": bool(contained), "assumptions_ok": bool(cone),
+            "contested": contested, "sector": list(st.sector) if st.sector is not None else None,
+            "sector_basis": st.sector_basis,
+        }  # fmt: skip
 
     @staticmethod
     def _truth_entry(t: Truth) -> dict:
         d = t.model_dump(mode="json")
-        for f in ("v", "type"):
+        for f in ("v", "type", "drops"):  # the vehicle's drop counters go to the summary
             d.pop(f, None)
         return d
+
+    # ------------------------------------------------------------------ summary
+
+    def finish(self, meta: dict, deadline_misses: dict[int, int] | None = None, drops: dict[str, dict[str, int]] | None = None) -> dict:
+        """Close every open step, then the summary (also written to the sink, which is closed).
+
+        ``drops``: further drop counters by role (the runtime's, e.g. a shared in-memory bus).
+        """
+        last = max([self.head, *self.states], default=-1)
+        for k in range(self.closed + 1, min(last, self.sc.steps) + 1):
+            self._close(k)
+        last = self.closed
+        node_rows = []
+        for n in self.sc.nodes:
+            i, t = n.id, self.totals[n.id]
+            node_rows.append(
+                {
+                    "id": i,
+                    "max_E": t.E_max,
+                    "violations": t.violations,
+                    "misses_assumption_broken": t.broken_misses,
+                    "assumption_violations": t.assumption_violations,
+                    "sector_failures": t.sector_failures,
+                    "sectors_assumed": t.sectors_assumed,
+                    "sector_breaks": t.sector_breaks,
+                    "first_sector_break": t.first_sector_break,
+                    "fault_bound_mean_width": t.width_sum / t.reported if t.reported else None,
+                    "solve_ms_median": statistics.median(t.solve) if t.solve else None,
+                    "fallbacks": t.fallbacks,
+                    "steps_reported": t.reported,
+                    "steps_rejected": t.rejected,
+                    "steps_contested": t.contested,
+                    "steps_evaluated": t.evaluated,
+                    "steps_contained": t.contained,
+                    "steps_covered": t.covered,
+                    "missing_steps": t.missing_steps,
+                    "missing_from": t.missing_from,
+                    "rejoined_at": t.rejoined_at,
+                    "neighbour_messages_missing": t.neighbour_missing,
+                    "dropped_messages": t.dropped,
+                    "drops": t.drops,
+                    "deadline_misses": (deadline_misses or {}).get(i, t.late),
+                }
+            )
+        own_drops = self.drops + (Counter() if self.bus.shared else self.bus.dropped)
+        by_role: dict[str, dict[str, int]] = {"collector": dict(sorted(own_drops.items())), "vehicle": dict(sorted(self.vehicle_drops.items()))}
+        by_role.update({f"node {r['id']}": dict(sorted(r["drops"].items())) for r in node_rows})
+        by_role.update(drops or {})
+        totals = self.totals.values()
+        summary = {
+            **{k: meta[k] for k in ("mode", "security", "variant", "objective", "case", "signals", "steps", "seed", "clock") if k in meta},
+            "violations_total": sum(r["violations"] for r in node_rows),
+            "misses_assumption_broken_total": sum(r["misses_assumption_broken"] for r in node_rows),
+            "sector_failures_total": sum(r["sector_failures"] for r in node_rows),
+            "steps_completed": last,
+            "node_steps_reported": sum(t.reported for t in totals),
+            "node_steps_rejected": sum(t.rejected for t in totals),
+            "node_steps_contested": sum(t.contested for t in totals),
+            "node_steps_evaluated": sum(t.evaluated for t in totals),
+            "node_steps_contained": sum(t.contained for t in totals),
+            "node_steps_covered": sum(t.covered for t in totals),
+            "node_steps_not_covered": dict(sorted(self.not_covered.items())),
+            # lost for good: silent at the last step; rejoined: a gap, then heard from up to the last step
+            "nodes_missing": [i for i, t in self.totals.items() if t.last_heard is None or t.last_heard < last],
+            "nodes_rejoined": [i for i, t in self.totals.items() if t.missing_from is not None and t.last_heard == last],
+            "losses": dict(sorted(self.losses.items())),
+            "losses_total": sum(self.losses.values()),
+            "dropped_messages": dict(own_drops),  # by the collector; per node in nodes[*]
+            "drops": {role: d for role, d in by_role.items() if d},
+            "nodes": node_rows,
+        }
+        if self.sink is not None:
+            self.sink.summary(summary)
+            self.sink.close()
+        return summary

@@ -4,33 +4,51 @@ At step k+1 node i needs its :class:`NodeInput` of step k+1 (ỹ_i,k+1, γ_i,k+1
 step-k states of the in-neighbours the vehicle told it to expect.  A neighbour message that is
 scheduled lost, or has not arrived when the runtime gives up waiting, is left out of the step and its
 η slots are zeroed (the guarantee holds with the neighbours that did arrive).  Node i never sees the
-truth.  Every neighbour message is checked in context (a real in-neighbour on its own key, a usable
-step) and dropped and counted otherwise; decode() has already checked types, sizes and the shape.
+truth.  decode() has already checked types, sizes and the shape; every message is then checked in
+context and dropped and counted by reason otherwise, never repaired:
+
+- anything naming a step after the run or a node the topology does not have (:class:`RunScope`);
+- an input not for us, not ahead of our step, further ahead than ``MAX_AHEAD``, a second copy of a
+  step (the first counts), or with values the scenario rules out (speed, steering, γ range, unknown
+  neighbours, no u/Vx after step 0);
+- a neighbour state not from a real in-neighbour on its own key, stale, too far ahead, a second copy,
+  or one that cannot be honest (:mod:`netsetest.roles.plausibility`: an innovation its own ellipsoid and
+  noise bound cannot produce, or a (β, r) set disjoint from our own certified one of that step);
+- an End not naming the scheduled last step; one that arrives before we published that step is
+  counted (``end-early``) and takes effect only once we have.
+
+Buffers are bounded: at most ``MAX_AHEAD`` steps of inputs and of neighbour states, one per sender.
 """
 
 from __future__ import annotations
 
 import time
+from collections import Counter
 
 import numpy as np
 
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import Scenario
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE
 from netsetest.estimator.rejoin import rejoin_ellipsoid
-from netsetest.estimator.sdp import LocalEstimator, NeighbourState, Variant
-from netsetest.messages import End, Message, NodeInput, NodeState
+from netsetest.estimator.sdp import Ellipsoid, LocalEstimator, NeighbourState, Objective, StepInput, StepResult, Variant
+from netsetest.estimator.sector import FaultBound, Sector, derive_sector, measurement_interval
+from netsetest.messages import End, Message, NodeInput, NodeState, RunScope
 from netsetest.models.sensor import NA
+from netsetest.roles.plausibility import innovation_possible, states_disjoint
 
 
 MAX_AHEAD = 50  # steps ahead of our own: more is a corrupt or hostile message (bounds the buffers)
+GAMMA_RTOL = 1e-12  # γ = lo + (hi − lo)·rand may round a hair outside [lo, hi]
 LATE_START_EVIDENCE = 3  # inputs of later steps and none of step 0: the run started without us, rejoin
 
 
 class Node:
     def __init__(
-        self, scenario: Scenario, node_id: int, bus: Bus, run_id: str, variant: Variant = "scheduled", rejoin: bool = False
-    ) -> None:
+        self, scenario: Scenario, node_id: int, bus: Bus, run_id: str, variant: Variant = "scheduled", rejoin: bool = False,
+        objective: Objective = DEFAULT_OBJECTIVE,
+    ) -> None:  # fmt: skip
         self.sc, self.bus, self.run = scenario, bus, run_id
         self.cfg = scenario.node(node_id)
         self.id = node_id
@@ -42,6 +60,8 @@ class Node:
             scenario.model,
             scenario.W,
             variant,
+            fault_bound=FaultBound(self.cfg.fault_rate, self.cfg.fault_size),
+            objective=objective,
         )
         self.others = [j for j in self.cfg.in_weights if j != node_id]
         # estimator state, plain arrays: centre, shape, radius, and our own last published message
@@ -52,9 +72,13 @@ class Node:
         self.own: NeighbourState | None = None
         self.inputs: dict[int, NodeInput] = {}
         self.inbox: dict[int, dict[int, NeighbourState]] = {}  # step → j → state
+        self.screened: set[tuple[int, int]] = set()  # (step, j) compared with our own set of that step
         self.waiting_since: float | None = None
         self.give_up = False  # set by the runtime when the neighbour deadline passed
         self.ended = False
+        self.end_seen = False  # the scheduled End arrived (perhaps before our last step)
+        self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
+        self.drops: Counter[str] = Counter()
         self.rejoin = rejoin  # started into a running network: initialise from a neighbour's ellipsoid
         self.late_start_evidence = 0
         bus.subscribe(keys.node_input(run_id, node_id), self.on_message)
@@ -65,44 +89,120 @@ class Node:
     # ------------------------------------------------------------------ receiving
 
     def on_message(self, key: str, msg: Message) -> None:
-        if isinstance(msg, End):
-            self.ended = True
+        reason = self.scope.reject(msg)
+        if reason is not None:
+            self.drop(reason)
+        elif isinstance(msg, End):
+            self._on_end(key, msg)
         elif isinstance(msg, NodeInput):
-            if msg.node != self.id or msg.step <= self.k:
-                self.bus.drop("node-input-mismatch")
-                return
-            if self.k < 0 and not self.rejoin and msg.step > 0:
-                # a fresh node starts at step 0; later steps mean a hostile message or a run we missed
-                self.bus.drop("implausible-step" if msg.step > MAX_AHEAD else "before-start")
-                self.late_start_evidence += 1
-                if self.late_start_evidence >= LATE_START_EVIDENCE and 0 not in self.inputs:
-                    self.rejoin = True  # the run started without us (a start-up race): re-enter safely
-                return
-            if self.k >= 0 and msg.step > self.k + MAX_AHEAD:
-                self.bus.drop("implausible-step")
-                return
-            self.inputs[msg.step] = msg
-            if len(self.inputs) > MAX_AHEAD:  # a rejoining node before it re-entered: keep the newest
-                del self.inputs[min(self.inputs)]
+            self._on_input(key, msg)
         elif isinstance(msg, NodeState):
             self._on_neighbour(key, msg)
         else:
-            self.bus.drop("unexpected-type")
+            self.drop("unexpected-type")
+
+    def drop(self, reason: str) -> None:
+        self.drops[reason] += 1
+
+    def drop_report(self) -> dict[str, int]:
+        """Drop counters by reason: this role's, and its bus's unless the bus is shared with other roles."""
+        return dict(self.drops + (Counter() if self.bus.shared else self.bus.dropped))
+
+    def _on_end(self, key: str, msg: End) -> None:
+        if key != keys.end(self.run) or msg.steps != self.sc.steps:
+            self.drop("end-not-scheduled")
+            return
+        if self.k < self.sc.steps:
+            self.drop("end-early")  # counted; it takes effect once our last step is out
+        self.end_seen = True
+        self._check_end()
+
+    def _check_end(self) -> None:
+        self.ended = self.end_seen and self.k >= self.sc.steps
+
+    def _on_input(self, key: str, msg: NodeInput) -> None:
+        if msg.node != self.id or key != keys.node_input(self.run, self.id) or msg.step <= self.k:
+            self.drop("node-input-mismatch")
+            return
+        if msg.step in self.inputs:
+            self.drop("duplicate-input")  # the first copy counts
+            return
+        why = self._implausible_input(msg)
+        if why is not None:
+            self.drop(why)
+            return
+        if self.k < 0 and not self.rejoin and msg.step > 0:
+            # a fresh node starts at step 0; later steps mean a hostile message or a run we missed
+            self.drop("implausible-step" if msg.step > MAX_AHEAD else "before-start")
+            self.late_start_evidence += 1
+            if self.late_start_evidence >= LATE_START_EVIDENCE and 0 not in self.inputs:
+                self.rejoin = True  # the run started without us (a start-up race): re-enter safely
+            return
+        if self.k >= 0 and msg.step > self.k + MAX_AHEAD:
+            self.drop("implausible-step")
+            return
+        self.inputs[msg.step] = msg
+        if len(self.inputs) > MAX_AHEAD:  # a rejoining node before it re-entered: keep the newest
+            del self.inputs[min(self.inputs)]
+
+    def _implausible_input(self, msg: NodeInput) -> str | None:
+        """Why the scenario rules this input out (the vehicle's values are known ranges), or None."""
+        sc = self.sc
+        if not set(msg.expect_from) | set(msg.lost_from) <= set(self.others):
+            return "input-not-neighbours"
+        if msg.step > 0:
+            if msg.u_prev is None or msg.vx_prev is None:
+                return "input-incomplete"
+            if not sc.steer_low <= msg.u_prev <= sc.steer_high:
+                return "input-steering"
+            if msg.vx_prev != sc.vx(msg.step - 1):  # the speed profile is part of the scenario
+                return "input-speed"
+        g = self.cfg.gamma_range if sc.case == "saim" else (1.0, 1.0)
+        if g is not None and not g[0] * (1 - GAMMA_RTOL) <= msg.gamma <= g[1] * (1 + GAMMA_RTOL):
+            return "input-gamma"
+        return None
 
     def _on_neighbour(self, key: str, msg: NodeState) -> None:
         if msg.node not in self.others or key != keys.node_state(self.run, msg.node):
-            self.bus.drop("not-a-neighbour")
+            self.drop("not-a-neighbour")
             return
         if msg.step < self.k:  # too late to be used
-            self.bus.drop("stale")
+            self.drop("stale")
             return
-        if self.k >= 0 and msg.step > self.k + MAX_AHEAD:
-            self.bus.drop("implausible-step")
+        if self.k >= 0 and msg.step > self.k + MAX_AHEAD:  # not started: any step (kept: the newest few)
+            self.drop("implausible-step")
+            return
+        have = self.inbox.get(msg.step, {})
+        if msg.node in have:
+            self.drop("duplicate-state")  # the first copy counts
+            return
+        sensor = self.sc.node(msg.node).sensor
+        if (msg.sector is not None) != sensor.saturated:
+            self.drop("sector-mismatch")  # a saturating sensor publishes its sector, no other one does
             return
         P = msg.P_matrix()  # symmetric positive definite: checked by decode()
-        self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(
-            np.asarray(msg.xhat), 0.5 * (P + P.T), msg.rho, msg.gamma, msg.innov
-        )
+        P = 0.5 * (P + P.T)
+        sector = Sector(msg.sector[0], msg.sector[1], msg.sector_basis) if msg.sector is not None else None
+        if not innovation_possible(sensor, np.asarray(msg.xhat), P, msg.rho, msg.gamma, sector, msg.innov):
+            self.drop("neighbour-innovation")
+            return
+        if self.k < 0 and len(self.inbox) >= MAX_AHEAD and msg.step not in self.inbox:
+            del self.inbox[min(self.inbox)]  # not started (rejoin): keep the newest steps only
+        self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(np.asarray(msg.xhat), P, msg.rho, msg.gamma, msg.innov, sector)
+        self._screen()
+
+    def _screen(self) -> None:
+        """Drop the neighbour states of our current step whose (β, r) set is disjoint from our own."""
+        if self.own is None or self.k < 0:
+            return
+        have = self.inbox.get(self.k, {})
+        for j in [j for j in have if (self.k, j) not in self.screened]:
+            nb = have[j]
+            self.screened.add((self.k, j))
+            if states_disjoint(self.own.xhat, self.own.P, self.own.rho, nb.xhat, nb.P, nb.rho):
+                del have[j]
+                self.drop("neighbour-disjoint")
+        self.screened = {(s, j) for s, j in self.screened if s >= self.k}
 
     # ------------------------------------------------------------------ stepping
 
@@ -124,27 +224,37 @@ class Node:
     def try_step(self, now: float | None = None) -> bool:
         """Compute and publish the next step if its inputs are here (or the runtime gave up waiting)."""
         inp = self.next_input()
-        if inp is None or self.ended and self.k >= self.sc.steps:
+        if inp is None or self.k >= self.sc.steps:
             return False
         if self.k < 0:
-            return self._start(inp)
-        if self.missing() and not self.give_up:
+            stepped = self._start(inp)
+        elif self.missing() and not self.give_up:
             if self.waiting_since is None:
                 self.waiting_since = now if now is not None else time.monotonic()
             return False
-        self._update(inp)
-        return True
+        else:
+            self._update(inp)
+            stepped = True
+        if stepped:
+            self._screen()  # neighbour states of our new step that arrived before it
+            self._check_end()
+        return stepped
 
     def _start(self, inp: NodeInput) -> bool:
-        """Step 0: publish the prior ellipsoid (Assumption 1).  Rejoin: see :mod:`netsetest.estimator.rejoin`."""
+        """Step 0: the prior ellipsoid (Assumption 1) updated by ỹ₀, certified like every step (the prior
+        itself if that fails).  Rejoin: see :mod:`netsetest.estimator.rejoin`."""
         if inp.step == 0:
-            self._publish(inp, "init", rho_cert=None, solve_ms=0.0, used=[], missing=[])
+            res = self.estimator.first(Ellipsoid(self.xhat, self.P, self.rho), inp.y, inp.gamma)
+            status = "init" if res.status == "ok" else "init-prior"
+            self._publish(inp, status, res, used=[], missing=[])
             return True
         have = self.inbox.get(inp.step, {})
         if not have:
             return False  # wait for a neighbour's ellipsoid of this step
-        self.xhat, self.P = rejoin_ellipsoid(self.cfg.sensor, inp.y, inp.gamma, self.rho, list(have.values()))
-        self._publish(inp, "rejoin", rho_cert=None, solve_ms=0.0, used=sorted(have), missing=[])
+        xhat, P = rejoin_ellipsoid(self.cfg.sensor, inp.y, inp.gamma, self.rho, list(have.values()))
+        sector = derive_sector(self.cfg.sensor, FaultBound(), measurement_interval(self.cfg.sensor, inp.y, inp.gamma), None)
+        res = StepResult(xhat, P, "ok", float("nan"), 0.0, "rejoin", sector=sector)
+        self._publish(inp, "rejoin", res, used=sorted(have), missing=[])
         return True
 
     def _update(self, inp: NodeInput) -> None:
@@ -153,21 +263,27 @@ class Node:
         if self.id in self.cfg.in_weights:
             neigh[self.id] = self.own  # type: ignore[assignment]
         alpha = self.sc.model.weights(inp.vx_prev)  # type: ignore[arg-type]
-        res = self.estimator.step(self.xhat, self.P, self.rho, alpha, inp.u_prev, inp.y, inp.gamma, neigh)  # type: ignore[arg-type]
-        self.xhat, self.P = res.xhat, res.P
-        self._publish(
-            inp, res.status, rho_cert=res.rho_cert if np.isfinite(res.rho_cert) else None,
-            solve_ms=res.solve_ms, used=sorted(j for j in neigh if j != self.id), missing=self.missing(),
-        )  # fmt: skip
+        step_in = StepInput(alpha, inp.u_prev, inp.y, inp.gamma, neigh)  # type: ignore[arg-type]
+        res = self.estimator.step(Ellipsoid(self.xhat, self.P, self.rho), step_in)
+        self._publish(inp, res.status, res, used=sorted(j for j in neigh if j != self.id), missing=self.missing())
 
-    def _publish(self, inp: NodeInput, status: str, rho_cert: float | None, solve_ms: float, used: list[int], missing: list[int]) -> None:
-        innov = float(inp.y - self.cfg.sensor.Cbar @ self.xhat)
-        self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, innov)
+    def _publish(self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int]) -> None:
+        """Keep ``res`` as the node's own set (its next step starts from it) and publish ``res.public``."""
+        self.xhat, self.P = res.xhat, res.P
+        sector = res.sector
+        cbar = self.cfg.sensor.Cbar
+        self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, float(inp.y - cbar @ self.xhat), sector)
+        pub = res.public
+        innov = float(inp.y - cbar @ pub.xhat)
+        rho_cert = pub.rho_cert if np.isfinite(pub.rho_cert) else None
+        drops = self.drop_report()
         msg = NodeState(
-            step=inp.step, node=self.id, xhat=[float(a) for a in self.xhat], P=[float(a) for a in self.P.reshape(NA * NA)],
+            step=inp.step, node=self.id, xhat=[float(a) for a in pub.xhat], P=[float(a) for a in pub.P.reshape(NA * NA)],
             rho=self.rho, gamma=inp.gamma, innov=innov, status=status, rho_cert=rho_cert,  # type: ignore[arg-type]
-            solve_ms=solve_ms, used=used, missing=missing,
-            late=inp.deadline is not None and time.time() > inp.deadline, dropped=sum(self.bus.dropped.values()),
+            solve_ms=res.solve_ms, used=used, missing=missing,
+            late=inp.deadline is not None and time.time() > inp.deadline, dropped=sum(drops.values()), drops=drops,
+            sector=(sector.h1, sector.h) if sector is not None else None,
+            sector_basis=sector.basis if sector is not None else "none",
         )  # fmt: skip
         self.k = inp.step
         self.inputs = {s: m for s, m in self.inputs.items() if s > self.k}

@@ -8,19 +8,33 @@ advances x_{k+1} = Σ α_ℓ(Vx_k)(A_ℓ x_k + B_ℓ u_k + Dw_ℓ w_k)  (8).
 Lockstep: the next step is published once every alive node has published its step-k state (the
 runtime decides what to do with nodes that stay silent).  Real time: the runtime calls
 :meth:`advance` every τs whatever the nodes did.
+
+The vehicle remembers who reported for the last ``dead_after`` steps only (constant memory), drops
+states outside the run or on a foreign key, and counts an End it did not send (someone else speaks
+on its key); its drop counters travel in every Truth.
 """
 
 from __future__ import annotations
 
 import time
+from collections import Counter
 
 import numpy as np
 
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
-from netsetest.config.schema import Scenario
-from netsetest.messages import End, Message, NodeInput, NodeState, Truth
+from netsetest.config.schema import NodeConfig, Scenario
+from netsetest.messages import End, Message, NodeInput, NodeState, RunScope, Truth
 from netsetest.models.signals import ExogenousSignals, SignalKind
+
+
+def fault_bound_holds(n: NodeConfig, k: int) -> bool:
+    """The node's declared fault bound at step k: |f_k − f_k−1| ≤ δ (k ≥ 1) and |f_k| ≤ F, where declared."""
+    f = n.fault(k)
+    tol = 1 + 1e-12
+    if n.fault_size is not None and abs(f) > n.fault_size * tol:
+        return False
+    return not (n.fault_rate is not None and k > 0 and abs(f - n.fault(k - 1)) > n.fault_rate * tol)
 
 
 class LossSchedule:
@@ -72,21 +86,41 @@ class Vehicle:
         self.x = scenario.x0.copy()
         self.k = -1  # last published step
         self.u = self.w = self.vx = 0.0
-        self.heard: dict[int, set[int]] = {}
+        self.heard: dict[int, set[int]] = {}  # the last dead_after steps (lockstep: 1) only
         self.alive = set(scenario.ids)
         self.done = False
+        self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
+        self.drops: Counter[str] = Counter()
         bus.subscribe(keys.node_state(run_id, "*"), self.on_message)
+        bus.subscribe(keys.end(run_id), self.on_message)
 
     def on_message(self, key: str, msg: Message) -> None:
         """Record who reported; a node declared dead that reports again (late, or rejoined) is alive
         from the next step on — the vehicle only waits for the nodes alive at the current step."""
+        if isinstance(msg, End):
+            if not self.done:
+                self.drops["end-not-ours"] += 1  # ours is sent once, after the last step
+            return
         if not isinstance(msg, NodeState):
+            self.drops["unexpected-type"] += 1
             return
-        if msg.node not in self.sc.ids or key != keys.node_state(self.run, msg.node):
-            self.bus.drop("state-on-foreign-key")
-            return
-        if msg.step <= self.k:
+        reason = self.scope.reject(msg)
+        if reason is not None:
+            self.drops[reason] += 1
+        elif key != keys.node_state(self.run, msg.node):
+            self.drops["state-on-foreign-key"] += 1
+        elif msg.step <= self.k and msg.step in self._window():
             self.heard.setdefault(msg.step, set()).add(msg.node)
+        elif msg.step > self.k:
+            self.drops["state-ahead"] += 1  # a step not published yet cannot have been computed
+
+    def _window(self) -> range:
+        """Steps whose reports decide who is alive at the next step."""
+        return range(max(0, self.k - self.dead_after + 1), self.k + 1) if self.realtime else range(self.k, self.k + 1)
+
+    def drop_report(self) -> dict[str, int]:
+        """Drop counters by reason: this role's, and its bus's unless the bus is shared with other roles."""
+        return dict(self.drops + (Counter() if self.bus.shared else self.bus.dropped))
 
     def waiting_for(self) -> set[int]:
         """Alive nodes whose state of the current step has not arrived."""
@@ -100,8 +134,9 @@ class Vehicle:
         if self.done:
             return
         if self.k >= 0:
-            window = range(max(0, self.k - self.dead_after + 1), self.k + 1) if self.realtime else [self.k]
+            window = self._window()
             self.alive = set().union(*(self.heard.get(s, set()) for s in window))
+            self.heard = {s: self.heard[s] for s in window[1:] if s in self.heard}  # bounded memory
             if self.k == self.sc.steps:
                 self.bus.publish(keys.end(self.run), End(steps=self.sc.steps))
                 self.done = True
@@ -117,10 +152,12 @@ class Vehicle:
         self.vx = sc.vx(k)
         lost = self.losses.lost_at(k) if k > 0 else []
         deadline = time.time() + sc.tau_s if self.realtime else None
-        y, y0, faults, sector_ok, noise_ok = {}, {}, {}, {}, {}
+        y, y0, faults, sector_ok, noise_ok, r, fault_ok = {}, {}, {}, {}, {}, {}, {}
         for idx, n in enumerate(sc.nodes):
             f = n.fault(k)
             xbar = np.r_[self.x, f]
+            r[n.id] = float(n.sensor.Cbar @ xbar)
+            fault_ok[n.id] = fault_bound_holds(n, k)
             y[n.id] = n.sensor.measure(xbar, gamma[idx], v[idx])
             y0[n.id] = n.sensor.measure(np.r_[self.x, 0.0], gamma[idx], v[idx])
             faults[n.id] = f
@@ -143,7 +180,8 @@ class Vehicle:
                 step=k, x=list(map(float, self.x)), faults=s(faults), u=self.u, w=self.w, vx=self.vx,
                 noise={str(n.id): float(v[i]) for i, n in enumerate(sc.nodes)},
                 gamma={str(n.id): float(gamma[i]) for i, n in enumerate(sc.nodes)},
-                y=s(y), y_nofault=s(y0), sector_ok=s(sector_ok), noise_ok=s(noise_ok),
+                y=s(y), y_nofault=s(y0), sector_ok=s(sector_ok), noise_ok=s(noise_ok), r=s(r), fault_ok=s(fault_ok),
                 dist_ok=bool(self.w**2 <= sc.W * (1 + 1e-12)), lost=lost, alive=sorted(self.alive),
+                drops=self.drop_report(),
             ),  # fmt: skip
         )

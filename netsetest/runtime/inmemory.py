@@ -2,29 +2,33 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from netsetest.bus.base import MemoryBus
 from netsetest.config.schema import Scenario
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.estimator.sdp import Variant
 from netsetest.models.signals import SignalKind
 from netsetest.roles.collector import Collector
 from netsetest.roles.node import Node
 from netsetest.roles.vehicle import Vehicle
-from netsetest.runtime.report import Progress
+from netsetest.runtime.report import Progress, record_sink
 
 
 @dataclass
 class RunResult:
     summary: dict
     meta: dict
-    parts: dict  # truth and node entries of the record
+    parts: dict | None  # truth and node entries of the record (None when not kept in memory)
 
 
-def run_meta(scenario: Scenario, mode: str, clock: str, signals: str, variant: str, seed: int, run_id: str) -> dict:
+def run_meta(
+    scenario: Scenario, mode: str, clock: str, signals: str, variant: str, seed: int, run_id: str, objective: str = DEFAULT_OBJECTIVE
+) -> dict:
     return {
         "topology": scenario.path, "name": scenario.name, "mode": mode, "clock": clock, "case": scenario.case,
-        "signals": signals, "variant": variant, "seed": seed, "steps": scenario.steps, "tau_s": scenario.tau_s,
+        "signals": signals, "variant": variant, "objective": objective, "seed": seed, "steps": scenario.steps, "tau_s": scenario.tau_s,
         "run_id": run_id, "node_ids": scenario.ids,
         "in_weights": {str(n.id): {str(j): a for j, a in n.in_weights.items()} for n in scenario.nodes},
         "r_max": {str(n.id): (n.sensor.r_max if n.sensor.saturated else None) for n in scenario.nodes},
@@ -40,13 +44,26 @@ def run_inmemory(
     seed: int = 0,
     progress: bool = False,
     bus: MemoryBus | None = None,
+    record: str | None = None,
+    keep: bool = True,
+    on_step: Callable[[int], None] | None = None,
+    objective: Objective = DEFAULT_OBJECTIVE,
 ) -> RunResult:
-    """Run vehicle, nodes and collector in lockstep; the same role code as the Zenoh processes."""
+    """Run vehicle, nodes and collector in lockstep; the same role code as the Zenoh processes.
+
+    ``record``: stream the record to this file as the run goes; ``keep``: also keep it in memory
+    (``RunResult.parts``; a long soak turns it off to run in constant memory); ``on_step(k)``: called
+    each time the vehicle publishes step k (the soak benchmark samples memory with it).
+    """
     run_id = "mem"
     bus = bus or MemoryBus()
+    meta = run_meta(scenario, "inmemory", "lockstep", signals, variant, seed, run_id, objective)
+    sink, memory = record_sink(record, keep)
     vehicle = Vehicle(scenario, bus, run_id, signals, seed)
-    nodes = [Node(scenario, i, bus, run_id, variant) for i in scenario.ids]
-    collector = Collector(scenario, bus, run_id)
+    nodes = [Node(scenario, i, bus, run_id, variant, objective=objective) for i in scenario.ids]
+    collector = Collector(scenario, bus, run_id, sink)
+    if sink is not None:
+        sink.meta(meta)
     bar = Progress(scenario.steps, "inmemory", enabled=progress)
     vehicle.advance()
     while not vehicle.done:
@@ -60,13 +77,17 @@ def run_inmemory(
         if vehicle.ready_to_advance():
             bar.update(vehicle.k)
             vehicle.advance()
-        elif not stepped:
-            # in one process a message that has not arrived never will: proceed without it
-            for n in nodes:
-                if n.missing():
-                    n.give_up = True
+            if on_step is not None:
+                on_step(vehicle.k)
+        elif not stepped and not bus.pending():
+            # in one process a message that has not arrived never will (lost, or dropped as hostile):
+            # nodes proceed without the missing neighbours, the vehicle without the silent nodes
+            waiting = [n for n in nodes if n.missing()]
+            for n in waiting:
+                n.give_up = True
+            if not waiting:
+                vehicle.advance()
     bus.pump()
     bar.close()
-    meta = run_meta(scenario, "inmemory", "lockstep", signals, variant, seed, run_id)
-    summary, parts = collector.finish(meta)
-    return RunResult(summary, meta, parts)
+    summary = collector.finish(meta, drops={"bus": dict(bus.dropped)} if bus.dropped else None)
+    return RunResult(summary, meta, memory.parts() if memory is not None else None)

@@ -25,13 +25,14 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import Scenario
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.estimator.sdp import Variant
 from netsetest.messages import Message, Ready
 from netsetest.models.signals import SignalKind
 from netsetest.roles.collector import Collector
 from netsetest.roles.node import Node
 from netsetest.roles.vehicle import Vehicle
-from netsetest.runtime.report import EXIT_VIOLATION, exit_code, write_outputs
+from netsetest.runtime.report import EXIT_VIOLATION, exit_code, record_sink, write_summary
 
 READY_PERIOD_S = 0.1
 IDLE_WAIT_S = 1.0  # a started node with nothing due sleeps until a message arrives (or this long)
@@ -208,10 +209,11 @@ def run_node(
     realtime: bool,
     neighbour_timeout: float,
     rejoin: bool,
+    objective: Objective = DEFAULT_OBJECTIVE,
     crash_after: int | None = None,
 ) -> int:
     """``crash_after``: SIGKILL this process right after publishing that step (``run --kill``: exactly there)."""
-    node = Node(sc, node_id, bus, run_id, variant, rejoin=rejoin)
+    node = Node(sc, node_id, bus, run_id, variant, rejoin=rejoin, objective=objective)
     role = f"node {node_id}"
     barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), node_peers(sc, node_id))
     while not node.ended:
@@ -268,7 +270,10 @@ def run_collector(
     idle_timeout: float,
     on_summary: Callable[[dict], None] | None = None,
 ) -> int:
-    collector = Collector(sc, bus, run_id)
+    sink, _ = record_sink(record)  # opened now: the record grows step by step and survives a crash
+    collector = Collector(sc, bus, run_id, sink)
+    if sink is not None:
+        sink.meta(meta)
     barrier = Barrier(bus, run_id, Ready(role="collector"), _all_roles(sc) - {("collector", None)})
     prog = _CollectorProgress(progress)
     last_msg = time.monotonic()
@@ -276,7 +281,7 @@ def run_collector(
     try:
         while True:
             now = time.monotonic()
-            if not collector.truth:
+            if not collector.started:
                 barrier.tick(now)
             if bus.pump(timeout=0.05):
                 last_msg = time.monotonic()
@@ -296,29 +301,11 @@ def run_collector(
             signal.signal(sig, signal.SIG_IGN)  # a second signal must not cut the writing short
         log("collector", f"stopped by {why}; writing what was received")
         stopped = True
-    summary, parts = collector.finish(meta)
-    account_rejoins(summary, {i: collector.states[i].keys() for i in sc.ids})
-    if "security" in meta:
-        summary["security"] = meta["security"]
-    write_outputs(summary, meta, parts, record, summary_json)
+    summary = collector.finish(meta)
+    write_summary(summary, summary_json)
     if on_summary:
         on_summary(summary)
     if stopped:
         return EXIT_STOPPED
     return exit_code(summary) if collector.ended is not None else EXIT_VIOLATION
 
-
-def account_rejoins(summary: dict, reported: dict[int, Iterable[int]]) -> None:
-    """Per node ``rejoined_at`` (first step reported after ``missing_from``); ``nodes_missing`` lists only the
-    nodes lost for good (silent at the last step), ``nodes_rejoined`` those that came back."""
-    last = summary["steps_completed"]
-    lost, back = [], []
-    for row in summary["nodes"]:
-        steps = sorted(reported[row["id"]])
-        gap = row["missing_from"]
-        row["rejoined_at"] = next((k for k in steps if gap is not None and k > gap), None)
-        if not steps or steps[-1] < last:
-            lost.append(row["id"])
-        elif gap is not None:
-            back.append(row["id"])
-    summary["nodes_missing"], summary["nodes_rejoined"] = lost, back

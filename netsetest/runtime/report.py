@@ -8,15 +8,16 @@ import time
 from pathlib import Path
 from typing import TextIO
 
-from netsetest.records.record import save_record
+from netsetest.records.record import MemorySink, RecordSink, TeeSink, open_sink
 
 
 class Progress:
     """One line per update on a terminal (\\r), a line every 10 % otherwise; always to stderr."""
 
-    def __init__(self, total: int, label: str, stream: TextIO = sys.stderr, enabled: bool = True) -> None:
+    def __init__(self, total: int, label: str, stream: TextIO | None = None, enabled: bool = True) -> None:
+        stream = stream or sys.stderr  # looked up now: sys.stderr may have been replaced since import
         self.total, self.label, self.stream, self.enabled = total, label, stream, enabled
-        self.tty = stream.isatty()
+        self.tty = enabled and stream.isatty()
         self.last_pct = -1
         self.t0 = time.monotonic()
 
@@ -64,30 +65,53 @@ def format_table(summary: dict) -> str:
     widths = [max(len(h), *(len(r[c]) for r in rows)) for c, h in enumerate(head)]
     line = lambda cells: "  ".join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731
     out = [line(head), line(["-" * w for w in widths])] + [line(r) for r in rows]
-    verdict = (
-        "every ellipsoid contained the truth on every step where the assumptions held"
-        if summary["violations_total"] == 0
-        else f"CONTAINMENT VIOLATED {summary['violations_total']} time(s) on steps where the assumptions held"
-    )
     out.append("")
-    out.append(f"{summary.get('mode', '')} run, case {summary.get('case')}, signals {summary.get('signals')}, "
-               f"variant {summary.get('variant')}, {summary.get('steps_completed')} steps: {verdict}.")  # fmt: skip
     if summary["misses_assumption_broken_total"]:
         out.append(f"{summary['misses_assumption_broken_total']} miss(es) after a broken assumption (not covered by the guarantee).")
     if summary.get("nodes_missing"):
         out.append(f"nodes missing: {summary['nodes_missing']}")
+    if summary.get("nodes_rejoined"):
+        out.append(f"nodes rejoined: {summary['nodes_rejoined']}")
     if summary.get("losses_total"):
         out.append(f"scheduled message losses: {summary['losses_total']}")
-    if summary.get("dropped_messages"):
-        out.append(f"dropped messages: {summary['dropped_messages']}")
+    for role, reasons in (summary.get("drops") or {}).items():
+        out.append(f"dropped by {role}: " + ", ".join(f"{r} {n}" for r, n in reasons.items()))
+    # the last line: the run, its security mode (Zenoh) and the verdict
+    security = f" (security: {summary['security']})" if summary.get("security") else ""
+    out.append(f"{summary.get('mode', '')} run{security}, case {summary.get('case')}, signals {summary.get('signals')}, "
+               f"variant {summary.get('variant')}, {summary.get('steps_completed')} steps: {verdict(summary)}.")  # fmt: skip
     return "\n".join(out)
 
 
-def write_outputs(summary: dict, meta: dict, parts: dict, record: str | None, summary_json: str | None) -> None:
-    if record:
-        save_record(record, meta, parts["truth"], parts["nodes"], summary)
+def verdict(summary: dict) -> str:
+    """The result in words, never more than was checked: how many node-steps the guarantee covered."""
+    evaluated, contained = summary["node_steps_evaluated"], summary["node_steps_contained"]
+    covered, reported = summary["node_steps_covered"], summary["node_steps_reported"]
+    if summary["violations_total"]:
+        head = f"CONTAINMENT VIOLATED {summary['violations_total']} time(s) where the assumptions held; contained on {contained} of {evaluated} node-steps"
+    else:
+        head = f"contained on {contained} of {evaluated} node-steps"
+    text = f"{head}; the guarantee applied on {covered}"
+    causes = summary.get("node_steps_not_covered") or {}
+    if causes:
+        text += f" (assumption broken on {evaluated - covered}: " + ", ".join(f"{c} {n}" for c, n in causes.items()) + ")"
+    if reported > evaluated:
+        text += f"; {reported - evaluated} node-step(s) not judged (truth unknown or copies contested)"
+    if summary.get("node_steps_rejected"):
+        text += f"; {summary['node_steps_rejected']} node-step(s) rejected (no copy matched the truth)"
+    return text
+
+
+def record_sink(record: str | None, keep: bool = False) -> tuple[RecordSink | None, MemorySink | None]:
+    """The sink a run's collector writes to: the record file (opened now), and/or memory when ``keep``."""
+    memory = MemorySink() if keep else None
+    file = open_sink(record) if record else None
+    sinks = [s for s in (file, memory) if s is not None]
+    return (TeeSink(*sinks) if len(sinks) > 1 else sinks[0] if sinks else None), memory
+
+
+def write_summary(summary: dict, summary_json: str | None) -> None:
     if summary_json:
-        Path(summary_json).parent.mkdir(parents=True, exist_ok=True)
         Path(summary_json).write_text(json.dumps(summary, indent=2) + "\n")
 
 

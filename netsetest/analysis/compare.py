@@ -1,0 +1,349 @@
+"""``netsetest compare``: every guaranteed estimator on the same vehicle, network and data (issue 9).
+
+For each (case, signals, seed) the network runs in memory with this project's ellipsoidal SDP (the
+``sdp`` row, from the run's record); every other estimator of estimator/registry.py is then stepped
+per node on that run's data (the vehicle's u, Vx and each node's ỹ, γ: what the node sees), and the
+exact limit (analysis/exact.py, centralized, declared fault bounds where a saturating sensor needs
+them) is the reference and the ``exact`` row (not real time: its ms is the offline solve time per
+node-step).
+
+Per row: containment — the published set is checked against the truth at every node-step; a miss
+where every assumption the method declares held (its *cone*: the prior at step 0, the noise bound at
+every step ≤ k, the wind bound at every step < k, the declared fault bound at every step ≤ k if it
+relies on it) is a ``violation``, other misses are attributed to the first broken assumption;
+``covered`` counts the node-steps whose cone held.  Widths are per-coordinate interval-hull widths,
+mean over nodes and the steps ≥ FROM_STEP; ``ratio_exact`` is the mean fault width over the exact
+one's (same steps, bounded exact intervals only), ``ratio_exact_state`` the same for β and r, each
+against the exact limit under the row's own assumptions: a method that relies on the declared fault
+bound of a node where the ``exact`` row does not (every non-saturating node) is compared with the exact
+limit with every declared bound (``exact_reference`` "all");
+``rms_radius_rel`` is Althoff & Rath's relative-RMS radius (their eq. (9)) with the exact limit as the
+reference observer, mean over nodes and the three coordinates; ms are per node-step.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from netsetest.analysis.exact import FROM_STEP, ExactBounds, StepData, exact_bounds, step_data
+from netsetest.config.schema import Case, Scenario, load_topology
+from netsetest.estimator.base import Assumption, EstimatorError, StepInput
+from netsetest.analysis.errors import CompareError
+from netsetest.estimator.names import DEFAULT_COMPARE, ESTIMATOR_NAMES, EXACT, SDP
+from netsetest.estimator.registry import SET_ESTIMATORS
+from netsetest.models.signals import SignalKind
+from netsetest.records.record import Record, record_from_parts
+from netsetest.runtime.inmemory import run_inmemory
+
+CONTAIN_TOL = 1e-8  # the sets' own membership slack (sets.MEMBERSHIP_TOL) plus float sums of the bounds
+_SDP_ASSUMPTIONS: tuple[str, ...] = ("dependency cone (collector)",)
+
+
+@dataclass
+class _Accumulator:
+    """One estimator's samples over every run, node and step."""
+
+    node_steps: int = 0
+    covered: int = 0
+    violations: int = 0
+    attributed: Counter = field(default_factory=Counter)
+    widths: list[np.ndarray] = field(default_factory=list)  # (3,) per late node-step with a bounded exact
+    exact_widths: list[np.ndarray] = field(default_factory=list)
+    rms: list[float] = field(default_factory=list)  # relative-RMS radius per run, node and coordinate
+    ms: list[float] = field(default_factory=list)
+    fallbacks: int = 0
+    refused: list[str] = field(default_factory=list)
+    assumptions: set[str] = field(default_factory=set)
+    references: set[str] = field(default_factory=set)  # fault-bounds modes of the exact limits compared with
+
+
+@dataclass(frozen=True)
+class CompareRow:
+    estimator: str
+    real_time: bool
+    assumptions: list[str]
+    node_steps: int
+    covered: int
+    violations: int
+    misses_attributed: dict[str, int]
+    fault_width_mean: float | None
+    beta_width_mean: float | None
+    r_width_mean: float | None
+    ratio_exact: float | None
+    ratio_exact_state: list[float | None]
+    rms_radius_rel: float | None
+    ms_median: float | None
+    ms_p95: float | None
+    fallbacks: int
+    refused: list[str]
+    exact_reference: list[str]  # fault-bounds modes of the exact limit its ratios are against
+
+
+@dataclass(frozen=True)
+class Comparison:
+    topology: str
+    runs: list[str]  # case/signals/seed of each run
+    steps: int
+    tau_s: float
+    rows: list[CompareRow]
+    bounds: dict[str, dict[int, np.ndarray]]  # first run: estimator → node → (K, 3, 2)
+    truth_fault: dict[int, np.ndarray]  # first run: node → (K,)
+
+
+def _cones(sc: Scenario, rec: Record, assumptions: tuple[str, ...], nodes: list[int]) -> dict[tuple[int, int], str | None]:
+    """Per (node, step): None if every assumption of the node's cone held, else the first broken one."""
+    truth = sorted(rec.truth, key=lambda t: t["step"])
+    out: dict[tuple[int, int], str | None] = {}
+    for i in nodes:
+        n, s = sc.node(i), str(i)
+        e = np.r_[truth[0]["x"], truth[0]["faults"][s]] - n.x0_hat
+        broken: str | None = None if float(e @ np.linalg.solve(n.P0, e)) <= n.rho else "prior"
+        for k, t in enumerate(truth):
+            if broken is None and k > 0 and not truth[k - 1]["dist_ok"]:
+                broken = "disturbance"
+            if broken is None and not t["noise_ok"][s]:
+                broken = "noise"
+            if broken is None and "fault_bound" in assumptions and not t.get("fault_ok", {}).get(s, True):
+                broken = "fault_bound"
+            out[(i, k)] = broken
+    return out
+
+
+def _centralized_cones(sc: Scenario, rec: Record, bounded: tuple[int, ...]) -> dict[int, str | None]:
+    """Per step: the exact limit rests on every node's cone (with the fault bound where applied)."""
+    per_node = {i: _cones(sc, rec, ("fault_bound",) if i in bounded else (), [i]) for i in sc.ids}
+    steps = len(rec.truth)
+    return {k: next((per_node[i][(i, k)] for i in sc.ids if per_node[i][(i, k)] is not None), None) for k in range(steps)}
+
+
+def _record_bounds(rec: Record, i: int) -> np.ndarray:
+    tr = rec.nodes[i]
+    return np.stack([np.stack(tr.bounds(c), axis=1) for c in range(3)], axis=1)
+
+
+def _exact_array(ex: ExactBounds, i: int) -> np.ndarray:
+    return np.stack([ex.beta, ex.r, ex.fault[i]], axis=1)
+
+
+def _score(acc: _Accumulator, bounds: np.ndarray, steps: np.ndarray, truth: np.ndarray, exact: np.ndarray,
+           broken: list[str | None]) -> None:  # fmt: skip
+    """Add one node's run: bounds (K, 3, 2) at ``steps``, truth (K, 3), exact (all steps, 3, 2)."""
+    ex = exact[steps]
+    for n in range(len(steps)):
+        acc.node_steps += 1
+        inside = bool(np.all(bounds[n, :, 0] <= truth[n] + CONTAIN_TOL) and np.all(truth[n] <= bounds[n, :, 1] + CONTAIN_TOL))
+        if broken[n] is None:
+            acc.covered += 1
+            acc.violations += not inside
+        elif not inside:
+            acc.attributed[broken[n]] += 1
+    ok = np.isfinite(ex).all(axis=(1, 2))
+    late = ok & (steps >= FROM_STEP)
+    acc.widths += list(np.diff(bounds[late], axis=2)[..., 0])
+    acc.exact_widths += list(np.diff(ex[late], axis=2)[..., 0])
+    if ok.any():
+        half, ex_half = np.diff(bounds[ok], axis=2)[..., 0] / 2, np.diff(ex[ok], axis=2)[..., 0] / 2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            acc.rms += list(np.sqrt((half**2).mean(axis=0) / (ex_half**2).mean(axis=0)))
+
+
+def _run_set_estimator(name: str, sc: Scenario, i: int, data: list[StepData], acc: _Accumulator) -> tuple[np.ndarray, tuple[Assumption, ...]] | None:
+    """Step one node's estimator through the run's data: (K, 3, 2) bounds and the assumptions of its
+    guarantee on this node, or None if it refuses the node."""
+    try:
+        est = SET_ESTIMATORS[name](sc, i)
+    except EstimatorError as exc:
+        acc.refused.append(str(exc))
+        return None
+    acc.assumptions.update(est.assumptions)
+    out, prev = [], None
+    for d in data:
+        inp = StepInput(d.step, d.y[i], d.gamma[i], None if prev is None else prev.u, None if prev is None else prev.vx)
+        t0 = time.perf_counter()
+        try:
+            s = est.step(inp)
+            lo, hi = s.bounds()  # publishing = computing the per-coordinate bounds
+        except EstimatorError as exc:
+            acc.refused.append(f"step {d.step}: {exc}")
+            return None
+        acc.ms.append(1000 * (time.perf_counter() - t0))
+        out.append(np.stack([lo, hi], axis=1))
+        prev = d
+    return np.array(out), est.assumptions
+
+
+def _row(name: str, acc: _Accumulator, real_time: bool) -> CompareRow:
+    def num(v: float) -> float | None:
+        return float(v) if np.isfinite(v) else None
+
+    w = np.array(acc.widths).reshape(-1, 3)
+    ew = np.array(acc.exact_widths).reshape(-1, 3)
+    mean = w.mean(axis=0) if len(w) else np.full(3, np.nan)
+    ratio = mean / ew.mean(axis=0) if len(ew) else np.full(3, np.nan)
+    ms = np.array(acc.ms)
+    return CompareRow(
+        estimator=name, real_time=real_time, assumptions=sorted(acc.assumptions), node_steps=acc.node_steps,
+        covered=acc.covered, violations=acc.violations, misses_attributed=dict(acc.attributed),
+        fault_width_mean=num(mean[2]), beta_width_mean=num(mean[0]), r_width_mean=num(mean[1]),
+        ratio_exact=num(ratio[2]), ratio_exact_state=[num(ratio[0]), num(ratio[1])],
+        rms_radius_rel=num(float(np.nanmean(acc.rms))) if acc.rms else None,
+        ms_median=num(float(np.median(ms))) if len(ms) else None, ms_p95=num(float(np.percentile(ms, 95))) if len(ms) else None,
+        fallbacks=acc.fallbacks, refused=acc.refused[:3], exact_reference=sorted(acc.references),
+    )  # fmt: skip
+
+
+def compare(
+    topology: str | Path,
+    estimators: tuple[str, ...] = DEFAULT_COMPARE,
+    cases: tuple[Case | None, ...] = (None,),
+    signals: tuple[SignalKind, ...] = ("paper",),
+    seeds: tuple[int, ...] = (0,),
+    steps: int | None = None,
+) -> Comparison:
+    """Run every (case, signals, seed) and score every estimator (module doc)."""
+    unknown = [e for e in estimators if e not in ESTIMATOR_NAMES]
+    if unknown:
+        raise CompareError(f"unknown estimator {unknown[0]!r}; choose from {', '.join(ESTIMATOR_NAMES)}")
+    if len(set(estimators)) != len(estimators):
+        raise CompareError(f"estimator list {','.join(estimators)} names one twice")
+    if not estimators or not cases or not signals or not seeds:
+        raise CompareError("nothing to compare: give at least one estimator, case, signal kind and seed")
+    acc = {e: _Accumulator() for e in estimators}
+    runs: list[str] = []
+    first_bounds: dict[str, dict[int, np.ndarray]] = {}
+    truth_fault: dict[int, np.ndarray] = {}
+    sc = None
+    for case in cases:
+        sc = load_topology(topology, case, steps)
+        for sig in signals:
+            for seed in seeds:
+                res = run_inmemory(sc, sig, "scheduled", seed)
+                rec = record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
+                runs.append(f"{sc.case}/{sig}/{seed}")
+                _score_run(sc, rec, estimators, acc, first_bounds if len(runs) == 1 else None)
+                if len(runs) == 1:
+                    truth_fault = {i: np.array([t["faults"][str(i)] for t in sorted(rec.truth, key=lambda t: t["step"])]) for i in sc.ids}
+    assert sc is not None
+    rows = [_row(e, acc[e], e != EXACT) for e in estimators]
+    return Comparison(str(topology), runs, sc.steps, sc.tau_s, rows, first_bounds, truth_fault)
+
+
+def _score_run(sc: Scenario, rec: Record, estimators: tuple[str, ...], acc: dict[str, _Accumulator],
+               keep: dict[str, dict[int, np.ndarray]] | None) -> None:  # fmt: skip
+    data = step_data(rec)
+    t0 = time.perf_counter()
+    ex = exact_bounds(sc, rec, "used")
+    exact_ms = 1000 * (time.perf_counter() - t0) / (len(data) * len(sc.ids))
+    ex_all: ExactBounds | None = None  # the exact limit with every declared fault bound, if a row uses more
+    truth = sorted(rec.truth, key=lambda t: t["step"])
+    all_steps = np.arange(len(data))
+    for name in estimators:
+        a = acc[name]
+        if keep is not None:
+            keep[name] = {}
+        for i in sc.ids:
+            tr_i = np.array([np.r_[t["x"], t["faults"][str(i)]] for t in truth])
+            reference = ex
+            if name == SDP:
+                track = rec.nodes[i]
+                bounds, steps = _record_bounds(rec, i), track.steps.astype(int)
+                broken = [None if ok else "dependency cone" for ok in track.assumptions_ok]
+                a.ms += [float(m) for m, s, k in zip(track.solve_ms, track.status, steps) if s in ("ok", "fallback") and k > 0]
+                a.fallbacks += sum(s == "fallback" for s in track.status)
+                a.assumptions.update(_SDP_ASSUMPTIONS)
+            elif name == EXACT:
+                bounds, steps = _exact_array(ex, i), all_steps
+                cones = _centralized_cones(sc, rec, ex.bounded_nodes)
+                broken = [cones[int(k)] for k in steps]
+                a.ms += [exact_ms] * len(steps)
+                a.assumptions.update(("prior", "noise", "disturbance", *(("fault_bound",) if ex.bounded_nodes else ())))
+            else:
+                got = _run_set_estimator(name, sc, i, data, a)
+                if got is None:
+                    continue
+                bounds, est_assumptions = got
+                steps = all_steps
+                cones_i = _cones(sc, rec, est_assumptions, [i])
+                broken = [cones_i[(i, int(k))] for k in steps]
+                if "fault_bound" in est_assumptions and i not in ex.bounded_nodes:
+                    ex_all = ex_all or exact_bounds(sc, rec, "all")
+                    reference = ex_all
+            a.references.add(reference.fault_bounds)
+            _score(a, bounds, steps, tr_i[steps], _exact_array(reference, i), broken)
+            if keep is not None:
+                keep[name][i] = bounds
+
+
+def comparison_document(c: Comparison) -> list[dict]:
+    """The ``--json`` document: one object per row."""
+    return [asdict(r) for r in c.rows]
+
+
+def _fmt(v: float | None, spec: str = ".4f") -> str:
+    return "–" if v is None else format(v, spec)
+
+
+TABLE_HEADER = ("estimator", "violations", "misses (broken assumption)", "covered", "fault width", "β width", "r width",
+                "fault/exact", "β, r / exact", "exact with fault bounds", "rms radius rel.", "ms median", "ms p95", "fallbacks")  # fmt: skip
+
+
+def table_rows(c: Comparison) -> list[tuple[str, ...]]:
+    out = []
+    for r in c.rows:
+        broken = ", ".join(f"{k} {v}" for k, v in sorted(r.misses_attributed.items())) or "0"
+        name = r.estimator + ("" if r.real_time else " (offline)") + (" [refused some nodes]" if r.refused else "")
+        out.append((
+            name, str(r.violations), broken, f"{r.covered}/{r.node_steps}", _fmt(r.fault_width_mean), _fmt(r.beta_width_mean),
+            _fmt(r.r_width_mean), _fmt(r.ratio_exact, ".3f"), "/".join(_fmt(v, ".3f") for v in r.ratio_exact_state),
+            ",".join(r.exact_reference),
+            _fmt(r.rms_radius_rel, ".3f"), _fmt(r.ms_median, ".3f"), _fmt(r.ms_p95, ".3f"), str(r.fallbacks),
+        ))  # fmt: skip
+    return out
+
+
+def markdown_table(c: Comparison) -> str:
+    lines = [f"Comparison on {c.topology}, runs {', '.join(c.runs)} ({c.steps} steps); widths mean over nodes and steps ≥ {FROM_STEP}.", ""]
+    lines.append("| " + " | ".join(TABLE_HEADER) + " |")
+    lines.append("|" + "---|" * len(TABLE_HEADER))
+    lines += ["| " + " | ".join(row) + " |" for row in table_rows(c)]
+    return "\n".join(lines) + "\n"
+
+
+def plot_fault_bounds(c: Comparison, out_dir: str | Path) -> list[Path]:
+    """One figure per node: every estimator's fault bounds (first run) with the true fault."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i, truth in sorted(c.truth_fault.items()):
+        fig, ax = plt.subplots(figsize=(8, 4))
+        t = np.arange(len(truth)) * c.tau_s
+        ax.plot(t, truth, "k-", lw=2, label="true f")
+        for n, (name, per_node) in enumerate(c.bounds.items()):
+            if i not in per_node:
+                continue
+            b = per_node[i]
+            tt = np.arange(len(b)) * c.tau_s
+            color = f"C{n}"
+            ax.plot(tt, b[:, 2, 0], color=color, lw=1, label=name)
+            ax.plot(tt, b[:, 2, 1], color=color, lw=1)
+        truth_span = float(np.ptp(truth)) or 0.1
+        ax.set_ylim(float(truth.min()) - 2 * truth_span, float(truth.max()) + 2 * truth_span)
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel(f"f_{i} [rad/s]")
+        ax.set_title(f"node {i}: fault bounds of every estimator ({c.runs[0]})")
+        ax.legend(fontsize=7, ncol=2)
+        path = out / f"compare_fault_node{i}.png"
+        fig.savefig(path, dpi=100, bbox_inches="tight")
+        plt.close(fig)
+        paths.append(path)
+    return paths

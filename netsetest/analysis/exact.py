@@ -1,0 +1,482 @@
+"""The exact limit: the tightest intervals any guaranteed estimator could publish from a run's data.
+
+For every step k and node i, :func:`exact_bounds` computes the smallest and largest value of f_i,k, β_k
+and r_k over every trajectory that meets the run's assumptions and reproduces every measurement of
+steps 0..k of every node (centralized: no networked estimator can be tighter).  Decision variables are
+z = [x_0, w_0..w_{k−1}, f_i,0..k (every node i)]; the state is affine in z through the known scheduled
+dynamics x_{j+1} = Ā_j x_j + B̄_j u_j + D̄_j w_j (α_j from the recorded speed), and the noise is eliminated:
+
+    node i's prior:        ‖P0_i^{-½}([x_0; f_i,0] − x̂0_i)‖ ≤ √ρ_i                  (second-order cone)
+    wind:                  |w_j| ≤ √W
+    measurement (i, j):    σ(C̄_i x̄_i,j) ∈ [(ỹ − |Dv|√R)/γ, (ỹ + |Dv|√R)/γ]  ⇔  C̄_i x̄_i,j ∈ [lo, hi]
+    declared fault bounds: |f_i,j+1 − f_i,j| ≤ δ_i,  |f_i,j| ≤ F_i   (where ``fault_bounds`` applies them)
+
+σ is the identity in NSNIM; in SAIM it is the saturation sign(r)·min(r_max, |r|), monotone and the
+identity on [−r_max, r_max], so its preimage of an interval is an interval whose side is open (±∞) where
+the measured interval reaches ±r_max.  Every constraint is linear or a cone, so each bound is one
+Clarabel solve (an SOCP); the solves of one horizon share one factorisation structure (only the
+objective changes).  The solver's argument at each bound is a *witness*: a trajectory reaching it.
+Derivation and measured figures: docs/exact.md.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+import clarabel
+import numpy as np
+from scipy import sparse
+
+from netsetest.analysis.errors import ExactError
+from netsetest.config.schema import FaultBoundsMode, Scenario
+from netsetest.records.record import Record
+
+Coordinate = Literal["beta", "r", "f"]
+COORDINATES: tuple[Coordinate, ...] = ("beta", "r", "f")
+Side = Literal["lo", "hi"]
+
+FROM_STEP = 10  # ratios "from step 10" leave out the start-up transient of the estimators
+NARROWER_TOL = 1e-8  # solver precision of the exact ends (measured ≤ 2e-9 over 80 steps) with margin
+SOLVER_TOL = 1e-10  # Clarabel gap and feasibility tolerances: witnesses meet every constraint to ~1e-9
+_SOLVED = ("Solved", "AlmostSolved")
+_UNBOUNDED = ("DualInfeasible", "AlmostDualInfeasible")
+_INFEASIBLE = ("PrimalInfeasible", "AlmostPrimalInfeasible")
+
+
+@dataclass(frozen=True)
+class StepData:
+    """What every node knows at step k (the vehicle publishes it): u_k, Vx_k, and each ỹ_i,k, γ_i,k."""
+
+    step: int
+    u: float
+    vx: float
+    y: dict[int, float]
+    gamma: dict[int, float]
+
+
+@dataclass(frozen=True)
+class Witness:
+    """A trajectory reaching one end of an exact interval: x_0, w_0..w_{k−1}, f_i,0..k of every node."""
+
+    x0: np.ndarray  # (2,)
+    w: np.ndarray  # (k,)
+    f: dict[int, np.ndarray]  # node → (k+1,)
+
+
+@dataclass(frozen=True)
+class WitnessKey:
+    coordinate: Coordinate
+    node: int | None  # None for the state coordinates β, r (shared by every node)
+    step: int
+    side: Side
+
+
+@dataclass(frozen=True)
+class ExactBounds:
+    """Per step: the exact intervals of β, r (all nodes) and of each node's fault; ±inf where unbounded.
+
+    ``infeasible_steps``: steps whose data contradict the assumptions (no trajectory exists; NaN bounds).
+    """
+
+    steps: np.ndarray  # (K,)
+    beta: np.ndarray  # (K, 2) lower, upper
+    r: np.ndarray  # (K, 2)
+    fault: dict[int, np.ndarray]  # node → (K, 2)
+    fault_bounds: FaultBoundsMode
+    bounded_nodes: tuple[int, ...]  # nodes whose declared fault bounds were applied
+    infeasible_steps: tuple[int, ...]
+    witnesses: dict[WitnessKey, Witness] = field(default_factory=dict)
+
+    def interval(self, coordinate: Coordinate, node: int | None = None) -> np.ndarray:
+        """(K, 2) bounds of one coordinate (``node`` is needed for the fault)."""
+        if coordinate == "f":
+            if node is None:
+                raise ValueError("the fault interval needs a node id")
+            return self.fault[node]
+        return self.beta if coordinate == "beta" else self.r
+
+
+# ---------------------------------------------------------------- data
+
+
+def step_data(record: Record) -> list[StepData]:
+    """The data of steps 0..K from the record's truth entries (u, Vx, ỹ, γ: what the nodes see)."""
+    out = []
+    try:
+        for k, t in enumerate(sorted(record.truth, key=lambda t: t["step"])):
+            if t["step"] != k:
+                raise ExactError(f"{record.path}: truth entries are not the contiguous steps 0..K (step {k} missing)")
+            out.append(
+                StepData(
+                    step=k, u=float(t["u"]), vx=float(t["vx"]),
+                    y={int(i): float(v) for i, v in t["y"].items()},
+                    gamma={int(i): float(v) for i, v in t["gamma"].items()},
+                )
+            )  # fmt: skip
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise ExactError(f"{record.path}: malformed truth entry ({type(exc).__name__}: {exc})") from None
+    if not out:
+        raise ExactError(f"{record.path}: the record has no truth entries")
+    return out
+
+
+# ---------------------------------------------------------------- the program
+
+
+class _Program:
+    """Every constraint of the full horizon 0..K, each row tagged with the last step it involves.
+
+    Columns: x_0..x_K (2 each), w_0..w_{K−1}, then f_i,0..K per node; the dynamics are equality rows,
+    so every row is sparse.  The horizon-k program keeps the rows of steps ≤ k and the columns of steps
+    ≤ k (the others appear in no kept row).
+    """
+
+    def __init__(self, scenario: Scenario, data: list[StepData], bounded: tuple[int, ...]) -> None:
+        self.sc, self.data, self.bounded = scenario, data, bounded
+        self.ids = scenario.ids
+        self.K = K = len(data) - 1
+        self.nz = 2 * (K + 1) + K + len(self.ids) * (K + 1)
+        self.intervals = {
+            (node.id, j): node.sensor.measured_interval(dj.y[node.id], dj.gamma[node.id])
+            for node in scenario.nodes for j, dj in enumerate(data)
+        }  # fmt: skip
+        eq = _Rows()  # x_{j+1} − Ā_j x_j − D̄_j w_j = B̄_j u_j
+        for j in range(K):
+            a, b, d = scenario.model.blend(scenario.model.weights(data[j].vx))
+            for row in range(2):
+                terms = {self._x(j + 1, row): 1.0, self._w(j): -d[row, 0]}
+                terms.update({self._x(j, c): -a[row, c] for c in range(2)})
+                eq.add(terms, b[row, 0] * data[j].u, j + 1)
+        lin = _Rows()  # a z ≤ b
+        sqrt_w = np.sqrt(scenario.W)
+        for j in range(K):
+            lin.add({self._w(j): 1.0}, sqrt_w, j + 1)
+            lin.add({self._w(j): -1.0}, sqrt_w, j + 1)
+        for n, node in enumerate(scenario.nodes):
+            free = node.id not in bounded
+            c, ds = node.sensor.C, node.sensor.Ds
+            for j in range(K + 1):
+                lo, hi = self.intervals[node.id, j]
+                r = {self._x(j, 0): c[0], self._x(j, 1): c[1], self._f(n, j): ds}  # r = C̄_i x̄_i,j
+                if np.isfinite(hi):
+                    lin.add(r, hi, j, j if free else -1)
+                if np.isfinite(lo):
+                    lin.add({col: -v for col, v in r.items()}, -lo, j, j if free else -1)
+            if not free:
+                for j in range(K + 1):
+                    if node.fault_size is not None:
+                        lin.add({self._f(n, j): 1.0}, node.fault_size, j)
+                        lin.add({self._f(n, j): -1.0}, node.fault_size, j)
+                    if node.fault_rate is not None and j > 0:
+                        lin.add({self._f(n, j): 1.0, self._f(n, j - 1): -1.0}, node.fault_rate, j)
+                        lin.add({self._f(n, j): -1.0, self._f(n, j - 1): 1.0}, node.fault_rate, j)
+        soc = _Rows()  # priors: s = b − A z = [√ρ; L⁻¹([x_0; f_i,0] − x̂0)] ∈ SOC(4), P0 = L Lᵀ
+        for n, node in enumerate(scenario.nodes):
+            li = np.linalg.inv(np.linalg.cholesky(node.P0))
+            prior_cols = (self._x(0, 0), self._x(0, 1), self._f(n, 0))
+            soc.add({}, np.sqrt(node.rho), 0)
+            centre = li @ node.x0_hat
+            for row in range(3):
+                soc.add({col: -li[row, m] for m, col in enumerate(prior_cols) if li[row, m] != 0}, -centre[row], 0)
+        self.eq, self.lin, self.soc = eq.build(self.nz), lin.build(self.nz), soc.build(self.nz)
+
+    def _x(self, j: int, comp: int) -> int:
+        return 2 * j + comp
+
+    def _w(self, j: int) -> int:
+        return 2 * (self.K + 1) + j
+
+    def _f(self, n: int, j: int) -> int:
+        return 2 * (self.K + 1) + self.K + n * (self.K + 1) + j
+
+    def _eliminated(self, n: int, j: int, k: int, eliminate: bool) -> bool:
+        """Whether f_i,j leaves the horizon-k program: a fault without declared bounds at 0 < j < k
+        appears only in its own measurement rows, and some f_i,j meets them for every x_j (Ds ≠ 0, the
+        measured interval is not empty), so dropping the variable with its rows is exact."""
+        return eliminate and self.ids[n] not in self.bounded and 0 < j < k
+
+    def columns(self, k: int, eliminate: bool) -> np.ndarray:
+        """Columns of the horizon-k program: x_0..x_k, w_0..w_{k−1}, the f_i,0..k not eliminated."""
+        cols = [np.arange(2 * (k + 1)), self._w(0) + np.arange(k)]
+        for n in range(len(self.ids)):
+            cols.append(np.array([self._f(n, j) for j in range(k + 1) if not self._eliminated(n, j, k, eliminate)]))
+        return np.concatenate(cols).astype(int)
+
+    def matrices(self, k: int, eliminate: bool) -> tuple[np.ndarray, sparse.csc_matrix, np.ndarray, list]:
+        """Columns, A, b and cones of the horizon-k program (A z + s = b, s in the cones)."""
+        cols = self.columns(k, eliminate)
+        keep_eq = self.eq.step <= k
+        keep_lin = self.lin.step <= k
+        if eliminate:
+            keep_lin &= (self.lin.free <= 0) | (self.lin.free == k)
+        A = sparse.vstack(
+            [self.eq.A[keep_eq][:, cols], self.lin.A[keep_lin][:, cols], self.soc.A[:, cols]], format="csc"
+        )
+        b = np.r_[self.eq.b[keep_eq], self.lin.b[keep_lin], self.soc.b]
+        cones = [clarabel.ZeroConeT(int(keep_eq.sum())), clarabel.NonnegativeConeT(int(keep_lin.sum()))]
+        cones += [clarabel.SecondOrderConeT(4)] * len(self.ids)
+        return cols, A, b, cones
+
+    def objectives(self, k: int) -> list[tuple[Coordinate, int | None, int]]:
+        """(coordinate, node, column) of every bounded quantity at step k."""
+        out: list[tuple[Coordinate, int | None, int]] = [("beta", None, self._x(k, 0)), ("r", None, self._x(k, 1))]
+        return out + [("f", i, self._f(n, k)) for n, i in enumerate(self.ids)]
+
+    def witness(self, z: np.ndarray, k: int, eliminate: bool) -> Witness:
+        """The trajectory of a solution; an eliminated fault takes the value nearest 0 that meets its
+        measurement (C̄_i x̄_i,j in the measured interval)."""
+        f = {}
+        for n, node in enumerate(self.sc.nodes):
+            fi = z[self._f(n, 0) : self._f(n, k) + 1].copy()
+            for j in range(k + 1):
+                if self._eliminated(n, j, k, eliminate):
+                    cx = float(node.sensor.C @ z[self._x(j, 0) : self._x(j, 1) + 1])
+                    lo, hi = self.intervals[node.id, j]
+                    ends = sorted(((lo - cx) / node.sensor.Ds, (hi - cx) / node.sensor.Ds))
+                    fi[j] = float(np.clip(0.0, *ends))
+            f[node.id] = fi
+        return Witness(x0=z[:2].copy(), w=z[self._w(0) : self._w(0) + k].copy(), f=f)
+
+
+class _Rows:
+    """Sparse constraint rows with the step each belongs to (and, for a free fault's measurement, its step)."""
+
+    def __init__(self) -> None:
+        self.entries: list[tuple[dict[int, float], float, int, int]] = []
+
+    def add(self, terms: dict[int, float], rhs: float, step: int, free: int = -1) -> None:
+        self.entries.append((terms, float(rhs), step, free))
+
+    def build(self, nz: int) -> _RowBlock:
+        data, ri, ci = [], [], []
+        for r, (terms, *_rest) in enumerate(self.entries):
+            for c, v in terms.items():
+                ri.append(r)
+                ci.append(c)
+                data.append(float(v))
+        A = sparse.csr_matrix((data, (ri, ci)), shape=(len(self.entries), nz))
+        return _RowBlock(
+            A=A, b=np.array([e[1] for e in self.entries]),
+            step=np.array([e[2] for e in self.entries], dtype=int), free=np.array([e[3] for e in self.entries], dtype=int),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class _RowBlock:
+    A: sparse.csr_matrix
+    b: np.ndarray
+    step: np.ndarray
+    free: np.ndarray
+
+
+def _settings() -> clarabel.DefaultSettings:
+    st = clarabel.DefaultSettings()
+    st.verbose = False
+    st.presolve_enable = False  # keep every row: the objective is updated in place between solves
+    st.tol_gap_abs = st.tol_gap_rel = st.tol_feas = SOLVER_TOL
+    st.tol_ktratio = 1e-8
+    st.max_iter = 200
+    return st
+
+
+def exact_bounds(
+    scenario: Scenario,
+    record: Record,
+    fault_bounds: FaultBoundsMode = "used",
+    keep_witnesses: bool = False,
+    eliminate_free_faults: bool = True,
+    nodes: Sequence[int] | None = None,
+) -> ExactBounds:
+    """The exact intervals of every step of ``record`` under ``scenario``'s assumptions (module doc).
+
+    ``nodes``: use only these nodes' priors and measurements (e.g. one node: the limit of a purely
+    local estimator); default every node (centralized).  ``eliminate_free_faults`` drops the past
+    faults that no declared bound ties (exact, see :meth:`_Program._eliminated`; False keeps the
+    whole program, for checking that).
+    """
+    data = step_data(record)
+    for d in data:
+        if set(d.y) != set(scenario.ids) or set(d.gamma) != set(scenario.ids):
+            raise ExactError(
+                f"{record.path}: step {d.step} has measurements of nodes {sorted(d.y)}, "
+                f"the topology has nodes {scenario.ids}"
+            )
+    if nodes is not None:
+        unknown = sorted(set(nodes) - set(scenario.ids))
+        if unknown or not nodes:
+            raise ExactError(f"nodes {list(nodes)}: not a non-empty subset of the topology's nodes {scenario.ids}")
+        scenario = replace(scenario, nodes=[n for n in scenario.nodes if n.id in set(nodes)])
+    bounded = scenario.fault_bounded(fault_bounds)
+    prog = _Program(scenario, data, bounded)
+    K1 = len(data)
+    beta, r = np.full((K1, 2), np.nan), np.full((K1, 2), np.nan)
+    fault = {i: np.full((K1, 2), np.nan) for i in scenario.ids}
+    witnesses: dict[WitnessKey, Witness] = {}
+    infeasible = []
+    st = _settings()
+    for k in range(K1):
+        cols, A, b, cones = prog.matrices(k, eliminate_free_faults)
+        P = sparse.csc_matrix((len(cols), len(cols)))
+        position = {col: m for m, col in enumerate(cols)}
+        solver = None
+        step_infeasible = False
+        for coord, node, col in prog.objectives(k):
+            target = fault[node] if coord == "f" else (beta if coord == "beta" else r)
+            for side, sign in (("lo", 1.0), ("hi", -1.0)):
+                q = np.zeros(len(cols))
+                q[position[col]] = sign
+                if solver is None:
+                    solver = clarabel.DefaultSolver(P, q, A, b, cones, st)
+                else:
+                    solver.update(q=q)
+                sol = solver.solve()
+                status = str(sol.status)
+                end = 0 if side == "lo" else 1
+                if status in _SOLVED:
+                    z = np.zeros(prog.nz)
+                    z[cols] = np.asarray(sol.x)
+                    target[k, end] = z[col]
+                    if keep_witnesses:
+                        witnesses[WitnessKey(coord, node, k, side)] = prog.witness(z, k, eliminate_free_faults)  # type: ignore[arg-type]
+                elif status in _UNBOUNDED:
+                    target[k, end] = -np.inf if side == "lo" else np.inf
+                elif status in _INFEASIBLE:
+                    step_infeasible = True
+                else:
+                    raise ExactError(f"step {k}: the solver stopped with status {status} on the {coord} bound")
+        if step_infeasible:
+            infeasible.append(k)
+    return ExactBounds(
+        steps=np.arange(K1), beta=beta, r=r, fault=fault, fault_bounds=fault_bounds,
+        bounded_nodes=bounded, infeasible_steps=tuple(infeasible), witnesses=witnesses,
+    )  # fmt: skip
+
+
+# ---------------------------------------------------------------- a record against the exact limit
+
+
+@dataclass(frozen=True)
+class CoordinateRatio:
+    """One node's published intervals of one coordinate against the exact ones.
+
+    ``width_ratio``: mean published width / mean exact width over the steps ≥ FROM_STEP;
+    ``width_ratio_all``: the same over every step; ``rms_radius_rel``: Althoff & Rath's relative RMS
+    radius (their eq. (9)) with the exact limit as the reference observer: √(mean r²_published) /
+    √(mean r²_exact) over every step, r the interval's half-width (1 = exact).  Steps where the exact
+    interval is unbounded or empty are left out and counted in ``left_out``.  ``narrower``: steps where
+    the published interval does not contain the exact one (beyond NARROWER_TOL): the estimator relied
+    on more than these assumptions there, or one of the two is wrong.
+    """
+
+    coordinate: Coordinate
+    width_ratio: float
+    width_ratio_all: float
+    rms_radius_rel: float
+    steps: int
+    left_out: int
+    narrower: int
+
+
+@dataclass(frozen=True)
+class NodeRatios:
+    node: int
+    ratios: dict[Coordinate, CoordinateRatio]
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Per node and coordinate ratios, their mean over nodes per coordinate, and the overall mean."""
+
+    nodes: tuple[NodeRatios, ...]
+    mean_width_ratio: dict[Coordinate, float]
+    mean_rms_radius_rel: dict[Coordinate, float]
+    overall_width_ratio: float
+    overall_rms_radius_rel: float
+
+
+def _ratio(num: np.ndarray, den: np.ndarray) -> float:
+    return float(num.mean() / den.mean()) if len(num) and den.mean() > 0 else float("nan")
+
+
+def compare_record(record: Record, exact: ExactBounds) -> Comparison:
+    """The record's published intervals against ``exact`` (see :class:`CoordinateRatio`)."""
+    rows = []
+    for i in sorted(record.nodes):
+        if i not in exact.fault:
+            raise ExactError(f"{record.path}: node {i} is not in the exact bounds (nodes {sorted(exact.fault)})")
+        track = record.nodes[i]
+        ratios = {}
+        for idx, coord in enumerate(COORDINATES):
+            lo, hi = track.bounds(idx)
+            ex = exact.interval(coord, i)[track.steps]
+            ok = np.isfinite(ex).all(axis=1)
+            width, ex_width = (hi - lo)[ok], (ex[:, 1] - ex[:, 0])[ok]
+            late = track.steps[ok] >= FROM_STEP
+            slack = NARROWER_TOL * np.maximum(1.0, np.abs(ex))
+            with np.errstate(invalid="ignore"):
+                narrower = (lo > ex[:, 0] + slack[:, 0]) | (hi < ex[:, 1] - slack[:, 1])
+            ratios[coord] = CoordinateRatio(
+                coordinate=coord,
+                width_ratio=_ratio(width[late], ex_width[late]),
+                width_ratio_all=_ratio(width, ex_width),
+                rms_radius_rel=float(np.sqrt(_ratio((width / 2) ** 2, (ex_width / 2) ** 2))),
+                steps=int(ok.sum()),
+                left_out=int((~ok).sum()),
+                narrower=int(narrower.sum()),
+            )
+        rows.append(NodeRatios(i, ratios))
+
+    def mean(attr: str, coord: Coordinate) -> float:
+        return float(np.nanmean([getattr(n.ratios[coord], attr) for n in rows]))
+
+    return Comparison(
+        nodes=tuple(rows),
+        mean_width_ratio={c: mean("width_ratio", c) for c in COORDINATES},
+        mean_rms_radius_rel={c: mean("rms_radius_rel", c) for c in COORDINATES},
+        overall_width_ratio=float(np.nanmean([n.ratios[c].width_ratio for n in rows for c in COORDINATES])),
+        overall_rms_radius_rel=float(np.nanmean([n.ratios[c].rms_radius_rel for n in rows for c in COORDINATES])),
+    )
+
+
+def _finite_or_none(v: float) -> float | None:
+    return float(v) if np.isfinite(v) else None
+
+
+def exact_document(record: Record, exact: ExactBounds, comparison: Comparison) -> dict:
+    """The ``--json`` document: per step exact intervals (null: unbounded on that side, or no
+    trajectory at an infeasible step) and the record's ratios."""
+
+    def intervals(a: np.ndarray) -> list[list[float | None]]:
+        return [[_finite_or_none(lo), _finite_or_none(hi)] for lo, hi in a]
+
+    def ratio(c: CoordinateRatio) -> dict:
+        return {
+            "width_ratio": _finite_or_none(c.width_ratio), "width_ratio_all": _finite_or_none(c.width_ratio_all),
+            "rms_radius_rel": _finite_or_none(c.rms_radius_rel), "steps": c.steps, "left_out": c.left_out,
+            "narrower": c.narrower,
+        }  # fmt: skip
+
+    return {
+        "format": "netsetest-exact",
+        "version": 1,
+        "record": record.path,
+        "fault_bounds": exact.fault_bounds,
+        "bounded_nodes": list(exact.bounded_nodes),
+        "from_step": FROM_STEP,
+        "steps": [int(k) for k in exact.steps],
+        "infeasible_steps": list(exact.infeasible_steps),
+        "exact": {
+            "beta": intervals(exact.beta),
+            "r": intervals(exact.r),
+            "fault": {str(i): intervals(a) for i, a in exact.fault.items()},
+        },
+        "ratios": {
+            "nodes": {str(n.node): {c: ratio(n.ratios[c]) for c in COORDINATES} for n in comparison.nodes},
+            "mean_width_ratio": {c: _finite_or_none(v) for c, v in comparison.mean_width_ratio.items()},
+            "mean_rms_radius_rel": {c: _finite_or_none(v) for c, v in comparison.mean_rms_radius_rel.items()},
+            "overall_width_ratio": _finite_or_none(comparison.overall_width_ratio),
+            "overall_rms_radius_rel": _finite_or_none(comparison.overall_rms_radius_rel),
+        },
+    }

@@ -1,0 +1,148 @@
+"""A Python API for notebooks: ``netsetest.simulate(...)`` runs a scenario and returns typed arrays.
+
+    import netsetest
+    res = netsetest.simulate("paper6", case="saim", steps=40)
+    res.nodes[2].upper[:, 2]      # upper fault bound of node 2 per step
+    res.violations                # misses on steps where every assumption held (must be 0)
+    df = res.to_pandas()          # one row per node and step (pip install 'netsetest[export]')
+
+``mode="inmemory"`` runs every role in this process (deterministic); ``mode="zenoh"`` runs
+``netsetest run --mode zenoh`` (one process per role) and reads its record back.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+
+from netsetest.config.schema import Case, ConfigError, load_topology
+from netsetest.estimator.sdp import Variant
+from netsetest.extras import require
+from netsetest.models.signals import SignalKind
+from netsetest.records.export import node_table
+from netsetest.records.record import Record, load_record, record_from_parts, save_record
+
+if TYPE_CHECKING:
+    import pandas
+
+Mode = Literal["inmemory", "zenoh"]
+COMPONENT_NAMES = ("beta", "r", "fault")  # the columns of centre/lower/upper/truth: β [rad], r [rad/s], f [rad/s]
+
+
+class SimulationError(RuntimeError):
+    """A Zenoh run that ended without a record (the message carries its exit code and error output)."""
+
+
+@dataclass(frozen=True)
+class NodeSeries:
+    """One node's published ellipsoids over the steps it reported (K of them), and their check.
+
+    Columns of ``centre``, ``lower``, ``upper`` and ``truth``: β [rad], r [rad/s], f [rad/s];
+    bounds are x̂ ∓ √(ρ P_jj), the ellipsoid's projection on each axis."""
+
+    id: int
+    steps: np.ndarray  # (K,) int
+    t: np.ndarray  # (K,) k·τs [s]
+    centre: np.ndarray  # (K, 3) x̂
+    lower: np.ndarray  # (K, 3)
+    upper: np.ndarray  # (K, 3)
+    truth: np.ndarray  # (K, 3) true [β, r, f_i]; NaN where the truth of the step is unknown
+    E: np.ndarray  # (K,) eᵀP⁻¹e; NaN where the truth is unknown
+    rho: np.ndarray  # (K,) the radius: contained ⇔ E ≤ ρ
+    contained: np.ndarray  # (K,) bool
+    assumptions_ok: np.ndarray  # (K,) bool: every assumption in the step's dependency cone held
+    status: tuple[str, ...]  # per step: init, init-prior, ok, fallback or rejoin
+
+
+@dataclass(frozen=True)
+class SimulationResult:
+    """Per-node arrays, the run's summary (the ``--summary-json`` object) and the full record."""
+
+    nodes: dict[int, NodeSeries]
+    summary: dict
+    record: Record  # for plots (netsetest.records.plots), MCAP (netsetest.records.mcap_io), inspect
+
+    @property
+    def violations(self) -> int:
+        """Misses on steps where every assumption held: the estimator's failures (must be 0)."""
+        return int(self.summary["violations_total"])
+
+    @property
+    def covered_steps(self) -> dict[int, int]:
+        """Per node: how many of its published steps were judged with every assumption held (the summary's
+        ``steps_covered``: the truth known, one copy, the dependency cone intact)."""
+        return {i: int((s.assumptions_ok & np.isfinite(s.E)).sum()) for i, s in self.nodes.items()}
+
+    def save(self, path: str | Path) -> None:
+        """Write the record (JSON, ``.gz`` compressed, or ``.mcap``)."""
+        rec = self.record
+        save_record(path, rec.meta, rec.truth, rec.raw_nodes, rec.summary)
+
+    def to_pandas(self) -> pandas.DataFrame:
+        """One row per node and published step: node, step, t, estimate/lower/upper/true of β, r, f, E,
+        ρ, contained, assumptions_ok, status (the columns of ``netsetest export``)."""
+        require("pandas", "SimulationResult.to_pandas()")
+        import pandas as pd
+
+        frames = [pd.DataFrame({"node": i, **node_table(self.record, i)}) for i in sorted(self.nodes)]
+        return pd.concat(frames, ignore_index=True)
+
+
+def simulate(
+    topology: str | Path,
+    case: Case | None = None,
+    signals: SignalKind = "paper",
+    seed: int = 0,
+    variant: Variant = "scheduled",
+    steps: int | None = None,
+    mode: Mode = "inmemory",
+) -> SimulationResult:
+    """Run ``topology`` (a file, or a bundled name such as ``"paper6"``); ``case`` and ``steps`` override
+    the file.  Raises :class:`~netsetest.config.schema.ConfigError` on a bad file or argument."""
+    if mode == "inmemory":
+        from netsetest.runtime.inmemory import run_inmemory
+
+        res = run_inmemory(load_topology(topology, case, steps), signals, variant, seed)
+        return result_of(record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary))
+    if mode == "zenoh":
+        return result_of(_run_zenoh(topology, case, signals, seed, variant, steps))
+    raise ConfigError(f"mode must be 'inmemory' or 'zenoh', got {mode!r}")
+
+
+def _run_zenoh(topology: str | Path, case: Case | None, signals: str, seed: int, variant: str, steps: int | None) -> Record:
+    load_topology(topology, case, steps)  # bad input fails here, with the loader's message
+    with tempfile.TemporaryDirectory(prefix="netsetest-") as tmp:
+        rec = Path(tmp) / "run.json"
+        argv = [sys.executable, "-m", "netsetest.cli.main", "run", str(topology), "--mode", "zenoh", "--quiet",
+                "--signals", signals, "--seed", str(seed), "--variant", variant, "--record", str(rec)]  # fmt: skip
+        argv += ["--case", case] if case else []
+        argv += ["--steps", str(steps)] if steps else []
+        proc = subprocess.run(argv, capture_output=True, text=True)
+        if not rec.exists():
+            raise SimulationError(f"netsetest run --mode zenoh exited {proc.returncode} without a record: {proc.stderr.strip()[-2000:]}")
+        return load_record(rec)
+
+
+def result_of(rec: Record) -> SimulationResult:
+    """The typed view of a record (from a run, or :func:`~netsetest.records.record.load_record`)."""
+    nodes = {}
+    for i, tr in rec.nodes.items():
+        bounds = [tr.bounds(j) for j in range(3)]
+        truth = np.full((len(tr.steps), 3), np.nan)
+        for n, k in enumerate(tr.steps):
+            t = rec.truth_at(int(k))
+            if t is not None and str(i) in t["faults"]:
+                truth[n] = [t["x"][0], t["x"][1], t["faults"][str(i)]]
+        nodes[i] = NodeSeries(
+            id=i, steps=tr.steps, t=tr.steps * float(rec.meta.get("tau_s", 1.0)), centre=tr.xhat,
+            lower=np.column_stack([lo for lo, _ in bounds]), upper=np.column_stack([hi for _, hi in bounds]),
+            truth=truth, E=tr.E, rho=tr.rho, contained=tr.contained, assumptions_ok=tr.assumptions_ok,
+            status=tuple(tr.status),
+        )  # fmt: skip
+    return SimulationResult(nodes, rec.summary, rec)

@@ -1,0 +1,79 @@
+"""``netsetest compare``: one table, one row per guaranteed estimator (logic in analysis/compare.py)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable
+
+from netsetest.cli import checks
+from netsetest.estimator.names import DEFAULT_COMPARE, ESTIMATOR_NAMES
+
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
+SIGNAL_KINDS = ("paper", "worst")
+
+
+def _names(s: str) -> tuple[str, ...]:
+    items = tuple(x.strip() for x in s.split(",") if x.strip())
+    unknown = [x for x in items if x not in ESTIMATOR_NAMES]
+    if not items or unknown:
+        raise argparse.ArgumentTypeError(f"unknown estimator {unknown[0] if unknown else s!r}; choose from {', '.join(ESTIMATOR_NAMES)}")
+    return items
+
+
+def _signals(s: str) -> tuple[str, ...]:
+    items = tuple(x.strip() for x in s.split(","))
+    bad = [x for x in items if x not in SIGNAL_KINDS]
+    if bad:
+        raise argparse.ArgumentTypeError(f"signal kind {bad[0]!r}: choose from {', '.join(SIGNAL_KINDS)}")
+    return items
+
+
+def _seeds(s: str) -> tuple[int, ...]:
+    return tuple(checks.seed(x) for x in s.split(","))
+
+
+def add_parser(sub: argparse._SubParsersAction, scenario_args: Callable[[argparse.ArgumentParser], None]) -> None:
+    p = sub.add_parser("compare", help="every guaranteed estimator on the same vehicle, network and data: one row each")
+    scenario_args(p)
+    p.add_argument("--estimators", type=_names, default=DEFAULT_COMPARE, metavar="A,B,…",
+                   help=f"rows, from {', '.join(ESTIMATOR_NAMES)} (default: {','.join(DEFAULT_COMPARE)})")  # fmt: skip
+    p.add_argument("--signals", type=_signals, default=("paper",), metavar="KINDS", help="paper and/or worst, comma-separated (default: paper)")
+    p.add_argument("--seeds", type=_seeds, default=(0,), metavar="S,…", help="seeds, comma-separated (default: 0)")
+    p.add_argument("--json", metavar="PATH", help="write the rows as a JSON list")
+    p.add_argument("--markdown", metavar="PATH", help="write the table as Markdown")
+    p.add_argument("--plot", metavar="DIR", help="one figure per node: every estimator's fault bounds and the truth (first run)")
+    COMMANDS["compare"] = cmd_compare
+
+
+def cmd_compare(a: argparse.Namespace) -> int:
+    from netsetest.analysis.compare import TABLE_HEADER, compare, comparison_document, markdown_table, plot_fault_bounds, table_rows
+
+    checks.output_file(a.json, "--json")
+    checks.output_file(a.markdown, "--markdown")
+    if a.plot:
+        checks.output_dir(a.plot, "--plot")
+    c = compare(a.topology, a.estimators, (a.case,), a.signals, a.seeds, a.steps)
+    rows = [TABLE_HEADER, *table_rows(c)]
+    widths = [max(len(r[j]) for r in rows) for j in range(len(TABLE_HEADER))]
+    print(f"compare {c.topology}: runs {', '.join(c.runs)}, {c.steps} steps; widths: mean over nodes and steps ≥ 10")
+    for r in rows:
+        print("  ".join(cell.ljust(w) for cell, w in zip(r, widths)))
+    for row in c.rows:
+        for reason in row.refused:
+            print(f"  {row.estimator} refused: {reason}")
+    if a.json:
+        with open(a.json, "w") as fh:
+            json.dump(comparison_document(c), fh, indent=1)
+    if a.markdown:
+        with open(a.markdown, "w") as fh:
+            fh.write(markdown_table(c))
+    if a.plot:
+        for path in plot_fault_bounds(c, a.plot):
+            print(f"wrote {path}")
+    failed = [r.estimator for r in c.rows if r.violations]
+    if failed:
+        print(f"containment violated where the assumptions held: {', '.join(failed)}", file=sys.stderr)
+        return 1
+    return 0

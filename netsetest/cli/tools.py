@@ -1,0 +1,168 @@
+"""``netsetest echo``, ``watch`` (live views of a running run) and ``export`` (records as tables)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import time
+from collections.abc import Callable
+
+from netsetest.runtime.report import EXIT_BAD_INPUT
+
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
+WATCH_REFRESH_HZ = 4.0
+PIPE_WIDTH = 160  # watch's table width when stdout is not a terminal (a log, a test): never truncated
+POLL_S = 0.1  # how often the loops look at the clock while no message arrives
+
+
+def _seconds(s: str) -> float:
+    try:
+        v = float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number of seconds: {s!r}") from None
+    if not v > 0 or v == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {s}")
+    return v
+
+
+def _count(s: str) -> int:
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {s!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {v}")
+    return v
+
+
+def _observer_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--run-id", help="the run to observe (default: every run on the network, '*')")
+    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+                   help="Zenoh endpoint of the run, e.g. tcp/127.0.0.1:7447: a router or a role's --listen endpoint (repeatable; default: none)")  # fmt: skip
+    p.add_argument("--zenoh-mode", choices=["peer", "client"], default="peer", help="peer (default) or client of a router")
+    p.add_argument("--zenoh-config", metavar="FILE",
+                   help="Zenoh configuration file (JSON5), e.g. the credentials of a secured run; --connect adds endpoints to it")  # fmt: skip
+    p.add_argument("--duration", type=_seconds, metavar="S", help="stop after S seconds (default: until Ctrl-C)")
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("echo", help="print the decoded messages of a running run (like ros2 topic echo)")
+    p.add_argument("key", nargs="?",
+                   help="key expression, relative to the run (node/3/state, vehicle/**) or absolute (netsetest/...); default: everything")  # fmt: skip
+    _observer_args(p)
+    p.add_argument("--count", type=_count, metavar="N", help="stop after N messages (default: no limit)")
+    p.add_argument("--json", action="store_true", help="one JSON object per line: key and message fields")
+
+    p = sub.add_parser("watch", help="live per-node table of a running run: step, fault bound, E, drops, deadline misses")
+    _observer_args(p)
+
+    p = sub.add_parser("export", help="per-node tables of a record for pandas/polars (Parquet or CSV)")
+    p.add_argument("record", help="record file (.json, .json.gz or .mcap)")
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--parquet", metavar="DIR", help="write DIR/node_<i>.parquet (needs pip install 'netsetest[export]')")
+    g.add_argument("--csv", metavar="DIR", help="write DIR/node_<i>.csv")
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt  # SIGTERM ends echo/watch like Ctrl-C: the Zenoh session is closed
+
+
+def _observer(a: argparse.Namespace, key: str | None):  # noqa: ANN202 — (Observer | None, error message)
+    from netsetest.bus.zenoh_bus import BusError
+    from netsetest.runtime.live import Observer, observed_key, observer_config
+
+    try:
+        obs = Observer(observed_key(a.run_id, key), observer_config(a.zenoh_mode, a.connect, a.zenoh_config))
+    except BusError as exc:
+        return None, str(exc)
+    signal.signal(signal.SIGTERM, _interrupt)  # from here on the caller's loop closes the session
+    return obs, None
+
+
+def cmd_echo(a: argparse.Namespace) -> int:
+    obs, err = _observer(a, a.key)
+    if obs is None:
+        print(f"netsetest echo: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    end = None if a.duration is None else time.monotonic() + a.duration
+    shown = 0
+    try:
+        while (a.count is None or shown < a.count) and (end is None or time.monotonic() < end):
+            got = obs.get(POLL_S)
+            if got is None:
+                continue
+            doc = got.as_json()
+            if a.json:
+                print(json.dumps(doc, separators=(",", ":")), flush=True)
+            else:
+                key = doc.pop("key")
+                print(f"{key}  {json.dumps(doc, separators=(', ', ': '))}", flush=True)
+            shown += 1
+    except KeyboardInterrupt:
+        pass
+    finally:
+        obs.close()
+    return 0
+
+
+def _fmt(v: float | None, spec: str) -> str:
+    return "-" if v is None else format(v, spec)
+
+
+def _render(table, title: str):  # noqa: ANN001, ANN202 — LiveTable → rich Table
+    from rich.table import Table
+
+    t = Table(title=title)
+    for col in ("node", "step", "status", "fault lower", "fault upper", "E (step)", "ρ", "lost", "missing", "dropped", "deadline"):
+        t.add_column(col, justify="right")
+    for r in table.sorted_rows():
+        E = "-" if r.E is None else f"{r.E:.3f} ({r.E_step})"
+        t.add_row(str(r.id), _fmt(r.step, "d"), r.status, _fmt(r.fault_lower, ".4f"), _fmt(r.fault_upper, ".4f"),
+                  E, _fmt(r.rho, ".3g"), str(r.lost), str(r.missing), str(r.dropped), str(r.deadline_misses))  # fmt: skip
+    return t
+
+
+def cmd_watch(a: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.live import Live
+
+    from netsetest.runtime.live import LiveTable
+
+    obs, err = _observer(a, None)
+    if obs is None:
+        print(f"netsetest watch: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    table = LiveTable()
+    title = f"netsetest run {a.run_id or '*'}"
+    end = None if a.duration is None else time.monotonic() + a.duration
+    try:
+        console = Console(width=None if sys.stdout.isatty() else PIPE_WIDTH)
+        with Live(_render(table, title), console=console, refresh_per_second=WATCH_REFRESH_HZ) as live:
+            next_draw = 0.0
+            while table.ended is None and (end is None or time.monotonic() < end):
+                got = obs.get(POLL_S)
+                if got is not None:
+                    table.update(got.message)
+                if time.monotonic() >= next_draw or table.ended is not None:
+                    live.update(_render(table, title + (f": ended after {table.ended.steps} steps" if table.ended else "")))
+                    next_draw = time.monotonic() + 1.0 / WATCH_REFRESH_HZ
+    except KeyboardInterrupt:
+        pass
+    finally:
+        obs.close()
+    return 0
+
+
+def cmd_export(a: argparse.Namespace) -> int:
+    from netsetest.records.export import export_record
+    from netsetest.records.record import load_record
+
+    fmt, out = ("parquet", a.parquet) if a.parquet else ("csv", a.csv)
+    for f in export_record(load_record(a.record), out, fmt):
+        print(f)
+    return 0
+
+
+COMMANDS.update(echo=cmd_echo, watch=cmd_watch, export=cmd_export)

@@ -1,0 +1,71 @@
+"""The estimator interface every guaranteed estimator of a node implements (issue 9).
+
+Per node and step the input is a :class:`StepInput` (the node's own ỹ_k, γ_k and the vehicle's
+u_{k−1}, Vx_{k−1}) plus the neighbours' published sets (:class:`NeighbourSet`); the output is a
+guaranteed set over the node's augmented state [β, r, f_i] (a type of :mod:`netsetest.sets`, each with
+``contains`` and per-coordinate ``bounds``).
+
+Each method declares which assumptions its guarantee rests on (:data:`Assumption` names, so a checker
+can attribute a miss) and whether it uses its neighbours' sets.  The ellipsoidal SDP of this project
+(estimator/sdp.py, run by roles/node.py) is the one method that uses them; the methods of the other
+papers (001, 003) are single-sensor observers and ignore them (documented per module).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Literal, Union
+
+from netsetest.sets import Box, Ellipsoid, SumSet, Zonotope
+
+GuaranteedSet = Union[Ellipsoid, Zonotope, Box, SumSet]  # noqa: UP007 (a runtime alias)
+
+Assumption = Literal["prior", "noise", "disturbance", "fault_bound"]
+"""What a guarantee may rest on: the truth x̄_0 in the prior ellipsoid (step 0), the measurement noise
+bound v² ≤ R at every step used, the wind bound w² ≤ W at every step propagated, the declared fault
+bound (|f_k+1 − f_k| ≤ δ, |f_k| ≤ F) at every step used.  The truth record flags each per step."""
+
+BASE_ASSUMPTIONS: tuple[Assumption, ...] = ("prior", "noise", "disturbance")
+
+
+class EstimatorError(ValueError):
+    """An estimator cannot run on this node or these data (e.g. a needed declared bound is missing)."""
+
+
+@dataclass(frozen=True)
+class StepInput:
+    """What node i knows at step k: its own measurement and availability, and the vehicle's previous
+    input and speed (None at step 0, where the prior is cut by the first measurement)."""
+
+    step: int
+    y: float
+    gamma: float
+    u_prev: float | None = None
+    vx_prev: float | None = None
+
+
+@dataclass(frozen=True)
+class NeighbourSet:
+    """A neighbour's published set of step k−1 over its own [β, r, f_j]."""
+
+    node: int
+    step: int
+    set: GuaranteedSet
+
+
+class SetEstimator(ABC):
+    """One node's guaranteed estimator; :meth:`step` is called once per step, in order from step 0."""
+
+    name: str  # the registry name (``netsetest compare --estimators``)
+    uses_neighbours: bool = False
+
+    @property
+    @abstractmethod
+    def assumptions(self) -> tuple[Assumption, ...]:
+        """The assumptions this node's guarantee rests on (depends on the node: e.g. a fault bound is
+        needed only where a measurement can be one-sided)."""
+
+    @abstractmethod
+    def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> GuaranteedSet:
+        """The published set of step ``inp.step``."""

@@ -1,0 +1,7 @@
+"""Estimator names, in a module without heavy imports (the CLI's help lists them)."""
+
+SDP = "sdp"  # this project's ellipsoidal SDP (estimator/sdp.py), run by roles/node.py
+EXACT = "exact"  # the exact limit (analysis/exact.py): a comparison row, not a real-time estimator
+SET_ESTIMATOR_NAMES: tuple[str, ...] = ("zonotope", "zonotope-q10", "interval", "interval-classical", "strip", "setprop")
+ESTIMATOR_NAMES: tuple[str, ...] = (SDP, *SET_ESTIMATOR_NAMES, EXACT)
+DEFAULT_COMPARE: tuple[str, ...] = (SDP, "zonotope", "interval", "strip", "setprop", EXACT)

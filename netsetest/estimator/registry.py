@@ -1,0 +1,26 @@
+"""The guaranteed estimators a node can run, by name (``netsetest compare --estimators``).
+
+``sdp`` is this project's ellipsoidal estimator (estimator/sdp.py), run by roles/node.py in the network;
+the others implement estimator/base.py and are stepped per node on a run's data.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from netsetest.config.schema import Scenario
+from netsetest.estimator.base import SetEstimator
+from netsetest.estimator.interval_althoff_rath import IntervalObserver
+from netsetest.estimator.names import SET_ESTIMATOR_NAMES
+from netsetest.estimator.set_propagation_althoff_rath import SetPropagationObserver
+from netsetest.estimator.strip_althoff_rath import StripObserver
+from netsetest.estimator.zonotope_w_radius import ZonotopeEstimator
+
+SET_ESTIMATORS: dict[str, Callable[[Scenario, int], SetEstimator]] = {
+    "zonotope": lambda sc, i: ZonotopeEstimator(sc, i),
+    "zonotope-q10": lambda sc, i: ZonotopeEstimator(sc, i, order=10),
+    "interval": lambda sc, i: IntervalObserver(sc, i),
+    "interval-classical": lambda sc, i: IntervalObserver(sc, i, wrapping=True),
+    "strip": lambda sc, i: StripObserver(sc, i),
+    "setprop": lambda sc, i: SetPropagationObserver(sc, i),
+}

@@ -1,0 +1,171 @@
+"""The sector of a saturating sensor for one step, derived from what the node knows (docs/estimator.md).
+
+For the saturation σ(r) = sign(r)·min(r_max, |r|), σ(r)/r ∈ [min(1, r_max/R), 1] for every 0 < |r| ≤ R.
+So if the node can prove |r_k| ≤ R_k for the truth's r_k = C̄ x̄_k, the sector condition
+φ(h r − φ) ≥ 0 with φ = σ(r) − h1 r holds for h1 = min(1, r_max/R_k) and h = 1 − h1 (1 is the exact upper
+slope of a saturation: any h2 ≥ 1 is valid but looser, an h2 < 1 is false for small |r|).  If R_k ≤ r_max
+the sensor provably does not saturate at k: φ_k ≡ 0 and the φ slot is dropped.
+
+R_k comes from an interval [lo, hi] ∋ r_k, the intersection of whatever the node can prove:
+
+- ``measurement``: ỹ = γσ(r) + Dv v with v² ≤ R gives σ(r) ∈ [s_lo, s_hi]; σ is the identity on
+  (−r_max, r_max), so s_hi < r_max ⇒ r ≤ s_hi and s_lo > −r_max ⇒ r ≥ s_lo (a measurement at the limit
+  is a one-sided constraint);
+- ``fault-bound``: the node's certified set of step k−1 propagated through that step's blended dynamics
+  and the wind bound, with f_k − f_k−1 ∈ [−δ, δ] (declared rate) and/or f_k ∈ [−F, F] (declared size);
+  at step 0 the prior set (Assumption 1) and the size bound.
+
+Every bound is a support function of an ellipsoid plus interval radii: exact, no approximation.  If
+neither gives a finite R_k (no fault bound declared and the measurement at the limit), the paper's
+fixed sector (h1, h2 − h1 of the profile) is used and marked ``assumed``: it holds only while
+|r_k| ≤ r_max/h1, which the collector checks against the truth.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from netsetest.models.sensor import NX, ROUNDING_MARGIN, Sensor
+
+SATURATION_UPPER_SLOPE = 1.0  # sup σ(r)/r of a saturation: the exact h2
+SectorBasis = Literal["none", "measurement", "fault-bound", "assumed"]
+
+
+@dataclass(frozen=True)
+class FaultBound:
+    """Declared bound on a sensor's fault: |f_k − f_k−1| ≤ rate, |f_k| ≤ size (None: not declared)."""
+
+    rate: float | None = None
+    size: float | None = None
+
+
+@dataclass(frozen=True)
+class Sector:
+    """Sector of φ at one step: φ = σ(r) − h1·r ∈ [0, h·r]; ``basis`` says what it rests on.
+
+    h = 0 (then h1 = 1): the sensor provably does not saturate at this step, φ ≡ 0 (no φ slot).
+    """
+
+    h1: float
+    h: float
+    basis: SectorBasis
+
+    @property
+    def has_phi(self) -> bool:
+        return self.h > 0.0
+
+
+@dataclass(frozen=True)
+class Interval:
+    lo: float
+    hi: float
+
+    def __and__(self, other: Interval) -> Interval:
+        return Interval(max(self.lo, other.lo), min(self.hi, other.hi))
+
+    @property
+    def radius(self) -> float:
+        """max |r| over the interval."""
+        return max(abs(self.lo), abs(self.hi))
+
+
+UNBOUNDED = Interval(-math.inf, math.inf)
+
+
+def measurement_interval(sensor: Sensor, y: float, gamma: float) -> Interval:
+    """r ∈ this interval for every r with γσ(r) + Dv v = y, v² ≤ R (one-sided where σ is at the limit)."""
+    # widened for rounding: with v at its bound a saturated reading puts s_hi at r_max up to one ulp,
+    # and a one-ulp "below the limit" would wrongly prove that the sensor does not saturate (seen
+    # with worst-case signals)
+    half = abs(sensor.Dv) * math.sqrt(sensor.R) * (1 + ROUNDING_MARGIN) + ROUNDING_MARGIN * abs(y)
+    s_lo, s_hi = (y - half) / gamma, (y + half) / gamma
+    limit = sensor.r_max * (1 - ROUNDING_MARGIN)
+    return Interval(s_lo if s_lo > -limit else -math.inf, s_hi if s_hi < limit else math.inf)
+
+
+def _support(g: np.ndarray, P: np.ndarray, rho: float) -> float:
+    """max gᵀ(x̄ − x̂) over {(x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ}."""
+    return math.sqrt(max(rho * float(g @ P @ g), 0.0))
+
+
+def propagated_interval(
+    sensor: Sensor, bound: FaultBound, xhat: np.ndarray, P: np.ndarray, rho: float,
+    a: np.ndarray, b: np.ndarray, d: np.ndarray, u: float, W: float,
+) -> Interval:  # fmt: skip
+    """r⁺ = C(a x + b u + d w) + Ds f⁺ over x̄ in the ellipsoid of step k, w² ≤ W, f⁺ by the fault bound.
+
+    ``a``, ``b``, ``d``: the step's blended Ā (2×2), B̄, D̄ (2,).  Rate: r⁺ = (gₓ + Ds e₃)ᵀx̄ + C b u
+    + C d w + Ds(f⁺ − f), one support function over the joint set (x and f correlated).  Size:
+    r⁺ = gₓᵀx̄ + C b u + C d w + Ds f⁺ with |f⁺| ≤ F.  Both hold; the result is their intersection.
+    """
+    C, Ds = sensor.C, sensor.Ds
+    gx = np.r_[a.T @ C, 0.0]
+    centre_u = float(C @ b) * u
+    wind = abs(float(C @ d)) * math.sqrt(W)
+    out = UNBOUNDED
+    if bound.rate is not None:
+        g = gx + np.r_[np.zeros(NX), Ds]
+        c = float(g @ xhat) + centre_u
+        rad = _support(g, P, rho) + wind + abs(Ds) * bound.rate
+        out = out & Interval(c - rad, c + rad)
+    if bound.size is not None:
+        c = float(gx @ xhat) + centre_u
+        rad = _support(gx, P, rho) + wind + abs(Ds) * bound.size
+        out = out & Interval(c - rad, c + rad)
+    return out
+
+
+def prior_interval(sensor: Sensor, bound: FaultBound, xhat: np.ndarray, P: np.ndarray, rho: float) -> Interval:
+    """r₀ = C̄ x̄₀ over the prior ellipsoid (Assumption 1), and with |f₀| ≤ F where declared."""
+    cbar = sensor.Cbar
+    c = float(cbar @ xhat)
+    rad = _support(cbar, P, rho)
+    out = Interval(c - rad, c + rad)
+    if bound.size is not None:
+        gx = np.r_[sensor.C, 0.0]
+        cx, radx = float(gx @ xhat), _support(gx, P, rho) + abs(sensor.Ds) * bound.size
+        out = out & Interval(cx - radx, cx + radx)
+    return out
+
+
+def derive_sector(sensor: Sensor, bound: FaultBound, meas: Interval, prior: Interval | None) -> Sector | None:
+    """The step's sector from the measurement interval and (if a fault bound is declared) the propagated one.
+
+    None: the sensor models no saturation.  h = 0: it provably does not saturate at this step.
+    """
+    if not sensor.saturated:
+        return None
+    declared = bound.rate is not None or bound.size is not None
+    basis: SectorBasis = "measurement"
+    rng = meas
+    if declared and prior is not None:
+        both = meas & prior
+        if both.radius < meas.radius:
+            rng, basis = both, "fault-bound"
+    if not math.isfinite(rng.radius):
+        return Sector(sensor.h1, sensor.h2 - sensor.h1, "assumed")
+    if rng.radius <= sensor.r_max:
+        return Sector(1.0, 0.0, basis)
+    h1 = sensor.r_max / rng.radius
+    h2 = SATURATION_UPPER_SLOPE
+    if rng.lo > 0.0 or rng.hi < 0.0:  # one sign of r: σ(r)/r ≤ r_max/min|r| (a reading at the limit)
+        h2 = min(h2, sensor.r_max / min(abs(rng.lo), abs(rng.hi)))
+    return Sector(h1, h2 - h1, basis)
+
+
+def sector_ok(sensor: Sensor, sector: Sector | None, r: float) -> bool:
+    """Whether the step's sector holds for the truth's r = C̄ x̄ (None: the sensor models no saturation)."""
+    if sector is None or not sensor.saturated:
+        return True
+    limit = sensor.r_max / sector.h1
+    return abs(r) <= limit * (1 + 1e-12)
+
+
+__all__ = [
+    "FaultBound", "Sector", "SectorBasis", "Interval", "measurement_interval", "propagated_interval",
+    "prior_interval", "derive_sector", "sector_ok", "SATURATION_UPPER_SLOPE",
+]  # fmt: skip

@@ -1,0 +1,74 @@
+"""Set-propagation zonotopic observer of Althoff & Rath's comparison (seeds/003, Sec. 2.5 and 3.2, their
+eq. (8) with the FRad-C gain) for one node's [β, r, f_i] (issue 9).
+
+Reference: M. Althoff, J. J. Rath, "Comparison of guaranteed state estimators for linear time-invariant
+systems", Automatica 2021 (seeds/003): S_k+1 = (A − L C) S_k ⊕ B u_k ⊕ L y_k ⊕ (−L) V ⊕ W, guaranteed
+for any gain L, here L_k = A G Gᵀ Cᵀ (C G Gᵀ Cᵀ + F Fᵀ)⁻¹ minimising the F-radius (Combastel [22]),
+recomputed every step; order reduction ↓q.  Derivation: docs/estimators/set_propagation_althoff_rath.md.
+
+The augmented random-walk model of strip_althoff_rath (the declared fault rate, or f⁺ ∈ [−F, F] with
+only a size declared) gives A, B, W.  The measurement is C̄ x̄ ∈ [lo, hi]: y = the interval's midpoint,
+V = [−σ, σ] its half-width.  (8) is a one-step predictor: the set published at step k uses ỹ up to
+k − 1 (003, Sec. 2.7: it is ready before y_k arrives); step 0 publishes the prior box.  Where a
+saturated measurement is one-sided, L = 0 on that step (the measurement is not used).  The declared
+|f| ≤ F is not used (no intersection in this form).  It ignores the neighbours' sets.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from netsetest.config.schema import Scenario
+from netsetest.estimator.base import BASE_ASSUMPTIONS, Assumption, EstimatorError, NeighbourSet, SetEstimator, StepInput
+from netsetest.estimator.strip_althoff_rath import DEFAULT_ORDER, augmented_step, fault_model_required, prior_box
+from netsetest.estimator.zonotope_w_radius import reduce_order
+from netsetest.models.sensor import NA
+from netsetest.sets import Zonotope
+
+
+class SetPropagationObserver(SetEstimator):
+    """003's set-propagation observer (8) with the F-radius gain, on the random-walk augmented model."""
+
+    name = "setprop"
+    uses_neighbours = False
+
+    def __init__(self, scenario: Scenario, node_id: int, order: int | None = DEFAULT_ORDER) -> None:
+        self.sc, self.node = scenario, scenario.node(node_id)
+        fault_model_required(self.node)
+        self.order = order
+        self.set: Zonotope | None = None
+        self.last_interval: tuple[float, float] = (-np.inf, np.inf)  # C̄ x̄ of the previous step
+
+    @property
+    def assumptions(self) -> tuple[Assumption, ...]:
+        return BASE_ASSUMPTIONS + ("fault_bound",)
+
+    def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> Zonotope:
+        if self.set is None:
+            z = prior_box(self.node)
+        elif inp.u_prev is None or inp.vx_prev is None:
+            raise EstimatorError("a step after step 0 needs u and Vx of the previous step")
+        else:
+            z = self._propagate(self.set, inp.u_prev, inp.vx_prev)
+        self.last_interval = self.node.sensor.measured_interval(inp.y, inp.gamma)
+        self.set = z
+        return z
+
+    def _propagate(self, s: Zonotope, u: float, vx: float) -> Zonotope:
+        """(8): (A − L C̄) S ⊕ B u ⊕ L y ⊕ (−L) V ⊕ W with y, V the previous measurement's midpoint and
+        half-width (module doc)."""
+        m = augmented_step(self.sc, self.node, u, vx)
+        c_bar = self.node.sensor.Cbar
+        lo, hi = self.last_interval
+        if np.isfinite(lo) and np.isfinite(hi):
+            mid, sigma = (lo + hi) / 2, (hi - lo) / 2
+            gg = s.generators @ s.generators.T
+            gain = m.A @ gg @ c_bar / (c_bar @ gg @ c_bar + sigma**2)
+        else:
+            mid, sigma, gain = 0.0, 0.0, np.zeros(NA)
+        closed = m.A - np.outer(gain, c_bar)
+        center = closed @ s.center + m.shift + gain * mid
+        gens = np.hstack([closed @ s.generators, (gain * sigma)[:, None], m.gens])
+        if self.order is not None:
+            gens = reduce_order(gens, self.order, np.eye(NA))
+        return Zonotope(center, gens)

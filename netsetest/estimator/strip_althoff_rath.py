@@ -1,0 +1,114 @@
+"""Strip-based zonotopic observer of Althoff & Rath's comparison (seeds/003, Sec. 2.4 and 3.1) for one
+node's [β, r, f_i] (issue 9).
+
+Reference: M. Althoff, J. J. Rath, "Comparison of guaranteed state estimators for linear time-invariant
+systems", Automatica 2021 (seeds/003): prediction S_p = A S ⊕ B u ⊕ W, then the intersection with the
+measurement strip {|C x − y| ≤ σ} over-approximated by a zonotope with a gain (their (4)–(6); the
+F-radius-minimising gain of Le et al. [38], 003 Sec. 3.1), and order reduction.  Derivation:
+docs/estimators/strip_althoff_rath.md.
+
+003's observers are for a state-space model, so the fault needs a model: the augmented state
+x̄ = [x; f] follows x̄⁺ = [Ā 0; 0 1] x̄ + [B̄; 0] u + [D̄ w; δ s], |s| ≤ 1, with the node's declared fault
+rate δ (a random walk; with only a size F declared, f⁺ ∈ [−F, F]), and the declared |f| ≤ F is a
+second strip.  Every node using this observer therefore relies on its declared fault bound.  The
+measurement strip is C̄ x̄ ∈ [lo, hi] (the measured interval; one side open at saturation, then the
+strip is first clipped to the set's own extent).  The initial set is the box of the prior ellipsoid.
+It ignores the neighbours' sets.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from netsetest.config.schema import NodeConfig, Scenario
+from netsetest.estimator.base import BASE_ASSUMPTIONS, Assumption, EstimatorError, NeighbourSet, SetEstimator, StepInput
+from netsetest.estimator.zonotope_w_radius import frobenius_gain, reduce_order
+from netsetest.models.sensor import NA, NX
+from netsetest.sets import Zonotope
+
+DEFAULT_ORDER = 20  # generators kept by ↓q (003 compares orders of this size; each step adds 2–3)
+_E3 = np.eye(NA)[2]
+_NO_PRIOR = np.zeros((NA, 0))
+
+
+@dataclass(frozen=True)
+class AugmentedStep:
+    """x̄⁺ = A x̄ + shift + gens·b, ‖b‖∞ ≤ 1: the augmented model of one step (module doc)."""
+
+    A: np.ndarray
+    shift: np.ndarray
+    gens: np.ndarray
+
+
+def fault_model_required(node: NodeConfig) -> None:
+    if node.fault_rate is None and node.fault_size is None:
+        raise EstimatorError(f"node {node.id}: this observer needs a fault model; declare a [fault_bound] rate or size")
+
+
+def augmented_step(scenario: Scenario, node: NodeConfig, u: float, vx: float) -> AugmentedStep:
+    """The random-walk augmented model of step k → k+1 with u_k, Vx_k."""
+    a, b, d = scenario.model.blend(scenario.model.weights(vx))
+    A = np.zeros((NA, NA))
+    A[:NX, :NX] = a
+    if node.fault_rate is not None:
+        A[2, 2] = 1.0
+        fault_gen = node.fault_rate
+    else:
+        fault_gen = node.fault_size  # type: ignore[assignment]  # fault_model_required checked it
+    gens = np.column_stack([np.r_[d[:, 0] * np.sqrt(scenario.W), 0.0], fault_gen * _E3])
+    return AugmentedStep(A, np.r_[b[:, 0] * u, 0.0], gens)
+
+
+def prior_box(node: NodeConfig) -> Zonotope:
+    """The interval hull of the prior ellipsoid as a zonotope."""
+    return Zonotope(node.x0_hat.copy(), np.diag(np.sqrt(node.rho * np.diag(node.P0))))
+
+
+def intersect_strip(z: Zonotope, a: np.ndarray, lo: float, hi: float) -> Zonotope:
+    """Z ∩ {lo ≤ aᵀx ≤ hi} ⊆ (I − λaᵀ)Z ⊕ λ[lo', hi'] for any λ (003 (6), 001 Theorem 1), λ the
+    F-radius-minimising gain; [lo', hi'] is the strip clipped to Z's own extent."""
+    spread = float(np.abs(a @ z.generators).sum())
+    top, bottom = float(a @ z.center) + spread, float(a @ z.center) - spread
+    lo, hi = max(lo, bottom), min(hi, top)
+    if hi < lo:
+        raise EstimatorError("the measurement is inconsistent with the set (an assumption broke)")
+    mid, sigma = (lo + hi) / 2, (hi - lo) / 2
+    lam = frobenius_gain(z.generators, _NO_PRIOR, a, sigma)
+    proj = np.eye(len(a)) - np.outer(lam, a)
+    return Zonotope(proj @ z.center + lam * mid, np.hstack([proj @ z.generators, (sigma * lam)[:, None]]))
+
+
+class StripObserver(SetEstimator):
+    """003's strip-based zonotopic observer on the random-walk augmented model."""
+
+    name = "strip"
+    uses_neighbours = False
+
+    def __init__(self, scenario: Scenario, node_id: int, order: int | None = DEFAULT_ORDER) -> None:
+        self.sc, self.node = scenario, scenario.node(node_id)
+        fault_model_required(self.node)
+        self.order = order
+        self.set: Zonotope | None = None
+
+    @property
+    def assumptions(self) -> tuple[Assumption, ...]:
+        return BASE_ASSUMPTIONS + ("fault_bound",)
+
+    def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> Zonotope:
+        if self.set is None:
+            z = prior_box(self.node)
+        elif inp.u_prev is None or inp.vx_prev is None:
+            raise EstimatorError("a step after step 0 needs u and Vx of the previous step")
+        else:
+            m = augmented_step(self.sc, self.node, inp.u_prev, inp.vx_prev)
+            z = Zonotope(m.A @ self.set.center + m.shift, np.hstack([m.A @ self.set.generators, m.gens]))
+        lo, hi = self.node.sensor.measured_interval(inp.y, inp.gamma)
+        z = intersect_strip(z, self.node.sensor.Cbar, lo, hi)
+        if self.node.fault_size is not None:
+            z = intersect_strip(z, _E3, -self.node.fault_size, self.node.fault_size)
+        if self.order is not None:
+            z = Zonotope(z.center, reduce_order(z.generators, self.order, np.eye(NA)))
+        self.set = z
+        return z

@@ -1,0 +1,118 @@
+"""The exact plausibility tests a node applies to a neighbour's state (netsetest.roles.plausibility)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from netsetest.estimator.sector import Sector
+from netsetest.models.sensor import Sensor
+from netsetest.roles.plausibility import innovation_interval, innovation_possible, states_disjoint
+
+
+def _spd(rng: np.random.Generator, scale: float = 1.0) -> np.ndarray:
+    a = rng.normal(size=(3, 3))
+    return scale * (a @ a.T + 0.1 * np.eye(3))
+
+
+def _sensor(rng: np.random.Generator, saturated: bool) -> Sensor:
+    C = rng.normal(size=2)
+    if not saturated:
+        return Sensor(C=C, Ds=float(rng.uniform(0.3, 0.7)), Dv=float(rng.uniform(1e-3, 0.1)), R=float(rng.uniform(0.5, 3)))
+    return Sensor(C=C, Ds=float(rng.uniform(0.3, 0.7)), Dv=float(rng.uniform(1e-3, 0.1)), R=float(rng.uniform(0.5, 3)),
+                  saturated=True, r_max=float(rng.uniform(0.02, 1.0)), h1=float(rng.uniform(0.5, 0.95)), h2=float(rng.uniform(1.0, 1.5)))  # fmt: skip
+
+
+@pytest.mark.parametrize("saturated", [False, True])
+def test_every_honest_innovation_is_possible(saturated: bool) -> None:
+    """A sensor whose truth lies in its published ellipsoid, with noise within its bound and the sector
+    condition holding, always produces an innovation inside the interval."""
+    rng = np.random.default_rng(11)
+    checked = 0
+    for _ in range(3000):
+        s = _sensor(rng, saturated)
+        xhat, P, rho = rng.normal(size=3) * 0.3, _spd(rng, 0.05), float(rng.uniform(0.2, 2.0))
+        z = rng.normal(size=3)
+        z *= rng.uniform() ** (1 / 3) / np.linalg.norm(z)  # |z| ≤ 1
+        x = xhat + np.sqrt(rho) * np.linalg.cholesky(P) @ z  # in the ellipsoid
+        if not s.sector_holds(x):
+            continue
+        gamma = float(rng.uniform(0.1, 1.0))
+        v = float(rng.uniform(-1, 1) * np.sqrt(s.R))
+        y = s.measure(x, gamma, v)
+        assert innovation_possible(s, xhat, P, rho, gamma, None, y - float(s.Cbar @ xhat))
+        checked += 1
+    assert checked > 1000
+
+
+@pytest.mark.parametrize("saturated", [False, True])
+def test_interval_is_exactly_what_the_estimator_facts_admit(saturated: bool) -> None:
+    """The ends are reached by admissible (s, v, φ) of the S-procedure facts; a hair beyond is rejected."""
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        s = _sensor(rng, saturated)
+        xhat, P, rho, gamma = rng.normal(size=3), _spd(rng), float(rng.uniform(0.2, 2.0)), float(rng.uniform(0.1, 1.0))
+        lo, hi = innovation_interval(s, xhat, P, rho, gamma, None)
+        cx = float(s.Cbar @ xhat)
+        c = float(np.sqrt(rho * s.Cbar @ P @ s.Cbar))
+        noise = abs(s.Dv) * np.sqrt(s.R)
+        # y̌(s, φ, v) = (γ h1 − 1) cx + γ h1 c s + γ φ + Dv v with φ ∈ sector [0, h r], r = cx + c s
+        cands = []
+        for sj in (-1.0, 1.0):
+            r = cx + c * sj
+            for phi in (0.0, (s.h2 - s.h1) * r):
+                for v in (-noise, noise):
+                    cands.append((gamma * s.h1 - 1.0) * cx + gamma * s.h1 * c * sj + gamma * phi + v)
+        assert min(cands) == pytest.approx(lo, rel=1e-12, abs=1e-14) and max(cands) == pytest.approx(hi, rel=1e-12, abs=1e-14)
+        width = hi - lo
+        assert innovation_possible(s, xhat, P, rho, gamma, None, lo) and innovation_possible(s, xhat, P, rho, gamma, None, hi)
+        assert not innovation_possible(s, xhat, P, rho, gamma, None, hi + 1e-6 * width)
+        assert not innovation_possible(s, xhat, P, rho, gamma, None, lo - 1e-6 * width)
+
+
+def test_disjoint_only_when_provably_so() -> None:
+    rng = np.random.default_rng(3)
+    I = np.eye(3)
+    assert states_disjoint(np.zeros(3), I, 1.0, np.array([2.5, 0.0, 0.0]), I, 1.0)
+    assert not states_disjoint(np.zeros(3), I, 1.0, np.array([1.9, 0.0, 0.0]), I, 1.0)
+    assert not states_disjoint(np.zeros(3), I, 1.0, np.array([0.0, 0.0, 50.0]), I, 1.0)  # f is not shared
+    grid = np.stack(np.meshgrid(np.linspace(-3, 3, 241), np.linspace(-3, 3, 241)), -1).reshape(-1, 2)
+    said_disjoint = 0
+    for _ in range(150):
+        x1, x2 = rng.normal(size=3), rng.normal(size=3)
+        P1, P2 = _spd(rng, 0.1), _spd(rng, 0.1)
+        r1, r2 = float(rng.uniform(0.2, 1.5)), float(rng.uniform(0.2, 1.5))
+        disjoint = states_disjoint(x1, P1, r1, x2, P2, r2)
+
+        def inside(x, P, r):  # noqa: ANN001, ANN202
+            d = grid - x[:2]
+            return np.einsum("ni,ij,nj->n", d, np.linalg.inv(r * P[:2, :2]), d) <= 1.0
+
+        both = inside(x1, P1, r1) & inside(x2, P2, r2)
+        if disjoint:
+            said_disjoint += 1
+            assert not both.any(), "called disjoint, but a common point exists"
+    assert said_disjoint > 20
+
+
+def test_interval_uses_the_published_sector_of_the_step() -> None:
+    """With a neighbour's per-step sector (h1_k, h_k) the interval is what the estimator's facts for that
+    sector admit (h2 = h1_k + h_k), not the profile's fixed one; h = 0 (no saturation proven) narrows it."""
+    rng = np.random.default_rng(17)
+    for _ in range(200):
+        s = _sensor(rng, True)
+        sec = Sector(float(rng.uniform(0.3, 1.0)), float(rng.uniform(0.0, 0.8)) if rng.uniform() < 0.7 else 0.0, "measurement")
+        xhat, P, rho, gamma = rng.normal(size=3), _spd(rng), float(rng.uniform(0.2, 2.0)), float(rng.uniform(0.1, 1.0))
+        lo, hi = innovation_interval(s, xhat, P, rho, gamma, sec)
+        cx = float(s.Cbar @ xhat)
+        c = float(np.sqrt(rho * s.Cbar @ P @ s.Cbar))
+        noise = abs(s.Dv) * np.sqrt(s.R)
+        cands = [
+            (gamma * sec.h1 - 1.0) * cx + gamma * sec.h1 * c * sj + gamma * phi + v
+            for sj in (-1.0, 1.0) for phi in (0.0, sec.h * (cx + c * sj)) for v in (-noise, noise)
+        ]  # fmt: skip
+        assert min(cands) == pytest.approx(lo, rel=1e-12, abs=1e-14) and max(cands) == pytest.approx(hi, rel=1e-12, abs=1e-14)
+        assert (lo, hi) != innovation_interval(s, xhat, P, rho, gamma, None)
+        width = hi - lo
+        assert not innovation_possible(s, xhat, P, rho, gamma, sec, hi + 1e-6 * width)
+        assert not innovation_possible(s, xhat, P, rho, gamma, sec, lo - 1e-6 * width)

@@ -1,0 +1,107 @@
+"""What the figures draw: units on every axis, no line or band across steps a node did not report, and
+Fig. 6's y axes not dominated by the initial ellipsoid (while every true value stays visible)."""
+
+from __future__ import annotations
+
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+
+import netsetest
+from netsetest.records import plots
+from netsetest.records.record import load_record, save_record
+
+SILENT = range(20, 35)  # node 3 published nothing for these steps
+
+
+@pytest.fixture(scope="module")
+def gap_record(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201
+    d = tmp_path_factory.mktemp("plots")
+    netsetest.simulate("paper6", steps=60).save(d / "full.json")
+    full = load_record(d / "full.json")
+    nodes = {**full.raw_nodes, "3": [e for e in full.raw_nodes["3"] if e["step"] not in SILENT]}
+    save_record(d / "gap.json", full.meta, full.truth, nodes, full.summary)
+    return load_record(d / "gap.json")
+
+
+def _node3_axes(fig, rec) -> list:  # noqa: ANN001
+    return [ax for ax in fig.axes if "node 3" in ax.get_ylabel() or ax.get_title() in ("node 3", "fault f3")]
+
+
+def _assert_no_data_in_gap(ax, scale: float) -> None:  # noqa: ANN001
+    lo, hi = (SILENT.start - 0.5) * scale, (SILENT.stop - 0.5) * scale
+    for line in ax.get_lines():
+        x, y = np.asarray(line.get_xdata(), float), np.asarray(line.get_ydata(), float)
+        if line.get_color() in ("k", "black") or len(x) < 2:
+            continue  # the truth exists at every step
+        inside = (x > lo + 1e-9) & (x < hi - 1e-9) & np.isfinite(y)
+        assert not inside.any(), (ax.get_title(), x[inside])
+        assert np.isnan(y).any()  # the break
+    for coll in ax.collections:  # the bounds band: no polygon vertex inside the silent steps
+        for path in coll.get_paths():
+            vx = path.vertices[:, 0]
+            assert not ((vx > lo + 1e-9) & (vx < hi - 1e-9)).any(), ax.get_title()
+    assert any(abs(p.get_x() - lo) < 1e-9 for p in ax.patches), "silent steps are shaded"
+
+
+@pytest.mark.parametrize("fig_fn, scale", [(plots._fig6, 0.1), (plots._fig7, 0.1)])
+def test_no_interpolation_across_a_silent_node(gap_record, fig_fn, scale) -> None:  # noqa: ANN001
+    fig = fig_fn(gap_record, "x")
+    axes = _node3_axes(fig, gap_record)
+    assert axes
+    for ax in axes:
+        _assert_no_data_in_gap(ax, scale)
+    legends = [ax.get_legend() for ax in fig.axes if ax.get_legend()] + list(fig.legends)
+    assert len(legends) == 1 and "not reported" in [t.get_text() for t in legends[0].get_texts()]
+    plt.close(fig)
+
+
+def test_fig8_breaks_E_where_the_node_was_silent(gap_record) -> None:  # noqa: ANN001
+    fig = plots._fig8([gap_record], ["x"])
+    (ax,) = [a for a in fig.axes if a.get_title() == "node 3"]
+    _assert_no_data_in_gap(ax, 1.0)
+    plt.close(fig)
+
+
+def test_units_on_every_axis(gap_record) -> None:  # noqa: ANN001
+    for fn in (plots._fig5, plots._fig6, plots._fig7):
+        fig = fn(gap_record, "x")
+        for ax in fig.axes:
+            if ax.get_ylabel():
+                assert "[" in ax.get_ylabel() and "]" in ax.get_ylabel(), (fn.__name__, ax.get_ylabel())
+            if ax.get_xlabel():
+                assert ax.get_xlabel() == "t [s]"
+        plt.close(fig)
+    fig = plots._fig8([gap_record], ["x"])
+    assert all("[–]" in ax.get_ylabel() for ax in fig.axes if ax.get_ylabel())
+    assert any("τs = 0.1 s" in ax.get_xlabel() for ax in fig.axes)
+    plt.close(fig)
+
+
+def test_fig6_leaves_out_the_initial_transient_but_shows_every_true_value(gap_record) -> None:  # noqa: ANN001
+    fig = plots._fig6(gap_record, "x")
+    truth = np.array([e["x"] for e in gap_record.truth])
+    rows = [ax for ax in fig.axes if ax.get_ylabel()]
+    assert len(rows) == 12
+    for ax in rows:
+        comp = 0 if "β" in ax.get_ylabel() else 1
+        y0, y1 = ax.get_ylim()
+        assert y0 <= truth[:, comp].min() and truth[:, comp].max() <= y1
+        i = int(ax.get_ylabel().split()[1]) if ax.get_ylabel().startswith("node") else None
+        if i is not None:  # the initial bounds are outside the axes: the transient is left out
+            lo, hi = gap_record.nodes[i].bounds(comp)
+            assert lo[0] < y0 and hi[0] > y1
+            late = gap_record.nodes[i].steps * 0.1 >= plots.TRANSIENT_S
+            assert y0 <= lo[late].min() and hi[late].max() <= y1  # settled bounds fully visible
+    plt.close(fig)
+
+
+def test_short_run_keeps_full_limits() -> None:
+    res = netsetest.simulate("paper6", steps=8)  # shorter than 2·TRANSIENT_S: nothing to leave out
+    fig = plots._fig6(res.record, "x")
+    ax = next(a for a in fig.axes if a.get_ylabel().startswith("node 1"))
+    lo, hi = res.record.nodes[1].bounds(0)
+    y0, y1 = ax.get_ylim()
+    assert y0 <= lo.min() and hi.max() <= y1
+    plt.close(fig)
