@@ -42,6 +42,12 @@ class Box:
         slack = MEMBERSHIP_TOL * np.maximum(1.0, np.abs(point))
         return bool(np.all(point >= self.lo - slack) and np.all(point <= self.hi + slack))
 
+    def support(self, direction: np.ndarray) -> float:
+        """max dᵀx over the box (+inf if unbounded along d); a zero d_i ignores an infinite side."""
+        d = np.asarray(direction, dtype=float)
+        side = np.where(d > 0, self.hi, self.lo)
+        return float(np.sum(np.where(d != 0, d * side, 0.0)))
+
 
 @dataclass(frozen=True)
 class Ellipsoid:
