@@ -123,3 +123,35 @@ def test_wire_set_field() -> None:
     raw["set"] = {"type": "box", "lo": [0.0, 0.0], "hi": [1.0, 1.0]}  # wrong dimension: dropped at decode
     with pytest.raises(Exception, match="invalid"):
         decode(msgpack.packb(raw, use_bin_type=True))
+
+
+def test_record_uses_the_set_bounds(mixed_run) -> None:  # noqa: ANN001
+    *_, rec, path = mixed_run
+    for i in MIXED:
+        rows = rec.fault_rows(i)
+        entries = rec.raw_nodes[str(i)]
+        assert [[r["fault_lower"], r["fault_upper"]] for r in rows] == [e["bounds"][2] for e in entries]
+    ellipsoid = rec.nodes[1]
+    assert ellipsoid.set_bounds is None
+    lo, _ = ellipsoid.bounds(2)
+    assert np.allclose(lo, ellipsoid.xhat[:, 2] - np.sqrt(ellipsoid.rho * ellipsoid.P[:, 2, 2]))
+
+
+def test_simulate_estimator_and_mcap(tmp_path: Path) -> None:
+    import netsetest
+
+    res = netsetest.simulate("paper6", steps=8, estimator="interval")
+    assert res.summary["violations_total"] == 0
+    assert {r["estimator"] for r in res.summary["nodes"]} == {"interval"}
+    with pytest.raises(ConfigError, match="estimator"):
+        netsetest.simulate("paper6", steps=2, estimator="exact")
+    path = tmp_path / "run.mcap"
+    out = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "run", "paper6", "--mode", "inmemory", "--quiet",
+                          "--steps", "6", "--estimator", "zonotope", "--record", str(path)],
+                         capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    rec = load_record(path)
+    assert all(tr.set_bounds is not None for tr in rec.nodes.values())
+    bad = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "run", "paper6", "--mode", "inmemory", "--estimator", "nope"],
+                         capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr
