@@ -155,3 +155,22 @@ def test_simulate_estimator_and_mcap(tmp_path: Path) -> None:
     bad = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "run", "paper6", "--mode", "inmemory", "--estimator", "nope"],
                          capture_output=True, text=True, timeout=60)  # fmt: skip
     assert bad.returncode == 2 and "Traceback" not in bad.stderr
+
+
+def test_estimator_refusing_a_node_is_a_config_error(tmp_path: Path) -> None:
+    nodes = tmp_path / "nodes"
+    nodes.mkdir()
+    for f in (ROOT / "nodes").glob("*.toml"):
+        text = f.read_text()
+        if f.stem == "yaw6":  # no declared fault bound: the strip observer needs one
+            text = re.sub(r"\[fault_bound\][^\n]*\nrate = [^\n]*\nsize = [^\n]*\n", "", text)
+            assert "[fault_bound]" not in text
+        (nodes / f.name).write_text(text)
+    topo = mixed_topology(tmp_path).read_text().replace(f'node_dir = "{ROOT / "nodes"}"', f'node_dir = "{nodes}"')
+    path = tmp_path / "refused.toml"
+    path.write_text(topo)
+    with pytest.raises(ConfigError, match="node 6: estimator 'strip'"):
+        run_inmemory(load_topology(path, steps=2), "paper", "scheduled", seed=0)
+    out = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "run", str(path), "--mode", "inmemory", "--steps", "2"],
+                         capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert out.returncode == 2 and "node 6" in out.stderr and "Traceback" not in out.stderr

@@ -48,7 +48,7 @@ from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import NodeConfig, Scenario
 from netsetest.estimator.names import SDP
-from netsetest.estimator.registry import SET_ESTIMATORS
+from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.sector import Sector, sector_ok
 from netsetest.messages import End, Message, NodeState, RunScope, Truth
 from netsetest.records.record import RecordSink
@@ -130,7 +130,7 @@ class Collector:
         self._step_truth: Truth | None = None  # the judged truth of the step being closed
         # nodes running a set estimator whose guarantee also rests on the declared fault bound (its cone)
         self.needs_fault_bound = {
-            n.id for n in scenario.nodes if n.estimator != SDP and "fault_bound" in SET_ESTIMATORS[n.estimator](scenario, n.id).assumptions
+            n.id for n in scenario.nodes if n.estimator != SDP and "fault_bound" in node_set_estimator(scenario, n.id).assumptions
         }
         self.bounds: dict[tuple[int, int], np.ndarray] = {}  # open step being closed: a published set's (3, 2) bounds
         bus.subscribe(keys.truth(run_id), self.on_message)

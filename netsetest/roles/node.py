@@ -29,11 +29,11 @@ import numpy as np
 
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
-from netsetest.config.schema import ConfigError, Scenario
+from netsetest.config.schema import Scenario
 from netsetest.estimator import base
 from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE
-from netsetest.estimator.registry import SET_ESTIMATORS
+from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.rejoin import rejoin_ellipsoid
 from netsetest.estimator.sdp import Ellipsoid, LocalEstimator, NeighbourState, Objective, StepInput, StepResult, Variant
 from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sector, measurement_interval
@@ -86,10 +86,7 @@ class Node:
         )
         self.set_estimator: base.SetEstimator | None = None  # a non-SDP method (it ignores neighbours)
         if self.cfg.estimator != SDP:
-            try:
-                self.set_estimator = SET_ESTIMATORS[self.cfg.estimator](scenario, node_id)
-            except base.EstimatorError as exc:
-                raise ConfigError(f"{scenario.path}: node {node_id}: estimator {self.cfg.estimator!r}: {exc}") from None
+            self.set_estimator = node_set_estimator(scenario, node_id)
         self.others = [j for j in self.cfg.in_weights if j != node_id]
         # estimator state, plain arrays: centre, shape, radius, and our own last published message
         self.xhat = self.cfg.x0_hat.copy()
