@@ -174,3 +174,31 @@ def test_estimator_refusing_a_node_is_a_config_error(tmp_path: Path) -> None:
     out = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "run", str(path), "--mode", "inmemory", "--steps", "2"],
                          capture_output=True, text=True, timeout=60)  # fmt: skip
     assert out.returncode == 2 and "node 6" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_set_estimator_refusing_a_step_falls_back(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """A step whose measurement contradicts the set (only after a broken assumption): the node publishes
+    its last set marked ``fallback`` and the run goes on; the collector still judges it."""
+    from netsetest.estimator.base import EstimatorError
+    from netsetest.estimator.interval_althoff_rath import IntervalObserver
+
+    step = IntervalObserver.step
+
+    def refuse_step_3(self, inp, neighbours=()):  # noqa: ANN001, ANN202
+        if inp.step == 3:
+            raise EstimatorError("the measurement is inconsistent with the set (an assumption broke)")
+        return step(self, inp, neighbours)
+
+    monkeypatch.setattr(IntervalObserver, "step", refuse_step_3)
+    res = run_inmemory(load_topology(mixed_topology(tmp_path), steps=6), "paper", "scheduled", seed=0, keep=True)
+    entries = res.parts["nodes"]["5"]
+    assert [e["status"] for e in entries] == ["init", "ok", "ok", "fallback", "ok", "ok", "ok"]
+    assert entries[3]["bounds"] == entries[2]["bounds"]
+    row = next(r for r in res.summary["nodes"] if r["id"] == 5)
+    assert row["fallbacks"] == 1
+
+
+def test_set_node_cannot_be_killed_and_rejoined(tmp_path: Path) -> None:
+    out = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "run", str(mixed_topology(tmp_path)), "--insecure",
+                          "--steps", "4", "--kill", "5@2", "--rejoin", "5@3"], capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert out.returncode == 2 and "cannot rejoin" in out.stderr and "Traceback" not in out.stderr

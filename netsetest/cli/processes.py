@@ -27,7 +27,7 @@ from pathlib import Path
 
 from netsetest.bus import keys
 from netsetest.cli import checks
-from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
+from netsetest.estimator.names import NODE_ESTIMATOR_NAMES, SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION
 
@@ -443,7 +443,9 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
 
     sc = load_topology(a.topology, a.case, a.steps, a.estimator)
     for node, _ in a.kill + a.rejoin:
-        sc.node(node)
+        if sc.node(node).estimator != SDP:
+            log("run", f"--kill/--rejoin {node}@…: node {node} runs {sc.node(node).estimator!r}, which cannot rejoin (only the SDP can)")
+            return EXIT_BAD_INPUT
     try:
         schedule = kill_schedule(a.kill, a.rejoin, sc.steps)
     except ValueError as exc:

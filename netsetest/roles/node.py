@@ -85,6 +85,7 @@ class Node:
             objective=objective,
         )
         self.set_estimator: base.SetEstimator | None = None  # a non-SDP method (it ignores neighbours)
+        self.last_set: base.GuaranteedSet | None = None  # its last published set
         if self.cfg.estimator != SDP:
             self.set_estimator = node_set_estimator(scenario, node_id)
         self.others = [j for j in self.cfg.in_weights if j != node_id]
@@ -304,7 +305,15 @@ class Node:
         summary: SDP neighbours and the plausibility checks use it unchanged) and the step's sector."""
         assert self.set_estimator is not None
         t0 = time.perf_counter()
-        s = self.set_estimator.step(base.StepInput(inp.step, inp.y, inp.gamma, inp.u_prev, inp.vx_prev))
+        try:
+            s = self.set_estimator.step(base.StepInput(inp.step, inp.y, inp.gamma, inp.u_prev, inp.vx_prev))
+        except base.EstimatorError:
+            # the measurement contradicts the set: an assumption broke (the collector's cone shows which).
+            # Nothing guaranteed can be published; the last set is, marked "fallback", and the run goes on.
+            if self.last_set is None:
+                raise
+            s, status = self.last_set, "fallback"
+        self.last_set = s
         xhat, P = enclosing_ellipsoid(s, self.rho)
         solve_ms = 1000 * (time.perf_counter() - t0)
         sensor = self.cfg.sensor
