@@ -202,3 +202,21 @@ def test_set_node_cannot_be_killed_and_rejoined(tmp_path: Path) -> None:
     out = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "run", str(mixed_topology(tmp_path)), "--insecure",
                           "--steps", "4", "--kill", "5@2", "--rejoin", "5@3"], capture_output=True, text=True, timeout=60)  # fmt: skip
     assert out.returncode == 2 and "cannot rejoin" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_compare_on_a_mixed_topology_runs_the_sdp(tmp_path: Path) -> None:
+    from netsetest.analysis.compare import compare
+
+    cmp = compare(mixed_topology(tmp_path), estimators=("sdp", "interval"), steps=8)
+    rows = {r.estimator: r for r in cmp.rows}
+    assert rows["sdp"].violations == rows["interval"].violations == 0
+    assert rows["sdp"].node_steps == rows["interval"].node_steps == 6 * 9
+    sdp = netsetest_simulate_all_sdp(mixed_topology(tmp_path), steps=8)
+    for i in MIXED:  # the sdp row of a mixed topology is the SDP's, not the file's node estimators
+        np.testing.assert_allclose(cmp.bounds["sdp"][i][:, 2, 0], sdp.nodes[i].lower[:, 2], rtol=0, atol=1e-12)
+
+
+def netsetest_simulate_all_sdp(topology: Path, steps: int):  # noqa: ANN201
+    import netsetest
+
+    return netsetest.simulate(topology, steps=steps, estimator="sdp")
