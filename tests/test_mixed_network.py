@@ -220,3 +220,17 @@ def netsetest_simulate_all_sdp(topology: Path, steps: int):  # noqa: ANN201
     import netsetest
 
     return netsetest.simulate(topology, steps=steps, estimator="sdp")
+
+
+def test_live_table_shows_the_set_bounds(tmp_path: Path) -> None:
+    from netsetest.bus.base import MemoryBus
+    from netsetest.runtime.live import LiveTable, observed_key
+
+    bus = MemoryBus()
+    table = LiveTable()
+    bus.subscribe(observed_key("mem", None), lambda key, msg: table.update(msg))
+    res = run_inmemory(load_topology(mixed_topology(tmp_path), steps=5), bus=bus)
+    rows = {r.id: r for r in table.sorted_rows()}
+    for i in MIXED:
+        last = res.parts["nodes"][str(i)][-1]
+        assert [rows[i].fault_lower, rows[i].fault_upper] == last["bounds"][2]
