@@ -102,27 +102,31 @@ def simulate(
     variant: Variant = "scheduled",
     steps: int | None = None,
     mode: Mode = "inmemory",
+    estimator: str | None = None,
 ) -> SimulationResult:
     """Run ``topology`` (a file, or a bundled name such as ``"paper6"``); ``case`` and ``steps`` override
-    the file.  Raises :class:`~netsetest.config.schema.ConfigError` on a bad file or argument."""
+    the file, ``estimator`` every node's (default: each node's in the file, else ``"sdp"``).  Raises :class:`~netsetest.config.schema.ConfigError` on a bad file or argument."""
     if mode == "inmemory":
         from netsetest.runtime.inmemory import run_inmemory
 
-        res = run_inmemory(load_topology(topology, case, steps), signals, variant, seed)
+        res = run_inmemory(load_topology(topology, case, steps, estimator), signals, variant, seed)
         return result_of(record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary))
     if mode == "zenoh":
-        return result_of(_run_zenoh(topology, case, signals, seed, variant, steps))
+        return result_of(_run_zenoh(topology, case, signals, seed, variant, steps, estimator))
     raise ConfigError(f"mode must be 'inmemory' or 'zenoh', got {mode!r}")
 
 
-def _run_zenoh(topology: str | Path, case: Case | None, signals: str, seed: int, variant: str, steps: int | None) -> Record:
-    load_topology(topology, case, steps)  # bad input fails here, with the loader's message
+def _run_zenoh(
+    topology: str | Path, case: Case | None, signals: str, seed: int, variant: str, steps: int | None, estimator: str | None
+) -> Record:
+    load_topology(topology, case, steps, estimator)  # bad input fails here, with the loader's message
     with tempfile.TemporaryDirectory(prefix="netsetest-") as tmp:
         rec = Path(tmp) / "run.json"
         argv = [sys.executable, "-m", "netsetest.cli.main", "run", str(topology), "--mode", "zenoh", "--quiet",
                 "--signals", signals, "--seed", str(seed), "--variant", variant, "--record", str(rec)]  # fmt: skip
         argv += ["--case", case] if case else []
         argv += ["--steps", str(steps)] if steps else []
+        argv += ["--estimator", estimator] if estimator else []
         proc = subprocess.run(argv, capture_output=True, text=True)
         if not rec.exists():
             raise SimulationError(f"netsetest run --mode zenoh exited {proc.returncode} without a record: {proc.stderr.strip()[-2000:]}")

@@ -12,11 +12,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Annotated, Literal, Union
+from typing import Annotated, Any, Literal, Union
 
 import msgpack
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
+
+from netsetest.models.sensor import NA
+from netsetest.sets import set_from_wire
 
 SCHEMA_VERSION = 1
 
@@ -106,9 +109,14 @@ class NodeState(_Msg):
     # at this step; None: the sensor models no saturation.  sector_basis: what it rests on (estimator/sector.py)
     sector: tuple[SectorH1, SectorH] | None = None
     sector_basis: Literal["none", "measurement", "fault-bound", "assumed"] = "none"
+    # a non-SDP node's own guaranteed set over [β, r, f_i] (sets.set_to_wire); the ellipsoid above then
+    # encloses it and is only the neighbour-facing summary.  Absent (not sent) for the SDP.
+    set: dict[str, Any] | None = None
 
     @model_validator(mode="after")
     def _shape_spd(self) -> NodeState:
+        if self.set is not None:
+            set_from_wire(self.set, NA)  # SetFormatError is a ValueError: a malformed set fails decode()
         problem = spd_problem(self.P)
         if problem:
             raise ValueError(problem)
@@ -228,7 +236,10 @@ _ADAPTER: TypeAdapter[Message] = TypeAdapter(Annotated[Message, Field(discrimina
 
 
 def encode(msg: Message) -> bytes:
-    return msgpack.packb(msg.model_dump(mode="python"), use_bin_type=True)
+    d = msg.model_dump(mode="python")
+    if isinstance(msg, NodeState) and msg.set is None:
+        del d["set"]  # the SDP's wire format is unchanged
+    return msgpack.packb(d, use_bin_type=True)
 
 
 def decode(payload: bytes) -> Message:

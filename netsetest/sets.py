@@ -15,7 +15,6 @@ from dataclasses import dataclass
 
 import clarabel
 import numpy as np
-from scipy import sparse
 
 MEMBERSHIP_TOL = 1e-9  # relative slack of contains(): a point on the boundary is inside
 
@@ -41,6 +40,12 @@ class Box:
     def contains(self, point: np.ndarray) -> bool:
         slack = MEMBERSHIP_TOL * np.maximum(1.0, np.abs(point))
         return bool(np.all(point >= self.lo - slack) and np.all(point <= self.hi + slack))
+
+    def support(self, direction: np.ndarray) -> float:
+        """max dᵀx over the box (+inf if unbounded along d); a zero d_i ignores an infinite side."""
+        d = np.asarray(direction, dtype=float)
+        side = np.where(d > 0, self.hi, self.lo)
+        return float(np.sum(np.where(d != 0, d * side, 0.0)))
 
 
 @dataclass(frozen=True)
@@ -135,6 +140,7 @@ class SumSet:
 
     def _ellipsoid_part(self, g: np.ndarray) -> tuple[float, np.ndarray]:
         """max gᵀe over the sliced ellipsoid, by an SOCP: variables e; cone rows as in analysis/exact."""
+        from scipy import sparse  # here: the SDP nodes import this module and must start without scipy.sparse
         s = self.sliced
         assert s is not None
         el = s.ellipsoid
@@ -159,6 +165,7 @@ class SumSet:
 
     def contains(self, point: np.ndarray) -> bool:
         """Whether point = c + G b + M e with ‖b‖∞ ≤ 1 + tol and e in the sliced ellipsoid (an SOCP)."""
+        from scipy import sparse  # here, see _ellipsoid_part
         z = self.zonotope
         n, m = z.generators.shape
         has_e = self.sliced is not None and self.M is not None

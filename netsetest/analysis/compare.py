@@ -219,7 +219,7 @@ def compare(
     truth_fault: dict[int, np.ndarray] = {}
     sc = None
     for case in cases:
-        sc = load_topology(topology, case, steps)
+        sc = load_topology(topology, case, steps, SDP)  # the run (row sdp) is all-SDP, whatever the file's nodes say
         for sig in signals:
             for seed in seeds:
                 res = run_inmemory(sc, sig, "scheduled", seed)

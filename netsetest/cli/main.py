@@ -83,17 +83,18 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--version", action=ShowVersion, help="print the version and exit")
     sub = ap.add_subparsers(dest="command", required=True)
 
+    from netsetest.cli import processes
+
     p = sub.add_parser("run", help="run a whole network (in memory, or as Zenoh processes)")
     _scenario_args(p)
     _run_args(p)
+    processes.estimator_arg(p)
     p.add_argument("--mode", choices=["inmemory", "zenoh"], default="zenoh", help="one process, or one process per role over Zenoh")
     p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep",
                    help="lockstep: the vehicle waits for every node; realtime: one step every τs (zenoh mode)")  # fmt: skip
     p.add_argument("--record", metavar="PATH", help="write the run record: JSON, .gz compresses, .mcap for Foxglove (default: none)")
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON (default: none)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
-    from netsetest.cli import processes
-
     processes.add_run_options(p)
     processes.add_role_parsers(sub, _scenario_args, _run_args)
 
@@ -144,7 +145,7 @@ def cmd_run(a: argparse.Namespace) -> int:
     from netsetest.runtime.inmemory import run_inmemory
     from netsetest.runtime.report import exit_code, format_table, write_summary
 
-    sc = load_topology(a.topology, a.case, a.steps)
+    sc = load_topology(a.topology, a.case, a.steps, a.estimator)
     res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet, record=a.record, keep=False, objective=a.objective)
     write_summary(res.summary, a.summary_json)
     print(format_table(res.summary))

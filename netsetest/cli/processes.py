@@ -27,6 +27,7 @@ from pathlib import Path
 
 from netsetest.bus import keys
 from netsetest.cli import checks
+from netsetest.estimator.names import NODE_ESTIMATOR_NAMES, SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION
 
@@ -135,9 +136,15 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     _zenoh_config_arg(g)
 
 
+def estimator_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--estimator", choices=list(NODE_ESTIMATOR_NAMES), metavar="NAME",
+                   help=f"every node's estimator, overriding the topology's per-node 'estimator' ({', '.join(NODE_ESTIMATOR_NAMES)}; default: the file's, else sdp)")  # fmt: skip
+
+
 def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, run_args: Callable) -> None:
     p = sub.add_parser("vehicle", help="the vehicle process (truth, measurements) of a Zenoh run")
     scenario_args(p)
+    estimator_arg(p)
     p.add_argument("--signals", choices=["paper", "worst"], default="paper", help="noise and wind: the paper's, or held at ±bound")
     p.add_argument("--seed", type=checks.seed, default=0, help="random seed of noise, wind and losses")
     p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep", help="lockstep: wait for every node; realtime: one step every τs")
@@ -150,6 +157,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
 
     p = sub.add_parser("node", help="one sensing-node process of a Zenoh run")
     scenario_args(p)
+    estimator_arg(p)
     p.add_argument("--id", type=int, required=True, help="node id in the topology")
     p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled", help="estimator: one SDP with the scheduled model, or one per T-S rule")
     p.add_argument("--objective", choices=list(OBJECTIVES), default=DEFAULT_OBJECTIVE, help=OBJECTIVE_HELP)
@@ -161,6 +169,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
 
     p = sub.add_parser("collector", help="the collector process: checks containment, writes record and summary")
     scenario_args(p)
+    estimator_arg(p)
     run_args(p)
     p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep", help="the run's clock (recorded in the summary)")
     p.add_argument("--record", metavar="PATH", help="write the run record (.json, .json.gz or .mcap; default: none)")
@@ -208,7 +217,7 @@ def _role(name: str, who: str, a: argparse.Namespace, body: Callable) -> int:
     from netsetest.runtime.processes import EXIT_STOPPED, Stop, install_signal_handlers, log
     from netsetest.runtime.security import CredentialsError
 
-    sc = load_topology(a.topology, a.case, a.steps)
+    sc = load_topology(a.topology, a.case, a.steps, a.estimator)
     install_signal_handlers()
     try:
         bus = _open_bus(a, who)
@@ -443,9 +452,11 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         ROUTER, SECURITY_INSECURE, SECURITY_MTLS, identity, role_names, router_settings, write_credentials,
     )  # fmt: skip
 
-    sc = load_topology(a.topology, a.case, a.steps)
+    sc = load_topology(a.topology, a.case, a.steps, a.estimator)
     for node, _ in a.kill + a.rejoin:
-        sc.node(node)
+        if sc.node(node).estimator != SDP:
+            log("run", f"--kill/--rejoin {node}@…: node {node} runs {sc.node(node).estimator!r}, which cannot rejoin (only the SDP can)")
+            return EXIT_BAD_INPUT
     try:
         schedule = kill_schedule(a.kill, a.rejoin, sc.steps)
     except ValueError as exc:
@@ -472,6 +483,8 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         common += ["--case", a.case]
     if a.steps:
         common += ["--steps", str(a.steps)]
+    if a.estimator:
+        common += ["--estimator", a.estimator]
     names = ["collector", "vehicle", *(f"node{i}" for i in sc.ids)]
     ports = dict(zip(names, free_ports(len(names))))
 

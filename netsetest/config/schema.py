@@ -22,6 +22,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from netsetest.estimator.names import NODE_ESTIMATOR_NAMES, SDP
 from netsetest.models.sensor import Sensor
 from netsetest.models.signals import Fault, NoFault, PiecewiseLinearFault, SpeedProfile, SquareFault
 from netsetest.models.vehicle import KMH, TSModel, VehicleParams
@@ -218,6 +219,14 @@ class NodeRef(_Strict):
     profile: Annotated[str, Field(min_length=1, max_length=200, pattern=r"^[^/\\\x00]+$")] = Field(
         description="file name in the node directory, without .toml (no path separators, no NUL)"
     )
+    estimator: str = Field(default=SDP, description=f"the node's estimator: one of {', '.join(NODE_ESTIMATOR_NAMES)}")
+
+    @field_validator("estimator")
+    @classmethod
+    def _known_estimator(cls, v: str) -> str:
+        if v not in NODE_ESTIMATOR_NAMES:
+            raise ValueError(f"unknown estimator {v!r} (one of {', '.join(NODE_ESTIMATOR_NAMES)})")
+        return v
 
 
 class Edge(_Strict):
@@ -307,6 +316,7 @@ class NodeConfig:
     in_weights: dict[int, float]  # j → a_ij for j ∈ N_i (i itself when a_ii > 0)
     fault_rate: float | None = None  # declared δ_i: |f_k+1 − f_k| ≤ δ_i (None: not declared)
     fault_size: float | None = None  # declared F_i: |f_k| ≤ F_i (None: not declared)
+    estimator: str = SDP  # estimator/names.py: NODE_ESTIMATOR_NAMES
 
 
 @dataclass(frozen=True)
@@ -395,9 +405,11 @@ def load_profile(path: Path) -> NodeProfile:
         raise ConfigError(_format_errors(path, exc)) from None
 
 
-def load_topology(path: str | Path, case: Case | None = None, steps: int | None = None) -> Scenario:
+def load_topology(
+    path: str | Path, case: Case | None = None, steps: int | None = None, estimator: str | None = None
+) -> Scenario:
     """Read and validate a topology (a path, or the name of a bundled one such as ``paper6``) and its node
-    profiles; ``case``/``steps`` override the file."""
+    profiles; ``case``/``steps``/``estimator`` (every node's) override the file."""
     path = resolve_topology(path)
     if not path.exists():
         raise ConfigError(f"{path}: file not found (bundled topologies: {', '.join(bundled_topologies())})")
@@ -405,6 +417,8 @@ def load_topology(path: str | Path, case: Case | None = None, steps: int | None 
         raise ConfigError(f"{path}: case must be 'nsnim' or 'saim', got {case!r}")
     if steps is not None and steps < 1:
         raise ConfigError(f"{path}: steps must be ≥ 1, got {steps}")
+    if estimator is not None and estimator not in NODE_ESTIMATOR_NAMES:
+        raise ConfigError(f"estimator must be one of {', '.join(NODE_ESTIMATOR_NAMES)}, got {estimator!r}")
     try:
         topo = TopologyFile.model_validate(_read_toml(path))
     except ValidationError as exc:
@@ -447,6 +461,7 @@ def load_topology(path: str | Path, case: Case | None = None, steps: int | None 
                 in_weights=dict(sorted(in_w.items())),
                 fault_rate=prof.fault_bound.rate,
                 fault_size=prof.fault_bound.size,
+                estimator=estimator or ref.estimator,
             )
         )
     return Scenario(

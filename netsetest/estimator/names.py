@@ -5,3 +5,4 @@ EXACT = "exact"  # the exact limit (analysis/exact.py): a comparison row, not a 
 SET_ESTIMATOR_NAMES: tuple[str, ...] = ("zonotope", "zonotope-q10", "interval", "interval-classical", "strip", "setprop")
 ESTIMATOR_NAMES: tuple[str, ...] = (SDP, *SET_ESTIMATOR_NAMES, EXACT)
 DEFAULT_COMPARE: tuple[str, ...] = (SDP, "zonotope", "interval", "strip", "setprop", EXACT)
+NODE_ESTIMATOR_NAMES: tuple[str, ...] = (SDP, *SET_ESTIMATOR_NAMES)  # what a node can run in the network (`run --estimator`)

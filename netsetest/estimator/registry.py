@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from netsetest.config.schema import Scenario
-from netsetest.estimator.base import SetEstimator
+from netsetest.config.schema import ConfigError, Scenario
+from netsetest.estimator.base import EstimatorError, SetEstimator
 from netsetest.estimator.interval_althoff_rath import IntervalObserver
 from netsetest.estimator.names import SET_ESTIMATOR_NAMES
 from netsetest.estimator.set_propagation_althoff_rath import SetPropagationObserver
@@ -24,3 +24,13 @@ SET_ESTIMATORS: dict[str, Callable[[Scenario, int], SetEstimator]] = {
     "strip": lambda sc, i: StripObserver(sc, i),
     "setprop": lambda sc, i: SetPropagationObserver(sc, i),
 }
+
+
+def node_set_estimator(scenario: Scenario, node_id: int) -> SetEstimator:
+    """The set estimator node ``node_id`` is configured to run in the network; ConfigError if it refuses
+    the node (e.g. ``strip`` without a declared fault bound)."""
+    name = scenario.node(node_id).estimator
+    try:
+        return SET_ESTIMATORS[name](scenario, node_id)
+    except EstimatorError as exc:
+        raise ConfigError(f"{scenario.path}: node {node_id}: estimator {name!r}: {exc}") from None

@@ -17,7 +17,9 @@ w, vx, noise {i}, gamma {i}, y {i}, y_nofault {i}, sector_ok {i}, r {i} = C̄x̄
 dist_ok, lost [[j, i]], alive [i], drops {reason: n}.  State entry: step, xhat [3], P [9, row-major], rho,
 status, rho_cert, solve_ms, used, missing, late, dropped, drops {reason: n}, sector [h1, h] | null,
 sector_basis, E = eᵀP⁻¹e (null when the truth of the step is unknown), contained
-(E ≤ rho), assumptions_ok (every assumption in the step's dependency cone held), contested (more
+(E ≤ rho; for a node running a set estimator: the truth in its published set, whose per-coordinate
+bounds [[lo, hi] ×3] are then in ``bounds`` and the ellipsoid is the enclosing one its neighbours
+use), assumptions_ok (every assumption in the step's dependency cone held), contested (more
 than one copy matched the truth: not judged).  ``summary``: the
 per-node table and totals (the same object ``--summary-json`` writes).
 
@@ -187,9 +189,13 @@ class NodeTrack:
     assumptions_ok: np.ndarray  # (K,) bool
     status: list[str]
     solve_ms: np.ndarray  # (K,)
+    set_bounds: np.ndarray | None = None  # (K, 3, 2) a set estimator's published per-coordinate bounds
 
     def bounds(self, index: int) -> tuple[np.ndarray, np.ndarray]:
-        """Lower/upper bound of component ``index`` (0 β, 1 r, 2 f): x̂ ∓ √(ρ P_ii)."""
+        """Lower/upper bound of component ``index`` (0 β, 1 r, 2 f): the published set's bounds where the
+        node runs a set estimator, else the ellipsoid's x̂ ∓ √(ρ P_ii)."""
+        if self.set_bounds is not None:
+            return self.set_bounds[:, index, 0].copy(), self.set_bounds[:, index, 1].copy()
         half = np.sqrt(self.rho * self.P[:, index, index])
         return self.xhat[:, index] - half, self.xhat[:, index] + half
 
@@ -368,6 +374,16 @@ def _build(path: Path, meta: dict, truth: list, raw_nodes: dict, summary: dict, 
         raise RecordError(f"{path}: malformed record ({type(exc).__name__}: {exc})") from None
 
 
+def _set_bounds(entries: list[dict]) -> np.ndarray | None:
+    """(K, 3, 2) from the entries' ``bounds`` (a set estimator's node: every entry has them), else None."""
+    if not entries or "bounds" not in entries[0]:
+        return None
+    b = np.array([e["bounds"] for e in entries], dtype=float)
+    if b.shape != (len(entries), 3, 2):
+        raise ValueError(f"state bounds: expected [[lo, hi] ×3] per entry, got shape {b.shape}")
+    return b
+
+
 def record_from_parts(
     meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: dict, path: str = "",
     partial: bool = False, last_complete_step: int | None = None,
@@ -387,6 +403,7 @@ def record_from_parts(
             assumptions_ok=np.array([bool(e["assumptions_ok"]) for e in entries], dtype=bool),
             status=[e["status"] for e in entries],
             solve_ms=np.array([e["solve_ms"] for e in entries], dtype=float),
+            set_bounds=_set_bounds(entries),
         )
     for t in truth:
         if not isinstance(t, dict) or not isinstance(t.get("step"), int):

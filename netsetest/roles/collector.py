@@ -47,10 +47,13 @@ import numpy as np
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import NodeConfig, Scenario
+from netsetest.estimator.names import SDP
+from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.sector import Sector, sector_ok
 from netsetest.messages import End, Message, NodeState, RunScope, Truth
 from netsetest.records.record import RecordSink
 from netsetest.roles.vehicle import fault_bound_holds
+from netsetest.sets import set_from_wire
 
 WINDOW = 50  # steps a step may stay open behind the newest truth (bounds memory against a stalled node)
 CLOSE_LAG = 2  # a step whose alive nodes reported closes this many truths later (late and rejoining states)
@@ -61,7 +64,7 @@ CHAIN_RTOL = 1e-12  # x_k recomputed from x_{k−1}: same code, same inputs — 
 
 def _same_set(a: NodeState, b: NodeState) -> bool:
     """Copies that publish the same ellipsoid are one for judging (bookkeeping fields may differ)."""
-    return a.xhat == b.xhat and a.P == b.P and a.rho == b.rho and a.innov == b.innov and a.gamma == b.gamma
+    return a.xhat == b.xhat and a.P == b.P and a.rho == b.rho and a.innov == b.innov and a.gamma == b.gamma and a.set == b.set
 
 
 def _published_sector(st: NodeState) -> Sector | None:
@@ -125,6 +128,11 @@ class Collector:
         self.drops: Counter[str] = Counter()
         self._end: End | None = None
         self._step_truth: Truth | None = None  # the judged truth of the step being closed
+        # nodes running a set estimator whose guarantee also rests on the declared fault bound (its cone)
+        self.needs_fault_bound = {
+            n.id for n in scenario.nodes if n.estimator != SDP and "fault_bound" in node_set_estimator(scenario, n.id).assumptions
+        }
+        self.bounds: dict[tuple[int, int], np.ndarray] = {}  # open step being closed: a published set's (3, 2) bounds
         bus.subscribe(keys.truth(run_id), self.on_message)
         bus.subscribe(keys.node_state(run_id, "*"), self.on_message)
         bus.subscribe(keys.end(run_id), self.on_message)
@@ -303,6 +311,8 @@ class Collector:
         innov = float(tr.y[s] - n.sensor.Cbar @ np.asarray(st.xhat))
         if not np.isclose(st.innov, innov, rtol=INNOV_RTOL, atol=1e-300):
             return "state-not-from-input"
+        if (st.set is None) != (n.estimator == SDP):
+            return "state-wrong-method"  # a set estimator publishes its set, the SDP none
         if (st.step == 0) != (st.status in ("init", "init-prior")):
             return "state-not-prior"  # step 0 publishes the prior (updated by ỹ₀), no other step does
         if st.status == "init-prior" and (
@@ -318,7 +328,13 @@ class Collector:
         xbar = np.r_[tr.x, tr.faults[str(i)]]
         e = xbar - np.asarray(st.xhat)
         E = float(e @ np.linalg.solve(st.P_matrix(), e))
-        self.evaluated[(i, k)] = (E, E <= st.rho)
+        if st.set is None:
+            self.evaluated[(i, k)] = (E, E <= st.rho)
+            return
+        # a set estimator's node: its own set is judged; the ellipsoid is only its neighbour-facing summary
+        s = set_from_wire(st.set, len(xbar))
+        self.evaluated[(i, k)] = (E, s.contains(xbar))
+        self.bounds[(i, k)] = np.stack(s.bounds(), axis=1)
 
     def _sector_premise(self, n: NodeConfig, st: NodeState | None, tr: Truth) -> bool:
         """What the node's step sector rests on held: nothing more than the noise bound (measurement),
@@ -346,6 +362,8 @@ class Collector:
                 continue
             st = self._judged.get(i)
             own = tr.noise_ok[s] and self._sector_premise(n, st, tr)
+            if i in self.needs_fault_bound:
+                own = own and tr.fault_ok.get(s, False)
             if k == 0:
                 own = own and _in_prior(n, tr)  # Assumption 1: x̄_0 in the prior ellipsoid
             else:
@@ -364,6 +382,8 @@ class Collector:
             return "sector"
         if not tr.noise_ok[s]:
             return "noise"
+        if i in self.needs_fault_bound and not tr.fault_ok.get(s, False):
+            return "fault bound"
         if k == 0:
             return "initial set"
         if prev is None or prev.step != k - 1:
@@ -421,6 +441,7 @@ class Collector:
         self.states.pop(k, None)
         self.truth.pop(k, None)
         self.evaluated.clear()
+        self.bounds.clear()
         self.prev_truth = tr
         self.prev_cone = {i: cone[i] for i in self._judged if i not in contested}
         self.closed = k
@@ -457,7 +478,8 @@ class Collector:
         t.neighbour_missing += len(st.missing)
         t.dropped = max(t.dropped, st.dropped)
         t.drops = dict(st.drops)
-        t.width_sum += 2.0 * np.sqrt(st.rho * st.P_matrix()[2, 2])
+        b = self.bounds.get((i, k))
+        t.width_sum += float(b[2, 1] - b[2, 0]) if b is not None else 2.0 * np.sqrt(st.rho * st.P_matrix()[2, 2])
 
     def _state_entry(self, i: int, k: int, st: NodeState, cone: bool, contested: bool) -> dict:
         ev = self.evaluated.get((i, k))
@@ -468,6 +490,7 @@ class Collector:
             "late": st.late, "E": E, "contained": bool(contained), "assumptions_ok": bool(cone),
             "contested": contested, "sector": list(st.sector) if st.sector is not None else None,
             "sector_basis": st.sector_basis,
+            **({"bounds": self.bounds[(i, k)].tolist()} if (i, k) in self.bounds else {}),
         }  # fmt: skip
 
     @staticmethod
@@ -494,6 +517,7 @@ class Collector:
             node_rows.append(
                 {
                     "id": i,
+                    "estimator": n.estimator,
                     "max_E": t.E_max,
                     "violations": t.violations,
                     "misses_assumption_broken": t.broken_misses,

@@ -30,18 +30,39 @@ import numpy as np
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import Scenario
+from netsetest.estimator import base
+from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE
+from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.rejoin import rejoin_ellipsoid
 from netsetest.estimator.sdp import Ellipsoid, LocalEstimator, NeighbourState, Objective, StepInput, StepResult, Variant
-from netsetest.estimator.sector import FaultBound, Sector, derive_sector, measurement_interval
+from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sector, measurement_interval
 from netsetest.messages import End, Message, NodeInput, NodeState, RunScope
 from netsetest.models.sensor import NA
 from netsetest.roles.plausibility import innovation_possible, states_disjoint
+from netsetest.sets import set_to_wire
 
 
 MAX_AHEAD = 50  # steps ahead of our own: more is a corrupt or hostile message (bounds the buffers)
 GAMMA_RTOL = 1e-12  # γ = lo + (hi − lo)·rand may round a hair outside [lo, hi]
 LATE_START_EVIDENCE = 3  # inputs of later steps and none of step 0: the run started without us, rejoin
+BOX_WIDEN = 1e-9  # relative widening of a published set's interval hull: rounding of c ± h stays inside
+MIN_HALF_WIDTH = 1e-12  # a flat coordinate of a set is widened to this, so the enclosing P is definite
+
+
+def enclosing_ellipsoid(s: base.GuaranteedSet, rho: float) -> tuple[np.ndarray, np.ndarray]:
+    """(x̂, P) with {x: (x − x̂)ᵀP⁻¹(x − x̂) ≤ ρ} ⊇ s: the ellipsoid through the corners of s's interval hull.
+
+    Proof: with c the hull's centre, h its half-widths and P = n·diag(h²)/ρ (n = 3), every x of the hull
+    has (x − c)ᵀP⁻¹(x − c) = ρ·Σ (x_i − c_i)²/(n h_i²) ≤ ρ·Σ 1/n = ρ.  h is widened (never narrowed) for
+    rounding and flat coordinates.  Among the axis-aligned ellipsoids through the corners it is the one of
+    minimum volume."""
+    lo, hi = s.bounds()
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        raise base.EstimatorError("the set is unbounded: no ellipsoid encloses it")
+    c = (lo + hi) / 2
+    h = np.maximum((hi - lo) / 2 * (1 + BOX_WIDEN), MIN_HALF_WIDTH * np.maximum(1.0, np.abs(c)))
+    return c, np.diag(NA * h**2 / rho)
 
 
 class Node:
@@ -63,6 +84,10 @@ class Node:
             fault_bound=FaultBound(self.cfg.fault_rate, self.cfg.fault_size),
             objective=objective,
         )
+        self.set_estimator: base.SetEstimator | None = None  # a non-SDP method (it ignores neighbours)
+        self.last_set: base.GuaranteedSet | None = None  # its last published set
+        if self.cfg.estimator != SDP:
+            self.set_estimator = node_set_estimator(scenario, node_id)
         self.others = [j for j in self.cfg.in_weights if j != node_id]
         # estimator state, plain arrays: centre, shape, radius, and our own last published message
         self.xhat = self.cfg.x0_hat.copy()
@@ -216,7 +241,7 @@ class Node:
     def missing(self) -> list[int]:
         """Expected neighbour messages for the next step that have not arrived."""
         inp = self.next_input()
-        if inp is None or self.k < 0:
+        if inp is None or self.k < 0 or self.set_estimator is not None:
             return []
         have = self.inbox.get(self.k, {})
         return [j for j in inp.expect_from if j not in have]
@@ -243,6 +268,11 @@ class Node:
     def _start(self, inp: NodeInput) -> bool:
         """Step 0: the prior ellipsoid (Assumption 1) updated by ỹ₀, certified like every step (the prior
         itself if that fails).  Rejoin: see :mod:`netsetest.estimator.rejoin`."""
+        if self.set_estimator is not None:
+            if inp.step != 0:
+                return False  # a set estimator starts from its prior at step 0 only: no rejoin
+            self._publish_set(inp, "init")
+            return True
         if inp.step == 0:
             res = self.estimator.first(Ellipsoid(self.xhat, self.P, self.rho), inp.y, inp.gamma)
             status = "init" if res.status == "ok" else "init-prior"
@@ -258,6 +288,9 @@ class Node:
         return True
 
     def _update(self, inp: NodeInput) -> None:
+        if self.set_estimator is not None:
+            self._publish_set(inp, "ok")
+            return
         have = self.inbox.get(self.k, {})
         neigh = {j: have[j] for j in inp.expect_from if j in have}
         if self.id in self.cfg.in_weights:
@@ -267,7 +300,34 @@ class Node:
         res = self.estimator.step(Ellipsoid(self.xhat, self.P, self.rho), step_in)
         self._publish(inp, res.status, res, used=sorted(j for j in neigh if j != self.id), missing=self.missing())
 
-    def _publish(self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int]) -> None:
+    def _publish_set(self, inp: NodeInput, status: str) -> None:
+        """Step the set estimator and publish its set with an enclosing ellipsoid (the neighbour-facing
+        summary: SDP neighbours and the plausibility checks use it unchanged) and the step's sector."""
+        assert self.set_estimator is not None
+        t0 = time.perf_counter()
+        try:
+            s = self.set_estimator.step(base.StepInput(inp.step, inp.y, inp.gamma, inp.u_prev, inp.vx_prev))
+        except base.EstimatorError:
+            # the measurement contradicts the set: an assumption broke (the collector's cone shows which).
+            # Nothing guaranteed can be published; the last set is, marked "fallback", and the run goes on.
+            if self.last_set is None:
+                raise
+            s, status = self.last_set, "fallback"
+        self.last_set = s
+        xhat, P = enclosing_ellipsoid(s, self.rho)
+        solve_ms = 1000 * (time.perf_counter() - t0)
+        sensor = self.cfg.sensor
+        # the sector from the measurement, and (declared fault bound: basis "fault-bound", so the collector
+        # also requires it) from C̄ x̄ over the node's own set
+        r_set = Interval(-s.support(-sensor.Cbar), s.support(sensor.Cbar))
+        fault_bound = FaultBound(self.cfg.fault_rate, self.cfg.fault_size)
+        sector = derive_sector(sensor, fault_bound, measurement_interval(sensor, inp.y, inp.gamma), r_set)
+        res = StepResult(xhat, P, "ok", float("nan"), solve_ms, status, sector=sector)
+        self._publish(inp, status, res, used=[], missing=[], wire_set=set_to_wire(s))
+
+    def _publish(
+        self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int], wire_set: dict | None = None
+    ) -> None:
         """Keep ``res`` as the node's own set (its next step starts from it) and publish ``res.public``."""
         self.xhat, self.P = res.xhat, res.P
         sector = res.sector
@@ -283,7 +343,7 @@ class Node:
             solve_ms=res.solve_ms, used=used, missing=missing,
             late=inp.deadline is not None and time.time() > inp.deadline, dropped=sum(drops.values()), drops=drops,
             sector=(sector.h1, sector.h) if sector is not None else None,
-            sector_basis=sector.basis if sector is not None else "none",
+            sector_basis=sector.basis if sector is not None else "none", set=wire_set,
         )  # fmt: skip
         self.k = inp.step
         self.inputs = {s: m for s, m in self.inputs.items() if s > self.k}

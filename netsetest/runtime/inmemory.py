@@ -34,6 +34,7 @@ def run_meta(
         "r_max": {str(n.id): (n.sensor.r_max if n.sensor.saturated else None) for n in scenario.nodes},
         "h1": {str(n.id): n.sensor.h1 for n in scenario.nodes},
         "C": {str(n.id): list(n.sensor.Cbar) for n in scenario.nodes},
+        "estimators": {str(n.id): n.estimator for n in scenario.nodes},
     }  # fmt: skip
 
 

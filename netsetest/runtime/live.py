@@ -22,6 +22,8 @@ import zenoh
 from netsetest.bus import keys
 from netsetest.bus.zenoh_bus import BusError, ZenohMode, zenoh_config
 from netsetest.messages import BadMessage, End, Message, NodeInput, NodeState, Truth, decode
+from netsetest.models.sensor import NA
+from netsetest.sets import set_from_wire
 
 ANY_RUN = "*"
 PENDING_STEPS = 50  # how far back a state still waits for its truth (and a truth for its states)
@@ -147,9 +149,13 @@ class LiveTable:
         if isinstance(msg, NodeState):
             row = self.rows.setdefault(msg.node, NodeRow(msg.node))
             if row.step is None or msg.step >= row.step:
-                half = float(np.sqrt(msg.rho * msg.P_matrix()[2, 2]))
                 row.step, row.status, row.rho = msg.step, msg.status, msg.rho
-                row.fault_lower, row.fault_upper = msg.xhat[2] - half, msg.xhat[2] + half
+                if msg.set is not None:  # a set estimator's node: its own set's bounds (E: its enclosing ellipsoid)
+                    lo, hi = set_from_wire(msg.set, NA).bounds()
+                    row.fault_lower, row.fault_upper = float(lo[2]), float(hi[2])
+                else:
+                    half = float(np.sqrt(msg.rho * msg.P_matrix()[2, 2]))
+                    row.fault_lower, row.fault_upper = msg.xhat[2] - half, msg.xhat[2] + half
                 row.dropped = max(row.dropped, msg.dropped)
             row.missing += len(msg.missing)
             row.deadline_misses += msg.late
