@@ -15,6 +15,17 @@ class OutputError(Exception):
     """An output path that cannot be written; the message names the option, the path and why."""
 
 
+def positive_int(s: str) -> int:
+    """argparse type: an integer ≥ 1 (steps, counts)."""
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {s!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {v}")
+    return v
+
+
 def seed(s: str) -> int:
     """argparse type of ``--seed``: a non-negative integer (numpy rejects negative seeds)."""
     try:

@@ -27,7 +27,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 def _scenario_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("topology", help="topology file (e.g. topologies/paper6.toml) or bundled name (paper6, paper6_lossy)")
     p.add_argument("--case", choices=["nsnim", "saim"], help="override the topology's case (default: the file's)")
-    p.add_argument("--steps", type=_positive_int, metavar="N", help="override the number of steps of τs each (default: the file's)")
+    p.add_argument("--steps", type=checks.positive_int, metavar="N", help="override the number of steps of τs each (default: the file's)")
 
 
 def _run_args(p: argparse.ArgumentParser) -> None:
@@ -37,16 +37,6 @@ def _run_args(p: argparse.ArgumentParser) -> None:
                    help="estimator: one SDP with the scheduled model, or one per T-S rule")  # fmt: skip
     p.add_argument("--objective", choices=list(OBJECTIVES), default=DEFAULT_OBJECTIVE, help=OBJECTIVE_HELP)
     p.add_argument("--seed", type=checks.seed, default=0, help="non-negative integer: random seed of noise, wind and losses")
-
-
-def _positive_int(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {s!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {v}")
-    return v
 
 
 def has_default(action: argparse.Action) -> bool:

@@ -9,6 +9,7 @@ import sys
 import time
 from collections.abc import Callable
 
+from netsetest.cli import checks
 from netsetest.runtime.report import EXIT_BAD_INPUT
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
@@ -27,16 +28,6 @@ def _seconds(s: str) -> float:
     return v
 
 
-def _count(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {s!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {v}")
-    return v
-
-
 def _observer_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--run-id", help="the run to observe (default: every run on the network, '*')")
     p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
@@ -52,7 +43,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("key", nargs="?",
                    help="key expression, relative to the run (node/3/state, vehicle/**) or absolute (netsetest/...); default: everything")  # fmt: skip
     _observer_args(p)
-    p.add_argument("--count", type=_count, metavar="N", help="stop after N messages (default: no limit)")
+    p.add_argument("--count", type=checks.positive_int, metavar="N", help="stop after N messages (default: no limit)")
     p.add_argument("--json", action="store_true", help="one JSON object per line: key and message fields")
 
     p = sub.add_parser("watch", help="live per-node table of a running run: step, fault bound, E, drops, deadline misses")
