@@ -16,6 +16,7 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 WATCH_REFRESH_HZ = 4.0
 PIPE_WIDTH = 160  # watch's table width when stdout is not a terminal (a log, a test): never truncated
 POLL_S = 0.1  # how often the loops look at the clock while no message arrives
+END_GRACE_S = 2.0  # End can overtake the last states (other paths): wait this long for them, as the collector does
 
 
 def _seconds(s: str) -> float:
@@ -131,8 +132,12 @@ def cmd_watch(a: argparse.Namespace) -> int:
     try:
         console = Console(width=None if sys.stdout.isatty() else PIPE_WIDTH)
         with Live(_render(table, title), console=console, refresh_per_second=WATCH_REFRESH_HZ) as live:
-            next_draw = 0.0
-            while table.ended is None and (end is None or time.monotonic() < end):
+            next_draw, ended_at = 0.0, None
+            while end is None or time.monotonic() < end:
+                if table.ended is not None:
+                    ended_at = ended_at or time.monotonic()
+                    if table.complete or time.monotonic() - ended_at > END_GRACE_S:
+                        break
                 got = obs.get(POLL_S)
                 if got is not None:
                     table.update(got.message)

@@ -185,5 +185,10 @@ class LiveTable:
             e = np.r_[tr.x, tr.faults[str(node)]] - np.asarray(st.xhat)
             row.E, row.E_step = float(e @ np.linalg.solve(st.P_matrix(), e)), step
 
+    @property
+    def complete(self) -> bool:
+        """The run ended and every node seen has shown its state of the last step."""
+        return self.ended is not None and all(r.step is not None and r.step >= self.ended.steps for r in self.rows.values())
+
     def sorted_rows(self) -> list[NodeRow]:
         return [self.rows[i] for i in sorted(self.rows)]
