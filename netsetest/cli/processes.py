@@ -114,16 +114,6 @@ _seconds, _non_negative = _seconds_type(False), _seconds_type(True)
 DEFAULT_VALIDITY_DAYS = 30
 
 
-def _positive_days(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number of days: {s!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {v}")
-    return v
-
-
 def add_run_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("zenoh mode")
     g.add_argument("--node-timeout", type=_seconds, default=10.0, metavar="S", help="lockstep: a node silent this long [s] is declared dead")
@@ -192,7 +182,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
     p.add_argument("--run-id", type=_run_id, help="the deployment's run id (default: a random one)")
     p.add_argument("--router-host", action="append", default=[], metavar="NAME",
                    help="a name or address the router is reached at (repeatable; default: localhost, 127.0.0.1 and router, always included)")  # fmt: skip
-    p.add_argument("--days", type=_positive_days, default=DEFAULT_VALIDITY_DAYS, help="validity of the certificates in days")
+    p.add_argument("--days", type=checks.positive_int, default=DEFAULT_VALIDITY_DAYS, help="validity of the certificates in days")
 
     p = sub.add_parser("compose", help="print a docker-compose.yml for a topology (router + one service per role)")
     p.add_argument("topology", help="topology file or bundled name, e.g. paper6")
