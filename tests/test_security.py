@@ -146,13 +146,13 @@ def test_credentials_are_private_and_name_the_roles(tmp_path: Path) -> None:
     assert stat.S_IMODE(d.stat().st_mode) == 0o700
     assert role_names(sc) == ["vehicle", "collector", "node-1", "node-2", "node-3", "node-4", "node-5", "node-6"]
     ca = x509.load_pem_x509_certificate((d / "ca.pem").read_bytes())
-    for name in [*role_names(sc), "router"]:
+    for name in [*role_names(sc), "router", "observer"]:
         ident = identity(d, name)
         assert stat.S_IMODE(ident.key.stat().st_mode) == 0o600, name
         cert = x509.load_pem_x509_certificate(ident.cert.read_bytes())
         assert cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value == name
         cert.verify_directly_issued_by(ca)
-    assert not list(d.glob("ca.key")) and len(list(d.glob("*.key"))) == len(role_names(sc)) + 1  # no CA key on disk
+    assert not list(d.glob("ca.key")) and len(list(d.glob("*.key"))) == len(role_names(sc)) + 2  # no CA key on disk
     (d / "node-2.key").chmod(0o644)
     with pytest.raises(CredentialsError, match="readable by group or others"):
         identity(d, "node-2")

@@ -30,17 +30,16 @@ from netsetest.cli import checks
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES, SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION
+from netsetest.runtime.security import RUN_ENV_FILE, RUN_ID_ENV
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 ZENOH_DEFAULT_PORT = 7447
-RUN_ENV_FILE = "run.env"  # written by `netsetest credentials`: the deployment's run id, for compose's env_file
 START_TIMEOUT_S = 60.0  # the vehicle's default wait for every role to be ready
 
 
 # ---------------------------------------------------------------- option groups
 
 
-RUN_ID_ENV = "NETSETEST_RUN_ID"  # default of --run-id (compose services read it from the credentials' run.env)
 RUN_ID_RE = re.compile(r"[A-Za-z0-9_-]{1,64}")
 # proto/host:port with an optional Zenoh suffix (?metadata, #config); host a name, an IPv4 or a [IPv6]
 ENDPOINT_RE = re.compile(r"(tcp|udp|tls|quic)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):(\d{1,5})([?#].*)?")
@@ -319,7 +318,7 @@ def cmd_credentials(a: argparse.Namespace) -> int:
     run_id = a.run_id or f"run-{secrets.token_hex(8)}"
     out = write_credentials(a.dir, role_names(sc), [*ROUTER_HOSTS, *a.router_host], datetime.timedelta(days=a.days))
     (out / RUN_ENV_FILE).write_text(f"{RUN_ID_ENV}={run_id}\n")
-    print(f"credentials for {len(role_names(sc))} roles and the router in {out} (run id {run_id}, valid {a.days} days)")
+    print(f"credentials for {len(role_names(sc))} roles, an observer (echo/watch) and the router in {out} (run id {run_id}, valid {a.days} days)")
     return 0
 
 
@@ -439,7 +438,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
     from netsetest.runtime.processes import log
     from netsetest.runtime.report import Progress, format_table
     from netsetest.runtime.security import (
-        ROUTER, SECURITY_INSECURE, SECURITY_MTLS, identity, role_names, router_settings, write_credentials,
+        ROUTER, SECURITY_INSECURE, SECURITY_MTLS, identity, role_names, router_settings, write_credentials, write_observer_access,
     )  # fmt: skip
 
     sc = load_topology(a.topology, a.case, a.steps, a.estimator)
@@ -502,12 +501,13 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
             except BusError as exc:
                 log("run", str(exc))
                 return EXIT_BAD_INPUT
+            write_observer_access(creds, run_id, [router_endpoint])
         log("run", f"security: {security}" + (f" (mTLS per role, access control at the run's router {router_endpoint}; credentials in {creds})"
                                                if router is not None else " (open peer mesh: any local process can read and forge messages)"))  # fmt: skip
         if not a.quiet:  # how to look inside the run from another terminal (README: Live views)
             log("run", f"run id {run_id}; " + (
                 f"watch it with: netsetest watch --run-id {run_id} --connect tcp/127.0.0.1:{ports['collector']}" if router is None
-                else "outside observers are shut out of a secured run (watch it from another terminal: run with --insecure)"))  # fmt: skip
+                else f"watch it with: netsetest watch --credentials {creds}"))  # fmt: skip
         bar = Progress(sc.steps, f"zenoh ({len(sc.ids)} nodes + vehicle + collector)", enabled=not a.quiet)
         progress = [-1]
 

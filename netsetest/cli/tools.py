@@ -35,7 +35,10 @@ def _observer_args(p: argparse.ArgumentParser) -> None:
                    help="Zenoh endpoint of the run, e.g. tcp/127.0.0.1:7447: a router or a role's --listen endpoint (repeatable; default: none)")  # fmt: skip
     p.add_argument("--zenoh-mode", choices=["peer", "client"], default="peer", help="peer (default) or client of a router")
     p.add_argument("--zenoh-config", metavar="FILE",
-                   help="Zenoh configuration file (JSON5), e.g. the credentials of a secured run; --connect adds endpoints to it")  # fmt: skip
+                   help="Zenoh configuration file (JSON5) to start from; --connect adds endpoints to it (default: none)")  # fmt: skip
+    p.add_argument("--credentials", metavar="DIR",
+                   help="a secured run's credentials directory (printed by `netsetest run`, or made by `netsetest credentials`): "
+                        "connect to its router as the read-only observer; run id and endpoint from DIR unless given (default: none)")  # fmt: skip
     p.add_argument("--duration", type=_seconds, metavar="S", help="stop after S seconds (default: until Ctrl-C)")
 
 
@@ -64,9 +67,18 @@ def _interrupt(signum: int, frame: object) -> None:
 def _observer(a: argparse.Namespace, key: str | None):  # noqa: ANN202 — (Observer | None, error message)
     from netsetest.bus.zenoh_bus import BusError
     from netsetest.runtime.live import Observer, observed_key, observer_config
+    from netsetest.runtime.security import CredentialsError, observer_access
 
     try:
-        obs = Observer(observed_key(a.run_id, key), observer_config(a.zenoh_mode, a.connect, a.zenoh_config))
+        access = observer_access(a.credentials) if a.credentials else None
+    except CredentialsError as exc:
+        return None, f"--credentials: {exc}"
+    run_id = a.run_id or (access.run_id if access else None)
+    if access is not None and run_id is None:  # the observer's grant covers one run's keys, not '*'
+        return None, f"--credentials {a.credentials}: no run id there; give it with --run-id"
+    a.run_id = run_id  # what watch's title names
+    try:
+        obs = Observer(observed_key(run_id, key), observer_config(a.zenoh_mode, a.connect, a.zenoh_config, access))
     except BusError as exc:
         return None, str(exc)
     signal.signal(signal.SIGTERM, _interrupt)  # from here on the caller's loop closes the session

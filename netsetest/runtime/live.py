@@ -2,9 +2,10 @@
 ``netsetest watch``) and the per-node table ``watch`` shows.
 
 The observer is one more Zenoh peer (or client): it connects to an endpoint of the run (a router, or a
-role's ``--listen`` endpoint; gossip brings it to the other peers) or is configured completely by a
-Zenoh configuration file (``--zenoh-config``), e.g. the credentials of a secured run.  It never
-publishes.  Payloads are decoded with :func:`netsetest.messages.decode`; one that fails validation is
+role's ``--listen`` endpoint; gossip brings it to the other peers), or is configured completely by a
+Zenoh configuration file (``--zenoh-config``), or — a secured run — is an mTLS client of the run's
+router with the ``observer`` certificate of the run's credentials (``--credentials``), which the
+router's access control lets receive every key of the run and publish none.  It never publishes.  Payloads are decoded with :func:`netsetest.messages.decode`; one that fails validation is
 shown as such, never repaired.
 """
 
@@ -23,6 +24,7 @@ from netsetest.bus import keys
 from netsetest.bus.zenoh_bus import BusError, ZenohMode, zenoh_config
 from netsetest.messages import BadMessage, End, Message, NodeInput, NodeState, Truth, decode
 from netsetest.models.sensor import NA
+from netsetest.runtime.security import ObserverAccess, client_settings
 from netsetest.sets import set_from_wire
 
 ANY_RUN = "*"
@@ -38,9 +40,23 @@ def observed_key(run_id: str | None, key: str | None) -> str:
     return f"{keys.ROOT}/{run_id or ANY_RUN}/{key.strip('/') if key else '**'}"
 
 
-def observer_config(mode: ZenohMode, connect: Sequence[str], config_file: str | None) -> zenoh.Config:
-    """The run's configuration file when given (``connect`` endpoints are added to it), else the same
-    configuration the roles use, connecting to ``connect``."""
+def observer_config(
+    mode: ZenohMode, connect: Sequence[str], config_file: str | None, access: ObserverAccess | None = None
+) -> zenoh.Config:
+    """The observer's Zenoh configuration.
+
+    ``access`` (``--credentials``): an mTLS client of the run's router with the observer certificate,
+    connecting to ``connect`` or else the endpoints the run left with its credentials.  Else the run's
+    configuration file when given (``connect`` endpoints are added to it), else the same configuration
+    the roles use, connecting to ``connect``."""
+    if access is not None:
+        endpoints = list(connect) or list(access.connect)
+        if not endpoints:
+            raise BusError("--credentials: no router endpoint in the credentials directory; give it with --connect")
+        try:
+            return zenoh_config("client", (), endpoints, base_file=config_file, settings=client_settings(access.identity))
+        except zenoh.ZError as exc:
+            raise BusError(f"bad --connect endpoint in {endpoints}: {_short(exc)}") from None
     if config_file is None:
         try:
             return zenoh_config(mode, (), connect)

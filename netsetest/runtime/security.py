@@ -7,7 +7,8 @@ Everything here configures Zenoh mechanisms; nothing is home-made crypto:
   for the router.  A session without a certificate of this CA cannot connect at all.
 - **access control** (``access_control``, enforced by the router): subjects are the certificates'
   common names; with ``default_permission: deny`` each role may publish only its own keys and receive
-  only what it needs (``acl_config``).  Because every role is a client of one router, the router sees
+  only what it needs (``acl_config``).  Every set of credentials also holds an ``observer`` certificate
+  for ``netsetest echo`` / ``watch``: it may receive every key of the run and publish none.  Because every role is a client of one router, the router sees
   every message and its rules are authoritative.
 
 Credentials are written by :func:`write_credentials` (the ``cryptography`` package): ``ca.pem``,
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import datetime
 import ipaddress
+import json
 import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -31,6 +33,10 @@ from netsetest.config.schema import Scenario
 SECURITY_MTLS = "mtls+acl"  # the summary's "security" field: Zenoh mTLS + access control at the router
 SECURITY_INSECURE = "insecure"  # open peer mesh: any local process can read and forge messages
 ROUTER = "router"  # common name of the router's certificate
+OBSERVER = "observer"  # common name of the read-only certificate `netsetest echo/watch --credentials` use
+RUN_ENV_FILE = "run.env"  # written by `netsetest credentials`: the deployment's run id, for compose's env_file
+RUN_ID_ENV = "NETSETEST_RUN_ID"  # default of --run-id (compose services read it from the credentials' run.env)
+OBSERVER_ACCESS = "observer.json"  # written by `netsetest run` next to its credentials: run id and router endpoint
 ROUTER_HOSTS = ("localhost", "127.0.0.1", ROUTER)  # names the router's certificate is valid for
 CA_FILE = "ca.pem"
 DIR_MODE, KEY_MODE = 0o700, 0o600
@@ -76,7 +82,7 @@ def _write_private(path: Path, data: bytes) -> None:
 def write_credentials(
     directory: str | Path, names: Iterable[str], router_hosts: Sequence[str] = ROUTER_HOSTS, validity: datetime.timedelta = RUN_VALIDITY
 ) -> Path:
-    """A fresh CA and one certificate + key per name (and the router) in ``directory`` (created 0700)."""
+    """A fresh CA and one certificate + key per name, the router and the observer in ``directory`` (created 0700)."""
     # imported here: a role process only reads credentials, and cryptography costs it ~8 MB and 20 ms
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes, serialization
@@ -110,7 +116,7 @@ def write_credentials(
         .sign(ca_key, hashes.SHA256())
     )  # fmt: skip
     (d / CA_FILE).write_bytes(ca.public_bytes(serialization.Encoding.PEM))
-    for name in [ROUTER, *names]:
+    for name in [ROUTER, OBSERVER, *names]:
         key = ec.generate_private_key(ec.SECP256R1())
         hosts = list(router_hosts) if name == ROUTER else [name]
         usage = ExtendedKeyUsageOID.SERVER_AUTH if name == ROUTER else ExtendedKeyUsageOID.CLIENT_AUTH
@@ -163,6 +169,7 @@ def grants(sc: Scenario, run_id: str) -> dict[str, Grant]:
             (keys.truth(run_id), keys.node_state(run_id, "*"), *control),
         ),
     }
+    out[OBSERVER] = Grant((), (keys.run_root(run_id),))  # reads everything of the run, publishes nothing
     for n in sc.nodes:
         me = role_name("node", n.id)
         neighbours = tuple(keys.node_state(run_id, j) for j in sorted(n.in_weights) if j != n.id)
@@ -182,15 +189,17 @@ def acl_config(sc: Scenario, run_id: str) -> dict[str, object]:
     ]  # fmt: skip
     subjects, policies = [], []
     for name, g in grants(sc, run_id).items():
-        rules.append({"id": f"{name}-publish", "messages": ["put"], "flows": ["ingress"], "permission": "allow",
-                      "key_exprs": list(g.publish)})  # fmt: skip
+        mine = [f"{name}-subscribe", f"{name}-receive", "interest"]
+        if g.publish:  # the observer publishes nothing: no rule at all (Zenoh rejects a rule without keys)
+            rules.append({"id": f"{name}-publish", "messages": ["put"], "flows": ["ingress"], "permission": "allow",
+                          "key_exprs": list(g.publish)})  # fmt: skip
+            mine.append(f"{name}-publish")
         rules.append({"id": f"{name}-subscribe", "messages": ["declare_subscriber"], "flows": ["ingress"],
                       "permission": "allow", "key_exprs": list(g.receive)})  # fmt: skip
         rules.append({"id": f"{name}-receive", "messages": ["put"], "flows": ["egress"], "permission": "allow",
                       "key_exprs": list(g.receive)})  # fmt: skip
         subjects.append({"id": name, "cert_common_names": [name]})
-        policies.append({"id": name, "rules": [f"{name}-publish", f"{name}-subscribe", f"{name}-receive", "interest"],
-                         "subjects": [name]})  # fmt: skip
+        policies.append({"id": name, "rules": mine, "subjects": [name]})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}
 
 
@@ -206,3 +215,39 @@ def client_settings(ident: Identity) -> dict[str, object]:
 def router_settings(ident: Identity, sc: Scenario, run_id: str) -> dict[str, object]:
     """Zenoh settings of the run's router: TLS links only, client certificates required, the run's ACL."""
     return {"transport/link/protocols": ["tls"], **_tls_paths(ident, listen=True), "access_control": acl_config(sc, run_id)}
+
+
+@dataclass(frozen=True)
+class ObserverAccess:
+    """How an observer reaches a secured run: its identity, the run id and the router's endpoints."""
+
+    identity: Identity
+    run_id: str | None
+    connect: tuple[str, ...]
+
+
+def write_observer_access(directory: str | Path, run_id: str, connect: Sequence[str]) -> Path:
+    """Write :data:`OBSERVER_ACCESS` (run id and router endpoints) into a credentials directory."""
+    path = Path(directory) / OBSERVER_ACCESS
+    path.write_text(json.dumps({"run_id": run_id, "connect": list(connect)}) + "\n")
+    return path
+
+
+def observer_access(directory: str | Path) -> ObserverAccess:
+    """The observer's identity in ``directory``, with the run id and endpoints :func:`write_observer_access`
+    left there (a ``netsetest run``), or the run id of ``run.env`` (``netsetest credentials``), if any."""
+    ident = identity(directory, OBSERVER)
+    d = Path(directory)
+    run_id, connect = None, ()
+    if (d / OBSERVER_ACCESS).is_file():
+        try:
+            doc = json.loads((d / OBSERVER_ACCESS).read_text())
+            run_id, connect = str(doc["run_id"]), tuple(str(e) for e in doc["connect"])
+        except (ValueError, KeyError, TypeError) as exc:
+            raise CredentialsError(f"{d / OBSERVER_ACCESS}: not an observer access file ({exc})") from None
+    elif (d / RUN_ENV_FILE).is_file():
+        for line in (d / RUN_ENV_FILE).read_text().splitlines():
+            name, _, value = line.partition("=")
+            if name.strip() == RUN_ID_ENV and value.strip():
+                run_id = value.strip()
+    return ObserverAccess(ident, run_id, connect)
