@@ -167,3 +167,51 @@ def test_save_record_writes_the_streamed_layout(finished: dict[str, Path], tmp_p
         back = load_record(tmp_path / name)
         assert not back.partial and back.summary == rec.summary and back.truth == rec.truth and back.raw_nodes == rec.raw_nodes
     assert (tmp_path / "copy.jsonl").read_bytes() == finished["run.jsonl"].read_bytes()
+
+
+@pytest.fixture(scope="module")
+def streamed_mcap(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    pytest.importorskip("mcap")
+    p = tmp_path_factory.mktemp("mcap") / "run.mcap"
+    assert main(["run", TOPOLOGY, "--mode", "inmemory", "--steps", str(STEPS), "--record", str(p), "--quiet"]) == 0
+    return p
+
+
+def test_mcap_cut_anywhere_loads_or_says_why(streamed_mcap: Path, tmp_path: Path) -> None:
+    """As the JSON Lines record: an MCAP record cut at any byte is a clear RecordError before its meta
+    message, else a consistent partial record (the complete one only when nothing is missing)."""
+    data = streamed_mcap.read_bytes()
+    complete = load_record(streamed_mcap)
+    assert not complete.partial
+    first_loaded: int | None = None
+    rng = random.Random(11)
+    loaded = 0
+    for cut in sorted({*rng.sample(range(1, len(data)), 60), len(data) - 1}):
+        p = tmp_path / f"cut{cut}.mcap"
+        p.write_bytes(data[:cut])
+        try:
+            rec = load_record(p)
+        except RecordError as exc:
+            assert str(p) in str(exc) and first_loaded is None, (cut, exc)  # only a cut before the meta message
+            continue
+        first_loaded = cut if first_loaded is None else first_loaded
+        loaded += 1
+        if not rec.partial:  # cut inside the footer, after the verdict
+            assert rec.summary == complete.summary, cut
+        _check_partial(rec, complete=not rec.partial)
+        for i, track in rec.nodes.items():  # what was read is what the run wrote
+            n = len(track.steps)
+            assert np.array_equal(track.xhat, complete.nodes[i].xhat[:n]), (cut, i)
+    assert loaded >= 50 and first_loaded < len(data) // 10  # the meta message comes first
+
+
+def test_killed_inmemory_run_leaves_a_partial_mcap_record(procs: ProcessGuard, tmp_path: Path) -> None:  # noqa: F811
+    pytest.importorskip("mcap")
+    rec = tmp_path / "killed.mcap"
+    proc = procs.start("inmemory_mcap", cli("run", TOPOLOGY, "--mode", "inmemory", "--steps", "400", "--record", str(rec), "--quiet"))
+    wait_for(lambda: rec.exists() and rec.read_bytes().count(b"/vehicle/truth") >= 1 and rec.stat().st_size > 60_000, 60, what="steps in the record")
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(10)
+    r = load_record(rec)
+    assert r.partial and r.last_complete_step >= 4 and r.summary == {}
+    _check_partial(r, complete=False)

@@ -14,13 +14,14 @@ Channels (message encoding ``json``, schema encoding ``jsonschema``), log time =
 :class:`McapRecordWriter` streams a run (one call per message, the file flushed after each, unindexed so
 that nothing waits for a chunk to fill); :func:`write_mcap` converts a loaded record (chunked, zstd,
 indexed).  :func:`read_mcap` returns the same document a JSON record holds (derived fields dropped), so
-``load_record`` reads both.  Non-finite numbers are written as ``null`` (JSON has no NaN).
+``load_record`` reads both; a streamed file cut short (a killed run) reads as a partial record.  Non-finite numbers are written as ``null`` (JSON has no NaN).
 """
 
 from __future__ import annotations
 
 import json
 import math
+import struct
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
@@ -289,16 +290,20 @@ class McapReadError(Exception):
     """An MCAP file that is not a readable netsetest record (the caller adds the path)."""
 
 
-def read_mcap(path: str | Path) -> dict:
+def read_mcap(path: str | Path) -> tuple[dict, bool]:
     """The parts ``meta``, ``truth``, ``nodes``, ``summary`` of an MCAP record, as a JSON record holds
-    them; raises :class:`McapReadError` for a truncated or foreign file."""
+    them, and whether the record is partial: a file cut short (a killed run: the streamed file is
+    flushed after every message) gives what precedes the cut and no summary.  MCAP has no checksum
+    per unchunked message, so a file damaged in the middle reads the same way, up to the damage.  Raises
+    :class:`McapReadError` for a file without the meta message (foreign, or cut before it)."""
     meta: dict | None = None
     summary: dict | None = None
     truth: list[dict] = []
     nodes: dict[str, list[dict]] = {}
+    cut: str | None = None
     with open(path, "rb") as fh:
         try:
-            for _schema_rec, channel, message in NonSeekingReader(fh).iter_messages():
+            for _schema_rec, channel, message in NonSeekingReader(fh).iter_messages(log_time_order=False):  # file order: stream, no buffering
                 topic = channel.topic
                 if topic == TOPIC_META:
                     meta = json.loads(message.data)
@@ -311,15 +316,15 @@ def read_mcap(path: str | Path) -> dict:
                     d = json.loads(message.data)
                     node = topic.split("/")[2]
                     nodes.setdefault(node, []).append({k: v for k, v in d.items() if k not in DERIVED_STATE_FIELDS})
-        except (McapError, EOFError, ValueError, KeyError, AssertionError) as exc:
-            raise McapReadError(f"not a complete MCAP file ({type(exc).__name__}: {exc})") from None
+        except (McapError, EOFError, ValueError, KeyError, AssertionError, struct.error) as exc:
+            cut = f"{type(exc).__name__}: {exc}"  # a killed writer; what precedes is the record so far
     if meta is None:
-        raise McapReadError(f"no {TOPIC_META} message (not a netsetest record)")
-    if summary is None:
-        raise McapReadError(f"no {TOPIC_VERDICT} message (the run did not finish writing it)")
+        why = f"not a readable MCAP file ({cut})" if cut else f"no {TOPIC_META} message"
+        raise McapReadError(f"{why} (not a netsetest record, or cut before its first message)")
     truth.sort(key=lambda e: e["step"])
     for entries in nodes.values():
         entries.sort(key=lambda e: e["step"])
     for i in meta.get("node_ids", []):  # a node that never published has no channel, but an entry list
         nodes.setdefault(str(i), [])
-    return {"meta": meta, "truth": truth, "nodes": nodes, "summary": summary}
+    return {"meta": meta, "truth": truth, "nodes": nodes, "summary": summary or {}}, summary is None
+

@@ -278,12 +278,12 @@ def check_record_path(path: str | Path | None) -> None:
 
 
 def _read_mcap(path: Path) -> Record:
-    """An MCAP record (complete only: an MCAP file without its verdict message is not loaded)."""
+    """An MCAP record; a file cut short (a killed run) loads as a partial record, as JSON Lines do."""
     require("mcap", "an MCAP record")
     from netsetest.records.mcap_io import McapReadError, read_mcap
 
     try:
-        doc = read_mcap(path)
+        doc, partial = read_mcap(path)
     except FileNotFoundError:
         raise RecordError(f"{path}: file not found") from None
     except OSError as exc:
@@ -291,7 +291,7 @@ def _read_mcap(path: Path) -> Record:
     except McapReadError as exc:
         raise RecordError(f"{path}: {exc}") from None
     last = max((t["step"] for t in doc["truth"] if isinstance(t, dict) and isinstance(t.get("step"), int)), default=-1)
-    return _build(path, doc["meta"], doc["truth"], doc["nodes"], doc["summary"], partial=False, last_complete=last)
+    return _build(path, doc["meta"], doc["truth"], doc["nodes"], doc["summary"], partial=partial, last_complete=last)
 
 
 def load_record(path: str | Path) -> Record:
