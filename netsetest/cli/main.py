@@ -19,7 +19,7 @@ from netsetest.config.schema import ConfigError
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.extras import MissingExtra, require
 from netsetest.records.record import Record, RecordError
-from netsetest.runtime.report import EXIT_BAD_INPUT
+from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 
@@ -251,7 +251,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     except KeyboardInterrupt:
         print(f"netsetest {a.command}: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -30,7 +30,7 @@ from typing import IO, TYPE_CHECKING, Literal
 from netsetest.config.schema import Case, Scenario, load_topology
 from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
-from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION, Progress
+from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress
 
 if TYPE_CHECKING:  # the CLI imports this module for its defaults: the estimator and the roles load only to launch
     from netsetest.estimator.sdp import Variant
@@ -45,7 +45,6 @@ NEIGHBOUR_TIMEOUT_S = 5.0  # lockstep: how long a node waits for a neighbour's m
 COLLECTOR_GRACE_S = 10.0  # on Ctrl-C/SIGTERM: how long the collector may take to write its record and summary
 ROLE_GRACE_S = 5.0  # how long a role may take to leave after SIGTERM (or after End)
 FOLLOW_PERIOD_S = 0.05  # how often the launcher looks at its children and the collector's progress
-EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM reached the launcher
 ROLE_MODULE = "netsetest.cli.main"  # what a role process runs: ``python -m ROLE_MODULE ROLE ...``
 
 
