@@ -1,4 +1,4 @@
-"""``netsetest bench``: the whole benchmark in one run (see docs/performance.md for what it means).
+"""``python -m bench.run``: the whole benchmark in one run (see docs/performance.md for what it means).
 
 Parts, in order: per-node per-step solve times on the paper scenario (NSNIM/SAIM × scheduled/
 per-rule, fast path vs. the previous default, the straightforward and the naive formulations); the
@@ -272,7 +272,7 @@ TARGETS = [
 
 def markdown(res: dict) -> str:
     f = lambda v, spec=".2f": "—" if v is None else format(v, spec)  # noqa: E731
-    lines = [f"# netsetest bench ({'quick' if res['meta']['quick'] else 'full'}, {res['meta']['date']})", ""]
+    lines = [f"# netsetest benchmark ({'quick' if res['meta']['quick'] else 'full'}, {res['meta']['date']})", ""]
     lines += [f"Machine: {res['meta']['cpus']} CPUs, Python {res['meta']['python']}; load average before/after: "
               f"{res['meta']['load_before']} / {res['meta']['load_after']}; {res['meta']['duration_s']:.0f} s in all.", ""]  # fmt: skip
     lines += ["## Targets", "", "| figure | value | target | met |", "|---|---|---|---|"]
@@ -379,14 +379,25 @@ def _jsonable(o: object) -> object:
     return str(o)
 
 
+EXIT_BAD_INPUT = 2  # as netsetest's: a missing dependency or a bad option
+
+
 def main(argv: list[str] | None = None) -> int:
+    """``python -m bench.run [--quick] [--json PATH] [--markdown PATH]`` from the checkout's root."""
     import argparse
 
-    ap = argparse.ArgumentParser(prog="python -m bench.run")
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--json")
-    ap.add_argument("--markdown")
+    from netsetest.extras import MissingExtra, require
+
+    ap = argparse.ArgumentParser(prog="python -m bench.run", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="fewer steps and samples (a few minutes; default: the full benchmark)")
+    ap.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
+    ap.add_argument("--markdown", metavar="PATH", help="write the report as Markdown (default: none)")
     a = ap.parse_args(argv)
+    try:
+        require("cvxpy", "the benchmark (its reference formulations)")
+    except MissingExtra as exc:
+        print(f"python -m bench.run: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     return run_bench(a.quick, a.json, a.markdown)
 
 

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import msgpack
 
-from netsetest.cli.processes import free_ports
+from netsetest.runtime.launcher import free_ports
 from netsetest.runtime.processes import role_env
 
 PY = [sys.executable, "-m", "netsetest.cli.main"]

@@ -193,7 +193,6 @@ def test_export_parquet_without_pyarrow_exits_2(records: dict[str, Path], tmp_pa
     ("mcap", ["run", str(ROOT / "topologies" / "paper6.toml"), "--mode", "inmemory", "--record", "{tmp}/r.mcap", "--quiet"]),
     ("mcap", ["inspect", "{tmp}/r.mcap"]),
     ("matplotlib", ["plot", "{tmp}/r.json", "--out", "{tmp}/figs"]),
-    ("cvxpy", ["bench", "--quick"]),
 ])  # fmt: skip
 def test_missing_optional_dependency_exits_2_before_any_work(missing: str, argv: list[str], records: dict[str, Path], tmp_path: Path,
                                                              monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip

@@ -74,7 +74,7 @@ def test_a_node_listens_to_its_peers_ready_only():
 
 
 def test_run_gives_large_networks_longer_to_start():
-    from netsetest.cli.processes import START_S_PER_ROLE, START_TIMEOUT_S, run_start_timeout
+    from netsetest.runtime.launcher import START_S_PER_ROLE, START_TIMEOUT_S, run_start_timeout
 
     assert run_start_timeout(8) == START_TIMEOUT_S  # the paper run keeps the vehicle's default
     assert run_start_timeout(130) == 130 * START_S_PER_ROLE > START_TIMEOUT_S  # 128 nodes + vehicle + collector

@@ -1,5 +1,5 @@
 """Bounded memory: a long in-memory run keeps its resident memory flat (the full 20 000-step figure is
-in ``netsetest bench``).  Before the vehicle and the collector pruned their per-step maps this grew by
+in the benchmark, ``python -m bench.run``).  Before the vehicle and the collector pruned their per-step maps this grew by
 about 20 MB per 1000 steps."""
 
 from __future__ import annotations

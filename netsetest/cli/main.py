@@ -1,4 +1,4 @@
-"""``netsetest`` command line: run, inspect, plot, exact, compare, bench (and the role processes of the Zenoh runtime).
+"""``netsetest`` command line: run, inspect, plot, exact, compare (and the role processes of the Zenoh runtime).
 
 Exit codes: 0 success (every ellipsoid contained where the assumptions held); 1 containment violated
 on a step where the assumptions held; 2 bad input (file, option); 3 a node stopped reporting;
@@ -19,7 +19,7 @@ from netsetest.config.schema import ConfigError
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.extras import MissingExtra, require
 from netsetest.records.record import Record, RecordError
-from netsetest.runtime.report import EXIT_BAD_INPUT
+from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 
@@ -105,10 +105,6 @@ def build_parser() -> argparse.ArgumentParser:
                    help="declared fault bounds: where the estimator relies on them (saturating sensors), "
                    "everywhere, or nowhere")  # fmt: skip
 
-    p = sub.add_parser("bench", help="benchmark: solve times, scaling, Zenoh overhead, real time, node cost (docs/performance.md)")
-    p.add_argument("--quick", action="store_true", help="fewer steps and samples (a few minutes)")
-    p.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
-    p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown (default: none)")
     from netsetest.cli import compare, tools
 
     tools.add_parsers(sub)
@@ -233,22 +229,7 @@ def cmd_exact(a: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_bench(a: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    root = Path(__file__).resolve().parents[2]  # the benchmark lives next to the package, in bench/
-    if not (root / "bench" / "run.py").exists():
-        print(f"netsetest bench: needs a source checkout ({root / 'bench'} not found)", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    require("cvxpy", "netsetest bench (its reference formulations)")
-    if str(root) not in sys.path:
-        sys.path.insert(0, str(root))
-    from bench.run import run_bench
-
-    return run_bench(a.quick, a.json, a.markdown)
-
-
-COMMANDS.update(run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, exact=cmd_exact, bench=cmd_bench)
+COMMANDS.update(run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, exact=cmd_exact)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -270,7 +251,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     except KeyboardInterrupt:
         print(f"netsetest {a.command}: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -1,40 +1,28 @@
-"""CLI of the Zenoh runtime: the role processes, ``run --mode zenoh`` (spawns them), router, compose.
-
-``netsetest run TOPOLOGY`` starts 1 vehicle, 1 collector and one process per node on loopback, all in
-Zenoh peer mode, each listening on its own free port and connecting to all the others (no router).
-It follows the collector's progress, can kill and restart nodes mid-run (``--kill``, ``--rejoin``),
-and stops every child on Ctrl-C, on SIGTERM or when the vehicle or the collector fails.  A node that
-dies is not a failure of the run: the others go on without it and the summary says so (exit code 3).
+"""CLI of the Zenoh runtime: the role processes (vehicle, node, collector), ``run --mode zenoh``, router,
+credentials, compose.  Each command parses its options and hands over to netsetest/runtime: ``run``
+to the launcher (runtime/launcher.py), which starts and follows the role processes.
 """
 
 from __future__ import annotations
 
 import argparse
-import ctypes
 import math
 import os
 import re
-import signal
-import socket
-import subprocess
 import sys
-import tempfile
-import threading
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from pathlib import Path
+from collections.abc import Callable
 
 from netsetest.bus import keys
 from netsetest.cli import checks
-from netsetest.estimator.names import NODE_ESTIMATOR_NAMES, SDP
+from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
-from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION
+from netsetest.runtime.launcher import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, START_TIMEOUT_S
+from netsetest.runtime.report import EXIT_BAD_INPUT
 from netsetest.runtime.security import RUN_ENV_FILE, RUN_ID_ENV
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 ZENOH_DEFAULT_PORT = 7447
-START_TIMEOUT_S = 60.0  # the vehicle's default wait for every role to be ready
 
 
 # ---------------------------------------------------------------- option groups
@@ -115,8 +103,8 @@ DEFAULT_VALIDITY_DAYS = 30
 
 def add_run_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("zenoh mode")
-    g.add_argument("--node-timeout", type=_seconds, default=10.0, metavar="S", help="lockstep: a node silent this long [s] is declared dead")
-    g.add_argument("--neighbour-timeout", type=_seconds, default=5.0, metavar="S", help="lockstep: how long [s] a node waits for a neighbour's message")
+    g.add_argument("--node-timeout", type=_seconds, default=NODE_TIMEOUT_S, metavar="S", help="lockstep: a node silent this long [s] is declared dead")
+    g.add_argument("--neighbour-timeout", type=_seconds, default=NEIGHBOUR_TIMEOUT_S, metavar="S", help="lockstep: how long [s] a node waits for a neighbour's message")
     g.add_argument("--pace", type=_non_negative, default=0.0, metavar="S", help="lockstep: at least S seconds per step (default: 0, as fast as possible)")
     g.add_argument("--kill", type=_at, action="append", default=[], metavar="NODE@STEP", help="SIGKILL node NODE once step STEP is checked (repeatable; default: none)")
     g.add_argument("--rejoin", type=_at, action="append", default=[], metavar="NODE@STEP", help="restart node NODE with --rejoin at step STEP (repeatable; default: none)")
@@ -137,7 +125,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
     p.add_argument("--signals", choices=["paper", "worst"], default="paper", help="noise and wind: the paper's, or held at ±bound")
     p.add_argument("--seed", type=checks.seed, default=0, help="random seed of noise, wind and losses")
     p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep", help="lockstep: wait for every node; realtime: one step every τs")
-    p.add_argument("--node-timeout", type=_seconds, default=10.0, metavar="S", help="lockstep: a node silent this long [s] is declared dead")
+    p.add_argument("--node-timeout", type=_seconds, default=NODE_TIMEOUT_S, metavar="S", help="lockstep: a node silent this long [s] is declared dead")
     p.add_argument("--pace", type=_non_negative, default=0.0, metavar="S", help="lockstep: at least S seconds per step")
     p.add_argument("--start-timeout", type=_seconds, default=START_TIMEOUT_S, metavar="S", help=f"how long [s] to wait for every role to be ready (default: {START_TIMEOUT_S:g})")
     p.add_argument("--await-rejoin", type=_at, action="append", default=[], metavar="NODE@STEP",
@@ -151,7 +139,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
     p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled", help="estimator: one SDP with the scheduled model, or one per T-S rule")
     p.add_argument("--objective", choices=list(OBJECTIVES), default=DEFAULT_OBJECTIVE, help=OBJECTIVE_HELP)
     p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep", help="lockstep: wait for neighbours; realtime: step on the vehicle's input")
-    p.add_argument("--neighbour-timeout", type=_seconds, default=5.0, metavar="S", help="lockstep: how long [s] to wait for a neighbour's message")
+    p.add_argument("--neighbour-timeout", type=_seconds, default=NEIGHBOUR_TIMEOUT_S, metavar="S", help="lockstep: how long [s] to wait for a neighbour's message")
     p.add_argument("--rejoin", action="store_true", help="join a running network (after a crash or restart)")
     p.add_argument("--crash-after", type=int, metavar="STEP", help="SIGKILL itself right after publishing step STEP (run --kill; default: never)")
     _zenoh_args(p)
@@ -259,23 +247,10 @@ def cmd_collector(a: argparse.Namespace) -> int:
     return _role("collector", keys.role_name("collector"), a, body)
 
 
-def router_session(listen: list[str], base_file: str | None, security: dict[str, object] | None):  # noqa: ANN201
-    """Open a Zenoh router session (BusError naming the option: a bad --zenoh-config, or cannot --listen)."""
-    from netsetest.bus.zenoh_bus import BusError, open_session, zenoh_config
-
-    try:
-        cfg = zenoh_config("router", listen, base_file=base_file, settings=security)
-    except BusError as exc:
-        raise BusError(f"--zenoh-config: {exc}") from None
-    try:
-        return open_session(cfg, f"router on {', '.join(listen)}")
-    except BusError as exc:
-        raise BusError(f"--listen: {exc}") from None
-
-
 def cmd_router(a: argparse.Namespace) -> int:
     from netsetest.bus.zenoh_bus import BusError
     from netsetest.config.schema import load_topology
+    from netsetest.runtime.launcher import router_session
     from netsetest.runtime.processes import Stop, install_signal_handlers, log
     from netsetest.runtime.security import ROUTER, CredentialsError, identity, router_settings
 
@@ -336,268 +311,22 @@ COMMANDS.update(vehicle=cmd_vehicle, node=cmd_node, collector=cmd_collector, rou
 # ---------------------------------------------------------------- run --mode zenoh: the parent
 
 
-def free_ports(n: int) -> list[int]:
-    socks, ports = [], []
-    for _ in range(n):
-        s = socket.socket()
-        s.bind(("127.0.0.1", 0))
-        socks.append(s)
-        ports.append(s.getsockname()[1])
-    for s in socks:
-        s.close()
-    return ports
-
-
-def _die_with_parent() -> None:
-    """In the child, before exec: get SIGKILL if the parent dies, however it dies (Linux)."""
-    try:
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    except OSError:
-        pass
-
-
-class Children:
-    """The processes a run started; :meth:`stop_all` leaves none behind."""
-
-    def __init__(self) -> None:
-        self.procs: dict[str, subprocess.Popen] = {}
-        self.ended: list[subprocess.Popen] = []
-
-    def start(self, name: str, argv: list[str], **kw: object) -> subprocess.Popen:
-        from netsetest.runtime.processes import role_env
-
-        cmd = [sys.executable, "-m", "netsetest.cli.main", *argv]
-        proc = subprocess.Popen(cmd, start_new_session=True, preexec_fn=_die_with_parent, stdin=subprocess.DEVNULL, env=role_env(), **kw)  # type: ignore[call-overload]
-        self.procs[name] = proc
-        return proc
-
-    def start_again(self, name: str) -> None:
-        """Forget a process that ended (a killed node about to be restarted); it was waited for."""
-        self.procs[name].wait()
-        self.ended.append(self.procs.pop(name))
-
-    def stop_all(self, grace: float, keep: Sequence[str] = ()) -> None:
-        """SIGTERM every live child except ``keep``, SIGKILL those still alive after ``grace`` s."""
-        live = [p for n, p in self.procs.items() if p.poll() is None and n not in keep]
-        for p in live:
-            p.send_signal(signal.SIGTERM)
-        deadline = time.monotonic() + grace
-        for p in live:
-            try:
-                p.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-
-
-@dataclass(frozen=True)
-class Schedule:
-    """``--kill`` / ``--rejoin`` per node, checked: kill and rejoin alternate, steps increase, within the run."""
-
-    kills: dict[int, list[int]]
-    rejoins: dict[int, list[int]]
-
-    def next_kill(self, node: int, after: int) -> int | None:
-        """The first kill step of ``node`` at or after step ``after`` (its process' --crash-after)."""
-        return min((k for k in self.kills.get(node, []) if k >= after), default=None)
-
-
-def kill_schedule(kill: list[tuple[int, int]], rejoin: list[tuple[int, int]], steps: int) -> Schedule:
-    """Validate the kill/rejoin options (ValueError naming the option); a kill lands right after its step."""
-    events: dict[int, list[tuple[int, str]]] = {}
-    for opt, pairs in (("kill", kill), ("rejoin", rejoin)):
-        for node, step in pairs:
-            if not 0 <= step < steps:
-                raise ValueError(f"--{opt} {node}@{step}: the step must be in 0..{steps - 1} (the run has {steps} steps)")
-            events.setdefault(node, []).append((step, opt))
-    for node, evs in events.items():
-        evs.sort()
-        for n, (step, opt) in enumerate(evs):
-            want = "kill" if n % 2 == 0 else "rejoin"
-            if opt != want or (n and step <= evs[n - 1][0]):
-                raise ValueError(f"--{opt} {node}@{step}: each node's --kill and --rejoin must alternate, kill first, at increasing steps")
-    by = lambda opt: {i: [s for s, o in evs if o == opt] for i, evs in events.items()}  # noqa: E731
-    return Schedule(by("kill"), by("rejoin"))
-
-
-START_S_PER_ROLE = 1.0  # `run`: each role process imports for ≈0.35 s of CPU; 100 of them share a few cores
-
-
-def run_start_timeout(roles: int) -> float:
-    """The vehicle's start-up timeout in a ``run`` of ``roles`` processes: large networks take longer to start."""
-    return max(START_TIMEOUT_S, START_S_PER_ROLE * roles)
-
-
-COLLECTOR_GRACE_S = 10.0  # on Ctrl-C/SIGTERM: how long the collector may take to write its record and summary
-ROLE_GRACE_S = 5.0  # how long a role may take to leave after SIGTERM (or after End)
-
-
 def cmd_run_zenoh(a: argparse.Namespace) -> int:
-    from netsetest.bus.zenoh_bus import BusError, zenoh_config
-    from netsetest.config.schema import load_topology
-    from netsetest.runtime.processes import log
-    from netsetest.runtime.report import Progress, format_table
-    from netsetest.runtime.security import (
-        ROUTER, SECURITY_INSECURE, SECURITY_MTLS, identity, role_names, router_settings, write_credentials, write_observer_access,
+    from netsetest.runtime.launcher import LaunchError, LaunchOptions, launch, plan_run
+    from netsetest.runtime.report import format_table
+
+    opts = LaunchOptions(
+        topology=a.topology, case=a.case, steps=a.steps, estimator=a.estimator, signals=a.signals, variant=a.variant,
+        objective=a.objective, seed=a.seed, clock=a.clock, record=a.record, summary_json=a.summary_json, quiet=a.quiet,
+        node_timeout=a.node_timeout, neighbour_timeout=a.neighbour_timeout, pace=a.pace, kill=tuple(a.kill), rejoin=tuple(a.rejoin),
+        insecure=a.insecure, zenoh_config=a.zenoh_config,
     )  # fmt: skip
-
-    sc = load_topology(a.topology, a.case, a.steps, a.estimator)
-    for node, _ in a.kill + a.rejoin:
-        if sc.node(node).estimator != SDP:
-            log("run", f"--kill/--rejoin {node}@…: node {node} runs {sc.node(node).estimator!r}, which cannot rejoin (only the SDP can)")
-            return EXIT_BAD_INPUT
     try:
-        schedule = kill_schedule(a.kill, a.rejoin, sc.steps)
-    except ValueError as exc:
-        log("run", str(exc))
+        plan = plan_run(opts)
+    except LaunchError as exc:
+        print(f"netsetest run: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    if a.neighbour_timeout >= a.node_timeout:
-        # else a node waiting for a dead neighbour is itself declared dead by the vehicle
-        log("run", f"--neighbour-timeout ({a.neighbour_timeout:g} s) must be shorter than --node-timeout ({a.node_timeout:g} s)")
-        return EXIT_BAD_INPUT
-    if a.zenoh_config:
-        try:
-            zenoh_config("peer", base_file=a.zenoh_config)
-        except BusError as exc:
-            log("run", f"--zenoh-config: {exc}")
-            return EXIT_BAD_INPUT
-    security = SECURITY_INSECURE if a.insecure else SECURITY_MTLS
-    run_id = f"run{os.getpid()}"
-    tmp = tempfile.TemporaryDirectory(prefix="netsetest-")  # mode 0700 (mkdtemp)
-    summary_path = a.summary_json or str(Path(tmp.name) / "summary.json")
-    children = Children()
-    router = None
-    common = [a.topology, "--run-id", run_id, *(["--zenoh-config", a.zenoh_config] if a.zenoh_config else [])]
-    if a.case:
-        common += ["--case", a.case]
-    if a.steps:
-        common += ["--steps", str(a.steps)]
-    if a.estimator:
-        common += ["--estimator", a.estimator]
-    names = ["collector", "vehicle", *(f"node{i}" for i in sc.ids)]
-    ports = dict(zip(names, free_ports(len(names))))
-
-    def net(name: str) -> list[str]:
-        if router is not None:  # star: every role is an mTLS client of the parent's router
-            return ["--zenoh-mode", "client", "--connect", router_endpoint, "--credentials", creds]
-        endpoint = lambda n: f"tcp/127.0.0.1:{ports[n]}"  # noqa: E731
-        out = ["--zenoh-mode", "peer", "--listen", endpoint(name)]  # insecure: today's full peer mesh
-        for other in names:
-            if other != name:
-                out += ["--connect", endpoint(other)]
-        return out
-
-    def on_term(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, on_term)
-    try:
-        if not a.insecure:
-            creds = str(Path(tmp.name) / "credentials")
-            write_credentials(creds, role_names(sc))
-            router_endpoint = f"tls/127.0.0.1:{free_ports(1)[0]}"
-            try:
-                router = router_session([router_endpoint], a.zenoh_config, router_settings(identity(creds, ROUTER), sc, run_id))
-            except BusError as exc:
-                log("run", str(exc))
-                return EXIT_BAD_INPUT
-            write_observer_access(creds, run_id, [router_endpoint])
-        log("run", f"security: {security}" + (f" (mTLS per role, access control at the run's router {router_endpoint}; credentials in {creds})"
-                                               if router is not None else " (open peer mesh: any local process can read and forge messages)"))  # fmt: skip
-        if not a.quiet:  # how to look inside the run from another terminal (README: Live views)
-            log("run", f"run id {run_id}; " + (
-                f"watch it with: netsetest watch --run-id {run_id} --connect tcp/127.0.0.1:{ports['collector']}" if router is None
-                else f"watch it with: netsetest watch --credentials {creds}"))  # fmt: skip
-        bar = Progress(sc.steps, f"zenoh ({len(sc.ids)} nodes + vehicle + collector)", enabled=not a.quiet)
-        progress = [-1]
-
-        def follow(stream) -> None:  # noqa: ANN001
-            for line in stream:
-                if line.startswith("@progress "):
-                    progress[0] = int(line.split()[1])
-
-        def start_node(i: int, rejoin: bool, after: int) -> None:
-            crash = schedule.next_kill(i, after)
-            children.start(f"node{i}", ["node", *common, "--id", str(i), "--variant", a.variant, "--objective", a.objective, "--clock", a.clock,
-                                        "--neighbour-timeout", str(a.neighbour_timeout), *net(f"node{i}"),
-                                        *(["--rejoin"] if rejoin else []), *([] if crash is None else ["--crash-after", str(crash)])],
-                           stdout=subprocess.DEVNULL)  # fmt: skip
-
-        col = children.start(
-            "collector",
-            ["collector", *common, "--signals", a.signals, "--variant", a.variant, "--objective", a.objective, "--seed", str(a.seed), "--clock", a.clock,
-             "--summary-json", summary_path, "--progress", *(["--record", a.record] if a.record else []), *net("collector")],
-            stdout=subprocess.PIPE, text=True,
-        )  # fmt: skip
-        threading.Thread(target=follow, args=(col.stdout,), daemon=True).start()
-        for i in sc.ids:
-            start_node(i, False, 0)
-        awaits = [f"{i}@{r}" for i, rs in schedule.rejoins.items() for r in rs]
-        children.start(
-            "vehicle",
-            ["vehicle", *common, "--signals", a.signals, "--seed", str(a.seed), "--clock", a.clock,
-             "--node-timeout", str(a.node_timeout), "--pace", str(a.pace), "--start-timeout", str(run_start_timeout(len(names))),
-             *net("vehicle"),
-             *(x for w in awaits for x in ("--await-rejoin", w))],
-            stdout=subprocess.DEVNULL,
-        )  # fmt: skip
-        rejoins = sorted((r, i) for i, rs in schedule.rejoins.items() for r in rs)
-        reported: set[str] = set()
-        while True:
-            time.sleep(0.05)
-            bar.update(max(progress[0], 0))
-            for step, node in list(rejoins):
-                if progress[0] >= step and children.procs[f"node{node}"].poll() is not None:
-                    log("run", f"restarting node {node} with --rejoin at step {progress[0]}")
-                    ports[f"node{node}"] = free_ports(1)[0]
-                    children.start_again(f"node{node}")
-                    reported.discard(f"node{node}")
-                    start_node(node, True, step)
-                    rejoins.remove((step, node))
-            if col.poll() is not None:
-                break
-            veh = children.procs["vehicle"].poll()
-            if veh not in (None, 0):
-                log("run", f"the vehicle process failed (exit {veh}); stopping the run")
-                return EXIT_VIOLATION
-            for name, proc in children.procs.items():
-                code = proc.poll()
-                if not name.startswith("node") or name in reported or code in (None, 0):
-                    continue
-                reported.add(name)
-                if code == -signal.SIGKILL and schedule.kills.get(int(name.removeprefix("node"))):
-                    log("run", f"{name} killed (SIGKILL) as --kill asked")
-                else:
-                    log("run", f"{name} exited with code {code}; the run goes on without it")
-        bar.update(max(progress[0], 0))
-        bar.close()
-        code = col.returncode
-        for p in children.procs.values():  # vehicle and nodes end on End; give them a moment
-            try:
-                p.wait(timeout=ROLE_GRACE_S)
-            except subprocess.TimeoutExpired:
-                pass
-        return _print_summary(summary_path, code, format_table)
-    except KeyboardInterrupt:
-        log("run", "interrupted: stopping the vehicle and the nodes, then letting the collector write what it has")
-        children.stop_all(ROLE_GRACE_S, keep=["collector"])
-        children.stop_all(COLLECTOR_GRACE_S)
-        if Path(summary_path).exists() and a.summary_json:
-            log("run", f"partial summary written to {summary_path}")
-        return 130
-    finally:
-        children.stop_all(ROLE_GRACE_S)
-        if router is not None:
-            router.close()
-        tmp.cleanup()
-
-
-def _print_summary(summary_path: str, code: int, format_table: Callable[[dict], str]) -> int:
-    import json
-
-    if not Path(summary_path).exists():
-        print(f"netsetest run: the collector exited with code {code} without a summary", file=sys.stderr)
-        return EXIT_VIOLATION
-    summary = json.loads(Path(summary_path).read_text())
-    print(format_table(summary))  # its last line names the security mode and the verdict
-    return code
+    outcome = launch(plan)
+    if outcome.summary is not None:
+        print(format_table(outcome.summary))  # its last line names the security mode and the verdict
+    return outcome.exit_code

@@ -116,6 +116,7 @@ def write_summary(summary: dict, summary_json: str | None) -> None:
 
 
 EXIT_OK, EXIT_VIOLATION, EXIT_BAD_INPUT, EXIT_NODE_LOST = 0, 1, 2, 3
+EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM reached the command (128 + SIGINT, as shells report it)
 
 
 def exit_code(summary: dict) -> int:
