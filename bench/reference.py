@@ -9,7 +9,7 @@ once from cvxpy Parameters and solved with Clarabel's default settings:
     [[−P, Π₀ − L ℓᵀ], [(Π₀ − L ℓᵀ)ᵀ, −ρ e₁e₁ᵀ + Σ_m τ_m Q_m]] ⪯ 0,  τ ≥ 0,  min trace(P)   (22×22)
 
 ``NaiveSDP`` is the same mathematics with the cvxpy problem rebuilt from constants at every step.
-Both certify their answers with :func:`netsetest.estimator.sdp.certify` on their own facts, exactly
+Both certify their answers with :func:`netsetest.estimator.certificate.certify` on their own facts, exactly
 like the estimator, so their published shapes are comparable with the fast path's.
 """
 
@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from netsetest.estimator.sdp import NeighbourState, certify
+from netsetest.estimator.certificate import certify
+from netsetest.estimator.sdp import NeighbourState
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.vehicle import N_RULES, TSModel
 
