@@ -93,7 +93,7 @@ def test_corner_profile_runs_contained_or_flagged(name: str, case: str, tmp_path
     sc = load_topology(_network(tmp_path, CORNERS[name]), case, STEPS)
     res = run_inmemory(sc)
     s = res.summary
-    assert s["steps_completed"] == STEPS and s["violations_total"] == 0 and s["nodes_missing"] == []
+    assert s.steps_completed == STEPS and s.violations_total == 0 and s.nodes_missing == []
     for node, entries in res.parts["nodes"].items():
         assert len(entries) == STEPS + 1, node
         for e in entries:

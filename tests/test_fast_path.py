@@ -224,8 +224,8 @@ def test_fast_and_cvxpy_paths_agree_on_the_paper_scenario(case, steps, low, high
     sc = load_topology(PAPER6, case, steps)
     fast, ref = _run(sc, "clarabel"), _run(sc, "cvxpy")
     for res in (fast, ref):
-        assert res.summary["violations_total"] == 0
-        assert all(r["fallbacks"] == 0 for r in res.summary["nodes"])
+        assert res.summary.violations_total == 0
+        assert all(r.fallbacks == 0 for r in res.summary.nodes)
     for node, entries in fast.parts["nodes"].items():
         others = ref.parts["nodes"][node]
         assert [e["step"] for e in entries] == [e["step"] for e in others] == list(range(steps + 1))

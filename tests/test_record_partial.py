@@ -46,7 +46,7 @@ def _check_partial(rec, complete: bool) -> None:  # noqa: ANN001
     steps = [t["step"] for t in rec.truth]
     assert steps == list(range(len(steps)))
     assert rec.last_complete_step == len(steps) - 1
-    assert rec.partial != complete and (rec.summary != {}) == complete
+    assert rec.partial != complete and (rec.summary is not None) == complete
     for i, track in rec.nodes.items():
         assert all(int(k) <= rec.last_complete_step + 1 for k in track.steps), i
         for n, k in enumerate(track.steps):

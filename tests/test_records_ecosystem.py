@@ -54,7 +54,7 @@ def _same_record(a, b) -> None:  # noqa: ANN001
 def test_mcap_record_matches_the_json_record(records: dict[str, Path], tmp_path: Path) -> None:
     a, b = load_record(records["json"]), load_record(records["mcap"])
     _same_record(a, b)
-    assert a.summary["losses_total"] > 0  # the lossy scenario: drops are in the record
+    assert a.summary.losses_total > 0  # the lossy scenario: drops are in the record
     # converting a loaded record gives the same again
     mcap_io.write_mcap(a, tmp_path / "converted.mcap")
     _same_record(a, load_record(tmp_path / "converted.mcap"))
@@ -150,7 +150,7 @@ def test_run_record_mcap_from_the_cli(tmp_path: Path) -> None:
     p = tmp_path / "cli.mcap"
     assert main(["run", str(ROOT / "topologies" / "paper6.toml"), "--mode", "inmemory", "--steps", "4", "--record", str(p), "--quiet"]) == 0
     rec = load_record(p)
-    assert [int(k) for k in rec.nodes[1].steps] == list(range(5)) and rec.summary["violations_total"] == 0
+    assert [int(k) for k in rec.nodes[1].steps] == list(range(5)) and rec.summary.violations_total == 0
 
 
 # ------------------------------------------------------------------------------------ export

@@ -29,7 +29,8 @@ from netsetest.bus import keys
 from netsetest.cli import checks
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES, SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
-from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION
+from netsetest.records.summary import RunSummary
+from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION, read_summary
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 ZENOH_DEFAULT_PORT = 7447
@@ -592,12 +593,9 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         tmp.cleanup()
 
 
-def _print_summary(summary_path: str, code: int, format_table: Callable[[dict], str]) -> int:
-    import json
-
+def _print_summary(summary_path: str, code: int, format_table: Callable[[RunSummary], str]) -> int:
     if not Path(summary_path).exists():
         print(f"netsetest run: the collector exited with code {code} without a summary", file=sys.stderr)
         return EXIT_VIOLATION
-    summary = json.loads(Path(summary_path).read_text())
-    print(format_table(summary))  # its last line names the security mode and the verdict
+    print(format_table(read_summary(summary_path)))  # its last line names the security mode and the verdict
     return code
