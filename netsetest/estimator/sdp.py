@@ -118,13 +118,15 @@ class StepInput:
 
 @dataclass
 class StepResult:
-    xhat: np.ndarray
-    P: np.ndarray  # published shape: e⁺ᵀ P⁻¹ e⁺ ≤ ρ_i
+    """One step's set {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ_i} and how it was obtained."""
+
+    xhat: np.ndarray  # (NA,)
+    P: np.ndarray  # (NA, NA) published shape: e⁺ᵀ P⁻¹ e⁺ ≤ ρ_i
     status: Status
     rho_cert: float  # ρ' certified for the solver's P (P is published as P_solver·ρ'/ρ_i)
     solve_ms: float
     solver_status: str
-    L: np.ndarray = field(default_factory=lambda: np.zeros((NA, 1)))
+    L: np.ndarray = field(default_factory=lambda: np.zeros((NA, 1)))  # (NA, 1) the gain of (16)
     sector: Sector | None = None  # the own sensor's sector of this step (None: no saturation modelled)
     published: StepResult | None = None  # objective ``bank``: the set to publish (None: this one)
 
@@ -154,6 +156,7 @@ def _sector(d: int, slot: int, g: np.ndarray, h: float) -> np.ndarray:
 
 
 def _chol(p: np.ndarray) -> np.ndarray:
+    """M with M Mᵀ = P (P symmetrised first)."""
     return np.linalg.cholesky(0.5 * (p + p.T))
 
 
@@ -171,6 +174,12 @@ class LocalEstimator:
 
     Which sensors have a φ slot changes from step to step (a sector derived per step may prove that a
     sensor does not saturate): one η layout and solver per pattern, built when first needed.
+
+    Shapes: NA = 3 (the augmented state [β, r, f_i]), NX = 2, d = the η dimension of a pattern
+    (``pattern(...).lay.dim``), n_rules = N_RULES.  Static: ``_abar`` (n_rules, NA, NA) Ā_ℓ,
+    ``_bbar`` and ``_dbar`` (n_rules, NA) B̄_ℓ and D̄_ℓ, ``_cbar[j]`` (NA,) C̄_j.  Per step:
+    :meth:`step_data` → :class:`~netsetest.estimator.problem.StepData` (Π₀ (NA, d) per LMI, ℓ (d,),
+    Q_m (d, d)), :meth:`step` → :class:`StepResult` (x̂ (NA,), P (NA, NA), L (NA, 1)).
     """
 
     def __init__(
