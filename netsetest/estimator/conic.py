@@ -390,6 +390,12 @@ class InverseData:
 class ConicSolver:
     """Assembles and solves the reduced conic problem of one node; structure fixed by the topology.
 
+    As cvxpy's Clarabel interface: :meth:`apply` turns a step's data into Clarabel's (:class:`ConicData`)
+    plus what maps the answer back (:class:`InverseData`), :meth:`solve_via_data` runs the kept solver
+    of the template, :meth:`invert` returns the :class:`~netsetest.estimator.problem.Solution`;
+    :meth:`solve` does the three.  A template (the pattern of A, b and the cones) is built once per
+    :data:`TemplateKey` by one ``_put_*`` method per cone group.
+
     ``aggregate`` (step 1), ``cones`` (step 2) and ``decompose`` (step 4) can be switched off, e.g. to
     check that they change nothing but the speed; the scalings of step 3 are congruences, always on.
     """
@@ -404,7 +410,7 @@ class ConicSolver:
         decompose: bool = True,
     ) -> None:
         self.lay, self.n_lmi = lay, n_lmi
-        self._solvers: dict[tuple[bool, bool], clarabel.DefaultSolver] = {}
+        self._solvers: dict[TemplateKey, clarabel.DefaultSolver] = {}
         self.settings = settings or default_settings()
         facts = lay.facts
         self.sector = [m for m, f in enumerate(facts) if f.kind == "sector"]
@@ -459,7 +465,7 @@ class ConicSolver:
         # that the own sensor does not saturate) the clique problem stalled (InsufficientProgress) on
         # paper SAIM steps where the one LMI solved in 8-13 iterations
         self.cliques = self._cliques() if (decompose and self.socp and lay.phi_new is not None) else None
-        self._templates: dict[tuple[bool, bool], _Template] = {}
+        self._templates: dict[TemplateKey, _Template] = {}
         self.last_iterations = 0
 
     @property

@@ -11,13 +11,15 @@ Drop and loss counters stay mappings: their keys (roles, reasons, causes) are da
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import TypeVar
 
+from netsetest.estimator.names import SDP
+
 T = TypeVar("T")
 
-DEFAULT_ESTIMATOR = "sdp"  # the node estimator of records written before nodes could run others
+DEFAULT_ESTIMATOR = SDP  # the node estimator of records written before nodes could run others
 RUN_FIELDS = ("mode", "security", "variant", "objective", "case", "signals", "steps", "seed", "clock")
 """The run's settings copied from its meta (each only if the meta has it; written in this order)."""
 
@@ -221,6 +223,4 @@ class _Reader:
         return [self._check(key, v, int) for v in self.get(key, list, [])]
 
 
-SummaryCallback = Callable[[RunSummary], None]
-
-__all__ = ["DEFAULT_ESTIMATOR", "NodeSummary", "RunSummary", "SummaryCallback"]
+__all__ = ["DEFAULT_ESTIMATOR", "RUN_FIELDS", "NodeSummary", "RunSummary"]

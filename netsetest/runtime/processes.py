@@ -29,9 +29,9 @@ from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.estimator.sdp import Variant
 from netsetest.messages import Message, Ready
 from netsetest.models.signals import SignalKind
+from netsetest.records.summary import RunSummary
 from netsetest.roles.collector import Collector
 from netsetest.roles.node import Node
-from netsetest.records.summary import RunSummary
 from netsetest.roles.vehicle import Vehicle
 from netsetest.runtime.report import EXIT_VIOLATION, exit_code, record_sink, write_summary
 
