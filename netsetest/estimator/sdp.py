@@ -342,13 +342,13 @@ class LocalEstimator:
             pi0[0][:, lay.w] = Td  # T D̄ w
         else:
             pi0 = np.zeros((N_RULES, NA, d))
-            pi0[:, :, lay.z] = T @ self._abar @ Mi
-            pi0[:, :, lay.w] = self._dbar @ T.T
+            pi0[:, :, lay.z] = T @ self._abar @ Mi  # per rule ℓ: T Ā_ℓ ρ_i^½ M_i z_i
+            pi0[:, :, lay.w] = self._dbar @ T.T  # T D̄_ℓ w
         pi0[:, :, lay.v_new] = -g * dv_new  # − G Dv_i v⁺
         if lay.phi_new is not None:
             pi0[:, :, lay.phi_new] = -g * gamma_new  # − G γ⁺ φ⁺
-        # L-free part of the centre (16); the blended matrices are exact for the truth in both variants
-        x_pred = TA @ prev.xhat + (T @ bb) * inp.u + g * y_new
+        # L-free part of the centre; the blended matrices are exact for the truth in both variants
+        x_pred = TA @ prev.xhat + (T @ bb) * inp.u + g * y_new  # (16): T Ā x̂ + T B̄ u + G ỹ⁺
         if lay.phi_new is None:
             return pi0, x_pred, None
         cbar = self._own_cbar
