@@ -63,8 +63,8 @@ def flood(steps: int, rate: float, topology_path: str, target: str = "input") ->
             th.join(5)
         return {
             "steps_per_s": steps / wall, "wall_s": wall, "sent": sent[0], "sent_per_s": sent[0] / wall,
-            "violations": res.summary["violations_total"], "steps_completed": res.summary["steps_completed"],
-            "dropped": dict(bus.dropped), "drops": res.summary["drops"],
+            "violations": res.summary.violations_total, "steps_completed": res.summary.steps_completed,
+            "dropped": dict(bus.dropped), "drops": res.summary.drops,
         }  # fmt: skip
 
     base = one(0.0)

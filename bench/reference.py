@@ -9,7 +9,7 @@ once from cvxpy Parameters and solved with Clarabel's default settings:
     [[−P, Π₀ − L ℓᵀ], [(Π₀ − L ℓᵀ)ᵀ, −ρ e₁e₁ᵀ + Σ_m τ_m Q_m]] ⪯ 0,  τ ≥ 0,  min trace(P)   (22×22)
 
 ``NaiveSDP`` is the same mathematics with the cvxpy problem rebuilt from constants at every step.
-Both certify their answers with :func:`netsetest.estimator.sdp.certify` on their own facts, exactly
+Both certify their answers with :func:`netsetest.estimator.certificate.certify` on their own facts, exactly
 like the estimator, so their published shapes are comparable with the fast path's.
 """
 
@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from netsetest.estimator.sdp import NeighbourState, certify
+from netsetest.estimator.certificate import certify
+from netsetest.estimator.sdp import NeighbourState
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.vehicle import N_RULES, TSModel
 
@@ -33,6 +34,17 @@ class RefResult:
     status: str
     step_ms: float  # data + solve + certification
     solve_ms: float  # cvxpy (parameter update / problem build) + Clarabel
+
+
+@dataclass(frozen=True)
+class RefData:
+    """One step of the straightforward LMI over its d η slots (cf. netsetest.estimator.problem.StepData)."""
+
+    pi0: list[np.ndarray]  # Π₀ per rule, each (NA, d)
+    ell: np.ndarray  # (d,)
+    facts: list[np.ndarray]  # Q_m, each (d, d)
+    x_pred: np.ndarray  # (NA,) the L-free part of x̂⁺
+    innov_sum: float  # Σ_j a_ij y̌_j
 
 
 class FullEta:
@@ -62,7 +74,7 @@ class FullEta:
         self.n_facts = len(self.z) + 1 + len(self.v) + 1 + len(self.phi) + 1
 
     def data(self, xhat: np.ndarray, P: np.ndarray, rho: float, alpha: np.ndarray, u: float, y_new: float,
-             gamma_new: float, neigh: dict[int, NeighbourState]) -> dict:  # fmt: skip
+             gamma_new: float, neigh: dict[int, NeighbourState]) -> RefData:  # fmt: skip
         d, own = self.dim, self.own
         T, G = own.descriptor_gains(gamma_new)
         g = G[:, 0]
@@ -119,7 +131,7 @@ class FullEta:
         gn[self.phi_new] = -cg * gamma_new
         facts.append(self._sector(self.phi_new, gn, own.h))
         innov = sum(self.weights[j] * neigh[j].innov for j in self.neigh if j in neigh)
-        return {"pi0": pi0, "ell": ell, "facts": facts, "x_pred": x_pred, "innov_sum": float(innov)}
+        return RefData(pi0, ell, facts, x_pred, float(innov))
 
     def _ball(self, slot: int, bound: float) -> np.ndarray:
         q = np.zeros((self.dim, self.dim))
@@ -168,17 +180,17 @@ class StraightforwardSDP:
             self.p_rho = cp.Parameter(nonneg=True)
             self.problem, self.v_P, self.v_L, self.v_tau = _lmi_problem(cp, d, m, nr, self.p_pi0, self.p_ell, self.p_q, self.p_rho)
 
-    def _solve(self, dat: dict, rho: float) -> tuple[str, np.ndarray | None, list, list]:
+    def _solve(self, dat: RefData, rho: float) -> tuple[str, np.ndarray | None, list, list]:
         cp = self.cp
         if self.rebuild:
             e = self.eta
             self.problem, self.v_P, self.v_L, self.v_tau = _lmi_problem(
-                cp, e.dim, e.n_facts, e.n_rules, dat["pi0"], dat["ell"][None, :], dat["facts"], rho)  # fmt: skip
+                cp, e.dim, e.n_facts, e.n_rules, dat.pi0, dat.ell[None, :], dat.facts, rho)  # fmt: skip
         else:
-            for r, p in enumerate(dat["pi0"]):
+            for r, p in enumerate(dat.pi0):
                 self.p_pi0[r].value = p
-            self.p_ell.value = dat["ell"][None, :]
-            for q, Q in enumerate(dat["facts"]):
+            self.p_ell.value = dat.ell[None, :]
+            for q, Q in enumerate(dat.facts):
                 self.p_q[q].value = Q
             self.p_rho.value = rho
         try:
@@ -198,18 +210,18 @@ class StraightforwardSDP:
         t1 = time.perf_counter()
         status, Pv, Ls, taus = self._solve(dat, rho)
         t2 = time.perf_counter()
-        P_pub, xhat_new = None, dat["x_pred"]
+        P_pub, xhat_new = None, dat.x_pred
         if Pv is not None:
             if len(Ls) == 1:
-                L, tau, pi0 = Ls[0], taus[0], dat["pi0"][0]
+                L, tau, pi0 = Ls[0], taus[0], dat.pi0[0]
             else:
                 L = sum(a * v for a, v in zip(alpha, Ls))
                 tau = sum(a * v for a, v in zip(alpha, taus))
-                pi0 = sum(a * p for a, p in zip(alpha, dat["pi0"]))
-            rho_c = certify(Pv, pi0 - L @ dat["ell"][None, :], tau, dat["facts"])
+                pi0 = sum(a * p for a, p in zip(alpha, dat.pi0))
+            rho_c = certify(Pv, pi0 - L @ dat.ell[None, :], tau, dat.facts)
             if rho_c is not None:
                 P_pub = 0.5 * (Pv + Pv.T) * rho_c / rho
-                xhat_new = dat["x_pred"] + L[:, 0] * dat["innov_sum"]
+                xhat_new = dat.x_pred + L[:, 0] * dat.innov_sum
         t3 = time.perf_counter()
         return RefResult(xhat_new, P_pub, status, 1e3 * (t3 - t0), 1e3 * (t2 - t1))
 
@@ -220,4 +232,4 @@ class NaiveSDP(StraightforwardSDP):
     rebuild = True
 
 
-__all__ = ["FullEta", "NaiveSDP", "RefResult", "StraightforwardSDP"]
+__all__ = ["FullEta", "NaiveSDP", "RefData", "RefResult", "StraightforwardSDP"]

@@ -63,9 +63,9 @@ def paper_solve_times(cfg: dict) -> dict:
             t0 = time.perf_counter()
             res = side_by_side(cap, n_ref, n_naive, n_prev)
             res["run_summary"] = {
-                "violations_total": cap.summary["violations_total"],
-                "fallbacks": sum(r["fallbacks"] for r in cap.summary["nodes"]),
-                "fault_bound_mean_width": [r["fault_bound_mean_width"] for r in cap.summary["nodes"]],
+                "violations_total": cap.summary.violations_total,
+                "fallbacks": cap.summary.fallbacks,
+                "fault_bound_mean_width": [r.fault_bound_mean_width for r in cap.summary.nodes],
             }
             out[f"{case}/{variant}"] = res
             _log(
@@ -96,7 +96,7 @@ def scaling(cfg: dict, tmp: Path) -> dict:
             "nodes": n, "node_steps": ns, "ms_per_node_step": 1e3 * cap.wall_s / ns,
             "estimator_ms_median": statistics.median(cap.step_ms), "estimator_ms_mean": statistics.fmean(cap.step_ms),
             "estimator_ms_median_by_degree": {d: statistics.median(v) for d, v in sorted(by_deg.items())},
-            "fallbacks": sum(r["fallbacks"] for r in cap.summary["nodes"]), "violations": cap.summary["violations_total"],
+            "fallbacks": cap.summary.fallbacks, "violations": cap.summary.violations_total,
         })  # fmt: skip
         _log(f"  {n} nodes: {rows[-1]['ms_per_node_step']:.2f} ms per node-step (estimator {rows[-1]['estimator_ms_median']:.2f} ms)")
     base = rows[0]["ms_per_node_step"]

@@ -28,6 +28,7 @@ import numpy as np
 
 from netsetest.config.schema import Scenario
 from netsetest.estimator import sdp
+from netsetest.records.summary import RunSummary
 from netsetest.runtime.inmemory import run_inmemory
 
 
@@ -42,7 +43,7 @@ class Capture:
     scenario: Scenario
     variant: str
     cases: list[StepCase]
-    summary: dict
+    summary: RunSummary
     wall_s: float
     step_ms: list[float] = field(default_factory=list)  # the fast path inside the run
 

@@ -27,6 +27,7 @@ from netsetest.extras import require
 from netsetest.models.signals import SignalKind
 from netsetest.records.export import node_table
 from netsetest.records.record import Record, load_record, record_from_parts, save_record
+from netsetest.records.summary import RunSummary
 
 if TYPE_CHECKING:
     import pandas
@@ -36,7 +37,8 @@ COMPONENT_NAMES = ("beta", "r", "fault")  # the columns of centre/lower/upper/tr
 
 
 class SimulationError(RuntimeError):
-    """A Zenoh run that ended without a record (the message carries its exit code and error output)."""
+    """A Zenoh run that ended without a record (the message carries its exit code and error output), or a
+    verdict asked of a partial record."""
 
 
 @dataclass(frozen=True)
@@ -65,13 +67,15 @@ class SimulationResult:
     """Per-node arrays, the run's summary (the ``--summary-json`` object) and the full record."""
 
     nodes: dict[int, NodeSeries]
-    summary: dict
+    summary: RunSummary | None  # None: a partial record (the run did not finish writing it)
     record: Record  # for plots (netsetest.records.plots), MCAP (netsetest.records.mcap_io), inspect
 
     @property
     def violations(self) -> int:
         """Misses on steps where every assumption held: the estimator's failures (must be 0)."""
-        return int(self.summary["violations_total"])
+        if self.summary is None:
+            raise SimulationError(f"{self.record.path}: a partial record has no verdict")
+        return self.summary.violations_total
 
     @property
     def covered_steps(self) -> dict[int, int]:

@@ -54,7 +54,7 @@ def test_simulate_arrays_match_the_record(tmp_path: Path) -> None:
         assert np.allclose(s.t, s.steps * 0.1, rtol=0, atol=1e-12)
         # covered steps are counted from the record's flags; with the derived sector SAIM is covered throughout
         assert res.covered_steps[i] == int(tr.assumptions_ok.sum()) == len(s.steps)
-        assert res.covered_steps[i] == next(r["steps_covered"] for r in res.summary["nodes"] if r["id"] == i)
+        assert res.covered_steps[i] == res.summary.node(i).steps_covered
         assert (s.contained == (s.E <= s.rho)).all()
 
 
@@ -73,6 +73,6 @@ def test_simulate_over_zenoh_equals_in_memory() -> None:
     """mode="zenoh" runs one process per role; lockstep reproduces the in-memory run bit for bit."""
     z = netsetest.simulate("paper6", steps=6, mode="zenoh")
     m = netsetest.simulate("paper6", steps=6)
-    assert z.summary["mode"] == "zenoh" and z.violations == 0
+    assert z.summary.mode == "zenoh" and z.violations == 0
     for i in m.nodes:
         assert np.array_equal(z.nodes[i].centre, m.nodes[i].centre) and np.array_equal(z.nodes[i].upper, m.nodes[i].upper)

@@ -27,7 +27,7 @@ PAPER6 = ROOT / "topologies" / "paper6.toml"
 
 def check_every_step(res, expect_all_assumptions: bool) -> None:
     """Per node and step: E ≤ ρ wherever the step's assumption cone held; each step was published."""
-    steps = res.summary["steps_completed"]
+    steps = res.summary.steps_completed
     assert steps == res.meta["steps"]
     for node, entries in res.parts["nodes"].items():
         assert [e["step"] for e in entries] == list(range(steps + 1)), f"node {node} skipped a step"
@@ -37,15 +37,15 @@ def check_every_step(res, expect_all_assumptions: bool) -> None:
                 assert e["E"] <= e["rho"], f"node {node} step {e['step']}: E = {e['E']} > ρ with assumptions intact"
             elif expect_all_assumptions:
                 pytest.fail(f"node {node} step {e['step']}: an assumption broke where none should")
-    assert res.summary["violations_total"] == 0
+    assert res.summary.violations_total == 0
 
 
 def test_paper_nsnim_contained_every_node_every_step():
     res = run_inmemory(load_topology(PAPER6, "nsnim"), "paper", "scheduled", seed=0)
     check_every_step(res, expect_all_assumptions=True)
-    assert all(r["fallbacks"] == 0 for r in res.summary["nodes"])
+    assert all(r.fallbacks == 0 for r in res.summary.nodes)
     # the bounds are informative, not just valid: the fault interval is much narrower than ±0.3
-    assert all(r["fault_bound_mean_width"] < 0.25 for r in res.summary["nodes"])
+    assert all(r.fault_bound_mean_width < 0.25 for r in res.summary.nodes)
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -53,7 +53,7 @@ def test_worst_case_signals_nsnim(seed):
     res = run_inmemory(load_topology(PAPER6, "nsnim"), "worst", "scheduled", seed=seed)
     check_every_step(res, expect_all_assumptions=True)
     # worst-case signals push the error much closer to the boundary than the paper's cos noise
-    assert max(r["max_E"] for r in res.summary["nodes"]) > 0.5
+    assert max(r.max_E for r in res.summary.nodes) > 0.5
 
 
 def test_per_rule_variant_worst_case():
@@ -64,9 +64,9 @@ def test_per_rule_variant_worst_case():
 def test_paper_saim_run_reports_broken_sector_and_no_estimator_violation():
     """The paper's SAIM settings drive |C̄ x̄| beyond r_max/h1 (DESIGN.md §1): the collector says so."""
     res = run_inmemory(load_topology(PAPER6, "saim"), "paper", "scheduled", seed=0)
-    assert res.summary["violations_total"] == 0
-    rows = {r["id"]: r for r in res.summary["nodes"]}
-    assert rows[6]["sector_breaks"] > 0, "sensor 6 should leave the sector region in the paper's SAIM case"
+    assert res.summary.violations_total == 0
+    rows = {r.id: r for r in res.summary.nodes}
+    assert rows[6].sector_breaks > 0, "sensor 6 should leave the sector region in the paper's SAIM case"
     # every reported miss, if any, happened after a broken assumption
     for node, entries in res.parts["nodes"].items():
         for e in entries:

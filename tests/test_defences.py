@@ -117,8 +117,8 @@ def assert_same_estimates(a: RunResult, b: RunResult) -> None:
 
 def assert_no_false_verdict(res: RunResult) -> None:
     s = res.summary
-    assert s["violations_total"] == 0
-    assert s["steps_completed"] == STEPS
+    assert s.violations_total == 0
+    assert s.steps_completed == STEPS
     # every judged node-step is inside the truth, or outside the guarantee
     for entries in res.parts["nodes"].values():
         for e in entries:
@@ -143,12 +143,12 @@ def test_forged_state_with_huge_innovation_is_never_used(case: str, tmp_path: Pa
     assert bus.injected == STEPS
     assert_no_false_verdict(res)
     assert_same_estimates(res, clean(case))
-    drops = res.summary["drops"]
+    drops = res.summary.drops
     # a node reports its counters with each state: the forgery of the last step may come after its last one
     for i in (2, 4):
         assert STEPS - 1 <= drops[f"node {i}"]["neighbour-innovation"] <= STEPS
     assert drops["collector"]["state-not-from-input"] == STEPS
-    assert res.summary["node_steps_covered"] == clean(case).summary["node_steps_covered"]
+    assert res.summary.node_steps_covered == clean(case).summary.node_steps_covered
     assert_record_consistent(tmp_path / "rec.jsonl", STEPS)
 
 
@@ -157,10 +157,10 @@ def test_honest_network_drops_nothing(case: str) -> None:
     """The plausibility tests take each neighbour's published sector of the step (saim: derived per step):
     no honest state is ever dropped by a node or rejected by the collector."""
     s = clean(case).summary
-    for role, reasons in s["drops"].items():
+    for role, reasons in s.drops.items():
         assert not reasons or role == "bus", (role, reasons)  # the in-memory bus may count deliveries only
-    assert s["node_steps_rejected"] == s["node_steps_contested"] == 0
-    assert s["node_steps_covered"] == s["node_steps_evaluated"] == s["node_steps_reported"]
+    assert s.node_steps_rejected == s.node_steps_contested == 0
+    assert s.node_steps_covered == s.node_steps_evaluated == s.node_steps_reported
 
 
 def test_forged_step0_status_is_checked() -> None:
@@ -177,8 +177,8 @@ def test_forged_step0_status_is_checked() -> None:
     assert_no_false_verdict(res)
     assert_same_estimates(res, clean("saim"))
     s = res.summary
-    assert s["drops"]["collector"]["state-not-prior"] == STEPS + 1
-    assert s["node_steps_contested"] == 0 and s["node_steps_covered"] == clean("saim").summary["node_steps_covered"]
+    assert s.drops["collector"]["state-not-prior"] == STEPS + 1
+    assert s.node_steps_contested == 0 and s.node_steps_covered == clean("saim").summary.node_steps_covered
 
 
 def test_forged_state_far_away_is_dropped_or_harmless_and_never_judged() -> None:
@@ -194,10 +194,10 @@ def test_forged_state_far_away_is_dropped_or_harmless_and_never_judged() -> None
 
     res = _run("nsnim", AttackBus(before=before))
     assert_no_false_verdict(res)
-    drops = res.summary["drops"]
+    drops = res.summary.drops
     assert drops["node 2"]["neighbour-disjoint"] >= STEPS - 1 and drops["node 4"]["neighbour-disjoint"] >= STEPS - 1
-    row = {r["id"]: r for r in res.summary["nodes"]}[ATTACKED]
-    assert row["steps_contested"] == STEPS and row["violations"] == 0
+    row = {r.id: r for r in res.summary.nodes}[ATTACKED]
+    assert row.steps_contested == STEPS and row.violations == 0
     node3 = res.parts["nodes"][str(ATTACKED)]
     assert all(e["contested"] and e["E"] is None for e in node3 if e["step"] >= 1)
     # the other nodes never used the forgery: their ellipsoids are those of the clean run
@@ -218,7 +218,7 @@ def test_forged_state_from_a_non_neighbour_key_and_unknown_node() -> None:
     res = _run("nsnim", AttackBus(after=after))
     assert_no_false_verdict(res)
     assert_same_estimates(res, clean("nsnim"))
-    d = res.summary["drops"]
+    d = res.summary.drops
     assert d["collector"]["state-on-foreign-key"] > 0 and d["collector"]["unknown-node"] > 0
     assert d["collector"]["step-beyond-run"] > 0 and d["vehicle"]["step-beyond-run"] > 0
     assert d["node 2"]["not-a-neighbour"] > 0  # node 2 subscribes to node 3's key
@@ -251,7 +251,7 @@ def test_forged_inputs_the_scenario_rules_out_are_dropped() -> None:
     res = _run("nsnim", AttackBus(before=before, after=after))
     assert_no_false_verdict(res)
     assert_same_estimates(res, clean("nsnim"))
-    d = res.summary["drops"]["node 2"]
+    d = res.summary.drops["node 2"]
     for reason in ("input-speed", "input-steering", "input-gamma", "input-not-neighbours", "input-incomplete", "step-beyond-run",
                    "node-input-mismatch", "duplicate-input"):  # fmt: skip
         assert d.get(reason, 0) > 0, (reason, d)
@@ -270,9 +270,9 @@ def test_plausible_forged_input_is_caught_by_the_collector() -> None:
 
     res = _run("nsnim", AttackBus(before=before))
     assert_no_false_verdict(res)
-    rows = {r["id"]: r for r in res.summary["nodes"]}
-    assert rows[2]["steps_rejected"] == 4 and rows[2]["missing_steps"] == 0
-    assert res.summary["drops"]["collector"]["state-not-from-input"] == 4
+    rows = {r.id: r for r in res.summary.nodes}
+    assert rows[2].steps_rejected == 4 and rows[2].missing_steps == 0
+    assert res.summary.drops["collector"]["state-not-from-input"] == 4
     assert [e["step"] for e in res.parts["nodes"]["2"]] == [k for k in range(STEPS + 1) if not 5 <= k <= 8]
     for i in (1, 3):  # used node 2's states of steps 5..8 at steps 6..9
         entries = {e["step"]: e for e in res.parts["nodes"][str(i)]}
@@ -291,12 +291,12 @@ def test_forged_end_does_not_stop_the_run() -> None:
     res = _run("nsnim", AttackBus(after=after))
     assert_no_false_verdict(res)
     assert_same_estimates(res, clean("nsnim"))
-    d = res.summary["drops"]
+    d = res.summary.drops
     assert d["collector"]["end-early"] == 2 and d["collector"]["end-not-scheduled"] == 2
     assert d["vehicle"]["end-not-ours"] == 4
     for i in range(1, 7):
         assert d[f"node {i}"]["end-early"] == 2 and d[f"node {i}"]["end-not-scheduled"] == 2
-    assert all(r["steps_reported"] == STEPS + 1 for r in res.summary["nodes"])
+    assert all(r.steps_reported == STEPS + 1 for r in res.summary.nodes)
 
 
 # ------------------------------------------------------------------------------ Truth
@@ -339,8 +339,8 @@ def test_forged_truth_is_checked_against_the_model() -> None:
     res = _run("nsnim", AttackBus(before=before))
     assert_no_false_verdict(res)
     assert_same_estimates(res, clean("nsnim"))
-    s, d = res.summary, res.summary["drops"]
-    assert s["node_steps_covered"] == clean("nsnim").summary["node_steps_covered"]
+    s, d = res.summary, res.summary.drops
+    assert s.node_steps_covered == clean("nsnim").summary.node_steps_covered
     assert d["collector"]["truth-not-from-model"] >= STEPS and d["collector"]["truth-fault"] == STEPS + 1
     assert d["collector"]["truth-flags"] == 2 * (STEPS + 1) and d["collector"]["step-beyond-run"] == 2 * (STEPS + 1)
     assert d["collector"]["truth-sensor-input"] == STEPS + 1
@@ -359,8 +359,8 @@ def test_consistent_truth_copies_are_contested_not_judged() -> None:
     res = _run("nsnim", AttackBus(before=before))
     assert_no_false_verdict(res)
     s = res.summary
-    assert s["drops"]["collector"]["truth-conflict"] == 2
-    assert s["node_steps_evaluated"] == clean("nsnim").summary["node_steps_evaluated"] - 6
+    assert s.drops["collector"]["truth-conflict"] == 2
+    assert s.node_steps_evaluated == clean("nsnim").summary.node_steps_evaluated - 6
     assert all(e["E"] is None for i in res.parts["nodes"] for e in res.parts["nodes"][i] if e["step"] == 10)
     assert "not judged" in __import__("netsetest.runtime.report", fromlist=["verdict"]).verdict(s)
 
@@ -382,7 +382,7 @@ def test_duplicates_never_overwrite() -> None:
 
     res = _run("nsnim", AttackBus(after=after))
     assert_no_false_verdict(res)
-    d = res.summary["drops"]
+    d = res.summary.drops
     # two more copies per node-step: duplicates, or too late once the genuine copy completed the step
     c = d["collector"]
     assert c["duplicate-state"] + c.get("state-after-close", 0) == 2 * 6 * (STEPS + 1) and c["duplicate-truth"] == STEPS + 1
@@ -391,7 +391,7 @@ def test_duplicates_never_overwrite() -> None:
     assert_same_estimates(res, clean("nsnim"))
     for i, entries in res.parts["nodes"].items():
         assert [e["solve_ms"] for e in entries] == [genuine[(i, e["step"])] for e in entries]
-    assert res.summary["node_steps_covered"] == clean("nsnim").summary["node_steps_covered"]
+    assert res.summary.node_steps_covered == clean("nsnim").summary.node_steps_covered
 
 
 @pytest.mark.parametrize("when", ["after", "before"])
@@ -410,10 +410,10 @@ def test_flood_on_one_key(when: str) -> None:
     res = _run("nsnim", bus)
     assert bus.injected == flood * (STEPS + 1)
     assert bus.dropped["inbox-full"] > 0
-    assert res.summary["violations_total"] == 0 and res.summary["steps_completed"] == STEPS
+    assert res.summary.violations_total == 0 and res.summary.steps_completed == STEPS
     if when == "after":  # the genuine copy was first in line: nothing changes
         assert_same_estimates(res, clean("nsnim"))
-        assert res.summary["nodes_missing"] == []
+        assert res.summary.nodes_missing == []
     else:  # the genuine copy came behind a full queue and was lost: node 3 is missing, never forged
         for entries in res.parts["nodes"].values():
             assert all(e["contained"] or not e["assumptions_ok"] for e in entries)
@@ -447,7 +447,7 @@ def test_vehicle_and_collector_keep_only_open_steps(monkeypatch: pytest.MonkeyPa
         sizes.append((len(v.heard), len(c.states), len(c.truth)))  # type: ignore[attr-defined]
 
     res = run_inmemory(_scenario("nsnim"), keep=False, on_step=on_step)
-    assert res.summary["steps_completed"] == STEPS and res.parts is None
+    assert res.summary.steps_completed == STEPS and res.parts is None
     assert max(h for h, _, _ in sizes) <= 1
     assert max(s for _, s, _ in sizes) <= CLOSE_LAG + 1 and max(t for _, _, t in sizes) <= CLOSE_LAG + 1
     c = made["Collector"]

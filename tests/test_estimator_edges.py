@@ -4,6 +4,7 @@ contained, flagged as a fallback, or outside the guarantee (a broken assumption)
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import shutil
 from pathlib import Path
@@ -13,7 +14,8 @@ import pytest
 
 from netsetest.cli.main import main
 from netsetest.config.schema import load_topology
-from netsetest.estimator.sdp import Ellipsoid, FallbackUnavailable, LocalEstimator, StepInput, fallback_shape, publishable
+from netsetest.estimator.certificate import FallbackUnavailable, fallback_shape, publishable
+from netsetest.estimator.sdp import Ellipsoid, LocalEstimator, StepInput
 from netsetest.runtime.inmemory import run_inmemory
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -91,7 +93,7 @@ def test_corner_profile_runs_contained_or_flagged(name: str, case: str, tmp_path
     sc = load_topology(_network(tmp_path, CORNERS[name]), case, STEPS)
     res = run_inmemory(sc)
     s = res.summary
-    assert s["steps_completed"] == STEPS and s["violations_total"] == 0 and s["nodes_missing"] == []
+    assert s.steps_completed == STEPS and s.violations_total == 0 and s.nodes_missing == []
     for node, entries in res.parts["nodes"].items():
         assert len(entries) == STEPS + 1, node
         for e in entries:
@@ -114,13 +116,12 @@ def _estimator_data(sc, node: int = 3):  # noqa: ANN001, ANN202
 def test_fallback_shape_is_scale_free_and_spd() -> None:
     sc = load_topology(ROOT / "topologies" / "paper6.toml", "saim", 2)
     est, n, alpha, data = _estimator_data(sc)
-    shape = fallback_shape(data, n.sensor, 0.8, sc.W, alpha, sc.model)
+    shape = fallback_shape(data.Mi, dataclasses.replace(data.own, sensor=n.sensor, gamma=0.8), sc.W, alpha, sc.model)
     assert publishable(np.zeros(3), shape)
     # scaling every term (here through Mi and a sensor with scaled Dv·√R, r_max) by c scales the shape by c²
     for c in (1e-100, 1e100):
-        scaled = dict(data, Mi=data["Mi"] * c)
         sens = type(n.sensor)(n.sensor.C, n.sensor.Ds, n.sensor.Dv * c, n.sensor.R, True, n.sensor.r_max * c, n.sensor.h1, n.sensor.h2)
-        big = fallback_shape(scaled, sens, 0.8, sc.W * c * c, alpha, sc.model)
+        big = fallback_shape(data.Mi * c, dataclasses.replace(data.own, sensor=sens, gamma=0.8), sc.W * c * c, alpha, sc.model)
         assert np.all(np.isfinite(big))
         np.testing.assert_allclose(big / (c * c), shape, rtol=1e-9)
 
@@ -130,9 +131,9 @@ def test_fallback_shape_refuses_what_it_cannot_represent() -> None:
     est, n, alpha, data = _estimator_data(sc)
     for bad in (np.inf, np.nan):
         with np.errstate(invalid="ignore"), pytest.raises(FallbackUnavailable):
-            fallback_shape(dict(data, Mi=data["Mi"] * bad), n.sensor, 1.0, sc.W, alpha, sc.model)
+            fallback_shape(data.Mi * bad, dataclasses.replace(data.own, sensor=n.sensor, gamma=1.0), sc.W, alpha, sc.model)
     with pytest.raises(FallbackUnavailable):  # finite terms whose squares overflow
-        fallback_shape(dict(data, Mi=data["Mi"] * 1e200), n.sensor, 1.0, sc.W, alpha, sc.model)
+        fallback_shape(data.Mi * 1e200, dataclasses.replace(data.own, sensor=n.sensor, gamma=1.0), sc.W, alpha, sc.model)
 
 
 def test_publishable() -> None:

@@ -32,6 +32,7 @@ import pytest
 import netsetest.roles.node as node_mod
 from netsetest.config.schema import load_topology
 from netsetest.estimator import sdp
+from netsetest.estimator.certificate import certify
 from netsetest.estimator.conic import ConicSolver
 from netsetest.runtime.inmemory import run_inmemory
 
@@ -105,25 +106,25 @@ def test_conic_assembly_reproduces_the_lmi(case, variant, saim_steps, nsnim_step
         est = _estimator(sc, node, variant)
         data = _data(est, args)
         rho = args[0].rho
-        solver = ConicSolver(data["lay"], est.n_lmi, aggregate=False, cones=False)
-        prob = solver.assemble(data, rho)
-        tpl = prob["tpl"]
-        A = prob["A"].toarray()
+        solver = ConicSolver(data.lay, est.n_lmi, aggregate=False, cones=False)
+        prob, inv = solver.apply(data, rho)
+        tpl = inv.tpl
+        A = prob.A.toarray()
         x = rng.normal(size=A.shape[1])
-        s = prob["b"] - A @ x
-        P, Ls, taus = solver.unpack(x, prob)  # P = S P̃ Sᵀ, L = S L̃, τ = τ̂/κ
-        taus = [x[tpl.iT[r]] / prob["kappa"] for r in range(est.n_lmi)]  # unclipped, to test every entry
-        Sinv = np.linalg.inv(prob["S"])
-        D = np.diag(np.r_[np.ones(3), prob["sc"]])
+        s = prob.b - A @ x
+        P, Ls, taus = solver.unpack(x, inv)  # P = S P̃ Sᵀ, L = S L̃, τ = τ̂/κ
+        taus = [x[tpl.iT[r]] / inv.kappa for r in range(est.n_lmi)]  # unclipped, to test every entry
+        Sinv = np.linalg.inv(inv.S)
+        D = np.diag(np.r_[np.ones(3), inv.sc])
         D[:3, :3] = Sinv
         idx = [0, 1, 2] + [3 + k for k in solver.lmi_slots]
-        d = data["lay"].dim
+        d = data.lay.dim
         assert solver.lmi_slots == list(range(d))  # nothing left out: this is the whole LMI
         e11 = np.zeros((d, d))
         e11[0, 0] = 1.0
         for r in range(est.n_lmi):
-            pi = data["pi0"][r] - Ls[r] @ data["ell"][None, :]
-            N = rho * e11 - np.tensordot(taus[r], np.asarray(data["facts"]), axes=1)
+            pi = data.pi0[r] - Ls[r] @ data.ell[None, :]
+            N = rho * e11 - np.tensordot(taus[r], np.asarray(data.facts), axes=1)
             M = np.block([[P, pi], [pi.T, N]])[np.ix_(idx, idx)]
             n = tpl.lmi_n
             got = _smat(s[tpl.lmi_rows[r] : tpl.lmi_rows[r] + n * (n + 1) // 2], n)
@@ -138,13 +139,13 @@ def test_second_order_cones_carry_the_schur_terms(saim_steps, nsnim_steps):
         for node, args in steps[-6:]:
             est = _estimator(sc, node)
             data = _data(est, args)
-            solver = est.pattern(*data["key"]).solver
-            prob = solver.assemble(data, args[0].rho)
-            tpl = prob["tpl"]
+            solver = est.pattern(*data.key).solver
+            prob, inv = solver.apply(data, args[0].rho)
+            tpl = inv.tpl
             x = rng.normal(size=tpl.nv)
-            s = prob["b"] - prob["A"].toarray() @ x
-            L = prob["S"] @ x[tpl.iL[0]]
-            pi = data["pi0"][0] - np.outer(L, data["ell"])
+            s = prob.b - prob.A.toarray() @ x
+            L = inv.S @ x[tpl.iL[0]]
+            pi = data.pi0[0] - np.outer(L, data.ell)
             row, socs = 0, []  # the rows are laid out cone by cone, in the order of the cone list
             for cone in tpl.cones:
                 name = str(cone)
@@ -157,7 +158,7 @@ def test_second_order_cones_carry_the_schur_terms(saim_steps, nsnim_steps):
             for g, v in zip(tpl.groups, socs):
                 t, tau = x[tpl.iTt[tpl.groups.index(g)]], x[tpl.iT[0][g.fact]]
                 np.testing.assert_allclose(v[:2], [t + tau, t - tau], atol=1e-12)
-                cols = pi[:, list(g.slots)] if g.slots else -prob["B"] * L[:, None]
+                cols = pi[:, list(g.slots)] if g.slots else -inv.B * L[:, None]
                 beta = g.bound if g.slots else 1.0
                 np.testing.assert_allclose(v[2:], (2.0 * np.sqrt(beta) * cols.T).ravel(), rtol=1e-10, atol=1e-12)
 
@@ -170,17 +171,17 @@ def test_clique_decomposition_sums_to_the_lmi(saim_steps):
     for node, args in saim_steps[::-1]:
         est = _estimator(sc, node)
         data = _sector_data(est, args)
-        if data["lay"].phi_new is None or checked == 6:
+        if data.lay.phi_new is None or checked == 6:
             continue  # decomposed only where the own sensor has a φ slot
         checked += 1
-        dec, one = ConicSolver(data["lay"], 1), ConicSolver(data["lay"], 1, decompose=False)
+        dec, one = ConicSolver(data.lay, 1), ConicSolver(data.lay, 1, decompose=False)
         assert dec.cliques is not None and len(dec.cliques) >= 2
-        pd, po = dec.assemble(data, args[0].rho), one.assemble(data, args[0].rho)
-        td, to = pd["tpl"], po["tpl"]
+        (pd, invd), (po, invo) = dec.apply(data, args[0].rho), one.apply(data, args[0].rho)
+        td, to = invd.tpl, invo.tpl
         assert td.decomposed and not to.decomposed and td.nv > to.nv  # split variables come last
         x = rng.normal(size=td.nv)
-        sd = pd["b"] - pd["A"].toarray() @ x
-        so = po["b"] - po["A"].toarray() @ x[: to.nv]
+        sd = pd.b - pd.A.toarray() @ x
+        so = po.b - po.A.toarray() @ x[: to.nv]
         np.testing.assert_allclose(sd[: td.lmi_rows[0]], so[: to.lmi_rows[0]], rtol=1e-12, atol=1e-12)
         n = to.lmi_n
         total = np.zeros((n, n))
@@ -201,10 +202,10 @@ def test_reductions_leave_the_optimum_unchanged(case, saim_steps, nsnim_steps):
         data = _data(est, args)
         rho = args[0].rho
         traces = []
-        for solver in (ConicSolver(data["lay"], 1), ConicSolver(data["lay"], 1, aggregate=False, cones=False, decompose=False)):
+        for solver in (ConicSolver(data.lay, 1), ConicSolver(data.lay, 1, aggregate=False, cones=False, decompose=False)):
             sol = solver.solve(data, rho)
-            pi = data["pi0"][0] - sol.L[0] @ data["ell"][None, :]
-            rho_c = sdp.certify(sol.P, pi, sol.tau[0], data["facts"])
+            pi = data.pi0[0] - sol.L[0] @ data.ell[None, :]
+            rho_c = certify(sol.P, pi, sol.tau[0], data.facts)
             assert rho_c is not None
             traces.append(np.trace(sol.P) * rho_c / rho)
         assert traces[0] == pytest.approx(traces[1], rel=1e-5)
@@ -223,8 +224,8 @@ def test_fast_and_cvxpy_paths_agree_on_the_paper_scenario(case, steps, low, high
     sc = load_topology(PAPER6, case, steps)
     fast, ref = _run(sc, "clarabel"), _run(sc, "cvxpy")
     for res in (fast, ref):
-        assert res.summary["violations_total"] == 0
-        assert all(r["fallbacks"] == 0 for r in res.summary["nodes"])
+        assert res.summary.violations_total == 0
+        assert all(r.fallbacks == 0 for r in res.summary.nodes)
     for node, entries in fast.parts["nodes"].items():
         others = ref.parts["nodes"][node]
         assert [e["step"] for e in entries] == [e["step"] for e in others] == list(range(steps + 1))

@@ -114,7 +114,7 @@ def test_live_table_matches_the_collector(tmp_path: Path) -> None:
     assert table.ended is not None and table.ended.steps == 12
     rows = {r.id: r for r in table.sorted_rows()}
     assert sorted(rows) == sc.ids
-    summary = {n["id"]: n for n in res.summary["nodes"]}
+    summary = {n.id: n for n in res.summary.nodes}
     for i, row in rows.items():
         entries = res.parts["nodes"][str(i)]
         last = entries[-1]
@@ -124,10 +124,10 @@ def test_live_table_matches_the_collector(tmp_path: Path) -> None:
         assert row.fault_lower == pytest.approx(last["xhat"][2] - half, abs=1e-15)
         assert row.fault_upper == pytest.approx(last["xhat"][2] + half, abs=1e-15)
         assert row.E_step == 12 and row.E == pytest.approx(last["E"], rel=1e-12)
-        assert row.missing == summary[i]["neighbour_messages_missing"] == sum(len(e["missing"]) for e in entries)
+        assert row.missing == summary[i].neighbour_messages_missing == sum(len(e["missing"]) for e in entries)
         assert row.deadline_misses == 0 and row.dropped == 0
         assert row.lost == sum(1 for t in res.parts["truth"] for j, to in t["lost"] if to == i)
-    assert sum(r.lost for r in rows.values()) == res.summary["losses_total"] > 0  # the lossy scenario
+    assert sum(r.lost for r in rows.values()) == res.summary.losses_total > 0  # the lossy scenario
 
 
 def test_live_table_without_truth_shows_no_E_and_stays_bounded() -> None:

@@ -62,11 +62,11 @@ def test_topology_field_and_override(tmp_path: Path) -> None:
 def test_mixed_network_contained_where_assumptions_held(mixed_run) -> None:  # noqa: ANN001
     sc, res, rec, _ = mixed_run
     s = res.summary
-    assert s["violations_total"] == 0
-    assert s["node_steps_evaluated"] == 6 * (STEPS + 1)
-    assert s["node_steps_covered"] > 0.9 * s["node_steps_evaluated"]  # the guarantee actually covered them
-    rows = {r["id"]: r for r in s["nodes"]}
-    assert {i: rows[i]["estimator"] for i in MIXED} == MIXED
+    assert s.violations_total == 0
+    assert s.node_steps_evaluated == 6 * (STEPS + 1)
+    assert s.node_steps_covered > 0.9 * s.node_steps_evaluated  # the guarantee actually covered them
+    rows = {r.id: r for r in s.nodes}
+    assert {i: rows[i].estimator for i in MIXED} == MIXED
     assert rec.meta["estimators"] == {str(n.id): n.estimator for n in sc.nodes}
     truth = {t["step"]: t for t in rec.truth}
     for i, entries in rec.raw_nodes.items():
@@ -141,8 +141,8 @@ def test_simulate_estimator_and_mcap(tmp_path: Path) -> None:
     import netsetest
 
     res = netsetest.simulate("paper6", steps=8, estimator="interval")
-    assert res.summary["violations_total"] == 0
-    assert {r["estimator"] for r in res.summary["nodes"]} == {"interval"}
+    assert res.summary.violations_total == 0
+    assert {r.estimator for r in res.summary.nodes} == {"interval"}
     with pytest.raises(ConfigError, match="estimator"):
         netsetest.simulate("paper6", steps=2, estimator="exact")
     path = tmp_path / "run.mcap"
@@ -194,8 +194,8 @@ def test_set_estimator_refusing_a_step_falls_back(monkeypatch: pytest.MonkeyPatc
     entries = res.parts["nodes"]["5"]
     assert [e["status"] for e in entries] == ["init", "ok", "ok", "fallback", "ok", "ok", "ok"]
     assert entries[3]["bounds"] == entries[2]["bounds"]
-    row = next(r for r in res.summary["nodes"] if r["id"] == 5)
-    assert row["fallbacks"] == 1
+    row = res.summary.node(5)
+    assert row.fallbacks == 1
 
 
 def test_set_node_cannot_be_killed_and_rejoined(tmp_path: Path) -> None:

@@ -13,6 +13,8 @@ import pytest
 from netsetest.cli.main import main
 from netsetest.records.plots import plot_records
 from netsetest.records.record import RecordError, load_record
+from netsetest.records.summary import NodeSummary, RunSummary
+from netsetest.runtime.report import exit_code, format_table
 
 ROOT = Path(__file__).resolve().parents[1]
 TOPOLOGY = str(ROOT / "topologies" / "paper6.toml")
@@ -60,7 +62,7 @@ def _check_record(path: Path, steps: int, summary_path: Path) -> None:
             E = float(e @ np.linalg.solve(tr.P[n], e))
             assert abs(E - tr.E[n]) <= 1e-12 * max(1.0, E), (i, k)
             assert tr.contained[n] == (tr.E[n] <= tr.rho[n])
-    assert rec.summary == json.loads(summary_path.read_text())
+    assert rec.summary is not None and rec.summary.to_dict() == json.loads(summary_path.read_text())
 
 
 def test_record_round_trip(nsnim: dict[str, Path]) -> None:
@@ -81,7 +83,7 @@ def test_gzip_record_round_trip(saim: dict[str, Path], nsnim: dict[str, Path], t
 def _legacy_doc(path: Path) -> dict:
     """The same record in the version-1 layout (one JSON document) that older netsetest wrote."""
     rec = load_record(path)
-    return {"format": "netsetest-record", "version": 1, "meta": rec.meta, "truth": rec.truth, "nodes": rec.raw_nodes, "summary": rec.summary}
+    return {"format": "netsetest-record", "version": 1, "meta": rec.meta, "truth": rec.truth, "nodes": rec.raw_nodes, "summary": rec.summary.to_dict()}
 
 
 def test_legacy_document_record_loads(nsnim: dict[str, Path], tmp_path: Path) -> None:
@@ -152,6 +154,48 @@ def test_summary_json_fields(nsnim: dict[str, Path]) -> None:
             assert key in n, key
         assert 0.0 <= n["max_E"] <= 1.0
         assert n["violations"] == 0 and n["fault_bound_mean_width"] > 0 and n["solve_ms_median"] > 0
+
+
+def test_summary_is_typed_and_round_trips(nsnim: dict[str, Path]) -> None:
+    """In code the summary is a RunSummary; its dict is the --summary-json object, key for key, in order."""
+    rec = load_record(nsnim["record"])
+    s = rec.summary
+    assert isinstance(s, RunSummary) and all(isinstance(n, NodeSummary) for n in s.nodes)
+    text = nsnim["summary"].read_text()
+    assert json.dumps(s.to_dict(), indent=2) + "\n" == text
+    assert RunSummary.from_dict(json.loads(text)) == s and s.node(3).id == 3 and s.fallbacks == 0
+    assert exit_code(s) == 0 and "contained on 78 of 78 node-steps" in format_table(s)
+
+
+def test_summary_of_an_older_record_loads(nsnim: dict[str, Path], tmp_path: Path) -> None:
+    """Fields added since a record was written take their defaults (an older record still loads)."""
+    doc = _legacy_doc(nsnim["record"])
+    for key in ("sector_failures_total", "node_steps_contested", "node_steps_not_covered", "drops", "objective", "clock"):
+        del doc["summary"][key]
+    for n in doc["summary"]["nodes"]:
+        del n["estimator"], n["sector_failures"], n["steps_contested"]
+    p = tmp_path / "older.json"
+    p.write_text(json.dumps(doc))
+    s = load_record(p).summary
+    assert s is not None and s.objective is None and s.drops == {} and s.node_steps_contested == 0
+    assert {n.estimator for n in s.nodes} == {"sdp"} and s.violations_total == 0
+    assert "case nsnim" in format_table(s)
+
+
+@pytest.mark.parametrize(("where", "value", "field"), [
+    ("summary", "0", "summary.violations_total"), ("summary", True, "summary.violations_total"),
+    ("node", "x", "nodes[].fallbacks"), ("node", [1], "nodes[].fallbacks"),
+])  # fmt: skip
+def test_a_mistyped_summary_field_is_a_malformed_record(where: str, value: object, field: str, nsnim: dict[str, Path], tmp_path: Path) -> None:
+    doc = _legacy_doc(nsnim["record"])
+    if where == "summary":
+        doc["summary"]["violations_total"] = value
+    else:
+        doc["summary"]["nodes"][2]["fallbacks"] = value
+    p = tmp_path / "mistyped.json"
+    p.write_text(json.dumps(doc))
+    with pytest.raises(RecordError, match=re.escape(field)):
+        load_record(p)
 
 
 # ------------------------------------------------------------------------------------ inspect

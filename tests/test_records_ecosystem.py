@@ -54,7 +54,7 @@ def _same_record(a, b) -> None:  # noqa: ANN001
 def test_mcap_record_matches_the_json_record(records: dict[str, Path], tmp_path: Path) -> None:
     a, b = load_record(records["json"]), load_record(records["mcap"])
     _same_record(a, b)
-    assert a.summary["losses_total"] > 0  # the lossy scenario: drops are in the record
+    assert a.summary.losses_total > 0  # the lossy scenario: drops are in the record
     # converting a loaded record gives the same again
     mcap_io.write_mcap(a, tmp_path / "converted.mcap")
     _same_record(a, load_record(tmp_path / "converted.mcap"))
@@ -113,7 +113,7 @@ def test_streaming_writer_flushes_every_message_and_unfinished_file_is_partial(r
             sizes.append(path.stat().st_size)
     assert all(b > a for a, b in zip(sizes, sizes[1:])), sizes  # each call reached the file
     part = load_record(path)  # no verdict yet: the run did not finish
-    assert part.partial and part.summary == {} and part.last_complete_step == rec.truth[2]["step"]
+    assert part.partial and part.summary is None and part.last_complete_step == rec.truth[2]["step"]
     assert all(len(part.raw_nodes[str(i)]) == 3 for i in rec.meta["node_ids"])
     for t in rec.truth[3:]:
         w.truth(t)
@@ -151,7 +151,7 @@ def test_run_record_mcap_from_the_cli(tmp_path: Path) -> None:
     p = tmp_path / "cli.mcap"
     assert main(["run", str(ROOT / "topologies" / "paper6.toml"), "--mode", "inmemory", "--steps", "4", "--record", str(p), "--quiet"]) == 0
     rec = load_record(p)
-    assert [int(k) for k in rec.nodes[1].steps] == list(range(5)) and rec.summary["violations_total"] == 0
+    assert [int(k) for k in rec.nodes[1].steps] == list(range(5)) and rec.summary.violations_total == 0
 
 
 # ------------------------------------------------------------------------------------ export

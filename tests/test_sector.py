@@ -129,9 +129,9 @@ def test_derived_sector_holds_on_the_interval(lo, hi):
 
 def _assert_fully_covered(res, sc) -> None:
     s = res.summary
-    assert s["violations_total"] == 0 and s["misses_assumption_broken_total"] == 0
-    assert s["node_steps_covered"] == s["node_steps_reported"] == len(sc.ids) * (sc.steps + 1)
-    assert s["sector_failures_total"] == 0
+    assert s.violations_total == 0 and s.misses_assumption_broken_total == 0
+    assert s.node_steps_covered == s.node_steps_reported == len(sc.ids) * (sc.steps + 1)
+    assert s.sector_failures_total == 0
     truth = {t["step"]: t for t in res.parts["truth"]}
     derived = 0
     for node, entries in res.parts["nodes"].items():
@@ -152,7 +152,7 @@ def test_paper_saim_is_fully_covered_by_the_guarantee():
     res = run_inmemory(sc, "paper", "scheduled", 0)
     _assert_fully_covered(res, sc)
     # the paper's fixed sector breaks on this scenario: the derived one replaces an assumption that is false
-    assert sum(r["sector_breaks"] for r in res.summary["nodes"]) > 0
+    assert sum(r.sector_breaks for r in res.summary.nodes) > 0
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -176,9 +176,9 @@ def test_without_a_declared_fault_bound_the_paper_sector_is_assumed_and_checked(
     sc = load_topology(topo, "saim")
     assert all(n.fault_rate is None and n.fault_size is None for n in sc.nodes)
     res = run_inmemory(sc, "paper", "scheduled", 0)
-    rows = {r["id"]: r for r in res.summary["nodes"]}
-    assert sum(r["sectors_assumed"] for r in rows.values()) > 0
-    assert res.summary["violations_total"] == 0 and res.summary["sector_failures_total"] == 0
+    rows = {r.id: r for r in res.summary.nodes}
+    assert sum(r.sectors_assumed for r in rows.values()) > 0
+    assert res.summary.violations_total == 0 and res.summary.sector_failures_total == 0
     truth = {t["step"]: t for t in res.parts["truth"]}
     for node, entries in res.parts["nodes"].items():
         sensor = sc.node(int(node)).sensor
@@ -187,7 +187,7 @@ def test_without_a_declared_fault_bound_the_paper_sector_is_assumed_and_checked(
             if e["sector_basis"] == "assumed":
                 holds = abs(truth[e["step"]]["r"][node]) <= sensor.r_max / sensor.h1
                 assert e["assumptions_ok"] <= holds  # a broken assumed sector takes the step out of the guarantee
-    assert res.summary["node_steps_covered"] < res.summary["node_steps_evaluated"]
+    assert res.summary.node_steps_covered < res.summary.node_steps_evaluated
 
 
 def test_a_broken_declared_fault_bound_takes_its_steps_out_of_the_guarantee(tmp_path):
@@ -196,7 +196,7 @@ def test_a_broken_declared_fault_bound_takes_its_steps_out_of_the_guarantee(tmp_
     sc = load_topology(topo, "saim")
     res = run_inmemory(sc, "paper", "scheduled", 0)
     assert any(not t["fault_ok"]["1"] for t in res.parts["truth"])
-    assert res.summary["violations_total"] == 0 and res.summary["sector_failures_total"] == 0
+    assert res.summary.violations_total == 0 and res.summary.sector_failures_total == 0
     truth = {t["step"]: t for t in res.parts["truth"]}
     broken = 0
     for node, entries in res.parts["nodes"].items():

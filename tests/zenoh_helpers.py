@@ -92,7 +92,8 @@ def read_record(path: str | Path) -> dict:
     from netsetest.records.record import load_record
 
     rec = load_record(path)
-    return {"meta": rec.meta, "truth": rec.truth, "nodes": rec.raw_nodes, "summary": rec.summary, "partial": rec.partial}
+    summary = rec.summary.to_dict() if rec.summary is not None else None
+    return {"meta": rec.meta, "truth": rec.truth, "nodes": rec.raw_nodes, "summary": summary, "partial": rec.partial}
 
 
 # ------------------------------------------------------------------------------ processes via /proc

@@ -4,7 +4,7 @@ Every file is validated with pydantic.  :func:`load_topology` returns a :class:`
 data for the roles) or raises :class:`ConfigError` naming the file, the field and the reason.
 
 Physical ranges.  Every magnitude a node's estimator works with is bounded so that the estimator, its
-certificate and its guaranteed fallback ellipsoid (:func:`netsetest.estimator.sdp.fallback_shape`) stay
+certificate and its guaranteed fallback ellipsoid (:func:`netsetest.estimator.certificate.fallback_shape`) stay
 in floating-point range: a profile outside them is rejected at load (exit 2) rather than crashing a node
 mid-run.  The limits (the ``*_MIN``/``*_MAX`` constants below, documented in README.md) are generous for
 a yaw-rate sensor — gains, offsets and signals in rad, rad/s and the sensor's unit are O(1) — and the

@@ -5,7 +5,7 @@ The LMI of :mod:`netsetest.estimator.sdp` (DESIGN.md §2), written as M ⪰ 0 wi
     M(P, L, τ) = [[P, Π(L)], [Π(L)ᵀ, N(τ)]],   Π(L) = Π₀ − L ℓᵀ,   N(τ) = ρ e₁e₁ᵀ − Σ_m τ_m Q_m,
 
 τ ≥ 0, minimise trace(P), is rewritten with exact steps before it reaches the solver; the answer is
-mapped back to (P, L, τ) of that LMI, which :func:`netsetest.estimator.sdp.certify` verifies as before.
+mapped back to (P, L, τ) of that LMI, which :func:`netsetest.estimator.certificate.certify` verifies as before.
 
 1. **One scalar for the innovation noise** (``aggregate``).  A ball fact 1 − η_k²/β_k ≥ 0 on a single
    slot k that no sector fact touches and whose column of Π₀ is zero (every v_j, and the s_j of
@@ -50,12 +50,14 @@ LMIs Clarabel decomposes itself) a fresh solver is set up per step.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Union
 
 import clarabel
 import numpy as np
 
-from netsetest.estimator.sdp import EtaLayout, Solution
+from netsetest.estimator.problem import EtaLayout, Solution, StepData
 from netsetest.models.sensor import NA
 
 SQ2 = math.sqrt(2.0)
@@ -100,7 +102,7 @@ def _copy_settings(st: clarabel.DefaultSettings) -> clarabel.DefaultSettings:
 
 
 def default_settings() -> clarabel.DefaultSettings:
-    """Clarabel settings of the fast path; every answer is certified afterwards (sdp.certify).
+    """Clarabel settings of the fast path; every answer is certified afterwards (certificate.certify).
 
     Tolerances stay at 1e-8: looser ones (1e-7, 1e-6) save one or two iterations but let the SAIM
     answers drift 3e-5 / 2e-4 above the optimum (2–7 % before the scaling of step 3).  Equilibration
@@ -127,9 +129,158 @@ class _Group:
     bound: float  # β of the ball fact (B² for ξ)
 
 
-@dataclass
-class _Template:
-    """The sparsity pattern and variable map of one pattern key; values are filled per step."""
+TemplateKey = tuple[bool, bool]
+"""(ξ is used, the η₁ slot has its own cone): the two per-step choices that change the pattern."""
+
+
+def _tri(i: int, j: int) -> tuple[int, float]:
+    """svec index of entry (i, j) of a symmetric matrix and its factor (off-diagonals × √2)."""
+    i, j = min(i, j), max(i, j)
+    return j * (j + 1) // 2 + i, (1.0 if i == j else SQ2)
+
+
+# ---------------------------------------------------------------------- the values of one step
+
+
+@dataclass(frozen=True)
+class _Values:
+    """What a step's entries of A and b are computed from (d η slots, n the LMI slots)."""
+
+    ell: np.ndarray  # (d,) ℓ
+    facts: tuple[np.ndarray, ...]  # Q_m, each (d, d)
+    pi0: tuple[np.ndarray, ...]  # Π₀ per LMI, each (NA, d)
+    S: np.ndarray  # (NA, NA) with S Sᵀ = P_prev: the congruence of the P rows
+    Sinv: np.ndarray  # (NA, NA) S⁻¹
+    sc: np.ndarray  # (n,) scale of each LMI slot
+    kappa: np.ndarray  # (n_tau,) scale of each multiplier
+    B: float  # ξ's bound Σ_k |ℓ_k| √β_k
+    rho: float  # ρ_i
+    lmi_slots: list[int]  # the η slots of the LMI
+
+
+# Entries of A, one block per group of entries in pattern order; ``values`` gives them for a step.
+
+
+@dataclass(frozen=True)
+class _Const:
+    """Entries that do not change from step to step."""
+
+    v: np.ndarray
+
+    def values(self, s: _Values) -> np.ndarray:
+        return self.v
+
+
+@dataclass(frozen=True)
+class _SocL:
+    """2√β ℓ_s S[a, c] for (s, a, c): the L̃ columns of a ball group's rotated cone."""
+
+    group: _Group
+
+    def values(self, s: _Values) -> np.ndarray:
+        g = self.group
+        return (2.0 * math.sqrt(g.bound) * s.ell[list(g.slots)][:, None, None] * s.S[None, :, :]).ravel()
+
+
+@dataclass(frozen=True)
+class _SocXi:
+    """2 B S[a, c]: the L̃ columns of ξ's rotated cone."""
+
+    def values(self, s: _Values) -> np.ndarray:
+        return (2.0 * s.B * s.S).ravel()
+
+
+@dataclass(frozen=True)
+class _Soc0:
+    """2 ℓ₀ S[a, c]: the L̃ columns of the η₁ slot's cone."""
+
+    def values(self, s: _Values) -> np.ndarray:
+        return (2.0 * float(s.ell[0]) * s.S).ravel()
+
+
+@dataclass(frozen=True)
+class _LmiL:
+    """−L̃ ℓᵀ D in the LMI's off-diagonal block (``f`` the svec factors)."""
+
+    f: np.ndarray
+
+    def values(self, s: _Values) -> np.ndarray:
+        return self.f * np.repeat(s.sc * s.ell[s.lmi_slots], NA)
+
+
+@dataclass(frozen=True)
+class _LmiXi:
+    """ξ's column −B L̃ in the LMI (``per-rule``)."""
+
+    f: np.ndarray
+
+    def values(self, s: _Values) -> np.ndarray:
+        return self.f * s.B
+
+
+@dataclass(frozen=True)
+class _LmiTau:
+    """τ̂_c Q̂_m: the structural entries (gi, gj) of fact m, at LMI positions (li, lj)."""
+
+    m: int
+    gi: np.ndarray
+    gj: np.ndarray
+    li: np.ndarray
+    lj: np.ndarray
+    f: np.ndarray
+    c: int
+
+    def values(self, s: _Values) -> np.ndarray:
+        return self.f * s.facts[self.m][self.gi, self.gj] * s.sc[self.li] * s.sc[self.lj] / s.kappa[self.c]
+
+
+_ABlock = Union[_Const, _SocL, _SocXi, _Soc0, _LmiL, _LmiXi, _LmiTau]  # noqa: UP007 (a runtime alias)
+
+# Rows of b that change per step (the others stay at b_const); ``fill`` writes them for a step.
+
+
+@dataclass(frozen=True)
+class _Rho:
+    rows: list[int]
+    sign: float = 1.0
+
+    def fill(self, b: np.ndarray, s: _Values) -> None:
+        b[self.rows] = s.rho if self.sign > 0 else -s.rho
+
+
+@dataclass(frozen=True)
+class _SocPi0:
+    """2√β Π₀[a, s] for (s, a): the constant part of a ball group's rotated cone."""
+
+    rows: list[int]
+    group: _Group
+
+    def fill(self, b: np.ndarray, s: _Values) -> None:
+        g = self.group
+        b[self.rows] = (2.0 * math.sqrt(g.bound) * s.pi0[0][:, list(g.slots)].T).ravel()
+
+
+@dataclass(frozen=True)
+class _LmiPi0:
+    """S⁻¹ Π₀ D of LMI r in its off-diagonal block (``f`` the svec factors)."""
+
+    rows: list[int]
+    r: int
+    f: np.ndarray
+
+    def fill(self, b: np.ndarray, s: _Values) -> None:
+        b[self.rows] = self.f * ((s.Sinv @ s.pi0[self.r][:, s.lmi_slots]) * s.sc).T.ravel()
+
+
+_BBlock = Union[_Rho, _SocPi0, _LmiPi0]  # noqa: UP007 (a runtime alias)
+
+
+# ---------------------------------------------------------------------- the pattern of a template key
+
+
+@dataclass(frozen=True)
+class _Variables:
+    """Column indices of the conic variables: P̃ (svec), per LMI L̃ and τ̂, the cone epigraphs t."""
 
     nv: int
     iP: list[int]
@@ -137,23 +288,113 @@ class _Template:
     iT: list[list[int]]
     iTt: list[int]
     groups: list[_Group]
-    cones: list
+
+
+class _Builder:
+    """Collects a template's A entries (rows × columns, one value block each), rows of b and cones."""
+
+    def __init__(self) -> None:
+        self.rows: list[np.ndarray] = []
+        self.cols: list[np.ndarray] = []
+        self.a_blocks: list[_ABlock] = []
+        self.b_blocks: list[_BBlock] = []
+        self.cones: list = []
+        self.n_rows = 0
+        self.n_split = 0  # free variables of entries shared by several cliques (after all others)
+
+    def put(self, block: _ABlock, r: list[int] | np.ndarray, c: list[int] | np.ndarray) -> None:
+        self.rows.append(np.asarray(r, dtype=int))
+        self.cols.append(np.asarray(c, dtype=int))
+        self.a_blocks.append(block)
+
+    def newrows(self, k: int) -> list[int]:
+        start = self.n_rows
+        self.n_rows += k
+        return list(range(start, start + k))
+
+
+@dataclass(frozen=True)
+class _Template:
+    """The sparsity pattern and variable map of one template key; values are filled per step."""
+
+    key: TemplateKey
+    var: _Variables
+    nv: int  # variables, split variables included
     n_rows: int
-    rows: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
-    cols: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
-    blocks: list = field(default_factory=list)  # (kind, length, meta) in entry order
-    b_const: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    b_blocks: list = field(default_factory=list)  # (kind, row indices, meta)
-    order: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
-    indices: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    indptr: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    lmi_rows: list[int] = field(default_factory=list)  # first row of each LMI block (each clique cone)
-    lmi_n: int = 0
-    decomposed: bool = False
+    cones: list
+    a_blocks: list[_ABlock]  # in entry order
+    b_blocks: list[_BBlock]
+    order: np.ndarray  # csc order of the entries: data = values[order]
+    indices: np.ndarray
+    indptr: np.ndarray
+    lmi_rows: list[int]  # first row of each LMI block (each clique cone)
+    lmi_n: int  # size of the (undecomposed) LMI
+    decomposed: bool
+
+    @property
+    def iP(self) -> list[int]:
+        return self.var.iP
+
+    @property
+    def iL(self) -> list[list[int]]:
+        return self.var.iL
+
+    @property
+    def iT(self) -> list[list[int]]:
+        return self.var.iT
+
+    @property
+    def iTt(self) -> list[int]:
+        return self.var.iTt
+
+    @property
+    def groups(self) -> list[_Group]:
+        return self.var.groups
+
+
+@dataclass(frozen=True)
+class ConicData:
+    """Clarabel's problem of one step: minimise ½xᵀPx + qᵀx subject to b − A x ∈ cones (P = 0)."""
+
+    P: CscMatrix  # (nv, nv), empty: the objective is linear
+    q: np.ndarray  # (nv,)
+    A: CscMatrix  # (n_rows, nv)
+    b: np.ndarray  # (n_rows,)
+    cones: list
+    key: TemplateKey  # which template (and which kept solver) this is
+
+
+@dataclass(frozen=True)
+class InverseData:
+    """What maps a conic point x back to (P, L_ℓ, τ_ℓ) of the LMI (cvxpy's ``inverse_data``)."""
+
+    tpl: _Template
+    S: np.ndarray  # (NA, NA) the congruence of the P rows
+    sc: np.ndarray  # (n,) scale of each LMI slot
+    kappa: np.ndarray  # (n_tau,) scale of each multiplier
+    B: float  # ξ's bound
+    agg_w: np.ndarray  # (n_agg,) |ℓ_k| √β_k of the aggregated facts
+    pi0: np.ndarray  # (NA, d) Π₀ of the first LMI
+    ell: np.ndarray  # (d,) ℓ
+    rho: float
+
+    @property
+    def use_xi(self) -> bool:
+        return self.tpl.key[0]
+
+    @property
+    def slot0_cone(self) -> bool:
+        return self.tpl.key[1]
 
 
 class ConicSolver:
     """Assembles and solves the reduced conic problem of one node; structure fixed by the topology.
+
+    As cvxpy's Clarabel interface: :meth:`apply` turns a step's data into Clarabel's (:class:`ConicData`)
+    plus what maps the answer back (:class:`InverseData`), :meth:`solve_via_data` runs the kept solver
+    of the template, :meth:`invert` returns the :class:`~netsetest.estimator.problem.Solution`;
+    :meth:`solve` does the three.  A template (the pattern of A, b and the cones) is built once per
+    :data:`TemplateKey` by one ``_put_*`` method per cone group.
 
     ``aggregate`` (step 1), ``cones`` (step 2) and ``decompose`` (step 4) can be switched off, e.g. to
     check that they change nothing but the speed; the scalings of step 3 are congruences, always on.
@@ -169,7 +410,7 @@ class ConicSolver:
         decompose: bool = True,
     ) -> None:
         self.lay, self.n_lmi = lay, n_lmi
-        self._solvers: dict[tuple[bool, bool], clarabel.DefaultSolver] = {}
+        self._solvers: dict[TemplateKey, clarabel.DefaultSolver] = {}
         self.settings = settings or default_settings()
         facts = lay.facts
         self.sector = [m for m, f in enumerate(facts) if f.kind == "sector"]
@@ -224,7 +465,7 @@ class ConicSolver:
         # that the own sensor does not saturate) the clique problem stalled (InsufficientProgress) on
         # paper SAIM steps where the one LMI solved in 8-13 iterations
         self.cliques = self._cliques() if (decompose and self.socp and lay.phi_new is not None) else None
-        self._templates: dict[tuple[bool, bool], _Template] = {}
+        self._templates: dict[TemplateKey, _Template] = {}
         self.last_iterations = 0
 
     @property
@@ -295,17 +536,31 @@ class ConicSolver:
 
     # ------------------------------------------------------------------ pattern (once per key)
 
-    def _template(self, use_xi: bool, slot0_cone: bool) -> _Template:
-        key = (use_xi, slot0_cone)
+    # ------------------------------------------------------------------ pattern (once per key)
+
+    def _template(self, key: TemplateKey) -> _Template:
+        """The pattern of one template key, built on first use: the cones in the order the rows hold them."""
         if key in self._templates:
             return self._templates[key]
-        facts, n_lmi = self.lay.facts, self.n_lmi
-        has_lmi = bool(self.lmi_slots)
+        use_xi, slot0_cone = key
+        var = self._variables(use_xi, slot0_cone)
+        bld = _Builder()
+        self._put_xi_pin(bld, var, use_xi)
+        self._put_nonneg(bld, var, use_xi, slot0_cone)
+        self._put_group_cones(bld, var)
+        if slot0_cone:
+            self._put_slot0_cone(bld, var, use_xi)
+        lmi_rows, n = self._put_lmis(bld, var, use_xi) if self.lmi_slots else ([], 0)
+        tpl = self._templates[key] = self._finish(bld, var, key, lmi_rows, n)
+        return tpl
+
+    def _variables(self, use_xi: bool, slot0_cone: bool) -> _Variables:
+        """P̃ (svec, only with an LMI), per LMI L̃ (NA) and τ̂ (n_tau), then one epigraph t per cone."""
         nv = 0
-        iP = list(range(nv, nv + len(_P_ENTRIES))) if has_lmi else []
+        iP = list(range(nv, nv + len(_P_ENTRIES))) if self.lmi_slots else []
         nv += len(iP)
         iL, iT = [], []
-        for _ in range(n_lmi):
+        for _ in range(self.n_lmi):
             iL.append(list(range(nv, nv + NA)))
             nv += NA
             iT.append(list(range(nv, nv + self.n_tau)))
@@ -316,235 +571,194 @@ class ConicSolver:
         n_t = len(groups) + (1 if slot0_cone else 0)
         iTt = list(range(nv, nv + n_t))
         nv += n_t
+        return _Variables(nv, iP, iL, iT, iTt, groups)
 
-        rows: list[np.ndarray] = []
-        cols: list[np.ndarray] = []
-        blocks: list[tuple] = []
-        b_blocks: list[tuple] = []
-        cones: list = []
-        b_const: list[float] = []
+    def _put_xi_pin(self, bld: _Builder, var: _Variables, use_xi: bool) -> None:
+        """ξ's multiplier of a step without ξ is pinned to 0 (zero cone)."""
+        if self.xi is None or use_xi:
+            return
+        rr = bld.newrows(self.n_lmi)
+        bld.put(_Const(np.ones(self.n_lmi)), rr, [var.iT[r][self.xi] for r in range(self.n_lmi)])
+        bld.cones.append(clarabel.ZeroConeT(self.n_lmi))
 
-        def put(kind: str, r: list[int] | np.ndarray, c: list[int] | np.ndarray, meta: object = None) -> None:
-            r, c = np.asarray(r, dtype=int), np.asarray(c, dtype=int)
-            rows.append(r)
-            cols.append(c)
-            blocks.append((kind, len(r), meta))
-
-        def newrows(k: int) -> list[int]:
-            start = len(b_const)
-            b_const.extend([0.0] * k)
-            return list(range(start, start + k))
-
-        # ξ's multiplier of a step without ξ is pinned to 0
-        if self.xi is not None and not use_xi:
-            rr = newrows(n_lmi)
-            put("const", rr, [iT[r][self.xi] for r in range(n_lmi)], np.ones(n_lmi))
-            cones.append(clarabel.ZeroConeT(n_lmi))
-        # τ ≥ 0  (and, for a pure SOCP whose η₁ column is zero, the budget Σ τ ≤ ρ)
-        tcols = [iT[r][c] for r in range(n_lmi) for c in range(self.n_tau) if not (c == self.xi and not use_xi)]
-        rr = newrows(len(tcols))
-        put("const", rr, tcols, -np.ones(len(tcols)))
+    def _put_nonneg(self, bld: _Builder, var: _Variables, use_xi: bool, slot0_cone: bool) -> None:
+        """τ ≥ 0 and, for a pure SOCP whose η₁ column is zero, the budget Σ τ ≤ ρ (one nonnegative cone)."""
+        iT = var.iT
+        tcols = [iT[r][c] for r in range(self.n_lmi) for c in range(self.n_tau) if not (c == self.xi and not use_xi)]
+        rr = bld.newrows(len(tcols))
+        bld.put(_Const(-np.ones(len(tcols))), rr, tcols)
         n_nn = len(tcols)
-        balls_c = self.ball_compact + ([self.xi] if use_xi else [])
-        if self.socp and not has_lmi and not slot0_cone:
-            (r0,) = newrows(1)
-            put("const", [r0] * len(balls_c), [iT[0][c] for c in balls_c], np.ones(len(balls_c)))
-            b_blocks.append(("rho", [r0], None))
+        if self.socp and not self.lmi_slots and not slot0_cone:
+            balls_c = self._balls_compact(use_xi)
+            (r0,) = bld.newrows(1)
+            bld.put(_Const(np.ones(len(balls_c))), [r0] * len(balls_c), [iT[0][c] for c in balls_c])
+            bld.b_blocks.append(_Rho([r0]))
             n_nn += 1
-        cones.append(clarabel.NonnegativeConeT(n_nn))
-        # rotated cones β ‖Π_k(L)‖² ≤ t τ  ⇔  ‖(t − τ, 2√β Π_k)‖ ≤ t + τ, with L = S L̃
-        for k, g in enumerate(groups):
-            r0, r1 = newrows(2)
-            put("const", [r0, r0, r1, r1], [iTt[k], iT[0][g.fact], iTt[k], iT[0][g.fact]], np.array([-1.0, -1.0, -1.0, 1.0]))
+        bld.cones.append(clarabel.NonnegativeConeT(n_nn))
+
+    def _balls_compact(self, use_xi: bool) -> list[int]:
+        """Compact multiplier indices of the ball facts (ξ included when used)."""
+        return self.ball_compact + ([self.xi] if use_xi else [])  # type: ignore[list-item]
+
+    def _put_group_cones(self, bld: _Builder, var: _Variables) -> None:
+        """Rotated cones β ‖Π_k(L)‖² ≤ t τ  ⇔  ‖(t − τ, 2√β Π_k)‖ ≤ t + τ, with L = S L̃, one per group."""
+        for k, g in enumerate(var.groups):
+            r0, r1 = bld.newrows(2)
+            bld.put(_Const(np.array([-1.0, -1.0, -1.0, 1.0])), [r0, r0, r1, r1], [var.iTt[k], var.iT[0][g.fact], var.iTt[k], var.iT[0][g.fact]])
             ns = max(len(g.slots), 1)
-            xr = newrows(ns * NA)
+            xr = bld.newrows(ns * NA)
             rr_ = np.repeat(np.asarray(xr), NA)  # (slot, a) rows × c columns of S
-            cc_ = np.tile(np.asarray(iL[0]), ns * NA)
-            put("soc_L" if g.slots else "soc_xi", rr_, cc_, g)
+            cc_ = np.tile(np.asarray(var.iL[0]), ns * NA)
+            bld.put(_SocL(g) if g.slots else _SocXi(), rr_, cc_)
             if g.slots:
-                b_blocks.append(("soc_pi0", xr, g))
-            cones.append(clarabel.SecondOrderConeT(2 + ns * NA))
-        if slot0_cone:  # ℓ₀² ‖L‖² ≤ t₀ λ₀, λ₀ = ρ − Σ τ over the balls
-            r0, r1 = newrows(2)
-            t0 = iTt[-1]
-            put("const", [r0, r1] + [r0] * len(balls_c) + [r1] * len(balls_c),
-                [t0, t0] + [iT[0][c] for c in balls_c] * 2,
-                np.r_[-1.0, -1.0, np.ones(len(balls_c)), -np.ones(len(balls_c))])  # fmt: skip
-            b_blocks.append(("rho", [r0], None))
-            b_blocks.append(("-rho", [r1], None))
-            xr = newrows(NA)
-            put("soc_0", np.repeat(np.asarray(xr), NA), np.tile(np.asarray(iL[0]), NA), None)
-            cones.append(clarabel.SecondOrderConeT(2 + NA))
+                bld.b_blocks.append(_SocPi0(xr, g))
+            bld.cones.append(clarabel.SecondOrderConeT(2 + ns * NA))
 
-        # LMIs [[P̃, Π̃_r], [Π̃_rᵀ, Ñ_r]] ⪰ 0 (upper triangle, column-wise, off-diagonals × √2)
+    def _put_slot0_cone(self, bld: _Builder, var: _Variables, use_xi: bool) -> None:
+        """ℓ₀² ‖L‖² ≤ t₀ λ₀ with λ₀ = ρ − Σ τ over the balls (a pure SOCP with ℓ₀ ≠ 0)."""
+        balls_c = self._balls_compact(use_xi)
+        r0, r1 = bld.newrows(2)
+        t0 = var.iTt[-1]
+        bld.put(_Const(np.r_[-1.0, -1.0, np.ones(len(balls_c)), -np.ones(len(balls_c))]),
+                [r0, r1] + [r0] * len(balls_c) + [r1] * len(balls_c), [t0, t0] + [var.iT[0][c] for c in balls_c] * 2)  # fmt: skip
+        bld.b_blocks.append(_Rho([r0]))
+        bld.b_blocks.append(_Rho([r1], -1.0))
+        xr = bld.newrows(NA)
+        bld.put(_Soc0(), np.repeat(np.asarray(xr), NA), np.tile(np.asarray(var.iL[0]), NA))
+        bld.cones.append(clarabel.SecondOrderConeT(2 + NA))
+
+    def _put_lmis(self, bld: _Builder, var: _Variables, use_xi: bool) -> tuple[list[int], int]:
+        """LMIs [[P̃, Π̃_r], [Π̃_rᵀ, Ñ_r]] ⪰ 0 (upper triangle, column-wise, off-diagonals × √2), one PSD
+        cone each or, decomposed, one per clique; returns the first row of each cone and the LMI size."""
+        xi_in_lmi = (not self.socp) and use_xi
+        n = NA + len(self.lmi_slots) + (1 if xi_in_lmi else 0)
+        cliques = self.cliques if self.n_lmi == 1 else None
         lmi_rows: list[int] = []
-        n = 0
-        n_split = 0  # free variables of entries shared by several cliques (after all others)
-        if has_lmi:
-            slots = self.lmi_slots
-            xi_in_lmi = (not self.socp) and use_xi
-            n = NA + len(slots) + (1 if xi_in_lmi else 0)
+        for r in range(self.n_lmi):
+            vm = self._lmi_rows_whole(bld, n, lmi_rows) if cliques is None else self._lmi_rows_cliques(bld, var, n, cliques, lmi_rows)
+            row_of = lambda x: int(vm[x])  # noqa: E731 - svec entry of the LMI → row of A
+            self._put_lmi_p(bld, var, row_of)
+            self._put_lmi_pi(bld, var, r, row_of, n, xi_in_lmi)
+            self._put_lmi_n(bld, var, r, row_of, n, xi_in_lmi)
+            if cliques is None:
+                bld.cones.append(clarabel.PSDTriangleConeT(n))
+        return lmi_rows, n
 
-            def tri(i: int, j: int) -> tuple[int, float]:
-                i, j = min(i, j), max(i, j)
-                return j * (j + 1) // 2 + i, (1.0 if i == j else SQ2)
+    @staticmethod
+    def _lmi_rows_whole(bld: _Builder, n: int, lmi_rows: list[int]) -> np.ndarray:
+        """One PSD cone: the LMI's svec entries on consecutive rows."""
+        base = bld.newrows(n * (n + 1) // 2)[0]
+        lmi_rows.append(base)
+        return np.arange(base, base + n * (n + 1) // 2)
 
-            cliques = self.cliques if n_lmi == 1 else None
-            for r in range(n_lmi):
-                if cliques is None:
-                    base = newrows(n * (n + 1) // 2)[0]
-                    vm = np.arange(base, base + n * (n + 1) // 2)  # svec entry of M → row
-                    lmi_rows.append(base)
-                else:  # one cone per clique; entries in several cliques are split (free variables)
-                    vm = np.full(n * (n + 1) // 2, -1)
-                    owners: dict[int, list[int]] = {}
-                    for C in cliques:
-                        rr = newrows(len(C) * (len(C) + 1) // 2)
-                        k = 0
-                        for jj in range(len(C)):
-                            for ii in range(jj + 1):
-                                owners.setdefault(tri(C[ii], C[jj])[0], []).append(rr[k])
-                                k += 1
-                        lmi_rows.append(rr[0])
-                    for ri, rws in owners.items():
-                        vm[ri] = rws[-1]  # the last clique holding an entry carries M's value minus the splits
-                        f = 1.0 if ri in {tri(i, i)[0] for i in range(n)} else SQ2
-                        for other in rws[:-1]:
-                            put("const", [other, rws[-1]], [nv + n_split, nv + n_split], np.array([-f, f]))
-                            n_split += 1
-                    for C in cliques:
-                        cones.append(clarabel.PSDTriangleConeT(len(C)))
-                    base = 0
-                row_of = lambda x: int(vm[x])  # noqa: E731
-                pr, pf = zip(*[tri(i, j) for i, j in _P_ENTRIES])
-                put("const", [row_of(x) for x in pr], iP, -np.asarray(pf))
-                # Π̃ = S⁻¹Π₀ D − L̃ ℓᵀ D: L̃_a at (a, slot kk)
-                lr, lc, lf = [], [], []
-                for kk in range(len(slots)):
-                    for a in range(NA):
-                        ri, f = tri(a, NA + kk)
-                        lr.append(row_of(ri))
-                        lc.append(iL[r][a])
-                        lf.append(f)
-                put("lmi_L", lr, lc, np.asarray(lf))
-                b_blocks.append(("lmi_pi0", [x for x in lr], (r, np.asarray(lf))))
-                if xi_in_lmi:
-                    xr_, xf_ = zip(*[tri(a, n - 1) for a in range(NA)])
-                    put("lmi_xi", [row_of(x) for x in xr_], iL[r], np.asarray(xf_))
-                # Ñ = ρ e₁e₁ᵀ − Σ τ̂ Q̂: the structural entries of each fact on the LMI slots
-                for c in self.lmi_facts:
-                    m = self.kept[c]
-                    f_ = facts[m]
-                    if f_.kind == "ball":
-                        ent = [(0, 0)] + [(s, s) for s in f_.slots]
-                    else:
-                        p = f_.slots[0]
-                        ent = [(p, p)] + [(min(p, u), max(p, u)) for u in f_.support if u != p]
-                    gi = np.array([e[0] for e in ent])
-                    gj = np.array([e[1] for e in ent])
-                    li = np.array([self.lmi_pos[x] for x in gi])
-                    lj = np.array([self.lmi_pos[x] for x in gj])
-                    rr_, ff_ = zip(*[tri(NA + x, NA + y) for x, y in zip(li, lj)])
-                    put("lmi_tau", [row_of(x) for x in rr_], [iT[r][c]] * len(ent), (m, gi, gj, li, lj, np.asarray(ff_), c))
-                r00, _ = tri(NA, NA)
-                b_blocks.append(("rho", [row_of(r00)], None))
-                # balls living in cones (and ξ) still cost τ in Ñ₁₁
-                extra = [g.fact for g in groups] if self.socp else []
-                if xi_in_lmi:
-                    extra.append(self.xi)
-                if extra:
-                    put("const", [row_of(r00)] * len(extra), [iT[r][c] for c in extra], np.ones(len(extra)))
-                if xi_in_lmi:
-                    rx, _ = tri(n - 1, n - 1)
-                    put("const", [row_of(rx)], [iT[r][self.xi]], -np.ones(1))
-                if cliques is None:
-                    cones.append(clarabel.PSDTriangleConeT(n))
+    def _lmi_rows_cliques(self, bld: _Builder, var: _Variables, n: int, cliques: list[list[int]], lmi_rows: list[int]) -> np.ndarray:
+        """One PSD cone per clique; an entry held by several cliques gets free split variables (after all
+        others) so that the cliques' matrices add up to the LMI."""
+        vm = np.full(n * (n + 1) // 2, -1)
+        owners: dict[int, list[int]] = {}
+        for C in cliques:
+            rr = bld.newrows(len(C) * (len(C) + 1) // 2)
+            k = 0
+            for jj in range(len(C)):
+                for ii in range(jj + 1):
+                    owners.setdefault(_tri(C[ii], C[jj])[0], []).append(rr[k])
+                    k += 1
+            lmi_rows.append(rr[0])
+        diagonal = {_tri(i, i)[0] for i in range(n)}
+        for ri, rws in owners.items():
+            vm[ri] = rws[-1]  # the last clique holding an entry carries M's value minus the splits
+            f = 1.0 if ri in diagonal else SQ2
+            for other in rws[:-1]:
+                col = var.nv + bld.n_split
+                bld.put(_Const(np.array([-f, f])), [other, rws[-1]], [col, col])
+                bld.n_split += 1
+        for C in cliques:
+            bld.cones.append(clarabel.PSDTriangleConeT(len(C)))
+        return vm
 
-        nv += n_split
-        tpl = _Template(nv=nv, iP=iP, iL=iL, iT=iT, iTt=iTt, groups=groups, cones=cones, n_rows=len(b_const))
-        tpl.decomposed = has_lmi and self.cliques is not None and n_lmi == 1
-        tpl.rows = np.concatenate(rows)
-        assert tpl.rows.min() >= 0 and all(min(rr) >= 0 for _, rr, _ in b_blocks), "an LMI entry outside every clique"
-        tpl.cols = np.concatenate(cols)
-        tpl.blocks = blocks
-        tpl.b_const = np.asarray(b_const)
-        tpl.b_blocks = b_blocks
-        tpl.lmi_rows, tpl.lmi_n = lmi_rows, n
-        # csc order of the entries (fixed pattern): data = values[order]
-        order = np.lexsort((tpl.rows, tpl.cols))
-        assert len(set(zip(tpl.rows.tolist(), tpl.cols.tolist()))) == len(order), "duplicate entries in the pattern"
-        tpl.order = order
-        tpl.indices = tpl.rows[order].astype(np.int64)
-        tpl.indptr = np.r_[0, np.cumsum(np.bincount(tpl.cols, minlength=nv))].astype(np.int64)
-        self._templates[key] = tpl
-        return tpl
+    @staticmethod
+    def _put_lmi_p(bld: _Builder, var: _Variables, row_of: Callable[[int], int]) -> None:
+        """The P̃ block."""
+        pr, pf = zip(*[_tri(i, j) for i, j in _P_ENTRIES])
+        bld.put(_Const(-np.asarray(pf)), [row_of(x) for x in pr], var.iP)
+
+    def _put_lmi_pi(self, bld: _Builder, var: _Variables, r: int, row_of: Callable[[int], int], n: int, xi_in_lmi: bool) -> None:
+        """Π̃ = S⁻¹Π₀ D − L̃ ℓᵀ D: L̃_a at (a, slot kk), S⁻¹Π₀ D in b; ξ's column −B L̃ when it is in the LMI."""
+        lr, lc, lf = [], [], []
+        for kk in range(len(self.lmi_slots)):
+            for a in range(NA):
+                ri, f = _tri(a, NA + kk)
+                lr.append(row_of(ri))
+                lc.append(var.iL[r][a])
+                lf.append(f)
+        bld.put(_LmiL(np.asarray(lf)), lr, lc)
+        bld.b_blocks.append(_LmiPi0(list(lr), r, np.asarray(lf)))
+        if xi_in_lmi:
+            xr_, xf_ = zip(*[_tri(a, n - 1) for a in range(NA)])
+            bld.put(_LmiXi(np.asarray(xf_)), [row_of(x) for x in xr_], var.iL[r])
+
+    def _put_lmi_n(self, bld: _Builder, var: _Variables, r: int, row_of: Callable[[int], int], n: int, xi_in_lmi: bool) -> None:
+        """Ñ = ρ e₁e₁ᵀ − Σ τ̂ Q̂: the structural entries of each fact on the LMI slots; ρ in Ñ₁₁ (b), where
+        the balls living in cones (and ξ) still cost their τ."""
+        facts = self.lay.facts
+        iT = var.iT
+        for c in self.lmi_facts:
+            m = self.kept[c]
+            f_ = facts[m]
+            if f_.kind == "ball":
+                ent = [(0, 0)] + [(s, s) for s in f_.slots]
+            else:
+                p = f_.slots[0]
+                ent = [(p, p)] + [(min(p, u), max(p, u)) for u in f_.support if u != p]
+            gi = np.array([e[0] for e in ent])
+            gj = np.array([e[1] for e in ent])
+            li = np.array([self.lmi_pos[x] for x in gi])
+            lj = np.array([self.lmi_pos[x] for x in gj])
+            rr_, ff_ = zip(*[_tri(NA + x, NA + y) for x, y in zip(li, lj)])
+            bld.put(_LmiTau(m, gi, gj, li, lj, np.asarray(ff_), c), [row_of(x) for x in rr_], [iT[r][c]] * len(ent))
+        r00, _ = _tri(NA, NA)
+        bld.b_blocks.append(_Rho([row_of(r00)]))
+        extra = [g.fact for g in var.groups] if self.socp else []
+        if xi_in_lmi:
+            extra.append(self.xi)  # type: ignore[arg-type]
+        if extra:
+            bld.put(_Const(np.ones(len(extra))), [row_of(r00)] * len(extra), [iT[r][c] for c in extra])
+        if xi_in_lmi:
+            rx, _ = _tri(n - 1, n - 1)
+            bld.put(_Const(-np.ones(1)), [row_of(rx)], [iT[r][self.xi]])  # type: ignore[index]
+
+    def _finish(self, bld: _Builder, var: _Variables, key: TemplateKey, lmi_rows: list[int], n: int) -> _Template:
+        """The csc order of the entries (the pattern is fixed: data = values[order]) and the template."""
+        nv = var.nv + bld.n_split
+        rows, cols = np.concatenate(bld.rows), np.concatenate(bld.cols)
+        assert rows.min() >= 0 and all(min(b.rows) >= 0 for b in bld.b_blocks), "an LMI entry outside every clique"
+        order = np.lexsort((rows, cols))
+        assert len(set(zip(rows.tolist(), cols.tolist()))) == len(order), "duplicate entries in the pattern"
+        return _Template(
+            key=key, var=var, nv=nv, n_rows=bld.n_rows, cones=bld.cones, a_blocks=bld.a_blocks, b_blocks=bld.b_blocks,
+            order=order, indices=rows[order].astype(np.int64), indptr=np.r_[0, np.cumsum(np.bincount(cols, minlength=nv))].astype(np.int64),
+            lmi_rows=lmi_rows, lmi_n=n, decomposed=bool(self.lmi_slots) and self.cliques is not None and self.n_lmi == 1,
+        )  # fmt: skip
 
     # ------------------------------------------------------------------ values (every step)
 
-    def assemble(self, data: dict, rho: float) -> dict:
-        """Clarabel data (P, q, A, b, cones) and the maps back to (P, L, τ), for one step."""
-        facts = self.lay.facts
-        ell = data["ell"]
-        Q = data["facts"]
+    def apply(self, data: StepData, rho: float) -> tuple[ConicData, InverseData]:
+        """Clarabel's data for one step and what maps its answer back to (P, L, τ) (cvxpy's ``apply``)."""
+        ell = data.ell
         agg_w = np.abs(ell[self.agg_slots]) * self.agg_sqrtb if self.agg else np.zeros(0)
         B = float(agg_w.sum())
         use_xi = self.xi is not None and B > 0.0
         has_lmi = bool(self.lmi_slots)
-        ell0 = float(ell[0])
-        slot0_cone = self.socp and not has_lmi and ell0 != 0.0
-        tpl = self._template(use_xi, slot0_cone)
-
-        # congruence of the P rows: P_prev = S Sᵀ (data["Mi"] = ρ^½ chol(P_prev))
-        S = data["Mi"] / math.sqrt(rho)
-        Sinv = np.linalg.inv(S)
-        # φ slots: |φ| ≤ h|r| ≤ Σ_k h|g_k| σ_k (from the sector fact's row); multipliers by κ
-        sc = self.scale[self.lmi_slots] if has_lmi else np.zeros(0)
-        kappa = np.ones(self.n_tau)
-        if self.sector_lmi:
-            sc = sc.copy()
-            for c, m in self.sector_lmi:
-                p = facts[m].slots[0]
-                row = np.abs(Q[m][p])
-                bound = 2.0 * float(row @ self.scale) - 2.0 * row[p] * self.scale[p]
-                if bound > 0.0:
-                    sc[self.lmi_pos[p]] = bound
-            for c, m in self.sector_lmi:
-                p = self.lmi_pos[facts[m].slots[0]]
-                kap = abs(Q[m][facts[m].slots[0], facts[m].slots[0]]) * sc[p] ** 2
-                if kap > 0.0:
-                    kappa[c] = kap
-
-        vals = []
-        for kind, length, meta in tpl.blocks:
-            if kind == "const":
-                vals.append(meta)
-            elif kind == "soc_L":  # 2√β ℓ_s S[a, c] for (s, a, c)
-                g = meta
-                vals.append((2.0 * math.sqrt(g.bound) * ell[list(g.slots)][:, None, None] * S[None, :, :]).ravel())
-            elif kind == "soc_xi":
-                vals.append((2.0 * B * S).ravel())
-            elif kind == "soc_0":
-                vals.append((2.0 * ell0 * S).ravel())
-            elif kind == "lmi_L":
-                vals.append(meta * np.repeat(sc * ell[self.lmi_slots], NA))
-            elif kind == "lmi_xi":
-                vals.append(meta * B)
-            elif kind == "lmi_tau":
-                m, gi, gj, li, lj, ff, c = meta
-                vals.append(ff * Q[m][gi, gj] * sc[li] * sc[lj] / kappa[c])
-        values = np.concatenate(vals)
-        b = tpl.b_const.copy()
-        pi0 = data["pi0"]
-        for kind, rr, meta in tpl.b_blocks:
-            if kind == "rho":
-                b[rr] = rho
-            elif kind == "-rho":
-                b[rr] = -rho
-            elif kind == "soc_pi0":  # 2√β Π₀[a, s] for (s, a)
-                b[rr] = (2.0 * math.sqrt(meta.bound) * pi0[0][:, list(meta.slots)].T).ravel()
-            elif kind == "lmi_pi0":
-                r, ff = meta
-                b[rr] = ff * ((Sinv @ pi0[r][:, self.lmi_slots]) * sc).T.ravel()
+        slot0_cone = self.socp and not has_lmi and float(ell[0]) != 0.0
+        tpl = self._template((use_xi, slot0_cone))
+        # congruence of the P rows: P_prev = S Sᵀ (data.Mi = ρ^½ chol(P_prev))
+        S = data.Mi / math.sqrt(rho)
+        sc, kappa = self._slot_scales(data.facts, has_lmi)
+        vals = _Values(ell, data.facts, data.pi0, S, np.linalg.inv(S), sc, kappa, B, rho, self.lmi_slots)
+        values = np.concatenate([blk.values(vals) for blk in tpl.a_blocks])
+        b = np.zeros(tpl.n_rows)
+        for blk in tpl.b_blocks:
+            blk.fill(b, vals)
         A = CscMatrix(values[tpl.order], tpl.indices, tpl.indptr, (tpl.n_rows, tpl.nv))
         q = np.zeros(tpl.nv)
         if has_lmi:
@@ -552,20 +766,39 @@ class ConicSolver:
             for k, (i, j) in enumerate(_P_ENTRIES):
                 q[tpl.iP[k]] = StS[i, j] * (1.0 if i == j else 2.0)
         q[tpl.iTt] = 1.0
-        return {
-            "P": CscMatrix.empty(tpl.nv, tpl.nv), "q": q, "A": A, "b": b, "cones": tpl.cones, "tpl": tpl, "key": (use_xi, slot0_cone),
-            "S": S, "sc": sc, "kappa": kappa, "B": B, "agg_w": agg_w, "use_xi": use_xi,
-            "slot0_cone": slot0_cone, "has_lmi": has_lmi,
-        }  # fmt: skip
+        conic = ConicData(CscMatrix.empty(tpl.nv, tpl.nv), q, A, b, tpl.cones, tpl.key)
+        return conic, InverseData(tpl, S, sc, kappa, B, agg_w, data.pi0[0], ell, rho)
+
+    def _slot_scales(self, Q: tuple[np.ndarray, ...], has_lmi: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Step 3's per-step scales: each LMI slot's (√β of a ball slot; a φ slot: a bound of h|r| from its
+        sector fact's row, |φ| ≤ h|r| ≤ Σ_k h|g_k| σ_k) and each multiplier's κ (its scaled Q's size)."""
+        facts = self.lay.facts
+        sc = self.scale[self.lmi_slots] if has_lmi else np.zeros(0)
+        kappa = np.ones(self.n_tau)
+        if not self.sector_lmi:
+            return sc, kappa
+        sc = sc.copy()
+        for _, m in self.sector_lmi:
+            p = facts[m].slots[0]
+            row = np.abs(Q[m][p])
+            bound = 2.0 * float(row @ self.scale) - 2.0 * row[p] * self.scale[p]
+            if bound > 0.0:
+                sc[self.lmi_pos[p]] = bound
+        for c, m in self.sector_lmi:
+            p = self.lmi_pos[facts[m].slots[0]]
+            kap = abs(Q[m][facts[m].slots[0], facts[m].slots[0]]) * sc[p] ** 2
+            if kap > 0.0:
+                kappa[c] = kap
+        return sc, kappa
 
     # ------------------------------------------------------------------ solve and map back
 
-    def solve(self, data: dict, rho: float) -> Solution:
-        prob = self.assemble(data, rho)
+    def solve(self, data: StepData, rho: float) -> Solution:
+        conic, inv = self.apply(data, rho)
         try:
-            sol = self._solve(prob)
+            sol = self.solve_via_data(conic)
         except Exception as exc:  # noqa: BLE001 - a solver failure is a fallback step, not a crash
-            self._solvers.pop(prob["key"], None)
+            self._solvers.pop(conic.key, None)
             return Solution(None, [], [], f"error: {exc}")
         status = str(sol.status)
         self.last_iterations = sol.iterations
@@ -574,52 +807,52 @@ class ConicSolver:
         x = np.asarray(sol.x)
         if not np.all(np.isfinite(x)):
             return Solution(None, [], [], "non-finite", sol.iterations)
-        return self.recover(x, prob, data, rho, status, sol.iterations)
+        return self.invert(x, inv, status, sol.iterations)
 
-    def _solve(self, prob: dict):  # noqa: ANN202
-        """Solve with the node's solver for this pattern, its data updated in place where Clarabel
+    def solve_via_data(self, conic: ConicData):  # noqa: ANN201 - clarabel's DefaultSolution
+        """Solve with the node's solver for this template, its data updated in place where Clarabel
         allows it (no chordal decomposition of its own, no presolve, no equilibration): the set-up
         (KKT symbolic factorisation) is then paid once per node, not per step."""
-        key, tpl = prob["key"], prob["tpl"]
-        solver = self._solvers.get(key)
+        solver = self._solvers.get(conic.key)
         if solver is not None:
             try:
-                solver.update(q=prob["q"], A=prob["A"].data, b=prob["b"])
+                solver.update(q=conic.q, A=conic.A.data, b=conic.b)
                 return solver.solve()
             except Exception:  # noqa: BLE001 - refused update: set up a fresh solver below
-                del self._solvers[key]
-        st = self.settings_decomposed if tpl.decomposed else self.settings
-        solver = clarabel.DefaultSolver(prob["P"], prob["q"], prob["A"], prob["b"], prob["cones"], st)
+                del self._solvers[conic.key]
+        st = self.settings_decomposed if self._templates[conic.key].decomposed else self.settings
+        solver = clarabel.DefaultSolver(conic.P, conic.q, conic.A, conic.b, conic.cones, st)
         if solver.is_data_update_allowed():
-            self._solvers[key] = solver
+            self._solvers[conic.key] = solver
         return solver.solve()
 
-    def unpack(self, x: np.ndarray, prob: dict) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
+    def unpack(self, x: np.ndarray, inv: InverseData) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
         """P_c (zero without an LMI), L_ℓ and τ_ℓ over the original facts, from a conic point x."""
-        tpl, S = prob["tpl"], prob["S"]
+        tpl, S = inv.tpl, inv.S
         Ls = [S @ x[i][:, None] for i in tpl.iL]
         taus = []
         for r in range(self.n_lmi):
-            tc = np.maximum(x[tpl.iT[r]], 0.0) / prob["kappa"]
+            tc = np.maximum(x[tpl.iT[r]], 0.0) / inv.kappa
             tau = np.zeros(len(self.lay.facts))
             tau[self.kept] = tc[: len(self.kept)]
-            if prob["use_xi"]:
-                tau[self.agg] = tc[self.xi] * prob["agg_w"] / prob["B"]
+            if inv.use_xi:
+                tau[self.agg] = tc[self.xi] * inv.agg_w / inv.B
             taus.append(tau)
         P = np.zeros((NA, NA))
-        if prob["has_lmi"]:
+        if self.lmi_slots:
             for k, (i, j) in enumerate(_P_ENTRIES):
                 P[i, j] = P[j, i] = x[tpl.iP[k]]
             P = S @ P @ S.T
         return P, Ls, taus
 
-    def recover(self, x: np.ndarray, prob: dict, data: dict, rho: float, status: str = "", iterations: int = 0) -> Solution:
-        """(P, L_ℓ, τ_ℓ) of the LMI from the conic solution; in ``scheduled`` the smallest P for (L, τ)."""
-        P, Ls, taus = self.unpack(x, prob)
+    def invert(self, x: np.ndarray, inv: InverseData, status: str = "", iterations: int = 0) -> Solution:
+        """(P, L_ℓ, τ_ℓ) of the LMI from the conic solution (cvxpy's ``invert``); in ``scheduled`` the
+        smallest P for (L, τ)."""
+        P, Ls, taus = self.unpack(x, inv)
         if self.socp:  # P = P_c + Σ β Π_k Π_kᵀ / τ_k
-            L, tau, tpl = Ls[0], taus[0], prob["tpl"]
-            tc = np.maximum(x[tpl.iT[0]], 0.0) / prob["kappa"]
-            pi = data["pi0"][0] - L @ data["ell"][None, :]
+            L, tau, tpl = Ls[0], taus[0], inv.tpl
+            tc = np.maximum(x[tpl.iT[0]], 0.0) / inv.kappa
+            pi = inv.pi0 - L @ inv.ell[None, :]
             for g in tpl.groups:
                 t = tc[g.fact]
                 if t <= 0.0:
@@ -628,12 +861,12 @@ class ConicSolver:
                     cols = pi[:, list(g.slots)]
                     P = P + g.bound * (cols @ cols.T) / t
                 else:  # ξ: column −L, bound B²
-                    P = P + prob["B"] ** 2 * (L @ L.T) / t
-            if prob["slot0_cone"]:
-                lam0 = rho - float(tau[self.balls].sum())
+                    P = P + inv.B**2 * (L @ L.T) / t
+            if inv.slot0_cone:
+                lam0 = inv.rho - float(tau[self.balls].sum())
                 if lam0 > 0.0:
-                    P = P + (data["ell"][0] ** 2 / lam0) * (L @ L.T)
+                    P = P + (inv.ell[0] ** 2 / lam0) * (L @ L.T)
         return Solution(P, Ls, taus, status, iterations)
 
 
-__all__ = ["ConicSolver", "CscMatrix", "default_settings"]
+__all__ = ["ConicData", "ConicSolver", "CscMatrix", "InverseData", "default_settings"]

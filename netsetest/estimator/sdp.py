@@ -34,26 +34,35 @@ used as the measurement instead of the φ⁺ sector fact.  Step 0 updates the pr
 (:meth:`LocalEstimator.first`).  The objective is trace(D P) (a congruence of the LMI); ``bank`` solves
 each step twice and publishes the fault-weighted set while recurring on the trace-optimal one.
 
+A step is the prediction (the model part: Π₀, the L-free centre, the own φ⁺ fact; :meth:`LocalEstimator._predict`)
+and the update (the neighbours' innovations ℓ and facts, :meth:`LocalEstimator._innovations`; then the
+solve and the certificate, :meth:`LocalEstimator._update`), the way filterpy's KalmanFilter keeps
+``predict`` and ``update`` apart.  Their data meet in a :class:`~netsetest.estimator.problem.StepData`.
+
 Two backends solve it.  ``clarabel`` (the default, :mod:`netsetest.estimator.conic`) assembles an
 exactly equivalent, smaller conic problem for Clarabel directly from the step data (Π₀, ℓ, Q_m) and
-maps its answer back to (P, L, τ) of the LMI above; ``cvxpy`` builds the LMI as written once from cvxpy
-Parameters and re-solves it every step (cvxpy is imported only when this backend is chosen).  Either
-way every answer is verified in floating point against the LMI above (:func:`certify`) before it is
-published; if that fails, :func:`fallback_shape` gives a guaranteed (looser) ellipsoid and the step is
-flagged.
+maps its answer back to (P, L, τ) of the LMI above; ``cvxpy`` (:mod:`netsetest.estimator.lmi_cvxpy`)
+builds the LMI as written once from cvxpy Parameters and re-solves it every step (cvxpy is imported
+only when this backend is chosen).  Either way every answer is verified in floating point against the
+LMI above (:func:`~netsetest.estimator.certificate.certify`) before it is published; if that fails,
+:func:`~netsetest.estimator.certificate.fallback_shape` gives a guaranteed (looser) ellipsoid and the
+step is flagged.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import time
-import warnings
 from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 
+from netsetest.estimator.certificate import FallbackUnavailable, certify, fallback_shape, publishable
+from netsetest.estimator.conic import ConicSolver
+from netsetest.estimator.lmi_cvxpy import CvxpySolver
 from netsetest.estimator.objective import BANK_FAULT_WEIGHT, DEFAULT_OBJECTIVE, FAULT_WEIGHT, OBJECTIVES, Objective
+from netsetest.estimator.problem import EtaLayout, OwnUpdate, PatternKey, ProblemSolver, Solution, StepData
 from netsetest.estimator.sector import (
     FaultBound, Interval, Sector, derive_sector, measurement_interval, prior_interval, propagated_interval,
 )  # fmt: skip
@@ -109,13 +118,15 @@ class StepInput:
 
 @dataclass
 class StepResult:
-    xhat: np.ndarray
-    P: np.ndarray  # published shape: e⁺ᵀ P⁻¹ e⁺ ≤ ρ_i
+    """One step's set {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ_i} and how it was obtained."""
+
+    xhat: np.ndarray  # (NA,)
+    P: np.ndarray  # (NA, NA) published shape: e⁺ᵀ P⁻¹ e⁺ ≤ ρ_i
     status: Status
     rho_cert: float  # ρ' certified for the solver's P (P is published as P_solver·ρ'/ρ_i)
     solve_ms: float
     solver_status: str
-    L: np.ndarray = field(default_factory=lambda: np.zeros((NA, 1)))
+    L: np.ndarray = field(default_factory=lambda: np.zeros((NA, 1)))  # (NA, 1) the gain of (16)
     sector: Sector | None = None  # the own sensor's sector of this step (None: no saturation modelled)
     published: StepResult | None = None  # objective ``bank``: the set to publish (None: this one)
 
@@ -123,72 +134,6 @@ class StepResult:
     def public(self) -> StepResult:
         """What the node publishes: ``published`` if the bank made one, else this set."""
         return self.published if self.published is not None else self
-
-
-@dataclass(frozen=True)
-class FactInfo:
-    """Structure of one quadratic fact ηᵀQ_m η ≥ 0, in the order of ``step_data()['facts']``.
-
-    ``ball``: 1 − Σ_{k ∈ slots} η_k²/bound (Q[0,0] = 1, Q[k,k] = −1/bound, nothing else).
-    ``sector``: φ (h gᵀη − φ) with φ = η[slots[0]]; ``support`` are the slots where g may be non-zero.
-    """
-
-    kind: Literal["ball", "sector"]
-    slots: tuple[int, ...]
-    bound: float = 1.0
-    support: tuple[int, ...] = ()
-
-
-class EtaLayout:
-    """Slot indices of η for node i and its in-neighbours N_i (fixed by the topology)."""
-
-    def __init__(self, node_id: int, neighbours: dict[int, Sensor], own: Sensor, W: float = 1.0, predict: bool = True) -> None:
-        """``saturated`` of each sensor says whether it has a φ slot; ``predict`` False: the step-0 update
-        (the prior updated by the own measurement through the self slot: no w, v⁺ or φ⁺)."""
-        self.node_id = node_id
-        self.neigh = list(neighbours)  # j ∈ N_i in a fixed order (may include i)
-        idx = 1
-        self.z = list(range(idx, idx + NA))
-        idx += NA
-        self.s: dict[int, int] = {}
-        for j in self.neigh:
-            if j != node_id:
-                self.s[j], idx = idx, idx + 1
-        self.w: int | None = None
-        if predict:
-            self.w, idx = idx, idx + 1
-        self.v: dict[int, int] = {}
-        for j in self.neigh:
-            self.v[j], idx = idx, idx + 1
-        self.v_new: int | None = None
-        if predict:
-            self.v_new, idx = idx, idx + 1
-        self.phi: dict[int, int] = {}
-        for j, sens in neighbours.items():
-            if sens.saturated:  # no saturation ⇒ φ_j ≡ 0: no slot (DESIGN.md §2)
-                self.phi[j], idx = idx, idx + 1
-        self.phi_new: int | None = None
-        if own.saturated and predict:
-            self.phi_new, idx = idx, idx + 1
-        self.dim = idx
-        # one quadratic fact per constraint, in this order
-        facts = [FactInfo("ball", tuple(self.z))]
-        facts += [FactInfo("ball", (self.s[j],)) for j in self.s]
-        if self.w is not None:
-            facts.append(FactInfo("ball", (self.w,), W))
-        facts += [FactInfo("ball", (self.v[j],), neighbours[j].R) for j in self.v]
-        if self.v_new is not None:
-            facts.append(FactInfo("ball", (self.v_new,), own.R))
-        for j in self.neigh:
-            if j in self.phi:
-                r_slots = tuple(self.z) if j == node_id else (self.s[j],)
-                facts.append(FactInfo("sector", (self.phi[j],), support=(0, *r_slots)))
-        if self.phi_new is not None:
-            facts.append(FactInfo("sector", (self.phi_new,), support=(0, *self.z, self.w, self.v_new, self.phi_new)))
-        self.facts = facts
-        self.n_facts = len(facts)
-        # slots whose column of Π₀ is zero in every rule: they enter e⁺ only through L ℓᵀη
-        self.pi0_zero = set(self.s.values()) | set(self.v.values()) | set(self.phi.values())
 
 
 def _ball(d: int, slots: list[int], bound: float = 1.0) -> np.ndarray:
@@ -211,6 +156,7 @@ def _sector(d: int, slot: int, g: np.ndarray, h: float) -> np.ndarray:
 
 
 def _chol(p: np.ndarray) -> np.ndarray:
+    """M with M Mᵀ = P (P symmetrised first)."""
     return np.linalg.cholesky(0.5 * (p + p.T))
 
 
@@ -219,8 +165,8 @@ class _Pattern:
     """η layout, static ball facts and solver of one φ-slot pattern (which sensors saturate this step)."""
 
     lay: EtaLayout
-    balls: list[np.ndarray]
-    solver: object
+    balls: list[np.ndarray]  # (d, d) Q of each ball fact, read-only
+    solver: ProblemSolver
 
 
 class LocalEstimator:
@@ -228,6 +174,12 @@ class LocalEstimator:
 
     Which sensors have a φ slot changes from step to step (a sector derived per step may prove that a
     sensor does not saturate): one η layout and solver per pattern, built when first needed.
+
+    Shapes: NA = 3 (the augmented state [β, r, f_i]), NX = 2, d = the η dimension of a pattern
+    (``pattern(...).lay.dim``), n_rules = N_RULES.  Static: ``_abar`` (n_rules, NA, NA) Ā_ℓ,
+    ``_bbar`` and ``_dbar`` (n_rules, NA) B̄_ℓ and D̄_ℓ, ``_cbar[j]`` (NA,) C̄_j.  Per step:
+    :meth:`step_data` → :class:`~netsetest.estimator.problem.StepData` (Π₀ (NA, d) per LMI, ℓ (d,),
+    Q_m (d, d)), :meth:`step` → :class:`StepResult` (x̂ (NA,), P (NA, NA), L (NA, 1)).
     """
 
     def __init__(
@@ -267,7 +219,7 @@ class LocalEstimator:
         self._cbar = {j: s.Cbar for j, s in neighbours.items()} | {node_id: own.Cbar}
         self._own_cbar = own.Cbar
         self._gains: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
-        self._patterns: dict[tuple, _Pattern] = {}
+        self._patterns: dict[PatternKey, _Pattern] = {}
         self.last_iterations = 0  # of the last solve (bench)
         # objective weight: trace(D P) is trace(P') for P' = D^½ P D^½ (a congruence of the LMI)
         self._wh = np.sqrt(np.array([1.0, 1.0, FAULT_WEIGHT])) if objective == "fault" else None
@@ -291,12 +243,11 @@ class LocalEstimator:
                     q.flags.writeable = False
                     balls.append(q)
             n_lmi = self.n_lmi if predict else 1
+            solver: ProblemSolver
             if self.backend == "clarabel":
-                from netsetest.estimator.conic import ConicSolver
-
-                solver: object = ConicSolver(lay, n_lmi)
+                solver = ConicSolver(lay, n_lmi)
             else:
-                solver = _CvxpySolver(lay.dim, lay.n_facts, n_lmi)
+                solver = CvxpySolver(lay.dim, lay.n_facts, n_lmi)
             pat = self._patterns[key] = _Pattern(lay, balls, solver)
         return pat
 
@@ -341,67 +292,80 @@ class LocalEstimator:
         meas = measurement_interval(self.own, y, gamma)
         return derive_sector(self.own, self.fault_bound, meas, prior_interval(self.own, self.fault_bound, prior.xhat, prior.P, prior.rho))
 
-    def step_data(self, prev: Ellipsoid, inp: StepInput, sector: Sector | None, reading: Interval | None = None) -> dict:
-        """Π₀ (per rule), ℓ, the facts Q_m and the L-free part of x̂⁺, as plain arrays.
+    def step_data(self, prev: Ellipsoid, inp: StepInput, sector: Sector | None, reading: Interval | None = None) -> StepData:
+        """The LMI data of step k → k+1: the prediction (Π₀, x̂ part, own facts) and the neighbours' update (ℓ).
 
         ``reading``: a proven interval [lo, hi] ∋ r⁺ used as the own measurement instead of the sector:
         r⁺ = m + Dv' v with m its centre, Dv' = (hi − lo)/(2√R) and v² ≤ R (so Θ = [E; C̄], no φ⁺).
         """
-        own = self.own
         neigh = inp.neigh
         phi_from = frozenset(j for j in self.sensors if j in neigh and neigh[j].has_phi)
         phi_new = sector is not None and sector.has_phi and reading is None
-        pat = self.pattern(phi_from, phi_new)
-        lay, d = pat.lay, pat.lay.dim
+        key: PatternKey = (phi_from, phi_new, True)
+        pat = self.pattern(*key)
+        own = self._own_update(inp, sector, reading, phi_new)
+        Mi = np.sqrt(prev.rho) * _chol(prev.P)  # ρ_i^½ M_i
+        pi0, x_pred, own_fact = self._predict(pat.lay, prev, inp, own, Mi, sector)
+        ell, facts = self._innovations(pat.lay, pat.balls, neigh, Mi)
+        if own_fact is not None:
+            facts.append(own_fact)
+        innov_sum = sum(self.weights[j] * neigh[j].innov for j in pat.lay.neigh if j in neigh)  # Σ_j a_ij y̌_j
+        return StepData(tuple(pi0), ell, tuple(facts), x_pred, float(innov_sum), Mi, pat.lay, key, sector, own)
+
+    def _own_update(self, inp: StepInput, sector: Sector | None, reading: Interval | None, phi_new: bool) -> OwnUpdate:
+        """How step k+1 uses the own measurement: ỹ⁺ (or the reading's centre), its γ⁺, h1, Dv and T, G."""
+        own = self.own
         y_new, gamma_new, dv_new = inp.y, inp.gamma, own.Dv
         h1_new = sector.h1 if sector is not None else own.h1
-        if reading is not None:
+        if reading is not None:  # r⁺ = m + Dv' v: the centre m, Dv' = (hi − lo)/(2√R)
             y_new, gamma_new, h1_new = 0.5 * (reading.lo + reading.hi), 1.0, 1.0
             dv_new = 0.5 * (reading.hi - reading.lo) / np.sqrt(own.R)
         T, G = self.descriptor_gains(gamma_new, h1_new)
-        g = G[:, 0]
-        Mi = np.sqrt(prev.rho) * _chol(prev.P)  # ρ_i^½ M_i
+        return OwnUpdate(T, G, dataclasses.replace(own, Dv=dv_new, saturated=phi_new, h1=h1_new), y_new, gamma_new)
+
+    def _predict(
+        self, lay: EtaLayout, prev: Ellipsoid, inp: StepInput, own: OwnUpdate, Mi: np.ndarray, sector: Sector | None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """The model part of step k → k+1: Π₀ (n_rules, NA, d), the L-free centre x̂ (NA,) and the own
+        sensor's φ⁺ sector fact (d, d) (None without φ⁺)."""
+        d, T, g = lay.dim, own.T, own.G[:, 0]
         alpha = np.asarray(inp.alpha, dtype=float)
         ab = np.tensordot(alpha, self._abar, axes=1)  # the blended Ā, B̄, D̄ (exact for the truth)
         bb = alpha @ self._bbar
         db = alpha @ self._dbar
         TA = T @ ab
         Td = T @ db
-
+        y_new, dv_new, gamma_new = own.y, own.sensor.Dv, own.gamma
         if self.variant == "scheduled":
             pi0 = np.zeros((1, NA, d))
-            pi0[0][:, lay.z] = TA @ Mi
-            pi0[0][:, lay.w] = Td
+            pi0[0][:, lay.z] = TA @ Mi  # T Ā ρ_i^½ M_i z_i
+            pi0[0][:, lay.w] = Td  # T D̄ w
         else:
             pi0 = np.zeros((N_RULES, NA, d))
-            pi0[:, :, lay.z] = T @ self._abar @ Mi
-            pi0[:, :, lay.w] = self._dbar @ T.T
-        pi0[:, :, lay.v_new] = -g * dv_new
+            pi0[:, :, lay.z] = T @ self._abar @ Mi  # per rule ℓ: T Ā_ℓ ρ_i^½ M_i z_i
+            pi0[:, :, lay.w] = self._dbar @ T.T  # T D̄_ℓ w
+        pi0[:, :, lay.v_new] = -g * dv_new  # − G Dv_i v⁺
         if lay.phi_new is not None:
-            pi0[:, :, lay.phi_new] = -g * gamma_new
-
-        ell, facts = self._innovations(lay, pat.balls, neigh, Mi)
+            pi0[:, :, lay.phi_new] = -g * gamma_new  # − G γ⁺ φ⁺
         # L-free part of the centre; the blended matrices are exact for the truth in both variants
-        x_pred = TA @ prev.xhat + (T @ bb) * inp.u + g * y_new
-        if lay.phi_new is not None:
-            cbar = self._own_cbar
-            cg = float(cbar @ g)
-            g_new = np.zeros(d)  # r⁺ = C̄ x̄⁺ of the truth, with the blended model in every rule
-            g_new[0] = cbar @ x_pred
-            g_new[lay.z] = cbar @ TA @ Mi
-            g_new[lay.w] = cbar @ Td
-            g_new[lay.v_new] = -cg * dv_new
-            g_new[lay.phi_new] = -cg * gamma_new
-            facts.append(_sector(d, lay.phi_new, g_new, sector.h))  # type: ignore[union-attr]
-        innov_sum = sum(self.weights[j] * neigh[j].innov for j in lay.neigh if j in neigh)
-        return {"pi0": list(pi0), "ell": ell, "facts": facts, "x_pred": x_pred, "innov_sum": float(innov_sum),
-                "T": T, "G": G, "Mi": Mi, "lay": lay, "key": (phi_from, phi_new, True), "sector": sector,
-                "own_meas": dataclasses.replace(own, Dv=dv_new, saturated=phi_new, h1=h1_new), "gamma": gamma_new}  # fmt: skip
+        x_pred = TA @ prev.xhat + (T @ bb) * inp.u + g * y_new  # (16): T Ā x̂ + T B̄ u + G ỹ⁺
+        if lay.phi_new is None:
+            return pi0, x_pred, None
+        cbar = self._own_cbar
+        cg = float(cbar @ g)
+        g_new = np.zeros(d)  # r⁺ = C̄ x̄⁺ of the truth, with the blended model in every rule
+        g_new[0] = cbar @ x_pred
+        g_new[lay.z] = cbar @ TA @ Mi
+        g_new[lay.w] = cbar @ Td
+        g_new[lay.v_new] = -cg * dv_new
+        g_new[lay.phi_new] = -cg * gamma_new
+        return pi0, x_pred, _sector(d, lay.phi_new, g_new, sector.h)  # type: ignore[union-attr]  φ⁺ (h r⁺ − φ⁺) ≥ 0
 
     def _innovations(
         self, lay: EtaLayout, balls: list[np.ndarray], neigh: dict[int, NeighbourState], Mi: np.ndarray, weights: dict[int, float] | None = None
     ) -> tuple[np.ndarray, list[np.ndarray]]:
-        """ℓ (ℓᵀη = Σ_j a_ij y̌_j(η)) and the facts: the balls and each neighbour's φ_j sector fact.
+        """The update's data: ℓ (d,) with ℓᵀη = Σ_j a_ij y̌_j(η), and the facts (d, d): the balls and each
+        neighbour's φ_j sector fact.
 
         A missing neighbour's slots stay zero (its facts then hold with η-slot 0).
         """
@@ -413,6 +377,7 @@ class LocalEstimator:
             sj, nb = (self.own if j == self.node_id else self.sensors[j]), neigh.get(j)
             g_r = np.zeros(d)  # r_j = gᵀη
             if nb is not None:
+                # y̌_j = (γ_j h1_j − 1) C̄_j x̂_j + γ_j h1_j C̄_j ρ_j^½ M_j z_j + γ_j φ_j + Dv_j v_j
                 a = weights[j]
                 cbar = self._cbar[j]
                 cx = float(cbar @ nb.xhat)
@@ -423,269 +388,119 @@ class LocalEstimator:
                     row = cbar @ Mi  # the node's own z_i
                     ell[lay.z] += a * nb.gamma * nb.h1 * row
                     g_r[lay.z] = row
-                else:
+                else:  # C̄_j M_j z_j = c_j s_j, c_j = (ρ_j C̄_j P_j C̄_jᵀ)^½
                     c_j = np.sqrt(max(nb.rho * float(cbar @ nb.P @ cbar), 0.0))
                     ell[lay.s[j]] += a * nb.gamma * nb.h1 * c_j
                     g_r[lay.s[j]] = c_j
                 if j in lay.phi:
                     ell[lay.phi[j]] += a * nb.gamma
-            if j in lay.phi:
+            if j in lay.phi:  # φ_j (h_j r_j − φ_j) ≥ 0
                 facts.append(_sector(d, lay.phi[j], g_r, nb.sector.h))  # type: ignore[union-attr]
         return ell, facts
 
-    def initial_data(self, prior: Ellipsoid, y: float, gamma: float, sector: Sector | None) -> dict:
+    def initial_data(self, prior: Ellipsoid, y: float, gamma: float, sector: Sector | None) -> StepData:
         """Step 0: x̂₀ = x̂ + L(ỹ₀ − C̄x̂), error e = ρ^½Mz − L y̌₀(η) with y̌₀ the own innovation."""
         i = self.node_id
         phi = sector is not None and sector.has_phi
-        pat = self.pattern(frozenset([i]) if phi else frozenset(), False, predict=False)
+        key: PatternKey = (frozenset([i]) if phi else frozenset(), False, False)
+        pat = self.pattern(*key)
         lay = pat.lay
         Mi = np.sqrt(prior.rho) * _chol(prior.P)
         pi0 = np.zeros((1, NA, lay.dim))
-        pi0[0][:, lay.z] = Mi
-        innov = float(y - self._own_cbar @ prior.xhat)
+        pi0[0][:, lay.z] = Mi  # e = ρ^½ M z − L y̌₀(η)
+        innov = float(y - self._own_cbar @ prior.xhat)  # y̌₀ = ỹ₀ − C̄ x̂
         me = NeighbourState(prior.xhat, prior.P, prior.rho, gamma, innov, sector)
         ell, facts = self._innovations(lay, pat.balls, {i: me}, Mi, {i: 1.0})
-        return {"pi0": list(pi0), "ell": ell, "facts": facts, "x_pred": prior.xhat.copy(), "innov_sum": innov,
-                "Mi": Mi, "lay": lay, "key": (frozenset([i]) if phi else frozenset(), False, False), "sector": sector}  # fmt: skip
+        return StepData(tuple(pi0), ell, tuple(facts), prior.xhat.copy(), innov, Mi, lay, key, sector)
 
     # ------------------------------------------------------------------ one step
 
     def step(self, prev: Ellipsoid, inp: StepInput) -> StepResult:
+        """Step k → k+1: the step's data, then the update (solve, certify); the fallback without a certificate."""
         sector, reading = self._own_range(prev, inp)
         data = self.step_data(prev, inp, sector, reading)
         alpha = np.asarray(inp.alpha, dtype=float)
-        res = self._solve_certify(data, prev.rho, alpha, self._wh)
+        res, solve = self._update(data, prev.rho, alpha)
         if res is not None:
-            return self._bank(res, data, prev.rho, alpha)
-        P_fb = fallback_shape(data, data["own_meas"], data["gamma"], self.W, inp.alpha, self.model) / prev.rho
-        return self._fallback(data["x_pred"].copy(), P_fb, data, sector)
+            return res
+        assert data.own is not None  # a predicting step always has its own update
+        P_fb = fallback_shape(data.Mi, data.own, self.W, inp.alpha, self.model) / prev.rho
+        return self._fallback(data.x_pred.copy(), P_fb, solve, sector)
 
     def first(self, prior: Ellipsoid, y: float, gamma: float) -> StepResult:
         """Step 0: the prior updated by ỹ₀, certified like every step; ``fallback``: the prior itself."""
         sector = self.initial_sector(prior, y, gamma)
         data = self.initial_data(prior, y, gamma, sector)
-        res = self._solve_certify(data, prior.rho, np.ones(1), self._wh)
+        res, solve = self._update(data, prior.rho, np.ones(1))
         if res is not None:
-            return self._bank(res, data, prior.rho, np.ones(1))
-        return self._fallback(prior.xhat.copy(), prior.P.copy(), data, sector)
+            return res
+        return self._fallback(prior.xhat.copy(), prior.P.copy(), solve, sector)
 
-    def _fallback(self, xhat: np.ndarray, P: np.ndarray, data: dict, sector: Sector | None) -> StepResult:
+    def _fallback(self, xhat: np.ndarray, P: np.ndarray, solve: _Solve, sector: Sector | None) -> StepResult:
         """The guaranteed set when the solver gave no certificate; FallbackUnavailable if even it is not publishable."""
         if not publishable(xhat, P):
             raise FallbackUnavailable(f"node {self.node_id}: the fallback ellipsoid is not finite and positive definite")
-        return StepResult(xhat, P, "fallback", np.nan, data["solve_ms"], data["solver_status"], sector=sector)
+        return StepResult(xhat, P, "fallback", np.nan, solve.ms, solve.status, sector=sector)
 
-    def _bank(self, res: StepResult, data: dict, rho: float, alpha: np.ndarray) -> StepResult:
-        """Objective ``bank``: add the fault-weighted set of the same step data as the one to publish."""
-        if self._wh_pub is None:
-            return res
-        solve_ms = data["solve_ms"]
-        pub = self._solve_certify(data, rho, alpha, self._wh_pub)
-        res.solve_ms = solve_ms + data["solve_ms"]
+    def _update(self, data: StepData, rho: float, alpha: np.ndarray) -> tuple[StepResult | None, _Solve]:
+        """The certified set of the step's data (None: no certificate) and the last solve's figures.
+
+        Objective ``bank``: the fault-weighted set of the same data is added as the one to publish.
+        """
+        res, solve = self._solve_certify(data, rho, alpha, self._wh)
+        if res is None or self._wh_pub is None:
+            return res, solve
+        pub, solve_pub = self._solve_certify(data, rho, alpha, self._wh_pub)
+        res.solve_ms = solve.ms + solve_pub.ms
         if pub is not None:
             pub.solve_ms = res.solve_ms
             res.published = pub
-        return res
+        return res, solve
 
-    def _solve_certify(self, data: dict, rho: float, alpha: np.ndarray, wh: np.ndarray | None) -> StepResult | None:
+    def _solve_certify(self, data: StepData, rho: float, alpha: np.ndarray, wh: np.ndarray | None) -> tuple[StepResult | None, _Solve]:
         """Solve the step's problem for the objective trace(D P), D^½ = diag(wh) (None: trace P), and
         certify the answer; None if there is no certificate."""
-        pat = self._patterns[data["key"]]
+        pat = self._patterns[data.key]
         t0 = time.perf_counter()
-        sol = pat.solver.solve(self._weighted(data, wh) if wh is not None else data, rho)  # type: ignore[attr-defined]
-        data["solve_ms"] = 1e3 * (time.perf_counter() - t0)
-        data["solver_status"] = sol.status
+        sol = pat.solver.solve(_weighted(data, wh) if wh is not None else data, rho)
+        solve = _Solve(1e3 * (time.perf_counter() - t0), sol.status)
         self.last_iterations = sol.iterations
         if sol.P is None:
-            return None
+            return None, solve
         if wh is not None:  # back from P' = D^½ P D^½, L' = D^½ L
             wi = 1.0 / wh
             sol = Solution(wi[:, None] * sol.P * wi[None, :], [wi[:, None] * L for L in sol.L], sol.tau, sol.status, sol.iterations)
         if len(sol.L) == 1:
-            L, tau, pi0 = sol.L[0], sol.tau[0], data["pi0"][0]
-        else:
+            L, tau, pi0 = sol.L[0], sol.tau[0], data.pi0[0]
+        else:  # per-rule: L = Σ_ℓ α_ℓ L_ℓ (and τ, Π₀ alike)
             L = sum(a * v for a, v in zip(alpha, sol.L))
             tau = sum(a * v for a, v in zip(alpha, sol.tau))
-            pi0 = sum(a * p for a, p in zip(alpha, data["pi0"]))
-        pi = pi0 - L @ data["ell"][None, :]
-        rho_c = certify(sol.P, pi, tau, data["facts"])
+            pi0 = sum(a * p for a, p in zip(alpha, data.pi0))
+        pi = pi0 - L @ data.ell[None, :]  # Π(L) = Π₀ − L ℓᵀ
+        rho_c = certify(sol.P, pi, tau, data.facts)
         if rho_c is None:
-            return None
+            return None, solve
         P_pub = 0.5 * (sol.P + sol.P.T) * rho_c / rho
-        xhat_new = data["x_pred"] + L[:, 0] * data["innov_sum"]
+        xhat_new = data.x_pred + L[:, 0] * data.innov_sum  # (16): x̂⁺ = x̂_pred + L Σ_j a_ij y̌_j
         if not publishable(xhat_new, P_pub):  # a certified set nobody can use: treated as no certificate
-            return None
-        return StepResult(xhat_new, P_pub, "ok", rho_c, data["solve_ms"], sol.status, L, data["sector"])
-
-    @staticmethod
-    def _weighted(data: dict, wh: np.ndarray) -> dict:
-        """The step's data for the objective trace(D P), D^½ = diag(wh): Π₀ and the P-row scaling by D^½."""
-        wh = wh[:, None]
-        return {**data, "pi0": [wh * p for p in data["pi0"]], "Mi": wh * data["Mi"]}
+            return None, solve
+        return StepResult(xhat_new, P_pub, "ok", rho_c, solve.ms, sol.status, L, data.sector), solve
 
 
-@dataclass
-class Solution:
-    """A backend's answer in the terms of the LMI: P, and per rule L_ℓ (3×1) and τ_ℓ (one per fact)."""
+@dataclass(frozen=True)
+class _Solve:
+    """The figures of one backend call: its wall time and status."""
 
-    P: np.ndarray | None
-    L: list[np.ndarray]
-    tau: list[np.ndarray]
+    ms: float
     status: str
-    iterations: int = 0
 
 
-class _CvxpySolver:
-    """The LMI exactly as written, built once from cvxpy Parameters and re-solved with Clarabel."""
-
-    def __init__(self, d: int, m: int, n_lmi: int) -> None:
-        import cvxpy as cp  # only here: importing cvxpy costs ~120 MB and ~1 s
-
-        self.cp, self.n_lmi = cp, n_lmi
-        self.p_pi0 = [cp.Parameter((NA, d), name=f"Pi0_{r}") for r in range(n_lmi)]
-        self.p_ell = cp.Parameter((1, d), name="ell")
-        self.p_q = [cp.Parameter((d, d), symmetric=True, name=f"Q_{q}") for q in range(m)]
-        self.p_rho = cp.Parameter(nonneg=True, name="rho")
-        self.v_P = cp.Variable((NA, NA), symmetric=True, name="P")
-        self.v_L = [cp.Variable((NA, 1), name=f"L_{r}") for r in range(n_lmi)]
-        self.v_tau = [cp.Variable(m, nonneg=True, name=f"tau_{r}") for r in range(n_lmi)]
-        e11 = np.zeros((d, d))
-        e11[0, 0] = 1.0
-        cons = []
-        for r in range(n_lmi):
-            pi = self.p_pi0[r] - self.v_L[r] @ self.p_ell
-            mult = -self.p_rho * e11 + sum(self.v_tau[r][q] * self.p_q[q] for q in range(m))
-            lmi = cp.bmat([[-self.v_P, pi], [pi.T, mult]])
-            cons.append(0.5 * (lmi + lmi.T) << 0)
-        self.problem = cp.Problem(cp.Minimize(cp.trace(self.v_P)), cons)
-        assert self.problem.is_dcp(dpp=True)
-
-    def solve(self, data: dict, rho: float) -> Solution:
-        cp = self.cp
-        for r in range(self.n_lmi):
-            self.p_pi0[r].value = data["pi0"][r]
-        self.p_ell.value = data["ell"][None, :]
-        for q, Q in enumerate(data["facts"]):
-            self.p_q[q].value = Q
-        self.p_rho.value = rho
-        try:
-            with warnings.catch_warnings():  # "inaccurate" answers are certified below, not trusted
-                warnings.simplefilter("ignore", UserWarning)
-                self.problem.solve(solver=cp.CLARABEL)
-            status = str(self.problem.status)
-        except cp.error.SolverError as exc:
-            return Solution(None, [], [], f"error: {exc}")
-        if self.v_P.value is None or status not in ("optimal", "optimal_inaccurate"):
-            return Solution(None, [], [], status)
-        return Solution(self.v_P.value, [v.value for v in self.v_L], [v.value for v in self.v_tau], status)
-
-
-def certify(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: list[np.ndarray]) -> float | None:
-    """Smallest ρ' (up to rounding) with Πᵀ P⁻¹ Π + Σ τ_m Q_m ⪯ ρ' e₁e₁ᵀ, or None if there is none.
-
-    This is the S-procedure condition itself, checked in floating point on the solver's answer: then
-    for the truth eᵀP⁻¹e ≤ ρ' and the published shape P·ρ'/ρ_i satisfies eᵀ(·)⁻¹e ≤ ρ_i.  The
-    multipliers are nudged up by the smallest ε in 1e-10, 1e-9, … (relative) that makes the lower block
-    strictly negative: every η slot other than the first has a strictly negative diagonal in some Q_m,
-    so a solver answer that is feasible up to its tolerance becomes strictly feasible there, at a cost
-    of O(ε) in ρ'.
-    """
-    if not all(np.all(np.isfinite(v)) for v in (P, pi, tau, *facts)):
-        return None  # a NaN passes Cholesky silently
-    P = 0.5 * (P + P.T)
-    try:
-        chol = np.linalg.cholesky(P)
-    except np.linalg.LinAlgError:
-        return None
-    x = np.linalg.solve(chol, pi)  # Πᵀ P⁻¹ Π = xᵀx
-    base = x.T @ x
-    tau = np.maximum(tau, 0.0)
-    scale = max(1.0, float(np.max(tau)))
-    Q = np.asarray(facts)
-    K0 = base + np.tensordot(tau, Q, axes=1)
-    Qsum = Q.sum(axis=0)
-    for eps in scale * 10.0 ** np.arange(-10.0, -2.0):
-        K = K0 + eps * Qsum
-        K = 0.5 * (K + K.T)
-        k11, k, K22 = K[0, 0], K[1:, 0], K[1:, 1:]
-        try:
-            c22 = np.linalg.cholesky(-K22)
-            break
-        except np.linalg.LinAlgError:
-            continue
-    else:
-        return None
-    y = np.linalg.solve(c22, k)
-    rho_c = float(k11 + y @ y)  # Schur complement: K − ρ' e₁e₁ᵀ ⪯ 0 ⇔ K22 ≺ 0 and ρ' ≥ k11 − kᵀK22⁻¹k
-    rho_c = rho_c * (1 + 1e-9) + 1e-12
-    for _ in range(60):  # confirm with eigenvalues; widen by a hair if rounding says otherwise
-        Kc = K.copy()
-        Kc[0, 0] -= rho_c
-        if np.linalg.eigvalsh(Kc)[-1] <= 0.0:
-            return rho_c if rho_c > 0 else None
-        rho_c *= 1 + 1e-6
-    return None
-
-
-COND_MAX = 1e13  # largest eigenvalue ratio of a published shape: beyond it E = eᵀP⁻¹e is rounding noise
-FALLBACK_INFLATE = 1e-9  # relative: makes a rank-deficient Minkowski bound positive definite
-
-
-class FallbackUnavailable(ArithmeticError):
-    """Even the guaranteed fallback ellipsoid is not representable (the profile's magnitudes are out of range)."""
-
-
-def publishable(xhat: np.ndarray, P: np.ndarray) -> bool:
-    """A centre and shape a node may publish: finite, symmetric positive definite, not degenerate."""
-    if not (np.all(np.isfinite(xhat)) and np.all(np.isfinite(P))) or not np.array_equal(P, P.T):
-        return False
-    try:
-        np.linalg.cholesky(P)
-        eig = np.linalg.eigvalsh(P)
-    except np.linalg.LinAlgError:
-        return False
-    return bool(eig[0] > 0 and eig[-1] <= COND_MAX * eig[0])
-
-
-def fallback_shape(data: dict, own: Sensor, gamma_new: float, W: float, alpha: np.ndarray, model: TSModel) -> np.ndarray:
-    """A guaranteed shape without the solver: L = 0 and an outer ellipsoid of a Minkowski sum.
-
-    e⁺ = T Ā ρ^½ M z + T D̄ w − G Dv v⁺ − G γ⁺ φ⁺ with |z| ≤ 1, |w| ≤ √W, |v⁺| ≤ √R and, under the sector
-    assumption |C̄ x̄⁺| ≤ r_max/h1, |φ⁺| ≤ (1 − h1) r_max.  For terms F_k ξ_k with |ξ_k| ≤ 1 the sum lies
-    in {e: eᵀ(Σ F_kF_kᵀ/p_k)⁻¹e ≤ 1} for any p_k > 0 with Σ p_k = 1; p_k ∝ ‖F_k‖_F minimises the trace.
-
-    Computed scale-free (each term divided by its largest entry before squaring) so that magnitudes up to
-    the schema's limits neither overflow nor underflow; raises :class:`FallbackUnavailable` when an input
-    or the result is not finite (a profile outside those limits) — never a silently wrong shape.
-    """
-    T, G, Mi = data["T"], data["G"], data["Mi"]
-    a, _, d = model.blend(alpha)
-    abar = np.zeros((NA, NA))
-    abar[:NX, :NX] = a
-    dbar = np.r_[d[:, 0], 0.0]
-    terms = [T @ abar @ Mi, (T @ dbar * np.sqrt(W))[:, None], G * own.Dv * np.sqrt(own.R)]
-    if own.saturated:
-        terms.append(G * gamma_new * (1.0 - own.h1) * own.r_max)
-    if not all(np.all(np.isfinite(f)) for f in terms):
-        raise FallbackUnavailable("a term of the fallback bound is not finite")
-    scales = [float(np.max(np.abs(f))) for f in terms]
-    live = [(f / s, s) for f, s in zip(terms, scales) if s > 0]
-    if not live:
-        raise FallbackUnavailable("every term of the fallback bound is zero")
-    unit = [(u, s, float(np.linalg.norm(u))) for u, s in live]  # ‖F‖_F = s ‖F/s‖_F, ‖F/s‖_F ∈ [1, √9]
-    total = sum(s * n for _, s, n in unit)
-    # Σ_k F_kF_kᵀ / p_k with p_k = s_k n_k / total:  = total · Σ_k (s_k / n_k) U_k U_kᵀ
-    with np.errstate(over="ignore", invalid="ignore"):  # overflow is detected below, not warned about
-        shape = total * sum((s / n) * (u @ u.T) for u, s, n in unit)
-        shape = 0.5 * (shape + shape.T)
-        trace = float(np.trace(shape))
-    if not (np.all(np.isfinite(shape)) and np.isfinite(trace)):
-        raise FallbackUnavailable("the fallback bound overflows")
-    # a rank-deficient sum is still an outer bound once inflated a little in every direction
-    return shape + FALLBACK_INFLATE * max(trace, np.finfo(float).tiny / FALLBACK_INFLATE) * np.eye(NA)
+def _weighted(data: StepData, wh: np.ndarray) -> StepData:
+    """The step's data for the objective trace(D P), D^½ = diag(wh): Π₀ and the P-row scaling by D^½."""
+    w = wh[:, None]
+    return dataclasses.replace(data, pi0=tuple(w * p for p in data.pi0), Mi=w * data.Mi)
 
 
 __all__ = [
-    "LocalEstimator", "NeighbourState", "StepInput", "Ellipsoid", "StepResult", "OBJECTIVES", "Objective", "Solution",
-    "certify", "fallback_shape", "publishable", "FallbackUnavailable", "BACKENDS",
+    "BACKENDS", "Backend", "Ellipsoid", "LocalEstimator", "NeighbourState", "Objective", "StepInput", "StepResult", "Variant",
 ]  # fmt: skip

@@ -29,6 +29,8 @@ from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader
 from mcap.writer import CompressionType, Writer
 
+from netsetest.records.summary import RunSummary
+
 if TYPE_CHECKING:
     from netsetest.records.record import Record
 
@@ -241,8 +243,8 @@ class McapRecordWriter:
         })  # fmt: skip
         self._flush()
 
-    def summary(self, summary: dict) -> None:
-        self._write(TOPIC_VERDICT, self._last_ns, summary)
+    def summary(self, summary: RunSummary) -> None:
+        self._write(TOPIC_VERDICT, self._last_ns, summary.to_dict())
         self._flush()
 
     def close(self) -> None:
@@ -255,7 +257,7 @@ class McapRecordWriter:
             self._fh.close()
 
 
-def save_mcap(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: dict) -> None:
+def save_mcap(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None) -> None:
     """Write a whole record as an indexed MCAP file, in time order (never a half-written file at ``path``)."""
     path = Path(path)
     tmp = path.with_name(path.name + ".part")
@@ -272,7 +274,8 @@ def save_mcap(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, 
                 w.truth(truth_by_step[k])
             for node, e in sorted(by_step.get(k, []), key=lambda ne: ne[0]):
                 w.state(node, e)
-        w.summary(summary)
+        if summary is not None:  # a partial record stays one (the reader refuses it)
+            w.summary(summary)
     finally:
         w.close()
     tmp.replace(path)
@@ -326,5 +329,5 @@ def read_mcap(path: str | Path) -> tuple[dict, bool]:
         entries.sort(key=lambda e: e["step"])
     for i in meta.get("node_ids", []):  # a node that never published has no channel, but an entry list
         nodes.setdefault(str(i), [])
-    return {"meta": meta, "truth": truth, "nodes": nodes, "summary": summary or {}}, summary is None
+    return {"meta": meta, "truth": truth, "nodes": nodes, "summary": summary}, summary is None
 

@@ -21,10 +21,11 @@ sector_basis, E = eᵀP⁻¹e (null when the truth of the step is unknown), cont
 bounds [[lo, hi] ×3] are then in ``bounds`` and the ellipsoid is the enclosing one its neighbours
 use), assumptions_ok (every assumption in the step's dependency cone held), contested (more
 than one copy matched the truth: not judged).  ``summary``: the
-per-node table and totals (the same object ``--summary-json`` writes).
+per-node table and totals (the same object ``--summary-json`` writes; in code a
+:class:`~netsetest.records.summary.RunSummary`, converted at this boundary).
 
 A file without the summary line (the collector, the vehicle or the parent was killed) loads as a
-partial record: ``partial`` is true, ``last_complete_step`` the last step whose truth line was written,
+partial record: ``partial`` is true, ``summary`` None, ``last_complete_step`` the last step whose truth line was written,
 and an incomplete last line is ignored (an MCAP file loads only complete, with its verdict message).
 :func:`load_record` also reads version 1 records (one JSON
 document with ``meta``, ``truth``, ``nodes``, ``summary``; optionally gzip-compressed).
@@ -43,6 +44,7 @@ from typing import IO, Protocol
 import numpy as np
 
 from netsetest.extras import require
+from netsetest.records.summary import RunSummary
 
 FORMAT = "netsetest-record"
 VERSION = 2
@@ -62,7 +64,7 @@ class RecordSink(Protocol):
     def meta(self, meta: dict) -> None: ...
     def truth(self, entry: dict) -> None: ...
     def state(self, node: int, entry: dict) -> None: ...
-    def summary(self, summary: dict) -> None: ...
+    def summary(self, summary: RunSummary) -> None: ...
     def close(self) -> None: ...
 
 
@@ -95,8 +97,8 @@ class JsonlSink:
     def state(self, node: int, entry: dict) -> None:
         self._line({"kind": "state", "node": node, "entry": entry})
 
-    def summary(self, summary: dict) -> None:
-        self._line({"kind": "summary", "summary": summary})
+    def summary(self, summary: RunSummary) -> None:
+        self._line({"kind": "summary", "summary": summary.to_dict()})
         self._flush()
 
     def close(self) -> None:
@@ -112,7 +114,7 @@ class MemorySink:
     meta_doc: dict = field(default_factory=dict)
     truth_entries: list[dict] = field(default_factory=list)
     node_entries: dict[str, list[dict]] = field(default_factory=dict)
-    summary_doc: dict | None = None
+    summary_doc: RunSummary | None = None
 
     def meta(self, meta: dict) -> None:
         self.meta_doc = meta
@@ -124,7 +126,7 @@ class MemorySink:
     def state(self, node: int, entry: dict) -> None:
         self.node_entries.setdefault(str(node), []).append(entry)
 
-    def summary(self, summary: dict) -> None:
+    def summary(self, summary: RunSummary) -> None:
         self.summary_doc = summary
 
     def close(self) -> None:
@@ -152,7 +154,7 @@ class TeeSink:
         for s in self.sinks:
             s.state(node, entry)
 
-    def summary(self, summary: dict) -> None:
+    def summary(self, summary: RunSummary) -> None:
         for s in self.sinks:
             s.summary(summary)
 
@@ -206,7 +208,7 @@ class Record:
     meta: dict
     truth: list[dict]
     nodes: dict[int, NodeTrack]
-    summary: dict  # empty in a partial record
+    summary: RunSummary | None  # None in a partial record
     raw_nodes: dict[str, list[dict]]
     partial: bool = False  # the run did not finish writing it (no summary line)
     last_complete_step: int = -1  # last step whose truth (and states) were written
@@ -345,7 +347,7 @@ def _load_lines(path: Path, data: bytes) -> Record:
     except (KeyError, TypeError, ValueError) as exc:
         raise RecordError(f"{path}: malformed record ({type(exc).__name__}: {exc})") from None
     last = max((t["step"] for t in truth if isinstance(t, dict) and isinstance(t.get("step"), int)), default=-1)
-    return _build(path, meta, truth, nodes, summary or {}, partial=summary is None, last_complete=last)
+    return _build(path, meta, truth, nodes, summary, partial=summary is None, last_complete=last)
 
 
 def _load_document(path: Path, data: bytes) -> Record:
@@ -365,11 +367,13 @@ def _load_document(path: Path, data: bytes) -> Record:
     return _build(path, doc["meta"], doc["truth"], doc["nodes"], doc["summary"], partial=False, last_complete=last)
 
 
-def _build(path: Path, meta: dict, truth: list, raw_nodes: dict, summary: dict, partial: bool, last_complete: int) -> Record:
-    if not isinstance(summary, dict):
+def _build(path: Path, meta: dict, truth: list, raw_nodes: dict, summary: object, partial: bool, last_complete: int) -> Record:
+    """``summary``: the summary object as the file holds it (None: a partial record)."""
+    if not (summary is None or isinstance(summary, dict)):
         raise RecordError(f"{path}: malformed record (summary must be a dict)")
     try:
-        return record_from_parts(meta, truth, raw_nodes, summary, str(path), partial, last_complete)
+        typed = None if summary is None else RunSummary.from_dict(summary)
+        return record_from_parts(meta, truth, raw_nodes, typed, str(path), partial, last_complete)
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise RecordError(f"{path}: malformed record ({type(exc).__name__}: {exc})") from None
 
@@ -385,7 +389,7 @@ def _set_bounds(entries: list[dict]) -> np.ndarray | None:
 
 
 def record_from_parts(
-    meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: dict, path: str = "",
+    meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None, path: str = "",
     partial: bool = False, last_complete_step: int | None = None,
 ) -> Record:  # fmt: skip
     """A :class:`Record` from the parts a run returns (or a file holds); raises KeyError/TypeError/ValueError
@@ -413,9 +417,9 @@ def record_from_parts(
     return Record(path, meta, truth, tracks, summary, nodes, partial, last_complete_step)
 
 
-def save_record(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: dict) -> None:
+def save_record(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None) -> None:
     """Write a whole record (e.g. one kept in memory) in the streamed layout, step by step (``.mcap``: an
-    indexed MCAP file)."""
+    indexed MCAP file); without a summary (a partial record) it stays partial (MCAP: not loadable)."""
     path = Path(path)
     if path.suffix == MCAP_SUFFIX:
         require("mcap", "an MCAP record")
@@ -437,6 +441,7 @@ def save_record(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str
                 sink.state(node, e)
             if k in truth_at:
                 sink.truth(truth_at[k])
-        sink.summary(summary)
+        if summary is not None:
+            sink.summary(summary)
     finally:
         sink.close()

@@ -52,6 +52,7 @@ from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.sector import Sector, sector_ok
 from netsetest.messages import End, Message, NodeState, RunScope, Truth
 from netsetest.records.record import RecordSink
+from netsetest.records.summary import RUN_FIELDS, NodeSummary, RunSummary
 from netsetest.roles.vehicle import fault_bound_holds
 from netsetest.sets import set_from_wire
 
@@ -502,7 +503,7 @@ class Collector:
 
     # ------------------------------------------------------------------ summary
 
-    def finish(self, meta: dict, deadline_misses: dict[int, int] | None = None, drops: dict[str, dict[str, int]] | None = None) -> dict:
+    def finish(self, meta: dict, deadline_misses: dict[int, int] | None = None, drops: dict[str, dict[str, int]] | None = None) -> RunSummary:
         """Close every open step, then the summary (also written to the sink, which is closed).
 
         ``drops``: further drop counters by role (the runtime's, e.g. a shared in-memory bus).
@@ -511,67 +512,66 @@ class Collector:
         for k in range(self.closed + 1, min(last, self.sc.steps) + 1):
             self._close(k)
         last = self.closed
-        node_rows = []
-        for n in self.sc.nodes:
-            i, t = n.id, self.totals[n.id]
-            node_rows.append(
-                {
-                    "id": i,
-                    "estimator": n.estimator,
-                    "max_E": t.E_max,
-                    "violations": t.violations,
-                    "misses_assumption_broken": t.broken_misses,
-                    "assumption_violations": t.assumption_violations,
-                    "sector_failures": t.sector_failures,
-                    "sectors_assumed": t.sectors_assumed,
-                    "sector_breaks": t.sector_breaks,
-                    "first_sector_break": t.first_sector_break,
-                    "fault_bound_mean_width": t.width_sum / t.reported if t.reported else None,
-                    "solve_ms_median": statistics.median(t.solve) if t.solve else None,
-                    "fallbacks": t.fallbacks,
-                    "steps_reported": t.reported,
-                    "steps_rejected": t.rejected,
-                    "steps_contested": t.contested,
-                    "steps_evaluated": t.evaluated,
-                    "steps_contained": t.contained,
-                    "steps_covered": t.covered,
-                    "missing_steps": t.missing_steps,
-                    "missing_from": t.missing_from,
-                    "rejoined_at": t.rejoined_at,
-                    "neighbour_messages_missing": t.neighbour_missing,
-                    "dropped_messages": t.dropped,
-                    "drops": t.drops,
-                    "deadline_misses": (deadline_misses or {}).get(i, t.late),
-                }
-            )
+        node_rows = [self._node_summary(n, (deadline_misses or {}).get(n.id, self.totals[n.id].late)) for n in self.sc.nodes]
         own_drops = self.drops + (Counter() if self.bus.shared else self.bus.dropped)
         by_role: dict[str, dict[str, int]] = {"collector": dict(sorted(own_drops.items())), "vehicle": dict(sorted(self.vehicle_drops.items()))}
-        by_role.update({f"node {r['id']}": dict(sorted(r["drops"].items())) for r in node_rows})
+        by_role.update({f"node {r.id}": dict(sorted(r.drops.items())) for r in node_rows})
         by_role.update(drops or {})
         totals = self.totals.values()
-        summary = {
-            **{k: meta[k] for k in ("mode", "security", "variant", "objective", "case", "signals", "steps", "seed", "clock") if k in meta},
-            "violations_total": sum(r["violations"] for r in node_rows),
-            "misses_assumption_broken_total": sum(r["misses_assumption_broken"] for r in node_rows),
-            "sector_failures_total": sum(r["sector_failures"] for r in node_rows),
-            "steps_completed": last,
-            "node_steps_reported": sum(t.reported for t in totals),
-            "node_steps_rejected": sum(t.rejected for t in totals),
-            "node_steps_contested": sum(t.contested for t in totals),
-            "node_steps_evaluated": sum(t.evaluated for t in totals),
-            "node_steps_contained": sum(t.contained for t in totals),
-            "node_steps_covered": sum(t.covered for t in totals),
-            "node_steps_not_covered": dict(sorted(self.not_covered.items())),
+        summary = RunSummary(
+            **{k: meta[k] for k in RUN_FIELDS if k in meta},
+            violations_total=sum(r.violations for r in node_rows),
+            misses_assumption_broken_total=sum(r.misses_assumption_broken for r in node_rows),
+            sector_failures_total=sum(r.sector_failures for r in node_rows),
+            steps_completed=last,
+            node_steps_reported=sum(t.reported for t in totals),
+            node_steps_rejected=sum(t.rejected for t in totals),
+            node_steps_contested=sum(t.contested for t in totals),
+            node_steps_evaluated=sum(t.evaluated for t in totals),
+            node_steps_contained=sum(t.contained for t in totals),
+            node_steps_covered=sum(t.covered for t in totals),
+            node_steps_not_covered=dict(sorted(self.not_covered.items())),
             # lost for good: silent at the last step; rejoined: a gap, then heard from up to the last step
-            "nodes_missing": [i for i, t in self.totals.items() if t.last_heard is None or t.last_heard < last],
-            "nodes_rejoined": [i for i, t in self.totals.items() if t.missing_from is not None and t.last_heard == last],
-            "losses": dict(sorted(self.losses.items())),
-            "losses_total": sum(self.losses.values()),
-            "dropped_messages": dict(own_drops),  # by the collector; per node in nodes[*]
-            "drops": {role: d for role, d in by_role.items() if d},
-            "nodes": node_rows,
-        }
+            nodes_missing=[i for i, t in self.totals.items() if t.last_heard is None or t.last_heard < last],
+            nodes_rejoined=[i for i, t in self.totals.items() if t.missing_from is not None and t.last_heard == last],
+            losses=dict(sorted(self.losses.items())),
+            losses_total=sum(self.losses.values()),
+            dropped_messages=dict(own_drops),  # by the collector; per node in nodes[*]
+            drops={role: d for role, d in by_role.items() if d},
+            nodes=node_rows,
+        )
         if self.sink is not None:
             self.sink.summary(summary)
             self.sink.close()
         return summary
+
+    def _node_summary(self, n: NodeConfig, deadline_misses: int) -> NodeSummary:
+        t = self.totals[n.id]
+        return NodeSummary(
+            id=n.id,
+            estimator=n.estimator,
+            max_E=t.E_max,
+            violations=t.violations,
+            misses_assumption_broken=t.broken_misses,
+            assumption_violations=t.assumption_violations,
+            sector_failures=t.sector_failures,
+            sectors_assumed=t.sectors_assumed,
+            sector_breaks=t.sector_breaks,
+            first_sector_break=t.first_sector_break,
+            fault_bound_mean_width=t.width_sum / t.reported if t.reported else None,
+            solve_ms_median=statistics.median(t.solve) if t.solve else None,
+            fallbacks=t.fallbacks,
+            steps_reported=t.reported,
+            steps_rejected=t.rejected,
+            steps_contested=t.contested,
+            steps_evaluated=t.evaluated,
+            steps_contained=t.contained,
+            steps_covered=t.covered,
+            missing_steps=t.missing_steps,
+            missing_from=t.missing_from,
+            rejoined_at=t.rejoined_at,
+            neighbour_messages_missing=t.neighbour_missing,
+            dropped_messages=t.dropped,
+            drops=t.drops,
+            deadline_misses=deadline_misses,
+        )

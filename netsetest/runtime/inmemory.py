@@ -10,6 +10,7 @@ from netsetest.config.schema import Scenario
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.estimator.sdp import Variant
 from netsetest.models.signals import SignalKind
+from netsetest.records.summary import RunSummary
 from netsetest.roles.collector import Collector
 from netsetest.roles.node import Node
 from netsetest.roles.vehicle import Vehicle
@@ -18,7 +19,7 @@ from netsetest.runtime.report import Progress, record_sink
 
 @dataclass
 class RunResult:
-    summary: dict
+    summary: RunSummary
     meta: dict
     parts: dict | None  # truth and node entries of the record (None when not kept in memory)
 

@@ -13,7 +13,6 @@ the run: the others go on without it and the summary says so (exit code 3, from 
 from __future__ import annotations
 
 import ctypes
-import json
 import os
 import signal
 import socket
@@ -30,7 +29,8 @@ from typing import IO, TYPE_CHECKING, Literal
 from netsetest.config.schema import Case, Scenario, load_topology
 from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
-from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress
+from netsetest.records.summary import RunSummary
+from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress, read_summary
 
 if TYPE_CHECKING:  # the CLI imports this module for its defaults: the estimator and the roles load only to launch
     from netsetest.estimator.sdp import Variant
@@ -104,7 +104,7 @@ class RunOutcome:
     at the normal end of the run (not when interrupted or when the vehicle failed)."""
 
     exit_code: int
-    summary: dict | None
+    summary: RunSummary | None
 
 
 def kill_schedule(kill: Sequence[tuple[int, int]], rejoin: Sequence[tuple[int, int]], steps: int) -> Schedule:
@@ -384,7 +384,7 @@ def launch(plan: RunPlan) -> RunOutcome:
         if not summary_path.exists():
             log("run", f"the collector exited with code {col.returncode} without a summary")
             return RunOutcome(EXIT_VIOLATION, None)
-        return RunOutcome(col.returncode, json.loads(summary_path.read_text()))
+        return RunOutcome(col.returncode, read_summary(summary_path))
     except KeyboardInterrupt:
         log("run", "interrupted: stopping the vehicle and the nodes, then letting the collector write what it has")
         children.stop_all(ROLE_GRACE_S, keep=["collector"])

@@ -29,6 +29,7 @@ from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.estimator.sdp import Variant
 from netsetest.messages import Message, Ready
 from netsetest.models.signals import SignalKind
+from netsetest.records.summary import RunSummary
 from netsetest.roles.collector import Collector
 from netsetest.roles.node import Node
 from netsetest.roles.vehicle import Vehicle
@@ -268,7 +269,7 @@ def run_collector(
     summary_json: str | None,
     progress: bool,
     idle_timeout: float,
-    on_summary: Callable[[dict], None] | None = None,
+    on_summary: Callable[[RunSummary], None] | None = None,
 ) -> int:
     sink, _ = record_sink(record)  # opened now: the record grows step by step and survives a crash
     collector = Collector(sc, bus, run_id, sink)

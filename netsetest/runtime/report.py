@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import TextIO
 
 from netsetest.records.record import MemorySink, RecordSink, TeeSink, open_sink
+from netsetest.records.summary import RunSummary
 
 
 class Progress:
@@ -45,60 +46,60 @@ def _fmt(v: object, spec: str) -> str:
     return "-" if v is None else format(v, spec)
 
 
-def format_table(summary: dict) -> str:
+def format_table(summary: RunSummary) -> str:
     head = ["node", "max E", "viol.", "assump.viol", "miss(assump.)", "fault width", "solve ms", "fallbacks", "missing", "deadline"]
     rows = [
         [
-            str(r["id"]),
-            _fmt(r["max_E"], ".3f"),
-            str(r["violations"]),
-            str(r["assumption_violations"]),
-            str(r["misses_assumption_broken"]),
-            _fmt(r["fault_bound_mean_width"], ".4f"),
-            _fmt(r["solve_ms_median"], ".2f"),
-            str(r["fallbacks"]),
-            "-" if r["missing_from"] is None else f"from {r['missing_from']}",
-            str(r["deadline_misses"]),
+            str(r.id),
+            _fmt(r.max_E, ".3f"),
+            str(r.violations),
+            str(r.assumption_violations),
+            str(r.misses_assumption_broken),
+            _fmt(r.fault_bound_mean_width, ".4f"),
+            _fmt(r.solve_ms_median, ".2f"),
+            str(r.fallbacks),
+            "-" if r.missing_from is None else f"from {r.missing_from}",
+            str(r.deadline_misses),
         ]
-        for r in summary["nodes"]
+        for r in summary.nodes
     ]
     widths = [max(len(h), *(len(r[c]) for r in rows)) for c, h in enumerate(head)]
     line = lambda cells: "  ".join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731
     out = [line(head), line(["-" * w for w in widths])] + [line(r) for r in rows]
     out.append("")
-    if summary["misses_assumption_broken_total"]:
-        out.append(f"{summary['misses_assumption_broken_total']} miss(es) after a broken assumption (not covered by the guarantee).")
-    if summary.get("nodes_missing"):
-        out.append(f"nodes missing: {summary['nodes_missing']}")
-    if summary.get("nodes_rejoined"):
-        out.append(f"nodes rejoined: {summary['nodes_rejoined']}")
-    if summary.get("losses_total"):
-        out.append(f"scheduled message losses: {summary['losses_total']}")
-    for role, reasons in (summary.get("drops") or {}).items():
+    if summary.misses_assumption_broken_total:
+        out.append(f"{summary.misses_assumption_broken_total} miss(es) after a broken assumption (not covered by the guarantee).")
+    if summary.nodes_missing:
+        out.append(f"nodes missing: {summary.nodes_missing}")
+    if summary.nodes_rejoined:
+        out.append(f"nodes rejoined: {summary.nodes_rejoined}")
+    if summary.losses_total:
+        out.append(f"scheduled message losses: {summary.losses_total}")
+    for role, reasons in summary.drops.items():
         out.append(f"dropped by {role}: " + ", ".join(f"{r} {n}" for r, n in reasons.items()))
     # the last line: the run, its security mode (Zenoh) and the verdict
-    security = f" (security: {summary['security']})" if summary.get("security") else ""
-    out.append(f"{summary.get('mode', '')} run{security}, case {summary.get('case')}, signals {summary.get('signals')}, "
-               f"variant {summary.get('variant')}, {summary.get('steps_completed')} steps: {verdict(summary)}.")  # fmt: skip
+    security = f" (security: {summary.security})" if summary.security else ""
+    out.append(f"{summary.mode or ''} run{security}, case {summary.case}, signals {summary.signals}, "
+               f"variant {summary.variant}, {summary.steps_completed} steps: {verdict(summary)}.")  # fmt: skip
     return "\n".join(out)
 
 
-def verdict(summary: dict) -> str:
+def verdict(summary: RunSummary) -> str:
     """The result in words, never more than was checked: how many node-steps the guarantee covered."""
-    evaluated, contained = summary["node_steps_evaluated"], summary["node_steps_contained"]
-    covered, reported = summary["node_steps_covered"], summary["node_steps_reported"]
-    if summary["violations_total"]:
-        head = f"CONTAINMENT VIOLATED {summary['violations_total']} time(s) where the assumptions held; contained on {contained} of {evaluated} node-steps"
+    evaluated, contained = summary.node_steps_evaluated, summary.node_steps_contained
+    covered, reported = summary.node_steps_covered, summary.node_steps_reported
+    if summary.violations_total:
+        head = f"CONTAINMENT VIOLATED {summary.violations_total} time(s) where the assumptions held; contained on {contained} of {evaluated} node-steps"
     else:
         head = f"contained on {contained} of {evaluated} node-steps"
     text = f"{head}; the guarantee applied on {covered}"
-    causes = summary.get("node_steps_not_covered") or {}
+    causes = summary.node_steps_not_covered
     if causes:
         text += f" (assumption broken on {evaluated - covered}: " + ", ".join(f"{c} {n}" for c, n in causes.items()) + ")"
     if reported > evaluated:
         text += f"; {reported - evaluated} node-step(s) not judged (truth unknown or copies contested)"
-    if summary.get("node_steps_rejected"):
-        text += f"; {summary['node_steps_rejected']} node-step(s) rejected (no copy matched the truth)"
+    if summary.node_steps_rejected:
+        text += f"; {summary.node_steps_rejected} node-step(s) rejected (no copy matched the truth)"
     return text
 
 
@@ -110,17 +111,22 @@ def record_sink(record: str | None, keep: bool = False) -> tuple[RecordSink | No
     return (TeeSink(*sinks) if len(sinks) > 1 else sinks[0] if sinks else None), memory
 
 
-def write_summary(summary: dict, summary_json: str | None) -> None:
+def write_summary(summary: RunSummary, summary_json: str | None) -> None:
     if summary_json:
-        Path(summary_json).write_text(json.dumps(summary, indent=2) + "\n")
+        Path(summary_json).write_text(json.dumps(summary.to_dict(), indent=2) + "\n")
+
+
+def read_summary(summary_json: str | Path) -> RunSummary:
+    """A ``--summary-json`` file written by :func:`write_summary` (ValueError if it is not one)."""
+    return RunSummary.from_dict(json.loads(Path(summary_json).read_text()))
 
 
 EXIT_OK, EXIT_VIOLATION, EXIT_BAD_INPUT, EXIT_NODE_LOST = 0, 1, 2, 3
 EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM reached the command (128 + SIGINT, as shells report it)
 
 
-def exit_code(summary: dict) -> int:
+def exit_code(summary: RunSummary) -> int:
     """0 contained wherever the assumptions held; 1 estimator violation; 3 a node stopped reporting."""
-    if summary["violations_total"]:
+    if summary.violations_total:
         return EXIT_VIOLATION
-    return EXIT_NODE_LOST if summary.get("nodes_missing") else EXIT_OK
+    return EXIT_NODE_LOST if summary.nodes_missing else EXIT_OK
