@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from zenoh_helpers import describe, free_ports, new_run_id, pids_with_arg, wait_for, wait_gone
 
-from netsetest.runtime.forkserver import NAME_PREFIX, ForkServer
+from netsetest.runtime.forkserver import NAME_PREFIX, ForkServer, ForkServerError
 from netsetest.runtime.launcher import ROLE_MODULE
 from netsetest.runtime.processes import role_env
 
@@ -41,6 +41,10 @@ def _router(fs: ForkServer, run_id: str):  # noqa: ANN202
     return fs.spawn("router", ["router", "--listen", f"tcp/127.0.0.1:{free_ports(1)[0]}", "--run-id", run_id], pipe_stdout=False)
 
 
+def _comm(pid: int) -> str:
+    return Path(f"/proc/{pid}/comm").read_text().strip()
+
+
 def _threads(pid: int) -> int:
     return len(os.listdir(f"/proc/{pid}/task"))
 
@@ -60,7 +64,7 @@ def test_a_child_runs_the_command_line_with_its_own_stdout_and_exit_code(server:
 def test_signals_reach_the_child_and_its_name_says_its_role(server: tuple[ForkServer, str]) -> None:
     fs, run_id = server
     child = _router(fs, run_id)
-    assert Path(f"/proc/{child.pid}/comm").read_text().strip() == f"{NAME_PREFIX}router"
+    wait_for(lambda: _comm(child.pid) == f"{NAME_PREFIX}router", 10, what="the child's process name")  # set right after fork
     assert child.pid in pids_with_arg(run_id)  # the server's command line, with the run id
     with pytest.raises(subprocess.TimeoutExpired):
         child.wait(0.3)
@@ -72,7 +76,7 @@ def test_signals_reach_the_child_and_its_name_says_its_role(server: tuple[ForkSe
 def test_children_die_with_the_server(server: tuple[ForkServer, str]) -> None:
     fs, run_id = server
     kids = [_router(fs, run_id) for _ in range(2)]
-    wait_for(lambda: all(f"{NAME_PREFIX}router" == Path(f"/proc/{k.pid}/comm").read_text().strip() for k in kids), 10, what="the routers")
+    wait_for(lambda: all(_comm(k.pid) == f"{NAME_PREFIX}router" for k in kids), 10, what="the routers")
     os.kill(fs.proc.pid, signal.SIGKILL)
     fs.proc.wait(5)
     left = wait_gone([run_id], 5.0)
@@ -88,3 +92,12 @@ def test_closing_the_server_kills_what_is_left(server: tuple[ForkServer, str]) -
     assert fs.proc.returncode == 0
     assert not wait_gone([run_id], 5.0)
     assert child.poll() == -signal.SIGKILL
+
+
+def test_a_server_that_is_gone_is_an_error_not_a_hang() -> None:
+    fs = ForkServer([sys.executable, "-c", "pass"], role_env())  # ends at once, without serving
+    try:
+        with pytest.raises(ForkServerError, match="ended"):
+            fs.spawn("vehicle", ["vehicle", "paper6"], pipe_stdout=False)
+    finally:
+        fs.close()

@@ -2,7 +2,8 @@
 
 :func:`plan_run` checks a :class:`LaunchOptions` against its topology (a :class:`LaunchError` names the
 bad option) and :func:`launch` runs the resulting :class:`RunPlan`: 1 vehicle, 1 collector and one process
-per node.  Secured (the default), the launcher writes per-run mTLS credentials and holds the run's
+per node, forked by the run's fork server (runtime/forkserver.py), which the launcher starts first so
+that it imports while the launcher writes credentials and opens the router.  Secured (the default), the launcher writes per-run mTLS credentials and holds the run's
 router (access control) in its own process, and every role is a client of it; ``insecure``, the roles
 form a full peer mesh on loopback, each listening on its own free port.  The launcher follows the
 collector's progress, kills and restarts nodes mid-run (``kill``, ``rejoin``), and stops every child on
@@ -29,7 +30,7 @@ from typing import IO, TYPE_CHECKING, Literal
 from netsetest.config.schema import Case, Scenario, load_topology
 from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
-from netsetest.runtime.forkserver import ForkedProcess, ForkServer
+from netsetest.runtime.forkserver import ForkedProcess, ForkServer, ForkServerError
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress
 
 if TYPE_CHECKING:  # the CLI imports this module for its defaults: the estimator and the roles load only to launch
@@ -39,7 +40,7 @@ if TYPE_CHECKING:  # the CLI imports this module for its defaults: the estimator
 Clock = Literal["lockstep", "realtime"]
 
 START_TIMEOUT_S = 60.0  # the vehicle's default wait for every role to be ready
-START_S_PER_ROLE = 1.0  # each role process imports for ≈0.35 s of CPU; 100 of them share a few cores
+START_S_PER_ROLE = 1.0  # each role sets up its estimator, session and barrier; 100 of them share a few cores
 NODE_TIMEOUT_S = 10.0  # lockstep: a node silent this long is declared dead by the vehicle
 NEIGHBOUR_TIMEOUT_S = 5.0  # lockstep: how long a node waits for a neighbour's message
 COLLECTOR_GRACE_S = 10.0  # on Ctrl-C/SIGTERM: how long the collector may take to write its record and summary
@@ -372,6 +373,9 @@ def launch(plan: RunPlan) -> RunOutcome:
             log("run", f"the collector exited with code {col.returncode} without a summary")
             return RunOutcome(EXIT_VIOLATION, None)
         return RunOutcome(col.returncode, json.loads(summary_path.read_text()))
+    except ForkServerError as exc:
+        log("run", f"{exc}; stopping the run")
+        return RunOutcome(EXIT_VIOLATION, None)
     except KeyboardInterrupt:
         log("run", "interrupted: stopping the vehicle and the nodes, then letting the collector write what it has")
         children.stop_all(ROLE_GRACE_S, keep=["collector"])
