@@ -3,8 +3,9 @@
 Parts, in order: per-node per-step solve times on the paper scenario (NSNIM/SAIM × scheduled/
 per-rule, fast path vs. the previous default, the straightforward and the naive formulations); the
 published intervals of the paper run against the exact limit (``netsetest exact``); the in-memory cost per node-step for ring-with-chords networks of 6, 24 and 96 nodes; the Zenoh lockstep
-run against the in-memory run of the paper scenario; the largest real-time network without a
-deadline miss; one node process's peak RSS and start-up time; the defences (stepping under a
+run against the in-memory run of the paper scenario; ``netsetest run`` of the paper network from
+launch to step 0; one node process's peak RSS and start-up time; the largest real-time network without a
+deadline miss; the defences (stepping under a
 30 000 msg/s flood at one node, RSS slope over a long run, bench/defences.py).  ``--quick`` uses fewer steps and
 samples (a few minutes); the default takes longer.  Times are wall-clock milliseconds on this
 machine, measured side by side in one run; medians and ratios, not single runs, are the figures.

@@ -5,6 +5,8 @@
   vehicle`` with the same options, all-to-all on loopback), started here so that an observer session
   can time the run from the vehicle's step-0 input to the last node's final state (the stepping
   phase, without process start-up), and so that each node's peak RSS (VmHWM) can be read.
+- ``launch_to_step0``: ``netsetest run`` of a topology (secured, roles forked by the fork server) timed
+  from launch to the vehicle's step-0 input.
 - ``node_startup``: a one-node network whose vehicle and collector are already up and waiting; a
   node process is launched and timed from ``Popen`` to its first published state (the prior
   ellipsoid, step 0) and to its first solved estimate (step 1).
@@ -13,7 +15,9 @@
   (CPU per role over the stepping phase, the machine's other work, node RSS) so a failure shows why.
 - ``node_memory_profile``: RSS and import time of a node process, stage by stage.
 
-Every role process is started with the environment ``netsetest run`` gives it (``role_env``).
+Every role process is started with the environment ``netsetest run`` gives it (``role_env``).  The
+roles of ``netsetest run`` are forked by its fork server: :class:`ProcessSampler` tells them apart by
+process name (``ns-node3``), the others by command line.
 """
 
 from __future__ import annotations
