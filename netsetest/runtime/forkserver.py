@@ -34,7 +34,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
-from typing import IO
+from typing import IO, NoReturn
 
 PR_SET_PDEATHSIG, PR_SET_NAME = 1, 15  # prctl(2)
 NAME_PREFIX = "ns-"  # process name of a forked role: ns-vehicle, ns-collector, ns-node3
@@ -120,12 +120,17 @@ def _kill_all(children: Mapping[int, int]) -> None:
 
 
 def _fork(name: str, argv: list[str], stdout_fd: int | None, run: Callable[[list[str]], int], close: list[int]) -> int:
+    """Fork a child that runs ``run(argv)`` and exits with its code; the child's pid."""
     server = os.getpid()
     sys.stdout.flush()
     sys.stderr.flush()
     pid = os.fork()
-    if pid:
-        return pid
+    if pid == 0:
+        _child(server, name, argv, stdout_fd, run, close)
+    return pid
+
+
+def _child(server: int, name: str, argv: list[str], stdout_fd: int | None, run: Callable[[list[str]], int], close: list[int]) -> NoReturn:
     code = 1
     try:
         os.setsid()  # like start_new_session: the terminal's Ctrl-C goes to the launcher alone
@@ -138,6 +143,8 @@ def _fork(name: str, argv: list[str], stdout_fd: int | None, run: Callable[[list
         os.dup2(devnull, 0)
         os.dup2(stdout_fd if stdout_fd is not None else devnull, 1)
         os.close(devnull)
+        if stdout_fd is not None:
+            os.close(stdout_fd)
         for sig in (signal.SIGTERM, signal.SIGCHLD):
             signal.signal(sig, signal.SIG_DFL)
         signal.signal(signal.SIGINT, signal.default_int_handler)
@@ -155,7 +162,6 @@ def _fork(name: str, argv: list[str], stdout_fd: int | None, run: Callable[[list
             sys.stderr.flush()
         finally:
             os._exit(code)
-    raise AssertionError("unreachable")
 
 
 # ---------------------------------------------------------------- the launcher's side
