@@ -5,6 +5,8 @@
   vehicle`` with the same options, all-to-all on loopback), started here so that an observer session
   can time the run from the vehicle's step-0 input to the last node's final state (the stepping
   phase, without process start-up), and so that each node's peak RSS (VmHWM) can be read.
+- ``launch_to_step0``: ``netsetest run`` of a topology (secured, roles forked by the fork server) timed
+  from launch to the vehicle's step-0 input.
 - ``node_startup``: a one-node network whose vehicle and collector are already up and waiting; a
   node process is launched and timed from ``Popen`` to its first published state (the prior
   ellipsoid, step 0) and to its first solved estimate (step 1).
@@ -13,7 +15,9 @@
   (CPU per role over the stepping phase, the machine's other work, node RSS) so a failure shows why.
 - ``node_memory_profile``: RSS and import time of a node process, stage by stage.
 
-Every role process is started with the environment ``netsetest run`` gives it (``role_env``).
+Every role process is started with the environment ``netsetest run`` gives it (``role_env``).  The
+roles of ``netsetest run`` are forked by its fork server: :class:`ProcessSampler` tells them apart by
+process name (``ns-node3``), the others by command line.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ from pathlib import Path
 
 import msgpack
 
+from netsetest.runtime.forkserver import NAME_PREFIX
 from netsetest.runtime.launcher import free_ports
 from netsetest.runtime.processes import role_env
 
@@ -84,6 +89,40 @@ def cli_run(
             "processes": sampler.stop(sample_stepping_s) if sampler else None, "late_per_step": late}  # fmt: skip
 
 
+STEP0_LINE = ("[vehicle] all ", "are ready; clock")  # logged by run_vehicle right before step 0's input goes out
+
+
+def launch_to_step0(topology: Path, reps: int, steps: int = 3, timeout: float = 120.0) -> dict:
+    """``netsetest run TOPOLOGY`` as a user starts it (secured default: mTLS + access control at the
+    router in the parent, roles forked by the fork server): seconds from ``Popen`` to the vehicle's
+    line "all N nodes and the collector are ready", which it logs right before publishing step 0's
+    input; ``reps`` runs of ``steps`` steps, one after another, with the load average before each."""
+    rows = []
+    for _ in range(reps):
+        load = Path("/proc/loadavg").read_text().split()[0]
+        t0 = time.perf_counter()
+        proc = subprocess.Popen([*PY, "run", str(topology), "--quiet", "--steps", str(steps)], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
+        seen: list[float] = []
+
+        def read(stream) -> None:  # noqa: ANN001
+            for line in stream:
+                if not seen and line.startswith(STEP0_LINE[0]) and STEP0_LINE[1] in line:
+                    seen.append(time.perf_counter() - t0)
+
+        reader = threading.Thread(target=read, args=(proc.stderr,), daemon=True)
+        reader.start()
+        try:
+            code = proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            _kill([proc])
+            code = None
+        reader.join(5)
+        rows.append({"launch_to_step0_s": seen[0] if seen else None, "exit_code": code, "load_before": float(load)})
+    values = [r["launch_to_step0_s"] for r in rows if r["launch_to_step0_s"] is not None]
+    return {"reps": rows, "median_s": statistics.median(values) if values else None, "steps": steps}
+
+
 def _late_per_step(record_path: Path) -> dict[int, int] | None:
     """Step → how many nodes published it after its deadline (from the run's record)."""
     if not record_path.exists():
@@ -103,12 +142,15 @@ SAMPLE_PERIOD_S = 0.25
 def _proc_stat(pid: int) -> tuple[int, float, float, str] | None:
     """(parent pid, CPU seconds, VmHWM MB, role) of a process, from /proc; None once it is gone."""
     try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        comm, fields = stat[stat.index("(") + 1 : stat.rindex(")")], stat.rsplit(")", 1)[1].split()
         hwm = next(int(x.split()[1]) for x in Path(f"/proc/{pid}/status").read_text().splitlines() if x.startswith("VmHWM:"))
         argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
-    except (OSError, StopIteration, IndexError):
+    except (OSError, StopIteration, IndexError, ValueError):
         return None
     role = argv[3].decode() if len(argv) > 3 and argv[1:3] == [b"-m", b"netsetest.cli.main"] else "?"
+    if role == "forkserver" and comm.startswith(NAME_PREFIX):  # a role forked by `netsetest run`'s fork server
+        role = comm.removeprefix(NAME_PREFIX).rstrip("0123456789")
     return int(fields[1]), (int(fields[11]) + int(fields[12])) / CLK_TCK, hwm / 1024.0, role
 
 

@@ -124,14 +124,24 @@ def pids_with_arg(marker: str) -> list[int]:
     return sorted(out)
 
 
+def _comm(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/comm").read_text().strip()
+    except OSError:
+        return ""
+
+
 def find_role(run_id: str, role: str) -> list[int]:
-    """Pids of ``netsetest.cli.main ROLE ... --run-id RUN_ID`` processes (like ``pgrep -f``)."""
+    """Pids of the run's ROLE processes: exec'd as ``netsetest.cli.main ROLE ... --run-id RUN_ID`` (like
+    ``pgrep -f``), or forked by the run's fork server (its command line, with the run id; process name
+    ``ns-ROLE`` or ``ns-nodeN``, runtime/forkserver.py)."""
     out = []
     for pid in pids_with_arg(run_id):
         argv = _cmdline(pid) or []
         if "netsetest.cli.main" in argv:
             i = argv.index("netsetest.cli.main")
-            if i + 1 < len(argv) and argv[i + 1] == role:
+            name = _comm(pid)
+            if (i + 1 < len(argv) and argv[i + 1] == role) or name.removeprefix("ns-").rstrip("0123456789") == role != name:
                 out.append(pid)
     return out
 

@@ -171,6 +171,10 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
                    help="a name or address the router is reached at (repeatable; default: localhost, 127.0.0.1 and router, always included)")  # fmt: skip
     p.add_argument("--days", type=checks.positive_int, default=DEFAULT_VALIDITY_DAYS, help="validity of the certificates in days")
 
+    p = sub.add_parser("forkserver", help="internal: the fork server of `netsetest run` (imports once, forks each role process)")
+    p.add_argument("--run-id", type=_run_id, required=True, help="the run it serves (in its command line and its children's, to find them)")
+    p.add_argument("--control-fd", type=int, required=True, help="file descriptor of the launcher's control socket")
+
     p = sub.add_parser("compose", help="print a docker-compose.yml for a topology (router + one service per role)")
     p.add_argument("topology", help="topology file or bundled name, e.g. paper6")
     p.add_argument("--image", default="netsetest:latest", help="image with netsetest installed (built from the Dockerfile)")
@@ -304,8 +308,15 @@ def cmd_compose(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_forkserver(a: argparse.Namespace) -> int:
+    from netsetest.cli.main import main
+    from netsetest.runtime.forkserver import serve
+
+    return serve(a.control_fd, main)
+
+
 COMMANDS.update(vehicle=cmd_vehicle, node=cmd_node, collector=cmd_collector, router=cmd_router, credentials=cmd_credentials,
-                compose=cmd_compose)
+                compose=cmd_compose, forkserver=cmd_forkserver)
 
 
 # ---------------------------------------------------------------- run --mode zenoh: the parent

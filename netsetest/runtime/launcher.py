@@ -2,7 +2,8 @@
 
 :func:`plan_run` checks a :class:`LaunchOptions` against its topology (a :class:`LaunchError` names the
 bad option) and :func:`launch` runs the resulting :class:`RunPlan`: 1 vehicle, 1 collector and one process
-per node.  Secured (the default), the launcher writes per-run mTLS credentials and holds the run's
+per node, forked by the run's fork server (runtime/forkserver.py), which the launcher starts first so
+that it imports while the launcher writes credentials and opens the router.  Secured (the default), the launcher writes per-run mTLS credentials and holds the run's
 router (access control) in its own process, and every role is a client of it; ``insecure``, the roles
 form a full peer mesh on loopback, each listening on its own free port.  The launcher follows the
 collector's progress, kills and restarts nodes mid-run (``kill``, ``rejoin``), and stops every child on
@@ -12,7 +13,6 @@ the run: the others go on without it and the summary says so (exit code 3, from 
 
 from __future__ import annotations
 
-import ctypes
 import os
 import signal
 import socket
@@ -30,6 +30,7 @@ from netsetest.config.schema import Case, Scenario, load_topology
 from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.records.summary import RunSummary
+from netsetest.runtime.forkserver import ForkedProcess, ForkServer, ForkServerError
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress, read_summary
 
 if TYPE_CHECKING:  # the CLI imports this module for its defaults: the estimator and the roles load only to launch
@@ -39,7 +40,7 @@ if TYPE_CHECKING:  # the CLI imports this module for its defaults: the estimator
 Clock = Literal["lockstep", "realtime"]
 
 START_TIMEOUT_S = 60.0  # the vehicle's default wait for every role to be ready
-START_S_PER_ROLE = 1.0  # each role process imports for ≈0.35 s of CPU; 100 of them share a few cores
+START_S_PER_ROLE = 1.0  # each role sets up its estimator, session and barrier; 100 of them share a few cores
 NODE_TIMEOUT_S = 10.0  # lockstep: a node silent this long is declared dead by the vehicle
 NEIGHBOUR_TIMEOUT_S = 5.0  # lockstep: how long a node waits for a neighbour's message
 COLLECTOR_GRACE_S = 10.0  # on Ctrl-C/SIGTERM: how long the collector may take to write its record and summary
@@ -133,8 +134,6 @@ def run_start_timeout(roles: int) -> float:
 def plan_run(opts: LaunchOptions) -> RunPlan:
     """Load the topology and check the options against it and each other (LaunchError naming the option;
     ConfigError for a bad topology)."""
-    from netsetest.bus.zenoh_bus import BusError, zenoh_config
-
     sc = load_topology(opts.topology, opts.case, opts.steps, opts.estimator)
     for node, _ in (*opts.kill, *opts.rejoin):
         if sc.node(node).estimator != SDP:
@@ -147,6 +146,8 @@ def plan_run(opts: LaunchOptions) -> RunPlan:
         # else a node waiting for a dead neighbour is itself declared dead by the vehicle
         raise LaunchError(f"--neighbour-timeout ({opts.neighbour_timeout:g} s) must be shorter than --node-timeout ({opts.node_timeout:g} s)")
     if opts.zenoh_config:
+        from netsetest.bus.zenoh_bus import BusError, zenoh_config
+
         try:
             zenoh_config("peer", base_file=opts.zenoh_config)
         except BusError as exc:
@@ -170,38 +171,25 @@ def free_ports(n: int) -> list[int]:
     return ports
 
 
-PR_SET_PDEATHSIG = 1  # prctl(2)
-
-
-def _die_with_parent() -> None:
-    """In the child, before exec: get SIGKILL if the parent dies, however it dies (Linux)."""
-    try:
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
-    except OSError:
-        pass
-
-
 class Children:
-    """The role processes a run started; :meth:`stop_all` leaves none behind."""
+    """The role processes of a run, forked by the run's fork server; :meth:`close` leaves none behind."""
 
-    def __init__(self) -> None:
-        self.procs: dict[str, subprocess.Popen] = {}
-        self.ended: list[subprocess.Popen] = []
-
-    def start(self, name: str, argv: list[str], stdout: int | IO | None = None, text: bool = False) -> subprocess.Popen:
-        """``python -m netsetest.cli.main ARGV`` in its own session, in the role environment (ROLE_ENV)."""
+    def __init__(self, run_id: str) -> None:
+        """Starts the fork server at once: it imports while the launcher writes credentials and opens the router."""
         from netsetest.runtime.processes import role_env
 
-        cmd = [sys.executable, "-m", ROLE_MODULE, *argv]
-        proc = subprocess.Popen(cmd, start_new_session=True, preexec_fn=_die_with_parent, stdin=subprocess.DEVNULL, env=role_env(),
-                                stdout=stdout, text=text)  # fmt: skip
+        self.server = ForkServer([sys.executable, "-m", ROLE_MODULE, "forkserver", "--run-id", run_id], role_env())
+        self.procs: dict[str, ForkedProcess] = {}
+
+    def start(self, name: str, argv: list[str], pipe_stdout: bool = False) -> ForkedProcess:
+        """A role process running ``netsetest ARGV`` (stdout: a text pipe to us with ``pipe_stdout``, else /dev/null)."""
+        proc = self.server.spawn(name, argv, pipe_stdout)
         self.procs[name] = proc
         return proc
 
     def start_again(self, name: str) -> None:
-        """Forget a process that ended (a killed node about to be restarted); it was waited for."""
-        self.procs[name].wait()
-        self.ended.append(self.procs.pop(name))
+        """Forget a process that ended (a killed node about to be restarted)."""
+        self.procs.pop(name).wait()
 
     def stop_all(self, grace: float, keep: Sequence[str] = ()) -> None:
         """SIGTERM every live child except ``keep``, SIGKILL those still alive after ``grace`` s."""
@@ -215,6 +203,11 @@ class Children:
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
+
+    def close(self) -> None:
+        """Stop every child (as :meth:`stop_all`), then the fork server."""
+        self.stop_all(ROLE_GRACE_S)
+        self.server.close()
 
 
 def router_session(listen: list[str], base_file: str | None, security: dict[str, object] | None):  # noqa: ANN201
@@ -284,7 +277,7 @@ def launch(plan: RunPlan) -> RunOutcome:
     run_id = f"run{os.getpid()}"
     tmp = tempfile.TemporaryDirectory(prefix="netsetest-")  # mode 0700 (mkdtemp)
     summary_path = Path(o.summary_json or Path(tmp.name) / "summary.json")
-    children = Children()
+    children = Children(run_id)  # first: the fork server imports while we set up
     router = None
     common = _role_options(o, run_id)
     names = ["collector", "vehicle", *(f"node{i}" for i in sc.ids)]
@@ -325,14 +318,13 @@ def launch(plan: RunPlan) -> RunOutcome:
             crash = schedule.next_kill(i, after)
             children.start(f"node{i}", ["node", *common, "--id", str(i), "--variant", o.variant, "--objective", o.objective, "--clock", o.clock,
                                         "--neighbour-timeout", str(o.neighbour_timeout), *net.argv(f"node{i}"),
-                                        *(["--rejoin"] if rejoin else []), *([] if crash is None else ["--crash-after", str(crash)])],
-                           stdout=subprocess.DEVNULL)  # fmt: skip
+                                        *(["--rejoin"] if rejoin else []), *([] if crash is None else ["--crash-after", str(crash)])])  # fmt: skip
 
         col = children.start(
             "collector",
             ["collector", *common, "--signals", o.signals, "--variant", o.variant, "--objective", o.objective, "--seed", str(o.seed), "--clock", o.clock,
              "--summary-json", str(summary_path), "--progress", *(["--record", o.record] if o.record else []), *net.argv("collector")],
-            stdout=subprocess.PIPE, text=True,
+            pipe_stdout=True,
         )  # fmt: skip
         threading.Thread(target=follow, args=(col.stdout,), daemon=True).start()
         for i in sc.ids:
@@ -344,7 +336,6 @@ def launch(plan: RunPlan) -> RunOutcome:
              "--node-timeout", str(o.node_timeout), "--pace", str(o.pace), "--start-timeout", str(run_start_timeout(len(names))),
              *net.argv("vehicle"),
              *(x for w in awaits for x in ("--await-rejoin", w))],
-            stdout=subprocess.DEVNULL,
         )  # fmt: skip
         rejoins = sorted((r, i) for i, rs in schedule.rejoins.items() for r in rs)
         reported: set[str] = set()
@@ -385,6 +376,9 @@ def launch(plan: RunPlan) -> RunOutcome:
             log("run", f"the collector exited with code {col.returncode} without a summary")
             return RunOutcome(EXIT_VIOLATION, None)
         return RunOutcome(col.returncode, read_summary(summary_path))
+    except ForkServerError as exc:
+        log("run", f"{exc}; stopping the run")
+        return RunOutcome(EXIT_VIOLATION, None)
     except KeyboardInterrupt:
         log("run", "interrupted: stopping the vehicle and the nodes, then letting the collector write what it has")
         children.stop_all(ROLE_GRACE_S, keep=["collector"])
@@ -396,4 +390,5 @@ def launch(plan: RunPlan) -> RunOutcome:
         children.stop_all(ROLE_GRACE_S)
         if router is not None:
             router.close()
+        children.close()
         tmp.cleanup()

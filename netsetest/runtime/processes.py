@@ -1,6 +1,8 @@
 """Main loops of the role processes over any bus (used by ``netsetest vehicle|node|collector``).
 
-Start-up barrier: every role repeats :class:`Ready` until it is started; a role sets ``seen_all`` once it
+Start-up barrier: every role repeats :class:`Ready` until it is started, every 0.1 s and at once when
+it hears a role for the first time (so a newcomer hears it without waiting for the period, and its
+``seen_all`` goes out as soon as it holds; a few hops, not a few periods); a role sets ``seen_all`` once it
 has heard every role it exchanges messages with (the vehicle and the collector: everyone; a node: the
 vehicle, the collector and its in- and out-neighbours).  The vehicle publishes step 0 when every node
 and the collector report ``seen_all`` — by then every subscription is known where it matters.  A node
@@ -82,6 +84,7 @@ class Barrier:
         self.heard_at: dict[tuple[str, int | None], float] = {}  # last Ready (a restarted node's comes late)
         self.complete: set[tuple[str, int | None]] = set()  # roles that reported seen_all
         self.last_sent = 0.0
+        self.prompt = False  # a role was heard for the first time: answer now, not at the next period
         for role, node in sorted(others, key=str):
             bus.subscribe(keys.ready_of(run_id, keys.role_name(role, node)), self.on_message)
 
@@ -92,16 +95,18 @@ class Barrier:
             self.bus.drop("ready-wrong-key")  # a role speaks for itself only (the ACL allows its own key)
             return
         who = (msg.role, msg.node)
+        self.prompt |= who not in self.heard  # it needs our Ready too; and our seen_all may have just become true
         self.heard.add(who)
         self.heard_at[who] = time.monotonic()
         if msg.seen_all:
             self.complete.add(who)
 
     def tick(self, now: float, **changes: object) -> None:
-        if now - self.last_sent >= READY_PERIOD_S:
+        if self.prompt or now - self.last_sent >= READY_PERIOD_S:
             seen_all = self.others <= self.heard
             self.bus.publish(keys.ready_of(self.run, keys.role_name(self.me.role, self.me.node)), self.me.model_copy(update={"seen_all": seen_all, **changes}))
             self.last_sent = now
+            self.prompt = False
 
 
 def _all_roles(sc: Scenario) -> set[tuple[str, int | None]]:
