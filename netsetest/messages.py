@@ -23,7 +23,7 @@ from typing import Annotated, Any, Literal, Union
 
 import msgspec
 import numpy as np
-from msgspec import Meta, Struct
+from msgspec import Meta, Struct, field
 
 from netsetest.models.sensor import NA
 from netsetest.sets import set_from_wire
@@ -59,10 +59,21 @@ class BadMessage(ValueError):
         self.reason = reason
 
 
-class _Msg(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, tag_field="type"):
-    """Base of every message: ``v`` is the schema version, ``type`` (the msgspec tag) its kind."""
+def _schema_version() -> Literal[1]:
+    return SCHEMA_VERSION
 
-    v: Literal[1] = SCHEMA_VERSION
+
+class _Msg(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, omit_defaults=True, tag_field="type"):
+    """Base of every message: ``v`` is the schema version, ``type`` (the msgspec tag) its kind.
+
+    Fields at their default may be left out of the payload (a NodeState without a set carries no
+    ``set`` key; every receiver, the pydantic-based version before this one included, fills in the same
+    defaults).  msgspec omits a value if it *is* the default object (an empty list or dict, None, a
+    bool), so a decoded 0.0 may be sent again.  ``v`` is always sent: a default_factory's result is
+    never omitted (tests/test_messages_wire.py checks every kind's payload for ``v``).
+    """
+
+    v: Literal[1] = field(default_factory=_schema_version)
 
     @property
     def type(self) -> str:
@@ -71,11 +82,10 @@ class _Msg(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, tag_fi
     def model_dump(self, mode: Literal["python", "json"] = "python") -> dict[str, Any]:
         """The message as a dict in wire order (``v``, ``type``, fields); ``json``: tuples as lists."""
         d: dict[str, Any] = {"v": self.v, "type": self.type}
-        if mode == "json":
-            d.update(msgspec.to_builtins(self, enc_hook=_enc_hook))
-        else:
-            d.update((f, copy.deepcopy(getattr(self, f))) for f in self.__struct_fields__)
-        return d
+        d.update((f, getattr(self, f)) for f in self.__struct_fields__)
+        if mode == "json":  # every field, defaults included (records and echo show them), as JSON types
+            return msgspec.json.decode(msgspec.json.encode(d, enc_hook=_enc_hook))
+        return copy.deepcopy(d)
 
     def model_copy(self, update: dict[str, Any] | None = None) -> Any:
         """A copy with ``update`` applied, unchecked (as pydantic's): tests forge messages with it."""
