@@ -14,6 +14,7 @@ extreme-profile sweep (tests/test_estimator_edges.py) runs the network at their 
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 import stat
 import tomllib
@@ -360,7 +361,20 @@ _BOUND = re.compile(r"^Expected `(?:int|float)` (?P<op>>=|>|<=|<) (?P<value>\S+)
 _BOUND_WORDS = {">=": "greater than or equal to", ">": "greater than", "<=": "less than or equal to", "<": "less than"}
 
 
-def _explain(err: msgspec.ValidationError) -> str:
+_STEP = re.compile(r"\.?([^.\[\]]+)|\[(\d+)\]")  # "edges[3].from" → "edges", 3, "from"
+
+
+def _value_at(data: object, loc: str) -> object:
+    """The input value at msgspec's location ``loc`` (None if there is none)."""
+    for name, index in _STEP.findall(loc):
+        try:
+            data = data[int(index)] if index else data[name]  # type: ignore[index]
+        except (KeyError, IndexError, TypeError, ValueError):
+            return None
+    return data
+
+
+def _explain(err: msgspec.ValidationError, data: object) -> str:
     """msgspec's "Expected `int` >= 1 - at `$.steps`" as "steps: Input should be greater than or equal to 1"."""
     m = _AT.match(str(err))
     assert m is not None  # the pattern matches every string
@@ -371,8 +385,9 @@ def _explain(err: msgspec.ValidationError) -> str:
     elif msg.startswith("Expected `str` matching regex"):  # the profile name is the only pattern
         msg = "Input should be a file name without '/', '\\' or NUL"
     elif b := _BOUND.match(msg):
-        if b["value"].lstrip("-") == repr(FLOAT_MAX):
-            msg = "Input should be a finite number"
+        value = _value_at(data, loc)
+        if isinstance(value, float) and not math.isfinite(value) or b["value"].lstrip("-") == repr(FLOAT_MAX):
+            msg = "Input should be a finite number"  # NaN fails whichever bound is checked first
         else:
             msg = f"Input should be {_BOUND_WORDS[b['op']]} {b['value']}"
     return f"{loc}: {msg}" if loc else msg
@@ -383,7 +398,7 @@ def _validated(path: Path, data: dict, cls: type[_T]) -> _T:
     try:
         return msgspec.convert(data, cls, strict=False)
     except msgspec.ValidationError as exc:
-        raise ConfigError(f"{path}: invalid configuration\n  {_explain(exc)}") from None
+        raise ConfigError(f"{path}: invalid configuration\n  {_explain(exc, data)}") from None
 
 
 MAX_CONFIG_BYTES = 1 << 20  # a topology or profile is a few kB: larger is not one
