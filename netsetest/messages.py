@@ -19,7 +19,7 @@ import copy
 import math
 import re
 from dataclasses import dataclass
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal, Self, Union
 
 import msgspec
 import numpy as np
@@ -27,15 +27,15 @@ from msgspec import Meta, Struct, field
 
 from netsetest.models.sensor import NA
 from netsetest.sets import set_from_wire
+from netsetest.validation import FINITE_BOUND_TEXT, FLOAT_MAX, Finite, Positive, split_error
 
 SCHEMA_VERSION = 1
 
-FLOAT_MAX = 1.7976931348623157e308  # the largest finite double: a bound at ±FLOAT_MAX rejects ±inf and NaN
-FiniteF = Annotated[float, Meta(ge=-FLOAT_MAX, le=FLOAT_MAX)]  # msgspec is strict: no "0.1" or True
+FiniteF = Finite  # msgspec decodes strictly: no "0.1" or True for a number
 Step = Annotated[int, Meta(ge=0)]
 NodeId = Annotated[int, Meta(ge=1)]
 Gamma = Annotated[float, Meta(gt=0, le=1)]
-PositiveF = Annotated[float, Meta(gt=0, le=FLOAT_MAX)]
+PositiveF = Positive
 Vec3 = Annotated[list[FiniteF], Meta(min_length=3, max_length=3)]
 Vec2 = Annotated[list[FiniteF], Meta(min_length=2, max_length=2)]
 Mat3 = Annotated[list[FiniteF], Meta(min_length=9, max_length=9)]
@@ -80,14 +80,15 @@ class _Msg(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, omit_d
         return self.__struct_config__.tag  # type: ignore[return-value]
 
     def model_dump(self, mode: Literal["python", "json"] = "python") -> dict[str, Any]:
-        """The message as a dict in wire order (``v``, ``type``, fields); ``json``: tuples as lists."""
+        """Every field as a dict, ``v`` and ``type`` first (as the previous version sent them); ``json``:
+        JSON types only (tuples as lists)."""
         d: dict[str, Any] = {"v": self.v, "type": self.type}
         d.update((f, getattr(self, f)) for f in self.__struct_fields__)
         if mode == "json":  # every field, defaults included (records and echo show them), as JSON types
             return msgspec.json.decode(msgspec.json.encode(d, enc_hook=_enc_hook))
         return copy.deepcopy(d)
 
-    def model_copy(self, update: dict[str, Any] | None = None) -> Any:
+    def model_copy(self, update: dict[str, Any] | None = None) -> Self:
         """A copy with ``update`` applied, unchecked (as pydantic's): tests forge messages with it."""
         new = copy.copy(self)
         for name, value in (update or {}).items():
@@ -285,16 +286,14 @@ _ENCODER = msgspec.msgpack.Encoder(enc_hook=_enc_hook)
 _HEADER = msgspec.msgpack.Decoder(_Header)
 _DECODER = msgspec.msgpack.Decoder(Message)
 MAX_DETAIL = 200  # characters of a BadMessage's detail: a forged value must not make a log line huge
-_AT = re.compile(r"^(?P<msg>.*?)(?: - at `\$\.?(?P<loc>[^`]*)`)?$", re.S)
-_FINITE = re.compile(r"`float` (?:>= -|<= )1\.7976931348623157e\+308")
+_FINITE = re.compile(rf"`float` (?:>= -|<= ){re.escape(FINITE_BOUND_TEXT)}")
 
 
 def _detail(exc: msgspec.ValidationError) -> str:
     """msgspec's "Expected `float` >= 0 - at `$.xhat[1]`" as "xhat[1]: Expected `float` >= 0"."""
-    m = _AT.match(str(exc))
-    assert m is not None  # the pattern matches every string
-    text = _FINITE.sub("finite `float`", m["msg"])
-    return (f"{m['loc']}: {text}" if m["loc"] else text)[:MAX_DETAIL]
+    msg, loc = split_error(exc)
+    text = _FINITE.sub("finite `float`", msg)
+    return (f"{loc}: {text}" if loc else text)[:MAX_DETAIL]
 
 
 def _version_of_odd_payload(payload: bytes) -> object:
@@ -302,7 +301,7 @@ def _version_of_odd_payload(payload: bytes) -> object:
     try:
         raw = msgspec.msgpack.decode(payload)
     except msgspec.DecodeError as exc:  # e.g. a map used as a key
-        raise BadMessage("undecodable", str(exc)[:120]) from None
+        raise BadMessage("undecodable", str(exc)[:MAX_DETAIL]) from None
     if not isinstance(raw, dict):
         raise BadMessage("not-a-map")
     if raw.get("v") == SCHEMA_VERSION:
@@ -320,7 +319,7 @@ def decode(payload: bytes) -> Message:
     except msgspec.ValidationError:  # not a map with string keys: say which
         version = _version_of_odd_payload(payload)
     except msgspec.DecodeError as exc:
-        raise BadMessage("undecodable", str(exc)[:120]) from None
+        raise BadMessage("undecodable", str(exc)[:MAX_DETAIL]) from None
     if version != SCHEMA_VERSION:
         raise BadMessage("schema-version", f"got {version!r}, expected {SCHEMA_VERSION}"[:MAX_DETAIL])
     try:
@@ -328,4 +327,4 @@ def decode(payload: bytes) -> Message:
     except msgspec.ValidationError as exc:
         raise BadMessage("invalid", _detail(exc)) from None
     except msgspec.DecodeError as exc:  # e.g. nested too deeply for the typed decoder
-        raise BadMessage("undecodable", str(exc)[:120]) from None
+        raise BadMessage("undecodable", str(exc)[:MAX_DETAIL]) from None

@@ -1,7 +1,9 @@
 """Configuration files: node profiles (``nodes/*.toml``) and network topologies (``topologies/*.toml``).
 
-Every file is validated with msgspec (``msgspec.convert`` into frozen Structs).  :func:`load_topology` returns a :class:`Scenario` (plain numpy
-data for the roles) or raises :class:`ConfigError` naming the file, the field and the reason.
+Every file is validated with msgspec (``msgspec.convert`` into frozen Structs, lax about numbers as
+TOML users expect).  :func:`load_topology` returns a :class:`Scenario` (plain numpy data for the roles)
+or raises :class:`ConfigError` naming the file, the field and the reason on one line (msgspec stops at
+the first error).
 
 Physical ranges.  Every magnitude a node's estimator works with is bounded so that the estimator, its
 certificate and its guaranteed fallback ellipsoid (:func:`netsetest.estimator.sdp.fallback_shape`) stay
@@ -31,6 +33,7 @@ from netsetest.models.sensor import Sensor
 from netsetest.models.signals import Fault, NoFault, PiecewiseLinearFault, SpeedProfile, SquareFault
 from netsetest.models.vehicle import KMH, TSModel, VehicleParams
 from netsetest.scenarios import bundled_topologies, resolve_topology
+from netsetest.validation import FINITE_BOUND_TEXT, Finite, Positive, split_error
 
 Case = Literal["nsnim", "saim"]
 Variant = Literal["scheduled", "per-rule"]
@@ -46,10 +49,6 @@ class ConfigError(Exception):
 class _Strict(Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
     """A table of a configuration file: unknown keys are errors (a typo must not be silently ignored)."""
 
-
-FLOAT_MAX = 1.7976931348623157e308  # the largest finite double: a bound at ±FLOAT_MAX rejects ±inf and NaN
-Finite = Annotated[float, Meta(ge=-FLOAT_MAX, le=FLOAT_MAX)]
-Positive = Annotated[float, Meta(gt=0, le=FLOAT_MAX)]
 
 MAGNITUDE_MAX = 1e3  # |C|, |Ds|, Dv, |x̂0|, r_max, h2, fault values: a sensor gain or signal of 1000 is not a yaw-rate sensor
 DS_MIN = 1e-6  # |Ds|: smaller makes the fault practically unobservable and the descriptor gain G ~ 1/Ds overflow later steps
@@ -355,12 +354,9 @@ class Scenario:
         return [n.id for n in self.nodes if j in n.in_weights and n.id != j]
 
 
-_AT = re.compile(r"^(?P<msg>.*?)(?: - at `\$\.?(?P<loc>[^`]*)`)?$", re.S)
 _FIELD = re.compile(r"^Object (?P<what>contains unknown|missing required) field `(?P<name>[^`]*)`$")
 _BOUND = re.compile(r"^Expected `(?:int|float)` (?P<op>>=|>|<=|<) (?P<value>\S+)$")
 _BOUND_WORDS = {">=": "greater than or equal to", ">": "greater than", "<=": "less than or equal to", "<": "less than"}
-
-
 _STEP = re.compile(r"\.?([^.\[\]]+)|\[(\d+)\]")  # "edges[3].from" → "edges", 3, "from"
 
 
@@ -376,9 +372,7 @@ def _value_at(data: object, loc: str) -> object:
 
 def _explain(err: msgspec.ValidationError, data: object) -> str:
     """msgspec's "Expected `int` >= 1 - at `$.steps`" as "steps: Input should be greater than or equal to 1"."""
-    m = _AT.match(str(err))
-    assert m is not None  # the pattern matches every string
-    msg, loc = m["msg"], m["loc"] or ""
+    msg, loc = split_error(err)
     if f := _FIELD.match(msg):  # name the field itself, not the table holding it
         loc = f"{loc}.{f['name']}" if loc else f["name"]
         msg = "Field required" if f["what"] == "missing required" else "Extra inputs are not permitted (unknown field)"
@@ -386,7 +380,7 @@ def _explain(err: msgspec.ValidationError, data: object) -> str:
         msg = "Input should be a file name without '/', '\\' or NUL"
     elif b := _BOUND.match(msg):
         value = _value_at(data, loc)
-        if isinstance(value, float) and not math.isfinite(value) or b["value"].lstrip("-") == repr(FLOAT_MAX):
+        if (isinstance(value, float) and not math.isfinite(value)) or b["value"].lstrip("-") == FINITE_BOUND_TEXT:
             msg = "Input should be a finite number"  # NaN fails whichever bound is checked first
         else:
             msg = f"Input should be {_BOUND_WORDS[b['op']]} {b['value']}"
