@@ -445,7 +445,7 @@ def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int 
 
 
 # What a node process loads, in the order it loads it (netsetest.cli.main → the node's modules).
-NODE_IMPORT_STAGES = ("numpy", "pydantic", "netsetest.messages", "netsetest.config.schema", "zenoh", "clarabel",
+NODE_IMPORT_STAGES = ("numpy", "msgspec", "netsetest.messages", "netsetest.config.schema", "zenoh", "clarabel",
                       "netsetest.estimator.sdp", "netsetest.roles.node", "netsetest.cli.main", "netsetest.cli.processes")  # fmt: skip
 _MEMORY_PROBE = r"""
 import json, sys, time

@@ -1,4 +1,4 @@
-"""Every message the roles exchange, defined once: pydantic models, msgpack on the wire.
+"""Every message the roles exchange, defined once: msgspec Structs, msgpack on the wire.
 
 A payload is a msgpack map with ``v`` (schema version) and ``type``; :func:`decode` validates it
 (types, dimensions, finite numbers, step ≥ 0, bounded lists and maps, a Truth whose maps are non-empty
@@ -6,39 +6,49 @@ and keyed by the same node ids) and raises :class:`BadMessage` otherwise.  :clas
 decoded message against the run (its node ids, its last step); the receiving role applies it and its
 own context checks (is the sender a real neighbour, is the step plausible).  Both buses encode and
 decode every message, so the in-memory run exercises the same wire format as the Zenoh run.
+
+The types and ranges (``msgspec.Meta`` on each field) are checked when a payload is decoded, not when a
+role constructs a message; the cross-field checks (``__post_init__``: P symmetric positive definite, a
+set that parses, Truth's maps over the same nodes) run on both.  A role that built a message outside
+the ranges would see it dropped as ``invalid`` by every receiver, as both buses decode what they carry.
 """
 
 from __future__ import annotations
 
+import copy
 import math
+import re
 from dataclasses import dataclass
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal, Self, Union
 
-import msgpack
+import msgspec
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, ValidationError, model_validator
+from msgspec import Meta, Struct, field
 
 from netsetest.models.sensor import NA
 from netsetest.sets import set_from_wire
+from netsetest.validation import FINITE_BOUND_TEXT, FLOAT_MAX, Finite, Positive, split_error
 
 SCHEMA_VERSION = 1
 
-FiniteF = Annotated[float, Field(allow_inf_nan=False, strict=True)]  # strict: no "0.1" or True
-Step = Annotated[int, Field(ge=0, strict=True)]
-NodeId = Annotated[int, Field(ge=1, strict=True)]
-Vec3 = Annotated[list[FiniteF], Field(min_length=3, max_length=3)]
-Vec2 = Annotated[list[FiniteF], Field(min_length=2, max_length=2)]
-Mat3 = Annotated[list[FiniteF], Field(min_length=9, max_length=9)]
+FiniteF = Finite  # msgspec decodes strictly: no "0.1" or True for a number
+Step = Annotated[int, Meta(ge=0)]
+NodeId = Annotated[int, Meta(ge=1)]
+Gamma = Annotated[float, Meta(gt=0, le=1)]
+PositiveF = Positive
+Vec3 = Annotated[list[FiniteF], Meta(min_length=3, max_length=3)]
+Vec2 = Annotated[list[FiniteF], Meta(min_length=2, max_length=2)]
+Mat3 = Annotated[list[FiniteF], Meta(min_length=9, max_length=9)]
 MAX_NODES = 256  # a network larger than this is not a yaw-rate sensor network: bounds every list and map
 MAX_REASON = 64  # characters of a drop-reason key or an End reason
-IdList = Annotated[list[NodeId], Field(max_length=MAX_NODES)]
-NodeMap = Annotated[dict[str, FiniteF], Field(min_length=1, max_length=MAX_NODES)]
-FlagMap = Annotated[dict[str, bool], Field(min_length=1, max_length=MAX_NODES)]
-Drops = Annotated[
-    dict[Annotated[str, Field(max_length=MAX_REASON)], Annotated[int, Field(ge=0, strict=True)]], Field(max_length=64)
-]
-SectorH1 = Annotated[float, Field(gt=0, le=1, allow_inf_nan=False, strict=True)]
-SectorH = Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)]
+MAX_DROP_REASONS = 64  # entries of a drop-counter map
+IdList = Annotated[list[NodeId], Meta(max_length=MAX_NODES)]
+NodeMap = Annotated[dict[str, FiniteF], Meta(min_length=1, max_length=MAX_NODES)]
+FlagMap = Annotated[dict[str, bool], Meta(min_length=1, max_length=MAX_NODES)]
+Reason = Annotated[str, Meta(max_length=MAX_REASON)]
+Drops = Annotated[dict[Reason, Annotated[int, Meta(ge=0)]], Meta(max_length=MAX_DROP_REASONS)]
+SectorH1 = Annotated[float, Meta(gt=0, le=1)]
+SectorH = Annotated[float, Meta(ge=0, le=FLOAT_MAX)]
 
 
 class BadMessage(ValueError):
@@ -49,61 +59,92 @@ class BadMessage(ValueError):
         self.reason = reason
 
 
-class _Msg(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-    v: Literal[1] = SCHEMA_VERSION
+def _schema_version() -> Literal[1]:
+    return SCHEMA_VERSION
 
 
-class Ready(_Msg):
+class _Msg(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, omit_defaults=True, tag_field="type"):
+    """Base of every message: ``v`` is the schema version, ``type`` (the msgspec tag) its kind.
+
+    Fields at their default may be left out of the payload (a NodeState without a set carries no
+    ``set`` key; every receiver, the pydantic-based version before this one included, fills in the same
+    defaults).  msgspec omits a value if it *is* the default object (an empty list or dict, None, a
+    bool), so a decoded 0.0 may be sent again.  ``v`` is always sent: a default_factory's result is
+    never omitted (tests/test_messages_wire.py checks every kind's payload for ``v``).
+    """
+
+    v: Literal[1] = field(default_factory=_schema_version)
+
+    @property
+    def type(self) -> str:
+        return self.__struct_config__.tag  # type: ignore[return-value]
+
+    def model_dump(self, mode: Literal["python", "json"] = "python") -> dict[str, Any]:
+        """Every field as a dict, ``v`` and ``type`` first (as the previous version sent them); ``json``:
+        JSON types only (tuples as lists)."""
+        d: dict[str, Any] = {"v": self.v, "type": self.type}
+        d.update((f, getattr(self, f)) for f in self.__struct_fields__)
+        if mode == "json":  # every field, defaults included (records and echo show them), as JSON types
+            return msgspec.json.decode(msgspec.json.encode(d, enc_hook=_enc_hook))
+        return copy.deepcopy(d)
+
+    def model_copy(self, update: dict[str, Any] | None = None) -> Self:
+        """A copy with ``update`` applied, unchecked (as pydantic's): tests forge messages with it."""
+        new = copy.copy(self)
+        for name, value in (update or {}).items():
+            if name not in self.__struct_fields__:
+                raise AttributeError(f"{type(self).__name__} has no field {name!r}")
+            msgspec.structs.force_setattr(new, name, value)
+        return new
+
+
+class Ready(_Msg, tag="ready", kw_only=True):
     """A role announces it is subscribed (Zenoh start-up barrier).
 
     ``seen_all``: this role has heard Ready from every other role, so its subscriptions are known to
     them and theirs to it (a Ready travels on the same link after the subscriber declarations).
     """
 
-    type: Literal["ready"] = "ready"
     role: Literal["vehicle", "node", "collector"]
     node: NodeId | None = None
     seen_all: bool = False
 
 
-class NodeInput(_Msg):
+class NodeInput(_Msg, tag="input", kw_only=True):
     """Vehicle → node i at step k: ỹ_i,k and γ_i,k; u and Vx of step k−1; which neighbour messages to expect.
 
     ``expect_from``: in-neighbours j ≠ i whose step k−1 message node i should wait for (alive, not lost);
     ``lost_from``: in-neighbours whose step k−1 message is lost by the scheduled packet-loss model.
     """
 
-    type: Literal["input"] = "input"
     step: Step
     node: NodeId
     y: FiniteF
-    gamma: Annotated[float, Field(gt=0, le=1, strict=True)]
+    gamma: Gamma
     u_prev: FiniteF | None = None
-    vx_prev: Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)] | None = None
+    vx_prev: PositiveF | None = None
     expect_from: IdList = []
     lost_from: IdList = []
     deadline: FiniteF | None = None  # real-time clock: wall-clock time (s since epoch) the step is due
 
 
-class NodeState(_Msg):
+class NodeState(_Msg, tag="state", kw_only=True):
     """Node i → neighbours and collector: the ellipsoid {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} of step k and y̌_i,k."""
 
-    type: Literal["state"] = "state"
     step: Step
     node: NodeId
     xhat: Vec3
     P: Mat3  # row-major 3×3, symmetric positive definite
-    rho: Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)]
-    gamma: Annotated[float, Field(gt=0, le=1, strict=True)]
+    rho: PositiveF
+    gamma: Gamma
     innov: FiniteF
     status: Literal["init", "init-prior", "ok", "fallback", "rejoin"]  # init: prior ⊕ ỹ₀; init-prior: the prior
     rho_cert: FiniteF | None = None
-    solve_ms: Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)] = 0.0
+    solve_ms: Annotated[float, Meta(ge=0, le=FLOAT_MAX)] = 0.0
     used: IdList = []  # neighbours j ≠ i whose message entered this step
     missing: IdList = []  # expected neighbours whose message did not arrive in time
     late: bool = False  # real-time clock: finished after its deadline
-    dropped: Annotated[int, Field(ge=0, strict=True)] = 0  # messages this node has dropped so far
+    dropped: Annotated[int, Meta(ge=0)] = 0  # messages this node has dropped so far
     drops: Drops = {}  # the same, by reason (cumulative)
     # the own sensor's sector of this step, (h1_k, h_k): φ = σ(r) − h1·r ∈ [0, h·r]; h = 0: no saturation
     # at this step; None: the sensor models no saturation.  sector_basis: what it rests on (estimator/sector.py)
@@ -113,14 +154,12 @@ class NodeState(_Msg):
     # encloses it and is only the neighbour-facing summary.  Absent (not sent) for the SDP.
     set: dict[str, Any] | None = None
 
-    @model_validator(mode="after")
-    def _shape_spd(self) -> NodeState:
+    def __post_init__(self) -> None:
         if self.set is not None:
             set_from_wire(self.set, NA)  # SetFormatError is a ValueError: a malformed set fails decode()
         problem = spd_problem(self.P)
         if problem:
             raise ValueError(problem)
-        return self
 
     def P_matrix(self) -> np.ndarray:
         return np.asarray(self.P, dtype=float).reshape(3, 3)
@@ -152,10 +191,9 @@ def spd_problem(p: list[float]) -> str | None:
     return None
 
 
-class Truth(_Msg):
+class Truth(_Msg, tag="truth", kw_only=True):
     """Vehicle → collector only: the truth of step k and which assumptions held."""
 
-    type: Literal["truth"] = "truth"
     step: Step
     x: Vec2
     faults: NodeMap  # node id → f_i,k (msgpack keys are strings)
@@ -167,16 +205,15 @@ class Truth(_Msg):
     y: NodeMap
     y_nofault: NodeMap
     sector_ok: FlagMap  # |C̄_i x̄_i,k| ≤ r_max/h1 of the profile (the paper's fixed sector)
-    r: Annotated[dict[str, FiniteF], Field(max_length=MAX_NODES)] = {}  # C̄_i x̄_i,k: the collector checks each node's published sector with it
-    fault_ok: Annotated[dict[str, bool], Field(max_length=MAX_NODES)] = {}  # the declared fault bound held: |f_k − f_k−1| ≤ δ_i, |f_k| ≤ F_i
+    r: Annotated[dict[str, FiniteF], Meta(max_length=MAX_NODES)] = {}  # C̄_i x̄_i,k: the collector checks each node's published sector with it
+    fault_ok: Annotated[dict[str, bool], Meta(max_length=MAX_NODES)] = {}  # the declared fault bound held: |f_k − f_k−1| ≤ δ_i, |f_k| ≤ F_i
     noise_ok: FlagMap  # v_i,k² ≤ R_i
     dist_ok: bool  # w_k² ≤ W
-    lost: Annotated[list[tuple[NodeId, NodeId]], Field(max_length=MAX_NODES * MAX_NODES)] = []  # (j, i): j's k−1 message to i lost
+    lost: Annotated[list[tuple[NodeId, NodeId]], Meta(max_length=MAX_NODES * MAX_NODES)] = []  # (j, i): j's k−1 message to i lost
     alive: IdList = []  # nodes the vehicle heard from at step k−1
     drops: Drops = {}  # messages the vehicle has dropped so far, by reason
 
-    @model_validator(mode="after")
-    def _same_nodes(self) -> Truth:
+    def __post_init__(self) -> None:
         ids = set(self.faults)
         if not all(k.isdecimal() and int(k) >= 1 for k in ids):
             raise ValueError("faults: keys must be node ids (decimal integers ≥ 1)")
@@ -186,18 +223,16 @@ class Truth(_Msg):
         for name in ("r", "fault_ok"):  # absent ({}) in records written before the derived sector
             if getattr(self, name) and set(getattr(self, name)) != ids:
                 raise ValueError(f"{name}: keys differ from the keys of faults")
-        return self
 
     def node_ids(self) -> set[int]:
         return {int(k) for k in self.faults}
 
 
-class End(_Msg):
+class End(_Msg, tag="end", kw_only=True):
     """Vehicle → all: the run is over after ``steps`` steps (or aborted with a reason)."""
 
-    type: Literal["end"] = "end"
     steps: Step
-    reason: Annotated[str, Field(max_length=MAX_REASON)] = "done"
+    reason: Reason = "done"
 
 
 Message = Union[Ready, NodeInput, NodeState, Truth, End]
@@ -232,28 +267,64 @@ class RunScope:
             named.update(msg.alive, *msg.lost)
         return "unknown-node" if not named <= self.ids else None
 
-_ADAPTER: TypeAdapter[Message] = TypeAdapter(Annotated[Message, Field(discriminator="type")])
+
+def _enc_hook(obj: object) -> object:
+    """numpy scalars (a role's float64 or bool_ results) go on the wire as the Python numbers they are."""
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(f"cannot encode {type(obj).__name__} in a message")
+
+
+class _Header(Struct):
+    """What :func:`decode` reads first: a map, and its ``v``.  A missing ``v`` must be rejected, while a
+    constructed message gets ``v`` by default, so the version is checked before the typed decode."""
+
+    v: Any = None
+
+
+_ENCODER = msgspec.msgpack.Encoder(enc_hook=_enc_hook)
+_HEADER = msgspec.msgpack.Decoder(_Header)
+_DECODER = msgspec.msgpack.Decoder(Message)
+MAX_DETAIL = 200  # characters of a BadMessage's detail: a forged value must not make a log line huge
+_FINITE = re.compile(rf"`float` (?:>= -|<= ){re.escape(FINITE_BOUND_TEXT)}")
+
+
+def _detail(exc: msgspec.ValidationError) -> str:
+    """msgspec's "Expected `float` >= 0 - at `$.xhat[1]`" as "xhat[1]: Expected `float` >= 0"."""
+    msg, loc = split_error(exc)
+    text = _FINITE.sub("finite `float`", msg)
+    return (f"{loc}: {text}" if loc else text)[:MAX_DETAIL]
+
+
+def _version_of_odd_payload(payload: bytes) -> object:
+    """``v`` of a msgpack value that is not a map with string keys; BadMessage unless it is a map."""
+    try:
+        raw = msgspec.msgpack.decode(payload)
+    except msgspec.DecodeError as exc:  # e.g. a map used as a key
+        raise BadMessage("undecodable", str(exc)[:MAX_DETAIL]) from None
+    if not isinstance(raw, dict):
+        raise BadMessage("not-a-map")
+    if raw.get("v") == SCHEMA_VERSION:
+        raise BadMessage("invalid", "field names must be strings")
+    return raw.get("v")
 
 
 def encode(msg: Message) -> bytes:
-    d = msg.model_dump(mode="python")
-    if isinstance(msg, NodeState) and msg.set is None:
-        del d["set"]  # the SDP's wire format is unchanged
-    return msgpack.packb(d, use_bin_type=True)
+    return _ENCODER.encode(msg)
 
 
 def decode(payload: bytes) -> Message:
     try:
-        raw = msgpack.unpackb(payload, raw=False, strict_map_key=False)
-    except Exception as exc:  # msgpack raises several unrelated types
-        raise BadMessage("undecodable", str(exc)[:120]) from None
-    if not isinstance(raw, dict):
-        raise BadMessage("not-a-map")
-    if raw.get("v") != SCHEMA_VERSION:
-        raise BadMessage("schema-version", f"got {raw.get('v')!r}, expected {SCHEMA_VERSION}")
+        version = _HEADER.decode(payload).v
+    except msgspec.ValidationError:  # not a map with string keys: say which
+        version = _version_of_odd_payload(payload)
+    except msgspec.DecodeError as exc:
+        raise BadMessage("undecodable", str(exc)[:MAX_DETAIL]) from None
+    if version != SCHEMA_VERSION:
+        raise BadMessage("schema-version", f"got {version!r}, expected {SCHEMA_VERSION}"[:MAX_DETAIL])
     try:
-        return _ADAPTER.validate_python(raw)
-    except ValidationError as exc:
-        first = exc.errors()[0]
-        loc = ".".join(str(p) for p in first["loc"])
-        raise BadMessage("invalid", f"{loc}: {first['msg']}") from None
+        return _DECODER.decode(payload)
+    except msgspec.ValidationError as exc:
+        raise BadMessage("invalid", _detail(exc)) from None
+    except msgspec.DecodeError as exc:  # e.g. nested too deeply for the typed decoder
+        raise BadMessage("undecodable", str(exc)[:MAX_DETAIL]) from None

@@ -1,7 +1,9 @@
 """Configuration files: node profiles (``nodes/*.toml``) and network topologies (``topologies/*.toml``).
 
-Every file is validated with pydantic.  :func:`load_topology` returns a :class:`Scenario` (plain numpy
-data for the roles) or raises :class:`ConfigError` naming the file, the field and the reason.
+Every file is validated with msgspec (``msgspec.convert`` into frozen Structs, lax about numbers as
+TOML users expect).  :func:`load_topology` returns a :class:`Scenario` (plain numpy data for the roles)
+or raises :class:`ConfigError` naming the file, the field and the reason on one line (msgspec stops at
+the first error).
 
 Physical ranges.  Every magnitude a node's estimator works with is bounded so that the estimator, its
 certificate and its guaranteed fallback ellipsoid (:func:`netsetest.estimator.certificate.fallback_shape`) stay
@@ -13,37 +15,40 @@ extreme-profile sweep (tests/test_estimator_edges.py) runs the network at their 
 
 from __future__ import annotations
 
+import dataclasses
+import math
+import re
 import stat
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, TypeVar
 
+import msgspec
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from msgspec import Meta, Struct, field
 
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES, SDP
 from netsetest.models.sensor import Sensor
 from netsetest.models.signals import Fault, NoFault, PiecewiseLinearFault, SpeedProfile, SquareFault
 from netsetest.models.vehicle import KMH, TSModel, VehicleParams
 from netsetest.scenarios import bundled_topologies, resolve_topology
+from netsetest.validation import FINITE_BOUND_TEXT, Finite, Positive, split_error
 
 Case = Literal["nsnim", "saim"]
 Variant = Literal["scheduled", "per-rule"]
 FaultBoundsMode = Literal["used", "all", "none"]  # where declared fault bounds are applied (Scenario.fault_bounded)
 FAULT_BOUNDS_MODES: tuple[FaultBoundsMode, ...] = ("used", "all", "none")
+_T = TypeVar("_T")
 
 
 class ConfigError(Exception):
     """A configuration file is missing, unreadable or invalid; the message says where and why."""
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+class _Strict(Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """A table of a configuration file: unknown keys are errors (a typo must not be silently ignored)."""
 
-
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
 MAGNITUDE_MAX = 1e3  # |C|, |Ds|, Dv, |x̂0|, r_max, h2, fault values: a sensor gain or signal of 1000 is not a yaw-rate sensor
 DS_MIN = 1e-6  # |Ds|: smaller makes the fault practically unobservable and the descriptor gain G ~ 1/Ds overflow later steps
@@ -55,46 +60,45 @@ H1_MIN = 1e-3  # sector 0 < h1 < 1: h1 → 0 makes γ h1 C̄ (hence T, G) degene
 GAMMA_MIN = 1e-3  # availability γ ∈ [GAMMA_MIN, 1]
 W_MIN, W_MAX = 1e-12, 1e6  # side-wind bound w² ≤ W
 FREQ_MAX = 1e6  # |noise_frequency|
+MAX_NAME = 200  # characters of a label or a profile name
+PROFILE_NAME_PATTERN = r"^[^/\\\x00]+$"  # a file name in the node directory: no path separators, no NUL
 
-Magnitude = Annotated[float, Field(ge=-MAGNITUDE_MAX, le=MAGNITUDE_MAX, allow_inf_nan=False)]
+Magnitude = Annotated[float, Meta(ge=-MAGNITUDE_MAX, le=MAGNITUDE_MAX)]
 
 
 # ---------------------------------------------------------------- node profile (nodes/*.toml)
 
 
-class SaturationSpec(_Strict):
+class SaturationSpec(_Strict, kw_only=True):
     """σ(r) = sign(r) min(r_max, |r|) with sector scalars 0 < h1 < 1 ≤ h2 (used in the SAIM case)."""
 
-    r_max: Annotated[float, Field(gt=0, le=MAGNITUDE_MAX, allow_inf_nan=False)]
-    h1: Annotated[float, Field(ge=H1_MIN, lt=1)]
-    h2: Annotated[float, Field(ge=1, le=MAGNITUDE_MAX, allow_inf_nan=False)]
+    r_max: Annotated[float, Meta(gt=0, le=MAGNITUDE_MAX)]
+    h1: Annotated[float, Meta(ge=H1_MIN, lt=1)]
+    h2: Annotated[float, Meta(ge=1, le=MAGNITUDE_MAX)]
 
 
-class AvailabilitySpec(_Strict):
+class AvailabilitySpec(_Strict, kw_only=True):
     """γ_i,k uniform in [gamma_min, gamma_max] ⊂ (0, 1] (used in the SAIM case)."""
 
-    gamma_min: Annotated[float, Field(ge=GAMMA_MIN, le=1)]
-    gamma_max: Annotated[float, Field(ge=GAMMA_MIN, le=1)]
+    gamma_min: Annotated[float, Meta(ge=GAMMA_MIN, le=1)]
+    gamma_max: Annotated[float, Meta(ge=GAMMA_MIN, le=1)]
 
-    @model_validator(mode="after")
-    def _ordered(self) -> AvailabilitySpec:
+    def __post_init__(self) -> None:
         if self.gamma_min > self.gamma_max:
             raise ValueError("gamma_min must not exceed gamma_max")
-        return self
 
 
-class FaultSpec(_Strict):
+class FaultSpec(_Strict, kw_only=True):
     """``none``; ``square``: amplitude·sign(sin(2πk/period)) on [start, end); ``piecewise``: through points."""
 
     kind: Literal["none", "square", "piecewise"] = "none"
     amplitude: Magnitude | None = None
-    period: Annotated[int, Field(gt=0)] | None = None
-    start: Annotated[int, Field(ge=0)] | None = None
-    end: Annotated[int, Field(ge=0)] | None = None
+    period: Annotated[int, Meta(gt=0)] | None = None
+    start: Annotated[int, Meta(ge=0)] | None = None
+    end: Annotated[int, Meta(ge=0)] | None = None
     points: list[tuple[Finite, Magnitude]] | None = None
 
-    @model_validator(mode="after")
-    def _complete(self) -> FaultSpec:
+    def __post_init__(self) -> None:
         if self.kind == "square":
             missing = [n for n in ("amplitude", "period", "start", "end") if getattr(self, n) is None]
             if missing:
@@ -107,7 +111,6 @@ class FaultSpec(_Strict):
             ks = [p[0] for p in self.points]
             if any(b <= a for a, b in zip(ks, ks[1:])):
                 raise ValueError("piecewise fault points must have increasing k")
-        return self
 
     def build(self) -> Fault:
         if self.kind == "square":
@@ -117,58 +120,56 @@ class FaultSpec(_Strict):
         return NoFault()
 
 
-class FaultBoundSpec(_Strict):
+class FaultBoundSpec(_Strict, kw_only=True):
     """Declared physical bounds on the sensor fault: |f_k+1 − f_k| ≤ rate and/or |f_k| ≤ size.
 
     An assumption like the noise bound: the estimator may rely on it (the adaptive sector of the SAIM
     case, docs/estimator.md), and the collector checks it against the truth and attributes misses to it.
     """
 
-    rate: Positive | None = Field(default=None, description="δ_i: largest fault change per step")
-    size: Positive | None = Field(default=None, description="F_i: largest fault magnitude")
+    rate: Annotated[Positive | None, Meta(description="δ_i: largest fault change per step")] = None
+    size: Annotated[Positive | None, Meta(description="F_i: largest fault magnitude")] = None
 
 
-class NodeProfile(_Strict):
+def _p0_problem(v: list[list[float]]) -> str | None:
+    """Why a matrix P0 is not a 3×3 SPD matrix with eigenvalues in [P0_MIN, P0_MAX] (None if it is)."""
+    if len(v) != 3 or any(len(row) != 3 for row in v):
+        return f"must be 3×3, got {len(v)} rows of lengths {[len(row) for row in v]}"
+    a = np.asarray(v, dtype=float)
+    if not np.allclose(a, a.T) or np.linalg.eigvalsh(a).min() <= 0:
+        return "must be symmetric positive definite"
+    eig = np.linalg.eigvalsh(0.5 * (a + a.T))
+    if eig.min() < P0_MIN or eig.max() > P0_MAX:
+        return f"eigenvalues must lie in [{P0_MIN:g}, {P0_MAX:g}], got [{eig.min():.3g}, {eig.max():.3g}]"
+    return None
+
+
+class NodeProfile(_Strict, kw_only=True):
     """One yaw-rate sensor: y = C x + Ds f + Dv v, v² ≤ R, plus its estimator's initial ellipsoid."""
 
-    label: Annotated[str, Field(max_length=200)] = ""
+    label: Annotated[str, Meta(max_length=MAX_NAME)] = ""
     C: tuple[Magnitude, Magnitude]
     Ds: Magnitude
-    Dv: Annotated[float, Field(ge=DV_MIN, le=MAGNITUDE_MAX, allow_inf_nan=False)]
-    R: Annotated[float, Field(ge=R_MIN, le=R_MAX, allow_inf_nan=False)]
-    noise_frequency: Annotated[float, Field(ge=-FREQ_MAX, le=FREQ_MAX, allow_inf_nan=False)] = Field(
-        description="f_i of v_i,k = cos(2π f_i (k−1) τs)"
-    )
+    Dv: Annotated[float, Meta(ge=DV_MIN, le=MAGNITUDE_MAX)]
+    R: Annotated[float, Meta(ge=R_MIN, le=R_MAX)]
+    noise_frequency: Annotated[float, Meta(ge=-FREQ_MAX, le=FREQ_MAX, description="f_i of v_i,k = cos(2π f_i (k−1) τs)")]
     x0_hat: tuple[Magnitude, Magnitude, Magnitude]
-    P0: Annotated[float, Field(ge=P0_MIN, le=P0_MAX, allow_inf_nan=False)] | list[list[Finite]] = Field(
-        description="scalar (× I3) or a 3×3 SPD matrix"
-    )
-    rho: Annotated[float, Field(ge=RHO_MIN, le=RHO_MAX, allow_inf_nan=False)] = 1.0
+    P0: Annotated[
+        Annotated[float, Meta(ge=P0_MIN, le=P0_MAX)] | list[list[Finite]], Meta(description="scalar (× I3) or a 3×3 SPD matrix")
+    ]
+    rho: Annotated[float, Meta(ge=RHO_MIN, le=RHO_MAX)] = 1.0
     saturation: SaturationSpec | None = None
     availability: AvailabilitySpec | None = None
-    fault: FaultSpec = FaultSpec()
-    fault_bound: FaultBoundSpec = FaultBoundSpec()
+    fault: FaultSpec = field(default_factory=FaultSpec)
+    fault_bound: FaultBoundSpec = field(default_factory=FaultBoundSpec)
 
-    @field_validator("Ds")
-    @classmethod
-    def _ds_nonzero(cls, v: float) -> float:
-        if abs(v) < DS_MIN:
-            raise ValueError(f"|Ds| must be at least {DS_MIN:g}, else the fault is (practically) unobservable")
-        return v
-
-    @field_validator("P0")
-    @classmethod
-    def _p0_spd(cls, v: float | list[list[float]]) -> float | list[list[float]]:
-        if isinstance(v, list):
-            a = np.asarray(v, dtype=float)
-            if a.shape != (3, 3):
-                raise ValueError(f"P0 must be 3×3, got shape {a.shape}")
-            if not np.allclose(a, a.T) or np.linalg.eigvalsh(a).min() <= 0:
-                raise ValueError("P0 must be symmetric positive definite")
-            eig = np.linalg.eigvalsh(0.5 * (a + a.T))
-            if eig.min() < P0_MIN or eig.max() > P0_MAX:
-                raise ValueError(f"P0's eigenvalues must lie in [{P0_MIN:g}, {P0_MAX:g}], got [{eig.min():.3g}, {eig.max():.3g}]")
-        return v
+    def __post_init__(self) -> None:
+        if abs(self.Ds) < DS_MIN:
+            raise ValueError(f"Ds: |Ds| must be at least {DS_MIN:g}, else the fault is (practically) unobservable")
+        if isinstance(self.P0, list):
+            problem = _p0_problem(self.P0)
+            if problem:
+                raise ValueError(f"P0: {problem}")
 
     def P0_matrix(self) -> np.ndarray:
         return np.eye(3) * self.P0 if isinstance(self.P0, (int, float)) else np.asarray(self.P0, dtype=float)
@@ -177,7 +178,7 @@ class NodeProfile(_Strict):
 # ---------------------------------------------------------------- topology (topologies/*.toml)
 
 
-class VehicleSpec(_Strict):
+class VehicleSpec(_Strict, kw_only=True):
     m: Positive = 1832.0
     Jz: Positive = 2488.0
     lf: Positive = 1.18
@@ -190,88 +191,79 @@ class VehicleSpec(_Strict):
     vx_max_kmh: Positive = 120.0
     x0: tuple[Finite, Finite] = (0.0, 0.0)
 
-    @model_validator(mode="after")
-    def _range(self) -> VehicleSpec:
+    def __post_init__(self) -> None:
         if self.vx_min_kmh >= self.vx_max_kmh:
             raise ValueError("vx_min_kmh must be below vx_max_kmh")
-        return self
 
 
-class SpeedSpec(_Strict):
+class SpeedSpec(_Strict, kw_only=True):
     mean_kmh: Positive = 100.0
-    amplitude_kmh: Annotated[float, Field(ge=0)] = 18.0
+    amplitude_kmh: Annotated[float, Meta(ge=0)] = 18.0
     period_s: Positive = 8.0
 
 
-class SteeringSpec(_Strict):
+class SteeringSpec(_Strict, kw_only=True):
     low: Finite = 0.0175
     high: Finite = 0.0542
 
-    @model_validator(mode="after")
-    def _ordered(self) -> SteeringSpec:
+    def __post_init__(self) -> None:
         if self.low > self.high:
             raise ValueError("steering low must not exceed high")
-        return self
 
 
-class NodeRef(_Strict):
-    id: Annotated[int, Field(ge=1)]
-    profile: Annotated[str, Field(min_length=1, max_length=200, pattern=r"^[^/\\\x00]+$")] = Field(
-        description="file name in the node directory, without .toml (no path separators, no NUL)"
-    )
-    estimator: str = Field(default=SDP, description=f"the node's estimator: one of {', '.join(NODE_ESTIMATOR_NAMES)}")
+class NodeRef(_Strict, kw_only=True):
+    id: Annotated[int, Meta(ge=1)]
+    profile: Annotated[
+        str,
+        Meta(
+            min_length=1, max_length=MAX_NAME, pattern=PROFILE_NAME_PATTERN,
+            description="file name in the node directory, without .toml (no path separators, no NUL)",
+        ),
+    ]  # fmt: skip
+    estimator: Annotated[str, Meta(description=f"the node's estimator: one of {', '.join(NODE_ESTIMATOR_NAMES)}")] = SDP
 
-    @field_validator("estimator")
-    @classmethod
-    def _known_estimator(cls, v: str) -> str:
-        if v not in NODE_ESTIMATOR_NAMES:
-            raise ValueError(f"unknown estimator {v!r} (one of {', '.join(NODE_ESTIMATOR_NAMES)})")
-        return v
+    def __post_init__(self) -> None:
+        if self.estimator not in NODE_ESTIMATOR_NAMES:
+            raise ValueError(f"estimator: unknown estimator {self.estimator!r} (one of {', '.join(NODE_ESTIMATOR_NAMES)})")
 
 
-class Edge(_Strict):
+class Edge(_Strict, kw_only=True):
     """a_ij > 0: node ``to`` (i) uses the innovation of node ``from`` (j); i = j is a self-loop."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
-    to: Annotated[int, Field(ge=1)]
-    from_: Annotated[int, Field(ge=1, alias="from")]
+    to: Annotated[int, Meta(ge=1)]
+    from_: Annotated[int, Meta(ge=1)] = field(name="from")
     weight: Positive = 1.0
 
 
-class LinkLoss(_Strict):
+class Burst(_Strict, kw_only=True):
+    to: Annotated[int, Meta(ge=1)]
+    from_: Annotated[int, Meta(ge=1)] = field(name="from")
+    start: Annotated[int, Meta(ge=0)]
+    length: Annotated[int, Meta(ge=1)]
+
+
+class LinkLoss(_Strict, kw_only=True):
     """Scheduled loss of node messages: i.i.d. per link and step, plus bursts on chosen links."""
 
-    probability: Annotated[float, Field(ge=0, le=1)] = 0.0
+    probability: Annotated[float, Meta(ge=0, le=1)] = 0.0
     bursts: list[Burst] = []
 
 
-class Burst(_Strict):
-    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
-    to: Annotated[int, Field(ge=1)]
-    from_: Annotated[int, Field(ge=1, alias="from")]
-    start: Annotated[int, Field(ge=0)]
-    length: Annotated[int, Field(ge=1)]
-
-
-LinkLoss.model_rebuild()
-
-
-class TopologyFile(_Strict):
+class TopologyFile(_Strict, kw_only=True):
     name: str
     node_dir: str = "../nodes"
-    steps: Annotated[int, Field(ge=1)] = 80
+    steps: Annotated[int, Meta(ge=1)] = 80
     tau_s: Positive = 0.1
     case: Case = "nsnim"
-    W: Annotated[float, Field(ge=W_MIN, le=W_MAX, allow_inf_nan=False)] = Field(2.0, description="side-wind bound w² ≤ W")
-    vehicle: VehicleSpec = VehicleSpec()
-    speed: SpeedSpec = SpeedSpec()
-    steering: SteeringSpec = SteeringSpec()
+    W: Annotated[float, Meta(ge=W_MIN, le=W_MAX, description="side-wind bound w² ≤ W")] = 2.0
+    vehicle: VehicleSpec = field(default_factory=VehicleSpec)
+    speed: SpeedSpec = field(default_factory=SpeedSpec)
+    steering: SteeringSpec = field(default_factory=SteeringSpec)
     nodes: list[NodeRef]
     edges: list[Edge]
-    loss: LinkLoss = LinkLoss()
+    loss: LinkLoss = field(default_factory=LinkLoss)
 
-    @model_validator(mode="after")
-    def _graph(self) -> TopologyFile:
+    def __post_init__(self) -> None:
         ids = [n.id for n in self.nodes]
         if not ids:
             raise ValueError("nodes: at least one node is needed")
@@ -294,7 +286,6 @@ class TopologyFile(_Strict):
                 f"speed: profile spans [{lo}, {hi}] km/h, outside the model's "
                 f"[{self.vehicle.vx_min_kmh}, {self.vehicle.vx_max_kmh}] km/h"
             )
-        return self
 
 
 # ---------------------------------------------------------------- resolved scenario
@@ -333,7 +324,7 @@ class Scenario:
     steer_low: float
     steer_high: float
     nodes: list[NodeConfig]
-    loss: LinkLoss = field(default_factory=LinkLoss)
+    loss: LinkLoss = dataclasses.field(default_factory=LinkLoss)
 
     def node(self, node_id: int) -> NodeConfig:
         for n in self.nodes:
@@ -363,12 +354,45 @@ class Scenario:
         return [n.id for n in self.nodes if j in n.in_weights and n.id != j]
 
 
-def _format_errors(path: Path, err: ValidationError) -> str:
-    lines = [f"{path}: invalid configuration"]
-    for e in err.errors():
-        loc = ".".join(str(p) for p in e["loc"]) or "(file)"
-        lines.append(f"  {loc}: {e['msg']}")
-    return "\n".join(lines)
+_FIELD = re.compile(r"^Object (?P<what>contains unknown|missing required) field `(?P<name>[^`]*)`$")
+_BOUND = re.compile(r"^Expected `(?:int|float)` (?P<op>>=|>|<=|<) (?P<value>\S+)$")
+_BOUND_WORDS = {">=": "greater than or equal to", ">": "greater than", "<=": "less than or equal to", "<": "less than"}
+_STEP = re.compile(r"\.?([^.\[\]]+)|\[(\d+)\]")  # "edges[3].from" → "edges", 3, "from"
+
+
+def _value_at(data: object, loc: str) -> object:
+    """The input value at msgspec's location ``loc`` (None if there is none)."""
+    for name, index in _STEP.findall(loc):
+        try:
+            data = data[int(index)] if index else data[name]  # type: ignore[index]
+        except (KeyError, IndexError, TypeError, ValueError):
+            return None
+    return data
+
+
+def _explain(err: msgspec.ValidationError, data: object) -> str:
+    """msgspec's "Expected `int` >= 1 - at `$.steps`" as "steps: Input should be greater than or equal to 1"."""
+    msg, loc = split_error(err)
+    if f := _FIELD.match(msg):  # name the field itself, not the table holding it
+        loc = f"{loc}.{f['name']}" if loc else f["name"]
+        msg = "Field required" if f["what"] == "missing required" else "Extra inputs are not permitted (unknown field)"
+    elif msg.startswith("Expected `str` matching regex"):  # the profile name is the only pattern
+        msg = "Input should be a file name without '/', '\\' or NUL"
+    elif b := _BOUND.match(msg):
+        value = _value_at(data, loc)
+        if (isinstance(value, float) and not math.isfinite(value)) or b["value"].lstrip("-") == FINITE_BOUND_TEXT:
+            msg = "Input should be a finite number"  # NaN fails whichever bound is checked first
+        else:
+            msg = f"Input should be {_BOUND_WORDS[b['op']]} {b['value']}"
+    return f"{loc}: {msg}" if loc else msg
+
+
+def _validated(path: Path, data: dict, cls: type[_T]) -> _T:
+    """``data`` as a ``cls``; lax as TOML users expect ("3" or 3.0 for an integer), ConfigError otherwise."""
+    try:
+        return msgspec.convert(data, cls, strict=False)
+    except msgspec.ValidationError as exc:
+        raise ConfigError(f"{path}: invalid configuration\n  {_explain(exc, data)}") from None
 
 
 MAX_CONFIG_BYTES = 1 << 20  # a topology or profile is a few kB: larger is not one
@@ -399,10 +423,7 @@ def _read_toml(path: Path) -> dict:
 
 
 def load_profile(path: Path) -> NodeProfile:
-    try:
-        return NodeProfile.model_validate(_read_toml(path))
-    except ValidationError as exc:
-        raise ConfigError(_format_errors(path, exc)) from None
+    return _validated(path, _read_toml(path), NodeProfile)
 
 
 def load_topology(
@@ -419,10 +440,7 @@ def load_topology(
         raise ConfigError(f"{path}: steps must be ≥ 1, got {steps}")
     if estimator is not None and estimator not in NODE_ESTIMATOR_NAMES:
         raise ConfigError(f"estimator must be one of {', '.join(NODE_ESTIMATOR_NAMES)}, got {estimator!r}")
-    try:
-        topo = TopologyFile.model_validate(_read_toml(path))
-    except ValidationError as exc:
-        raise ConfigError(_format_errors(path, exc)) from None
+    topo = _validated(path, _read_toml(path), TopologyFile)
     case = case or topo.case
     try:
         node_dir = (path.parent / topo.node_dir).resolve()

@@ -23,6 +23,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING
 
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
@@ -31,11 +32,12 @@ from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.estimator.sdp import Variant
 from netsetest.messages import Message, Ready
 from netsetest.models.signals import SignalKind
-from netsetest.records.summary import RunSummary
-from netsetest.roles.collector import Collector
 from netsetest.roles.node import Node
-from netsetest.roles.vehicle import Vehicle
 from netsetest.runtime.report import EXIT_VIOLATION, exit_code, record_sink, write_summary
+
+if TYPE_CHECKING:  # a node process never loads the vehicle and the collector (memory: docs/performance.md)
+    from netsetest.records.summary import RunSummary
+    from netsetest.roles.vehicle import Vehicle
 
 READY_PERIOD_S = 0.1
 IDLE_WAIT_S = 1.0  # a started node with nothing due sleeps until a message arrives (or this long)
@@ -132,6 +134,8 @@ def run_vehicle(
     await_rejoin: Sequence[tuple[int, int]] = (),
 ) -> int:
     """``await_rejoin``: (node, step) pairs; in lockstep, step+1 waits (at most ``node_timeout``) for the node."""
+    from netsetest.roles.vehicle import Vehicle
+
     vehicle = Vehicle(sc, bus, run_id, signals, seed, realtime=realtime)
     holds = RejoinHolds(await_rejoin)
     dead_at: dict[int, float] = {}  # node → when the vehicle went on without it
@@ -276,6 +280,8 @@ def run_collector(
     idle_timeout: float,
     on_summary: Callable[[RunSummary], None] | None = None,
 ) -> int:
+    from netsetest.roles.collector import Collector
+
     sink, _ = record_sink(record)  # opened now: the record grows step by step and survives a crash
     collector = Collector(sc, bus, run_id, sink)
     if sink is not None:
