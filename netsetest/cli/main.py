@@ -229,7 +229,14 @@ def cmd_exact(a: argparse.Namespace) -> int:
     return 0
 
 
-COMMANDS.update(run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, exact=cmd_exact)
+def cmd_forkserver(a: argparse.Namespace) -> int:
+    """The launcher's fork server (internal): each forked role runs ``main`` on its command line."""
+    from netsetest.runtime.forkserver import serve
+
+    return serve(a.control_fd, main)
+
+
+COMMANDS.update(run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, exact=cmd_exact, forkserver=cmd_forkserver)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -308,15 +308,8 @@ def cmd_compose(a: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_forkserver(a: argparse.Namespace) -> int:
-    from netsetest.cli.main import main
-    from netsetest.runtime.forkserver import serve
-
-    return serve(a.control_fd, main)
-
-
 COMMANDS.update(vehicle=cmd_vehicle, node=cmd_node, collector=cmd_collector, router=cmd_router, credentials=cmd_credentials,
-                compose=cmd_compose, forkserver=cmd_forkserver)
+                compose=cmd_compose)
 
 
 # ---------------------------------------------------------------- run --mode zenoh: the parent
