@@ -16,6 +16,7 @@ from zenoh_helpers import (
     new_run_id,
     procs,  # noqa: F401 (fixture)
     read_json,
+    wait_for,
     wait_port,
     wait_roles,
 )
@@ -30,7 +31,8 @@ def test_zenoh_client_mode_through_router(procs, tmp_path) -> None:  # noqa: ANN
     router_ep = f"tcp/127.0.0.1:{port}"
     router = procs.start("router", cli("router", "--listen", router_ep))
     wait_port("127.0.0.1", port, 30)
-    assert f"listening on {router_ep}" in procs.stderr("router")
+    # the port opens inside zenoh.open(); the router logs the line just after it returns
+    wait_for(lambda: f"listening on {router_ep}" in procs.stderr("router"), 10, what="the router's listening line")
 
     run_id = new_run_id()
     summary_path = tmp_path / "summary.json"
