@@ -86,10 +86,14 @@ def cli_run(
 
 def _late_per_step(record_path: Path) -> dict[int, int] | None:
     """Step → how many nodes published it after its deadline (from the run's record)."""
-    if not record_path.exists():
+    from netsetest.records.record import RecordError, load_record
+
+    try:
+        record = load_record(record_path)
+    except RecordError:
         return None
     late: dict[int, int] = {}
-    for rows in json.loads(record_path.read_text())["nodes"].values():
+    for rows in record.raw_nodes.values():
         for e in rows:
             if e["late"]:
                 late[e["step"]] = late.get(e["step"], 0) + 1

@@ -21,6 +21,7 @@ from collections.abc import Callable
 
 from netsetest.bus.keys import matches
 from netsetest.messages import BadMessage, Message, decode, encode
+from netsetest.profile import PROFILE
 
 Handler = Callable[[str, Message], None]
 
@@ -88,7 +89,14 @@ class Bus(ABC):
         self.received = 0
 
     def publish(self, key: str, msg: Message) -> None:
-        self._send(key, encode(msg))
+        if PROFILE is None:
+            self._send(key, encode(msg))
+            return
+        t = PROFILE.now()
+        payload = encode(msg)
+        t = PROFILE.add("encode", t)
+        self._send(key, payload)
+        PROFILE.add("put", t)
 
     @abstractmethod
     def _send(self, key: str, payload: bytes) -> None: ...
@@ -111,7 +119,10 @@ class Bus(ABC):
         flood cannot keep it from returning.  Returns how many valid messages ran.
         """
         if not len(self._inbox) and (timeout is None or timeout > 0):
+            t = PROFILE.now() if PROFILE is not None else 0
             self._inbox.wait(timeout)
+            if PROFILE is not None:
+                PROFILE.add("wait", t)
         budget = len(self._inbox)
         done = rounds = 0
         while budget > 0 and rounds < MAX_ROUNDS and (limit is None or done < limit):
@@ -122,12 +133,18 @@ class Bus(ABC):
             for key, payload, handler in batch:
                 budget -= 1
                 self.received += 1
+                t = PROFILE.now() if PROFILE is not None else 0
                 try:
                     msg = decode(payload)
                 except BadMessage as exc:
                     self.dropped[exc.reason] += 1
                     continue
+                finally:
+                    if PROFILE is not None:
+                        t = PROFILE.add("decode", t)
                 handler(key, msg)
+                if PROFILE is not None:
+                    PROFILE.add("handle", t)
                 done += 1
         return done
 

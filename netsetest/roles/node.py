@@ -39,6 +39,7 @@ from netsetest.estimator.sdp import Ellipsoid, LocalEstimator, NeighbourState, O
 from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sector, measurement_interval
 from netsetest.messages import End, Message, NodeInput, NodeState, RunScope
 from netsetest.models.sensor import NA
+from netsetest.profile import PROFILE
 from netsetest.roles.plausibility import innovation_possible, states_disjoint
 from netsetest.sets import set_to_wire
 
@@ -297,7 +298,10 @@ class Node:
             neigh[self.id] = self.own  # type: ignore[assignment]
         alpha = self.sc.model.weights(inp.vx_prev)  # type: ignore[arg-type]
         step_in = StepInput(alpha, inp.u_prev, inp.y, inp.gamma, neigh)  # type: ignore[arg-type]
+        t = PROFILE.now() if PROFILE is not None else 0
         res = self.estimator.step(Ellipsoid(self.xhat, self.P, self.rho), step_in)
+        if PROFILE is not None:
+            PROFILE.add("solve", t)
         self._publish(inp, res.status, res, used=sorted(j for j in neigh if j != self.id), missing=self.missing())
 
     def _publish_set(self, inp: NodeInput, status: str) -> None:
@@ -336,6 +340,7 @@ class Node:
         pub = res.public
         innov = float(inp.y - cbar @ pub.xhat)
         rho_cert = pub.rho_cert if np.isfinite(pub.rho_cert) else None
+        t = PROFILE.now() if PROFILE is not None else 0
         drops = self.drop_report()
         msg = NodeState(
             step=inp.step, node=self.id, xhat=[float(a) for a in pub.xhat], P=[float(a) for a in pub.P.reshape(NA * NA)],
@@ -345,6 +350,8 @@ class Node:
             sector=(sector.h1, sector.h) if sector is not None else None,
             sector_basis=sector.basis if sector is not None else "none", set=wire_set,
         )  # fmt: skip
+        if PROFILE is not None:
+            PROFILE.add("build", t)
         self.k = inp.step
         self.inputs = {s: m for s, m in self.inputs.items() if s > self.k}
         self.inbox = {s: m for s, m in self.inbox.items() if s >= self.k}

@@ -29,6 +29,7 @@ from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.estimator.sdp import Variant
 from netsetest.messages import Message, Ready
 from netsetest.models.signals import SignalKind
+from netsetest.profile import PROFILE
 from netsetest.roles.collector import Collector
 from netsetest.roles.node import Node
 from netsetest.roles.vehicle import Vehicle
@@ -216,6 +217,7 @@ def run_node(
     node = Node(sc, node_id, bus, run_id, variant, rejoin=rejoin, objective=objective)
     role = f"node {node_id}"
     barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), node_peers(sc, node_id))
+    first_profiled = 0
     while not node.ended:
         if node.k < 0:
             barrier.tick(time.monotonic())  # until started
@@ -229,10 +231,15 @@ def run_node(
                 node.give_up = True
             if not node.try_step(now):
                 break
+            if PROFILE is not None and node.k >= 1 and not PROFILE.started:
+                PROFILE.start_window()  # from the first solved step: start-up and step 0 left out
+                first_profiled = node.k
             if node.k == crash_after:
                 time.sleep(CRASH_FLUSH_S)  # the state of step k leaves before the crash
                 log(role, f"killing myself (SIGKILL) after step {node.k} as asked")
                 os.kill(os.getpid(), signal.SIGKILL)
+    if PROFILE is not None:
+        PROFILE.write(f"node-{node_id}", node.k - first_profiled if PROFILE.started else 0)
     return 0
 
 
