@@ -69,8 +69,10 @@ def enclosing_ellipsoid(s: base.GuaranteedSet, rho: float) -> tuple[np.ndarray, 
 class Node:
     def __init__(
         self, scenario: Scenario, node_id: int, bus: Bus, run_id: str, variant: Variant = "scheduled", rejoin: bool = False,
-        objective: Objective = DEFAULT_OBJECTIVE,
+        objective: Objective = DEFAULT_OBJECTIVE, lazy_neighbours: bool = False,
     ) -> None:  # fmt: skip
+        """``lazy_neighbours``: neighbour states do not wake the node (real time: they are used when the next
+        input arrives, which does wake it; see netsetest/bus/base.py)."""
         self.sc, self.bus, self.run = scenario, bus, run_id
         self.cfg = scenario.node(node_id)
         self.id = node_id
@@ -109,7 +111,7 @@ class Node:
         self.late_start_evidence = 0
         bus.subscribe(keys.node_input(run_id, node_id), self.on_message)
         for j in self.others:
-            bus.subscribe(keys.node_state(run_id, j), self.on_message)
+            bus.subscribe(keys.node_state(run_id, j), self.on_message, lazy=lazy_neighbours)
         bus.subscribe(keys.end(run_id), self.on_message)
 
     # ------------------------------------------------------------------ receiving

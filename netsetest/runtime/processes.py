@@ -76,14 +76,15 @@ def log(role: str, text: str) -> None:
 class Barrier:
     """Tracks Ready messages of the other roles and repeats our own until we are started."""
 
-    def __init__(self, bus: Bus, run_id: str, me: Ready, others: set[tuple[str, int | None]]) -> None:
+    def __init__(self, bus: Bus, run_id: str, me: Ready, others: set[tuple[str, int | None]], lazy: bool = False) -> None:
+        """``lazy``: Ready messages do not wake the role (a node: it ticks every READY_PERIOD_S until started)."""
         self.bus, self.run, self.me, self.others = bus, run_id, me, others
         self.heard: set[tuple[str, int | None]] = set()
         self.heard_at: dict[tuple[str, int | None], float] = {}  # last Ready (a restarted node's comes late)
         self.complete: set[tuple[str, int | None]] = set()  # roles that reported seen_all
         self.last_sent = 0.0
         for role, node in sorted(others, key=str):
-            bus.subscribe(keys.ready_of(run_id, keys.role_name(role, node)), self.on_message)
+            bus.subscribe(keys.ready_of(run_id, keys.role_name(role, node)), self.on_message, lazy=lazy)
 
     def on_message(self, key: str, msg: Message) -> None:
         if not isinstance(msg, Ready):
@@ -214,9 +215,9 @@ def run_node(
     crash_after: int | None = None,
 ) -> int:
     """``crash_after``: SIGKILL this process right after publishing that step (``run --kill``: exactly there)."""
-    node = Node(sc, node_id, bus, run_id, variant, rejoin=rejoin, objective=objective)
+    node = Node(sc, node_id, bus, run_id, variant, rejoin=rejoin, objective=objective, lazy_neighbours=realtime)
     role = f"node {node_id}"
-    barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), node_peers(sc, node_id))
+    barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), node_peers(sc, node_id), lazy=True)
     first_profiled = 0
     while not node.ended:
         if node.k < 0:
