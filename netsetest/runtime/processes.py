@@ -219,6 +219,8 @@ def run_node(
     role = f"node {node_id}"
     barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), node_peers(sc, node_id), lazy=True)
     first_profiled = 0
+    barrier.tick(time.monotonic())  # announce ourselves first: the others start meanwhile
+    node.warm_up()  # before we can report seen_all, so before the run can start
     while not node.ended:
         if node.k < 0:
             barrier.tick(time.monotonic())  # until started
