@@ -77,12 +77,13 @@ class Node:
         self.cfg = scenario.node(node_id)
         self.id = node_id
         self.variant, self.objective = variant, objective
+        self.others = [j for j in self.cfg.in_weights if j != node_id]
+        self.sensors = {j: scenario.node(j).sensor for j in self.cfg.in_weights}  # looked up per message
         self.estimator = self._new_estimator()
         self.set_estimator: base.SetEstimator | None = None  # a non-SDP method (it ignores neighbours)
         self.last_set: base.GuaranteedSet | None = None  # its last published set
         if self.cfg.estimator != SDP:
             self.set_estimator = node_set_estimator(scenario, node_id)
-        self.others = [j for j in self.cfg.in_weights if j != node_id]
         # estimator state, plain arrays: centre, shape, radius, and our own last published message
         self.xhat = self.cfg.x0_hat.copy()
         self.P = self.cfg.P0.copy()
@@ -108,7 +109,7 @@ class Node:
     def _new_estimator(self) -> LocalEstimator:
         sc, cfg = self.sc, self.cfg
         return LocalEstimator(
-            self.id, cfg.sensor, {j: sc.node(j).sensor for j in cfg.in_weights}, cfg.in_weights, sc.model, sc.W, self.variant,
+            self.id, cfg.sensor, self.sensors, cfg.in_weights, sc.model, sc.W, self.variant,
             fault_bound=FaultBound(cfg.fault_rate, cfg.fault_size), objective=self.objective,
         )  # fmt: skip
 
@@ -236,7 +237,7 @@ class Node:
         if msg.node in have:
             self.drop("duplicate-state")  # the first copy counts
             return
-        sensor = self.sc.node(msg.node).sensor
+        sensor = self.sensors[msg.node]
         if (msg.sector is not None) != sensor.saturated:
             self.drop("sector-mismatch")  # a saturating sensor publishes its sector, no other one does
             return
