@@ -49,7 +49,8 @@ def innovation_interval(
     x = [float(a) for a in xhat]
     Pl = np.asarray(P).tolist()
     cx = cb[0] * x[0] + cb[1] * x[1] + cb[2] * x[2]
-    cpc = sum(cb[i] * Pl[i][j] * cb[j] for i in range(3) for j in range(3))
+    Pc = [Pl[i][0] * cb[0] + Pl[i][1] * cb[1] + Pl[i][2] * cb[2] for i in range(3)]
+    cpc = cb[0] * Pc[0] + cb[1] * Pc[1] + cb[2] * Pc[2]
     c = math.sqrt(max(rho * cpc, 0.0))
     r_lo, r_hi = cx - c, cx + c
     h1, h2 = (sector.h1, sector.h1 + sector.h) if sector is not None else (sensor.h1, sensor.h2)
