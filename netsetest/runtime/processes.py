@@ -37,6 +37,7 @@ from netsetest.runtime.report import EXIT_VIOLATION, exit_code, record_sink, wri
 
 READY_PERIOD_S = 0.1
 IDLE_WAIT_S = 1.0  # a started node with nothing due sleeps until a message arrives (or this long)
+NEIGHBOUR_POLL_S = 0.002  # lockstep, an expected neighbour state not in yet: look in its (lazy) ring this often
 EXIT_STOPPED = 128 + signal.SIGTERM  # a role stopped by SIGTERM/SIGINT
 CRASH_FLUSH_S = 0.2  # --crash-after: time for the last state to leave before SIGKILL
 
@@ -215,7 +216,7 @@ def run_node(
     crash_after: int | None = None,
 ) -> int:
     """``crash_after``: SIGKILL this process right after publishing that step (``run --kill``: exactly there)."""
-    node = Node(sc, node_id, bus, run_id, variant, rejoin=rejoin, objective=objective, lazy_neighbours=realtime)
+    node = Node(sc, node_id, bus, run_id, variant, rejoin=rejoin, objective=objective, lazy_neighbours=True)
     role = f"node {node_id}"
     barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), node_peers(sc, node_id), lazy=True)
     first_profiled = 0
@@ -247,13 +248,18 @@ def run_node(
 
 
 def _node_wait(node: Node, ready_sent: float, neighbour_timeout: float, realtime: bool, now: float) -> float:
-    """How long a node may block for its next message: until its next Ready is due (not started yet),
-    until its neighbour deadline (lockstep, waiting), else :data:`IDLE_WAIT_S`.  Event-driven: a
-    hundred idle nodes polling every few ms would keep two cores busy waking up."""
+    """How long a node may block for its next message: until its next Ready is due (not started yet);
+    lockstep, waiting for a neighbour: :data:`NEIGHBOUR_POLL_S` (neighbour states are lazy, they do not
+    wake the node) or until the neighbour deadline if sooner; else :data:`IDLE_WAIT_S`.  Event-driven
+    otherwise: a hundred idle nodes polling every few ms would keep two cores busy waking up.
+
+    Neighbour states are lazy in both clocks: the vehicle sends input k+1 only after it heard every
+    state of step k, which the neighbours sent at the same moment on a path no longer than the
+    vehicle's, so they are almost always in when the input wakes the node; polling is the rare case."""
     if node.k < 0:
         return max(0.0, ready_sent + READY_PERIOD_S - now)
     if not realtime and node.waiting_since is not None:
-        return max(0.0, node.waiting_since + neighbour_timeout - now)
+        return max(0.0, min(node.waiting_since + neighbour_timeout - now, NEIGHBOUR_POLL_S))
     return IDLE_WAIT_S
 
 
