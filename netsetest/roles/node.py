@@ -71,8 +71,8 @@ class Node:
         self, scenario: Scenario, node_id: int, bus: Bus, run_id: str, variant: Variant = "scheduled", rejoin: bool = False,
         objective: Objective = DEFAULT_OBJECTIVE, lazy_neighbours: bool = False,
     ) -> None:  # fmt: skip
-        """``lazy_neighbours``: neighbour states do not wake the node (real time: they are used when the next
-        input arrives, which does wake it; see netsetest/bus/base.py)."""
+        """``lazy_neighbours``: neighbour states do not wake the node: they are used when its next input
+        arrives, which does wake it (a runtime waiting for one polls; netsetest/bus/base.py, runtime/processes.py)."""
         self.sc, self.bus, self.run = scenario, bus, run_id
         self.cfg = scenario.node(node_id)
         self.id = node_id
