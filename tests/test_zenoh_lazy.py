@@ -5,6 +5,7 @@ other key; and a real-time run over Zenoh, whose nodes hear their neighbours laz
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import threading
 import time
@@ -112,12 +113,16 @@ def test_lazy_subscription_needs_an_exact_key(pair) -> None:  # noqa: ANN001
 @pytest.mark.timeout(180)
 def test_realtime_run_over_zenoh_uses_its_neighbours(tmp_path: Path) -> None:
     """A real-time secured paper run: every node publishes every step, the truth is contained, and the
-    nodes, which hear their neighbours lazily, use them (a broken lazy path would leave ``used`` empty)."""
+    nodes, which hear their neighbours lazily, use them (a broken lazy path would leave ``used`` empty)
+    and wake about once per step (``NETSETEST_PROFILE``: blocking waits per step; ≈3 if every neighbour
+    state woke the node)."""
     steps = 30
-    summary, record = tmp_path / "s.json", tmp_path / "r.jsonl"
+    summary, record, prof = tmp_path / "s.json", tmp_path / "r.jsonl", tmp_path / "profile"
+    prof.mkdir()
     out = subprocess.run(cli("run", PAPER6, "--mode", "zenoh", "--clock", "realtime", "--steps", str(steps), "--quiet",
                              "--summary-json", str(summary), "--record", str(record)),
-                         cwd=ROOT, capture_output=True, text=True, timeout=170)  # fmt: skip
+                         cwd=ROOT, capture_output=True, text=True, timeout=170,
+                         env={**os.environ, "NETSETEST_PROFILE": str(prof)})  # fmt: skip
     assert out.returncode == 0, out.stderr[-2000:]
     s = json.loads(summary.read_text())
     assert s["violations_total"] == 0 and not s.get("nodes_missing")
@@ -129,3 +134,10 @@ def test_realtime_run_over_zenoh_uses_its_neighbours(tmp_path: Path) -> None:
             total += 1
             used_all += not e["missing"] and len(e["used"]) == 2  # paper6: two in-neighbours each
     assert used_all >= total // 2, f"only {used_all} of {total} node-steps used both neighbours"
+    reports = {p.name: json.loads(p.read_text()) for p in prof.glob("node-*.json")}
+    assert sorted(reports) == [f"node-{i}.json" for i in range(1, 7)]
+    for name, r in reports.items():
+        ph = r["phases"]
+        assert r["steps"] == steps - 1 and ph["solve"]["calls_per_step"] == 1.0, (name, r)  # steps 2..30
+        assert ph["decode"]["calls_per_step"] >= 2.0 and r["process_ms_per_step"] >= r["thread_ms_per_step"] > 0, (name, r)
+        assert ph["wait"]["calls_per_step"] <= 1.5, (name, ph["wait"])  # one wake-up per step: the input
