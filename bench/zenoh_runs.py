@@ -33,6 +33,7 @@ from pathlib import Path
 import msgpack
 
 from netsetest.cli.processes import free_ports
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE
 from netsetest.runtime.processes import role_env
 
 PY = [sys.executable, "-m", "netsetest.cli.main"]
@@ -55,17 +56,19 @@ def _kill(procs: list[subprocess.Popen]) -> None:
 
 def cli_run(
     topology: Path, mode: str, clock: str = "lockstep", steps: int | None = None, timeout: float = 600.0,
-    sample_stepping_s: float | None = None, env: dict[str, str] | None = None,
+    sample_stepping_s: float | None = None, env: dict[str, str] | None = None, extra: list[str] | None = None,
 ) -> dict:
     """One ``netsetest run`` as a subprocess: wall time, exit code and the summary JSON; with
     ``sample_stepping_s`` (how long its stepping lasts), the CPU and memory of its processes
-    (:class:`ProcessSampler`) and its record (lateness per step).  ``env``: added to the environment."""
+    (:class:`ProcessSampler`) and its record (lateness per step).  ``env``: added to the environment;
+    ``extra``: more ``netsetest run`` options."""
     sample = sample_stepping_s is not None
     with tempfile.TemporaryDirectory(prefix="nsbench-") as tmp:
         summary_path, record_path = Path(tmp) / "summary.json", Path(tmp) / "record.json"
         cmd = [*PY, "run", str(topology), "--mode", mode, "--clock", clock, "--quiet", "--summary-json", str(summary_path)]
         if steps:
             cmd += ["--steps", str(steps)]
+        cmd += extra or []
         if sample:
             cmd += ["--record", str(record_path)]
         t0 = time.perf_counter()
@@ -426,21 +429,23 @@ def cpu_demand(processes: dict | None, nodes: int) -> dict:
     return {"node_cpu_ms_per_step": per_step_ms, "demand_cores": nodes * per_step_ms / 1000.0 / RING_TAU_S + roles}
 
 
-def realtime_node_profile(directory: Path, nodes: int, steps: int) -> dict:
+def realtime_node_profile(directory: Path, nodes: int, steps: int, objective: str | None = None) -> dict:
     """One real-time ring run with every node profiled (``NETSETEST_PROFILE``, netsetest/profile.py):
-    per phase of the node's own thread the median over nodes of CPU ms per step, and its calls per step."""
+    per phase of the node's own thread the median over nodes of CPU ms per step, and its calls per step.
+    ``objective``: the nodes' ``--objective`` (default: the run's default)."""
     from bench.topologies import RING_TAU_S, ring_topology
 
     topo = ring_topology(directory, nodes, steps)
     with tempfile.TemporaryDirectory(prefix="nsprofile-") as prof:
         load = _loadavg()
         r = cli_run(topo, "zenoh", "realtime", timeout=120 + 3 * nodes + steps * 0.2, sample_stepping_s=steps * RING_TAU_S,
-                    env={"NETSETEST_PROFILE": prof})  # fmt: skip
+                    env={"NETSETEST_PROFILE": prof}, extra=["--objective", objective] if objective else None)  # fmt: skip
         reports = [json.loads(p.read_text()) for p in sorted(Path(prof).glob("node-*.json"))]
     reports = [x for x in reports if x.get("steps")]
     s = r["summary"] or {}
     out: dict = {
-        "nodes": nodes, "steps": steps, "load_before": load, "exit_code": r["exit_code"], "profiled_nodes": len(reports),
+        "nodes": nodes, "steps": steps, "objective": objective or DEFAULT_OBJECTIVE, "load_before": load, "exit_code": r["exit_code"],
+        "profiled_nodes": len(reports),
         "deadline_misses": sum(row.get("deadline_misses") or 0 for row in s.get("nodes", [])) if s else None,
         "processes": r["processes"], **cpu_demand(r["processes"], nodes),
     }  # fmt: skip
