@@ -28,12 +28,13 @@ PAPER6 = ROOT / "topologies" / "paper6.toml"
 
 QUICK = {
     "steps": 40, "ref_sched": 24, "ref_rule": 8, "naive": 12, "prev_sched": 24, "prev_rule": 8,
-    "scaling_steps": 20, "scaling_sizes": [6, 24, 96], "rt_sizes": [12, 24, 48, 64, 96, 128], "rt_steps": 50, "startup_reps": 3, "launch_reps": 5,
+    "scaling_steps": 20, "scaling_sizes": [6, 24, 96], "rt_sizes": [12, 24, 48, 64, 96, 128], "rt_steps": 50, "profile_nodes": 96, "startup_reps": 3,
+    "launch_reps": 5,
     "flood_steps": 30, "flood_rate": 30000, "soak_steps": 2000,
 }  # fmt: skip
 FULL = {
     "steps": 80, "ref_sched": 80, "ref_rule": 24, "naive": 40, "prev_sched": 80, "prev_rule": 24,
-    "scaling_steps": 40, "scaling_sizes": [6, 24, 96], "rt_sizes": [6, 12, 24, 36, 48, 64, 80, 96, 112, 128], "rt_steps": 50,
+    "scaling_steps": 40, "scaling_sizes": [6, 24, 96], "rt_sizes": [6, 12, 24, 36, 48, 64, 80, 96, 112, 128], "rt_steps": 50, "profile_nodes": 96,
     "startup_reps": 5, "launch_reps": 9, "flood_steps": 80, "flood_rate": 30000, "soak_steps": 20000,
 }  # fmt: skip
 
@@ -187,7 +188,7 @@ def tightness(cfg: dict, tmp: Path) -> dict:
 
 
 def run_bench(quick: bool = False, json_path: str | None = None, markdown_path: str | None = None) -> int:
-    from bench.zenoh_runs import launch_to_step0, node_memory_profile, node_startup, realtime_ladder
+    from bench.zenoh_runs import launch_to_step0, node_memory_profile, node_startup, realtime_ladder, realtime_node_profile
 
     cfg = QUICK if quick else FULL
     t_all = time.perf_counter()
@@ -217,6 +218,11 @@ def run_bench(quick: bool = False, json_path: str | None = None, markdown_path: 
         _log(f"  {res['node']}")
         _log("real time (τs = 0.1 s, nodes as processes): growing networks")
         res["realtime"] = realtime_ladder(tmp, cfg["rt_sizes"], cfg["rt_steps"], log=_log)
+        _log(f"a node's CPU per step by phase (real time, {cfg['profile_nodes']} nodes, NETSETEST_PROFILE), default and trace objective")
+        res["node_profile"] = realtime_node_profile(tmp, cfg["profile_nodes"], cfg["rt_steps"])
+        res["node_profile_trace"] = realtime_node_profile(tmp, cfg["profile_nodes"], cfg["rt_steps"], objective="trace")
+        for p in (res["node_profile"], res["node_profile_trace"]):
+            _log(f"  {p['objective']}: {p.get('process_ms_per_step')} ms per node-step, {p['deadline_misses']} deadline misses")
         res["defences"] = defences(cfg)
     res["meta"]["load_after"] = _load()
     res["meta"]["duration_s"] = time.perf_counter() - t_all
@@ -248,6 +254,8 @@ def headline(res: dict) -> dict:
         "zenoh_overhead_ratio": res["zenoh"]["ratio"],
         "scaling": [{"nodes": r["nodes"], "ms_per_node_step": r["ms_per_node_step"]} for r in res["inmemory_scaling"]["rows"]],
         "realtime_max_nodes": res["realtime"]["max_nodes"],
+        "realtime_node_cpu_ms_per_step": (res.get("node_profile") or {}).get("process_ms_per_step"),
+        "realtime_node_cpu_ms_per_step_trace": (res.get("node_profile_trace") or {}).get("process_ms_per_step"),
         "fault_width_ratio_exact_nsnim": res["tightness"]["nsnim"]["width_ratio"]["f"],
         "fault_width_ratio_exact_saim": res["tightness"]["saim"]["width_ratio"]["f"],
         "node_rss_mb": _med([r["peak_rss_mb"] for r in node]),
@@ -346,16 +354,17 @@ def markdown(res: dict) -> str:
     lines += ["", f"Real time ({res['realtime']['steps']} steps at τs = 0.1 s; CPU in % of one core, steady state, "
               "the machine has 2 cores = 200 %):", "",
               "| nodes | attempt | load before | exit | deadline misses | late steps (first) | nodes missing | wall s | "
-              "CPU per node | all nodes | run (router) / vehicle / collector | other work on the machine | node peak RSS MB |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+              "CPU per node | ms per node-step | all nodes | run (router) / vehicle / collector | cores needed | other work on the machine | node peak RSS MB |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for r in res["realtime"]["runs"]:
         pr = r.get("processes") or {}
         roles = pr.get("role_cpu_pct") or {}
         lines.append(f"| {r['nodes']} | {r['attempt']} | {r.get('load_before')} | {r['exit_code']} | {r['deadline_misses']} | "
                      f"{r.get('late_steps')} ({r.get('first_late_step')}) | {r['nodes_missing']} | {f(r['wall_s'], '.0f')} | "
-                     f"{f(pr.get('node_cpu_pct_median'))} | {f(pr.get('nodes_cpu_pct_total'), '.0f')} | "
-                     f"{' / '.join(f(roles.get(k), '.1f') for k in ('run', 'vehicle', 'collector'))} | {f(pr.get('other_work_pct'), '.0f')} | "
-                     f"{f(pr.get('node_peak_rss_mb_median'), '.1f')} |")  # fmt: skip
+                     f"{f(pr.get('node_cpu_pct_median'))} | {f(r.get('node_cpu_ms_per_step'))} | {f(pr.get('nodes_cpu_pct_total'), '.0f')} | "
+                     f"{' / '.join(f(roles.get(k), '.1f') for k in ('run', 'vehicle', 'collector'))} | {f(r.get('demand_cores'))} | "
+                     f"{f(pr.get('other_work_pct'), '.0f')} | {f(pr.get('node_peak_rss_mb_median'), '.1f')} |")  # fmt: skip
+    lines += _profile_lines(res.get("node_profile") or {}, res.get("node_profile_trace") or {})
     d = res["defences"]
     lines += ["", "## Defences (bench/defences.py)", ""]
     for target, what in (("input", "node 2's input key (one subscriber)"), ("state", "node 3's state key (four subscribers in one process)")):
@@ -366,6 +375,42 @@ def markdown(res: dict) -> str:
     lines.append(f"- soak of {r['steps']} steps in memory: RSS {f(r['rss_start_mb'], '.1f')} → {f(r['rss_end_mb'], '.1f')} MB, "
                  f"slope {f(r['slope_mb_per_10k_steps'])} MB per 10 000 steps ({f(r['steps_per_s'], '.0f')} steps/s)")  # fmt: skip
     return "\n".join(lines) + "\n"
+
+
+PROFILE_ROWS = (
+    ("solve", "estimator step (data, Clarabel, certificate; two solves with the default objective `bank`)"),
+    ("decode", "msgpack + validation of received messages"),
+    ("handle", "the node's checks of them (context, plausibility, buffering)"),
+    ("build", "building the published NodeState (validated)"),
+    ("encode", "msgpack of it"),
+    ("put", "Zenoh `Publisher.put` in the node's thread"),
+    ("wait", "blocking for the next message: going to sleep and being woken (calls = wake-ups)"),
+    ("other", "the rest of the node's thread: its loop, deciding to step, bookkeeping"),
+    ("threads", "the process's other threads: Zenoh's runtime (TLS, routing), subscriber callbacks"),
+)
+
+
+def _profile_lines(*profiles: dict) -> list[str]:
+    """The per-step node profile table (``realtime_node_profile``), one column pair per objective."""
+    ok = [p for p in profiles if p.get("phases")]
+    if not ok:
+        return ["", "Node profile: no report (exit " + ", ".join(str(p.get("exit_code")) for p in profiles) + ")."]
+    p0 = ok[0]
+    lines = ["", f"Where a node's CPU goes per step: real-time ring of {p0['nodes']} nodes, {p0['steps']} steps, every node "
+             "profiled (`NETSETEST_PROFILE`, thread CPU; median over the nodes; " + "; ".join(
+                 f"{p['objective']}: load before {p['load_before']}, {p['deadline_misses']} deadline misses" for p in ok) + "):", "",
+             "| phase | " + " | ".join(f"{p['objective']}: µs per step | calls" for p in ok) + " | what |",
+             "|---|" + "---|---|" * len(ok) + "---|"]  # fmt: skip
+    for name, what in PROFILE_ROWS:
+        cells = []
+        for p in ok:
+            ph = p["phases"][name]
+            cells += [f"{1000 * ph['ms_per_step']:.0f}", f"{ph['calls_per_step']:.2f}" if name not in ("other", "threads") else ""]
+        lines.append(f"| {name} | " + " | ".join(cells) + f" | {what} |")
+    lines.append("| **process** | " + " | ".join(f"**{1000 * p['process_ms_per_step']:.0f}** | " for p in ok)
+                 + "the node's whole CPU per step; at 10 Hz " + ", ".join(
+                     f"{p['objective']}: {p['nodes']} nodes need {p['nodes'] * p['process_ms_per_step'] / 100:.2f} cores" for p in ok) + " |")
+    return lines
 
 
 def _cpus() -> int:

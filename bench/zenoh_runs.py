@@ -36,6 +36,7 @@ from pathlib import Path
 
 import msgpack
 
+from netsetest.estimator.objective import DEFAULT_OBJECTIVE
 from netsetest.runtime.forkserver import NAME_PREFIX
 from netsetest.runtime.launcher import free_ports
 from netsetest.runtime.processes import role_env
@@ -60,21 +61,24 @@ def _kill(procs: list[subprocess.Popen]) -> None:
 
 def cli_run(
     topology: Path, mode: str, clock: str = "lockstep", steps: int | None = None, timeout: float = 600.0,
-    sample_stepping_s: float | None = None,
+    sample_stepping_s: float | None = None, env: dict[str, str] | None = None, extra: list[str] | None = None,
 ) -> dict:
     """One ``netsetest run`` as a subprocess: wall time, exit code and the summary JSON; with
     ``sample_stepping_s`` (how long its stepping lasts), the CPU and memory of its processes
-    (:class:`ProcessSampler`) and its record (lateness per step)."""
+    (:class:`ProcessSampler`) and its record (lateness per step).  ``env``: added to the environment;
+    ``extra``: more ``netsetest run`` options."""
     sample = sample_stepping_s is not None
     with tempfile.TemporaryDirectory(prefix="nsbench-") as tmp:
         summary_path, record_path = Path(tmp) / "summary.json", Path(tmp) / "record.json"
         cmd = [*PY, "run", str(topology), "--mode", mode, "--clock", clock, "--quiet", "--summary-json", str(summary_path)]
         if steps:
             cmd += ["--steps", str(steps)]
+        cmd += extra or []
         if sample:
             cmd += ["--record", str(record_path)]
         t0 = time.perf_counter()
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                                env={**os.environ, **(env or {})})  # fmt: skip
         sampler = ProcessSampler(proc.pid) if sample else None
         try:
             _, err = proc.communicate(timeout=timeout)
@@ -125,10 +129,14 @@ def launch_to_step0(topology: Path, reps: int, steps: int = 3, timeout: float = 
 
 def _late_per_step(record_path: Path) -> dict[int, int] | None:
     """Step → how many nodes published it after its deadline (from the run's record)."""
-    if not record_path.exists():
+    from netsetest.records.record import RecordError, load_record
+
+    try:
+        record = load_record(record_path)
+    except RecordError:
         return None
     late: dict[int, int] = {}
-    for rows in json.loads(record_path.read_text())["nodes"].values():
+    for rows in record.raw_nodes.values():
         for e in rows:
             if e["late"]:
                 late[e["step"]] = late.get(e["step"], 0) + 1
@@ -428,13 +436,15 @@ def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int 
                 "violations": s.get("violations_total") if s else None,
                 "load_before": load, "late_steps": len(late), "first_late_step": min(late) if late else None,
                 "processes": r["processes"],
+                **cpu_demand(r["processes"], n),
             }  # fmt: skip
             runs.append(row)
             pr = r["processes"] or {}
             log(f"  real time, {n} nodes (attempt {attempt + 1}, load {load}): exit {r['exit_code']}, deadline misses {misses} "
                 f"in {len(late)} steps, missing {row['nodes_missing']}, {r['wall_s']:.0f} s; node CPU {pr.get('node_cpu_pct_median') or 0:.2f} % "
                 f"each, all nodes {pr.get('nodes_cpu_pct_total', 0):.0f} %, others {pr.get('role_cpu_pct')}, other work on the machine "
-                f"{pr.get('other_work_pct') or 0:.0f} %")  # fmt: skip
+                f"{pr.get('other_work_pct') or 0:.0f} %; {row['node_cpu_ms_per_step'] or 0:.2f} ms of CPU per node-step, "
+                f"{row['demand_cores'] or 0:.2f} cores needed")  # fmt: skip
             ok = r["exit_code"] == 0 and misses == 0 and not row["nodes_missing"]
             if ok:
                 break
@@ -442,6 +452,56 @@ def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int 
             break
         best = n
     return {"max_nodes": best, "runs": runs, "steps": steps}
+
+
+MACHINE_CORES = os.cpu_count() or 1
+
+
+def cpu_demand(processes: dict | None, nodes: int) -> dict:
+    """What a real-time run asks of the machine: a node's CPU per step (its share of a core over the
+    stepping phase × τs, robust to other work as long as the node keeps up), and the cores the run
+    needs at that cost — N nodes × CPU per step / τs, plus what vehicle, collector and router used."""
+    from bench.topologies import RING_TAU_S
+
+    share = (processes or {}).get("node_cpu_pct_median")
+    if share is None:
+        return {"node_cpu_ms_per_step": None, "demand_cores": None}
+    per_step_ms = share / 100.0 * RING_TAU_S * 1000.0
+    roles = sum(((processes or {}).get("role_cpu_pct") or {}).values()) / 100.0
+    return {"node_cpu_ms_per_step": per_step_ms, "demand_cores": nodes * per_step_ms / 1000.0 / RING_TAU_S + roles}
+
+
+def realtime_node_profile(directory: Path, nodes: int, steps: int, objective: str | None = None) -> dict:
+    """One real-time ring run with every node profiled (``NETSETEST_PROFILE``, netsetest/profile.py):
+    per phase of the node's own thread the median over nodes of CPU ms per step, and its calls per step.
+    ``objective``: the nodes' ``--objective`` (default: the run's default)."""
+    from bench.topologies import RING_TAU_S, ring_topology
+
+    topo = ring_topology(directory, nodes, steps)
+    with tempfile.TemporaryDirectory(prefix="nsprofile-") as prof:
+        load = _loadavg()
+        r = cli_run(topo, "zenoh", "realtime", timeout=120 + 3 * nodes + steps * 0.2, sample_stepping_s=steps * RING_TAU_S,
+                    env={"NETSETEST_PROFILE": prof}, extra=["--objective", objective] if objective else None)  # fmt: skip
+        reports = [json.loads(p.read_text()) for p in sorted(Path(prof).glob("node-*.json"))]
+    reports = [x for x in reports if x.get("steps")]
+    s = r["summary"] or {}
+    out: dict = {
+        "nodes": nodes, "steps": steps, "objective": objective or DEFAULT_OBJECTIVE, "load_before": load, "exit_code": r["exit_code"],
+        "profiled_nodes": len(reports),
+        "deadline_misses": sum(row.get("deadline_misses") or 0 for row in s.get("nodes", [])) if s else None,
+        "processes": r["processes"], **cpu_demand(r["processes"], nodes),
+    }  # fmt: skip
+    if not reports:
+        return out
+    med = lambda xs: statistics.median(xs)  # noqa: E731
+    out["phases"] = {
+        name: {"ms_per_step": med([x["phases"][name]["ms_per_step"] for x in reports]),
+               "calls_per_step": med([x["phases"][name]["calls_per_step"] for x in reports])}
+        for name in reports[0]["phases"]
+    }  # fmt: skip
+    out["thread_ms_per_step"] = med([x["thread_ms_per_step"] for x in reports])
+    out["process_ms_per_step"] = med([x["process_ms_per_step"] for x in reports])
+    return out
 
 
 # What a node process loads, in the order it loads it (netsetest.cli.main → the node's modules).

@@ -116,3 +116,45 @@ def test_interval_uses_the_published_sector_of_the_step() -> None:
         width = hi - lo
         assert not innovation_possible(s, xhat, P, rho, gamma, sec, hi + 1e-6 * width)
         assert not innovation_possible(s, xhat, P, rho, gamma, sec, lo - 1e-6 * width)
+
+
+def _grid_disjoint(x1, P1, r1, x2, P2, r2) -> bool:  # noqa: ANN001
+    """The λ-grid test alone (states_disjoint without its shortcut), as the reference."""
+    from netsetest.roles.plausibility import DISJOINT_MARGIN, LAMBDA_GRID
+
+    A1, A2, d = r1 * P1[:2, :2], r2 * P2[:2, :2], x2[:2] - x1[:2]
+    vals = [d @ np.linalg.solve(A1 / (1 - lam) + A2 / lam, d) for lam in LAMBDA_GRID]
+    return max(vals) > 1.0 + DISJOINT_MARGIN
+
+
+def test_shortcut_decides_as_the_grid() -> None:
+    """states_disjoint's cheap bound dᵀ(A₁+A₂)⁻¹d ≤ 1 only skips pairs the λ grid would not call disjoint:
+    same answer on random pairs at every distance, many of them near the boundary."""
+    rng = np.random.default_rng(5)
+    answers = set()
+    for _ in range(400):
+        x1 = rng.normal(size=3)
+        P1, P2 = _spd(rng, 0.1), _spd(rng, 0.1)
+        r1, r2 = float(rng.uniform(0.2, 1.5)), float(rng.uniform(0.2, 1.5))
+        direction = rng.normal(size=3)
+        x2 = x1 + direction * rng.uniform(0.0, 3.0) / np.linalg.norm(direction[:2])
+        got = states_disjoint(x1, P1, r1, x2, P2, r2)
+        assert got == _grid_disjoint(x1, P1, r1, x2, P2, r2)
+        answers.add(got)
+    assert answers == {True, False}
+
+
+def test_scalar_interval_matches_numpy() -> None:
+    """innovation_interval's scalar arithmetic equals the matrix formula (C̄x̂, √(ρ C̄PC̄ᵀ)) to rounding."""
+    rng = np.random.default_rng(9)
+    for saturated in (False, True):
+        for _ in range(200):
+            s = _sensor(rng, saturated)
+            xhat, P, rho, gamma = rng.normal(size=3), _spd(rng), float(rng.uniform(0.2, 2)), float(rng.uniform(0.8, 1.2))
+            cx = float(s.Cbar @ xhat)
+            c = float(np.sqrt(rho * s.Cbar @ P @ s.Cbar))
+            noise = abs(s.Dv) * np.sqrt(s.R)
+            lo_ref = gamma * min(s.h1 * (cx - c), s.h2 * (cx - c)) - noise - cx
+            hi_ref = gamma * max(s.h1 * (cx + c), s.h2 * (cx + c)) + noise - cx
+            lo, hi = innovation_interval(s, xhat, P, rho, gamma, None)
+            assert lo == pytest.approx(lo_ref, rel=1e-12, abs=1e-14) and hi == pytest.approx(hi_ref, rel=1e-12, abs=1e-14)

@@ -13,7 +13,7 @@ from netsetest.roles.node import Node
 from netsetest.bus import keys
 from netsetest.messages import Ready
 from netsetest.runtime.processes import (
-    IDLE_WAIT_S, READY_PERIOD_S, ROLE_ENV, Barrier, _all_roles, _node_wait, node_peers, role_env,
+    IDLE_WAIT_S, NEIGHBOUR_POLL_S, READY_PERIOD_S, ROLE_ENV, Barrier, _all_roles, _node_wait, node_peers, role_env,
 )
 
 
@@ -50,8 +50,9 @@ def test_node_blocks_until_something_is_due():
     assert _node_wait(node, ready_sent=10.0, neighbour_timeout=5.0, realtime=False, now=10.5) == 0.0
     node.k = 2
     assert _node_wait(node, 0.0, 5.0, False, now=100.0) == IDLE_WAIT_S  # started, nothing due: sleep on the queue
-    node.waiting_since = 98.0  # lockstep, waiting for neighbours: until the neighbour deadline
-    assert _node_wait(node, 0.0, 5.0, False, now=100.0) == 3.0
+    node.waiting_since = 98.0  # lockstep, waiting for neighbours: poll their lazy rings, never past the deadline
+    assert _node_wait(node, 0.0, 5.0, False, now=100.0) == NEIGHBOUR_POLL_S
+    assert _node_wait(node, 0.0, 5.0, False, now=102.9995) == pytest.approx(0.0005)
     assert _node_wait(node, 0.0, 5.0, False, now=104.0) == 0.0
     assert _node_wait(node, 0.0, 5.0, True, now=100.0) == IDLE_WAIT_S  # real time never waits for neighbours
 

@@ -10,6 +10,12 @@ most ``MAX_KEYS`` keys wait at once; beyond that the newest payload is dropped (
 ``inbox-keys``).  :meth:`Bus.pump` serves the waiting keys in turn, one payload each per round, for at
 most ``MAX_ROUNDS`` rounds and never more than was queued when it started — so a flood on one key costs
 a role at most ``MAX_ROUNDS`` decodes per pump, delays nothing else and cannot keep it from stepping.
+
+A *lazy* subscription (``subscribe(..., lazy=True)``, exact keys only) is for messages a role needs only
+when something else arrives (a real-time node's neighbour states, needed when its next input comes):
+their arrival does not end a blocking :meth:`Bus.pump`; the next pump that runs collects them first.  A
+transport may then keep them outside Python until that pump (Zenoh: a bounded ring buffer per key), which
+spares a thread switch and a wake-up of the role per message.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from collections.abc import Callable
 
 from netsetest.bus.keys import matches
 from netsetest.messages import BadMessage, Message, decode, encode
+from netsetest.profile import PROFILE
 
 Handler = Callable[[str, Message], None]
 
@@ -88,13 +95,24 @@ class Bus(ABC):
         self.received = 0
 
     def publish(self, key: str, msg: Message) -> None:
-        self._send(key, encode(msg))
+        if PROFILE is None:
+            self._send(key, encode(msg))
+            return
+        t = PROFILE.now()
+        payload = encode(msg)
+        t = PROFILE.add("encode", t)
+        self._send(key, payload)
+        PROFILE.add("put", t)
 
     @abstractmethod
     def _send(self, key: str, payload: bytes) -> None: ...
 
     @abstractmethod
-    def subscribe(self, key_expr: str, handler: Handler) -> None: ...
+    def subscribe(self, key_expr: str, handler: Handler, lazy: bool = False) -> None:
+        """Deliver messages on ``key_expr`` to ``handler`` (in :meth:`pump`); ``lazy``: see the module doc."""
+
+    def _collect_lazy(self) -> None:
+        """Move what lazy subscriptions hold outside the inbox into it (transports that keep them apart)."""
 
     def close(self) -> None:
         """Release transport resources (sessions, sockets); idempotent."""
@@ -110,8 +128,13 @@ class Bus(ABC):
         Handles at most what was queued when it started (and at most ``limit`` valid messages), so a
         flood cannot keep it from returning.  Returns how many valid messages ran.
         """
+        self._collect_lazy()
         if not len(self._inbox) and (timeout is None or timeout > 0):
+            t = PROFILE.now() if PROFILE is not None else 0
             self._inbox.wait(timeout)
+            if PROFILE is not None:
+                PROFILE.add("wait", t)
+            self._collect_lazy()
         budget = len(self._inbox)
         done = rounds = 0
         while budget > 0 and rounds < MAX_ROUNDS and (limit is None or done < limit):
@@ -122,12 +145,18 @@ class Bus(ABC):
             for key, payload, handler in batch:
                 budget -= 1
                 self.received += 1
+                t = PROFILE.now() if PROFILE is not None else 0
                 try:
                     msg = decode(payload)
                 except BadMessage as exc:
                     self.dropped[exc.reason] += 1
                     continue
+                finally:
+                    if PROFILE is not None:
+                        t = PROFILE.add("decode", t)
                 handler(key, msg)
+                if PROFILE is not None:
+                    PROFILE.add("handle", t)
                 done += 1
         return done
 
@@ -146,7 +175,8 @@ class MemoryBus(Bus):
         self._subs: list[tuple[str, Handler]] = []
         self._routes: dict[str, list[Handler]] = {}  # key → matching handlers (else O(N²) per step)
 
-    def subscribe(self, key_expr: str, handler: Handler) -> None:
+    def subscribe(self, key_expr: str, handler: Handler, lazy: bool = False) -> None:
+        # lazy changes nothing here: the in-memory runtime never blocks in pump
         self._subs.append((key_expr, handler))
         self._routes.clear()
 

@@ -117,7 +117,7 @@ class TSModel:
         th3, th4 = th1**2, th2**2
         m_hi = (1.0 / vx - th2) / (th1 - th2)  # weight of the 1/Vx = ϑ1 (low-speed) end
         q_hi = (1.0 / vx**2 - th4) / (th3 - th4)
-        m_hi, q_hi = float(np.clip(m_hi, 0, 1)), float(np.clip(q_hi, 0, 1))
+        m_hi, q_hi = min(max(m_hi, 0.0), 1.0), min(max(q_hi, 0.0), 1.0)  # np.clip costs µs per scalar call
         return np.array(
             [(1 - m_hi) * (1 - q_hi), (1 - m_hi) * q_hi, m_hi * (1 - q_hi), m_hi * q_hi]
         )

@@ -109,9 +109,16 @@ class NodeTotals:
     solve: array = field(default_factory=lambda: array("d"))  # 8 bytes per step: the median needs them
 
 
+def _isclose(a: float, b: float, rtol: float) -> bool:
+    """np.isclose(a, b, rtol, atol=1e-300) for finite scalars (messages carry finite numbers only),
+    without numpy's per-call cost: the collector runs it for every node at every step."""
+    return abs(a - b) <= 1e-300 + rtol * abs(b)
+
+
 class Collector:
     def __init__(self, scenario: Scenario, bus: Bus, run_id: str, sink: RecordSink | None = None) -> None:
         self.sc, self.bus, self.run = scenario, bus, run_id
+        self.node_cfg = {n.id: n for n in scenario.nodes}  # looked up per state
         self.sink = sink
         self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
         self.truth: dict[int, list[Truth]] = {}  # open steps: the copies received, first first
@@ -278,10 +285,11 @@ class Collector:
             f = n.fault(k)
             if t.faults[s] != f:
                 return "truth-fault"
-            if t.sector_ok[s] != n.sensor.sector_holds(np.r_[x, f]) or t.fault_ok.get(s) != fault_bound_holds(n, k):
+            xf = np.r_[x, f]
+            if t.sector_ok[s] != n.sensor.sector_holds(xf) or t.fault_ok.get(s) != fault_bound_holds(n, k):
                 return "truth-flags"
             r = t.r.get(s)
-            if r is None or not np.isclose(r, float(n.sensor.Cbar @ np.r_[x, f]), rtol=CHAIN_RTOL, atol=1e-300):
+            if r is None or not _isclose(r, float(n.sensor.Cbar @ xf), CHAIN_RTOL):
                 return "truth-sensor-input"
             if t.noise_ok[s] != bool(t.noise[s] ** 2 <= n.sensor.R * (1 + 1e-12)):
                 return "truth-flags"
@@ -306,11 +314,11 @@ class Collector:
         return (good[0], len(good) == 1) if good else (None, False)
 
     def _state_mismatch(self, i: int, st: NodeState, tr: Truth) -> str | None:
-        n, s = self.sc.node(i), str(i)
+        n, s = self.node_cfg[i], str(i)
         if st.gamma != tr.gamma[s]:
             return "state-not-from-input"
         innov = float(tr.y[s] - n.sensor.Cbar @ np.asarray(st.xhat))
-        if not np.isclose(st.innov, innov, rtol=INNOV_RTOL, atol=1e-300):
+        if not _isclose(st.innov, innov, INNOV_RTOL):
             return "state-not-from-input"
         if (st.set is None) != (n.estimator == SDP):
             return "state-wrong-method"  # a set estimator publishes its set, the SDP none
@@ -379,7 +387,7 @@ class Collector:
         tr, prev, s = self._step_truth, self.prev_truth, str(i)
         if tr is None:
             return "truth unknown"
-        if not self._sector_premise(self.sc.node(i), self._judged.get(i), tr):
+        if not self._sector_premise(self.node_cfg[i], self._judged.get(i), tr):
             return "sector"
         if not tr.noise_ok[s]:
             return "noise"
@@ -450,7 +458,7 @@ class Collector:
     def _sector_failed(self, i: int, st: NodeState, tr: Truth | None, cone: bool) -> bool:
         """A derived sector (measurement or fault-bound basis) missing the truth's C̄ x̄ although its
         premises held: an estimator bug."""
-        n = self.sc.node(i)
+        n = self.node_cfg[i]
         if tr is None or not cone or not n.sensor.saturated or st.sector_basis in ("none", "assumed"):
             return False
         return not sector_ok(n.sensor, _published_sector(st), tr.r[str(i)])

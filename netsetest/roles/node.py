@@ -37,8 +37,9 @@ from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.rejoin import rejoin_ellipsoid
 from netsetest.estimator.sdp import Ellipsoid, LocalEstimator, NeighbourState, Objective, StepInput, StepResult, Variant
 from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sector, measurement_interval
-from netsetest.messages import End, Message, NodeInput, NodeState, RunScope
+from netsetest.messages import End, Message, NodeInput, NodeState, RunScope, decode, encode
 from netsetest.models.sensor import NA
+from netsetest.profile import PROFILE
 from netsetest.roles.plausibility import innovation_possible, states_disjoint
 from netsetest.sets import set_to_wire
 
@@ -68,27 +69,21 @@ def enclosing_ellipsoid(s: base.GuaranteedSet, rho: float) -> tuple[np.ndarray, 
 class Node:
     def __init__(
         self, scenario: Scenario, node_id: int, bus: Bus, run_id: str, variant: Variant = "scheduled", rejoin: bool = False,
-        objective: Objective = DEFAULT_OBJECTIVE,
+        objective: Objective = DEFAULT_OBJECTIVE, lazy_neighbours: bool = False,
     ) -> None:  # fmt: skip
+        """``lazy_neighbours``: neighbour states do not wake the node: they are used when its next input
+        arrives, which does wake it (a runtime waiting for one polls; netsetest/bus/base.py, runtime/processes.py)."""
         self.sc, self.bus, self.run = scenario, bus, run_id
         self.cfg = scenario.node(node_id)
         self.id = node_id
-        self.estimator = LocalEstimator(
-            node_id,
-            self.cfg.sensor,
-            {j: scenario.node(j).sensor for j in self.cfg.in_weights},
-            self.cfg.in_weights,
-            scenario.model,
-            scenario.W,
-            variant,
-            fault_bound=FaultBound(self.cfg.fault_rate, self.cfg.fault_size),
-            objective=objective,
-        )
+        self.variant, self.objective = variant, objective
+        self.others = [j for j in self.cfg.in_weights if j != node_id]
+        self.sensors = {j: scenario.node(j).sensor for j in self.cfg.in_weights}  # looked up per message
+        self.estimator = self._new_estimator()
         self.set_estimator: base.SetEstimator | None = None  # a non-SDP method (it ignores neighbours)
         self.last_set: base.GuaranteedSet | None = None  # its last published set
         if self.cfg.estimator != SDP:
             self.set_estimator = node_set_estimator(scenario, node_id)
-        self.others = [j for j in self.cfg.in_weights if j != node_id]
         # estimator state, plain arrays: centre, shape, radius, and our own last published message
         self.xhat = self.cfg.x0_hat.copy()
         self.P = self.cfg.P0.copy()
@@ -108,8 +103,49 @@ class Node:
         self.late_start_evidence = 0
         bus.subscribe(keys.node_input(run_id, node_id), self.on_message)
         for j in self.others:
-            bus.subscribe(keys.node_state(run_id, j), self.on_message)
+            bus.subscribe(keys.node_state(run_id, j), self.on_message, lazy=lazy_neighbours)
         bus.subscribe(keys.end(run_id), self.on_message)
+
+    def _new_estimator(self) -> LocalEstimator:
+        sc, cfg = self.sc, self.cfg
+        return LocalEstimator(
+            self.id, cfg.sensor, self.sensors, cfg.in_weights, sc.model, sc.W, self.variant,
+            fault_bound=FaultBound(cfg.fault_rate, cfg.fault_size), objective=self.objective,
+        )  # fmt: skip
+
+    def warm_up(self) -> None:
+        """Run a step 0 and a step 1 on made-up data (the priors) through a throwaway estimator, and build,
+        encode and decode the state it would publish; nothing of it is kept or sent.
+
+        A process's first step costs ≈14 ms of CPU against ≈2 ms later (first calls into numpy.linalg,
+        Clarabel and the message models); in real time a hundred nodes take their step 0 at the same
+        moment, so a role process does this while it waits for the others to start.  The node's own
+        estimator is untouched, so its results are those of a node that did not warm up."""
+        if self.set_estimator is not None:
+            return
+        sc, cfg = self.sc, self.cfg
+        est = self._new_estimator()
+        gamma = sum(cfg.gamma_range) / 2 if sc.case == "saim" and cfg.gamma_range is not None else 1.0
+
+        def prior_state(j: int, ell: Ellipsoid, sector: Sector | None) -> NeighbourState:
+            sensor = sc.node(j).sensor
+            y = float(sensor.Cbar @ ell.xhat)
+            if sector is None:
+                sector = derive_sector(sensor, FaultBound(), measurement_interval(sensor, y, gamma), None)
+            return NeighbourState(ell.xhat, ell.P, ell.rho, gamma, 0.0, sector)
+
+        prior = Ellipsoid(cfg.x0_hat.copy(), cfg.P0.copy(), self.rho)
+        y = float(cfg.sensor.Cbar @ prior.xhat)
+        first = est.first(prior, y, gamma)
+        own = Ellipsoid(first.xhat, first.P, self.rho)
+        neigh = {j: prior_state(j, Ellipsoid(sc.node(j).x0_hat, sc.node(j).P0, sc.node(j).rho), None) for j in self.others}
+        if self.id in cfg.in_weights:
+            neigh[self.id] = prior_state(self.id, own, first.sector)
+        u, vx = (sc.steer_low + sc.steer_high) / 2, sc.vx(0)
+        res = est.step(own, StepInput(sc.model.weights(vx), u, y, gamma, neigh))
+        inp = NodeInput(step=1, node=self.id, y=y, gamma=gamma, u_prev=u, vx_prev=vx, expect_from=self.others)
+        decode(encode(inp))
+        decode(encode(self._state_message(inp, res.status, res, used=self.others, missing=[])))
 
     # ------------------------------------------------------------------ receiving
 
@@ -201,7 +237,7 @@ class Node:
         if msg.node in have:
             self.drop("duplicate-state")  # the first copy counts
             return
-        sensor = self.sc.node(msg.node).sensor
+        sensor = self.sensors[msg.node]
         if (msg.sector is not None) != sensor.saturated:
             self.drop("sector-mismatch")  # a saturating sensor publishes its sector, no other one does
             return
@@ -297,7 +333,10 @@ class Node:
             neigh[self.id] = self.own  # type: ignore[assignment]
         alpha = self.sc.model.weights(inp.vx_prev)  # type: ignore[arg-type]
         step_in = StepInput(alpha, inp.u_prev, inp.y, inp.gamma, neigh)  # type: ignore[arg-type]
+        t = PROFILE.now() if PROFILE is not None else 0
         res = self.estimator.step(Ellipsoid(self.xhat, self.P, self.rho), step_in)
+        if PROFILE is not None:
+            PROFILE.add("solve", t)
         self._publish(inp, res.status, res, used=sorted(j for j in neigh if j != self.id), missing=self.missing())
 
     def _publish_set(self, inp: NodeInput, status: str) -> None:
@@ -333,11 +372,25 @@ class Node:
         sector = res.sector
         cbar = self.cfg.sensor.Cbar
         self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, float(inp.y - cbar @ self.xhat), sector)
-        pub = res.public
-        innov = float(inp.y - cbar @ pub.xhat)
+        t = PROFILE.now() if PROFILE is not None else 0
+        msg = self._state_message(inp, status, res, used, missing, wire_set)
+        if PROFILE is not None:
+            PROFILE.add("build", t)
+        self.k = inp.step
+        self.inputs = {s: m for s, m in self.inputs.items() if s > self.k}
+        self.inbox = {s: m for s, m in self.inbox.items() if s >= self.k}
+        self.waiting_since, self.give_up = None, False
+        self.bus.publish(keys.node_state(self.run, self.id), msg)
+
+    def _state_message(
+        self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int], wire_set: dict | None = None
+    ) -> NodeState:
+        """The state message of ``res.public`` for the step of ``inp`` (validated)."""
+        pub, sector = res.public, res.sector
+        innov = float(inp.y - self.cfg.sensor.Cbar @ pub.xhat)
         rho_cert = pub.rho_cert if np.isfinite(pub.rho_cert) else None
         drops = self.drop_report()
-        msg = NodeState(
+        return NodeState(
             step=inp.step, node=self.id, xhat=[float(a) for a in pub.xhat], P=[float(a) for a in pub.P.reshape(NA * NA)],
             rho=self.rho, gamma=inp.gamma, innov=innov, status=status, rho_cert=rho_cert,  # type: ignore[arg-type]
             solve_ms=res.solve_ms, used=used, missing=missing,
@@ -345,8 +398,3 @@ class Node:
             sector=(sector.h1, sector.h) if sector is not None else None,
             sector_basis=sector.basis if sector is not None else "none", set=wire_set,
         )  # fmt: skip
-        self.k = inp.step
-        self.inputs = {s: m for s, m in self.inputs.items() if s > self.k}
-        self.inbox = {s: m for s, m in self.inbox.items() if s >= self.k}
-        self.waiting_since, self.give_up = None, False
-        self.bus.publish(keys.node_state(self.run, self.id), msg)

@@ -27,6 +27,8 @@ they are disjoint one of them is wrong — node i then leaves the neighbour out 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from netsetest.estimator.sector import Sector
@@ -41,12 +43,18 @@ def innovation_interval(
 ) -> tuple[float, float]:
     """The innovations y̌ = ỹ − C̄ x̂ a sensor with this published ellipsoid, sector and noise bound can
     produce; ``sector`` None: the sensor's fixed h1, h2 (1, 1 for a sensor without saturation)."""
-    cbar = sensor.Cbar
-    cx = float(cbar @ xhat)
-    c = float(np.sqrt(max(rho * float(cbar @ P @ cbar), 0.0)))
+    # scalar arithmetic on the 3-vectors: a node runs this for every neighbour message, and numpy's
+    # per-call overhead on 3×3 data is most of the cost
+    cb = (float(sensor.C[0]), float(sensor.C[1]), float(sensor.Ds))
+    x = [float(a) for a in xhat]
+    Pl = np.asarray(P).tolist()
+    cx = cb[0] * x[0] + cb[1] * x[1] + cb[2] * x[2]
+    Pc = [Pl[i][0] * cb[0] + Pl[i][1] * cb[1] + Pl[i][2] * cb[2] for i in range(3)]
+    cpc = cb[0] * Pc[0] + cb[1] * Pc[1] + cb[2] * Pc[2]
+    c = math.sqrt(max(rho * cpc, 0.0))
     r_lo, r_hi = cx - c, cx + c
     h1, h2 = (sector.h1, sector.h1 + sector.h) if sector is not None else (sensor.h1, sensor.h2)
-    noise = abs(sensor.Dv) * float(np.sqrt(sensor.R))
+    noise = abs(sensor.Dv) * math.sqrt(sensor.R)
     lo = gamma * min(h1 * r_lo, h2 * r_lo) - noise - cx
     hi = gamma * max(h1 * r_hi, h2 * r_hi) + noise - cx
     return lo, hi
@@ -69,6 +77,8 @@ def states_disjoint(x1: np.ndarray, P1: np.ndarray, rho1: float, x2: np.ndarray,
     A1 = rho1 * np.asarray(P1)[:NX, :NX]
     A2 = rho2 * np.asarray(P2)[:NX, :NX]
     d = np.asarray(x2)[:NX] - np.asarray(x1)[:NX]
+    if _overlap_bound(A1, A2, d) <= 1.0:
+        return False  # no λ can prove disjointness (the common case: honest neighbours overlap)
     # S(λ) = A₁/(1−λ) + A₂/λ for every λ of the grid at once; dᵀS⁻¹d by the 2×2 adjugate
     S = A1[None] / (1.0 - LAMBDA_GRID)[:, None, None] + A2[None] / LAMBDA_GRID[:, None, None]
     det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
@@ -77,3 +87,15 @@ def states_disjoint(x1: np.ndarray, P1: np.ndarray, rho1: float, x2: np.ndarray,
         val = num / det
     ok = np.isfinite(val) & (det > 0)
     return bool(np.any(val[ok] > 1.0 + DISJOINT_MARGIN))
+
+
+def _overlap_bound(A1: np.ndarray, A2: np.ndarray, d: np.ndarray) -> float:
+    """dᵀ(A₁ + A₂)⁻¹d, an upper bound of dᵀS(λ)⁻¹d for every λ ∈ (0, 1): S(λ) = A₁/(1−λ) + A₂/λ ⪰ A₁ + A₂
+    ≻ 0, so S(λ)⁻¹ ⪯ (A₁ + A₂)⁻¹.  At most 1: no λ proves the sets disjoint (+inf if A₁ + A₂ is not
+    definite, which leaves the decision to the full test)."""
+    a, b, c, e = (float(v) for v in (A1 + A2).ravel())  # [[a, b], [c, e]]
+    det = a * e - b * c
+    if not det > 0.0 or not a > 0.0:
+        return math.inf
+    d0, d1 = float(d[0]), float(d[1])
+    return (d0 * d0 * e - d0 * d1 * (b + c) + d1 * d1 * a) / det

@@ -32,6 +32,7 @@ from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.estimator.sdp import Variant
 from netsetest.messages import Message, Ready
 from netsetest.models.signals import SignalKind
+from netsetest.profile import PROFILE
 from netsetest.roles.node import Node
 from netsetest.runtime.report import EXIT_VIOLATION, exit_code, record_sink, write_summary
 
@@ -41,6 +42,7 @@ if TYPE_CHECKING:  # a node process never loads the vehicle and the collector (m
 
 READY_PERIOD_S = 0.1
 IDLE_WAIT_S = 1.0  # a started node with nothing due sleeps until a message arrives (or this long)
+NEIGHBOUR_POLL_S = 0.002  # lockstep, an expected neighbour state not in yet: look in its (lazy) ring this often
 EXIT_STOPPED = 128 + signal.SIGTERM  # a role stopped by SIGTERM/SIGINT
 CRASH_FLUSH_S = 0.2  # --crash-after: time for the last state to leave before SIGKILL
 
@@ -80,7 +82,8 @@ def log(role: str, text: str) -> None:
 class Barrier:
     """Tracks Ready messages of the other roles and repeats our own until we are started."""
 
-    def __init__(self, bus: Bus, run_id: str, me: Ready, others: set[tuple[str, int | None]]) -> None:
+    def __init__(self, bus: Bus, run_id: str, me: Ready, others: set[tuple[str, int | None]], lazy: bool = False) -> None:
+        """``lazy``: Ready messages do not wake the role (a node: it ticks every READY_PERIOD_S until started)."""
         self.bus, self.run, self.me, self.others = bus, run_id, me, others
         self.heard: set[tuple[str, int | None]] = set()
         self.heard_at: dict[tuple[str, int | None], float] = {}  # last Ready (a restarted node's comes late)
@@ -88,7 +91,7 @@ class Barrier:
         self.last_sent = 0.0
         self.prompt = False  # a role was heard for the first time: answer now, not at the next period
         for role, node in sorted(others, key=str):
-            bus.subscribe(keys.ready_of(run_id, keys.role_name(role, node)), self.on_message)
+            bus.subscribe(keys.ready_of(run_id, keys.role_name(role, node)), self.on_message, lazy=lazy)
 
     def on_message(self, key: str, msg: Message) -> None:
         if not isinstance(msg, Ready):
@@ -223,9 +226,12 @@ def run_node(
     crash_after: int | None = None,
 ) -> int:
     """``crash_after``: SIGKILL this process right after publishing that step (``run --kill``: exactly there)."""
-    node = Node(sc, node_id, bus, run_id, variant, rejoin=rejoin, objective=objective)
+    node = Node(sc, node_id, bus, run_id, variant, rejoin=rejoin, objective=objective, lazy_neighbours=True)
     role = f"node {node_id}"
-    barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), node_peers(sc, node_id))
+    barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), node_peers(sc, node_id), lazy=True)
+    first_profiled = 0
+    barrier.tick(time.monotonic())  # announce ourselves first: the others start meanwhile
+    node.warm_up()  # before we can report seen_all, so before the run can start
     while not node.ended:
         if node.k < 0:
             barrier.tick(time.monotonic())  # until started
@@ -239,21 +245,31 @@ def run_node(
                 node.give_up = True
             if not node.try_step(now):
                 break
+            if PROFILE is not None and node.k >= 1 and not PROFILE.started:
+                PROFILE.start_window()  # from the first solved step: start-up and step 0 left out
+                first_profiled = node.k
             if node.k == crash_after:
                 time.sleep(CRASH_FLUSH_S)  # the state of step k leaves before the crash
                 log(role, f"killing myself (SIGKILL) after step {node.k} as asked")
                 os.kill(os.getpid(), signal.SIGKILL)
+    if PROFILE is not None:
+        PROFILE.write(f"node-{node_id}", node.k - first_profiled if PROFILE.started else 0)
     return 0
 
 
 def _node_wait(node: Node, ready_sent: float, neighbour_timeout: float, realtime: bool, now: float) -> float:
-    """How long a node may block for its next message: until its next Ready is due (not started yet),
-    until its neighbour deadline (lockstep, waiting), else :data:`IDLE_WAIT_S`.  Event-driven: a
-    hundred idle nodes polling every few ms would keep two cores busy waking up."""
+    """How long a node may block for its next message: until its next Ready is due (not started yet);
+    lockstep, waiting for a neighbour: :data:`NEIGHBOUR_POLL_S` (neighbour states are lazy, they do not
+    wake the node) or until the neighbour deadline if sooner; else :data:`IDLE_WAIT_S`.  Event-driven
+    otherwise: a hundred idle nodes polling every few ms would keep two cores busy waking up.
+
+    Neighbour states are lazy in both clocks: the vehicle sends input k+1 only after it heard every
+    state of step k, which the neighbours sent at the same moment on a path no longer than the
+    vehicle's, so they are almost always in when the input wakes the node; polling is the rare case."""
     if node.k < 0:
         return max(0.0, ready_sent + READY_PERIOD_S - now)
     if not realtime and node.waiting_since is not None:
-        return max(0.0, node.waiting_since + neighbour_timeout - now)
+        return max(0.0, min(node.waiting_since + neighbour_timeout - now, NEIGHBOUR_POLL_S))
     return IDLE_WAIT_S
 
 

@@ -1,0 +1,143 @@
+"""Lazy subscriptions of the Zenoh bus (netsetest/bus/base.py, bus/zenoh_bus.py): their messages do not
+wake a blocking pump, the next pump delivers them, a flood on one is bounded by its ring and delays no
+other key; and a real-time run over Zenoh, whose nodes hear their neighbours lazily, uses them."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from netsetest.bus.base import MAX_PER_KEY, MAX_ROUNDS
+from netsetest.bus.zenoh_bus import ZenohBus
+from netsetest.messages import End, Message
+from netsetest.records.record import load_record
+from zenoh_helpers import PAPER6, ROOT, cli, free_ports
+
+LAZY, WAKE = "lazytest/a/lazy", "lazytest/a/wake"
+
+
+@pytest.fixture
+def pair():  # noqa: ANN201
+    """Two peers on loopback: ``rx`` subscribes (lazily on LAZY), ``tx`` publishes."""
+    p_rx, p_tx = free_ports(2)
+    rx = ZenohBus("peer", listen=[f"tcp/127.0.0.1:{p_rx}"], connect=[f"tcp/127.0.0.1:{p_tx}"])
+    tx = ZenohBus("peer", listen=[f"tcp/127.0.0.1:{p_tx}"], connect=[f"tcp/127.0.0.1:{p_rx}"])
+    got: list[tuple[str, int]] = []
+
+    def handler(key: str, msg: Message) -> None:
+        assert isinstance(msg, End)
+        got.append((key, msg.steps))
+
+    rx.subscribe(LAZY, handler, lazy=True)
+    rx.subscribe(WAKE, handler)
+    time.sleep(0.5)  # the peers connect and learn each other's subscriptions
+    try:
+        yield rx, tx, got
+    finally:
+        rx.close()
+        tx.close()
+
+
+def _pump_until(rx: ZenohBus, got: list, n: int, timeout: float = 5.0) -> None:
+    t0 = time.monotonic()
+    while len(got) < n and time.monotonic() - t0 < timeout:
+        rx.pump(timeout=0.05)
+
+
+def test_lazy_message_does_not_wake_but_the_next_pump_delivers_it(pair) -> None:  # noqa: ANN001
+    rx, tx, got = pair
+    tx.publish(LAZY, End(steps=1))
+    time.sleep(0.2)  # it is in rx's ring now
+    t0 = time.monotonic()
+    rx.pump(timeout=0.3)  # collected before the wait: delivered at once, no waiting
+    assert got == [(LAZY, 1)] and time.monotonic() - t0 < 0.2
+    tx.publish(LAZY, End(steps=2))
+    time.sleep(0.05)
+    got.clear()
+    t0 = time.monotonic()
+    rx.pump(timeout=0.4)  # already in the ring when the pump starts: delivered without waiting
+    assert got == [(LAZY, 2)] and time.monotonic() - t0 < 0.3
+    got.clear()
+    t0 = time.monotonic()
+    rx.pump(timeout=0.3)  # nothing in: the full timeout
+    assert got == [] and time.monotonic() - t0 >= 0.29
+
+
+def test_lazy_arrival_does_not_end_a_blocking_pump_a_normal_one_does(pair) -> None:  # noqa: ANN001
+    rx, tx, got = pair
+
+    def publish_later(key: str, steps: int) -> None:
+        threading.Timer(0.1, lambda: tx.publish(key, End(steps=steps))).start()
+
+    publish_later(LAZY, 3)
+    t0 = time.monotonic()
+    rx.pump(timeout=0.6)  # the lazy message arrives after 0.1 s and does not wake us
+    waited = time.monotonic() - t0
+    assert waited >= 0.59 and got == [(LAZY, 3)]  # …but is delivered once the wait ends
+    got.clear()
+    publish_later(WAKE, 4)
+    t0 = time.monotonic()
+    rx.pump(timeout=3.0)
+    assert got == [(WAKE, 4)] and time.monotonic() - t0 < 1.5
+
+
+def test_flood_on_a_lazy_key_is_bounded_and_delays_no_other_key(pair) -> None:  # noqa: ANN001
+    rx, tx, got = pair
+    flood = 10 * MAX_PER_KEY
+    for k in range(flood):
+        tx.publish(LAZY, End(steps=k))
+    tx.publish(WAKE, End(steps=999_999))
+    time.sleep(0.5)
+    rx.pump(timeout=1.0)
+    first = [s for key, s in got if key == LAZY]
+    assert (WAKE, 999_999) in got  # the other key in the same pump
+    assert 0 < len(first) <= MAX_ROUNDS  # the flooded key: at most MAX_ROUNDS decodes in one pump
+    _pump_until(rx, got, flood + 1, timeout=1.0)
+    lazy = [s for key, s in got if key == LAZY]
+    assert len(lazy) <= 2 * MAX_PER_KEY  # the ring (oldest dropped) and the inbox hold at most this
+    assert lazy == sorted(lazy) and lazy[-1] == flood - 1  # in order, the newest kept
+
+
+def test_lazy_subscription_needs_an_exact_key(pair) -> None:  # noqa: ANN001
+    rx, _, _ = pair
+    with pytest.raises(ValueError, match="exact key"):
+        rx.subscribe("lazytest/*/state", lambda k, m: None, lazy=True)
+
+
+@pytest.mark.timeout(180)
+def test_realtime_run_over_zenoh_uses_its_neighbours(tmp_path: Path) -> None:
+    """A real-time secured paper run: every node publishes every step, the truth is contained, and the
+    nodes, which hear their neighbours lazily, use them (a broken lazy path would leave ``used`` empty)
+    and wake about once per step (``NETSETEST_PROFILE``: blocking waits per step; ≈3 if every neighbour
+    state woke the node)."""
+    steps = 30
+    summary, record, prof = tmp_path / "s.json", tmp_path / "r.jsonl", tmp_path / "profile"
+    prof.mkdir()
+    out = subprocess.run(cli("run", PAPER6, "--mode", "zenoh", "--clock", "realtime", "--steps", str(steps), "--quiet",
+                             "--summary-json", str(summary), "--record", str(record)),
+                         cwd=ROOT, capture_output=True, text=True, timeout=170,
+                         env={**os.environ, "NETSETEST_PROFILE": str(prof)})  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    s = json.loads(summary.read_text())
+    assert s["violations_total"] == 0 and not s.get("nodes_missing")
+    rec = load_record(record)
+    used_all = total = 0
+    for rows in rec.raw_nodes.values():
+        assert [e["step"] for e in rows] == list(range(steps + 1))
+        for e in rows[1:]:
+            total += 1
+            used_all += not e["missing"] and len(e["used"]) == 2  # paper6: two in-neighbours each
+    assert used_all >= total // 2, f"only {used_all} of {total} node-steps used both neighbours"
+    reports = {p.name: json.loads(p.read_text()) for p in prof.glob("node-*.json")}
+    assert sorted(reports) == [f"node-{i}.json" for i in range(1, 7)]
+    for name, r in reports.items():
+        ph = r["phases"]
+        assert r["steps"] == steps - 1 and ph["solve"]["calls_per_step"] == 1.0, (name, r)  # steps 2..30
+        assert ph["decode"]["calls_per_step"] >= 2.0 and r["process_ms_per_step"] >= r["thread_ms_per_step"] > 0, (name, r)
+        assert ph["wait"]["calls_per_step"] <= 1.5, (name, ph["wait"])  # one wake-up per step: the input
