@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from dataclasses import replace
 from functools import cache
@@ -135,16 +134,14 @@ def test_compare_every_row_is_contained_where_its_assumptions_held(case: str, si
     assert by["zonotope"].fault_width_mean <= by["zonotope-q10"].fault_width_mean + TOL  # type: ignore[operator]
 
 
-def _bench_topologies():  # bench/ is not a package of the wheel: load its topology builder by path
-    spec = importlib.util.spec_from_file_location("bench_topologies", ROOT / "bench" / "topologies.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def _bench_topologies():  # the benchmark's ring builder
+    from netsetest.bench import topologies
+
+    return topologies
 
 
 def test_compare_on_a_non_paper_topology(tmp_path: Path) -> None:
-    """A ring of 8 with chords (bench/topologies.py), SAIM, worst-case signals."""
+    """A ring of 8 with chords (netsetest/bench/topologies.py), SAIM, worst-case signals."""
     topo = _bench_topologies().ring_topology(tmp_path, 8, steps=25, case="saim")
     c = compare(topo, (SDP, "zonotope", "interval", "strip", EXACT), (None,), ("worst",), (2,), None)
     for r in c.rows:

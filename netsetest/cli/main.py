@@ -104,6 +104,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fault-bounds", choices=["used", "all", "none"], default="used",
                    help="declared fault bounds: where the estimator relies on them (saturating sensors), "
                    "everywhere, or nowhere")  # fmt: skip
+    p = sub.add_parser("bench", help="the performance benchmark: solve times, tightness, Zenoh overhead, start-up, memory, real-time scale, defences")
+    p.add_argument("--quick", action="store_true", help="fewer steps and samples (about 10 minutes; default: the full benchmark, about 30)")
+    p.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
+    p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown (default: none)")
 
     from netsetest.cli import compare, tools
 
@@ -229,6 +233,15 @@ def cmd_exact(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(a: argparse.Namespace) -> int:
+    require("cvxpy", "the benchmark (its reference formulations)")
+    checks.output_file(a.json, "--json")
+    checks.output_file(a.markdown, "--markdown")
+    from netsetest.bench.run import run_bench
+
+    return run_bench(a.quick, a.json, a.markdown)
+
+
 def cmd_forkserver(a: argparse.Namespace) -> int:
     """The launcher's fork server (internal): each forked role runs ``main`` on its command line."""
     from netsetest.runtime.forkserver import serve
@@ -236,7 +249,7 @@ def cmd_forkserver(a: argparse.Namespace) -> int:
     return serve(a.control_fd, main)
 
 
-COMMANDS.update(run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, exact=cmd_exact, forkserver=cmd_forkserver)
+COMMANDS.update(run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, exact=cmd_exact, bench=cmd_bench, forkserver=cmd_forkserver)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

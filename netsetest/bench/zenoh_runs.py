@@ -368,7 +368,7 @@ def observed_lockstep(topology: Path, steps: int | None = None, timeout: float =
 
 def node_startup(directory: Path, reps: int = 3, timeout: float = 120.0) -> dict:
     """One node process launched into a waiting one-node network: start-up time and peak RSS."""
-    from bench.topologies import single_node_topology
+    from netsetest.bench.topologies import single_node_topology
 
     topo = single_node_topology(directory, steps=3)
     rows = []
@@ -416,7 +416,7 @@ def _loadavg() -> str:
 
 def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int = 1, log=print) -> dict:  # noqa: ANN001
     """Real-time runs of ring networks of growing size; the largest without a deadline miss."""
-    from bench.topologies import RING_TAU_S, ring_topology
+    from netsetest.bench.topologies import RING_TAU_S, ring_topology
 
     runs = []
     best = None
@@ -461,7 +461,7 @@ def cpu_demand(processes: dict | None, nodes: int) -> dict:
     """What a real-time run asks of the machine: a node's CPU per step (its share of a core over the
     stepping phase × τs, robust to other work as long as the node keeps up), and the cores the run
     needs at that cost — N nodes × CPU per step / τs, plus what vehicle, collector and router used."""
-    from bench.topologies import RING_TAU_S
+    from netsetest.bench.topologies import RING_TAU_S
 
     share = (processes or {}).get("node_cpu_pct_median")
     if share is None:
@@ -475,7 +475,7 @@ def realtime_node_profile(directory: Path, nodes: int, steps: int, objective: st
     """One real-time ring run with every node profiled (``NETSETEST_PROFILE``, netsetest/profile.py):
     per phase of the node's own thread the median over nodes of CPU ms per step, and its calls per step.
     ``objective``: the nodes' ``--objective`` (default: the run's default)."""
-    from bench.topologies import RING_TAU_S, ring_topology
+    from netsetest.bench.topologies import RING_TAU_S, ring_topology
 
     topo = ring_topology(directory, nodes, steps)
     with tempfile.TemporaryDirectory(prefix="nsprofile-") as prof:

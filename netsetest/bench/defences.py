@@ -6,7 +6,7 @@
   roles, so the figure includes the attacker's own cost; a flood from another process costs the victim
   only the receiving side.  The per-key bounded inbox and a pump that handles at most what was
   queued when it started keep the run stepping (the issue's bound: at least half the normal rate).
-The RSS slope over a long run is :mod:`bench.soak`.
+The RSS slope over a long run is :mod:`netsetest.bench.soak`.
 """
 
 from __future__ import annotations

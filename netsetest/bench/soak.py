@@ -1,5 +1,5 @@
 """Memory soak: a long in-memory run must keep its resident memory flat (vehicle and collector prune
-their per-step maps, the record streams to disk).  ``python -m bench.soak --steps N`` prints JSON:
+their per-step maps, the record streams to disk).  ``python -m netsetest.bench.soak --steps N`` prints JSON:
 RSS samples and the least-squares slope in MB per 10 000 steps after a warm-up.
 """
 
@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
 SAMPLE_EVERY = 250  # steps between RSS samples
 WARMUP_FRACTION = 0.25  # the first quarter (imports, caches, allocator pools) is not part of the slope
 
@@ -26,11 +25,11 @@ def rss_mb() -> float:
     return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
-def soak(steps: int, topology: str = "topologies/paper6.toml") -> dict:
+def soak(steps: int, topology: str = "paper6") -> dict:
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
 
-    sc = load_topology(ROOT / topology, None, steps)
+    sc = load_topology(topology, None, steps)  # a path or a bundled name
     samples: list[tuple[int, float]] = []
 
     def on_step(k: int) -> None:

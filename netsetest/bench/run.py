@@ -1,4 +1,4 @@
-"""``python -m bench.run``: the whole benchmark in one run (see docs/performance.md for what it means).
+"""``netsetest bench``: the whole benchmark in one run (see docs/performance.md for what it means).
 
 Parts, in order: per-node per-step solve times on the paper scenario (NSNIM/SAIM × scheduled/
 per-rule, fast path vs. the previous default, the straightforward and the naive formulations); the
@@ -6,7 +6,7 @@ published intervals of the paper run against the exact limit (``netsetest exact`
 run against the in-memory run of the paper scenario; ``netsetest run`` of the paper network from
 launch to step 0; one node process's peak RSS and start-up time; the largest real-time network without a
 deadline miss; the defences (stepping under a
-30 000 msg/s flood at one node, RSS slope over a long run, bench/defences.py).  ``--quick`` uses fewer steps and
+30 000 msg/s flood at one node, RSS slope over a long run, netsetest/bench/defences.py).  ``--quick`` uses fewer steps and
 samples (a few minutes); the default takes longer.  Times are wall-clock milliseconds on this
 machine, measured side by side in one run; medians and ratios, not single runs, are the figures.
 """
@@ -23,8 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-PAPER6 = ROOT / "topologies" / "paper6.toml"
+from netsetest.scenarios import TOPOLOGY_DIR
+
+PAPER6 = TOPOLOGY_DIR / "paper6.toml"
 
 QUICK = {
     "steps": 40, "ref_sched": 24, "ref_rule": 8, "naive": 12, "prev_sched": 24, "prev_rule": 8,
@@ -51,7 +52,7 @@ def _med(v: list[float]) -> float | None:
 def paper_solve_times(cfg: dict) -> dict:
     from netsetest.config.schema import load_topology
 
-    from bench.solvers import capture, side_by_side
+    from netsetest.bench.solvers import capture, side_by_side
 
     out = {}
     for case in ("nsnim", "saim"):
@@ -81,8 +82,8 @@ def paper_solve_times(cfg: dict) -> dict:
 def scaling(cfg: dict, tmp: Path) -> dict:
     from netsetest.config.schema import load_topology
 
-    from bench.solvers import capture
-    from bench.topologies import degrees, ring_topology, ring_with_chords
+    from netsetest.bench.solvers import capture
+    from netsetest.bench.topologies import degrees, ring_topology, ring_with_chords
 
     capture(load_topology(PAPER6, "nsnim", 5), "scheduled")  # warm-up
     rows = []
@@ -109,7 +110,7 @@ def zenoh_overhead(cfg: dict) -> dict:
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
 
-    from bench.zenoh_runs import cli_run, observed_lockstep
+    from netsetest.bench.zenoh_runs import cli_run, observed_lockstep
 
     sc = load_topology(PAPER6, "nsnim")
     mem, zen = [], []
@@ -137,8 +138,8 @@ def zenoh_overhead(cfg: dict) -> dict:
 
 
 def defences(cfg: dict) -> dict:
-    from bench.defences import flood
-    from bench.soak import soak
+    from netsetest.bench.defences import flood
+    from netsetest.bench.soak import soak
 
     out: dict = {}
     for target in ("input", "state"):
@@ -188,7 +189,7 @@ def tightness(cfg: dict, tmp: Path) -> dict:
 
 
 def run_bench(quick: bool = False, json_path: str | None = None, markdown_path: str | None = None) -> int:
-    from bench.zenoh_runs import launch_to_step0, node_memory_profile, node_startup, realtime_ladder, realtime_node_profile
+    from netsetest.bench.zenoh_runs import launch_to_step0, node_memory_profile, node_startup, realtime_ladder, realtime_node_profile
 
     cfg = QUICK if quick else FULL
     t_all = time.perf_counter()
@@ -366,7 +367,7 @@ def markdown(res: dict) -> str:
                      f"{f(pr.get('other_work_pct'), '.0f')} | {f(pr.get('node_peak_rss_mb_median'), '.1f')} |")  # fmt: skip
     lines += _profile_lines(res.get("node_profile") or {}, res.get("node_profile_trace") or {})
     d = res["defences"]
-    lines += ["", "## Defences (bench/defences.py)", ""]
+    lines += ["", "## Defences (netsetest/bench/defences.py)", ""]
     for target, what in (("input", "node 2's input key (one subscriber)"), ("state", "node 3's state key (four subscribers in one process)")):
         r = d[f"flood_{target}"]
         lines.append(f"- flood of {f(r['flood']['sent_per_s'], '.0f')} forged msg/s on {what}: {f(r['flood']['steps_per_s'], '.1f')} steps/s "
@@ -432,29 +433,3 @@ def _jsonable(o: object) -> object:
     if isinstance(o, np.ndarray):
         return o.tolist()
     return str(o)
-
-
-EXIT_BAD_INPUT = 2  # as netsetest's: a missing dependency or a bad option
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m bench.run [--quick] [--json PATH] [--markdown PATH]`` from the checkout's root."""
-    import argparse
-
-    from netsetest.extras import MissingExtra, require
-
-    ap = argparse.ArgumentParser(prog="python -m bench.run", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--quick", action="store_true", help="fewer steps and samples (a few minutes; default: the full benchmark)")
-    ap.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
-    ap.add_argument("--markdown", metavar="PATH", help="write the report as Markdown (default: none)")
-    a = ap.parse_args(argv)
-    try:
-        require("cvxpy", "the benchmark (its reference formulations)")
-    except MissingExtra as exc:
-        print(f"python -m bench.run: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    return run_bench(a.quick, a.json, a.markdown)
-
-
-if __name__ == "__main__":
-    sys.exit(main())
