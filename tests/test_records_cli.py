@@ -184,7 +184,7 @@ def test_summary_of_an_older_record_loads(nsnim: dict[str, Path], tmp_path: Path
 
 @pytest.mark.parametrize(("where", "value", "field"), [
     ("summary", "0", "summary.violations_total"), ("summary", True, "summary.violations_total"),
-    ("node", "x", "nodes[].fallbacks"), ("node", [1], "nodes[].fallbacks"),
+    ("node", "x", "summary.nodes[2].fallbacks"), ("node", [1], "summary.nodes[2].fallbacks"),
 ])  # fmt: skip
 def test_a_mistyped_summary_field_is_a_malformed_record(where: str, value: object, field: str, nsnim: dict[str, Path], tmp_path: Path) -> None:
     doc = _legacy_doc(nsnim["record"])

@@ -11,13 +11,12 @@ Drop and loss counters stay mappings: their keys (roles, reasons, causes) are da
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
-from typing import TypeVar
+
+import msgspec
 
 from netsetest.estimator.names import SDP
-
-T = TypeVar("T")
+from netsetest.validation import split_error
 
 DEFAULT_ESTIMATOR = SDP  # the node estimator of records written before nodes could run others
 RUN_FIELDS = ("mode", "security", "variant", "objective", "case", "signals", "steps", "seed", "clock")
@@ -57,38 +56,6 @@ class NodeSummary:
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
-
-    @classmethod
-    def from_dict(cls, d: Mapping) -> NodeSummary:
-        r = _Reader(d, "nodes[]")
-        return cls(
-            id=r.required("id", int),
-            estimator=r.get("estimator", str, DEFAULT_ESTIMATOR),
-            max_E=r.optional("max_E", float),
-            violations=r.get("violations", int, 0),
-            misses_assumption_broken=r.get("misses_assumption_broken", int, 0),
-            assumption_violations=r.get("assumption_violations", int, 0),
-            sector_failures=r.get("sector_failures", int, 0),
-            sectors_assumed=r.get("sectors_assumed", int, 0),
-            sector_breaks=r.get("sector_breaks", int, 0),
-            first_sector_break=r.optional("first_sector_break", int),
-            fault_bound_mean_width=r.optional("fault_bound_mean_width", float),
-            solve_ms_median=r.optional("solve_ms_median", float),
-            fallbacks=r.get("fallbacks", int, 0),
-            steps_reported=r.get("steps_reported", int, 0),
-            steps_rejected=r.get("steps_rejected", int, 0),
-            steps_contested=r.get("steps_contested", int, 0),
-            steps_evaluated=r.get("steps_evaluated", int, 0),
-            steps_contained=r.get("steps_contained", int, 0),
-            steps_covered=r.get("steps_covered", int, 0),
-            missing_steps=r.get("missing_steps", int, 0),
-            missing_from=r.optional("missing_from", int),
-            rejoined_at=r.optional("rejoined_at", int),
-            neighbour_messages_missing=r.get("neighbour_messages_missing", int, 0),
-            dropped_messages=r.get("dropped_messages", int, 0),
-            drops=r.counts("drops"),
-            deadline_misses=r.get("deadline_misses", int, 0),
-        )
 
 
 @dataclass(frozen=True)
@@ -148,79 +115,11 @@ class RunSummary:
         return out
 
     @classmethod
-    def from_dict(cls, d: Mapping) -> RunSummary:
-        r = _Reader(d, "summary")
-        nodes = r.get("nodes", list, [])
-        drops = r.get("drops", dict, {})
-        return cls(
-            violations_total=r.get("violations_total", int, 0),
-            misses_assumption_broken_total=r.get("misses_assumption_broken_total", int, 0),
-            sector_failures_total=r.get("sector_failures_total", int, 0),
-            steps_completed=r.get("steps_completed", int, -1),
-            node_steps_reported=r.get("node_steps_reported", int, 0),
-            node_steps_rejected=r.get("node_steps_rejected", int, 0),
-            node_steps_contested=r.get("node_steps_contested", int, 0),
-            node_steps_evaluated=r.get("node_steps_evaluated", int, 0),
-            node_steps_contained=r.get("node_steps_contained", int, 0),
-            node_steps_covered=r.get("node_steps_covered", int, 0),
-            node_steps_not_covered=r.counts("node_steps_not_covered"),
-            nodes_missing=r.ints("nodes_missing"),
-            nodes_rejoined=r.ints("nodes_rejoined"),
-            losses=r.counts("losses"),
-            losses_total=r.get("losses_total", int, 0),
-            dropped_messages=r.counts("dropped_messages"),
-            drops={str(role): _Reader(drops, "summary.drops").counts(role) for role in drops},
-            nodes=[NodeSummary.from_dict(_mapping(n, "summary.nodes[]")) for n in nodes],
-            mode=r.optional("mode", str),
-            security=r.optional("security", str),
-            variant=r.optional("variant", str),
-            objective=r.optional("objective", str),
-            case=r.optional("case", str),
-            signals=r.optional("signals", str),
-            steps=r.optional("steps", int),
-            seed=r.optional("seed", int),
-            clock=r.optional("clock", str),
-        )
-
-
-def _mapping(v: object, where: str) -> Mapping:
-    if not isinstance(v, Mapping):
-        raise ValueError(f"{where}: expected an object, got {type(v).__name__}")
-    return v
-
-
-class _Reader:
-    """Typed reads from one JSON object; a value of the wrong type is a ValueError naming the field."""
-
-    def __init__(self, d: object, where: str) -> None:
-        self.d, self.where = _mapping(d, where), where
-
-    def _check(self, key: str, v: object, kind: type[T]) -> T:
-        ok = isinstance(v, kind) and not (kind is int and isinstance(v, bool))
-        if kind is float and isinstance(v, int) and not isinstance(v, bool):
-            return float(v)  # type: ignore[return-value]  JSON writes 2.0 as 2 in other encoders
-        if not ok:
-            raise ValueError(f"{self.where}.{key}: expected {kind.__name__}, got {type(v).__name__}")
-        return v  # type: ignore[return-value]
-
-    def required(self, key: str, kind: type[T]) -> T:
-        if key not in self.d:
-            raise ValueError(f"{self.where}: no {key!r}")
-        return self._check(key, self.d[key], kind)
-
-    def get(self, key: str, kind: type[T], default: T) -> T:
-        return self._check(key, self.d[key], kind) if key in self.d else default
-
-    def optional(self, key: str, kind: type[T]) -> T | None:
-        v = self.d.get(key)
-        return None if v is None else self._check(key, v, kind)
-
-    def counts(self, key: str) -> dict[str, int]:
-        raw = self.get(key, dict, {})
-        return {str(k): _Reader({"n": n}, f"{self.where}.{key}").required("n", int) for k, n in raw.items()}
-
-    def ints(self, key: str) -> list[int]:
-        return [self._check(key, v, int) for v in self.get(key, list, [])]
-
-
-__all__ = ["DEFAULT_ESTIMATOR", "RUN_FIELDS", "NodeSummary", "RunSummary"]
+    def from_dict(cls, d: object) -> RunSummary:
+        """The typed summary of a record's or ``--summary-json``'s object: fields it lacks take their
+        defaults; a value of the wrong type (a bool for an int included) is a ValueError naming it."""
+        try:
+            return msgspec.convert(d, cls)
+        except msgspec.ValidationError as exc:
+            what, where = split_error(exc)
+            raise ValueError(f"summary{'.' + where if where else ''}: {what}") from None
