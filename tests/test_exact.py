@@ -7,6 +7,7 @@ from functools import cache
 
 import numpy as np
 import pytest
+from run_helpers import recorded_run
 
 from netsetest.analysis.exact import (
     COORDINATES,
@@ -20,8 +21,7 @@ from netsetest.analysis.exact import (
 )
 from netsetest.cli.main import main
 from netsetest.config.schema import Scenario, load_topology
-from netsetest.records.record import Record, load_record, save_record
-from netsetest.runtime.inmemory import run_inmemory
+from netsetest.records.record import Record, save_record
 
 PAPER6 = "topologies/paper6.toml"
 STEPS = 16
@@ -31,13 +31,8 @@ WITNESS_TOL = 1e-8
 CONTAIN_TOL = 1e-9
 
 
-@cache
 def _run(case: str, signals: str, seed: int, tmp: str) -> tuple[Scenario, Record]:
-    sc = load_topology(PAPER6, case, STEPS)
-    res = run_inmemory(sc, signals, "scheduled", seed)  # type: ignore[arg-type]
-    path = f"{tmp}/{case}-{signals}-{seed}.json"
-    save_record(path, res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
-    return sc, load_record(path)
+    return recorded_run(case, signals, seed, STEPS, tmp)
 
 
 @pytest.fixture(scope="module")
@@ -153,7 +148,7 @@ def test_a_shrunk_record_is_reported_narrower(tmp: str) -> None:
     cmp = compare_record(rec, ex)
     assert all(n.ratios["f"].narrower > STEPS // 2 for n in cmp.nodes)
     assert cmp.mean_width_ratio["f"] < 0.5
-    _run.cache_clear()  # the record object was changed in place
+    recorded_run.cache_clear()  # the record object was changed in place
 
 
 @pytest.mark.parametrize(("signals", "seed"), [("paper", 0), ("worst", 1)])

@@ -2,31 +2,23 @@
 
 from __future__ import annotations
 
-from functools import cache
-
 import numpy as np
 import pytest
+from run_helpers import recorded_run
 
 from netsetest.analysis.exact import COORDINATES, ExactBounds, exact_bounds, step_data
-from netsetest.config.schema import Scenario, load_topology
+from netsetest.config.schema import Scenario
 from netsetest.estimator.zonotope_w_radius import ZonotopeEstimator, reduce_order
-from netsetest.records.record import Record, load_record, save_record
-from netsetest.runtime.inmemory import run_inmemory
+from netsetest.records.record import Record
 from netsetest.sets import Box, Ellipsoid, SlicedEllipsoid, Slab, SumSet, Zonotope
 
-PAPER6 = "topologies/paper6.toml"
 STEPS = 30
 EXACT_TOL = 1e-7  # both are Clarabel answers at 1e-10 tolerances; the zonotope adds only float sums
 CONTAIN_TOL = 1e-8
 
 
-@cache
 def _run(case: str, signals: str, seed: int, tmp: str) -> tuple[Scenario, Record]:
-    sc = load_topology(PAPER6, case, STEPS)
-    res = run_inmemory(sc, signals, "scheduled", seed)  # type: ignore[arg-type]
-    path = f"{tmp}/{case}-{signals}-{seed}.json"
-    save_record(path, res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
-    return sc, load_record(path)
+    return recorded_run(case, signals, seed, STEPS, tmp)
 
 
 @pytest.fixture(scope="module")

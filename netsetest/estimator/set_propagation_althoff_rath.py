@@ -19,37 +19,23 @@ from __future__ import annotations
 import numpy as np
 
 from netsetest.config.schema import Scenario
-from netsetest.estimator.base import BASE_ASSUMPTIONS, Assumption, EstimatorError, NeighbourSet, SetEstimator, StepInput
-from netsetest.estimator.strip_althoff_rath import DEFAULT_ORDER, augmented_step, fault_model_required, prior_box
-from netsetest.estimator.zonotope_w_radius import reduce_order
+from netsetest.estimator.base import NeighbourSet, StepInput
+from netsetest.estimator.strip_althoff_rath import DEFAULT_ORDER, RandomWalkObserver, augmented_step
 from netsetest.models.sensor import NA
 from netsetest.sets import Zonotope
 
 
-class SetPropagationObserver(SetEstimator):
+class SetPropagationObserver(RandomWalkObserver):
     """003's set-propagation observer (8) with the F-radius gain, on the random-walk augmented model."""
 
     name = "setprop"
-    uses_neighbours = False
 
     def __init__(self, scenario: Scenario, node_id: int, order: int | None = DEFAULT_ORDER) -> None:
-        self.sc, self.node = scenario, scenario.node(node_id)
-        fault_model_required(self.node)
-        self.order = order
-        self.set: Zonotope | None = None
+        super().__init__(scenario, node_id, order)
         self.last_interval: tuple[float, float] = (-np.inf, np.inf)  # C̄ x̄ of the previous step
 
-    @property
-    def assumptions(self) -> tuple[Assumption, ...]:
-        return BASE_ASSUMPTIONS + ("fault_bound",)
-
     def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> Zonotope:
-        if self.set is None:
-            z = prior_box(self.node)
-        elif inp.u_prev is None or inp.vx_prev is None:
-            raise EstimatorError("a step after step 0 needs u and Vx of the previous step")
-        else:
-            z = self._propagate(self.set, inp.u_prev, inp.vx_prev)
+        z = self._predicted(inp)
         self.last_interval = self.node.sensor.measured_interval(inp.y, inp.gamma)
         self.set = z
         return z
@@ -68,7 +54,4 @@ class SetPropagationObserver(SetEstimator):
             mid, sigma, gain = 0.0, 0.0, np.zeros(NA)
         closed = m.A - np.outer(gain, c_bar)
         center = closed @ s.center + m.shift + gain * mid
-        gens = np.hstack([closed @ s.generators, (gain * sigma)[:, None], m.gens])
-        if self.order is not None:
-            gens = reduce_order(gens, self.order, np.eye(NA))
-        return Zonotope(center, gens)
+        return self._reduced(Zonotope(center, np.hstack([closed @ s.generators, (gain * sigma)[:, None], m.gens])))

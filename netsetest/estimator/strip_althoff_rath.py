@@ -18,6 +18,7 @@ It ignores the neighbours' sets.
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,10 +81,10 @@ def intersect_strip(z: Zonotope, a: np.ndarray, lo: float, hi: float) -> Zonotop
     return Zonotope(proj @ z.center + lam * mid, np.hstack([proj @ z.generators, (sigma * lam)[:, None]]))
 
 
-class StripObserver(SetEstimator):
-    """003's strip-based zonotopic observer on the random-walk augmented model."""
+class RandomWalkObserver(SetEstimator):
+    """What 003's single-sensor observers here share: the random-walk augmented model (its fault bound
+    required), the prior box at step 0, order reduction, and their assumptions."""
 
-    name = "strip"
     uses_neighbours = False
 
     def __init__(self, scenario: Scenario, node_id: int, order: int | None = DEFAULT_ORDER) -> None:
@@ -96,19 +97,37 @@ class StripObserver(SetEstimator):
     def assumptions(self) -> tuple[Assumption, ...]:
         return BASE_ASSUMPTIONS + ("fault_bound",)
 
-    def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> Zonotope:
+    def _predicted(self, inp: StepInput) -> Zonotope:
+        """The prior box at step 0, else the previous set through :meth:`_propagate`."""
         if self.set is None:
-            z = prior_box(self.node)
-        elif inp.u_prev is None or inp.vx_prev is None:
+            return prior_box(self.node)
+        if inp.u_prev is None or inp.vx_prev is None:
             raise EstimatorError("a step after step 0 needs u and Vx of the previous step")
-        else:
-            m = augmented_step(self.sc, self.node, inp.u_prev, inp.vx_prev)
-            z = Zonotope(m.A @ self.set.center + m.shift, np.hstack([m.A @ self.set.generators, m.gens]))
+        return self._propagate(self.set, inp.u_prev, inp.vx_prev)
+
+    @abstractmethod
+    def _propagate(self, s: Zonotope, u: float, vx: float) -> Zonotope:
+        """The previous set ``s`` through one step with input ``u`` and speed ``vx``."""
+
+    def _reduced(self, z: Zonotope) -> Zonotope:
+        return z if self.order is None else Zonotope(z.center, reduce_order(z.generators, self.order, np.eye(NA)))
+
+
+class StripObserver(RandomWalkObserver):
+    """003's strip-based zonotopic observer on the random-walk augmented model."""
+
+    name = "strip"
+
+    def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> Zonotope:
+        z = self._predicted(inp)
         lo, hi = self.node.sensor.measured_interval(inp.y, inp.gamma)
         z = intersect_strip(z, self.node.sensor.Cbar, lo, hi)
         if self.node.fault_size is not None:
             z = intersect_strip(z, _E3, -self.node.fault_size, self.node.fault_size)
-        if self.order is not None:
-            z = Zonotope(z.center, reduce_order(z.generators, self.order, np.eye(NA)))
-        self.set = z
-        return z
+        self.set = self._reduced(z)
+        return self.set
+
+    def _propagate(self, s: Zonotope, u: float, vx: float) -> Zonotope:
+        """The open-loop step of the augmented model: A S ⊕ B u ⊕ W."""
+        m = augmented_step(self.sc, self.node, u, vx)
+        return Zonotope(m.A @ s.center + m.shift, np.hstack([m.A @ s.generators, m.gens]))
