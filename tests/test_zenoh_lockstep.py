@@ -11,14 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from zenoh_helpers import (
-    read_record,
     PAPER6,
     PAPER6_LOSSY,
     RING,
     ROOT,
-    ProcessGuard,
     read_json,
-    run_parent,
+    read_record,
+    run_to_success,
 )
 
 pytestmark = pytest.mark.zenoh
@@ -49,14 +48,7 @@ class Runs:
                     "--record", str(rec), "--summary-json", str(summ)]  # fmt: skip
             if case:
                 args += ["--case", case]
-            guard = ProcessGuard(d / "logs")
-            try:
-                code = run_parent(guard, "run", args, timeout=100)
-                logs = guard.logs()
-            finally:
-                left = guard.cleanup()
-            assert not left, f"processes left behind: {left}"
-            assert code == 0, f"netsetest run {name}: exit {code}\n{logs}"
+            logs = run_to_success(d / "logs", args, timeout=100)
             self.zenoh[name] = {"record": read_record(rec), "summary": read_json(summ), "logs": logs}
         return self.zenoh[name]
 

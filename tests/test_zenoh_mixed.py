@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from test_mixed_network import MIXED, mixed_topology
-from zenoh_helpers import ProcessGuard, read_json, read_record, run_parent
+from zenoh_helpers import read_json, read_record, run_to_success
 
 from netsetest.config.schema import load_topology
 from netsetest.runtime.inmemory import run_inmemory
@@ -24,14 +24,7 @@ def test_zenoh_mixed_equals_inmemory(tmp_path: Path) -> None:
     rec, summ = tmp_path / "record.json", tmp_path / "summary.json"
     args = [str(topo), "--steps", str(STEPS), "--case", CASE, "--seed", str(SEED), "--signals", SIGNALS,
             "--record", str(rec), "--summary-json", str(summ)]  # fmt: skip
-    guard = ProcessGuard(tmp_path / "logs")
-    try:
-        code = run_parent(guard, "run", args, timeout=150)
-        logs = guard.logs()
-    finally:
-        left = guard.cleanup()
-    assert not left, f"processes left behind: {left}"
-    assert code == 0, f"netsetest run: exit {code}\n{logs}"
+    run_to_success(tmp_path / "logs", args, timeout=150)
     z = read_record(rec)
     m = run_inmemory(load_topology(topo, CASE, STEPS), SIGNALS, "scheduled", seed=SEED)
     assert z["truth"] == m.parts["truth"]

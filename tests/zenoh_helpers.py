@@ -286,6 +286,19 @@ def run_parent(guard: ProcessGuard, name: str, args: Sequence[str], timeout: flo
     return code
 
 
+def run_to_success(log_dir: Path, args: Sequence[str], timeout: float) -> str:
+    """``netsetest run ARGS`` with its own guard: it must exit 0 and leave no process; its logs."""
+    guard = ProcessGuard(log_dir)
+    try:
+        code = run_parent(guard, "run", args, timeout)
+        logs = guard.logs()
+    finally:
+        left = guard.cleanup()
+    assert not left, f"processes left behind: {left}"
+    assert code == 0, f"netsetest run {' '.join(map(str, args))}: exit {code}\n{logs}"
+    return logs
+
+
 # ------------------------------------------------------------------------------ roles launched by hand
 
 
