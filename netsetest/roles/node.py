@@ -192,8 +192,9 @@ class Node:
         if why is not None:
             self.drop(why)
             return
-        if self.k < 0 and not self.rejoin and msg.step > 0:
-            # a fresh node starts at step 0; later steps mean a hostile message or a run we missed
+        if self.k < 0 and not self.rejoin and msg.step > 0 and 0 not in self.inputs:
+            # a fresh node starts at step 0; later steps without it mean a hostile message or a run we
+            # missed (with step 0 in hand they are the next steps, arriving before we took step 0)
             self.drop("implausible-step" if msg.step > MAX_AHEAD else "before-start")
             self.late_start_evidence += 1
             if self.late_start_evidence >= LATE_START_EVIDENCE and 0 not in self.inputs:
