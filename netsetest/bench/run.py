@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from netsetest.config.schema import Scenario
 from netsetest.scenarios import TOPOLOGY_DIR
 
 PAPER6 = TOPOLOGY_DIR / "paper6.toml"
@@ -31,12 +32,12 @@ QUICK = {
     "steps": 40, "ref_sched": 24, "ref_rule": 8, "naive": 12, "prev_sched": 24, "prev_rule": 8,
     "scaling_steps": 20, "scaling_sizes": [6, 24, 96], "rt_sizes": [12, 24, 48, 64, 96, 128], "rt_steps": 50, "profile_nodes": 96, "startup_reps": 3,
     "launch_reps": 5,
-    "flood_steps": 30, "flood_rate": 30000, "soak_steps": 2000,
+    "flood_steps": 30, "flood_rate": 30000, "soak_steps": 2000, "cpu_steps": 400,
 }  # fmt: skip
 FULL = {
     "steps": 80, "ref_sched": 80, "ref_rule": 24, "naive": 40, "prev_sched": 80, "prev_rule": 24,
     "scaling_steps": 40, "scaling_sizes": [6, 24, 96], "rt_sizes": [6, 12, 24, 36, 48, 64, 80, 96, 112, 128], "rt_steps": 50, "profile_nodes": 96,
-    "startup_reps": 5, "launch_reps": 9, "flood_steps": 80, "flood_rate": 30000, "soak_steps": 20000,
+    "startup_reps": 5, "launch_reps": 9, "flood_steps": 80, "flood_rate": 30000, "soak_steps": 20000, "cpu_steps": 800,
 }  # fmt: skip
 
 
@@ -121,6 +122,7 @@ def zenoh_overhead(cfg: dict) -> dict:
         mem.append(time.perf_counter() - t0)
         obs = observed_lockstep(PAPER6)
         zen.append(obs["stepping_s"])
+    floor = lockstep_cpu_floor(sc, obs, cfg["cpu_steps"])
     cli_z = cli_run(PAPER6, "zenoh", "lockstep")
     cli_m = cli_run(PAPER6, "inmemory", "lockstep")
     res = {
@@ -129,12 +131,52 @@ def zenoh_overhead(cfg: dict) -> dict:
         "zenoh_exit_codes": obs["exit_codes"] if obs else None,
         "zenoh_violations": (obs["summary"] or {}).get("violations_total") if obs else None,
         "node_peak_rss_mb_in_run": obs["node_peak_rss_mb"] if obs else [],
+        "cpu_floor": floor,
         "cli_end_to_end": {"zenoh_s": cli_z["wall_s"], "inmemory_s": cli_m["wall_s"], "zenoh_exit": cli_z["exit_code"],
                            "inmemory_exit": cli_m["exit_code"], "ratio": cli_z["wall_s"] / cli_m["wall_s"]},
     }  # fmt: skip
     _log(f"  in memory {_med(mem):.2f} s, Zenoh lockstep stepping {_med(zen) or float('nan'):.2f} s (ratio {res['ratio'] or float('nan'):.2f}); "
          f"end to end {cli_z['wall_s']:.1f} s vs {cli_m['wall_s']:.1f} s")  # fmt: skip
+    if floor:
+        _log(f"  CPU per step: Zenoh {floor['zenoh_cpu_ms_per_step']:.2f} ms in its processes, in memory {floor['inmemory_ms_per_step']:.2f} ms; "
+             f"on {floor['cores']} cores the lockstep ratio cannot fall below {floor['ratio_floor']:.2f}")  # fmt: skip
     return res
+
+
+def lockstep_cpu_floor(sc: Scenario, short: dict | None, steps: int) -> dict | None:
+    """Why the lockstep Zenoh run cannot beat one process on this machine, in numbers: the CPU a step costs
+    in the run's processes (per role), from the difference of a long and the short run (start-up cancels),
+    against the in-memory run's time per step measured the same way; with ``cores`` cores the stepping
+    phase is at least CPU/cores per step, so the ratio is at least (CPU per step / cores) / in-memory."""
+    from netsetest.config.schema import load_topology
+    from netsetest.runtime.inmemory import run_inmemory
+
+    from netsetest.bench.zenoh_runs import MACHINE_CORES, observed_lockstep
+
+    if short is None or short["stepping_s"] is None:
+        return None
+    long = observed_lockstep(PAPER6, steps=steps)
+    extra = steps - short["steps"]
+    if long["stepping_s"] is None or extra <= 0:
+        return None
+    per_role: dict[str, list[float]] = {}
+    for name, u in long["usage"].items():
+        before = short["usage"].get(name, {}).get("cpu_s")
+        if u.get("cpu_s") is None or before is None:
+            return None
+        per_role.setdefault(name.rstrip("0123456789"), []).append(1e3 * (u["cpu_s"] - before) / extra)
+    t0 = time.perf_counter()
+    run_inmemory(sc, "paper", "scheduled", 0)
+    t1 = time.perf_counter()
+    run_inmemory(load_topology(PAPER6, sc.case, steps), "paper", "scheduled", 0)
+    mem_ms = 1e3 * ((time.perf_counter() - t1) - (t1 - t0)) / extra
+    zen_cpu = sum(sum(v) for v in per_role.values())
+    return {
+        "steps": steps, "cores": MACHINE_CORES, "inmemory_ms_per_step": mem_ms, "zenoh_cpu_ms_per_step": zen_cpu,
+        "cpu_ms_per_step_by_role": {r: (statistics.median(v), len(v)) for r, v in per_role.items()},
+        "zenoh_stepping_ms_per_step": 1e3 * (long["stepping_s"] - short["stepping_s"]) / extra,
+        "ratio_floor": zen_cpu / MACHINE_CORES / mem_ms,
+    }  # fmt: skip
 
 
 def defences(cfg: dict) -> dict:
@@ -253,6 +295,7 @@ def headline(res: dict) -> dict:
         "naive_ratio": ns["naive"]["ratio"],
         "previous_default_ratio": ns["prev"]["ratio"],
         "zenoh_overhead_ratio": res["zenoh"]["ratio"],
+        "zenoh_overhead_ratio_cpu_floor": (res["zenoh"].get("cpu_floor") or {}).get("ratio_floor"),
         "scaling": [{"nodes": r["nodes"], "ms_per_node_step": r["ms_per_node_step"]} for r in res["inmemory_scaling"]["rows"]],
         "realtime_max_nodes": res["realtime"]["max_nodes"],
         "realtime_node_cpu_ms_per_step": (res.get("node_profile") or {}).get("process_ms_per_step"),
@@ -296,6 +339,9 @@ def markdown(res: dict) -> str:
         v = res.get(key)
         lines.append(f"| {key} | {f(v)} | {target} | {'—' if v is None else ('yes' if ok(v) else 'no')} |")
     sc = res["inmemory_scaling"]
+    floor = res.get("zenoh_overhead_ratio_cpu_floor")
+    if floor is not None:  # why zenoh_overhead_ratio is what it is (section Zenoh)
+        lines.append(f"| zenoh_overhead_ratio_cpu_floor (the lowest ratio this machine's cores allow at the measured CPU per step) | {f(floor)} | — | — |")
     spread = max(abs(x) for x in sc["spread_vs_smallest"])
     lines.append(f"| scaling spread 6→96 nodes | {spread * 100:.0f} % | ≤ ±30 % | {'yes' if spread <= 0.3 else 'no'} |")
     lines += ["", "## Paper scenario, per node-step (wall ms; whole estimator step incl. certification)", "",
@@ -339,6 +385,7 @@ def markdown(res: dict) -> str:
     lines += ["", "## Zenoh", "",
               f"- lockstep stepping phase {f(_med(z['zenoh_stepping_s']))} s vs in memory {f(_med(z['inmemory_s']))} s: ratio {f(z['ratio'])} "
               f"(start-up before step 0: {f(z['zenoh_startup_s'])} s)",
+              *_cpu_floor_lines(z.get("cpu_floor")),
               f"- end to end through `netsetest run`: {f(z['cli_end_to_end']['zenoh_s'])} s vs {f(z['cli_end_to_end']['inmemory_s'])} s "
               f"(ratio {f(z['cli_end_to_end']['ratio'])})",
               "- `netsetest run` of the paper network (8 processes, mTLS + ACL), launch → step 0: " + ", ".join(
@@ -389,6 +436,17 @@ PROFILE_ROWS = (
     ("other", "the rest of the node's thread: its loop, deciding to step, bookkeeping"),
     ("threads", "the process's other threads: Zenoh's runtime (TLS, routing), subscriber callbacks"),
 )
+
+
+def _cpu_floor_lines(fl: dict | None) -> list[str]:
+    """Why the lockstep ratio is what it is: the CPU one step costs in the run's processes."""
+    if not fl:
+        return []
+    roles = ", ".join(f"{r} {v[0]:.2f}" + (f" × {v[1]}" if v[1] > 1 else "") for r, v in fl["cpu_ms_per_step_by_role"].items())
+    return [f"- CPU per lockstep step (paper run, {fl['steps']} against its 80 steps, start-up cancels): {fl['zenoh_cpu_ms_per_step']:.2f} ms "
+            f"in the Zenoh run's processes ({roles} ms) against {fl['inmemory_ms_per_step']:.2f} ms per step in memory; stepping "
+            f"{fl['zenoh_stepping_ms_per_step']:.2f} ms per step.  On {fl['cores']} cores a step cannot take less than CPU/{fl['cores']}, "
+            f"so the ratio cannot fall below **{fl['ratio_floor']:.2f}** at these costs, however well the processes overlap"]
 
 
 def _profile_lines(*profiles: dict) -> list[str]:

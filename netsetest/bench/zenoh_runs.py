@@ -285,7 +285,8 @@ def _vm_hwm_mb(pid: int) -> float | None:
 
 
 def _wait_rusage(procs: dict[str, subprocess.Popen], deadline: float) -> dict[str, dict]:
-    """Wait for the children: exit code and peak RSS (last VmHWM read before the exit) of each."""
+    """Wait for the children: exit code, peak RSS (last VmHWM read before the exit) and CPU seconds
+    (user + system, from the kernel's rusage at the exit) of each."""
     left = dict(procs)
     out: dict[str, dict] = {}
     hwm: dict[str, float] = {}
@@ -294,14 +295,16 @@ def _wait_rusage(procs: dict[str, subprocess.Popen], deadline: float) -> dict[st
             v = _vm_hwm_mb(p.pid)
             if v is not None:
                 hwm[name] = max(v, hwm.get(name, 0.0))
-            if p.poll() is not None:
-                out[name] = {"exit_code": p.returncode, "peak_rss_mb": hwm.get(name)}
+            pid, status, usage = os.wait4(p.pid, os.WNOHANG)
+            if pid:
+                p.returncode = os.waitstatus_to_exitcode(status)  # reaped here: Popen must not wait again
+                out[name] = {"exit_code": p.returncode, "peak_rss_mb": hwm.get(name), "cpu_s": usage.ru_utime + usage.ru_stime}
                 del left[name]
         time.sleep(0.01)
     if left:
         _kill(list(left.values()))
         for name in left:
-            out[name] = {"exit_code": None, "peak_rss_mb": hwm.get(name)}
+            out[name] = {"exit_code": None, "peak_rss_mb": hwm.get(name), "cpu_s": None}
     return out
 
 
