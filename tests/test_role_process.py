@@ -79,3 +79,25 @@ def test_run_gives_large_networks_longer_to_start():
 
     assert run_start_timeout(8) == START_TIMEOUT_S  # the paper run keeps the vehicle's default
     assert run_start_timeout(130) == 130 * START_S_PER_ROLE > START_TIMEOUT_S  # 128 nodes + vehicle + collector
+
+
+def test_roles_declare_their_publishers_before_the_run():
+    """The vehicle's inputs, truth and End and a node's state are declared at construction, so that the
+    transport announces them during start-up rather than in step 0's burst."""
+    from netsetest.roles.vehicle import Vehicle
+
+    class Recording(MemoryBus):
+        def __init__(self) -> None:
+            super().__init__()
+            self.declared: list[str] = []
+
+        def declare_publisher(self, key: str) -> None:
+            self.declared.append(key)
+
+    sc = load_topology("topologies/paper6.toml")
+    bus = Recording()
+    Vehicle(sc, bus, "t", "paper", 0)
+    assert set(bus.declared) == {keys.truth("t"), keys.end("t"), *(keys.node_input("t", i) for i in sc.ids)}
+    bus.declared.clear()
+    Node(sc, 3, bus, "t")
+    assert bus.declared == [keys.node_state("t", 3)]

@@ -107,6 +107,9 @@ class Bus(ABC):
     @abstractmethod
     def _send(self, key: str, payload: bytes) -> None: ...
 
+    def declare_publisher(self, key: str) -> None:
+        """Get ready to publish on ``key`` before the first message (a transport announces it now)."""
+
     @abstractmethod
     def subscribe(self, key_expr: str, handler: Handler, lazy: bool = False) -> None:
         """Deliver messages on ``key_expr`` to ``handler`` (in :meth:`pump`); ``lazy``: see the module doc."""

@@ -120,7 +120,13 @@ class ZenohBus(Bus):
                     break
                 self._enqueue(key, sample.payload.to_bytes(), handler)
 
-    def _send(self, key: str, payload: bytes) -> None:
+    def declare_publisher(self, key: str) -> None:
+        """Roles declare the keys they will publish at start-up: the declarations reach the router and the
+        subscribers then, not in the first step's burst (a hundred nodes take step 0 at once)."""
+        self._publisher(key)
+
+    def _publisher(self, key: str) -> zenoh.Publisher:
+        """The key's publisher, declared once (by :meth:`declare_publisher` or at the first put)."""
         pub = self._pubs.get(key)
         if pub is None:
             # lockstep needs every message: reliable transport, and block rather than drop when congested
@@ -128,7 +134,10 @@ class ZenohBus(Bus):
                 key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE
             )
             self._pubs[key] = pub
-        pub.put(payload)
+        return pub
+
+    def _send(self, key: str, payload: bytes) -> None:
+        self._publisher(key).put(payload)
 
     def send_raw(self, key: str, payload: bytes) -> None:
         """Publish arbitrary bytes (tests inject malformed messages with it)."""

@@ -105,6 +105,7 @@ class Node:
         for j in self.others:
             bus.subscribe(keys.node_state(run_id, j), self.on_message, lazy=lazy_neighbours)
         bus.subscribe(keys.end(run_id), self.on_message)
+        bus.declare_publisher(keys.node_state(run_id, node_id))
 
     def _new_estimator(self) -> LocalEstimator:
         sc, cfg = self.sc, self.cfg

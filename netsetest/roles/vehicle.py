@@ -93,6 +93,8 @@ class Vehicle:
         self.drops: Counter[str] = Counter()
         bus.subscribe(keys.node_state(run_id, "*"), self.on_message)
         bus.subscribe(keys.end(run_id), self.on_message)
+        for key in [keys.truth(run_id), keys.end(run_id), *(keys.node_input(run_id, i) for i in scenario.ids)]:
+            bus.declare_publisher(key)
 
     def on_message(self, key: str, msg: Message) -> None:
         """Record who reported; a node declared dead that reports again (late, or rejoined) is alive
