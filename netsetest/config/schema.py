@@ -16,6 +16,7 @@ extreme-profile sweep (tests/test_estimator_edges.py) runs the network at their 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import re
 import stat
@@ -327,14 +328,18 @@ class Scenario:
     loss: LinkLoss = dataclasses.field(default_factory=LinkLoss)
 
     def node(self, node_id: int) -> NodeConfig:
-        for n in self.nodes:
-            if n.id == node_id:
-                return n
-        raise ConfigError(f"{self.path}: no node with id {node_id} (ids: {[n.id for n in self.nodes]})")
+        n = self._by_id.get(node_id)
+        if n is None:
+            raise ConfigError(f"{self.path}: no node with id {node_id} (ids: {self.ids})")
+        return n
+
+    @functools.cached_property
+    def _by_id(self) -> dict[int, NodeConfig]:  # roles look nodes up per message: a hundred nodes, every step
+        return {n.id: n for n in self.nodes}
 
     @property
     def ids(self) -> list[int]:
-        return [n.id for n in self.nodes]
+        return list(self._by_id)
 
     def vx(self, k: int) -> float:
         return self.speed.kmh(k * self.tau_s) * KMH

@@ -13,6 +13,8 @@ h1 = h2 = 1, σ = identity and φ ≡ 0.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,6 +27,14 @@ E_DESCRIPTOR = np.diag([1.0, 1.0, 0.0])  # E of (11)
 # σ-interval this close to ±r_max may be the limit itself rounded (worst-case noise at exactly its
 # bound) and is treated as open, which is always sound (also used by estimator/sector.py)
 ROUNDING_MARGIN = 1e-9
+
+
+def augmented(x: np.ndarray | Sequence[float], f: float) -> np.ndarray:
+    """x̄ = [β, r, f] (NA,) of the vehicle state x (NX,) and a sensor fault f (np.r_ costs ≈8 µs, this ≈1)."""
+    xbar = np.empty(NA)
+    xbar[:NX] = x
+    xbar[NX] = f
+    return xbar
 
 
 @dataclass(frozen=True)
@@ -40,10 +50,12 @@ class Sensor:
     h1: float = 1.0
     h2: float = 1.0
 
-    @property
+    @functools.cached_property
     def Cbar(self) -> np.ndarray:
-        """C̄_i = [C_i, Ds_i] (1×3 as a flat vector)."""
-        return np.array([self.C[0], self.C[1], self.Ds])
+        """C̄_i = [C_i, Ds_i] (1×3 as a flat vector; read-only, built once: roles use it per message)."""
+        cbar = np.array([self.C[0], self.C[1], self.Ds])
+        cbar.flags.writeable = False
+        return cbar
 
     @property
     def h(self) -> float:

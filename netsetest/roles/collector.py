@@ -51,6 +51,7 @@ from netsetest.estimator.names import SDP
 from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.sector import Sector, sector_ok
 from netsetest.messages import End, Message, NodeState, RunScope, Truth
+from netsetest.models.sensor import augmented
 from netsetest.records.record import RecordSink
 from netsetest.records.summary import RUN_FIELDS, NodeSummary, RunSummary
 from netsetest.roles.vehicle import fault_bound_holds
@@ -74,7 +75,7 @@ def _published_sector(st: NodeState) -> Sector | None:
 
 def _in_prior(n: NodeConfig, tr: Truth) -> bool:
     """Assumption 1: the true x̄_0 lies in node n's prior ellipsoid."""
-    e = np.r_[tr.x, tr.faults[str(n.id)]] - n.x0_hat
+    e = augmented(tr.x, tr.faults[str(n.id)]) - n.x0_hat
     return float(e @ np.linalg.solve(n.P0, e)) <= n.rho
 
 
@@ -285,7 +286,7 @@ class Collector:
             f = n.fault(k)
             if t.faults[s] != f:
                 return "truth-fault"
-            xf = np.r_[x, f]
+            xf = augmented(x, f)
             if t.sector_ok[s] != n.sensor.sector_holds(xf) or t.fault_ok.get(s) != fault_bound_holds(n, k):
                 return "truth-flags"
             r = t.r.get(s)
@@ -334,7 +335,7 @@ class Collector:
         st, tr = self._judged.get(i), self._step_truth
         if st is None or tr is None or (i, k) in self.evaluated:
             return
-        xbar = np.r_[tr.x, tr.faults[str(i)]]
+        xbar = augmented(tr.x, tr.faults[str(i)])
         e = xbar - np.asarray(st.xhat)
         E = float(e @ np.linalg.solve(st.P_matrix(), e))
         if st.set is None:

@@ -25,6 +25,7 @@ from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import NodeConfig, Scenario
 from netsetest.messages import End, Message, NodeInput, NodeState, RunScope, Truth
+from netsetest.models.sensor import augmented
 from netsetest.models.signals import ExogenousSignals, SignalKind
 
 
@@ -157,11 +158,11 @@ class Vehicle:
         y, y0, faults, sector_ok, noise_ok, r, fault_ok = {}, {}, {}, {}, {}, {}, {}
         for idx, n in enumerate(sc.nodes):
             f = n.fault(k)
-            xbar = np.r_[self.x, f]
+            xbar = augmented(self.x, f)
             r[n.id] = float(n.sensor.Cbar @ xbar)
             fault_ok[n.id] = fault_bound_holds(n, k)
             y[n.id] = n.sensor.measure(xbar, gamma[idx], v[idx])
-            y0[n.id] = n.sensor.measure(np.r_[self.x, 0.0], gamma[idx], v[idx])
+            y0[n.id] = n.sensor.measure(augmented(self.x, 0.0), gamma[idx], v[idx])
             faults[n.id] = f
             sector_ok[n.id] = n.sensor.sector_holds(xbar)
             noise_ok[n.id] = bool(v[idx] ** 2 <= n.sensor.R * (1 + 1e-12))

@@ -23,7 +23,7 @@ import zenoh
 from netsetest.bus import keys
 from netsetest.bus.zenoh_bus import BusError, ZenohMode, zenoh_config
 from netsetest.messages import BadMessage, End, Message, NodeInput, NodeState, Truth, decode
-from netsetest.models.sensor import NA
+from netsetest.models.sensor import NA, augmented
 from netsetest.runtime.security import ObserverAccess, client_settings
 from netsetest.sets import set_from_wire
 
@@ -198,7 +198,7 @@ class LiveTable:
         del self.pending[node][step]
         row = self.rows[node]
         if row.E_step is None or step >= row.E_step:  # the latest step whose truth is known
-            e = np.r_[tr.x, tr.faults[str(node)]] - np.asarray(st.xhat)
+            e = augmented(tr.x, tr.faults[str(node)]) - np.asarray(st.xhat)
             row.E, row.E_step = float(e @ np.linalg.solve(st.P_matrix(), e)), step
 
     @property
