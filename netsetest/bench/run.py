@@ -30,7 +30,7 @@ PAPER6 = TOPOLOGY_DIR / "paper6.toml"
 
 QUICK = {
     "steps": 40, "ref_sched": 24, "ref_rule": 8, "naive": 12, "prev_sched": 24, "prev_rule": 8,
-    "scaling_steps": 20, "scaling_sizes": [6, 24, 96], "rt_sizes": [12, 24, 48, 64, 96, 128], "rt_steps": 50, "profile_nodes": 96, "startup_reps": 3,
+    "scaling_steps": 20, "scaling_sizes": [6, 24, 96], "rt_sizes": [12, 24, 48, 64, 80, 96, 128], "rt_steps": 50, "profile_nodes": 96, "startup_reps": 3,
     "launch_reps": 5,
     "flood_steps": 30, "flood_rate": 30000, "soak_steps": 2000, "cpu_steps": 400,
 }  # fmt: skip
