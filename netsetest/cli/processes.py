@@ -17,9 +17,9 @@ from netsetest.bus import keys
 from netsetest.cli import checks
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
-from netsetest.runtime.launcher import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, START_TIMEOUT_S
 from netsetest.runtime.report import EXIT_BAD_INPUT
 from netsetest.runtime.security import RUN_ENV_FILE, RUN_ID_ENV
+from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, START_TIMEOUT_S
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 ZENOH_DEFAULT_PORT = 7447
