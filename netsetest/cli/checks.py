@@ -6,8 +6,6 @@ import argparse
 import os
 from pathlib import Path
 
-from netsetest.records.record import check_record_path
-
 SEED_MAX = 2**63 - 1  # numpy's SeedSequence takes any non-negative integer; keep it to 64 bits
 
 
@@ -58,6 +56,8 @@ def output_file(path: str | None, option: str) -> None:
 
 def record_file(path: str | None) -> None:
     """``--record``: writable, and its format's optional dependency installed (MissingExtra if not)."""
+    from netsetest.records.record import check_record_path  # the records load only for a command that writes one
+
     output_file(path, "--record")
     check_record_path(path)
 

@@ -12,14 +12,18 @@ import json
 import os
 import sys
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 from netsetest.analysis.errors import CompareError, ExactError
 from netsetest.cli import checks
 from netsetest.config.schema import ConfigError
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.extras import MissingExtra, require
-from netsetest.records.record import Record, RecordError
+from netsetest.records.errors import RecordError
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED
+
+if TYPE_CHECKING:  # a role process never loads the records (memory: docs/performance.md)
+    from netsetest.records.record import Record
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 

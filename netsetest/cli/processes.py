@@ -17,9 +17,9 @@ from netsetest.bus import keys
 from netsetest.cli import checks
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
-from netsetest.runtime.launcher import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, START_TIMEOUT_S
 from netsetest.runtime.report import EXIT_BAD_INPUT
 from netsetest.runtime.security import RUN_ENV_FILE, RUN_ID_ENV
+from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, START_TIMEOUT_S
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 ZENOH_DEFAULT_PORT = 7447
@@ -195,11 +195,12 @@ def _role(name: str, who: str, a: argparse.Namespace, body: Callable) -> int:
     """Run a role process: ``name`` for its log lines, ``who`` its certificate name (keys.role_name)."""
     from netsetest.bus.zenoh_bus import BusError
     from netsetest.config.schema import load_topology
-    from netsetest.runtime.processes import EXIT_STOPPED, Stop, install_signal_handlers, log
+    from netsetest.runtime.processes import EXIT_STOPPED, Stop, install_signal_handlers, log, release_free_memory
     from netsetest.runtime.security import CredentialsError
 
     sc = load_topology(a.topology, a.case, a.steps, a.estimator)
     install_signal_handlers()
+    release_free_memory()
     try:
         bus = _open_bus(a, who)
     except (BusError, CredentialsError) as exc:

@@ -44,6 +44,7 @@ from typing import IO, Protocol
 import numpy as np
 
 from netsetest.extras import require
+from netsetest.records.errors import RecordError
 from netsetest.records.summary import RunSummary
 
 FORMAT = "netsetest-record"
@@ -171,10 +172,6 @@ def open_sink(path: str | Path) -> RecordSink:
 
         return McapRecordWriter(path)
     return JsonlSink(path)
-
-
-class RecordError(Exception):
-    """A record file that cannot be read; the message names the file and the reason."""
 
 
 @dataclass

@@ -32,17 +32,15 @@ from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.records.summary import RunSummary
 from netsetest.runtime.forkserver import ForkedProcess, ForkServer, ForkServerError
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress, read_summary
+from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, START_TIMEOUT_S
 
-if TYPE_CHECKING:  # the CLI imports this module for its defaults: the estimator and the roles load only to launch
+if TYPE_CHECKING:  # annotations only: the estimator and the models load in the role processes, not in the launcher
     from netsetest.estimator.sdp import Variant
     from netsetest.models.signals import SignalKind
 
 Clock = Literal["lockstep", "realtime"]
 
-START_TIMEOUT_S = 60.0  # the vehicle's default wait for every role to be ready
 START_S_PER_ROLE = 1.0  # each role sets up its estimator, session and barrier; 100 of them share a few cores
-NODE_TIMEOUT_S = 10.0  # lockstep: a node silent this long is declared dead by the vehicle
-NEIGHBOUR_TIMEOUT_S = 5.0  # lockstep: how long a node waits for a neighbour's message
 COLLECTOR_GRACE_S = 10.0  # on Ctrl-C/SIGTERM: how long the collector may take to write its record and summary
 ROLE_GRACE_S = 5.0  # how long a role may take to leave after SIGTERM (or after End)
 FOLLOW_PERIOD_S = 0.05  # how often the launcher looks at its children and the collector's progress

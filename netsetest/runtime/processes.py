@@ -17,6 +17,7 @@ Real time: the vehicle publishes a step every τs; nodes step as soon as their i
 
 from __future__ import annotations
 
+import ctypes
 import math
 import os
 import signal
@@ -73,6 +74,19 @@ def install_signal_handlers() -> None:
 
     signal.signal(signal.SIGTERM, handler)
     signal.signal(signal.SIGINT, handler)
+
+
+def release_free_memory() -> None:
+    """Give the C heap's free pages back to the system (glibc's ``malloc_trim``; nothing where it is missing).
+
+    A role compiles and imports its modules before it opens its session: what the imports freed stays
+    resident in the heap's free lists (≈1.4 MB in a node), and the session and the run come on top of it,
+    so it adds to the process' peak RSS (docs/performance.md, *Imports and memory*).  Call once, after
+    the imports and before the bus opens (no other thread yet); the heap refills as the role needs.
+    """
+    trim = getattr(ctypes.CDLL(None), "malloc_trim", None)  # the symbols already loaded: libc's
+    if trim is not None:
+        trim(0)
 
 
 def log(role: str, text: str) -> None:

@@ -6,10 +6,11 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
-from netsetest.records.record import MemorySink, RecordSink, TeeSink, open_sink
-from netsetest.records.summary import RunSummary
+if TYPE_CHECKING:  # every role and command imports this module (exit codes); the records load where a run ends
+    from netsetest.records.record import MemorySink, RecordSink
+    from netsetest.records.summary import RunSummary
 
 
 class Progress:
@@ -105,6 +106,8 @@ def verdict(summary: RunSummary) -> str:
 
 def record_sink(record: str | None, keep: bool = False) -> tuple[RecordSink | None, MemorySink | None]:
     """The sink a run's collector writes to: the record file (opened now), and/or memory when ``keep``."""
+    from netsetest.records.record import MemorySink, TeeSink, open_sink
+
     memory = MemorySink() if keep else None
     file = open_sink(record) if record else None
     sinks = [s for s in (file, memory) if s is not None]
@@ -118,6 +121,8 @@ def write_summary(summary: RunSummary, summary_json: str | None) -> None:
 
 def read_summary(summary_json: str | Path) -> RunSummary:
     """A ``--summary-json`` file written by :func:`write_summary` (ValueError if it is not one)."""
+    from netsetest.records.summary import RunSummary
+
     return RunSummary.from_dict(json.loads(Path(summary_json).read_text()))
 
 

@@ -1,0 +1,9 @@
+"""Default timeouts of the role processes, shared by the CLI's options and the launcher.
+
+A module of its own: every ``netsetest`` command builds every parser, and a role process must not load
+the launcher (subprocess, tempfile, socket, ...) for three numbers (memory: docs/performance.md).
+"""
+
+START_TIMEOUT_S = 60.0  # the vehicle's default wait for every role to be ready
+NODE_TIMEOUT_S = 10.0  # lockstep: a node silent this long is declared dead by the vehicle
+NEIGHBOUR_TIMEOUT_S = 5.0  # lockstep: how long a node waits for a neighbour's message
