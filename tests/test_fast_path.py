@@ -32,7 +32,7 @@ import pytest
 import netsetest.roles.node as node_mod
 from netsetest.config.schema import load_topology
 from netsetest.estimator import sdp
-from netsetest.estimator.certificate import certify
+from netsetest.estimator.certificate import FactStack, certify
 from netsetest.estimator.conic import ConicSolver
 from netsetest.runtime.inmemory import run_inmemory
 
@@ -265,3 +265,24 @@ def test_default_backend_does_not_import_cvxpy():
         "assert 'scipy.sparse' not in sys.modules, 'scipy.sparse imported'\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+
+
+@pytest.mark.parametrize("case", ["nsnim", "saim"])
+def test_certificate_of_stacked_facts_is_the_certificate(case, saim_steps, nsnim_steps):
+    """``bank`` stacks a step's facts once for its two certificates (FactStack): the same ρ' bit for bit as
+    from the list of facts, and still no certificate when a fact or the answer is not finite."""
+    sc = load_topology(PAPER6, case, 12)
+    steps = saim_steps if case == "saim" else nsnim_steps
+    for node, args in steps[::5]:
+        est = _estimator(sc, node)
+        data = _data(est, args)
+        sol = ConicSolver(data.lay, 1).solve(data, args[0].rho)
+        pi = data.pi0[0] - sol.L[0] @ data.ell[None, :]
+        stack = FactStack.of(data.facts)
+        rho_c = certify(sol.P, pi, sol.tau[0], stack)
+        assert rho_c is not None and rho_c == certify(sol.P, pi, sol.tau[0], data.facts)
+        bad = list(data.facts)
+        bad[-1] = bad[-1].copy()
+        bad[-1][1, 1] = np.nan
+        assert certify(sol.P, pi, sol.tau[0], FactStack.of(bad)) is None
+        assert certify(np.full_like(sol.P, np.inf), pi, sol.tau[0], stack) is None

@@ -9,6 +9,7 @@ Nothing here trusts a solver: a set is published only with a certificate or as t
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -17,7 +18,30 @@ from netsetest.models.sensor import NA, NX
 from netsetest.models.vehicle import TSModel
 
 
-def certify(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: Sequence[np.ndarray]) -> float | None:
+EPS_LADDER = 10.0 ** np.arange(-10.0, -2.0)  # relative nudges of the multipliers, smallest first
+
+
+@dataclass(frozen=True)
+class FactStack:
+    """A step's facts Q_m stacked once, for every certificate of that step (objective ``bank`` certifies
+    two answers of the same data): Q (m, d, d), Q reshaped (m, d²), Σ_m Q_m, and whether all are finite."""
+
+    Q: np.ndarray
+    Qflat: np.ndarray
+    Qsum: np.ndarray
+    finite: bool
+
+    @classmethod
+    def of(cls, facts: Sequence[np.ndarray]) -> FactStack:
+        Q = np.asarray(facts)
+        return cls(Q, Q.reshape(Q.shape[0], -1), Q.sum(axis=0), bool(np.isfinite(Q).all()))
+
+
+def _finite(*arrays: np.ndarray) -> bool:
+    return all(np.isfinite(a).all() for a in arrays)
+
+
+def certify(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: Sequence[np.ndarray] | FactStack) -> float | None:
     """Smallest ρ' (up to rounding) with Πᵀ P⁻¹ Π + Σ τ_m Q_m ⪯ ρ' e₁e₁ᵀ, or None if there is none.
 
     This is the S-procedure condition itself, checked in floating point on the solver's answer: then
@@ -27,7 +51,8 @@ def certify(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: Sequence[np.n
     so a solver answer that is feasible up to its tolerance becomes strictly feasible there, at a cost
     of O(ε) in ρ'.
     """
-    if not all(np.all(np.isfinite(v)) for v in (P, pi, tau, *facts)):
+    fs = facts if isinstance(facts, FactStack) else FactStack.of(facts)
+    if not (fs.finite and _finite(P, pi, tau)):
         return None  # a NaN passes Cholesky silently
     P = 0.5 * (P + P.T)
     try:
@@ -38,11 +63,10 @@ def certify(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: Sequence[np.n
     base = x.T @ x
     tau = np.maximum(tau, 0.0)
     scale = max(1.0, float(np.max(tau)))
-    Q = np.asarray(facts)
-    K0 = base + np.tensordot(tau, Q, axes=1)
-    Qsum = Q.sum(axis=0)
-    for eps in scale * 10.0 ** np.arange(-10.0, -2.0):
-        K = K0 + eps * Qsum
+    d = base.shape[0]
+    K0 = base + np.dot(tau.reshape(1, -1), fs.Qflat).reshape(d, d)  # Σ τ_m Q_m, exactly as np.tensordot(tau, Q, 1)
+    for eps in scale * EPS_LADDER:
+        K = K0 + eps * fs.Qsum
         K = 0.5 * (K + K.T)
         k11, k, K22 = K[0, 0], K[1:, 0], K[1:, 1:]
         try:
@@ -122,4 +146,4 @@ def fallback_shape(Mi: np.ndarray, own: OwnUpdate, W: float, alpha: np.ndarray, 
     return shape + FALLBACK_INFLATE * max(trace, np.finfo(float).tiny / FALLBACK_INFLATE) * np.eye(NA)
 
 
-__all__ = ["COND_MAX", "FallbackUnavailable", "certify", "fallback_shape", "publishable"]
+__all__ = ["COND_MAX", "FactStack", "FallbackUnavailable", "certify", "fallback_shape", "publishable"]

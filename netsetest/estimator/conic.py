@@ -150,7 +150,7 @@ class _Values:
     facts: tuple[np.ndarray, ...]  # Q_m, each (d, d)
     pi0: tuple[np.ndarray, ...]  # Π₀ per LMI, each (NA, d)
     S: np.ndarray  # (NA, NA) with S Sᵀ = P_prev: the congruence of the P rows
-    Sinv: np.ndarray  # (NA, NA) S⁻¹
+    Sinv: np.ndarray | None  # (NA, NA) S⁻¹ (only with an LMI: its off-diagonal block)
     sc: np.ndarray  # (n,) scale of each LMI slot
     kappa: np.ndarray  # (n_tau,) scale of each multiplier
     B: float  # ξ's bound Σ_k |ℓ_k| √β_k
@@ -269,6 +269,7 @@ class _LmiPi0:
     f: np.ndarray
 
     def fill(self, b: np.ndarray, s: _Values) -> None:
+        assert s.Sinv is not None  # an LMI block exists only with an LMI
         b[self.rows] = self.f * ((s.Sinv @ s.pi0[self.r][:, s.lmi_slots]) * s.sc).T.ravel()
 
 
@@ -754,7 +755,7 @@ class ConicSolver:
         # congruence of the P rows: P_prev = S Sᵀ (data.Mi = ρ^½ chol(P_prev))
         S = data.Mi / math.sqrt(rho)
         sc, kappa = self._slot_scales(data.facts, has_lmi)
-        vals = _Values(ell, data.facts, data.pi0, S, np.linalg.inv(S), sc, kappa, B, rho, self.lmi_slots)
+        vals = _Values(ell, data.facts, data.pi0, S, np.linalg.inv(S) if has_lmi else None, sc, kappa, B, rho, self.lmi_slots)
         values = np.concatenate([blk.values(vals) for blk in tpl.a_blocks])
         b = np.zeros(tpl.n_rows)
         for blk in tpl.b_blocks:

@@ -58,7 +58,7 @@ from typing import Literal
 
 import numpy as np
 
-from netsetest.estimator.certificate import FallbackUnavailable, certify, fallback_shape, publishable
+from netsetest.estimator.certificate import FactStack, FallbackUnavailable, certify, fallback_shape, publishable
 from netsetest.estimator.conic import ConicSolver
 from netsetest.estimator.lmi_cvxpy import CvxpySolver
 from netsetest.estimator.objective import BANK_FAULT_WEIGHT, DEFAULT_OBJECTIVE, FAULT_WEIGHT, OBJECTIVES, Objective
@@ -447,17 +447,20 @@ class LocalEstimator:
 
         Objective ``bank``: the fault-weighted set of the same data is added as the one to publish.
         """
-        res, solve = self._solve_certify(data, rho, alpha, self._wh)
+        facts = FactStack.of(data.facts)  # shared by both certificates of ``bank``
+        res, solve = self._solve_certify(data, rho, alpha, self._wh, facts)
         if res is None or self._wh_pub is None:
             return res, solve
-        pub, solve_pub = self._solve_certify(data, rho, alpha, self._wh_pub)
+        pub, solve_pub = self._solve_certify(data, rho, alpha, self._wh_pub, facts)
         res.solve_ms = solve.ms + solve_pub.ms
         if pub is not None:
             pub.solve_ms = res.solve_ms
             res.published = pub
         return res, solve
 
-    def _solve_certify(self, data: StepData, rho: float, alpha: np.ndarray, wh: np.ndarray | None) -> tuple[StepResult | None, _Solve]:
+    def _solve_certify(
+        self, data: StepData, rho: float, alpha: np.ndarray, wh: np.ndarray | None, facts: FactStack
+    ) -> tuple[StepResult | None, _Solve]:
         """Solve the step's problem for the objective trace(D P), D^½ = diag(wh) (None: trace P), and
         certify the answer; None if there is no certificate."""
         pat = self._patterns[data.key]
@@ -477,7 +480,7 @@ class LocalEstimator:
             tau = sum(a * v for a, v in zip(alpha, sol.tau))
             pi0 = sum(a * p for a, p in zip(alpha, data.pi0))
         pi = pi0 - L @ data.ell[None, :]  # Π(L) = Π₀ − L ℓᵀ
-        rho_c = certify(sol.P, pi, tau, data.facts)
+        rho_c = certify(sol.P, pi, tau, facts)
         if rho_c is None:
             return None, solve
         P_pub = 0.5 * (sol.P + sol.P.T) * rho_c / rho
