@@ -58,6 +58,7 @@ import clarabel
 import numpy as np
 
 from netsetest.estimator.problem import EtaLayout, Solution, StepData
+from netsetest.estimator.sum_of_norms import SumOfNorms
 from netsetest.models.sensor import NA
 
 SQ2 = math.sqrt(2.0)
@@ -409,6 +410,7 @@ class ConicSolver:
         aggregate: bool = True,
         cones: bool = True,
         decompose: bool = True,
+        closed_form: bool = True,
     ) -> None:
         self.lay, self.n_lmi = lay, n_lmi
         self._solvers: dict[TemplateKey, clarabel.DefaultSolver] = {}
@@ -468,6 +470,13 @@ class ConicSolver:
         self.cliques = self._cliques() if (decompose and self.socp and lay.phi_new is not None) else None
         self._templates: dict[TemplateKey, _Template] = {}
         self.last_iterations = 0
+        # no LMI block (NSNIM, scheduled): closed form over τ, Newton over L (estimator/sum_of_norms.py)
+        self.newton = closed_form and self.socp and not self.lmi_slots
+        if self.newton:
+            self._cols = np.array([s for g in self.groups for s in g.slots], dtype=int)
+            self._col_sqrtb = np.array([math.sqrt(g.bound) for g in self.groups for _ in g.slots])
+            self._onehot = np.zeros((len(self._cols), len(self.groups)))
+            self._onehot[np.arange(len(self._cols)), [k for k, g in enumerate(self.groups) for _ in g.slots]] = 1.0
 
     @property
     def settings(self) -> clarabel.DefaultSettings:
@@ -795,6 +804,11 @@ class ConicSolver:
     # ------------------------------------------------------------------ solve and map back
 
     def solve(self, data: StepData, rho: float) -> Solution:
+        """The step's answer: in closed form where there is no LMI block, else (or if that fails) from Clarabel."""
+        if self.newton:
+            sol = self._solve_sum_of_norms(data, rho)
+            if sol is not None:
+                return sol
         conic, inv = self.apply(data, rho)
         try:
             sol = self.solve_via_data(conic)
@@ -809,6 +823,40 @@ class ConicSolver:
         if not np.all(np.isfinite(x)):
             return Solution(None, [], [], "non-finite", sol.iterations)
         return self.invert(x, inv, status, sol.iterations)
+
+    def _solve_sum_of_norms(self, data: StepData, rho: float) -> Solution | None:
+        """The pure SOCP by :class:`~netsetest.estimator.sum_of_norms.SumOfNorms`, mapped back as
+        :meth:`invert` maps Clarabel's answer: τ_g = ρ a_g / Σ a, P = Σ_g β_g Π_gΠ_gᵀ/τ_g + (B²/τ_ξ + ℓ₀²/λ₀) L Lᵀ."""
+        ell, pi0 = data.ell, data.pi0[0]
+        agg_w = np.abs(ell[self.agg_slots]) * self.agg_sqrtb if self.agg else np.zeros(0)
+        B = float(agg_w.sum())
+        use_xi = self.xi is not None and B > 0.0
+        ell0 = abs(float(ell[0]))
+        problem = SumOfNorms(pi0[:, self._cols] * self._col_sqrtb, ell[self._cols] * self._col_sqrtb, self._onehot, (B if use_xi else 0.0) + ell0)
+        found = problem.minimise()
+        if found is None:
+            return None
+        L, a, ln, iterations = found
+        a_xi, a0 = (B * ln if use_xi else 0.0), ell0 * ln
+        total = float(a.sum()) + a_xi + a0
+        tc = rho * a / total  # τ of each group, in the order of self.groups
+        tau = np.zeros(len(self.lay.facts))
+        for g, t in zip(self.groups, tc):
+            tau[self.kept[g.fact]] = t
+        Lc = L[:, None]
+        pi = pi0 - Lc @ ell[None, :]
+        P = np.zeros((NA, NA))
+        for g, t in zip(self.groups, tc):
+            cols = pi[:, list(g.slots)]
+            P = P + g.bound * (cols @ cols.T) / t
+        if a_xi > 0.0:  # (L = 0: ξ and the η₁ slot need no multiplier, their columns −L ℓ are zero)
+            t_xi = rho * a_xi / total
+            tau[self.agg] = t_xi * agg_w / B
+            P = P + B**2 * (Lc @ Lc.T) / t_xi
+        if a0 > 0.0:
+            P = P + (ell0**2 / (rho * a0 / total)) * (Lc @ Lc.T)
+        self.last_iterations = iterations
+        return Solution(P, [Lc], [tau], "Solved (closed form)", iterations)
 
     def solve_via_data(self, conic: ConicData):  # noqa: ANN201 - clarabel's DefaultSolution
         """Solve with the node's solver for this template, its data updated in place where Clarabel
