@@ -46,8 +46,9 @@ def test_node_blocks_until_something_is_due():
     sc = load_topology("topologies/paper6.toml", steps=3)
     node = Node(sc, 1, MemoryBus(), "t")
     # not started: until its next Ready is due
-    assert _node_wait(node, ready_sent=10.0, neighbour_timeout=5.0, realtime=False, now=10.03) == pytest.approx(READY_PERIOD_S - 0.03)
-    assert _node_wait(node, ready_sent=10.0, neighbour_timeout=5.0, realtime=False, now=10.5) == 0.0
+    assert _node_wait(node, ready_due=10.0 + READY_PERIOD_S, neighbour_timeout=5.0, realtime=False, now=10.03) == pytest.approx(READY_PERIOD_S - 0.03)
+    assert _node_wait(node, ready_due=10.0 + READY_PERIOD_S, neighbour_timeout=5.0, realtime=False, now=10.5) == 0.0
+    assert _node_wait(node, ready_due=None, neighbour_timeout=5.0, realtime=False, now=10.5) == IDLE_WAIT_S  # quiet: input 0 wakes it
     node.k = 2
     assert _node_wait(node, 0.0, 5.0, False, now=100.0) == IDLE_WAIT_S  # started, nothing due: sleep on the queue
     node.waiting_since = 98.0  # lockstep, waiting for neighbours: poll their lazy rings, never past the deadline
@@ -72,6 +73,36 @@ def test_a_node_listens_to_its_peers_ready_only():
     assert node.heard == {("collector", None), ("node", 2), ("node", 6)}  # and its own Ready is not for itself
     assert vehicle.heard == _all_roles(sc) - {("vehicle", None)}  # the vehicle still hears everyone
     assert ("node", 4) in vehicle.complete
+
+
+def test_a_barrier_goes_quiet_once_everyone_heard_it():
+    """A node repeats its Ready until its seen_all went out and every peer reported seen_all (each heard
+    it); then it stops (its start-up traffic would otherwise load step 0), and answers a newcomer still."""
+    sc = load_topology("topologies/paper6.toml", steps=3)
+    bus = MemoryBus()
+    sent: list[Ready] = []
+    bus.subscribe(keys.ready_of("t", keys.role_name("node", 1)), lambda key, msg: sent.append(msg))
+    node = Barrier(bus, "t", Ready(role="node", node=1), node_peers(sc, 1))
+    node.tick(1.0)
+    bus.pump()
+    assert [m.seen_all for m in sent] == [False] and not node.quiet and node.next_due() == 1.0 + READY_PERIOD_S
+    for role, i in sorted(node_peers(sc, 1), key=str):
+        bus.publish(keys.ready_of("t", keys.role_name(role, i)), Ready(role=role, node=i, seen_all=False))
+    bus.pump()
+    node.tick(1.01)  # prompt: newcomers heard; our seen_all goes out, but the peers have not reported theirs
+    bus.pump()
+    assert sent[-1].seen_all and not node.quiet
+    for role, i in sorted(node_peers(sc, 1), key=str):
+        bus.publish(keys.ready_of("t", keys.role_name(role, i)), Ready(role=role, node=i, seen_all=True))
+    bus.pump()
+    n = len(sent)
+    node.tick(5.0)
+    bus.pump()
+    assert node.quiet and node.next_due() is None and len(sent) == n  # nothing repeated
+    node.prompt = True  # a role heard for the first time (a restarted peer) is still answered
+    node.tick(6.0)
+    bus.pump()
+    assert len(sent) == n + 1
 
 
 def test_run_gives_large_networks_longer_to_start():
