@@ -313,7 +313,23 @@ def encode(msg: Message) -> bytes:
     return _ENCODER.encode(msg)
 
 
+# What msgspec's decoders raise on hostile bytes besides DecodeError: invalid UTF-8 in a string
+# (UnicodeDecodeError, a ValueError), nesting deeper than the interpreter's stack (RecursionError), and a
+# validator of ours (ValueError). None of them may leave decode(): a role would crash on one message.
+_HOSTILE = (ValueError, RecursionError, OverflowError, TypeError)
+
+
 def decode(payload: bytes) -> Message:
+    """The message in ``payload``; raises :class:`BadMessage` and nothing else, whatever the bytes."""
+    try:
+        return _decode(payload)
+    except BadMessage:
+        raise
+    except _HOSTILE as exc:
+        raise BadMessage("undecodable", f"{type(exc).__name__}: {exc}"[:MAX_DETAIL]) from None
+
+
+def _decode(payload: bytes) -> Message:
     try:
         version = _HEADER.decode(payload).v
     except msgspec.ValidationError:  # not a map with string keys: say which

@@ -332,8 +332,8 @@ def test_inbox_bounded_per_key_and_fair():
     got: list[str] = []
     bus.subscribe("netsetest/r/**", lambda k, m: got.append(k))
     flooded, quiet = keys.node_state("r", 3), keys.node_state("r", 4)
-    for _ in range(10 * MAX_PER_KEY):
-        bus.publish(flooded, _state(node=3))
+    for k in range(10 * MAX_PER_KEY):  # ever later steps: each one finds the queue full of earlier ones
+        bus.publish(flooded, _state(node=3, step=k))
     bus.publish(quiet, _state(node=4))
     assert bus.dropped["inbox-full"] == 9 * MAX_PER_KEY
     assert bus.pending() == MAX_PER_KEY + 1
@@ -342,6 +342,71 @@ def test_inbox_bounded_per_key_and_fair():
     while bus.pump():
         pass
     assert got.count(flooded) == MAX_PER_KEY and bus.pending() == 0
+
+
+def test_flood_never_evicts_the_step_a_role_waits_for():
+    """The input a node waits for arrives into a key already full of a flood (future steps, copies of its
+    own step, invalid values): it is kept and handled (a flood once lost a node for the whole run)."""
+    from netsetest.bus.base import MAX_COPIES_PER_STEP, MAX_PER_KEY
+
+    bus = MemoryBus()
+    got: list[NodeState] = []
+    bus.subscribe("netsetest/r/**", lambda k, m: got.append(m))
+    key = keys.node_state("r", 3)
+    for k in range(100, 100 + 2 * MAX_PER_KEY):  # schema-valid, far ahead
+        bus.publish(key, _state(step=k))
+    for _ in range(3 * MAX_COPIES_PER_STEP):  # copies of the awaited step, differing in value
+        bus.publish(key, _state(step=7, innov=float(_)))
+    for _ in range(5 * MAX_PER_KEY):  # invalid values: never queued at all
+        bus.inject(key, _mut(_state(), xhat=[math.nan, 0.0, 0.0]))
+    genuine = _state(step=5)
+    bus.publish(key, genuine)
+    assert bus.pending() == MAX_PER_KEY
+    assert bus.dropped["invalid"] == 5 * MAX_PER_KEY
+    assert bus.dropped["inbox-copies"] == 2 * MAX_COPIES_PER_STEP
+    assert bus.dropped["inbox-evicted"] == MAX_COPIES_PER_STEP + 1  # the farthest steps made room
+    while bus.pump():
+        pass
+    assert genuine in got
+    assert sum(m.step == 7 for m in got) == MAX_COPIES_PER_STEP
+
+
+def test_barrier_drops_a_ready_on_a_wrong_key_on_every_bus():
+    """A schema-valid Ready on another role's key is dropped and counted, on every Bus implementation
+    (the Barrier once called a method only one bus had: four roles crashed on one message)."""
+    from netsetest.bus.base import Bus
+    from netsetest.runtime.processes import Barrier
+
+    for cls in [MemoryBus, *_zenoh_bus_classes()]:
+        assert callable(getattr(cls, "drop", None)), cls
+    bus = MemoryBus()
+    me = Ready(role="node", node=1, seen_all=False)
+    barrier = Barrier(bus, "r", me, {("node", 2), ("node", 3)})
+    bus.publish(keys.ready_of("r", keys.role_name("node", 2)), Ready(role="node", node=3, seen_all=True))
+    bus.publish(keys.ready_of("r", keys.role_name("node", 2)), _state())
+    bus.pump()
+    assert barrier.heard == set() and bus.dropped == {"ready-wrong-key": 1, "unexpected-type": 1}
+    assert issubclass(MemoryBus, Bus)
+
+
+def _zenoh_bus_classes() -> list[type]:
+    from netsetest.bus.zenoh_bus import ZenohBus
+
+    return [ZenohBus]
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        b"\xa1\xbe",  # a msgpack string of invalid UTF-8: UnicodeDecodeError
+        b"\x91" * 1000 + b"\x00",  # an array nested 1000 deep: RecursionError
+        b"\x81\xa1v" + b"\x91" * 5000 + b"\x00",  # the same inside the header's map
+        b"\x81\xa4type" + b"\xa2\xff\xfe",  # invalid UTF-8 as a value
+    ],
+)
+def test_decode_raises_only_bad_message(payload):
+    with pytest.raises(BadMessage):
+        decode(payload)
 
 
 def test_inbox_bounded_number_of_keys():

@@ -7,7 +7,7 @@ from pathlib import Path
 from netsetest.bus import keys
 from netsetest.bus.base import MemoryBus
 from netsetest.config.schema import load_topology
-from netsetest.messages import NodeInput
+from netsetest.messages import NodeInput, NodeState
 from netsetest.roles.node import Node
 
 PAPER6 = Path(__file__).resolve().parents[1] / "topologies" / "paper6.toml"
@@ -48,3 +48,35 @@ def test_a_later_input_without_step_0_is_still_dropped_before_start() -> None:
     bus.pump(timeout=0.0)
     assert node.drops["before-start"] == 1 and node.late_start_evidence == 1 and not node.inputs
     assert not node.try_step() and node.k == -1
+
+
+def test_a_dropped_neighbour_state_answers_the_wait() -> None:
+    """A neighbour whose state of our step we dropped as implausible has spoken: the node steps without
+    it at once instead of waiting the neighbour timeout for it every step (over Zenoh a false-bound
+    mixed run took 289 s against 6.7 s in memory)."""
+    sc = load_topology(PAPER6, None, 5)
+    bus = MemoryBus()
+    node = Node(sc, 1, bus, "t")
+    assert node.others, "node 1 needs an in-neighbour for this test"
+    j = node.others[0]
+    bus.publish(keys.node_input("t", 1), _input(sc, 0))
+    bus.pump(timeout=0.0)
+    assert node.try_step() and node.k == 0
+    inp = NodeInput(
+        step=1, node=1, y=0.0, gamma=1.0, u_prev=(sc.steer_low + sc.steer_high) / 2, vx_prev=sc.vx(0), expect_from=[j]
+    )
+    bus.publish(keys.node_input("t", 1), inp)
+    bus.pump(timeout=0.0)
+    assert node.missing() == [j] and not node.try_step()  # waiting for j
+    own = node.own
+    assert own is not None
+    nb = sc.node(j)
+    forged = NodeState(
+        step=0, node=j, xhat=[float(a) for a in nb.x0_hat], P=[float(a) for a in (nb.P0 * 1e-6).reshape(9)],
+        rho=nb.rho, gamma=1.0, innov=1e6, status="init",
+        sector=None if not nb.sensor.saturated else (0.8, 0.3), sector_basis="none" if not nb.sensor.saturated else "measurement",
+    )  # an innovation its own tiny set and noise bound cannot produce
+    bus.publish(keys.node_state("t", j), forged)
+    bus.pump(timeout=0.0)
+    assert node.drops["neighbour-innovation"] == 1
+    assert node.missing() == [] and node.try_step() and node.k == 1  # no wait for the dropped copy

@@ -1,15 +1,20 @@
 """The bus interface the roles talk through; the in-memory and Zenoh buses implement it.
 
-Delivery is pull-based: a transport queues raw payloads as they arrive (on any thread), and
-:meth:`Bus.pump` decodes and dispatches them in the caller's thread, so a role never runs concurrently
-with itself.  A payload that fails validation is dropped and counted in :attr:`Bus.dropped` (by
-reason), never handed to a role.
+Delivery is pull-based: a transport decodes each payload as it arrives (on any thread) and queues the
+message; :meth:`Bus.pump` dispatches them in the caller's thread, so a role never runs concurrently with
+itself.  A payload that fails validation is dropped and counted in :attr:`Bus.dropped` (by reason),
+never queued and never handed to a role: a flood of malformed or out-of-range messages takes no room
+that a genuine message needs.
 
-The inbox is bounded per key (:class:`Inbox`): at most ``MAX_PER_KEY`` payloads wait on one key and at
-most ``MAX_KEYS`` keys wait at once; beyond that the newest payload is dropped (``inbox-full``,
-``inbox-keys``).  :meth:`Bus.pump` serves the waiting keys in turn, one payload each per round, for at
-most ``MAX_ROUNDS`` rounds and never more than was queued when it started — so a flood on one key costs
-a role at most ``MAX_ROUNDS`` decodes per pump, delays nothing else and cannot keep it from stepping.
+The inbox is bounded per key (:class:`Inbox`): at most ``MAX_PER_KEY`` messages wait on one key, at most
+``MAX_COPIES_PER_STEP`` of them for one step, and at most ``MAX_KEYS`` keys wait at once.  A role needs
+the earliest steps first (its next input, the neighbour states of its current step), so when a key's
+queue is full a message for an earlier step evicts the one for the farthest step (``inbox-evicted``);
+otherwise the newest is dropped (``inbox-full``, ``inbox-copies``, ``inbox-keys``).  A flood of future
+steps or of copies of one step therefore never pushes out what the role waits for.  :meth:`Bus.pump`
+serves the waiting keys in turn, one message each per round, for at most ``MAX_ROUNDS`` rounds and never
+more than was queued when it started — so a flood on one key delays nothing else and cannot keep a role
+from stepping.
 
 A *lazy* subscription (``subscribe(..., lazy=True)``, exact keys only) is for messages a role needs only
 when something else arrives (a real-time node's neighbour states, needed when its next input comes):
@@ -35,34 +40,48 @@ Handler = Callable[[str, Message], None]
 MAX_PER_KEY = 64  # a role handles ~1 message per key per step and pumps many times a step: more is a flood
 MAX_ROUNDS = 16  # payloads per key one pump handles: a flooded key's decoding cost per pump is bounded
 MAX_KEYS = 1024  # distinct (key, subscriber) queues: a wildcard subscription must not allocate per forged key
+MAX_COPIES_PER_STEP = 4  # an honest sender puts one message per step on its key: more are copies or forgeries
+NO_STEP = -1  # the service rank of a message that names no step (Ready, End): never evicted for a step's
+
+
+def _rank(msg: Message) -> int:
+    """The step a message is for (NO_STEP if it names none): the lower, the sooner a role needs it."""
+    step = getattr(msg, "step", None)
+    return step if isinstance(step, int) else NO_STEP
 
 
 class Inbox:
-    """Raw payloads per (key, handler), FIFO per key, bounded; thread-safe (transport threads put)."""
+    """Decoded messages per (key, handler), FIFO per key, bounded; thread-safe (transport threads put)."""
 
-    def __init__(self, per_key: int = MAX_PER_KEY, max_keys: int = MAX_KEYS) -> None:
-        self.per_key, self.max_keys = per_key, max_keys
-        self._queues: dict[tuple[str, Handler], deque[bytes]] = {}  # insertion order = service order
+    def __init__(self, per_key: int = MAX_PER_KEY, max_keys: int = MAX_KEYS, copies: int = MAX_COPIES_PER_STEP) -> None:
+        self.per_key, self.max_keys, self.copies = per_key, max_keys, copies
+        self._queues: dict[tuple[str, Handler], deque[Message]] = {}  # insertion order = service order
         self._size = 0
         self._cv = threading.Condition()
 
-    def put(self, key: str, payload: bytes, handler: Handler) -> str | None:
-        """Queue a payload; the drop reason when the inbox is full."""
-        q = self._queues.get((key, handler))
-        if q is not None and len(q) >= self.per_key:
-            return "inbox-full"  # without the lock: under a flood this is the common case, keep it cheap
+    def put(self, key: str, msg: Message, handler: Handler) -> str | None:
+        """Queue a message; the reason it (or the message it evicted) was dropped, None if nothing was."""
+        rank = _rank(msg)
         with self._cv:
             q = self._queues.get((key, handler))
             if q is None:
                 if len(self._queues) >= self.max_keys:
                     return "inbox-keys"
                 q = self._queues[(key, handler)] = deque()
+            if rank != NO_STEP and sum(_rank(m) == rank for m in q) >= self.copies:
+                return "inbox-copies"
+            reason = None
             if len(q) >= self.per_key:
-                return "inbox-full"
-            q.append(payload)
+                far = max(range(len(q)), key=lambda i: _rank(q[i]))
+                if _rank(q[far]) <= rank:
+                    return "inbox-full"
+                del q[far]  # a later step than this one's: the role needs it after this one, if at all
+                self._size -= 1
+                reason = "inbox-evicted"
+            q.append(msg)
             self._size += 1
             self._cv.notify()
-        return None
+        return reason
 
     def __len__(self) -> int:
         return self._size
@@ -72,8 +91,8 @@ class Inbox:
         with self._cv:
             return self._cv.wait_for(lambda: self._size > 0, timeout)
 
-    def take_round(self, most: int | None = None) -> list[tuple[str, bytes, Handler]]:
-        """One payload from every waiting key (at most ``most`` keys), oldest key first."""
+    def take_round(self, most: int | None = None) -> list[tuple[str, Message, Handler]]:
+        """One message from every waiting key (at most ``most`` keys), oldest key first."""
         with self._cv:
             out = []
             for kh in list(self._queues)[:most]:
@@ -120,10 +139,32 @@ class Bus(ABC):
     def close(self) -> None:
         """Release transport resources (sessions, sockets); idempotent."""
 
+    def drop(self, reason: str) -> None:
+        """Count a message a role dropped on this bus (by reason); every bus has it."""
+        self.dropped[reason] += 1  # Counter += is one bytecode-level dict update: safe from any thread
+
+    def _decoded(self, payload: bytes) -> Message | None:
+        """The message in ``payload``, or None (dropped and counted) if it is not a valid message."""
+        self.received += 1
+        t = PROFILE.now() if PROFILE is not None else 0
+        try:
+            return decode(payload)
+        except BadMessage as exc:
+            self.drop(exc.reason)
+            return None
+        finally:
+            if PROFILE is not None:
+                PROFILE.add("decode", t)
+
     def _enqueue(self, key: str, payload: bytes, handler: Handler) -> None:
-        reason = self._inbox.put(key, payload, handler)
+        msg = self._decoded(payload)
+        if msg is not None:
+            self._put(key, msg, handler)
+
+    def _put(self, key: str, msg: Message, handler: Handler) -> None:
+        reason = self._inbox.put(key, msg, handler)
         if reason is not None:
-            self.dropped[reason] += 1  # Counter += is one bytecode-level dict update: safe from any thread
+            self.drop(reason)
 
     def pump(self, timeout: float | None = 0.0, limit: int | None = None) -> int:
         """Dispatch queued messages, the waiting keys in turn; wait up to ``timeout`` s for the first one.
@@ -145,18 +186,9 @@ class Bus(ABC):
             batch = self._inbox.take_round(budget if limit is None else min(budget, limit - done))
             if not batch:
                 break
-            for key, payload, handler in batch:
+            for key, msg, handler in batch:
                 budget -= 1
-                self.received += 1
                 t = PROFILE.now() if PROFILE is not None else 0
-                try:
-                    msg = decode(payload)
-                except BadMessage as exc:
-                    self.dropped[exc.reason] += 1
-                    continue
-                finally:
-                    if PROFILE is not None:
-                        t = PROFILE.add("decode", t)
                 handler(key, msg)
                 if PROFILE is not None:
                     PROFILE.add("handle", t)
@@ -187,8 +219,12 @@ class MemoryBus(Bus):
         handlers = self._routes.get(key)
         if handlers is None:
             handlers = self._routes[key] = [h for pattern, h in self._subs if matches(pattern, key)]
-        for handler in handlers:
-            self._enqueue(key, payload, handler)
+        if not handlers:
+            return
+        msg = self._decoded(payload)  # once, whatever the number of subscribers
+        if msg is not None:
+            for handler in handlers:
+                self._put(key, msg, handler)
 
     def inject(self, key: str, payload: bytes) -> None:
         """Deliver raw bytes as if from the network (tests of malformed messages)."""

@@ -93,6 +93,9 @@ class Node:
         self.inputs: dict[int, NodeInput] = {}
         self.inbox: dict[int, dict[int, NeighbourState]] = {}  # step → j → state
         self.screened: set[tuple[int, int]] = set()  # (step, j) compared with our own set of that step
+        # step → neighbours whose state of that step we dropped: it spoke, so it answers our wait (it is
+        # left out of the step, which is always sound) — else we would wait the neighbour timeout for it
+        self.refused: dict[int, set[int]] = {}
         self.waiting_since: float | None = None
         self.give_up = False  # set by the runtime when the neighbour deadline passed
         self.ended = False
@@ -249,18 +252,24 @@ class Node:
             return
         sensor = self.sensors[msg.node]
         if (msg.sector is not None) != sensor.saturated:
-            self.drop("sector-mismatch")  # a saturating sensor publishes its sector, no other one does
+            self._refuse(msg, "sector-mismatch")  # a saturating sensor publishes its sector, no other one does
             return
         P = msg.P_matrix()  # symmetric positive definite: checked by decode()
         P = 0.5 * (P + P.T)
         sector = Sector(msg.sector[0], msg.sector[1], msg.sector_basis) if msg.sector is not None else None
         if not innovation_possible(sensor, np.asarray(msg.xhat), P, msg.rho, msg.gamma, sector, msg.innov):
-            self.drop("neighbour-innovation")
+            self._refuse(msg, "neighbour-innovation")
             return
         if self.k < 0 and len(self.inbox) >= MAX_AHEAD and msg.step not in self.inbox:
             del self.inbox[min(self.inbox)]  # not started (rejoin): keep the newest steps only
         self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(np.asarray(msg.xhat), P, msg.rho, msg.gamma, msg.innov, sector)
         self._screen()
+
+    def _refuse(self, msg: NodeState, reason: str) -> None:
+        """Drop a neighbour state that cannot be honest; its sender no longer holds up that step."""
+        self.drop(reason)
+        if len(self.refused) < MAX_AHEAD or msg.step in self.refused:  # bounded like the inbox
+            self.refused.setdefault(msg.step, set()).add(msg.node)
 
     def _screen(self) -> None:
         """Drop the neighbour states of our current step whose (β, r) set is disjoint from our own."""
@@ -273,6 +282,7 @@ class Node:
             if states_disjoint(self.own.xhat, self.own.P, self.own.rho, nb.xhat, nb.P, nb.rho):
                 del have[j]
                 self.drop("neighbour-disjoint")
+                self.refused.setdefault(self.k, set()).add(j)
         self.screened = {(s, j) for s, j in self.screened if s >= self.k}
 
     # ------------------------------------------------------------------ stepping
@@ -289,8 +299,8 @@ class Node:
         inp = self.next_input()
         if inp is None or self.k < 0 or self.set_estimator is not None:
             return []
-        have = self.inbox.get(self.k, {})
-        return [j for j in inp.expect_from if j not in have]
+        have, refused = self.inbox.get(self.k, {}), self.refused.get(self.k, set())
+        return [j for j in inp.expect_from if j not in have and j not in refused]
 
     def try_step(self, now: float | None = None) -> bool:
         """Compute and publish the next step if its inputs are here (or the runtime gave up waiting)."""
@@ -389,6 +399,7 @@ class Node:
         self.k = inp.step
         self.inputs = {s: m for s, m in self.inputs.items() if s > self.k}
         self.inbox = {s: m for s, m in self.inbox.items() if s >= self.k}
+        self.refused = {s: js for s, js in self.refused.items() if s >= self.k}
         self.waiting_since, self.give_up = None, False
         self.bus.publish(keys.node_state(self.run, self.id), msg)
 

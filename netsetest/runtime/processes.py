@@ -111,6 +111,7 @@ class Barrier:
 
     def on_message(self, key: str, msg: Message) -> None:
         if not isinstance(msg, Ready):
+            self.bus.drop("unexpected-type")
             return
         if key != keys.ready_of(self.run, keys.role_name(msg.role, msg.node)):
             self.bus.drop("ready-wrong-key")  # a role speaks for itself only (the ACL allows its own key)
