@@ -16,6 +16,7 @@ the ranges would see it dropped as ``invalid`` by every receiver, as both buses 
 from __future__ import annotations
 
 import copy
+import hashlib
 import math
 import re
 from dataclasses import dataclass
@@ -49,6 +50,8 @@ Reason = Annotated[str, Meta(max_length=MAX_REASON)]
 Drops = Annotated[dict[Reason, Annotated[int, Meta(ge=0)]], Meta(max_length=MAX_DROP_REASONS)]
 SectorH1 = Annotated[float, Meta(gt=0, le=1)]
 SectorH = Annotated[float, Meta(ge=0, le=FLOAT_MAX)]
+DIGEST_BYTES = 16  # a state copy's identity (not a security mechanism: the transport authenticates)
+Digest = Annotated[str, Meta(pattern=f"^[0-9a-f]{{{2 * DIGEST_BYTES}}}$")]
 
 
 class BadMessage(ValueError):
@@ -153,6 +156,13 @@ class NodeState(_Msg, tag="state", kw_only=True):
     # a non-SDP node's own guaranteed set over [β, r, f_i] (sets.set_to_wire); the ellipsoid above then
     # encloses it and is only the neighbour-facing summary.  Absent (not sent) for the SDP.
     set: dict[str, Any] | None = None
+    # the exact copy of every state this step used, as (node, state_digest of the copy): the in-neighbours'
+    # states and the node's own previous one (the collector judges those copies: docs/coverage.md)
+    inputs: Annotated[list[tuple[NodeId, Digest]], Meta(max_length=MAX_NODES + 1)] = []
+    # the set the node continues from where it is not the one published (objective bank: x̂, P of the
+    # trace recursion); the collector judges it as the next step's prior
+    own_xhat: Vec3 | None = None
+    own_P: Mat3 | None = None
 
     def __post_init__(self) -> None:
         if self.set is not None:
@@ -160,9 +170,30 @@ class NodeState(_Msg, tag="state", kw_only=True):
         problem = spd_problem(self.P)
         if problem:
             raise ValueError(problem)
+        if (self.own_xhat is None) != (self.own_P is None):
+            raise ValueError("own_xhat and own_P: both or neither")
+        if self.own_P is not None:
+            problem = spd_problem(self.own_P)
+            if problem:
+                raise ValueError(f"own_P: {problem}")
+
+    def own_P_matrix(self) -> np.ndarray:
+        """The shape of the set the node continues from (the published one unless own_P is given)."""
+        return np.asarray(self.own_P if self.own_P is not None else self.P, dtype=float).reshape(3, 3)
+
+    def own_centre(self) -> np.ndarray:
+        return np.asarray(self.own_xhat if self.own_xhat is not None else self.xhat, dtype=float)
 
     def P_matrix(self) -> np.ndarray:
         return np.asarray(self.P, dtype=float).reshape(3, 3)
+
+
+def state_digest(st: NodeState) -> str:
+    """The identity of a state copy: every field a receiver's step takes from it (the set, the innovation,
+    γ, the sector, and the set the sender continues from).  Two copies with the same digest are one."""
+    content = [st.step, st.node, st.xhat, st.P, st.rho, st.gamma, st.innov, st.sector, st.sector_basis, st.set,
+               st.own_xhat, st.own_P]  # fmt: skip
+    return hashlib.blake2b(msgspec.msgpack.encode(content), digest_size=DIGEST_BYTES).hexdigest()
 
 
 SYM_RTOL, SYM_ATOL = 1e-9, 1e-15  # P = Pᵀ up to rounding, as np.allclose(P, P.T, rtol, atol)

@@ -6,12 +6,13 @@ itself.  A payload that fails validation is dropped and counted in :attr:`Bus.dr
 never queued and never handed to a role: a flood of malformed or out-of-range messages takes no room
 that a genuine message needs.
 
-The inbox is bounded per key (:class:`Inbox`): at most ``MAX_PER_KEY`` messages wait on one key, at most
-``MAX_COPIES_PER_STEP`` of them for one step, and at most ``MAX_KEYS`` keys wait at once.  A role needs
-the earliest steps first (its next input, the neighbour states of its current step), so when a key's
-queue is full a message for an earlier step evicts the one for the farthest step (``inbox-evicted``);
-otherwise the newest is dropped (``inbox-full``, ``inbox-copies``, ``inbox-keys``).  A flood of future
-steps or of copies of one step therefore never pushes out what the role waits for.  :meth:`Bus.pump`
+The inbox is bounded per key (:class:`Inbox`): at most ``MAX_PER_KEY`` messages wait on one key and at
+most ``MAX_KEYS`` keys wait at once.  A role needs the earliest steps first (its next input, the
+neighbour states of its current step), so when a key's queue is full a message for an earlier step
+evicts the one for the farthest step (``inbox-evicted``); otherwise the newest is dropped
+(``inbox-full``, ``inbox-keys``).  A flood of future steps therefore never pushes out what the role waits
+for.  (Copies of the very step a role waits for cannot be told from the genuine one here: the role's own
+checks drop them, and they pass through at ``MAX_ROUNDS`` per pump.)  :meth:`Bus.pump`
 serves the waiting keys in turn, one message each per round, for at most ``MAX_ROUNDS`` rounds and never
 more than was queued when it started — so a flood on one key delays nothing else and cannot keep a role
 from stepping.
@@ -40,7 +41,6 @@ Handler = Callable[[str, Message], None]
 MAX_PER_KEY = 64  # a role handles ~1 message per key per step and pumps many times a step: more is a flood
 MAX_ROUNDS = 16  # payloads per key one pump handles: a flooded key's decoding cost per pump is bounded
 MAX_KEYS = 1024  # distinct (key, subscriber) queues: a wildcard subscription must not allocate per forged key
-MAX_COPIES_PER_STEP = 4  # an honest sender puts one message per step on its key: more are copies or forgeries
 NO_STEP = -1  # the service rank of a message that names no step (Ready, End): never evicted for a step's
 
 
@@ -53,8 +53,8 @@ def _rank(msg: Message) -> int:
 class Inbox:
     """Decoded messages per (key, handler), FIFO per key, bounded; thread-safe (transport threads put)."""
 
-    def __init__(self, per_key: int = MAX_PER_KEY, max_keys: int = MAX_KEYS, copies: int = MAX_COPIES_PER_STEP) -> None:
-        self.per_key, self.max_keys, self.copies = per_key, max_keys, copies
+    def __init__(self, per_key: int = MAX_PER_KEY, max_keys: int = MAX_KEYS) -> None:
+        self.per_key, self.max_keys = per_key, max_keys
         self._queues: dict[tuple[str, Handler], deque[Message]] = {}  # insertion order = service order
         self._size = 0
         self._cv = threading.Condition()
@@ -68,8 +68,6 @@ class Inbox:
                 if len(self._queues) >= self.max_keys:
                     return "inbox-keys"
                 q = self._queues[(key, handler)] = deque()
-            if rank != NO_STEP and sum(_rank(m) == rank for m in q) >= self.copies:
-                return "inbox-copies"
             reason = None
             if len(q) >= self.per_key:
                 far = max(range(len(q)), key=lambda i: _rank(q[i]))

@@ -172,7 +172,7 @@ def cmd_inspect(a: argparse.Namespace) -> int:
         for r in rec.fault_rows(i):
             ft = "-" if r["fault_true"] is None else f"{r['fault_true']:9.4f}"
             e = "-" if r["E"] is None else f"{r['E']:7.3f}"
-            flag = "" if r["contained"] else "  MISS"
+            flag = "  not judged" if not r["judged"] else ("" if r["contained"] else "  MISS")
             print(f"{r['step']:5d} {ft:>9} {r['fault_estimate']:9.4f} {r['fault_lower']:9.4f} {r['fault_upper']:9.4f} {e:>7}  {r['status']}{flag}")
         print()
     return 0

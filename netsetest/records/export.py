@@ -18,7 +18,7 @@ COMPONENTS = ("beta", "r", "fault")
 COLUMNS: tuple[str, ...] = (
     "step", "t",
     *(f"{c}_{part}" for c in COMPONENTS for part in ("estimate", "lower", "upper", "true")),
-    "E", "rho", "contained", "assumptions_ok", "status",
+    "E", "rho", "judged", "contained", "assumptions_ok", "status",
 )  # fmt: skip
 FORMATS = ("parquet", "csv")
 

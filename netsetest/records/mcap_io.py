@@ -122,7 +122,8 @@ SCHEMAS: dict[str, dict[str, Any]] = {
                     "description": "[h1, h] of this step's sector (null: the sensor models no saturation)"},
          "sector_basis": {"type": "string", "description": "none | measurement | fault-bound | assumed"},
          "E": {**_NUM, "description": "eᵀP⁻¹e (contained while ≤ ρ); null if the truth is unknown"},
-         "contained": _BOOL, "assumptions_ok": _BOOL,
+         "judged": {**_BOOL, "description": "the collector judged this set (false: contested copies or unknown truth)"},
+         "contained": {"type": ["boolean", "null"], "description": "null where not judged"}, "assumptions_ok": _BOOL,
          "contested": {**_BOOL, "description": "more than one copy matched the truth: not judged"},
          **{f"{n}_{s}": {"type": "number", "description": f"{s} bound of {n}: x̂ ∓ √(ρ P)"}
             for n, _ in COMPONENTS for s in ("lower", "upper")}},

@@ -184,11 +184,15 @@ class NodeTrack:
     P: np.ndarray  # (K, 3, 3)
     rho: np.ndarray  # (K,)
     E: np.ndarray  # (K,) eᵀP⁻¹e, NaN where the truth of that step is unknown
-    contained: np.ndarray  # (K,) bool
+    contained: np.ndarray  # (K,) bool: judged and inside (False where not judged: see ``judged``)
     assumptions_ok: np.ndarray  # (K,) bool
     status: list[str]
     solve_ms: np.ndarray  # (K,)
     set_bounds: np.ndarray | None = None  # (K, 3, 2) a set estimator's published per-coordinate bounds
+    judged: np.ndarray | None = None  # (K,) bool: the collector judged the step (None: all were, older records)
+
+    def was_judged(self, n: int) -> bool:
+        return bool(self.judged[n]) if self.judged is not None else True
 
     def bounds(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """Lower/upper bound of component ``index`` (0 β, 1 r, 2 f): the published set's bounds where the
@@ -231,7 +235,8 @@ class Record:
                     "fault_upper": float(hi[n]),
                     "fault_true": None if t is None or str(node) not in t["faults"] else float(t["faults"][str(node)]),
                     "E": None if np.isnan(tr.E[n]) else float(tr.E[n]),
-                    "contained": bool(tr.contained[n]),
+                    "judged": tr.was_judged(n),
+                    "contained": bool(tr.contained[n]) if tr.was_judged(n) else None,
                     "status": tr.status[n],
                 }
             )
@@ -400,11 +405,13 @@ def record_from_parts(
             P=np.array([e["P"] for e in entries], dtype=float).reshape(-1, 3, 3),
             rho=np.array([e["rho"] for e in entries], dtype=float),
             E=np.array([np.nan if e["E"] is None else e["E"] for e in entries], dtype=float),
-            contained=np.array([bool(e["contained"]) for e in entries], dtype=bool),
+            contained=np.array([e["contained"] is True for e in entries], dtype=bool),
             assumptions_ok=np.array([bool(e["assumptions_ok"]) for e in entries], dtype=bool),
             status=[e["status"] for e in entries],
             solve_ms=np.array([e["solve_ms"] for e in entries], dtype=float),
             set_bounds=_set_bounds(entries),
+            # records before "judged" wrote contained: true on unjudged rows too; say where they could not be
+            judged=np.array([e.get("judged", e.get("E") is not None and not e.get("contested", False)) for e in entries], dtype=bool),
         )
     for t in truth:
         if not isinstance(t, dict) or not isinstance(t.get("step"), int):

@@ -59,6 +59,20 @@ class NodeSummary:
 
 
 @dataclass(frozen=True)
+class InheritedOrigin:
+    """Where the node-steps counted as ``inherited`` come from: an input (node, from step ``first_step``)
+    that did not hold the truth or could not be judged (``why``), and how many node-steps rested on it."""
+
+    node: int
+    why: str  # missed the truth | truth unknown | not judged | not from its true input | noise | sector
+    first_step: int
+    node_steps: int
+
+    def to_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(frozen=True)
 class RunSummary:
     """The verdict of a run: totals over node-steps, per-role drop counters and one row per node.
 
@@ -77,6 +91,7 @@ class RunSummary:
     node_steps_contained: int = 0
     node_steps_covered: int = 0  # evaluated with every assumption held
     node_steps_not_covered: dict[str, int] = field(default_factory=dict)  # evaluated outside the guarantee, by cause
+    inherited_from: list[InheritedOrigin] = field(default_factory=list)  # the origins of cause "inherited"
     nodes_missing: list[int] = field(default_factory=list)  # silent at the last step
     nodes_rejoined: list[int] = field(default_factory=list)
     losses: dict[str, int] = field(default_factory=dict)  # scheduled message losses, by kind
@@ -111,7 +126,7 @@ class RunSummary:
         for f in fields(self):
             if f.name not in RUN_FIELDS:
                 v = getattr(self, f.name)
-                out[f.name] = [n.to_dict() for n in v] if f.name == "nodes" else v
+                out[f.name] = [n.to_dict() for n in v] if f.name in ("nodes", "inherited_from") else v
         return out
 
     @classmethod

@@ -1,11 +1,13 @@
 """The collector role: checks every published ellipsoid against the truth and writes the record.
 
 For node i at step k it computes E_i,k = e_i,kᵀ P_i,k⁻¹ e_i,k with e = x̄_i,k − x̂_i,k and declares
-containment when E_i,k ≤ ρ_i.  A miss is attributed by the step's *dependency cone*: the estimate of
-(i, k) relies on its own sector condition and noise bound at k, the disturbance bound at k−1, and on
-every (j, k−1) with j ∈ N_i ∪ {i}; step 0 relies on the initial ellipsoid containing x̄_0
-(Assumption 1).  A miss inside an intact cone is an estimator failure (``violations``); a miss after a
-broken assumption is reported separately (``misses_assumption_broken``).  A saturating node's sector
+containment when E_i,k ≤ ρ_i.  A miss is attributed by the step's *dependency cone*, one step deep over
+judged inputs (docs/coverage.md): the estimate of (i, k) relies on its own sector condition and noise
+bound at k, the disturbance bound at k−1, and on the exact copies of the states it used (its own
+previous set and its neighbours' of k−1, named by digest in ``NodeState.inputs``), each judged directly
+against the truth of k−1; step 0 relies on the initial ellipsoid containing x̄_0 (Assumption 1).  A miss
+inside an intact cone is an estimator failure (``violations``); a miss after a broken assumption is
+reported separately (``misses_assumption_broken``).  A saturating node's sector
 premise is what its published sector rests on (``sector_basis``): the noise bound only, the declared
 fault bound, or — for an assumed sector — the sector itself checked against the truth's C̄ x̄.  A derived
 sector that misses the truth inside an intact cone is counted as a ``sector_failure`` (an estimator bug).
@@ -50,10 +52,10 @@ from netsetest.config.schema import NodeConfig, Scenario
 from netsetest.estimator.names import SDP
 from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.sector import Sector, sector_ok
-from netsetest.messages import End, Message, NodeState, RunScope, Truth
+from netsetest.messages import End, Message, NodeState, RunScope, Truth, state_digest
 from netsetest.models.sensor import augmented
 from netsetest.records.record import RecordSink
-from netsetest.records.summary import RUN_FIELDS, NodeSummary, RunSummary
+from netsetest.records.summary import RUN_FIELDS, InheritedOrigin, NodeSummary, RunSummary
 from netsetest.roles.vehicle import fault_bound_holds
 from netsetest.sets import set_from_wire
 
@@ -62,6 +64,43 @@ CLOSE_LAG = 2  # a step whose alive nodes reported closes this many truths later
 MAX_COPIES = 4  # differing copies of one step's truth, or one node-step's state, kept until the step closes
 INNOV_RTOL = 1e-12  # the node computes ỹ − C̄ x̂ with the same numbers: rounding only across machines
 CHAIN_RTOL = 1e-12  # x_k recomputed from x_{k−1}: same code, same inputs — rounding only across machines
+
+# why an input of a node-step gives it no guarantee (docs/coverage.md)
+TRUTH_UNKNOWN = "truth unknown"  # no single consistent truth of that step: nothing can be judged
+NOT_FROM_INPUT = "not from its true input"  # its γ or innovation is not what the true measurement gives
+MISSED = "missed the truth"
+NOT_JUDGED = "not judged"  # no copy with that digest reached the collector, or several matched the truth
+INHERITED = "inherited"  # the cause of a node-step whose input failed: its Origin says which and why
+
+
+@dataclass(frozen=True)
+class CopyCheck:
+    """One copy of a node's state of a closed step, as an input of a later step: None where every fact a
+    step takes from it held, else why not."""
+
+    as_neighbour: str | None  # its published set held the truth; its innovation's noise and sector facts held
+    as_prior: str | None  # the set its node continues from held the truth (self-loop: and those facts)
+
+
+@dataclass(frozen=True)
+class Origin:
+    node: int
+    step: int
+    why: str
+
+
+@dataclass(frozen=True)
+class Cone:
+    """A node-step's dependency cone: covered, or the first cause that takes it out of the guarantee."""
+
+    ok: bool
+    cause: str | None = None
+    origin: Origin | None = None
+
+
+def _in_ellipsoid(x: np.ndarray, c: np.ndarray, P: np.ndarray, rho: float) -> bool:
+    e = x - c
+    return bool(float(e @ np.linalg.solve(P, e)) <= rho)
 
 
 def _same_set(a: NodeState, b: NodeState) -> bool:
@@ -129,7 +168,9 @@ class Collector:
         self.closed = -1  # last closed step
         self.head = -1  # newest step with a truth copy
         self.prev_truth: Truth | None = None  # the judged truth of the last closed step
-        self.prev_cone: dict[int, bool] = {}  # nodes with a judged state at the last closed step
+        self.prev_checks: dict[int, dict[str, CopyCheck]] = {}  # last closed step: node → copy digest → check
+        self.prev_sole: dict[int, str] = {}  # last closed step: node → digest of its sole judged copy
+        self.origins: dict[tuple[int, str], list[int]] = {}  # (node, why) → [first step, node-steps] of "inherited"
         self.totals = {i: NodeTotals() for i in scenario.ids}
         self.losses: Counter[str] = Counter()
         self.vehicle_drops: dict[str, int] = {}
@@ -361,46 +402,88 @@ class Collector:
             return tr.fault_ok[s]
         return True
 
-    def _cones(self, k: int) -> dict[int, bool]:
-        """Whether every assumption in the dependency cone of (i, k) held, per node (False: truth unknown)."""
-        tr, prev = self._step_truth, self.prev_truth
-        ok: dict[int, bool] = {}
-        for n in self.sc.nodes:
-            i, s = n.id, str(n.id)
-            if tr is None:
-                ok[i] = False
-                continue
-            st = self._judged.get(i)
-            own = tr.noise_ok[s] and self._sector_premise(n, st, tr)
-            if i in self.needs_fault_bound:
-                own = own and tr.fault_ok.get(s, False)
-            if k == 0:
-                own = own and _in_prior(n, tr)  # Assumption 1: x̄_0 in the prior ellipsoid
-            else:
-                own = own and prev is not None and prev.step == k - 1 and prev.dist_ok
-                # the step relied on the judged states of k−1 it used (own and neighbours'), nothing else
-                deps = (set(st.used) if st is not None else set(n.in_weights) - {i}) | {i}
-                own = own and all(self.prev_cone.get(j, False) for j in deps)
-            ok[i] = bool(own)
-        return ok
+    def _copy_checks(self, k: int, tr: Truth | None) -> dict[int, dict[str, CopyCheck]]:
+        """Every copy received of every node's state of step k, judged as an input of a later step."""
+        out: dict[int, dict[str, CopyCheck]] = {}
+        for j, copies in self.states.get(k, {}).items():
+            out[j] = {state_digest(c): self._copy_check(j, c, tr) for c in copies}
+        return out
 
-    def _not_covered_cause(self, i: int, k: int) -> str:
-        tr, prev, s = self._step_truth, self.prev_truth, str(i)
+    def _copy_check(self, j: int, c: NodeState, tr: Truth | None) -> CopyCheck:
         if tr is None:
-            return "truth unknown"
-        if not self._sector_premise(self.node_cfg[i], self._judged.get(i), tr):
+            return CopyCheck(TRUTH_UNKNOWN, TRUTH_UNKNOWN)
+        if self._state_mismatch(j, c, tr):
+            return CopyCheck(NOT_FROM_INPUT, NOT_FROM_INPUT)
+        n, s = self.node_cfg[j], str(j)
+        facts = None
+        if not tr.noise_ok[s]:
+            facts = "noise"
+        elif n.sensor.saturated and not (s in tr.r and sector_ok(n.sensor, _published_sector(c), tr.r[s])):
+            facts = "sector"
+        xbar = augmented(tr.x, tr.faults[s])
+        published_in = _in_ellipsoid(xbar, np.asarray(c.xhat), c.P_matrix(), c.rho)
+        if c.set is not None:  # a set estimator continues from the set it published
+            prior_in = set_from_wire(c.set, len(xbar)).contains(xbar)
+        else:
+            prior_in = _in_ellipsoid(xbar, c.own_centre(), c.own_P_matrix(), c.rho)
+        self_loop = j in n.in_weights  # its own innovation enters its next step: the same facts
+        return CopyCheck(
+            as_neighbour=facts or (None if published_in else MISSED),
+            as_prior=(facts if self_loop else None) or (None if prior_in else MISSED),
+        )
+
+    def _own_cause(self, n: NodeConfig, st: NodeState | None, tr: Truth, k: int) -> str | None:
+        """The first of the step's own assumptions that broke (None: all held)."""
+        s, prev = str(n.id), self.prev_truth
+        if not self._sector_premise(n, st, tr):
             return "sector"
         if not tr.noise_ok[s]:
             return "noise"
-        if i in self.needs_fault_bound and not tr.fault_ok.get(s, False):
+        if n.id in self.needs_fault_bound and not tr.fault_ok.get(s, False):
             return "fault bound"
         if k == 0:
-            return "initial set"
+            return None if _in_prior(n, tr) else "initial set"
+        if st is not None and st.status == "rejoin":
+            return None  # built from the neighbours' sets of this very step: no transition crossed
         if prev is None or prev.step != k - 1:
-            return "truth unknown"
+            return TRUTH_UNKNOWN
         if not prev.dist_ok:
             return "disturbance"
-        return "inherited"
+        return None
+
+    def _cone(self, n: NodeConfig, k: int, checks: dict[int, dict[str, CopyCheck]], sole: dict[int, str]) -> Cone:
+        """Whether node-step (n, k) is covered: its own assumptions held and every input it used was judged
+        and held the truth (one step deep, over judged inputs: docs/coverage.md)."""
+        i, tr = n.id, self._step_truth
+        if tr is None:
+            return Cone(False, TRUTH_UNKNOWN)
+        st = self._judged.get(i)
+        own = self._own_cause(n, st, tr, k)
+        if own is not None:
+            return Cone(False, own)
+        if st is None or k == 0:
+            return Cone(True)
+        if st.status == "fallback" and st.set is not None:
+            return Cone(False, "fallback")  # the previous step's set again: no guarantee for this step
+        for j, m, digest, as_prior in self._inputs_of(st, k):
+            table, sole_of = (checks, sole) if m == k else (self.prev_checks, self.prev_sole)
+            if digest is None:
+                digest = sole_of.get(j)
+            c = table.get(j, {}).get(digest) if digest is not None else None
+            why = NOT_JUDGED if c is None else (c.as_prior if as_prior else c.as_neighbour)
+            if why is not None:
+                return Cone(False, INHERITED, Origin(j, m, why))
+        return Cone(True)
+
+    @staticmethod
+    def _inputs_of(st: NodeState, k: int) -> list[tuple[int, int, str | None, bool]]:
+        """(node, step, digest, whether it is the node's own prior) of every input of the step; digest None:
+        a state from before digests, whose inputs are its neighbours' sole judged copies (and its own)."""
+        m = k if st.status == "rejoin" else k - 1
+        if st.inputs:
+            return [(j, m, d, j == st.node) for j, d in st.inputs]
+        deps = [(j, m, None, False) for j in st.used]
+        return deps if st.status == "rejoin" else [*deps, (st.node, m, None, True)]
 
     def _close(self, k: int) -> None:
         """Judge step k, stream it to the sink, add it to the totals and forget it."""
@@ -414,15 +497,18 @@ class Collector:
                     contested.add(i)
                 if tr is not None and sole:
                     self._evaluate(i, k)
-        cone = self._cones(k)
+        checks = self._copy_checks(k, tr)
+        sole_digest = {i: state_digest(st) for i, st in self._judged.items() if i not in contested}
+        cones = {n.id: self._cone(n, k, checks, sole_digest) for n in self.sc.nodes}
         for i in self.sc.ids:
             t = self.totals[i]
             st = self._judged.get(i)
+            cone = cones[i]
             if tr is not None and not tr.sector_ok[str(i)]:
                 t.sector_breaks += 1
                 if t.first_sector_break is None:
                     t.first_sector_break = k
-            if not cone[i]:
+            if not cone.ok:
                 t.assumption_violations += 1
             if self.states.get(k, {}).get(i):
                 t.last_heard = k
@@ -438,10 +524,10 @@ class Collector:
                 continue
             t.contested += i in contested
             t.sectors_assumed += st.sector_basis == "assumed"
-            t.sector_failures += self._sector_failed(i, st, tr, cone[i] and i not in contested)
+            t.sector_failures += self._sector_failed(i, st, tr, cone.ok and i not in contested)
             if self.sink is not None:
-                self.sink.state(i, self._state_entry(i, k, st, cone[i], i in contested))
-            self._add(t, i, k, st, cone[i])
+                self.sink.state(i, self._state_entry(i, k, st, cone, i in contested))
+            self._add(t, i, k, st, cone)
         if tr is not None:
             for j, i in tr.lost:
                 self.losses[f"{j}->{i}"] += 1
@@ -453,7 +539,7 @@ class Collector:
         self.evaluated.clear()
         self.bounds.clear()
         self.prev_truth = tr
-        self.prev_cone = {i: cone[i] for i in self._judged if i not in contested}
+        self.prev_checks, self.prev_sole = checks, sole_digest
         self.closed = k
 
     def _sector_failed(self, i: int, st: NodeState, tr: Truth | None, cone: bool) -> bool:
@@ -464,7 +550,7 @@ class Collector:
             return False
         return not sector_ok(n.sensor, _published_sector(st), tr.r[str(i)])
 
-    def _add(self, t: NodeTotals, i: int, k: int, st: NodeState, cone: bool) -> None:
+    def _add(self, t: NodeTotals, i: int, k: int, st: NodeState, cone: Cone) -> None:
         t.reported += 1
         ev = self.evaluated.get((i, k))
         if ev is not None:
@@ -472,12 +558,15 @@ class Collector:
             t.evaluated += 1
             t.E_max = E if t.E_max is None else max(t.E_max, E)
             t.contained += contained
-            if cone:
+            if cone.ok:
                 t.covered += 1
             else:
-                self.not_covered[self._not_covered_cause(i, k)] += 1
+                self.not_covered[cone.cause or INHERITED] += 1
+                if cone.origin is not None:
+                    o = self.origins.setdefault((cone.origin.node, cone.origin.why), [cone.origin.step, 0])
+                    o[1] += 1
             if not contained:
-                if cone:
+                if cone.ok:
                     t.violations += 1
                 else:
                     t.broken_misses += 1
@@ -491,13 +580,18 @@ class Collector:
         b = self.bounds.get((i, k))
         t.width_sum += float(b[2, 1] - b[2, 0]) if b is not None else 2.0 * np.sqrt(st.rho * st.P_matrix()[2, 2])
 
-    def _state_entry(self, i: int, k: int, st: NodeState, cone: bool, contested: bool) -> dict:
+    def _state_entry(self, i: int, k: int, st: NodeState, cone: Cone, contested: bool) -> dict:
         ev = self.evaluated.get((i, k))
-        E, contained = ev if ev is not None else (None, True)
+        E, contained = ev if ev is not None else (None, None)  # not judged: neither contained nor a miss
+        unjudged = None if ev is not None else ("contested" if contested else TRUTH_UNKNOWN)
+        origin = cone.origin
         return {
             "step": k, "xhat": list(st.xhat), "P": list(st.P), "rho": st.rho, "status": st.status,
             "rho_cert": st.rho_cert, "solve_ms": st.solve_ms, "used": st.used, "missing": st.missing,
-            "late": st.late, "E": E, "contained": bool(contained), "assumptions_ok": bool(cone),
+            "late": st.late, "E": E, "judged": ev is not None, "not_judged_why": unjudged,
+            "contained": None if contained is None else bool(contained), "assumptions_ok": cone.ok,
+            "not_covered_cause": cone.cause,
+            "inherited_from": [origin.node, origin.step, origin.why] if origin is not None else None,
             "contested": contested, "sector": list(st.sector) if st.sector is not None else None,
             "sector_basis": st.sector_basis,
             **({"bounds": self.bounds[(i, k)].tolist()} if (i, k) in self.bounds else {}),
@@ -540,6 +634,7 @@ class Collector:
             node_steps_contained=sum(t.contained for t in totals),
             node_steps_covered=sum(t.covered for t in totals),
             node_steps_not_covered=dict(sorted(self.not_covered.items())),
+            inherited_from=[InheritedOrigin(j, why, first, count) for (j, why), (first, count) in sorted(self.origins.items())],
             # lost for good: silent at the last step; rejoined: a gap, then heard from up to the last step
             nodes_missing=[i for i, t in self.totals.items() if t.last_heard is None or t.last_heard < last],
             nodes_rejoined=[i for i, t in self.totals.items() if t.missing_from is not None and t.last_heard == last],

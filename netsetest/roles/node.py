@@ -37,7 +37,7 @@ from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.rejoin import rejoin_ellipsoid
 from netsetest.estimator.sdp import Ellipsoid, LocalEstimator, NeighbourState, Objective, StepInput, StepResult, Variant
 from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sector, measurement_interval
-from netsetest.messages import End, Message, NodeInput, NodeState, RunScope, decode, encode
+from netsetest.messages import End, Message, NodeInput, NodeState, RunScope, decode, encode, state_digest
 from netsetest.models.sensor import NA
 from netsetest.profile import PROFILE
 from netsetest.roles.plausibility import innovation_possible, states_disjoint
@@ -92,6 +92,8 @@ class Node:
         self.own: NeighbourState | None = None
         self.inputs: dict[int, NodeInput] = {}
         self.inbox: dict[int, dict[int, NeighbourState]] = {}  # step → j → state
+        self.digests: dict[int, dict[int, str]] = {}  # step → j → state_digest of the copy in the inbox
+        self.own_digest: str | None = None  # of our last published state: the next step's prior
         self.screened: set[tuple[int, int]] = set()  # (step, j) compared with our own set of that step
         # step → neighbours whose state of that step we dropped: it spoke, so it answers our wait (it is
         # left out of the step, which is always sound) — else we would wait the neighbour timeout for it
@@ -153,7 +155,7 @@ class Node:
         res = est.step(own, StepInput(sc.model.weights(vx), u, y, gamma, neigh))
         inp = NodeInput(step=1, node=self.id, y=y, gamma=gamma, u_prev=u, vx_prev=vx, expect_from=self.others)
         decode(encode(inp))
-        decode(encode(self._state_message(inp, res.status, res, used=self.others, missing=[])))
+        decode(encode(self._state_message(inp, res.status, res, used=self.others, missing=[], inputs=[])))
         for j in self.others:  # the checks every neighbour state of step 1 goes through (results unused)
             nb = neigh[j]
             innovation_possible(self.sensors[j], nb.xhat, nb.P, nb.rho, nb.gamma, nb.sector, nb.innov)
@@ -261,8 +263,11 @@ class Node:
             self._refuse(msg, "neighbour-innovation")
             return
         if self.k < 0 and len(self.inbox) >= MAX_AHEAD and msg.step not in self.inbox:
-            del self.inbox[min(self.inbox)]  # not started (rejoin): keep the newest steps only
+            oldest = min(self.inbox)  # not started (rejoin): keep the newest steps only
+            del self.inbox[oldest]
+            self.digests.pop(oldest, None)
         self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(np.asarray(msg.xhat), P, msg.rho, msg.gamma, msg.innov, sector)
+        self.digests.setdefault(msg.step, {})[msg.node] = state_digest(msg)
         self._screen()
 
     def _refuse(self, msg: NodeState, reason: str) -> None:
@@ -332,7 +337,7 @@ class Node:
         if inp.step == 0:
             res = self.estimator.first(Ellipsoid(self.xhat, self.P, self.rho), inp.y, inp.gamma)
             status = "init" if res.status == "ok" else "init-prior"
-            self._publish(inp, status, res, used=[], missing=[])
+            self._publish(inp, status, res, used=[], missing=[], inputs=[])
             return True
         have = self.inbox.get(inp.step, {})
         if not have:
@@ -340,7 +345,7 @@ class Node:
         xhat, P = rejoin_ellipsoid(self.cfg.sensor, inp.y, inp.gamma, self.rho, list(have.values()))
         sector = derive_sector(self.cfg.sensor, FaultBound(), measurement_interval(self.cfg.sensor, inp.y, inp.gamma), None)
         res = StepResult(xhat, P, "ok", float("nan"), 0.0, "rejoin", sector=sector)
-        self._publish(inp, "rejoin", res, used=sorted(have), missing=[])
+        self._publish(inp, "rejoin", res, used=sorted(have), missing=[], inputs=self._inputs(inp.step, sorted(have), own=False))
         return True
 
     def _update(self, inp: NodeInput) -> None:
@@ -357,7 +362,16 @@ class Node:
         res = self.estimator.step(Ellipsoid(self.xhat, self.P, self.rho), step_in)
         if PROFILE is not None:
             PROFILE.add("solve", t)
-        self._publish(inp, res.status, res, used=sorted(j for j in neigh if j != self.id), missing=self.missing())
+        used = sorted(j for j in neigh if j != self.id)
+        self._publish(inp, res.status, res, used=used, missing=self.missing(), inputs=self._inputs(self.k, used, own=True))
+
+    def _inputs(self, step: int, used: list[int], own: bool) -> list[tuple[int, str]]:
+        """(node, digest) of every state copy a step used: the neighbours' of ``step`` and our own prior."""
+        have = self.digests.get(step, {})
+        out = [(j, have[j]) for j in used]
+        if own and self.own_digest is not None:
+            out.append((self.id, self.own_digest))
+        return out
 
     def _publish_set(self, inp: NodeInput, status: str) -> None:
         """Step the set estimator and publish its set with an enclosing ellipsoid (the neighbour-facing
@@ -373,6 +387,7 @@ class Node:
                 raise
             s, status = self.last_set, "fallback"
         self.last_set = s
+        inputs = self._inputs(self.k, [], own=True) if inp.step > 0 else []
         xhat, P = enclosing_ellipsoid(s, self.rho)
         solve_ms = 1000 * (time.perf_counter() - t0)
         sensor = self.cfg.sensor
@@ -382,30 +397,34 @@ class Node:
         fault_bound = FaultBound(self.cfg.fault_rate, self.cfg.fault_size)
         sector = derive_sector(sensor, fault_bound, measurement_interval(sensor, inp.y, inp.gamma), r_set)
         res = StepResult(xhat, P, "ok", float("nan"), solve_ms, status, sector=sector)
-        self._publish(inp, status, res, used=[], missing=[], wire_set=set_to_wire(s))
+        self._publish(inp, status, res, used=[], missing=[], inputs=inputs, wire_set=set_to_wire(s))
 
     def _publish(
-        self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int], wire_set: dict | None = None
-    ) -> None:
+        self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int],
+        inputs: list[tuple[int, str]], wire_set: dict | None = None,
+    ) -> None:  # fmt: skip
         """Keep ``res`` as the node's own set (its next step starts from it) and publish ``res.public``."""
         self.xhat, self.P = res.xhat, res.P
         sector = res.sector
         cbar = self.cfg.sensor.Cbar
         self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, float(inp.y - cbar @ self.xhat), sector)
         t = PROFILE.now() if PROFILE is not None else 0
-        msg = self._state_message(inp, status, res, used, missing, wire_set)
+        msg = self._state_message(inp, status, res, used, missing, inputs, wire_set)
+        self.own_digest = state_digest(msg)
         if PROFILE is not None:
             PROFILE.add("build", t)
         self.k = inp.step
         self.inputs = {s: m for s, m in self.inputs.items() if s > self.k}
         self.inbox = {s: m for s, m in self.inbox.items() if s >= self.k}
         self.refused = {s: js for s, js in self.refused.items() if s >= self.k}
+        self.digests = {s: d for s, d in self.digests.items() if s >= self.k}
         self.waiting_since, self.give_up = None, False
         self.bus.publish(keys.node_state(self.run, self.id), msg)
 
     def _state_message(
-        self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int], wire_set: dict | None = None
-    ) -> NodeState:
+        self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int],
+        inputs: list[tuple[int, str]], wire_set: dict | None = None,
+    ) -> NodeState:  # fmt: skip
         """The state message of ``res.public`` for the step of ``inp`` (validated)."""
         pub, sector = res.public, res.sector
         innov = float(inp.y - self.cfg.sensor.Cbar @ pub.xhat)
@@ -417,5 +436,13 @@ class Node:
             solve_ms=res.solve_ms, used=used, missing=missing,
             late=inp.deadline is not None and time.time() > inp.deadline, dropped=sum(drops.values()), drops=drops,
             sector=(sector.h1, sector.h) if sector is not None else None,
-            sector_basis=sector.basis if sector is not None else "none", set=wire_set,
+            sector_basis=sector.basis if sector is not None else "none", set=wire_set, inputs=inputs,
+            **self._own_set(res),
         )  # fmt: skip
+
+    @staticmethod
+    def _own_set(res: StepResult) -> dict[str, list[float]]:
+        """The set we continue from, where it is not the published one (the collector judges it too)."""
+        if res.published is None:
+            return {}
+        return {"own_xhat": [float(a) for a in res.xhat], "own_P": [float(a) for a in res.P.reshape(NA * NA)]}
