@@ -64,16 +64,45 @@ def test_one_line_names_field_and_reason(topo, target, old, new, line_re):
     assert len(rest) == 1 and re.search(line_re, rest[0]), msg
 
 
-def test_lax_numbers_as_before(topo):
-    """pydantic's lax mode took an integral float or a numeric string for an integer, an integer for
-    a float; msgspec's non-strict conversion keeps that."""
-    _edit(topo, "steps = 80", 'steps = "12"')
-    assert load_topology(topo).steps == 12
-    _edit(topo, 'steps = "12"', "steps = 13.0")
-    assert load_topology(topo).steps == 13
+def test_strict_numbers(topo):
+    """No string or fractional value is taken for a number: a quoted ``"from" = "1.0"`` once silently
+    rewired an edge (6→5 became 1→5) and the run exited 0.  An integer is still a float (TOML's 1 for 1.0)."""
+    for old, new, says in [
+        ("steps = 80", 'steps = "12"', "steps: Expected `int`, got `str`"),
+        ("steps = 80", "steps = 13.0", "steps: Expected `int`, got `float`"),
+        ("to = 5\nfrom = 6", 'to = 5\nfrom = "1.0"', "from: Expected `int`, got `str`"),
+    ]:
+        text = topo.read_text()
+        _edit(topo, old, new)
+        assert says in _error(topo)
+        topo.write_text(text)
     _edit(topo, "tau_s = 0.1", "tau_s = 1")
     sc = load_topology(topo)
     assert sc.tau_s == 1.0 and isinstance(sc.tau_s, float)
+
+
+def test_profile_numbers_are_strict(topo):
+    prof = topo.parent.parent / "nodes" / "yaw4.toml"
+    _edit(prof, "R = 2.0", 'R = "2.0"')
+    assert "R: Expected `float`, got `str`" in _error(topo)
+
+
+@pytest.mark.parametrize(
+    "old,new,says",
+    [
+        ("period_s = 8.0", "period_s = 5e-324", "speed.period_s: Input should be greater than or equal to"),
+        ("mean_kmh = 100.0", "mean_kmh = 1e300", "speed.mean_kmh: Input should be less than or equal to"),
+    ],
+)
+def test_physical_ranges_of_the_speed_profile(topo, old, new, says):
+    _edit(topo, old, new)
+    assert says in _error(topo)
+
+
+def test_fault_bound_must_be_physical(topo):
+    """A declared fault bound of 1e300 passed the schema and crashed SAIM nodes (FallbackUnavailable)."""
+    _edit(topo.parent.parent / "nodes" / "yaw2.toml", "rate = 0.2", "rate = 1e300")
+    assert "fault_bound.rate: Input should be less than or equal to" in _error(topo)
 
 
 def test_cli_exit_2_without_traceback(topo, capsys):

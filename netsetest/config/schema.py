@@ -1,7 +1,8 @@
 """Configuration files: node profiles (``nodes/*.toml``) and network topologies (``topologies/*.toml``).
 
-Every file is validated with msgspec (``msgspec.convert`` into frozen Structs, lax about numbers as
-TOML users expect).  :func:`load_topology` returns a :class:`Scenario` (plain numpy data for the roles)
+Every file is validated with msgspec (``msgspec.convert`` into frozen Structs, strictly: no string or
+fractional value is taken for a number — a quoted ``"from" = "1.0"`` once silently rewired an edge; an
+integer is still accepted for a float).  :func:`load_topology` returns a :class:`Scenario` (plain numpy data for the roles)
 or raises :class:`ConfigError` naming the file, the field and the reason on one line (msgspec stops at
 the first error).
 
@@ -61,6 +62,8 @@ H1_MIN = 1e-3  # sector 0 < h1 < 1: h1 → 0 makes γ h1 C̄ (hence T, G) degene
 GAMMA_MIN = 1e-3  # availability γ ∈ [GAMMA_MIN, 1]
 W_MIN, W_MAX = 1e-12, 1e6  # side-wind bound w² ≤ W
 FREQ_MAX = 1e6  # |noise_frequency|
+SPEED_MAX_KMH = 500.0  # mean and amplitude of the speed profile: no road vehicle is faster
+PERIOD_MIN_S, PERIOD_MAX_S = 1e-3, 1e6  # of the speed profile: shorter than a millisecond is no speed profile
 MAX_NAME = 200  # characters of a label or a profile name
 PROFILE_NAME_PATTERN = r"^[^/\\\x00]+$"  # a file name in the node directory: no path separators, no NUL
 
@@ -121,6 +124,9 @@ class FaultSpec(_Strict, kw_only=True):
         return NoFault()
 
 
+FaultBoundValue = Annotated[float, Meta(gt=0, le=MAGNITUDE_MAX)]
+
+
 class FaultBoundSpec(_Strict, kw_only=True):
     """Declared physical bounds on the sensor fault: |f_k+1 − f_k| ≤ rate and/or |f_k| ≤ size.
 
@@ -128,8 +134,9 @@ class FaultBoundSpec(_Strict, kw_only=True):
     case, docs/estimator.md), and the collector checks it against the truth and attributes misses to it.
     """
 
-    rate: Annotated[Positive | None, Meta(description="δ_i: largest fault change per step")] = None
-    size: Annotated[Positive | None, Meta(description="F_i: largest fault magnitude")] = None
+    # at most MAGNITUDE_MAX like the fault values themselves: 1e300 overflowed the SAIM node's fallback set
+    rate: Annotated[FaultBoundValue | None, Meta(description="δ_i: largest fault change per step")] = None
+    size: Annotated[FaultBoundValue | None, Meta(description="F_i: largest fault magnitude")] = None
 
 
 def _p0_problem(v: list[list[float]]) -> str | None:
@@ -198,9 +205,9 @@ class VehicleSpec(_Strict, kw_only=True):
 
 
 class SpeedSpec(_Strict, kw_only=True):
-    mean_kmh: Positive = 100.0
-    amplitude_kmh: Annotated[float, Meta(ge=0)] = 18.0
-    period_s: Positive = 8.0
+    mean_kmh: Annotated[float, Meta(gt=0, le=SPEED_MAX_KMH)] = 100.0
+    amplitude_kmh: Annotated[float, Meta(ge=0, le=SPEED_MAX_KMH)] = 18.0
+    period_s: Annotated[float, Meta(ge=PERIOD_MIN_S, le=PERIOD_MAX_S)] = 8.0
 
 
 class SteeringSpec(_Strict, kw_only=True):
@@ -393,9 +400,9 @@ def _explain(err: msgspec.ValidationError, data: object) -> str:
 
 
 def _validated(path: Path, data: dict, cls: type[_T]) -> _T:
-    """``data`` as a ``cls``; lax as TOML users expect ("3" or 3.0 for an integer), ConfigError otherwise."""
+    """``data`` as a ``cls`` (strict types: an int for a float is the only conversion), ConfigError otherwise."""
     try:
-        return msgspec.convert(data, cls, strict=False)
+        return msgspec.convert(data, cls, strict=True)
     except msgspec.ValidationError as exc:
         raise ConfigError(f"{path}: invalid configuration\n  {_explain(exc, data)}") from None
 

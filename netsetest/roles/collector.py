@@ -333,9 +333,10 @@ class Collector:
             r = t.r.get(s)
             if r is None or not _isclose(r, float(n.sensor.Cbar @ xf), CHAIN_RTOL):
                 return "truth-sensor-input"
-            if t.noise_ok[s] != bool(t.noise[s] ** 2 <= n.sensor.R * (1 + 1e-12)):
+            # v·v, not v**2: a forged huge value squares to inf (a float's ** raises OverflowError instead)
+            if t.noise_ok[s] != bool(t.noise[s] * t.noise[s] <= n.sensor.R * (1 + 1e-12)):
                 return "truth-flags"
-        if t.dist_ok != bool(t.w**2 <= sc.W * (1 + 1e-12)):
+        if t.dist_ok != bool(t.w * t.w <= sc.W * (1 + 1e-12)):
             return "truth-flags"
         return None
 
