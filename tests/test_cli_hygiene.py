@@ -127,3 +127,83 @@ def test_inspect_into_a_closed_pipe_exits_quietly(tmp_path: Path) -> None:
 def test_kill_in_memory_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(_run("--kill", "3@1")) == 2
     _one_clear_line(capsys.readouterr().err, "--kill", "--mode zenoh")
+
+
+# ---------------------------------------------------------------- bad options: exit 2, one line, no traceback
+
+
+@pytest.mark.parametrize(
+    "argv,says",
+    [
+        (["echo", "--run-id", "a/**", "--duration", "1"], "--run-id: 'a/**': only letters"),
+        (["watch", "--run-id", "a*", "--duration", "1"], "--run-id: 'a*': only letters"),
+        (["echo", "--connect", "tcp/1.2.3.4:99999", "--duration", "1"], "port ≤ 65535"),
+        (["credentials", "/proc/netsetest-x", "paper6"], "/proc/netsetest-x: cannot write the credentials there"),
+        (["run", "paper6", "--mode", "inmemory", "--record", "/proc/netsetest-x.json"], "--record /proc/netsetest-x.json: cannot be written"),
+        (["run", "paper6", "--mode", "inmemory", "--summary-json", "/proc/netsetest-x.json"], "--summary-json /proc/netsetest-x.json: cannot be written"),
+    ],
+)
+def test_bad_outputs_and_observer_options_exit_2_before_anything(argv: list[str], says: str) -> None:
+    """These printed tracebacks, exited 0 silently, or (--record under /proc) let the run start and the
+    collector crash after it."""
+    import subprocess
+    import sys as _sys
+
+    p = subprocess.run([_sys.executable, "-m", "netsetest", *argv], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2, (p.returncode, p.stdout, p.stderr)
+    assert says in p.stderr and "Traceback" not in p.stderr, p.stderr
+    assert not Path("/proc/netsetest-x").exists()
+
+
+# ---------------------------------------------------------------- the truth is not computable from `ps`
+
+
+def test_each_run_draws_its_own_seed_and_prints_it(tmp_path: Path) -> None:
+    """The default seed was 0 for every run, so anyone could recompute the truth the access control hides
+    from the nodes; now each run draws one, prints and records it, and --seed replays it."""
+    import json
+
+    def run(*extra: str) -> tuple[int, str, dict]:
+        summ = tmp_path / f"s{len(list(tmp_path.iterdir()))}.json"
+        p = subprocess.run([sys.executable, "-m", "netsetest", "run", TOPOLOGY, "--mode", "inmemory", "--steps", "3",
+                            "--summary-json", str(summ), *extra], capture_output=True, text=True, timeout=120)  # fmt: skip
+        assert p.returncode == 0, p.stderr
+        return json.loads(summ.read_text())["seed"], p.stdout, json.loads(summ.read_text())
+
+    (a, out_a, _), (b, _, _) = run(), run()
+    assert a != b and f"seed {a}," in out_a.splitlines()[-1]
+    rec1, rec2 = tmp_path / "r1.json", tmp_path / "r2.json"
+    run("--seed", str(a), "--record", str(rec1))
+    run("--seed", str(a), "--record", str(rec2))
+    t1 = [json.loads(x) for x in rec1.read_text().splitlines() if '"truth"' in x]
+    t2 = [json.loads(x) for x in rec2.read_text().splitlines() if '"truth"' in x]
+    assert t1 == t2 and t1
+
+
+@pytest.mark.zenoh
+def test_no_process_of_a_run_shows_its_seed_or_a_guessable_run_id(tmp_path: Path) -> None:
+    import json
+
+    summ = tmp_path / "summary.json"
+    parent = subprocess.Popen([sys.executable, "-m", "netsetest", "run", TOPOLOGY, "--steps", "20", "--pace", "0.1", "--quiet",
+                               "--summary-json", str(summ)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    seen: set[str] = set()
+    try:
+        deadline = time.monotonic() + 120
+        while parent.poll() is None and time.monotonic() < deadline:
+            for d in Path("/proc").iterdir():
+                if d.name.isdigit():
+                    try:
+                        seen.add((d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace"))
+                    except OSError:
+                        pass
+            time.sleep(0.2)
+        out, err = parent.communicate(timeout=30)
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+    assert parent.returncode == 0, err
+    seed = json.loads(summ.read_text())["seed"]
+    roles = [c for c in seen if "netsetest" in c]
+    assert roles and not any(f" {seed} " in f" {c} " for c in roles), roles
+    assert not any(f"run{parent.pid}" in c for c in roles), "the run id must not be derivable from the parent's pid"

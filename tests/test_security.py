@@ -32,6 +32,7 @@ from zenoh_helpers import (
     procs,  # noqa: F401 (fixture)
     read_json,
     read_record,
+    parent_run_id,
     start_parent,
     wait_for,
     wait_roles,
@@ -198,7 +199,7 @@ def test_secured_run_shuts_out_an_outsider(procs, tmp_path: Path) -> None:  # no
         # should never get here; if it does, do every harm the issue lists and let the asserts below judge
         heard: list[str] = []
         session.declare_subscriber("**", lambda s: heard.append(str(s.key_expr)))
-        forge_everything(session, parent_run := f"run{parent.pid}")
+        forge_everything(session, parent_run := parent_run_id(parent))
         time.sleep(1.0)
         session.close()
         pytest.fail(f"{what}: the outsider opened a session with the run's router (heard {len(heard)} messages on {parent_run})")

@@ -262,13 +262,21 @@ def procs(tmp_path: Path):  # noqa: ANN201
 
 
 def parent_run_id(proc: subprocess.Popen) -> str:
-    """``netsetest run`` names its run ``run<parent pid>``; every child carries it in ``--run-id``."""
-    return f"run{proc.pid}"
+    """The run id start_parent gave ``netsetest run`` (every child carries it on its command line)."""
+    return proc.netsetest_run_id  # type: ignore[attr-defined]
+
+
+_PARENTS = iter(range(1_000_000))
 
 
 def start_parent(guard: ProcessGuard, name: str, args: Sequence[str]) -> subprocess.Popen:
-    proc = guard.start(name, cli("run", *args))
-    guard.markers.add(parent_run_id(proc))
+    """``netsetest run ARGS`` with a run id of the test's (the default is random) and, unless ARGS give one,
+    seed 0 (the default is a fresh random seed; the tests compare with in-memory runs of seed 0)."""
+    run_id = f"t{os.getpid()}n{next(_PARENTS)}"
+    extra = ["--run-id", run_id, *([] if "--seed" in args else ["--seed", "0"])]
+    guard.markers.add(run_id)
+    proc = guard.start(name, cli("run", *args, *extra))
+    proc.netsetest_run_id = run_id  # type: ignore[attr-defined]
     return proc
 
 

@@ -4,9 +4,15 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 from pathlib import Path
 
 SEED_MAX = 2**63 - 1  # numpy's SeedSequence takes any non-negative integer; keep it to 64 bits
+DRAWN_SEED_BITS = 32  # a run's own seed: unguessable by another local user, short enough to type back
+RUN_ID_RE = re.compile(r"[A-Za-z0-9_-]{1,64}")
+# proto/host:port with an optional Zenoh suffix (?metadata, #config); host a name, an IPv4 or a [IPv6]
+ENDPOINT_RE = re.compile(r"(tcp|udp|tls|quic)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):(\d{1,5})([?#].*)?")
+MAX_PORT = 65535
 
 
 class OutputError(Exception):
@@ -52,6 +58,27 @@ def output_file(path: str | None, option: str) -> None:
         raise OutputError(f"{option} {path}: cannot create its directory ({exc.strerror or exc})") from None
     if not os.access(p.parent, os.W_OK | os.X_OK) or (p.exists() and not os.access(p, os.W_OK)):
         raise OutputError(f"{option} {path}: not writable")
+    why = _cannot_write(p)
+    if why:
+        raise OutputError(f"{option} {path}: cannot be written ({why})")
+
+
+def _cannot_write(p: Path) -> str | None:
+    """Why a file cannot be created (or appended to) at ``p``, found by trying: os.access says yes to root
+    everywhere, /proc included, and the collector then failed after the run."""
+    import tempfile  # only for a command that writes a file: a node process never loads it
+
+    try:
+        if p.exists():
+            with open(p, "ab"):
+                pass
+        else:
+            fd, probe = tempfile.mkstemp(dir=p.parent, prefix=".netsetest-probe-")
+            os.close(fd)
+            os.unlink(probe)
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    return None
 
 
 def record_file(path: str | None) -> None:
@@ -75,3 +102,26 @@ def output_dir(path: str, option: str) -> None:
         raise OutputError(f"{option} {path}: cannot create it ({exc.strerror or exc})") from None
     if not os.access(p, os.W_OK | os.X_OK):
         raise OutputError(f"{option} {path}: not writable")
+
+
+def run_id(s: str) -> str:
+    """argparse type of ``--run-id``: one key-expression chunk (no '/', '*', '$': they would widen the keys)."""
+    if not RUN_ID_RE.fullmatch(s):
+        raise argparse.ArgumentTypeError(f"{s!r}: only letters, digits, '_' and '-' (1 to 64), it is a key-expression chunk")
+    return s
+
+
+def endpoint(s: str) -> str:
+    """argparse type of a Zenoh endpoint: PROTO/HOST:PORT with a port in range."""
+    m = ENDPOINT_RE.fullmatch(s)
+    if not m or int(m.group(3)) > MAX_PORT:
+        raise argparse.ArgumentTypeError(f"{s!r}: expected PROTO/HOST:PORT with PROTO tcp, udp, tls or quic and a port ≤ {MAX_PORT}, e.g. tls/127.0.0.1:7447")
+    return s
+
+
+def seed_or_fresh(value: int | None) -> int:
+    """``--seed`` if given, else a fresh random seed (a default everyone knows would let any local user
+    recompute the truth the access control hides); the run prints and records it, so ``--seed`` replays it."""
+    import secrets  # only for `run` (it loads `random`, which a node process does without)
+
+    return value if value is not None else secrets.randbits(DRAWN_SEED_BITS)

@@ -40,7 +40,8 @@ def _run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled",
                    help="estimator: one SDP with the scheduled model, or one per T-S rule")  # fmt: skip
     p.add_argument("--objective", choices=list(OBJECTIVES), default=DEFAULT_OBJECTIVE, help=OBJECTIVE_HELP)
-    p.add_argument("--seed", type=checks.seed, default=0, help="non-negative integer: random seed of noise, wind and losses")
+    p.add_argument("--seed", type=checks.seed, default=None,
+                   help="non-negative integer: random seed of noise, wind and losses (default: a fresh random one, printed with the verdict)")
 
 
 def has_default(action: argparse.Action) -> bool:
@@ -125,6 +126,7 @@ def build_parser() -> argparse.ArgumentParser:
 def cmd_run(a: argparse.Namespace) -> int:
     checks.record_file(a.record)
     checks.output_file(a.summary_json, "--summary-json")
+    a.seed = checks.seed_or_fresh(a.seed)
     if a.mode == "zenoh":
         from netsetest.cli import processes
 

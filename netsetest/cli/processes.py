@@ -8,7 +8,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import re
 import sys
 import time
 from collections.abc import Callable
@@ -28,25 +27,6 @@ ZENOH_DEFAULT_PORT = 7447
 # ---------------------------------------------------------------- option groups
 
 
-RUN_ID_RE = re.compile(r"[A-Za-z0-9_-]{1,64}")
-# proto/host:port with an optional Zenoh suffix (?metadata, #config); host a name, an IPv4 or a [IPv6]
-ENDPOINT_RE = re.compile(r"(tcp|udp|tls|quic)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):(\d{1,5})([?#].*)?")
-MAX_PORT = 65535
-
-
-def _run_id(s: str) -> str:
-    if not RUN_ID_RE.fullmatch(s):
-        raise argparse.ArgumentTypeError(f"{s!r}: only letters, digits, '_' and '-' (1 to 64), it is a key-expression chunk")
-    return s
-
-
-def _endpoint(s: str) -> str:
-    m = ENDPOINT_RE.fullmatch(s)
-    if not m or int(m.group(3)) > MAX_PORT:
-        raise argparse.ArgumentTypeError(f"{s!r}: expected PROTO/HOST:PORT with PROTO tcp, udp, tls or quic, e.g. tls/127.0.0.1:7447")
-    return s
-
-
 def _readable_file(s: str) -> str:
     if not os.path.isfile(s) or not os.access(s, os.R_OK):
         raise argparse.ArgumentTypeError(f"{s}: not a readable file")
@@ -60,12 +40,12 @@ def _zenoh_config_arg(g: argparse._ArgumentGroup) -> None:
 
 def _zenoh_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("zenoh")
-    g.add_argument("--run-id", type=_run_id, default=os.environ.get(RUN_ID_ENV, "default"),
+    g.add_argument("--run-id", type=checks.run_id, default=os.environ.get(RUN_ID_ENV, "default"),
                    help=f"key-expression namespace of the run (netsetest/<run-id>/...); default ${RUN_ID_ENV} or 'default'")  # fmt: skip
     g.add_argument("--zenoh-mode", choices=["peer", "client"], default="peer", help="peer (one host) or client of a router")
-    g.add_argument("--listen", type=_endpoint, action="append", default=[], metavar="ENDPOINT",
+    g.add_argument("--listen", type=checks.endpoint, action="append", default=[], metavar="ENDPOINT",
                    help="endpoint to listen on, e.g. tcp/127.0.0.1:7450 (repeatable; default: none)")  # fmt: skip
-    g.add_argument("--connect", type=_endpoint, action="append", default=[], metavar="ENDPOINT",
+    g.add_argument("--connect", type=checks.endpoint, action="append", default=[], metavar="ENDPOINT",
                    help="endpoint to connect to, e.g. tls/10.0.0.1:7447 (repeatable; default: none)")  # fmt: skip
     g.add_argument("--credentials", metavar="DIR",
                    help="mTLS: this role's certificate and key from DIR (`netsetest credentials`); connect on tls/ endpoints (default: none, no TLS)")  # fmt: skip
@@ -110,6 +90,7 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--rejoin", type=_at, action="append", default=[], metavar="NODE@STEP", help="restart node NODE with --rejoin at step STEP (repeatable; default: none)")
     g.add_argument("--insecure", action="store_true",
                    help="no credentials, no access control: an open peer mesh any local process can join (labelled in the summary; default: secured)")  # fmt: skip
+    g.add_argument("--run-id", type=checks.run_id, metavar="ID", help="the run's key-expression namespace (default: a fresh random one, printed)")
     _zenoh_config_arg(g)
 
 
@@ -157,22 +138,22 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
 
     p = sub.add_parser("router", help="a Zenoh router in Python (for client-mode roles on several hosts)")
     p.add_argument("topology", nargs="?", help="topology whose access-control rules the router enforces (with --credentials)")
-    p.add_argument("--listen", type=_endpoint, action="append", default=[], metavar="ENDPOINT",
+    p.add_argument("--listen", type=checks.endpoint, action="append", default=[], metavar="ENDPOINT",
                    help=f"endpoint to listen on (repeatable; default: tcp/0.0.0.0:{ZENOH_DEFAULT_PORT}, or tls/0.0.0.0:{ZENOH_DEFAULT_PORT} with --credentials)")  # fmt: skip
     p.add_argument("--credentials", metavar="DIR", help="mTLS with DIR/router.pem and the run's access-control rules (default: none, open router)")
-    p.add_argument("--run-id", type=_run_id, default=os.environ.get(RUN_ID_ENV, "default"), help=f"the run whose keys the access control grants (default: ${RUN_ID_ENV} or 'default')")
+    p.add_argument("--run-id", type=checks.run_id, default=os.environ.get(RUN_ID_ENV, "default"), help=f"the run whose keys the access control grants (default: ${RUN_ID_ENV} or 'default')")
     _zenoh_config_arg(p)
 
     p = sub.add_parser("credentials", help="write per-role mTLS credentials (CA, certificates, keys) and run.env for a deployment")
     p.add_argument("dir", help="output directory (created with mode 0700)")
     p.add_argument("topology", help="topology file or bundled name, e.g. paper6")
-    p.add_argument("--run-id", type=_run_id, help="the deployment's run id (default: a random one)")
+    p.add_argument("--run-id", type=checks.run_id, help="the deployment's run id (default: a random one)")
     p.add_argument("--router-host", action="append", default=[], metavar="NAME",
                    help="a name or address the router is reached at (repeatable; default: localhost, 127.0.0.1 and router, always included)")  # fmt: skip
     p.add_argument("--days", type=checks.positive_int, default=DEFAULT_VALIDITY_DAYS, help="validity of the certificates in days")
 
     p = sub.add_parser("forkserver", help="internal: the fork server of `netsetest run` (imports once, forks each role process)")
-    p.add_argument("--run-id", type=_run_id, required=True, help="the run it serves (in its command line and its children's, to find them)")
+    p.add_argument("--run-id", type=checks.run_id, required=True, help="the run it serves (in its command line and its children's, to find them)")
     p.add_argument("--control-fd", type=int, required=True, help="file descriptor of the launcher's control socket")
 
     p = sub.add_parser("compose", help="print a docker-compose.yml for a topology (router + one service per role)")
@@ -296,8 +277,12 @@ def cmd_credentials(a: argparse.Namespace) -> int:
 
     sc = load_topology(a.topology)
     run_id = a.run_id or f"run-{secrets.token_hex(8)}"
-    out = write_credentials(a.dir, role_names(sc), [*ROUTER_HOSTS, *a.router_host], datetime.timedelta(days=a.days))
-    (out / RUN_ENV_FILE).write_text(f"{RUN_ID_ENV}={run_id}\n")
+    try:
+        out = write_credentials(a.dir, role_names(sc), [*ROUTER_HOSTS, *a.router_host], datetime.timedelta(days=a.days))
+        (out / RUN_ENV_FILE).write_text(f"{RUN_ID_ENV}={run_id}\n")
+    except OSError as exc:
+        print(f"netsetest credentials: {a.dir}: cannot write the credentials there ({exc.strerror or exc})", file=sys.stderr)
+        return EXIT_BAD_INPUT
     print(f"credentials for {len(role_names(sc))} roles, an observer (echo/watch) and the router in {out} (run id {run_id}, valid {a.days} days)")
     return 0
 
@@ -324,7 +309,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         topology=a.topology, case=a.case, steps=a.steps, estimator=a.estimator, signals=a.signals, variant=a.variant,
         objective=a.objective, seed=a.seed, clock=a.clock, record=a.record, summary_json=a.summary_json, quiet=a.quiet,
         node_timeout=a.node_timeout, neighbour_timeout=a.neighbour_timeout, pace=a.pace, kill=tuple(a.kill), rejoin=tuple(a.rejoin),
-        insecure=a.insecure, zenoh_config=a.zenoh_config,
+        insecure=a.insecure, zenoh_config=a.zenoh_config, run_id=a.run_id,
     )  # fmt: skip
     try:
         plan = plan_run(opts)

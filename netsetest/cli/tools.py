@@ -30,8 +30,8 @@ def _seconds(s: str) -> float:
 
 
 def _observer_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--run-id", help="the run to observe (default: every run on the network, '*')")
-    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+    p.add_argument("--run-id", type=checks.run_id, help="the run to observe (default: every run on the network, '*')")
+    p.add_argument("--connect", type=checks.endpoint, action="append", default=[], metavar="ENDPOINT",
                    help="Zenoh endpoint of the run, e.g. tcp/127.0.0.1:7447: a router or a role's --listen endpoint (repeatable; default: none)")  # fmt: skip
     p.add_argument("--zenoh-mode", choices=["peer", "client"], default="peer", help="peer (default) or client of a router")
     p.add_argument("--zenoh-config", metavar="FILE",

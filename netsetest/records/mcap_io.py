@@ -125,6 +125,9 @@ SCHEMAS: dict[str, dict[str, Any]] = {
          "judged": {**_BOOL, "description": "the collector judged this set (false: contested copies or unknown truth)"},
          "contained": {"type": ["boolean", "null"], "description": "null where not judged"}, "assumptions_ok": _BOOL,
          "contested": {**_BOOL, "description": "more than one copy matched the truth: not judged"},
+         "not_judged_why": {"type": ["string", "null"], "description": "contested | truth unknown; null where judged"},
+         "not_covered_cause": {"type": ["string", "null"], "description": "why the guarantee did not apply (docs/coverage.md); null where it did"},
+         "inherited_from": {"type": ["array", "null"], "description": "[node, step, why] of the input a not-covered step rests on"},
          **{f"{n}_{s}": {"type": "number", "description": f"{s} bound of {n}: x̂ ∓ √(ρ P)"}
             for n, _ in COMPONENTS for s in ("lower", "upper")}},
         ["step", "xhat", "P", "rho", "status"],

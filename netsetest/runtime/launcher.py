@@ -14,6 +14,7 @@ the run: the others go on without it and the summary says so (exit code 3, from 
 from __future__ import annotations
 
 import os
+import secrets
 import signal
 import socket
 import subprocess
@@ -74,6 +75,10 @@ class LaunchOptions:
     rejoin: tuple[tuple[int, int], ...] = ()  # (node, step): restart the node with --rejoin at that step
     insecure: bool = False
     zenoh_config: str | None = None
+    run_id: str | None = None  # None: a fresh random one (a guessable id, run<pid>, named every key of the run)
+
+
+RUN_ID_BYTES = 8  # of a run's random id (as `netsetest credentials` makes)
 
 
 @dataclass(frozen=True)
@@ -272,7 +277,7 @@ def launch(plan: RunPlan) -> RunOutcome:
 
     o, sc, schedule = plan.options, plan.scenario, plan.schedule
     security = SECURITY_INSECURE if o.insecure else SECURITY_MTLS
-    run_id = f"run{os.getpid()}"
+    run_id = o.run_id or f"run-{secrets.token_hex(RUN_ID_BYTES)}"
     tmp = tempfile.TemporaryDirectory(prefix="netsetest-")  # mode 0700 (mkdtemp)
     summary_path = Path(o.summary_json or Path(tmp.name) / "summary.json")
     children = Children(run_id)  # first: the fork server imports while we set up

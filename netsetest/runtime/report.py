@@ -80,9 +80,13 @@ def format_table(summary: RunSummary) -> str:
         out.append(f"dropped by {role}: " + ", ".join(f"{r} {n}" for r, n in reasons.items()))
     # the last line: the run, its security mode (Zenoh) and the verdict
     security = f" (security: {summary.security})" if summary.security else ""
+    seed = f", seed {summary.seed}" if summary.seed is not None else ""
     out.append(f"{summary.mode or ''} run{security}, case {summary.case}, signals {summary.signals}, "
-               f"variant {summary.variant}, {summary.steps_completed} steps: {verdict(summary)}.")  # fmt: skip
+               f"variant {summary.variant}{seed}, {summary.steps_completed} steps: {verdict(summary)}.")  # fmt: skip
     return "\n".join(out)
+
+
+MAX_ORIGINS = 3  # origins of "inherited" named in the verdict line; the summary JSON has them all
 
 
 def verdict(summary: RunSummary) -> str:
@@ -96,7 +100,11 @@ def verdict(summary: RunSummary) -> str:
     text = f"{head}; the guarantee applied on {covered}"
     causes = summary.node_steps_not_covered
     if causes:
-        text += f" (assumption broken on {evaluated - covered}: " + ", ".join(f"{c} {n}" for c, n in causes.items()) + ")"
+        text += f" (not covered {evaluated - covered}: " + ", ".join(f"{c} {n}" for c, n in causes.items()) + ")"
+    if summary.inherited_from:
+        shown = [f"node {o.node} {o.why} from step {o.first_step} ({o.node_steps})" for o in summary.inherited_from[:MAX_ORIGINS]]
+        more = len(summary.inherited_from) - MAX_ORIGINS
+        text += "; inherited from " + ", ".join(shown) + (f" and {more} more (see the summary)" if more > 0 else "")
     if reported > evaluated:
         text += f"; {reported - evaluated} node-step(s) not judged (truth unknown or copies contested)"
     if summary.node_steps_rejected:
