@@ -36,7 +36,7 @@ def finished(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("finished")
     out = {}
     for name in ("run.jsonl", "run.jsonl.gz"):
-        assert main(["run", TOPOLOGY, "--mode", "inmemory", "--steps", str(STEPS), "--record", str(d / name), "--quiet"]) == 0
+        assert main(["run", TOPOLOGY, "--mode", "inmemory", "--steps", str(STEPS), "--seed", "0", "--record", str(d / name), "--quiet"]) == 0
         out[name] = d / name
     return out
 

@@ -429,15 +429,22 @@ def compare_record(record: Record, exact: ExactBounds) -> Comparison:
         rows.append(NodeRatios(i, ratios))
 
     def mean(attr: str, coord: Coordinate) -> float:
-        return float(np.nanmean([getattr(n.ratios[coord], attr) for n in rows]))
+        return _nanmean([getattr(n.ratios[coord], attr) for n in rows])
 
     return Comparison(
         nodes=tuple(rows),
         mean_width_ratio={c: mean("width_ratio", c) for c in COORDINATES},
         mean_rms_radius_rel={c: mean("rms_radius_rel", c) for c in COORDINATES},
-        overall_width_ratio=float(np.nanmean([n.ratios[c].width_ratio for n in rows for c in COORDINATES])),
-        overall_rms_radius_rel=float(np.nanmean([n.ratios[c].rms_radius_rel for n in rows for c in COORDINATES])),
+        overall_width_ratio=_nanmean([n.ratios[c].width_ratio for n in rows for c in COORDINATES]),
+        overall_rms_radius_rel=_nanmean([n.ratios[c].rms_radius_rel for n in rows for c in COORDINATES]),
     )
+
+
+def _nanmean(values: list[float]) -> float:
+    """The mean of the values that are not NaN; NaN (quietly) when none is (e.g. a record shorter than the
+    steps the ratios skip)."""
+    finite = [v for v in values if not np.isnan(v)]
+    return float(np.mean(finite)) if finite else float("nan")
 
 
 def _finite_or_none(v: float) -> float | None:

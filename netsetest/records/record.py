@@ -24,9 +24,13 @@ than one copy matched the truth: not judged).  ``summary``: the
 per-node table and totals (the same object ``--summary-json`` writes; in code a
 :class:`~netsetest.records.summary.RunSummary`, converted at this boundary).
 
-A file without the summary line (the collector, the vehicle or the parent was killed) loads as a
-partial record: ``partial`` is true, ``summary`` None, ``last_complete_step`` the last step whose truth line was written,
-and an incomplete last line is ignored (an MCAP file loads only complete, with its verdict message).
+Every line carries its number (``seq``, from 0), so a dropped, repeated or moved line makes the record
+*damaged* (RecordError naming the line), not silently different; in every record the truth steps and each
+node's state steps must strictly increase.  A file without the summary line (the collector, the vehicle
+or the parent was killed) loads as a partial record: ``partial`` is true, ``summary`` None,
+``last_complete_step`` the last step whose truth line was written, the states of the step being written
+are left out, and an incomplete last line is ignored (an MCAP file loads only complete, with its verdict
+message).
 :func:`load_record` also reads version 1 records (one JSON
 document with ``meta``, ``truth``, ``nodes``, ``summary``; optionally gzip-compressed).
 :meth:`Record.fault_rows` gives the fault bounds.
@@ -52,6 +56,8 @@ VERSION = 2
 LEGACY_VERSION = 1  # one JSON document per run, written at the end
 GZIP_MAGIC = b"\x1f\x8b"
 MCAP_SUFFIX = ".mcap"  # open_sink/save_record/load_record dispatch on it (netsetest.records.mcap_io)
+MAX_STEP = 10**9  # a step number beyond this is no run's (and would overflow the tools' integer arrays)
+SEQ = "seq"  # every line's number, from 0 (the meta line); records written before it have none
 
 
 class RecordSink(Protocol):
@@ -77,8 +83,11 @@ class JsonlSink:
         raw = open(path, "wb")  # noqa: SIM115 (closed in close())
         self._fh: IO[bytes] = gzip.GzipFile(fileobj=raw, mode="wb") if path.suffix == ".gz" else raw
         self._raw = raw
+        self._seq = 0
 
     def _line(self, obj: dict) -> None:
+        obj[SEQ] = self._seq  # the loader finds a dropped, repeated or moved line by it
+        self._seq += 1
         self._fh.write(json.dumps(obj, separators=(",", ":"), allow_nan=True).encode() + b"\n")
 
     def _flush(self) -> None:
@@ -332,12 +341,18 @@ def _load_lines(path: Path, data: bytes) -> Record:
     meta = objs[0].get("meta")
     if not isinstance(meta, dict):
         raise RecordError(f"{path}: malformed record (meta must be a dict)")
+    _check_sequence(path, objs)
     truth: list[dict] = []
-    nodes: dict[str, list[dict]] = {str(i): [] for i in meta.get("node_ids", [])}
+    node_ids = meta.get("node_ids", [])
+    if not isinstance(node_ids, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in node_ids):
+        raise RecordError(f"{path}: malformed record (meta.node_ids must be a list of node ids)")
+    nodes: dict[str, list[dict]] = {str(i): [] for i in node_ids}
     summary: dict | None = None
     try:
         for n, obj in enumerate(objs[1:], start=2):
             kind = obj["kind"]
+            if summary is not None:
+                raise RecordError(f"{path}: damaged record (line {n}: a {kind!r} line after the summary)")
             if kind == "truth":
                 truth.append(obj["entry"])
             elif kind == "state":
@@ -346,10 +361,42 @@ def _load_lines(path: Path, data: bytes) -> Record:
                 summary = obj["summary"]
             else:
                 raise RecordError(f"{path}: malformed record (line {n}: unknown kind {kind!r})")
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, OverflowError) as exc:
         raise RecordError(f"{path}: malformed record ({type(exc).__name__}: {exc})") from None
-    last = max((t["step"] for t in truth if isinstance(t, dict) and isinstance(t.get("step"), int)), default=-1)
+    last = _check_order(path, truth, nodes)
+    if summary is None:  # a partial record: the states of the step being written when it stopped are not a step
+        nodes = {i: [e for e in es if e["step"] <= last] for i, es in nodes.items()}
     return _build(path, meta, truth, nodes, summary, partial=summary is None, last_complete=last)
+
+
+def _check_sequence(path: Path, objs: list[dict]) -> None:
+    """Every line carries its number (``seq``): a dropped, repeated or moved line is damage, not a record."""
+    if SEQ not in objs[0]:
+        return  # written before line numbers: the order checks below are all there is
+    for n, obj in enumerate(objs):
+        seq = obj.get(SEQ)
+        if seq != n:
+            what = "missing" if seq is None else f"{seq!r}"
+            raise RecordError(f"{path}: damaged record (line {n + 1}: sequence number {what}, expected {n}: a line was dropped, repeated or moved)")
+
+
+def _check_order(path: Path, truth: list, nodes: dict[str, list]) -> int:
+    """The truth steps and each node's state steps strictly increase (integers); the last truth step."""
+    def steps(entries: list, what: str) -> list[int]:
+        out = []
+        for e in entries:
+            k = e.get("step") if isinstance(e, dict) else None
+            if not isinstance(k, int) or isinstance(k, bool) or not 0 <= k <= MAX_STEP:
+                raise RecordError(f"{path}: malformed record ({what}: step {k!r} is not a step number)")
+            if out and k <= out[-1]:
+                raise RecordError(f"{path}: damaged record ({what}: step {k} after step {out[-1]}: a line was repeated or moved)")
+            out.append(k)
+        return out
+
+    last = (steps(truth, "truth") or [-1])[-1]
+    for i, entries in nodes.items():
+        steps(entries, f"node {i}")
+    return last
 
 
 def _load_document(path: Path, data: bytes) -> Record:
@@ -365,7 +412,7 @@ def _load_document(path: Path, data: bytes) -> Record:
     for name, kind in (("meta", dict), ("truth", list), ("nodes", dict), ("summary", dict)):
         if not isinstance(doc.get(name), kind):
             raise RecordError(f"{path}: malformed record ({name} must be a {kind.__name__})")
-    last = max((t["step"] for t in doc["truth"] if isinstance(t, dict) and isinstance(t.get("step"), int)), default=-1)
+    last = _check_order(path, doc["truth"], {str(i): es if isinstance(es, list) else [None] for i, es in doc["nodes"].items()})
     return _build(path, doc["meta"], doc["truth"], doc["nodes"], doc["summary"], partial=False, last_complete=last)
 
 
@@ -376,7 +423,7 @@ def _build(path: Path, meta: dict, truth: list, raw_nodes: dict, summary: object
     try:
         typed = None if summary is None else RunSummary.from_dict(summary)
         return record_from_parts(meta, truth, raw_nodes, typed, str(path), partial, last_complete)
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+    except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
         raise RecordError(f"{path}: malformed record ({type(exc).__name__}: {exc})") from None
 
 
