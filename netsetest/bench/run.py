@@ -5,8 +5,9 @@ per-rule, fast path vs. the previous default, the straightforward and the naive 
 published intervals of the paper run against the exact limit (``netsetest exact``); the in-memory cost per node-step for ring-with-chords networks of 6, 24 and 96 nodes; the Zenoh lockstep
 run against the in-memory run of the paper scenario; ``netsetest run`` of the paper network from
 launch to step 0; one node process's peak RSS and start-up time; the largest real-time network without a
-deadline miss; the defences (stepping under a
-30 000 msg/s flood at one node, RSS slope over a long run, netsetest/bench/defences.py).  ``--quick`` uses fewer steps and
+deadline miss; the defences (``netsetest run`` secured and ``--insecure`` under a 30 000 msg/s flood on
+one node's input and state key and under an insider's crash payloads, netsetest/bench/attacks.py; RSS
+slope over a long run, netsetest/bench/soak.py).  ``--quick`` uses fewer steps and
 samples (a few minutes); the default takes longer.  Times are wall-clock milliseconds on this
 machine, measured side by side in one run; medians and ratios, not single runs, are the figures.
 """
@@ -32,12 +33,12 @@ QUICK = {
     "steps": 40, "ref_sched": 24, "ref_rule": 8, "naive": 12, "prev_sched": 24, "prev_rule": 8,
     "scaling_steps": 20, "scaling_sizes": [6, 24, 96], "rt_sizes": [12, 24, 48, 64, 80, 96, 128], "rt_steps": 50, "profile_nodes": 96, "startup_reps": 3,
     "launch_reps": 5,
-    "flood_steps": 30, "flood_rate": 30000, "soak_steps": 2000, "cpu_steps": 400,
+    "flood_steps": 200, "flood_rate": 30000, "crash_steps": 30, "soak_steps": 2000, "cpu_steps": 400,
 }  # fmt: skip
 FULL = {
     "steps": 80, "ref_sched": 80, "ref_rule": 24, "naive": 40, "prev_sched": 80, "prev_rule": 24,
     "scaling_steps": 40, "scaling_sizes": [6, 24, 96], "rt_sizes": [6, 12, 24, 36, 48, 64, 80, 96, 112, 128], "rt_steps": 50, "profile_nodes": 96,
-    "startup_reps": 5, "launch_reps": 9, "flood_steps": 80, "flood_rate": 30000, "soak_steps": 20000, "cpu_steps": 800,
+    "startup_reps": 5, "launch_reps": 9, "flood_steps": 400, "flood_rate": 30000, "crash_steps": 60, "soak_steps": 20000, "cpu_steps": 800,
 }  # fmt: skip
 
 
@@ -180,15 +181,18 @@ def lockstep_cpu_floor(sc: Scenario, short: dict | None, steps: int) -> dict | N
 
 
 def defences(cfg: dict) -> dict:
-    from netsetest.bench.defences import flood
+    from netsetest.bench.attacks import crash, flood
     from netsetest.bench.soak import soak
 
     out: dict = {}
-    for target in ("input", "state"):
-        _log(f"flood: {cfg['flood_rate']} forged messages/s on one {target} key, in memory")
-        r = out[f"flood_{target}"] = flood(cfg["flood_steps"], cfg["flood_rate"], str(PAPER6), target)
-        _log(f"  {r['none']['steps_per_s']:.1f} steps/s without, {r['flood']['steps_per_s']:.1f} with ({r['flood']['sent_per_s']:.0f} msg/s): "
-             f"ratio {r['ratio']:.2f}")  # fmt: skip
+    for secured, label in ((True, "secured"), (False, "insecure")):
+        for target in ("input", "state"):
+            _log(f"flood ({label} run): {cfg['flood_rate']} msg/s on node 2's {target} key from a process of its own")
+            r = out[f"flood_{target}_{label}"] = flood(PAPER6, cfg["flood_steps"], cfg["flood_rate"], target, secured)
+            _log(f"  step rate ratio {r['ratio']:.2f} ({r['sent_per_s']:.0f} msg/s sent), nodes lost {r['nodes_lost']}, exit {r['exit_code']}")
+        _log(f"crash payloads ({label} run): node 2's insider sends what once crashed every receiving role")
+        r = out[f"crash_{label}"] = crash(PAPER6, cfg["crash_steps"], secured, pace=0.1)
+        _log(f"  roles lost {r['roles_lost']}, exit {r['exit_code']}, nodes missing {r['nodes_missing']}")
     _log(f"soak: {cfg['soak_steps']} steps in memory, RSS sampled every 250 steps")
     r = out["soak"] = soak(cfg["soak_steps"])
     _log(f"  RSS {r['rss_start_mb']:.1f} → {r['rss_end_mb']:.1f} MB, slope {r['slope_mb_per_10k_steps']:.2f} MB per 10 000 steps")
@@ -306,8 +310,11 @@ def headline(res: dict) -> dict:
         "node_startup_s": _med([r["first_state_s"] for r in node]),
         "node_first_estimate_s": _med([r["first_estimate_s"] for r in node]),
         "launch_to_step0_s": res["launch"]["median_s"],
-        "flood_step_rate_ratio": res["defences"]["flood_input"]["ratio"],
-        "flood_step_rate_ratio_state_key": res["defences"]["flood_state"]["ratio"],
+        "flood_step_rate_ratio": min(res["defences"][f"flood_{t}_secured"]["ratio"] for t in ("input", "state")),
+        "flood_step_rate_ratio_insecure_input": res["defences"]["flood_input_insecure"]["ratio"],
+        "flood_step_rate_ratio_insecure_state": res["defences"]["flood_state_insecure"]["ratio"],
+        "flood_nodes_lost": sum(res["defences"][f"flood_{t}_{m}"]["nodes_lost"] for t in ("input", "state") for m in ("secured", "insecure")),
+        "crash_roles_lost": sum(1 if res["defences"][f"crash_{m}"]["roles_lost"] is None else 0 for m in ("secured", "insecure")),
         "soak_rss_slope_mb_per_10k_steps": res["defences"]["soak"]["slope_mb_per_10k_steps"],
     }
 
@@ -325,6 +332,8 @@ TARGETS = [
     ("launch_to_step0_s", "< 1 s", lambda v: v < 1.0),
     ("realtime_max_nodes", "≥ 96", lambda v: v >= 96),
     ("flood_step_rate_ratio", "≥ 0.5", lambda v: v >= 0.5),
+    ("flood_nodes_lost", "0", lambda v: v == 0),
+    ("crash_roles_lost", "0", lambda v: v == 0),
     ("soak_rss_slope_mb_per_10k_steps", "< 5 MB", lambda v: v < 5.0),
 ]
 
@@ -414,11 +423,17 @@ def markdown(res: dict) -> str:
                      f"{f(pr.get('other_work_pct'), '.0f')} | {f(pr.get('node_peak_rss_mb_median'), '.1f')} |")  # fmt: skip
     lines += _profile_lines(res.get("node_profile") or {}, res.get("node_profile_trace") or {})
     d = res["defences"]
-    lines += ["", "## Defences (netsetest/bench/defences.py)", ""]
-    for target, what in (("input", "node 2's input key (one subscriber)"), ("state", "node 3's state key (four subscribers in one process)")):
-        r = d[f"flood_{target}"]
-        lines.append(f"- flood of {f(r['flood']['sent_per_s'], '.0f')} forged msg/s on {what}: {f(r['flood']['steps_per_s'], '.1f')} steps/s "
-                     f"vs {f(r['none']['steps_per_s'], '.1f')} without (ratio {f(r['ratio'])}); violations {r['flood']['violations']}")  # fmt: skip
+    lines += ["", "## Defences (netsetest/bench/attacks.py, netsetest/bench/soak.py)", "",
+              "`netsetest run` of the paper network as users start it, attacked from a process of its own (secured: with node 2's "
+              "certificate, an insider; insecure: a peer of the open mesh):", ""]  # fmt: skip
+    for m in ("secured", "insecure"):
+        for target, what in (("input", "node 2's input key"), ("state", "node 2's state key")):
+            r = d[f"flood_{target}_{m}"]
+            lines.append(f"- {m}: flood of {f(r['sent_per_s'], '.0f')} msg/s on {what}: step rate ratio {f(r['ratio'])}, "
+                         f"nodes lost {r['nodes_lost']}, exit {r['exit_code']}")  # fmt: skip
+        r = d[f"crash_{m}"]
+        lines.append(f"- {m}: the crash payloads (invalid UTF-8, deep nesting, a foreign Ready, a huge number) on node 2's keys: "
+                     f"roles lost {'0' if r['roles_lost'] == 0 else 'some'} (exit {r['exit_code']}, nodes missing {r['nodes_missing']})")  # fmt: skip
     r = d["soak"]
     lines.append(f"- soak of {r['steps']} steps in memory: RSS {f(r['rss_start_mb'], '.1f')} → {f(r['rss_end_mb'], '.1f')} MB, "
                  f"slope {f(r['slope_mb_per_10k_steps'])} MB per 10 000 steps ({f(r['steps_per_s'], '.0f')} steps/s)")  # fmt: skip
