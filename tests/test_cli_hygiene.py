@@ -207,3 +207,26 @@ def test_no_process_of_a_run_shows_its_seed_or_a_guessable_run_id(tmp_path: Path
     roles = [c for c in seen if "netsetest" in c]
     assert roles and not any(f" {seed} " in f" {c} " for c in roles), roles
     assert not any(f"run{parent.pid}" in c for c in roles), "the run id must not be derivable from the parent's pid"
+
+
+def test_verdict_line_starts_with_the_outcome_and_names_the_step_range() -> None:
+    """It had no pass/fail word and said "80 steps" next to 486 node-steps (6 × 81)."""
+    from dataclasses import replace
+
+    from netsetest.records.summary import NodeSummary, RunSummary
+    from netsetest.runtime.report import LEGEND_WIDTH, format_table, outcome
+
+    nodes = [NodeSummary(id=i) for i in (1, 2)]
+    full = RunSummary(steps_completed=3, node_steps_evaluated=8, node_steps_covered=8, node_steps_contained=8, nodes=nodes)
+    assert outcome(full) == "PASS"
+    assert outcome(replace(full, node_steps_covered=7, node_steps_not_covered={"noise": 1})) == "PASS (partial coverage)"
+    assert outcome(replace(full, node_steps_evaluated=7, node_steps_covered=7)) == "PASS (partial coverage)"
+    assert outcome(replace(full, nodes_missing=[2])) == "PASS (partial coverage)"
+    assert outcome(replace(full, violations_total=1)) == "FAIL"
+    text = format_table(replace(full, mode="inmemory", case="nsnim", signals="paper", variant="scheduled", seed=4))
+    last = text.splitlines()[-1]
+    assert last.startswith("PASS: inmemory run") and "steps 0–3:" in last
+    assert "viol.: misses where every assumption held" in text
+    assert all(len(ln) <= LEGEND_WIDTH for ln in text.splitlines()[:-1])
+    mixed = format_table(replace(full, nodes=[NodeSummary(id=1, estimator="sdp"), NodeSummary(id=2, estimator="zonotope")]))
+    assert "estimator" in mixed.splitlines()[0] and "zonotope" in mixed

@@ -468,3 +468,17 @@ def test_vehicle_and_collector_keep_only_open_steps(monkeypatch: pytest.MonkeyPa
     assert max(s for _, s, _ in sizes) <= CLOSE_LAG + 1 and max(t for _, _, t in sizes) <= CLOSE_LAG + 1
     c = made["Collector"]
     assert c.states == {} and c.truth == {} and c.evaluated == {}  # type: ignore[attr-defined]
+
+
+def test_an_end_that_overtakes_the_last_truth_is_not_hostile() -> None:
+    """Over Zenoh the End (its own key) can overtake the last step's truth: benign runs reported
+    `end-early 1`. An End before the second-to-last step is still early, and counted."""
+
+    def before(key: str, msg: Message) -> list[tuple[str, bytes]]:
+        if key == keys.truth(RUN) and isinstance(msg, Truth) and msg.step == STEPS:
+            return [(keys.end(RUN), encode(End(steps=STEPS)))]  # the End first, then the last truth
+        return []
+
+    res = _run("nsnim", AttackBus(before=before))
+    assert "end-early" not in res.summary.drops.get("collector", {})
+    assert res.summary.steps_completed == STEPS and res.summary.violations_total == 0

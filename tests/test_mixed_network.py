@@ -234,3 +234,16 @@ def test_live_table_shows_the_set_bounds(tmp_path: Path) -> None:
     for i in MIXED:
         last = res.parts["nodes"][str(i)][-1]
         assert [rows[i].fault_lower, rows[i].fault_upper] == last["bounds"][2]
+
+
+def test_inspect_labels_a_set_estimators_bounds_as_what_they_are(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A zonotope node's bounds are its set's interval hull, not an ellipsoid's f̂ ± √(ρ P33)."""
+    from netsetest.cli.main import main
+
+    rec = tmp_path / "r.json"
+    run_inmemory(load_topology(mixed_topology(tmp_path), steps=3), "paper", "scheduled", seed=0, record=str(rec))
+    assert main(["inspect", str(rec)]) == 0
+    out = capsys.readouterr().out
+    assert "node 1: fault estimate and bounds f̂ ± √(ρ P33) of its ellipsoid" in out
+    for i in MIXED:
+        assert f"node {i} ({MIXED[i]}): fault bounds of its published set (interval hull)" in out

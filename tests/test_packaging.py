@@ -96,7 +96,7 @@ def test_installed_wheel_runs_bundled_scenario_from_any_directory(venv: Path, tm
     assert netsetest.__version__[0].isdigit()
     r = _run(str(exe), "run", "paper6", "--mode", "inmemory", "--steps", "5", "--quiet", "--record", "r.json", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
-    assert "5 steps: contained on 36 of 36 node-steps; the guarantee applied on 36." in r.stdout
+    assert "steps 0–5: contained on 36 of 36 node-steps; the guarantee applied on 36." in r.stdout
     assert (tmp_path / "r.json").is_file()
     # a path still works, and python -m netsetest is the same command
     m = _run(str(venv / "bin" / "python"), "-m", "netsetest", "run", str(ROOT / "topologies" / "paper6_lossy.toml"),

@@ -169,7 +169,11 @@ def cmd_inspect(a: argparse.Namespace) -> int:
         sys.stdout.write("\n")
         return 0
     for i in ids:
-        print(f"node {i}: fault estimate and bounds f̂ ± √(ρ P33)")
+        method = (rec.meta.get("estimators") or {}).get(str(i), "sdp")
+        if method == "sdp":
+            print(f"node {i}: fault estimate and bounds f̂ ± √(ρ P33) of its ellipsoid")
+        else:  # a set estimator publishes its own set: its bounds are that set's interval hull
+            print(f"node {i} ({method}): fault bounds of its published set (interval hull), estimate their midpoint")
         print(f"{'step':>5} {'f_true':>9} {'f_est':>9} {'lower':>9} {'upper':>9} {'E':>7}  status")
         for r in rec.fault_rows(i):
             ft = "-" if r["fault_true"] is None else f"{r['fault_true']:9.4f}"

@@ -177,6 +177,7 @@ class Collector:
         self.not_covered: Counter[str] = Counter()  # evaluated node-steps outside the guarantee, by cause
         self.drops: Counter[str] = Counter()
         self._end: End | None = None
+        self._end_early = False  # an End was counted as early already
         self._step_truth: Truth | None = None  # the judged truth of the step being closed
         # nodes running a set estimator whose guarantee also rests on the declared fault bound (its cone)
         self.needs_fault_bound = {
@@ -246,10 +247,13 @@ class Collector:
     def _on_end(self, key: str, msg: End) -> None:
         if key != keys.end(self.run) or msg.steps != self.sc.steps:
             self.drops["end-not-scheduled"] += 1
-        elif self.sc.steps not in self.truth and self.closed < self.sc.steps:
-            self.drops["end-early"] += 1  # kept: it counts once the last step's truth is here
-            self._end = msg
         else:
+            # kept, and it counts once the last step's truth is here.  Over Zenoh the End may overtake the
+            # last truth (another key): that is ordering, not hostility; an End before the step before the
+            # last is early, and so is one whose last truth never comes (counted at finish)
+            if self.sc.steps not in self.truth and max(self.head, self.closed) < self.sc.steps - 1:
+                self.drops["end-early"] += 1
+                self._end_early = True
             self._end = msg
 
     @property
@@ -613,6 +617,8 @@ class Collector:
         ``drops``: further drop counters by role (the runtime's, e.g. a shared in-memory bus).
         """
         last = max([self.head, *self.states], default=-1)
+        if self._end is not None and not self._end_early and self.sc.steps not in self.truth and self.closed < self.sc.steps:
+            self.drops["end-early"] += 1  # the run ends, and the End's last step never came
         for k in range(self.closed + 1, min(last, self.sc.steps) + 1):
             self._close(k)
         last = self.closed

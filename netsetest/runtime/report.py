@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+import textwrap
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
@@ -47,11 +48,35 @@ def _fmt(v: object, spec: str) -> str:
     return "-" if v is None else format(v, spec)
 
 
+LEGEND = (
+    "max E: largest eᵀP⁻¹e (inside while ≤ ρ = 1); viol.: misses where every assumption held (must be 0); "
+    "assump.viol: node-steps outside the guarantee; miss(assump.): misses there; fault width: mean width of "
+    "the published fault bounds; missing: first step not reported"
+)
+
+
+LEGEND_WIDTH = 100  # characters: the legend folds to a terminal's width
+
+
+def outcome(summary: RunSummary) -> str:
+    """The verdict's first word, consistent with the exit code: FAIL iff exit 1 (a miss where every
+    assumption held); PASS (partial coverage) when the guarantee did not apply to every node-step the
+    run should have had judged (not covered, not judged, rejected, or a node missing); PASS otherwise."""
+    if summary.violations_total:
+        return "FAIL"
+    expected = (summary.steps_completed + 1) * len(summary.nodes)
+    full = summary.node_steps_covered == summary.node_steps_evaluated == expected and not summary.nodes_missing
+    return "PASS" if full else "PASS (partial coverage)"
+
+
 def format_table(summary: RunSummary) -> str:
-    head = ["node", "max E", "viol.", "assump.viol", "miss(assump.)", "fault width", "solve ms", "fallbacks", "missing", "deadline"]
+    mixed = len({r.estimator for r in summary.nodes}) > 1  # name each node's method where they differ
+    head = ["node", *(["estimator"] if mixed else []), "max E", "viol.", "assump.viol", "miss(assump.)", "fault width", "solve ms",
+            "fallbacks", "missing", "deadline"]  # fmt: skip
     rows = [
         [
             str(r.id),
+            *([r.estimator] if mixed else []),
             _fmt(r.max_E, ".3f"),
             str(r.violations),
             str(r.assumption_violations),
@@ -67,6 +92,7 @@ def format_table(summary: RunSummary) -> str:
     widths = [max(len(h), *(len(r[c]) for r in rows)) for c, h in enumerate(head)]
     line = lambda cells: "  ".join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731
     out = [line(head), line(["-" * w for w in widths])] + [line(r) for r in rows]
+    out.extend(textwrap.wrap(LEGEND, LEGEND_WIDTH))
     out.append("")
     if summary.misses_assumption_broken_total:
         out.append(f"{summary.misses_assumption_broken_total} miss(es) after a broken assumption (not covered by the guarantee).")
@@ -81,8 +107,8 @@ def format_table(summary: RunSummary) -> str:
     # the last line: the run, its security mode (Zenoh) and the verdict
     security = f" (security: {summary.security})" if summary.security else ""
     seed = f", seed {summary.seed}" if summary.seed is not None else ""
-    out.append(f"{summary.mode or ''} run{security}, case {summary.case}, signals {summary.signals}, "
-               f"variant {summary.variant}{seed}, {summary.steps_completed} steps: {verdict(summary)}.")  # fmt: skip
+    out.append(f"{outcome(summary)}: {summary.mode or ''} run{security}, case {summary.case}, signals {summary.signals}, "
+               f"variant {summary.variant}{seed}, steps 0–{summary.steps_completed}: {verdict(summary)}.")  # fmt: skip
     return "\n".join(out)
 
 
