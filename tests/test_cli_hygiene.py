@@ -230,3 +230,27 @@ def test_verdict_line_starts_with_the_outcome_and_names_the_step_range() -> None
     assert all(len(ln) <= LEGEND_WIDTH for ln in text.splitlines()[:-1])
     mixed = format_table(replace(full, nodes=[NodeSummary(id=1, estimator="sdp"), NodeSummary(id=2, estimator="zonotope")]))
     assert "estimator" in mixed.splitlines()[0] and "zonotope" in mixed
+
+
+@pytest.mark.parametrize(
+    "option",
+    [["--pace", "0.1"], ["--insecure"], ["--node-timeout", "3"], ["--neighbour-timeout", "1"], ["--run-id", "x1"], ["--rejoin", "2@3"]],
+)
+def test_zenoh_only_options_are_refused_in_memory(option: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    """They were accepted and silently ignored with --mode inmemory (only --kill was refused)."""
+    assert main(["run", TOPOLOGY, "--mode", "inmemory", "--steps", "1", *option]) == 2
+    err = capsys.readouterr().err
+    assert f"{option[0]}: only a Zenoh run has it" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize(
+    "name,says",
+    [("out.csv", "the name must end in .json, .jsonl"), ("r.mcap.gz", "the name must end in"),
+     ("nonexistent-dir/r.json", "does not exist")],
+)  # fmt: skip
+def test_record_names_are_not_taken_literally(name: str, says: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """out.csv got JSON Lines, r.mcap.gz gzipped JSON, a missing directory was created silently."""
+    assert main(["run", TOPOLOGY, "--mode", "inmemory", "--steps", "1", "--record", str(tmp_path / name)]) == 2
+    err = capsys.readouterr().err
+    assert says in err and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []

@@ -179,6 +179,10 @@ def test_export_tables_round_trip_with_pandas(fmt: str, records: dict[str, Path]
         assert np.array_equal(df["rho"].to_numpy(), rec.nodes[i].rho)
         assert np.allclose(df["t"].to_numpy(), rec.nodes[i].steps * rec.meta["tau_s"], rtol=0, atol=1e-12)
         assert list(df["status"]) == rec.nodes[i].status
+        assert set(df["node"]) == {i}
+    # the directory read at once (pandas, polars): the rows still say which node they are (they did not)
+    together = pd.concat([pd.read_csv(p) for p in sorted(out.glob("*.csv"))]) if fmt == "csv" else pd.read_parquet(out)
+    assert sorted(set(together["node"])) == sorted(rec.nodes) and len(together) == sum(len(t.steps) for t in rec.nodes.values())
 
 
 def test_export_parquet_without_pyarrow_exits_2(records: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,

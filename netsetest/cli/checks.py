@@ -42,7 +42,7 @@ def seed(s: str) -> int:
 
 
 def output_file(path: str | None, option: str) -> None:
-    """Fail now, not after the run, when ``path`` cannot be written as a file (missing parents are made)."""
+    """Fail now, not after the run, when ``path`` cannot be written as a file (its directory must exist)."""
     if path is None:
         return
     p = Path(path)
@@ -52,10 +52,8 @@ def output_file(path: str | None, option: str) -> None:
         raise OutputError(f"{option} {path}: is a directory")
     if p.exists() and not p.is_file():
         raise OutputError(f"{option} {path}: not a regular file")
-    try:
-        p.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"{option} {path}: cannot create its directory ({exc.strerror or exc})") from None
+    if not p.parent.is_dir():  # a typo in a directory name must not become a new directory tree
+        raise OutputError(f"{option} {path}: the directory {p.parent} does not exist")
     if not os.access(p.parent, os.W_OK | os.X_OK) or (p.exists() and not os.access(p, os.W_OK)):
         raise OutputError(f"{option} {path}: not writable")
     why = _cannot_write(p)
@@ -83,8 +81,10 @@ def _cannot_write(p: Path) -> str | None:
 
 def record_file(path: str | None) -> None:
     """``--record``: writable, and its format's optional dependency installed (MissingExtra if not)."""
-    from netsetest.records.record import check_record_path  # the records load only for a command that writes one
+    from netsetest.records.record import RECORD_SUFFIXES, check_record_path  # loaded only by a command that writes one
 
+    if path is not None and not Path(path).name.endswith(RECORD_SUFFIXES):  # out.csv once got JSON Lines
+        raise OutputError(f"--record {path}: the name must end in {', '.join(RECORD_SUFFIXES)} (the suffix chooses the format)")
     output_file(path, "--record")
     check_record_path(path)
 

@@ -134,8 +134,12 @@ def cmd_run(a: argparse.Namespace) -> int:
     if a.clock != "lockstep":
         print("netsetest run: --clock realtime needs --mode zenoh (the in-memory bus is lockstep only)", file=sys.stderr)
         return EXIT_BAD_INPUT
-    if a.kill or a.rejoin:
-        print("netsetest run: --kill and --rejoin need --mode zenoh (in memory there is no process to kill)", file=sys.stderr)
+    from netsetest.cli.processes import zenoh_options_given
+
+    given = zenoh_options_given(a)
+    if given:
+        print(f"netsetest run: {', '.join(given)}: only a Zenoh run has {'it' if len(given) == 1 else 'them'} "
+              "(--mode zenoh, the default); the in-memory run would ignore it", file=sys.stderr)  # fmt: skip
         return EXIT_BAD_INPUT
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory

@@ -81,6 +81,19 @@ _seconds, _non_negative = _seconds_type(False), _seconds_type(True)
 DEFAULT_VALIDITY_DAYS = 30
 
 
+# the options only a Zenoh run has, with their defaults: `run --mode inmemory` refuses any other value
+ZENOH_ONLY: dict[str, tuple[str, object]] = {
+    "--node-timeout": ("node_timeout", NODE_TIMEOUT_S), "--neighbour-timeout": ("neighbour_timeout", NEIGHBOUR_TIMEOUT_S),
+    "--pace": ("pace", 0.0), "--kill": ("kill", []), "--rejoin": ("rejoin", []), "--insecure": ("insecure", False),
+    "--run-id": ("run_id", None), "--zenoh-config": ("zenoh_config", None),
+}  # fmt: skip
+
+
+def zenoh_options_given(a: argparse.Namespace) -> list[str]:
+    """The Zenoh-only options set to something other than their default."""
+    return [opt for opt, (dest, default) in ZENOH_ONLY.items() if getattr(a, dest) != default]
+
+
 def add_run_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("zenoh mode")
     g.add_argument("--node-timeout", type=_seconds, default=NODE_TIMEOUT_S, metavar="S", help="lockstep: a node silent this long [s] is declared dead")

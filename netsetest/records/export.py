@@ -16,7 +16,7 @@ from netsetest.records.record import Record
 
 COMPONENTS = ("beta", "r", "fault")
 COLUMNS: tuple[str, ...] = (
-    "step", "t",
+    "node", "step", "t",
     *(f"{c}_{part}" for c in COMPONENTS for part in ("estimate", "lower", "upper", "true")),
     "E", "rho", "judged", "contained", "assumptions_ok", "status",
 )  # fmt: skip
@@ -30,7 +30,8 @@ def node_table(rec: Record, node: int) -> dict[str, list]:
     rows = rec.state_rows(node)
     table: dict[str, list] = {c: [] for c in COLUMNS}
     for n, row in enumerate(rows):
-        extra = {"t": row["step"] * tau, "rho": float(tr.rho[n]), "assumptions_ok": bool(tr.assumptions_ok[n])}
+        # the node in every row: read together (pd.read_parquet(dir)), the per-node files stay apart
+        extra = {"node": node, "t": row["step"] * tau, "rho": float(tr.rho[n]), "assumptions_ok": bool(tr.assumptions_ok[n])}
         for c in COLUMNS:
             table[c].append(extra[c] if c in extra else row[c])
     return table

@@ -57,6 +57,7 @@ LEGACY_VERSION = 1  # one JSON document per run, written at the end
 GZIP_MAGIC = b"\x1f\x8b"
 MCAP_SUFFIX = ".mcap"  # open_sink/save_record/load_record dispatch on it (netsetest.records.mcap_io)
 MAX_STEP = 10**9  # a step number beyond this is no run's (and would overflow the tools' integer arrays)
+RECORD_SUFFIXES = (".json", ".jsonl", ".json.gz", ".jsonl.gz", MCAP_SUFFIX)  # what a record file may be named
 SEQ = "seq"  # every line's number, from 0 (the meta line); records written before it have none
 
 
