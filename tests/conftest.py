@@ -25,3 +25,32 @@ def _children_tmpdir() -> Iterator[None]:
         else:
             os.environ["TMPDIR"] = previous
         shutil.rmtree(root, ignore_errors=True)
+
+
+# ---------------------------------------------------------------- nothing left behind
+
+SYSTEM_TMP = os.environ.get("TMPDIR", "/tmp")  # before the session fixture points TMPDIR elsewhere
+OURS = ("netsetest", "nsbench", "nsattack")  # the prefixes of every temporary file or directory the package makes
+_before: set[str] = set()
+
+
+def _ours() -> set[str]:
+    try:
+        return {n for n in os.listdir(SYSTEM_TMP) if n.startswith(OURS)}
+    except OSError:
+        return set()
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    _before.update(_ours())
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    """Fail the run if a test left a temporary file or directory of ours (a run's private keys) in the
+    system's temporary directory: every test works in tmp_path or the session's directory."""
+    left = sorted(_ours() - _before - {os.path.basename(os.environ.get("TMPDIR", ""))})
+    if left:
+        session.config.pluginmanager.get_plugin("terminalreporter").write_line(  # type: ignore[union-attr]
+            f"tests left behind in {SYSTEM_TMP}: {', '.join(left)}", red=True
+        )
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
