@@ -26,10 +26,22 @@ SET_ESTIMATORS: dict[str, Callable[[Scenario, int], SetEstimator]] = {
 }
 
 
+# methods whose set has no bound on the fault once a reading sits at the saturation limit (one-sided):
+# on a saturating sensor they need a declared fault bound (the SDP copes with an assumed sector instead)
+UNBOUNDED_WHEN_SATURATED = frozenset({"zonotope", "zonotope-q10", "interval", "interval-classical"})
+
+
 def node_set_estimator(scenario: Scenario, node_id: int) -> SetEstimator:
     """The set estimator node ``node_id`` is configured to run in the network; ConfigError if it refuses
-    the node (e.g. ``strip`` without a declared fault bound)."""
-    name = scenario.node(node_id).estimator
+    the node (e.g. ``strip`` without a declared fault bound, or ``zonotope`` on a saturating sensor
+    without one: it fell back to its previous set at the first saturated reading and failed the run)."""
+    node = scenario.node(node_id)
+    name = node.estimator
+    if name in UNBOUNDED_WHEN_SATURATED and node.sensor.saturated and node.fault_rate is None and node.fault_size is None:
+        raise ConfigError(
+            f"{scenario.path}: node {node_id}: estimator {name!r} on a saturating sensor needs a declared "
+            "[fault_bound] rate or size (a reading at the saturation limit leaves the fault unbounded); sdp copes without"
+        )
     try:
         return SET_ESTIMATORS[name](scenario, node_id)
     except EstimatorError as exc:
