@@ -254,3 +254,32 @@ def test_record_names_are_not_taken_literally(name: str, says: str, tmp_path: Pa
     err = capsys.readouterr().err
     assert says in err and "Traceback" not in err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_exact_table_mean_row_lines_up_and_progress_is_shown(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The mean row put its numbers under the wrong columns; exact ran 14 s on SAIM without progress."""
+    rec = tmp_path / "r.json"
+    assert main(["run", TOPOLOGY, "--mode", "inmemory", "--steps", "12", "--seed", "1", "--record", str(rec), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["exact", str(rec)]) == 0
+    out, err = capsys.readouterr()
+    rows = [ln for ln in out.splitlines() if ln[:4].strip().isdigit() or ln.startswith("mean")]
+    bars = {tuple(i for i, ch in enumerate(ln) if ch == "|") for ln in rows}
+    assert len(rows) == 7 and len(bars) == 1 and len(next(iter(bars))) == 3, rows
+    assert len({len(ln) for ln in rows}) == 1, rows
+    assert "exact: step 12/13" in err or "exact: step" in err
+
+
+def test_compare_table_folds_to_the_terminal_and_reports_progress() -> None:
+    """compare printed a 220-character table after 26-90 s of silence."""
+    from netsetest.analysis.compare import TABLE_HEADER, compare, table_rows
+    from netsetest.cli.compare import TERMINAL_WIDTH, folded_table
+
+    calls: list[tuple[int, int, str]] = []
+    c = compare(TOPOLOGY, ("sdp", "interval"), steps=3, progress=lambda d, t, w: calls.append((d, t, w)))
+    assert [d for d, _, _ in calls] == [1, 2, 3] and {t for _, t, _ in calls} == {3}
+    rows = [TABLE_HEADER, *table_rows(c)]
+    lines = folded_table(rows, TERMINAL_WIDTH)
+    assert all(len(ln) <= TERMINAL_WIDTH for ln in lines)
+    text = "\n".join(lines)
+    assert all(h in text for h in TABLE_HEADER) and sum(len("  ".join(r)) for r in rows[:1]) > TERMINAL_WIDTH

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -204,8 +205,10 @@ def compare(
     signals: tuple[SignalKind, ...] = ("paper",),
     seeds: tuple[int, ...] = (0,),
     steps: int | None = None,
+    progress: Callable[[int, int, str], None] | None = None,
 ) -> Comparison:
-    """Run every (case, signals, seed) and score every estimator (module doc)."""
+    """Run every (case, signals, seed) and score every estimator (module doc); ``progress(done, total,
+    what)`` after each run and each estimator's scoring (a comparison takes tens of seconds)."""
     unknown = [e for e in estimators if e not in ESTIMATOR_NAMES]
     if unknown:
         raise CompareError(f"unknown estimator {unknown[0]!r}; choose from {', '.join(ESTIMATOR_NAMES)}")
@@ -218,14 +221,23 @@ def compare(
     first_bounds: dict[str, dict[int, np.ndarray]] = {}
     truth_fault: dict[int, np.ndarray] = {}
     sc = None
+    total = len(cases) * len(signals) * len(seeds) * (1 + len(estimators))  # a run, then each estimator's scoring
+    done = [0]
+
+    def report(what: str) -> None:
+        done[0] += 1
+        if progress is not None:
+            progress(done[0], total, what)
+
     for case in cases:
         sc = load_topology(topology, case, steps, SDP)  # the run (row sdp) is all-SDP, whatever the file's nodes say
         for sig in signals:
             for seed in seeds:
                 res = run_inmemory(sc, sig, "scheduled", seed)
                 rec = record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
+                report(f"run {sc.case}/{sig}/{seed}")
+                _score_run(sc, rec, estimators, acc, first_bounds if not runs else None, report)
                 runs.append(f"{sc.case}/{sig}/{seed}")
-                _score_run(sc, rec, estimators, acc, first_bounds if len(runs) == 1 else None)
                 if len(runs) == 1:
                     truth_fault = {i: np.array([t["faults"][str(i)] for t in sorted(rec.truth, key=lambda t: t["step"])]) for i in sc.ids}
     assert sc is not None
@@ -234,7 +246,7 @@ def compare(
 
 
 def _score_run(sc: Scenario, rec: Record, estimators: tuple[str, ...], acc: dict[str, _Accumulator],
-               keep: dict[str, dict[int, np.ndarray]] | None) -> None:  # fmt: skip
+               keep: dict[str, dict[int, np.ndarray]] | None, report: Callable[[str], None]) -> None:  # fmt: skip
     data = step_data(rec)
     t0 = time.perf_counter()
     ex = exact_bounds(sc, rec, "used")
@@ -277,6 +289,7 @@ def _score_run(sc: Scenario, rec: Record, estimators: tuple[str, ...], acc: dict
             _score(a, bounds, steps, tr_i[steps], _exact_array(reference, i), broken)
             if keep is not None:
                 keep[name][i] = bounds
+        report(name)
 
 
 def comparison_document(c: Comparison) -> list[dict]:

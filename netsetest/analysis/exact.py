@@ -21,7 +21,7 @@ Derivation and measured figures: docs/exact.md.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -288,8 +288,11 @@ def exact_bounds(
     keep_witnesses: bool = False,
     eliminate_free_faults: bool = True,
     nodes: Sequence[int] | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> ExactBounds:
     """The exact intervals of every step of ``record`` under ``scenario``'s assumptions (module doc).
+
+    ``progress(k, K)``: called after each step's programs (a SAIM record takes seconds).
 
     ``nodes``: use only these nodes' priors and measurements (e.g. one node: the limit of a purely
     local estimator); default every node (centralized).  ``eliminate_free_faults`` drops the past
@@ -317,6 +320,8 @@ def exact_bounds(
     infeasible = []
     st = _settings()
     for k in range(K1):
+        if progress is not None:
+            progress(k, K1)
         cols, A, b, cones = prog.matrices(k, eliminate_free_faults)
         P = sparse.csc_matrix((len(cols), len(cols)))
         position = {col: m for m, col in enumerate(cols)}
@@ -393,6 +398,7 @@ class Comparison:
     mean_width_ratio: dict[Coordinate, float]
     mean_rms_radius_rel: dict[Coordinate, float]
     overall_width_ratio: float
+    mean_width_ratio_all: dict[Coordinate, float]  # over all steps (mean_width_ratio: steps ≥ 10)
     overall_rms_radius_rel: float
 
 
@@ -437,6 +443,7 @@ def compare_record(record: Record, exact: ExactBounds) -> Comparison:
         mean_rms_radius_rel={c: mean("rms_radius_rel", c) for c in COORDINATES},
         overall_width_ratio=_nanmean([n.ratios[c].width_ratio for n in rows for c in COORDINATES]),
         overall_rms_radius_rel=_nanmean([n.ratios[c].rms_radius_rel for n in rows for c in COORDINATES]),
+        mean_width_ratio_all={c: mean("width_ratio_all", c) for c in COORDINATES},
     )
 
 

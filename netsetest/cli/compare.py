@@ -47,6 +47,26 @@ def add_parser(sub: argparse._SubParsersAction, scenario_args: Callable[[argpars
     COMMANDS["compare"] = cmd_compare
 
 
+TERMINAL_WIDTH = 100  # characters: the table folds its columns into blocks that fit (--markdown has them in one)
+
+
+def folded_table(rows: list[tuple[str, ...]], width: int) -> list[str]:
+    """The table in blocks of columns, each block at most ``width`` wide and led by the first column."""
+    widths = [max(len(r[j]) for r in rows) for j in range(len(rows[0]))]
+    blocks: list[list[int]] = [[]]
+    for j in range(1, len(widths)):
+        used = widths[0] + sum(widths[c] + 2 for c in blocks[-1])
+        if blocks[-1] and used + widths[j] + 2 > width:
+            blocks.append([])
+        blocks[-1].append(j)
+    out: list[str] = []
+    for n, cols in enumerate(blocks):
+        if n:
+            out.append("")
+        out += ["  ".join(r[j].ljust(widths[j]) for j in (0, *cols)).rstrip() for r in rows]
+    return out
+
+
 def cmd_compare(a: argparse.Namespace) -> int:
     from netsetest.analysis.compare import TABLE_HEADER, compare, comparison_document, markdown_table, plot_fault_bounds, table_rows
 
@@ -54,12 +74,19 @@ def cmd_compare(a: argparse.Namespace) -> int:
     checks.output_file(a.markdown, "--markdown")
     if a.plot:
         checks.output_dir(a.plot, "--plot")
-    c = compare(a.topology, a.estimators, (a.case,), a.signals, a.seeds, a.steps)
-    rows = [TABLE_HEADER, *table_rows(c)]
-    widths = [max(len(r[j]) for r in rows) for j in range(len(TABLE_HEADER))]
+    from netsetest.runtime.report import Progress
+
+    bar = Progress(1, "compare")
+
+    def on_progress(done: int, total: int, what: str) -> None:
+        bar.total = total  # known once compare has counted its runs and estimators
+        bar.update(done, what)
+
+    c = compare(a.topology, a.estimators, (a.case,), a.signals, a.seeds, a.steps, progress=on_progress)
+    bar.close()
     print(f"compare {c.topology}: runs {', '.join(c.runs)}, {c.steps} steps; widths: mean over nodes and steps ≥ 10")
-    for r in rows:
-        print("  ".join(cell.ljust(w) for cell, w in zip(r, widths)))
+    for line in folded_table([TABLE_HEADER, *table_rows(c)], TERMINAL_WIDTH):
+        print(line)
     for row in c.rows:
         for reason in row.refused:
             print(f"  {row.estimator} refused: {reason}")

@@ -218,8 +218,17 @@ def cmd_exact(a: argparse.Namespace) -> int:
         print(f"netsetest exact: {a.record} names topology {topology!r}, not found from here (give --topology PATH)", file=sys.stderr)
         return EXIT_BAD_INPUT
     sc = load_topology(topology, rec.meta.get("case"), rec.meta.get("steps"))
+    from netsetest.runtime.report import Progress
+
     t0 = time.perf_counter()
-    ex = exact_bounds(sc, rec, a.fault_bounds)
+    bar = Progress(1, "exact")
+
+    def on_progress(k: int, total: int) -> None:
+        bar.total = total
+        bar.update(k)
+
+    ex = exact_bounds(sc, rec, a.fault_bounds, progress=on_progress)
+    bar.close()
     cmp = compare_record(rec, ex)
     bounded = ", ".join(map(str, ex.bounded_nodes)) or "none"
     print(f"exact bounds for {a.record}: case {sc.case}, {len(ex.steps)} steps, fault bounds '{a.fault_bounds}' "
@@ -229,10 +238,12 @@ def cmd_exact(a: argparse.Namespace) -> int:
     names = {"f": "fault", "r": "yaw rate", "beta": "sideslip"}
     print("published width / exact width: mean over steps ≥ 10 | all steps; relative-RMS radius (Althoff & Rath (9), exact = 1)")
     print(f"{'node':>4}  " + "  ".join(f"{names[c]:>22}" for c in COORDINATES))
+    def cell(width: float, width_all: float, rms: float) -> str:  # one format for the node rows and the mean
+        return f"{width:6.3f} |{width_all:6.3f}  {rms:6.3f}"
+
     for n in cmp.nodes:
-        cells = [n.ratios[c] for c in COORDINATES]
-        print(f"{n.node:>4}  " + "  ".join(f"{x.width_ratio:6.3f} |{x.width_ratio_all:6.3f}  {x.rms_radius_rel:6.3f}" for x in cells))
-    print(f"{'mean':>4}  " + "  ".join(f"{cmp.mean_width_ratio[c]:6.3f}         {cmp.mean_rms_radius_rel[c]:6.3f}" for c in COORDINATES))
+        print(f"{n.node:>4}  " + "  ".join(cell(x.width_ratio, x.width_ratio_all, x.rms_radius_rel) for x in (n.ratios[c] for c in COORDINATES)))
+    print(f"{'mean':>4}  " + "  ".join(cell(cmp.mean_width_ratio[c], cmp.mean_width_ratio_all[c], cmp.mean_rms_radius_rel[c]) for c in COORDINATES))
     print(f"overall: width ratio {cmp.overall_width_ratio:.3f}, relative-RMS radius {cmp.overall_rms_radius_rel:.3f}")
     left = sum(x.left_out for n in cmp.nodes for x in n.ratios.values())
     if left:
