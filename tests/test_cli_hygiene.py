@@ -283,3 +283,24 @@ def test_compare_table_folds_to_the_terminal_and_reports_progress() -> None:
     assert all(len(ln) <= TERMINAL_WIDTH for ln in lines)
     text = "\n".join(lines)
     assert all(h in text for h in TABLE_HEADER) and sum(len("  ".join(r)) for r in rows[:1]) > TERMINAL_WIDTH
+
+
+def test_a_record_is_never_written_by_two_runs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Two runs writing the same --record both exited 0 and interleaved their lines."""
+    from netsetest.records.errors import RecordError
+    from netsetest.records.files import open_locked
+    from netsetest.records.record import load_record
+
+    rec = tmp_path / "r.json"
+    run = ["run", TOPOLOGY, "--mode", "inmemory", "--steps", "2", "--quiet", "--record", str(rec)]
+    assert main(run) == 0
+    before = rec.read_bytes()
+    assert main(run) == 2 and "the file exists; give --overwrite" in capsys.readouterr().err
+    assert rec.read_bytes() == before
+    assert main([*run, "--overwrite", "--seed", "5"]) == 0 and load_record(rec).meta["seed"] == 5
+    held = open_locked(rec)  # a run writing it: another writer fails at once and empties nothing
+    try:
+        with pytest.raises(RecordError, match="another run is writing this record"):
+            open_locked(rec)
+    finally:
+        held.close()

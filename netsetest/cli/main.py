@@ -88,6 +88,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep",
                    help="lockstep: the vehicle waits for every node; realtime: one step every τs (zenoh mode)")  # fmt: skip
     p.add_argument("--record", metavar="PATH", help="write the run record: JSON, .gz compresses, .mcap for Foxglove (default: none)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --record file (default: refuse it)")
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON (default: none)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     processes.add_run_options(p)
@@ -124,7 +125,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def cmd_run(a: argparse.Namespace) -> int:
-    checks.record_file(a.record)
+    checks.record_file(a.record, a.overwrite)
     checks.output_file(a.summary_json, "--summary-json")
     a.seed = checks.seed_or_fresh(a.seed)
     if a.mode == "zenoh":

@@ -234,7 +234,7 @@ def cmd_collector(a: argparse.Namespace) -> int:
     from netsetest.runtime.report import format_table
     from netsetest.runtime.security import SECURITY_INSECURE, SECURITY_MTLS
 
-    checks.record_file(a.record)  # before the run, not after it
+    checks.record_file(a.record, overwrite=True)  # before the run; the parent refused an existing file, the lock guards the rest
     checks.output_file(a.summary_json, "--summary-json")
 
     def body(sc, bus) -> int:  # noqa: ANN001

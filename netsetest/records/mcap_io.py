@@ -29,6 +29,7 @@ from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader
 from mcap.writer import CompressionType, Writer
 
+from netsetest.records.files import open_locked
 from netsetest.records.summary import RunSummary
 
 if TYPE_CHECKING:
@@ -179,7 +180,7 @@ class McapRecordWriter:
     def __init__(self, path: str | Path, indexed: bool = False) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh: IO[bytes] = open(self.path, "wb")
+        self._fh: IO[bytes] = open_locked(self.path)
         self._writer = Writer(
             self._fh,
             compression=CompressionType.ZSTD if indexed else CompressionType.NONE,

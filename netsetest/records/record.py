@@ -49,6 +49,7 @@ import numpy as np
 
 from netsetest.extras import require
 from netsetest.records.errors import RecordError
+from netsetest.records.files import open_locked
 from netsetest.records.summary import RunSummary
 
 FORMAT = "netsetest-record"
@@ -81,7 +82,7 @@ class JsonlSink:
 
     def __init__(self, path: str | Path) -> None:
         path = Path(path)
-        raw = open(path, "wb")  # noqa: SIM115 (closed in close())
+        raw = open_locked(path)
         self._fh: IO[bytes] = gzip.GzipFile(fileobj=raw, mode="wb") if path.suffix == ".gz" else raw
         self._raw = raw
         self._seq = 0
