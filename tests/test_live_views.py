@@ -243,3 +243,14 @@ def test_run_watch_hint_works_insecure(procs: ProcessGuard) -> None:  # noqa: F8
     out, _ = echo.communicate(timeout=90)
     assert echo.returncode == 0 and len(out.decode().splitlines()) == 3, procs.logs()
     assert parent.wait(timeout=120) == 0, procs.logs()
+
+
+@pytest.mark.parametrize("command", ["echo", "watch"])
+def test_observer_that_hears_nothing_says_why(command: str) -> None:
+    """echo/watch on a secured run without --credentials printed nothing and exited 0 (or waited for ever)."""
+    import subprocess
+    import sys as _sys
+
+    p = subprocess.run([_sys.executable, "-m", "netsetest", command, "--duration", "4"], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0
+    assert f"netsetest {command}: nothing heard in 3 s" in p.stderr and "--credentials DIR" in p.stderr, p.stderr

@@ -85,6 +85,33 @@ def _observer(a: argparse.Namespace, key: str | None):  # noqa: ANN202 — (Obse
     return obs, None
 
 
+SILENCE_HINT_S = 3.0  # seconds without a message before echo/watch say why they may hear nothing
+
+
+class SilenceHint:
+    """Says once, on stderr, that nothing was heard and the likely reason (a secured run needs its
+    credentials: echo and watch without them printed nothing and exited 0, or waited for ever)."""
+
+    def __init__(self, command: str, a: argparse.Namespace) -> None:
+        self.command, self.a = command, a
+        self.deadline: float | None = time.monotonic() + SILENCE_HINT_S
+
+    def heard(self) -> None:
+        self.deadline = None
+
+    def tick(self) -> None:
+        if self.deadline is None or time.monotonic() < self.deadline:
+            return
+        self.deadline = None
+        a = self.a
+        why = (
+            f"is the run still going, and is its run id {a.run_id!r}?" if a.credentials
+            else "a secured run (the default) lets no one in without its credentials: give --credentials DIR "
+            "(the run prints it: 'watch it with: netsetest watch --credentials DIR')" + ("" if a.connect else "; an --insecure run needs --connect ENDPOINT")
+        )  # fmt: skip
+        print(f"netsetest {self.command}: nothing heard in {SILENCE_HINT_S:g} s; {why}", file=sys.stderr, flush=True)
+
+
 def cmd_echo(a: argparse.Namespace) -> int:
     obs, err = _observer(a, a.key)
     if obs is None:
@@ -92,11 +119,14 @@ def cmd_echo(a: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     end = None if a.duration is None else time.monotonic() + a.duration
     shown = 0
+    hint = SilenceHint("echo", a)
     try:
         while (a.count is None or shown < a.count) and (end is None or time.monotonic() < end):
             got = obs.get(POLL_S)
             if got is None:
+                hint.tick()
                 continue
+            hint.heard()
             doc = got.as_json()
             if a.json:
                 print(json.dumps(doc, separators=(",", ":")), flush=True)
@@ -139,6 +169,7 @@ def cmd_watch(a: argparse.Namespace) -> int:
         print(f"netsetest watch: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
     table = LiveTable()
+    hint = SilenceHint("watch", a)
     title = f"netsetest run {a.run_id or '*'}"
     end = None if a.duration is None else time.monotonic() + a.duration
     try:
@@ -152,7 +183,10 @@ def cmd_watch(a: argparse.Namespace) -> int:
                         break
                 got = obs.get(POLL_S)
                 if got is not None:
+                    hint.heard()
                     table.update(got.message)
+                else:
+                    hint.tick()
                 if time.monotonic() >= next_draw or table.ended is not None:
                     live.update(_render(table, title + (f": ended after {table.ended.steps} steps" if table.ended else "")))
                     next_draw = time.monotonic() + 1.0 / WATCH_REFRESH_HZ
