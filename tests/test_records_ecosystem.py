@@ -86,7 +86,7 @@ def test_mcap_channels_schemas_and_bounds_read_with_the_mcap_reader(records: dic
                     lo, hi = tr.bounds(j)
                     assert msg[f"{name}_lower"] == pytest.approx(lo[n], rel=1e-15, abs=1e-15)
                     assert msg[f"{name}_upper"] == pytest.approx(hi[n], rel=1e-15, abs=1e-15)
-                assert message.log_time == round(msg["step"] * rec.meta["tau_s"] * 1e9)
+                assert message.log_time == rec.meta["started_ns"] + round(msg["step"] * rec.meta["tau_s"] * 1e9)
             if channel.topic.endswith("/drops"):
                 i = int(channel.topic.split("/")[2])
                 entry = next(e for e in rec.raw_nodes[str(i)] if e["step"] == msg["step"])
@@ -200,7 +200,8 @@ def test_export_parquet_without_pyarrow_exits_2(records: dict[str, Path], tmp_pa
 ])  # fmt: skip
 def test_missing_optional_dependency_exits_2_before_any_work(missing: str, argv: list[str], records: dict[str, Path], tmp_path: Path,
                                                              monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
-    (tmp_path / "r.mcap").write_bytes(records["mcap"].read_bytes())
+    if argv[0] != "run":  # run writes it (an existing record is refused before the missing extra is named)
+        (tmp_path / "r.mcap").write_bytes(records["mcap"].read_bytes())
     (tmp_path / "r.json").write_bytes(records["json"].read_bytes())
     monkeypatch.setitem(sys.modules, missing, None)
     if missing == "matplotlib":
@@ -253,3 +254,23 @@ def test_streamed_mcap_record_is_the_run_and_validates(streamed: tuple[Path, obj
             jsonschema.Draft202012Validator(doc).validate(json.loads(message.data))
             if schema.name == "netsetest.NodeState":
                 assert set(json.loads(message.data)) - set(mcap_io.DERIVED_STATE_FIELDS) <= set(doc["properties"])
+
+
+def test_a_finished_mcap_record_is_chunked_indexed_and_on_the_run_clock(tmp_path: Path) -> None:
+    """It was written unchunked (Foxglove reads all of a long run to open it) with log times from the epoch
+    (Foxglove showed 1970-01-01)."""
+    pytest.importorskip("mcap")
+    import time
+
+    from mcap.reader import make_reader
+
+    p = tmp_path / "r.mcap"
+    t0 = time.time_ns()
+    assert main(["run", str(ROOT / "topologies" / "paper6.toml"), "--mode", "inmemory", "--steps", "6", "--record", str(p), "--quiet"]) == 0
+    t1 = time.time_ns()
+    with open(p, "rb") as fh:
+        summary = make_reader(fh).get_summary()
+    assert summary is not None and summary.chunk_indexes and summary.statistics.message_count > 0
+    start, end = summary.statistics.message_start_time, summary.statistics.message_end_time
+    assert t0 <= start <= t1 and end - start == round(6 * 0.1 * 1e9)  # step k at start + k τs
+    assert load_record(p).summary is not None

@@ -175,9 +175,10 @@ def _finite(v: Any) -> Any:
 class McapRecordWriter:
     """Writes a run as MCAP, one call per record part: ``meta`` first, ``truth``/``state`` per step, then
     ``summary`` and ``close``.  ``indexed``: chunked, compressed and indexed (for a finished record);
-    otherwise every message reaches the file at once (a stream that a crash leaves readable up to there)."""
+    otherwise every message reaches the file at once (a stream that a crash leaves readable up to there),
+    and a run that finishes (summary, close) is rewritten indexed unless ``index_at_close`` is False."""
 
-    def __init__(self, path: str | Path, indexed: bool = False) -> None:
+    def __init__(self, path: str | Path, indexed: bool = False, index_at_close: bool = True) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._fh: IO[bytes] = open_locked(self.path)
@@ -190,8 +191,10 @@ class McapRecordWriter:
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._tau_s = 1.0
+        self._t0_ns = 0  # the run's start on the wall clock (meta "started_ns"): Foxglove shows real dates
         self._last_ns = 0
         self._closed = False
+        self._indexed, self._finished = indexed or not index_at_close, False  # not index_at_close: leave the stream
 
     def _channel(self, topic: str) -> int:
         cid = self._channels.get(topic)
@@ -212,14 +215,16 @@ class McapRecordWriter:
 
     def _time(self, step: int) -> tuple[float, int]:
         t = step * self._tau_s
-        return t, round(t * NS_PER_S)
+        return t, self._t0_ns + round(t * NS_PER_S)
 
     def _flush(self) -> None:
         self._fh.flush()
 
     def meta(self, meta: dict) -> None:
         self._tau_s = float(meta.get("tau_s", 1.0))
-        self._write(TOPIC_META, 0, meta)
+        started = meta.get("started_ns")
+        self._t0_ns = started if isinstance(started, int) and 0 <= started < MAX_LOG_NS else 0
+        self._write(TOPIC_META, self._t0_ns, meta)
         self._flush()
 
     def truth(self, entry: dict) -> None:
@@ -251,6 +256,7 @@ class McapRecordWriter:
     def summary(self, summary: RunSummary) -> None:
         self._write(TOPIC_VERDICT, self._last_ns, summary.to_dict())
         self._flush()
+        self._finished = True
 
     def close(self) -> None:
         if self._closed:
@@ -260,6 +266,14 @@ class McapRecordWriter:
             self._writer.finish()
         finally:
             self._fh.close()
+        if self._finished and not self._indexed:
+            # the run is over: the stream (readable after a crash) becomes a chunked, indexed file, which
+            # Foxglove opens without reading it all; replaced in one rename, never half-written
+            parts, _ = read_mcap(self.path)
+            save_mcap(self.path, parts["meta"], parts["truth"], parts["nodes"], RunSummary.from_dict(parts["summary"]))
+
+
+MAX_LOG_NS = 2**63  # MCAP log times are unsigned 64-bit nanoseconds; a meta start beyond is ignored
 
 
 def save_mcap(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -36,6 +37,7 @@ def run_meta(
         "h1": {str(n.id): n.sensor.h1 for n in scenario.nodes},
         "C": {str(n.id): list(n.sensor.Cbar) for n in scenario.nodes},
         "estimators": {str(n.id): n.estimator for n in scenario.nodes},
+        "started_ns": time.time_ns(),  # the run's start on the wall clock (an MCAP record's log times start here)
     }  # fmt: skip
 
 
