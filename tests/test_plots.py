@@ -105,3 +105,36 @@ def test_short_run_keeps_full_limits() -> None:
     y0, y1 = ax.get_ylim()
     assert y0 <= lo.min() and hi.max() <= y1
     plt.close(fig)
+
+
+@pytest.fixture(scope="module")
+def saim_record(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201
+    d = tmp_path_factory.mktemp("saim")
+    netsetest.simulate("paper6", steps=40, case="saim").save(d / "saim.json")
+    return load_record(d / "saim.json")
+
+
+def test_fig5_shows_the_saturation_limit_and_gamma(saim_record) -> None:  # noqa: ANN001
+    """Fig. 5 drew neither the saturation limit nor γ (SAIM)."""
+    fig = plots._fig5(saim_record, "saim")
+    r_max = saim_record.meta["r_max"]["1"]
+    first = next(ax for ax in fig.axes if ax.get_title() == "sensor 1")
+    levels = {round(float(ln.get_ydata()[0]), 12) for ln in first.get_lines() if ln.get_label().startswith("saturation")}
+    assert levels == {round(r_max, 12), round(-r_max, 12)}
+    gamma_axes = [ax for ax in fig.axes if ax.get_ylabel().startswith("γ")]
+    assert gamma_axes and all(ax.get_ylim() == (0, 1.05) for ax in gamma_axes)
+    plt.close(fig)
+
+
+def test_fig7_leaves_out_the_initial_transient_like_fig6(saim_record) -> None:  # noqa: ANN001
+    """Fig. 7 let the first second's (wide) bounds set the y range."""
+    fig = plots._fig7(saim_record, "saim")
+    tau = saim_record.meta["tau_s"]
+    for i, track in saim_record.nodes.items():
+        ax = next(a for a in fig.axes if a.get_title() == f"fault f{i}")
+        lo, hi = track.bounds(2)
+        y0, y1 = ax.get_ylim()
+        late = track.steps * tau >= plots.TRANSIENT_S
+        assert y0 <= lo[late].min() and hi[late].max() <= y1
+        assert y1 - y0 < (hi.max() - lo.min()), f"node {i}: the initial bounds still set the range"
+    plt.close(fig)

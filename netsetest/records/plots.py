@@ -196,9 +196,19 @@ def _fig5(rec: Record, label: str) -> Figure:
     for i, ax in panels:
         ax.plot(*_truth_series(rec, "y", i), color="tab:red", lw=1.2, label="with fault")
         ax.plot(*_truth_series(rec, "y_nofault", i), color="tab:blue", lw=1.2, ls="--", label="without fault")
+        r_max = (rec.meta.get("r_max") or {}).get(str(i))
+        if isinstance(r_max, (int, float)):  # SAIM: the saturation limits a reading cannot pass (times γ ≤ 1)
+            for sign in (1, -1):
+                ax.axhline(sign * r_max, color="0.4", lw=0.8, ls=":", label="saturation limit ±r_max")
+        gamma = _truth_series(rec, "gamma", i)
+        if len(gamma[1]) and np.nanmin(gamma[1]) < 1.0:  # incomplete measurements: γ on a second axis
+            ax2 = ax.twinx()
+            ax2.plot(*gamma, color="tab:green", lw=0.8, alpha=0.7, label="γ (right axis)")
+            ax2.set_ylim(0, 1.05)
+            ax2.set_ylabel("γ [–]", fontsize=8, color="tab:green")
         ax.set_title(f"sensor {i}", fontsize=9)
         ax.set_ylabel("ỹ [rad/s]")
-    panels[0][1].legend(fontsize=7)
+    _legend(panels[0][1], fig)
     fig.tight_layout()
     return fig
 
@@ -234,12 +244,21 @@ def _fig6(rec: Record, label: str) -> Figure:
 
 def _fig7(rec: Record, label: str) -> Figure:
     fig, panels = _panels(_node_ids(rec), MAX_PANELS, f"Fig. 7: fault estimates and bounds ({label})", "t [s]")
+    clipped = False
     for i, ax in panels:
-        _estimate(ax, rec, i, 2, _truth_series(rec, "faults", i))
+        truth = _truth_series(rec, "faults", i)
+        _estimate(ax, rec, i, 2, truth)
+        limits = _settled_limits(rec, [i], 2, truth[1])  # the same rule as Fig. 6: not the first second's bounds
+        if limits is not None:
+            ax.set_ylim(*limits)
+            clipped = True
         ax.set_title(f"fault f{i}", fontsize=9)
         ax.set_ylabel("f [rad/s]")
     _legend(panels[0][1], fig)
-    fig.tight_layout()
+    if clipped:
+        fig.text(0.5, 0.005, f"y axes show the bounds from t = {TRANSIENT_S:g} s on; every true value is inside the axes",
+                 ha="center", fontsize=8, color="0.3")  # fmt: skip
+    fig.tight_layout(rect=(0, 0.02, 1, 1))
     return fig
 
 
