@@ -203,6 +203,7 @@ def test_no_process_of_a_run_shows_its_seed_or_a_guessable_run_id(tmp_path: Path
         if parent.poll() is None:
             parent.kill()
     assert parent.returncode == 0, err
+    assert err == "", err  # --quiet: no line on stderr on success (it printed the security and ready lines)
     seed = json.loads(summ.read_text())["seed"]
     roles = [c for c in seen if "netsetest" in c]
     assert roles and not any(f" {seed} " in f" {c} " for c in roles), roles

@@ -105,7 +105,7 @@ def launch_to_step0(topology: Path, reps: int, steps: int = 3, timeout: float = 
     for _ in range(reps):
         load = Path("/proc/loadavg").read_text().split()[0]
         t0 = time.perf_counter()
-        proc = subprocess.Popen([*PY, "run", str(topology), "--quiet", "--steps", str(steps)], stdout=subprocess.DEVNULL,
+        proc = subprocess.Popen([*PY, "run", str(topology), "--steps", str(steps)], stdout=subprocess.DEVNULL,
                                 stderr=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
         seen: list[float] = []
 

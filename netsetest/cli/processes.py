@@ -122,6 +122,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
     p.add_argument("--node-timeout", type=_seconds, default=NODE_TIMEOUT_S, metavar="S", help="lockstep: a node silent this long [s] is declared dead")
     p.add_argument("--pace", type=_non_negative, default=0.0, metavar="S", help="lockstep: at least S seconds per step")
     p.add_argument("--start-timeout", type=_seconds, default=START_TIMEOUT_S, metavar="S", help=f"how long [s] to wait for every role to be ready (default: {START_TIMEOUT_S:g})")
+    p.add_argument("--quiet", action="store_true", help="no line on success (errors are still logged)")
     p.add_argument("--await-rejoin", type=_at, action="append", default=[], metavar="NODE@STEP",
                    help="lockstep: before step STEP+1 wait (at most --node-timeout) for node NODE to come back (repeatable; default: none)")  # fmt: skip
     _zenoh_args(p)
@@ -214,7 +215,7 @@ def cmd_vehicle(a: argparse.Namespace) -> int:
 
     return _role("vehicle", keys.role_name("vehicle"), a, lambda sc, bus: run_vehicle(
         sc, bus, a.run_id, a.signals, a.seed, a.clock == "realtime", a.node_timeout, a.start_timeout, a.pace,
-        a.await_rejoin))  # fmt: skip
+        a.await_rejoin, a.quiet))  # fmt: skip
 
 
 def cmd_node(a: argparse.Namespace) -> int:

@@ -303,8 +303,9 @@ def launch(plan: RunPlan) -> RunOutcome:
                 return RunOutcome(EXIT_BAD_INPUT, None)
             write_observer_access(creds, run_id, [router_endpoint])
             net = _Network(names, router_endpoint, creds)
-        log("run", f"security: {security}" + (f" (mTLS per role, access control at the run's router {net.router_endpoint}; credentials in {net.credentials})"
-                                               if router is not None else " (open peer mesh: any local process can read and forge messages)"))  # fmt: skip
+        if not o.quiet:  # --quiet: nothing on success; the summary and the record name the security mode
+            log("run", f"security: {security}" + (f" (mTLS per role, access control at the run's router {net.router_endpoint}; credentials in {net.credentials})"
+                                                   if router is not None else " (open peer mesh: any local process can read and forge messages)"))  # fmt: skip
         if not o.quiet:  # how to look inside the run from another terminal (README: Live views)
             log("run", f"run id {run_id}; " + (
                 f"watch it with: netsetest watch --run-id {run_id} --connect {net.endpoint('collector')}" if router is None
@@ -335,7 +336,7 @@ def launch(plan: RunPlan) -> RunOutcome:
         awaits = [f"{i}@{r}" for i, rs in schedule.rejoins.items() for r in rs]
         children.start(
             "vehicle",
-            ["vehicle", *common, "--signals", o.signals, "--seed", str(o.seed), "--clock", o.clock,
+            ["vehicle", *common, "--signals", o.signals, "--seed", str(o.seed), "--clock", o.clock, *(["--quiet"] if o.quiet else []),
              "--node-timeout", str(o.node_timeout), "--pace", str(o.pace), "--start-timeout", str(run_start_timeout(len(names))),
              *net.argv("vehicle"),
              *(x for w in awaits for x in ("--await-rejoin", w))],

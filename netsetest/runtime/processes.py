@@ -164,8 +164,10 @@ def run_vehicle(
     start_timeout: float,
     pace: float = 0.0,
     await_rejoin: Sequence[tuple[int, int]] = (),
+    quiet: bool = False,
 ) -> int:
-    """``await_rejoin``: (node, step) pairs; in lockstep, step+1 waits (at most ``node_timeout``) for the node."""
+    """``await_rejoin``: (node, step) pairs; in lockstep, step+1 waits (at most ``node_timeout``) for the node.
+    ``quiet``: no line on success (errors are still logged)."""
     from netsetest.roles.vehicle import Vehicle
 
     vehicle = Vehicle(sc, bus, run_id, signals, seed, realtime=realtime)
@@ -182,7 +184,8 @@ def run_vehicle(
             log("vehicle", f"start-up timed out after {start_timeout:.0f} s; not ready: {', '.join(missing)}")
             return EXIT_VIOLATION
     barrier.tick(time.monotonic() + READY_PERIOD_S)  # a last Ready with seen_all for everyone
-    log("vehicle", f"all {len(sc.ids)} nodes and the collector are ready; clock {'realtime' if realtime else 'lockstep'}")
+    if not quiet:
+        log("vehicle", f"all {len(sc.ids)} nodes and the collector are ready; clock {'realtime' if realtime else 'lockstep'}")
     if realtime:
         # the machine is still busy with the start-up (the last roles' warm-up, their sessions, the Ready
         # traffic) when everyone is ready; a real-time clock must not start into that (a hundred nodes
