@@ -84,6 +84,8 @@ class CopyCheck:
 
 @dataclass(frozen=True)
 class Origin:
+    """The input a not-covered node-step rests on: node ``node``'s state of step ``step``, and why it failed."""
+
     node: int
     step: int
     why: str
