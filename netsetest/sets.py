@@ -1,4 +1,4 @@
-"""Guaranteed set types a node may publish: ellipsoid, zonotope, interval box (issue 9).
+"""Guaranteed set types a node may publish: ellipsoid, zonotope, interval box.
 
 Each offers ``contains(point)`` (membership, with a relative tolerance for points on the boundary) and
 ``bounds()`` (per-coordinate interval hull, lower and upper arrays), so that the collector, records and
@@ -50,7 +50,7 @@ class Box:
 
 @dataclass(frozen=True)
 class Ellipsoid:
-    """{x : (x − c)ᵀ P⁻¹ (x − c) ≤ ρ} (the estimator's published form, DESIGN.md §2)."""
+    """{x : (x − c)ᵀ P⁻¹ (x − c) ≤ ρ} (the estimator's published form, docs/design.md §2)."""
 
     center: np.ndarray
     P: np.ndarray
@@ -197,7 +197,7 @@ class SumSet:
         return str(sol.status) in ("Solved", "AlmostSolved")
 
 
-# ---------------------------------------------------------------- wire form (issue 9, phase 2 groundwork)
+# ---------------------------------------------------------------- wire form
 
 MAX_GENERATORS = 1024  # a published zonotope with more generators is refused (bounded message size)
 

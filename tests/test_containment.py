@@ -62,7 +62,7 @@ def test_per_rule_variant_worst_case():
 
 
 def test_paper_saim_run_reports_broken_sector_and_no_estimator_violation():
-    """The paper's SAIM settings drive |C̄ x̄| beyond r_max/h1 (DESIGN.md §1): the collector says so."""
+    """The paper's SAIM settings drive |C̄ x̄| beyond r_max/h1 (docs/design.md §1): the collector says so."""
     res = run_inmemory(load_topology(PAPER6, "saim"), "paper", "scheduled", seed=0)
     assert res.summary.violations_total == 0
     rows = {r.id: r for r in res.summary.nodes}

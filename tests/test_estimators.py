@@ -1,4 +1,4 @@
-"""The papers' other guaranteed estimators behind one interface, and ``netsetest compare`` (issue 9)."""
+"""The papers' other guaranteed estimators behind one interface, and ``netsetest compare``."""
 
 from __future__ import annotations
 

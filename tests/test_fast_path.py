@@ -1,6 +1,6 @@
 """The fast path (direct Clarabel assembly, netsetest/estimator/conic.py) against the LMI it replaces.
 
-- The assembly reproduces the LMI of DESIGN.md §2 entry by entry (up to its documented congruence
+- The assembly reproduces the LMI of docs/design.md §2 entry by entry (up to its documented congruence
   scaling) at random points, and the second-order cones carry the Schur terms they stand for.
 - Its reductions (one slot for the innovation noise, cones for the uncoupled groups, the LMI split
   into clique cones) leave the optimum unchanged: the clique matrices add up to the LMI, and the
@@ -99,7 +99,7 @@ def _smat(v: np.ndarray, n: int) -> np.ndarray:
 
 @pytest.mark.parametrize("case,variant", [("saim", "scheduled"), ("saim", "per-rule"), ("nsnim", "per-rule")])
 def test_conic_assembly_reproduces_the_lmi(case, variant, saim_steps, nsnim_steps):
-    """b − A x = svec(D M(P, L, τ) D) at random points, M the LMI of DESIGN.md §2 (negated)."""
+    """b − A x = svec(D M(P, L, τ) D) at random points, M the LMI of docs/design.md §2 (negated)."""
     sc = load_topology(PAPER6, case, 12)
     steps = saim_steps if case == "saim" else nsnim_steps
     rng = np.random.default_rng(7)

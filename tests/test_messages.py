@@ -1,4 +1,4 @@
-"""Wire format (msgpack + pydantic), the in-memory bus and key expressions (DESIGN.md §4)."""
+"""Wire format (msgpack + pydantic), the in-memory bus and key expressions (docs/design.md §6)."""
 
 from __future__ import annotations
 

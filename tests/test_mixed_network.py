@@ -1,4 +1,4 @@
-"""Mixed networks: nodes running different guaranteed estimators side by side (issue 9, phase 2).
+"""Mixed networks: nodes running different guaranteed estimators side by side.
 
 Nodes 1–3 run the SDP, 4 the zonotope, 5 the interval and 6 the strip observer (paper6, saim: three
 saturating sensors).  A non-SDP node publishes its own set and an enclosing ellipsoid; the collector

@@ -1,4 +1,4 @@
-"""Models (DESIGN.md §1, paper Sec. III and VI): T-S vehicle model, sensor, faults, exogenous signals."""
+"""Models (docs/design.md §1, paper Sec. III and VI): T-S vehicle model, sensor, faults, exogenous signals."""
 
 from __future__ import annotations
 

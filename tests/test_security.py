@@ -87,7 +87,7 @@ def forge_forever(router: str, creds: str, run: str) -> None:
 
 
 def forge_everything(session: zenoh.Session, run: str, flood: int = 2000) -> None:
-    """Every forgery of issue 7: a neighbour state, a vehicle input, End, Truth (also far in the future),
+    """Every forgery tried: a neighbour state, a vehicle input, End, Truth (also far in the future),
     and a flood on one node's input."""
     for k in range(0, STEPS, 5):
         session.put(keys.node_state(run, 3), encode(_state(3, k)))

@@ -1,7 +1,7 @@
 """Lockstep Zenoh runs (``netsetest run --mode zenoh``) give the in-memory numbers, losses included.
 
 Each scenario runs once per module as a subprocess (one process per role, peers on loopback) and once
-in memory with the same seed; the tests compare them node by node and step by step (DESIGN.md §4).
+in memory with the same seed; the tests compare them node by node and step by step (docs/design.md §6).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Malformed messages from the network are dropped and counted, never used (DESIGN.md §4, wire format).
+"""Malformed messages from the network are dropped and counted, never used (docs/design.md §6, wire format).
 
 (a) two ``ZenohBus`` peers in this process; (b) a whole run launched role by role with an injector
 session that publishes bad payloads on the run's keys while the run goes.

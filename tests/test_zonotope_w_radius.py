@@ -1,4 +1,4 @@
-"""The zonotopic W-radius estimator (seeds/001) offline against `netsetest exact`, and the set types."""
+"""The zonotopic W-radius estimator ([Ifqir-zonotope]) offline against `netsetest exact`, and the set types."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``netsetest compare``: every guaranteed estimator on the same vehicle, network and data (issue 9).
+"""``netsetest compare``: every guaranteed estimator on the same vehicle, network and data.
 
 For each (case, signals, seed) the network runs in memory with this project's ellipsoidal SDP (the
 ``sdp`` row, from the run's record); every other estimator of estimator/registry.py is then stepped

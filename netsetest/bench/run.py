@@ -375,7 +375,7 @@ def markdown(res: dict) -> str:
     lines += ["", "## Tightness against the exact limit (`netsetest exact`, paper signals, seed 0)", "",
               "Mean over nodes of published width / exact width (steps ≥ 10), and Althoff & Rath's relative-RMS radius (all steps). "
               "Where the published interval is narrower than exact, the estimator relied on more than the exact program's assumptions "
-              "(the SAIM estimator's fixed sector, issue 8) and the ratio there is not a tightness figure.", "",
+              "(the SAIM estimator's fixed sector) and the ratio there is not a tightness figure.", "",
               "| case | fault bounds | fault | yaw rate | sideslip | RMS radius f / r / β | narrower than exact | exact solve |",
               "|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for case, t in res["tightness"].items():

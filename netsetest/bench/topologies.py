@@ -1,7 +1,7 @@
 """Topology files for the benchmark: rings with chords of any size, and a one-node network.
 
 Every node has a self-loop and its two ring neighbours; chords (drawn with a fixed seed) give some
-nodes one or two more in-neighbours, so |N_i| (self included, as DESIGN.md §5 counts the paper's
+nodes one or two more in-neighbours, so |N_i| (self included, as docs/performance.md counts the paper's
 "degree 3") lies between 3 and 5.  Edges are undirected (both directions, weight 1), node profiles
 cycle through the bundled ``nodes/yaw1..6.toml``; vehicle, speed and steering are the paper's.
 """

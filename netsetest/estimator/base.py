@@ -1,4 +1,4 @@
-"""The estimator interface every guaranteed estimator of a node implements (issue 9).
+"""The estimator interface every guaranteed estimator of a node implements.
 
 Per node and step the input is a :class:`StepInput` (the node's own ỹ_k, γ_k and the vehicle's
 u_{k−1}, Vx_{k−1}) plus the neighbours' published sets (:class:`NeighbourSet`); the output is a

@@ -1,7 +1,7 @@
 """The certificate of node i's step and the guaranteed fallback when there is none.
 
 :func:`certify` checks a backend's answer (P, L, τ) in floating point against the S-procedure condition
-of the LMI (DESIGN.md §2) and returns the ρ' it proves; :func:`publishable` says whether a set can be
+of the LMI (docs/design.md §2) and returns the ρ' it proves; :func:`publishable` says whether a set can be
 published at all; :func:`fallback_shape` bounds the error without any solver (L = 0, a Minkowski sum).
 Nothing here trusts a solver: a set is published only with a certificate or as the fallback.
 """

@@ -1,6 +1,6 @@
 """Node i's SDP assembled for Clarabel directly: an exactly equivalent, smaller, well-scaled conic problem.
 
-The LMI of :mod:`netsetest.estimator.sdp` (DESIGN.md §2), written as M ⪰ 0 with
+The LMI of :mod:`netsetest.estimator.sdp` (docs/design.md §2), written as M ⪰ 0 with
 
     M(P, L, τ) = [[P, Π(L)], [Π(L)ᵀ, N(τ)]],   Π(L) = Π₀ − L ℓᵀ,   N(τ) = ρ e₁e₁ᵀ − Σ_m τ_m Q_m,
 

@@ -1,8 +1,8 @@
-"""Interval observer of Althoff & Rath's comparison (seeds/003, Algorithm 1, after Tang et al. [65]) for
-one node's [β, r, f_i], in the descriptor form of 002/(18)–(20) (issue 9).
+"""Interval observer of Althoff & Rath's comparison ([Althoff-Rath], Algorithm 1, after Tang et al. [65]) for
+one node's [β, r, f_i], in the descriptor form of [Mousavinejad] (18)–(20).
 
 Reference: M. Althoff, J. J. Rath, "Comparison of guaranteed state estimators for linear time-invariant
-systems", Automatica 2021 (seeds/003), Sec. 2.6, Algorithm 1.  Derivation, and why 004's functional
+systems", Automatica 2021 ([Althoff-Rath]), Sec. 2.6, Algorithm 1.  Derivation, and why 004's functional
 interval observer does not apply to this vehicle: docs/estimators/interval_althoff_rath.md.
 
 The observer's error dynamics are the descriptor step x̄⁺ = Φ x̄ + T_x B̄ u + G r⁺ + T_x D̄ w with

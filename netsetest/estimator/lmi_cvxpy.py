@@ -1,4 +1,4 @@
-"""The ``cvxpy`` backend of node i's SDP: the LMI of DESIGN.md §2 exactly as written, in cvxpy.
+"""The ``cvxpy`` backend of node i's SDP: the LMI of docs/design.md §2 exactly as written, in cvxpy.
 
 Built once per pattern from cvxpy Parameters (``d`` η slots, ``m`` facts, ``n_lmi`` LMIs) and re-solved
 with Clarabel every step: slower than :mod:`netsetest.estimator.conic`, and the reference it is checked

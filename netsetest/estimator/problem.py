@@ -1,7 +1,7 @@
 """The data of node i's per-step SDP, shared by the estimator (:mod:`netsetest.estimator.sdp`) and its
 backends (:mod:`netsetest.estimator.conic`, :mod:`netsetest.estimator.lmi_cvxpy`).
 
-The estimator builds a :class:`StepData` per step (the LMI of DESIGN.md §2 as plain arrays over the η
+The estimator builds a :class:`StepData` per step (the LMI of docs/design.md §2 as plain arrays over the η
 slots of an :class:`EtaLayout`), a backend turns it into a :class:`Solution` (P, L_ℓ, τ_ℓ of that
 LMI), and the certificate (:mod:`netsetest.estimator.certificate`) checks the answer.  This module
 imports neither side, so neither imports the other.
@@ -61,7 +61,7 @@ class EtaLayout:
             self.v_new, idx = idx, idx + 1
         self.phi: dict[int, int] = {}
         for j, sens in neighbours.items():
-            if sens.saturated:  # no saturation ⇒ φ_j ≡ 0: no slot (DESIGN.md §2)
+            if sens.saturated:  # no saturation ⇒ φ_j ≡ 0: no slot (docs/design.md §2)
                 self.phi[j], idx = idx, idx + 1
         self.phi_new: int | None = None
         if own.saturated and predict:

@@ -1,4 +1,4 @@
-"""Local ellipsoidal set-membership estimator of node i (paper (16), (22), corrected as in DESIGN.md §2).
+"""Local ellipsoidal set-membership estimator of node i (paper (16), (22), corrected as in docs/design.md §2).
 
 One step k → k+1 at node i, with everything a real node has:
 
@@ -13,7 +13,7 @@ variant ``per-rule``, one gain L_ℓ per rule and the estimate blended with α_k
     ℓᵀ η = Σ_j a_ij y̌_j(η),  y̌_j = (γ_j h1_j − 1) C̄_j x̂_j + γ_j h1_j C̄_j ρ_j^½ M_j z_j + γ_j φ_j + Dv_j v_j.
 
 For a neighbour j ≠ i, z_j only enters through the scalar C̄_j M_j z_j = c_j s_j with
-c_j = (C̄_j P_j C̄_jᵀ)^½ and |s_j| ≤ 1 — an exact reduction (DESIGN.md §2).  The truth satisfies the
+c_j = (C̄_j P_j C̄_jᵀ)^½ and |s_j| ≤ 1 — an exact reduction (docs/design.md §2).  The truth satisfies the
 quadratic facts ηᵀ Q_m η ≥ 0 (one per constraint):
 
     1 − z_iᵀz_i;  1 − s_j²;  1 − w²/W;  1 − v_j²/R_j;  1 − v⁺²/R_i;

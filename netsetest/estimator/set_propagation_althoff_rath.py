@@ -1,8 +1,8 @@
-"""Set-propagation zonotopic observer of Althoff & Rath's comparison (seeds/003, Sec. 2.5 and 3.2, their
-eq. (8) with the FRad-C gain) for one node's [β, r, f_i] (issue 9).
+"""Set-propagation zonotopic observer of Althoff & Rath's comparison ([Althoff-Rath], Sec. 2.5 and 3.2, their
+eq. (8) with the FRad-C gain) for one node's [β, r, f_i].
 
 Reference: M. Althoff, J. J. Rath, "Comparison of guaranteed state estimators for linear time-invariant
-systems", Automatica 2021 (seeds/003): S_k+1 = (A − L C) S_k ⊕ B u_k ⊕ L y_k ⊕ (−L) V ⊕ W, guaranteed
+systems", Automatica 2021 ([Althoff-Rath]): S_k+1 = (A − L C) S_k ⊕ B u_k ⊕ L y_k ⊕ (−L) V ⊕ W, guaranteed
 for any gain L, here L_k = A G Gᵀ Cᵀ (C G Gᵀ Cᵀ + F Fᵀ)⁻¹ minimising the F-radius (Combastel [22]),
 recomputed every step; order reduction ↓q.  Derivation: docs/estimators/set_propagation_althoff_rath.md.
 

@@ -1,8 +1,8 @@
-"""Strip-based zonotopic observer of Althoff & Rath's comparison (seeds/003, Sec. 2.4 and 3.1) for one
-node's [β, r, f_i] (issue 9).
+"""Strip-based zonotopic observer of Althoff & Rath's comparison ([Althoff-Rath], Sec. 2.4 and 3.1) for one
+node's [β, r, f_i].
 
 Reference: M. Althoff, J. J. Rath, "Comparison of guaranteed state estimators for linear time-invariant
-systems", Automatica 2021 (seeds/003): prediction S_p = A S ⊕ B u ⊕ W, then the intersection with the
+systems", Automatica 2021 ([Althoff-Rath]): prediction S_p = A S ⊕ B u ⊕ W, then the intersection with the
 measurement strip {|C x − y| ≤ σ} over-approximated by a zonotope with a gain (their (4)–(6); the
 F-radius-minimising gain of Le et al. [38], 003 Sec. 3.1), and order reduction.  Derivation:
 docs/estimators/strip_althoff_rath.md.

@@ -1,8 +1,8 @@
-"""Zonotopic set-membership estimator with W-radius minimisation, for one node's [β, r, f_i] (issue 9).
+"""Zonotopic set-membership estimator with W-radius minimisation, for one node's [β, r, f_i].
 
 Reference: S. Ifqir, V. Puig, D. Ichalal, N. Aït Oufroukh, S. Mammar, "Zonotopic set-membership
 estimation for switched systems based on W_i-radius minimization: vehicle application", IFAC World
-Congress 2020 (seeds/001): prediction by exact Minkowski sums, a parameterised intersection with the
+Congress 2020 ([Ifqir-zonotope]): prediction by exact Minkowski sums, a parameterised intersection with the
 measurement strip (Theorem 1, gain Λ), W-radius as the size to minimise, order reduction ↓q,W
 (Property 3).  Derivation and the choices made for this problem: docs/estimators/zonotope_w_radius.md.
 
@@ -14,7 +14,7 @@ slabs (kept exact: an ellipsoid is not a zonotope) and ⟨c, G⟩ collects every
 
 Two constructions, chosen per node as ``netsetest exact --fault-bounds`` does:
 
-- **free fault** (no declared bound applied): the descriptor form of 002/(18)–(20), which is 001's
+- **free fault** (no declared bound applied): the descriptor form of [Mousavinejad] (18)–(20), which is 001's
   unknown-input decoupling P + M C = I, P E = 0 with the fault as the unknown input.  With Θ = [E; C̄]
   of full column rank, x̄⁺ = T E x̄⁺ + G C̄ x̄⁺ holds for every x̄⁺, so the step
   x̄⁺ = T_x(Ā x + B̄ u + D̄ w) + G r⁺, r⁺ = C̄ x̄⁺ ∈ [lo, hi], is an exact parameterisation of the

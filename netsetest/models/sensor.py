@@ -5,7 +5,7 @@ Augmented state x̄_i = [x; f_i] (n = 3), C̄_i = [C_i, Ds_i].  The measurement 
     ỹ_i = γ_i σ(C̄_i x̄_i) + Dv_i v_i,        v_i² ≤ R_i                                   (12)
     σ(r) = sign(r)·min(r_max, |r|) = h1·r + φ(r),   φ(r)(φ(r) − h·r) ≤ 0,  h = h2 − h1     (14)-(15)
 
-The sector condition (15) holds exactly while |r| ≤ r_max/h1 (DESIGN.md §1).  The profile's fixed h1
+The sector condition (15) holds exactly while |r| ≤ r_max/h1 (docs/design.md §1).  The profile's fixed h1
 is the paper's; the estimator derives a sector per step instead (netsetest/estimator/sector.py) and
 falls back to the fixed one, marked assumed, only without a declared fault bound.  A sensor without saturation has
 h1 = h2 = 1, σ = identity and φ ≡ 0.

@@ -9,7 +9,7 @@ The premise values of the rules are:
     rule 3: 1/Vx = 1/Vx_min, 1/Vx² = 1/Vx_max²     rule 4: 1/Vx = 1/Vx_min, 1/Vx² = 1/Vx_min²
 
 This ordering reproduces the printed A1..A4, B1..B4, Dw,1..Dw,4 of Sec. VI (the paper's "High/Low" labels
-are swapped with respect to its own matrices, see DESIGN.md §1).
+are swapped with respect to its own matrices, see docs/design.md §1).
 """
 
 from __future__ import annotations
