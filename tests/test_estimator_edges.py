@@ -107,7 +107,7 @@ def test_corner_profile_runs_contained_or_flagged(name: str, case: str, tmp_path
 
 def _estimator_data(sc, node: int = 3):  # noqa: ANN001, ANN202
     n = sc.node(node)
-    est = LocalEstimator(node, n.sensor, {j: sc.node(j).sensor for j in n.in_weights}, n.in_weights, sc.model, sc.W)
+    est = LocalEstimator.for_node(sc, node)
     alpha = sc.model.weights(sc.vx(0))
     data = est.step_data(Ellipsoid(n.x0_hat, n.P0, n.rho), StepInput(alpha, 0.03, 0.01, 1.0, {}), None)
     return est, n, alpha, data

@@ -22,7 +22,6 @@
 from __future__ import annotations
 
 import dataclasses
-import functools
 import subprocess
 import sys
 from pathlib import Path
@@ -30,7 +29,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import netsetest.roles.node as node_mod
 from netsetest.config.schema import load_topology
 from netsetest.estimator import sdp
 from netsetest.estimator.certificate import FactStack, certify
@@ -42,8 +40,7 @@ PAPER6 = ROOT / "topologies" / "paper6.toml"
 
 
 def _estimator(sc, i, variant="scheduled", backend="clarabel"):
-    n = sc.node(i)
-    return sdp.LocalEstimator(i, n.sensor, {j: sc.node(j).sensor for j in n.in_weights}, n.in_weights, sc.model, sc.W, variant, backend)
+    return sdp.LocalEstimator.for_node(sc, i, variant, backend=backend)
 
 
 def _data(est, args):
@@ -62,17 +59,7 @@ def _sector_data(est, args):
 def _capture(sc, variant="scheduled"):
     """Run in memory with the fast path; return the result and every node-step's estimator inputs."""
     cases = []
-    original = sdp.LocalEstimator.step
-
-    def recording(self, *args):
-        cases.append((self.node_id, args))
-        return original(self, *args)
-
-    sdp.LocalEstimator.step = recording
-    try:
-        res = run_inmemory(sc, "paper", variant, 0)
-    finally:
-        sdp.LocalEstimator.step = original
+    res = run_inmemory(sc, "paper", variant, 0, observer=lambda est, prev, inp, r, ms: cases.append((est.node_id, (prev, inp))))
     return res, cases
 
 
@@ -212,18 +199,17 @@ def test_reductions_leave_the_optimum_unchanged(case, saim_steps, nsnim_steps):
         assert traces[0] == pytest.approx(traces[1], rel=1e-5)
 
 
-def _run(sc, backend):
-    node_mod.LocalEstimator = functools.partial(sdp.LocalEstimator, backend=backend)
-    try:
-        return run_inmemory(sc, "paper", "scheduled", 0)
-    finally:
-        node_mod.LocalEstimator = sdp.LocalEstimator
+def _run(sc, backend, monkeypatch):
+    """The network with every node's estimator on ``backend`` (built by for_node, as the nodes build it)."""
+    build = sdp.LocalEstimator.for_node.__func__
+    monkeypatch.setattr(sdp.LocalEstimator, "for_node", classmethod(lambda cls, *a, **k: build(cls, *a, **{**k, "backend": backend})))
+    return run_inmemory(sc, "paper", "scheduled", 0)
 
 
 @pytest.mark.parametrize("case,steps,low,high", [("nsnim", 40, -1e-3, 1e-3), ("saim", 30, -2e-2, 1e-3)])
-def test_fast_and_cvxpy_paths_agree_on_the_paper_scenario(case, steps, low, high):
+def test_fast_and_cvxpy_paths_agree_on_the_paper_scenario(case, steps, low, high, monkeypatch):
     sc = load_topology(PAPER6, case, steps)
-    fast, ref = _run(sc, "clarabel"), _run(sc, "cvxpy")
+    fast, ref = _run(sc, "clarabel", monkeypatch), _run(sc, "cvxpy", monkeypatch)
     for res in (fast, ref):
         assert res.summary.violations_total == 0
         assert all(r.fallbacks == 0 for r in res.summary.nodes)
@@ -319,3 +305,26 @@ def test_closed_form_agrees_with_clarabel(nsnim_steps, informative):
         t_fast, t_ref = _certified_trace(sol, data, rho), _certified_trace(ref.solve(data, rho), data, rho)
         assert t_ref * (1 - 1e-5) <= t_fast <= t_ref * (1 + 1e-9)
     assert (nonzero > 0) == informative
+
+
+@pytest.mark.parametrize("case", ["nsnim", "saim"])
+def test_the_benchmark_solves_the_nodes_own_problem(case: str) -> None:
+    """The benchmark re-solves every captured step with an estimator built as the node builds it: the
+    answer is bit for bit the state the node published (its hand-built copy had no fault bound and solved
+    another SAIM problem: 55 of 120 steps came out with an `assumed` sector where the node's had
+    `fault-bound`)."""
+    from netsetest.bench.solvers import capture, fast_estimators
+
+    sc = load_topology(PAPER6, case, steps=12)
+    cap = capture(sc, "scheduled")
+    assert cap.parts is not None and len(cap.cases) == 6 * 12
+    published = {(int(i), e["step"]): e for i, es in cap.parts["nodes"].items() for e in es}
+    est = fast_estimators(sc, "scheduled")  # what the benchmark times
+    bases = set()
+    for n, c in enumerate(cap.cases):
+        r = est[c.node].step(*c.args).public
+        e = published[(c.node, n // 6 + 1)]
+        assert r.xhat.tolist() == e["xhat"] and r.P.reshape(9).tolist() == e["P"], (c.node, n)
+        assert (r.sector.basis if r.sector is not None else "none") == e["sector_basis"]
+        bases.add(e["sector_basis"])
+    assert case == "nsnim" or "fault-bound" in bases

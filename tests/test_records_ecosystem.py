@@ -217,12 +217,9 @@ def test_cvxpy_backend_without_cvxpy_names_the_extra(monkeypatch: pytest.MonkeyP
     from netsetest.extras import MissingExtra
 
     sc = load_topology(ROOT / "topologies" / "paper6.toml", steps=2)
-    n = sc.node(1)
     monkeypatch.setitem(sys.modules, "cvxpy", None)
     with pytest.raises(MissingExtra, match=r"netsetest\[cvxpy\]"):
-        LocalEstimator(
-            1, n.sensor, {j: sc.node(j).sensor for j in n.in_weights}, n.in_weights, sc.model, sc.W, backend="cvxpy"
-        )
+        LocalEstimator.for_node(sc, 1, backend="cvxpy")
 
 
 def test_every_mcap_message_validates_against_its_json_schema(records: dict[str, Path]) -> None:

@@ -224,23 +224,10 @@ def test_bank_recurs_on_the_trace_sets_and_publishes_a_narrower_fault_bound():
     """Same step data: the bank's own set is the trace objective's set; the published one is narrower in f."""
     sc = load_topology(PAPER6, "nsnim", steps=15)
     captured = []
-    original = sdp.LocalEstimator.step
-
-    def recording(self, prev, inp):  # noqa: ANN001
-        captured.append((self.node_id, prev, inp))
-        return original(self, prev, inp)
-
-    sdp.LocalEstimator.step = recording
-    try:
-        run_inmemory(sc, "paper", "scheduled", 0, objective="bank")
-    finally:
-        sdp.LocalEstimator.step = original
+    run_inmemory(sc, "paper", "scheduled", 0, objective="bank", observer=lambda est, prev, inp, r, ms: captured.append((est.node_id, prev, inp)))
     assert len(captured) == 6 * 15
     for i, prev, inp in captured[::7]:
-        n = sc.node(i)
-        make = lambda obj: sdp.LocalEstimator(  # noqa: E731
-            i, n.sensor, {j: sc.node(j).sensor for j in n.in_weights}, n.in_weights, sc.model, sc.W, objective=obj
-        )
+        make = lambda obj: sdp.LocalEstimator.for_node(sc, i, objective=obj)  # noqa: E731
         bank, trace = make("bank").step(prev, inp), make("trace").step(prev, inp)
         assert bank.status == trace.status == "ok" and bank.published is not None
         np.testing.assert_allclose(bank.P, trace.P, rtol=1e-12, atol=0)

@@ -1,7 +1,8 @@
 """Per-node per-step solve times on the paper scenario, fast path and yardsticks side by side.
 
 1. An in-memory run with the default (fast) estimator records every node-step's inputs (the exact
-   arguments of ``LocalEstimator.step``) and the run's summary.
+   arguments of ``LocalEstimator.step``, through its observer hook) and the run's summary; the
+   estimators are built as the nodes build them (``LocalEstimator.for_node``: declared fault bounds).
 2. The recorded steps are solved again, interleaved step by step so that every formulation sees the
    same machine load: the fast path (``backend="clarabel"``, every step), the previous default
    (``backend="cvxpy"``: the reduced LMI through cvxpy Parameters), the straightforward and the naive
@@ -19,7 +20,6 @@ different problem and only the times compare.
 
 from __future__ import annotations
 
-import functools
 import statistics
 import time
 from dataclasses import dataclass, field
@@ -35,7 +35,7 @@ from netsetest.runtime.inmemory import run_inmemory
 @dataclass
 class StepCase:
     node: int
-    args: tuple  # (xhat, P, rho, alpha, u, y_new, gamma_new, neigh)
+    args: tuple  # (prev, inp): the arguments of LocalEstimator.step
 
 
 @dataclass
@@ -46,33 +46,32 @@ class Capture:
     summary: RunSummary
     wall_s: float
     step_ms: list[float] = field(default_factory=list)  # the fast path inside the run
+    parts: dict | None = None  # the run's record parts (its published states)
 
 
 def capture(scenario: Scenario, variant: str, signals: str = "paper", seed: int = 0) -> Capture:
-    """Run in memory with the fast path; keep every node-step's estimator inputs."""
+    """Run in memory with the fast path, as the nodes run it; keep every node-step's estimator inputs
+    (through the estimators' observer hook) and the run's published states."""
     cases: list[StepCase] = []
     times: list[float] = []
-    original = sdp.LocalEstimator.step
 
-    @functools.wraps(original)
-    def recording(self, *args):  # noqa: ANN001, ANN202
-        t0 = time.perf_counter()
-        res = original(self, *args)
-        times.append(1e3 * (time.perf_counter() - t0))
-        cases.append(StepCase(self.node_id, args))
-        return res
+    def record(est: sdp.LocalEstimator, prev: sdp.Ellipsoid, inp: sdp.StepInput, res: sdp.StepResult, ms: float) -> None:
+        times.append(ms)
+        cases.append(StepCase(est.node_id, (prev, inp)))
 
-    sdp.LocalEstimator.step = recording  # type: ignore[method-assign]
-    try:
-        t0 = time.perf_counter()
-        res = run_inmemory(scenario, signals, variant, seed, objective="trace")  # type: ignore[arg-type]
-        wall = time.perf_counter() - t0
-    finally:
-        sdp.LocalEstimator.step = original  # type: ignore[method-assign]
-    return Capture(scenario, variant, cases, res.summary, wall, times)
+    t0 = time.perf_counter()
+    res = run_inmemory(scenario, signals, variant, seed, objective="trace", observer=record)  # type: ignore[arg-type]
+    wall = time.perf_counter() - t0
+    return Capture(scenario, variant, cases, res.summary, wall, times, res.parts)
 
 
-def _cfg(sc: Scenario, i: int, variant: str) -> tuple:
+def fast_estimators(sc: Scenario, variant: str) -> dict[int, sdp.LocalEstimator]:
+    """The fast path the benchmark times: each node's estimator exactly as the node builds it."""
+    return {i: sdp.LocalEstimator.for_node(sc, i, variant, "trace") for i in sc.ids}  # type: ignore[arg-type]
+
+
+def _yardstick_args(sc: Scenario, i: int, variant: str) -> tuple:
+    """The positional arguments of bench.reference's formulations (they keep the profile's fixed sector)."""
     n = sc.node(i)
     return (i, n.sensor, {j: sc.node(j).sensor for j in n.in_weights}, n.in_weights, sc.model, sc.W, variant)
 
@@ -89,10 +88,10 @@ def side_by_side(cap: Capture, n_ref: int, n_naive: int, n_cvxpy: int) -> dict:
 
     sc, variant = cap.scenario, cap.variant
     ids = sc.ids
-    fast = {i: sdp.LocalEstimator(*_cfg(sc, i, variant), objective="trace") for i in ids}
-    prev = {i: sdp.LocalEstimator(*_cfg(sc, i, variant), backend="cvxpy", objective="trace") for i in ids} if n_cvxpy else {}
-    ref = {i: StraightforwardSDP(*_cfg(sc, i, variant)) for i in ids} if n_ref else {}
-    naive = {i: NaiveSDP(*_cfg(sc, i, variant)) for i in ids} if n_naive else {}
+    fast = fast_estimators(sc, variant)
+    prev = {i: sdp.LocalEstimator.for_node(sc, i, variant, "trace", backend="cvxpy") for i in ids} if n_cvxpy else {}  # type: ignore[arg-type]
+    ref = {i: StraightforwardSDP(*_yardstick_args(sc, i, variant)) for i in ids} if n_ref else {}
+    naive = {i: NaiveSDP(*_yardstick_args(sc, i, variant)) for i in ids} if n_naive else {}
     cases = cap.cases
 
     def subset(k: int) -> set[int]:

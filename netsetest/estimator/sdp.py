@@ -53,11 +53,13 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 
+from netsetest.config.schema import Scenario
 from netsetest.estimator.certificate import FactStack, FallbackUnavailable, certify, fallback_shape, publishable
 from netsetest.estimator.conic import ConicSolver
 from netsetest.estimator.lmi_cvxpy import CvxpySolver
@@ -169,6 +171,10 @@ class _Pattern:
     solver: ProblemSolver
 
 
+StepObserver = Callable[["LocalEstimator", "Ellipsoid", "StepInput", "StepResult", float], None]
+"""Called after every step with the estimator, its prior, its input, its result and the step's ms."""
+
+
 class LocalEstimator:
     """The per-node SDP of one node: static data prepared once, solved every step by a backend.
 
@@ -205,6 +211,7 @@ class LocalEstimator:
             require("cvxpy", "the cvxpy estimator backend")  # at construction, not at the first solve
         self.node_id, self.own, self.model, self.W, self.variant = node_id, own, model, W, variant
         self.backend, self.fault_bound, self.objective = backend, fault_bound, objective
+        self.observer: StepObserver | None = None  # a recorder of every step (bench, tests); never changes a result
         self.sensors = neighbours
         self.weights = weights
         self.n_lmi = N_RULES if variant == "per-rule" else 1
@@ -415,8 +422,32 @@ class LocalEstimator:
 
     # ------------------------------------------------------------------ one step
 
+    @classmethod
+    def for_node(
+        cls, scenario: Scenario, node_id: int, variant: Variant = "scheduled", objective: Objective = DEFAULT_OBJECTIVE,
+        backend: Backend = "clarabel",
+    ) -> LocalEstimator:  # fmt: skip
+        """The estimator of node ``node_id`` as the node runs it: its sensor, its in-neighbours' sensors and
+        weights, the scenario's model and wind bound, and its declared fault bound.  The node, the
+        benchmark and the tests all build it here (a hand-built copy without the fault bound once solved
+        another SAIM problem than the nodes did)."""
+        n = scenario.node(node_id)
+        return cls(
+            node_id, n.sensor, {j: scenario.node(j).sensor for j in n.in_weights}, n.in_weights, scenario.model, scenario.W,
+            variant, backend, FaultBound(n.fault_rate, n.fault_size), objective,
+        )  # fmt: skip
+
     def step(self, prev: Ellipsoid, inp: StepInput) -> StepResult:
-        """Step k → k+1: the step's data, then the update (solve, certify); the fallback without a certificate."""
+        """Step k → k+1: the step's data, then the update (solve, certify); the fallback without a certificate.
+        ``observer`` (if set) sees every step: the estimator, its inputs, its result and its time."""
+        if self.observer is None:
+            return self._step(prev, inp)
+        t0 = time.perf_counter()
+        res = self._step(prev, inp)
+        self.observer(self, prev, inp, res, 1e3 * (time.perf_counter() - t0))
+        return res
+
+    def _step(self, prev: Ellipsoid, inp: StepInput) -> StepResult:
         sector, reading = self._own_range(prev, inp)
         data = self.step_data(prev, inp, sector, reading)
         alpha = np.asarray(inp.alpha, dtype=float)

@@ -113,11 +113,7 @@ class Node:
         bus.declare_publisher(keys.node_state(run_id, node_id))
 
     def _new_estimator(self) -> LocalEstimator:
-        sc, cfg = self.sc, self.cfg
-        return LocalEstimator(
-            self.id, cfg.sensor, self.sensors, cfg.in_weights, sc.model, sc.W, self.variant,
-            fault_bound=FaultBound(cfg.fault_rate, cfg.fault_size), objective=self.objective,
-        )  # fmt: skip
+        return LocalEstimator.for_node(self.sc, self.id, self.variant, self.objective)
 
     def warm_up(self) -> None:
         """Run a step 0 and a step 1 on made-up data (the priors) through the node's estimator, build,

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from netsetest.bus.base import MemoryBus
 from netsetest.config.schema import Scenario
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
-from netsetest.estimator.sdp import Variant
+from netsetest.estimator.sdp import StepObserver, Variant
 from netsetest.models.signals import SignalKind
 from netsetest.records.summary import RunSummary
 from netsetest.roles.collector import Collector
@@ -52,12 +52,14 @@ def run_inmemory(
     keep: bool = True,
     on_step: Callable[[int], None] | None = None,
     objective: Objective = DEFAULT_OBJECTIVE,
+    observer: StepObserver | None = None,
 ) -> RunResult:
     """Run vehicle, nodes and collector in lockstep; the same role code as the Zenoh processes.
 
     ``record``: stream the record to this file as the run goes; ``keep``: also keep it in memory
     (``RunResult.parts``; a long soak turns it off to run in constant memory); ``on_step(k)``: called
-    each time the vehicle publishes step k (the soak benchmark samples memory with it).
+    each time the vehicle publishes step k (the soak benchmark samples memory with it); ``observer``: called
+    after every SDP step of every node (estimator/sdp.py ``StepObserver``; the benchmark captures steps with it).
     """
     run_id = "mem"
     bus = bus or MemoryBus()
@@ -65,6 +67,8 @@ def run_inmemory(
     sink, memory = record_sink(record, keep)
     vehicle = Vehicle(scenario, bus, run_id, signals, seed)
     nodes = [Node(scenario, i, bus, run_id, variant, objective=objective) for i in scenario.ids]
+    for n in nodes:  # ``observer``: sees every SDP step of every node (the benchmark's capture)
+        n.estimator.observer = observer
     collector = Collector(scenario, bus, run_id, sink)
     if sink is not None:
         sink.meta(meta)
