@@ -136,7 +136,7 @@ BAD = [
     ("edge-unknown-node", "topology", _sub("to = 6\nfrom = 6", "to = 6\nfrom = 7"), [], "paper6.toml", r"\bedges\b", r"unknown node 7"),
     ("duplicate-node", "topology", _sub("id = 6", "id = 5"), [], "paper6.toml", r"\bnodes\b", r"duplicate"),
     ("steps-zero", "topology", _sub("steps = 80", "steps = 0"), [], "paper6.toml", r"\bsteps\b", r"greater than or equal to 1"),
-    ("tau-negative", "topology", _sub("tau_s = 0.1", "tau_s = -0.1"), [], "paper6.toml", r"\btau_s\b", r"greater than 0"),
+    ("tau-negative", "topology", _sub("tau_s = 0.1", "tau_s = -0.1"), [], "paper6.toml", r"\btau_s\b", r"greater than or equal to 0.0001"),
     ("speed-outside", "topology", _sub("amplitude_kmh = 18.0", "amplitude_kmh = 25.0"), [], "paper6.toml", r"\bspeed\b", r"outside"),
     ("profile-missing-C", "yaw3", _sub("C = [0.0, 0.18]", "# no C"), [], "yaw3.toml", r"(?m)^\s*C\b", r"[Rr]equired|missing"),
     ("profile-R-negative", "yaw2", _sub("R = 2.0", "R = -1"), [], "yaw2.toml", r"(?m)^\s*R\b", r"greater than or equal to 1e-12|0\.000000000001"),

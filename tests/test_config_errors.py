@@ -99,6 +99,13 @@ def test_physical_ranges_of_the_speed_profile(topo, old, new, says):
     assert says in _error(topo)
 
 
+def test_vehicle_parameters_must_be_physical(topo):
+    """Found by the configuration fuzzer: a wind gain of 1e300 loaded, then overflowed a node's guaranteed
+    fallback set mid-run (FallbackUnavailable)."""
+    _edit(topo, "fw = 1360.0", "fw = 1e300")
+    assert "vehicle.fw: Input should be less than or equal to" in _error(topo)
+
+
 def test_fault_bound_must_be_physical(topo):
     """A declared fault bound of 1e300 passed the schema and crashed SAIM nodes (FallbackUnavailable)."""
     _edit(topo.parent.parent / "nodes" / "yaw2.toml", "rate = 0.2", "rate = 1e300")

@@ -63,6 +63,15 @@ GAMMA_MIN = 1e-3  # availability γ ∈ [GAMMA_MIN, 1]
 W_MIN, W_MAX = 1e-12, 1e6  # side-wind bound w² ≤ W
 FREQ_MAX = 1e6  # |noise_frequency|
 SPEED_MAX_KMH = 500.0  # mean and amplitude of the speed profile: no road vehicle is faster
+MASS_KG = (1.0, 1e5)  # [vehicle] m
+YAW_INERTIA_KGM2 = (1.0, 1e6)  # [vehicle] Jz
+AXLE_DISTANCE_M = (0.05, 20.0)  # [vehicle] lf, lr (and |lw|)
+CORNERING_STIFFNESS_N_PER_RAD = (1.0, 1e7)  # [vehicle] cf, cr
+WIND_GAIN_MAX_N = 1e5  # [vehicle] |fw|
+STATE_MAX = 10.0  # |β| [rad], |r| [rad/s] of the initial state
+SAMPLING_PERIOD_S = (1e-4, 10.0)  # τs: the T-S rules are discretised exactly at it (expm stays in range)
+MAX_STEPS = 10**7  # a run's steps (a record line per node-step: 10⁷ steps is days of a real clock)
+STEERING_MAX_RAD = 1.0  # |δ_f|: beyond ±57° no tyre model of a road car holds
 PERIOD_MIN_S, PERIOD_MAX_S = 1e-3, 1e6  # of the speed profile: shorter than a millisecond is no speed profile
 MAX_NAME = 200  # characters of a label or a profile name
 PROFILE_NAME_PATTERN = r"^[^/\\\x00]+$"  # a file name in the node directory: no path separators, no NUL
@@ -186,18 +195,24 @@ class NodeProfile(_Strict, kw_only=True):
 # ---------------------------------------------------------------- topology (topologies/*.toml)
 
 
+def _between(lo: float, hi: float) -> object:
+    return Annotated[float, Meta(ge=lo, le=hi)]
+
+
 class VehicleSpec(_Strict, kw_only=True):
-    m: Positive = 1832.0
-    Jz: Positive = 2488.0
-    lf: Positive = 1.18
-    lr: Positive = 1.77
-    cf: Positive = 96240.0
-    cr: Positive = 107180.0
-    fw: Finite = 1360.0
-    lw: Finite = 0.5
-    vx_min_kmh: Positive = 80.0
-    vx_max_kmh: Positive = 120.0
-    x0: tuple[Finite, Finite] = (0.0, 0.0)
+    # physical ranges of a road vehicle (generous): a fuzzed wind gain of 1e300 overflowed a node's
+    # guaranteed fallback set mid-run; the model must stay in floating-point range like the profiles
+    m: _between(*MASS_KG) = 1832.0  # type: ignore[valid-type]
+    Jz: _between(*YAW_INERTIA_KGM2) = 2488.0  # type: ignore[valid-type]
+    lf: _between(*AXLE_DISTANCE_M) = 1.18  # type: ignore[valid-type]
+    lr: _between(*AXLE_DISTANCE_M) = 1.77  # type: ignore[valid-type]
+    cf: _between(*CORNERING_STIFFNESS_N_PER_RAD) = 96240.0  # type: ignore[valid-type]
+    cr: _between(*CORNERING_STIFFNESS_N_PER_RAD) = 107180.0  # type: ignore[valid-type]
+    fw: _between(-WIND_GAIN_MAX_N, WIND_GAIN_MAX_N) = 1360.0  # type: ignore[valid-type]
+    lw: _between(-AXLE_DISTANCE_M[1], AXLE_DISTANCE_M[1]) = 0.5  # type: ignore[valid-type]
+    vx_min_kmh: Annotated[float, Meta(gt=0, le=SPEED_MAX_KMH)] = 80.0
+    vx_max_kmh: Annotated[float, Meta(gt=0, le=SPEED_MAX_KMH)] = 120.0
+    x0: tuple[_between(-STATE_MAX, STATE_MAX), _between(-STATE_MAX, STATE_MAX)] = (0.0, 0.0)  # type: ignore[valid-type]
 
     def __post_init__(self) -> None:
         if self.vx_min_kmh >= self.vx_max_kmh:
@@ -211,8 +226,8 @@ class SpeedSpec(_Strict, kw_only=True):
 
 
 class SteeringSpec(_Strict, kw_only=True):
-    low: Finite = 0.0175
-    high: Finite = 0.0542
+    low: _between(-STEERING_MAX_RAD, STEERING_MAX_RAD) = 0.0175  # type: ignore[valid-type]
+    high: _between(-STEERING_MAX_RAD, STEERING_MAX_RAD) = 0.0542  # type: ignore[valid-type]
 
     def __post_init__(self) -> None:
         if self.low > self.high:
@@ -260,8 +275,8 @@ class LinkLoss(_Strict, kw_only=True):
 class TopologyFile(_Strict, kw_only=True):
     name: str
     node_dir: str = "../nodes"
-    steps: Annotated[int, Meta(ge=1)] = 80
-    tau_s: Positive = 0.1
+    steps: Annotated[int, Meta(ge=1, le=MAX_STEPS)] = 80
+    tau_s: _between(*SAMPLING_PERIOD_S) = 0.1  # type: ignore[valid-type]
     case: Case = "nsnim"
     W: Annotated[float, Meta(ge=W_MIN, le=W_MAX, description="side-wind bound w² ≤ W")] = 2.0
     vehicle: VehicleSpec = field(default_factory=VehicleSpec)
