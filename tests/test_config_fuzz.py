@@ -63,6 +63,8 @@ def _similar(v: object) -> st.SearchStrategy:
         return st.booleans()
     if isinstance(v, int):
         return st.integers(v - 3, v + 3) | st.integers(min_value=-(2**63), max_value=2**63 - 1)
+    if isinstance(v, float) and not math.isfinite(v):  # a value an earlier mutation put on this line
+        return _VALUE
     if isinstance(v, float):
         lo, hi = sorted((v * 0.5, v * 2))
         return st.floats(lo - 1e-3, hi + 1e-3, allow_nan=False) | st.sampled_from([v * 1e3, v * 1e-3, -v, 1e300, 5e-324])
