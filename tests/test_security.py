@@ -296,19 +296,5 @@ def test_insider_crash_payloads_and_flood_lose_no_role() -> None:
     c = crash(ROOT / PAPER6, steps=25, secured=True, pace=0.1)
     assert c["exit_code"] == 0 and c["nodes_missing"] == [] and c["roles_lost"] == 0, c
     assert c["drops"]["collector"]["undecodable"] > 0 and c["drops"]["vehicle"]["ready-wrong-key"] > 0, c["drops"]
-    f = flood(ROOT / PAPER6, steps=60, rate=30000, target="state", secured=True)
+    f = flood(ROOT / PAPER6, steps=30, rate=30000, target="state", secured=True)
     assert f["exit_code"] == 0 and f["nodes_lost"] == 0, f
-
-
-def test_router_limits_each_links_rate_per_key() -> None:
-    """The run's router cuts a flood in Zenoh (downsampling on every incoming link, one rule per key of the
-    run), except on the start-up barrier's keys, whose newest Ready must never be dropped."""
-    from netsetest.runtime.security import MAX_KEY_RATE_HZ, ingress_limits
-
-    sc = load_topology(ROOT / PAPER6)
-    (item,) = ingress_limits(sc, "r1")
-    limited = {r["key_expr"] for r in item["rules"]}
-    assert item["flows"] == ["ingress"] and item["messages"] == ["put"]
-    assert {keys.node_state("r1", i) for i in sc.ids} | {keys.node_input("r1", i) for i in sc.ids} <= limited
-    assert keys.truth("r1") in limited and not any("ready" in k for k in limited)
-    assert all(r["freq"] == MAX_KEY_RATE_HZ for r in item["rules"])

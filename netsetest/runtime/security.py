@@ -180,26 +180,6 @@ def grants(sc: Scenario, run_id: str) -> dict[str, Grant]:
     return out
 
 
-MAX_KEY_RATE_HZ = 1000.0  # per key and link: an honest role puts one message per step (≤ ~100 steps/s)
-
-
-def ingress_limits(sc: Scenario, run_id: str) -> list[dict[str, object]]:
-    """Zenoh's ``downsampling`` section: on every incoming link, at most ``MAX_KEY_RATE_HZ`` puts per key of
-    the run (one rule per concrete key: Zenoh's limit is per rule and per link).  A flood is then cut in
-    Zenoh, before Python sees it, while another link's messages on the same key (the honest sender's) pass.
-    The run's router applies it (each role is a client with a link of its own).  The open peer mesh
-    (``--insecure``) has no such limit: the same rules in its peers dropped honest messages (a 200-step
-    paper6 run took 48 s instead of 5, nodes declared dead: measured with and without), so a flood there
-    costs what it costs (docs/performance.md, Defences)."""
-    # not the start-up barrier's Ready keys: a role answers several newcomers within a millisecond, and
-    # Zenoh's limit drops the newest — the Ready that says "seen all" (the start-up then timed out)
-    exprs = [keys.truth(run_id), keys.end(run_id)]
-    for i in sc.ids:
-        exprs += [keys.node_input(run_id, i), keys.node_state(run_id, i)]
-    rules = [{"key_expr": e, "freq": MAX_KEY_RATE_HZ} for e in exprs]
-    return [{"id": "per-key-rate", "messages": ["put"], "flows": ["ingress"], "rules": rules}]
-
-
 def acl_config(sc: Scenario, run_id: str) -> dict[str, object]:
     """The router's ``access_control`` section: deny by default, allow each role's :func:`grants`."""
     rules: list[dict[str, object]] = [
@@ -234,8 +214,7 @@ def client_settings(ident: Identity) -> dict[str, object]:
 
 def router_settings(ident: Identity, sc: Scenario, run_id: str) -> dict[str, object]:
     """Zenoh settings of the run's router: TLS links only, client certificates required, the run's ACL."""
-    return {"transport/link/protocols": ["tls"], **_tls_paths(ident, listen=True), "access_control": acl_config(sc, run_id),
-            "downsampling": ingress_limits(sc, run_id)}
+    return {"transport/link/protocols": ["tls"], **_tls_paths(ident, listen=True), "access_control": acl_config(sc, run_id)}
 
 
 @dataclass(frozen=True)
