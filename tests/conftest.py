@@ -11,6 +11,9 @@ from collections.abc import Iterator
 
 import pytest
 
+# the Zenoh tests' fixtures (``procs``: every process a test starts is stopped after it), for every module
+pytest_plugins = ["zenoh_helpers"]
+
 
 @pytest.fixture(autouse=True, scope="session")
 def _children_tmpdir() -> Iterator[None]:

@@ -17,7 +17,6 @@ from zenoh_helpers import (  # noqa: F401
     launch_peer_mesh,
     new_run_id,
     parent_run_id,
-    procs,
     start_parent,
     wait_for,
     wait_port,
@@ -54,7 +53,7 @@ def _listening_config(path: Path, port: int) -> str:
 
 
 @pytest.mark.zenoh
-def test_echo_and_watch_on_a_live_run(procs: ProcessGuard, tmp_path: Path) -> None:  # noqa: F811
+def test_echo_and_watch_on_a_live_run(procs: ProcessGuard, tmp_path: Path) -> None:
     run = new_run_id("echo")
     p_echo, p_watch = free_ports(2)
     # echo 1 and watch: configured by a file (as on a secured run), listening; the roles connect to them
@@ -214,7 +213,7 @@ def test_observer_decodes_and_reports_undecodable_payloads(tmp_path: Path) -> No
 @pytest.mark.zenoh
 @pytest.mark.parametrize("command", ["echo", "watch"])
 @pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
-def test_observer_stops_cleanly_on_signal(command: str, sig: str, procs: ProcessGuard) -> None:  # noqa: F811
+def test_observer_stops_cleanly_on_signal(command: str, sig: str, procs: ProcessGuard) -> None:
     import signal as _signal
 
     (port,) = free_ports(1)
@@ -232,7 +231,7 @@ WATCH_HINT = re.compile(r"run id (\S+); watch it with: netsetest watch --run-id 
 
 @pytest.mark.zenoh
 @pytest.mark.timeout(180)
-def test_run_watch_hint_works_insecure(procs: ProcessGuard) -> None:  # noqa: F811
+def test_run_watch_hint_works_insecure(procs: ProcessGuard) -> None:
     """--insecure: the printed command's run id and endpoint reach the run (secured runs: test_observer_secured.py)."""
     parent = start_parent(procs, "insecure", [PAPER6, "--insecure", "--steps", "60", "--pace", "0.1"])
     hint = wait_for(lambda: WATCH_HINT.search(procs.stderr("insecure")), 60, what="the watch hint")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from zenoh_helpers import PAPER6, ProcessGuard, cli, procs, start_parent, wait_for  # noqa: F401
+from zenoh_helpers import PAPER6, ProcessGuard, cli, start_parent, wait_for
 
 from netsetest.bus import keys
 from netsetest.bus.zenoh_bus import zenoh_config
@@ -36,7 +36,7 @@ def test_observer_grant_receives_the_run_and_publishes_nothing() -> None:
 
 @pytest.mark.zenoh
 @pytest.mark.timeout(240)
-def test_echo_and_watch_follow_a_secured_run_and_cannot_publish(procs: ProcessGuard, tmp_path: Path) -> None:  # noqa: F811
+def test_echo_and_watch_follow_a_secured_run_and_cannot_publish(procs: ProcessGuard, tmp_path: Path) -> None:
     summary = tmp_path / "summary.json"
     parent = start_parent(procs, "secured", [PAPER6, "--steps", str(STEPS), "--pace", "0.1", "--summary-json", str(summary)])
     run, creds = wait_for(lambda: SECURED_HINT.search(procs.stderr("secured")), 90, what="the watch hint").groups()
@@ -71,11 +71,11 @@ def test_echo_and_watch_follow_a_secured_run_and_cannot_publish(procs: ProcessGu
 
 
 @pytest.mark.zenoh
-def test_credentials_errors_are_one_line_exit_2(procs: ProcessGuard, tmp_path: Path) -> None:  # noqa: F811
+def test_credentials_errors_are_one_line_exit_2(procs: ProcessGuard, tmp_path: Path) -> None:
     for name, args, why in [
         ("missing", ["--credentials", str(tmp_path / "none")], "no ca.pem"),
     ]:
-        p = procs.start(name, cli("echo", *args, "--duration", "5"))
+        procs.start(name, cli("echo", *args, "--duration", "5"))
         assert procs.wait(name, 30) == 2, procs.logs()
         err = procs.stderr(name)
         assert why in err and "Traceback" not in err, err

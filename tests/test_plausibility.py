@@ -72,10 +72,10 @@ def test_interval_is_exactly_what_the_estimator_facts_admit(saturated: bool) -> 
 
 def test_disjoint_only_when_provably_so() -> None:
     rng = np.random.default_rng(3)
-    I = np.eye(3)
-    assert states_disjoint(np.zeros(3), I, 1.0, np.array([2.5, 0.0, 0.0]), I, 1.0)
-    assert not states_disjoint(np.zeros(3), I, 1.0, np.array([1.9, 0.0, 0.0]), I, 1.0)
-    assert not states_disjoint(np.zeros(3), I, 1.0, np.array([0.0, 0.0, 50.0]), I, 1.0)  # f is not shared
+    eye = np.eye(3)
+    assert states_disjoint(np.zeros(3), eye, 1.0, np.array([2.5, 0.0, 0.0]), eye, 1.0)
+    assert not states_disjoint(np.zeros(3), eye, 1.0, np.array([1.9, 0.0, 0.0]), eye, 1.0)
+    assert not states_disjoint(np.zeros(3), eye, 1.0, np.array([0.0, 0.0, 50.0]), eye, 1.0)  # f is not shared
     grid = np.stack(np.meshgrid(np.linspace(-3, 3, 241), np.linspace(-3, 3, 241)), -1).reshape(-1, 2)
     said_disjoint = 0
     for _ in range(150):

@@ -19,7 +19,6 @@ from zenoh_helpers import (  # noqa: F401 (fixture)
     find_role,
     launch_peer_mesh,
     new_run_id,
-    procs,
     wait_for,
 )
 
@@ -110,7 +109,7 @@ def test_inspect_and_plot_work_on_a_partial_record(finished: dict[str, Path], tm
     assert len(list((tmp_path / "figs").glob("*.png"))) == 4
 
 
-def test_killed_inmemory_run_leaves_a_partial_record(procs: ProcessGuard, tmp_path: Path) -> None:  # noqa: F811
+def test_killed_inmemory_run_leaves_a_partial_record(procs: ProcessGuard, tmp_path: Path) -> None:
     rec = tmp_path / "killed.jsonl"
     proc = procs.start("inmemory", cli("run", TOPOLOGY, "--mode", "inmemory", "--steps", "400", "--record", str(rec), "--quiet"))
     wait_for(lambda: rec.exists() and rec.read_bytes().count(b'"kind":"truth"') >= 5, 60, what="five steps in the record")
@@ -123,7 +122,7 @@ def test_killed_inmemory_run_leaves_a_partial_record(procs: ProcessGuard, tmp_pa
 
 @pytest.mark.zenoh
 @pytest.mark.timeout(120)
-def test_sigkill_of_the_zenoh_collector_leaves_a_partial_record(procs: ProcessGuard, tmp_path: Path) -> None:  # noqa: F811
+def test_sigkill_of_the_zenoh_collector_leaves_a_partial_record(procs: ProcessGuard, tmp_path: Path) -> None:
     run_id, rec = new_run_id(), tmp_path / "record.jsonl"
     launch_peer_mesh(procs, PAPER6, run_id, 2000, tmp_path / "summary.json", record=rec)
     wait_for(lambda: rec.exists() and rec.read_bytes().count(b'"kind":"truth"') >= 5, 90, what="five steps in the record")
@@ -147,7 +146,7 @@ def test_sigkill_of_the_zenoh_collector_leaves_a_partial_record(procs: ProcessGu
 
 @pytest.mark.zenoh
 @pytest.mark.timeout(120)
-def test_sigkill_of_the_parent_leaves_a_partial_record(procs: ProcessGuard, tmp_path: Path) -> None:  # noqa: F811
+def test_sigkill_of_the_parent_leaves_a_partial_record(procs: ProcessGuard, tmp_path: Path) -> None:
     """``netsetest run`` killed with SIGKILL: its children die with it (PDEATHSIG); the record stays."""
     from zenoh_helpers import parent_run_id, start_parent, wait_gone
 
@@ -225,7 +224,7 @@ def test_mcap_cut_anywhere_loads_or_says_why(streamed_mcap: Path, tmp_path: Path
     assert loaded >= 50 and first_loaded < len(data) // 10  # the meta message comes first
 
 
-def test_killed_inmemory_run_leaves_a_partial_mcap_record(procs: ProcessGuard, tmp_path: Path) -> None:  # noqa: F811
+def test_killed_inmemory_run_leaves_a_partial_mcap_record(procs: ProcessGuard, tmp_path: Path) -> None:
     pytest.importorskip("mcap")
     rec = tmp_path / "killed.mcap"
     proc = procs.start("inmemory_mcap", cli("run", TOPOLOGY, "--mode", "inmemory", "--steps", "400", "--record", str(rec), "--quiet"))

@@ -29,7 +29,6 @@ from zenoh_helpers import (
     free_ports,
     launch_clients,
     new_run_id,
-    procs,  # noqa: F401 (fixture)
     read_json,
     read_record,
     parent_run_id,

@@ -21,7 +21,6 @@ from zenoh_helpers import (
     free_ports,
     launch_peer_mesh,
     new_run_id,
-    procs,  # noqa: F401 (fixture)
     read_json,
     wait_roles,
 )

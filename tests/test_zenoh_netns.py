@@ -24,7 +24,6 @@ from zenoh_helpers import (
     cli,
     launch_clients,
     new_run_id,
-    procs,  # noqa: F401 (fixture)
     read_json,
     role_names,
     wait_for,

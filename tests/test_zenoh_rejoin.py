@@ -27,7 +27,6 @@ from zenoh_helpers import (  # noqa: F401 (fixture)
     RING,
     ROOT,
     cli,
-    procs,
     read_json,
     read_record,
     run_parent,

@@ -14,7 +14,6 @@ from zenoh_helpers import (
     free_ports,
     launch_clients,
     new_run_id,
-    procs,  # noqa: F401 (fixture)
     read_json,
     wait_for,
     wait_port,

@@ -19,7 +19,6 @@ from zenoh_helpers import (
     find_role,
     parent_run_id,
     pids_with_arg,
-    procs,  # noqa: F401 (fixture)
     progress_steps,
     start_parent,
     wait_for,

@@ -11,7 +11,6 @@ from collections.abc import Callable
 from netsetest.config.schema import ConfigError, Scenario
 from netsetest.estimator.base import EstimatorError, SetEstimator
 from netsetest.estimator.interval_althoff_rath import IntervalObserver
-from netsetest.estimator.names import SET_ESTIMATOR_NAMES
 from netsetest.estimator.set_propagation_althoff_rath import SetPropagationObserver
 from netsetest.estimator.strip_althoff_rath import StripObserver
 from netsetest.estimator.zonotope_w_radius import ZonotopeEstimator

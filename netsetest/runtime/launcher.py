@@ -13,7 +13,6 @@ the run: the others go on without it and the summary says so (exit code 3, from 
 
 from __future__ import annotations
 
-import os
 import secrets
 import signal
 import socket
