@@ -243,6 +243,8 @@ class Truth(_Msg, tag="truth", kw_only=True):
     lost: Annotated[list[tuple[NodeId, NodeId]], Meta(max_length=MAX_NODES * MAX_NODES)] = []  # (j, i): j's k−1 message to i lost
     alive: IdList = []  # nodes the vehicle heard from at step k−1
     drops: Drops = {}  # messages the vehicle has dropped so far, by reason
+    e: Vec2 | None = None  # model mismatch of k → k+1: x_{k+1} − (Ā x_k + B̄ u_k + D̄ w_k) (None: last step, older records)
+    mismatch_ok: bool = True  # e_k within the declared [model_uncertainty] (none declared: e_k = 0)
 
     def __post_init__(self) -> None:
         ids = set(self.faults)

@@ -103,7 +103,7 @@ def test_installed_wheel_runs_bundled_scenario_from_any_directory(venv: Path, tm
              "--mode", "inmemory", "--steps", "3", "--quiet", cwd=tmp_path)  # fmt: skip
     assert m.returncode == 0, m.stderr
     bad = _run(str(exe), "run", "nosuch", "--mode", "inmemory", cwd=tmp_path)
-    assert bad.returncode == 2 and "bundled topologies: paper6, paper6_lossy" in bad.stderr and "Traceback" not in bad.stderr
+    assert bad.returncode == 2 and f"bundled topologies: {', '.join(bundled_topologies())}" in bad.stderr and "Traceback" not in bad.stderr
 
 
 def test_bundled_names_resolve_in_the_checkout(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

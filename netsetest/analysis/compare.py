@@ -107,6 +107,8 @@ def _cones(sc: Scenario, rec: Record, assumptions: tuple[str, ...], nodes: list[
         for k, t in enumerate(truth):
             if broken is None and k > 0 and not truth[k - 1]["dist_ok"]:
                 broken = "disturbance"
+            if broken is None and k > 0 and not truth[k - 1].get("mismatch_ok", True):
+                broken = "model mismatch"  # every estimator uses the declared bound on e_k (docs/plant.md)
             if broken is None and not t["noise_ok"][s]:
                 broken = "noise"
             if broken is None and "fault_bound" in assumptions and not t.get("fault_ok", {}).get(s, True):

@@ -4,10 +4,12 @@ For every step k and node i, :func:`exact_bounds` computes the smallest and larg
 and r_k over every trajectory that meets the run's assumptions and reproduces every measurement of
 steps 0..k of every node (centralized: no networked estimator can be tighter).  Decision variables are
 z = [x_0, w_0..w_{k−1}, f_i,0..k (every node i)]; the state is affine in z through the known scheduled
-dynamics x_{j+1} = Ā_j x_j + B̄_j u_j + D̄_j w_j (α_j from the recorded speed), and the noise is eliminated:
+dynamics x_{j+1} = Ā_j x_j + B̄_j u_j + D̄_j w_j + e_j (α_j from the recorded speed; e_j ≡ 0 unless the topology
+declares a ``[model_uncertainty]``, docs/plant.md), and the noise is eliminated:
 
     node i's prior:        ‖P0_i^{-½}([x_0; f_i,0] − x̂0_i)‖ ≤ √ρ_i                  (second-order cone)
     wind:                  |w_j| ≤ √W
+    model mismatch:        e_j in the declared box (linear) or ellipsoid (SOC(3)), where one is declared
     measurement (i, j):    σ(C̄_i x̄_i,j) ∈ [(ỹ − |Dv|√R)/γ, (ỹ + |Dv|√R)/γ]  ⇔  C̄_i x̄_i,j ∈ [lo, hi]
     declared fault bounds: |f_i,j+1 − f_i,j| ≤ δ_i,  |f_i,j| ≤ F_i   (where ``fault_bounds`` applies them)
 
@@ -63,6 +65,7 @@ class Witness:
     x0: np.ndarray  # (2,)
     w: np.ndarray  # (k,)
     f: dict[int, np.ndarray]  # node → (k+1,)
+    e: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (k, 2) model mismatch (declared bound only)
 
 
 @dataclass(frozen=True)
@@ -128,8 +131,8 @@ def step_data(record: Record) -> list[StepData]:
 class _Program:
     """Every constraint of the full horizon 0..K, each row tagged with the last step it involves.
 
-    Columns: x_0..x_K (2 each), w_0..w_{K−1}, then f_i,0..K per node; the dynamics are equality rows,
-    so every row is sparse.  The horizon-k program keeps the rows of steps ≤ k and the columns of steps
+    Columns: x_0..x_K (2 each), w_0..w_{K−1}, e_0..e_{K−1} (2 each, only with a declared model-mismatch
+    bound), then f_i,0..K per node; the dynamics are equality rows, so every row is sparse.  The horizon-k program keeps the rows of steps ≤ k and the columns of steps
     ≤ k (the others appear in no kept row).
     """
 
@@ -137,17 +140,21 @@ class _Program:
         self.sc, self.data, self.bounded = scenario, data, bounded
         self.ids = scenario.ids
         self.K = K = len(data) - 1
-        self.nz = 2 * (K + 1) + K + len(self.ids) * (K + 1)
+        unc = scenario.uncertainty
+        self.ne = 2 if unc is not None else 0  # e_j columns per step
+        self.nz = 2 * (K + 1) + K + self.ne * K + len(self.ids) * (K + 1)
         self.intervals = {
             (node.id, j): node.sensor.measured_interval(dj.y[node.id], dj.gamma[node.id])
             for node in scenario.nodes for j, dj in enumerate(data)
         }  # fmt: skip
-        eq = _Rows()  # x_{j+1} − Ā_j x_j − D̄_j w_j = B̄_j u_j
+        eq = _Rows()  # x_{j+1} − Ā_j x_j − D̄_j w_j − e_j = B̄_j u_j
         for j in range(K):
             a, b, d = scenario.model.blend(scenario.model.weights(data[j].vx))
             for row in range(2):
                 terms = {self._x(j + 1, row): 1.0, self._w(j): -d[row, 0]}
                 terms.update({self._x(j, c): -a[row, c] for c in range(2)})
+                if self.ne:
+                    terms[self._e(j, row)] = -1.0
                 eq.add(terms, b[row, 0] * data[j].u, j + 1)
         lin = _Rows()  # a z ≤ b
         sqrt_w = np.sqrt(scenario.W)
@@ -172,6 +179,18 @@ class _Program:
                     if node.fault_rate is not None and j > 0:
                         lin.add({self._f(n, j): 1.0, self._f(n, j - 1): -1.0}, node.fault_rate, j)
                         lin.add({self._f(n, j): -1.0, self._f(n, j - 1): 1.0}, node.fault_rate, j)
+        esoc = _Rows()  # an ellipsoid on e_j: s = [1; G⁻¹ e_j] ∈ SOC(3)
+        if unc is not None and unc.kind == "box":
+            for j in range(K):
+                for row in range(2):
+                    lin.add({self._e(j, row): 1.0}, unc.G[row, row], j + 1)
+                    lin.add({self._e(j, row): -1.0}, unc.G[row, row], j + 1)
+        elif unc is not None:
+            g_inv = np.linalg.inv(unc.G)
+            for j in range(K):
+                esoc.add({}, 1.0, j + 1)
+                for row in range(2):
+                    esoc.add({self._e(j, c): -g_inv[row, c] for c in range(2)}, 0.0, j + 1)
         soc = _Rows()  # priors: s = b − A z = [√ρ; L⁻¹([x_0; f_i,0] − x̂0)] ∈ SOC(4), P0 = L Lᵀ
         for n, node in enumerate(scenario.nodes):
             li = np.linalg.inv(np.linalg.cholesky(node.P0))
@@ -181,6 +200,7 @@ class _Program:
             for row in range(3):
                 soc.add({col: -li[row, m] for m, col in enumerate(prior_cols) if li[row, m] != 0}, -centre[row], 0)
         self.eq, self.lin, self.soc = eq.build(self.nz), lin.build(self.nz), soc.build(self.nz)
+        self.esoc = esoc.build(self.nz)
 
     def _x(self, j: int, comp: int) -> int:
         return 2 * j + comp
@@ -188,8 +208,11 @@ class _Program:
     def _w(self, j: int) -> int:
         return 2 * (self.K + 1) + j
 
+    def _e(self, j: int, comp: int) -> int:
+        return 2 * (self.K + 1) + self.K + 2 * j + comp
+
     def _f(self, n: int, j: int) -> int:
-        return 2 * (self.K + 1) + self.K + n * (self.K + 1) + j
+        return 2 * (self.K + 1) + self.K + self.ne * self.K + n * (self.K + 1) + j
 
     def _eliminated(self, n: int, j: int, k: int, eliminate: bool) -> bool:
         """Whether f_i,j leaves the horizon-k program: a fault without declared bounds at 0 < j < k
@@ -198,8 +221,10 @@ class _Program:
         return eliminate and self.ids[n] not in self.bounded and 0 < j < k
 
     def columns(self, k: int, eliminate: bool) -> np.ndarray:
-        """Columns of the horizon-k program: x_0..x_k, w_0..w_{k−1}, the f_i,0..k not eliminated."""
+        """Columns of the horizon-k program: x_0..x_k, w_0..w_{k−1}, e_0..e_{k−1}, the f_i,0..k not eliminated."""
         cols = [np.arange(2 * (k + 1)), self._w(0) + np.arange(k)]
+        if self.ne:
+            cols.append(self._e(0, 0) + np.arange(2 * k))
         for n in range(len(self.ids)):
             cols.append(np.array([self._f(n, j) for j in range(k + 1) if not self._eliminated(n, j, k, eliminate)]))
         return np.concatenate(cols).astype(int)
@@ -211,12 +236,15 @@ class _Program:
         keep_lin = self.lin.step <= k
         if eliminate:
             keep_lin &= (self.lin.free <= 0) | (self.lin.free == k)
+        keep_esoc = self.esoc.step <= k
         A = sparse.vstack(
-            [self.eq.A[keep_eq][:, cols], self.lin.A[keep_lin][:, cols], self.soc.A[:, cols]], format="csc"
+            [self.eq.A[keep_eq][:, cols], self.lin.A[keep_lin][:, cols], self.soc.A[:, cols], self.esoc.A[keep_esoc][:, cols]],
+            format="csc",
         )
-        b = np.r_[self.eq.b[keep_eq], self.lin.b[keep_lin], self.soc.b]
+        b = np.r_[self.eq.b[keep_eq], self.lin.b[keep_lin], self.soc.b, self.esoc.b[keep_esoc]]
         cones = [clarabel.ZeroConeT(int(keep_eq.sum())), clarabel.NonnegativeConeT(int(keep_lin.sum()))]
         cones += [clarabel.SecondOrderConeT(4)] * len(self.ids)
+        cones += [clarabel.SecondOrderConeT(3)] * (int(keep_esoc.sum()) // 3)
         return cols, A, b, cones
 
     def objectives(self, k: int) -> list[tuple[Coordinate, int | None, int]]:
@@ -237,7 +265,8 @@ class _Program:
                     ends = sorted(((lo - cx) / node.sensor.Ds, (hi - cx) / node.sensor.Ds))
                     fi[j] = float(np.clip(0.0, *ends))
             f[node.id] = fi
-        return Witness(x0=z[:2].copy(), w=z[self._w(0) : self._w(0) + k].copy(), f=f)
+        e = z[self._e(0, 0) : self._e(0, 0) + 2 * k].reshape(k, 2).copy() if self.ne else np.zeros((k, 2))
+        return Witness(x0=z[:2].copy(), w=z[self._w(0) : self._w(0) + k].copy(), f=f, e=e)
 
 
 class _Rows:

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import re
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
-SEED_MAX = 2**63 - 1  # numpy's SeedSequence takes any non-negative integer; keep it to 64 bits
+SEED_MAX = 2**63 - 1
+SEED_RANGE_RE = re.compile(r"(\d+)\s*-\s*(\d+)")
+SEED_RANGE_MAX = 10_000  # seeds one range may name (a typo like 0-99999999 is not a request)  # numpy's SeedSequence takes any non-negative integer; keep it to 64 bits
 DRAWN_SEED_BITS = 32  # a run's own seed: unguessable by another local user, short enough to type back
 RUN_ID_RE = re.compile(r"[A-Za-z0-9_-]{1,64}")
 # proto/host:port with an optional Zenoh suffix (?metadata, #config); host a name, an IPv4 or a [IPv6]
@@ -38,6 +42,45 @@ def seed(s: str) -> int:
         raise argparse.ArgumentTypeError(f"not an integer: {s!r}") from None
     if not 0 <= v <= SEED_MAX:
         raise argparse.ArgumentTypeError(f"must be between 0 and 2**63 − 1, got {v}")
+    return v
+
+
+def name_list(choices: Sequence[str], what: str) -> Callable[[str], tuple[str, ...]]:
+    """argparse type: comma-separated names, each one of ``choices``."""
+
+    def parse(s: str) -> tuple[str, ...]:
+        items = tuple(x.strip() for x in s.split(",") if x.strip())
+        unknown = [x for x in items if x not in choices]
+        if not items or unknown:
+            raise argparse.ArgumentTypeError(f"unknown {what} {unknown[0] if unknown else s!r}; choose from {', '.join(choices)}")
+        return items
+
+    return parse
+
+
+def seed_list(s: str) -> tuple[int, ...]:
+    """argparse type: comma-separated seeds and ranges A-B (inclusive), e.g. ``0-4,9``."""
+    out: list[int] = []
+    for part in s.split(","):
+        m = SEED_RANGE_RE.fullmatch(part.strip())
+        if m is None:  # one seed (a negative number is a seed, and an error, not a range)
+            out.append(seed(part))
+            continue
+        a, b = seed(m[1]), seed(m[2])
+        if b < a or b - a >= SEED_RANGE_MAX:
+            raise argparse.ArgumentTypeError(f"seed range {part.strip()!r}: must be A-B with A ≤ B and at most {SEED_RANGE_MAX} seeds")
+        out.extend(range(a, b + 1))
+    return tuple(out)
+
+
+def non_negative_float(s: str) -> float:
+    """argparse type: a finite number ≥ 0."""
+    try:
+        v = float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {s!r}") from None
+    if not (v >= 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"must be a finite number ≥ 0, got {s}")
     return v
 
 

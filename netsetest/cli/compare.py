@@ -9,38 +9,18 @@ from collections.abc import Callable
 
 from netsetest.cli import checks
 from netsetest.estimator.names import DEFAULT_COMPARE, ESTIMATOR_NAMES
+from netsetest.models.signals import SIGNAL_KINDS
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
-SIGNAL_KINDS = ("paper", "worst")
-
-
-def _names(s: str) -> tuple[str, ...]:
-    items = tuple(x.strip() for x in s.split(",") if x.strip())
-    unknown = [x for x in items if x not in ESTIMATOR_NAMES]
-    if not items or unknown:
-        raise argparse.ArgumentTypeError(f"unknown estimator {unknown[0] if unknown else s!r}; choose from {', '.join(ESTIMATOR_NAMES)}")
-    return items
-
-
-def _signals(s: str) -> tuple[str, ...]:
-    items = tuple(x.strip() for x in s.split(","))
-    bad = [x for x in items if x not in SIGNAL_KINDS]
-    if bad:
-        raise argparse.ArgumentTypeError(f"signal kind {bad[0]!r}: choose from {', '.join(SIGNAL_KINDS)}")
-    return items
-
-
-def _seeds(s: str) -> tuple[int, ...]:
-    return tuple(checks.seed(x) for x in s.split(","))
 
 
 def add_parser(sub: argparse._SubParsersAction, scenario_args: Callable[[argparse.ArgumentParser], None]) -> None:
     p = sub.add_parser("compare", help="every guaranteed estimator on the same vehicle, network and data: one row each")
     scenario_args(p)
-    p.add_argument("--estimators", type=_names, default=DEFAULT_COMPARE, metavar="A,B,…",
+    p.add_argument("--estimators", type=checks.name_list(ESTIMATOR_NAMES, "estimator"), default=DEFAULT_COMPARE, metavar="A,B,…",
                    help=f"rows, from {', '.join(ESTIMATOR_NAMES)} (default: {','.join(DEFAULT_COMPARE)})")  # fmt: skip
-    p.add_argument("--signals", type=_signals, default=("paper",), metavar="KINDS", help="paper and/or worst, comma-separated (default: paper)")
-    p.add_argument("--seeds", type=_seeds, default=(0,), metavar="S,…", help="seeds, comma-separated (default: 0)")
+    p.add_argument("--signals", type=checks.name_list(SIGNAL_KINDS, "signal kind"), default=("paper",), metavar="KINDS", help="paper and/or worst, comma-separated (default: paper)")
+    p.add_argument("--seeds", type=checks.seed_list, default=(0,), metavar="S,…", help="seeds, comma-separated, ranges A-B allowed (default: 0)")
     p.add_argument("--json", metavar="PATH", help="write the rows as a JSON list")
     p.add_argument("--markdown", metavar="PATH", help="write the table as Markdown")
     p.add_argument("--plot", metavar="DIR", help="one figure per node: every estimator's fault bounds and the truth (first run)")

@@ -17,7 +17,10 @@ from typing import TYPE_CHECKING
 from netsetest.analysis.errors import CompareError, ExactError
 from netsetest.cli import checks
 from netsetest.config.schema import ConfigError
+from netsetest.analysis.calibrate import DEFAULT_MARGIN
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
+from netsetest.models.manoeuvres import MANOEUVRES
+from netsetest.models.signals import SIGNAL_KINDS
 from netsetest.extras import MissingExtra, require
 from netsetest.records.errors import RecordError
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED
@@ -110,6 +113,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fault-bounds", choices=["used", "all", "none"], default="used",
                    help="declared fault bounds: where the estimator relies on them (saturating sensors), "
                    "everywhere, or nowhere")  # fmt: skip
+    p = sub.add_parser("calibrate", help="the smallest model-mismatch bound covering a plant's e_k on training manoeuvres")
+    p.add_argument("topology", help="topology with a nonlinear plant (a path, or a bundled name such as paper6_car)")
+    p.add_argument("--manoeuvres", type=checks.name_list(MANOEUVRES, "manoeuvre"), required=True, metavar="A,B,...",
+                   help=f"training manoeuvres, comma-separated: {', '.join(MANOEUVRES)}")  # fmt: skip
+    p.add_argument("--seeds", type=checks.seed_list, default=tuple(range(5)), metavar="A-B,...",
+                   help="seeds of the training drives, e.g. 0-9 (default: 0-4)")  # fmt: skip
+    p.add_argument("--signals", type=checks.name_list(SIGNAL_KINDS, "signal kind"), default=SIGNAL_KINDS, metavar="A,B",
+                   help="signal families of the training drives (default: paper,worst)")  # fmt: skip
+    p.add_argument("--steps", type=checks.positive_int, help="steps per drive (default: the topology's)")
+    p.add_argument("--margin", type=checks.non_negative_float, default=DEFAULT_MARGIN,
+                   help=f"relative enlargement of the half-widths and semi-axes (default: {DEFAULT_MARGIN})")  # fmt: skip
+    p.add_argument("--json", metavar="PATH", help="write the bounds and the per-drive maxima as JSON")
+
     p = sub.add_parser("bench", help="the performance benchmark: solve times, tightness, Zenoh overhead, start-up, memory, real-time scale, defences")
     p.add_argument("--quick", action="store_true", help="fewer steps and samples (about 10 minutes; default: the full benchmark, about 30)")
     p.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
@@ -259,6 +275,54 @@ def cmd_exact(a: argparse.Namespace) -> int:
     return 0
 
 
+def _seed_text(seeds: Sequence[int]) -> str:
+    return f"{seeds[0]}-{seeds[-1]}" if list(seeds) == list(range(seeds[0], seeds[-1] + 1)) and len(seeds) > 1 else ",".join(map(str, seeds))
+
+
+def cmd_calibrate(a: argparse.Namespace) -> int:
+    from netsetest.analysis.calibrate import calibrate
+    from netsetest.config.schema import load_topology
+    from netsetest.runtime.report import Progress
+
+    checks.output_file(a.json, "--json")
+    scenarios = [load_topology(a.topology, steps=a.steps, manoeuvre=m) for m in a.manoeuvres]
+    if scenarios[0].plant == "ts":
+        print(f"netsetest calibrate: {a.topology}: plant 'ts' is the T-S model itself (e_k = 0): nothing to calibrate",
+              file=sys.stderr)  # fmt: skip
+        return EXIT_BAD_INPUT
+    bar = Progress(1, "calibrate")
+
+    def on_progress(n: int, total: int) -> None:
+        bar.total = total
+        bar.update(n)
+
+    import numpy as np
+
+    cal = calibrate(scenarios, list(a.seeds), a.signals, a.margin, progress=on_progress)
+    bar.close()
+    sc = scenarios[0]
+    print(f"model mismatch of {sc.name}: plant {sc.plant} (CommonRoad vehicle {sc.vehicle_id}), {sc.steps} steps per drive, "
+          f"seeds {_seed_text(a.seeds)}, signals {','.join(a.signals)}")  # fmt: skip
+    print(f"{'manoeuvre':>20}  {'drives':>6}  {'max |e_beta| [rad]':>18}  {'max |e_r| [rad/s]':>18}")
+    for m in a.manoeuvres:
+        ds = [d for d in cal.drives if d.manoeuvre == m]
+        mx = np.max([d.max_abs for d in ds], axis=0)
+        print(f"{m:>20}  {len(ds):>6}  {mx[0]:>18.3e}  {mx[1]:>18.3e}")
+    print(f"bounds covering every e_k with margin {a.margin:g} (declare one in the topology):")
+    print(cal.box.as_toml() + "# or\n" + cal.ellipsoid.as_toml(), end="")
+    if a.json:
+        doc = {
+            "topology": sc.path, "plant": sc.plant, "vehicle": sc.vehicle_id, "steps": sc.steps, "margin": a.margin,
+            "seeds": list(a.seeds), "signals": a.signals,
+            "box": np.diag(cal.box.G).tolist(), "ellipsoid": cal.ellipsoid.E.tolist(),
+            "drives": [{"manoeuvre": d.manoeuvre, "signals": d.signals, "seed": d.seed, "max_abs": d.max_abs.tolist()}
+                       for d in cal.drives],
+        }  # fmt: skip
+        with open(a.json, "w") as fh:
+            json.dump(doc, fh, indent=1)
+    return 0
+
+
 def cmd_bench(a: argparse.Namespace) -> int:
     require("cvxpy", "the benchmark (its reference formulations)")
     checks.output_file(a.json, "--json")
@@ -275,7 +339,10 @@ def cmd_forkserver(a: argparse.Namespace) -> int:
     return serve(a.control_fd, main)
 
 
-COMMANDS.update(run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, exact=cmd_exact, bench=cmd_bench, forkserver=cmd_forkserver)
+COMMANDS.update(
+    run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, exact=cmd_exact, calibrate=cmd_calibrate, bench=cmd_bench,
+    forkserver=cmd_forkserver,
+)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -33,6 +33,9 @@ from msgspec import Meta, Struct, field
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES, SDP
 from netsetest.models.sensor import Sensor
 from netsetest.models.signals import Fault, NoFault, PiecewiseLinearFault, SpeedProfile, SquareFault
+from netsetest.models.manoeuvres import MANOEUVRES, SINE_SPEED, ManoeuvreName, steering_range
+from netsetest.models.plant import PLANTS, VEHICLE_IDS, PlantKind, PlantUnavailable, derived_params
+from netsetest.models.uncertainty import ModelUncertainty
 from netsetest.models.vehicle import KMH, TSModel, VehicleParams
 from netsetest.scenarios import bundled_topologies, resolve_topology
 from netsetest.validation import FINITE_BOUND_TEXT, Finite, Positive, split_error
@@ -200,14 +203,24 @@ def _between(lo: float, hi: float) -> object:
 
 
 class VehicleSpec(_Strict, kw_only=True):
+    """The car: the plant that generates the truth, its manoeuvre, and the T-S model's parameters.
+
+    ``plant = "ts"`` (default): the truth is the T-S model of m..cr (the paper's Table I by default).
+    A nonlinear plant (``single-track``, ``multi-body``; the ``plant`` extra) is CommonRoad vehicle
+    ``vehicle`` and the T-S model is derived from that car (models/plant.py): m..cr may not be given then.
+    """
+
+    plant: Annotated[str, Meta(description=f"the truth's vehicle: one of {', '.join(PLANTS)}")] = "ts"
+    vehicle: Annotated[int, Meta(ge=min(VEHICLE_IDS), le=max(VEHICLE_IDS), description="CommonRoad parameters_vehicle<N>")] = 2
+    manoeuvre: Annotated[str, Meta(description=f"one of {', '.join(MANOEUVRES)}")] = "paper"
     # physical ranges of a road vehicle (generous): a fuzzed wind gain of 1e300 overflowed a node's
     # guaranteed fallback set mid-run; the model must stay in floating-point range like the profiles
-    m: _between(*MASS_KG) = 1832.0  # type: ignore[valid-type]
-    Jz: _between(*YAW_INERTIA_KGM2) = 2488.0  # type: ignore[valid-type]
-    lf: _between(*AXLE_DISTANCE_M) = 1.18  # type: ignore[valid-type]
-    lr: _between(*AXLE_DISTANCE_M) = 1.77  # type: ignore[valid-type]
-    cf: _between(*CORNERING_STIFFNESS_N_PER_RAD) = 96240.0  # type: ignore[valid-type]
-    cr: _between(*CORNERING_STIFFNESS_N_PER_RAD) = 107180.0  # type: ignore[valid-type]
+    m: _between(*MASS_KG) | None = None  # type: ignore[valid-type]
+    Jz: _between(*YAW_INERTIA_KGM2) | None = None  # type: ignore[valid-type]
+    lf: _between(*AXLE_DISTANCE_M) | None = None  # type: ignore[valid-type]
+    lr: _between(*AXLE_DISTANCE_M) | None = None  # type: ignore[valid-type]
+    cf: _between(*CORNERING_STIFFNESS_N_PER_RAD) | None = None  # type: ignore[valid-type]
+    cr: _between(*CORNERING_STIFFNESS_N_PER_RAD) | None = None  # type: ignore[valid-type]
     fw: _between(-WIND_GAIN_MAX_N, WIND_GAIN_MAX_N) = 1360.0  # type: ignore[valid-type]
     lw: _between(-AXLE_DISTANCE_M[1], AXLE_DISTANCE_M[1]) = 0.5  # type: ignore[valid-type]
     vx_min_kmh: Annotated[float, Meta(gt=0, le=SPEED_MAX_KMH)] = 80.0
@@ -217,6 +230,56 @@ class VehicleSpec(_Strict, kw_only=True):
     def __post_init__(self) -> None:
         if self.vx_min_kmh >= self.vx_max_kmh:
             raise ValueError("vx_min_kmh must be below vx_max_kmh")
+        if self.plant not in PLANTS:
+            raise ValueError(f"plant: unknown plant {self.plant!r} (one of {', '.join(PLANTS)})")
+        if self.manoeuvre not in MANOEUVRES:
+            raise ValueError(f"manoeuvre: unknown manoeuvre {self.manoeuvre!r} (one of {', '.join(MANOEUVRES)})")
+        given = [n for n in TABLE_I if getattr(self, n) is not None]
+        if self.plant != "ts" and given:
+            raise ValueError(
+                f"{', '.join(given)}: the T-S model of a {self.plant} plant is derived from CommonRoad vehicle "
+                f"{self.vehicle}; remove these keys"
+            )
+
+    def params(self) -> VehicleParams:
+        """The T-S model's parameters: derived from the plant's car, else the keys given over Table I."""
+        lo, hi = self.vx_min_kmh * KMH, self.vx_max_kmh * KMH
+        if self.plant != "ts":
+            return derived_params(self.vehicle, self.fw, self.lw, lo, hi)
+        table = VehicleParams()
+        given = {n: getattr(self, n) for n in TABLE_I if getattr(self, n) is not None}
+        return dataclasses.replace(table, **given, fw=self.fw, lw=self.lw, vx_min=lo, vx_max=hi)
+
+
+TABLE_I = ("m", "Jz", "lf", "lr", "cf", "cr")  # the bicycle model's parameters (VehicleParams defaults: the paper's)
+UNCERTAINTY_MAX = 10.0  # |e_k| components [rad, rad/s] per step: beyond it the model says nothing
+
+
+class ModelUncertaintySpec(_Strict, kw_only=True):
+    """Declared bound on the model mismatch e_k of x_{k+1} = Ā x_k + B̄ u_k + D̄ w_k + e_k (one of the two)."""
+
+    box: tuple[_between(0, UNCERTAINTY_MAX), _between(0, UNCERTAINTY_MAX)] | None = None  # type: ignore[valid-type]
+    ellipsoid: list[list[Finite]] | None = None
+
+    def __post_init__(self) -> None:
+        if (self.box is None) == (self.ellipsoid is None):
+            raise ValueError("give exactly one of box = [b_beta, b_r] and ellipsoid = [[E11, E12], [E21, E22]]")
+        if self.box is not None and min(self.box) <= 0:
+            raise ValueError("box: half-widths must be positive")
+        if self.ellipsoid is not None:
+            e = self.ellipsoid
+            if len(e) != 2 or any(len(row) != 2 for row in e):
+                raise ValueError("ellipsoid: must be 2×2")
+            a = np.asarray(e, dtype=float)
+            if not np.allclose(a, a.T) or np.linalg.eigvalsh(0.5 * (a + a.T)).min() <= 0:
+                raise ValueError("ellipsoid: must be symmetric positive definite")
+            if np.sqrt(np.diag(a)).max() > UNCERTAINTY_MAX:
+                raise ValueError(f"ellipsoid: semi-axes must be at most {UNCERTAINTY_MAX:g}")
+
+    def build(self) -> ModelUncertainty:
+        if self.box is not None:
+            return ModelUncertainty.box(self.box)
+        return ModelUncertainty.ellipsoid(np.asarray(self.ellipsoid, dtype=float))
 
 
 class SpeedSpec(_Strict, kw_only=True):
@@ -285,6 +348,7 @@ class TopologyFile(_Strict, kw_only=True):
     nodes: list[NodeRef]
     edges: list[Edge]
     loss: LinkLoss = field(default_factory=LinkLoss)
+    model_uncertainty: ModelUncertaintySpec | None = None
 
     def __post_init__(self) -> None:
         ids = [n.id for n in self.nodes]
@@ -304,10 +368,12 @@ class TopologyFile(_Strict, kw_only=True):
             if (b.to, b.from_) not in seen or b.to == b.from_:
                 raise ValueError(f"loss.bursts: {b.from_}→{b.to} is not an edge between two nodes")
         lo, hi = self.speed.mean_kmh - self.speed.amplitude_kmh, self.speed.mean_kmh + self.speed.amplitude_kmh
+        if self.vehicle.manoeuvre not in SINE_SPEED:  # held at the mean speed
+            lo = hi = self.speed.mean_kmh
         if lo < self.vehicle.vx_min_kmh or hi > self.vehicle.vx_max_kmh:
             raise ValueError(
-                f"speed: profile spans [{lo}, {hi}] km/h, outside the model's "
-                f"[{self.vehicle.vx_min_kmh}, {self.vehicle.vx_max_kmh}] km/h"
+                f"speed: manoeuvre {self.vehicle.manoeuvre!r}: its speed reference spans [{lo}, {hi}] km/h, "
+                f"outside the model's [{self.vehicle.vx_min_kmh}, {self.vehicle.vx_max_kmh}] km/h"
             )
 
 
@@ -348,6 +414,10 @@ class Scenario:
     steer_high: float
     nodes: list[NodeConfig]
     loss: LinkLoss = dataclasses.field(default_factory=LinkLoss)
+    plant: PlantKind = "ts"
+    vehicle_id: int = 2  # CommonRoad parameters_vehicle<N> (a nonlinear plant only)
+    manoeuvre: ManoeuvreName = "paper"
+    uncertainty: ModelUncertainty | None = None  # declared bound on e_k (None: e_k = 0 is assumed)
 
     def node(self, node_id: int) -> NodeConfig:
         n = self._by_id.get(node_id)
@@ -364,7 +434,24 @@ class Scenario:
         return list(self._by_id)
 
     def vx(self, k: int) -> float:
+        """The speed reference at step k [m/s] (the T-S plant's Vx_k itself)."""
         return self.speed.kmh(k * self.tau_s) * KMH
+
+    def speed_plausible(self, k: int, vx: float) -> bool:
+        """Whether Vx_k can be the truth's: the reference itself (T-S plant) or inside the model's range."""
+        if self.plant == "ts":
+            return vx == self.vx(k)
+        return self.model.params.vx_min <= vx <= self.model.params.vx_max
+
+    @property
+    def mismatch_generators(self) -> np.ndarray:
+        """(NX, q) generators of the declared model mismatch, e ∈ G·[−1, 1]^q (an ellipsoid's G spans a box
+        around it: sound for the linear set estimators; the SDP and ``exact`` use the ellipsoid itself)."""
+        return self.uncertainty.G if self.uncertainty is not None else np.zeros((2, 0))
+
+    def steering_range(self) -> tuple[float, float]:
+        """Every steering angle the manoeuvre can command."""
+        return steering_range(self.manoeuvre, self.steer_low, self.steer_high)
 
     def fault_bounded(self, mode: FaultBoundsMode) -> tuple[int, ...]:
         """Nodes whose declared fault bounds an analysis applies: ``used`` — where an estimator relies
@@ -454,10 +541,11 @@ def load_profile(path: Path) -> NodeProfile:
 
 
 def load_topology(
-    path: str | Path, case: Case | None = None, steps: int | None = None, estimator: str | None = None
-) -> Scenario:
+    path: str | Path, case: Case | None = None, steps: int | None = None, estimator: str | None = None,
+    manoeuvre: str | None = None,
+) -> Scenario:  # fmt: skip
     """Read and validate a topology (a path, or the name of a bundled one such as ``paper6``) and its node
-    profiles; ``case``/``steps``/``estimator`` (every node's) override the file."""
+    profiles; ``case``/``steps``/``estimator`` (every node's)/``manoeuvre`` override the file."""
     path = resolve_topology(path)
     if not path.exists():
         raise ConfigError(f"{path}: file not found (bundled topologies: {', '.join(bundled_topologies())})")
@@ -467,17 +555,22 @@ def load_topology(
         raise ConfigError(f"{path}: steps must be ≥ 1, got {steps}")
     if estimator is not None and estimator not in NODE_ESTIMATOR_NAMES:
         raise ConfigError(f"estimator must be one of {', '.join(NODE_ESTIMATOR_NAMES)}, got {estimator!r}")
-    topo = _validated(path, _read_toml(path), TopologyFile)
+    data = _read_toml(path)
+    if manoeuvre is not None:  # validated with the file: the speed range depends on the manoeuvre
+        vehicle = data.get("vehicle", {})
+        if isinstance(vehicle, dict):  # anything else fails validation as it is
+            data["vehicle"] = {**vehicle, "manoeuvre": manoeuvre}
+    topo = _validated(path, data, TopologyFile)
     case = case or topo.case
     try:
         node_dir = (path.parent / topo.node_dir).resolve()
     except (RuntimeError, OSError, ValueError) as exc:  # a symlink loop, a NUL byte
         raise ConfigError(f"{path}: node_dir {topo.node_dir!r}: {exc}") from None
     v = topo.vehicle
-    params = VehicleParams(
-        m=v.m, Jz=v.Jz, lf=v.lf, lr=v.lr, cf=v.cf, cr=v.cr, fw=v.fw, lw=v.lw,
-        vx_min=v.vx_min_kmh * KMH, vx_max=v.vx_max_kmh * KMH,
-    )  # fmt: skip
+    try:
+        params = v.params()
+    except PlantUnavailable as exc:
+        raise ConfigError(f"{path}: vehicle.plant = {v.plant!r}: {exc}") from None
     nodes = []
     for ref in topo.nodes:
         ppath = node_dir / f"{ref.profile}.toml"
@@ -518,9 +611,16 @@ def load_topology(
         W=topo.W,
         model=TSModel.build(params, topo.tau_s),
         x0=np.array(v.x0, dtype=float),
-        speed=SpeedProfile(topo.speed.mean_kmh, topo.speed.amplitude_kmh, topo.speed.period_s),
+        # the speed reference: the sine profile, or its mean held (models/manoeuvres.py)
+        speed=SpeedProfile(
+            topo.speed.mean_kmh, topo.speed.amplitude_kmh if v.manoeuvre in SINE_SPEED else 0.0, topo.speed.period_s
+        ),
         steer_low=topo.steering.low,
         steer_high=topo.steering.high,
         nodes=nodes,
         loss=topo.loss,
+        plant=v.plant,  # type: ignore[arg-type]  (checked by VehicleSpec)
+        vehicle_id=v.vehicle,
+        manoeuvre=v.manoeuvre,  # type: ignore[arg-type]
+        uncertainty=topo.model_uncertainty.build() if topo.model_uncertainty is not None else None,
     )

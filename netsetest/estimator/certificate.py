@@ -15,6 +15,7 @@ import numpy as np
 
 from netsetest.estimator.problem import OwnUpdate
 from netsetest.models.sensor import NA, NX
+from netsetest.models.uncertainty import ModelUncertainty
 from netsetest.models.vehicle import TSModel
 
 
@@ -108,11 +109,14 @@ def publishable(xhat: np.ndarray, P: np.ndarray) -> bool:
     return bool(eig[0] > 0 and eig[-1] <= COND_MAX * eig[0])
 
 
-def fallback_shape(Mi: np.ndarray, own: OwnUpdate, W: float, alpha: np.ndarray, model: TSModel) -> np.ndarray:
+def fallback_shape(
+    Mi: np.ndarray, own: OwnUpdate, W: float, alpha: np.ndarray, model: TSModel, uncertainty: ModelUncertainty | None = None
+) -> np.ndarray:
     """A guaranteed shape without the solver: L = 0 and an outer ellipsoid of a Minkowski sum.
 
     e⁺ = T Ā ρ^½ M z + T D̄ w − G Dv v⁺ − G γ⁺ φ⁺ with |z| ≤ 1, |w| ≤ √W, |v⁺| ≤ √R and, under the sector
-    assumption |C̄ x̄⁺| ≤ r_max/h1, |φ⁺| ≤ (1 − h1) r_max.  For terms F_k ξ_k with |ξ_k| ≤ 1 the sum lies
+    assumption |C̄ x̄⁺| ≤ r_max/h1, |φ⁺| ≤ (1 − h1) r_max; plus T [G; 0] ζ for a declared model mismatch
+    (one term per ball of ζ, docs/plant.md).  For terms F_k ξ_k with |ξ_k| ≤ 1 the sum lies
     in {e: eᵀ(Σ F_kF_kᵀ/p_k)⁻¹e ≤ 1} for any p_k > 0 with Σ p_k = 1; p_k ∝ ‖F_k‖_F minimises the trace.
 
     Computed scale-free (each term divided by its largest entry before squaring) so that magnitudes up to
@@ -125,6 +129,10 @@ def fallback_shape(Mi: np.ndarray, own: OwnUpdate, W: float, alpha: np.ndarray, 
     abar[:NX, :NX] = a
     dbar = np.r_[d[:, 0], 0.0]
     terms = [T @ abar @ Mi, (T @ dbar * np.sqrt(W))[:, None], G * sensor.Dv * np.sqrt(sensor.R)]
+    if uncertainty is not None:
+        ebar = np.zeros((NA, NX))
+        ebar[:NX] = uncertainty.G
+        terms += [T @ ebar[:, list(ball)] for ball in uncertainty.balls]
     if sensor.saturated:
         terms.append(G * gamma_new * (1.0 - sensor.h1) * sensor.r_max)
     if not all(np.all(np.isfinite(f)) for f in terms):

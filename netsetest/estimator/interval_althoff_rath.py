@@ -106,7 +106,7 @@ class IntervalObserver(SetEstimator):
         if two_sided:
             phi = self.T_x @ a @ np.eye(NX, NA)
             shift = self.T_x @ b[:, 0] * u + self.G_r * (lo + hi) / 2
-            gens = np.column_stack([self.T_x @ d[:, 0] * sq_w, self.G_r * (hi - lo) / 2])
+            gens = np.column_stack([self.T_x @ d[:, 0] * sq_w, self.T_x @ self.sc.mismatch_generators, self.G_r * (hi - lo) / 2])
             return phi, shift, gens
         n = self.node
         phi = np.zeros((NA, NA))
@@ -117,7 +117,8 @@ class IntervalObserver(SetEstimator):
             fault_gen = n.fault_rate
         else:
             fault_gen = n.fault_size  # type: ignore[assignment]  # bounded: one is declared
-        gens = np.column_stack([np.r_[d[:, 0] * sq_w, 0.0], fault_gen * _E3])
+        e_gens = np.vstack([self.sc.mismatch_generators, np.zeros((1, self.sc.mismatch_generators.shape[1]))])
+        gens = np.column_stack([np.r_[d[:, 0] * sq_w, 0.0], e_gens, fault_gen * _E3])
         return phi, shift, gens
 
     def _publish(self) -> Box:

@@ -15,7 +15,8 @@ from typing import Literal, Protocol
 import numpy as np
 
 from netsetest.estimator.sector import Sector
-from netsetest.models.sensor import NA, Sensor
+from netsetest.models.sensor import NA, NX, Sensor
+from netsetest.models.uncertainty import ModelUncertainty
 
 PatternKey = tuple[frozenset[int], bool, bool]
 """Which η slots exist this step: (neighbours with a φ slot, φ⁺ exists, predict (False: step 0))."""
@@ -38,9 +39,13 @@ class FactInfo:
 class EtaLayout:
     """Slot indices of η for node i and its in-neighbours N_i (fixed by the topology)."""
 
-    def __init__(self, node_id: int, neighbours: dict[int, Sensor], own: Sensor, W: float = 1.0, predict: bool = True) -> None:
+    def __init__(
+        self, node_id: int, neighbours: dict[int, Sensor], own: Sensor, W: float = 1.0, predict: bool = True,
+        uncertainty: ModelUncertainty | None = None,
+    ) -> None:  # fmt: skip
         """``saturated`` of each sensor says whether it has a φ slot; ``predict`` False: the step-0 update
-        (the prior updated by the own measurement through the self slot: no w, v⁺ or φ⁺)."""
+        (the prior updated by the own measurement through the self slot: no w, e, v⁺ or φ⁺); ``uncertainty``:
+        the declared model mismatch e = G ζ (one ζ slot per column of G, after w; None: no e slots)."""
         self.node_id = node_id
         self.neigh = list(neighbours)  # j ∈ N_i in a fixed order (may include i)
         idx = 1
@@ -53,6 +58,10 @@ class EtaLayout:
         self.w: int | None = None
         if predict:
             self.w, idx = idx, idx + 1
+        self.e: list[int] = []
+        if predict and uncertainty is not None:
+            self.e = list(range(idx, idx + NX))
+            idx += NX
         self.v: dict[int, int] = {}
         for j in self.neigh:
             self.v[j], idx = idx, idx + 1
@@ -72,6 +81,8 @@ class EtaLayout:
         facts += [FactInfo("ball", (self.s[j],)) for j in self.s]
         if self.w is not None:
             facts.append(FactInfo("ball", (self.w,), W))
+        if self.e:  # 1 − ‖ζ_ball‖² per ball of the mismatch bound (a box: one per component)
+            facts += [FactInfo("ball", tuple(self.e[m] for m in ball)) for ball in uncertainty.balls]  # type: ignore[union-attr]
         facts += [FactInfo("ball", (self.v[j],), neighbours[j].R) for j in self.v]
         if self.v_new is not None:
             facts.append(FactInfo("ball", (self.v_new,), own.R))
@@ -80,7 +91,7 @@ class EtaLayout:
                 r_slots = tuple(self.z) if j == node_id else (self.s[j],)
                 facts.append(FactInfo("sector", (self.phi[j],), support=(0, *r_slots)))
         if self.phi_new is not None:
-            facts.append(FactInfo("sector", (self.phi_new,), support=(0, *self.z, self.w, self.v_new, self.phi_new)))
+            facts.append(FactInfo("sector", (self.phi_new,), support=(0, *self.z, self.w, *self.e, self.v_new, self.phi_new)))
         self.facts = facts
         self.n_facts = len(facts)
         # slots whose column of Π₀ is zero in every rule: they enter e⁺ only through L ℓᵀη

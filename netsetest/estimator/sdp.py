@@ -70,6 +70,7 @@ from netsetest.estimator.sector import (
 )  # fmt: skip
 from netsetest.extras import require
 from netsetest.models.sensor import NA, NX, Sensor
+from netsetest.models.uncertainty import ModelUncertainty
 from netsetest.models.vehicle import N_RULES, TSModel
 
 Variant = Literal["scheduled", "per-rule"]
@@ -200,6 +201,7 @@ class LocalEstimator:
         backend: Backend = "clarabel",
         fault_bound: FaultBound = FaultBound(),
         objective: Objective = DEFAULT_OBJECTIVE,
+        uncertainty: ModelUncertainty | None = None,
     ) -> None:
         if variant not in ("scheduled", "per-rule"):
             raise ValueError(f"variant must be 'scheduled' or 'per-rule', got {variant!r}")
@@ -211,6 +213,7 @@ class LocalEstimator:
             require("cvxpy", "the cvxpy estimator backend")  # at construction, not at the first solve
         self.node_id, self.own, self.model, self.W, self.variant = node_id, own, model, W, variant
         self.backend, self.fault_bound, self.objective = backend, fault_bound, objective
+        self.uncertainty = uncertainty  # declared model mismatch e = G ζ (docs/plant.md); None: e = 0
         self.observer: StepObserver | None = None  # a recorder of every step (bench, tests); never changes a result
         self.sensors = neighbours
         self.weights = weights
@@ -223,6 +226,9 @@ class LocalEstimator:
         self._bbar[:, :NX] = model.B[:, :, 0]
         self._dbar = np.zeros((nr, NA))
         self._dbar[:, :NX] = model.Dw[:, :, 0]
+        self._ebar = np.zeros((NA, NX))  # [G; 0]: e enters the state rows only
+        if uncertainty is not None:
+            self._ebar[:NX] = uncertainty.G
         self._cbar = {j: s.Cbar for j, s in neighbours.items()} | {node_id: own.Cbar}
         self._own_cbar = own.Cbar
         self._gains: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
@@ -242,7 +248,7 @@ class LocalEstimator:
             else:  # step 0: the prior and the own measurement, through the self slot
                 sens = {self.node_id: dataclasses.replace(self.own, saturated=self.node_id in phi_from)}
             own = dataclasses.replace(self.own, saturated=phi_new)
-            lay = EtaLayout(self.node_id, sens, own, self.W, predict)
+            lay = EtaLayout(self.node_id, sens, own, self.W, predict, self.uncertainty)
             balls = []
             for f in lay.facts:
                 if f.kind == "ball":
@@ -286,7 +292,9 @@ class LocalEstimator:
             return None, None
         a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
         meas = measurement_interval(self.own, inp.y, inp.gamma)
-        prop = propagated_interval(self.own, self.fault_bound, prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W)
+        prop = propagated_interval(
+            self.own, self.fault_bound, prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W, self.uncertainty
+        )
         sector = derive_sector(self.own, self.fault_bound, meas, prop)
         if sector is None or not sector.has_phi or sector.basis == "assumed":
             return sector, None
@@ -351,6 +359,8 @@ class LocalEstimator:
             pi0 = np.zeros((N_RULES, NA, d))
             pi0[:, :, lay.z] = T @ self._abar @ Mi  # per rule ℓ: T Ā_ℓ ρ_i^½ M_i z_i
             pi0[:, :, lay.w] = self._dbar @ T.T  # T D̄_ℓ w
+        if lay.e:
+            pi0[:, :, lay.e] = T @ self._ebar  # T [G; 0] ζ: the model mismatch e (every rule: e is of the blend)
         pi0[:, :, lay.v_new] = -g * dv_new  # − G Dv_i v⁺
         if lay.phi_new is not None:
             pi0[:, :, lay.phi_new] = -g * gamma_new  # − G γ⁺ φ⁺
@@ -364,6 +374,8 @@ class LocalEstimator:
         g_new[0] = cbar @ x_pred
         g_new[lay.z] = cbar @ TA @ Mi
         g_new[lay.w] = cbar @ Td
+        if lay.e:
+            g_new[lay.e] = cbar @ T @ self._ebar
         g_new[lay.v_new] = -cg * dv_new
         g_new[lay.phi_new] = -cg * gamma_new
         return pi0, x_pred, _sector(d, lay.phi_new, g_new, sector.h)  # type: ignore[union-attr]  φ⁺ (h r⁺ − φ⁺) ≥ 0
@@ -434,7 +446,7 @@ class LocalEstimator:
         n = scenario.node(node_id)
         return cls(
             node_id, n.sensor, {j: scenario.node(j).sensor for j in n.in_weights}, n.in_weights, scenario.model, scenario.W,
-            variant, backend, FaultBound(n.fault_rate, n.fault_size), objective,
+            variant, backend, FaultBound(n.fault_rate, n.fault_size), objective, scenario.uncertainty,
         )  # fmt: skip
 
     def step(self, prev: Ellipsoid, inp: StepInput) -> StepResult:
@@ -455,7 +467,7 @@ class LocalEstimator:
         if res is not None:
             return res
         assert data.own is not None  # a predicting step always has its own update
-        P_fb = fallback_shape(data.Mi, data.own, self.W, inp.alpha, self.model) / prev.rho
+        P_fb = fallback_shape(data.Mi, data.own, self.W, inp.alpha, self.model, self.uncertainty) / prev.rho
         return self._fallback(data.x_pred.copy(), P_fb, solve, sector)
 
     def first(self, prior: Ellipsoid, y: float, gamma: float) -> StepResult:

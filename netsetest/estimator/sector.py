@@ -30,6 +30,7 @@ from typing import Literal
 import numpy as np
 
 from netsetest.models.sensor import NX, ROUNDING_MARGIN, Sensor
+from netsetest.models.uncertainty import ModelUncertainty
 
 SATURATION_UPPER_SLOPE = 1.0  # sup σ(r)/r of a saturation: the exact h2
 SectorBasis = Literal["none", "measurement", "fault-bound", "assumed"]
@@ -94,18 +95,21 @@ def _support(g: np.ndarray, P: np.ndarray, rho: float) -> float:
 
 def propagated_interval(
     sensor: Sensor, bound: FaultBound, xhat: np.ndarray, P: np.ndarray, rho: float,
-    a: np.ndarray, b: np.ndarray, d: np.ndarray, u: float, W: float,
+    a: np.ndarray, b: np.ndarray, d: np.ndarray, u: float, W: float, uncertainty: ModelUncertainty | None = None,
 ) -> Interval:  # fmt: skip
     """r⁺ = C(a x + b u + d w) + Ds f⁺ over x̄ in the ellipsoid of step k, w² ≤ W, f⁺ by the fault bound.
 
     ``a``, ``b``, ``d``: the step's blended Ā (2×2), B̄, D̄ (2,).  Rate: r⁺ = (gₓ + Ds e₃)ᵀx̄ + C b u
-    + C d w + Ds(f⁺ − f), one support function over the joint set (x and f correlated).  Size:
-    r⁺ = gₓᵀx̄ + C b u + C d w + Ds f⁺ with |f⁺| ≤ F.  Both hold; the result is their intersection.
+    + C d w + C e + Ds(f⁺ − f), one support function over the joint set (x and f correlated).  Size:
+    r⁺ = gₓᵀx̄ + C b u + C d w + C e + Ds f⁺ with |f⁺| ≤ F.  Both hold; the result is their intersection.
+    (e: the declared model mismatch, docs/plant.md; its support function adds to the wind's.)
     """
     C, Ds = sensor.C, sensor.Ds
     gx = np.r_[a.T @ C, 0.0]
     centre_u = float(C @ b) * u
     wind = abs(float(C @ d)) * math.sqrt(W)
+    if uncertainty is not None:
+        wind += uncertainty.support(C)
     out = UNBOUNDED
     if bound.rate is not None:
         g = gx + np.r_[np.zeros(NX), Ds]

@@ -58,7 +58,8 @@ def augmented_step(scenario: Scenario, node: NodeConfig, u: float, vx: float) ->
         fault_gen = node.fault_rate
     else:
         fault_gen = node.fault_size  # type: ignore[assignment]  # fault_model_required checked it
-    gens = np.column_stack([np.r_[d[:, 0] * np.sqrt(scenario.W), 0.0], fault_gen * _E3])
+    e_gens = np.vstack([scenario.mismatch_generators, np.zeros((1, scenario.mismatch_generators.shape[1]))])
+    gens = np.column_stack([np.r_[d[:, 0] * np.sqrt(scenario.W), 0.0], e_gens, fault_gen * _E3])
     return AugmentedStep(A, np.r_[b[:, 0] * u, 0.0], gens)
 
 

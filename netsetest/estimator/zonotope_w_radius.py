@@ -170,7 +170,9 @@ class ZonotopeEstimator(SetEstimator):
         z, sq_w = self.set.zonotope, np.sqrt(self.sc.W)
         L = self.T_x @ a @ np.eye(NX, NA)
         center = L @ z.center + self.T_x @ bu + self.G_r * (lo + hi) / 2
-        gens = np.hstack([L @ z.generators, (self.T_x @ d * sq_w)[:, None], (self.G_r * (hi - lo) / 2)[:, None]])
+        gens = np.hstack([
+            L @ z.generators, (self.T_x @ d * sq_w)[:, None], self.T_x @ self.sc.mismatch_generators, (self.G_r * (hi - lo) / 2)[:, None],
+        ])  # fmt: skip
         return SumSet(Zonotope(center, gens), L @ self.set.M, self.set.sliced)  # type: ignore[operator]
 
     def _bounded_step(self, a: np.ndarray, bu: np.ndarray, d: np.ndarray, y: float, gamma: float) -> SumSet:
@@ -189,10 +191,12 @@ class ZonotopeEstimator(SetEstimator):
             lift[:NA] = self.T_x @ a @ np.eye(NX, NA)
             shift[:NA] = self.T_x @ bu + self.G_r * (lo + hi) / 2
             extra += [np.r_[self.T_x @ d * sq_w, 0.0], np.r_[self.G_r * (hi - lo) / 2, 0.0]]
+            extra += [np.r_[self.T_x @ g, 0.0] for g in self.sc.mismatch_generators.T]
         else:
             lift[:NX, :NX] = a
             shift[:NX] = bu
             extra.append(np.r_[d * sq_w, 0.0, 0.0])
+            extra += [np.r_[g, 0.0, 0.0] for g in self.sc.mismatch_generators.T]
             if n.fault_rate is not None:
                 lift[2, 2] = 1.0  # f⁺ = f + δ s
                 extra.append(n.fault_rate * np.eye(NA + 1)[2])

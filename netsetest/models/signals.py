@@ -9,12 +9,14 @@ Two signal families for w and v (selected per run, seeded):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
 SignalKind = Literal["paper", "worst"]
+SIGNAL_KINDS: tuple[SignalKind, ...] = ("paper", "worst")
 
 
 @dataclass(frozen=True)
@@ -68,6 +70,11 @@ class SpeedProfile:
 
     def kmh(self, t: float) -> float:
         return self.mean_kmh + self.amplitude_kmh * np.sin(2 * np.pi * t / self.period_s)
+
+    def ms(self, t: float) -> tuple[float, float]:
+        """(Vx, dVx/dt) at t in m/s and m/s² (a plant's speed reference)."""
+        w = 2 * math.pi / self.period_s
+        return (self.mean_kmh + self.amplitude_kmh * math.sin(w * t)) / 3.6, self.amplitude_kmh * w * math.cos(w * t) / 3.6
 
 
 class ExogenousSignals:

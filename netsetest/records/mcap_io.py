@@ -103,7 +103,10 @@ SCHEMAS: dict[str, dict[str, Any]] = {
          "r": {**_PER_NODE_NUM, "description": "node id → the sensor's true input C̄x̄"},
          "fault_ok": {**_PER_NODE_BOOL, "description": "node id → the declared fault bound held"},
          "lost": {"type": "array", "items": _IDS, "description": "[from j, to i]: j's previous message to i lost"},
-         "alive": _IDS},
+         "alive": _IDS,
+         "e": {"type": ["array", "null"], "items": {"type": "number"},
+               "description": "model mismatch of k → k+1: x_{k+1} − (Ā x_k + B̄ u_k + D̄ w_k) [rad, rad/s]; null after the last step"},
+         "mismatch_ok": {**_BOOL, "description": "e_k within the declared [model_uncertainty] (none declared: e_k = 0)"}},
         ["step", "x", "faults"],
     ),
     "netsetest.NodeInput": _schema(

@@ -14,7 +14,7 @@ step::
 ``meta``: run settings (topology, case, signals, variant, seed, steps, tau_s, mode, clock, node ids,
 in-neighbour weights {i: {j: a_ij}}, run id).  Truth entry of step k: x = [β, r], faults {i: f_i}, u,
 w, vx, noise {i}, gamma {i}, y {i}, y_nofault {i}, sector_ok {i}, r {i} = C̄x̄, fault_ok {i}, noise_ok {i},
-dist_ok, lost [[j, i]], alive [i], drops {reason: n}.  State entry: step, xhat [3], P [9, row-major], rho,
+dist_ok, lost [[j, i]], alive [i], drops {reason: n}, e [2] | null (model mismatch of k → k+1), mismatch_ok.  State entry: step, xhat [3], P [9, row-major], rho,
 status, rho_cert, solve_ms, used, missing, late, dropped, drops {reason: n}, sector [h1, h] | null,
 sector_basis, E = eᵀP⁻¹e (null when the truth of the step is unknown), contained
 (E ≤ rho; for a node running a set estimator: the truth in its published set, whose per-coordinate

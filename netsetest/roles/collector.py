@@ -56,7 +56,7 @@ from netsetest.messages import End, Message, NodeState, RunScope, Truth, state_d
 from netsetest.models.sensor import augmented
 from netsetest.records.record import RecordSink
 from netsetest.records.summary import RUN_FIELDS, InheritedOrigin, NodeSummary, RunSummary
-from netsetest.roles.vehicle import fault_bound_holds
+from netsetest.roles.vehicle import fault_bound_holds, mismatch_holds
 from netsetest.sets import set_from_wire
 
 WINDOW = 50  # steps a step may stay open behind the newest truth (bounds memory against a stalled node)
@@ -70,6 +70,7 @@ TRUTH_UNKNOWN = "truth unknown"  # no single consistent truth of that step: noth
 NOT_FROM_INPUT = "not from its true input"  # its γ or innovation is not what the true measurement gives
 MISSED = "missed the truth"
 NOT_JUDGED = "not judged"  # no copy with that digest reached the collector, or several matched the truth
+MODEL_MISMATCH = "model mismatch"  # e_k outside the declared [model_uncertainty] (docs/plant.md)
 INHERITED = "inherited"  # the cause of a node-step whose input failed: its Origin says which and why
 
 
@@ -322,12 +323,16 @@ class Collector:
             expect = sc.x0
         elif prev is not None:
             expect = sc.model.step(np.asarray(prev.x), prev.u, prev.w, prev.vx)
+            if prev.e is not None:  # the plant's model mismatch of k−1 → k (docs/plant.md)
+                expect = expect + np.asarray(prev.e)
         else:
             expect = None  # the previous truth is unknown: x cannot be checked, the rest can
         if expect is not None and not np.allclose(x, expect, rtol=CHAIN_RTOL, atol=1e-300):
             return "truth-not-from-model"
-        if not np.isclose(t.vx, sc.vx(k), rtol=CHAIN_RTOL, atol=0.0):
+        if sc.plant == "ts" and not np.isclose(t.vx, sc.vx(k), rtol=CHAIN_RTOL, atol=0.0):
             return "truth-speed"
+        if sc.plant != "ts" and not sc.speed_plausible(k, t.vx):
+            return "truth-speed"  # a plant's Vx is its own, but always inside the model's range
         for n in sc.nodes:
             s = str(n.id)
             f = n.fault(k)
@@ -343,6 +348,8 @@ class Collector:
             if t.noise_ok[s] != bool(t.noise[s] * t.noise[s] <= n.sensor.R * (1 + 1e-12)):
                 return "truth-flags"
         if t.dist_ok != bool(t.w * t.w <= sc.W * (1 + 1e-12)):
+            return "truth-flags"
+        if t.e is not None and t.mismatch_ok != mismatch_holds(sc, np.asarray(t.e)):
             return "truth-flags"
         return None
 
@@ -456,6 +463,8 @@ class Collector:
             return TRUTH_UNKNOWN
         if not prev.dist_ok:
             return "disturbance"
+        if not prev.mismatch_ok:
+            return MODEL_MISMATCH
         return None
 
     def _cone(self, n: NodeConfig, k: int, checks: dict[int, dict[str, CopyCheck]], sole: dict[int, str]) -> Cone:

@@ -225,9 +225,10 @@ class Node:
         if msg.step > 0:
             if msg.u_prev is None or msg.vx_prev is None:
                 return "input-incomplete"
-            if not sc.steer_low <= msg.u_prev <= sc.steer_high:
+            lo, hi = sc.steering_range()
+            if not lo <= msg.u_prev <= hi:
                 return "input-steering"
-            if msg.vx_prev != sc.vx(msg.step - 1):  # the speed profile is part of the scenario
+            if not sc.speed_plausible(msg.step - 1, msg.vx_prev):  # the speed profile is part of the scenario
                 return "input-speed"
         g = self.cfg.gamma_range if sc.case == "saim" else (1.0, 1.0)
         if g is not None and not g[0] * (1 - GAMMA_RTOL) <= msg.gamma <= g[1] * (1 + GAMMA_RTOL):

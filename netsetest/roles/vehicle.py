@@ -2,8 +2,10 @@
 
 Step k: the vehicle draws u_k, w_k, v_i,k, γ_i,k, computes ỹ_i,k and publishes to node i a
 :class:`NodeInput` (ỹ_i,k, γ_i,k, u_{k−1}, Vx_{k−1}, which neighbour messages of step k−1 to expect),
-and to the collector a :class:`Truth` (x_k, f_i,k, assumption flags, scheduled losses).  It then
-advances x_{k+1} = Σ α_ℓ(Vx_k)(A_ℓ x_k + B_ℓ u_k + Dw_ℓ w_k)  (8).
+and to the collector a :class:`Truth` (x_k, f_i,k, assumption flags, scheduled losses, and the model
+mismatch e_k of the step to come).  The plant (models/plant.py: the T-S model (8) itself by default, or a
+nonlinear CommonRoad car) then advances to x_{k+1} under the manoeuvre's steering (models/manoeuvres.py)
+and the wind; e_k = x_{k+1} − (Ā_k x_k + B̄_k u_k + D̄_k w_k) with the matrices of the published Vx_k.
 
 Lockstep: the next step is published once every alive node has published its step-k state (the
 runtime decides what to do with nodes that stay silent).  Real time: the runtime calls
@@ -25,8 +27,16 @@ from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import NodeConfig, Scenario
 from netsetest.messages import End, Message, NodeInput, NodeState, RunScope, Truth
+from netsetest.models.drive import Drive
 from netsetest.models.sensor import augmented
-from netsetest.models.signals import ExogenousSignals, SignalKind
+from netsetest.models.signals import SignalKind
+
+
+def mismatch_holds(sc: Scenario, e: np.ndarray) -> bool:
+    """e_k inside the declared [model_uncertainty] (none declared: the model is exact, e_k = 0)."""
+    if sc.uncertainty is None:
+        return bool(np.all(np.asarray(e) == 0.0))
+    return sc.uncertainty.holds(np.asarray(e))
 
 
 def fault_bound_holds(n: NodeConfig, k: int) -> bool:
@@ -72,17 +82,7 @@ class Vehicle:
         self.sc, self.bus, self.run = scenario, bus, run_id
         # lockstep: a node not heard at step k is dead; real time: not heard for dead_after_steps steps
         self.realtime, self.dead_after = realtime, dead_after_steps
-        self.signals = ExogenousSignals(
-            signals,
-            seed,
-            scenario.steer_low,
-            scenario.steer_high,
-            scenario.W,
-            [n.sensor.R for n in scenario.nodes],
-            [n.noise_frequency for n in scenario.nodes],
-            [n.gamma_range for n in scenario.nodes] if scenario.case == "saim" else None,
-            scenario.tau_s,
-        )
+        self.drive = Drive(scenario, signals, seed)
         self.losses = LossSchedule(scenario, seed)
         self.x = scenario.x0.copy()
         self.k = -1  # last published step
@@ -144,15 +144,14 @@ class Vehicle:
                 self.bus.publish(keys.end(self.run), End(steps=self.sc.steps))
                 self.done = True
                 return
-            self.x = self.sc.model.step(self.x, self.u, self.w, self.vx)
         self.k += 1
         self._publish_step(self.k)
 
     def _publish_step(self, k: int) -> None:
         sc = self.sc
         u_prev, vx_prev = (self.u, self.vx) if k > 0 else (None, None)
-        self.u, self.w, v, gamma = self.signals.draw(k)
-        self.vx = sc.vx(k)
+        d = self.drive.step(k)
+        self.x, self.u, self.w, self.vx, v, gamma, e = d.x, d.u, d.w, d.vx, d.v, d.gamma, d.e
         lost = self.losses.lost_at(k) if k > 0 else []
         deadline = time.time() + sc.tau_s if self.realtime else None
         y, y0, faults, sector_ok, noise_ok, r, fault_ok = {}, {}, {}, {}, {}, {}, {}
@@ -185,6 +184,7 @@ class Vehicle:
                 gamma={str(n.id): float(gamma[i]) for i, n in enumerate(sc.nodes)},
                 y=s(y), y_nofault=s(y0), sector_ok=s(sector_ok), noise_ok=s(noise_ok), r=s(r), fault_ok=s(fault_ok),
                 dist_ok=bool(self.w**2 <= sc.W * (1 + 1e-12)), lost=lost, alive=sorted(self.alive),
-                drops=self.drop_report(),
+                drops=self.drop_report(), e=None if e is None else list(map(float, e)),
+                mismatch_ok=e is None or mismatch_holds(sc, e),
             ),  # fmt: skip
         )

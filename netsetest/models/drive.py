@@ -1,0 +1,68 @@
+"""The truth of one run, step by step: the exogenous signals, the manoeuvre's steering and the plant.
+
+One way to drive the car: the vehicle role publishes what :class:`Drive` produces, and ``netsetest
+calibrate`` (analysis/calibrate.py) measures the model mismatch on exactly the same truth.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from netsetest.config.schema import Scenario
+from netsetest.models.manoeuvres import Manoeuvre
+from netsetest.models.plant import make_plant
+from netsetest.models.signals import ExogenousSignals, SignalKind
+
+
+def scheduled_speed(sc: Scenario, vx: float) -> float:
+    """The Vx a plant's truth publishes for scheduling: its longitudinal speed, held inside the model's range."""
+    p = sc.model.params
+    return min(max(vx, p.vx_min), p.vx_max)
+
+
+@dataclass(frozen=True)
+class DriveStep:
+    """Step k of the truth: x_k, the inputs held over [k, k+1], the sensors' v_k, γ_k, and e_k (None after
+    the last step) = x_{k+1} − (Ā_k x_k + B̄_k u_k + D̄_k w_k) with the matrices of Vx_k."""
+
+    k: int
+    x: np.ndarray  # (NX,)
+    u: float
+    w: float
+    vx: float
+    v: np.ndarray  # (N,) per node in scenario order
+    gamma: np.ndarray  # (N,)
+    e: np.ndarray | None
+
+
+class Drive:
+    """The seeded truth of a run; :meth:`step` is called once per step, in order from 0."""
+
+    def __init__(self, sc: Scenario, signals: SignalKind, seed: int) -> None:
+        self.sc = sc
+        self.signals = ExogenousSignals(
+            signals, seed, sc.steer_low, sc.steer_high, sc.W,
+            [n.sensor.R for n in sc.nodes], [n.noise_frequency for n in sc.nodes],
+            [n.gamma_range for n in sc.nodes] if sc.case == "saim" else None, sc.tau_s,
+        )  # fmt: skip
+        p = sc.model.params
+        self.manoeuvre = Manoeuvre.build(sc.manoeuvre, sc.speed, sc.steer_high, p.lf + p.lr, sc.steps * sc.tau_s)
+        self.plant = make_plant(sc.plant, sc.vehicle_id, sc.model, sc.x0, sc.vx(0), 0.0)
+
+    def step(self, k: int) -> DriveStep:
+        sc = self.sc
+        st = self.plant.state()
+        drawn, w, v, gamma = self.signals.draw(k)  # the draw order of every run: u, w, v, γ
+        u = self.manoeuvre.steer(k * sc.tau_s, st, drawn)
+        vx = sc.vx(k) if sc.plant == "ts" else scheduled_speed(sc, st.vx)
+        e = None
+        if k < sc.steps:  # the transition to k+1 (none after the last step)
+            predicted = sc.model.step(st.x, u, w, vx)
+            self.plant.advance(u, w, k * sc.tau_s, (k + 1) * sc.tau_s, sc.speed)
+            e = self.plant.state().x - predicted
+        return DriveStep(k, st.x, u, w, vx, v, gamma, e)
+
+
+__all__ = ["Drive", "DriveStep", "scheduled_speed"]

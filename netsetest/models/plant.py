@@ -1,0 +1,225 @@
+"""The truth's vehicle: the T-S model itself (``ts``) or a nonlinear CommonRoad vehicle model.
+
+``single-track``: the single-track drift model with Pacejka tyres (``vehicle_dynamics_std``, 9 states);
+``multi-body``: the multi-body model (``vehicle_dynamics_mb``, 29 states); both from the maintained
+``commonroad-vehicle-models`` package (version 3.0.2, the ``plant`` extra), with its vehicles
+``parameters_vehicle1..3``.  They are not re-implemented here: this module only
+
+- holds the steering angle δ_k over the sampling interval (the zero-order hold the estimators assume;
+  the steering-rate input is 0 and the package's steering constraints apply),
+- adds the side wind as a lateral body force f_w·w at lever arm l_w (the force the T-S model's D̄ carries),
+- drives the longitudinal acceleration input to follow the manoeuvre's speed reference
+  (a = ṽ_ref + K_SPEED (v_ref − v)), and
+- integrates between sampling instants with SciPy's adaptive Runge–Kutta 5(4) (``solve_ivp``, RK45) at
+  relative tolerance :data:`RTOL` and absolute tolerance :data:`ATOL`.
+
+The estimators' x = [β, r] is the plant's slip angle at the centre of gravity and yaw rate; the speed the
+vehicle publishes for scheduling is the longitudinal speed Vx = v cos β, held inside the model's
+[vx_min, vx_max] (any difference that makes is model mismatch e_k, bounded and checked like the rest).
+
+:func:`derived_params` gives the T-S model of the same car (docs/plant.md): mass, yaw inertia and axle
+distances of the parameter set, cornering stiffnesses = the Pacejka lateral force's slope at zero slip
+under the static axle load.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal, Protocol
+
+import numpy as np
+
+from netsetest.models.signals import SpeedProfile
+from netsetest.models.vehicle import KMH, TSModel, VehicleParams
+
+PlantKind = Literal["ts", "single-track", "multi-body"]
+PLANTS: tuple[PlantKind, ...] = ("ts", "single-track", "multi-body")
+VEHICLE_IDS = (1, 2, 3)  # CommonRoad parameters_vehicle1..3 (Ford Escort, BMW 320i, VW Vanagon)
+VEHICLE_NAMES = {1: "Ford Escort", 2: "BMW 320i", 3: "VW Vanagon"}
+PACKAGE = "commonroad-vehicle-models"
+PACKAGE_VERSION = "3.0.2"
+RTOL = 1e-8  # solve_ivp's relative tolerance: x_{k+1} to ~1e-9 relative, far below any mismatch bound
+ATOL = 1e-10
+K_SPEED = 2.0  # [1/s] speed-tracking gain of the longitudinal acceleration input
+GRAVITY = 9.81  # [m/s²], the package's value
+
+
+class PlantUnavailable(ImportError):
+    """The ``plant`` extra (commonroad-vehicle-models) is not installed."""
+
+
+def _vehiclemodels():  # noqa: ANN202  (a module)
+    try:
+        import vehiclemodels  # noqa: F401  (the import is the check)
+    except ImportError:
+        raise PlantUnavailable(f"a nonlinear plant needs {PACKAGE}: pip install 'netsetest[plant]'") from None
+    import vehiclemodels as vm
+
+    return vm
+
+
+def vehicle_parameters(vehicle_id: int):  # noqa: ANN201  (the package's VehicleParameters)
+    """CommonRoad's parameter set ``parameters_vehicle<id>``."""
+    _vehiclemodels()
+    from vehiclemodels.vehicle_parameters import setup_vehicle_parameters
+
+    return setup_vehicle_parameters(vehicle_id=vehicle_id)
+
+
+def _cornering_stiffness(tire, f_z: float) -> float:  # noqa: ANN001
+    """−dF_y/dα at α = 0 of the package's Pacejka lateral force at load f_z (central difference)."""
+    from vehiclemodels.utils.tire_model import formula_lateral
+
+    h = 1e-6
+    return -(formula_lateral(h, 0.0, f_z, tire)[0] - formula_lateral(-h, 0.0, f_z, tire)[0]) / (2 * h)
+
+
+def derived_params(vehicle_id: int, fw: float, lw: float, vx_min: float, vx_max: float) -> VehicleParams:
+    """The bicycle-model parameters of CommonRoad vehicle ``vehicle_id`` (docs/plant.md): m, I_z, a, b of
+    the set; c_f, c_r the tyre's slope at zero slip under the static axle loads m g b/(a+b), m g a/(a+b)."""
+    p = vehicle_parameters(vehicle_id)
+    lf, lr, m = float(p.a), float(p.b), float(p.m)
+    fzf, fzr = m * GRAVITY * lr / (lf + lr), m * GRAVITY * lf / (lf + lr)
+    return VehicleParams(
+        m=m, Jz=float(p.I_z), lf=lf, lr=lr,
+        cf=_cornering_stiffness(p.tire, fzf), cr=_cornering_stiffness(p.tire, fzr),
+        fw=fw, lw=lw, vx_min=vx_min, vx_max=vx_max,
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class PlantState:
+    """What the vehicle role reads from a plant at a sampling instant."""
+
+    x: np.ndarray  # (2,) [β, r]
+    speed: float  # v at the centre of gravity [m/s]
+    vx: float  # longitudinal speed v cos β [m/s]
+    pose: tuple[float, float, float]  # X, Y [m], yaw ψ [rad] in the ground frame
+
+
+class Plant(Protocol):
+    def state(self) -> PlantState: ...
+
+    def advance(self, u: float, w: float, t0: float, t1: float, speed: SpeedProfile) -> None:
+        """Hold steering u and wind w over [t0, t1] while following the speed reference."""
+        ...
+
+
+class TSPlant:
+    """The T-S model (8) as the truth, scheduled with the reference speed (the paper's setting; e_k ≡ 0).
+
+    The pose is integrated along (Euler at τs: only a path-following driver reads it)."""
+
+    def __init__(self, model: TSModel, x0: np.ndarray, vx0: float) -> None:
+        self.model, self.x, self.vx = model, np.asarray(x0, dtype=float).copy(), vx0
+        self.pose = (0.0, 0.0, 0.0)
+
+    def state(self) -> PlantState:
+        return PlantState(self.x.copy(), self.vx / math.cos(self.x[0]), self.vx, self.pose)
+
+    def advance(self, u: float, w: float, t0: float, t1: float, speed: SpeedProfile) -> None:
+        X, Y, psi = self.pose
+        tau = t1 - t0
+        v = self.vx / math.cos(self.x[0])
+        self.pose = (X + tau * v * math.cos(psi + self.x[0]), Y + tau * v * math.sin(psi + self.x[0]), psi + tau * self.x[1])
+        self.x = self.model.step(self.x, u, w, self.vx)
+        self.vx = speed.kmh(t1) * KMH  # as Scenario.vx: the paper's run, bit for bit
+
+
+class _CommonRoadPlant:
+    """Shared integration of a CommonRoad model: the wind and speed inputs enter through ``_rhs``."""
+
+    def __init__(self, vehicle_id: int, fw: float, lw: float) -> None:
+        self.p = vehicle_parameters(vehicle_id)
+        self.m, self.Iz = float(self.p.m), float(self.p.I_z)
+        self.fw, self.lw = fw, lw
+        self.s = np.zeros(0)
+        self._f: Callable[[list[float], list[float], object], list[float]]
+
+    def _wind(self, f: list[float], s: np.ndarray, force: float) -> None:
+        raise NotImplementedError
+
+    def advance(self, u: float, w: float, t0: float, t1: float, speed: SpeedProfile) -> None:
+        from scipy.integrate import solve_ivp
+
+        self.s[2] = u  # δ held over the interval (zero-order hold)
+        force = self.fw * w
+        f_model, p, ref = self._f, self.p, speed.ms
+
+        def rhs(tt: float, s: np.ndarray) -> list[float]:
+            v_ref, dv_ref = ref(tt)
+            accel = dv_ref + K_SPEED * (v_ref - s[3])  # s[3]: the speed state of both models
+            f = f_model(s.tolist(), [0.0, accel], p)
+            self._wind(f, s, force)
+            return f
+
+        sol = solve_ivp(rhs, (t0, t1), self.s, method="RK45", rtol=RTOL, atol=ATOL)
+        if not sol.success:
+            raise ArithmeticError(f"the plant's integration failed at t = {t0:.3f} s: {sol.message}")
+        self.s = sol.y[:, -1].copy()
+        self.s[2] = u
+
+
+class SingleTrackPlant(_CommonRoadPlant):
+    """``vehicle_dynamics_std``: states X, Y, δ, v, ψ, ψ̇, β, ω_f, ω_r."""
+
+    def __init__(self, vehicle_id: int, fw: float, lw: float, x0: np.ndarray, vx0: float, delta0: float) -> None:
+        super().__init__(vehicle_id, fw, lw)
+        from vehiclemodels.init_std import init_std
+        from vehiclemodels.vehicle_dynamics_std import vehicle_dynamics_std
+
+        self._f = vehicle_dynamics_std
+        beta0, r0 = float(x0[0]), float(x0[1])
+        self.s = np.array(init_std([0.0, 0.0, delta0, vx0 / math.cos(beta0), 0.0, r0, beta0], self.p), dtype=float)
+
+    def _wind(self, f: list[float], s: np.ndarray, force: float) -> None:
+        # a lateral body force F at lever arm l_w: v̇ += F sin β / m, β̇ += F cos β / (m v), ψ̈ += l_w F / I_z
+        beta, v = s[6], s[3]
+        f[3] += force * math.sin(beta) / self.m
+        f[6] += force * math.cos(beta) / (self.m * v)
+        f[5] += self.lw * force / self.Iz
+
+    def state(self) -> PlantState:
+        s = self.s
+        return PlantState(np.array([s[6], s[5]]), float(s[3]), float(s[3] * math.cos(s[6])), (float(s[0]), float(s[1]), float(s[4])))
+
+
+class MultiBodyPlant(_CommonRoadPlant):
+    """``vehicle_dynamics_mb``: 29 states; x[3] = v_x, x[10] = v_y (body frame), x[5] = ψ̇."""
+
+    def __init__(self, vehicle_id: int, fw: float, lw: float, x0: np.ndarray, vx0: float, delta0: float) -> None:
+        super().__init__(vehicle_id, fw, lw)
+        from vehiclemodels.init_mb import init_mb
+        from vehiclemodels.vehicle_dynamics_mb import vehicle_dynamics_mb
+
+        self._f = vehicle_dynamics_mb
+        beta0, r0 = float(x0[0]), float(x0[1])
+        self.s = np.array(init_mb([0.0, 0.0, delta0, vx0 / math.cos(beta0), 0.0, r0, beta0], self.p), dtype=float)
+
+    def _wind(self, f: list[float], s: np.ndarray, force: float) -> None:
+        # a lateral body force F at lever arm l_w: v̇_y += F / m, ψ̈ += l_w F / I_z
+        f[10] += force / self.m
+        f[5] += self.lw * force / self.Iz
+
+    def state(self) -> PlantState:
+        s = self.s
+        return PlantState(
+            np.array([math.atan2(s[10], s[3]), s[5]]), float(math.hypot(s[3], s[10])), float(s[3]),
+            (float(s[0]), float(s[1]), float(s[4])),
+        )  # fmt: skip
+
+
+def make_plant(kind: PlantKind, vehicle_id: int, model: TSModel, x0: np.ndarray, vx0: float, delta0: float) -> Plant:
+    """The plant a topology names, at the initial state x0 = [β, r], speed vx0, steering δ0."""
+    if kind == "ts":
+        return TSPlant(model, x0, vx0)
+    p = model.params
+    cls = SingleTrackPlant if kind == "single-track" else MultiBodyPlant
+    return cls(vehicle_id, p.fw, p.lw, x0, vx0, delta0)
+
+
+__all__ = [
+    "PLANTS", "Plant", "PlantKind", "PlantState", "PlantUnavailable", "derived_params", "make_plant", "vehicle_parameters",
+]  # fmt: skip
