@@ -94,6 +94,7 @@ class Comparison:
     rows: list[CompareRow]
     bounds: dict[str, dict[int, np.ndarray]]  # first run: estimator → node → (K, 3, 2)
     truth_fault: dict[int, np.ndarray]  # first run: node → (K,)
+    plant: str = "ts"  # what generated the truth (Scenario.plant_label)
 
 
 def _cones(sc: Scenario, rec: Record, assumptions: tuple[str, ...], nodes: list[int]) -> dict[tuple[int, int], str | None]:
@@ -244,7 +245,7 @@ def compare(
                     truth_fault = {i: np.array([t["faults"][str(i)] for t in sorted(rec.truth, key=lambda t: t["step"])]) for i in sc.ids}
     assert sc is not None
     rows = [_row(e, acc[e], e != EXACT) for e in estimators]
-    return Comparison(str(topology), runs, sc.steps, sc.tau_s, rows, first_bounds, truth_fault)
+    return Comparison(str(topology), runs, sc.steps, sc.tau_s, rows, first_bounds, truth_fault, sc.plant_label)
 
 
 def _score_run(sc: Scenario, rec: Record, estimators: tuple[str, ...], acc: dict[str, _Accumulator],
@@ -296,14 +297,14 @@ def _score_run(sc: Scenario, rec: Record, estimators: tuple[str, ...], acc: dict
 
 def comparison_document(c: Comparison) -> list[dict]:
     """The ``--json`` document: one object per row."""
-    return [asdict(r) for r in c.rows]
+    return [asdict(r) | {"plant": c.plant} for r in c.rows]
 
 
 def _fmt(v: float | None, spec: str = ".4f") -> str:
     return "–" if v is None else format(v, spec)
 
 
-TABLE_HEADER = ("estimator", "violations", "misses (broken assumption)", "covered", "fault width", "β width", "r width",
+TABLE_HEADER = ("estimator", "plant", "violations", "misses (broken assumption)", "covered", "fault width", "β width", "r width",
                 "fault/exact", "β, r / exact", "exact with fault bounds", "rms radius rel.", "ms median", "ms p95", "fallbacks")  # fmt: skip
 
 
@@ -313,7 +314,7 @@ def table_rows(c: Comparison) -> list[tuple[str, ...]]:
         broken = ", ".join(f"{k} {v}" for k, v in sorted(r.misses_attributed.items())) or "0"
         name = r.estimator + ("" if r.real_time else " (offline)") + (" [refused some nodes]" if r.refused else "")
         out.append((
-            name, str(r.violations), broken, f"{r.covered}/{r.node_steps}", _fmt(r.fault_width_mean), _fmt(r.beta_width_mean),
+            name, c.plant, str(r.violations), broken, f"{r.covered}/{r.node_steps}", _fmt(r.fault_width_mean), _fmt(r.beta_width_mean),
             _fmt(r.r_width_mean), _fmt(r.ratio_exact, ".3f"), "/".join(_fmt(v, ".3f") for v in r.ratio_exact_state),
             ",".join(r.exact_reference),
             _fmt(r.rms_radius_rel, ".3f"), _fmt(r.ms_median, ".3f"), _fmt(r.ms_p95, ".3f"), str(r.fallbacks),

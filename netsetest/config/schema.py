@@ -444,6 +444,11 @@ class Scenario:
         return self.model.params.vx_min <= vx <= self.model.params.vx_max
 
     @property
+    def plant_label(self) -> str:
+        """The truth's vehicle in a few characters: ``ts``, or e.g. ``single-track/2`` (CommonRoad vehicle 2)."""
+        return self.plant if self.plant == "ts" else f"{self.plant}/{self.vehicle_id}"
+
+    @property
     def mismatch_generators(self) -> np.ndarray:
         """(NX, q) generators of the declared model mismatch, e ∈ G·[−1, 1]^q (an ellipsoid's G spans a box
         around it: sound for the linear set estimators; the SDP and ``exact`` use the ellipsoid itself)."""

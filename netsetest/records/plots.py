@@ -59,6 +59,8 @@ def plot_records(records: list[Record], out_dir: str) -> list[str]:
         prefix = "" if len(records) == 1 else labels[n].replace("/", "_").replace("#", "_") + "_"
         for name, draw in (("fig5_measurements", _fig5), ("fig6_states", _fig6), ("fig7_faults", _fig7)):
             written.append(_save(draw(rec, labels[n]), out / f"{prefix}{name}.png"))
+        if _mismatch(rec) is not None:  # a plant other than the T-S model generated the truth
+            written.append(_save(_fig_mismatch(rec, labels[n]), out / f"{prefix}mismatch.png"))
     written.append(_save(_fig8(records, labels), out / "fig8_E.png"))
     return written
 
@@ -271,6 +273,44 @@ def _spans(steps: np.ndarray, flags: np.ndarray) -> list[tuple[float, float]]:
         else:
             out.append((k - 0.5, k + 0.5))
     return out
+
+
+def _mismatch(rec: Record) -> tuple[np.ndarray, np.ndarray] | None:
+    """Steps and e_k (K, 2) of a record whose truth carries a non-zero model mismatch, else None."""
+    rows = [(e["step"], e["e"]) for e in rec.truth if e.get("e") is not None]
+    if not rows or not any(any(v) for _, v in rows):
+        return None
+    return np.array([k for k, _ in rows], dtype=float), np.array([v for _, v in rows], dtype=float)
+
+
+def _fig_mismatch(rec: Record, label: str) -> Figure:
+    """e_k of the plant against the declared bound: each component with the bound's half-widths (the box
+    itself, or the box around an ellipsoid), and the size of e_k in the bound's own norm (≤ 1 inside)."""
+    steps, e = _mismatch(rec)  # type: ignore[misc]
+    t = steps * float(rec.meta.get("tau_s", 1.0))
+    unc = rec.meta.get("model_uncertainty")
+    fig, axes = plt.subplots(3, 1, figsize=(8, 6.5), sharex=True)
+    fig.suptitle(f"Model mismatch e_k of {rec.meta.get('plant', 'the plant')} against the declared bound ({label})")
+    G = np.asarray(unc["G"], dtype=float) if isinstance(unc, dict) else None
+    for comp, (ax, name) in enumerate(zip(axes[:2], ("e_β [rad]", "e_r [rad/s]"))):
+        ax.plot(t, e[:, comp], color="tab:purple", lw=1.0, label="e_k (plant − T-S model)")
+        if G is not None:
+            radius = float(np.abs(G[comp]).sum()) if unc["kind"] == "box" else float(np.linalg.norm(G[comp]))
+            for sign in (1, -1):
+                ax.axhline(sign * radius, color="0.3", lw=0.9, ls="--", label="declared bound" if sign > 0 else None)
+        ax.set_ylabel(name)
+    if G is not None:
+        zeta = np.linalg.solve(G, e.T)  # e = G ζ
+        size = np.abs(zeta).max(axis=0) if unc["kind"] == "box" else np.sqrt((zeta * zeta).sum(axis=0))
+        axes[2].plot(t, size, color="tab:purple", lw=1.0)
+        axes[2].axhline(1.0, color="tab:red", lw=0.9, ls="--", label="bound (1)")
+        axes[2].set_ylabel("‖G⁻¹e_k‖ (box: ∞-norm)")
+    else:
+        axes[2].text(0.5, 0.5, "no [model_uncertainty] declared: e_k = 0 is assumed", ha="center", transform=axes[2].transAxes)
+    axes[2].set_xlabel("t [s]")
+    _legend(axes[0], fig)
+    fig.tight_layout()
+    return fig
 
 
 def _fig8(records: list[Record], labels: list[str]) -> Figure:

@@ -37,6 +37,8 @@ def run_meta(
         "h1": {str(n.id): n.sensor.h1 for n in scenario.nodes},
         "C": {str(n.id): list(n.sensor.Cbar) for n in scenario.nodes},
         "estimators": {str(n.id): n.estimator for n in scenario.nodes},
+        "plant": scenario.plant_label, "manoeuvre": scenario.manoeuvre,
+        "model_uncertainty": None if (u := scenario.uncertainty) is None else {"kind": u.kind, "G": u.G.tolist()},
         "started_ns": time.time_ns(),  # the run's start on the wall clock (an MCAP record's log times start here)
     }  # fmt: skip
 
