@@ -373,3 +373,13 @@ def test_plant_run_is_the_same_in_memory_and_over_the_drive_twice() -> None:
     a, b = drive_mismatch(sc, "worst", 5), drive_mismatch(sc, "worst", 5)
     assert np.array_equal(a.e, b.e)
     assert dataclasses.replace(sc, plant="ts").plant == "ts"
+
+
+def test_multi_body_plant_runs_and_is_contained() -> None:
+    """The multi-body model as the truth (29 states): its own calibrated bound, 8 steps, every node-step
+    covered and contained."""
+    sc = dataclasses.replace(_car(steps=8), plant="multi-body")
+    cal = calibrate([sc], [0], ["paper"], margin=0.0)
+    s = run_inmemory(with_uncertainty(sc, cal.box), seed=0).summary
+    assert s.violations_total == 0 and s.node_steps_covered == s.node_steps_evaluated == 9 * 6
+    assert np.abs(cal.drives[0].e).max() > 0  # not the T-S model

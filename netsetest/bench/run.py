@@ -34,11 +34,13 @@ QUICK = {
     "scaling_steps": 20, "scaling_sizes": [6, 24, 96], "rt_sizes": [12, 24, 48, 64, 80, 96, 128], "rt_steps": 50, "profile_nodes": 96, "startup_reps": 3,
     "launch_reps": 5,
     "flood_steps": 200, "flood_rate": 30000, "crash_steps": 30, "soak_steps": 2000, "cpu_steps": 400,
+    "plant_steps": 80, "plant_seeds": [10, 11], "plant_lap_steps": 200, "plant_mb_steps": 10,
 }  # fmt: skip
 FULL = {
     "steps": 80, "ref_sched": 80, "ref_rule": 24, "naive": 40, "prev_sched": 80, "prev_rule": 24,
     "scaling_steps": 40, "scaling_sizes": [6, 24, 96], "rt_sizes": [6, 12, 24, 36, 48, 64, 80, 96, 112, 128], "rt_steps": 50, "profile_nodes": 96,
     "startup_reps": 5, "launch_reps": 9, "flood_steps": 400, "flood_rate": 30000, "crash_steps": 60, "soak_steps": 20000, "cpu_steps": 800,
+    "plant_steps": 80, "plant_seeds": list(range(10, 20)), "plant_lap_steps": 600, "plant_mb_steps": 30,
 }  # fmt: skip
 
 
@@ -234,7 +236,11 @@ def tightness(cfg: dict, tmp: Path) -> dict:
     return out
 
 
-def run_bench(quick: bool = False, json_path: str | None = None, markdown_path: str | None = None) -> int:
+def run_bench(
+    quick: bool = False, json_path: str | None = None, markdown_path: str | None = None, only: str | None = None,
+    readme_path: str | None = None,
+) -> int:  # fmt: skip
+    from netsetest.bench.plant import plant_figures, plant_markdown
     from netsetest.bench.zenoh_runs import launch_to_step0, node_memory_profile, node_startup, realtime_ladder, realtime_node_profile
 
     cfg = QUICK if quick else FULL
@@ -242,9 +248,17 @@ def run_bench(quick: bool = False, json_path: str | None = None, markdown_path: 
     res: dict = {
         "meta": {
             "quick": quick, "python": platform.python_version(), "machine": platform.machine(), "cpus": _cpus(),
-            "date": time.strftime("%Y-%m-%d %H:%M:%S"), "config": cfg, "load_before": _load(),
+            "date": time.strftime("%Y-%m-%d %H:%M:%S"), "config": cfg, "load_before": _load(), "only": only,
         }
     }  # fmt: skip
+    if only == "plant":
+        with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
+            res["plant"] = plant_figures(cfg, Path(tmpd))
+        res["meta"]["load_after"] = _load()
+        res["meta"]["duration_s"] = time.perf_counter() - t_all
+        md = f"# netsetest benchmark: a car as the truth ({'quick' if quick else 'full'}, {res['meta']['date']})\n\n" + plant_markdown(res["plant"])
+        _write(res, md, json_path, markdown_path, readme_path)
+        return 0
     with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
         tmp = Path(tmpd)
         _log("paper scenario: per-node per-step times, side by side")
@@ -271,17 +285,25 @@ def run_bench(quick: bool = False, json_path: str | None = None, markdown_path: 
         for p in (res["node_profile"], res["node_profile_trace"]):
             _log(f"  {p['objective']}: {p.get('process_ms_per_step')} ms per node-step, {p['deadline_misses']} deadline misses")
         res["defences"] = defences(cfg)
+        res["plant"] = plant_figures(cfg, tmp)
     res["meta"]["load_after"] = _load()
     res["meta"]["duration_s"] = time.perf_counter() - t_all
     res.update(headline(res))
-    text = json.dumps(res, indent=1, default=_jsonable)
+    md = markdown(res) + "\n## A car as the truth (netsetest/bench/plant.py)\n\n" + plant_markdown(res["plant"])
+    _write(res, md, json_path, markdown_path, readme_path)
+    return 0
+
+
+def _write(res: dict, md: str, json_path: str | None, markdown_path: str | None, readme_path: str | None) -> None:
+    if readme_path:
+        from netsetest.bench.docs import write_readme
+
+        write_readme(readme_path, json.loads(json.dumps(res, default=_jsonable)))  # what the JSON file says
     if json_path:
-        Path(json_path).write_text(text + "\n")
-    md = markdown(res)
+        Path(json_path).write_text(json.dumps(res, indent=1, default=_jsonable) + "\n")
     if markdown_path:
         Path(markdown_path).write_text(md)
     print(md)
-    return 0
 
 
 def headline(res: dict) -> dict:

@@ -18,6 +18,7 @@ from netsetest.analysis.errors import CompareError, ExactError
 from netsetest.cli import checks
 from netsetest.config.schema import ConfigError
 from netsetest.analysis.calibrate import DEFAULT_MARGIN
+from netsetest.bench.sections import SECTIONS
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.models.manoeuvres import MANOEUVRES
 from netsetest.models.signals import SIGNAL_KINDS
@@ -130,6 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="fewer steps and samples (about 10 minutes; default: the full benchmark, about 30)")
     p.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
     p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown (default: none)")
+    p.add_argument("--only", choices=SECTIONS, help="run one part alone: plant = a car as the truth (default: every part)")
+    p.add_argument("--readme", metavar="PATH", help="rewrite the generated section of this README from the figures (default: none)")
 
     from netsetest.cli import compare, tools
 
@@ -324,12 +327,20 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
 
 
 def cmd_bench(a: argparse.Namespace) -> int:
-    require("cvxpy", "the benchmark (its reference formulations)")
+    if a.only is None:
+        require("cvxpy", "the benchmark (its reference formulations)")
     checks.output_file(a.json, "--json")
     checks.output_file(a.markdown, "--markdown")
     from netsetest.bench.run import run_bench
 
-    return run_bench(a.quick, a.json, a.markdown)
+    if a.readme:
+        from netsetest.bench.docs import BEGIN, END
+
+        text = open(a.readme, encoding="utf-8").read() if os.path.isfile(a.readme) else ""
+        if BEGIN not in text or END not in text:  # fail now, not after the benchmark
+            print(f"netsetest bench: --readme {a.readme}: no generated section (markers) in it", file=sys.stderr)
+            return EXIT_BAD_INPUT
+    return run_bench(a.quick, a.json, a.markdown, a.only, a.readme)
 
 
 def cmd_forkserver(a: argparse.Namespace) -> int:
