@@ -19,7 +19,7 @@ from netsetest.runtime.report import exit_code, format_table
 ROOT = Path(__file__).resolve().parents[1]
 TOPOLOGY = str(ROOT / "topologies" / "paper6.toml")
 PNG = b"\x89PNG\r\n\x1a\n"
-FIGS = ("fig5_measurements.png", "fig6_states.png", "fig7_faults.png", "fig8_E.png")
+FIGS = ("fig5_measurements.png", "fig6_states.png", "fig7_faults.png", "fault_detection.png", "fig8_E.png")
 
 
 @pytest.fixture(scope="module")
@@ -214,7 +214,8 @@ def test_inspect_table(nsnim: dict[str, Path], capsys: pytest.CaptureFixture[str
         assert lo == pytest.approx(want["fault_lower"], abs=6e-5)
         assert hi == pytest.approx(want["fault_upper"], abs=6e-5)
         assert E == pytest.approx(want["E"], abs=6e-4)
-        assert r[6] == want["status"]
+        assert r[6] == want["fdi"]  # detected | healthy | undecided (docs/fdi.md)
+        assert r[7] == want["status"]
 
 
 def test_inspect_json(nsnim: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
@@ -259,7 +260,7 @@ def test_plot_one_record(nsnim: dict[str, Path], tmp_path: Path, capsys: pytest.
 def test_plot_two_records(nsnim: dict[str, Path], saim: dict[str, Path], tmp_path: Path) -> None:
     out = tmp_path / "figs"
     assert main(["plot", str(nsnim["record"]), str(saim["record"]), "--out", str(out)]) == 0
-    expected = [out / "fig8_E.png"] + [out / f"{c}_paper_{f}" for c in ("nsnim", "saim") for f in FIGS[:3]]
+    expected = [out / "fig8_E.png"] + [out / f"{c}_paper_{f}" for c in ("nsnim", "saim") for f in FIGS[:4]]
     _assert_pngs(expected)
     assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in expected)
 

@@ -198,12 +198,14 @@ def cmd_inspect(a: argparse.Namespace) -> int:
             print(f"node {i}: fault estimate and bounds f̂ ± √(ρ P33) of its ellipsoid")
         else:  # a set estimator publishes its own set: its bounds are that set's interval hull
             print(f"node {i} ({method}): fault bounds of its published set (interval hull), estimate their midpoint")
-        print(f"{'step':>5} {'f_true':>9} {'f_est':>9} {'lower':>9} {'upper':>9} {'E':>7}  status")
+        print(f"{'step':>5} {'f_true':>9} {'f_est':>9} {'lower':>9} {'upper':>9} {'E':>7}  {'fault':<9}  status")
         for r in rec.fault_rows(i):
             ft = "-" if r["fault_true"] is None else f"{r['fault_true']:9.4f}"
             e = "-" if r["E"] is None else f"{r['E']:7.3f}"
             flag = "  not judged" if not r["judged"] else ("" if r["contained"] else "  MISS")
-            print(f"{r['step']:5d} {ft:>9} {r['fault_estimate']:9.4f} {r['fault_lower']:9.4f} {r['fault_upper']:9.4f} {e:>7}  {r['status']}{flag}")
+            fdi = r["fdi"] or "-"  # detected: the interval excludes 0 (docs/fdi.md)
+            print(f"{r['step']:5d} {ft:>9} {r['fault_estimate']:9.4f} {r['fault_lower']:9.4f} {r['fault_upper']:9.4f} {e:>7}  {fdi:<9}  "
+                  f"{r['status']}{flag}")  # fmt: skip
         print()
     return 0
 

@@ -149,12 +149,15 @@ def _render(table, title: str):  # noqa: ANN001, ANN202 — LiveTable → rich T
     from rich.table import Table
 
     t = Table(title=title)
-    for col in ("node", "step", "status", "fault lower", "fault upper", "E (step)", "ρ", "lost", "missing", "dropped", "deadline"):
+    cols = ("node", "step", "status", "fault lower", "fault upper", "fault", "detected from", "E (step)", "ρ", "lost", "missing",
+            "dropped", "deadline")  # fmt: skip
+    for col in cols:
         t.add_column(col, justify="right")
     for r in table.sorted_rows():
         E = "-" if r.E is None else f"{r.E:.3f} ({r.E_step})"
-        t.add_row(str(r.id), _fmt(r.step, "d"), r.status, _fmt(r.fault_lower, ".4f"), _fmt(r.fault_upper, ".4f"),
-                  E, _fmt(r.rho, ".3g"), str(r.lost), str(r.missing), str(r.dropped), str(r.deadline_misses))  # fmt: skip
+        t.add_row(str(r.id), _fmt(r.step, "d"), r.status, _fmt(r.fault_lower, ".4f"), _fmt(r.fault_upper, ".4f"), r.fdi,
+                  _fmt(r.first_detection, "d"), E, _fmt(r.rho, ".3g"), str(r.lost), str(r.missing), str(r.dropped),
+                  str(r.deadline_misses))  # fmt: skip
     return t
 
 

@@ -255,6 +255,14 @@ TABLE_I = ("m", "Jz", "lf", "lr", "cf", "cr")  # the bicycle model's parameters 
 UNCERTAINTY_MAX = 10.0  # |e_k| components [rad, rad/s] per step: beyond it the model says nothing
 
 
+class NetworkSpec(_Strict, kw_only=True):
+    """Network-wide declarations."""
+
+    fault_tolerance: Annotated[
+        float, Meta(ge=0, le=MAGNITUDE_MAX, description="a fault with |f| ≤ this counts as no fault (detection, docs/fdi.md)")
+    ] = 0.0
+
+
 class ModelUncertaintySpec(_Strict, kw_only=True):
     """Declared bound on the model mismatch e_k of x_{k+1} = Ā x_k + B̄ u_k + D̄ w_k + e_k (one of the two)."""
 
@@ -349,6 +357,7 @@ class TopologyFile(_Strict, kw_only=True):
     edges: list[Edge]
     loss: LinkLoss = field(default_factory=LinkLoss)
     model_uncertainty: ModelUncertaintySpec | None = None
+    network: NetworkSpec = field(default_factory=NetworkSpec)
 
     def __post_init__(self) -> None:
         ids = [n.id for n in self.nodes]
@@ -418,6 +427,7 @@ class Scenario:
     vehicle_id: int = 2  # CommonRoad parameters_vehicle<N> (a nonlinear plant only)
     manoeuvre: ManoeuvreName = "paper"
     uncertainty: ModelUncertainty | None = None  # declared bound on e_k (None: e_k = 0 is assumed)
+    fault_tolerance: float = 0.0  # |f| ≤ this counts as no fault (fault detection, docs/fdi.md)
 
     def node(self, node_id: int) -> NodeConfig:
         n = self._by_id.get(node_id)
@@ -628,4 +638,5 @@ def load_topology(
         vehicle_id=v.vehicle,
         manoeuvre=v.manoeuvre,  # type: ignore[arg-type]
         uncertainty=topo.model_uncertainty.build() if topo.model_uncertainty is not None else None,
+        fault_tolerance=topo.network.fault_tolerance,
     )

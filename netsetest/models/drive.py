@@ -7,13 +7,16 @@ calibrate`` (analysis/calibrate.py) measures the model mismatch on exactly the s
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from netsetest.config.schema import Scenario
 from netsetest.models.manoeuvres import Manoeuvre
 from netsetest.models.plant import make_plant
 from netsetest.models.signals import ExogenousSignals, SignalKind
+
+if TYPE_CHECKING:  # models never import config at run time (DEVELOPERS.md, import rules): the scenario is passed in
+    from netsetest.config.schema import Scenario
 
 
 def scheduled_speed(sc: Scenario, vx: float) -> float:

@@ -132,6 +132,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
          "not_judged_why": {"type": ["string", "null"], "description": "contested | truth unknown; null where judged"},
          "not_covered_cause": {"type": ["string", "null"], "description": "why the guarantee did not apply (docs/coverage.md); null where it did"},
          "inherited_from": {"type": ["array", "null"], "description": "[node, step, why] of the input a not-covered step rests on"},
+         "fdi": {"type": ["string", "null"], "description": "detected | healthy | undecided: the fault interval against 0 (docs/fdi.md)"},
          **{f"{n}_{s}": {"type": "number", "description": f"{s} bound of {n}: x̂ ∓ √(ρ P)"}
             for n, _ in COMPONENTS for s in ("lower", "upper")}},
         ["step", "xhat", "P", "rho", "status"],

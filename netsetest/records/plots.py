@@ -59,6 +59,8 @@ def plot_records(records: list[Record], out_dir: str) -> list[str]:
         prefix = "" if len(records) == 1 else labels[n].replace("/", "_").replace("#", "_") + "_"
         for name, draw in (("fig5_measurements", _fig5), ("fig6_states", _fig6), ("fig7_faults", _fig7)):
             written.append(_save(draw(rec, labels[n]), out / f"{prefix}{name}.png"))
+        if any(tr.fdi is not None and any(tr.fdi) for tr in rec.nodes.values()):
+            written.append(_save(_fig_fdi(rec, labels[n]), out / f"{prefix}fault_detection.png"))
         if _mismatch(rec) is not None:  # a plant other than the T-S model generated the truth
             written.append(_save(_fig_mismatch(rec, labels[n]), out / f"{prefix}mismatch.png"))
     written.append(_save(_fig8(records, labels), out / "fig8_E.png"))
@@ -273,6 +275,36 @@ def _spans(steps: np.ndarray, flags: np.ndarray) -> list[tuple[float, float]]:
         else:
             out.append((k - 0.5, k + 0.5))
     return out
+
+
+FDI_COLOURS = {"detected": "tab:red", "healthy": "tab:green"}
+
+
+def _fig_fdi(rec: Record, label: str) -> Figure:
+    """Per node: the true fault, the published fault interval, and the steps it proves a fault (red) or
+    proves none (green) — docs/fdi.md."""
+    fig, panels = _panels(_node_ids(rec), MAX_PANELS, f"Fault detection: detected where the fault interval excludes 0 ({label})", "t [s]")
+    tau = float(rec.meta.get("tau_s", 1.0))
+    for i, ax in panels:
+        rows = rec.fault_rows(i) if i in rec.nodes else []
+        if not rows:
+            continue
+        t = np.array([r["step"] for r in rows], dtype=float) * tau
+        ax.fill_between(t, [r["fault_lower"] for r in rows], [r["fault_upper"] for r in rows], color="tab:blue", alpha=0.2,
+                        label="published fault interval")  # fmt: skip
+        ax.plot(*_truth_series(rec, "faults", i), color="black", lw=1.0, label="true fault")
+        ax.axhline(0.0, color="0.5", lw=0.6)
+        for status, colour in FDI_COLOURS.items():
+            for a, b in _spans(np.array([r["step"] for r in rows]), np.array([r["fdi"] == status for r in rows])):
+                ax.axvspan(a * tau, b * tau, color=colour, alpha=0.15, lw=0, label=status)
+        ax.set_title(f"sensor {i}", fontsize=9)
+        ax.set_ylabel("f [rad/s]")
+        lo = min(min(r["fault_lower"] for r in rows[len(rows) // 8 :]), -0.05)
+        hi = max(max(r["fault_upper"] for r in rows[len(rows) // 8 :]), 0.05)
+        ax.set_ylim(lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo))  # the settled intervals, not the prior's
+    _legend(panels[0][1], fig)
+    fig.tight_layout()
+    return fig
 
 
 def _mismatch(rec: Record) -> tuple[np.ndarray, np.ndarray] | None:

@@ -201,6 +201,7 @@ class NodeTrack:
     solve_ms: np.ndarray  # (K,)
     set_bounds: np.ndarray | None = None  # (K, 3, 2) a set estimator's published per-coordinate bounds
     judged: np.ndarray | None = None  # (K,) bool: the collector judged the step (None: all were, older records)
+    fdi: list[str | None] | None = None  # (K,) detected | healthy | undecided (docs/fdi.md; None: older records)
 
     def was_judged(self, n: int) -> bool:
         return bool(self.judged[n]) if self.judged is not None else True
@@ -249,6 +250,7 @@ class Record:
                     "judged": tr.was_judged(n),
                     "contained": bool(tr.contained[n]) if tr.was_judged(n) else None,
                     "status": tr.status[n],
+                    "fdi": tr.fdi[n] if tr.fdi is not None else None,
                 }
             )
         return rows
@@ -439,6 +441,15 @@ def _set_bounds(entries: list[dict]) -> np.ndarray | None:
     return b
 
 
+FDI_VALUES = ("detected", "healthy", "undecided")  # roles/fdi.py's statuses, as the record spells them
+
+
+def _fdi(v: object) -> str | None:
+    if v is not None and v not in FDI_VALUES:
+        raise ValueError(f"fdi: expected one of {', '.join(FDI_VALUES)}, got {v!r}")
+    return v  # type: ignore[return-value]
+
+
 def record_from_parts(
     meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None, path: str = "",
     partial: bool = False, last_complete_step: int | None = None,
@@ -461,6 +472,7 @@ def record_from_parts(
             set_bounds=_set_bounds(entries),
             # records before "judged" wrote contained: true on unjudged rows too; say where they could not be
             judged=np.array([e.get("judged", e.get("E") is not None and not e.get("contested", False)) for e in entries], dtype=bool),
+            fdi=[_fdi(e.get("fdi")) for e in entries],
         )
     for t in truth:
         if not isinstance(t, dict) or not isinstance(t.get("step"), int):

@@ -53,6 +53,14 @@ class NodeSummary:
     dropped_messages: int = 0
     drops: dict[str, int] = field(default_factory=dict)  # by reason
     deadline_misses: int = 0
+    # guaranteed fault detection (roles/fdi.py, docs/fdi.md): steps, None where there is none
+    fault_onset: int | None = None  # first step whose true fault exceeds the declared tolerance
+    first_detection: int | None = None  # first step whose published fault interval excludes it
+    detection_delay: int | None = None  # steps from the onset to the first detection of a real fault
+    detected_steps: int = 0
+    healthy_steps: int = 0  # proved fault-free
+    false_detections: int = 0  # detected while the true fault was within the tolerance
+    false_detections_covered: int = 0  # of them, where every assumption held (each is also a violation)
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}

@@ -56,6 +56,7 @@ from netsetest.messages import End, Message, NodeState, RunScope, Truth, state_d
 from netsetest.models.sensor import augmented
 from netsetest.records.record import RecordSink
 from netsetest.records.summary import RUN_FIELDS, InheritedOrigin, NodeSummary, RunSummary
+from netsetest.roles.fdi import FdiTotals, classify
 from netsetest.roles.vehicle import fault_bound_holds, mismatch_holds
 from netsetest.sets import set_from_wire
 
@@ -148,6 +149,7 @@ class NodeTotals:
     late: int = 0
     neighbour_missing: int = 0
     dropped: int = 0
+    fdi: FdiTotals = field(default_factory=FdiTotals)  # guaranteed fault detection (roles/fdi.py)
     drops: dict[str, int] = field(default_factory=dict)
     solve: array = field(default_factory=lambda: array("d"))  # 8 bytes per step: the median needs them
 
@@ -520,6 +522,8 @@ class Collector:
             t = self.totals[i]
             st = self._judged.get(i)
             cone = cones[i]
+            if tr is not None:
+                t.fdi.truth(k, tr.faults[str(i)], self.sc.fault_tolerance)
             if tr is not None and not tr.sector_ok[str(i)]:
                 t.sector_breaks += 1
                 if t.first_sector_break is None:
@@ -541,9 +545,12 @@ class Collector:
             t.contested += i in contested
             t.sectors_assumed += st.sector_basis == "assumed"
             t.sector_failures += self._sector_failed(i, st, tr, cone.ok and i not in contested)
+            fdi = classify(*self._fault_interval(i, k, st), self.sc.fault_tolerance)
             if self.sink is not None:
-                self.sink.state(i, self._state_entry(i, k, st, cone, i in contested))
+                self.sink.state(i, self._state_entry(i, k, st, cone, i in contested) | {"fdi": fdi})
             self._add(t, i, k, st, cone)
+            judged = (i, k) in self.evaluated
+            t.fdi.add(k, fdi, tr.faults[str(i)] if tr is not None and judged else None, self.sc.fault_tolerance, cone.ok)
         if tr is not None:
             for j, i in tr.lost:
                 self.losses[f"{j}->{i}"] += 1
@@ -593,8 +600,16 @@ class Collector:
         t.neighbour_missing += len(st.missing)
         t.dropped = max(t.dropped, st.dropped)
         t.drops = dict(st.drops)
+        lo, hi = self._fault_interval(i, k, st)
+        t.width_sum += hi - lo
+
+    def _fault_interval(self, i: int, k: int, st: NodeState) -> tuple[float, float]:
+        """The published fault interval: a set estimator's own bounds, else f̂ ± √(ρ P₃₃) of the ellipsoid."""
         b = self.bounds.get((i, k))
-        t.width_sum += float(b[2, 1] - b[2, 0]) if b is not None else 2.0 * np.sqrt(st.rho * st.P_matrix()[2, 2])
+        if b is not None:
+            return float(b[2, 0]), float(b[2, 1])
+        half = float(np.sqrt(st.rho * st.P_matrix()[2, 2]))
+        return float(st.xhat[2]) - half, float(st.xhat[2]) + half
 
     def _state_entry(self, i: int, k: int, st: NodeState, cone: Cone, contested: bool) -> dict:
         ev = self.evaluated.get((i, k))
@@ -696,4 +711,11 @@ class Collector:
             dropped_messages=t.dropped,
             drops=t.drops,
             deadline_misses=deadline_misses,
+            fault_onset=t.fdi.fault_onset,
+            first_detection=t.fdi.first_detection,
+            detection_delay=t.fdi.detection_delay,
+            detected_steps=t.fdi.detected_steps,
+            healthy_steps=t.fdi.healthy_steps,
+            false_detections=t.fdi.false_detections,
+            false_detections_covered=t.fdi.false_detections_covered,
         )

@@ -24,6 +24,7 @@ from netsetest.bus import keys
 from netsetest.bus.zenoh_bus import BusError, ZenohMode, zenoh_config
 from netsetest.messages import BadMessage, End, Message, NodeInput, NodeState, Truth, decode
 from netsetest.models.sensor import NA, augmented
+from netsetest.roles.fdi import classify
 from netsetest.runtime.security import ObserverAccess, client_settings
 from netsetest.sets import set_from_wire
 
@@ -146,6 +147,8 @@ class NodeRow:
     dropped: int = 0  # messages this node has dropped as invalid (its own counter)
     missing: int = 0  # expected neighbour messages that did not arrive, summed over steps
     deadline_misses: int = 0  # steps published after their deadline (real-time clock)
+    fdi: str = "-"  # the latest step's detection status (roles/fdi.py; tolerance 0: watch has no topology)
+    first_detection: int | None = None
 
 
 @dataclass
@@ -172,6 +175,9 @@ class LiveTable:
                 else:
                     half = float(np.sqrt(msg.rho * msg.P_matrix()[2, 2]))
                     row.fault_lower, row.fault_upper = msg.xhat[2] - half, msg.xhat[2] + half
+                row.fdi = classify(row.fault_lower, row.fault_upper)
+                if row.fdi == "detected" and (row.first_detection is None or msg.step < row.first_detection):
+                    row.first_detection = msg.step
                 row.dropped = max(row.dropped, msg.dropped)
             row.missing += len(msg.missing)
             row.deadline_misses += msg.late

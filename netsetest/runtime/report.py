@@ -94,6 +94,7 @@ def format_table(summary: RunSummary) -> str:
     out = [line(head), line(["-" * w for w in widths])] + [line(r) for r in rows]
     out.extend(textwrap.wrap(LEGEND, LEGEND_WIDTH))
     out.append("")
+    out.extend(fdi_table(summary))
     if summary.misses_assumption_broken_total:
         out.append(f"{summary.misses_assumption_broken_total} miss(es) after a broken assumption (not covered by the guarantee).")
     if summary.nodes_missing:
@@ -110,6 +111,22 @@ def format_table(summary: RunSummary) -> str:
     out.append(f"{outcome(summary)}: {summary.mode or ''} run{security}, case {summary.case}, signals {summary.signals}, "
                f"variant {summary.variant}{seed}, steps 0–{summary.steps_completed}: {verdict(summary)}.")  # fmt: skip
     return "\n".join(out)
+
+
+def fdi_table(summary: RunSummary) -> list[str]:
+    """Guaranteed fault detection per node (docs/fdi.md): what a fault-diagnosis engineer reads first."""
+    head = ["node", "fault from", "detected from", "delay", "detected steps", "proved healthy", "false detections"]
+    rows = [
+        [str(r.id), _fmt(r.fault_onset, "d"), _fmt(r.first_detection, "d"), _fmt(r.detection_delay, "d"), str(r.detected_steps),
+         str(r.healthy_steps), str(r.false_detections) + (f" ({r.false_detections_covered} covered)" if r.false_detections_covered else "")]
+        for r in summary.nodes
+    ]  # fmt: skip
+    widths = [max(len(h), *(len(r[c]) for r in rows)) for c, h in enumerate(head)]
+    line = lambda cells: "  ".join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731
+    return [
+        "fault detection (guaranteed where the assumptions held: a detected step's fault interval excludes 0):",
+        line(head), line(["-" * w for w in widths]), *(line(r) for r in rows), "",
+    ]  # fmt: skip
 
 
 MAX_ORIGINS = 3  # origins of "inherited" named in the verdict line; the summary JSON has them all
