@@ -106,7 +106,7 @@ def test_inspect_and_plot_work_on_a_partial_record(finished: dict[str, Path], tm
     assert main(["inspect", str(p), "--node", "2"]) == 0
     assert "partial record" in capsys.readouterr().err
     assert main(["plot", str(p), "--out", str(tmp_path / "figs")]) == 0
-    assert len(list((tmp_path / "figs").glob("*.png"))) == 4
+    assert len(list((tmp_path / "figs").glob("*.png"))) == 5  # Figs. 5-8 and fault detection
 
 
 def test_killed_inmemory_run_leaves_a_partial_record(procs: ProcessGuard, tmp_path: Path) -> None:
