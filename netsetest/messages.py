@@ -73,7 +73,7 @@ class _Msg(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, omit_d
     ``set`` key; every receiver, the pydantic-based version before this one included, fills in the same
     defaults).  msgspec omits a value if it *is* the default object (an empty list or dict, None, a
     bool), so a decoded 0.0 may be sent again.  ``v`` is always sent: a default_factory's result is
-    never omitted (tests/test_messages_wire.py checks every kind's payload for ``v``).
+    never omitted (tests/unit/test_messages_wire.py checks every kind's payload for ``v``).
     """
 
     v: Literal[1] = field(default_factory=_schema_version)

@@ -13,6 +13,19 @@ import pytest
 
 # the Zenoh tests' fixtures (``procs``: every process a test starts is stopped after it), for every module
 pytest_plugins = ["zenoh_helpers"]
+LAYERS = ("unit", "inmemory", "process")  # tests/<layer>/: each test is marked with its folder's layer
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark every test with its layer (its folder), so that nothing goes unmarked; a process test also
+    counts as ``zenoh`` (it may open sessions or spawn roles). A test outside the layers is an error."""
+    for item in items:
+        layer = item.path.parent.name
+        if layer not in LAYERS:
+            raise pytest.UsageError(f"{item.nodeid}: every test lives in tests/unit, tests/inmemory or tests/process")
+        item.add_marker(layer)
+        if layer == "process":
+            item.add_marker("zenoh")
 
 
 @pytest.fixture(autouse=True, scope="session")

@@ -1,7 +1,7 @@
 """The README's generated section: "How close to a real car" from the benchmark's plant figures.
 
 ``netsetest bench --only plant --json bench/plant.json --readme README.md`` measures and rewrites the
-section between :data:`BEGIN` and :data:`END`; tests/test_readme.py checks that the committed README is
+section between :data:`BEGIN` and :data:`END`; tests/unit/test_readme.py checks that the committed README is
 what :func:`render` makes of the committed bench/plant.json (no number in it is typed by hand).
 """
 

@@ -126,7 +126,7 @@ class Node:
         take their step 0 and 1 at the same moment, so a role process does this while it waits for the
         others to start.  Only the estimator's caches keep anything of it (layouts, T and G per γ, the
         Clarabel solvers, whose data every solve replaces: a solver updated in place answers bit for bit
-        like a new one), so its results are those of a node that did not warm up (tests/test_warm_up.py)."""
+        like a new one), so its results are those of a node that did not warm up (tests/inmemory/test_warm_up.py)."""
         if self.set_estimator is not None:
             return
         sc, cfg = self.sc, self.cfg

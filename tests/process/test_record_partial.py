@@ -1,0 +1,236 @@
+"""Crash-safe records: the collector streams JSON Lines, so a killed run leaves a loadable partial record."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import random
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from zenoh_helpers import (  # noqa: F401 (fixture)
+    PAPER6,
+    ProcessGuard,
+    cli,
+    find_role,
+    launch_peer_mesh,
+    new_run_id,
+    wait_for,
+)
+
+from netsetest.cli.main import main
+from netsetest.records.record import RecordError, load_record
+
+ROOT = Path(__file__).resolve().parents[2]
+TOPOLOGY = str(ROOT / PAPER6)
+STEPS = 10
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("finished")
+    out = {}
+    for name in ("run.jsonl", "run.jsonl.gz"):
+        assert main(["run", TOPOLOGY, "--mode", "inmemory", "--steps", str(STEPS), "--seed", "0", "--record", str(d / name), "--quiet"]) == 0
+        out[name] = d / name
+    return out
+
+
+def _check_partial(rec, complete: bool) -> None:  # noqa: ANN001
+    """A (partial) record agrees with itself: truth steps 0..last, entries of known steps judged."""
+    steps = [t["step"] for t in rec.truth]
+    assert steps == list(range(len(steps)))
+    assert rec.last_complete_step == len(steps) - 1
+    assert rec.partial != complete and (rec.summary is not None) == complete
+    for i, track in rec.nodes.items():
+        assert all(int(k) <= rec.last_complete_step + 1 for k in track.steps), i
+        for n, k in enumerate(track.steps):
+            if int(k) <= rec.last_complete_step:  # written with its step: judged
+                assert not np.isnan(track.E[n])
+
+
+def test_finished_record_is_json_lines(finished: dict[str, Path]) -> None:
+    lines = finished["run.jsonl"].read_text().splitlines()
+    kinds = [json.loads(ln)["kind"] for ln in lines]
+    assert kinds[0] == "meta" and kinds[-1] == "summary"
+    assert kinds.count("truth") == STEPS + 1 and kinds.count("state") == 6 * (STEPS + 1)
+    # per step: the states first, then the truth that completes the step
+    assert kinds[1:8] == ["state"] * 6 + ["truth"]
+    rec = load_record(finished["run.jsonl"])
+    _check_partial(rec, complete=True)
+    def meta_line(text: str) -> dict:  # the two runs started at different instants: all else is equal
+        d = json.loads(text)
+        d["meta"].pop("started_ns")
+        return d
+
+    assert meta_line(gzip.decompress(finished["run.jsonl.gz"].read_bytes()).decode().splitlines()[0]) == meta_line(lines[0])
+
+
+@pytest.mark.parametrize("name", ["run.jsonl", "run.jsonl.gz"])
+def test_truncated_anywhere_loads_or_says_why(name: str, finished: dict[str, Path], tmp_path: Path) -> None:
+    """Cut the file at random byte offsets: before the end of the meta line it is not a record (a clear
+    RecordError); after it, a partial record whose every entry is consistent."""
+    data = finished[name].read_bytes()
+    raw = gzip.decompress(data) if name.endswith(".gz") else data
+    meta_end = raw.index(b"\n") + 1
+    rng = random.Random(7)
+    offsets = sorted({*rng.sample(range(1, len(data)), 60), len(data) - 1, len(data)})
+    loaded = 0
+    for cut in offsets:
+        p = tmp_path / f"cut{cut}{'.gz' if name.endswith('.gz') else ''}"
+        p.write_bytes(data[:cut])
+        try:
+            rec = load_record(p)
+        except RecordError as exc:
+            assert str(p) in str(exc)
+            if not name.endswith(".gz"):
+                assert cut < meta_end, (cut, exc)
+            continue
+        loaded += 1
+        if not rec.partial:  # only the last few bytes (newline, gzip trailer) may be missing
+            assert cut >= len(data) - 16, cut
+        _check_partial(rec, complete=not rec.partial)
+    assert loaded >= 40
+
+
+def test_inspect_and_plot_work_on_a_partial_record(finished: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    data = finished["run.jsonl"].read_bytes()
+    p = tmp_path / "partial.jsonl"
+    p.write_bytes(data[: int(len(data) * 0.6)])
+    rec = load_record(p)
+    assert rec.partial and 0 < rec.last_complete_step < STEPS
+    assert main(["inspect", str(p), "--node", "2"]) == 0
+    assert "partial record" in capsys.readouterr().err
+    assert main(["plot", str(p), "--out", str(tmp_path / "figs")]) == 0
+    assert len(list((tmp_path / "figs").glob("*.png"))) == 5  # Figs. 5-8 and fault detection
+
+
+def test_killed_inmemory_run_leaves_a_partial_record(procs: ProcessGuard, tmp_path: Path) -> None:
+    rec = tmp_path / "killed.jsonl"
+    proc = procs.start("inmemory", cli("run", TOPOLOGY, "--mode", "inmemory", "--steps", "400", "--record", str(rec), "--quiet"))
+    wait_for(lambda: rec.exists() and rec.read_bytes().count(b'"kind":"truth"') >= 5, 60, what="five steps in the record")
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(10)
+    r = load_record(rec)
+    assert r.partial and r.last_complete_step >= 4
+    _check_partial(r, complete=False)
+
+
+@pytest.mark.zenoh
+@pytest.mark.timeout(120)
+def test_sigkill_of_the_zenoh_collector_leaves_a_partial_record(procs: ProcessGuard, tmp_path: Path) -> None:
+    run_id, rec = new_run_id(), tmp_path / "record.jsonl"
+    launch_peer_mesh(procs, PAPER6, run_id, 2000, tmp_path / "summary.json", record=rec)
+    wait_for(lambda: rec.exists() and rec.read_bytes().count(b'"kind":"truth"') >= 5, 90, what="five steps in the record")
+    (pid,) = find_role(run_id, "collector")
+    procs.procs["collector"].send_signal(signal.SIGKILL)
+    procs.procs["collector"].wait(10)
+    assert pid not in find_role(run_id, "collector")
+    r = load_record(rec)
+    assert r.partial and r.last_complete_step >= 4 and not (tmp_path / "summary.json").exists()
+    _check_partial(r, complete=False)
+    for name, p in procs.procs.items():  # the rest of the run is not ours to wait for
+        if p.poll() is None:
+            p.send_signal(signal.SIGTERM)
+    deadline = time.monotonic() + 20
+    for p in procs.procs.values():
+        try:
+            p.wait(max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            pass
+
+
+@pytest.mark.zenoh
+@pytest.mark.timeout(120)
+def test_sigkill_of_the_parent_leaves_a_partial_record(procs: ProcessGuard, tmp_path: Path) -> None:
+    """``netsetest run`` killed with SIGKILL: its children die with it (PDEATHSIG); the record stays."""
+    from zenoh_helpers import parent_run_id, start_parent, wait_gone
+
+    rec = tmp_path / "record.jsonl"
+    parent = start_parent(procs, "parent", [PAPER6, "--steps", "2000", "--record", str(rec), "--quiet"])
+    wait_for(lambda: rec.exists() and rec.read_bytes().count(b'"kind":"truth"') >= 5, 90, what="five steps in the record")
+    parent.send_signal(signal.SIGKILL)
+    parent.wait(10)
+    assert not wait_gone([parent_run_id(parent)], 10.0)
+    r = load_record(rec)
+    assert r.partial and r.last_complete_step >= 4
+    _check_partial(r, complete=False)
+
+
+def test_save_record_writes_the_streamed_layout(finished: dict[str, Path], tmp_path: Path) -> None:
+    """A record kept in memory (the API's) saved as a file loads back equal, in the same line layout."""
+    from netsetest.records.record import save_record
+
+    rec = load_record(finished["run.jsonl"])
+    for name in ("copy.jsonl", "copy.jsonl.gz"):
+        save_record(tmp_path / name, rec.meta, rec.truth, rec.raw_nodes, rec.summary)
+        back = load_record(tmp_path / name)
+        assert not back.partial and back.summary == rec.summary and back.truth == rec.truth and back.raw_nodes == rec.raw_nodes
+    assert (tmp_path / "copy.jsonl").read_bytes() == finished["run.jsonl"].read_bytes()
+
+
+@pytest.fixture(scope="module")
+def streamed_mcap(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The MCAP stream as a run writes it (a finished run's file is then rewritten chunked and indexed;
+    a killed run leaves the stream, so the stream is what must load from any cut)."""
+    pytest.importorskip("mcap")
+    from netsetest.records.mcap_io import McapRecordWriter
+    from netsetest.runtime.inmemory import run_inmemory
+
+    from netsetest.config.schema import load_topology
+
+    p = tmp_path_factory.mktemp("mcap") / "run.mcap"
+    res = run_inmemory(load_topology(TOPOLOGY, None, STEPS), seed=0, record=None, keep=True)
+    w = McapRecordWriter(p, index_at_close=False)
+    w.meta(res.meta)
+    for k in range(STEPS + 1):
+        for node, entries in res.parts["nodes"].items():
+            w.state(int(node), entries[k])
+        w.truth(res.parts["truth"][k])
+    w.summary(res.summary)
+    w.close()
+    return p
+
+
+def test_mcap_cut_anywhere_loads_or_says_why(streamed_mcap: Path, tmp_path: Path) -> None:
+    """As the JSON Lines record: an MCAP record cut at any byte is a clear RecordError before its meta
+    message, else a consistent partial record (the complete one only when nothing is missing)."""
+    data = streamed_mcap.read_bytes()
+    complete = load_record(streamed_mcap)
+    assert not complete.partial
+    first_loaded: int | None = None
+    rng = random.Random(11)
+    loaded = 0
+    for cut in sorted({*rng.sample(range(1, len(data)), 60), len(data) - 1}):
+        p = tmp_path / f"cut{cut}.mcap"
+        p.write_bytes(data[:cut])
+        try:
+            rec = load_record(p)
+        except RecordError as exc:
+            assert str(p) in str(exc) and first_loaded is None, (cut, exc)  # only a cut before the meta message
+            continue
+        first_loaded = cut if first_loaded is None else first_loaded
+        loaded += 1
+        if not rec.partial:  # cut inside the footer, after the verdict
+            assert rec.summary == complete.summary, cut
+        _check_partial(rec, complete=not rec.partial)
+        for i, track in rec.nodes.items():  # what was read is what the run wrote
+            n = len(track.steps)
+            assert np.array_equal(track.xhat, complete.nodes[i].xhat[:n]), (cut, i)
+    assert loaded >= 50 and first_loaded < len(data) // 10  # the meta message comes first
+
+
+def test_killed_inmemory_run_leaves_a_partial_mcap_record(procs: ProcessGuard, tmp_path: Path) -> None:
+    pytest.importorskip("mcap")
+    rec = tmp_path / "killed.mcap"
+    proc = procs.start("inmemory_mcap", cli("run", TOPOLOGY, "--mode", "inmemory", "--steps", "400", "--record", str(rec), "--quiet"))
+    wait_for(lambda: rec.exists() and rec.read_bytes().count(b"/vehicle/truth") >= 1 and rec.stat().st_size > 60_000, 60, what="steps in the record")
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(10)
+    r = load_record(rec)
+    assert r.partial and r.last_complete_step >= 4 and r.summary is None
+    _check_partial(r, complete=False)
