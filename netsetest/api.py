@@ -114,6 +114,7 @@ def simulate(
         from netsetest.runtime.inmemory import run_inmemory
 
         res = run_inmemory(load_topology(topology, case, steps, estimator), signals, variant, seed)
+        assert res.parts is not None  # kept in memory (run_inmemory's default)
         return result_of(record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary))
     if mode == "zenoh":
         return result_of(_run_zenoh(topology, case, signals, seed, variant, steps, estimator))

@@ -20,7 +20,7 @@ import hashlib
 import math
 import re
 from dataclasses import dataclass
-from typing import Annotated, Any, Literal, Self, Union
+from typing import Annotated, Any, Final, Literal, Self, Union
 
 import msgspec
 import numpy as np
@@ -30,7 +30,7 @@ from netsetest.models.sensor import NA
 from netsetest.sets import set_from_wire
 from netsetest.validation import FINITE_BOUND_TEXT, FLOAT_MAX, Finite, Positive, split_error
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION: Final = 1
 
 FiniteF = Finite  # msgspec decodes strictly: no "0.1" or True for a number
 Step = Annotated[int, Meta(ge=0)]
@@ -80,7 +80,7 @@ class _Msg(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, omit_d
 
     @property
     def type(self) -> str:
-        return self.__struct_config__.tag  # type: ignore[return-value]
+        return self.__struct_config__.tag  # type: ignore[return-value]  # msgspec types the tag as str | int | None; ours are the class's str tags
 
     def model_dump(self, mode: Literal["python", "json"] = "python") -> dict[str, Any]:
         """Every field as a dict, ``v`` and ``type`` first (as the previous version sent them); ``json``:
@@ -101,7 +101,7 @@ class _Msg(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, omit_d
         return new
 
 
-class Ready(_Msg, tag="ready", kw_only=True):
+class Ready(_Msg, tag="ready", frozen=True, kw_only=True):
     """A role announces it is subscribed (Zenoh start-up barrier).
 
     ``seen_all``: this role has heard Ready from every other role, so its subscriptions are known to
@@ -113,7 +113,7 @@ class Ready(_Msg, tag="ready", kw_only=True):
     seen_all: bool = False
 
 
-class NodeInput(_Msg, tag="input", kw_only=True):
+class NodeInput(_Msg, tag="input", frozen=True, kw_only=True):
     """Vehicle → node i at step k: ỹ_i,k and γ_i,k; u and Vx of step k−1; which neighbour messages to expect.
 
     ``expect_from``: in-neighbours j ≠ i whose step k−1 message node i should wait for (alive, not lost);
@@ -131,7 +131,7 @@ class NodeInput(_Msg, tag="input", kw_only=True):
     deadline: FiniteF | None = None  # real-time clock: wall-clock time (s since epoch) the step is due
 
 
-class NodeState(_Msg, tag="state", kw_only=True):
+class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     """Node i → neighbours and collector: the ellipsoid {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} of step k and y̌_i,k."""
 
     step: Step
@@ -222,7 +222,7 @@ def spd_problem(p: list[float]) -> str | None:
     return None
 
 
-class Truth(_Msg, tag="truth", kw_only=True):
+class Truth(_Msg, tag="truth", frozen=True, kw_only=True):
     """Vehicle → collector only: the truth of step k and which assumptions held."""
 
     step: Step
@@ -261,7 +261,7 @@ class Truth(_Msg, tag="truth", kw_only=True):
         return {int(k) for k in self.faults}
 
 
-class End(_Msg, tag="end", kw_only=True):
+class End(_Msg, tag="end", frozen=True, kw_only=True):
     """Vehicle → all: the run is over after ``steps`` steps (or aborted with a reason)."""
 
     steps: Step

@@ -169,10 +169,10 @@ class SumSet:
         z = self.zonotope
         n, m = z.generators.shape
         has_e = self.sliced is not None and self.M is not None
-        ne = len(self.sliced.ellipsoid.center) if has_e else 0  # type: ignore[union-attr]
+        ne = len(self.sliced.ellipsoid.center) if has_e else 0  # type: ignore[union-attr]  # has_e: sliced is set
         nv = m + ne
         slack = 1 + MEMBERSHIP_TOL
-        eq_A = np.hstack([z.generators, self.M if has_e else np.zeros((n, 0))])  # type: ignore[list-item]
+        eq_A = np.hstack([z.generators, self.M if has_e else np.zeros((n, 0))])  # type: ignore[list-item]  # has_e: M is set
         blocks_A = [eq_A, np.hstack([np.eye(m), np.zeros((m, ne))]), np.hstack([-np.eye(m), np.zeros((m, ne))])]
         blocks_b = [point - z.center, np.full(m, slack), np.full(m, slack)]
         cones = [clarabel.ZeroConeT(n)]
@@ -263,7 +263,7 @@ def set_from_wire(d: object, dim: int) -> Ellipsoid | Zonotope | Box | SumSet:
     kind = d.get("type")
     try:
         if kind == "ellipsoid":
-            rho = float(d.get("rho"))  # type: ignore[arg-type]
+            rho = float(d.get("rho"))  # type: ignore[arg-type]  # a missing rho raises TypeError, caught below as a malformed set
             if not (np.isfinite(rho) and rho > 0):
                 raise SetFormatError("rho: expected a finite positive number")
             return Ellipsoid(_vec(d, "center", dim), _spd(_mat(d, "P", dim), "P"), rho)
@@ -280,18 +280,18 @@ def set_from_wire(d: object, dim: int) -> Ellipsoid | Zonotope | Box | SumSet:
                 raise SetFormatError("sum: 'zonotope' must be a zonotope of the set's dimension")
             if "M" not in d:
                 return SumSet(z)
-            el = set_from_wire(d.get("ellipsoid"), len(d.get("M")[0]))  # type: ignore[index]
+            el = set_from_wire(d.get("ellipsoid"), len(d.get("M")[0]))  # type: ignore[index]  # a missing M raises TypeError, caught below as a malformed set
             if not isinstance(el, Ellipsoid):
                 raise SetFormatError("sum: 'ellipsoid' must be an ellipsoid")
             M = _mat(d, "M", dim)
             slabs = []
             for item in d.get("slabs") or []:
                 a = np.asarray(item[0], dtype=float)
-                lo = -np.inf if item[1] is None else float(item[1])
-                hi = np.inf if item[2] is None else float(item[2])
-                if a.shape != el.center.shape or not np.all(np.isfinite(a)) or np.isnan(lo) or np.isnan(hi) or lo > hi:
+                s_lo = -np.inf if item[1] is None else float(item[1])
+                s_hi = np.inf if item[2] is None else float(item[2])
+                if a.shape != el.center.shape or not np.all(np.isfinite(a)) or np.isnan(s_lo) or np.isnan(s_hi) or s_lo > s_hi:
                     raise SetFormatError("sum: a malformed slab")
-                slabs.append(Slab(a, lo, hi))
+                slabs.append(Slab(a, s_lo, s_hi))
             return SumSet(z, M, SlicedEllipsoid(el, tuple(slabs)))
     except (TypeError, ValueError, IndexError, np.linalg.LinAlgError) as exc:
         if isinstance(exc, SetFormatError):

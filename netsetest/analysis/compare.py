@@ -237,6 +237,7 @@ def compare(
         for sig in signals:
             for seed in seeds:
                 res = run_inmemory(sc, sig, "scheduled", seed)
+                assert res.parts is not None  # kept in memory (run_inmemory's default)
                 rec = record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
                 report(f"run {sc.case}/{sig}/{seed}")
                 _score_run(sc, rec, estimators, acc, first_bounds if not runs else None, report)
@@ -309,7 +310,7 @@ TABLE_HEADER = ("estimator", "plant", "violations", "misses (broken assumption)"
 
 
 def table_rows(c: Comparison) -> list[tuple[str, ...]]:
-    out = []
+    out: list[tuple[str, ...]] = []
     for r in c.rows:
         broken = ", ".join(f"{k} {v}" for k, v in sorted(r.misses_attributed.items())) or "0"
         name = r.estimator + ("" if r.real_time else " (offline)") + (" [refused some nodes]" if r.refused else "")

@@ -263,7 +263,7 @@ class _Program:
                     cx = float(node.sensor.C @ z[self._x(j, 0) : self._x(j, 1) + 1])
                     lo, hi = self.intervals[node.id, j]
                     ends = sorted(((lo - cx) / node.sensor.Ds, (hi - cx) / node.sensor.Ds))
-                    fi[j] = float(np.clip(0.0, *ends))
+                    fi[j] = float(np.clip(0.0, ends[0], ends[1]))
             f[node.id] = fi
         e = z[self._e(0, 0) : self._e(0, 0) + 2 * k].reshape(k, 2).copy() if self.ne else np.zeros((k, 2))
         return Witness(x0=z[:2].copy(), w=z[self._w(0) : self._w(0) + k].copy(), f=f, e=e)
@@ -357,7 +357,7 @@ def exact_bounds(
         solver = None
         step_infeasible = False
         for coord, node, col in prog.objectives(k):
-            target = fault[node] if coord == "f" else (beta if coord == "beta" else r)
+            target = fault[node] if node is not None else (beta if coord == "beta" else r)  # node: the fault's only
             for side, sign in (("lo", 1.0), ("hi", -1.0)):
                 q = np.zeros(len(cols))
                 q[position[col]] = sign
@@ -373,7 +373,7 @@ def exact_bounds(
                     z[cols] = np.asarray(sol.x)
                     target[k, end] = z[col]
                     if keep_witnesses:
-                        witnesses[WitnessKey(coord, node, k, side)] = prog.witness(z, k, eliminate_free_faults)  # type: ignore[arg-type]
+                        witnesses[WitnessKey(coord, node, k, side)] = prog.witness(z, k, eliminate_free_faults)  # type: ignore[arg-type]  # coord is one of COORDINATES and side one of lo, hi: str in the loop
                 elif status in _UNBOUNDED:
                     target[k, end] = -np.inf if side == "lo" else np.inf
                 elif status in _INFEASIBLE:

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from netsetest.models.plant import PlantKind
 from netsetest.scenarios import TOPOLOGY_DIR
 
 CAR = TOPOLOGY_DIR / "paper6_car.toml"
@@ -64,7 +65,7 @@ def _drive(sc, signals: str, seed: int, tmp: Path, exact: bool = True) -> dict: 
     from netsetest.runtime.inmemory import run_inmemory
 
     path = tmp / "drive.json"
-    run = run_inmemory(sc, signals, "scheduled", seed, record=str(path), keep=False)  # type: ignore[arg-type]
+    run = run_inmemory(sc, signals, "scheduled", seed, record=str(path), keep=False)  # type: ignore[arg-type]  # signals is paper or worst, passed through as str
     rec = load_record(str(path))
     s = run.summary
     es = np.array([t["e"] for t in rec.truth if t.get("e") is not None])
@@ -99,7 +100,7 @@ def held_out(cfg: dict, tmp: Path) -> dict:
         _log(f"  {label}: e_k up to {max(r['e_max_in_bound_norm'] for r in rows):.2f}× the bound, "
              f"covered {sum(r['covered'] for r in rows)}/{sum(r['evaluated'] for r in rows)}, "
              f"violations {sum(r['violations'] for r in rows)}, fault/exact {statistics.mean(r['fault_ratio_exact'] for r in rows):.3f}")  # fmt: skip
-    return {"training": TRAINING, "bound": load_topology(CAR).uncertainty.as_toml(), "drives": drives}  # type: ignore[union-attr]
+    return {"training": TRAINING, "bound": load_topology(CAR).uncertainty.as_toml(), "drives": drives}  # type: ignore[union-attr]  # paper6_car declares a bound
 
 
 def cost(cfg: dict, tmp: Path) -> dict:
@@ -128,7 +129,8 @@ def vehicle_cpu(cfg: dict) -> dict:
     from netsetest.models.drive import Drive
 
     out = {}
-    for plant, steps in (("ts", cfg["plant_steps"]), ("single-track", cfg["plant_steps"]), ("multi-body", cfg["plant_mb_steps"])):
+    plan: tuple[tuple[PlantKind, int], ...] = (("ts", cfg["plant_steps"]), ("single-track", cfg["plant_steps"]), ("multi-body", cfg["plant_mb_steps"]))
+    for plant, steps in plan:
         sc = dataclasses.replace(load_topology(CAR, steps=steps), plant=plant)
         drive = Drive(sc, "paper", 0)
         times = []
@@ -145,7 +147,7 @@ def halved(cfg: dict, tmp: Path) -> dict:
     from netsetest.config.schema import load_topology
 
     base = load_topology(CAR).uncertainty
-    b = np.diag(base.G)  # type: ignore[union-attr]
+    b = np.diag(base.G)  # type: ignore[union-attr]  # paper6_car declares a bound
     out = {}
     for label, scale in (("halved", 0.5), ("thousandth", 1e-3)):
         path = _variant(tmp, f"car_{label}", _with_bound(CAR.read_text(), f"box = [{float(b[0]) * scale!r}, {float(b[1]) * scale!r}]"))

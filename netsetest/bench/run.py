@@ -20,6 +20,7 @@ import statistics
 import sys
 import tempfile
 import time
+from typing import Any
 from pathlib import Path
 
 import numpy as np
@@ -29,14 +30,14 @@ from netsetest.scenarios import TOPOLOGY_DIR
 
 PAPER6 = TOPOLOGY_DIR / "paper6.toml"
 
-QUICK = {
+QUICK: dict[str, Any] = {
     "steps": 40, "ref_sched": 24, "ref_rule": 8, "naive": 12, "prev_sched": 24, "prev_rule": 8,
     "scaling_steps": 20, "scaling_sizes": [6, 24, 96], "rt_sizes": [12, 24, 48, 64, 80, 96, 128], "rt_steps": 50, "profile_nodes": 96, "startup_reps": 3,
     "launch_reps": 5,
     "flood_steps": 200, "flood_rate": 30000, "crash_steps": 30, "soak_steps": 2000, "cpu_steps": 400,
     "plant_steps": 80, "plant_seeds": [10, 11], "plant_lap_steps": 200, "plant_mb_steps": 10,
 }  # fmt: skip
-FULL = {
+FULL: dict[str, Any] = {
     "steps": 80, "ref_sched": 80, "ref_rule": 24, "naive": 40, "prev_sched": 80, "prev_rule": 24,
     "scaling_steps": 40, "scaling_sizes": [6, 24, 96], "rt_sizes": [6, 12, 24, 36, 48, 64, 80, 96, 112, 128], "rt_steps": 50, "profile_nodes": 96,
     "startup_reps": 5, "launch_reps": 9, "flood_steps": 400, "flood_rate": 30000, "crash_steps": 60, "soak_steps": 20000, "cpu_steps": 800,
@@ -46,6 +47,10 @@ FULL = {
 
 def _log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
+
+
+def _ratio(a: float | None, b: float | None) -> float | None:
+    return a / b if a and b else None
 
 
 def _med(v: list[float]) -> float | None:
@@ -129,7 +134,7 @@ def zenoh_overhead(cfg: dict) -> dict:
     cli_z = cli_run(PAPER6, "zenoh", "lockstep")
     cli_m = cli_run(PAPER6, "inmemory", "lockstep")
     res = {
-        "inmemory_s": mem, "zenoh_stepping_s": zen, "ratio": (_med(zen) / _med(mem)) if _med(zen) else None,
+        "inmemory_s": mem, "zenoh_stepping_s": zen, "ratio": _ratio(_med(zen), _med(mem)),
         "zenoh_startup_s": obs["startup_s"] if obs else None,
         "zenoh_exit_codes": obs["exit_codes"] if obs else None,
         "zenoh_violations": (obs["summary"] or {}).get("violations_total") if obs else None,
@@ -212,6 +217,7 @@ def tightness(cfg: dict, tmp: Path) -> dict:
     for case in ("nsnim", "saim"):
         sc = load_topology(PAPER6, case, cfg["steps"])
         run = run_inmemory(sc, "paper", "scheduled", 0)
+        assert run.parts is not None  # kept in memory (run_inmemory's default)
         path = tmp / f"tightness-{case}.json"
         save_record(path, run.meta, run.parts["truth"], run.parts["nodes"], run.summary)
         rec = load_record(path)

@@ -60,14 +60,14 @@ def capture(scenario: Scenario, variant: str, signals: str = "paper", seed: int 
         cases.append(StepCase(est.node_id, (prev, inp)))
 
     t0 = time.perf_counter()
-    res = run_inmemory(scenario, signals, variant, seed, objective="trace", observer=record)  # type: ignore[arg-type]
+    res = run_inmemory(scenario, signals, variant, seed, objective="trace", observer=record)  # type: ignore[arg-type]  # signals and variant are the Literal's values, passed through as str
     wall = time.perf_counter() - t0
     return Capture(scenario, variant, cases, res.summary, wall, times, res.parts)
 
 
 def fast_estimators(sc: Scenario, variant: str) -> dict[int, sdp.LocalEstimator]:
     """The fast path the benchmark times: each node's estimator exactly as the node builds it."""
-    return {i: sdp.LocalEstimator.for_node(sc, i, variant, "trace") for i in sc.ids}  # type: ignore[arg-type]
+    return {i: sdp.LocalEstimator.for_node(sc, i, variant, "trace") for i in sc.ids}  # type: ignore[arg-type]  # variant is one of the Literal's values, passed through as str
 
 
 def _yardstick_args(sc: Scenario, i: int, variant: str) -> tuple:
@@ -89,7 +89,7 @@ def side_by_side(cap: Capture, n_ref: int, n_naive: int, n_cvxpy: int) -> dict:
     sc, variant = cap.scenario, cap.variant
     ids = sc.ids
     fast = fast_estimators(sc, variant)
-    prev = {i: sdp.LocalEstimator.for_node(sc, i, variant, "trace", backend="cvxpy") for i in ids} if n_cvxpy else {}  # type: ignore[arg-type]
+    prev = {i: sdp.LocalEstimator.for_node(sc, i, variant, "trace", backend="cvxpy") for i in ids} if n_cvxpy else {}  # type: ignore[arg-type]  # variant is one of the Literal's values, passed through as str
     ref = {i: StraightforwardSDP(*_yardstick_args(sc, i, variant)) for i in ids} if n_ref else {}
     naive = {i: NaiveSDP(*_yardstick_args(sc, i, variant)) for i in ids} if n_naive else {}
     cases = cap.cases

@@ -239,7 +239,7 @@ def cmd_exact(a: argparse.Namespace) -> int:
     if not a.topology and not (isinstance(topology, str) and os.path.exists(topology)):
         print(f"netsetest exact: {a.record} names topology {topology!r}, not found from here (give --topology PATH)", file=sys.stderr)
         return EXIT_BAD_INPUT
-    sc = load_topology(topology, rec.meta.get("case"), rec.meta.get("steps"))
+    sc = load_topology(str(topology), rec.meta.get("case"), rec.meta.get("steps"))
     from netsetest.runtime.report import Progress
 
     t0 = time.perf_counter()

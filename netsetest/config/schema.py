@@ -24,7 +24,7 @@ import stat
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Literal, TypeVar
+from typing import Annotated, Literal, TypeVar, cast
 
 import msgspec
 import numpy as np
@@ -85,7 +85,7 @@ Magnitude = Annotated[float, Meta(ge=-MAGNITUDE_MAX, le=MAGNITUDE_MAX)]
 # ---------------------------------------------------------------- node profile (nodes/*.toml)
 
 
-class SaturationSpec(_Strict, kw_only=True):
+class SaturationSpec(_Strict, frozen=True, kw_only=True):
     """σ(r) = sign(r) min(r_max, |r|) with sector scalars 0 < h1 < 1 ≤ h2 (used in the SAIM case)."""
 
     r_max: Annotated[float, Meta(gt=0, le=MAGNITUDE_MAX)]
@@ -93,7 +93,7 @@ class SaturationSpec(_Strict, kw_only=True):
     h2: Annotated[float, Meta(ge=1, le=MAGNITUDE_MAX)]
 
 
-class AvailabilitySpec(_Strict, kw_only=True):
+class AvailabilitySpec(_Strict, frozen=True, kw_only=True):
     """γ_i,k uniform in [gamma_min, gamma_max] ⊂ (0, 1] (used in the SAIM case)."""
 
     gamma_min: Annotated[float, Meta(ge=GAMMA_MIN, le=1)]
@@ -104,7 +104,7 @@ class AvailabilitySpec(_Strict, kw_only=True):
             raise ValueError("gamma_min must not exceed gamma_max")
 
 
-class FaultSpec(_Strict, kw_only=True):
+class FaultSpec(_Strict, frozen=True, kw_only=True):
     """``none``; ``square``: amplitude·sign(sin(2πk/period)) on [start, end); ``piecewise``: through points."""
 
     kind: Literal["none", "square", "piecewise"] = "none"
@@ -119,7 +119,7 @@ class FaultSpec(_Strict, kw_only=True):
             missing = [n for n in ("amplitude", "period", "start", "end") if getattr(self, n) is None]
             if missing:
                 raise ValueError(f"square fault needs {', '.join(missing)}")
-            if self.end <= self.start:  # type: ignore[operator]
+            if self.end <= self.start:  # type: ignore[operator]  # both set: checked just above for kind = square
                 raise ValueError("end must be after start")
         if self.kind == "piecewise":
             if not self.points or len(self.points) < 2:
@@ -130,16 +130,16 @@ class FaultSpec(_Strict, kw_only=True):
 
     def build(self) -> Fault:
         if self.kind == "square":
-            return SquareFault(self.amplitude, self.period, self.start, self.end)  # type: ignore[arg-type]
+            return SquareFault(self.amplitude, self.period, self.start, self.end)  # type: ignore[arg-type]  # every field set: __post_init__ checked them for kind = square
         if self.kind == "piecewise":
-            return PiecewiseLinearFault(tuple((float(a), float(b)) for a, b in self.points))  # type: ignore[union-attr]
+            return PiecewiseLinearFault(tuple((float(a), float(b)) for a, b in self.points))  # type: ignore[union-attr]  # points set: __post_init__ checked them for kind = piecewise
         return NoFault()
 
 
 FaultBoundValue = Annotated[float, Meta(gt=0, le=MAGNITUDE_MAX)]
 
 
-class FaultBoundSpec(_Strict, kw_only=True):
+class FaultBoundSpec(_Strict, frozen=True, kw_only=True):
     """Declared physical bounds on the sensor fault: |f_k+1 − f_k| ≤ rate and/or |f_k| ≤ size.
 
     An assumption like the noise bound: the estimator may rely on it (the adaptive sector of the SAIM
@@ -164,7 +164,7 @@ def _p0_problem(v: list[list[float]]) -> str | None:
     return None
 
 
-class NodeProfile(_Strict, kw_only=True):
+class NodeProfile(_Strict, frozen=True, kw_only=True):
     """One yaw-rate sensor: y = C x + Ds f + Dv v, v² ≤ R, plus its estimator's initial ellipsoid."""
 
     label: Annotated[str, Meta(max_length=MAX_NAME)] = ""
@@ -202,7 +202,7 @@ def _between(lo: float, hi: float) -> object:
     return Annotated[float, Meta(ge=lo, le=hi)]
 
 
-class VehicleSpec(_Strict, kw_only=True):
+class VehicleSpec(_Strict, frozen=True, kw_only=True):
     """The car: the plant that generates the truth, its manoeuvre, and the T-S model's parameters.
 
     ``plant = "ts"`` (default): the truth is the T-S model of m..cr (the paper's Table I by default).
@@ -215,17 +215,17 @@ class VehicleSpec(_Strict, kw_only=True):
     manoeuvre: Annotated[str, Meta(description=f"one of {', '.join(MANOEUVRES)}")] = "paper"
     # physical ranges of a road vehicle (generous): a fuzzed wind gain of 1e300 overflowed a node's
     # guaranteed fallback set mid-run; the model must stay in floating-point range like the profiles
-    m: _between(*MASS_KG) | None = None  # type: ignore[valid-type]
-    Jz: _between(*YAW_INERTIA_KGM2) | None = None  # type: ignore[valid-type]
-    lf: _between(*AXLE_DISTANCE_M) | None = None  # type: ignore[valid-type]
-    lr: _between(*AXLE_DISTANCE_M) | None = None  # type: ignore[valid-type]
-    cf: _between(*CORNERING_STIFFNESS_N_PER_RAD) | None = None  # type: ignore[valid-type]
-    cr: _between(*CORNERING_STIFFNESS_N_PER_RAD) | None = None  # type: ignore[valid-type]
-    fw: _between(-WIND_GAIN_MAX_N, WIND_GAIN_MAX_N) = 1360.0  # type: ignore[valid-type]
-    lw: _between(-AXLE_DISTANCE_M[1], AXLE_DISTANCE_M[1]) = 0.5  # type: ignore[valid-type]
+    m: _between(*MASS_KG) | None = None  # type: ignore[valid-type]  # an Annotated type built by _between: valid at run time, opaque to mypy
+    Jz: _between(*YAW_INERTIA_KGM2) | None = None  # type: ignore[valid-type]  # an Annotated type built by _between: valid at run time, opaque to mypy
+    lf: _between(*AXLE_DISTANCE_M) | None = None  # type: ignore[valid-type]  # an Annotated type built by _between: valid at run time, opaque to mypy
+    lr: _between(*AXLE_DISTANCE_M) | None = None  # type: ignore[valid-type]  # an Annotated type built by _between: valid at run time, opaque to mypy
+    cf: _between(*CORNERING_STIFFNESS_N_PER_RAD) | None = None  # type: ignore[valid-type]  # an Annotated type built by _between: valid at run time, opaque to mypy
+    cr: _between(*CORNERING_STIFFNESS_N_PER_RAD) | None = None  # type: ignore[valid-type]  # an Annotated type built by _between: valid at run time, opaque to mypy
+    fw: _between(-WIND_GAIN_MAX_N, WIND_GAIN_MAX_N) = 1360.0  # type: ignore[valid-type]  # an Annotated type built by _between: valid at run time, opaque to mypy
+    lw: _between(-AXLE_DISTANCE_M[1], AXLE_DISTANCE_M[1]) = 0.5  # type: ignore[valid-type]  # an Annotated type built by _between: valid at run time, opaque to mypy
     vx_min_kmh: Annotated[float, Meta(gt=0, le=SPEED_MAX_KMH)] = 80.0
     vx_max_kmh: Annotated[float, Meta(gt=0, le=SPEED_MAX_KMH)] = 120.0
-    x0: tuple[_between(-STATE_MAX, STATE_MAX), _between(-STATE_MAX, STATE_MAX)] = (0.0, 0.0)  # type: ignore[valid-type]
+    x0: tuple[_between(-STATE_MAX, STATE_MAX), _between(-STATE_MAX, STATE_MAX)] = (0.0, 0.0)  # type: ignore[valid-type]  # an Annotated type built by _between: valid at run time, opaque to mypy
 
     def __post_init__(self) -> None:
         if self.vx_min_kmh >= self.vx_max_kmh:
@@ -255,7 +255,7 @@ TABLE_I = ("m", "Jz", "lf", "lr", "cf", "cr")  # the bicycle model's parameters 
 UNCERTAINTY_MAX = 10.0  # |e_k| components [rad, rad/s] per step: beyond it the model says nothing
 
 
-class NetworkSpec(_Strict, kw_only=True):
+class NetworkSpec(_Strict, frozen=True, kw_only=True):
     """Network-wide declarations."""
 
     fault_tolerance: Annotated[
@@ -263,10 +263,10 @@ class NetworkSpec(_Strict, kw_only=True):
     ] = 0.0
 
 
-class ModelUncertaintySpec(_Strict, kw_only=True):
+class ModelUncertaintySpec(_Strict, frozen=True, kw_only=True):
     """Declared bound on the model mismatch e_k of x_{k+1} = Ā x_k + B̄ u_k + D̄ w_k + e_k (one of the two)."""
 
-    box: tuple[_between(0, UNCERTAINTY_MAX), _between(0, UNCERTAINTY_MAX)] | None = None  # type: ignore[valid-type]
+    box: tuple[_between(0, UNCERTAINTY_MAX), _between(0, UNCERTAINTY_MAX)] | None = None  # type: ignore[valid-type]  # an Annotated type built by _between: valid at run time, opaque to mypy
     ellipsoid: list[list[Finite]] | None = None
 
     def __post_init__(self) -> None:
@@ -290,22 +290,22 @@ class ModelUncertaintySpec(_Strict, kw_only=True):
         return ModelUncertainty.ellipsoid(np.asarray(self.ellipsoid, dtype=float))
 
 
-class SpeedSpec(_Strict, kw_only=True):
+class SpeedSpec(_Strict, frozen=True, kw_only=True):
     mean_kmh: Annotated[float, Meta(gt=0, le=SPEED_MAX_KMH)] = 100.0
     amplitude_kmh: Annotated[float, Meta(ge=0, le=SPEED_MAX_KMH)] = 18.0
     period_s: Annotated[float, Meta(ge=PERIOD_MIN_S, le=PERIOD_MAX_S)] = 8.0
 
 
-class SteeringSpec(_Strict, kw_only=True):
-    low: _between(-STEERING_MAX_RAD, STEERING_MAX_RAD) = 0.0175  # type: ignore[valid-type]
-    high: _between(-STEERING_MAX_RAD, STEERING_MAX_RAD) = 0.0542  # type: ignore[valid-type]
+class SteeringSpec(_Strict, frozen=True, kw_only=True):
+    low: _between(-STEERING_MAX_RAD, STEERING_MAX_RAD) = 0.0175  # type: ignore[valid-type]  # an Annotated type built by _between: valid at run time, opaque to mypy
+    high: _between(-STEERING_MAX_RAD, STEERING_MAX_RAD) = 0.0542  # type: ignore[valid-type]  # an Annotated type built by _between: valid at run time, opaque to mypy
 
     def __post_init__(self) -> None:
         if self.low > self.high:
             raise ValueError("steering low must not exceed high")
 
 
-class NodeRef(_Strict, kw_only=True):
+class NodeRef(_Strict, frozen=True, kw_only=True):
     id: Annotated[int, Meta(ge=1)]
     profile: Annotated[
         str,
@@ -321,7 +321,7 @@ class NodeRef(_Strict, kw_only=True):
             raise ValueError(f"estimator: unknown estimator {self.estimator!r} (one of {', '.join(NODE_ESTIMATOR_NAMES)})")
 
 
-class Edge(_Strict, kw_only=True):
+class Edge(_Strict, frozen=True, kw_only=True):
     """a_ij > 0: node ``to`` (i) uses the innovation of node ``from`` (j); i = j is a self-loop."""
 
     to: Annotated[int, Meta(ge=1)]
@@ -329,25 +329,25 @@ class Edge(_Strict, kw_only=True):
     weight: Positive = 1.0
 
 
-class Burst(_Strict, kw_only=True):
+class Burst(_Strict, frozen=True, kw_only=True):
     to: Annotated[int, Meta(ge=1)]
     from_: Annotated[int, Meta(ge=1)] = field(name="from")
     start: Annotated[int, Meta(ge=0)]
     length: Annotated[int, Meta(ge=1)]
 
 
-class LinkLoss(_Strict, kw_only=True):
+class LinkLoss(_Strict, frozen=True, kw_only=True):
     """Scheduled loss of node messages: i.i.d. per link and step, plus bursts on chosen links."""
 
     probability: Annotated[float, Meta(ge=0, le=1)] = 0.0
     bursts: list[Burst] = []
 
 
-class TopologyFile(_Strict, kw_only=True):
+class TopologyFile(_Strict, frozen=True, kw_only=True):
     name: str
     node_dir: str = "../nodes"
     steps: Annotated[int, Meta(ge=1, le=MAX_STEPS)] = 80
-    tau_s: _between(*SAMPLING_PERIOD_S) = 0.1  # type: ignore[valid-type]
+    tau_s: _between(*SAMPLING_PERIOD_S) = 0.1  # type: ignore[valid-type]  # an Annotated type built by _between: valid at run time, opaque to mypy
     case: Case = "nsnim"
     W: Annotated[float, Meta(ge=W_MIN, le=W_MAX, description="side-wind bound w² ≤ W")] = 2.0
     vehicle: VehicleSpec = field(default_factory=VehicleSpec)
@@ -493,7 +493,7 @@ def _value_at(data: object, loc: str) -> object:
     """The input value at msgspec's location ``loc`` (None if there is none)."""
     for name, index in _STEP.findall(loc):
         try:
-            data = data[int(index)] if index else data[name]  # type: ignore[index]
+            data = data[int(index)] if index else data[name]  # type: ignore[index]  # data is whatever TOML holds; a miss raises and returns None below
         except (KeyError, IndexError, TypeError, ValueError):
             return None
     return data
@@ -606,7 +606,7 @@ def load_topology(
                 label=prof.label or ref.profile,
                 sensor=sensor,
                 noise_frequency=prof.noise_frequency,
-                gamma_range=(prof.availability.gamma_min, prof.availability.gamma_max) if saim else None,  # type: ignore[union-attr]
+                gamma_range=(prof.availability.gamma_min, prof.availability.gamma_max) if saim else None,  # type: ignore[union-attr]  # saim: the check above raised unless both sections exist
                 fault=prof.fault.build(),
                 x0_hat=np.array(prof.x0_hat, dtype=float),
                 P0=prof.P0_matrix(),
@@ -634,9 +634,9 @@ def load_topology(
         steer_high=topo.steering.high,
         nodes=nodes,
         loss=topo.loss,
-        plant=v.plant,  # type: ignore[arg-type]  (checked by VehicleSpec)
+        plant=cast(PlantKind, v.plant),  # one of PLANTS: VehicleSpec checked it
         vehicle_id=v.vehicle,
-        manoeuvre=v.manoeuvre,  # type: ignore[arg-type]
+        manoeuvre=cast(ManoeuvreName, v.manoeuvre),  # one of MANOEUVRES: VehicleSpec checked it
         uncertainty=topo.model_uncertainty.build() if topo.model_uncertainty is not None else None,
         fault_tolerance=topo.network.fault_tolerance,
     )

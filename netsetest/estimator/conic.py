@@ -577,7 +577,7 @@ class ConicSolver:
             nv += self.n_tau
         groups = list(self.groups)
         if self.socp and use_xi:
-            groups.append(_Group(self.xi, (), 0.0))  # type: ignore[arg-type]
+            groups.append(_Group(self.xi, (), 0.0))  # type: ignore[arg-type]  # xi is set whenever balls were aggregated (use_xi)
         n_t = len(groups) + (1 if slot0_cone else 0)
         iTt = list(range(nv, nv + n_t))
         nv += n_t
@@ -608,7 +608,7 @@ class ConicSolver:
 
     def _balls_compact(self, use_xi: bool) -> list[int]:
         """Compact multiplier indices of the ball facts (ξ included when used)."""
-        return self.ball_compact + ([self.xi] if use_xi else [])  # type: ignore[list-item]
+        return self.ball_compact + ([self.xi] if use_xi else [])  # type: ignore[list-item]  # xi is set whenever use_xi
 
     def _put_group_cones(self, bld: _Builder, var: _Variables) -> None:
         """Rotated cones β ‖Π_k(L)‖² ≤ t τ  ⇔  ‖(t − τ, 2√β Π_k)‖ ≤ t + τ, with L = S L̃, one per group."""
@@ -730,12 +730,12 @@ class ConicSolver:
         bld.b_blocks.append(_Rho([row_of(r00)]))
         extra = [g.fact for g in var.groups] if self.socp else []
         if xi_in_lmi:
-            extra.append(self.xi)  # type: ignore[arg-type]
+            extra.append(self.xi)  # type: ignore[arg-type]  # xi is set whenever use_xi
         if extra:
             bld.put(_Const(np.ones(len(extra))), [row_of(r00)] * len(extra), [iT[r][c] for c in extra])
         if xi_in_lmi:
             rx, _ = _tri(n - 1, n - 1)
-            bld.put(_Const(-np.ones(1)), [row_of(rx)], [iT[r][self.xi]])  # type: ignore[index]
+            bld.put(_Const(-np.ones(1)), [row_of(rx)], [iT[r][self.xi]])  # type: ignore[index]  # xi is set whenever use_xi
 
     def _finish(self, bld: _Builder, var: _Variables, key: TemplateKey, lmi_rows: list[int], n: int) -> _Template:
         """The csc order of the entries (the pattern is fixed: data = values[order]) and the template."""

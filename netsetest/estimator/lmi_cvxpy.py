@@ -38,7 +38,7 @@ class CvxpySolver:
             lmi = cp.bmat([[-self.v_P, pi], [pi.T, mult]])
             cons.append(0.5 * (lmi + lmi.T) << 0)
         self.problem = cp.Problem(cp.Minimize(cp.trace(self.v_P)), cons)
-        assert self.problem.is_dcp(dpp=True)
+        assert self.problem.is_dcp(dpp=True)  # type: ignore[call-arg]  # cvxpy's annotation of is_dcp omits its dpp keyword
 
     def solve(self, data: StepData, rho: float) -> Solution:
         cp = self.cp
@@ -57,7 +57,8 @@ class CvxpySolver:
             return Solution(None, [], [], f"error: {exc}")
         if self.v_P.value is None or status not in ("optimal", "optimal_inaccurate"):
             return Solution(None, [], [], status)
-        return Solution(self.v_P.value, [v.value for v in self.v_L], [v.value for v in self.v_tau], status)
+        L = [np.asarray(v.value) for v in self.v_L]  # solved: every variable has a value
+        return Solution(self.v_P.value, L, [np.asarray(v.value) for v in self.v_tau], status)
 
 
 __all__ = ["CvxpySolver"]

@@ -82,7 +82,7 @@ class EtaLayout:
         if self.w is not None:
             facts.append(FactInfo("ball", (self.w,), W))
         if self.e:  # 1 − ‖ζ_ball‖² per ball of the mismatch bound (a box: one per component)
-            facts += [FactInfo("ball", tuple(self.e[m] for m in ball)) for ball in uncertainty.balls]  # type: ignore[union-attr]
+            facts += [FactInfo("ball", tuple(self.e[m] for m in ball)) for ball in uncertainty.balls]  # type: ignore[union-attr]  # self.e is non-empty only with an uncertainty
         facts += [FactInfo("ball", (self.v[j],), neighbours[j].R) for j in self.v]
         if self.v_new is not None:
             facts.append(FactInfo("ball", (self.v_new,), own.R))
@@ -91,6 +91,7 @@ class EtaLayout:
                 r_slots = tuple(self.z) if j == node_id else (self.s[j],)
                 facts.append(FactInfo("sector", (self.phi[j],), support=(0, *r_slots)))
         if self.phi_new is not None:
+            assert self.w is not None and self.v_new is not None  # φ⁺ exists only in a predicting step
             facts.append(FactInfo("sector", (self.phi_new,), support=(0, *self.z, self.w, *self.e, self.v_new, self.phi_new)))
         self.facts = facts
         self.n_facts = len(facts)

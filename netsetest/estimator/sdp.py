@@ -378,7 +378,8 @@ class LocalEstimator:
             g_new[lay.e] = cbar @ T @ self._ebar
         g_new[lay.v_new] = -cg * dv_new
         g_new[lay.phi_new] = -cg * gamma_new
-        return pi0, x_pred, _sector(d, lay.phi_new, g_new, sector.h)  # type: ignore[union-attr]  φ⁺ (h r⁺ − φ⁺) ≥ 0
+        assert sector is not None  # a φ⁺ slot exists only with a sector
+        return pi0, x_pred, _sector(d, lay.phi_new, g_new, sector.h)  # φ⁺ (h r⁺ − φ⁺) ≥ 0
 
     def _innovations(
         self, lay: EtaLayout, balls: list[np.ndarray], neigh: dict[int, NeighbourState], Mi: np.ndarray, weights: dict[int, float] | None = None
@@ -414,7 +415,7 @@ class LocalEstimator:
                 if j in lay.phi:
                     ell[lay.phi[j]] += a * nb.gamma
             if j in lay.phi:  # φ_j (h_j r_j − φ_j) ≥ 0
-                facts.append(_sector(d, lay.phi[j], g_r, nb.sector.h))  # type: ignore[union-attr]
+                facts.append(_sector(d, lay.phi[j], g_r, nb.sector.h))  # type: ignore[union-attr]  # j has a φ slot only with a published sector
         return ell, facts
 
     def initial_data(self, prior: Ellipsoid, y: float, gamma: float, sector: Sector | None) -> StepData:
@@ -523,6 +524,7 @@ class LocalEstimator:
             tau = sum(a * v for a, v in zip(alpha, sol.tau))
             pi0 = sum(a * p for a, p in zip(alpha, data.pi0))
         pi = pi0 - L @ data.ell[None, :]  # Π(L) = Π₀ − L ℓᵀ
+        assert sol.P is not None  # checked by the caller: a Solution without P is no answer
         rho_c = certify(sol.P, pi, tau, facts)
         if rho_c is None:
             return None, solve

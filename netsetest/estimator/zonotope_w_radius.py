@@ -173,7 +173,7 @@ class ZonotopeEstimator(SetEstimator):
         gens = np.hstack([
             L @ z.generators, (self.T_x @ d * sq_w)[:, None], self.T_x @ self.sc.mismatch_generators, (self.G_r * (hi - lo) / 2)[:, None],
         ])  # fmt: skip
-        return SumSet(Zonotope(center, gens), L @ self.set.M, self.set.sliced)  # type: ignore[operator]
+        return SumSet(Zonotope(center, gens), L @ self.set.M, self.set.sliced)
 
     def _bounded_step(self, a: np.ndarray, bu: np.ndarray, d: np.ndarray, y: float, gamma: float) -> SumSet:
         """In the lifted space [x̄⁺; f_k]: the descriptor step where the measurement is two-sided (exact),
@@ -201,7 +201,7 @@ class ZonotopeEstimator(SetEstimator):
                 lift[2, 2] = 1.0  # f⁺ = f + δ s
                 extra.append(n.fault_rate * np.eye(NA + 1)[2])
             else:
-                extra.append(n.fault_size * np.eye(NA + 1)[2])  # type: ignore[operator]  # fault_bounded: one is declared
+                extra.append(n.fault_size * np.eye(NA + 1)[2])  # fault_bounded: one is declared
         gens = np.hstack([lift @ z.generators, np.array(extra).T])
         out = SumSet(Zonotope(lift @ z.center + shift, gens), lift @ self.set.M, self.set.sliced)
         slabs = []
@@ -214,7 +214,7 @@ class ZonotopeEstimator(SetEstimator):
         for slab in slabs:
             out = self._intersect(out, slab)
         zo = out.zonotope
-        return SumSet(Zonotope(zo.center[:NA], zo.generators[:NA]), out.M[:NA], out.sliced)  # type: ignore[index]
+        return SumSet(Zonotope(zo.center[:NA], zo.generators[:NA]), out.M[:NA], out.sliced)  # type: ignore[index]  # M is set in the bounded (lifted) step
 
     def _intersect(self, s: SumSet, slab: Slab) -> SumSet:
         """001 Theorem 1 for one strip: X ∩ {lo ≤ aᵀx ≤ hi} ⊆ (I − λaᵀ)X ⊕ λ[lo', hi'] for any λ; the

@@ -7,7 +7,7 @@ calibrate`` (analysis/calibrate.py) measures the model mismatch on exactly the s
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -48,7 +48,8 @@ class Drive:
         self.signals = ExogenousSignals(
             signals, seed, sc.steer_low, sc.steer_high, sc.W,
             [n.sensor.R for n in sc.nodes], [n.noise_frequency for n in sc.nodes],
-            [n.gamma_range for n in sc.nodes] if sc.case == "saim" else None, sc.tau_s,
+            cast(list[tuple[float, float]], [n.gamma_range for n in sc.nodes]) if sc.case == "saim" else None,  # saim: every node has one
+            sc.tau_s,
         )  # fmt: skip
         p = sc.model.params
         self.manoeuvre = Manoeuvre.build(sc.manoeuvre, sc.speed, sc.steer_high, p.lf + p.lr, sc.steps * sc.tau_s)

@@ -38,7 +38,7 @@ class VehicleParams:
     vx_max: float = 120.0 * KMH  # [m/s]
 
 
-def continuous_matrices(p: VehicleParams, inv_vx: float, inv_vx2: float) -> tuple[np.ndarray, ...]:
+def continuous_matrices(p: VehicleParams, inv_vx: float, inv_vx2: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A', B', D' of (4)-(5) with 1/Vx and 1/Vx² treated as independent premise values."""
     a = np.array(
         [

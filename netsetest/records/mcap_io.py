@@ -288,9 +288,9 @@ def save_mcap(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, 
     try:
         w.meta(meta)
         by_step: dict[int, list[tuple[int, dict]]] = {}
-        for node, entries in nodes.items():
+        for node_key, entries in nodes.items():
             for e in entries:
-                by_step.setdefault(int(e["step"]), []).append((int(node), e))
+                by_step.setdefault(int(e["step"]), []).append((int(node_key), e))
         truth_by_step = {int(t["step"]): t for t in truth}
         for k in sorted(set(by_step) | set(truth_by_step)):
             if k in truth_by_step:

@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -176,10 +177,10 @@ def _settled_limits(rec: Record, ids: list[int], comp: int, truth: np.ndarray) -
     return a - pad, b + pad
 
 
-def _legend(target: Axes | Figure, fig: Figure, **kw: object) -> None:
+def _legend(target: Axes | Figure, fig: Figure, **kw: Any) -> None:
     """One legend on ``target`` (a panel, or the figure) with every label drawn anywhere in ``fig`` (e.g.
     "not reported" of one node)."""
-    entries: dict[str, object] = {}
+    entries: dict[str, Any] = {}  # label → artist
     for a in fig.axes:
         for h, label in zip(*a.get_legend_handles_labels()):
             entries.setdefault(label, h)
@@ -318,22 +319,23 @@ def _mismatch(rec: Record) -> tuple[np.ndarray, np.ndarray] | None:
 def _fig_mismatch(rec: Record, label: str) -> Figure:
     """e_k of the plant against the declared bound: each component with the bound's half-widths (the box
     itself, or the box around an ellipsoid), and the size of e_k in the bound's own norm (≤ 1 inside)."""
-    steps, e = _mismatch(rec)  # type: ignore[misc]
+    steps, e = _mismatch(rec)  # type: ignore[misc]  # called only where _mismatch found one (plot_records checks)
     t = steps * float(rec.meta.get("tau_s", 1.0))
     unc = rec.meta.get("model_uncertainty")
     fig, axes = plt.subplots(3, 1, figsize=(8, 6.5), sharex=True)
     fig.suptitle(f"Model mismatch e_k of {rec.meta.get('plant', 'the plant')} against the declared bound ({label})")
     G = np.asarray(unc["G"], dtype=float) if isinstance(unc, dict) else None
+    kind = unc["kind"] if isinstance(unc, dict) else None
     for comp, (ax, name) in enumerate(zip(axes[:2], ("e_β [rad]", "e_r [rad/s]"))):
         ax.plot(t, e[:, comp], color="tab:purple", lw=1.0, label="e_k (plant − T-S model)")
         if G is not None:
-            radius = float(np.abs(G[comp]).sum()) if unc["kind"] == "box" else float(np.linalg.norm(G[comp]))
+            radius = float(np.abs(G[comp]).sum()) if kind == "box" else float(np.linalg.norm(G[comp]))
             for sign in (1, -1):
                 ax.axhline(sign * radius, color="0.3", lw=0.9, ls="--", label="declared bound" if sign > 0 else None)
         ax.set_ylabel(name)
     if G is not None:
         zeta = np.linalg.solve(G, e.T)  # e = G ζ
-        size = np.abs(zeta).max(axis=0) if unc["kind"] == "box" else np.sqrt((zeta * zeta).sum(axis=0))
+        size = np.abs(zeta).max(axis=0) if kind == "box" else np.sqrt((zeta * zeta).sum(axis=0))
         axes[2].plot(t, size, color="tab:purple", lw=1.0)
         axes[2].axhline(1.0, color="tab:red", lw=0.9, ls="--", label="bound (1)")
         axes[2].set_ylabel("‖G⁻¹e_k‖ (box: ∞-norm)")
@@ -349,7 +351,7 @@ def _fig8(records: list[Record], labels: list[str]) -> Figure:
     ids = sorted(set().union(*(_node_ids(r) for r in records)))
     tau = float(records[0].meta.get("tau_s", 1.0))
     fig, panels = _panels(ids, MAX_PANELS, "Fig. 8: E_i = eᵀP⁻¹e and radius ρ_i (dimensionless)", f"step k (τs = {tau:g} s)")
-    handles: dict[str, object] = {}
+    handles: dict[str, Any] = {}  # label → artist
     for i, ax in panels:
         top = 0.0
         for n, rec in enumerate(records):

@@ -43,7 +43,7 @@ import json
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Protocol
+from typing import IO, Protocol, cast
 
 import numpy as np
 
@@ -83,7 +83,7 @@ class JsonlSink:
     def __init__(self, path: str | Path) -> None:
         path = Path(path)
         raw = open_locked(path)
-        self._fh: IO[bytes] = gzip.GzipFile(fileobj=raw, mode="wb") if path.suffix == ".gz" else raw
+        self._fh: IO[bytes] = cast(IO[bytes], gzip.GzipFile(fileobj=raw, mode="wb")) if path.suffix == ".gz" else raw
         self._raw = raw
         self._seq = 0
 
@@ -387,7 +387,7 @@ def _check_sequence(path: Path, objs: list[dict]) -> None:
 def _check_order(path: Path, truth: list, nodes: dict[str, list]) -> int:
     """The truth steps and each node's state steps strictly increase (integers); the last truth step."""
     def steps(entries: list, what: str) -> list[int]:
-        out = []
+        out: list[int] = []
         for e in entries:
             k = e.get("step") if isinstance(e, dict) else None
             if not isinstance(k, int) or isinstance(k, bool) or not 0 <= k <= MAX_STEP:
@@ -447,7 +447,7 @@ FDI_VALUES = ("detected", "healthy", "undecided")  # roles/fdi.py's statuses, as
 def _fdi(v: object) -> str | None:
     if v is not None and v not in FDI_VALUES:
         raise ValueError(f"fdi: expected one of {', '.join(FDI_VALUES)}, got {v!r}")
-    return v  # type: ignore[return-value]
+    return v
 
 
 def record_from_parts(

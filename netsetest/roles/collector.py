@@ -500,7 +500,7 @@ class Collector:
         m = k if st.status == "rejoin" else k - 1
         if st.inputs:
             return [(j, m, d, j == st.node) for j, d in st.inputs]
-        deps = [(j, m, None, False) for j in st.used]
+        deps: list[tuple[int, int, str | None, bool]] = [(j, m, None, False) for j in st.used]
         return deps if st.status == "rejoin" else [*deps, (st.node, m, None, True)]
 
     def _close(self, k: int) -> None:

@@ -352,9 +352,9 @@ class Node:
         have = self.inbox.get(self.k, {})
         neigh = {j: have[j] for j in inp.expect_from if j in have}
         if self.id in self.cfg.in_weights:
-            neigh[self.id] = self.own  # type: ignore[assignment]
-        alpha = self.sc.model.weights(inp.vx_prev)  # type: ignore[arg-type]
-        step_in = StepInput(alpha, inp.u_prev, inp.y, inp.gamma, neigh)  # type: ignore[arg-type]
+            neigh[self.id] = self.own  # type: ignore[assignment]  # the own Ellipsoid stands in for the NeighbourState the self-loop reads (same fields)
+        alpha = self.sc.model.weights(inp.vx_prev)  # type: ignore[arg-type]  # steps > 0 carry vx_prev: _implausible_input dropped inputs without it
+        step_in = StepInput(alpha, inp.u_prev, inp.y, inp.gamma, neigh)  # type: ignore[arg-type]  # steps > 0 carry u_prev: _implausible_input dropped inputs without it
         t = PROFILE.now() if PROFILE is not None else 0
         res = self.estimator.step(Ellipsoid(self.xhat, self.P, self.rho), step_in)
         if PROFILE is not None:
@@ -429,12 +429,12 @@ class Node:
         drops = self.drop_report()
         return NodeState(
             step=inp.step, node=self.id, xhat=[float(a) for a in pub.xhat], P=[float(a) for a in pub.P.reshape(NA * NA)],
-            rho=self.rho, gamma=inp.gamma, innov=innov, status=status, rho_cert=rho_cert,  # type: ignore[arg-type]
+            rho=self.rho, gamma=inp.gamma, innov=innov, status=status, rho_cert=rho_cert,  # type: ignore[arg-type]  # status is one of the Literal's values; rho_cert a float
             solve_ms=res.solve_ms, used=used, missing=missing,
             late=inp.deadline is not None and time.time() > inp.deadline, dropped=sum(drops.values()), drops=drops,
             sector=(sector.h1, sector.h) if sector is not None else None,
             sector_basis=sector.basis if sector is not None else "none", set=wire_set, inputs=inputs,
-            **self._own_set(res),
+            **self._own_set(res),  # type: ignore[arg-type]  # own_xhat/own_P only: mypy cannot tell the keys of a dict
         )  # fmt: skip
 
     @staticmethod

@@ -378,6 +378,7 @@ def launch(plan: RunPlan) -> RunOutcome:
         if not summary_path.exists():
             log("run", f"the collector exited with code {col.returncode} without a summary")
             return RunOutcome(EXIT_VIOLATION, None)
+        assert col.returncode is not None  # the loop above ends once the collector has exited
         return RunOutcome(col.returncode, read_summary(summary_path))
     except ForkServerError as exc:
         log("run", f"{exc}; stopping the run")

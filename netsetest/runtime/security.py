@@ -238,7 +238,8 @@ def observer_access(directory: str | Path) -> ObserverAccess:
     left there (a ``netsetest run``), or the run id of ``run.env`` (``netsetest credentials``), if any."""
     ident = identity(directory, OBSERVER)
     d = Path(directory)
-    run_id, connect = None, ()
+    run_id: str | None = None
+    connect: tuple[str, ...] = ()
     if (d / OBSERVER_ACCESS).is_file():
         try:
             doc = json.loads((d / OBSERVER_ACCESS).read_text())

@@ -1,4 +1,4 @@
-"""The linter runs with the tests (so CI runs it): ruff with the rules configured in pyproject.toml."""
+"""The linter and the type checker run with the tests (so CI runs them): ruff and mypy as configured in pyproject.toml."""
 
 from __future__ import annotations
 
@@ -18,3 +18,24 @@ def test_ruff_finds_nothing() -> None:
         pytest.fail("ruff is not installed: pip install -e '.[dev]'")
     p = subprocess.run([ruff, "check", "netsetest", "tests"], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stdout + p.stderr
+
+
+def test_mypy_finds_nothing() -> None:
+    """The type checker over the package, configured in pyproject.toml ([tool.mypy])."""
+    mypy = shutil.which("mypy") or str(Path(sys.executable).with_name("mypy"))
+    if not Path(mypy).exists():
+        pytest.fail("mypy is not installed: pip install -e '.[dev]'")
+    p = subprocess.run([mypy, "--no-error-summary"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stdout + p.stderr
+
+
+def test_every_type_suppression_says_why() -> None:
+    """A `# type: ignore[code]` in the package is followed on its line by `# why` (mypy flags unused ones)."""
+    import re
+
+    bare = []
+    for path in sorted((ROOT / "netsetest").rglob("*.py")):
+        for n, line in enumerate(path.read_text().splitlines(), 1):
+            if "type: ignore" in line and not re.search(r"type: ignore\[[a-z, -]+\]  # \S", line):
+                bare.append(f"{path.relative_to(ROOT)}:{n}")
+    assert not bare, "type: ignore without a reason: " + ", ".join(bare)
