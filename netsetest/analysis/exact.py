@@ -40,6 +40,7 @@ COORDINATES: tuple[Coordinate, ...] = ("beta", "r", "f")
 Side = Literal["lo", "hi"]
 
 FROM_STEP = 10  # ratios "from step 10" leave out the start-up transient of the estimators
+DEGENERATE_WIDTH = 1e-6  # a mean exact width below it is a point (a declared zero), not an interval to compare
 NARROWER_TOL = 1e-8  # solver precision of the exact ends (measured ≤ 2e-9 over 80 steps) with margin
 SOLVER_TOL = 1e-10  # Clarabel gap and feasibility tolerances: witnesses meet every constraint to ~1e-9
 _SOLVED = ("Solved", "AlmostSolved")
@@ -474,6 +475,41 @@ def compare_record(record: Record, exact: ExactBounds) -> Comparison:
         overall_rms_radius_rel=_nanmean([n.ratios[c].rms_radius_rel for n in rows for c in COORDINATES]),
         mean_width_ratio_all={c: mean("width_ratio_all", c) for c in COORDINATES},
     )
+
+
+@dataclass(frozen=True)
+class LocalLimit:
+    """What the network could buy node i at best: its exact limit from its own data alone (``local``) over
+    the exact limit from every node's data (``central``), mean width ratio from step FROM_STEP (docs/network.md)."""
+
+    node: int
+    fault_ratio: float  # node i's own fault
+    r_ratio: float
+    beta_ratio: float
+
+
+def local_limits(
+    scenario: Scenario, record: Record, fault_bounds: FaultBoundsMode = "used", central: ExactBounds | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[LocalLimit]:  # fmt: skip
+    """Per node: the one-node exact limit against the whole network's (``central``: computed unless given)."""
+    central = central or exact_bounds(scenario, record, fault_bounds)
+    keep = central.steps >= FROM_STEP
+    out = []
+    for n, i in enumerate(scenario.ids):
+        local = exact_bounds(scenario, record, fault_bounds, nodes=[i])
+
+        def ratio(coord: Coordinate) -> float:
+            """NaN where the central width is solver precision (a reference sensor's own fault is 0)."""
+            a, b = local.interval(coord, i)[keep], central.interval(coord, i)[keep]
+            ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+            wa, wb = (a[:, 1] - a[:, 0])[ok], (b[:, 1] - b[:, 0])[ok]
+            return _ratio(wa, wb) if len(wb) and wb.mean() > DEGENERATE_WIDTH else float("nan")
+
+        out.append(LocalLimit(i, ratio("f"), ratio("r"), ratio("beta")))
+        if progress is not None:
+            progress(n + 1, len(scenario.ids))
+    return out
 
 
 def _nanmean(values: list[float]) -> float:

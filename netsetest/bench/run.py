@@ -35,13 +35,14 @@ QUICK: dict[str, Any] = {
     "scaling_steps": 20, "scaling_sizes": [6, 24, 96], "rt_sizes": [12, 24, 48, 64, 80, 96, 128], "rt_steps": 50, "profile_nodes": 96, "startup_reps": 3,
     "launch_reps": 5,
     "flood_steps": 200, "flood_rate": 30000, "crash_steps": 30, "soak_steps": 2000, "cpu_steps": 400,
-    "plant_steps": 80, "plant_seeds": [10, 11], "plant_lap_steps": 200, "plant_mb_steps": 10,
+    "plant_steps": 80, "plant_seeds": [10, 11], "plant_lap_steps": 200, "plant_mb_steps": 10, "network_steps": 80, "network_seeds": [0],
 }  # fmt: skip
 FULL: dict[str, Any] = {
     "steps": 80, "ref_sched": 80, "ref_rule": 24, "naive": 40, "prev_sched": 80, "prev_rule": 24,
     "scaling_steps": 40, "scaling_sizes": [6, 24, 96], "rt_sizes": [6, 12, 24, 36, 48, 64, 80, 96, 112, 128], "rt_steps": 50, "profile_nodes": 96,
     "startup_reps": 5, "launch_reps": 9, "flood_steps": 400, "flood_rate": 30000, "crash_steps": 60, "soak_steps": 20000, "cpu_steps": 800,
     "plant_steps": 80, "plant_seeds": list(range(10, 20)), "plant_lap_steps": 600, "plant_mb_steps": 30,
+    "network_steps": 80, "network_seeds": [0, 1, 2],
 }  # fmt: skip
 
 
@@ -246,6 +247,7 @@ def run_bench(
     quick: bool = False, json_path: str | None = None, markdown_path: str | None = None, only: str | None = None,
     readme_path: str | None = None,
 ) -> int:  # fmt: skip
+    from netsetest.bench.network import network_figures, network_markdown
     from netsetest.bench.plant import plant_figures, plant_markdown
     from netsetest.bench.zenoh_runs import launch_to_step0, node_memory_profile, node_startup, realtime_ladder, realtime_node_profile
 
@@ -257,12 +259,13 @@ def run_bench(
             "date": time.strftime("%Y-%m-%d %H:%M:%S"), "config": cfg, "load_before": _load(), "only": only,
         }
     }  # fmt: skip
-    if only == "plant":
+    if only is not None:  # one part alone: its figures and its Markdown
+        figures, render = {"plant": (plant_figures, plant_markdown), "network": (network_figures, network_markdown)}[only]
         with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
-            res["plant"] = plant_figures(cfg, Path(tmpd))
+            res[only] = figures(cfg, Path(tmpd))
         res["meta"]["load_after"] = _load()
         res["meta"]["duration_s"] = time.perf_counter() - t_all
-        md = f"# netsetest benchmark: a car as the truth ({'quick' if quick else 'full'}, {res['meta']['date']})\n\n" + plant_markdown(res["plant"])
+        md = f"# netsetest benchmark: {only} ({'quick' if quick else 'full'}, {res['meta']['date']})\n\n" + render(res[only])
         _write(res, md, json_path, markdown_path, readme_path)
         return 0
     with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
@@ -292,10 +295,12 @@ def run_bench(
             _log(f"  {p['objective']}: {p.get('process_ms_per_step')} ms per node-step, {p['deadline_misses']} deadline misses")
         res["defences"] = defences(cfg)
         res["plant"] = plant_figures(cfg, tmp)
+        res["network"] = network_figures(cfg, tmp)
     res["meta"]["load_after"] = _load()
     res["meta"]["duration_s"] = time.perf_counter() - t_all
     res.update(headline(res))
     md = markdown(res) + "\n## A car as the truth (netsetest/bench/plant.py)\n\n" + plant_markdown(res["plant"])
+    md += "\n## What the exchange can buy (netsetest/bench/network.py)\n\n" + network_markdown(res["network"])
     _write(res, md, json_path, markdown_path, readme_path)
     return 0
 

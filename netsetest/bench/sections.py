@@ -1,3 +1,3 @@
 """The parts of ``netsetest bench`` that ``--only`` can run alone (a light module: the CLI imports it)."""
 
-SECTIONS = ("plant",)  # a car as the truth: netsetest/bench/plant.py
+SECTIONS = ("plant", "network")  # a car as the truth: bench/plant.py; what the exchange can buy: bench/network.py

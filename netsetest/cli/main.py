@@ -8,7 +8,9 @@ on a step where the assumptions held; 2 bad input (file, option); 3 a node stopp
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+import math
 import os
 import sys
 from collections.abc import Callable, Sequence
@@ -112,8 +114,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", metavar="PATH", help="write the per-step exact intervals and the ratios as JSON")
     p.add_argument("--topology", metavar="PATH", help="topology file (default: the one named in the record)")
     p.add_argument("--fault-bounds", choices=["used", "all", "none"], default="used",
-                   help="declared fault bounds: where the estimator relies on them (saturating sensors), "
-                   "everywhere, or nowhere")  # fmt: skip
+                   help="declared fault bounds: where the estimator relies on them (saturating sensors) and reference "
+                   "sensors (size = 0), everywhere, or nowhere")  # fmt: skip
+    p.add_argument("--local", action="store_true",
+                   help="also each node's exact limit from its own data alone, against the whole network's: what the "
+                   "exchange could buy it at best (docs/network.md)")  # fmt: skip
     p = sub.add_parser("calibrate", help="the smallest model-mismatch bound covering a plant's e_k on training manoeuvres")
     p.add_argument("topology", help="topology with a nonlinear plant (a path, or a bundled name such as paper6_car)")
     p.add_argument("--manoeuvres", type=checks.name_list(MANOEUVRES, "manoeuvre"), required=True, metavar="A,B,...",
@@ -131,7 +136,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="fewer steps and samples (about 10 minutes; default: the full benchmark, about 30)")
     p.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
     p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown (default: none)")
-    p.add_argument("--only", choices=SECTIONS, help="run one part alone: plant = a car as the truth (default: every part)")
+    p.add_argument("--only", choices=SECTIONS,
+                   help="run one part alone: plant = a car as the truth, network = what the exchange can buy (default: every part)")  # fmt: skip
     p.add_argument("--readme", metavar="PATH", help="rewrite the generated section of this README from the figures (default: none)")
 
     from netsetest.cli import compare, tools
@@ -274,9 +280,24 @@ def cmd_exact(a: argparse.Namespace) -> int:
     total = sum(len(rec.nodes[n.node].steps) for n in cmp.nodes) * len(COORDINATES)
     print(f"published interval narrower than exact on {narrower} of {total} node-step intervals"
           + (" (the estimator relied on more than these assumptions there, or one of the two is wrong)" if narrower else ""))
+    doc = exact_document(rec, ex, cmp)
+    if a.local:
+        from netsetest.analysis.exact import local_limits
+
+        bar = Progress(len(sc.ids), "exact --local")
+        limits = local_limits(sc, rec, a.fault_bounds, central=ex, progress=lambda n, total: bar.update(n))
+        bar.close()
+        print("the exchange's value at best: exact limit from the node's own data / from every node's data "
+              "(mean width from step 10; 1.000: the network cannot help this node)")  # fmt: skip
+        print(f"{'node':>4}  {'own fault':>10}  {'yaw rate':>10}  {'sideslip':>10}")
+        for lim in limits:
+            cells = ("  declared 0" if math.isnan(v) else f"{v:10.3f}" for v in (lim.fault_ratio, lim.r_ratio, lim.beta_ratio))
+            print(f"{lim.node:>4}  " + "  ".join(cells))
+        doc["local_over_central"] = [{k: None if isinstance(v, float) and math.isnan(v) else v for k, v in dataclasses.asdict(lim).items()}
+                                     for lim in limits]  # fmt: skip
     if a.json:
         with open(a.json, "w") as fh:
-            json.dump(exact_document(rec, ex, cmp), fh, indent=1)
+            json.dump(doc, fh, indent=1)
     return 0
 
 
@@ -336,11 +357,12 @@ def cmd_bench(a: argparse.Namespace) -> int:
     from netsetest.bench.run import run_bench
 
     if a.readme:
-        from netsetest.bench.docs import BEGIN, END
+        from netsetest.bench.docs import check_markers
 
         text = open(a.readme, encoding="utf-8").read() if os.path.isfile(a.readme) else ""
-        if BEGIN not in text or END not in text:  # fail now, not after the benchmark
-            print(f"netsetest bench: --readme {a.readme}: no generated section (markers) in it", file=sys.stderr)
+        why = check_markers(text, a.only)
+        if why:  # fail now, not after the benchmark
+            print(f"netsetest bench: --readme {a.readme}: {why}", file=sys.stderr)
             return EXIT_BAD_INPUT
     return run_bench(a.quick, a.json, a.markdown, a.only, a.readme)
 

@@ -148,7 +148,10 @@ class FaultBoundSpec(_Strict, frozen=True, kw_only=True):
 
     # at most MAGNITUDE_MAX like the fault values themselves: 1e300 overflowed the SAIM node's fallback set
     rate: Annotated[FaultBoundValue | None, Meta(description="δ_i: largest fault change per step")] = None
-    size: Annotated[FaultBoundValue | None, Meta(description="F_i: largest fault magnitude")] = None
+    size: Annotated[
+        Annotated[float, Meta(ge=0, le=MAGNITUDE_MAX)] | None,
+        Meta(description="F_i: largest fault magnitude; 0 declares a reference sensor (fault-free, docs/network.md)"),
+    ] = None
 
 
 def _p0_problem(v: list[list[float]]) -> str | None:
@@ -404,7 +407,7 @@ class NodeConfig:
     rho: float
     in_weights: dict[int, float]  # j → a_ij for j ∈ N_i (i itself when a_ii > 0)
     fault_rate: float | None = None  # declared δ_i: |f_k+1 − f_k| ≤ δ_i (None: not declared)
-    fault_size: float | None = None  # declared F_i: |f_k| ≤ F_i (None: not declared)
+    fault_size: float | None = None  # declared F_i: |f_k| ≤ F_i (None: not declared; 0: a reference sensor)
     estimator: str = SDP  # estimator/names.py: NODE_ESTIMATOR_NAMES
 
 
@@ -470,13 +473,14 @@ class Scenario:
 
     def fault_bounded(self, mode: FaultBoundsMode) -> tuple[int, ...]:
         """Nodes whose declared fault bounds an analysis applies: ``used`` — where an estimator relies
-        on them (a saturating sensor); ``all`` — every node that declares one; ``none`` — no node."""
+        on them (a saturating sensor) and every reference sensor (``size = 0``: a health declaration);
+        ``all`` — every node that declares one; ``none`` — no node."""
         if mode not in FAULT_BOUNDS_MODES:
             raise ConfigError(f"fault bounds mode must be one of {', '.join(FAULT_BOUNDS_MODES)}, got {mode!r}")
         declared = [n for n in self.nodes if n.fault_rate is not None or n.fault_size is not None]
         if mode == "none":
             return ()
-        return tuple(n.id for n in declared if mode == "all" or n.sensor.saturated)
+        return tuple(n.id for n in declared if mode == "all" or n.sensor.saturated or n.fault_size == 0)
 
     def out_neighbours(self, j: int) -> list[int]:
         """Nodes i ≠ j that use j's message."""

@@ -2,6 +2,8 @@
 
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -23,27 +25,28 @@ def test_ci_runs_the_readme_test_command_verbatim():
     assert ci[-1] == test
 
 
-def test_the_generated_section_is_what_the_committed_figures_make() -> None:
-    """README's "How close to a real car" tables are bench/plant.json rendered (`netsetest bench --only plant
-    --readme README.md`), never typed: editing either alone fails here."""
+@pytest.mark.parametrize(("part", "expect"), [("plant", ("| held-out drive |", "| estimator | fault width, car |")),
+                                             ("network", ("| topology | case | signals |",))])
+def test_the_generated_sections_are_what_the_committed_figures_make(part: str, expect: tuple[str, ...]) -> None:
+    """README's generated tables are bench/<part>.json rendered (`netsetest bench --only <part> --readme
+    README.md`), never typed: editing either alone fails here."""
     import json
 
-    from netsetest.bench.docs import BEGIN, END, render
+    from netsetest.bench.docs import begin, end, render
 
     readme = (ROOT / "README.md").read_text()
-    assert readme.count(BEGIN) == readme.count(END) == 1
-    results = json.loads((ROOT / "bench" / "plant.json").read_text())
+    assert readme.count(begin(part)) == readme.count(end(part)) == 1
+    results = json.loads((ROOT / "bench" / f"{part}.json").read_text())
     assert render(readme, results) == readme
-    section = readme[readme.index(BEGIN) : readme.index(END)]
-    assert "| held-out drive |" in section and "| estimator | fault width, car |" in section
+    section = readme[readme.index(begin(part)) : readme.index(end(part))]
+    assert all(e in section for e in expect)
 
 
 def test_a_broken_generated_section_is_an_error() -> None:
-    import pytest
-
-    from netsetest.bench.docs import BEGIN, END, DocsError, render
+    from netsetest.bench.docs import DocsError, begin, check_markers, end, render
 
     with pytest.raises(DocsError):
-        render("# no markers\n", {})
+        render("# no markers\n", {"plant": {}})
     with pytest.raises(DocsError):
-        render(f"{END}\n{BEGIN}\n", {})
+        render(f"{end('plant')}\n{begin('plant')}\n", {"plant": {}})
+    assert check_markers("# none\n", "network") == "no generated network section (markers) in it"
