@@ -354,12 +354,13 @@ def launch_peer_mesh(
     signals: str = "paper",
     record: Path | None = None,
     also_connect: Sequence[str] = (),
+    endpoints: dict[str, str] | None = None,
 ) -> dict[str, str]:
-    """Collector, nodes and vehicle as peers: each listens on a free port and connects to all the others
-    (the same layout ``netsetest run --mode zenoh`` builds) and to ``also_connect``.  Returns name → listen
-    endpoint."""
+    """Collector, nodes and vehicle as peers: each listens on a free port (or its given one in ``endpoints``)
+    and connects to all the others (the same layout ``netsetest run --mode zenoh`` builds) and to
+    ``also_connect``.  Returns name → listen endpoint."""
     names = role_names()
-    endpoints = {n: f"tcp/127.0.0.1:{p}" for n, p in zip(names, free_ports(len(names)))}
+    endpoints = {**{n: f"tcp/127.0.0.1:{p}" for n, p in zip(names, free_ports(len(names)))}, **(endpoints or {})}
     guard.markers.add(run_id)
     for name in names:
         role = "node" if name.startswith("node") else name

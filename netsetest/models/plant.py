@@ -129,14 +129,22 @@ class TSPlant:
 
 
 class _CommonRoadPlant:
-    """Shared integration of a CommonRoad model: the wind and speed inputs enter through ``_rhs``."""
+    """A CommonRoad model integrated between sampling instants; the wind enters through ``_wind``."""
 
-    def __init__(self, vehicle_id: int, fw: float, lw: float) -> None:
+    MODEL: str  # the package's model: vehicle_dynamics_<MODEL> and init_<MODEL>
+
+    def __init__(self, vehicle_id: int, fw: float, lw: float, x0: np.ndarray, vx0: float, delta0: float) -> None:
+        """The car at x0 = [β, r], speed vx0 (longitudinal), steering δ0; the package's own initial state."""
+        import importlib
+
         self.p = vehicle_parameters(vehicle_id)
         self.m, self.Iz = float(self.p.m), float(self.p.I_z)
         self.fw, self.lw = fw, lw
-        self.s = np.zeros(0)
-        self._f: Callable[[list[float], list[float], object], list[float]]
+        dynamics = importlib.import_module(f"vehiclemodels.vehicle_dynamics_{self.MODEL}")
+        init = getattr(importlib.import_module(f"vehiclemodels.init_{self.MODEL}"), f"init_{self.MODEL}")
+        self._f: Callable[[list[float], list[float], object], list[float]] = getattr(dynamics, f"vehicle_dynamics_{self.MODEL}")
+        beta0, r0 = float(x0[0]), float(x0[1])
+        self.s = np.array(init([0.0, 0.0, delta0, vx0 / math.cos(beta0), 0.0, r0, beta0], self.p), dtype=float)
 
     def _wind(self, f: list[float], s: np.ndarray, force: float) -> None:
         raise NotImplementedError
@@ -165,14 +173,7 @@ class _CommonRoadPlant:
 class SingleTrackPlant(_CommonRoadPlant):
     """``vehicle_dynamics_std``: states X, Y, δ, v, ψ, ψ̇, β, ω_f, ω_r."""
 
-    def __init__(self, vehicle_id: int, fw: float, lw: float, x0: np.ndarray, vx0: float, delta0: float) -> None:
-        super().__init__(vehicle_id, fw, lw)
-        from vehiclemodels.init_std import init_std
-        from vehiclemodels.vehicle_dynamics_std import vehicle_dynamics_std
-
-        self._f = vehicle_dynamics_std
-        beta0, r0 = float(x0[0]), float(x0[1])
-        self.s = np.array(init_std([0.0, 0.0, delta0, vx0 / math.cos(beta0), 0.0, r0, beta0], self.p), dtype=float)
+    MODEL = "std"
 
     def _wind(self, f: list[float], s: np.ndarray, force: float) -> None:
         # a lateral body force F at lever arm l_w: v̇ += F sin β / m, β̇ += F cos β / (m v), ψ̈ += l_w F / I_z
@@ -189,14 +190,7 @@ class SingleTrackPlant(_CommonRoadPlant):
 class MultiBodyPlant(_CommonRoadPlant):
     """``vehicle_dynamics_mb``: 29 states; x[3] = v_x, x[10] = v_y (body frame), x[5] = ψ̇."""
 
-    def __init__(self, vehicle_id: int, fw: float, lw: float, x0: np.ndarray, vx0: float, delta0: float) -> None:
-        super().__init__(vehicle_id, fw, lw)
-        from vehiclemodels.init_mb import init_mb
-        from vehiclemodels.vehicle_dynamics_mb import vehicle_dynamics_mb
-
-        self._f = vehicle_dynamics_mb
-        beta0, r0 = float(x0[0]), float(x0[1])
-        self.s = np.array(init_mb([0.0, 0.0, delta0, vx0 / math.cos(beta0), 0.0, r0, beta0], self.p), dtype=float)
+    MODEL = "mb"
 
     def _wind(self, f: list[float], s: np.ndarray, force: float) -> None:
         # a lateral body force F at lever arm l_w: v̇_y += F / m, ψ̈ += l_w F / I_z

@@ -64,11 +64,13 @@ def test_echo_and_watch_on_a_live_run(procs: ProcessGuard, tmp_path: Path) -> No
     wait_port("127.0.0.1", p_echo, 30)
     wait_port("127.0.0.1", p_watch, 30)
     record, summary = tmp_path / "run.json", tmp_path / "summary.json"
-    eps = launch_peer_mesh(procs, PAPER6, run, STEPS, summary, record=record,
-                           also_connect=[f"tcp/127.0.0.1:{p_echo}", f"tcp/127.0.0.1:{p_watch}"])  # fmt: skip
-    # echo 2: joins by --connect to one role's endpoint (gossip finds the others), the vehicle's keys
-    e2 = procs.start("echo_connect", cli("echo", "vehicle/**", "--run-id", run, "--connect", eps["collector"], "--count", "20",
-                                         "--duration", "120"), stdout=True)  # fmt: skip
+    # echo 2: joins by --connect to an endpoint that is up before the run (echo 1's) and finds the roles by
+    # gossip; the vehicle's keys. Connected to a role's endpoint instead, it raced the roles' start-up:
+    # Zenoh retries a refused connection after a back-off, and a 30-step lockstep run can be over by then
+    e2 = procs.start("echo_connect", cli("echo", "vehicle/**", "--run-id", run, "--connect", f"tcp/127.0.0.1:{p_echo}",
+                                         "--count", "20", "--duration", "120"), stdout=True)  # fmt: skip
+    launch_peer_mesh(procs, PAPER6, run, STEPS, summary, record=record,
+                     also_connect=[f"tcp/127.0.0.1:{p_echo}", f"tcp/127.0.0.1:{p_watch}"])  # fmt: skip
     wait_roles(procs, 180)
     out1, _ = e1.communicate(timeout=60)
     out2, _ = e2.communicate(timeout=60)
