@@ -128,7 +128,7 @@ def _run_zenoh(
     with tempfile.TemporaryDirectory(prefix="netsetest-") as tmp:
         rec = Path(tmp) / "run.json"
         argv = [sys.executable, "-m", "netsetest.cli.main", "run", str(topology), "--mode", "zenoh", "--quiet",
-                "--signals", signals, "--seed", str(seed), "--variant", variant, "--record", str(rec)]  # fmt: skip
+                "--signals", signals, "--seed", str(seed), "--variant", variant, "--record", str(rec)]
         argv += ["--case", case] if case else []
         argv += ["--steps", str(steps)] if steps else []
         argv += ["--estimator", estimator] if estimator else []
@@ -153,5 +153,5 @@ def result_of(rec: Record) -> SimulationResult:
             lower=np.column_stack([lo for lo, _ in bounds]), upper=np.column_stack([hi for _, hi in bounds]),
             truth=truth, E=tr.E, rho=tr.rho, contained=tr.contained, assumptions_ok=tr.assumptions_ok,
             status=tuple(tr.status),
-        )  # fmt: skip
+        )
     return SimulationResult(nodes, rec.summary, rec)

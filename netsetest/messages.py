@@ -192,7 +192,7 @@ def state_digest(st: NodeState) -> str:
     """The identity of a state copy: every field a receiver's step takes from it (the set, the innovation,
     γ, the sector, and the set the sender continues from).  Two copies with the same digest are one."""
     content = [st.step, st.node, st.xhat, st.P, st.rho, st.gamma, st.innov, st.sector, st.sector_basis, st.set,
-               st.own_xhat, st.own_P]  # fmt: skip
+               st.own_xhat, st.own_P]
     return hashlib.blake2b(msgspec.msgpack.encode(content), digest_size=DIGEST_BYTES).hexdigest()
 
 

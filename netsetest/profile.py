@@ -68,14 +68,14 @@ class PhaseProfile:
         thread0, process0, wall0 = self._window
         thread_ns = time.thread_time_ns() - thread0
         process_ns = time.process_time_ns() - process0
-        per_step = lambda ns: ns / 1e6 / steps  # noqa: E731
+        per_step = lambda ns: ns / 1e6 / steps  # noqa: E731  # a one-line local helper
         phases = {p: {"ms_per_step": per_step(self.cpu_ns[p]), "calls_per_step": self.calls[p] / steps} for p in PHASES}
         phases["other"] = {"ms_per_step": per_step(thread_ns - sum(self.cpu_ns.values())), "calls_per_step": 0.0}
         phases["threads"] = {"ms_per_step": per_step(process_ns - thread_ns), "calls_per_step": 0.0}
         return {
             "steps": steps, "wall_s": time.monotonic() - wall0,
             "thread_ms_per_step": per_step(thread_ns), "process_ms_per_step": per_step(process_ns), "phases": phases,
-        }  # fmt: skip
+        }
 
     def write(self, name: str, steps: int) -> None:
         """Write the report to ``$NETSETEST_PROFILE/<name>.json`` (a failure to write only warns)."""

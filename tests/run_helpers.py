@@ -15,7 +15,7 @@ PAPER6 = "topologies/paper6.toml"
 def recorded_run(case: str, signals: str, seed: int, steps: int, tmp: str) -> tuple[Scenario, Record]:
     """The paper network run in memory (scheduled variant), its record written to ``tmp`` and loaded."""
     sc = load_topology(PAPER6, case, steps)
-    res = run_inmemory(sc, signals, "scheduled", seed)  # type: ignore[arg-type]
+    res = run_inmemory(sc, signals, "scheduled", seed)
     path = f"{tmp}/{case}-{signals}-{seed}-{steps}.json"
     save_record(path, res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
     return sc, load_record(path)

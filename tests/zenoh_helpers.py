@@ -187,10 +187,10 @@ class ProcessGuard:
             out: object = subprocess.PIPE
         else:
             out = open(self.logdir / f"{name}.out", "wb")
-            self._files.append(out)  # type: ignore[arg-type]
+            self._files.append(out)
         kw.setdefault("cwd", str(ROOT))
         proc = subprocess.Popen(
-            list(argv), stdin=subprocess.DEVNULL, stdout=out, stderr=err, start_new_session=True, **kw  # type: ignore[call-overload]
+            list(argv), stdin=subprocess.DEVNULL, stdout=out, stderr=err, start_new_session=True, **kw
         )
         self.procs[name] = proc
         return proc
@@ -250,7 +250,7 @@ class ProcessGuard:
 
 
 @pytest.fixture
-def procs(tmp_path: Path):  # noqa: ANN201
+def procs(tmp_path: Path):
     """A :class:`ProcessGuard`; at teardown every leftover is SIGKILLed, then none may remain."""
     guard = ProcessGuard(tmp_path / "logs")
     yield guard
@@ -263,7 +263,7 @@ def procs(tmp_path: Path):  # noqa: ANN201
 
 def parent_run_id(proc: subprocess.Popen) -> str:
     """The run id start_parent gave ``netsetest run`` (every child carries it on its command line)."""
-    return proc.netsetest_run_id  # type: ignore[attr-defined]
+    return proc.netsetest_run_id
 
 
 _PARENTS = iter(range(1_000_000))
@@ -276,7 +276,7 @@ def start_parent(guard: ProcessGuard, name: str, args: Sequence[str]) -> subproc
     extra = ["--run-id", run_id, *([] if "--seed" in args else ["--seed", "0"])]
     guard.markers.add(run_id)
     proc = guard.start(name, cli("run", *args, *extra))
-    proc.netsetest_run_id = run_id  # type: ignore[attr-defined]
+    proc.netsetest_run_id = run_id
     return proc
 
 
@@ -366,7 +366,7 @@ def launch_peer_mesh(
         role = "node" if name.startswith("node") else name
         others = [endpoints[o] for o in names if o != name] + list(also_connect)
         argv = role_argv(role, topology, run_id, "peer", [endpoints[name]], others, steps,
-                         role_extra(name, summary, seed, signals, record))  # fmt: skip
+                         role_extra(name, summary, seed, signals, record))
         guard.start(name, cli(*argv))
     return endpoints
 
@@ -403,7 +403,7 @@ def wait_roles(guard: ProcessGuard, timeout: float, names: Sequence[str] | None 
         if failed:
             pytest.fail(f"role process(es) failed: {failed}\n{guard.logs()}")
         if all(c is not None for c in codes.values()):
-            return codes  # type: ignore[return-value]
+            return codes
         if time.monotonic() > deadline:
             pytest.fail(f"roles still running after {timeout:g} s: {[n for n, c in codes.items() if c is None]}\n{guard.logs()}")
         time.sleep(0.1)

@@ -93,7 +93,7 @@ def origin_mvee(points: np.ndarray) -> np.ndarray:
 def calibrate(
     scenarios: Sequence[Scenario], seeds: Sequence[int], signals: Sequence[SignalKind], margin: float = DEFAULT_MARGIN,
     progress: Callable[[int, int], None] | None = None,
-) -> Calibration:  # fmt: skip
+) -> Calibration:
     """The box and ellipsoid bounds covering every e_k of every (scenario, seed, signals) drive."""
     if margin < 0:
         raise ValueError(f"margin must be ≥ 0, got {margin}")

@@ -135,7 +135,7 @@ def _exact_array(ex: ExactBounds, i: int) -> np.ndarray:
 
 
 def _score(acc: _Accumulator, bounds: np.ndarray, steps: np.ndarray, truth: np.ndarray, exact: np.ndarray,
-           broken: list[str | None]) -> None:  # fmt: skip
+           broken: list[str | None]) -> None:
     """Add one node's run: bounds (K, 3, 2) at ``steps``, truth (K, 3), exact (all steps, 3, 2)."""
     ex = exact[steps]
     for n in range(len(steps)):
@@ -198,7 +198,7 @@ def _row(name: str, acc: _Accumulator, real_time: bool) -> CompareRow:
         rms_radius_rel=num(float(np.nanmean(acc.rms))) if acc.rms else None,
         ms_median=num(float(np.median(ms))) if len(ms) else None, ms_p95=num(float(np.percentile(ms, 95))) if len(ms) else None,
         fallbacks=acc.fallbacks, refused=acc.refused[:3], exact_reference=sorted(acc.references),
-    )  # fmt: skip
+    )
 
 
 def compare(
@@ -250,7 +250,7 @@ def compare(
 
 
 def _score_run(sc: Scenario, rec: Record, estimators: tuple[str, ...], acc: dict[str, _Accumulator],
-               keep: dict[str, dict[int, np.ndarray]] | None, report: Callable[[str], None]) -> None:  # fmt: skip
+               keep: dict[str, dict[int, np.ndarray]] | None, report: Callable[[str], None]) -> None:
     data = step_data(rec)
     t0 = time.perf_counter()
     ex = exact_bounds(sc, rec, "used")
@@ -306,7 +306,7 @@ def _fmt(v: float | None, spec: str = ".4f") -> str:
 
 
 TABLE_HEADER = ("estimator", "plant", "violations", "misses (broken assumption)", "covered", "fault width", "β width", "r width",
-                "fault/exact", "β, r / exact", "exact with fault bounds", "rms radius rel.", "ms median", "ms p95", "fallbacks")  # fmt: skip
+                "fault/exact", "β, r / exact", "exact with fault bounds", "rms radius rel.", "ms median", "ms p95", "fallbacks")
 
 
 def table_rows(c: Comparison) -> list[tuple[str, ...]]:
@@ -319,7 +319,7 @@ def table_rows(c: Comparison) -> list[tuple[str, ...]]:
             _fmt(r.r_width_mean), _fmt(r.ratio_exact, ".3f"), "/".join(_fmt(v, ".3f") for v in r.ratio_exact_state),
             ",".join(r.exact_reference),
             _fmt(r.rms_radius_rel, ".3f"), _fmt(r.ms_median, ".3f"), _fmt(r.ms_p95, ".3f"), str(r.fallbacks),
-        ))  # fmt: skip
+        ))
     return out
 
 

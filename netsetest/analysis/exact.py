@@ -118,7 +118,7 @@ def step_data(record: Record) -> list[StepData]:
                     y={int(i): float(v) for i, v in t["y"].items()},
                     gamma={int(i): float(v) for i, v in t["gamma"].items()},
                 )
-            )  # fmt: skip
+            )
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise ExactError(f"{record.path}: malformed truth entry ({type(exc).__name__}: {exc})") from None
     if not out:
@@ -147,7 +147,7 @@ class _Program:
         self.intervals = {
             (node.id, j): node.sensor.measured_interval(dj.y[node.id], dj.gamma[node.id])
             for node in scenario.nodes for j, dj in enumerate(data)
-        }  # fmt: skip
+        }
         eq = _Rows()  # x_{j+1} − Ā_j x_j − D̄_j w_j − e_j = B̄_j u_j
         for j in range(K):
             a, b, d = scenario.model.blend(scenario.model.weights(data[j].vx))
@@ -290,7 +290,7 @@ class _Rows:
         return _RowBlock(
             A=A, b=np.array([e[1] for e in self.entries]),
             step=np.array([e[2] for e in self.entries], dtype=int), free=np.array([e[3] for e in self.entries], dtype=int),
-        )  # fmt: skip
+        )
 
 
 @dataclass(frozen=True)
@@ -386,7 +386,7 @@ def exact_bounds(
     return ExactBounds(
         steps=np.arange(K1), beta=beta, r=r, fault=fault, fault_bounds=fault_bounds,
         bounded_nodes=bounded, infeasible_steps=tuple(infeasible), witnesses=witnesses,
-    )  # fmt: skip
+    )
 
 
 # ---------------------------------------------------------------- a record against the exact limit
@@ -491,7 +491,7 @@ class LocalLimit:
 def local_limits(
     scenario: Scenario, record: Record, fault_bounds: FaultBoundsMode = "used", central: ExactBounds | None = None,
     progress: Callable[[int, int], None] | None = None,
-) -> list[LocalLimit]:  # fmt: skip
+) -> list[LocalLimit]:
     """Per node: the one-node exact limit against the whole network's (``central``: computed unless given)."""
     central = central or exact_bounds(scenario, record, fault_bounds)
     keep = central.steps >= FROM_STEP
@@ -535,7 +535,7 @@ def exact_document(record: Record, exact: ExactBounds, comparison: Comparison) -
             "width_ratio": _finite_or_none(c.width_ratio), "width_ratio_all": _finite_or_none(c.width_ratio_all),
             "rms_radius_rel": _finite_or_none(c.rms_radius_rel), "steps": c.steps, "left_out": c.left_out,
             "narrower": c.narrower,
-        }  # fmt: skip
+        }
 
     return {
         "format": "netsetest-exact",

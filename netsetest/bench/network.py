@@ -38,7 +38,7 @@ def network_figures(cfg: dict, tmp: Path) -> dict:
                     run_inmemory(sc, sig, "scheduled", seed, record=str(path), keep=False)
                     limits = local_limits(sc, load_record(str(path)))
                     rows.append({"topology": name, "case": case, "signals": sig, "seed": seed,
-                                 "nodes": {lim.node: {"fault": _num(lim.fault_ratio), "r": _num(lim.r_ratio)} for lim in limits}})  # fmt: skip
+                                 "nodes": {lim.node: {"fault": _num(lim.fault_ratio), "r": _num(lim.r_ratio)} for lim in limits}})
                     faults = [v["fault"] for v in rows[-1]["nodes"].values() if v["fault"] is not None]
                     _log(f"  {name} {case} {sig} seed {seed}: own fault local/central {min(faults):.3f}–{max(faults):.3f}")
     return {"steps": cfg["network_steps"], "seeds": cfg["network_seeds"], "runs": rows}
@@ -53,7 +53,7 @@ def network_markdown(res: dict) -> str:
     seeds = ", ".join(map(str, res["seeds"]))
     lines = [f"Exact limit from the node's own data over the exact limit from every node's data (mean width from step 10; "
              f"{res['steps']} steps, seeds {seeds}, mean over the seeds; `declared 0`: the reference's own fault):", "",
-             "| topology | case | signals | own fault, node 1 … 6 | yaw rate, every node |", "|---|---|---|---|---|"]  # fmt: skip
+             "| topology | case | signals | own fault, node 1 … 6 | yaw rate, every node |", "|---|---|---|---|---|"]
     groups: dict[tuple[str, str, str], list[dict]] = {}
     for r in res["runs"]:
         groups.setdefault((r["topology"], r["case"], r["signals"]), []).append(r)

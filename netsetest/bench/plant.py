@@ -58,7 +58,7 @@ def _ts_twin(text: str) -> str:
     return _with_bound(text, None)
 
 
-def _drive(sc, signals: str, seed: int, tmp: Path, exact: bool = True) -> dict:  # noqa: ANN001
+def _drive(sc, signals: str, seed: int, tmp: Path, exact: bool = True) -> dict:
     """One drive as users run it, scored against its exact limit (``exact``)."""
     from netsetest.analysis.exact import compare_record, exact_bounds
     from netsetest.records.record import load_record
@@ -79,7 +79,7 @@ def _drive(sc, signals: str, seed: int, tmp: Path, exact: bool = True) -> dict: 
         "e_outside_steps": int((size > 1 + 1e-12).sum()), "evaluated": s.node_steps_evaluated, "covered": s.node_steps_covered,
         "contained": s.node_steps_contained, "violations": s.violations_total, "misses_attributed": s.misses_assumption_broken_total,
         "not_covered": dict(s.node_steps_not_covered), "fault_width": statistics.mean(widths), "fault_ratio_exact": ratio,
-    }  # fmt: skip
+    }
 
 
 def held_out(cfg: dict, tmp: Path) -> dict:
@@ -88,7 +88,7 @@ def held_out(cfg: dict, tmp: Path) -> dict:
     drives: dict[str, list[dict]] = {}
     plan = [("paper (seeds unseen)", CAR, None, cfg["plant_steps"], cfg["plant_seeds"]),
             ("double-lane-change", CAR, "double-lane-change", cfg["plant_steps"], cfg["plant_seeds"][:2]),
-            ("lap", CAR, "lap", cfg["plant_lap_steps"], cfg["plant_seeds"][:1])]  # fmt: skip
+            ("lap", CAR, "lap", cfg["plant_lap_steps"], cfg["plant_seeds"][:1])]
     for label, topo, manoeuvre, steps, seeds in plan:
         for case in ("nsnim", "saim"):
             sc = load_topology(topo, case, steps, manoeuvre=manoeuvre)
@@ -99,7 +99,7 @@ def held_out(cfg: dict, tmp: Path) -> dict:
         rows = drives[label]
         _log(f"  {label}: e_k up to {max(r['e_max_in_bound_norm'] for r in rows):.2f}× the bound, "
              f"covered {sum(r['covered'] for r in rows)}/{sum(r['evaluated'] for r in rows)}, "
-             f"violations {sum(r['violations'] for r in rows)}, fault/exact {statistics.mean(r['fault_ratio_exact'] for r in rows):.3f}")  # fmt: skip
+             f"violations {sum(r['violations'] for r in rows)}, fault/exact {statistics.mean(r['fault_ratio_exact'] for r in rows):.3f}")
     return {"training": TRAINING, "bound": load_topology(CAR).uncertainty.as_toml(), "drives": drives}  # type: ignore[union-attr]  # paper6_car declares a bound
 
 
@@ -113,7 +113,7 @@ def cost(cfg: dict, tmp: Path) -> dict:
     for label, topo in (("car", CAR), ("ts_twin", twin)):
         c = compare(topo, DEFAULT_COMPARE, (None,), ("paper", "worst"), tuple(cfg["plant_seeds"][:2]), cfg["plant_steps"])
         out[label] = {r.estimator: {"fault_width": r.fault_width_mean, "fault_ratio_exact": r.ratio_exact, "violations": r.violations,
-                                    "covered": r.covered, "node_steps": r.node_steps} for r in c.rows}  # fmt: skip
+                                    "covered": r.covered, "node_steps": r.node_steps} for r in c.rows}
     for est, row in out["car"].items():
         twin_w = out["ts_twin"][est]["fault_width"]
         row["width_vs_ts_twin"] = None if not twin_w or row["fault_width"] is None else row["fault_width"] / twin_w
@@ -158,9 +158,9 @@ def halved(cfg: dict, tmp: Path) -> dict:
                 rows.append(_drive(sc, sig, 0, tmp, exact=False) | {"case": case})
         misses = sum(r["evaluated"] - r["contained"] for r in rows)
         out[label] = {"scale": scale, "drives": rows, "misses": misses,
-                      "misses_attributed": sum(r["misses_attributed"] for r in rows), "violations": sum(r["violations"] for r in rows)}  # fmt: skip
+                      "misses_attributed": sum(r["misses_attributed"] for r in rows), "violations": sum(r["violations"] for r in rows)}
         _log(f"  bound × {scale:g}: covered {sum(r['covered'] for r in rows)}/{sum(r['evaluated'] for r in rows)}, "
-             f"misses {misses} (attributed {out[label]['misses_attributed']}), violations {out[label]['violations']}")  # fmt: skip
+             f"misses {misses} (attributed {out[label]['misses_attributed']}), violations {out[label]['violations']}")
     return out
 
 
@@ -194,7 +194,7 @@ def plant_markdown(res: dict) -> str:
              "objective); fault / exact: mean fault width from step 10 over the exact limit with the same bound.", "",
              "| held-out drive | case | drives | largest e_k / bound | steps with e_k outside | covered | contained | "
              "violations | misses (all attributed) | SDP fault width | fault / exact |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for label, rows in h["drives"].items():
         for case in ("nsnim", "saim"):
             rs = [r for r in rows if r["case"] == case]
@@ -212,11 +212,11 @@ def plant_markdown(res: dict) -> str:
     lines += ["", "The width the mismatch costs: every estimator on `paper6_car` and on the same car's own T-S model as the "
               "truth (same signals, steering and seeds; NSNIM, mean fault width from step 10):", "",
               "| estimator | fault width, car | fault width, T-S twin | car / twin | fault / exact, car | violations |",
-              "|---|---|---|---|---|---|"]  # fmt: skip
+              "|---|---|---|---|---|---|"]
     for est, row in c["car"].items():
         twin = c["ts_twin"][est]
         lines.append(f"| {est} | {_f(row['fault_width'], '.4f')} | {_f(twin['fault_width'], '.4f')} | {_f(row['width_vs_ts_twin'])} | "
-                     f"{_f(row['fault_ratio_exact'])} | {row['violations']} |")  # fmt: skip
+                     f"{_f(row['fault_ratio_exact'])} | {row['violations']} |")
     v = res["vehicle_cpu"]
     lines += ["", "The vehicle role's CPU per step (signals, driver, plant and e_k): "
               + ", ".join(f"{p} {r['ms_median']:.2f} ms (p95 {r['ms_p95']:.2f})" for p, r in v.items()) + " at τs = 0.1 s.", ""]

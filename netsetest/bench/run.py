@@ -36,14 +36,14 @@ QUICK: dict[str, Any] = {
     "launch_reps": 5,
     "flood_steps": 200, "flood_rate": 30000, "crash_steps": 30, "soak_steps": 2000, "cpu_steps": 400,
     "plant_steps": 80, "plant_seeds": [10, 11], "plant_lap_steps": 200, "plant_mb_steps": 10, "network_steps": 80, "network_seeds": [0],
-}  # fmt: skip
+}
 FULL: dict[str, Any] = {
     "steps": 80, "ref_sched": 80, "ref_rule": 24, "naive": 40, "prev_sched": 80, "prev_rule": 24,
     "scaling_steps": 40, "scaling_sizes": [6, 24, 96], "rt_sizes": [6, 12, 24, 36, 48, 64, 80, 96, 112, 128], "rt_steps": 50, "profile_nodes": 96,
     "startup_reps": 5, "launch_reps": 9, "flood_steps": 400, "flood_rate": 30000, "crash_steps": 60, "soak_steps": 20000, "cpu_steps": 800,
     "plant_steps": 80, "plant_seeds": list(range(10, 20)), "plant_lap_steps": 600, "plant_mb_steps": 30,
     "network_steps": 80, "network_seeds": [0, 1, 2],
-}  # fmt: skip
+}
 
 
 def _log(msg: str) -> None:
@@ -110,7 +110,7 @@ def scaling(cfg: dict, tmp: Path) -> dict:
             "estimator_ms_median": statistics.median(cap.step_ms), "estimator_ms_mean": statistics.fmean(cap.step_ms),
             "estimator_ms_median_by_degree": {d: statistics.median(v) for d, v in sorted(by_deg.items())},
             "fallbacks": cap.summary.fallbacks, "violations": cap.summary.violations_total,
-        })  # fmt: skip
+        })
         _log(f"  {n} nodes: {rows[-1]['ms_per_node_step']:.2f} ms per node-step (estimator {rows[-1]['estimator_ms_median']:.2f} ms)")
     base = rows[0]["ms_per_node_step"]
     return {"rows": rows, "spread_vs_smallest": [r["ms_per_node_step"] / base - 1 for r in rows]}
@@ -143,12 +143,12 @@ def zenoh_overhead(cfg: dict) -> dict:
         "cpu_floor": floor,
         "cli_end_to_end": {"zenoh_s": cli_z["wall_s"], "inmemory_s": cli_m["wall_s"], "zenoh_exit": cli_z["exit_code"],
                            "inmemory_exit": cli_m["exit_code"], "ratio": cli_z["wall_s"] / cli_m["wall_s"]},
-    }  # fmt: skip
+    }
     _log(f"  in memory {_med(mem):.2f} s, Zenoh lockstep stepping {_med(zen) or float('nan'):.2f} s (ratio {res['ratio'] or float('nan'):.2f}); "
-         f"end to end {cli_z['wall_s']:.1f} s vs {cli_m['wall_s']:.1f} s")  # fmt: skip
+         f"end to end {cli_z['wall_s']:.1f} s vs {cli_m['wall_s']:.1f} s")
     if floor:
         _log(f"  CPU per step: Zenoh {floor['zenoh_cpu_ms_per_step']:.2f} ms in its processes, in memory {floor['inmemory_ms_per_step']:.2f} ms; "
-             f"on {floor['cores']} cores the lockstep ratio cannot fall below {floor['ratio_floor']:.2f}")  # fmt: skip
+             f"on {floor['cores']} cores the lockstep ratio cannot fall below {floor['ratio_floor']:.2f}")
     return res
 
 
@@ -185,7 +185,7 @@ def lockstep_cpu_floor(sc: Scenario, short: dict | None, steps: int) -> dict | N
         "cpu_ms_per_step_by_role": {r: (statistics.median(v), len(v)) for r, v in per_role.items()},
         "zenoh_stepping_ms_per_step": 1e3 * (long["stepping_s"] - short["stepping_s"]) / extra,
         "ratio_floor": zen_cpu / MACHINE_CORES / mem_ms,
-    }  # fmt: skip
+    }
 
 
 def defences(cfg: dict) -> dict:
@@ -246,7 +246,7 @@ def tightness(cfg: dict, tmp: Path) -> dict:
 def run_bench(
     quick: bool = False, json_path: str | None = None, markdown_path: str | None = None, only: str | None = None,
     readme_path: str | None = None,
-) -> int:  # fmt: skip
+) -> int:
     from netsetest.bench.network import network_figures, network_markdown
     from netsetest.bench.plant import plant_figures, plant_markdown
     from netsetest.bench.zenoh_runs import launch_to_step0, node_memory_profile, node_startup, realtime_ladder, realtime_node_profile
@@ -258,7 +258,7 @@ def run_bench(
             "quick": quick, "python": platform.python_version(), "machine": platform.machine(), "cpus": _cpus(),
             "date": time.strftime("%Y-%m-%d %H:%M:%S"), "config": cfg, "load_before": _load(), "only": only,
         }
-    }  # fmt: skip
+    }
     if only is not None:  # one part alone: its figures and its Markdown
         figures, render = {"plant": (plant_figures, plant_markdown), "network": (network_figures, network_markdown)}[only]
         with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
@@ -281,7 +281,7 @@ def run_bench(
         _log(f"the 8-process paper run (secured): launch → step 0, {cfg['launch_reps']} runs")
         res["launch"] = launch_to_step0(PAPER6, cfg["launch_reps"])
         _log(f"  median {res['launch']['median_s'] or float('nan'):.2f} s: " + ", ".join(
-            "—" if r["launch_to_step0_s"] is None else f"{r['launch_to_step0_s']:.2f}" for r in res["launch"]["reps"]))  # fmt: skip
+            "—" if r["launch_to_step0_s"] is None else f"{r['launch_to_step0_s']:.2f}" for r in res["launch"]["reps"]))
         _log("one node process: start-up and peak RSS")
         res["node"] = node_startup(tmp, cfg["startup_reps"])
         res["node"]["memory_by_stage"] = node_memory_profile()
@@ -372,10 +372,10 @@ TARGETS = [
 
 
 def markdown(res: dict) -> str:
-    f = lambda v, spec=".2f": "—" if v is None else format(v, spec)  # noqa: E731
+    f = lambda v, spec=".2f": "—" if v is None else format(v, spec)  # noqa: E731  # a one-line local helper
     lines = [f"# netsetest benchmark ({'quick' if res['meta']['quick'] else 'full'}, {res['meta']['date']})", ""]
     lines += [f"Machine: {res['meta']['cpus']} CPUs, Python {res['meta']['python']}; load average before/after: "
-              f"{res['meta']['load_before']} / {res['meta']['load_after']}; {res['meta']['duration_s']:.0f} s in all.", ""]  # fmt: skip
+              f"{res['meta']['load_before']} / {res['meta']['load_after']}; {res['meta']['duration_s']:.0f} s in all.", ""]
     lines += ["## Targets", "", "| figure | value | target | met |", "|---|---|---|---|"]
     for key, target, ok in TARGETS:
         v = res.get(key)
@@ -388,7 +388,7 @@ def markdown(res: dict) -> str:
     lines.append(f"| scaling spread 6→96 nodes | {spread * 100:.0f} % | ≤ ±30 % | {'yes' if spread <= 0.3 else 'no'} |")
     lines += ["", "## Paper scenario, per node-step (wall ms; whole estimator step incl. certification)", "",
               "| case / variant | fast median | fast p95 | solve part | CPU median | iters | previous default (cvxpy) | straightforward | naive | fallbacks |",
-              "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+              "|---|---|---|---|---|---|---|---|---|---|"]
     for key, r in res["paper"].items():
         def cell(name: str) -> str:
             if name not in r:
@@ -410,19 +410,19 @@ def markdown(res: dict) -> str:
               "Where the published interval is narrower than exact, the estimator relied on more than the exact program's assumptions "
               "(the SAIM estimator's fixed sector) and the ratio there is not a tightness figure.", "",
               "| case | fault bounds | fault | yaw rate | sideslip | RMS radius f / r / β | narrower than exact | exact solve |",
-              "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+              "|---|---|---|---|---|---|---|---|"]
     for case, t in res["tightness"].items():
         w, rr = t["width_ratio"], t["rms_radius_rel"]
         lines.append(f"| {case} | {t['fault_bounds']} | {f(w['f'], '.3f')} | {f(w['r'], '.3f')} | {f(w['beta'], '.3f')} | "
                      f"{f(rr['f'], '.3f')} / {f(rr['r'], '.3f')} / {f(rr['beta'], '.3f')} | {t['narrower']} of {t['intervals']} | "
-                     f"{f(t['exact_s'], '.1f')} s |")  # fmt: skip
+                     f"{f(t['exact_s'], '.1f')} s |")
     lines += ["", "## In memory, ring with chords (|N_i| = 3, 4, 5 in equal shares)", "",
               "| nodes | ms per node-step | estimator median | by degree 3 / 4 / 5 |",
-              "|---|---|---|---|"]  # fmt: skip
+              "|---|---|---|---|"]
     for r in sc["rows"]:
         bd = r["estimator_ms_median_by_degree"]
         lines.append(f"| {r['nodes']} | {f(r['ms_per_node_step'])} | {f(r['estimator_ms_median'])} | "
-                     f"{' / '.join(f(bd.get(k)) for k in (3, 4, 5))} |")  # fmt: skip
+                     f"{' / '.join(f(bd.get(k)) for k in (3, 4, 5))} |")
     z = res["zenoh"]
     lines += ["", "## Zenoh", "",
               f"- lockstep stepping phase {f(_med(z['zenoh_stepping_s']))} s vs in memory {f(_med(z['inmemory_s']))} s: ratio {f(z['ratio'])} "
@@ -438,14 +438,14 @@ def markdown(res: dict) -> str:
                   f"first state {f(r['first_state_s'])} s, first estimate {f(r['first_estimate_s'])} s, peak RSS {f(r['peak_rss_mb'], '.0f')} MB"
                   for r in res["node"]["reps"]),
               "", "Where a node process's memory and start-up go (RSS after each import stage, wall ms):", "",
-              "| stage | RSS MB | added MB | ms |", "|---|---|---|---|"]  # fmt: skip
+              "| stage | RSS MB | added MB | ms |", "|---|---|---|---|"]
     for r in res["node"].get("memory_by_stage", []):
         lines.append(f"| {r['stage']} | {f(r.get('rss_mb'), '.1f')} | {f(r.get('added_mb'), '.1f')} | {f(r.get('ms'), '.0f')} |")
     lines += ["", f"Real time ({res['realtime']['steps']} steps at τs = 0.1 s; CPU in % of one core, steady state, "
               "the machine has 2 cores = 200 %):", "",
               "| nodes | attempt | load before | exit | deadline misses | late steps (first) | nodes missing | wall s | "
               "CPU per node | ms per node-step | all nodes | run (router) / vehicle / collector | cores needed | other work on the machine | node peak RSS MB |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in res["realtime"]["runs"]:
         pr = r.get("processes") or {}
         roles = pr.get("role_cpu_pct") or {}
@@ -453,23 +453,23 @@ def markdown(res: dict) -> str:
                      f"{r.get('late_steps')} ({r.get('first_late_step')}) | {r['nodes_missing']} | {f(r['wall_s'], '.0f')} | "
                      f"{f(pr.get('node_cpu_pct_median'))} | {f(r.get('node_cpu_ms_per_step'))} | {f(pr.get('nodes_cpu_pct_total'), '.0f')} | "
                      f"{' / '.join(f(roles.get(k), '.1f') for k in ('run', 'vehicle', 'collector'))} | {f(r.get('demand_cores'))} | "
-                     f"{f(pr.get('other_work_pct'), '.0f')} | {f(pr.get('node_peak_rss_mb_median'), '.1f')} |")  # fmt: skip
+                     f"{f(pr.get('other_work_pct'), '.0f')} | {f(pr.get('node_peak_rss_mb_median'), '.1f')} |")
     lines += _profile_lines(res.get("node_profile") or {}, res.get("node_profile_trace") or {})
     d = res["defences"]
     lines += ["", "## Defences (netsetest/bench/attacks.py, netsetest/bench/soak.py)", "",
               "`netsetest run` of the paper network as users start it, attacked from a process of its own (secured: with node 2's "
-              "certificate, an insider; insecure: a peer of the open mesh):", ""]  # fmt: skip
+              "certificate, an insider; insecure: a peer of the open mesh):", ""]
     for m in ("secured", "insecure"):
         for target, what in (("input", "node 2's input key"), ("state", "node 2's state key")):
             r = d[f"flood_{target}_{m}"]
             lines.append(f"- {m}: flood of {f(r['sent_per_s'], '.0f')} msg/s on {what}: step rate ratio {f(r['ratio'])}, "
-                         f"nodes lost {r['nodes_lost']}, exit {r['exit_code']}")  # fmt: skip
+                         f"nodes lost {r['nodes_lost']}, exit {r['exit_code']}")
         r = d[f"crash_{m}"]
         lines.append(f"- {m}: the crash payloads (invalid UTF-8, deep nesting, a foreign Ready, a huge number) on node 2's keys: "
-                     f"roles lost {'0' if r['roles_lost'] == 0 else 'some'} (exit {r['exit_code']}, nodes missing {r['nodes_missing']})")  # fmt: skip
+                     f"roles lost {'0' if r['roles_lost'] == 0 else 'some'} (exit {r['exit_code']}, nodes missing {r['nodes_missing']})")
     r = d["soak"]
     lines.append(f"- soak of {r['steps']} steps in memory: RSS {f(r['rss_start_mb'], '.1f')} → {f(r['rss_end_mb'], '.1f')} MB, "
-                 f"slope {f(r['slope_mb_per_10k_steps'])} MB per 10 000 steps ({f(r['steps_per_s'], '.0f')} steps/s)")  # fmt: skip
+                 f"slope {f(r['slope_mb_per_10k_steps'])} MB per 10 000 steps ({f(r['steps_per_s'], '.0f')} steps/s)")
     return "\n".join(lines) + "\n"
 
 
@@ -507,7 +507,7 @@ def _profile_lines(*profiles: dict) -> list[str]:
              "profiled (`NETSETEST_PROFILE`, thread CPU; median over the nodes; " + "; ".join(
                  f"{p['objective']}: load before {p['load_before']}, {p['deadline_misses']} deadline misses" for p in ok) + "):", "",
              "| phase | " + " | ".join(f"{p['objective']}: µs per step | calls" for p in ok) + " | what |",
-             "|---|" + "---|---|" * len(ok) + "---|"]  # fmt: skip
+             "|---|" + "---|---|" * len(ok) + "---|"]
     for name, what in PROFILE_ROWS:
         cells = []
         for p in ok:

@@ -48,7 +48,7 @@ def soak(steps: int, topology: str = "paper6") -> dict:
         "steps": steps, "wall_s": wall, "steps_per_s": steps / wall, "rss_mb": samples,
         "rss_start_mb": float(mb[tail][0]) if tail.any() else None, "rss_end_mb": float(mb[-1]) if len(mb) else None,
         "slope_mb_per_10k_steps": slope, "violations": res.summary.violations_total,
-    }  # fmt: skip
+    }
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -138,7 +138,7 @@ def side_by_side(cap: Capture, n_ref: int, n_naive: int, n_cvxpy: int) -> dict:
         "fast_ms": _stats(list(out["fast"].values())), "fast_cpu_ms": _stats(list(out["fast_cpu"].values())),
         "fast_solve_ms": _stats(list(out["fast_solve"].values())),
         "in_run_fast_ms": _stats(cap.step_ms), "degree_of_nodes": {i: len(sc.node(i).in_weights) for i in ids},
-    }  # fmt: skip
+    }
     for name in ("prev", "straightforward", "naive"):
         ks = sorted(out[name])
         if not ks:

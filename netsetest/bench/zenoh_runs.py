@@ -78,19 +78,19 @@ def cli_run(
             cmd += ["--record", str(record_path)]
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True,
-                                env={**os.environ, **(env or {})})  # fmt: skip
+                                env={**os.environ, **(env or {})})
         sampler = ProcessSampler(proc.pid) if sample else None
         try:
             _, err = proc.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:
             _kill([proc])
             return {"wall_s": timeout, "exit_code": None, "summary": None, "error": "timeout",
-                    "processes": sampler.stop(sample_stepping_s) if sampler else None}  # fmt: skip
+                    "processes": sampler.stop(sample_stepping_s) if sampler else None}
         wall = time.perf_counter() - t0
         summary = json.loads(summary_path.read_text()) if summary_path.exists() else None
         late = _late_per_step(record_path) if sample else None
     return {"wall_s": wall, "exit_code": proc.returncode, "summary": summary, "stderr_tail": err[-800:] if err else "",
-            "processes": sampler.stop(sample_stepping_s) if sampler else None, "late_per_step": late}  # fmt: skip
+            "processes": sampler.stop(sample_stepping_s) if sampler else None, "late_per_step": late}
 
 
 STEP0_LINE = ("[vehicle] all ", "are ready; clock")  # logged by run_vehicle right before step 0's input goes out
@@ -106,10 +106,10 @@ def launch_to_step0(topology: Path, reps: int, steps: int = 3, timeout: float = 
         load = Path("/proc/loadavg").read_text().split()[0]
         t0 = time.perf_counter()
         proc = subprocess.Popen([*PY, "run", str(topology), "--steps", str(steps)], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.PIPE, text=True, start_new_session=True)  # fmt: skip
+                                stderr=subprocess.PIPE, text=True, start_new_session=True)
         seen: list[float] = []
 
-        def read(stream) -> None:  # noqa: ANN001
+        def read(stream) -> None:
             for line in stream:
                 if not seen and line.startswith(STEP0_LINE[0]) and STEP0_LINE[1] in line:
                     seen.append(time.perf_counter() - t0)
@@ -232,7 +232,7 @@ class ProcessSampler:
             "nodes_cpu_pct_total": sum(nodes),
             "role_cpu_pct": {r: sum(v) for r, v in shares.items()},  # run (the parent, with the router), vehicle, collector
             "node_peak_rss_mb_median": statistics.median(hwm) if hwm else None,
-        }  # fmt: skip
+        }
 
 
 class Observer:
@@ -254,14 +254,14 @@ class Observer:
 
         self.sub = self.session.declare_subscriber(f"netsetest/{run_id}/**", on_sample)
 
-    def seen(self, predicate) -> list[tuple[float, str, dict]]:  # noqa: ANN001
+    def seen(self, predicate) -> list[tuple[float, str, dict]]:
         with self._lock:
             events = list(self.events)
         out = []
         for t, key, payload in events:
             try:
                 msg = msgpack.unpackb(payload, raw=False, strict_map_key=False)
-            except Exception:  # noqa: BLE001
+            except Exception:
                 continue
             if isinstance(msg, dict) and predicate(key, msg):
                 out.append((t, key, msg))
@@ -309,7 +309,7 @@ def _wait_rusage(procs: dict[str, subprocess.Popen], deadline: float) -> dict[st
 
 
 def _role_argv(topology: Path, run_id: str, steps: int | None, name: str, ports: dict[str, int], clock: str) -> list[str]:
-    endpoint = lambda n: f"tcp/127.0.0.1:{ports[n]}"  # noqa: E731
+    endpoint = lambda n: f"tcp/127.0.0.1:{ports[n]}"  # noqa: E731  # a one-line local helper
     common = [str(topology), "--run-id", run_id, "--zenoh-mode", "peer"] + (["--steps", str(steps)] if steps else [])
     net = ["--listen", endpoint(name)]
     for other in ports:
@@ -345,7 +345,7 @@ def observed_lockstep(topology: Path, steps: int | None = None, timeout: float =
                     argv += ["--summary-json", str(summary_path)]
                 launched[name] = time.monotonic()
                 procs[name] = subprocess.Popen([*PY, *argv], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                               stdin=subprocess.DEVNULL, start_new_session=True, env=role_env())  # fmt: skip
+                                               stdin=subprocess.DEVNULL, start_new_session=True, env=role_env())
             usage = _wait_rusage(procs, time.monotonic() + timeout)
             t_done = time.monotonic()
         finally:
@@ -366,7 +366,7 @@ def observed_lockstep(topology: Path, steps: int | None = None, timeout: float =
         "startup_s": (min(inputs0) - t_start) if inputs0 else None,
         "node_first_state_s": first_state, "node_peak_rss_mb": node_rss, "usage": usage, "summary": summary,
         "exit_codes": {n: u["exit_code"] for n, u in usage.items()},
-    }  # fmt: skip
+    }
 
 
 def node_startup(directory: Path, reps: int = 3, timeout: float = 120.0) -> dict:
@@ -386,7 +386,7 @@ def node_startup(directory: Path, reps: int = 3, timeout: float = 120.0) -> dict
             for name in ("collector", "vehicle"):
                 procs[name] = subprocess.Popen([*PY, *_role_argv(topo, run_id, None, name, role_ports, "lockstep")],
                                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
-                                               start_new_session=True, env=role_env())  # fmt: skip
+                                               start_new_session=True, env=role_env())
             # wait until both announce themselves (they then wait for the node at the start-up barrier)
             t_wait = time.monotonic()
             while time.monotonic() - t_wait < timeout:
@@ -398,7 +398,7 @@ def node_startup(directory: Path, reps: int = 3, timeout: float = 120.0) -> dict
             t0 = time.monotonic()
             procs["node1"] = subprocess.Popen([*PY, *_role_argv(topo, run_id, None, "node1", role_ports, "lockstep")],
                                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
-                                              start_new_session=True, env=role_env())  # fmt: skip
+                                              start_new_session=True, env=role_env())
             usage = _wait_rusage(procs, time.monotonic() + timeout)
         finally:
             _kill(list(procs.values()))
@@ -409,7 +409,7 @@ def node_startup(directory: Path, reps: int = 3, timeout: float = 120.0) -> dict
             "first_estimate_s": st[1] - t0 if 1 in st else None,
             "peak_rss_mb": usage["node1"]["peak_rss_mb"],
             "exit_code": usage["node1"]["exit_code"],
-        })  # fmt: skip
+        })
     return {"reps": rows}
 
 
@@ -417,7 +417,7 @@ def _loadavg() -> str:
     return " ".join(Path("/proc/loadavg").read_text().split()[:3])
 
 
-def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int = 1, log=print) -> dict:  # noqa: ANN001
+def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int = 1, log=print) -> dict:
     """Real-time runs of ring networks of growing size; the largest without a deadline miss."""
     from netsetest.bench.topologies import RING_TAU_S, ring_topology
 
@@ -440,14 +440,14 @@ def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int 
                 "load_before": load, "late_steps": len(late), "first_late_step": min(late) if late else None,
                 "processes": r["processes"],
                 **cpu_demand(r["processes"], n),
-            }  # fmt: skip
+            }
             runs.append(row)
             pr = r["processes"] or {}
             log(f"  real time, {n} nodes (attempt {attempt + 1}, load {load}): exit {r['exit_code']}, deadline misses {misses} "
                 f"in {len(late)} steps, missing {row['nodes_missing']}, {r['wall_s']:.0f} s; node CPU {pr.get('node_cpu_pct_median') or 0:.2f} % "
                 f"each, all nodes {pr.get('nodes_cpu_pct_total', 0):.0f} %, others {pr.get('role_cpu_pct')}, other work on the machine "
                 f"{pr.get('other_work_pct') or 0:.0f} %; {row['node_cpu_ms_per_step'] or 0:.2f} ms of CPU per node-step, "
-                f"{row['demand_cores'] or 0:.2f} cores needed")  # fmt: skip
+                f"{row['demand_cores'] or 0:.2f} cores needed")
             ok = r["exit_code"] == 0 and misses == 0 and not row["nodes_missing"]
             if ok:
                 break
@@ -484,7 +484,7 @@ def realtime_node_profile(directory: Path, nodes: int, steps: int, objective: st
     with tempfile.TemporaryDirectory(prefix="nsprofile-") as prof:
         load = _loadavg()
         r = cli_run(topo, "zenoh", "realtime", timeout=120 + 3 * nodes + steps * 0.2, sample_stepping_s=steps * RING_TAU_S,
-                    env={"NETSETEST_PROFILE": prof}, extra=["--objective", objective] if objective else None)  # fmt: skip
+                    env={"NETSETEST_PROFILE": prof}, extra=["--objective", objective] if objective else None)
         reports = [json.loads(p.read_text()) for p in sorted(Path(prof).glob("node-*.json"))]
     reports = [x for x in reports if x.get("steps")]
     s = r["summary"] or {}
@@ -493,15 +493,15 @@ def realtime_node_profile(directory: Path, nodes: int, steps: int, objective: st
         "profiled_nodes": len(reports),
         "deadline_misses": sum(row.get("deadline_misses") or 0 for row in s.get("nodes", [])) if s else None,
         "processes": r["processes"], **cpu_demand(r["processes"], nodes),
-    }  # fmt: skip
+    }
     if not reports:
         return out
-    med = lambda xs: statistics.median(xs)  # noqa: E731
+    med = lambda xs: statistics.median(xs)  # noqa: E731  # a one-line local helper
     out["phases"] = {
         name: {"ms_per_step": med([x["phases"][name]["ms_per_step"] for x in reports]),
                "calls_per_step": med([x["phases"][name]["calls_per_step"] for x in reports])}
         for name in reports[0]["phases"]
-    }  # fmt: skip
+    }
     out["thread_ms_per_step"] = med([x["thread_ms_per_step"] for x in reports])
     out["process_ms_per_step"] = med([x["process_ms_per_step"] for x in reports])
     return out
@@ -509,7 +509,7 @@ def realtime_node_profile(directory: Path, nodes: int, steps: int, objective: st
 
 # What a node process loads, in the order it loads it (netsetest.cli.main → the node's modules).
 NODE_IMPORT_STAGES = ("numpy", "msgspec", "netsetest.messages", "netsetest.config.schema", "zenoh", "clarabel",
-                      "netsetest.estimator.sdp", "netsetest.roles.node", "netsetest.cli.main", "netsetest.cli.processes")  # fmt: skip
+                      "netsetest.estimator.sdp", "netsetest.roles.node", "netsetest.cli.main", "netsetest.cli.processes")
 _MEMORY_PROBE = r"""
 import json, sys, time
 def rss():
@@ -530,7 +530,7 @@ def node_memory_profile() -> list[dict]:
     """RSS and wall time a node process adds per import stage and for its Zenoh session (the
     environment of :func:`role_env`): where the node's memory and start-up go."""
     out = subprocess.run([sys.executable, "-c", _MEMORY_PROBE, *NODE_IMPORT_STAGES], capture_output=True, text=True,
-                         timeout=120, env=role_env())  # fmt: skip
+                         timeout=120, env=role_env())
     if out.returncode != 0:
         return [{"stage": "error", "detail": out.stderr[-300:]}]
     rows, prev = [], 0.0

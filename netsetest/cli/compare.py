@@ -18,7 +18,7 @@ def add_parser(sub: argparse._SubParsersAction, scenario_args: Callable[[argpars
     p = sub.add_parser("compare", help="every guaranteed estimator on the same vehicle, network and data: one row each")
     scenario_args(p)
     p.add_argument("--estimators", type=checks.name_list(ESTIMATOR_NAMES, "estimator"), default=DEFAULT_COMPARE, metavar="A,B,…",
-                   help=f"rows, from {', '.join(ESTIMATOR_NAMES)} (default: {','.join(DEFAULT_COMPARE)})")  # fmt: skip
+                   help=f"rows, from {', '.join(ESTIMATOR_NAMES)} (default: {','.join(DEFAULT_COMPARE)})")
     p.add_argument("--signals", type=checks.name_list(SIGNAL_KINDS, "signal kind"), default=("paper",), metavar="KINDS", help="paper and/or worst, comma-separated (default: paper)")
     p.add_argument("--seeds", type=checks.seed_list, default=(0,), metavar="S,…", help="seeds, comma-separated, ranges A-B allowed (default: 0)")
     p.add_argument("--json", metavar="PATH", help="write the rows as a JSON list")

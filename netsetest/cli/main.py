@@ -42,9 +42,9 @@ def _scenario_args(p: argparse.ArgumentParser) -> None:
 
 def _run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--signals", choices=["paper", "worst"], default="paper",
-                   help="paper: cos noise and uniform wind; worst: noise and wind at ±bound, random sign")  # fmt: skip
+                   help="paper: cos noise and uniform wind; worst: noise and wind at ±bound, random sign")
     p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled",
-                   help="estimator: one SDP with the scheduled model, or one per T-S rule")  # fmt: skip
+                   help="estimator: one SDP with the scheduled model, or one per T-S rule")
     p.add_argument("--objective", choices=list(OBJECTIVES), default=DEFAULT_OBJECTIVE, help=OBJECTIVE_HELP)
     p.add_argument("--seed", type=checks.seed, default=None,
                    help="non-negative integer: random seed of noise, wind and losses (default: a fresh random one, printed with the verdict)")
@@ -69,7 +69,7 @@ class HelpFormatter(argparse.RawDescriptionHelpFormatter):
 class ShowVersion(argparse.Action):
     """``--version``: the installed version, looked up only when asked for (it costs ~90 ms)."""
 
-    def __init__(self, option_strings: list[str], dest: str, help: str | None = None) -> None:  # noqa: A002
+    def __init__(self, option_strings: list[str], dest: str, help: str | None = None) -> None:
         super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
 
     def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object, option_string: str | None = None) -> None:
@@ -92,7 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     processes.estimator_arg(p)
     p.add_argument("--mode", choices=["inmemory", "zenoh"], default="zenoh", help="one process, or one process per role over Zenoh")
     p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep",
-                   help="lockstep: the vehicle waits for every node; realtime: one step every τs (zenoh mode)")  # fmt: skip
+                   help="lockstep: the vehicle waits for every node; realtime: one step every τs (zenoh mode)")
     p.add_argument("--record", metavar="PATH", help="write the run record: JSON, .gz compresses, .mcap for Foxglove (default: none)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --record file (default: refuse it)")
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON (default: none)")
@@ -115,21 +115,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--topology", metavar="PATH", help="topology file (default: the one named in the record)")
     p.add_argument("--fault-bounds", choices=["used", "all", "none"], default="used",
                    help="declared fault bounds: where the estimator relies on them (saturating sensors) and reference "
-                   "sensors (size = 0), everywhere, or nowhere")  # fmt: skip
+                   "sensors (size = 0), everywhere, or nowhere")
     p.add_argument("--local", action="store_true",
                    help="also each node's exact limit from its own data alone, against the whole network's: what the "
-                   "exchange could buy it at best (docs/network.md)")  # fmt: skip
+                   "exchange could buy it at best (docs/network.md)")
     p = sub.add_parser("calibrate", help="the smallest model-mismatch bound covering a plant's e_k on training manoeuvres")
     p.add_argument("topology", help="topology with a nonlinear plant (a path, or a bundled name such as paper6_car)")
     p.add_argument("--manoeuvres", type=checks.name_list(MANOEUVRES, "manoeuvre"), required=True, metavar="A,B,...",
-                   help=f"training manoeuvres, comma-separated: {', '.join(MANOEUVRES)}")  # fmt: skip
+                   help=f"training manoeuvres, comma-separated: {', '.join(MANOEUVRES)}")
     p.add_argument("--seeds", type=checks.seed_list, default=tuple(range(5)), metavar="A-B,...",
-                   help="seeds of the training drives, e.g. 0-9 (default: 0-4)")  # fmt: skip
+                   help="seeds of the training drives, e.g. 0-9 (default: 0-4)")
     p.add_argument("--signals", type=checks.name_list(SIGNAL_KINDS, "signal kind"), default=SIGNAL_KINDS, metavar="A,B",
-                   help="signal families of the training drives (default: paper,worst)")  # fmt: skip
+                   help="signal families of the training drives (default: paper,worst)")
     p.add_argument("--steps", type=checks.positive_int, help="steps per drive (default: the topology's)")
     p.add_argument("--margin", type=checks.non_negative_float, default=DEFAULT_MARGIN,
-                   help=f"relative enlargement of the half-widths and semi-axes (default: {DEFAULT_MARGIN})")  # fmt: skip
+                   help=f"relative enlargement of the half-widths and semi-axes (default: {DEFAULT_MARGIN})")
     p.add_argument("--json", metavar="PATH", help="write the bounds and the per-drive maxima as JSON")
 
     p = sub.add_parser("bench", help="the performance benchmark: solve times, tightness, Zenoh overhead, start-up, memory, real-time scale, defences")
@@ -137,7 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
     p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown (default: none)")
     p.add_argument("--only", choices=SECTIONS,
-                   help="run one part alone: plant = a car as the truth, network = what the exchange can buy (default: every part)")  # fmt: skip
+                   help="run one part alone: plant = a car as the truth, network = what the exchange can buy (default: every part)")
     p.add_argument("--readme", metavar="PATH", help="rewrite the generated section of this README from the figures (default: none)")
 
     from netsetest.cli import compare, tools
@@ -165,7 +165,7 @@ def cmd_run(a: argparse.Namespace) -> int:
     given = zenoh_options_given(a)
     if given:
         print(f"netsetest run: {', '.join(given)}: only a Zenoh run has {'it' if len(given) == 1 else 'them'} "
-              "(--mode zenoh, the default); the in-memory run would ignore it", file=sys.stderr)  # fmt: skip
+              "(--mode zenoh, the default); the in-memory run would ignore it", file=sys.stderr)
         return EXIT_BAD_INPUT
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
@@ -181,7 +181,7 @@ def cmd_run(a: argparse.Namespace) -> int:
 def _note_partial(command: str, rec: Record) -> None:
     if rec.partial:
         print(f"netsetest {command}: {rec.path}: partial record (the run did not finish; last complete step "
-              f"{rec.last_complete_step})", file=sys.stderr)  # fmt: skip
+              f"{rec.last_complete_step})", file=sys.stderr)
 
 
 def cmd_inspect(a: argparse.Namespace) -> int:
@@ -211,7 +211,7 @@ def cmd_inspect(a: argparse.Namespace) -> int:
             flag = "  not judged" if not r["judged"] else ("" if r["contained"] else "  MISS")
             fdi = r["fdi"] or "-"  # detected: the interval excludes 0 (docs/fdi.md)
             print(f"{r['step']:5d} {ft:>9} {r['fault_estimate']:9.4f} {r['fault_lower']:9.4f} {r['fault_upper']:9.4f} {e:>7}  {fdi:<9}  "
-                  f"{r['status']}{flag}")  # fmt: skip
+                  f"{r['status']}{flag}")
         print()
     return 0
 
@@ -260,7 +260,7 @@ def cmd_exact(a: argparse.Namespace) -> int:
     cmp = compare_record(rec, ex)
     bounded = ", ".join(map(str, ex.bounded_nodes)) or "none"
     print(f"exact bounds for {a.record}: case {sc.case}, {len(ex.steps)} steps, fault bounds '{a.fault_bounds}' "
-          f"(applied on nodes: {bounded}), {time.perf_counter() - t0:.1f} s")  # fmt: skip
+          f"(applied on nodes: {bounded}), {time.perf_counter() - t0:.1f} s")
     if ex.infeasible_steps:
         print(f"  no trajectory meets the assumptions at steps {list(ex.infeasible_steps)} (an assumption was broken)")
     names = {"f": "fault", "r": "yaw rate", "beta": "sideslip"}
@@ -288,13 +288,13 @@ def cmd_exact(a: argparse.Namespace) -> int:
         limits = local_limits(sc, rec, a.fault_bounds, central=ex, progress=lambda n, total: bar.update(n))
         bar.close()
         print("the exchange's value at best: exact limit from the node's own data / from every node's data "
-              "(mean width from step 10; 1.000: the network cannot help this node)")  # fmt: skip
+              "(mean width from step 10; 1.000: the network cannot help this node)")
         print(f"{'node':>4}  {'own fault':>10}  {'yaw rate':>10}  {'sideslip':>10}")
         for lim in limits:
             cells = ("  declared 0" if math.isnan(v) else f"{v:10.3f}" for v in (lim.fault_ratio, lim.r_ratio, lim.beta_ratio))
             print(f"{lim.node:>4}  " + "  ".join(cells))
         doc["local_over_central"] = [{k: None if isinstance(v, float) and math.isnan(v) else v for k, v in dataclasses.asdict(lim).items()}
-                                     for lim in limits]  # fmt: skip
+                                     for lim in limits]
     if a.json:
         with open(a.json, "w") as fh:
             json.dump(doc, fh, indent=1)
@@ -314,7 +314,7 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
     scenarios = [load_topology(a.topology, steps=a.steps, manoeuvre=m) for m in a.manoeuvres]
     if scenarios[0].plant == "ts":
         print(f"netsetest calibrate: {a.topology}: plant 'ts' is the T-S model itself (e_k = 0): nothing to calibrate",
-              file=sys.stderr)  # fmt: skip
+              file=sys.stderr)
         return EXIT_BAD_INPUT
     bar = Progress(1, "calibrate")
 
@@ -328,7 +328,7 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
     bar.close()
     sc = scenarios[0]
     print(f"model mismatch of {sc.name}: plant {sc.plant} (CommonRoad vehicle {sc.vehicle_id}), {sc.steps} steps per drive, "
-          f"seeds {_seed_text(a.seeds)}, signals {','.join(a.signals)}")  # fmt: skip
+          f"seeds {_seed_text(a.seeds)}, signals {','.join(a.signals)}")
     print(f"{'manoeuvre':>20}  {'drives':>6}  {'max |e_beta| [rad]':>18}  {'max |e_r| [rad/s]':>18}")
     for m in a.manoeuvres:
         ds = [d for d in cal.drives if d.manoeuvre == m]
@@ -343,7 +343,7 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
             "box": np.diag(cal.box.G).tolist(), "ellipsoid": cal.ellipsoid.E.tolist(),
             "drives": [{"manoeuvre": d.manoeuvre, "signals": d.signals, "seed": d.seed, "max_abs": d.max_abs.tolist()}
                        for d in cal.drives],
-        }  # fmt: skip
+        }
         with open(a.json, "w") as fh:
             json.dump(doc, fh, indent=1)
     return 0

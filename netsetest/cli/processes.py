@@ -35,20 +35,20 @@ def _readable_file(s: str) -> str:
 
 def _zenoh_config_arg(g: argparse._ArgumentGroup) -> None:
     g.add_argument("--zenoh-config", type=_readable_file, metavar="FILE",
-                   help="a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting and security on top (default: none)")  # fmt: skip
+                   help="a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting and security on top (default: none)")
 
 
 def _zenoh_args(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("zenoh")
     g.add_argument("--run-id", type=checks.run_id, default=os.environ.get(RUN_ID_ENV, "default"),
-                   help=f"key-expression namespace of the run (netsetest/<run-id>/...); default ${RUN_ID_ENV} or 'default'")  # fmt: skip
+                   help=f"key-expression namespace of the run (netsetest/<run-id>/...); default ${RUN_ID_ENV} or 'default'")
     g.add_argument("--zenoh-mode", choices=["peer", "client"], default="peer", help="peer (one host) or client of a router")
     g.add_argument("--listen", type=checks.endpoint, action="append", default=[], metavar="ENDPOINT",
-                   help="endpoint to listen on, e.g. tcp/127.0.0.1:7450 (repeatable; default: none)")  # fmt: skip
+                   help="endpoint to listen on, e.g. tcp/127.0.0.1:7450 (repeatable; default: none)")
     g.add_argument("--connect", type=checks.endpoint, action="append", default=[], metavar="ENDPOINT",
-                   help="endpoint to connect to, e.g. tls/10.0.0.1:7447 (repeatable; default: none)")  # fmt: skip
+                   help="endpoint to connect to, e.g. tls/10.0.0.1:7447 (repeatable; default: none)")
     g.add_argument("--credentials", metavar="DIR",
-                   help="mTLS: this role's certificate and key from DIR (`netsetest credentials`); connect on tls/ endpoints (default: none, no TLS)")  # fmt: skip
+                   help="mTLS: this role's certificate and key from DIR (`netsetest credentials`); connect on tls/ endpoints (default: none, no TLS)")
     _zenoh_config_arg(g)
 
 
@@ -86,7 +86,7 @@ ZENOH_ONLY: dict[str, tuple[str, object]] = {
     "--node-timeout": ("node_timeout", NODE_TIMEOUT_S), "--neighbour-timeout": ("neighbour_timeout", NEIGHBOUR_TIMEOUT_S),
     "--pace": ("pace", 0.0), "--kill": ("kill", []), "--rejoin": ("rejoin", []), "--insecure": ("insecure", False),
     "--run-id": ("run_id", None), "--zenoh-config": ("zenoh_config", None),
-}  # fmt: skip
+}
 
 
 def zenoh_options_given(a: argparse.Namespace) -> list[str]:
@@ -102,14 +102,14 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--kill", type=_at, action="append", default=[], metavar="NODE@STEP", help="SIGKILL node NODE once step STEP is checked (repeatable; default: none)")
     g.add_argument("--rejoin", type=_at, action="append", default=[], metavar="NODE@STEP", help="restart node NODE with --rejoin at step STEP (repeatable; default: none)")
     g.add_argument("--insecure", action="store_true",
-                   help="no credentials, no access control: an open peer mesh any local process can join (labelled in the summary; default: secured)")  # fmt: skip
+                   help="no credentials, no access control: an open peer mesh any local process can join (labelled in the summary; default: secured)")
     g.add_argument("--run-id", type=checks.run_id, metavar="ID", help="the run's key-expression namespace (default: a fresh random one, printed)")
     _zenoh_config_arg(g)
 
 
 def estimator_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--estimator", choices=list(NODE_ESTIMATOR_NAMES), metavar="NAME",
-                   help=f"every node's estimator, overriding the topology's per-node 'estimator' ({', '.join(NODE_ESTIMATOR_NAMES)}; default: the file's, else sdp)")  # fmt: skip
+                   help=f"every node's estimator, overriding the topology's per-node 'estimator' ({', '.join(NODE_ESTIMATOR_NAMES)}; default: the file's, else sdp)")
 
 
 def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, run_args: Callable) -> None:
@@ -124,7 +124,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
     p.add_argument("--start-timeout", type=_seconds, default=START_TIMEOUT_S, metavar="S", help=f"how long [s] to wait for every role to be ready (default: {START_TIMEOUT_S:g})")
     p.add_argument("--quiet", action="store_true", help="no line on success (errors are still logged)")
     p.add_argument("--await-rejoin", type=_at, action="append", default=[], metavar="NODE@STEP",
-                   help="lockstep: before step STEP+1 wait (at most --node-timeout) for node NODE to come back (repeatable; default: none)")  # fmt: skip
+                   help="lockstep: before step STEP+1 wait (at most --node-timeout) for node NODE to come back (repeatable; default: none)")
     _zenoh_args(p)
 
     p = sub.add_parser("node", help="one sensing-node process of a Zenoh run")
@@ -153,7 +153,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
     p = sub.add_parser("router", help="a Zenoh router in Python (for client-mode roles on several hosts)")
     p.add_argument("topology", nargs="?", help="topology whose access-control rules the router enforces (with --credentials)")
     p.add_argument("--listen", type=checks.endpoint, action="append", default=[], metavar="ENDPOINT",
-                   help=f"endpoint to listen on (repeatable; default: tcp/0.0.0.0:{ZENOH_DEFAULT_PORT}, or tls/0.0.0.0:{ZENOH_DEFAULT_PORT} with --credentials)")  # fmt: skip
+                   help=f"endpoint to listen on (repeatable; default: tcp/0.0.0.0:{ZENOH_DEFAULT_PORT}, or tls/0.0.0.0:{ZENOH_DEFAULT_PORT} with --credentials)")
     p.add_argument("--credentials", metavar="DIR", help="mTLS with DIR/router.pem and the run's access-control rules (default: none, open router)")
     p.add_argument("--run-id", type=checks.run_id, default=os.environ.get(RUN_ID_ENV, "default"), help=f"the run whose keys the access control grants (default: ${RUN_ID_ENV} or 'default')")
     _zenoh_config_arg(p)
@@ -163,7 +163,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
     p.add_argument("topology", help="topology file or bundled name, e.g. paper6")
     p.add_argument("--run-id", type=checks.run_id, help="the deployment's run id (default: a random one)")
     p.add_argument("--router-host", action="append", default=[], metavar="NAME",
-                   help="a name or address the router is reached at (repeatable; default: localhost, 127.0.0.1 and router, always included)")  # fmt: skip
+                   help="a name or address the router is reached at (repeatable; default: localhost, 127.0.0.1 and router, always included)")
     p.add_argument("--days", type=checks.positive_int, default=DEFAULT_VALIDITY_DAYS, help="validity of the certificates in days")
 
     p = sub.add_parser("forkserver", help="internal: the fork server of `netsetest run` (imports once, forks each role process)")
@@ -178,7 +178,7 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
 # ---------------------------------------------------------------- role commands
 
 
-def _open_bus(a: argparse.Namespace, name: str):  # noqa: ANN202
+def _open_bus(a: argparse.Namespace, name: str):
     from netsetest.bus.zenoh_bus import ZenohBus
     from netsetest.runtime.security import client_settings, identity
 
@@ -215,13 +215,13 @@ def cmd_vehicle(a: argparse.Namespace) -> int:
 
     return _role("vehicle", keys.role_name("vehicle"), a, lambda sc, bus: run_vehicle(
         sc, bus, a.run_id, a.signals, a.seed, a.clock == "realtime", a.node_timeout, a.start_timeout, a.pace,
-        a.await_rejoin, a.quiet))  # fmt: skip
+        a.await_rejoin, a.quiet))
 
 
 def cmd_node(a: argparse.Namespace) -> int:
     from netsetest.runtime.processes import run_node
 
-    def body(sc, bus) -> int:  # noqa: ANN001
+    def body(sc, bus) -> int:
         sc.node(a.id)  # unknown id → ConfigError, exit 2
         return run_node(sc, a.id, bus, a.run_id, a.variant, a.clock == "realtime", a.neighbour_timeout, a.rejoin,
                         a.objective, a.crash_after)
@@ -238,7 +238,7 @@ def cmd_collector(a: argparse.Namespace) -> int:
     checks.record_file(a.record, overwrite=True)  # before the run; the parent refused an existing file, the lock guards the rest
     checks.output_file(a.summary_json, "--summary-json")
 
-    def body(sc, bus) -> int:  # noqa: ANN001
+    def body(sc, bus) -> int:
         meta = run_meta(sc, "zenoh", a.clock, a.signals, a.variant, a.seed, a.run_id, a.objective)
         meta["security"] = SECURITY_MTLS if a.credentials else SECURITY_INSECURE
         show = None if a.progress else (lambda s: print(format_table(s), flush=True))
@@ -324,7 +324,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         objective=a.objective, seed=a.seed, clock=a.clock, record=a.record, summary_json=a.summary_json, quiet=a.quiet,
         node_timeout=a.node_timeout, neighbour_timeout=a.neighbour_timeout, pace=a.pace, kill=tuple(a.kill), rejoin=tuple(a.rejoin),
         insecure=a.insecure, zenoh_config=a.zenoh_config, run_id=a.run_id,
-    )  # fmt: skip
+    )
     try:
         plan = plan_run(opts)
     except LaunchError as exc:

@@ -316,7 +316,7 @@ class NodeRef(_Strict, frozen=True, kw_only=True):
             min_length=1, max_length=MAX_NAME, pattern=PROFILE_NAME_PATTERN,
             description="file name in the node directory, without .toml (no path separators, no NUL)",
         ),
-    ]  # fmt: skip
+    ]
     estimator: Annotated[str, Meta(description=f"the node's estimator: one of {', '.join(NODE_ESTIMATOR_NAMES)}")] = SDP
 
     def __post_init__(self) -> None:
@@ -562,7 +562,7 @@ def load_profile(path: Path) -> NodeProfile:
 def load_topology(
     path: str | Path, case: Case | None = None, steps: int | None = None, estimator: str | None = None,
     manoeuvre: str | None = None,
-) -> Scenario:  # fmt: skip
+) -> Scenario:
     """Read and validate a topology (a path, or the name of a bundled one such as ``paper6``) and its node
     profiles; ``case``/``steps``/``estimator`` (every node's)/``manoeuvre`` override the file."""
     path = resolve_topology(path)
@@ -602,7 +602,7 @@ def load_topology(
             C=np.array(prof.C, dtype=float), Ds=prof.Ds, Dv=prof.Dv, R=prof.R,
             saturated=sat is not None,
             r_max=sat.r_max if sat else np.inf, h1=sat.h1 if sat else 1.0, h2=sat.h2 if sat else 1.0,
-        )  # fmt: skip
+        )
         in_w = {e.from_: e.weight for e in topo.edges if e.to == ref.id}
         nodes.append(
             NodeConfig(

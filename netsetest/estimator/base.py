@@ -19,7 +19,7 @@ from typing import Literal, Union
 
 from netsetest.sets import Box, Ellipsoid, SumSet, Zonotope
 
-GuaranteedSet = Union[Ellipsoid, Zonotope, Box, SumSet]  # noqa: UP007 (a runtime alias)
+GuaranteedSet = Union[Ellipsoid, Zonotope, Box, SumSet]  # a runtime alias
 
 Assumption = Literal["prior", "noise", "disturbance", "fault_bound"]
 """What a guarantee may rest on: the truth x̄_0 in the prior ellipsoid (step 0), the measurement noise

@@ -235,7 +235,7 @@ class _LmiTau:
         return self.f * s.facts[self.m][self.gi, self.gj] * s.sc[self.li] * s.sc[self.lj] / s.kappa[self.c]
 
 
-_ABlock = Union[_Const, _SocL, _SocXi, _Soc0, _LmiL, _LmiXi, _LmiTau]  # noqa: UP007 (a runtime alias)
+_ABlock = Union[_Const, _SocL, _SocXi, _Soc0, _LmiL, _LmiXi, _LmiTau]  # a runtime alias
 
 # Rows of b that change per step (the others stay at b_const); ``fill`` writes them for a step.
 
@@ -274,7 +274,7 @@ class _LmiPi0:
         b[self.rows] = self.f * ((s.Sinv @ s.pi0[self.r][:, s.lmi_slots]) * s.sc).T.ravel()
 
 
-_BBlock = Union[_Rho, _SocPi0, _LmiPi0]  # noqa: UP007 (a runtime alias)
+_BBlock = Union[_Rho, _SocPi0, _LmiPi0]  # a runtime alias
 
 
 # ---------------------------------------------------------------------- the pattern of a template key
@@ -427,7 +427,7 @@ class ConicSolver:
             [m for m in self.balls if len(facts[m].slots) == 1 and facts[m].slots[0] in lay.pi0_zero and facts[m].slots[0] not in coupled]
             if aggregate
             else []
-        )  # fmt: skip
+        )
         self.kept = [m for m in range(len(facts)) if m not in self.agg]
         self.xi = len(self.kept) if self.agg else None  # compact index of ξ's multiplier
         self.n_tau = len(self.kept) + (1 if self.agg else 0)
@@ -630,7 +630,7 @@ class ConicSolver:
         r0, r1 = bld.newrows(2)
         t0 = var.iTt[-1]
         bld.put(_Const(np.r_[-1.0, -1.0, np.ones(len(balls_c)), -np.ones(len(balls_c))]),
-                [r0, r1] + [r0] * len(balls_c) + [r1] * len(balls_c), [t0, t0] + [var.iT[0][c] for c in balls_c] * 2)  # fmt: skip
+                [r0, r1] + [r0] * len(balls_c) + [r1] * len(balls_c), [t0, t0] + [var.iT[0][c] for c in balls_c] * 2)
         bld.b_blocks.append(_Rho([r0]))
         bld.b_blocks.append(_Rho([r1], -1.0))
         xr = bld.newrows(NA)
@@ -748,7 +748,7 @@ class ConicSolver:
             key=key, var=var, nv=nv, n_rows=bld.n_rows, cones=bld.cones, a_blocks=bld.a_blocks, b_blocks=bld.b_blocks,
             order=order, indices=rows[order].astype(np.int64), indptr=np.r_[0, np.cumsum(np.bincount(cols, minlength=nv))].astype(np.int64),
             lmi_rows=lmi_rows, lmi_n=n, decomposed=bool(self.lmi_slots) and self.cliques is not None and self.n_lmi == 1,
-        )  # fmt: skip
+        )
 
     # ------------------------------------------------------------------ values (every step)
 
@@ -812,7 +812,7 @@ class ConicSolver:
         conic, inv = self.apply(data, rho)
         try:
             sol = self.solve_via_data(conic)
-        except Exception as exc:  # noqa: BLE001 - a solver failure is a fallback step, not a crash
+        except Exception as exc:  # a solver failure is a fallback step, not a crash
             self._solvers.pop(conic.key, None)
             return Solution(None, [], [], f"error: {exc}")
         status = str(sol.status)
@@ -858,7 +858,7 @@ class ConicSolver:
         self.last_iterations = iterations
         return Solution(P, [Lc], [tau], "Solved (closed form)", iterations)
 
-    def solve_via_data(self, conic: ConicData):  # noqa: ANN201 - clarabel's DefaultSolution
+    def solve_via_data(self, conic: ConicData):  # clarabel's DefaultSolution
         """Solve with the node's solver for this template, its data updated in place where Clarabel
         allows it (no chordal decomposition of its own, no presolve, no equilibration): the set-up
         (KKT symbolic factorisation) is then paid once per node, not per step."""
@@ -867,7 +867,7 @@ class ConicSolver:
             try:
                 solver.update(q=conic.q, A=conic.A.data, b=conic.b)
                 return solver.solve()
-            except Exception:  # noqa: BLE001 - refused update: set up a fresh solver below
+            except Exception:  # refused update: set up a fresh solver below
                 del self._solvers[conic.key]
         st = self.settings_decomposed if self._templates[conic.key].decomposed else self.settings
         solver = clarabel.DefaultSolver(conic.P, conic.q, conic.A, conic.b, conic.cones, st)

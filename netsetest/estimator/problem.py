@@ -42,7 +42,7 @@ class EtaLayout:
     def __init__(
         self, node_id: int, neighbours: dict[int, Sensor], own: Sensor, W: float = 1.0, predict: bool = True,
         uncertainty: ModelUncertainty | None = None,
-    ) -> None:  # fmt: skip
+    ) -> None:
         """``saturated`` of each sensor says whether it has a φ slot; ``predict`` False: the step-0 update
         (the prior updated by the own measurement through the self slot: no w, e, v⁺ or φ⁺); ``uncertainty``:
         the declared model mismatch e = G ζ (one ζ slot per column of G, after w; None: no e slots)."""

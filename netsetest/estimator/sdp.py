@@ -67,7 +67,7 @@ from netsetest.estimator.objective import BANK_FAULT_WEIGHT, DEFAULT_OBJECTIVE, 
 from netsetest.estimator.problem import EtaLayout, OwnUpdate, PatternKey, ProblemSolver, Solution, StepData
 from netsetest.estimator.sector import (
     FaultBound, Interval, Sector, derive_sector, measurement_interval, prior_interval, propagated_interval,
-)  # fmt: skip
+)
 from netsetest.extras import require
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.uncertainty import ModelUncertainty
@@ -439,7 +439,7 @@ class LocalEstimator:
     def for_node(
         cls, scenario: Scenario, node_id: int, variant: Variant = "scheduled", objective: Objective = DEFAULT_OBJECTIVE,
         backend: Backend = "clarabel",
-    ) -> LocalEstimator:  # fmt: skip
+    ) -> LocalEstimator:
         """The estimator of node ``node_id`` as the node runs it: its sensor, its in-neighbours' sensors and
         weights, the scenario's model and wind bound, and its declared fault bound.  The node, the
         benchmark and the tests all build it here (a hand-built copy without the fault bound once solved
@@ -448,7 +448,7 @@ class LocalEstimator:
         return cls(
             node_id, n.sensor, {j: scenario.node(j).sensor for j in n.in_weights}, n.in_weights, scenario.model, scenario.W,
             variant, backend, FaultBound(n.fault_rate, n.fault_size), objective, scenario.uncertainty,
-        )  # fmt: skip
+        )
 
     def step(self, prev: Ellipsoid, inp: StepInput) -> StepResult:
         """Step k → k+1: the step's data, then the update (solve, certify); the fallback without a certificate.
@@ -551,4 +551,4 @@ def _weighted(data: StepData, wh: np.ndarray) -> StepData:
 
 __all__ = [
     "BACKENDS", "Backend", "Ellipsoid", "LocalEstimator", "NeighbourState", "Objective", "StepInput", "StepResult", "Variant",
-]  # fmt: skip
+]

@@ -96,7 +96,7 @@ def _support(g: np.ndarray, P: np.ndarray, rho: float) -> float:
 def propagated_interval(
     sensor: Sensor, bound: FaultBound, xhat: np.ndarray, P: np.ndarray, rho: float,
     a: np.ndarray, b: np.ndarray, d: np.ndarray, u: float, W: float, uncertainty: ModelUncertainty | None = None,
-) -> Interval:  # fmt: skip
+) -> Interval:
     """r⁺ = C(a x + b u + d w) + Ds f⁺ over x̄ in the ellipsoid of step k, w² ≤ W, f⁺ by the fault bound.
 
     ``a``, ``b``, ``d``: the step's blended Ā (2×2), B̄, D̄ (2,).  Rate: r⁺ = (gₓ + Ds e₃)ᵀx̄ + C b u
@@ -172,4 +172,4 @@ def sector_ok(sensor: Sensor, sector: Sector | None, r: float) -> bool:
 __all__ = [
     "FaultBound", "Sector", "SectorBasis", "Interval", "measurement_interval", "propagated_interval",
     "prior_interval", "derive_sector", "sector_ok", "SATURATION_UPPER_SLOPE",
-]  # fmt: skip
+]

@@ -172,7 +172,7 @@ class ZonotopeEstimator(SetEstimator):
         center = L @ z.center + self.T_x @ bu + self.G_r * (lo + hi) / 2
         gens = np.hstack([
             L @ z.generators, (self.T_x @ d * sq_w)[:, None], self.T_x @ self.sc.mismatch_generators, (self.G_r * (hi - lo) / 2)[:, None],
-        ])  # fmt: skip
+        ])
         return SumSet(Zonotope(center, gens), L @ self.set.M, self.set.sliced)
 
     def _bounded_step(self, a: np.ndarray, bu: np.ndarray, d: np.ndarray, y: float, gamma: float) -> SumSet:

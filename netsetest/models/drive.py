@@ -50,7 +50,7 @@ class Drive:
             [n.sensor.R for n in sc.nodes], [n.noise_frequency for n in sc.nodes],
             cast(list[tuple[float, float]], [n.gamma_range for n in sc.nodes]) if sc.case == "saim" else None,  # saim: every node has one
             sc.tau_s,
-        )  # fmt: skip
+        )
         p = sc.model.params
         self.manoeuvre = Manoeuvre.build(sc.manoeuvre, sc.speed, sc.steer_high, p.lf + p.lr, sc.steps * sc.tau_s)
         self.plant = make_plant(sc.plant, sc.vehicle_id, sc.model, sc.x0, sc.vx(0), 0.0)

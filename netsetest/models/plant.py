@@ -50,7 +50,7 @@ class PlantUnavailable(ImportError):
     """The ``plant`` extra (commonroad-vehicle-models) is not installed."""
 
 
-def _vehiclemodels():  # noqa: ANN202  (a module)
+def _vehiclemodels():  # a module
     try:
         import vehiclemodels  # noqa: F401  (the import is the check)
     except ImportError:
@@ -60,7 +60,7 @@ def _vehiclemodels():  # noqa: ANN202  (a module)
     return vm
 
 
-def vehicle_parameters(vehicle_id: int):  # noqa: ANN201  (the package's VehicleParameters)
+def vehicle_parameters(vehicle_id: int):  # the package's VehicleParameters
     """CommonRoad's parameter set ``parameters_vehicle<id>``."""
     _vehiclemodels()
     from vehiclemodels.vehicle_parameters import setup_vehicle_parameters
@@ -68,7 +68,7 @@ def vehicle_parameters(vehicle_id: int):  # noqa: ANN201  (the package's Vehicle
     return setup_vehicle_parameters(vehicle_id=vehicle_id)
 
 
-def _cornering_stiffness(tire, f_z: float) -> float:  # noqa: ANN001
+def _cornering_stiffness(tire, f_z: float) -> float:
     """−dF_y/dα at α = 0 of the package's Pacejka lateral force at load f_z (central difference)."""
     from vehiclemodels.utils.tire_model import formula_lateral
 
@@ -86,7 +86,7 @@ def derived_params(vehicle_id: int, fw: float, lw: float, vx_min: float, vx_max:
         m=m, Jz=float(p.I_z), lf=lf, lr=lr,
         cf=_cornering_stiffness(p.tire, fzf), cr=_cornering_stiffness(p.tire, fzr),
         fw=fw, lw=lw, vx_min=vx_min, vx_max=vx_max,
-    )  # fmt: skip
+    )
 
 
 @dataclass(frozen=True)
@@ -202,7 +202,7 @@ class MultiBodyPlant(_CommonRoadPlant):
         return PlantState(
             np.array([math.atan2(s[10], s[3]), s[5]]), float(math.hypot(s[3], s[10])), float(s[3]),
             (float(s[0]), float(s[1]), float(s[4])),
-        )  # fmt: skip
+        )
 
 
 def make_plant(kind: PlantKind, vehicle_id: int, model: TSModel, x0: np.ndarray, vx0: float, delta0: float) -> Plant:
@@ -216,4 +216,4 @@ def make_plant(kind: PlantKind, vehicle_id: int, model: TSModel, x0: np.ndarray,
 
 __all__ = [
     "PLANTS", "Plant", "PlantKind", "PlantState", "PlantUnavailable", "derived_params", "make_plant", "vehicle_parameters",
-]  # fmt: skip
+]

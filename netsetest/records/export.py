@@ -19,7 +19,7 @@ COLUMNS: tuple[str, ...] = (
     "node", "step", "t",
     *(f"{c}_{part}" for c in COMPONENTS for part in ("estimate", "lower", "upper", "true")),
     "E", "rho", "judged", "contained", "assumptions_ok", "status",
-)  # fmt: skip
+)
 FORMATS = ("parquet", "csv")
 
 
@@ -60,7 +60,7 @@ def _write_csv(table: dict[str, list], path: Path) -> None:
             w.writerow("" if v is None else repr(v) if isinstance(v, float) else v for v in row)
 
 
-def _parquet_writer():  # noqa: ANN202 — a callable (table, path) -> None
+def _parquet_writer():  # a callable (table, path) -> None
     require("pyarrow", "--parquet")
     import pyarrow as pa
     import pyarrow.parquet as pq

@@ -149,7 +149,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
          "nodes_missing": _IDS, "nodes_rejoined": _IDS, "nodes": {"type": "array", "items": {"type": "object"}}},
         ["violations_total", "nodes"],
     ),
-}  # fmt: skip
+}
 
 TOPIC_SCHEMA = {TOPIC_META: "netsetest.RunMeta", TOPIC_TRUTH: "netsetest.Truth", TOPIC_VERDICT: "netsetest.Verdict"}
 
@@ -239,7 +239,7 @@ class McapRecordWriter:
                 "step": entry["step"], "t": t, "node": int(node), "y": y,
                 "y_nofault": entry.get("y_nofault", {}).get(node), "gamma": entry.get("gamma", {}).get(node),
                 "u": entry.get("u"), "vx": entry.get("vx"),
-            })  # fmt: skip
+            })
         self._flush()
 
     def state(self, node: int, entry: dict) -> None:
@@ -254,7 +254,7 @@ class McapRecordWriter:
         self._write(drops_topic(node), ns, {
             "step": entry["step"], "t": t, "node": node, "used": list(entry.get("used", [])), "missing": missing,
             "late": bool(entry.get("late", False)), "missing_count": len(missing),
-        })  # fmt: skip
+        })
         self._flush()
 
     def summary(self, summary: RunSummary) -> None:

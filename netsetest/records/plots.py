@@ -32,13 +32,13 @@ from typing import Any
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.axes import Axes  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.patches import Patch  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 
-from netsetest.records.record import Record  # noqa: E402
+from netsetest.records.record import Record
 
 MAX_PANELS = 12
 TRANSIENT_S = 1.0  # Fig. 6: y limits ignore the bounds of the first second (Sec. VI: they settle within ~1 s)
@@ -241,7 +241,7 @@ def _fig6(rec: Record, label: str) -> Figure:
         axes[-1, comp].set_xlabel("t [s]")
     if clipped:
         fig.text(0.5, 0.005, f"y axes show the bounds from t = {TRANSIENT_S:g} s on (the initial ellipsoid is much wider); "
-                 "every true value is inside the axes", ha="center", fontsize=8, color="0.3")  # fmt: skip
+                 "every true value is inside the axes", ha="center", fontsize=8, color="0.3")
     _legend(fig, fig, loc="upper center", ncol=4, bbox_to_anchor=(0.5, 1.0 - LEGEND_TOP_IN / fig.get_figheight()))
     fig.tight_layout(rect=(0, 0.02, 1, 1.0 - (LEGEND_TOP_IN + 0.05) / fig.get_figheight()))
     return fig
@@ -262,7 +262,7 @@ def _fig7(rec: Record, label: str) -> Figure:
     _legend(panels[0][1], fig)
     if clipped:
         fig.text(0.5, 0.005, f"y axes show the bounds from t = {TRANSIENT_S:g} s on; every true value is inside the axes",
-                 ha="center", fontsize=8, color="0.3")  # fmt: skip
+                 ha="center", fontsize=8, color="0.3")
     fig.tight_layout(rect=(0, 0.02, 1, 1))
     return fig
 
@@ -292,7 +292,7 @@ def _fig_fdi(rec: Record, label: str) -> Figure:
             continue
         t = np.array([r["step"] for r in rows], dtype=float) * tau
         ax.fill_between(t, [r["fault_lower"] for r in rows], [r["fault_upper"] for r in rows], color="tab:blue", alpha=0.2,
-                        label="published fault interval")  # fmt: skip
+                        label="published fault interval")
         ax.plot(*_truth_series(rec, "faults", i), color="black", lw=1.0, label="true fault")
         ax.axhline(0.0, color="0.5", lw=0.6)
         for status, colour in FDI_COLOURS.items():

@@ -453,7 +453,7 @@ def _fdi(v: object) -> str | None:
 def record_from_parts(
     meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None, path: str = "",
     partial: bool = False, last_complete_step: int | None = None,
-) -> Record:  # fmt: skip
+) -> Record:
     """A :class:`Record` from the parts a run returns (or a file holds); raises KeyError/TypeError/ValueError
     on malformed entries.  ``last_complete_step`` defaults to the last step of ``truth``."""
     tracks = {}

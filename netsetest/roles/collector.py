@@ -626,7 +626,7 @@ class Collector:
             "contested": contested, "sector": list(st.sector) if st.sector is not None else None,
             "sector_basis": st.sector_basis,
             **({"bounds": self.bounds[(i, k)].tolist()} if (i, k) in self.bounds else {}),
-        }  # fmt: skip
+        }
 
     @staticmethod
     def _truth_entry(t: Truth) -> dict:

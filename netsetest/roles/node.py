@@ -70,7 +70,7 @@ class Node:
     def __init__(
         self, scenario: Scenario, node_id: int, bus: Bus, run_id: str, variant: Variant = "scheduled", rejoin: bool = False,
         objective: Objective = DEFAULT_OBJECTIVE, lazy_neighbours: bool = False,
-    ) -> None:  # fmt: skip
+    ) -> None:
         """``lazy_neighbours``: neighbour states do not wake the node: they are used when its next input
         arrives, which does wake it (a runtime waiting for one polls; netsetest/bus/base.py, runtime/processes.py)."""
         self.sc, self.bus, self.run = scenario, bus, run_id
@@ -399,7 +399,7 @@ class Node:
     def _publish(
         self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int],
         inputs: list[tuple[int, str]], wire_set: dict | None = None,
-    ) -> None:  # fmt: skip
+    ) -> None:
         """Keep ``res`` as the node's own set (its next step starts from it) and publish ``res.public``."""
         self.xhat, self.P = res.xhat, res.P
         sector = res.sector
@@ -421,7 +421,7 @@ class Node:
     def _state_message(
         self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int],
         inputs: list[tuple[int, str]], wire_set: dict | None = None,
-    ) -> NodeState:  # fmt: skip
+    ) -> NodeState:
         """The state message of ``res.public`` for the step of ``inp`` (validated)."""
         pub, sector = res.public, res.sector
         innov = float(inp.y - self.cfg.sensor.Cbar @ pub.xhat)
@@ -435,7 +435,7 @@ class Node:
             sector=(sector.h1, sector.h) if sector is not None else None,
             sector_basis=sector.basis if sector is not None else "none", set=wire_set, inputs=inputs,
             **self._own_set(res),  # type: ignore[arg-type]  # own_xhat/own_P only: mypy cannot tell the keys of a dict
-        )  # fmt: skip
+        )
 
     @staticmethod
     def _own_set(res: StepResult) -> dict[str, list[float]]:

@@ -173,9 +173,9 @@ class Vehicle:
                 NodeInput(
                     step=k, node=n.id, y=y[n.id], gamma=float(gamma[idx]),
                     u_prev=u_prev, vx_prev=vx_prev, expect_from=expect, lost_from=lost_from, deadline=deadline,
-                ),  # fmt: skip
+                ),
             )
-        s = lambda d: {str(i): val for i, val in d.items()}  # noqa: E731
+        s = lambda d: {str(i): val for i, val in d.items()}  # noqa: E731  # a one-line local helper
         self.bus.publish(
             keys.truth(self.run),
             Truth(
@@ -186,5 +186,5 @@ class Vehicle:
                 dist_ok=bool(self.w**2 <= sc.W * (1 + 1e-12)), lost=lost, alive=sorted(self.alive),
                 drops=self.drop_report(), e=None if e is None else list(map(float, e)),
                 mismatch_ok=e is None or mismatch_holds(sc, e),
-            ),  # fmt: skip
+            ),
         )

@@ -46,9 +46,9 @@ def compose_yaml(topology: str, image: str = "netsetest:latest") -> str:
         "services:",
     ]
     out += _service("router", image, ["netsetest", "router", topo, "--credentials", CREDENTIALS_MOUNT, "--listen", "tls/0.0.0.0:7447"],
-                    ports=("127.0.0.1:7447:7447",))  # fmt: skip
+                    ports=("127.0.0.1:7447:7447",))
     out += _service("collector", image, ["netsetest", "collector", topo, *net, "--record", "/runs/record.json.gz",
-                                         "--summary-json", "/runs/summary.json"], volumes=("./runs:/runs",))  # fmt: skip
+                                         "--summary-json", "/runs/summary.json"], volumes=("./runs:/runs",))
     for i in sc.ids:
         out += _service(f"node{i}", image, ["netsetest", "node", topo, "--id", str(i), *net])
     out += _service("vehicle", image, ["netsetest", "vehicle", topo, *net])

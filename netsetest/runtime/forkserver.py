@@ -216,7 +216,7 @@ class ForkServer:
         """``argv``: the server's command; ``--control-fd N`` is appended."""
         self.sock, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         self.proc = subprocess.Popen([*argv, "--control-fd", str(theirs.fileno())], pass_fds=[theirs.fileno()], start_new_session=True,
-                                     preexec_fn=die_with_parent, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, env=dict(env))  # fmt: skip
+                                     preexec_fn=die_with_parent, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, env=dict(env))
         theirs.close()
         self.children: dict[int, ForkedProcess] = {}
         self.started: list[tuple[str, int]] = []  # (name, pid) answers not yet claimed by spawn()

@@ -124,7 +124,7 @@ def kill_schedule(kill: Sequence[tuple[int, int]], rejoin: Sequence[tuple[int, i
             want = "kill" if n % 2 == 0 else "rejoin"
             if opt != want or (n and step <= evs[n - 1][0]):
                 raise ValueError(f"--{opt} {node}@{step}: each node's --kill and --rejoin must alternate, kill first, at increasing steps")
-    by = lambda opt: {i: [s for s, o in evs if o == opt] for i, evs in events.items()}  # noqa: E731
+    by = lambda opt: {i: [s for s, o in evs if o == opt] for i, evs in events.items()}  # noqa: E731  # a one-line local helper
     return Schedule(by("kill"), by("rejoin"))
 
 
@@ -212,7 +212,7 @@ class Children:
         self.server.close()
 
 
-def router_session(listen: list[str], base_file: str | None, security: dict[str, object] | None):  # noqa: ANN201
+def router_session(listen: list[str], base_file: str | None, security: dict[str, object] | None):
     """Open a Zenoh router session (BusError naming the option: a bad --zenoh-config, or cannot --listen)."""
     from netsetest.bus.zenoh_bus import BusError, open_session, zenoh_config
 
@@ -272,7 +272,7 @@ def launch(plan: RunPlan) -> RunOutcome:
     from netsetest.runtime.processes import log
     from netsetest.runtime.security import (
         ROUTER, SECURITY_INSECURE, SECURITY_MTLS, identity, role_names, router_settings, write_credentials, write_observer_access,
-    )  # fmt: skip
+    )
 
     o, sc, schedule = plan.options, plan.scenario, plan.schedule
     security = SECURITY_INSECURE if o.insecure else SECURITY_MTLS
@@ -304,11 +304,11 @@ def launch(plan: RunPlan) -> RunOutcome:
             net = _Network(names, router_endpoint, creds)
         if not o.quiet:  # --quiet: nothing on success; the summary and the record name the security mode
             log("run", f"security: {security}" + (f" (mTLS per role, access control at the run's router {net.router_endpoint}; credentials in {net.credentials})"
-                                                   if router is not None else " (open peer mesh: any local process can read and forge messages)"))  # fmt: skip
+                                                   if router is not None else " (open peer mesh: any local process can read and forge messages)"))
         if not o.quiet:  # how to look inside the run from another terminal (README: Live views)
             log("run", f"run id {run_id}; " + (
                 f"watch it with: netsetest watch --run-id {run_id} --connect {net.endpoint('collector')}" if router is None
-                else f"watch it with: netsetest watch --credentials {net.credentials}"))  # fmt: skip
+                else f"watch it with: netsetest watch --credentials {net.credentials}"))
         bar = Progress(sc.steps, f"zenoh ({len(sc.ids)} nodes + vehicle + collector)", enabled=not o.quiet)
         progress = [-1]
 
@@ -321,14 +321,14 @@ def launch(plan: RunPlan) -> RunOutcome:
             crash = schedule.next_kill(i, after)
             children.start(f"node{i}", ["node", *common, "--id", str(i), "--variant", o.variant, "--objective", o.objective, "--clock", o.clock,
                                         "--neighbour-timeout", str(o.neighbour_timeout), *net.argv(f"node{i}"),
-                                        *(["--rejoin"] if rejoin else []), *([] if crash is None else ["--crash-after", str(crash)])])  # fmt: skip
+                                        *(["--rejoin"] if rejoin else []), *([] if crash is None else ["--crash-after", str(crash)])])
 
         col = children.start(
             "collector",
             ["collector", *common, "--signals", o.signals, "--variant", o.variant, "--objective", o.objective, "--seed", str(o.seed), "--clock", o.clock,
              "--summary-json", str(summary_path), "--progress", *(["--record", o.record] if o.record else []), *net.argv("collector")],
             pipe_stdout=True,
-        )  # fmt: skip
+        )
         threading.Thread(target=follow, args=(col.stdout,), daemon=True).start()
         for i in sc.ids:
             start_node(i, False, 0)
@@ -339,7 +339,7 @@ def launch(plan: RunPlan) -> RunOutcome:
              "--node-timeout", str(o.node_timeout), "--pace", str(o.pace), "--start-timeout", str(run_start_timeout(len(names))),
              *net.argv("vehicle"),
              *(x for w in awaits for x in ("--await-rejoin", w))],
-        )  # fmt: skip
+        )
         rejoins = sorted((r, i) for i, rs in schedule.rejoins.items() for r in rs)
         reported: set[str] = set()
         while True:

@@ -114,7 +114,7 @@ def write_credentials(
                                      encipher_only=False, decipher_only=False), critical=True)
         .add_extension(x509.SubjectKeyIdentifier.from_public_key(ca_key.public_key()), critical=False)
         .sign(ca_key, hashes.SHA256())
-    )  # fmt: skip
+    )
     (d / CA_FILE).write_bytes(ca.public_bytes(serialization.Encoding.PEM))
     for name in [ROUTER, OBSERVER, *names]:
         key = ec.generate_private_key(ec.SECP256R1())
@@ -128,7 +128,7 @@ def write_credentials(
             .add_extension(x509.ExtendedKeyUsage([usage]), critical=False)
             .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()), critical=False)
             .sign(ca_key, hashes.SHA256())
-        )  # fmt: skip
+        )
         (d / f"{name}.pem").write_bytes(cert.public_bytes(serialization.Encoding.PEM))
         _write_private(
             d / f"{name}.key",
@@ -186,18 +186,18 @@ def acl_config(sc: Scenario, run_id: str) -> dict[str, object]:
         # subscriptions are propagated to publishers (which then send); declarations carry no data
         {"id": "interest", "messages": ["declare_subscriber"], "flows": ["egress"], "permission": "allow",
          "key_exprs": [keys.run_root(run_id)]},
-    ]  # fmt: skip
+    ]
     subjects, policies = [], []
     for name, g in grants(sc, run_id).items():
         mine = [f"{name}-subscribe", f"{name}-receive", "interest"]
         if g.publish:  # the observer publishes nothing: no rule at all (Zenoh rejects a rule without keys)
             rules.append({"id": f"{name}-publish", "messages": ["put"], "flows": ["ingress"], "permission": "allow",
-                          "key_exprs": list(g.publish)})  # fmt: skip
+                          "key_exprs": list(g.publish)})
             mine.append(f"{name}-publish")
         rules.append({"id": f"{name}-subscribe", "messages": ["declare_subscriber"], "flows": ["ingress"],
-                      "permission": "allow", "key_exprs": list(g.receive)})  # fmt: skip
+                      "permission": "allow", "key_exprs": list(g.receive)})
         rules.append({"id": f"{name}-receive", "messages": ["put"], "flows": ["egress"], "permission": "allow",
-                      "key_exprs": list(g.receive)})  # fmt: skip
+                      "key_exprs": list(g.receive)})
         subjects.append({"id": name, "cert_common_names": [name]})
         policies.append({"id": name, "rules": mine, "subjects": [name]})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}

@@ -116,7 +116,7 @@ def test_saturated_within_sector_contained_every_step(tmp_path, signals):
     saturated = sum(
         1 for t in res.parts["truth"] for n in sc.nodes
         if abs(float(n.sensor.Cbar @ np.r_[t["x"], t["faults"][str(n.id)]])) > n.sensor.r_max
-    )  # fmt: skip
+    )
     assert saturated > 0, "the scenario must really saturate"
     check_every_step(res, expect_all_assumptions=True)
 

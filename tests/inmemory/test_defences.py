@@ -264,7 +264,7 @@ def test_forged_inputs_the_scenario_rules_out_are_dropped() -> None:
     assert_same_estimates(res, clean("nsnim"))
     d = res.summary.drops["node 2"]
     for reason in ("input-speed", "input-steering", "input-gamma", "input-not-neighbours", "input-incomplete", "step-beyond-run",
-                   "node-input-mismatch", "duplicate-input"):  # fmt: skip
+                   "node-input-mismatch", "duplicate-input"):
         assert d.get(reason, 0) > 0, (reason, d)
 
 
@@ -338,7 +338,7 @@ def test_forged_truth_is_checked_against_the_model() -> None:
             (key, _raw_truth(msg, faults={**s, "7": 0.0})),
             (key, encode(msg.model_copy(update={"faults": {"9": 0.0}, "noise": {"9": 0.0}, "gamma": {"9": 1.0}, "y": {"9": 0.0},
                                                 "y_nofault": {"9": 0.0}, "sector_ok": {"9": True}, "noise_ok": {"9": True},
-                                                "r": {"9": 0.0}, "fault_ok": {"9": True}}))),  # fmt: skip
+                                                "r": {"9": 0.0}, "fault_ok": {"9": True}}))),
             # what the collector's cone reads for a derived sector: C̄x̄ and the fault-bound flag
             (key, encode(msg.model_copy(update={"r": {**msg.r, "3": msg.r["3"] + 1e-3}}))),
             (key, encode(msg.model_copy(update={"fault_ok": {**msg.fault_ok, "4": not msg.fault_ok["4"]}}))),
@@ -447,8 +447,8 @@ def test_vehicle_and_collector_keep_only_open_steps(monkeypatch: pytest.MonkeyPa
 
     made: dict[str, object] = {}
 
-    def capture(cls):  # noqa: ANN001, ANN202
-        def make(*a, **kw):  # noqa: ANN002, ANN003, ANN202
+    def capture(cls):
+        def make(*a, **kw):
             made[cls.__name__] = obj = cls(*a, **kw)
             return obj
 
@@ -460,14 +460,14 @@ def test_vehicle_and_collector_keep_only_open_steps(monkeypatch: pytest.MonkeyPa
 
     def on_step(k: int) -> None:
         v, c = made["Vehicle"], made["Collector"]
-        sizes.append((len(v.heard), len(c.states), len(c.truth)))  # type: ignore[attr-defined]
+        sizes.append((len(v.heard), len(c.states), len(c.truth)))
 
     res = run_inmemory(_scenario("nsnim"), keep=False, on_step=on_step)
     assert res.summary.steps_completed == STEPS and res.parts is None
     assert max(h for h, _, _ in sizes) <= 1
     assert max(s for _, s, _ in sizes) <= CLOSE_LAG + 1 and max(t for _, _, t in sizes) <= CLOSE_LAG + 1
     c = made["Collector"]
-    assert c.states == {} and c.truth == {} and c.evaluated == {}  # type: ignore[attr-defined]
+    assert c.states == {} and c.truth == {} and c.evaluated == {}
 
 
 def test_an_end_that_overtakes_the_last_truth_is_not_hostile() -> None:

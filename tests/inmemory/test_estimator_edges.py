@@ -105,7 +105,7 @@ def test_corner_profile_runs_contained_or_flagged(name: str, case: str, tmp_path
 # ------------------------------------------------------------------------------ fallback_shape itself
 
 
-def _estimator_data(sc, node: int = 3):  # noqa: ANN001, ANN202
+def _estimator_data(sc, node: int = 3):
     n = sc.node(node)
     est = LocalEstimator.for_node(sc, node)
     alpha = sc.model.weights(sc.vx(0))

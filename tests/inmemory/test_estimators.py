@@ -32,7 +32,7 @@ JSON_FIELDS = ("estimator", "violations", "fault_width_mean", "ratio_exact", "rm
 @cache
 def _run(case: str, signals: str, seed: int) -> tuple[Scenario, Record]:
     sc = load_topology(PAPER6, case, STEPS)
-    res = run_inmemory(sc, signals, "scheduled", seed)  # type: ignore[arg-type]
+    res = run_inmemory(sc, signals, "scheduled", seed)
     return sc, record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
 
 
@@ -60,7 +60,7 @@ def test_every_estimator_contains_the_exact_local_set_under_its_own_assumptions(
     for node in (1, 4):
         b, assumptions = _bounds(name, sc, rec, node)
         mode = "all" if "fault_bound" in assumptions else "used"
-        ex = exact_bounds(sc, rec, mode, nodes=[node])  # type: ignore[arg-type]
+        ex = exact_bounds(sc, rec, mode, nodes=[node])
         exact = np.stack([ex.beta, ex.r, ex.fault[node]], axis=1)
         slack = TOL * np.maximum(1.0, np.abs(np.nan_to_num(exact, posinf=0, neginf=0)))
         assert np.all(b[:, :, 0] <= exact[:, :, 0] + slack[:, :, 0]), f"{name} node {node} narrower than exact (lower)"
@@ -124,14 +124,14 @@ def test_a_saturated_reading_rounded_below_the_limit_is_open() -> None:
 @pytest.mark.parametrize(("case", "signals", "seeds"), [("nsnim", ("paper", "worst"), (0, 3)), ("saim", ("paper", "worst"), (1,))])
 def test_compare_every_row_is_contained_where_its_assumptions_held(case: str, signals: tuple, seeds: tuple) -> None:
     names = (SDP, *SET_ESTIMATOR_NAMES, EXACT)
-    c = compare(PAPER6, names, (case,), signals, seeds, STEPS)  # type: ignore[arg-type]
+    c = compare(PAPER6, names, (case,), signals, seeds, STEPS)
     assert [r.estimator for r in c.rows] == list(names)
     for r in c.rows:
         assert r.violations == 0, r
         assert r.node_steps == len(signals) * len(seeds) * 6 * (STEPS + 1) and r.covered > 0.9 * r.node_steps
         assert not r.refused
     by = {r.estimator: r for r in c.rows}
-    assert by["zonotope"].fault_width_mean <= by["zonotope-q10"].fault_width_mean + TOL  # type: ignore[operator]
+    assert by["zonotope"].fault_width_mean <= by["zonotope-q10"].fault_width_mean + TOL
 
 
 def _bench_topologies():  # the benchmark's ring builder
@@ -169,7 +169,7 @@ def test_compare_cli_prints_the_rows_and_writes_json(tmp_path: Path, capsys: pyt
 
 
 @pytest.mark.parametrize(("argv", "what"), [(["--estimators", "nope"], "unknown estimator"), (["--signals", "loud"], "signal kind"),
-                                            (["--seeds", "x"], "not an integer"), (["--seeds", "0,-1"], "between 0")])  # fmt: skip
+                                            (["--seeds", "x"], "not an integer"), (["--seeds", "0,-1"], "between 0")])
 def test_compare_bad_options_exit_2(argv: list[str], what: str, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exc:
         main(["compare", PAPER6, *argv])

@@ -43,11 +43,11 @@ def tmp(tmp_path_factory: pytest.TempPathFactory) -> str:
 @cache
 def _exact(case: str, signals: str, seed: int, tmp: str, mode: str = "used") -> ExactBounds:
     sc, rec = _run(case, signals, seed, tmp)
-    return exact_bounds(sc, rec, mode, keep_witnesses=True)  # type: ignore[arg-type]
+    return exact_bounds(sc, rec, mode, keep_witnesses=True)
 
 
 def _coordinate(x: np.ndarray, f: dict[int, float], key: WitnessKey) -> float:
-    return f[key.node] if key.coordinate == "f" else x[0 if key.coordinate == "beta" else 1]  # type: ignore[index]
+    return f[key.node] if key.coordinate == "f" else x[0 if key.coordinate == "beta" else 1]
 
 
 def _check_witness(sc: Scenario, rec: Record, ex: ExactBounds, key: WitnessKey, wit: Witness) -> None:
@@ -106,7 +106,7 @@ def test_truth_inside_every_exact_interval(case: str, signals: str, seed: int, m
         for coord, value, node in [("beta", t["x"][0], None), ("r", t["x"][1], None)] + [
             ("f", t["faults"][str(i)], i) for i in sc.ids
         ]:
-            lo, hi = ex.interval(coord, node)[k]  # type: ignore[arg-type]
+            lo, hi = ex.interval(coord, node)[k]
             assert lo - CONTAIN_TOL <= value <= hi + CONTAIN_TOL, f"{coord} node {node} step {k}: {value} ∉ [{lo}, {hi}]"
 
 
@@ -162,8 +162,8 @@ def test_free_fault_elimination_is_exact(tmp: str) -> None:
     for case in ("nsnim", "saim"):
         sc, rec = _run(case, "worst", 1, tmp)
         for mode in ("used", "none"):
-            a = exact_bounds(sc, rec, mode)  # type: ignore[arg-type]
-            b = exact_bounds(sc, rec, mode, eliminate_free_faults=False)  # type: ignore[arg-type]
+            a = exact_bounds(sc, rec, mode)
+            b = exact_bounds(sc, rec, mode, eliminate_free_faults=False)
             for coord in COORDINATES:
                 for i in sc.ids:
                     np.testing.assert_allclose(a.interval(coord, i), b.interval(coord, i), atol=1e-7)

@@ -31,7 +31,7 @@ def test_totals_delay_counts_from_the_true_onset() -> None:
     t = FdiTotals()
     for k, (f, status) in enumerate([(0.0, "undecided"), (0.0, "detected"), (0.1, "undecided"), (0.1, "detected"), (0.0, "healthy")]):
         t.truth(k, f, 0.0)
-        t.add(k, status, f, 0.0, covered=k != 1)  # type: ignore[arg-type]
+        t.add(k, status, f, 0.0, covered=k != 1)
     assert (t.fault_onset, t.first_detection, t.first_true_detection, t.detection_delay) == (2, 1, 3, 1)
     assert (t.detected_steps, t.healthy_steps, t.false_detections, t.false_detections_covered) == (2, 1, 1, 0)
 
@@ -40,10 +40,10 @@ def test_totals_delay_counts_from_the_true_onset() -> None:
 def test_no_false_detection_and_every_fault_detected_on_the_paper_network(case: str) -> None:
     """Seeds 0-4, paper and worst-case signals: no false detection anywhere; the four faulty sensors are
     detected after their onset, the two healthy ones never."""
-    sc = load_topology("paper6", case=case)  # type: ignore[arg-type]
+    sc = load_topology("paper6", case=case)
     for seed in range(5):
         for sig in ("paper", "worst"):
-            s = run_inmemory(sc, sig, seed=seed).summary  # type: ignore[arg-type]
+            s = run_inmemory(sc, sig, seed=seed).summary
             assert s.violations_total == 0
             for r in s.nodes:
                 assert r.false_detections == 0, (case, sig, seed, r.id)
@@ -58,7 +58,7 @@ def test_a_false_detection_where_the_assumptions_held_is_a_violation(monkeypatch
     on a covered node-step, counted as one and as a violation (exit 1)."""
     orig = LocalEstimator.step
 
-    def shifted(self: LocalEstimator, prev, inp):  # noqa: ANN001, ANN202
+    def shifted(self: LocalEstimator, prev, inp):
         res = orig(self, prev, inp)
         if self.node_id == 3:
             pub = res.public

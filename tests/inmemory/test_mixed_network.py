@@ -42,7 +42,7 @@ def mixed_topology(tmp: Path, estimators: dict[int, str] = MIXED) -> Path:
 
 
 @pytest.fixture(scope="module")
-def mixed_run(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201
+def mixed_run(tmp_path_factory: pytest.TempPathFactory):
     d = tmp_path_factory.mktemp("mixed")
     sc = load_topology(mixed_topology(d), "saim", STEPS)
     rec = d / "run.json"
@@ -60,7 +60,7 @@ def test_topology_field_and_override(tmp_path: Path) -> None:
         load_topology("paper6", estimator="nope")
 
 
-def test_mixed_network_contained_where_assumptions_held(mixed_run) -> None:  # noqa: ANN001
+def test_mixed_network_contained_where_assumptions_held(mixed_run) -> None:
     sc, res, rec, _ = mixed_run
     s = res.summary
     assert s.violations_total == 0
@@ -89,10 +89,10 @@ def test_mixed_network_contained_where_assumptions_held(mixed_run) -> None:  # n
                 assert d @ np.linalg.solve(P, d) <= e["rho"] * (1 + 1e-9)
 
 
-def test_inspect_uses_the_set_bounds(mixed_run) -> None:  # noqa: ANN001
+def test_inspect_uses_the_set_bounds(mixed_run) -> None:
     *_, path = mixed_run
     out = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "inspect", str(path), "--node", "5"],
-                         capture_output=True, text=True, timeout=120)  # fmt: skip
+                         capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
 
 
@@ -110,7 +110,7 @@ def test_enclosing_ellipsoid_contains_the_set() -> None:
     assert (flat.hi - c) @ np.linalg.solve(P, flat.hi - c) <= 1.0
 
 
-def _state(**kw) -> NodeState:  # noqa: ANN003
+def _state(**kw) -> NodeState:
     base = dict(step=1, node=1, xhat=[0.0, 0.0, 0.0], P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
     return NodeState(**{**base, **kw})
 
@@ -126,7 +126,7 @@ def test_wire_set_field() -> None:
         decode(msgpack.packb(raw, use_bin_type=True))
 
 
-def test_record_uses_the_set_bounds(mixed_run) -> None:  # noqa: ANN001
+def test_record_uses_the_set_bounds(mixed_run) -> None:
     *_, rec, path = mixed_run
     for i in MIXED:
         rows = rec.fault_rows(i)
@@ -149,12 +149,12 @@ def test_simulate_estimator_and_mcap(tmp_path: Path) -> None:
     path = tmp_path / "run.mcap"
     out = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "run", "paper6", "--mode", "inmemory", "--quiet",
                           "--steps", "6", "--estimator", "zonotope", "--record", str(path)],
-                         capture_output=True, text=True, timeout=120)  # fmt: skip
+                         capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     rec = load_record(path)
     assert all(tr.set_bounds is not None for tr in rec.nodes.values())
     bad = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "run", "paper6", "--mode", "inmemory", "--estimator", "nope"],
-                         capture_output=True, text=True, timeout=60)  # fmt: skip
+                         capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr
 
 
@@ -173,7 +173,7 @@ def test_estimator_refusing_a_node_is_a_config_error(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="node 6: estimator 'strip'"):
         run_inmemory(load_topology(path, steps=2), "paper", "scheduled", seed=0)
     out = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "run", str(path), "--mode", "inmemory", "--steps", "2"],
-                         capture_output=True, text=True, timeout=60)  # fmt: skip
+                         capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "node 6" in out.stderr and "Traceback" not in out.stderr
 
 
@@ -185,7 +185,7 @@ def test_set_estimator_refusing_a_step_falls_back(monkeypatch: pytest.MonkeyPatc
 
     step = IntervalObserver.step
 
-    def refuse_step_3(self, inp, neighbours=()):  # noqa: ANN001, ANN202
+    def refuse_step_3(self, inp, neighbours=()):
         if inp.step == 3:
             raise EstimatorError("the measurement is inconsistent with the set (an assumption broke)")
         return step(self, inp, neighbours)
@@ -204,7 +204,7 @@ def test_set_estimator_refusing_a_step_falls_back(monkeypatch: pytest.MonkeyPatc
 
 def test_set_node_cannot_be_killed_and_rejoined(tmp_path: Path) -> None:
     out = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "run", str(mixed_topology(tmp_path)), "--insecure",
-                          "--steps", "4", "--kill", "5@2", "--rejoin", "5@3"], capture_output=True, text=True, timeout=60)  # fmt: skip
+                          "--steps", "4", "--kill", "5@2", "--rejoin", "5@3"], capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "cannot rejoin" in out.stderr and "Traceback" not in out.stderr
 
 
@@ -220,7 +220,7 @@ def test_compare_on_a_mixed_topology_runs_the_sdp(tmp_path: Path) -> None:
         np.testing.assert_allclose(cmp.bounds["sdp"][i][:, 2, 0], sdp.nodes[i].lower[:, 2], rtol=0, atol=1e-12)
 
 
-def netsetest_simulate_all_sdp(topology: Path, steps: int):  # noqa: ANN201
+def netsetest_simulate_all_sdp(topology: Path, steps: int):
     import netsetest
 
     return netsetest.simulate(topology, steps=steps, estimator="sdp")
@@ -255,7 +255,7 @@ def test_inspect_labels_a_set_estimators_bounds_as_what_they_are(tmp_path: Path,
 
 @pytest.mark.parametrize("estimator", ["zonotope", "interval", "strip", "setprop"])
 def test_set_estimators_on_saturating_sensors_without_a_fault_bound_are_refused(estimator: str, tmp_path: Path,
-                                                                              capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
+                                                                              capsys: pytest.CaptureFixture[str]) -> None:
     """zonotope fell back to its previous set at the first saturated reading and failed the run with 441
     false violations; interval raised a traceback. Every set estimator now refuses the set-up, exit 2."""
     from netsetest.cli.main import main
@@ -267,6 +267,6 @@ def test_set_estimators_on_saturating_sensors_without_a_fault_bound_are_refused(
         prof.write_text(re.sub(r"\[fault_bound\][^\[]*", "", prof.read_text()))
     topo = tmp_path / "topologies" / "paper6.toml"
     assert main(["run", str(topo), "--mode", "inmemory", "--case", "saim", "--signals", "worst", "--steps", "3",
-                 "--estimator", estimator]) == 2  # fmt: skip
+                 "--estimator", estimator]) == 2
     err = capsys.readouterr().err
     assert "fault" in err and f"{estimator!r}" in err and "Traceback" not in err

@@ -18,9 +18,9 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _record(name: str, tmp_path: Path, steps: int = 30, case: str = "nsnim", signals: str = "paper") -> tuple:
-    sc = load_topology(name, case=case, steps=steps)  # type: ignore[arg-type]
+    sc = load_topology(name, case=case, steps=steps)
     path = tmp_path / f"{name}-{case}-{signals}.json"
-    run_inmemory(sc, signals, seed=0, record=str(path), keep=False)  # type: ignore[arg-type]
+    run_inmemory(sc, signals, seed=0, record=str(path), keep=False)
     return sc, load_record(str(path))
 
 

@@ -28,8 +28,8 @@ pytest.importorskip("vehiclemodels")
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _car(steps: int = 30, **kw: object):  # noqa: ANN202
-    return load_topology("paper6_car", steps=steps, **kw)  # type: ignore[arg-type]
+def _car(steps: int = 30, **kw: object):
+    return load_topology("paper6_car", steps=steps, **kw)
 
 
 # ---------------------------------------------------------------- the plant and its T-S model
@@ -43,7 +43,7 @@ def test_single_track_rhs_is_the_package_model_plus_the_wind() -> None:
 
     p = parameters_vehicle2()
     x = [2.0233348142065677, 0.0041907137716636, 0.0197545248559617, 15.7216236334290116, 0.0025857914776859,
-         0.0529001056654038, 0.0033, 45.0, 45.7]  # fmt: skip
+         0.0529001056654038, 0.0033, 45.0, 45.7]
     car = plant_mod.SingleTrackPlant(2, 1360.0, 0.5, np.zeros(2), 25.0, 0.0)
     base = vehicle_dynamics_std(list(x), [0.0, 0.3], p)
     f = list(base)
@@ -149,7 +149,7 @@ def test_ts_plant_is_bit_identical_to_the_paper_run() -> None:
         ("saim", "worst"): "76a3d48282ab4767efa7028cf76e2b70",
     }
     for (case, sig), digest in want.items():
-        res = run_inmemory(load_topology("paper6", case=case, steps=30), signals=sig, seed=3)  # type: ignore[arg-type]
+        res = run_inmemory(load_topology("paper6", case=case, steps=30), signals=sig, seed=3)
         h = hashlib.blake2b(digest_size=16)
         for i in sorted(res.parts["nodes"]):
             for e in res.parts["nodes"][i]:
@@ -167,7 +167,7 @@ def test_containment_on_every_manoeuvre_with_its_calibrated_bound(manoeuvre: str
     contained, and the verdict says so; the SDP, NSNIM and SAIM."""
     steps = 200 if manoeuvre == "lap" else 40
     for case in ("nsnim", "saim"):
-        sc = load_topology("paper6_car", case=case, steps=steps, manoeuvre=manoeuvre)  # type: ignore[arg-type]
+        sc = load_topology("paper6_car", case=case, steps=steps, manoeuvre=manoeuvre)
         cal = calibrate([sc], [1], ["worst"], margin=0.0)
         for bound in (cal.box, cal.ellipsoid):
             res = run_inmemory(with_uncertainty(sc, bound), signals="worst", seed=1)
@@ -200,7 +200,7 @@ def test_a_halved_bound_is_attributed_to_model_mismatch(capsys: pytest.CaptureFi
     # a bound a thousand times too small: the sets do miss the car's truth, and every miss is attributed
     path.write_text(path.read_text().replace(f"box = [{float(box[0]) / 2!r}, {float(box[1]) / 2!r}]", "box = [1e-6, 1e-5]"))
     code = main(["run", str(path), "--mode", "inmemory", "--seed", "0", "--signals", "worst", "--quiet",
-                 "--summary-json", str(tmp_path / "s.json")])  # fmt: skip
+                 "--summary-json", str(tmp_path / "s.json")])
     summary = json.loads((tmp_path / "s.json").read_text())
     assert code == 0 and summary["violations_total"] == 0
     misses = summary["node_steps_evaluated"] - summary["node_steps_contained"]
@@ -225,7 +225,7 @@ def test_exact_with_the_mismatch_bound_has_witnesses_and_is_never_wider_than_the
             for j in range(key.step):
                 assert unc.holds(wit.e[j] / (1 + 1e-7)), (key, wit.e[j])  # inside the bound to solver precision
                 x = sc.model.step(x, data[j].u, float(wit.w[j]), data[j].vx) + wit.e[j]
-            value = x[0] if key.coordinate == "beta" else x[1] if key.coordinate == "r" else wit.f[key.node][key.step]  # type: ignore[index]
+            value = x[0] if key.coordinate == "beta" else x[1] if key.coordinate == "r" else wit.f[key.node][key.step]
             bound = ex.interval(key.coordinate, key.node)[key.step, 0 if key.side == "lo" else 1]
             assert value == pytest.approx(bound, abs=1e-6), key
         truth = sorted(rec.truth, key=lambda t: t["step"])
@@ -265,7 +265,7 @@ def test_origin_mvee_of_a_known_set() -> None:
 
 def test_calibrate_command(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     code = main(["calibrate", "paper6_car", "--manoeuvres", "paper,step-steer", "--seeds", "0-1", "--steps", "20",
-                 "--json", str(tmp_path / "c.json")])  # fmt: skip
+                 "--json", str(tmp_path / "c.json")])
     out = capsys.readouterr().out
     assert code == 0
     assert "[model_uncertainty]\nbox = [" in out and "ellipsoid = [[" in out
@@ -349,7 +349,7 @@ def test_double_lane_change_driver_follows_the_course() -> None:
     lap's driver stays within 1 m of the oval for 60 s."""
     sc = load_topology("paper6_car", steps=80, manoeuvre="double-lane-change")
     drive = Drive(sc, "paper", 0)
-    course = drive.manoeuvre.driver.course  # type: ignore[union-attr]
+    course = drive.manoeuvre.driver.course
     worst, lateral_max = 0.0, 0.0
     for k in range(80):
         drive.step(k)
@@ -360,7 +360,7 @@ def test_double_lane_change_driver_follows_the_course() -> None:
     assert abs(drive.plant.state().pose[1]) < 0.5
     sc = load_topology("paper6_lap", steps=600)
     drive = Drive(sc, "paper", 0)
-    course = drive.manoeuvre.driver.course  # type: ignore[union-attr]
+    course = drive.manoeuvre.driver.course
     for k in range(600):
         drive.step(k)
         X, Y, _ = drive.plant.state().pose

@@ -16,7 +16,7 @@ SILENT = range(20, 35)  # node 3 published nothing for these steps
 
 
 @pytest.fixture(scope="module")
-def gap_record(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201
+def gap_record(tmp_path_factory: pytest.TempPathFactory):
     d = tmp_path_factory.mktemp("plots")
     netsetest.simulate("paper6", steps=60).save(d / "full.json")
     full = load_record(d / "full.json")
@@ -25,11 +25,11 @@ def gap_record(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201
     return load_record(d / "gap.json")
 
 
-def _node3_axes(fig, rec) -> list:  # noqa: ANN001
+def _node3_axes(fig, rec) -> list:
     return [ax for ax in fig.axes if "node 3" in ax.get_ylabel() or ax.get_title() in ("node 3", "fault f3")]
 
 
-def _assert_no_data_in_gap(ax, scale: float) -> None:  # noqa: ANN001
+def _assert_no_data_in_gap(ax, scale: float) -> None:
     lo, hi = (SILENT.start - 0.5) * scale, (SILENT.stop - 0.5) * scale
     for line in ax.get_lines():
         x, y = np.asarray(line.get_xdata(), float), np.asarray(line.get_ydata(), float)
@@ -46,7 +46,7 @@ def _assert_no_data_in_gap(ax, scale: float) -> None:  # noqa: ANN001
 
 
 @pytest.mark.parametrize("fig_fn, scale", [(plots._fig6, 0.1), (plots._fig7, 0.1)])
-def test_no_interpolation_across_a_silent_node(gap_record, fig_fn, scale) -> None:  # noqa: ANN001
+def test_no_interpolation_across_a_silent_node(gap_record, fig_fn, scale) -> None:
     fig = fig_fn(gap_record, "x")
     axes = _node3_axes(fig, gap_record)
     assert axes
@@ -57,14 +57,14 @@ def test_no_interpolation_across_a_silent_node(gap_record, fig_fn, scale) -> Non
     plt.close(fig)
 
 
-def test_fig8_breaks_E_where_the_node_was_silent(gap_record) -> None:  # noqa: ANN001
+def test_fig8_breaks_E_where_the_node_was_silent(gap_record) -> None:
     fig = plots._fig8([gap_record], ["x"])
     (ax,) = [a for a in fig.axes if a.get_title() == "node 3"]
     _assert_no_data_in_gap(ax, 1.0)
     plt.close(fig)
 
 
-def test_units_on_every_axis(gap_record) -> None:  # noqa: ANN001
+def test_units_on_every_axis(gap_record) -> None:
     for fn in (plots._fig5, plots._fig6, plots._fig7):
         fig = fn(gap_record, "x")
         for ax in fig.axes:
@@ -79,7 +79,7 @@ def test_units_on_every_axis(gap_record) -> None:  # noqa: ANN001
     plt.close(fig)
 
 
-def test_fig6_leaves_out_the_initial_transient_but_shows_every_true_value(gap_record) -> None:  # noqa: ANN001
+def test_fig6_leaves_out_the_initial_transient_but_shows_every_true_value(gap_record) -> None:
     fig = plots._fig6(gap_record, "x")
     truth = np.array([e["x"] for e in gap_record.truth])
     rows = [ax for ax in fig.axes if ax.get_ylabel()]
@@ -108,13 +108,13 @@ def test_short_run_keeps_full_limits() -> None:
 
 
 @pytest.fixture(scope="module")
-def saim_record(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201
+def saim_record(tmp_path_factory: pytest.TempPathFactory):
     d = tmp_path_factory.mktemp("saim")
     netsetest.simulate("paper6", steps=40, case="saim").save(d / "saim.json")
     return load_record(d / "saim.json")
 
 
-def test_fig5_shows_the_saturation_limit_and_gamma(saim_record) -> None:  # noqa: ANN001
+def test_fig5_shows_the_saturation_limit_and_gamma(saim_record) -> None:
     """Fig. 5 drew neither the saturation limit nor γ (SAIM)."""
     fig = plots._fig5(saim_record, "saim")
     r_max = saim_record.meta["r_max"]["1"]
@@ -126,7 +126,7 @@ def test_fig5_shows_the_saturation_limit_and_gamma(saim_record) -> None:  # noqa
     plt.close(fig)
 
 
-def test_fig7_leaves_out_the_initial_transient_like_fig6(saim_record) -> None:  # noqa: ANN001
+def test_fig7_leaves_out_the_initial_transient_like_fig6(saim_record) -> None:
     """Fig. 7 let the first second's (wide) bounds set the y range."""
     fig = plots._fig7(saim_record, "saim")
     tau = saim_record.meta["tau_s"]

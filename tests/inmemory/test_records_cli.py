@@ -36,7 +36,7 @@ def saim(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("saim")
     rec, summ = d / "run.json.gz", d / "summary.json"
     rc = main(["run", TOPOLOGY, "--mode", "inmemory", "--case", "saim", "--steps", "8", "--record", str(rec),
-               "--summary-json", str(summ), "--quiet"])  # fmt: skip
+               "--summary-json", str(summ), "--quiet"])
     assert rc == 0
     return {"record": rec, "summary": summ}
 
@@ -89,7 +89,7 @@ def _legacy_doc(path: Path) -> dict:
 def test_legacy_document_record_loads(nsnim: dict[str, Path], tmp_path: Path) -> None:
     new = load_record(nsnim["record"])
     for name, data in (("old.json", json.dumps(_legacy_doc(nsnim["record"])).encode()),
-                       ("old.json.gz", gzip.compress(json.dumps(_legacy_doc(nsnim["record"])).encode()))):  # fmt: skip
+                       ("old.json.gz", gzip.compress(json.dumps(_legacy_doc(nsnim["record"])).encode()))):
         p = tmp_path / name
         p.write_bytes(data)
         old = load_record(p)
@@ -185,7 +185,7 @@ def test_summary_of_an_older_record_loads(nsnim: dict[str, Path], tmp_path: Path
 @pytest.mark.parametrize(("where", "value", "field"), [
     ("summary", "0", "summary.violations_total"), ("summary", True, "summary.violations_total"),
     ("node", "x", "summary.nodes[2].fallbacks"), ("node", [1], "summary.nodes[2].fallbacks"),
-])  # fmt: skip
+])
 def test_a_mistyped_summary_field_is_a_malformed_record(where: str, value: object, field: str, nsnim: dict[str, Path], tmp_path: Path) -> None:
     doc = _legacy_doc(nsnim["record"])
     if where == "summary":
@@ -225,7 +225,7 @@ def test_inspect_json(nsnim: dict[str, Path], capsys: pytest.CaptureFixture[str]
     rec = load_record(nsnim["record"])
     for r in rows:
         for key in ("step", "fault_estimate", "fault_lower", "fault_upper", "fault_true", "E", "contained", "status",
-                    "beta_estimate", "beta_lower", "beta_upper", "beta_true", "r_estimate", "r_lower", "r_upper", "r_true"):  # fmt: skip
+                    "beta_estimate", "beta_lower", "beta_upper", "beta_true", "r_estimate", "r_lower", "r_upper", "r_true"):
             assert key in r, key
         t = rec.truth_at(r["step"])
         assert r["beta_true"] == t["x"][0] and r["r_true"] == t["x"][1] and r["fault_true"] == t["faults"]["2"]

@@ -41,7 +41,7 @@ def records(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return out
 
 
-def _same_record(a, b) -> None:  # noqa: ANN001
+def _same_record(a, b) -> None:
     assert a.meta == b.meta and a.truth == b.truth and a.summary == b.summary
     assert a.raw_nodes == b.raw_nodes
     assert sorted(a.nodes) == sorted(b.nodes)
@@ -186,7 +186,7 @@ def test_export_tables_round_trip_with_pandas(fmt: str, records: dict[str, Path]
 
 
 def test_export_parquet_without_pyarrow_exits_2(records: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                                                capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
+                                                capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setitem(sys.modules, "pyarrow", None)  # import pyarrow now raises ImportError
     assert main(["export", str(records["json"]), "--parquet", str(tmp_path / "pq")]) == 2
     err = capsys.readouterr().err
@@ -197,9 +197,9 @@ def test_export_parquet_without_pyarrow_exits_2(records: dict[str, Path], tmp_pa
     ("mcap", ["run", str(ROOT / "topologies" / "paper6.toml"), "--mode", "inmemory", "--record", "{tmp}/r.mcap", "--quiet"]),
     ("mcap", ["inspect", "{tmp}/r.mcap"]),
     ("matplotlib", ["plot", "{tmp}/r.json", "--out", "{tmp}/figs"]),
-])  # fmt: skip
+])
 def test_missing_optional_dependency_exits_2_before_any_work(missing: str, argv: list[str], records: dict[str, Path], tmp_path: Path,
-                                                             monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
+                                                             monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     if argv[0] != "run":  # run writes it (an existing record is refused before the missing extra is named)
         (tmp_path / "r.mcap").write_bytes(records["mcap"].read_bytes())
     (tmp_path / "r.json").write_bytes(records["json"].read_bytes())
@@ -241,8 +241,8 @@ def test_streamed_mcap_record_is_the_run_and_validates(streamed: tuple[Path, obj
     jsonschema = pytest.importorskip("jsonschema")
     path, res = streamed
     rec = load_record(path)
-    assert rec.meta == res.meta and rec.summary == res.summary and rec.truth == res.parts["truth"]  # type: ignore[attr-defined]
-    assert rec.raw_nodes == res.parts["nodes"]  # type: ignore[attr-defined]
+    assert rec.meta == res.meta and rec.summary == res.summary and rec.truth == res.parts["truth"]
+    assert rec.raw_nodes == res.parts["nodes"]
     assert all({"contested", "sector", "sector_basis"} <= set(e) for es in rec.raw_nodes.values() for e in es)
     assert all({"r", "fault_ok"} <= set(t) for t in rec.truth)
     with open(path, "rb") as fh:

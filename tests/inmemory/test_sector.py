@@ -25,7 +25,7 @@ from netsetest.config.schema import load_topology
 from netsetest.estimator import sdp
 from netsetest.estimator.sector import (
     FaultBound, Interval, derive_sector, measurement_interval, prior_interval, propagated_interval, sector_ok,
-)  # fmt: skip
+)
 from netsetest.models.sensor import Sensor
 from netsetest.runtime.inmemory import run_inmemory
 
@@ -162,7 +162,7 @@ def test_worst_case_saim_is_fully_covered_by_the_guarantee(seed):
     _assert_fully_covered(res, sc)
 
 
-def _with_profiles(tmp_path: Path, edit) -> Path:  # noqa: ANN001
+def _with_profiles(tmp_path: Path, edit) -> Path:
     shutil.copytree(ROOT / "nodes", tmp_path / "nodes")
     text = PAPER6.read_text().replace('node_dir = "../nodes"', 'node_dir = "nodes"')
     (tmp_path / "topo.toml").write_text(text)
@@ -227,7 +227,7 @@ def test_bank_recurs_on_the_trace_sets_and_publishes_a_narrower_fault_bound():
     run_inmemory(sc, "paper", "scheduled", 0, objective="bank", observer=lambda est, prev, inp, r, ms: captured.append((est.node_id, prev, inp)))
     assert len(captured) == 6 * 15
     for i, prev, inp in captured[::7]:
-        make = lambda obj: sdp.LocalEstimator.for_node(sc, i, objective=obj)  # noqa: E731
+        make = lambda obj: sdp.LocalEstimator.for_node(sc, i, objective=obj)  # noqa: E731  # a one-line local helper
         bank, trace = make("bank").step(prev, inp), make("trace").step(prev, inp)
         assert bank.status == trace.status == "ok" and bank.published is not None
         np.testing.assert_allclose(bank.P, trace.P, rtol=1e-12, atol=0)
@@ -250,7 +250,7 @@ def test_a_neighbour_sector_that_contradicts_the_topology_is_dropped(case, secto
     msg = NodeState(
         step=0, node=2, xhat=[0.0, 0.1, 0.0], P=[0.3, 0, 0, 0, 0.3, 0, 0, 0, 0.3], rho=1.0, gamma=1.0, innov=0.0,
         status="init", sector=sector, sector_basis="measurement" if sector else "none",
-    )  # fmt: skip
+    )
     bus.publish(keys.node_state("t", 2), msg)
     bus.pump()
     assert (node.drop_report().get("sector-mismatch", 0) == 1) == dropped

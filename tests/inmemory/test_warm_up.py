@@ -23,7 +23,7 @@ def test_warm_up_changes_no_published_state(case: str, variant: str, signals: st
     warmed: list[int] = []
     original = node_module.Node.__init__
 
-    def init_and_warm(self, *args, **kwargs) -> None:  # noqa: ANN001, ANN002, ANN003
+    def init_and_warm(self, *args, **kwargs) -> None:
         original(self, *args, **kwargs)
         self.warm_up()
         warmed.append(self.id)

@@ -28,7 +28,7 @@ def tmp(tmp_path_factory: pytest.TempPathFactory) -> str:
 
 def _zonotope_bounds(sc: Scenario, rec: Record, node: int, order: int | None, mode: str, gain: str = "hull") -> np.ndarray:
     """(K, 3, 2) published bounds of β, r, f of one node's zonotopic estimator over the record's data."""
-    est = ZonotopeEstimator(sc, node, order=order, fault_bounds=mode, gain=gain)  # type: ignore[arg-type]
+    est = ZonotopeEstimator(sc, node, order=order, fault_bounds=mode, gain=gain)
     out = []
     prev = None
     for d in step_data(rec):
@@ -113,9 +113,9 @@ def test_sum_set_support_and_membership_agree() -> None:
     lo, hi = s.bounds()
     for d in rng.normal(size=(5, 3)):
         h = s.support(d)
-        _, e = s._ellipsoid_part(s.M.T @ d)  # type: ignore[union-attr]
+        _, e = s._ellipsoid_part(s.M.T @ d)
         b = np.sign(d @ s.zonotope.generators)
-        point = s.zonotope.center + s.zonotope.generators @ b + s.M @ e  # type: ignore[operator]
+        point = s.zonotope.center + s.zonotope.generators @ b + s.M @ e
         assert d @ point == pytest.approx(h, abs=1e-8)
         assert s.contains(point)
         assert not s.contains(point + 1e-3 * d / np.linalg.norm(d))

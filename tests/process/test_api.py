@@ -65,7 +65,7 @@ def test_simulate_is_deterministic_and_rejects_bad_input() -> None:
     with pytest.raises(ConfigError, match="nosuch"):
         netsetest.simulate("nosuch")
     with pytest.raises(ConfigError, match="mode"):
-        netsetest.simulate("paper6", steps=2, mode="bogus")  # type: ignore[arg-type]
+        netsetest.simulate("paper6", steps=2, mode="bogus")
 
 
 @pytest.mark.zenoh

@@ -36,7 +36,7 @@ def server() -> Iterator[tuple[ForkServer, str]]:
         assert not left, f"left behind: {describe(left)}"
 
 
-def _router(fs: ForkServer, run_id: str):  # noqa: ANN202
+def _router(fs: ForkServer, run_id: str):
     """A child that runs until stopped: an open Zenoh router on a free port."""
     return fs.spawn("router", ["router", "--listen", f"tcp/127.0.0.1:{free_ports(1)[0]}", "--run-id", run_id], pipe_stdout=False)
 

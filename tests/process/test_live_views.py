@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from zenoh_helpers import (  # noqa: F401
+from zenoh_helpers import (
     PAPER6,
     ProcessGuard,
     cli,
@@ -48,7 +48,7 @@ def _catches(pid: int, signum: int) -> bool:
 def _listening_config(path: Path, port: int) -> str:
     """A Zenoh configuration file for an observer that listens (the roles connect to it at start-up)."""
     path.write_text(json.dumps({"mode": "peer", "listen": {"endpoints": [f"tcp/127.0.0.1:{port}"]},
-                                "scouting": {"multicast": {"enabled": False}}}))  # fmt: skip
+                                "scouting": {"multicast": {"enabled": False}}}))
     return str(path)
 
 
@@ -58,9 +58,9 @@ def test_echo_and_watch_on_a_live_run(procs: ProcessGuard, tmp_path: Path) -> No
     p_echo, p_watch = free_ports(2)
     # echo 1 and watch: configured by a file (as on a secured run), listening; the roles connect to them
     e1 = procs.start("echo_cfg", cli("echo", "node/2/state", "--run-id", run, "--json", "--count", str(STEPS + 1), "--duration", "120",
-                                     "--zenoh-config", _listening_config(tmp_path / "echo.json5", p_echo)), stdout=True)  # fmt: skip
+                                     "--zenoh-config", _listening_config(tmp_path / "echo.json5", p_echo)), stdout=True)
     w = procs.start("watch", cli("watch", "--run-id", run, "--duration", "120",
-                                 "--zenoh-config", _listening_config(tmp_path / "watch.json5", p_watch)), stdout=True)  # fmt: skip
+                                 "--zenoh-config", _listening_config(tmp_path / "watch.json5", p_watch)), stdout=True)
     wait_port("127.0.0.1", p_echo, 30)
     wait_port("127.0.0.1", p_watch, 30)
     record, summary = tmp_path / "run.json", tmp_path / "summary.json"
@@ -68,9 +68,9 @@ def test_echo_and_watch_on_a_live_run(procs: ProcessGuard, tmp_path: Path) -> No
     # gossip; the vehicle's keys. Connected to a role's endpoint instead, it raced the roles' start-up:
     # Zenoh retries a refused connection after a back-off, and a 30-step lockstep run can be over by then
     e2 = procs.start("echo_connect", cli("echo", "vehicle/**", "--run-id", run, "--connect", f"tcp/127.0.0.1:{p_echo}",
-                                         "--count", "20", "--duration", "120"), stdout=True)  # fmt: skip
+                                         "--count", "20", "--duration", "120"), stdout=True)
     launch_peer_mesh(procs, PAPER6, run, STEPS, summary, record=record,
-                     also_connect=[f"tcp/127.0.0.1:{p_echo}", f"tcp/127.0.0.1:{p_watch}"])  # fmt: skip
+                     also_connect=[f"tcp/127.0.0.1:{p_echo}", f"tcp/127.0.0.1:{p_watch}"])
     wait_roles(procs, 180)
     out1, _ = e1.communicate(timeout=60)
     out2, _ = e2.communicate(timeout=60)
@@ -137,7 +137,7 @@ def test_live_table_without_truth_shows_no_E_and_stays_bounded() -> None:
     P = [1.0, 0, 0, 0, 1.0, 0, 0, 0, 0.25]
     for k in range(500):
         table.update(NodeState(step=k, node=1, xhat=[0.0, 0.0, 0.1], P=P, rho=1.0, gamma=1.0, innov=0.0, status="ok",
-                               missing=[2] if k % 2 else [], late=k % 5 == 0, dropped=k // 100))  # fmt: skip
+                               missing=[2] if k % 2 else [], late=k % 5 == 0, dropped=k // 100))
     (row,) = table.sorted_rows()
     assert row.step == 499 and row.E is None and row.fault_lower == pytest.approx(-0.4) and row.fault_upper == pytest.approx(0.6)
     assert row.missing == 250 and row.deadline_misses == 100 and row.dropped == 4
@@ -158,10 +158,10 @@ def test_observed_keys() -> None:
     (["--zenoh-config", "/nonexistent/zenoh.json5"], "file not found"),
     (["--zenoh-config", "{bad}"], "not a usable Zenoh configuration"),
     (["--duration", "0"], None),
-])  # fmt: skip
+])
 @pytest.mark.parametrize("command", ["echo", "watch"])
 def test_bad_observer_options_exit_2(command: str, args: list[str], msg: str | None, tmp_path: Path,
-                                     capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
+                                     capsys: pytest.CaptureFixture[str]) -> None:
     if "{bad}" in args:
         bad = tmp_path / "bad.json5"
         bad.write_text('{mode: "peer", no_such_field: 1}')
@@ -240,7 +240,7 @@ def test_run_watch_hint_works_insecure(procs: ProcessGuard) -> None:
     run, watched, endpoint = hint.groups()
     assert watched == run == parent_run_id(parent)
     echo = procs.start("echo_hint", cli("echo", "node/1/state", "--run-id", run, "--connect", endpoint, "--count", "3",
-                                        "--duration", "60"), stdout=True)  # fmt: skip
+                                        "--duration", "60"), stdout=True)
     out, _ = echo.communicate(timeout=90)
     assert echo.returncode == 0 and len(out.decode().splitlines()) == 3, procs.logs()
     assert parent.wait(timeout=120) == 0, procs.logs()

@@ -12,18 +12,18 @@ import sys
 NODE_MODULES = (
     "netsetest.cli.main", "netsetest.cli.processes", "netsetest.runtime.security", "netsetest.runtime.processes",
     "netsetest.bus.zenoh_bus", "netsetest.roles.node",
-)  # fmt: skip
+)
 NODE_ARGV = ["node", "paper6", "--id", "1"]
 NEVER_IN_A_NODE = (
     "pydantic", "pydantic_core", "msgpack", "rich", "netsetest.roles.collector", "netsetest.roles.vehicle",
     "netsetest.runtime.launcher", "netsetest.runtime.forkserver", "netsetest.records.record", "netsetest.records.summary",
     "subprocess", "tempfile", "socket", "random", "gzip",
-)  # fmt: skip
+)
 
 
 def test_node_process_loads_only_what_a_node_needs():
     code = (f"import sys\nfor m in {NODE_MODULES!r}: __import__(m)\n"
-            f"sys.modules['netsetest.cli.main'].build_parser().parse_args({NODE_ARGV!r})\nprint(")  # fmt: skip
+            f"sys.modules['netsetest.cli.main'].build_parser().parse_args({NODE_ARGV!r})\nprint(")
     code += f"sorted(set(sys.modules) & set({NEVER_IN_A_NODE!r})))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and out.stdout.strip() == "[]", (out.stdout, out.stderr[-500:])
@@ -59,5 +59,5 @@ def test_release_free_memory_returns_the_heaps_free_pages():
         "before = rss_kb()\n"
         "release_free_memory()\n"
         "print(before - rss_kb())"
-    )  # fmt: skip
+    )
     assert int(_run(code)) > 20_000  # kB: most of the 40 MB freed but still resident

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from zenoh_helpers import (  # noqa: F401 (fixture)
+from zenoh_helpers import (  # fixture
     PAPER6,
     ProcessGuard,
     cli,
@@ -40,7 +40,7 @@ def finished(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return out
 
 
-def _check_partial(rec, complete: bool) -> None:  # noqa: ANN001
+def _check_partial(rec, complete: bool) -> None:
     """A (partial) record agrees with itself: truth steps 0..last, entries of known steps judged."""
     steps = [t["step"] for t in rec.truth]
     assert steps == list(range(len(steps)))

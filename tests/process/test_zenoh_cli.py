@@ -49,7 +49,7 @@ def test_router_port_in_use_exits_2() -> None:
 
 @pytest.mark.zenoh
 @pytest.mark.timeout(120)
-def test_run_with_a_user_zenoh_config_stays_secured(tmp_path) -> None:  # noqa: ANN001
+def test_run_with_a_user_zenoh_config_stays_secured(tmp_path) -> None:
     """--zenoh-config is the base of every role's and the router's configuration; security goes on top."""
     import json
 
@@ -57,7 +57,7 @@ def test_run_with_a_user_zenoh_config_stays_secured(tmp_path) -> None:  # noqa: 
     cfg.write_text("// a user's tuning\n{ transport: { unicast: { max_links: 2 } } }\n")
     summary = tmp_path / "summary.json"
     out = subprocess.run(cli("run", PAPER6, "--steps", "5", "--quiet", "--zenoh-config", str(cfg), "--summary-json", str(summary)),
-                         cwd=ROOT, capture_output=True, text=True, timeout=110)  # fmt: skip
+                         cwd=ROOT, capture_output=True, text=True, timeout=110)
     assert out.returncode == 0, out.stderr
     s = json.loads(summary.read_text())
     assert s["security"] == "mtls+acl" and s["steps_completed"] == 5 and s["violations_total"] == 0

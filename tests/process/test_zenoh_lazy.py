@@ -23,7 +23,7 @@ LAZY, WAKE = "lazytest/a/lazy", "lazytest/a/wake"
 
 
 @pytest.fixture
-def pair():  # noqa: ANN201
+def pair():
     """Two peers on loopback: ``rx`` subscribes (lazily on LAZY), ``tx`` publishes."""
     p_rx, p_tx = free_ports(2)
     rx = ZenohBus("peer", listen=[f"tcp/127.0.0.1:{p_rx}"], connect=[f"tcp/127.0.0.1:{p_tx}"])
@@ -50,7 +50,7 @@ def _pump_until(rx: ZenohBus, got: list, n: int, timeout: float = 5.0) -> None:
         rx.pump(timeout=0.05)
 
 
-def test_lazy_message_does_not_wake_but_the_next_pump_delivers_it(pair) -> None:  # noqa: ANN001
+def test_lazy_message_does_not_wake_but_the_next_pump_delivers_it(pair) -> None:
     rx, tx, got = pair
     tx.publish(LAZY, End(steps=1))
     time.sleep(0.2)  # it is in rx's ring now
@@ -69,7 +69,7 @@ def test_lazy_message_does_not_wake_but_the_next_pump_delivers_it(pair) -> None:
     assert got == [] and time.monotonic() - t0 >= 0.29
 
 
-def test_lazy_arrival_does_not_end_a_blocking_pump_a_normal_one_does(pair) -> None:  # noqa: ANN001
+def test_lazy_arrival_does_not_end_a_blocking_pump_a_normal_one_does(pair) -> None:
     rx, tx, got = pair
 
     def publish_later(key: str, steps: int) -> None:
@@ -87,7 +87,7 @@ def test_lazy_arrival_does_not_end_a_blocking_pump_a_normal_one_does(pair) -> No
     assert got == [(WAKE, 4)] and time.monotonic() - t0 < 1.5
 
 
-def test_flood_on_a_lazy_key_is_bounded_and_delays_no_other_key(pair) -> None:  # noqa: ANN001
+def test_flood_on_a_lazy_key_is_bounded_and_delays_no_other_key(pair) -> None:
     rx, tx, got = pair
     flood = 10 * MAX_PER_KEY
     for k in range(flood):
@@ -104,7 +104,7 @@ def test_flood_on_a_lazy_key_is_bounded_and_delays_no_other_key(pair) -> None:  
     assert lazy == sorted(lazy) and lazy[-1] == flood - 1  # in order, the newest kept
 
 
-def test_lazy_subscription_needs_an_exact_key(pair) -> None:  # noqa: ANN001
+def test_lazy_subscription_needs_an_exact_key(pair) -> None:
     rx, _, _ = pair
     with pytest.raises(ValueError, match="exact key"):
         rx.subscribe("lazytest/*/state", lambda k, m: None, lazy=True)
@@ -122,7 +122,7 @@ def test_realtime_run_over_zenoh_uses_its_neighbours(tmp_path: Path) -> None:
     out = subprocess.run(cli("run", PAPER6, "--mode", "zenoh", "--clock", "realtime", "--steps", str(steps), "--quiet",
                              "--summary-json", str(summary), "--record", str(record)),
                          cwd=ROOT, capture_output=True, text=True, timeout=170,
-                         env={**os.environ, "NETSETEST_PROFILE": str(prof)})  # fmt: skip
+                         env={**os.environ, "NETSETEST_PROFILE": str(prof)})
     assert out.returncode == 0, out.stderr[-2000:]
     s = json.loads(summary.read_text())
     assert s["violations_total"] == 0 and not s.get("nodes_missing")

@@ -46,14 +46,14 @@ class Runs:
             d = self.tmp.mktemp(f"zenoh-{name}")
             rec, summ = d / "record.json", d / "summary.json"
             args = [topo, "--steps", str(steps), "--seed", str(SEED), "--signals", SIGNALS,
-                    "--record", str(rec), "--summary-json", str(summ)]  # fmt: skip
+                    "--record", str(rec), "--summary-json", str(summ)]
             if case:
                 args += ["--case", case]
             logs = run_to_success(d / "logs", args, timeout=100)
             self.zenoh[name] = {"record": read_record(rec), "summary": read_json(summ), "logs": logs}
         return self.zenoh[name]
 
-    def mem_run(self, name: str):  # noqa: ANN201
+    def mem_run(self, name: str):
         if name not in self.mem:
             from netsetest.config.schema import load_topology
             from netsetest.runtime.inmemory import run_inmemory

@@ -36,7 +36,7 @@ def _state(node: int = 2, step: int = 0, **changes: object) -> NodeState:
     return NodeState(
         step=step, node=node, xhat=[0.0, 0.0, 0.0], P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0,
         innov=0.0, status="ok", **changes,
-    )  # fmt: skip
+    )
 
 
 def _raw(msg: NodeState | NodeInput, **fields: object) -> bytes:
@@ -58,7 +58,7 @@ BAD_STATES = {  # payload → the reason Bus.pump counts it under
 
 
 @pytest.fixture
-def bus_pair():  # noqa: ANN201
+def bus_pair():
     (port,) = free_ports(1)
     ep = f"tcp/127.0.0.1:{port}"
     opened: list[ZenohBus] = []
@@ -74,7 +74,7 @@ def bus_pair():  # noqa: ANN201
 
 
 @pytest.mark.timeout(60)
-def test_zenoh_bus_drops_and_counts_malformed(bus_pair) -> None:  # noqa: ANN001
+def test_zenoh_bus_drops_and_counts_malformed(bus_pair) -> None:
     rx, tx = bus_pair
     seen: list[tuple[str, object]] = []
     rx.subscribe("netsetest/t/node/*/state", lambda key, msg: seen.append((key, msg)))
@@ -95,12 +95,12 @@ def test_zenoh_bus_drops_and_counts_malformed(bus_pair) -> None:  # noqa: ANN001
     tx.publish(key, _state(step=99))  # sentinel: same key, same publisher, so it arrives last
 
     deadline = time.monotonic() + 10
-    while not any(m.step == 99 for _, m in seen):  # type: ignore[attr-defined]
+    while not any(m.step == 99 for _, m in seen):
         assert time.monotonic() < deadline, f"sentinel never arrived; dropped so far {dict(rx.dropped)}"
         rx.pump(timeout=0.1)
 
     assert all(isinstance(m, NodeState) for _, m in seen)
-    assert [m.step for _, m in seen[before:]] == [99], "a malformed payload reached the handler"  # type: ignore[attr-defined]
+    assert [m.step for _, m in seen[before:]] == [99], "a malformed payload reached the handler"
     assert all(k == key for k, _ in seen)
     assert rx.dropped == Counter(reason for _, reason in BAD_STATES.values())
     assert rx.dropped == {"undecodable": 1, "not-a-map": 1, "schema-version": 1, "invalid": 2}
@@ -117,7 +117,7 @@ class Injector:
         self.endpoint = f"tcp/127.0.0.1:{port}"
         self.bus = ZenohBus("peer", listen=[self.endpoint])
         self.heard: set[tuple[str, int | None]] = set()  # Ready of the roles: they are connected to us
-        self.bus.subscribe(keys.ready_of(run_id, "*"), lambda key, m: self.heard.add((m.role, m.node)))  # type: ignore[union-attr]
+        self.bus.subscribe(keys.ready_of(run_id, "*"), lambda key, m: self.heard.add((m.role, m.node)))
         self.stop = threading.Event()
         self.sent = 0
         self.thread = threading.Thread(target=self._loop, daemon=True)
@@ -162,7 +162,7 @@ class Injector:
 
 
 @pytest.mark.timeout(150)
-def test_zenoh_run_ignores_injected_garbage(procs, tmp_path) -> None:  # noqa: ANN001
+def test_zenoh_run_ignores_injected_garbage(procs, tmp_path) -> None:
     steps, seed = 40, 1
     run_id = new_run_id()
     summary_path, record_path = tmp_path / "summary.json", tmp_path / "record.json"
@@ -205,7 +205,7 @@ def test_zenoh_run_ignores_injected_garbage(procs, tmp_path) -> None:  # noqa: A
 
 
 @pytest.mark.timeout(60)
-def test_zenoh_node_drops_far_future_input_before_start(bus_pair) -> None:  # noqa: ANN001
+def test_zenoh_node_drops_far_future_input_before_start(bus_pair) -> None:
     """A NodeInput after the run's last step that reaches a node still waiting for step 0 is dropped."""
     from netsetest.bus.base import Bus
     from netsetest.config.schema import load_topology
@@ -235,7 +235,7 @@ def test_zenoh_node_drops_far_future_input_before_start(bus_pair) -> None:  # no
 
 
 @pytest.mark.timeout(60)
-def test_zenoh_vehicle_ignores_state_on_a_foreign_key(bus_pair) -> None:  # noqa: ANN001
+def test_zenoh_vehicle_ignores_state_on_a_foreign_key(bus_pair) -> None:
     from netsetest.config.schema import load_topology
     from netsetest.roles.vehicle import Vehicle
 

@@ -77,7 +77,7 @@ class Namespaces:
 
 
 @pytest.fixture
-def netns(procs):  # noqa: ANN001, ANN201
+def netns(procs):
     if os.geteuid() != 0:
         pytest.skip("network namespaces need root (ip netns add)")
     if shutil.which("ip") is None:
@@ -91,7 +91,7 @@ def netns(procs):  # noqa: ANN001, ANN201
 
 
 @pytest.mark.timeout(120)
-def test_zenoh_multi_host_namespaces(procs, netns, tmp_path) -> None:  # noqa: ANN001
+def test_zenoh_multi_host_namespaces(procs, netns, tmp_path) -> None:
     steps = 10
     vc, na, nb = netns.hosts
     placement = {"vehicle": vc, "collector": vc, "node1": na, "node2": na, "node3": na, "node4": nb, "node5": nb, "node6": nb}

@@ -19,7 +19,7 @@ import subprocess
 from collections import defaultdict
 
 import pytest
-from zenoh_helpers import (  # noqa: F401 (fixture)
+from zenoh_helpers import (  # fixture
     EXIT_BAD_INPUT,
     EXIT_NODE_LOST,
     EXIT_OK,
@@ -39,7 +39,7 @@ NODE_TIMEOUT = "8"  # bounds the wait for the dead node (once) and for the resta
 
 
 @pytest.mark.timeout(150)
-def test_zenoh_kill_and_rejoin(procs, tmp_path) -> None:  # noqa: ANN001
+def test_zenoh_kill_and_rejoin(procs, tmp_path) -> None:
     rec_path, summ_path = tmp_path / "record.json", tmp_path / "summary.json"
     code = run_parent(
         procs, "run",
@@ -48,7 +48,7 @@ def test_zenoh_kill_and_rejoin(procs, tmp_path) -> None:  # noqa: ANN001
          # below --node-timeout: see test_vehicle_takes_back_a_node_that_was_only_late
          "--neighbour-timeout", "1"],
         timeout=120,
-    )  # fmt: skip
+    )
     logs = procs.logs()
     assert code == EXIT_OK, f"exit {code}\n{logs}"
     assert f"killing myself (SIGKILL) after step {KILL_AT}" in logs and f"restarting node {KILLED} with --rejoin" in logs
@@ -104,10 +104,10 @@ def test_zenoh_kill_and_rejoin(procs, tmp_path) -> None:  # noqa: ANN001
 
 
 @pytest.mark.timeout(150)
-def test_zenoh_node_killed_for_good(procs, tmp_path) -> None:  # noqa: ANN001
+def test_zenoh_node_killed_for_good(procs, tmp_path) -> None:
     summ_path = tmp_path / "summary.json"
     code = run_parent(procs, "run", [PAPER6, "--steps", "30", "--node-timeout", "3", "--neighbour-timeout", "1",
-                                     "--kill", f"{KILLED}@10", "--summary-json", str(summ_path)], timeout=120)  # fmt: skip
+                                     "--kill", f"{KILLED}@10", "--summary-json", str(summ_path)], timeout=120)
     assert code == EXIT_NODE_LOST, procs.logs()
     s = read_json(summ_path)
     rows = {r["id"]: r for r in s["nodes"]}
@@ -188,7 +188,7 @@ def test_vehicle_takes_back_a_node_that_was_only_late() -> None:
     net.step()  # step 8
     net.compute()
     assert late in net.vehicle.alive, "node 2 published every step since step 5, but the vehicle ignores it for good"
-    assert late in net.states[1][8].used and late in net.states[3][8].used  # type: ignore[attr-defined]
+    assert late in net.states[1][8].used and late in net.states[3][8].used
 
 
 @pytest.mark.timeout(60)
@@ -208,7 +208,7 @@ def test_rejoining_node_is_expected_only_after_its_rejoin_state() -> None:
     net.compute()
     assert 8 in net.states[2] and 8 in net.states[4], "the neighbours are stuck waiting for the rejoining node"
     for j in (2, 4):
-        assert KILLED not in net.states[j][8].missing, f"node {j} was told to wait for node {KILLED}'s step 7"  # type: ignore[attr-defined]
+        assert KILLED not in net.states[j][8].missing, f"node {j} was told to wait for node {KILLED}'s step 7"
 
 
 @pytest.mark.timeout(60)
@@ -222,9 +222,9 @@ def test_node_restarted_within_the_node_timeout_is_taken_back() -> None:
     net.nodes[KILLED] = net.Node(net.sc, KILLED, net.bus, "u", rejoin=True)
     net.vehicle.advance()  # the node timeout expires: step 6 without node 3
     net.compute()
-    assert net.states[KILLED][6].status == "rejoin"  # type: ignore[attr-defined]
+    assert net.states[KILLED][6].status == "rejoin"
     net.step()  # 6 -> 7
     net.step()  # 7 -> 8
     assert KILLED in net.vehicle.alive, "the rejoined node publishes every step but the vehicle never expects it again"
     net.compute()
-    assert KILLED in net.states[2][8].used and KILLED in net.states[4][8].used  # type: ignore[attr-defined]
+    assert KILLED in net.states[2][8].used and KILLED in net.states[4][8].used

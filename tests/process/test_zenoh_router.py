@@ -24,7 +24,7 @@ pytestmark = pytest.mark.zenoh
 
 
 @pytest.mark.timeout(120)
-def test_zenoh_client_mode_through_router(procs, tmp_path) -> None:  # noqa: ANN001
+def test_zenoh_client_mode_through_router(procs, tmp_path) -> None:
     steps = 10
     (port,) = free_ports(1)
     router_ep = f"tcp/127.0.0.1:{port}"
@@ -99,7 +99,7 @@ def test_zenoh_compose_matches_committed_file() -> None:
     assert "./runs:/runs" in col["volumes"]
 
 
-def test_credentials_command_writes_run_env(tmp_path) -> None:  # noqa: ANN001
+def test_credentials_command_writes_run_env(tmp_path) -> None:
     import os
     import stat
 

@@ -35,7 +35,7 @@ def _children(run_id: str) -> dict[str, list[int]]:
     return {role: find_role(run_id, role) for role in ROLES}
 
 
-def _wait_running(guard, proc, min_step: int | None) -> None:  # noqa: ANN001
+def _wait_running(guard, proc, min_step: int | None) -> None:
     """Wait until every role is up and (``min_step``) the parent's progress shows a step > ``min_step``."""
 
     def ready() -> bool:
@@ -53,7 +53,7 @@ def _wait_running(guard, proc, min_step: int | None) -> None:  # noqa: ANN001
 
 @pytest.mark.timeout(120)
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-def test_zenoh_signal_to_parent_stops_every_child(procs, sig, tmp_path) -> None:  # noqa: ANN001
+def test_zenoh_signal_to_parent_stops_every_child(procs, sig, tmp_path) -> None:
     summary = tmp_path / "summary.json"
     proc = start_parent(procs, "run", [*LONG, "--summary-json", str(summary)])
     run_id = parent_run_id(proc)
@@ -75,7 +75,7 @@ def test_zenoh_signal_to_parent_stops_every_child(procs, sig, tmp_path) -> None:
 
 
 @pytest.mark.timeout(120)
-def test_zenoh_sigkill_parent_kills_children(procs) -> None:  # noqa: ANN001
+def test_zenoh_sigkill_parent_kills_children(procs) -> None:
     proc = start_parent(procs, "run", LONG)
     run_id = parent_run_id(proc)
     _wait_running(procs, proc, min_step=None)
@@ -88,7 +88,7 @@ def test_zenoh_sigkill_parent_kills_children(procs) -> None:  # noqa: ANN001
 
 
 @pytest.mark.timeout(120)
-def test_zenoh_failing_vehicle_stops_the_run(procs) -> None:  # noqa: ANN001
+def test_zenoh_failing_vehicle_stops_the_run(procs) -> None:
     proc = start_parent(procs, "run", LONG)
     run_id = parent_run_id(proc)
     _wait_running(procs, proc, min_step=None)

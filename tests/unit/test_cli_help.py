@@ -34,7 +34,7 @@ def test_help_shows_defaults_and_units(name: str) -> None:
         if not a.option_strings or not has_default(a):
             continue
         # the default is printed next to the option (either by its help text or by the formatter)
-        helptext = " ".join(p._get_formatter()._expand_help(a).split())  # noqa: SLF001 — argparse's own expansion
+        helptext = " ".join(p._get_formatter()._expand_help(a).split())  # argparse's own expansion
         assert "default" in helptext, (name, a.option_strings, helptext)
         assert "".join(helptext.split()) in text
         if a.metavar == "S":  # a duration: the unit is named

@@ -23,7 +23,7 @@ def _state(**kw) -> NodeState:
     base = dict(
         step=7, node=3, xhat=X, P=P, rho=1 / 3, gamma=0.8123456789012345, innov=-0.0123456789,
         status="ok", rho_cert=1.0000000001, solve_ms=24.75, used=[2, 4], missing=[4], late=True,
-    )  # fmt: skip
+    )
     base.update(kw)
     return NodeState(**base)
 
@@ -33,7 +33,7 @@ MESSAGES = [
     Ready(role="node", node=5),
     NodeInput(step=0, node=1, y=0.123456789012345678, gamma=1.0),
     NodeInput(step=12, node=6, y=-1e-12, gamma=0.7200000000000001, u_prev=0.0175 + 0.0367 * 0.3,
-              vx_prev=100 / 3.6, expect_from=[1, 5], lost_from=[5]),  # fmt: skip
+              vx_prev=100 / 3.6, expect_from=[1, 5], lost_from=[5]),
     _state(),
     _state(status="init", rho_cert=None, used=[], missing=[], late=False),
     _state(sector=(0.123456789, 0.876543211), sector_basis="fault-bound"),
@@ -44,7 +44,7 @@ MESSAGES = [
         y={"1": 0.01 / 3, "2": 0.1}, y_nofault={"1": -0.0, "2": 0.0}, sector_ok={"1": True, "2": False},
         noise_ok={"1": True, "2": True}, dist_ok=False,
         lost=[(2, 1), (6, 1)], alive=[1, 2, 3], r={"1": -0.0312345678901, "2": 0.5}, fault_ok={"1": True, "2": False},
-    ),  # fmt: skip
+    ),
     End(steps=80),
     End(steps=3, reason="aborted: node 4 silent"),
 ]

@@ -14,7 +14,7 @@ import pytest
 
 from netsetest.messages import (
     MAX_DETAIL, SCHEMA_VERSION, BadMessage, End, NodeInput, NodeState, Ready, Truth, decode, encode,
-)  # fmt: skip
+)
 
 P_EYE = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
 
@@ -22,7 +22,7 @@ P_EYE = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
 def _state(**kw: object) -> NodeState:
     base: dict[str, object] = dict(step=4, node=2, xhat=[0.1, -0.2, 0.3], P=P_EYE, rho=1.0, gamma=0.9, innov=0.01, status="ok")
     base.update(kw)
-    return NodeState(**base)  # type: ignore[arg-type]
+    return NodeState(**base)
 
 
 def _truth(**kw: object) -> Truth:
@@ -31,9 +31,9 @@ def _truth(**kw: object) -> Truth:
         step=3, x=[0.01, 0.2], faults=one, u=0.03, w=0.1, vx=27.0, noise=one, gamma={"1": 0.8, "2": 0.9}, y=one,
         y_nofault=one, sector_ok={"1": True, "2": True}, noise_ok={"1": True, "2": False}, dist_ok=True,
         r={"1": 0.1, "2": 0.2}, fault_ok={"1": True, "2": True}, lost=[(1, 2)], alive=[1, 2], drops={"stale": 2},
-    )  # fmt: skip
+    )
     base.update(kw)
-    return Truth(**base)  # type: ignore[arg-type]
+    return Truth(**base)
 
 
 EVERY_KIND = [
@@ -121,7 +121,7 @@ FLOAT_FIELDS = [
     (NodeInput, "y"), (NodeInput, "gamma"), (NodeInput, "u_prev"), (NodeInput, "vx_prev"), (NodeInput, "deadline"),
     (NodeState, "rho"), (NodeState, "gamma"), (NodeState, "innov"), (NodeState, "rho_cert"), (NodeState, "solve_ms"),
     (Truth, "u"), (Truth, "w"), (Truth, "vx"),
-]  # fmt: skip
+]
 BY_TYPE = {type(m): m for m in EVERY_KIND}
 
 
@@ -160,7 +160,7 @@ def test_truth_map_values_must_be_finite(name):
         (Truth, {"drops": {str(i): 1 for i in range(65)}}),
     ],
     ids=lambda v: v.__name__ if isinstance(v, type) else ",".join(v),
-)  # fmt: skip
+)
 def test_types_and_sizes_are_strict(cls, change):
     d = BY_TYPE[cls].model_dump()
     d.update(change)
@@ -210,7 +210,7 @@ def test_cross_field_checks_run_at_construction():
 
 def test_messages_are_frozen():
     with pytest.raises(AttributeError):
-        End(steps=1).steps = 2  # type: ignore[misc]
+        End(steps=1).steps = 2
 
 
 def test_model_copy_is_unchecked_and_model_dump_is_complete():

@@ -333,7 +333,7 @@ def _signals(kind, seed=0, R=(2.0, 0.5, 3.0, 2.0, 1.0, 4.0), gamma_ranges=None):
     return ExogenousSignals(
         kind, seed, 0.0175, 0.0542, W=2.0, R=list(R), noise_freq=[1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
         gamma_ranges=gamma_ranges, tau_s=0.1,
-    )  # fmt: skip
+    )
 
 
 def test_worst_signals_at_the_bounds_with_both_signs():

@@ -13,7 +13,7 @@ from netsetest.roles.node import Node
 PAPER6 = Path(__file__).resolve().parents[2] / "topologies" / "paper6.toml"
 
 
-def _input(sc, step: int) -> NodeInput:  # noqa: ANN001
+def _input(sc, step: int) -> NodeInput:
     if step == 0:
         return NodeInput(step=0, node=1, y=0.0, gamma=1.0)
     return NodeInput(step=step, node=1, y=0.0, gamma=1.0, u_prev=(sc.steer_low + sc.steer_high) / 2, vx_prev=sc.vx(step - 1))

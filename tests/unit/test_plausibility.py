@@ -20,7 +20,7 @@ def _sensor(rng: np.random.Generator, saturated: bool) -> Sensor:
     if not saturated:
         return Sensor(C=C, Ds=float(rng.uniform(0.3, 0.7)), Dv=float(rng.uniform(1e-3, 0.1)), R=float(rng.uniform(0.5, 3)))
     return Sensor(C=C, Ds=float(rng.uniform(0.3, 0.7)), Dv=float(rng.uniform(1e-3, 0.1)), R=float(rng.uniform(0.5, 3)),
-                  saturated=True, r_max=float(rng.uniform(0.02, 1.0)), h1=float(rng.uniform(0.5, 0.95)), h2=float(rng.uniform(1.0, 1.5)))  # fmt: skip
+                  saturated=True, r_max=float(rng.uniform(0.02, 1.0)), h1=float(rng.uniform(0.5, 0.95)), h2=float(rng.uniform(1.0, 1.5)))
 
 
 @pytest.mark.parametrize("saturated", [False, True])
@@ -84,7 +84,7 @@ def test_disjoint_only_when_provably_so() -> None:
         r1, r2 = float(rng.uniform(0.2, 1.5)), float(rng.uniform(0.2, 1.5))
         disjoint = states_disjoint(x1, P1, r1, x2, P2, r2)
 
-        def inside(x, P, r):  # noqa: ANN001, ANN202
+        def inside(x, P, r):
             d = grid - x[:2]
             return np.einsum("ni,ij,nj->n", d, np.linalg.inv(r * P[:2, :2]), d) <= 1.0
 
@@ -110,7 +110,7 @@ def test_interval_uses_the_published_sector_of_the_step() -> None:
         cands = [
             (gamma * sec.h1 - 1.0) * cx + gamma * sec.h1 * c * sj + gamma * phi + v
             for sj in (-1.0, 1.0) for phi in (0.0, sec.h * (cx + c * sj)) for v in (-noise, noise)
-        ]  # fmt: skip
+        ]
         assert min(cands) == pytest.approx(lo, rel=1e-12, abs=1e-14) and max(cands) == pytest.approx(hi, rel=1e-12, abs=1e-14)
         assert (lo, hi) != innovation_interval(s, xhat, P, rho, gamma, None)
         width = hi - lo
@@ -118,7 +118,7 @@ def test_interval_uses_the_published_sector_of_the_step() -> None:
         assert not innovation_possible(s, xhat, P, rho, gamma, sec, lo - 1e-6 * width)
 
 
-def _grid_disjoint(x1, P1, r1, x2, P2, r2) -> bool:  # noqa: ANN001
+def _grid_disjoint(x1, P1, r1, x2, P2, r2) -> bool:
     """The λ-grid test alone (states_disjoint without its shortcut), as the reference."""
     from netsetest.roles.plausibility import DISJOINT_MARGIN, LAMBDA_GRID
 

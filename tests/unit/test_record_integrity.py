@@ -27,7 +27,7 @@ def lines(tmp_path_factory: pytest.TempPathFactory) -> list[str]:
     d = tmp_path_factory.mktemp("rec")
     path = d / "r.json"
     assert main(["run", str(ROOT / "topologies" / "paper6.toml"), "--mode", "inmemory", "--steps", str(STEPS), "--seed", "3",
-                 "--record", str(path), "--quiet"]) == 0  # fmt: skip
+                 "--record", str(path), "--quiet"]) == 0
     return path.read_text().splitlines()
 
 
@@ -49,7 +49,7 @@ def _exits_cleanly(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple
     return code, err
 
 
-def test_every_truncation_loads_as_partial_or_is_refused(lines: list[str], tmp_path: Path, capsys) -> None:  # noqa: ANN001
+def test_every_truncation_loads_as_partial_or_is_refused(lines: list[str], tmp_path: Path, capsys) -> None:
     """Cut at every line boundary and in the middle of every line: load_record gives a partial record
     (whose node tracks stop at its last complete step) or a RecordError; the tools exit 0 or 2 (`exact`
     raised IndexError on 85 of 114 records cut mid-step)."""
@@ -69,7 +69,7 @@ def test_every_truncation_loads_as_partial_or_is_refused(lines: list[str], tmp_p
 
 
 @pytest.mark.parametrize("damage", ["dropped", "repeated", "moved"])
-def test_a_dropped_repeated_or_moved_line_is_damage(lines: list[str], tmp_path: Path, damage: str, capsys) -> None:  # noqa: ANN001
+def test_a_dropped_repeated_or_moved_line_is_damage(lines: list[str], tmp_path: Path, damage: str, capsys) -> None:
     i = len(lines) // 2
     bad = {
         "dropped": lines[:i] + lines[i + 1 :],
@@ -95,7 +95,7 @@ def test_records_without_line_numbers_are_still_checked_for_order(lines: list[st
 
 
 @pytest.mark.parametrize("where", ["step", "node", "rho", "seed"])
-def test_huge_integers_are_refused_or_harmless(lines: list[str], tmp_path: Path, where: str, capsys) -> None:  # noqa: ANN001
+def test_huge_integers_are_refused_or_harmless(lines: list[str], tmp_path: Path, where: str, capsys) -> None:
     """An integer ≥ 2⁶³ gave OverflowError tracebacks in inspect, plot, exact and export."""
     out = [json.loads(x) for x in lines]
     state = next(o for o in out if o["kind"] == "state")
@@ -111,7 +111,7 @@ def test_huge_integers_are_refused_or_harmless(lines: list[str], tmp_path: Path,
 
 
 FUZZ = settings(max_examples=EXAMPLES or 120, derandomize=EXAMPLES is None, deadline=None, database=None,
-                suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])  # fmt: skip
+                suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 
 
 @FUZZ
