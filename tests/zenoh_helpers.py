@@ -24,13 +24,13 @@ from typing import IO
 
 import pytest
 
+from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_NODE_LOST, EXIT_OK, EXIT_VIOLATION  # noqa: F401  # the tests import them from here: one source of truth
+
 ROOT = Path(__file__).resolve().parents[1]
 PAPER6 = "topologies/paper6.toml"
 PAPER6_LOSSY = "topologies/paper6_lossy.toml"
 NODE_IDS = [1, 2, 3, 4, 5, 6]
 RING = {1: [2, 6], 2: [1, 3], 3: [2, 4], 4: [3, 5], 5: [4, 6], 6: [1, 5]}  # in-neighbours j ≠ i (paper6)
-
-EXIT_OK, EXIT_VIOLATION, EXIT_BAD_INPUT, EXIT_NODE_LOST, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
 
 # ------------------------------------------------------------------------------ small utilities

@@ -1,10 +1,14 @@
-"""The benchmark's network figures (docs/network.md): what the exchange between nodes can buy at best.
+"""The benchmark's network figures (docs/network.md): what the exchange between nodes buys.
 
-Per scenario, case and signals: each node's exact limit from its own data alone over the exact limit from
-every node's data (``netsetest exact --local``), mean width from step 10, for its own fault and the yaw
-rate. ``paper6``: the paper's assumptions (every fault free at every step); ``paper6_reference``: sensor 3
-declared fault-free. The estimators do not exchange same-step data yet, so these are the limits an
-exchange could reach, not what the SDP network reaches.
+Per scenario, case and signals:
+
+- at best: each node's exact limit from its own data alone over the exact limit from every node's data
+  (``netsetest exact --local``), mean width from step 10, for its own fault and the yaw rate;
+- today: each node's SDP fault width run alone (a self-loop only) over the same node in the network, the
+  network's over the exact central limit, and the detection delays in the network and alone.
+
+``paper6``: the paper's assumptions (every fault free at every step); ``paper6_reference``: sensor 3
+declared fault-free.
 """
 
 from __future__ import annotations
@@ -13,6 +17,8 @@ import math
 import sys
 from pathlib import Path
 
+from netsetest.config.schema import Scenario
+from netsetest.records.record import Record
 from netsetest.scenarios import TOPOLOGY_DIR
 
 SCENARIOS = ("paper6", "paper6_reference")
@@ -22,11 +28,37 @@ def _log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def network_figures(cfg: dict, tmp: Path) -> dict:
-    from netsetest.analysis.exact import local_limits
-    from netsetest.config.schema import load_topology
+def _alone(sc: Scenario) -> Scenario:
+    """The same scenario with every node on its own (a self-loop only)."""
+    import dataclasses
+
+    return dataclasses.replace(sc, nodes=[dataclasses.replace(n, in_weights={n.id: 1.0}) for n in sc.nodes])
+
+
+def _sdp_figures(sc: Scenario, sig: str, seed: int, path: Path) -> tuple[dict, Record]:
+    """Per node: the SDP's mean fault width from step FROM_STEP and its detection delay (docs/fdi.md); and
+    the run's record."""
+    import numpy as np
+
+    from netsetest.analysis.exact import FROM_STEP
     from netsetest.records.record import load_record
     from netsetest.runtime.inmemory import run_inmemory
+
+    res = run_inmemory(sc, sig, "scheduled", seed, record=str(path), keep=False)  # type: ignore[arg-type]  # paper or worst
+    rec = load_record(str(path))
+    out = {}
+    for row in res.summary.nodes:
+        lo, hi = rec.nodes[row.id].bounds(2)
+        late = rec.nodes[row.id].steps >= FROM_STEP
+        out[row.id] = {"fault_width": float(np.mean((hi - lo)[late])), "delay": row.detection_delay}
+    return out, rec
+
+
+def network_figures(cfg: dict, tmp: Path) -> dict:
+    import numpy as np
+
+    from netsetest.analysis.exact import FROM_STEP, exact_bounds, local_limits
+    from netsetest.config.schema import load_topology
 
     rows = []
     for name in SCENARIOS:
@@ -34,13 +66,25 @@ def network_figures(cfg: dict, tmp: Path) -> dict:
             sc = load_topology(TOPOLOGY_DIR / f"{name}.toml", case, cfg["network_steps"])
             for sig in ("paper", "worst"):
                 for seed in cfg["network_seeds"]:
-                    path = tmp / "network.json"
-                    run_inmemory(sc, sig, "scheduled", seed, record=str(path), keep=False)
-                    limits = local_limits(sc, load_record(str(path)))
-                    rows.append({"topology": name, "case": case, "signals": sig, "seed": seed,
-                                 "nodes": {lim.node: {"fault": _num(lim.fault_ratio), "r": _num(lim.r_ratio)} for lim in limits}})
-                    faults = [v["fault"] for v in rows[-1]["nodes"].values() if v["fault"] is not None]
-                    _log(f"  {name} {case} {sig} seed {seed}: own fault local/central {min(faults):.3f}–{max(faults):.3f}")
+                    sdp, rec = _sdp_figures(sc, sig, seed, tmp / "network.json")
+                    alone, _ = _sdp_figures(_alone(sc), sig, seed, tmp / "alone.json")
+                    central = exact_bounds(sc, rec)
+                    keep = central.steps >= FROM_STEP
+                    nodes = {}
+                    for lim in local_limits(sc, rec, central=central):
+                        ex = central.interval("f", lim.node)[keep]
+                        ex_w = float(np.mean(ex[:, 1] - ex[:, 0]))
+                        nodes[lim.node] = {
+                            "fault": _num(lim.fault_ratio), "r": _num(lim.r_ratio),
+                            "sdp_alone_over_network": alone[lim.node]["fault_width"] / sdp[lim.node]["fault_width"],
+                            "sdp_network_over_exact": sdp[lim.node]["fault_width"] / ex_w if ex_w > 1e-6 else None,
+                            "delay_network": sdp[lim.node]["delay"], "delay_alone": alone[lim.node]["delay"],
+                        }
+                    rows.append({"topology": name, "case": case, "signals": sig, "seed": seed, "nodes": nodes})
+                    faults = [v["fault"] for v in nodes.values() if v["fault"] is not None]
+                    gain = [v["sdp_alone_over_network"] for v in nodes.values()]
+                    _log(f"  {name} {case} {sig} seed {seed}: exact own fault local/central {min(faults):.3f}–{max(faults):.3f}; "
+                         f"SDP alone/network {min(gain):.3f}–{max(gain):.3f}")
     return {"steps": cfg["network_steps"], "seeds": cfg["network_seeds"], "runs": rows}
 
 
@@ -65,7 +109,22 @@ def network_markdown(res: dict) -> str:
             faults.append("declared 0" if any(v is None for v in vals) else f"{sum(vals) / len(vals):.2f}")
         rs = [r["nodes"][i]["r"] for r in runs for i in ids if r["nodes"][i]["r"] is not None]
         lines.append(f"| `{topo}` | {case} | {sig} | {' / '.join(faults)} | {min(rs):.2f}–{max(rs):.2f} |")
+    lines += ["", "What the nodes reach today: each node's SDP fault width run alone (a self-loop only) over the same node in "
+              "the network, the network's over the exact central limit, and the detection delay in steps after the fault's "
+              "onset, in the network / alone (`-`: no fault, never detected):", "",
+              "| topology | case | signals | alone / network | network / exact | delay, network / alone (node 1 … 6) |",
+              "|---|---|---|---|---|---|"]  # fmt: skip
+    for (topo, case, sig), runs in groups.items():
+        ids = sorted(runs[0]["nodes"], key=int)
+        gain = [r["nodes"][i]["sdp_alone_over_network"] for r in runs for i in ids]
+        over = [r["nodes"][i]["sdp_network_over_exact"] for r in runs for i in ids if r["nodes"][i]["sdp_network_over_exact"] is not None]
+        delays = " · ".join(f"{_d(runs[0]['nodes'][i]['delay_network'])}/{_d(runs[0]['nodes'][i]['delay_alone'])}" for i in ids)
+        lines.append(f"| `{topo}` | {case} | {sig} | {min(gain):.3f}–{max(gain):.3f} | {min(over):.2f}–{max(over):.2f} | {delays} |")
     return "\n".join(lines) + "\n"
+
+
+def _d(v: int | None) -> str:
+    return "-" if v is None else str(v)
 
 
 __all__ = ["network_figures", "network_markdown"]
