@@ -113,7 +113,7 @@ def network_markdown(res: dict) -> str:
               "the network, the network's over the exact central limit, and the detection delay in steps after the fault's "
               "onset, in the network / alone (`-`: no fault, never detected):", "",
               "| topology | case | signals | alone / network | network / exact | delay, network / alone (node 1 … 6) |",
-              "|---|---|---|---|---|---|"]  # fmt: skip
+              "|---|---|---|---|---|---|"]
     for (topo, case, sig), runs in groups.items():
         ids = sorted(runs[0]["nodes"], key=int)
         gain = [r["nodes"][i]["sdp_alone_over_network"] for r in runs for i in ids]
