@@ -34,7 +34,8 @@ from netsetest.estimator.names import NODE_ESTIMATOR_NAMES, SDP
 from netsetest.models.sensor import Sensor
 from netsetest.models.signals import Fault, NoFault, PiecewiseLinearFault, SpeedProfile, SquareFault
 from netsetest.models.manoeuvres import MANOEUVRES, SINE_SPEED, ManoeuvreName, steering_range
-from netsetest.models.plant import PLANTS, VEHICLE_IDS, PlantKind, PlantUnavailable, derived_params
+from netsetest.extras import MissingExtra
+from netsetest.models.plant import PLANTS, VEHICLE_IDS, PlantKind, derived_params
 from netsetest.models.uncertainty import ModelUncertainty
 from netsetest.models.vehicle import KMH, TSModel, VehicleParams
 from netsetest.scenarios import bundled_topologies, resolve_topology
@@ -588,7 +589,7 @@ def load_topology(
     v = topo.vehicle
     try:
         params = v.params()
-    except PlantUnavailable as exc:
+    except MissingExtra as exc:
         raise ConfigError(f"{path}: vehicle.plant = {v.plant!r}: {exc}") from None
     nodes = []
     for ref in topo.nodes:

@@ -31,38 +31,27 @@ from typing import Literal, Protocol
 
 import numpy as np
 
+from netsetest.extras import require
 from netsetest.models.signals import SpeedProfile
 from netsetest.models.vehicle import KMH, TSModel, VehicleParams
 
 PlantKind = Literal["ts", "single-track", "multi-body"]
 PLANTS: tuple[PlantKind, ...] = ("ts", "single-track", "multi-body")
 VEHICLE_IDS = (1, 2, 3)  # CommonRoad parameters_vehicle1..3 (Ford Escort, BMW 320i, VW Vanagon)
-VEHICLE_NAMES = {1: "Ford Escort", 2: "BMW 320i", 3: "VW Vanagon"}
-PACKAGE = "commonroad-vehicle-models"
-PACKAGE_VERSION = "3.0.2"
 RTOL = 1e-8  # solve_ivp's relative tolerance: x_{k+1} to ~1e-9 relative, far below any mismatch bound
 ATOL = 1e-10
 K_SPEED = 2.0  # [1/s] speed-tracking gain of the longitudinal acceleration input
 GRAVITY = 9.81  # [m/s²], the package's value
 
 
-class PlantUnavailable(ImportError):
-    """The ``plant`` extra (commonroad-vehicle-models) is not installed."""
-
-
-def _vehiclemodels():  # a module
-    try:
-        import vehiclemodels  # noqa: F401  (the import is the check)
-    except ImportError:
-        raise PlantUnavailable(f"a nonlinear plant needs {PACKAGE}: pip install 'netsetest[plant]'") from None
-    import vehiclemodels as vm
-
-    return vm
+def require_plant() -> None:
+    """Raise :class:`~netsetest.extras.MissingExtra` unless the ``plant`` extra is installed."""
+    require("vehiclemodels", "a nonlinear plant")
 
 
 def vehicle_parameters(vehicle_id: int):  # the package's VehicleParameters
     """CommonRoad's parameter set ``parameters_vehicle<id>``."""
-    _vehiclemodels()
+    require_plant()
     from vehiclemodels.vehicle_parameters import setup_vehicle_parameters
 
     return setup_vehicle_parameters(vehicle_id=vehicle_id)
@@ -215,5 +204,5 @@ def make_plant(kind: PlantKind, vehicle_id: int, model: TSModel, x0: np.ndarray,
 
 
 __all__ = [
-    "PLANTS", "Plant", "PlantKind", "PlantState", "PlantUnavailable", "derived_params", "make_plant", "vehicle_parameters",
+    "PLANTS", "Plant", "PlantKind", "PlantState", "derived_params", "make_plant", "require_plant", "vehicle_parameters",
 ]

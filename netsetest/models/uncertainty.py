@@ -65,10 +65,6 @@ class ModelUncertainty:
         g = self.G.T @ np.asarray(c, dtype=float)
         return float(np.abs(g).sum()) if self.kind == "box" else float(np.linalg.norm(g))
 
-    @property
-    def radii(self) -> np.ndarray:
-        """Half-widths of the smallest box around 𝓔 (NX,)."""
-        return np.array([self.support(np.eye(NX)[m]) for m in range(NX)])
 
     def as_toml(self) -> str:
         """The ``[model_uncertainty]`` table that declares this bound."""

@@ -43,7 +43,7 @@ import json
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Protocol, cast
+from typing import IO, Literal, Protocol, cast, get_args
 
 import numpy as np
 
@@ -441,7 +441,8 @@ def _set_bounds(entries: list[dict]) -> np.ndarray | None:
     return b
 
 
-FDI_VALUES = ("detected", "healthy", "undecided")  # roles/fdi.py's statuses, as the record spells them
+FdiStatus = Literal["detected", "healthy", "undecided"]  # a node-step's fault detection (roles/fdi.py, docs/fdi.md)
+FDI_VALUES: tuple[FdiStatus, ...] = get_args(FdiStatus)
 
 
 def _fdi(v: object) -> str | None:

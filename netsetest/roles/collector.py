@@ -545,10 +545,11 @@ class Collector:
             t.contested += i in contested
             t.sectors_assumed += st.sector_basis == "assumed"
             t.sector_failures += self._sector_failed(i, st, tr, cone.ok and i not in contested)
-            fdi = classify(*self._fault_interval(i, k, st), self.sc.fault_tolerance)
+            interval = self._fault_interval(i, k, st)
+            fdi = classify(*interval, self.sc.fault_tolerance)
             if self.sink is not None:
                 self.sink.state(i, self._state_entry(i, k, st, cone, i in contested) | {"fdi": fdi})
-            self._add(t, i, k, st, cone)
+            self._add(t, i, k, st, cone, interval)
             judged = (i, k) in self.evaluated
             t.fdi.add(k, fdi, tr.faults[str(i)] if tr is not None and judged else None, self.sc.fault_tolerance, cone.ok)
         if tr is not None:
@@ -573,7 +574,7 @@ class Collector:
             return False
         return not sector_ok(n.sensor, _published_sector(st), tr.r[str(i)])
 
-    def _add(self, t: NodeTotals, i: int, k: int, st: NodeState, cone: Cone) -> None:
+    def _add(self, t: NodeTotals, i: int, k: int, st: NodeState, cone: Cone, interval: tuple[float, float]) -> None:
         t.reported += 1
         ev = self.evaluated.get((i, k))
         if ev is not None:
@@ -600,8 +601,7 @@ class Collector:
         t.neighbour_missing += len(st.missing)
         t.dropped = max(t.dropped, st.dropped)
         t.drops = dict(st.drops)
-        lo, hi = self._fault_interval(i, k, st)
-        t.width_sum += hi - lo
+        t.width_sum += interval[1] - interval[0]
 
     def _fault_interval(self, i: int, k: int, st: NodeState) -> tuple[float, float]:
         """The published fault interval: a set estimator's own bounds, else f̂ ± √(ρ P₃₃) of the ellipsoid."""

@@ -12,10 +12,8 @@ tolerance τ ≥ 0 (``[network] fault_tolerance``: a fault with |f| ≤ τ count
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
-FdiStatus = Literal["detected", "healthy", "undecided"]
-FDI_STATUSES: tuple[FdiStatus, ...] = ("detected", "healthy", "undecided")  # records/record.py FDI_VALUES spells them too
+from netsetest.records.record import FdiStatus  # the statuses, spelled once (the record checks them on load)
 
 
 def classify(lo: float, hi: float, tolerance: float = 0.0) -> FdiStatus:
@@ -67,4 +65,4 @@ class FdiTotals:
         return self.first_true_detection - self.fault_onset
 
 
-__all__ = ["FDI_STATUSES", "FdiStatus", "FdiTotals", "classify"]
+__all__ = ["FdiStatus", "FdiTotals", "classify"]

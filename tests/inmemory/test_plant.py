@@ -319,10 +319,16 @@ def test_speed_reference_outside_the_model_range_names_the_manoeuvre(tmp_path: P
 
 
 def test_missing_plant_extra_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
-    def missing() -> None:
-        raise plant_mod.PlantUnavailable("a nonlinear plant needs commonroad-vehicle-models: pip install 'netsetest[plant]'")
+    import importlib
 
-    monkeypatch.setattr(plant_mod, "_vehiclemodels", missing)
+    real = importlib.import_module
+
+    def import_module(name: str, *a: object) -> object:  # vehiclemodels as if not installed
+        if name.startswith("vehiclemodels"):
+            raise ImportError(name)
+        return real(name, *a)
+
+    monkeypatch.setattr(importlib, "import_module", import_module)
     with pytest.raises(ConfigError, match=r"pip install 'netsetest\[plant\]'"):
         load_topology("paper6_car")
 
