@@ -7,10 +7,14 @@ import json
 import signal
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import TYPE_CHECKING
 
 from netsetest.cli import checks
-from netsetest.runtime.report import EXIT_BAD_INPUT
+
+if TYPE_CHECKING:
+    from netsetest.runtime.live import Observer
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 WATCH_REFRESH_HZ = 4.0
@@ -60,11 +64,28 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--csv", metavar="DIR", help="write DIR/node_<i>.csv")
 
 
-def _interrupt(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt  # SIGTERM ends echo/watch like Ctrl-C: the Zenoh session is closed
+class ObserverError(Exception):
+    """echo/watch cannot observe: bad credentials, no run id for them, or no Zenoh session."""
 
 
-def _observer(a: argparse.Namespace, key: str | None):  # Observer | None, error message
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class StopRequest:
+    """Ctrl-C and SIGTERM ask echo/watch to stop; their loops look between polls.
+
+    A flag rather than an exception: an exception could fall between opening the session and the
+    ``try`` that closes it, and an open Zenoh session keeps the interpreter from exiting (CI once saw
+    ``watch`` hang after a Ctrl-C that arrived while it opened). A second signal cannot cut the close short."""
+
+    def __init__(self) -> None:
+        self.requested = False
+
+    def __call__(self, signum: int, frame: object) -> None:
+        self.requested = True
+
+
+def _open_observer(a: argparse.Namespace, key: str | None) -> Observer:
     from netsetest.bus.zenoh_bus import BusError
     from netsetest.runtime.live import Observer, observed_key, observer_config
     from netsetest.runtime.security import CredentialsError, observer_access
@@ -72,17 +93,31 @@ def _observer(a: argparse.Namespace, key: str | None):  # Observer | None, error
     try:
         access = observer_access(a.credentials) if a.credentials else None
     except CredentialsError as exc:
-        return None, f"--credentials: {exc}"
+        raise ObserverError(f"--credentials: {exc}") from None
     run_id = a.run_id or (access.run_id if access else None)
     if access is not None and run_id is None:  # the observer's grant covers one run's keys, not '*'
-        return None, f"--credentials {a.credentials}: no run id there; give it with --run-id"
+        raise ObserverError(f"--credentials {a.credentials}: no run id there; give it with --run-id")
     a.run_id = run_id  # what watch's title names
     try:
-        obs = Observer(observed_key(run_id, key), observer_config(a.zenoh_mode, a.connect, a.zenoh_config, access))
+        return Observer(observed_key(run_id, key), observer_config(a.zenoh_mode, a.connect, a.zenoh_config, access))
     except BusError as exc:
-        return None, str(exc)
-    signal.signal(signal.SIGTERM, _interrupt)  # from here on the caller's loop closes the session
-    return obs, None
+        raise ObserverError(str(exc)) from None
+
+
+@contextmanager
+def observing(a: argparse.Namespace, key: str | None) -> Iterator[tuple[Observer, StopRequest]]:
+    """The observer's session, closed however the body ends, and the stop request its loop watches."""
+    stop = StopRequest()
+    previous = {sig: signal.signal(sig, stop) for sig in _STOP_SIGNALS}  # before the session opens
+    try:
+        obs = _open_observer(a, key)
+        try:
+            yield obs, stop
+        finally:
+            obs.close()
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 SILENCE_HINT_S = 3.0  # seconds without a message before echo/watch say why they may hear nothing
@@ -113,15 +148,11 @@ class SilenceHint:
 
 
 def cmd_echo(a: argparse.Namespace) -> int:
-    obs, err = _observer(a, a.key)
-    if obs is None:
-        print(f"netsetest echo: {err}", file=sys.stderr)
-        return EXIT_BAD_INPUT
     end = None if a.duration is None else time.monotonic() + a.duration
     shown = 0
     hint = SilenceHint("echo", a)
-    try:
-        while (a.count is None or shown < a.count) and (end is None or time.monotonic() < end):
+    with observing(a, a.key) as (obs, stop):
+        while not stop.requested and (a.count is None or shown < a.count) and (end is None or time.monotonic() < end):
             got = obs.get(POLL_S)
             if got is None:
                 hint.tick()
@@ -134,10 +165,6 @@ def cmd_echo(a: argparse.Namespace) -> int:
                 key = doc.pop("key")
                 print(f"{key}  {json.dumps(doc, separators=(', ', ': '))}", flush=True)
             shown += 1
-    except KeyboardInterrupt:
-        pass
-    finally:
-        obs.close()
     return 0
 
 
@@ -167,19 +194,15 @@ def cmd_watch(a: argparse.Namespace) -> int:
 
     from netsetest.runtime.live import LiveTable
 
-    obs, err = _observer(a, None)
-    if obs is None:
-        print(f"netsetest watch: {err}", file=sys.stderr)
-        return EXIT_BAD_INPUT
     table = LiveTable()
-    hint = SilenceHint("watch", a)
-    title = f"netsetest run {a.run_id or '*'}"
     end = None if a.duration is None else time.monotonic() + a.duration
-    try:
+    with observing(a, None) as (obs, stop):
+        hint = SilenceHint("watch", a)
+        title = f"netsetest run {a.run_id or '*'}"
         console = Console(width=None if sys.stdout.isatty() else PIPE_WIDTH)
         with Live(_render(table, title), console=console, refresh_per_second=WATCH_REFRESH_HZ) as live:
             next_draw, ended_at = 0.0, None
-            while end is None or time.monotonic() < end:
+            while not stop.requested and (end is None or time.monotonic() < end):
                 if table.ended is not None:
                     ended_at = ended_at or time.monotonic()
                     if table.complete or time.monotonic() - ended_at > END_GRACE_S:
@@ -193,10 +216,6 @@ def cmd_watch(a: argparse.Namespace) -> int:
                 if time.monotonic() >= next_draw or table.ended is not None:
                     live.update(_render(table, title + (f": ended after {table.ended.steps} steps" if table.ended else "")))
                     next_draw = time.monotonic() + 1.0 / WATCH_REFRESH_HZ
-    except KeyboardInterrupt:
-        pass
-    finally:
-        obs.close()
     return 0
 
 

@@ -220,7 +220,7 @@ def test_observer_stops_cleanly_on_signal(command: str, sig: str, procs: Process
 
     (port,) = free_ports(1)
     p = procs.start(command, cli(command, "--run-id", new_run_id("sig"), "--connect", f"tcp/127.0.0.1:{port}"), stdout=True)
-    # the observer catches SIGTERM once its session is open: wait for that (signal mask in /proc)
+    # the observer catches SIGTERM from before its session opens (signal mask in /proc): a signal while it opens must also end it cleanly
     wait_for(lambda: _catches(p.pid, _signal.SIGTERM) or p.poll() is not None, 30, what=f"{command} to open its session")
     assert p.poll() is None, procs.logs()
     p.send_signal(getattr(_signal, sig))
