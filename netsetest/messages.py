@@ -163,6 +163,9 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     # trace recursion); the collector judges it as the next step's prior
     own_xhat: Vec3 | None = None
     own_P: Mat3 | None = None
+    # the references' readings of this very step the update used, as (node, ỹ, γ): the collector checks
+    # them against the truth and puts their noise and zero-fault declarations into the step's cone
+    readings: Annotated[list[tuple[NodeId, FiniteF, Gamma]], Meta(max_length=MAX_NODES)] = []
 
     def __post_init__(self) -> None:
         if self.set is not None:
@@ -261,6 +264,17 @@ class Truth(_Msg, tag="truth", frozen=True, kw_only=True):
         return {int(k) for k in self.faults}
 
 
+class Reading(_Msg, tag="reading", frozen=True, kw_only=True):
+    """Reference node j → every other node, at step k before j estimates: the ỹ_j,k and γ_j,k it
+    measured (the same-step exchange phase, docs/network.md).  The receiver computes the interval of
+    C_j x_k from them and j's sensor data in the topology."""
+
+    step: Step
+    node: NodeId
+    y: FiniteF
+    gamma: Gamma
+
+
 class End(_Msg, tag="end", frozen=True, kw_only=True):
     """Vehicle → all: the run is over after ``steps`` steps (or aborted with a reason)."""
 
@@ -268,7 +282,7 @@ class End(_Msg, tag="end", frozen=True, kw_only=True):
     reason: Reason = "done"
 
 
-Message = Union[Ready, NodeInput, NodeState, Truth, End]
+Message = Union[Ready, NodeInput, NodeState, Truth, End, Reading]
 
 
 @dataclass(frozen=True)
@@ -288,12 +302,12 @@ class RunScope:
         if step is not None and step > self.steps:
             return "step-beyond-run"
         named: set[int] = set()
-        if isinstance(msg, (NodeInput, NodeState, Ready)) and msg.node is not None:
+        if isinstance(msg, (NodeInput, NodeState, Ready, Reading)) and msg.node is not None:
             named.add(msg.node)
         if isinstance(msg, NodeInput):
             named.update(msg.expect_from, msg.lost_from)
         elif isinstance(msg, NodeState):
-            named.update(msg.used, msg.missing)
+            named.update(msg.used, msg.missing, (j for j, _, _ in msg.readings))
         elif isinstance(msg, Truth):
             if msg.node_ids() != self.ids:
                 return "truth-wrong-nodes"

@@ -29,10 +29,10 @@ def _log(msg: str) -> None:
 
 
 def _alone(sc: Scenario) -> Scenario:
-    """The same scenario with every node on its own (a self-loop only)."""
+    """The same scenario with every node on its own (a self-loop only, no reference's reading)."""
     import dataclasses
 
-    return dataclasses.replace(sc, nodes=[dataclasses.replace(n, in_weights={n.id: 1.0}) for n in sc.nodes])
+    return dataclasses.replace(sc, nodes=[dataclasses.replace(n, in_weights={n.id: 1.0}) for n in sc.nodes], readings=False)
 
 
 def _sdp_figures(sc: Scenario, sig: str, seed: int, path: Path) -> tuple[dict, Record]:

@@ -3,6 +3,7 @@
     netsetest/<run>/vehicle/input/<i>   NodeInput for node i (measurement, γ, u, Vx, expected neighbours)
     netsetest/<run>/vehicle/truth       Truth (collector only: the truth, faults, assumption flags, losses)
     netsetest/<run>/node/<i>/state      NodeState of node i (to its out-neighbours and the collector)
+    netsetest/<run>/node/<i>/reading    Reading of reference node i (its measurement of the step, to every node)
     netsetest/<run>/control/ready/<who> Ready of role <who> (vehicle, collector, node-<i>; start-up barrier)
     netsetest/<run>/control/end         End (vehicle → all)
 
@@ -25,6 +26,10 @@ def truth(run: str) -> str:
 
 def node_state(run: str, i: int | str) -> str:
     return f"{ROOT}/{run}/node/{i}/state"
+
+
+def reading(run: str, i: int | str) -> str:
+    return f"{ROOT}/{run}/node/{i}/reading"
 
 
 def run_root(run: str) -> str:

@@ -265,6 +265,10 @@ class NetworkSpec(_Strict, frozen=True, kw_only=True):
     fault_tolerance: Annotated[
         float, Meta(ge=0, le=MAGNITUDE_MAX, description="a fault with |f| ≤ this counts as no fault (detection, docs/fdi.md)")
     ] = 0.0
+    readings: Annotated[
+        bool, Meta(description="the same-step exchange: reference sensors publish their reading before estimating and the "
+                               "SDP nodes use it (docs/network.md); false: every node uses its neighbours' states only")
+    ] = True
 
 
 class ModelUncertaintySpec(_Strict, frozen=True, kw_only=True):
@@ -432,6 +436,7 @@ class Scenario:
     manoeuvre: ManoeuvreName = "paper"
     uncertainty: ModelUncertainty | None = None  # declared bound on e_k (None: e_k = 0 is assumed)
     fault_tolerance: float = 0.0  # |f| ≤ this counts as no fault (fault detection, docs/fdi.md)
+    readings: bool = True  # the same-step exchange of the references' readings (docs/network.md)
 
     def node(self, node_id: int) -> NodeConfig:
         n = self._by_id.get(node_id)
@@ -482,6 +487,12 @@ class Scenario:
         if mode == "none":
             return ()
         return tuple(n.id for n in declared if mode == "all" or n.sensor.saturated or n.fault_size == 0)
+
+    def references(self) -> tuple[int, ...]:
+        """Reference sensors whose readings are exchanged: declared fault-free (``[fault_bound] size = 0``);
+        they publish their reading of every step before estimating and every other node uses it
+        (docs/network.md).  None with ``[network] readings = false``."""
+        return tuple(n.id for n in self.nodes if n.fault_size == 0) if self.readings else ()
 
     def out_neighbours(self, j: int) -> list[int]:
         """Nodes i ≠ j that use j's message."""
@@ -643,5 +654,5 @@ def load_topology(
         vehicle_id=v.vehicle,
         manoeuvre=cast(ManoeuvreName, v.manoeuvre),  # one of MANOEUVRES: VehicleSpec checked it
         uncertainty=topo.model_uncertainty.build() if topo.model_uncertainty is not None else None,
-        fault_tolerance=topo.network.fault_tolerance,
+        fault_tolerance=topo.network.fault_tolerance, readings=topo.network.readings,
     )

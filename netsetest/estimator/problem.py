@@ -18,8 +18,9 @@ from netsetest.estimator.sector import Sector
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.uncertainty import ModelUncertainty
 
-PatternKey = tuple[frozenset[int], bool, bool]
-"""Which η slots exist this step: (neighbours with a φ slot, φ⁺ exists, predict (False: step 0))."""
+PatternKey = tuple[frozenset[int], bool, bool, frozenset[int]]
+"""Which η slots exist this step: (neighbours with a φ slot, φ⁺ exists, predict (False: step 0), the reference
+sensors whose reading of this very step the update uses (docs/network.md; non-empty: no neighbour slots))."""
 
 
 @dataclass(frozen=True)
@@ -41,11 +42,13 @@ class EtaLayout:
 
     def __init__(
         self, node_id: int, neighbours: dict[int, Sensor], own: Sensor, W: float = 1.0, predict: bool = True,
-        uncertainty: ModelUncertainty | None = None,
+        uncertainty: ModelUncertainty | None = None, readings: tuple[int, ...] = (),
     ) -> None:
         """``saturated`` of each sensor says whether it has a φ slot; ``predict`` False: the step-0 update
         (the prior updated by the own measurement through the self slot: no w, e, v⁺ or φ⁺); ``uncertainty``:
-        the declared model mismatch e = G ζ (one ζ slot per column of G, after w; None: no e slots)."""
+        the declared model mismatch e = G ζ (one ζ slot per column of G, after w; None: no e slots);
+        ``readings``: the reference sensors whose same-step reading interval C_j x⁺ = m_j + h_j ν_j enters,
+        one slot ν_j each with the fact 1 − ν_j² ≥ 0 (after v⁺; they enter e⁺ through ℓ only)."""
         self.node_id = node_id
         self.neigh = list(neighbours)  # j ∈ N_i in a fixed order (may include i)
         idx = 1
@@ -68,6 +71,9 @@ class EtaLayout:
         self.v_new: int | None = None
         if predict:
             self.v_new, idx = idx, idx + 1
+        self.nu: dict[int, int] = {}
+        for j in readings:
+            self.nu[j], idx = idx, idx + 1
         self.phi: dict[int, int] = {}
         for j, sens in neighbours.items():
             if sens.saturated:  # no saturation ⇒ φ_j ≡ 0: no slot (docs/design.md §2)
@@ -86,6 +92,7 @@ class EtaLayout:
         facts += [FactInfo("ball", (self.v[j],), neighbours[j].R) for j in self.v]
         if self.v_new is not None:
             facts.append(FactInfo("ball", (self.v_new,), own.R))
+        facts += [FactInfo("ball", (self.nu[j],)) for j in self.nu]
         for j in self.neigh:
             if j in self.phi:
                 r_slots = tuple(self.z) if j == node_id else (self.s[j],)
@@ -96,7 +103,7 @@ class EtaLayout:
         self.facts = facts
         self.n_facts = len(facts)
         # slots whose column of Π₀ is zero in every rule: they enter e⁺ only through L ℓᵀη
-        self.pi0_zero = set(self.s.values()) | set(self.v.values()) | set(self.phi.values())
+        self.pi0_zero = set(self.s.values()) | set(self.v.values()) | set(self.phi.values()) | set(self.nu.values())
 
 
 @dataclass(frozen=True)

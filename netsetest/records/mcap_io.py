@@ -122,6 +122,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
          "P": {"type": "array", "items": {"type": "number"}, "description": "3×3 shape matrix, row-major"},
          "rho": {"type": "number"}, "status": {"type": "string"}, "rho_cert": _NUM, "solve_ms": _NUM,
          "used": _IDS, "missing": _IDS, "late": _BOOL,
+         "readings": {**_IDS, "description": "references whose reading of this step the published set used (docs/network.md)"},
          "sector": {"type": ["array", "null"], "items": {"type": "number"},
                     "description": "[h1, h] of this step's sector (null: the sensor models no saturation)"},
          "sector_basis": {"type": "string", "description": "none | measurement | fault-bound | assumed"},

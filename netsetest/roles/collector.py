@@ -481,6 +481,10 @@ class Collector:
             return Cone(False, own)
         if st is None or k == 0:
             return Cone(True)
+        for j, y, gamma in st.readings:  # the references' readings of this very step
+            why = self._reading_cause(j, y, gamma, tr)
+            if why is not None:
+                return Cone(False, INHERITED, Origin(j, k, why))
         if st.status == "fallback" and st.set is not None:
             return Cone(False, "fallback")  # the previous step's set again: no guarantee for this step
         for j, m, digest, as_prior in self._inputs_of(st, k):
@@ -492,6 +496,18 @@ class Collector:
             if why is not None:
                 return Cone(False, INHERITED, Origin(j, m, why))
         return Cone(True)
+
+    def _reading_cause(self, j: int, y: float, gamma: float, tr: Truth) -> str | None:
+        """Why reference j's reading of the step gives no guarantee (None: it is the true measurement, its
+        noise bound held and its declared fault-free sensor had no fault)."""
+        s = str(j)
+        if s not in tr.y or y != tr.y[s] or gamma != tr.gamma[s]:
+            return NOT_FROM_INPUT
+        if not tr.noise_ok[s]:
+            return "noise"
+        if not tr.fault_ok.get(s, False):
+            return "fault bound"  # its declared size 0
+        return None
 
     @staticmethod
     def _inputs_of(st: NodeState, k: int) -> list[tuple[int, int, str | None, bool]]:
@@ -619,6 +635,7 @@ class Collector:
         return {
             "step": k, "xhat": list(st.xhat), "P": list(st.P), "rho": st.rho, "status": st.status,
             "rho_cert": st.rho_cert, "solve_ms": st.solve_ms, "used": st.used, "missing": st.missing,
+            "readings": [j for j, _, _ in st.readings],
             "late": st.late, "E": E, "judged": ev is not None, "not_judged_why": unjudged,
             "contained": None if contained is None else bool(contained), "assumptions_ok": cone.ok,
             "not_covered_cause": cone.cause,

@@ -14,8 +14,15 @@ context and dropped and counted by reason otherwise, never repaired:
 - a neighbour state not from a real in-neighbour on its own key, stale, too far ahead, a second copy,
   or one that cannot be honest (:mod:`netsetest.roles.plausibility`: an innovation its own ellipsoid and
   noise bound cannot produce, or a (β, r) set disjoint from our own certified one of that step);
+- a reference's reading (the same-step exchange phase, docs/network.md) not from a reference on its own
+  key, for a step we have already taken, a second copy, or with a γ the scenario rules out;
 - an End not naming the scheduled last step; one that arrives before we published that step is
   counted (``end-early``) and takes effect only once we have.
+
+A reference node publishes its reading of a step as soon as it has the step's input, before it
+estimates; an SDP node waits for the references' readings of its next step (bounded like neighbour
+states) and, when one is here, its update uses them instead of its neighbours' states of the previous
+step (estimator/sdp.py).
 
 Buffers are bounded: at most ``MAX_AHEAD`` steps of inputs and of neighbour states, one per sender.
 """
@@ -37,7 +44,7 @@ from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.rejoin import rejoin_ellipsoid
 from netsetest.estimator.sdp import Ellipsoid, LocalEstimator, NeighbourState, Objective, StepInput, StepResult, Variant
 from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sector, measurement_interval
-from netsetest.messages import End, Message, NodeInput, NodeState, RunScope, decode, encode, state_digest
+from netsetest.messages import End, Message, NodeInput, NodeState, Reading, RunScope, decode, encode, state_digest
 from netsetest.models.sensor import NA
 from netsetest.profile import PROFILE
 from netsetest.roles.plausibility import innovation_possible, states_disjoint
@@ -84,6 +91,10 @@ class Node:
         self.last_set: base.GuaranteedSet | None = None  # its last published set
         if self.cfg.estimator != SDP:
             self.set_estimator = node_set_estimator(scenario, node_id)
+        self.is_reference = node_id in scenario.references()
+        # the references whose reading of each step this node waits for and uses (the SDP's update only)
+        self.references = [j for j in scenario.references() if j != node_id] if self.set_estimator is None else []
+        self.readings: dict[int, dict[int, tuple[float, float]]] = {}  # step → reference j → (ỹ_j, γ_j)
         # estimator state, plain arrays: centre, shape, radius, and our own last published message
         self.xhat = self.cfg.x0_hat.copy()
         self.P = self.cfg.P0.copy()
@@ -109,8 +120,12 @@ class Node:
         bus.subscribe(keys.node_input(run_id, node_id), self.on_message)
         for j in self.others:
             bus.subscribe(keys.node_state(run_id, j), self.on_message, lazy=lazy_neighbours)
+        for j in self.references:  # never lazy: a reading arrives after the input that would wake us
+            bus.subscribe(keys.reading(run_id, j), self.on_message)
         bus.subscribe(keys.end(run_id), self.on_message)
         bus.declare_publisher(keys.node_state(run_id, node_id))
+        if self.is_reference:
+            bus.declare_publisher(keys.reading(run_id, node_id))
 
     def _new_estimator(self) -> LocalEstimator:
         return LocalEstimator.for_node(self.sc, self.id, self.variant, self.objective)
@@ -149,6 +164,10 @@ class Node:
             neigh[self.id] = prior_state(self.id, own, first.sector)
         u, vx = (sc.steer_low + sc.steer_high) / 2, sc.vx(0)
         res = est.step(own, StepInput(sc.model.weights(vx), u, y, gamma, neigh))
+        if self.references:  # the pattern of a step that uses the references' readings
+            readings = {j: (float(sc.node(j).sensor.Cbar @ cfg.x0_hat), gamma) for j in self.references}
+            est.step(own, StepInput(sc.model.weights(vx), u, y, gamma, {}, readings))
+            decode(encode(Reading(step=1, node=self.id, y=y, gamma=gamma)))
         inp = NodeInput(step=1, node=self.id, y=y, gamma=gamma, u_prev=u, vx_prev=vx, expect_from=self.others)
         decode(encode(inp))
         decode(encode(self._state_message(inp, res.status, res, used=self.others, missing=[], inputs=[])))
@@ -169,6 +188,8 @@ class Node:
             self._on_input(key, msg)
         elif isinstance(msg, NodeState):
             self._on_neighbour(key, msg)
+        elif isinstance(msg, Reading):
+            self._on_reading(key, msg)
         else:
             self.drop("unexpected-type")
 
@@ -216,6 +237,8 @@ class Node:
         self.inputs[msg.step] = msg
         if len(self.inputs) > MAX_AHEAD:  # a rejoining node before it re-entered: keep the newest
             del self.inputs[min(self.inputs)]
+        if self.is_reference and msg.step > 0:  # the same-step exchange phase (step 0 uses none): our reading goes out before we estimate
+            self.bus.publish(keys.reading(self.run, self.id), Reading(step=msg.step, node=self.id, y=msg.y, gamma=msg.gamma))
 
     def _implausible_input(self, msg: NodeInput) -> str | None:
         """Why the scenario rules this input out (the vehicle's values are known ranges), or None."""
@@ -234,6 +257,28 @@ class Node:
         if g is not None and not g[0] * (1 - GAMMA_RTOL) <= msg.gamma <= g[1] * (1 + GAMMA_RTOL):
             return "input-gamma"
         return None
+
+    def _on_reading(self, key: str, msg: Reading) -> None:
+        if msg.node not in self.references or key != keys.reading(self.run, msg.node):
+            self.drop("not-a-reference")
+            return
+        if msg.step <= self.k:  # a reading serves the step it was taken at: that one is done
+            self.drop("stale")
+            return
+        if self.k >= 0 and msg.step > self.k + MAX_AHEAD:
+            self.drop("implausible-step")
+            return
+        have = self.readings.get(msg.step, {})
+        if msg.node in have:
+            self.drop("duplicate-reading")  # the first copy counts
+            return
+        g = self.sc.node(msg.node).gamma_range if self.sc.case == "saim" else (1.0, 1.0)
+        if g is not None and not g[0] * (1 - GAMMA_RTOL) <= msg.gamma <= g[1] * (1 + GAMMA_RTOL):
+            self.drop("reading-gamma")
+            return
+        if len(self.readings) >= MAX_AHEAD and msg.step not in self.readings:
+            del self.readings[min(self.readings)]  # not started (rejoin): keep the newest steps only
+        self.readings.setdefault(msg.step, {})[msg.node] = (msg.y, msg.gamma)
 
     def _on_neighbour(self, key: str, msg: NodeState) -> None:
         if msg.node not in self.others or key != keys.node_state(self.run, msg.node):
@@ -297,12 +342,31 @@ class Node:
         return self.inputs.get(0)
 
     def missing(self) -> list[int]:
-        """Expected neighbour messages for the next step that have not arrived."""
+        """Expected messages for the next step that have not arrived: the neighbours' states of our step and
+        the references' readings of the next one."""
         inp = self.next_input()
         if inp is None or self.k < 0 or self.set_estimator is not None:
             return []
-        have, refused = self.inbox.get(self.k, {}), self.refused.get(self.k, set())
-        return [j for j in inp.expect_from if j not in have and j not in refused]
+        have, refused, readings = self.inbox.get(self.k, {}), self.refused.get(self.k, set()), self.readings.get(inp.step, {})
+        return [j for j in inp.expect_from if j not in have and j not in refused] + [j for j in self.references if j not in readings]
+
+    def awaiting_readings(self) -> bool:
+        """Whether a reference's reading of the next step has not arrived (the real-time clock waits a
+        budget for it: runtime/processes.py)."""
+        inp = self.next_input()
+        if inp is None or self.k < 0 or not self.references:
+            return False
+        readings = self.readings.get(inp.step, {})
+        return any(j not in readings for j in self.references)
+
+    def _prior(self) -> Ellipsoid:
+        """The set the next step starts from."""
+        return Ellipsoid(self.xhat, self.P, self.rho)
+
+    def _step_input(self, inp: NodeInput, neigh: dict[int, NeighbourState], readings: dict[int, tuple[float, float]]) -> StepInput:
+        """The estimator's input of a step > 0 (its u and Vx are there: _implausible_input dropped inputs without them)."""
+        assert inp.u_prev is not None and inp.vx_prev is not None
+        return StepInput(self.sc.model.weights(inp.vx_prev), inp.u_prev, inp.y, inp.gamma, neigh, readings)
 
     def try_step(self, now: float | None = None) -> bool:
         """Compute and publish the next step if its inputs are here (or the runtime gave up waiting)."""
@@ -350,17 +414,20 @@ class Node:
             self._publish_set(inp, "ok")
             return
         have = self.inbox.get(self.k, {})
+        readings = self.readings.get(inp.step, {})
         neigh = {j: have[j] for j in inp.expect_from if j in have}
         if self.id in self.cfg.in_weights:
             neigh[self.id] = self.own  # type: ignore[assignment]  # the own Ellipsoid stands in for the NeighbourState the self-loop reads (same fields)
-        alpha = self.sc.model.weights(inp.vx_prev)  # type: ignore[arg-type]  # steps > 0 carry vx_prev: _implausible_input dropped inputs without it
-        step_in = StepInput(alpha, inp.u_prev, inp.y, inp.gamma, neigh)  # type: ignore[arg-type]  # steps > 0 carry u_prev: _implausible_input dropped inputs without it
+        step_in = self._step_input(inp, neigh, readings)
         t = PROFILE.now() if PROFILE is not None else 0
-        res = self.estimator.step(Ellipsoid(self.xhat, self.P, self.rho), step_in)
+        res = self.estimator.step(self._prior(), step_in)
+        # the readings the published set rests on (the recursion never does: estimator/sdp.py _refine)
+        refs = sorted(self.estimator.reference_intervals(self._prior(), step_in)) if res.public.readings else []
         if PROFILE is not None:
             PROFILE.add("solve", t)
         used = sorted(j for j in neigh if j != self.id)
-        self._publish(inp, res.status, res, used=used, missing=self.missing(), inputs=self._inputs(self.k, used, own=True))
+        self._publish(inp, res.status, res, used=used, missing=self.missing(), inputs=self._inputs(self.k, used, own=True),
+                      readings=[(j, *readings[j]) for j in refs])
 
     def _inputs(self, step: int, used: list[int], own: bool) -> list[tuple[int, str]]:
         """(node, digest) of every state copy a step used: the neighbours' of ``step`` and our own prior."""
@@ -398,7 +465,7 @@ class Node:
 
     def _publish(
         self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int],
-        inputs: list[tuple[int, str]], wire_set: dict | None = None,
+        inputs: list[tuple[int, str]], wire_set: dict | None = None, readings: list[tuple[int, float, float]] | None = None,
     ) -> None:
         """Keep ``res`` as the node's own set (its next step starts from it) and publish ``res.public``."""
         self.xhat, self.P = res.xhat, res.P
@@ -406,7 +473,7 @@ class Node:
         cbar = self.cfg.sensor.Cbar
         self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, float(inp.y - cbar @ self.xhat), sector)
         t = PROFILE.now() if PROFILE is not None else 0
-        msg = self._state_message(inp, status, res, used, missing, inputs, wire_set)
+        msg = self._state_message(inp, status, res, used, missing, inputs, wire_set, readings or [])
         self.own_digest = state_digest(msg)
         if PROFILE is not None:
             PROFILE.add("build", t)
@@ -415,12 +482,13 @@ class Node:
         self.inbox = {s: m for s, m in self.inbox.items() if s >= self.k}
         self.refused = {s: js for s, js in self.refused.items() if s >= self.k}
         self.digests = {s: d for s, d in self.digests.items() if s >= self.k}
+        self.readings = {s: r for s, r in self.readings.items() if s > self.k}
         self.waiting_since, self.give_up = None, False
         self.bus.publish(keys.node_state(self.run, self.id), msg)
 
     def _state_message(
         self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int],
-        inputs: list[tuple[int, str]], wire_set: dict | None = None,
+        inputs: list[tuple[int, str]], wire_set: dict | None = None, readings: list[tuple[int, float, float]] | None = None,
     ) -> NodeState:
         """The state message of ``res.public`` for the step of ``inp`` (validated)."""
         pub, sector = res.public, res.sector
@@ -433,7 +501,7 @@ class Node:
             solve_ms=res.solve_ms, used=used, missing=missing,
             late=inp.deadline is not None and time.time() > inp.deadline, dropped=sum(drops.values()), drops=drops,
             sector=(sector.h1, sector.h) if sector is not None else None,
-            sector_basis=sector.basis if sector is not None else "none", set=wire_set, inputs=inputs,
+            sector_basis=sector.basis if sector is not None else "none", set=wire_set, inputs=inputs, readings=readings or [],
             **self._own_set(res),  # type: ignore[arg-type]  # own_xhat/own_P only: mypy cannot tell the keys of a dict
         )
 

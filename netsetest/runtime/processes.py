@@ -36,6 +36,7 @@ from netsetest.models.signals import SignalKind
 from netsetest.profile import PROFILE
 from netsetest.roles.node import Node
 from netsetest.runtime.report import EXIT_VIOLATION, exit_code, record_sink, write_summary
+from netsetest.runtime.timeouts import READING_WAIT
 
 if TYPE_CHECKING:  # a node process never loads the vehicle and the collector (memory: docs/performance.md)
     from netsetest.records.summary import RunSummary
@@ -274,11 +275,13 @@ def run_node(
     while not node.ended:
         if node.k < 0:
             barrier.tick(time.monotonic())  # until started
-        bus.pump(timeout=_node_wait(node, barrier.next_due(), neighbour_timeout, realtime, time.monotonic()))
+        bus.pump(timeout=_node_wait(node, barrier.next_due(), neighbour_timeout, READING_WAIT * sc.tau_s if realtime else None, time.monotonic()))
         while True:
             now = time.monotonic()
-            if realtime:
-                node.give_up = True  # real time: step with whatever neighbours have arrived
+            if realtime:  # step with whatever neighbours have arrived; the readings of the step are worth a short wait
+                node.give_up = not node.awaiting_readings() or (
+                    node.waiting_since is not None and now - node.waiting_since > READING_WAIT * sc.tau_s
+                )
             elif node.waiting_since is not None and now - node.waiting_since > neighbour_timeout:
                 log(role, f"step {node.k + 1}: neighbour(s) {node.missing()} silent for {neighbour_timeout:g} s; going on without")
                 node.give_up = True
@@ -296,11 +299,13 @@ def run_node(
     return 0
 
 
-def _node_wait(node: Node, ready_due: float | None, neighbour_timeout: float, realtime: bool, now: float) -> float:
+def _node_wait(node: Node, ready_due: float | None, neighbour_timeout: float, reading_wait: float | None, now: float) -> float:
     """How long a node may block for its next message: until its next Ready is due (not started yet; None:
     none is due, :attr:`Barrier.quiet`, and the step-0 input will wake it);
     lockstep, waiting for a neighbour: :data:`NEIGHBOUR_POLL_S` (neighbour states are lazy, they do not
-    wake the node) or until the neighbour deadline if sooner; else :data:`IDLE_WAIT_S`.  Event-driven
+    wake the node) or until the neighbour deadline if sooner; real time (``reading_wait``: its budget in
+    s), waiting for a reference's reading: until the budget is spent (a reading wakes it); else
+    :data:`IDLE_WAIT_S`.  Event-driven
     otherwise: a hundred idle nodes polling every few ms would keep two cores busy waking up.
 
     Neighbour states are lazy in both clocks: the vehicle sends input k+1 only after it heard every
@@ -308,8 +313,10 @@ def _node_wait(node: Node, ready_due: float | None, neighbour_timeout: float, re
     vehicle's, so they are almost always in when the input wakes the node; polling is the rare case."""
     if node.k < 0:
         return IDLE_WAIT_S if ready_due is None else max(0.0, ready_due - now)
-    if not realtime and node.waiting_since is not None:
-        return max(0.0, min(node.waiting_since + neighbour_timeout - now, NEIGHBOUR_POLL_S))
+    if node.waiting_since is not None:
+        if reading_wait is None:
+            return max(0.0, min(node.waiting_since + neighbour_timeout - now, NEIGHBOUR_POLL_S))
+        return max(0.0, node.waiting_since + reading_wait - now)
     return IDLE_WAIT_S
 
 

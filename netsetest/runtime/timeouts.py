@@ -7,3 +7,4 @@ the launcher (subprocess, tempfile, socket, ...) for three numbers (memory: docs
 START_TIMEOUT_S = 60.0  # the vehicle's default wait for every role to be ready
 NODE_TIMEOUT_S = 10.0  # lockstep: a node silent this long is declared dead by the vehicle
 NEIGHBOUR_TIMEOUT_S = 5.0  # lockstep: how long a node waits for a neighbour's message
+READING_WAIT = 0.25  # real time: how long (in sampling periods) a node waits for the references' readings of its step

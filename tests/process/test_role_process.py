@@ -46,16 +46,18 @@ def test_node_blocks_until_something_is_due():
     sc = load_topology("topologies/paper6.toml", steps=3)
     node = Node(sc, 1, MemoryBus(), "t")
     # not started: until its next Ready is due
-    assert _node_wait(node, ready_due=10.0 + READY_PERIOD_S, neighbour_timeout=5.0, realtime=False, now=10.03) == pytest.approx(READY_PERIOD_S - 0.03)
-    assert _node_wait(node, ready_due=10.0 + READY_PERIOD_S, neighbour_timeout=5.0, realtime=False, now=10.5) == 0.0
-    assert _node_wait(node, ready_due=None, neighbour_timeout=5.0, realtime=False, now=10.5) == IDLE_WAIT_S  # quiet: input 0 wakes it
+    assert _node_wait(node, ready_due=10.0 + READY_PERIOD_S, neighbour_timeout=5.0, reading_wait=None, now=10.03) == pytest.approx(READY_PERIOD_S - 0.03)
+    assert _node_wait(node, ready_due=10.0 + READY_PERIOD_S, neighbour_timeout=5.0, reading_wait=None, now=10.5) == 0.0
+    assert _node_wait(node, ready_due=None, neighbour_timeout=5.0, reading_wait=None, now=10.5) == IDLE_WAIT_S  # quiet: input 0 wakes it
     node.k = 2
-    assert _node_wait(node, 0.0, 5.0, False, now=100.0) == IDLE_WAIT_S  # started, nothing due: sleep on the queue
+    assert _node_wait(node, 0.0, 5.0, None, now=100.0) == IDLE_WAIT_S  # started, nothing due: sleep on the queue
     node.waiting_since = 98.0  # lockstep, waiting for neighbours: poll their lazy rings, never past the deadline
-    assert _node_wait(node, 0.0, 5.0, False, now=100.0) == NEIGHBOUR_POLL_S
-    assert _node_wait(node, 0.0, 5.0, False, now=102.9995) == pytest.approx(0.0005)
-    assert _node_wait(node, 0.0, 5.0, False, now=104.0) == 0.0
-    assert _node_wait(node, 0.0, 5.0, True, now=100.0) == IDLE_WAIT_S  # real time never waits for neighbours
+    assert _node_wait(node, 0.0, 5.0, None, now=100.0) == NEIGHBOUR_POLL_S
+    assert _node_wait(node, 0.0, 5.0, None, now=102.9995) == pytest.approx(0.0005)
+    assert _node_wait(node, 0.0, 5.0, None, now=104.0) == 0.0
+    # real time waits only for a reference's reading, within its budget (a reading wakes it)
+    assert _node_wait(node, 0.0, 5.0, 2.5, now=100.0) == pytest.approx(0.5)
+    assert _node_wait(node, 0.0, 5.0, 2.5, now=101.0) == 0.0
 
 
 def test_a_node_listens_to_its_peers_ready_only():

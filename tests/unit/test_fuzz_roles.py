@@ -30,7 +30,8 @@ from netsetest.roles.vehicle import Vehicle
 from netsetest.runtime.inmemory import run_meta
 from netsetest.runtime.processes import Barrier
 
-PAPER6 = Path(__file__).resolve().parents[2] / "topologies" / "paper6.toml"
+# paper6 with sensor 3 declared a reference: every message kind, the same-step readings included
+PAPER6 = Path(__file__).resolve().parents[2] / "topologies" / "paper6_reference.toml"
 FUZZ_EXAMPLES_ENV = "NETSETEST_FUZZ_EXAMPLES"  # the long run: raise the number of examples per property
 EXAMPLES = int(os.environ.get(FUZZ_EXAMPLES_ENV, "0")) or None
 RUN = "fz"
@@ -144,7 +145,7 @@ def _mutated(draw: st.DrawFn) -> tuple[str, bytes]:
 def _all_keys(sc) -> list[str]:
     out = [keys.truth(RUN), keys.end(RUN), "netsetest/other/x"]
     for i in sc.ids:
-        out += [keys.node_input(RUN, i), keys.node_state(RUN, i), keys.ready_of(RUN, keys.role_name("node", i))]
+        out += [keys.node_input(RUN, i), keys.node_state(RUN, i), keys.reading(RUN, i), keys.ready_of(RUN, keys.role_name("node", i))]
     out += [keys.ready_of(RUN, keys.role_name("vehicle", None)), keys.ready_of(RUN, keys.role_name("collector", None))]
     return out
 
@@ -179,5 +180,6 @@ def test_every_role_handler_drops_never_raises(deliveries: list[tuple[tuple[str,
 
 def test_the_fuzz_templates_cover_every_message_type() -> None:
     types = {msgpack.unpackb(p, raw=False)["type"] for _, p in TEMPLATES}
-    assert {"input", "state", "truth", "end"} <= types
+    assert {"input", "state", "truth", "end", "reading"} <= types
+    assert any(msgpack.unpackb(p, raw=False).get("readings") for _, p in TEMPLATES)  # states that used a reading
     assert not math.isnan(len(TEMPLATES))

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from netsetest.messages import (
-    MAX_DETAIL, SCHEMA_VERSION, BadMessage, End, NodeInput, NodeState, Ready, Truth, decode, encode,
+    MAX_DETAIL, SCHEMA_VERSION, BadMessage, End, NodeInput, NodeState, Reading, Ready, Truth, decode, encode,
 )
 
 P_EYE = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
@@ -43,6 +43,8 @@ EVERY_KIND = [
     _state(sector=(0.8, 0.1), sector_basis="measurement", used=[1, 3], missing=[3], late=True, dropped=2, drops={"x": 2}),
     _truth(),
     End(steps=5, reason="aborted"),
+    Reading(step=4, node=3, y=0.01, gamma=0.7),
+    _state(readings=[(3, 0.01, 0.7)]),
 ]
 
 
