@@ -77,6 +77,7 @@ Variant = Literal["scheduled", "per-rule"]
 Backend = Literal["clarabel", "cvxpy"]
 Status = Literal["ok", "fallback"]
 BACKENDS = ("clarabel", "cvxpy")
+REFINE_RTOL = 1e-6  # the readings' set is published only if it is smaller by more than this (relative): not for rounding
 
 
 @dataclass(frozen=True)
@@ -553,8 +554,8 @@ class LocalEstimator:
         refined, solve = self._solve_certify(data, rho, alpha, wh, FactStack.of(data.facts))
         pub = res.public
         res.solve_ms += solve.ms
-        if refined is None or _objective(refined.P, wh) >= _objective(pub.P, wh):
-            return
+        if refined is None or _objective(refined.P, wh) >= (1 - REFINE_RTOL) * _objective(pub.P, wh):
+            return  # no certificate, or nothing gained: no reason to rest the published set on the readings
         refined.solve_ms = res.solve_ms
         refined.readings = True
         res.published = refined

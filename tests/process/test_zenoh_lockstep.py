@@ -28,6 +28,7 @@ SCENARIOS = {  # name: topology, steps, case override
     "saim": (PAPER6, 10, "saim"),
     "lossy": (PAPER6_LOSSY, 12, None),
     "car": ("topologies/paper6_car.toml", 12, None),  # a CommonRoad plant generates the truth (docs/plant.md)
+    "reference": ("topologies/paper6_reference.toml", 10, "saim"),  # the same-step readings (docs/network.md)
 }
 TOL = 1e-9
 
@@ -97,12 +98,15 @@ def test_zenoh_lockstep_equals_inmemory(runs: Runs, name: str) -> None:
             assert ze["rho"] == me["rho"]
             assert ze["status"] == me["status"], f"{name}: node {i} step {k} status"
             assert ze["used"] == me["used"], f"{name}: node {i} step {k} used neighbours"
+            assert ze["readings"] == me["readings"], f"{name}: node {i} step {k} used readings"
             assert ze["contained"] == me["contained"]
 
     zs, ms = z["summary"], m.summary.to_dict()  # the file against the in-memory object
     assert zs["violations_total"] == ms["violations_total"] == 0
     assert zs["mode"] == "zenoh" and zs["seed"] == SEED and zs["signals"] == SIGNALS
     assert zs["case"] == (SCENARIOS[name][2] or "nsnim")
+    if name == "reference":  # the readings crossed Zenoh (ACL included) and were used in lockstep every step
+        assert all(e["readings"] == [3] for i, es in zrec["nodes"].items() if i != "3" for e in es[1:])
     if name == "car":  # the car's mismatch reached the record the same way in both runtimes
         assert all(t["e"] is not None and any(t["e"]) for t in zrec["truth"][:-1])
     assert zs["losses"] == ms["losses"], f"{name}: scheduled losses differ"
