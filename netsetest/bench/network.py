@@ -4,8 +4,11 @@ Per scenario, case and signals:
 
 - at best: each node's exact limit from its own data alone over the exact limit from every node's data
   (``netsetest exact --local``), mean width from step 10, for its own fault and the yaw rate;
-- today: each node's SDP fault width run alone (a self-loop only) over the same node in the network, the
-  network's over the exact central limit, and the detection delays in the network and alone.
+- today: each node's SDP fault width run alone (a self-loop only, no reference's reading) over the same
+  node in the network (neighbours' states and, with a reference, its same-step readings), the network's
+  over the exact central limit, and the detection delays in the network and alone;
+- the same-step phase's cost: ``netsetest run`` of ``paper6_reference`` over Zenoh (secured, lockstep,
+  as users start it) with the readings and with ``[network] readings = false``, time per step.
 
 ``paper6``: the paper's assumptions (every fault free at every step); ``paper6_reference``: sensor 3
 declared fault-free.
@@ -14,7 +17,10 @@ declared fault-free.
 from __future__ import annotations
 
 import math
+import statistics
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 from netsetest.config.schema import Scenario
@@ -85,7 +91,36 @@ def network_figures(cfg: dict, tmp: Path) -> dict:
                     gain = [v["sdp_alone_over_network"] for v in nodes.values()]
                     _log(f"  {name} {case} {sig} seed {seed}: exact own fault local/central {min(faults):.3f}–{max(faults):.3f}; "
                          f"SDP alone/network {min(gain):.3f}–{max(gain):.3f}")
-    return {"steps": cfg["network_steps"], "seeds": cfg["network_seeds"], "runs": rows}
+    return {"steps": cfg["network_steps"], "seeds": cfg["network_seeds"], "runs": rows, "exchange_cost": exchange_cost(cfg, tmp)}
+
+
+COST_STEPS = (20, 120)  # two run lengths: the per-step time is their difference (start-up cancels)
+
+
+def _run_seconds(topology: Path, steps: int) -> float:
+    """Wall time of ``netsetest run TOPOLOGY --mode zenoh`` (secured, lockstep) as users start it."""
+    cmd = [sys.executable, "-m", "netsetest.cli.main", "run", str(topology), "--mode", "zenoh", "--steps", str(steps),
+           "--seed", "0", "--quiet"]
+    t0 = time.perf_counter()
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    if out.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} exited {out.returncode}: {out.stderr[-400:]}")
+    return time.perf_counter() - t0
+
+
+def exchange_cost(cfg: dict, tmp: Path) -> dict:
+    """Lockstep time per step over Zenoh of ``paper6_reference`` with its readings and without them
+    (the same file with ``[network] readings = false``), median over ``cost_reps`` runs of each length."""
+    base = TOPOLOGY_DIR / "paper6_reference.toml"
+    off = tmp / "paper6_reference_no_readings.toml"
+    text = base.read_text().replace('node_dir = "../nodes"', f'node_dir = "{(TOPOLOGY_DIR.parent / "nodes").as_posix()}"')
+    off.write_text(text + "\n[network]\nreadings = false\n")
+    out = {}
+    for name, topo in (("readings", base), ("no_readings", off)):
+        per = {n: statistics.median(_run_seconds(topo, n) for _ in range(cfg["cost_reps"])) for n in COST_STEPS}
+        out[name] = 1e3 * (per[COST_STEPS[1]] - per[COST_STEPS[0]]) / (COST_STEPS[1] - COST_STEPS[0])
+        _log(f"  paper6_reference over Zenoh, {name}: {out[name]:.1f} ms per lockstep step")
+    return {"ms_per_step": out, "reps": cfg["cost_reps"], "steps": list(COST_STEPS)}
 
 
 def _num(v: float) -> float | None:
@@ -109,17 +144,25 @@ def network_markdown(res: dict) -> str:
             faults.append("declared 0" if any(v is None for v in vals) else f"{sum(vals) / len(vals):.2f}")
         rs = [r["nodes"][i]["r"] for r in runs for i in ids if r["nodes"][i]["r"] is not None]
         lines.append(f"| `{topo}` | {case} | {sig} | {' / '.join(faults)} | {min(rs):.2f}–{max(rs):.2f} |")
-    lines += ["", "What the nodes reach today: each node's SDP fault width run alone (a self-loop only) over the same node in "
-              "the network, the network's over the exact central limit, and the detection delay in steps after the fault's "
-              "onset, in the network / alone (`-`: no fault, never detected):", "",
+    lines += ["", "What the nodes reach today: each node's SDP fault width run alone (a self-loop only, no reading) over the same "
+              "node in the network (its neighbours' states and, in `paper6_reference`, sensor 3's reading of the same step), the "
+              "network's over the exact central limit, and the detection delay in steps after the fault's onset, in the network / "
+              "alone (`-`: no fault, never detected):", "",
               "| topology | case | signals | alone / network | network / exact | delay, network / alone (node 1 … 6) |",
               "|---|---|---|---|---|---|"]
     for (topo, case, sig), runs in groups.items():
         ids = sorted(runs[0]["nodes"], key=int)
-        gain = [r["nodes"][i]["sdp_alone_over_network"] for r in runs for i in ids]
+        gain = [r["nodes"][i]["sdp_alone_over_network"] for r in runs for i in ids]  # the reference's own 1.000 included
         over = [r["nodes"][i]["sdp_network_over_exact"] for r in runs for i in ids if r["nodes"][i]["sdp_network_over_exact"] is not None]
         delays = " · ".join(f"{_d(runs[0]['nodes'][i]['delay_network'])}/{_d(runs[0]['nodes'][i]['delay_alone'])}" for i in ids)
         lines.append(f"| `{topo}` | {case} | {sig} | {min(gain):.3f}–{max(gain):.3f} | {min(over):.2f}–{max(over):.2f} | {delays} |")
+    cost = res.get("exchange_cost")
+    if cost:
+        on, off = cost["ms_per_step"]["readings"], cost["ms_per_step"]["no_readings"]
+        lines += ["", f"The same-step phase's cost: `netsetest run paper6_reference --mode zenoh` (secured, lockstep) takes "
+                  f"{on:.1f} ms per step with the readings and {off:.1f} ms without (`[network] readings = false`): "
+                  f"{100 * (on / off - 1):+.0f} % (median of {cost['reps']} runs of {cost['steps'][0]} and {cost['steps'][1]} "
+                  "steps each, the per-step time from their difference)."]
     return "\n".join(lines) + "\n"
 
 

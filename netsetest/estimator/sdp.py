@@ -532,19 +532,21 @@ class LocalEstimator:
         sector, reading = self._own_range(prev, inp)
         data = self.step_data(prev, inp, sector, reading)
         alpha = np.asarray(inp.alpha, dtype=float)
-        res, solve = self._update(data, prev.rho, alpha)
+        refs = self.reference_intervals(prev, inp)
+        facts = FactStack.of(data.facts)
+        res, solve = self._solve_certify(data, prev.rho, alpha, self._wh, facts)  # the set the node recurs on
         if res is None:
             assert data.own is not None  # a predicting step always has its own update
             P_fb = fallback_shape(data.Mi, data.own, self.W, inp.alpha, self.model, self.uncertainty) / prev.rho
-            res = self._fallback(data.x_pred.copy(), P_fb, solve, sector)
-        refs = self.reference_intervals(prev, inp)
-        if refs:
-            self._refine(res, self.readings_data(prev, inp, sector, reading, refs), prev.rho, alpha)
+            return self._fallback(data.x_pred.copy(), P_fb, solve, sector)
+        if not (refs and self._refine(res, self.readings_data(prev, inp, sector, reading, refs), prev.rho, alpha)):
+            self._bank(res, data, prev.rho, alpha, facts)
         return res
 
-    def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> None:
-        """Publish the readings' set of the step where it is certified and smaller in the published
-        objective than what ``res`` publishes; the recursion stays on ``res``.
+    def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> bool:
+        """Publish the readings' set of the step (its only innovation the references' readings) where it
+        is certified, uses them (L ≠ 0) and is smaller in the published objective than ``res``; whether
+        it did.  The node recurs on ``res`` either way.
 
         Why not recur on it: its trace-optimal shape trades sideslip width for yaw-rate width (the
         reading measures the yaw rate), and later steps predict from the sideslip; recurring on it
@@ -552,13 +554,13 @@ class LocalEstimator:
         (docs/network.md)."""
         wh = self._wh_pub if self._wh_pub is not None else self._wh
         refined, solve = self._solve_certify(data, rho, alpha, wh, FactStack.of(data.facts))
-        pub = res.public
         res.solve_ms += solve.ms
-        if refined is None or _objective(refined.P, wh) >= (1 - REFINE_RTOL) * _objective(pub.P, wh):
-            return  # no certificate, or nothing gained: no reason to rest the published set on the readings
+        if refined is None or not np.any(refined.L) or _objective(refined.P, wh) >= (1 - REFINE_RTOL) * _objective(res.P, wh):
+            return False  # no certificate, or nothing gained: no reason to rest the published set on the readings
         refined.solve_ms = res.solve_ms
         refined.readings = True
         res.published = refined
+        return True
 
     def first(self, prior: Ellipsoid, y: float, gamma: float) -> StepResult:
         """Step 0: the prior updated by ỹ₀, certified like every step; ``fallback``: the prior itself."""
@@ -576,20 +578,23 @@ class LocalEstimator:
         return StepResult(xhat, P, "fallback", np.nan, solve.ms, solve.status, sector=sector)
 
     def _update(self, data: StepData, rho: float, alpha: np.ndarray) -> tuple[StepResult | None, _Solve]:
-        """The certified set of the step's data (None: no certificate) and the last solve's figures.
-
-        Objective ``bank``: the fault-weighted set of the same data is added as the one to publish.
-        """
+        """The certified set of the step's data (None: no certificate) and the last solve's figures;
+        objective ``bank``: with the set to publish (:meth:`_bank`)."""
         facts = FactStack.of(data.facts)  # shared by both certificates of ``bank``
         res, solve = self._solve_certify(data, rho, alpha, self._wh, facts)
-        if res is None or self._wh_pub is None:
-            return res, solve
+        if res is not None:
+            self._bank(res, data, rho, alpha, facts)
+        return res, solve
+
+    def _bank(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray, facts: FactStack) -> None:
+        """Objective ``bank``: the fault-weighted set of the same data is added to ``res`` as the one to publish."""
+        if self._wh_pub is None:
+            return
         pub, solve_pub = self._solve_certify(data, rho, alpha, self._wh_pub, facts)
-        res.solve_ms = solve.ms + solve_pub.ms
+        res.solve_ms += solve_pub.ms
         if pub is not None:
             pub.solve_ms = res.solve_ms
             res.published = pub
-        return res, solve
 
     def _solve_certify(
         self, data: StepData, rho: float, alpha: np.ndarray, wh: np.ndarray | None, facts: FactStack

@@ -1,0 +1,55 @@
+"""What a node makes of a reference's reading (estimator/sdp.py ``reference_intervals``, docs/network.md)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from netsetest.config.schema import load_topology
+from netsetest.estimator.sdp import Ellipsoid, LocalEstimator, StepInput
+from netsetest.estimator.sector import measurement_interval
+
+REFERENCE = Path(__file__).resolve().parents[2] / "topologies" / "paper6_reference.toml"
+
+
+def _setup(case: str):
+    sc = load_topology(REFERENCE, case, 5)
+    est = LocalEstimator.for_node(sc, 2)
+    n = sc.node(2)
+    prior = Ellipsoid(n.x0_hat, n.P0, n.rho)
+    return sc, est, prior
+
+
+def _inp(sc, readings: dict[int, tuple[float, float]]) -> StepInput:
+    return StepInput(sc.model.weights(sc.vx(0)), (sc.steer_low + sc.steer_high) / 2, 0.03, 1.0, {}, readings)
+
+
+def test_only_declared_references_are_read() -> None:
+    sc, est, prior = _setup("nsnim")
+    assert set(est.references) == {3}  # node 2's estimator reads sensor 3, the only reference
+    assert est.reference_intervals(prior, _inp(sc, {4: (0.03, 1.0)})) == {}  # node 4 is no reference: ignored
+
+
+def test_a_reading_inside_the_range_is_its_measurement_interval() -> None:
+    sc, est, prior = _setup("nsnim")
+    got = est.reference_intervals(prior, _inp(sc, {3: (0.03, 1.0)}))
+    assert got == {3: measurement_interval(sc.node(3).sensor, 0.03, 1.0)}
+    assert math.isfinite(got[3].lo) and math.isfinite(got[3].hi)
+
+
+def test_a_reading_at_the_limit_takes_its_open_side_from_the_propagated_set() -> None:
+    """SAIM: sensor 3 saturates at r_max = 0.035 (γ = 0.8 gives a reading at γ·r_max): the measurement
+    bounds C̄x̄ from below only; the node's own set propagated through the step bounds it from above."""
+    sc, est, prior = _setup("saim")
+    s3 = sc.node(3).sensor
+    y = 0.8 * s3.r_max
+    meas = measurement_interval(s3, y, 0.8)
+    assert math.isfinite(meas.lo) and meas.hi == math.inf
+    got = est.reference_intervals(prior, _inp(sc, {3: (y, 0.8)}))
+    assert got[3].lo == meas.lo and math.isfinite(got[3].hi) and got[3].hi > got[3].lo
+    # and the estimator publishes a certified set that uses it (its gain on the reading is not zero)
+    res = est.step(prior, _inp(sc, {3: (y, 0.8)}))
+    assert res.status == "ok"
+    assert res.public.readings and np.any(res.public.L)
