@@ -46,12 +46,13 @@ class SumOfNorms:
         R = self.M - L[:, None] * self.b[None, :]
         return float(np.sqrt((R * R).sum(axis=0) @ self.onehot).sum() + self.c * np.sqrt(L @ L))
 
-    def minimise(self) -> tuple[np.ndarray, np.ndarray, float, int] | None:
+    def minimise(self, start: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float, int] | None:
         """(L, the group norms a_g, ‖L‖, iterations) at the minimum, or None (a vanished term, no convergence).
 
         L = 0 (no use for the innovations) is the minimum exactly when the gradient of the groups' part there
         is at most c long: then c‖L‖'s subgradient cancels it (found without iterating).  Else Newton starts
-        from the least-squares gain Σ M_g b_g / Σ ‖b_g‖² (the minimiser of the squared terms)."""
+        from ``start`` (a warm start: the last step's gain) or the least-squares gain Σ M_g b_g / Σ ‖b_g‖²
+        (the minimiser of the squared terms)."""
         r0 = np.sqrt((self.M * self.M).sum(axis=0) @ self.onehot)
         if r0.min() <= TINY:
             return None
@@ -59,7 +60,7 @@ class SumOfNorms:
         if float(np.sqrt(g0 @ g0)) <= self.c:
             return np.zeros_like(g0), r0, 0.0, 0
         nb = (self.b * self.b) @ self.onehot  # ‖b_g‖²
-        L = (self.M @ self.b) / float(nb.sum())
+        L = (self.M @ self.b) / float(nb.sum()) if start is None else start.copy()
         eye = np.eye(L.shape[0])
         for it in range(1, MAX_NEWTON + 1):
             R = self.M - L[:, None] * self.b[None, :]
