@@ -828,6 +828,11 @@ class ConicSolver:
             return Solution(None, [], [], "non-finite", sol.iterations)
         return self.invert(x, inv, status, sol.iterations)
 
+    def forget_warm_start(self) -> None:
+        """Start the next closed-form solve afresh (after a warm-up on made-up data: a node that warmed up
+        must answer bit for bit like one that did not)."""
+        self._last_L = None
+
     def _solve_sum_of_norms(self, data: StepData, rho: float) -> Solution | None:
         """The pure SOCP by :class:`~netsetest.estimator.sum_of_norms.SumOfNorms`, mapped back as
         :meth:`invert` maps Clarabel's answer: τ_g = ρ a_g / Σ a, P = Σ_g β_g Π_gΠ_gᵀ/τ_g + (B²/τ_ξ + ℓ₀²/λ₀) L Lᵀ."""

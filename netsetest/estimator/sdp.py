@@ -274,6 +274,12 @@ class LocalEstimator:
             pat = self._patterns[key] = _Pattern(lay, balls, solver)
         return pat
 
+    def forget_warm_starts(self) -> None:
+        """Every solver starts its next solve afresh (the node's warm-up leaves no trace in results)."""
+        for pat in self._patterns.values():
+            if isinstance(pat.solver, ConicSolver):
+                pat.solver.forget_warm_start()
+
     @property
     def lay(self) -> EtaLayout:
         """The layout with every saturating sensor's φ slot (the static worst case)."""
@@ -549,9 +555,8 @@ class LocalEstimator:
         it did.  The node recurs on ``res`` either way.
 
         Why not recur on it: its trace-optimal shape trades sideslip width for yaw-rate width (the
-        reading measures the yaw rate), and later steps predict from the sideslip; recurring on it
-        measured 0.86–0.98× the width without readings on paper6_reference SAIM, this 1.10–1.16×
-        (docs/network.md)."""
+        reading measures the yaw rate), and later steps predict from the sideslip; recurring on it made
+        paper6_reference's SAIM fault intervals wider than without readings (docs/network.md)."""
         wh = self._wh_pub if self._wh_pub is not None else self._wh
         refined, solve = self._solve_certify(data, rho, alpha, wh, FactStack.of(data.facts))
         res.solve_ms += solve.ms

@@ -168,6 +168,7 @@ class Node:
             readings = {j: (float(sc.node(j).sensor.Cbar @ cfg.x0_hat), gamma) for j in self.references}
             est.step(own, StepInput(sc.model.weights(vx), u, y, gamma, {}, readings))
             decode(encode(Reading(step=1, node=self.id, y=y, gamma=gamma)))
+            est.forget_warm_starts()  # the readings' solver would start the run from this made-up gain
         inp = NodeInput(step=1, node=self.id, y=y, gamma=gamma, u_prev=u, vx_prev=vx, expect_from=self.others)
         decode(encode(inp))
         decode(encode(self._state_message(inp, res.status, res, used=self.others, missing=[], inputs=[])))
