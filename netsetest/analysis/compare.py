@@ -42,6 +42,7 @@ from netsetest.records.record import Record, record_from_parts
 from netsetest.runtime.inmemory import run_inmemory
 
 CONTAIN_TOL = 1e-8  # the sets' own membership slack (sets.MEMBERSHIP_TOL) plus float sums of the bounds
+EXACT_PINNED = 1e-9  # an exact half-width below this is a coordinate pinned by a declaration (no ratio to it)
 _SDP_ASSUMPTIONS: tuple[str, ...] = ("dependency cone (collector)",)
 
 
@@ -97,8 +98,11 @@ class Comparison:
     plant: str = "ts"  # what generated the truth (Scenario.plant_label)
 
 
-def _cones(sc: Scenario, rec: Record, assumptions: tuple[str, ...], nodes: list[int]) -> dict[tuple[int, int], str | None]:
-    """Per (node, step): None if every assumption of the node's cone held, else the first broken one."""
+def _cones(
+    sc: Scenario, rec: Record, assumptions: tuple[str, ...], nodes: list[int], references: tuple[int, ...] = (),
+) -> dict[tuple[int, int], str | None]:
+    """Per (node, step): None if every assumption of the node's cone held, else the first broken one;
+    ``references``: whose readings the node used from step 1 on (their noise bound and zero fault)."""
     truth = sorted(rec.truth, key=lambda t: t["step"])
     out: dict[tuple[int, int], str | None] = {}
     for i in nodes:
@@ -114,6 +118,8 @@ def _cones(sc: Scenario, rec: Record, assumptions: tuple[str, ...], nodes: list[
                 broken = "noise"
             if broken is None and "fault_bound" in assumptions and not t.get("fault_ok", {}).get(s, True):
                 broken = "fault_bound"
+            if broken is None and k > 0 and any(not (t["noise_ok"][str(j)] and t.get("fault_ok", {}).get(str(j), False)) for j in references):
+                broken = "reference"  # a reference's reading of the step: its noise bound or its declared zero fault broke
             out[(i, k)] = broken
     return out
 
@@ -152,22 +158,28 @@ def _score(acc: _Accumulator, bounds: np.ndarray, steps: np.ndarray, truth: np.n
     acc.exact_widths += list(np.diff(ex[late], axis=2)[..., 0])
     if ok.any():
         half, ex_half = np.diff(bounds[ok], axis=2)[..., 0] / 2, np.diff(ex[ok], axis=2)[..., 0] / 2
-        with np.errstate(divide="ignore", invalid="ignore"):
-            acc.rms += list(np.sqrt((half**2).mean(axis=0) / (ex_half**2).mean(axis=0)))
+        ex_ms = (ex_half**2).mean(axis=0)
+        with np.errstate(divide="ignore", invalid="ignore"):  # a coordinate the exact limit pins (a reference's declared fault): no ratio
+            acc.rms += list(np.where(ex_ms > EXACT_PINNED**2, np.sqrt((half**2).mean(axis=0) / ex_ms), np.nan))
 
 
-def _run_set_estimator(name: str, sc: Scenario, i: int, data: list[StepData], acc: _Accumulator) -> tuple[np.ndarray, tuple[Assumption, ...]] | None:
-    """Step one node's estimator through the run's data: (K, 3, 2) bounds and the assumptions of its
-    guarantee on this node, or None if it refuses the node."""
+def _run_set_estimator(
+    name: str, sc: Scenario, i: int, data: list[StepData], acc: _Accumulator,
+) -> tuple[np.ndarray, tuple[Assumption, ...], tuple[int, ...]] | None:
+    """Step one node's estimator through the run's data, with the references' readings of each step where
+    it uses them (as the node does): (K, 3, 2) bounds, the assumptions of its guarantee on this node and
+    the references it read; None if it refuses the node."""
     try:
         est = SET_ESTIMATORS[name](sc, i)
     except EstimatorError as exc:
         acc.refused.append(str(exc))
         return None
     acc.assumptions.update(est.assumptions)
+    refs = tuple(j for j in sc.references() if j != i) if est.uses_readings else ()
     out, prev = [], None
     for d in data:
-        inp = StepInput(d.step, d.y[i], d.gamma[i], None if prev is None else prev.u, None if prev is None else prev.vx)
+        readings: dict[int, tuple[float, float]] = {j: (d.y[j], d.gamma[j]) for j in refs} if prev is not None else {}
+        inp = StepInput(d.step, d.y[i], d.gamma[i], None if prev is None else prev.u, None if prev is None else prev.vx, readings)
         t0 = time.perf_counter()
         try:
             s = est.step(inp)
@@ -178,7 +190,7 @@ def _run_set_estimator(name: str, sc: Scenario, i: int, data: list[StepData], ac
         acc.ms.append(1000 * (time.perf_counter() - t0))
         out.append(np.stack([lo, hi], axis=1))
         prev = d
-    return np.array(out), est.assumptions
+    return np.array(out), est.assumptions, refs
 
 
 def _row(name: str, acc: _Accumulator, real_time: bool) -> CompareRow:
@@ -282,9 +294,9 @@ def _score_run(sc: Scenario, rec: Record, estimators: tuple[str, ...], acc: dict
                 got = _run_set_estimator(name, sc, i, data, a)
                 if got is None:
                     continue
-                bounds, est_assumptions = got
+                bounds, est_assumptions, refs = got
                 steps = all_steps
-                cones_i = _cones(sc, rec, est_assumptions, [i])
+                cones_i = _cones(sc, rec, est_assumptions, [i], refs)
                 broken = [cones_i[(i, int(k))] for k in steps]
                 if "fault_bound" in est_assumptions and i not in ex.bounded_nodes:
                     ex_all = ex_all or exact_bounds(sc, rec, "all")

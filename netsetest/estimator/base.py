@@ -8,16 +8,23 @@ guaranteed set over the node's augmented state [β, r, f_i] (a type of :mod:`net
 Each method declares which assumptions its guarantee rests on (:data:`Assumption` names, so a checker
 can attribute a miss) and whether it uses its neighbours' sets.  The ellipsoidal SDP of this project
 (estimator/sdp.py, run by roles/node.py) is the one method that uses them; the methods of the other
-papers (001, 003) are single-sensor observers and ignore them (documented per module).
+papers (001, 003) are single-sensor observers and ignore them (documented per module).  Where the
+topology declares reference sensors, an estimator may also take their readings of the same step
+(``uses_readings``; :func:`reading_slabs`, docs/network.md).
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
-from typing import Literal, Union
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Literal, Union
 
-from netsetest.sets import Box, Ellipsoid, SumSet, Zonotope
+import numpy as np
+
+from netsetest.sets import Box, Ellipsoid, Slab, SumSet, Zonotope
+
+if TYPE_CHECKING:
+    from netsetest.config.schema import Scenario
 
 GuaranteedSet = Union[Ellipsoid, Zonotope, Box, SumSet]  # a runtime alias
 
@@ -43,6 +50,18 @@ class StepInput:
     gamma: float
     u_prev: float | None = None
     vx_prev: float | None = None
+    readings: dict[int, tuple[float, float]] = field(default_factory=dict)  # reference j → (ỹ_j, γ_j) of this step
+
+
+def reading_slabs(scenario: Scenario, readings: dict[int, tuple[float, float]]) -> list[Slab]:
+    """The references' readings of a step as slabs over a node's [β, r, f_i]: C_j x ∈ [lo, hi] (the
+    reference's fault is declared 0, so C̄_j x̄_j = C_j x; a side at the sensor's limit is open)."""
+    out = []
+    for j, (y, gamma) in sorted(readings.items()):
+        sensor = scenario.node(j).sensor
+        lo, hi = sensor.measured_interval(y, gamma)
+        out.append(Slab(np.r_[sensor.C, 0.0], float(lo), float(hi)))
+    return out
 
 
 @dataclass(frozen=True)
@@ -59,6 +78,7 @@ class SetEstimator(ABC):
 
     name: str  # the registry name (``netsetest compare --estimators``)
     uses_neighbours: bool = False
+    uses_readings: bool = False  # it intersects its set with the references' readings of the step (docs/network.md)
 
     @property
     @abstractmethod

@@ -13,7 +13,8 @@ rate δ (a random walk; with only a size F declared, f⁺ ∈ [−F, F]), and th
 second strip.  Every node using this observer therefore relies on its declared fault bound.  The
 measurement strip is C̄ x̄ ∈ [lo, hi] (the measured interval; one side open at saturation, then the
 strip is first clipped to the set's own extent).  The initial set is the box of the prior ellipsoid.
-It ignores the neighbours' sets.
+It ignores the neighbours' sets; a reference sensor's reading of the same step is one more strip
+(docs/network.md).  A strip that does not cut the set (the set is flat along it) leaves it unchanged.
 """
 
 from __future__ import annotations
@@ -24,8 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from netsetest.config.schema import NodeConfig, Scenario
-from netsetest.estimator.base import BASE_ASSUMPTIONS, Assumption, EstimatorError, NeighbourSet, SetEstimator, StepInput
-from netsetest.estimator.zonotope_w_radius import frobenius_gain, reduce_order
+from netsetest.estimator.base import BASE_ASSUMPTIONS, Assumption, EstimatorError, NeighbourSet, SetEstimator, StepInput, reading_slabs
+from netsetest.estimator.zonotope_w_radius import NEGLIGIBLE_CUT, frobenius_gain, reduce_order
 from netsetest.models.sensor import NA, NX
 from netsetest.sets import Zonotope
 
@@ -76,6 +77,8 @@ def intersect_strip(z: Zonotope, a: np.ndarray, lo: float, hi: float) -> Zonotop
     lo, hi = max(lo, bottom), min(hi, top)
     if hi < lo:
         raise EstimatorError("the measurement is inconsistent with the set (an assumption broke)")
+    if (lo - bottom) + (top - hi) <= NEGLIGIBLE_CUT * max(1.0, top - bottom):
+        return z  # the strip does not cut the set (e.g. the set is flat along a): nothing to intersect
     mid, sigma = (lo + hi) / 2, (hi - lo) / 2
     lam = frobenius_gain(z.generators, _NO_PRIOR, a, sigma)
     proj = np.eye(len(a)) - np.outer(lam, a)
@@ -118,11 +121,14 @@ class StripObserver(RandomWalkObserver):
     """003's strip-based zonotopic observer on the random-walk augmented model."""
 
     name = "strip"
+    uses_readings = True  # a reference's reading is one more strip of the same step
 
     def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> Zonotope:
         z = self._predicted(inp)
         lo, hi = self.node.sensor.measured_interval(inp.y, inp.gamma)
         z = intersect_strip(z, self.node.sensor.Cbar, lo, hi)
+        for slab in reading_slabs(self.sc, inp.readings):
+            z = intersect_strip(z, slab.a, slab.lo, slab.hi)
         if self.node.fault_size is not None:
             z = intersect_strip(z, _E3, -self.node.fault_size, self.node.fault_size)
         self.set = self._reduced(z)

@@ -7,7 +7,8 @@ measurement strip (Theorem 1, gain Λ), W-radius as the size to minimise, order 
 (Property 3).  Derivation and the choices made for this problem: docs/estimators/zonotope_w_radius.md.
 
 Implements the estimator interface (estimator/base.py, name ``zonotope``); it ignores the neighbours'
-sets (001 is a single-sensor observer).  :class:`ZonotopeEstimator` steps through one node's
+sets (001 is a single-sensor observer), and takes a reference sensor's reading of the same step as one
+more strip (Theorem 1; docs/network.md).  :class:`ZonotopeEstimator` steps through one node's
 inputs, using only what that node has (its prior, its measurements, u, Vx), and publishes a
 :class:`~netsetest.sets.SumSet` ⟨c, G⟩ ⊕ M·S, where S is the node's prior ellipsoid cut by its step-0
 slabs (kept exact: an ellipsoid is not a zonotope) and ⟨c, G⟩ collects every later uncertainty.
@@ -40,12 +41,12 @@ from typing import Literal
 import numpy as np
 
 from netsetest.config.schema import FaultBoundsMode, NodeConfig, Scenario
-from netsetest.estimator.base import BASE_ASSUMPTIONS, Assumption, EstimatorError, NeighbourSet, SetEstimator, StepInput
+from netsetest.estimator.base import BASE_ASSUMPTIONS, Assumption, EstimatorError, NeighbourSet, SetEstimator, StepInput, reading_slabs
 from netsetest.models.sensor import E_DESCRIPTOR, NA, NX
 from netsetest.sets import Ellipsoid, SlicedEllipsoid, Slab, SumSet, Zonotope
 
 _E3 = np.eye(NA)[2]
-_NEGLIGIBLE = 1e-12  # a strip narrower than the set by less than this (relative) carries no information
+NEGLIGIBLE_CUT = 1e-12  # a strip narrower than the set by less than this (relative) carries no information
 _TIE = 1e-9  # relative width difference below which two gains count as equally good
 _KINK_FLOOR = 1e-9  # generators with |aᵀg| below this (relative) give no usable kink
 Gain = Literal["hull", "frobenius"]
@@ -103,6 +104,7 @@ class ZonotopeEstimator(SetEstimator):
     """One node's zonotopic estimator; :meth:`step` takes that step's data and returns the published set."""
 
     name = "zonotope"
+    uses_readings = True  # a reference's reading is one more strip of the same step (Theorem 1)
 
     def __init__(
         self,
@@ -129,7 +131,12 @@ class ZonotopeEstimator(SetEstimator):
         return BASE_ASSUMPTIONS + (("fault_bound",) if self.bounded else ())
 
     def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> SumSet:
-        return self.advance(inp.y, inp.gamma, inp.u_prev, inp.vx_prev)
+        s = self.advance(inp.y, inp.gamma, inp.u_prev, inp.vx_prev)
+        if inp.readings and inp.u_prev is not None:  # the references' readings: one more strip each (Theorem 1)
+            for slab in reading_slabs(self.sc, inp.readings):
+                s = self._intersect(s, slab)
+            self.set = s
+        return s
 
     def _slabs(self, y: float, gamma: float) -> list[Slab]:
         lo, hi = self.node.sensor.measured_interval(y, gamma)
@@ -224,7 +231,7 @@ class ZonotopeEstimator(SetEstimator):
         lo, hi = max(slab.lo, bottom), min(slab.hi, top)
         if hi < lo:
             raise EstimatorError(f"node {self.node.id}: the measurement is inconsistent with the set (an assumption broke)")
-        if (lo - bottom) + (top - hi) <= _NEGLIGIBLE * max(1.0, top - bottom):
+        if (lo - bottom) + (top - hi) <= NEGLIGIBLE_CUT * max(1.0, top - bottom):
             return s
         mid, sigma = (lo + hi) / 2, (hi - lo) / 2
         G = s.zonotope.generators

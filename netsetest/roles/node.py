@@ -92,8 +92,9 @@ class Node:
         if self.cfg.estimator != SDP:
             self.set_estimator = node_set_estimator(scenario, node_id)
         self.is_reference = node_id in scenario.references()
-        # the references whose reading of each step this node waits for and uses (the SDP's update only)
-        self.references = [j for j in scenario.references() if j != node_id] if self.set_estimator is None else []
+        # the references whose reading of each step this node waits for and uses (its estimator must use them)
+        uses = self.set_estimator is None or self.set_estimator.uses_readings
+        self.references = [j for j in scenario.references() if j != node_id] if uses else []
         self.readings: dict[int, dict[int, tuple[float, float]]] = {}  # step → reference j → (ỹ_j, γ_j)
         # estimator state, plain arrays: centre, shape, radius, and our own last published message
         self.xhat = self.cfg.x0_hat.copy()
@@ -346,10 +347,14 @@ class Node:
         """Expected messages for the next step that have not arrived: the neighbours' states of our step and
         the references' readings of the next one."""
         inp = self.next_input()
-        if inp is None or self.k < 0 or self.set_estimator is not None:
+        if inp is None or self.k < 0:
             return []
-        have, refused, readings = self.inbox.get(self.k, {}), self.refused.get(self.k, set()), self.readings.get(inp.step, {})
-        return [j for j in inp.expect_from if j not in have and j not in refused] + [j for j in self.references if j not in readings]
+        readings = self.readings.get(inp.step, {})
+        unread = [j for j in self.references if j not in readings]
+        if self.set_estimator is not None:  # it uses no neighbour state
+            return unread
+        have, refused = self.inbox.get(self.k, {}), self.refused.get(self.k, set())
+        return [j for j in inp.expect_from if j not in have and j not in refused] + unread
 
     def awaiting_readings(self) -> bool:
         """Whether a reference's reading of the next step has not arrived (the real-time clock waits a
@@ -443,8 +448,9 @@ class Node:
         summary: SDP neighbours and the plausibility checks use it unchanged) and the step's sector."""
         assert self.set_estimator is not None
         t0 = time.perf_counter()
+        readings = self.readings.get(inp.step, {}) if inp.step > 0 else {}
         try:
-            s = self.set_estimator.step(base.StepInput(inp.step, inp.y, inp.gamma, inp.u_prev, inp.vx_prev))
+            s = self.set_estimator.step(base.StepInput(inp.step, inp.y, inp.gamma, inp.u_prev, inp.vx_prev, readings))
         except base.EstimatorError:
             # the measurement contradicts the set: an assumption broke (the collector's cone shows which).
             # Nothing guaranteed can be published; the last set is, marked "fallback", and the run goes on.
@@ -462,7 +468,8 @@ class Node:
         fault_bound = FaultBound(self.cfg.fault_rate, self.cfg.fault_size)
         sector = derive_sector(sensor, fault_bound, measurement_interval(sensor, inp.y, inp.gamma), r_set)
         res = StepResult(xhat, P, "ok", float("nan"), solve_ms, status, sector=sector)
-        self._publish(inp, status, res, used=[], missing=[], inputs=inputs, wire_set=set_to_wire(s))
+        used_readings = [(j, *readings[j]) for j in sorted(readings)] if status == "ok" else []  # "fallback": the last set
+        self._publish(inp, status, res, used=[], missing=self.missing(), inputs=inputs, wire_set=set_to_wire(s), readings=used_readings)
 
     def _publish(
         self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int],
