@@ -141,3 +141,22 @@ def test_realtime_run_over_zenoh_uses_its_neighbours(tmp_path: Path) -> None:
         assert r["steps"] == steps - 1 and ph["solve"]["calls_per_step"] == 1.0, (name, r)  # steps 2..30
         assert ph["decode"]["calls_per_step"] >= 2.0 and r["process_ms_per_step"] >= r["thread_ms_per_step"] > 0, (name, r)
         assert ph["wait"]["calls_per_step"] <= 1.5, (name, ph["wait"])  # one wake-up per step: the input
+
+
+@pytest.mark.timeout(180)
+def test_realtime_run_over_zenoh_waits_for_the_readings(tmp_path: Path) -> None:
+    """A real-time secured paper6_reference run: sensor 3's reading of each step reaches the other nodes
+    within their budget (a quarter period) and they use it nearly every step (docs/network.md)."""
+    steps = 20
+    summary, record = tmp_path / "s.json", tmp_path / "r.jsonl"
+    out = subprocess.run(cli("run", ROOT / "topologies" / "paper6_reference.toml", "--mode", "zenoh", "--clock", "realtime",
+                             "--steps", str(steps), "--quiet", "--summary-json", str(summary), "--record", str(record)),
+                         cwd=ROOT, capture_output=True, text=True, timeout=170)
+    assert out.returncode == 0, out.stderr[-2000:]
+    s = json.loads(summary.read_text())
+    assert s["violations_total"] == 0 and not s.get("nodes_missing")
+    rec = load_record(record)
+    rows = [e for i, es in rec.raw_nodes.items() if i != "3" for e in es[1:]]
+    assert len(rows) == 5 * steps
+    with_reading = sum(e["readings"] == [3] for e in rows)
+    assert with_reading >= 0.8 * len(rows), f"only {with_reading} of {len(rows)} node-steps used the reading"
