@@ -56,7 +56,8 @@ def _sdp_figures(sc: Scenario, sig: str, seed: int, path: Path) -> tuple[dict, R
     for row in res.summary.nodes:
         lo, hi = rec.nodes[row.id].bounds(2)
         late = rec.nodes[row.id].steps >= FROM_STEP
-        out[row.id] = {"fault_width": float(np.mean((hi - lo)[late])), "delay": row.detection_delay}
+        out[row.id] = {"fault_width": float(np.mean((hi - lo)[late])), "delay": row.detection_delay,
+                       "false_detections": row.false_detections, "false_detections_covered": row.false_detections_covered}
     return out, rec
 
 
@@ -85,6 +86,8 @@ def network_figures(cfg: dict, tmp: Path) -> dict:
                             "sdp_alone_over_network": alone[lim.node]["fault_width"] / sdp[lim.node]["fault_width"],
                             "sdp_network_over_exact": sdp[lim.node]["fault_width"] / ex_w if ex_w > 1e-6 else None,
                             "delay_network": sdp[lim.node]["delay"], "delay_alone": alone[lim.node]["delay"],
+                            "false_detections": sdp[lim.node]["false_detections"],
+                            "false_detections_covered": sdp[lim.node]["false_detections_covered"],
                         }
                     rows.append({"topology": name, "case": case, "signals": sig, "seed": seed, "nodes": nodes})
                     faults = [v["fault"] for v in nodes.values() if v["fault"] is not None]
@@ -156,6 +159,11 @@ def network_markdown(res: dict) -> str:
         over = [r["nodes"][i]["sdp_network_over_exact"] for r in runs for i in ids if r["nodes"][i]["sdp_network_over_exact"] is not None]
         delays = " · ".join(f"{_d(runs[0]['nodes'][i]['delay_network'])}/{_d(runs[0]['nodes'][i]['delay_alone'])}" for i in ids)
         lines.append(f"| `{topo}` | {case} | {sig} | {min(gain):.3f}–{max(gain):.3f} | {min(over):.2f}–{max(over):.2f} | {delays} |")
+    runs = res["runs"]
+    false = sum(v.get("false_detections", 0) for r in runs for v in r["nodes"].values())
+    false_cov = sum(v.get("false_detections_covered", 0) for r in runs for v in r["nodes"].values())
+    lines += ["", f"False detections (a fault interval excluding 0 while the true fault was 0) over these {len(runs)} runs "
+              f"in the network: {false}, of them where every assumption held: {false_cov}."]
     cost = res.get("exchange_cost")
     if cost:
         on, off = cost["ms_per_step"]["readings"], cost["ms_per_step"]["no_readings"]
