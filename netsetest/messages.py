@@ -166,6 +166,7 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     # the references' readings of this very step the update used, as (node, ỹ, γ): the collector checks
     # them against the truth and puts their noise and zero-fault declarations into the step's cone
     readings: Annotated[list[tuple[NodeId, FiniteF, Gamma]], Meta(max_length=MAX_NODES)] = []
+    health: bool = False  # the published set used the k-of-N interval of the step's readings and its own ([network] max_faulty)
 
     def __post_init__(self) -> None:
         if self.set is not None:
@@ -248,6 +249,7 @@ class Truth(_Msg, tag="truth", frozen=True, kw_only=True):
     drops: Drops = {}  # messages the vehicle has dropped so far, by reason
     e: Vec2 | None = None  # model mismatch of k → k+1: x_{k+1} − (Ā x_k + B̄ u_k + D̄ w_k) (None: last step, older records)
     mismatch_ok: bool = True  # e_k within the declared [model_uncertainty] (none declared: e_k = 0)
+    health_ok: bool = True  # at most [network] max_faulty sensors faulty at step k (none declared: True)
 
     def __post_init__(self) -> None:
         ids = set(self.faults)

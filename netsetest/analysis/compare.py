@@ -99,10 +99,12 @@ class Comparison:
 
 
 def _cones(
-    sc: Scenario, rec: Record, assumptions: tuple[str, ...], nodes: list[int], references: tuple[int, ...] = (),
+    sc: Scenario, rec: Record, assumptions: tuple[str, ...], nodes: list[int], readings: tuple[int, ...] = (),
 ) -> dict[tuple[int, int], str | None]:
     """Per (node, step): None if every assumption of the node's cone held, else the first broken one;
-    ``references``: whose readings the node used from step 1 on (their noise bound and zero fault)."""
+    ``readings``: whose readings the node used from step 1 on (their noise bound; a reference's zero
+    fault; under max_faulty the k-of-N assumption)."""
+    refs = set(sc.references())
     truth = sorted(rec.truth, key=lambda t: t["step"])
     out: dict[tuple[int, int], str | None] = {}
     for i in nodes:
@@ -118,8 +120,11 @@ def _cones(
                 broken = "noise"
             if broken is None and "fault_bound" in assumptions and not t.get("fault_ok", {}).get(s, True):
                 broken = "fault_bound"
-            if broken is None and k > 0 and any(not (t["noise_ok"][str(j)] and t.get("fault_ok", {}).get(str(j), False)) for j in references):
-                broken = "reference"  # a reference's reading of the step: its noise bound or its declared zero fault broke
+            if broken is None and k > 0 and readings:
+                if any(not t["noise_ok"][str(j)] or (j in refs and not t.get("fault_ok", {}).get(str(j), False)) for j in readings):
+                    broken = "reading"  # a reading of the step: its noise bound or a reference's declared zero fault broke
+                elif sc.health_declared and not t.get("health_ok", True):
+                    broken = "k-of-N health"
             out[(i, k)] = broken
     return out
 
@@ -175,7 +180,7 @@ def _run_set_estimator(
         acc.refused.append(str(exc))
         return None
     acc.assumptions.update(est.assumptions)
-    refs = tuple(j for j in sc.references() if j != i) if est.uses_readings else ()
+    refs = sc.reading_sources(i) if est.uses_readings else ()
     out, prev = [], None
     for d in data:
         readings: dict[int, tuple[float, float]] = {j: (d.y[j], d.gamma[j]) for j in refs} if prev is not None else {}

@@ -269,6 +269,10 @@ class NetworkSpec(_Strict, frozen=True, kw_only=True):
         bool, Meta(description="the same-step exchange: reference sensors publish their reading before estimating and the "
                                "SDP nodes use it (docs/network.md); false: every node uses its neighbours' states only")
     ] = True
+    max_faulty: Annotated[
+        int, Meta(ge=0, description="at most this many sensors have a fault above fault_tolerance at any step: every "
+                                    "node publishes its reading and uses everyone's (docs/network.md); default: no such bound")
+    ] | None = None
 
 
 class ModelUncertaintySpec(_Strict, frozen=True, kw_only=True):
@@ -437,6 +441,7 @@ class Scenario:
     uncertainty: ModelUncertainty | None = None  # declared bound on e_k (None: e_k = 0 is assumed)
     fault_tolerance: float = 0.0  # |f| ≤ this counts as no fault (fault detection, docs/fdi.md)
     readings: bool = True  # the same-step exchange of the references' readings (docs/network.md)
+    max_faulty: int | None = None  # declared: at most this many sensors faulty (|f| > fault_tolerance) at any step
 
     def node(self, node_id: int) -> NodeConfig:
         n = self._by_id.get(node_id)
@@ -493,6 +498,25 @@ class Scenario:
         they publish their reading of every step before estimating and every other node uses it
         (docs/network.md).  None with ``[network] readings = false``."""
         return tuple(n.id for n in self.nodes if n.fault_size == 0) if self.readings else ()
+
+    @property
+    def health_declared(self) -> bool:
+        """Whether the nodes use the k-of-N health assumption (``[network] max_faulty``, readings on)."""
+        return self.max_faulty is not None and self.readings
+
+    def publishes_reading(self, i: int) -> bool:
+        """Whether node i publishes its reading of every step: a reference, or every node under ``max_faulty``."""
+        return self.health_declared or i in self.references()
+
+    def reading_sources(self, i: int) -> tuple[int, ...]:
+        """The nodes whose readings node i uses (its own reading comes with its input)."""
+        return tuple(j for j in self.ids if j != i and self.publishes_reading(j))
+
+    def health_holds(self, faults: dict[int, float]) -> bool:
+        """The k-of-N assumption at one step: at most ``max_faulty`` faults above the tolerance (True if none is declared)."""
+        if self.max_faulty is None:
+            return True
+        return sum(abs(f) > self.fault_tolerance * (1 + 1e-12) for f in faults.values()) <= self.max_faulty
 
     def out_neighbours(self, j: int) -> list[int]:
         """Nodes i ≠ j that use j's message."""
@@ -655,4 +679,23 @@ def load_topology(
         manoeuvre=cast(ManoeuvreName, v.manoeuvre),  # one of MANOEUVRES: VehicleSpec checked it
         uncertainty=topo.model_uncertainty.build() if topo.model_uncertainty is not None else None,
         fault_tolerance=topo.network.fault_tolerance, readings=topo.network.readings,
+        max_faulty=_max_faulty(path, topo.network.max_faulty, nodes),
     )
+
+
+def _max_faulty(path: Path, m: int | None, nodes: list[NodeConfig]) -> int | None:
+    """``[network] max_faulty``, checked: fewer than the nodes, and every sensor measuring the same
+    combination of the state (C_j = s_j uᵀ), so that the k-of-N readings bound one quantity (estimator/health.py)."""
+    if m is None:
+        return None
+    if m >= len(nodes):
+        raise ConfigError(f"{path}: network.max_faulty = {m}: must be less than the number of nodes ({len(nodes)})")
+    u = nodes[0].sensor.C / np.linalg.norm(nodes[0].sensor.C)
+    for n in nodes:
+        c = n.sensor.C
+        if np.linalg.norm(c - (c @ u) * u) > 1e-9 * np.linalg.norm(c):
+            raise ConfigError(
+                f"{path}: network.max_faulty needs every sensor to measure the same combination of the state; "
+                f"node {n.id}'s C = {list(c)} is not parallel to node {nodes[0].id}'s"
+            )
+    return m

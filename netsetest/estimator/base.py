@@ -16,6 +16,7 @@ topology declares reference sensors, an estimator may also take their readings o
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, Union
 
@@ -53,14 +54,33 @@ class StepInput:
     readings: dict[int, tuple[float, float]] = field(default_factory=dict)  # reference j → (ỹ_j, γ_j) of this step
 
 
-def reading_slabs(scenario: Scenario, readings: dict[int, tuple[float, float]]) -> list[Slab]:
-    """The references' readings of a step as slabs over a node's [β, r, f_i]: C_j x ∈ [lo, hi] (the
-    reference's fault is declared 0, so C̄_j x̄_j = C_j x; a side at the sensor's limit is open)."""
+def reading_slabs(
+    scenario: Scenario, node_id: int, own: tuple[float, float], readings: dict[int, tuple[float, float]],
+    extent: Callable[[np.ndarray], tuple[float, float]] | None = None,
+) -> list[Slab]:
+    """A step's readings as slabs over node ``node_id``'s [β, r, f_i]: each reference's C_j x ∈ [lo, hi]
+    (its fault is declared 0, so C̄_j x̄_j = C_j x; a side at the sensor's limit is open), and under
+    ``[network] max_faulty`` the k-of-N interval of every reading and the node's own (``own``: ỹ, γ),
+    its hypotheses pruned by ``extent`` (the range of aᵀx̄ over the node's own set), and the own fault
+    |f| ≤ τ where no consistent majority leaves the node's sensor out (estimator/health.py)."""
+    from netsetest.estimator.health import HealthModel
+
+    refs = set(scenario.references())
     out = []
     for j, (y, gamma) in sorted(readings.items()):
-        sensor = scenario.node(j).sensor
-        lo, hi = sensor.measured_interval(y, gamma)
-        out.append(Slab(np.r_[sensor.C, 0.0], float(lo), float(hi)))
+        if j in refs:
+            sensor = scenario.node(j).sensor
+            lo, hi = sensor.measured_interval(y, gamma)
+            out.append(Slab(np.r_[sensor.C, 0.0], float(lo), float(hi)))
+    health = HealthModel.of(scenario)
+    if health is not None:
+        a = np.r_[health.u, 0.0]
+        within = extent(a) if extent is not None else None
+        hull = health.interval(node_id, own, readings, within)
+        if hull is not None:
+            out.append(Slab(a, hull.lo, hull.hi))
+        if health.own_fault_pinned(node_id, own, readings, within):  # no consistent majority without this sensor: |f| ≤ τ
+            out.append(Slab(np.array([0.0, 0.0, 1.0]), -health.tolerance, health.tolerance))
     return out
 
 

@@ -62,6 +62,7 @@ import numpy as np
 from netsetest.config.schema import Scenario
 from netsetest.estimator.certificate import FactStack, FallbackUnavailable, certify, fallback_shape, publishable
 from netsetest.estimator.conic import ConicSolver
+from netsetest.estimator.health import HEALTH_KEY, HealthModel
 from netsetest.estimator.lmi_cvxpy import CvxpySolver
 from netsetest.estimator.objective import BANK_FAULT_WEIGHT, DEFAULT_OBJECTIVE, FAULT_WEIGHT, OBJECTIVES, Objective
 from netsetest.estimator.problem import EtaLayout, OwnUpdate, PatternKey, ProblemSolver, Solution, StepData
@@ -134,7 +135,7 @@ class StepResult:
     L: np.ndarray = field(default_factory=lambda: np.zeros((NA, 1)))  # (NA, 1) the gain of (16)
     sector: Sector | None = None  # the own sensor's sector of this step (None: no saturation modelled)
     published: StepResult | None = None  # objective ``bank`` or readings: the set to publish (None: this one)
-    readings: bool = False  # this set used the references' readings of its step (StepInput.readings)
+    reading_keys: frozenset[int] = frozenset()  # the readings this set used (keys of LocalEstimator.reading_intervals)
 
     @property
     def public(self) -> StepResult:
@@ -206,9 +207,11 @@ class LocalEstimator:
         objective: Objective = DEFAULT_OBJECTIVE,
         uncertainty: ModelUncertainty | None = None,
         references: dict[int, Sensor] | None = None,
+        health: HealthModel | None = None,
     ) -> None:
         """``references``: the reference sensors (declared fault-free, j ≠ i) whose same-step readings
-        a step may use (StepInput.readings; docs/network.md)."""
+        a step may use (StepInput.readings; docs/network.md); ``health``: the k-of-N assumption
+        (``[network] max_faulty``) under which every node's reading of the step bounds the state."""
         if variant not in ("scheduled", "per-rule"):
             raise ValueError(f"variant must be 'scheduled' or 'per-rule', got {variant!r}")
         if backend not in BACKENDS:
@@ -224,6 +227,9 @@ class LocalEstimator:
         self.sensors = neighbours
         self.weights = weights
         self.references = dict(references or {})
+        self.health = health
+        # a sensor of uᵀx alone (no fault, no saturation): what propagated_interval needs for the prediction of uᵀx⁺
+        self._u_sensor = dataclasses.replace(own, C=health.u, Ds=0.0, saturated=False) if health is not None else own
         self.n_lmi = N_RULES if variant == "per-rule" else 1
         # static data, prepared once: augmented rule matrices Ā_ℓ, B̄_ℓ, D̄_ℓ
         nr = model.A.shape[0]
@@ -344,10 +350,10 @@ class LocalEstimator:
         return StepData(tuple(pi0), ell, tuple(facts), x_pred, float(innov_sum), Mi, pat.lay, key, sector, own)
 
     def readings_data(
-        self, prev: Ellipsoid, inp: StepInput, sector: Sector | None, reading: Interval | None, refs: dict[int, Interval]
+        self, prev: Ellipsoid, inp: StepInput, sector: Sector | None, reading: Interval | None, refs: dict[int, tuple[np.ndarray, Interval]]
     ) -> StepData:
-        """The LMI data of step k → k+1 whose only innovation is the references' readings of step k+1
-        (``refs``, from :meth:`reference_intervals`): the prediction as in :meth:`step_data`, no neighbour."""
+        """The LMI data of step k → k+1 whose only innovation is the readings of step k+1 (``refs``, from
+        :meth:`reading_intervals`): the prediction as in :meth:`step_data`, no neighbour."""
         phi_new = sector is not None and sector.has_phi and reading is None
         key: PatternKey = (frozenset(), phi_new, True, frozenset(refs))
         pat = self.pattern(*key)
@@ -358,12 +364,15 @@ class LocalEstimator:
         facts = [*pat.balls, *([own_fact] if own_fact is not None else [])]
         return StepData(tuple(pi0), ell, tuple(facts), x_pred, innov, Mi, pat.lay, key, sector, own)
 
-    def reference_intervals(self, prev: Ellipsoid, inp: StepInput) -> dict[int, Interval]:
-        """C_j x⁺ ∈ [lo, hi] from each reference j's reading of this step (its fault declared 0, so
-        C̄_j x̄_j = C_j x).  A reading at the sensor's limit bounds one side only: the other comes from
-        the node's own set propagated through the step (both hold wherever the step's cone does); a
-        reading that still leaves a side open is left out."""
-        out: dict[int, Interval] = {}
+    def reading_intervals(self, prev: Ellipsoid, inp: StepInput) -> dict[int, tuple[np.ndarray, Interval]]:
+        """What the step's readings prove, as c̄ (NA,) and c̄ᵀx̄⁺ ∈ [lo, hi], keyed by the reference's id, and
+        by :data:`~netsetest.estimator.health.HEALTH_KEY` for the k-of-N interval of every reading (the
+        hypotheses pruned by the node's own prediction of uᵀx⁺).
+
+        A reference j (fault declared 0): C̄_j x̄_j = C_j x.  A reading at the sensor's limit bounds one
+        side only: the other comes from the node's own set propagated through the step (both hold
+        wherever the step's cone does); a reading that still leaves a side open is left out."""
+        out: dict[int, tuple[np.ndarray, Interval]] = {}
         for j, (y, gamma) in inp.readings.items():
             sensor = self.references.get(j)
             if sensor is None:
@@ -375,26 +384,35 @@ class LocalEstimator:
                     sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W, self.uncertainty
                 )
             if np.isfinite(iv.lo) and np.isfinite(iv.hi) and iv.hi > iv.lo:
-                out[j] = iv
+                out[j] = (np.r_[sensor.C, 0.0], iv)
+        if self.health is not None:
+            own = (inp.y, inp.gamma)
+            a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
+            pred = propagated_interval(  # uᵀx⁺ over the node's own set through the step: prunes the hypotheses
+                self._u_sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W, self.uncertainty
+            )
+            within = (pred.lo, pred.hi)
+            hull = self.health.interval(self.node_id, own, inp.readings, within)
+            if hull is not None:
+                out[HEALTH_KEY] = (np.r_[self.health.u, 0.0], hull)
         return out
 
     def _reference_innovation(
-        self, lay: EtaLayout, pi0: np.ndarray, alpha: np.ndarray, x_pred: np.ndarray, refs: dict[int, Interval]
+        self, lay: EtaLayout, pi0: np.ndarray, alpha: np.ndarray, x_pred: np.ndarray, refs: dict[int, tuple[np.ndarray, Interval]]
     ) -> tuple[np.ndarray, float]:
-        """ℓ (d,) and the value of the innovation the gain acts on when references' readings of this step
-        are here: y̌ = Σ_j w_j (m_j − c̄_jᵀ x̂_pred), c̄_j = [C_j, 0], m_j the centre of j's interval,
+        """ℓ (d,) and the value of the innovation the gain acts on when readings of this step are here
+        (:meth:`reading_intervals`): y̌ = Σ_j w_j (m_j − c̄_jᵀ x̂_pred), c̄_j = [c_j, 0], m_j the centre of j's interval,
         h_j its half-width and w_j ∝ 1/h_j (Σ w_j = 1).  For the truth C_j x⁺ = m_j + h_j ν_j with
         |ν_j| ≤ 1 and x̄⁺ − x̂_pred = Π̄₀ η (Π̄₀ the α-blend of Π₀: the truth's model), so
         y̌(η) = Σ_j w_j (c̄_jᵀ Π̄₀ η − h_j ν_j)."""
         pi_truth = np.tensordot(alpha, pi0, axes=1) if len(pi0) > 1 else pi0[0]
-        inv_h = {j: 1.0 / (0.5 * (iv.hi - iv.lo)) for j, iv in refs.items()}
+        inv_h = {j: 1.0 / (0.5 * (iv.hi - iv.lo)) for j, (_, iv) in refs.items()}
         total = sum(inv_h.values())
         ell = np.zeros(lay.dim)
         innov = 0.0
-        for j, iv in refs.items():
+        for j, (c, iv) in refs.items():
             w, h, m = inv_h[j] / total, 0.5 * (iv.hi - iv.lo), 0.5 * (iv.hi + iv.lo)
-            cj = np.zeros(NA)
-            cj[:NX] = self.references[j].C  # c̄_j = [C_j, 0]: the reference's own fault is 0
+            cj = c
             ell += w * (cj @ pi_truth)  # c̄_jᵀ Π̄₀ η
             ell[lay.nu[j]] -= w * h  # − h_j ν_j
             innov += w * (m - float(cj @ x_pred))
@@ -521,7 +539,7 @@ class LocalEstimator:
         return cls(
             node_id, n.sensor, {j: scenario.node(j).sensor for j in n.in_weights}, n.in_weights, scenario.model, scenario.W,
             variant, backend, FaultBound(n.fault_rate, n.fault_size), objective, scenario.uncertainty,
-            {j: scenario.node(j).sensor for j in scenario.references() if j != node_id},
+            {j: scenario.node(j).sensor for j in scenario.references() if j != node_id}, HealthModel.of(scenario),
         )
 
     def step(self, prev: Ellipsoid, inp: StepInput) -> StepResult:
@@ -538,7 +556,7 @@ class LocalEstimator:
         sector, reading = self._own_range(prev, inp)
         data = self.step_data(prev, inp, sector, reading)
         alpha = np.asarray(inp.alpha, dtype=float)
-        refs = self.reference_intervals(prev, inp)
+        refs = self.reading_intervals(prev, inp)
         facts = FactStack.of(data.facts)
         res, solve = self._solve_certify(data, prev.rho, alpha, self._wh, facts)  # the set the node recurs on
         if res is None:
@@ -550,9 +568,9 @@ class LocalEstimator:
         return res
 
     def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> bool:
-        """Publish the readings' set of the step (its only innovation the references' readings) where it
-        is certified, uses them (L ≠ 0) and is smaller in the published objective than ``res``; whether
-        it did.  The node recurs on ``res`` either way.
+        """Publish the readings' set of the step (its only innovation those readings) where it is
+        certified, uses them (L ≠ 0) and is smaller in the published objective than ``res``; whether it
+        did.  The node recurs on ``res`` either way.
 
         Why not recur on it: its trace-optimal shape trades sideslip width for yaw-rate width (the
         reading measures the yaw rate), and later steps predict from the sideslip; recurring on it made
@@ -563,7 +581,7 @@ class LocalEstimator:
         if refined is None or not np.any(refined.L) or _objective(refined.P, wh) >= (1 - REFINE_RTOL) * _objective(res.P, wh):
             return False  # no certificate, or nothing gained: no reason to rest the published set on the readings
         refined.solve_ms = res.solve_ms
-        refined.readings = True
+        refined.reading_keys = frozenset(data.key[3])
         res.published = refined
         return True
 

@@ -127,7 +127,7 @@ class StripObserver(RandomWalkObserver):
         z = self._predicted(inp)
         lo, hi = self.node.sensor.measured_interval(inp.y, inp.gamma)
         z = intersect_strip(z, self.node.sensor.Cbar, lo, hi)
-        for slab in reading_slabs(self.sc, inp.readings):
+        for slab in reading_slabs(self.sc, self.node.id, (inp.y, inp.gamma), inp.readings, lambda a: (-z.support(-a), z.support(a))):
             z = intersect_strip(z, slab.a, slab.lo, slab.hi)
         if self.node.fault_size is not None:
             z = intersect_strip(z, _E3, -self.node.fault_size, self.node.fault_size)

@@ -133,7 +133,7 @@ class ZonotopeEstimator(SetEstimator):
     def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> SumSet:
         s = self.advance(inp.y, inp.gamma, inp.u_prev, inp.vx_prev)
         if inp.readings and inp.u_prev is not None:  # the references' readings: one more strip each (Theorem 1)
-            for slab in reading_slabs(self.sc, inp.readings):
+            for slab in reading_slabs(self.sc, self.node.id, (inp.y, inp.gamma), inp.readings, lambda a: (-s.support(-a), s.support(a))):
                 s = self._intersect(s, slab)
             self.set = s
         return s

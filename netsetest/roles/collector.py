@@ -72,6 +72,7 @@ NOT_FROM_INPUT = "not from its true input"  # its γ or innovation is not what t
 MISSED = "missed the truth"
 NOT_JUDGED = "not judged"  # no copy with that digest reached the collector, or several matched the truth
 MODEL_MISMATCH = "model mismatch"  # e_k outside the declared [model_uncertainty] (docs/plant.md)
+HEALTH = "k-of-N health"  # more than [network] max_faulty sensors faulty at a step whose set used it (docs/network.md)
 INHERITED = "inherited"  # the cause of a node-step whose input failed: its Origin says which and why
 
 
@@ -184,6 +185,7 @@ class Collector:
         self._end: End | None = None
         self._end_early = False  # an End was counted as early already
         self._step_truth: Truth | None = None  # the judged truth of the step being closed
+        self.references = set(scenario.references())  # whose readings rest on their declared zero fault
         # nodes running a set estimator whose guarantee also rests on the declared fault bound (its cone)
         self.needs_fault_bound = {
             n.id for n in scenario.nodes if n.estimator != SDP and "fault_bound" in node_set_estimator(scenario, n.id).assumptions
@@ -353,6 +355,8 @@ class Collector:
             return "truth-flags"
         if t.e is not None and t.mismatch_ok != mismatch_holds(sc, np.asarray(t.e)):
             return "truth-flags"
+        if t.health_ok != sc.health_holds({n.id: n.fault(k) for n in sc.nodes}):
+            return "truth-flags"
         return None
 
     def _judge_state(self, i: int, k: int, tr: Truth | None) -> tuple[NodeState | None, bool]:
@@ -481,10 +485,12 @@ class Collector:
             return Cone(False, own)
         if st is None or k == 0:
             return Cone(True)
-        for j, y, gamma in st.readings:  # the references' readings of this very step
+        for j, y, gamma in st.readings:  # the readings of this very step
             why = self._reading_cause(j, y, gamma, tr)
             if why is not None:
                 return Cone(False, INHERITED, Origin(j, k, why))
+        if st.health and not tr.health_ok:
+            return Cone(False, HEALTH)
         if st.status == "fallback" and st.set is not None:
             return Cone(False, "fallback")  # the previous step's set again: no guarantee for this step
         for j, m, digest, as_prior in self._inputs_of(st, k):
@@ -498,14 +504,14 @@ class Collector:
         return Cone(True)
 
     def _reading_cause(self, j: int, y: float, gamma: float, tr: Truth) -> str | None:
-        """Why reference j's reading of the step gives no guarantee (None: it is the true measurement, its
-        noise bound held and its declared fault-free sensor had no fault)."""
+        """Why node j's reading of the step gives no guarantee (None: it is the true measurement, its noise
+        bound held and, for a reference, its declared fault-free sensor had no fault)."""
         s = str(j)
         if s not in tr.y or y != tr.y[s] or gamma != tr.gamma[s]:
             return NOT_FROM_INPUT
         if not tr.noise_ok[s]:
             return "noise"
-        if not tr.fault_ok.get(s, False):
+        if j in self.references and not tr.fault_ok.get(s, False):
             return "fault bound"  # its declared size 0
         return None
 
@@ -635,7 +641,7 @@ class Collector:
         return {
             "step": k, "xhat": list(st.xhat), "P": list(st.P), "rho": st.rho, "status": st.status,
             "rho_cert": st.rho_cert, "solve_ms": st.solve_ms, "used": st.used, "missing": st.missing,
-            "readings": [j for j, _, _ in st.readings],
+            "readings": [j for j, _, _ in st.readings], "health": st.health,
             "late": st.late, "E": E, "judged": ev is not None, "not_judged_why": unjudged,
             "contained": None if contained is None else bool(contained), "assumptions_ok": cone.ok,
             "not_covered_cause": cone.cause,

@@ -40,6 +40,7 @@ from netsetest.config.schema import Scenario
 from netsetest.estimator import base
 from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE
+from netsetest.estimator.health import HEALTH_KEY
 from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.rejoin import rejoin_ellipsoid
 from netsetest.estimator.sdp import Ellipsoid, LocalEstimator, NeighbourState, Objective, StepInput, StepResult, Variant
@@ -91,10 +92,10 @@ class Node:
         self.last_set: base.GuaranteedSet | None = None  # its last published set
         if self.cfg.estimator != SDP:
             self.set_estimator = node_set_estimator(scenario, node_id)
-        self.is_reference = node_id in scenario.references()
-        # the references whose reading of each step this node waits for and uses (its estimator must use them)
+        self.publishes_reading = scenario.publishes_reading(node_id)  # a reference, or every node under max_faulty
+        # the nodes whose reading of each step this node waits for and uses (its estimator must use them)
         uses = self.set_estimator is None or self.set_estimator.uses_readings
-        self.references = [j for j in scenario.references() if j != node_id] if uses else []
+        self.references = list(scenario.reading_sources(node_id)) if uses else []
         self.readings: dict[int, dict[int, tuple[float, float]]] = {}  # step → reference j → (ỹ_j, γ_j)
         # estimator state, plain arrays: centre, shape, radius, and our own last published message
         self.xhat = self.cfg.x0_hat.copy()
@@ -125,7 +126,7 @@ class Node:
             bus.subscribe(keys.reading(run_id, j), self.on_message)
         bus.subscribe(keys.end(run_id), self.on_message)
         bus.declare_publisher(keys.node_state(run_id, node_id))
-        if self.is_reference:
+        if self.publishes_reading:
             bus.declare_publisher(keys.reading(run_id, node_id))
 
     def _new_estimator(self) -> LocalEstimator:
@@ -239,7 +240,7 @@ class Node:
         self.inputs[msg.step] = msg
         if len(self.inputs) > MAX_AHEAD:  # a rejoining node before it re-entered: keep the newest
             del self.inputs[min(self.inputs)]
-        if self.is_reference and msg.step > 0:  # the same-step exchange phase (step 0 uses none): our reading goes out before we estimate
+        if self.publishes_reading and msg.step > 0:  # the same-step exchange phase (step 0 uses none): our reading goes out before we estimate
             self.bus.publish(keys.reading(self.run, self.id), Reading(step=msg.step, node=self.id, y=msg.y, gamma=msg.gamma))
 
     def _implausible_input(self, msg: NodeInput) -> str | None:
@@ -428,12 +429,14 @@ class Node:
         t = PROFILE.now() if PROFILE is not None else 0
         res = self.estimator.step(self._prior(), step_in)
         # the readings the published set rests on (the recursion never does: estimator/sdp.py _refine)
-        refs = sorted(self.estimator.reference_intervals(self._prior(), step_in)) if res.public.readings else []
+        keys_used = res.public.reading_keys
+        health = HEALTH_KEY in keys_used
+        refs = sorted(readings) if health else sorted(keys_used)  # the k-of-N facts rest on every reading
         if PROFILE is not None:
             PROFILE.add("solve", t)
         used = sorted(j for j in neigh if j != self.id)
         self._publish(inp, res.status, res, used=used, missing=self.missing(), inputs=self._inputs(self.k, used, own=True),
-                      readings=[(j, *readings[j]) for j in refs])
+                      readings=[(j, *readings[j]) for j in refs], health=health)
 
     def _inputs(self, step: int, used: list[int], own: bool) -> list[tuple[int, str]]:
         """(node, digest) of every state copy a step used: the neighbours' of ``step`` and our own prior."""
@@ -469,11 +472,14 @@ class Node:
         sector = derive_sector(sensor, fault_bound, measurement_interval(sensor, inp.y, inp.gamma), r_set)
         res = StepResult(xhat, P, "ok", float("nan"), solve_ms, status, sector=sector)
         used_readings = [(j, *readings[j]) for j in sorted(readings)] if status == "ok" else []  # "fallback": the last set
-        self._publish(inp, status, res, used=[], missing=self.missing(), inputs=inputs, wire_set=set_to_wire(s), readings=used_readings)
+        health = bool(used_readings) and self.sc.health_declared
+        self._publish(inp, status, res, used=[], missing=self.missing(), inputs=inputs, wire_set=set_to_wire(s), readings=used_readings,
+                      health=health)
 
     def _publish(
         self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int],
         inputs: list[tuple[int, str]], wire_set: dict | None = None, readings: list[tuple[int, float, float]] | None = None,
+        health: bool = False,
     ) -> None:
         """Keep ``res`` as the node's own set (its next step starts from it) and publish ``res.public``."""
         self.xhat, self.P = res.xhat, res.P
@@ -481,7 +487,7 @@ class Node:
         cbar = self.cfg.sensor.Cbar
         self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, float(inp.y - cbar @ self.xhat), sector)
         t = PROFILE.now() if PROFILE is not None else 0
-        msg = self._state_message(inp, status, res, used, missing, inputs, wire_set, readings or [])
+        msg = self._state_message(inp, status, res, used, missing, inputs, wire_set, readings or [], health)
         self.own_digest = state_digest(msg)
         if PROFILE is not None:
             PROFILE.add("build", t)
@@ -497,6 +503,7 @@ class Node:
     def _state_message(
         self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int],
         inputs: list[tuple[int, str]], wire_set: dict | None = None, readings: list[tuple[int, float, float]] | None = None,
+        health: bool = False,
     ) -> NodeState:
         """The state message of ``res.public`` for the step of ``inp`` (validated)."""
         pub, sector = res.public, res.sector
@@ -509,7 +516,7 @@ class Node:
             solve_ms=res.solve_ms, used=used, missing=missing,
             late=inp.deadline is not None and time.time() > inp.deadline, dropped=sum(drops.values()), drops=drops,
             sector=(sector.h1, sector.h) if sector is not None else None,
-            sector_basis=sector.basis if sector is not None else "none", set=wire_set, inputs=inputs, readings=readings or [],
+            sector_basis=sector.basis if sector is not None else "none", set=wire_set, inputs=inputs, readings=readings or [], health=health,
             **self._own_set(res),  # type: ignore[arg-type]  # own_xhat/own_P only: mypy cannot tell the keys of a dict
         )
 

@@ -185,6 +185,6 @@ class Vehicle:
                 y=s(y), y_nofault=s(y0), sector_ok=s(sector_ok), noise_ok=s(noise_ok), r=s(r), fault_ok=s(fault_ok),
                 dist_ok=bool(self.w**2 <= sc.W * (1 + 1e-12)), lost=lost, alive=sorted(self.alive),
                 drops=self.drop_report(), e=None if e is None else list(map(float, e)),
-                mismatch_ok=e is None or mismatch_holds(sc, e),
+                mismatch_ok=e is None or mismatch_holds(sc, e), health_ok=sc.health_holds(faults),
             ),
         )

@@ -43,6 +43,16 @@ def run_meta(
     }
 
 
+def _step_all(nodes: list[Node], bus: MemoryBus) -> bool:
+    """Every node takes every step it can (delivering what each step publishes); whether any did."""
+    stepped = False
+    for n in nodes:
+        while n.try_step():
+            stepped = True
+            bus.pump()
+    return stepped
+
+
 def run_inmemory(
     scenario: Scenario,
     signals: SignalKind = "paper",
@@ -78,12 +88,9 @@ def run_inmemory(
     vehicle.advance()
     while not vehicle.done:
         bus.pump()
-        stepped = False
-        for n in nodes:
-            while n.try_step():
-                stepped = True
-                bus.pump()
+        stepped = _step_all(nodes, bus)
         bus.pump()
+        stepped = _step_all(nodes, bus) or stepped  # what that pump delivered (the step's readings) may let a node step
         if vehicle.ready_to_advance():
             bar.update(vehicle.k)
             vehicle.advance()

@@ -170,12 +170,11 @@ def grants(sc: Scenario, run_id: str) -> dict[str, Grant]:
         ),
     }
     out[OBSERVER] = Grant((), (keys.run_root(run_id),))  # reads everything of the run, publishes nothing
-    refs = sc.references()
     for n in sc.nodes:
         me = role_name("node", n.id)
         neighbours = tuple(keys.node_state(run_id, j) for j in sorted(n.in_weights) if j != n.id)
-        readings = tuple(keys.reading(run_id, j) for j in refs if j != n.id)  # every reference's, same step
-        mine = (keys.reading(run_id, n.id),) if n.id in refs else ()
+        readings = tuple(keys.reading(run_id, j) for j in sc.reading_sources(n.id))  # the same step's
+        mine = (keys.reading(run_id, n.id),) if sc.publishes_reading(n.id) else ()
         out[me] = Grant(
             (keys.node_state(run_id, n.id), *mine, keys.ready_of(run_id, me)),
             (keys.node_input(run_id, n.id), *neighbours, *readings, *control),

@@ -216,3 +216,66 @@ def test_no_false_detection_and_no_miss_with_the_readings(case: str) -> None:
             assert s.violations_total == 0 and s.node_steps_covered == s.node_steps_evaluated == s.node_steps_contained, (signals, seed)
             assert sum(n.false_detections for n in s.nodes) == 0, (signals, seed)
             assert any(n.first_detection is not None for n in s.nodes)  # the faults of nodes 1, 2, 4 and 6 are seen
+
+
+# ---------------------------------------------------------------- [network] max_faulty (docs/network.md)
+
+
+def _states(sc, signals: str = "paper") -> tuple[object, dict[int, list]]:
+    from netsetest.bus import keys
+    from netsetest.bus.base import MemoryBus
+    from netsetest.messages import NodeState
+
+    bus = MemoryBus()
+    states: dict[int, list] = {}
+    bus.subscribe(keys.node_state("mem", "*"), lambda key, m: isinstance(m, NodeState) and states.setdefault(m.node, []).append(m))
+    return run_inmemory(sc, signals, seed=0, bus=bus).summary, states
+
+
+def _fault_width(m) -> float:
+    import numpy as np
+
+    if m.set is not None:
+        from netsetest.sets import set_from_wire
+
+        lo, hi = set_from_wire(m.set, 3).bounds()
+        return float(hi[2] - lo[2])
+    return 2 * float(np.sqrt(m.rho * m.P[8]))
+
+
+@pytest.mark.parametrize(("case", "estimator", "gain", "gain_3_5"), [
+    ("nsnim", "sdp", 1.2, 1.25), ("saim", "sdp", 1.05, 1.05), ("nsnim", "zonotope", 1.15, 2.5), ("nsnim", "strip", 1.1, 2.5),
+])
+def test_at_most_four_faulty_sensors_narrow_every_node(case: str, estimator: str, gain: float, gain_3_5: float) -> None:
+    """paper6_max_faulty: every node reads everyone's reading of the step; the nodes' fault intervals are
+    narrower than without the declaration (the set estimators also pin the healthy sensors 3 and 5: no
+    two other readings agree inside their own set), and everything is covered and contained."""
+    import dataclasses
+
+    sc = load_topology("paper6_max_faulty", case=case, steps=40)
+    if estimator != "sdp":
+        sc = dataclasses.replace(sc, nodes=[dataclasses.replace(n, estimator=estimator) for n in sc.nodes])
+    s, states = _states(sc)
+    s0, states0 = _states(dataclasses.replace(sc, max_faulty=None))
+    assert s.violations_total == 0 and s.node_steps_covered == s.node_steps_evaluated == s.node_steps_contained
+    for i in sc.ids:
+        late = [m for m in states[i] if m.step >= 10]
+        used = [m for m in states[i][1:] if m.health]
+        assert len(used) >= 0.6 * 40 and all([j for j, _, _ in m.readings] == [j for j in sc.ids if j != i] for m in used)
+        w, w0 = (sum(_fault_width(m) for m in ms) / len(ms) for ms in (late, [m for m in states0[i] if m.step >= 10]))
+        assert w0 / w >= (gain_3_5 if i in (3, 5) else gain), (i, w0, w)
+
+
+def test_a_false_health_declaration_is_attributed_to_it() -> None:
+    """At most 3 faulty sensors declared where the paper's four are at some steps: the node-steps that used
+    the k-of-N interval there are not covered ("k-of-N health"), nothing is a violation."""
+    import dataclasses
+
+    sc = dataclasses.replace(load_topology("paper6_max_faulty", case="nsnim", steps=60), max_faulty=3)
+    s, states = _states(sc)
+    assert s.violations_total == 0
+    assert s.node_steps_not_covered.get("k-of-N health", 0) > 0
+    broken = {k for k in range(61) if not sc.health_holds({n.id: n.fault(k) for n in sc.nodes})}
+    assert broken
+    expected = sum(1 for ms in states.values() for m in ms if m.health and m.step in broken)
+    assert s.node_steps_not_covered["k-of-N health"] == expected

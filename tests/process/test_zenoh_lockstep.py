@@ -29,6 +29,7 @@ SCENARIOS = {  # name: topology, steps, case override
     "lossy": (PAPER6_LOSSY, 12, None),
     "car": ("topologies/paper6_car.toml", 12, None),  # a CommonRoad plant generates the truth (docs/plant.md)
     "reference": ("topologies/paper6_reference.toml", 10, "saim"),  # the same-step readings (docs/network.md)
+    "max_faulty": ("topologies/paper6_max_faulty.toml", 10, None),  # every node's reading, the k-of-N interval
 }
 TOL = 1e-9
 
@@ -99,6 +100,7 @@ def test_zenoh_lockstep_equals_inmemory(runs: Runs, name: str) -> None:
             assert ze["status"] == me["status"], f"{name}: node {i} step {k} status"
             assert ze["used"] == me["used"], f"{name}: node {i} step {k} used neighbours"
             assert ze["readings"] == me["readings"], f"{name}: node {i} step {k} used readings"
+            assert ze["health"] == me["health"], f"{name}: node {i} step {k} used the k-of-N interval"
             assert ze["contained"] == me["contained"]
 
     zs, ms = z["summary"], m.summary.to_dict()  # the file against the in-memory object
@@ -107,6 +109,8 @@ def test_zenoh_lockstep_equals_inmemory(runs: Runs, name: str) -> None:
     assert zs["case"] == (SCENARIOS[name][2] or "nsnim")
     if name == "reference":  # the readings crossed Zenoh (ACL included) and were used in lockstep every step
         assert all(e["readings"] == [3] for i, es in zrec["nodes"].items() if i != "3" for e in es[1:])
+    if name == "max_faulty":  # every node's reading crossed Zenoh (ACL included) and the k-of-N interval was used
+        assert sum(e["health"] for es in zrec["nodes"].values() for e in es[1:]) >= 0.6 * 6 * steps
     if name == "car":  # the car's mismatch reached the record the same way in both runtimes
         assert all(t["e"] is not None and any(t["e"]) for t in zrec["truth"][:-1])
     assert zs["losses"] == ms["losses"], f"{name}: scheduled losses differ"

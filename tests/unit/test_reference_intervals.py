@@ -1,4 +1,4 @@
-"""What a node makes of a reference's reading (estimator/sdp.py ``reference_intervals``, docs/network.md)."""
+"""What a node makes of a reference's reading (estimator/sdp.py ``reading_intervals``, docs/network.md)."""
 
 from __future__ import annotations
 
@@ -29,14 +29,15 @@ def _inp(sc, readings: dict[int, tuple[float, float]]) -> StepInput:
 def test_only_declared_references_are_read() -> None:
     sc, est, prior = _setup("nsnim")
     assert set(est.references) == {3}  # node 2's estimator reads sensor 3, the only reference
-    assert est.reference_intervals(prior, _inp(sc, {4: (0.03, 1.0)})) == {}  # node 4 is no reference: ignored
+    assert est.reading_intervals(prior, _inp(sc, {4: (0.03, 1.0)})) == {}  # node 4 is no reference: ignored
 
 
 def test_a_reading_inside_the_range_is_its_measurement_interval() -> None:
     sc, est, prior = _setup("nsnim")
-    got = est.reference_intervals(prior, _inp(sc, {3: (0.03, 1.0)}))
-    assert got == {3: measurement_interval(sc.node(3).sensor, 0.03, 1.0)}
-    assert math.isfinite(got[3].lo) and math.isfinite(got[3].hi)
+    got = est.reading_intervals(prior, _inp(sc, {3: (0.03, 1.0)}))
+    c, iv = got[3]
+    assert list(c) == [0.0, 0.18, 0.0] and iv == measurement_interval(sc.node(3).sensor, 0.03, 1.0)  # c̄ = [C_3, 0]
+    assert math.isfinite(iv.lo) and math.isfinite(iv.hi)
 
 
 def test_a_reading_at_the_limit_takes_its_open_side_from_the_propagated_set() -> None:
@@ -47,9 +48,10 @@ def test_a_reading_at_the_limit_takes_its_open_side_from_the_propagated_set() ->
     y = 0.8 * s3.r_max
     meas = measurement_interval(s3, y, 0.8)
     assert math.isfinite(meas.lo) and meas.hi == math.inf
-    got = est.reference_intervals(prior, _inp(sc, {3: (y, 0.8)}))
-    assert got[3].lo == meas.lo and math.isfinite(got[3].hi) and got[3].hi > got[3].lo
+    got = est.reading_intervals(prior, _inp(sc, {3: (y, 0.8)}))
+    iv = got[3][1]
+    assert iv.lo == meas.lo and math.isfinite(iv.hi) and iv.hi > iv.lo
     # and the estimator publishes a certified set that uses it (its gain on the reading is not zero)
     res = est.step(prior, _inp(sc, {3: (y, 0.8)}))
     assert res.status == "ok"
-    assert res.public.readings and np.any(res.public.L)
+    assert res.public.reading_keys == {3} and np.any(res.public.L)

@@ -1,0 +1,126 @@
+"""The k-of-N health assumption on one step's readings (``[network] max_faulty = m``, docs/network.md).
+
+Every sensor j measures the same combination of the state, C_j = s_j uᵀ (checked when the topology is
+loaded), so a healthy sensor's reading (fault 0) bounds t = uᵀx to an interval I_j.  At most m of the N
+sensors are faulty at a step, so the truth's t lies in the intersection of the intervals of some N − m
+sensors: equivalently, in at least N − m of the N intervals.  :func:`healthy_interval` returns the hull
+of that set (a union of intervals, found by one sweep over the endpoints instead of the C(N, m)
+hypotheses).  A sensor whose reading did not arrive has the interval (−∞, ∞): it may be the faulty one
+or not, which is always sound.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from netsetest.estimator.sector import Interval, measurement_interval
+from netsetest.models.sensor import Sensor
+
+if TYPE_CHECKING:
+    from netsetest.config.schema import Scenario
+
+Span = tuple[float, float]
+HEALTH_KEY = 0  # the k-of-N interval among a step's readings (node ids start at 1)
+
+
+def healthy_interval(spans: Sequence[Span], need: int) -> Span | None:
+    """The hull of {t : t lies in at least ``need`` of the closed intervals ``spans``}; None if no t does
+    (the assumption broke).  Endpoints may be ±inf."""
+    if need <= 0:
+        return (-math.inf, math.inf)
+    # opening events sort before closing ones at the same point: closed intervals that touch do overlap
+    events = sorted([(lo, 0) for lo, _ in spans] + [(hi, 1) for _, hi in spans])
+    count, lo_hull, hi_hull = 0, None, None
+    for t, kind in events:
+        if kind == 0:
+            count += 1
+            if count >= need and lo_hull is None:
+                lo_hull = t
+        else:
+            if count >= need:
+                hi_hull = t  # the last point where the count still reaches ``need``
+            count -= 1
+    if lo_hull is None or hi_hull is None:
+        return None
+    return (lo_hull, hi_hull)
+
+
+@dataclass(frozen=True)
+class HealthModel:
+    """What a node needs for the k-of-N interval: every sensor, how many must be healthy (N − m), the
+    tolerance below which a fault counts as none, and the direction u every sensor measures."""
+
+    sensors: dict[int, Sensor]
+    need: int
+    tolerance: float
+    u: np.ndarray  # (2,) unit vector: C_j = s_j uᵀ for every sensor (checked when the topology is loaded)
+
+    @classmethod
+    def of(cls, scenario: Scenario) -> HealthModel | None:
+        """The scenario's model, or None when it declares no ``max_faulty`` (or its readings are off)."""
+        if not scenario.health_declared:
+            return None
+        assert scenario.max_faulty is not None  # health_declared says so
+        c = scenario.nodes[0].sensor.C
+        return cls({n.id: n.sensor for n in scenario.nodes}, len(scenario.nodes) - scenario.max_faulty,
+                   scenario.fault_tolerance, c / np.linalg.norm(c))
+
+    def interval(
+        self, own: int, own_reading: tuple[float, float], readings: dict[int, tuple[float, float]], within: Span | None = None,
+    ) -> Interval | None:
+        """uᵀx ∈ this interval wherever at most m sensors are faulty and the readings' noise bounds held;
+        None if it is unbounded or empty (an assumption broke: nothing is used).  ``within``: an interval
+        known to hold uᵀx (the node's own prediction): hypotheses that agree only outside it are no
+        hypotheses (this is what makes the assumption bite: faulty sensors that agree with each other
+        usually do so far from the truth)."""
+        hull = healthy_interval(_present(_clipped(self._spans(own, own_reading, readings), within)), self.need)
+        if hull is None or not (math.isfinite(hull[0]) and math.isfinite(hull[1])) or hull[1] <= hull[0]:
+            return None
+        return Interval(*hull)
+
+    def own_fault_pinned(
+        self, own: int, own_reading: tuple[float, float], readings: dict[int, tuple[float, float]], within: Span | None = None,
+    ) -> bool:
+        """Whether the node's own sensor is healthy (|f| ≤ τ) in every consistent hypothesis: the others'
+        readings alone cannot supply N − m agreeing sensors (inside ``within``), while with its own they can."""
+        spans = _clipped(self._spans(own, own_reading, readings), within)
+        others = [sp for j, sp in zip(self.sensors, spans) if j != own]
+        return healthy_interval(_present(spans), self.need) is not None and healthy_interval(_present(others), self.need) is None
+
+    def _spans(self, own: int, own_reading: tuple[float, float], readings: dict[int, tuple[float, float]]) -> list[Span]:
+        """Per sensor (in ``sensors`` order), the interval of uᵀx its reading gives if it is healthy: |f_j| ≤ τ,
+        so C_j x lies within |Ds_j| τ of its measurement interval of C̄_j x̄_j; (−∞, ∞) if it did not arrive."""
+        spans: list[Span] = []
+        for j, sensor in self.sensors.items():
+            r = own_reading if j == own else readings.get(j)
+            if r is None:  # not here: it may be healthy with any value
+                spans.append((-math.inf, math.inf))
+                continue
+            iv = measurement_interval(sensor, *r)
+            slack = abs(sensor.Ds) * self.tolerance
+            s = float(sensor.C @ self.u)  # C_j x = s_j uᵀx
+            a, b = (iv.lo - slack) / s, (iv.hi + slack) / s
+            spans.append((min(a, b), max(a, b)))
+        return spans
+
+
+def _clipped(spans: list[Span], within: Span | None) -> list[Span | None]:
+    """Each span ∩ ``within``, in order; None where it misses it (it contains no admissible t)."""
+    out: list[Span | None] = []
+    for lo, hi in spans:
+        a, b = (lo, hi) if within is None else (max(lo, within[0]), min(hi, within[1]))
+        out.append((a, b) if a <= b else None)
+    return out
+
+
+def _present(spans: list[Span | None]) -> list[Span]:
+    """The non-empty spans: an empty one counts for no t (a sensor that must then be a faulty one)."""
+    return [sp for sp in spans if sp is not None]
+
+
+__all__ = ["HEALTH_KEY", "HealthModel", "Span", "healthy_interval"]
