@@ -36,14 +36,14 @@ QUICK: dict[str, Any] = {
     "launch_reps": 5,
     "flood_steps": 200, "flood_rate": 30000, "crash_steps": 30, "soak_steps": 2000, "cpu_steps": 400,
     "plant_steps": 80, "plant_seeds": [10, 11], "plant_lap_steps": 200, "plant_mb_steps": 10, "network_steps": 80, "network_seeds": [0],
-    "cost_reps": 3,
+    "cost_reps": 5,
 }
 FULL: dict[str, Any] = {
     "steps": 80, "ref_sched": 80, "ref_rule": 24, "naive": 40, "prev_sched": 80, "prev_rule": 24,
     "scaling_steps": 40, "scaling_sizes": [6, 24, 96], "rt_sizes": [6, 12, 24, 36, 48, 64, 80, 96, 112, 128], "rt_steps": 50, "profile_nodes": 96,
     "startup_reps": 5, "launch_reps": 9, "flood_steps": 400, "flood_rate": 30000, "crash_steps": 60, "soak_steps": 20000, "cpu_steps": 800,
     "plant_steps": 80, "plant_seeds": list(range(10, 20)), "plant_lap_steps": 600, "plant_mb_steps": 30,
-    "network_steps": 80, "network_seeds": [0, 1, 2], "cost_reps": 5,
+    "network_steps": 80, "network_seeds": [0, 1, 2], "cost_reps": 9,
 }
 
 
