@@ -30,6 +30,7 @@ Buffers are bounded: at most ``MAX_AHEAD`` steps of inputs and of neighbour stat
 from __future__ import annotations
 
 import time
+from typing import Any
 from collections import Counter
 
 import numpy as np
@@ -256,8 +257,7 @@ class Node:
                 return "input-steering"
             if not sc.speed_plausible(msg.step - 1, msg.vx_prev):  # the speed profile is part of the scenario
                 return "input-speed"
-        g = self.cfg.gamma_range if sc.case == "saim" else (1.0, 1.0)
-        if g is not None and not g[0] * (1 - GAMMA_RTOL) <= msg.gamma <= g[1] * (1 + GAMMA_RTOL):
+        if not self._gamma_possible(self.id, msg.gamma):
             return "input-gamma"
         return None
 
@@ -265,19 +265,12 @@ class Node:
         if msg.node not in self.references or key != keys.reading(self.run, msg.node):
             self.drop("not-a-reference")
             return
-        if msg.step <= self.k:  # a reading serves the step it was taken at: that one is done
-            self.drop("stale")
-            return
-        if self.k >= 0 and msg.step > self.k + MAX_AHEAD:
-            self.drop("implausible-step")
-            return
-        have = self.readings.get(msg.step, {})
-        if msg.node in have:
-            self.drop("duplicate-reading")  # the first copy counts
-            return
-        g = self.sc.node(msg.node).gamma_range if self.sc.case == "saim" else (1.0, 1.0)
-        if g is not None and not g[0] * (1 - GAMMA_RTOL) <= msg.gamma <= g[1] * (1 + GAMMA_RTOL):
-            self.drop("reading-gamma")
+        # a reading serves the step it was taken at: once that step is done it is stale
+        why = self._out_of_window(msg.step, msg.node, self.k + 1, self.readings, "duplicate-reading")
+        if why is None and not self._gamma_possible(msg.node, msg.gamma):
+            why = "reading-gamma"
+        if why is not None:
+            self.drop(why)
             return
         if len(self.readings) >= MAX_AHEAD and msg.step not in self.readings:
             del self.readings[min(self.readings)]  # not started (rejoin): keep the newest steps only
@@ -287,15 +280,9 @@ class Node:
         if msg.node not in self.others or key != keys.node_state(self.run, msg.node):
             self.drop("not-a-neighbour")
             return
-        if msg.step < self.k:  # too late to be used
-            self.drop("stale")
-            return
-        if self.k >= 0 and msg.step > self.k + MAX_AHEAD:  # not started: any step (kept: the newest few)
-            self.drop("implausible-step")
-            return
-        have = self.inbox.get(msg.step, {})
-        if msg.node in have:
-            self.drop("duplicate-state")  # the first copy counts
+        why = self._out_of_window(msg.step, msg.node, self.k, self.inbox, "duplicate-state")  # k: our next step uses it
+        if why is not None:
+            self.drop(why)
             return
         sensor = self.sensors[msg.node]
         if (msg.sector is not None) != sensor.saturated:
@@ -314,6 +301,21 @@ class Node:
         self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(np.asarray(msg.xhat), P, msg.rho, msg.gamma, msg.innov, sector)
         self.digests.setdefault(msg.step, {})[msg.node] = state_digest(msg)
         self._screen()
+
+    def _out_of_window(self, step: int, node: int, first: int, buffered: dict[int, dict[int, Any]], duplicate: str) -> str | None:
+        """Why a message of ``node`` for ``step`` is dropped before its content is looked at: earlier than
+        ``first`` (too late to be used), further ahead than the buffers take (not started: any step, the
+        newest few kept), or a second copy (``duplicate``: the first counts); None if none applies."""
+        if step < first:
+            return "stale"
+        if self.k >= 0 and step > self.k + MAX_AHEAD:
+            return "implausible-step"
+        return duplicate if node in buffered.get(step, {}) else None
+
+    def _gamma_possible(self, node: int, gamma: float) -> bool:
+        """γ within node's availability range (SAIM; NSNIM: 1), up to the rounding of lo + (hi − lo)·rand."""
+        g = self.sc.node(node).gamma_range if self.sc.case == "saim" else (1.0, 1.0)
+        return g is None or g[0] * (1 - GAMMA_RTOL) <= gamma <= g[1] * (1 + GAMMA_RTOL)
 
     def _refuse(self, msg: NodeState, reason: str) -> None:
         """Drop a neighbour state that cannot be honest; its sender no longer holds up that step."""
