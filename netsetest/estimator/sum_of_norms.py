@@ -13,7 +13,10 @@ sum of norms
 
 in three unknowns.  L = 0 is the minimum when the innovations' information costs more than their noise
 (a subgradient test; on the paper's NSNIM data it is, on every step); elsewhere F is smooth unless a term
-vanishes, and damped Newton from the least-squares gain converges in a few steps.  Nothing here is trusted: the answer is mapped back exactly
+vanishes, and damped Newton from the least-squares gain converges in a few steps.  A minimum where a
+term vanishes (a group with M_g = L b_gᵀ: the readings' update often has its minimum there) would
+stall Newton; each such point is tested first like L = 0: it is the minimum if the rest's gradient
+there is at most ‖b_g‖ long.  Nothing here is trusted: the answer is mapped back exactly
 as Clarabel's is and certified against the LMI like every answer (:func:`~netsetest.estimator.certificate.certify`);
 where Newton does not converge, or a term vanishes, the caller solves with Clarabel.
 """
@@ -30,6 +33,8 @@ ARMIJO = 1e-4
 DECREMENT_TOL = 1e-12  # converged: the Newton decrement (≈ 2 (F − min F)) this small relative to F
 ROUNDING_TOL = 1e-8  # no descent left to rounding and a decrement this small: converged as far as F can tell
 TINY = 1e-290  # a term this small is treated as vanished (F is not smooth there)
+KINK_TOL = 1e-9  # a group's term counts as vanishing at its own least-squares L below this (relative); margin of the test
+KINK_FLOOR = 1e-12  # the vanished term's norm used for its multiplier (relative): its columns of Π are ~0
 
 
 @dataclass(frozen=True)
@@ -59,6 +64,9 @@ class SumOfNorms:
         g0 = ((self.M * self.b[None, :]) @ self.onehot) @ (1.0 / r0)  # −∇ of Σ_g ‖M_g − L b_gᵀ‖ at L = 0
         if float(np.sqrt(g0 @ g0)) <= self.c:
             return np.zeros_like(g0), r0, 0.0, 0
+        kink = self._kink()  # a minimum where a term vanishes: Newton would stall there
+        if kink is not None:
+            return kink
         nb = (self.b * self.b) @ self.onehot  # ‖b_g‖²
         L = (self.M @ self.b) / float(nb.sum()) if start is None else start.copy()
         eye = np.eye(L.shape[0])
@@ -93,6 +101,34 @@ class SumOfNorms:
             else:
                 return (L, r, ln, it) if dec <= ROUNDING_TOL * F else None
             L = L + t * step
+        return None
+
+    def _kink(self) -> tuple[np.ndarray, np.ndarray, float, int] | None:
+        scale = float(np.abs(self.M).max(initial=0.0))
+        for g in range(self.onehot.shape[1]):
+            cols = self.onehot[:, g] > 0
+            bg, Mg = self.b[cols], self.M[:, cols]
+            nb2 = float(bg @ bg)
+            if nb2 <= TINY:
+                continue
+            L = Mg @ bg / nb2  # the least-squares L of the group alone: its term vanishes there if Mg is rank one along bg
+            if float(np.abs(Mg - L[:, None] * bg[None, :]).max()) > KINK_TOL * max(scale, TINY):
+                continue
+            R = self.M - L[:, None] * self.b[None, :]
+            r = np.sqrt((R * R).sum(axis=0) @ self.onehot)
+            others = np.arange(len(r)) != g
+            if r[others].min(initial=np.inf) <= TINY:
+                continue
+            W = (R * self.b[None, :]) @ self.onehot
+            grad = -(W[:, others] @ (1.0 / r[others]))  # ∇ of the other groups' terms
+            ln = float(np.sqrt(L @ L))
+            if self.c > 0.0:
+                if ln <= TINY:
+                    continue
+                grad = grad + self.c * L / ln
+            if float(np.sqrt(grad @ grad)) <= np.sqrt(nb2) * (1.0 - KINK_TOL):  # 0 ∈ ∂F(L): the minimum
+                r[g] = max(float(r[g]), KINK_FLOOR * max(scale, TINY))  # its multiplier share: positive, negligible
+                return L, r, ln, 0
         return None
 
 

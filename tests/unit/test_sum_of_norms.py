@@ -69,3 +69,31 @@ def test_zero_gain_is_exact_when_the_noise_costs_more() -> None:
     below = SumOfNorms(p.M, p.b, p.onehot, threshold * 0.9)
     found = below.minimise()
     assert found is not None and found[2] > 0.0 and below.value(found[0]) < below.value(np.zeros(3))
+
+
+def test_a_minimum_where_a_term_vanishes_is_found_and_is_the_minimum() -> None:
+    """The readings' update of paper6_max_faulty (captured): the minimum lies where the one-column group of
+    slot 3 vanishes (L = M₃ / b₃), where Newton stalls; the subgradient test finds it, without iterating."""
+    M = np.array([[0.00846, -0.00591, 0.0, 0.00126, 0.0],
+                  [0.02938, 0.04838, 0.0, 0.03164, 0.0],
+                  [-0.04109, -0.06766, 0.0, -0.04424, -0.14388]])
+    b = np.array([0.02938, 0.04838, 0.0, 0.03164, 0.0])
+    onehot = np.array([[1.0, 0, 0], [1, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    p = SumOfNorms(M, b, onehot, 0.019272747222410277)
+    L, a, ln, iterations = p.minimise()
+    assert iterations == 0 and np.allclose(L, M[:, 3] / b[3], rtol=1e-12)
+    assert a[1] <= 1e-12 * np.abs(M).max()  # the vanished term's share of the multipliers: negligible, positive
+    assert p.value(L) <= _by_cvxpy(p) * (1 + 1e-7)
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        assert p.value(L) <= p.value(L + 1e-4 * rng.normal(size=3)) * (1 + 1e-12)
+
+
+@pytest.mark.parametrize("seed", range(16))
+def test_with_vanishing_terms_the_answer_is_the_minimum_or_nothing(seed: int) -> None:
+    """Random instances whose one-column groups can vanish at the minimum: every answer given is the
+    minimum (cvxpy), the kink ones included."""
+    rng = np.random.default_rng(100 + seed)
+    p = _instance(rng, c=0.02 * seed, nsnim_like=False)
+    found = p.minimise()
+    assert found is None or p.value(found[0]) <= _by_cvxpy(p) * (1 + 1e-7)
