@@ -98,6 +98,10 @@ class Node:
         uses = self.set_estimator is None or self.set_estimator.uses_readings
         self.references = list(scenario.reading_sources(node_id)) if uses else []
         self.readings: dict[int, dict[int, tuple[float, float]]] = {}  # step → reference j → (ỹ_j, γ_j)
+        # readers whose reading did not come before we gave up on it: not waited for until one arrives (a
+        # dead reference must not cost every later step a timeout; a neighbour's state is not expected once
+        # the vehicle stops hearing from it, but the vehicle says nothing of non-neighbours)
+        self.silent: set[int] = set()
         # estimator state, plain arrays: centre, shape, radius, and our own last published message
         self.xhat = self.cfg.x0_hat.copy()
         self.P = self.cfg.P0.copy()
@@ -275,6 +279,7 @@ class Node:
         if len(self.readings) >= MAX_AHEAD and msg.step not in self.readings:
             del self.readings[min(self.readings)]  # not started (rejoin): keep the newest steps only
         self.readings.setdefault(msg.step, {})[msg.node] = (msg.y, msg.gamma)
+        self.silent.discard(msg.node)
 
     def _on_neighbour(self, key: str, msg: NodeState) -> None:
         if msg.node not in self.others or key != keys.node_state(self.run, msg.node):
@@ -352,21 +357,22 @@ class Node:
         inp = self.next_input()
         if inp is None or self.k < 0:
             return []
-        readings = self.readings.get(inp.step, {})
-        unread = [j for j in self.references if j not in readings]
+        unread = self._unread(inp)
         if self.set_estimator is not None:  # it uses no neighbour state
             return unread
         have, refused = self.inbox.get(self.k, {}), self.refused.get(self.k, set())
         return [j for j in inp.expect_from if j not in have and j not in refused] + unread
 
     def awaiting_readings(self) -> bool:
-        """Whether a reference's reading of the next step has not arrived (the real-time clock waits a
-        budget for it: runtime/processes.py)."""
+        """Whether a reading of the next step has not arrived (the real-time clock waits a budget for it:
+        runtime/processes.py)."""
         inp = self.next_input()
-        if inp is None or self.k < 0 or not self.references:
-            return False
+        return inp is not None and self.k >= 0 and bool(self._unread(inp))
+
+    def _unread(self, inp: NodeInput) -> list[int]:
+        """The readers whose reading of ``inp``'s step we still wait for (not the silent ones)."""
         readings = self.readings.get(inp.step, {})
-        return any(j not in readings for j in self.references)
+        return [j for j in self.references if j not in readings and j not in self.silent]
 
     def _prior(self) -> Ellipsoid:
         """The set the next step starts from."""
@@ -389,6 +395,8 @@ class Node:
                 self.waiting_since = now if now is not None else time.monotonic()
             return False
         else:
+            if self.give_up:  # whoever's reading is still missing: not waited for again until one arrives
+                self.silent |= set(self._unread(inp))
             self._update(inp)
             stepped = True
         if stepped:

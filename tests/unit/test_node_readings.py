@@ -101,3 +101,30 @@ def test_the_access_control_lets_the_reference_publish_and_every_other_node_rece
         assert all(keys.reading("r1", j) not in g[f"node-{i}"].publish for j in sc.ids if j != 3)
     paper6 = load_topology(REFERENCE.with_name("paper6.toml"))
     assert not any("reading" in k for gr in grants(paper6, "r1").values() for k in (*gr.publish, *gr.receive) if "node/" in k)
+
+
+def test_a_silent_reference_costs_one_wait_not_one_per_step() -> None:
+    """A reference whose reading did not come before the node gave up is not waited for again until one of
+    its readings arrives (a dead reference would otherwise cost every later step the neighbour timeout)."""
+    sc = load_topology(REFERENCE, None, 10)
+    bus = MemoryBus()
+    node = Node(sc, 2, bus, "t")
+    bus.publish(keys.node_input("t", 2), _input(sc, 2, 0))
+    bus.pump()
+    node.try_step()
+    bus.publish(keys.node_input("t", 2), _input(sc, 2, 1))
+    bus.pump()
+    assert node.missing() == [3]
+    node.give_up = True  # the runtime's deadline for step 1 passed
+    assert node.try_step() and node.k == 1 and node.silent == {3}
+    bus.publish(keys.node_input("t", 2), _input(sc, 2, 2))
+    bus.pump()
+    assert node.missing() == [] and not node.awaiting_readings() and node.try_step() and node.k == 2  # no wait
+    bus.publish(keys.reading("t", 3), Reading(step=3, node=3, y=0.0388, gamma=1.0))  # it speaks again
+    bus.publish(keys.node_input("t", 2), _input(sc, 2, 4))
+    bus.pump()
+    assert node.silent == set()
+    bus.publish(keys.node_input("t", 2), _input(sc, 2, 3))
+    bus.pump()
+    assert node.try_step() and node.k == 3  # its reading of step 3 is here
+    assert node.missing() == [3]  # and for step 4 the node waits for it again
