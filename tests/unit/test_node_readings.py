@@ -24,6 +24,17 @@ def _input(sc, node: int, step: int) -> NodeInput:
     return NodeInput(step=step, node=node, y=0.03, gamma=1.0, u_prev=(sc.steer_low + sc.steer_high) / 2, vx_prev=sc.vx(step - 1))
 
 
+def _node_after_step_0(steps: int) -> tuple[object, MemoryBus, Node]:
+    """Node 2 of paper6_reference on its own bus, its step 0 taken."""
+    sc = load_topology(REFERENCE, None, steps)
+    bus = MemoryBus()
+    node = Node(sc, 2, bus, "t")
+    bus.publish(keys.node_input("t", 2), _input(sc, 2, 0))
+    bus.pump()
+    assert node.try_step() and node.k == 0
+    return sc, bus, node
+
+
 def test_a_reference_publishes_its_reading_with_its_input_and_no_other_node_does() -> None:
     sc = load_topology(REFERENCE, None, 5)
     bus = MemoryBus()
@@ -44,12 +55,7 @@ def test_a_reference_publishes_its_reading_with_its_input_and_no_other_node_does
 
 
 def test_a_node_waits_for_the_reading_and_then_uses_it() -> None:
-    sc = load_topology(REFERENCE, None, 5)
-    bus = MemoryBus()
-    node = Node(sc, 2, bus, "t")
-    bus.publish(keys.node_input("t", 2), _input(sc, 2, 0))
-    bus.pump()
-    assert node.try_step() and node.k == 0
+    sc, bus, node = _node_after_step_0(5)
     bus.publish(keys.node_input("t", 2), _input(sc, 2, 1))
     bus.pump()
     assert node.missing() == [3] and node.awaiting_readings() and not node.try_step(now=1.0)  # the reading of step 1
@@ -74,12 +80,7 @@ def test_a_node_waits_for_the_reading_and_then_uses_it() -> None:
     ],
 )
 def test_a_reading_that_cannot_be_one_of_the_run_is_dropped(key: str, reading: Reading, reason: str) -> None:
-    sc = load_topology(REFERENCE, None, 80)
-    bus = MemoryBus()
-    node = Node(sc, 2, bus, "t")
-    bus.publish(keys.node_input("t", 2), _input(sc, 2, 0))
-    bus.pump()
-    node.try_step()
+    _, _, node = _node_after_step_0(80)
     node.on_message(key, reading)
     assert node.drops[reason] == 1 and not node.readings
 
@@ -106,12 +107,7 @@ def test_the_access_control_lets_the_reference_publish_and_every_other_node_rece
 def test_a_silent_reference_costs_one_wait_not_one_per_step() -> None:
     """A reference whose reading did not come before the node gave up is not waited for again until one of
     its readings arrives (a dead reference would otherwise cost every later step the neighbour timeout)."""
-    sc = load_topology(REFERENCE, None, 10)
-    bus = MemoryBus()
-    node = Node(sc, 2, bus, "t")
-    bus.publish(keys.node_input("t", 2), _input(sc, 2, 0))
-    bus.pump()
-    node.try_step()
+    sc, bus, node = _node_after_step_0(10)
     bus.publish(keys.node_input("t", 2), _input(sc, 2, 1))
     bus.pump()
     assert node.missing() == [3]
