@@ -10,7 +10,7 @@ can attribute a miss) and whether it uses its neighbours' sets.  The ellipsoidal
 (estimator/sdp.py, run by roles/node.py) is the one method that uses them; the methods of the other
 papers (001, 003) are single-sensor observers and ignore them (documented per module).  Where the
 topology declares reference sensors, an estimator may also take their readings of the same step
-(``uses_readings``; :func:`reading_slabs`, docs/network.md).
+(``uses_readings``; :class:`ReadingSlabs`, docs/network.md).
 """
 
 from __future__ import annotations
@@ -26,6 +26,8 @@ from netsetest.sets import Box, Ellipsoid, Slab, SumSet, Zonotope
 
 if TYPE_CHECKING:
     from netsetest.config.schema import Scenario
+    from netsetest.estimator.health import HealthModel
+    from netsetest.models.sensor import Sensor
 
 GuaranteedSet = Union[Ellipsoid, Zonotope, Box, SumSet]  # a runtime alias
 
@@ -51,37 +53,48 @@ class StepInput:
     gamma: float
     u_prev: float | None = None
     vx_prev: float | None = None
-    readings: dict[int, tuple[float, float]] = field(default_factory=dict)  # reference j → (ỹ_j, γ_j) of this step
+    readings: dict[int, tuple[float, float]] = field(default_factory=dict)  # node j → (ỹ_j, γ_j) of this step
 
 
-def reading_slabs(
-    scenario: Scenario, node_id: int, own: tuple[float, float], readings: dict[int, tuple[float, float]],
-    extent: Callable[[np.ndarray], tuple[float, float]] | None = None,
-) -> list[Slab]:
-    """A step's readings as slabs over node ``node_id``'s [β, r, f_i]: each reference's C_j x ∈ [lo, hi]
-    (its fault is declared 0, so C̄_j x̄_j = C_j x; a side at the sensor's limit is open), and under
-    ``[network] max_faulty`` the k-of-N interval of every reading and the node's own (``own``: ỹ, γ),
-    its hypotheses pruned by ``extent`` (the range of aᵀx̄ over the node's own set), and the own fault
-    |f| ≤ τ where no consistent majority leaves the node's sensor out (estimator/health.py)."""
-    from netsetest.estimator.health import HealthModel
+@dataclass(frozen=True)
+class ReadingSlabs:
+    """How a set estimator of one node turns a step's readings into slabs over its [β, r, f_i] (built once
+    per node: the references' sensors and the k-of-N model of ``[network] max_faulty``)."""
 
-    refs = set(scenario.references())
-    out = []
-    for j, (y, gamma) in sorted(readings.items()):
-        if j in refs:
-            sensor = scenario.node(j).sensor
-            lo, hi = sensor.measured_interval(y, gamma)
-            out.append(Slab(np.r_[sensor.C, 0.0], float(lo), float(hi)))
-    health = HealthModel.of(scenario)
-    if health is not None:
-        a = np.r_[health.u, 0.0]
-        within = extent(a) if extent is not None else None
-        hull = health.interval(node_id, own, readings, within)
-        if hull is not None:
-            out.append(Slab(a, hull.lo, hull.hi))
-        if health.own_fault_pinned(node_id, own, readings, within):  # no consistent majority without this sensor: |f| ≤ τ
-            out.append(Slab(np.array([0.0, 0.0, 1.0]), -health.tolerance, health.tolerance))
-    return out
+    node_id: int
+    references: dict[int, Sensor]  # reference j ≠ node → its sensor
+    health: HealthModel | None
+
+    @classmethod
+    def of(cls, scenario: Scenario, node_id: int) -> ReadingSlabs:
+        from netsetest.estimator.health import HealthModel
+
+        refs = {j: scenario.node(j).sensor for j in scenario.references() if j != node_id}
+        return cls(node_id, refs, HealthModel.of(scenario))
+
+    def slabs(
+        self, own: tuple[float, float], readings: dict[int, tuple[float, float]],
+        extent: Callable[[np.ndarray], tuple[float, float]] | None = None,
+    ) -> list[Slab]:
+        """Each reference's C_j x ∈ [lo, hi] (its fault is declared 0, so C̄_j x̄_j = C_j x; a side at the
+        sensor's limit is open), and under ``max_faulty`` the k-of-N interval of every reading and the
+        node's own (``own``: ỹ, γ), its hypotheses pruned by ``extent`` (the range of aᵀx̄ over the node's
+        own set), and the own fault |f| ≤ τ where no consistent majority leaves the node's sensor out
+        (estimator/health.py)."""
+        out = []
+        for j, (y, gamma) in sorted(readings.items()):
+            sensor = self.references.get(j)
+            if sensor is not None:
+                lo, hi = sensor.measured_interval(y, gamma)
+                out.append(Slab(np.r_[sensor.C, 0.0], float(lo), float(hi)))
+        if self.health is not None:
+            a = np.r_[self.health.u, 0.0]
+            hull, pinned = self.health.assess(self.node_id, own, readings, extent(a) if extent is not None else None, pin=True)
+            if hull is not None:
+                out.append(Slab(a, hull.lo, hull.hi))
+            if pinned:  # no consistent majority without this sensor: |f| ≤ τ
+                out.append(Slab(np.array([0.0, 0.0, 1.0]), -self.health.tolerance, self.health.tolerance))
+        return out
 
 
 @dataclass(frozen=True)

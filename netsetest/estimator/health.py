@@ -70,27 +70,26 @@ class HealthModel:
         return cls({n.id: n.sensor for n in scenario.nodes}, len(scenario.nodes) - scenario.max_faulty,
                    scenario.fault_tolerance, c / np.linalg.norm(c))
 
-    def interval(
+    def assess(
         self, own: int, own_reading: tuple[float, float], readings: dict[int, tuple[float, float]], within: Span | None = None,
-    ) -> Interval | None:
-        """uᵀx ∈ this interval wherever at most m sensors are faulty and the readings' noise bounds held;
-        None if it is unbounded or empty (an assumption broke: nothing is used).  ``within``: an interval
-        known to hold uᵀx (the node's own prediction): hypotheses that agree only outside it are no
-        hypotheses (this is what makes the assumption bite: faulty sensors that agree with each other
-        usually do so far from the truth)."""
-        hull = healthy_interval(_present(_clipped(self._spans(own, own_reading, readings), within)), self.need)
-        if hull is None or not (math.isfinite(hull[0]) and math.isfinite(hull[1])) or hull[1] <= hull[0]:
-            return None
-        return Interval(*hull)
+        pin: bool = False,
+    ) -> tuple[Interval | None, bool]:
+        """(the interval, whether the own fault is pinned) of one step.
 
-    def own_fault_pinned(
-        self, own: int, own_reading: tuple[float, float], readings: dict[int, tuple[float, float]], within: Span | None = None,
-    ) -> bool:
-        """Whether the node's own sensor is healthy (|f| ≤ τ) in every consistent hypothesis: the others'
-        readings alone cannot supply N − m agreeing sensors (inside ``within``), while with its own they can."""
+        The interval: uᵀx lies in it wherever at most m sensors are faulty and the readings' noise bounds
+        held; None if it is unbounded or empty (an assumption broke: nothing is used).  ``within``: an
+        interval known to hold uᵀx (the node's own prediction): hypotheses that agree only outside it are no
+        hypotheses (this is what makes the assumption bite: faulty sensors that agree with each other usually
+        do so far from the truth).  ``pin``: also tell whether the node's own sensor is healthy (|f| ≤ τ) in
+        every consistent hypothesis: the others' readings alone cannot supply N − m agreeing sensors (inside
+        ``within``), while with its own they can."""
         spans = _clipped(self._spans(own, own_reading, readings), within)
-        others = [sp for j, sp in zip(self.sensors, spans) if j != own]
-        return healthy_interval(_present(spans), self.need) is not None and healthy_interval(_present(others), self.need) is None
+        hull = healthy_interval(_present(spans), self.need)
+        pinned = pin and hull is not None and healthy_interval(
+            _present([sp for j, sp in zip(self.sensors, spans) if j != own]), self.need) is None
+        if hull is None or not (math.isfinite(hull[0]) and math.isfinite(hull[1])) or hull[1] <= hull[0]:
+            return None, pinned
+        return Interval(*hull), pinned
 
     def _spans(self, own: int, own_reading: tuple[float, float], readings: dict[int, tuple[float, float]]) -> list[Span]:
         """Per sensor (in ``sensors`` order), the interval of uᵀx its reading gives if it is healthy: |f_j| ≤ τ,

@@ -392,7 +392,7 @@ class LocalEstimator:
                 self._u_sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W, self.uncertainty
             )
             within = (pred.lo, pred.hi)
-            hull = self.health.interval(self.node_id, own, inp.readings, within)
+            hull, _ = self.health.assess(self.node_id, own, inp.readings, within)
             if hull is not None:
                 out[HEALTH_KEY] = (np.r_[self.health.u, 0.0], hull)
         return out

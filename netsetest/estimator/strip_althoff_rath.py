@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from netsetest.config.schema import NodeConfig, Scenario
-from netsetest.estimator.base import BASE_ASSUMPTIONS, Assumption, EstimatorError, NeighbourSet, SetEstimator, StepInput, reading_slabs
+from netsetest.estimator.base import BASE_ASSUMPTIONS, Assumption, EstimatorError, NeighbourSet, SetEstimator, ReadingSlabs, StepInput
 from netsetest.estimator.zonotope_w_radius import NEGLIGIBLE_CUT, frobenius_gain, reduce_order
 from netsetest.models.sensor import NA, NX
 from netsetest.sets import Zonotope
@@ -93,6 +93,7 @@ class RandomWalkObserver(SetEstimator):
 
     def __init__(self, scenario: Scenario, node_id: int, order: int | None = DEFAULT_ORDER) -> None:
         self.sc, self.node = scenario, scenario.node(node_id)
+        self.reading_slabs = ReadingSlabs.of(scenario, node_id)  # built once: the references and the k-of-N model
         fault_model_required(self.node)
         self.order = order
         self.set: Zonotope | None = None
@@ -127,7 +128,7 @@ class StripObserver(RandomWalkObserver):
         z = self._predicted(inp)
         lo, hi = self.node.sensor.measured_interval(inp.y, inp.gamma)
         z = intersect_strip(z, self.node.sensor.Cbar, lo, hi)
-        for slab in reading_slabs(self.sc, self.node.id, (inp.y, inp.gamma), inp.readings, lambda a: (-z.support(-a), z.support(a))):
+        for slab in self.reading_slabs.slabs((inp.y, inp.gamma), inp.readings, lambda a: (-z.support(-a), z.support(a))):
             z = intersect_strip(z, slab.a, slab.lo, slab.hi)
         if self.node.fault_size is not None:
             z = intersect_strip(z, _E3, -self.node.fault_size, self.node.fault_size)

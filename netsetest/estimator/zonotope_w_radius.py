@@ -41,7 +41,7 @@ from typing import Literal
 import numpy as np
 
 from netsetest.config.schema import FaultBoundsMode, NodeConfig, Scenario
-from netsetest.estimator.base import BASE_ASSUMPTIONS, Assumption, EstimatorError, NeighbourSet, SetEstimator, StepInput, reading_slabs
+from netsetest.estimator.base import BASE_ASSUMPTIONS, Assumption, EstimatorError, NeighbourSet, SetEstimator, ReadingSlabs, StepInput
 from netsetest.models.sensor import E_DESCRIPTOR, NA, NX
 from netsetest.sets import Ellipsoid, SlicedEllipsoid, Slab, SumSet, Zonotope
 
@@ -116,6 +116,7 @@ class ZonotopeEstimator(SetEstimator):
         gain: Gain = "hull",
     ) -> None:
         self.sc = scenario
+        self.reading_slabs = ReadingSlabs.of(scenario, node_id)  # built once: the references and the k-of-N model
         self.gain = gain
         self.node: NodeConfig = scenario.node(node_id)
         self.order = order
@@ -133,7 +134,7 @@ class ZonotopeEstimator(SetEstimator):
     def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> SumSet:
         s = self.advance(inp.y, inp.gamma, inp.u_prev, inp.vx_prev)
         if inp.readings and inp.u_prev is not None:  # the references' readings: one more strip each (Theorem 1)
-            for slab in reading_slabs(self.sc, self.node.id, (inp.y, inp.gamma), inp.readings, lambda a: (-s.support(-a), s.support(a))):
+            for slab in self.reading_slabs.slabs((inp.y, inp.gamma), inp.readings, lambda a: (-s.support(-a), s.support(a))):
                 s = self._intersect(s, slab)
             self.set = s
         return s

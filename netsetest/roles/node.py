@@ -96,9 +96,9 @@ class Node:
         self.publishes_reading = scenario.publishes_reading(node_id)  # a reference, or every node under max_faulty
         # the nodes whose reading of each step this node waits for and uses (its estimator must use them)
         uses = self.set_estimator is None or self.set_estimator.uses_readings
-        self.references = list(scenario.reading_sources(node_id)) if uses else []
-        self.readings: dict[int, dict[int, tuple[float, float]]] = {}  # step → reference j → (ỹ_j, γ_j)
-        # readers whose reading did not come before we gave up on it: not waited for until one arrives (a
+        self.read_from = list(scenario.reading_sources(node_id)) if uses else []
+        self.readings: dict[int, dict[int, tuple[float, float]]] = {}  # step → sender j → (ỹ_j, γ_j)
+        # senders whose reading did not come before we gave up on it: not waited for until one arrives (a
         # dead reference must not cost every later step a timeout; a neighbour's state is not expected once
         # the vehicle stops hearing from it, but the vehicle says nothing of non-neighbours)
         self.silent: set[int] = set()
@@ -127,7 +127,7 @@ class Node:
         bus.subscribe(keys.node_input(run_id, node_id), self.on_message)
         for j in self.others:
             bus.subscribe(keys.node_state(run_id, j), self.on_message, lazy=lazy_neighbours)
-        for j in self.references:  # never lazy: a reading arrives after the input that would wake us
+        for j in self.read_from:  # never lazy: a reading arrives after the input that would wake us
             bus.subscribe(keys.reading(run_id, j), self.on_message)
         bus.subscribe(keys.end(run_id), self.on_message)
         bus.declare_publisher(keys.node_state(run_id, node_id))
@@ -171,8 +171,8 @@ class Node:
             neigh[self.id] = prior_state(self.id, own, first.sector)
         u, vx = (sc.steer_low + sc.steer_high) / 2, sc.vx(0)
         res = est.step(own, StepInput(sc.model.weights(vx), u, y, gamma, neigh))
-        if self.references:  # the pattern of a step that uses the references' readings
-            readings = {j: (float(sc.node(j).sensor.Cbar @ cfg.x0_hat), gamma) for j in self.references}
+        if self.read_from:  # the pattern of a step that uses readings
+            readings = {j: (float(sc.node(j).sensor.Cbar @ cfg.x0_hat), gamma) for j in self.read_from}
             est.step(own, StepInput(sc.model.weights(vx), u, y, gamma, {}, readings))
             decode(encode(Reading(step=1, node=self.id, y=y, gamma=gamma)))
             est.forget_warm_starts()  # the readings' solver would start the run from this made-up gain
@@ -266,7 +266,7 @@ class Node:
         return None
 
     def _on_reading(self, key: str, msg: Reading) -> None:
-        if msg.node not in self.references or key != keys.reading(self.run, msg.node):
+        if msg.node not in self.read_from or key != keys.reading(self.run, msg.node):
             self.drop("not-a-reference")
             return
         # a reading serves the step it was taken at: once that step is done it is stale
@@ -370,9 +370,9 @@ class Node:
         return inp is not None and self.k >= 0 and bool(self._unread(inp))
 
     def _unread(self, inp: NodeInput) -> list[int]:
-        """The readers whose reading of ``inp``'s step we still wait for (not the silent ones)."""
+        """The senders whose reading of ``inp``'s step we still wait for (not the silent ones)."""
         readings = self.readings.get(inp.step, {})
-        return [j for j in self.references if j not in readings and j not in self.silent]
+        return [j for j in self.read_from if j not in readings and j not in self.silent]
 
     def _prior(self) -> Ellipsoid:
         """The set the next step starts from."""
