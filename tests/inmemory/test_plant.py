@@ -56,7 +56,7 @@ def test_single_track_rhs_is_the_package_model_plus_the_wind() -> None:
 
 
 def test_integration_agrees_with_an_independent_fixed_step_integrator() -> None:
-    """The adaptive RK45 of the plant against a classical RK4 at 0.1 ms over the same 2 s of a step steer."""
+    """The adaptive DOPRI5 of the plant against a classical RK4 at 0.1 ms over the same 2 s of a step steer."""
     sc = load_topology("paper6_car", steps=20, manoeuvre="step-steer")
     drive = Drive(sc, "paper", 0)
     car = drive.plant
