@@ -141,29 +141,44 @@ class _Program:
         self.sc, self.data, self.bounded = scenario, data, bounded
         self.ids = scenario.ids
         self.K = K = len(data) - 1
-        unc = scenario.uncertainty
-        self.ne = 2 if unc is not None else 0  # e_j columns per step
+        self.ne = 2 if scenario.uncertainty is not None else 0  # e_j columns per step
         self.nz = 2 * (K + 1) + K + self.ne * K + len(self.ids) * (K + 1)
         self.intervals = {
             (node.id, j): node.sensor.measured_interval(dj.y[node.id], dj.gamma[node.id])
             for node in scenario.nodes for j, dj in enumerate(data)
         }
-        eq = _Rows()  # x_{j+1} − Ā_j x_j − D̄_j w_j − e_j = B̄_j u_j
-        for j in range(K):
-            a, b, d = scenario.model.blend(scenario.model.weights(data[j].vx))
+        lin = _Rows()  # a z ≤ b
+        self._wind_rows(lin)
+        self._sensor_rows(lin)
+        esoc = self._mismatch_rows(lin)
+        self.eq, self.lin, self.soc = self._dynamics_rows().build(self.nz), lin.build(self.nz), self._prior_rows().build(self.nz)
+        self.esoc = esoc.build(self.nz)
+
+    def _dynamics_rows(self) -> _Rows:
+        """x_{j+1} − Ā_j x_j − D̄_j w_j − e_j = B̄_j u_j."""
+        eq, sc, data = _Rows(), self.sc, self.data
+        for j in range(self.K):
+            a, b, d = sc.model.blend(sc.model.weights(data[j].vx))
             for row in range(2):
                 terms = {self._x(j + 1, row): 1.0, self._w(j): -d[row, 0]}
                 terms.update({self._x(j, c): -a[row, c] for c in range(2)})
                 if self.ne:
                     terms[self._e(j, row)] = -1.0
                 eq.add(terms, b[row, 0] * data[j].u, j + 1)
-        lin = _Rows()  # a z ≤ b
-        sqrt_w = np.sqrt(scenario.W)
-        for j in range(K):
+        return eq
+
+    def _wind_rows(self, lin: _Rows) -> None:
+        """|w_j| ≤ √W."""
+        sqrt_w = np.sqrt(self.sc.W)
+        for j in range(self.K):
             lin.add({self._w(j): 1.0}, sqrt_w, j + 1)
             lin.add({self._w(j): -1.0}, sqrt_w, j + 1)
-        for n, node in enumerate(scenario.nodes):
-            free = node.id not in bounded
+
+    def _sensor_rows(self, lin: _Rows) -> None:
+        """lo ≤ C̄_i x̄_i,j ≤ hi (the measured interval), and the declared fault bounds of the bounded nodes."""
+        K = self.K
+        for n, node in enumerate(self.sc.nodes):
+            free = node.id not in self.bounded
             c, ds = node.sensor.C, node.sensor.Ds
             for j in range(K + 1):
                 lo, hi = self.intervals[node.id, j]
@@ -172,36 +187,43 @@ class _Program:
                     lin.add(r, hi, j, j if free else -1)
                 if np.isfinite(lo):
                     lin.add({col: -v for col, v in r.items()}, -lo, j, j if free else -1)
-            if not free:
-                for j in range(K + 1):
-                    if node.fault_size is not None:
-                        lin.add({self._f(n, j): 1.0}, node.fault_size, j)
-                        lin.add({self._f(n, j): -1.0}, node.fault_size, j)
-                    if node.fault_rate is not None and j > 0:
-                        lin.add({self._f(n, j): 1.0, self._f(n, j - 1): -1.0}, node.fault_rate, j)
-                        lin.add({self._f(n, j): -1.0, self._f(n, j - 1): 1.0}, node.fault_rate, j)
-        esoc = _Rows()  # an ellipsoid on e_j: s = [1; G⁻¹ e_j] ∈ SOC(3)
+            if free:
+                continue
+            for j in range(K + 1):
+                if node.fault_size is not None:
+                    lin.add({self._f(n, j): 1.0}, node.fault_size, j)
+                    lin.add({self._f(n, j): -1.0}, node.fault_size, j)
+                if node.fault_rate is not None and j > 0:
+                    lin.add({self._f(n, j): 1.0, self._f(n, j - 1): -1.0}, node.fault_rate, j)
+                    lin.add({self._f(n, j): -1.0, self._f(n, j - 1): 1.0}, node.fault_rate, j)
+
+    def _mismatch_rows(self, lin: _Rows) -> _Rows:
+        """The declared bound on e_j: a box as linear rows, an ellipsoid as s = [1; G⁻¹ e_j] ∈ SOC(3) (returned)."""
+        esoc, unc = _Rows(), self.sc.uncertainty
         if unc is not None and unc.kind == "box":
-            for j in range(K):
+            for j in range(self.K):
                 for row in range(2):
                     lin.add({self._e(j, row): 1.0}, unc.G[row, row], j + 1)
                     lin.add({self._e(j, row): -1.0}, unc.G[row, row], j + 1)
         elif unc is not None:
             g_inv = np.linalg.inv(unc.G)
-            for j in range(K):
+            for j in range(self.K):
                 esoc.add({}, 1.0, j + 1)
                 for row in range(2):
                     esoc.add({self._e(j, c): -g_inv[row, c] for c in range(2)}, 0.0, j + 1)
-        soc = _Rows()  # priors: s = b − A z = [√ρ; L⁻¹([x_0; f_i,0] − x̂0)] ∈ SOC(4), P0 = L Lᵀ
-        for n, node in enumerate(scenario.nodes):
+        return esoc
+
+    def _prior_rows(self) -> _Rows:
+        """The priors: s = b − A z = [√ρ; L⁻¹([x_0; f_i,0] − x̂0)] ∈ SOC(4), P0 = L Lᵀ."""
+        soc = _Rows()
+        for n, node in enumerate(self.sc.nodes):
             li = np.linalg.inv(np.linalg.cholesky(node.P0))
             prior_cols = (self._x(0, 0), self._x(0, 1), self._f(n, 0))
             soc.add({}, np.sqrt(node.rho), 0)
             centre = li @ node.x0_hat
             for row in range(3):
                 soc.add({col: -li[row, m] for m, col in enumerate(prior_cols) if li[row, m] != 0}, -centre[row], 0)
-        self.eq, self.lin, self.soc = eq.build(self.nz), lin.build(self.nz), soc.build(self.nz)
-        self.esoc = esoc.build(self.nz)
+        return soc
 
     def _x(self, j: int, comp: int) -> int:
         return 2 * j + comp
