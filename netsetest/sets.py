@@ -47,6 +47,24 @@ class Box:
         side = np.where(d > 0, self.hi, self.lo)
         return float(np.sum(np.where(d != 0, d * side, 0.0)))
 
+    def cut(self, slab: Slab) -> Box:
+        """The interval hull of the box ∩ {lo ≤ aᵀx ≤ hi}: per coordinate j with a_j ≠ 0, a_j x_j lies in
+        [lo − max Σ_{i≠j} a_i x_i, hi − min Σ_{i≠j} a_i x_i] (exact for one slab: the other coordinates
+        range independently over the box).  The box itself if the two do not meet (an assumption broke)."""
+        a = np.asarray(slab.a, dtype=float)
+        if self.support(-a) > slab.hi or self.support(a) < slab.lo:
+            return self
+        lo, hi = self.lo.copy(), self.hi.copy()
+        for j in np.flatnonzero(a):
+            rest = a.copy()
+            rest[j] = 0.0
+            upper, lower = slab.hi + self.support(-rest), slab.lo - self.support(rest)  # bounds of a_j x_j
+            if a[j] > 0:
+                lo[j], hi[j] = max(lo[j], lower / a[j]), min(hi[j], upper / a[j])
+            else:
+                lo[j], hi[j] = max(lo[j], upper / a[j]), min(hi[j], lower / a[j])
+        return Box(lo, hi)
+
 
 @dataclass(frozen=True)
 class Ellipsoid:

@@ -1,6 +1,6 @@
 """``netsetest calibrate``: the smallest model-mismatch bound that covers a plant's e_k on training drives.
 
-For each training manoeuvre, seed and signal family the plant is driven exactly as the vehicle role drives
+For each training drive (a manoeuvre, at a steering amplitude where it has one), seed and signal family the plant is driven exactly as the vehicle role drives
 it (:class:`~netsetest.models.drive.Drive`) and every e_k = x_{k+1} − (Ā_k x_k + B̄_k u_k + D̄_k w_k) is
 collected.  Two bounds cover all of them, each enlarged by the stated margin:
 
@@ -8,6 +8,11 @@ collected.  Two bounds cover all of them, each enlarged by the stated margin:
 - the ellipsoid: the minimum-area origin-centred ellipse {e: eᵀE⁻¹e ≤ 1} around the e_k (Khachiyan's
   algorithm on the symmetric set ±e_k, to relative tolerance :data:`MVEE_TOL`, then scaled so that every
   e_k lies inside), its semi-axes enlarged by (1 + margin).
+
+Where the package has a simpler model of the same car, the same drives on it say how much of e_k each
+cause contributes (:func:`simpler_mismatch`): the multi-body model without its suspension and roll is the
+single-track drift model, and that without its tyres' nonlinearity is the single track with linear tyres
+of the same slope (``single-track-linear``), whose T-S model is the same.
 
 A bound calibrated on some manoeuvres is only an assumption on others: the collector checks it on every
 step of every run and attributes a miss beyond it to "model mismatch" (docs/plant.md, "Calibration").
@@ -23,11 +28,17 @@ import numpy as np
 
 from netsetest.config.schema import Scenario
 from netsetest.models.drive import Drive
-from netsetest.models.manoeuvres import ManoeuvreName
+from netsetest.models.manoeuvres import WITH_AMPLITUDE, DriveSpec
+from netsetest.models.plant import PlantKind
 from netsetest.models.signals import SignalKind
 from netsetest.models.uncertainty import ModelUncertainty
 
 DEFAULT_MARGIN = 0.1
+# the same car with one cause of mismatch less at each step down (their derived T-S models are the same)
+SIMPLER: dict[PlantKind, tuple[PlantKind, ...]] = {
+    "ts": (), "single-track-linear": (), "single-track": ("single-track-linear",),
+    "multi-body": ("single-track", "single-track-linear"),
+}
 MVEE_TOL = 1e-7
 MVEE_MAX_ITER = 10_000
 
@@ -36,7 +47,7 @@ MVEE_MAX_ITER = 10_000
 class DriveMismatch:
     """The e_k of one training drive."""
 
-    manoeuvre: ManoeuvreName
+    drive: DriveSpec  # the manoeuvre, with its steering amplitude where it has one
     signals: SignalKind
     seed: int
     e: np.ndarray  # (steps, NX)
@@ -63,7 +74,8 @@ def drive_mismatch(sc: Scenario, signals: SignalKind, seed: int) -> DriveMismatc
     """e_0..e_{K−1} of one run's truth (no estimator runs)."""
     drive = Drive(sc, signals, seed)
     es = [d.e for d in (drive.step(k) for k in range(sc.steps)) if d.e is not None]
-    return DriveMismatch(sc.manoeuvre, signals, seed, np.array(es))
+    spec = DriveSpec(sc.manoeuvre, sc.steer_high if sc.manoeuvre in WITH_AMPLITUDE else None)
+    return DriveMismatch(spec, signals, seed, np.array(es))
 
 
 def origin_mvee(points: np.ndarray) -> np.ndarray:
@@ -110,9 +122,34 @@ def calibrate(
     return Calibration(drives, margin, box, ellipsoid)
 
 
+def simpler_mismatch(
+    scenarios: Sequence[Scenario], seeds: Sequence[int], signals: Sequence[SignalKind],
+    progress: Callable[[int, int], None] | None = None,
+) -> dict[PlantKind, list[DriveMismatch]]:
+    """The same drives on each simpler model of the car (:data:`SIMPLER`), plant by plant."""
+    out: dict[PlantKind, list[DriveMismatch]] = {}
+    runs = [(plant, sc, s, sig) for plant in SIMPLER[scenarios[0].plant] for sc in scenarios for s in seeds for sig in signals]
+    for n, (plant, sc, seed, sig) in enumerate(runs):
+        out.setdefault(plant, []).append(drive_mismatch(dataclasses.replace(sc, plant=plant), sig, seed))
+        if progress is not None:
+            progress(n + 1, len(runs))
+    return out
+
+
+def max_by_drive(drives: Sequence[DriveMismatch]) -> dict[str, np.ndarray]:
+    """max_k |e_k| per drive label (a manoeuvre at its amplitude), over seeds and signals, in first-seen order."""
+    out: dict[str, np.ndarray] = {}
+    for d in drives:
+        out[d.drive.label] = np.maximum(out.get(d.drive.label, np.zeros(2)), d.max_abs)
+    return out
+
+
 def with_uncertainty(sc: Scenario, bound: ModelUncertainty | None) -> Scenario:
     """The scenario with another declared mismatch bound (e.g. a calibrated one, or a halved one)."""
     return dataclasses.replace(sc, uncertainty=bound)
 
 
-__all__ = ["Calibration", "DriveMismatch", "calibrate", "drive_mismatch", "origin_mvee", "with_uncertainty"]
+__all__ = [
+    "SIMPLER", "Calibration", "DriveMismatch", "calibrate", "drive_mismatch", "max_by_drive", "origin_mvee",
+    "simpler_mismatch", "with_uncertainty",
+]

@@ -44,6 +44,8 @@ from netsetest.runtime.inmemory import run_inmemory
 CONTAIN_TOL = 1e-8  # the sets' own membership slack (sets.MEMBERSHIP_TOL) plus float sums of the bounds
 EXACT_PINNED = 1e-9  # an exact half-width below this is a coordinate pinned by a declaration (no ratio to it)
 _SDP_ASSUMPTIONS: tuple[str, ...] = ("dependency cone (collector)",)
+SDP_ALONE, EXACT_LOCAL = "sdp-alone", "exact-local"  # compare(alone=True): the nodes alone, each node's exact local limit
+ALONE_ROWS = (SDP_ALONE, EXACT_LOCAL)
 
 
 @dataclass
@@ -226,9 +228,14 @@ def compare(
     seeds: tuple[int, ...] = (0,),
     steps: int | None = None,
     progress: Callable[[int, int, str], None] | None = None,
+    alone: bool = False,
 ) -> Comparison:
     """Run every (case, signals, seed) and score every estimator (module doc); ``progress(done, total,
-    what)`` after each run and each estimator's scoring (a comparison takes tens of seconds)."""
+    what)`` after each run and each estimator's scoring (a comparison takes tens of seconds).
+
+    ``alone``: two more rows, what the network is worth: ``sdp-alone``, the same nodes run on their own (a
+    self-loop only, no reading: :meth:`Scenario.alone`), and ``exact-local``, each node's exact limit from
+    its own data (the best any node alone can do); both against the central exact limit, like every row."""
     unknown = [e for e in estimators if e not in ESTIMATOR_NAMES]
     if unknown:
         raise CompareError(f"unknown estimator {unknown[0]!r}; choose from {', '.join(ESTIMATOR_NAMES)}")
@@ -236,12 +243,12 @@ def compare(
         raise CompareError(f"estimator list {','.join(estimators)} names one twice")
     if not estimators or not cases or not signals or not seeds:
         raise CompareError("nothing to compare: give at least one estimator, case, signal kind and seed")
-    acc = {e: _Accumulator() for e in estimators}
+    acc = {e: _Accumulator() for e in (*estimators, *(ALONE_ROWS if alone else ()))}
     runs: list[str] = []
     first_bounds: dict[str, dict[int, np.ndarray]] = {}
     truth_fault: dict[int, np.ndarray] = {}
     sc = None
-    total = len(cases) * len(signals) * len(seeds) * (1 + len(estimators))  # a run, then each estimator's scoring
+    total = len(cases) * len(signals) * len(seeds) * (1 + len(estimators) + 2 * alone)  # a run, then each row's scoring
     done = [0]
 
     def report(what: str) -> None:
@@ -257,17 +264,62 @@ def compare(
                 assert res.parts is not None  # kept in memory (run_inmemory's default)
                 rec = record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
                 report(f"run {sc.case}/{sig}/{seed}")
-                _score_run(sc, rec, estimators, acc, first_bounds if not runs else None, report)
+                ex = _score_run(sc, rec, estimators, acc, first_bounds if not runs else None, report)
+                if alone:
+                    res_alone = run_inmemory(sc.alone(), sig, "scheduled", seed)
+                    assert res_alone.parts is not None
+                    rec_alone = record_from_parts(res_alone.meta, res_alone.parts["truth"], res_alone.parts["nodes"], res_alone.summary)
+                    _score_alone(sc, rec, rec_alone, ex, acc, first_bounds if not runs else None, report)
                 runs.append(f"{sc.case}/{sig}/{seed}")
                 if len(runs) == 1:
                     truth_fault = {i: np.array([t["faults"][str(i)] for t in sorted(rec.truth, key=lambda t: t["step"])]) for i in sc.ids}
     assert sc is not None
-    rows = [_row(e, acc[e], e != EXACT) for e in estimators]
+    rows = [_row(e, a, e not in (EXACT, EXACT_LOCAL)) for e, a in acc.items()]
     return Comparison(str(topology), runs, sc.steps, sc.tau_s, rows, first_bounds, truth_fault, sc.plant_label)
 
 
+def _sdp_track(rec: Record, i: int, a: _Accumulator) -> tuple[np.ndarray, np.ndarray, list[str | None]]:
+    """Node i's published bounds in a run's record, its steps, and per step None or "dependency cone" (the
+    collector's verdict); its solve times go to ``a``."""
+    track = rec.nodes[i]
+    bounds, steps = _record_bounds(rec, i), track.steps.astype(int)
+    a.ms += [float(m) for m, s, k in zip(track.solve_ms, track.status, steps) if s in ("ok", "fallback") and k > 0]
+    a.fallbacks += sum(s == "fallback" for s in track.status)
+    a.assumptions.update(_SDP_ASSUMPTIONS)
+    return bounds, steps, [None if ok else "dependency cone" for ok in track.assumptions_ok]
+
+
+def _score_alone(sc: Scenario, rec: Record, rec_alone: Record, ex: ExactBounds, acc: dict[str, _Accumulator],
+                 keep: dict[str, dict[int, np.ndarray]] | None, report: Callable[[str], None]) -> None:
+    """The rows of ``compare(alone=True)``: the nodes run alone (``rec_alone``, the same truth and
+    measurements) and each node's exact local limit, against the central exact limit ``ex``."""
+    truth = sorted(rec.truth, key=lambda t: t["step"])
+    for name in ALONE_ROWS:
+        a = acc[name]
+        if keep is not None:
+            keep[name] = {}
+        for i in sc.ids:
+            tr_i = np.array([np.r_[t["x"], t["faults"][str(i)]] for t in truth])
+            if name == SDP_ALONE:
+                bounds, steps, broken = _sdp_track(rec_alone, i, a)
+            else:
+                t0 = time.perf_counter()
+                local = exact_bounds(sc, rec, "used", nodes=[i])
+                bounds, steps = _exact_array(local, i), np.arange(len(truth))
+                a.ms += [1000 * (time.perf_counter() - t0) / len(steps)] * len(steps)
+                cones = _cones(sc, rec, ("fault_bound",) if i in local.bounded_nodes else (), [i])
+                broken = [cones[(i, int(k))] for k in steps]
+                a.assumptions.update(("prior", "noise", "disturbance", *(("fault_bound",) if local.bounded_nodes else ())))
+            a.references.add(ex.fault_bounds + "".join(f" without {o}" for o in ex.omitted))
+            _score(a, bounds, steps, tr_i[steps], _exact_array(ex, i), broken)
+            if keep is not None:
+                keep[name][i] = bounds
+        report(name)
+
+
 def _score_run(sc: Scenario, rec: Record, estimators: tuple[str, ...], acc: dict[str, _Accumulator],
-               keep: dict[str, dict[int, np.ndarray]] | None, report: Callable[[str], None]) -> None:
+               keep: dict[str, dict[int, np.ndarray]] | None, report: Callable[[str], None]) -> ExactBounds:
+    """Score every estimator on one run; the run's central exact limit (what every row is measured against)."""
     data = step_data(rec)
     t0 = time.perf_counter()
     ex = exact_bounds(sc, rec, "used")
@@ -283,12 +335,7 @@ def _score_run(sc: Scenario, rec: Record, estimators: tuple[str, ...], acc: dict
             tr_i = np.array([np.r_[t["x"], t["faults"][str(i)]] for t in truth])
             reference = ex
             if name == SDP:
-                track = rec.nodes[i]
-                bounds, steps = _record_bounds(rec, i), track.steps.astype(int)
-                broken = [None if ok else "dependency cone" for ok in track.assumptions_ok]
-                a.ms += [float(m) for m, s, k in zip(track.solve_ms, track.status, steps) if s in ("ok", "fallback") and k > 0]
-                a.fallbacks += sum(s == "fallback" for s in track.status)
-                a.assumptions.update(_SDP_ASSUMPTIONS)
+                bounds, steps, broken = _sdp_track(rec, i, a)
             elif name == EXACT:
                 bounds, steps = _exact_array(ex, i), all_steps
                 cones = _centralized_cones(sc, rec, ex.bounded_nodes)
@@ -306,11 +353,12 @@ def _score_run(sc: Scenario, rec: Record, estimators: tuple[str, ...], acc: dict
                 if "fault_bound" in est_assumptions and i not in ex.bounded_nodes:
                     ex_all = ex_all or exact_bounds(sc, rec, "all")
                     reference = ex_all
-            a.references.add(reference.fault_bounds)
+            a.references.add(reference.fault_bounds + "".join(f" without {o}" for o in reference.omitted))
             _score(a, bounds, steps, tr_i[steps], _exact_array(reference, i), broken)
             if keep is not None:
                 keep[name][i] = bounds
         report(name)
+    return ex
 
 
 def comparison_document(c: Comparison) -> list[dict]:

@@ -92,6 +92,9 @@ class ExactBounds:
     bounded_nodes: tuple[int, ...]  # nodes whose declared fault bounds were applied
     infeasible_steps: tuple[int, ...]
     witnesses: dict[WitnessKey, Witness] = field(default_factory=dict)
+    # declared assumptions the program leaves out: the limit is then an outer bound of the exact one, and a
+    # node that uses them may be narrower than it (the k-of-N health: a union over hypotheses at every step)
+    omitted: tuple[str, ...] = ()
 
     def interval(self, coordinate: Coordinate, node: int | None = None) -> np.ndarray:
         """(K, 2) bounds of one coordinate (``node`` is needed for the fault)."""
@@ -407,8 +410,13 @@ def exact_bounds(
             infeasible.append(k)
     return ExactBounds(
         steps=np.arange(K1), beta=beta, r=r, fault=fault, fault_bounds=fault_bounds,
-        bounded_nodes=bounded, infeasible_steps=tuple(infeasible), witnesses=witnesses,
+        bounded_nodes=bounded, infeasible_steps=tuple(infeasible), witnesses=witnesses, omitted=omitted_assumptions(scenario),
     )
+
+
+def omitted_assumptions(scenario: Scenario) -> tuple[str, ...]:
+    """The declared assumptions :func:`exact_bounds` does not apply (docs/exact.md)."""
+    return (f"k-of-N health (max_faulty = {scenario.max_faulty})",) if scenario.health_declared else ()
 
 
 # ---------------------------------------------------------------- a record against the exact limit

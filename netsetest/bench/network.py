@@ -35,13 +35,6 @@ def _log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def _alone(sc: Scenario) -> Scenario:
-    """The same scenario with every node on its own (a self-loop only, no reference's reading)."""
-    import dataclasses
-
-    return dataclasses.replace(sc, nodes=[dataclasses.replace(n, in_weights={n.id: 1.0}) for n in sc.nodes], readings=False)
-
-
 def _sdp_figures(sc: Scenario, sig: str, seed: int, path: Path) -> tuple[dict, Record]:
     """Per node: the SDP's mean fault width from step FROM_STEP and its detection delay (docs/fdi.md); and
     the run's record."""
@@ -72,7 +65,7 @@ def network_figures(cfg: dict, tmp: Path) -> dict:
             for sig in ("paper", "worst"):
                 for seed in cfg["network_seeds"]:
                     sdp, rec = _sdp_figures(sc, sig, seed, tmp / "network.json")
-                    alone, _ = _sdp_figures(_alone(sc), sig, seed, tmp / "alone.json")
+                    alone, _ = _sdp_figures(sc.alone(), sig, seed, tmp / "alone.json")
                     nodes = {}
                     exact = _exact_figures(sc, rec, sdp) if sc.max_faulty is None else {}  # exact has no k-of-N
                     for i in sc.ids:

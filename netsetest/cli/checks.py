@@ -9,6 +9,8 @@ import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from netsetest.models.manoeuvres import DriveSpec
+
 SEED_MAX = 2**63 - 1
 SEED_RANGE_RE = re.compile(r"(\d+)\s*-\s*(\d+)")
 SEED_RANGE_MAX = 10_000  # seeds one range may name (a typo like 0-99999999 is not a request)  # numpy's SeedSequence takes any non-negative integer; keep it to 64 bits
@@ -56,6 +58,17 @@ def name_list(choices: Sequence[str], what: str) -> Callable[[str], tuple[str, .
         return items
 
     return parse
+
+
+def drive_list(s: str) -> tuple[DriveSpec, ...]:
+    """argparse type: comma-separated training drives, ``name`` or ``name@amplitude`` (models/manoeuvres.py)."""
+    items = [x.strip() for x in s.split(",") if x.strip()]
+    if not items:
+        raise argparse.ArgumentTypeError(f"no manoeuvre in {s!r}")
+    try:
+        return tuple(DriveSpec.parse(x) for x in items)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def seed_list(s: str) -> tuple[int, ...]:

@@ -21,6 +21,10 @@ def add_parser(sub: argparse._SubParsersAction, scenario_args: Callable[[argpars
                    help=f"rows, from {', '.join(ESTIMATOR_NAMES)} (default: {','.join(DEFAULT_COMPARE)})")
     p.add_argument("--signals", type=checks.name_list(SIGNAL_KINDS, "signal kind"), default=("paper",), metavar="KINDS", help="paper and/or worst, comma-separated (default: paper)")
     p.add_argument("--seeds", type=checks.seed_list, default=(0,), metavar="S,…", help="seeds, comma-separated, ranges A-B allowed (default: 0)")
+    p.add_argument("--alone", action="store_true",
+                   help="two more rows, what the network is worth: sdp-alone (every node run on its own: a self-loop "
+                   "only, no reading) and exact-local (each node's exact limit from its own data), against the same "
+                   "central exact limit (docs/network.md)")
     p.add_argument("--json", metavar="PATH", help="write the rows as a JSON list")
     p.add_argument("--markdown", metavar="PATH", help="write the table as Markdown")
     p.add_argument("--plot", metavar="DIR", help="one figure per node: every estimator's fault bounds and the truth (first run)")
@@ -62,7 +66,7 @@ def cmd_compare(a: argparse.Namespace) -> int:
         bar.total = total  # known once compare has counted its runs and estimators
         bar.update(done, what)
 
-    c = compare(a.topology, a.estimators, (a.case,), a.signals, a.seeds, a.steps, progress=on_progress)
+    c = compare(a.topology, a.estimators, (a.case,), a.signals, a.seeds, a.steps, progress=on_progress, alone=a.alone)
     bar.close()
     print(f"compare {c.topology}: runs {', '.join(c.runs)}, {c.steps} steps; widths: mean over nodes and steps ≥ 10")
     for line in folded_table([TABLE_HEADER, *table_rows(c)], TERMINAL_WIDTH):

@@ -22,7 +22,7 @@ from netsetest.config.schema import ConfigError
 from netsetest.analysis.calibrate import DEFAULT_MARGIN
 from netsetest.bench.sections import SECTIONS
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
-from netsetest.models.manoeuvres import MANOEUVRES
+from netsetest.models.manoeuvres import MANOEUVRES, WITH_AMPLITUDE
 from netsetest.models.signals import SIGNAL_KINDS
 from netsetest.extras import MissingExtra, require
 from netsetest.records.errors import RecordError
@@ -121,8 +121,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "exchange could buy it at best (docs/network.md)")
     p = sub.add_parser("calibrate", help="the smallest model-mismatch bound covering a plant's e_k on training manoeuvres")
     p.add_argument("topology", help="topology with a nonlinear plant (a path, or a bundled name such as paper6_car)")
-    p.add_argument("--manoeuvres", type=checks.name_list(MANOEUVRES, "manoeuvre"), required=True, metavar="A,B,...",
-                   help=f"training manoeuvres, comma-separated: {', '.join(MANOEUVRES)}")
+    p.add_argument("--manoeuvres", type=checks.drive_list, required=True, metavar="A,B@AMP,...",
+                   help=f"training manoeuvres, comma-separated: {', '.join(MANOEUVRES)}; NAME@AMP steers "
+                   f"{', '.join(WITH_AMPLITUDE)} with amplitude AMP rad instead of [steering] high (e.g. an "
+                   "FMVSS 126 series sine-dwell@0.012,sine-dwell@0.02,sine-dwell@0.03)")
     p.add_argument("--seeds", type=checks.seed_list, default=tuple(range(5)), metavar="A-B,...",
                    help="seeds of the training drives, e.g. 0-9 (default: 0-4)")
     p.add_argument("--signals", type=checks.name_list(SIGNAL_KINDS, "signal kind"), default=SIGNAL_KINDS, metavar="A,B",
@@ -130,6 +132,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", type=checks.positive_int, help="steps per drive (default: the topology's)")
     p.add_argument("--margin", type=checks.non_negative_float, default=DEFAULT_MARGIN,
                    help=f"relative enlargement of the half-widths and semi-axes (default: {DEFAULT_MARGIN})")
+    p.add_argument("--causes", action="store_true",
+                   help="also drive the same car's simpler models (multi-body → single-track → linear tyres): how much of "
+                   "e_k each cause contributes")
     p.add_argument("--json", metavar="PATH", help="write the bounds and the per-drive maxima as JSON")
 
     p = sub.add_parser("bench", help="the performance benchmark: solve times, tightness, Zenoh overhead, start-up, memory, real-time scale, defences")
@@ -263,6 +268,9 @@ def cmd_exact(a: argparse.Namespace) -> int:
           f"(applied on nodes: {bounded}), {time.perf_counter() - t0:.1f} s")
     if ex.infeasible_steps:
         print(f"  no trajectory meets the assumptions at steps {list(ex.infeasible_steps)} (an assumption was broken)")
+    if ex.omitted:
+        print(f"  not applied: {', '.join(ex.omitted)} (a mixed-integer program): these bounds are an outer bound of the "
+              "exact limit, and a node that uses the assumption may be narrower (docs/exact.md)")
     names = {"f": "fault", "r": "yaw rate", "beta": "sideslip"}
     print("published width / exact width: mean over steps ≥ 10 | all steps; relative-RMS radius (Althoff & Rath (9), exact = 1)")
     print(f"{'node':>4}  " + "  ".join(f"{names[c]:>22}" for c in COORDINATES))
@@ -279,7 +287,8 @@ def cmd_exact(a: argparse.Namespace) -> int:
     narrower = sum(x.narrower for n in cmp.nodes for x in n.ratios.values())
     total = sum(len(rec.nodes[n.node].steps) for n in cmp.nodes) * len(COORDINATES)
     print(f"published interval narrower than exact on {narrower} of {total} node-step intervals"
-          + (" (the estimator relied on more than these assumptions there, or one of the two is wrong)" if narrower else ""))
+          + (f" (the nodes used {', '.join(ex.omitted)}, which these bounds leave out)" if narrower and ex.omitted
+             else " (the estimator relied on more than these assumptions there, or one of the two is wrong)" if narrower else ""))
     doc = exact_document(rec, ex, cmp)
     if a.local:
         from netsetest.analysis.exact import local_limits
@@ -306,12 +315,14 @@ def _seed_text(seeds: Sequence[int]) -> str:
 
 
 def cmd_calibrate(a: argparse.Namespace) -> int:
-    from netsetest.analysis.calibrate import calibrate
+    import numpy as np
+
+    from netsetest.analysis.calibrate import calibrate, max_by_drive, simpler_mismatch
     from netsetest.config.schema import load_topology
     from netsetest.runtime.report import Progress
 
     checks.output_file(a.json, "--json")
-    scenarios = [load_topology(a.topology, steps=a.steps, manoeuvre=m) for m in a.manoeuvres]
+    scenarios = [load_topology(a.topology, steps=a.steps, manoeuvre=d.manoeuvre, steer_high=d.amplitude) for d in a.manoeuvres]
     if scenarios[0].plant == "ts":
         print(f"netsetest calibrate: {a.topology}: plant 'ts' is the T-S model itself (e_k = 0): nothing to calibrate",
               file=sys.stderr)
@@ -322,18 +333,19 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
         bar.total = total
         bar.update(n)
 
-    import numpy as np
-
     cal = calibrate(scenarios, list(a.seeds), a.signals, a.margin, progress=on_progress)
+    simpler = simpler_mismatch(scenarios, list(a.seeds), a.signals, progress=on_progress) if a.causes else {}
     bar.close()
     sc = scenarios[0]
     print(f"model mismatch of {sc.name}: plant {sc.plant} (CommonRoad vehicle {sc.vehicle_id}), {sc.steps} steps per drive, "
           f"seeds {_seed_text(a.seeds)}, signals {','.join(a.signals)}")
-    print(f"{'manoeuvre':>20}  {'drives':>6}  {'max |e_beta| [rad]':>18}  {'max |e_r| [rad/s]':>18}")
-    for m in a.manoeuvres:
-        ds = [d for d in cal.drives if d.manoeuvre == m]
-        mx = np.max([d.max_abs for d in ds], axis=0)
-        print(f"{m:>20}  {len(ds):>6}  {mx[0]:>18.3e}  {mx[1]:>18.3e}")
+    columns = [sc.plant, *simpler]
+    maxima = [max_by_drive(cal.drives), *(max_by_drive(ds) for ds in simpler.values())]
+    print(f"{'plant:':>34}" + "".join(f"  {p:^23}" for p in columns))
+    print(f"{'drive':>26} {'drives':>7}" + f"  {'max|e_β| rad':>11} {'max|e_r| /s':>11}" * len(columns))
+    for label in maxima[0]:
+        print(f"{label:>26} {sum(d.drive.label == label for d in cal.drives):>7}"
+              + "".join(f"  {m[label][0]:>11.3e} {m[label][1]:>11.3e}" for m in maxima))
     print(f"bounds covering every e_k with margin {a.margin:g} (declare one in the topology):")
     print(cal.box.as_toml() + "# or\n" + cal.ellipsoid.as_toml(), end="")
     if a.json:
@@ -341,8 +353,9 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
             "topology": sc.path, "plant": sc.plant, "vehicle": sc.vehicle_id, "steps": sc.steps, "margin": a.margin,
             "seeds": list(a.seeds), "signals": a.signals,
             "box": np.diag(cal.box.G).tolist(), "ellipsoid": cal.ellipsoid.E.tolist(),
-            "drives": [{"manoeuvre": d.manoeuvre, "signals": d.signals, "seed": d.seed, "max_abs": d.max_abs.tolist()}
-                       for d in cal.drives],
+            "drives": [{"manoeuvre": d.drive.manoeuvre, "amplitude": d.drive.amplitude, "signals": d.signals, "seed": d.seed,
+                        "max_abs": d.max_abs.tolist()} for d in cal.drives],
+            "simpler": {plant: {label: mx.tolist() for label, mx in max_by_drive(ds).items()} for plant, ds in simpler.items()},
         }
         with open(a.json, "w") as fh:
             json.dump(doc, fh, indent=1)

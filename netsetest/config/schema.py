@@ -210,7 +210,7 @@ class VehicleSpec(_Strict, frozen=True, kw_only=True):
     """The car: the plant that generates the truth, its manoeuvre, and the T-S model's parameters.
 
     ``plant = "ts"`` (default): the truth is the T-S model of m..cr (the paper's Table I by default).
-    A nonlinear plant (``single-track``, ``multi-body``; the ``plant`` extra) is CommonRoad vehicle
+    A nonlinear plant (``single-track``, ``single-track-linear``, ``multi-body``; the ``plant`` extra) is CommonRoad vehicle
     ``vehicle`` and the T-S model is derived from that car (models/plant.py): m..cr may not be given then.
     """
 
@@ -518,6 +518,11 @@ class Scenario:
             return True
         return sum(abs(f) > self.fault_tolerance * (1 + 1e-12) for f in faults.values()) <= self.max_faulty
 
+    def alone(self) -> Scenario:
+        """The same scenario with every node on its own: a self-loop only, no reading exchanged (what the
+        network is measured against, docs/network.md)."""
+        return dataclasses.replace(self, nodes=[dataclasses.replace(n, in_weights={n.id: 1.0}) for n in self.nodes], readings=False)
+
     def out_neighbours(self, j: int) -> list[int]:
         """Nodes i ≠ j that use j's message."""
         return [n.id for n in self.nodes if j in n.in_weights and n.id != j]
@@ -597,10 +602,11 @@ def load_profile(path: Path) -> NodeProfile:
 
 def load_topology(
     path: str | Path, case: Case | None = None, steps: int | None = None, estimator: str | None = None,
-    manoeuvre: str | None = None,
+    manoeuvre: str | None = None, steer_high: float | None = None,
 ) -> Scenario:
     """Read and validate a topology (a path, or the name of a bundled one such as ``paper6``) and its node
-    profiles; ``case``/``steps``/``estimator`` (every node's)/``manoeuvre`` override the file."""
+    profiles; ``case``/``steps``/``estimator`` (every node's)/``manoeuvre``/``steer_high`` (``[steering]
+    high``) override the file."""
     path = resolve_topology(path)
     if not path.exists():
         raise ConfigError(f"{path}: file not found (bundled topologies: {', '.join(bundled_topologies())})")
@@ -615,6 +621,10 @@ def load_topology(
         vehicle = data.get("vehicle", {})
         if isinstance(vehicle, dict):  # anything else fails validation as it is
             data["vehicle"] = {**vehicle, "manoeuvre": manoeuvre}
+    if steer_high is not None:  # validated with the file: low ≤ high, the physical range
+        steering = data.get("steering", {})
+        if isinstance(steering, dict):  # anything else fails validation as it is
+            data["steering"] = {**steering, "high": steer_high}
     topo = _validated(path, data, TopologyFile)
     case = case or topo.case
     try:

@@ -19,7 +19,10 @@ interval arithmetic and wraps from the start.
 Where a saturated measurement is one-sided (SAIM) the fault is not decoupled at that step: the step
 is the prediction x⁺ = Ā x + B̄u + D̄w, f⁺ = f + δ s (or f⁺ ∈ [−F, F]) with the declared fault bound,
 and the published box is clipped to |f| ≤ F (an intersection of the published box only, as Algorithm 1
-has none).  It ignores the neighbours' sets.
+has none).  It ignores the neighbours' sets.  The readings of the same step (a reference's, or
+everyone's under ``max_faulty``: :class:`ReadingSlabs`, docs/network.md) cut the published box the same
+way, to the interval hull of its intersection with each slab, and then with the own measurement's slab
+(a box forgets that f follows from x and ỹ); the recursion stays Algorithm 1's.
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from netsetest.config.schema import NodeConfig, Scenario
-from netsetest.estimator.base import BASE_ASSUMPTIONS, Assumption, EstimatorError, NeighbourSet, SetEstimator, StepInput
+from netsetest.estimator.base import BASE_ASSUMPTIONS, Assumption, EstimatorError, NeighbourSet, ReadingSlabs, SetEstimator, StepInput
 from netsetest.models.sensor import E_DESCRIPTOR, NA, NX
 from netsetest.sets import Box, Ellipsoid, SlicedEllipsoid, Slab, SumSet, Zonotope
 
@@ -54,6 +57,7 @@ class IntervalObserver(SetEstimator):
     """003's Algorithm 1 (``wrapping=False``) or the classical interval observer (``wrapping=True``)."""
 
     uses_neighbours = False
+    uses_readings = True
 
     def __init__(self, scenario: Scenario, node_id: int, wrapping: bool = False, window: int | None = DEFAULT_WINDOW) -> None:
         self.sc, self.node = scenario, scenario.node(node_id)
@@ -67,6 +71,7 @@ class IntervalObserver(SetEstimator):
         self.window = window
         self.dist: list[np.ndarray] = []  # propagated disturbance generators, one (3, m) block per step
         self.radius = np.zeros(NA)  # the box propagated by interval arithmetic: all (wrapping) or the folded tail
+        self.reading_slabs = ReadingSlabs.of(scenario, node_id)  # built once: the references and the k-of-N model
 
     @property
     def assumptions(self) -> tuple[Assumption, ...]:
@@ -84,7 +89,7 @@ class IntervalObserver(SetEstimator):
             self.center, self.init_radius = (blo + bhi) / 2, (bhi - blo) / 2
             if self.wrapping:
                 self.radius = self.init_radius.copy()
-            return self._publish()
+            return self._publish(inp)
         if inp.u_prev is None or inp.vx_prev is None:
             raise EstimatorError("a step after step 0 needs u and Vx of the previous step")
         phi, shift, gens = self._step_matrices(inp.u_prev, inp.vx_prev, lo, hi, two_sided)
@@ -97,7 +102,7 @@ class IntervalObserver(SetEstimator):
             self.dist = [phi @ d for d in self.dist] + [gens]
             if self.window is not None and len(self.dist) > self.window:
                 self.radius = self.radius + np.abs(self.dist.pop(0)).sum(axis=1)
-        return self._publish()
+        return self._publish(inp)
 
     def _step_matrices(self, u: float, vx: float, lo: float, hi: float, two_sided: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Φ, the known shift and the disturbance generators of one step (module doc)."""
@@ -121,7 +126,8 @@ class IntervalObserver(SetEstimator):
         gens = np.column_stack([np.r_[d[:, 0] * sq_w, 0.0], e_gens, fault_gen * _E3])
         return phi, shift, gens
 
-    def _publish(self) -> Box:
+    def _publish(self, inp: StepInput) -> Box:
+        """The observer's box, clipped to the declared |f| ≤ F and cut by the step's readings (module doc)."""
         assert self.center is not None
         if self.wrapping:
             radius = self.radius
@@ -132,4 +138,10 @@ class IntervalObserver(SetEstimator):
         lo, hi = self.center - radius, self.center + radius
         if self.bounded and self.node.fault_size is not None:
             lo[2], hi[2] = max(lo[2], -self.node.fault_size), min(hi[2], self.node.fault_size)
-        return Box(lo, hi)
+        box = Box(lo, hi)
+        slabs = self.reading_slabs.slabs((inp.y, inp.gamma), inp.readings, lambda a: (-box.support(-a), box.support(a)))
+        for slab in slabs:
+            box = box.cut(slab)
+        if slabs:  # a box keeps no tie between x and f: the own measurement C̄ x̄ ∈ [lo, hi] carries the cut to f
+            box = box.cut(Slab(self.node.sensor.Cbar, *self.node.sensor.measured_interval(inp.y, inp.gamma)))
+        return box

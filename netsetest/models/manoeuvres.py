@@ -137,6 +137,41 @@ class Manoeuvre:
         return self.driver.steer(st)
 
 
+AMPLITUDE_SEP = "@"  # a drive "sine-dwell@0.03": the manoeuvre with [steering] high = 0.03 rad
+WITH_AMPLITUDE: tuple[ManoeuvreName, ...] = ("paper", "step-steer", "sine-dwell")  # steered by [steering] high
+
+
+@dataclass(frozen=True)
+class DriveSpec:
+    """A manoeuvre, and optionally its steering amplitude [rad] over the topology's ``[steering] high``
+    (the paper's draw range's upper end, the step, the sine's amplitude); the drivers' manoeuvres take none."""
+
+    manoeuvre: ManoeuvreName
+    amplitude: float | None = None
+
+    @classmethod
+    def parse(cls, token: str) -> DriveSpec:
+        """``name`` or ``name@amplitude``; ValueError naming what is wrong."""
+        name, sep, amp = token.partition(AMPLITUDE_SEP)
+        if name not in MANOEUVRES:
+            raise ValueError(f"unknown manoeuvre {name!r}; choose from {', '.join(MANOEUVRES)}")
+        if not sep:
+            return cls(name)
+        if name not in WITH_AMPLITUDE:
+            raise ValueError(f"{name} takes no amplitude: its driver steers (amplitudes: {', '.join(WITH_AMPLITUDE)})")
+        try:
+            value = float(amp)
+        except ValueError:
+            raise ValueError(f"{token}: the amplitude must be a number of radians, got {amp!r}") from None
+        if not math.isfinite(value) or value <= 0:
+            raise ValueError(f"{token}: the amplitude must be a positive number of radians")
+        return cls(name, value)
+
+    @property
+    def label(self) -> str:
+        return self.manoeuvre if self.amplitude is None else f"{self.manoeuvre}{AMPLITUDE_SEP}{self.amplitude:g}"
+
+
 def steering_range(name: ManoeuvreName, low: float, high: float) -> tuple[float, float]:
     """Every δ_k the manoeuvre can command: what a node accepts as u_{k−1} (others are dropped)."""
     if name == "paper":
@@ -162,4 +197,4 @@ def sine_with_dwell(t: float) -> float:
     return 0.0
 
 
-__all__ = ["steering_range", "MANOEUVRES", "Manoeuvre", "ManoeuvreName", "PurePursuit", "sine_with_dwell"]
+__all__ = ["steering_range", "DriveSpec", "MANOEUVRES", "Manoeuvre", "ManoeuvreName", "PurePursuit", "sine_with_dwell"]

@@ -1,6 +1,8 @@
 """The truth's vehicle: the T-S model itself (``ts``) or a nonlinear CommonRoad vehicle model.
 
 ``single-track``: the single-track drift model with Pacejka tyres (``vehicle_dynamics_std``, 9 states);
+``single-track-linear``: the single-track model with linear tyres of the same slope at zero slip
+(``vehicle_dynamics_st``, 7 states; what the car's mismatch is without the tyres' nonlinearity);
 ``multi-body``: the multi-body model (``vehicle_dynamics_mb``, 29 states); both from the maintained
 ``commonroad-vehicle-models`` package (version 3.0.2, the ``plant`` extra), with its vehicles
 ``parameters_vehicle1..3``.  They are not re-implemented here: this module only
@@ -37,8 +39,8 @@ from netsetest.extras import require
 from netsetest.models.signals import SpeedProfile
 from netsetest.models.vehicle import KMH, TSModel, VehicleParams
 
-PlantKind = Literal["ts", "single-track", "multi-body"]
-PLANTS: tuple[PlantKind, ...] = ("ts", "single-track", "multi-body")
+PlantKind = Literal["ts", "single-track", "single-track-linear", "multi-body"]
+PLANTS: tuple[PlantKind, ...] = ("ts", "single-track", "single-track-linear", "multi-body")
 VEHICLE_IDS = (1, 2, 3)  # CommonRoad parameters_vehicle1..3 (Ford Escort, BMW 320i, VW Vanagon)
 RTOL = 1e-8  # DOPRI5's relative tolerance: x_{k+1} to ~1e-9 relative, far below any mismatch bound
 ATOL = 1e-10
@@ -124,6 +126,7 @@ class _CommonRoadPlant:
     """A CommonRoad model integrated between sampling instants; the wind enters through ``_wind``."""
 
     MODEL: str  # the package's model: vehicle_dynamics_<MODEL> and init_<MODEL>
+    INIT_TAKES_PARAMETERS = True  # init_<MODEL>(core, p); the linear single track's is init_st(core)
 
     def __init__(self, vehicle_id: int, fw: float, lw: float, x0: np.ndarray, vx0: float, delta0: float) -> None:
         """The car at x0 = [β, r], speed vx0 (longitudinal), steering δ0; the package's own initial state."""
@@ -135,10 +138,11 @@ class _CommonRoadPlant:
         self.m, self.Iz = float(self.p.m), float(self.p.I_z)
         self.fw, self.lw = fw, lw
         dynamics = importlib.import_module(f"vehiclemodels.vehicle_dynamics_{self.MODEL}")
-        init = getattr(importlib.import_module(f"vehiclemodels.init_{self.MODEL}"), f"init_{self.MODEL}")
         self._f: Callable[[list[float], list[float], object], list[float]] = getattr(dynamics, f"vehicle_dynamics_{self.MODEL}")
         beta0, r0 = float(x0[0]), float(x0[1])
-        self.s = np.array(init([0.0, 0.0, delta0, vx0 / math.cos(beta0), 0.0, r0, beta0], self.p), dtype=float)
+        init = getattr(importlib.import_module(f"vehiclemodels.init_{self.MODEL}"), f"init_{self.MODEL}")
+        core = [0.0, 0.0, delta0, vx0 / math.cos(beta0), 0.0, r0, beta0]  # X, Y, δ, v, ψ, ψ̇, β
+        self.s = np.array(init(core, self.p) if self.INIT_TAKES_PARAMETERS else init(core), dtype=float)
         self._ode = ode(self._rhs).set_integrator("dopri5", rtol=RTOL, atol=ATOL, nsteps=MAX_STEPS)
 
     def _wind(self, f: list[float], s: np.ndarray, force: float) -> None:
@@ -179,6 +183,16 @@ class SingleTrackPlant(_CommonRoadPlant):
         return PlantState(np.array([s[6], s[5]]), float(s[3]), float(s[3] * math.cos(s[6])), (float(s[0]), float(s[1]), float(s[4])))
 
 
+class LinearTyrePlant(SingleTrackPlant):
+    """``vehicle_dynamics_st``: states X, Y, δ, v, ψ, ψ̇, β (the first seven of the drift model's, so its wind
+    and its x = [β, r] are the same). Its tyres are linear, C_S μ F_z = −p_ky1 F_z: the Pacejka tyre's slope
+    at zero slip, so the derived T-S model is the same as the drift model's; load transfer under longitudinal
+    acceleration is kept."""
+
+    MODEL = "st"
+    INIT_TAKES_PARAMETERS = False
+
+
 class MultiBodyPlant(_CommonRoadPlant):
     """``vehicle_dynamics_mb``: 29 states; x[3] = v_x, x[10] = v_y (body frame), x[5] = ψ̇."""
 
@@ -202,7 +216,9 @@ def make_plant(kind: PlantKind, vehicle_id: int, model: TSModel, x0: np.ndarray,
     if kind == "ts":
         return TSPlant(model, x0, vx0)
     p = model.params
-    cls = SingleTrackPlant if kind == "single-track" else MultiBodyPlant
+    if kind == "multi-body":
+        return MultiBodyPlant(vehicle_id, p.fw, p.lw, x0, vx0, delta0)
+    cls = LinearTyrePlant if kind == "single-track-linear" else SingleTrackPlant
     return cls(vehicle_id, p.fw, p.lw, x0, vx0, delta0)
 
 

@@ -165,11 +165,12 @@ def test_a_false_reference_reading_is_attributed_to_it(tmp_path: Path) -> None:
     assert s.misses_assumption_broken_total == s.node_steps_evaluated - s.node_steps_contained
 
 
-@pytest.mark.parametrize("name, gain", [("strip", 1.08), ("zonotope", 1.12)])
+@pytest.mark.parametrize("name, gain", [("strip", 1.08), ("zonotope", 1.12), ("interval", 1.03)])
 def test_set_estimators_intersect_with_the_references_reading(name: str, gain: float) -> None:
     """003's strip observer and 001's zonotope take a reference's reading of the step as one more strip
-    (C_j x ∈ [lo, hi]); the node waits for it and names it in its state.  NSNIM: measured 1.10–1.15×
-    (strip) and 1.17–1.27× (zonotope) narrower than without it; everything covered and contained."""
+    (C_j x ∈ [lo, hi]), 003's interval observer cuts its published box with it; the node waits for it and
+    names it in its state.  NSNIM: measured 1.10–1.15× (strip), 1.17–1.27× (zonotope) and 1.04–1.2×
+    (interval) narrower than without it; everything covered and contained."""
     import dataclasses
 
     from netsetest.sets import set_from_wire
@@ -279,3 +280,48 @@ def test_a_false_health_declaration_is_attributed_to_it() -> None:
     assert broken
     expected = sum(1 for ms in states.values() for m in ms if m.health and m.step in broken)
     assert s.node_steps_not_covered["k-of-N health"] == expected
+
+
+def test_exact_says_it_leaves_the_k_of_n_assumption_out(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """On a max_faulty record exact's bounds are an outer bound of the limit: the command says which assumption it
+    left out, and a node narrower than them is explained by it, not called a suspect estimator."""
+    _, rec = _record("paper6_max_faulty", tmp_path, steps=15)
+    assert main(["exact", str(rec.path)]) == 0
+    out = capsys.readouterr().out
+    assert "not applied: k-of-N health (max_faulty = 4)" in out
+    assert "or one of the two is wrong" not in out
+    _, plain = _record("paper6", tmp_path, steps=5)
+    assert main(["exact", str(plain.path)]) == 0
+    assert "not applied" not in capsys.readouterr().out
+
+
+def _rows(name: str, capsys: pytest.CaptureFixture[str], tmp_path: Path) -> dict[str, dict]:
+    out = tmp_path / f"{name}.json"
+    code = main(["compare", name, "--alone", "--estimators", "sdp,exact", "--steps", "40", "--json", str(out)])
+    assert code == 0, capsys.readouterr().err
+    return {r["estimator"]: r for r in json.loads(out.read_text())}
+
+
+def test_compare_alone_reproduces_what_the_network_is_worth(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """``compare --alone``: on paper6 a node's exact local limit is the central one (the network can buy nothing);
+    with a reference it is wider (the issue's local / central table), and the SDP run alone is wider than in the
+    network. No row is ever narrower than the exact limit it rests on, and nothing is violated."""
+    plain = _rows("paper6", capsys, tmp_path)
+    assert plain["exact-local"]["ratio_exact"] == pytest.approx(1.0, abs=0.01)
+    ref = _rows("paper6_reference", capsys, tmp_path)
+    assert ref["exact-local"]["ratio_exact"] > 1.1
+    assert ref["sdp-alone"]["fault_width_mean"] > 1.15 * ref["sdp"]["fault_width_mean"]
+    for rows in (plain, ref):
+        assert rows["exact-local"]["fault_width_mean"] <= rows["sdp-alone"]["fault_width_mean"] * (1 + 1e-9)
+        for r in rows.values():
+            assert r["violations"] == 0 and r["covered"] == r["node_steps"], r
+            assert r["ratio_exact"] >= 1 - 1e-6, r
+
+
+def test_the_nodes_alone_see_the_same_truth() -> None:
+    """``Scenario.alone`` changes the nodes only: the vehicle's truth and measurements are those of the network run."""
+    sc = load_topology("paper6_reference", steps=10)
+    a, b = (run_inmemory(s, "paper", seed=3) for s in (sc, sc.alone()))
+    assert a.parts is not None and b.parts is not None
+    assert [t["x"] for t in a.parts["truth"]] == [t["x"] for t in b.parts["truth"]]
+    assert all(n.in_weights == {n.id: 1.0} for n in sc.alone().nodes) and not sc.alone().readings

@@ -87,12 +87,14 @@ def test_integration_agrees_with_an_independent_fixed_step_integrator() -> None:
     assert abs(steps[-1].x[1]) > 0.05  # the car is turning: the comparison is not of zeros
 
 
-def test_derived_model_is_the_plants_linearisation_at_small_angles() -> None:
-    """The bicycle model of the derived parameters equals the single-track model linearised about straight
-    driving (finite differences of β̇, ṙ in β, r, δ at 100 km/h, no wind, constant speed) to 0.5 %."""
+@pytest.mark.parametrize("plant", [plant_mod.SingleTrackPlant, plant_mod.LinearTyrePlant])
+def test_derived_model_is_the_plants_linearisation_at_small_angles(plant: type[plant_mod.SingleTrackPlant]) -> None:
+    """The bicycle model of the derived parameters equals the single-track model (Pacejka tyres, or linear
+    tyres of the same slope) linearised about straight driving (finite differences of β̇, ṙ in β, r, δ at
+    100 km/h, no wind, constant speed) to 0.5 %: one derived T-S model serves both."""
     params = plant_mod.derived_params(2, 1360.0, 0.5, 80 * KMH, 120 * KMH)
     v = 100 * KMH
-    car = plant_mod.SingleTrackPlant(2, 1360.0, 0.5, np.zeros(2), v, 0.0)
+    car = plant(2, 1360.0, 0.5, np.zeros(2), v, 0.0)
     x0 = car.s.copy()
 
     def f(beta: float, r: float, delta: float) -> np.ndarray:
@@ -277,6 +279,64 @@ def test_calibrate_command(capsys: pytest.CaptureFixture[str], tmp_path: Path) -
         main(["calibrate", "paper6_car", "--manoeuvres", "slalom"])
     assert exc.value.code == 2
     assert "unknown manoeuvre 'slalom'" in capsys.readouterr().err
+
+
+def test_linear_tyres_remove_most_of_the_mismatch_near_the_limit() -> None:
+    """The sine with dwell at 0.03 rad (about 9 m/s²): with linear tyres of the same slope, e_r is at least
+    5× smaller than with Pacejka tyres (the tyres' saturation is the main cause there); on the paper's
+    steering at 0.012 rad the two are of the same size (the cause there is not the tyres)."""
+    from netsetest.analysis.calibrate import max_by_drive, simpler_mismatch
+
+    near = load_topology("paper6_car", steps=40, manoeuvre="sine-dwell", steer_high=0.03)
+    gentle = load_topology("paper6_car", steps=40)
+    car = max_by_drive([drive_mismatch(sc, "paper", 0) for sc in (near, gentle)])
+    linear = max_by_drive(simpler_mismatch([near, gentle], [0], ["paper"])["single-track-linear"])
+    assert linear["sine-dwell@0.03"][1] * 5 < car["sine-dwell@0.03"][1]
+    assert 0.5 < linear["paper@0.012"][1] / car["paper@0.012"][1] < 2.0
+
+
+def test_calibrate_causes_column(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    code = main(["calibrate", "paper6_car", "--manoeuvres", "sine-dwell@0.03", "--seeds", "0", "--signals", "paper",
+                 "--steps", "30", "--causes", "--json", str(tmp_path / "c.json")])
+    out = capsys.readouterr().out
+    assert code == 0 and "single-track-linear" in out
+    doc = json.loads((tmp_path / "c.json").read_text())
+    assert list(doc["simpler"]) == ["single-track-linear"]
+    assert list(doc["simpler"]["single-track-linear"]) == ["sine-dwell@0.03"]
+
+
+def test_calibrate_a_series_of_amplitudes(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """``name@amp`` drives the manoeuvre at that steering amplitude: a larger sine with dwell leaves the
+    tyres' linear range, so its e_k is larger; each amplitude is a row of its own and in the JSON."""
+    code = main(["calibrate", "paper6_car", "--manoeuvres", "sine-dwell@0.012,sine-dwell@0.03", "--seeds", "0",
+                 "--signals", "paper", "--steps", "30", "--json", str(tmp_path / "c.json")])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "sine-dwell@0.012" in out and "sine-dwell@0.03" in out
+    drives = json.loads((tmp_path / "c.json").read_text())["drives"]
+    assert [d["amplitude"] for d in drives] == [0.012, 0.03]
+    small, large = (np.array(d["max_abs"]) for d in drives)
+    assert np.all(large > 3 * small)
+
+
+@pytest.mark.parametrize(("token", "why"), [
+    ("lap@0.02", "lap takes no amplitude"),
+    ("sine-dwell@x", "must be a number of radians"),
+    ("sine-dwell@-0.1", "positive number of radians"),
+    ("sine-dwell@nan", "positive number of radians"),
+    ("slalom@0.1", "unknown manoeuvre 'slalom'"),
+])
+def test_calibrate_refuses_a_bad_drive(capsys: pytest.CaptureFixture[str], token: str, why: str) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["calibrate", "paper6_car", "--manoeuvres", f"paper,{token}"])
+    assert exc.value.code == 2
+    assert why in capsys.readouterr().err
+
+
+def test_an_amplitude_outside_the_steering_range_is_a_config_error(capsys: pytest.CaptureFixture[str]) -> None:
+    """``paper@A`` with A below ``[steering] low`` is refused by the topology's own check, exit 2."""
+    assert main(["calibrate", "paper6_car", "--manoeuvres", "paper@0.001", "--steps", "3"]) == 2
+    assert "steering low must not exceed high" in capsys.readouterr().err
 
 
 # ---------------------------------------------------------------- configuration
