@@ -41,6 +41,17 @@ class FactInfo:
 class EtaLayout:
     """Slot indices of η for node i and its in-neighbours N_i (fixed by the topology)."""
 
+    z: list[int]  # z_i, the own prior's unit-ball coordinates (NA slots, after the constant slot 0)
+    s: dict[int, int]  # s_j of each neighbour j ≠ i (its set through C̄_j: the scalar C̄_j M_j z_j = c_j s_j)
+    w: int | None  # the disturbance (None at step 0, as e, v⁺ and φ⁺)
+    e: list[int]  # ζ of the model mismatch, one per column of G
+    v: dict[int, int]  # v_j, the measurement noise of each j ∈ N_i (i included)
+    v_new: int | None  # the own measurement noise of step k+1
+    nu: dict[int, int]  # ν_j of each reading used
+    phi: dict[int, int]  # φ_j of each saturating sensor
+    phi_new: int | None  # φ⁺ of the own sensor
+    dim: int
+
     def __init__(
         self, node_id: int, neighbours: dict[int, Sensor], own: Sensor, W: float = 1.0, predict: bool = True,
         uncertainty: ModelUncertainty | None = None, readings: tuple[int, ...] = (),
