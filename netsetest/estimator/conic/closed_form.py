@@ -72,9 +72,9 @@ class ClosedFormSolver:
         if a_xi > 0.0:  # (L = 0: ξ and the η₁ slot need no multiplier, their columns −L ℓ are zero)
             assert self.red.xi is not None  # a_xi > 0 only with ξ
             tc[self.red.xi] = rho * a_xi / total
+        lam0 = rho * a0 / total if a0 > 0.0 else 0.0  # the η₁ slot's multiplier
         Lc = L[:, None]
-        groups = self.red.cone_groups(agg.use_xi)
-        P = smallest_p(np.zeros((NA, NA)), Lc, pi0 - Lc @ ell[None, :], groups, tc, agg.B, ell0, rho * a0 / total if a0 > 0.0 else 0.0)
+        P = smallest_p(np.zeros((NA, NA)), Lc, pi0 - Lc @ ell[None, :], self.red.cone_groups(agg.use_xi), tc, agg.B, ell0, lam0)
         return Solution(P, [Lc], [self.red.fact_tau(tc, agg)], CLOSED_FORM_STATUS, iterations)
 
 
