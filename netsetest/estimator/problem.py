@@ -9,6 +9,7 @@ imports neither side, so neither imports the other.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
@@ -40,6 +41,17 @@ class FactInfo:
 class EtaLayout:
     """Slot indices of η for node i and its in-neighbours N_i (fixed by the topology)."""
 
+    z: list[int]  # z_i, the own prior's unit-ball coordinates (NA slots, after the constant slot 0)
+    s: dict[int, int]  # s_j of each neighbour j ≠ i (its set through C̄_j: the scalar C̄_j M_j z_j = c_j s_j)
+    w: int | None  # the disturbance (None at step 0, as e, v⁺ and φ⁺)
+    e: list[int]  # ζ of the model mismatch, one per column of G
+    v: dict[int, int]  # v_j, the measurement noise of each j ∈ N_i (i included)
+    v_new: int | None  # the own measurement noise of step k+1
+    nu: dict[int, int]  # ν_j of each reading used
+    phi: dict[int, int]  # φ_j of each saturating sensor
+    phi_new: int | None  # φ⁺ of the own sensor
+    dim: int
+
     def __init__(
         self, node_id: int, neighbours: dict[int, Sensor], own: Sensor, W: float = 1.0, predict: bool = True,
         uncertainty: ModelUncertainty | None = None, readings: tuple[int, ...] = (),
@@ -51,38 +63,29 @@ class EtaLayout:
         one slot ν_j each with the fact 1 − ν_j² ≥ 0 (after v⁺; they enter e⁺ through ℓ only)."""
         self.node_id = node_id
         self.neigh = list(neighbours)  # j ∈ N_i in a fixed order (may include i)
-        idx = 1
-        self.z = list(range(idx, idx + NA))
-        idx += NA
-        self.s: dict[int, int] = {}
-        for j in self.neigh:
-            if j != node_id:
-                self.s[j], idx = idx, idx + 1
-        self.w: int | None = None
-        if predict:
-            self.w, idx = idx, idx + 1
-        self.e: list[int] = []
-        if predict and uncertainty is not None:
-            self.e = list(range(idx, idx + NX))
-            idx += NX
-        self.v: dict[int, int] = {}
-        for j in self.neigh:
-            self.v[j], idx = idx, idx + 1
-        self.v_new: int | None = None
-        if predict:
-            self.v_new, idx = idx, idx + 1
-        self.nu: dict[int, int] = {}
-        for j in readings:
-            self.nu[j], idx = idx, idx + 1
-        self.phi: dict[int, int] = {}
-        for j, sens in neighbours.items():
-            if sens.saturated:  # no saturation ⇒ φ_j ≡ 0: no slot (docs/design.md §2)
-                self.phi[j], idx = idx, idx + 1
-        self.phi_new: int | None = None
-        if own.saturated and predict:
-            self.phi_new, idx = idx, idx + 1
-        self.dim = idx
-        # one quadratic fact per constraint, in this order
+        self._place(neighbours, own, predict, uncertainty is not None, readings)
+        self.facts = self._facts(neighbours, own, W, uncertainty)
+        self.n_facts = len(self.facts)
+        # slots whose column of Π₀ is zero in every rule: they enter e⁺ only through L ℓᵀη
+        self.pi0_zero = set(self.s.values()) | set(self.v.values()) | set(self.phi.values()) | set(self.nu.values())
+
+    def _place(self, neighbours: dict[int, Sensor], own: Sensor, predict: bool, mismatch: bool, readings: tuple[int, ...]) -> None:
+        """η's slots in order: 1 (slot 0), z_i, s_j (j ≠ i), w, e, v_j, v⁺, ν_j, φ_j, φ⁺."""
+        slots = itertools.count(1)
+        self.z = [next(slots) for _ in range(NA)]
+        self.s = {j: next(slots) for j in self.neigh if j != self.node_id}
+        self.w = next(slots) if predict else None
+        self.e = [next(slots) for _ in range(NX)] if predict and mismatch else []
+        self.v = {j: next(slots) for j in self.neigh}
+        self.v_new = next(slots) if predict else None
+        self.nu = {j: next(slots) for j in readings}
+        # no saturation ⇒ φ_j ≡ 0: no slot (docs/design.md §2)
+        self.phi = {j: next(slots) for j, sens in neighbours.items() if sens.saturated}
+        self.phi_new = next(slots) if own.saturated and predict else None
+        self.dim = next(slots)
+
+    def _facts(self, neighbours: dict[int, Sensor], own: Sensor, W: float, uncertainty: ModelUncertainty | None) -> list[FactInfo]:
+        """One quadratic fact per constraint, in this order."""
         facts = [FactInfo("ball", tuple(self.z))]
         facts += [FactInfo("ball", (self.s[j],)) for j in self.s]
         if self.w is not None:
@@ -95,15 +98,12 @@ class EtaLayout:
         facts += [FactInfo("ball", (self.nu[j],)) for j in self.nu]
         for j in self.neigh:
             if j in self.phi:
-                r_slots = tuple(self.z) if j == node_id else (self.s[j],)
+                r_slots = tuple(self.z) if j == self.node_id else (self.s[j],)
                 facts.append(FactInfo("sector", (self.phi[j],), support=(0, *r_slots)))
         if self.phi_new is not None:
             assert self.w is not None and self.v_new is not None  # φ⁺ exists only in a predicting step
             facts.append(FactInfo("sector", (self.phi_new,), support=(0, *self.z, self.w, *self.e, self.v_new, self.phi_new)))
-        self.facts = facts
-        self.n_facts = len(facts)
-        # slots whose column of Π₀ is zero in every rule: they enter e⁺ only through L ℓᵀη
-        self.pi0_zero = set(self.s.values()) | set(self.v.values()) | set(self.phi.values()) | set(self.nu.values())
+        return facts
 
 
 @dataclass(frozen=True)

@@ -61,7 +61,7 @@ import numpy as np
 
 from netsetest.config.schema import Scenario
 from netsetest.estimator.certificate import FactStack, FallbackUnavailable, certify, fallback_shape, publishable
-from netsetest.estimator.conic import ConicSolver
+from netsetest.estimator.conic.closed_form import ClosedFormSolver, clarabel_backend
 from netsetest.estimator.health import HEALTH_KEY, HealthModel
 from netsetest.estimator.lmi_cvxpy import CvxpySolver
 from netsetest.estimator.objective import BANK_FAULT_WEIGHT, DEFAULT_OBJECTIVE, FAULT_WEIGHT, OBJECTIVES, Objective
@@ -274,7 +274,7 @@ class LocalEstimator:
             n_lmi = self.n_lmi if predict else 1
             solver: ProblemSolver
             if self.backend == "clarabel":
-                solver = ConicSolver(lay, n_lmi)
+                solver = clarabel_backend(lay, n_lmi)
             else:
                 solver = CvxpySolver(lay.dim, lay.n_facts, n_lmi)
             pat = self._patterns[key] = _Pattern(lay, balls, solver)
@@ -283,7 +283,7 @@ class LocalEstimator:
     def forget_warm_starts(self) -> None:
         """Every solver starts its next solve afresh (the node's warm-up leaves no trace in results)."""
         for pat in self._patterns.values():
-            if isinstance(pat.solver, ConicSolver):
+            if isinstance(pat.solver, ClosedFormSolver):
                 pat.solver.forget_warm_start()
 
     @property

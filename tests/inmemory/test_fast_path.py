@@ -1,4 +1,4 @@
-"""The fast path (direct Clarabel assembly, netsetest/estimator/conic.py) against the LMI it replaces.
+"""The fast path (direct Clarabel assembly, netsetest/estimator/conic/) against the LMI it replaces.
 
 - The assembly reproduces the LMI of docs/design.md §2 entry by entry (up to its documented congruence
   scaling) at random points, and the second-order cones carry the Schur terms they stand for.
@@ -32,7 +32,9 @@ import pytest
 from netsetest.config.schema import load_topology
 from netsetest.estimator import sdp
 from netsetest.estimator.certificate import FactStack, certify
-from netsetest.estimator.conic import ConicSolver
+from netsetest.estimator.conic.closed_form import ClosedFormSolver
+from netsetest.estimator.conic.reduction import Reduction
+from netsetest.estimator.conic.solver import ConicSolver
 from netsetest.runtime.inmemory import run_inmemory
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -94,20 +96,21 @@ def test_conic_assembly_reproduces_the_lmi(case, variant, saim_steps, nsnim_step
         est = _estimator(sc, node, variant)
         data = _data(est, args)
         rho = args[0].rho
-        solver = ConicSolver(data.lay, est.n_lmi, aggregate=False, cones=False)
+        solver = ConicSolver(Reduction(data.lay, est.n_lmi, aggregate=False, cones=False))
         prob, inv = solver.apply(data, rho)
         tpl = inv.tpl
         A = prob.A.toarray()
         x = rng.normal(size=A.shape[1])
         s = prob.b - A @ x
-        P, Ls, taus = solver.unpack(x, inv)  # P = S P̃ Sᵀ, L = S L̃, τ = τ̂/κ
-        taus = [x[tpl.iT[r]] / inv.kappa for r in range(est.n_lmi)]  # unclipped, to test every entry
-        Sinv = np.linalg.inv(inv.S)
-        D = np.diag(np.r_[np.ones(3), inv.sc])
+        point = solver.unpack(x, inv)  # P = S P̃ Sᵀ, L = S L̃, τ = τ̂/κ
+        P, Ls = point.P, point.L
+        taus = [x[tpl.iT[r]] / inv.values.kappa for r in range(est.n_lmi)]  # unclipped, to test every entry
+        Sinv = np.linalg.inv(inv.values.S)
+        D = np.diag(np.r_[np.ones(3), inv.values.sc])
         D[:3, :3] = Sinv
-        idx = [0, 1, 2] + [3 + k for k in solver.lmi_slots]
+        idx = [0, 1, 2] + [3 + k for k in solver.red.lmi_slots]
         d = data.lay.dim
-        assert solver.lmi_slots == list(range(d))  # nothing left out: this is the whole LMI
+        assert solver.red.lmi_slots == list(range(d))  # nothing left out: this is the whole LMI
         e11 = np.zeros((d, d))
         e11[0, 0] = 1.0
         for r in range(est.n_lmi):
@@ -127,12 +130,12 @@ def test_second_order_cones_carry_the_schur_terms(saim_steps, nsnim_steps):
         for node, args in steps[-6:]:
             est = _estimator(sc, node)
             data = _data(est, args)
-            solver = est.pattern(*data.key).solver
+            solver = ConicSolver(Reduction(data.lay, 1))  # the node's own cones, Clarabel's problem also where NSNIM has a closed form
             prob, inv = solver.apply(data, args[0].rho)
             tpl = inv.tpl
             x = rng.normal(size=tpl.nv)
             s = prob.b - prob.A.toarray() @ x
-            L = inv.S @ x[tpl.iL[0]]
+            L = inv.values.S @ x[tpl.iL[0]]
             pi = data.pi0[0] - np.outer(L, data.ell)
             row, socs = 0, []  # the rows are laid out cone by cone, in the order of the cone list
             for cone in tpl.cones:
@@ -146,7 +149,7 @@ def test_second_order_cones_carry_the_schur_terms(saim_steps, nsnim_steps):
             for g, v in zip(tpl.groups, socs):
                 t, tau = x[tpl.iTt[tpl.groups.index(g)]], x[tpl.iT[0][g.fact]]
                 np.testing.assert_allclose(v[:2], [t + tau, t - tau], atol=1e-12)
-                cols = pi[:, list(g.slots)] if g.slots else -inv.B * L[:, None]
+                cols = pi[:, list(g.slots)] if g.slots else -inv.values.B * L[:, None]
                 beta = g.bound if g.slots else 1.0
                 np.testing.assert_allclose(v[2:], (2.0 * np.sqrt(beta) * cols.T).ravel(), rtol=1e-10, atol=1e-12)
 
@@ -162,8 +165,9 @@ def test_clique_decomposition_sums_to_the_lmi(saim_steps):
         if data.lay.phi_new is None or checked == 6:
             continue  # decomposed only where the own sensor has a φ slot
         checked += 1
-        dec, one = ConicSolver(data.lay, 1), ConicSolver(data.lay, 1, decompose=False)
-        assert dec.cliques is not None and len(dec.cliques) >= 2
+        dec, one = ConicSolver(Reduction(data.lay, 1)), ConicSolver(Reduction(data.lay, 1, decompose=False))
+        cliques = dec.red.cliques
+        assert cliques is not None and len(cliques) >= 2
         (pd, invd), (po, invo) = dec.apply(data, args[0].rho), one.apply(data, args[0].rho)
         td, to = invd.tpl, invo.tpl
         assert td.decomposed and not to.decomposed and td.nv > to.nv  # split variables come last
@@ -173,7 +177,7 @@ def test_clique_decomposition_sums_to_the_lmi(saim_steps):
         np.testing.assert_allclose(sd[: td.lmi_rows[0]], so[: to.lmi_rows[0]], rtol=1e-12, atol=1e-12)
         n = to.lmi_n
         total = np.zeros((n, n))
-        for C, r0 in zip(dec.cliques, td.lmi_rows):
+        for C, r0 in zip(cliques, td.lmi_rows):
             k = len(C)
             total[np.ix_(C, C)] += _smat(sd[r0 : r0 + k * (k + 1) // 2], k)
         np.testing.assert_allclose(total, _smat(so[to.lmi_rows[0] :], n), rtol=1e-10, atol=1e-10)
@@ -190,7 +194,7 @@ def test_reductions_leave_the_optimum_unchanged(case, saim_steps, nsnim_steps):
         data = _data(est, args)
         rho = args[0].rho
         traces = []
-        for solver in (ConicSolver(data.lay, 1), ConicSolver(data.lay, 1, aggregate=False, cones=False, decompose=False)):
+        for solver in (ConicSolver(Reduction(data.lay, 1)), ConicSolver(Reduction(data.lay, 1, aggregate=False, cones=False, decompose=False))):
             sol = solver.solve(data, rho)
             pi = data.pi0[0] - sol.L[0] @ data.ell[None, :]
             rho_c = certify(sol.P, pi, sol.tau[0], data.facts)
@@ -263,7 +267,7 @@ def test_certificate_of_stacked_facts_is_the_certificate(case, saim_steps, nsnim
     for node, args in steps[::5]:
         est = _estimator(sc, node)
         data = _data(est, args)
-        sol = ConicSolver(data.lay, 1).solve(data, args[0].rho)
+        sol = ConicSolver(Reduction(data.lay, 1)).solve(data, args[0].rho)
         pi = data.pi0[0] - sol.L[0] @ data.ell[None, :]
         stack = FactStack.of(data.facts)
         rho_c = certify(sol.P, pi, sol.tau[0], stack)
@@ -293,11 +297,11 @@ def test_closed_form_agrees_with_clarabel(nsnim_steps, informative):
         est = _estimator(sc, node)
         data = _data(est, args)
         rho = args[0].rho
-        fast, ref = ConicSolver(data.lay, 1), ConicSolver(data.lay, 1, closed_form=False)
-        assert fast.newton and not ref.newton
+        red = Reduction(data.lay, 1)
+        fast, ref = ClosedFormSolver(red), ConicSolver(red)
         if informative:
             ell = data.ell.copy()
-            ell[fast.agg_slots] *= 1e-3
+            ell[red.agg_slots] *= 1e-3
             data = dataclasses.replace(data, ell=ell)
         sol = fast.solve(data, rho)
         assert sol.status == "Solved (closed form)"
