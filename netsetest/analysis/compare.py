@@ -1,16 +1,18 @@
 """``netsetest compare``: every guaranteed estimator on the same vehicle, network and data.
 
-For each (case, signals, seed) the network runs in memory with this project's ellipsoidal SDP (the
-``sdp`` row, from the run's record); every other estimator of estimator/registry.py is then stepped
-per node on that run's data (the vehicle's u, Vx and each node's ỹ, γ: what the node sees), and the
-exact limit (analysis/exact.py, centralized, declared fault bounds where a saturating sensor needs
-them) is the reference and the ``exact`` row (not real time: its ms is the offline solve time per
-node-step).
+For each (case, signals, seed) the network runs in memory once per real-time estimator, every node
+running it (the ``sdp`` row: this project's ellipsoidal SDP; the others of estimator/registry.py as
+node estimators, each node keeping the SDP where a method refuses it; the vehicle's truth and
+measurements are the same in every run of a seed), exactly as ``netsetest run`` runs them; the exact
+limit (analysis/exact.py, centralized, declared fault bounds where a saturating sensor needs them) is
+the reference and the ``exact`` row (not real time: its ms is the offline solve time per node-step).
 
-Per row: containment — the published set is checked against the truth at every node-step; a miss
-where every assumption the method declares held (its *cone*: the prior at step 0, the noise bound at
-every step ≤ k, the wind bound at every step < k, the declared fault bound at every step ≤ k if it
-relies on it) is a ``violation``, other misses are attributed to the first broken assumption;
+Per row: containment — the published set is checked against the truth at every node-step; every node
+row is judged by the run's collector (its one-step dependency cone, docs/coverage.md: a miss where the
+cone held is a ``violation``, other misses are attributed to the cause the collector names), so a row
+here is what a user's run of that estimator reports.  The exact rows use every datum of the horizon, so
+their cone is the whole history: the prior at step 0, the noise bound at every step ≤ k, the wind bound
+at every step < k, the declared fault bound at every step ≤ k where applied (:func:`_cones`).
 ``covered`` counts the node-steps whose cone held.  Widths are per-coordinate interval-hull widths,
 mean over nodes and the steps ≥ FROM_STEP; ``ratio_exact`` is the mean fault width over the exact
 one's (same steps, bounded exact intervals only), ``ratio_exact_state`` the same for β and r, each
@@ -23,6 +25,7 @@ reference observer, mean over nodes and the three coordinates; ms are per node-s
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -31,19 +34,18 @@ from pathlib import Path
 
 import numpy as np
 
-from netsetest.analysis.exact import FROM_STEP, ExactBounds, StepData, exact_bounds, step_data
-from netsetest.config.schema import Case, Scenario, load_topology
-from netsetest.estimator.base import Assumption, EstimatorError, StepInput
+from netsetest.analysis.exact import FROM_STEP, ExactBounds, exact_bounds, step_data
+from netsetest.config.schema import Case, ConfigError, Scenario, load_topology
 from netsetest.analysis.errors import CompareError
 from netsetest.estimator.names import DEFAULT_COMPARE, ESTIMATOR_NAMES, EXACT, SDP
-from netsetest.estimator.registry import SET_ESTIMATORS
+from netsetest.estimator.registry import node_set_estimator
 from netsetest.models.signals import SignalKind
 from netsetest.records.record import Record, record_from_parts
 from netsetest.runtime.inmemory import run_inmemory
 
 CONTAIN_TOL = 1e-8  # the sets' own membership slack (sets.MEMBERSHIP_TOL) plus float sums of the bounds
 EXACT_PINNED = 1e-9  # an exact half-width below this is a coordinate pinned by a declaration (no ratio to it)
-_SDP_ASSUMPTIONS: tuple[str, ...] = ("dependency cone (collector)",)
+_COLLECTOR: tuple[str, ...] = ("dependency cone (collector)",)  # a node row: judged by the run's collector
 SDP_ALONE, EXACT_LOCAL = "sdp-alone", "exact-local"  # compare(alone=True): the nodes alone, each node's exact local limit
 ALONE_ROWS = (SDP_ALONE, EXACT_LOCAL)
 
@@ -100,13 +102,9 @@ class Comparison:
     plant: str = "ts"  # what generated the truth (Scenario.plant_label)
 
 
-def _cones(
-    sc: Scenario, rec: Record, assumptions: tuple[str, ...], nodes: list[int], readings: tuple[int, ...] = (),
-) -> dict[tuple[int, int], str | None]:
-    """Per (node, step): None if every assumption of the node's cone held, else the first broken one;
-    ``readings``: whose readings the node used from step 1 on (their noise bound; a reference's zero
-    fault; under max_faulty the k-of-N assumption)."""
-    refs = set(sc.references())
+def _cones(sc: Scenario, rec: Record, assumptions: tuple[str, ...], nodes: list[int]) -> dict[tuple[int, int], str | None]:
+    """Per (node, step) of an exact row: None if every assumption of the node's whole history held, else the
+    first broken one (an exact limit uses every datum up to the step, so its cone is never one step deep)."""
     truth = sorted(rec.truth, key=lambda t: t["step"])
     out: dict[tuple[int, int], str | None] = {}
     for i in nodes:
@@ -122,11 +120,6 @@ def _cones(
                 broken = "noise"
             if broken is None and "fault_bound" in assumptions and not t.get("fault_ok", {}).get(s, True):
                 broken = "fault_bound"
-            if broken is None and k > 0 and readings:
-                if any(not t["noise_ok"][str(j)] or (j in refs and not t.get("fault_ok", {}).get(str(j), False)) for j in readings):
-                    broken = "reading"  # a reading of the step: its noise bound or a reference's declared zero fault broke
-                elif sc.health_declared and not t.get("health_ok", True):
-                    broken = "k-of-N health"
             out[(i, k)] = broken
     return out
 
@@ -168,36 +161,6 @@ def _score(acc: _Accumulator, bounds: np.ndarray, steps: np.ndarray, truth: np.n
         ex_ms = (ex_half**2).mean(axis=0)
         with np.errstate(divide="ignore", invalid="ignore"):  # a coordinate the exact limit pins (a reference's declared fault): no ratio
             acc.rms += list(np.where(ex_ms > EXACT_PINNED**2, np.sqrt((half**2).mean(axis=0) / ex_ms), np.nan))
-
-
-def _run_set_estimator(
-    name: str, sc: Scenario, i: int, data: list[StepData], acc: _Accumulator,
-) -> tuple[np.ndarray, tuple[Assumption, ...], tuple[int, ...]] | None:
-    """Step one node's estimator through the run's data, with the references' readings of each step where
-    it uses them (as the node does): (K, 3, 2) bounds, the assumptions of its guarantee on this node and
-    the references it read; None if it refuses the node."""
-    try:
-        est = SET_ESTIMATORS[name](sc, i)
-    except EstimatorError as exc:
-        acc.refused.append(str(exc))
-        return None
-    acc.assumptions.update(est.assumptions)
-    refs = sc.reading_sources(i) if est.uses_readings else ()
-    out, prev = [], None
-    for d in data:
-        readings: dict[int, tuple[float, float]] = {j: (d.y[j], d.gamma[j]) for j in refs} if prev is not None else {}
-        inp = StepInput(d.step, d.y[i], d.gamma[i], None if prev is None else prev.u, None if prev is None else prev.vx, readings)
-        t0 = time.perf_counter()
-        try:
-            s = est.step(inp)
-            lo, hi = s.bounds()  # publishing = computing the per-coordinate bounds
-        except EstimatorError as exc:
-            acc.refused.append(f"step {d.step}: {exc}")
-            return None
-        acc.ms.append(1000 * (time.perf_counter() - t0))
-        out.append(np.stack([lo, hi], axis=1))
-        prev = d
-    return np.array(out), est.assumptions, refs
 
 
 def _row(name: str, acc: _Accumulator, real_time: bool) -> CompareRow:
@@ -260,16 +223,11 @@ def compare(
         sc = load_topology(topology, case, steps, SDP)  # the run (row sdp) is all-SDP, whatever the file's nodes say
         for sig in signals:
             for seed in seeds:
-                res = run_inmemory(sc, sig, "scheduled", seed)
-                assert res.parts is not None  # kept in memory (run_inmemory's default)
-                rec = record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
+                rec = _run_record(sc, sig, seed)
                 report(f"run {sc.case}/{sig}/{seed}")
-                ex = _score_run(sc, rec, estimators, acc, first_bounds if not runs else None, report)
+                ex = _score_run(sc, rec, sig, seed, estimators, acc, first_bounds if not runs else None, report)
                 if alone:
-                    res_alone = run_inmemory(sc.alone(), sig, "scheduled", seed)
-                    assert res_alone.parts is not None
-                    rec_alone = record_from_parts(res_alone.meta, res_alone.parts["truth"], res_alone.parts["nodes"], res_alone.summary)
-                    _score_alone(sc, rec, rec_alone, ex, acc, first_bounds if not runs else None, report)
+                    _score_alone(sc, rec, _run_record(sc.alone(), sig, seed), ex, acc, first_bounds if not runs else None, report)
                 runs.append(f"{sc.case}/{sig}/{seed}")
                 if len(runs) == 1:
                     truth_fault = {i: np.array([t["faults"][str(i)] for t in sorted(rec.truth, key=lambda t: t["step"])]) for i in sc.ids}
@@ -278,15 +236,31 @@ def compare(
     return Comparison(str(topology), runs, sc.steps, sc.tau_s, rows, first_bounds, truth_fault, sc.plant_label)
 
 
-def _sdp_track(rec: Record, i: int, a: _Accumulator) -> tuple[np.ndarray, np.ndarray, list[str | None]]:
-    """Node i's published bounds in a run's record, its steps, and per step None or "dependency cone" (the
-    collector's verdict); its solve times go to ``a``."""
+def _node_track(rec: Record, i: int, a: _Accumulator) -> tuple[np.ndarray, np.ndarray, list[str | None]]:
+    """Node i's published bounds in a run's record, its steps, and per step None (covered) or the cause the
+    collector named; its solve times and fallbacks go to ``a``."""
     track = rec.nodes[i]
     bounds, steps = _record_bounds(rec, i), track.steps.astype(int)
     a.ms += [float(m) for m, s, k in zip(track.solve_ms, track.status, steps) if s in ("ok", "fallback") and k > 0]
     a.fallbacks += sum(s == "fallback" for s in track.status)
-    a.assumptions.update(_SDP_ASSUMPTIONS)
-    return bounds, steps, [None if ok else "dependency cone" for ok in track.assumptions_ok]
+    a.assumptions.update(_COLLECTOR)
+    causes = [e.get("not_covered_cause") or "dependency cone" for e in rec.raw_nodes[str(i)]]
+    return bounds, steps, [None if ok else why for ok, why in zip(track.assumptions_ok, causes)]
+
+
+def _network_of(sc: Scenario, name: str) -> tuple[Scenario, dict[int, tuple[str, ...]], list[str]]:
+    """The scenario with every node running set estimator ``name`` where it accepts the node (the others keep
+    the SDP and are left out of the row), the accepted nodes' declared assumptions, and the refusals."""
+    trial = dataclasses.replace(sc, nodes=[dataclasses.replace(n, estimator=name) for n in sc.nodes])
+    accepted: dict[int, tuple[str, ...]] = {}
+    refused: list[str] = []
+    for n in sc.nodes:
+        try:
+            accepted[n.id] = tuple(node_set_estimator(trial, n.id).assumptions)
+        except ConfigError as exc:
+            refused.append(str(exc))
+    run = dataclasses.replace(sc, nodes=[dataclasses.replace(n, estimator=name) if n.id in accepted else n for n in sc.nodes])
+    return run, accepted, refused
 
 
 def _score_alone(sc: Scenario, rec: Record, rec_alone: Record, ex: ExactBounds, acc: dict[str, _Accumulator],
@@ -301,7 +275,7 @@ def _score_alone(sc: Scenario, rec: Record, rec_alone: Record, ex: ExactBounds, 
         for i in sc.ids:
             tr_i = np.array([np.r_[t["x"], t["faults"][str(i)]] for t in truth])
             if name == SDP_ALONE:
-                bounds, steps, broken = _sdp_track(rec_alone, i, a)
+                bounds, steps, broken = _node_track(rec_alone, i, a)
             else:
                 t0 = time.perf_counter()
                 local = exact_bounds(sc, rec, "used", nodes=[i])
@@ -317,9 +291,18 @@ def _score_alone(sc: Scenario, rec: Record, rec_alone: Record, ex: ExactBounds, 
         report(name)
 
 
-def _score_run(sc: Scenario, rec: Record, estimators: tuple[str, ...], acc: dict[str, _Accumulator],
+def _run_record(sc: Scenario, signals: SignalKind, seed: int) -> Record:
+    """One in-memory run, as ``netsetest run --mode inmemory`` makes it, kept in memory as a record."""
+    res = run_inmemory(sc, signals, "scheduled", seed)
+    assert res.parts is not None  # kept in memory (run_inmemory's default)
+    return record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
+
+
+def _score_run(sc: Scenario, rec: Record, signals: SignalKind, seed: int, estimators: tuple[str, ...], acc: dict[str, _Accumulator],
                keep: dict[str, dict[int, np.ndarray]] | None, report: Callable[[str], None]) -> ExactBounds:
-    """Score every estimator on one run; the run's central exact limit (what every row is measured against)."""
+    """Score every estimator on one (case, signals, seed): ``rec`` is the SDP network's run; each set
+    estimator runs as the network's nodes on the same seed.  Returns the central exact limit (what every
+    row is measured against)."""
     data = step_data(rec)
     t0 = time.perf_counter()
     ex = exact_bounds(sc, rec, "used")
@@ -331,26 +314,25 @@ def _score_run(sc: Scenario, rec: Record, estimators: tuple[str, ...], acc: dict
         a = acc[name]
         if keep is not None:
             keep[name] = {}
-        for i in sc.ids:
+        accepted: dict[int, tuple[str, ...]]
+        if name in (SDP, EXACT):
+            run, accepted = rec, {i: () for i in sc.ids}
+        else:
+            sc_run, accepted, refused = _network_of(sc, name)
+            a.refused += refused
+            run = _run_record(sc_run, signals, seed)
+        for i in accepted:
             tr_i = np.array([np.r_[t["x"], t["faults"][str(i)]] for t in truth])
             reference = ex
-            if name == SDP:
-                bounds, steps, broken = _sdp_track(rec, i, a)
-            elif name == EXACT:
+            if name == EXACT:
                 bounds, steps = _exact_array(ex, i), all_steps
                 cones = _centralized_cones(sc, rec, ex.bounded_nodes)
                 broken = [cones[int(k)] for k in steps]
                 a.ms += [exact_ms] * len(steps)
                 a.assumptions.update(("prior", "noise", "disturbance", *(("fault_bound",) if ex.bounded_nodes else ())))
             else:
-                got = _run_set_estimator(name, sc, i, data, a)
-                if got is None:
-                    continue
-                bounds, est_assumptions, refs = got
-                steps = all_steps
-                cones_i = _cones(sc, rec, est_assumptions, [i], refs)
-                broken = [cones_i[(i, int(k))] for k in steps]
-                if "fault_bound" in est_assumptions and i not in ex.bounded_nodes:
+                bounds, steps, broken = _node_track(run, i, a)
+                if "fault_bound" in accepted[i] and i not in ex.bounded_nodes:
                     ex_all = ex_all or exact_bounds(sc, rec, "all")
                     reference = ex_all
             a.references.add(reference.fault_bounds + "".join(f" without {o}" for o in reference.omitted))
