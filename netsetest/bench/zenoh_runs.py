@@ -40,6 +40,7 @@ from netsetest.estimator.objective import DEFAULT_OBJECTIVE
 from netsetest.runtime.forkserver import NAME_PREFIX
 from netsetest.runtime.launcher import free_ports
 from netsetest.runtime.processes import role_env
+from netsetest.runtime.rolespec import Clock, CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
 
 PY = [sys.executable, "-m", "netsetest.cli.main"]
 
@@ -308,18 +309,17 @@ def _wait_rusage(procs: dict[str, subprocess.Popen], deadline: float) -> dict[st
     return out
 
 
-def _role_argv(topology: Path, run_id: str, steps: int | None, name: str, ports: dict[str, int], clock: str) -> list[str]:
+def _role_argv(topology: Path, run_id: str, steps: int | None, name: str, ports: dict[str, int], clock: Clock,
+               summary_json: str | None = None) -> list[str]:
+    """The command line of role ``name`` (collector, vehicle, nodeN) in an open peer mesh on ``ports``."""
     endpoint = lambda n: f"tcp/127.0.0.1:{ports[n]}"  # noqa: E731  # a one-line local helper
-    common = [str(topology), "--run-id", run_id, "--zenoh-mode", "peer"] + (["--steps", str(steps)] if steps else [])
-    net = ["--listen", endpoint(name)]
-    for other in ports:
-        if other != name:
-            net += ["--connect", endpoint(other)]
+    scenario = ScenarioSpec(str(topology), steps=steps)
+    zenoh = ZenohSpec(run_id, "peer", (endpoint(name),), tuple(endpoint(other) for other in ports if other != name))
     if name == "collector":
-        return ["collector", *common, "--clock", clock, *net]
+        return CollectorSpec(scenario, clock=clock, summary_json=summary_json, zenoh=zenoh).to_argv()
     if name == "vehicle":
-        return ["vehicle", *common, "--clock", clock, *net]
-    return ["node", *common, "--id", name[4:], "--clock", clock, *net]
+        return VehicleSpec(scenario, clock=clock, zenoh=zenoh).to_argv()
+    return NodeSpec(scenario, int(name.removeprefix("node")), clock=clock, zenoh=zenoh).to_argv()
 
 
 def observed_lockstep(topology: Path, steps: int | None = None, timeout: float = 300.0) -> dict:
@@ -340,9 +340,7 @@ def observed_lockstep(topology: Path, steps: int | None = None, timeout: float =
         try:
             t_start = time.monotonic()
             for name in ["collector", *(f"node{i}" for i in sc.ids), "vehicle"]:
-                argv = _role_argv(topology, run_id, steps, name, role_ports, "lockstep")
-                if name == "collector":
-                    argv += ["--summary-json", str(summary_path)]
+                argv = _role_argv(topology, run_id, steps, name, role_ports, "lockstep", str(summary_path) if name == "collector" else None)
                 launched[name] = time.monotonic()
                 procs[name] = subprocess.Popen([*PY, *argv], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                                stdin=subprocess.DEVNULL, start_new_session=True, env=role_env())

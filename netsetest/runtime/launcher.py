@@ -24,7 +24,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Literal
+from typing import IO, TYPE_CHECKING
 
 from netsetest.config.schema import Case, Scenario, load_topology
 from netsetest.estimator.names import SDP
@@ -32,13 +32,12 @@ from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.records.summary import RunSummary
 from netsetest.runtime.forkserver import ForkedProcess, ForkServer, ForkServerError
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress, read_summary
+from netsetest.runtime.rolespec import Clock, CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
 from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, START_TIMEOUT_S
 
 if TYPE_CHECKING:  # annotations only: the estimator and the models load in the role processes, not in the launcher
     from netsetest.estimator.sdp import Variant
     from netsetest.models.signals import SignalKind
-
-Clock = Literal["lockstep", "realtime"]
 
 START_S_PER_ROLE = 1.0  # each role sets up its estimator, session and barrier; 100 of them share a few cores
 COLLECTOR_GRACE_S = 10.0  # on Ctrl-C/SIGTERM: how long the collector may take to write its record and summary
@@ -229,18 +228,6 @@ def router_session(listen: list[str], base_file: str | None, security: dict[str,
 # ---------------------------------------------------------------- the run
 
 
-def _role_options(o: LaunchOptions, run_id: str) -> list[str]:
-    """The options every role process of the run gets: the scenario and the run id."""
-    out = [o.topology, "--run-id", run_id, *(["--zenoh-config", o.zenoh_config] if o.zenoh_config else [])]
-    if o.case:
-        out += ["--case", o.case]
-    if o.steps:
-        out += ["--steps", str(o.steps)]
-    if o.estimator:
-        out += ["--estimator", o.estimator]
-    return out
-
-
 class _Network:
     """How each role connects: as an mTLS client of the launcher's router, or as a peer of the open mesh."""
 
@@ -251,14 +238,12 @@ class _Network:
     def endpoint(self, name: str) -> str:
         return f"tcp/127.0.0.1:{self.ports[name]}"
 
-    def argv(self, name: str) -> list[str]:
+    def zenoh(self, name: str, run_id: str, config: str | None) -> ZenohSpec:
+        """How role ``name`` connects."""
         if self.router_endpoint is not None:  # star: every role is an mTLS client of the launcher's router
-            return ["--zenoh-mode", "client", "--connect", self.router_endpoint, "--credentials", str(self.credentials)]
-        out = ["--zenoh-mode", "peer", "--listen", self.endpoint(name)]  # insecure: a full peer mesh
-        for other in self.names:
-            if other != name:
-                out += ["--connect", self.endpoint(other)]
-        return out
+            return ZenohSpec(run_id, "client", (), (self.router_endpoint,), self.credentials, config)
+        others = tuple(self.endpoint(other) for other in self.names if other != name)  # insecure: a full peer mesh
+        return ZenohSpec(run_id, "peer", (self.endpoint(name),), others, None, config)
 
     def renew(self, name: str) -> None:
         """A fresh port for a restarted role (its old one may linger in TIME_WAIT)."""
@@ -281,7 +266,7 @@ def launch(plan: RunPlan) -> RunOutcome:
     summary_path = Path(o.summary_json or Path(tmp.name) / "summary.json")
     children = Children(run_id)  # first: the fork server imports while we set up
     router = None
-    common = _role_options(o, run_id)
+    scenario = ScenarioSpec(o.topology, o.case, o.steps, o.estimator)
     names = ["collector", "vehicle", *(f"node{i}" for i in sc.ids)]
 
     def on_term(signum: int, frame: object) -> None:
@@ -318,28 +303,20 @@ def launch(plan: RunPlan) -> RunOutcome:
                     progress[0] = int(line.split()[1])
 
         def start_node(i: int, rejoin: bool, after: int) -> None:
-            crash = schedule.next_kill(i, after)
-            children.start(f"node{i}", ["node", *common, "--id", str(i), "--variant", o.variant, "--objective", o.objective, "--clock", o.clock,
-                                        "--neighbour-timeout", str(o.neighbour_timeout), *net.argv(f"node{i}"),
-                                        *(["--rejoin"] if rejoin else []), *([] if crash is None else ["--crash-after", str(crash)])])
+            spec = NodeSpec(scenario, i, o.variant, o.objective, o.clock, o.neighbour_timeout, rejoin, schedule.next_kill(i, after),
+                            net.zenoh(f"node{i}", run_id, o.zenoh_config))
+            children.start(f"node{i}", spec.to_argv())
 
-        col = children.start(
-            "collector",
-            ["collector", *common, "--signals", o.signals, "--variant", o.variant, "--objective", o.objective, "--seed", str(o.seed), "--clock", o.clock,
-             "--summary-json", str(summary_path), "--progress", *(["--record", o.record] if o.record else []), *net.argv("collector")],
-            pipe_stdout=True,
-        )
+        collector = CollectorSpec(scenario, o.signals, o.variant, o.objective, o.seed, o.clock, o.record, str(summary_path), True,
+                                  zenoh=net.zenoh("collector", run_id, o.zenoh_config))
+        col = children.start("collector", collector.to_argv(), pipe_stdout=True)
         threading.Thread(target=follow, args=(col.stdout,), daemon=True).start()
         for i in sc.ids:
             start_node(i, False, 0)
-        awaits = [f"{i}@{r}" for i, rs in schedule.rejoins.items() for r in rs]
-        children.start(
-            "vehicle",
-            ["vehicle", *common, "--signals", o.signals, "--seed", str(o.seed), "--clock", o.clock, *(["--quiet"] if o.quiet else []),
-             "--node-timeout", str(o.node_timeout), "--pace", str(o.pace), "--start-timeout", str(run_start_timeout(len(names))),
-             *net.argv("vehicle"),
-             *(x for w in awaits for x in ("--await-rejoin", w))],
-        )
+        awaits = tuple((i, r) for i, rs in schedule.rejoins.items() for r in rs)
+        vehicle = VehicleSpec(scenario, o.signals, o.seed, o.clock, o.node_timeout, o.pace, run_start_timeout(len(names)), o.quiet, awaits,
+                              net.zenoh("vehicle", run_id, o.zenoh_config))
+        children.start("vehicle", vehicle.to_argv())
         rejoins = sorted((r, i) for i, rs in schedule.rejoins.items() for r in rs)
         reported: set[str] = set()
         while True:
