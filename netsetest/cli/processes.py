@@ -107,7 +107,7 @@ def cmd_collector(a: argparse.Namespace) -> int:
     spec = CollectorSpec.from_namespace(a)
     checks.record_file(spec.record, overwrite=True)  # before the run; the parent refused an existing file, the lock guards the rest
     checks.output_file(spec.summary_json, "--summary-json")
-    show = None if spec.progress else (lambda s: print(format_table(s), flush=True))
+    show = None if spec.channel_fd is not None else (lambda s: print(format_table(s), flush=True))
     return collector_main(spec, show)
 
 
@@ -115,7 +115,8 @@ def cmd_router(a: argparse.Namespace) -> int:
     from netsetest.bus.zenoh_bus import BusError
     from netsetest.config.schema import load_topology
     from netsetest.runtime.launcher import router_session
-    from netsetest.runtime.processes import Stop, install_signal_handlers, log
+    from netsetest.runtime.processes import Stop, install_signal_handlers
+    from netsetest.runtime.report import log
     from netsetest.runtime.security import ROUTER, CredentialsError, identity, router_settings
 
     spec = RouterSpec.from_namespace(a)

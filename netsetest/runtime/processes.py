@@ -21,7 +21,6 @@ import ctypes
 import math
 import os
 import signal
-import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
@@ -32,7 +31,7 @@ from netsetest.config.schema import Scenario
 from netsetest.messages import Message, Ready
 from netsetest.profile import PROFILE
 from netsetest.roles.node import Node
-from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION, exit_code, record_sink, write_summary
+from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION, exit_code, log, record_sink, write_summary
 from netsetest.runtime.rolespec import CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
 from netsetest.runtime.timeouts import READING_WAIT
 
@@ -87,10 +86,6 @@ def release_free_memory() -> None:
     trim = getattr(ctypes.CDLL(None), "malloc_trim", None)  # the symbols already loaded: libc's
     if trim is not None:
         trim(0)
-
-
-def log(role: str, text: str) -> None:
-    print(f"[{role}] {text}", file=sys.stderr, flush=True)
 
 
 class Barrier:
@@ -298,29 +293,19 @@ def _node_wait(node: Node, ready_due: float | None, neighbour_timeout: float, re
     return IDLE_WAIT_S
 
 
-class _CollectorProgress:
-    """Prints ``@progress k`` lines on stdout for a parent process (``netsetest run``)."""
-
-    def __init__(self, enabled: bool) -> None:
-        self.enabled, self.last = enabled, -1
-
-    def update(self, k: int) -> None:
-        if self.enabled and k > self.last:
-            print(f"@progress {k}", flush=True)
-            self.last = k
-
-
 def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: dict, on_summary: Callable[[RunSummary], None] | None = None) -> int:
     """The collector's loop: judge until End (or the vehicle is gone, or SIGTERM), then write the summary."""
     from netsetest.roles.collector import Collector
 
-    run_id, record, summary_json, progress, idle_timeout = spec.zenoh.resolved_run_id, spec.record, spec.summary_json, spec.progress, spec.idle_timeout
+    from netsetest.runtime.channel import ChannelWriter, RunFinished
+
+    run_id, record, summary_json, idle_timeout = spec.zenoh.resolved_run_id, spec.record, spec.summary_json, spec.idle_timeout
     sink, _ = record_sink(record)  # opened now: the record grows step by step and survives a crash
     collector = Collector(sc, bus, run_id, sink)
     if sink is not None:
         sink.meta(meta)
     barrier = Barrier(bus, run_id, Ready(role="collector"), _all_roles(sc) - {("collector", None)})
-    prog = _CollectorProgress(progress)
+    channel = ChannelWriter(spec.channel_fd) if spec.channel_fd is not None else None  # to the launcher: progress, summary
     last_msg = time.monotonic()
     stopped = False
     try:
@@ -330,13 +315,15 @@ def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: dict, on_su
                 barrier.tick(now)
             if bus.pump(timeout=0.05):
                 last_msg = time.monotonic()
-            prog.update(collector.progress)
+            if channel is not None:
+                channel.step(collector.progress)
             if collector.ended is not None:
                 # End overtakes the last states on other paths: wait until they are in (or a grace period)
                 t_end = time.monotonic()
                 while collector.progress < collector.ended.steps and time.monotonic() - t_end < 2.0:
                     bus.pump(timeout=0.05)
-                prog.update(collector.progress)
+                if channel is not None:
+                    channel.step(collector.progress)
                 break
             if now - last_msg > idle_timeout:
                 log("collector", f"no message for {idle_timeout:g} s: the vehicle is gone; writing what was received")
@@ -348,6 +335,9 @@ def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: dict, on_su
         stopped = True
     summary = collector.finish(meta)
     write_summary(summary, summary_json)
+    if channel is not None:
+        channel.send(RunFinished(summary))
+        channel.close()
     if on_summary:
         on_summary(summary)
     if stopped:

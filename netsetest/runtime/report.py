@@ -14,6 +14,11 @@ if TYPE_CHECKING:  # every role and command imports this module (exit codes); th
     from netsetest.records.summary import RunSummary
 
 
+def log(role: str, text: str) -> None:
+    """A role's or the launcher's line on stderr: ``[role] text``."""
+    print(f"[{role}] {text}", file=sys.stderr, flush=True)
+
+
 class Progress:
     """One line per update on a terminal (\\r), a line every 10 % otherwise; always to stderr."""
 

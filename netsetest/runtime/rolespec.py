@@ -292,7 +292,8 @@ class NodeSpec(RoleSpec):
 
 @dataclass(frozen=True)
 class CollectorSpec(RoleSpec):
-    """``netsetest collector``: judges every published set, writes the record and the summary."""
+    """``netsetest collector``: judges every published set, writes the record and the summary.  ``channel_fd``:
+    where it reports progress and the summary to the launcher (runtime/channel.py)."""
 
     ROLE: ClassVar[str] = "collector"
     HELP: ClassVar[str] = "the collector process: checks containment, writes record and summary"
@@ -305,7 +306,8 @@ class CollectorSpec(RoleSpec):
     clock: Clock = _opt("lockstep", "--clock", "the run's clock (recorded in the summary)", choices=_CLOCK_CHOICES)
     record: str | None = _opt(None, "--record", "write the run record (.json, .json.gz or .mcap; default: none)", metavar="PATH")
     summary_json: str | None = _opt(None, "--summary-json", "write the summary as JSON (default: none)", metavar="PATH")
-    progress: bool = _opt(False, "--progress", "print '@progress K' lines for a parent process", switch=True)
+    channel_fd: int | None = _opt(None, "--channel-fd", "report progress and the summary to the parent process on this inherited file "
+                                  "descriptor (runtime/channel.py; `netsetest run`) instead of printing the table (default: none)", int, metavar="FD")
     idle_timeout: float = _opt(COLLECTOR_IDLE_TIMEOUT_S, "--idle-timeout", "give up when no message arrives for S seconds",
                                argtypes.seconds, metavar="S")
     zenoh: ZenohSpec = _group(ZenohSpec, "zenoh")

@@ -46,7 +46,7 @@ SPECS: dict[type[RoleSpec], st.SearchStrategy] = {
                         clocks, seconds, st.booleans(), maybe(st.integers(-10, 10**6)), zenohs),
     CollectorSpec: st.builds(CollectorSpec, scenarios, st.sampled_from(["paper", "worst"]), st.sampled_from(["scheduled", "per-rule"]),
                              st.sampled_from(OBJECTIVES), maybe(st.integers(0, SEED_MAX)), clocks, maybe(texts), maybe(texts),
-                             st.booleans(), seconds, zenohs),
+                             maybe(st.integers(0, 1024)), seconds, zenohs),
     RouterSpec: st.builds(RouterSpec, maybe(positional), maybe(texts), st.lists(endpoints, max_size=3).map(tuple), maybe(run_ids),
                           maybe(st.sampled_from(READABLE))),
 }
