@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import os
 import threading
+import time
 from dataclasses import dataclass
 from typing import IO, TYPE_CHECKING
 
@@ -107,6 +108,7 @@ class ChannelReader:
         self.stream = stream
         self.step = -1  # the latest StepChecked (−1: none yet)
         self.summary: RunSummary | None = None  # from RunFinished
+        self.checked_at: dict[int, float] = {}  # step → time.monotonic() its StepChecked arrived (the benchmark's clock)
         self.errors: list[str] = []  # lines that were no message (reported by the launcher)
         self._thread = threading.Thread(target=self._read, name="channel", daemon=True)
         self._thread.start()
@@ -123,6 +125,7 @@ class ChannelReader:
             self.errors.append(str(exc))
             return
         if isinstance(msg, StepChecked):
+            self.checked_at.setdefault(msg.step, time.monotonic())
             self.step = max(self.step, msg.step)
         else:
             self.summary = msg.summary

@@ -19,7 +19,8 @@ Protocol (a SOCK_SEQPACKET socket pair, one JSON object per packet): the launche
 ``{"name", "argv", "pipes"}`` (``pipes``: descriptor numbers in the child, e.g. 1 for its stdout or 3 for
 the collector's channel to the launcher; the write end of a pipe for each rides along as SCM_RIGHTS, in
 that order); the server answers ``{"started": name, "pid"}`` and later, when the child has
-ended, ``{"exited": pid, "code"}`` (``code`` as :attr:`subprocess.Popen.returncode`: −N for signal N).
+ended, ``{"exited": pid, "code", "cpu_s", "peak_rss_mb"}`` (``code`` as :attr:`subprocess.Popen.returncode`: −N
+for signal N; the child's user + system CPU seconds and peak RSS, from its rusage: the benchmark's figures).
 """
 
 from __future__ import annotations
@@ -108,8 +109,9 @@ def serve(control_fd: int, run: Callable[[list[str]], int]) -> int:
                 pid = children.pop(pidfd)
                 sel.unregister(pidfd)
                 os.close(pidfd)
-                _, status = os.waitpid(pid, 0)
-                _send(sock, {"exited": pid, "code": os.waitstatus_to_exitcode(status)})
+                _, status, usage = os.wait4(pid, 0)
+                _send(sock, {"exited": pid, "code": os.waitstatus_to_exitcode(status), "cpu_s": usage.ru_utime + usage.ru_stime,
+                             "peak_rss_mb": usage.ru_maxrss / 1024.0})
 
 
 def _hold_low_fds() -> list[int]:
@@ -189,13 +191,15 @@ class ForkedProcess:
         """``pipes``: the read ends of the child's pipes, by their descriptor number in the child."""
         self.server, self.name, self.pid, self.pipes = server, name, pid, pipes
         self.returncode: int | None = None
+        self.cpu_s: float | None = None  # at its exit: user + system CPU seconds (None: killed with the server)
+        self.peak_rss_mb: float | None = None  # at its exit: peak resident memory (ru_maxrss)
         try:  # signals go through a pidfd: never to another process that got the pid after this one was reaped
             self.pidfd: int | None = os.pidfd_open(pid)
         except ProcessLookupError:  # already ended and reaped: its exit is on the way
             self.pidfd = None
 
-    def ended(self, code: int) -> None:
-        self.returncode = code
+    def ended(self, code: int, cpu_s: float | None = None, peak_rss_mb: float | None = None) -> None:
+        self.returncode, self.cpu_s, self.peak_rss_mb = code, cpu_s, peak_rss_mb
         if self.pidfd is not None:
             os.close(self.pidfd)
             self.pidfd = None
@@ -275,7 +279,7 @@ class ForkServer:
                 if "started" in msg:
                     self.started.append((msg["started"], msg["pid"]))
                 elif msg["exited"] in self.children:
-                    self.children[msg["exited"]].ended(msg["code"])
+                    self.children[msg["exited"]].ended(msg["code"], msg.get("cpu_s"), msg.get("peak_rss_mb"))
                 self.sock.settimeout(0.0)  # then take what is there without waiting
         except (BlockingIOError, TimeoutError):
             return True

@@ -14,6 +14,7 @@ the run: the others go on without it and the summary says so (exit code 3, from 
 from __future__ import annotations
 
 import contextlib
+import io
 import secrets
 import signal
 import socket
@@ -21,8 +22,8 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Protocol
 
@@ -102,12 +103,25 @@ class RunPlan:
 
 
 @dataclass(frozen=True)
+class RoleUsage:
+    """What one role process cost, from its rusage at its exit (None: not known, e.g. killed with the fork server)."""
+
+    exit_code: int | None
+    cpu_s: float | None  # user + system
+    peak_rss_mb: float | None
+
+
+@dataclass(frozen=True)
 class RunOutcome:
     """How a launched run ended: the launcher's exit code and the collector's summary, if it wrote one
-    at the normal end of the run (not when interrupted or when the vehicle failed)."""
+    at the normal end of the run (not when interrupted or when the vehicle failed).  :func:`launch` adds
+    what the benchmark measures: each role's usage (its last process) and when the launcher heard that
+    the collector had checked each step (``time.monotonic()``)."""
 
     exit_code: int
     summary: RunSummary | None
+    roles: Mapping[str, RoleUsage] = field(default_factory=dict)
+    checked_at: Mapping[int, float] = field(default_factory=dict)
 
 
 def kill_schedule(kill: Sequence[tuple[int, int]], rejoin: Sequence[tuple[int, int]], steps: int) -> Schedule:
@@ -178,6 +192,8 @@ class RoleProcess(Protocol):
 
     returncode: int | None
     pipes: dict[int, IO[bytes]]
+    cpu_s: float | None  # once ended: its rusage (None: not known)
+    peak_rss_mb: float | None
 
     def poll(self) -> int | None: ...
     def wait(self, timeout: float | None = None) -> int: ...
@@ -429,6 +445,11 @@ class Supervisor:
         assert col.returncode is not None  # follow() saw it exit
         return RunOutcome(col.returncode, self.channel.summary)
 
+    @classmethod
+    def idle(cls, children: Children) -> Supervisor:
+        """A supervisor of roles not started yet (Ctrl-C during the set-up: stop what was started)."""
+        return cls(children, Schedule({}, {}), ChannelReader(io.BytesIO(b"")), lambda node, step: None)
+
     def interrupted(self, summary_json: str | None) -> RunOutcome:
         """Ctrl-C/SIGTERM: stop the vehicle and the nodes, then let the collector write what it has."""
         log("run", "interrupted: stopping the vehicle and the nodes, then letting the collector write what it has")
@@ -470,29 +491,28 @@ def launch(plan: RunPlan) -> RunOutcome:
         network: Network | None = None
         supervisor: Supervisor | None = None
         try:
-            try:
-                network = open_network(plan, run_id, tmp)
-            except BusError as exc:
-                log("run", str(exc))
-                return RunOutcome(EXIT_BAD_INPUT, None)
+            network = open_network(plan, run_id, tmp)
             if not o.quiet:  # --quiet: nothing on success; the summary and the record name the security mode
                 for line in network.describe():
                     log("run", line)
             starter = RoleStarter(plan, network, children)
             bar = Progress(plan.scenario.steps, f"zenoh ({len(plan.scenario.ids)} nodes + vehicle + collector)", enabled=not o.quiet)
             supervisor = Supervisor(children, plan.schedule, starter.start_all(), starter.restart_node, bar)
-            return supervisor.follow()
+            outcome = supervisor.follow()
+        except BusError as exc:  # the router: a bad --zenoh-config, or it cannot listen
+            log("run", str(exc))
+            outcome = RunOutcome(EXIT_BAD_INPUT, None)
         except ForkServerError as exc:
             log("run", f"{exc}; stopping the run")
-            return RunOutcome(EXIT_VIOLATION, None)
+            outcome = RunOutcome(EXIT_VIOLATION, None)
         except KeyboardInterrupt:
             if supervisor is None:
                 log("run", "interrupted while starting the run")
-                children.stop_all(ROLE_GRACE_S)
-                return RunOutcome(EXIT_INTERRUPTED, None)
-            return supervisor.interrupted(o.summary_json)
+            outcome = (supervisor or Supervisor.idle(children)).interrupted(o.summary_json)
         finally:
             children.stop_all(ROLE_GRACE_S)
             if network is not None:
                 network.close()
             server.close()
+    usage = {name: RoleUsage(p.returncode, p.cpu_s, p.peak_rss_mb) for name, p in children.procs.items()}
+    return replace(outcome, roles=usage, checked_at=dict(supervisor.channel.checked_at) if supervisor else {})
