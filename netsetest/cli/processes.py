@@ -100,6 +100,16 @@ def cmd_node(a: argparse.Namespace) -> int:
     return node_main(NodeSpec.from_namespace(a))
 
 
+def _open_fd(fd: int) -> bool:
+    import os
+
+    try:
+        os.fstat(fd)
+    except (OSError, OverflowError):
+        return False
+    return True
+
+
 def cmd_collector(a: argparse.Namespace) -> int:
     from netsetest.runtime.processes import collector_main
     from netsetest.runtime.report import format_table
@@ -107,6 +117,9 @@ def cmd_collector(a: argparse.Namespace) -> int:
     spec = CollectorSpec.from_namespace(a)
     checks.record_file(spec.record, overwrite=True)  # before the run; the parent refused an existing file, the lock guards the rest
     checks.output_file(spec.summary_json, "--summary-json")
+    if spec.channel_fd is not None and not _open_fd(spec.channel_fd):
+        print(f"netsetest collector: --channel-fd {spec.channel_fd}: not an open file descriptor (the parent passes one)", file=sys.stderr)
+        return EXIT_BAD_INPUT
     show = None if spec.channel_fd is not None else (lambda s: print(format_table(s), flush=True))
     return collector_main(spec, show)
 

@@ -1,14 +1,20 @@
 """The launcher of a Zenoh run (``netsetest run TOPOLOGY``): one process per role, followed to the end.
 
 :func:`plan_run` checks a :class:`LaunchOptions` against its topology (a :class:`LaunchError` names the
-bad option) and :func:`launch` runs the resulting :class:`RunPlan`: 1 vehicle, 1 collector and one process
-per node, forked by the run's fork server (runtime/forkserver.py), which the launcher starts first so
-that it imports while the launcher writes credentials and opens the router.  Secured (the default), the launcher writes per-run mTLS credentials and holds the run's
-router (access control) in its own process, and every role is a client of it; ``insecure``, the roles
-form a full peer mesh on loopback, each listening on its own free port.  The launcher follows the
-collector's progress, kills and restarts nodes mid-run (``kill``, ``rejoin``), and stops every child on
-Ctrl-C, on SIGTERM or when the vehicle or the collector fails.  A node that dies is not a failure of
-the run: the others go on without it and the summary says so (exit code 3, from the collector).
+bad option) and :func:`launch` runs the resulting :class:`RunPlan` in three parts:
+
+- *network set-up* (:func:`open_network`, :class:`Network`): secured (the default), per-run mTLS credentials
+  and the run's router (access control) in this process, every role a client of it; ``insecure``, a full
+  peer mesh on loopback, each role listening on its own free port;
+- *role start* (:class:`RoleStarter`): each role's typed spec (runtime/rolespec.py) from the plan and the
+  network, forked by the run's fork server (runtime/forkserver.py), which starts first so that it imports
+  while the launcher writes credentials and opens the router: 1 collector, one process per node, 1 vehicle;
+- the *supervisor* (:class:`Supervisor`): follows the collector's progress and summary on its channel
+  (runtime/channel.py), kills and restarts nodes mid-run (``kill``, ``rejoin``), logs the roles' exits,
+  and stops every child on Ctrl-C, on SIGTERM or when the vehicle or the collector fails.  A node that
+  dies is not a failure of the run: the others go on without it and the summary says so (exit code 3,
+  from the collector).  It only polls, signals and restarts processes: tests/unit/test_supervisor.py runs
+  it on fake ones.
 """
 
 from __future__ import annotations

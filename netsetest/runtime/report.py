@@ -175,13 +175,6 @@ def write_summary(summary: RunSummary, summary_json: str | None) -> None:
         Path(summary_json).write_text(json.dumps(summary.to_dict(), indent=2) + "\n")
 
 
-def read_summary(summary_json: str | Path) -> RunSummary:
-    """A ``--summary-json`` file written by :func:`write_summary` (ValueError if it is not one)."""
-    from netsetest.records.summary import RunSummary
-
-    return RunSummary.from_dict(json.loads(Path(summary_json).read_text()))
-
-
 EXIT_OK, EXIT_VIOLATION, EXIT_BAD_INPUT, EXIT_NODE_LOST = 0, 1, 2, 3
 EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM reached the command (128 + SIGINT, as shells report it)
 

@@ -116,3 +116,10 @@ def test_the_run_id_comes_from_the_environment_of_the_role_process(monkeypatch: 
     assert spec.zenoh.resolved_run_id == "from-env" and "--run-id" not in spec.to_argv()  # compose relies on it
     assert VehicleSpec(spec.scenario, zenoh=ZenohSpec(run_id="mine")).zenoh.resolved_run_id == "mine"
     assert RouterSpec().resolved_run_id == "from-env" and RouterSpec().endpoints == ["tcp/0.0.0.0:7447"]
+
+
+def test_a_collector_refuses_a_channel_that_is_not_open(capsys: pytest.CaptureFixture[str]) -> None:
+    from netsetest.cli.main import main
+
+    assert main(["collector", "paper6", "--channel-fd", "987"]) == 2
+    assert "--channel-fd 987: not an open file descriptor" in capsys.readouterr().err
