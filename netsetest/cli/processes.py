@@ -14,7 +14,9 @@ from netsetest.cli import checks
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.runtime import argtypes
 from netsetest.runtime.report import EXIT_BAD_INPUT
-from netsetest.runtime.rolespec import ROLE_SPECS, RUN_ID_ENV, CollectorSpec, NodeSpec, RouterSpec, VehicleSpec
+from netsetest.runtime.rolespec import (
+    ESTIMATOR_HELP, ROLE_SPECS, RUN_ID_ENV, ZENOH_CONFIG_HELP, CollectorSpec, NodeSpec, RouterSpec, VehicleSpec,
+)
 from netsetest.runtime.security import RUN_ENV_FILE
 from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S
 
@@ -22,11 +24,6 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 
 
 # ---------------------------------------------------------------- option groups
-
-
-def _zenoh_config_arg(g: argparse._ArgumentGroup) -> None:
-    g.add_argument("--zenoh-config", type=argtypes.readable_file, metavar="FILE",
-                   help="a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting and security on top (default: none)")
 
 
 _at, _seconds, _non_negative = argtypes.node_at, argtypes.seconds, argtypes.non_negative_seconds
@@ -56,12 +53,11 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--insecure", action="store_true",
                    help="no credentials, no access control: an open peer mesh any local process can join (labelled in the summary; default: secured)")
     g.add_argument("--run-id", type=checks.run_id, metavar="ID", help="the run's key-expression namespace (default: a fresh random one, printed)")
-    _zenoh_config_arg(g)
+    g.add_argument("--zenoh-config", type=argtypes.readable_file, metavar="FILE", help=ZENOH_CONFIG_HELP)
 
 
 def estimator_arg(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--estimator", choices=list(NODE_ESTIMATOR_NAMES), metavar="NAME",
-                   help=f"every node's estimator, overriding the topology's per-node 'estimator' ({', '.join(NODE_ESTIMATOR_NAMES)}; default: the file's, else sdp)")
+    p.add_argument("--estimator", choices=list(NODE_ESTIMATOR_NAMES), metavar="NAME", help=ESTIMATOR_HELP)
 
 
 def add_role_parsers(sub: argparse._SubParsersAction) -> None:

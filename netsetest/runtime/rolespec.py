@@ -192,6 +192,11 @@ def _argv(spec: object) -> tuple[list[str], list[str]]:
 # ---------------------------------------------------------------- the parts every role shares
 
 
+ESTIMATOR_HELP = (f"every node's estimator, overriding the topology's per-node 'estimator' ({', '.join(NODE_ESTIMATOR_NAMES)}; "
+                  "default: the file's, else sdp)")
+ZENOH_CONFIG_HELP = "a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting and security on top (default: none)"
+
+
 @dataclass(frozen=True)
 class ScenarioSpec:
     """Which run: the topology and what the command line overrides of it."""
@@ -199,9 +204,7 @@ class ScenarioSpec:
     topology: str = _opt(MISSING, None, "topology file (e.g. topologies/paper6.toml) or bundled name (paper6, paper6_lossy)")
     case: Case | None = _opt(None, "--case", "override the topology's case (default: the file's)", choices=("nsnim", "saim"))
     steps: int | None = _opt(None, "--steps", "override the number of steps of τs each (default: the file's)", argtypes.positive_int, metavar="N")
-    estimator: str | None = _opt(
-        None, "--estimator", f"every node's estimator, overriding the topology's per-node 'estimator' ({', '.join(NODE_ESTIMATOR_NAMES)}; "
-        "default: the file's, else sdp)", choices=NODE_ESTIMATOR_NAMES, metavar="NAME")
+    estimator: str | None = _opt(None, "--estimator", ESTIMATOR_HELP, choices=NODE_ESTIMATOR_NAMES, metavar="NAME")
 
     def load(self) -> Scenario:
         """The scenario (ConfigError naming what is wrong with the file or an override)."""
@@ -215,7 +218,6 @@ def _resolve_run_id(run_id: str | None) -> str:
 
 
 _RUN_ID_HELP = f"key-expression namespace of the run (netsetest/<run-id>/...); default ${RUN_ID_ENV} or '{DEFAULT_RUN_ID}'"
-_CONFIG_HELP = "a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting and security on top (default: none)"
 
 
 @dataclass(frozen=True)
@@ -231,7 +233,7 @@ class ZenohSpec:
                                     argtypes.endpoint, metavar="ENDPOINT", many=True)
     credentials: str | None = _opt(None, "--credentials", "mTLS: this role's certificate and key from DIR (`netsetest credentials`); "
                                    "connect on tls/ endpoints (default: none, no TLS)", metavar="DIR")
-    config: str | None = _opt(None, "--zenoh-config", _CONFIG_HELP, argtypes.readable_file, metavar="FILE")
+    config: str | None = _opt(None, "--zenoh-config", ZENOH_CONFIG_HELP, argtypes.readable_file, metavar="FILE")
 
     @property
     def resolved_run_id(self) -> str:
@@ -327,7 +329,7 @@ class RouterSpec(RoleSpec):
                                    f"or tls/0.0.0.0:{ZENOH_DEFAULT_PORT} with --credentials)", argtypes.endpoint, metavar="ENDPOINT", many=True)
     run_id: str | None = _opt(None, "--run-id", f"the run whose keys the access control grants (default: ${RUN_ID_ENV} or '{DEFAULT_RUN_ID}')",
                               argtypes.run_id)
-    zenoh_config: str | None = _opt(None, "--zenoh-config", _CONFIG_HELP, argtypes.readable_file, metavar="FILE")
+    zenoh_config: str | None = _opt(None, "--zenoh-config", ZENOH_CONFIG_HELP, argtypes.readable_file, metavar="FILE")
 
     @property
     def resolved_run_id(self) -> str:
