@@ -333,6 +333,8 @@ def observed_lockstep(topology: Path, steps: int | None = None, insecure: bool =
     the start-up is launch → that first report.  Each role's CPU seconds and peak RSS come from its rusage
     at its exit (the fork server reaps it); ``run`` is this process while it launched (the router when
     secured, the supervisor, the channel)."""
+    import netsetest.bus.zenoh_bus  # imported by the launcher once: not counted in the first run's "run" CPU
+    import netsetest.runtime.security  # noqa: F401  # the same (credentials, the router's access control)
     from netsetest.runtime.launcher import LaunchOptions, launch, plan_run
     from netsetest.runtime.report import EXIT_INTERRUPTED
 
