@@ -124,19 +124,23 @@ def zenoh_overhead(cfg: dict) -> dict:
     from netsetest.bench.zenoh_runs import cli_run, observed_lockstep
 
     sc = load_topology(PAPER6, "nsnim")
-    mem, zen = [], []
-    obs = None
+    mem, zen, zen_open = [], [], []
+    obs = obs_open = None
     for _ in range(3):  # interleaved, medians of three (the lockstep run shares two cores with everything else)
         t0 = time.perf_counter()
         run_inmemory(sc, "paper", "scheduled", 0)
         mem.append(time.perf_counter() - t0)
-        obs = observed_lockstep(PAPER6)
+        obs = observed_lockstep(PAPER6)  # what `netsetest run` runs: secured, router star, forked roles
         zen.append(obs["stepping_s"])
+        obs_open = observed_lockstep(PAPER6, insecure=True)  # `netsetest run --insecure`: the open peer mesh
+        zen_open.append(obs_open["stepping_s"])
     floor = lockstep_cpu_floor(sc, obs, cfg["cpu_steps"])
     cli_z = cli_run(PAPER6, "zenoh", "lockstep")
     cli_m = cli_run(PAPER6, "inmemory", "lockstep")
     res = {
         "inmemory_s": mem, "zenoh_stepping_s": zen, "ratio": _ratio(_med(zen), _med(mem)),
+        "zenoh_insecure_stepping_s": zen_open, "ratio_insecure": _ratio(_med(zen_open), _med(mem)),
+        "zenoh_insecure_exit_codes": obs_open["exit_codes"] if obs_open else None,
         "zenoh_startup_s": obs["startup_s"] if obs else None,
         "zenoh_exit_codes": obs["exit_codes"] if obs else None,
         "zenoh_violations": (obs["summary"] or {}).get("violations_total") if obs else None,
@@ -145,7 +149,8 @@ def zenoh_overhead(cfg: dict) -> dict:
         "cli_end_to_end": {"zenoh_s": cli_z["wall_s"], "inmemory_s": cli_m["wall_s"], "zenoh_exit": cli_z["exit_code"],
                            "inmemory_exit": cli_m["exit_code"], "ratio": cli_z["wall_s"] / cli_m["wall_s"]},
     }
-    _log(f"  in memory {_med(mem):.2f} s, Zenoh lockstep stepping {_med(zen) or float('nan'):.2f} s (ratio {res['ratio'] or float('nan'):.2f}); "
+    _log(f"  in memory {_med(mem):.2f} s, Zenoh lockstep stepping {_med(zen) or float('nan'):.2f} s (ratio {res['ratio'] or float('nan'):.2f}), "
+         f"--insecure {_med(zen_open) or float('nan'):.2f} s (ratio {res['ratio_insecure'] or float('nan'):.2f}); "
          f"end to end {cli_z['wall_s']:.1f} s vs {cli_m['wall_s']:.1f} s")
     if floor:
         _log(f"  CPU per step: Zenoh {floor['zenoh_cpu_ms_per_step']:.2f} ms in its processes, in memory {floor['inmemory_ms_per_step']:.2f} ms; "
@@ -333,6 +338,7 @@ def headline(res: dict) -> dict:
         "naive_ratio": ns["naive"]["ratio"],
         "previous_default_ratio": ns["prev"]["ratio"],
         "zenoh_overhead_ratio": res["zenoh"]["ratio"],
+        "zenoh_overhead_ratio_insecure": res["zenoh"].get("ratio_insecure"),
         "zenoh_overhead_ratio_cpu_floor": (res["zenoh"].get("cpu_floor") or {}).get("ratio_floor"),
         "scaling": [{"nodes": r["nodes"], "ms_per_node_step": r["ms_per_node_step"]} for r in res["inmemory_scaling"]["rows"]],
         "realtime_max_nodes": res["realtime"]["max_nodes"],
@@ -426,8 +432,9 @@ def markdown(res: dict) -> str:
                      f"{' / '.join(f(bd.get(k)) for k in (3, 4, 5))} |")
     z = res["zenoh"]
     lines += ["", "## Zenoh", "",
-              f"- lockstep stepping phase {f(_med(z['zenoh_stepping_s']))} s vs in memory {f(_med(z['inmemory_s']))} s: ratio {f(z['ratio'])} "
-              f"(start-up before step 0: {f(z['zenoh_startup_s'])} s)",
+              f"- lockstep stepping phase of `netsetest run` (secured: mTLS, router star, forked roles) {f(_med(z['zenoh_stepping_s']))} s "
+              f"vs in memory {f(_med(z['inmemory_s']))} s: ratio {f(z['ratio'])} (start-up before step 0: {f(z['zenoh_startup_s'])} s)",
+              f"- the same with `--insecure` (open peer mesh): {f(_med(z.get('zenoh_insecure_stepping_s') or []))} s: ratio {f(z.get('ratio_insecure'))}",
               *_cpu_floor_lines(z.get("cpu_floor")),
               f"- end to end through `netsetest run`: {f(z['cli_end_to_end']['zenoh_s'])} s vs {f(z['cli_end_to_end']['inmemory_s'])} s "
               f"(ratio {f(z['cli_end_to_end']['ratio'])})",

@@ -1,10 +1,10 @@
 """The multi-process parts of the benchmark: Zenoh lockstep overhead, real-time capacity, one node's cost.
 
 - ``cli_run``: ``netsetest run TOPOLOGY --mode zenoh|inmemory --clock ...`` end to end, as a user runs it.
-- ``observed_lockstep``: the same role processes ``netsetest run`` starts (``netsetest collector|node|
-  vehicle`` with the same options, all-to-all on loopback), started here so that an observer session
-  can time the run from the vehicle's step-0 input to the last node's final state (the stepping
-  phase, without process start-up), and so that each node's peak RSS (VmHWM) can be read.
+- ``observed_lockstep``: a lockstep run through ``netsetest run``'s own launcher (runtime/launcher.py),
+  secured by default or ``--insecure``, in this process: the stepping phase timed by the collector's
+  progress on the launcher's channel (without process start-up), each role's CPU and peak RSS from its
+  rusage at exit.
 - ``launch_to_step0``: ``netsetest run`` of a topology (secured, roles forked by the fork server) timed
   from launch to the vehicle's step-0 input.
 - ``node_startup``: a one-node network whose vehicle and collector are already up and waiting; a
@@ -15,7 +15,8 @@
   (CPU per role over the stepping phase, the machine's other work, node RSS) so a failure shows why.
 - ``node_memory_profile``: RSS and import time of a node process, stage by stage.
 
-Every role process is started with the environment ``netsetest run`` gives it (``role_env``).  The
+Every role process is started with the environment ``netsetest run`` gives it (``role_env``); the command
+lines of the roles this module starts itself (``node_startup``) come from their specs (runtime/rolespec.py).  The
 roles of ``netsetest run`` are forked by its fork server: :class:`ProcessSampler` tells them apart by
 process name (``ns-node3``), the others by command line.
 """
@@ -40,6 +41,7 @@ from netsetest.estimator.objective import DEFAULT_OBJECTIVE
 from netsetest.runtime.forkserver import NAME_PREFIX
 from netsetest.runtime.launcher import free_ports
 from netsetest.runtime.processes import role_env
+from netsetest.runtime.rolespec import Clock, CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
 
 PY = [sys.executable, "-m", "netsetest.cli.main"]
 
@@ -308,63 +310,52 @@ def _wait_rusage(procs: dict[str, subprocess.Popen], deadline: float) -> dict[st
     return out
 
 
-def _role_argv(topology: Path, run_id: str, steps: int | None, name: str, ports: dict[str, int], clock: str) -> list[str]:
+def _role_argv(topology: Path, run_id: str, steps: int | None, name: str, ports: dict[str, int], clock: Clock,
+               summary_json: str | None = None) -> list[str]:
+    """The command line of role ``name`` (collector, vehicle, nodeN) in an open peer mesh on ``ports``."""
     endpoint = lambda n: f"tcp/127.0.0.1:{ports[n]}"  # noqa: E731  # a one-line local helper
-    common = [str(topology), "--run-id", run_id, "--zenoh-mode", "peer"] + (["--steps", str(steps)] if steps else [])
-    net = ["--listen", endpoint(name)]
-    for other in ports:
-        if other != name:
-            net += ["--connect", endpoint(other)]
+    scenario = ScenarioSpec(str(topology), steps=steps)
+    zenoh = ZenohSpec(run_id, "peer", (endpoint(name),), tuple(endpoint(other) for other in ports if other != name))
     if name == "collector":
-        return ["collector", *common, "--clock", clock, *net]
+        return CollectorSpec(scenario, clock=clock, summary_json=summary_json, zenoh=zenoh).to_argv()
     if name == "vehicle":
-        return ["vehicle", *common, "--clock", clock, *net]
-    return ["node", *common, "--id", name[4:], "--clock", clock, *net]
+        return VehicleSpec(scenario, clock=clock, zenoh=zenoh).to_argv()
+    return NodeSpec(scenario, int(name.removeprefix("node")), clock=clock, zenoh=zenoh).to_argv()
 
 
-def observed_lockstep(topology: Path, steps: int | None = None, timeout: float = 300.0) -> dict:
-    """Start the roles of one lockstep Zenoh run; time its stepping phase; peak RSS per process."""
-    from netsetest.config.schema import load_topology
+def observed_lockstep(topology: Path, steps: int | None = None, insecure: bool = False) -> dict:
+    """One lockstep run of ``topology`` through the launcher ``netsetest run`` uses (runtime/launcher.py, in
+    this process): secured by default (mTLS, every role a client of the run's router, roles forked by the
+    fork server); ``insecure``: the open peer mesh of ``run --insecure``.
 
-    sc = load_topology(topology, steps=steps)
-    n_steps = sc.steps
-    run_id = f"bench{os.getpid()}x{int(time.time() * 1000) % 100000}"
-    names = ["collector", "vehicle", *(f"node{i}" for i in sc.ids), "observer"]
-    ports = dict(zip(names, free_ports(len(names))))
-    role_ports = {k: v for k, v in ports.items()}
-    obs = Observer(run_id, f"tcp/127.0.0.1:{ports['observer']}", [f"tcp/127.0.0.1:{p}" for n, p in ports.items() if n != "observer"])
-    procs: dict[str, subprocess.Popen] = {}
-    launched: dict[str, float] = {}
-    with tempfile.TemporaryDirectory(prefix="nsbench-") as tmp:
-        summary_path = Path(tmp) / "summary.json"
-        try:
-            t_start = time.monotonic()
-            for name in ["collector", *(f"node{i}" for i in sc.ids), "vehicle"]:
-                argv = _role_argv(topology, run_id, steps, name, role_ports, "lockstep")
-                if name == "collector":
-                    argv += ["--summary-json", str(summary_path)]
-                launched[name] = time.monotonic()
-                procs[name] = subprocess.Popen([*PY, *argv], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                               stdin=subprocess.DEVNULL, start_new_session=True, env=role_env())
-            usage = _wait_rusage(procs, time.monotonic() + timeout)
-            t_done = time.monotonic()
-        finally:
-            _kill(list(procs.values()))
-            obs.close()
-        summary = json.loads(summary_path.read_text()) if summary_path.exists() else None
-    inputs0 = [t for t, k, m in obs.seen(lambda k, m: m.get("type") == "input" and m.get("step") == 0)]
-    finals = [t for t, k, m in obs.seen(lambda k, m: m.get("type") == "state" and m.get("step") == n_steps)]
-    first_state = {}
-    for i in sc.ids:
-        ts = [t for t, k, m in obs.seen(lambda k, m, i=i: m.get("type") == "state" and m.get("node") == i and m.get("step") == 0)]
-        if ts:
-            first_state[i] = min(ts) - launched[f"node{i}"]
-    stepping = (max(finals) - min(inputs0)) if inputs0 and len(finals) == len(sc.ids) else None
-    node_rss = [u["peak_rss_mb"] for n, u in usage.items() if n.startswith("node") and u["peak_rss_mb"] is not None]
+    The stepping phase is timed by the collector's progress on the launcher's channel: from the first step
+    it reports checked to the last, scaled to the run's N+1 steps (the first step's own time is not in it);
+    the start-up is launch → that first report.  Each role's CPU seconds and peak RSS come from its rusage
+    at its exit (the fork server reaps it); ``run`` is this process while it launched (the router when
+    secured, the supervisor, the channel)."""
+    import netsetest.bus.zenoh_bus  # imported by the launcher once: not counted in the first run's "run" CPU
+    import netsetest.runtime.security  # noqa: F401  # the same (credentials, the router's access control)
+    from netsetest.runtime.launcher import LaunchOptions, launch, plan_run
+    from netsetest.runtime.report import EXIT_INTERRUPTED
+
+    plan = plan_run(LaunchOptions(str(topology), steps=steps, seed=0, quiet=True, insecure=insecure))
+    n_steps = plan.scenario.steps
+    cpu0, t_start = time.process_time(), time.monotonic()
+    out = launch(plan)
+    t_done = time.monotonic()
+    if out.exit_code == EXIT_INTERRUPTED:  # Ctrl-C reached the launcher: the benchmark stops too
+        raise KeyboardInterrupt
+    usage = {name: {"exit_code": u.exit_code, "peak_rss_mb": u.peak_rss_mb, "cpu_s": u.cpu_s} for name, u in out.roles.items()}
+    usage["run"] = {"exit_code": out.exit_code, "peak_rss_mb": None, "cpu_s": time.process_time() - cpu0}
+    first = min(out.checked_at, default=None)
+    stepping = None
+    if first is not None and n_steps in out.checked_at and n_steps > first:
+        stepping = (out.checked_at[n_steps] - out.checked_at[first]) * (n_steps + 1) / (n_steps - first)
     return {
-        "nodes": len(sc.ids), "steps": n_steps, "stepping_s": stepping, "total_s": t_done - t_start,
-        "startup_s": (min(inputs0) - t_start) if inputs0 else None,
-        "node_first_state_s": first_state, "node_peak_rss_mb": node_rss, "usage": usage, "summary": summary,
+        "security": "insecure" if insecure else "mtls+acl", "nodes": len(plan.scenario.ids), "steps": n_steps, "stepping_s": stepping,
+        "total_s": t_done - t_start, "startup_s": None if first is None else out.checked_at[first] - t_start,
+        "node_peak_rss_mb": [u["peak_rss_mb"] for n, u in usage.items() if n.startswith("node") and u["peak_rss_mb"] is not None],
+        "usage": usage, "summary": out.summary.to_dict() if out.summary else None,
         "exit_codes": {n: u["exit_code"] for n, u in usage.items()},
     }
 

@@ -10,41 +10,18 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from netsetest.models.manoeuvres import DriveSpec
+from netsetest.runtime import argtypes
 
-SEED_MAX = 2**63 - 1
+# the parsers a role spec shares (runtime/argtypes.py), under the names every command uses
+positive_int, seed, run_id, endpoint = argtypes.positive_int, argtypes.seed, argtypes.run_id, argtypes.endpoint
+
 SEED_RANGE_RE = re.compile(r"(\d+)\s*-\s*(\d+)")
 SEED_RANGE_MAX = 10_000  # seeds one range may name (a typo like 0-99999999 is not a request)  # numpy's SeedSequence takes any non-negative integer; keep it to 64 bits
 DRAWN_SEED_BITS = 32  # a run's own seed: unguessable by another local user, short enough to type back
-RUN_ID_RE = re.compile(r"[A-Za-z0-9_-]{1,64}")
-# proto/host:port with an optional Zenoh suffix (?metadata, #config); host a name, an IPv4 or a [IPv6]
-ENDPOINT_RE = re.compile(r"(tcp|udp|tls|quic)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):(\d{1,5})([?#].*)?")
-MAX_PORT = 65535
 
 
 class OutputError(Exception):
     """An output path that cannot be written; the message names the option, the path and why."""
-
-
-def positive_int(s: str) -> int:
-    """argparse type: an integer ≥ 1 (steps, counts)."""
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {s!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {v}")
-    return v
-
-
-def seed(s: str) -> int:
-    """argparse type of ``--seed``: a non-negative integer (numpy rejects negative seeds)."""
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {s!r}") from None
-    if not 0 <= v <= SEED_MAX:
-        raise argparse.ArgumentTypeError(f"must be between 0 and 2**63 − 1, got {v}")
-    return v
 
 
 def name_list(choices: Sequence[str], what: str) -> Callable[[str], tuple[str, ...]]:
@@ -163,19 +140,8 @@ def output_dir(path: str, option: str) -> None:
         raise OutputError(f"{option} {path}: not writable")
 
 
-def run_id(s: str) -> str:
-    """argparse type of ``--run-id``: one key-expression chunk (no '/', '*', '$': they would widen the keys)."""
-    if not RUN_ID_RE.fullmatch(s):
-        raise argparse.ArgumentTypeError(f"{s!r}: only letters, digits, '_' and '-' (1 to 64), it is a key-expression chunk")
-    return s
 
 
-def endpoint(s: str) -> str:
-    """argparse type of a Zenoh endpoint: PROTO/HOST:PORT with a port in range."""
-    m = ENDPOINT_RE.fullmatch(s)
-    if not m or int(m.group(3)) > MAX_PORT:
-        raise argparse.ArgumentTypeError(f"{s!r}: expected PROTO/HOST:PORT with PROTO tcp, udp, tls or quic and a port ≤ {MAX_PORT}, e.g. tls/127.0.0.1:7447")
-    return s
 
 
 def seed_or_fresh(value: int | None) -> int:

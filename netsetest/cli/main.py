@@ -98,7 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON (default: none)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     processes.add_run_options(p)
-    processes.add_role_parsers(sub, _scenario_args, _run_args)
+    processes.add_role_parsers(sub)
 
     p = sub.add_parser("inspect", help="per-step fault (and state) bounds of one node from a record")
     p.add_argument("record", help="record file (.json, .json.gz or .mcap)")

@@ -6,78 +6,27 @@ to the launcher (runtime/launcher.py), which starts and follows the role process
 from __future__ import annotations
 
 import argparse
-import math
-import os
 import sys
 import time
 from collections.abc import Callable
 
-from netsetest.bus import keys
 from netsetest.cli import checks
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
-from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
+from netsetest.runtime import argtypes
 from netsetest.runtime.report import EXIT_BAD_INPUT
-from netsetest.runtime.security import RUN_ENV_FILE, RUN_ID_ENV
-from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, START_TIMEOUT_S
+from netsetest.runtime.rolespec import (
+    ESTIMATOR_HELP, ROLE_SPECS, RUN_ID_ENV, ZENOH_CONFIG_HELP, CollectorSpec, NodeSpec, RouterSpec, VehicleSpec,
+)
+from netsetest.runtime.security import RUN_ENV_FILE
+from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
-ZENOH_DEFAULT_PORT = 7447
 
 
 # ---------------------------------------------------------------- option groups
 
 
-def _readable_file(s: str) -> str:
-    if not os.path.isfile(s) or not os.access(s, os.R_OK):
-        raise argparse.ArgumentTypeError(f"{s}: not a readable file")
-    return s
-
-
-def _zenoh_config_arg(g: argparse._ArgumentGroup) -> None:
-    g.add_argument("--zenoh-config", type=_readable_file, metavar="FILE",
-                   help="a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting and security on top (default: none)")
-
-
-def _zenoh_args(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("zenoh")
-    g.add_argument("--run-id", type=checks.run_id, default=os.environ.get(RUN_ID_ENV, "default"),
-                   help=f"key-expression namespace of the run (netsetest/<run-id>/...); default ${RUN_ID_ENV} or 'default'")
-    g.add_argument("--zenoh-mode", choices=["peer", "client"], default="peer", help="peer (one host) or client of a router")
-    g.add_argument("--listen", type=checks.endpoint, action="append", default=[], metavar="ENDPOINT",
-                   help="endpoint to listen on, e.g. tcp/127.0.0.1:7450 (repeatable; default: none)")
-    g.add_argument("--connect", type=checks.endpoint, action="append", default=[], metavar="ENDPOINT",
-                   help="endpoint to connect to, e.g. tls/10.0.0.1:7447 (repeatable; default: none)")
-    g.add_argument("--credentials", metavar="DIR",
-                   help="mTLS: this role's certificate and key from DIR (`netsetest credentials`); connect on tls/ endpoints (default: none, no TLS)")
-    _zenoh_config_arg(g)
-
-
-def _at(s: str) -> tuple[int, int]:
-    try:
-        node, step = s.split("@")
-        return int(node), int(step)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected NODE@STEP, e.g. 3@20, got {s!r}") from None
-
-
-def _seconds_type(allow_zero: bool) -> Callable[[str], float]:
-    """argparse type for a duration: > 0, or ≥ 0 with ``allow_zero``."""
-
-    def parse(s: str) -> float:
-        try:
-            v = float(s)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a number of seconds: {s!r}") from None
-        if not math.isfinite(v):
-            raise argparse.ArgumentTypeError(f"must be a finite number of seconds, got {s!r}")
-        if v < 0 or (v == 0 and not allow_zero):
-            raise argparse.ArgumentTypeError(f"must be {'≥' if allow_zero else '>'} 0, got {v}")
-        return v
-
-    return parse
-
-
-_seconds, _non_negative = _seconds_type(False), _seconds_type(True)
+_at, _seconds, _non_negative = argtypes.node_at, argtypes.seconds, argtypes.non_negative_seconds
 DEFAULT_VALIDITY_DAYS = 30
 
 
@@ -104,59 +53,16 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--insecure", action="store_true",
                    help="no credentials, no access control: an open peer mesh any local process can join (labelled in the summary; default: secured)")
     g.add_argument("--run-id", type=checks.run_id, metavar="ID", help="the run's key-expression namespace (default: a fresh random one, printed)")
-    _zenoh_config_arg(g)
+    g.add_argument("--zenoh-config", type=argtypes.readable_file, metavar="FILE", help=ZENOH_CONFIG_HELP)
 
 
 def estimator_arg(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--estimator", choices=list(NODE_ESTIMATOR_NAMES), metavar="NAME",
-                   help=f"every node's estimator, overriding the topology's per-node 'estimator' ({', '.join(NODE_ESTIMATOR_NAMES)}; default: the file's, else sdp)")
+    p.add_argument("--estimator", choices=list(NODE_ESTIMATOR_NAMES), metavar="NAME", help=ESTIMATOR_HELP)
 
 
-def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, run_args: Callable) -> None:
-    p = sub.add_parser("vehicle", help="the vehicle process (truth, measurements) of a Zenoh run")
-    scenario_args(p)
-    estimator_arg(p)
-    p.add_argument("--signals", choices=["paper", "worst"], default="paper", help="noise and wind: the paper's, or held at ±bound")
-    p.add_argument("--seed", type=checks.seed, default=0, help="random seed of noise, wind and losses")
-    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep", help="lockstep: wait for every node; realtime: one step every τs")
-    p.add_argument("--node-timeout", type=_seconds, default=NODE_TIMEOUT_S, metavar="S", help="lockstep: a node silent this long [s] is declared dead")
-    p.add_argument("--pace", type=_non_negative, default=0.0, metavar="S", help="lockstep: at least S seconds per step")
-    p.add_argument("--start-timeout", type=_seconds, default=START_TIMEOUT_S, metavar="S", help=f"how long [s] to wait for every role to be ready (default: {START_TIMEOUT_S:g})")
-    p.add_argument("--quiet", action="store_true", help="no line on success (errors are still logged)")
-    p.add_argument("--await-rejoin", type=_at, action="append", default=[], metavar="NODE@STEP",
-                   help="lockstep: before step STEP+1 wait (at most --node-timeout) for node NODE to come back (repeatable; default: none)")
-    _zenoh_args(p)
-
-    p = sub.add_parser("node", help="one sensing-node process of a Zenoh run")
-    scenario_args(p)
-    estimator_arg(p)
-    p.add_argument("--id", type=int, required=True, help="node id in the topology")
-    p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled", help="estimator: one SDP with the scheduled model, or one per T-S rule")
-    p.add_argument("--objective", choices=list(OBJECTIVES), default=DEFAULT_OBJECTIVE, help=OBJECTIVE_HELP)
-    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep", help="lockstep: wait for neighbours; realtime: step on the vehicle's input")
-    p.add_argument("--neighbour-timeout", type=_seconds, default=NEIGHBOUR_TIMEOUT_S, metavar="S", help="lockstep: how long [s] to wait for a neighbour's message")
-    p.add_argument("--rejoin", action="store_true", help="join a running network (after a crash or restart)")
-    p.add_argument("--crash-after", type=int, metavar="STEP", help="SIGKILL itself right after publishing step STEP (run --kill; default: never)")
-    _zenoh_args(p)
-
-    p = sub.add_parser("collector", help="the collector process: checks containment, writes record and summary")
-    scenario_args(p)
-    estimator_arg(p)
-    run_args(p)
-    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep", help="the run's clock (recorded in the summary)")
-    p.add_argument("--record", metavar="PATH", help="write the run record (.json, .json.gz or .mcap; default: none)")
-    p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON (default: none)")
-    p.add_argument("--progress", action="store_true", help="print '@progress K' lines for a parent process")
-    p.add_argument("--idle-timeout", type=_seconds, default=60.0, metavar="S", help="give up when no message arrives for S seconds")
-    _zenoh_args(p)
-
-    p = sub.add_parser("router", help="a Zenoh router in Python (for client-mode roles on several hosts)")
-    p.add_argument("topology", nargs="?", help="topology whose access-control rules the router enforces (with --credentials)")
-    p.add_argument("--listen", type=checks.endpoint, action="append", default=[], metavar="ENDPOINT",
-                   help=f"endpoint to listen on (repeatable; default: tcp/0.0.0.0:{ZENOH_DEFAULT_PORT}, or tls/0.0.0.0:{ZENOH_DEFAULT_PORT} with --credentials)")
-    p.add_argument("--credentials", metavar="DIR", help="mTLS with DIR/router.pem and the run's access-control rules (default: none, open router)")
-    p.add_argument("--run-id", type=checks.run_id, default=os.environ.get(RUN_ID_ENV, "default"), help=f"the run whose keys the access control grants (default: ${RUN_ID_ENV} or 'default')")
-    _zenoh_config_arg(p)
+def add_role_parsers(sub: argparse._SubParsersAction) -> None:
+    for spec in ROLE_SPECS:  # one definition of each role's options: its spec (runtime/rolespec.py)
+        spec.add_arguments(sub.add_parser(spec.ROLE, help=spec.HELP))
 
     p = sub.add_parser("credentials", help="write per-role mTLS credentials (CA, certificates, keys) and run.env for a deployment")
     p.add_argument("dir", help="output directory (created with mode 0700)")
@@ -178,101 +84,69 @@ def add_role_parsers(sub: argparse._SubParsersAction, scenario_args: Callable, r
 # ---------------------------------------------------------------- role commands
 
 
-def _open_bus(a: argparse.Namespace, name: str):
-    from netsetest.bus.zenoh_bus import ZenohBus
-    from netsetest.runtime.security import client_settings, identity
-
-    settings = client_settings(identity(a.credentials, name)) if a.credentials else None
-    return ZenohBus(a.zenoh_mode, a.listen, a.connect, base_file=a.zenoh_config, settings=settings)
-
-
-def _role(name: str, who: str, a: argparse.Namespace, body: Callable) -> int:
-    """Run a role process: ``name`` for its log lines, ``who`` its certificate name (keys.role_name)."""
-    from netsetest.bus.zenoh_bus import BusError
-    from netsetest.config.schema import load_topology
-    from netsetest.runtime.processes import EXIT_STOPPED, Stop, install_signal_handlers, log, release_free_memory
-    from netsetest.runtime.security import CredentialsError
-
-    sc = load_topology(a.topology, a.case, a.steps, a.estimator)
-    install_signal_handlers()
-    release_free_memory()
-    try:
-        bus = _open_bus(a, who)
-    except (BusError, CredentialsError) as exc:
-        log(name, str(exc))
-        return EXIT_BAD_INPUT
-    try:
-        return body(sc, bus)
-    except Stop as why:
-        log(name, f"stopped by {why}")
-        return EXIT_STOPPED
-    finally:
-        bus.close()
-
-
 def cmd_vehicle(a: argparse.Namespace) -> int:
-    from netsetest.runtime.processes import run_vehicle
+    from netsetest.runtime.processes import vehicle_main
 
-    return _role("vehicle", keys.role_name("vehicle"), a, lambda sc, bus: run_vehicle(
-        sc, bus, a.run_id, a.signals, a.seed, a.clock == "realtime", a.node_timeout, a.start_timeout, a.pace,
-        a.await_rejoin, a.quiet))
+    return vehicle_main(VehicleSpec.from_namespace(a))
 
 
 def cmd_node(a: argparse.Namespace) -> int:
-    from netsetest.runtime.processes import run_node
+    from netsetest.runtime.processes import node_main
 
-    def body(sc, bus) -> int:
-        sc.node(a.id)  # unknown id → ConfigError, exit 2
-        return run_node(sc, a.id, bus, a.run_id, a.variant, a.clock == "realtime", a.neighbour_timeout, a.rejoin,
-                        a.objective, a.crash_after)
+    return node_main(NodeSpec.from_namespace(a))
 
-    return _role(f"node {a.id}", keys.role_name("node", a.id), a, body)
+
+def _open_fd(fd: int) -> bool:
+    import os
+
+    try:
+        os.fstat(fd)
+    except (OSError, OverflowError):
+        return False
+    return True
 
 
 def cmd_collector(a: argparse.Namespace) -> int:
-    from netsetest.runtime.inmemory import run_meta
-    from netsetest.runtime.processes import run_collector
+    from netsetest.runtime.processes import collector_main
     from netsetest.runtime.report import format_table
-    from netsetest.runtime.security import SECURITY_INSECURE, SECURITY_MTLS
 
-    checks.record_file(a.record, overwrite=True)  # before the run; the parent refused an existing file, the lock guards the rest
-    checks.output_file(a.summary_json, "--summary-json")
-
-    def body(sc, bus) -> int:
-        meta = run_meta(sc, "zenoh", a.clock, a.signals, a.variant, a.seed, a.run_id, a.objective)
-        meta["security"] = SECURITY_MTLS if a.credentials else SECURITY_INSECURE
-        show = None if a.progress else (lambda s: print(format_table(s), flush=True))
-        return run_collector(sc, bus, a.run_id, meta, a.record, a.summary_json, a.progress, a.idle_timeout, show)
-
-    return _role("collector", keys.role_name("collector"), a, body)
+    spec = CollectorSpec.from_namespace(a)
+    checks.record_file(spec.record, overwrite=True)  # before the run; the parent refused an existing file, the lock guards the rest
+    checks.output_file(spec.summary_json, "--summary-json")
+    if spec.channel_fd is not None and not _open_fd(spec.channel_fd):
+        print(f"netsetest collector: --channel-fd {spec.channel_fd}: not an open file descriptor (the parent passes one)", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    show = None if spec.channel_fd is not None else (lambda s: print(format_table(s), flush=True))
+    return collector_main(spec, show)
 
 
 def cmd_router(a: argparse.Namespace) -> int:
     from netsetest.bus.zenoh_bus import BusError
     from netsetest.config.schema import load_topology
     from netsetest.runtime.launcher import router_session
-    from netsetest.runtime.processes import Stop, install_signal_handlers, log
+    from netsetest.runtime.processes import Stop, install_signal_handlers
+    from netsetest.runtime.report import log
     from netsetest.runtime.security import ROUTER, CredentialsError, identity, router_settings
 
+    spec = RouterSpec.from_namespace(a)
     security = None
-    if a.credentials:
-        if not a.topology:
+    if spec.credentials:
+        if not spec.topology:
             log("router", "--credentials needs the TOPOLOGY (the access-control rules are built from it)")
             return EXIT_BAD_INPUT
         try:
-            security = router_settings(identity(a.credentials, ROUTER), load_topology(a.topology), a.run_id)
+            security = router_settings(identity(spec.credentials, ROUTER), load_topology(spec.topology), spec.resolved_run_id)
         except CredentialsError as exc:
             log("router", f"--credentials: {exc}")
             return EXIT_BAD_INPUT
-    proto = "tls" if a.credentials else "tcp"
-    listen = a.listen or [f"{proto}/0.0.0.0:{ZENOH_DEFAULT_PORT}"]
+    listen = spec.endpoints
     install_signal_handlers()
     try:
-        session = router_session(listen, a.zenoh_config, security)
+        session = router_session(listen, spec.zenoh_config, security)
     except BusError as exc:
         log("router", str(exc))
         return EXIT_BAD_INPUT
-    log("router", f"listening on {', '.join(listen)}" + (f"; mTLS and access control for run {a.run_id}" if security else ""))
+    log("router", f"listening on {', '.join(listen)}" + (f"; mTLS and access control for run {spec.resolved_run_id}" if security else ""))
     try:
         while True:
             time.sleep(3600)

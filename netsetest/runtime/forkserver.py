@@ -16,9 +16,11 @@ line is the server's, which carries the run id).  When the launcher closes the c
 server SIGKILLs what is left of its children, reaps them and exits.
 
 Protocol (a SOCK_SEQPACKET socket pair, one JSON object per packet): the launcher sends
-``{"name", "argv", "pipe"}`` (with ``pipe``, the write end of a pipe for the child's stdout rides
-along as SCM_RIGHTS); the server answers ``{"started": name, "pid"}`` and later, when the child has
-ended, ``{"exited": pid, "code"}`` (``code`` as :attr:`subprocess.Popen.returncode`: −N for signal N).
+``{"name", "argv", "pipes"}`` (``pipes``: descriptor numbers in the child, e.g. 1 for its stdout or 3 for
+the collector's channel to the launcher; the write end of a pipe for each rides along as SCM_RIGHTS, in
+that order); the server answers ``{"started": name, "pid"}`` and later, when the child has
+ended, ``{"exited": pid, "code", "cpu_s", "peak_rss_mb"}`` (``code`` as :attr:`subprocess.Popen.returncode`: −N
+for signal N; the child's user + system CPU seconds and peak RSS, from its rusage: the benchmark's figures).
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ from typing import IO, NoReturn
 PR_SET_PDEATHSIG, PR_SET_NAME = 1, 15  # prctl(2)
 NAME_PREFIX = "ns-"  # process name of a forked role: ns-vehicle, ns-collector, ns-node3
 SERVER_GRACE_S = 5.0  # how long the server may take to kill and reap what is left when told to end
+HIGHEST_PIPE_FD = 9  # a child's pipes go to descriptors up to this one (stdout 1, the collector's channel 3)
 MAX_PACKET = 1 << 20  # a request's argv: a 128-node peer mesh is ≈5 kB per role
 # What every role imports beyond the command line itself; imported once, by the server.
 ROLE_MODULES = ("numpy", "clarabel", "zenoh", "netsetest.bus.zenoh_bus", "netsetest.runtime.processes", "netsetest.runtime.security")
@@ -79,6 +82,7 @@ def _recv(sock: socket.socket) -> tuple[dict | None, list[int]]:
 
 def serve(control_fd: int, run: Callable[[list[str]], int]) -> int:
     """The server's loop: fork a child running ``run(argv)`` per request, report children's ends."""
+    placeholders = _hold_low_fds()
     for name in ROLE_MODULES:
         importlib.import_module(name)
     sock = socket.socket(fileno=control_fd)
@@ -93,7 +97,7 @@ def serve(control_fd: int, run: Callable[[list[str]], int]) -> int:
                 if req is None:  # the launcher is done (or gone): nothing may outlive it
                     _kill_all(children)
                     return 0
-                pid = _fork(req["name"], req["argv"], fds[0] if fds else None, run, [sock.fileno(), *children, sel.fileno()])
+                pid = _fork(req["name"], req["argv"], dict(zip(req.get("pipes", []), fds)), run, [sock.fileno(), *children, sel.fileno(), *placeholders])
                 for fd in fds:
                     os.close(fd)
                 pidfd = os.pidfd_open(pid)
@@ -105,8 +109,19 @@ def serve(control_fd: int, run: Callable[[list[str]], int]) -> int:
                 pid = children.pop(pidfd)
                 sel.unregister(pidfd)
                 os.close(pidfd)
-                _, status = os.waitpid(pid, 0)
-                _send(sock, {"exited": pid, "code": os.waitstatus_to_exitcode(status)})
+                _, status, usage = os.wait4(pid, 0)
+                _send(sock, {"exited": pid, "code": os.waitstatus_to_exitcode(status), "cpu_s": usage.ru_utime + usage.ru_stime,
+                             "peak_rss_mb": usage.ru_maxrss / 1024.0})
+
+
+def _hold_low_fds() -> list[int]:
+    """Open /dev/null on every free descriptor up to :data:`HIGHEST_PIPE_FD`, so that nothing the imports
+    open lands where a child's pipe goes (a child closes these first)."""
+    held = []
+    while (fd := os.open(os.devnull, os.O_RDONLY)) <= HIGHEST_PIPE_FD:
+        held.append(fd)
+    os.close(fd)
+    return held
 
 
 def _kill_all(children: Mapping[int, int]) -> None:
@@ -119,18 +134,19 @@ def _kill_all(children: Mapping[int, int]) -> None:
         os.waitpid(pid, 0)
 
 
-def _fork(name: str, argv: list[str], stdout_fd: int | None, run: Callable[[list[str]], int], close: list[int]) -> int:
+def _fork(name: str, argv: list[str], pipes: dict[int, int], run: Callable[[list[str]], int], close: list[int]) -> int:
     """Fork a child that runs ``run(argv)`` and exits with its code; the child's pid."""
     server = os.getpid()
     sys.stdout.flush()
     sys.stderr.flush()
     pid = os.fork()
     if pid == 0:
-        _child(server, name, argv, stdout_fd, run, close)
+        _child(server, name, argv, pipes, run, close)
     return pid
 
 
-def _child(server: int, name: str, argv: list[str], stdout_fd: int | None, run: Callable[[list[str]], int], close: list[int]) -> NoReturn:
+def _child(server: int, name: str, argv: list[str], pipes: dict[int, int], run: Callable[[list[str]], int], close: list[int]) -> NoReturn:
+    """``pipes``: descriptor number in the child → the received write end to put there."""
     code = 1
     try:
         os.setsid()  # like start_new_session: the terminal's Ctrl-C goes to the launcher alone
@@ -141,10 +157,11 @@ def _child(server: int, name: str, argv: list[str], stdout_fd: int | None, run: 
             os.close(fd)
         devnull = os.open(os.devnull, os.O_RDWR)
         os.dup2(devnull, 0)
-        os.dup2(stdout_fd if stdout_fd is not None else devnull, 1)
+        os.dup2(devnull, 1)
         os.close(devnull)
-        if stdout_fd is not None:
-            os.close(stdout_fd)
+        for target, fd in pipes.items():  # received above HIGHEST_PIPE_FD (the low ones are held): no clash
+            os.dup2(fd, target)
+            os.close(fd)
         for sig in (signal.SIGTERM, signal.SIGCHLD):
             signal.signal(sig, signal.SIG_DFL)
         signal.signal(signal.SIGINT, signal.default_int_handler)
@@ -170,16 +187,19 @@ def _child(server: int, name: str, argv: list[str], stdout_fd: int | None, run: 
 class ForkedProcess:
     """A role forked by the server, with the part of :class:`subprocess.Popen` the launcher uses."""
 
-    def __init__(self, server: ForkServer, name: str, pid: int, stdout: IO[str] | None) -> None:
-        self.server, self.name, self.pid, self.stdout = server, name, pid, stdout
+    def __init__(self, server: ForkServer, name: str, pid: int, pipes: dict[int, IO[bytes]]) -> None:
+        """``pipes``: the read ends of the child's pipes, by their descriptor number in the child."""
+        self.server, self.name, self.pid, self.pipes = server, name, pid, pipes
         self.returncode: int | None = None
+        self.cpu_s: float | None = None  # at its exit: user + system CPU seconds (None: killed with the server)
+        self.peak_rss_mb: float | None = None  # at its exit: peak resident memory (ru_maxrss)
         try:  # signals go through a pidfd: never to another process that got the pid after this one was reaped
             self.pidfd: int | None = os.pidfd_open(pid)
         except ProcessLookupError:  # already ended and reaped: its exit is on the way
             self.pidfd = None
 
-    def ended(self, code: int) -> None:
-        self.returncode = code
+    def ended(self, code: int, cpu_s: float | None = None, peak_rss_mb: float | None = None) -> None:
+        self.returncode, self.cpu_s, self.peak_rss_mb = code, cpu_s, peak_rss_mb
         if self.pidfd is not None:
             os.close(self.pidfd)
             self.pidfd = None
@@ -221,24 +241,27 @@ class ForkServer:
         self.children: dict[int, ForkedProcess] = {}
         self.started: list[tuple[str, int]] = []  # (name, pid) answers not yet claimed by spawn()
 
-    def spawn(self, name: str, argv: list[str], pipe_stdout: bool) -> ForkedProcess:
-        """Fork ``argv`` (a role's command line) as ``name``; with ``pipe_stdout`` its stdout comes back as text."""
-        r = w = None
-        if pipe_stdout:
-            r, w = os.pipe()
+    def spawn(self, name: str, argv: list[str], pipes: Sequence[int] = ()) -> ForkedProcess:
+        """Fork ``argv`` (a role's command line) as ``name``; each descriptor in ``pipes`` (1: its stdout) is
+        the write end of a pipe whose read end comes back in :attr:`ForkedProcess.pipes` (binary)."""
+        if any(not 0 < fd <= HIGHEST_PIPE_FD for fd in pipes):
+            raise ValueError(f"pipes {list(pipes)}: descriptors 1 to {HIGHEST_PIPE_FD}")
+        ends = {fd: os.pipe() for fd in pipes}
         try:
-            _send(self.sock, {"name": name, "argv": argv}, [w] if w is not None else [])
+            _send(self.sock, {"name": name, "argv": argv, "pipes": list(ends)}, [w for _, w in ends.values()])
         except OSError as exc:
+            for r, _ in ends.values():
+                os.close(r)
             raise ForkServerError(f"the fork server is gone ({exc})") from None
         finally:
-            if w is not None:
+            for _, w in ends.values():
                 os.close(w)
         while not any(n == name for n, _ in self.started):
             if not self.pump(None):
                 raise ForkServerError(f"the fork server ended (exit {self.proc.wait()}) before starting {name}")
         pid = next(p for n, p in self.started if n == name)
         self.started.remove((name, pid))
-        child = ForkedProcess(self, name, pid, os.fdopen(r, "r") if r is not None else None)
+        child = ForkedProcess(self, name, pid, {fd: os.fdopen(r, "rb") for fd, (r, _) in ends.items()})
         self.children[pid] = child
         return child
 
@@ -256,7 +279,7 @@ class ForkServer:
                 if "started" in msg:
                     self.started.append((msg["started"], msg["pid"]))
                 elif msg["exited"] in self.children:
-                    self.children[msg["exited"]].ended(msg["code"])
+                    self.children[msg["exited"]].ended(msg["code"], msg.get("cpu_s"), msg.get("peak_rss_mb"))
                 self.sock.settimeout(0.0)  # then take what is there without waiting
         except (BlockingIOError, TimeoutError):
             return True

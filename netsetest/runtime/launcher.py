@@ -1,44 +1,51 @@
 """The launcher of a Zenoh run (``netsetest run TOPOLOGY``): one process per role, followed to the end.
 
 :func:`plan_run` checks a :class:`LaunchOptions` against its topology (a :class:`LaunchError` names the
-bad option) and :func:`launch` runs the resulting :class:`RunPlan`: 1 vehicle, 1 collector and one process
-per node, forked by the run's fork server (runtime/forkserver.py), which the launcher starts first so
-that it imports while the launcher writes credentials and opens the router.  Secured (the default), the launcher writes per-run mTLS credentials and holds the run's
-router (access control) in its own process, and every role is a client of it; ``insecure``, the roles
-form a full peer mesh on loopback, each listening on its own free port.  The launcher follows the
-collector's progress, kills and restarts nodes mid-run (``kill``, ``rejoin``), and stops every child on
-Ctrl-C, on SIGTERM or when the vehicle or the collector fails.  A node that dies is not a failure of
-the run: the others go on without it and the summary says so (exit code 3, from the collector).
+bad option) and :func:`launch` runs the resulting :class:`RunPlan` in three parts:
+
+- *network set-up* (:func:`open_network`, :class:`Network`): secured (the default), per-run mTLS credentials
+  and the run's router (access control) in this process, every role a client of it; ``insecure``, a full
+  peer mesh on loopback, each role listening on its own free port;
+- *role start* (:class:`RoleStarter`): each role's typed spec (runtime/rolespec.py) from the plan and the
+  network, forked by the run's fork server (runtime/forkserver.py), which starts first so that it imports
+  while the launcher writes credentials and opens the router: 1 collector, one process per node, 1 vehicle;
+- the *supervisor* (:class:`Supervisor`): follows the collector's progress and summary on its channel
+  (runtime/channel.py), kills and restarts nodes mid-run (``kill``, ``rejoin``), logs the roles' exits,
+  and stops every child on Ctrl-C, on SIGTERM or when the vehicle or the collector fails.  A node that
+  dies is not a failure of the run: the others go on without it and the summary says so (exit code 3,
+  from the collector).  It only polls, signals and restarts processes: tests/unit/test_supervisor.py runs
+  it on fake ones.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import secrets
 import signal
 import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Literal
+from typing import IO, TYPE_CHECKING, Protocol
 
 from netsetest.config.schema import Case, Scenario, load_topology
 from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.records.summary import RunSummary
-from netsetest.runtime.forkserver import ForkedProcess, ForkServer, ForkServerError
-from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress, read_summary
+from netsetest.runtime.channel import CHANNEL_FD, ChannelReader
+from netsetest.runtime.forkserver import ForkServer, ForkServerError
+from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress, log
+from netsetest.runtime.rolespec import Clock, CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
 from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, START_TIMEOUT_S
 
 if TYPE_CHECKING:  # annotations only: the estimator and the models load in the role processes, not in the launcher
     from netsetest.estimator.sdp import Variant
     from netsetest.models.signals import SignalKind
-
-Clock = Literal["lockstep", "realtime"]
 
 START_S_PER_ROLE = 1.0  # each role sets up its estimator, session and barrier; 100 of them share a few cores
 COLLECTOR_GRACE_S = 10.0  # on Ctrl-C/SIGTERM: how long the collector may take to write its record and summary
@@ -102,12 +109,25 @@ class RunPlan:
 
 
 @dataclass(frozen=True)
+class RoleUsage:
+    """What one role process cost, from its rusage at its exit (None: not known, e.g. killed with the fork server)."""
+
+    exit_code: int | None
+    cpu_s: float | None  # user + system
+    peak_rss_mb: float | None
+
+
+@dataclass(frozen=True)
 class RunOutcome:
     """How a launched run ended: the launcher's exit code and the collector's summary, if it wrote one
-    at the normal end of the run (not when interrupted or when the vehicle failed)."""
+    at the normal end of the run (not when interrupted or when the vehicle failed).  :func:`launch` adds
+    what the benchmark measures: each role's usage (its last process) and when the launcher heard that
+    the collector had checked each step (``time.monotonic()``)."""
 
     exit_code: int
     summary: RunSummary | None
+    roles: Mapping[str, RoleUsage] = field(default_factory=dict)
+    checked_at: Mapping[int, float] = field(default_factory=dict)
 
 
 def kill_schedule(kill: Sequence[tuple[int, int]], rejoin: Sequence[tuple[int, int]], steps: int) -> Schedule:
@@ -157,7 +177,7 @@ def plan_run(opts: LaunchOptions) -> RunPlan:
     return RunPlan(opts, sc, schedule)
 
 
-# ---------------------------------------------------------------- processes
+# ---------------------------------------------------------------- the role processes
 
 
 def free_ports(n: int) -> list[int]:
@@ -173,23 +193,37 @@ def free_ports(n: int) -> list[int]:
     return ports
 
 
+class RoleProcess(Protocol):
+    """What the launcher needs of a role process (a :class:`ForkedProcess`; a fake one in the unit tests)."""
+
+    returncode: int | None
+    pipes: dict[int, IO[bytes]]
+    cpu_s: float | None  # once ended: its rusage (None: not known)
+    peak_rss_mb: float | None
+
+    def poll(self) -> int | None: ...
+    def wait(self, timeout: float | None = None) -> int: ...
+    def send_signal(self, sig: int) -> None: ...
+    def kill(self) -> None: ...
+
+
+Spawn = Callable[[str, list[str], Sequence[int]], RoleProcess]  # (name, argv, pipes) → the started process
+
+
 class Children:
-    """The role processes of a run, forked by the run's fork server; :meth:`close` leaves none behind."""
+    """The role processes of a run by name; :meth:`stop_all` leaves none running."""
 
-    def __init__(self, run_id: str) -> None:
-        """Starts the fork server at once: it imports while the launcher writes credentials and opens the router."""
-        from netsetest.runtime.processes import role_env
+    def __init__(self, spawn: Spawn) -> None:
+        self.spawn = spawn
+        self.procs: dict[str, RoleProcess] = {}
 
-        self.server = ForkServer([sys.executable, "-m", ROLE_MODULE, "forkserver", "--run-id", run_id], role_env())
-        self.procs: dict[str, ForkedProcess] = {}
-
-    def start(self, name: str, argv: list[str], pipe_stdout: bool = False) -> ForkedProcess:
-        """A role process running ``netsetest ARGV`` (stdout: a text pipe to us with ``pipe_stdout``, else /dev/null)."""
-        proc = self.server.spawn(name, argv, pipe_stdout)
+    def start(self, name: str, argv: list[str], pipes: Sequence[int] = ()) -> RoleProcess:
+        """A role process running ``netsetest ARGV`` (``pipes``: descriptors of the child that are pipes to us)."""
+        proc = self.spawn(name, argv, pipes)
         self.procs[name] = proc
         return proc
 
-    def start_again(self, name: str) -> None:
+    def forget(self, name: str) -> None:
         """Forget a process that ended (a killed node about to be restarted)."""
         self.procs.pop(name).wait()
 
@@ -206,10 +240,12 @@ class Children:
                 p.kill()
                 p.wait()
 
-    def close(self) -> None:
-        """Stop every child (as :meth:`stop_all`), then the fork server."""
-        self.stop_all(ROLE_GRACE_S)
-        self.server.close()
+
+def fork_server(run_id: str) -> ForkServer:
+    """The run's fork server, started at once: it imports while the launcher writes credentials and opens the router."""
+    from netsetest.runtime.processes import role_env
+
+    return ForkServer([sys.executable, "-m", ROLE_MODULE, "forkserver", "--run-id", run_id], role_env())
 
 
 def router_session(listen: list[str], base_file: str | None, security: dict[str, object] | None):
@@ -226,173 +262,263 @@ def router_session(listen: list[str], base_file: str | None, security: dict[str,
         raise BusError(f"--listen: {exc}") from None
 
 
-# ---------------------------------------------------------------- the run
+# ---------------------------------------------------------------- network set-up
 
 
-def _role_options(o: LaunchOptions, run_id: str) -> list[str]:
-    """The options every role process of the run gets: the scenario and the run id."""
-    out = [o.topology, "--run-id", run_id, *(["--zenoh-config", o.zenoh_config] if o.zenoh_config else [])]
-    if o.case:
-        out += ["--case", o.case]
-    if o.steps:
-        out += ["--steps", str(o.steps)]
-    if o.estimator:
-        out += ["--estimator", o.estimator]
-    return out
+class Network:
+    """How each role connects: as an mTLS client of the launcher's router (``router_endpoint``), or as a
+    peer of the open mesh (insecure: each role listens on its own port and connects to every other)."""
 
-
-class _Network:
-    """How each role connects: as an mTLS client of the launcher's router, or as a peer of the open mesh."""
-
-    def __init__(self, names: list[str], router_endpoint: str | None, credentials: str | None) -> None:
-        self.names, self.router_endpoint, self.credentials = names, router_endpoint, credentials
+    def __init__(self, names: list[str], run_id: str, config: str | None, router_endpoint: str | None = None,
+                 credentials: str | None = None, router: object | None = None) -> None:
+        self.names, self.run_id, self.config = names, run_id, config
+        self.router_endpoint, self.credentials, self.router = router_endpoint, credentials, router
         self.ports = dict(zip(names, free_ports(len(names))))
+
+    @property
+    def secured(self) -> bool:
+        return self.router_endpoint is not None
 
     def endpoint(self, name: str) -> str:
         return f"tcp/127.0.0.1:{self.ports[name]}"
 
-    def argv(self, name: str) -> list[str]:
-        if self.router_endpoint is not None:  # star: every role is an mTLS client of the launcher's router
-            return ["--zenoh-mode", "client", "--connect", self.router_endpoint, "--credentials", str(self.credentials)]
-        out = ["--zenoh-mode", "peer", "--listen", self.endpoint(name)]  # insecure: a full peer mesh
-        for other in self.names:
-            if other != name:
-                out += ["--connect", self.endpoint(other)]
-        return out
+    def zenoh(self, name: str) -> ZenohSpec:
+        """How role ``name`` connects."""
+        if self.router_endpoint is not None:
+            return ZenohSpec(self.run_id, "client", (), (self.router_endpoint,), self.credentials, self.config)
+        others = tuple(self.endpoint(other) for other in self.names if other != name)
+        return ZenohSpec(self.run_id, "peer", (self.endpoint(name),), others, None, self.config)
 
     def renew(self, name: str) -> None:
         """A fresh port for a restarted role (its old one may linger in TIME_WAIT)."""
         self.ports[name] = free_ports(1)[0]
 
+    def describe(self) -> list[str]:
+        """The launcher's lines about the network: its security, and how to watch the run."""
+        from netsetest.runtime.security import SECURITY_INSECURE, SECURITY_MTLS
 
-def launch(plan: RunPlan) -> RunOutcome:
-    """Run the plan's role processes to the end; on Ctrl-C/SIGTERM stop them and let the collector
-    write what it has.  Leaves no process behind and closes the router."""
-    from netsetest.bus.zenoh_bus import BusError
-    from netsetest.runtime.processes import log
-    from netsetest.runtime.security import (
-        ROUTER, SECURITY_INSECURE, SECURITY_MTLS, identity, role_names, router_settings, write_credentials, write_observer_access,
-    )
+        if self.secured:
+            return [f"security: {SECURITY_MTLS} (mTLS per role, access control at the run's router {self.router_endpoint}; credentials in {self.credentials})",
+                    f"run id {self.run_id}; watch it with: netsetest watch --credentials {self.credentials}"]
+        return [f"security: {SECURITY_INSECURE} (open peer mesh: any local process can read and forge messages)",
+                f"run id {self.run_id}; watch it with: netsetest watch --run-id {self.run_id} --connect {self.endpoint('collector')}"]
 
-    o, sc, schedule = plan.options, plan.scenario, plan.schedule
-    security = SECURITY_INSECURE if o.insecure else SECURITY_MTLS
-    run_id = o.run_id or f"run-{secrets.token_hex(RUN_ID_BYTES)}"
-    tmp = tempfile.TemporaryDirectory(prefix="netsetest-")  # mode 0700 (mkdtemp)
-    summary_path = Path(o.summary_json or Path(tmp.name) / "summary.json")
-    children = Children(run_id)  # first: the fork server imports while we set up
-    router = None
-    common = _role_options(o, run_id)
-    names = ["collector", "vehicle", *(f"node{i}" for i in sc.ids)]
+    def close(self) -> None:
+        if self.router is not None:
+            self.router.close()  # type: ignore[attr-defined]  # a zenoh.Session (zenoh ships no types)
+            self.router = None
 
-    def on_term(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt
 
-    signal.signal(signal.SIGTERM, on_term)
-    try:
-        if o.insecure:
-            net = _Network(names, None, None)
-        else:
-            creds = str(Path(tmp.name) / "credentials")
-            write_credentials(creds, role_names(sc))
-            router_endpoint = f"tls/127.0.0.1:{free_ports(1)[0]}"
-            try:
-                router = router_session([router_endpoint], o.zenoh_config, router_settings(identity(creds, ROUTER), sc, run_id))
-            except BusError as exc:
-                log("run", str(exc))
-                return RunOutcome(EXIT_BAD_INPUT, None)
-            write_observer_access(creds, run_id, [router_endpoint])
-            net = _Network(names, router_endpoint, creds)
-        if not o.quiet:  # --quiet: nothing on success; the summary and the record name the security mode
-            log("run", f"security: {security}" + (f" (mTLS per role, access control at the run's router {net.router_endpoint}; credentials in {net.credentials})"
-                                                   if router is not None else " (open peer mesh: any local process can read and forge messages)"))
-        if not o.quiet:  # how to look inside the run from another terminal (README: Live views)
-            log("run", f"run id {run_id}; " + (
-                f"watch it with: netsetest watch --run-id {run_id} --connect {net.endpoint('collector')}" if router is None
-                else f"watch it with: netsetest watch --credentials {net.credentials}"))
-        bar = Progress(sc.steps, f"zenoh ({len(sc.ids)} nodes + vehicle + collector)", enabled=not o.quiet)
-        progress = [-1]
+def role_names(sc: Scenario) -> list[str]:
+    """The run's role processes, in the order they start: the collector first, the vehicle last."""
+    return ["collector", *(f"node{i}" for i in sc.ids), "vehicle"]
 
-        def follow(stream: IO[str]) -> None:
-            for line in stream:
-                if line.startswith("@progress "):
-                    progress[0] = int(line.split()[1])
 
-        def start_node(i: int, rejoin: bool, after: int) -> None:
-            crash = schedule.next_kill(i, after)
-            children.start(f"node{i}", ["node", *common, "--id", str(i), "--variant", o.variant, "--objective", o.objective, "--clock", o.clock,
-                                        "--neighbour-timeout", str(o.neighbour_timeout), *net.argv(f"node{i}"),
-                                        *(["--rejoin"] if rejoin else []), *([] if crash is None else ["--crash-after", str(crash)])])
+def open_network(plan: RunPlan, run_id: str, tmp: str) -> Network:
+    """Secured: write the run's credentials into ``tmp`` and open its router (BusError naming the option);
+    insecure: pick a port per role."""
+    from netsetest.runtime.security import ROUTER, identity, router_settings, write_credentials, write_observer_access
+    from netsetest.runtime.security import role_names as certificate_names
 
-        col = children.start(
-            "collector",
-            ["collector", *common, "--signals", o.signals, "--variant", o.variant, "--objective", o.objective, "--seed", str(o.seed), "--clock", o.clock,
-             "--summary-json", str(summary_path), "--progress", *(["--record", o.record] if o.record else []), *net.argv("collector")],
-            pipe_stdout=True,
-        )
-        threading.Thread(target=follow, args=(col.stdout,), daemon=True).start()
-        for i in sc.ids:
-            start_node(i, False, 0)
-        awaits = [f"{i}@{r}" for i, rs in schedule.rejoins.items() for r in rs]
-        children.start(
-            "vehicle",
-            ["vehicle", *common, "--signals", o.signals, "--seed", str(o.seed), "--clock", o.clock, *(["--quiet"] if o.quiet else []),
-             "--node-timeout", str(o.node_timeout), "--pace", str(o.pace), "--start-timeout", str(run_start_timeout(len(names))),
-             *net.argv("vehicle"),
-             *(x for w in awaits for x in ("--await-rejoin", w))],
-        )
-        rejoins = sorted((r, i) for i, rs in schedule.rejoins.items() for r in rs)
-        reported: set[str] = set()
+    o, sc = plan.options, plan.scenario
+    names = role_names(sc)
+    if o.insecure:
+        return Network(names, run_id, o.zenoh_config)
+    creds = str(Path(tmp) / "credentials")
+    write_credentials(creds, certificate_names(sc))
+    endpoint = f"tls/127.0.0.1:{free_ports(1)[0]}"
+    router = router_session([endpoint], o.zenoh_config, router_settings(identity(creds, ROUTER), sc, run_id))
+    write_observer_access(creds, run_id, [endpoint])
+    return Network(names, run_id, o.zenoh_config, endpoint, creds, router)
+
+
+# ---------------------------------------------------------------- role start
+
+
+class RoleStarter:
+    """Each role's spec from the plan and the network, started as a child (the only place the launcher
+    writes a role's command line: ``spec.to_argv()``)."""
+
+    def __init__(self, plan: RunPlan, network: Network, children: Children) -> None:
+        o = plan.options
+        self.plan, self.network, self.children = plan, network, children
+        self.scenario = ScenarioSpec(o.topology, o.case, o.steps, o.estimator)
+
+    def collector(self) -> CollectorSpec:
+        o = self.plan.options
+        return CollectorSpec(self.scenario, o.signals, o.variant, o.objective, o.seed, o.clock, o.record, o.summary_json, CHANNEL_FD,
+                             zenoh=self.network.zenoh("collector"))
+
+    def node(self, i: int, rejoin: bool = False, after: int = 0) -> NodeSpec:
+        """Node ``i``; ``after``: the step it (re)joins at (its --crash-after is the next --kill from there)."""
+        o = self.plan.options
+        return NodeSpec(self.scenario, i, o.variant, o.objective, o.clock, o.neighbour_timeout, rejoin, self.plan.schedule.next_kill(i, after),
+                        self.network.zenoh(f"node{i}"))
+
+    def vehicle(self) -> VehicleSpec:
+        o, schedule = self.plan.options, self.plan.schedule
+        awaits = tuple((i, r) for i, rs in schedule.rejoins.items() for r in rs)
+        return VehicleSpec(self.scenario, o.signals, o.seed, o.clock, o.node_timeout, o.pace, run_start_timeout(len(self.network.names)), o.quiet,
+                           awaits, self.network.zenoh("vehicle"))
+
+    def start_all(self) -> ChannelReader:
+        """Collector, nodes, vehicle (it waits for everyone else); the collector's channel, being read."""
+        col = self.children.start("collector", self.collector().to_argv(), pipes=[CHANNEL_FD])
+        channel = ChannelReader(col.pipes[CHANNEL_FD])
+        for i in self.plan.scenario.ids:
+            self.children.start(f"node{i}", self.node(i).to_argv())
+        self.children.start("vehicle", self.vehicle().to_argv())
+        return channel
+
+    def restart_node(self, i: int, step: int) -> None:
+        """Node ``i`` again, with --rejoin at ``step``, on a fresh port."""
+        name = f"node{i}"
+        self.network.renew(name)
+        self.children.forget(name)
+        self.children.start(name, self.node(i, rejoin=True, after=step).to_argv())
+
+
+# ---------------------------------------------------------------- the supervisor
+
+
+class Supervisor:
+    """Follows a started run to its end: the collector's progress (its channel), the --rejoin schedule,
+    the roles' exits; on Ctrl-C/SIGTERM it stops the vehicle and the nodes, then the collector.  It
+    only polls, signals and restarts processes, so it runs on fake ones (tests/unit/test_supervisor.py)."""
+
+    def __init__(self, children: Children, schedule: Schedule, channel: ChannelReader, restart_node: Callable[[int, int], None],
+                 bar: Progress | None = None, sleep: Callable[[float], None] = time.sleep) -> None:
+        self.children, self.schedule, self.channel, self.restart_node = children, schedule, channel, restart_node
+        self.bar, self.sleep = bar, sleep
+        self.rejoins = sorted((r, i) for i, rs in schedule.rejoins.items() for r in rs)  # (step, node) still to do
+        self.reported: set[str] = set()  # nodes whose exit was logged
+
+    def follow(self) -> RunOutcome:
+        """Until the collector exits (its exit code and summary) or the vehicle fails (EXIT_VIOLATION)."""
         while True:
-            time.sleep(FOLLOW_PERIOD_S)
-            bar.update(max(progress[0], 0))
-            for step, node in list(rejoins):
-                if progress[0] >= step and children.procs[f"node{node}"].poll() is not None:
-                    log("run", f"restarting node {node} with --rejoin at step {progress[0]}")
-                    net.renew(f"node{node}")
-                    children.start_again(f"node{node}")
-                    reported.discard(f"node{node}")
-                    start_node(node, True, step)
-                    rejoins.remove((step, node))
-            if col.poll() is not None:
-                break
-            veh = children.procs["vehicle"].poll()
+            self.sleep(FOLLOW_PERIOD_S)
+            self._show_progress()
+            self._rejoin_due()
+            if self.children.procs["collector"].poll() is not None:
+                return self._finish()
+            veh = self.children.procs["vehicle"].poll()
             if veh not in (None, 0):
                 log("run", f"the vehicle process failed (exit {veh}); stopping the run")
                 return RunOutcome(EXIT_VIOLATION, None)
-            for name, proc in children.procs.items():
-                code = proc.poll()
-                if not name.startswith("node") or name in reported or code in (None, 0):
-                    continue
-                reported.add(name)
-                if code == -signal.SIGKILL and schedule.kills.get(int(name.removeprefix("node"))):
-                    log("run", f"{name} killed (SIGKILL) as --kill asked")
-                else:
-                    log("run", f"{name} exited with code {code}; the run goes on without it")
-        bar.update(max(progress[0], 0))
-        bar.close()
-        for p in children.procs.values():  # vehicle and nodes end on End; give them a moment
+            self._report_exits()
+
+    def _show_progress(self) -> None:
+        if self.bar is not None:
+            self.bar.update(max(self.channel.step, 0))
+
+    def _rejoin_due(self) -> None:
+        for step, node in list(self.rejoins):
+            if self.channel.step >= step and self.children.procs[f"node{node}"].poll() is not None:
+                log("run", f"restarting node {node} with --rejoin at step {self.channel.step}")
+                self.restart_node(node, step)
+                self.reported.discard(f"node{node}")
+                self.rejoins.remove((step, node))
+
+    def _report_exits(self) -> None:
+        """A node that died is logged once (the run goes on without it)."""
+        for name, proc in self.children.procs.items():
+            code = proc.poll()
+            if not name.startswith("node") or name in self.reported or code in (None, 0):
+                continue
+            self.reported.add(name)
+            if code == -signal.SIGKILL and self.schedule.kills.get(int(name.removeprefix("node"))):
+                log("run", f"{name} killed (SIGKILL) as --kill asked")
+            else:
+                log("run", f"{name} exited with code {code}; the run goes on without it")
+
+    def _finish(self) -> RunOutcome:
+        """The collector has exited: the last progress, a moment for the others to end on End, its summary."""
+        self.channel.wait_closed(ROLE_GRACE_S)  # its write end closed with it: every message is in
+        self._show_progress()
+        if self.bar is not None:
+            self.bar.close()
+        for p in self.children.procs.values():  # vehicle and nodes end on End; give them a moment
             try:
                 p.wait(timeout=ROLE_GRACE_S)
             except subprocess.TimeoutExpired:
                 pass
-        if not summary_path.exists():
+        col = self.children.procs["collector"]
+        for why in self.channel.errors:
+            log("run", f"the collector's channel: {why}")
+        if self.channel.summary is None:
             log("run", f"the collector exited with code {col.returncode} without a summary")
             return RunOutcome(EXIT_VIOLATION, None)
-        assert col.returncode is not None  # the loop above ends once the collector has exited
-        return RunOutcome(col.returncode, read_summary(summary_path))
-    except ForkServerError as exc:
-        log("run", f"{exc}; stopping the run")
-        return RunOutcome(EXIT_VIOLATION, None)
-    except KeyboardInterrupt:
+        assert col.returncode is not None  # follow() saw it exit
+        return RunOutcome(col.returncode, self.channel.summary)
+
+    @classmethod
+    def idle(cls, children: Children) -> Supervisor:
+        """A supervisor of roles not started yet (Ctrl-C during the set-up: stop what was started)."""
+        return cls(children, Schedule({}, {}), ChannelReader(io.BytesIO(b"")), lambda node, step: None)
+
+    def interrupted(self, summary_json: str | None) -> RunOutcome:
+        """Ctrl-C/SIGTERM: stop the vehicle and the nodes, then let the collector write what it has."""
         log("run", "interrupted: stopping the vehicle and the nodes, then letting the collector write what it has")
-        children.stop_all(ROLE_GRACE_S, keep=["collector"])
-        children.stop_all(COLLECTOR_GRACE_S)
-        if summary_path.exists() and o.summary_json:
-            log("run", f"partial summary written to {summary_path}")
+        self.children.stop_all(ROLE_GRACE_S, keep=["collector"])
+        self.children.stop_all(COLLECTOR_GRACE_S)
+        if summary_json and Path(summary_json).exists():
+            log("run", f"partial summary written to {summary_json}")
         return RunOutcome(EXIT_INTERRUPTED, None)
+
+
+# ---------------------------------------------------------------- the run
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """SIGTERM stops the launcher as Ctrl-C does (the handler before is restored after)."""
+
+    def on_term(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    before = signal.signal(signal.SIGTERM, on_term)
+    try:
+        yield
     finally:
-        children.stop_all(ROLE_GRACE_S)
-        if router is not None:
-            router.close()
-        children.close()
-        tmp.cleanup()
+        signal.signal(signal.SIGTERM, before)
+
+
+def launch(plan: RunPlan) -> RunOutcome:
+    """Run the plan's role processes to the end: network set-up (:func:`open_network`), role start
+    (:class:`RoleStarter`), then the :class:`Supervisor`; on Ctrl-C/SIGTERM stop them and let the
+    collector write what it has.  Leaves no process behind and closes the router."""
+    from netsetest.bus.zenoh_bus import BusError
+
+    o = plan.options
+    run_id = o.run_id or f"run-{secrets.token_hex(RUN_ID_BYTES)}"
+    with tempfile.TemporaryDirectory(prefix="netsetest-") as tmp, _sigterm_as_interrupt():  # mode 0700 (mkdtemp)
+        server = fork_server(run_id)  # first: it imports while we set up
+        children = Children(server.spawn)
+        network: Network | None = None
+        supervisor: Supervisor | None = None
+        try:
+            network = open_network(plan, run_id, tmp)
+            if not o.quiet:  # --quiet: nothing on success; the summary and the record name the security mode
+                for line in network.describe():
+                    log("run", line)
+            starter = RoleStarter(plan, network, children)
+            bar = Progress(plan.scenario.steps, f"zenoh ({len(plan.scenario.ids)} nodes + vehicle + collector)", enabled=not o.quiet)
+            supervisor = Supervisor(children, plan.schedule, starter.start_all(), starter.restart_node, bar)
+            outcome = supervisor.follow()
+        except BusError as exc:  # the router: a bad --zenoh-config, or it cannot listen
+            log("run", str(exc))
+            outcome = RunOutcome(EXIT_BAD_INPUT, None)
+        except ForkServerError as exc:
+            log("run", f"{exc}; stopping the run")
+            outcome = RunOutcome(EXIT_VIOLATION, None)
+        except KeyboardInterrupt:
+            if supervisor is None:
+                log("run", "interrupted while starting the run")
+            outcome = (supervisor or Supervisor.idle(children)).interrupted(o.summary_json)
+        finally:
+            children.stop_all(ROLE_GRACE_S)
+            if network is not None:
+                network.close()
+            server.close()
+    usage = {name: RoleUsage(p.returncode, p.cpu_s, p.peak_rss_mb) for name, p in children.procs.items()}
+    return replace(outcome, roles=usage, checked_at=dict(supervisor.channel.checked_at) if supervisor else {})

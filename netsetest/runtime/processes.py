@@ -21,7 +21,6 @@ import ctypes
 import math
 import os
 import signal
-import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
@@ -29,13 +28,11 @@ from typing import TYPE_CHECKING
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import Scenario
-from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
-from netsetest.estimator.sdp import Variant
 from netsetest.messages import Message, Ready
-from netsetest.models.signals import SignalKind
 from netsetest.profile import PROFILE
 from netsetest.roles.node import Node
-from netsetest.runtime.report import EXIT_VIOLATION, exit_code, record_sink, write_summary
+from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION, exit_code, log, record_sink, write_summary
+from netsetest.runtime.rolespec import CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
 from netsetest.runtime.timeouts import READING_WAIT
 
 if TYPE_CHECKING:  # a node process never loads the vehicle and the collector (memory: docs/performance.md)
@@ -89,10 +86,6 @@ def release_free_memory() -> None:
     trim = getattr(ctypes.CDLL(None), "malloc_trim", None)  # the symbols already loaded: libc's
     if trim is not None:
         trim(0)
-
-
-def log(role: str, text: str) -> None:
-    print(f"[{role}] {text}", file=sys.stderr, flush=True)
 
 
 class Barrier:
@@ -154,23 +147,13 @@ def node_peers(sc: Scenario, node_id: int) -> set[tuple[str, int | None]]:
     return {("vehicle", None), ("collector", None)} | {("node", j) for j in neighbours - {node_id}}
 
 
-def run_vehicle(
-    sc: Scenario,
-    bus: Bus,
-    run_id: str,
-    signals: SignalKind,
-    seed: int,
-    realtime: bool,
-    node_timeout: float,
-    start_timeout: float,
-    pace: float = 0.0,
-    await_rejoin: Sequence[tuple[int, int]] = (),
-    quiet: bool = False,
-) -> int:
-    """``await_rejoin``: (node, step) pairs; in lockstep, step+1 waits (at most ``node_timeout``) for the node.
-    ``quiet``: no line on success (errors are still logged)."""
+def run_vehicle(spec: VehicleSpec, sc: Scenario, bus: Bus) -> int:
+    """The vehicle's loop.  ``spec.await_rejoin``: (node, step) pairs; in lockstep, step+1 waits (at most
+    ``node_timeout``) for the node.  ``spec.quiet``: no line on success (errors are still logged)."""
     from netsetest.roles.vehicle import Vehicle
 
+    run_id, realtime, node_timeout, start_timeout = spec.zenoh.resolved_run_id, spec.clock == "realtime", spec.node_timeout, spec.start_timeout
+    signals, seed, pace, await_rejoin, quiet = spec.signals, spec.seed, spec.pace, spec.await_rejoin, spec.quiet
     vehicle = Vehicle(sc, bus, run_id, signals, seed, realtime=realtime)
     holds = RejoinHolds(await_rejoin)
     dead_at: dict[int, float] = {}  # node → when the vehicle went on without it
@@ -253,20 +236,10 @@ class RejoinHolds:
         return True
 
 
-def run_node(
-    sc: Scenario,
-    node_id: int,
-    bus: Bus,
-    run_id: str,
-    variant: Variant,
-    realtime: bool,
-    neighbour_timeout: float,
-    rejoin: bool,
-    objective: Objective = DEFAULT_OBJECTIVE,
-    crash_after: int | None = None,
-) -> int:
-    """``crash_after``: SIGKILL this process right after publishing that step (``run --kill``: exactly there)."""
-    node = Node(sc, node_id, bus, run_id, variant, rejoin=rejoin, objective=objective, lazy_neighbours=True)
+def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
+    """A node's loop.  ``spec.crash_after``: SIGKILL this process right after publishing that step (``run --kill``: exactly there)."""
+    node_id, run_id, realtime, neighbour_timeout, crash_after = spec.id, spec.zenoh.resolved_run_id, spec.clock == "realtime", spec.neighbour_timeout, spec.crash_after
+    node = Node(sc, node_id, bus, run_id, spec.variant, rejoin=spec.rejoin, objective=spec.objective, lazy_neighbours=True)
     role = f"node {node_id}"
     barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), node_peers(sc, node_id), lazy=True)
     first_profiled = 0
@@ -320,37 +293,19 @@ def _node_wait(node: Node, ready_due: float | None, neighbour_timeout: float, re
     return IDLE_WAIT_S
 
 
-class _CollectorProgress:
-    """Prints ``@progress k`` lines on stdout for a parent process (``netsetest run``)."""
-
-    def __init__(self, enabled: bool) -> None:
-        self.enabled, self.last = enabled, -1
-
-    def update(self, k: int) -> None:
-        if self.enabled and k > self.last:
-            print(f"@progress {k}", flush=True)
-            self.last = k
-
-
-def run_collector(
-    sc: Scenario,
-    bus: Bus,
-    run_id: str,
-    meta: dict,
-    record: str | None,
-    summary_json: str | None,
-    progress: bool,
-    idle_timeout: float,
-    on_summary: Callable[[RunSummary], None] | None = None,
-) -> int:
+def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: dict, on_summary: Callable[[RunSummary], None] | None = None) -> int:
+    """The collector's loop: judge until End (or the vehicle is gone, or SIGTERM), then write the summary."""
     from netsetest.roles.collector import Collector
 
+    from netsetest.runtime.channel import ChannelWriter, RunFinished
+
+    run_id, record, summary_json, idle_timeout = spec.zenoh.resolved_run_id, spec.record, spec.summary_json, spec.idle_timeout
     sink, _ = record_sink(record)  # opened now: the record grows step by step and survives a crash
     collector = Collector(sc, bus, run_id, sink)
     if sink is not None:
         sink.meta(meta)
     barrier = Barrier(bus, run_id, Ready(role="collector"), _all_roles(sc) - {("collector", None)})
-    prog = _CollectorProgress(progress)
+    channel = ChannelWriter(spec.channel_fd) if spec.channel_fd is not None else None  # to the launcher: progress, summary
     last_msg = time.monotonic()
     stopped = False
     try:
@@ -360,13 +315,15 @@ def run_collector(
                 barrier.tick(now)
             if bus.pump(timeout=0.05):
                 last_msg = time.monotonic()
-            prog.update(collector.progress)
+            if channel is not None:
+                channel.step(collector.progress)
             if collector.ended is not None:
                 # End overtakes the last states on other paths: wait until they are in (or a grace period)
                 t_end = time.monotonic()
                 while collector.progress < collector.ended.steps and time.monotonic() - t_end < 2.0:
                     bus.pump(timeout=0.05)
-                prog.update(collector.progress)
+                if channel is not None:
+                    channel.step(collector.progress)
                 break
             if now - last_msg > idle_timeout:
                 log("collector", f"no message for {idle_timeout:g} s: the vehicle is gone; writing what was received")
@@ -378,9 +335,68 @@ def run_collector(
         stopped = True
     summary = collector.finish(meta)
     write_summary(summary, summary_json)
+    if channel is not None:
+        channel.send(RunFinished(summary))
+        channel.close()
     if on_summary:
         on_summary(summary)
     if stopped:
         return EXIT_STOPPED
     return exit_code(summary) if collector.ended is not None else EXIT_VIOLATION
 
+
+
+# ---------------------------------------------------------------- a role process from its spec
+
+
+def serve_role(name: str, who: str, scenario: ScenarioSpec, zenoh: ZenohSpec, body: Callable[[Scenario, Bus], int]) -> int:
+    """Run a role process: load its scenario (ConfigError to the caller), open its bus, run ``body``;
+    ``name`` for its log lines, ``who`` its certificate name (keys.role_name).  Exit code: ``body``'s;
+    EXIT_BAD_INPUT when the bus cannot open; :data:`EXIT_STOPPED` on SIGTERM/SIGINT."""
+    from netsetest.bus.zenoh_bus import BusError, ZenohBus
+    from netsetest.runtime.security import CredentialsError, client_settings, identity
+
+    sc = scenario.load()
+    install_signal_handlers()
+    release_free_memory()
+    try:
+        settings = client_settings(identity(zenoh.credentials, who)) if zenoh.credentials else None
+        bus = ZenohBus(zenoh.mode, list(zenoh.listen), list(zenoh.connect), base_file=zenoh.config, settings=settings)
+    except (BusError, CredentialsError) as exc:
+        log(name, str(exc))
+        return EXIT_BAD_INPUT
+    try:
+        return body(sc, bus)
+    except Stop as why:
+        log(name, f"stopped by {why}")
+        return EXIT_STOPPED
+    finally:
+        bus.close()
+
+
+def vehicle_main(spec: VehicleSpec) -> int:
+    """``netsetest vehicle``."""
+    return serve_role("vehicle", keys.role_name("vehicle"), spec.scenario, spec.zenoh, lambda sc, bus: run_vehicle(spec, sc, bus))
+
+
+def node_main(spec: NodeSpec) -> int:
+    """``netsetest node``: an id not in the topology is a ConfigError (exit 2)."""
+
+    def body(sc: Scenario, bus: Bus) -> int:
+        sc.node(spec.id)  # unknown id → ConfigError, exit 2
+        return run_node(spec, sc, bus)
+
+    return serve_role(f"node {spec.id}", keys.role_name("node", spec.id), spec.scenario, spec.zenoh, body)
+
+
+def collector_main(spec: CollectorSpec, on_summary: Callable[[RunSummary], None] | None = None) -> int:
+    """``netsetest collector``: the run's meta data from the spec, ``on_summary`` called with the summary."""
+    from netsetest.runtime.inmemory import run_meta
+    from netsetest.runtime.security import SECURITY_INSECURE, SECURITY_MTLS
+
+    def body(sc: Scenario, bus: Bus) -> int:
+        meta = run_meta(sc, "zenoh", spec.clock, spec.signals, spec.variant, spec.seed, spec.zenoh.resolved_run_id, spec.objective)  # type: ignore[arg-type]  # a collector started by hand without --seed records none
+        meta["security"] = SECURITY_MTLS if spec.zenoh.credentials else SECURITY_INSECURE
+        return run_collector(spec, sc, bus, meta, on_summary)
+
+    return serve_role("collector", keys.role_name("collector"), spec.scenario, spec.zenoh, body)

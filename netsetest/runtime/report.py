@@ -14,6 +14,11 @@ if TYPE_CHECKING:  # every role and command imports this module (exit codes); th
     from netsetest.records.summary import RunSummary
 
 
+def log(role: str, text: str) -> None:
+    """A role's or the launcher's line on stderr: ``[role] text``."""
+    print(f"[{role}] {text}", file=sys.stderr, flush=True)
+
+
 class Progress:
     """One line per update on a terminal (\\r), a line every 10 % otherwise; always to stderr."""
 
@@ -168,13 +173,6 @@ def record_sink(record: str | None, keep: bool = False) -> tuple[RecordSink | No
 def write_summary(summary: RunSummary, summary_json: str | None) -> None:
     if summary_json:
         Path(summary_json).write_text(json.dumps(summary.to_dict(), indent=2) + "\n")
-
-
-def read_summary(summary_json: str | Path) -> RunSummary:
-    """A ``--summary-json`` file written by :func:`write_summary` (ValueError if it is not one)."""
-    from netsetest.records.summary import RunSummary
-
-    return RunSummary.from_dict(json.loads(Path(summary_json).read_text()))
 
 
 EXIT_OK, EXIT_VIOLATION, EXIT_BAD_INPUT, EXIT_NODE_LOST = 0, 1, 2, 3

@@ -29,13 +29,13 @@ from pathlib import Path
 from netsetest.bus import keys
 from netsetest.bus.keys import role_name
 from netsetest.config.schema import Scenario
+from netsetest.runtime.rolespec import RUN_ID_ENV
 
 SECURITY_MTLS = "mtls+acl"  # the summary's "security" field: Zenoh mTLS + access control at the router
 SECURITY_INSECURE = "insecure"  # open peer mesh: any local process can read and forge messages
 ROUTER = "router"  # common name of the router's certificate
 OBSERVER = "observer"  # common name of the read-only certificate `netsetest echo/watch --credentials` use
 RUN_ENV_FILE = "run.env"  # written by `netsetest credentials`: the deployment's run id, for compose's env_file
-RUN_ID_ENV = "NETSETEST_RUN_ID"  # default of --run-id (compose services read it from the credentials' run.env)
 OBSERVER_ACCESS = "observer.json"  # written by `netsetest run` next to its credentials: run id and router endpoint
 ROUTER_HOSTS = ("localhost", "127.0.0.1", ROUTER)  # names the router's certificate is valid for
 CA_FILE = "ca.pem"

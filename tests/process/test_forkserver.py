@@ -38,7 +38,7 @@ def server() -> Iterator[tuple[ForkServer, str]]:
 
 def _router(fs: ForkServer, run_id: str):
     """A child that runs until stopped: an open Zenoh router on a free port."""
-    return fs.spawn("router", ["router", "--listen", f"tcp/127.0.0.1:{free_ports(1)[0]}", "--run-id", run_id], pipe_stdout=False)
+    return fs.spawn("router", ["router", "--listen", f"tcp/127.0.0.1:{free_ports(1)[0]}", "--run-id", run_id])
 
 
 def _comm(pid: int) -> str:
@@ -51,12 +51,11 @@ def _threads(pid: int) -> int:
 
 def test_a_child_runs_the_command_line_with_its_own_stdout_and_exit_code(server: tuple[ForkServer, str]) -> None:
     fs, _ = server
-    child = fs.spawn("compose", ["compose", "paper6"], pipe_stdout=True)
-    assert child.stdout is not None
-    out = child.stdout.read()
+    child = fs.spawn("compose", ["compose", "paper6"], pipes=[1])
+    out = child.pipes[1].read().decode()
     assert child.wait(30) == 0 and "services:" in out and "  node6:" in out, out[:300]
-    assert fs.spawn("bad", ["compose", "no-such-topology"], pipe_stdout=False).wait(30) == 2  # bad input, as exec'd
-    assert fs.spawn("usage", ["node", "paper6"], pipe_stdout=False).wait(30) == 2  # argparse: --id is required
+    assert fs.spawn("bad", ["compose", "no-such-topology"]).wait(30) == 2  # bad input, as exec'd
+    assert fs.spawn("usage", ["node", "paper6"]).wait(30) == 2  # argparse: --id is required
     # the server forks with a single thread: no Zenoh runtime, no BLAS pool before fork
     assert _threads(fs.proc.pid) == 1
 
@@ -98,6 +97,6 @@ def test_a_server_that_is_gone_is_an_error_not_a_hang() -> None:
     fs = ForkServer([sys.executable, "-c", "pass"], role_env())  # ends at once, without serving
     try:
         with pytest.raises(ForkServerError, match="ended"):
-            fs.spawn("vehicle", ["vehicle", "paper6"], pipe_stdout=False)
+            fs.spawn("vehicle", ["vehicle", "paper6"])
     finally:
         fs.close()

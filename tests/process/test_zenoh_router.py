@@ -70,6 +70,7 @@ def test_zenoh_compose_matches_committed_file() -> None:
     assert router["ports"] == ["127.0.0.1:7447:7447"], "the router must not be published on every interface"
 
     from netsetest.cli.main import build_parser
+    from netsetest.runtime.rolespec import ROLE_SPECS
 
     for name in ["vehicle", "collector", *nodes]:
         svc = services[name]
@@ -85,10 +86,11 @@ def test_zenoh_compose_matches_committed_file() -> None:
         assert svc["env_file"] == ["./credentials/run.env"] and "./credentials:/credentials:ro" in svc["volumes"], name
         # the command line is one netsetest accepts
         a = build_parser().parse_args(cmd[1:])
-        assert a.command == role and a.zenoh_mode == "client" and a.connect == ["tls/router:7447"]
-        assert a.topology == PAPER6
+        spec = next(s for s in ROLE_SPECS if s.ROLE == role).from_namespace(a)
+        assert a.command == role and spec.zenoh.mode == "client" and spec.zenoh.connect == ("tls/router:7447",)
+        assert spec.scenario.topology == PAPER6
         if role == "node":
-            assert a.id == int(name.removeprefix("node")), (name, cmd)
+            assert spec.id == int(name.removeprefix("node")), (name, cmd)
             assert cmd.count("--id") == 1
         else:
             assert "--id" not in cmd
@@ -111,7 +113,7 @@ def test_credentials_command_writes_run_env(tmp_path) -> None:
     name, run_id = line.split("=")
     assert name == "NETSETEST_RUN_ID" and run_id.startswith("run-") and len(run_id) == 20
     # a compose service gets run.env as its environment: --run-id defaults to it
-    probe = "from netsetest.cli.main import build_parser; print(build_parser().parse_args(['vehicle', 'x.toml']).run_id)"
+    probe = "from netsetest.runtime.rolespec import VehicleSpec; print(VehicleSpec.from_argv(['vehicle', 'x.toml']).zenoh.resolved_run_id)"
     got = subprocess.run([sys.executable, "-c", probe], env={**os.environ, name: run_id}, capture_output=True, text=True, timeout=60)
     assert got.stdout.strip() == run_id, got.stderr
     for f in ("ca.pem", "router.pem", "vehicle.pem", "collector.pem", *(f"node-{i}.pem" for i in range(1, 7))):

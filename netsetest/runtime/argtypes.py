@@ -1,0 +1,93 @@
+"""Parsers of command-line values that role specs (runtime/rolespec.py) and the CLI share: each takes the
+text of one option and returns its value or raises :class:`argparse.ArgumentTypeError` naming why.
+
+They live below the CLI because a role spec parses its own command line (``RoleSpec.from_argv``); the
+CLI's checks (cli/checks.py) use the same functions, so each rule is written once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import re
+from collections.abc import Callable
+
+SEED_MAX = 2**63 - 1
+RUN_ID_RE = re.compile(r"[A-Za-z0-9_-]{1,64}")
+# proto/host:port with an optional Zenoh suffix (?metadata, #config); host a name, an IPv4 or a [IPv6]
+ENDPOINT_RE = re.compile(r"(tcp|udp|tls|quic)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):(\d{1,5})([?#].*)?")
+MAX_PORT = 65535
+
+
+def positive_int(s: str) -> int:
+    """argparse type: an integer ≥ 1 (steps, counts)."""
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {s!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {v}")
+    return v
+
+
+def seed(s: str) -> int:
+    """argparse type of ``--seed``: a non-negative integer (numpy rejects negative seeds)."""
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {s!r}") from None
+    if not 0 <= v <= SEED_MAX:
+        raise argparse.ArgumentTypeError(f"must be between 0 and 2**63 − 1, got {v}")
+    return v
+
+
+def run_id(s: str) -> str:
+    """argparse type of ``--run-id``: one key-expression chunk (no '/', '*', '$': they would widen the keys)."""
+    if not RUN_ID_RE.fullmatch(s):
+        raise argparse.ArgumentTypeError(f"{s!r}: only letters, digits, '_' and '-' (1 to 64), it is a key-expression chunk")
+    return s
+
+
+def endpoint(s: str) -> str:
+    """argparse type of a Zenoh endpoint: PROTO/HOST:PORT with a port in range."""
+    m = ENDPOINT_RE.fullmatch(s)
+    if not m or int(m.group(3)) > MAX_PORT:
+        raise argparse.ArgumentTypeError(f"{s!r}: expected PROTO/HOST:PORT with PROTO tcp, udp, tls or quic and a port ≤ {MAX_PORT}, e.g. tls/127.0.0.1:7447")
+    return s
+
+
+def readable_file(s: str) -> str:
+    """argparse type: the name of a file this process can read."""
+    if not os.path.isfile(s) or not os.access(s, os.R_OK):
+        raise argparse.ArgumentTypeError(f"{s}: not a readable file")
+    return s
+
+
+def node_at(s: str) -> tuple[int, int]:
+    """argparse type of ``NODE@STEP`` (``--kill``, ``--rejoin``, ``--await-rejoin``)."""
+    try:
+        node, step = s.split("@")
+        return int(node), int(step)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected NODE@STEP, e.g. 3@20, got {s!r}") from None
+
+
+def _seconds_type(allow_zero: bool) -> Callable[[str], float]:
+    """argparse type for a duration: > 0, or ≥ 0 with ``allow_zero``."""
+
+    def parse(s: str) -> float:
+        try:
+            v = float(s)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number of seconds: {s!r}") from None
+        if not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"must be a finite number of seconds, got {s!r}")
+        if v < 0 or (v == 0 and not allow_zero):
+            raise argparse.ArgumentTypeError(f"must be {'≥' if allow_zero else '>'} 0, got {v}")
+        return v
+
+    return parse
+
+
+seconds, non_negative_seconds = _seconds_type(False), _seconds_type(True)
