@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from netsetest.bench.topologies import RingVariant
 from netsetest.config.schema import Scenario
 from netsetest.scenarios import TOPOLOGY_DIR
 
@@ -45,6 +46,9 @@ FULL: dict[str, Any] = {
     "plant_steps": 80, "plant_seeds": list(range(10, 20)), "plant_lap_steps": 600, "plant_mb_steps": 30,
     "network_steps": 80, "network_seeds": [0, 1, 2], "cost_reps": 9,
 }
+
+
+RT_VARIANTS: tuple[RingVariant, ...] = ("reference", "max_faulty", "car")
 
 
 def _log(msg: str) -> None:
@@ -255,7 +259,9 @@ def run_bench(
 ) -> int:
     from netsetest.bench.network import network_figures, network_markdown
     from netsetest.bench.plant import plant_figures, plant_markdown
-    from netsetest.bench.zenoh_runs import launch_to_step0, node_memory_profile, node_startup, realtime_ladder, realtime_node_profile
+    from netsetest.bench.zenoh_runs import (
+        launch_to_step0, node_memory_profile, node_startup, realtime_fit, realtime_ladder, realtime_node_profile,
+    )
 
     cfg = QUICK if quick else FULL
     t_all = time.perf_counter()
@@ -294,6 +300,8 @@ def run_bench(
         _log(f"  {res['node']}")
         _log("real time (τs = 0.1 s, nodes as processes): growing networks")
         res["realtime"] = realtime_ladder(tmp, cfg["rt_sizes"], cfg["rt_steps"], log=_log)
+        _log("real time with a reference's readings, everyone's readings (max_faulty) and the car as the truth: the largest ring that fits")
+        res["realtime"]["variants"] = realtime_fit(tmp, RT_VARIANTS, cfg["rt_sizes"], res["realtime"]["max_nodes"], cfg["rt_steps"], log=_log)
         _log(f"a node's CPU per step by phase (real time, {cfg['profile_nodes']} nodes, NETSETEST_PROFILE), default and trace objective")
         res["node_profile"] = realtime_node_profile(tmp, cfg["profile_nodes"], cfg["rt_steps"])
         res["node_profile_trace"] = realtime_node_profile(tmp, cfg["profile_nodes"], cfg["rt_steps"], objective="trace")
@@ -342,6 +350,7 @@ def headline(res: dict) -> dict:
         "zenoh_overhead_ratio_cpu_floor": (res["zenoh"].get("cpu_floor") or {}).get("ratio_floor"),
         "scaling": [{"nodes": r["nodes"], "ms_per_node_step": r["ms_per_node_step"]} for r in res["inmemory_scaling"]["rows"]],
         "realtime_max_nodes": res["realtime"]["max_nodes"],
+        **{f"realtime_max_nodes_{v}_ratio": r["ratio_to_plain"] for v, r in res["realtime"].get("variants", {}).items()},
         "realtime_node_cpu_ms_per_step": (res.get("node_profile") or {}).get("process_ms_per_step"),
         "realtime_node_cpu_ms_per_step_trace": (res.get("node_profile_trace") or {}).get("process_ms_per_step"),
         "fault_width_ratio_exact_nsnim": res["tightness"]["nsnim"]["width_ratio"]["f"],
@@ -371,6 +380,8 @@ TARGETS = [
     ("node_startup_s", "< 1 s", lambda v: v < 1.0),
     ("launch_to_step0_s", "< 1 s", lambda v: v < 1.0),
     ("realtime_max_nodes", "≥ 96", lambda v: v >= 96),
+    ("realtime_max_nodes_reference_ratio", "≥ 0.8", lambda v: v >= 0.8),  # the readings' phase may cost ≤ 20 % of the size
+    ("realtime_max_nodes_max_faulty_ratio", "≥ 0.8", lambda v: v >= 0.8),
     ("flood_step_rate_ratio", "≥ 0.5", lambda v: v >= 0.5),
     ("flood_nodes_lost", "0", lambda v: v == 0),
     ("crash_roles_lost", "0", lambda v: v == 0),
@@ -462,6 +473,15 @@ def markdown(res: dict) -> str:
                      f"{f(pr.get('node_cpu_pct_median'))} | {f(r.get('node_cpu_ms_per_step'))} | {f(pr.get('nodes_cpu_pct_total'), '.0f')} | "
                      f"{' / '.join(f(roles.get(k), '.1f') for k in ('run', 'vehicle', 'collector'))} | {f(r.get('demand_cores'))} | "
                      f"{f(pr.get('other_work_pct'), '.0f')} | {f(pr.get('node_peak_rss_mb_median'), '.1f')} |")
+    variants = res["realtime"].get("variants") or {}
+    if variants:
+        lines += ["", f"The largest ring that still runs in real time with each variant, walking down from the plain ladder's "
+                  f"{res['realtime']['max_nodes']} nodes (bench/topologies.py: `reference` = node 3's reading read by every node, "
+                  "`max_faulty` = everyone's reading read by everyone, N² messages a step, `car` = the CommonRoad car as the truth):", "",
+                  "| variant | largest ring | / plain | deadline misses in the runs tried (nodes) |", "|---|---|---|---|"]
+        for v, r in variants.items():
+            tried = ", ".join(f"{x['deadline_misses']} ({x['nodes']})" for x in r["runs"])
+            lines.append(f"| {v} | {r['max_nodes'] if r['max_nodes'] is not None else '—'} | {f(r['ratio_to_plain'])} | {tried} |")
     lines += _profile_lines(res.get("node_profile") or {}, res.get("node_profile_trace") or {})
     d = res["defences"]
     lines += ["", "## Defences (netsetest/bench/attacks.py, netsetest/bench/soak.py)", "",

@@ -42,6 +42,7 @@ from netsetest.runtime.forkserver import NAME_PREFIX
 from netsetest.runtime.launcher import free_ports
 from netsetest.runtime.processes import role_env
 from netsetest.runtime.rolespec import Clock, CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
+from netsetest.bench.topologies import RingVariant
 
 PY = [sys.executable, "-m", "netsetest.cli.main"]
 
@@ -408,44 +409,73 @@ def _loadavg() -> str:
     return " ".join(Path("/proc/loadavg").read_text().split()[:3])
 
 
+def _realtime_run(topo: Path, n: int, steps: int, retries: int, log, label: str = "") -> tuple[bool, list[dict]]:
+    """Real-time runs of one topology (up to ``1 + retries``): whether one ran without a deadline miss or a
+    lost node, and every attempt's row."""
+    from netsetest.bench.topologies import RING_TAU_S
+
+    rows = []
+    for attempt in range(retries + 1):
+        load = _loadavg()
+        r = cli_run(topo, "zenoh", "realtime", timeout=120 + 3 * n + steps * 0.2, sample_stepping_s=steps * RING_TAU_S)
+        s = r["summary"] or {}
+        misses = sum(row.get("deadline_misses") or 0 for row in s.get("nodes", [])) if s else None
+        late = r.get("late_per_step") or {}
+        row = {
+            "nodes": n, "attempt": attempt + 1, "exit_code": r["exit_code"], "wall_s": r["wall_s"], "deadline_misses": misses,
+            "nodes_missing": s.get("nodes_missing") if s else None,
+            "fallbacks": sum(x.get("fallbacks", 0) for x in s.get("nodes", [])) if s else None,
+            "violations": s.get("violations_total") if s else None,
+            "load_before": load, "late_steps": len(late), "first_late_step": min(late) if late else None,
+            "processes": r["processes"],
+            **cpu_demand(r["processes"], n),
+        }
+        rows.append(row)
+        pr = r["processes"] or {}
+        log(f"  real time{label}, {n} nodes (attempt {attempt + 1}, load {load}): exit {r['exit_code']}, deadline misses {misses} "
+            f"in {len(late)} steps, missing {row['nodes_missing']}, {r['wall_s']:.0f} s; node CPU {pr.get('node_cpu_pct_median') or 0:.2f} % "
+            f"each, all nodes {pr.get('nodes_cpu_pct_total', 0):.0f} %, others {pr.get('role_cpu_pct')}, other work on the machine "
+            f"{pr.get('other_work_pct') or 0:.0f} %; {row['node_cpu_ms_per_step'] or 0:.2f} ms of CPU per node-step, "
+            f"{row['demand_cores'] or 0:.2f} cores needed")
+        if r["exit_code"] == 0 and misses == 0 and not row["nodes_missing"]:
+            return True, rows
+    return False, rows
+
+
 def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int = 1, log=print) -> dict:
     """Real-time runs of ring networks of growing size; the largest without a deadline miss."""
-    from netsetest.bench.topologies import RING_TAU_S, ring_topology
+    from netsetest.bench.topologies import ring_topology
 
-    runs = []
+    runs: list[dict] = []
     best = None
     for n in sizes:
-        topo = ring_topology(directory, n, steps)
-        ok = False
-        for attempt in range(retries + 1):
-            load = _loadavg()
-            r = cli_run(topo, "zenoh", "realtime", timeout=120 + 3 * n + steps * 0.2, sample_stepping_s=steps * RING_TAU_S)
-            s = r["summary"] or {}
-            misses = sum(row.get("deadline_misses") or 0 for row in s.get("nodes", [])) if s else None
-            late = r.get("late_per_step") or {}
-            row = {
-                "nodes": n, "attempt": attempt + 1, "exit_code": r["exit_code"], "wall_s": r["wall_s"], "deadline_misses": misses,
-                "nodes_missing": s.get("nodes_missing") if s else None,
-                "fallbacks": sum(x.get("fallbacks", 0) for x in s.get("nodes", [])) if s else None,
-                "violations": s.get("violations_total") if s else None,
-                "load_before": load, "late_steps": len(late), "first_late_step": min(late) if late else None,
-                "processes": r["processes"],
-                **cpu_demand(r["processes"], n),
-            }
-            runs.append(row)
-            pr = r["processes"] or {}
-            log(f"  real time, {n} nodes (attempt {attempt + 1}, load {load}): exit {r['exit_code']}, deadline misses {misses} "
-                f"in {len(late)} steps, missing {row['nodes_missing']}, {r['wall_s']:.0f} s; node CPU {pr.get('node_cpu_pct_median') or 0:.2f} % "
-                f"each, all nodes {pr.get('nodes_cpu_pct_total', 0):.0f} %, others {pr.get('role_cpu_pct')}, other work on the machine "
-                f"{pr.get('other_work_pct') or 0:.0f} %; {row['node_cpu_ms_per_step'] or 0:.2f} ms of CPU per node-step, "
-                f"{row['demand_cores'] or 0:.2f} cores needed")
-            ok = r["exit_code"] == 0 and misses == 0 and not row["nodes_missing"]
-            if ok:
-                break
+        ok, rows = _realtime_run(ring_topology(directory, n, steps), n, steps, retries, log)
+        runs += rows
         if not ok:
             break
         best = n
     return {"max_nodes": best, "runs": runs, "steps": steps}
+
+
+def realtime_fit(directory: Path, variants: tuple[RingVariant, ...], sizes: list[int], start: int | None, steps: int,
+                 retries: int = 1, log=print) -> dict:
+    """Per ring variant (bench/topologies.py: a reference sensor, everyone's readings under max_faulty, the
+    CommonRoad car as the truth): the largest of ``sizes`` up to ``start`` (the plain ladder's largest) that
+    still runs in real time, walking down from ``start``, and its ratio to ``start``."""
+    from netsetest.bench.topologies import ring_topology
+
+    out: dict = {}
+    for variant in variants:
+        runs: list[dict] = []
+        best = None
+        for n in sorted((m for m in sizes if start is not None and m <= start), reverse=True):
+            ok, rows = _realtime_run(ring_topology(directory, n, steps, variant=variant), n, steps, retries, log, f" ({variant})")
+            runs += rows
+            if ok:
+                best = n
+                break
+        out[variant] = {"max_nodes": best, "ratio_to_plain": None if best is None or not start else best / start, "runs": runs}
+    return out
 
 
 MACHINE_CORES = os.cpu_count() or 1

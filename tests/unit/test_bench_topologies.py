@@ -1,0 +1,28 @@
+"""The benchmark's ring variants (netsetest/bench/topologies.py) are the topologies they claim to be: the
+real-time figures per variant (``realtime_fit``) measure a reference's readings, everyone's readings under
+``max_faulty`` and the car, and nothing else."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from netsetest.bench.topologies import FAULTY_PROFILES, ring_topology
+from netsetest.config.schema import load_topology
+
+
+@pytest.mark.parametrize("n", [6, 13])
+def test_ring_variants(tmp_path: Path, n: int) -> None:
+    plain = load_topology(ring_topology(tmp_path, n, 5))
+    ref = load_topology(ring_topology(tmp_path, n, 5, variant="reference"))
+    faulty = load_topology(ring_topology(tmp_path, n, 5, variant="max_faulty"))
+    car = load_topology(ring_topology(tmp_path, n, 5, variant="car"))
+    assert plain.references() == () and not plain.health_declared and plain.plant == "ts"
+    assert ref.references() == (3,) and all(ref.reading_sources(i) == (3,) for i in ref.ids if i != 3)
+    assert faulty.health_declared and all(len(faulty.reading_sources(i)) == n - 1 for i in faulty.ids)
+    # the declaration holds on the profiles' faults: exactly the nodes whose profile has one may be faulty
+    assert faulty.max_faulty == sum((i - 1) % 6 + 1 in FAULTY_PROFILES for i in faulty.ids) < n
+    assert car.plant == "single-track" and car.uncertainty is not None
+    for sc in (ref, faulty, car):  # the same ring: only what the variant names differs
+        assert [n_.in_weights for n_ in sc.nodes] == [n_.in_weights for n_ in plain.nodes]
