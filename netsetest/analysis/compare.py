@@ -12,7 +12,8 @@ row is judged by the run's collector (its one-step dependency cone, docs/coverag
 cone held is a ``violation``, other misses are attributed to the cause the collector names), so a row
 here is what a user's run of that estimator reports.  The exact rows use every datum of the horizon, so
 their cone is the whole history: the prior at step 0, the noise bound at every step ≤ k, the wind bound
-at every step < k, the declared fault bound at every step ≤ k where applied (:func:`_cones`).
+at every step < k, the declared fault bound at every step ≤ k where applied (roles/judge.py,
+:func:`~netsetest.roles.judge.history_cone`).
 ``covered`` counts the node-steps whose cone held.  Widths are per-coordinate interval-hull widths,
 mean over nodes and the steps ≥ FROM_STEP; ``ratio_exact`` is the mean fault width over the exact
 one's (same steps, bounded exact intervals only), ``ratio_exact_state`` the same for β and r, each
@@ -41,6 +42,7 @@ from netsetest.estimator.names import DEFAULT_COMPARE, ESTIMATOR_NAMES, EXACT, S
 from netsetest.estimator.registry import node_set_estimator
 from netsetest.models.signals import SignalKind
 from netsetest.records.record import Record, record_from_parts
+from netsetest.roles.judge import history_cone
 from netsetest.runtime.inmemory import run_inmemory
 
 CONTAIN_TOL = 1e-8  # the sets' own membership slack (sets.MEMBERSHIP_TOL) plus float sums of the bounds
@@ -102,33 +104,11 @@ class Comparison:
     plant: str = "ts"  # what generated the truth (Scenario.plant_label)
 
 
-def _cones(sc: Scenario, rec: Record, assumptions: tuple[str, ...], nodes: list[int]) -> dict[tuple[int, int], str | None]:
-    """Per (node, step) of an exact row: None if every assumption of the node's whole history held, else the
-    first broken one (an exact limit uses every datum up to the step, so its cone is never one step deep)."""
-    truth = sorted(rec.truth, key=lambda t: t["step"])
-    out: dict[tuple[int, int], str | None] = {}
-    for i in nodes:
-        n, s = sc.node(i), str(i)
-        e = np.r_[truth[0]["x"], truth[0]["faults"][s]] - n.x0_hat
-        broken: str | None = None if float(e @ np.linalg.solve(n.P0, e)) <= n.rho else "prior"
-        for k, t in enumerate(truth):
-            if broken is None and k > 0 and not truth[k - 1]["dist_ok"]:
-                broken = "disturbance"
-            if broken is None and k > 0 and not truth[k - 1].get("mismatch_ok", True):
-                broken = "model mismatch"  # every estimator uses the declared bound on e_k (docs/plant.md)
-            if broken is None and not t["noise_ok"][s]:
-                broken = "noise"
-            if broken is None and "fault_bound" in assumptions and not t.get("fault_ok", {}).get(s, True):
-                broken = "fault_bound"
-            out[(i, k)] = broken
-    return out
-
-
 def _centralized_cones(sc: Scenario, rec: Record, bounded: tuple[int, ...]) -> dict[int, str | None]:
-    """Per step: the exact limit rests on every node's cone (with the fault bound where applied)."""
-    per_node = {i: _cones(sc, rec, ("fault_bound",) if i in bounded else (), [i]) for i in sc.ids}
-    steps = len(rec.truth)
-    return {k: next((per_node[i][(i, k)] for i in sc.ids if per_node[i][(i, k)] is not None), None) for k in range(steps)}
+    """Per step: the exact limit rests on every node's whole history (with the fault bound where applied)."""
+    truth = sorted(rec.truth, key=lambda t: t["step"])
+    per_node = {i: history_cone(sc, truth, i, i in bounded) for i in sc.ids}
+    return {k: next((per_node[i][k] for i in sc.ids if per_node[i][k] is not None), None) for k in range(len(truth))}
 
 
 def _record_bounds(rec: Record, i: int) -> np.ndarray:
@@ -281,8 +261,7 @@ def _score_alone(sc: Scenario, rec: Record, rec_alone: Record, ex: ExactBounds, 
                 local = exact_bounds(sc, rec, "used", nodes=[i])
                 bounds, steps = _exact_array(local, i), np.arange(len(truth))
                 a.ms += [1000 * (time.perf_counter() - t0) / len(steps)] * len(steps)
-                cones = _cones(sc, rec, ("fault_bound",) if i in local.bounded_nodes else (), [i])
-                broken = [cones[(i, int(k))] for k in steps]
+                broken = history_cone(sc, truth, i, i in local.bounded_nodes)
                 a.assumptions.update(("prior", "noise", "disturbance", *(("fault_bound",) if local.bounded_nodes else ())))
             a.references.add(ex.fault_bounds + "".join(f" without {o}" for o in ex.omitted))
             _score(a, bounds, steps, tr_i[steps], _exact_array(ex, i), broken)

@@ -1,4 +1,5 @@
-"""The collector role: checks every published ellipsoid against the truth and writes the record.
+"""The collector role: admits the run's messages, has every closed step judged (roles/judge.py) and
+writes the record and the summary.
 
 For node i at step k it computes E_i,k = e_i,kᵀ P_i,k⁻¹ e_i,k with e = x̄_i,k − x̂_i,k and declares
 containment when E_i,k ≤ ρ_i.  A miss is attributed by the step's *dependency cone*, one step deep over
@@ -49,78 +50,22 @@ import numpy as np
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import NodeConfig, Scenario
-from netsetest.estimator.names import SDP
-from netsetest.estimator.registry import node_set_estimator
-from netsetest.estimator.sector import Sector, sector_ok
-from netsetest.messages import End, Message, NodeState, RunScope, Truth, state_digest
+from netsetest.messages import End, Message, NodeState, RunScope, Truth
 from netsetest.models.sensor import augmented
 from netsetest.records.record import RecordSink
 from netsetest.records.summary import RUN_FIELDS, InheritedOrigin, NodeSummary, RunSummary
 from netsetest.roles.fdi import FdiTotals, classify
+from netsetest.roles.judge import INHERITED, NO_CHECKS, TRUTH_UNKNOWN, Judge, NodeVerdict, StepInputs, isclose, state_mismatch
 from netsetest.roles.vehicle import fault_bound_holds, mismatch_holds
-from netsetest.sets import set_from_wire
 
 WINDOW = 50  # steps a step may stay open behind the newest truth (bounds memory against a stalled node)
 CLOSE_LAG = 2  # a step whose alive nodes reported closes this many truths later (late and rejoining states)
 MAX_COPIES = 4  # differing copies of one step's truth, or one node-step's state, kept until the step closes
-INNOV_RTOL = 1e-12  # the node computes ỹ − C̄ x̂ with the same numbers: rounding only across machines
 CHAIN_RTOL = 1e-12  # x_k recomputed from x_{k−1}: same code, same inputs — rounding only across machines
-
-# why an input of a node-step gives it no guarantee (docs/coverage.md)
-TRUTH_UNKNOWN = "truth unknown"  # no single consistent truth of that step: nothing can be judged
-NOT_FROM_INPUT = "not from its true input"  # its γ or innovation is not what the true measurement gives
-MISSED = "missed the truth"
-NOT_JUDGED = "not judged"  # no copy with that digest reached the collector, or several matched the truth
-MODEL_MISMATCH = "model mismatch"  # e_k outside the declared [model_uncertainty] (docs/plant.md)
-HEALTH = "k-of-N health"  # more than [network] max_faulty sensors faulty at a step whose set used it (docs/network.md)
-INHERITED = "inherited"  # the cause of a node-step whose input failed: its Origin says which and why
-
-
-@dataclass(frozen=True)
-class CopyCheck:
-    """One copy of a node's state of a closed step, as an input of a later step: None where every fact a
-    step takes from it held, else why not."""
-
-    as_neighbour: str | None  # its published set held the truth; its innovation's noise and sector facts held
-    as_prior: str | None  # the set its node continues from held the truth (self-loop: and those facts)
-
-
-@dataclass(frozen=True)
-class Origin:
-    """The input a not-covered node-step rests on: node ``node``'s state of step ``step``, and why it failed."""
-
-    node: int
-    step: int
-    why: str
-
-
-@dataclass(frozen=True)
-class Cone:
-    """A node-step's dependency cone: covered, or the first cause that takes it out of the guarantee."""
-
-    ok: bool
-    cause: str | None = None
-    origin: Origin | None = None
-
-
-def _in_ellipsoid(x: np.ndarray, c: np.ndarray, P: np.ndarray, rho: float) -> bool:
-    e = x - c
-    return bool(float(e @ np.linalg.solve(P, e)) <= rho)
-
 
 def _same_set(a: NodeState, b: NodeState) -> bool:
     """Copies that publish the same ellipsoid are one for judging (bookkeeping fields may differ)."""
     return a.xhat == b.xhat and a.P == b.P and a.rho == b.rho and a.innov == b.innov and a.gamma == b.gamma and a.set == b.set
-
-
-def _published_sector(st: NodeState) -> Sector | None:
-    return Sector(st.sector[0], st.sector[1], st.sector_basis) if st.sector is not None else None
-
-
-def _in_prior(n: NodeConfig, tr: Truth) -> bool:
-    """Assumption 1: the true x̄_0 lies in node n's prior ellipsoid."""
-    e = augmented(tr.x, tr.faults[str(n.id)]) - n.x0_hat
-    return float(e @ np.linalg.solve(n.P0, e)) <= n.rho
 
 
 @dataclass
@@ -155,10 +100,32 @@ class NodeTotals:
     solve: array = field(default_factory=lambda: array("d"))  # 8 bytes per step: the median needs them
 
 
-def _isclose(a: float, b: float, rtol: float) -> bool:
-    """np.isclose(a, b, rtol, atol=1e-300) for finite scalars (messages carry finite numbers only),
-    without numpy's per-call cost: the collector runs it for every node at every step."""
-    return abs(a - b) <= 1e-300 + rtol * abs(b)
+def _fault_interval(st: NodeState, v: NodeVerdict) -> tuple[float, float]:
+    """The published fault interval: a set estimator's own bounds, else f̂ ± √(ρ P₃₃) of the ellipsoid."""
+    b = v.containment.bounds if v.containment is not None else None
+    if b is not None:
+        return float(b[2, 0]), float(b[2, 1])
+    half = float(np.sqrt(st.rho * st.P_matrix()[2, 2]))
+    return float(st.xhat[2]) - half, float(st.xhat[2]) + half
+
+
+def _state_entry(st: NodeState, v: NodeVerdict, contested: bool) -> dict:
+    """The record's line of a judged node-step."""
+    c = v.containment
+    unjudged = None if c is not None else ("contested" if contested else TRUTH_UNKNOWN)  # neither contained nor a miss
+    origin = v.cone.origin
+    return {
+        "step": v.step, "xhat": list(st.xhat), "P": list(st.P), "rho": st.rho, "status": st.status,
+        "rho_cert": st.rho_cert, "solve_ms": st.solve_ms, "used": st.used, "missing": st.missing,
+        "readings": [j for j, _, _ in st.readings], "health": st.health,
+        "late": st.late, "E": c.E if c is not None else None, "judged": c is not None, "not_judged_why": unjudged,
+        "contained": None if c is None else bool(c.contained), "assumptions_ok": v.cone.ok,
+        "not_covered_cause": v.cone.cause,
+        "inherited_from": [origin.node, origin.step, origin.why] if origin is not None else None,
+        "contested": contested, "sector": list(st.sector) if st.sector is not None else None,
+        "sector_basis": st.sector_basis,
+        **({"bounds": c.bounds.tolist()} if c is not None and c.bounds is not None else {}),
+    }
 
 
 class Collector:
@@ -169,13 +136,11 @@ class Collector:
         self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
         self.truth: dict[int, list[Truth]] = {}  # open steps: the copies received, first first
         self.states: dict[int, dict[int, list[NodeState]]] = {}  # open steps: node → copies, first first
-        self._judged: dict[int, NodeState] = {}  # the step being closed: node → the state judged
-        self.evaluated: dict[tuple[int, int], tuple[float, bool]] = {}  # open step being closed
         self.closed = -1  # last closed step
         self.head = -1  # newest step with a truth copy
         self.prev_truth: Truth | None = None  # the judged truth of the last closed step
-        self.prev_checks: dict[int, dict[str, CopyCheck]] = {}  # last closed step: node → copy digest → check
-        self.prev_sole: dict[int, str] = {}  # last closed step: node → digest of its sole judged copy
+        self.judge = Judge(scenario)
+        self.prev_checks = NO_CHECKS  # the last closed step's copies, judged as inputs of the next
         self.origins: dict[tuple[int, str], list[int]] = {}  # (node, why) → [first step, node-steps] of "inherited"
         self.totals = {i: NodeTotals() for i in scenario.ids}
         self.losses: Counter[str] = Counter()
@@ -184,13 +149,6 @@ class Collector:
         self.drops: Counter[str] = Counter()
         self._end: End | None = None
         self._end_early = False  # an End was counted as early already
-        self._step_truth: Truth | None = None  # the judged truth of the step being closed
-        self.references = set(scenario.references())  # whose readings rest on their declared zero fault
-        # nodes running a set estimator whose guarantee also rests on the declared fault bound (its cone)
-        self.needs_fault_bound = {
-            n.id for n in scenario.nodes if n.estimator != SDP and "fault_bound" in node_set_estimator(scenario, n.id).assumptions
-        }
-        self.bounds: dict[tuple[int, int], np.ndarray] = {}  # open step being closed: a published set's (3, 2) bounds
         bus.subscribe(keys.truth(run_id), self.on_message)
         bus.subscribe(keys.node_state(run_id, "*"), self.on_message)
         bus.subscribe(keys.end(run_id), self.on_message)
@@ -346,7 +304,7 @@ class Collector:
             if t.sector_ok[s] != n.sensor.sector_holds(xf) or t.fault_ok.get(s) != fault_bound_holds(n, k):
                 return "truth-flags"
             r = t.r.get(s)
-            if r is None or not _isclose(r, float(n.sensor.Cbar @ xf), CHAIN_RTOL):
+            if r is None or not isclose(r, float(n.sensor.Cbar @ xf), CHAIN_RTOL):
                 return "truth-sensor-input"
             # v·v, not v**2: a forged huge value squares to inf (a float's ** raises OverflowError instead)
             if t.noise_ok[s] != bool(t.noise[s] * t.noise[s] <= n.sensor.R * (1 + 1e-12)):
@@ -366,7 +324,7 @@ class Collector:
             return (copies[0], len(copies) == 1) if copies else (None, False)
         good = []
         for st in copies:
-            why = self._state_mismatch(i, st, tr)
+            why = state_mismatch(self.node_cfg[i], st, tr)
             if why:
                 self.drops[why] += 1
             else:
@@ -375,189 +333,34 @@ class Collector:
             self.drops["state-conflict"] += len(good)
         return (good[0], len(good) == 1) if good else (None, False)
 
-    def _state_mismatch(self, i: int, st: NodeState, tr: Truth) -> str | None:
-        n, s = self.node_cfg[i], str(i)
-        if st.gamma != tr.gamma[s]:
-            return "state-not-from-input"
-        innov = float(tr.y[s] - n.sensor.Cbar @ np.asarray(st.xhat))
-        if not _isclose(st.innov, innov, INNOV_RTOL):
-            return "state-not-from-input"
-        if (st.set is None) != (n.estimator == SDP):
-            return "state-wrong-method"  # a set estimator publishes its set, the SDP none
-        if (st.step == 0) != (st.status in ("init", "init-prior")):
-            return "state-not-prior"  # step 0 publishes the prior (updated by ỹ₀), no other step does
-        if st.status == "init-prior" and (
-            st.rho != n.rho or not np.array_equal(st.xhat, n.x0_hat) or not np.array_equal(st.P_matrix(), n.P0)
-        ):
-            return "state-not-prior"
-        return None
-
-    def _evaluate(self, i: int, k: int) -> None:
-        st, tr = self._judged.get(i), self._step_truth
-        if st is None or tr is None or (i, k) in self.evaluated:
-            return
-        xbar = augmented(tr.x, tr.faults[str(i)])
-        e = xbar - np.asarray(st.xhat)
-        E = float(e @ np.linalg.solve(st.P_matrix(), e))
-        if st.set is None:
-            self.evaluated[(i, k)] = (E, E <= st.rho)
-            return
-        # a set estimator's node: its own set is judged; the ellipsoid is only its neighbour-facing summary
-        s = set_from_wire(st.set, len(xbar))
-        self.evaluated[(i, k)] = (E, s.contains(xbar))
-        self.bounds[(i, k)] = np.stack(s.bounds(), axis=1)
-
-    def _sector_premise(self, n: NodeConfig, st: NodeState | None, tr: Truth) -> bool:
-        """What the node's step sector rests on held: nothing more than the noise bound (measurement),
-        the declared fault bound (fault-bound), or the sector itself against the truth (assumed); without
-        a judged state, the profile's fixed sector."""
-        s = str(n.id)
-        if not n.sensor.saturated:
-            return True
-        if st is None:
-            return tr.sector_ok[s]
-        if st.sector_basis == "assumed":
-            return sector_ok(n.sensor, _published_sector(st), tr.r[s])
-        if st.sector_basis == "fault-bound":
-            return tr.fault_ok[s]
-        return True
-
-    def _copy_checks(self, k: int, tr: Truth | None) -> dict[int, dict[str, CopyCheck]]:
-        """Every copy received of every node's state of step k, judged as an input of a later step."""
-        out: dict[int, dict[str, CopyCheck]] = {}
-        for j, copies in self.states.get(k, {}).items():
-            out[j] = {state_digest(c): self._copy_check(j, c, tr) for c in copies}
-        return out
-
-    def _copy_check(self, j: int, c: NodeState, tr: Truth | None) -> CopyCheck:
-        if tr is None:
-            return CopyCheck(TRUTH_UNKNOWN, TRUTH_UNKNOWN)
-        if self._state_mismatch(j, c, tr):
-            return CopyCheck(NOT_FROM_INPUT, NOT_FROM_INPUT)
-        n, s = self.node_cfg[j], str(j)
-        facts = None
-        if not tr.noise_ok[s]:
-            facts = "noise"
-        elif n.sensor.saturated and not (s in tr.r and sector_ok(n.sensor, _published_sector(c), tr.r[s])):
-            facts = "sector"
-        xbar = augmented(tr.x, tr.faults[s])
-        published_in = _in_ellipsoid(xbar, np.asarray(c.xhat), c.P_matrix(), c.rho)
-        if c.set is not None:  # a set estimator continues from the set it published
-            prior_in = set_from_wire(c.set, len(xbar)).contains(xbar)
-        else:
-            prior_in = _in_ellipsoid(xbar, c.own_centre(), c.own_P_matrix(), c.rho)
-        self_loop = j in n.in_weights  # its own innovation enters its next step: the same facts
-        return CopyCheck(
-            as_neighbour=facts or (None if published_in else MISSED),
-            as_prior=(facts if self_loop else None) or (None if prior_in else MISSED),
-        )
-
-    def _own_cause(self, n: NodeConfig, st: NodeState | None, tr: Truth, k: int) -> str | None:
-        """The first of the step's own assumptions that broke (None: all held)."""
-        s, prev = str(n.id), self.prev_truth
-        if not self._sector_premise(n, st, tr):
-            return "sector"
-        if not tr.noise_ok[s]:
-            return "noise"
-        if n.id in self.needs_fault_bound and not tr.fault_ok.get(s, False):
-            return "fault bound"
-        if k == 0:
-            return None if _in_prior(n, tr) else "initial set"
-        if st is not None and st.status == "rejoin":
-            return None  # built from the neighbours' sets of this very step: no transition crossed
-        if prev is None or prev.step != k - 1:
-            return TRUTH_UNKNOWN
-        if not prev.dist_ok:
-            return "disturbance"
-        if not prev.mismatch_ok:
-            return MODEL_MISMATCH
-        return None
-
-    def _cone(self, n: NodeConfig, k: int, checks: dict[int, dict[str, CopyCheck]], sole: dict[int, str]) -> Cone:
-        """Whether node-step (n, k) is covered: its own assumptions held and every input it used was judged
-        and held the truth (one step deep, over judged inputs: docs/coverage.md)."""
-        i, tr = n.id, self._step_truth
-        if tr is None:
-            return Cone(False, TRUTH_UNKNOWN)
-        st = self._judged.get(i)
-        own = self._own_cause(n, st, tr, k)
-        if own is not None:
-            return Cone(False, own)
-        if st is None or k == 0:
-            return Cone(True)
-        for j, y, gamma in st.readings:  # the readings of this very step
-            why = self._reading_cause(j, y, gamma, tr)
-            if why is not None:
-                return Cone(False, INHERITED, Origin(j, k, why))
-        if st.health and not tr.health_ok:
-            return Cone(False, HEALTH)
-        if st.status == "fallback" and st.set is not None:
-            return Cone(False, "fallback")  # the previous step's set again: no guarantee for this step
-        for j, m, digest, as_prior in self._inputs_of(st, k):
-            table, sole_of = (checks, sole) if m == k else (self.prev_checks, self.prev_sole)
-            if digest is None:
-                digest = sole_of.get(j)
-            c = table.get(j, {}).get(digest) if digest is not None else None
-            why = NOT_JUDGED if c is None else (c.as_prior if as_prior else c.as_neighbour)
-            if why is not None:
-                return Cone(False, INHERITED, Origin(j, m, why))
-        return Cone(True)
-
-    def _reading_cause(self, j: int, y: float, gamma: float, tr: Truth) -> str | None:
-        """Why node j's reading of the step gives no guarantee (None: it is the true measurement, its noise
-        bound held and, for a reference, its declared fault-free sensor had no fault)."""
-        s = str(j)
-        if s not in tr.y or y != tr.y[s] or gamma != tr.gamma[s]:
-            return NOT_FROM_INPUT
-        if not tr.noise_ok[s]:
-            return "noise"
-        if j in self.references and not tr.fault_ok.get(s, False):
-            return "fault bound"  # its declared size 0
-        return None
-
-    @staticmethod
-    def _inputs_of(st: NodeState, k: int) -> list[tuple[int, int, str | None, bool]]:
-        """(node, step, digest, whether it is the node's own prior) of every input of the step; digest None:
-        a state from before digests, whose inputs are its neighbours' sole judged copies (and its own)."""
-        m = k if st.status == "rejoin" else k - 1
-        if st.inputs:
-            return [(j, m, d, j == st.node) for j, d in st.inputs]
-        deps: list[tuple[int, int, str | None, bool]] = [(j, m, None, False) for j in st.used]
-        return deps if st.status == "rejoin" else [*deps, (st.node, m, None, True)]
-
     def _close(self, k: int) -> None:
         """Judge step k, stream it to the sink, add it to the totals and forget it."""
-        self._step_truth = tr = self._judged_truth(k)
-        self._judged, contested = {}, set()
+        tr = self._judged_truth(k)
+        judged, contested = {}, set()
         for i in self.sc.ids:
             st, sole = self._judge_state(i, k, tr)
             if st is not None:
-                self._judged[i] = st
+                judged[i] = st
                 if not sole:
                     contested.add(i)
-                if tr is not None and sole:
-                    self._evaluate(i, k)
-        checks = self._copy_checks(k, tr)
-        sole_digest = {i: state_digest(st) for i, st in self._judged.items() if i not in contested}
-        cones = {n.id: self._cone(n, k, checks, sole_digest) for n in self.sc.nodes}
+        copies = self.states.get(k, {})
+        verdict = self.judge.step(StepInputs(k, tr, self.prev_truth, judged, frozenset(contested), copies), self.prev_checks)
         for i in self.sc.ids:
-            t = self.totals[i]
-            st = self._judged.get(i)
-            cone = cones[i]
+            t, st, v = self.totals[i], judged.get(i), verdict.nodes[i]
             if tr is not None:
                 t.fdi.truth(k, tr.faults[str(i)], self.sc.fault_tolerance)
             if tr is not None and not tr.sector_ok[str(i)]:
                 t.sector_breaks += 1
                 if t.first_sector_break is None:
                     t.first_sector_break = k
-            if not cone.ok:
+            if not v.cone.ok:
                 t.assumption_violations += 1
-            if self.states.get(k, {}).get(i):
+            if copies.get(i):
                 t.last_heard = k
                 if t.missing_from is not None and t.rejoined_at is None:
                     t.rejoined_at = k
             if st is None:
-                if self.states.get(k, {}).get(i):
+                if copies.get(i):
                     t.rejected += 1  # it reported, but nothing it sent can be its own
                 else:
                     t.missing_steps += 1
@@ -566,14 +369,13 @@ class Collector:
                 continue
             t.contested += i in contested
             t.sectors_assumed += st.sector_basis == "assumed"
-            t.sector_failures += self._sector_failed(i, st, tr, cone.ok and i not in contested)
-            interval = self._fault_interval(i, k, st)
+            t.sector_failures += self.judge.sector_failed(i, st, tr, v.cone.ok and i not in contested)
+            interval = _fault_interval(st, v)
             fdi = classify(*interval, self.sc.fault_tolerance)
             if self.sink is not None:
-                self.sink.state(i, self._state_entry(i, k, st, cone, i in contested) | {"fdi": fdi})
-            self._add(t, i, k, st, cone, interval)
-            judged = (i, k) in self.evaluated
-            t.fdi.add(k, fdi, tr.faults[str(i)] if tr is not None and judged else None, self.sc.fault_tolerance, cone.ok)
+                self.sink.state(i, _state_entry(st, v, i in contested) | {"fdi": fdi})
+            self._add(t, k, st, v, interval)
+            t.fdi.add(k, fdi, tr.faults[str(i)] if tr is not None and v.containment is not None else None, self.sc.fault_tolerance, v.cone.ok)
         if tr is not None:
             for j, i in tr.lost:
                 self.losses[f"{j}->{i}"] += 1
@@ -582,28 +384,17 @@ class Collector:
                 self.sink.truth(self._truth_entry(tr))
         self.states.pop(k, None)
         self.truth.pop(k, None)
-        self.evaluated.clear()
-        self.bounds.clear()
         self.prev_truth = tr
-        self.prev_checks, self.prev_sole = checks, sole_digest
+        self.prev_checks = verdict.checks
         self.closed = k
 
-    def _sector_failed(self, i: int, st: NodeState, tr: Truth | None, cone: bool) -> bool:
-        """A derived sector (measurement or fault-bound basis) missing the truth's C̄ x̄ although its
-        premises held: an estimator bug."""
-        n = self.node_cfg[i]
-        if tr is None or not cone or not n.sensor.saturated or st.sector_basis in ("none", "assumed"):
-            return False
-        return not sector_ok(n.sensor, _published_sector(st), tr.r[str(i)])
-
-    def _add(self, t: NodeTotals, i: int, k: int, st: NodeState, cone: Cone, interval: tuple[float, float]) -> None:
+    def _add(self, t: NodeTotals, k: int, st: NodeState, v: NodeVerdict, interval: tuple[float, float]) -> None:
         t.reported += 1
-        ev = self.evaluated.get((i, k))
-        if ev is not None:
-            E, contained = ev
+        cone, c = v.cone, v.containment
+        if c is not None:
             t.evaluated += 1
-            t.E_max = E if t.E_max is None else max(t.E_max, E)
-            t.contained += contained
+            t.E_max = c.E if t.E_max is None else max(t.E_max, c.E)
+            t.contained += c.contained
             if cone.ok:
                 t.covered += 1
             else:
@@ -611,7 +402,7 @@ class Collector:
                 if cone.origin is not None:
                     o = self.origins.setdefault((cone.origin.node, cone.origin.why), [cone.origin.step, 0])
                     o[1] += 1
-            if not contained:
+            if not c.contained:
                 if cone.ok:
                     t.violations += 1
                 else:
@@ -624,32 +415,6 @@ class Collector:
         t.dropped = max(t.dropped, st.dropped)
         t.drops = dict(st.drops)
         t.width_sum += interval[1] - interval[0]
-
-    def _fault_interval(self, i: int, k: int, st: NodeState) -> tuple[float, float]:
-        """The published fault interval: a set estimator's own bounds, else f̂ ± √(ρ P₃₃) of the ellipsoid."""
-        b = self.bounds.get((i, k))
-        if b is not None:
-            return float(b[2, 0]), float(b[2, 1])
-        half = float(np.sqrt(st.rho * st.P_matrix()[2, 2]))
-        return float(st.xhat[2]) - half, float(st.xhat[2]) + half
-
-    def _state_entry(self, i: int, k: int, st: NodeState, cone: Cone, contested: bool) -> dict:
-        ev = self.evaluated.get((i, k))
-        E, contained = ev if ev is not None else (None, None)  # not judged: neither contained nor a miss
-        unjudged = None if ev is not None else ("contested" if contested else TRUTH_UNKNOWN)
-        origin = cone.origin
-        return {
-            "step": k, "xhat": list(st.xhat), "P": list(st.P), "rho": st.rho, "status": st.status,
-            "rho_cert": st.rho_cert, "solve_ms": st.solve_ms, "used": st.used, "missing": st.missing,
-            "readings": [j for j, _, _ in st.readings], "health": st.health,
-            "late": st.late, "E": E, "judged": ev is not None, "not_judged_why": unjudged,
-            "contained": None if contained is None else bool(contained), "assumptions_ok": cone.ok,
-            "not_covered_cause": cone.cause,
-            "inherited_from": [origin.node, origin.step, origin.why] if origin is not None else None,
-            "contested": contested, "sector": list(st.sector) if st.sector is not None else None,
-            "sector_basis": st.sector_basis,
-            **({"bounds": self.bounds[(i, k)].tolist()} if (i, k) in self.bounds else {}),
-        }
 
     @staticmethod
     def _truth_entry(t: Truth) -> dict:

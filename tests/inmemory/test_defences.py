@@ -467,7 +467,7 @@ def test_vehicle_and_collector_keep_only_open_steps(monkeypatch: pytest.MonkeyPa
     assert max(h for h, _, _ in sizes) <= 1
     assert max(s for _, s, _ in sizes) <= CLOSE_LAG + 1 and max(t for _, _, t in sizes) <= CLOSE_LAG + 1
     c = made["Collector"]
-    assert c.states == {} and c.truth == {} and c.evaluated == {}
+    assert c.states == {} and c.truth == {}  # the judge keeps nothing per step (roles/judge.py)
 
 
 def test_an_end_that_overtakes_the_last_truth_is_not_hostile() -> None:
