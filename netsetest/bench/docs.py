@@ -81,8 +81,9 @@ def results_document(docs: dict[str, dict], sections: dict[str, str]) -> str:
              "files, without measuring. tests/unit/test_docs_generated.py fails when they differ.", ""]
     for part, p in PARTS.items():
         meta = docs[p.source].get("meta", {})
-        lines += [f"## {p.title}", "", f"Measured {meta.get('date', '(date not recorded)')} by `{p.measure}`.", "",
-                  sections[part].rstrip("\n"), ""]
+        report = p.source.removesuffix(".json") + ".md"  # the measuring run's own report (its --markdown)
+        lines += [f"## {p.title}", "", f"Measured {meta.get('date', '(date not recorded)')} by `{p.measure}` "
+                  f"(every figure of that run: [{report}](../{report})).", "", sections[part].rstrip("\n"), ""]
     return "\n".join(lines)
 
 

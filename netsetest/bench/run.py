@@ -413,7 +413,7 @@ def performance_markdown(res: dict) -> str:
          yes("node_startup_s")),
         ("`netsetest run` of the paper network (8 processes, mTLS + ACL), launch → step 0", f"{f(res['launch_to_step0_s'])} s", "< 1 s",
          yes("launch_to_step0_s")),
-        (f"a flood of {meta['config']['flood_rate']} msg/s at node 2 (secured run): step rate against the unflooded run",
+        (f"a flood of {meta['config']['flood_rate']:,} msg/s at node 2 (secured run): step rate against the unflooded run".replace(",", " "),
          f"{f(res.get('flood_step_rate_ratio'))}", "≥ 0.5", yes("flood_step_rate_ratio")),
         ("RSS slope over a long run", f"{f(res.get('soak_rss_slope_mb_per_10k_steps'))} MB per 10 000 steps", "< 5 MB",
          yes("soak_rss_slope_mb_per_10k_steps")),
