@@ -9,13 +9,17 @@ import pytest
 from netsetest.bench.docs import PARTS, RESULTS, SECTIONED, DocsError, begin, end, render, render_docs
 
 ROOT = Path(__file__).resolve().parents[2]
-RENDERED = render_docs(ROOT)
+
+
+@pytest.fixture(scope="module")
+def rendered() -> dict[str, str]:
+    return render_docs(ROOT)
 
 
 @pytest.mark.parametrize("name", [*SECTIONED, RESULTS])
-def test_the_committed_doc_is_what_the_committed_figures_make(name: str) -> None:
+def test_the_committed_doc_is_what_the_committed_figures_make(name: str, rendered: dict[str, str]) -> None:
     committed = (ROOT / name).read_text(encoding="utf-8")
-    assert committed == RENDERED[name], f"{name} differs from what `netsetest bench --render-docs` writes: run it and commit the result"
+    assert committed == rendered[name], f"{name} differs from what `netsetest bench --render-docs` writes: run it and commit the result"
 
 
 @pytest.mark.parametrize(("name", "parts"), [("README.md", ("scenario", "performance")), ("docs/performance.md", ("performance",))])
@@ -27,8 +31,8 @@ def test_the_generated_sections_are_there(name: str, parts: tuple[str, ...]) -> 
         assert "|---|" in text[text.index(begin(part)) : text.index(end(part))]
 
 
-def test_the_results_page_has_every_part_and_its_measuring_command() -> None:
-    text = RENDERED[RESULTS]
+def test_the_results_page_has_every_part_and_its_measuring_command(rendered: dict[str, str]) -> None:
+    text = rendered[RESULTS]
     for part in PARTS.values():
         assert f"## {part.title}\n" in text and f"`{part.measure}`" in text
 
