@@ -7,8 +7,9 @@ run against the in-memory run of the paper scenario; ``netsetest run`` of the pa
 launch to step 0; one node process's peak RSS and start-up time; the largest real-time network without a
 deadline miss; the defences (``netsetest run`` secured and ``--insecure`` under a 30 000 msg/s flood on
 one node's input and state key and under an insider's crash payloads, netsetest/bench/attacks.py; RSS
-slope over a long run, netsetest/bench/soak.py).  ``--quick`` uses fewer steps and
-samples (a few minutes); the default takes longer.  Times are wall-clock milliseconds on this
+slope over a long run, netsetest/bench/soak.py); the car as the truth (bench/plant.py), what the exchange
+buys (bench/network.py), the paper's scenario per node and every estimator compared (bench/scenario.py).
+``--quick`` uses fewer steps and samples (a few minutes); the default takes longer.  Times are wall-clock milliseconds on this
 machine, measured side by side in one run; medians and ratios, not single runs, are the figures.
 """
 
