@@ -147,7 +147,7 @@ def _num(v: float) -> float | None:
 
 
 def network_markdown(res: dict) -> str:
-    """The README's "When the network helps" table."""
+    """The network section of docs/results.md (netsetest/bench/docs.py)."""
     seeds = ", ".join(map(str, res["seeds"]))
     lines = [f"Exact limit from the node's own data over the exact limit from every node's data (mean width from step 10; "
              f"{res['steps']} steps, seeds {seeds}, mean over the seeds; `declared 0`: the reference's own fault):", "",

@@ -221,7 +221,7 @@ def _f(v: float | None, spec: str = ".3f") -> str:
 
 
 def plant_markdown(res: dict) -> str:
-    """The README's "How close to a real car" tables, from the benchmark's ``plant`` figures."""
+    """The car section of docs/results.md (netsetest/bench/docs.py), from the benchmark's ``plant`` figures."""
     h, t, cfg = res["held_out"], res["training"], res["config"]
     seeds = cfg["plant_seeds"]
 

@@ -7,8 +7,9 @@ run against the in-memory run of the paper scenario; ``netsetest run`` of the pa
 launch to step 0; one node process's peak RSS and start-up time; the largest real-time network without a
 deadline miss; the defences (``netsetest run`` secured and ``--insecure`` under a 30 000 msg/s flood on
 one node's input and state key and under an insider's crash payloads, netsetest/bench/attacks.py; RSS
-slope over a long run, netsetest/bench/soak.py).  ``--quick`` uses fewer steps and
-samples (a few minutes); the default takes longer.  Times are wall-clock milliseconds on this
+slope over a long run, netsetest/bench/soak.py); the car as the truth (bench/plant.py), what the exchange
+buys (bench/network.py), the paper's scenario per node and every estimator compared (bench/scenario.py).
+``--quick`` uses fewer steps and samples (a few minutes); the default takes longer.  Times are wall-clock milliseconds on this
 machine, measured side by side in one run; medians and ratios, not single runs, are the figures.
 """
 
@@ -37,14 +38,14 @@ QUICK: dict[str, Any] = {
     "launch_reps": 5,
     "flood_steps": 200, "flood_rate": 30000, "crash_steps": 30, "soak_steps": 2000, "cpu_steps": 400,
     "plant_steps": 80, "plant_seeds": [10, 11], "plant_lap_steps": 200, "plant_mb_steps": 10, "network_steps": 80, "network_seeds": [0],
-    "cost_reps": 5,
+    "cost_reps": 5, "compare_seeds": [0, 1],
 }
 FULL: dict[str, Any] = {
     "steps": 80, "ref_sched": 80, "ref_rule": 24, "naive": 40, "prev_sched": 80, "prev_rule": 24,
     "scaling_steps": 40, "scaling_sizes": [6, 24, 96], "rt_sizes": [6, 12, 24, 36, 48, 64, 80, 96, 112, 128], "rt_steps": 50, "profile_nodes": 96,
     "startup_reps": 5, "launch_reps": 9, "flood_steps": 400, "flood_rate": 30000, "crash_steps": 60, "soak_steps": 20000, "cpu_steps": 800,
     "plant_steps": 80, "plant_seeds": list(range(10, 20)), "plant_lap_steps": 600, "plant_mb_steps": 30,
-    "network_steps": 80, "network_seeds": [0, 1, 2], "cost_reps": 9,
+    "network_steps": 80, "network_seeds": [0, 1, 2], "cost_reps": 9, "compare_seeds": [0, 1, 2],
 }
 
 
@@ -255,10 +256,10 @@ def tightness(cfg: dict, tmp: Path) -> dict:
 
 def run_bench(
     quick: bool = False, json_path: str | None = None, markdown_path: str | None = None, only: str | None = None,
-    readme_path: str | None = None,
 ) -> int:
     from netsetest.bench.network import network_figures, network_markdown
     from netsetest.bench.plant import plant_figures, plant_markdown
+    from netsetest.bench.scenario import compare_markdown, scenario_figures, scenario_markdown
     from netsetest.bench.zenoh_runs import (
         launch_to_step0, node_memory_profile, node_startup, realtime_fit, realtime_ladder, realtime_node_profile,
     )
@@ -272,13 +273,14 @@ def run_bench(
         }
     }
     if only is not None:  # one part alone: its figures and its Markdown
-        figures, render = {"plant": (plant_figures, plant_markdown), "network": (network_figures, network_markdown)}[only]
+        figures, render = {"plant": (plant_figures, plant_markdown), "network": (network_figures, network_markdown),
+                           "scenario": (scenario_figures, lambda r: scenario_markdown(r) + "\n" + compare_markdown(r))}[only]
         with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
             res[only] = figures(cfg, Path(tmpd))
         res["meta"]["load_after"] = _load()
         res["meta"]["duration_s"] = time.perf_counter() - t_all
         md = f"# netsetest benchmark: {only} ({'quick' if quick else 'full'}, {res['meta']['date']})\n\n" + render(res[only])
-        _write(res, md, json_path, markdown_path, readme_path)
+        _write(res, md, json_path, markdown_path)
         return 0
     with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
         tmp = Path(tmpd)
@@ -310,20 +312,19 @@ def run_bench(
         res["defences"] = defences(cfg)
         res["plant"] = plant_figures(cfg, tmp)
         res["network"] = network_figures(cfg, tmp)
+        res["scenario"] = scenario_figures(cfg, tmp)
     res["meta"]["load_after"] = _load()
     res["meta"]["duration_s"] = time.perf_counter() - t_all
     res.update(headline(res))
     md = markdown(res) + "\n## A car as the truth (netsetest/bench/plant.py)\n\n" + plant_markdown(res["plant"])
     md += "\n## What the exchange can buy (netsetest/bench/network.py)\n\n" + network_markdown(res["network"])
-    _write(res, md, json_path, markdown_path, readme_path)
+    md += "\n## The paper's scenario (netsetest/bench/scenario.py)\n\n" + scenario_markdown(res["scenario"])
+    md += "\n" + compare_markdown(res["scenario"])
+    _write(res, md, json_path, markdown_path)
     return 0
 
 
-def _write(res: dict, md: str, json_path: str | None, markdown_path: str | None, readme_path: str | None) -> None:
-    if readme_path:
-        from netsetest.bench.docs import write_readme
-
-        write_readme(readme_path, json.loads(json.dumps(res, default=_jsonable)))  # what the JSON file says
+def _write(res: dict, md: str, json_path: str | None, markdown_path: str | None) -> None:
     if json_path:
         Path(json_path).write_text(json.dumps(res, indent=1, default=_jsonable) + "\n")
     if markdown_path:
@@ -387,6 +388,53 @@ TARGETS = [
     ("crash_roles_lost", "0", lambda v: v == 0),
     ("soak_rss_slope_mb_per_10k_steps", "< 5 MB", lambda v: v < 5.0),
 ]
+
+
+def performance_markdown(res: dict) -> str:
+    """The headline figures of a whole benchmark (README, docs/results.md, docs/performance.md)."""
+    f = lambda v, spec=".2f": "—" if v is None else format(v, spec)  # noqa: E731  # a one-line local helper
+    meta, z, sa = res["meta"], res["zenoh"], res["paper"]["saim/scheduled"]
+    floor = res.get("zenoh_overhead_ratio_cpu_floor")
+    scale = res["scaling"]
+    spread = max(abs(x) for x in res["inmemory_scaling"]["spread_vs_smallest"])
+    met = {key: ok(res[key]) for key, _, ok in TARGETS if res.get(key) is not None}
+
+    def yes(*keys: str) -> str:
+        return " / ".join("—" if k not in met else ("yes" if met[k] else "no") for k in keys)
+
+    rows = [
+        ("median node-step, NSNIM / SAIM (scheduled, incl. certification)",
+         f"{f(res['solve_ms_median'])} ms / {f(res['solve_ms_median_saim'])} ms", "≤ 2 ms / ≤ 5 ms", yes("solve_ms_median", "solve_ms_median_saim")),
+        ("vs. the straightforward / the naive formulation (NSNIM)",
+         f"×{f(res['straightforward_ratio'], '.0f')} / ×{f(res['naive_ratio'], '.0f')}", "≥ 10 / ≥ 20", yes("straightforward_ratio", "naive_ratio")),
+        ("vs. the previous cvxpy-Parameters estimator, NSNIM / SAIM",
+         f"×{f(res['previous_default_ratio'], '.0f')} / ×{f(sa['prev']['ratio'], '.0f')}", "", ""),
+        (f"mean fault width / exact limit, NSNIM / SAIM (paper signals, seed 0, {meta['config']['steps']} steps)",
+         f"{f(res['fault_width_ratio_exact_nsnim'], '.3f')} / {f(res['fault_width_ratio_exact_saim'], '.3f')}", "≤ 1.15 / ≤ 1.25",
+         yes("fault_width_ratio_exact_nsnim", "fault_width_ratio_exact_saim")),
+        ("in memory, ms per node-step at " + " / ".join(str(r["nodes"]) for r in scale) + " nodes",
+         " / ".join(f(r["ms_per_node_step"]) for r in scale), "flat ±30 %", "yes" if spread <= 0.3 else "no"),
+        ("Zenoh lockstep / in-memory wall time of the stepping phase (the lowest ratio the cores allow at the measured CPU per step)",
+         f"{f(res['zenoh_overhead_ratio'])} ({f(_med(z['zenoh_stepping_s']))} s against {f(_med(z['inmemory_s']))} s; floor {f(floor)})",
+         "≤ 1.0", yes("zenoh_overhead_ratio")),
+        ("largest real-time network (τs = 0.1 s) without a deadline miss", f"{f(res['realtime_max_nodes'], '.0f')} nodes", "≥ 96",
+         yes("realtime_max_nodes")),
+        ("node peak RSS: in `netsetest run` (forked, median) / a `netsetest node` started on its own",
+         f"{f(_med(z['node_peak_rss_mb_in_run']), '.1f')} MB / {f(res['node_rss_mb'], '.1f')} MB", "≤ 50 MB", yes("node_rss_mb")),
+        ("one node process into a waiting network, launch → first estimate", f"{f(res['node_first_estimate_s'])} s", "< 1 s",
+         yes("node_startup_s")),
+        ("`netsetest run` of the paper network (8 processes, mTLS + ACL), launch → step 0", f"{f(res['launch_to_step0_s'])} s", "< 1 s",
+         yes("launch_to_step0_s")),
+        (f"a flood of {meta['config']['flood_rate']:,} msg/s at node 2 (secured run): step rate against the unflooded run".replace(",", " "),
+         f"{f(res.get('flood_step_rate_ratio'))}", "≥ 0.5", yes("flood_step_rate_ratio")),
+        ("RSS slope over a long run", f"{f(res.get('soak_rss_slope_mb_per_10k_steps'))} MB per 10 000 steps", "< 5 MB",
+         yes("soak_rss_slope_mb_per_10k_steps")),
+    ]
+    lines = [f"`netsetest bench{' --quick' if meta['quick'] else ''}` of {meta['date']} ({meta['cpus']} CPUs, Python {meta['python']}, "
+             f"load average {meta['load_before']} before, {meta['duration_s'] / 60:.0f} minutes in all):", "",
+             "| figure | value | target | met |", "|---|---|---|---|"]
+    lines += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
+    return "\n".join(lines) + "\n"
 
 
 def markdown(res: dict) -> str:

@@ -142,8 +142,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
     p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown (default: none)")
     p.add_argument("--only", choices=SECTIONS,
-                   help="run one part alone: plant = a car as the truth, network = what the exchange can buy (default: every part)")
-    p.add_argument("--readme", metavar="PATH", help="rewrite the generated section of this README from the figures (default: none)")
+                   help="run one part alone: plant = a car as the truth, network = what the exchange can buy, scenario = the paper's "
+                   "scenario per node and every estimator compared (default: every part)")
+    p.add_argument("--render-docs", nargs="?", const=".", metavar="ROOT",
+                   help="measure nothing: rewrite docs/results.md and the generated sections of README.md and docs/performance.md "
+                   "under ROOT (default: .) from the committed figures, bench/*.json")
 
     from netsetest.cli import compare, tools
 
@@ -363,21 +366,33 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
 
 
 def cmd_bench(a: argparse.Namespace) -> int:
+    if a.render_docs is not None:
+        return _render_docs(a)
     if a.only is None:
         require("cvxpy", "the benchmark (its reference formulations)")
     checks.output_file(a.json, "--json")
     checks.output_file(a.markdown, "--markdown")
     from netsetest.bench.run import run_bench
 
-    if a.readme:
-        from netsetest.bench.docs import check_markers
+    return run_bench(a.quick, a.json, a.markdown, a.only)
 
-        text = open(a.readme, encoding="utf-8").read() if os.path.isfile(a.readme) else ""
-        why = check_markers(text, a.only)
-        if why:  # fail now, not after the benchmark
-            print(f"netsetest bench: --readme {a.readme}: {why}", file=sys.stderr)
-            return EXIT_BAD_INPUT
-    return run_bench(a.quick, a.json, a.markdown, a.only, a.readme)
+
+def _render_docs(a: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from netsetest.bench.docs import DocsError, write_docs
+
+    measuring = [opt for opt, given in (("--quick", a.quick), ("--json", a.json), ("--markdown", a.markdown), ("--only", a.only)) if given]
+    if measuring:
+        print(f"netsetest bench: --render-docs measures nothing; {measuring[0]} does not go with it", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        changed = write_docs(Path(a.render_docs))
+    except (DocsError, OSError) as e:
+        print(f"netsetest bench: --render-docs: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    print("rewrote " + ", ".join(changed) if changed else "every generated doc is up to date")
+    return 0
 
 
 def cmd_forkserver(a: argparse.Namespace) -> int:
