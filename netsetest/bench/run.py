@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from netsetest.bench.sections import PARTS
 from netsetest.bench.topologies import RingVariant
 from netsetest.config.schema import Scenario
 from netsetest.scenarios import TOPOLOGY_DIR
@@ -272,7 +273,7 @@ def run_bench(
             "date": time.strftime("%Y-%m-%d %H:%M:%S"), "config": cfg, "load_before": _load(), "only": only,
         }
     }
-    if only is not None:  # one part alone: its figures and its Markdown
+    if only is not None and only != "performance":  # one part alone: its figures and its Markdown
         figures, render = {"plant": (plant_figures, plant_markdown), "network": (network_figures, network_markdown),
                            "scenario": (scenario_figures, lambda r: scenario_markdown(r) + "\n" + compare_markdown(r))}[only]
         with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
@@ -310,23 +311,32 @@ def run_bench(
         for p in (res["node_profile"], res["node_profile_trace"]):
             _log(f"  {p['objective']}: {p.get('process_ms_per_step')} ms per node-step, {p['deadline_misses']} deadline misses")
         res["defences"] = defences(cfg)
-        res["plant"] = plant_figures(cfg, tmp)
-        res["network"] = network_figures(cfg, tmp)
-        res["scenario"] = scenario_figures(cfg, tmp)
+        if only is None:  # every part too; --only performance leaves them out
+            res["plant"] = plant_figures(cfg, tmp)
+            res["network"] = network_figures(cfg, tmp)
+            res["scenario"] = scenario_figures(cfg, tmp)
     res["meta"]["load_after"] = _load()
     res["meta"]["duration_s"] = time.perf_counter() - t_all
     res.update(headline(res))
-    md = markdown(res) + "\n## A car as the truth (netsetest/bench/plant.py)\n\n" + plant_markdown(res["plant"])
-    md += "\n## What the exchange can buy (netsetest/bench/network.py)\n\n" + network_markdown(res["network"])
-    md += "\n## The paper's scenario (netsetest/bench/scenario.py)\n\n" + scenario_markdown(res["scenario"])
-    md += "\n" + compare_markdown(res["scenario"])
+    md = markdown(res)
+    if only is None:
+        md += "\n## A car as the truth (netsetest/bench/plant.py)\n\n" + plant_markdown(res["plant"])
+        md += "\n## What the exchange can buy (netsetest/bench/network.py)\n\n" + network_markdown(res["network"])
+        md += "\n## The paper's scenario (netsetest/bench/scenario.py)\n\n" + scenario_markdown(res["scenario"])
+        md += "\n" + compare_markdown(res["scenario"])
     _write(res, md, json_path, markdown_path)
     return 0
 
 
 def _write(res: dict, md: str, json_path: str | None, markdown_path: str | None) -> None:
+    """The figures and the report; a whole run also writes each part's figures beside its JSON
+    (<dir>/<part>.json, what ``--only PART --json`` writes), so that one run refreshes every generated doc."""
     if json_path:
         Path(json_path).write_text(json.dumps(res, indent=1, default=_jsonable) + "\n")
+        for part in PARTS:
+            if part in res and res["meta"]["only"] is None:
+                doc = {"meta": res["meta"], part: res[part]}
+                (Path(json_path).parent / f"{part}.json").write_text(json.dumps(doc, indent=1, default=_jsonable) + "\n")
     if markdown_path:
         Path(markdown_path).write_text(md)
     print(md)
