@@ -149,7 +149,7 @@ def result_of(rec: Record) -> SimulationResult:
             if t is not None and str(i) in t["faults"]:
                 truth[n] = [t["x"][0], t["x"][1], t["faults"][str(i)]]
         nodes[i] = NodeSeries(
-            id=i, steps=tr.steps, t=tr.steps * float(rec.meta.get("tau_s", 1.0)), centre=tr.xhat,
+            id=i, steps=tr.steps, t=tr.steps * rec.meta.tau_s, centre=tr.xhat,
             lower=np.column_stack([lo for lo, _ in bounds]), upper=np.column_stack([hi for _, hi in bounds]),
             truth=truth, E=tr.E, rho=tr.rho, contained=tr.contained, assumptions_ok=tr.assumptions_ok,
             status=tuple(tr.status),

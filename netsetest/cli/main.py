@@ -207,7 +207,7 @@ def cmd_inspect(a: argparse.Namespace) -> int:
         sys.stdout.write("\n")
         return 0
     for i in ids:
-        method = (rec.meta.get("estimators") or {}).get(str(i), "sdp")
+        method = rec.meta.estimators.get(str(i), "sdp")
         if method == "sdp":
             print(f"node {i}: fault estimate and bounds f̂ ± √(ρ P33) of its ellipsoid")
         else:  # a set estimator publishes its own set: its bounds are that set's interval hull
@@ -249,11 +249,11 @@ def cmd_exact(a: argparse.Namespace) -> int:
 
     checks.output_file(a.json, "--json")
     rec = load_record(a.record)
-    topology = a.topology or rec.meta.get("topology")
+    topology = a.topology or rec.meta.topology
     if not a.topology and not (isinstance(topology, str) and os.path.exists(topology)):
         print(f"netsetest exact: {a.record} names topology {topology!r}, not found from here (give --topology PATH)", file=sys.stderr)
         return EXIT_BAD_INPUT
-    sc = load_topology(str(topology), rec.meta.get("case"), rec.meta.get("steps"))
+    sc = load_topology(str(topology), rec.meta.case, rec.meta.steps)  # type: ignore[arg-type]  # an unknown case is refused by load_topology
     from netsetest.runtime.report import Progress
 
     t0 = time.perf_counter()

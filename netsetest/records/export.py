@@ -26,7 +26,7 @@ FORMATS = ("parquet", "csv")
 def node_table(rec: Record, node: int) -> dict[str, list]:
     """Column name → values over the node's published steps."""
     tr = rec.nodes[node]
-    tau = float(rec.meta.get("tau_s", 1.0))
+    tau = rec.meta.tau_s
     rows = rec.state_rows(node)
     table: dict[str, list] = {c: [] for c in COLUMNS}
     for n, row in enumerate(rows):

@@ -30,6 +30,7 @@ from mcap.reader import NonSeekingReader
 from mcap.writer import CompressionType, Writer
 
 from netsetest.records.files import open_locked
+from netsetest.records.meta import RunMeta
 from netsetest.records.summary import RunSummary
 
 if TYPE_CHECKING:
@@ -227,11 +228,11 @@ class McapRecordWriter:
     def _flush(self) -> None:
         self._fh.flush()
 
-    def meta(self, meta: dict) -> None:
-        self._tau_s = float(meta.get("tau_s", 1.0))
-        started = meta.get("started_ns")
+    def meta(self, meta: RunMeta) -> None:
+        self._tau_s = meta.tau_s
+        started = meta.started_ns
         self._t0_ns = started if isinstance(started, int) and 0 <= started < MAX_LOG_NS else 0
-        self._write(TOPIC_META, self._t0_ns, meta)
+        self._write(TOPIC_META, self._t0_ns, meta.to_dict())
         self._flush()
 
     def truth(self, entry: dict) -> None:
@@ -277,13 +278,13 @@ class McapRecordWriter:
             # the run is over: the stream (readable after a crash) becomes a chunked, indexed file, which
             # Foxglove opens without reading it all; replaced in one rename, never half-written
             parts, _ = read_mcap(self.path)
-            save_mcap(self.path, parts["meta"], parts["truth"], parts["nodes"], RunSummary.from_dict(parts["summary"]))
+            save_mcap(self.path, RunMeta.from_dict(parts["meta"]), parts["truth"], parts["nodes"], RunSummary.from_dict(parts["summary"]))
 
 
 MAX_LOG_NS = 2**63  # MCAP log times are unsigned 64-bit nanoseconds; a meta start beyond is ignored
 
 
-def save_mcap(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None) -> None:
+def save_mcap(path: str | Path, meta: RunMeta, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None) -> None:
     """Write a whole record as an indexed MCAP file, in time order (never a half-written file at ``path``)."""
     path = Path(path)
     tmp = path.with_name(path.name + ".part")

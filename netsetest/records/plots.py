@@ -72,13 +72,13 @@ def plot_records(records: list[Record], out_dir: str) -> list[str]:
 
 
 def _labels(records: list[Record]) -> list[str]:
-    base = [f"{r.meta.get('case', '?')}/{r.meta.get('signals', '?')}" for r in records]
+    base = [f"{r.meta.case or '?'}/{r.meta.signals or '?'}" for r in records]
     dup = Counter(base)
     return [b if dup[b] == 1 else f"{b}#{n}" for n, b in enumerate(base)]
 
 
 def _node_ids(rec: Record) -> list[int]:
-    return sorted(set(rec.nodes) | {int(i) for i in rec.meta.get("node_ids", [])})
+    return sorted(set(rec.nodes) | set(rec.meta.node_ids))
 
 
 def _grid(ids: list[int], cap: int) -> tuple[list[int], int, int, str]:
@@ -108,7 +108,7 @@ def _times(rec: Record, steps: np.ndarray | None = None) -> np.ndarray:
     """t = k·τs for the given steps (default: the truth's steps)."""
     if steps is None:
         steps = np.array([e["step"] for e in rec.truth], dtype=float)
-    return steps.astype(float) * float(rec.meta.get("tau_s", 1.0))
+    return steps.astype(float) * rec.meta.tau_s
 
 
 def _truth_series(rec: Record, field: str, node: int) -> tuple[np.ndarray, np.ndarray]:
@@ -142,7 +142,7 @@ def _shade_silent(ax: Axes, rec: Record, node: int, scale: float) -> bool:
 
 def _estimate(ax: Axes, rec: Record, node: int, comp: int, truth: tuple[np.ndarray, np.ndarray]) -> None:
     ax.plot(*truth, color="k", lw=1.6, label="true")
-    tau = float(rec.meta.get("tau_s", 1.0))
+    tau = rec.meta.tau_s
     _shade_silent(ax, rec, node, tau)
     tr = rec.nodes.get(node)
     if tr is None or len(tr.steps) == 0:
@@ -158,7 +158,7 @@ def _estimate(ax: Axes, rec: Record, node: int, comp: int, truth: tuple[np.ndarr
 def _settled_limits(rec: Record, ids: list[int], comp: int, truth: np.ndarray) -> tuple[float, float] | None:
     """y limits covering every true value and the bounds after :data:`TRANSIENT_S`; None if the run is too
     short to have a transient worth leaving out."""
-    tau = float(rec.meta.get("tau_s", 1.0))
+    tau = rec.meta.tau_s
     vals = [truth[np.isfinite(truth)]]
     for i in ids:
         tr = rec.nodes.get(i)
@@ -201,7 +201,7 @@ def _fig5(rec: Record, label: str) -> Figure:
     for i, ax in panels:
         ax.plot(*_truth_series(rec, "y", i), color="tab:red", lw=1.2, label="with fault")
         ax.plot(*_truth_series(rec, "y_nofault", i), color="tab:blue", lw=1.2, ls="--", label="without fault")
-        r_max = (rec.meta.get("r_max") or {}).get(str(i))
+        r_max = rec.meta.r_max.get(str(i))
         if isinstance(r_max, (int, float)):  # SAIM: the saturation limits a reading cannot pass (times γ ≤ 1)
             for sign in (1, -1):
                 ax.axhline(sign * r_max, color="0.4", lw=0.8, ls=":", label="saturation limit ±r_max")
@@ -285,7 +285,7 @@ def _fig_fdi(rec: Record, label: str) -> Figure:
     """Per node: the true fault, the published fault interval, and the steps it proves a fault (red) or
     proves none (green) — docs/fdi.md."""
     fig, panels = _panels(_node_ids(rec), MAX_PANELS, f"Fault detection: detected where the fault interval excludes 0 ({label})", "t [s]")
-    tau = float(rec.meta.get("tau_s", 1.0))
+    tau = rec.meta.tau_s
     for i, ax in panels:
         rows = rec.fault_rows(i) if i in rec.nodes else []
         if not rows:
@@ -320,10 +320,10 @@ def _fig_mismatch(rec: Record, label: str) -> Figure:
     """e_k of the plant against the declared bound: each component with the bound's half-widths (the box
     itself, or the box around an ellipsoid), and the size of e_k in the bound's own norm (≤ 1 inside)."""
     steps, e = _mismatch(rec)  # type: ignore[misc]  # called only where _mismatch found one (plot_records checks)
-    t = steps * float(rec.meta.get("tau_s", 1.0))
-    unc = rec.meta.get("model_uncertainty")
+    t = steps * rec.meta.tau_s
+    unc = rec.meta.model_uncertainty
     fig, axes = plt.subplots(3, 1, figsize=(8, 6.5), sharex=True)
-    fig.suptitle(f"Model mismatch e_k of {rec.meta.get('plant', 'the plant')} against the declared bound ({label})")
+    fig.suptitle(f"Model mismatch e_k of {rec.meta.plant} against the declared bound ({label})")
     G = np.asarray(unc["G"], dtype=float) if isinstance(unc, dict) else None
     kind = unc["kind"] if isinstance(unc, dict) else None
     for comp, (ax, name) in enumerate(zip(axes[:2], ("e_β [rad]", "e_r [rad/s]"))):
@@ -349,7 +349,7 @@ def _fig_mismatch(rec: Record, label: str) -> Figure:
 
 def _fig8(records: list[Record], labels: list[str]) -> Figure:
     ids = sorted(set().union(*(_node_ids(r) for r in records)))
-    tau = float(records[0].meta.get("tau_s", 1.0))
+    tau = records[0].meta.tau_s
     fig, panels = _panels(ids, MAX_PANELS, "Fig. 8: E_i = eᵀP⁻¹e and radius ρ_i (dimensionless)", f"step k (τs = {tau:g} s)")
     handles: dict[str, Any] = {}  # label → artist
     for i, ax in panels:

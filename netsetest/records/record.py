@@ -50,6 +50,7 @@ import numpy as np
 from netsetest.extras import require
 from netsetest.records.errors import RecordError
 from netsetest.records.files import open_locked
+from netsetest.records.meta import RunMeta
 from netsetest.records.summary import RunSummary
 
 FORMAT = "netsetest-record"
@@ -70,7 +71,7 @@ class RecordSink(Protocol):
     completes the step), ``summary`` once at the end, ``close``.
     """
 
-    def meta(self, meta: dict) -> None: ...
+    def meta(self, meta: RunMeta) -> None: ...
     def truth(self, entry: dict) -> None: ...
     def state(self, node: int, entry: dict) -> None: ...
     def summary(self, summary: RunSummary) -> None: ...
@@ -98,8 +99,8 @@ class JsonlSink:
         self._fh.flush()
         self._raw.flush()
 
-    def meta(self, meta: dict) -> None:
-        self._line({"kind": "meta", "format": FORMAT, "version": VERSION, "meta": meta})
+    def meta(self, meta: RunMeta) -> None:
+        self._line({"kind": "meta", "format": FORMAT, "version": VERSION, "meta": meta.to_dict()})
         self._flush()
 
     def truth(self, entry: dict) -> None:
@@ -123,14 +124,14 @@ class JsonlSink:
 class MemorySink:
     """Keeps the record in memory (in-memory runs and tests): ``parts()`` as the record has them."""
 
-    meta_doc: dict = field(default_factory=dict)
+    meta_doc: RunMeta = field(default_factory=RunMeta)
     truth_entries: list[dict] = field(default_factory=list)
     node_entries: dict[str, list[dict]] = field(default_factory=dict)
     summary_doc: RunSummary | None = None
 
-    def meta(self, meta: dict) -> None:
+    def meta(self, meta: RunMeta) -> None:
         self.meta_doc = meta
-        self.node_entries = {str(i): [] for i in meta.get("node_ids", [])}
+        self.node_entries = {str(i): [] for i in meta.node_ids}
 
     def truth(self, entry: dict) -> None:
         self.truth_entries.append(entry)
@@ -154,7 +155,7 @@ class TeeSink:
     def __init__(self, *sinks: RecordSink) -> None:
         self.sinks = sinks
 
-    def meta(self, meta: dict) -> None:
+    def meta(self, meta: RunMeta) -> None:
         for s in self.sinks:
             s.meta(meta)
 
@@ -218,7 +219,7 @@ class NodeTrack:
 @dataclass
 class Record:
     path: str
-    meta: dict
+    meta: RunMeta
     truth: list[dict]
     nodes: dict[int, NodeTrack]
     summary: RunSummary | None  # None in a partial record
@@ -426,7 +427,7 @@ def _build(path: Path, meta: dict, truth: list, raw_nodes: dict, summary: object
         raise RecordError(f"{path}: malformed record (summary must be a dict)")
     try:
         typed = None if summary is None else RunSummary.from_dict(summary)
-        return record_from_parts(meta, truth, raw_nodes, typed, str(path), partial, last_complete)
+        return record_from_parts(RunMeta.from_dict(meta), truth, raw_nodes, typed, str(path), partial, last_complete)
     except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
         raise RecordError(f"{path}: malformed record ({type(exc).__name__}: {exc})") from None
 
@@ -452,7 +453,7 @@ def _fdi(v: object) -> str | None:
 
 
 def record_from_parts(
-    meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None, path: str = "",
+    meta: RunMeta, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None, path: str = "",
     partial: bool = False, last_complete_step: int | None = None,
 ) -> Record:
     """A :class:`Record` from the parts a run returns (or a file holds); raises KeyError/TypeError/ValueError
@@ -483,7 +484,7 @@ def record_from_parts(
     return Record(path, meta, truth, tracks, summary, nodes, partial, last_complete_step)
 
 
-def save_record(path: str | Path, meta: dict, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None) -> None:
+def save_record(path: str | Path, meta: RunMeta, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None) -> None:
     """Write a whole record (e.g. one kept in memory) in the streamed layout, step by step (``.mcap``: an
     indexed MCAP file); without a summary (a partial record) it stays partial (MCAP: not loadable)."""
     path = Path(path)

@@ -52,6 +52,7 @@ from netsetest.bus.base import Bus
 from netsetest.config.schema import NodeConfig, Scenario
 from netsetest.messages import End, Message, NodeState, RunScope, Truth
 from netsetest.models.sensor import augmented
+from netsetest.records.meta import RunMeta
 from netsetest.records.record import RecordSink
 from netsetest.records.summary import RUN_FIELDS, InheritedOrigin, NodeSummary, RunSummary
 from netsetest.roles.fdi import FdiTotals, classify
@@ -425,7 +426,7 @@ class Collector:
 
     # ------------------------------------------------------------------ summary
 
-    def finish(self, meta: dict, deadline_misses: dict[int, int] | None = None, drops: dict[str, dict[str, int]] | None = None) -> RunSummary:
+    def finish(self, meta: RunMeta, deadline_misses: dict[int, int] | None = None, drops: dict[str, dict[str, int]] | None = None) -> RunSummary:
         """Close every open step, then the summary (also written to the sink, which is closed).
 
         ``drops``: further drop counters by role (the runtime's, e.g. a shared in-memory bus).
@@ -443,7 +444,7 @@ class Collector:
         by_role.update(drops or {})
         totals = self.totals.values()
         summary = RunSummary(
-            **{k: meta[k] for k in RUN_FIELDS if k in meta},
+            **{k: getattr(meta, k) for k in RUN_FIELDS},
             violations_total=sum(r.violations for r in node_rows),
             misses_assumption_broken_total=sum(r.misses_assumption_broken for r in node_rows),
             sector_failures_total=sum(r.sector_failures for r in node_rows),

@@ -11,6 +11,7 @@ from netsetest.config.schema import Scenario
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.estimator.sdp import StepObserver, Variant
 from netsetest.models.signals import SignalKind
+from netsetest.records.meta import RunMeta
 from netsetest.records.summary import RunSummary
 from netsetest.roles.collector import Collector
 from netsetest.roles.node import Node
@@ -21,26 +22,26 @@ from netsetest.runtime.report import Progress, record_sink
 @dataclass
 class RunResult:
     summary: RunSummary
-    meta: dict
+    meta: RunMeta
     parts: dict | None  # truth and node entries of the record (None when not kept in memory)
 
 
 def run_meta(
-    scenario: Scenario, mode: str, clock: str, signals: str, variant: str, seed: int, run_id: str, objective: str = DEFAULT_OBJECTIVE
-) -> dict:
-    return {
-        "topology": scenario.path, "name": scenario.name, "mode": mode, "clock": clock, "case": scenario.case,
-        "signals": signals, "variant": variant, "objective": objective, "seed": seed, "steps": scenario.steps, "tau_s": scenario.tau_s,
-        "run_id": run_id, "node_ids": scenario.ids,
-        "in_weights": {str(n.id): {str(j): a for j, a in n.in_weights.items()} for n in scenario.nodes},
-        "r_max": {str(n.id): (n.sensor.r_max if n.sensor.saturated else None) for n in scenario.nodes},
-        "h1": {str(n.id): n.sensor.h1 for n in scenario.nodes},
-        "C": {str(n.id): list(n.sensor.Cbar) for n in scenario.nodes},
-        "estimators": {str(n.id): n.estimator for n in scenario.nodes},
-        "plant": scenario.plant_label, "manoeuvre": scenario.manoeuvre,
-        "model_uncertainty": None if (u := scenario.uncertainty) is None else {"kind": u.kind, "G": u.G.tolist()},
-        "started_ns": time.time_ns(),  # the run's start on the wall clock (an MCAP record's log times start here)
-    }
+    scenario: Scenario, mode: str, clock: str, signals: str, variant: str, seed: int | None, run_id: str, objective: str = DEFAULT_OBJECTIVE
+) -> RunMeta:
+    return RunMeta(
+        topology=str(scenario.path), name=scenario.name, mode=mode, clock=clock, case=scenario.case, signals=signals,
+        variant=variant, objective=objective, seed=seed, steps=scenario.steps, tau_s=scenario.tau_s, run_id=run_id,
+        node_ids=list(scenario.ids),
+        in_weights={str(n.id): {str(j): a for j, a in n.in_weights.items()} for n in scenario.nodes},
+        r_max={str(n.id): (n.sensor.r_max if n.sensor.saturated else None) for n in scenario.nodes},
+        h1={str(n.id): n.sensor.h1 for n in scenario.nodes},
+        C={str(n.id): list(n.sensor.Cbar) for n in scenario.nodes},
+        estimators={str(n.id): n.estimator for n in scenario.nodes},
+        plant=scenario.plant_label, manoeuvre=scenario.manoeuvre,
+        model_uncertainty=None if (u := scenario.uncertainty) is None else {"kind": u.kind, "G": u.G.tolist()},
+        started_ns=time.time_ns(),  # the run's start on the wall clock (an MCAP record's log times start here)
+    )
 
 
 def _step_all(nodes: list[Node], bus: MemoryBus) -> bool:

@@ -30,6 +30,7 @@ from netsetest.bus.base import Bus
 from netsetest.config.schema import Scenario
 from netsetest.messages import Message, Ready
 from netsetest.profile import PROFILE
+from netsetest.records.meta import RunMeta
 from netsetest.roles.node import Node
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION, exit_code, log, record_sink, write_summary
 from netsetest.runtime.rolespec import CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
@@ -293,7 +294,7 @@ def _node_wait(node: Node, ready_due: float | None, neighbour_timeout: float, re
     return IDLE_WAIT_S
 
 
-def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: dict, on_summary: Callable[[RunSummary], None] | None = None) -> int:
+def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: RunMeta, on_summary: Callable[[RunSummary], None] | None = None) -> int:
     """The collector's loop: judge until End (or the vehicle is gone, or SIGTERM), then write the summary."""
     from netsetest.roles.collector import Collector
 
@@ -395,8 +396,8 @@ def collector_main(spec: CollectorSpec, on_summary: Callable[[RunSummary], None]
     from netsetest.runtime.security import SECURITY_INSECURE, SECURITY_MTLS
 
     def body(sc: Scenario, bus: Bus) -> int:
-        meta = run_meta(sc, "zenoh", spec.clock, spec.signals, spec.variant, spec.seed, spec.zenoh.resolved_run_id, spec.objective)  # type: ignore[arg-type]  # a collector started by hand without --seed records none
-        meta["security"] = SECURITY_MTLS if spec.zenoh.credentials else SECURITY_INSECURE
+        meta = run_meta(sc, "zenoh", spec.clock, spec.signals, spec.variant, spec.seed, spec.zenoh.resolved_run_id, spec.objective)
+        meta = meta.with_security(SECURITY_MTLS if spec.zenoh.credentials else SECURITY_INSECURE)
         return run_collector(spec, sc, bus, meta, on_summary)
 
     return serve_role("collector", keys.role_name("collector"), spec.scenario, spec.zenoh, body)

@@ -28,7 +28,7 @@ PAPER6 = ROOT / "topologies" / "paper6.toml"
 def check_every_step(res, expect_all_assumptions: bool) -> None:
     """Per node and step: E ≤ ρ wherever the step's assumption cone held; each step was published."""
     steps = res.summary.steps_completed
-    assert steps == res.meta["steps"]
+    assert steps == res.meta.steps
     for node, entries in res.parts["nodes"].items():
         assert [e["step"] for e in entries] == list(range(steps + 1)), f"node {node} skipped a step"
         for e in entries:

@@ -117,7 +117,7 @@ def saim_record(tmp_path_factory: pytest.TempPathFactory):
 def test_fig5_shows_the_saturation_limit_and_gamma(saim_record) -> None:
     """Fig. 5 drew neither the saturation limit nor γ (SAIM)."""
     fig = plots._fig5(saim_record, "saim")
-    r_max = saim_record.meta["r_max"]["1"]
+    r_max = saim_record.meta.r_max["1"]
     first = next(ax for ax in fig.axes if ax.get_title() == "sensor 1")
     levels = {round(float(ln.get_ydata()[0]), 12) for ln in first.get_lines() if ln.get_label().startswith("saturation")}
     assert levels == {round(r_max, 12), round(-r_max, 12)}
@@ -129,7 +129,7 @@ def test_fig5_shows_the_saturation_limit_and_gamma(saim_record) -> None:
 def test_fig7_leaves_out_the_initial_transient_like_fig6(saim_record) -> None:
     """Fig. 7 let the first second's (wide) bounds set the y range."""
     fig = plots._fig7(saim_record, "saim")
-    tau = saim_record.meta["tau_s"]
+    tau = saim_record.meta.tau_s
     for i, track in saim_record.nodes.items():
         ax = next(a for a in fig.axes if a.get_title() == f"fault f{i}")
         lo, hi = track.bounds(2)

@@ -48,7 +48,7 @@ def _check_record(path: Path, steps: int, summary_path: Path) -> None:
     rec = load_record(path)
     K = steps + 1  # steps 0..steps
     assert len(rec.truth) == K
-    assert sorted(rec.nodes) == rec.meta["node_ids"] == [1, 2, 3, 4, 5, 6]
+    assert sorted(rec.nodes) == rec.meta.node_ids == [1, 2, 3, 4, 5, 6]
     for i, tr in rec.nodes.items():
         assert tr.steps.shape == (K,) and list(tr.steps) == list(range(K))
         assert tr.xhat.shape == (K, 3) and tr.P.shape == (K, 3, 3)
@@ -72,7 +72,7 @@ def test_record_round_trip(nsnim: dict[str, Path]) -> None:
 def test_gzip_record_round_trip(saim: dict[str, Path], nsnim: dict[str, Path], tmp_path: Path) -> None:
     assert saim["record"].read_bytes()[:2] == b"\x1f\x8b"
     _check_record(saim["record"], 8, saim["summary"])
-    assert load_record(saim["record"]).meta["case"] == "saim"
+    assert load_record(saim["record"]).meta.case == "saim"
     # gzip is detected by content too: a compressed record under a .json name loads the same
     z = tmp_path / "copy.json"
     z.write_bytes(gzip.compress(nsnim["record"].read_bytes()))
@@ -83,7 +83,7 @@ def test_gzip_record_round_trip(saim: dict[str, Path], nsnim: dict[str, Path], t
 def _legacy_doc(path: Path) -> dict:
     """The same record in the version-1 layout (one JSON document) that older netsetest wrote."""
     rec = load_record(path)
-    return {"format": "netsetest-record", "version": 1, "meta": rec.meta, "truth": rec.truth, "nodes": rec.raw_nodes, "summary": rec.summary.to_dict()}
+    return {"format": "netsetest-record", "version": 1, "meta": rec.meta.to_dict(), "truth": rec.truth, "nodes": rec.raw_nodes, "summary": rec.summary.to_dict()}
 
 
 def test_legacy_document_record_loads(nsnim: dict[str, Path], tmp_path: Path) -> None:

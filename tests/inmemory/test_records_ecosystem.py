@@ -62,7 +62,7 @@ def test_mcap_record_matches_the_json_record(records: dict[str, Path], tmp_path:
 
 def test_mcap_channels_schemas_and_bounds_read_with_the_mcap_reader(records: dict[str, Path]) -> None:
     rec = load_record(records["json"])
-    ids = rec.meta["node_ids"]
+    ids = rec.meta.node_ids
     counts: dict[str, int] = {}
     with open(records["mcap"], "rb") as fh:
         reader = make_reader(fh)
@@ -86,7 +86,7 @@ def test_mcap_channels_schemas_and_bounds_read_with_the_mcap_reader(records: dic
                     lo, hi = tr.bounds(j)
                     assert msg[f"{name}_lower"] == pytest.approx(lo[n], rel=1e-15, abs=1e-15)
                     assert msg[f"{name}_upper"] == pytest.approx(hi[n], rel=1e-15, abs=1e-15)
-                assert message.log_time == rec.meta["started_ns"] + round(msg["step"] * rec.meta["tau_s"] * 1e9)
+                assert message.log_time == rec.meta.started_ns + round(msg["step"] * rec.meta.tau_s * 1e9)
             if channel.topic.endswith("/drops"):
                 i = int(channel.topic.split("/")[2])
                 entry = next(e for e in rec.raw_nodes[str(i)] if e["step"] == msg["step"])
@@ -108,16 +108,16 @@ def test_streaming_writer_flushes_every_message_and_unfinished_file_is_partial(r
     for t in rec.truth[:3]:
         w.truth(t)
         sizes.append(path.stat().st_size)
-        for i in rec.meta["node_ids"]:
+        for i in rec.meta.node_ids:
             w.state(i, rec.raw_nodes[str(i)][t["step"]])
             sizes.append(path.stat().st_size)
     assert all(b > a for a, b in zip(sizes, sizes[1:])), sizes  # each call reached the file
     part = load_record(path)  # no verdict yet: the run did not finish
     assert part.partial and part.summary is None and part.last_complete_step == rec.truth[2]["step"]
-    assert all(len(part.raw_nodes[str(i)]) == 3 for i in rec.meta["node_ids"])
+    assert all(len(part.raw_nodes[str(i)]) == 3 for i in rec.meta.node_ids)
     for t in rec.truth[3:]:
         w.truth(t)
-        for i in rec.meta["node_ids"]:
+        for i in rec.meta.node_ids:
             w.state(i, rec.raw_nodes[str(i)][t["step"]])
     w.summary(rec.summary)
     w.close()
@@ -177,7 +177,7 @@ def test_export_tables_round_trip_with_pandas(fmt: str, records: dict[str, Path]
                 assert np.array_equal(df[f"{col}_{part}"].to_numpy(dtype=float), want, equal_nan=True), (i, col, part)
         assert np.array_equal(df["E"].to_numpy(dtype=float), rec.nodes[i].E, equal_nan=True)
         assert np.array_equal(df["rho"].to_numpy(), rec.nodes[i].rho)
-        assert np.allclose(df["t"].to_numpy(), rec.nodes[i].steps * rec.meta["tau_s"], rtol=0, atol=1e-12)
+        assert np.allclose(df["t"].to_numpy(), rec.nodes[i].steps * rec.meta.tau_s, rtol=0, atol=1e-12)
         assert list(df["status"]) == rec.nodes[i].status
         assert set(df["node"]) == {i}
     # the directory read at once (pandas, polars): the rows still say which node they are (they did not)

@@ -40,7 +40,7 @@ def test_simulate_arrays_match_the_record(tmp_path: Path) -> None:
     res = netsetest.simulate("paper6_lossy", case="saim", steps=8, seed=3)
     res.save(tmp_path / "r.json")
     rec = load_record(tmp_path / "r.json")
-    assert rec.summary == res.summary and rec.meta["case"] == "saim" and rec.meta["seed"] == 3
+    assert rec.summary == res.summary and rec.meta.case == "saim" and rec.meta.seed == 3
     for i, s in res.nodes.items():
         tr = rec.nodes[i]
         assert s.steps.dtype.kind == "i" and list(s.steps) == list(range(9))

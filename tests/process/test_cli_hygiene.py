@@ -298,7 +298,7 @@ def test_a_record_is_never_written_by_two_runs(tmp_path: Path, capsys: pytest.Ca
     before = rec.read_bytes()
     assert main(run) == 2 and "the file exists; give --overwrite" in capsys.readouterr().err
     assert rec.read_bytes() == before
-    assert main([*run, "--overwrite", "--seed", "5"]) == 0 and load_record(rec).meta["seed"] == 5
+    assert main([*run, "--overwrite", "--seed", "5"]) == 0 and load_record(rec).meta.seed == 5
     held = open_locked(rec)  # a run writing it: another writer fails at once and empties nothing
     try:
         with pytest.raises(RecordError, match="another run is writing this record"):
