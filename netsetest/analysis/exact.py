@@ -49,7 +49,7 @@ _INFEASIBLE = ("PrimalInfeasible", "AlmostPrimalInfeasible")
 
 
 @dataclass(frozen=True)
-class StepData:
+class RecordedStep:
     """What every node knows at step k (the vehicle publishes it): u_k, Vx_k, and each ỹ_i,k, γ_i,k."""
 
     step: int
@@ -108,7 +108,7 @@ class ExactBounds:
 # ---------------------------------------------------------------- data
 
 
-def step_data(record: Record) -> list[StepData]:
+def step_data(record: Record) -> list[RecordedStep]:
     """The data of steps 0..K from the record's truth entries (u, Vx, ỹ, γ: what the nodes see)."""
     out = []
     try:
@@ -116,7 +116,7 @@ def step_data(record: Record) -> list[StepData]:
             if t["step"] != k:
                 raise ExactError(f"{record.path}: truth entries are not the contiguous steps 0..K (step {k} missing)")
             out.append(
-                StepData(
+                RecordedStep(
                     step=k, u=float(t["u"]), vx=float(t["vx"]),
                     y={int(i): float(v) for i, v in t["y"].items()},
                     gamma={int(i): float(v) for i, v in t["gamma"].items()},
@@ -140,7 +140,7 @@ class _Program:
     ≤ k (the others appear in no kept row).
     """
 
-    def __init__(self, scenario: Scenario, data: list[StepData], bounded: tuple[int, ...]) -> None:
+    def __init__(self, scenario: Scenario, data: list[RecordedStep], bounded: tuple[int, ...]) -> None:
         self.sc, self.data, self.bounded = scenario, data, bounded
         self.ids = scenario.ids
         self.K = K = len(data) - 1
@@ -451,7 +451,7 @@ class NodeRatios:
 
 
 @dataclass(frozen=True)
-class Comparison:
+class ExactComparison:
     """Per node and coordinate ratios, their mean over nodes per coordinate, and the overall mean."""
 
     nodes: tuple[NodeRatios, ...]
@@ -466,7 +466,7 @@ def _ratio(num: np.ndarray, den: np.ndarray) -> float:
     return float(num.mean() / den.mean()) if len(num) and den.mean() > 0 else float("nan")
 
 
-def compare_record(record: Record, exact: ExactBounds) -> Comparison:
+def compare_record(record: Record, exact: ExactBounds) -> ExactComparison:
     """The record's published intervals against ``exact`` (see :class:`CoordinateRatio`)."""
     rows = []
     for i in sorted(record.nodes):
@@ -497,7 +497,7 @@ def compare_record(record: Record, exact: ExactBounds) -> Comparison:
     def mean(attr: str, coord: Coordinate) -> float:
         return _nanmean([getattr(n.ratios[coord], attr) for n in rows])
 
-    return Comparison(
+    return ExactComparison(
         nodes=tuple(rows),
         mean_width_ratio={c: mean("width_ratio", c) for c in COORDINATES},
         mean_rms_radius_rel={c: mean("rms_radius_rel", c) for c in COORDINATES},
@@ -553,7 +553,7 @@ def _finite_or_none(v: float) -> float | None:
     return float(v) if np.isfinite(v) else None
 
 
-def exact_document(record: Record, exact: ExactBounds, comparison: Comparison) -> dict:
+def exact_document(record: Record, exact: ExactBounds, comparison: ExactComparison) -> dict:
     """The ``--json`` document: per step exact intervals (null: unbounded on that side, or no
     trajectory at an infeasible step) and the record's ratios."""
 

@@ -238,7 +238,7 @@ class ProcessSampler:
         }
 
 
-class Observer:
+class MessageTap:
     """A Zenoh peer that records (arrival time, key, step) of every message of one run."""
 
     def __init__(self, run_id: str, listen: str, connect: list[str]) -> None:
@@ -372,7 +372,7 @@ def node_startup(directory: Path, reps: int = 3, timeout: float = 120.0) -> dict
         names = ["collector", "vehicle", "node1", "observer"]
         ports = dict(zip(names, free_ports(len(names))))
         role_ports = {k: v for k, v in ports.items()}
-        obs = Observer(run_id, f"tcp/127.0.0.1:{ports['observer']}", [f"tcp/127.0.0.1:{p}" for n, p in ports.items() if n != "observer"])
+        obs = MessageTap(run_id, f"tcp/127.0.0.1:{ports['observer']}", [f"tcp/127.0.0.1:{p}" for n, p in ports.items() if n != "observer"])
         procs: dict[str, subprocess.Popen] = {}
         try:
             for name in ("collector", "vehicle"):
