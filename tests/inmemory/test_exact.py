@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import json
 from functools import cache
 
@@ -244,7 +246,7 @@ def test_record_and_topology_must_match(tmp: str) -> None:
 
 def test_cli_record_naming_a_missing_topology(tmp: str, capsys: pytest.CaptureFixture[str]) -> None:
     sc, rec = _run("nsnim", "paper", 0, tmp)
-    meta = {**rec.meta, "topology": f"{tmp}/moved.toml"}
+    meta = dataclasses.replace(rec.meta, topology=f"{tmp}/moved.toml")
     path = f"{tmp}/moved-record.json"
     save_record(path, meta, rec.truth, rec.raw_nodes, rec.summary)
     assert main(["exact", path]) == 2
