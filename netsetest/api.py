@@ -121,14 +121,28 @@ def simulate(
     raise ConfigError(f"mode must be 'inmemory' or 'zenoh', got {mode!r}")
 
 
-def _run_zenoh(
-    topology: str | Path, case: Case | None, signals: str, seed: int, variant: str, steps: int | None, estimator: str | None
-) -> Record:
+def _run_zenoh(topology: str | Path, case: Case | None, signals: str, seed: int, variant: str, steps: int | None, estimator: str | None) -> Record:
     load_topology(topology, case, steps, estimator)  # bad input fails here, with the loader's message
     with tempfile.TemporaryDirectory(prefix="netsetest-") as tmp:
         rec = Path(tmp) / "run.json"
-        argv = [sys.executable, "-m", "netsetest.cli.main", "run", str(topology), "--mode", "zenoh", "--quiet",
-                "--signals", signals, "--seed", str(seed), "--variant", variant, "--record", str(rec)]
+        argv = [
+            sys.executable,
+            "-m",
+            "netsetest.cli.main",
+            "run",
+            str(topology),
+            "--mode",
+            "zenoh",
+            "--quiet",
+            "--signals",
+            signals,
+            "--seed",
+            str(seed),
+            "--variant",
+            variant,
+            "--record",
+            str(rec),
+        ]
         argv += ["--case", case] if case else []
         argv += ["--steps", str(steps)] if steps else []
         argv += ["--estimator", estimator] if estimator else []
@@ -149,9 +163,17 @@ def result_of(rec: Record) -> SimulationResult:
             if t is not None and str(i) in t["faults"]:
                 truth[n] = [t["x"][0], t["x"][1], t["faults"][str(i)]]
         nodes[i] = NodeSeries(
-            id=i, steps=tr.steps, t=tr.steps * rec.meta.tau_s, centre=tr.xhat,
-            lower=np.column_stack([lo for lo, _ in bounds]), upper=np.column_stack([hi for _, hi in bounds]),
-            truth=truth, E=tr.E, rho=tr.rho, contained=tr.contained, assumptions_ok=tr.assumptions_ok,
+            id=i,
+            steps=tr.steps,
+            t=tr.steps * rec.meta.tau_s,
+            centre=tr.xhat,
+            lower=np.column_stack([lo for lo, _ in bounds]),
+            upper=np.column_stack([hi for _, hi in bounds]),
+            truth=truth,
+            E=tr.E,
+            rho=tr.rho,
+            contained=tr.contained,
+            assumptions_ok=tr.assumptions_ok,
             status=tuple(tr.status),
         )
     return SimulationResult(nodes, rec.summary, rec)

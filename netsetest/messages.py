@@ -131,6 +131,9 @@ class NodeInput(_Msg, tag="input", frozen=True, kw_only=True):
     deadline: FiniteF | None = None  # real-time clock: wall-clock time (s since epoch) the step is due
 
 
+NodeStatus = Literal["init", "init-prior", "ok", "fallback", "rejoin"]  # what a node's published set is (NodeState.status)
+
+
 class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     """Node i → neighbours and collector: the ellipsoid {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} of step k and y̌_i,k."""
 
@@ -141,7 +144,7 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     rho: PositiveF
     gamma: Gamma
     innov: FiniteF
-    status: Literal["init", "init-prior", "ok", "fallback", "rejoin"]  # init: prior ⊕ ỹ₀; init-prior: the prior
+    status: NodeStatus  # init: prior ⊕ ỹ₀; init-prior: the prior
     rho_cert: FiniteF | None = None
     solve_ms: Annotated[float, Meta(ge=0, le=FLOAT_MAX)] = 0.0
     used: IdList = []  # neighbours j ≠ i whose message entered this step
@@ -195,8 +198,7 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
 def state_digest(st: NodeState) -> str:
     """The identity of a state copy: every field a receiver's step takes from it (the set, the innovation,
     γ, the sector, and the set the sender continues from).  Two copies with the same digest are one."""
-    content = [st.step, st.node, st.xhat, st.P, st.rho, st.gamma, st.innov, st.sector, st.sector_basis, st.set,
-               st.own_xhat, st.own_P]
+    content = [st.step, st.node, st.xhat, st.P, st.rho, st.gamma, st.innov, st.sector, st.sector_basis, st.set, st.own_xhat, st.own_P]
     return hashlib.blake2b(msgspec.msgpack.encode(content), digest_size=DIGEST_BYTES).hexdigest()
 
 

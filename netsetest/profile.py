@@ -73,8 +73,11 @@ class PhaseProfile:
         phases["other"] = {"ms_per_step": per_step(thread_ns - sum(self.cpu_ns.values())), "calls_per_step": 0.0}
         phases["threads"] = {"ms_per_step": per_step(process_ns - thread_ns), "calls_per_step": 0.0}
         return {
-            "steps": steps, "wall_s": time.monotonic() - wall0,
-            "thread_ms_per_step": per_step(thread_ns), "process_ms_per_step": per_step(process_ns), "phases": phases,
+            "steps": steps,
+            "wall_s": time.monotonic() - wall0,
+            "thread_ms_per_step": per_step(thread_ns),
+            "process_ms_per_step": per_step(process_ns),
+            "phases": phases,
         }
 
     def write(self, name: str, steps: int) -> None:

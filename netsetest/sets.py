@@ -159,6 +159,7 @@ class SumSet:
     def _ellipsoid_part(self, g: np.ndarray) -> tuple[float, np.ndarray]:
         """max gᵀe over the sliced ellipsoid, by an SOCP: variables e; cone rows as in analysis/exact."""
         from scipy import sparse  # here: the SDP nodes import this module and must start without scipy.sparse
+
         s = self.sliced
         assert s is not None
         el = s.ellipsoid
@@ -184,6 +185,7 @@ class SumSet:
     def contains(self, point: np.ndarray) -> bool:
         """Whether point = c + G b + M e with ‖b‖∞ ≤ 1 + tol and e in the sliced ellipsoid (an SOCP)."""
         from scipy import sparse  # here, see _ellipsoid_part
+
         z = self.zonotope
         n, m = z.generators.shape
         has_e = self.sliced is not None and self.M is not None

@@ -66,7 +66,5 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     system's temporary directory: every test works in tmp_path or the session's directory."""
     left = sorted(_ours() - _before - {os.path.basename(os.environ.get("TMPDIR", ""))})
     if left:
-        session.config.pluginmanager.get_plugin("terminalreporter").write_line(
-            f"tests left behind in {SYSTEM_TMP}: {', '.join(left)}", red=True
-        )
+        session.config.pluginmanager.get_plugin("terminalreporter").write_line(f"tests left behind in {SYSTEM_TMP}: {', '.join(left)}", red=True)
         session.exitstatus = pytest.ExitCode.TESTS_FAILED

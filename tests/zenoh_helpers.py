@@ -189,9 +189,7 @@ class ProcessGuard:
             out = open(self.logdir / f"{name}.out", "wb")
             self._files.append(out)
         kw.setdefault("cwd", str(ROOT))
-        proc = subprocess.Popen(
-            list(argv), stdin=subprocess.DEVNULL, stdout=out, stderr=err, start_new_session=True, **kw
-        )
+        proc = subprocess.Popen(list(argv), stdin=subprocess.DEVNULL, stdout=out, stderr=err, start_new_session=True, **kw)
         self.procs[name] = proc
         return proc
 
@@ -365,8 +363,7 @@ def launch_peer_mesh(
     for name in names:
         role = "node" if name.startswith("node") else name
         others = [endpoints[o] for o in names if o != name] + list(also_connect)
-        argv = role_argv(role, topology, run_id, "peer", [endpoints[name]], others, steps,
-                         role_extra(name, summary, seed, signals, record))
+        argv = role_argv(role, topology, run_id, "peer", [endpoints[name]], others, steps, role_extra(name, summary, seed, signals, record))
         guard.start(name, cli(*argv))
     return endpoints
 

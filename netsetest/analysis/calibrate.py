@@ -36,7 +36,9 @@ from netsetest.models.uncertainty import ModelUncertainty
 DEFAULT_MARGIN = 0.1
 # the same car with one cause of mismatch less at each step down (their derived T-S models are the same)
 SIMPLER: dict[PlantKind, tuple[PlantKind, ...]] = {
-    "ts": (), "single-track-linear": (), "single-track": ("single-track-linear",),
+    "ts": (),
+    "single-track-linear": (),
+    "single-track": ("single-track-linear",),
     "multi-body": ("single-track", "single-track-linear"),
 }
 MVEE_TOL = 1e-7
@@ -103,7 +105,10 @@ def origin_mvee(points: np.ndarray) -> np.ndarray:
 
 
 def calibrate(
-    scenarios: Sequence[Scenario], seeds: Sequence[int], signals: Sequence[SignalKind], margin: float = DEFAULT_MARGIN,
+    scenarios: Sequence[Scenario],
+    seeds: Sequence[int],
+    signals: Sequence[SignalKind],
+    margin: float = DEFAULT_MARGIN,
     progress: Callable[[int, int], None] | None = None,
 ) -> Calibration:
     """The box and ellipsoid bounds covering every e_k of every (scenario, seed, signals) drive."""
@@ -123,7 +128,9 @@ def calibrate(
 
 
 def simpler_mismatch(
-    scenarios: Sequence[Scenario], seeds: Sequence[int], signals: Sequence[SignalKind],
+    scenarios: Sequence[Scenario],
+    seeds: Sequence[int],
+    signals: Sequence[SignalKind],
     progress: Callable[[int, int], None] | None = None,
 ) -> dict[PlantKind, list[DriveMismatch]]:
     """The same drives on each simpler model of the car (:data:`SIMPLER`), plant by plant."""
@@ -150,6 +157,13 @@ def with_uncertainty(sc: Scenario, bound: ModelUncertainty | None) -> Scenario:
 
 
 __all__ = [
-    "SIMPLER", "Calibration", "DriveMismatch", "calibrate", "drive_mismatch", "max_by_drive", "origin_mvee",
-    "simpler_mismatch", "with_uncertainty",
+    "SIMPLER",
+    "Calibration",
+    "DriveMismatch",
+    "calibrate",
+    "drive_mismatch",
+    "max_by_drive",
+    "origin_mvee",
+    "simpler_mismatch",
+    "with_uncertainty",
 ]

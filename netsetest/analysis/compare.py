@@ -120,8 +120,7 @@ def _exact_array(ex: ExactBounds, i: int) -> np.ndarray:
     return np.stack([ex.beta, ex.r, ex.fault[i]], axis=1)
 
 
-def _score(acc: _Accumulator, bounds: np.ndarray, steps: np.ndarray, truth: np.ndarray, exact: np.ndarray,
-           broken: list[str | None]) -> None:
+def _score(acc: _Accumulator, bounds: np.ndarray, steps: np.ndarray, truth: np.ndarray, exact: np.ndarray, broken: list[str | None]) -> None:
     """Add one node's run: bounds (K, 3, 2) at ``steps``, truth (K, 3), exact (all steps, 3, 2)."""
     ex = exact[steps]
     for n in range(len(steps)):
@@ -153,13 +152,24 @@ def _row(name: str, acc: _Accumulator, real_time: bool) -> CompareRow:
     ratio = mean / ew.mean(axis=0) if len(ew) else np.full(3, np.nan)
     ms = np.array(acc.ms)
     return CompareRow(
-        estimator=name, real_time=real_time, assumptions=sorted(acc.assumptions), node_steps=acc.node_steps,
-        covered=acc.covered, violations=acc.violations, misses_attributed=dict(acc.attributed),
-        fault_width_mean=num(mean[2]), beta_width_mean=num(mean[0]), r_width_mean=num(mean[1]),
-        ratio_exact=num(ratio[2]), ratio_exact_state=[num(ratio[0]), num(ratio[1])],
+        estimator=name,
+        real_time=real_time,
+        assumptions=sorted(acc.assumptions),
+        node_steps=acc.node_steps,
+        covered=acc.covered,
+        violations=acc.violations,
+        misses_attributed=dict(acc.attributed),
+        fault_width_mean=num(mean[2]),
+        beta_width_mean=num(mean[0]),
+        r_width_mean=num(mean[1]),
+        ratio_exact=num(ratio[2]),
+        ratio_exact_state=[num(ratio[0]), num(ratio[1])],
         rms_radius_rel=num(float(np.nanmean(acc.rms))) if acc.rms else None,
-        ms_median=num(float(np.median(ms))) if len(ms) else None, ms_p95=num(float(np.percentile(ms, 95))) if len(ms) else None,
-        fallbacks=acc.fallbacks, refused=acc.refused[:3], exact_reference=sorted(acc.references),
+        ms_median=num(float(np.median(ms))) if len(ms) else None,
+        ms_p95=num(float(np.percentile(ms, 95))) if len(ms) else None,
+        fallbacks=acc.fallbacks,
+        refused=acc.refused[:3],
+        exact_reference=sorted(acc.references),
     )
 
 
@@ -243,8 +253,15 @@ def _network_of(sc: Scenario, name: str) -> tuple[Scenario, dict[int, tuple[str,
     return run, accepted, refused
 
 
-def _score_alone(sc: Scenario, rec: Record, rec_alone: Record, ex: ExactBounds, acc: dict[str, _Accumulator],
-                 keep: dict[str, dict[int, np.ndarray]] | None, report: Callable[[str], None]) -> None:
+def _score_alone(
+    sc: Scenario,
+    rec: Record,
+    rec_alone: Record,
+    ex: ExactBounds,
+    acc: dict[str, _Accumulator],
+    keep: dict[str, dict[int, np.ndarray]] | None,
+    report: Callable[[str], None],
+) -> None:
     """The rows of ``compare(alone=True)``: the nodes run alone (``rec_alone``, the same truth and
     measurements) and each node's exact local limit, against the central exact limit ``ex``."""
     truth = sorted(rec.truth, key=lambda t: t["step"])
@@ -277,8 +294,16 @@ def _run_record(sc: Scenario, signals: SignalKind, seed: int) -> Record:
     return record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
 
 
-def _score_run(sc: Scenario, rec: Record, signals: SignalKind, seed: int, estimators: tuple[str, ...], acc: dict[str, _Accumulator],
-               keep: dict[str, dict[int, np.ndarray]] | None, report: Callable[[str], None]) -> ExactBounds:
+def _score_run(
+    sc: Scenario,
+    rec: Record,
+    signals: SignalKind,
+    seed: int,
+    estimators: tuple[str, ...],
+    acc: dict[str, _Accumulator],
+    keep: dict[str, dict[int, np.ndarray]] | None,
+    report: Callable[[str], None],
+) -> ExactBounds:
     """Score every estimator on one (case, signals, seed): ``rec`` is the SDP network's run; each set
     estimator runs as the network's nodes on the same seed.  Returns the central exact limit (what every
     row is measured against)."""
@@ -331,8 +356,23 @@ def _fmt(v: float | None, spec: str = ".4f") -> str:
     return "–" if v is None else format(v, spec)
 
 
-TABLE_HEADER = ("estimator", "plant", "violations", "misses (broken assumption)", "covered", "fault width", "β width", "r width",
-                "fault/exact", "β, r / exact", "exact with fault bounds", "rms radius rel.", "ms median", "ms p95", "fallbacks")
+TABLE_HEADER = (
+    "estimator",
+    "plant",
+    "violations",
+    "misses (broken assumption)",
+    "covered",
+    "fault width",
+    "β width",
+    "r width",
+    "fault/exact",
+    "β, r / exact",
+    "exact with fault bounds",
+    "rms radius rel.",
+    "ms median",
+    "ms p95",
+    "fallbacks",
+)
 
 
 def table_rows(c: Comparison) -> list[tuple[str, ...]]:
@@ -340,12 +380,25 @@ def table_rows(c: Comparison) -> list[tuple[str, ...]]:
     for r in c.rows:
         broken = ", ".join(f"{k} {v}" for k, v in sorted(r.misses_attributed.items())) or "0"
         name = r.estimator + ("" if r.real_time else " (offline)") + (" [refused some nodes]" if r.refused else "")
-        out.append((
-            name, c.plant, str(r.violations), broken, f"{r.covered}/{r.node_steps}", _fmt(r.fault_width_mean), _fmt(r.beta_width_mean),
-            _fmt(r.r_width_mean), _fmt(r.ratio_exact, ".3f"), "/".join(_fmt(v, ".3f") for v in r.ratio_exact_state),
-            ",".join(r.exact_reference),
-            _fmt(r.rms_radius_rel, ".3f"), _fmt(r.ms_median, ".3f"), _fmt(r.ms_p95, ".3f"), str(r.fallbacks),
-        ))
+        out.append(
+            (
+                name,
+                c.plant,
+                str(r.violations),
+                broken,
+                f"{r.covered}/{r.node_steps}",
+                _fmt(r.fault_width_mean),
+                _fmt(r.beta_width_mean),
+                _fmt(r.r_width_mean),
+                _fmt(r.ratio_exact, ".3f"),
+                "/".join(_fmt(v, ".3f") for v in r.ratio_exact_state),
+                ",".join(r.exact_reference),
+                _fmt(r.rms_radius_rel, ".3f"),
+                _fmt(r.ms_median, ".3f"),
+                _fmt(r.ms_p95, ".3f"),
+                str(r.fallbacks),
+            )
+        )
     return out
 
 

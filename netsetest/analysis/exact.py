@@ -117,7 +117,9 @@ def step_data(record: Record) -> list[RecordedStep]:
                 raise ExactError(f"{record.path}: truth entries are not the contiguous steps 0..K (step {k} missing)")
             out.append(
                 RecordedStep(
-                    step=k, u=float(t["u"]), vx=float(t["vx"]),
+                    step=k,
+                    u=float(t["u"]),
+                    vx=float(t["vx"]),
                     y={int(i): float(v) for i, v in t["y"].items()},
                     gamma={int(i): float(v) for i, v in t["gamma"].items()},
                 )
@@ -146,10 +148,7 @@ class _Program:
         self.K = K = len(data) - 1
         self.ne = 2 if scenario.uncertainty is not None else 0  # e_j columns per step
         self.nz = 2 * (K + 1) + K + self.ne * K + len(self.ids) * (K + 1)
-        self.intervals = {
-            (node.id, j): node.sensor.measured_interval(dj.y[node.id], dj.gamma[node.id])
-            for node in scenario.nodes for j, dj in enumerate(data)
-        }
+        self.intervals = {(node.id, j): node.sensor.measured_interval(dj.y[node.id], dj.gamma[node.id]) for node in scenario.nodes for j, dj in enumerate(data)}
         lin = _Rows()  # a z ≤ b
         self._wind_rows(lin)
         self._sensor_rows(lin)
@@ -313,8 +312,10 @@ class _Rows:
                 data.append(float(v))
         A = sparse.csr_matrix((data, (ri, ci)), shape=(len(self.entries), nz))
         return _RowBlock(
-            A=A, b=np.array([e[1] for e in self.entries]),
-            step=np.array([e[2] for e in self.entries], dtype=int), free=np.array([e[3] for e in self.entries], dtype=int),
+            A=A,
+            b=np.array([e[1] for e in self.entries]),
+            step=np.array([e[2] for e in self.entries], dtype=int),
+            free=np.array([e[3] for e in self.entries], dtype=int),
         )
 
 
@@ -357,10 +358,7 @@ def exact_bounds(
     data = step_data(record)
     for d in data:
         if set(d.y) != set(scenario.ids) or set(d.gamma) != set(scenario.ids):
-            raise ExactError(
-                f"{record.path}: step {d.step} has measurements of nodes {sorted(d.y)}, "
-                f"the topology has nodes {scenario.ids}"
-            )
+            raise ExactError(f"{record.path}: step {d.step} has measurements of nodes {sorted(d.y)}, the topology has nodes {scenario.ids}")
     if nodes is not None:
         unknown = sorted(set(nodes) - set(scenario.ids))
         if unknown or not nodes:
@@ -409,8 +407,15 @@ def exact_bounds(
         if step_infeasible:
             infeasible.append(k)
     return ExactBounds(
-        steps=np.arange(K1), beta=beta, r=r, fault=fault, fault_bounds=fault_bounds,
-        bounded_nodes=bounded, infeasible_steps=tuple(infeasible), witnesses=witnesses, omitted=omitted_assumptions(scenario),
+        steps=np.arange(K1),
+        beta=beta,
+        r=r,
+        fault=fault,
+        fault_bounds=fault_bounds,
+        bounded_nodes=bounded,
+        infeasible_steps=tuple(infeasible),
+        witnesses=witnesses,
+        omitted=omitted_assumptions(scenario),
     )
 
 
@@ -519,7 +524,10 @@ class LocalLimit:
 
 
 def local_limits(
-    scenario: Scenario, record: Record, fault_bounds: FaultBoundsMode = "used", central: ExactBounds | None = None,
+    scenario: Scenario,
+    record: Record,
+    fault_bounds: FaultBoundsMode = "used",
+    central: ExactBounds | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> list[LocalLimit]:
     """Per node: the one-node exact limit against the whole network's (``central``: computed unless given)."""
@@ -562,8 +570,11 @@ def exact_document(record: Record, exact: ExactBounds, comparison: ExactComparis
 
     def ratio(c: CoordinateRatio) -> dict:
         return {
-            "width_ratio": _finite_or_none(c.width_ratio), "width_ratio_all": _finite_or_none(c.width_ratio_all),
-            "rms_radius_rel": _finite_or_none(c.rms_radius_rel), "steps": c.steps, "left_out": c.left_out,
+            "width_ratio": _finite_or_none(c.width_ratio),
+            "width_ratio_all": _finite_or_none(c.width_ratio_all),
+            "rms_radius_rel": _finite_or_none(c.rms_radius_rel),
+            "steps": c.steps,
+            "left_out": c.left_out,
             "narrower": c.narrower,
         }
 

@@ -68,8 +68,18 @@ def _payloads(kind: str, run_id: str, steps: int) -> list[tuple[str, bytes]]:
     if kind == "crash":
         own = keys.node_state(run_id, VICTIM)
         ready = keys.ready_of(run_id, keys.role_name("node", VICTIM))
-        huge = {"v": 1, "type": "state", "step": 1, "node": VICTIM, "xhat": [1.8e154, 0.0, 0.0], "P": [1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0],
-                "rho": 1.0, "gamma": 1.0, "innov": 1.8e154, "status": "ok"}
+        huge = {
+            "v": 1,
+            "type": "state",
+            "step": 1,
+            "node": VICTIM,
+            "xhat": [1.8e154, 0.0, 0.0],
+            "P": [1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0],
+            "rho": 1.0,
+            "gamma": 1.0,
+            "innov": 1.8e154,
+            "status": "ok",
+        }
         return [
             (own, b"\xa1\xbe"),
             (own, b"\x91" * 1000 + b"\xc0"),
@@ -129,8 +139,22 @@ def attacked_run(topology: Path, steps: int, secured: bool, kind: str | None, ra
     with tempfile.TemporaryDirectory(prefix="nsattack-") as tmpd:
         summary = Path(tmpd) / "summary.json"
         run_id = f"attack{int(time.time() * 1000) % 10**9}"
-        argv = [*PY, "run", str(topology), "--steps", str(steps), "--seed", "0", "--pace", str(pace), "--run-id", run_id,
-                "--summary-json", str(summary), *([] if secured else ["--insecure"])]
+        argv = [
+            *PY,
+            "run",
+            str(topology),
+            "--steps",
+            str(steps),
+            "--seed",
+            "0",
+            "--pace",
+            str(pace),
+            "--run-id",
+            run_id,
+            "--summary-json",
+            str(summary),
+            *([] if secured else ["--insecure"]),
+        ]
         t0 = time.perf_counter()
         parent = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         found: list[tuple[str, str | None]] = []
@@ -143,11 +167,31 @@ def attacked_run(topology: Path, steps: int, secured: bool, kind: str | None, ra
                 if m and not found:
                     found.append((m.group(1), m.group(2) if secured else None))
                     if kind is not None:
-                        attacker.append(subprocess.Popen(
-                            [sys.executable, "-m", "netsetest.bench.attacks", "--kind", kind, "--run-id", run_id, "--steps", str(steps),
-                             "--rate", str(rate), "--duration", str(steps * pace + 30), "--connect", m.group(1),
-                             *(["--credentials", m.group(2)] if secured else [])],
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True))
+                        attacker.append(
+                            subprocess.Popen(
+                                [
+                                    sys.executable,
+                                    "-m",
+                                    "netsetest.bench.attacks",
+                                    "--kind",
+                                    kind,
+                                    "--run-id",
+                                    run_id,
+                                    "--steps",
+                                    str(steps),
+                                    "--rate",
+                                    str(rate),
+                                    "--duration",
+                                    str(steps * pace + 30),
+                                    "--connect",
+                                    m.group(1),
+                                    *(["--credentials", m.group(2)] if secured else []),
+                                ],
+                                stdout=subprocess.PIPE,
+                                stderr=subprocess.DEVNULL,
+                                text=True,
+                            )
+                        )
 
         reader = threading.Thread(target=follow, daemon=True)
         reader.start()
@@ -175,9 +219,15 @@ def flood(topology: Path, steps: int, rate: float, target: str, secured: bool, p
     base = attacked_run(topology, steps, secured, None, rate, pace)
     hit = attacked_run(topology, steps, secured, target, rate, pace)
     return {
-        "target": target, "secured": secured, "rate": rate, "steps": steps,
-        "ratio": hit.steps_per_s / base.steps_per_s, "sent_per_s": hit.sent / hit.wall_s if hit.wall_s else 0.0,
-        "nodes_lost": len(hit.nodes_missing), "exit_code": hit.exit_code, "base_exit_code": base.exit_code,
+        "target": target,
+        "secured": secured,
+        "rate": rate,
+        "steps": steps,
+        "ratio": hit.steps_per_s / base.steps_per_s,
+        "sent_per_s": hit.sent / hit.wall_s if hit.wall_s else 0.0,
+        "nodes_lost": len(hit.nodes_missing),
+        "exit_code": hit.exit_code,
+        "base_exit_code": base.exit_code,
         "drops": hit.drops,
     }
 
@@ -186,8 +236,14 @@ def crash(topology: Path, steps: int, secured: bool, pace: float) -> dict:
     """The insider's crash payloads during a paced run: roles lost (0 when the run ends with exit 0 and no
     node missing)."""
     r = attacked_run(topology, steps, secured, "crash", 200.0, pace)
-    return {"secured": secured, "exit_code": r.exit_code, "nodes_missing": r.nodes_missing, "sent": r.sent,
-            "roles_lost": 0 if r.exit_code == 0 and not r.nodes_missing else None, "drops": r.drops}
+    return {
+        "secured": secured,
+        "exit_code": r.exit_code,
+        "nodes_missing": r.nodes_missing,
+        "sent": r.sent,
+        "roles_lost": 0 if r.exit_code == 0 and not r.nodes_missing else None,
+        "drops": r.drops,
+    }
 
 
 if __name__ == "__main__":

@@ -50,8 +50,12 @@ def _sdp_figures(sc: Scenario, sig: str, seed: int, path: Path) -> tuple[dict, R
     for row in res.summary.nodes:
         lo, hi = rec.nodes[row.id].bounds(2)
         late = rec.nodes[row.id].steps >= FROM_STEP
-        out[row.id] = {"fault_width": float(np.mean((hi - lo)[late])), "delay": row.detection_delay,
-                       "false_detections": row.false_detections, "false_detections_covered": row.false_detections_covered}
+        out[row.id] = {
+            "fault_width": float(np.mean((hi - lo)[late])),
+            "delay": row.detection_delay,
+            "false_detections": row.false_detections,
+            "false_detections_covered": row.false_detections_covered,
+        }
     return out, rec
 
 
@@ -72,7 +76,8 @@ def network_figures(cfg: dict, tmp: Path) -> dict:
                         nodes[i] = {
                             **exact.get(i, {"fault": None, "r": None, "sdp_network_over_exact": None}),
                             "sdp_alone_over_network": alone[i]["fault_width"] / sdp[i]["fault_width"],
-                            "delay_network": sdp[i]["delay"], "delay_alone": alone[i]["delay"],
+                            "delay_network": sdp[i]["delay"],
+                            "delay_alone": alone[i]["delay"],
                             "false_detections": sdp[i]["false_detections"],
                             "false_detections_covered": sdp[i]["false_detections_covered"],
                         }
@@ -87,8 +92,7 @@ COST_STEPS = (20, 120)  # two run lengths: the per-step time is their difference
 
 def _run_seconds(topology: Path, steps: int) -> float:
     """Wall time of ``netsetest run TOPOLOGY --mode zenoh`` (secured, lockstep) as users start it."""
-    cmd = [sys.executable, "-m", "netsetest.cli.main", "run", str(topology), "--mode", "zenoh", "--steps", str(steps),
-           "--seed", "0", "--quiet"]
+    cmd = [sys.executable, "-m", "netsetest.cli.main", "run", str(topology), "--mode", "zenoh", "--steps", str(steps), "--seed", "0", "--quiet"]
     t0 = time.perf_counter()
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     if out.returncode != 0:
@@ -117,10 +121,8 @@ def exchange_cost(cfg: dict, tmp: Path) -> dict:
                 for n in COST_STEPS:
                     times.setdefault((variant, n), []).append(_run_seconds(topo, n))
         med = {key: statistics.median(v) for key, v in times.items()}
-        out[name] = {v: 1e3 * (med[(v, COST_STEPS[1])] - med[(v, COST_STEPS[0])]) / (COST_STEPS[1] - COST_STEPS[0])
-                     for v in ("readings", "no_readings")}
-        _log(f"  {name} over Zenoh: {out[name]['readings']:.1f} ms per lockstep step with the readings, "
-             f"{out[name]['no_readings']:.1f} without")
+        out[name] = {v: 1e3 * (med[(v, COST_STEPS[1])] - med[(v, COST_STEPS[0])]) / (COST_STEPS[1] - COST_STEPS[0]) for v in ("readings", "no_readings")}
+        _log(f"  {name} over Zenoh: {out[name]['readings']:.1f} ms per lockstep step with the readings, {out[name]['no_readings']:.1f} without")
     return {"ms_per_step": out, "reps": cfg["cost_reps"], "steps": list(COST_STEPS)}
 
 
@@ -137,8 +139,11 @@ def _exact_figures(sc: Scenario, rec: Record, sdp: dict) -> dict[int, dict]:
     for lim in local_limits(sc, rec, central=central):
         ex = central.interval("f", lim.node)[keep]
         ex_w = float(np.mean(ex[:, 1] - ex[:, 0]))
-        out[lim.node] = {"fault": _num(lim.fault_ratio), "r": _num(lim.r_ratio),
-                         "sdp_network_over_exact": sdp[lim.node]["fault_width"] / ex_w if ex_w > 1e-6 else None}
+        out[lim.node] = {
+            "fault": _num(lim.fault_ratio),
+            "r": _num(lim.r_ratio),
+            "sdp_network_over_exact": sdp[lim.node]["fault_width"] / ex_w if ex_w > 1e-6 else None,
+        }
     return out
 
 
@@ -149,9 +154,13 @@ def _num(v: float) -> float | None:
 def network_markdown(res: dict) -> str:
     """The network section of docs/results.md (netsetest/bench/docs.py)."""
     seeds = ", ".join(map(str, res["seeds"]))
-    lines = [f"Exact limit from the node's own data over the exact limit from every node's data (mean width from step 10; "
-             f"{res['steps']} steps, seeds {seeds}, mean over the seeds; `declared 0`: the reference's own fault):", "",
-             "| topology | case | signals | own fault, node 1 … 6 | yaw rate, every node |", "|---|---|---|---|---|"]
+    lines = [
+        f"Exact limit from the node's own data over the exact limit from every node's data (mean width from step 10; "
+        f"{res['steps']} steps, seeds {seeds}, mean over the seeds; `declared 0`: the reference's own fault):",
+        "",
+        "| topology | case | signals | own fault, node 1 … 6 | yaw rate, every node |",
+        "|---|---|---|---|---|",
+    ]
     groups: dict[tuple[str, str, str], list[dict]] = {}
     for r in res["runs"]:
         groups.setdefault((r["topology"], r["case"], r["signals"]), []).append(r)
@@ -165,13 +174,17 @@ def network_markdown(res: dict) -> str:
             faults.append("declared 0" if any(v is None for v in vals) else f"{sum(vals) / len(vals):.2f}")
         rs = [r["nodes"][i]["r"] for r in runs for i in ids if r["nodes"][i]["r"] is not None]
         lines.append(f"| `{topo}` | {case} | {sig} | {' / '.join(faults)} | {min(rs):.2f}–{max(rs):.2f} |")
-    lines += ["", "What the nodes reach today: each node's SDP fault width run alone (a self-loop only, no reading) over the same "
-              "node in the network (its neighbours' states and the readings of the same step: sensor 3's in `paper6_reference`, "
-              "everyone's under `max_faulty = 4` in `paper6_max_faulty`), the network's over the exact central limit (`-`: "
-              "`netsetest exact` has no k-of-N assumption), and the detection delay in steps after the fault's onset, in the "
-              "network / alone (`-`: no fault, never detected):", "",
-              "| topology | case | signals | alone / network | network / exact | delay, network / alone (node 1 … 6) |",
-              "|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        "What the nodes reach today: each node's SDP fault width run alone (a self-loop only, no reading) over the same "
+        "node in the network (its neighbours' states and the readings of the same step: sensor 3's in `paper6_reference`, "
+        "everyone's under `max_faulty = 4` in `paper6_max_faulty`), the network's over the exact central limit (`-`: "
+        "`netsetest exact` has no k-of-N assumption), and the detection delay in steps after the fault's onset, in the "
+        "network / alone (`-`: no fault, never detected):",
+        "",
+        "| topology | case | signals | alone / network | network / exact | delay, network / alone (node 1 … 6) |",
+        "|---|---|---|---|---|---|",
+    ]
     for (topo, case, sig), runs in groups.items():
         ids = sorted(runs[0]["nodes"], key=int)
         gain = [r["nodes"][i]["sdp_alone_over_network"] for r in runs for i in ids]  # the reference's own 1.000 included
@@ -182,17 +195,23 @@ def network_markdown(res: dict) -> str:
     runs = res["runs"]
     false = sum(v.get("false_detections", 0) for r in runs for v in r["nodes"].values())
     false_cov = sum(v.get("false_detections_covered", 0) for r in runs for v in r["nodes"].values())
-    lines += ["", f"False detections (a fault interval excluding 0 while the true fault was 0) over these {len(runs)} runs "
-              f"in the network: {false}, of them where every assumption held: {false_cov}."]
+    lines += [
+        "",
+        f"False detections (a fault interval excluding 0 while the true fault was 0) over these {len(runs)} runs "
+        f"in the network: {false}, of them where every assumption held: {false_cov}.",
+    ]
     cost = res.get("exchange_cost")
     if cost and "paper6_reference" in cost["ms_per_step"]:
         parts = []
         for name, ms in cost["ms_per_step"].items():
             on, off = ms["readings"], ms["no_readings"]
             parts.append(f"`{name}` {on:.1f} ms per step with the readings and {off:.1f} ms without ({100 * (on / off - 1):+.0f} %)")
-        lines += ["", "The same-step phase's cost, `netsetest run … --mode zenoh` (secured, lockstep) against the same file with "
-                  f"`[network] readings = false`: {'; '.join(parts)} (medians of {cost['reps']} interleaved runs of "
-                  f"{cost['steps'][0]} and {cost['steps'][1]} steps each, the per-step time from their difference)."]
+        lines += [
+            "",
+            "The same-step phase's cost, `netsetest run … --mode zenoh` (secured, lockstep) against the same file with "
+            f"`[network] readings = false`: {'; '.join(parts)} (medians of {cost['reps']} interleaved runs of "
+            f"{cost['steps'][0]} and {cost['steps'][1]} steps each, the per-step time from their difference).",
+        ]
     return "\n".join(lines) + "\n"
 
 

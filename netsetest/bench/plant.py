@@ -60,7 +60,7 @@ def _ts_twin(text: str) -> str:
 
     p = load_topology(CAR).model.params
     table = "\n".join(f"{k} = {float(getattr(p, k))!r}" for k in ("m", "Jz", "lf", "lr", "cf", "cr"))
-    text = text.replace('plant = "single-track"\nvehicle = 2\n', f"plant = \"ts\"\n{table}\n")
+    text = text.replace('plant = "single-track"\nvehicle = 2\n', f'plant = "ts"\n{table}\n')
     return _with_bound(text, None)
 
 
@@ -81,10 +81,19 @@ def _drive(sc, signals: str, seed: int, tmp: Path, exact: bool = True) -> dict:
     ratio = compare_record(rec, exact_bounds(sc, rec, "used")).mean_width_ratio["f"] if exact else None
     widths = [r.fault_bound_mean_width for r in s.nodes if r.fault_bound_mean_width is not None]
     return {
-        "signals": signals, "seed": seed, "steps": sc.steps, "e_max_in_bound_norm": float(size.max()),
-        "e_outside_steps": int((size > 1 + 1e-12).sum()), "evaluated": s.node_steps_evaluated, "covered": s.node_steps_covered,
-        "contained": s.node_steps_contained, "violations": s.violations_total, "misses_attributed": s.misses_assumption_broken_total,
-        "not_covered": dict(s.node_steps_not_covered), "fault_width": statistics.mean(widths), "fault_ratio_exact": ratio,
+        "signals": signals,
+        "seed": seed,
+        "steps": sc.steps,
+        "e_max_in_bound_norm": float(size.max()),
+        "e_outside_steps": int((size > 1 + 1e-12).sum()),
+        "evaluated": s.node_steps_evaluated,
+        "covered": s.node_steps_covered,
+        "contained": s.node_steps_contained,
+        "violations": s.violations_total,
+        "misses_attributed": s.misses_assumption_broken_total,
+        "not_covered": dict(s.node_steps_not_covered),
+        "fault_width": statistics.mean(widths),
+        "fault_ratio_exact": ratio,
     }
 
 
@@ -108,9 +117,14 @@ def training() -> dict:
     declared = np.diag(load_topology(CAR).uncertainty.G)  # type: ignore[union-attr]  # paper6_car declares a bound
     (envelope, causes), (moderate, _) = _calibration(ENVELOPE, causes=True), _calibration(MODERATE)
     _log(f"  calibrated box: envelope {envelope.tolist()}, moderate {moderate.tolist()}; declared {declared.tolist()}")
-    return {"seeds": list(TRAINING_SEEDS), "envelope": {"drives": list(ENVELOPE), "box": envelope.tolist()},
-            "moderate": {"drives": list(MODERATE), "box": moderate.tolist()}, "causes": causes,
-            "declared": declared.tolist(), "declared_covers_envelope": bool(np.all(declared >= envelope))}
+    return {
+        "seeds": list(TRAINING_SEEDS),
+        "envelope": {"drives": list(ENVELOPE), "box": envelope.tolist()},
+        "moderate": {"drives": list(MODERATE), "box": moderate.tolist()},
+        "causes": causes,
+        "declared": declared.tolist(),
+        "declared_covers_envelope": bool(np.all(declared >= envelope)),
+    }
 
 
 def held_out(cfg: dict, tmp: Path, moderate_box: list[float]) -> dict:
@@ -119,9 +133,11 @@ def held_out(cfg: dict, tmp: Path, moderate_box: list[float]) -> dict:
 
     moderate = _variant(tmp, "paper6_car_moderate", _with_bound(CAR.read_text(), f"box = [{moderate_box[0]!r}, {moderate_box[1]!r}]"))
     out: dict = {"bound": load_topology(CAR).uncertainty.as_toml()}  # type: ignore[union-attr]  # paper6_car declares a bound
-    plan = [("paper (seeds unseen)", None, cfg["plant_steps"], cfg["plant_seeds"]),
-            ("double-lane-change", "double-lane-change", cfg["plant_steps"], cfg["plant_seeds"][:2]),
-            ("lap", "lap", cfg["plant_lap_steps"], cfg["plant_seeds"][:1])]
+    plan = [
+        ("paper (seeds unseen)", None, cfg["plant_steps"], cfg["plant_seeds"]),
+        ("double-lane-change", "double-lane-change", cfg["plant_steps"], cfg["plant_seeds"][:2]),
+        ("lap", "lap", cfg["plant_lap_steps"], cfg["plant_seeds"][:1]),
+    ]
     for which, topo in (("declared", CAR), ("moderate", moderate)):
         drives: dict[str, list[dict]] = {}
         for label, manoeuvre, steps, seeds in plan:
@@ -131,8 +147,10 @@ def held_out(cfg: dict, tmp: Path, moderate_box: list[float]) -> dict:
                     for sig in ("paper", "worst"):
                         drives.setdefault(label, []).append(_drive(sc, sig, seed, tmp, exact=which == "declared") | {"case": case})
             rows = drives[label]
-            _log(f"  {which} bound, {label}: e_k up to {max(r['e_max_in_bound_norm'] for r in rows):.2f}× the bound, "
-                 f"covered {sum(r['covered'] for r in rows)}/{sum(r['evaluated'] for r in rows)}, violations {sum(r['violations'] for r in rows)}")
+            _log(
+                f"  {which} bound, {label}: e_k up to {max(r['e_max_in_bound_norm'] for r in rows):.2f}× the bound, "
+                f"covered {sum(r['covered'] for r in rows)}/{sum(r['evaluated'] for r in rows)}, violations {sum(r['violations'] for r in rows)}"
+            )
         out[which] = drives
     return out
 
@@ -146,8 +164,16 @@ def cost(cfg: dict, tmp: Path) -> dict:
     out = {}
     for label, topo in (("car", CAR), ("ts_twin", twin)):
         c = compare(topo, DEFAULT_COMPARE, (None,), ("paper", "worst"), tuple(cfg["plant_seeds"][:2]), cfg["plant_steps"])
-        out[label] = {r.estimator: {"fault_width": r.fault_width_mean, "fault_ratio_exact": r.ratio_exact, "violations": r.violations,
-                                    "covered": r.covered, "node_steps": r.node_steps} for r in c.rows}
+        out[label] = {
+            r.estimator: {
+                "fault_width": r.fault_width_mean,
+                "fault_ratio_exact": r.ratio_exact,
+                "violations": r.violations,
+                "covered": r.covered,
+                "node_steps": r.node_steps,
+            }
+            for r in c.rows
+        }
     for est, row in out["car"].items():
         twin_w = out["ts_twin"][est]["fault_width"]
         row["width_vs_ts_twin"] = None if not twin_w or row["fault_width"] is None else row["fault_width"] / twin_w
@@ -191,10 +217,17 @@ def halved(cfg: dict, tmp: Path) -> dict:
             for sig in ("paper", "worst"):
                 rows.append(_drive(sc, sig, 0, tmp, exact=False) | {"case": case})
         misses = sum(r["evaluated"] - r["contained"] for r in rows)
-        out[label] = {"scale": scale, "drives": rows, "misses": misses,
-                      "misses_attributed": sum(r["misses_attributed"] for r in rows), "violations": sum(r["violations"] for r in rows)}
-        _log(f"  bound × {scale:g}: covered {sum(r['covered'] for r in rows)}/{sum(r['evaluated'] for r in rows)}, "
-             f"misses {misses} (attributed {out[label]['misses_attributed']}), violations {out[label]['violations']}")
+        out[label] = {
+            "scale": scale,
+            "drives": rows,
+            "misses": misses,
+            "misses_attributed": sum(r["misses_attributed"] for r in rows),
+            "violations": sum(r["violations"] for r in rows),
+        }
+        _log(
+            f"  bound × {scale:g}: covered {sum(r['covered'] for r in rows)}/{sum(r['evaluated'] for r in rows)}, "
+            f"misses {misses} (attributed {out[label]['misses_attributed']}), violations {out[label]['violations']}"
+        )
     return out
 
 
@@ -228,17 +261,20 @@ def plant_markdown(res: dict) -> str:
     def box(b: list[float]) -> str:
         return f"[{b[0]:.3g}, {b[1]:.3g}]"
 
-    lines = [f"`paper6_car` declares `{h['bound'].splitlines()[-1]}`. `netsetest calibrate paper6_car --manoeuvres "
-             f"{','.join(t['envelope']['drives'])} --seeds 0-{t['seeds'][-1]}` (the envelope: the FMVSS 126 series of sines with "
-             f"dwell up to 0.03 rad) gives the box {box(t['envelope']['box'])}, which the declared bound "
-             f"{'covers' if t['declared_covers_envelope'] else 'does NOT cover'}; the moderate drives alone "
-             f"({','.join(t['moderate']['drives'])}) give {box(t['moderate']['box'])}. Held-out drives: seeds "
-             f"{', '.join(map(str, seeds))} of the paper steering, seeds {', '.join(map(str, seeds[:2]))} of the double lane change, "
-             f"seed {seeds[0]} of the lap; paper and worst-case signals each; the SDP (default objective); fault / exact: mean "
-             "fault width from step 10 over the exact limit with the same bound.", "",
-             "| held-out drive | bound | case | drives | largest e_k / bound | steps with e_k outside | covered | contained | "
-             "violations | misses (all attributed) | SDP fault width | fault / exact |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"`paper6_car` declares `{h['bound'].splitlines()[-1]}`. `netsetest calibrate paper6_car --manoeuvres "
+        f"{','.join(t['envelope']['drives'])} --seeds 0-{t['seeds'][-1]}` (the envelope: the FMVSS 126 series of sines with "
+        f"dwell up to 0.03 rad) gives the box {box(t['envelope']['box'])}, which the declared bound "
+        f"{'covers' if t['declared_covers_envelope'] else 'does NOT cover'}; the moderate drives alone "
+        f"({','.join(t['moderate']['drives'])}) give {box(t['moderate']['box'])}. Held-out drives: seeds "
+        f"{', '.join(map(str, seeds))} of the paper steering, seeds {', '.join(map(str, seeds[:2]))} of the double lane change, "
+        f"seed {seeds[0]} of the lap; paper and worst-case signals each; the SDP (default objective); fault / exact: mean "
+        "fault width from step 10 over the exact limit with the same bound.",
+        "",
+        "| held-out drive | bound | case | drives | largest e_k / bound | steps with e_k outside | covered | contained | "
+        "violations | misses (all attributed) | SDP fault width | fault / exact |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for which in ("declared", "moderate"):
         for label, rows in h[which].items():
             for case in ("nsnim", "saim"):
@@ -256,31 +292,47 @@ def plant_markdown(res: dict) -> str:
                 )
     causes = t["causes"]
     car, *simpler = causes
-    lines += ["", f"Where e_k comes from: the largest |e_β|, |e_r| of each training drive (seeds 0-{t['seeds'][-1]}, both signal "
-              "families) on the car and on the same car with linear tyres of the same slope at zero slip (CommonRoad's "
-              "`vehicle_dynamics_st`; `netsetest calibrate --causes`); the rest is the speed's change within a step, load "
-              "transfer and the single track's large-angle kinematics:", "",
-              "| training drive | " + " | ".join(f"{p}: e_β, e_r" for p in causes) + " | e_r, linear tyres / car |",
-              "|---|" + "---|" * (len(causes) + 1)]
+    lines += [
+        "",
+        f"Where e_k comes from: the largest |e_β|, |e_r| of each training drive (seeds 0-{t['seeds'][-1]}, both signal "
+        "families) on the car and on the same car with linear tyres of the same slope at zero slip (CommonRoad's "
+        "`vehicle_dynamics_st`; `netsetest calibrate --causes`); the rest is the speed's change within a step, load "
+        "transfer and the single track's large-angle kinematics:",
+        "",
+        "| training drive | " + " | ".join(f"{p}: e_β, e_r" for p in causes) + " | e_r, linear tyres / car |",
+        "|---|" + "---|" * (len(causes) + 1),
+    ]
     for label, mx in causes[car].items():
         lin = causes[simpler[-1]][label] if simpler else mx
-        lines.append(f"| {label} | " + " | ".join(f"{causes[p][label][0]:.2e}, {causes[p][label][1]:.2e}" for p in causes)
-                     + f" | {lin[1] / mx[1]:.2f} |")
+        lines.append(f"| {label} | " + " | ".join(f"{causes[p][label][0]:.2e}, {causes[p][label][1]:.2e}" for p in causes) + f" | {lin[1] / mx[1]:.2f} |")
     c = res["cost"]
-    lines += ["", "The width the mismatch costs: every estimator on `paper6_car` and on the same car's own T-S model as the "
-              "truth (same signals, steering and seeds; NSNIM, mean fault width from step 10):", "",
-              "| estimator | fault width, car | fault width, T-S twin | car / twin | fault / exact, car | violations |",
-              "|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        "The width the mismatch costs: every estimator on `paper6_car` and on the same car's own T-S model as the "
+        "truth (same signals, steering and seeds; NSNIM, mean fault width from step 10):",
+        "",
+        "| estimator | fault width, car | fault width, T-S twin | car / twin | fault / exact, car | violations |",
+        "|---|---|---|---|---|---|",
+    ]
     for est, row in c["car"].items():
         twin = c["ts_twin"][est]
-        lines.append(f"| {est} | {_f(row['fault_width'], '.4f')} | {_f(twin['fault_width'], '.4f')} | {_f(row['width_vs_ts_twin'])} | "
-                     f"{_f(row['fault_ratio_exact'])} | {row['violations']} |")
+        lines.append(
+            f"| {est} | {_f(row['fault_width'], '.4f')} | {_f(twin['fault_width'], '.4f')} | {_f(row['width_vs_ts_twin'])} | "
+            f"{_f(row['fault_ratio_exact'])} | {row['violations']} |"
+        )
     v = res["vehicle_cpu"]
-    lines += ["", "The vehicle role's CPU per step (signals, driver, plant and e_k): "
-              + ", ".join(f"{p} {r['ms_median']:.2f} ms (p95 {r['ms_p95']:.2f})" for p, r in v.items()) + " at τs = 0.1 s.", ""]
+    lines += [
+        "",
+        "The vehicle role's CPU per step (signals, driver, plant and e_k): "
+        + ", ".join(f"{p} {r['ms_median']:.2f} ms (p95 {r['ms_p95']:.2f})" for p, r in v.items())
+        + " at τs = 0.1 s.",
+        "",
+    ]
     for label, r in res["halved"].items():
         covered = sum(d["covered"] for d in r["drives"])
         evaluated = sum(d["evaluated"] for d in r["drives"])
-        lines.append(f"- bound × {r['scale']:g} on the double lane change: covered {covered} of {evaluated} node-steps; {r['misses']} misses, "
-                     f"{r['misses_attributed']} of them attributed to a broken assumption; violations {r['violations']}.")
+        lines.append(
+            f"- bound × {r['scale']:g} on the double lane change: covered {covered} of {evaluated} node-steps; {r['misses']} misses, "
+            f"{r['misses_attributed']} of them attributed to a broken assumption; violations {r['violations']}."
+        )
     return "\n".join(lines) + "\n"

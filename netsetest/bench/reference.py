@@ -50,8 +50,7 @@ class RefData:
 class FullEta:
     """Slots of the straightforward η and its data (Π₀ per rule, ℓ, Q_m) for one step."""
 
-    def __init__(self, node_id: int, own: Sensor, neighbours: dict[int, Sensor], weights: dict[int, float],
-                 model: TSModel, W: float, variant: str) -> None:
+    def __init__(self, node_id: int, own: Sensor, neighbours: dict[int, Sensor], weights: dict[int, float], model: TSModel, W: float, variant: str) -> None:
         self.i, self.own, self.sensors, self.weights, self.model, self.W = node_id, own, neighbours, weights, model, W
         self.n_rules = N_RULES if variant == "per-rule" else 1
         self.neigh = list(neighbours)
@@ -73,8 +72,9 @@ class FullEta:
         self.dim = idx
         self.n_facts = len(self.z) + 1 + len(self.v) + 1 + len(self.phi) + 1
 
-    def data(self, xhat: np.ndarray, P: np.ndarray, rho: float, alpha: np.ndarray, u: float, y_new: float,
-             gamma_new: float, neigh: dict[int, NeighbourState]) -> RefData:
+    def data(
+        self, xhat: np.ndarray, P: np.ndarray, rho: float, alpha: np.ndarray, u: float, y_new: float, gamma_new: float, neigh: dict[int, NeighbourState]
+    ) -> RefData:
         d, own = self.dim, self.own
         T, G = own.descriptor_gains(gamma_new)
         g = G[:, 0]
@@ -166,8 +166,9 @@ class StraightforwardSDP:
 
     rebuild = False
 
-    def __init__(self, node_id: int, own: Sensor, neighbours: dict[int, Sensor], weights: dict[int, float],
-                 model: TSModel, W: float, variant: str = "scheduled") -> None:
+    def __init__(
+        self, node_id: int, own: Sensor, neighbours: dict[int, Sensor], weights: dict[int, float], model: TSModel, W: float, variant: str = "scheduled"
+    ) -> None:
         import cvxpy as cp
 
         self.cp = cp
@@ -184,8 +185,7 @@ class StraightforwardSDP:
         cp = self.cp
         if self.rebuild:
             e = self.eta
-            self.problem, self.v_P, self.v_L, self.v_tau = _lmi_problem(
-                cp, e.dim, e.n_facts, e.n_rules, dat.pi0, dat.ell[None, :], dat.facts, rho)
+            self.problem, self.v_P, self.v_L, self.v_tau = _lmi_problem(cp, e.dim, e.n_facts, e.n_rules, dat.pi0, dat.ell[None, :], dat.facts, rho)
         else:
             for r, p in enumerate(dat.pi0):
                 self.p_pi0[r].value = p
@@ -203,8 +203,9 @@ class StraightforwardSDP:
             return str(self.problem.status), None, [], []
         return str(self.problem.status), self.v_P.value, [v.value for v in self.v_L], [v.value for v in self.v_tau]
 
-    def step(self, xhat: np.ndarray, P: np.ndarray, rho: float, alpha: np.ndarray, u: float, y_new: float,
-             gamma_new: float, neigh: dict[int, NeighbourState]) -> RefResult:
+    def step(
+        self, xhat: np.ndarray, P: np.ndarray, rho: float, alpha: np.ndarray, u: float, y_new: float, gamma_new: float, neigh: dict[int, NeighbourState]
+    ) -> RefResult:
         t0 = time.perf_counter()
         dat = self.eta.data(xhat, P, rho, alpha, u, y_new, gamma_new, neigh)
         t1 = time.perf_counter()

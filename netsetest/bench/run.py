@@ -34,19 +34,60 @@ from netsetest.scenarios import TOPOLOGY_DIR
 PAPER6 = TOPOLOGY_DIR / "paper6.toml"
 
 QUICK: dict[str, Any] = {
-    "steps": 40, "ref_sched": 24, "ref_rule": 8, "naive": 12, "prev_sched": 24, "prev_rule": 8,
-    "scaling_steps": 20, "scaling_sizes": [6, 24, 96], "rt_sizes": [12, 24, 48, 64, 80, 96, 128], "rt_steps": 50, "profile_nodes": 96, "startup_reps": 3,
+    "steps": 40,
+    "ref_sched": 24,
+    "ref_rule": 8,
+    "naive": 12,
+    "prev_sched": 24,
+    "prev_rule": 8,
+    "scaling_steps": 20,
+    "scaling_sizes": [6, 24, 96],
+    "rt_sizes": [12, 24, 48, 64, 80, 96, 128],
+    "rt_steps": 50,
+    "profile_nodes": 96,
+    "startup_reps": 3,
     "launch_reps": 5,
-    "flood_steps": 200, "flood_rate": 30000, "crash_steps": 30, "soak_steps": 2000, "cpu_steps": 400,
-    "plant_steps": 80, "plant_seeds": [10, 11], "plant_lap_steps": 200, "plant_mb_steps": 10, "network_steps": 80, "network_seeds": [0],
-    "cost_reps": 5, "compare_seeds": [0, 1],
+    "flood_steps": 200,
+    "flood_rate": 30000,
+    "crash_steps": 30,
+    "soak_steps": 2000,
+    "cpu_steps": 400,
+    "plant_steps": 80,
+    "plant_seeds": [10, 11],
+    "plant_lap_steps": 200,
+    "plant_mb_steps": 10,
+    "network_steps": 80,
+    "network_seeds": [0],
+    "cost_reps": 5,
+    "compare_seeds": [0, 1],
 }
 FULL: dict[str, Any] = {
-    "steps": 80, "ref_sched": 80, "ref_rule": 24, "naive": 40, "prev_sched": 80, "prev_rule": 24,
-    "scaling_steps": 40, "scaling_sizes": [6, 24, 96], "rt_sizes": [6, 12, 24, 36, 48, 64, 80, 96, 112, 128], "rt_steps": 50, "profile_nodes": 96,
-    "startup_reps": 5, "launch_reps": 9, "flood_steps": 400, "flood_rate": 30000, "crash_steps": 60, "soak_steps": 20000, "cpu_steps": 800,
-    "plant_steps": 80, "plant_seeds": list(range(10, 20)), "plant_lap_steps": 600, "plant_mb_steps": 30,
-    "network_steps": 80, "network_seeds": [0, 1, 2], "cost_reps": 9, "compare_seeds": [0, 1, 2],
+    "steps": 80,
+    "ref_sched": 80,
+    "ref_rule": 24,
+    "naive": 40,
+    "prev_sched": 80,
+    "prev_rule": 24,
+    "scaling_steps": 40,
+    "scaling_sizes": [6, 24, 96],
+    "rt_sizes": [6, 12, 24, 36, 48, 64, 80, 96, 112, 128],
+    "rt_steps": 50,
+    "profile_nodes": 96,
+    "startup_reps": 5,
+    "launch_reps": 9,
+    "flood_steps": 400,
+    "flood_rate": 30000,
+    "crash_steps": 60,
+    "soak_steps": 20000,
+    "cpu_steps": 800,
+    "plant_steps": 80,
+    "plant_seeds": list(range(10, 20)),
+    "plant_lap_steps": 600,
+    "plant_mb_steps": 30,
+    "network_steps": 80,
+    "network_seeds": [0, 1, 2],
+    "cost_reps": 9,
+    "compare_seeds": [0, 1, 2],
 }
 
 
@@ -117,12 +158,18 @@ def scaling(cfg: dict, tmp: Path) -> dict:
         by_deg: dict[int, list[float]] = {}
         for c, t in zip(cap.cases, cap.step_ms):
             by_deg.setdefault(deg[c.node], []).append(t)
-        rows.append({
-            "nodes": n, "node_steps": ns, "ms_per_node_step": 1e3 * cap.wall_s / ns,
-            "estimator_ms_median": statistics.median(cap.step_ms), "estimator_ms_mean": statistics.fmean(cap.step_ms),
-            "estimator_ms_median_by_degree": {d: statistics.median(v) for d, v in sorted(by_deg.items())},
-            "fallbacks": cap.summary.fallbacks, "violations": cap.summary.violations_total,
-        })
+        rows.append(
+            {
+                "nodes": n,
+                "node_steps": ns,
+                "ms_per_node_step": 1e3 * cap.wall_s / ns,
+                "estimator_ms_median": statistics.median(cap.step_ms),
+                "estimator_ms_mean": statistics.fmean(cap.step_ms),
+                "estimator_ms_median_by_degree": {d: statistics.median(v) for d, v in sorted(by_deg.items())},
+                "fallbacks": cap.summary.fallbacks,
+                "violations": cap.summary.violations_total,
+            }
+        )
         _log(f"  {n} nodes: {rows[-1]['ms_per_node_step']:.2f} ms per node-step (estimator {rows[-1]['estimator_ms_median']:.2f} ms)")
     base = rows[0]["ms_per_node_step"]
     return {"rows": rows, "spread_vs_smallest": [r["ms_per_node_step"] / base - 1 for r in rows]}
@@ -149,23 +196,35 @@ def zenoh_overhead(cfg: dict) -> dict:
     cli_z = cli_run(PAPER6, "zenoh", "lockstep")
     cli_m = cli_run(PAPER6, "inmemory", "lockstep")
     res = {
-        "inmemory_s": mem, "zenoh_stepping_s": zen, "ratio": _ratio(_med(zen), _med(mem)),
-        "zenoh_insecure_stepping_s": zen_open, "ratio_insecure": _ratio(_med(zen_open), _med(mem)),
+        "inmemory_s": mem,
+        "zenoh_stepping_s": zen,
+        "ratio": _ratio(_med(zen), _med(mem)),
+        "zenoh_insecure_stepping_s": zen_open,
+        "ratio_insecure": _ratio(_med(zen_open), _med(mem)),
         "zenoh_insecure_exit_codes": obs_open["exit_codes"] if obs_open else None,
         "zenoh_startup_s": obs["startup_s"] if obs else None,
         "zenoh_exit_codes": obs["exit_codes"] if obs else None,
         "zenoh_violations": (obs["summary"] or {}).get("violations_total") if obs else None,
         "node_peak_rss_mb_in_run": obs["node_peak_rss_mb"] if obs else [],
         "cpu_floor": floor,
-        "cli_end_to_end": {"zenoh_s": cli_z["wall_s"], "inmemory_s": cli_m["wall_s"], "zenoh_exit": cli_z["exit_code"],
-                           "inmemory_exit": cli_m["exit_code"], "ratio": cli_z["wall_s"] / cli_m["wall_s"]},
+        "cli_end_to_end": {
+            "zenoh_s": cli_z["wall_s"],
+            "inmemory_s": cli_m["wall_s"],
+            "zenoh_exit": cli_z["exit_code"],
+            "inmemory_exit": cli_m["exit_code"],
+            "ratio": cli_z["wall_s"] / cli_m["wall_s"],
+        },
     }
-    _log(f"  in memory {_med(mem):.2f} s, Zenoh lockstep stepping {_med(zen) or float('nan'):.2f} s (ratio {res['ratio'] or float('nan'):.2f}), "
-         f"--insecure {_med(zen_open) or float('nan'):.2f} s (ratio {res['ratio_insecure'] or float('nan'):.2f}); "
-         f"end to end {cli_z['wall_s']:.1f} s vs {cli_m['wall_s']:.1f} s")
+    _log(
+        f"  in memory {_med(mem):.2f} s, Zenoh lockstep stepping {_med(zen) or float('nan'):.2f} s (ratio {res['ratio'] or float('nan'):.2f}), "
+        f"--insecure {_med(zen_open) or float('nan'):.2f} s (ratio {res['ratio_insecure'] or float('nan'):.2f}); "
+        f"end to end {cli_z['wall_s']:.1f} s vs {cli_m['wall_s']:.1f} s"
+    )
     if floor:
-        _log(f"  CPU per step: Zenoh {floor['zenoh_cpu_ms_per_step']:.2f} ms in its processes, in memory {floor['inmemory_ms_per_step']:.2f} ms; "
-             f"on {floor['cores']} cores the lockstep ratio cannot fall below {floor['ratio_floor']:.2f}")
+        _log(
+            f"  CPU per step: Zenoh {floor['zenoh_cpu_ms_per_step']:.2f} ms in its processes, in memory {floor['inmemory_ms_per_step']:.2f} ms; "
+            f"on {floor['cores']} cores the lockstep ratio cannot fall below {floor['ratio_floor']:.2f}"
+        )
     return res
 
 
@@ -198,7 +257,10 @@ def lockstep_cpu_floor(sc: Scenario, short: dict | None, steps: int) -> dict | N
     mem_ms = 1e3 * ((time.perf_counter() - t1) - (t1 - t0)) / extra
     zen_cpu = sum(sum(v) for v in per_role.values())
     return {
-        "steps": steps, "cores": MACHINE_CORES, "inmemory_ms_per_step": mem_ms, "zenoh_cpu_ms_per_step": zen_cpu,
+        "steps": steps,
+        "cores": MACHINE_CORES,
+        "inmemory_ms_per_step": mem_ms,
+        "zenoh_cpu_ms_per_step": zen_cpu,
         "cpu_ms_per_step_by_role": {r: (statistics.median(v), len(v)) for r, v in per_role.items()},
         "zenoh_stepping_ms_per_step": 1e3 * (long["stepping_s"] - short["stepping_s"]) / extra,
         "ratio_floor": zen_cpu / MACHINE_CORES / mem_ms,
@@ -253,34 +315,53 @@ def tightness(cfg: dict, tmp: Path) -> dict:
             "narrower": sum(n.ratios[c].narrower for n in cmp.nodes for c in COORDINATES),
             "intervals": sum(n.ratios[c].steps + n.ratios[c].left_out for n in cmp.nodes for c in COORDINATES),
         }
-        _log(f"  {case}: fault width / exact {cmp.mean_width_ratio['f']:.3f} (nodes "
-             + ", ".join(f"{n.ratios['f'].width_ratio:.2f}" for n in cmp.nodes)
-             + f"), r {cmp.mean_width_ratio['r']:.3f}, β {cmp.mean_width_ratio['beta']:.3f}; "
-             f"narrower than exact on {out[case]['narrower']} of {out[case]['intervals']} intervals; exact in {out[case]['exact_s']:.1f} s")
+        _log(
+            f"  {case}: fault width / exact {cmp.mean_width_ratio['f']:.3f} (nodes "
+            + ", ".join(f"{n.ratios['f'].width_ratio:.2f}" for n in cmp.nodes)
+            + f"), r {cmp.mean_width_ratio['r']:.3f}, β {cmp.mean_width_ratio['beta']:.3f}; "
+            f"narrower than exact on {out[case]['narrower']} of {out[case]['intervals']} intervals; exact in {out[case]['exact_s']:.1f} s"
+        )
     return out
 
 
 def run_bench(
-    quick: bool = False, json_path: str | None = None, markdown_path: str | None = None, only: str | None = None,
+    quick: bool = False,
+    json_path: str | None = None,
+    markdown_path: str | None = None,
+    only: str | None = None,
 ) -> int:
     from netsetest.bench.network import network_figures, network_markdown
     from netsetest.bench.plant import plant_figures, plant_markdown
     from netsetest.bench.scenario import compare_markdown, scenario_figures, scenario_markdown
     from netsetest.bench.zenoh_runs import (
-        launch_to_step0, node_memory_profile, node_startup, realtime_fit, realtime_ladder, realtime_node_profile,
+        launch_to_step0,
+        node_memory_profile,
+        node_startup,
+        realtime_fit,
+        realtime_ladder,
+        realtime_node_profile,
     )
 
     cfg = QUICK if quick else FULL
     t_all = time.perf_counter()
     res: dict = {
         "meta": {
-            "quick": quick, "python": platform.python_version(), "machine": platform.machine(), "cpus": _cpus(),
-            "date": time.strftime("%Y-%m-%d %H:%M:%S"), "config": cfg, "load_before": _load(), "only": only,
+            "quick": quick,
+            "python": platform.python_version(),
+            "machine": platform.machine(),
+            "cpus": _cpus(),
+            "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+            "config": cfg,
+            "load_before": _load(),
+            "only": only,
         }
     }
     if only is not None and only != "performance":  # one part alone: its figures and its Markdown
-        figures, render = {"plant": (plant_figures, plant_markdown), "network": (network_figures, network_markdown),
-                           "scenario": (scenario_figures, lambda r: scenario_markdown(r) + "\n" + compare_markdown(r))}[only]
+        figures, render = {
+            "plant": (plant_figures, plant_markdown),
+            "network": (network_figures, network_markdown),
+            "scenario": (scenario_figures, lambda r: scenario_markdown(r) + "\n" + compare_markdown(r)),
+        }[only]
         with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
             res[only] = figures(cfg, Path(tmpd))
         res["meta"]["load_after"] = _load()
@@ -300,8 +381,10 @@ def run_bench(
         res["zenoh"] = zenoh_overhead(cfg)
         _log(f"the 8-process paper run (secured): launch → step 0, {cfg['launch_reps']} runs")
         res["launch"] = launch_to_step0(PAPER6, cfg["launch_reps"])
-        _log(f"  median {res['launch']['median_s'] or float('nan'):.2f} s: " + ", ".join(
-            "—" if r["launch_to_step0_s"] is None else f"{r['launch_to_step0_s']:.2f}" for r in res["launch"]["reps"]))
+        _log(
+            f"  median {res['launch']['median_s'] or float('nan'):.2f} s: "
+            + ", ".join("—" if r["launch_to_step0_s"] is None else f"{r['launch_to_step0_s']:.2f}" for r in res["launch"]["reps"])
+        )
         _log("one node process: start-up and peak RSS")
         res["node"] = node_startup(tmp, cfg["startup_reps"])
         res["node"]["memory_by_stage"] = node_memory_profile()
@@ -418,40 +501,76 @@ def performance_markdown(res: dict) -> str:
         return " / ".join("—" if k not in met else ("yes" if met[k] else "no") for k in keys)
 
     rows = [
-        ("median node-step, NSNIM / SAIM (scheduled, incl. certification)",
-         f"{f(res['solve_ms_median'])} ms / {f(res['solve_ms_median_saim'])} ms", "≤ 2 ms / ≤ 5 ms", yes("solve_ms_median", "solve_ms_median_saim")),
-        ("vs. the straightforward / the naive formulation (NSNIM)",
-         f"×{f(res['straightforward_ratio'], '.0f')} / ×{f(res['naive_ratio'], '.0f')}", "≥ 10 / ≥ 20", yes("straightforward_ratio", "naive_ratio")),
-        ("vs. the previous cvxpy-Parameters estimator, NSNIM / SAIM",
-         f"×{f(res['previous_default_ratio'], '.0f')} / ×{f(sa['prev']['ratio'], '.0f')}", "", ""),
-        (f"mean fault width / exact limit, NSNIM / SAIM (paper signals, seed 0, {meta['config']['steps']} steps)",
-         f"{f(res['fault_width_ratio_exact_nsnim'], '.3f')} / {f(res['fault_width_ratio_exact_saim'], '.3f')}", "≤ 1.15 / ≤ 1.25",
-         yes("fault_width_ratio_exact_nsnim", "fault_width_ratio_exact_saim")),
-        ("in memory, ms per node-step at " + " / ".join(str(r["nodes"]) for r in scale) + " nodes",
-         " / ".join(f(r["ms_per_node_step"]) for r in scale), "flat ±30 %", "yes" if spread <= 0.3 else "no"),
-        ("Zenoh lockstep / in-memory wall time of the stepping phase (the lowest ratio the cores allow at the measured CPU per step)",
-         f"{f(res['zenoh_overhead_ratio'])} ({f(_med(z['zenoh_stepping_s']))} s against {f(_med(z['inmemory_s']))} s; floor {f(floor)})",
-         "≤ 1.0", yes("zenoh_overhead_ratio")),
-        ("largest real-time network (τs = 0.1 s) without a deadline miss", f"{f(res['realtime_max_nodes'], '.0f')} nodes", "≥ 96",
-         yes("realtime_max_nodes")),
-        *((f"largest real-time network with {what}, against the plain one",
-           f"{f(v.get('max_nodes'), '.0f')} nodes ({f(v.get('ratio_to_plain'))})", target, yes(key) if target else "")
-          for variant, what, target, key in RT_VARIANT_ROWS
-          if (v := (res["realtime"].get("variants") or {}).get(variant)) is not None),
-        ("node peak RSS: in `netsetest run` (forked, median) / a `netsetest node` started on its own",
-         f"{f(_med(z['node_peak_rss_mb_in_run']), '.1f')} MB / {f(res['node_rss_mb'], '.1f')} MB", "≤ 50 MB", yes("node_rss_mb")),
-        ("one node process into a waiting network, launch → first estimate", f"{f(res['node_first_estimate_s'])} s", "< 1 s",
-         yes("node_startup_s")),
-        ("`netsetest run` of the paper network (8 processes, mTLS + ACL), launch → step 0", f"{f(res['launch_to_step0_s'])} s", "< 1 s",
-         yes("launch_to_step0_s")),
-        (f"a flood of {meta['config']['flood_rate']:,} msg/s at node 2 (secured run): step rate against the unflooded run".replace(",", " "),
-         f"{f(res.get('flood_step_rate_ratio'))}", "≥ 0.5", yes("flood_step_rate_ratio")),
-        ("RSS slope over a long run", f"{f(res.get('soak_rss_slope_mb_per_10k_steps'))} MB per 10 000 steps", "< 5 MB",
-         yes("soak_rss_slope_mb_per_10k_steps")),
+        (
+            "median node-step, NSNIM / SAIM (scheduled, incl. certification)",
+            f"{f(res['solve_ms_median'])} ms / {f(res['solve_ms_median_saim'])} ms",
+            "≤ 2 ms / ≤ 5 ms",
+            yes("solve_ms_median", "solve_ms_median_saim"),
+        ),
+        (
+            "vs. the straightforward / the naive formulation (NSNIM)",
+            f"×{f(res['straightforward_ratio'], '.0f')} / ×{f(res['naive_ratio'], '.0f')}",
+            "≥ 10 / ≥ 20",
+            yes("straightforward_ratio", "naive_ratio"),
+        ),
+        ("vs. the previous cvxpy-Parameters estimator, NSNIM / SAIM", f"×{f(res['previous_default_ratio'], '.0f')} / ×{f(sa['prev']['ratio'], '.0f')}", "", ""),
+        (
+            f"mean fault width / exact limit, NSNIM / SAIM (paper signals, seed 0, {meta['config']['steps']} steps)",
+            f"{f(res['fault_width_ratio_exact_nsnim'], '.3f')} / {f(res['fault_width_ratio_exact_saim'], '.3f')}",
+            "≤ 1.15 / ≤ 1.25",
+            yes("fault_width_ratio_exact_nsnim", "fault_width_ratio_exact_saim"),
+        ),
+        (
+            "in memory, ms per node-step at " + " / ".join(str(r["nodes"]) for r in scale) + " nodes",
+            " / ".join(f(r["ms_per_node_step"]) for r in scale),
+            "flat ±30 %",
+            "yes" if spread <= 0.3 else "no",
+        ),
+        (
+            "Zenoh lockstep / in-memory wall time of the stepping phase (the lowest ratio the cores allow at the measured CPU per step)",
+            f"{f(res['zenoh_overhead_ratio'])} ({f(_med(z['zenoh_stepping_s']))} s against {f(_med(z['inmemory_s']))} s; floor {f(floor)})",
+            "≤ 1.0",
+            yes("zenoh_overhead_ratio"),
+        ),
+        ("largest real-time network (τs = 0.1 s) without a deadline miss", f"{f(res['realtime_max_nodes'], '.0f')} nodes", "≥ 96", yes("realtime_max_nodes")),
+        *(
+            (
+                f"largest real-time network with {what}, against the plain one",
+                f"{f(v.get('max_nodes'), '.0f')} nodes ({f(v.get('ratio_to_plain'))})",
+                target,
+                yes(key) if target else "",
+            )
+            for variant, what, target, key in RT_VARIANT_ROWS
+            if (v := (res["realtime"].get("variants") or {}).get(variant)) is not None
+        ),
+        (
+            "node peak RSS: in `netsetest run` (forked, median) / a `netsetest node` started on its own",
+            f"{f(_med(z['node_peak_rss_mb_in_run']), '.1f')} MB / {f(res['node_rss_mb'], '.1f')} MB",
+            "≤ 50 MB",
+            yes("node_rss_mb"),
+        ),
+        ("one node process into a waiting network, launch → first estimate", f"{f(res['node_first_estimate_s'])} s", "< 1 s", yes("node_startup_s")),
+        (
+            "`netsetest run` of the paper network (8 processes, mTLS + ACL), launch → step 0",
+            f"{f(res['launch_to_step0_s'])} s",
+            "< 1 s",
+            yes("launch_to_step0_s"),
+        ),
+        (
+            f"a flood of {meta['config']['flood_rate']:,} msg/s at node 2 (secured run): step rate against the unflooded run".replace(",", " "),
+            f"{f(res.get('flood_step_rate_ratio'))}",
+            "≥ 0.5",
+            yes("flood_step_rate_ratio"),
+        ),
+        ("RSS slope over a long run", f"{f(res.get('soak_rss_slope_mb_per_10k_steps'))} MB per 10 000 steps", "< 5 MB", yes("soak_rss_slope_mb_per_10k_steps")),
     ]
-    lines = [f"`netsetest bench{' --quick' if meta['quick'] else ''}` of {meta['date']} ({meta['cpus']} CPUs, Python {meta['python']}, "
-             f"load average {meta['load_before']} before, {meta['duration_s'] / 60:.0f} minutes in all):", "",
-             "| figure | value | target | met |", "|---|---|---|---|"]
+    lines = [
+        f"`netsetest bench{' --quick' if meta['quick'] else ''}` of {meta['date']} ({meta['cpus']} CPUs, Python {meta['python']}, "
+        f"load average {meta['load_before']} before, {meta['duration_s'] / 60:.0f} minutes in all):",
+        "",
+        "| figure | value | target | met |",
+        "|---|---|---|---|",
+    ]
     lines += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
     return "\n".join(lines) + "\n"
 
@@ -459,8 +578,11 @@ def performance_markdown(res: dict) -> str:
 def markdown(res: dict) -> str:
     f = lambda v, spec=".2f": "—" if v is None else format(v, spec)  # noqa: E731  # a one-line local helper
     lines = [f"# netsetest benchmark ({'quick' if res['meta']['quick'] else 'full'}, {res['meta']['date']})", ""]
-    lines += [f"Machine: {res['meta']['cpus']} CPUs, Python {res['meta']['python']}; load average before/after: "
-              f"{res['meta']['load_before']} / {res['meta']['load_after']}; {res['meta']['duration_s']:.0f} s in all.", ""]
+    lines += [
+        f"Machine: {res['meta']['cpus']} CPUs, Python {res['meta']['python']}; load average before/after: "
+        f"{res['meta']['load_before']} / {res['meta']['load_after']}; {res['meta']['duration_s']:.0f} s in all.",
+        "",
+    ]
     lines += ["## Targets", "", "| figure | value | target | met |", "|---|---|---|---|"]
     for key, target, ok in TARGETS:
         v = res.get(key)
@@ -471,10 +593,15 @@ def markdown(res: dict) -> str:
         lines.append(f"| zenoh_overhead_ratio_cpu_floor (the lowest ratio this machine's cores allow at the measured CPU per step) | {f(floor)} | — | — |")
     spread = max(abs(x) for x in sc["spread_vs_smallest"])
     lines.append(f"| scaling spread 6→96 nodes | {spread * 100:.0f} % | ≤ ±30 % | {'yes' if spread <= 0.3 else 'no'} |")
-    lines += ["", "## Paper scenario, per node-step (wall ms; whole estimator step incl. certification)", "",
-              "| case / variant | fast median | fast p95 | solve part | CPU median | iters | previous default (cvxpy) | straightforward | naive | fallbacks |",
-              "|---|---|---|---|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        "## Paper scenario, per node-step (wall ms; whole estimator step incl. certification)",
+        "",
+        "| case / variant | fast median | fast p95 | solve part | CPU median | iters | previous default (cvxpy) | straightforward | naive | fallbacks |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for key, r in res["paper"].items():
+
         def cell(name: str) -> str:
             if name not in r:
                 return "—"
@@ -488,83 +615,125 @@ def markdown(res: dict) -> str:
         )
     lines += ["", "Fault-bound width of the same step, fast / yardstick − 1 (negative: the fast path is tighter):", ""]
     for key, r in res["paper"].items():
-        parts = [f"{n} [{f(r[n]['width_rel_diff_min'], '.1e')}, {f(r[n]['width_rel_diff_max'], '.1e')}]" for n in ("prev", "straightforward", "naive") if n in r]
+        parts = [
+            f"{n} [{f(r[n]['width_rel_diff_min'], '.1e')}, {f(r[n]['width_rel_diff_max'], '.1e')}]" for n in ("prev", "straightforward", "naive") if n in r
+        ]
         lines.append(f"- {key}: " + "; ".join(parts))
-    lines += ["", "## Tightness against the exact limit (`netsetest exact`, paper signals, seed 0)", "",
-              "Mean over nodes of published width / exact width (steps ≥ 10), and Althoff & Rath's relative-RMS radius (all steps). "
-              "Where the published interval is narrower than exact, the estimator relied on more than the exact program's assumptions "
-              "(the SAIM estimator's fixed sector) and the ratio there is not a tightness figure.", "",
-              "| case | fault bounds | fault | yaw rate | sideslip | RMS radius f / r / β | narrower than exact | exact solve |",
-              "|---|---|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        "## Tightness against the exact limit (`netsetest exact`, paper signals, seed 0)",
+        "",
+        "Mean over nodes of published width / exact width (steps ≥ 10), and Althoff & Rath's relative-RMS radius (all steps). "
+        "Where the published interval is narrower than exact, the estimator relied on more than the exact program's assumptions "
+        "(the SAIM estimator's fixed sector) and the ratio there is not a tightness figure.",
+        "",
+        "| case | fault bounds | fault | yaw rate | sideslip | RMS radius f / r / β | narrower than exact | exact solve |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for case, t in res["tightness"].items():
         w, rr = t["width_ratio"], t["rms_radius_rel"]
-        lines.append(f"| {case} | {t['fault_bounds']} | {f(w['f'], '.3f')} | {f(w['r'], '.3f')} | {f(w['beta'], '.3f')} | "
-                     f"{f(rr['f'], '.3f')} / {f(rr['r'], '.3f')} / {f(rr['beta'], '.3f')} | {t['narrower']} of {t['intervals']} | "
-                     f"{f(t['exact_s'], '.1f')} s |")
-    lines += ["", "## In memory, ring with chords (|N_i| = 3, 4, 5 in equal shares)", "",
-              "| nodes | ms per node-step | estimator median | by degree 3 / 4 / 5 |",
-              "|---|---|---|---|"]
+        lines.append(
+            f"| {case} | {t['fault_bounds']} | {f(w['f'], '.3f')} | {f(w['r'], '.3f')} | {f(w['beta'], '.3f')} | "
+            f"{f(rr['f'], '.3f')} / {f(rr['r'], '.3f')} / {f(rr['beta'], '.3f')} | {t['narrower']} of {t['intervals']} | "
+            f"{f(t['exact_s'], '.1f')} s |"
+        )
+    lines += [
+        "",
+        "## In memory, ring with chords (|N_i| = 3, 4, 5 in equal shares)",
+        "",
+        "| nodes | ms per node-step | estimator median | by degree 3 / 4 / 5 |",
+        "|---|---|---|---|",
+    ]
     for r in sc["rows"]:
         bd = r["estimator_ms_median_by_degree"]
-        lines.append(f"| {r['nodes']} | {f(r['ms_per_node_step'])} | {f(r['estimator_ms_median'])} | "
-                     f"{' / '.join(f(bd.get(k)) for k in (3, 4, 5))} |")
+        lines.append(f"| {r['nodes']} | {f(r['ms_per_node_step'])} | {f(r['estimator_ms_median'])} | {' / '.join(f(bd.get(k)) for k in (3, 4, 5))} |")
     z = res["zenoh"]
-    lines += ["", "## Zenoh", "",
-              f"- lockstep stepping phase of `netsetest run` (secured: mTLS, router star, forked roles) {f(_med(z['zenoh_stepping_s']))} s "
-              f"vs in memory {f(_med(z['inmemory_s']))} s: ratio {f(z['ratio'])} (start-up before step 0: {f(z['zenoh_startup_s'])} s)",
-              f"- the same with `--insecure` (open peer mesh): {f(_med(z.get('zenoh_insecure_stepping_s') or []))} s: ratio {f(z.get('ratio_insecure'))}",
-              *_cpu_floor_lines(z.get("cpu_floor")),
-              f"- end to end through `netsetest run`: {f(z['cli_end_to_end']['zenoh_s'])} s vs {f(z['cli_end_to_end']['inmemory_s'])} s "
-              f"(ratio {f(z['cli_end_to_end']['ratio'])})",
-              "- `netsetest run` of the paper network (8 processes, mTLS + ACL), launch → step 0: " + ", ".join(
-                  "—" if r["launch_to_step0_s"] is None else f"{f(r['launch_to_step0_s'])} s (load {r['load_before']:.1f})"
-                  for r in res["launch"]["reps"]) + f"; median {f(res['launch']['median_s'])} s",
-              f"- node peak RSS in the paper run: {', '.join(f(x, '.0f') for x in z['node_peak_rss_mb_in_run'])} MB",
-              "- one node launched into a waiting network: " + "; ".join(
-                  f"first state {f(r['first_state_s'])} s, first estimate {f(r['first_estimate_s'])} s, peak RSS {f(r['peak_rss_mb'], '.0f')} MB"
-                  for r in res["node"]["reps"]),
-              "", "Where a node process's memory and start-up go (RSS after each import stage, wall ms):", "",
-              "| stage | RSS MB | added MB | ms |", "|---|---|---|---|"]
+    lines += [
+        "",
+        "## Zenoh",
+        "",
+        f"- lockstep stepping phase of `netsetest run` (secured: mTLS, router star, forked roles) {f(_med(z['zenoh_stepping_s']))} s "
+        f"vs in memory {f(_med(z['inmemory_s']))} s: ratio {f(z['ratio'])} (start-up before step 0: {f(z['zenoh_startup_s'])} s)",
+        f"- the same with `--insecure` (open peer mesh): {f(_med(z.get('zenoh_insecure_stepping_s') or []))} s: ratio {f(z.get('ratio_insecure'))}",
+        *_cpu_floor_lines(z.get("cpu_floor")),
+        f"- end to end through `netsetest run`: {f(z['cli_end_to_end']['zenoh_s'])} s vs {f(z['cli_end_to_end']['inmemory_s'])} s "
+        f"(ratio {f(z['cli_end_to_end']['ratio'])})",
+        "- `netsetest run` of the paper network (8 processes, mTLS + ACL), launch → step 0: "
+        + ", ".join("—" if r["launch_to_step0_s"] is None else f"{f(r['launch_to_step0_s'])} s (load {r['load_before']:.1f})" for r in res["launch"]["reps"])
+        + f"; median {f(res['launch']['median_s'])} s",
+        f"- node peak RSS in the paper run: {', '.join(f(x, '.0f') for x in z['node_peak_rss_mb_in_run'])} MB",
+        "- one node launched into a waiting network: "
+        + "; ".join(
+            f"first state {f(r['first_state_s'])} s, first estimate {f(r['first_estimate_s'])} s, peak RSS {f(r['peak_rss_mb'], '.0f')} MB"
+            for r in res["node"]["reps"]
+        ),
+        "",
+        "Where a node process's memory and start-up go (RSS after each import stage, wall ms):",
+        "",
+        "| stage | RSS MB | added MB | ms |",
+        "|---|---|---|---|",
+    ]
     for r in res["node"].get("memory_by_stage", []):
         lines.append(f"| {r['stage']} | {f(r.get('rss_mb'), '.1f')} | {f(r.get('added_mb'), '.1f')} | {f(r.get('ms'), '.0f')} |")
-    lines += ["", f"Real time ({res['realtime']['steps']} steps at τs = 0.1 s; CPU in % of one core, steady state, "
-              "the machine has 2 cores = 200 %):", "",
-              "| nodes | attempt | load before | exit | deadline misses | late steps (first) | nodes missing | wall s | "
-              "CPU per node | ms per node-step | all nodes | run (router) / vehicle / collector | cores needed | other work on the machine | node peak RSS MB |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        f"Real time ({res['realtime']['steps']} steps at τs = 0.1 s; CPU in % of one core, steady state, the machine has 2 cores = 200 %):",
+        "",
+        "| nodes | attempt | load before | exit | deadline misses | late steps (first) | nodes missing | wall s | "
+        "CPU per node | ms per node-step | all nodes | run (router) / vehicle / collector | cores needed | other work on the machine | node peak RSS MB |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for r in res["realtime"]["runs"]:
         pr = r.get("processes") or {}
         roles = pr.get("role_cpu_pct") or {}
-        lines.append(f"| {r['nodes']} | {r['attempt']} | {r.get('load_before')} | {r['exit_code']} | {r['deadline_misses']} | "
-                     f"{r.get('late_steps')} ({r.get('first_late_step')}) | {r['nodes_missing']} | {f(r['wall_s'], '.0f')} | "
-                     f"{f(pr.get('node_cpu_pct_median'))} | {f(r.get('node_cpu_ms_per_step'))} | {f(pr.get('nodes_cpu_pct_total'), '.0f')} | "
-                     f"{' / '.join(f(roles.get(k), '.1f') for k in ('run', 'vehicle', 'collector'))} | {f(r.get('demand_cores'))} | "
-                     f"{f(pr.get('other_work_pct'), '.0f')} | {f(pr.get('node_peak_rss_mb_median'), '.1f')} |")
+        lines.append(
+            f"| {r['nodes']} | {r['attempt']} | {r.get('load_before')} | {r['exit_code']} | {r['deadline_misses']} | "
+            f"{r.get('late_steps')} ({r.get('first_late_step')}) | {r['nodes_missing']} | {f(r['wall_s'], '.0f')} | "
+            f"{f(pr.get('node_cpu_pct_median'))} | {f(r.get('node_cpu_ms_per_step'))} | {f(pr.get('nodes_cpu_pct_total'), '.0f')} | "
+            f"{' / '.join(f(roles.get(k), '.1f') for k in ('run', 'vehicle', 'collector'))} | {f(r.get('demand_cores'))} | "
+            f"{f(pr.get('other_work_pct'), '.0f')} | {f(pr.get('node_peak_rss_mb_median'), '.1f')} |"
+        )
     variants = res["realtime"].get("variants") or {}
     if variants:
-        lines += ["", f"The largest ring that still runs in real time with each variant, walking down from the plain ladder's "
-                  f"{res['realtime']['max_nodes']} nodes (bench/topologies.py: `reference` = node 3's reading read by every node, "
-                  "`max_faulty` = everyone's reading read by everyone, N² messages a step, `car` = the CommonRoad car as the truth):", "",
-                  "| variant | largest ring | / plain | deadline misses in the runs tried (nodes) |", "|---|---|---|---|"]
+        lines += [
+            "",
+            f"The largest ring that still runs in real time with each variant, walking down from the plain ladder's "
+            f"{res['realtime']['max_nodes']} nodes (bench/topologies.py: `reference` = node 3's reading read by every node, "
+            "`max_faulty` = everyone's reading read by everyone, N² messages a step, `car` = the CommonRoad car as the truth):",
+            "",
+            "| variant | largest ring | / plain | deadline misses in the runs tried (nodes) |",
+            "|---|---|---|---|",
+        ]
         for v, r in variants.items():
             tried = ", ".join(f"{x['deadline_misses']} ({x['nodes']})" for x in r["runs"])
             lines.append(f"| {v} | {r['max_nodes'] if r['max_nodes'] is not None else '—'} | {f(r['ratio_to_plain'])} | {tried} |")
     lines += _profile_lines(res.get("node_profile") or {}, res.get("node_profile_trace") or {})
     d = res["defences"]
-    lines += ["", "## Defences (netsetest/bench/attacks.py, netsetest/bench/soak.py)", "",
-              "`netsetest run` of the paper network as users start it, attacked from a process of its own (secured: with node 2's "
-              "certificate, an insider; insecure: a peer of the open mesh):", ""]
+    lines += [
+        "",
+        "## Defences (netsetest/bench/attacks.py, netsetest/bench/soak.py)",
+        "",
+        "`netsetest run` of the paper network as users start it, attacked from a process of its own (secured: with node 2's "
+        "certificate, an insider; insecure: a peer of the open mesh):",
+        "",
+    ]
     for m in ("secured", "insecure"):
         for target, what in (("input", "node 2's input key"), ("state", "node 2's state key")):
             r = d[f"flood_{target}_{m}"]
-            lines.append(f"- {m}: flood of {f(r['sent_per_s'], '.0f')} msg/s on {what}: step rate ratio {f(r['ratio'])}, "
-                         f"nodes lost {r['nodes_lost']}, exit {r['exit_code']}")
+            lines.append(
+                f"- {m}: flood of {f(r['sent_per_s'], '.0f')} msg/s on {what}: step rate ratio {f(r['ratio'])}, "
+                f"nodes lost {r['nodes_lost']}, exit {r['exit_code']}"
+            )
         r = d[f"crash_{m}"]
-        lines.append(f"- {m}: the crash payloads (invalid UTF-8, deep nesting, a foreign Ready, a huge number) on node 2's keys: "
-                     f"roles lost {'0' if r['roles_lost'] == 0 else 'some'} (exit {r['exit_code']}, nodes missing {r['nodes_missing']})")
+        lines.append(
+            f"- {m}: the crash payloads (invalid UTF-8, deep nesting, a foreign Ready, a huge number) on node 2's keys: "
+            f"roles lost {'0' if r['roles_lost'] == 0 else 'some'} (exit {r['exit_code']}, nodes missing {r['nodes_missing']})"
+        )
     r = d["soak"]
-    lines.append(f"- soak of {r['steps']} steps in memory: RSS {f(r['rss_start_mb'], '.1f')} → {f(r['rss_end_mb'], '.1f')} MB, "
-                 f"slope {f(r['slope_mb_per_10k_steps'])} MB per 10 000 steps ({f(r['steps_per_s'], '.0f')} steps/s)")
+    lines.append(
+        f"- soak of {r['steps']} steps in memory: RSS {f(r['rss_start_mb'], '.1f')} → {f(r['rss_end_mb'], '.1f')} MB, "
+        f"slope {f(r['slope_mb_per_10k_steps'])} MB per 10 000 steps ({f(r['steps_per_s'], '.0f')} steps/s)"
+    )
     return "\n".join(lines) + "\n"
 
 
@@ -586,10 +755,12 @@ def _cpu_floor_lines(fl: dict | None) -> list[str]:
     if not fl:
         return []
     roles = ", ".join(f"{r} {v[0]:.2f}" + (f" × {v[1]}" if v[1] > 1 else "") for r, v in fl["cpu_ms_per_step_by_role"].items())
-    return [f"- CPU per lockstep step (paper run, {fl['steps']} against its 80 steps, start-up cancels): {fl['zenoh_cpu_ms_per_step']:.2f} ms "
-            f"in the Zenoh run's processes ({roles} ms) against {fl['inmemory_ms_per_step']:.2f} ms per step in memory; stepping "
-            f"{fl['zenoh_stepping_ms_per_step']:.2f} ms per step.  On {fl['cores']} cores a step cannot take less than CPU/{fl['cores']}, "
-            f"so the ratio cannot fall below **{fl['ratio_floor']:.2f}** at these costs, however well the processes overlap"]
+    return [
+        f"- CPU per lockstep step (paper run, {fl['steps']} against its 80 steps, start-up cancels): {fl['zenoh_cpu_ms_per_step']:.2f} ms "
+        f"in the Zenoh run's processes ({roles} ms) against {fl['inmemory_ms_per_step']:.2f} ms per step in memory; stepping "
+        f"{fl['zenoh_stepping_ms_per_step']:.2f} ms per step.  On {fl['cores']} cores a step cannot take less than CPU/{fl['cores']}, "
+        f"so the ratio cannot fall below **{fl['ratio_floor']:.2f}** at these costs, however well the processes overlap"
+    ]
 
 
 def _profile_lines(*profiles: dict) -> list[str]:
@@ -598,20 +769,29 @@ def _profile_lines(*profiles: dict) -> list[str]:
     if not ok:
         return ["", "Node profile: no report (exit " + ", ".join(str(p.get("exit_code")) for p in profiles) + ")."]
     p0 = ok[0]
-    lines = ["", f"Where a node's CPU goes per step: real-time ring of {p0['nodes']} nodes, {p0['steps']} steps, every node "
-             "profiled (`NETSETEST_PROFILE`, thread CPU; median over the nodes; " + "; ".join(
-                 f"{p['objective']}: load before {p['load_before']}, {p['deadline_misses']} deadline misses" for p in ok) + "):", "",
-             "| phase | " + " | ".join(f"{p['objective']}: µs per step | calls" for p in ok) + " | what |",
-             "|---|" + "---|---|" * len(ok) + "---|"]
+    lines = [
+        "",
+        f"Where a node's CPU goes per step: real-time ring of {p0['nodes']} nodes, {p0['steps']} steps, every node "
+        "profiled (`NETSETEST_PROFILE`, thread CPU; median over the nodes; "
+        + "; ".join(f"{p['objective']}: load before {p['load_before']}, {p['deadline_misses']} deadline misses" for p in ok)
+        + "):",
+        "",
+        "| phase | " + " | ".join(f"{p['objective']}: µs per step | calls" for p in ok) + " | what |",
+        "|---|" + "---|---|" * len(ok) + "---|",
+    ]
     for name, what in PROFILE_ROWS:
         cells = []
         for p in ok:
             ph = p["phases"][name]
             cells += [f"{1000 * ph['ms_per_step']:.0f}", f"{ph['calls_per_step']:.2f}" if name not in ("other", "threads") else ""]
         lines.append(f"| {name} | " + " | ".join(cells) + f" | {what} |")
-    lines.append("| **process** | " + " | ".join(f"**{1000 * p['process_ms_per_step']:.0f}** | " for p in ok)
-                 + "the node's whole CPU per step; at 10 Hz " + ", ".join(
-                     f"{p['objective']}: {p['nodes']} nodes need {p['nodes'] * p['process_ms_per_step'] / 100:.2f} cores" for p in ok) + " |")
+    lines.append(
+        "| **process** | "
+        + " | ".join(f"**{1000 * p['process_ms_per_step']:.0f}** | " for p in ok)
+        + "the node's whole CPU per step; at 10 Hz "
+        + ", ".join(f"{p['objective']}: {p['nodes']} nodes need {p['nodes'] * p['process_ms_per_step'] / 100:.2f} cores" for p in ok)
+        + " |"
+    )
     return lines
 
 

@@ -45,9 +45,14 @@ def soak(steps: int, topology: str = "paper6") -> dict:
     tail = ks >= WARMUP_FRACTION * steps
     slope = float(np.polyfit(ks[tail], mb[tail], 1)[0] * 10_000) if tail.sum() >= 3 else float("nan")
     return {
-        "steps": steps, "wall_s": wall, "steps_per_s": steps / wall, "rss_mb": samples,
-        "rss_start_mb": float(mb[tail][0]) if tail.any() else None, "rss_end_mb": float(mb[-1]) if len(mb) else None,
-        "slope_mb_per_10k_steps": slope, "violations": res.summary.violations_total,
+        "steps": steps,
+        "wall_s": wall,
+        "steps_per_s": steps / wall,
+        "rss_mb": samples,
+        "rss_start_mb": float(mb[tail][0]) if tail.any() else None,
+        "rss_end_mb": float(mb[-1]) if len(mb) else None,
+        "slope_mb_per_10k_steps": slope,
+        "violations": res.summary.violations_total,
     }
 
 

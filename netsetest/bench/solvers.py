@@ -55,7 +55,7 @@ def capture(scenario: Scenario, variant: str, signals: str = "paper", seed: int 
     cases: list[StepCase] = []
     times: list[float] = []
 
-    def record(est: sdp.LocalEstimator, prev: sdp.Ellipsoid, inp: sdp.StepInput, res: sdp.StepResult, ms: float) -> None:
+    def record(est: sdp.LocalEstimator, prev: sdp.NodeSet, inp: sdp.UpdateInput, res: sdp.StepResult, ms: float) -> None:
         times.append(ms)
         cases.append(StepCase(est.node_id, (prev, inp)))
 
@@ -133,11 +133,17 @@ def side_by_side(cap: Capture, n_ref: int, n_naive: int, n_cvxpy: int) -> dict:
                 width["naive"][k] = 2.0 * np.sqrt(rho * rn.P[2, 2])
 
     res: dict = {
-        "variant": variant, "case": sc.case, "node_steps": len(cases), "fallbacks": fallbacks,
-        "iterations_median": statistics.median(iters) if iters else None, "iterations_max": max(iters) if iters else None,
-        "fast_ms": _stats(list(out["fast"].values())), "fast_cpu_ms": _stats(list(out["fast_cpu"].values())),
+        "variant": variant,
+        "case": sc.case,
+        "node_steps": len(cases),
+        "fallbacks": fallbacks,
+        "iterations_median": statistics.median(iters) if iters else None,
+        "iterations_max": max(iters) if iters else None,
+        "fast_ms": _stats(list(out["fast"].values())),
+        "fast_cpu_ms": _stats(list(out["fast_cpu"].values())),
         "fast_solve_ms": _stats(list(out["fast_solve"].values())),
-        "in_run_fast_ms": _stats(cap.step_ms), "degree_of_nodes": {i: len(sc.node(i).in_weights) for i in ids},
+        "in_run_fast_ms": _stats(cap.step_ms),
+        "degree_of_nodes": {i: len(sc.node(i).in_weights) for i in ids},
     }
     for name in ("prev", "straightforward", "naive"):
         ks = sorted(out[name])

@@ -106,7 +106,7 @@ W = 2.0
 def _car_tables() -> str:
     """paper6_car's [vehicle], [speed], [steering] and [model_uncertainty] tables, as the file has them."""
     text = (TOPOLOGY_DIR / "paper6_car.toml").read_text()
-    return text[text.index("[vehicle]"):text.index("[[nodes]]")]
+    return text[text.index("[vehicle]") : text.index("[[nodes]]")]
 
 
 def _profile(i: int, variant: RingVariant) -> str:
@@ -115,7 +115,11 @@ def _profile(i: int, variant: RingVariant) -> str:
 
 
 def write_topology(
-    path: Path, neighbours: dict[int, set[int]], steps: int = 80, case: str = "nsnim", name: str | None = None,
+    path: Path,
+    neighbours: dict[int, set[int]],
+    steps: int = 80,
+    case: str = "nsnim",
+    name: str | None = None,
     variant: RingVariant = "plain",
 ) -> Path:
     """Write a topology file (self-loops included) that points at the repository's node profiles."""

@@ -63,8 +63,14 @@ def _kill(procs: list[subprocess.Popen]) -> None:
 
 
 def cli_run(
-    topology: Path, mode: str, clock: str = "lockstep", steps: int | None = None, timeout: float = 600.0,
-    sample_stepping_s: float | None = None, env: dict[str, str] | None = None, extra: list[str] | None = None,
+    topology: Path,
+    mode: str,
+    clock: str = "lockstep",
+    steps: int | None = None,
+    timeout: float = 600.0,
+    sample_stepping_s: float | None = None,
+    env: dict[str, str] | None = None,
+    extra: list[str] | None = None,
 ) -> dict:
     """One ``netsetest run`` as a subprocess: wall time, exit code and the summary JSON; with
     ``sample_stepping_s`` (how long its stepping lasts), the CPU and memory of its processes
@@ -80,20 +86,30 @@ def cli_run(
         if sample:
             cmd += ["--record", str(record_path)]
         t0 = time.perf_counter()
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True,
-                                env={**os.environ, **(env or {})})
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True, env={**os.environ, **(env or {})})
         sampler = ProcessSampler(proc.pid) if sample else None
         try:
             _, err = proc.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:
             _kill([proc])
-            return {"wall_s": timeout, "exit_code": None, "summary": None, "error": "timeout",
-                    "processes": sampler.stop(sample_stepping_s) if sampler else None}
+            return {
+                "wall_s": timeout,
+                "exit_code": None,
+                "summary": None,
+                "error": "timeout",
+                "processes": sampler.stop(sample_stepping_s) if sampler else None,
+            }
         wall = time.perf_counter() - t0
         summary = json.loads(summary_path.read_text()) if summary_path.exists() else None
         late = _late_per_step(record_path) if sample else None
-    return {"wall_s": wall, "exit_code": proc.returncode, "summary": summary, "stderr_tail": err[-800:] if err else "",
-            "processes": sampler.stop(sample_stepping_s) if sampler else None, "late_per_step": late}
+    return {
+        "wall_s": wall,
+        "exit_code": proc.returncode,
+        "summary": summary,
+        "stderr_tail": err[-800:] if err else "",
+        "processes": sampler.stop(sample_stepping_s) if sampler else None,
+        "late_per_step": late,
+    }
 
 
 STEP0_LINE = ("[vehicle] all ", "are ready; clock")  # logged by run_vehicle right before step 0's input goes out
@@ -108,8 +124,9 @@ def launch_to_step0(topology: Path, reps: int, steps: int = 3, timeout: float = 
     for _ in range(reps):
         load = Path("/proc/loadavg").read_text().split()[0]
         t0 = time.perf_counter()
-        proc = subprocess.Popen([*PY, "run", str(topology), "--steps", str(steps)], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.PIPE, text=True, start_new_session=True)
+        proc = subprocess.Popen(
+            [*PY, "run", str(topology), "--steps", str(steps)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True
+        )
         seen: list[float] = []
 
         def read(stream) -> None:
@@ -311,8 +328,7 @@ def _wait_rusage(procs: dict[str, subprocess.Popen], deadline: float) -> dict[st
     return out
 
 
-def _role_argv(topology: Path, run_id: str, steps: int | None, name: str, ports: dict[str, int], clock: Clock,
-               summary_json: str | None = None) -> list[str]:
+def _role_argv(topology: Path, run_id: str, steps: int | None, name: str, ports: dict[str, int], clock: Clock, summary_json: str | None = None) -> list[str]:
     """The command line of role ``name`` (collector, vehicle, nodeN) in an open peer mesh on ``ports``."""
     endpoint = lambda n: f"tcp/127.0.0.1:{ports[n]}"  # noqa: E731  # a one-line local helper
     scenario = ScenarioSpec(str(topology), steps=steps)
@@ -353,10 +369,15 @@ def observed_lockstep(topology: Path, steps: int | None = None, insecure: bool =
     if first is not None and n_steps in out.checked_at and n_steps > first:
         stepping = (out.checked_at[n_steps] - out.checked_at[first]) * (n_steps + 1) / (n_steps - first)
     return {
-        "security": "insecure" if insecure else "mtls+acl", "nodes": len(plan.scenario.ids), "steps": n_steps, "stepping_s": stepping,
-        "total_s": t_done - t_start, "startup_s": None if first is None else out.checked_at[first] - t_start,
+        "security": "insecure" if insecure else "mtls+acl",
+        "nodes": len(plan.scenario.ids),
+        "steps": n_steps,
+        "stepping_s": stepping,
+        "total_s": t_done - t_start,
+        "startup_s": None if first is None else out.checked_at[first] - t_start,
         "node_peak_rss_mb": [u["peak_rss_mb"] for n, u in usage.items() if n.startswith("node") and u["peak_rss_mb"] is not None],
-        "usage": usage, "summary": out.summary.to_dict() if out.summary else None,
+        "usage": usage,
+        "summary": out.summary.to_dict() if out.summary else None,
         "exit_codes": {n: u["exit_code"] for n, u in usage.items()},
     }
 
@@ -376,9 +397,14 @@ def node_startup(directory: Path, reps: int = 3, timeout: float = 120.0) -> dict
         procs: dict[str, subprocess.Popen] = {}
         try:
             for name in ("collector", "vehicle"):
-                procs[name] = subprocess.Popen([*PY, *_role_argv(topo, run_id, None, name, role_ports, "lockstep")],
-                                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
-                                               start_new_session=True, env=role_env())
+                procs[name] = subprocess.Popen(
+                    [*PY, *_role_argv(topo, run_id, None, name, role_ports, "lockstep")],
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                    stdin=subprocess.DEVNULL,
+                    start_new_session=True,
+                    env=role_env(),
+                )
             # wait until both announce themselves (they then wait for the node at the start-up barrier)
             t_wait = time.monotonic()
             while time.monotonic() - t_wait < timeout:
@@ -388,20 +414,27 @@ def node_startup(directory: Path, reps: int = 3, timeout: float = 120.0) -> dict
                 time.sleep(0.05)
             time.sleep(0.3)  # let the machine settle after their start-up
             t0 = time.monotonic()
-            procs["node1"] = subprocess.Popen([*PY, *_role_argv(topo, run_id, None, "node1", role_ports, "lockstep")],
-                                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
-                                              start_new_session=True, env=role_env())
+            procs["node1"] = subprocess.Popen(
+                [*PY, *_role_argv(topo, run_id, None, "node1", role_ports, "lockstep")],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                stdin=subprocess.DEVNULL,
+                start_new_session=True,
+                env=role_env(),
+            )
             usage = _wait_rusage(procs, time.monotonic() + timeout)
         finally:
             _kill(list(procs.values()))
             obs.close()
         st = {m.get("step"): t for t, _, m in sorted(obs.seen(lambda k, m: m.get("type") == "state" and m.get("node") == 1), reverse=True)}
-        rows.append({
-            "first_state_s": st[0] - t0 if 0 in st else None,
-            "first_estimate_s": st[1] - t0 if 1 in st else None,
-            "peak_rss_mb": usage["node1"]["peak_rss_mb"],
-            "exit_code": usage["node1"]["exit_code"],
-        })
+        rows.append(
+            {
+                "first_state_s": st[0] - t0 if 0 in st else None,
+                "first_estimate_s": st[1] - t0 if 1 in st else None,
+                "peak_rss_mb": usage["node1"]["peak_rss_mb"],
+                "exit_code": usage["node1"]["exit_code"],
+            }
+        )
     return {"reps": rows}
 
 
@@ -422,21 +455,29 @@ def _realtime_run(topo: Path, n: int, steps: int, retries: int, log, label: str 
         misses = sum(row.get("deadline_misses") or 0 for row in s.get("nodes", [])) if s else None
         late = r.get("late_per_step") or {}
         row = {
-            "nodes": n, "attempt": attempt + 1, "exit_code": r["exit_code"], "wall_s": r["wall_s"], "deadline_misses": misses,
+            "nodes": n,
+            "attempt": attempt + 1,
+            "exit_code": r["exit_code"],
+            "wall_s": r["wall_s"],
+            "deadline_misses": misses,
             "nodes_missing": s.get("nodes_missing") if s else None,
             "fallbacks": sum(x.get("fallbacks", 0) for x in s.get("nodes", [])) if s else None,
             "violations": s.get("violations_total") if s else None,
-            "load_before": load, "late_steps": len(late), "first_late_step": min(late) if late else None,
+            "load_before": load,
+            "late_steps": len(late),
+            "first_late_step": min(late) if late else None,
             "processes": r["processes"],
             **cpu_demand(r["processes"], n),
         }
         rows.append(row)
         pr = r["processes"] or {}
-        log(f"  real time{label}, {n} nodes (attempt {attempt + 1}, load {load}): exit {r['exit_code']}, deadline misses {misses} "
+        log(
+            f"  real time{label}, {n} nodes (attempt {attempt + 1}, load {load}): exit {r['exit_code']}, deadline misses {misses} "
             f"in {len(late)} steps, missing {row['nodes_missing']}, {r['wall_s']:.0f} s; node CPU {pr.get('node_cpu_pct_median') or 0:.2f} % "
             f"each, all nodes {pr.get('nodes_cpu_pct_total', 0):.0f} %, others {pr.get('role_cpu_pct')}, other work on the machine "
             f"{pr.get('other_work_pct') or 0:.0f} %; {row['node_cpu_ms_per_step'] or 0:.2f} ms of CPU per node-step, "
-            f"{row['demand_cores'] or 0:.2f} cores needed")
+            f"{row['demand_cores'] or 0:.2f} cores needed"
+        )
         if r["exit_code"] == 0 and misses == 0 and not row["nodes_missing"]:
             return True, rows
     return False, rows
@@ -457,8 +498,7 @@ def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int 
     return {"max_nodes": best, "runs": runs, "steps": steps}
 
 
-def realtime_fit(directory: Path, variants: tuple[RingVariant, ...], sizes: list[int], start: int | None, steps: int,
-                 retries: int = 1, log=print) -> dict:
+def realtime_fit(directory: Path, variants: tuple[RingVariant, ...], sizes: list[int], start: int | None, steps: int, retries: int = 1, log=print) -> dict:
     """Per ring variant (bench/topologies.py: a reference sensor, everyone's readings under max_faulty, the
     CommonRoad car as the truth): the largest of ``sizes`` up to ``start`` (the plain ladder's largest) that
     still runs in real time, walking down from ``start``, and its ratio to ``start``."""
@@ -504,23 +544,37 @@ def realtime_node_profile(directory: Path, nodes: int, steps: int, objective: st
     topo = ring_topology(directory, nodes, steps)
     with tempfile.TemporaryDirectory(prefix="nsprofile-") as prof:
         load = _loadavg()
-        r = cli_run(topo, "zenoh", "realtime", timeout=120 + 3 * nodes + steps * 0.2, sample_stepping_s=steps * RING_TAU_S,
-                    env={"NETSETEST_PROFILE": prof}, extra=["--objective", objective] if objective else None)
+        r = cli_run(
+            topo,
+            "zenoh",
+            "realtime",
+            timeout=120 + 3 * nodes + steps * 0.2,
+            sample_stepping_s=steps * RING_TAU_S,
+            env={"NETSETEST_PROFILE": prof},
+            extra=["--objective", objective] if objective else None,
+        )
         reports = [json.loads(p.read_text()) for p in sorted(Path(prof).glob("node-*.json"))]
     reports = [x for x in reports if x.get("steps")]
     s = r["summary"] or {}
     out: dict = {
-        "nodes": nodes, "steps": steps, "objective": objective or DEFAULT_OBJECTIVE, "load_before": load, "exit_code": r["exit_code"],
+        "nodes": nodes,
+        "steps": steps,
+        "objective": objective or DEFAULT_OBJECTIVE,
+        "load_before": load,
+        "exit_code": r["exit_code"],
         "profiled_nodes": len(reports),
         "deadline_misses": sum(row.get("deadline_misses") or 0 for row in s.get("nodes", [])) if s else None,
-        "processes": r["processes"], **cpu_demand(r["processes"], nodes),
+        "processes": r["processes"],
+        **cpu_demand(r["processes"], nodes),
     }
     if not reports:
         return out
     med = lambda xs: statistics.median(xs)  # noqa: E731  # a one-line local helper
     out["phases"] = {
-        name: {"ms_per_step": med([x["phases"][name]["ms_per_step"] for x in reports]),
-               "calls_per_step": med([x["phases"][name]["calls_per_step"] for x in reports])}
+        name: {
+            "ms_per_step": med([x["phases"][name]["ms_per_step"] for x in reports]),
+            "calls_per_step": med([x["phases"][name]["calls_per_step"] for x in reports]),
+        }
         for name in reports[0]["phases"]
     }
     out["thread_ms_per_step"] = med([x["thread_ms_per_step"] for x in reports])
@@ -529,8 +583,18 @@ def realtime_node_profile(directory: Path, nodes: int, steps: int, objective: st
 
 
 # What a node process loads, in the order it loads it (netsetest.cli.main → the node's modules).
-NODE_IMPORT_STAGES = ("numpy", "msgspec", "netsetest.messages", "netsetest.config.schema", "zenoh", "clarabel",
-                      "netsetest.estimator.sdp", "netsetest.roles.node", "netsetest.cli.main", "netsetest.cli.processes")
+NODE_IMPORT_STAGES = (
+    "numpy",
+    "msgspec",
+    "netsetest.messages",
+    "netsetest.config.schema",
+    "zenoh",
+    "clarabel",
+    "netsetest.estimator.sdp",
+    "netsetest.roles.node",
+    "netsetest.cli.main",
+    "netsetest.cli.processes",
+)
 _MEMORY_PROBE = r"""
 import json, sys, time
 def rss():
@@ -550,8 +614,7 @@ print(json.dumps(rows))
 def node_memory_profile() -> list[dict]:
     """RSS and wall time a node process adds per import stage and for its Zenoh session (the
     environment of :func:`role_env`): where the node's memory and start-up go."""
-    out = subprocess.run([sys.executable, "-c", _MEMORY_PROBE, *NODE_IMPORT_STAGES], capture_output=True, text=True,
-                         timeout=120, env=role_env())
+    out = subprocess.run([sys.executable, "-c", _MEMORY_PROBE, *NODE_IMPORT_STAGES], capture_output=True, text=True, timeout=120, env=role_env())
     if out.returncode != 0:
         return [{"stage": "error", "detail": out.stderr[-300:]}]
     rows, prev = [], 0.0

@@ -140,9 +140,7 @@ class ZenohBus(Bus):
         pub = self._pubs.get(key)
         if pub is None:
             # lockstep needs every message: reliable transport, and block rather than drop when congested
-            pub = self.session.declare_publisher(
-                key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE
-            )
+            pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE)
             self._pubs[key] = pub
         return pub
 

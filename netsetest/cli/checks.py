@@ -16,7 +16,9 @@ from netsetest.runtime import argtypes
 positive_int, seed, run_id, endpoint = argtypes.positive_int, argtypes.seed, argtypes.run_id, argtypes.endpoint
 
 SEED_RANGE_RE = re.compile(r"(\d+)\s*-\s*(\d+)")
-SEED_RANGE_MAX = 10_000  # seeds one range may name (a typo like 0-99999999 is not a request)  # numpy's SeedSequence takes any non-negative integer; keep it to 64 bits
+SEED_RANGE_MAX = (
+    10_000  # seeds one range may name (a typo like 0-99999999 is not a request)  # numpy's SeedSequence takes any non-negative integer; keep it to 64 bits
+)
 DRAWN_SEED_BITS = 32  # a run's own seed: unguessable by another local user, short enough to type back
 
 
@@ -138,10 +140,6 @@ def output_dir(path: str, option: str) -> None:
         raise OutputError(f"{option} {path}: cannot create it ({exc.strerror or exc})") from None
     if not os.access(p, os.W_OK | os.X_OK):
         raise OutputError(f"{option} {path}: not writable")
-
-
-
-
 
 
 def seed_or_fresh(value: int | None) -> int:

@@ -17,14 +17,28 @@ COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 def add_parser(sub: argparse._SubParsersAction, scenario_args: Callable[[argparse.ArgumentParser], None]) -> None:
     p = sub.add_parser("compare", help="every guaranteed estimator on the same vehicle, network and data: one row each")
     scenario_args(p)
-    p.add_argument("--estimators", type=checks.name_list(ESTIMATOR_NAMES, "estimator"), default=DEFAULT_COMPARE, metavar="A,B,…",
-                   help=f"rows, from {', '.join(ESTIMATOR_NAMES)} (default: {','.join(DEFAULT_COMPARE)})")
-    p.add_argument("--signals", type=checks.name_list(SIGNAL_KINDS, "signal kind"), default=("paper",), metavar="KINDS", help="paper and/or worst, comma-separated (default: paper)")
+    p.add_argument(
+        "--estimators",
+        type=checks.name_list(ESTIMATOR_NAMES, "estimator"),
+        default=DEFAULT_COMPARE,
+        metavar="A,B,…",
+        help=f"rows, from {', '.join(ESTIMATOR_NAMES)} (default: {','.join(DEFAULT_COMPARE)})",
+    )
+    p.add_argument(
+        "--signals",
+        type=checks.name_list(SIGNAL_KINDS, "signal kind"),
+        default=("paper",),
+        metavar="KINDS",
+        help="paper and/or worst, comma-separated (default: paper)",
+    )
     p.add_argument("--seeds", type=checks.seed_list, default=(0,), metavar="S,…", help="seeds, comma-separated, ranges A-B allowed (default: 0)")
-    p.add_argument("--alone", action="store_true",
-                   help="two more rows, what the network is worth: sdp-alone (every node run on its own: a self-loop "
-                   "only, no reading) and exact-local (each node's exact limit from its own data), against the same "
-                   "central exact limit (docs/network.md)")
+    p.add_argument(
+        "--alone",
+        action="store_true",
+        help="two more rows, what the network is worth: sdp-alone (every node run on its own: a self-loop "
+        "only, no reading) and exact-local (each node's exact limit from its own data), against the same "
+        "central exact limit (docs/network.md)",
+    )
     p.add_argument("--json", metavar="PATH", help="write the rows as a JSON list")
     p.add_argument("--markdown", metavar="PATH", help="write the table as Markdown")
     p.add_argument("--plot", metavar="DIR", help="one figure per node: every estimator's fault bounds and the truth (first run)")

@@ -41,13 +41,17 @@ def _scenario_args(p: argparse.ArgumentParser) -> None:
 
 
 def _run_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--signals", choices=["paper", "worst"], default="paper",
-                   help="paper: cos noise and uniform wind; worst: noise and wind at ±bound, random sign")
-    p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled",
-                   help="estimator: one SDP with the scheduled model, or one per T-S rule")
+    p.add_argument(
+        "--signals", choices=["paper", "worst"], default="paper", help="paper: cos noise and uniform wind; worst: noise and wind at ±bound, random sign"
+    )
+    p.add_argument("--variant", choices=["scheduled", "per-rule"], default="scheduled", help="estimator: one SDP with the scheduled model, or one per T-S rule")
     p.add_argument("--objective", choices=list(OBJECTIVES), default=DEFAULT_OBJECTIVE, help=OBJECTIVE_HELP)
-    p.add_argument("--seed", type=checks.seed, default=None,
-                   help="non-negative integer: random seed of noise, wind and losses (default: a fresh random one, printed with the verdict)")
+    p.add_argument(
+        "--seed",
+        type=checks.seed,
+        default=None,
+        help="non-negative integer: random seed of noise, wind and losses (default: a fresh random one, printed with the verdict)",
+    )
 
 
 def has_default(action: argparse.Action) -> bool:
@@ -91,8 +95,12 @@ def build_parser() -> argparse.ArgumentParser:
     _run_args(p)
     processes.estimator_arg(p)
     p.add_argument("--mode", choices=["inmemory", "zenoh"], default="zenoh", help="one process, or one process per role over Zenoh")
-    p.add_argument("--clock", choices=["lockstep", "realtime"], default="lockstep",
-                   help="lockstep: the vehicle waits for every node; realtime: one step every τs (zenoh mode)")
+    p.add_argument(
+        "--clock",
+        choices=["lockstep", "realtime"],
+        default="lockstep",
+        help="lockstep: the vehicle waits for every node; realtime: one step every τs (zenoh mode)",
+    )
     p.add_argument("--record", metavar="PATH", help="write the run record: JSON, .gz compresses, .mcap for Foxglove (default: none)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing --record file (default: refuse it)")
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON (default: none)")
@@ -113,40 +121,68 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("record", help="a run record (JSON, JSON Lines, .gz or .mcap)")
     p.add_argument("--json", metavar="PATH", help="write the per-step exact intervals and the ratios as JSON")
     p.add_argument("--topology", metavar="PATH", help="topology file (default: the one named in the record)")
-    p.add_argument("--fault-bounds", choices=["used", "all", "none"], default="used",
-                   help="declared fault bounds: where the estimator relies on them (saturating sensors) and reference "
-                   "sensors (size = 0), everywhere, or nowhere")
-    p.add_argument("--local", action="store_true",
-                   help="also each node's exact limit from its own data alone, against the whole network's: what the "
-                   "exchange could buy it at best (docs/network.md)")
+    p.add_argument(
+        "--fault-bounds",
+        choices=["used", "all", "none"],
+        default="used",
+        help="declared fault bounds: where the estimator relies on them (saturating sensors) and reference sensors (size = 0), everywhere, or nowhere",
+    )
+    p.add_argument(
+        "--local",
+        action="store_true",
+        help="also each node's exact limit from its own data alone, against the whole network's: what the exchange could buy it at best (docs/network.md)",
+    )
     p = sub.add_parser("calibrate", help="the smallest model-mismatch bound covering a plant's e_k on training manoeuvres")
     p.add_argument("topology", help="topology with a nonlinear plant (a path, or a bundled name such as paper6_car)")
-    p.add_argument("--manoeuvres", type=checks.drive_list, required=True, metavar="A,B@AMP,...",
-                   help=f"training manoeuvres, comma-separated: {', '.join(MANOEUVRES)}; NAME@AMP steers "
-                   f"{', '.join(WITH_AMPLITUDE)} with amplitude AMP rad instead of [steering] high (e.g. an "
-                   "FMVSS 126 series sine-dwell@0.012,sine-dwell@0.02,sine-dwell@0.03)")
-    p.add_argument("--seeds", type=checks.seed_list, default=tuple(range(5)), metavar="A-B,...",
-                   help="seeds of the training drives, e.g. 0-9 (default: 0-4)")
-    p.add_argument("--signals", type=checks.name_list(SIGNAL_KINDS, "signal kind"), default=SIGNAL_KINDS, metavar="A,B",
-                   help="signal families of the training drives (default: paper,worst)")
+    p.add_argument(
+        "--manoeuvres",
+        type=checks.drive_list,
+        required=True,
+        metavar="A,B@AMP,...",
+        help=f"training manoeuvres, comma-separated: {', '.join(MANOEUVRES)}; NAME@AMP steers "
+        f"{', '.join(WITH_AMPLITUDE)} with amplitude AMP rad instead of [steering] high (e.g. an "
+        "FMVSS 126 series sine-dwell@0.012,sine-dwell@0.02,sine-dwell@0.03)",
+    )
+    p.add_argument("--seeds", type=checks.seed_list, default=tuple(range(5)), metavar="A-B,...", help="seeds of the training drives, e.g. 0-9 (default: 0-4)")
+    p.add_argument(
+        "--signals",
+        type=checks.name_list(SIGNAL_KINDS, "signal kind"),
+        default=SIGNAL_KINDS,
+        metavar="A,B",
+        help="signal families of the training drives (default: paper,worst)",
+    )
     p.add_argument("--steps", type=checks.positive_int, help="steps per drive (default: the topology's)")
-    p.add_argument("--margin", type=checks.non_negative_float, default=DEFAULT_MARGIN,
-                   help=f"relative enlargement of the half-widths and semi-axes (default: {DEFAULT_MARGIN})")
-    p.add_argument("--causes", action="store_true",
-                   help="also drive the same car's simpler models (multi-body → single-track → linear tyres): how much of "
-                   "e_k each cause contributes")
+    p.add_argument(
+        "--margin",
+        type=checks.non_negative_float,
+        default=DEFAULT_MARGIN,
+        help=f"relative enlargement of the half-widths and semi-axes (default: {DEFAULT_MARGIN})",
+    )
+    p.add_argument(
+        "--causes",
+        action="store_true",
+        help="also drive the same car's simpler models (multi-body → single-track → linear tyres): how much of e_k each cause contributes",
+    )
     p.add_argument("--json", metavar="PATH", help="write the bounds and the per-drive maxima as JSON")
 
     p = sub.add_parser("bench", help="the performance benchmark: solve times, tightness, Zenoh overhead, start-up, memory, real-time scale, defences")
     p.add_argument("--quick", action="store_true", help="fewer steps and samples (about 10 minutes; default: the full benchmark, about 30)")
     p.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
     p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown (default: none)")
-    p.add_argument("--only", choices=SECTIONS,
-                   help="run one part alone: plant = a car as the truth, network = what the exchange can buy, scenario = the paper's "
-                   "scenario per node and every estimator compared (default: every part)")
-    p.add_argument("--render-docs", nargs="?", const=".", metavar="ROOT",
-                   help="measure nothing: rewrite docs/results.md and the generated sections of README.md and docs/performance.md "
-                   "under ROOT (default: .) from the committed figures, bench/*.json")
+    p.add_argument(
+        "--only",
+        choices=SECTIONS,
+        help="run one part alone: plant = a car as the truth, network = what the exchange can buy, scenario = the paper's "
+        "scenario per node and every estimator compared (default: every part)",
+    )
+    p.add_argument(
+        "--render-docs",
+        nargs="?",
+        const=".",
+        metavar="ROOT",
+        help="measure nothing: rewrite docs/results.md and the generated sections of README.md and docs/performance.md "
+        "under ROOT (default: .) from the committed figures, bench/*.json",
+    )
 
     from netsetest.cli import compare, tools
 
@@ -172,8 +208,11 @@ def cmd_run(a: argparse.Namespace) -> int:
 
     given = zenoh_options_given(a)
     if given:
-        print(f"netsetest run: {', '.join(given)}: only a Zenoh run has {'it' if len(given) == 1 else 'them'} "
-              "(--mode zenoh, the default); the in-memory run would ignore it", file=sys.stderr)
+        print(
+            f"netsetest run: {', '.join(given)}: only a Zenoh run has {'it' if len(given) == 1 else 'them'} "
+            "(--mode zenoh, the default); the in-memory run would ignore it",
+            file=sys.stderr,
+        )
         return EXIT_BAD_INPUT
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
@@ -188,8 +227,7 @@ def cmd_run(a: argparse.Namespace) -> int:
 
 def _note_partial(command: str, rec: Record) -> None:
     if rec.partial:
-        print(f"netsetest {command}: {rec.path}: partial record (the run did not finish; last complete step "
-              f"{rec.last_complete_step})", file=sys.stderr)
+        print(f"netsetest {command}: {rec.path}: partial record (the run did not finish; last complete step {rec.last_complete_step})", file=sys.stderr)
 
 
 def cmd_inspect(a: argparse.Namespace) -> int:
@@ -218,8 +256,7 @@ def cmd_inspect(a: argparse.Namespace) -> int:
             e = "-" if r["E"] is None else f"{r['E']:7.3f}"
             flag = "  not judged" if not r["judged"] else ("" if r["contained"] else "  MISS")
             fdi = r["fdi"] or "-"  # detected: the interval excludes 0 (docs/fdi.md)
-            print(f"{r['step']:5d} {ft:>9} {r['fault_estimate']:9.4f} {r['fault_lower']:9.4f} {r['fault_upper']:9.4f} {e:>7}  {fdi:<9}  "
-                  f"{r['status']}{flag}")
+            print(f"{r['step']:5d} {ft:>9} {r['fault_estimate']:9.4f} {r['fault_lower']:9.4f} {r['fault_upper']:9.4f} {e:>7}  {fdi:<9}  {r['status']}{flag}")
         print()
     return 0
 
@@ -267,16 +304,21 @@ def cmd_exact(a: argparse.Namespace) -> int:
     bar.close()
     cmp = compare_record(rec, ex)
     bounded = ", ".join(map(str, ex.bounded_nodes)) or "none"
-    print(f"exact bounds for {a.record}: case {sc.case}, {len(ex.steps)} steps, fault bounds '{a.fault_bounds}' "
-          f"(applied on nodes: {bounded}), {time.perf_counter() - t0:.1f} s")
+    print(
+        f"exact bounds for {a.record}: case {sc.case}, {len(ex.steps)} steps, fault bounds '{a.fault_bounds}' "
+        f"(applied on nodes: {bounded}), {time.perf_counter() - t0:.1f} s"
+    )
     if ex.infeasible_steps:
         print(f"  no trajectory meets the assumptions at steps {list(ex.infeasible_steps)} (an assumption was broken)")
     if ex.omitted:
-        print(f"  not applied: {', '.join(ex.omitted)} (a mixed-integer program): these bounds are an outer bound of the "
-              "exact limit, and a node that uses the assumption may be narrower (docs/exact.md)")
+        print(
+            f"  not applied: {', '.join(ex.omitted)} (a mixed-integer program): these bounds are an outer bound of the "
+            "exact limit, and a node that uses the assumption may be narrower (docs/exact.md)"
+        )
     names = {"f": "fault", "r": "yaw rate", "beta": "sideslip"}
     print("published width / exact width: mean over steps ≥ 10 | all steps; relative-RMS radius (Althoff & Rath (9), exact = 1)")
     print(f"{'node':>4}  " + "  ".join(f"{names[c]:>22}" for c in COORDINATES))
+
     def cell(width: float, width_all: float, rms: float) -> str:  # one format for the node rows and the mean
         return f"{width:6.3f} |{width_all:6.3f}  {rms:6.3f}"
 
@@ -289,9 +331,16 @@ def cmd_exact(a: argparse.Namespace) -> int:
         print(f"  {left} node-step intervals left out: the exact interval is unbounded there (inf) or empty")
     narrower = sum(x.narrower for n in cmp.nodes for x in n.ratios.values())
     total = sum(len(rec.nodes[n.node].steps) for n in cmp.nodes) * len(COORDINATES)
-    print(f"published interval narrower than exact on {narrower} of {total} node-step intervals"
-          + (f" (the nodes used {', '.join(ex.omitted)}, which these bounds leave out)" if narrower and ex.omitted
-             else " (the estimator relied on more than these assumptions there, or one of the two is wrong)" if narrower else ""))
+    print(
+        f"published interval narrower than exact on {narrower} of {total} node-step intervals"
+        + (
+            f" (the nodes used {', '.join(ex.omitted)}, which these bounds leave out)"
+            if narrower and ex.omitted
+            else " (the estimator relied on more than these assumptions there, or one of the two is wrong)"
+            if narrower
+            else ""
+        )
+    )
     doc = exact_document(rec, ex, cmp)
     if a.local:
         from netsetest.analysis.exact import local_limits
@@ -299,14 +348,15 @@ def cmd_exact(a: argparse.Namespace) -> int:
         bar = Progress(len(sc.ids), "exact --local")
         limits = local_limits(sc, rec, a.fault_bounds, central=ex, progress=lambda n, total: bar.update(n))
         bar.close()
-        print("the exchange's value at best: exact limit from the node's own data / from every node's data "
-              "(mean width from step 10; 1.000: the network cannot help this node)")
+        print(
+            "the exchange's value at best: exact limit from the node's own data / from every node's data "
+            "(mean width from step 10; 1.000: the network cannot help this node)"
+        )
         print(f"{'node':>4}  {'own fault':>10}  {'yaw rate':>10}  {'sideslip':>10}")
         for lim in limits:
             cells = ("  declared 0" if math.isnan(v) else f"{v:10.3f}" for v in (lim.fault_ratio, lim.r_ratio, lim.beta_ratio))
             print(f"{lim.node:>4}  " + "  ".join(cells))
-        doc["local_over_central"] = [{k: None if isinstance(v, float) and math.isnan(v) else v for k, v in dataclasses.asdict(lim).items()}
-                                     for lim in limits]
+        doc["local_over_central"] = [{k: None if isinstance(v, float) and math.isnan(v) else v for k, v in dataclasses.asdict(lim).items()} for lim in limits]
     if a.json:
         with open(a.json, "w") as fh:
             json.dump(doc, fh, indent=1)
@@ -327,8 +377,7 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
     checks.output_file(a.json, "--json")
     scenarios = [load_topology(a.topology, steps=a.steps, manoeuvre=d.manoeuvre, steer_high=d.amplitude) for d in a.manoeuvres]
     if scenarios[0].plant == "ts":
-        print(f"netsetest calibrate: {a.topology}: plant 'ts' is the T-S model itself (e_k = 0): nothing to calibrate",
-              file=sys.stderr)
+        print(f"netsetest calibrate: {a.topology}: plant 'ts' is the T-S model itself (e_k = 0): nothing to calibrate", file=sys.stderr)
         return EXIT_BAD_INPUT
     bar = Progress(1, "calibrate")
 
@@ -340,24 +389,33 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
     simpler = simpler_mismatch(scenarios, list(a.seeds), a.signals, progress=on_progress) if a.causes else {}
     bar.close()
     sc = scenarios[0]
-    print(f"model mismatch of {sc.name}: plant {sc.plant} (CommonRoad vehicle {sc.vehicle_id}), {sc.steps} steps per drive, "
-          f"seeds {_seed_text(a.seeds)}, signals {','.join(a.signals)}")
+    print(
+        f"model mismatch of {sc.name}: plant {sc.plant} (CommonRoad vehicle {sc.vehicle_id}), {sc.steps} steps per drive, "
+        f"seeds {_seed_text(a.seeds)}, signals {','.join(a.signals)}"
+    )
     columns = [sc.plant, *simpler]
     maxima = [max_by_drive(cal.drives), *(max_by_drive(ds) for ds in simpler.values())]
     print(f"{'plant:':>34}" + "".join(f"  {p:^23}" for p in columns))
     print(f"{'drive':>26} {'drives':>7}" + f"  {'max|e_β| rad':>11} {'max|e_r| /s':>11}" * len(columns))
     for label in maxima[0]:
-        print(f"{label:>26} {sum(d.drive.label == label for d in cal.drives):>7}"
-              + "".join(f"  {m[label][0]:>11.3e} {m[label][1]:>11.3e}" for m in maxima))
+        print(f"{label:>26} {sum(d.drive.label == label for d in cal.drives):>7}" + "".join(f"  {m[label][0]:>11.3e} {m[label][1]:>11.3e}" for m in maxima))
     print(f"bounds covering every e_k with margin {a.margin:g} (declare one in the topology):")
     print(cal.box.as_toml() + "# or\n" + cal.ellipsoid.as_toml(), end="")
     if a.json:
         doc = {
-            "topology": sc.path, "plant": sc.plant, "vehicle": sc.vehicle_id, "steps": sc.steps, "margin": a.margin,
-            "seeds": list(a.seeds), "signals": a.signals,
-            "box": np.diag(cal.box.G).tolist(), "ellipsoid": cal.ellipsoid.E.tolist(),
-            "drives": [{"manoeuvre": d.drive.manoeuvre, "amplitude": d.drive.amplitude, "signals": d.signals, "seed": d.seed,
-                        "max_abs": d.max_abs.tolist()} for d in cal.drives],
+            "topology": sc.path,
+            "plant": sc.plant,
+            "vehicle": sc.vehicle_id,
+            "steps": sc.steps,
+            "margin": a.margin,
+            "seeds": list(a.seeds),
+            "signals": a.signals,
+            "box": np.diag(cal.box.G).tolist(),
+            "ellipsoid": cal.ellipsoid.E.tolist(),
+            "drives": [
+                {"manoeuvre": d.drive.manoeuvre, "amplitude": d.drive.amplitude, "signals": d.signals, "seed": d.seed, "max_abs": d.max_abs.tolist()}
+                for d in cal.drives
+            ],
             "simpler": {plant: {label: mx.tolist() for label, mx in max_by_drive(ds).items()} for plant, ds in simpler.items()},
         }
         with open(a.json, "w") as fh:
@@ -403,7 +461,12 @@ def cmd_forkserver(a: argparse.Namespace) -> int:
 
 
 COMMANDS.update(
-    run=cmd_run, inspect=cmd_inspect, plot=cmd_plot, exact=cmd_exact, calibrate=cmd_calibrate, bench=cmd_bench,
+    run=cmd_run,
+    inspect=cmd_inspect,
+    plot=cmd_plot,
+    exact=cmd_exact,
+    calibrate=cmd_calibrate,
+    bench=cmd_bench,
     forkserver=cmd_forkserver,
 )
 

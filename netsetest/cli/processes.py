@@ -15,7 +15,14 @@ from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.runtime import argtypes
 from netsetest.runtime.report import EXIT_BAD_INPUT
 from netsetest.runtime.rolespec import (
-    ESTIMATOR_HELP, ROLE_SPECS, RUN_ID_ENV, ZENOH_CONFIG_HELP, CollectorSpec, NodeSpec, RouterSpec, VehicleSpec,
+    ESTIMATOR_HELP,
+    ROLE_SPECS,
+    RUN_ID_ENV,
+    ZENOH_CONFIG_HELP,
+    CollectorSpec,
+    NodeSpec,
+    RouterSpec,
+    VehicleSpec,
 )
 from netsetest.runtime.security import RUN_ENV_FILE
 from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S
@@ -32,9 +39,14 @@ DEFAULT_VALIDITY_DAYS = 30
 
 # the options only a Zenoh run has, with their defaults: `run --mode inmemory` refuses any other value
 ZENOH_ONLY: dict[str, tuple[str, object]] = {
-    "--node-timeout": ("node_timeout", NODE_TIMEOUT_S), "--neighbour-timeout": ("neighbour_timeout", NEIGHBOUR_TIMEOUT_S),
-    "--pace": ("pace", 0.0), "--kill": ("kill", []), "--rejoin": ("rejoin", []), "--insecure": ("insecure", False),
-    "--run-id": ("run_id", None), "--zenoh-config": ("zenoh_config", None),
+    "--node-timeout": ("node_timeout", NODE_TIMEOUT_S),
+    "--neighbour-timeout": ("neighbour_timeout", NEIGHBOUR_TIMEOUT_S),
+    "--pace": ("pace", 0.0),
+    "--kill": ("kill", []),
+    "--rejoin": ("rejoin", []),
+    "--insecure": ("insecure", False),
+    "--run-id": ("run_id", None),
+    "--zenoh-config": ("zenoh_config", None),
 }
 
 
@@ -46,12 +58,21 @@ def zenoh_options_given(a: argparse.Namespace) -> list[str]:
 def add_run_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("zenoh mode")
     g.add_argument("--node-timeout", type=_seconds, default=NODE_TIMEOUT_S, metavar="S", help="lockstep: a node silent this long [s] is declared dead")
-    g.add_argument("--neighbour-timeout", type=_seconds, default=NEIGHBOUR_TIMEOUT_S, metavar="S", help="lockstep: how long [s] a node waits for a neighbour's message")
+    g.add_argument(
+        "--neighbour-timeout", type=_seconds, default=NEIGHBOUR_TIMEOUT_S, metavar="S", help="lockstep: how long [s] a node waits for a neighbour's message"
+    )
     g.add_argument("--pace", type=_non_negative, default=0.0, metavar="S", help="lockstep: at least S seconds per step (default: 0, as fast as possible)")
-    g.add_argument("--kill", type=_at, action="append", default=[], metavar="NODE@STEP", help="SIGKILL node NODE once step STEP is checked (repeatable; default: none)")
-    g.add_argument("--rejoin", type=_at, action="append", default=[], metavar="NODE@STEP", help="restart node NODE with --rejoin at step STEP (repeatable; default: none)")
-    g.add_argument("--insecure", action="store_true",
-                   help="no credentials, no access control: an open peer mesh any local process can join (labelled in the summary; default: secured)")
+    g.add_argument(
+        "--kill", type=_at, action="append", default=[], metavar="NODE@STEP", help="SIGKILL node NODE once step STEP is checked (repeatable; default: none)"
+    )
+    g.add_argument(
+        "--rejoin", type=_at, action="append", default=[], metavar="NODE@STEP", help="restart node NODE with --rejoin at step STEP (repeatable; default: none)"
+    )
+    g.add_argument(
+        "--insecure",
+        action="store_true",
+        help="no credentials, no access control: an open peer mesh any local process can join (labelled in the summary; default: secured)",
+    )
     g.add_argument("--run-id", type=checks.run_id, metavar="ID", help="the run's key-expression namespace (default: a fresh random one, printed)")
     g.add_argument("--zenoh-config", type=argtypes.readable_file, metavar="FILE", help=ZENOH_CONFIG_HELP)
 
@@ -68,8 +89,13 @@ def add_role_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("dir", help="output directory (created with mode 0700)")
     p.add_argument("topology", help="topology file or bundled name, e.g. paper6")
     p.add_argument("--run-id", type=checks.run_id, help="the deployment's run id (default: a random one)")
-    p.add_argument("--router-host", action="append", default=[], metavar="NAME",
-                   help="a name or address the router is reached at (repeatable; default: localhost, 127.0.0.1 and router, always included)")
+    p.add_argument(
+        "--router-host",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="a name or address the router is reached at (repeatable; default: localhost, 127.0.0.1 and router, always included)",
+    )
     p.add_argument("--days", type=checks.positive_int, default=DEFAULT_VALIDITY_DAYS, help="validity of the certificates in days")
 
     p = sub.add_parser("forkserver", help="internal: the fork server of `netsetest run` (imports once, forks each role process)")
@@ -182,8 +208,7 @@ def cmd_compose(a: argparse.Namespace) -> int:
     return 0
 
 
-COMMANDS.update(vehicle=cmd_vehicle, node=cmd_node, collector=cmd_collector, router=cmd_router, credentials=cmd_credentials,
-                compose=cmd_compose)
+COMMANDS.update(vehicle=cmd_vehicle, node=cmd_node, collector=cmd_collector, router=cmd_router, credentials=cmd_credentials, compose=cmd_compose)
 
 
 # ---------------------------------------------------------------- run --mode zenoh: the parent
@@ -194,10 +219,26 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
     from netsetest.runtime.report import format_table
 
     opts = LaunchOptions(
-        topology=a.topology, case=a.case, steps=a.steps, estimator=a.estimator, signals=a.signals, variant=a.variant,
-        objective=a.objective, seed=a.seed, clock=a.clock, record=a.record, summary_json=a.summary_json, quiet=a.quiet,
-        node_timeout=a.node_timeout, neighbour_timeout=a.neighbour_timeout, pace=a.pace, kill=tuple(a.kill), rejoin=tuple(a.rejoin),
-        insecure=a.insecure, zenoh_config=a.zenoh_config, run_id=a.run_id,
+        topology=a.topology,
+        case=a.case,
+        steps=a.steps,
+        estimator=a.estimator,
+        signals=a.signals,
+        variant=a.variant,
+        objective=a.objective,
+        seed=a.seed,
+        clock=a.clock,
+        record=a.record,
+        summary_json=a.summary_json,
+        quiet=a.quiet,
+        node_timeout=a.node_timeout,
+        neighbour_timeout=a.neighbour_timeout,
+        pace=a.pace,
+        kill=tuple(a.kill),
+        rejoin=tuple(a.rejoin),
+        insecure=a.insecure,
+        zenoh_config=a.zenoh_config,
+        run_id=a.run_id,
     )
     try:
         plan = plan_run(opts)

@@ -35,21 +35,28 @@ def _seconds(s: str) -> float:
 
 def _observer_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--run-id", type=checks.run_id, help="the run to observe (default: every run on the network, '*')")
-    p.add_argument("--connect", type=checks.endpoint, action="append", default=[], metavar="ENDPOINT",
-                   help="Zenoh endpoint of the run, e.g. tcp/127.0.0.1:7447: a router or a role's --listen endpoint (repeatable; default: none)")
+    p.add_argument(
+        "--connect",
+        type=checks.endpoint,
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
+        help="Zenoh endpoint of the run, e.g. tcp/127.0.0.1:7447: a router or a role's --listen endpoint (repeatable; default: none)",
+    )
     p.add_argument("--zenoh-mode", choices=["peer", "client"], default="peer", help="peer (default) or client of a router")
-    p.add_argument("--zenoh-config", metavar="FILE",
-                   help="Zenoh configuration file (JSON5) to start from; --connect adds endpoints to it (default: none)")
-    p.add_argument("--credentials", metavar="DIR",
-                   help="a secured run's credentials directory (printed by `netsetest run`, or made by `netsetest credentials`): "
-                        "connect to its router as the read-only observer; run id and endpoint from DIR unless given (default: none)")
+    p.add_argument("--zenoh-config", metavar="FILE", help="Zenoh configuration file (JSON5) to start from; --connect adds endpoints to it (default: none)")
+    p.add_argument(
+        "--credentials",
+        metavar="DIR",
+        help="a secured run's credentials directory (printed by `netsetest run`, or made by `netsetest credentials`): "
+        "connect to its router as the read-only observer; run id and endpoint from DIR unless given (default: none)",
+    )
     p.add_argument("--duration", type=_seconds, metavar="S", help="stop after S seconds (default: until Ctrl-C)")
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("echo", help="print the decoded messages of a running run (like ros2 topic echo)")
-    p.add_argument("key", nargs="?",
-                   help="key expression, relative to the run (node/3/state, vehicle/**) or absolute (netsetest/...); default: everything")
+    p.add_argument("key", nargs="?", help="key expression, relative to the run (node/3/state, vehicle/**) or absolute (netsetest/...); default: everything")
     _observer_args(p)
     p.add_argument("--count", type=checks.positive_int, metavar="N", help="stop after N messages (default: no limit)")
     p.add_argument("--json", action="store_true", help="one JSON object per line: key and message fields")
@@ -140,7 +147,8 @@ class SilenceHint:
         self.deadline = None
         a = self.a
         why = (
-            f"is the run still going, and is its run id {a.run_id!r}?" if a.credentials
+            f"is the run still going, and is its run id {a.run_id!r}?"
+            if a.credentials
             else "a secured run (the default) lets no one in without its credentials: give --credentials DIR "
             "(the run prints it: 'watch it with: netsetest watch --credentials DIR')" + ("" if a.connect else "; an --insecure run needs --connect ENDPOINT")
         )
@@ -176,15 +184,26 @@ def _render(table, title: str):  # LiveTable → rich Table
     from rich.table import Table
 
     t = Table(title=title)
-    cols = ("node", "step", "status", "fault lower", "fault upper", "fault", "detected from", "E (step)", "ρ", "lost", "missing",
-            "dropped", "deadline")
+    cols = ("node", "step", "status", "fault lower", "fault upper", "fault", "detected from", "E (step)", "ρ", "lost", "missing", "dropped", "deadline")
     for col in cols:
         t.add_column(col, justify="right")
     for r in table.sorted_rows():
         E = "-" if r.E is None else f"{r.E:.3f} ({r.E_step})"
-        t.add_row(str(r.id), _fmt(r.step, "d"), r.status, _fmt(r.fault_lower, ".4f"), _fmt(r.fault_upper, ".4f"), r.fdi,
-                  _fmt(r.first_detection, "d"), E, _fmt(r.rho, ".3g"), str(r.lost), str(r.missing), str(r.dropped),
-                  str(r.deadline_misses))
+        t.add_row(
+            str(r.id),
+            _fmt(r.step, "d"),
+            r.status,
+            _fmt(r.fault_lower, ".4f"),
+            _fmt(r.fault_upper, ".4f"),
+            r.fdi,
+            _fmt(r.first_detection, "d"),
+            E,
+            _fmt(r.rho, ".3g"),
+            str(r.lost),
+            str(r.missing),
+            str(r.dropped),
+            str(r.deadline_misses),
+        )
     return t
 
 

@@ -178,9 +178,7 @@ class NodeProfile(_Strict, frozen=True, kw_only=True):
     R: Annotated[float, Meta(ge=R_MIN, le=R_MAX)]
     noise_frequency: Annotated[float, Meta(ge=-FREQ_MAX, le=FREQ_MAX, description="f_i of v_i,k = cos(2π f_i (k−1) τs)")]
     x0_hat: tuple[Magnitude, Magnitude, Magnitude]
-    P0: Annotated[
-        Annotated[float, Meta(ge=P0_MIN, le=P0_MAX)] | list[list[Finite]], Meta(description="scalar (× I3) or a 3×3 SPD matrix")
-    ]
+    P0: Annotated[Annotated[float, Meta(ge=P0_MIN, le=P0_MAX)] | list[list[Finite]], Meta(description="scalar (× I3) or a 3×3 SPD matrix")]
     rho: Annotated[float, Meta(ge=RHO_MIN, le=RHO_MAX)] = 1.0
     saturation: SaturationSpec | None = None
     availability: AvailabilitySpec | None = None
@@ -240,10 +238,7 @@ class VehicleSpec(_Strict, frozen=True, kw_only=True):
             raise ValueError(f"manoeuvre: unknown manoeuvre {self.manoeuvre!r} (one of {', '.join(MANOEUVRES)})")
         given = [n for n in TABLE_I if getattr(self, n) is not None]
         if self.plant != "ts" and given:
-            raise ValueError(
-                f"{', '.join(given)}: the T-S model of a {self.plant} plant is derived from CommonRoad vehicle "
-                f"{self.vehicle}; remove these keys"
-            )
+            raise ValueError(f"{', '.join(given)}: the T-S model of a {self.plant} plant is derived from CommonRoad vehicle {self.vehicle}; remove these keys")
 
     def params(self) -> VehicleParams:
         """The T-S model's parameters: derived from the plant's car, else the keys given over Table I."""
@@ -262,17 +257,25 @@ UNCERTAINTY_MAX = 10.0  # |e_k| components [rad, rad/s] per step: beyond it the 
 class NetworkSpec(_Strict, frozen=True, kw_only=True):
     """Network-wide declarations."""
 
-    fault_tolerance: Annotated[
-        float, Meta(ge=0, le=MAGNITUDE_MAX, description="a fault with |f| ≤ this counts as no fault (detection, docs/fdi.md)")
-    ] = 0.0
+    fault_tolerance: Annotated[float, Meta(ge=0, le=MAGNITUDE_MAX, description="a fault with |f| ≤ this counts as no fault (detection, docs/fdi.md)")] = 0.0
     readings: Annotated[
-        bool, Meta(description="the same-step exchange: reference sensors publish their reading before estimating and the "
-                               "SDP nodes use it (docs/network.md); false: every node uses its neighbours' states only")
+        bool,
+        Meta(
+            description="the same-step exchange: reference sensors publish their reading before estimating and the "
+            "SDP nodes use it (docs/network.md); false: every node uses its neighbours' states only"
+        ),
     ] = True
-    max_faulty: Annotated[
-        int, Meta(ge=0, description="at most this many sensors have a fault above fault_tolerance at any step: every "
-                                    "node publishes its reading and uses everyone's (docs/network.md); default: no such bound")
-    ] | None = None
+    max_faulty: (
+        Annotated[
+            int,
+            Meta(
+                ge=0,
+                description="at most this many sensors have a fault above fault_tolerance at any step: every "
+                "node publishes its reading and uses everyone's (docs/network.md); default: no such bound",
+            ),
+        ]
+        | None
+    ) = None
 
 
 class ModelUncertaintySpec(_Strict, frozen=True, kw_only=True):
@@ -322,7 +325,9 @@ class NodeRef(_Strict, frozen=True, kw_only=True):
     profile: Annotated[
         str,
         Meta(
-            min_length=1, max_length=MAX_NAME, pattern=PROFILE_NAME_PATTERN,
+            min_length=1,
+            max_length=MAX_NAME,
+            pattern=PROFILE_NAME_PATTERN,
             description="file name in the node directory, without .toml (no path separators, no NUL)",
         ),
     ]
@@ -601,8 +606,12 @@ def load_profile(path: Path) -> NodeProfile:
 
 
 def load_topology(
-    path: str | Path, case: Case | None = None, steps: int | None = None, estimator: str | None = None,
-    manoeuvre: str | None = None, steer_high: float | None = None,
+    path: str | Path,
+    case: Case | None = None,
+    steps: int | None = None,
+    estimator: str | None = None,
+    manoeuvre: str | None = None,
+    steer_high: float | None = None,
 ) -> Scenario:
     """Read and validate a topology (a path, or the name of a bundled one such as ``paper6``) and its node
     profiles; ``case``/``steps``/``estimator`` (every node's)/``manoeuvre``/``steer_high`` (``[steering]
@@ -645,9 +654,14 @@ def load_topology(
             raise ConfigError(f"{ppath}: the saim case needs [saturation] and [availability] sections")
         sat = prof.saturation if saim else None
         sensor = Sensor(
-            C=np.array(prof.C, dtype=float), Ds=prof.Ds, Dv=prof.Dv, R=prof.R,
+            C=np.array(prof.C, dtype=float),
+            Ds=prof.Ds,
+            Dv=prof.Dv,
+            R=prof.R,
             saturated=sat is not None,
-            r_max=sat.r_max if sat else np.inf, h1=sat.h1 if sat else 1.0, h2=sat.h2 if sat else 1.0,
+            r_max=sat.r_max if sat else np.inf,
+            h1=sat.h1 if sat else 1.0,
+            h2=sat.h2 if sat else 1.0,
         )
         in_w = {e.from_: e.weight for e in topo.edges if e.to == ref.id}
         nodes.append(
@@ -677,9 +691,7 @@ def load_topology(
         model=TSModel.build(params, topo.tau_s),
         x0=np.array(v.x0, dtype=float),
         # the speed reference: the sine profile, or its mean held (models/manoeuvres.py)
-        speed=SpeedProfile(
-            topo.speed.mean_kmh, topo.speed.amplitude_kmh if v.manoeuvre in SINE_SPEED else 0.0, topo.speed.period_s
-        ),
+        speed=SpeedProfile(topo.speed.mean_kmh, topo.speed.amplitude_kmh if v.manoeuvre in SINE_SPEED else 0.0, topo.speed.period_s),
         steer_low=topo.steering.low,
         steer_high=topo.steering.high,
         nodes=nodes,
@@ -688,7 +700,8 @@ def load_topology(
         vehicle_id=v.vehicle,
         manoeuvre=cast(ManoeuvreName, v.manoeuvre),  # one of MANOEUVRES: VehicleSpec checked it
         uncertainty=topo.model_uncertainty.build() if topo.model_uncertainty is not None else None,
-        fault_tolerance=topo.network.fault_tolerance, readings=topo.network.readings,
+        fault_tolerance=topo.network.fault_tolerance,
+        readings=topo.network.readings,
         max_faulty=_max_faulty(path, topo.network.max_faulty, nodes),
     )
 

@@ -73,7 +73,9 @@ class ReadingSlabs:
         return cls(node_id, refs, HealthModel.of(scenario))
 
     def slabs(
-        self, own: tuple[float, float], readings: dict[int, tuple[float, float]],
+        self,
+        own: tuple[float, float],
+        readings: dict[int, tuple[float, float]],
         extent: Callable[[np.ndarray], tuple[float, float]] | None = None,
     ) -> list[Slab]:
         """Each reference's C_j x ∈ [lo, hi] (its fault is declared 0, so C̄_j x̄_j = C_j x; a side at the

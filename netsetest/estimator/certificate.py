@@ -109,9 +109,7 @@ def publishable(xhat: np.ndarray, P: np.ndarray) -> bool:
     return bool(eig[0] > 0 and eig[-1] <= COND_MAX * eig[0])
 
 
-def fallback_shape(
-    Mi: np.ndarray, own: OwnUpdate, W: float, alpha: np.ndarray, model: TSModel, uncertainty: ModelUncertainty | None = None
-) -> np.ndarray:
+def fallback_shape(Mi: np.ndarray, own: OwnUpdate, W: float, alpha: np.ndarray, model: TSModel, uncertainty: ModelUncertainty | None = None) -> np.ndarray:
     """A guaranteed shape without the solver: L = 0 and an outer ellipsoid of a Minkowski sum.
 
     e⁺ = T Ā ρ^½ M z + T D̄ w − G Dv v⁺ − G γ⁺ φ⁺ with |z| ≤ 1, |w| ≤ √W, |v⁺| ≤ √R and, under the sector

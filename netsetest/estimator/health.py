@@ -67,11 +67,14 @@ class HealthModel:
             return None
         assert scenario.max_faulty is not None  # health_declared says so
         c = scenario.nodes[0].sensor.C
-        return cls({n.id: n.sensor for n in scenario.nodes}, len(scenario.nodes) - scenario.max_faulty,
-                   scenario.fault_tolerance, c / np.linalg.norm(c))
+        return cls({n.id: n.sensor for n in scenario.nodes}, len(scenario.nodes) - scenario.max_faulty, scenario.fault_tolerance, c / np.linalg.norm(c))
 
     def assess(
-        self, own: int, own_reading: tuple[float, float], readings: dict[int, tuple[float, float]], within: Span | None = None,
+        self,
+        own: int,
+        own_reading: tuple[float, float],
+        readings: dict[int, tuple[float, float]],
+        within: Span | None = None,
         pin: bool = False,
     ) -> tuple[Interval | None, bool]:
         """(the interval, whether the own fault is pinned) of one step.
@@ -85,8 +88,7 @@ class HealthModel:
         ``within``), while with its own they can."""
         spans = _clipped(self._spans(own, own_reading, readings), within)
         hull = healthy_interval(_present(spans), self.need)
-        pinned = pin and hull is not None and healthy_interval(
-            _present([sp for j, sp in zip(self.sensors, spans) if j != own]), self.need) is None
+        pinned = pin and hull is not None and healthy_interval(_present([sp for j, sp in zip(self.sensors, spans) if j != own]), self.need) is None
         if hull is None or not (math.isfinite(hull[0]) and math.isfinite(hull[1])) or hull[1] <= hull[0]:
             return None, pinned
         return Interval(*hull), pinned

@@ -81,9 +81,7 @@ class IntervalObserver(SetEstimator):
         lo, hi = self.node.sensor.measured_interval(inp.y, inp.gamma)
         two_sided = bool(np.isfinite(lo) and np.isfinite(hi))
         if not two_sided and not self.bounded:
-            raise EstimatorError(
-                f"node {self.node.id}: a saturated measurement leaves the fault unbounded; a declared fault bound is needed"
-            )
+            raise EstimatorError(f"node {self.node.id}: a saturated measurement leaves the fault unbounded; a declared fault bound is needed")
         if self.center is None:
             blo, bhi = step0_set(self.node, lo, hi, self.bounded).bounds()
             self.center, self.init_radius = (blo + bhi) / 2, (bhi - blo) / 2

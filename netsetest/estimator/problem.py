@@ -53,8 +53,14 @@ class EtaLayout:
     dim: int
 
     def __init__(
-        self, node_id: int, neighbours: dict[int, Sensor], own: Sensor, W: float = 1.0, predict: bool = True,
-        uncertainty: ModelUncertainty | None = None, readings: tuple[int, ...] = (),
+        self,
+        node_id: int,
+        neighbours: dict[int, Sensor],
+        own: Sensor,
+        W: float = 1.0,
+        predict: bool = True,
+        uncertainty: ModelUncertainty | None = None,
+        readings: tuple[int, ...] = (),
     ) -> None:
         """``saturated`` of each sensor says whether it has a φ slot; ``predict`` False: the step-0 update
         (the prior updated by the own measurement through the self slot: no w, e, v⁺ or φ⁺); ``uncertainty``:

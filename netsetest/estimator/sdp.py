@@ -67,7 +67,13 @@ from netsetest.estimator.lmi_cvxpy import CvxpySolver
 from netsetest.estimator.objective import BANK_FAULT_WEIGHT, DEFAULT_OBJECTIVE, FAULT_WEIGHT, OBJECTIVES, Objective
 from netsetest.estimator.problem import EtaLayout, OwnUpdate, PatternKey, ProblemSolver, Solution, StepData
 from netsetest.estimator.sector import (
-    FaultBound, Interval, Sector, derive_sector, measurement_interval, prior_interval, propagated_interval,
+    FaultBound,
+    Interval,
+    Sector,
+    derive_sector,
+    measurement_interval,
+    prior_interval,
+    propagated_interval,
 )
 from netsetest.extras import require
 from netsetest.models.sensor import NA, NX, Sensor
@@ -82,8 +88,8 @@ REFINE_RTOL = 1e-6  # the readings' set is published only if it is smaller by mo
 
 
 @dataclass(frozen=True)
-class Ellipsoid:
-    """{x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ}."""
+class NodeSet:
+    """A node's own set {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} in the SDP's (x̂, P, ρ) form (sets.Ellipsoid is the published one)."""
 
     xhat: np.ndarray  # (3,)
     P: np.ndarray  # (3, 3)
@@ -111,7 +117,7 @@ class NeighbourState:
 
 
 @dataclass(frozen=True)
-class StepInput:
+class UpdateInput:
     """What node i has for step k → k+1 besides its own ellipsoid of step k."""
 
     alpha: np.ndarray  # α(Vx_k)
@@ -176,7 +182,7 @@ class _Pattern:
     solver: ProblemSolver
 
 
-StepObserver = Callable[["LocalEstimator", "Ellipsoid", "StepInput", "StepResult", float], None]
+StepObserver = Callable[["LocalEstimator", "NodeSet", "UpdateInput", "StepResult", float], None]
 """Called after every step with the estimator, its prior, its input, its result and the step's ms."""
 
 
@@ -210,7 +216,7 @@ class LocalEstimator:
         health: HealthModel | None = None,
     ) -> None:
         """``references``: the reference sensors (declared fault-free, j ≠ i) whose same-step readings
-        a step may use (StepInput.readings; docs/network.md); ``health``: the k-of-N assumption
+        a step may use (UpdateInput.readings; docs/network.md); ``health``: the k-of-N assumption
         (``[network] max_faulty``) under which every node's reading of the step bounds the state."""
         if variant not in ("scheduled", "per-rule"):
             raise ValueError(f"variant must be 'scheduled' or 'per-rule', got {variant!r}")
@@ -303,33 +309,31 @@ class LocalEstimator:
             self._gains[key] = self.own.descriptor_gains(gamma, h1)
         return self._gains[key]
 
-    def own_sector(self, prev: Ellipsoid, inp: StepInput) -> Sector | None:
+    def own_sector(self, prev: NodeSet, inp: UpdateInput) -> Sector | None:
         """The own sensor's sector of step k+1 (docs/estimator.md, "Adaptive sector")."""
         return self._own_range(prev, inp)[0]
 
-    def _own_range(self, prev: Ellipsoid, inp: StepInput) -> tuple[Sector | None, Interval | None]:
+    def _own_range(self, prev: NodeSet, inp: UpdateInput) -> tuple[Sector | None, Interval | None]:
         """The own sector of step k+1 and, where it is derived and the sensor may saturate, the proven
         interval of r⁺ = C̄ x̄⁺ (the step then uses it as the measurement; see ``step_data``)."""
         if not self.own.saturated:
             return None, None
         a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
         meas = measurement_interval(self.own, inp.y, inp.gamma)
-        prop = propagated_interval(
-            self.own, self.fault_bound, prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W, self.uncertainty
-        )
+        prop = propagated_interval(self.own, self.fault_bound, prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W, self.uncertainty)
         sector = derive_sector(self.own, self.fault_bound, meas, prop)
         if sector is None or not sector.has_phi or sector.basis == "assumed":
             return sector, None
         return sector, (meas & prop if sector.basis == "fault-bound" else meas)
 
-    def initial_sector(self, prior: Ellipsoid, y: float, gamma: float) -> Sector | None:
+    def initial_sector(self, prior: NodeSet, y: float, gamma: float) -> Sector | None:
         """The own sensor's sector of step 0: the prior (Assumption 1), |f₀| ≤ F and the measurement."""
         if not self.own.saturated:
             return None
         meas = measurement_interval(self.own, y, gamma)
         return derive_sector(self.own, self.fault_bound, meas, prior_interval(self.own, self.fault_bound, prior.xhat, prior.P, prior.rho))
 
-    def step_data(self, prev: Ellipsoid, inp: StepInput, sector: Sector | None, reading: Interval | None = None) -> StepData:
+    def step_data(self, prev: NodeSet, inp: UpdateInput, sector: Sector | None, reading: Interval | None = None) -> StepData:
         """The LMI data of step k → k+1: the prediction (Π₀, x̂ part, own facts) and the neighbours' update (ℓ).
 
         ``reading``: a proven interval [lo, hi] ∋ r⁺ used as the own measurement instead of the sector:
@@ -350,7 +354,7 @@ class LocalEstimator:
         return StepData(tuple(pi0), ell, tuple(facts), x_pred, float(innov_sum), Mi, pat.lay, key, sector, own)
 
     def readings_data(
-        self, prev: Ellipsoid, inp: StepInput, sector: Sector | None, reading: Interval | None, refs: dict[int, tuple[np.ndarray, Interval]]
+        self, prev: NodeSet, inp: UpdateInput, sector: Sector | None, reading: Interval | None, refs: dict[int, tuple[np.ndarray, Interval]]
     ) -> StepData:
         """The LMI data of step k → k+1 whose only innovation is the readings of step k+1 (``refs``, from
         :meth:`reading_intervals`): the prediction as in :meth:`step_data`, no neighbour."""
@@ -364,7 +368,7 @@ class LocalEstimator:
         facts = [*pat.balls, *([own_fact] if own_fact is not None else [])]
         return StepData(tuple(pi0), ell, tuple(facts), x_pred, innov, Mi, pat.lay, key, sector, own)
 
-    def reading_intervals(self, prev: Ellipsoid, inp: StepInput) -> dict[int, tuple[np.ndarray, Interval]]:
+    def reading_intervals(self, prev: NodeSet, inp: UpdateInput) -> dict[int, tuple[np.ndarray, Interval]]:
         """What the step's readings prove, as c̄ (NA,) and c̄ᵀx̄⁺ ∈ [lo, hi], keyed by the reference's id, and
         by :data:`~netsetest.estimator.health.HEALTH_KEY` for the k-of-N interval of every reading (the
         hypotheses pruned by the node's own prediction of uᵀx⁺).
@@ -380,9 +384,7 @@ class LocalEstimator:
             iv = measurement_interval(sensor, y, gamma)
             if not (np.isfinite(iv.lo) and np.isfinite(iv.hi)):
                 a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
-                iv = iv & propagated_interval(
-                    sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W, self.uncertainty
-                )
+                iv = iv & propagated_interval(sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W, self.uncertainty)
             if np.isfinite(iv.lo) and np.isfinite(iv.hi) and iv.hi > iv.lo:
                 out[j] = (np.r_[sensor.C, 0.0], iv)
         if self.health is not None:
@@ -418,7 +420,7 @@ class LocalEstimator:
             innov += w * (m - float(cj @ x_pred))
         return ell, innov
 
-    def _own_update(self, inp: StepInput, sector: Sector | None, reading: Interval | None, phi_new: bool) -> OwnUpdate:
+    def _own_update(self, inp: UpdateInput, sector: Sector | None, reading: Interval | None, phi_new: bool) -> OwnUpdate:
         """How step k+1 uses the own measurement: ỹ⁺ (or the reading's centre), its γ⁺, h1, Dv and T, G."""
         own = self.own
         y_new, gamma_new, dv_new = inp.y, inp.gamma, own.Dv
@@ -430,7 +432,7 @@ class LocalEstimator:
         return OwnUpdate(T, G, dataclasses.replace(own, Dv=dv_new, saturated=phi_new, h1=h1_new), y_new, gamma_new)
 
     def _predict(
-        self, lay: EtaLayout, prev: Ellipsoid, inp: StepInput, own: OwnUpdate, Mi: np.ndarray, sector: Sector | None
+        self, lay: EtaLayout, prev: NodeSet, inp: UpdateInput, own: OwnUpdate, Mi: np.ndarray, sector: Sector | None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """The model part of step k → k+1: Π₀ (n_rules, NA, d), the L-free centre x̂ (NA,) and the own
         sensor's φ⁺ sector fact (d, d) (None without φ⁺)."""
@@ -509,7 +511,7 @@ class LocalEstimator:
                 facts.append(_sector(d, lay.phi[j], g_r, nb.sector.h))  # type: ignore[union-attr]  # j has a φ slot only with a published sector
         return ell, facts
 
-    def initial_data(self, prior: Ellipsoid, y: float, gamma: float, sector: Sector | None) -> StepData:
+    def initial_data(self, prior: NodeSet, y: float, gamma: float, sector: Sector | None) -> StepData:
         """Step 0: x̂₀ = x̂ + L(ỹ₀ − C̄x̂), error e = ρ^½Mz − L y̌₀(η) with y̌₀ the own innovation."""
         i = self.node_id
         phi = sector is not None and sector.has_phi
@@ -528,7 +530,11 @@ class LocalEstimator:
 
     @classmethod
     def for_node(
-        cls, scenario: Scenario, node_id: int, variant: Variant = "scheduled", objective: Objective = DEFAULT_OBJECTIVE,
+        cls,
+        scenario: Scenario,
+        node_id: int,
+        variant: Variant = "scheduled",
+        objective: Objective = DEFAULT_OBJECTIVE,
         backend: Backend = "clarabel",
     ) -> LocalEstimator:
         """The estimator of node ``node_id`` as the node runs it: its sensor, its in-neighbours' sensors and
@@ -537,12 +543,22 @@ class LocalEstimator:
         another SAIM problem than the nodes did)."""
         n = scenario.node(node_id)
         return cls(
-            node_id, n.sensor, {j: scenario.node(j).sensor for j in n.in_weights}, n.in_weights, scenario.model, scenario.W,
-            variant, backend, FaultBound(n.fault_rate, n.fault_size), objective, scenario.uncertainty,
-            {j: scenario.node(j).sensor for j in scenario.references() if j != node_id}, HealthModel.of(scenario),
+            node_id,
+            n.sensor,
+            {j: scenario.node(j).sensor for j in n.in_weights},
+            n.in_weights,
+            scenario.model,
+            scenario.W,
+            variant,
+            backend,
+            FaultBound(n.fault_rate, n.fault_size),
+            objective,
+            scenario.uncertainty,
+            {j: scenario.node(j).sensor for j in scenario.references() if j != node_id},
+            HealthModel.of(scenario),
         )
 
-    def step(self, prev: Ellipsoid, inp: StepInput) -> StepResult:
+    def step(self, prev: NodeSet, inp: UpdateInput) -> StepResult:
         """Step k → k+1: the step's data, then the update (solve, certify); the fallback without a certificate.
         ``observer`` (if set) sees every step: the estimator, its inputs, its result and its time."""
         if self.observer is None:
@@ -552,7 +568,7 @@ class LocalEstimator:
         self.observer(self, prev, inp, res, 1e3 * (time.perf_counter() - t0))
         return res
 
-    def _step(self, prev: Ellipsoid, inp: StepInput) -> StepResult:
+    def _step(self, prev: NodeSet, inp: UpdateInput) -> StepResult:
         sector, reading = self._own_range(prev, inp)
         data = self.step_data(prev, inp, sector, reading)
         alpha = np.asarray(inp.alpha, dtype=float)
@@ -585,7 +601,7 @@ class LocalEstimator:
         res.published = refined
         return True
 
-    def first(self, prior: Ellipsoid, y: float, gamma: float) -> StepResult:
+    def first(self, prior: NodeSet, y: float, gamma: float) -> StepResult:
         """Step 0: the prior updated by ỹ₀, certified like every step; ``fallback``: the prior itself."""
         sector = self.initial_sector(prior, y, gamma)
         data = self.initial_data(prior, y, gamma, sector)
@@ -619,9 +635,7 @@ class LocalEstimator:
             pub.solve_ms = res.solve_ms
             res.published = pub
 
-    def _solve_certify(
-        self, data: StepData, rho: float, alpha: np.ndarray, wh: np.ndarray | None, facts: FactStack
-    ) -> tuple[StepResult | None, _Solve]:
+    def _solve_certify(self, data: StepData, rho: float, alpha: np.ndarray, wh: np.ndarray | None, facts: FactStack) -> tuple[StepResult | None, _Solve]:
         """Solve the step's problem for the objective trace(D P), D^½ = diag(wh) (None: trace P), and
         certify the answer; None if there is no certificate."""
         pat = self._patterns[data.key]
@@ -672,5 +686,13 @@ def _weighted(data: StepData, wh: np.ndarray) -> StepData:
 
 
 __all__ = [
-    "BACKENDS", "Backend", "Ellipsoid", "LocalEstimator", "NeighbourState", "Objective", "StepInput", "StepResult", "Variant",
+    "BACKENDS",
+    "Backend",
+    "NodeSet",
+    "LocalEstimator",
+    "NeighbourState",
+    "Objective",
+    "UpdateInput",
+    "StepResult",
+    "Variant",
 ]

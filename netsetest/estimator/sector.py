@@ -94,8 +94,17 @@ def _support(g: np.ndarray, P: np.ndarray, rho: float) -> float:
 
 
 def propagated_interval(
-    sensor: Sensor, bound: FaultBound, xhat: np.ndarray, P: np.ndarray, rho: float,
-    a: np.ndarray, b: np.ndarray, d: np.ndarray, u: float, W: float, uncertainty: ModelUncertainty | None = None,
+    sensor: Sensor,
+    bound: FaultBound,
+    xhat: np.ndarray,
+    P: np.ndarray,
+    rho: float,
+    a: np.ndarray,
+    b: np.ndarray,
+    d: np.ndarray,
+    u: float,
+    W: float,
+    uncertainty: ModelUncertainty | None = None,
 ) -> Interval:
     """r⁺ = C(a x + b u + d w) + Ds f⁺ over x̄ in the ellipsoid of step k, w² ≤ W, f⁺ by the fault bound.
 
@@ -170,6 +179,14 @@ def sector_ok(sensor: Sensor, sector: Sector | None, r: float) -> bool:
 
 
 __all__ = [
-    "FaultBound", "Sector", "SectorBasis", "Interval", "measurement_interval", "propagated_interval",
-    "prior_interval", "derive_sector", "sector_ok", "SATURATION_UPPER_SLOPE",
+    "FaultBound",
+    "Sector",
+    "SectorBasis",
+    "Interval",
+    "measurement_interval",
+    "propagated_interval",
+    "prior_interval",
+    "derive_sector",
+    "sector_ok",
+    "SATURATION_UPPER_SLOPE",
 ]

@@ -171,16 +171,20 @@ class ZonotopeEstimator(SetEstimator):
         lo, hi = self.node.sensor.measured_interval(y, gamma)
         if not (np.isfinite(lo) and np.isfinite(hi)):
             raise EstimatorError(
-                f"node {self.node.id}: a saturated measurement leaves the fault unbounded; "
-                "a declared fault bound is needed (fault_bounds 'used' or 'all')"
+                f"node {self.node.id}: a saturated measurement leaves the fault unbounded; a declared fault bound is needed (fault_bounds 'used' or 'all')"
             )
         assert self.set is not None
         z, sq_w = self.set.zonotope, np.sqrt(self.sc.W)
         L = self.T_x @ a @ np.eye(NX, NA)
         center = L @ z.center + self.T_x @ bu + self.G_r * (lo + hi) / 2
-        gens = np.hstack([
-            L @ z.generators, (self.T_x @ d * sq_w)[:, None], self.T_x @ self.sc.mismatch_generators, (self.G_r * (hi - lo) / 2)[:, None],
-        ])
+        gens = np.hstack(
+            [
+                L @ z.generators,
+                (self.T_x @ d * sq_w)[:, None],
+                self.T_x @ self.sc.mismatch_generators,
+                (self.G_r * (hi - lo) / 2)[:, None],
+            ]
+        )
         return SumSet(Zonotope(center, gens), L @ self.set.M, self.set.sliced)
 
     def _bounded_step(self, a: np.ndarray, bu: np.ndarray, d: np.ndarray, y: float, gamma: float) -> SumSet:

@@ -46,8 +46,13 @@ class Drive:
     def __init__(self, sc: Scenario, signals: SignalKind, seed: int) -> None:
         self.sc = sc
         self.signals = ExogenousSignals(
-            signals, seed, sc.steer_low, sc.steer_high, sc.W,
-            [n.sensor.R for n in sc.nodes], [n.noise_frequency for n in sc.nodes],
+            signals,
+            seed,
+            sc.steer_low,
+            sc.steer_high,
+            sc.W,
+            [n.sensor.R for n in sc.nodes],
+            [n.noise_frequency for n in sc.nodes],
             cast(list[tuple[float, float]], [n.gamma_range for n in sc.nodes]) if sc.case == "saim" else None,  # saim: every node has one
             sc.tau_s,
         )

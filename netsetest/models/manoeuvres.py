@@ -124,7 +124,6 @@ class Manoeuvre:
             driver = PurePursuit(lap_course(), wheelbase, closed=True)
         return cls(name, profile, amplitude, wheelbase, driver)
 
-
     def steer(self, t: float, st: PlantState, drawn: float) -> float:
         """δ_k [rad] held over the next sampling interval; ``drawn`` is the paper's random draw of this step."""
         if self.name == "paper":

@@ -77,9 +77,16 @@ def derived_params(vehicle_id: int, fw: float, lw: float, vx_min: float, vx_max:
     lf, lr, m = float(p.a), float(p.b), float(p.m)
     fzf, fzr = m * GRAVITY * lr / (lf + lr), m * GRAVITY * lf / (lf + lr)
     return VehicleParams(
-        m=m, Jz=float(p.I_z), lf=lf, lr=lr,
-        cf=_cornering_stiffness(p.tire, fzf), cr=_cornering_stiffness(p.tire, fzr),
-        fw=fw, lw=lw, vx_min=vx_min, vx_max=vx_max,
+        m=m,
+        Jz=float(p.I_z),
+        lf=lf,
+        lr=lr,
+        cf=_cornering_stiffness(p.tire, fzf),
+        cr=_cornering_stiffness(p.tire, fzr),
+        fw=fw,
+        lw=lw,
+        vx_min=vx_min,
+        vx_max=vx_max,
     )
 
 
@@ -206,7 +213,9 @@ class MultiBodyPlant(_CommonRoadPlant):
     def state(self) -> PlantState:
         s = self.s
         return PlantState(
-            np.array([math.atan2(s[10], s[3]), s[5]]), float(math.hypot(s[3], s[10])), float(s[3]),
+            np.array([math.atan2(s[10], s[3]), s[5]]),
+            float(math.hypot(s[3], s[10])),
+            float(s[3]),
             (float(s[0]), float(s[1]), float(s[4])),
         )
 
@@ -223,5 +232,12 @@ def make_plant(kind: PlantKind, vehicle_id: int, model: TSModel, x0: np.ndarray,
 
 
 __all__ = [
-    "PLANTS", "Plant", "PlantKind", "PlantState", "derived_params", "make_plant", "require_plant", "vehicle_parameters",
+    "PLANTS",
+    "Plant",
+    "PlantKind",
+    "PlantState",
+    "derived_params",
+    "make_plant",
+    "require_plant",
+    "vehicle_parameters",
 ]

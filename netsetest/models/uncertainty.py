@@ -65,7 +65,6 @@ class ModelUncertainty:
         g = self.G.T @ np.asarray(c, dtype=float)
         return float(np.abs(g).sum()) if self.kind == "box" else float(np.linalg.norm(g))
 
-
     def as_toml(self) -> str:
         """The ``[model_uncertainty]`` table that declares this bound."""
         r = lambda v: repr(float(v))  # noqa: E731  (every digit: a rounded bound could exclude a sample)

@@ -118,9 +118,7 @@ class TSModel:
         m_hi = (1.0 / vx - th2) / (th1 - th2)  # weight of the 1/Vx = ϑ1 (low-speed) end
         q_hi = (1.0 / vx**2 - th4) / (th3 - th4)
         m_hi, q_hi = min(max(m_hi, 0.0), 1.0), min(max(q_hi, 0.0), 1.0)  # np.clip costs µs per scalar call
-        return np.array(
-            [(1 - m_hi) * (1 - q_hi), (1 - m_hi) * q_hi, m_hi * (1 - q_hi), m_hi * q_hi]
-        )
+        return np.array([(1 - m_hi) * (1 - q_hi), (1 - m_hi) * q_hi, m_hi * (1 - q_hi), m_hi * q_hi])
 
     def blend(self, alpha: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Σ α_ℓ (A_ℓ, B_ℓ, Dw_ℓ): the exact scheduled matrices for a known α."""

@@ -16,9 +16,16 @@ from netsetest.records.record import Record
 
 COMPONENTS = ("beta", "r", "fault")
 COLUMNS: tuple[str, ...] = (
-    "node", "step", "t",
+    "node",
+    "step",
+    "t",
     *(f"{c}_{part}" for c in COMPONENTS for part in ("estimate", "lower", "upper", "true")),
-    "E", "rho", "judged", "contained", "assumptions_ok", "status",
+    "E",
+    "rho",
+    "judged",
+    "contained",
+    "assumptions_ok",
+    "status",
 )
 FORMATS = ("parquet", "csv")
 

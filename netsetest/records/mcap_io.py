@@ -84,73 +84,115 @@ def _schema(title: str, description: str, properties: dict[str, Any], required: 
 
 SCHEMAS: dict[str, dict[str, Any]] = {
     "netsetest.RunMeta": _schema(
-        "netsetest.RunMeta", "Run settings and graph",
-        {"run_id": {"type": "string"}, "topology": {"type": "string"}, "case": {"type": "string"},
-         "signals": {"type": "string"}, "variant": {"type": "string"}, "seed": _INT, "steps": _INT,
-         "tau_s": {"type": "number", "description": "sampling period [s]"}, "mode": {"type": "string"},
-         "clock": {"type": "string"}, "node_ids": _IDS,
-         "in_weights": {"type": "object", "description": "node i → {in-neighbour j → a_ij}"}},
+        "netsetest.RunMeta",
+        "Run settings and graph",
+        {
+            "run_id": {"type": "string"},
+            "topology": {"type": "string"},
+            "case": {"type": "string"},
+            "signals": {"type": "string"},
+            "variant": {"type": "string"},
+            "seed": _INT,
+            "steps": _INT,
+            "tau_s": {"type": "number", "description": "sampling period [s]"},
+            "mode": {"type": "string"},
+            "clock": {"type": "string"},
+            "node_ids": _IDS,
+            "in_weights": {"type": "object", "description": "node i → {in-neighbour j → a_ij}"},
+        },
         ["run_id", "tau_s", "node_ids"],
     ),
     "netsetest.Truth": _schema(
-        "netsetest.Truth", "The vehicle's truth of step k and which assumptions held",
-        {"step": _INT, "t": {"type": "number", "description": "k·τs [s]"},
-         "x": {"type": "array", "items": {"type": "number"}, "description": "[β rad, r rad/s]"},
-         "faults": _PER_NODE_NUM, "u": {"type": "number", "description": "steering angle [rad]"},
-         "w": {"type": "number", "description": "disturbance (wind)"}, "vx": {"type": "number", "description": "speed [m/s]"},
-         "noise": _PER_NODE_NUM, "gamma": _PER_NODE_NUM, "y": _PER_NODE_NUM, "y_nofault": _PER_NODE_NUM,
-         "sector_ok": {**_PER_NODE_BOOL, "description": "node id → the paper's fixed sector |C̄x̄| ≤ r_max/h1 held"},
-         "noise_ok": _PER_NODE_BOOL, "dist_ok": _BOOL,
-         "r": {**_PER_NODE_NUM, "description": "node id → the sensor's true input C̄x̄"},
-         "fault_ok": {**_PER_NODE_BOOL, "description": "node id → the declared fault bound held"},
-         "lost": {"type": "array", "items": _IDS, "description": "[from j, to i]: j's previous message to i lost"},
-         "alive": _IDS,
-         "e": {"type": ["array", "null"], "items": {"type": "number"},
-               "description": "model mismatch of k → k+1: x_{k+1} − (Ā x_k + B̄ u_k + D̄ w_k) [rad, rad/s]; null after the last step"},
-         "mismatch_ok": {**_BOOL, "description": "e_k within the declared [model_uncertainty] (none declared: e_k = 0)"},
-         "health_ok": {**_BOOL, "description": "at most [network] max_faulty sensors faulty at this step (none declared: true)"}},
+        "netsetest.Truth",
+        "The vehicle's truth of step k and which assumptions held",
+        {
+            "step": _INT,
+            "t": {"type": "number", "description": "k·τs [s]"},
+            "x": {"type": "array", "items": {"type": "number"}, "description": "[β rad, r rad/s]"},
+            "faults": _PER_NODE_NUM,
+            "u": {"type": "number", "description": "steering angle [rad]"},
+            "w": {"type": "number", "description": "disturbance (wind)"},
+            "vx": {"type": "number", "description": "speed [m/s]"},
+            "noise": _PER_NODE_NUM,
+            "gamma": _PER_NODE_NUM,
+            "y": _PER_NODE_NUM,
+            "y_nofault": _PER_NODE_NUM,
+            "sector_ok": {**_PER_NODE_BOOL, "description": "node id → the paper's fixed sector |C̄x̄| ≤ r_max/h1 held"},
+            "noise_ok": _PER_NODE_BOOL,
+            "dist_ok": _BOOL,
+            "r": {**_PER_NODE_NUM, "description": "node id → the sensor's true input C̄x̄"},
+            "fault_ok": {**_PER_NODE_BOOL, "description": "node id → the declared fault bound held"},
+            "lost": {"type": "array", "items": _IDS, "description": "[from j, to i]: j's previous message to i lost"},
+            "alive": _IDS,
+            "e": {
+                "type": ["array", "null"],
+                "items": {"type": "number"},
+                "description": "model mismatch of k → k+1: x_{k+1} − (Ā x_k + B̄ u_k + D̄ w_k) [rad, rad/s]; null after the last step",
+            },
+            "mismatch_ok": {**_BOOL, "description": "e_k within the declared [model_uncertainty] (none declared: e_k = 0)"},
+            "health_ok": {**_BOOL, "description": "at most [network] max_faulty sensors faulty at this step (none declared: true)"},
+        },
         ["step", "x", "faults"],
     ),
     "netsetest.NodeInput": _schema(
-        "netsetest.NodeInput", "What node i measured at step k",
-        {"step": _INT, "t": {"type": "number"}, "node": _INT, "y": _NUM, "y_nofault": _NUM, "gamma": _NUM,
-         "u": _NUM, "vx": _NUM},
+        "netsetest.NodeInput",
+        "What node i measured at step k",
+        {"step": _INT, "t": {"type": "number"}, "node": _INT, "y": _NUM, "y_nofault": _NUM, "gamma": _NUM, "u": _NUM, "vx": _NUM},
         ["step", "node"],
     ),
     "netsetest.NodeState": _schema(
-        "netsetest.NodeState", "Node i's ellipsoid {x: (x − x̂)ᵀP⁻¹(x − x̂) ≤ ρ} of step k and its check",
-        {"step": _INT, "t": {"type": "number"},
-         "xhat": {"type": "array", "items": {"type": "number"}, "description": "[β rad, r rad/s, f rad/s]"},
-         "P": {"type": "array", "items": {"type": "number"}, "description": "3×3 shape matrix, row-major"},
-         "rho": {"type": "number"}, "status": {"type": "string"}, "rho_cert": _NUM, "solve_ms": _NUM,
-         "used": _IDS, "missing": _IDS, "late": _BOOL,
-         "readings": {**_IDS, "description": "nodes whose reading of this step the published set used (docs/network.md)"},
-         "health": {**_BOOL, "description": "the published set used the k-of-N interval of the step's readings ([network] max_faulty)"},
-         "sector": {"type": ["array", "null"], "items": {"type": "number"},
-                    "description": "[h1, h] of this step's sector (null: the sensor models no saturation)"},
-         "sector_basis": {"type": "string", "description": "none | measurement | fault-bound | assumed"},
-         "E": {**_NUM, "description": "eᵀP⁻¹e (contained while ≤ ρ); null if the truth is unknown"},
-         "judged": {**_BOOL, "description": "the collector judged this set (false: contested copies or unknown truth)"},
-         "contained": {"type": ["boolean", "null"], "description": "null where not judged"}, "assumptions_ok": _BOOL,
-         "contested": {**_BOOL, "description": "more than one copy matched the truth: not judged"},
-         "not_judged_why": {"type": ["string", "null"], "description": "contested | truth unknown; null where judged"},
-         "not_covered_cause": {"type": ["string", "null"], "description": "why the guarantee did not apply (docs/coverage.md); null where it did"},
-         "inherited_from": {"type": ["array", "null"], "description": "[node, step, why] of the input a not-covered step rests on"},
-         "fdi": {"type": ["string", "null"], "description": "detected | healthy | undecided: the fault interval against 0 (docs/fdi.md)"},
-         **{f"{n}_{s}": {"type": "number", "description": f"{s} bound of {n}: x̂ ∓ √(ρ P)"}
-            for n, _ in COMPONENTS for s in ("lower", "upper")}},
+        "netsetest.NodeState",
+        "Node i's ellipsoid {x: (x − x̂)ᵀP⁻¹(x − x̂) ≤ ρ} of step k and its check",
+        {
+            "step": _INT,
+            "t": {"type": "number"},
+            "xhat": {"type": "array", "items": {"type": "number"}, "description": "[β rad, r rad/s, f rad/s]"},
+            "P": {"type": "array", "items": {"type": "number"}, "description": "3×3 shape matrix, row-major"},
+            "rho": {"type": "number"},
+            "status": {"type": "string"},
+            "rho_cert": _NUM,
+            "solve_ms": _NUM,
+            "used": _IDS,
+            "missing": _IDS,
+            "late": _BOOL,
+            "readings": {**_IDS, "description": "nodes whose reading of this step the published set used (docs/network.md)"},
+            "health": {**_BOOL, "description": "the published set used the k-of-N interval of the step's readings ([network] max_faulty)"},
+            "sector": {
+                "type": ["array", "null"],
+                "items": {"type": "number"},
+                "description": "[h1, h] of this step's sector (null: the sensor models no saturation)",
+            },
+            "sector_basis": {"type": "string", "description": "none | measurement | fault-bound | assumed"},
+            "E": {**_NUM, "description": "eᵀP⁻¹e (contained while ≤ ρ); null if the truth is unknown"},
+            "judged": {**_BOOL, "description": "the collector judged this set (false: contested copies or unknown truth)"},
+            "contained": {"type": ["boolean", "null"], "description": "null where not judged"},
+            "assumptions_ok": _BOOL,
+            "contested": {**_BOOL, "description": "more than one copy matched the truth: not judged"},
+            "not_judged_why": {"type": ["string", "null"], "description": "contested | truth unknown; null where judged"},
+            "not_covered_cause": {"type": ["string", "null"], "description": "why the guarantee did not apply (docs/coverage.md); null where it did"},
+            "inherited_from": {"type": ["array", "null"], "description": "[node, step, why] of the input a not-covered step rests on"},
+            "fdi": {"type": ["string", "null"], "description": "detected | healthy | undecided: the fault interval against 0 (docs/fdi.md)"},
+            **{f"{n}_{s}": {"type": "number", "description": f"{s} bound of {n}: x̂ ∓ √(ρ P)"} for n, _ in COMPONENTS for s in ("lower", "upper")},
+        },
         ["step", "xhat", "P", "rho", "status"],
     ),
     "netsetest.NodeDrops": _schema(
-        "netsetest.NodeDrops", "Neighbour messages node i used, missed or was late with at step k",
-        {"step": _INT, "t": {"type": "number"}, "node": _INT, "used": _IDS, "missing": _IDS, "late": _BOOL,
-         "missing_count": _INT},
+        "netsetest.NodeDrops",
+        "Neighbour messages node i used, missed or was late with at step k",
+        {"step": _INT, "t": {"type": "number"}, "node": _INT, "used": _IDS, "missing": _IDS, "late": _BOOL, "missing_count": _INT},
         ["step", "node"],
     ),
     "netsetest.Verdict": _schema(
-        "netsetest.Verdict", "The run's summary: violations, misses after broken assumptions, per-node table",
-        {"violations_total": _INT, "misses_assumption_broken_total": _INT, "steps_completed": _INT,
-         "nodes_missing": _IDS, "nodes_rejoined": _IDS, "nodes": {"type": "array", "items": {"type": "object"}}},
+        "netsetest.Verdict",
+        "The run's summary: violations, misses after broken assumptions, per-node table",
+        {
+            "violations_total": _INT,
+            "misses_assumption_broken_total": _INT,
+            "steps_completed": _INT,
+            "nodes_missing": _IDS,
+            "nodes_rejoined": _IDS,
+            "nodes": {"type": "array", "items": {"type": "object"}},
+        },
         ["violations_total", "nodes"],
     ),
 }
@@ -210,9 +252,7 @@ class McapRecordWriter:
             name = schema_of(topic)
             sid = self._schemas.get(name)
             if sid is None:
-                sid = self._schemas[name] = self._writer.register_schema(
-                    name=name, encoding=SCHEMA_ENCODING, data=json.dumps(SCHEMAS[name]).encode()
-                )
+                sid = self._schemas[name] = self._writer.register_schema(name=name, encoding=SCHEMA_ENCODING, data=json.dumps(SCHEMAS[name]).encode())
             cid = self._channels[topic] = self._writer.register_channel(topic, MESSAGE_ENCODING, sid)
         return cid
 
@@ -239,11 +279,20 @@ class McapRecordWriter:
         t, ns = self._time(int(entry["step"]))
         self._write(TOPIC_TRUTH, ns, {**entry, "t": t})
         for node, y in entry.get("y", {}).items():
-            self._write(input_topic(node), ns, {
-                "step": entry["step"], "t": t, "node": int(node), "y": y,
-                "y_nofault": entry.get("y_nofault", {}).get(node), "gamma": entry.get("gamma", {}).get(node),
-                "u": entry.get("u"), "vx": entry.get("vx"),
-            })
+            self._write(
+                input_topic(node),
+                ns,
+                {
+                    "step": entry["step"],
+                    "t": t,
+                    "node": int(node),
+                    "y": y,
+                    "y_nofault": entry.get("y_nofault", {}).get(node),
+                    "gamma": entry.get("gamma", {}).get(node),
+                    "u": entry.get("u"),
+                    "vx": entry.get("vx"),
+                },
+            )
         self._flush()
 
     def state(self, node: int, entry: dict) -> None:
@@ -255,10 +304,19 @@ class McapRecordWriter:
             msg[f"{name}_lower"], msg[f"{name}_upper"] = entry["xhat"][j] - half, entry["xhat"][j] + half
         self._write(state_topic(node), ns, msg)
         missing = list(entry.get("missing", []))
-        self._write(drops_topic(node), ns, {
-            "step": entry["step"], "t": t, "node": node, "used": list(entry.get("used", [])), "missing": missing,
-            "late": bool(entry.get("late", False)), "missing_count": len(missing),
-        })
+        self._write(
+            drops_topic(node),
+            ns,
+            {
+                "step": entry["step"],
+                "t": t,
+                "node": node,
+                "used": list(entry.get("used", [])),
+                "missing": missing,
+                "late": bool(entry.get("late", False)),
+                "missing_count": len(missing),
+            },
+        )
         self._flush()
 
     def summary(self, summary: RunSummary) -> None:
@@ -357,4 +415,3 @@ def read_mcap(path: str | Path) -> tuple[dict, bool]:
     for i in meta.get("node_ids", []):  # a node that never published has no channel, but an entry list
         nodes.setdefault(str(i), [])
     return {"meta": meta, "truth": truth, "nodes": nodes, "summary": summary}, summary is None
-

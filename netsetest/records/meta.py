@@ -66,9 +66,22 @@ class RunMeta:
 
 _NOT_NONE = frozenset({"tau_s", "node_ids", "in_weights", "r_max", "h1", "C", "estimators", "plant", "manoeuvre"})
 _SCALARS: dict[str, tuple[type, ...]] = {
-    "seed": (int,), "steps": (int,), "started_ns": (int,), "tau_s": (int, float), "topology": (str,), "name": (str,), "mode": (str,),
-    "clock": (str,), "case": (str,), "signals": (str,), "variant": (str,), "objective": (str,), "run_id": (str,), "plant": (str,),
-    "manoeuvre": (str,), "security": (str,),
+    "seed": (int,),
+    "steps": (int,),
+    "started_ns": (int,),
+    "tau_s": (int, float),
+    "topology": (str,),
+    "name": (str,),
+    "mode": (str,),
+    "clock": (str,),
+    "case": (str,),
+    "signals": (str,),
+    "variant": (str,),
+    "objective": (str,),
+    "run_id": (str,),
+    "plant": (str,),
+    "manoeuvre": (str,),
+    "security": (str,),
 }
 _DICTS = frozenset({"in_weights", "r_max", "h1", "C", "estimators", "model_uncertainty"})
 

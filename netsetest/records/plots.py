@@ -93,7 +93,7 @@ def _panels(ids: list[int], cap: int, title: str, xlabel: str) -> tuple[Figure, 
     shown, nrows, ncols, note = _grid(ids, cap)
     fig, axes = plt.subplots(nrows, ncols, figsize=(5.5 * ncols, 2.6 * nrows), squeeze=False, sharex=True)
     flat = list(axes.flat)
-    for ax in flat[len(shown):]:
+    for ax in flat[len(shown) :]:
         ax.set_visible(False)
     for c in range(ncols):
         col = [ax for ax in axes[:, c] if ax.get_visible()]
@@ -240,8 +240,14 @@ def _fig6(rec: Record, label: str) -> Figure:
         axes[0, comp].set_title(name.split()[0], fontsize=10)
         axes[-1, comp].set_xlabel("t [s]")
     if clipped:
-        fig.text(0.5, 0.005, f"y axes show the bounds from t = {TRANSIENT_S:g} s on (the initial ellipsoid is much wider); "
-                 "every true value is inside the axes", ha="center", fontsize=8, color="0.3")
+        fig.text(
+            0.5,
+            0.005,
+            f"y axes show the bounds from t = {TRANSIENT_S:g} s on (the initial ellipsoid is much wider); every true value is inside the axes",
+            ha="center",
+            fontsize=8,
+            color="0.3",
+        )
     _legend(fig, fig, loc="upper center", ncol=4, bbox_to_anchor=(0.5, 1.0 - LEGEND_TOP_IN / fig.get_figheight()))
     fig.tight_layout(rect=(0, 0.02, 1, 1.0 - (LEGEND_TOP_IN + 0.05) / fig.get_figheight()))
     return fig
@@ -261,8 +267,7 @@ def _fig7(rec: Record, label: str) -> Figure:
         ax.set_ylabel("f [rad/s]")
     _legend(panels[0][1], fig)
     if clipped:
-        fig.text(0.5, 0.005, f"y axes show the bounds from t = {TRANSIENT_S:g} s on; every true value is inside the axes",
-                 ha="center", fontsize=8, color="0.3")
+        fig.text(0.5, 0.005, f"y axes show the bounds from t = {TRANSIENT_S:g} s on; every true value is inside the axes", ha="center", fontsize=8, color="0.3")
     fig.tight_layout(rect=(0, 0.02, 1, 1))
     return fig
 
@@ -291,8 +296,7 @@ def _fig_fdi(rec: Record, label: str) -> Figure:
         if not rows:
             continue
         t = np.array([r["step"] for r in rows], dtype=float) * tau
-        ax.fill_between(t, [r["fault_lower"] for r in rows], [r["fault_upper"] for r in rows], color="tab:blue", alpha=0.2,
-                        label="published fault interval")
+        ax.fill_between(t, [r["fault_lower"] for r in rows], [r["fault_upper"] for r in rows], color="tab:blue", alpha=0.2, label="published fault interval")
         ax.plot(*_truth_series(rec, "faults", i), color="black", lw=1.0, label="true fault")
         ax.axhline(0.0, color="0.5", lw=0.6)
         for status, colour in FDI_COLOURS.items():

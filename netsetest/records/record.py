@@ -387,6 +387,7 @@ def _check_sequence(path: Path, objs: list[dict]) -> None:
 
 def _check_order(path: Path, truth: list, nodes: dict[str, list]) -> int:
     """The truth steps and each node's state steps strictly increase (integers); the last truth step."""
+
     def steps(entries: list, what: str) -> list[int]:
         out: list[int] = []
         for e in entries:
@@ -453,8 +454,13 @@ def _fdi(v: object) -> str | None:
 
 
 def record_from_parts(
-    meta: RunMeta, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None, path: str = "",
-    partial: bool = False, last_complete_step: int | None = None,
+    meta: RunMeta,
+    truth: list[dict],
+    nodes: dict[str, list[dict]],
+    summary: RunSummary | None,
+    path: str = "",
+    partial: bool = False,
+    last_complete_step: int | None = None,
 ) -> Record:
     """A :class:`Record` from the parts a run returns (or a file holds); raises KeyError/TypeError/ValueError
     on malformed entries.  ``last_complete_step`` defaults to the last step of ``truth``."""

@@ -64,6 +64,7 @@ CLOSE_LAG = 2  # a step whose alive nodes reported closes this many truths later
 MAX_COPIES = 4  # differing copies of one step's truth, or one node-step's state, kept until the step closes
 CHAIN_RTOL = 1e-12  # x_k recomputed from x_{k−1}: same code, same inputs — rounding only across machines
 
+
 def _same_set(a: NodeState, b: NodeState) -> bool:
     """Copies that publish the same ellipsoid are one for judging (bookkeeping fields may differ)."""
     return a.xhat == b.xhat and a.P == b.P and a.rho == b.rho and a.innov == b.innov and a.gamma == b.gamma and a.set == b.set
@@ -116,14 +117,27 @@ def _state_entry(st: NodeState, v: NodeVerdict, contested: bool) -> dict:
     unjudged = None if c is not None else ("contested" if contested else TRUTH_UNKNOWN)  # neither contained nor a miss
     origin = v.cone.origin
     return {
-        "step": v.step, "xhat": list(st.xhat), "P": list(st.P), "rho": st.rho, "status": st.status,
-        "rho_cert": st.rho_cert, "solve_ms": st.solve_ms, "used": st.used, "missing": st.missing,
-        "readings": [j for j, _, _ in st.readings], "health": st.health,
-        "late": st.late, "E": c.E if c is not None else None, "judged": c is not None, "not_judged_why": unjudged,
-        "contained": None if c is None else bool(c.contained), "assumptions_ok": v.cone.ok,
+        "step": v.step,
+        "xhat": list(st.xhat),
+        "P": list(st.P),
+        "rho": st.rho,
+        "status": st.status,
+        "rho_cert": st.rho_cert,
+        "solve_ms": st.solve_ms,
+        "used": st.used,
+        "missing": st.missing,
+        "readings": [j for j, _, _ in st.readings],
+        "health": st.health,
+        "late": st.late,
+        "E": c.E if c is not None else None,
+        "judged": c is not None,
+        "not_judged_why": unjudged,
+        "contained": None if c is None else bool(c.contained),
+        "assumptions_ok": v.cone.ok,
         "not_covered_cause": v.cone.cause,
         "inherited_from": [origin.node, origin.step, origin.why] if origin is not None else None,
-        "contested": contested, "sector": list(st.sector) if st.sector is not None else None,
+        "contested": contested,
+        "sector": list(st.sector) if st.sector is not None else None,
         "sector_basis": st.sector_basis,
         **({"bounds": c.bounds.tolist()} if c is not None and c.bounds is not None else {}),
     }
@@ -258,8 +272,11 @@ class Collector:
             here = k in self.truth
             if not (
                 self.head >= k + WINDOW
-                or here and self._reported(k, alive_only=False)
-                or here and self.head >= k + CLOSE_LAG and self._reported(k, alive_only=True)
+                or here
+                and self._reported(k, alive_only=False)
+                or here
+                and self.head >= k + CLOSE_LAG
+                and self._reported(k, alive_only=True)
             ):
                 return
             self._close(k)

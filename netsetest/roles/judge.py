@@ -155,9 +155,7 @@ def state_mismatch(n: NodeConfig, st: NodeState, tr: Truth) -> str | None:
         return "state-wrong-method"  # a set estimator publishes its set, the SDP none
     if (st.step == 0) != (st.status in ("init", "init-prior")):
         return "state-not-prior"  # step 0 publishes the prior (updated by ỹ₀), no other step does
-    if st.status == "init-prior" and (
-        st.rho != n.rho or not np.array_equal(st.xhat, n.x0_hat) or not np.array_equal(st.P_matrix(), n.P0)
-    ):
+    if st.status == "init-prior" and (st.rho != n.rho or not np.array_equal(st.xhat, n.x0_hat) or not np.array_equal(st.P_matrix(), n.P0)):
         return "state-not-prior"
     return None
 
@@ -170,9 +168,7 @@ class Judge:
         self.node_cfg = {n.id: n for n in scenario.nodes}
         self.references = set(scenario.references())  # whose readings rest on their declared zero fault
         # nodes running a set estimator whose guarantee also rests on the declared fault bound (its cone)
-        self.needs_fault_bound = {
-            n.id for n in scenario.nodes if n.estimator != SDP and "fault_bound" in node_set_estimator(scenario, n.id).assumptions
-        }
+        self.needs_fault_bound = {n.id for n in scenario.nodes if n.estimator != SDP and "fault_bound" in node_set_estimator(scenario, n.id).assumptions}
 
     def step(self, inp: StepInputs, prev: StepChecks) -> StepVerdict:
         """Every node's verdict of one closed step, and the copy checks its successor judges inputs by."""
@@ -186,7 +182,10 @@ class Judge:
             st = inp.judged.get(n.id)
             judged = st is not None and tr is not None and n.id not in inp.contested
             out[n.id] = NodeVerdict(
-                n.id, inp.step, self.cone(n, inp, checks, prev), self.containment(n.id, st, tr) if judged else None,  # type: ignore[arg-type]  # judged: st and tr are set
+                n.id,
+                inp.step,
+                self.cone(n, inp, checks, prev),
+                self.containment(n.id, st, tr) if judged else None,  # type: ignore[arg-type]  # judged: st and tr are set
             )
         return StepVerdict(out, checks)
 
@@ -343,7 +342,25 @@ def history_cone(sc: Scenario, truth: list[dict], node: int, fault_bound: bool) 
 
 
 __all__ = [
-    "HEALTH", "INHERITED", "MISSED", "MODEL_MISMATCH", "NOT_FROM_INPUT", "NOT_JUDGED", "NO_CHECKS", "TRUTH_UNKNOWN",
-    "Cone", "Containment", "CopyCheck", "Judge", "NodeVerdict", "Origin", "StepChecks", "StepInputs", "StepVerdict",
-    "history_cone", "isclose", "published_sector", "state_mismatch",
+    "HEALTH",
+    "INHERITED",
+    "MISSED",
+    "MODEL_MISMATCH",
+    "NOT_FROM_INPUT",
+    "NOT_JUDGED",
+    "NO_CHECKS",
+    "TRUTH_UNKNOWN",
+    "Cone",
+    "Containment",
+    "CopyCheck",
+    "Judge",
+    "NodeVerdict",
+    "Origin",
+    "StepChecks",
+    "StepInputs",
+    "StepVerdict",
+    "history_cone",
+    "isclose",
+    "published_sector",
+    "state_mismatch",
 ]

@@ -44,9 +44,9 @@ from netsetest.estimator.objective import DEFAULT_OBJECTIVE
 from netsetest.estimator.health import HEALTH_KEY
 from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.rejoin import rejoin_ellipsoid
-from netsetest.estimator.sdp import Ellipsoid, LocalEstimator, NeighbourState, Objective, StepInput, StepResult, Variant
+from netsetest.estimator.sdp import NodeSet, LocalEstimator, NeighbourState, Objective, UpdateInput, StepResult, Variant
 from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sector, measurement_interval
-from netsetest.messages import End, Message, NodeInput, NodeState, Reading, RunScope, decode, encode, state_digest
+from netsetest.messages import End, Message, NodeInput, NodeState, NodeStatus, Reading, RunScope, decode, encode, state_digest
 from netsetest.models.sensor import NA
 from netsetest.profile import PROFILE
 from netsetest.roles.plausibility import innovation_possible, states_disjoint
@@ -77,8 +77,15 @@ def enclosing_ellipsoid(s: base.GuaranteedSet, rho: float) -> tuple[np.ndarray, 
 
 class Node:
     def __init__(
-        self, scenario: Scenario, node_id: int, bus: Bus, run_id: str, variant: Variant = "scheduled", rejoin: bool = False,
-        objective: Objective = DEFAULT_OBJECTIVE, lazy_neighbours: bool = False,
+        self,
+        scenario: Scenario,
+        node_id: int,
+        bus: Bus,
+        run_id: str,
+        variant: Variant = "scheduled",
+        rejoin: bool = False,
+        objective: Objective = DEFAULT_OBJECTIVE,
+        lazy_neighbours: bool = False,
     ) -> None:
         """``lazy_neighbours``: neighbour states do not wake the node: they are used when its next input
         arrives, which does wake it (a runtime waiting for one polls; netsetest/bus/base.py, runtime/processes.py)."""
@@ -155,25 +162,25 @@ class Node:
         est = self.estimator
         gamma = sum(cfg.gamma_range) / 2 if sc.case == "saim" and cfg.gamma_range is not None else 1.0
 
-        def prior_state(j: int, ell: Ellipsoid, sector: Sector | None) -> NeighbourState:
+        def prior_state(j: int, ell: NodeSet, sector: Sector | None) -> NeighbourState:
             sensor = sc.node(j).sensor
             y = float(sensor.Cbar @ ell.xhat)
             if sector is None:
                 sector = derive_sector(sensor, FaultBound(), measurement_interval(sensor, y, gamma), None)
             return NeighbourState(ell.xhat, ell.P, ell.rho, gamma, 0.0, sector)
 
-        prior = Ellipsoid(cfg.x0_hat.copy(), cfg.P0.copy(), self.rho)
+        prior = NodeSet(cfg.x0_hat.copy(), cfg.P0.copy(), self.rho)
         y = float(cfg.sensor.Cbar @ prior.xhat)
         first = est.first(prior, y, gamma)
-        own = Ellipsoid(first.xhat, first.P, self.rho)
-        neigh = {j: prior_state(j, Ellipsoid(sc.node(j).x0_hat, sc.node(j).P0, sc.node(j).rho), None) for j in self.others}
+        own = NodeSet(first.xhat, first.P, self.rho)
+        neigh = {j: prior_state(j, NodeSet(sc.node(j).x0_hat, sc.node(j).P0, sc.node(j).rho), None) for j in self.others}
         if self.id in cfg.in_weights:
             neigh[self.id] = prior_state(self.id, own, first.sector)
         u, vx = (sc.steer_low + sc.steer_high) / 2, sc.vx(0)
-        res = est.step(own, StepInput(sc.model.weights(vx), u, y, gamma, neigh))
+        res = est.step(own, UpdateInput(sc.model.weights(vx), u, y, gamma, neigh))
         if self.read_from:  # the pattern of a step that uses readings
             readings = {j: (float(sc.node(j).sensor.Cbar @ cfg.x0_hat), gamma) for j in self.read_from}
-            est.step(own, StepInput(sc.model.weights(vx), u, y, gamma, {}, readings))
+            est.step(own, UpdateInput(sc.model.weights(vx), u, y, gamma, {}, readings))
             decode(encode(Reading(step=1, node=self.id, y=y, gamma=gamma)))
             est.forget_warm_starts()  # the readings' solver would start the run from this made-up gain
         inp = NodeInput(step=1, node=self.id, y=y, gamma=gamma, u_prev=u, vx_prev=vx, expect_from=self.others)
@@ -374,14 +381,14 @@ class Node:
         readings = self.readings.get(inp.step, {})
         return [j for j in self.read_from if j not in readings and j not in self.silent]
 
-    def _prior(self) -> Ellipsoid:
+    def _prior(self) -> NodeSet:
         """The set the next step starts from."""
-        return Ellipsoid(self.xhat, self.P, self.rho)
+        return NodeSet(self.xhat, self.P, self.rho)
 
-    def _step_input(self, inp: NodeInput, neigh: dict[int, NeighbourState], readings: dict[int, tuple[float, float]]) -> StepInput:
+    def _step_input(self, inp: NodeInput, neigh: dict[int, NeighbourState], readings: dict[int, tuple[float, float]]) -> UpdateInput:
         """The estimator's input of a step > 0 (its u and Vx are there: _implausible_input dropped inputs without them)."""
         assert inp.u_prev is not None and inp.vx_prev is not None
-        return StepInput(self.sc.model.weights(inp.vx_prev), inp.u_prev, inp.y, inp.gamma, neigh, readings)
+        return UpdateInput(self.sc.model.weights(inp.vx_prev), inp.u_prev, inp.y, inp.gamma, neigh, readings)
 
     def try_step(self, now: float | None = None) -> bool:
         """Compute and publish the next step if its inputs are here (or the runtime gave up waiting)."""
@@ -413,8 +420,8 @@ class Node:
             self._publish_set(inp, "init")
             return True
         if inp.step == 0:
-            res = self.estimator.first(Ellipsoid(self.xhat, self.P, self.rho), inp.y, inp.gamma)
-            status = "init" if res.status == "ok" else "init-prior"
+            res = self.estimator.first(NodeSet(self.xhat, self.P, self.rho), inp.y, inp.gamma)
+            status: NodeStatus = "init" if res.status == "ok" else "init-prior"
             self._publish(inp, status, res, used=[], missing=[], inputs=[])
             return True
         have = self.inbox.get(inp.step, {})
@@ -434,7 +441,7 @@ class Node:
         readings = self.readings.get(inp.step, {})
         neigh = {j: have[j] for j in inp.expect_from if j in have}
         if self.id in self.cfg.in_weights:
-            neigh[self.id] = self.own  # type: ignore[assignment]  # the own Ellipsoid stands in for the NeighbourState the self-loop reads (same fields)
+            neigh[self.id] = self.own  # type: ignore[assignment]  # the own NodeSet stands in for the NeighbourState the self-loop reads (same fields)
         step_in = self._step_input(inp, neigh, readings)
         t = PROFILE.now() if PROFILE is not None else 0
         res = self.estimator.step(self._prior(), step_in)
@@ -445,8 +452,16 @@ class Node:
         if PROFILE is not None:
             PROFILE.add("solve", t)
         used = sorted(j for j in neigh if j != self.id)
-        self._publish(inp, res.status, res, used=used, missing=self.missing(), inputs=self._inputs(self.k, used, own=True),
-                      readings=[(j, *readings[j]) for j in refs], health=health)
+        self._publish(
+            inp,
+            res.status,
+            res,
+            used=used,
+            missing=self.missing(),
+            inputs=self._inputs(self.k, used, own=True),
+            readings=[(j, *readings[j]) for j in refs],
+            health=health,
+        )
 
     def _inputs(self, step: int, used: list[int], own: bool) -> list[tuple[int, str]]:
         """(node, digest) of every state copy a step used: the neighbours' of ``step`` and our own prior."""
@@ -456,7 +471,7 @@ class Node:
             out.append((self.id, self.own_digest))
         return out
 
-    def _publish_set(self, inp: NodeInput, status: str) -> None:
+    def _publish_set(self, inp: NodeInput, status: NodeStatus) -> None:
         """Step the set estimator and publish its set with an enclosing ellipsoid (the neighbour-facing
         summary: SDP neighbours and the plausibility checks use it unchanged) and the step's sector."""
         assert self.set_estimator is not None
@@ -483,12 +498,18 @@ class Node:
         res = StepResult(xhat, P, "ok", float("nan"), solve_ms, status, sector=sector)
         used_readings = [(j, *readings[j]) for j in sorted(readings)] if status == "ok" else []  # "fallback": the last set
         health = bool(used_readings) and self.sc.health_declared
-        self._publish(inp, status, res, used=[], missing=self.missing(), inputs=inputs, wire_set=set_to_wire(s), readings=used_readings,
-                      health=health)
+        self._publish(inp, status, res, used=[], missing=self.missing(), inputs=inputs, wire_set=set_to_wire(s), readings=used_readings, health=health)
 
     def _publish(
-        self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int],
-        inputs: list[tuple[int, str]], wire_set: dict | None = None, readings: list[tuple[int, float, float]] | None = None,
+        self,
+        inp: NodeInput,
+        status: NodeStatus,
+        res: StepResult,
+        used: list[int],
+        missing: list[int],
+        inputs: list[tuple[int, str]],
+        wire_set: dict | None = None,
+        readings: list[tuple[int, float, float]] | None = None,
         health: bool = False,
     ) -> None:
         """Keep ``res`` as the node's own set (its next step starts from it) and publish ``res.public``."""
@@ -511,8 +532,15 @@ class Node:
         self.bus.publish(keys.node_state(self.run, self.id), msg)
 
     def _state_message(
-        self, inp: NodeInput, status: str, res: StepResult, used: list[int], missing: list[int],
-        inputs: list[tuple[int, str]], wire_set: dict | None = None, readings: list[tuple[int, float, float]] | None = None,
+        self,
+        inp: NodeInput,
+        status: NodeStatus,
+        res: StepResult,
+        used: list[int],
+        missing: list[int],
+        inputs: list[tuple[int, str]],
+        wire_set: dict | None = None,
+        readings: list[tuple[int, float, float]] | None = None,
         health: bool = False,
     ) -> NodeState:
         """The state message of ``res.public`` for the step of ``inp`` (validated)."""
@@ -521,12 +549,27 @@ class Node:
         rho_cert = pub.rho_cert if np.isfinite(pub.rho_cert) else None
         drops = self.drop_report()
         return NodeState(
-            step=inp.step, node=self.id, xhat=[float(a) for a in pub.xhat], P=[float(a) for a in pub.P.reshape(NA * NA)],
-            rho=self.rho, gamma=inp.gamma, innov=innov, status=status, rho_cert=rho_cert,  # type: ignore[arg-type]  # status is one of the Literal's values; rho_cert a float
-            solve_ms=res.solve_ms, used=used, missing=missing,
-            late=inp.deadline is not None and time.time() > inp.deadline, dropped=sum(drops.values()), drops=drops,
+            step=inp.step,
+            node=self.id,
+            xhat=[float(a) for a in pub.xhat],
+            P=[float(a) for a in pub.P.reshape(NA * NA)],
+            rho=self.rho,
+            gamma=inp.gamma,
+            innov=innov,
+            status=status,
+            rho_cert=rho_cert,
+            solve_ms=res.solve_ms,
+            used=used,
+            missing=missing,
+            late=inp.deadline is not None and time.time() > inp.deadline,
+            dropped=sum(drops.values()),
+            drops=drops,
             sector=(sector.h1, sector.h) if sector is not None else None,
-            sector_basis=sector.basis if sector is not None else "none", set=wire_set, inputs=inputs, readings=readings or [], health=health,
+            sector_basis=sector.basis if sector is not None else "none",
+            set=wire_set,
+            inputs=inputs,
+            readings=readings or [],
+            health=health,
             **self._own_set(res),  # type: ignore[arg-type]  # own_xhat/own_P only: mypy cannot tell the keys of a dict
         )
 

@@ -38,9 +38,7 @@ DISJOINT_MARGIN = 1e-9  # relative: call two ellipses disjoint only when clearly
 LAMBDA_GRID = np.linspace(0.005, 0.995, 199)  # any λ ∈ (0, 1) gives a valid separation certificate
 
 
-def innovation_interval(
-    sensor: Sensor, xhat: np.ndarray, P: np.ndarray, rho: float, gamma: float, sector: Sector | None
-) -> tuple[float, float]:
+def innovation_interval(sensor: Sensor, xhat: np.ndarray, P: np.ndarray, rho: float, gamma: float, sector: Sector | None) -> tuple[float, float]:
     """The innovations y̌ = ỹ − C̄ x̂ a sensor with this published ellipsoid, sector and noise bound can
     produce; ``sector`` None: the sensor's fixed h1, h2 (1, 1 for a sensor without saturation)."""
     # scalar arithmetic on the 3-vectors: a node runs this for every neighbour message, and numpy's
@@ -60,9 +58,7 @@ def innovation_interval(
     return lo, hi
 
 
-def innovation_possible(
-    sensor: Sensor, xhat: np.ndarray, P: np.ndarray, rho: float, gamma: float, sector: Sector | None, innov: float
-) -> bool:
+def innovation_possible(sensor: Sensor, xhat: np.ndarray, P: np.ndarray, rho: float, gamma: float, sector: Sector | None, innov: float) -> bool:
     lo, hi = innovation_interval(sensor, xhat, P, rho, gamma, sector)
     return bool(lo <= innov <= hi)
 

@@ -47,8 +47,7 @@ def compose_yaml(topology: str, image: str = "netsetest:latest") -> str:
         "# Start: docker compose up --build   (the record and summary land in ./runs)",
         "services:",
     ]
-    out += _service("router", image, ["netsetest", *RouterSpec(topo, CREDENTIALS_MOUNT, ("tls/0.0.0.0:7447",)).to_argv()],
-                    ports=("127.0.0.1:7447:7447",))
+    out += _service("router", image, ["netsetest", *RouterSpec(topo, CREDENTIALS_MOUNT, ("tls/0.0.0.0:7447",)).to_argv()], ports=("127.0.0.1:7447:7447",))
     collector = CollectorSpec(scenario, record="/runs/record.json.gz", summary_json="/runs/summary.json", zenoh=net)
     out += _service("collector", image, ["netsetest", *collector.to_argv()], volumes=("./runs:/runs",))
     for i in sc.ids:

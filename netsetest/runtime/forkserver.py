@@ -110,8 +110,15 @@ def serve(control_fd: int, run: Callable[[list[str]], int]) -> int:
                 sel.unregister(pidfd)
                 os.close(pidfd)
                 _, status, usage = os.wait4(pid, 0)
-                _send(sock, {"exited": pid, "code": os.waitstatus_to_exitcode(status), "cpu_s": usage.ru_utime + usage.ru_stime,
-                             "peak_rss_mb": usage.ru_maxrss / 1024.0})
+                _send(
+                    sock,
+                    {
+                        "exited": pid,
+                        "code": os.waitstatus_to_exitcode(status),
+                        "cpu_s": usage.ru_utime + usage.ru_stime,
+                        "peak_rss_mb": usage.ru_maxrss / 1024.0,
+                    },
+                )
 
 
 def _hold_low_fds() -> list[int]:
@@ -235,8 +242,15 @@ class ForkServer:
     def __init__(self, argv: list[str], env: Mapping[str, str]) -> None:
         """``argv``: the server's command; ``--control-fd N`` is appended."""
         self.sock, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
-        self.proc = subprocess.Popen([*argv, "--control-fd", str(theirs.fileno())], pass_fds=[theirs.fileno()], start_new_session=True,
-                                     preexec_fn=die_with_parent, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, env=dict(env))
+        self.proc = subprocess.Popen(
+            [*argv, "--control-fd", str(theirs.fileno())],
+            pass_fds=[theirs.fileno()],
+            start_new_session=True,
+            preexec_fn=die_with_parent,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            env=dict(env),
+        )
         theirs.close()
         self.children: dict[int, ForkedProcess] = {}
         self.started: list[tuple[str, int]] = []  # (name, pid) answers not yet claimed by spawn()

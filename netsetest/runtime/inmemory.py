@@ -30,15 +30,26 @@ def run_meta(
     scenario: Scenario, mode: str, clock: str, signals: str, variant: str, seed: int | None, run_id: str, objective: str = DEFAULT_OBJECTIVE
 ) -> RunMeta:
     return RunMeta(
-        topology=str(scenario.path), name=scenario.name, mode=mode, clock=clock, case=scenario.case, signals=signals,
-        variant=variant, objective=objective, seed=seed, steps=scenario.steps, tau_s=scenario.tau_s, run_id=run_id,
+        topology=str(scenario.path),
+        name=scenario.name,
+        mode=mode,
+        clock=clock,
+        case=scenario.case,
+        signals=signals,
+        variant=variant,
+        objective=objective,
+        seed=seed,
+        steps=scenario.steps,
+        tau_s=scenario.tau_s,
+        run_id=run_id,
         node_ids=list(scenario.ids),
         in_weights={str(n.id): {str(j): a for j, a in n.in_weights.items()} for n in scenario.nodes},
         r_max={str(n.id): (n.sensor.r_max if n.sensor.saturated else None) for n in scenario.nodes},
         h1={str(n.id): n.sensor.h1 for n in scenario.nodes},
         C={str(n.id): list(n.sensor.Cbar) for n in scenario.nodes},
         estimators={str(n.id): n.estimator for n in scenario.nodes},
-        plant=scenario.plant_label, manoeuvre=scenario.manoeuvre,
+        plant=scenario.plant_label,
+        manoeuvre=scenario.manoeuvre,
         model_uncertainty=None if (u := scenario.uncertainty) is None else {"kind": u.kind, "G": u.G.tolist()},
         started_ns=time.time_ns(),  # the run's start on the wall clock (an MCAP record's log times start here)
     )

@@ -269,8 +269,15 @@ class Network:
     """How each role connects: as an mTLS client of the launcher's router (``router_endpoint``), or as a
     peer of the open mesh (insecure: each role listens on its own port and connects to every other)."""
 
-    def __init__(self, names: list[str], run_id: str, config: str | None, router_endpoint: str | None = None,
-                 credentials: str | None = None, router: object | None = None) -> None:
+    def __init__(
+        self,
+        names: list[str],
+        run_id: str,
+        config: str | None,
+        router_endpoint: str | None = None,
+        credentials: str | None = None,
+        router: object | None = None,
+    ) -> None:
         self.names, self.run_id, self.config = names, run_id, config
         self.router_endpoint, self.credentials, self.router = router_endpoint, credentials, router
         self.ports = dict(zip(names, free_ports(len(names))))
@@ -298,10 +305,14 @@ class Network:
         from netsetest.runtime.security import SECURITY_INSECURE, SECURITY_MTLS
 
         if self.secured:
-            return [f"security: {SECURITY_MTLS} (mTLS per role, access control at the run's router {self.router_endpoint}; credentials in {self.credentials})",
-                    f"run id {self.run_id}; watch it with: netsetest watch --credentials {self.credentials}"]
-        return [f"security: {SECURITY_INSECURE} (open peer mesh: any local process can read and forge messages)",
-                f"run id {self.run_id}; watch it with: netsetest watch --run-id {self.run_id} --connect {self.endpoint('collector')}"]
+            return [
+                f"security: {SECURITY_MTLS} (mTLS per role, access control at the run's router {self.router_endpoint}; credentials in {self.credentials})",
+                f"run id {self.run_id}; watch it with: netsetest watch --credentials {self.credentials}",
+            ]
+        return [
+            f"security: {SECURITY_INSECURE} (open peer mesh: any local process can read and forge messages)",
+            f"run id {self.run_id}; watch it with: netsetest watch --run-id {self.run_id} --connect {self.endpoint('collector')}",
+        ]
 
     def close(self) -> None:
         if self.router is not None:
@@ -346,20 +357,40 @@ class RoleStarter:
 
     def collector(self) -> CollectorSpec:
         o = self.plan.options
-        return CollectorSpec(self.scenario, o.signals, o.variant, o.objective, o.seed, o.clock, o.record, o.summary_json, CHANNEL_FD,
-                             zenoh=self.network.zenoh("collector"))
+        return CollectorSpec(
+            self.scenario, o.signals, o.variant, o.objective, o.seed, o.clock, o.record, o.summary_json, CHANNEL_FD, zenoh=self.network.zenoh("collector")
+        )
 
     def node(self, i: int, rejoin: bool = False, after: int = 0) -> NodeSpec:
         """Node ``i``; ``after``: the step it (re)joins at (its --crash-after is the next --kill from there)."""
         o = self.plan.options
-        return NodeSpec(self.scenario, i, o.variant, o.objective, o.clock, o.neighbour_timeout, rejoin, self.plan.schedule.next_kill(i, after),
-                        self.network.zenoh(f"node{i}"))
+        return NodeSpec(
+            self.scenario,
+            i,
+            o.variant,
+            o.objective,
+            o.clock,
+            o.neighbour_timeout,
+            rejoin,
+            self.plan.schedule.next_kill(i, after),
+            self.network.zenoh(f"node{i}"),
+        )
 
     def vehicle(self) -> VehicleSpec:
         o, schedule = self.plan.options, self.plan.schedule
         awaits = tuple((i, r) for i, rs in schedule.rejoins.items() for r in rs)
-        return VehicleSpec(self.scenario, o.signals, o.seed, o.clock, o.node_timeout, o.pace, run_start_timeout(len(self.network.names)), o.quiet,
-                           awaits, self.network.zenoh("vehicle"))
+        return VehicleSpec(
+            self.scenario,
+            o.signals,
+            o.seed,
+            o.clock,
+            o.node_timeout,
+            o.pace,
+            run_start_timeout(len(self.network.names)),
+            o.quiet,
+            awaits,
+            self.network.zenoh("vehicle"),
+        )
 
     def start_all(self) -> ChannelReader:
         """Collector, nodes, vehicle (it waits for everyone else); the collector's channel, being read."""
@@ -386,8 +417,15 @@ class Supervisor:
     the roles' exits; on Ctrl-C/SIGTERM it stops the vehicle and the nodes, then the collector.  It
     only polls, signals and restarts processes, so it runs on fake ones (tests/unit/test_supervisor.py)."""
 
-    def __init__(self, children: Children, schedule: Schedule, channel: ChannelReader, restart_node: Callable[[int, int], None],
-                 bar: Progress | None = None, sleep: Callable[[float], None] = time.sleep) -> None:
+    def __init__(
+        self,
+        children: Children,
+        schedule: Schedule,
+        channel: ChannelReader,
+        restart_node: Callable[[int, int], None],
+        bar: Progress | None = None,
+        sleep: Callable[[float], None] = time.sleep,
+    ) -> None:
         self.children, self.schedule, self.channel, self.restart_node = children, schedule, channel, restart_node
         self.bar, self.sleep = bar, sleep
         self.rejoins = sorted((r, i) for i, rs in schedule.rejoins.items() for r in rs)  # (step, node) still to do

@@ -41,9 +41,7 @@ def observed_key(run_id: str | None, key: str | None) -> str:
     return f"{keys.ROOT}/{run_id or ANY_RUN}/{key.strip('/') if key else '**'}"
 
 
-def observer_config(
-    mode: ZenohMode, connect: Sequence[str], config_file: str | None, access: ObserverAccess | None = None
-) -> zenoh.Config:
+def observer_config(mode: ZenohMode, connect: Sequence[str], config_file: str | None, access: ObserverAccess | None = None) -> zenoh.Config:
     """The observer's Zenoh configuration.
 
     ``access`` (``--credentials``): an mTLS client of the run's router with the observer certificate,
@@ -105,9 +103,7 @@ class Observer:
         except zenoh.ZError as exc:
             raise BusError(f"cannot open a Zenoh session: {_short(exc)}") from None
         self._samples: queue.Queue[tuple[str, bytes]] = queue.Queue()
-        self._sub = self._session.declare_subscriber(
-            key_expr, lambda s: self._samples.put((str(s.key_expr), s.payload.to_bytes()))
-        )
+        self._sub = self._session.declare_subscriber(key_expr, lambda s: self._samples.put((str(s.key_expr), s.payload.to_bytes())))
         self._closed = False
 
     def get(self, timeout: float) -> Observed | None:

@@ -239,7 +239,13 @@ class RejoinHolds:
 
 def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
     """A node's loop.  ``spec.crash_after``: SIGKILL this process right after publishing that step (``run --kill``: exactly there)."""
-    node_id, run_id, realtime, neighbour_timeout, crash_after = spec.id, spec.zenoh.resolved_run_id, spec.clock == "realtime", spec.neighbour_timeout, spec.crash_after
+    node_id, run_id, realtime, neighbour_timeout, crash_after = (
+        spec.id,
+        spec.zenoh.resolved_run_id,
+        spec.clock == "realtime",
+        spec.neighbour_timeout,
+        spec.crash_after,
+    )
     node = Node(sc, node_id, bus, run_id, spec.variant, rejoin=spec.rejoin, objective=spec.objective, lazy_neighbours=True)
     role = f"node {node_id}"
     barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), node_peers(sc, node_id), lazy=True)
@@ -253,9 +259,7 @@ def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
         while True:
             now = time.monotonic()
             if realtime:  # step with whatever neighbours have arrived; the readings of the step are worth a short wait
-                node.give_up = not node.awaiting_readings() or (
-                    node.waiting_since is not None and now - node.waiting_since > READING_WAIT * sc.tau_s
-                )
+                node.give_up = not node.awaiting_readings() or (node.waiting_since is not None and now - node.waiting_since > READING_WAIT * sc.tau_s)
             elif node.waiting_since is not None and now - node.waiting_since > neighbour_timeout:
                 log(role, f"step {node.k + 1}: neighbour(s) {node.missing()} silent for {neighbour_timeout:g} s; going on without")
                 node.give_up = True
@@ -344,7 +348,6 @@ def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: RunMeta, on
     if stopped:
         return EXIT_STOPPED
     return exit_code(summary) if collector.ended is not None else EXIT_VIOLATION
-
 
 
 # ---------------------------------------------------------------- a role process from its spec

@@ -76,8 +76,19 @@ def outcome(summary: RunSummary) -> str:
 
 def format_table(summary: RunSummary) -> str:
     mixed = len({r.estimator for r in summary.nodes}) > 1  # name each node's method where they differ
-    head = ["node", *(["estimator"] if mixed else []), "max E", "viol.", "assump.viol", "miss(assump.)", "fault width", "solve ms",
-            "fallbacks", "missing", "deadline"]
+    head = [
+        "node",
+        *(["estimator"] if mixed else []),
+        "max E",
+        "viol.",
+        "assump.viol",
+        "miss(assump.)",
+        "fault width",
+        "solve ms",
+        "fallbacks",
+        "missing",
+        "deadline",
+    ]
     rows = [
         [
             str(r.id),
@@ -113,8 +124,10 @@ def format_table(summary: RunSummary) -> str:
     # the last line: the run, its security mode (Zenoh) and the verdict
     security = f" (security: {summary.security})" if summary.security else ""
     seed = f", seed {summary.seed}" if summary.seed is not None else ""
-    out.append(f"{outcome(summary)}: {summary.mode or ''} run{security}, case {summary.case}, signals {summary.signals}, "
-               f"variant {summary.variant}{seed}, steps 0–{summary.steps_completed}: {verdict(summary)}.")
+    out.append(
+        f"{outcome(summary)}: {summary.mode or ''} run{security}, case {summary.case}, signals {summary.signals}, "
+        f"variant {summary.variant}{seed}, steps 0–{summary.steps_completed}: {verdict(summary)}."
+    )
     return "\n".join(out)
 
 
@@ -122,15 +135,25 @@ def fdi_table(summary: RunSummary) -> list[str]:
     """Guaranteed fault detection per node (docs/fdi.md): what a fault-diagnosis engineer reads first."""
     head = ["node", "fault from", "detected from", "delay", "detected steps", "proved healthy", "false detections"]
     rows = [
-        [str(r.id), _fmt(r.fault_onset, "d"), _fmt(r.first_detection, "d"), _fmt(r.detection_delay, "d"), str(r.detected_steps),
-         str(r.healthy_steps), str(r.false_detections) + (f" ({r.false_detections_covered} covered)" if r.false_detections_covered else "")]
+        [
+            str(r.id),
+            _fmt(r.fault_onset, "d"),
+            _fmt(r.first_detection, "d"),
+            _fmt(r.detection_delay, "d"),
+            str(r.detected_steps),
+            str(r.healthy_steps),
+            str(r.false_detections) + (f" ({r.false_detections_covered} covered)" if r.false_detections_covered else ""),
+        ]
         for r in summary.nodes
     ]
     widths = [max(len(h), *(len(r[c]) for r in rows)) for c, h in enumerate(head)]
     line = lambda cells: "  ".join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731  # a one-line local helper
     return [
         "fault detection (detected: the published fault interval excludes 0; docs/fdi.md):",
-        line(head), line(["-" * w for w in widths]), *(line(r) for r in rows), "",
+        line(head),
+        line(["-" * w for w in widths]),
+        *(line(r) for r in rows),
+        "",
     ]
 
 

@@ -192,8 +192,7 @@ def _argv(spec: object) -> tuple[list[str], list[str]]:
 # ---------------------------------------------------------------- the parts every role shares
 
 
-ESTIMATOR_HELP = (f"every node's estimator, overriding the topology's per-node 'estimator' ({', '.join(NODE_ESTIMATOR_NAMES)}; "
-                  "default: the file's, else sdp)")
+ESTIMATOR_HELP = f"every node's estimator, overriding the topology's per-node 'estimator' ({', '.join(NODE_ESTIMATOR_NAMES)}; default: the file's, else sdp)"
 ZENOH_CONFIG_HELP = "a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting and security on top (default: none)"
 
 
@@ -227,12 +226,18 @@ class ZenohSpec:
 
     run_id: str | None = _opt(None, "--run-id", _RUN_ID_HELP, argtypes.run_id)
     mode: ZenohMode = _opt("peer", "--zenoh-mode", "peer (one host) or client of a router", choices=("peer", "client"))
-    listen: tuple[str, ...] = _opt((), "--listen", "endpoint to listen on, e.g. tcp/127.0.0.1:7450 (repeatable; default: none)",
-                                   argtypes.endpoint, metavar="ENDPOINT", many=True)
-    connect: tuple[str, ...] = _opt((), "--connect", "endpoint to connect to, e.g. tls/10.0.0.1:7447 (repeatable; default: none)",
-                                    argtypes.endpoint, metavar="ENDPOINT", many=True)
-    credentials: str | None = _opt(None, "--credentials", "mTLS: this role's certificate and key from DIR (`netsetest credentials`); "
-                                   "connect on tls/ endpoints (default: none, no TLS)", metavar="DIR")
+    listen: tuple[str, ...] = _opt(
+        (), "--listen", "endpoint to listen on, e.g. tcp/127.0.0.1:7450 (repeatable; default: none)", argtypes.endpoint, metavar="ENDPOINT", many=True
+    )
+    connect: tuple[str, ...] = _opt(
+        (), "--connect", "endpoint to connect to, e.g. tls/10.0.0.1:7447 (repeatable; default: none)", argtypes.endpoint, metavar="ENDPOINT", many=True
+    )
+    credentials: str | None = _opt(
+        None,
+        "--credentials",
+        "mTLS: this role's certificate and key from DIR (`netsetest credentials`); connect on tls/ endpoints (default: none, no TLS)",
+        metavar="DIR",
+    )
     config: str | None = _opt(None, "--zenoh-config", ZENOH_CONFIG_HELP, argtypes.readable_file, metavar="FILE")
 
     @property
@@ -260,15 +265,21 @@ class VehicleSpec(RoleSpec):
     signals: SignalKind = _opt("paper", "--signals", "noise and wind: the paper's, or held at ±bound", choices=_SIGNALS_CHOICES)
     seed: int = _opt(0, "--seed", "random seed of noise, wind and losses", argtypes.seed)
     clock: Clock = _opt("lockstep", "--clock", "lockstep: wait for every node; realtime: one step every τs", choices=_CLOCK_CHOICES)
-    node_timeout: float = _opt(NODE_TIMEOUT_S, "--node-timeout", "lockstep: a node silent this long [s] is declared dead",
-                               argtypes.seconds, metavar="S")
+    node_timeout: float = _opt(NODE_TIMEOUT_S, "--node-timeout", "lockstep: a node silent this long [s] is declared dead", argtypes.seconds, metavar="S")
     pace: float = _opt(0.0, "--pace", "lockstep: at least S seconds per step", argtypes.non_negative_seconds, metavar="S")
-    start_timeout: float = _opt(START_TIMEOUT_S, "--start-timeout", f"how long [s] to wait for every role to be ready (default: {START_TIMEOUT_S:g})",
-                                argtypes.seconds, metavar="S")
+    start_timeout: float = _opt(
+        START_TIMEOUT_S, "--start-timeout", f"how long [s] to wait for every role to be ready (default: {START_TIMEOUT_S:g})", argtypes.seconds, metavar="S"
+    )
     quiet: bool = _opt(False, "--quiet", "no line on success (errors are still logged)", switch=True)
     await_rejoin: tuple[tuple[int, int], ...] = _opt(
-        (), "--await-rejoin", "lockstep: before step STEP+1 wait (at most --node-timeout) for node NODE to come back (repeatable; default: none)",
-        argtypes.node_at, _show_at, metavar="NODE@STEP", many=True)
+        (),
+        "--await-rejoin",
+        "lockstep: before step STEP+1 wait (at most --node-timeout) for node NODE to come back (repeatable; default: none)",
+        argtypes.node_at,
+        _show_at,
+        metavar="NODE@STEP",
+        many=True,
+    )
     zenoh: ZenohSpec = _group(ZenohSpec, "zenoh")
 
 
@@ -284,11 +295,11 @@ class NodeSpec(RoleSpec):
     variant: Variant = _opt("scheduled", "--variant", _VARIANT_HELP, choices=_VARIANT_CHOICES)
     objective: Objective = _opt(DEFAULT_OBJECTIVE, "--objective", OBJECTIVE_HELP, choices=OBJECTIVES)
     clock: Clock = _opt("lockstep", "--clock", "lockstep: wait for neighbours; realtime: step on the vehicle's input", choices=_CLOCK_CHOICES)
-    neighbour_timeout: float = _opt(NEIGHBOUR_TIMEOUT_S, "--neighbour-timeout", "lockstep: how long [s] to wait for a neighbour's message",
-                                    argtypes.seconds, metavar="S")
+    neighbour_timeout: float = _opt(
+        NEIGHBOUR_TIMEOUT_S, "--neighbour-timeout", "lockstep: how long [s] to wait for a neighbour's message", argtypes.seconds, metavar="S"
+    )
     rejoin: bool = _opt(False, "--rejoin", "join a running network (after a crash or restart)", switch=True)
-    crash_after: int | None = _opt(None, "--crash-after", "SIGKILL itself right after publishing step STEP (run --kill; default: never)",
-                                   int, metavar="STEP")
+    crash_after: int | None = _opt(None, "--crash-after", "SIGKILL itself right after publishing step STEP (run --kill; default: never)", int, metavar="STEP")
     zenoh: ZenohSpec = _group(ZenohSpec, "zenoh")
 
 
@@ -308,10 +319,15 @@ class CollectorSpec(RoleSpec):
     clock: Clock = _opt("lockstep", "--clock", "the run's clock (recorded in the summary)", choices=_CLOCK_CHOICES)
     record: str | None = _opt(None, "--record", "write the run record (.json, .json.gz or .mcap; default: none)", metavar="PATH")
     summary_json: str | None = _opt(None, "--summary-json", "write the summary as JSON (default: none)", metavar="PATH")
-    channel_fd: int | None = _opt(None, "--channel-fd", "report progress and the summary to the parent process on this inherited file "
-                                  "descriptor (runtime/channel.py; `netsetest run`) instead of printing the table (default: none)", int, metavar="FD")
-    idle_timeout: float = _opt(COLLECTOR_IDLE_TIMEOUT_S, "--idle-timeout", "give up when no message arrives for S seconds",
-                               argtypes.seconds, metavar="S")
+    channel_fd: int | None = _opt(
+        None,
+        "--channel-fd",
+        "report progress and the summary to the parent process on this inherited file "
+        "descriptor (runtime/channel.py; `netsetest run`) instead of printing the table (default: none)",
+        int,
+        metavar="FD",
+    )
+    idle_timeout: float = _opt(COLLECTOR_IDLE_TIMEOUT_S, "--idle-timeout", "give up when no message arrives for S seconds", argtypes.seconds, metavar="S")
     zenoh: ZenohSpec = _group(ZenohSpec, "zenoh")
 
 
@@ -323,12 +339,18 @@ class RouterSpec(RoleSpec):
     HELP: ClassVar[str] = "a Zenoh router in Python (for client-mode roles on several hosts)"
 
     topology: str | None = _opt(None, None, "topology whose access-control rules the router enforces (with --credentials)", optional=True)
-    credentials: str | None = _opt(None, "--credentials", "mTLS with DIR/router.pem and the run's access-control rules (default: none, open router)",
-                                   metavar="DIR")
-    listen: tuple[str, ...] = _opt((), "--listen", f"endpoint to listen on (repeatable; default: tcp/0.0.0.0:{ZENOH_DEFAULT_PORT}, "
-                                   f"or tls/0.0.0.0:{ZENOH_DEFAULT_PORT} with --credentials)", argtypes.endpoint, metavar="ENDPOINT", many=True)
-    run_id: str | None = _opt(None, "--run-id", f"the run whose keys the access control grants (default: ${RUN_ID_ENV} or '{DEFAULT_RUN_ID}')",
-                              argtypes.run_id)
+    credentials: str | None = _opt(
+        None, "--credentials", "mTLS with DIR/router.pem and the run's access-control rules (default: none, open router)", metavar="DIR"
+    )
+    listen: tuple[str, ...] = _opt(
+        (),
+        "--listen",
+        f"endpoint to listen on (repeatable; default: tcp/0.0.0.0:{ZENOH_DEFAULT_PORT}, or tls/0.0.0.0:{ZENOH_DEFAULT_PORT} with --credentials)",
+        argtypes.endpoint,
+        metavar="ENDPOINT",
+        many=True,
+    )
+    run_id: str | None = _opt(None, "--run-id", f"the run whose keys the access control grants (default: ${RUN_ID_ENV} or '{DEFAULT_RUN_ID}')", argtypes.run_id)
     zenoh_config: str | None = _opt(None, "--zenoh-config", ZENOH_CONFIG_HELP, argtypes.readable_file, metavar="FILE")
 
     @property

@@ -106,12 +106,28 @@ def write_credentials(
     ca_key = ec.generate_private_key(ec.SECP256R1())
     ca_name = _name(f"netsetest CA {now:%Y%m%dT%H%M%S}")
     ca = (
-        x509.CertificateBuilder().subject_name(ca_name).issuer_name(ca_name).public_key(ca_key.public_key())
-        .serial_number(x509.random_serial_number()).not_valid_before(start).not_valid_after(end)
+        x509.CertificateBuilder()
+        .subject_name(ca_name)
+        .issuer_name(ca_name)
+        .public_key(ca_key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(start)
+        .not_valid_after(end)
         .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
-        .add_extension(x509.KeyUsage(digital_signature=True, key_cert_sign=True, crl_sign=True, content_commitment=False,
-                                     key_encipherment=False, data_encipherment=False, key_agreement=False,
-                                     encipher_only=False, decipher_only=False), critical=True)
+        .add_extension(
+            x509.KeyUsage(
+                digital_signature=True,
+                key_cert_sign=True,
+                crl_sign=True,
+                content_commitment=False,
+                key_encipherment=False,
+                data_encipherment=False,
+                key_agreement=False,
+                encipher_only=False,
+                decipher_only=False,
+            ),
+            critical=True,
+        )
         .add_extension(x509.SubjectKeyIdentifier.from_public_key(ca_key.public_key()), critical=False)
         .sign(ca_key, hashes.SHA256())
     )
@@ -121,8 +137,13 @@ def write_credentials(
         hosts = list(router_hosts) if name == ROUTER else [name]
         usage = ExtendedKeyUsageOID.SERVER_AUTH if name == ROUTER else ExtendedKeyUsageOID.CLIENT_AUTH
         cert = (
-            x509.CertificateBuilder().subject_name(_name(name)).issuer_name(ca_name).public_key(key.public_key())
-            .serial_number(x509.random_serial_number()).not_valid_before(start).not_valid_after(end)
+            x509.CertificateBuilder()
+            .subject_name(_name(name))
+            .issuer_name(ca_name)
+            .public_key(key.public_key())
+            .serial_number(x509.random_serial_number())
+            .not_valid_before(start)
+            .not_valid_after(end)
             .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
             .add_extension(x509.SubjectAlternativeName([_san(h) for h in hosts]), critical=False)
             .add_extension(x509.ExtendedKeyUsage([usage]), critical=False)
@@ -186,20 +207,16 @@ def acl_config(sc: Scenario, run_id: str) -> dict[str, object]:
     """The router's ``access_control`` section: deny by default, allow each role's :func:`grants`."""
     rules: list[dict[str, object]] = [
         # subscriptions are propagated to publishers (which then send); declarations carry no data
-        {"id": "interest", "messages": ["declare_subscriber"], "flows": ["egress"], "permission": "allow",
-         "key_exprs": [keys.run_root(run_id)]},
+        {"id": "interest", "messages": ["declare_subscriber"], "flows": ["egress"], "permission": "allow", "key_exprs": [keys.run_root(run_id)]},
     ]
     subjects, policies = [], []
     for name, g in grants(sc, run_id).items():
         mine = [f"{name}-subscribe", f"{name}-receive", "interest"]
         if g.publish:  # the observer publishes nothing: no rule at all (Zenoh rejects a rule without keys)
-            rules.append({"id": f"{name}-publish", "messages": ["put"], "flows": ["ingress"], "permission": "allow",
-                          "key_exprs": list(g.publish)})
+            rules.append({"id": f"{name}-publish", "messages": ["put"], "flows": ["ingress"], "permission": "allow", "key_exprs": list(g.publish)})
             mine.append(f"{name}-publish")
-        rules.append({"id": f"{name}-subscribe", "messages": ["declare_subscriber"], "flows": ["ingress"],
-                      "permission": "allow", "key_exprs": list(g.receive)})
-        rules.append({"id": f"{name}-receive", "messages": ["put"], "flows": ["egress"], "permission": "allow",
-                      "key_exprs": list(g.receive)})
+        rules.append({"id": f"{name}-subscribe", "messages": ["declare_subscriber"], "flows": ["ingress"], "permission": "allow", "key_exprs": list(g.receive)})
+        rules.append({"id": f"{name}-receive", "messages": ["put"], "flows": ["egress"], "permission": "allow", "key_exprs": list(g.receive)})
         subjects.append({"id": name, "cert_common_names": [name]})
         policies.append({"id": name, "rules": mine, "subjects": [name]})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}

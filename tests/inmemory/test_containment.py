@@ -113,10 +113,7 @@ def test_saturated_within_sector_contained_every_step(tmp_path, signals):
         p.write_text(re.sub(r"r_max = [0-9.]+", f"r_max = {0.85 * m!r}", p.read_text()))
     sc = load_topology(tmp_path / "topo.toml", "saim")
     res = run_inmemory(sc, signals, "scheduled", seed=5)
-    saturated = sum(
-        1 for t in res.parts["truth"] for n in sc.nodes
-        if abs(float(n.sensor.Cbar @ np.r_[t["x"], t["faults"][str(n.id)]])) > n.sensor.r_max
-    )
+    saturated = sum(1 for t in res.parts["truth"] for n in sc.nodes if abs(float(n.sensor.Cbar @ np.r_[t["x"], t["faults"][str(n.id)]])) > n.sensor.r_max)
     assert saturated > 0, "the scenario must really saturate"
     check_every_step(res, expect_all_assumptions=True)
 

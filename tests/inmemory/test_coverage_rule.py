@@ -31,8 +31,11 @@ def _transitive(parts: dict) -> dict[tuple[int, int], bool]:
                 continue
             own = e["assumptions_ok"] or e["not_covered_cause"] in ("inherited", "fallback")
             deps = [] if k == 0 else [*e["used"], i]
-            old[(i, k)] = own and all(old.get((j, k - 1), False) and not rows[(j, k - 1)]["contested"]
-                                      for j in deps if (j, k - 1) in rows) and all((j, k - 1) in rows for j in deps)
+            old[(i, k)] = (
+                own
+                and all(old.get((j, k - 1), False) and not rows[(j, k - 1)]["contested"] for j in deps if (j, k - 1) in rows)
+                and all((j, k - 1) in rows for j in deps)
+            )
     return old
 
 

@@ -263,8 +263,16 @@ def test_forged_inputs_the_scenario_rules_out_are_dropped() -> None:
     assert_no_false_verdict(res)
     assert_same_estimates(res, clean("nsnim"))
     d = res.summary.drops["node 2"]
-    for reason in ("input-speed", "input-steering", "input-gamma", "input-not-neighbours", "input-incomplete", "step-beyond-run",
-                   "node-input-mismatch", "duplicate-input"):
+    for reason in (
+        "input-speed",
+        "input-steering",
+        "input-gamma",
+        "input-not-neighbours",
+        "input-incomplete",
+        "step-beyond-run",
+        "node-input-mismatch",
+        "duplicate-input",
+    ):
         assert d.get(reason, 0) > 0, (reason, d)
 
 
@@ -336,9 +344,24 @@ def test_forged_truth_is_checked_against_the_model() -> None:
             (key, encode(msg.model_copy(update={"step": 10_000_000}))),
             (key, _raw_truth(msg, faults={}, noise={}, gamma={}, y={}, y_nofault={}, sector_ok={}, noise_ok={})),
             (key, _raw_truth(msg, faults={**s, "7": 0.0})),
-            (key, encode(msg.model_copy(update={"faults": {"9": 0.0}, "noise": {"9": 0.0}, "gamma": {"9": 1.0}, "y": {"9": 0.0},
-                                                "y_nofault": {"9": 0.0}, "sector_ok": {"9": True}, "noise_ok": {"9": True},
-                                                "r": {"9": 0.0}, "fault_ok": {"9": True}}))),
+            (
+                key,
+                encode(
+                    msg.model_copy(
+                        update={
+                            "faults": {"9": 0.0},
+                            "noise": {"9": 0.0},
+                            "gamma": {"9": 1.0},
+                            "y": {"9": 0.0},
+                            "y_nofault": {"9": 0.0},
+                            "sector_ok": {"9": True},
+                            "noise_ok": {"9": True},
+                            "r": {"9": 0.0},
+                            "fault_ok": {"9": True},
+                        }
+                    )
+                ),
+            ),
             # what the collector's cone reads for a derived sector: C̄x̄ and the fault-bound flag
             (key, encode(msg.model_copy(update={"r": {**msg.r, "3": msg.r["3"] + 1e-3}}))),
             (key, encode(msg.model_copy(update={"fault_ok": {**msg.fault_ok, "4": not msg.fault_ok["4"]}}))),

@@ -15,7 +15,7 @@ import pytest
 from netsetest.cli.main import main
 from netsetest.config.schema import load_topology
 from netsetest.estimator.certificate import FallbackUnavailable, fallback_shape, publishable
-from netsetest.estimator.sdp import Ellipsoid, LocalEstimator, StepInput
+from netsetest.estimator.sdp import NodeSet, LocalEstimator, UpdateInput
 from netsetest.runtime.inmemory import run_inmemory
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -109,7 +109,7 @@ def _estimator_data(sc, node: int = 3):
     n = sc.node(node)
     est = LocalEstimator.for_node(sc, node)
     alpha = sc.model.weights(sc.vx(0))
-    data = est.step_data(Ellipsoid(n.x0_hat, n.P0, n.rho), StepInput(alpha, 0.03, 0.01, 1.0, {}), None)
+    data = est.step_data(NodeSet(n.x0_hat, n.P0, n.rho), UpdateInput(alpha, 0.03, 0.01, 1.0, {}), None)
     return est, n, alpha, data
 
 

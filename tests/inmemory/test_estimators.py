@@ -168,8 +168,15 @@ def test_compare_cli_prints_the_rows_and_writes_json(tmp_path: Path, capsys: pyt
     assert len(list((tmp_path / "fig").glob("compare_fault_node*.png"))) == 6
 
 
-@pytest.mark.parametrize(("argv", "what"), [(["--estimators", "nope"], "unknown estimator"), (["--signals", "loud"], "signal kind"),
-                                            (["--seeds", "x"], "not an integer"), (["--seeds", "0,-1"], "between 0")])
+@pytest.mark.parametrize(
+    ("argv", "what"),
+    [
+        (["--estimators", "nope"], "unknown estimator"),
+        (["--signals", "loud"], "signal kind"),
+        (["--seeds", "x"], "not an integer"),
+        (["--seeds", "0,-1"], "between 0"),
+    ],
+)
 def test_compare_bad_options_exit_2(argv: list[str], what: str, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exc:
         main(["compare", PAPER6, *argv])
@@ -209,7 +216,10 @@ def test_sets_round_trip_through_the_wire_form_and_malformed_ones_are_refused() 
         np.testing.assert_allclose(np.array(back.bounds()), np.array(s.bounds()), rtol=0, atol=1e-12)  # SOCP bounds: solver round-off
         assert set_to_wire(back) == set_to_wire(s)  # the data are exact
     bad = [
-        None, {"type": "cube"}, {"type": "box", "lo": [0, 0, 1], "hi": [1, 1, 0]}, {"type": "box", "lo": [0, 0], "hi": [1, 1]},
+        None,
+        {"type": "cube"},
+        {"type": "box", "lo": [0, 0, 1], "hi": [1, 1, 0]},
+        {"type": "box", "lo": [0, 0], "hi": [1, 1]},
         {"type": "ellipsoid", "center": [0, 0, 0], "P": [[1, 0, 0], [0, -1, 0], [0, 0, 1]], "rho": 1.0},
         {"type": "ellipsoid", "center": [0, 0, 0], "P": np.eye(3).tolist(), "rho": float("nan")},
         {"type": "zonotope", "center": [0, 0, 0], "G": [[1.0, float("inf"), 0.0]]},

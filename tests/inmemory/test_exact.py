@@ -105,9 +105,7 @@ def test_truth_inside_every_exact_interval(case: str, signals: str, seed: int, m
     for t in rec.truth:
         k = t["step"]
         assert all(t["noise_ok"].values()) and t["dist_ok"]
-        for coord, value, node in [("beta", t["x"][0], None), ("r", t["x"][1], None)] + [
-            ("f", t["faults"][str(i)], i) for i in sc.ids
-        ]:
+        for coord, value, node in [("beta", t["x"][0], None), ("r", t["x"][1], None)] + [("f", t["faults"][str(i)], i) for i in sc.ids]:
             lo, hi = ex.interval(coord, node)[k]
             assert lo - CONTAIN_TOL <= value <= hi + CONTAIN_TOL, f"{coord} node {node} step {k}: {value} ∉ [{lo}, {hi}]"
 

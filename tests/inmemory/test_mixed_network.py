@@ -91,8 +91,7 @@ def test_mixed_network_contained_where_assumptions_held(mixed_run) -> None:
 
 def test_inspect_uses_the_set_bounds(mixed_run) -> None:
     *_, path = mixed_run
-    out = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "inspect", str(path), "--node", "5"],
-                         capture_output=True, text=True, timeout=120)
+    out = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "inspect", str(path), "--node", "5"], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
 
 
@@ -147,14 +146,33 @@ def test_simulate_estimator_and_mcap(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="estimator"):
         netsetest.simulate("paper6", steps=2, estimator="exact")
     path = tmp_path / "run.mcap"
-    out = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "run", "paper6", "--mode", "inmemory", "--quiet",
-                          "--steps", "6", "--estimator", "zonotope", "--record", str(path)],
-                         capture_output=True, text=True, timeout=120)
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "netsetest.cli.main",
+            "run",
+            "paper6",
+            "--mode",
+            "inmemory",
+            "--quiet",
+            "--steps",
+            "6",
+            "--estimator",
+            "zonotope",
+            "--record",
+            str(path),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert out.returncode == 0, out.stderr
     rec = load_record(path)
     assert all(tr.set_bounds is not None for tr in rec.nodes.values())
-    bad = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "run", "paper6", "--mode", "inmemory", "--estimator", "nope"],
-                         capture_output=True, text=True, timeout=60)
+    bad = subprocess.run(
+        [sys.executable, "-m", "netsetest.cli.main", "run", "paper6", "--mode", "inmemory", "--estimator", "nope"], capture_output=True, text=True, timeout=60
+    )
     assert bad.returncode == 2 and "Traceback" not in bad.stderr
 
 
@@ -172,8 +190,9 @@ def test_estimator_refusing_a_node_is_a_config_error(tmp_path: Path) -> None:
     path.write_text(topo)
     with pytest.raises(ConfigError, match="node 6: estimator 'strip'"):
         run_inmemory(load_topology(path, steps=2), "paper", "scheduled", seed=0)
-    out = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "run", str(path), "--mode", "inmemory", "--steps", "2"],
-                         capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "netsetest.cli.main", "run", str(path), "--mode", "inmemory", "--steps", "2"], capture_output=True, text=True, timeout=60
+    )
     assert out.returncode == 2 and "node 6" in out.stderr and "Traceback" not in out.stderr
 
 
@@ -203,8 +222,12 @@ def test_set_estimator_refusing_a_step_falls_back(monkeypatch: pytest.MonkeyPatc
 
 
 def test_set_node_cannot_be_killed_and_rejoined(tmp_path: Path) -> None:
-    out = subprocess.run([sys.executable, "-m", "netsetest.cli.main", "run", str(mixed_topology(tmp_path)), "--insecure",
-                          "--steps", "4", "--kill", "5@2", "--rejoin", "5@3"], capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "netsetest.cli.main", "run", str(mixed_topology(tmp_path)), "--insecure", "--steps", "4", "--kill", "5@2", "--rejoin", "5@3"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 2 and "cannot rejoin" in out.stderr and "Traceback" not in out.stderr
 
 
@@ -254,8 +277,7 @@ def test_inspect_labels_a_set_estimators_bounds_as_what_they_are(tmp_path: Path,
 
 
 @pytest.mark.parametrize("estimator", ["zonotope", "interval", "strip", "setprop"])
-def test_set_estimators_on_saturating_sensors_without_a_fault_bound_are_refused(estimator: str, tmp_path: Path,
-                                                                              capsys: pytest.CaptureFixture[str]) -> None:
+def test_set_estimators_on_saturating_sensors_without_a_fault_bound_are_refused(estimator: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """zonotope fell back to its previous set at the first saturated reading and failed the run with 441
     false violations; interval raised a traceback. Every set estimator now refuses the set-up, exit 2."""
     from netsetest.cli.main import main
@@ -266,7 +288,6 @@ def test_set_estimators_on_saturating_sensors_without_a_fault_bound_are_refused(
     for prof in (tmp_path / "nodes").glob("*.toml"):
         prof.write_text(re.sub(r"\[fault_bound\][^\[]*", "", prof.read_text()))
     topo = tmp_path / "topologies" / "paper6.toml"
-    assert main(["run", str(topo), "--mode", "inmemory", "--case", "saim", "--signals", "worst", "--steps", "3",
-                 "--estimator", estimator]) == 2
+    assert main(["run", str(topo), "--mode", "inmemory", "--case", "saim", "--signals", "worst", "--steps", "3", "--estimator", estimator]) == 2
     err = capsys.readouterr().err
     assert "fault" in err and f"{estimator!r}" in err and "Traceback" not in err

@@ -96,8 +96,10 @@ def _fault_widths(sc, signals: str = "paper") -> tuple[dict[int, float], object,
     used: dict[int, list] = {}
     bus.subscribe(keys.node_state("mem", "*"), lambda key, m: isinstance(m, NodeState) and used.setdefault(m.node, []).append(m.readings))
     widths: dict[int, list[float]] = {}
-    bus.subscribe(keys.node_state("mem", "*"), lambda key, m: isinstance(m, NodeState) and m.step >= 10 and widths.setdefault(m.node, []).append(
-        2 * float(np.sqrt(m.rho * m.P[8]))))
+    bus.subscribe(
+        keys.node_state("mem", "*"),
+        lambda key, m: isinstance(m, NodeState) and m.step >= 10 and widths.setdefault(m.node, []).append(2 * float(np.sqrt(m.rho * m.P[8]))),
+    )
     s = run_inmemory(sc, signals, seed=0, bus=bus).summary
     return {i: float(np.mean(w)) for i, w in widths.items()}, s, used
 
@@ -136,8 +138,12 @@ def test_the_recursion_never_rests_on_a_reading() -> None:
     sc = dataclasses.replace(sc, nodes=[dataclasses.replace(n, in_weights={n.id: 1.0}) for n in sc.nodes])
     priors: dict[bool, list] = {True: [], False: []}
     for on in (True, False):
-        run_inmemory(dataclasses.replace(sc, readings=on), "paper", seed=0,
-                     observer=lambda est, prev, inp, res, ms, on=on: est.node_id == 1 and priors[on].append((prev.xhat, prev.P)))
+        run_inmemory(
+            dataclasses.replace(sc, readings=on),
+            "paper",
+            seed=0,
+            observer=lambda est, prev, inp, res, ms, on=on: est.node_id == 1 and priors[on].append((prev.xhat, prev.P)),
+        )
     assert len(priors[True]) == len(priors[False]) == 12
     for (xa, Pa), (xb, Pb) in zip(priors[True], priors[False]):
         assert np.array_equal(xa, xb) and np.array_equal(Pa, Pb)
@@ -244,9 +250,15 @@ def _fault_width(m) -> float:
     return 2 * float(np.sqrt(m.rho * m.P[8]))
 
 
-@pytest.mark.parametrize(("case", "estimator", "gain", "gain_3_5"), [
-    ("nsnim", "sdp", 1.2, 1.25), ("saim", "sdp", 1.05, 1.05), ("nsnim", "zonotope", 1.15, 2.5), ("nsnim", "strip", 1.1, 2.5),
-])
+@pytest.mark.parametrize(
+    ("case", "estimator", "gain", "gain_3_5"),
+    [
+        ("nsnim", "sdp", 1.2, 1.25),
+        ("saim", "sdp", 1.05, 1.05),
+        ("nsnim", "zonotope", 1.15, 2.5),
+        ("nsnim", "strip", 1.1, 2.5),
+    ],
+)
 def test_at_most_four_faulty_sensors_narrow_every_node(case: str, estimator: str, gain: float, gain_3_5: float) -> None:
     """paper6_max_faulty: every node reads everyone's reading of the step; the nodes' fault intervals are
     narrower than without the declaration (the set estimators also pin the healthy sensors 3 and 5: no

@@ -42,8 +42,7 @@ def test_single_track_rhs_is_the_package_model_plus_the_wind() -> None:
     from vehiclemodels.vehicle_dynamics_std import vehicle_dynamics_std
 
     p = parameters_vehicle2()
-    x = [2.0233348142065677, 0.0041907137716636, 0.0197545248559617, 15.7216236334290116, 0.0025857914776859,
-         0.0529001056654038, 0.0033, 45.0, 45.7]
+    x = [2.0233348142065677, 0.0041907137716636, 0.0197545248559617, 15.7216236334290116, 0.0025857914776859, 0.0529001056654038, 0.0033, 45.0, 45.7]
     car = plant_mod.SingleTrackPlant(2, 1360.0, 0.5, np.zeros(2), 25.0, 0.0)
     base = vehicle_dynamics_std(list(x), [0.0, 0.3], p)
     f = list(base)
@@ -201,8 +200,7 @@ def test_a_halved_bound_is_attributed_to_model_mismatch(capsys: pytest.CaptureFi
     assert "PASS (partial coverage)" in out and "model mismatch" in out.splitlines()[-1]
     # a bound a thousand times too small: the sets do miss the car's truth, and every miss is attributed
     path.write_text(path.read_text().replace(f"box = [{float(box[0]) / 2!r}, {float(box[1]) / 2!r}]", "box = [1e-6, 1e-5]"))
-    code = main(["run", str(path), "--mode", "inmemory", "--seed", "0", "--signals", "worst", "--quiet",
-                 "--summary-json", str(tmp_path / "s.json")])
+    code = main(["run", str(path), "--mode", "inmemory", "--seed", "0", "--signals", "worst", "--quiet", "--summary-json", str(tmp_path / "s.json")])
     summary = json.loads((tmp_path / "s.json").read_text())
     assert code == 0 and summary["violations_total"] == 0
     misses = summary["node_steps_evaluated"] - summary["node_steps_contained"]
@@ -266,8 +264,7 @@ def test_origin_mvee_of_a_known_set() -> None:
 
 
 def test_calibrate_command(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
-    code = main(["calibrate", "paper6_car", "--manoeuvres", "paper,step-steer", "--seeds", "0-1", "--steps", "20",
-                 "--json", str(tmp_path / "c.json")])
+    code = main(["calibrate", "paper6_car", "--manoeuvres", "paper,step-steer", "--seeds", "0-1", "--steps", "20", "--json", str(tmp_path / "c.json")])
     out = capsys.readouterr().out
     assert code == 0
     assert "[model_uncertainty]\nbox = [" in out and "ellipsoid = [[" in out
@@ -296,8 +293,23 @@ def test_linear_tyres_remove_most_of_the_mismatch_near_the_limit() -> None:
 
 
 def test_calibrate_causes_column(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
-    code = main(["calibrate", "paper6_car", "--manoeuvres", "sine-dwell@0.03", "--seeds", "0", "--signals", "paper",
-                 "--steps", "30", "--causes", "--json", str(tmp_path / "c.json")])
+    code = main(
+        [
+            "calibrate",
+            "paper6_car",
+            "--manoeuvres",
+            "sine-dwell@0.03",
+            "--seeds",
+            "0",
+            "--signals",
+            "paper",
+            "--steps",
+            "30",
+            "--causes",
+            "--json",
+            str(tmp_path / "c.json"),
+        ]
+    )
     out = capsys.readouterr().out
     assert code == 0 and "single-track-linear" in out
     doc = json.loads((tmp_path / "c.json").read_text())
@@ -308,8 +320,22 @@ def test_calibrate_causes_column(capsys: pytest.CaptureFixture[str], tmp_path: P
 def test_calibrate_a_series_of_amplitudes(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     """``name@amp`` drives the manoeuvre at that steering amplitude: a larger sine with dwell leaves the
     tyres' linear range, so its e_k is larger; each amplitude is a row of its own and in the JSON."""
-    code = main(["calibrate", "paper6_car", "--manoeuvres", "sine-dwell@0.012,sine-dwell@0.03", "--seeds", "0",
-                 "--signals", "paper", "--steps", "30", "--json", str(tmp_path / "c.json")])
+    code = main(
+        [
+            "calibrate",
+            "paper6_car",
+            "--manoeuvres",
+            "sine-dwell@0.012,sine-dwell@0.03",
+            "--seeds",
+            "0",
+            "--signals",
+            "paper",
+            "--steps",
+            "30",
+            "--json",
+            str(tmp_path / "c.json"),
+        ]
+    )
     out = capsys.readouterr().out
     assert code == 0
     assert "sine-dwell@0.012" in out and "sine-dwell@0.03" in out
@@ -319,13 +345,16 @@ def test_calibrate_a_series_of_amplitudes(capsys: pytest.CaptureFixture[str], tm
     assert np.all(large > 3 * small)
 
 
-@pytest.mark.parametrize(("token", "why"), [
-    ("lap@0.02", "lap takes no amplitude"),
-    ("sine-dwell@x", "must be a number of radians"),
-    ("sine-dwell@-0.1", "positive number of radians"),
-    ("sine-dwell@nan", "positive number of radians"),
-    ("slalom@0.1", "unknown manoeuvre 'slalom'"),
-])
+@pytest.mark.parametrize(
+    ("token", "why"),
+    [
+        ("lap@0.02", "lap takes no amplitude"),
+        ("sine-dwell@x", "must be a number of radians"),
+        ("sine-dwell@-0.1", "positive number of radians"),
+        ("sine-dwell@nan", "positive number of radians"),
+        ("slalom@0.1", "unknown manoeuvre 'slalom'"),
+    ],
+)
 def test_calibrate_refuses_a_bad_drive(capsys: pytest.CaptureFixture[str], token: str, why: str) -> None:
     with pytest.raises(SystemExit) as exc:
         main(["calibrate", "paper6_car", "--manoeuvres", f"paper,{token}"])
@@ -357,7 +386,7 @@ def _topology(tmp_path: Path, vehicle: str, extra: str = "") -> Path:
         ('[vehicle]\nplant = "single-track"\nm = 1500.0\n', "", "m: the T-S model of a single-track plant is derived"),
         ('[vehicle]\nplant = "boat"\n', "", "unknown plant 'boat'"),
         ('[vehicle]\nmanoeuvre = "slalom"\n', "", "unknown manoeuvre 'slalom'"),
-        ('[vehicle]\nvehicle = 7\n', "", "vehicle"),
+        ("[vehicle]\nvehicle = 7\n", "", "vehicle"),
         ("[vehicle]\n", "[model_uncertainty]\n", "give exactly one of box"),
         ("[vehicle]\n", "[model_uncertainty]\nbox = [0.0, 0.1]\n", "half-widths must be positive"),
         ("[vehicle]\n", "[model_uncertainty]\nellipsoid = [[1.0, 2.0], [2.0, 1.0]]\n", "symmetric positive definite"),

@@ -35,8 +35,7 @@ def nsnim(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 def saim(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("saim")
     rec, summ = d / "run.json.gz", d / "summary.json"
-    rc = main(["run", TOPOLOGY, "--mode", "inmemory", "--case", "saim", "--steps", "8", "--record", str(rec),
-               "--summary-json", str(summ), "--quiet"])
+    rc = main(["run", TOPOLOGY, "--mode", "inmemory", "--case", "saim", "--steps", "8", "--record", str(rec), "--summary-json", str(summ), "--quiet"])
     assert rc == 0
     return {"record": rec, "summary": summ}
 
@@ -83,13 +82,22 @@ def test_gzip_record_round_trip(saim: dict[str, Path], nsnim: dict[str, Path], t
 def _legacy_doc(path: Path) -> dict:
     """The same record in the version-1 layout (one JSON document) that older netsetest wrote."""
     rec = load_record(path)
-    return {"format": "netsetest-record", "version": 1, "meta": rec.meta.to_dict(), "truth": rec.truth, "nodes": rec.raw_nodes, "summary": rec.summary.to_dict()}
+    return {
+        "format": "netsetest-record",
+        "version": 1,
+        "meta": rec.meta.to_dict(),
+        "truth": rec.truth,
+        "nodes": rec.raw_nodes,
+        "summary": rec.summary.to_dict(),
+    }
 
 
 def test_legacy_document_record_loads(nsnim: dict[str, Path], tmp_path: Path) -> None:
     new = load_record(nsnim["record"])
-    for name, data in (("old.json", json.dumps(_legacy_doc(nsnim["record"])).encode()),
-                       ("old.json.gz", gzip.compress(json.dumps(_legacy_doc(nsnim["record"])).encode()))):
+    for name, data in (
+        ("old.json", json.dumps(_legacy_doc(nsnim["record"])).encode()),
+        ("old.json.gz", gzip.compress(json.dumps(_legacy_doc(nsnim["record"])).encode())),
+    ):
         p = tmp_path / name
         p.write_bytes(data)
         old = load_record(p)
@@ -182,10 +190,15 @@ def test_summary_of_an_older_record_loads(nsnim: dict[str, Path], tmp_path: Path
     assert "case nsnim" in format_table(s)
 
 
-@pytest.mark.parametrize(("where", "value", "field"), [
-    ("summary", "0", "summary.violations_total"), ("summary", True, "summary.violations_total"),
-    ("node", "x", "summary.nodes[2].fallbacks"), ("node", [1], "summary.nodes[2].fallbacks"),
-])
+@pytest.mark.parametrize(
+    ("where", "value", "field"),
+    [
+        ("summary", "0", "summary.violations_total"),
+        ("summary", True, "summary.violations_total"),
+        ("node", "x", "summary.nodes[2].fallbacks"),
+        ("node", [1], "summary.nodes[2].fallbacks"),
+    ],
+)
 def test_a_mistyped_summary_field_is_a_malformed_record(where: str, value: object, field: str, nsnim: dict[str, Path], tmp_path: Path) -> None:
     doc = _legacy_doc(nsnim["record"])
     if where == "summary":
@@ -224,8 +237,24 @@ def test_inspect_json(nsnim: dict[str, Path], capsys: pytest.CaptureFixture[str]
     assert [r["step"] for r in rows] == list(range(13))
     rec = load_record(nsnim["record"])
     for r in rows:
-        for key in ("step", "fault_estimate", "fault_lower", "fault_upper", "fault_true", "E", "contained", "status",
-                    "beta_estimate", "beta_lower", "beta_upper", "beta_true", "r_estimate", "r_lower", "r_upper", "r_true"):
+        for key in (
+            "step",
+            "fault_estimate",
+            "fault_lower",
+            "fault_upper",
+            "fault_true",
+            "E",
+            "contained",
+            "status",
+            "beta_estimate",
+            "beta_lower",
+            "beta_upper",
+            "beta_true",
+            "r_estimate",
+            "r_lower",
+            "r_upper",
+            "r_true",
+        ):
             assert key in r, key
         t = rec.truth_at(r["step"])
         assert r["beta_true"] == t["x"][0] and r["r_true"] == t["x"][1] and r["fault_true"] == t["faults"]["2"]

@@ -185,21 +185,26 @@ def test_export_tables_round_trip_with_pandas(fmt: str, records: dict[str, Path]
     assert sorted(set(together["node"])) == sorted(rec.nodes) and len(together) == sum(len(t.steps) for t in rec.nodes.values())
 
 
-def test_export_parquet_without_pyarrow_exits_2(records: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                                                capsys: pytest.CaptureFixture[str]) -> None:
+def test_export_parquet_without_pyarrow_exits_2(
+    records: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     monkeypatch.setitem(sys.modules, "pyarrow", None)  # import pyarrow now raises ImportError
     assert main(["export", str(records["json"]), "--parquet", str(tmp_path / "pq")]) == 2
     err = capsys.readouterr().err
     assert "pyarrow" in err and "netsetest[export]" in err and "Traceback" not in err
 
 
-@pytest.mark.parametrize("missing, argv", [
-    ("mcap", ["run", str(ROOT / "topologies" / "paper6.toml"), "--mode", "inmemory", "--record", "{tmp}/r.mcap", "--quiet"]),
-    ("mcap", ["inspect", "{tmp}/r.mcap"]),
-    ("matplotlib", ["plot", "{tmp}/r.json", "--out", "{tmp}/figs"]),
-])
-def test_missing_optional_dependency_exits_2_before_any_work(missing: str, argv: list[str], records: dict[str, Path], tmp_path: Path,
-                                                             monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize(
+    "missing, argv",
+    [
+        ("mcap", ["run", str(ROOT / "topologies" / "paper6.toml"), "--mode", "inmemory", "--record", "{tmp}/r.mcap", "--quiet"]),
+        ("mcap", ["inspect", "{tmp}/r.mcap"]),
+        ("matplotlib", ["plot", "{tmp}/r.json", "--out", "{tmp}/figs"]),
+    ],
+)
+def test_missing_optional_dependency_exits_2_before_any_work(
+    missing: str, argv: list[str], records: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     if argv[0] != "run":  # run writes it (an existing record is refused before the missing extra is named)
         (tmp_path / "r.mcap").write_bytes(records["mcap"].read_bytes())
     (tmp_path / "r.json").write_bytes(records["json"].read_bytes())

@@ -24,7 +24,13 @@ import pytest
 from netsetest.config.schema import load_topology
 from netsetest.estimator import sdp
 from netsetest.estimator.sector import (
-    FaultBound, Interval, derive_sector, measurement_interval, prior_interval, propagated_interval, sector_ok,
+    FaultBound,
+    Interval,
+    derive_sector,
+    measurement_interval,
+    prior_interval,
+    propagated_interval,
+    sector_ok,
 )
 from netsetest.models.sensor import Sensor
 from netsetest.runtime.inmemory import run_inmemory
@@ -248,8 +254,16 @@ def test_a_neighbour_sector_that_contradicts_the_topology_is_dropped(case, secto
     bus = MemoryBus()
     node = Node(sc, 1, bus, "t")
     msg = NodeState(
-        step=0, node=2, xhat=[0.0, 0.1, 0.0], P=[0.3, 0, 0, 0, 0.3, 0, 0, 0, 0.3], rho=1.0, gamma=1.0, innov=0.0,
-        status="init", sector=sector, sector_basis="measurement" if sector else "none",
+        step=0,
+        node=2,
+        xhat=[0.0, 0.1, 0.0],
+        P=[0.3, 0, 0, 0, 0.3, 0, 0, 0, 0.3],
+        rho=1.0,
+        gamma=1.0,
+        innov=0.0,
+        status="init",
+        sector=sector,
+        sector_basis="measurement" if sector else "none",
     )
     bus.publish(keys.node_state("t", 2), msg)
     bus.pump()

@@ -14,11 +14,17 @@ from netsetest.runtime.inmemory import run_inmemory
 ROOT = Path(__file__).resolve().parents[2]
 
 
-@pytest.mark.parametrize(("topology", "case", "variant", "signals"), [
-    ("paper6", "nsnim", "scheduled", "paper"), ("paper6", "saim", "scheduled", "paper"), ("paper6", "saim", "scheduled", "worst"),
-    ("paper6", "nsnim", "per-rule", "paper"),
-    ("paper6_reference", "nsnim", "scheduled", "paper"), ("paper6_reference", "saim", "scheduled", "paper"),  # the readings' solvers
-])
+@pytest.mark.parametrize(
+    ("topology", "case", "variant", "signals"),
+    [
+        ("paper6", "nsnim", "scheduled", "paper"),
+        ("paper6", "saim", "scheduled", "paper"),
+        ("paper6", "saim", "scheduled", "worst"),
+        ("paper6", "nsnim", "per-rule", "paper"),
+        ("paper6_reference", "nsnim", "scheduled", "paper"),
+        ("paper6_reference", "saim", "scheduled", "paper"),  # the readings' solvers
+    ],
+)
 def test_warm_up_changes_no_published_state(topology: str, case: str, variant: str, signals: str, monkeypatch: pytest.MonkeyPatch) -> None:
     """The warm-up runs through the node's own estimator (its layouts and Clarabel solvers are built then)."""
     sc = load_topology(ROOT / "topologies" / f"{topology}.toml", case, 30)

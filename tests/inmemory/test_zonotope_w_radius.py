@@ -52,7 +52,9 @@ def test_without_reduction_equals_the_exact_local_limit(signals: str, seed: int,
     np.testing.assert_allclose(z, ex, atol=EXACT_TOL, rtol=0)
 
 
-@pytest.mark.parametrize(("case", "signals", "seed", "order"), [("nsnim", "worst", 1, 6), ("nsnim", "paper", 0, 3), ("saim", "worst", 1, None), ("saim", "paper", 0, 8)])
+@pytest.mark.parametrize(
+    ("case", "signals", "seed", "order"), [("nsnim", "worst", 1, 6), ("nsnim", "paper", 0, 3), ("saim", "worst", 1, None), ("saim", "paper", 0, 8)]
+)
 def test_never_narrower_than_exact_and_contains_the_truth(case: str, signals: str, seed: int, order: int | None, tmp: str) -> None:
     sc, rec = _run(case, signals, seed, tmp)
     for node in (2, 5):

@@ -108,8 +108,7 @@ def test_fifo_in_node_dir_does_not_hang(tmp_path: Path) -> None:
     topo = _copy(tmp_path)
     (tmp_path / "nodes" / "yaw3.toml").unlink()
     os.mkfifo(tmp_path / "nodes" / "yaw3.toml")
-    r = subprocess.run([sys.executable, "-m", "netsetest.cli.main", *_run()[:1], str(topo), *_run()[2:]], capture_output=True,
-                       text=True, timeout=60)
+    r = subprocess.run([sys.executable, "-m", "netsetest.cli.main", *_run()[:1], str(topo), *_run()[2:]], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2
     _one_clear_line(r.stderr, "yaw3.toml", "FIFO")
 
@@ -165,8 +164,12 @@ def test_each_run_draws_its_own_seed_and_prints_it(tmp_path: Path) -> None:
 
     def run(*extra: str) -> tuple[int, str, dict]:
         summ = tmp_path / f"s{len(list(tmp_path.iterdir()))}.json"
-        p = subprocess.run([sys.executable, "-m", "netsetest", "run", TOPOLOGY, "--mode", "inmemory", "--steps", "3",
-                            "--summary-json", str(summ), *extra], capture_output=True, text=True, timeout=120)
+        p = subprocess.run(
+            [sys.executable, "-m", "netsetest", "run", TOPOLOGY, "--mode", "inmemory", "--steps", "3", "--summary-json", str(summ), *extra],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert p.returncode == 0, p.stderr
         return json.loads(summ.read_text())["seed"], p.stdout, json.loads(summ.read_text())
 
@@ -185,8 +188,12 @@ def test_no_process_of_a_run_shows_its_seed_or_a_guessable_run_id(tmp_path: Path
     import json
 
     summ = tmp_path / "summary.json"
-    parent = subprocess.Popen([sys.executable, "-m", "netsetest", "run", TOPOLOGY, "--steps", "20", "--pace", "0.1", "--quiet",
-                               "--summary-json", str(summ)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    parent = subprocess.Popen(
+        [sys.executable, "-m", "netsetest", "run", TOPOLOGY, "--steps", "20", "--pace", "0.1", "--quiet", "--summary-json", str(summ)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     seen: set[str] = set()
     try:
         deadline = time.monotonic() + 120
@@ -246,8 +253,7 @@ def test_zenoh_only_options_are_refused_in_memory(option: list[str], capsys: pyt
 
 @pytest.mark.parametrize(
     "name,says",
-    [("out.csv", "the name must end in .json, .jsonl"), ("r.mcap.gz", "the name must end in"),
-     ("nonexistent-dir/r.json", "does not exist")],
+    [("out.csv", "the name must end in .json, .jsonl"), ("r.mcap.gz", "the name must end in"), ("nonexistent-dir/r.json", "does not exist")],
 )
 def test_record_names_are_not_taken_literally(name: str, says: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """out.csv got JSON Lines, r.mcap.gz gzipped JSON, a missing directory was created silently."""

@@ -47,8 +47,7 @@ def _catches(pid: int, signum: int) -> bool:
 
 def _listening_config(path: Path, port: int) -> str:
     """A Zenoh configuration file for an observer that listens (the roles connect to it at start-up)."""
-    path.write_text(json.dumps({"mode": "peer", "listen": {"endpoints": [f"tcp/127.0.0.1:{port}"]},
-                                "scouting": {"multicast": {"enabled": False}}}))
+    path.write_text(json.dumps({"mode": "peer", "listen": {"endpoints": [f"tcp/127.0.0.1:{port}"]}, "scouting": {"multicast": {"enabled": False}}}))
     return str(path)
 
 
@@ -57,20 +56,36 @@ def test_echo_and_watch_on_a_live_run(procs: ProcessGuard, tmp_path: Path) -> No
     run = new_run_id("echo")
     p_echo, p_watch = free_ports(2)
     # echo 1 and watch: configured by a file (as on a secured run), listening; the roles connect to them
-    e1 = procs.start("echo_cfg", cli("echo", "node/2/state", "--run-id", run, "--json", "--count", str(STEPS + 1), "--duration", "120",
-                                     "--zenoh-config", _listening_config(tmp_path / "echo.json5", p_echo)), stdout=True)
-    w = procs.start("watch", cli("watch", "--run-id", run, "--duration", "120",
-                                 "--zenoh-config", _listening_config(tmp_path / "watch.json5", p_watch)), stdout=True)
+    e1 = procs.start(
+        "echo_cfg",
+        cli(
+            "echo",
+            "node/2/state",
+            "--run-id",
+            run,
+            "--json",
+            "--count",
+            str(STEPS + 1),
+            "--duration",
+            "120",
+            "--zenoh-config",
+            _listening_config(tmp_path / "echo.json5", p_echo),
+        ),
+        stdout=True,
+    )
+    w = procs.start(
+        "watch", cli("watch", "--run-id", run, "--duration", "120", "--zenoh-config", _listening_config(tmp_path / "watch.json5", p_watch)), stdout=True
+    )
     wait_port("127.0.0.1", p_echo, 30)
     wait_port("127.0.0.1", p_watch, 30)
     record, summary = tmp_path / "run.json", tmp_path / "summary.json"
     # echo 2: joins by --connect to an endpoint that is up before the run (echo 1's) and finds the roles by
     # gossip; the vehicle's keys. Connected to a role's endpoint instead, it raced the roles' start-up:
     # Zenoh retries a refused connection after a back-off, and a 30-step lockstep run can be over by then
-    e2 = procs.start("echo_connect", cli("echo", "vehicle/**", "--run-id", run, "--connect", f"tcp/127.0.0.1:{p_echo}",
-                                         "--count", "20", "--duration", "120"), stdout=True)
-    launch_peer_mesh(procs, PAPER6, run, STEPS, summary, record=record,
-                     also_connect=[f"tcp/127.0.0.1:{p_echo}", f"tcp/127.0.0.1:{p_watch}"])
+    e2 = procs.start(
+        "echo_connect", cli("echo", "vehicle/**", "--run-id", run, "--connect", f"tcp/127.0.0.1:{p_echo}", "--count", "20", "--duration", "120"), stdout=True
+    )
+    launch_peer_mesh(procs, PAPER6, run, STEPS, summary, record=record, also_connect=[f"tcp/127.0.0.1:{p_echo}", f"tcp/127.0.0.1:{p_watch}"])
     wait_roles(procs, 180)
     out1, _ = e1.communicate(timeout=60)
     out2, _ = e2.communicate(timeout=60)
@@ -136,8 +151,21 @@ def test_live_table_without_truth_shows_no_E_and_stays_bounded() -> None:
     table = LiveTable()
     P = [1.0, 0, 0, 0, 1.0, 0, 0, 0, 0.25]
     for k in range(500):
-        table.update(NodeState(step=k, node=1, xhat=[0.0, 0.0, 0.1], P=P, rho=1.0, gamma=1.0, innov=0.0, status="ok",
-                               missing=[2] if k % 2 else [], late=k % 5 == 0, dropped=k // 100))
+        table.update(
+            NodeState(
+                step=k,
+                node=1,
+                xhat=[0.0, 0.0, 0.1],
+                P=P,
+                rho=1.0,
+                gamma=1.0,
+                innov=0.0,
+                status="ok",
+                missing=[2] if k % 2 else [],
+                late=k % 5 == 0,
+                dropped=k // 100,
+            )
+        )
     (row,) = table.sorted_rows()
     assert row.step == 499 and row.E is None and row.fault_lower == pytest.approx(-0.4) and row.fault_upper == pytest.approx(0.6)
     assert row.missing == 250 and row.deadline_misses == 100 and row.dropped == 4
@@ -152,16 +180,18 @@ def test_observed_keys() -> None:
     assert observed_key("r1", "netsetest/r2/control/end") == "netsetest/r2/control/end"
 
 
-@pytest.mark.parametrize("args, msg", [
-    (["--connect", "bogus"], None),  # argparse: its usage line and the reason, exit 2
-    (["--connect", "tcp/1.2.3.4:99999"], None),  # a port out of range exited 0 silently
-    (["--zenoh-config", "/nonexistent/zenoh.json5"], "file not found"),
-    (["--zenoh-config", "{bad}"], "not a usable Zenoh configuration"),
-    (["--duration", "0"], None),
-])
+@pytest.mark.parametrize(
+    "args, msg",
+    [
+        (["--connect", "bogus"], None),  # argparse: its usage line and the reason, exit 2
+        (["--connect", "tcp/1.2.3.4:99999"], None),  # a port out of range exited 0 silently
+        (["--zenoh-config", "/nonexistent/zenoh.json5"], "file not found"),
+        (["--zenoh-config", "{bad}"], "not a usable Zenoh configuration"),
+        (["--duration", "0"], None),
+    ],
+)
 @pytest.mark.parametrize("command", ["echo", "watch"])
-def test_bad_observer_options_exit_2(command: str, args: list[str], msg: str | None, tmp_path: Path,
-                                     capsys: pytest.CaptureFixture[str]) -> None:
+def test_bad_observer_options_exit_2(command: str, args: list[str], msg: str | None, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     if "{bad}" in args:
         bad = tmp_path / "bad.json5"
         bad.write_text('{mode: "peer", no_such_field: 1}')
@@ -239,8 +269,7 @@ def test_run_watch_hint_works_insecure(procs: ProcessGuard) -> None:
     hint = wait_for(lambda: WATCH_HINT.search(procs.stderr("insecure")), 60, what="the watch hint")
     run, watched, endpoint = hint.groups()
     assert watched == run == parent_run_id(parent)
-    echo = procs.start("echo_hint", cli("echo", "node/1/state", "--run-id", run, "--connect", endpoint, "--count", "3",
-                                        "--duration", "60"), stdout=True)
+    echo = procs.start("echo_hint", cli("echo", "node/1/state", "--run-id", run, "--connect", endpoint, "--count", "3", "--duration", "60"), stdout=True)
     out, _ = echo.communicate(timeout=90)
     assert echo.returncode == 0 and len(out.decode().splitlines()) == 3, procs.logs()
     assert parent.wait(timeout=120) == 0, procs.logs()

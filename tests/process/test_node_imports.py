@@ -10,20 +10,35 @@ import subprocess
 import sys
 
 NODE_MODULES = (
-    "netsetest.cli.main", "netsetest.cli.processes", "netsetest.runtime.security", "netsetest.runtime.processes",
-    "netsetest.bus.zenoh_bus", "netsetest.roles.node",
+    "netsetest.cli.main",
+    "netsetest.cli.processes",
+    "netsetest.runtime.security",
+    "netsetest.runtime.processes",
+    "netsetest.bus.zenoh_bus",
+    "netsetest.roles.node",
 )
 NODE_ARGV = ["node", "paper6", "--id", "1"]
 NEVER_IN_A_NODE = (
-    "pydantic", "pydantic_core", "msgpack", "rich", "netsetest.roles.collector", "netsetest.roles.vehicle",
-    "netsetest.runtime.launcher", "netsetest.runtime.forkserver", "netsetest.records.record", "netsetest.records.summary",
-    "subprocess", "tempfile", "socket", "random", "gzip",
+    "pydantic",
+    "pydantic_core",
+    "msgpack",
+    "rich",
+    "netsetest.roles.collector",
+    "netsetest.roles.vehicle",
+    "netsetest.runtime.launcher",
+    "netsetest.runtime.forkserver",
+    "netsetest.records.record",
+    "netsetest.records.summary",
+    "subprocess",
+    "tempfile",
+    "socket",
+    "random",
+    "gzip",
 )
 
 
 def test_node_process_loads_only_what_a_node_needs():
-    code = (f"import sys\nfor m in {NODE_MODULES!r}: __import__(m)\n"
-            f"sys.modules['netsetest.cli.main'].build_parser().parse_args({NODE_ARGV!r})\nprint(")
+    code = f"import sys\nfor m in {NODE_MODULES!r}: __import__(m)\nsys.modules['netsetest.cli.main'].build_parser().parse_args({NODE_ARGV!r})\nprint("
     code += f"sorted(set(sys.modules) & set({NEVER_IN_A_NODE!r})))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and out.stdout.strip() == "[]", (out.stdout, out.stderr[-500:])

@@ -44,8 +44,12 @@ def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
         else:
             shutil.copy2(p, src / name)
     out = tmp_path_factory.mktemp("dist")
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "--no-index", "-q", "-w", str(out), str(src)],
-                   check=True, env=_clean_env(), timeout=240)
+    subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "--no-index", "-q", "-w", str(out), str(src)],
+        check=True,
+        env=_clean_env(),
+        timeout=240,
+    )
     (whl,) = out.glob("netsetest-*.whl")
     return whl
 
@@ -55,10 +59,12 @@ def venv(wheel: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     d = tmp_path_factory.mktemp("venv") / "v"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(d)], check=True, timeout=120)
     py = d / "bin" / "python"
-    subprocess.run([sys.executable, "-m", "pip", "--python", str(py), "install", "-q", "--no-deps", "--no-index", str(wheel)],
-                   check=True, env=_clean_env(), timeout=240)
-    site = subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                          check=True, capture_output=True, text=True).stdout.strip()
+    subprocess.run(
+        [sys.executable, "-m", "pip", "--python", str(py), "install", "-q", "--no-deps", "--no-index", str(wheel)], check=True, env=_clean_env(), timeout=240
+    )
+    site = subprocess.run(
+        [str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], check=True, capture_output=True, text=True
+    ).stdout.strip()
     # the dependencies: this environment's site-packages, after the venv's own
     (Path(site) / "zz_deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
     return d
@@ -99,8 +105,19 @@ def test_installed_wheel_runs_bundled_scenario_from_any_directory(venv: Path, tm
     assert "steps 0–5: contained on 36 of 36 node-steps; the guarantee applied on 36." in r.stdout
     assert (tmp_path / "r.json").is_file()
     # a path still works, and python -m netsetest is the same command
-    m = _run(str(venv / "bin" / "python"), "-m", "netsetest", "run", str(ROOT / "topologies" / "paper6_lossy.toml"),
-             "--mode", "inmemory", "--steps", "3", "--quiet", cwd=tmp_path)
+    m = _run(
+        str(venv / "bin" / "python"),
+        "-m",
+        "netsetest",
+        "run",
+        str(ROOT / "topologies" / "paper6_lossy.toml"),
+        "--mode",
+        "inmemory",
+        "--steps",
+        "3",
+        "--quiet",
+        cwd=tmp_path,
+    )
     assert m.returncode == 0, m.stderr
     bad = _run(str(exe), "run", "nosuch", "--mode", "inmemory", cwd=tmp_path)
     assert bad.returncode == 2 and f"bundled topologies: {', '.join(bundled_topologies())}" in bad.stderr and "Traceback" not in bad.stderr

@@ -62,6 +62,7 @@ def test_finished_record_is_json_lines(finished: dict[str, Path]) -> None:
     assert kinds[1:8] == ["state"] * 6 + ["truth"]
     rec = load_record(finished["run.jsonl"])
     _check_partial(rec, complete=True)
+
     def meta_line(text: str) -> dict:  # the two runs started at different instants: all else is equal
         d = json.loads(text)
         d["meta"].pop("started_ns")

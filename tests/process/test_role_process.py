@@ -13,7 +13,15 @@ from netsetest.roles.node import Node
 from netsetest.bus import keys
 from netsetest.messages import Ready
 from netsetest.runtime.processes import (
-    IDLE_WAIT_S, NEIGHBOUR_POLL_S, READY_PERIOD_S, ROLE_ENV, Barrier, _all_roles, _node_wait, node_peers, role_env,
+    IDLE_WAIT_S,
+    NEIGHBOUR_POLL_S,
+    READY_PERIOD_S,
+    ROLE_ENV,
+    Barrier,
+    _all_roles,
+    _node_wait,
+    node_peers,
+    role_env,
 )
 
 

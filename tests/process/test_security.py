@@ -63,8 +63,7 @@ SECURITY_LINE = re.compile(r"security: mtls\+acl \(.*router (tls/127\.0\.0\.1:\d
 
 
 def _state(node: int, step: int) -> NodeState:
-    return NodeState(step=step, node=node, xhat=[5.0, 5.0, 5.0], P=[1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6], rho=1.0,
-                     gamma=1.0, innov=1e6, status="ok")
+    return NodeState(step=step, node=node, xhat=[5.0, 5.0, 5.0], P=[1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6], rho=1.0, gamma=1.0, innov=1e6, status="ok")
 
 
 def _input(node: int, step: int) -> NodeInput:
@@ -74,9 +73,23 @@ def _input(node: int, step: int) -> NodeInput:
 def _truth(step: int) -> Truth:
     ids = [str(i) for i in range(1, 7)]
     z = {i: 0.0 for i in ids}
-    return Truth(step=step, x=[0.0, 0.0], faults=z, u=0.0, w=0.0, vx=20.0, noise=z, gamma={i: 1.0 for i in ids}, y=z,
-                 y_nofault=z, sector_ok={i: True for i in ids}, noise_ok={i: True for i in ids}, dist_ok=True, lost=[],
-                 alive=list(range(1, 7)))
+    return Truth(
+        step=step,
+        x=[0.0, 0.0],
+        faults=z,
+        u=0.0,
+        w=0.0,
+        vx=20.0,
+        noise=z,
+        gamma={i: 1.0 for i in ids},
+        y=z,
+        y_nofault=z,
+        sector_ok={i: True for i in ids},
+        noise_ok={i: True for i in ids},
+        dist_ok=True,
+        lost=[],
+        alive=list(range(1, 7)),
+    )
 
 
 def forge_forever(router: str, creds: str, run: str) -> None:
@@ -110,11 +123,10 @@ def _outsider_configs(router: str, tmp: Path, run_ca: Path) -> dict[str, zenoh.C
     out = {
         "tcp client": zenoh_config("client", connect=[f"tcp/127.0.0.1:{port}"], connect_timeout_s=2),
         "tcp peer": zenoh_config("peer", connect=[f"tcp/127.0.0.1:{port}"], connect_timeout_s=2),
-        "tls, no certificate": zenoh_config("client", connect=[router], connect_timeout_s=2,
-                                            settings={"transport/link/tls/root_ca_certificate": str(run_ca)}),
+        "tls, no certificate": zenoh_config("client", connect=[router], connect_timeout_s=2, settings={"transport/link/tls/root_ca_certificate": str(run_ca)}),
         "tls, certificate 'vehicle' of another CA": zenoh_config(
-            "client", connect=[router], connect_timeout_s=2,
-            settings={**client_settings(forged), "transport/link/tls/root_ca_certificate": str(run_ca)}),
+            "client", connect=[router], connect_timeout_s=2, settings={**client_settings(forged), "transport/link/tls/root_ca_certificate": str(run_ca)}
+        ),
     }
     for cfg in out.values():
         cfg.insert_json5("connect/exit_on_failure", "true")
@@ -167,8 +179,13 @@ def test_grants_follow_the_topology() -> None:
     sc = load_topology(ROOT / PAPER6)
     g = grants(sc, "r")
     assert g["node-3"].publish == ("netsetest/r/node/3/state", "netsetest/r/control/ready/node-3")
-    assert set(g["node-3"].receive) == {"netsetest/r/vehicle/input/3", "netsetest/r/node/2/state", "netsetest/r/node/4/state",
-                                        "netsetest/r/control/ready/*", "netsetest/r/control/end"}
+    assert set(g["node-3"].receive) == {
+        "netsetest/r/vehicle/input/3",
+        "netsetest/r/node/2/state",
+        "netsetest/r/node/4/state",
+        "netsetest/r/control/ready/*",
+        "netsetest/r/control/end",
+    }
     assert [n for n, gr in g.items() if keys.truth("r") in gr.receive] == ["collector"]
     assert [n for n, gr in g.items() if keys.truth("r") in gr.publish] == ["vehicle"]
     assert [n for n, gr in g.items() if keys.end("r") in gr.publish] == ["vehicle"]
@@ -183,8 +200,7 @@ def test_grants_follow_the_topology() -> None:
 def test_secured_run_shuts_out_an_outsider(procs, tmp_path: Path) -> None:
     rec_path, summ_path = tmp_path / "record.json", tmp_path / "summary.json"
     # paced (40 × 0.5 s) so that the run outlasts the outsider's attempts (2 s each)
-    parent = start_parent(procs, "run", [PAPER6, "--steps", str(STEPS), "--pace", "0.5", "--record", str(rec_path),
-                                         "--summary-json", str(summ_path)])
+    parent = start_parent(procs, "run", [PAPER6, "--steps", str(STEPS), "--pace", "0.5", "--record", str(rec_path), "--summary-json", str(summ_path)])
     m = wait_for(lambda: SECURITY_LINE.search(procs.stderr("run")), 60, what="the parent's security line")
     router, creds = m.group(1), Path(m.group(2))
     assert stat.S_IMODE(creds.stat().st_mode) == 0o700
@@ -242,9 +258,19 @@ def test_insider_with_a_node_certificate_is_confined(procs, tmp_path: Path) -> N
         with lock:
             heard.append(str(sample.key_expr))
 
-    subs = [insider.declare_subscriber(k, on) for k in
-            ("**", f"netsetest/{run}/**", keys.truth(run), keys.node_state(run, "*"), keys.node_state(run, 5),
-             keys.node_input(run, "*"), keys.node_input(run, 4), keys.node_input(run, 2))]
+    subs = [
+        insider.declare_subscriber(k, on)
+        for k in (
+            "**",
+            f"netsetest/{run}/**",
+            keys.truth(run),
+            keys.node_state(run, "*"),
+            keys.node_state(run, 5),
+            keys.node_input(run, "*"),
+            keys.node_input(run, 4),
+            keys.node_input(run, 2),
+        )
+    ]
     # the forger is another process with node 2's certificate (a session hears its own puts, router or not)
     procs.start("forger", [sys.executable, str(Path(__file__)), "forge", router, str(creds), run])
     summary, record = tmp_path / "summary.json", tmp_path / "record.json"
@@ -276,8 +302,13 @@ def test_secured_role_needs_its_own_certificate(tmp_path: Path) -> None:
     import subprocess
 
     creds = write_credentials(tmp_path / "c", ["vehicle"])
-    out = subprocess.run(cli("node", PAPER6, "--id", "3", "--zenoh-mode", "client", "--connect", "tls/127.0.0.1:1",
-                             "--credentials", str(creds)), cwd=ROOT, capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        cli("node", PAPER6, "--id", "3", "--zenoh-mode", "client", "--connect", "tls/127.0.0.1:1", "--credentials", str(creds)),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 2, out.stderr
     assert "no node-3.pem" in out.stderr and "Traceback" not in out.stderr
     assert os.path.isdir(creds)

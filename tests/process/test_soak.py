@@ -19,8 +19,9 @@ MAX_SLOPE_MB_PER_10K = 5.0  # the issue's bound
 @pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_rss_stays_flat() -> None:
-    out = subprocess.run([sys.executable, "-m", "netsetest.bench.soak", "--steps", str(STEPS)], cwd=ROOT, capture_output=True,
-                         text=True, timeout=560, check=True).stdout
+    out = subprocess.run(
+        [sys.executable, "-m", "netsetest.bench.soak", "--steps", str(STEPS)], cwd=ROOT, capture_output=True, text=True, timeout=560, check=True
+    ).stdout
     d = json.loads(out)
     assert d["violations"] == 0
     assert d["slope_mb_per_10k_steps"] < MAX_SLOPE_MB_PER_10K, d

@@ -56,8 +56,13 @@ def test_run_with_a_user_zenoh_config_stays_secured(tmp_path) -> None:
     cfg = tmp_path / "zenoh.json5"
     cfg.write_text("// a user's tuning\n{ transport: { unicast: { max_links: 2 } } }\n")
     summary = tmp_path / "summary.json"
-    out = subprocess.run(cli("run", PAPER6, "--steps", "5", "--quiet", "--zenoh-config", str(cfg), "--summary-json", str(summary)),
-                         cwd=ROOT, capture_output=True, text=True, timeout=110)
+    out = subprocess.run(
+        cli("run", PAPER6, "--steps", "5", "--quiet", "--zenoh-config", str(cfg), "--summary-json", str(summary)),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=110,
+    )
     assert out.returncode == 0, out.stderr
     s = json.loads(summary.read_text())
     assert s["security"] == "mtls+acl" and s["steps_completed"] == 5 and s["violations_total"] == 0

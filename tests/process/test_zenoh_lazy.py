@@ -119,10 +119,14 @@ def test_realtime_run_over_zenoh_uses_its_neighbours(tmp_path: Path) -> None:
     steps = 30
     summary, record, prof = tmp_path / "s.json", tmp_path / "r.jsonl", tmp_path / "profile"
     prof.mkdir()
-    out = subprocess.run(cli("run", PAPER6, "--mode", "zenoh", "--clock", "realtime", "--steps", str(steps), "--quiet",
-                             "--summary-json", str(summary), "--record", str(record)),
-                         cwd=ROOT, capture_output=True, text=True, timeout=170,
-                         env={**os.environ, "NETSETEST_PROFILE": str(prof)})
+    out = subprocess.run(
+        cli("run", PAPER6, "--mode", "zenoh", "--clock", "realtime", "--steps", str(steps), "--quiet", "--summary-json", str(summary), "--record", str(record)),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=170,
+        env={**os.environ, "NETSETEST_PROFILE": str(prof)},
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     s = json.loads(summary.read_text())
     assert s["violations_total"] == 0 and not s.get("nodes_missing")
@@ -149,9 +153,27 @@ def test_realtime_run_over_zenoh_waits_for_the_readings(tmp_path: Path) -> None:
     within their budget (a quarter period) and they use it nearly every step (docs/network.md)."""
     steps = 20
     summary, record = tmp_path / "s.json", tmp_path / "r.jsonl"
-    out = subprocess.run(cli("run", ROOT / "topologies" / "paper6_reference.toml", "--mode", "zenoh", "--clock", "realtime",
-                             "--steps", str(steps), "--quiet", "--summary-json", str(summary), "--record", str(record)),
-                         cwd=ROOT, capture_output=True, text=True, timeout=170)
+    out = subprocess.run(
+        cli(
+            "run",
+            ROOT / "topologies" / "paper6_reference.toml",
+            "--mode",
+            "zenoh",
+            "--clock",
+            "realtime",
+            "--steps",
+            str(steps),
+            "--quiet",
+            "--summary-json",
+            str(summary),
+            "--record",
+            str(record),
+        ),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=170,
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     s = json.loads(summary.read_text())
     assert s["violations_total"] == 0 and not s.get("nodes_missing")

@@ -47,8 +47,7 @@ class Runs:
             topo, steps, case = SCENARIOS[name]
             d = self.tmp.mktemp(f"zenoh-{name}")
             rec, summ = d / "record.json", d / "summary.json"
-            args = [topo, "--steps", str(steps), "--seed", str(SEED), "--signals", SIGNALS,
-                    "--record", str(rec), "--summary-json", str(summ)]
+            args = [topo, "--steps", str(steps), "--seed", str(SEED), "--signals", SIGNALS, "--record", str(rec), "--summary-json", str(summ)]
             if case:
                 args += ["--case", case]
             logs = run_to_success(d / "logs", args, timeout=100)

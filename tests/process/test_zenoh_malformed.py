@@ -34,8 +34,15 @@ pytestmark = pytest.mark.zenoh
 
 def _state(node: int = 2, step: int = 0, **changes: object) -> NodeState:
     return NodeState(
-        step=step, node=node, xhat=[0.0, 0.0, 0.0], P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0,
-        innov=0.0, status="ok", **changes,
+        step=step,
+        node=node,
+        xhat=[0.0, 0.0, 0.0],
+        P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0],
+        rho=1.0,
+        gamma=1.0,
+        innov=0.0,
+        status="ok",
+        **changes,
     )
 
 

@@ -22,8 +22,7 @@ TOL = 1e-9
 def test_zenoh_mixed_equals_inmemory(tmp_path: Path) -> None:
     topo = mixed_topology(tmp_path)
     rec, summ = tmp_path / "record.json", tmp_path / "summary.json"
-    args = [str(topo), "--steps", str(STEPS), "--case", CASE, "--seed", str(SEED), "--signals", SIGNALS,
-            "--record", str(rec), "--summary-json", str(summ)]
+    args = [str(topo), "--steps", str(STEPS), "--case", CASE, "--seed", str(SEED), "--signals", SIGNALS, "--record", str(rec), "--summary-json", str(summ)]
     run_to_success(tmp_path / "logs", args, timeout=150)
     z = read_record(rec)
     m = run_inmemory(load_topology(topo, CASE, STEPS), SIGNALS, "scheduled", seed=SEED)

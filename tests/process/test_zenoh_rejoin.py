@@ -42,11 +42,26 @@ NODE_TIMEOUT = "8"  # bounds the wait for the dead node (once) and for the resta
 def test_zenoh_kill_and_rejoin(procs, tmp_path) -> None:
     rec_path, summ_path = tmp_path / "record.json", tmp_path / "summary.json"
     code = run_parent(
-        procs, "run",
-        [PAPER6, "--steps", str(STEPS), "--node-timeout", NODE_TIMEOUT, "--kill", f"{KILLED}@{KILL_AT}",
-         "--rejoin", f"{KILLED}@{REJOIN_AT}", "--record", str(rec_path), "--summary-json", str(summ_path),
-         # below --node-timeout: see test_vehicle_takes_back_a_node_that_was_only_late
-         "--neighbour-timeout", "1"],
+        procs,
+        "run",
+        [
+            PAPER6,
+            "--steps",
+            str(STEPS),
+            "--node-timeout",
+            NODE_TIMEOUT,
+            "--kill",
+            f"{KILLED}@{KILL_AT}",
+            "--rejoin",
+            f"{KILLED}@{REJOIN_AT}",
+            "--record",
+            str(rec_path),
+            "--summary-json",
+            str(summ_path),
+            # below --node-timeout: see test_vehicle_takes_back_a_node_that_was_only_late
+            "--neighbour-timeout",
+            "1",
+        ],
         timeout=120,
     )
     logs = procs.logs()
@@ -84,7 +99,8 @@ def test_zenoh_kill_and_rejoin(procs, tmp_path) -> None:
     for k in range(r, STEPS + 1):
         e = mine[k]
         assert e["E"] is not None and e["contained"] and e["E"] <= e["rho"], (
-            f"node {KILLED} step {k}: E={e['E']}, {e.get('not_judged_why')}; drops {s['drops']}")
+            f"node {KILLED} step {k}: E={e['E']}, {e.get('not_judged_why')}; drops {s['drops']}"
+        )
     assert mine[r]["used"], "the rejoin ellipsoid must come from at least one neighbour"
     assert set(mine[r]["used"]) <= set(RING[KILLED])
 
@@ -106,8 +122,12 @@ def test_zenoh_kill_and_rejoin(procs, tmp_path) -> None:
 @pytest.mark.timeout(150)
 def test_zenoh_node_killed_for_good(procs, tmp_path) -> None:
     summ_path = tmp_path / "summary.json"
-    code = run_parent(procs, "run", [PAPER6, "--steps", "30", "--node-timeout", "3", "--neighbour-timeout", "1",
-                                     "--kill", f"{KILLED}@10", "--summary-json", str(summ_path)], timeout=120)
+    code = run_parent(
+        procs,
+        "run",
+        [PAPER6, "--steps", "30", "--node-timeout", "3", "--neighbour-timeout", "1", "--kill", f"{KILLED}@10", "--summary-json", str(summ_path)],
+        timeout=120,
+    )
     assert code == EXIT_NODE_LOST, procs.logs()
     s = read_json(summ_path)
     rows = {r["id"]: r for r in s["nodes"]}

@@ -23,8 +23,12 @@ PAPER_DS = [0.47, 0.42, 0.56, 0.52, 0.58, 0.61]
 PAPER_RMAX = [0.08, 0.07, 0.035, 0.06, 0.03, 0.025]
 PAPER_GAMMA = [(0.72, 0.85), (0.82, 0.95), (0.76, 0.91), (0.83, 0.98), (0.78, 0.90), (0.87, 0.96)]
 PAPER_X0 = [
-    (0.028, 0.168, 0.0), (0.032, 0.192, 0.0), (0.036, 0.216, 0.0),
-    (0.023, 0.138, 0.0), (0.033, 0.198, 0.0), (0.038, 0.288, 0.0),
+    (0.028, 0.168, 0.0),
+    (0.032, 0.192, 0.0),
+    (0.036, 0.216, 0.0),
+    (0.023, 0.138, 0.0),
+    (0.033, 0.198, 0.0),
+    (0.038, 0.288, 0.0),
 ]
 
 
@@ -140,7 +144,15 @@ BAD = [
     ("speed-outside", "topology", _sub("amplitude_kmh = 18.0", "amplitude_kmh = 25.0"), [], "paper6.toml", r"\bspeed\b", r"outside"),
     ("profile-missing-C", "yaw3", _sub("C = [0.0, 0.18]", "# no C"), [], "yaw3.toml", r"(?m)^\s*C\b", r"[Rr]equired|missing"),
     ("profile-R-negative", "yaw2", _sub("R = 2.0", "R = -1"), [], "yaw2.toml", r"(?m)^\s*R\b", r"greater than or equal to 1e-12|0\.000000000001"),
-    ("profile-P0-not-spd", "yaw4", _sub("P0 = 0.3", "P0 = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]]"), [], "yaw4.toml", r"\bP0\b", r"positive definite"),
+    (
+        "profile-P0-not-spd",
+        "yaw4",
+        _sub("P0 = 0.3", "P0 = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]]"),
+        [],
+        "yaw4.toml",
+        r"\bP0\b",
+        r"positive definite",
+    ),
     ("profile-Ds-zero", "yaw5", _sub("Ds = 0.58", "Ds = 0"), [], "yaw5.toml", r"\bDs\b", r"at least 1e-06.*unobservable"),
     ("saturation-h1", "yaw1", _sub("h1 = 0.8", "h1 = 1.2"), [], "yaw1.toml", r"\bh1\b", r"less than 1"),
     ("gamma-order", "yaw6", _sub("gamma_min = 0.87\ngamma_max = 0.96", "gamma_min = 0.96\ngamma_max = 0.87"), [], "yaw6.toml", r"gamma_min", r"exceed"),

@@ -21,8 +21,13 @@ from netsetest.runtime.inmemory import run_inmemory
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = int(os.environ.get("NETSETEST_FUZZ_EXAMPLES", "0")) or None
-FUZZ = settings(max_examples=EXAMPLES or 80, derandomize=EXAMPLES is None, deadline=None, database=None,
-                suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+FUZZ = settings(
+    max_examples=EXAMPLES or 80,
+    derandomize=EXAMPLES is None,
+    deadline=None,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
 VALUE_LINE = re.compile(r"^(\s*[A-Za-z0-9_\"]+\s*=\s*)(.+?)(\s*#.*)?$")
 
 
@@ -42,8 +47,11 @@ def _toml(v: object) -> str:
 
 
 _SCALAR = (
-    st.booleans() | st.integers(min_value=-(2**63), max_value=2**63 - 1) | st.integers(-3, 100)
-    | st.floats() | st.sampled_from([0.0, -0.0, 1e300, -1e300, 5e-324, 0.2, 1.0, 80.0])
+    st.booleans()
+    | st.integers(min_value=-(2**63), max_value=2**63 - 1)
+    | st.integers(-3, 100)
+    | st.floats()
+    | st.sampled_from([0.0, -0.0, 1e300, -1e300, 5e-324, 0.2, 1.0, 80.0])
     | st.text(alphabet="abcdefghijklmnopqrstuvwxyz0123456789.-_", max_size=6)
 )
 _VALUE = _SCALAR | st.lists(_SCALAR, max_size=4) | st.lists(st.lists(st.floats(-2, 2) | st.integers(-2, 2), max_size=4), max_size=4)

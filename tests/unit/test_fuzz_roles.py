@@ -57,12 +57,10 @@ def test_decode_arbitrary_bytes_raises_only_bad_message(payload: bytes) -> None:
         pass
 
 
-_SCALARS = (
-    st.none() | st.booleans() | st.integers(min_value=-(2**63), max_value=2**64 - 1) | st.floats()
-    | st.text(max_size=8) | st.binary(max_size=8)
-)
+_SCALARS = st.none() | st.booleans() | st.integers(min_value=-(2**63), max_value=2**64 - 1) | st.floats() | st.text(max_size=8) | st.binary(max_size=8)
 _MSGPACK = st.recursive(
-    _SCALARS, lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6) | st.integers(), inner, max_size=4),
+    _SCALARS,
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6) | st.integers(), inner, max_size=4),
     max_leaves=20,
 )
 
@@ -115,14 +113,16 @@ def _value_like(v: object) -> st.SearchStrategy:
     if isinstance(v, float):
         return st.floats(allow_nan=True, allow_infinity=True) | st.sampled_from([0.0, -0.0, 1e-300, 1e300, 5e-324, 1.0, -1.0])
     if isinstance(v, str):
-        return st.sampled_from(["ok", "init", "init-prior", "fallback", "rejoin", "node", "vehicle", "collector", "none",
-                                "measurement", "fault-bound", "assumed", "1", "7", ""]) | st.text(max_size=6)
+        return st.sampled_from(
+            ["ok", "init", "init-prior", "fallback", "rejoin", "node", "vehicle", "collector", "none", "measurement", "fault-bound", "assumed", "1", "7", ""]
+        ) | st.text(max_size=6)
     if isinstance(v, list):
         inner = _value_like(v[0]) if v else st.integers(-1, 8)
         return st.lists(inner, min_size=max(0, len(v) - 1), max_size=len(v) + 1)
     if isinstance(v, dict):
-        return st.dictionaries(st.sampled_from(["1", "2", "3", "4", "5", "6", "0", "99", "x"]),
-                               _value_like(next(iter(v.values()))) if v else st.floats(), max_size=7)
+        return st.dictionaries(
+            st.sampled_from(["1", "2", "3", "4", "5", "6", "0", "99", "x"]), _value_like(next(iter(v.values()))) if v else st.floats(), max_size=7
+        )
     return _MSGPACK
 
 

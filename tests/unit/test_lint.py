@@ -20,6 +20,13 @@ def test_ruff_finds_nothing() -> None:
     assert p.returncode == 0, p.stdout + p.stderr
 
 
+def test_ruff_format_is_applied() -> None:
+    """The code is as `ruff format` writes it (run `ruff format netsetest tests` before committing)."""
+    ruff = shutil.which("ruff") or str(Path(sys.executable).with_name("ruff"))
+    p = subprocess.run([ruff, "format", "--check", "netsetest", "tests"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stdout + p.stderr
+
+
 def test_mypy_finds_nothing() -> None:
     """The type checker over the package, configured in pyproject.toml ([tool.mypy])."""
     mypy = shutil.which("mypy") or str(Path(sys.executable).with_name("mypy"))
@@ -34,7 +41,7 @@ FMT_SKIP = "# fmt" + ": skip"  # spelled in two parts so that this file does not
 
 def test_every_suppression_says_why() -> None:
     """A `type: ignore[code]` in the package and a `noqa: CODE` anywhere are followed on their line by why
-    (mypy and ruff's RUF100 flag unused ones); no formatter directive (no formatter runs)."""
+    (mypy and ruff's RUF100 flag unused ones); no formatter directive (the formatter applies everywhere)."""
     import re
 
     bare = []

@@ -41,11 +41,14 @@ def test_every_node_may_publish_its_reading_and_receive_everyone_elses() -> None
         assert {k for k in g[f"node-{i}"].receive if k.endswith("/reading")} == {keys.reading("r", j) for j in sc.ids if j != i}
 
 
-@pytest.mark.parametrize(("network", "C", "why"), [
-    ("max_faulty = 6", None, r"must be less than the number of nodes \(6\)"),
-    ("max_faulty = -1", None, "max_faulty"),
-    ("max_faulty = 2", "[0.01, 0.12]", "the same combination of the state"),
-])
+@pytest.mark.parametrize(
+    ("network", "C", "why"),
+    [
+        ("max_faulty = 6", None, r"must be less than the number of nodes \(6\)"),
+        ("max_faulty = -1", None, "max_faulty"),
+        ("max_faulty = 2", "[0.01, 0.12]", "the same combination of the state"),
+    ],
+)
 def test_a_declaration_that_cannot_hold_is_refused(tmp_path: Path, network: str, C: str | None, why: str) -> None:
     with pytest.raises(ConfigError, match=why):
         load_topology(_topology(tmp_path, network, C))

@@ -11,7 +11,18 @@ import pytest
 from netsetest.bus import keys
 from netsetest.bus.base import MemoryBus
 from netsetest.messages import (
-    SCHEMA_VERSION, SYM_ATOL, SYM_RTOL, BadMessage, End, NodeInput, NodeState, Ready, Truth, decode, encode, spd_problem,
+    SCHEMA_VERSION,
+    SYM_ATOL,
+    SYM_RTOL,
+    BadMessage,
+    End,
+    NodeInput,
+    NodeState,
+    Ready,
+    Truth,
+    decode,
+    encode,
+    spd_problem,
 )
 
 # floats that a lossy encoding (float32, decimal text) would not preserve
@@ -21,8 +32,19 @@ P = [0.3, 1e-17, -0.1 / 7, 1e-17, 0.3, 2 / 3, -0.1 / 7, 2 / 3, 1.797693134862315
 
 def _state(**kw) -> NodeState:
     base = dict(
-        step=7, node=3, xhat=X, P=P, rho=1 / 3, gamma=0.8123456789012345, innov=-0.0123456789,
-        status="ok", rho_cert=1.0000000001, solve_ms=24.75, used=[2, 4], missing=[4], late=True,
+        step=7,
+        node=3,
+        xhat=X,
+        P=P,
+        rho=1 / 3,
+        gamma=0.8123456789012345,
+        innov=-0.0123456789,
+        status="ok",
+        rho_cert=1.0000000001,
+        solve_ms=24.75,
+        used=[2, 4],
+        missing=[4],
+        late=True,
     )
     base.update(kw)
     return NodeState(**base)
@@ -32,18 +54,29 @@ MESSAGES = [
     Ready(role="collector"),
     Ready(role="node", node=5),
     NodeInput(step=0, node=1, y=0.123456789012345678, gamma=1.0),
-    NodeInput(step=12, node=6, y=-1e-12, gamma=0.7200000000000001, u_prev=0.0175 + 0.0367 * 0.3,
-              vx_prev=100 / 3.6, expect_from=[1, 5], lost_from=[5]),
+    NodeInput(step=12, node=6, y=-1e-12, gamma=0.7200000000000001, u_prev=0.0175 + 0.0367 * 0.3, vx_prev=100 / 3.6, expect_from=[1, 5], lost_from=[5]),
     _state(),
     _state(status="init", rho_cert=None, used=[], missing=[], late=False),
     _state(sector=(0.123456789, 0.876543211), sector_basis="fault-bound"),
     _state(status="init-prior", sector=(1.0, 0.0), sector_basis="measurement"),
     Truth(
-        step=80, x=[1e-3 / 7, -0.2 / 3], faults={"1": 0.1745, "2": 0.08725}, u=0.03, w=-0.99,
-        vx=27.77777777777778, noise={"1": math.cos(0.2 * math.pi), "2": 0.5}, gamma={"1": 0.77, "2": 1.0},
-        y={"1": 0.01 / 3, "2": 0.1}, y_nofault={"1": -0.0, "2": 0.0}, sector_ok={"1": True, "2": False},
-        noise_ok={"1": True, "2": True}, dist_ok=False,
-        lost=[(2, 1), (6, 1)], alive=[1, 2, 3], r={"1": -0.0312345678901, "2": 0.5}, fault_ok={"1": True, "2": False},
+        step=80,
+        x=[1e-3 / 7, -0.2 / 3],
+        faults={"1": 0.1745, "2": 0.08725},
+        u=0.03,
+        w=-0.99,
+        vx=27.77777777777778,
+        noise={"1": math.cos(0.2 * math.pi), "2": 0.5},
+        gamma={"1": 0.77, "2": 1.0},
+        y={"1": 0.01 / 3, "2": 0.1},
+        y_nofault={"1": -0.0, "2": 0.0},
+        sector_ok={"1": True, "2": False},
+        noise_ok={"1": True, "2": True},
+        dist_ok=False,
+        lost=[(2, 1), (6, 1)],
+        alive=[1, 2, 3],
+        r={"1": -0.0312345678901, "2": 0.5},
+        fault_ok={"1": True, "2": False},
     ),
     End(steps=80),
     End(steps=3, reason="aborted: node 4 silent"),

@@ -13,7 +13,17 @@ import numpy as np
 import pytest
 
 from netsetest.messages import (
-    MAX_DETAIL, SCHEMA_VERSION, BadMessage, End, NodeInput, NodeState, Reading, Ready, Truth, decode, encode,
+    MAX_DETAIL,
+    SCHEMA_VERSION,
+    BadMessage,
+    End,
+    NodeInput,
+    NodeState,
+    Reading,
+    Ready,
+    Truth,
+    decode,
+    encode,
 )
 
 P_EYE = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
@@ -28,9 +38,24 @@ def _state(**kw: object) -> NodeState:
 def _truth(**kw: object) -> Truth:
     one = {"1": 0.5, "2": -0.5}
     base: dict[str, object] = dict(
-        step=3, x=[0.01, 0.2], faults=one, u=0.03, w=0.1, vx=27.0, noise=one, gamma={"1": 0.8, "2": 0.9}, y=one,
-        y_nofault=one, sector_ok={"1": True, "2": True}, noise_ok={"1": True, "2": False}, dist_ok=True,
-        r={"1": 0.1, "2": 0.2}, fault_ok={"1": True, "2": True}, lost=[(1, 2)], alive=[1, 2], drops={"stale": 2},
+        step=3,
+        x=[0.01, 0.2],
+        faults=one,
+        u=0.03,
+        w=0.1,
+        vx=27.0,
+        noise=one,
+        gamma={"1": 0.8, "2": 0.9},
+        y=one,
+        y_nofault=one,
+        sector_ok={"1": True, "2": True},
+        noise_ok={"1": True, "2": False},
+        dist_ok=True,
+        r={"1": 0.1, "2": 0.2},
+        fault_ok={"1": True, "2": True},
+        lost=[(1, 2)],
+        alive=[1, 2],
+        drops={"stale": 2},
     )
     base.update(kw)
     return Truth(**base)
@@ -120,9 +145,19 @@ def test_odd_payload_reasons(payload, reason):
 
 
 FLOAT_FIELDS = [
-    (NodeInput, "y"), (NodeInput, "gamma"), (NodeInput, "u_prev"), (NodeInput, "vx_prev"), (NodeInput, "deadline"),
-    (NodeState, "rho"), (NodeState, "gamma"), (NodeState, "innov"), (NodeState, "rho_cert"), (NodeState, "solve_ms"),
-    (Truth, "u"), (Truth, "w"), (Truth, "vx"),
+    (NodeInput, "y"),
+    (NodeInput, "gamma"),
+    (NodeInput, "u_prev"),
+    (NodeInput, "vx_prev"),
+    (NodeInput, "deadline"),
+    (NodeState, "rho"),
+    (NodeState, "gamma"),
+    (NodeState, "innov"),
+    (NodeState, "rho_cert"),
+    (NodeState, "solve_ms"),
+    (Truth, "u"),
+    (Truth, "w"),
+    (Truth, "vx"),
 ]
 BY_TYPE = {type(m): m for m in EVERY_KIND}
 
@@ -155,10 +190,20 @@ def test_truth_map_values_must_be_finite(name):
 @pytest.mark.parametrize(
     "cls,change",
     [
-        (NodeState, {"step": True}), (NodeState, {"step": 2.0}), (NodeState, {"node": "2"}), (NodeState, {"late": 1}),
-        (NodeState, {"dropped": -1}), (NodeState, {"drops": {"x" * 65: 1}}), (NodeState, {"used": [0]}),
-        (NodeState, {"used": list(range(1, 258))}), (End, {"reason": "x" * 65}), (End, {"reason": b"done"}),
-        (Ready, {"role": "router"}), (Truth, {"lost": [[1, 2, 3]]}), (Truth, {"alive": [-1]}), (Truth, {"dist_ok": "yes"}),
+        (NodeState, {"step": True}),
+        (NodeState, {"step": 2.0}),
+        (NodeState, {"node": "2"}),
+        (NodeState, {"late": 1}),
+        (NodeState, {"dropped": -1}),
+        (NodeState, {"drops": {"x" * 65: 1}}),
+        (NodeState, {"used": [0]}),
+        (NodeState, {"used": list(range(1, 258))}),
+        (End, {"reason": "x" * 65}),
+        (End, {"reason": b"done"}),
+        (Ready, {"role": "router"}),
+        (Truth, {"lost": [[1, 2, 3]]}),
+        (Truth, {"alive": [-1]}),
+        (Truth, {"dist_ok": "yes"}),
         (Truth, {"drops": {str(i): 1 for i in range(65)}}),
     ],
     ids=lambda v: v.__name__ if isinstance(v, type) else ",".join(v),

@@ -331,8 +331,15 @@ def test_f3_f5_no_fault(faults):
 
 def _signals(kind, seed=0, R=(2.0, 0.5, 3.0, 2.0, 1.0, 4.0), gamma_ranges=None):
     return ExogenousSignals(
-        kind, seed, 0.0175, 0.0542, W=2.0, R=list(R), noise_freq=[1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
-        gamma_ranges=gamma_ranges, tau_s=0.1,
+        kind,
+        seed,
+        0.0175,
+        0.0542,
+        W=2.0,
+        R=list(R),
+        noise_freq=[1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+        gamma_ranges=gamma_ranges,
+        tau_s=0.1,
     )
 
 

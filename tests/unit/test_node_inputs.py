@@ -62,9 +62,7 @@ def test_a_dropped_neighbour_state_answers_the_wait() -> None:
     bus.publish(keys.node_input("t", 1), _input(sc, 0))
     bus.pump(timeout=0.0)
     assert node.try_step() and node.k == 0
-    inp = NodeInput(
-        step=1, node=1, y=0.0, gamma=1.0, u_prev=(sc.steer_low + sc.steer_high) / 2, vx_prev=sc.vx(0), expect_from=[j]
-    )
+    inp = NodeInput(step=1, node=1, y=0.0, gamma=1.0, u_prev=(sc.steer_low + sc.steer_high) / 2, vx_prev=sc.vx(0), expect_from=[j])
     bus.publish(keys.node_input("t", 1), inp)
     bus.pump(timeout=0.0)
     assert node.missing() == [j] and not node.try_step()  # waiting for j
@@ -72,9 +70,16 @@ def test_a_dropped_neighbour_state_answers_the_wait() -> None:
     assert own is not None
     nb = sc.node(j)
     forged = NodeState(
-        step=0, node=j, xhat=[float(a) for a in nb.x0_hat], P=[float(a) for a in (nb.P0 * 1e-6).reshape(9)],
-        rho=nb.rho, gamma=1.0, innov=1e6, status="init",
-        sector=None if not nb.sensor.saturated else (0.8, 0.3), sector_basis="none" if not nb.sensor.saturated else "measurement",
+        step=0,
+        node=j,
+        xhat=[float(a) for a in nb.x0_hat],
+        P=[float(a) for a in (nb.P0 * 1e-6).reshape(9)],
+        rho=nb.rho,
+        gamma=1.0,
+        innov=1e6,
+        status="init",
+        sector=None if not nb.sensor.saturated else (0.8, 0.3),
+        sector_basis="none" if not nb.sensor.saturated else "measurement",
     )  # an innovation its own tiny set and noise bound cannot produce
     bus.publish(keys.node_state("t", j), forged)
     bus.pump(timeout=0.0)

@@ -19,8 +19,16 @@ def _sensor(rng: np.random.Generator, saturated: bool) -> Sensor:
     C = rng.normal(size=2)
     if not saturated:
         return Sensor(C=C, Ds=float(rng.uniform(0.3, 0.7)), Dv=float(rng.uniform(1e-3, 0.1)), R=float(rng.uniform(0.5, 3)))
-    return Sensor(C=C, Ds=float(rng.uniform(0.3, 0.7)), Dv=float(rng.uniform(1e-3, 0.1)), R=float(rng.uniform(0.5, 3)),
-                  saturated=True, r_max=float(rng.uniform(0.02, 1.0)), h1=float(rng.uniform(0.5, 0.95)), h2=float(rng.uniform(1.0, 1.5)))
+    return Sensor(
+        C=C,
+        Ds=float(rng.uniform(0.3, 0.7)),
+        Dv=float(rng.uniform(1e-3, 0.1)),
+        R=float(rng.uniform(0.5, 3)),
+        saturated=True,
+        r_max=float(rng.uniform(0.02, 1.0)),
+        h1=float(rng.uniform(0.5, 0.95)),
+        h2=float(rng.uniform(1.0, 1.5)),
+    )
 
 
 @pytest.mark.parametrize("saturated", [False, True])
@@ -109,7 +117,9 @@ def test_interval_uses_the_published_sector_of_the_step() -> None:
         noise = abs(s.Dv) * np.sqrt(s.R)
         cands = [
             (gamma * sec.h1 - 1.0) * cx + gamma * sec.h1 * c * sj + gamma * phi + v
-            for sj in (-1.0, 1.0) for phi in (0.0, sec.h * (cx + c * sj)) for v in (-noise, noise)
+            for sj in (-1.0, 1.0)
+            for phi in (0.0, sec.h * (cx + c * sj))
+            for v in (-noise, noise)
         ]
         assert min(cands) == pytest.approx(lo, rel=1e-12, abs=1e-14) and max(cands) == pytest.approx(hi, rel=1e-12, abs=1e-14)
         assert (lo, hi) != innovation_interval(s, xhat, P, rho, gamma, None)

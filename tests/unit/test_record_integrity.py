@@ -26,8 +26,10 @@ EXAMPLES = int(os.environ.get("NETSETEST_FUZZ_EXAMPLES", "0")) or None
 def lines(tmp_path_factory: pytest.TempPathFactory) -> list[str]:
     d = tmp_path_factory.mktemp("rec")
     path = d / "r.json"
-    assert main(["run", str(ROOT / "topologies" / "paper6.toml"), "--mode", "inmemory", "--steps", str(STEPS), "--seed", "3",
-                 "--record", str(path), "--quiet"]) == 0
+    assert (
+        main(["run", str(ROOT / "topologies" / "paper6.toml"), "--mode", "inmemory", "--steps", str(STEPS), "--seed", "3", "--record", str(path), "--quiet"])
+        == 0
+    )
     return path.read_text().splitlines()
 
 
@@ -110,8 +112,13 @@ def test_huge_integers_are_refused_or_harmless(lines: list[str], tmp_path: Path,
         _exits_cleanly(argv, capsys)
 
 
-FUZZ = settings(max_examples=EXAMPLES or 120, derandomize=EXAMPLES is None, deadline=None, database=None,
-                suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+FUZZ = settings(
+    max_examples=EXAMPLES or 120,
+    derandomize=EXAMPLES is None,
+    deadline=None,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
 
 
 @FUZZ

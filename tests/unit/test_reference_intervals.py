@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from netsetest.config.schema import load_topology
-from netsetest.estimator.sdp import Ellipsoid, LocalEstimator, StepInput
+from netsetest.estimator.sdp import NodeSet, LocalEstimator, UpdateInput
 from netsetest.estimator.sector import measurement_interval
 
 REFERENCE = Path(__file__).resolve().parents[2] / "topologies" / "paper6_reference.toml"
@@ -18,12 +18,12 @@ def _setup(case: str):
     sc = load_topology(REFERENCE, case, 5)
     est = LocalEstimator.for_node(sc, 2)
     n = sc.node(2)
-    prior = Ellipsoid(n.x0_hat, n.P0, n.rho)
+    prior = NodeSet(n.x0_hat, n.P0, n.rho)
     return sc, est, prior
 
 
-def _inp(sc, readings: dict[int, tuple[float, float]]) -> StepInput:
-    return StepInput(sc.model.weights(sc.vx(0)), (sc.steer_low + sc.steer_high) / 2, 0.03, 1.0, {}, readings)
+def _inp(sc, readings: dict[int, tuple[float, float]]) -> UpdateInput:
+    return UpdateInput(sc.model.weights(sc.vx(0)), (sc.steer_low + sc.steer_high) / 2, 0.03, 1.0, {}, readings)
 
 
 def test_only_declared_references_are_read() -> None:

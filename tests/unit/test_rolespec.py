@@ -15,7 +15,16 @@ from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.estimator.objective import OBJECTIVES
 from netsetest.runtime.argtypes import SEED_MAX
 from netsetest.runtime.rolespec import (
-    DEFAULT_RUN_ID, ROLE_SPECS, RUN_ID_ENV, CollectorSpec, NodeSpec, RoleSpec, RouterSpec, ScenarioSpec, VehicleSpec, ZenohSpec,
+    DEFAULT_RUN_ID,
+    ROLE_SPECS,
+    RUN_ID_ENV,
+    CollectorSpec,
+    NodeSpec,
+    RoleSpec,
+    RouterSpec,
+    ScenarioSpec,
+    VehicleSpec,
+    ZenohSpec,
 )
 
 EXAMPLES = int(os.environ.get("NETSETEST_FUZZ_EXAMPLES", "0")) or None
@@ -28,27 +37,72 @@ texts = st.text(st.characters(blacklist_characters="\0", blacklist_categories=("
 positional = texts.filter(lambda s: not s.startswith("-"))
 maybe = lambda s: st.none() | s  # noqa: E731  # a one-line local helper
 run_ids = st.from_regex(r"[A-Za-z0-9_-]{1,64}", fullmatch=True).filter(lambda s: s != "--")
-endpoints = st.builds(lambda proto, host, port: f"{proto}/{host}:{port}", st.sampled_from(["tcp", "tls", "udp", "quic"]),
-                      st.sampled_from(["127.0.0.1", "localhost", "router", "[::1]"]), st.integers(0, 65535))
+endpoints = st.builds(
+    lambda proto, host, port: f"{proto}/{host}:{port}",
+    st.sampled_from(["tcp", "tls", "udp", "quic"]),
+    st.sampled_from(["127.0.0.1", "localhost", "router", "[::1]"]),
+    st.integers(0, 65535),
+)
 seconds = st.floats(min_value=1e-9, max_value=1e9, allow_nan=False, allow_infinity=False)
 non_negative = st.just(0.0) | seconds
 pairs = st.tuples(st.integers(-5, 200), st.integers(-5, 10_000))
 clocks = st.sampled_from(["lockstep", "realtime"])
 
-scenarios = st.builds(ScenarioSpec, positional, maybe(st.sampled_from(["nsnim", "saim"])), maybe(st.integers(1, 10**6)),
-                      maybe(st.sampled_from(NODE_ESTIMATOR_NAMES)))
-zenohs = st.builds(ZenohSpec, maybe(run_ids), st.sampled_from(["peer", "client"]), st.lists(endpoints, max_size=3).map(tuple),
-                   st.lists(endpoints, max_size=3).map(tuple), maybe(texts), maybe(st.sampled_from(READABLE)))
+scenarios = st.builds(
+    ScenarioSpec, positional, maybe(st.sampled_from(["nsnim", "saim"])), maybe(st.integers(1, 10**6)), maybe(st.sampled_from(NODE_ESTIMATOR_NAMES))
+)
+zenohs = st.builds(
+    ZenohSpec,
+    maybe(run_ids),
+    st.sampled_from(["peer", "client"]),
+    st.lists(endpoints, max_size=3).map(tuple),
+    st.lists(endpoints, max_size=3).map(tuple),
+    maybe(texts),
+    maybe(st.sampled_from(READABLE)),
+)
 SPECS: dict[type[RoleSpec], st.SearchStrategy] = {
-    VehicleSpec: st.builds(VehicleSpec, scenarios, st.sampled_from(["paper", "worst"]), st.integers(0, SEED_MAX), clocks, seconds, non_negative,
-                           seconds, st.booleans(), st.lists(pairs, max_size=3).map(tuple), zenohs),
-    NodeSpec: st.builds(NodeSpec, scenarios, st.integers(-10, 10**6), st.sampled_from(["scheduled", "per-rule"]), st.sampled_from(OBJECTIVES),
-                        clocks, seconds, st.booleans(), maybe(st.integers(-10, 10**6)), zenohs),
-    CollectorSpec: st.builds(CollectorSpec, scenarios, st.sampled_from(["paper", "worst"]), st.sampled_from(["scheduled", "per-rule"]),
-                             st.sampled_from(OBJECTIVES), maybe(st.integers(0, SEED_MAX)), clocks, maybe(texts), maybe(texts),
-                             maybe(st.integers(0, 1024)), seconds, zenohs),
-    RouterSpec: st.builds(RouterSpec, maybe(positional), maybe(texts), st.lists(endpoints, max_size=3).map(tuple), maybe(run_ids),
-                          maybe(st.sampled_from(READABLE))),
+    VehicleSpec: st.builds(
+        VehicleSpec,
+        scenarios,
+        st.sampled_from(["paper", "worst"]),
+        st.integers(0, SEED_MAX),
+        clocks,
+        seconds,
+        non_negative,
+        seconds,
+        st.booleans(),
+        st.lists(pairs, max_size=3).map(tuple),
+        zenohs,
+    ),
+    NodeSpec: st.builds(
+        NodeSpec,
+        scenarios,
+        st.integers(-10, 10**6),
+        st.sampled_from(["scheduled", "per-rule"]),
+        st.sampled_from(OBJECTIVES),
+        clocks,
+        seconds,
+        st.booleans(),
+        maybe(st.integers(-10, 10**6)),
+        zenohs,
+    ),
+    CollectorSpec: st.builds(
+        CollectorSpec,
+        scenarios,
+        st.sampled_from(["paper", "worst"]),
+        st.sampled_from(["scheduled", "per-rule"]),
+        st.sampled_from(OBJECTIVES),
+        maybe(st.integers(0, SEED_MAX)),
+        clocks,
+        maybe(texts),
+        maybe(texts),
+        maybe(st.integers(0, 1024)),
+        seconds,
+        zenohs,
+    ),
+    RouterSpec: st.builds(
+        RouterSpec, maybe(positional), maybe(texts), st.lists(endpoints, max_size=3).map(tuple), maybe(run_ids), maybe(st.sampled_from(READABLE))
+    ),
 }
 any_spec = st.one_of(*SPECS.values())
 
@@ -101,8 +155,13 @@ def test_defaults_are_left_out_and_values_that_look_like_options_survive() -> No
 
 
 def test_bad_values_are_refused_as_on_the_command_line() -> None:
-    for argv in (["node", "paper6"], ["vehicle", "paper6", "--run-id", "a/b"], ["vehicle", "paper6", "--pace", "-1"],
-                 ["collector", "paper6", "--connect", "tcp/h:99999"], ["node", "paper6", "--id", "1", "--clock", "soon"]):
+    for argv in (
+        ["node", "paper6"],
+        ["vehicle", "paper6", "--run-id", "a/b"],
+        ["vehicle", "paper6", "--pace", "-1"],
+        ["collector", "paper6", "--connect", "tcp/h:99999"],
+        ["node", "paper6", "--id", "1", "--clock", "soon"],
+    ):
         with pytest.raises(SystemExit) as exc:
             ROLE_SPECS[[s.ROLE for s in ROLE_SPECS].index(argv[0])].from_argv(argv)
         assert exc.value.code == 2, argv

@@ -26,9 +26,17 @@ def test_an_older_records_meta_takes_defaults_and_unknown_keys_are_ignored() -> 
     assert meta.estimators == {} and meta.seed is None
 
 
-@pytest.mark.parametrize(("field", "value"), [
-    ("tau_s", "0.1"), ("seed", True), ("seed", 1.5), ("node_ids", [1, "2"]), ("estimators", [1]), ("case", 3),
-])
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("tau_s", "0.1"),
+        ("seed", True),
+        ("seed", 1.5),
+        ("node_ids", [1, "2"]),
+        ("estimators", [1]),
+        ("case", 3),
+    ],
+)
 def test_a_wrong_type_is_refused_naming_the_field(field: str, value: object) -> None:
     with pytest.raises(ValueError, match=f"meta.{field}"):
         RunMeta.from_dict({field: value})

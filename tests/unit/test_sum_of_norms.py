@@ -74,9 +74,7 @@ def test_zero_gain_is_exact_when_the_noise_costs_more() -> None:
 def test_a_minimum_where_a_term_vanishes_is_found_and_is_the_minimum() -> None:
     """The readings' update of paper6_max_faulty (captured): the minimum lies where the one-column group of
     slot 3 vanishes (L = M₃ / b₃), where Newton stalls; the subgradient test finds it, without iterating."""
-    M = np.array([[0.00846, -0.00591, 0.0, 0.00126, 0.0],
-                  [0.02938, 0.04838, 0.0, 0.03164, 0.0],
-                  [-0.04109, -0.06766, 0.0, -0.04424, -0.14388]])
+    M = np.array([[0.00846, -0.00591, 0.0, 0.00126, 0.0], [0.02938, 0.04838, 0.0, 0.03164, 0.0], [-0.04109, -0.06766, 0.0, -0.04424, -0.14388]])
     b = np.array([0.02938, 0.04838, 0.0, 0.03164, 0.0])
     onehot = np.array([[1.0, 0, 0], [1, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
     p = SumOfNorms(M, b, onehot, 0.019272747222410277)

@@ -17,7 +17,16 @@ import pytest
 from netsetest.records.summary import RunSummary
 from netsetest.runtime.channel import CHANNEL_FD, ChannelReader, RunFinished, StepChecked, decode, encode
 from netsetest.runtime.launcher import (
-    Children, LaunchOptions, Network, RoleStarter, RunOutcome, Schedule, Supervisor, kill_schedule, plan_run, role_names,
+    Children,
+    LaunchOptions,
+    Network,
+    RoleStarter,
+    RunOutcome,
+    Schedule,
+    Supervisor,
+    kill_schedule,
+    plan_run,
+    role_names,
 )
 from netsetest.runtime.report import EXIT_INTERRUPTED, EXIT_NODE_LOST, EXIT_OK, EXIT_VIOLATION
 from netsetest.runtime.rolespec import CollectorSpec, NodeSpec, VehicleSpec

@@ -58,4 +58,3 @@ The package follows those seams (imports run down the list):
   closed form (:mod:`netsetest.estimator.sum_of_norms`), Clarabel where that fails, and
   :func:`~netsetest.estimator.conic.closed_form.clarabel_backend`, which picks one of the two for a node.
 """
-

@@ -347,8 +347,11 @@ class _Assembly:
         balls_c = self.red.balls_compact(use_xi)
         r0, r1 = self.newrows(2)
         t0 = var.iTt[-1]
-        self.put(_Const(np.r_[-1.0, -1.0, np.ones(len(balls_c)), -np.ones(len(balls_c))]),
-                 [r0, r1] + [r0] * len(balls_c) + [r1] * len(balls_c), [t0, t0] + [var.iT[0][c] for c in balls_c] * 2)
+        self.put(
+            _Const(np.r_[-1.0, -1.0, np.ones(len(balls_c)), -np.ones(len(balls_c))]),
+            [r0, r1] + [r0] * len(balls_c) + [r1] * len(balls_c),
+            [t0, t0] + [var.iT[0][c] for c in balls_c] * 2,
+        )
         self.b_blocks.append(_Rho([r0]))
         self.b_blocks.append(_Rho([r1], -1.0))
         xr = self.newrows(NA)
@@ -455,9 +458,19 @@ class _Assembly:
         order = np.lexsort((rows, cols))
         assert len(set(zip(rows.tolist(), cols.tolist()))) == len(order), "duplicate entries in the pattern"
         return Template(
-            key=key, var=self.var, nv=nv, n_rows=self.n_rows, cones=self.cones, a_blocks=self.a_blocks, b_blocks=self.b_blocks,
-            order=order, indices=rows[order].astype(np.int64), indptr=np.r_[0, np.cumsum(np.bincount(cols, minlength=nv))].astype(np.int64),
-            lmi_rows=lmi_rows, lmi_n=n, decomposed=self.red.cliques is not None,
+            key=key,
+            var=self.var,
+            nv=nv,
+            n_rows=self.n_rows,
+            cones=self.cones,
+            a_blocks=self.a_blocks,
+            b_blocks=self.b_blocks,
+            order=order,
+            indices=rows[order].astype(np.int64),
+            indptr=np.r_[0, np.cumsum(np.bincount(cols, minlength=nv))].astype(np.int64),
+            lmi_rows=lmi_rows,
+            lmi_n=n,
+            decomposed=self.red.cliques is not None,
         )
 
 
