@@ -37,7 +37,7 @@ ZenohMode = Literal["peer", "client", "router"]
 # RUST_BACKTRACE=1 (a developer's shell; this project's machines) also makes every Rust error *value*
 # capture a backtrace (std::backtrace, through anyhow): Zenoh builds one for each link it closes, and each
 # capture walks the stack through the library's unwind tables, ≈1.2 MB that stay resident — the node's
-# peak RSS was reached at session close (docs/performance.md, *Imports and memory*).  netsetest never shows
+# peak RSS was reached at session close (docs/performance-history.md, *Imports and memory*).  netsetest never shows
 # those backtraces; panics keep theirs (RUST_BACKTRACE).  Set here, before this process opens a session
 # (no Zenoh thread reads the environment yet); a value the user exported wins.
 RUST_ERROR_BACKTRACE_ENV = "RUST_LIB_BACKTRACE"

@@ -28,7 +28,7 @@ from netsetest.extras import MissingExtra, require
 from netsetest.records.errors import RecordError
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED
 
-if TYPE_CHECKING:  # a role process never loads the records (memory: docs/performance.md)
+if TYPE_CHECKING:  # a role process never loads the records (memory: docs/performance-history.md)
     from netsetest.records.record import Record
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
@@ -180,7 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="?",
         const=".",
         metavar="ROOT",
-        help="measure nothing: rewrite docs/results.md and the generated sections of README.md and docs/performance.md "
+        help="measure nothing: rewrite docs/results.md and the generated sections of README.md, docs/performance.md and docs/exact.md "
         "under ROOT (default: .) from the committed figures, bench/*.json",
     )
 

@@ -36,7 +36,7 @@ from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION, exit_code, 
 from netsetest.runtime.rolespec import CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
 from netsetest.runtime.timeouts import READING_WAIT
 
-if TYPE_CHECKING:  # a node process never loads the vehicle and the collector (memory: docs/performance.md)
+if TYPE_CHECKING:  # a node process never loads the vehicle and the collector (memory: docs/performance-history.md)
     from netsetest.records.summary import RunSummary
     from netsetest.roles.vehicle import Vehicle
 
@@ -81,7 +81,7 @@ def release_free_memory() -> None:
 
     A role compiles and imports its modules before it opens its session: what the imports freed stays
     resident in the heap's free lists (≈1.4 MB in a node), and the session and the run come on top of it,
-    so it adds to the process' peak RSS (docs/performance.md, *Imports and memory*).  Call once, after
+    so it adds to the process' peak RSS (docs/performance-history.md, *Imports and memory*).  Call once, after
     the imports and before the bus opens (no other thread yet); the heap refills as the role needs.
     """
     trim = getattr(ctypes.CDLL(None), "malloc_trim", None)  # the symbols already loaded: libc's

@@ -1,7 +1,7 @@
 """Default timeouts of the role processes, shared by the CLI's options and the launcher.
 
 A module of its own: every ``netsetest`` command builds every parser, and a role process must not load
-the launcher (subprocess, tempfile, socket, ...) for three numbers (memory: docs/performance.md).
+the launcher (subprocess, tempfile, socket, ...) for three numbers (memory: docs/performance-history.md).
 """
 
 START_TIMEOUT_S = 60.0  # the vehicle's default wait for every role to be ready

@@ -22,7 +22,9 @@ def test_the_committed_doc_is_what_the_committed_figures_make(name: str, rendere
     assert committed == rendered[name], f"{name} differs from what `netsetest bench --render-docs` writes: run it and commit the result"
 
 
-@pytest.mark.parametrize(("name", "parts"), [("README.md", ("scenario", "performance")), ("docs/performance.md", ("performance",))])
+@pytest.mark.parametrize(
+    ("name", "parts"), [("README.md", ("scenario", "performance")), ("docs/performance.md", ("performance",)), ("docs/exact.md", ("exact",))]
+)
 def test_the_generated_sections_are_there(name: str, parts: tuple[str, ...]) -> None:
     """A deleted marker pair would silently leave a section unchecked."""
     text = (ROOT / name).read_text(encoding="utf-8")
