@@ -166,7 +166,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", metavar="PATH", help="write the bounds and the per-drive maxima as JSON")
 
     p = sub.add_parser("bench", help="the performance benchmark: solve times, tightness, Zenoh overhead, start-up, memory, real-time scale, defences")
-    p.add_argument("--quick", action="store_true", help="fewer steps and samples (about 10 minutes; default: the full benchmark, about 30)")
+    p.add_argument("--quick", action="store_true", help="fewer steps and samples (the report's header says how long the run took)")
     p.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
     p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown (default: none)")
     p.add_argument(
@@ -182,6 +182,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="ROOT",
         help="measure nothing: rewrite docs/results.md and the generated sections of README.md, docs/performance.md and docs/exact.md "
         "under ROOT (default: .) from the committed figures, bench/*.json",
+    )
+    p.add_argument(
+        "--spread",
+        nargs="+",
+        metavar="FIGURES",
+        help="measure nothing: the headline figures of several runs' --json files side by side, their median and spread "
+        "(how noisy the benchmark is); with --json, write them",
     )
 
     from netsetest.cli import compare, tools
@@ -426,6 +433,8 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
 def cmd_bench(a: argparse.Namespace) -> int:
     if a.render_docs is not None:
         return _render_docs(a)
+    if a.spread is not None:
+        return _spread(a)
     if a.only in (None, "performance"):
         require("cvxpy", "the benchmark (its reference formulations)")
     checks.output_file(a.json, "--json")
@@ -450,6 +459,24 @@ def _render_docs(a: argparse.Namespace) -> int:
         print(f"netsetest bench: --render-docs: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
     print("rewrote " + ", ".join(changed) if changed else "every generated doc is up to date")
+    return 0
+
+
+def _spread(a: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from netsetest.bench.spread import SpreadError, write_spread
+
+    measuring = [opt for opt, given in (("--quick", a.quick), ("--markdown", a.markdown), ("--only", a.only)) if given]
+    if measuring:
+        print(f"netsetest bench: --spread measures nothing; {measuring[0]} does not go with it", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    checks.output_file(a.json, "--json")
+    try:
+        print(write_spread([Path(p) for p in a.spread], a.json), end="")
+    except SpreadError as e:
+        print(f"netsetest bench: --spread: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     return 0
 
 
