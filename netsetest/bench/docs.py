@@ -14,8 +14,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from netsetest.bench.network import network_markdown
-from netsetest.bench.plant import plant_markdown
+from netsetest.bench.network import network_markdown, network_summary_markdown
+from netsetest.bench.plant import plant_markdown, plant_summary_markdown
 from netsetest.bench.run import performance_markdown
 from netsetest.bench.scenario import compare_markdown, exact_markdown, scenario_markdown
 
@@ -29,6 +29,7 @@ class Part:
     key: str | None  # the part's figures in that file (None: the whole document)
     draw: Callable[[dict], str]
     measure: str  # the command that measures it (and writes ``source``)
+    in_results: bool = True  # a heading of its own in docs/results.md (False: a short form for the README)
 
 
 _SCENARIO = "netsetest bench --quick --only scenario --json bench/scenario.json --markdown bench/scenario.md"
@@ -49,6 +50,22 @@ PARTS: dict[str, Part] = {
         "plant",
         plant_markdown,
         "netsetest bench --quick --only plant --json bench/plant.json --markdown bench/plant.md",
+    ),
+    "network-summary": Part(
+        "What the network exchange buys, in short",
+        "bench/network.json",
+        "network",
+        network_summary_markdown,
+        "netsetest bench --quick --only network --json bench/network.json --markdown bench/network.md",
+        in_results=False,
+    ),
+    "plant-summary": Part(
+        "A car as the truth, in short",
+        "bench/plant.json",
+        "plant",
+        plant_summary_markdown,
+        "netsetest bench --quick --only plant --json bench/plant.json --markdown bench/plant.md",
+        in_results=False,
     ),
     "performance": Part(
         "Performance",
@@ -100,6 +117,8 @@ def results_document(docs: dict[str, dict], sections: dict[str, str]) -> str:
         "",
     ]
     for part, p in PARTS.items():
+        if not p.in_results:
+            continue
         meta = docs[p.source].get("meta", {})
         report = p.source.removesuffix(".json") + ".md"  # the measuring run's own report (its --markdown)
         lines += [
