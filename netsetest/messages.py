@@ -16,7 +16,6 @@ the ranges would see it dropped as ``invalid`` by every receiver, as both buses 
 from __future__ import annotations
 
 import copy
-import hashlib
 import math
 import re
 from dataclasses import dataclass
@@ -24,6 +23,11 @@ from typing import Annotated, Any, Final, Literal, Self, Union
 
 import msgspec
 import numpy as np
+
+try:  # CPython's own BLAKE2, which hashlib.blake2b is: importing hashlib would also load OpenSSL (+3.5 MB in every node)
+    from _blake2 import blake2b
+except ImportError:  # another interpreter
+    from hashlib import blake2b
 from msgspec import Meta, Struct, field
 
 from netsetest.models.sensor import NA
@@ -199,7 +203,7 @@ def state_digest(st: NodeState) -> str:
     """The identity of a state copy: every field a receiver's step takes from it (the set, the innovation,
     γ, the sector, and the set the sender continues from).  Two copies with the same digest are one."""
     content = [st.step, st.node, st.xhat, st.P, st.rho, st.gamma, st.innov, st.sector, st.sector_basis, st.set, st.own_xhat, st.own_P]
-    return hashlib.blake2b(msgspec.msgpack.encode(content), digest_size=DIGEST_BYTES).hexdigest()
+    return blake2b(msgspec.msgpack.encode(content), digest_size=DIGEST_BYTES).hexdigest()
 
 
 SYM_RTOL, SYM_ATOL = 1e-9, 1e-15  # P = Pᵀ up to rounding, as np.allclose(P, P.T, rtol, atol)

@@ -31,9 +31,8 @@ from netsetest.models.drive import Drive
 from netsetest.models.manoeuvres import WITH_AMPLITUDE, DriveSpec
 from netsetest.models.plant import PlantKind
 from netsetest.models.signals import SignalKind
-from netsetest.models.uncertainty import ModelUncertainty
+from netsetest.models.uncertainty import DEFAULT_MARGIN, ModelUncertainty
 
-DEFAULT_MARGIN = 0.1
 # the same car with one cause of mismatch less at each step down (their derived T-S models are the same)
 SIMPLER: dict[PlantKind, tuple[PlantKind, ...]] = {
     "ts": (),

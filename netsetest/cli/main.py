@@ -19,13 +19,13 @@ from typing import TYPE_CHECKING
 from netsetest.analysis.errors import CompareError, ExactError
 from netsetest.cli import checks
 from netsetest.config.schema import ConfigError
-from netsetest.analysis.calibrate import DEFAULT_MARGIN
 from netsetest.bench.sections import SECTIONS
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.models.manoeuvres import MANOEUVRES, WITH_AMPLITUDE
 from netsetest.models.signals import SIGNAL_KINDS
 from netsetest.extras import MissingExtra, require
 from netsetest.records.errors import RecordError
+from netsetest.models.uncertainty import DEFAULT_MARGIN
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED
 
 if TYPE_CHECKING:  # a role process never loads the records (memory: docs/performance-history.md)

@@ -10,18 +10,40 @@ from collections.abc import Callable
 
 from netsetest.config.schema import ConfigError, Scenario
 from netsetest.estimator.base import EstimatorError, SetEstimator
-from netsetest.estimator.interval_althoff_rath import IntervalObserver
-from netsetest.estimator.set_propagation_althoff_rath import SetPropagationObserver
-from netsetest.estimator.strip_althoff_rath import StripObserver
-from netsetest.estimator.zonotope_w_radius import ZonotopeEstimator
+
+
+# Each method's module is imported when a node runs it: an SDP node never loads the others.
+def _zonotope(sc: Scenario, i: int, order: int | None = None) -> SetEstimator:
+    from netsetest.estimator.zonotope_w_radius import ZonotopeEstimator
+
+    return ZonotopeEstimator(sc, i, order=order)
+
+
+def _interval(sc: Scenario, i: int, wrapping: bool = False) -> SetEstimator:
+    from netsetest.estimator.interval_althoff_rath import IntervalObserver
+
+    return IntervalObserver(sc, i, wrapping=wrapping)
+
+
+def _strip(sc: Scenario, i: int) -> SetEstimator:
+    from netsetest.estimator.strip_althoff_rath import StripObserver
+
+    return StripObserver(sc, i)
+
+
+def _setprop(sc: Scenario, i: int) -> SetEstimator:
+    from netsetest.estimator.set_propagation_althoff_rath import SetPropagationObserver
+
+    return SetPropagationObserver(sc, i)
+
 
 SET_ESTIMATORS: dict[str, Callable[[Scenario, int], SetEstimator]] = {
-    "zonotope": lambda sc, i: ZonotopeEstimator(sc, i),
-    "zonotope-q10": lambda sc, i: ZonotopeEstimator(sc, i, order=10),
-    "interval": lambda sc, i: IntervalObserver(sc, i),
-    "interval-classical": lambda sc, i: IntervalObserver(sc, i, wrapping=True),
-    "strip": lambda sc, i: StripObserver(sc, i),
-    "setprop": lambda sc, i: SetPropagationObserver(sc, i),
+    "zonotope": _zonotope,
+    "zonotope-q10": lambda sc, i: _zonotope(sc, i, order=10),
+    "interval": _interval,
+    "interval-classical": lambda sc, i: _interval(sc, i, wrapping=True),
+    "strip": _strip,
+    "setprop": _setprop,
 }
 
 

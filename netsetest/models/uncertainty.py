@@ -22,6 +22,9 @@ UncertaintyKind = Literal["box", "ellipsoid"]
 HOLDS_RTOL = 1e-12  # the check of e_k against the bound, as for the noise and wind bounds
 
 
+DEFAULT_MARGIN = 0.1  # netsetest calibrate: the bound's half-widths and semi-axes enlarged by 10 % over what the training drives reached
+
+
 @dataclass(frozen=True)
 class ModelUncertainty:
     """e_k ∈ {G ζ : ζ in the unit box (``box``) or the unit ball (``ellipsoid``)}, G (NX, NX)."""

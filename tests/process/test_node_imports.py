@@ -34,6 +34,13 @@ NEVER_IN_A_NODE = (
     "socket",
     "random",
     "gzip",
+    "_hashlib",  # OpenSSL's libcrypto, +3.5 MB: the state digest's BLAKE2 is CPython's own (messages.py)
+    "netsetest.analysis.calibrate",
+    "netsetest.models.drive",
+    "netsetest.estimator.zonotope_w_radius",  # the other methods load only in a node that runs them
+    "netsetest.estimator.interval_althoff_rath",
+    "netsetest.estimator.strip_althoff_rath",
+    "netsetest.estimator.set_propagation_althoff_rath",
 )
 
 
