@@ -25,7 +25,8 @@ import heapq
 import itertools
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Literal
 
 import clarabel
@@ -145,11 +146,16 @@ class Conic:
     cones: list
     settings: clarabel.DefaultSettings
 
+    @cached_property
+    def position(self) -> dict[int, int]:
+        """Global column → position in ``cols``."""
+        return {int(c): m for m, c in enumerate(self.cols)}
+
     def with_rows(self, rows: Sequence[Row]) -> Conic:
         """The same program with ``rows`` (a·z ≤ b) added as one more non-negative cone."""
         if not rows:
             return self
-        position = {int(c): m for m, c in enumerate(self.cols)}
+        position = self.position
         data, ri, ci = [], [], []
         for r, (terms, _) in enumerate(rows):
             for c, v in terms.items():
@@ -197,22 +203,106 @@ def _expand(conic: Conic, x: np.ndarray, nz: int) -> np.ndarray:
     return z
 
 
+GAP_TOL = 1e-9  # relative: the search stops once the best trajectory found is within this of the least open bound
+
+
 @dataclass(order=True)
 class _Node:
+    """An open node: its bound (a lower bound of q·z over its region), unsolved (``lazy``: the parent's bound)
+    or solved; at equal bounds a solved node comes first and then the order the children were made in."""
+
     bound: float
+    lazy: bool
     order: int
-    chosen: frozenset[int]  # unions (by position in the list) whose piece is fixed
-    rows: tuple[Row, ...]
-    z: np.ndarray | None  # the relaxation's minimiser (global columns); None: unbounded
+    chosen: frozenset[int] = field(compare=False)  # unions (by position in the list) whose piece is fixed
+    rows: tuple[Row, ...] = field(compare=False)
+    z: np.ndarray | None = field(compare=False, default=None)  # the minimiser (global columns); None: unbounded or lazy
+    origin: tuple[int, Piece] | None = field(compare=False, default=None)  # (step, piece) of a child of the root
 
 
 def _branch_on(unions: Sequence[StepUnion], node: _Node) -> int | None:
     """The union to branch on: the latest step the minimiser violates; for an unbounded relaxation (no
-    minimiser) the latest one not yet chosen.  None: the node is a leaf (its relaxation is exact)."""
+    minimiser) the latest one not yet chosen.  None: the node's minimiser meets every union (or, unbounded,
+    every union is chosen: its relaxation is exact)."""
     for m in range(len(unions) - 1, -1, -1):
         if m not in node.chosen and (node.z is None or not unions[m].holds(node.z)):
             return m
     return None
+
+
+def _distance(union: StepUnion, piece: Piece, z: np.ndarray | None) -> float:
+    """How far the parent's minimiser is from the piece: the child to solve first is the nearest."""
+    if z is None:
+        return 0.0
+    t = sum(v * z[c] for c, v in union.t.items())
+    out = max(0.0, piece.lo - t, t - piece.hi)
+    return out + sum(max(0.0, abs(z[c]) - union.tolerance) for c in (union.f_col[n] for n in piece.healthy) if c is not None)
+
+
+@dataclass
+class _Search:
+    """Best-first branch and bound of one end (see :func:`minimise`)."""
+
+    conic: Conic
+    q: np.ndarray
+    nz: int
+    unions: Sequence[StepUnion]
+    budget: int
+    heap: list[_Node] = field(default_factory=list)
+    solves: int = 0
+    dead: list[tuple[int, Piece]] = field(default_factory=list)
+    best: tuple[float, np.ndarray] | None = None  # the least q·z of a minimiser that meets every union
+    order: itertools.count = field(default_factory=itertools.count)
+
+    def result(self, status: Literal["solved", "unbounded", "infeasible"], value: float, exact: bool) -> EndResult:
+        z = self.best[1] if exact and self.best is not None else None
+        return EndResult(status, value, z, exact, self.solves, tuple(self.dead))
+
+    def settle_node(self, node: _Node) -> bool:
+        """Solve a lazy node and keep it (or the trajectory it found); False if the solver could not settle it."""
+        status, x = self.conic.solve(self.q, node.rows)
+        self.solves += 1
+        kind = settle(status)
+        if kind == "other":
+            return False
+        if kind == "infeasible":
+            if node.origin is not None:
+                self.dead.append(node.origin)
+            return True
+        z = None if x is None else _expand(self.conic, x, self.nz)
+        value = -math.inf if x is None else float(self.q @ x)
+        # a child no worse than its parent to the gap keeps the parent's bound: it is then explored before its siblings
+        bound = node.bound if value <= node.bound + GAP_TOL * max(1.0, abs(node.bound)) else value
+        solved = _Node(bound, False, next(self.order), node.chosen, node.rows, z, node.origin)
+        if z is not None and _branch_on(self.unions, solved) is None:
+            if self.best is None or bound < self.best[0]:
+                self.best = (bound, z)
+        else:
+            heapq.heappush(self.heap, solved)
+        return True
+
+    def branch(self, node: _Node, m: int) -> None:
+        union = self.unions[m]
+        for piece in sorted(union.pieces, key=lambda p: _distance(union, p, node.z)):
+            origin = (union.step, piece) if not node.chosen else None
+            heapq.heappush(self.heap, _Node(node.bound, True, next(self.order), node.chosen | {m}, node.rows + tuple(union.rows(piece)), None, origin))
+
+    def run(self, root: _Node) -> EndResult:
+        heapq.heappush(self.heap, root)
+        while self.heap:
+            node = heapq.heappop(self.heap)
+            if self.best is not None and self.best[0] <= node.bound + GAP_TOL * max(1.0, abs(node.bound)):
+                return self.result("solved", min(self.best[0], node.bound), True)  # the end to the gap, on the sound side
+            status: Literal["solved", "unbounded"] = "unbounded" if node.bound == -math.inf else "solved"
+            if node.lazy:
+                if self.solves >= self.budget or not self.settle_node(node):
+                    return self.result(status, node.bound, False)  # the least open bound: an outer bound
+                continue
+            m = _branch_on(self.unions, node)
+            if m is None:  # an unbounded relaxation with every union chosen: exact
+                return self.result("unbounded", -math.inf, True)
+            self.branch(node, m)
+        return self.result("solved", self.best[0], True) if self.best is not None else self.result("infeasible", math.nan, True)
 
 
 def minimise(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], root: tuple[str, np.ndarray | None], budget: int) -> EndResult:
@@ -222,34 +312,11 @@ def minimise(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], 
     assert kind != "other", root[0]  # the caller reports a root the solver could not settle
     if kind == "infeasible":
         return EndResult("infeasible", math.nan, None, True, 0)
-    counter = itertools.count()
-    z0 = root[1]
-    heap = [_Node(-math.inf if z0 is None else float(q @ z0[conic.cols]), next(counter), frozenset(), (), z0)]
-    solves, dead = 0, list[tuple[int, Piece]]()
-    while heap:
-        node = heapq.heappop(heap)
-        m = _branch_on(unions, node)
-        if m is None:  # every step's union holds at the least bound of all open nodes: the minimum
-            if node.z is None:
-                return EndResult("unbounded", -math.inf, None, True, solves, tuple(dead))
-            return EndResult("solved", node.bound, node.z, True, solves, tuple(dead))
-        pieces = unions[m].pieces
-        if solves + len(pieces) > budget:
-            return EndResult("unbounded" if node.z is None else "solved", node.bound, None, False, solves, tuple(dead))
-        for piece in pieces:
-            rows = node.rows + tuple(unions[m].rows(piece))
-            status, x = conic.solve(q, rows)
-            solves += 1
-            kind = settle(status)
-            if kind == "other":  # a child the solver could not settle cannot be pruned: stop at the least bound
-                return EndResult("unbounded" if node.z is None else "solved", node.bound, None, False, solves, tuple(dead))
-            if kind == "infeasible":
-                if not node.chosen:
-                    dead.append((unions[m].step, piece))
-                continue
-            z = None if x is None else _expand(conic, x, nz)
-            heapq.heappush(heap, _Node(-math.inf if z is None else float(q @ x), next(counter), node.chosen | {m}, rows, z))
-    return EndResult("infeasible", math.nan, None, True, solves, tuple(dead))
+    z = root[1]
+    node = _Node(-math.inf if z is None else float(q @ z[conic.cols]), False, 0, frozenset(), (), z)
+    if z is not None and _branch_on(unions, node) is None:
+        return EndResult("solved", node.bound, z, True, 0)
+    return _Search(conic, q, nz, unions, budget, order=itertools.count(1)).run(node)
 
 
 __all__ = ["HEALTH_TOL", "Conic", "EndResult", "Piece", "Row", "Span", "StepUnion", "covered", "minimise", "settle", "step_pieces"]
