@@ -60,7 +60,9 @@ def _brute_force(sc: Scenario, rec: Record, fault_bounds: str) -> dict[tuple[str
                     q = np.zeros(len(cols))
                     q[pos[col]] = sign
                     if solver is None:
-                        solver = clarabel.DefaultSolver(sparse.csc_matrix((len(cols), len(cols))), q, A2, b2, [*cones, clarabel.NonnegativeConeT(2 * len(fcols))], _settings())
+                        solver = clarabel.DefaultSolver(
+                            sparse.csc_matrix((len(cols), len(cols))), q, A2, b2, [*cones, clarabel.NonnegativeConeT(2 * len(fcols))], _settings()
+                        )
                     else:
                         solver.update(q=q)
                     sol = solver.solve()
