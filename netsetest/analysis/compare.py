@@ -280,7 +280,7 @@ def _score_alone(
                 a.ms += [1000 * (time.perf_counter() - t0) / len(steps)] * len(steps)
                 broken = history_cone(sc, truth, i, i in local.bounded_nodes)
                 a.assumptions.update(("prior", "noise", "disturbance", *(("fault_bound",) if local.bounded_nodes else ())))
-            a.references.add(ex.fault_bounds + "".join(f" without {o}" for o in ex.omitted))
+            a.references.add(ex.label)
             _score(a, bounds, steps, tr_i[steps], _exact_array(ex, i), broken)
             if keep is not None:
                 keep[name][i] = bounds
@@ -339,7 +339,7 @@ def _score_run(
                 if "fault_bound" in accepted[i] and i not in ex.bounded_nodes:
                     ex_all = ex_all or exact_bounds(sc, rec, "all")
                     reference = ex_all
-            a.references.add(reference.fault_bounds + "".join(f" without {o}" for o in reference.omitted))
+            a.references.add(reference.label)
             _score(a, bounds, steps, tr_i[steps], _exact_array(reference, i), broken)
             if keep is not None:
                 keep[name][i] = bounds

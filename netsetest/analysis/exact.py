@@ -583,6 +583,19 @@ def _end(horizon: _Horizon, col: int, sign: float, unions: tuple[list[StepUnion]
     return replace(result, exact=result.exact and unions[1], solves=result.solves + 1)
 
 
+def health_line(h: HealthSearch) -> str:
+    """One line on the k-of-N branch and bound: what was applied and how many ends are exact."""
+    line = (
+        f"applied: k-of-N health (max_faulty = {h.max_faulty}: at least {h.need} sensors healthy at every step) by branch and bound, "
+        f"{h.exact_ends} of {h.ends} ends exact ({h.solves} solves, at most {h.budget} per end)"
+    )
+    if not h.relaxed:
+        return line
+    shown = ", ".join(f"{k.coordinate}{'' if k.node is None else k.node} {k.side} at step {k.step}" for k in h.relaxed[:8])
+    more = f" and {len(h.relaxed) - 8} more" if len(h.relaxed) > 8 else ""
+    return f"{line}; relaxed (the least bound proven, an outer bound): {shown}{more}"
+
+
 def omitted_assumptions(scenario: Scenario, health: bool = True) -> tuple[str, ...]:
     """The declared assumptions :func:`exact_bounds` does not apply (docs/exact.md): the k-of-N health
     unless it is applied (``health``)."""
@@ -726,6 +739,13 @@ def _finite_or_none(v: float) -> float | None:
     return float(v) if np.isfinite(v) else None
 
 
+def _health_document(h: HealthSearch | None) -> dict | None:
+    if h is None:
+        return None
+    relaxed = [{"coordinate": k.coordinate, "node": k.node, "step": k.step, "side": k.side} for k in h.relaxed]
+    return {"max_faulty": h.max_faulty, "need": h.need, "budget": h.budget, "ends": h.ends, "exact_ends": h.exact_ends, "solves": h.solves, "relaxed": relaxed}
+
+
 def exact_document(record: Record, exact: ExactBounds, comparison: ExactComparison) -> dict:
     """The ``--json`` document: per step exact intervals (null: unbounded on that side, or no
     trajectory at an infeasible step) and the record's ratios."""
@@ -752,6 +772,8 @@ def exact_document(record: Record, exact: ExactBounds, comparison: ExactComparis
         "from_step": FROM_STEP,
         "steps": [int(k) for k in exact.steps],
         "infeasible_steps": list(exact.infeasible_steps),
+        "omitted": list(exact.omitted),
+        "health": _health_document(exact.health),
         "exact": {
             "beta": intervals(exact.beta),
             "r": intervals(exact.r),

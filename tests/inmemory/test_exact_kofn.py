@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import json
 from functools import cache
+from pathlib import Path
 
 import clarabel
 import numpy as np
@@ -15,6 +17,7 @@ from scipy import sparse
 
 from netsetest.analysis.exact import COORDINATES, ExactBounds, _Program, _settings, compare_record, exact_bounds, step_data
 from netsetest.analysis.kofn import Piece, covered, step_pieces
+from netsetest.cli.main import main
 from netsetest.config.schema import Scenario, load_topology
 from netsetest.records.record import Record, record_from_parts
 from netsetest.runtime.inmemory import run_inmemory
@@ -141,3 +144,34 @@ def test_the_pieces_of_a_step() -> None:
     assert step_pieces(spans, [True, False, False, False], [True] * 4, 2, (-np.inf, np.inf)) == [Piece(5.5, 6.0, ()), Piece(1.0, 2.0, (0,))]
     # a tied sensor known to be faulty, and a window that leaves one piece
     assert step_pieces(spans, [True, False, False, False], [False, True, True, True], 2, (0.0, 4.0)) == []
+
+
+def test_the_command_applies_it_and_says_how_many_ends_are_exact(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``netsetest exact`` applies max_faulty by default (``--no-health``: the outer bound of before) and writes
+    the search's figures into its JSON document."""
+    sc = load_topology(TOPOLOGY, case="nsnim", steps=6)
+    path = tmp_path / "run.json"
+    run_inmemory(sc, "paper", seed=0, record=str(path), keep=False)
+    assert main(["exact", str(path), "--json", str(tmp_path / "exact.json")]) == 0
+    out = capsys.readouterr().out
+    assert "applied: k-of-N health (max_faulty = 4: at least 2 sensors healthy at every step) by branch and bound, 112 of 112 ends exact" in out
+    assert "not applied" not in out and "narrower than exact on 0 of" in out
+    doc = json.loads((tmp_path / "exact.json").read_text())
+    assert doc["omitted"] == [] and doc["health"]["exact_ends"] == doc["health"]["ends"] == 112 and doc["health"]["relaxed"] == []
+    assert main(["exact", str(path), "--no-health"]) == 0
+    out = capsys.readouterr().out
+    assert "not applied: k-of-N health (max_faulty = 4)" in out and "applied: k-of-N" not in out.replace("not applied: k-of-N", "")
+
+
+def test_a_spent_budget_relaxes_the_end_and_says_so() -> None:
+    """With too few solves the search stops at the least bound proven: the end is reported relaxed, and it is an
+    outer bound of the exact one (inside the bound without the assumption)."""
+    sc, rec = _run(12)
+    tight = exact_bounds(sc, rec, health_budget=1)
+    ex, without = _exact(12), _exact(12, health=False)
+    assert tight.health is not None and tight.health.relaxed and tight.health.exact_ends + len(tight.health.relaxed) == tight.health.ends
+    assert "relaxed" in tight.label and ex.label == "used with k-of-N health" and without.label == "used without k-of-N health (max_faulty = 4)"
+    for key in tight.health.relaxed:
+        side = 0 if key.side == "lo" else 1
+        got, exact, outer = (e.interval(key.coordinate, key.node)[key.step, side] for e in (tight, ex, without))
+        assert (got <= exact + 1e-9 and got >= outer - 1e-9) if side == 0 else (got >= exact - 1e-9 and got <= outer + 1e-9)
