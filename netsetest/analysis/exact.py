@@ -33,7 +33,7 @@ from scipy import sparse
 
 from netsetest.analysis.errors import ExactError
 from netsetest.analysis.kofn import Conic, EndResult, Piece, Row, Span, StepUnion, minimise, settle, step_pieces
-from netsetest.config.schema import FaultBoundsMode, Scenario
+from netsetest.config.schema import FaultBoundsMode, NodeConfig, Scenario
 from netsetest.estimator.health import HealthModel
 from netsetest.records.record import Record
 
@@ -394,8 +394,10 @@ class _HealthPlan:
         return StepUnion(j, self._t(j), self._spans(j), f_col, self.model.tolerance, self.model.need, tuple(pieces))
 
     def _tied(self, j: int) -> list[bool]:
-        """A fault tied to more than its measurement in every horizon after j: a prior (j = 0) or a declared bound."""
-        return [j == 0 or node.id in self.prog.bounded for node in self.prog.sc.nodes]
+        """A fault tied to more than its measurement in every horizon after j: by a prior (j = 0), or by a declared
+        bound that a healthy value could break (:func:`_bound_admits_health`)."""
+        tol = self.model.tolerance
+        return [j == 0 or (node.id in self.prog.bounded and not _bound_admits_health(node, tol)) for node in self.prog.sc.nodes]
 
     def window(self, j: int, beta: np.ndarray, r: np.ndarray) -> Span:
         """The interval of t_j = uᵀx_j over the box of β_j, r_j (loosened), or the whole line."""
@@ -436,6 +438,15 @@ class _HealthPlan:
         for u in [u for u in self.unions if len(u.pieces) == 1]:  # convex: one more row set of every later horizon
             self.cuts += u.rows(u.pieces[0])
             self.unions.remove(u)
+
+
+def _bound_admits_health(node: NodeConfig, tolerance: float) -> bool:
+    """Whether any |f_j| ≤ τ meets node's declared bounds whatever its neighbours f_j±1 (themselves within them):
+    τ ≤ F and F + τ ≤ δ (paper6: F = δ, τ = 0).  Then replacing f_j by the healthy value its measurement allows
+    keeps every row, so its health is t_j in its span, as for a fault without bounds (docs/exact.md)."""
+    size_ok = node.fault_size is None or tolerance <= node.fault_size
+    rate_ok = node.fault_rate is None or (node.fault_size is not None and node.fault_size + tolerance <= node.fault_rate)
+    return size_ok and rate_ok
 
 
 class _Horizon:

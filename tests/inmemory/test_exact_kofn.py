@@ -76,10 +76,11 @@ def _brute_force(sc: Scenario, rec: Record, fault_bounds: str) -> dict[tuple[str
     return out
 
 
-@pytest.mark.parametrize(("fault_bounds", "tolerance"), [("used", 0.0), ("all", 0.02)])
+@pytest.mark.parametrize(("fault_bounds", "tolerance"), [("used", 0.0), ("all", 0.0), ("all", 0.02)])
 def test_branch_and_bound_is_brute_force_over_every_hypothesis_sequence(fault_bounds: str, tolerance: float) -> None:
     """Three sensors (1, 3, 5), at most one faulty, 4 steps: 3^(k+1) hypothesis sequences per horizon k.  With
-    ``all`` every fault is tied to a declared bound (health is |f| ≤ τ, not a span of t)."""
+    ``all`` every fault has declared bounds (F = δ = 0.2): with τ = 0 a healthy value always meets them (health is
+    t_j in the span), with τ = 0.02 it may not (F + τ > δ: health is |f| ≤ τ, branched on per sensor)."""
     full, rec = _run(3)
     full = dataclasses.replace(full, max_faulty=1, fault_tolerance=tolerance)
     ex = exact_bounds(full, rec, fault_bounds, nodes=[1, 3, 5])  # type: ignore[arg-type]  # a mode of the parametrisation
