@@ -32,7 +32,7 @@ import numpy as np
 from scipy import sparse
 
 from netsetest.analysis.errors import ExactError
-from netsetest.analysis.kofn import Conic, EndResult, Piece, Row, Span, StepUnion, minimise, settle, step_pieces
+from netsetest.analysis.kofn import Conic, EndResult, Piece, Row, Span, StepUnion, interval_rows, minimise, settle, step_pieces
 from netsetest.config.schema import FaultBoundsMode, NodeConfig, Scenario
 from netsetest.estimator.health import HealthModel
 from netsetest.records.record import Record
@@ -403,9 +403,7 @@ class _HealthPlan:
         """The interval of t_j = uᵀx_j over the box of β_j, r_j (loosened), or the whole line."""
         ends = [sorted((u * lo, u * hi)) for u, (lo, hi) in zip(self.model.u, (beta, r))]
         lo, hi = sum(e[0] for e in ends), sum(e[1] for e in ends)
-        if np.isnan(lo) or np.isnan(hi):
-            return (-np.inf, np.inf)
-        return (lo - CUT_MARGIN * max(1.0, abs(lo)), hi + CUT_MARGIN * max(1.0, abs(hi)))
+        return (-np.inf, np.inf) if np.isnan(lo) or np.isnan(hi) else _loosened(lo, hi)
 
     def unions_at(self, k: int, objective: int, window: Span) -> tuple[list[StepUnion], bool]:
         """The unions of horizon k for one objective column, and whether they are complete (exact ends)."""
@@ -421,15 +419,13 @@ class _HealthPlan:
     def learn(self, k: int, beta: np.ndarray, r: np.ndarray, fault: dict[int, np.ndarray]) -> None:
         """Horizon k is done: its ends of t_k and of the tied faults bound step k in every later horizon."""
         window, tied = self.window(k, beta, r), self._tied(k)
-        t = self._t(k)
-        self.cuts += [(t, window[1]), ({c: -v for c, v in t.items()}, -window[0])]
+        self.cuts += interval_rows(self._t(k), window)
         allowed = []
         for n, node in enumerate(self.prog.sc.nodes):
-            lo, hi = fault[node.id]
-            allowed.append(bool(lo - CUT_MARGIN * max(1.0, abs(lo)) <= self.model.tolerance and hi + CUT_MARGIN * max(1.0, abs(hi)) >= -self.model.tolerance))
-            if tied[n] and np.isfinite(lo) and np.isfinite(hi):
-                col = self.prog._f(n, k)
-                self.cuts += [({col: 1.0}, hi + CUT_MARGIN * max(1.0, abs(hi))), ({col: -1.0}, -lo + CUT_MARGIN * max(1.0, abs(lo)))]
+            lo, hi = _loosened(*fault[node.id])
+            allowed.append(bool(lo <= self.model.tolerance and hi >= -self.model.tolerance))
+            if tied[n]:
+                self.cuts += interval_rows({self.prog._f(n, k): 1.0}, (lo, hi))
         union = self._union(k, tied, allowed, window)
         if union is None:
             self.incomplete = True
@@ -438,6 +434,11 @@ class _HealthPlan:
         for u in [u for u in self.unions if len(u.pieces) == 1]:  # convex: one more row set of every later horizon
             self.cuts += u.rows(u.pieces[0])
             self.unions.remove(u)
+
+
+def _loosened(lo: float, hi: float) -> Span:
+    """An interval proven by a solve, widened by :data:`CUT_MARGIN` (relative) for the solver's precision."""
+    return lo - CUT_MARGIN * max(1.0, abs(lo)), hi + CUT_MARGIN * max(1.0, abs(hi))
 
 
 def _bound_admits_health(node: NodeConfig, tolerance: float) -> bool:

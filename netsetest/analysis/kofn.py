@@ -6,9 +6,10 @@ measurement rows put t_j in its span I_i,j (the measured interval widened by |Ds
 sensor's health is a condition on t_j alone depends on its fault variable:
 
 - *untied*: f_i,j appears only in its own measurement rows (no declared bound, 0 < j, not the objective),
-  so some |f_i,j| ≤ τ meets them exactly when t_j ∈ I_i,j: health is t_j ∈ I_i,j;
-- *tied*: f_i,j also enters a prior (j = 0), a declared fault bound, or the objective: health is
-  |f_i,j| ≤ τ itself.
+  or also in declared bounds that every healthy value meets whatever its neighbours (the caller decides), so
+  some |f_i,j| ≤ τ meets them exactly when t_j ∈ I_i,j: health is t_j ∈ I_i,j;
+- *tied*: f_i,j also enters a prior (j = 0), a declared fault bound a healthy value could break, or the
+  objective: health is |f_i,j| ≤ τ itself.
 
 The step's feasible set is then exactly the union of convex *pieces*: for each set Q of tied sensors
 assumed healthy (|Q| ≤ need), a maximal interval of t_j inside ∩_{q∈Q} I_q that at least need − |Q|
@@ -73,6 +74,12 @@ def covered(spans: Sequence[Span], need: int) -> list[Span]:
     return out
 
 
+def interval_rows(terms: dict[int, float], span: Span) -> list[Row]:
+    """lo ≤ Σ terms[c]·z[c] ≤ hi as rows a·z ≤ b; an infinite side gives none."""
+    lo, hi = span
+    return ([(dict(terms), hi)] if math.isfinite(hi) else []) + ([({c: -v for c, v in terms.items()}, -lo)] if math.isfinite(lo) else [])
+
+
 def _clip(parts: list[Span], lo: float, hi: float) -> list[Span]:
     return [(max(a, lo), min(b, hi)) for a, b in parts if max(a, lo) <= min(b, hi)]
 
@@ -124,11 +131,7 @@ class StepUnion:
 
     def rows(self, piece: Piece) -> list[Row]:
         """The piece as rows a·z ≤ b (a side at ±inf gives none)."""
-        out: list[Row] = []
-        if math.isfinite(piece.hi):
-            out.append((dict(self.t), piece.hi))
-        if math.isfinite(piece.lo):
-            out.append(({c: -v for c, v in self.t.items()}, -piece.lo))
+        out = interval_rows(self.t, (piece.lo, piece.hi))
         for n in piece.healthy:
             col = self.f_col[n]
             assert col is not None  # only tied sensors are assumed healthy by a row
@@ -319,4 +322,4 @@ def minimise(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], 
     return _Search(conic, q, nz, unions, budget, order=itertools.count(1)).run(node)
 
 
-__all__ = ["HEALTH_TOL", "Conic", "EndResult", "Piece", "Row", "Span", "StepUnion", "covered", "minimise", "settle", "step_pieces"]
+__all__ = ["HEALTH_TOL", "Conic", "EndResult", "Piece", "Row", "Span", "StepUnion", "covered", "interval_rows", "minimise", "settle", "step_pieces"]

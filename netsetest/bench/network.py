@@ -71,7 +71,7 @@ def network_figures(cfg: dict, tmp: Path) -> dict:
                     sdp, rec = _sdp_figures(sc, sig, seed, tmp / "network.json")
                     alone, _ = _sdp_figures(sc.alone(), sig, seed, tmp / "alone.json")
                     nodes = {}
-                    exact = _exact_figures(sc, rec, sdp) if sc.max_faulty is None else {}  # exact has no k-of-N
+                    exact = _exact_figures(sc, rec, sdp) if sc.max_faulty is None else {}  # k-of-N: 10-60 s a run
                     for i in sc.ids:
                         nodes[i] = {
                             **exact.get(i, {"fault": None, "r": None, "sdp_network_over_exact": None}),
