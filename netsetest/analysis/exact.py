@@ -455,13 +455,12 @@ class _Horizon:
 
     def __init__(self, conic: Conic, nz: int) -> None:
         self.conic, self.nz = conic, nz
-        self.position = {int(col): m for m, col in enumerate(conic.cols)}
         self.solver: clarabel.DefaultSolver | None = None
 
     def root(self, col: int, sign: float) -> tuple[np.ndarray, str, np.ndarray | None]:
         """q, the solver's status and its minimiser (over every column of the program) of sign·z[col]."""
         q = np.zeros(len(self.conic.cols))
-        q[self.position[col]] = sign
+        q[self.conic.position[col]] = sign
         if self.solver is None:
             self.solver = self.conic.solver(q)
         else:
