@@ -23,6 +23,7 @@ from netsetest.records.record import Record, record_from_parts
 from netsetest.runtime.inmemory import run_inmemory
 
 TOPOLOGY = "paper6_max_faulty"
+ROOT = Path(__file__).resolve().parents[2]
 AGREE = 1e-7  # branch and bound against brute force: both are Clarabel solves at 1e-10
 STEPS_RECORD = 24  # the paper's faults of sensors 1, 2, 4 and 6 start within it
 
@@ -179,3 +180,18 @@ def test_a_spent_budget_relaxes_the_end_and_says_so() -> None:
         side = 0 if key.side == "lo" else 1
         got, exact, outer = (e.interval(key.coordinate, key.node)[key.step, side] for e in (tight, ex, without))
         assert (got <= exact + 1e-9 and got >= outer - 1e-9) if side == 0 else (got >= exact - 1e-9 and got <= outer + 1e-9)
+
+
+def test_a_false_declaration_is_the_exact_rows_broken_assumption(tmp_path: Path) -> None:
+    """At most 3 faulty declared where the paper's four are from step 20: ``compare``'s exact row (the limit under
+    the declaration) is not covered from the first step it breaks, attributed to it, never a violation; its
+    reference and assumptions say the assumption was applied."""
+    from netsetest.analysis.compare import compare
+
+    text = (ROOT / "topologies" / f"{TOPOLOGY}.toml").read_text()
+    topo = tmp_path / "false_kofn.toml"
+    topo.write_text(text.replace('node_dir = "../nodes"', f'node_dir = "{ROOT / "nodes"}"').replace("max_faulty = 4", "max_faulty = 3"))
+    row = next(r for r in compare(topo, ("exact",), steps=21).rows if r.estimator == "exact")
+    assert row.violations == 0 and row.covered < row.node_steps
+    assert row.misses_attributed.get("k-of-N health", 0) > 0 and "k-of-N health" in row.assumptions
+    assert row.exact_reference == ["used with k-of-N health"]
