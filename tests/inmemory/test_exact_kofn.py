@@ -18,7 +18,7 @@ from scipy import sparse
 from netsetest.analysis.exact import COORDINATES, ExactBounds, _Program, _settings, compare_record, exact_bounds, step_data
 from netsetest.analysis.kofn import Piece, covered, step_pieces
 from netsetest.cli.main import main
-from netsetest.config.schema import Scenario, load_topology
+from netsetest.config.schema import FaultBoundsMode, Scenario, load_topology
 from netsetest.records.record import Record, record_from_parts
 from netsetest.runtime.inmemory import run_inmemory
 
@@ -39,16 +39,16 @@ def _run(steps: int, case: str = "nsnim", estimator: str | None = None) -> tuple
 
 
 @cache
-def _exact(steps: int, health: bool = True, fault_bounds: str = "used") -> ExactBounds:
+def _exact(steps: int, health: bool = True, fault_bounds: FaultBoundsMode = "used") -> ExactBounds:
     sc, rec = _run(steps)
-    return exact_bounds(sc, rec, fault_bounds, health=health)  # type: ignore[arg-type]  # a mode of the parametrisation
+    return exact_bounds(sc, rec, fault_bounds, health=health)
 
 
-def _brute_force(sc: Scenario, rec: Record, fault_bounds: str) -> dict[tuple[str, int | None, int], tuple[float, float]]:
+def _brute_force(sc: Scenario, rec: Record, fault_bounds: FaultBoundsMode) -> dict[tuple[str, int | None, int], tuple[float, float]]:
     """Every end as the least (greatest) value over every sequence of hypotheses H_0..H_k (N − m sensors with
     |f| ≤ τ at each step), each one convex program on the whole horizon (no fault eliminated)."""
     assert sc.max_faulty is not None
-    prog = _Program(sc, step_data(rec), sc.fault_bounded(fault_bounds))  # type: ignore[arg-type]  # a mode of the parametrisation
+    prog = _Program(sc, step_data(rec), sc.fault_bounded(fault_bounds))
     hypotheses = list(itertools.combinations(range(len(sc.ids)), len(sc.ids) - sc.max_faulty))
     out = {}
     for k in range(len(step_data(rec))):
@@ -79,13 +79,13 @@ def _brute_force(sc: Scenario, rec: Record, fault_bounds: str) -> dict[tuple[str
 
 
 @pytest.mark.parametrize(("fault_bounds", "tolerance"), [("used", 0.0), ("all", 0.0), ("all", 0.02)])
-def test_branch_and_bound_is_brute_force_over_every_hypothesis_sequence(fault_bounds: str, tolerance: float) -> None:
+def test_branch_and_bound_is_brute_force_over_every_hypothesis_sequence(fault_bounds: FaultBoundsMode, tolerance: float) -> None:
     """Three sensors (1, 3, 5), at most one faulty, 4 steps: 3^(k+1) hypothesis sequences per horizon k.  With
     ``all`` every fault has declared bounds (F = δ = 0.2): with τ = 0 a healthy value always meets them (health is
     t_j in the span), with τ = 0.02 it may not (F + τ > δ: health is |f| ≤ τ, branched on per sensor)."""
     full, rec = _run(3)
     full = dataclasses.replace(full, max_faulty=1, fault_tolerance=tolerance)
-    ex = exact_bounds(full, rec, fault_bounds, nodes=[1, 3, 5])  # type: ignore[arg-type]  # a mode of the parametrisation
+    ex = exact_bounds(full, rec, fault_bounds, nodes=[1, 3, 5])
     assert ex.health is not None and ex.health.need == 2 and ex.health.exact_ends == ex.health.ends and not ex.health.relaxed
     sc = dataclasses.replace(full, nodes=[n for n in full.nodes if n.id in (1, 3, 5)])
     brute = _brute_force(sc, rec, fault_bounds)
@@ -93,7 +93,7 @@ def test_branch_and_bound_is_brute_force_over_every_hypothesis_sequence(fault_bo
     for (coord, node, k), (lo, hi) in brute.items():
         got = ex.interval(coord, node)[k]
         assert abs(got[0] - lo) <= AGREE and abs(got[1] - hi) <= AGREE, (coord, node, k, got, (lo, hi))
-    without = exact_bounds(full, rec, fault_bounds, nodes=[1, 3, 5], health=False)  # type: ignore[arg-type]
+    without = exact_bounds(full, rec, fault_bounds, nodes=[1, 3, 5], health=False)
     assert any(ex.fault[i][k, 1] - ex.fault[i][k, 0] < without.fault[i][k, 1] - without.fault[i][k, 0] - 1e-3 for i in sc.ids for k in ex.steps)
 
 
@@ -119,7 +119,7 @@ def test_k_of_n_bounds_lie_inside_the_bounds_without_and_hold_the_truth() -> Non
 
 
 @pytest.mark.parametrize(("estimator", "fault_bounds"), [(None, "used"), ("zonotope", "used"), ("strip", "all")])
-def test_no_node_is_narrower_than_the_k_of_n_limit(estimator: str | None, fault_bounds: str) -> None:
+def test_no_node_is_narrower_than_the_k_of_n_limit(estimator: str | None, fault_bounds: FaultBoundsMode) -> None:
     """Every node uses the k-of-N interval (the SDP) and the set observers also pin their own fault: where every
     assumption held, none is narrower than the exact limit under the same assumptions (the strip observer relies on
     every declared fault bound, as ``compare`` knows: measured against ``all``, it is narrower than ``used`` by up to
