@@ -32,7 +32,7 @@ import numpy as np
 from scipy import sparse
 
 from netsetest.analysis.errors import ExactError
-from netsetest.analysis.kofn import Conic, EndResult, Piece, Row, Span, StepUnion, interval_rows, minimise, settle, step_pieces
+from netsetest.analysis.kofn import Conic, EndResult, Piece, Row, Solvers, Span, StepUnion, interval_rows, minimise, settle, step_pieces
 from netsetest.config.schema import FaultBoundsMode, NodeConfig, Scenario
 from netsetest.estimator.health import HealthModel
 from netsetest.records.record import Record
@@ -456,6 +456,7 @@ class _Horizon:
     def __init__(self, conic: Conic, nz: int) -> None:
         self.conic, self.nz = conic, nz
         self.solver: clarabel.DefaultSolver | None = None
+        self.branches: Solvers = {}  # the branch and bound's, shared by the horizon's ends
 
     def root(self, col: int, sign: float) -> tuple[np.ndarray, str, np.ndarray | None]:
         """q, the solver's status and its minimiser (over every column of the program) of sign·z[col]."""
@@ -590,7 +591,7 @@ def _end(horizon: _Horizon, col: int, sign: float, unions: tuple[list[StepUnion]
     if unions is None:
         value = {"solved": float(q @ z[horizon.conic.cols]) if z is not None else np.nan, "unbounded": -np.inf, "infeasible": np.nan}[kind]
         return EndResult(kind, value, z, True, 1)
-    result = minimise(horizon.conic, q, horizon.nz, unions[0], (status, z), budget)
+    result = minimise(horizon.conic, q, horizon.nz, unions[0], (status, z), budget, horizon.branches)
     return replace(result, exact=result.exact and unions[1], solves=result.solves + 1)
 
 

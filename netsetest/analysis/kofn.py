@@ -55,6 +55,10 @@ class Piece:
         return set(other.healthy) <= set(self.healthy) and other.lo <= self.lo and self.hi <= other.hi
 
 
+Path = tuple[tuple[int, Piece], ...]  # the (step, piece) a node chose, in order
+Solvers = dict[Path, clarabel.DefaultSolver]  # a node's solver by its path: the same rows for every end of a program
+
+
 def covered(spans: Sequence[Span], need: int) -> list[Span]:
     """The points in at least ``need`` of the closed ``spans``, as disjoint closed intervals in order."""
     if need <= 0:
@@ -173,11 +177,6 @@ class Conic:
         n = len(self.cols)
         return clarabel.DefaultSolver(sparse.csc_matrix((n, n)), q, self.A, self.b, self.cones, self.settings)
 
-    def solve(self, q: np.ndarray, rows: Sequence[Row]) -> tuple[str, np.ndarray | None]:
-        """Minimise q·z with ``rows`` added: (status, minimiser over ``cols`` or None)."""
-        sol = self.with_rows(rows).solver(q).solve()
-        return str(sol.status), np.asarray(sol.x) if str(sol.status) in _SOLVED else None
-
 
 @dataclass(frozen=True)
 class EndResult:
@@ -220,7 +219,7 @@ class _Node:
     chosen: frozenset[int] = field(compare=False)  # unions (by position in the list) whose piece is fixed
     rows: tuple[Row, ...] = field(compare=False)
     z: np.ndarray | None = field(compare=False, default=None)  # the minimiser (global columns); None: unbounded or lazy
-    origin: tuple[int, Piece] | None = field(compare=False, default=None)  # (step, piece) of a child of the root
+    path: Path = field(compare=False, default=())
 
 
 def _branch_on(unions: Sequence[StepUnion], node: _Node) -> int | None:
@@ -256,6 +255,7 @@ class _Search:
     dead: list[tuple[int, Piece]] = field(default_factory=list)
     best: tuple[float, np.ndarray] | None = None  # the least q·z of a minimiser that meets every union
     order: itertools.count = field(default_factory=itertools.count)
+    solvers: Solvers = field(default_factory=dict)
 
     def result(self, status: Literal["solved", "unbounded", "infeasible"], value: float, exact: bool) -> EndResult:
         z = self.best[1] if exact and self.best is not None else None
@@ -263,20 +263,26 @@ class _Search:
 
     def settle_node(self, node: _Node) -> bool:
         """Solve a lazy node and keep it (or the trajectory it found); False if the solver could not settle it."""
-        status, x = self.conic.solve(self.q, node.rows)
+        solver = self.solvers.get(node.path)
+        if solver is None:
+            solver = self.solvers[node.path] = self.conic.with_rows(node.rows).solver(self.q)
+        else:
+            solver.update(q=self.q)
+        sol = solver.solve()
+        status, x = str(sol.status), np.asarray(sol.x) if str(sol.status) in _SOLVED else None
         self.solves += 1
         kind = settle(status)
         if kind == "other":
             return False
         if kind == "infeasible":
-            if node.origin is not None:
-                self.dead.append(node.origin)
+            if len(node.path) == 1:  # the root's program and one piece: no trajectory in any later horizon either
+                self.dead.append(node.path[0])
             return True
         z = None if x is None else _expand(self.conic, x, self.nz)
         value = -math.inf if x is None else float(self.q @ x)
         # a child no worse than its parent to the gap keeps the parent's bound: it is then explored before its siblings
         bound = node.bound if value <= node.bound + GAP_TOL * max(1.0, abs(node.bound)) else value
-        solved = _Node(bound, False, next(self.order), node.chosen, node.rows, z, node.origin)
+        solved = _Node(bound, False, next(self.order), node.chosen, node.rows, z, node.path)
         if z is not None and _branch_on(self.unions, solved) is None:
             if self.best is None or bound < self.best[0]:
                 self.best = (bound, z)
@@ -287,8 +293,8 @@ class _Search:
     def branch(self, node: _Node, m: int) -> None:
         union = self.unions[m]
         for piece in sorted(union.pieces, key=lambda p: _distance(union, p, node.z)):
-            origin = (union.step, piece) if not node.chosen else None
-            heapq.heappush(self.heap, _Node(node.bound, True, next(self.order), node.chosen | {m}, node.rows + tuple(union.rows(piece)), None, origin))
+            path = (*node.path, (union.step, piece))
+            heapq.heappush(self.heap, _Node(node.bound, True, next(self.order), node.chosen | {m}, node.rows + tuple(union.rows(piece)), None, path))
 
     def run(self, root: _Node) -> EndResult:
         heapq.heappush(self.heap, root)
@@ -308,9 +314,19 @@ class _Search:
         return self.result("solved", self.best[0], True) if self.best is not None else self.result("infeasible", math.nan, True)
 
 
-def minimise(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], root: tuple[str, np.ndarray | None], budget: int) -> EndResult:
+def minimise(
+    conic: Conic,
+    q: np.ndarray,
+    nz: int,
+    unions: Sequence[StepUnion],
+    root: tuple[str, np.ndarray | None],
+    budget: int,
+    solvers: Solvers | None = None,
+) -> EndResult:
     """min q·z over the program and every union (module doc), from the root relaxation ``root`` (its status and
-    minimiser over the global columns).  At most ``budget`` solves; past it the least open bound, not exact."""
+    minimiser over the global columns).  At most ``budget`` solves; past it the least open bound, not exact.
+    ``solvers``: the nodes' solvers by path, shared by the ends of one program (a path's rows are the same for
+    every end, only q changes)."""
     kind = settle(root[0])
     assert kind != "other", root[0]  # the caller reports a root the solver could not settle
     if kind == "infeasible":
@@ -319,7 +335,22 @@ def minimise(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], 
     node = _Node(-math.inf if z is None else float(q @ z[conic.cols]), False, 0, frozenset(), (), z)
     if z is not None and _branch_on(unions, node) is None:
         return EndResult("solved", node.bound, z, True, 0)
-    return _Search(conic, q, nz, unions, budget, order=itertools.count(1)).run(node)
+    return _Search(conic, q, nz, unions, budget, order=itertools.count(1), solvers={} if solvers is None else solvers).run(node)
 
 
-__all__ = ["HEALTH_TOL", "Conic", "EndResult", "Piece", "Row", "Span", "StepUnion", "covered", "interval_rows", "minimise", "settle", "step_pieces"]
+__all__ = [
+    "HEALTH_TOL",
+    "Conic",
+    "EndResult",
+    "Piece",
+    "Path",
+    "Row",
+    "Solvers",
+    "Span",
+    "StepUnion",
+    "covered",
+    "interval_rows",
+    "minimise",
+    "settle",
+    "step_pieces",
+]
