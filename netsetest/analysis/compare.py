@@ -42,7 +42,7 @@ from netsetest.estimator.names import DEFAULT_COMPARE, ESTIMATOR_NAMES, EXACT, S
 from netsetest.estimator.registry import node_set_estimator
 from netsetest.models.signals import SignalKind
 from netsetest.records.record import Record, record_from_parts
-from netsetest.roles.judge import history_cone
+from netsetest.roles.judge import HEALTH, history_cone
 from netsetest.runtime.inmemory import run_inmemory
 
 CONTAIN_TOL = 1e-8  # the sets' own membership slack (sets.MEMBERSHIP_TOL) plus float sums of the bounds
@@ -104,11 +104,16 @@ class Comparison:
     plant: str = "ts"  # what generated the truth (Scenario.plant_label)
 
 
-def _centralized_cones(sc: Scenario, rec: Record, bounded: tuple[int, ...]) -> dict[int, str | None]:
-    """Per step: the exact limit rests on every node's whole history (with the fault bound where applied)."""
+def _centralized_cones(sc: Scenario, rec: Record, ex: ExactBounds) -> dict[int, str | None]:
+    """Per step: the exact limit rests on every node's whole history (with the fault bound where applied, and
+    the k-of-N health of every step where applied)."""
     truth = sorted(rec.truth, key=lambda t: t["step"])
-    per_node = {i: history_cone(sc, truth, i, i in bounded) for i in sc.ids}
-    return {k: next((per_node[i][k] for i in sc.ids if per_node[i][k] is not None), None) for k in range(len(truth))}
+    per_node = {i: history_cone(sc, truth, i, i in ex.bounded_nodes) for i in sc.ids}
+    cones = {k: next((per_node[i][k] for i in sc.ids if per_node[i][k] is not None), None) for k in range(len(truth))}
+    if ex.health is not None:
+        broke = next((k for k, t in enumerate(truth) if not t.get("health_ok", True)), len(truth))
+        cones.update({k: cones[k] or HEALTH for k in range(broke, len(truth))})
+    return cones
 
 
 def _record_bounds(rec: Record, i: int) -> np.ndarray:
@@ -280,7 +285,7 @@ def _score_alone(
                 a.ms += [1000 * (time.perf_counter() - t0) / len(steps)] * len(steps)
                 broken = history_cone(sc, truth, i, i in local.bounded_nodes)
                 a.assumptions.update(("prior", "noise", "disturbance", *(("fault_bound",) if local.bounded_nodes else ())))
-            a.references.add(ex.fault_bounds + "".join(f" without {o}" for o in ex.omitted))
+            a.references.add(ex.label)
             _score(a, bounds, steps, tr_i[steps], _exact_array(ex, i), broken)
             if keep is not None:
                 keep[name][i] = bounds
@@ -330,16 +335,16 @@ def _score_run(
             reference = ex
             if name == EXACT:
                 bounds, steps = _exact_array(ex, i), all_steps
-                cones = _centralized_cones(sc, rec, ex.bounded_nodes)
+                cones = _centralized_cones(sc, rec, ex)
                 broken = [cones[int(k)] for k in steps]
                 a.ms += [exact_ms] * len(steps)
-                a.assumptions.update(("prior", "noise", "disturbance", *(("fault_bound",) if ex.bounded_nodes else ())))
+                a.assumptions.update(("prior", "noise", "disturbance", *(("fault_bound",) if ex.bounded_nodes else ()), *((HEALTH,) if ex.health else ())))
             else:
                 bounds, steps, broken = _node_track(run, i, a)
                 if "fault_bound" in accepted[i] and i not in ex.bounded_nodes:
                     ex_all = ex_all or exact_bounds(sc, rec, "all")
                     reference = ex_all
-            a.references.add(reference.fault_bounds + "".join(f" without {o}" for o in reference.omitted))
+            a.references.add(reference.label)
             _score(a, bounds, steps, tr_i[steps], _exact_array(reference, i), broken)
             if keep is not None:
                 keep[name][i] = bounds

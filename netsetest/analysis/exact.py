@@ -32,7 +32,9 @@ import numpy as np
 from scipy import sparse
 
 from netsetest.analysis.errors import ExactError
-from netsetest.config.schema import FaultBoundsMode, Scenario
+from netsetest.analysis.kofn import Conic, EndResult, Piece, Row, Solvers, Span, StepUnion, interval_rows, minimise, settle, step_pieces
+from netsetest.config.schema import FaultBoundsMode, NodeConfig, Scenario
+from netsetest.estimator.health import HealthModel
 from netsetest.records.record import Record
 
 Coordinate = Literal["beta", "r", "f"]
@@ -43,9 +45,8 @@ FROM_STEP = 10  # ratios "from step 10" leave out the start-up transient of the 
 DEGENERATE_WIDTH = 1e-6  # a mean exact width below it is a point (a declared zero), not an interval to compare
 NARROWER_TOL = 1e-8  # solver precision of the exact ends (measured ≤ 2e-9 over 80 steps) with margin
 SOLVER_TOL = 1e-10  # Clarabel gap and feasibility tolerances: witnesses meet every constraint to ~1e-9
-_SOLVED = ("Solved", "AlmostSolved")
-_UNBOUNDED = ("DualInfeasible", "AlmostDualInfeasible")
-_INFEASIBLE = ("PrimalInfeasible", "AlmostPrimalInfeasible")
+HEALTH_BUDGET = 400  # solves per interval end for the k-of-N branch and bound; past it the end is relaxed
+CUT_MARGIN = 1e-8  # a past step's end is loosened by this (relative) before it bounds later horizons: solver precision
 
 
 @dataclass(frozen=True)
@@ -78,6 +79,21 @@ class WitnessKey:
 
 
 @dataclass(frozen=True)
+class HealthSearch:
+    """How :func:`exact_bounds` applied ``[network] max_faulty`` (branch and bound, docs/exact.md): every end
+    is exact but those in ``relaxed``, where the budget ran out and the end is the least bound proven (an outer
+    bound of the exact one, at worst the program without the assumption)."""
+
+    max_faulty: int
+    need: int  # sensors healthy at every step: N − m of the program's nodes
+    budget: int  # solves per end
+    ends: int
+    exact_ends: int
+    relaxed: tuple[WitnessKey, ...]
+    solves: int
+
+
+@dataclass(frozen=True)
 class ExactBounds:
     """Per step: the exact intervals of β, r (all nodes) and of each node's fault; ±inf where unbounded.
 
@@ -93,8 +109,16 @@ class ExactBounds:
     infeasible_steps: tuple[int, ...]
     witnesses: dict[WitnessKey, Witness] = field(default_factory=dict)
     # declared assumptions the program leaves out: the limit is then an outer bound of the exact one, and a
-    # node that uses them may be narrower than it (the k-of-N health: a union over hypotheses at every step)
+    # node that uses them may be narrower than it (the k-of-N health when not applied: ``health=False``)
     omitted: tuple[str, ...] = ()
+    health: HealthSearch | None = None  # the k-of-N branch and bound, where applied
+
+    @property
+    def label(self) -> str:
+        """The reference in a few words: the fault-bounds mode and what else was applied or left out."""
+        applied = " with k-of-N health" if self.health is not None else ""
+        relaxed = f" ({len(self.health.relaxed)} ends relaxed)" if self.health is not None and self.health.relaxed else ""
+        return self.fault_bounds + applied + relaxed + "".join(f" without {o}" for o in self.omitted)
 
     def interval(self, coordinate: Coordinate, node: int | None = None) -> np.ndarray:
         """(K, 2) bounds of one coordinate (``node`` is needed for the fault)."""
@@ -337,6 +361,135 @@ def _settings() -> clarabel.DefaultSettings:
     return st
 
 
+class _HealthPlan:
+    """The k-of-N unions of one program's steps (netsetest/analysis/kofn.py), and what each finished horizon j
+    proved about step j: the interval of t_j = uᵀx_j and the range of every tied fault, loosened by
+    :data:`CUT_MARGIN`.  They hold in every later horizon (it only adds constraints), so they become rows of
+    its program; a step left with one piece inside them is convex there and joins those rows."""
+
+    def __init__(self, prog: _Program, model: HealthModel) -> None:
+        self.prog, self.model = prog, model
+        self.cuts: list[Row] = []  # rows valid in every later horizon
+        self.unions: list[StepUnion] = []  # past steps with several pieces
+        self.incomplete = False  # a past step's pieces were too many to enumerate: later ends are relaxed
+
+    def _t(self, j: int) -> dict[int, float]:
+        return {self.prog._x(j, c): float(self.model.u[c]) for c in range(2) if self.model.u[c] != 0}
+
+    def _spans(self, j: int) -> tuple[Span, ...]:
+        """Per node: the interval of t_j its measurement gives with |f| ≤ τ (C_i = s_i uᵀ)."""
+        out = []
+        for node in self.prog.sc.nodes:
+            lo, hi = self.prog.intervals[node.id, j]
+            slack, s = abs(node.sensor.Ds) * self.model.tolerance, float(node.sensor.C @ self.model.u)
+            a, b = (lo - slack) / s, (hi + slack) / s
+            out.append((min(a, b), max(a, b)))
+        return tuple(out)
+
+    def _union(self, j: int, tied: list[bool], allowed: list[bool], window: Span) -> StepUnion | None:
+        pieces = step_pieces(self._spans(j), tied, allowed, self.model.need, window)
+        if pieces is None:
+            return None
+        f_col = tuple(self.prog._f(n, j) if t else None for n, t in enumerate(tied))
+        return StepUnion(j, self._t(j), self._spans(j), f_col, self.model.tolerance, self.model.need, tuple(pieces))
+
+    def _tied(self, j: int) -> list[bool]:
+        """A fault tied to more than its measurement in every horizon after j: by a prior (j = 0), or by a declared
+        bound that a healthy value could break (:func:`_bound_admits_health`)."""
+        tol = self.model.tolerance
+        return [j == 0 or (node.id in self.prog.bounded and not _bound_admits_health(node, tol)) for node in self.prog.sc.nodes]
+
+    def window(self, j: int, beta: np.ndarray, r: np.ndarray) -> Span:
+        """The interval of t_j = uᵀx_j over the box of β_j, r_j (loosened), or the whole line."""
+        ends = [sorted((u * lo, u * hi)) for u, (lo, hi) in zip(self.model.u, (beta, r))]
+        lo, hi = sum(e[0] for e in ends), sum(e[1] for e in ends)
+        return (-np.inf, np.inf) if np.isnan(lo) or np.isnan(hi) else _loosened(lo, hi)
+
+    def unions_at(self, k: int, objective: int, window: Span) -> tuple[list[StepUnion], bool]:
+        """The unions of horizon k for one objective column, and whether they are complete (exact ends)."""
+        tied = [t or self.prog._f(n, k) == objective for n, t in enumerate(self._tied(k))]
+        last = self._union(k, tied, [True] * len(tied), window)
+        return [*self.unions, *([last] if last is not None else [])], last is not None and not self.incomplete
+
+    def drop(self, dead: Sequence[tuple[int, Piece]]) -> None:
+        """Pieces that admit no trajectory in some horizon admit none in any later one (it adds constraints)."""
+        for step, piece in dead:
+            self.unions = [replace(u, pieces=tuple(p for p in u.pieces if p != piece)) if u.step == step else u for u in self.unions]
+
+    def learn(self, k: int, beta: np.ndarray, r: np.ndarray, fault: dict[int, np.ndarray]) -> None:
+        """Horizon k is done: its ends of t_k and of the tied faults bound step k in every later horizon."""
+        window, tied = self.window(k, beta, r), self._tied(k)
+        self.cuts += interval_rows(self._t(k), window)
+        allowed = []
+        for n, node in enumerate(self.prog.sc.nodes):
+            lo, hi = _loosened(*fault[node.id])
+            allowed.append(bool(lo <= self.model.tolerance and hi >= -self.model.tolerance))
+            if tied[n]:
+                self.cuts += interval_rows({self.prog._f(n, k): 1.0}, (lo, hi))
+        union = self._union(k, tied, allowed, window)
+        if union is None:
+            self.incomplete = True
+        else:
+            self.unions.append(union)
+        for u in [u for u in self.unions if len(u.pieces) == 1]:  # convex: one more row set of every later horizon
+            self.cuts += u.rows(u.pieces[0])
+            self.unions.remove(u)
+
+
+def _loosened(lo: float, hi: float) -> Span:
+    """An interval proven by a solve, widened by :data:`CUT_MARGIN` (relative) for the solver's precision."""
+    return lo - CUT_MARGIN * max(1.0, abs(lo)), hi + CUT_MARGIN * max(1.0, abs(hi))
+
+
+def _bound_admits_health(node: NodeConfig, tolerance: float) -> bool:
+    """Whether any |f_j| ≤ τ meets node's declared bounds whatever its neighbours f_j±1 (themselves within them):
+    τ ≤ F and F + τ ≤ δ (paper6: F = δ, τ = 0).  Then replacing f_j by the healthy value its measurement allows
+    keeps every row, so its health is t_j in its span, as for a fault without bounds (docs/exact.md)."""
+    size_ok = node.fault_size is None or tolerance <= node.fault_size
+    rate_ok = node.fault_rate is None or (node.fault_size is not None and node.fault_size + tolerance <= node.fault_rate)
+    return size_ok and rate_ok
+
+
+class _Horizon:
+    """One horizon's program and its solver, shared by the root relaxations of every end (only q changes)."""
+
+    def __init__(self, conic: Conic, nz: int) -> None:
+        self.conic, self.nz = conic, nz
+        self.solver: clarabel.DefaultSolver | None = None
+        self.branches: Solvers = {}  # the branch and bound's, shared by the horizon's ends
+
+    def root(self, col: int, sign: float) -> tuple[np.ndarray, str, np.ndarray | None]:
+        """q, the solver's status and its minimiser (over every column of the program) of sign·z[col]."""
+        q = np.zeros(len(self.conic.cols))
+        q[self.conic.position[col]] = sign
+        if self.solver is None:
+            self.solver = self.conic.solver(q)
+        else:
+            self.solver.update(q=q)
+        sol = self.solver.solve()
+        status = str(sol.status)
+        if settle(status) != "solved":
+            return q, status, None
+        z = np.zeros(self.nz)
+        z[self.conic.cols] = np.asarray(sol.x)
+        return q, status, z
+
+
+@dataclass
+class _HealthTally:
+    ends: int = 0
+    exact: int = 0
+    solves: int = 0
+    relaxed: list[WitnessKey] = field(default_factory=list)
+
+    def count(self, key: WitnessKey, end: EndResult) -> None:
+        self.ends += 1
+        self.exact += end.exact
+        self.solves += end.solves
+        if not end.exact:
+            self.relaxed.append(key)
+
+
 def exact_bounds(
     scenario: Scenario,
     record: Record,
@@ -345,6 +498,8 @@ def exact_bounds(
     eliminate_free_faults: bool = True,
     nodes: Sequence[int] | None = None,
     progress: Callable[[int, int], None] | None = None,
+    health: bool = True,
+    health_budget: int = HEALTH_BUDGET,
 ) -> ExactBounds:
     """The exact intervals of every step of ``record`` under ``scenario``'s assumptions (module doc).
 
@@ -353,7 +508,8 @@ def exact_bounds(
     ``nodes``: use only these nodes' priors and measurements (e.g. one node: the limit of a purely
     local estimator); default every node (centralized).  ``eliminate_free_faults`` drops the past
     faults that no declared bound ties (exact, see :meth:`_Program._eliminated`; False keeps the
-    whole program, for checking that).
+    whole program, for checking that).  ``health``: apply a declared ``[network] max_faulty`` by branch
+    and bound (at most ``health_budget`` solves per end, docs/exact.md); False leaves it out (an outer bound).
     """
     data = step_data(record)
     for d in data:
@@ -366,46 +522,51 @@ def exact_bounds(
         scenario = replace(scenario, nodes=[n for n in scenario.nodes if n.id in set(nodes)])
     bounded = scenario.fault_bounded(fault_bounds)
     prog = _Program(scenario, data, bounded)
+    model = HealthModel.of(scenario) if health else None
+    plan = _HealthPlan(prog, model) if model is not None and model.need > 0 else None
     K1 = len(data)
     beta, r = np.full((K1, 2), np.nan), np.full((K1, 2), np.nan)
     fault = {i: np.full((K1, 2), np.nan) for i in scenario.ids}
     witnesses: dict[WitnessKey, Witness] = {}
-    infeasible = []
+    infeasible: list[int] = []
+    tally = _HealthTally()
     st = _settings()
     for k in range(K1):
         if progress is not None:
             progress(k, K1)
+        if plan is not None and infeasible:  # a later horizon only adds constraints: no trajectory either
+            infeasible.append(k)
+            continue
         cols, A, b, cones = prog.matrices(k, eliminate_free_faults)
-        P = sparse.csc_matrix((len(cols), len(cols)))
-        position = {col: m for m, col in enumerate(cols)}
-        solver = None
+        conic = Conic(cols, A, b, cones, st)
+        horizon = _Horizon(conic.with_rows(plan.cuts) if plan is not None else conic, prog.nz)
         step_infeasible = False
         for coord, node, col in prog.objectives(k):
             target = fault[node] if node is not None else (beta if coord == "beta" else r)  # node: the fault's only
-            for side, sign in (("lo", 1.0), ("hi", -1.0)):
-                q = np.zeros(len(cols))
-                q[position[col]] = sign
-                if solver is None:
-                    solver = clarabel.DefaultSolver(P, q, A, b, cones, st)
-                else:
-                    solver.update(q=q)
-                sol = solver.solve()
-                status = str(sol.status)
-                end = 0 if side == "lo" else 1
-                if status in _SOLVED:
-                    z = np.zeros(prog.nz)
-                    z[cols] = np.asarray(sol.x)
-                    target[k, end] = z[col]
-                    if keep_witnesses:
-                        witnesses[WitnessKey(coord, node, k, side)] = prog.witness(z, k, eliminate_free_faults)  # type: ignore[arg-type]  # coord is one of COORDINATES and side one of lo, hi: str in the loop
-                elif status in _UNBOUNDED:
-                    target[k, end] = -np.inf if side == "lo" else np.inf
-                elif status in _INFEASIBLE:
+            unions = None
+            if plan is not None:
+                window = plan.window(k, beta[k], r[k]) if coord == "f" else (-np.inf, np.inf)  # β, r come first
+                unions = plan.unions_at(k, col, window)
+            for end, (side, sign) in enumerate((("lo", 1.0), ("hi", -1.0))):
+                key = WitnessKey(coord, node, k, side)  # type: ignore[arg-type]  # coord is one of COORDINATES and side one of lo, hi: str in the loop
+                result = _end(horizon, col, sign, unions, health_budget, f"step {k}: the {coord} bound")
+                if result.status == "infeasible":
                     step_infeasible = True
-                else:
-                    raise ExactError(f"step {k}: the solver stopped with status {status} on the {coord} bound")
+                    continue
+                target[k, end] = sign * result.value
+                if keep_witnesses and result.z is not None and result.status == "solved":
+                    witnesses[key] = prog.witness(result.z, k, eliminate_free_faults)
+                if plan is not None:
+                    tally.count(key, result)
+                    plan.drop([d for d in result.dead if d[0] < k])
         if step_infeasible:
             infeasible.append(k)
+        elif plan is not None:
+            plan.learn(k, beta[k], r[k], {i: fault[i][k] for i in scenario.ids})
+    search = None
+    if plan is not None:
+        assert scenario.max_faulty is not None  # a plan exists only under a declared max_faulty
+        search = HealthSearch(scenario.max_faulty, plan.model.need, health_budget, tally.ends, tally.exact, tuple(tally.relaxed), tally.solves)
     return ExactBounds(
         steps=np.arange(K1),
         beta=beta,
@@ -415,13 +576,42 @@ def exact_bounds(
         bounded_nodes=bounded,
         infeasible_steps=tuple(infeasible),
         witnesses=witnesses,
-        omitted=omitted_assumptions(scenario),
+        omitted=omitted_assumptions(scenario, health),
+        health=search,
     )
 
 
-def omitted_assumptions(scenario: Scenario) -> tuple[str, ...]:
-    """The declared assumptions :func:`exact_bounds` does not apply (docs/exact.md)."""
-    return (f"k-of-N health (max_faulty = {scenario.max_faulty})",) if scenario.health_declared else ()
+def _end(horizon: _Horizon, col: int, sign: float, unions: tuple[list[StepUnion], bool] | None, budget: int, what: str) -> EndResult:
+    """min sign·z[col]: the root relaxation, then (``unions``: the k-of-N unions and whether they are complete)
+    the branch and bound over them."""
+    q, status, z = horizon.root(col, sign)
+    kind = settle(status)
+    if kind == "other":
+        raise ExactError(f"{what}: the solver stopped with status {status}")
+    if unions is None:
+        value = {"solved": float(q @ z[horizon.conic.cols]) if z is not None else np.nan, "unbounded": -np.inf, "infeasible": np.nan}[kind]
+        return EndResult(kind, value, z, True, 1)
+    result = minimise(horizon.conic, q, horizon.nz, unions[0], (status, z), budget, horizon.branches)
+    return replace(result, exact=result.exact and unions[1], solves=result.solves + 1)
+
+
+def health_line(h: HealthSearch) -> str:
+    """One line on the k-of-N branch and bound: what was applied and how many ends are exact."""
+    line = (
+        f"applied: k-of-N health (max_faulty = {h.max_faulty}: at least {h.need} sensors healthy at every step) by branch and bound, "
+        f"{h.exact_ends} of {h.ends} ends exact ({h.solves} solves, at most {h.budget} per end)"
+    )
+    if not h.relaxed:
+        return line
+    shown = ", ".join(f"{k.coordinate}{'' if k.node is None else k.node} {k.side} at step {k.step}" for k in h.relaxed[:8])
+    more = f" and {len(h.relaxed) - 8} more" if len(h.relaxed) > 8 else ""
+    return f"{line}; relaxed (the least bound proven, an outer bound): {shown}{more}"
+
+
+def omitted_assumptions(scenario: Scenario, health: bool = True) -> tuple[str, ...]:
+    """The declared assumptions :func:`exact_bounds` does not apply (docs/exact.md): the k-of-N health
+    unless it is applied (``health``)."""
+    return (f"k-of-N health (max_faulty = {scenario.max_faulty})",) if scenario.health_declared and not health else ()
 
 
 # ---------------------------------------------------------------- a record against the exact limit
@@ -561,6 +751,13 @@ def _finite_or_none(v: float) -> float | None:
     return float(v) if np.isfinite(v) else None
 
 
+def _health_document(h: HealthSearch | None) -> dict | None:
+    if h is None:
+        return None
+    relaxed = [{"coordinate": k.coordinate, "node": k.node, "step": k.step, "side": k.side} for k in h.relaxed]
+    return {"max_faulty": h.max_faulty, "need": h.need, "budget": h.budget, "ends": h.ends, "exact_ends": h.exact_ends, "solves": h.solves, "relaxed": relaxed}
+
+
 def exact_document(record: Record, exact: ExactBounds, comparison: ExactComparison) -> dict:
     """The ``--json`` document: per step exact intervals (null: unbounded on that side, or no
     trajectory at an infeasible step) and the record's ratios."""
@@ -587,6 +784,8 @@ def exact_document(record: Record, exact: ExactBounds, comparison: ExactComparis
         "from_step": FROM_STEP,
         "steps": [int(k) for k in exact.steps],
         "infeasible_steps": list(exact.infeasible_steps),
+        "omitted": list(exact.omitted),
+        "health": _health_document(exact.health),
         "exact": {
             "beta": intervals(exact.beta),
             "r": intervals(exact.r),

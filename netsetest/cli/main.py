@@ -132,6 +132,11 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="also each node's exact limit from its own data alone, against the whole network's: what the exchange could buy it at best (docs/network.md)",
     )
+    p.add_argument(
+        "--no-health",
+        action="store_true",
+        help="leave out a declared [network] max_faulty (the k-of-N health, applied by branch and bound otherwise): an outer bound of the limit (docs/exact.md)",
+    )
     p = sub.add_parser("calibrate", help="the smallest model-mismatch bound covering a plant's e_k on training manoeuvres")
     p.add_argument("topology", help="topology with a nonlinear plant (a path, or a bundled name such as paper6_car)")
     p.add_argument(
@@ -287,7 +292,7 @@ def cmd_exact(a: argparse.Namespace) -> int:
     import os
     import time
 
-    from netsetest.analysis.exact import COORDINATES, compare_record, exact_bounds, exact_document
+    from netsetest.analysis.exact import COORDINATES, compare_record, exact_bounds, exact_document, health_line
     from netsetest.config.schema import load_topology
     from netsetest.records.record import load_record
 
@@ -307,7 +312,7 @@ def cmd_exact(a: argparse.Namespace) -> int:
         bar.total = total
         bar.update(k)
 
-    ex = exact_bounds(sc, rec, a.fault_bounds, progress=on_progress)
+    ex = exact_bounds(sc, rec, a.fault_bounds, progress=on_progress, health=not a.no_health)
     bar.close()
     cmp = compare_record(rec, ex)
     bounded = ", ".join(map(str, ex.bounded_nodes)) or "none"
@@ -317,9 +322,11 @@ def cmd_exact(a: argparse.Namespace) -> int:
     )
     if ex.infeasible_steps:
         print(f"  no trajectory meets the assumptions at steps {list(ex.infeasible_steps)} (an assumption was broken)")
+    if ex.health is not None:
+        print(f"  {health_line(ex.health)}")
     if ex.omitted:
         print(
-            f"  not applied: {', '.join(ex.omitted)} (a mixed-integer program): these bounds are an outer bound of the "
+            f"  not applied: {', '.join(ex.omitted)} (--no-health): these bounds are an outer bound of the "
             "exact limit, and a node that uses the assumption may be narrower (docs/exact.md)"
         )
     names = {"f": "fault", "r": "yaw rate", "beta": "sideslip"}
@@ -343,6 +350,8 @@ def cmd_exact(a: argparse.Namespace) -> int:
         + (
             f" (the nodes used {', '.join(ex.omitted)}, which these bounds leave out)"
             if narrower and ex.omitted
+            else " (some ends are relaxed: an outer bound there)"
+            if narrower and ex.health is not None and ex.health.relaxed
             else " (the estimator relied on more than these assumptions there, or one of the two is wrong)"
             if narrower
             else ""

@@ -1,0 +1,356 @@
+"""The k-of-N health assumption in the exact limit: branch and bound over each step's pieces (docs/exact.md).
+
+Under ``[network] max_faulty = m`` at least need = N − m sensors are healthy (|f_i,j| ≤ τ) at every step j.
+Every sensor measures t = uᵀx (C_i = s_i uᵀ, checked when the topology is loaded), so a healthy sensor's
+measurement rows put t_j in its span I_i,j (the measured interval widened by |Ds_i|τ, over s_i).  Whether a
+sensor's health is a condition on t_j alone depends on its fault variable:
+
+- *untied*: f_i,j appears only in its own measurement rows (no declared bound, 0 < j, not the objective),
+  or also in declared bounds that every healthy value meets whatever its neighbours (the caller decides), so
+  some |f_i,j| ≤ τ meets them exactly when t_j ∈ I_i,j: health is t_j ∈ I_i,j;
+- *tied*: f_i,j also enters a prior (j = 0), a declared fault bound a healthy value could break, or the
+  objective: health is |f_i,j| ≤ τ itself.
+
+The step's feasible set is then exactly the union of convex *pieces*: for each set Q of tied sensors
+assumed healthy (|Q| ≤ need), a maximal interval of t_j inside ∩_{q∈Q} I_q that at least need − |Q|
+untied spans cover, with |f_q,j| ≤ τ for q ∈ Q.  :func:`minimise` is a best-first branch and bound over
+them: the relaxation leaves every unchosen step's union out, a node whose minimiser meets every step's
+union is optimal (it has the least bound of all open nodes), otherwise it branches into the pieces of one
+violated step.  Past the budget of solves it stops with the least open bound: an outer bound (sound),
+reported as relaxed.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Literal
+
+import clarabel
+import numpy as np
+from scipy import sparse
+
+Span = tuple[float, float]
+Row = tuple[dict[int, float], float]  # a·z ≤ b over the program's columns (global indices)
+
+HEALTH_TOL = 1e-9  # a minimiser this close to a piece counts as in it: that can only widen an end (sound side)
+_SOLVED = ("Solved", "AlmostSolved")
+_UNBOUNDED = ("DualInfeasible", "AlmostDualInfeasible")
+_INFEASIBLE = ("PrimalInfeasible", "AlmostPrimalInfeasible")
+
+
+@dataclass(frozen=True)
+class Piece:
+    """One convex branch of a step's union: t_j ∈ [lo, hi] and |f_q,j| ≤ τ for every sensor q in ``healthy``."""
+
+    lo: float
+    hi: float
+    healthy: tuple[int, ...]  # sensor positions of tied faults assumed healthy
+
+    def within(self, other: Piece) -> bool:
+        return set(other.healthy) <= set(self.healthy) and other.lo <= self.lo and self.hi <= other.hi
+
+
+Path = tuple[tuple[int, Piece], ...]  # the (step, piece) a node chose, in order
+Solvers = dict[Path, clarabel.DefaultSolver]  # a node's solver by its path: the same rows for every end of a program
+
+
+def covered(spans: Sequence[Span], need: int) -> list[Span]:
+    """The points in at least ``need`` of the closed ``spans``, as disjoint closed intervals in order."""
+    if need <= 0:
+        return [(-math.inf, math.inf)]
+    # opening events sort before closing ones at the same point: closed intervals that touch do overlap
+    events = sorted([(lo, 0) for lo, _ in spans] + [(hi, 1) for _, hi in spans])
+    out, count, start = [], 0, -math.inf
+    for t, kind in events:
+        if kind == 0:
+            count += 1
+            if count == need:
+                start = t
+        else:
+            if count == need:
+                out.append((start, t))
+            count -= 1
+    return out
+
+
+def interval_rows(terms: dict[int, float], span: Span) -> list[Row]:
+    """lo ≤ Σ terms[c]·z[c] ≤ hi as rows a·z ≤ b; an infinite side gives none."""
+    lo, hi = span
+    return ([(dict(terms), hi)] if math.isfinite(hi) else []) + ([({c: -v for c, v in terms.items()}, -lo)] if math.isfinite(lo) else [])
+
+
+def _clip(parts: list[Span], lo: float, hi: float) -> list[Span]:
+    return [(max(a, lo), min(b, hi)) for a, b in parts if max(a, lo) <= min(b, hi)]
+
+
+def step_pieces(spans: Sequence[Span], tied: Sequence[bool], allowed: Sequence[bool], need: int, window: Span) -> list[Piece] | None:
+    """Every piece of one step (module doc) inside ``window`` (an interval known to hold t_j), none contained
+    in another; ``allowed``: tied sensors that may be healthy (their fault's known range meets [−τ, τ]).
+    None if there are more than :data:`MAX_PIECE_SETS` sets Q to try (the caller relaxes the step)."""
+    untied = [sp for sp, t in zip(spans, tied) if not t]
+    candidates = [n for n, (t, ok) in enumerate(zip(tied, allowed)) if t and ok]
+    sizes = range(max(0, need - len(untied)), min(need, len(candidates)) + 1)
+    if sum(math.comb(len(candidates), q) for q in sizes) > MAX_PIECE_SETS:
+        return None
+    pieces: list[Piece] = []
+    for q in sizes:
+        for group in itertools.combinations(candidates, q):
+            lo = max([window[0], *(spans[n][0] for n in group)])
+            hi = min([window[1], *(spans[n][1] for n in group)])
+            pieces += [Piece(a, b, group) for a, b in _clip(covered(untied, need - q), lo, hi)]
+    return [p for m, p in enumerate(pieces) if not any(p.within(o) and (not o.within(p) or n < m) for n, o in enumerate(pieces) if n != m)]
+
+
+MAX_PIECE_SETS = 2000  # sets Q of tied sensors enumerated at one step: C(N, need) grows fast with N
+
+
+@dataclass(frozen=True)
+class StepUnion:
+    """The k-of-N constraint of one step: t_j = Σ t[c]·z[c], the sensors' spans, and per sensor the column
+    of its tied fault (None: untied, its health is t_j ∈ its span); ``pieces``: the union, branch by branch."""
+
+    step: int
+    t: dict[int, float]
+    spans: tuple[Span, ...]
+    f_col: tuple[int | None, ...]
+    tolerance: float
+    need: int
+    pieces: tuple[Piece, ...]
+
+    def holds(self, z: np.ndarray) -> bool:
+        """Whether the point meets the union: at least ``need`` sensors healthy (to :data:`HEALTH_TOL`)."""
+        t = sum(v * z[c] for c, v in self.t.items())
+        healthy = 0
+        for (lo, hi), col in zip(self.spans, self.f_col):
+            if col is None:
+                healthy += lo - HEALTH_TOL <= t <= hi + HEALTH_TOL
+            else:
+                healthy += abs(z[col]) <= self.tolerance + HEALTH_TOL
+        return healthy >= self.need
+
+    def rows(self, piece: Piece) -> list[Row]:
+        """The piece as rows a·z ≤ b (a side at ±inf gives none)."""
+        out = interval_rows(self.t, (piece.lo, piece.hi))
+        for n in piece.healthy:
+            col = self.f_col[n]
+            assert col is not None  # only tied sensors are assumed healthy by a row
+            out += [({col: 1.0}, self.tolerance), ({col: -1.0}, self.tolerance)]
+        return out
+
+
+@dataclass(frozen=True)
+class Conic:
+    """One horizon's program, A z + s = b with s in ``cones``, over the columns ``cols`` (global indices)."""
+
+    cols: np.ndarray
+    A: sparse.csc_matrix
+    b: np.ndarray
+    cones: list
+    settings: clarabel.DefaultSettings
+
+    @cached_property
+    def position(self) -> dict[int, int]:
+        """Global column → position in ``cols``."""
+        return {int(c): m for m, c in enumerate(self.cols)}
+
+    def with_rows(self, rows: Sequence[Row]) -> Conic:
+        """The same program with ``rows`` (a·z ≤ b) added as one more non-negative cone."""
+        if not rows:
+            return self
+        position = self.position
+        data, ri, ci = [], [], []
+        for r, (terms, _) in enumerate(rows):
+            for c, v in terms.items():
+                ri.append(r)
+                ci.append(position[c])
+                data.append(v)
+        extra = sparse.csc_matrix((data, (ri, ci)), shape=(len(rows), len(self.cols)))
+        b = np.r_[self.b, [rhs for _, rhs in rows]]
+        return Conic(self.cols, sparse.vstack([self.A, extra], format="csc"), b, [*self.cones, clarabel.NonnegativeConeT(len(rows))], self.settings)
+
+    def solver(self, q: np.ndarray) -> clarabel.DefaultSolver:
+        n = len(self.cols)
+        return clarabel.DefaultSolver(sparse.csc_matrix((n, n)), q, self.A, self.b, self.cones, self.settings)
+
+
+@dataclass(frozen=True)
+class EndResult:
+    """One end's minimum of q·z over the union: ``value`` (−inf unbounded, NaN infeasible), the minimiser
+    (over the global columns; None unless solved exactly), whether it is exact, and the solves spent."""
+
+    status: Literal["solved", "unbounded", "infeasible"]
+    value: float
+    z: np.ndarray | None
+    exact: bool
+    solves: int
+    dead: tuple[tuple[int, Piece], ...] = ()  # (step, piece) with no trajectory: the root program plus the piece is infeasible
+
+
+def settle(status: str) -> Literal["solved", "unbounded", "infeasible", "other"]:
+    if status in _SOLVED:
+        return "solved"
+    if status in _UNBOUNDED:
+        return "unbounded"
+    return "infeasible" if status in _INFEASIBLE else "other"
+
+
+def _expand(conic: Conic, x: np.ndarray, nz: int) -> np.ndarray:
+    z = np.zeros(nz)
+    z[conic.cols] = x
+    return z
+
+
+GAP_TOL = 1e-9  # relative: the search stops once the best trajectory found is within this of the least open bound
+
+
+@dataclass(order=True)
+class _Node:
+    """An open node: its bound (a lower bound of q·z over its region), unsolved (``lazy``: the parent's bound)
+    or solved; at equal bounds a solved node comes first and then the order the children were made in."""
+
+    bound: float
+    lazy: bool
+    order: int
+    chosen: frozenset[int] = field(compare=False)  # unions (by position in the list) whose piece is fixed
+    rows: tuple[Row, ...] = field(compare=False)
+    z: np.ndarray | None = field(compare=False, default=None)  # the minimiser (global columns); None: unbounded or lazy
+    path: Path = field(compare=False, default=())
+
+
+def _branch_on(unions: Sequence[StepUnion], node: _Node) -> int | None:
+    """The union to branch on: the latest step the minimiser violates; for an unbounded relaxation (no
+    minimiser) the latest one not yet chosen.  None: the node's minimiser meets every union (or, unbounded,
+    every union is chosen: its relaxation is exact)."""
+    for m in range(len(unions) - 1, -1, -1):
+        if m not in node.chosen and (node.z is None or not unions[m].holds(node.z)):
+            return m
+    return None
+
+
+def _distance(union: StepUnion, piece: Piece, z: np.ndarray | None) -> float:
+    """How far the parent's minimiser is from the piece: the child to solve first is the nearest."""
+    if z is None:
+        return 0.0
+    t = sum(v * z[c] for c, v in union.t.items())
+    out = max(0.0, piece.lo - t, t - piece.hi)
+    return out + sum(max(0.0, abs(z[c]) - union.tolerance) for c in (union.f_col[n] for n in piece.healthy) if c is not None)
+
+
+@dataclass
+class _Search:
+    """Best-first branch and bound of one end (see :func:`minimise`)."""
+
+    conic: Conic
+    q: np.ndarray
+    nz: int
+    unions: Sequence[StepUnion]
+    budget: int
+    heap: list[_Node] = field(default_factory=list)
+    solves: int = 0
+    dead: list[tuple[int, Piece]] = field(default_factory=list)
+    best: tuple[float, np.ndarray] | None = None  # the least q·z of a minimiser that meets every union
+    order: itertools.count = field(default_factory=itertools.count)
+    solvers: Solvers = field(default_factory=dict)
+
+    def result(self, status: Literal["solved", "unbounded", "infeasible"], value: float, exact: bool) -> EndResult:
+        z = self.best[1] if exact and self.best is not None else None
+        return EndResult(status, value, z, exact, self.solves, tuple(self.dead))
+
+    def settle_node(self, node: _Node) -> bool:
+        """Solve a lazy node and keep it (or the trajectory it found); False if the solver could not settle it."""
+        solver = self.solvers.get(node.path)
+        if solver is None:
+            solver = self.solvers[node.path] = self.conic.with_rows(node.rows).solver(self.q)
+        else:
+            solver.update(q=self.q)
+        sol = solver.solve()
+        status, x = str(sol.status), np.asarray(sol.x) if str(sol.status) in _SOLVED else None
+        self.solves += 1
+        kind = settle(status)
+        if kind == "other":
+            return False
+        if kind == "infeasible":
+            if len(node.path) == 1:  # the root's program and one piece: no trajectory in any later horizon either
+                self.dead.append(node.path[0])
+            return True
+        z = None if x is None else _expand(self.conic, x, self.nz)
+        value = -math.inf if x is None else float(self.q @ x)
+        # a child no worse than its parent to the gap keeps the parent's bound: it is then explored before its siblings
+        bound = node.bound if value <= node.bound + GAP_TOL * max(1.0, abs(node.bound)) else value
+        solved = _Node(bound, False, next(self.order), node.chosen, node.rows, z, node.path)
+        if z is not None and _branch_on(self.unions, solved) is None:
+            if self.best is None or bound < self.best[0]:
+                self.best = (bound, z)
+        else:
+            heapq.heappush(self.heap, solved)
+        return True
+
+    def branch(self, node: _Node, m: int) -> None:
+        union = self.unions[m]
+        for piece in sorted(union.pieces, key=lambda p: _distance(union, p, node.z)):
+            path = (*node.path, (union.step, piece))
+            heapq.heappush(self.heap, _Node(node.bound, True, next(self.order), node.chosen | {m}, node.rows + tuple(union.rows(piece)), None, path))
+
+    def run(self, root: _Node) -> EndResult:
+        heapq.heappush(self.heap, root)
+        while self.heap:
+            node = heapq.heappop(self.heap)
+            if self.best is not None and self.best[0] <= node.bound + GAP_TOL * max(1.0, abs(node.bound)):
+                return self.result("solved", min(self.best[0], node.bound), True)  # the end to the gap, on the sound side
+            status: Literal["solved", "unbounded"] = "unbounded" if node.bound == -math.inf else "solved"
+            if node.lazy:
+                if self.solves >= self.budget or not self.settle_node(node):
+                    return self.result(status, node.bound, False)  # the least open bound: an outer bound
+                continue
+            m = _branch_on(self.unions, node)
+            if m is None:  # an unbounded relaxation with every union chosen: exact
+                return self.result("unbounded", -math.inf, True)
+            self.branch(node, m)
+        return self.result("solved", self.best[0], True) if self.best is not None else self.result("infeasible", math.nan, True)
+
+
+def minimise(
+    conic: Conic,
+    q: np.ndarray,
+    nz: int,
+    unions: Sequence[StepUnion],
+    root: tuple[str, np.ndarray | None],
+    budget: int,
+    solvers: Solvers | None = None,
+) -> EndResult:
+    """min q·z over the program and every union (module doc), from the root relaxation ``root`` (its status and
+    minimiser over the global columns).  At most ``budget`` solves; past it the least open bound, not exact.
+    ``solvers``: the nodes' solvers by path, shared by the ends of one program (a path's rows are the same for
+    every end, only q changes)."""
+    kind = settle(root[0])
+    assert kind != "other", root[0]  # the caller reports a root the solver could not settle
+    if kind == "infeasible":
+        return EndResult("infeasible", math.nan, None, True, 0)
+    z = root[1]
+    node = _Node(-math.inf if z is None else float(q @ z[conic.cols]), False, 0, frozenset(), (), z)
+    if z is not None and _branch_on(unions, node) is None:
+        return EndResult("solved", node.bound, z, True, 0)
+    return _Search(conic, q, nz, unions, budget, order=itertools.count(1), solvers={} if solvers is None else solvers).run(node)
+
+
+__all__ = [
+    "HEALTH_TOL",
+    "Conic",
+    "EndResult",
+    "Piece",
+    "Path",
+    "Row",
+    "Solvers",
+    "Span",
+    "StepUnion",
+    "covered",
+    "interval_rows",
+    "minimise",
+    "settle",
+    "step_pieces",
+]
