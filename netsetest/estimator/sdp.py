@@ -30,7 +30,8 @@ Per step (docs/estimator.md): the own sensor's sector is derived from the node's
 wind bound, its reading and the declared fault bound (:mod:`netsetest.estimator.sector`); neighbours'
 sectors come with their messages, so which φ slots exist changes per step (one layout and solver per
 pattern).  Where the own sector is derived and the sensor may saturate, the proven interval of r⁺ is
-used as the measurement instead of the φ⁺ sector fact.  Step 0 updates the prior with ỹ₀
+used as the measurement instead of the φ⁺ sector fact, and where that sector rests on the declared
+fault bound the published set is cut by |f⁺| ≤ F (:mod:`netsetest.estimator.slab`).  Step 0 updates the prior with ỹ₀
 (:meth:`LocalEstimator.first`).  The objective is trace(D P) (a congruence of the LMI); ``bank`` solves
 each step twice and publishes the fault-weighted set while recurring on the trace-optimal one.
 
