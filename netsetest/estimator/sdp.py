@@ -597,7 +597,8 @@ class LocalEstimator:
         wh = self._wh_pub if self._wh_pub is not None else self._wh
         out = cut(pub.xhat, pub.P, rho, NA - 1, -size, size, None if wh is None else wh**2)
         if out is not None:
-            res.published = dataclasses.replace(pub, xhat=out[0], P=out[1], rho_cert=out[2], published=None)
+            # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
+            res.published = dataclasses.replace(pub, xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None)
 
     def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> bool:
         """Publish the readings' set of the step (its only innovation those readings) where it is
