@@ -30,7 +30,8 @@ Per step (docs/estimator.md): the own sensor's sector is derived from the node's
 wind bound, its reading and the declared fault bound (:mod:`netsetest.estimator.sector`); neighbours'
 sectors come with their messages, so which φ slots exist changes per step (one layout and solver per
 pattern).  Where the own sector is derived and the sensor may saturate, the proven interval of r⁺ is
-used as the measurement instead of the φ⁺ sector fact.  Step 0 updates the prior with ỹ₀
+used as the measurement instead of the φ⁺ sector fact, and where that sector rests on the declared
+fault bound the published set is cut by |f⁺| ≤ F (:mod:`netsetest.estimator.slab`).  Step 0 updates the prior with ỹ₀
 (:meth:`LocalEstimator.first`).  The objective is trace(D P) (a congruence of the LMI); ``bank`` solves
 each step twice and publishes the fault-weighted set while recurring on the trace-optimal one.
 
@@ -75,6 +76,7 @@ from netsetest.estimator.sector import (
     prior_interval,
     propagated_interval,
 )
+from netsetest.estimator.slab import cut
 from netsetest.extras import require
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.uncertainty import ModelUncertainty
@@ -581,7 +583,22 @@ class LocalEstimator:
             return self._fallback(data.x_pred.copy(), P_fb, solve, sector)
         if not (refs and self._refine(res, self.readings_data(prev, inp, sector, reading, refs), prev.rho, alpha)):
             self._bank(res, data, prev.rho, alpha, facts)
+        self._size_cut(res, prev.rho)
         return res
+
+    def _size_cut(self, res: StepResult, rho: float) -> None:
+        """Where the step's sector rests on the declared fault bound, the truth's f⁺ lies in [−F, F]: the set to
+        publish is cut by that interval (:func:`~netsetest.estimator.slab.cut`, certified; docs/estimator.md).
+        The node recurs on ``res`` as solved."""
+        size, sector = self.fault_bound.size, res.sector
+        if size is None or sector is None or sector.basis != "fault-bound":
+            return
+        pub = res.public
+        wh = self._wh_pub if self._wh_pub is not None else self._wh
+        out = cut(pub.xhat, pub.P, rho, NA - 1, -size, size, None if wh is None else wh**2)
+        if out is not None:
+            # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
+            res.published = dataclasses.replace(pub, xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None)
 
     def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> bool:
         """Publish the readings' set of the step (its only innovation those readings) where it is

@@ -9,6 +9,8 @@
 - Without a declared fault bound the paper's fixed sector is used, marked assumed and checked; with a
   declared bound that the fault breaks, the steps that rest on it leave the guarantee.
 - Step 0 uses y₀; the ``bank`` objective recurs on exactly the paper's (trace) sets.
+- Where the sector rests on the declared fault bound, the published set is cut by |f⁺| ≤ F (narrower in
+  f); the recursion set and the other steps' published sets are unchanged.
 """
 
 from __future__ import annotations
@@ -240,6 +242,28 @@ def test_bank_recurs_on_the_trace_sets_and_publishes_a_narrower_fault_bound():
         np.testing.assert_allclose(bank.xhat, trace.xhat, rtol=1e-12, atol=1e-15)
         assert bank.published.P[2, 2] < trace.P[2, 2]
         assert np.trace(bank.published.P) >= np.trace(trace.P) * (1 - 1e-6)  # trace-optimal is optimal
+
+
+def test_the_size_cut_narrows_the_published_fault_only_where_the_sector_rests_on_the_fault_bound():
+    """Paper SAIM, the same step data: with the cut, the published set of a fault-bound step is the bank's set
+    cut by |f⁺| ≤ F (narrower in f); the node recurs on the solved set, and other steps are unchanged."""
+    sc = load_topology(PAPER6, "saim", steps=20)
+    captured = []
+    run_inmemory(sc, "paper", "scheduled", 0, observer=lambda est, prev, inp, r, ms: captured.append((est.node_id, prev, inp)))
+    cut = bound = 0
+    for i, prev, inp in captured[::3]:
+        plain = sdp.LocalEstimator.for_node(sc, i)
+        plain._size_cut = lambda res, rho: None  # type: ignore[method-assign]  # the same estimator without the cut
+        with_cut, without = sdp.LocalEstimator.for_node(sc, i).step(prev, inp), plain.step(prev, inp)
+        np.testing.assert_array_equal(with_cut.P, without.P)  # the recursion set is the solved one
+        if with_cut.sector is None or with_cut.sector.basis != "fault-bound":
+            np.testing.assert_array_equal(with_cut.public.P, without.public.P)
+            continue
+        bound += 1
+        if with_cut.public is not without.public and not np.array_equal(with_cut.public.P, without.public.P):
+            cut += 1
+            assert with_cut.public.P[2, 2] < without.public.P[2, 2]
+    assert cut > 0.5 * bound > 0
 
 
 @pytest.mark.parametrize("case,sector,dropped", [("saim", None, True), ("saim", (0.5, 0.5), False), ("nsnim", (0.5, 0.5), True), ("nsnim", None, False)])
