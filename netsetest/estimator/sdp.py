@@ -87,6 +87,7 @@ Backend = Literal["clarabel", "cvxpy"]
 Status = Literal["ok", "fallback"]
 BACKENDS = ("clarabel", "cvxpy")
 REFINE_RTOL = 1e-6  # the readings' set is published only if it is smaller by more than this (relative): not for rounding
+PIN_FLOOR = 1e-6  # a fault proved healthy is published as |f| ≤ max(τ, this): an ellipsoid cannot be flat
 
 
 @dataclass(frozen=True)
@@ -390,16 +391,17 @@ class LocalEstimator:
             if np.isfinite(iv.lo) and np.isfinite(iv.hi) and iv.hi > iv.lo:
                 out[j] = (np.r_[sensor.C, 0.0], iv)
         if self.health is not None:
-            own = (inp.y, inp.gamma)
-            a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
-            pred = propagated_interval(  # uᵀx⁺ over the node's own set through the step: prunes the hypotheses
-                self._u_sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W, self.uncertainty
-            )
-            within = (pred.lo, pred.hi)
-            hull, _ = self.health.assess(self.node_id, own, inp.readings, within)
+            hull, _ = self.health.assess(self.node_id, (inp.y, inp.gamma), inp.readings, self._health_within(prev, inp))
             if hull is not None:
                 out[HEALTH_KEY] = (np.r_[self.health.u, 0.0], hull)
         return out
+
+    def _health_within(self, prev: NodeSet, inp: UpdateInput) -> tuple[float, float]:
+        """uᵀx⁺ over the node's own set through the step: what prunes the k-of-N hypotheses (a majority that
+        agrees only outside it is none)."""
+        a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
+        pred = propagated_interval(self._u_sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W, self.uncertainty)
+        return pred.lo, pred.hi
 
     def _reference_innovation(
         self, lay: EtaLayout, pi0: np.ndarray, alpha: np.ndarray, x_pred: np.ndarray, refs: dict[int, tuple[np.ndarray, Interval]]
@@ -584,6 +586,7 @@ class LocalEstimator:
         if not (refs and self._refine(res, self.readings_data(prev, inp, sector, reading, refs), prev.rho, alpha)):
             self._bank(res, data, prev.rho, alpha, facts)
         self._size_cut(res, prev.rho)
+        self._health_pin(res, prev, inp)
         return res
 
     def _size_cut(self, res: StepResult, rho: float) -> None:
@@ -593,12 +596,30 @@ class LocalEstimator:
         size, sector = self.fault_bound.size, res.sector
         if size is None or sector is None or sector.basis != "fault-bound":
             return
+        self._cut_fault(res, rho, size)
+
+    def _health_pin(self, res: StepResult, prev: NodeSet, inp: UpdateInput) -> None:
+        """Under ``max_faulty``, where no consistent majority of the step's readings leaves this node's sensor
+        out, its fault is |f⁺| ≤ τ (docs/network.md): the set to publish is cut by that interval, widened to
+        :data:`PIN_FLOOR` (a superset: sound) so that the published ellipsoid stays full-dimensional, and it
+        then rests on every reading (the k-of-N facts do)."""
+        if self.health is None or not inp.readings:
+            return
+        _, pinned = self.health.assess(self.node_id, (inp.y, inp.gamma), inp.readings, self._health_within(prev, inp), pin=True)
+        if pinned and self._cut_fault(res, prev.rho, max(self.health.tolerance, PIN_FLOOR)):
+            res.published = dataclasses.replace(res.public, reading_keys=res.public.reading_keys | {HEALTH_KEY})
+
+    def _cut_fault(self, res: StepResult, rho: float, size: float) -> bool:
+        """Cut the set to publish by |f⁺| ≤ ``size`` (:func:`~netsetest.estimator.slab.cut`, certified); whether it did.
+        The node recurs on ``res`` as solved."""
         pub = res.public
         wh = self._wh_pub if self._wh_pub is not None else self._wh
         out = cut(pub.xhat, pub.P, rho, NA - 1, -size, size, None if wh is None else wh**2)
-        if out is not None:
-            # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
-            res.published = dataclasses.replace(pub, xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None)
+        if out is None:
+            return False
+        # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
+        res.published = dataclasses.replace(pub, xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None)
+        return True
 
     def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> bool:
         """Publish the readings' set of the step (its only innovation those readings) where it is

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from netsetest.analysis.exact import local_limits
@@ -337,3 +338,26 @@ def test_the_nodes_alone_see_the_same_truth() -> None:
     assert a.parts is not None and b.parts is not None
     assert [t["x"] for t in a.parts["truth"]] == [t["x"] for t in b.parts["truth"]]
     assert all(n.in_weights == {n.id: 1.0} for n in sc.alone().nodes) and not sc.alone().readings
+
+
+def test_the_sdp_pins_a_fault_that_every_consistent_majority_needs() -> None:
+    """paper6_max_faulty: where no 2 of the step's readings agree without node i's own (inside its predicted
+    range), its fault is |f⁺| ≤ τ, and the published set is cut by it (narrower in f, resting on every reading);
+    the set the node recurs on is the solved one. The healthy sensors 3 and 5 are the ones pinned most."""
+    from netsetest.estimator import sdp
+    from netsetest.estimator.health import HEALTH_KEY
+
+    sc = load_topology("paper6_max_faulty", case="nsnim", steps=30)
+    captured: list = []
+    run_inmemory(sc, "paper", "scheduled", 0, observer=lambda est, prev, inp, r, ms: captured.append((est.node_id, prev, inp)))
+    pinned: dict[int, int] = {}
+    for i, prev, inp in captured:
+        plain = sdp.LocalEstimator.for_node(sc, i)
+        plain._health_pin = lambda res, prev, inp: None  # type: ignore[method-assign]  # the same estimator without the pin
+        with_pin, without = sdp.LocalEstimator.for_node(sc, i).step(prev, inp), plain.step(prev, inp)
+        np.testing.assert_array_equal(with_pin.P, without.P)  # the recursion set is the solved one
+        if not np.array_equal(with_pin.public.P, without.public.P):
+            pinned[i] = pinned.get(i, 0) + 1
+            assert with_pin.public.P[2, 2] < 0.1 * without.public.P[2, 2]
+            assert HEALTH_KEY in with_pin.public.reading_keys
+    assert pinned.get(3, 0) > 10 and pinned.get(5, 0) > 10, pinned
