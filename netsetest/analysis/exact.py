@@ -27,6 +27,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
+import math
+
 import clarabel
 import numpy as np
 from scipy import sparse
@@ -44,6 +46,7 @@ Side = Literal["lo", "hi"]
 FROM_STEP = 10  # ratios "from step 10" leave out the start-up transient of the estimators
 DEGENERATE_WIDTH = 1e-6  # a mean exact width below it is a point (a declared zero), not an interval to compare
 NARROWER_TOL = 1e-8  # solver precision of the exact ends (measured ≤ 2e-9 over 80 steps) with margin
+PIECE_MARGIN = 1e-12  # relative widening of each k-of-N interval: ~10⁴ ulps, far below what the witnesses are checked to (1e-8)
 SOLVER_TOL = 1e-10  # Clarabel gap and feasibility tolerances: witnesses meet every constraint to ~1e-9
 HEALTH_BUDGET = 400  # solves per interval end for the k-of-N branch and bound; past it the end is relaxed
 CUT_MARGIN = 1e-8  # a past step's end is loosened by this (relative) before it bounds later horizons: solver precision
@@ -377,11 +380,15 @@ class _HealthPlan:
         return {self.prog._x(j, c): float(self.model.u[c]) for c in range(2) if self.model.u[c] != 0}
 
     def _spans(self, j: int) -> tuple[Span, ...]:
-        """Per node: the interval of t_j its measurement gives with |f| ≤ τ (C_i = s_i uᵀ)."""
+        """Per node: the interval of t_j its measurement gives with |f| ≤ τ (C_i = s_i uᵀ), widened by
+        :data:`PIECE_MARGIN` for rounding: with worst-case signals two healthy sensors' noises sit at opposite
+        bounds, their intervals meet in the truth's one point, and an ulp apart they would not."""
         out = []
         for node in self.prog.sc.nodes:
             lo, hi = self.prog.intervals[node.id, j]
-            slack, s = abs(node.sensor.Ds) * self.model.tolerance, float(node.sensor.C @ self.model.u)
+            sensor = node.sensor
+            pad = PIECE_MARGIN * (abs(sensor.Dv) * math.sqrt(sensor.R) + max((abs(v) for v in (lo, hi) if math.isfinite(v)), default=0.0))
+            slack, s = abs(sensor.Ds) * self.model.tolerance + pad, float(sensor.C @ self.model.u)
             a, b = (lo - slack) / s, (hi + slack) / s
             out.append((min(a, b), max(a, b)))
         return tuple(out)

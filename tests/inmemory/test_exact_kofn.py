@@ -223,3 +223,21 @@ def test_every_exact_end_is_reached_by_a_trajectory_with_enough_healthy_sensors(
                 x = sc.model.step(x, d.u, float(wit.w[j]), d.vx)
         value = wit.f[key.node][key.step] if key.coordinate == "f" else x[0 if key.coordinate == "beta" else 1]
         assert value == pytest.approx(ex.interval(key.coordinate, key.node)[key.step, 0 if key.side == "lo" else 1], abs=1e-8)
+
+
+def test_worst_case_noise_leaves_every_step_feasible() -> None:
+    """Worst-case signals put the two healthy sensors' noises at opposite bounds: their intervals meet in the
+    truth's one point. Unwidened for rounding, the k-of-N pieces missed it by an ulp and every step from the
+    faults' onset (20) was reported infeasible, though every assumption held; the truth stays inside."""
+    sc = load_topology(TOPOLOGY, case="nsnim", steps=STEPS_RECORD + 2)
+    res = run_inmemory(sc, "worst", "scheduled", 0)
+    assert res.parts is not None
+    rec = record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
+    ex = exact_bounds(sc, rec)
+    assert ex.infeasible_steps == ()
+    truth = {t["step"]: t for t in res.parts["truth"]}
+    for i in sc.ids:
+        iv = ex.interval("f", i)
+        for n, k in enumerate(ex.steps):
+            f = truth[int(k)]["faults"][str(i)]
+            assert iv[n, 0] - 1e-7 <= f <= iv[n, 1] + 1e-7
