@@ -18,7 +18,11 @@ LAYERS = ("unit", "inmemory", "process")  # tests/<layer>/: each test is marked 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Mark every test with its layer (its folder), so that nothing goes unmarked; a process test also
-    counts as ``zenoh`` (it may open sessions or spawn roles). A test outside the layers is an error."""
+    counts as ``zenoh`` (it may open sessions or spawn roles). A test outside the layers is an error.
+
+    pytest-xdist (``--dist loadgroup``, pyproject.toml): a module's tests run on one worker (its module
+    fixtures are made once), and so do the modules that name one ``xdist_group`` (they share session-cached
+    runs, run_helpers.shared_run)."""
     for item in items:
         layer = item.path.parent.name
         if layer not in LAYERS:
@@ -26,11 +30,16 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         item.add_marker(layer)
         if layer == "process":
             item.add_marker("zenoh")
+        if item.get_closest_marker("xdist_group") is None:
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+
+
+SESSION_PREFIX = "netsetest-tests-"  # one per session (with pytest-xdist: one per worker), removed at its end
 
 
 @pytest.fixture(autouse=True, scope="session")
 def _children_tmpdir() -> Iterator[None]:
-    root = tempfile.mkdtemp(prefix="netsetest-tests-")
+    root = tempfile.mkdtemp(prefix=SESSION_PREFIX)
     previous = os.environ.get("TMPDIR")
     os.environ["TMPDIR"] = root  # read by every child process's tempfile at start
     try:
@@ -41,6 +50,7 @@ def _children_tmpdir() -> Iterator[None]:
         else:
             os.environ["TMPDIR"] = previous
         shutil.rmtree(root, ignore_errors=True)
+    assert not os.path.exists(root), f"the session's temporary directory {root} could not be removed"
 
 
 # ---------------------------------------------------------------- nothing left behind
@@ -51,20 +61,30 @@ _before: set[str] = set()
 
 
 def _ours() -> set[str]:
+    """Our temporary entries in the system's directory; a session's own directory (any session's, or any
+    xdist worker's: each removes its own at its end, checked above) is not one."""
     try:
-        return {n for n in os.listdir(SYSTEM_TMP) if n.startswith(OURS)}
+        return {n for n in os.listdir(SYSTEM_TMP) if n.startswith(OURS) and not n.startswith(SESSION_PREFIX)}
     except OSError:
         return set()
 
 
+def _is_xdist_worker(config: pytest.Config) -> bool:
+    return hasattr(config, "workerinput")  # pytest-xdist: the controller checks once, after every worker ended
+
+
 def pytest_sessionstart(session: pytest.Session) -> None:
-    _before.update(_ours())
+    if not _is_xdist_worker(session.config):
+        _before.update(_ours())
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     """Fail the run if a test left a temporary file or directory of ours (a run's private keys) in the
-    system's temporary directory: every test works in tmp_path or the session's directory."""
-    left = sorted(_ours() - _before - {os.path.basename(os.environ.get("TMPDIR", ""))})
+    system's temporary directory: every test works in tmp_path or the session's directory. Under pytest-xdist
+    the controller checks, after every worker has ended (a worker's own check would see the others' files)."""
+    if _is_xdist_worker(session.config):
+        return
+    left = sorted(_ours() - _before)
     if left:
         session.config.pluginmanager.get_plugin("terminalreporter").write_line(f"tests left behind in {SYSTEM_TMP}: {', '.join(left)}", red=True)
         session.exitstatus = pytest.ExitCode.TESTS_FAILED
