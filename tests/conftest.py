@@ -18,11 +18,7 @@ LAYERS = ("unit", "inmemory", "process")  # tests/<layer>/: each test is marked 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Mark every test with its layer (its folder), so that nothing goes unmarked; a process test also
-    counts as ``zenoh`` (it may open sessions or spawn roles). A test outside the layers is an error.
-
-    pytest-xdist (``--dist loadgroup``, pyproject.toml): a module's tests run on one worker (its module
-    fixtures are made once), and so do the modules that name one ``xdist_group`` (they share session-cached
-    runs, run_helpers.shared_run)."""
+    counts as ``zenoh`` (it may open sessions or spawn roles). A test outside the layers is an error."""
     for item in items:
         layer = item.path.parent.name
         if layer not in LAYERS:
@@ -30,8 +26,6 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         item.add_marker(layer)
         if layer == "process":
             item.add_marker("zenoh")
-        if item.get_closest_marker("xdist_group") is None:
-            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
 
 
 SESSION_PREFIX = "netsetest-tests-"  # one per session (with pytest-xdist: one per worker), removed at its end

@@ -28,8 +28,9 @@ def recorded_run(case: str, signals: str, seed: int, steps: int, tmp: str) -> tu
 @cache
 def shared_run(case: str, signals: str, seed: int, steps: int | None = None, topology: str = "paper6") -> RunResult:
     """A bundled network's in-memory run (scheduled variant), made once per session (under pytest-xdist: once
-    per worker) and shared by the tests that only read it (test_containment, test_sector, test_fdi ask for the
-    same paper6 runs): a test must never change what it gets; one that checks that runs repeat runs its own."""
+    per worker, so shared between modules that land on the same one) and shared by the tests that only read it
+    (test_containment, test_sector, test_fdi ask for the same paper6 runs): a test must never change what it
+    gets; one that checks that runs repeat runs its own."""
     return run_inmemory(load_topology(ROOT / "topologies" / f"{topology}.toml", case, steps), signals, "scheduled", seed)
 
 

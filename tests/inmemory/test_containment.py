@@ -22,8 +22,6 @@ from netsetest.messages import Truth
 from netsetest.roles.vehicle import Vehicle
 from netsetest.runtime.inmemory import run_inmemory
 
-pytestmark = pytest.mark.xdist_group("paper6-runs")  # one worker: the shared paper6 runs (run_helpers.shared_run) are made once
-
 ROOT = Path(__file__).resolve().parents[2]
 PAPER6 = ROOT / "topologies" / "paper6.toml"
 

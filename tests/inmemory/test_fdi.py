@@ -18,8 +18,6 @@ from netsetest.records.record import load_record
 from netsetest.roles.fdi import FdiTotals, classify
 from netsetest.runtime.inmemory import run_inmemory
 
-pytestmark = pytest.mark.xdist_group("paper6-runs")  # one worker: the shared paper6 runs (run_helpers.shared_run) are made once
-
 
 def test_classify() -> None:
     assert classify(0.01, 0.2) == "detected" and classify(-0.3, -1e-9) == "detected"

@@ -36,8 +36,6 @@ from netsetest.estimator.sector import (
 from netsetest.models.sensor import Sensor
 from netsetest.runtime.inmemory import run_inmemory
 
-pytestmark = pytest.mark.xdist_group("paper6-runs")  # one worker: the shared paper6 runs (run_helpers.shared_run) are made once
-
 ROOT = Path(__file__).resolve().parents[2]
 PAPER6 = ROOT / "topologies" / "paper6.toml"
 SENSOR = Sensor(C=np.array([0.0, 0.14]), Ds=0.61, Dv=0.0122, R=2.0, saturated=True, r_max=0.03, h1=0.8, h2=1.1)
