@@ -12,6 +12,8 @@ messages and records; a malformed one raises :class:`SetFormatError`, so a role 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
 
 import clarabel
 import numpy as np
@@ -158,6 +160,17 @@ class SumSet:
 
     def _ellipsoid_part(self, g: np.ndarray) -> tuple[float, np.ndarray]:
         """max gᵀe over the sliced ellipsoid, by an SOCP: variables e; cone rows as in analysis/exact."""
+        P, A, b, cones = self._ellipsoid_socp
+        sol = clarabel.DefaultSolver(P, -g, A, b, cones, _settings()).solve()
+        if str(sol.status) not in ("Solved", "AlmostSolved"):
+            raise ValueError(f"support of a sliced ellipsoid: solver status {sol.status} (empty set?)")
+        e = np.asarray(sol.x)
+        return float(g @ e), e
+
+    @cached_property
+    def _ellipsoid_socp(self) -> tuple[Any, Any, np.ndarray, list]:
+        """The SOCP of :meth:`_ellipsoid_part` but its objective: (P = 0, A, b, cones), the same for every
+        direction, so made once per set (bounds() asks for six directions; Clarabel copies what it is given)."""
         from scipy import sparse  # here: the SDP nodes import this module and must start without scipy.sparse
 
         s = self.sliced
@@ -176,11 +189,7 @@ class SumSet:
         A = np.vstack([np.array(rows).reshape(-1, n), np.zeros((1, n)), -li])
         b = np.r_[rhs, np.sqrt(el.rho), -li @ el.center]
         cones = [clarabel.NonnegativeConeT(len(rows)), clarabel.SecondOrderConeT(n + 1)]
-        sol = clarabel.DefaultSolver(sparse.csc_matrix((n, n)), -g, sparse.csc_matrix(A), b, cones, _settings()).solve()
-        if str(sol.status) not in ("Solved", "AlmostSolved"):
-            raise ValueError(f"support of a sliced ellipsoid: solver status {sol.status} (empty set?)")
-        e = np.asarray(sol.x)
-        return float(g @ e), e
+        return sparse.csc_matrix((n, n)), sparse.csc_matrix(A), b, cones
 
     def contains(self, point: np.ndarray) -> bool:
         """Whether point = c + G b + M e with ‖b‖∞ ≤ 1 + tol and e in the sliced ellipsoid (an SOCP)."""

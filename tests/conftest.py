@@ -8,6 +8,7 @@ import os
 import shutil
 import tempfile
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
@@ -28,9 +29,12 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker("zenoh")
 
 
+SESSION_PREFIX = "netsetest-tests-"  # one per session (with pytest-xdist: one per worker), removed at its end
+
+
 @pytest.fixture(autouse=True, scope="session")
 def _children_tmpdir() -> Iterator[None]:
-    root = tempfile.mkdtemp(prefix="netsetest-tests-")
+    root = tempfile.mkdtemp(prefix=SESSION_PREFIX)
     previous = os.environ.get("TMPDIR")
     os.environ["TMPDIR"] = root  # read by every child process's tempfile at start
     try:
@@ -41,6 +45,7 @@ def _children_tmpdir() -> Iterator[None]:
         else:
             os.environ["TMPDIR"] = previous
         shutil.rmtree(root, ignore_errors=True)
+    assert not os.path.exists(root), f"the session's temporary directory {root} could not be removed"
 
 
 # ---------------------------------------------------------------- nothing left behind
@@ -51,20 +56,56 @@ _before: set[str] = set()
 
 
 def _ours() -> set[str]:
+    """Our temporary entries in the system's directory; a session's own directory (any session's, or any
+    xdist worker's: each removes its own at its end, checked above) is not one."""
     try:
-        return {n for n in os.listdir(SYSTEM_TMP) if n.startswith(OURS)}
+        return {n for n in os.listdir(SYSTEM_TMP) if n.startswith(OURS) and not n.startswith(SESSION_PREFIX)}
     except OSError:
         return set()
 
 
+def _in_use(names: list[str]) -> set[str]:
+    """Those of ``names`` a live process names on its command line, works in or holds open: another job's
+    (a benchmark running beside the tests), since when this runs every process of the session has ended."""
+    paths = {n: os.path.join(SYSTEM_TMP, n) for n in names}
+    used: set[str] = set()
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        refs = []
+        for what in ("cmdline", "cwd", *(f"fd/{fd}" for fd in _listdir(f"/proc/{pid}/fd"))):
+            try:
+                link = f"/proc/{pid}/{what}"
+                refs.append(Path(link).read_bytes().decode(errors="replace") if what == "cmdline" else os.readlink(link))
+            except OSError:  # gone, or not ours to read
+                pass
+        used.update(n for n, path in paths.items() if any(path in r for r in refs))
+    return used
+
+
+def _listdir(path: str) -> list[str]:
+    try:
+        return os.listdir(path)
+    except OSError:
+        return []
+
+
+def _is_xdist_worker(config: pytest.Config) -> bool:
+    return hasattr(config, "workerinput")  # pytest-xdist: the controller checks once, after every worker ended
+
+
 def pytest_sessionstart(session: pytest.Session) -> None:
-    _before.update(_ours())
+    if not _is_xdist_worker(session.config):
+        _before.update(_ours())
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     """Fail the run if a test left a temporary file or directory of ours (a run's private keys) in the
-    system's temporary directory: every test works in tmp_path or the session's directory."""
-    left = sorted(_ours() - _before - {os.path.basename(os.environ.get("TMPDIR", ""))})
+    system's temporary directory: every test works in tmp_path or the session's directory. Under pytest-xdist
+    the controller checks, after every worker has ended (a worker's own check would see the others' files). An
+    entry a live process still uses is another job's (the machine may be shared), not one left behind."""
+    if _is_xdist_worker(session.config):
+        return
+    left = sorted(_ours() - _before)
+    left = [n for n in left if n not in _in_use(left)] if left else left
     if left:
         session.config.pluginmanager.get_plugin("terminalreporter").write_line(f"tests left behind in {SYSTEM_TMP}: {', '.join(left)}", red=True)
         session.exitstatus = pytest.ExitCode.TESTS_FAILED

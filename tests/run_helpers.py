@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import re
 from functools import cache
+from pathlib import Path
 
 from netsetest.config.schema import Scenario, load_topology
 from netsetest.records.record import Record, load_record, save_record
-from netsetest.runtime.inmemory import run_inmemory
+from netsetest.runtime.inmemory import RunResult, run_inmemory
 
 PAPER6 = "topologies/paper6.toml"
+ROOT = Path(__file__).resolve().parents[1]
+MIXED = {4: "zonotope", 5: "interval", 6: "strip"}  # the mixed network: nodes 1–3 the SDP
 
 
 @cache
@@ -19,3 +23,25 @@ def recorded_run(case: str, signals: str, seed: int, steps: int, tmp: str) -> tu
     path = f"{tmp}/{case}-{signals}-{seed}-{steps}.json"
     save_record(path, res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
     return sc, load_record(path)
+
+
+@cache
+def shared_run(case: str, signals: str, seed: int, steps: int | None = None, topology: str = "paper6") -> RunResult:
+    """A bundled network's in-memory run (scheduled variant), made once per session (under pytest-xdist: once
+    per worker, so shared between modules that land on the same one) and shared by the tests that only read it
+    (test_containment, test_sector, test_fdi ask for the same paper6 runs): a test must never change what it
+    gets; one that checks that runs repeat runs its own."""
+    return run_inmemory(load_topology(ROOT / "topologies" / f"{topology}.toml", case, steps), signals, "scheduled", seed)
+
+
+def mixed_topology(tmp: Path, estimators: dict[int, str] = MIXED) -> Path:
+    """paper6 with a per-node ``estimator`` in its [[nodes]] tables (tests/inmemory/test_mixed_network.py,
+    tests/process/test_zenoh_mixed.py)."""
+    text = (ROOT / "topologies/paper6.toml").read_text()
+    text = text.replace('node_dir = "../nodes"', f'node_dir = "{ROOT / "nodes"}"')
+    for i, name in estimators.items():
+        text, n = re.subn(rf"(\[\[nodes\]\]\nid = {i}\nprofile = \"[^\"]+\")", rf'\1\nestimator = "{name}"', text)
+        assert n == 1
+    path = tmp / "mixed.toml"
+    path.write_text(text)
+    return path

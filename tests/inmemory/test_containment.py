@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from run_helpers import shared_run
 
 from netsetest.bus.base import MemoryBus
 from netsetest.bus import keys
@@ -41,7 +42,7 @@ def check_every_step(res, expect_all_assumptions: bool) -> None:
 
 
 def test_paper_nsnim_contained_every_node_every_step():
-    res = run_inmemory(load_topology(PAPER6, "nsnim"), "paper", "scheduled", seed=0)
+    res = shared_run("nsnim", "paper", 0)  # the paper6 runs: shared with test_fdi, test_sector
     check_every_step(res, expect_all_assumptions=True)
     assert all(r.fallbacks == 0 for r in res.summary.nodes)
     # the bounds are informative, not just valid: the fault interval is much narrower than ±0.3
@@ -50,7 +51,7 @@ def test_paper_nsnim_contained_every_node_every_step():
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_worst_case_signals_nsnim(seed):
-    res = run_inmemory(load_topology(PAPER6, "nsnim"), "worst", "scheduled", seed=seed)
+    res = shared_run("nsnim", "worst", seed)
     check_every_step(res, expect_all_assumptions=True)
     # worst-case signals push the error much closer to the boundary than the paper's cos noise
     assert max(r.max_E for r in res.summary.nodes) > 0.5
@@ -63,7 +64,7 @@ def test_per_rule_variant_worst_case():
 
 def test_paper_saim_run_reports_broken_sector_and_no_estimator_violation():
     """The paper's SAIM settings drive |C̄ x̄| beyond r_max/h1 (docs/design.md §1): the collector says so."""
-    res = run_inmemory(load_topology(PAPER6, "saim"), "paper", "scheduled", seed=0)
+    res = shared_run("saim", "paper", 0)
     assert res.summary.violations_total == 0
     rows = {r.id: r for r in res.summary.nodes}
     assert rows[6].sector_breaks > 0, "sensor 6 should leave the sector region in the paper's SAIM case"

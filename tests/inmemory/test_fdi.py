@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from run_helpers import shared_run
 
 from netsetest.cli.main import main
 from netsetest.config.schema import load_topology
@@ -39,11 +40,10 @@ def test_totals_delay_counts_from_the_true_onset() -> None:
 @pytest.mark.parametrize("case", ["nsnim", "saim"])
 def test_no_false_detection_and_every_fault_detected_on_the_paper_network(case: str) -> None:
     """Seeds 0-4, paper and worst-case signals: no false detection anywhere; the four faulty sensors are
-    detected after their onset, the two healthy ones never."""
-    sc = load_topology("paper6", case=case)
+    detected after their onset, the two healthy ones never. (Runs shared with test_containment and test_sector.)"""
     for seed in range(5):
         for sig in ("paper", "worst"):
-            s = run_inmemory(sc, sig, seed=seed).summary
+            s = shared_run(case, sig, seed).summary
             assert s.violations_total == 0
             for r in s.nodes:
                 assert r.false_detections == 0, (case, sig, seed, r.id)

@@ -16,6 +16,7 @@ from pathlib import Path
 import msgpack
 import numpy as np
 import pytest
+from run_helpers import MIXED, mixed_topology
 
 from netsetest.config.schema import ConfigError, load_topology
 from netsetest.messages import NodeState, decode, encode
@@ -25,20 +26,7 @@ from netsetest.runtime.inmemory import run_inmemory
 from netsetest.sets import Box, Zonotope, set_from_wire, set_to_wire
 
 ROOT = Path(__file__).resolve().parents[2]
-MIXED = {4: "zonotope", 5: "interval", 6: "strip"}
 STEPS = 40
-
-
-def mixed_topology(tmp: Path, estimators: dict[int, str] = MIXED) -> Path:
-    """paper6 with a per-node ``estimator`` in its [[nodes]] tables."""
-    text = (ROOT / "topologies/paper6.toml").read_text()
-    text = text.replace('node_dir = "../nodes"', f'node_dir = "{ROOT / "nodes"}"')
-    for i, name in estimators.items():
-        text, n = re.subn(rf"(\[\[nodes\]\]\nid = {i}\nprofile = \"[^\"]+\")", rf'\1\nestimator = "{name}"', text)
-        assert n == 1
-    path = tmp / "mixed.toml"
-    path.write_text(text)
-    return path
 
 
 @pytest.fixture(scope="module")

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from run_helpers import shared_run
 
 from netsetest.config.schema import load_topology
 from netsetest.estimator import sdp
@@ -157,7 +158,7 @@ def _assert_fully_covered(res, sc) -> None:
 
 def test_paper_saim_is_fully_covered_by_the_guarantee():
     sc = load_topology(PAPER6, "saim")
-    res = run_inmemory(sc, "paper", "scheduled", 0)
+    res = shared_run("saim", "paper", 0)  # the paper6 runs: shared with test_containment, test_fdi
     _assert_fully_covered(res, sc)
     # the paper's fixed sector breaks on this scenario: the derived one replaces an assumption that is false
     assert sum(r.sector_breaks for r in res.summary.nodes) > 0
@@ -166,7 +167,7 @@ def test_paper_saim_is_fully_covered_by_the_guarantee():
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_worst_case_saim_is_fully_covered_by_the_guarantee(seed):
     sc = load_topology(PAPER6, "saim")
-    res = run_inmemory(sc, "worst", "scheduled", seed)
+    res = shared_run("saim", "worst", seed)
     _assert_fully_covered(res, sc)
 
 

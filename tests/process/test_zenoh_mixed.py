@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_mixed_network import MIXED, mixed_topology
+from run_helpers import MIXED, mixed_topology
 from zenoh_helpers import read_json, read_record, run_to_success
 
 from netsetest.config.schema import load_topology
