@@ -257,3 +257,29 @@ def test_a_secured_network_makes_every_role_a_client_of_the_router() -> None:
     z = net.zenoh("node1")
     assert (z.mode, z.connect, z.listen, z.credentials) == ("client", ("tls/127.0.0.1:7999",), (), "/creds")
     assert "mtls" in net.describe()[0] and "--credentials /creds" in net.describe()[1]
+
+
+def test_roles_that_do_not_end_on_end_share_one_grace_period() -> None:
+    """The collector has finished; nodes that never leave are waited for ROLE_GRACE_S in all, not each (an
+    80-node ring whose nodes hung in their Zenoh close held `netsetest run` for 80 × 5 s)."""
+    from netsetest.runtime import launcher
+
+    run = Run()
+    now = [0.0]
+    waited: list[float] = []
+
+    def wait(self: FakeProcess, timeout: float | None = None) -> int:
+        if self.returncode is None:
+            waited.append(timeout or 0.0)
+            now[0] += timeout or 0.0  # a process that does not end takes its whole timeout
+            raise subprocess.TimeoutExpired(self.name, timeout or 0.0)
+        return self.returncode
+
+    run.supervisor.clock = lambda: now[0]
+    for name in run.children.procs:
+        p = run.proc(name)
+        p.wait = wait.__get__(p)  # type: ignore[method-assign]  # this fake's wait advances the fake clock
+    run.channel.receive(encode(RunFinished(summary())))
+    run.script[1] = lambda: run.proc("collector").exit(EXIT_OK)
+    run.supervisor.follow()
+    assert waited and sum(waited) <= launcher.ROLE_GRACE_S + 1e-9, waited
