@@ -47,19 +47,25 @@ from netsetest.bench.topologies import RingVariant
 PY = [sys.executable, "-m", "netsetest.cli.main"]
 
 
+STOP_GRACE_S = 20.0  # SIGTERM first: a launcher stops its roles and removes its run directory (its credentials)
+
+
 def _kill(procs: list[subprocess.Popen]) -> None:
-    """SIGKILL the process groups this module started (each child has its own session)."""
-    for p in procs:
-        if p.poll() is None:
+    """Stop the process groups this module started (each child has its own session): SIGTERM, and SIGKILL
+    what is still alive after STOP_GRACE_S (a SIGKILLed launcher leaves its credentials in /tmp)."""
+    for sig, wait in ((signal.SIGTERM, STOP_GRACE_S), (signal.SIGKILL, 5.0)):
+        live = [p for p in procs if p.poll() is None]
+        for p in live:
             try:
-                os.killpg(p.pid, signal.SIGKILL)
+                os.killpg(p.pid, sig)
             except ProcessLookupError:
                 pass
-    for p in procs:
-        try:
-            p.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            pass
+        deadline = time.monotonic() + wait
+        for p in live:
+            try:
+                p.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                pass
 
 
 def cli_run(
