@@ -18,6 +18,7 @@ from netsetest.bench.network import network_markdown, network_summary_markdown
 from netsetest.bench.plant import plant_markdown, plant_summary_markdown
 from netsetest.bench.run import performance_markdown
 from netsetest.bench.scenario import compare_markdown, exact_markdown, scenario_markdown
+from netsetest.bench.spread import RUNS_DIR, spread_markdown
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,13 @@ PARTS: dict[str, Part] = {
         None,
         performance_markdown,
         "netsetest bench --quick --only performance --json bench/results.json --markdown bench/results.md",
+    ),
+    "spread": Part(
+        "How noisy the benchmark is",
+        "bench/spread.json",
+        None,
+        spread_markdown,
+        f"netsetest bench --spread {RUNS_DIR}/1.json {RUNS_DIR}/2.json {RUNS_DIR}/3.json --json bench/spread.json --markdown bench/spread.md",
     ),
 }
 SECTIONED = ("README.md", "docs/performance.md", "docs/exact.md")  # files with generated sections between markers

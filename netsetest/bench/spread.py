@@ -16,6 +16,8 @@ from pathlib import Path
 from netsetest.bench.run import TARGETS
 
 MIN_RUNS = 2  # a spread needs two runs at least
+NEGLIGIBLE = 1e-9  # a median this close to 0 (a slope of nothing) has no relative spread
+RUNS_DIR = "bench/runs"  # the committed runs: `netsetest bench --quick --only performance --json bench/runs/N.json`
 
 
 class SpreadError(ValueError):
@@ -42,7 +44,7 @@ def spread_figures(paths: list[Path]) -> dict:
         values = [d.get(key) for d in docs]
         measured = [float(v) for v in values if v is not None]
         med = statistics.median(measured) if measured else None
-        rel = (max(measured) - min(measured)) / abs(med) if measured and med else None
+        rel = (max(measured) - min(measured)) / abs(med) if measured and med is not None and abs(med) > NEGLIGIBLE else None
         figures.append(
             {
                 "key": key,
@@ -70,9 +72,11 @@ def spread_markdown(res: dict) -> str:
     """One row per headline figure: each run's value, the median, the spread and the target."""
     runs = res["meta"]["runs"]
     loads = "; ".join(f"{r['date']} (load average {r['load_before']} before)" for r in runs)
+    files = ", ".join(f"`{r['file']}`" for r in runs)
     lines = [
-        f"The same benchmark run {len(runs)} times, one after another: {loads}. Spread = (max − min) / median; a figure "
-        "whose spread is wider than its distance to the target is a range on this shared 2-core machine, not a result.",
+        f"`netsetest bench --quick --only performance` run {len(runs)} times, one after another ({files}): {loads}. "
+        "Spread = (max − min) / median; a figure whose spread is wider than its distance to the target is a range on "
+        "this shared 2-core machine, not a result.",
         "",
         "| figure | " + " | ".join(f"run {i}" for i in range(1, len(runs) + 1)) + " | median | spread | target | met in every run |",
         "|---|" + "---|" * len(runs) + "---|---|---|---|",
@@ -87,12 +91,15 @@ def spread_markdown(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_spread(paths: list[Path], json_path: str | None) -> str:
-    """The spread of ``paths`` as Markdown; its figures written to ``json_path`` when given."""
+def write_spread(paths: list[Path], json_path: str | None, markdown_path: str | None = None) -> str:
+    """The spread of ``paths`` as Markdown; its figures and that Markdown written to the paths given."""
     res = spread_figures(paths)
+    md = spread_markdown(res)
     if json_path:
         Path(json_path).write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")
-    return spread_markdown(res)
+    if markdown_path:
+        Path(markdown_path).write_text(md, encoding="utf-8")
+    return md
 
 
 __all__ = ["SpreadError", "spread_figures", "spread_markdown", "write_spread"]

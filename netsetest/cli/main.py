@@ -193,7 +193,7 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         metavar="FIGURES",
         help="measure nothing: the headline figures of several runs' --json files side by side, their median and spread "
-        "(how noisy the benchmark is); with --json, write them",
+        "(how noisy the benchmark is); with --json / --markdown, write them",
     )
 
     from netsetest.cli import compare, tools
@@ -476,13 +476,14 @@ def _spread(a: argparse.Namespace) -> int:
 
     from netsetest.bench.spread import SpreadError, write_spread
 
-    measuring = [opt for opt, given in (("--quick", a.quick), ("--markdown", a.markdown), ("--only", a.only)) if given]
+    measuring = [opt for opt, given in (("--quick", a.quick), ("--only", a.only)) if given]
     if measuring:
         print(f"netsetest bench: --spread measures nothing; {measuring[0]} does not go with it", file=sys.stderr)
         return EXIT_BAD_INPUT
     checks.output_file(a.json, "--json")
+    checks.output_file(a.markdown, "--markdown")
     try:
-        print(write_spread([Path(p) for p in a.spread], a.json), end="")
+        print(write_spread([Path(p) for p in a.spread], a.json, a.markdown), end="")
     except SpreadError as e:
         print(f"netsetest bench: --spread: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT

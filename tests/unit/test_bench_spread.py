@@ -61,5 +61,5 @@ def test_the_command_writes_json_and_refuses_measuring_options(tmp_path: Path) -
     p = subprocess.run([*cli, "--json", str(out)], capture_output=True, text=True, timeout=60)
     assert p.returncode == 0, p.stderr
     assert json.loads(out.read_text())["figures"][0]["key"] == TARGETS[0][0]
-    p = subprocess.run([*cli, "--quick"], capture_output=True, text=True, timeout=60)
-    assert p.returncode == EXIT_BAD_INPUT and "--spread measures nothing" in p.stderr and "Traceback" not in p.stderr
+    p = subprocess.run([*cli, "--only", "plant"], capture_output=True, text=True, timeout=60)
+    assert p.returncode == EXIT_BAD_INPUT and "--spread measures nothing; --only" in p.stderr and "Traceback" not in p.stderr

@@ -24,7 +24,11 @@ def test_the_committed_doc_is_what_the_committed_figures_make(name: str, rendere
 
 @pytest.mark.parametrize(
     ("name", "parts"),
-    [("README.md", ("scenario", "network-summary", "plant-summary", "performance")), ("docs/performance.md", ("performance",)), ("docs/exact.md", ("exact",))],
+    [
+        ("README.md", ("scenario", "network-summary", "plant-summary", "performance")),
+        ("docs/performance.md", ("performance", "spread")),
+        ("docs/exact.md", ("exact",)),
+    ],
 )
 def test_the_generated_sections_are_there(name: str, parts: tuple[str, ...]) -> None:
     """A deleted marker pair would silently leave a section unchecked."""
