@@ -250,6 +250,27 @@ def _f(v: float | None, spec: str = ".3f") -> str:
     return "—" if v is None else format(v, spec)
 
 
+def _by_case(rows: list[dict]) -> list[tuple[str, list[dict], str]]:
+    """A held-out drive's runs per case, with their cells "covered | contained | violations | misses (all attributed)"."""
+    out = []
+    for case in ("nsnim", "saim"):
+        rs = [r for r in rows if r["case"] == case]
+        if rs:
+            misses = sum(r["evaluated"] - r["contained"] for r in rs)
+            attributed = "yes" if sum(r["misses_attributed"] for r in rs) == misses else "no"
+            judged = (
+                f"{sum(r['covered'] for r in rs)} / {sum(r['evaluated'] for r in rs)} | {sum(r['contained'] for r in rs)} | "
+                f"{sum(r['violations'] for r in rs)} | {misses} ({attributed})"
+            )
+            out.append((case, rs, judged))
+    return out
+
+
+def _mean_ratio(rs: list[dict]) -> str:
+    ratios = [r["fault_ratio_exact"] for r in rs if r["fault_ratio_exact"] is not None]
+    return _f(statistics.mean(ratios) if ratios else None)
+
+
 def plant_markdown(res: dict) -> str:
     """The car section of docs/results.md (netsetest/bench/docs.py), from the benchmark's ``plant`` figures."""
     h, t, cfg = res["held_out"], res["training"], res["config"]
@@ -274,18 +295,11 @@ def plant_markdown(res: dict) -> str:
     ]
     for which in ("declared", "moderate"):
         for label, rows in h[which].items():
-            for case in ("nsnim", "saim"):
-                rs = [r for r in rows if r["case"] == case]
-                if not rs:
-                    continue
-                misses = sum(r["evaluated"] - r["contained"] for r in rs)
-                ratios = [r["fault_ratio_exact"] for r in rs if r["fault_ratio_exact"] is not None]
+            for case, rs, judged in _by_case(rows):
                 lines.append(
                     f"| {label} ({rs[0]['steps']} steps) | {which} | {case} | {len(rs)} | {max(r['e_max_in_bound_norm'] for r in rs):.2f} | "
-                    f"{sum(r['e_outside_steps'] for r in rs)} | {sum(r['covered'] for r in rs)} / {sum(r['evaluated'] for r in rs)} | "
-                    f"{sum(r['contained'] for r in rs)} | {sum(r['violations'] for r in rs)} | {misses} "
-                    f"({'yes' if sum(r['misses_attributed'] for r in rs) == misses else 'no'}) | "
-                    f"{statistics.mean(r['fault_width'] for r in rs):.4f} | {_f(statistics.mean(ratios) if ratios else None)} |"
+                    f"{sum(r['e_outside_steps'] for r in rs)} | {judged} | "
+                    f"{statistics.mean(r['fault_width'] for r in rs):.4f} | {_mean_ratio(rs)} |"
                 )
     causes = t["causes"]
     car, *simpler = causes
@@ -345,18 +359,8 @@ def plant_summary_markdown(res: dict) -> str:
         "|---|---|---|---|---|---|---|",
     ]
     for label, rows in h["declared"].items():
-        for case in ("nsnim", "saim"):
-            rs = [r for r in rows if r["case"] == case]
-            if not rs:
-                continue
-            misses = sum(r["evaluated"] - r["contained"] for r in rs)
-            ratios = [r["fault_ratio_exact"] for r in rs if r["fault_ratio_exact"] is not None]
-            lines.append(
-                f"| {label} | {case} | {sum(r['covered'] for r in rs)} / {sum(r['evaluated'] for r in rs)} | "
-                f"{sum(r['contained'] for r in rs)} | {sum(r['violations'] for r in rs)} | {misses} "
-                f"({'yes' if sum(r['misses_attributed'] for r in rs) == misses else 'no'}) | "
-                f"{_f(statistics.mean(ratios) if ratios else None)} |"
-            )
+        for case, rs, judged in _by_case(rows):
+            lines.append(f"| {label} | {case} | {judged} | {_mean_ratio(rs)} |")
     small = "; ".join(
         f"× {r['scale']:g}: {r['misses']} misses, {r['misses_attributed']} attributed, violations {r['violations']}" for r in res["halved"].values()
     )
