@@ -50,6 +50,9 @@ def healthy_interval(spans: Sequence[Span], need: int) -> Span | None:
     return (lo_hull, hi_hull)
 
 
+HealthAssessment = tuple[Interval | None, bool]  # one step: uᵀx's k-of-N interval (None: unbounded or empty), own fault pinned
+
+
 @dataclass(frozen=True)
 class HealthModel:
     """What a node needs for the k-of-N interval: every sensor, how many must be healthy (N − m), the
@@ -76,7 +79,7 @@ class HealthModel:
         readings: dict[int, tuple[float, float]],
         within: Span | None = None,
         pin: bool = False,
-    ) -> tuple[Interval | None, bool]:
+    ) -> HealthAssessment:
         """(the interval, whether the own fault is pinned) of one step.
 
         The interval: uᵀx lies in it wherever at most m sensors are faulty and the readings' noise bounds
@@ -124,4 +127,4 @@ def _present(spans: list[Span | None]) -> list[Span]:
     return [sp for sp in spans if sp is not None]
 
 
-__all__ = ["HEALTH_KEY", "HealthModel", "Span", "healthy_interval"]
+__all__ = ["HEALTH_KEY", "HealthAssessment", "HealthModel", "Span", "healthy_interval"]

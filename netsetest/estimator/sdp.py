@@ -63,7 +63,7 @@ import numpy as np
 from netsetest.config.schema import Scenario
 from netsetest.estimator.certificate import FactStack, FallbackUnavailable, certify, fallback_shape, publishable
 from netsetest.estimator.conic.closed_form import ClosedFormSolver, clarabel_backend
-from netsetest.estimator.health import HEALTH_KEY, HealthModel
+from netsetest.estimator.health import HEALTH_KEY, HealthAssessment, HealthModel
 from netsetest.estimator.lmi_cvxpy import CvxpySolver
 from netsetest.estimator.objective import BANK_FAULT_WEIGHT, DEFAULT_OBJECTIVE, FAULT_WEIGHT, OBJECTIVES, Objective
 from netsetest.estimator.problem import EtaLayout, OwnUpdate, PatternKey, ProblemSolver, Solution, StepData
@@ -371,7 +371,7 @@ class LocalEstimator:
         facts = [*pat.balls, *([own_fact] if own_fact is not None else [])]
         return StepData(tuple(pi0), ell, tuple(facts), x_pred, innov, Mi, pat.lay, key, sector, own)
 
-    def reading_intervals(self, prev: NodeSet, inp: UpdateInput) -> dict[int, tuple[np.ndarray, Interval]]:
+    def reading_intervals(self, prev: NodeSet, inp: UpdateInput, health: HealthAssessment | None = None) -> dict[int, tuple[np.ndarray, Interval]]:
         """What the step's readings prove, as c̄ (NA,) and c̄ᵀx̄⁺ ∈ [lo, hi], keyed by the reference's id, and
         by :data:`~netsetest.estimator.health.HEALTH_KEY` for the k-of-N interval of every reading (the
         hypotheses pruned by the node's own prediction of uᵀx⁺).
@@ -391,17 +391,19 @@ class LocalEstimator:
             if np.isfinite(iv.lo) and np.isfinite(iv.hi) and iv.hi > iv.lo:
                 out[j] = (np.r_[sensor.C, 0.0], iv)
         if self.health is not None:
-            hull, _ = self.health.assess(self.node_id, (inp.y, inp.gamma), inp.readings, self._health_within(prev, inp))
+            hull, _ = health if health is not None else self._assess_health(prev, inp)
             if hull is not None:
                 out[HEALTH_KEY] = (np.r_[self.health.u, 0.0], hull)
         return out
 
-    def _health_within(self, prev: NodeSet, inp: UpdateInput) -> tuple[float, float]:
-        """uᵀx⁺ over the node's own set through the step: what prunes the k-of-N hypotheses (a majority that
-        agrees only outside it is none)."""
+    def _assess_health(self, prev: NodeSet, inp: UpdateInput) -> HealthAssessment:
+        """The step's k-of-N interval of uᵀx⁺ and whether the own fault is pinned, once per step (both the
+        readings' update and the pin use it).  Hypotheses are pruned by uᵀx⁺ over the node's own set through
+        the step: a majority that agrees only outside it is none."""
+        assert self.health is not None
         a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
         pred = propagated_interval(self._u_sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W, self.uncertainty)
-        return pred.lo, pred.hi
+        return self.health.assess(self.node_id, (inp.y, inp.gamma), inp.readings, (pred.lo, pred.hi), pin=True)
 
     def _reference_innovation(
         self, lay: EtaLayout, pi0: np.ndarray, alpha: np.ndarray, x_pred: np.ndarray, refs: dict[int, tuple[np.ndarray, Interval]]
@@ -576,7 +578,8 @@ class LocalEstimator:
         sector, reading = self._own_range(prev, inp)
         data = self.step_data(prev, inp, sector, reading)
         alpha = np.asarray(inp.alpha, dtype=float)
-        refs = self.reading_intervals(prev, inp)
+        health = self._assess_health(prev, inp) if self.health is not None and inp.readings else None
+        refs = self.reading_intervals(prev, inp, health)
         facts = FactStack.of(data.facts)
         res, solve = self._solve_certify(data, prev.rho, alpha, self._wh, facts)  # the set the node recurs on
         if res is None:
@@ -586,7 +589,8 @@ class LocalEstimator:
         if not (refs and self._refine(res, self.readings_data(prev, inp, sector, reading, refs), prev.rho, alpha)):
             self._bank(res, data, prev.rho, alpha, facts)
         self._size_cut(res, prev.rho)
-        self._health_pin(res, prev, inp)
+        if health is not None and health[1]:
+            self._health_pin(res, prev.rho)
         return res
 
     def _size_cut(self, res: StepResult, rho: float) -> None:
@@ -598,15 +602,13 @@ class LocalEstimator:
             return
         self._cut_fault(res, rho, size)
 
-    def _health_pin(self, res: StepResult, prev: NodeSet, inp: UpdateInput) -> None:
+    def _health_pin(self, res: StepResult, rho: float) -> None:
         """Under ``max_faulty``, where no consistent majority of the step's readings leaves this node's sensor
-        out, its fault is |f⁺| ≤ τ (docs/network.md): the set to publish is cut by that interval, widened to
-        :data:`PIN_FLOOR` (a superset: sound) so that the published ellipsoid stays full-dimensional, and it
-        then rests on every reading (the k-of-N facts do)."""
-        if self.health is None or not inp.readings:
-            return
-        _, pinned = self.health.assess(self.node_id, (inp.y, inp.gamma), inp.readings, self._health_within(prev, inp), pin=True)
-        if pinned and self._cut_fault(res, prev.rho, max(self.health.tolerance, PIN_FLOOR)):
+        out (:meth:`_assess_health`), its fault is |f⁺| ≤ τ (docs/network.md): the set to publish is cut by that
+        interval, widened to :data:`PIN_FLOOR` (a superset: sound) so that the published ellipsoid stays
+        full-dimensional, and it then rests on every reading (the k-of-N facts do)."""
+        assert self.health is not None
+        if self._cut_fault(res, rho, max(self.health.tolerance, PIN_FLOOR)):
             res.published = dataclasses.replace(res.public, reading_keys=res.public.reading_keys | {HEALTH_KEY})
 
     def _cut_fault(self, res: StepResult, rho: float, size: float) -> bool:

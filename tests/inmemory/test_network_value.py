@@ -354,7 +354,7 @@ def test_the_sdp_pins_a_fault_that_every_consistent_majority_needs() -> None:
     pinned: dict[int, int] = {}
     for i, prev, inp in captured:
         plain = sdp.LocalEstimator.for_node(sc, i)
-        plain._health_pin = lambda res, prev, inp: None  # type: ignore[method-assign]  # the same estimator without the pin
+        plain._health_pin = lambda res, rho: None  # type: ignore[method-assign]  # the same estimator without the pin
         with_pin, without = sdp.LocalEstimator.for_node(sc, i).step(prev, inp), plain.step(prev, inp)
         np.testing.assert_array_equal(with_pin.P, without.P)  # the recursion set is the solved one
         if not np.array_equal(with_pin.public.P, without.public.P):
