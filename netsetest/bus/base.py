@@ -50,12 +50,38 @@ def _rank(msg: Message) -> int:
     return step if isinstance(step, int) else NO_STEP
 
 
+class _KeyQueue(deque[Message]):
+    """One key's waiting messages, FIFO, with the farthest step among them kept up to date: a full
+    queue turns a flood of far steps away in O(1) (it is asked once per flood message)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.far = NO_STEP - 1  # the largest rank queued (below every rank while empty)
+
+    def push(self, msg: Message) -> None:
+        self.append(msg)
+        self.far = max(self.far, _rank(msg))
+
+    def pop_first(self) -> Message:
+        msg = self.popleft()
+        if _rank(msg) == self.far:
+            self._refresh()
+        return msg
+
+    def drop_farthest(self) -> None:
+        del self[next(i for i, m in enumerate(self) if _rank(m) == self.far)]
+        self._refresh()
+
+    def _refresh(self) -> None:
+        self.far = max(map(_rank, self), default=NO_STEP - 1)
+
+
 class Inbox:
     """Decoded messages per (key, handler), FIFO per key, bounded; thread-safe (transport threads put)."""
 
     def __init__(self, per_key: int = MAX_PER_KEY, max_keys: int = MAX_KEYS) -> None:
         self.per_key, self.max_keys = per_key, max_keys
-        self._queues: dict[tuple[str, Handler], deque[Message]] = {}  # insertion order = service order
+        self._queues: dict[tuple[str, Handler], _KeyQueue] = {}  # insertion order = service order
         self._size = 0
         self._cv = threading.Condition()
 
@@ -67,16 +93,15 @@ class Inbox:
             if q is None:
                 if len(self._queues) >= self.max_keys:
                     return "inbox-keys"
-                q = self._queues[(key, handler)] = deque()
+                q = self._queues[(key, handler)] = _KeyQueue()
             reason = None
             if len(q) >= self.per_key:
-                far = max(range(len(q)), key=lambda i: _rank(q[i]))
-                if _rank(q[far]) <= rank:
+                if q.far <= rank:
                     return "inbox-full"
-                del q[far]  # a later step than this one's: the role needs it after this one, if at all
+                q.drop_farthest()  # a later step than this one's: the role needs it after this one, if at all
                 self._size -= 1
                 reason = "inbox-evicted"
-            q.append(msg)
+            q.push(msg)
             self._size += 1
             self._cv.notify()
         return reason
@@ -95,7 +120,7 @@ class Inbox:
             out = []
             for kh in list(self._queues)[:most]:
                 q = self._queues[kh]
-                out.append((kh[0], q.popleft(), kh[1]))
+                out.append((kh[0], q.pop_first(), kh[1]))
                 if not q:
                     del self._queues[kh]
             self._size -= len(out)

@@ -43,7 +43,6 @@ if TYPE_CHECKING:  # a node process never loads the vehicle and the collector (m
 READY_PERIOD_S = 0.1
 IDLE_WAIT_S = 1.0  # a started node with nothing due sleeps until a message arrives (or this long)
 REALTIME_SETTLE_S = 0.5  # real time: from "all ready" to step 0, for the start-up's tail of work to drain
-NEIGHBOUR_POLL_S = 0.002  # lockstep, an expected neighbour state not in yet: look in its (lazy) ring this often
 EXIT_STOPPED = 128 + signal.SIGTERM  # a role stopped by SIGTERM/SIGINT
 CRASH_FLUSH_S = 0.2  # --crash-after: time for the last state to leave before SIGKILL
 
@@ -246,7 +245,10 @@ def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
         spec.neighbour_timeout,
         spec.crash_after,
     )
-    node = Node(sc, node_id, bus, run_id, spec.variant, rejoin=spec.rejoin, objective=spec.objective, lazy_neighbours=True)
+    # lockstep waits for its neighbours: their states go through the inbox, whose step-aware bound keeps
+    # the awaited one under a flood of the key (a ring buffer drops the oldest: an insider flooding its own
+    # state key made its neighbours wait out their timeout every step); real time never waits for them
+    node = Node(sc, node_id, bus, run_id, spec.variant, rejoin=spec.rejoin, objective=spec.objective, lazy_neighbours=realtime)
     role = f"node {node_id}"
     barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), node_peers(sc, node_id), lazy=True)
     first_profiled = 0
@@ -280,20 +282,15 @@ def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
 def _node_wait(node: Node, ready_due: float | None, neighbour_timeout: float, reading_wait: float | None, now: float) -> float:
     """How long a node may block for its next message: until its next Ready is due (not started yet; None:
     none is due, :attr:`Barrier.quiet`, and the step-0 input will wake it);
-    lockstep, waiting for a neighbour: :data:`NEIGHBOUR_POLL_S` (neighbour states are lazy, they do not
-    wake the node) or until the neighbour deadline if sooner; real time (``reading_wait``: its budget in
-    s), waiting for a reference's reading: until the budget is spent (a reading wakes it); else
-    :data:`IDLE_WAIT_S`.  Event-driven
-    otherwise: a hundred idle nodes polling every few ms would keep two cores busy waking up.
-
-    Neighbour states are lazy in both clocks: the vehicle sends input k+1 only after it heard every
-    state of step k, which the neighbours sent at the same moment on a path no longer than the
-    vehicle's, so they are almost always in when the input wakes the node; polling is the rare case."""
+    lockstep, waiting for a neighbour: until the neighbour deadline (its state wakes the node); real time
+    (``reading_wait``: its budget in s), waiting for a reference's reading: until the budget is spent (a
+    reading wakes it); else :data:`IDLE_WAIT_S`.  Event-driven: a hundred idle nodes polling every few ms
+    would keep two cores busy waking up.  (Real-time neighbour states are lazy and never waited for.)"""
     if node.k < 0:
         return IDLE_WAIT_S if ready_due is None else max(0.0, ready_due - now)
     if node.waiting_since is not None:
         if reading_wait is None:
-            return max(0.0, min(node.waiting_since + neighbour_timeout - now, NEIGHBOUR_POLL_S))
+            return max(0.0, node.waiting_since + neighbour_timeout - now)
         return max(0.0, node.waiting_since + reading_wait - now)
     return IDLE_WAIT_S
 

@@ -14,7 +14,6 @@ from netsetest.bus import keys
 from netsetest.messages import Ready
 from netsetest.runtime.processes import (
     IDLE_WAIT_S,
-    NEIGHBOUR_POLL_S,
     READY_PERIOD_S,
     ROLE_ENV,
     Barrier,
@@ -59,8 +58,8 @@ def test_node_blocks_until_something_is_due():
     assert _node_wait(node, ready_due=None, neighbour_timeout=5.0, reading_wait=None, now=10.5) == IDLE_WAIT_S  # quiet: input 0 wakes it
     node.k = 2
     assert _node_wait(node, 0.0, 5.0, None, now=100.0) == IDLE_WAIT_S  # started, nothing due: sleep on the queue
-    node.waiting_since = 98.0  # lockstep, waiting for neighbours: poll their lazy rings, never past the deadline
-    assert _node_wait(node, 0.0, 5.0, None, now=100.0) == NEIGHBOUR_POLL_S
+    node.waiting_since = 98.0  # lockstep, waiting for neighbours: their states wake it, never past the deadline
+    assert _node_wait(node, 0.0, 5.0, None, now=100.0) == pytest.approx(3.0)
     assert _node_wait(node, 0.0, 5.0, None, now=102.9995) == pytest.approx(0.0005)
     assert _node_wait(node, 0.0, 5.0, None, now=104.0) == 0.0
     # real time waits only for a reference's reading, within its budget (a reading wakes it)

@@ -11,11 +11,12 @@ import threading
 import time
 from pathlib import Path
 
+import msgspec
 import pytest
 
 from netsetest.bus.base import MAX_PER_KEY, MAX_ROUNDS
 from netsetest.bus.zenoh_bus import ZenohBus
-from netsetest.messages import End, Message
+from netsetest.messages import End, Message, NodeState
 from netsetest.records.record import load_record
 from zenoh_helpers import PAPER6, ROOT, cli, free_ports
 
@@ -102,6 +103,37 @@ def test_flood_on_a_lazy_key_is_bounded_and_delays_no_other_key(pair) -> None:
     lazy = [s for key, s in got if key == LAZY]
     assert len(lazy) <= 2 * MAX_PER_KEY  # the ring (oldest dropped) and the inbox hold at most this
     assert lazy == sorted(lazy) and lazy[-1] == flood - 1  # in order, the newest kept
+
+
+def test_a_flood_of_far_steps_loses_the_awaited_state_from_a_ring_not_from_the_inbox() -> None:
+    """Why a lockstep node hears its neighbours through the inbox (runtime/processes.py, run_node): an
+    insider flooding its own state key with far steps pushes its genuine state out of a lazy ring (the
+    oldest goes), and its neighbours waited out their timeout every step; the inbox keeps an earlier
+    step over the flood's."""
+    p_rx, p_tx = free_ports(2)
+    rx = ZenohBus("peer", listen=[f"tcp/127.0.0.1:{p_rx}"], connect=[f"tcp/127.0.0.1:{p_tx}"])
+    tx = ZenohBus("peer", listen=[f"tcp/127.0.0.1:{p_tx}"], connect=[f"tcp/127.0.0.1:{p_rx}"])
+    got: dict[str, list[int]] = {LAZY: [], WAKE: []}
+    try:
+        rx.subscribe(LAZY, lambda key, msg: got[key].append(msg.step), lazy=True)
+        rx.subscribe(WAKE, lambda key, msg: got[key].append(msg.step))
+        time.sleep(0.5)
+        far = NodeState(step=10_000, node=2, xhat=[0.0] * 3, P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
+        for key in (LAZY, WAKE):
+            for _ in range(4 * MAX_PER_KEY):
+                tx.publish(key, far)
+            tx.publish(key, msgspec.structs.replace(far, step=7))  # the state a neighbour waits for, amid the flood
+            for _ in range(4 * MAX_PER_KEY):
+                tx.publish(key, far)
+        time.sleep(1.0)  # everything has arrived before the role looks
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 2.0:
+            rx.pump(timeout=0.05)
+    finally:
+        rx.close()
+        tx.close()
+    assert 7 in got[WAKE]  # the inbox: the far steps were turned away, step 7 kept
+    assert 7 not in got[LAZY] and len(got[LAZY]) <= MAX_PER_KEY  # the ring kept the newest copies only
 
 
 def test_lazy_subscription_needs_an_exact_key(pair) -> None:
