@@ -9,7 +9,7 @@ the first error).
 Physical ranges.  Every magnitude a node's estimator works with is bounded so that the estimator, its
 certificate and its guaranteed fallback ellipsoid (:func:`netsetest.estimator.certificate.fallback_shape`) stay
 in floating-point range: a profile outside them is rejected at load (exit 2) rather than crashing a node
-mid-run.  The limits (the ``*_MIN``/``*_MAX`` constants below, documented in README.md) are generous for
+mid-run.  The limits (the ``*_MIN``/``*_MAX`` constants below, documented in docs/configuration.md) are generous for
 a yaw-rate sensor — gains, offsets and signals in rad, rad/s and the sensor's unit are O(1) — and the
 extreme-profile sweep (tests/inmemory/test_estimator_edges.py) runs the network at their corners.
 """
