@@ -30,6 +30,7 @@ Buffers are bounded: at most ``MAX_AHEAD`` steps of inputs and of neighbour stat
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 from typing import Any
 from collections import Counter
 
@@ -73,6 +74,22 @@ def enclosing_ellipsoid(s: base.GuaranteedSet, rho: float) -> tuple[np.ndarray, 
     c = (lo + hi) / 2
     h = np.maximum((hi - lo) / 2 * (1 + BOX_WIDEN), MIN_HALF_WIDTH * np.maximum(1.0, np.abs(c)))
     return c, np.diag(NA * h**2 / rho)
+
+
+@dataclass(frozen=True)
+class Publication:
+    """What a node publishes for one step: ``res`` (kept as its own set) and what its state message says
+    about how it was made."""
+
+    inp: NodeInput
+    status: NodeStatus
+    res: StepResult
+    used: list[int] = field(default_factory=list)  # neighbours whose states the step used
+    missing: list[int] = field(default_factory=list)  # expected neighbours it went on without
+    inputs: list[tuple[int, str]] = field(default_factory=list)  # (node, digest) of every state copy used
+    wire_set: dict | None = None  # a set estimator's own set, on the wire
+    readings: list[tuple[int, float, float]] = field(default_factory=list)  # (node, lo, hi) of the step
+    health: bool = False  # the k-of-N health assumption was applied
 
 
 class Node:
@@ -185,7 +202,7 @@ class Node:
             est.forget_warm_starts()  # the readings' solver would start the run from this made-up gain
         inp = NodeInput(step=1, node=self.id, y=y, gamma=gamma, u_prev=u, vx_prev=vx, expect_from=self.others)
         decode(encode(inp))
-        decode(encode(self._state_message(inp, res.status, res, used=self.others, missing=[], inputs=[])))
+        decode(encode(self._state_message(Publication(inp, res.status, res, used=self.others))))
         for j in self.others:  # the checks every neighbour state of step 1 goes through (results unused)
             nb = neigh[j]
             innovation_possible(self.sensors[j], nb.xhat, nb.P, nb.rho, nb.gamma, nb.sector, nb.innov)
@@ -422,7 +439,7 @@ class Node:
         if inp.step == 0:
             res = self.estimator.first(NodeSet(self.xhat, self.P, self.rho), inp.y, inp.gamma)
             status: NodeStatus = "init" if res.status == "ok" else "init-prior"
-            self._publish(inp, status, res, used=[], missing=[], inputs=[])
+            self._publish(Publication(inp, status, res))
             return True
         have = self.inbox.get(inp.step, {})
         if not have:
@@ -430,7 +447,7 @@ class Node:
         xhat, P = rejoin_ellipsoid(self.cfg.sensor, inp.y, inp.gamma, self.rho, list(have.values()))
         sector = derive_sector(self.cfg.sensor, FaultBound(), measurement_interval(self.cfg.sensor, inp.y, inp.gamma), None)
         res = StepResult(xhat, P, "ok", float("nan"), 0.0, "rejoin", sector=sector)
-        self._publish(inp, "rejoin", res, used=sorted(have), missing=[], inputs=self._inputs(inp.step, sorted(have), own=False))
+        self._publish(Publication(inp, "rejoin", res, used=sorted(have), inputs=self._inputs(inp.step, sorted(have), own=False)))
         return True
 
     def _update(self, inp: NodeInput) -> None:
@@ -453,14 +470,16 @@ class Node:
             PROFILE.add("solve", t)
         used = sorted(j for j in neigh if j != self.id)
         self._publish(
-            inp,
-            res.status,
-            res,
-            used=used,
-            missing=self.missing(),
-            inputs=self._inputs(self.k, used, own=True),
-            readings=[(j, *readings[j]) for j in refs],
-            health=health,
+            Publication(
+                inp,
+                res.status,
+                res,
+                used=used,
+                missing=self.missing(),
+                inputs=self._inputs(self.k, used, own=True),
+                readings=[(j, *readings[j]) for j in refs],
+                health=health,
+            )
         )
 
     def _inputs(self, step: int, used: list[int], own: bool) -> list[tuple[int, str]]:
@@ -498,27 +517,17 @@ class Node:
         res = StepResult(xhat, P, "ok", float("nan"), solve_ms, status, sector=sector)
         used_readings = [(j, *readings[j]) for j in sorted(readings)] if status == "ok" else []  # "fallback": the last set
         health = bool(used_readings) and self.sc.health_declared
-        self._publish(inp, status, res, used=[], missing=self.missing(), inputs=inputs, wire_set=set_to_wire(s), readings=used_readings, health=health)
+        self._publish(Publication(inp, status, res, missing=self.missing(), inputs=inputs, wire_set=set_to_wire(s), readings=used_readings, health=health))
 
-    def _publish(
-        self,
-        inp: NodeInput,
-        status: NodeStatus,
-        res: StepResult,
-        used: list[int],
-        missing: list[int],
-        inputs: list[tuple[int, str]],
-        wire_set: dict | None = None,
-        readings: list[tuple[int, float, float]] | None = None,
-        health: bool = False,
-    ) -> None:
-        """Keep ``res`` as the node's own set (its next step starts from it) and publish ``res.public``."""
+    def _publish(self, pub: Publication) -> None:
+        """Keep ``pub.res`` as the node's own set (its next step starts from it) and publish ``res.public``."""
+        inp, res = pub.inp, pub.res
         self.xhat, self.P = res.xhat, res.P
         sector = res.sector
         cbar = self.cfg.sensor.Cbar
         self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, float(inp.y - cbar @ self.xhat), sector)
         t = PROFILE.now() if PROFILE is not None else 0
-        msg = self._state_message(inp, status, res, used, missing, inputs, wire_set, readings or [], health)
+        msg = self._state_message(pub)
         self.own_digest = state_digest(msg)
         if PROFILE is not None:
             PROFILE.add("build", t)
@@ -531,19 +540,9 @@ class Node:
         self.waiting_since, self.give_up = None, False
         self.bus.publish(keys.node_state(self.run, self.id), msg)
 
-    def _state_message(
-        self,
-        inp: NodeInput,
-        status: NodeStatus,
-        res: StepResult,
-        used: list[int],
-        missing: list[int],
-        inputs: list[tuple[int, str]],
-        wire_set: dict | None = None,
-        readings: list[tuple[int, float, float]] | None = None,
-        health: bool = False,
-    ) -> NodeState:
-        """The state message of ``res.public`` for the step of ``inp`` (validated)."""
+    def _state_message(self, p: Publication) -> NodeState:
+        """The state message of ``p.res.public`` for the step of ``p.inp`` (validated)."""
+        inp, res = p.inp, p.res
         pub, sector = res.public, res.sector
         innov = float(inp.y - self.cfg.sensor.Cbar @ pub.xhat)
         rho_cert = pub.rho_cert if np.isfinite(pub.rho_cert) else None
@@ -556,20 +555,20 @@ class Node:
             rho=self.rho,
             gamma=inp.gamma,
             innov=innov,
-            status=status,
+            status=p.status,
             rho_cert=rho_cert,
             solve_ms=res.solve_ms,
-            used=used,
-            missing=missing,
+            used=p.used,
+            missing=p.missing,
             late=inp.deadline is not None and time.time() > inp.deadline,
             dropped=sum(drops.values()),
             drops=drops,
             sector=(sector.h1, sector.h) if sector is not None else None,
             sector_basis=sector.basis if sector is not None else "none",
-            set=wire_set,
-            inputs=inputs,
-            readings=readings or [],
-            health=health,
+            set=p.wire_set,
+            inputs=p.inputs,
+            readings=p.readings,
+            health=p.health,
             **self._own_set(res),  # type: ignore[arg-type]  # own_xhat/own_P only: mypy cannot tell the keys of a dict
         )
 
