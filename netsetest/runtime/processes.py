@@ -34,7 +34,7 @@ from netsetest.records.meta import RunMeta
 from netsetest.roles.node import Node
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION, exit_code, log, record_sink, write_summary
 from netsetest.runtime.rolespec import CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
-from netsetest.runtime.timeouts import READING_WAIT
+from netsetest.runtime.timeouts import READING_POLL, READING_WAIT
 
 if TYPE_CHECKING:  # a node process never loads the vehicle and the collector (memory: docs/performance-history.md)
     from netsetest.records.summary import RunSummary
@@ -245,19 +245,22 @@ def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
         spec.neighbour_timeout,
         spec.crash_after,
     )
-    # lockstep waits for its neighbours: their states go through the inbox, whose step-aware bound keeps
-    # the awaited one under a flood of the key (a ring buffer drops the oldest: an insider flooding its own
-    # state key made its neighbours wait out their timeout every step); real time never waits for them
-    node = Node(sc, node_id, bus, run_id, spec.variant, rejoin=spec.rejoin, objective=spec.objective, lazy_neighbours=realtime)
+    # lockstep waits for its neighbours and readings: they go through the inbox, whose step-aware bound
+    # keeps the awaited one under a flood of the key (a ring buffer drops the oldest: an insider flooding
+    # its own state key made its neighbours wait out their timeout every step).  Real time never waits for
+    # a neighbour and waits for the readings within a budget: both lazy, so the N readings of a step under
+    # max_faulty cost the node a few polls, not N callbacks and wake-ups
+    node = Node(sc, node_id, bus, run_id, spec.variant, rejoin=spec.rejoin, objective=spec.objective, lazy_neighbours=realtime, lazy_readings=realtime)
     role = f"node {node_id}"
     barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), node_peers(sc, node_id), lazy=True)
     first_profiled = 0
+    reading_wait = (READING_WAIT * sc.tau_s, READING_POLL * sc.tau_s) if realtime else None  # budget, poll period
     barrier.tick(time.monotonic())  # announce ourselves first: the others start meanwhile
     node.warm_up()  # before we can report seen_all, so before the run can start
     while not node.ended:
         if node.k < 0:
             barrier.tick(time.monotonic())  # until started
-        bus.pump(timeout=_node_wait(node, barrier.next_due(), neighbour_timeout, READING_WAIT * sc.tau_s if realtime else None, time.monotonic()))
+        bus.pump(timeout=_node_wait(node, barrier.next_due(), neighbour_timeout, reading_wait, time.monotonic()))
         while True:
             now = time.monotonic()
             if realtime:  # step with whatever neighbours have arrived; the readings of the step are worth a short wait
@@ -279,19 +282,20 @@ def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
     return 0
 
 
-def _node_wait(node: Node, ready_due: float | None, neighbour_timeout: float, reading_wait: float | None, now: float) -> float:
+def _node_wait(node: Node, ready_due: float | None, neighbour_timeout: float, reading_wait: tuple[float, float] | None, now: float) -> float:
     """How long a node may block for its next message: until its next Ready is due (not started yet; None:
     none is due, :attr:`Barrier.quiet`, and the step-0 input will wake it);
     lockstep, waiting for a neighbour: until the neighbour deadline (its state wakes the node); real time
-    (``reading_wait``: its budget in s), waiting for a reference's reading: until the budget is spent (a
-    reading wakes it); else :data:`IDLE_WAIT_S`.  Event-driven: a hundred idle nodes polling every few ms
-    would keep two cores busy waking up.  (Real-time neighbour states are lazy and never waited for.)"""
+    (``reading_wait``: the budget and the poll period in s), waiting for a reading: the poll period (readings
+    are lazy) or until the budget is spent if sooner; else :data:`IDLE_WAIT_S`.  Event-driven otherwise: a
+    hundred idle nodes polling every few ms would keep two cores busy waking up."""
     if node.k < 0:
         return IDLE_WAIT_S if ready_due is None else max(0.0, ready_due - now)
     if node.waiting_since is not None:
         if reading_wait is None:
             return max(0.0, node.waiting_since + neighbour_timeout - now)
-        return max(0.0, node.waiting_since + reading_wait - now)
+        budget, poll = reading_wait
+        return max(0.0, min(node.waiting_since + budget - now, poll))
     return IDLE_WAIT_S
 
 

@@ -62,9 +62,10 @@ def test_node_blocks_until_something_is_due():
     assert _node_wait(node, 0.0, 5.0, None, now=100.0) == pytest.approx(3.0)
     assert _node_wait(node, 0.0, 5.0, None, now=102.9995) == pytest.approx(0.0005)
     assert _node_wait(node, 0.0, 5.0, None, now=104.0) == 0.0
-    # real time waits only for a reference's reading, within its budget (a reading wakes it)
-    assert _node_wait(node, 0.0, 5.0, 2.5, now=100.0) == pytest.approx(0.5)
-    assert _node_wait(node, 0.0, 5.0, 2.5, now=101.0) == 0.0
+    # real time waits only for the readings, within its budget, looking for them (lazy) every poll period
+    assert _node_wait(node, 0.0, 5.0, (2.5, 0.2), now=100.0) == pytest.approx(0.2)
+    assert _node_wait(node, 0.0, 5.0, (2.5, 0.2), now=100.4) == pytest.approx(0.1)
+    assert _node_wait(node, 0.0, 5.0, (2.5, 0.2), now=101.0) == 0.0
 
 
 def test_a_node_listens_to_its_peers_ready_only():
