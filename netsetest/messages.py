@@ -31,7 +31,7 @@ except ImportError:  # another interpreter
 from msgspec import Meta, Struct, field
 
 from netsetest.models.sensor import NA
-from netsetest.sets import set_from_wire
+from netsetest.sets import ellipsoid_bounds, set_from_wire
 from netsetest.validation import FINITE_BOUND_TEXT, FLOAT_MAX, Finite, Positive, split_error
 
 SCHEMA_VERSION: Final = 1
@@ -174,8 +174,14 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     # them against the truth and puts their noise and zero-fault declarations into the step's cone
     readings: Annotated[list[tuple[NodeId, FiniteF, Gamma]], Meta(max_length=MAX_NODES)] = []
     health: bool = False  # the published set used the k-of-N interval of the step's readings and its own ([network] max_faulty)
+    # the SDP's published set is the ellipsoid ∩ {lo ≤ f_i ≤ hi} where a step's fault interval rests on a
+    # declared bound (|f| ≤ F: sector_basis "fault-bound"; the k-of-N pin: health): no ellipsoid can end
+    # at the flat face of that slab, so the bound is sent beside it.  Neighbours use the ellipsoid alone.
+    fault_range: Vec2 | None = None
 
     def __post_init__(self) -> None:
+        if self.fault_range is not None and not self.fault_range[0] <= self.fault_range[1]:
+            raise ValueError(f"fault_range: lo > hi ({self.fault_range})")
         if self.set is not None:
             set_from_wire(self.set, NA)  # SetFormatError is a ValueError: a malformed set fails decode()
         problem = spd_problem(self.P)
@@ -197,6 +203,13 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
 
     def P_matrix(self) -> np.ndarray:
         return np.asarray(self.P, dtype=float).reshape(3, 3)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bounds (3,) of the published set over [β, r, f_i]: a set estimator's own set's,
+        else the ellipsoid's x̂ ∓ √(ρ P_jj), the fault's within ``fault_range``."""
+        if self.set is not None:
+            return set_from_wire(self.set, NA).bounds()
+        return ellipsoid_bounds(np.asarray(self.xhat, dtype=float), np.diag(self.P_matrix()), self.rho, self.fault_range)
 
 
 def state_digest(st: NodeState) -> str:

@@ -11,6 +11,7 @@ messages and records; a malformed one raises :class:`SetFormatError`, so a role 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -229,6 +230,16 @@ class SumSet:
 # ---------------------------------------------------------------- wire form
 
 MAX_GENERATORS = 1024  # a published zonotope with more generators is refused (bounded message size)
+
+
+def ellipsoid_bounds(xhat: np.ndarray, p_diag: np.ndarray, rho: float, last_range: Sequence[float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per-coordinate bounds x̂ ∓ √(ρ P_jj) of {x : (x − x̂)ᵀP⁻¹(x − x̂) ≤ ρ}, the last coordinate's within
+    ``last_range`` (lo, hi) where the set is the ellipsoid intersected with that slab."""
+    half = np.sqrt(rho * p_diag)
+    lo, hi = xhat - half, xhat + half
+    if last_range is not None:
+        lo[-1], hi[-1] = max(lo[-1], last_range[0]), min(hi[-1], last_range[1])
+    return lo, hi
 
 
 class SetFormatError(ValueError):

@@ -145,6 +145,7 @@ class StepResult:
     sector: Sector | None = None  # the own sensor's sector of this step (None: no saturation modelled)
     published: StepResult | None = None  # objective ``bank`` or readings: the set to publish (None: this one)
     reading_keys: frozenset[int] = frozenset()  # the readings this set used (keys of LocalEstimator.reading_intervals)
+    fault_range: tuple[float, float] | None = None  # the set is the ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (a declared bound's cut)
 
     @property
     def public(self) -> StepResult:
@@ -612,15 +613,21 @@ class LocalEstimator:
             res.published = dataclasses.replace(res.public, reading_keys=res.public.reading_keys | {HEALTH_KEY})
 
     def _cut_fault(self, res: StepResult, rho: float, size: float) -> bool:
-        """Cut the set to publish by |f⁺| ≤ ``size`` (:func:`~netsetest.estimator.slab.cut`, certified); whether it did.
-        The node recurs on ``res`` as solved."""
+        """Cut the set to publish by |f⁺| ≤ ``size`` (:func:`~netsetest.estimator.slab.cut`, certified) and publish
+        it as that ellipsoid ∩ {|f⁺| ≤ size} (NodeState.fault_range: no ellipsoid ends at the slab's flat face);
+        whether it did.  The node recurs on ``res`` as solved."""
         pub = res.public
+        half = float(np.sqrt(rho * pub.P[NA - 1, NA - 1]))
+        f_lo, f_hi = float(pub.xhat[NA - 1]) - half, float(pub.xhat[NA - 1]) + half
+        lo, hi = (-size, size) if pub.fault_range is None else (max(-size, pub.fault_range[0]), min(size, pub.fault_range[1]))
+        if not (lo > f_lo or hi < f_hi) or max(lo, f_lo) > min(hi, f_hi):
+            return False  # no cut (an empty one means the assumptions broke: the step's set stays as certified)
         wh = self._wh_pub if self._wh_pub is not None else self._wh
-        out = cut(pub.xhat, pub.P, rho, NA - 1, -size, size, None if wh is None else wh**2)
-        if out is None:
-            return False
-        # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
-        res.published = dataclasses.replace(pub, xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None)
+        out = cut(pub.xhat, pub.P, rho, NA - 1, lo, hi, None if wh is None else wh**2)
+        if out is None:  # the ellipsoid gains nothing; the slab still bounds the fault
+            res.published = dataclasses.replace(pub, published=None, fault_range=(lo, hi))
+        else:  # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
+            res.published = dataclasses.replace(pub, xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None, fault_range=(lo, hi))
         return True
 
     def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> bool:

@@ -7,7 +7,7 @@ Channels (message encoding ``json``, schema encoding ``jsonschema``), log time =
                          assumption flags, lost links, alive nodes)
     /node/<i>/input      per step: what node i measured (y, y without fault, γ) and the vehicle's u, Vx
     /node/<i>/state      per published step: the record's node entry (x̂, P, ρ, status, sector, E,
-                         contained, assumptions_ok, contested, …) plus the bounds x̂ ∓ √(ρ P_jj) of β, r and f and the time t
+                         contained, assumptions_ok, contested, …) plus the bounds of β, r and f (a set estimator's own; else x̂ ∓ √(ρ P_jj), f within the fault range) and the time t
     /node/<i>/drops      per published step: neighbours used, expected but missing, late (real time)
     /run/verdict         once, at the last step: the summary (violations, misses, per-node table)
 
@@ -25,6 +25,7 @@ import struct
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
+import numpy as np
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader
 from mcap.writer import CompressionType, Writer
@@ -32,6 +33,7 @@ from mcap.writer import CompressionType, Writer
 from netsetest.records.files import open_locked
 from netsetest.records.meta import RunMeta
 from netsetest.records.summary import RunSummary
+from netsetest.sets import ellipsoid_bounds
 
 if TYPE_CHECKING:
     from netsetest.records.record import Record
@@ -298,10 +300,13 @@ class McapRecordWriter:
     def state(self, node: int, entry: dict) -> None:
         t, ns = self._time(int(entry["step"]))
         msg = {**entry, "t": t}
-        P, rho = entry["P"], entry["rho"]
+        if "bounds" in entry:  # a set estimator's own set
+            lo, hi = np.asarray(entry["bounds"], dtype=float).T
+        else:  # the ellipsoid, the fault within the step's fault range
+            P = np.asarray(entry["P"], dtype=float).reshape(3, 3)
+            lo, hi = ellipsoid_bounds(np.asarray(entry["xhat"], dtype=float), np.diag(P), entry["rho"], entry.get("fault_range"))
         for name, j in COMPONENTS:
-            half = math.sqrt(rho * P[4 * j])  # P is row-major 3×3: P_jj at 4j
-            msg[f"{name}_lower"], msg[f"{name}_upper"] = entry["xhat"][j] - half, entry["xhat"][j] + half
+            msg[f"{name}_lower"], msg[f"{name}_upper"] = float(lo[j]), float(hi[j])
         self._write(state_topic(node), ns, msg)
         missing = list(entry.get("missing", []))
         self._write(

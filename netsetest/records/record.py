@@ -48,6 +48,7 @@ from typing import IO, Literal, Protocol, cast, get_args
 import numpy as np
 
 from netsetest.extras import require
+from netsetest.models.sensor import NA
 from netsetest.records.errors import RecordError
 from netsetest.records.files import open_locked
 from netsetest.records.meta import RunMeta
@@ -203,6 +204,7 @@ class NodeTrack:
     set_bounds: np.ndarray | None = None  # (K, 3, 2) a set estimator's published per-coordinate bounds
     judged: np.ndarray | None = None  # (K,) bool: the collector judged the step (None: all were, older records)
     fdi: list[str | None] | None = None  # (K,) detected | healthy | undecided (docs/fdi.md; None: older records)
+    fault_range: np.ndarray | None = None  # (K, 2) the SDP's published fault range (±inf where none; None: no step had one)
 
     def was_judged(self, n: int) -> bool:
         return bool(self.judged[n]) if self.judged is not None else True
@@ -213,7 +215,10 @@ class NodeTrack:
         if self.set_bounds is not None:
             return self.set_bounds[:, index, 0].copy(), self.set_bounds[:, index, 1].copy()
         half = np.sqrt(self.rho * self.P[:, index, index])
-        return self.xhat[:, index] - half, self.xhat[:, index] + half
+        lo, hi = self.xhat[:, index] - half, self.xhat[:, index] + half
+        if index == NA - 1 and self.fault_range is not None:  # the ellipsoid ∩ the step's fault range
+            lo, hi = np.maximum(lo, self.fault_range[:, 0]), np.minimum(hi, self.fault_range[:, 1])
+        return lo, hi
 
 
 @dataclass
@@ -443,6 +448,16 @@ def _set_bounds(entries: list[dict]) -> np.ndarray | None:
     return b
 
 
+def _fault_ranges(entries: list[dict]) -> np.ndarray | None:
+    """(K, 2) of the entries' ``fault_range`` (±inf where an entry has none), None if none has one."""
+    if not any("fault_range" in e for e in entries):
+        return None
+    r = np.array([e.get("fault_range", (-np.inf, np.inf)) for e in entries], dtype=float)
+    if r.shape != (len(entries), 2):
+        raise ValueError(f"fault_range: expected [lo, hi] per entry, got shape {r.shape}")
+    return r
+
+
 FdiStatus = Literal["detected", "healthy", "undecided"]  # a node-step's fault detection (roles/fdi.py, docs/fdi.md)
 FDI_VALUES: tuple[FdiStatus, ...] = get_args(FdiStatus)
 
@@ -481,6 +496,7 @@ def record_from_parts(
             # records before "judged" wrote contained: true on unjudged rows too; say where they could not be
             judged=np.array([e.get("judged", e.get("E") is not None and not e.get("contested", False)) for e in entries], dtype=bool),
             fdi=[_fdi(e.get("fdi")) for e in entries],
+            fault_range=_fault_ranges(entries),
         )
     for t in truth:
         if not isinstance(t, dict) or not isinstance(t.get("step"), int):

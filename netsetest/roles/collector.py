@@ -102,13 +102,10 @@ class NodeTotals:
     solve: array = field(default_factory=lambda: array("d"))  # 8 bytes per step: the median needs them
 
 
-def _fault_interval(st: NodeState, v: NodeVerdict) -> tuple[float, float]:
-    """The published fault interval: a set estimator's own bounds, else f̂ ± √(ρ P₃₃) of the ellipsoid."""
-    b = v.containment.bounds if v.containment is not None else None
-    if b is not None:
-        return float(b[2, 0]), float(b[2, 1])
-    half = float(np.sqrt(st.rho * st.P_matrix()[2, 2]))
-    return float(st.xhat[2]) - half, float(st.xhat[2]) + half
+def _fault_interval(st: NodeState) -> tuple[float, float]:
+    """The published fault interval (NodeState.bounds: a set estimator's own, else the ellipsoid's within its fault range)."""
+    lo, hi = st.bounds()
+    return float(lo[2]), float(hi[2])
 
 
 def _state_entry(st: NodeState, v: NodeVerdict, contested: bool) -> dict:
@@ -139,7 +136,8 @@ def _state_entry(st: NodeState, v: NodeVerdict, contested: bool) -> dict:
         "contested": contested,
         "sector": list(st.sector) if st.sector is not None else None,
         "sector_basis": st.sector_basis,
-        **({"bounds": c.bounds.tolist()} if c is not None and c.bounds is not None else {}),
+        **({"bounds": c.bounds.tolist()} if c is not None and c.bounds is not None and st.set is not None else {}),
+        **({"fault_range": list(st.fault_range)} if st.fault_range is not None else {}),
     }
 
 
@@ -388,7 +386,7 @@ class Collector:
             t.contested += i in contested
             t.sectors_assumed += st.sector_basis == "assumed"
             t.sector_failures += self.judge.sector_failed(i, st, tr, v.cone.ok and i not in contested)
-            interval = _fault_interval(st, v)
+            interval = _fault_interval(st)
             fdi = classify(*interval, self.sc.fault_tolerance)
             if self.sink is not None:
                 self.sink.state(i, _state_entry(st, v, i in contested) | {"fdi": fdi})

@@ -73,7 +73,8 @@ class Cone:
 @dataclass(frozen=True)
 class Containment:
     """A judged state against its step's truth: E = eᵀP⁻¹e of its ellipsoid, whether its set holds the truth,
-    and a set estimator's per-coordinate bounds (3, 2) (None for the SDP's ellipsoid)."""
+    and the set's per-coordinate bounds (3, 2) where it is not the ellipsoid alone (a set estimator's set, or
+    the SDP's ellipsoid ∩ its fault range; None: the ellipsoid's)."""
 
     E: float
     contained: bool
@@ -194,7 +195,12 @@ class Judge:
         e = xbar - np.asarray(st.xhat)
         E = float(e @ np.linalg.solve(st.P_matrix(), e))
         if st.set is None:
-            return Containment(E, E <= st.rho)
+            if st.fault_range is None:
+                return Containment(E, E <= st.rho)
+            # the ellipsoid ∩ the fault's declared range: both must hold the truth
+            lo, hi = st.bounds()
+            inside = E <= st.rho and st.fault_range[0] <= float(xbar[-1]) <= st.fault_range[1]
+            return Containment(E, bool(inside), np.stack([lo, hi], axis=1))
         # a set estimator's node: its own set is judged; the ellipsoid is only its neighbour-facing summary
         s = set_from_wire(st.set, len(xbar))
         return Containment(E, s.contains(xbar), np.stack(s.bounds(), axis=1))

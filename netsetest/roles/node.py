@@ -571,6 +571,7 @@ class Node:
             inputs=p.inputs,
             readings=p.readings,
             health=p.health,
+            fault_range=list(pub.fault_range) if pub.fault_range is not None else None,
             **self._own_set(res),  # type: ignore[arg-type]  # own_xhat/own_P only: mypy cannot tell the keys of a dict
         )
 

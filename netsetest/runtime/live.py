@@ -23,10 +23,9 @@ import zenoh
 from netsetest.bus import keys
 from netsetest.bus.zenoh_bus import BusError, ZenohMode, zenoh_config
 from netsetest.messages import BadMessage, End, Message, NodeInput, NodeState, Truth, decode
-from netsetest.models.sensor import NA, augmented
+from netsetest.models.sensor import augmented
 from netsetest.roles.fdi import classify
 from netsetest.runtime.security import ObserverAccess, client_settings
-from netsetest.sets import set_from_wire
 
 ANY_RUN = "*"
 PENDING_STEPS = 50  # how far back a state still waits for its truth (and a truth for its states)
@@ -165,12 +164,8 @@ class LiveTable:
             row = self.rows.setdefault(msg.node, NodeRow(msg.node))
             if row.step is None or msg.step >= row.step:
                 row.step, row.status, row.rho = msg.step, msg.status, msg.rho
-                if msg.set is not None:  # a set estimator's node: its own set's bounds (E: its enclosing ellipsoid)
-                    lo, hi = set_from_wire(msg.set, NA).bounds()
-                    row.fault_lower, row.fault_upper = float(lo[2]), float(hi[2])
-                else:
-                    half = float(np.sqrt(msg.rho * msg.P_matrix()[2, 2]))
-                    row.fault_lower, row.fault_upper = msg.xhat[2] - half, msg.xhat[2] + half
+                lo, hi = msg.bounds()  # a set estimator's own set; the SDP's ellipsoid within its fault range
+                row.fault_lower, row.fault_upper = float(lo[2]), float(hi[2])
                 row.fdi = classify(row.fault_lower, row.fault_upper)
                 if row.fdi == "detected" and (row.first_detection is None or msg.step < row.first_detection):
                     row.first_detection = msg.step

@@ -20,6 +20,7 @@ import re
 import shutil
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 from run_helpers import shared_run
@@ -265,6 +266,37 @@ def test_the_size_cut_narrows_the_published_fault_only_where_the_sector_rests_on
             cut += 1
             assert with_cut.public.P[2, 2] < without.public.P[2, 2]
     assert cut > 0.5 * bound > 0
+
+
+def test_a_cut_set_is_published_with_the_bound_it_rests_on_and_judged_against_it(tmp_path: Path) -> None:
+    """Paper SAIM: a step whose fault interval rests on the declared |f| ≤ F publishes fault_range ⊆ [−F, F]
+    (only there), the record's fault bounds stay inside it and often end on it, and the collector judges
+    the truth against the ellipsoid and the range: a range that excludes the true fault is a miss."""
+    from netsetest.messages import NodeState, Truth
+    from netsetest.roles.judge import Judge
+
+    sc = load_topology(PAPER6, "saim", steps=40)
+    res = run_inmemory(sc, "paper", "scheduled", 0)
+    ranged = clipped = 0
+    for i, entries in res.parts["nodes"].items():
+        size = sc.node(int(i)).fault_size
+        for e in entries:
+            if "fault_range" not in e:
+                continue
+            ranged += 1
+            lo, hi = e["fault_range"]
+            assert e["sector_basis"] == "fault-bound" and -size <= lo <= hi <= size, e
+            half = float(np.sqrt(e["rho"] * e["P"][8]))
+            clipped += hi < e["xhat"][2] + half or lo > e["xhat"][2] - half
+            assert e["contained"], e  # the truth's fault is within the declared bound on the paper profiles
+    assert ranged > 0 and clipped > 0.5 * ranged
+    judge, truth = Judge(sc), res.parts["truth"][20]
+    f = truth["faults"]["1"]
+    st = NodeState(step=20, node=1, xhat=[*truth["x"], f], P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
+    tr = msgspec.convert({k: truth[k] for k in Truth.__struct_fields__ if k in truth}, Truth)
+    inside = judge.containment(1, msgspec.structs.replace(st, fault_range=[f - 0.01, f + 0.01]), tr)
+    outside = judge.containment(1, msgspec.structs.replace(st, fault_range=[f + 0.01, f + 0.02]), tr)
+    assert inside.contained and not outside.contained and outside.E == inside.E
 
 
 @pytest.mark.parametrize("case,sector,dropped", [("saim", None, True), ("saim", (0.5, 0.5), False), ("nsnim", (0.5, 0.5), True), ("nsnim", None, False)])

@@ -58,6 +58,7 @@ MESSAGES = [
     _state(),
     _state(status="init", rho_cert=None, used=[], missing=[], late=False),
     _state(sector=(0.123456789, 0.876543211), sector_basis="fault-bound"),
+    _state(sector=(0.5, 0.5), sector_basis="fault-bound", fault_range=[-0.2, 0.2]),
     _state(status="init-prior", sector=(1.0, 0.0), sector_basis="measurement"),
     Truth(
         step=80,
@@ -173,6 +174,9 @@ BAD = [
     ("sector-nan", _mut(_state(), sector=[0.5, float("nan")]), "invalid", "sector"),
     ("sector-3", _mut(_state(), sector=[0.5, 0.5, 0.5]), "invalid", "sector"),
     ("sector-basis-unknown", _mut(_state(), sector_basis="hope"), "invalid", "sector_basis"),
+    ("fault-range-reversed", _mut(_state(), fault_range=[0.2, -0.2]), "invalid", "fault_range"),
+    ("fault-range-inf", _mut(_state(), fault_range=[-float("inf"), 0.2]), "invalid", "fault_range"),
+    ("fault-range-3", _mut(_state(), fault_range=[-0.2, 0.0, 0.2]), "invalid", "fault_range"),
 ]
 
 
@@ -184,6 +188,16 @@ def test_decode_rejects(payload, reason, field):
     assert isinstance(exc.value, ValueError)
     if field is not None:
         assert field in str(exc.value), str(exc.value)
+
+
+def test_the_published_fault_interval_is_the_ellipsoids_within_its_fault_range():
+    """NodeState.bounds: x̂ ∓ √(ρ P_jj), the fault's clipped to fault_range where one is sent (never widened)."""
+    st = _state(xhat=[0.0, 0.0, 0.1], P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 0.04], rho=1.0)
+    lo, hi = st.bounds()
+    np.testing.assert_allclose([lo[2], hi[2]], [-0.1, 0.3])
+    np.testing.assert_allclose(np.array(_state(xhat=[0.0, 0.0, 0.1], P=st.P, rho=1.0, fault_range=[-0.2, 0.2]).bounds())[:, 2], [-0.1, 0.2])
+    np.testing.assert_allclose(np.array(_state(xhat=[0.0, 0.0, 0.1], P=st.P, rho=1.0, fault_range=[-1.0, 1.0]).bounds())[:, 2], [-0.1, 0.3])
+    np.testing.assert_allclose(np.array(_state(xhat=[0.0, 0.0, 0.1], P=st.P, rho=1.0, fault_range=[-1.0, 1.0]).bounds())[:, :2], np.array(st.bounds())[:, :2])
 
 
 def test_valid_mutation_baseline():
