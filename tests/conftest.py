@@ -17,9 +17,16 @@ pytest_plugins = ["zenoh_helpers"]
 LAYERS = ("unit", "inmemory", "process")  # tests/<layer>/: each test is marked with its folder's layer
 
 
+# modules that read the same recorded runs (run_helpers.shared_run, cached per worker): one worker runs them
+SHARED_RUN_MODULES = frozenset({"test_fdi.py", "test_sector.py", "test_containment.py"})
+
+
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the groups
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Mark every test with its layer (its folder), so that nothing goes unmarked; a process test also
-    counts as ``zenoh`` (it may open sessions or spawn roles). A test outside the layers is an error."""
+    counts as ``zenoh`` (it may open sessions or spawn roles). A test outside the layers is an error.
+    Each module is one pytest-xdist group (``--dist loadgroup``: a module's fixtures made once), the
+    modules of :data:`SHARED_RUN_MODULES` one group together (their runs made once)."""
     for item in items:
         layer = item.path.parent.name
         if layer not in LAYERS:
@@ -27,6 +34,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         item.add_marker(layer)
         if layer == "process":
             item.add_marker("zenoh")
+        group = "shared-runs" if item.path.name in SHARED_RUN_MODULES else f"{layer}/{item.path.name}"
+        item.add_marker(pytest.mark.xdist_group(group))
 
 
 SESSION_PREFIX = "netsetest-tests-"  # one per session (with pytest-xdist: one per worker), removed at its end
