@@ -80,6 +80,7 @@ from netsetest.estimator.slab import cut
 from netsetest.extras import require
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.uncertainty import ModelUncertainty
+from netsetest.sets import ellipsoid_bounds
 from netsetest.models.vehicle import N_RULES, TSModel
 
 Variant = Literal["scheduled", "per-rule"]
@@ -617,10 +618,9 @@ class LocalEstimator:
         it as that ellipsoid ∩ {|f⁺| ≤ size} (NodeState.fault_range: no ellipsoid ends at the slab's flat face);
         whether it did.  The node recurs on ``res`` as solved."""
         pub = res.public
-        half = float(np.sqrt(rho * pub.P[NA - 1, NA - 1]))
-        f_lo, f_hi = float(pub.xhat[NA - 1]) - half, float(pub.xhat[NA - 1]) + half
-        lo, hi = (-size, size) if pub.fault_range is None else (max(-size, pub.fault_range[0]), min(size, pub.fault_range[1]))
-        if not (lo > f_lo or hi < f_hi) or max(lo, f_lo) > min(hi, f_hi):
+        now_lo, now_hi = ellipsoid_bounds(pub.xhat, np.diag(pub.P), rho, pub.fault_range)  # the published fault interval
+        lo, hi = max(-size, now_lo[-1]), min(size, now_hi[-1])
+        if not (lo > now_lo[-1] or hi < now_hi[-1]) or lo > hi:
             return False  # no cut (an empty one means the assumptions broke: the step's set stays as certified)
         wh = self._wh_pub if self._wh_pub is not None else self._wh
         out = cut(pub.xhat, pub.P, rho, NA - 1, lo, hi, None if wh is None else wh**2)

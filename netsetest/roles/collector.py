@@ -102,8 +102,12 @@ class NodeTotals:
     solve: array = field(default_factory=lambda: array("d"))  # 8 bytes per step: the median needs them
 
 
-def _fault_interval(st: NodeState) -> tuple[float, float]:
-    """The published fault interval (NodeState.bounds: a set estimator's own, else the ellipsoid's within its fault range)."""
+def _fault_interval(st: NodeState, v: NodeVerdict) -> tuple[float, float]:
+    """The published fault interval (NodeState.bounds: a set estimator's own, else the ellipsoid's within its
+    fault range); the judged set's, where the judge computed them (a set is not parsed again)."""
+    b = v.containment.bounds if v.containment is not None else None
+    if b is not None:
+        return float(b[2, 0]), float(b[2, 1])
     lo, hi = st.bounds()
     return float(lo[2]), float(hi[2])
 
@@ -386,7 +390,7 @@ class Collector:
             t.contested += i in contested
             t.sectors_assumed += st.sector_basis == "assumed"
             t.sector_failures += self.judge.sector_failed(i, st, tr, v.cone.ok and i not in contested)
-            interval = _fault_interval(st)
+            interval = _fault_interval(st, v)
             fdi = classify(*interval, self.sc.fault_tolerance)
             if self.sink is not None:
                 self.sink.state(i, _state_entry(st, v, i in contested) | {"fdi": fdi})

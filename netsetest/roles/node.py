@@ -102,12 +102,10 @@ class Node:
         variant: Variant = "scheduled",
         rejoin: bool = False,
         objective: Objective = DEFAULT_OBJECTIVE,
-        lazy_neighbours: bool = False,
-        lazy_readings: bool = False,
+        lazy: bool = False,
     ) -> None:
-        """``lazy_neighbours``: neighbour states do not wake the node: they are used when its next input
-        arrives, which does wake it; ``lazy_readings``: the same for the step's readings (a runtime
-        waiting for one polls; netsetest/bus/base.py, runtime/processes.py)."""
+        """``lazy``: neighbour states and readings do not wake the node: they are used when its next input
+        arrives, which does wake it (a runtime waiting for one polls; netsetest/bus/base.py, runtime/processes.py)."""
         self.sc, self.bus, self.run = scenario, bus, run_id
         self.cfg = scenario.node(node_id)
         self.id = node_id
@@ -152,9 +150,9 @@ class Node:
         self.late_start_evidence = 0
         bus.subscribe(keys.node_input(run_id, node_id), self.on_message)
         for j in self.others:
-            bus.subscribe(keys.node_state(run_id, j), self.on_message, lazy=lazy_neighbours)
+            bus.subscribe(keys.node_state(run_id, j), self.on_message, lazy=lazy)
         for j in self.read_from:
-            bus.subscribe(keys.reading(run_id, j), self.on_message, lazy=lazy_readings)
+            bus.subscribe(keys.reading(run_id, j), self.on_message, lazy=lazy)
         bus.subscribe(keys.end(run_id), self.on_message)
         bus.declare_publisher(keys.node_state(run_id, node_id))
         if self.publishes_reading:
