@@ -29,6 +29,7 @@ import numpy as np
 
 MAX_NEWTON = 50  # iterations (quadratic convergence near the minimum; damped steps before)
 MAX_HALVINGS = 40  # Armijo backtracking
+WARM_HALVINGS = 10  # from a warm start: a step cut this often means Newton is stalling at a kink (the cold start is tried)
 ARMIJO = 1e-4
 DECREMENT_TOL = 1e-12  # converged: the Newton decrement (≈ 2 (F − min F)) this small relative to F
 ROUNDING_TOL = 1e-8  # no descent left to rounding and a decrement this small: converged as far as F can tell
@@ -56,8 +57,10 @@ class SumOfNorms:
 
         L = 0 (no use for the innovations) is the minimum exactly when the gradient of the groups' part there
         is at most c long: then c‖L‖'s subgradient cancels it (found without iterating).  Else Newton starts
-        from ``start`` (a warm start: the last step's gain) or the least-squares gain Σ M_g b_g / Σ ‖b_g‖²
-        (the minimiser of the squared terms)."""
+        from ``start`` (a warm start: the last step's gain), and from the least-squares gain Σ M_g b_g / Σ ‖b_g‖²
+        (the minimiser of the squared terms) if there is none or it stalls: a warm start next to a term's kink
+        (the last minimum close to a vanished term) drives Newton onto the kink, where its steps shrink to
+        nothing (paper6_max_faulty's readings' update: 1 step in 12 fell back to Clarabel that way)."""
         r0 = np.sqrt((self.M * self.M).sum(axis=0) @ self.onehot)
         if r0.min() <= TINY:
             return None
@@ -67,8 +70,16 @@ class SumOfNorms:
         kink = self._kink()  # a minimum where a term vanishes: Newton would stall there
         if kink is not None:
             return kink
+        if start is not None:  # a warm start next to a term's kink can stall Newton: then from the cold start
+            found = self._newton(start.copy(), WARM_HALVINGS)
+            if found is not None:
+                return found
+        return self._newton((self.M @ self.b) / float(((self.b * self.b) @ self.onehot).sum()), MAX_HALVINGS)
+
+    def _newton(self, L: np.ndarray, max_halvings: int) -> tuple[np.ndarray, np.ndarray, float, int] | None:
+        """Damped Newton from ``L``: the minimum, or None (a vanished term, no convergence, or a line search
+        that needed more than ``max_halvings`` halvings without being converged as far as F can tell)."""
         nb = (self.b * self.b) @ self.onehot  # ‖b_g‖²
-        L = (self.M @ self.b) / float(nb.sum()) if start is None else start.copy()
         eye = np.eye(L.shape[0])
         for it in range(1, MAX_NEWTON + 1):
             R = self.M - L[:, None] * self.b[None, :]
@@ -94,7 +105,7 @@ class SumOfNorms:
             if dec <= DECREMENT_TOL * F:
                 return L, r, ln, it
             t = 1.0
-            for _ in range(MAX_HALVINGS):
+            for _ in range(max_halvings):
                 if self.value(L + t * step) <= F - ARMIJO * t * dec:
                     break
                 t *= 0.5

@@ -95,3 +95,27 @@ def test_with_vanishing_terms_the_answer_is_the_minimum_or_nothing(seed: int) ->
     p = _instance(rng, c=0.02 * seed, nsnim_like=False)
     found = p.minimise()
     assert found is None or p.value(found[0]) <= _by_cvxpy(p) * (1 + 1e-7)
+
+
+def test_a_warm_start_next_to_a_kink_still_reaches_the_minimum() -> None:
+    """A readings' update of paper6_max_faulty (NSNIM, node 1): the last step's gain, the warm start, sits next
+    to the kink of the single-column group, and the minimum lies close to it but off it.  Newton from there
+    heads onto the kink and its steps shrink to nothing; the cold start reaches the minimum (before, the
+    step fell back to Clarabel)."""
+    M = np.array(
+        [
+            [8.9147991040134603e-03, -5.7265204537430333e-03, 0.0, 1.2711602694829495e-03, 0.0],
+            [3.1584770126813239e-02, 4.6848582337754387e-02, 0.0, 3.1613300492793393e-02, -3.7490726515634942e-19],
+            [-4.4169424013798059e-02, -6.5514958298364678e-02, 0.0, -4.4209322035128798e-02, -1.4387721111655644e-01],
+        ]
+    )
+    b = np.array([3.158477012681324e-02, 4.684858233775439e-02, 0.0, 3.161330049279339e-02, -3.749072651563494e-19])
+    onehot = np.zeros((5, 3))
+    onehot[[0, 1, 2, 3, 4], [0, 0, 0, 1, 2]] = 1.0
+    p = SumOfNorms(M, b, onehot, 0.03610537001264863)
+    start = np.array([0.0399289036423516, 1.0, -1.3984405723536146])
+    kink = M[:, 3] / b[3]  # the single-column group's term vanishes there
+    assert p.value(kink) > _by_cvxpy(p) * (1 + 1e-4)  # the minimum is not the kink
+    found = p.minimise(start)
+    assert found is not None
+    assert p.value(found[0]) <= _by_cvxpy(p) * (1 + 1e-7)
