@@ -268,7 +268,7 @@ class Truth(_Msg, tag="truth", frozen=True, kw_only=True):
     drops: Drops = {}  # messages the vehicle has dropped so far, by reason
     e: Vec2 | None = None  # model mismatch of k → k+1: x_{k+1} − (Ā x_k + B̄ u_k + D̄ w_k) (None: last step, older records)
     mismatch_ok: bool = True  # e_k within the declared [model_uncertainty] (none declared: e_k = 0)
-    health_ok: bool = True  # at most [network] max_faulty sensors faulty at step k (none declared: True)
+    health_ok: bool = True  # at most max_faulty sensors faulty in every k-of-N group at step k (none declared: True)
 
     def __post_init__(self) -> None:
         ids = set(self.faults)

@@ -372,6 +372,7 @@ class _HealthPlan:
 
     def __init__(self, prog: _Program, model: HealthModel) -> None:
         self.prog, self.model = prog, model
+        self.members = [(n, node) for n, node in enumerate(prog.sc.nodes) if node.id in model.sensors]  # (program position, node)
         self.cuts: list[Row] = []  # rows valid in every later horizon
         self.unions: list[StepUnion] = []  # past steps with several pieces
         self.incomplete = False  # a past step's pieces were too many to enumerate: later ends are relaxed
@@ -384,7 +385,7 @@ class _HealthPlan:
         :data:`PIECE_MARGIN` for rounding: with worst-case signals two healthy sensors' noises sit at opposite
         bounds, their intervals meet in the truth's one point, and an ulp apart they would not."""
         out = []
-        for node in self.prog.sc.nodes:
+        for _, node in self.members:
             lo, hi = self.prog.intervals[node.id, j]
             sensor = node.sensor
             pad = PIECE_MARGIN * (abs(sensor.Dv) * math.sqrt(sensor.R) + max((abs(v) for v in (lo, hi) if math.isfinite(v)), default=0.0))
@@ -397,14 +398,14 @@ class _HealthPlan:
         pieces = step_pieces(self._spans(j), tied, allowed, self.model.need, window)
         if pieces is None:
             return None
-        f_col = tuple(self.prog._f(n, j) if t else None for n, t in enumerate(tied))
+        f_col = tuple(self.prog._f(n, j) if t else None for (n, _), t in zip(self.members, tied))
         return StepUnion(j, self._t(j), self._spans(j), f_col, self.model.tolerance, self.model.need, tuple(pieces))
 
     def _tied(self, j: int) -> list[bool]:
         """A fault tied to more than its measurement in every horizon after j: by a prior (j = 0), or by a declared
         bound that a healthy value could break (:func:`_bound_admits_health`)."""
         tol = self.model.tolerance
-        return [j == 0 or (node.id in self.prog.bounded and not _bound_admits_health(node, tol)) for node in self.prog.sc.nodes]
+        return [j == 0 or (node.id in self.prog.bounded and not _bound_admits_health(node, tol)) for _, node in self.members]
 
     def window(self, j: int, beta: np.ndarray, r: np.ndarray) -> Span:
         """The interval of t_j = uᵀx_j over the box of β_j, r_j (loosened), or the whole line."""
@@ -414,7 +415,7 @@ class _HealthPlan:
 
     def unions_at(self, k: int, objective: int, window: Span) -> tuple[list[StepUnion], bool]:
         """The unions of horizon k for one objective column, and whether they are complete (exact ends)."""
-        tied = [t or self.prog._f(n, k) == objective for n, t in enumerate(self._tied(k))]
+        tied = [t or self.prog._f(n, k) == objective for (n, _), t in zip(self.members, self._tied(k))]
         last = self._union(k, tied, [True] * len(tied), window)
         return [*self.unions, *([last] if last is not None else [])], last is not None and not self.incomplete
 
@@ -428,10 +429,10 @@ class _HealthPlan:
         window, tied = self.window(k, beta, r), self._tied(k)
         self.cuts += interval_rows(self._t(k), window)
         allowed = []
-        for n, node in enumerate(self.prog.sc.nodes):
+        for (n, node), is_tied in zip(self.members, tied):
             lo, hi = _loosened(*fault[node.id])
             allowed.append(bool(lo <= self.model.tolerance and hi >= -self.model.tolerance))
-            if tied[n]:
+            if is_tied:
                 self.cuts += interval_rows({self.prog._f(n, k): 1.0}, (lo, hi))
         union = self._union(k, tied, allowed, window)
         if union is None:
@@ -529,7 +530,7 @@ def exact_bounds(
         scenario = replace(scenario, nodes=[n for n in scenario.nodes if n.id in set(nodes)])
     bounded = scenario.fault_bounded(fault_bounds)
     prog = _Program(scenario, data, bounded)
-    model = HealthModel.of(scenario) if health else None
+    model = HealthModel.of_group(scenario, scenario.health_groups[0]) if health and _health_applies(scenario) else None
     plan = _HealthPlan(prog, model) if model is not None and model.need > 0 else None
     K1 = len(data)
     beta, r = np.full((K1, 2), np.nan), np.full((K1, 2), np.nan)
@@ -572,8 +573,7 @@ def exact_bounds(
             plan.learn(k, beta[k], r[k], {i: fault[i][k] for i in scenario.ids})
     search = None
     if plan is not None:
-        assert scenario.max_faulty is not None  # a plan exists only under a declared max_faulty
-        search = HealthSearch(scenario.max_faulty, plan.model.need, health_budget, tally.ends, tally.exact, tuple(tally.relaxed), tally.solves)
+        search = HealthSearch(scenario.health_groups[0].max_faulty, plan.model.need, health_budget, tally.ends, tally.exact, tuple(tally.relaxed), tally.solves)
     return ExactBounds(
         steps=np.arange(K1),
         beta=beta,
@@ -615,10 +615,16 @@ def health_line(h: HealthSearch) -> str:
     return f"{line}; relaxed (the least bound proven, an outer bound): {shown}{more}"
 
 
+def _health_applies(scenario: Scenario) -> bool:
+    """Whether :func:`exact_bounds` can apply the declared k-of-N health: one group (``[network] max_faulty``
+    or a single ``[[network.health_groups]]``); several groups are left out (an outer bound, docs/exact.md)."""
+    return scenario.health_declared and len(scenario.health_groups) == 1
+
+
 def omitted_assumptions(scenario: Scenario, health: bool = True) -> tuple[str, ...]:
     """The declared assumptions :func:`exact_bounds` does not apply (docs/exact.md): the k-of-N health
-    unless it is applied (``health``)."""
-    return (f"k-of-N health (max_faulty = {scenario.max_faulty})",) if scenario.health_declared and not health else ()
+    unless it is applied (``health``: it is, for one group)."""
+    return (f"k-of-N health ({scenario.health_label})",) if scenario.health_declared and not (health and _health_applies(scenario)) else ()
 
 
 # ---------------------------------------------------------------- a record against the exact limit

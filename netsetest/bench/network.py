@@ -71,7 +71,7 @@ def network_figures(cfg: dict, tmp: Path) -> dict:
                     sdp, rec = _sdp_figures(sc, sig, seed, tmp / "network.json")
                     alone, _ = _sdp_figures(sc.alone(), sig, seed, tmp / "alone.json")
                     nodes = {}
-                    exact = _exact_figures(sc, rec, sdp, local=sc.max_faulty is None)
+                    exact = _exact_figures(sc, rec, sdp, local=not sc.health_groups)
                     for i in sc.ids:
                         nodes[i] = {
                             **exact.get(i, {"fault": None, "r": None, "sdp_network_over_exact": None}),
@@ -81,7 +81,7 @@ def network_figures(cfg: dict, tmp: Path) -> dict:
                             "false_detections": sdp[i]["false_detections"],
                             "false_detections_covered": sdp[i]["false_detections_covered"],
                         }
-                    rows.append({"topology": name, "case": case, "signals": sig, "seed": seed, "nodes": nodes, "exact": sc.max_faulty is None})
+                    rows.append({"topology": name, "case": case, "signals": sig, "seed": seed, "nodes": nodes, "exact": not sc.health_groups})
                     gain = [v["sdp_alone_over_network"] for v in nodes.values()]
                     _log(f"  {name} {case} {sig} seed {seed}: SDP alone/network {min(gain):.3f}–{max(gain):.3f}")
     return {"steps": cfg["network_steps"], "seeds": cfg["network_seeds"], "runs": rows, "exchange_cost": exchange_cost(cfg, tmp)}

@@ -7,8 +7,9 @@ cycle through the bundled ``nodes/yaw1..6.toml``; vehicle, speed and steering ar
 
 A :data:`RingVariant` changes what the nodes exchange or what generates the truth, for the real-time
 figures of each (``realtime_fit``): ``reference`` declares node 3 a reference sensor (every node reads
-its reading of each step), ``max_faulty`` declares at most as many faulty sensors as the profiles have
-faults (every node reads everyone's reading: N² messages a step), ``car`` puts paper6_car's CommonRoad
+its reading of each step), ``max_faulty`` declares k-of-N health per group of six consecutive sensors (the
+paper's six profiles; a short tail joins the group before it), each allowing as many faulty sensors as its
+profiles have faults (every node reads its group's readings: about 6N messages a step), ``car`` puts paper6_car's CommonRoad
 car (single track, its mismatch bound, steering and speed) in the vehicle role.
 """
 
@@ -114,6 +115,23 @@ def _profile(i: int, variant: RingVariant) -> str:
     return "yaw3_reference" if variant == "reference" and i == 3 else f"yaw{p}"
 
 
+HEALTH_GROUP = 6  # sensors per k-of-N group of the max_faulty variant: the paper's six
+
+
+def _faulty(group: list[int]) -> int:
+    return sum((i - 1) % 6 + 1 in FAULTY_PROFILES for i in group)
+
+
+def health_groups(ids: list[int]) -> list[list[int]]:
+    """Consecutive groups of :data:`HEALTH_GROUP` nodes; a tail that could not be a group (as many faults as
+    sensors, or one sensor) joins the group before it."""
+    groups = [ids[k : k + HEALTH_GROUP] for k in range(0, len(ids), HEALTH_GROUP)]
+    if len(groups) > 1 and (len(groups[-1]) < 2 or _faulty(groups[-1]) >= len(groups[-1])):
+        tail = groups.pop()
+        groups[-1] += tail
+    return groups
+
+
 def write_topology(
     path: Path,
     neighbours: dict[int, set[int]],
@@ -125,8 +143,9 @@ def write_topology(
     """Write a topology file (self-loops included) that points at the repository's node profiles."""
     fields = dict(name=name or path.stem, node_dir=NODES_DIR.as_posix(), steps=steps, case=case, tau_s=RING_TAU_S)
     lines = [CAR_HEADER.format(**fields, car=_car_tables()) if variant == "car" else HEADER.format(**fields)]
-    if variant == "max_faulty":  # as many faulty sensors as the profiles have faults: the declaration holds
-        lines.append(f"[network]\nmax_faulty = {sum((i - 1) % 6 + 1 in FAULTY_PROFILES for i in neighbours)}\n")
+    if variant == "max_faulty":  # as many faulty sensors per group as its profiles have faults: the declaration holds
+        for group in health_groups(sorted(neighbours)):
+            lines.append(f"[[network.health_groups]]\nnodes = {group}\nmax_faulty = {_faulty(group)}\n")
     for i in sorted(neighbours):
         lines.append(f'[[nodes]]\nid = {i}\nprofile = "{_profile(i, variant)}"\n')
     for i in sorted(neighbours):

@@ -505,7 +505,7 @@ def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int 
 
 
 def realtime_fit(directory: Path, variants: tuple[RingVariant, ...], sizes: list[int], start: int | None, steps: int, retries: int = 1, log=print) -> dict:
-    """Per ring variant (bench/topologies.py: a reference sensor, everyone's readings under max_faulty, the
+    """Per ring variant (bench/topologies.py: a reference sensor, k-of-N health per group of six, the
     CommonRoad car as the truth): the largest of ``sizes`` up to ``start`` (the plain ladder's largest) that
     still runs in real time, walking down from ``start``, and its ratio to ``start``."""
     from netsetest.bench.topologies import ring_topology

@@ -254,6 +254,13 @@ TABLE_I = ("m", "Jz", "lf", "lr", "cf", "cr")  # the bicycle model's parameters 
 UNCERTAINTY_MAX = 10.0  # |e_k| components [rad, rad/s] per step: beyond it the model says nothing
 
 
+class HealthGroupSpec(_Strict, frozen=True, kw_only=True):
+    """``[[network.health_groups]]``: at most ``max_faulty`` of these sensors faulty at any step."""
+
+    nodes: Annotated[list[int], Meta(min_length=2, description="the group's node ids (each node in at most one group)")]
+    max_faulty: Annotated[int, Meta(ge=0, description="at most this many of the group's sensors have a fault above fault_tolerance at any step")]
+
+
 class NetworkSpec(_Strict, frozen=True, kw_only=True):
     """Network-wide declarations."""
 
@@ -276,6 +283,13 @@ class NetworkSpec(_Strict, frozen=True, kw_only=True):
         ]
         | None
     ) = None
+    health_groups: Annotated[
+        list[HealthGroupSpec],
+        Meta(
+            description="the same per group of sensors ([[network.health_groups]] nodes = [...], max_faulty = m): a "
+            "node exchanges readings within its group only (docs/network.md); instead of max_faulty"
+        ),
+    ] = field(default_factory=list)
 
 
 class ModelUncertaintySpec(_Strict, frozen=True, kw_only=True):
@@ -407,6 +421,19 @@ class TopologyFile(_Strict, frozen=True, kw_only=True):
 
 
 @dataclass(frozen=True)
+class HealthGroup:
+    """A k-of-N declaration: at most ``max_faulty`` of the sensors of ``nodes`` faulty at any step."""
+
+    nodes: tuple[int, ...]
+    max_faulty: int
+
+    @property
+    def need(self) -> int:
+        """Sensors of the group healthy at every step."""
+        return len(self.nodes) - self.max_faulty
+
+
+@dataclass(frozen=True)
 class NodeConfig:
     """Everything about node i that any process needs: sensor, signals, initial ellipsoid, neighbours."""
 
@@ -446,7 +473,7 @@ class Scenario:
     uncertainty: ModelUncertainty | None = None  # declared bound on e_k (None: e_k = 0 is assumed)
     fault_tolerance: float = 0.0  # |f| ≤ this counts as no fault (fault detection, docs/fdi.md)
     readings: bool = True  # the same-step exchange of the references' readings (docs/network.md)
-    max_faulty: int | None = None  # declared: at most this many sensors faulty (|f| > fault_tolerance) at any step
+    health_groups: tuple[HealthGroup, ...] = ()  # declared: at most m of each group's sensors faulty (|f| > fault_tolerance) at any step
 
     def node(self, node_id: int) -> NodeConfig:
         n = self._by_id.get(node_id)
@@ -506,22 +533,36 @@ class Scenario:
 
     @property
     def health_declared(self) -> bool:
-        """Whether the nodes use the k-of-N health assumption (``[network] max_faulty``, readings on)."""
-        return self.max_faulty is not None and self.readings
+        """Whether the nodes use the k-of-N health assumption (``[network] max_faulty`` or health groups, readings on)."""
+        return bool(self.health_groups) and self.readings
+
+    def health_group(self, i: int) -> HealthGroup | None:
+        """Node i's k-of-N group (None: it is in none, or no health is used)."""
+        if not self.health_declared:
+            return None
+        return next((g for g in self.health_groups if i in g.nodes), None)
 
     def publishes_reading(self, i: int) -> bool:
-        """Whether node i publishes its reading of every step: a reference, or every node under ``max_faulty``."""
-        return self.health_declared or i in self.references()
+        """Whether node i publishes its reading of every step: a reference, or a member of a k-of-N group."""
+        return self.health_group(i) is not None or i in self.references()
 
     def reading_sources(self, i: int) -> tuple[int, ...]:
-        """The nodes whose readings node i uses (its own reading comes with its input)."""
-        return tuple(j for j in self.ids if j != i and self.publishes_reading(j))
+        """The nodes whose readings node i uses (its own reading comes with its input): the references and
+        the other members of its k-of-N group."""
+        group = self.health_group(i)
+        return tuple(j for j in self.ids if j != i and (j in self.references() or (group is not None and j in group.nodes)))
 
     def health_holds(self, faults: dict[int, float]) -> bool:
-        """The k-of-N assumption at one step: at most ``max_faulty`` faults above the tolerance (True if none is declared)."""
-        if self.max_faulty is None:
-            return True
-        return sum(abs(f) > self.fault_tolerance * (1 + 1e-12) for f in faults.values()) <= self.max_faulty
+        """The k-of-N assumption at one step: at most m faults above the tolerance in every declared group
+        (True if none is declared)."""
+        return all(sum(abs(faults[j]) > self.fault_tolerance * (1 + 1e-12) for j in g.nodes if j in faults) <= g.max_faulty for g in self.health_groups)
+
+    @property
+    def health_label(self) -> str:
+        """The declaration in a few words: ``max_faulty = 4`` (one group of every node) or the groups'."""
+        if len(self.health_groups) == 1 and set(self.health_groups[0].nodes) == set(self.ids):
+            return f"max_faulty = {self.health_groups[0].max_faulty}"
+        return "; ".join(f"max_faulty = {g.max_faulty} of nodes {', '.join(map(str, g.nodes))}" for g in self.health_groups)
 
     def alone(self) -> Scenario:
         """The same scenario with every node on its own: a self-loop only, no reading exchanged (what the
@@ -702,23 +743,40 @@ def load_topology(
         uncertainty=topo.model_uncertainty.build() if topo.model_uncertainty is not None else None,
         fault_tolerance=topo.network.fault_tolerance,
         readings=topo.network.readings,
-        max_faulty=_max_faulty(path, topo.network.max_faulty, nodes),
+        health_groups=_health_groups(path, topo.network, nodes),
     )
 
 
-def _max_faulty(path: Path, m: int | None, nodes: list[NodeConfig]) -> int | None:
-    """``[network] max_faulty``, checked: fewer than the nodes, and every sensor measuring the same
-    combination of the state (C_j = s_j uᵀ), so that the k-of-N readings bound one quantity (estimator/health.py)."""
-    if m is None:
-        return None
-    if m >= len(nodes):
-        raise ConfigError(f"{path}: network.max_faulty = {m}: must be less than the number of nodes ({len(nodes)})")
-    u = nodes[0].sensor.C / np.linalg.norm(nodes[0].sensor.C)
-    for n in nodes:
-        c = n.sensor.C
-        if np.linalg.norm(c - (c @ u) * u) > 1e-9 * np.linalg.norm(c):
-            raise ConfigError(
-                f"{path}: network.max_faulty needs every sensor to measure the same combination of the state; "
-                f"node {n.id}'s C = {list(c)} is not parallel to node {nodes[0].id}'s"
-            )
-    return m
+def _health_groups(path: Path, network: NetworkSpec, nodes: list[NodeConfig]) -> tuple[HealthGroup, ...]:
+    """``[network] max_faulty`` (one group of every node) or ``[[network.health_groups]]``, checked: known,
+    disjoint nodes, m fewer than the group, and every sensor of a group measuring the same combination of the
+    state (C_j = s_j uᵀ), so that its k-of-N readings bound one quantity (estimator/health.py)."""
+    if network.max_faulty is not None and network.health_groups:
+        raise ConfigError(f"{path}: network.max_faulty and network.health_groups: give one (max_faulty is one group of every node)")
+    if network.max_faulty is not None:
+        specs = [(f"network.max_faulty = {network.max_faulty}", [n.id for n in nodes], network.max_faulty)]
+    else:
+        specs = [(f"network.health_groups[{k}]", g.nodes, g.max_faulty) for k, g in enumerate(network.health_groups)]
+    by_id = {n.id: n for n in nodes}
+    seen: set[int] = set()
+    out = []
+    for what, ids, m in specs:
+        unknown = sorted(set(ids) - set(by_id))
+        if unknown:
+            raise ConfigError(f"{path}: {what}: no node with id {unknown[0]} (ids: {sorted(by_id)})")
+        if len(set(ids)) != len(ids) or seen & set(ids):
+            raise ConfigError(f"{path}: {what}: node {sorted(k for k in ids if ids.count(k) > 1 or k in seen)[0]} is in it twice or in two groups")
+        seen |= set(ids)
+        if m >= len(ids):
+            raise ConfigError(f"{path}: {what}: max_faulty must be less than the number of its nodes ({len(ids)})")
+        group = [by_id[i] for i in ids]
+        u = group[0].sensor.C / np.linalg.norm(group[0].sensor.C)
+        for n in group:
+            c = n.sensor.C
+            if np.linalg.norm(c - (c @ u) * u) > 1e-9 * np.linalg.norm(c):
+                raise ConfigError(
+                    f"{path}: {what} needs every sensor to measure the same combination of the state; "
+                    f"node {n.id}'s C = {list(c)} is not parallel to node {group[0].id}'s"
+                )
+        out.append(HealthGroup(tuple(ids), m))
+    return tuple(out)

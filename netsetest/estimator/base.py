@@ -70,7 +70,7 @@ class ReadingSlabs:
         from netsetest.estimator.health import HealthModel
 
         refs = {j: scenario.node(j).sensor for j in scenario.references() if j != node_id}
-        return cls(node_id, refs, HealthModel.of(scenario))
+        return cls(node_id, refs, HealthModel.of(scenario, node_id))
 
     def slabs(
         self,

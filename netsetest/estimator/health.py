@@ -1,4 +1,5 @@
-"""The k-of-N health assumption on one step's readings (``[network] max_faulty = m``, docs/network.md).
+"""The k-of-N health assumption on one step's readings (``[network] max_faulty = m``, or per group of
+sensors ``[[network.health_groups]]``; docs/network.md).  N and m below are the node's group's.
 
 Every sensor j measures the same combination of the state, C_j = s_j uᵀ (checked when the topology is
 loaded), so a healthy sensor's reading (fault 0) bounds t = uᵀx to an interval I_j.  At most m of the N
@@ -22,7 +23,7 @@ from netsetest.estimator.sector import Interval, measurement_interval
 from netsetest.models.sensor import Sensor
 
 if TYPE_CHECKING:
-    from netsetest.config.schema import Scenario
+    from netsetest.config.schema import HealthGroup, Scenario
 
 Span = tuple[float, float]
 HEALTH_KEY = 0  # the k-of-N interval among a step's readings (node ids start at 1)
@@ -64,13 +65,18 @@ class HealthModel:
     u: np.ndarray  # (2,) unit vector: C_j = s_j uᵀ for every sensor (checked when the topology is loaded)
 
     @classmethod
-    def of(cls, scenario: Scenario) -> HealthModel | None:
-        """The scenario's model, or None when it declares no ``max_faulty`` (or its readings are off)."""
-        if not scenario.health_declared:
-            return None
-        assert scenario.max_faulty is not None  # health_declared says so
-        c = scenario.nodes[0].sensor.C
-        return cls({n.id: n.sensor for n in scenario.nodes}, len(scenario.nodes) - scenario.max_faulty, scenario.fault_tolerance, c / np.linalg.norm(c))
+    def of(cls, scenario: Scenario, node_id: int) -> HealthModel | None:
+        """Node ``node_id``'s model: its k-of-N group's; None when it is in none (or the readings are off)."""
+        group = scenario.health_group(node_id)
+        return None if group is None else cls.of_group(scenario, group)
+
+    @classmethod
+    def of_group(cls, scenario: Scenario, group: HealthGroup) -> HealthModel:
+        """The model of one group over the scenario's nodes (a subset of the topology's: at least
+        |S| − m of the group's sensors in S are healthy wherever at least N − m of its N are)."""
+        sensors = {n.id: n.sensor for n in scenario.nodes if n.id in group.nodes}
+        c = next(iter(sensors.values())).C
+        return cls(sensors, len(sensors) - group.max_faulty, scenario.fault_tolerance, c / np.linalg.norm(c))
 
     def assess(
         self,

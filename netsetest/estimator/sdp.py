@@ -563,7 +563,7 @@ class LocalEstimator:
             objective,
             scenario.uncertainty,
             {j: scenario.node(j).sensor for j in scenario.references() if j != node_id},
-            HealthModel.of(scenario),
+            HealthModel.of(scenario, node_id),
         )
 
     def step(self, prev: NodeSet, inp: UpdateInput) -> StepResult:

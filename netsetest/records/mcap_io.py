@@ -132,7 +132,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
                 "description": "model mismatch of k → k+1: x_{k+1} − (Ā x_k + B̄ u_k + D̄ w_k) [rad, rad/s]; null after the last step",
             },
             "mismatch_ok": {**_BOOL, "description": "e_k within the declared [model_uncertainty] (none declared: e_k = 0)"},
-            "health_ok": {**_BOOL, "description": "at most [network] max_faulty sensors faulty at this step (none declared: true)"},
+            "health_ok": {**_BOOL, "description": "at most max_faulty sensors faulty in every k-of-N group at this step (none declared: true)"},
         },
         ["step", "x", "faults"],
     ),

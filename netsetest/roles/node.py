@@ -516,7 +516,7 @@ class Node:
         sector = derive_sector(sensor, fault_bound, measurement_interval(sensor, inp.y, inp.gamma), r_set)
         res = StepResult(xhat, P, "ok", float("nan"), solve_ms, status, sector=sector)
         used_readings = [(j, *readings[j]) for j in sorted(readings)] if status == "ok" else []  # "fallback": the last set
-        health = bool(used_readings) and self.sc.health_declared
+        health = bool(used_readings) and self.sc.health_group(self.id) is not None
         self._publish(Publication(inp, status, res, missing=self.missing(), inputs=inputs, wire_set=set_to_wire(s), readings=used_readings, health=health))
 
     def _publish(self, pub: Publication) -> None:

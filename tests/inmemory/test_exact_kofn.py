@@ -18,7 +18,7 @@ from scipy import sparse
 from netsetest.analysis.exact import COORDINATES, ExactBounds, _Program, _settings, compare_record, exact_bounds, step_data
 from netsetest.analysis.kofn import Piece, covered, step_pieces
 from netsetest.cli.main import main
-from netsetest.config.schema import FaultBoundsMode, Scenario, load_topology
+from netsetest.config.schema import FaultBoundsMode, HealthGroup, Scenario, load_topology
 from netsetest.records.record import Record, record_from_parts
 from netsetest.runtime.inmemory import run_inmemory
 
@@ -47,9 +47,9 @@ def _exact(steps: int, health: bool = True, fault_bounds: FaultBoundsMode = "use
 def _brute_force(sc: Scenario, rec: Record, fault_bounds: FaultBoundsMode) -> dict[tuple[str, int | None, int], tuple[float, float]]:
     """Every end as the least (greatest) value over every sequence of hypotheses H_0..H_k (N − m sensors with
     |f| ≤ τ at each step), each one convex program on the whole horizon (no fault eliminated)."""
-    assert sc.max_faulty is not None
+    (group,) = sc.health_groups
     prog = _Program(sc, step_data(rec), sc.fault_bounded(fault_bounds))
-    hypotheses = list(itertools.combinations(range(len(sc.ids)), len(sc.ids) - sc.max_faulty))
+    hypotheses = list(itertools.combinations(range(len(sc.ids)), len(sc.ids) - group.max_faulty))
     out = {}
     for k in range(len(step_data(rec))):
         cols, A, b, cones = prog.matrices(k, eliminate=False)
@@ -84,7 +84,7 @@ def test_branch_and_bound_is_brute_force_over_every_hypothesis_sequence(fault_bo
     ``all`` every fault has declared bounds (F = δ = 0.2): with τ = 0 a healthy value always meets them (health is
     t_j in the span), with τ = 0.02 it may not (F + τ > δ: health is |f| ≤ τ, branched on per sensor)."""
     full, rec = _run(3)
-    full = dataclasses.replace(full, max_faulty=1, fault_tolerance=tolerance)
+    full = dataclasses.replace(full, health_groups=(HealthGroup(tuple(full.ids), 1),), fault_tolerance=tolerance)
     ex = exact_bounds(full, rec, fault_bounds, nodes=[1, 3, 5])
     assert ex.health is not None and ex.health.need == 2 and ex.health.exact_ends == ex.health.ends and not ex.health.relaxed
     sc = dataclasses.replace(full, nodes=[n for n in full.nodes if n.id in (1, 3, 5)])

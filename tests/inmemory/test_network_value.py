@@ -11,7 +11,7 @@ import pytest
 
 from netsetest.analysis.exact import local_limits
 from netsetest.cli.main import main
-from netsetest.config.schema import load_topology
+from netsetest.config.schema import HealthGroup, load_topology
 from netsetest.records.record import load_record
 from netsetest.runtime.inmemory import run_inmemory
 
@@ -271,7 +271,7 @@ def test_at_most_four_faulty_sensors_narrow_every_node(case: str, estimator: str
     if estimator != "sdp":
         sc = dataclasses.replace(sc, nodes=[dataclasses.replace(n, estimator=estimator) for n in sc.nodes])
     s, states = _states(sc)
-    s0, states0 = _states(dataclasses.replace(sc, max_faulty=None))
+    s0, states0 = _states(dataclasses.replace(sc, health_groups=()))
     assert s.violations_total == 0 and s.node_steps_covered == s.node_steps_evaluated == s.node_steps_contained
     for i in sc.ids:
         late = [m for m in states[i] if m.step >= 10]
@@ -286,7 +286,7 @@ def test_a_false_health_declaration_is_attributed_to_it() -> None:
     the k-of-N interval there are not covered ("k-of-N health"), nothing is a violation."""
     import dataclasses
 
-    sc = dataclasses.replace(load_topology("paper6_max_faulty", case="nsnim", steps=60), max_faulty=3)
+    sc = dataclasses.replace(load_topology("paper6_max_faulty", case="nsnim", steps=60), health_groups=(HealthGroup((1, 2, 3, 4, 5, 6), 3),))
     s, states = _states(sc)
     assert s.violations_total == 0
     assert s.node_steps_not_covered.get("k-of-N health", 0) > 0
@@ -362,3 +362,40 @@ def test_the_sdp_pins_a_fault_that_every_consistent_majority_needs() -> None:
             assert with_pin.public.P[2, 2] < 0.1 * without.public.P[2, 2]
             assert HEALTH_KEY in with_pin.public.reading_keys
     assert pinned.get(3, 0) > 10 and pinned.get(5, 0) > 10, pinned
+
+
+def test_health_groups_read_within_their_group() -> None:
+    """paper6 with two k-of-N groups (sensors 1–3 and 4–6, at most 2 faulty in each, which the paper's faults
+    satisfy): a node rests its set on its own group's readings only, everything is covered and contained, and
+    the groups narrow the fault intervals against no declaration."""
+    import dataclasses
+
+    import numpy as np
+
+    groups = (HealthGroup((1, 2, 3), 2), HealthGroup((4, 5, 6), 2))
+    base = load_topology("paper6_max_faulty", case="nsnim", steps=40)
+    s, states = _states(dataclasses.replace(base, health_groups=groups))
+    s0, states0 = _states(dataclasses.replace(base, health_groups=()))
+    assert s.violations_total == 0 and s.node_steps_covered == s.node_steps_evaluated == s.node_steps_contained
+    for i, ms in states.items():
+        group = next(g for g in groups if i in g.nodes)
+        used = {j for m in ms for j, *_ in m.readings}
+        assert used and used <= set(group.nodes), (i, used)
+        assert any(m.health for m in ms)
+    narrower = [np.mean([_fault_width(m) for m in states0[i] if m.step >= 10]) / np.mean([_fault_width(m) for m in states[i] if m.step >= 10]) for i in states]
+    assert min(narrower) >= 1.0 and max(narrower) > 1.1, narrower
+
+
+def test_a_false_group_declaration_is_attributed_to_it() -> None:
+    """At most 1 faulty of sensors 1–3 declared where the paper's 1 and 2 are both faulty from step 20: the
+    node-steps that used a k-of-N interval at a broken step are not covered, nothing is a violation."""
+    import dataclasses
+
+    groups = (HealthGroup((1, 2, 3), 1), HealthGroup((4, 5, 6), 2))
+    sc = dataclasses.replace(load_topology("paper6_max_faulty", case="nsnim", steps=60), health_groups=groups)
+    s, states = _states(sc)
+    assert s.violations_total == 0
+    broken = {k for k in range(61) if not sc.health_holds({n.id: n.fault(k) for n in sc.nodes})}
+    assert broken
+    expected = sum(1 for ms in states.values() for m in ms if m.health and m.step in broken)
+    assert expected > 0 and s.node_steps_not_covered["k-of-N health"] == expected

@@ -30,7 +30,9 @@ SCENARIOS = {  # name: topology, steps, case override
     "car": ("topologies/paper6_car.toml", 12, None),  # a CommonRoad plant generates the truth (docs/plant.md)
     "reference": ("topologies/paper6_reference.toml", 10, "saim"),  # the same-step readings (docs/network.md)
     "max_faulty": ("topologies/paper6_max_faulty.toml", 10, None),  # every node's reading, the k-of-N interval
+    "groups": ("topologies/paper6_max_faulty.toml", 10, None),  # two k-of-N groups (GROUPS instead of max_faulty)
 }
+GROUPS = "[[network.health_groups]]\nnodes = [1, 2, 3]\nmax_faulty = 2\n\n[[network.health_groups]]\nnodes = [4, 5, 6]\nmax_faulty = 2\n"
 TOL = 1e-9
 
 
@@ -42,9 +44,21 @@ class Runs:
         self.zenoh: dict[str, dict] = {}
         self.mem: dict[str, object] = {}
 
+    def topology(self, name: str) -> str:
+        """The scenario's topology file; ``groups``: paper6_max_faulty with GROUPS for its max_faulty."""
+        topo = SCENARIOS[name][0]
+        if name != "groups":
+            return topo
+        path = self.tmp.getbasetemp() / "paper6_groups.toml"
+        if not path.exists():
+            text = (Path(ROOT) / topo).read_text().replace('node_dir = "../nodes"', f'node_dir = "{Path(ROOT) / "nodes"}"')
+            path.write_text(text.replace("max_faulty = 4\n", GROUPS))
+        return str(path)
+
     def zenoh_run(self, name: str) -> dict:
         if name not in self.zenoh:
-            topo, steps, case = SCENARIOS[name]
+            _, steps, case = SCENARIOS[name]
+            topo = self.topology(name)
             d = self.tmp.mktemp(f"zenoh-{name}")
             rec, summ = d / "record.json", d / "summary.json"
             args = [topo, "--steps", str(steps), "--seed", str(SEED), "--signals", SIGNALS, "--record", str(rec), "--summary-json", str(summ)]
@@ -59,8 +73,8 @@ class Runs:
             from netsetest.config.schema import load_topology
             from netsetest.runtime.inmemory import run_inmemory
 
-            topo, steps, case = SCENARIOS[name]
-            self.mem[name] = run_inmemory(load_topology(Path(ROOT) / topo, case, steps), SIGNALS, "scheduled", seed=SEED)
+            _, steps, case = SCENARIOS[name]
+            self.mem[name] = run_inmemory(load_topology(Path(ROOT) / self.topology(name), case, steps), SIGNALS, "scheduled", seed=SEED)
         return self.mem[name]
 
 
@@ -110,6 +124,10 @@ def test_zenoh_lockstep_equals_inmemory(runs: Runs, name: str) -> None:
         assert all(e["readings"] == [3] for i, es in zrec["nodes"].items() if i != "3" for e in es[1:])
     if name == "max_faulty":  # every node's reading crossed Zenoh (ACL included) and the k-of-N interval was used
         assert sum(e["health"] for es in zrec["nodes"].values() for e in es[1:]) >= 0.6 * 6 * steps
+    if name == "groups":  # a node's readings came from its own group only, over Zenoh as in memory
+        for i, es in zrec["nodes"].items():
+            group = {1, 2, 3} if int(i) <= 3 else {4, 5, 6}
+            assert all(set(e["readings"]) <= group for e in es) and any(e["health"] for e in es), i
     if name == "car":  # the car's mismatch reached the record the same way in both runtimes
         assert all(t["e"] is not None and any(t["e"]) for t in zrec["truth"][:-1])
     assert zs["losses"] == ms["losses"], f"{name}: scheduled losses differ"

@@ -1,6 +1,6 @@
 """The benchmark's ring variants (netsetest/bench/topologies.py) are the topologies they claim to be: the
-real-time figures per variant (``realtime_fit``) measure a reference's readings, everyone's readings under
-``max_faulty`` and the car, and nothing else."""
+real-time figures per variant (``realtime_fit``) measure a reference's readings, k-of-N health per group of
+six sensors and the car, and nothing else."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from netsetest.bench.topologies import FAULTY_PROFILES, ring_topology
 from netsetest.config.schema import load_topology
 
 
-@pytest.mark.parametrize("n", [6, 13])
+@pytest.mark.parametrize("n", [6, 13, 14, 32])
 def test_ring_variants(tmp_path: Path, n: int) -> None:
     plain = load_topology(ring_topology(tmp_path, n, 5))
     ref = load_topology(ring_topology(tmp_path, n, 5, variant="reference"))
@@ -20,9 +20,11 @@ def test_ring_variants(tmp_path: Path, n: int) -> None:
     car = load_topology(ring_topology(tmp_path, n, 5, variant="car"))
     assert plain.references() == () and not plain.health_declared and plain.plant == "ts"
     assert ref.references() == (3,) and all(ref.reading_sources(i) == (3,) for i in ref.ids if i != 3)
-    assert faulty.health_declared and all(len(faulty.reading_sources(i)) == n - 1 for i in faulty.ids)
-    # the declaration holds on the profiles' faults: exactly the nodes whose profile has one may be faulty
-    assert faulty.max_faulty == sum((i - 1) % 6 + 1 in FAULTY_PROFILES for i in faulty.ids) < n
+    assert faulty.health_declared and all(6 <= len(g.nodes) < 12 for g in faulty.health_groups)
+    assert sorted(i for g in faulty.health_groups for i in g.nodes) == faulty.ids  # every node in one group
+    for g in faulty.health_groups:  # a node reads its group's readings; the declaration holds on the profiles' faults
+        assert all(faulty.reading_sources(i) == tuple(j for j in g.nodes if j != i) for i in g.nodes)
+        assert g.max_faulty == sum((i - 1) % 6 + 1 in FAULTY_PROFILES for i in g.nodes) < len(g.nodes)
     assert car.plant == "single-track" and car.uncertainty is not None
     for sc in (ref, faulty, car):  # the same ring: only what the variant names differs
         assert [n_.in_weights for n_ in sc.nodes] == [n_.in_weights for n_ in plain.nodes]

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from netsetest.bus import keys
-from netsetest.config.schema import ConfigError, load_topology
+from netsetest.config.schema import ConfigError, HealthGroup, load_topology
 from netsetest.runtime.security import grants
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -26,7 +26,8 @@ def _topology(tmp_path: Path, network: str, yaw1_C: str | None = None) -> Path:
 
 def test_the_bundled_declaration() -> None:
     sc = load_topology("paper6_max_faulty")
-    assert sc.max_faulty == 4 and sc.health_declared and sc.references() == ()
+    assert sc.health_groups == (HealthGroup((1, 2, 3, 4, 5, 6), 4),) and sc.health_declared and sc.references() == ()
+    assert sc.health_label == "max_faulty = 4"
     assert all(sc.publishes_reading(i) for i in sc.ids)
     assert sc.reading_sources(3) == (1, 2, 4, 5, 6)
     assert sc.health_holds({1: 0.1, 2: 0.1, 3: 0.0, 4: 0.2, 5: 0.0, 6: -0.1})
@@ -44,7 +45,7 @@ def test_every_node_may_publish_its_reading_and_receive_everyone_elses() -> None
 @pytest.mark.parametrize(
     ("network", "C", "why"),
     [
-        ("max_faulty = 6", None, r"must be less than the number of nodes \(6\)"),
+        ("max_faulty = 6", None, r"must be less than the number of its nodes \(6\)"),
         ("max_faulty = -1", None, "max_faulty"),
         ("max_faulty = 2", "[0.01, 0.12]", "the same combination of the state"),
     ],
@@ -56,4 +57,46 @@ def test_a_declaration_that_cannot_hold_is_refused(tmp_path: Path, network: str,
 
 def test_readings_off_turns_the_declaration_off(tmp_path: Path) -> None:
     sc = load_topology(_topology(tmp_path, "max_faulty = 4\nreadings = false"))
-    assert sc.max_faulty == 4 and not sc.health_declared and not any(sc.publishes_reading(i) for i in sc.ids)
+    assert sc.health_groups and not sc.health_declared and not any(sc.publishes_reading(i) for i in sc.ids)
+    assert sc.health_group(1) is None and sc.reading_sources(1) == ()
+
+
+GROUPS = "[[network.health_groups]]\nnodes = [1, 2, 3]\nmax_faulty = 2\n[[network.health_groups]]\nnodes = [4, 5, 6]\nmax_faulty = 2"
+
+
+def test_health_groups(tmp_path: Path) -> None:
+    """Per group: a node reads its group's readings only (the ACL grants those), and the assumption holds
+    when every group has at most its m faulty."""
+    sc = load_topology(_topology(tmp_path, GROUPS))
+    assert sc.health_groups == (HealthGroup((1, 2, 3), 2), HealthGroup((4, 5, 6), 2)) and sc.health_declared
+    assert sc.reading_sources(1) == (2, 3) and sc.reading_sources(5) == (4, 6)
+    assert sc.health_label == "max_faulty = 2 of nodes 1, 2, 3; max_faulty = 2 of nodes 4, 5, 6"
+    g = grants(sc, "r")
+    assert {k for k in g["node-5"].receive if k.endswith("/reading")} == {keys.reading("r", 4), keys.reading("r", 6)}
+    assert sc.health_holds({1: 0.1, 2: 0.1, 3: 0.0, 4: 0.2, 5: 0.3, 6: 0.0})  # 2 and 2
+    assert not sc.health_holds({1: 0.1, 2: 0.1, 3: 0.1, 4: 0.0, 5: 0.0, 6: 0.0})  # 3 of the first group
+
+
+def test_a_node_in_no_group_reads_none(tmp_path: Path) -> None:
+    sc = load_topology(_topology(tmp_path, "[[network.health_groups]]\nnodes = [1, 2, 3]\nmax_faulty = 1"))
+    assert sc.health_group(4) is None and sc.reading_sources(4) == () and not sc.publishes_reading(4)
+    assert sc.publishes_reading(1) and sc.reading_sources(2) == (1, 3)
+    assert sc.health_holds({1: 0.1, 2: 0.0, 3: 0.0, 4: 0.5, 5: 0.5, 6: 0.5})  # 4–6 are in no group
+
+
+@pytest.mark.parametrize(
+    ("network", "why"),
+    [
+        ("max_faulty = 1\n" + GROUPS, "give one"),
+        ("[[network.health_groups]]\nnodes = [1, 2, 9]\nmax_faulty = 1", "no node with id 9"),
+        ("[[network.health_groups]]\nnodes = [1, 2, 3]\nmax_faulty = 3", r"health_groups\[0\]: max_faulty must be less than the number of its nodes \(3\)"),
+        (
+            "[[network.health_groups]]\nnodes = [1, 2]\nmax_faulty = 1\n[[network.health_groups]]\nnodes = [2, 3]\nmax_faulty = 1",
+            "node 2 is in it twice or in two groups",
+        ),
+        ("[[network.health_groups]]\nnodes = [1]\nmax_faulty = 0", "nodes"),
+    ],
+)
+def test_a_group_that_cannot_hold_is_refused(tmp_path: Path, network: str, why: str) -> None:
+    with pytest.raises(ConfigError, match=why):
+        load_topology(_topology(tmp_path, network))
