@@ -557,6 +557,12 @@ class Scenario:
         (True if none is declared)."""
         return all(sum(abs(faults[j]) > self.fault_tolerance * (1 + 1e-12) for j in g.nodes if j in faults) <= g.max_faulty for g in self.health_groups)
 
+    def group_health_holds(self, i: int, faults: dict[int, float]) -> bool:
+        """The k-of-N assumption of node i's group at one step (True if it is in none): what a set resting on
+        its group's k-of-N interval needs."""
+        group = self.health_group(i)
+        return group is None or sum(abs(faults[j]) > self.fault_tolerance * (1 + 1e-12) for j in group.nodes if j in faults) <= group.max_faulty
+
     @property
     def health_label(self) -> str:
         """The declaration in a few words: ``max_faulty = 4`` (one group of every node) or the groups'."""

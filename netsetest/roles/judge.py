@@ -289,8 +289,8 @@ class Judge:
             why = self.reading_cause(j, y, gamma, tr)
             if why is not None:
                 return Cone(False, INHERITED, Origin(j, k, why))
-        if st.health and not tr.health_ok:
-            return Cone(False, HEALTH)
+        if st.health and not self.sc.group_health_holds(i, {int(j): f for j, f in tr.faults.items()}):
+            return Cone(False, HEALTH)  # its group's k-of-N interval rested on more healthy sensors than there were
         if st.status == "fallback" and st.set is not None:
             return Cone(False, "fallback")  # the previous step's set again: no guarantee for this step
         for j, m, digest, as_prior in _inputs_of(st, k):

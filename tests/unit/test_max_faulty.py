@@ -75,6 +75,7 @@ def test_health_groups(tmp_path: Path) -> None:
     assert {k for k in g["node-5"].receive if k.endswith("/reading")} == {keys.reading("r", 4), keys.reading("r", 6)}
     assert sc.health_holds({1: 0.1, 2: 0.1, 3: 0.0, 4: 0.2, 5: 0.3, 6: 0.0})  # 2 and 2
     assert not sc.health_holds({1: 0.1, 2: 0.1, 3: 0.1, 4: 0.0, 5: 0.0, 6: 0.0})  # 3 of the first group
+    assert not sc.group_health_holds(2, {1: 0.1, 2: 0.1, 3: 0.1, 4: 0.0}) and sc.group_health_holds(5, {1: 0.1, 2: 0.1, 3: 0.1, 4: 0.0})
 
 
 def test_a_node_in_no_group_reads_none(tmp_path: Path) -> None:
