@@ -7,6 +7,8 @@ Per scenario, case and signals:
 - today: each node's SDP fault width run alone (a self-loop only, no reference's reading) over the same
   node in the network (neighbours' states and, with a reference, its same-step readings), the network's
   over the exact central limit, and the detection delays in the network and alone;
+- containment over seeds 0–9, in memory (:func:`containment_sweep`): violations, coverage, false detections,
+  and a false health declaration's misses, all where an assumption broke;
 - the same-step phase's cost: ``netsetest run`` of ``paper6_reference`` over Zenoh (secured, lockstep,
   as users start it) with the readings and with ``[network] readings = false``, time per step.
 
@@ -22,10 +24,13 @@ import statistics
 import subprocess
 import sys
 import time
+from collections import Counter
+from collections.abc import Sequence
 from pathlib import Path
 
 from netsetest.config.schema import Scenario
 from netsetest.records.record import Record
+from netsetest.roles.judge import HEALTH
 from netsetest.scenarios import TOPOLOGY_DIR
 
 SCENARIOS = ("paper6", "paper6_reference", "paper6_max_faulty")
@@ -84,7 +89,57 @@ def network_figures(cfg: dict, tmp: Path) -> dict:
                     rows.append({"topology": name, "case": case, "signals": sig, "seed": seed, "nodes": nodes, "exact": not sc.health_groups})
                     gain = [v["sdp_alone_over_network"] for v in nodes.values()]
                     _log(f"  {name} {case} {sig} seed {seed}: SDP alone/network {min(gain):.3f}–{max(gain):.3f}")
-    return {"steps": cfg["network_steps"], "seeds": cfg["network_seeds"], "runs": rows, "exchange_cost": exchange_cost(cfg, tmp)}
+    return {
+        "steps": cfg["network_steps"],
+        "seeds": cfg["network_seeds"],
+        "runs": rows,
+        "sweep": containment_sweep(cfg["network_steps"], SWEEP_SEEDS),
+        "exchange_cost": exchange_cost(cfg, tmp),
+    }
+
+
+SWEEP_SEEDS = tuple(range(10))  # the issue's seeds 0–9
+FALSE_MAX_FAULTY = 3  # a declaration the paper's faults break: four sensors are faulty at once from step 20
+
+
+def containment_sweep(steps: int, seeds: Sequence[int]) -> dict:
+    """Every seed of ``seeds``, both cases and signal families, in memory: ``paper6_reference`` and
+    ``paper6_max_faulty`` as declared (violations, node-steps covered and contained, false detections where every
+    assumption held), and ``paper6_max_faulty`` with a false declaration (``max_faulty = 3``: its misses must all
+    fall where an assumption broke, and the node-steps it uncovers are counted).  Lockstep Zenoh publishes the
+    same states as in memory (tests/process/test_zenoh_lockstep.py), so the verdicts carry over."""
+    from dataclasses import replace
+
+    from netsetest.config.schema import HealthGroup, load_topology
+    from netsetest.runtime.inmemory import run_inmemory
+
+    rows = []
+    for name, false in (("paper6_reference", False), ("paper6_max_faulty", False), ("paper6_max_faulty", True)):
+        for case in ("nsnim", "saim"):
+            sc = load_topology(TOPOLOGY_DIR / f"{name}.toml", case, steps)
+            if false:
+                sc = replace(sc, health_groups=(HealthGroup(tuple(sc.ids), FALSE_MAX_FAULTY),))
+            for sig in ("paper", "worst"):
+                tot: Counter[str] = Counter()
+                for seed in seeds:
+                    sm = run_inmemory(sc, sig, "scheduled", seed).summary
+                    tot.update(
+                        runs=1,
+                        violations=sm.violations_total,
+                        misses_broken=sm.misses_assumption_broken_total,
+                        evaluated=sm.node_steps_evaluated,
+                        covered=sm.node_steps_covered,
+                        contained=sm.node_steps_contained,
+                        uncovered_health=sm.node_steps_not_covered.get(HEALTH, 0),
+                        false_detections=sum(n.false_detections for n in sm.nodes),
+                        false_detections_covered=sum(n.false_detections_covered for n in sm.nodes),
+                    )
+                declared = f"max_faulty = {FALSE_MAX_FAULTY} (false)" if false else "as declared"
+                rows.append({"topology": name, "declared": declared, "case": case, "signals": sig, **tot})
+                _log(
+                    f"  {name} {declared} {case} {sig}, seeds {seeds[0]}–{seeds[-1]}: {tot['violations']} violations, {tot['covered']} of {tot['evaluated']} covered"
+                )
+    return {"seeds": list(seeds), "rows": rows}
 
 
 COST_STEPS = (20, 120)  # two run lengths: the per-step time is their difference (start-up cancels)
@@ -203,6 +258,23 @@ def network_markdown(res: dict) -> str:
         f"False detections (a fault interval excluding 0 while the true fault was 0) over these {len(runs)} runs "
         f"in the network: {false}, of them where every assumption held: {false_cov}.",
     ]
+    sweep = res.get("sweep")
+    if sweep:
+        seeds = sweep["seeds"]
+        lines += [
+            "",
+            f"Containment and detection over seeds {seeds[0]}–{seeds[-1]} in memory (node-steps summed over the seeds; a false detection "
+            "where every assumption held would also be a violation; `max_faulty = 3` is false for the paper's faults, four of "
+            "which are on at once from step 20):",
+            "",
+            "| topology | declared | case | signals | violations | covered / evaluated | contained | misses where an assumption broke | uncovered by k-of-N health | false detections (covered) |",
+            "|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for r in sweep["rows"]:
+            lines.append(
+                f"| `{r['topology']}` | {r['declared']} | {r['case']} | {r['signals']} | {r['violations']} | {r['covered']} / {r['evaluated']} | "
+                f"{r['contained']} | {r['misses_broken']} | {r['uncovered_health']} | {r['false_detections']} ({r['false_detections_covered']}) |"
+            )
     cost = res.get("exchange_cost")
     if cost and "paper6_reference" in cost["ms_per_step"]:
         parts = []
