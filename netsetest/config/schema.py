@@ -432,6 +432,10 @@ class HealthGroup:
         """Sensors of the group healthy at every step."""
         return len(self.nodes) - self.max_faulty
 
+    def holds(self, faults: dict[int, float], tolerance: float) -> bool:
+        """Whether at most ``max_faulty`` of the group's faults at one step exceed ``tolerance``."""
+        return sum(abs(faults[j]) > tolerance * (1 + 1e-12) for j in self.nodes if j in faults) <= self.max_faulty
+
 
 @dataclass(frozen=True)
 class NodeConfig:
@@ -555,13 +559,13 @@ class Scenario:
     def health_holds(self, faults: dict[int, float]) -> bool:
         """The k-of-N assumption at one step: at most m faults above the tolerance in every declared group
         (True if none is declared)."""
-        return all(sum(abs(faults[j]) > self.fault_tolerance * (1 + 1e-12) for j in g.nodes if j in faults) <= g.max_faulty for g in self.health_groups)
+        return all(g.holds(faults, self.fault_tolerance) for g in self.health_groups)
 
     def group_health_holds(self, i: int, faults: dict[int, float]) -> bool:
         """The k-of-N assumption of node i's group at one step (True if it is in none): what a set resting on
         its group's k-of-N interval needs."""
         group = self.health_group(i)
-        return group is None or sum(abs(faults[j]) > self.fault_tolerance * (1 + 1e-12) for j in group.nodes if j in faults) <= group.max_faulty
+        return group is None or group.holds(faults, self.fault_tolerance)
 
     @property
     def health_label(self) -> str:
