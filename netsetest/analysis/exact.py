@@ -87,8 +87,8 @@ class HealthSearch:
     is exact but those in ``relaxed``, where the budget ran out and the end is the least bound proven (an outer
     bound of the exact one, at worst the program without the assumption)."""
 
-    max_faulty: int
-    need: int  # sensors healthy at every step: N − m of the program's nodes
+    declared: str  # the declaration (Scenario.health_label)
+    need: tuple[int, ...]  # per group, sensors healthy at every step: |S| − m of the program's nodes S in it
     budget: int  # solves per end
     ends: int
     exact_ends: int
@@ -370,8 +370,8 @@ class _HealthPlan:
     :data:`CUT_MARGIN`.  They hold in every later horizon (it only adds constraints), so they become rows of
     its program; a step left with one piece inside them is convex there and joins those rows."""
 
-    def __init__(self, prog: _Program, model: HealthModel) -> None:
-        self.prog, self.model = prog, model
+    def __init__(self, prog: _Program, model: HealthModel, group: int = 0) -> None:
+        self.prog, self.model, self.group = prog, model, group
         self.members = [(n, node) for n, node in enumerate(prog.sc.nodes) if node.id in model.sensors]  # (program position, node)
         self.cuts: list[Row] = []  # rows valid in every later horizon
         self.unions: list[StepUnion] = []  # past steps with several pieces
@@ -395,7 +395,7 @@ class _HealthPlan:
         return tuple(out)
 
     def _union(self, j: int, tied: list[bool], allowed: list[bool], window: Span) -> StepUnion | None:
-        pieces = step_pieces(self._spans(j), tied, allowed, self.model.need, window)
+        pieces = step_pieces(self._spans(j), tied, allowed, self.model.need, window, self.group)
         if pieces is None:
             return None
         f_col = tuple(self.prog._f(n, j) if t else None for (n, _), t in zip(self.members, tied))
@@ -530,8 +530,8 @@ def exact_bounds(
         scenario = replace(scenario, nodes=[n for n in scenario.nodes if n.id in set(nodes)])
     bounded = scenario.fault_bounded(fault_bounds)
     prog = _Program(scenario, data, bounded)
-    model = HealthModel.of_group(scenario, scenario.health_groups[0]) if health and _health_applies(scenario) else None
-    plan = _HealthPlan(prog, model) if model is not None and model.need > 0 else None
+    models = [HealthModel.of_group(scenario, g) for g in scenario.health_groups] if health and scenario.health_declared else []
+    plans = [_HealthPlan(prog, m, k) for k, m in enumerate(models) if m.need > 0]
     K1 = len(data)
     beta, r = np.full((K1, 2), np.nan), np.full((K1, 2), np.nan)
     fault = {i: np.full((K1, 2), np.nan) for i in scenario.ids}
@@ -542,19 +542,16 @@ def exact_bounds(
     for k in range(K1):
         if progress is not None:
             progress(k, K1)
-        if plan is not None and infeasible:  # a later horizon only adds constraints: no trajectory either
+        if plans and infeasible:  # a later horizon only adds constraints: no trajectory either
             infeasible.append(k)
             continue
         cols, A, b, cones = prog.matrices(k, eliminate_free_faults)
         conic = Conic(cols, A, b, cones, st)
-        horizon = _Horizon(conic.with_rows(plan.cuts) if plan is not None else conic, prog.nz)
+        horizon = _Horizon(conic.with_rows([row for p in plans for row in p.cuts]) if plans else conic, prog.nz)
         step_infeasible = False
         for coord, node, col in prog.objectives(k):
             target = fault[node] if node is not None else (beta if coord == "beta" else r)  # node: the fault's only
-            unions = None
-            if plan is not None:
-                window = plan.window(k, beta[k], r[k]) if coord == "f" else (-np.inf, np.inf)  # β, r come first
-                unions = plan.unions_at(k, col, window)
+            unions = _unions_at(plans, k, col, beta[k], r[k], coord == "f") if plans else None
             for end, (side, sign) in enumerate((("lo", 1.0), ("hi", -1.0))):
                 key = WitnessKey(coord, node, k, side)  # type: ignore[arg-type]  # coord is one of COORDINATES and side one of lo, hi: str in the loop
                 result = _end(horizon, col, sign, unions, health_budget, f"step {k}: the {coord} bound")
@@ -564,16 +561,19 @@ def exact_bounds(
                 target[k, end] = sign * result.value
                 if keep_witnesses and result.z is not None and result.status == "solved":
                     witnesses[key] = prog.witness(result.z, k, eliminate_free_faults)
-                if plan is not None:
+                if plans:
                     tally.count(key, result)
-                    plan.drop([d for d in result.dead if d[0] < k])
+                    for p in plans:
+                        p.drop([d for d in result.dead if d[0] < k])
         if step_infeasible:
             infeasible.append(k)
-        elif plan is not None:
-            plan.learn(k, beta[k], r[k], {i: fault[i][k] for i in scenario.ids})
+        elif plans:
+            for p in plans:
+                p.learn(k, beta[k], r[k], {i: fault[i][k] for i in scenario.ids})
     search = None
-    if plan is not None:
-        search = HealthSearch(scenario.health_groups[0].max_faulty, plan.model.need, health_budget, tally.ends, tally.exact, tuple(tally.relaxed), tally.solves)
+    if plans:
+        needs = tuple(p.model.need for p in plans)
+        search = HealthSearch(scenario.health_label, needs, health_budget, tally.ends, tally.exact, tuple(tally.relaxed), tally.solves)
     return ExactBounds(
         steps=np.arange(K1),
         beta=beta,
@@ -586,6 +586,18 @@ def exact_bounds(
         omitted=omitted_assumptions(scenario, health),
         health=search,
     )
+
+
+def _unions_at(plans: list[_HealthPlan], k: int, col: int, beta: np.ndarray, r: np.ndarray, is_fault: bool) -> tuple[list[StepUnion], bool]:
+    """Every group's unions of horizon k for one objective column, by step, and whether all are complete; the
+    window of t_k (a group's direction u) from the horizon's β, r ends, which come before the faults'."""
+    unions: list[StepUnion] = []
+    complete = True
+    for p in plans:
+        got, done = p.unions_at(k, col, p.window(k, beta, r) if is_fault else (-np.inf, np.inf))
+        unions += got
+        complete = complete and done
+    return sorted(unions, key=lambda u: u.step), complete
 
 
 def _end(horizon: _Horizon, col: int, sign: float, unions: tuple[list[StepUnion], bool] | None, budget: int, what: str) -> EndResult:
@@ -605,7 +617,8 @@ def _end(horizon: _Horizon, col: int, sign: float, unions: tuple[list[StepUnion]
 def health_line(h: HealthSearch) -> str:
     """One line on the k-of-N branch and bound: what was applied and how many ends are exact."""
     line = (
-        f"applied: k-of-N health (max_faulty = {h.max_faulty}: at least {h.need} sensors healthy at every step) by branch and bound, "
+        f"applied: k-of-N health ({h.declared}: at least {', '.join(map(str, h.need))} sensors {'of each group ' if len(h.need) > 1 else ''}"
+        f"healthy at every step) by branch and bound, "
         f"{h.exact_ends} of {h.ends} ends exact ({h.solves} solves, at most {h.budget} per end)"
     )
     if not h.relaxed:
@@ -615,16 +628,10 @@ def health_line(h: HealthSearch) -> str:
     return f"{line}; relaxed (the least bound proven, an outer bound): {shown}{more}"
 
 
-def _health_applies(scenario: Scenario) -> bool:
-    """Whether :func:`exact_bounds` can apply the declared k-of-N health: one group (``[network] max_faulty``
-    or a single ``[[network.health_groups]]``); several groups are left out (an outer bound, docs/exact.md)."""
-    return scenario.health_declared and len(scenario.health_groups) == 1
-
-
 def omitted_assumptions(scenario: Scenario, health: bool = True) -> tuple[str, ...]:
     """The declared assumptions :func:`exact_bounds` does not apply (docs/exact.md): the k-of-N health
-    unless it is applied (``health``: it is, for one group)."""
-    return (f"k-of-N health ({scenario.health_label})",) if scenario.health_declared and not (health and _health_applies(scenario)) else ()
+    unless it is applied (``health``)."""
+    return (f"k-of-N health ({scenario.health_label})",) if scenario.health_declared and not health else ()
 
 
 # ---------------------------------------------------------------- a record against the exact limit
@@ -760,6 +767,9 @@ def _nanmean(values: list[float]) -> float:
     return float(np.mean(finite)) if finite else float("nan")
 
 
+EXACT_FORMAT_VERSION = 2  # 2: health {declared, need per group} (k-of-N groups) instead of {max_faulty, need}
+
+
 def _finite_or_none(v: float) -> float | None:
     return float(v) if np.isfinite(v) else None
 
@@ -768,7 +778,15 @@ def _health_document(h: HealthSearch | None) -> dict | None:
     if h is None:
         return None
     relaxed = [{"coordinate": k.coordinate, "node": k.node, "step": k.step, "side": k.side} for k in h.relaxed]
-    return {"max_faulty": h.max_faulty, "need": h.need, "budget": h.budget, "ends": h.ends, "exact_ends": h.exact_ends, "solves": h.solves, "relaxed": relaxed}
+    return {
+        "declared": h.declared,
+        "need": list(h.need),
+        "budget": h.budget,
+        "ends": h.ends,
+        "exact_ends": h.exact_ends,
+        "solves": h.solves,
+        "relaxed": relaxed,
+    }
 
 
 def exact_document(record: Record, exact: ExactBounds, comparison: ExactComparison) -> dict:
@@ -790,7 +808,7 @@ def exact_document(record: Record, exact: ExactBounds, comparison: ExactComparis
 
     return {
         "format": "netsetest-exact",
-        "version": 1,
+        "version": EXACT_FORMAT_VERSION,
         "record": record.path,
         "fault_bounds": exact.fault_bounds,
         "bounded_nodes": list(exact.bounded_nodes),

@@ -1,6 +1,7 @@
 """The k-of-N health assumption in the exact limit: branch and bound over each step's pieces (docs/exact.md).
 
-Under ``[network] max_faulty = m`` at least need = N − m sensors are healthy (|f_i,j| ≤ τ) at every step j.
+Under ``[network] max_faulty = m`` at least need = N − m sensors are healthy (|f_i,j| ≤ τ) at every step j
+(with several ``[[network.health_groups]]``, in each group: one union per group and step, N and m the group's).
 Every sensor measures t = uᵀx (C_i = s_i uᵀ, checked when the topology is loaded), so a healthy sensor's
 measurement rows put t_j in its span I_i,j (the measured interval widened by |Ds_i|τ, over s_i).  Whether a
 sensor's health is a condition on t_j alone depends on its fault variable:
@@ -49,7 +50,8 @@ class Piece:
 
     lo: float
     hi: float
-    healthy: tuple[int, ...]  # sensor positions of tied faults assumed healthy
+    healthy: tuple[int, ...]  # sensor positions (in its group) of tied faults assumed healthy
+    group: int = 0  # the k-of-N group it belongs to: pieces of different groups are different constraints
 
     def within(self, other: Piece) -> bool:
         return set(other.healthy) <= set(self.healthy) and other.lo <= self.lo and self.hi <= other.hi
@@ -88,7 +90,7 @@ def _clip(parts: list[Span], lo: float, hi: float) -> list[Span]:
     return [(max(a, lo), min(b, hi)) for a, b in parts if max(a, lo) <= min(b, hi)]
 
 
-def step_pieces(spans: Sequence[Span], tied: Sequence[bool], allowed: Sequence[bool], need: int, window: Span) -> list[Piece] | None:
+def step_pieces(spans: Sequence[Span], tied: Sequence[bool], allowed: Sequence[bool], need: int, window: Span, group: int = 0) -> list[Piece] | None:
     """Every piece of one step (module doc) inside ``window`` (an interval known to hold t_j), none contained
     in another; ``allowed``: tied sensors that may be healthy (their fault's known range meets [−τ, τ]).
     None if there are more than :data:`MAX_PIECE_SETS` sets Q to try (the caller relaxes the step)."""
@@ -99,10 +101,10 @@ def step_pieces(spans: Sequence[Span], tied: Sequence[bool], allowed: Sequence[b
         return None
     pieces: list[Piece] = []
     for q in sizes:
-        for group in itertools.combinations(candidates, q):
-            lo = max([window[0], *(spans[n][0] for n in group)])
-            hi = min([window[1], *(spans[n][1] for n in group)])
-            pieces += [Piece(a, b, group) for a, b in _clip(covered(untied, need - q), lo, hi)]
+        for healthy in itertools.combinations(candidates, q):
+            lo = max([window[0], *(spans[n][0] for n in healthy)])
+            hi = min([window[1], *(spans[n][1] for n in healthy)])
+            pieces += [Piece(a, b, healthy, group) for a, b in _clip(covered(untied, need - q), lo, hi)]
     return [p for m, p in enumerate(pieces) if not any(p.within(o) and (not o.within(p) or n < m) for n, o in enumerate(pieces) if n != m)]
 
 

@@ -326,7 +326,7 @@ def cmd_exact(a: argparse.Namespace) -> int:
         print(f"  {health_line(ex.health)}")
     if ex.omitted:
         print(
-            f"  not applied: {', '.join(ex.omitted)} ({'--no-health' if a.no_health else 'several groups'}): these bounds are an outer bound of the "
+            f"  not applied: {', '.join(ex.omitted)} (--no-health): these bounds are an outer bound of the "
             "exact limit, and a node that uses the assumption may be narrower (docs/exact.md)"
         )
     names = {"f": "fault", "r": "yaw rate", "beta": "sideslip"}

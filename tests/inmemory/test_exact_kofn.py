@@ -19,7 +19,7 @@ from netsetest.analysis.exact import COORDINATES, ExactBounds, _Program, _settin
 from netsetest.analysis.kofn import Piece, covered, step_pieces
 from netsetest.cli.main import main
 from netsetest.config.schema import FaultBoundsMode, HealthGroup, Scenario, load_topology
-from netsetest.records.record import Record, load_record, record_from_parts
+from netsetest.records.record import Record, record_from_parts
 from netsetest.runtime.inmemory import run_inmemory
 
 TOPOLOGY = "paper6_max_faulty"
@@ -45,11 +45,15 @@ def _exact(steps: int, health: bool = True, fault_bounds: FaultBoundsMode = "use
 
 
 def _brute_force(sc: Scenario, rec: Record, fault_bounds: FaultBoundsMode) -> dict[tuple[str, int | None, int], tuple[float, float]]:
-    """Every end as the least (greatest) value over every sequence of hypotheses H_0..H_k (N − m sensors with
-    |f| ≤ τ at each step), each one convex program on the whole horizon (no fault eliminated)."""
-    (group,) = sc.health_groups
+    """Every end as the least (greatest) value over every sequence of hypotheses H_0..H_k (in every group, N − m of
+    its sensors with |f| ≤ τ at each step), each one convex program on the whole horizon (no fault eliminated)."""
     prog = _Program(sc, step_data(rec), sc.fault_bounded(fault_bounds))
-    hypotheses = list(itertools.combinations(range(len(sc.ids)), len(sc.ids) - group.max_faulty))
+    position = {i: n for n, i in enumerate(sc.ids)}
+    per_group = []  # per group: every set of need of its sensors in the program (positions)
+    for g in sc.health_groups:
+        members = [position[i] for i in g.nodes if i in position]
+        per_group.append(list(itertools.combinations(members, len(members) - g.max_faulty)))
+    hypotheses = [tuple(n for part in parts for n in part) for parts in itertools.product(*per_group)]
     out = {}
     for k in range(len(step_data(rec))):
         cols, A, b, cones = prog.matrices(k, eliminate=False)
@@ -86,7 +90,7 @@ def test_branch_and_bound_is_brute_force_over_every_hypothesis_sequence(fault_bo
     full, rec = _run(3)
     full = dataclasses.replace(full, health_groups=(HealthGroup(tuple(full.ids), 1),), fault_tolerance=tolerance)
     ex = exact_bounds(full, rec, fault_bounds, nodes=[1, 3, 5])
-    assert ex.health is not None and ex.health.need == 2 and ex.health.exact_ends == ex.health.ends and not ex.health.relaxed
+    assert ex.health is not None and ex.health.need == (2,) and ex.health.exact_ends == ex.health.ends and not ex.health.relaxed
     sc = dataclasses.replace(full, nodes=[n for n in full.nodes if n.id in (1, 3, 5)])
     brute = _brute_force(sc, rec, fault_bounds)
     assert not ex.infeasible_steps and len(brute) == 4 * 5
@@ -163,14 +167,32 @@ def test_the_command_applies_it_and_says_how_many_ends_are_exact(tmp_path: Path,
     assert "not applied" not in out and "narrower than exact on 0 of" in out
     doc = json.loads((tmp_path / "exact.json").read_text())
     assert doc["omitted"] == [] and doc["health"]["exact_ends"] == doc["health"]["ends"] == 112 and doc["health"]["relaxed"] == []
+    assert doc["health"]["declared"] == "max_faulty = 4" and doc["health"]["need"] == [2]
     assert main(["exact", str(path), "--no-health"]) == 0
     out = capsys.readouterr().out
     assert "not applied: k-of-N health (max_faulty = 4)" in out and "applied: k-of-N" not in out.replace("not applied: k-of-N", "")
 
 
-def test_several_groups_are_left_out_and_said_so(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """Two k-of-N groups: ``netsetest exact`` applies neither (an outer bound) and says why, and the published
-    intervals that are narrower than it are put down to the assumption it left out."""
+def test_two_groups_are_brute_force_over_every_hypothesis_sequence() -> None:
+    """Two k-of-N groups, sensors (1, 2) and (3, 5), at most one faulty in each, 4 steps: 2 × 2 hypotheses a step,
+    4^(k+1) sequences per horizon k.  The branch and bound over both groups' unions is the brute force."""
+    full, rec = _run(3)
+    full = dataclasses.replace(full, health_groups=(HealthGroup((1, 2), 1), HealthGroup((3, 5), 1)))
+    ex = exact_bounds(full, rec, "used", nodes=[1, 2, 3, 5])
+    assert ex.health is not None and ex.health.need == (1, 1) and ex.health.exact_ends == ex.health.ends and not ex.health.relaxed
+    assert ex.omitted == () and ex.health.declared == "max_faulty = 1 of nodes 1, 2; max_faulty = 1 of nodes 3, 5"
+    sc = dataclasses.replace(full, nodes=[n for n in full.nodes if n.id in (1, 2, 3, 5)])
+    brute = _brute_force(sc, rec, "used")
+    assert not ex.infeasible_steps and len(brute) == 4 * 6
+    for (coord, node, k), (lo, hi) in brute.items():
+        got = ex.interval(coord, node)[k]
+        assert abs(got[0] - lo) <= AGREE and abs(got[1] - hi) <= AGREE, (coord, node, k, got, (lo, hi))
+    without = exact_bounds(full, rec, "used", nodes=[1, 2, 3, 5], health=False)
+    assert all(ex.fault[i][k, 1] - ex.fault[i][k, 0] < 0.5 * (without.fault[i][k, 1] - without.fault[i][k, 0]) for i in sc.ids for k in ex.steps)
+
+
+def test_the_command_applies_several_groups(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``netsetest exact`` on a record of a topology with two groups: applied, and said how."""
     text = (ROOT / "topologies" / f"{TOPOLOGY}.toml").read_text().replace('node_dir = "../nodes"', f'node_dir = "{ROOT / "nodes"}"')
     groups = "[[network.health_groups]]\nnodes = [1, 2, 3]\nmax_faulty = 2\n\n[[network.health_groups]]\nnodes = [4, 5, 6]\nmax_faulty = 2\n"
     topo = tmp_path / "groups.toml"
@@ -180,9 +202,8 @@ def test_several_groups_are_left_out_and_said_so(tmp_path: Path, capsys: pytest.
     run_inmemory(sc, "paper", seed=0, record=str(path), keep=False)
     assert main(["exact", str(path), "--topology", str(topo)]) == 0
     out = capsys.readouterr().out
-    label = "k-of-N health (max_faulty = 2 of nodes 1, 2, 3; max_faulty = 2 of nodes 4, 5, 6)"
-    assert f"not applied: {label} (several groups)" in out and "by branch and bound" not in out
-    assert exact_bounds(sc, load_record(str(path))).omitted == (label,)
+    assert "applied: k-of-N health (max_faulty = 2 of nodes 1, 2, 3; max_faulty = 2 of nodes 4, 5, 6: at least 1, 1 sensors of each group healthy" in out
+    assert "not applied" not in out and "narrower than exact on 0 of" in out
 
 
 def test_a_spent_budget_relaxes_the_end_and_says_so() -> None:
