@@ -81,11 +81,13 @@ def _similar(v: object) -> st.SearchStrategy:
     return _VALUE
 
 
-def _mutate(path: Path, data: st.DataObject, count: int) -> None:
+def _mutate(path: Path, data: st.DataObject, count: int, after: str | None = None) -> None:
+    """Replace ``count`` values of the file (``after``: only on lines after the first that starts with it)."""
     import tomllib
 
     lines = path.read_text().splitlines()
-    values = [n for n, ln in enumerate(lines) if VALUE_LINE.match(ln)]
+    first = 0 if after is None else next(n for n, ln in enumerate(lines) if ln.startswith(after))
+    values = [n for n, ln in enumerate(lines) if n >= first and VALUE_LINE.match(ln)]
     for _ in range(count):
         n = data.draw(st.sampled_from(values))
         m = VALUE_LINE.match(lines[n])
@@ -115,6 +117,19 @@ def test_mutated_configuration_loads_and_runs_or_is_refused(tree: Path, target: 
     shutil.copytree(ROOT / "nodes", tree / "nodes", dirs_exist_ok=True)
     shutil.copy(ROOT / "topologies" / "paper6.toml", topo)
     _mutate(topo if target == "topology" else tree / "nodes" / f"{target}.toml", data, count)
+    _load_and_run(topo)
+
+
+GROUPS = "\n[[network.health_groups]]\nnodes = [1, 2, 3]\nmax_faulty = 2\n\n[[network.health_groups]]\nnodes = [4, 5, 6]\nmax_faulty = 2\n"
+
+
+@FUZZ
+@given(st.integers(1, 3), st.data())
+def test_mutated_health_groups_load_and_run_or_are_refused(tree: Path, count: int, data: st.DataObject) -> None:
+    """The k-of-N groups' values replaced (node ids, m: any type, extremes, unknown or shared nodes)."""
+    topo = tree / "topologies" / "paper6.toml"
+    topo.write_text((ROOT / "topologies" / "paper6.toml").read_text() + GROUPS)
+    _mutate(topo, data, count, after="[[network.health_groups]]")
     _load_and_run(topo)
 
 
