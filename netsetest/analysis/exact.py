@@ -531,7 +531,9 @@ def exact_bounds(
     bounded = scenario.fault_bounded(fault_bounds)
     prog = _Program(scenario, data, bounded)
     models = [HealthModel.of_group(scenario, g) for g in scenario.health_groups] if health and scenario.health_declared else []
-    plans = [_HealthPlan(prog, m, k) for k, m in enumerate(models) if m.need > 0]
+    plans = [
+        _HealthPlan(prog, m, k) for k, m in enumerate(models) if m is not None and m.need > 0
+    ]  # a group the nodes leave out (or all but m of it) says nothing
     K1 = len(data)
     beta, r = np.full((K1, 2), np.nan), np.full((K1, 2), np.nan)
     fault = {i: np.full((K1, 2), np.nan) for i in scenario.ids}

@@ -71,10 +71,13 @@ class HealthModel:
         return None if group is None else cls.of_group(scenario, group)
 
     @classmethod
-    def of_group(cls, scenario: Scenario, group: HealthGroup) -> HealthModel:
+    def of_group(cls, scenario: Scenario, group: HealthGroup) -> HealthModel | None:
         """The model of one group over the scenario's nodes (a subset of the topology's: at least
-        |S| − m of the group's sensors in S are healthy wherever at least N − m of its N are)."""
+        |S| − m of the group's sensors in S are healthy wherever at least N − m of its N are); None if no
+        sensor of the group is among them."""
         sensors = {n.id: n.sensor for n in scenario.nodes if n.id in group.nodes}
+        if not sensors:
+            return None
         c = next(iter(sensors.values())).C
         return cls(sensors, len(sensors) - group.max_faulty, scenario.fault_tolerance, c / np.linalg.norm(c))
 

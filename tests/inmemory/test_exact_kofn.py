@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy import sparse
 
-from netsetest.analysis.exact import COORDINATES, ExactBounds, _Program, _settings, compare_record, exact_bounds, step_data
+from netsetest.analysis.exact import COORDINATES, ExactBounds, _Program, _settings, compare_record, exact_bounds, local_limits, step_data
 from netsetest.analysis.kofn import Piece, covered, step_pieces
 from netsetest.cli.main import main
 from netsetest.config.schema import FaultBoundsMode, HealthGroup, Scenario, load_topology
@@ -189,6 +189,17 @@ def test_two_groups_are_brute_force_over_every_hypothesis_sequence() -> None:
         assert abs(got[0] - lo) <= AGREE and abs(got[1] - hi) <= AGREE, (coord, node, k, got, (lo, hi))
     without = exact_bounds(full, rec, "used", nodes=[1, 2, 3, 5], health=False)
     assert all(ex.fault[i][k, 1] - ex.fault[i][k, 0] < 0.5 * (without.fault[i][k, 1] - without.fault[i][k, 0]) for i in sc.ids for k in ex.steps)
+
+
+def test_a_group_the_nodes_leave_out_is_not_applied() -> None:
+    """``exact`` over a subset of the nodes (``--local``, ``compare --alone``): a group with no node in it, or
+    with no more than its m, says nothing; one with more is applied to its nodes in the subset."""
+    full, rec = _run(3)
+    full = dataclasses.replace(full, health_groups=(HealthGroup((1, 2), 1), HealthGroup((3, 5, 6), 1)))
+    ex = exact_bounds(full, rec, "used", nodes=[3, 5])
+    assert ex.health is not None and ex.health.need == (1,) and ex.omitted == ()
+    assert exact_bounds(full, rec, "used", nodes=[4]).health is None
+    assert len(local_limits(full, rec)) == len(full.ids)
 
 
 def test_the_command_applies_several_groups(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
