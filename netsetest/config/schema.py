@@ -553,8 +553,8 @@ class Scenario:
     def reading_sources(self, i: int) -> tuple[int, ...]:
         """The nodes whose readings node i uses (its own reading comes with its input): the references and
         the other members of its k-of-N group."""
-        group = self.health_group(i)
-        return tuple(j for j in self.ids if j != i and (j in self.references() or (group is not None and j in group.nodes)))
+        group, refs = self.health_group(i), self.references()
+        return tuple(j for j in self.ids if j != i and (j in refs or (group is not None and j in group.nodes)))
 
     def health_holds(self, faults: dict[int, float]) -> bool:
         """The k-of-N assumption at one step: at most m faults above the tolerance in every declared group
