@@ -173,6 +173,12 @@ def _sector(d: int, slot: int, g: np.ndarray, h: float) -> np.ndarray:
     return q
 
 
+def _prediction_slots(lay: EtaLayout) -> list[int]:
+    """The η slots the prediction (Π₀ and the own φ⁺ fact) fills, in a fixed order: 1, z, w, e, v⁺, φ⁺."""
+    assert lay.w is not None and lay.v_new is not None  # a predicting step's layout
+    return [0, *lay.z, lay.w, *lay.e, lay.v_new, *([] if lay.phi_new is None else [lay.phi_new])]
+
+
 def _chol(p: np.ndarray) -> np.ndarray:
     """M with M Mᵀ = P (P symmetrised first)."""
     return np.linalg.cholesky(0.5 * (p + p.T))
@@ -358,20 +364,23 @@ class LocalEstimator:
         innov_sum = sum(self.weights[j] * neigh[j].innov for j in pat.lay.neigh if j in neigh)  # Σ_j a_ij y̌_j
         return StepData(tuple(pi0), ell, tuple(facts), x_pred, float(innov_sum), Mi, pat.lay, key, sector, own)
 
-    def readings_data(
-        self, prev: NodeSet, inp: UpdateInput, sector: Sector | None, reading: Interval | None, refs: dict[int, tuple[np.ndarray, Interval]]
-    ) -> StepData:
+    def readings_data(self, data: StepData, inp: UpdateInput, refs: dict[int, tuple[np.ndarray, Interval]]) -> StepData:
         """The LMI data of step k → k+1 whose only innovation is the readings of step k+1 (``refs``, from
-        :meth:`reading_intervals`): the prediction as in :meth:`step_data`, no neighbour."""
-        phi_new = sector is not None and sector.has_phi and reading is None
-        key: PatternKey = (frozenset(), phi_new, True, frozenset(refs))
+        :meth:`reading_intervals`): the prediction of the step's ``data`` (:meth:`step_data`) moved to the
+        readings' layout, no neighbour."""
+        key: PatternKey = (frozenset(), data.key[1], True, frozenset(refs))
         pat = self.pattern(*key)
-        own = self._own_update(inp, sector, reading, phi_new)
-        Mi = np.sqrt(prev.rho) * _chol(prev.P)
-        pi0, x_pred, own_fact = self._predict(pat.lay, prev, inp, own, Mi, sector)
-        ell, innov = self._reference_innovation(pat.lay, pi0, np.asarray(inp.alpha, dtype=float), x_pred, refs)
-        facts = [*pat.balls, *([own_fact] if own_fact is not None else [])]
-        return StepData(tuple(pi0), ell, tuple(facts), x_pred, innov, Mi, pat.lay, key, sector, own)
+        lay = pat.lay
+        src, dst = _prediction_slots(data.lay), _prediction_slots(lay)
+        pi0 = np.zeros((len(data.pi0), NA, lay.dim))
+        pi0[:, :, dst] = np.asarray(data.pi0)[:, :, src]  # Π₀'s columns are the prediction's: z, w, e, v⁺, φ⁺
+        facts = list(pat.balls)
+        if lay.phi_new is not None:  # the own φ⁺ sector fact, the last of the step's facts (EtaLayout._facts)
+            own_fact = np.zeros((lay.dim, lay.dim))
+            own_fact[np.ix_(dst, dst)] = data.facts[-1][np.ix_(src, src)]
+            facts.append(own_fact)
+        ell, innov = self._reference_innovation(lay, pi0, np.asarray(inp.alpha, dtype=float), data.x_pred, refs)
+        return StepData(tuple(pi0), ell, tuple(facts), data.x_pred, innov, data.Mi, lay, key, data.sector, data.own)
 
     def reading_intervals(self, prev: NodeSet, inp: UpdateInput, health: HealthAssessment | None = None) -> dict[int, tuple[np.ndarray, Interval]]:
         """What the step's readings prove, as c̄ (NA,) and c̄ᵀx̄⁺ ∈ [lo, hi], keyed by the reference's id, and
@@ -588,7 +597,7 @@ class LocalEstimator:
             assert data.own is not None  # a predicting step always has its own update
             P_fb = fallback_shape(data.Mi, data.own, self.W, inp.alpha, self.model, self.uncertainty) / prev.rho
             return self._fallback(data.x_pred.copy(), P_fb, solve, sector)
-        if not (refs and self._refine(res, self.readings_data(prev, inp, sector, reading, refs), prev.rho, alpha)):
+        if not (refs and self._refine(res, self.readings_data(data, inp, refs), prev.rho, alpha)):
             self._bank(res, data, prev.rho, alpha, facts)
         self._size_cut(res, prev.rho)
         if health is not None and health[1]:
@@ -639,9 +648,12 @@ class LocalEstimator:
         reading measures the yaw rate), and later steps predict from the sideslip; recurring on it made
         paper6_reference's SAIM fault intervals wider than without readings (docs/network.md)."""
         wh = self._wh_pub if self._wh_pub is not None else self._wh
-        refined, solve = self._solve_certify(data, rho, alpha, wh, FactStack.of(data.facts))
+        answer, solve = self._solve(data, alpha, wh, rho)
         res.solve_ms += solve.ms
-        if refined is None or not np.any(refined.L) or _objective(refined.P, wh) >= (1 - REFINE_RTOL) * _objective(res.P, wh):
+        if answer is None or not np.any(answer.L):
+            return False  # no answer, or the readings are of no use (L = 0): nothing to certify
+        refined = self._certify(answer, data, rho, FactStack.of(data.facts), solve)
+        if refined is None or _objective(refined.P, wh) >= (1 - REFINE_RTOL) * _objective(res.P, wh):
             return False  # no certificate, or nothing gained: no reason to rest the published set on the readings
         refined.solve_ms = res.solve_ms
         refined.reading_keys = frozenset(data.key[3])
@@ -685,6 +697,12 @@ class LocalEstimator:
     def _solve_certify(self, data: StepData, rho: float, alpha: np.ndarray, wh: np.ndarray | None, facts: FactStack) -> tuple[StepResult | None, _Solve]:
         """Solve the step's problem for the objective trace(D P), D^½ = diag(wh) (None: trace P), and
         certify the answer; None if there is no certificate."""
+        answer, solve = self._solve(data, alpha, wh, rho)
+        return (None if answer is None else self._certify(answer, data, rho, facts, solve)), solve
+
+    def _solve(self, data: StepData, alpha: np.ndarray, wh: np.ndarray | None, rho: float) -> tuple[_Answer | None, _Solve]:
+        """The backend's answer to the step's problem for the objective trace(D P), D^½ = diag(wh) (None:
+        trace P), mapped back to the unweighted problem and blended over the rules (not yet certified)."""
         pat = self._patterns[data.key]
         t0 = time.perf_counter()
         sol = pat.solver.solve(_weighted(data, wh) if wh is not None else data, rho)
@@ -695,22 +713,39 @@ class LocalEstimator:
         if wh is not None:  # back from P' = D^½ P D^½, L' = D^½ L
             wi = 1.0 / wh
             sol = Solution(wi[:, None] * sol.P * wi[None, :], [wi[:, None] * L for L in sol.L], sol.tau, sol.status, sol.iterations)
+        assert sol.P is not None  # checked above: a Solution without P is no answer
         if len(sol.L) == 1:
-            L, tau, pi0 = sol.L[0], sol.tau[0], data.pi0[0]
-        else:  # per-rule: L = Σ_ℓ α_ℓ L_ℓ (and τ, Π₀ alike)
-            L = sum(a * v for a, v in zip(alpha, sol.L))
-            tau = sum(a * v for a, v in zip(alpha, sol.tau))
-            pi0 = sum(a * p for a, p in zip(alpha, data.pi0))
-        pi = pi0 - L @ data.ell[None, :]  # Π(L) = Π₀ − L ℓᵀ
-        assert sol.P is not None  # checked by the caller: a Solution without P is no answer
-        rho_c = certify(sol.P, pi, tau, facts)
+            return _Answer(sol.P, sol.L[0], sol.tau[0], data.pi0[0], sol.status), solve
+        # per-rule: L = Σ_ℓ α_ℓ L_ℓ (and τ, Π₀ alike)
+        L = sum(a * v for a, v in zip(alpha, sol.L))
+        tau = sum(a * v for a, v in zip(alpha, sol.tau))
+        pi0 = sum(a * p for a, p in zip(alpha, data.pi0))
+        return _Answer(sol.P, L, tau, pi0, sol.status), solve
+
+    def _certify(self, answer: _Answer, data: StepData, rho: float, facts: FactStack, solve: _Solve) -> StepResult | None:
+        """The published set of an answer where the certificate holds and the set is publishable; else None."""
+        L = answer.L
+        pi = answer.pi0 - L @ data.ell[None, :]  # Π(L) = Π₀ − L ℓᵀ
+        rho_c = certify(answer.P, pi, answer.tau, facts)
         if rho_c is None:
-            return None, solve
-        P_pub = 0.5 * (sol.P + sol.P.T) * rho_c / rho
+            return None
+        P_pub = 0.5 * (answer.P + answer.P.T) * rho_c / rho
         xhat_new = data.x_pred + L[:, 0] * data.innov_sum  # (16): x̂⁺ = x̂_pred + L Σ_j a_ij y̌_j
         if not publishable(xhat_new, P_pub):  # a certified set nobody can use: treated as no certificate
-            return None, solve
-        return StepResult(xhat_new, P_pub, "ok", rho_c, solve.ms, sol.status, L, data.sector), solve
+            return None
+        return StepResult(xhat_new, P_pub, "ok", rho_c, solve.ms, answer.status, L, data.sector)
+
+
+@dataclass(frozen=True)
+class _Answer:
+    """A backend's answer to one step, mapped back and blended over the rules: P (NA, NA), L (NA, 1),
+    τ (the facts' multipliers) and Π₀ (NA, d) of the truth's model; to be certified."""
+
+    P: np.ndarray
+    L: np.ndarray
+    tau: np.ndarray
+    pi0: np.ndarray
+    status: str
 
 
 @dataclass(frozen=True)
