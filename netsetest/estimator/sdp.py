@@ -87,6 +87,7 @@ Variant = Literal["scheduled", "per-rule"]
 Backend = Literal["clarabel", "cvxpy"]
 Status = Literal["ok", "fallback"]
 BACKENDS = ("clarabel", "cvxpy")
+FAULT_AXIS = np.eye(NA)[NA - 1]  # f = e₃ᵀx̄: the direction the fault cuts act along
 REFINE_RTOL = 1e-6  # the readings' set is published only if it is smaller by more than this (relative): not for rounding
 PIN_FLOOR = 1e-6  # a fault proved healthy is published as |f| ≤ max(τ, this): an ellipsoid cannot be flat
 
@@ -599,10 +600,29 @@ class LocalEstimator:
             return self._fallback(data.x_pred.copy(), P_fb, solve, sector)
         if not (refs and self._refine(res, self.readings_data(data, inp, refs), prev.rho, alpha)):
             self._bank(res, data, prev.rho, alpha, facts)
+        if refs:
+            self._carry_readings(res, refs, prev.rho)
         self._size_cut(res, prev.rho)
         if health is not None and health[1]:
             self._health_pin(res, prev.rho)
         return res
+
+    def _carry_readings(self, res: StepResult, refs: dict[int, tuple[np.ndarray, Interval]], rho: float) -> None:
+        """Cut the set the node continues from by what each of the step's readings proves, c̄ᵀx̄⁺ ∈ [lo, hi]
+        (:func:`~netsetest.estimator.slab.cut`, certified, in the recursion's objective), so that it carries
+        over to the later steps; what is published does not change.  Without it the recursion forgets the
+        readings at every step while the exact limit keeps them (docs/network.md).  The collector judges
+        the set a node continues from directly against the truth, as the next step's prior."""
+        xhat, P, rho_cert = res.xhat, res.P, res.rho_cert
+        for c, iv in refs.values():
+            out = cut(xhat, P, rho, c, iv.lo, iv.hi, None if self._wh is None else self._wh**2)
+            if out is not None:  # ρ' as for a solved set (P = P_s·ρ'/ρ_i)
+                xhat, P, rho_cert = out[0], out[1], out[2] * rho
+        if xhat is res.xhat:
+            return  # no reading cuts it
+        if res.published is None:
+            res.published = dataclasses.replace(res)  # published: the step's set as solved
+        res.xhat, res.P, res.rho_cert = xhat, P, rho_cert
 
     def _size_cut(self, res: StepResult, rho: float) -> None:
         """Where the step's sector rests on the declared fault bound, the truth's f⁺ lies in [−F, F]: the set to
@@ -632,7 +652,7 @@ class LocalEstimator:
         if not (lo > now_lo[-1] or hi < now_hi[-1]) or lo > hi:
             return False  # no cut (an empty one means the assumptions broke: the step's set stays as certified)
         wh = self._wh_pub if self._wh_pub is not None else self._wh
-        out = cut(pub.xhat, pub.P, rho, NA - 1, lo, hi, None if wh is None else wh**2)
+        out = cut(pub.xhat, pub.P, rho, FAULT_AXIS, lo, hi, None if wh is None else wh**2)
         if out is None:  # the ellipsoid gains nothing; the slab still bounds the fault
             res.published = dataclasses.replace(pub, published=None, fault_range=(lo, hi))
         else:  # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
@@ -642,7 +662,7 @@ class LocalEstimator:
     def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> bool:
         """Publish the readings' set of the step (its only innovation those readings) where it is
         certified, uses them (L ≠ 0) and is smaller in the published objective than ``res``; whether it
-        did.  The node recurs on ``res`` either way.
+        did.  The node recurs on ``res`` either way (cut by the readings: :meth:`_carry_readings`).
 
         Why not recur on it: its trace-optimal shape trades sideslip width for yaw-rate width (the
         reading measures the yaw rate), and later steps predict from the sideslip; recurring on it made

@@ -462,7 +462,7 @@ class Node:
         step_in = self._step_input(inp, neigh, readings)
         t = PROFILE.now() if PROFILE is not None else 0
         res = self.estimator.step(self._prior(), step_in)
-        # the readings the published set rests on (the recursion never does: estimator/sdp.py _refine)
+        # the readings the published set rests on (the recursion's cut by them is judged as the next prior)
         keys_used = res.public.reading_keys
         health = HEALTH_KEY in keys_used
         refs = sorted(readings) if health else sorted(keys_used)  # the k-of-N facts rest on every reading
