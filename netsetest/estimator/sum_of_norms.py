@@ -16,7 +16,8 @@ in three unknowns.  L = 0 is the minimum when the innovations' information costs
 vanishes, and damped Newton from the least-squares gain converges in a few steps.  A minimum where a
 term vanishes (a group with M_g = L b_gᵀ: the readings' update often has its minimum there) would
 stall Newton; each such point is tested first like L = 0: it is the minimum if the rest's gradient
-there is at most ‖b_g‖ long.  Nothing here is trusted: the answer is mapped back exactly
+there is at most ‖b_g‖ long.  A minimum close to a kink but off it can still draw Newton onto the kink,
+its steps ever shorter: it gives up there (KINK_NEAR, STALL_HALVINGS).  Nothing here is trusted: the answer is mapped back exactly
 as Clarabel's is and certified against the LMI like every answer (:func:`~netsetest.estimator.certificate.certify`);
 where Newton does not converge, or a term vanishes, the caller solves with Clarabel.
 """
@@ -35,6 +36,8 @@ DECREMENT_TOL = 1e-12  # converged: the Newton decrement (≈ 2 (F − min F)) t
 ROUNDING_TOL = 1e-8  # no descent left to rounding and a decrement this small: converged as far as F can tell
 TINY = 1e-290  # a term this small is treated as vanished (F is not smooth there)
 KINK_TOL = 1e-9  # a group's term counts as vanishing at its own least-squares L below this (relative); margin of the test
+KINK_NEAR = 1e-6  # a term this small (relative to F) while the line search needs STALL_HALVINGS: Newton is creeping onto its kink
+STALL_HALVINGS = 10
 KINK_FLOOR = 1e-12  # the vanished term's norm used for its multiplier (relative): its columns of Π are ~0
 
 
@@ -105,12 +108,14 @@ class SumOfNorms:
             if dec <= DECREMENT_TOL * F:
                 return L, r, ln, it
             t = 1.0
-            for _ in range(max_halvings):
+            for halvings in range(max_halvings):
                 if self.value(L + t * step) <= F - ARMIJO * t * dec:
                     break
                 t *= 0.5
             else:
                 return (L, r, ln, it) if dec <= ROUNDING_TOL * F else None
+            if halvings >= STALL_HALVINGS and r.min() <= KINK_NEAR * F:
+                return None  # creeping onto a term's kink, which minimise's test ruled out as the minimum: it would stall there
             L = L + t * step
         return None
 

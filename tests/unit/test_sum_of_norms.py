@@ -119,3 +119,30 @@ def test_a_warm_start_next_to_a_kink_still_reaches_the_minimum() -> None:
     found = p.minimise(start)
     assert found is not None
     assert p.value(found[0]) <= _by_cvxpy(p) * (1 + 1e-7)
+
+
+def test_newton_creeping_onto_a_kink_that_is_no_minimum_gives_up_early(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A readings' update of paper6_max_faulty (NSNIM, node 1) once the recursion carries the readings: the
+    minimum lies off the single-column group's kink, which minimise's test rules out, yet Newton from both
+    starts creeps onto the kink with ever more halvings.  It gives up once a term is below KINK_NEAR of F while
+    the line search needs STALL_HALVINGS (105 evaluations of F instead of 569), and the caller solves
+    with Clarabel."""
+    M = np.array(
+        [
+            [0.008451201680302377, -0.0052759465295171845, 0.0, 0.0012533593174262534, -0.0],
+            [0.04003204854654091, 0.043168230204656016, 0.0, 0.031643981917059145, 9.067480287531796e-19],
+            [-0.05032301379822181, -0.054265407919561214, 0.0, -0.03977864227436462, -0.12190373811013513],
+        ]
+    )
+    b = np.array([0.04003204854654091, 0.043168230204656016, 0.0, 0.031643981917059145, 9.067480287531796e-19])
+    onehot = np.zeros((5, 3))
+    onehot[[0, 1, 2, 3, 4], [0, 0, 0, 1, 2]] = 1.0
+    p = SumOfNorms(M, b, onehot, 0.03610537005918982)
+    start = np.array([0.036156254337944144, 0.8847232503144914, -1.1121574325986083])
+    kink = M[:, 3] / b[3]
+    assert p.value(kink) > _by_cvxpy(p) * (1 + 1e-5)  # the kink is not the minimum
+    calls = []
+    value = SumOfNorms.value
+    monkeypatch.setattr(SumOfNorms, "value", lambda self, L: calls.append(1) or value(self, L))
+    assert p.minimise(start) is None
+    assert len(calls) < 200
