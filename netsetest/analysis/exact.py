@@ -89,6 +89,7 @@ class HealthSearch:
 
     declared: str  # the declaration (Scenario.health_label)
     need: tuple[int, ...]  # per group, sensors healthy at every step: |S| − m of the program's nodes S in it
+    nodes: tuple[tuple[int, ...], ...]  # per group, those nodes S (the group's within the nodes the program has)
     budget: int  # solves per end
     ends: int
     exact_ends: int
@@ -575,7 +576,8 @@ def exact_bounds(
     search = None
     if plans:
         needs = tuple(p.model.need for p in plans)
-        search = HealthSearch(scenario.health_label, needs, health_budget, tally.ends, tally.exact, tuple(tally.relaxed), tally.solves)
+        applied = tuple(tuple(p.model.sensors) for p in plans)
+        search = HealthSearch(scenario.health_label, needs, applied, health_budget, tally.ends, tally.exact, tuple(tally.relaxed), tally.solves)
     return ExactBounds(
         steps=np.arange(K1),
         beta=beta,
@@ -616,11 +618,15 @@ def _end(horizon: _Horizon, col: int, sign: float, unions: tuple[list[StepUnion]
     return replace(result, exact=result.exact and unions[1], solves=result.solves + 1)
 
 
+def _ids(nodes: tuple[int, ...]) -> str:
+    return ", ".join(map(str, nodes))
+
+
 def health_line(h: HealthSearch) -> str:
     """One line on the k-of-N branch and bound: what was applied and how many ends are exact."""
     line = (
-        f"applied: k-of-N health ({h.declared}: at least {', '.join(map(str, h.need))} sensors {'of each group ' if len(h.need) > 1 else ''}"
-        f"healthy at every step) by branch and bound, "
+        f"applied: k-of-N health ({h.declared}: at least "
+        f"{' and '.join(f'{n} of sensors {_ids(g)}' for n, g in zip(h.need, h.nodes))} healthy at every step) by branch and bound, "
         f"{h.exact_ends} of {h.ends} ends exact ({h.solves} solves, at most {h.budget} per end)"
     )
     if not h.relaxed:
@@ -769,7 +775,7 @@ def _nanmean(values: list[float]) -> float:
     return float(np.mean(finite)) if finite else float("nan")
 
 
-EXACT_FORMAT_VERSION = 2  # 2: health {declared, need per group} (k-of-N groups) instead of {max_faulty, need}
+EXACT_FORMAT_VERSION = 2  # 2: health {declared, need and nodes per group} (k-of-N groups) instead of {max_faulty, need}
 
 
 def _finite_or_none(v: float) -> float | None:
@@ -783,6 +789,7 @@ def _health_document(h: HealthSearch | None) -> dict | None:
     return {
         "declared": h.declared,
         "need": list(h.need),
+        "nodes": [list(g) for g in h.nodes],
         "budget": h.budget,
         "ends": h.ends,
         "exact_ends": h.exact_ends,

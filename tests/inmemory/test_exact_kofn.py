@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from scipy import sparse
 
-from netsetest.analysis.exact import COORDINATES, ExactBounds, _Program, _settings, compare_record, exact_bounds, local_limits, step_data
+from netsetest.analysis.exact import COORDINATES, ExactBounds, _Program, _settings, compare_record, exact_bounds, health_line, local_limits, step_data
 from netsetest.analysis.kofn import Piece, covered, step_pieces
 from netsetest.cli.main import main
 from netsetest.config.schema import FaultBoundsMode, HealthGroup, Scenario, load_topology
@@ -163,11 +163,14 @@ def test_the_command_applies_it_and_says_how_many_ends_are_exact(tmp_path: Path,
     run_inmemory(sc, "paper", seed=0, record=str(path), keep=False)
     assert main(["exact", str(path), "--json", str(tmp_path / "exact.json")]) == 0
     out = capsys.readouterr().out
-    assert "applied: k-of-N health (max_faulty = 4: at least 2 sensors healthy at every step) by branch and bound, 112 of 112 ends exact" in out
+    assert (
+        "applied: k-of-N health (max_faulty = 4: at least 2 of sensors 1, 2, 3, 4, 5, 6 healthy at every step) by branch and bound, 112 of 112 ends exact"
+        in out
+    )
     assert "not applied" not in out and "narrower than exact on 0 of" in out
     doc = json.loads((tmp_path / "exact.json").read_text())
     assert doc["omitted"] == [] and doc["health"]["exact_ends"] == doc["health"]["ends"] == 112 and doc["health"]["relaxed"] == []
-    assert doc["health"]["declared"] == "max_faulty = 4" and doc["health"]["need"] == [2]
+    assert doc["health"]["declared"] == "max_faulty = 4" and doc["health"]["need"] == [2] and doc["health"]["nodes"] == [[1, 2, 3, 4, 5, 6]]
     assert main(["exact", str(path), "--no-health"]) == 0
     out = capsys.readouterr().out
     assert "not applied: k-of-N health (max_faulty = 4)" in out and "applied: k-of-N" not in out.replace("not applied: k-of-N", "")
@@ -197,7 +200,8 @@ def test_a_group_the_nodes_leave_out_is_not_applied() -> None:
     full, rec = _run(3)
     full = dataclasses.replace(full, health_groups=(HealthGroup((1, 2), 1), HealthGroup((3, 5, 6), 1)))
     ex = exact_bounds(full, rec, "used", nodes=[3, 5])
-    assert ex.health is not None and ex.health.need == (1,) and ex.omitted == ()
+    assert ex.health is not None and ex.health.need == (1,) and ex.health.nodes == ((3, 5),) and ex.omitted == ()
+    assert "at least 1 of sensors 3, 5 healthy at every step" in health_line(ex.health)  # what was applied, not the declaration
     assert exact_bounds(full, rec, "used", nodes=[4]).health is None
     assert len(local_limits(full, rec)) == len(full.ids)
 
@@ -213,7 +217,10 @@ def test_the_command_applies_several_groups(tmp_path: Path, capsys: pytest.Captu
     run_inmemory(sc, "paper", seed=0, record=str(path), keep=False)
     assert main(["exact", str(path), "--topology", str(topo)]) == 0
     out = capsys.readouterr().out
-    assert "applied: k-of-N health (max_faulty = 2 of nodes 1, 2, 3; max_faulty = 2 of nodes 4, 5, 6: at least 1, 1 sensors of each group healthy" in out
+    assert (
+        "applied: k-of-N health (max_faulty = 2 of nodes 1, 2, 3; max_faulty = 2 of nodes 4, 5, 6: at least 1 of sensors 1, 2, 3 and 1 of sensors 4, 5, 6 healthy"
+        in out
+    )
     assert "not applied" not in out and "narrower than exact on 0 of" in out
 
 
