@@ -601,25 +601,26 @@ class LocalEstimator:
         if not (refs and self._refine(res, self.readings_data(data, inp, refs), prev.rho, alpha)):
             self._bank(res, data, prev.rho, alpha, facts)
         if refs:
-            self._carry_readings(res, refs, prev.rho)
+            self._carry(res, [(c, iv.lo, iv.hi) for c, iv in refs.values()], prev.rho)
         self._size_cut(res, prev.rho)
         if health is not None and health[1]:
             self._health_pin(res, prev.rho)
         return res
 
-    def _carry_readings(self, res: StepResult, refs: dict[int, tuple[np.ndarray, Interval]], rho: float) -> None:
-        """Cut the set the node continues from by what each of the step's readings proves, c̄ᵀx̄⁺ ∈ [lo, hi]
-        (:func:`~netsetest.estimator.slab.cut`, certified, in the recursion's objective), so that it carries
-        over to the later steps; what is published does not change.  Without it the recursion forgets the
-        readings at every step while the exact limit keeps them (docs/network.md).  The collector judges
-        the set a node continues from directly against the truth, as the next step's prior."""
+    def _carry(self, res: StepResult, slabs: list[tuple[np.ndarray, float, float]], rho: float) -> None:
+        """Cut the set the node continues from by what the step proved beyond its solve, each (c, lo, hi) a
+        slab cᵀx̄⁺ ∈ [lo, hi] that holds wherever the step's assumptions do (the readings' intervals, the k-of-N
+        pin), with :func:`~netsetest.estimator.slab.cut` (certified, in the recursion's objective), so that
+        it carries over to the later steps; what is published does not change.  Without it the recursion
+        forgets the readings at every step while the exact limit keeps them (docs/network.md).  The collector
+        judges the set a node continues from directly against the truth, as the next step's prior."""
         xhat, P, rho_cert = res.xhat, res.P, res.rho_cert
-        for c, iv in refs.values():
-            out = cut(xhat, P, rho, c, iv.lo, iv.hi, None if self._wh is None else self._wh**2)
+        for c, lo, hi in slabs:
+            out = cut(xhat, P, rho, c, lo, hi, None if self._wh is None else self._wh**2)
             if out is not None:  # ρ' as for a solved set (P = P_s·ρ'/ρ_i)
                 xhat, P, rho_cert = out[0], out[1], out[2] * rho
         if xhat is res.xhat:
-            return  # no reading cuts it
+            return  # no slab cuts it
         if res.published is None:
             res.published = dataclasses.replace(res)  # published: the step's set as solved
         res.xhat, res.P, res.rho_cert = xhat, P, rho_cert
@@ -637,10 +638,13 @@ class LocalEstimator:
         """Under ``max_faulty``, where no consistent majority of the step's readings leaves this node's sensor
         out (:meth:`_assess_health`), its fault is |f⁺| ≤ τ (docs/network.md): the set to publish is cut by that
         interval, widened to :data:`PIN_FLOOR` (a superset: sound) so that the published ellipsoid stays
-        full-dimensional, and it then rests on every reading (the k-of-N facts do)."""
+        full-dimensional, and it then rests on every reading (the k-of-N facts do).  The set the node continues
+        from is cut by it too (:meth:`_carry`)."""
         assert self.health is not None
-        if self._cut_fault(res, rho, max(self.health.tolerance, PIN_FLOOR)):
+        size = max(self.health.tolerance, PIN_FLOOR)
+        if self._cut_fault(res, rho, size):
             res.published = dataclasses.replace(res.public, reading_keys=res.public.reading_keys | {HEALTH_KEY})
+        self._carry(res, [(FAULT_AXIS, -size, size)], rho)  # and the set the node continues from
 
     def _cut_fault(self, res: StepResult, rho: float, size: float) -> bool:
         """Cut the set to publish by |f⁺| ≤ ``size`` (:func:`~netsetest.estimator.slab.cut`, certified) and publish
@@ -662,7 +666,7 @@ class LocalEstimator:
     def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> bool:
         """Publish the readings' set of the step (its only innovation those readings) where it is
         certified, uses them (L ≠ 0) and is smaller in the published objective than ``res``; whether it
-        did.  The node recurs on ``res`` either way (cut by the readings: :meth:`_carry_readings`).
+        did.  The node recurs on ``res`` either way (cut by the readings: :meth:`_carry`).
 
         Why not recur on it: its trace-optimal shape trades sideslip width for yaw-rate width (the
         reading measures the yaw rate), and later steps predict from the sideslip; recurring on it made
