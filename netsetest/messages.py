@@ -167,13 +167,15 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     # states and the node's own previous one (the collector judges those copies: docs/coverage.md)
     inputs: Annotated[list[tuple[NodeId, Digest]], Meta(max_length=MAX_NODES + 1)] = []
     # the set the node continues from where it is not the one published (objective bank: x̂, P of the
-    # trace recursion); the collector judges it as the next step's prior
+    # trace recursion; cut by the step's readings); the collector judges it at its own step (a miss on a
+    # covered node-step is a violation) and as the next step's prior
     own_xhat: Vec3 | None = None
     own_P: Mat3 | None = None
-    # the references' readings of this very step the update used, as (node, ỹ, γ): the collector checks
-    # them against the truth and puts their noise and zero-fault declarations into the step's cone
+    # the readings of this very step the published set or the one the node continues from used, as
+    # (node, ỹ, γ): the collector checks them against the truth and puts their noise and zero-fault
+    # declarations into the step's cone
     readings: Annotated[list[tuple[NodeId, FiniteF, Gamma]], Meta(max_length=MAX_NODES)] = []
-    health: bool = False  # the published set used the k-of-N interval of the step's readings and its own ([network] max_faulty)
+    health: bool = False  # either set used the k-of-N interval of the step's readings and its own ([network] max_faulty)
     # the SDP's published set is the ellipsoid ∩ {lo ≤ f_i ≤ hi} where a step's fault interval rests on a
     # declared bound (|f| ≤ F: sector_basis "fault-bound"; the k-of-N pin: health): no ellipsoid can end
     # at the flat face of that slab, so the bound is sent beside it.  Neighbours use the ellipsoid alone.

@@ -267,6 +267,8 @@ def cmd_inspect(a: argparse.Namespace) -> int:
             ft = "-" if r["fault_true"] is None else f"{r['fault_true']:9.4f}"
             e = "-" if r["E"] is None else f"{r['E']:7.3f}"
             flag = "  not judged" if not r["judged"] else ("" if r["contained"] else "  MISS")
+            if r["judged"] and r["contained"] and r["continues_contained"] is False:
+                flag = "  MISS (the set it continues from)"
             fdi = r["fdi"] or "-"  # detected: the interval excludes 0 (docs/fdi.md)
             print(f"{r['step']:5d} {ft:>9} {r['fault_estimate']:9.4f} {r['fault_lower']:9.4f} {r['fault_upper']:9.4f} {e:>7}  {fdi:<9}  {r['status']}{flag}")
         print()

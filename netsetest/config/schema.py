@@ -780,7 +780,7 @@ def _health_groups(path: Path, network: NetworkSpec, nodes: list[NodeConfig]) ->
         if m >= len(ids):
             raise ConfigError(f"{path}: {what}: max_faulty must be less than the number of its nodes ({len(ids)})")
         group = [by_id[i] for i in ids]
-        u = group[0].sensor.C / np.linalg.norm(group[0].sensor.C)
+        u = group[0].sensor.direction
         for n in group:
             c = n.sensor.C
             if np.linalg.norm(c - (c @ u) * u) > 1e-9 * np.linalg.norm(c):

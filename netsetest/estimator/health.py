@@ -78,8 +78,7 @@ class HealthModel:
         sensors = {n.id: n.sensor for n in scenario.nodes if n.id in group.nodes}
         if not sensors:
             return None
-        c = next(iter(sensors.values())).C
-        return cls(sensors, len(sensors) - group.max_faulty, scenario.fault_tolerance, c / np.linalg.norm(c))
+        return cls(sensors, len(sensors) - group.max_faulty, scenario.fault_tolerance, next(iter(sensors.values())).direction)
 
     def assess(
         self,

@@ -146,7 +146,7 @@ class StepResult:
     L: np.ndarray = field(default_factory=lambda: np.zeros((NA, 1)))  # (NA, 1) the gain of (16)
     sector: Sector | None = None  # the own sensor's sector of this step (None: no saturation modelled)
     published: StepResult | None = None  # objective ``bank`` or readings: the set to publish (None: this one)
-    reading_keys: frozenset[int] = frozenset()  # the readings this set used (keys of LocalEstimator.reading_intervals)
+    reading_keys: frozenset[int] = frozenset()  # the readings this set used (keys of LocalEstimator.reading_intervals); the recursion's: the ones it was cut by
     fault_range: tuple[float, float] | None = None  # the set is the ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (a declared bound's cut)
 
     @property
@@ -601,29 +601,33 @@ class LocalEstimator:
         if not (refs and self._refine(res, self.readings_data(data, inp, refs), prev.rho, alpha)):
             self._bank(res, data, prev.rho, alpha, facts)
         if refs:
-            self._carry(res, [(c, iv.lo, iv.hi) for c, iv in refs.values()], prev.rho)
+            self._carry(res, {key: (c, iv.lo, iv.hi) for key, (c, iv) in refs.items()}, prev.rho)
         self._size_cut(res, prev.rho)
         if health is not None and health[1]:
             self._health_pin(res, prev.rho)
         return res
 
-    def _carry(self, res: StepResult, slabs: list[tuple[np.ndarray, float, float]], rho: float) -> None:
+    def _carry(self, res: StepResult, slabs: dict[int, tuple[np.ndarray, float, float]], rho: float) -> None:
         """Cut the set the node continues from by what the step proved beyond its solve, each (c, lo, hi) a
-        slab cᵀx̄⁺ ∈ [lo, hi] that holds wherever the step's assumptions do (the readings' intervals, the k-of-N
-        pin), with :func:`~netsetest.estimator.slab.cut` (certified, in the recursion's objective), so that
-        it carries over to the later steps; what is published does not change.  Without it the recursion
-        forgets the readings at every step while the exact limit keeps them (docs/network.md).  The collector
-        judges the set a node continues from directly against the truth, as the next step's prior."""
-        xhat, P, rho_cert = res.xhat, res.P, res.rho_cert
-        for c, lo, hi in slabs:
+        slab cᵀx̄⁺ ∈ [lo, hi] that holds wherever the step's assumptions do (keyed like
+        :meth:`reading_intervals`: the readings' intervals; the k-of-N pin under HEALTH_KEY), with
+        :func:`~netsetest.estimator.slab.cut` (certified, in the recursion's objective), so that it carries over
+        to the later steps; what is published does not change.  Without it the recursion forgets the readings at
+        every step while the exact limit keeps them (docs/network.md).  The keys of the slabs that cut it join
+        its ``reading_keys``: the node lists those readings too, so the collector judges the set it continues
+        from under their assumptions (docs/coverage.md)."""
+        xhat, P, rho_cert, used = res.xhat, res.P, res.rho_cert, set()
+        for key, (c, lo, hi) in slabs.items():
             out = cut(xhat, P, rho, c, lo, hi, None if self._wh is None else self._wh**2)
             if out is not None:  # ρ' as for a solved set (P = P_s·ρ'/ρ_i)
                 xhat, P, rho_cert = out[0], out[1], out[2] * rho
-        if xhat is res.xhat:
+                used.add(key)
+        if not used:
             return  # no slab cuts it
         if res.published is None:
             res.published = dataclasses.replace(res)  # published: the step's set as solved
         res.xhat, res.P, res.rho_cert = xhat, P, rho_cert
+        res.reading_keys = res.reading_keys | used
 
     def _size_cut(self, res: StepResult, rho: float) -> None:
         """Where the step's sector rests on the declared fault bound, the truth's f⁺ lies in [−F, F]: the set to
@@ -644,7 +648,7 @@ class LocalEstimator:
         size = max(self.health.tolerance, PIN_FLOOR)
         if self._cut_fault(res, rho, size):
             res.published = dataclasses.replace(res.public, reading_keys=res.public.reading_keys | {HEALTH_KEY})
-        self._carry(res, [(FAULT_AXIS, -size, size)], rho)  # and the set the node continues from
+        self._carry(res, {HEALTH_KEY: (FAULT_AXIS, -size, size)}, rho)  # and the set the node continues from
 
     def _cut_fault(self, res: StepResult, rho: float, size: float) -> bool:
         """Cut the set to publish by |f⁺| ≤ ``size`` (:func:`~netsetest.estimator.slab.cut`, certified) and publish

@@ -58,6 +58,12 @@ class Sensor:
         return cbar
 
     @property
+    def direction(self) -> np.ndarray:
+        """u = C/‖C‖ (2,): the combination of the state the sensor measures (C = ‖C‖ uᵀ); sensors with one u
+        can form a k-of-N group (config/schema.py checks it, estimator/health.py uses it)."""
+        return self.C / np.linalg.norm(self.C)
+
+    @property
     def h(self) -> float:
         """Sector width h = h2 − h1 of φ."""
         return self.h2 - self.h1

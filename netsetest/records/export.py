@@ -2,7 +2,8 @@
 
 One row per published step; columns (:data:`COLUMNS`): the step and its time, the estimate, the lower
 and upper bound x̂ ∓ √(ρ P_jj) and the true value of β [rad], r [rad/s] and the fault f [rad/s], E, ρ,
-contained, assumptions_ok and the node's status.  CSV needs nothing extra; Parquet needs pyarrow (the
+contained, continues_contained (the set the node continues from held the truth; empty for older records),
+assumptions_ok and the node's status.  CSV needs nothing extra; Parquet needs pyarrow (the
 ``export`` extra).  A missing value (truth unknown) is empty in CSV and null in Parquet.
 """
 
@@ -24,6 +25,7 @@ COLUMNS: tuple[str, ...] = (
     "rho",
     "judged",
     "contained",
+    "continues_contained",
     "assumptions_ok",
     "status",
 )

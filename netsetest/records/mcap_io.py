@@ -157,8 +157,8 @@ SCHEMAS: dict[str, dict[str, Any]] = {
             "used": _IDS,
             "missing": _IDS,
             "late": _BOOL,
-            "readings": {**_IDS, "description": "nodes whose reading of this step the published set used (docs/network.md)"},
-            "health": {**_BOOL, "description": "the published set used the k-of-N interval of the step's readings ([network] max_faulty)"},
+            "readings": {**_IDS, "description": "nodes whose reading of this step the published set or the one the node continues from used (docs/network.md)"},
+            "health": {**_BOOL, "description": "either set used the k-of-N interval of the step's readings ([network] max_faulty)"},
             "sector": {
                 "type": ["array", "null"],
                 "items": {"type": "number"},
@@ -168,6 +168,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
             "E": {**_NUM, "description": "eᵀP⁻¹e (contained while ≤ ρ); null if the truth is unknown"},
             "judged": {**_BOOL, "description": "the collector judged this set (false: contested copies or unknown truth)"},
             "contained": {"type": ["boolean", "null"], "description": "null where not judged"},
+            "continues_contained": {"type": ["boolean", "null"], "description": "the set the node continues from held the truth; null where not judged"},
             "assumptions_ok": _BOOL,
             "contested": {**_BOOL, "description": "more than one copy matched the truth: not judged"},
             "not_judged_why": {"type": ["string", "null"], "description": "contested | truth unknown; null where judged"},

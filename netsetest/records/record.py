@@ -205,6 +205,7 @@ class NodeTrack:
     judged: np.ndarray | None = None  # (K,) bool: the collector judged the step (None: all were, older records)
     fdi: list[str | None] | None = None  # (K,) detected | healthy | undecided (docs/fdi.md; None: older records)
     fault_range: np.ndarray | None = None  # (K, 2) the SDP's published fault range (±inf where none; None: no step had one)
+    continues_contained: np.ndarray | None = None  # (K,) bool: the set the node continues from held the truth (None: older records)
 
     def was_judged(self, n: int) -> bool:
         return bool(self.judged[n]) if self.judged is not None else True
@@ -255,6 +256,7 @@ class Record:
                     "E": None if np.isnan(tr.E[n]) else float(tr.E[n]),
                     "judged": tr.was_judged(n),
                     "contained": bool(tr.contained[n]) if tr.was_judged(n) else None,
+                    "continues_contained": bool(tr.continues_contained[n]) if tr.was_judged(n) and tr.continues_contained is not None else None,
                     "status": tr.status[n],
                     "fdi": tr.fdi[n] if tr.fdi is not None else None,
                 }
@@ -497,6 +499,9 @@ def record_from_parts(
             judged=np.array([e.get("judged", e.get("E") is not None and not e.get("contested", False)) for e in entries], dtype=bool),
             fdi=[_fdi(e.get("fdi")) for e in entries],
             fault_range=_fault_ranges(entries),
+            continues_contained=np.array([e.get("continues_contained") is not False for e in entries], dtype=bool)
+            if any("continues_contained" in e for e in entries)
+            else None,
         )
     for t in truth:
         if not isinstance(t, dict) or not isinstance(t.get("step"), int):

@@ -30,7 +30,7 @@ class NodeSummary:
     id: int
     estimator: str = DEFAULT_ESTIMATOR
     max_E: float | None = None
-    violations: int = 0  # misses where every assumption held
+    violations: int = 0  # misses where every assumption held (of the published set or the one the node continues from)
     misses_assumption_broken: int = 0
     assumption_violations: int = 0
     sector_failures: int = 0  # derived sectors that missed C̄ x̄ inside an intact cone

@@ -2,7 +2,8 @@
 writes the record and the summary.
 
 For node i at step k it computes E_i,k = e_i,kᵀ P_i,k⁻¹ e_i,k with e = x̄_i,k − x̂_i,k and declares
-containment when E_i,k ≤ ρ_i.  A miss is attributed by the step's *dependency cone*, one step deep over
+containment when E_i,k ≤ ρ_i; where the node continues from another set (``own_xhat``/``own_P``), that
+set must hold the truth too.  A miss is attributed by the step's *dependency cone*, one step deep over
 judged inputs (docs/coverage.md): the estimate of (i, k) relies on its own sector condition and noise
 bound at k, the disturbance bound at k−1, and on the exact copies of the states it used (its own
 previous set and its neighbours' of k−1, named by digest in ``NodeState.inputs``), each judged directly
@@ -134,6 +135,7 @@ def _state_entry(st: NodeState, v: NodeVerdict, contested: bool) -> dict:
         "judged": c is not None,
         "not_judged_why": unjudged,
         "contained": None if c is None else bool(c.contained),
+        "continues_contained": None if c is None else bool(c.continues_contained),  # the set the node continues from
         "assumptions_ok": v.cone.ok,
         "not_covered_cause": v.cone.cause,
         "inherited_from": [origin.node, origin.step, origin.why] if origin is not None else None,
@@ -422,11 +424,10 @@ class Collector:
                 if cone.origin is not None:
                     o = self.origins.setdefault((cone.origin.node, cone.origin.why), [cone.origin.step, 0])
                     o[1] += 1
-            if not c.contained:
-                if cone.ok:
-                    t.violations += 1
-                else:
-                    t.broken_misses += 1
+            if cone.ok and not c.held:
+                t.violations += 1  # the published set, or the one the node continues from, missed on a covered node-step
+            elif not c.contained:
+                t.broken_misses += 1
         if st.status in ("ok", "fallback") and k > 0:
             t.solve.append(st.solve_ms)
         t.fallbacks += st.status == "fallback"

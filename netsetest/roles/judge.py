@@ -73,12 +73,19 @@ class Cone:
 @dataclass(frozen=True)
 class Containment:
     """A judged state against its step's truth: E = eᵀP⁻¹e of its ellipsoid, whether its set holds the truth,
+    whether the set its node continues from does (the same set unless the state gives ``own_xhat``/``own_P``),
     and the set's per-coordinate bounds (3, 2) where it is not the ellipsoid alone (a set estimator's set, or
     the SDP's ellipsoid ∩ its fault range; None: the ellipsoid's)."""
 
     E: float
     contained: bool
+    continues_contained: bool
     bounds: np.ndarray | None = None
+
+    @property
+    def held(self) -> bool:
+        """Both sets of the step hold the truth: on a covered node-step anything else is a violation."""
+        return self.contained and self.continues_contained
 
 
 @dataclass(frozen=True)
@@ -195,15 +202,18 @@ class Judge:
         e = xbar - np.asarray(st.xhat)
         E = float(e @ np.linalg.solve(st.P_matrix(), e))
         if st.set is None:
+            # the set the SDP continues from: its own where it publishes another one (it is what the next step rests on)
+            continues = E <= st.rho if st.own_xhat is None else _in_ellipsoid(xbar, st.own_centre(), st.own_P_matrix(), st.rho)
             if st.fault_range is None:
-                return Containment(E, E <= st.rho)
+                return Containment(E, E <= st.rho, continues)
             # the ellipsoid ∩ the fault's declared range: both must hold the truth
             lo, hi = st.bounds()
             inside = E <= st.rho and st.fault_range[0] <= float(xbar[-1]) <= st.fault_range[1]
-            return Containment(E, bool(inside), np.stack([lo, hi], axis=1))
-        # a set estimator's node: its own set is judged; the ellipsoid is only its neighbour-facing summary
+            return Containment(E, bool(inside), continues, np.stack([lo, hi], axis=1))
+        # a set estimator's node: its own set is judged (and continued from); the ellipsoid is only its neighbour-facing summary
         s = set_from_wire(st.set, len(xbar))
-        return Containment(E, s.contains(xbar), np.stack(s.bounds(), axis=1))
+        inside = s.contains(xbar)
+        return Containment(E, inside, inside, np.stack(s.bounds(), axis=1))
 
     def sector_premise(self, n: NodeConfig, st: NodeState | None, tr: Truth) -> bool:
         """What the node's step sector rests on held: nothing more than the noise bound (measurement),

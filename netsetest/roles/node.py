@@ -462,8 +462,9 @@ class Node:
         step_in = self._step_input(inp, neigh, readings)
         t = PROFILE.now() if PROFILE is not None else 0
         res = self.estimator.step(self._prior(), step_in)
-        # the readings the published set rests on (the recursion's cut by them is judged as the next prior)
-        keys_used = res.public.reading_keys
+        # the readings the step's sets rest on: the published one's and the ones the set it continues from was
+        # cut by (both are judged under the step's cone: docs/coverage.md)
+        keys_used = res.public.reading_keys | res.reading_keys
         health = HEALTH_KEY in keys_used
         refs = sorted(readings) if health else sorted(keys_used)  # the k-of-N facts rest on every reading
         if PROFILE is not None:

@@ -158,6 +158,68 @@ def test_the_recursion_carries_the_readings(case: str, gain: float) -> None:
     assert float(np.mean(r_width[False] / r_width[True])) >= gain
 
 
+def test_a_state_lists_the_readings_its_recursion_rests_on() -> None:
+    """The readings the set a node continues from was cut by are listed in its state like the published
+    set's (NodeState.readings), so the collector judges that set under their assumptions: on
+    paper6_reference every node-step whose recursion a reading cut lists it, including the steps whose
+    published set used none (1 in 40 steps here, SAIM with worst-case signals, 2026-11-28; without them a
+    false reading would turn the recursion's miss into a violation)."""
+    sc = load_topology("paper6_reference", case="saim", steps=40)
+    carried: dict[tuple[int, int], tuple[frozenset[int], frozenset[int]]] = {}
+    steps: dict[int, int] = {}
+
+    def observe(est, prev, inp, res, ms) -> None:  # the StepObserver signature
+        k = steps[est.node_id] = steps.get(est.node_id, 0) + 1
+        carried[(est.node_id, k)] = (res.reading_keys, res.public.reading_keys)
+
+    res = run_inmemory(sc, "worst", seed=0, observer=observe)
+    listed = {(int(i), e["step"]): set(e["readings"]) for i, entries in res.parts["nodes"].items() for e in entries}
+    only_recursion = 0
+    for key, (recursion, published) in carried.items():
+        assert recursion <= listed[key] and published <= listed[key], (key, recursion, published, listed[key])
+        only_recursion += bool(recursion) and not published
+    assert (
+        sum(bool(r) for r, _ in carried.values()) > len(carried) // 2 and only_recursion > 0
+    )  # steps whose published set used no reading while the recursion did
+    assert res.summary.violations_total == 0 and res.summary.node_steps_covered == res.summary.node_steps_evaluated
+
+
+def test_a_recursion_that_misses_on_a_covered_node_step_is_a_violation(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The collector judges the set a node continues from at its own step, not only as the next step's
+    prior: an estimator whose published sets hold the truth but whose recursion is moved away from it
+    (a deliberate bug) is caught as violations on covered node-steps, and the record says which set missed
+    (``contained`` true, ``continues_contained`` false; ``inspect`` flags the row).  Before, those misses only
+    made the next step inherit 'missed the truth' and the run reported no violation."""
+    import dataclasses
+
+    from netsetest.estimator.sdp import LocalEstimator
+
+    step = LocalEstimator._step
+
+    def broken(self: LocalEstimator, prev, inp):
+        res = step(self, prev, inp)
+        if res.published is None:
+            res.published = dataclasses.replace(res)
+        res.xhat = res.xhat + np.array([0.0, 0.0, 50.0])  # the recursion's fault centre far off; what is published is intact
+        return res
+
+    monkeypatch.setattr(LocalEstimator, "_step", broken)
+    sc = load_topology("paper6", case="nsnim", steps=6)
+    path = tmp_path / "r.json"
+    res = run_inmemory(sc, "paper", seed=0, record=str(path))
+    s = res.summary
+    assert s.violations_total > 0
+    rows = [e for entries in res.parts["nodes"].values() for e in entries if e["step"] > 0 and e["assumptions_ok"]]
+    assert rows and any(e["contained"] and e["continues_contained"] is False for e in rows)
+    assert all(e["contained"] for entries in res.parts["nodes"].values() for e in entries if e["judged"])
+    capsys.readouterr()
+    assert main(["inspect", str(path), "--node", "1"]) == 0
+    assert "MISS (the set it continues from)" in capsys.readouterr().out
+    assert any(r["continues_contained"] is False for r in load_record(str(path)).fault_rows(1))
+
+
 def test_a_false_reference_reading_is_attributed_to_it(tmp_path: Path) -> None:
     """paper6_reference with sensor 3 (the reference) given a fault from step 20: every other node uses
     its readings, so their published sets miss; every such miss is attributed to sensor 3's broken
