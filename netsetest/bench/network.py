@@ -246,11 +246,13 @@ def network_markdown(res: dict) -> str:
         "node in the network (its neighbours' states and the readings of the same step: sensor 3's in `paper6_reference`, "
         "everyone's under `max_faulty = 4` in `paper6_max_faulty`), the network's over the exact central limit with the same "
         "assumptions (`netsetest exact`, k-of-N health included: docs/exact.md), the same for its yaw rate and sideslip intervals "
-        "(what a yaw-rate sensor's fault interval follows: docs/network.md, *What is left against exact*), and the detection delay in steps after the fault's onset, in the "
-        "network / alone (`-`: no fault, never detected):",
+        "(what a yaw-rate sensor's fault interval follows: docs/network.md, *What is left against exact*), the ceiling of "
+        "alone / network per node, the node alone over the exact limit (no sound set in the network is narrower than that "
+        "limit, so no network can make alone / network larger; the reference's own fault, declared 0, left out), and the "
+        "detection delay in steps after the fault's onset, in the network / alone (`-`: no fault, never detected):",
         "",
-        "| topology | case | signals | alone / network | network / exact | yaw rate · sideslip, network / exact | delay, network / alone (node 1 … 6) |",
-        "|---|---|---|---|---|---|---|",
+        "| topology | case | signals | alone / network | network / exact | ceiling: alone / exact | yaw rate · sideslip, network / exact | delay, network / alone (node 1 … 6) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for (topo, case, sig), runs in groups.items():
         ids = sorted(runs[0]["nodes"], key=int)
@@ -258,7 +260,8 @@ def network_markdown(res: dict) -> str:
         over = [r["nodes"][i]["sdp_network_over_exact"] for r in runs for i in ids if r["nodes"][i]["sdp_network_over_exact"] is not None]
         delays = " · ".join(f"{_d(runs[0]['nodes'][i]['delay_network'])}/{_d(runs[0]['nodes'][i]['delay_alone'])}" for i in ids)
         states = " · ".join(_span([r["nodes"][i].get(key) for r in runs for i in ids]) for key in ("sdp_r_over_exact", "sdp_beta_over_exact"))
-        lines.append(f"| `{topo}` | {case} | {sig} | {min(gain):.3f}–{max(gain):.3f} | {_span(over)} | {states} | {delays} |")
+        ceiling = _span([_ceiling(r["nodes"][i]) for r in runs for i in ids])
+        lines.append(f"| `{topo}` | {case} | {sig} | {min(gain):.3f}–{max(gain):.3f} | {_span(over)} | {ceiling} | {states} | {delays} |")
     runs = res["runs"]
     false = sum(v.get("false_detections", 0) for r in runs for v in r["nodes"].values())
     false_cov = sum(v.get("false_detections_covered", 0) for r in runs for v in r["nodes"].values())
@@ -297,6 +300,12 @@ def network_markdown(res: dict) -> str:
             f"{cost['steps'][0]} and {cost['steps'][1]} steps each, the per-step time from their difference).",
         ]
     return "\n".join(lines) + "\n"
+
+
+def _ceiling(node: dict) -> float | None:
+    """The node alone over the exact central limit: alone / network times network / exact (None: no exact width)."""
+    over = node["sdp_network_over_exact"]
+    return None if over is None else node["sdp_alone_over_network"] * over
 
 
 def _span(values: list[float | None]) -> str:
