@@ -19,6 +19,8 @@ ellipsoid containing x̄_0 (Assumption 1).
 
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -112,6 +114,11 @@ class StepInputs:
     judged: dict[int, NodeState]
     contested: frozenset[int]
     copies: dict[int, list[NodeState]]
+
+    @functools.cached_property
+    def faults(self) -> dict[int, float]:
+        """The truth's faults by node id (the wire keys them by string), converted once per step."""
+        return {} if self.truth is None else {int(j): f for j, f in self.truth.faults.items()}
 
 
 @dataclass(frozen=True)
@@ -299,7 +306,7 @@ class Judge:
             why = self.reading_cause(j, y, gamma, tr)
             if why is not None:
                 return Cone(False, INHERITED, Origin(j, k, why))
-        if st.health and not self.sc.group_health_holds(i, {int(j): f for j, f in tr.faults.items()}):
+        if st.health and not self.sc.group_health_holds(i, inp.faults):
             return Cone(False, HEALTH)  # its group's k-of-N interval rested on more healthy sensors than there were
         if st.status == "fallback" and st.set is not None:
             return Cone(False, "fallback")  # the previous step's set again: no guarantee for this step
