@@ -30,6 +30,7 @@ except ImportError:  # another interpreter
     from hashlib import blake2b
 from msgspec import Meta, Struct, field
 
+from netsetest.estimator.polygon import MAX_VERTICES, MIN_VERTICES, Polygon
 from netsetest.models.sensor import NA
 from netsetest.sets import ellipsoid_bounds, set_from_wire
 from netsetest.validation import FINITE_BOUND_TEXT, FLOAT_MAX, Finite, Positive, split_error
@@ -171,6 +172,9 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     # covered node-step is a violation) and as the next step's prior
     own_xhat: Vec3 | None = None
     own_P: Mat3 | None = None
+    # and its region: a convex polygon of x = (β, r) that keeps what every earlier reading proved (vertices
+    # counter-clockwise, flattened [β₁, r₁, β₂, r₂, …]; estimator/polygon.py); the truth's x must lie in it too
+    own_region: Annotated[list[FiniteF], Meta(min_length=2 * MIN_VERTICES, max_length=2 * MAX_VERTICES)] | None = None
     # the readings of this very step the published set or the one the node continues from used, as
     # (node, ỹ, γ): the collector checks them against the truth and puts their noise and zero-fault
     # declarations into the step's cone
@@ -195,6 +199,12 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
             problem = spd_problem(self.own_P)
             if problem:
                 raise ValueError(f"own_P: {problem}")
+        if self.own_region is not None and len(self.own_region) % 2:
+            raise ValueError("own_region: an odd number of coordinates")
+
+    def region(self) -> Polygon | None:
+        """The region the node continues from (None: none sent)."""
+        return None if self.own_region is None else Polygon(np.asarray(self.own_region, dtype=float).reshape(-1, 2))
 
     def own_P_matrix(self) -> np.ndarray:
         """The shape of the set the node continues from (the published one unless own_P is given)."""
@@ -217,7 +227,7 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
 def state_digest(st: NodeState) -> str:
     """The identity of a state copy: every field a receiver's step takes from it (the set, the innovation,
     γ, the sector, and the set the sender continues from).  Two copies with the same digest are one."""
-    content = [st.step, st.node, st.xhat, st.P, st.rho, st.gamma, st.innov, st.sector, st.sector_basis, st.set, st.own_xhat, st.own_P]
+    content = [st.step, st.node, st.xhat, st.P, st.rho, st.gamma, st.innov, st.sector, st.sector_basis, st.set, st.own_xhat, st.own_P, st.own_region]
     return blake2b(msgspec.msgpack.encode(content), digest_size=DIGEST_BYTES).hexdigest()
 
 

@@ -65,6 +65,7 @@ from netsetest.estimator.certificate import FactStack, FallbackUnavailable, cert
 from netsetest.estimator.conic.closed_form import ClosedFormSolver, clarabel_backend
 from netsetest.estimator.health import HEALTH_KEY, HealthAssessment, HealthModel
 from netsetest.estimator.lmi_cvxpy import CvxpySolver
+from netsetest.estimator.polygon import Polygon
 from netsetest.estimator.objective import BANK_FAULT_WEIGHT, DEFAULT_OBJECTIVE, FAULT_WEIGHT, OBJECTIVES, Objective
 from netsetest.estimator.problem import EtaLayout, OwnUpdate, PatternKey, ProblemSolver, Solution, StepData
 from netsetest.estimator.sector import (
@@ -99,6 +100,7 @@ class NodeSet:
     xhat: np.ndarray  # (3,)
     P: np.ndarray  # (3, 3)
     rho: float
+    region: Polygon | None = None  # the states x = (β, r) the earlier readings left (None: none kept; docs/network.md)
 
 
 @dataclass(frozen=True)
@@ -148,6 +150,7 @@ class StepResult:
     published: StepResult | None = None  # objective ``bank`` or readings: the set to publish (None: this one)
     reading_keys: frozenset[int] = frozenset()  # the readings this set used (keys of LocalEstimator.reading_intervals); the recursion's: the ones it was cut by
     fault_range: tuple[float, float] | None = None  # the set is the ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (a declared bound's cut)
+    region: Polygon | None = None  # the recursion's: the states x⁺ the readings of every step so far leave (NodeSet.region)
 
     @property
     def public(self) -> StepResult:
@@ -408,13 +411,16 @@ class LocalEstimator:
                 out[HEALTH_KEY] = (np.r_[self.health.u, 0.0], hull)
         return out
 
-    def _assess_health(self, prev: NodeSet, inp: UpdateInput) -> HealthAssessment:
+    def _assess_health(self, prev: NodeSet, inp: UpdateInput, moved: Polygon | None = None) -> HealthAssessment:
         """The step's k-of-N interval of uᵀx⁺ and whether the own fault is pinned, once per step (both the
         readings' update and the pin use it).  Hypotheses are pruned by uᵀx⁺ over the node's own set through
         the step: a majority that agrees only outside it is none."""
         assert self.health is not None
         a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
         pred = propagated_interval(self._u_sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W, self.uncertainty)
+        if moved is not None:  # and over the moved region (both hold uᵀx⁺ wherever the prior does; disjoint: one broke)
+            both = pred & Interval(*moved.interval(self.health.u))
+            pred = both if both.lo <= both.hi else pred
         return self.health.assess(self.node_id, (inp.y, inp.gamma), inp.readings, (pred.lo, pred.hi), pin=True)
 
     def _reference_innovation(
@@ -590,7 +596,8 @@ class LocalEstimator:
         sector, reading = self._own_range(prev, inp)
         data = self.step_data(prev, inp, sector, reading)
         alpha = np.asarray(inp.alpha, dtype=float)
-        health = self._assess_health(prev, inp) if self.health is not None and inp.readings else None
+        moved = self._moved_region(prev, inp) if inp.readings else None
+        health = self._assess_health(prev, inp, moved) if self.health is not None and inp.readings else None
         refs = self.reading_intervals(prev, inp, health)
         facts = FactStack.of(data.facts)
         res, solve = self._solve_certify(data, prev.rho, alpha, self._wh, facts)  # the set the node recurs on
@@ -603,9 +610,55 @@ class LocalEstimator:
         if refs:
             self._carry(res, {key: (c, iv.lo, iv.hi) for key, (c, iv) in refs.items()}, prev.rho)
         self._size_cut(res, prev.rho)
+        if moved is not None and refs:
+            self._use_region(res, moved, refs, inp, prev.rho)
         if health is not None and health[1]:
             self._health_pin(res, prev.rho)
         return res
+
+    def _moved_region(self, prev: NodeSet, inp: UpdateInput) -> Polygon:
+        """The states x⁺ the prior allows: its region (else the box of its ellipsoid) through the step's blended dynamics (exact for the truth), plus the disturbance's and the
+        declared model mismatch's bounds (a box around e = G ζ holds it for either kind)."""
+        region = prev.region
+        if region is None:
+            lo, hi = ellipsoid_bounds(prev.xhat, np.diag(prev.P), prev.rho)
+            region = Polygon.box(lo[:NX], hi[:NX])
+        a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
+        region = region.affine(a, b[:, 0] * inp.u).plus_segment(d[:, 0] * np.sqrt(self.W))  # x⁺ = Ā x + B̄ u + D̄ w
+        if self.uncertainty is not None:
+            for m in range(NX):  # + e, e = G ζ with |ζ_m| ≤ 1
+                region = region.plus_segment(self.uncertainty.G[:, m])
+        return region
+
+    def _use_region(self, res: StepResult, moved: Polygon, refs: dict[int, tuple[np.ndarray, Interval]], inp: UpdateInput, rho: float) -> None:
+        """Cut the moved region by every reading of the step: the node continues from it (``res.region``, beside
+        its ellipsoid) and cuts the published fault interval by what its own measurement proves over it (C x⁺ +
+        Ds f⁺ within the measurement's interval, C x⁺ within the region's).  The region keeps what every reading
+        so far proved, as the exact limit does (docs/network.md); the ellipsoids keep one step of it.  Where the
+        readings and the region do not meet (an assumption broke), nothing is used."""
+        region: Polygon | None = moved
+        for c, iv in refs.values():
+            region = region.cut(c[:NX], iv.lo, iv.hi) if region is not None else None
+        if region is None:
+            return
+        region = region.inflated().reduced()
+        keys = frozenset(refs)
+        res.region = region
+        res.reading_keys = res.reading_keys | keys
+        fault = self._region_fault(region, inp)
+        if fault is not None and self._cut_fault(res, rho, *fault):
+            res.published = dataclasses.replace(res.public, reading_keys=res.public.reading_keys | keys)
+
+    def _region_fault(self, region: Polygon, inp: UpdateInput) -> tuple[float, float] | None:
+        """f⁺ from the own measurement over the region: C x⁺ + Ds f⁺ ∈ [m_lo, m_hi] and C x⁺ ∈ [c_lo, c_hi]
+        give Ds f⁺ ∈ [m_lo − c_hi, m_hi − c_lo]; None where the measurement leaves a side open (saturated)."""
+        own = self.own
+        meas = measurement_interval(own, inp.y, inp.gamma)
+        if own.Ds == 0.0 or not (np.isfinite(meas.lo) and np.isfinite(meas.hi)):
+            return None
+        c_lo, c_hi = region.interval(own.C)
+        lo, hi = (meas.lo - c_hi) / own.Ds, (meas.hi - c_lo) / own.Ds
+        return (lo, hi) if lo <= hi else (hi, lo)
 
     def _carry(self, res: StepResult, slabs: dict[int, tuple[np.ndarray, float, float]], rho: float) -> None:
         """Cut the set the node continues from by what the step proved beyond its solve, each (c, lo, hi) a
@@ -636,7 +689,7 @@ class LocalEstimator:
         size, sector = self.fault_bound.size, res.sector
         if size is None or sector is None or sector.basis != "fault-bound":
             return
-        self._cut_fault(res, rho, size)
+        self._cut_fault(res, rho, -size, size)
 
     def _health_pin(self, res: StepResult, rho: float) -> None:
         """Under ``max_faulty``, where no consistent majority of the step's readings leaves this node's sensor
@@ -646,17 +699,17 @@ class LocalEstimator:
         from is cut by it too (:meth:`_carry`)."""
         assert self.health is not None
         size = max(self.health.tolerance, PIN_FLOOR)
-        if self._cut_fault(res, rho, size):
+        if self._cut_fault(res, rho, -size, size):
             res.published = dataclasses.replace(res.public, reading_keys=res.public.reading_keys | {HEALTH_KEY})
         self._carry(res, {HEALTH_KEY: (FAULT_AXIS, -size, size)}, rho)  # and the set the node continues from
 
-    def _cut_fault(self, res: StepResult, rho: float, size: float) -> bool:
-        """Cut the set to publish by |f⁺| ≤ ``size`` (:func:`~netsetest.estimator.slab.cut`, certified) and publish
-        it as that ellipsoid ∩ {|f⁺| ≤ size} (NodeState.fault_range: no ellipsoid ends at the slab's flat face);
+    def _cut_fault(self, res: StepResult, rho: float, lo: float, hi: float) -> bool:
+        """Cut the set to publish by lo ≤ f⁺ ≤ hi (:func:`~netsetest.estimator.slab.cut`, certified) and publish
+        it as that ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (NodeState.fault_range: no ellipsoid ends at the slab's flat face);
         whether it did.  The node recurs on ``res`` as solved."""
         pub = res.public
         now_lo, now_hi = ellipsoid_bounds(pub.xhat, np.diag(pub.P), rho, pub.fault_range)  # the published fault interval
-        lo, hi = max(-size, now_lo[-1]), min(size, now_hi[-1])
+        lo, hi = max(lo, now_lo[-1]), min(hi, now_hi[-1])
         if not (lo > now_lo[-1] or hi < now_hi[-1]) or lo > hi:
             return False  # no cut (an empty one means the assumptions broke: the step's set stays as certified)
         wh = self._wh_pub if self._wh_pub is not None else self._wh

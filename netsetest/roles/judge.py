@@ -30,7 +30,7 @@ from netsetest.estimator.names import SDP
 from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.sector import Sector, sector_ok
 from netsetest.messages import NodeState, Truth, state_digest
-from netsetest.models.sensor import augmented
+from netsetest.models.sensor import NX, augmented
 from netsetest.sets import set_from_wire
 
 INNOV_RTOL = 1e-12  # the node computes ỹ − C̄ x̂ with the same numbers: rounding only across machines
@@ -146,6 +146,15 @@ def _in_ellipsoid(x: np.ndarray, c: np.ndarray, P: np.ndarray, rho: float) -> bo
     return bool(float(e @ np.linalg.solve(P, e)) <= rho)
 
 
+def _continues_in(st: NodeState, xbar: np.ndarray) -> bool:
+    """x̄ lies in the set an SDP node continues from: its own ellipsoid (the published one unless it sends
+    another) and, where it keeps one, its region of x (estimator/polygon.py)."""
+    region = st.region()
+    if region is not None and not region.contains(xbar[:NX]):
+        return False
+    return _in_ellipsoid(xbar, st.own_centre(), st.own_P_matrix(), st.rho)
+
+
 def _in_prior(n: NodeConfig, tr: Truth) -> bool:
     """Assumption 1: the true x̄_0 lies in node n's prior ellipsoid."""
     e = augmented(tr.x, tr.faults[str(n.id)]) - n.x0_hat
@@ -209,8 +218,7 @@ class Judge:
         e = xbar - np.asarray(st.xhat)
         E = float(e @ np.linalg.solve(st.P_matrix(), e))
         if st.set is None:
-            # the set the SDP continues from: its own where it publishes another one (it is what the next step rests on)
-            continues = E <= st.rho if st.own_xhat is None else _in_ellipsoid(xbar, st.own_centre(), st.own_P_matrix(), st.rho)
+            continues = _continues_in(st, xbar)  # what the next step rests on
             if st.fault_range is None:
                 return Containment(E, E <= st.rho, continues)
             # the ellipsoid ∩ the fault's declared range: both must hold the truth
@@ -262,7 +270,7 @@ class Judge:
         if c.set is not None:  # a set estimator continues from the set it published
             prior_in = set_from_wire(c.set, len(xbar)).contains(xbar)
         else:
-            prior_in = _in_ellipsoid(xbar, c.own_centre(), c.own_P_matrix(), c.rho)
+            prior_in = _continues_in(c, xbar)
         self_loop = j in n.in_weights  # its own innovation enters its next step: the same facts
         return CopyCheck(
             as_neighbour=facts or (None if published_in else MISSED),

@@ -44,6 +44,7 @@ from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE
 from netsetest.estimator.health import HEALTH_KEY
 from netsetest.estimator.registry import node_set_estimator
+from netsetest.estimator.polygon import Polygon
 from netsetest.estimator.rejoin import rejoin_ellipsoid
 from netsetest.estimator.sdp import NodeSet, LocalEstimator, NeighbourState, Objective, UpdateInput, StepResult, Variant
 from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sector, measurement_interval
@@ -129,6 +130,7 @@ class Node:
         # estimator state, plain arrays: centre, shape, radius, and our own last published message
         self.xhat = self.cfg.x0_hat.copy()
         self.P = self.cfg.P0.copy()
+        self.region: Polygon | None = None  # the region of x the readings left (estimator/polygon.py)
         self.rho = self.cfg.rho
         self.k = -1  # last published step
         self.own: NeighbourState | None = None
@@ -400,7 +402,7 @@ class Node:
 
     def _prior(self) -> NodeSet:
         """The set the next step starts from."""
-        return NodeSet(self.xhat, self.P, self.rho)
+        return NodeSet(self.xhat, self.P, self.rho, self.region)
 
     def _step_input(self, inp: NodeInput, neigh: dict[int, NeighbourState], readings: dict[int, tuple[float, float]]) -> UpdateInput:
         """The estimator's input of a step > 0 (its u and Vx are there: _implausible_input dropped inputs without them)."""
@@ -523,7 +525,7 @@ class Node:
     def _publish(self, pub: Publication) -> None:
         """Keep ``pub.res`` as the node's own set (its next step starts from it) and publish ``res.public``."""
         inp, res = pub.inp, pub.res
-        self.xhat, self.P = res.xhat, res.P
+        self.xhat, self.P, self.region = res.xhat, res.P, res.region
         sector = res.sector
         cbar = self.cfg.sensor.Cbar
         self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, float(inp.y - cbar @ self.xhat), sector)
@@ -572,6 +574,7 @@ class Node:
             health=p.health,
             fault_range=list(pub.fault_range) if pub.fault_range is not None else None,
             **self._own_set(res),  # type: ignore[arg-type]  # own_xhat/own_P only: mypy cannot tell the keys of a dict
+            own_region=None if res.region is None else [float(a) for a in res.region.vertices.reshape(-1)],
         )
 
     @staticmethod

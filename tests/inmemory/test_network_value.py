@@ -220,6 +220,39 @@ def test_a_recursion_that_misses_on_a_covered_node_step_is_a_violation(
     assert any(r["continues_contained"] is False for r in load_record(str(path)).fault_rows(1))
 
 
+def test_the_region_keeps_every_reading_and_is_judged(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A node with readings keeps a region of x (estimator/polygon.py) moved through every step and cut by
+    every reading, publishes it (NodeState.own_region) and cuts its published fault interval by what its own
+    measurement proves over it.  On paper6_reference, worst-case signals, NSNIM: every node-step is covered
+    and contained, the set each node continues from (region included) too, and the region's fault interval is
+    published on nearly every step from step 10 (a fault range the run without the region never has: NSNIM
+    has no declared bound).  A region moved off the truth (a deliberate bug) is a violation on covered
+    node-steps, with ``continues_contained`` false."""
+    from netsetest.estimator.polygon import Polygon
+    from netsetest.estimator.sdp import LocalEstimator
+
+    sc = load_topology("paper6_reference", case="nsnim", steps=30)
+    res = run_inmemory(sc, "worst", seed=0)
+    s = res.summary
+    assert s.violations_total == 0 and s.node_steps_covered == s.node_steps_evaluated == s.node_steps_contained
+    rows = [e for i, es in res.parts["nodes"].items() if int(i) != 3 for e in es if e["step"] >= 10]
+    assert all(e["continues_contained"] for e in rows)
+    assert sum("fault_range" in e for e in rows) >= 0.9 * len(rows) > 0
+
+    use = LocalEstimator._use_region
+
+    def moved_off(self: LocalEstimator, res, moved, refs, inp, rho):  # the StepResult and its inputs
+        use(self, res, moved, refs, inp, rho)
+        if res.region is not None:
+            res.region = Polygon(res.region.vertices + np.array([1.0, 0.0]))  # 1 rad of sideslip off
+
+    monkeypatch.setattr(LocalEstimator, "_use_region", moved_off)
+    broken = run_inmemory(sc, "worst", seed=0)
+    assert broken.summary.violations_total > 0
+    covered = [e for es in broken.parts["nodes"].values() for e in es if e["assumptions_ok"] and e["step"] > 0]
+    assert any(e["continues_contained"] is False for e in covered)
+
+
 def test_a_false_reference_reading_is_attributed_to_it(tmp_path: Path) -> None:
     """paper6_reference with sensor 3 (the reference) given a fault from step 20: every other node uses
     its readings, so their published sets miss; every such miss is attributed to sensor 3's broken

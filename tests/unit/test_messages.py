@@ -177,6 +177,10 @@ BAD = [
     ("fault-range-reversed", _mut(_state(), fault_range=[0.2, -0.2]), "invalid", "fault_range"),
     ("fault-range-inf", _mut(_state(), fault_range=[-float("inf"), 0.2]), "invalid", "fault_range"),
     ("fault-range-3", _mut(_state(), fault_range=[-0.2, 0.0, 0.2]), "invalid", "fault_range"),
+    ("region-odd", _mut(_state(), own_region=[0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.5]), "invalid", "own_region"),
+    ("region-2-vertices", _mut(_state(), own_region=[0.0, 0.0, 1.0, 0.0]), "invalid", "own_region"),
+    ("region-too-long", _mut(_state(), own_region=[0.0] * 1000), "invalid", "own_region"),
+    ("region-nan", _mut(_state(), own_region=[0.0, 0.0, 1.0, float("nan"), 1.0, 1.0]), "invalid", "own_region"),
 ]
 
 

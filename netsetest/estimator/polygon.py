@@ -1,0 +1,160 @@
+"""Convex polygons in the plane of the vehicle state x = (β, r): the one-step map, the sum with a segment,
+the cut by a slab and an outer reduction, each of which keeps every point it held (sound), with an outward
+margin for rounding.
+
+A node's *region* (docs/network.md) is such a polygon: the states its prior allows, moved through the
+step's dynamics and the disturbance's bound, and cut by the step's readings.  Unlike an ellipsoid it keeps
+what every earlier reading proved, as the exact limit does, at a bounded number of vertices.
+
+Vertices are stored counter-clockwise, (n, 2), n ≥ 3 (a cut that leaves fewer is empty: None).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+MIN_VERTICES = 3
+MAX_VERTICES = 24  # the reduction keeps at most this many (each step adds about 8)
+MARGIN = 1e-9  # outward, relative to the polygon's extent: covers the rounding of one step's operations
+ROUNDING = 1e-10  # outward, relative to the coordinates' size: far above one step's rounding (ε·n)
+DUPLICATE = 1e-13  # vertices closer than this (relative to the coordinates' size) are one: far below ROUNDING
+
+
+@dataclass(frozen=True)
+class Polygon:
+    """A convex polygon, vertices (n, 2) counter-clockwise."""
+
+    vertices: np.ndarray
+
+    @classmethod
+    def box(cls, lo: np.ndarray, hi: np.ndarray) -> Polygon:
+        """The box lo ≤ x ≤ hi."""
+        return cls(np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]], dtype=float))
+
+    def support(self, c: np.ndarray) -> float:
+        """max cᵀx over the polygon."""
+        return float((self.vertices @ c).max())
+
+    def interval(self, c: np.ndarray) -> tuple[float, float]:
+        """[min cᵀx, max cᵀx] over the polygon."""
+        v = self.vertices @ c
+        return float(v.min()), float(v.max())
+
+    def contains(self, x: np.ndarray) -> bool:
+        """x within every side's supporting line: nᵢᵀx ≤ max_j nᵢᵀv_j, nᵢ the outward normal of side i (no margin:
+        for tests and the judge).  The support over every vertex, not the side's own end, keeps the test sound where
+        a short side's direction is rounding noise: any direction with its support bounds the hull."""
+        v = self.vertices
+        e = np.roll(v, -1, axis=0) - v
+        n = np.stack([e[:, 1], -e[:, 0]], axis=1)  # outward for counter-clockwise vertices
+        return bool(np.all(n @ x <= (v @ n.T).max(axis=0)))
+
+    def affine(self, A: np.ndarray, t: np.ndarray) -> Polygon:
+        """{A x + t}: A (2, 2) invertible."""
+        v = self.vertices @ A.T + t
+        return Polygon(v if np.linalg.det(A) > 0 else v[::-1].copy())
+
+    def plus_segment(self, g: np.ndarray) -> Polygon:
+        """The sum with the segment {s g : |s| ≤ 1}: the polygon's edges and ±2g merged by angle (two more vertices)."""
+        v = self.vertices
+        first = int(np.lexsort((v[:, 0], v[:, 1]))[0])  # the lowest vertex (then leftmost): edges from it turn by angle
+        v = np.roll(v, -first, axis=0)
+        edges = np.vstack([np.roll(v, -1, axis=0) - v, 2.0 * g[None, :], -2.0 * g[None, :]])
+        angle = np.mod(np.arctan2(edges[:, 1], edges[:, 0]), 2.0 * np.pi)
+        low = -g if (g[1] > 0.0 or (g[1] == 0.0 and g[0] > 0.0)) else g  # the segment's lowest (then leftmost) end
+        walk = np.cumsum(edges[np.argsort(angle, kind="stable")], axis=0)
+        return Polygon(_distinct(v[0] + low + np.vstack([np.zeros((1, 2)), walk[:-1]])))
+
+    def cut(self, c: np.ndarray, lo: float, hi: float) -> Polygon | None:
+        """The part with lo ≤ cᵀx ≤ hi, widened outward by the margin; None if empty."""
+        pad = MARGIN * (1.0 + self.extent(c))
+        v = _clip(self.vertices, c, hi + pad)
+        if v is not None:
+            v = _clip(v, -c, -lo + pad)
+        return None if v is None else Polygon(v)
+
+    def extent(self, c: np.ndarray) -> float:
+        """max |cᵀx| over the polygon."""
+        return float(np.abs(self.vertices @ c).max())
+
+    def inflated(self) -> Polygon:
+        """The sum with the square of half-side ROUNDING of the coordinates' size: every side moves out by at least
+        that, which covers what one step's rounding (and the vertices merged as duplicates) may have moved."""
+        pad = ROUNDING * (1.0 + float(np.abs(self.vertices).max()))
+        return self.plus_segment(np.array([pad, 0.0])).plus_segment(np.array([0.0, pad]))
+
+    def reduced(self, max_vertices: int = MAX_VERTICES) -> Polygon:
+        """At most ``max_vertices`` vertices, containing this polygon: an edge is dropped by extending its two
+        neighbours until they meet, the ones that add the least area first (edges at least three apart at once:
+        their neighbours' lines are then untouched)."""
+        v = self.vertices
+        while len(v) > max_vertices:
+            drops = _cheapest_edges(v, len(v) - max_vertices)
+            if not drops:
+                break  # no edge can be dropped without an unbounded extension (cannot happen for n > 4)
+            v = _drop_edges(v, drops)
+        return Polygon(v)
+
+
+def _clip(v: np.ndarray, c: np.ndarray, b: float) -> np.ndarray | None:
+    """The polygon ∩ {cᵀx ≤ b} (Sutherland–Hodgman against one half-plane); None if fewer than 3 vertices remain."""
+    s = v @ c - b
+    if np.all(s <= 0.0):
+        return v
+    nxt = np.roll(v, -1, axis=0)
+    s_nxt = np.roll(s, -1)
+    crosses = ((s < 0.0) & (s_nxt > 0.0)) | ((s > 0.0) & (s_nxt < 0.0))
+    t = np.where(crosses, s / np.where(crosses, s - s_nxt, 1.0), 0.0)
+    points = np.stack([v, v + t[:, None] * (nxt - v)], axis=1).reshape(-1, 2)  # per edge: its start, its crossing
+    out = points[np.stack([s <= 0.0, crosses], axis=1).reshape(-1)]
+    out = _distinct(out) if len(out) else out
+    return out if len(out) >= MIN_VERTICES else None
+
+
+def _distinct(v: np.ndarray) -> np.ndarray:
+    """Without the vertices within DUPLICATE (relative to the extent) of the one before: an edge that short has a
+    direction of rounding noise, which the containment test would read as a side (the margin covers the move)."""
+    tol = DUPLICATE * (1.0 + float(np.abs(v).max()))
+    keep = np.abs(v - np.roll(v, 1, axis=0)).max(axis=1) > tol
+    return v[keep] if keep.any() else v[:1]
+
+
+def _cheapest_edges(v: np.ndarray, wanted: int) -> dict[int, np.ndarray]:
+    """Up to ``wanted`` edges i → q: dropping edge (v_i, v_i+1) by meeting its neighbours' lines at q adds the
+    least area; the edges chosen are at least three apart (cyclically)."""
+    n = len(v)
+    a0, a1 = np.roll(v, 1, axis=0), v  # the edge before edge i
+    b0, b1 = np.roll(v, -1, axis=0), np.roll(v, -2, axis=0)  # the edge after it
+    da, db = a1 - a0, b1 - b0
+    den = da[:, 0] * db[:, 1] - da[:, 1] * db[:, 0]
+    ok = den > 1e-300  # else parallel, or meeting behind: dropping that edge is unbounded
+    t = np.where(ok, ((b0[:, 0] - a0[:, 0]) * db[:, 1] - (b0[:, 1] - a0[:, 1]) * db[:, 0]) / np.where(ok, den, 1.0), -1.0)
+    ok &= t >= 1.0
+    q = a0 + t[:, None] * da
+    area = 0.5 * np.abs((q[:, 0] - a1[:, 0]) * (b0[:, 1] - a1[:, 1]) - (q[:, 1] - a1[:, 1]) * (b0[:, 0] - a1[:, 0]))
+    area = np.where(ok & np.isfinite(area), area, np.inf)
+    chosen: dict[int, np.ndarray] = {}
+    for i in np.argsort(area, kind="stable"):
+        if len(chosen) == wanted or not np.isfinite(area[i]):
+            break
+        if all(min((i - j) % n, (j - i) % n) >= 3 for j in chosen):
+            chosen[int(i)] = q[i]
+    return chosen
+
+
+def _drop_edges(v: np.ndarray, drops: dict[int, np.ndarray]) -> np.ndarray:
+    """The vertices with each dropped edge's two ends replaced by its q."""
+    n = len(v)
+    ends = {(i + 1) % n for i in drops}
+    out = []
+    for k in range(n):
+        if k in drops:
+            out.append(drops[k])
+        elif k not in ends:
+            out.append(v[k])
+    return np.array(out)
+
+
+__all__ = ["MARGIN", "MAX_VERTICES", "MIN_VERTICES", "Polygon"]

@@ -1,0 +1,85 @@
+"""estimator/polygon.py: every operation keeps every point it held (the region's guarantee rests on it),
+checked point by point on random polygons (Hypothesis) as a step applies them (then ``inflated``), and the cut
+and the reduction give what they say."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from netsetest.estimator.polygon import MARGIN, MAX_VERTICES, Polygon
+
+finite = st.floats(-1.0, 1.0, allow_nan=False)
+
+
+@st.composite
+def _cloud(draw: st.DrawFn) -> tuple[Polygon, np.ndarray]:
+    """A random convex polygon (the hull of random points, grown by a random segment so that it is never flat)
+    and points inside it (convex combinations of its vertices)."""
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    pts = rng.normal(size=(draw(st.integers(3, 40)), 2)) * draw(st.sampled_from([1e-3, 1.0, 50.0]))
+    poly = Polygon.box(pts.min(axis=0), pts.max(axis=0))
+    for p in pts:
+        poly = poly.plus_segment(0.01 * p)
+    w = rng.dirichlet(np.ones(len(poly.vertices)), size=60)
+    inside = np.vstack([w @ poly.vertices, poly.vertices])
+    return poly, inside
+
+
+@settings(max_examples=150, deadline=None)
+@given(_cloud(), finite, finite, finite, finite, finite, finite)
+def test_affine_and_segment_keep_every_point(cloud: tuple[Polygon, np.ndarray], a: float, b: float, c: float, d: float, gx: float, gy: float) -> None:
+    poly, pts = cloud
+    A = np.array([[1.0 + a, b], [c, 0.5 + d]])
+    if abs(np.linalg.det(A)) < 1e-3:
+        A = A + np.eye(2)
+    t = np.array([gx, gy])
+    moved = poly.affine(A, t).plus_segment(np.array([gy, gx])).inflated()
+    rng = np.random.default_rng(0)
+    s = rng.uniform(-1.0, 1.0, size=(len(pts), 1))
+    for x in pts @ A.T + t + s * np.array([gy, gx]):
+        assert moved.contains(x)
+
+
+@settings(max_examples=150, deadline=None)
+@given(_cloud(), finite, finite, st.floats(0.05, 0.95), st.floats(0.05, 0.95))
+def test_the_cut_keeps_the_points_in_the_slab_and_drops_the_rest(cloud: tuple[Polygon, np.ndarray], cx: float, cy: float, q1: float, q2: float) -> None:
+    poly, pts = cloud
+    c = np.array([cx, cy]) if abs(cx) + abs(cy) > 1e-3 else np.array([1.0, 0.0])
+    vals = pts @ c
+    lo, hi = np.quantile(vals, sorted((q1, q2)))
+    cut = poly.cut(c, lo, hi)
+    inside = pts[(vals >= lo) & (vals <= hi)]
+    if len(inside):
+        assert cut is not None
+        kept = cut.inflated()  # as a step ends: the margin covers the merged near-duplicate vertices
+        for x in inside:
+            assert kept.contains(x)
+    if cut is not None:
+        v_lo, v_hi = cut.interval(c)
+        pad = 1e-6 * (1.0 + np.abs(pts @ c).max())
+        assert v_lo >= lo - pad and v_hi <= hi + pad  # nothing of it outside the slab but the margin
+
+
+@settings(max_examples=100, deadline=None)
+@given(_cloud(), st.integers(4, MAX_VERTICES))
+def test_the_reduction_keeps_every_point_within_its_vertex_count(cloud: tuple[Polygon, np.ndarray], limit: int) -> None:
+    poly, pts = cloud
+    grown = poly
+    for g in ([1.0, 0.3], [-0.2, 1.0], [0.7, -0.7], [0.1, 0.05]):
+        grown = grown.plus_segment(np.array(g) * 0.01)
+    small = grown.reduced(limit)
+    assert len(small.vertices) <= max(limit, 4)
+    for x in pts:
+        assert small.contains(x)
+
+
+def test_a_cut_that_misses_the_polygon_is_empty() -> None:
+    square = Polygon.box(np.zeros(2), np.ones(2))
+    assert square.cut(np.array([1.0, 0.0]), 2.0, 3.0) is None
+    cut = square.cut(np.array([0.0, 1.0]), 0.25, 0.5)
+    assert cut is not None
+    pad = MARGIN * 2.0  # outward by the margin, relative to the extent (1)
+    assert cut.interval(np.array([0.0, 1.0])) == (0.25 - pad, 0.5 + pad) and cut.interval(np.array([1.0, 0.0])) == (0.0, 1.0)
