@@ -30,7 +30,7 @@ except ImportError:  # another interpreter
     from hashlib import blake2b
 from msgspec import Meta, Struct, field
 
-from netsetest.estimator.polygon import MAX_VERTICES, MIN_VERTICES, Polygon
+from netsetest.polygon import MAX_VERTICES, MIN_VERTICES, Polygon
 from netsetest.models.sensor import NA
 from netsetest.sets import ellipsoid_bounds, set_from_wire
 from netsetest.validation import FINITE_BOUND_TEXT, FLOAT_MAX, Finite, Positive, split_error
@@ -173,7 +173,7 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     own_xhat: Vec3 | None = None
     own_P: Mat3 | None = None
     # and its region: a convex polygon of x = (β, r) that keeps what every earlier reading proved (vertices
-    # counter-clockwise, flattened [β₁, r₁, β₂, r₂, …]; estimator/polygon.py); the truth's x must lie in it too
+    # counter-clockwise, flattened [β₁, r₁, β₂, r₂, …]; netsetest/polygon.py); the truth's x must lie in it too
     own_region: Annotated[list[FiniteF], Meta(min_length=2 * MIN_VERTICES, max_length=2 * MAX_VERTICES)] | None = None
     # the readings of this very step the published set or the one the node continues from used, as
     # (node, ỹ, γ): the collector checks them against the truth and puts their noise and zero-fault

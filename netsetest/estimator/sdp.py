@@ -65,7 +65,7 @@ from netsetest.estimator.certificate import FactStack, FallbackUnavailable, cert
 from netsetest.estimator.conic.closed_form import ClosedFormSolver, clarabel_backend
 from netsetest.estimator.health import HEALTH_KEY, HealthAssessment, HealthModel
 from netsetest.estimator.lmi_cvxpy import CvxpySolver
-from netsetest.estimator.polygon import Polygon
+from netsetest.polygon import Polygon
 from netsetest.estimator.objective import BANK_FAULT_WEIGHT, DEFAULT_OBJECTIVE, FAULT_WEIGHT, OBJECTIVES, Objective
 from netsetest.estimator.problem import EtaLayout, OwnUpdate, PatternKey, ProblemSolver, Solution, StepData
 from netsetest.estimator.sector import (
@@ -624,11 +624,10 @@ class LocalEstimator:
             lo, hi = ellipsoid_bounds(prev.xhat, np.diag(prev.P), prev.rho)
             region = Polygon.box(lo[:NX], hi[:NX])
         a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
-        region = region.affine(a, b[:, 0] * inp.u).plus_segment(d[:, 0] * np.sqrt(self.W))  # x⁺ = Ā x + B̄ u + D̄ w
+        segments = [d[:, 0] * np.sqrt(self.W)]  # x⁺ = Ā x + B̄ u + D̄ w (+ e)
         if self.uncertainty is not None:
-            for m in range(NX):  # + e, e = G ζ with |ζ_m| ≤ 1
-                region = region.plus_segment(self.uncertainty.G[:, m])
-        return region
+            segments += [self.uncertainty.G[:, m] for m in range(NX)]  # e = G ζ with |ζ_m| ≤ 1
+        return region.moved(a, b[:, 0] * inp.u, segments)
 
     def _use_region(self, res: StepResult, moved: Polygon, refs: dict[int, tuple[np.ndarray, Interval]], inp: UpdateInput, rho: float) -> None:
         """Cut the moved region by every reading of the step: the node continues from it (``res.region``, beside
@@ -641,7 +640,7 @@ class LocalEstimator:
             region = region.cut(c[:NX], iv.lo, iv.hi) if region is not None else None
         if region is None:
             return
-        region = region.inflated().reduced()
+        region = region.reduced()  # the move's margin covers the cuts' rounding (Polygon.moved)
         keys = frozenset(refs)
         res.region = region
         res.reading_keys = res.reading_keys | keys

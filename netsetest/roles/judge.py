@@ -148,7 +148,7 @@ def _in_ellipsoid(x: np.ndarray, c: np.ndarray, P: np.ndarray, rho: float) -> bo
 
 def _continues_in(st: NodeState, xbar: np.ndarray) -> bool:
     """x̄ lies in the set an SDP node continues from: its own ellipsoid (the published one unless it sends
-    another) and, where it keeps one, its region of x (estimator/polygon.py)."""
+    another) and, where it keeps one, its region of x (netsetest/polygon.py)."""
     region = st.region()
     if region is not None and not region.contains(xbar[:NX]):
         return False

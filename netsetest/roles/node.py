@@ -44,7 +44,7 @@ from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE
 from netsetest.estimator.health import HEALTH_KEY
 from netsetest.estimator.registry import node_set_estimator
-from netsetest.estimator.polygon import Polygon
+from netsetest.polygon import Polygon
 from netsetest.estimator.rejoin import rejoin_ellipsoid
 from netsetest.estimator.sdp import NodeSet, LocalEstimator, NeighbourState, Objective, UpdateInput, StepResult, Variant
 from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sector, measurement_interval
@@ -130,7 +130,7 @@ class Node:
         # estimator state, plain arrays: centre, shape, radius, and our own last published message
         self.xhat = self.cfg.x0_hat.copy()
         self.P = self.cfg.P0.copy()
-        self.region: Polygon | None = None  # the region of x the readings left (estimator/polygon.py)
+        self.region: Polygon | None = None  # the region of x the readings left (netsetest/polygon.py)
         self.rho = self.cfg.rho
         self.k = -1  # last published step
         self.own: NeighbourState | None = None

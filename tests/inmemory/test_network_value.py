@@ -221,14 +221,14 @@ def test_a_recursion_that_misses_on_a_covered_node_step_is_a_violation(
 
 
 def test_the_region_keeps_every_reading_and_is_judged(monkeypatch: pytest.MonkeyPatch) -> None:
-    """A node with readings keeps a region of x (estimator/polygon.py) moved through every step and cut by
+    """A node with readings keeps a region of x (netsetest/polygon.py) moved through every step and cut by
     every reading, publishes it (NodeState.own_region) and cuts its published fault interval by what its own
     measurement proves over it.  On paper6_reference, worst-case signals, NSNIM: every node-step is covered
     and contained, the set each node continues from (region included) too, and the region's fault interval is
     published on nearly every step from step 10 (a fault range the run without the region never has: NSNIM
     has no declared bound).  A region moved off the truth (a deliberate bug) is a violation on covered
     node-steps, with ``continues_contained`` false."""
-    from netsetest.estimator.polygon import Polygon
+    from netsetest.polygon import Polygon
     from netsetest.estimator.sdp import LocalEstimator
 
     sc = load_topology("paper6_reference", case="nsnim", steps=30)

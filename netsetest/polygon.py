@@ -56,16 +56,31 @@ class Polygon:
         v = self.vertices @ A.T + t
         return Polygon(v if np.linalg.det(A) > 0 else v[::-1].copy())
 
-    def plus_segment(self, g: np.ndarray) -> Polygon:
-        """The sum with the segment {s g : |s| ≤ 1}: the polygon's edges and ±2g merged by angle (two more vertices)."""
+    def plus_segments(self, segments: list[np.ndarray]) -> Polygon:
+        """The sum with the segments {s g : |s| ≤ 1} of ``segments`` (each g (2,)): the polygon's edges and every ±2g
+        merged by angle in one pass (two more vertices per segment)."""
         v = self.vertices
         first = int(np.lexsort((v[:, 0], v[:, 1]))[0])  # the lowest vertex (then leftmost): edges from it turn by angle
         v = np.roll(v, -first, axis=0)
-        edges = np.vstack([np.roll(v, -1, axis=0) - v, 2.0 * g[None, :], -2.0 * g[None, :]])
+        g = np.array(segments, dtype=float).reshape(-1, 2)
+        edges = np.vstack([np.roll(v, -1, axis=0) - v, 2.0 * g, -2.0 * g])
         angle = np.mod(np.arctan2(edges[:, 1], edges[:, 0]), 2.0 * np.pi)
-        low = -g if (g[1] > 0.0 or (g[1] == 0.0 and g[0] > 0.0)) else g  # the segment's lowest (then leftmost) end
+        up = (g[:, 1] > 0.0) | ((g[:, 1] == 0.0) & (g[:, 0] > 0.0))
+        low = np.where(up[:, None], -g, g).sum(axis=0)  # each segment's lowest (then leftmost) end
         walk = np.cumsum(edges[np.argsort(angle, kind="stable")], axis=0)
         return Polygon(_distinct(v[0] + low + np.vstack([np.zeros((1, 2)), walk[:-1]])))
+
+    def plus_segment(self, g: np.ndarray) -> Polygon:
+        """The sum with the segment {s g : |s| ≤ 1}."""
+        return self.plus_segments([g])
+
+    def moved(self, A: np.ndarray, t: np.ndarray, segments: list[np.ndarray]) -> Polygon:
+        """{A x + t} summed with the segments and a square of half-side ROUNDING of the coordinates' size, in one
+        merge: every side moves out by at least that, which covers the step's rounding (this move's, the cuts'
+        that follow, each widened by its own margin, and the vertices merged as duplicates)."""
+        v = self.affine(A, t)
+        pad = ROUNDING * (1.0 + float(np.abs(v.vertices).max()))
+        return v.plus_segments([*segments, np.array([pad, 0.0]), np.array([0.0, pad])])
 
     def cut(self, c: np.ndarray, lo: float, hi: float) -> Polygon | None:
         """The part with lo ≤ cᵀx ≤ hi, widened outward by the margin; None if empty."""
@@ -78,12 +93,6 @@ class Polygon:
     def extent(self, c: np.ndarray) -> float:
         """max |cᵀx| over the polygon."""
         return float(np.abs(self.vertices @ c).max())
-
-    def inflated(self) -> Polygon:
-        """The sum with the square of half-side ROUNDING of the coordinates' size: every side moves out by at least
-        that, which covers what one step's rounding (and the vertices merged as duplicates) may have moved."""
-        pad = ROUNDING * (1.0 + float(np.abs(self.vertices).max()))
-        return self.plus_segment(np.array([pad, 0.0])).plus_segment(np.array([0.0, pad]))
 
     def reduced(self, max_vertices: int = MAX_VERTICES) -> Polygon:
         """At most ``max_vertices`` vertices, containing this polygon: an edge is dropped by extending its two
