@@ -65,7 +65,6 @@ from netsetest.estimator.certificate import FactStack, FallbackUnavailable, cert
 from netsetest.estimator.conic.closed_form import ClosedFormSolver, clarabel_backend
 from netsetest.estimator.health import HEALTH_KEY, HealthAssessment, HealthModel
 from netsetest.estimator.lmi_cvxpy import CvxpySolver
-from netsetest.polygon import Polygon
 from netsetest.estimator.objective import BANK_FAULT_WEIGHT, DEFAULT_OBJECTIVE, FAULT_WEIGHT, OBJECTIVES, Objective
 from netsetest.estimator.problem import EtaLayout, OwnUpdate, PatternKey, ProblemSolver, Solution, StepData
 from netsetest.estimator.sector import (
@@ -81,6 +80,7 @@ from netsetest.estimator.slab import cut
 from netsetest.extras import require
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.uncertainty import ModelUncertainty
+from netsetest.polygon import Polygon
 from netsetest.sets import ellipsoid_bounds
 from netsetest.models.vehicle import N_RULES, TSModel
 
@@ -617,8 +617,9 @@ class LocalEstimator:
         return res
 
     def _moved_region(self, prev: NodeSet, inp: UpdateInput) -> Polygon:
-        """The states x⁺ the prior allows: its region (else the box of its ellipsoid) through the step's blended dynamics (exact for the truth), plus the disturbance's and the
-        declared model mismatch's bounds (a box around e = G ζ holds it for either kind)."""
+        """The states x⁺ the prior allows: its region (else the box of its ellipsoid) through the step's blended
+        dynamics (exact for the truth), plus the disturbance's and the declared model mismatch's bounds (a box
+        around e = G ζ holds it for either kind)."""
         region = prev.region
         if region is None:
             lo, hi = ellipsoid_bounds(prev.xhat, np.diag(prev.P), prev.rho)
