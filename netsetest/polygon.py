@@ -33,10 +33,6 @@ class Polygon:
         """The box lo ≤ x ≤ hi."""
         return cls(np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]], dtype=float))
 
-    def support(self, c: np.ndarray) -> float:
-        """max cᵀx over the polygon."""
-        return float((self.vertices @ c).max())
-
     def interval(self, c: np.ndarray) -> tuple[float, float]:
         """[min cᵀx, max cᵀx] over the polygon."""
         v = self.vertices @ c
@@ -69,10 +65,6 @@ class Polygon:
         low = np.where(up[:, None], -g, g).sum(axis=0)  # each segment's lowest (then leftmost) end
         walk = np.cumsum(edges[np.argsort(angle, kind="stable")], axis=0)
         return Polygon(_distinct(v[0] + low + np.vstack([np.zeros((1, 2)), walk[:-1]])))
-
-    def plus_segment(self, g: np.ndarray) -> Polygon:
-        """The sum with the segment {s g : |s| ≤ 1}."""
-        return self.plus_segments([g])
 
     def moved(self, A: np.ndarray, t: np.ndarray, segments: list[np.ndarray]) -> Polygon:
         """{A x + t} summed with the segments and a square of half-side ROUNDING of the coordinates' size, in one

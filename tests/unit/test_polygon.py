@@ -22,7 +22,7 @@ def _cloud(draw: st.DrawFn) -> tuple[Polygon, np.ndarray]:
     pts = rng.normal(size=(draw(st.integers(3, 40)), 2)) * draw(st.sampled_from([1e-3, 1.0, 50.0]))
     poly = Polygon.box(pts.min(axis=0), pts.max(axis=0))
     for p in pts:
-        poly = poly.plus_segment(0.01 * p)
+        poly = poly.plus_segments([0.01 * p])
     w = rng.dirichlet(np.ones(len(poly.vertices)), size=60)
     inside = np.vstack([w @ poly.vertices, poly.vertices])
     return poly, inside
@@ -68,7 +68,7 @@ def test_the_reduction_keeps_every_point_within_its_vertex_count(cloud: tuple[Po
     poly, pts = cloud
     grown = poly
     for g in ([1.0, 0.3], [-0.2, 1.0], [0.7, -0.7], [0.1, 0.05]):
-        grown = grown.plus_segment(np.array(g) * 0.01)
+        grown = grown.plus_segments([np.array(g) * 0.01])
     small = grown.reduced(limit)
     assert len(small.vertices) <= max(limit, 4)
     for x in pts:
