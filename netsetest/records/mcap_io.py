@@ -28,6 +28,8 @@ from typing import IO, TYPE_CHECKING, Any
 import numpy as np
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader
+from mcap.stream_reader import CRCValidationError
+from zstandard import ZstdError
 from mcap.writer import CompressionType, Writer
 
 from netsetest.records.files import open_locked
@@ -389,7 +391,9 @@ def read_mcap(path: str | Path) -> tuple[dict, bool]:
     them, and whether the record is partial: a file cut short (a killed run: the streamed file is
     flushed after every message) gives what precedes the cut and no summary.  MCAP has no checksum
     per unchunked message, so a file damaged in the middle reads the same way, up to the damage.  Raises
-    :class:`McapReadError` for a file without the meta message (foreign, or cut before it)."""
+    :class:`McapReadError` for a file without the meta message (foreign, or cut before it), and for a
+    damaged chunk of a finished (chunked, compressed) record: one that does not decompress or whose
+    checksum does not match is damage, never a cut."""
     meta: dict | None = None
     summary: dict | None = None
     truth: list[dict] = []
@@ -397,7 +401,8 @@ def read_mcap(path: str | Path) -> tuple[dict, bool]:
     cut: str | None = None
     with open(path, "rb") as fh:
         try:
-            for _schema_rec, channel, message in NonSeekingReader(fh).iter_messages(log_time_order=False):  # file order: stream, no buffering
+            reader = NonSeekingReader(fh, validate_crcs=True)  # a chunk's CRC: damage inside a chunk is found
+            for _schema_rec, channel, message in reader.iter_messages(log_time_order=False):  # file order: stream, no buffering
                 topic = channel.topic
                 if topic == TOPIC_META:
                     meta = json.loads(message.data)
@@ -410,6 +415,8 @@ def read_mcap(path: str | Path) -> tuple[dict, bool]:
                     d = json.loads(message.data)
                     node = topic.split("/")[2]
                     nodes.setdefault(node, []).append({k: v for k, v in d.items() if k not in DERIVED_STATE_FIELDS})
+        except (CRCValidationError, ZstdError) as exc:  # before ValueError (CRCValidationError is one)
+            raise McapReadError(f"damaged record (a compressed chunk is corrupt: {type(exc).__name__}: {exc})") from None
         except (McapError, EOFError, ValueError, KeyError, AssertionError, struct.error) as exc:
             cut = f"{type(exc).__name__}: {exc}"  # a killed writer; what precedes is the record so far
     if meta is None:
