@@ -397,7 +397,8 @@ class Collector:
             if self.sink is not None:
                 self.sink.state(i, _state_entry(st, v, i in contested) | {"fdi": fdi})
             self._add(t, k, st, v, interval)
-            t.fdi.add(k, fdi, tr.faults[str(i)] if tr is not None and v.containment is not None else None, self.sc.fault_tolerance, v.cone.ok)
+            if tr is not None and v.containment is not None:  # judged rows only: a contested copy may be forged
+                t.fdi.add(k, fdi, tr.faults[str(i)], self.sc.fault_tolerance, v.cone.ok)
         if tr is not None:
             for j, i in tr.lost:
                 self.losses[f"{j}->{i}"] += 1

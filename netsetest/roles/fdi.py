@@ -42,16 +42,17 @@ class FdiTotals:
         if self.fault_onset is None and abs(true_fault) > tolerance:
             self.fault_onset = k
 
-    def add(self, k: int, status: FdiStatus, true_fault: float | None, tolerance: float, covered: bool) -> None:
-        """Node-step k's status; ``true_fault`` None where the truth is unknown (no false or true detection)."""
-        faulty = true_fault is not None and abs(true_fault) > tolerance
+    def add(self, k: int, status: FdiStatus, true_fault: float, tolerance: float, covered: bool) -> None:
+        """Judged node-step k's status (never a contested or truth-unknown one: a forged copy of a node's
+        state must not count as its detection)."""
+        faulty = abs(true_fault) > tolerance
         if status == "detected":
             self.detected_steps += 1
             if self.first_detection is None:
                 self.first_detection = k
             if faulty and self.first_true_detection is None:
                 self.first_true_detection = k
-            if true_fault is not None and not faulty:
+            if not faulty:
                 self.false_detections += 1
                 self.false_detections_covered += covered
         elif status == "healthy":

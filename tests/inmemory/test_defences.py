@@ -216,6 +216,38 @@ def test_forged_state_far_away_is_dropped_or_harmless_and_never_judged() -> None
         assert [e["xhat"] for e in res.parts["nodes"][i]] == [e["xhat"] for e in clean("nsnim").parts["nodes"][i]]
 
 
+FAULTY = 2  # a node whose sensor's fault starts within STEPS (at step 11 with seed 0)
+
+
+def test_forged_copies_never_count_as_fault_detections() -> None:
+    """Node 2's state forged before its fault's onset, with the fault moved off 0 (and the innovation to
+    match, so the copy passes as computed from the true measurement) and sent first: the collector sees two
+    matching copies and judges neither (contested). The fault-detection figures come from judged rows
+    only: they once counted the forgeries (detected from step 1, twice the detected steps)."""
+    cbar = {n.id: n.sensor.Cbar for n in _scenario().nodes}
+    shift = 1.0
+    onset = clean("nsnim").summary.nodes[FAULTY - 1].fault_onset
+    assert onset is not None and onset > 2
+
+    def before(key: str, msg: Message) -> list[tuple[str, bytes]]:
+        if key == _state_key(FAULTY) and isinstance(msg, NodeState) and 1 <= msg.step < onset:
+            P = np.diag([1e-8, 1e-8, 1e-8]).reshape(9).tolist()
+            forged = {"xhat": [*msg.xhat[:2], msg.xhat[2] + shift], "P": P, "innov": msg.innov - float(cbar[FAULTY][2]) * shift}
+            return [(key, _forged_state(msg, **forged))]
+        return []
+
+    res = _run("nsnim", AttackBus(before=before))
+    row = {r.id: r for r in res.summary.nodes}[FAULTY]
+    genuine = {r.id: r for r in clean("nsnim").summary.nodes}[FAULTY]
+    assert row.steps_contested == onset - 1 and row.violations == 0
+    rows = res.parts["nodes"][str(FAULTY)]
+    assert any(e["fdi"] == "detected" and not e["judged"] for e in rows)  # the forgeries look detected
+    judged_detected = [e["step"] for e in rows if e["judged"] and e["fdi"] == "detected"]
+    assert row.detected_steps == len(judged_detected) == genuine.detected_steps
+    assert row.first_detection == min(judged_detected) == genuine.first_detection
+    assert row.detection_delay == genuine.detection_delay and row.false_detections == 0
+
+
 def test_forged_state_from_a_non_neighbour_key_and_unknown_node() -> None:
     def after(key: str, msg: Message) -> list[tuple[str, bytes]]:
         if key == _state_key(5) and isinstance(msg, NodeState):
