@@ -636,6 +636,25 @@ def health_line(h: HealthSearch) -> str:
     return f"{line}; relaxed (the least bound proven, an outer bound): {shown}{more}"
 
 
+# the record's meta fields its topology determines: another topology with other values is not the record's
+TOPOLOGY_FIELDS = ("node_ids", "tau_s", "C", "h1", "r_max", "in_weights", "plant", "model_uncertainty")
+
+
+def topology_mismatch(scenario: Scenario, record: Record) -> str | None:
+    """What differs between the record's meta and the meta ``scenario`` would write (None: nothing), over
+    :data:`TOPOLOGY_FIELDS`; an empty map or list (a field an older record lacks) is not compared."""
+    from netsetest.runtime.inmemory import run_meta  # the one place a scenario's meta is built
+
+    m = record.meta
+    mine = run_meta(scenario, m.mode or "", m.clock or "", m.signals or "", m.variant or "", m.seed, m.run_id or "")
+    diffs = [
+        f"{name} (record {getattr(m, name)!r:.80}, topology {getattr(mine, name)!r:.80})"
+        for name in TOPOLOGY_FIELDS
+        if getattr(m, name) != getattr(mine, name) and getattr(m, name) not in ({}, [])
+    ]
+    return "; ".join(diffs) or None
+
+
 def omitted_assumptions(scenario: Scenario, health: bool = True) -> tuple[str, ...]:
     """The declared assumptions :func:`exact_bounds` does not apply (docs/exact.md): the k-of-N health
     unless it is applied (``health``)."""

@@ -294,7 +294,7 @@ def cmd_exact(a: argparse.Namespace) -> int:
     import os
     import time
 
-    from netsetest.analysis.exact import COORDINATES, compare_record, exact_bounds, exact_document, health_line
+    from netsetest.analysis.exact import COORDINATES, compare_record, exact_bounds, exact_document, health_line, topology_mismatch
     from netsetest.config.schema import load_topology
     from netsetest.records.record import load_record
 
@@ -305,6 +305,9 @@ def cmd_exact(a: argparse.Namespace) -> int:
         print(f"netsetest exact: {a.record} names topology {topology!r}, not found from here (give --topology PATH)", file=sys.stderr)
         return EXIT_BAD_INPUT
     sc = load_topology(str(topology), rec.meta.case, rec.meta.steps)  # type: ignore[arg-type]  # an unknown case is refused by load_topology
+    if differs := topology_mismatch(sc, rec):
+        print(f"netsetest exact: {a.record} was not run on topology {topology}: {differs}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     from netsetest.runtime.report import Progress
 
     t0 = time.perf_counter()

@@ -242,6 +242,18 @@ def test_record_and_topology_must_match(tmp: str) -> None:
         exact_bounds(fewer, rec)
 
 
+def test_cli_refuses_a_topology_the_record_was_not_run_on(tmp: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """`exact REC --topology OTHER` once ran and exited 0 with bounds for another car: refused, exit 2, in
+    one line naming the fields that differ; the record's own topology still runs."""
+    sc, rec = _run("nsnim", "paper", 0, tmp)
+    assert main(["exact", rec.path, "--topology", "topologies/paper6_car.toml"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "not run on topology topologies/paper6_car.toml" in err
+    assert "plant (record 'ts', topology 'single-track/2')" in err and "model_uncertainty" in err
+    assert main(["exact", rec.path, "--topology", PAPER6]) == 0
+    capsys.readouterr()
+
+
 def test_cli_record_naming_a_missing_topology(tmp: str, capsys: pytest.CaptureFixture[str]) -> None:
     sc, rec = _run("nsnim", "paper", 0, tmp)
     meta = dataclasses.replace(rec.meta, topology=f"{tmp}/moved.toml")
