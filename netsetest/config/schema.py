@@ -622,7 +622,7 @@ def _validated(path: Path, data: dict, cls: type[_T]) -> _T:
     try:
         return msgspec.convert(data, cls, strict=True)
     except msgspec.ValidationError as exc:
-        raise ConfigError(f"{path}: invalid configuration\n  {_explain(exc, data)}") from None
+        raise ConfigError(f"{path}: {_explain(exc, data)}") from None  # one line: the file, the field, why
 
 
 MAX_CONFIG_BYTES = 1 << 20  # a topology or profile is a few kB: larger is not one
