@@ -33,7 +33,7 @@ from msgspec import Meta, Struct, field
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES, SDP
 from netsetest.models.sensor import Sensor
 from netsetest.models.signals import Fault, NoFault, PiecewiseLinearFault, SpeedProfile, SquareFault
-from netsetest.models.manoeuvres import MANOEUVRES, SINE_SPEED, ManoeuvreName, steering_range
+from netsetest.models.manoeuvres import MANOEUVRES, SINE_SPEED, STEERING_MAX_RAD, ManoeuvreName, steering_range
 from netsetest.extras import MissingExtra
 from netsetest.models.plant import PLANTS, VEHICLE_IDS, PlantKind, derived_params
 from netsetest.models.uncertainty import ModelUncertainty
@@ -75,7 +75,6 @@ WIND_GAIN_MAX_N = 1e5  # [vehicle] |fw|
 STATE_MAX = 10.0  # |β| [rad], |r| [rad/s] of the initial state
 SAMPLING_PERIOD_S = (1e-4, 10.0)  # τs: the T-S rules are discretised exactly at it (expm stays in range)
 MAX_STEPS = 10**7  # a run's steps (a record line per node-step: 10⁷ steps is days of a real clock)
-STEERING_MAX_RAD = 1.0  # |δ_f|: beyond ±57° no tyre model of a road car holds
 PERIOD_MIN_S, PERIOD_MAX_S = 1e-3, 1e6  # of the speed profile: shorter than a millisecond is no speed profile
 MAX_NAME = 200  # characters of a label or a profile name
 PROFILE_NAME_PATTERN = r"^[^/\\\x00]+$"  # a file name in the node directory: no path separators, no NUL
@@ -105,6 +104,10 @@ class AvailabilitySpec(_Strict, frozen=True, kw_only=True):
             raise ValueError("gamma_min must not exceed gamma_max")
 
 
+FAULT_FIELDS_OF: dict[str, tuple[str, ...]] = {"none": (), "square": ("amplitude", "period", "start", "end"), "piecewise": ("points",)}
+FAULT_FIELDS = ("amplitude", "period", "start", "end", "points")
+
+
 class FaultSpec(_Strict, frozen=True, kw_only=True):
     """``none``; ``square``: amplitude·sign(sin(2πk/period)) on [start, end); ``piecewise``: through points."""
 
@@ -116,6 +119,10 @@ class FaultSpec(_Strict, frozen=True, kw_only=True):
     points: list[tuple[Finite, Magnitude]] | None = None
 
     def __post_init__(self) -> None:
+        foreign = [n for n in FAULT_FIELDS if n not in FAULT_FIELDS_OF[self.kind] and getattr(self, n) is not None]
+        if foreign:  # once silently ignored: a user's points under kind = "square" never reached the truth
+            uses = ", ".join(f"{k}: {', '.join(f) or 'none'}" for k, f in FAULT_FIELDS_OF.items())
+            raise ValueError(f"{', '.join(foreign)}: not a field of a {self.kind!r} fault (fields per kind: {uses})")
         if self.kind == "square":
             missing = [n for n in ("amplitude", "period", "start", "end") if getattr(self, n) is None]
             if missing:
@@ -213,7 +220,9 @@ class VehicleSpec(_Strict, frozen=True, kw_only=True):
     """
 
     plant: Annotated[str, Meta(description=f"the truth's vehicle: one of {', '.join(PLANTS)}")] = "ts"
-    vehicle: Annotated[int, Meta(ge=min(VEHICLE_IDS), le=max(VEHICLE_IDS), description="CommonRoad parameters_vehicle<N>")] = 2
+    vehicle: Annotated[int, Meta(ge=min(VEHICLE_IDS), le=max(VEHICLE_IDS), description="CommonRoad parameters_vehicle<N> (a nonlinear plant only)")] | None = (
+        None
+    )
     manoeuvre: Annotated[str, Meta(description=f"one of {', '.join(MANOEUVRES)}")] = "paper"
     # physical ranges of a road vehicle (generous): a fuzzed wind gain of 1e300 overflowed a node's
     # guaranteed fallback set mid-run; the model must stay in floating-point range like the profiles
@@ -236,20 +245,31 @@ class VehicleSpec(_Strict, frozen=True, kw_only=True):
             raise ValueError(f"plant: unknown plant {self.plant!r} (one of {', '.join(PLANTS)})")
         if self.manoeuvre not in MANOEUVRES:
             raise ValueError(f"manoeuvre: unknown manoeuvre {self.manoeuvre!r} (one of {', '.join(MANOEUVRES)})")
+        if self.plant == "ts" and self.vehicle is not None:  # it was silently ignored
+            raise ValueError(
+                f'vehicle = {self.vehicle}: a CommonRoad car drives only a nonlinear plant; plant = "ts" (the default) is the '
+                "T-S model of m..cr: choose a plant (single-track, …; docs/plant.md) or remove vehicle"
+            )
         given = [n for n in TABLE_I if getattr(self, n) is not None]
         if self.plant != "ts" and given:
-            raise ValueError(f"{', '.join(given)}: the T-S model of a {self.plant} plant is derived from CommonRoad vehicle {self.vehicle}; remove these keys")
+            raise ValueError(f"{', '.join(given)}: the T-S model of a {self.plant} plant is derived from CommonRoad vehicle {self.car}; remove these keys")
+
+    @property
+    def car(self) -> int:
+        """The CommonRoad vehicle of a nonlinear plant (:data:`DEFAULT_VEHICLE` unless given)."""
+        return DEFAULT_VEHICLE if self.vehicle is None else self.vehicle
 
     def params(self) -> VehicleParams:
         """The T-S model's parameters: derived from the plant's car, else the keys given over Table I."""
         lo, hi = self.vx_min_kmh * KMH, self.vx_max_kmh * KMH
         if self.plant != "ts":
-            return derived_params(self.vehicle, self.fw, self.lw, lo, hi)
+            return derived_params(self.car, self.fw, self.lw, lo, hi)
         table = VehicleParams()
         given = {n: getattr(self, n) for n in TABLE_I if getattr(self, n) is not None}
         return dataclasses.replace(table, **given, fw=self.fw, lw=self.lw, vx_min=lo, vx_max=hi)
 
 
+DEFAULT_VEHICLE = 2  # CommonRoad's BMW 320i: the car of a nonlinear plant that names none
 TABLE_I = ("m", "Jz", "lf", "lr", "cf", "cr")  # the bicycle model's parameters (VehicleParams defaults: the paper's)
 UNCERTAINTY_MAX = 10.0  # |e_k| components [rad, rad/s] per step: beyond it the model says nothing
 
@@ -415,6 +435,14 @@ class TopologyFile(_Strict, frozen=True, kw_only=True):
                 f"speed: manoeuvre {self.vehicle.manoeuvre!r}: its speed reference spans [{lo}, {hi}] km/h, "
                 f"outside the model's [{self.vehicle.vx_min_kmh}, {self.vehicle.vx_max_kmh}] km/h"
             )
+        if self.vehicle.plant == "ts" and self.model_uncertainty is not None:
+            raise ValueError(
+                'model_uncertainty: a T-S plant (plant = "ts") is its own model, so e_k = 0 and a declared bound only widens '
+                "every set; remove [model_uncertainty], or choose a nonlinear plant (docs/plant.md)"
+            )
+        if not self.network.readings and (self.network.max_faulty is not None or self.network.health_groups):
+            what = "max_faulty" if self.network.max_faulty is not None else "health_groups"
+            raise ValueError(f"network.{what}: the k-of-N declaration rests on the readings' exchange, which readings = false turns off; remove one of the two")
 
 
 # ---------------------------------------------------------------- resolved scenario
@@ -472,7 +500,7 @@ class Scenario:
     nodes: list[NodeConfig]
     loss: LinkLoss = dataclasses.field(default_factory=LinkLoss)
     plant: PlantKind = "ts"
-    vehicle_id: int = 2  # CommonRoad parameters_vehicle<N> (a nonlinear plant only)
+    vehicle_id: int = DEFAULT_VEHICLE  # CommonRoad parameters_vehicle<N> (a nonlinear plant only)
     manoeuvre: ManoeuvreName = "paper"
     uncertainty: ModelUncertainty | None = None  # declared bound on e_k (None: e_k = 0 is assumed)
     fault_tolerance: float = 0.0  # |f| ≤ this counts as no fault (fault detection, docs/fdi.md)
@@ -748,7 +776,7 @@ def load_topology(
         nodes=nodes,
         loss=topo.loss,
         plant=cast(PlantKind, v.plant),  # one of PLANTS: VehicleSpec checked it
-        vehicle_id=v.vehicle,
+        vehicle_id=v.car,
         manoeuvre=cast(ManoeuvreName, v.manoeuvre),  # one of MANOEUVRES: VehicleSpec checked it
         uncertainty=topo.model_uncertainty.build() if topo.model_uncertainty is not None else None,
         fault_tolerance=topo.network.fault_tolerance,

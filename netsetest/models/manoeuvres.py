@@ -38,6 +38,7 @@ DWELL_S = 0.5
 L_D_MIN = 8.0  # [m] shortest look-ahead of the driver
 T_LOOK = 0.6  # [s] look-ahead time of the driver
 DELTA_MAX = 0.5  # [rad] the driver's steering limit
+STEERING_MAX_RAD = 1.0  # |δ_f| [rad] anywhere (a topology's [steering], an amplitude): beyond ±57° no tyre model of a road car holds
 COURSE_SPACING_M = 0.5
 LAP_STRAIGHT_M = 600.0
 LAP_RADIUS_M = 350.0
@@ -164,6 +165,8 @@ class DriveSpec:
             raise ValueError(f"{token}: the amplitude must be a number of radians, got {amp!r}") from None
         if not math.isfinite(value) or value <= 0:
             raise ValueError(f"{token}: the amplitude must be a positive number of radians")
+        if value > STEERING_MAX_RAD:  # the option's fault, not the topology's [steering] high it overrides
+            raise ValueError(f"{token}: the amplitude must be at most {STEERING_MAX_RAD:g} rad (a road car's steering range)")
         return cls(name, value)
 
     @property

@@ -55,10 +55,18 @@ def test_a_declaration_that_cannot_hold_is_refused(tmp_path: Path, network: str,
         load_topology(_topology(tmp_path, network, C))
 
 
-def test_readings_off_turns_the_declaration_off(tmp_path: Path) -> None:
-    sc = load_topology(_topology(tmp_path, "max_faulty = 4\nreadings = false"))
-    assert sc.health_groups and not sc.health_declared and not any(sc.publishes_reading(i) for i in sc.ids)
-    assert sc.health_group(1) is None and sc.reading_sources(1) == ()
+@pytest.mark.parametrize("declaration", ["max_faulty = 4", "GROUPS"])
+def test_readings_off_with_a_declaration_is_refused(tmp_path: Path, declaration: str) -> None:
+    """``readings = false`` with ``[[network.health_groups]]`` once loaded and ignored the groups silently:
+    refused in one line naming the declaration (the nodes could not use it without the readings)."""
+    network = "readings = false\n" + (GROUPS if declaration == "GROUPS" else declaration)
+    with pytest.raises(ConfigError, match="k-of-N declaration rests on the readings' exchange, which readings = false turns off") as exc:
+        load_topology(_topology(tmp_path, network))
+    assert len(str(exc.value).splitlines()) == 1 and ("health_groups" if declaration == "GROUPS" else "max_faulty") in str(exc.value)
+    sc = load_topology(_topology(tmp_path, "max_faulty = 4"))
+    off = sc.alone()  # the benchmark's nodes alone: no reading, so no declaration in use
+    assert off.health_groups and not off.health_declared and not any(off.publishes_reading(i) for i in off.ids)
+    assert off.health_group(1) is None and off.reading_sources(1) == ()
 
 
 GROUPS = "[[network.health_groups]]\nnodes = [1, 2, 3]\nmax_faulty = 2\n[[network.health_groups]]\nnodes = [4, 5, 6]\nmax_faulty = 2"
