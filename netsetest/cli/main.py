@@ -239,7 +239,10 @@ def cmd_run(a: argparse.Namespace) -> int:
 
 def _note_partial(command: str, rec: Record) -> None:
     if rec.partial:
-        print(f"netsetest {command}: {rec.path}: partial record (the run did not finish; last complete step {rec.last_complete_step})", file=sys.stderr)
+        print(
+            f"netsetest {command}: {rec.path}: partial record (the run did not finish; last complete step {rec.last_complete_step} of {rec.meta.steps})",
+            file=sys.stderr,
+        )
 
 
 def cmd_inspect(a: argparse.Namespace) -> int:

@@ -30,7 +30,8 @@ node's state steps must strictly increase.  A file without the summary line (the
 or the parent was killed) loads as a partial record: ``partial`` is true, ``summary`` None,
 ``last_complete_step`` the last step whose truth line was written, the states of the step being written
 are left out, and an incomplete last line is ignored (an MCAP file loads only complete, with its verdict
-message).
+message).  A run stopped before its last step (Ctrl-C: the collector writes what it has, and a summary)
+is partial as well, with its summary.
 :func:`load_record` also reads version 1 records (one JSON
 document with ``meta``, ``truth``, ``nodes``, ``summary``; optionally gzip-compressed).
 :meth:`Record.fault_rows` gives the fault bounds.
@@ -230,7 +231,7 @@ class Record:
     nodes: dict[int, NodeTrack]
     summary: RunSummary | None  # None in a partial record
     raw_nodes: dict[str, list[dict]]
-    partial: bool = False  # the run did not finish writing it (no summary line)
+    partial: bool = False  # the run did not finish: no summary line (cut short), or stopped before its last step (interrupted)
     last_complete_step: int = -1  # last step whose truth (and states) were written
 
     def truth_at(self, step: int) -> dict | None:
@@ -508,7 +509,9 @@ def record_from_parts(
             raise ValueError("a truth entry without a step")
     if last_complete_step is None:
         last_complete_step = max((t["step"] for t in truth), default=-1)
-    return Record(path, meta, truth, tracks, summary, nodes, partial, last_complete_step)
+    # a run stopped early (Ctrl-C: the collector writes what it has, summary included) is partial too
+    stopped = summary is not None and meta.steps is not None and summary.steps_completed < meta.steps
+    return Record(path, meta, truth, tracks, summary, nodes, partial or stopped, last_complete_step)
 
 
 def save_record(path: str | Path, meta: RunMeta, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None) -> None:

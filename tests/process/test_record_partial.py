@@ -235,3 +235,38 @@ def test_killed_inmemory_run_leaves_a_partial_mcap_record(procs: ProcessGuard, t
     r = load_record(rec)
     assert r.partial and r.last_complete_step >= 4 and r.summary is None
     _check_partial(r, complete=False)
+
+
+def test_an_interrupted_record_is_partial_and_the_tools_say_so(finished: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A record whose summary stops before the run's last step (what a Ctrl-C'd run writes: the collector
+    closes what it has, summary included) loaded with ``partial False``, and inspect and plot said nothing."""
+    lines = finished["run.jsonl"].read_text().splitlines()
+    meta = json.loads(lines[0])
+    meta["meta"]["steps"] = 80  # the run was meant to go on to step 80; its summary ends at step STEPS
+    p = tmp_path / "interrupted.jsonl"
+    p.write_text("\n".join([json.dumps(meta), *lines[1:]]) + "\n")
+    rec = load_record(p)
+    assert rec.summary is not None and rec.summary.steps_completed == STEPS
+    assert rec.partial and rec.last_complete_step == STEPS
+    assert main(["inspect", str(p), "--node", "2"]) == 0
+    assert f"partial record (the run did not finish; last complete step {STEPS} of 80)" in capsys.readouterr().err
+    assert main(["plot", str(p), "--out", str(tmp_path / "figs")]) == 0
+    assert "partial record" in capsys.readouterr().err
+    assert not load_record(finished["run.jsonl"]).partial
+
+
+@pytest.mark.zenoh
+@pytest.mark.timeout(120)
+def test_ctrl_c_leaves_a_partial_record(procs: ProcessGuard, tmp_path: Path) -> None:
+    """``netsetest run`` interrupted (SIGINT, as Ctrl-C sends): the collector writes what it has and a summary;
+    the record loads as partial, its summary's last step before the run's."""
+    from zenoh_helpers import start_parent
+
+    rec = tmp_path / "record.jsonl"
+    parent = start_parent(procs, "parent", [PAPER6, "--steps", "2000", "--pace", "0.02", "--record", str(rec), "--quiet"])
+    wait_for(lambda: rec.exists() and rec.read_bytes().count(b'"kind":"truth"') >= 5, 90, what="five steps in the record")
+    parent.send_signal(signal.SIGINT)
+    assert parent.wait(60) != 0
+    r = load_record(rec)
+    assert r.summary is not None and 4 <= r.summary.steps_completed < 2000
+    assert r.partial and r.last_complete_step == r.summary.steps_completed
