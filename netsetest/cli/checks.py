@@ -117,12 +117,15 @@ def _cannot_write(p: Path) -> str | None:
 def record_file(path: str | None, overwrite: bool = False) -> None:
     """``--record``: a record name, writable, not an existing file unless ``overwrite``, and its format's
     optional dependency installed (MissingExtra if not)."""
+    from netsetest.records.files import being_written
     from netsetest.records.record import RECORD_SUFFIXES, check_record_path  # loaded only by a command that writes one
 
     if path is not None and not Path(path).name.endswith(RECORD_SUFFIXES):  # out.csv once got JSON Lines
         raise OutputError(f"--record {path}: the name must end in {', '.join(RECORD_SUFFIXES)} (the suffix chooses the format)")
     if path is not None and not overwrite and Path(path).exists():  # two runs once interleaved one record
         raise OutputError(f"--record {path}: the file exists; give --overwrite to replace it")
+    if path is not None and being_written(path):  # refused before any role starts (once: exit 1, seven roles stopped)
+        raise OutputError(f"--record {path}: another run is writing this record")
     output_file(path, "--record")
     check_record_path(path)
 

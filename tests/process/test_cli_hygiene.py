@@ -309,5 +309,11 @@ def test_a_record_is_never_written_by_two_runs(tmp_path: Path, capsys: pytest.Ca
     try:
         with pytest.raises(RecordError, match="another run is writing this record"):
             open_locked(rec)
+        # a second run is refused before any role starts: one line, exit 2 (a Zenoh run once started its
+        # seven roles, then stopped them with exit 1 when its collector found the lock)
+        for mode in ("zenoh", "inmemory"):
+            assert main([*run, "--overwrite", "--mode", mode]) == 2
+            err = capsys.readouterr().err
+            assert err == f"netsetest run: --record {rec}: another run is writing this record\n", err
     finally:
         held.close()
