@@ -54,14 +54,14 @@ class RunResult:
 
 def _payloads(kind: str, run_id: str, steps: int) -> list[tuple[str, bytes]]:
     """(key, payload) pairs the attacker cycles through."""
-    import msgpack
+    import msgspec  # a default dependency (the bench must not need the dev extra's msgpack)
 
     from netsetest.bus import keys
     from netsetest.messages import NodeState, Ready, encode
 
     if kind == "input":
         raw = {"v": 1, "type": "input", "step": 1, "node": VICTIM, "y": math.nan, "gamma": 1.0}
-        return [(keys.node_input(run_id, VICTIM), msgpack.packb(raw))]
+        return [(keys.node_input(run_id, VICTIM), msgspec.msgpack.encode(raw))]
     if kind == "state":
         state = NodeState(step=steps + 5, node=VICTIM, xhat=[0.0] * 3, P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
         return [(keys.node_state(run_id, VICTIM), encode(state))]
@@ -84,7 +84,7 @@ def _payloads(kind: str, run_id: str, steps: int) -> list[tuple[str, bytes]]:
             (own, b"\xa1\xbe"),
             (own, b"\x91" * 1000 + b"\xc0"),
             (ready, encode(Ready(role="node", node=VICTIM + 1, seen_all=True))),
-            (own, msgpack.packb(huge)),
+            (own, msgspec.msgpack.encode(huge)),
             (keys.end(run_id), b"\xa1\xbe"),
         ]
     raise ValueError(f"unknown attack {kind!r}")

@@ -35,7 +35,7 @@ import threading
 import time
 from pathlib import Path
 
-import msgpack
+import msgspec  # a default dependency (the bench must not need the dev extra's msgpack)
 
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE
 from netsetest.runtime.forkserver import NAME_PREFIX
@@ -286,7 +286,7 @@ class MessageTap:
         out = []
         for t, key, payload in events:
             try:
-                msg = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+                msg = msgspec.msgpack.decode(payload)
             except Exception:
                 continue
             if isinstance(msg, dict) and predicate(key, msg):

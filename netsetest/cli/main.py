@@ -454,6 +454,8 @@ def cmd_bench(a: argparse.Namespace) -> int:
         return _spread(a)
     if a.only in (None, "performance"):
         require("cvxpy", "the benchmark (its reference formulations)")
+    if a.only in (None, "plant"):
+        require("vehiclemodels", "the benchmark's car part")
     checks.output_file(a.json, "--json")
     checks.output_file(a.markdown, "--markdown")
     from netsetest.bench.run import run_bench
