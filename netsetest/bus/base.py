@@ -114,6 +114,11 @@ class Inbox:
         with self._cv:
             return self._cv.wait_for(lambda: self._size > 0, timeout)
 
+    def queued(self, key: str) -> int:
+        """Messages waiting on ``key`` (every subscriber's)."""
+        with self._cv:
+            return sum(len(q) for (k, _), q in self._queues.items() if k == key)
+
     def take_round(self, most: int | None = None) -> list[tuple[str, Message, Handler]]:
         """One message from every waiting key (at most ``most`` keys), oldest key first."""
         with self._cv:
@@ -221,6 +226,11 @@ class Bus(ABC):
     def pending(self) -> int:
         """Payloads queued and not yet handled."""
         return len(self._inbox)
+
+    def queued(self, key: str) -> int:
+        """Messages on ``key`` received and not yet handled: what a message of another key, handled first
+        (the pump serves the keys in turn), overtook here rather than on the way."""
+        return self._inbox.queued(key)
 
 
 class MemoryBus(Bus):

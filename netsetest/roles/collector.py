@@ -168,6 +168,7 @@ class Collector:
         self.drops: Counter[str] = Counter()
         self._end: End | None = None
         self._end_early = False  # an End was counted as early already
+        self._end_recheck = 0  # Ends handled while truths they followed were still queued here: judged after them
         bus.subscribe(keys.truth(run_id), self.on_message)
         bus.subscribe(keys.node_state(run_id, "*"), self.on_message)
         bus.subscribe(keys.end(run_id), self.on_message)
@@ -180,6 +181,10 @@ class Collector:
             self.drops[reason] += 1
         elif isinstance(msg, Truth):
             self._on_truth(msg)
+            if self._end_recheck and not self.bus.queued(keys.truth(self.run)):
+                for _ in range(self._end_recheck):
+                    self._judge_end()
+                self._end_recheck = 0
         elif isinstance(msg, NodeState):
             self._on_state(key, msg)
         elif isinstance(msg, End):
@@ -234,11 +239,20 @@ class Collector:
         else:
             # kept, and it counts once the last step's truth is here.  Over Zenoh the End may overtake the
             # last truth (another key): that is ordering, not hostility; an End before the step before the
-            # last is early, and so is one whose last truth never comes (counted at finish)
-            if self.sc.steps not in self.truth and max(self.head, self.closed) < self.sc.steps - 1:
-                self.drops["end-early"] += 1
-                self._end_early = True
+            # last is early, and so is one whose last truth never comes (counted at finish).  Truths still
+            # queued here came before it: the pump serves keys in turn, so the End overtook them in our own
+            # inbox (a collector behind a fast run), and it is judged once they are handled
             self._end = msg
+            if self.bus.queued(keys.truth(self.run)):
+                self._end_recheck += 1
+            else:
+                self._judge_end()
+
+    def _judge_end(self) -> None:
+        """Count the kept End as early if the truth it should follow is still far off."""
+        if self.sc.steps not in self.truth and max(self.head, self.closed) < self.sc.steps - 1:
+            self.drops["end-early"] += 1
+            self._end_early = True
 
     @property
     def ended(self) -> End | None:

@@ -21,6 +21,7 @@ from netsetest.bus.base import MAX_PER_KEY, MemoryBus
 from netsetest.config.schema import Scenario, load_topology
 from netsetest.messages import End, Message, NodeInput, NodeState, Truth, decode, encode
 from netsetest.records.record import load_record
+from netsetest.roles.collector import Collector
 from netsetest.runtime.inmemory import RunResult, run_inmemory
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -523,6 +524,36 @@ def test_vehicle_and_collector_keep_only_open_steps(monkeypatch: pytest.MonkeyPa
     assert max(s for _, s, _ in sizes) <= CLOSE_LAG + 1 and max(t for _, _, t in sizes) <= CLOSE_LAG + 1
     c = made["Collector"]
     assert c.states == {} and c.truth == {}  # the judge keeps nothing per step (roles/judge.py)
+
+
+def test_an_end_handled_before_the_truths_queued_ahead_of_it_is_not_hostile() -> None:
+    """A collector behind a fast run (`run paper6 --estimator zonotope`: 2 of 2 runs said `end-early 1`)
+    has truths queued when the End arrives; its pump serves the keys in turn, so it handled the End
+    before them, saw the last truth far off and counted a benign End as hostile. The End is judged once
+    the truths received with it are handled; an End received before its truths were sent is still early."""
+    truths: list[Truth] = []
+
+    def tap(key: str, msg: Message) -> list[tuple[str, bytes]]:
+        if isinstance(msg, Truth):
+            truths.append(msg)
+        return []
+
+    _run("nsnim", AttackBus(after=tap))
+    assert [t.step for t in truths] == list(range(STEPS + 1))
+    for early in (False, True):
+        bus = MemoryBus()
+        collector = Collector(_scenario(), bus, RUN)
+        sent = truths[:4] if early else truths  # benign: the whole run's truths queued before any is handled
+        for t in sent:
+            bus.publish(keys.truth(RUN), t)
+        bus.publish(keys.end(RUN), End(steps=STEPS))
+        while bus.pump():
+            pass
+        for t in truths[len(sent) :]:  # hostile: the vehicle goes on after the End
+            bus.publish(keys.truth(RUN), t)
+            bus.pump()
+        assert collector.head == STEPS and collector.ended is not None
+        assert collector.drops["end-early"] == early
 
 
 def test_an_end_that_overtakes_the_last_truth_is_not_hostile() -> None:
