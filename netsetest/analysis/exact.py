@@ -652,6 +652,11 @@ def topology_mismatch(scenario: Scenario, record: Record) -> str | None:
         for name in TOPOLOGY_FIELDS
         if getattr(m, name) != getattr(mine, name) and getattr(m, name) not in ({}, [])
     ]
+    if not diffs and None not in (m.settings_digest, mine.settings_digest) and m.settings_digest != mine.settings_digest:
+        diffs.append(
+            "its other values (vehicle, speed, steering, noise, disturbance or fault bounds, priors, faults, losses or "
+            f"k-of-N groups: settings digest {mine.settings_digest}, the record's {m.settings_digest})"
+        )
     return "; ".join(diffs) or None
 
 

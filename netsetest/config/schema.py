@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import math
 import re
 import stat
@@ -506,6 +507,7 @@ class Scenario:
     fault_tolerance: float = 0.0  # |f| ≤ this counts as no fault (fault detection, docs/fdi.md)
     readings: bool = True  # the same-step exchange of the references' readings (docs/network.md)
     health_groups: tuple[HealthGroup, ...] = ()  # declared: at most m of each group's sensors faulty (|f| > fault_tolerance) at any step
+    settings_digest: str | None = None  # the files' values (load_topology's _settings_digest); None: built otherwise
 
     def node(self, node_id: int) -> NodeConfig:
         n = self._by_id.get(node_id)
@@ -725,9 +727,10 @@ def load_topology(
     except MissingExtra as exc:
         raise ConfigError(f"{path}: vehicle.plant = {v.plant!r}: {exc}") from None
     nodes = []
+    profiles: dict[int, NodeProfile] = {}
     for ref in topo.nodes:
         ppath = node_dir / f"{ref.profile}.toml"
-        prof = load_profile(ppath)
+        prof = profiles[ref.id] = load_profile(ppath)
         saim = case == "saim"
         if saim and (prof.saturation is None or prof.availability is None):
             raise ConfigError(f"{ppath}: the saim case needs [saturation] and [availability] sections")
@@ -782,7 +785,21 @@ def load_topology(
         fault_tolerance=topo.network.fault_tolerance,
         readings=topo.network.readings,
         health_groups=_health_groups(path, topo.network, nodes),
+        settings_digest=_settings_digest(topo, profiles),
     )
+
+
+def _settings_digest(topo: TopologyFile, profiles: dict[int, NodeProfile]) -> str:
+    """A digest of what a run rests on in its files: every value, not the names, paths, steps, case or
+    estimators (which a command line may change). A record keeps it, so that `netsetest exact` knows a
+    topology that is not the run's even where its meta holds nothing that differs."""
+    plain = msgspec.structs.replace
+    own = plain(topo, name="", node_dir="", steps=1, case="nsnim", nodes=[plain(n, profile="", estimator=SDP) for n in topo.nodes])
+    body = msgspec.json.encode([own, [[i, plain(p, label="")] for i, p in sorted(profiles.items())]])
+    return hashlib.sha256(body).hexdigest()[:SETTINGS_DIGEST_HEX]
+
+
+SETTINGS_DIGEST_HEX = 16  # 64 bits: tells two files apart, never a security property
 
 
 def _health_groups(path: Path, network: NetworkSpec, nodes: list[NodeConfig]) -> tuple[HealthGroup, ...]:

@@ -40,6 +40,7 @@ class RunMeta:
     model_uncertainty: dict | None = None  # {"kind": box | ellipsoid, "G": [[..]]} (docs/plant.md)
     started_ns: int | None = None  # the run's start on the wall clock (an MCAP record's log times start here)
     security: str | None = None  # a Zenoh run's: mtls+acl | insecure
+    settings_digest: str | None = None  # the topology's and profiles' values (config/schema.py); None: not from files
 
     def to_dict(self) -> dict:
         """The record's meta object: every field in order, ``security`` only for a Zenoh run."""
@@ -82,6 +83,7 @@ _SCALARS: dict[str, tuple[type, ...]] = {
     "plant": (str,),
     "manoeuvre": (str,),
     "security": (str,),
+    "settings_digest": (str,),
 }
 _DICTS = frozenset({"in_weights", "r_max", "h1", "C", "estimators", "model_uncertainty"})
 

@@ -52,6 +52,7 @@ def run_meta(
         manoeuvre=scenario.manoeuvre,
         model_uncertainty=None if (u := scenario.uncertainty) is None else {"kind": u.kind, "G": u.G.tolist()},
         started_ns=time.time_ns(),  # the run's start on the wall clock (an MCAP record's log times start here)
+        settings_digest=scenario.settings_digest,
     )
 
 

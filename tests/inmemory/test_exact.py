@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import json
+from pathlib import Path
 from functools import cache
 
 import numpy as np
@@ -251,6 +252,16 @@ def test_cli_refuses_a_topology_the_record_was_not_run_on(tmp: str, capsys: pyte
     assert len(err.strip().splitlines()) == 1 and "not run on topology topologies/paper6_car.toml" in err
     assert "plant (record 'ts', topology 'single-track/2')" in err and "model_uncertainty" in err
     assert main(["exact", rec.path, "--topology", PAPER6]) == 0
+    capsys.readouterr()
+    # what the meta does not hold (here the k-of-N declaration) the settings digest tells apart
+    assert main(["exact", rec.path, "--topology", "topologies/paper6_max_faulty.toml"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "its other values" in err and "settings digest" in err
+    # a copy under another name and path, its profiles elsewhere, is the same topology
+    text = Path(PAPER6).read_text().replace('node_dir = "../nodes"', f'node_dir = "{Path("nodes").resolve()}"')
+    copy = Path(tmp) / "renamed.toml"
+    copy.write_text(text.replace('name = "paper6"', 'name = "renamed"'))
+    assert main(["exact", rec.path, "--topology", str(copy)]) == 0
     capsys.readouterr()
 
 
