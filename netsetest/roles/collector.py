@@ -249,10 +249,15 @@ class Collector:
                 self._judge_end()
 
     def _judge_end(self) -> None:
-        """Count the kept End as early if the truth it should follow is still far off."""
-        if self.sc.steps not in self.truth and max(self.head, self.closed) < self.sc.steps - 1:
+        """Count the kept End as early if the truth it should follow is still far off (and not lost here)."""
+        if self.sc.steps not in self.truth and max(self.head, self.closed) < self.sc.steps - 1 and not self._overloaded():
             self.drops["end-early"] += 1
             self._end_early = True
+
+    def _overloaded(self) -> bool:
+        """Whether our own inbox turned messages away (we fell behind): a truth missing then may be one we
+        lost, which is our trouble (counted as such), not the End's."""
+        return bool(self.bus.dropped["inbox-full"] or self.bus.dropped["inbox-evicted"])
 
     @property
     def ended(self) -> End | None:
@@ -467,7 +472,7 @@ class Collector:
         ``drops``: further drop counters by role (the runtime's, e.g. a shared in-memory bus).
         """
         last = max([self.head, *self.states], default=-1)
-        if self._end is not None and not self._end_early and self.sc.steps not in self.truth and self.closed < self.sc.steps:
+        if self._end is not None and not self._end_early and self.sc.steps not in self.truth and self.closed < self.sc.steps and not self._overloaded():
             self.drops["end-early"] += 1  # the run ends, and the End's last step never came
         for k in range(self.closed + 1, min(last, self.sc.steps) + 1):
             self._close(k)

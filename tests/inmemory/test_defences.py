@@ -17,9 +17,10 @@ import numpy as np
 import pytest
 
 from netsetest.bus import keys
-from netsetest.bus.base import MAX_PER_KEY, MemoryBus
+from netsetest.bus.base import MAX_PER_KEY, Inbox, MemoryBus
 from netsetest.config.schema import Scenario, load_topology
 from netsetest.messages import End, Message, NodeInput, NodeState, Truth, decode, encode
+from netsetest.records.meta import RunMeta
 from netsetest.records.record import load_record
 from netsetest.roles.collector import Collector
 from netsetest.runtime.inmemory import RunResult, run_inmemory
@@ -554,6 +555,18 @@ def test_an_end_handled_before_the_truths_queued_ahead_of_it_is_not_hostile() ->
             bus.pump()
         assert collector.head == STEPS and collector.ended is not None
         assert collector.drops["end-early"] == early
+    # a collector so far behind that its own inbox turned truths away: the last truth it lost is its trouble
+    # (counted as inbox-full), not the End's (a loaded machine's zonotope run still said end-early 1)
+    bus = MemoryBus()
+    bus._inbox = Inbox(per_key=4)
+    collector = Collector(_scenario(), bus, RUN)
+    for t in truths:
+        bus.publish(keys.truth(RUN), t)
+    bus.publish(keys.end(RUN), End(steps=STEPS))
+    while bus.pump():
+        pass
+    collector.finish(RunMeta())
+    assert bus.dropped["inbox-full"] == STEPS + 1 - 4 and "end-early" not in collector.drops
 
 
 def test_an_end_that_overtakes_the_last_truth_is_not_hostile() -> None:
