@@ -20,6 +20,15 @@ every node reported, or the alive ones did and the truth is ``CLOSE_LAG`` steps 
 is ``WINDOW`` steps further whatever arrived; :meth:`finish` closes the rest.  Only running totals per
 node remain for the summary.
 
+Keeping up.  In lockstep the collector acknowledges the truths it has taken in (a Ready with ``acked``
+every ``ACK_STRIDE`` steps) and the vehicle stays within ``ACK_WINDOW`` steps of it (roles/vehicle.py), so
+the run's own messages never exceed the bus's bounded inbox, however slow the collector is.  In real time
+the clock cannot wait: the collector takes every message off the bus first and closes steps when nothing
+is waiting (:meth:`close_ready`), keeping the open steps up to ``budget`` node-steps
+(``OPEN_NODE_STEPS_BUDGET``); past it the oldest steps close unjudged as ``collector overloaded``
+(:data:`OVERLOADED`), counted under that name and never as a node missing: a node that published is
+never reported missing or rejoined because of it.
+
 Defences (the network may be open, or a credentialed peer may lie), each counted by reason:
 
 - a message outside the run (:class:`RunScope`), for a step already closed, or further than ``WINDOW``
@@ -51,19 +60,24 @@ import numpy as np
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import NodeConfig, Scenario
-from netsetest.messages import End, Message, NodeState, RunScope, Truth
+from netsetest.messages import End, Message, NodeState, Ready, RunScope, Truth
 from netsetest.models.sensor import augmented
 from netsetest.records.meta import RunMeta
 from netsetest.records.record import RecordSink
-from netsetest.records.summary import RUN_FIELDS, InheritedOrigin, NodeSummary, RunSummary
+from netsetest.records.summary import RUN_FIELDS, InheritedOrigin, NodeSummary, RunSummary, StopCause
 from netsetest.roles.fdi import FdiTotals, classify
 from netsetest.roles.judge import INHERITED, NO_CHECKS, TRUTH_UNKNOWN, Judge, NodeVerdict, StepInputs, isclose, state_mismatch
-from netsetest.roles.vehicle import fault_bound_holds, mismatch_holds
+from netsetest.roles.vehicle import ACK_STRIDE, fault_bound_holds, mismatch_holds
 
 WINDOW = 50  # steps a step may stay open behind the newest truth (bounds memory against a stalled node)
 CLOSE_LAG = 2  # a step whose alive nodes reported closes this many truths later (late and rejoining states)
 MAX_COPIES = 4  # differing copies of one step's truth, or one node-step's state, kept until the step closes
 CHAIN_RTOL = 1e-12  # x_k recomputed from x_{k−1}: same code, same inputs — rounding only across machines
+# Real time: the node-steps (states held, one truth per step counted as one more) the collector keeps open
+# before it closes the oldest step unjudged.  A state in memory is about 1 KB (x̂, P, its region and
+# bookkeeping), so the default holds about 50 MB: paper6 (six nodes, τs = 0.1 s) 700 s behind the clock.
+OPEN_NODE_STEPS_BUDGET = 50_000
+OVERLOADED = "collector overloaded"  # why a step closed unjudged: the collector was past its memory budget
 
 
 def _same_set(a: NodeState, b: NodeState) -> bool:
@@ -148,8 +162,18 @@ def _state_entry(st: NodeState, v: NodeVerdict, contested: bool) -> dict:
 
 
 class Collector:
-    def __init__(self, scenario: Scenario, bus: Bus, run_id: str, sink: RecordSink | None = None) -> None:
+    def __init__(
+        self, scenario: Scenario, bus: Bus, run_id: str, sink: RecordSink | None = None, realtime: bool = False, budget: int = OPEN_NODE_STEPS_BUDGET
+    ) -> None:
+        """``realtime``: close steps only in :meth:`close_ready` (the caller's loop, when the bus is drained)
+        and within ``budget`` open node-steps; lockstep: as messages arrive, and acknowledge the truths."""
         self.sc, self.bus, self.run = scenario, bus, run_id
+        self.realtime, self.budget = realtime, budget
+        self.open_node_steps = 0  # states held plus one per open step's truth copies: what the budget bounds
+        self.peak_open_node_steps = 0
+        self.overloaded_steps = 0  # steps closed unjudged past the budget
+        self.overloaded_node_steps = 0  # of them, node-steps with a state received
+        self.acked = -1  # the newest truth acknowledged to the vehicle (lockstep)
         self.node_cfg = {n.id: n for n in scenario.nodes}  # looked up per state
         self.sink = sink
         self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
@@ -171,6 +195,8 @@ class Collector:
         bus.subscribe(keys.truth(run_id), self.on_message)
         bus.subscribe(keys.node_state(run_id, "*"), self.on_message)
         bus.subscribe(keys.end(run_id), self.on_message)
+        if not realtime:
+            bus.declare_publisher(keys.ready_of(run_id, keys.role_name("collector")))
 
     # ------------------------------------------------------------------ receiving
 
@@ -186,7 +212,27 @@ class Collector:
             self._on_end(key, msg)
         else:
             self.drops["unexpected-type"] += 1
-        self._close_ready()
+        if not self.realtime:
+            self._close_ready()
+            self._acknowledge()
+
+    def _acknowledge(self) -> None:
+        """Lockstep: tell the vehicle the newest truth taken in, every ACK_STRIDE steps (its window, roles/vehicle.py)."""
+        if self.head >= self.acked + ACK_STRIDE or self.head == self.sc.steps > self.acked:  # the last: the vehicle's End waits for it
+            self.acked = self.head
+            self.bus.publish(keys.ready_of(self.run, keys.role_name("collector")), Ready(role="collector", seen_all=True, acked=self.head))
+
+    def close_ready(self, most: int | None = None) -> None:
+        """Real time, called when the bus is drained: close what is ready (at most ``most`` steps, so that
+        the caller gets back to its bus soon), then the oldest steps unjudged while more than ``budget``
+        node-steps are open."""
+        self._close_ready(most)
+        while self.open_node_steps > self.budget and self.closed < self.sc.steps:
+            self._close_overloaded(self.closed + 1)
+
+    def _held(self, n: int) -> None:
+        self.open_node_steps += n
+        self.peak_open_node_steps = max(self.peak_open_node_steps, self.open_node_steps)
 
     def _on_truth(self, msg: Truth) -> None:
         k = msg.step
@@ -207,6 +253,7 @@ class Collector:
             self.drops["truth-copies"] += 1
         else:
             copies.append(msg)
+            self._held(1)
             self.head = max(self.head, k)
 
     def _on_state(self, key: str, msg: NodeState) -> None:
@@ -227,6 +274,7 @@ class Collector:
             self.drops["state-copies"] += 1
         else:
             copies.append(msg)
+            self._held(1)
 
     def _on_end(self, key: str, msg: End) -> None:
         if key != keys.end(self.run) or msg.steps != self.sc.steps:
@@ -270,8 +318,9 @@ class Collector:
 
     # ------------------------------------------------------------------ closing steps
 
-    def _close_ready(self) -> None:
-        while self.closed < self.sc.steps:
+    def _close_ready(self, most: int | None = None) -> None:
+        done = 0
+        while self.closed < self.sc.steps and (most is None or done < most):
             k = self.closed + 1
             here = k in self.truth
             if not (
@@ -284,6 +333,7 @@ class Collector:
             ):
                 return
             self._close(k)
+            done += 1
 
     def _judged_truth(self, k: int) -> Truth | None:
         """The one copy of step k's truth consistent with the scenario and the previous truth, or None."""
@@ -404,10 +454,27 @@ class Collector:
             self.vehicle_drops = dict(tr.drops)
             if self.sink is not None:
                 self.sink.truth(self._truth_entry(tr))
-        self.states.pop(k, None)
-        self.truth.pop(k, None)
+        self._forget(k)
         self.prev_truth = tr
         self.prev_checks = verdict.checks
+        self.closed = k
+
+    def _forget(self, k: int) -> None:
+        held = self.states.pop(k, {})
+        self.open_node_steps -= len(self.truth.pop(k, [])) + sum(map(len, held.values()))
+
+    def _close_overloaded(self, k: int) -> None:
+        """Close step k unjudged, past the memory budget: nothing recorded, no node counted missing (a node
+        heard at k is heard: it is never reported missing or rejoined for it); the next step's inputs are
+        then not judged, so its node-steps are outside the guarantee, never covered by it."""
+        copies = self.states.get(k, {})
+        for i in self.sc.ids:
+            if copies.get(i):
+                self.totals[i].last_heard = k
+                self.overloaded_node_steps += 1
+        self.overloaded_steps += 1
+        self._forget(k)
+        self.prev_truth, self.prev_checks = None, NO_CHECKS
         self.closed = k
 
     def _add(self, t: NodeTotals, k: int, st: NodeState, v: NodeVerdict, interval: tuple[float, float]) -> None:
@@ -446,10 +513,17 @@ class Collector:
 
     # ------------------------------------------------------------------ summary
 
-    def finish(self, meta: RunMeta, deadline_misses: dict[int, int] | None = None, drops: dict[str, dict[str, int]] | None = None) -> RunSummary:
+    def finish(
+        self,
+        meta: RunMeta,
+        deadline_misses: dict[int, int] | None = None,
+        drops: dict[str, dict[str, int]] | None = None,
+        stopped: StopCause | None = None,
+    ) -> RunSummary:
         """Close every open step, then the summary (also written to the sink, which is closed).
 
-        ``drops``: further drop counters by role (the runtime's, e.g. a shared in-memory bus).
+        ``drops``: further drop counters by role (the runtime's, e.g. a shared in-memory bus); ``stopped``:
+        why the collector stopped before the vehicle's End (None: the run ended).
         """
         last = max([self.head, *self.states], default=-1)
         if self._end is not None and not self._end_early and self.sc.steps not in self.truth and self.closed < self.sc.steps:
@@ -485,6 +559,11 @@ class Collector:
             dropped_messages=dict(own_drops),  # by the collector; per node in nodes[*]
             drops={role: d for role, d in by_role.items() if d},
             nodes=node_rows,
+            stopped=stopped,
+            steps_overloaded=self.overloaded_steps,
+            node_steps_overloaded=self.overloaded_node_steps,
+            collector_budget=self.budget if self.realtime else None,
+            collector_peak=self.peak_open_node_steps,
         )
         if self.sink is not None:
             self.sink.summary(summary)
