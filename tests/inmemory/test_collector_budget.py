@@ -1,0 +1,41 @@
+"""Issue 33, real time: a collector past its memory budget closes the oldest steps unjudged as
+``collector overloaded``, counted under that name; no node that published is reported missing or
+rejoined, and the verdict says how many steps and why (roles/collector.py, runtime/report.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from netsetest.bus.base import MemoryBus
+from netsetest.config.schema import load_topology
+from netsetest.roles.collector import Collector
+from netsetest.runtime.inmemory import run_inmemory, run_meta
+from netsetest.runtime.report import EXIT_OK, format_table, outcome
+
+ROOT = Path(__file__).resolve().parents[2]
+STEPS = 30
+BUDGET_STEPS = 5  # steps of paper6 (six states and a truth each) the lagging collector may hold
+
+
+def test_a_collector_past_its_budget_blames_no_node() -> None:
+    sc = load_topology(ROOT / "topologies" / "paper6.toml", None, STEPS)
+    bus = MemoryBus()
+    per_step = len(sc.ids) + 1
+    behind = Collector(sc, bus, "mem", None, realtime=True, budget=BUDGET_STEPS * per_step)
+    steps_seen = []
+
+    def overloaded_now(k: int) -> None:  # the collector never gets the time to judge: only its budget closes steps
+        behind.close_ready(most=0)
+        steps_seen.append(k)
+
+    run_inmemory(sc, bus=bus, on_step=overloaded_now)
+    assert behind.peak_open_node_steps <= BUDGET_STEPS * per_step + per_step  # the budget holds, give or take the step arriving
+    s = behind.finish(run_meta(sc, "inmemory", "realtime", "paper", "scheduled", 0, "mem"))
+    total = (STEPS + 1) * len(sc.ids)
+    assert s.steps_overloaded > STEPS - 2 * BUDGET_STEPS, s.steps_overloaded  # most steps closed past the budget
+    assert s.node_steps_overloaded == s.steps_overloaded * len(sc.ids)  # every node published each of them
+    assert s.node_steps_evaluated + s.node_steps_overloaded == total  # the rest judged at the end, none lost
+    assert s.nodes_missing == [] and s.nodes_rejoined == [] and all(r.missing_from is None for r in s.nodes)
+    assert s.collector_budget == BUDGET_STEPS * per_step and s.collector_peak == behind.peak_open_node_steps
+    assert outcome(s) == ("PASS (partial coverage)", EXIT_OK)
+    assert f"{s.steps_overloaded} step(s) not judged (collector overloaded" in format_table(s).splitlines()[-1]
