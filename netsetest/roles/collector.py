@@ -25,9 +25,10 @@ every ``ACK_STRIDE`` steps) and the vehicle stays within ``ACK_WINDOW`` steps of
 the run's own messages never exceed the bus's bounded inbox, however slow the collector is.  In real time
 the clock cannot wait: the collector takes every message off the bus first and closes steps when nothing
 is waiting (:meth:`close_ready`), keeping the open steps up to ``budget`` node-steps
-(``OPEN_NODE_STEPS_BUDGET``); past it the oldest steps close unjudged as ``collector overloaded``
-(:data:`OVERLOADED`), counted under that name and never as a node missing: a node that published is
-never reported missing or rejoined because of it.
+(``OPEN_NODE_STEPS_BUDGET``); past it the oldest steps close unjudged, counted as the collector's
+overload (``steps_overloaded``, ``node_steps_overloaded``; the verdict says *collector overloaded*).  A
+message its full inbox dropped all the same (the bus tells it: ``Bus.overflow_listeners``) counts there
+too.  Neither is ever a node's silence: a node that published is never reported missing or rejoined.
 
 Defences (the network may be open, or a credentialed peer may lie), each counted by reason:
 
@@ -52,7 +53,7 @@ from __future__ import annotations
 
 import statistics
 from array import array
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -77,7 +78,7 @@ CHAIN_RTOL = 1e-12  # x_k recomputed from x_{k−1}: same code, same inputs — 
 # before it closes the oldest step unjudged.  A state in memory is about 1 KB (x̂, P, its region and
 # bookkeeping), so the default holds about 50 MB: paper6 (six nodes, τs = 0.1 s) 700 s behind the clock.
 OPEN_NODE_STEPS_BUDGET = 50_000
-OVERLOADED = "collector overloaded"  # why a step closed unjudged: the collector was past its memory budget
+LOST_NOTES = 4096  # messages the bus's full inbox dropped, noted until the next step closes (a flood beyond: forgotten)
 
 
 def _same_set(a: NodeState, b: NodeState) -> bool:
@@ -174,6 +175,11 @@ class Collector:
         self.overloaded_steps = 0  # steps closed unjudged past the budget
         self.overloaded_node_steps = 0  # of them, node-steps with a state received
         self.acked = -1  # the newest truth acknowledged to the vehicle (lockstep)
+        # what the bus's full inbox dropped before we saw it: (step, node; None for a truth), noted on the
+        # transport's thread (a deque's append is atomic), taken into ``lost`` (step → nodes) on ours
+        self._lost_notes: deque[tuple[int, int | None]] = deque(maxlen=LOST_NOTES)
+        self.lost: dict[int, set[int | None]] = {}
+        bus.overflow_listeners[self.on_message] = self._overflowed
         self.node_cfg = {n.id: n for n in scenario.nodes}  # looked up per state
         self.sink = sink
         self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
@@ -215,6 +221,26 @@ class Collector:
         if not self.realtime:
             self._close_ready()
             self._acknowledge()
+
+    def _overflowed(self, msg: Message) -> None:
+        """The bus dropped ``msg`` for us (inbox full): our loss, never the sender's silence.  Transport thread: note only."""
+        if isinstance(msg, NodeState):
+            self._lost_notes.append((msg.step, msg.node))
+        elif isinstance(msg, Truth):
+            self._lost_notes.append((msg.step, None))
+
+    def _take_lost(self, everything: bool = False) -> None:
+        """Notes of steps within WINDOW of the newest truth into ``lost`` (never allocate per a step we were
+        told); later ones stay noted (``everything``: at the end, each of the run's steps)."""
+        far = self.sc.steps if everything else max(self.head, self.closed) + WINDOW
+        later = []
+        while self._lost_notes:
+            k, node = self._lost_notes.popleft()
+            if k > far:
+                later.append((k, node))
+            elif self.closed < k <= self.sc.steps and (node is None or node in self.totals):
+                self.lost.setdefault(k, set()).add(node)
+        self._lost_notes.extend(later)
 
     def _acknowledge(self) -> None:
         """Lockstep: tell the vehicle the newest truth taken in, every ACK_STRIDE steps (its window, roles/vehicle.py)."""
@@ -319,6 +345,7 @@ class Collector:
     # ------------------------------------------------------------------ closing steps
 
     def _close_ready(self, most: int | None = None) -> None:
+        self._take_lost()
         done = 0
         while self.closed < self.sc.steps and (most is None or done < most):
             k = self.closed + 1
@@ -416,6 +443,8 @@ class Collector:
                 if not sole:
                     contested.add(i)
         copies = self.states.get(k, {})
+        lost = self.lost.get(k, set())
+        self.overloaded_steps += bool(lost)
         verdict = self.judge.step(StepInputs(k, tr, self.prev_truth, judged, frozenset(contested), copies), self.prev_checks)
         for i in self.sc.ids:
             t, st, v = self.totals[i], judged.get(i), verdict.nodes[i]
@@ -434,6 +463,9 @@ class Collector:
             if st is None:
                 if copies.get(i):
                     t.rejected += 1  # it reported, but nothing it sent can be its own
+                elif i in lost:
+                    t.last_heard = k  # it published; our inbox dropped it: not judged, never missing
+                    self.overloaded_node_steps += 1
                 else:
                     t.missing_steps += 1
                     if t.missing_from is None:
@@ -460,6 +492,7 @@ class Collector:
         self.closed = k
 
     def _forget(self, k: int) -> None:
+        self.lost.pop(k, None)
         held = self.states.pop(k, {})
         self.open_node_steps -= len(self.truth.pop(k, [])) + sum(map(len, held.values()))
 
@@ -467,9 +500,9 @@ class Collector:
         """Close step k unjudged, past the memory budget: nothing recorded, no node counted missing (a node
         heard at k is heard: it is never reported missing or rejoined for it); the next step's inputs are
         then not judged, so its node-steps are outside the guarantee, never covered by it."""
-        copies = self.states.get(k, {})
+        copies, lost = self.states.get(k, {}), self.lost.get(k, set())
         for i in self.sc.ids:
-            if copies.get(i):
+            if copies.get(i) or i in lost:
                 self.totals[i].last_heard = k
                 self.overloaded_node_steps += 1
         self.overloaded_steps += 1
@@ -525,7 +558,8 @@ class Collector:
         ``drops``: further drop counters by role (the runtime's, e.g. a shared in-memory bus); ``stopped``:
         why the collector stopped before the vehicle's End (None: the run ended).
         """
-        last = max([self.head, *self.states], default=-1)
+        self._take_lost(everything=True)
+        last = max([self.head, *self.states, *self.lost], default=-1)  # a step we lost whole is still the run's
         if self._end is not None and not self._end_early and self.sc.steps not in self.truth and self.closed < self.sc.steps:
             self.drops["end-early"] += 1  # the run ends, and the End's last step never came
         for k in range(self.closed + 1, min(last, self.sc.steps) + 1):

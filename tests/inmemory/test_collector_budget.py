@@ -38,4 +38,30 @@ def test_a_collector_past_its_budget_blames_no_node() -> None:
     assert s.nodes_missing == [] and s.nodes_rejoined == [] and all(r.missing_from is None for r in s.nodes)
     assert s.collector_budget == BUDGET_STEPS * per_step and s.collector_peak == behind.peak_open_node_steps
     assert outcome(s) == ("PASS (partial coverage)", EXIT_OK)
-    assert f"{s.steps_overloaded} step(s) not judged (collector overloaded" in format_table(s).splitlines()[-1]
+    assert f"collector overloaded on {s.steps_overloaded} step(s), over its budget of {s.collector_budget}" in format_table(s).splitlines()[-1]
+
+
+def test_what_the_collectors_full_inbox_dropped_is_not_a_node_missing() -> None:
+    """A collector that did not pump while a whole run arrived: its inbox kept MAX_PER_KEY steps per key
+    and dropped the rest.  Before, every node was then "missing" (or "rejoined") though all published."""
+    from netsetest.bus.base import MAX_PER_KEY
+    from netsetest.messages import NodeState, Truth
+
+    sc = load_topology(ROOT / "topologies" / "paper6.toml", None, MAX_PER_KEY + 16)
+    recorded = MemoryBus()
+    sent: list = []
+    recorded.subscribe("netsetest/**", lambda key, msg: sent.append((key, msg)) if isinstance(msg, Truth | NodeState) else None)
+    run_inmemory(sc, bus=recorded)
+    bus = MemoryBus()
+    behind = Collector(sc, bus, "mem", None, realtime=True)
+    for key, msg in sent:  # all of it before the collector pumps once
+        bus.publish(key, msg)
+    assert bus.dropped["inbox-full"] > 0
+    while bus.pump():
+        behind.close_ready()
+    s = behind.finish(run_meta(sc, "inmemory", "realtime", "paper", "scheduled", 0, "mem"))
+    lost_steps = sc.steps + 1 - MAX_PER_KEY
+    assert s.steps_completed == sc.steps and s.steps_overloaded == lost_steps
+    assert s.node_steps_overloaded == lost_steps * len(sc.ids) and s.node_steps_evaluated == MAX_PER_KEY * len(sc.ids)
+    assert s.nodes_missing == [] and s.nodes_rejoined == [] and all(r.missing_steps == 0 for r in s.nodes)
+    assert outcome(s).code == EXIT_OK

@@ -241,7 +241,7 @@ def test_the_first_word_and_the_exit_code_agree() -> None:
     lost = format_table(cases["NODE LOST"][0]).splitlines()[-1]
     assert "lost for good: node 2 from step 21" in lost
     overloaded = format_table(replace(cases["PASS (partial coverage)"][0], collector_budget=70, node_steps_overloaded=12)).splitlines()[-1]
-    assert "2 step(s) not judged (collector overloaded: more than 70 node-steps open; 12 node-step(s) had arrived)" in overloaded
+    assert "collector overloaded on 2 step(s), over its budget of 70 open node-steps: 12 published node-step(s) not judged" in overloaded
 
 
 def test_verdict_line_starts_with_the_outcome_and_names_the_step_range() -> None:
