@@ -201,9 +201,10 @@ def verdict(summary: RunSummary) -> str:
     if summary.node_steps_rejected:
         text += f"; {summary.node_steps_rejected} node-step(s) rejected (no copy matched the truth)"
     if summary.steps_overloaded:
-        budget = f", over its budget of {summary.collector_budget} open node-steps" if summary.collector_budget is not None else ""
+        b = summary.collector_budget
+        why = f"past its budget of {b} open node-steps" if b is not None and summary.collector_peak > b else "its inbox full"
         text += (
-            f"; collector overloaded on {summary.steps_overloaded} step(s){budget}: "
+            f"; collector overloaded on {summary.steps_overloaded} step(s) ({why}): "
             f"{summary.node_steps_overloaded} published node-step(s) not judged, no node blamed"
         )
     missing = {r.id: r.missing_from for r in summary.nodes if r.id in summary.nodes_missing}

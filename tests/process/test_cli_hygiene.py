@@ -240,8 +240,10 @@ def test_the_first_word_and_the_exit_code_agree() -> None:
         assert format_table(summary).splitlines()[-1].startswith(f"{word}: zenoh run")
     lost = format_table(cases["NODE LOST"][0]).splitlines()[-1]
     assert "lost for good: node 2 from step 21" in lost
-    overloaded = format_table(replace(cases["PASS (partial coverage)"][0], collector_budget=70, node_steps_overloaded=12)).splitlines()[-1]
-    assert "collector overloaded on 2 step(s), over its budget of 70 open node-steps: 12 published node-step(s) not judged" in overloaded
+    behind = replace(cases["PASS (partial coverage)"][0], collector_budget=70, node_steps_overloaded=12)
+    past_budget = format_table(replace(behind, collector_peak=77)).splitlines()[-1]
+    assert "collector overloaded on 2 step(s) (past its budget of 70 open node-steps): 12 published node-step(s) not judged" in past_budget
+    assert "collector overloaded on 2 step(s) (its inbox full)" in format_table(replace(behind, collector_peak=40)).splitlines()[-1]
 
 
 def test_verdict_line_starts_with_the_outcome_and_names_the_step_range() -> None:
