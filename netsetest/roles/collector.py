@@ -253,6 +253,8 @@ class Collector:
         the caller gets back to its bus soon), then the oldest steps unjudged while more than ``budget``
         node-steps are open."""
         self._close_ready(most)
+        if self.open_node_steps > self.budget:
+            self._take_lost()
         while self.open_node_steps > self.budget and self.closed < self.sc.steps:
             self._close_overloaded(self.closed + 1)
 
@@ -345,7 +347,6 @@ class Collector:
     # ------------------------------------------------------------------ closing steps
 
     def _close_ready(self, most: int | None = None) -> None:
-        self._take_lost()
         done = 0
         while self.closed < self.sc.steps and (most is None or done < most):
             k = self.closed + 1
@@ -359,6 +360,8 @@ class Collector:
                 and self._reported(k, alive_only=True)
             ):
                 return
+            if not done:
+                self._take_lost()  # once per closing run, not per message: a flood's notes are scanned rarely
             self._close(k)
             done += 1
 
