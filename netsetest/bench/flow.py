@@ -4,6 +4,8 @@ loses nothing, and what the lockstep window costs (roles/vehicle.py ``ACK_WINDOW
 - ``paused``: ``netsetest run paper6`` unpaced (lockstep), recording ``.jsonl.gz``, with its collector
   stopped (SIGSTOP) for a few seconds mid-run and then continued (SIGCONT): the exit code, the steps and
   node-steps judged and lost, the nodes reported missing or rejoined (all must be 0), the wall time.
+- ``soak``: unpaced 3000-step paper6 runs, nothing paused, one after another on whatever else loads the
+  machine (the soak that failed 2 of 2 before the window): exit code and node-steps lost per run.
 - ``ratio``: the unpaced paper6 lockstep run over Zenoh against the same run in memory, interleaved,
   medians of three (what the performance part's ``zenoh.ratio`` measures, with the same functions), beside
   that part's committed figure measured before the window existed: the window's cost is their difference.
@@ -45,17 +47,17 @@ def _collector_of(run_id: str) -> int | None:
     return None
 
 
-def paused_run(tmp: Path, steps: int, pause_s: float, timeout: float = 900.0) -> dict:
-    """One unpaced paper6 run whose collector is stopped for ``pause_s`` once the run is under way."""
-    run_id = f"flow{os.getpid()}{int(pause_s * 1000)}"
-    record, summary = tmp / f"paused-{pause_s:g}.jsonl.gz", tmp / f"paused-{pause_s:g}.json"
-    cmd = [sys.executable, "-m", "netsetest.cli.main", "run", str(PAPER6), "--steps", str(steps), "--seed", "0", "--quiet"]
+def paused_run(tmp: Path, steps: int, pause_s: float, timeout: float = 900.0, seed: int = 0) -> dict:
+    """One unpaced paper6 run whose collector is stopped for ``pause_s`` once the run is under way (0: never)."""
+    run_id = f"flow{os.getpid()}p{int(pause_s * 1000)}s{seed}"
+    record, summary = tmp / f"{run_id}.jsonl.gz", tmp / f"{run_id}.json"
+    cmd = [sys.executable, "-m", "netsetest.cli.main", "run", str(PAPER6), "--steps", str(steps), "--seed", str(seed), "--quiet"]
     cmd += ["--record", str(record), "--summary-json", str(summary), "--run-id", run_id]
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     paused_at = None
     try:
-        while proc.poll() is None and paused_at is None:
+        while pause_s > 0 and proc.poll() is None and paused_at is None:
             time.sleep(0.05)
             col = _collector_of(run_id)
             if col is not None and record.exists() and record.stat().st_size > UNDER_WAY_BYTES:
@@ -70,8 +72,11 @@ def paused_run(tmp: Path, steps: int, pause_s: float, timeout: float = 900.0) ->
             proc.wait()
     s = json.loads(summary.read_text()) if summary.exists() else {}
     expected = (steps + 1) * len(s.get("nodes", []))
+    record.unlink(missing_ok=True)  # a 3000-step record is large: the temporary directory holds one at a time
     return {
         "steps": steps,
+        "seed": seed,
+        "load_before": os.getloadavg()[0],
         "pause_s": pause_s,
         "paused_at_s": paused_at,
         "exit_code": code,
@@ -116,6 +121,14 @@ def flow_figures(cfg: dict, tmp: Path) -> dict:
             f"  exit {r['exit_code']}, node-steps lost {r['node_steps_lost']}, missing {r['nodes_missing']}, rejoined {r['nodes_rejoined']}, {r['wall_s']:.1f} s"
         )
         out["paused"].append(r)
+    out["soak"] = []
+    for seed in range(cfg["flow_soak_runs"]):
+        _log(f"soak: an unpaced {cfg['flow_soak_steps']}-step paper6 run, seed {seed}")
+        r = paused_run(tmp, cfg["flow_soak_steps"], 0.0, seed=seed)
+        _log(
+            f"  exit {r['exit_code']}, node-steps lost {r['node_steps_lost']}, missing {r['nodes_missing']}, rejoined {r['nodes_rejoined']}, {r['wall_s']:.1f} s"
+        )
+        out["soak"].append(r)
     _log("the unpaced paper6 lockstep ratio with the window (Zenoh / in memory)")
     out["ratio"] = lockstep_ratio(cfg.get("flow_ratio_steps"))
     _log(f"  ratio {out['ratio']['ratio']}, before the window {out['ratio']['ratio_before_window']}")
@@ -136,6 +149,15 @@ def flow_markdown(res: dict) -> str:
         lines.append(
             f"| {r['pause_s']:g} s | {r['steps']} | {r['exit_code']} | {r['node_steps_lost']} | {r['nodes_missing']} | {r['nodes_rejoined']} | {drops} | {f(r['wall_s'], '.1f')} s |"
         )
+    soak = res.get("soak", [])
+    if soak:
+        clean = sum(r["exit_code"] == 0 and r["node_steps_lost"] == 0 and not r["nodes_missing"] and not r["nodes_rejoined"] for r in soak)
+        loads = ", ".join(f(r["load_before"], ".1f") for r in soak)
+        lines += [
+            "",
+            f"Soak: {clean} of {len(soak)} unpaced {soak[0]['steps']}-step paper6 runs ended with exit 0, every node-step judged and "
+            f"no node reported missing or rejoined (load average before each: {loads}).",
+        ]
     q = res["ratio"]
     lines += [
         "",

@@ -53,6 +53,8 @@ QUICK: dict[str, Any] = {
     "soak_steps": 2000,
     "flow_steps": 300,  # --only flow: the paused-collector runs (unpaced paper6)
     "flow_pauses_s": (3.0,),
+    "flow_soak_runs": 1,
+    "flow_soak_steps": 300,
     "flow_ratio_steps": None,  # the topology's 80
     "cpu_steps": 400,
     "plant_steps": 80,
@@ -84,6 +86,8 @@ FULL: dict[str, Any] = {
     "soak_steps": 20000,
     "flow_steps": 1000,
     "flow_pauses_s": (3.0, 10.0),
+    "flow_soak_runs": 5,
+    "flow_soak_steps": 3000,
     "flow_ratio_steps": None,
     "cpu_steps": 800,
     "plant_steps": 80,

@@ -75,9 +75,10 @@ CLOSE_LAG = 2  # a step whose alive nodes reported closes this many truths later
 MAX_COPIES = 4  # differing copies of one step's truth, or one node-step's state, kept until the step closes
 CHAIN_RTOL = 1e-12  # x_k recomputed from x_{k−1}: same code, same inputs — rounding only across machines
 # Real time: the node-steps (states held, one truth per step counted as one more) the collector keeps open
-# before it closes the oldest step unjudged.  A state in memory is about 1 KB (x̂, P, its region and
-# bookkeeping), so the default holds about 50 MB: paper6 (six nodes, τs = 0.1 s) 700 s behind the clock.
-OPEN_NODE_STEPS_BUDGET = 50_000
+# before it closes the oldest step unjudged.  A decoded paper6 message takes about 2.4 KB (x̂, P, its region
+# and bookkeeping; measured with tracemalloc), so the default holds about 50 MB: paper6 (six nodes, τs =
+# 0.1 s) 280 s behind the clock.
+OPEN_NODE_STEPS_BUDGET = 20_000
 LOST_NOTES = 4096  # messages the bus's full inbox dropped, noted until the next step closes (a flood beyond: forgotten)
 
 
@@ -172,8 +173,8 @@ class Collector:
         self.realtime, self.budget = realtime, budget
         self.open_node_steps = 0  # states held plus one per open step's truth copies: what the budget bounds
         self.peak_open_node_steps = 0
-        self.overloaded_steps = 0  # steps closed unjudged past the budget
-        self.overloaded_node_steps = 0  # of them, node-steps with a state received
+        self.overloaded_steps = 0  # steps of which we lost something ourselves: past the budget, or our full inbox
+        self.overloaded_node_steps = 0  # published node-steps not judged for that reason
         self.acked = -1  # the newest truth acknowledged to the vehicle (lockstep)
         # what the bus's full inbox dropped before we saw it: (step, node; None for a truth), noted on the
         # transport's thread (a deque's append is atomic), taken into ``lost`` (step → nodes) on ours

@@ -47,6 +47,7 @@ IDLE_WAIT_S = 1.0  # a started node with nothing due sleeps until a message arri
 REALTIME_SETTLE_S = 0.5  # real time: from "all ready" to step 0, for the start-up's tail of work to drain
 EXIT_STOPPED = 128 + signal.SIGTERM  # a role stopped by SIGTERM/SIGINT
 REALTIME_CLOSE_BATCH = 10  # real time: steps the collector closes between two looks at its bus (a few ms each)
+REALTIME_DRAIN_PUMPS = 50  # real time: pumps that empty the collector's bus before it judges (a flood cannot hold it there)
 CRASH_FLUSH_S = 0.2  # --crash-after: time for the last state to leave before SIGKILL
 
 
@@ -334,8 +335,9 @@ def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: RunMeta, on
                 barrier.tick(now)
             if bus.pump(timeout=0.05):
                 last_msg = time.monotonic()
-                while realtime and bus.pump(timeout=0.0):
-                    pass  # real time: everything off the bus first (its inbox is bounded), then judge
+                for _ in range(REALTIME_DRAIN_PUMPS if realtime else 0):  # real time: all off the bus first (its inbox is bounded), then judge
+                    if not bus.pump(timeout=0.0):
+                        break
             if realtime:
                 collector.close_ready(REALTIME_CLOSE_BATCH)
             if channel is not None:
