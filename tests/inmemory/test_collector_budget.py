@@ -65,3 +65,18 @@ def test_what_the_collectors_full_inbox_dropped_is_not_a_node_missing() -> None:
     assert s.node_steps_overloaded == lost_steps * len(sc.ids) and s.node_steps_evaluated == MAX_PER_KEY * len(sc.ids)
     assert s.nodes_missing == [] and s.nodes_rejoined == [] and all(r.missing_steps == 0 for r in s.nodes)
     assert outcome(s).code == EXIT_OK and "(its inbox full)" in format_table(s).splitlines()[-1]
+
+
+def test_the_collector_acknowledges_every_stride_and_the_last_step() -> None:
+    """The in-memory run goes through the same acknowledgments as the processes (its collector shares the bus)."""
+    from netsetest.bus import keys
+    from netsetest.messages import Ready
+    from netsetest.roles.vehicle import ACK_STRIDE
+
+    sc = load_topology(ROOT / "topologies" / "paper6.toml", None, 20)
+    bus = MemoryBus()
+    acks: list[int] = []
+    bus.subscribe(keys.ready_of("mem", "collector"), lambda key, msg: acks.append(msg.acked) if isinstance(msg, Ready) else None)
+    s = run_inmemory(sc, bus=bus).summary
+    assert s.steps_completed == sc.steps and s.collector_budget is None and s.steps_overloaded == 0
+    assert acks == sorted(acks) and acks[-1] == sc.steps and all(b - a >= ACK_STRIDE for a, b in zip(acks, acks[1:-1]))
