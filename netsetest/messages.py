@@ -111,11 +111,15 @@ class Ready(_Msg, tag="ready", frozen=True, kw_only=True):
 
     ``seen_all``: this role has heard Ready from every other role, so its subscriptions are known to
     them and theirs to it (a Ready travels on the same link after the subscriber declarations).
+
+    ``acked`` (the collector's, during the run): the newest step whose truth it has taken in; in lockstep
+    the vehicle publishes step k + ACK_WINDOW only once step k is acknowledged (roles/vehicle.py).
     """
 
     role: Literal["vehicle", "node", "collector"]
     node: NodeId | None = None
     seen_all: bool = False
+    acked: Step | None = None
 
 
 class NodeInput(_Msg, tag="input", frozen=True, kw_only=True):

@@ -51,6 +51,11 @@ QUICK: dict[str, Any] = {
     "flood_rate": 30000,
     "crash_steps": 30,
     "soak_steps": 2000,
+    "flow_steps": 300,  # --only flow: the paused-collector runs (unpaced paper6)
+    "flow_pauses_s": (3.0,),
+    "flow_soak_runs": 1,
+    "flow_soak_steps": 300,
+    "flow_ratio_steps": None,  # the topology's 80
     "cpu_steps": 400,
     "plant_steps": 80,
     "plant_seeds": [10, 11],
@@ -79,6 +84,11 @@ FULL: dict[str, Any] = {
     "flood_rate": 30000,
     "crash_steps": 60,
     "soak_steps": 20000,
+    "flow_steps": 1000,
+    "flow_pauses_s": (3.0, 10.0),
+    "flow_soak_runs": 5,
+    "flow_soak_steps": 3000,
+    "flow_ratio_steps": None,
     "cpu_steps": 800,
     "plant_steps": 80,
     "plant_seeds": list(range(10, 20)),
@@ -338,6 +348,7 @@ def run_bench(
     from netsetest.bench.network import network_figures, network_markdown
     from netsetest.bench.plant import plant_figures, plant_markdown
     from netsetest.bench.scenario import compare_markdown, scenario_figures, scenario_markdown
+    from netsetest.bench.flow import flow_figures, flow_markdown
     from netsetest.bench.zenoh_runs import (
         launch_to_step0,
         node_memory_profile,
@@ -366,6 +377,7 @@ def run_bench(
             "plant": (plant_figures, plant_markdown),
             "network": (network_figures, network_markdown),
             "scenario": (scenario_figures, lambda r: scenario_markdown(r) + "\n" + compare_markdown(r)),
+            "flow": (flow_figures, flow_markdown),
         }[only]
         with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
             res[only] = figures(cfg, Path(tmpd))

@@ -68,9 +68,12 @@ class _KeyQueue(deque[Message]):
             self._refresh()
         return msg
 
-    def drop_farthest(self) -> None:
-        del self[next(i for i, m in enumerate(self) if _rank(m) == self.far)]
+    def drop_farthest(self) -> Message:
+        i = next(i for i, m in enumerate(self) if _rank(m) == self.far)
+        msg = self[i]
+        del self[i]
         self._refresh()
+        return msg
 
     def _refresh(self) -> None:
         self.far = max(map(_rank, self), default=NO_STEP - 1)
@@ -85,26 +88,25 @@ class Inbox:
         self._size = 0
         self._cv = threading.Condition()
 
-    def put(self, key: str, msg: Message, handler: Handler) -> str | None:
-        """Queue a message; the reason it (or the message it evicted) was dropped, None if nothing was."""
+    def put(self, key: str, msg: Message, handler: Handler) -> tuple[str, Message] | None:
+        """Queue a message; None, or why a message was dropped and which (this one, or the one it evicted)."""
         rank = _rank(msg)
         with self._cv:
             q = self._queues.get((key, handler))
             if q is None:
                 if len(self._queues) >= self.max_keys:
-                    return "inbox-keys"
+                    return "inbox-keys", msg
                 q = self._queues[(key, handler)] = _KeyQueue()
-            reason = None
+            dropped = None
             if len(q) >= self.per_key:
                 if q.far <= rank:
-                    return "inbox-full"
-                q.drop_farthest()  # a later step than this one's: the role needs it after this one, if at all
+                    return "inbox-full", msg
+                dropped = "inbox-evicted", q.drop_farthest()  # a later step than this one's: the role needs it after this one, if at all
                 self._size -= 1
-                reason = "inbox-evicted"
             q.push(msg)
             self._size += 1
             self._cv.notify()
-        return reason
+        return dropped
 
     def __len__(self) -> int:
         return self._size
@@ -140,6 +142,9 @@ class Bus(ABC):
         self._inbox = Inbox()
         self.dropped: Counter[str] = Counter()
         self.received = 0
+        # handler → told of every message the inbox dropped for it (the collector: a node-step it lost
+        # itself is not a node's silence); called on the transport's thread, so it must only record
+        self.overflow_listeners: dict[Handler, Callable[[Message], None]] = {}
 
     def publish(self, key: str, msg: Message) -> None:
         if PROFILE is None:
@@ -190,9 +195,12 @@ class Bus(ABC):
             self._put(key, msg, handler)
 
     def _put(self, key: str, msg: Message, handler: Handler) -> None:
-        reason = self._inbox.put(key, msg, handler)
-        if reason is not None:
-            self.drop(reason)
+        dropped = self._inbox.put(key, msg, handler)
+        if dropped is not None:
+            self.drop(dropped[0])
+            listener = self.overflow_listeners.get(handler)
+            if listener is not None:
+                listener(dropped[1])
 
     def pump(self, timeout: float | None = 0.0, limit: int | None = None) -> int:
         """Dispatch queued messages, the waiting keys in turn; wait up to ``timeout`` s for the first one.

@@ -44,6 +44,14 @@ RUST_ERROR_BACKTRACE_ENV = "RUST_LIB_BACKTRACE"
 os.environ.setdefault(RUST_ERROR_BACKTRACE_ENV, "0")
 
 
+# How long a session's links outlive a silent peer (Zenoh's ``transport/link/tx/lease``; its default is 10 s).
+# A role process paused that long (SIGSTOP, a loaded or swapping machine) had its session closed by the
+# router, and every message queued for it was lost: a collector paused for 10 s never caught up.  A role
+# that dies closes its links with its sockets at once, and a silent role is detected by netsetest's own
+# timeouts (the vehicle's node timeout, the collector's idle timeout), not by the lease.
+LEASE_S = 60.0
+
+
 class BusError(RuntimeError):
     """The transport could not be set up (bad endpoint, port in use, router unreachable)."""
 
@@ -68,6 +76,8 @@ def zenoh_config(
     cfg.insert_json5("scouting/multicast/enabled", "false")  # runs on one host must not find each other
     cfg.insert_json5("scouting/delay", "0")  # else open() blocks 0.5 s while a peer is not up yet
     cfg.insert_json5("transport/shared_memory/enabled", "false")
+    if not base_file:  # a user's own file keeps its own lease
+        cfg.insert_json5("transport/link/tx/lease", str(int(LEASE_S * 1000)))
     if listen or not base_file:
         cfg.insert_json5("listen/endpoints", json.dumps(list(listen)))
     if connect or not base_file:

@@ -12,6 +12,7 @@ Drop and loss counters stay mappings: their keys (roles, reasons, causes) are da
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
+from typing import Literal
 
 import msgspec
 
@@ -19,6 +20,8 @@ from netsetest.estimator.names import SDP
 from netsetest.validation import split_error
 
 DEFAULT_ESTIMATOR = SDP  # the node estimator of records written before nodes could run others
+StopCause = Literal["vehicle gone", "interrupted"]
+"""Why a collector wrote its summary before the vehicle's End: no message for its idle timeout, or a signal."""
 RUN_FIELDS = ("mode", "security", "variant", "objective", "case", "signals", "steps", "seed", "clock")
 """The run's settings copied from its meta (each only if the meta has it; written in this order)."""
 
@@ -107,6 +110,12 @@ class RunSummary:
     dropped_messages: dict[str, int] = field(default_factory=dict)  # by the collector, by reason
     drops: dict[str, dict[str, int]] = field(default_factory=dict)  # role → reason → count
     nodes: list[NodeSummary] = field(default_factory=list)
+    stopped: StopCause | None = None  # the collector stopped before the vehicle's End (None: the run ended)
+    # the collector keeping up (real time: roles/collector.py; lockstep holds the vehicle instead)
+    steps_overloaded: int = 0  # steps closed unjudged, past the collector's memory budget
+    node_steps_overloaded: int = 0  # of them, node-steps whose state had arrived
+    collector_budget: int | None = None  # open node-steps the collector may hold (real time; None: lockstep, the vehicle waits)
+    collector_peak: int = 0  # the most node-steps it held open
     mode: str | None = None
     security: str | None = None
     variant: str | None = None

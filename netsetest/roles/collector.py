@@ -20,6 +20,16 @@ every node reported, or the alive ones did and the truth is ``CLOSE_LAG`` steps 
 is ``WINDOW`` steps further whatever arrived; :meth:`finish` closes the rest.  Only running totals per
 node remain for the summary.
 
+Keeping up.  In lockstep the collector acknowledges the truths it has taken in (a Ready with ``acked``
+every ``ACK_STRIDE`` steps) and the vehicle stays within ``ACK_WINDOW`` steps of it (roles/vehicle.py), so
+the run's own messages never exceed the bus's bounded inbox, however slow the collector is.  In real time
+the clock cannot wait: the collector takes every message off the bus first and closes steps when nothing
+is waiting (:meth:`close_ready`), keeping the open steps up to ``budget`` node-steps
+(``OPEN_NODE_STEPS_BUDGET``); past it the oldest steps close unjudged, counted as the collector's
+overload (``steps_overloaded``, ``node_steps_overloaded``; the verdict says *collector overloaded*).  A
+message its full inbox dropped all the same (the bus tells it: ``Bus.overflow_listeners``) counts there
+too.  Neither is ever a node's silence: a node that published is never reported missing or rejoined.
+
 Defences (the network may be open, or a credentialed peer may lie), each counted by reason:
 
 - a message outside the run (:class:`RunScope`), for a step already closed, or further than ``WINDOW``
@@ -43,7 +53,7 @@ from __future__ import annotations
 
 import statistics
 from array import array
-from collections import Counter
+from collections import Counter, deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -51,19 +61,25 @@ import numpy as np
 from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import NodeConfig, Scenario
-from netsetest.messages import End, Message, NodeState, RunScope, Truth
+from netsetest.messages import End, Message, NodeState, Ready, RunScope, Truth
 from netsetest.models.sensor import augmented
 from netsetest.records.meta import RunMeta
 from netsetest.records.record import RecordSink
-from netsetest.records.summary import RUN_FIELDS, InheritedOrigin, NodeSummary, RunSummary
+from netsetest.records.summary import RUN_FIELDS, InheritedOrigin, NodeSummary, RunSummary, StopCause
 from netsetest.roles.fdi import FdiTotals, classify
 from netsetest.roles.judge import INHERITED, NO_CHECKS, TRUTH_UNKNOWN, Judge, NodeVerdict, StepInputs, isclose, state_mismatch
-from netsetest.roles.vehicle import fault_bound_holds, mismatch_holds
+from netsetest.roles.vehicle import ACK_STRIDE, fault_bound_holds, mismatch_holds
 
 WINDOW = 50  # steps a step may stay open behind the newest truth (bounds memory against a stalled node)
 CLOSE_LAG = 2  # a step whose alive nodes reported closes this many truths later (late and rejoining states)
 MAX_COPIES = 4  # differing copies of one step's truth, or one node-step's state, kept until the step closes
 CHAIN_RTOL = 1e-12  # x_k recomputed from x_{k−1}: same code, same inputs — rounding only across machines
+# Real time: the node-steps (states held, one truth per step counted as one more) the collector keeps open
+# before it closes the oldest step unjudged.  A decoded paper6 message takes about 2.4 KB (x̂, P, its region
+# and bookkeeping; measured with tracemalloc), so the default holds about 50 MB: paper6 (six nodes, τs =
+# 0.1 s) 280 s behind the clock.
+OPEN_NODE_STEPS_BUDGET = 20_000
+LOST_NOTES = 4096  # messages the bus's full inbox dropped, noted until the next step closes (a flood beyond: forgotten)
 
 
 def _same_set(a: NodeState, b: NodeState) -> bool:
@@ -148,8 +164,23 @@ def _state_entry(st: NodeState, v: NodeVerdict, contested: bool) -> dict:
 
 
 class Collector:
-    def __init__(self, scenario: Scenario, bus: Bus, run_id: str, sink: RecordSink | None = None) -> None:
+    def __init__(
+        self, scenario: Scenario, bus: Bus, run_id: str, sink: RecordSink | None = None, realtime: bool = False, budget: int = OPEN_NODE_STEPS_BUDGET
+    ) -> None:
+        """``realtime``: close steps only in :meth:`close_ready` (the caller's loop, when the bus is drained)
+        and within ``budget`` open node-steps; lockstep: as messages arrive, and acknowledge the truths."""
         self.sc, self.bus, self.run = scenario, bus, run_id
+        self.realtime, self.budget = realtime, budget
+        self.open_node_steps = 0  # states held plus one per open step's truth copies: what the budget bounds
+        self.peak_open_node_steps = 0
+        self.overloaded_steps = 0  # steps of which we lost something ourselves: past the budget, or our full inbox
+        self.overloaded_node_steps = 0  # published node-steps not judged for that reason
+        self.acked = -1  # the newest truth acknowledged to the vehicle (lockstep)
+        # what the bus's full inbox dropped before we saw it: (step, node; None for a truth), noted on the
+        # transport's thread (a deque's append is atomic), taken into ``lost`` (step → nodes) on ours
+        self._lost_notes: deque[tuple[int, int | None]] = deque(maxlen=LOST_NOTES)
+        self.lost: dict[int, set[int | None]] = {}
+        bus.overflow_listeners[self.on_message] = self._overflowed
         self.node_cfg = {n.id: n for n in scenario.nodes}  # looked up per state
         self.sink = sink
         self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
@@ -172,6 +203,8 @@ class Collector:
         bus.subscribe(keys.truth(run_id), self.on_message)
         bus.subscribe(keys.node_state(run_id, "*"), self.on_message)
         bus.subscribe(keys.end(run_id), self.on_message)
+        if not realtime:
+            bus.declare_publisher(keys.ready_of(run_id, keys.role_name("collector")))
 
     # ------------------------------------------------------------------ receiving
 
@@ -191,7 +224,49 @@ class Collector:
             self._on_end(key, msg)
         else:
             self.drops["unexpected-type"] += 1
-        self._close_ready()
+        if not self.realtime:
+            self._close_ready()
+            self._acknowledge()
+
+    def _overflowed(self, msg: Message) -> None:
+        """The bus dropped ``msg`` for us (inbox full): our loss, never the sender's silence.  Transport thread: note only."""
+        if isinstance(msg, NodeState):
+            self._lost_notes.append((msg.step, msg.node))
+        elif isinstance(msg, Truth):
+            self._lost_notes.append((msg.step, None))
+
+    def _take_lost(self, everything: bool = False) -> None:
+        """Notes of steps within WINDOW of the newest truth into ``lost`` (never allocate per a step we were
+        told); later ones stay noted (``everything``: at the end, each of the run's steps)."""
+        far = self.sc.steps if everything else max(self.head, self.closed) + WINDOW
+        later = []
+        while self._lost_notes:
+            k, node = self._lost_notes.popleft()
+            if k > far:
+                later.append((k, node))
+            elif self.closed < k <= self.sc.steps and (node is None or node in self.totals):
+                self.lost.setdefault(k, set()).add(node)
+        self._lost_notes.extend(later)
+
+    def _acknowledge(self) -> None:
+        """Lockstep: tell the vehicle the newest truth taken in, every ACK_STRIDE steps (its window, roles/vehicle.py)."""
+        if self.head >= self.acked + ACK_STRIDE or self.head == self.sc.steps > self.acked:  # the last: the vehicle's End waits for it
+            self.acked = self.head
+            self.bus.publish(keys.ready_of(self.run, keys.role_name("collector")), Ready(role="collector", seen_all=True, acked=self.head))
+
+    def close_ready(self, most: int | None = None) -> None:
+        """Real time, called when the bus is drained: close what is ready (at most ``most`` steps, so that
+        the caller gets back to its bus soon), then the oldest steps unjudged while more than ``budget``
+        node-steps are open."""
+        self._close_ready(most)
+        if self.open_node_steps > self.budget:
+            self._take_lost()
+        while self.open_node_steps > self.budget and self.closed < self.sc.steps:
+            self._close_overloaded(self.closed + 1)
+
+    def _held(self, n: int) -> None:
+        self.open_node_steps += n
+        self.peak_open_node_steps = max(self.peak_open_node_steps, self.open_node_steps)
 
     def _on_truth(self, msg: Truth) -> None:
         k = msg.step
@@ -212,6 +287,7 @@ class Collector:
             self.drops["truth-copies"] += 1
         else:
             copies.append(msg)
+            self._held(1)
             self.head = max(self.head, k)
 
     def _on_state(self, key: str, msg: NodeState) -> None:
@@ -232,6 +308,7 @@ class Collector:
             self.drops["state-copies"] += 1
         else:
             copies.append(msg)
+            self._held(1)
 
     def _on_end(self, key: str, msg: End) -> None:
         if key != keys.end(self.run) or msg.steps != self.sc.steps:
@@ -289,8 +366,9 @@ class Collector:
 
     # ------------------------------------------------------------------ closing steps
 
-    def _close_ready(self) -> None:
-        while self.closed < self.sc.steps:
+    def _close_ready(self, most: int | None = None) -> None:
+        done = 0
+        while self.closed < self.sc.steps and (most is None or done < most):
             k = self.closed + 1
             here = k in self.truth
             if not (
@@ -302,7 +380,10 @@ class Collector:
                 and self._reported(k, alive_only=True)
             ):
                 return
+            if not done:
+                self._take_lost()  # once per closing run, not per message: a flood's notes are scanned rarely
             self._close(k)
+            done += 1
 
     def _judged_truth(self, k: int) -> Truth | None:
         """The one copy of step k's truth consistent with the scenario and the previous truth, or None."""
@@ -385,6 +466,8 @@ class Collector:
                 if not sole:
                     contested.add(i)
         copies = self.states.get(k, {})
+        lost = self.lost.get(k, set())
+        self.overloaded_steps += bool(lost)
         verdict = self.judge.step(StepInputs(k, tr, self.prev_truth, judged, frozenset(contested), copies), self.prev_checks)
         for i in self.sc.ids:
             t, st, v = self.totals[i], judged.get(i), verdict.nodes[i]
@@ -403,6 +486,9 @@ class Collector:
             if st is None:
                 if copies.get(i):
                     t.rejected += 1  # it reported, but nothing it sent can be its own
+                elif i in lost:
+                    t.last_heard = k  # it published; our inbox dropped it: not judged, never missing
+                    self.overloaded_node_steps += 1
                 else:
                     t.missing_steps += 1
                     if t.missing_from is None:
@@ -424,10 +510,28 @@ class Collector:
             self.vehicle_drops = dict(tr.drops)
             if self.sink is not None:
                 self.sink.truth(self._truth_entry(tr))
-        self.states.pop(k, None)
-        self.truth.pop(k, None)
+        self._forget(k)
         self.prev_truth = tr
         self.prev_checks = verdict.checks
+        self.closed = k
+
+    def _forget(self, k: int) -> None:
+        self.lost.pop(k, None)
+        held = self.states.pop(k, {})
+        self.open_node_steps -= len(self.truth.pop(k, [])) + sum(map(len, held.values()))
+
+    def _close_overloaded(self, k: int) -> None:
+        """Close step k unjudged, past the memory budget: nothing recorded, no node counted missing (a node
+        heard at k is heard: it is never reported missing or rejoined for it); the next step's inputs are
+        then not judged, so its node-steps are outside the guarantee, never covered by it."""
+        copies, lost = self.states.get(k, {}), self.lost.get(k, set())
+        for i in self.sc.ids:
+            if copies.get(i) or i in lost:
+                self.totals[i].last_heard = k
+                self.overloaded_node_steps += 1
+        self.overloaded_steps += 1
+        self._forget(k)
+        self.prev_truth, self.prev_checks = None, NO_CHECKS
         self.closed = k
 
     def _add(self, t: NodeTotals, k: int, st: NodeState, v: NodeVerdict, interval: tuple[float, float]) -> None:
@@ -466,12 +570,20 @@ class Collector:
 
     # ------------------------------------------------------------------ summary
 
-    def finish(self, meta: RunMeta, deadline_misses: dict[int, int] | None = None, drops: dict[str, dict[str, int]] | None = None) -> RunSummary:
+    def finish(
+        self,
+        meta: RunMeta,
+        deadline_misses: dict[int, int] | None = None,
+        drops: dict[str, dict[str, int]] | None = None,
+        stopped: StopCause | None = None,
+    ) -> RunSummary:
         """Close every open step, then the summary (also written to the sink, which is closed).
 
-        ``drops``: further drop counters by role (the runtime's, e.g. a shared in-memory bus).
+        ``drops``: further drop counters by role (the runtime's, e.g. a shared in-memory bus); ``stopped``:
+        why the collector stopped before the vehicle's End (None: the run ended).
         """
-        last = max([self.head, *self.states], default=-1)
+        self._take_lost(everything=True)
+        last = max([self.head, *self.states, *self.lost], default=-1)  # a step we lost whole is still the run's
         if self._end is not None and not self._end_early and self.sc.steps not in self.truth and self.closed < self.sc.steps and not self._overloaded():
             self.drops["end-early"] += 1  # the run ends, and the End's last step never came
         for k in range(self.closed + 1, min(last, self.sc.steps) + 1):
@@ -505,6 +617,11 @@ class Collector:
             dropped_messages=dict(own_drops),  # by the collector; per node in nodes[*]
             drops={role: d for role, d in by_role.items() if d},
             nodes=node_rows,
+            stopped=stopped,
+            steps_overloaded=self.overloaded_steps,
+            node_steps_overloaded=self.overloaded_node_steps,
+            collector_budget=self.budget if self.realtime else None,
+            collector_peak=self.peak_open_node_steps,
         )
         if self.sink is not None:
             self.sink.summary(summary)

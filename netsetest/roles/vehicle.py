@@ -8,8 +8,11 @@ nonlinear CommonRoad car) then advances to x_{k+1} under the manoeuvre's steerin
 and the wind; e_k = x_{k+1} − (Ā_k x_k + B̄_k u_k + D̄_k w_k) with the matrices of the published Vx_k.
 
 Lockstep: the next step is published once every alive node has published its step-k state (the
-runtime decides what to do with nodes that stay silent).  Real time: the runtime calls
-:meth:`advance` every τs whatever the nodes did.
+runtime decides what to do with nodes that stay silent) and the step is inside the collector's window:
+step k + ``ACK_WINDOW`` waits until the collector has acknowledged step k (its Ready's ``acked``), so a
+collector that falls behind (a slow record, a loaded machine, a paused process) holds the run instead of
+losing the run's own messages at its bounded inbox.  Real time: the runtime calls :meth:`advance` every τs
+whatever the nodes did (the collector then keeps up within its memory budget, roles/collector.py).
 
 The vehicle remembers who reported for the last ``dead_after`` steps only (constant memory), drops
 states outside the run or on a foreign key, and counts an End it did not send (someone else speaks
@@ -24,12 +27,24 @@ from collections import Counter
 import numpy as np
 
 from netsetest.bus import keys
-from netsetest.bus.base import Bus
+from netsetest.bus.base import MAX_PER_KEY, Bus
 from netsetest.config.schema import NodeConfig, Scenario
-from netsetest.messages import End, Message, NodeInput, NodeState, RunScope, Truth
+from netsetest.messages import End, Message, NodeInput, NodeState, Ready, RunScope, Truth
 from netsetest.models.drive import Drive
 from netsetest.models.sensor import augmented
 from netsetest.models.signals import SignalKind
+
+
+# Lockstep flow control.  An honest role sends one message per key per step (the truth; a node's state),
+# and the collector's inbox holds at most MAX_PER_KEY messages per key (bus/base.py: the bound that stops
+# a flood).  With the vehicle at most ACK_WINDOW steps past the collector's acknowledgment, no key of the
+# collector holds more than ACK_WINDOW (+ a late state or two) unhandled honest messages, whatever the
+# collector's speed: an eighth of the bound, the rest is room for copies a peer repeats.  A few steps of
+# lead are enough for a collector that keeps up (it takes in a step in far less than a node solves one).
+ACK_WINDOW = MAX_PER_KEY // 8
+# The collector acknowledges every ACK_STRIDE steps (one small message to every role per stride): the
+# vehicle's lead stays between ACK_WINDOW − ACK_STRIDE + 1 and ACK_WINDOW steps.
+ACK_STRIDE = ACK_WINDOW // 4
 
 
 def mismatch_holds(sc: Scenario, e: np.ndarray) -> bool:
@@ -92,8 +107,10 @@ class Vehicle:
         self.done = False
         self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
         self.drops: Counter[str] = Counter()
+        self.acked = -1  # the newest step the collector acknowledged (lockstep flow control)
         bus.subscribe(keys.node_state(run_id, "*"), self.on_message)
         bus.subscribe(keys.end(run_id), self.on_message)
+        bus.subscribe(keys.ready_of(run_id, keys.role_name("collector")), self.on_ack)
         for key in [keys.truth(run_id), keys.end(run_id), *(keys.node_input(run_id, i) for i in scenario.ids)]:
             bus.declare_publisher(key)
 
@@ -116,6 +133,20 @@ class Vehicle:
             self.heard.setdefault(msg.step, set()).add(msg.node)
         elif msg.step > self.k:
             self.drops["state-ahead"] += 1  # a step not published yet cannot have been computed
+
+    def on_ack(self, key: str, msg: Message) -> None:
+        """The collector's acknowledgment (a Ready on its key with ``acked``); never beyond the step we
+        published (a forged one cannot open the window past what the collector could have seen)."""
+        if not isinstance(msg, Ready) or msg.role != "collector":
+            self.drops["unexpected-type"] += 1
+        elif msg.acked is not None:
+            self.acked = max(self.acked, min(msg.acked, self.k))
+
+    def window_open(self) -> bool:
+        """Lockstep: the next step is inside the collector's window (step k + ACK_WINDOW needs step k
+        acknowledged); the End needs the last step acknowledged (else it overtakes the truths still on their
+        way and the collector counts it early)."""
+        return self.k + 1 <= self.acked + ACK_WINDOW if self.k < self.sc.steps else self.acked >= self.sc.steps
 
     def _window(self) -> range:
         """Steps whose reports decide who is alive at the next step."""

@@ -9,8 +9,10 @@ and the collector report ``seen_all`` — by then every subscription is known wh
 listens to its peers' Ready only: with everyone hearing everyone, N roles' Ready every 0.1 s are N²·10
 messages a second to decode (≈90 000 at 96 nodes), which kept a 96-node run from ever starting.
 
-Lockstep: the vehicle publishes step k+1 once every alive node has published step k; a node silent for
-``node_timeout`` s is declared dead and the run goes on without it.  A node waits for its expected
+Lockstep: the vehicle publishes step k+1 once every alive node has published step k and the collector
+has acknowledged step k+1−ACK_WINDOW (roles/vehicle.py; it waits for the collector as long as it takes:
+the launcher ends the run if the collector dies); a node silent for ``node_timeout`` s is declared dead and
+the run goes on without it.  A node waits for its expected
 neighbours at most ``neighbour_timeout`` s, then proceeds without the missing ones.
 Real time: the vehicle publishes a step every τs; nodes step as soon as their input arrives.
 """
@@ -37,13 +39,15 @@ from netsetest.runtime.rolespec import CollectorSpec, NodeSpec, ScenarioSpec, Ve
 from netsetest.runtime.timeouts import READING_POLL, READING_WAIT
 
 if TYPE_CHECKING:  # a node process never loads the vehicle and the collector (memory: docs/performance-history.md)
-    from netsetest.records.summary import RunSummary
+    from netsetest.records.summary import RunSummary, StopCause
     from netsetest.roles.vehicle import Vehicle
 
 READY_PERIOD_S = 0.1
 IDLE_WAIT_S = 1.0  # a started node with nothing due sleeps until a message arrives (or this long)
 REALTIME_SETTLE_S = 0.5  # real time: from "all ready" to step 0, for the start-up's tail of work to drain
 EXIT_STOPPED = 128 + signal.SIGTERM  # a role stopped by SIGTERM/SIGINT
+REALTIME_CLOSE_BATCH = 10  # real time: steps the collector closes between two looks at its bus (a few ms each)
+REALTIME_DRAIN_PUMPS = 50  # real time: pumps that empty the collector's bus before it judges (a flood cannot hold it there)
 CRASH_FLUSH_S = 0.2  # --crash-after: time for the last state to leave before SIGKILL
 
 
@@ -179,6 +183,8 @@ def run_vehicle(spec: VehicleSpec, sc: Scenario, bus: Bus) -> int:
             bus.pump(timeout=min(left, 0.05))
     vehicle.advance()
     t_step = next_tick = time.monotonic()
+    held_since: float | None = None  # lockstep: since when the collector's window holds the next step
+    held_logged = False
     while not vehicle.done:
         now = time.monotonic()
         if realtime:
@@ -192,10 +198,17 @@ def run_vehicle(spec: VehicleSpec, sc: Scenario, bus: Bus) -> int:
                 vehicle.advance()
         elif vehicle.ready_to_advance() and holds.holding(vehicle, barrier, dead_at, now - t_step, node_timeout):
             pass
+        elif vehicle.ready_to_advance() and not vehicle.window_open():
+            held_since = now if held_since is None else held_since  # the collector is behind: hold, blame no node
+            if now - held_since > node_timeout and not held_logged:
+                log("vehicle", f"step {vehicle.k + 1}: waiting for the collector (it acknowledged step {vehicle.acked})")
+                held_logged = True
+            t_step = now  # the nodes' time starts when the step is published
         elif vehicle.ready_to_advance():
             if now - t_step >= pace:  # lockstep paced for watching
                 vehicle.advance()
                 t_step = now
+                held_since, held_logged = None, False
         elif now - t_step > node_timeout:
             log("vehicle", f"step {vehicle.k}: no state from node(s) {sorted(vehicle.waiting_for())} in {node_timeout:g} s; going on without")
             dead_at.update((n, now) for n in vehicle.waiting_for())
@@ -307,13 +320,14 @@ def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: RunMeta, on
 
     run_id, record, summary_json, idle_timeout = spec.zenoh.resolved_run_id, spec.record, spec.summary_json, spec.idle_timeout
     sink, _ = record_sink(record)  # opened now: the record grows step by step and survives a crash
-    collector = Collector(sc, bus, run_id, sink)
+    realtime = spec.clock == "realtime"
+    collector = Collector(sc, bus, run_id, sink, realtime=realtime)
     if sink is not None:
         sink.meta(meta)
     barrier = Barrier(bus, run_id, Ready(role="collector"), _all_roles(sc) - {("collector", None)})
     channel = ChannelWriter(spec.channel_fd) if spec.channel_fd is not None else None  # to the launcher: progress, summary
     last_msg = time.monotonic()
-    stopped = False
+    stopped: StopCause | None = None
     try:
         while True:
             now = time.monotonic()
@@ -321,6 +335,11 @@ def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: RunMeta, on
                 barrier.tick(now)
             if bus.pump(timeout=0.05):
                 last_msg = time.monotonic()
+                for _ in range(REALTIME_DRAIN_PUMPS if realtime else 0):  # real time: all off the bus first (its inbox is bounded), then judge
+                    if not bus.pump(timeout=0.0):
+                        break
+            if realtime:
+                collector.close_ready(REALTIME_CLOSE_BATCH)
             if channel is not None:
                 channel.step(collector.progress)
             if collector.ended is not None:
@@ -328,27 +347,28 @@ def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: RunMeta, on
                 t_end = time.monotonic()
                 while collector.progress < collector.ended.steps and time.monotonic() - t_end < 2.0:
                     bus.pump(timeout=0.05)
+                    if realtime:
+                        collector.close_ready()
                 if channel is not None:
                     channel.step(collector.progress)
                 break
             if now - last_msg > idle_timeout:
                 log("collector", f"no message for {idle_timeout:g} s: the vehicle is gone; writing what was received")
+                stopped = "vehicle gone"
                 break
     except Stop as why:  # the parent was interrupted: write what was received, then leave
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, signal.SIG_IGN)  # a second signal must not cut the writing short
         log("collector", f"stopped by {why}; writing what was received")
-        stopped = True
-    summary = collector.finish(meta)
+        stopped = "interrupted"
+    summary = collector.finish(meta, stopped=stopped)
     write_summary(summary, summary_json)
     if channel is not None:
         channel.send(RunFinished(summary))
         channel.close()
     if on_summary:
         on_summary(summary)
-    if stopped:
-        return EXIT_STOPPED
-    return exit_code(summary) if collector.ended is not None else EXIT_VIOLATION
+    return EXIT_STOPPED if stopped == "interrupted" else exit_code(summary)
 
 
 # ---------------------------------------------------------------- a role process from its spec

@@ -7,7 +7,7 @@ import sys
 import textwrap
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, NamedTuple, TextIO
 
 if TYPE_CHECKING:  # every role and command imports this module (exit codes); the records load where a run ends
     from netsetest.records.record import MemorySink, RecordSink
@@ -63,15 +63,35 @@ LEGEND = (
 LEGEND_WIDTH = 100  # characters: the legend folds to a terminal's width
 
 
-def outcome(summary: RunSummary) -> str:
-    """The verdict's first word, consistent with the exit code: FAIL iff exit 1 (a miss where every
-    assumption held); PASS (partial coverage) when the guarantee did not apply to every node-step the
-    run should have had judged (not covered, not judged, rejected, or a node missing); PASS otherwise."""
+class Outcome(NamedTuple):
+    """A run's verdict word and its exit code: one decision (:func:`outcome`), so they always agree."""
+
+    word: str
+    code: int
+
+
+def outcome(summary: RunSummary) -> Outcome:
+    """The verdict's first word and the exit code, decided together (docs/summary.md):
+
+    - ``FAIL`` (exit 1): a miss where every assumption held; ``FAIL (vehicle gone)`` (exit 1): the
+      collector stopped waiting for the vehicle before its End;
+    - ``INTERRUPTED`` (exit 130): the run was stopped by Ctrl-C or SIGTERM;
+    - ``NODE LOST`` (exit 3): a node stopped reporting for good;
+    - ``PASS (partial coverage)`` (exit 0): the guarantee did not apply to every node-step the run should
+      have had judged (not covered, not judged, rejected, a node back after a gap, the collector overloaded);
+    - ``PASS`` (exit 0): it applied to every node-step of every node.
+    """
     if summary.violations_total:
-        return "FAIL"
+        return Outcome("FAIL", EXIT_VIOLATION)
+    if summary.stopped == "interrupted":
+        return Outcome("INTERRUPTED", EXIT_INTERRUPTED)
+    if summary.stopped is not None:
+        return Outcome(f"FAIL ({summary.stopped})", EXIT_VIOLATION)
+    if summary.nodes_missing:
+        return Outcome("NODE LOST", EXIT_NODE_LOST)
     expected = (summary.steps_completed + 1) * len(summary.nodes)
-    full = summary.node_steps_covered == summary.node_steps_evaluated == expected and not summary.nodes_missing
-    return "PASS" if full else "PASS (partial coverage)"
+    full = summary.node_steps_covered == summary.node_steps_evaluated == expected
+    return Outcome("PASS" if full else "PASS (partial coverage)", EXIT_OK)
 
 
 def format_table(summary: RunSummary) -> str:
@@ -125,7 +145,7 @@ def format_table(summary: RunSummary) -> str:
     security = f" (security: {summary.security})" if summary.security else ""
     seed = f", seed {summary.seed}" if summary.seed is not None else ""
     out.append(
-        f"{outcome(summary)}: {summary.mode or ''} run{security}, case {summary.case}, signals {summary.signals}, "
+        f"{outcome(summary).word}: {summary.mode or ''} run{security}, case {summary.case}, signals {summary.signals}, "
         f"variant {summary.variant}{seed}, steps 0–{summary.steps_completed}: {verdict(summary)}."
     )
     return "\n".join(out)
@@ -180,6 +200,18 @@ def verdict(summary: RunSummary) -> str:
         text += f"; {reported - evaluated} node-step(s) not judged (truth unknown or copies contested)"
     if summary.node_steps_rejected:
         text += f"; {summary.node_steps_rejected} node-step(s) rejected (no copy matched the truth)"
+    if summary.steps_overloaded:
+        b = summary.collector_budget
+        why = f"past its budget of {b} open node-steps" if b is not None and summary.collector_peak > b else "its inbox full"
+        text += (
+            f"; collector overloaded on {summary.steps_overloaded} step(s) ({why}): "
+            f"{summary.node_steps_overloaded} published node-step(s) not judged, no node blamed"
+        )
+    missing = {r.id: r.missing_from for r in summary.nodes if r.id in summary.nodes_missing}
+    if missing:
+        text += "; lost for good: " + ", ".join(f"node {i} from step {'-' if k is None else k}" for i, k in missing.items())
+    if summary.stopped == "vehicle gone":
+        text += "; the vehicle's End never came (no message for the collector's idle timeout)"
     return text
 
 
@@ -203,7 +235,5 @@ EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM reached the command (128 + SIGINT, a
 
 
 def exit_code(summary: RunSummary) -> int:
-    """0 contained wherever the assumptions held; 1 estimator violation; 3 a node stopped reporting."""
-    if summary.violations_total:
-        return EXIT_VIOLATION
-    return EXIT_NODE_LOST if summary.nodes_missing else EXIT_OK
+    """The exit code that goes with the verdict's first word (:func:`outcome`)."""
+    return outcome(summary).code

@@ -217,6 +217,35 @@ def test_no_process_of_a_run_shows_its_seed_or_a_guessable_run_id(tmp_path: Path
     assert not any(f"run{parent.pid}" in c for c in roles), "the run id must not be derivable from the parent's pid"
 
 
+def test_the_first_word_and_the_exit_code_agree() -> None:
+    """Issue 29: ``run paper6 --kill 3@20`` printed PASS (partial coverage) and exited 3; a collector that
+    gave up on the vehicle printed PASS (partial coverage) and exited 1.  One decision gives both."""
+    from dataclasses import replace
+
+    from netsetest.records.summary import NodeSummary, RunSummary
+    from netsetest.runtime.report import EXIT_INTERRUPTED, EXIT_NODE_LOST, EXIT_OK, EXIT_VIOLATION, exit_code, format_table, outcome
+
+    nodes = [NodeSummary(id=1), NodeSummary(id=2, missing_from=21)]
+    full = RunSummary(steps_completed=3, node_steps_evaluated=8, node_steps_covered=8, node_steps_contained=8, nodes=nodes, mode="zenoh")
+    cases = {
+        "NODE LOST": (replace(full, nodes_missing=[2]), EXIT_NODE_LOST),
+        "FAIL (vehicle gone)": (replace(full, stopped="vehicle gone"), EXIT_VIOLATION),
+        "INTERRUPTED": (replace(full, stopped="interrupted"), EXIT_INTERRUPTED),
+        "FAIL": (replace(full, violations_total=1, nodes_missing=[2], stopped="vehicle gone"), EXIT_VIOLATION),
+        "PASS (partial coverage)": (replace(full, steps_overloaded=2, node_steps_evaluated=6, node_steps_covered=6), EXIT_OK),
+        "PASS": (full, EXIT_OK),
+    }
+    for word, (summary, code) in cases.items():
+        assert outcome(summary) == (word, code) and exit_code(summary) == code
+        assert format_table(summary).splitlines()[-1].startswith(f"{word}: zenoh run")
+    lost = format_table(cases["NODE LOST"][0]).splitlines()[-1]
+    assert "lost for good: node 2 from step 21" in lost
+    behind = replace(cases["PASS (partial coverage)"][0], collector_budget=70, node_steps_overloaded=12)
+    past_budget = format_table(replace(behind, collector_peak=77)).splitlines()[-1]
+    assert "collector overloaded on 2 step(s) (past its budget of 70 open node-steps): 12 published node-step(s) not judged" in past_budget
+    assert "collector overloaded on 2 step(s) (its inbox full)" in format_table(replace(behind, collector_peak=40)).splitlines()[-1]
+
+
 def test_verdict_line_starts_with_the_outcome_and_names_the_step_range() -> None:
     """It had no pass/fail word and said "80 steps" next to 486 node-steps (6 × 81)."""
     from dataclasses import replace
@@ -226,11 +255,10 @@ def test_verdict_line_starts_with_the_outcome_and_names_the_step_range() -> None
 
     nodes = [NodeSummary(id=i) for i in (1, 2)]
     full = RunSummary(steps_completed=3, node_steps_evaluated=8, node_steps_covered=8, node_steps_contained=8, nodes=nodes)
-    assert outcome(full) == "PASS"
-    assert outcome(replace(full, node_steps_covered=7, node_steps_not_covered={"noise": 1})) == "PASS (partial coverage)"
-    assert outcome(replace(full, node_steps_evaluated=7, node_steps_covered=7)) == "PASS (partial coverage)"
-    assert outcome(replace(full, nodes_missing=[2])) == "PASS (partial coverage)"
-    assert outcome(replace(full, violations_total=1)) == "FAIL"
+    assert outcome(full) == ("PASS", 0)
+    assert outcome(replace(full, node_steps_covered=7, node_steps_not_covered={"noise": 1})) == ("PASS (partial coverage)", 0)
+    assert outcome(replace(full, node_steps_evaluated=7, node_steps_covered=7)) == ("PASS (partial coverage)", 0)
+    assert outcome(replace(full, violations_total=1)) == ("FAIL", 1)
     text = format_table(replace(full, mode="inmemory", case="nsnim", signals="paper", variant="scheduled", seed=4))
     last = text.splitlines()[-1]
     assert last.startswith("PASS: inmemory run") and "steps 0–3:" in last

@@ -133,6 +133,9 @@ def test_zenoh_node_killed_for_good(procs, tmp_path) -> None:
     rows = {r["id"]: r for r in s["nodes"]}
     assert s["nodes_missing"] == [KILLED] and s["nodes_rejoined"] == []
     assert rows[KILLED]["missing_from"] == 11 and rows[KILLED]["rejoined_at"] is None
+    # issue 29: it printed "PASS (partial coverage)" with exit 3; the first word now goes with the exit code
+    last = (procs.logdir / "run.out").read_text().splitlines()[-1]
+    assert last.startswith("NODE LOST: zenoh run") and f"lost for good: node {KILLED} from step 11" in last, last
 
 
 @pytest.mark.parametrize(

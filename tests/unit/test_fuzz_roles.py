@@ -160,8 +160,9 @@ def test_every_role_handler_drops_never_raises(deliveries: list[tuple[tuple[str,
     vehicle = Vehicle(sc, bus, RUN)
     nodes = [Node(sc, i, bus, RUN) for i in sc.ids]
     collector = Collector(sc, bus, RUN, None)
+    behind = Collector(sc, bus, RUN, None, realtime=True, budget=3 * len(sc.ids))  # real time, a budget it exceeds at once
     barrier = Barrier(bus, RUN, Ready(role="node", node=1), {("node", 2), ("vehicle", None), ("collector", None)})
-    handlers = [vehicle.on_message, collector.on_message, barrier.on_message, *(n.on_message for n in nodes)]
+    handlers = [vehicle.on_message, vehicle.on_ack, collector.on_message, behind.on_message, barrier.on_message, *(n.on_message for n in nodes)]
     all_keys = _all_keys(sc)
     for (key, payload), pick in deliveries:
         try:
@@ -171,11 +172,13 @@ def test_every_role_handler_drops_never_raises(deliveries: list[tuple[tuple[str,
         for handler in handlers:
             handler(key, msg)
             handler(all_keys[pick % len(all_keys)], msg)
+        behind.close_ready(most=0)
         for n in nodes:
             n.give_up = True
             while n.try_step():
                 pass
     collector.finish(run_meta(sc, "inmemory", "lockstep", "paper", "scheduled", 0, RUN))
+    behind.finish(run_meta(sc, "inmemory", "realtime", "paper", "scheduled", 0, RUN))
 
 
 def test_the_fuzz_templates_cover_every_message_type() -> None:

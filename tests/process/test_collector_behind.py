@@ -1,0 +1,72 @@
+"""Issue 33: a collector that falls behind loses nothing.  The deterministic trigger: SIGSTOP the collector
+of an unpaced lockstep run for a while, then SIGCONT.  Before the vehicle waited for the collector's
+acknowledgment (roles/vehicle.py, ACK_WINDOW), its inbox bound dropped the run's own truths and states:
+a 3 s pause ended with exit 1 at "steps 0–319" and two nodes falsely reported missing.  Each run also
+writes a slow record (gzip, MCAP), the other way a collector fell behind."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from pathlib import Path
+
+import pytest
+from zenoh_helpers import find_role, parent_run_id, read_json, start_parent, wait_for
+
+STEPS = 1000  # unpaced: long enough that the pause falls mid-run with most of the run after it
+NODES = 6
+UNDER_WAY_BYTES = 100_000  # the record has grown this much: the run is under way (about 20–60 steps)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize(("pause_s", "suffix"), [(3.0, "jsonl.gz"), (10.0, "mcap")])
+def test_a_paused_collector_loses_no_step(procs, tmp_path: Path, pause_s: float, suffix: str) -> None:
+    record, summary = tmp_path / f"r.{suffix}", tmp_path / "s.json"
+    proc = start_parent(procs, "run", ["paper6", "--steps", str(STEPS), "--record", str(record), "--summary-json", str(summary), "--quiet"])
+    wait_for(lambda: find_role(parent_run_id(proc), "collector"), 60, what="the collector")
+    collector = find_role(parent_run_id(proc), "collector")[0]
+    wait_for(lambda: record.exists() and record.stat().st_size > UNDER_WAY_BYTES, 120, interval=0.05, what="the run under way")
+    os.kill(collector, signal.SIGSTOP)
+    try:
+        time.sleep(pause_s)
+        assert proc.poll() is None, "the run ended while its collector was stopped"
+    finally:
+        os.kill(collector, signal.SIGCONT)
+    assert procs.wait("run", 240) == 0, procs.logs()
+    s = read_json(summary)
+    assert s["steps_completed"] == STEPS
+    assert s["node_steps_evaluated"] == s["node_steps_covered"] == (STEPS + 1) * NODES, "a node-step was not judged"
+    assert s["nodes_missing"] == [] and s["nodes_rejoined"] == []
+    assert s["steps_overloaded"] == 0 and s["stopped"] is None
+    assert not s["drops"].get("collector"), s["drops"]  # no inbox-full, no End counted early
+
+
+REALTIME_STEPS = 300  # 30 s at τs = 0.1 s: the pause falls mid-run
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_a_paused_realtime_collector_blames_no_node(procs, tmp_path: Path) -> None:
+    """Real time cannot wait for the collector: what it could not take in (its inbox full when it came back)
+    is its own overload, in the verdict under that name; before, all six nodes were reported "rejoined"."""
+    record, summary = tmp_path / "r.jsonl", tmp_path / "s.json"
+    args = ["paper6", "--clock", "realtime", "--steps", str(REALTIME_STEPS), "--record", str(record), "--summary-json", str(summary), "--quiet"]
+    proc = start_parent(procs, "run", args)
+    wait_for(lambda: find_role(parent_run_id(proc), "collector"), 60, what="the collector")
+    collector = find_role(parent_run_id(proc), "collector")[0]
+    wait_for(lambda: record.exists() and record.stat().st_size > UNDER_WAY_BYTES, 120, interval=0.05, what="the run under way")
+    os.kill(collector, signal.SIGSTOP)
+    try:
+        time.sleep(10.0)
+    finally:
+        os.kill(collector, signal.SIGCONT)
+    assert procs.wait("run", 240) == 0, procs.logs()
+    s = read_json(summary)
+    assert s["steps_completed"] == REALTIME_STEPS and s["stopped"] is None
+    assert s["nodes_missing"] == [] and s["nodes_rejoined"] == [] and all(r["missing_steps"] == 0 for r in s["nodes"])
+    lost_here = s["drops"].get("collector", {}).get("inbox-full", 0)
+    assert (s["steps_overloaded"] > 0) == (lost_here > 0), s  # what the inbox dropped is counted as the collector's overload
+    last = (procs.logdir / "run.out").read_text().splitlines()[-1]
+    assert last.startswith("PASS") and ("collector overloaded" in last) == (s["steps_overloaded"] > 0), last
