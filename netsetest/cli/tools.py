@@ -1,4 +1,5 @@
-"""``netsetest echo``, ``watch`` (live views of a running run) and ``export`` (records as tables)."""
+"""``netsetest echo``, ``watch`` (live views of a running run), ``export`` (records as tables) and ``report``
+(records as one HTML page)."""
 
 from __future__ import annotations
 
@@ -69,6 +70,17 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--parquet", metavar="DIR", help="write DIR/node_<i>.parquet (needs pip install 'netsetest[export]')")
     g.add_argument("--csv", metavar="DIR", help="write DIR/node_<i>.csv")
+
+    p = sub.add_parser("report", help="one self-contained HTML page of one or more records: verdict, tables, graph, interactive Figs. 5-8")
+    p.add_argument("record", nargs="+", help="record files (.jsonl, .json.gz or .mcap)")
+    p.add_argument("--html", metavar="PATH", required=True, help="the page to write (needs pip install 'netsetest[view]')")
+    p.add_argument(
+        "--exact",
+        metavar="JSON",
+        action="append",
+        default=[],
+        help="a `netsetest exact RECORD --json JSON` document: its ratios go beside the record it names (repeatable; default: none)",
+    )
 
 
 class ObserverError(Exception):
@@ -248,4 +260,26 @@ def cmd_export(a: argparse.Namespace) -> int:
     return 0
 
 
-COMMANDS.update(echo=cmd_echo, watch=cmd_watch, export=cmd_export)
+def cmd_report(a: argparse.Namespace) -> int:
+    from netsetest.extras import require
+
+    require("bokeh", "the HTML report")
+    from netsetest.records.record import load_record
+    from netsetest.records.report_html import RecordPage, attach_exact, load_exact, write_report
+    from netsetest.runtime.report import format_table
+
+    checks.output_file(a.html, "--html")
+    records = [load_record(r) for r in a.record]
+    exact = attach_exact(records, [(path, load_exact(path)) for path in a.exact])
+    labels = [f"{r.meta.case or '?'}/{r.meta.signals or '?'}" + (f" #{n}" if len(records) > 1 else "") for n, r in enumerate(records)]
+    pages = []
+    for rec, label, doc in zip(records, labels, exact):
+        table = "" if rec.summary is None else format_table(rec.summary)
+        verdict = table.splitlines()[-1] if table else ""
+        pages.append(RecordPage(rec, label, verdict, table, doc))
+    size = write_report(a.html, pages)
+    print(f"wrote {a.html} ({size / 1e6:.1f} MB)")
+    return 0
+
+
+COMMANDS.update(echo=cmd_echo, watch=cmd_watch, export=cmd_export, report=cmd_report)
