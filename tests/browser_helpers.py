@@ -188,7 +188,7 @@ def load_page(url: str, workdir: Path, expressions: dict[str, str], ready: str, 
 
 BOKEH_READY = (
     "window.Bokeh !== undefined && Bokeh.documents.length > 0 && Bokeh.index !== undefined && "
-    "Object.keys(Bokeh.index).length === Bokeh.documents[0].roots().length"
+    "Bokeh.documents[0].roots().every(r => Bokeh.index[r.id] !== undefined)"
 )
 """BokehJS has built a view for every root of the page."""
 

@@ -453,7 +453,7 @@ def write_report(path: str | Path, pages: Sequence[RecordPage]) -> int:
     for p in pages:
         rec, fail = p.record, p.verdict.startswith("FAIL")
         parts.append(
-            f'<h2>{html.escape(p.label)}</h2><p class="note">{html.escape(rec.path)}: topology {html.escape(str(rec.meta.name))}, '
+            f'<h2>{html.escape(p.label)}</h2><p class="note">{html.escape(Path(rec.path).name)}: topology {html.escape(str(rec.meta.name))}, '
             f"{len(_node_ids(rec))} nodes, τs = {rec.meta.tau_s:g} s, plant {html.escape(rec.meta.plant)}</p>"
         )
         if rec.partial:
