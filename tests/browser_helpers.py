@@ -108,9 +108,10 @@ def _errors(events: list[dict]) -> list[str]:
     return out
 
 
-def load_page(url: str, workdir: Path, expressions: dict[str, str], ready: str, height: int | None = None) -> Page:
+def load_page(url: str, workdir: Path, expressions: dict[str, str], ready: str, height: int | None = None, settle_s: float = 0.0) -> Page:
     """Open ``url``, wait until the JavaScript expression ``ready`` is true, evaluate ``expressions``
-    (name → expression, JSON-serialisable results) and screenshot the whole page (or its top ``height`` px)."""
+    (name → expression, JSON-serialisable results) after ``settle_s`` more seconds, and screenshot the whole
+    page (or its top ``height`` px)."""
     browser = chromium()
     profile = workdir / "chromium-profile"
     profile.mkdir(parents=True, exist_ok=True)
@@ -160,6 +161,7 @@ def load_page(url: str, workdir: Path, expressions: dict[str, str], ready: str, 
                 raise TimeoutError(f"the page did not become ready ({ready}) within {RENDER_TIMEOUT_S} s")
             time.sleep(0.1)
         load_s = time.monotonic() - start
+        time.sleep(settle_s)
         values = {}
         for name, expr in expressions.items():
             res = cdp.send("Runtime.evaluate", {"expression": expr, "returnByValue": True}, session=session)

@@ -13,6 +13,7 @@ from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 from netsetest.cli import checks
+from netsetest.runtime import argtypes
 
 if TYPE_CHECKING:
     from netsetest.runtime.live import Observer
@@ -65,6 +66,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("watch", help="live per-node table of a running run: step, fault bound, E, drops, deadline misses")
     _observer_args(p)
 
+    p = sub.add_parser("view", help="live view of a running run in Rerun's web viewer, served from this machine (no internet): intervals, sets, graph, verdict")
+    _observer_args(p)
+    view_args(p)
+
     p = sub.add_parser("export", help="per-node tables of a record for pandas/polars (Parquet or CSV)")
     p.add_argument("record", help="record file (.json, .json.gz or .mcap)")
     g = p.add_mutually_exclusive_group(required=True)
@@ -81,6 +86,14 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         default=[],
         help="a `netsetest exact RECORD --json JSON` document: its ratios go beside the record it names (repeatable; default: none)",
     )
+
+
+def view_args(p: argparse.ArgumentParser) -> None:
+    """The live view's options (``view``, and ``run --view`` hands them to the view it starts)."""
+    p.add_argument(
+        "--port", type=argtypes.port, default=0, metavar="N", help="the web viewer's port on 127.0.0.1 (default: 0, a free one; the address is printed)"
+    )
+    p.add_argument("--tau-s", type=_seconds, metavar="S", help="the run's sampling period: a time axis and the car's path (default: steps only)")
 
 
 class ObserverError(Exception):
@@ -250,6 +263,33 @@ def cmd_watch(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_view(a: argparse.Namespace) -> int:
+    from netsetest.extras import require
+
+    require("rerun", "the live view")
+    from netsetest.runtime.launcher import free_ports
+    from netsetest.runtime.view import LiveView, serve
+
+    end = None if a.duration is None else time.monotonic() + a.duration
+    with observing(a, None) as (obs, stop):
+        web, grpc = free_ports(2)
+        rec, url = serve(a.port or web, grpc)
+        print(f"live view of run {a.run_id or '*'}: {url}", flush=True)
+        view, hint = LiveView(rec, a.tau_s), SilenceHint("view", a)
+        try:
+            while not stop.requested and (end is None or time.monotonic() < end):  # after the run's end it still serves, until Ctrl-C
+                got = obs.get(POLL_S)
+                if got is not None:
+                    hint.heard()
+                    view.feed(got.message, obs.backlog())
+                else:
+                    hint.tick()
+        finally:
+            rec.flush()
+            rec.disconnect()
+    return 0
+
+
 def cmd_export(a: argparse.Namespace) -> int:
     from netsetest.records.export import export_record
     from netsetest.records.record import load_record
@@ -282,4 +322,4 @@ def cmd_report(a: argparse.Namespace) -> int:
     return 0
 
 
-COMMANDS.update(echo=cmd_echo, watch=cmd_watch, export=cmd_export, report=cmd_report)
+COMMANDS.update(echo=cmd_echo, watch=cmd_watch, view=cmd_view, export=cmd_export, report=cmd_report)
