@@ -43,6 +43,7 @@ class Page:
 
     values: dict[str, Any]
     errors: list[str] = field(default_factory=list)
+    failed_requests: list[str] = field(default_factory=list)  # URLs the page asked for and did not get
     screenshot: bytes = b""
     load_s: float = 0.0
 
@@ -57,7 +58,8 @@ class Page:
 class _Cdp:
     """Commands and events of the DevTools protocol over the pipe."""
 
-    def __init__(self, proc: subprocess.Popen, to_browser: int, from_browser: int) -> None:
+    def __init__(self, proc: subprocess.Popen, to_browser: int, from_browser: int, timeout: float) -> None:
+        self.timeout = timeout
         self.proc, self._out, self._in = proc, os.fdopen(to_browser, "wb", buffering=0), os.fdopen(from_browser, "rb", buffering=0)
         self._buf = b""
         self._id = 0
@@ -74,13 +76,13 @@ class _Cdp:
         msg, self._buf = self._buf.split(b"\0", 1)
         return json.loads(msg)
 
-    def send(self, method: str, params: dict | None = None, session: str | None = None, timeout: float = RENDER_TIMEOUT_S) -> dict:
+    def send(self, method: str, params: dict | None = None, session: str | None = None, timeout: float | None = None) -> dict:
         self._id += 1
         cmd: dict[str, Any] = {"id": self._id, "method": method, "params": params or {}}
         if session:
             cmd["sessionId"] = session
         self._out.write(json.dumps(cmd).encode() + b"\0")
-        deadline = time.monotonic() + timeout
+        deadline = time.monotonic() + (timeout or self.timeout)
         while True:
             msg = self._read(deadline)
             if msg.get("id") == self._id:
@@ -108,10 +110,18 @@ def _errors(events: list[dict]) -> list[str]:
     return out
 
 
-def load_page(url: str, workdir: Path, expressions: dict[str, str], ready: str, height: int | None = None, settle_s: float = 0.0) -> Page:
+def _failed_requests(events: list[dict]) -> list[str]:
+    urls = {e["params"]["requestId"]: e["params"]["request"]["url"] for e in events if e.get("method") == "Network.requestWillBeSent"}
+    return [urls.get(e["params"]["requestId"], "?") for e in events if e.get("method") == "Network.loadingFailed"]
+
+
+def load_page(
+    url: str, workdir: Path, expressions: dict[str, str], ready: str, height: int | None = None, settle_s: float = 0.0, timeout: float = RENDER_TIMEOUT_S
+) -> Page:
     """Open ``url``, wait until the JavaScript expression ``ready`` is true, evaluate ``expressions``
     (name → expression, JSON-serialisable results) after ``settle_s`` more seconds, and screenshot the whole
-    page (or its top ``height`` px)."""
+    page (or its top ``height`` px); ``timeout`` bounds each step (a page compiling a large WebAssembly module
+    on a loaded machine answers late)."""
     browser = chromium()
     profile = workdir / "chromium-profile"
     profile.mkdir(parents=True, exist_ok=True)
@@ -146,19 +156,19 @@ def load_page(url: str, workdir: Path, expressions: dict[str, str], ready: str, 
     )
     os.close(to_r)
     os.close(from_w)
-    cdp = _Cdp(proc, to_w, from_r)
+    cdp = _Cdp(proc, to_w, from_r, timeout)
     try:
         target = cdp.send("Target.createTarget", {"url": "about:blank"})["targetId"]
         session = cdp.send("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
-        for domain in ("Runtime", "Log", "Page"):
+        for domain in ("Runtime", "Log", "Page", "Network"):
             cdp.send(f"{domain}.enable", session=session)
         cdp.send("Emulation.setDeviceMetricsOverride", {"width": PAGE_WIDTH, "height": 900, "deviceScaleFactor": 1, "mobile": False}, session=session)
         start = time.monotonic()
         cdp.send("Page.navigate", {"url": url}, session=session)
-        deadline = start + RENDER_TIMEOUT_S
+        deadline = start + timeout
         while not cdp.send("Runtime.evaluate", {"expression": f"!!({ready})", "returnByValue": True}, session=session)["result"].get("value"):
             if time.monotonic() > deadline:
-                raise TimeoutError(f"the page did not become ready ({ready}) within {RENDER_TIMEOUT_S} s")
+                raise TimeoutError(f"the page did not become ready ({ready}) within {timeout:g} s")
             time.sleep(0.1)
         load_s = time.monotonic() - start
         time.sleep(settle_s)
@@ -174,11 +184,12 @@ def load_page(url: str, workdir: Path, expressions: dict[str, str], ready: str, 
         time.sleep(0.5)  # a resize re-renders the canvases
         shot = base64.b64decode(cdp.send("Page.captureScreenshot", {"format": "png"}, session=session)["data"])
         errors = _errors(cdp.events)
+        failed = _failed_requests(cdp.events)
         try:
             cdp.send("Browser.close", timeout=10)
         except (RuntimeError, TimeoutError):
             pass
-        return Page(values, errors, shot, load_s)
+        return Page(values, errors, failed, shot, load_s)
     finally:
         cdp.close()
         try:

@@ -79,9 +79,35 @@ class LiveView:
     path: list[tuple[float, float]] = field(default_factory=lambda: [(0.0, 0.0)])
     heading: float = 0.0
 
+    def layout(self) -> None:
+        """The viewer's layout for the nodes seen so far (sent again when a node appears): the graph, the
+        verdict and the (β, r) sets on the left; per node its fault and its yaw rate against the truth."""
+        import rerun.blueprint as rrb
+
+        ids = sorted(self.table.rows)
+        per_node = [
+            rrb.Grid(*(rrb.TimeSeriesView(origin=f"nodes/{i}/{what}", name=f"node {i} {what}") for i in ids), name=what) for what in ("fault", "yaw_rate")
+        ]
+        plant = [
+            rrb.Vertical(
+                rrb.Spatial2DView(origin="plant/path", name="car path"),
+                rrb.TimeSeriesView(origin="plant", contents=["plant/e/**", "plant/mismatch_ok"], name="e_k; 1 = in bound"),
+                name="plant",
+            )
+        ]
+        left = rrb.Vertical(
+            rrb.GraphView(origin="graph", name="topology"),
+            rrb.TextDocumentView(origin="verdict", name="verdict"),
+            rrb.Spatial2DView(origin="sets", name="(β, r) sets and truth"),
+        )
+        self.rec.send_blueprint(rrb.Blueprint(rrb.Horizontal(left, rrb.Tabs(*per_node, *plant), column_shares=[1, 2]), collapse_panels=True))
+
     def feed(self, msg: Message | None, backlog: int = 0) -> None:
         """Take one message; draw it unless ``backlog`` messages wait behind it (then count only)."""
+        known = len(self.table.rows)
         self.table.update(msg)
+        if len(self.table.rows) != known:
+            self.layout()
         judged = self.table.judged or []
         for node, step, E, rho in judged:
             self.coverage.judged += 1

@@ -9,11 +9,17 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 from pathlib import Path
+from urllib.parse import urlparse
+
+import pytest
 
 from browser_helpers import BOKEH_READY, chromium, load_page, named
+from zenoh_helpers import PAPER6, ProcessGuard, cli, wait_for
 
 from netsetest.cli.main import main
+from netsetest.runtime.report import EXIT_INTERRUPTED
 
 ROOT = Path(__file__).resolve().parents[2]
 TOPOLOGY = str(ROOT / "topologies" / "paper6.toml")
@@ -88,3 +94,32 @@ def test_a_page_with_a_broken_script_is_caught(tmp_path: Path) -> None:
     seen = load_page(page.resolve().as_uri(), tmp_path, {}, ready="true")
     assert any("undefined_function" in e for e in seen.errors)
     assert seen.pixel_std() < MIN_PIXEL_STD  # and a nearly empty page counts as blank
+
+
+LOCAL_HOSTS = ("127.0.0.1", "localhost")
+VIEW_STEPS = 6000  # at --pace 0.1 up to 10 min: the run goes on while the browser loads the viewer (interrupted after)
+VIEW_LOAD_S = 240.0  # the viewer is a 30 MB WebAssembly module, compiled by a software-rendering browser on a shared machine
+OFFLINE_NOISE = ("Failed to load resource", "Failed to fetch")  # how Chromium reports a request that could not leave the machine
+
+
+@pytest.mark.timeout(2 * VIEW_LOAD_S + 120)
+def test_live_view_renders_in_chromium_during_a_run(procs: ProcessGuard, tmp_path: Path) -> None:
+    """``run --view``: the viewer served by the installed Rerun package loads from this machine alone while
+    the run goes (what it draws: tests/inmemory/test_live_view.py decodes the stream)."""
+    chromium()
+    pytest.importorskip("rerun")
+    run = procs.start("run", cli("run", PAPER6, "--steps", str(VIEW_STEPS), "--pace", "0.1", "--view", "--quiet"))
+    url = wait_for(lambda: next((ln.split("live view: ", 1)[1].strip() for ln in procs.stderr("run").splitlines() if "live view: " in ln), None), 90)
+    assert url and url.startswith("http://127.0.0.1:")
+    seen = load_page(url, tmp_path, {"title": "document.title"}, ready="document.querySelector('canvas') !== null", settle_s=10.0, timeout=VIEW_LOAD_S)
+    assert run.poll() is None, "the run was still going while the viewer loaded"
+    _save(seen.screenshot, tmp_path, "live_view.png")
+    assert seen.values["title"] == "Rerun Viewer"
+    # the viewer itself and the stream came from this machine; what failed are only its calls outside
+    # (a web font, an update check, usage statistics), which an offline machine refuses
+    local_failures = [u for u in seen.failed_requests if urlparse(u).hostname in LOCAL_HOSTS]
+    assert local_failures == []
+    assert [e for e in seen.errors if not any(n in e for n in OFFLINE_NOISE)] == []
+    assert seen.pixel_std() > MIN_PIXEL_STD
+    run.send_signal(signal.SIGINT)  # Ctrl-C: the run stops its roles and its view
+    assert procs.wait("run", 60) == EXIT_INTERRUPTED
