@@ -41,6 +41,7 @@ MAX_BACKLOG = 200  # messages waiting: above this the view drops frames (about o
 ELLIPSE_POINTS = 48  # vertices of a drawn (β, r) ellipse
 SERVER_MEMORY = "256MiB"  # the Rerun server keeps this much of the run for a browser that connects late; older data goes first
 APP_ID = "netsetest"
+BOUND_RGB = (31, 119, 180)
 COLOURS = {  # a node's step in the graph (RGB)
     "contained": (44, 160, 44),
     "missed": (214, 39, 40),
@@ -78,6 +79,7 @@ class LiveView:
     edges: set[tuple[int, int]] = field(default_factory=set)
     path: list[tuple[float, float]] = field(default_factory=lambda: [(0.0, 0.0)])
     heading: float = 0.0
+    styled: set[int] = field(default_factory=set)
 
     def layout(self) -> None:
         """The viewer's layout for the nodes seen so far (sent again when a node appears): the graph, the
@@ -102,11 +104,22 @@ class LiveView:
         )
         self.rec.send_blueprint(rrb.Blueprint(rrb.Horizontal(left, rrb.Tabs(*per_node, *plant), column_shares=[1, 2]), collapse_panels=True))
 
+    def _styles(self, ids: set[int]) -> None:
+        """Once per node: the bounds blue, the truth black (as the report's figures draw them)."""
+        import rerun as rr
+
+        for i in ids - self.styled:
+            for what in ("fault", "yaw_rate"):
+                for part, colour in (("lower", BOUND_RGB), ("upper", BOUND_RGB), ("true", (0, 0, 0))):
+                    self.rec.log(f"nodes/{i}/{what}/{part}", rr.SeriesLines(colors=[colour], names=[part]), static=True)
+        self.styled |= ids
+
     def feed(self, msg: Message | None, backlog: int = 0) -> None:
         """Take one message; draw it unless ``backlog`` messages wait behind it (then count only)."""
         known = len(self.table.rows)
         self.table.update(msg)
         if len(self.table.rows) != known:
+            self._styles(set(self.table.rows))
             self.layout()
         judged = self.table.judged or []
         for node, step, E, rho in judged:
