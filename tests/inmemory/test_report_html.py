@@ -52,6 +52,7 @@ def test_report_without_exact_has_no_exact_section_and_two_records_share_fig8(ru
     assert main(["report", str(run["record"]), str(run["record"]), "--html", str(out)]) == 0
     page = out.read_text()
     assert "Exact limit" not in page
+    assert '"mismatch-size"' not in page  # the T-S model drove: no e_k to draw
     assert page.count('"fig8-node-1"') == 1 and page.count('"fig7-node-1"') == 2  # Fig. 8 overlays the records
 
 
@@ -128,3 +129,14 @@ def test_compare_html_writes_the_table_and_one_figure_per_node(tmp_path: Path, c
     assert "no estimator missed the truth" in page and "<th>fault/exact</th>" in page and "<td>interval" in page
     for i in range(1, 7):
         assert f'"compare-node-{i}"' in page
+
+
+def test_a_plant_run_shows_its_e_k_against_the_bound(tmp_path: Path) -> None:
+    """paper6_car (a nonlinear car drives the truth): the page draws e_k and its size in the bound's norm, as
+    ``plot``'s mismatch figure does (one computation: records.record.mismatch)."""
+    pytest.importorskip("vehiclemodels")
+    rec, out = tmp_path / "car.jsonl", tmp_path / "car.html"
+    assert main(["run", str(ROOT / "topologies" / "paper6_car.toml"), "--mode", "inmemory", "--steps", "15", "--record", str(rec), "--quiet"]) == 0
+    assert main(["report", str(rec), "--html", str(out)]) == 0
+    page = out.read_text()
+    assert '"mismatch-size"' in page and "Model mismatch e_k of" in page
