@@ -268,15 +268,18 @@ def cmd_view(a: argparse.Namespace) -> int:
 
     require("rerun", "the live view")
     from netsetest.runtime.launcher import free_ports
-    from netsetest.runtime.view import LiveView, serve
+    from netsetest.runtime.view import LiveView, ViewError, serve
 
     end = None if a.duration is None else time.monotonic() + a.duration
     with observing(a, None) as (obs, stop):
         web, grpc = free_ports(2)
-        rec, url = serve(a.port or web, grpc)
-        print(f"live view of run {a.run_id or '*'}: {url}", flush=True)
-        view, hint = LiveView(rec, a.tau_s), SilenceHint("view", a)
         try:
+            server = serve(a.port or web, grpc)
+        except ViewError as exc:
+            raise ObserverError(str(exc)) from None
+        try:
+            print(f"live view of run {a.run_id or '*'}: {server.url}", flush=True)
+            view, hint = LiveView(server.rec, a.tau_s), SilenceHint("view", a)
             while not stop.requested and (end is None or time.monotonic() < end):  # after the run's end it still serves, until Ctrl-C
                 got = obs.get(POLL_S)
                 if got is not None:
@@ -285,8 +288,7 @@ def cmd_view(a: argparse.Namespace) -> int:
                 else:
                     hint.tick()
         finally:
-            rec.flush()
-            rec.disconnect()
+            server.close()
     return 0
 
 

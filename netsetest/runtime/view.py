@@ -25,11 +25,15 @@ never waits for it.
 from __future__ import annotations
 
 import math
+import os
 import select
 import signal
+import socket
 import subprocess
 import sys
+import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -204,22 +208,69 @@ class LiveView:
         self.rec.log("verdict", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
 
 
-def serve(web_port: int, grpc_port: int) -> tuple[Any, str]:
-    """A recording served to Rerun's web viewer on this machine: the stream and the page's address."""
+class ViewError(Exception):
+    """The live view did not start (its viewer, or the view process of ``run --view``)."""
+
+
+LOOPBACK = "127.0.0.1"  # the viewer shows the truth: it listens on this machine only
+SERVER_START_TIMEOUT_S = 60.0
+
+
+@dataclass
+class ViewerServer:
+    """Rerun's server (its ``rerun --serve-web``: the gRPC proxy and the web viewer, both bound to the
+    loopback address) and the recording stream connected to it."""
+
+    proc: subprocess.Popen
+    rec: Any
+    url: str
+
+    def close(self) -> None:
+        self.rec.flush()
+        self.rec.disconnect()
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(VIEW_STOP_S)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+
+
+def serve(web_port: int, grpc_port: int) -> ViewerServer:
+    """Start Rerun's web viewer and its gRPC proxy on this machine (the package's own ``rerun`` binary, bound
+    to the loopback address: the SDK's in-process servers listen on every interface) and connect a
+    recording stream to it."""
     import rerun as rr
 
+    env = {**os.environ, "RERUN_APP_ONLY": "true"}  # as the SDK's own spawn: an app, no first-run banner
+    import rerun_cli
+
+    exe = Path(rerun_cli.__file__).parent / "rerun"  # the binary itself (its Python wrapper would leave it orphaned when stopped)
+    argv = [str(exe), "--serve-web", "--bind", LOOPBACK, "--port", str(grpc_port), "--web-viewer-port", str(web_port)]
+    proc = subprocess.Popen(
+        [*argv, "--server-memory-limit", SERVER_MEMORY], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, preexec_fn=_die_with_parent
+    )
+    deadline = time.monotonic() + SERVER_START_TIMEOUT_S
+    while not all(_listening(p) for p in (grpc_port, web_port)):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            proc.wait()
+            raise ViewError(f"Rerun's viewer did not start on ports {web_port} and {grpc_port} (exit {proc.returncode}): is a port taken?")
+        time.sleep(0.1)
+    uri = f"rerun+http://{LOOPBACK}:{grpc_port}/proxy"
     rec = rr.RecordingStream(APP_ID)
-    uri = rec.serve_grpc(grpc_port=grpc_port, server_memory_limit=SERVER_MEMORY)
-    rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=uri)
-    return rec, f"http://127.0.0.1:{web_port}/?url={uri.replace('+', '%2B')}"
+    rec.connect_grpc(uri)
+    return ViewerServer(proc, rec, f"http://{LOOPBACK}:{web_port}/?url={uri.replace('+', '%2B')}")
+
+
+def _listening(port: int) -> bool:
+    with socket.socket() as s:
+        return s.connect_ex((LOOPBACK, port)) == 0
 
 
 VIEW_START_TIMEOUT_S = 60.0  # the view process imports Rerun and opens its session and servers
 VIEW_STOP_S = 5.0
-
-
-class ViewError(Exception):
-    """``run --view``: the view process did not start."""
 
 
 @dataclass
