@@ -27,10 +27,12 @@ from __future__ import annotations
 import math
 import os
 import select
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -224,6 +226,7 @@ class ViewerServer:
     proc: subprocess.Popen
     rec: Any
     url: str
+    home: str  # its configuration (usage statistics off) and data, removed on close
 
     def close(self) -> None:
         self.rec.flush()
@@ -235,6 +238,7 @@ class ViewerServer:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait()
+        shutil.rmtree(self.home, ignore_errors=True)
 
 
 def serve(web_port: int, grpc_port: int) -> ViewerServer:
@@ -243,10 +247,14 @@ def serve(web_port: int, grpc_port: int) -> ViewerServer:
     recording stream to it."""
     import rerun as rr
 
-    env = {**os.environ, "RERUN_APP_ONLY": "true"}  # as the SDK's own spawn: an app, no first-run banner
     import rerun_cli
 
     exe = Path(rerun_cli.__file__).parent / "rerun"  # the binary itself (its Python wrapper would leave it orphaned when stopped)
+    home = tempfile.mkdtemp(prefix="netsetest-view-")  # the viewer's configuration and data: not the user's home
+    env = {**os.environ, "RERUN_APP_ONLY": "true", "XDG_CONFIG_HOME": f"{home}/config", "XDG_DATA_HOME": f"{home}/data"}
+    subprocess.run(
+        [str(exe), "analytics", "disable"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=SERVER_START_TIMEOUT_S, check=False
+    )
     argv = [str(exe), "--serve-web", "--bind", LOOPBACK, "--port", str(grpc_port), "--web-viewer-port", str(web_port)]
     proc = subprocess.Popen(
         [*argv, "--server-memory-limit", SERVER_MEMORY], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, preexec_fn=_die_with_parent
@@ -256,12 +264,13 @@ def serve(web_port: int, grpc_port: int) -> ViewerServer:
         if proc.poll() is not None or time.monotonic() > deadline:
             proc.kill()
             proc.wait()
+            shutil.rmtree(home, ignore_errors=True)
             raise ViewError(f"Rerun's viewer did not start on ports {web_port} and {grpc_port} (exit {proc.returncode}): is a port taken?")
         time.sleep(0.1)
     uri = f"rerun+http://{LOOPBACK}:{grpc_port}/proxy"
     rec = rr.RecordingStream(APP_ID)
     rec.connect_grpc(uri)
-    return ViewerServer(proc, rec, f"http://{LOOPBACK}:{web_port}/?url={uri.replace('+', '%2B')}")
+    return ViewerServer(proc, rec, f"http://{LOOPBACK}:{web_port}/?url={uri.replace('+', '%2B')}", home)
 
 
 def _listening(port: int) -> bool:
