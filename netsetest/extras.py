@@ -4,7 +4,16 @@ from __future__ import annotations
 
 import importlib
 
-EXTRAS = {"matplotlib": "plot", "mcap": "mcap", "pyarrow": "export", "pandas": "export", "cvxpy": "cvxpy", "vehiclemodels": "plant"}
+EXTRAS = {
+    "matplotlib": "plot",
+    "mcap": "mcap",
+    "pyarrow": "export",
+    "pandas": "export",
+    "cvxpy": "cvxpy",
+    "vehiclemodels": "plant",
+    "bokeh": "view",
+    "rerun": "view",
+}
 
 
 class MissingExtra(Exception):

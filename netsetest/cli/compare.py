@@ -42,6 +42,7 @@ def add_parser(sub: argparse._SubParsersAction, scenario_args: Callable[[argpars
     p.add_argument("--json", metavar="PATH", help="write the rows as a JSON list")
     p.add_argument("--markdown", metavar="PATH", help="write the table as Markdown")
     p.add_argument("--plot", metavar="DIR", help="one figure per node: every estimator's fault bounds and the truth (first run)")
+    p.add_argument("--html", metavar="PATH", help="the table and per node every estimator's fault bounds as one self-contained page (extra view)")
     COMMANDS["compare"] = cmd_compare
 
 
@@ -70,6 +71,11 @@ def cmd_compare(a: argparse.Namespace) -> int:
 
     checks.output_file(a.json, "--json")
     checks.output_file(a.markdown, "--markdown")
+    checks.output_file(a.html, "--html")
+    if a.html:
+        from netsetest.extras import require
+
+        require("bokeh", "compare --html")
     if a.plot:
         checks.output_dir(a.plot, "--plot")
     from netsetest.runtime.report import Progress
@@ -98,6 +104,12 @@ def cmd_compare(a: argparse.Namespace) -> int:
         for path in plot_fault_bounds(c, a.plot):
             print(f"wrote {path}")
     failed = [r.estimator for r in c.rows if r.violations]
+    if a.html:
+        from netsetest.records.report_html import ComparePage, write_compare
+
+        title = f"netsetest compare {c.topology}: runs {', '.join(c.runs)}, {c.steps} steps"
+        write_compare(a.html, ComparePage(title, TABLE_HEADER, table_rows(c), c.tau_s, c.truth_fault, c.bounds, failed))
+        print(f"wrote {a.html}")
     if failed:
         print(f"containment violated where the assumptions held: {', '.join(failed)}", file=sys.stderr)
         return 1

@@ -47,6 +47,8 @@ ZENOH_ONLY: dict[str, tuple[str, object]] = {
     "--insecure": ("insecure", False),
     "--run-id": ("run_id", None),
     "--zenoh-config": ("zenoh_config", None),
+    "--view": ("view", False),
+    "--view-port": ("view_port", 0),
 }
 
 
@@ -75,6 +77,12 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument("--run-id", type=checks.run_id, metavar="ID", help="the run's key-expression namespace (default: a fresh random one, printed)")
     g.add_argument("--zenoh-config", type=argtypes.readable_file, metavar="FILE", help=ZENOH_CONFIG_HELP)
+    g.add_argument(
+        "--view",
+        action="store_true",
+        help="a live view in Rerun's web viewer, served from this machine (`netsetest view` beside the run; extra view); its address is printed",
+    )
+    g.add_argument("--view-port", type=argtypes.port, default=0, metavar="N", help="the live view's web port (default: 0, a free one)")
 
 
 def estimator_arg(p: argparse.ArgumentParser) -> None:
@@ -239,7 +247,13 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         insecure=a.insecure,
         zenoh_config=a.zenoh_config,
         run_id=a.run_id,
+        view=a.view,
+        view_port=a.view_port,
     )
+    if a.view:
+        from netsetest.extras import require
+
+        require("rerun", "--view")
     try:
         plan = plan_run(opts)
     except LaunchError as exc:

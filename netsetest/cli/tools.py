@@ -1,4 +1,5 @@
-"""``netsetest echo``, ``watch`` (live views of a running run) and ``export`` (records as tables)."""
+"""``netsetest echo``, ``watch`` (live views of a running run), ``export`` (records as tables) and ``report``
+(records as one HTML page)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
 from netsetest.cli import checks
+from netsetest.runtime import argtypes
 
 if TYPE_CHECKING:
     from netsetest.runtime.live import Observer
@@ -64,11 +66,34 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("watch", help="live per-node table of a running run: step, fault bound, E, drops, deadline misses")
     _observer_args(p)
 
+    p = sub.add_parser("view", help="live view of a running run in Rerun's web viewer, served from this machine (no internet): intervals, sets, graph, verdict")
+    _observer_args(p)
+    view_args(p)
+
     p = sub.add_parser("export", help="per-node tables of a record for pandas/polars (Parquet or CSV)")
     p.add_argument("record", help="record file (.json, .json.gz or .mcap)")
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--parquet", metavar="DIR", help="write DIR/node_<i>.parquet (needs pip install 'netsetest[export]')")
     g.add_argument("--csv", metavar="DIR", help="write DIR/node_<i>.csv")
+
+    p = sub.add_parser("report", help="one self-contained HTML page of one or more records: verdict, tables, graph, interactive Figs. 5-8")
+    p.add_argument("record", nargs="+", help="record files (.jsonl, .json.gz or .mcap)")
+    p.add_argument("--html", metavar="PATH", required=True, help="the page to write (needs pip install 'netsetest[view]')")
+    p.add_argument(
+        "--exact",
+        metavar="JSON",
+        action="append",
+        default=[],
+        help="a `netsetest exact RECORD --json JSON` document: its ratios go beside the record it names (repeatable; default: none)",
+    )
+
+
+def view_args(p: argparse.ArgumentParser) -> None:
+    """The live view's options (``view``, and ``run --view`` hands them to the view it starts)."""
+    p.add_argument(
+        "--port", type=argtypes.port, default=0, metavar="N", help="the web viewer's port on 127.0.0.1 (default: 0, a free one; the address is printed)"
+    )
+    p.add_argument("--tau-s", type=_seconds, metavar="S", help="the run's sampling period: a time axis and the car's path (default: steps only)")
 
 
 class ObserverError(Exception):
@@ -238,6 +263,35 @@ def cmd_watch(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_view(a: argparse.Namespace) -> int:
+    from netsetest.extras import require
+
+    require("rerun", "the live view")
+    from netsetest.runtime.launcher import free_ports
+    from netsetest.runtime.view import LiveView, ViewError, serve
+
+    end = None if a.duration is None else time.monotonic() + a.duration
+    with observing(a, None) as (obs, stop):
+        web, grpc = free_ports(2)
+        try:
+            server = serve(a.port or web, grpc)
+        except ViewError as exc:
+            raise ObserverError(str(exc)) from None
+        try:
+            print(f"live view of run {a.run_id or '*'}: {server.url}", flush=True)
+            view, hint = LiveView(server.rec, a.tau_s), SilenceHint("view", a)
+            while not stop.requested and (end is None or time.monotonic() < end):  # after the run's end it still serves, until Ctrl-C
+                got = obs.get(POLL_S)
+                if got is not None:
+                    hint.heard()
+                    view.feed(got.message, obs.backlog())
+                else:
+                    hint.tick()
+        finally:
+            server.close()
+    return 0
+
+
 def cmd_export(a: argparse.Namespace) -> int:
     from netsetest.records.export import export_record
     from netsetest.records.record import load_record
@@ -248,4 +302,26 @@ def cmd_export(a: argparse.Namespace) -> int:
     return 0
 
 
-COMMANDS.update(echo=cmd_echo, watch=cmd_watch, export=cmd_export)
+def cmd_report(a: argparse.Namespace) -> int:
+    from netsetest.extras import require
+
+    require("bokeh", "the HTML report")
+    from netsetest.records.record import load_record
+    from netsetest.records.report_html import RecordPage, attach_exact, load_exact, write_report
+    from netsetest.runtime.report import format_table
+
+    checks.output_file(a.html, "--html")
+    records = [load_record(r) for r in a.record]
+    exact = attach_exact(records, [(path, load_exact(path)) for path in a.exact])
+    labels = [f"{r.meta.case or '?'}/{r.meta.signals or '?'}" + (f" #{n}" if len(records) > 1 else "") for n, r in enumerate(records)]
+    pages = []
+    for rec, label, doc in zip(records, labels, exact):
+        table = "" if rec.summary is None else format_table(rec.summary)
+        verdict = table.splitlines()[-1] if table else ""
+        pages.append(RecordPage(rec, label, verdict, table, doc))
+    size = write_report(a.html, pages)
+    print(f"wrote {a.html} ({size / 1e6:.1f} MB)")
+    return 0
+
+
+COMMANDS.update(echo=cmd_echo, watch=cmd_watch, view=cmd_view, export=cmd_export, report=cmd_report)

@@ -38,7 +38,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
-from netsetest.records.record import Record
+from netsetest.records.record import Record, mismatch
 
 MAX_PANELS = 12
 TRANSIENT_S = 1.0  # Fig. 6: y limits ignore the bounds of the first second (Sec. VI: they settle within ~1 s)
@@ -62,7 +62,7 @@ def plot_records(records: list[Record], out_dir: str) -> list[str]:
             written.append(_save(draw(rec, labels[n]), out / f"{prefix}{name}.png"))
         if any(tr.fdi is not None and any(tr.fdi) for tr in rec.nodes.values()):
             written.append(_save(_fig_fdi(rec, labels[n]), out / f"{prefix}fault_detection.png"))
-        if _mismatch(rec) is not None:  # a plant other than the T-S model generated the truth
+        if mismatch(rec) is not None:  # a plant other than the T-S model generated the truth
             written.append(_save(_fig_mismatch(rec, labels[n]), out / f"{prefix}mismatch.png"))
     written.append(_save(_fig8(records, labels), out / "fig8_E.png"))
     return written
@@ -312,35 +312,22 @@ def _fig_fdi(rec: Record, label: str) -> Figure:
     return fig
 
 
-def _mismatch(rec: Record) -> tuple[np.ndarray, np.ndarray] | None:
-    """Steps and e_k (K, 2) of a record whose truth carries a non-zero model mismatch, else None."""
-    rows = [(e["step"], e["e"]) for e in rec.truth if e.get("e") is not None]
-    if not rows or not any(any(v) for _, v in rows):
-        return None
-    return np.array([k for k, _ in rows], dtype=float), np.array([v for _, v in rows], dtype=float)
-
-
 def _fig_mismatch(rec: Record, label: str) -> Figure:
     """e_k of the plant against the declared bound: each component with the bound's half-widths (the box
     itself, or the box around an ellipsoid), and the size of e_k in the bound's own norm (≤ 1 inside)."""
-    steps, e = _mismatch(rec)  # type: ignore[misc]  # called only where _mismatch found one (plot_records checks)
-    t = steps * rec.meta.tau_s
-    unc = rec.meta.model_uncertainty
+    m = mismatch(rec)
+    assert m is not None  # called only where mismatch() found one (plot_records checks)
+    t = m.steps * rec.meta.tau_s
     fig, axes = plt.subplots(3, 1, figsize=(8, 6.5), sharex=True)
     fig.suptitle(f"Model mismatch e_k of {rec.meta.plant} against the declared bound ({label})")
-    G = np.asarray(unc["G"], dtype=float) if isinstance(unc, dict) else None
-    kind = unc["kind"] if isinstance(unc, dict) else None
     for comp, (ax, name) in enumerate(zip(axes[:2], ("e_β [rad]", "e_r [rad/s]"))):
-        ax.plot(t, e[:, comp], color="tab:purple", lw=1.0, label="e_k (plant − T-S model)")
-        if G is not None:
-            radius = float(np.abs(G[comp]).sum()) if kind == "box" else float(np.linalg.norm(G[comp]))
+        ax.plot(t, m.e[:, comp], color="tab:purple", lw=1.0, label="e_k (plant − T-S model)")
+        if m.radius is not None:
             for sign in (1, -1):
-                ax.axhline(sign * radius, color="0.3", lw=0.9, ls="--", label="declared bound" if sign > 0 else None)
+                ax.axhline(sign * m.radius[comp], color="0.3", lw=0.9, ls="--", label="declared bound" if sign > 0 else None)
         ax.set_ylabel(name)
-    if G is not None:
-        zeta = np.linalg.solve(G, e.T)  # e = G ζ
-        size = np.abs(zeta).max(axis=0) if kind == "box" else np.sqrt((zeta * zeta).sum(axis=0))
-        axes[2].plot(t, size, color="tab:purple", lw=1.0)
+    if m.size is not None:
+        axes[2].plot(t, m.size, color="tab:purple", lw=1.0)
         axes[2].axhline(1.0, color="tab:red", lw=0.9, ls="--", label="bound (1)")
         axes[2].set_ylabel("‖G⁻¹e_k‖ (box: ∞-norm)")
     else:

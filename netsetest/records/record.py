@@ -542,3 +542,29 @@ def save_record(path: str | Path, meta: RunMeta, truth: list[dict], nodes: dict[
             sink.summary(summary)
     finally:
         sink.close()
+
+
+@dataclass(frozen=True)
+class Mismatch:
+    """A plant's model mismatch e_k (plant − T-S model) against the declared bound (docs/plant.md)."""
+
+    steps: np.ndarray  # (K,)
+    e: np.ndarray  # (K, 2) e_β [rad], e_r [rad/s]
+    radius: np.ndarray | None  # (2,) the bound's half-width per component (a box's, or the box around an ellipsoid); None: no bound declared
+    size: np.ndarray | None  # (K,) e_k in the bound's own norm, ‖G⁻¹e_k‖ (box: ∞-norm); ≤ 1 inside
+
+
+def mismatch(rec: Record) -> Mismatch | None:
+    """The record's e_k when its truth carries a non-zero model mismatch (a plant other than the T-S
+    model), else None."""
+    rows = [(e["step"], e["e"]) for e in rec.truth if e.get("e") is not None]
+    if not rows or not any(any(v) for _, v in rows):
+        return None
+    steps, e = np.array([k for k, _ in rows], dtype=float), np.array([v for _, v in rows], dtype=float)
+    unc = rec.meta.model_uncertainty
+    if not isinstance(unc, dict):
+        return Mismatch(steps, e, None, None)
+    G, box = np.asarray(unc["G"], dtype=float), unc["kind"] == "box"
+    radius = np.abs(G).sum(axis=1) if box else np.linalg.norm(G, axis=1)
+    zeta = np.linalg.solve(G, e.T)  # e = G ζ
+    return Mismatch(steps, e, radius, np.abs(zeta).max(axis=0) if box else np.sqrt((zeta * zeta).sum(axis=0)))

@@ -91,3 +91,17 @@ def _seconds_type(allow_zero: bool) -> Callable[[str], float]:
 
 
 seconds, non_negative_seconds = _seconds_type(False), _seconds_type(True)
+
+
+MAX_PORT = 65535
+
+
+def port(s: str) -> int:
+    """argparse type: a TCP port, 0 for a free one."""
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a port number: {s!r}") from None
+    if not 0 <= v <= MAX_PORT:
+        raise argparse.ArgumentTypeError(f"must be 0-{MAX_PORT}, got {v}")
+    return v

@@ -42,6 +42,7 @@ from netsetest.runtime.forkserver import ForkServer, ForkServerError
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress, log
 from netsetest.runtime.rolespec import Clock, CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
 from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, START_TIMEOUT_S
+from netsetest.runtime.view import ViewError, ViewProcess, start_view
 
 if TYPE_CHECKING:  # annotations only: the estimator and the models load in the role processes, not in the launcher
     from netsetest.estimator.sdp import Variant
@@ -82,6 +83,8 @@ class LaunchOptions:
     insecure: bool = False
     zenoh_config: str | None = None
     run_id: str | None = None  # None: a fresh random one (a guessable id, run<pid>, named every key of the run)
+    view: bool = False  # a live view beside the run (runtime/view.py), an observer like `watch`
+    view_port: int = 0  # its web port (0: a free one)
 
 
 RUN_ID_BYTES = 8  # of a run's random id (as `netsetest credentials` makes)
@@ -299,6 +302,12 @@ class Network:
     def renew(self, name: str) -> None:
         """A fresh port for a restarted role (its old one may linger in TIME_WAIT)."""
         self.ports[name] = free_ports(1)[0]
+
+    def observer_args(self) -> list[str]:
+        """The options with which ``watch`` and ``view`` join this run."""
+        if self.secured:
+            return ["--credentials", str(self.credentials)]
+        return ["--run-id", self.run_id, "--connect", self.endpoint("collector")]
 
     def describe(self) -> list[str]:
         """The launcher's lines about the network: its security, and how to watch the run."""
@@ -536,15 +545,26 @@ def launch(plan: RunPlan) -> RunOutcome:
         children = Children(server.spawn)
         network: Network | None = None
         supervisor: Supervisor | None = None
+        view: ViewProcess | None = None
         try:
             network = open_network(plan, run_id, tmp)
             if not o.quiet:  # --quiet: nothing on success; the summary and the record name the security mode
                 for line in network.describe():
                     log("run", line)
+            if o.view:  # subscribed before the first role starts: it sees step 0
+                view = start_view(network.observer_args(), plan.scenario.tau_s, o.view_port)
+                log("run", f"live view: {view.url}")
             starter = RoleStarter(plan, network, children)
             bar = Progress(plan.scenario.steps, f"zenoh ({len(plan.scenario.ids)} nodes + vehicle + collector)", enabled=not o.quiet)
             supervisor = Supervisor(children, plan.schedule, starter.start_all(), starter.restart_node, bar)
             outcome = supervisor.follow()
+            if view is not None and sys.stdin.isatty():
+                log("run", f"the run is over; its live view stays at {view.url} until Ctrl-C")
+                with contextlib.suppress(KeyboardInterrupt):
+                    signal.pause()
+        except ViewError as exc:
+            log("run", str(exc))
+            outcome = RunOutcome(EXIT_BAD_INPUT, None)
         except BusError as exc:  # the router: a bad --zenoh-config, or it cannot listen
             log("run", str(exc))
             outcome = RunOutcome(EXIT_BAD_INPUT, None)
@@ -556,6 +576,8 @@ def launch(plan: RunPlan) -> RunOutcome:
                 log("run", "interrupted while starting the run")
             outcome = (supervisor or Supervisor.idle(children)).interrupted(o.summary_json)
         finally:
+            if view is not None:
+                view.stop()
             children.stop_all(ROLE_GRACE_S)
             if network is not None:
                 network.close()

@@ -105,6 +105,10 @@ class Observer:
         self._sub = self._session.declare_subscriber(key_expr, lambda s: self._samples.put((str(s.key_expr), s.payload.to_bytes())))
         self._closed = False
 
+    def backlog(self) -> int:
+        """Samples received and not yet taken (the live view drops frames above a bound)."""
+        return self._samples.qsize()
+
     def get(self, timeout: float) -> Observed | None:
         try:
             key, payload = self._samples.get(timeout=timeout)
@@ -158,6 +162,7 @@ class LiveTable:
     truth: dict[int, Truth] = field(default_factory=dict)
     pending: dict[int, dict[int, NodeState]] = field(default_factory=dict)  # node → step → state
     ended: End | None = None
+    judged: list[tuple[int, int, float, float]] | None = None  # a list: every node-step judged, (node, step, E, ρ), for its reader to take
 
     def update(self, msg: Message | None) -> None:
         if isinstance(msg, NodeState):
@@ -194,9 +199,12 @@ class LiveTable:
             return
         del self.pending[node][step]
         row = self.rows[node]
+        e = augmented(tr.x, tr.faults[str(node)]) - np.asarray(st.xhat)
+        E = float(e @ np.linalg.solve(st.P_matrix(), e))
         if row.E_step is None or step >= row.E_step:  # the latest step whose truth is known
-            e = augmented(tr.x, tr.faults[str(node)]) - np.asarray(st.xhat)
-            row.E, row.E_step = float(e @ np.linalg.solve(st.P_matrix(), e)), step
+            row.E, row.E_step = E, step
+        if self.judged is not None:
+            self.judged.append((node, step, E, st.rho))
 
     @property
     def complete(self) -> bool:

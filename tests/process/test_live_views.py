@@ -190,7 +190,7 @@ def test_observed_keys() -> None:
         (["--duration", "0"], None),
     ],
 )
-@pytest.mark.parametrize("command", ["echo", "watch"])
+@pytest.mark.parametrize("command", ["echo", "watch", "view"])
 def test_bad_observer_options_exit_2(command: str, args: list[str], msg: str | None, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     if "{bad}" in args:
         bad = tmp_path / "bad.json5"
@@ -243,7 +243,7 @@ def test_observer_decodes_and_reports_undecodable_payloads(tmp_path: Path) -> No
 
 
 @pytest.mark.zenoh
-@pytest.mark.parametrize("command", ["echo", "watch"])
+@pytest.mark.parametrize("command", ["echo", "watch", "view"])
 @pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
 def test_observer_stops_cleanly_on_signal(command: str, sig: str, procs: ProcessGuard) -> None:
     import signal as _signal
@@ -275,7 +275,7 @@ def test_run_watch_hint_works_insecure(procs: ProcessGuard) -> None:
     assert parent.wait(timeout=120) == 0, procs.logs()
 
 
-@pytest.mark.parametrize("command", ["echo", "watch"])
+@pytest.mark.parametrize("command", ["echo", "watch", "view"])
 def test_observer_that_hears_nothing_says_why(command: str) -> None:
     """echo/watch on a secured run without --credentials printed nothing and exited 0 (or waited for ever)."""
     import subprocess

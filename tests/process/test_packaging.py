@@ -89,7 +89,7 @@ def test_wheel_contents_and_dependencies(wheel: Path) -> None:
     for dep in OPTIONAL:
         assert not any(r.lower().startswith(dep) for r in plain), (dep, plain)
     assert any(r.startswith("cvxpy") and 'extra == "cvxpy"' in r for r in requires)
-    for dep, extra in (("pyarrow", "export"), ("matplotlib", "plot"), ("mcap", "mcap")):
+    for dep, extra in (("pyarrow", "export"), ("matplotlib", "plot"), ("mcap", "mcap"), ("bokeh", "view"), ("rerun-sdk", "view")):
         assert any(r.startswith(dep) and f'extra == "{extra}"' in r for r in requires), (dep, requires)
 
 

@@ -186,3 +186,22 @@ def test_the_fuzz_templates_cover_every_message_type() -> None:
     assert {"input", "state", "truth", "end", "reading"} <= types
     assert any(msgpack.unpackb(p, raw=False).get("readings") for _, p in TEMPLATES)  # states that used a reading
     assert not math.isnan(len(TEMPLATES))
+
+
+@SEEDED
+@given(st.lists(_mutated(), min_size=1, max_size=12), st.integers(0, 400))
+def test_the_live_view_never_raises(deliveries: list[tuple[str, bytes]], backlog: int) -> None:
+    """``netsetest view`` draws whatever the observer decodes (forged states and truths included) or drops
+    it; it never raises (runtime/view.py)."""
+    rr = pytest.importorskip("rerun")
+    from netsetest.runtime.view import APP_ID, LiveView
+
+    rec = rr.RecordingStream(APP_ID)
+    rec.memory_recording()  # kept in memory, dropped with the test
+    view = LiveView(rec, tau_s=0.1)
+    for _key, payload in deliveries:
+        try:
+            msg: Message = decode(payload)
+        except BadMessage:
+            continue
+        view.feed(msg, backlog)

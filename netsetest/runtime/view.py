@@ -1,0 +1,325 @@
+"""The live view (``netsetest view``, ``netsetest run … --view``; extra ``view``): what an observer hears,
+streamed to Rerun, whose web viewer the installed package serves on this machine (no internet needed).
+
+It is one more subscribe-only session, like ``watch`` (:mod:`netsetest.runtime.live`): the nodes do no
+work for it.  :class:`LiveView` turns each decoded message into Rerun entities, timed by the step
+(timeline ``step``) and, when the sampling period is known, by t = k·τs (timeline ``t``):
+
+``nodes/<i>/fault/{lower,upper,true}``    the published fault interval and the true fault (Fig. 7 live)
+``nodes/<i>/yaw_rate/{lower,upper,true}`` the same for r
+``sets/node<i>``, ``sets/truth``          the published set projected on (β, r) (the ellipse of ρP, or a set
+                                          estimator's box) and the true (β, r), at the current step
+``graph``                                 the topology: an edge j → i for every message node i used, each
+                                          node coloured by its step (contained, missed, late, fault detected)
+``verdict``                               E ≤ ρ so far over the node-steps whose truth was heard, as ``watch``
+                                          computes it (the collector's verdict is the run's word)
+``plant/path``, ``plant/e/{beta,r}``, ``plant/mismatch_ok``   with a plant: the car's path (integrated
+                                          from r, β and v_x) and its model mismatch e_k with the flag whether
+                                          it stayed in its declared bound
+
+A view that falls behind drops frames: while more than :data:`MAX_BACKLOG` messages wait, messages are
+counted (the verdict stays exact) but not drawn, and the verdict says how many were left out.  The run
+never waits for it.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import select
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from netsetest.messages import End, Message, NodeState, Truth
+from netsetest.runtime.live import LiveTable
+
+MAX_BACKLOG = 200  # messages waiting: above this the view drops frames (about one step of a 24-node run and its truth ×4)
+ELLIPSE_POINTS = 48  # vertices of a drawn (β, r) ellipse
+SERVER_MEMORY = "256MiB"  # the Rerun server keeps this much of the run for a browser that connects late; older data goes first
+APP_ID = "netsetest"
+BOUND_RGB = (31, 119, 180)
+COLOURS = {  # a node's step in the graph (RGB)
+    "contained": (44, 160, 44),
+    "missed": (214, 39, 40),
+    "late": (255, 127, 14),
+    "fault detected": (148, 103, 189),
+    "no truth yet": (127, 127, 127),
+}
+
+
+def ellipse(centre: np.ndarray, shape: np.ndarray, n: int = ELLIPSE_POINTS) -> np.ndarray:
+    """(n + 1, 2) points of {x : (x − c)ᵀ shape⁻¹ (x − c) = 1}, closed."""
+    w, v = np.linalg.eigh(0.5 * (shape + shape.T))
+    a = np.linspace(0.0, 2 * math.pi, n + 1)
+    return np.asarray(centre, dtype=float) + ((v * np.sqrt(np.maximum(w, 0.0))) @ np.vstack([np.cos(a), np.sin(a)])).T
+
+
+@dataclass
+class Coverage:
+    """Node-steps whose state and truth the view heard, and how many had E ≤ ρ."""
+
+    judged: int = 0
+    contained: int = 0
+    dropped_frames: int = 0
+
+
+@dataclass
+class LiveView:
+    """Rerun entities from observed messages (module doc); ``rec`` is a ``rerun.RecordingStream``."""
+
+    rec: Any
+    tau_s: float | None = None
+    table: LiveTable = field(default_factory=lambda: LiveTable(judged=[]))
+    coverage: Coverage = field(default_factory=Coverage)
+    node_colour: dict[int, tuple[int, int, int]] = field(default_factory=dict)
+    edges: set[tuple[int, int]] = field(default_factory=set)
+    path: list[tuple[float, float]] = field(default_factory=lambda: [(0.0, 0.0)])
+    heading: float = 0.0
+    styled: set[int] = field(default_factory=set)
+
+    def layout(self) -> None:
+        """The viewer's layout for the nodes seen so far (sent again when a node appears): the graph, the
+        verdict and the (β, r) sets on the left; per node its fault and its yaw rate against the truth."""
+        import rerun.blueprint as rrb
+
+        ids = sorted(self.table.rows)
+        per_node = [
+            rrb.Grid(*(rrb.TimeSeriesView(origin=f"nodes/{i}/{what}", name=f"node {i} {what}") for i in ids), name=what) for what in ("fault", "yaw_rate")
+        ]
+        plant = [
+            rrb.Vertical(
+                rrb.Spatial2DView(origin="plant/path", name="car path"),
+                rrb.TimeSeriesView(origin="plant", contents=["plant/e/**", "plant/mismatch_ok"], name="e_k; 1 = in bound"),
+                name="plant",
+            )
+        ]
+        left = rrb.Vertical(
+            rrb.GraphView(origin="graph", name="topology"),
+            rrb.TextDocumentView(origin="verdict", name="verdict"),
+            rrb.Spatial2DView(origin="sets", name="(β, r) sets and truth"),
+        )
+        self.rec.send_blueprint(rrb.Blueprint(rrb.Horizontal(left, rrb.Tabs(*per_node, *plant), column_shares=[1, 2]), collapse_panels=True))
+
+    def _styles(self, ids: set[int]) -> None:
+        """Once per node: the bounds blue, the truth black (as the report's figures draw them)."""
+        import rerun as rr
+
+        for i in ids - self.styled:
+            for what in ("fault", "yaw_rate"):
+                for part, colour in (("lower", BOUND_RGB), ("upper", BOUND_RGB), ("true", (0, 0, 0))):
+                    self.rec.log(f"nodes/{i}/{what}/{part}", rr.SeriesLines(colors=[colour], names=[part]), static=True)
+        self.styled |= ids
+
+    def feed(self, msg: Message | None, backlog: int = 0) -> None:
+        """Take one message; draw it unless ``backlog`` messages wait behind it (then count only)."""
+        known = len(self.table.rows)
+        self.table.update(msg)
+        if len(self.table.rows) != known:
+            self._styles(set(self.table.rows))
+            self.layout()
+        judged = self.table.judged or []
+        for node, step, E, rho in judged:
+            self.coverage.judged += 1
+            self.coverage.contained += E <= rho
+            self.node_colour[node] = COLOURS["contained" if E <= rho else "missed"]
+        if judged:
+            judged.clear()
+        if backlog > MAX_BACKLOG:
+            self.coverage.dropped_frames += 1
+            return
+        if isinstance(msg, NodeState):
+            self._state(msg)
+        elif isinstance(msg, Truth):
+            self._truth(msg)
+        elif isinstance(msg, End):
+            self._verdict(msg.steps, ended=True)
+
+    def _time(self, step: int) -> None:
+        self.rec.set_time("step", sequence=step)
+        if self.tau_s is not None:
+            self.rec.set_time("t", duration=step * self.tau_s)
+
+    def _state(self, m: NodeState) -> None:
+        import rerun as rr
+
+        self._time(m.step)
+        lo, hi = m.bounds()
+        base = f"nodes/{m.node}"
+        for name, idx in (("fault", 2), ("yaw_rate", 1)):
+            self.rec.log(f"{base}/{name}/lower", rr.Scalars(float(lo[idx])))
+            self.rec.log(f"{base}/{name}/upper", rr.Scalars(float(hi[idx])))
+        P = m.P_matrix()
+        xhat = np.asarray(m.xhat, dtype=float)
+        if m.set is None:  # the SDP's ellipsoid, projected on (β, r)
+            pts = ellipse(xhat[:2], m.rho * P[:2, :2])
+        else:  # a set estimator's own set: its box in (β, r)
+            pts = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]], [lo[0], lo[1]]])
+        colour = COLOURS["late"] if m.late else COLOURS["fault detected"] if self.table.rows[m.node].fdi == "detected" else None
+        if colour is not None:
+            self.node_colour[m.node] = colour
+        self.rec.log(f"sets/node{m.node}", rr.LineStrips2D([pts], labels=[str(m.node)]))
+        self.edges |= {(j, m.node) for j in m.used}
+        ids = sorted(self.table.rows)
+        self.rec.log(
+            "graph",
+            rr.GraphNodes([str(i) for i in ids], labels=[str(i) for i in ids], colors=[self.node_colour.get(i, COLOURS["no truth yet"]) for i in ids]),
+            rr.GraphEdges([(str(j), str(i)) for j, i in sorted(self.edges)], graph_type="directed"),
+        )
+
+    def _truth(self, t: Truth) -> None:
+        import rerun as rr
+
+        self._time(t.step)
+        for i, f in t.faults.items():
+            self.rec.log(f"nodes/{i}/fault/true", rr.Scalars(float(f)))
+            self.rec.log(f"nodes/{i}/yaw_rate/true", rr.Scalars(float(t.x[1])))
+        self.rec.log("sets/truth", rr.Points2D([t.x], radii=[0.002], colors=[(0, 0, 0)]))
+        if t.e is not None and any(t.e):  # a plant other than the T-S model drives the truth
+            self.rec.log("plant/e/beta", rr.Scalars(float(t.e[0])))
+            self.rec.log("plant/e/r", rr.Scalars(float(t.e[1])))
+            self.rec.log("plant/mismatch_ok", rr.Scalars(float(t.mismatch_ok)))
+            if self.tau_s is not None:
+                beta, r = float(t.x[0]), float(t.x[1])
+                x, y = self.path[-1]
+                self.path.append((x + t.vx * math.cos(self.heading + beta) * self.tau_s, y + t.vx * math.sin(self.heading + beta) * self.tau_s))
+                self.heading += r * self.tau_s
+                self.rec.log("plant/path", rr.LineStrips2D([self.path]))
+        self._verdict(t.step, ended=False)
+
+    def _verdict(self, step: int, ended: bool) -> None:
+        import rerun as rr
+
+        c = self.coverage
+        text = (
+            f"## {'run ended after' if ended else 'step'} {step}\n\n"
+            f"E ≤ ρ on **{c.contained} of {c.judged}** node-steps heard with their truth"
+            + (f" — **{c.judged - c.contained} outside**" if c.judged > c.contained else "")
+            + f"\n\nframes dropped (the view was behind): {c.dropped_frames}\n\n"
+            "As `watch` computes it; the run's verdict (coverage, assumptions) is the collector's."
+        )
+        self.rec.log("verdict", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
+
+
+class ViewError(Exception):
+    """The live view did not start (its viewer, or the view process of ``run --view``)."""
+
+
+LOOPBACK = "127.0.0.1"  # the viewer shows the truth: it listens on this machine only
+SERVER_START_TIMEOUT_S = 60.0
+
+
+@dataclass
+class ViewerServer:
+    """Rerun's server (its ``rerun --serve-web``: the gRPC proxy and the web viewer, both bound to the
+    loopback address) and the recording stream connected to it."""
+
+    proc: subprocess.Popen
+    rec: Any
+    url: str
+    home: str  # its configuration (usage statistics off) and data, removed on close
+
+    def close(self) -> None:
+        self.rec.flush()
+        self.rec.disconnect()
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(VIEW_STOP_S)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        shutil.rmtree(self.home, ignore_errors=True)
+
+
+def serve(web_port: int, grpc_port: int) -> ViewerServer:
+    """Start Rerun's web viewer and its gRPC proxy on this machine (the package's own ``rerun`` binary, bound
+    to the loopback address: the SDK's in-process servers listen on every interface) and connect a
+    recording stream to it."""
+    import rerun as rr
+
+    import rerun_cli
+
+    exe = Path(rerun_cli.__file__).parent / "rerun"  # the binary itself (its Python wrapper would leave it orphaned when stopped)
+    home = tempfile.mkdtemp(prefix="netsetest-view-")  # the viewer's configuration and data: not the user's home
+    env = {**os.environ, "RERUN_APP_ONLY": "true", "XDG_CONFIG_HOME": f"{home}/config", "XDG_DATA_HOME": f"{home}/data"}
+    subprocess.run(
+        [str(exe), "analytics", "disable"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=SERVER_START_TIMEOUT_S, check=False
+    )
+    argv = [str(exe), "--serve-web", "--bind", LOOPBACK, "--port", str(grpc_port), "--web-viewer-port", str(web_port)]
+    proc = subprocess.Popen(
+        [*argv, "--server-memory-limit", SERVER_MEMORY], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, preexec_fn=_die_with_parent
+    )
+    deadline = time.monotonic() + SERVER_START_TIMEOUT_S
+    while not all(_listening(p) for p in (grpc_port, web_port)):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            proc.kill()
+            proc.wait()
+            shutil.rmtree(home, ignore_errors=True)
+            raise ViewError(f"Rerun's viewer did not start on ports {web_port} and {grpc_port} (exit {proc.returncode}): is a port taken?")
+        time.sleep(0.1)
+    uri = f"rerun+http://{LOOPBACK}:{grpc_port}/proxy"
+    rec = rr.RecordingStream(APP_ID)
+    rec.connect_grpc(uri)
+    return ViewerServer(proc, rec, f"http://{LOOPBACK}:{web_port}/?url={uri.replace('+', '%2B')}", home)
+
+
+def _listening(port: int) -> bool:
+    with socket.socket() as s:
+        return s.connect_ex((LOOPBACK, port)) == 0
+
+
+VIEW_START_TIMEOUT_S = 60.0  # the view process imports Rerun and opens its session and servers
+VIEW_STOP_S = 5.0
+
+
+@dataclass
+class ViewProcess:
+    """``run --view``: a ``netsetest view`` process beside the run (an observer like ``watch``), and its address."""
+
+    proc: subprocess.Popen
+    url: str
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)  # the view closes its session and servers
+            try:
+                self.proc.wait(VIEW_STOP_S)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
+
+
+def start_view(observer_args: list[str], tau_s: float, port: int) -> ViewProcess:
+    """Start ``netsetest view`` with the run's observer options; return once it subscribes and serves
+    (its first line is the address).  ViewError when it does not start."""
+    argv = [sys.executable, "-m", "netsetest", "view", *observer_args, "--tau-s", repr(tau_s), "--port", str(port)]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, text=True, preexec_fn=_die_with_parent)
+    assert proc.stdout is not None
+    ready, _, _ = select.select([proc.stdout], [], [], VIEW_START_TIMEOUT_S)
+    line = proc.stdout.readline() if ready else ""
+    if "http://" not in line:
+        ViewProcess(proc, "").stop()
+        raise ViewError(f"the live view did not start (exit {proc.returncode}); run `netsetest view` by hand to see why")
+    return ViewProcess(proc, line[line.index("http://") :].strip())
+
+
+def _die_with_parent() -> None:
+    """In the view's process: SIGTERM when the run's parent dies (no orphan serving a finished run)."""
+    import ctypes
+
+    ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+
+
+PR_SET_PDEATHSIG = 1  # prctl(2)

@@ -1,0 +1,211 @@
+"""A page in headless Chromium (Debian's ``chromium``, installed by .ci/run), driven over the DevTools
+protocol on a pipe (``--remote-debugging-pipe``: JSON messages separated by NUL on fds 3 and 4), so the
+tests need no websocket client and no browser download.
+
+:func:`load_page` opens a file, waits until BokehJS has rendered every root, evaluates the test's
+expressions, collects every console error and uncaught exception, and takes a full-page screenshot.
+The browser's profile and temporary files live in the test's directory (nothing in the system's /tmp).
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import os
+import shutil
+import subprocess
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome")
+RENDER_TIMEOUT_S = 60.0  # the machine is shared: a loaded core still renders a 1.5 MB page within this
+PAGE_WIDTH = 1200  # px
+
+
+def chromium() -> str:
+    """The browser's path, or skip the test saying why."""
+    for name in CHROMIUM_NAMES:
+        path = shutil.which(name)
+        if path:
+            return path
+    pytest.skip("no Chromium on this machine (.ci/run installs Debian's chromium with apt-get; install it to run the browser tests)")
+
+
+@dataclass
+class Page:
+    """What the browser saw: the results of the expressions, console errors, the screenshot (PNG)."""
+
+    values: dict[str, Any]
+    errors: list[str] = field(default_factory=list)
+    failed_requests: list[str] = field(default_factory=list)  # URLs the page asked for and did not get
+    screenshot: bytes = b""
+    load_s: float = 0.0
+
+    def pixel_std(self) -> float:
+        """Standard deviation of the screenshot's grey levels: about 0 for a blank page."""
+        from PIL import Image
+
+        img = np.asarray(Image.open(io.BytesIO(self.screenshot)).convert("L"), dtype=float)
+        return float(img.std())
+
+
+class _Cdp:
+    """Commands and events of the DevTools protocol over the pipe."""
+
+    def __init__(self, proc: subprocess.Popen, to_browser: int, from_browser: int, timeout: float) -> None:
+        self.timeout = timeout
+        self.proc, self._out, self._in = proc, os.fdopen(to_browser, "wb", buffering=0), os.fdopen(from_browser, "rb", buffering=0)
+        self._buf = b""
+        self._id = 0
+        self.events: list[dict] = []
+
+    def _read(self, deadline: float) -> dict:
+        while b"\0" not in self._buf:
+            if time.monotonic() > deadline:
+                raise TimeoutError("the browser did not answer")
+            chunk = self._in.read(65536)
+            if not chunk:
+                raise RuntimeError(f"the browser closed the pipe (exit {self.proc.poll()})")
+            self._buf += chunk
+        msg, self._buf = self._buf.split(b"\0", 1)
+        return json.loads(msg)
+
+    def send(self, method: str, params: dict | None = None, session: str | None = None, timeout: float | None = None) -> dict:
+        self._id += 1
+        cmd: dict[str, Any] = {"id": self._id, "method": method, "params": params or {}}
+        if session:
+            cmd["sessionId"] = session
+        self._out.write(json.dumps(cmd).encode() + b"\0")
+        deadline = time.monotonic() + (timeout or self.timeout)
+        while True:
+            msg = self._read(deadline)
+            if msg.get("id") == self._id:
+                if "error" in msg:
+                    raise RuntimeError(f"{method}: {msg['error']}")
+                return msg.get("result", {})
+            self.events.append(msg)
+
+    def close(self) -> None:
+        self._out.close()
+        self._in.close()
+
+
+def _errors(events: list[dict]) -> list[str]:
+    out = []
+    for e in events:
+        m, p = e.get("method"), e.get("params", {})
+        if m == "Runtime.exceptionThrown":
+            d = p.get("exceptionDetails", {})
+            out.append(f"exception: {d.get('exception', {}).get('description') or d.get('text')}")
+        elif m == "Runtime.consoleAPICalled" and p.get("type") in ("error", "assert"):
+            out.append("console.error: " + " ".join(str(a.get("value", a.get("description", ""))) for a in p.get("args", [])))
+        elif m == "Log.entryAdded" and p.get("entry", {}).get("level") == "error":
+            out.append(f"log: {p['entry'].get('text')} ({p['entry'].get('url', '')})")
+    return out
+
+
+def _failed_requests(events: list[dict]) -> list[str]:
+    urls = {e["params"]["requestId"]: e["params"]["request"]["url"] for e in events if e.get("method") == "Network.requestWillBeSent"}
+    return [urls.get(e["params"]["requestId"], "?") for e in events if e.get("method") == "Network.loadingFailed"]
+
+
+def load_page(
+    url: str, workdir: Path, expressions: dict[str, str], ready: str, height: int | None = None, settle_s: float = 0.0, timeout: float = RENDER_TIMEOUT_S
+) -> Page:
+    """Open ``url``, wait until the JavaScript expression ``ready`` is true, evaluate ``expressions``
+    (name → expression, JSON-serialisable results) after ``settle_s`` more seconds, and screenshot the whole
+    page (or its top ``height`` px); ``timeout`` bounds each step (a page compiling a large WebAssembly module
+    on a loaded machine answers late)."""
+    browser = chromium()
+    profile = workdir / "chromium-profile"
+    profile.mkdir(parents=True, exist_ok=True)
+    to_r, to_w = os.pipe()  # the browser reads commands on its fd 3
+    from_r, from_w = os.pipe()  # and writes answers on its fd 4
+
+    def fds() -> None:  # in the child: the two pipe ends where Chromium expects them
+        os.dup2(to_r, 3)
+        os.dup2(from_w, 4)
+
+    env = {**os.environ, "TMPDIR": str(workdir), "HOME": str(workdir)}
+    proc = subprocess.Popen(
+        [
+            browser,
+            "--headless",
+            "--disable-gpu",
+            "--no-sandbox",
+            "--remote-debugging-pipe",
+            f"--user-data-dir={profile}",
+            "--no-first-run",
+            "--disable-extensions",
+            "--disable-background-networking",
+            "--disable-crash-reporter",
+            "--hide-scrollbars",
+            "about:blank",
+        ],
+        preexec_fn=fds,
+        pass_fds=(3, 4),  # kept open across exec (preexec_fn runs before the other fds are closed)
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=env,
+    )
+    os.close(to_r)
+    os.close(from_w)
+    cdp = _Cdp(proc, to_w, from_r, timeout)
+    try:
+        target = cdp.send("Target.createTarget", {"url": "about:blank"})["targetId"]
+        session = cdp.send("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
+        for domain in ("Runtime", "Log", "Page", "Network"):
+            cdp.send(f"{domain}.enable", session=session)
+        cdp.send("Emulation.setDeviceMetricsOverride", {"width": PAGE_WIDTH, "height": 900, "deviceScaleFactor": 1, "mobile": False}, session=session)
+        start = time.monotonic()
+        cdp.send("Page.navigate", {"url": url}, session=session)
+        deadline = start + timeout
+        while not cdp.send("Runtime.evaluate", {"expression": f"!!({ready})", "returnByValue": True}, session=session)["result"].get("value"):
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"the page did not become ready ({ready}) within {timeout:g} s")
+            time.sleep(0.1)
+        load_s = time.monotonic() - start
+        time.sleep(settle_s)
+        values = {}
+        for name, expr in expressions.items():
+            res = cdp.send("Runtime.evaluate", {"expression": expr, "returnByValue": True}, session=session)
+            if "exceptionDetails" in res:
+                raise RuntimeError(f"{name}: {res['exceptionDetails'].get('exception', {}).get('description')}")
+            values[name] = res["result"].get("value")
+        full = cdp.send("Runtime.evaluate", {"expression": "document.documentElement.scrollHeight", "returnByValue": True}, session=session)["result"]["value"]
+        h = min(int(full), height) if height else int(full)
+        cdp.send("Emulation.setDeviceMetricsOverride", {"width": PAGE_WIDTH, "height": h, "deviceScaleFactor": 1, "mobile": False}, session=session)
+        time.sleep(0.5)  # a resize re-renders the canvases
+        shot = base64.b64decode(cdp.send("Page.captureScreenshot", {"format": "png"}, session=session)["data"])
+        errors = _errors(cdp.events)
+        failed = _failed_requests(cdp.events)
+        try:
+            cdp.send("Browser.close", timeout=10)
+        except (RuntimeError, TimeoutError):
+            pass
+        return Page(values, errors, failed, shot, load_s)
+    finally:
+        cdp.close()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+BOKEH_READY = (
+    "window.Bokeh !== undefined && Bokeh.documents.length > 0 && Bokeh.index !== undefined && "
+    "Bokeh.documents[0].roots().every(r => Bokeh.index[r.id] !== undefined)"
+)
+"""BokehJS has built a view for every root of the page."""
+
+
+def named(name: str) -> str:
+    """An expression: the data of the renderer called ``name`` (its ``node`` column), or null."""
+    return f"(() => {{ const m = Bokeh.documents[0].get_model_by_name({json.dumps(name)}); if (m === null) return null; const d = m.data_source.data; return Array.from(d instanceof Map ? d.get('node') : d['node']); }})()"

@@ -1,0 +1,125 @@
+"""The report page in a real browser (headless Chromium, tests/browser_helpers.py): it renders without a
+console error, draws one line per node in every per-node figure, the graph's nodes and the verdict, and
+its screenshot is not blank.  Skips, saying why, where Chromium is not installed.
+
+``NETSETEST_DOCS_SCREENSHOTS=1`` also writes the screenshots the README shows into docs/images/.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+from pathlib import Path
+from urllib.parse import urlparse
+
+import pytest
+
+from browser_helpers import BOKEH_READY, chromium, load_page, named
+from zenoh_helpers import PAPER6, ProcessGuard, cli, wait_for
+
+from netsetest.cli.main import main
+from netsetest.runtime.report import EXIT_INTERRUPTED
+
+ROOT = Path(__file__).resolve().parents[2]
+TOPOLOGY = str(ROOT / "topologies" / "paper6.toml")
+NODES = list(range(1, 7))
+FIGURES = ("fig5", "fig6-0", "fig6-1", "fig7", "fig8")
+MIN_PIXEL_STD = 10.0  # grey levels: a blank (or one-colour) page is about 0, the report about 30
+DOCS_SHOT = "NETSETEST_DOCS_SCREENSHOTS"  # set: the screenshots also go to docs/images/ (the README's)
+DOCS_HEIGHT = 1400  # px of the page's top kept for the README
+
+
+def _named_in(prefix: str) -> str:
+    """An expression: the names of every model of the page starting with ``prefix``."""
+    return (
+        "(() => { const d = Bokeh.documents[0]; const all = d._all_models ?? d.all_models; "
+        "return Array.from(all.values ? all.values() : all).map(m => m.name).filter(n => typeof n === 'string' && n.startsWith("
+        + json.dumps(prefix)
+        + ")); })()"
+    )
+
+
+def _save(shot: bytes, tmp_path: Path, name: str) -> None:
+    (tmp_path / name).write_bytes(shot)
+    if os.environ.get(DOCS_SHOT):
+        (ROOT / "docs" / "images").mkdir(exist_ok=True)
+        (ROOT / "docs" / "images" / name).write_bytes(shot)
+
+
+def test_report_page_renders_in_chromium(tmp_path: Path) -> None:
+    chromium()  # skip before the run where there is no browser
+    rec, page = tmp_path / "run.jsonl", tmp_path / "report.html"
+    assert main(["run", TOPOLOGY, "--mode", "inmemory", "--steps", "40", "--seed", "1", "--record", str(rec), "--quiet"]) == 0
+    assert main(["report", str(rec), "--html", str(page)]) == 0
+    seen = load_page(
+        page.resolve().as_uri(),
+        tmp_path,
+        {
+            "text": "document.body.innerText",
+            "graph": named("graph-nodes"),
+            **{fig: _named_in(f"{fig}-node-") for fig in FIGURES},
+            **{f"{fig}-{i}": named(f"{fig}-node-{i}") for fig in FIGURES for i in NODES},
+        },
+        ready=BOKEH_READY,
+        height=DOCS_HEIGHT if os.environ.get(DOCS_SHOT) else None,
+    )
+    _save(seen.screenshot, tmp_path, "report.png")
+    assert seen.errors == []
+    assert "PASS: inmemory run, case nsnim" in seen.values["text"] and "contained on 246 of 246 node-steps" in seen.values["text"]
+    assert sorted(seen.values["graph"]) == NODES
+    for fig in FIGURES:  # one line per node, each carrying its own node's data
+        assert sorted(seen.values[fig]) == sorted(f"{fig}-node-{i}" for i in NODES), fig
+        for i in NODES:
+            assert set(seen.values[f"{fig}-{i}"]) == {i}, (fig, i)
+    assert seen.pixel_std() > MIN_PIXEL_STD
+
+
+def test_compare_page_renders_in_chromium(tmp_path: Path) -> None:
+    chromium()
+    page = tmp_path / "compare.html"
+    assert main(["compare", TOPOLOGY, "--steps", "12", "--estimators", "sdp,interval", "--html", str(page)]) == 0
+    seen = load_page(page.resolve().as_uri(), tmp_path, {"text": "document.body.innerText", "lines": _named_in("compare-node-")}, ready=BOKEH_READY)
+    assert seen.errors == []
+    assert "no estimator missed the truth" in seen.values["text"]
+    assert sorted(seen.values["lines"]) == sorted(f"compare-node-{i}" for i in NODES)
+    assert seen.pixel_std() > MIN_PIXEL_STD
+
+
+def test_a_page_with_a_broken_script_is_caught(tmp_path: Path) -> None:
+    """The console check can fail: a page whose script throws is reported."""
+    chromium()
+    page = tmp_path / "broken.html"
+    page.write_text("<html><body><p>x</p><script>window.Bokeh = {documents: [1], index: {}}; undefined_function();</script></body></html>")
+    seen = load_page(page.resolve().as_uri(), tmp_path, {}, ready="true")
+    assert any("undefined_function" in e for e in seen.errors)
+    assert seen.pixel_std() < MIN_PIXEL_STD  # and a nearly empty page counts as blank
+
+
+LOCAL_HOSTS = ("127.0.0.1", "localhost")
+VIEW_STEPS = 6000  # at --pace 0.1 up to 10 min: the run goes on while the browser loads the viewer (interrupted after)
+VIEW_LOAD_S = 240.0  # the viewer is a 30 MB WebAssembly module, compiled by a software-rendering browser on a shared machine
+OFFLINE_NOISE = ("Failed to load resource", "Failed to fetch")  # how Chromium reports a request that could not leave the machine
+
+
+@pytest.mark.timeout(2 * VIEW_LOAD_S + 120)
+def test_live_view_renders_in_chromium_during_a_run(procs: ProcessGuard, tmp_path: Path) -> None:
+    """``run --view``: the viewer served by the installed Rerun package loads from this machine alone while
+    the run goes (what it draws: tests/inmemory/test_live_view.py decodes the stream)."""
+    chromium()
+    pytest.importorskip("rerun")
+    run = procs.start("run", cli("run", PAPER6, "--steps", str(VIEW_STEPS), "--pace", "0.1", "--view", "--quiet"))
+    url = wait_for(lambda: next((ln.split("live view: ", 1)[1].strip() for ln in procs.stderr("run").splitlines() if "live view: " in ln), None), 90)
+    assert url and url.startswith("http://127.0.0.1:")
+    seen = load_page(url, tmp_path, {"title": "document.title"}, ready="document.querySelector('canvas') !== null", settle_s=10.0, timeout=VIEW_LOAD_S)
+    assert run.poll() is None, "the run was still going while the viewer loaded"
+    _save(seen.screenshot, tmp_path, "live_view.png")
+    assert seen.values["title"] == "Rerun Viewer"
+    # the viewer itself and the stream came from this machine; what failed are only its calls outside
+    # (a web font, an update check, usage statistics), which an offline machine refuses
+    local_failures = [u for u in seen.failed_requests if urlparse(u).hostname in LOCAL_HOSTS]
+    assert local_failures == []
+    assert [e for e in seen.errors if not any(n in e for n in OFFLINE_NOISE)] == []
+    assert seen.pixel_std() > MIN_PIXEL_STD
+    run.send_signal(signal.SIGINT)  # Ctrl-C: the run stops its roles and its view
+    assert procs.wait("run", 60) == EXIT_INTERRUPTED
