@@ -17,10 +17,12 @@ assumed healthy (|Q| ≤ need), a maximal interval of t_j inside ∩_{q∈Q} I_q
 untied spans cover, with |f_q,j| ≤ τ for q ∈ Q.  :func:`minimise` is a best-first branch and bound over
 them: the relaxation leaves every unchosen step's union out, a node whose minimiser meets every step's
 union is optimal (it has the least bound of all open nodes), otherwise it branches into the pieces of one
-violated step.  Past the budget of solves, or past the run's deadline, it stops with the least open bound: an
-outer bound (sound), reported as relaxed.  The solvers of the nodes are kept for the other ends of the same
-program (the same rows, another objective), at most :data:`MAX_SOLVERS` of them (least recently used out): what
-the search keeps is bounded, whatever the number of branches.
+violated step; before it, one *dive* tries the pieces the same end chose at the previous horizon, all at once
+(one solve where the search would branch once per union), and a child whose piece's interval bounds the objective
+past the incumbent is never solved.  Past the budget of solves, or past the run's deadline (CPU time), it stops
+with the least open bound: an outer bound (sound), reported as relaxed.  The solvers of the nodes are kept for the
+other ends of the same program (the same rows, another objective), at most :data:`MAX_SOLVERS` of them (least
+recently used out): what the search keeps is bounded, whatever the number of branches.
 """
 
 from __future__ import annotations
