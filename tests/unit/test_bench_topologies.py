@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from netsetest.bench.topologies import FAULTY_PROFILES, ring_topology
-from netsetest.config.schema import load_topology
+from netsetest.config.schema import Scenario, load_topology
 
 
 @pytest.mark.parametrize("n", [6, 13, 14, 32])
@@ -39,3 +39,16 @@ def test_the_two_groups_variant_is_issue_34s_ring(tmp_path: Path) -> None:
     assert [g.nodes for g in ring24.health_groups] == [(2, 3, 5, 10, 14, 15, 17, 22), (1, 4, 9, 12, 13, 16, 21, 24)]
     for g in ring24.health_groups:
         assert g.max_faulty == sum((i - 1) % 6 + 1 in FAULTY_PROFILES for i in g.nodes) < len(g.nodes)
+
+
+def test_the_issue_34_fixture_is_the_benchmarks_ring(tmp_path: Path) -> None:
+    """tests/fixtures/ring12_two_groups.toml (run it: ``netsetest run tests/fixtures/ring12_two_groups.toml --signals
+    worst``, then ``netsetest exact``) is the 12-node ring the benchmark's exact part measures."""
+    fixture = load_topology(Path(__file__).resolve().parents[1] / "fixtures" / "ring12_two_groups.toml", "saim")
+    bench = load_topology(ring_topology(tmp_path, 12, 80, "saim", variant="two_groups"), "saim")
+    assert fixture.health_groups == bench.health_groups and fixture.steps == bench.steps == 80
+
+    def nodes(sc: Scenario) -> list[tuple]:
+        return [(n.id, n.in_weights, n.sensor.C.tolist(), n.sensor.Ds, n.fault_size, n.fault_rate) for n in sc.nodes]
+
+    assert nodes(fixture) == nodes(bench)
