@@ -647,12 +647,13 @@ def _end(
 
 def eta_s(elapsed: float, done: int, total: int, budget_s: float | None) -> float | None:
     """Seconds left after ``done`` of ``total`` steps in ``elapsed`` s: a step costs about its horizon's length
-    (every program grows with it), so the time so far grows as done², and the search stops at the budget (the
-    steps after it cost one solve an end).  None before the first step is done."""
+    (every program grows with it), so the time so far grows as done².  Before the budget, at most what is left of
+    it (the search stops there; the steps after it cost one solve an end, not counted); past it, that pace (an
+    overestimate: the later steps have no search).  None before the first step is done."""
     if done <= 0:
         return None
     left = elapsed * (total**2 - done**2) / done**2
-    return left if budget_s is None else max(0.0, min(left, budget_s - elapsed))
+    return left if budget_s is None or elapsed >= budget_s else min(left, budget_s - elapsed)
 
 
 def _ids(nodes: tuple[int, ...]) -> str:
@@ -665,7 +666,7 @@ def health_line(h: HealthSearch) -> str:
         f"applied: k-of-N health ({h.declared}: at least "
         f"{' and '.join(f'{n} of sensors {_ids(g)}' for n, g in zip(h.need, h.nodes))} healthy at every step) by branch and bound, "
         f"{h.exact_ends} of {h.ends} ends exact ({h.solves} solves, at most {h.budget} per end"
-        + ("" if h.budget_s is None else f", {h.budget_s:g} s in all")
+        + ("" if h.budget_s is None else f", {h.budget_s:g} s of CPU in all")
         + ")"
     )
     if h.out_of_time is not None:

@@ -342,7 +342,7 @@ def test_the_eta_grows_with_the_horizon_and_stops_at_the_budget() -> None:
     assert eta_s(5.0, 0, 80, None) is None
     assert eta_s(10.0, 40, 80, None) == pytest.approx(30.0)  # a step costs its horizon: 10 s for 40 steps, 40 s for 80
     assert eta_s(10.0, 40, 80, 25.0) == pytest.approx(15.0)
-    assert eta_s(30.0, 40, 80, 25.0) == 0.0
+    assert eta_s(30.0, 40, 80, 25.0) == pytest.approx(90.0)  # past the budget: the pace so far
 
 
 @pytest.mark.parametrize("value", ["-1", "abc", "nan", "inf"])
