@@ -28,13 +28,14 @@ from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import math
+import time
 
 import clarabel
 import numpy as np
 from scipy import sparse
 
 from netsetest.analysis.errors import ExactError
-from netsetest.analysis.kofn import Conic, EndResult, Piece, Row, Solvers, Span, StepUnion, interval_rows, minimise, settle, step_pieces
+from netsetest.analysis.kofn import Conic, EndResult, Guide, Piece, Row, Solvers, Span, StepUnion, interval_rows, minimise, settle, step_pieces
 from netsetest.config.schema import FaultBoundsMode, NodeConfig, Scenario
 from netsetest.estimator.health import HealthModel
 from netsetest.records.record import Record
@@ -95,6 +96,8 @@ class HealthSearch:
     exact_ends: int
     relaxed: tuple[WitnessKey, ...]
     solves: int
+    budget_s: float | None = None  # the whole computation's time budget (CPU seconds of this process; None: none)
+    out_of_time: int | None = None  # the step during which it ran out: the search of every later end was cut short
 
 
 @dataclass(frozen=True)
@@ -465,7 +468,7 @@ class _Horizon:
     def __init__(self, conic: Conic, nz: int) -> None:
         self.conic, self.nz = conic, nz
         self.solver: clarabel.DefaultSolver | None = None
-        self.branches: Solvers = {}  # the branch and bound's, shared by the horizon's ends
+        self.branches = Solvers()  # the branch and bound's, shared by the horizon's ends (bounded: kofn.MAX_SOLVERS)
 
     def root(self, col: int, sign: float) -> tuple[np.ndarray, str, np.ndarray | None]:
         """q, the solver's status and its minimiser (over every column of the program) of sign·z[col]."""
@@ -509,6 +512,7 @@ def exact_bounds(
     progress: Callable[[int, int], None] | None = None,
     health: bool = True,
     health_budget: int = HEALTH_BUDGET,
+    budget_s: float | None = None,
 ) -> ExactBounds:
     """The exact intervals of every step of ``record`` under ``scenario``'s assumptions (module doc).
 
@@ -519,6 +523,10 @@ def exact_bounds(
     faults that no declared bound ties (exact, see :meth:`_Program._eliminated`; False keeps the
     whole program, for checking that).  ``health``: apply a declared ``[network] max_faulty`` by branch
     and bound (at most ``health_budget`` solves per end, docs/exact.md); False leaves it out (an outer bound).
+    ``budget_s``: CPU seconds of this process for the whole computation (its wall time on an idle core; CPU, so
+    that which ends are exact does not depend on what else the machine runs); past them no branch is solved any
+    more, and every end its relaxation does not settle is relaxed (sound, labelled: ``HealthSearch.out_of_time``).
+    None: no limit.
     """
     data = step_data(record)
     for d in data:
@@ -541,6 +549,9 @@ def exact_bounds(
     witnesses: dict[WitnessKey, Witness] = {}
     infeasible: list[int] = []
     tally = _HealthTally()
+    guides: dict[tuple[Coordinate, int | None, Side], Guide] = {}  # per end: its last minimiser (one vector each)
+    deadline = math.inf if budget_s is None else time.process_time() + budget_s
+    out_of_time: int | None = None
     st = _settings()
     for k in range(K1):
         if progress is not None:
@@ -557,7 +568,8 @@ def exact_bounds(
             unions = _unions_at(plans, k, col, beta[k], r[k], coord == "f") if plans else None
             for end, (side, sign) in enumerate((("lo", 1.0), ("hi", -1.0))):
                 key = WitnessKey(coord, node, k, side)  # type: ignore[arg-type]  # coord is one of COORDINATES and side one of lo, hi: str in the loop
-                result = _end(horizon, col, sign, unions, health_budget, f"step {k}: the {coord} bound")
+                end_key = (coord, node, key.side)
+                result = _end(horizon, col, sign, unions, health_budget, f"step {k}: the {coord} bound", deadline, guides.get(end_key))
                 if result.status == "infeasible":
                     step_infeasible = True
                     continue
@@ -566,8 +578,12 @@ def exact_bounds(
                     witnesses[key] = prog.witness(result.z, k, eliminate_free_faults)
                 if plans:
                     tally.count(key, result)
+                    if result.z is not None:  # the next horizon's search of this end tries its pieces first
+                        guides[end_key] = (k, result.z)
                     for p in plans:
                         p.drop([d for d in result.dead if d[0] < k])
+        if out_of_time is None and time.process_time() >= deadline:
+            out_of_time = k
         if step_infeasible:
             infeasible.append(k)
         elif plans:
@@ -577,7 +593,9 @@ def exact_bounds(
     if plans:
         needs = tuple(p.model.need for p in plans)
         applied = tuple(tuple(p.model.sensors) for p in plans)
-        search = HealthSearch(scenario.health_label, needs, applied, health_budget, tally.ends, tally.exact, tuple(tally.relaxed), tally.solves)
+        search = HealthSearch(
+            scenario.health_label, needs, applied, health_budget, tally.ends, tally.exact, tuple(tally.relaxed), tally.solves, budget_s, out_of_time
+        )
     return ExactBounds(
         steps=np.arange(K1),
         beta=beta,
@@ -604,7 +622,16 @@ def _unions_at(plans: list[_HealthPlan], k: int, col: int, beta: np.ndarray, r: 
     return sorted(unions, key=lambda u: u.step), complete
 
 
-def _end(horizon: _Horizon, col: int, sign: float, unions: tuple[list[StepUnion], bool] | None, budget: int, what: str) -> EndResult:
+def _end(
+    horizon: _Horizon,
+    col: int,
+    sign: float,
+    unions: tuple[list[StepUnion], bool] | None,
+    budget: int,
+    what: str,
+    deadline: float = math.inf,
+    guide: Guide | None = None,
+) -> EndResult:
     """min sign·z[col]: the root relaxation, then (``unions``: the k-of-N unions and whether they are complete)
     the branch and bound over them."""
     q, status, z = horizon.root(col, sign)
@@ -614,8 +641,19 @@ def _end(horizon: _Horizon, col: int, sign: float, unions: tuple[list[StepUnion]
     if unions is None:
         value = {"solved": float(q @ z[horizon.conic.cols]) if z is not None else np.nan, "unbounded": -np.inf, "infeasible": np.nan}[kind]
         return EndResult(kind, value, z, True, 1)
-    result = minimise(horizon.conic, q, horizon.nz, unions[0], (status, z), budget, horizon.branches)
+    result = minimise(horizon.conic, q, horizon.nz, unions[0], (status, z), budget, horizon.branches, deadline, guide)
     return replace(result, exact=result.exact and unions[1], solves=result.solves + 1)
+
+
+def eta_s(elapsed: float, done: int, total: int, budget_s: float | None) -> float | None:
+    """Seconds left after ``done`` of ``total`` steps in ``elapsed`` s: a step costs about its horizon's length
+    (every program grows with it), so the time so far grows as done².  Before the budget, at most what is left of
+    it (the search stops there; the steps after it cost one solve an end, not counted); past it, that pace (an
+    overestimate: the later steps have no search).  None before the first step is done."""
+    if done <= 0:
+        return None
+    left = elapsed * (total**2 - done**2) / done**2
+    return left if budget_s is None or elapsed >= budget_s else min(left, budget_s - elapsed)
 
 
 def _ids(nodes: tuple[int, ...]) -> str:
@@ -627,8 +665,12 @@ def health_line(h: HealthSearch) -> str:
     line = (
         f"applied: k-of-N health ({h.declared}: at least "
         f"{' and '.join(f'{n} of sensors {_ids(g)}' for n, g in zip(h.need, h.nodes))} healthy at every step) by branch and bound, "
-        f"{h.exact_ends} of {h.ends} ends exact ({h.solves} solves, at most {h.budget} per end)"
+        f"{h.exact_ends} of {h.ends} ends exact ({h.solves} solves, at most {h.budget} per end"
+        + ("" if h.budget_s is None else f", {h.budget_s:g} s of CPU in all")
+        + ")"
     )
+    if h.out_of_time is not None:
+        line += f"; the time budget ran out at step {h.out_of_time}: later ends are relaxed where one solve does not settle them"
     if not h.relaxed:
         return line
     shown = ", ".join(f"{k.coordinate}{'' if k.node is None else k.node} {k.side} at step {k.step}" for k in h.relaxed[:8])
@@ -799,7 +841,7 @@ def _nanmean(values: list[float]) -> float:
     return float(np.mean(finite)) if finite else float("nan")
 
 
-EXACT_FORMAT_VERSION = 2  # 2: health {declared, need and nodes per group} (k-of-N groups) instead of {max_faulty, need}
+EXACT_FORMAT_VERSION = 3  # 3: health has relaxed_ends, budget_s, out_of_time; 2: {declared, need and nodes per group} instead of {max_faulty, need}
 
 
 def _finite_or_none(v: float) -> float | None:
@@ -817,7 +859,10 @@ def _health_document(h: HealthSearch | None) -> dict | None:
         "budget": h.budget,
         "ends": h.ends,
         "exact_ends": h.exact_ends,
+        "relaxed_ends": len(h.relaxed),
         "solves": h.solves,
+        "budget_s": h.budget_s,
+        "out_of_time": h.out_of_time,
         "relaxed": relaxed,
     }
 

@@ -17,8 +17,12 @@ assumed healthy (|Q| ≤ need), a maximal interval of t_j inside ∩_{q∈Q} I_q
 untied spans cover, with |f_q,j| ≤ τ for q ∈ Q.  :func:`minimise` is a best-first branch and bound over
 them: the relaxation leaves every unchosen step's union out, a node whose minimiser meets every step's
 union is optimal (it has the least bound of all open nodes), otherwise it branches into the pieces of one
-violated step.  Past the budget of solves it stops with the least open bound: an outer bound (sound),
-reported as relaxed.
+violated step; before it, one *dive* tries the pieces the same end chose at the previous horizon, all at once
+(one solve where the search would branch once per union), and a child whose piece's interval bounds the objective
+past the incumbent is never solved.  Past the budget of solves, or past the run's deadline (CPU time), it stops
+with the least open bound: an outer bound (sound), reported as relaxed.  The solvers of the nodes are kept for the
+other ends of the same program (the same rows, another objective), at most :data:`MAX_SOLVERS` of them (least
+recently used out): what the search keeps is bounded, whatever the number of branches.
 """
 
 from __future__ import annotations
@@ -26,6 +30,8 @@ from __future__ import annotations
 import heapq
 import itertools
 import math
+import time
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -58,7 +64,34 @@ class Piece:
 
 
 Path = tuple[tuple[int, Piece], ...]  # the (step, piece) a node chose, in order
-Solvers = dict[Path, clarabel.DefaultSolver]  # a node's solver by its path: the same rows for every end of a program
+
+MAX_SOLVERS = 64  # branch solvers kept per program: each holds its KKT factorisation (~1 MB at 80 steps, 12 nodes)
+
+
+class Solvers:
+    """A node's solver by its path (the same rows for every end of one program, only q changes), at most
+    ``size`` of them, the least recently used dropped first: unbounded, this cache held every branch of every
+    end of a horizon and grew by about 1 GB a minute on a 12-node ring with two groups (issue 34)."""
+
+    def __init__(self, size: int = MAX_SOLVERS) -> None:
+        self.size = size
+        self._kept: OrderedDict[Path, clarabel.DefaultSolver] = OrderedDict()
+        self.built = 0  # solvers made (the others were reused)
+
+    def get(self, path: Path) -> clarabel.DefaultSolver | None:
+        solver = self._kept.get(path)
+        if solver is not None:
+            self._kept.move_to_end(path)
+        return solver
+
+    def put(self, path: Path, solver: clarabel.DefaultSolver) -> None:
+        self.built += 1
+        self._kept[path] = solver
+        if len(self._kept) > self.size:
+            self._kept.popitem(last=False)
+
+    def __len__(self) -> int:
+        return len(self._kept)
 
 
 def covered(spans: Sequence[Span], need: int) -> list[Span]:
@@ -207,6 +240,8 @@ def _expand(conic: Conic, x: np.ndarray, nz: int) -> np.ndarray:
     return z
 
 
+Guide = tuple[int, np.ndarray]  # an earlier horizon's last step and its minimiser of the same end (global columns)
+DIVE_ROUNDS = 3  # pieces added at most three times in the dive: a guide that misses costs at most three solves
 GAP_TOL = 1e-9  # relative: the search stops once the best trajectory found is within this of the least open bound
 
 
@@ -252,53 +287,101 @@ class _Search:
     nz: int
     unions: Sequence[StepUnion]
     budget: int
+    deadline: float = math.inf  # time.process_time() past which no node is solved
+    objective: tuple[int, float] = (-1, 0.0)  # q·z = sign·z[col] (global column): every end's objective
     heap: list[_Node] = field(default_factory=list)
     solves: int = 0
     dead: list[tuple[int, Piece]] = field(default_factory=list)
     best: tuple[float, np.ndarray] | None = None  # the least q·z of a minimiser that meets every union
     order: itertools.count = field(default_factory=itertools.count)
-    solvers: Solvers = field(default_factory=dict)
+    solvers: Solvers = field(default_factory=Solvers)
 
     def result(self, status: Literal["solved", "unbounded", "infeasible"], value: float, exact: bool) -> EndResult:
         z = self.best[1] if exact and self.best is not None else None
         return EndResult(status, value, z, exact, self.solves, tuple(self.dead))
 
-    def settle_node(self, node: _Node) -> bool:
-        """Solve a lazy node and keep it (or the trajectory it found); False if the solver could not settle it."""
+    def solve(self, node: _Node) -> tuple[Literal["solved", "unbounded", "infeasible", "other"], _Node | None]:
+        """Solve a lazy node: its kind and, solved or unbounded, the node with its bound and minimiser."""
         solver = self.solvers.get(node.path)
         if solver is None:
-            solver = self.solvers[node.path] = self.conic.with_rows(node.rows).solver(self.q)
+            solver = self.conic.with_rows(node.rows).solver(self.q)
+            self.solvers.put(node.path, solver)
         else:
             solver.update(q=self.q)
         sol = solver.solve()
         status, x = str(sol.status), np.asarray(sol.x) if str(sol.status) in _SOLVED else None
         self.solves += 1
         kind = settle(status)
-        if kind == "other":
-            return False
-        if kind == "infeasible":
-            if len(node.path) == 1:  # the root's program and one piece: no trajectory in any later horizon either
-                self.dead.append(node.path[0])
-            return True
+        if kind == "infeasible" and len(node.path) == 1:  # the root's program and one piece: no trajectory in any later horizon either
+            self.dead.append(node.path[0])
+        if kind in ("other", "infeasible"):
+            return kind, None
         z = None if x is None else _expand(self.conic, x, self.nz)
         value = -math.inf if x is None else float(self.q @ x)
         # a child no worse than its parent to the gap keeps the parent's bound: it is then explored before its siblings
         bound = node.bound if value <= node.bound + GAP_TOL * max(1.0, abs(node.bound)) else value
-        solved = _Node(bound, False, next(self.order), node.chosen, node.rows, z, node.path)
-        if z is not None and _branch_on(self.unions, solved) is None:
-            if self.best is None or bound < self.best[0]:
-                self.best = (bound, z)
-        else:
-            heapq.heappush(self.heap, solved)
+        return kind, _Node(bound, False, next(self.order), node.chosen, node.rows, z, node.path)
+
+    def keep(self, solved: _Node) -> bool:
+        """A solved node's minimiser that meets every union is a trajectory (the incumbent if the best): True."""
+        if solved.z is None or _branch_on(self.unions, solved) is not None:
+            return False
+        if self.best is None or solved.bound < self.best[0]:
+            self.best = (solved.bound, solved.z)
         return True
+
+    def settle_node(self, node: _Node) -> bool:
+        """Solve a lazy node and keep it (or the trajectory it found); False if the solver could not settle it."""
+        kind, solved = self.solve(node)
+        if solved is not None and not self.keep(solved):
+            heapq.heappush(self.heap, solved)
+        return kind != "other"
+
+    def spent(self) -> bool:
+        return self.solves >= self.budget or time.process_time() >= self.deadline
+
+    def dive(self, root: _Node, guide: Guide | None) -> None:
+        """One path tried before the search, all its pieces at once: for each union the minimiser violates, the
+        piece nearest the guide (a trajectory of an earlier horizon, for its steps) or else the minimiser.  A
+        trajectory found is only an incumbent (the search still proves the end); when the relaxation's minimiser
+        lands between pieces only because the objective does not care, it reaches the root's bound in one solve
+        where the search would branch once per union (docs/exact.md, measured)."""
+        node = root
+        for _ in range(DIVE_ROUNDS):
+            violated = [m for m in range(len(self.unions)) if m not in node.chosen and (node.z is None or not self.unions[m].holds(node.z))]
+            if not violated or self.spent() or any(not self.unions[m].pieces for m in violated):
+                return  # a union with no piece left: the search proves the end infeasible
+            rows, path = node.rows, node.path
+            for m in violated:
+                union = self.unions[m]
+                ref = guide[1] if guide is not None and union.step <= guide[0] else node.z
+                piece = min(union.pieces, key=lambda p: _distance(union, p, ref))
+                rows, path = rows + tuple(union.rows(piece)), (*path, (union.step, piece))
+            kind, solved = self.solve(_Node(node.bound, True, next(self.order), node.chosen | set(violated), rows, None, path))
+            if solved is None or self.keep(solved):
+                return
+            node = solved
 
     def branch(self, node: _Node, m: int) -> None:
         union = self.unions[m]
         for piece in sorted(union.pieces, key=lambda p: _distance(union, p, node.z)):
             path = (*node.path, (union.step, piece))
-            heapq.heappush(self.heap, _Node(node.bound, True, next(self.order), node.chosen | {m}, node.rows + tuple(union.rows(piece)), None, path))
+            bound = max(node.bound, self.piece_bound(union, piece))  # a child its interval puts past the incumbent is never solved
+            heapq.heappush(self.heap, _Node(bound, True, next(self.order), node.chosen | {m}, node.rows + tuple(union.rows(piece)), None, path))
 
-    def run(self, root: _Node) -> EndResult:
+    def piece_bound(self, union: StepUnion, piece: Piece) -> float:
+        """A lower bound of the objective over a piece, without solving: where the objective is a multiple of t_j
+        (the yaw rate of the piece's step) its interval bounds it, and a tied fault assumed healthy by τ."""
+        col, sign = self.objective
+        if len(union.t) == 1 and col in union.t:
+            a = sign / union.t[col]  # objective = a·t_j
+            return min(a * piece.lo, a * piece.hi)  # a ≠ 0: an infinite side gives −inf only where it is the minimum
+        if any(union.f_col[n] == col for n in piece.healthy):
+            return -abs(sign) * union.tolerance
+        return -math.inf
+
+    def run(self, root: _Node, guide: Guide | None = None) -> EndResult:
+        self.dive(root, guide)
         heapq.heappush(self.heap, root)
         while self.heap:
             node = heapq.heappop(self.heap)
@@ -306,7 +389,7 @@ class _Search:
                 return self.result("solved", min(self.best[0], node.bound), True)  # the end to the gap, on the sound side
             status: Literal["solved", "unbounded"] = "unbounded" if node.bound == -math.inf else "solved"
             if node.lazy:
-                if self.solves >= self.budget or not self.settle_node(node):
+                if self.spent() or not self.settle_node(node):
                     return self.result(status, node.bound, False)  # the least open bound: an outer bound
                 continue
             m = _branch_on(self.unions, node)
@@ -324,11 +407,15 @@ def minimise(
     root: tuple[str, np.ndarray | None],
     budget: int,
     solvers: Solvers | None = None,
+    deadline: float = math.inf,
+    guide: Guide | None = None,
 ) -> EndResult:
     """min q·z over the program and every union (module doc), from the root relaxation ``root`` (its status and
     minimiser over the global columns).  At most ``budget`` solves; past it the least open bound, not exact.
     ``solvers``: the nodes' solvers by path, shared by the ends of one program (a path's rows are the same for
-    every end, only q changes)."""
+    every end, only q changes); ``deadline``: a time.process_time() past which no more nodes are solved (relaxed);
+    ``guide``: (its last step, a minimiser over the global columns) of the same end at an earlier horizon, whose
+    pieces are tried first (:meth:`_Search.dive`)."""
     kind = settle(root[0])
     assert kind != "other", root[0]  # the caller reports a root the solver could not settle
     if kind == "infeasible":
@@ -337,13 +424,18 @@ def minimise(
     node = _Node(-math.inf if z is None else float(q @ z[conic.cols]), False, 0, frozenset(), (), z)
     if z is not None and _branch_on(unions, node) is None:
         return EndResult("solved", node.bound, z, True, 0)
-    return _Search(conic, q, nz, unions, budget, order=itertools.count(1), solvers={} if solvers is None else solvers).run(node)
+    (at,) = np.flatnonzero(q)  # one coordinate's end
+    search = _Search(conic, q, nz, unions, budget, deadline, (int(conic.cols[at]), float(q[at])), order=itertools.count(1))
+    search.solvers = Solvers() if solvers is None else solvers
+    return search.run(node, guide)
 
 
 __all__ = [
     "HEALTH_TOL",
+    "MAX_SOLVERS",
     "Conic",
     "EndResult",
+    "Guide",
     "Piece",
     "Path",
     "Row",

@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from netsetest.bench.exact_cost import exact_cost_markdown
 from netsetest.bench.network import network_markdown, network_summary_markdown
 from netsetest.bench.plant import plant_markdown, plant_summary_markdown
 from netsetest.bench.run import performance_markdown
@@ -38,6 +39,13 @@ PARTS: dict[str, Part] = {
     "scenario": Part("The paper's scenario, per node", "bench/scenario.json", "scenario", scenario_markdown, _SCENARIO),
     "compare": Part("The papers' estimators compared", "bench/scenario.json", "scenario", compare_markdown, _SCENARIO),
     "exact": Part("The SDP against the exact limit", "bench/scenario.json", "scenario", exact_markdown, _SCENARIO),
+    "exact-cost": Part(
+        "What the exact limit costs under k-of-N health",
+        "bench/exact.json",
+        "exact",
+        exact_cost_markdown,
+        "netsetest bench --quick --only exact --json bench/exact.json --markdown bench/exact.md",
+    ),
     "network": Part(
         "What the network exchange buys",
         "bench/network.json",

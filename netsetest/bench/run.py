@@ -62,6 +62,8 @@ QUICK: dict[str, Any] = {
     "plant_lap_steps": 200,
     "plant_mb_steps": 10,
     "network_steps": 80,
+    "exact_steps": 80,  # issue 34's record length
+    "exact_rings": [[12, 600.0], [24, 30.0]],  # ring size, CPU budget (s): quick cuts the 24-node search short
     "network_seeds": [0],
     "cost_reps": 5,
     "compare_seeds": [0, 1],
@@ -95,6 +97,8 @@ FULL: dict[str, Any] = {
     "plant_lap_steps": 600,
     "plant_mb_steps": 30,
     "network_steps": 80,
+    "exact_steps": 80,  # issue 34's record length
+    "exact_rings": [[12, 600.0], [24, 600.0]],  # ring size, CPU budget (s)
     "network_seeds": [0, 1, 2],
     "cost_reps": 9,
     "compare_seeds": [0, 1, 2],
@@ -345,6 +349,7 @@ def run_bench(
     markdown_path: str | None = None,
     only: str | None = None,
 ) -> int:
+    from netsetest.bench.exact_cost import exact_cost_markdown, exact_figures
     from netsetest.bench.network import network_figures, network_markdown
     from netsetest.bench.plant import plant_figures, plant_markdown
     from netsetest.bench.scenario import compare_markdown, scenario_figures, scenario_markdown
@@ -374,6 +379,7 @@ def run_bench(
     }
     if only is not None and only != "performance":  # one part alone: its figures and its Markdown
         figures, render = {
+            "exact": (exact_figures, exact_cost_markdown),
             "plant": (plant_figures, plant_markdown),
             "network": (network_figures, network_markdown),
             "scenario": (scenario_figures, lambda r: scenario_markdown(r) + "\n" + compare_markdown(r)),
@@ -420,6 +426,7 @@ def run_bench(
             res["plant"] = plant_figures(cfg, tmp)
             res["network"] = network_figures(cfg, tmp)
             res["scenario"] = scenario_figures(cfg, tmp)
+            res["exact"] = exact_figures(cfg, tmp)
     res["meta"]["load_after"] = _load()
     res["meta"]["duration_s"] = time.perf_counter() - t_all
     res.update(headline(res))
@@ -429,6 +436,7 @@ def run_bench(
         md += "\n## What the exchange can buy (netsetest/bench/network.py)\n\n" + network_markdown(res["network"])
         md += "\n## The paper's scenario (netsetest/bench/scenario.py)\n\n" + scenario_markdown(res["scenario"])
         md += "\n" + compare_markdown(res["scenario"])
+        md += "\n## What `netsetest exact` costs under k-of-N health (netsetest/bench/exact_cost.py)\n\n" + exact_cost_markdown(res["exact"])
     _write(res, md, json_path, markdown_path)
     return 0
 

@@ -9,7 +9,9 @@ A :data:`RingVariant` changes what the nodes exchange or what generates the trut
 figures of each (``realtime_fit``): ``reference`` declares node 3 a reference sensor (every node reads
 its reading of each step), ``max_faulty`` declares k-of-N health per group of six consecutive sensors (the
 paper's six profiles; a short tail joins the group before it), each allowing as many faulty sensors as its
-profiles have faults (every node reads its group's readings: about 6N messages a step), ``car`` puts paper6_car's CommonRoad
+profiles have faults (every node reads its group's readings: about 6N messages a step), ``two_groups`` declares
+the two interleaved groups of issue 34 (nodes 2, 3, 5, 10 and 1, 4, 9, 12 of every block of twelve, each allowing
+as many faulty sensors as its profiles have faults; the other nodes in no group), ``car`` puts paper6_car's CommonRoad
 car (single track, its mismatch bound, steering and speed) in the vehicle role.
 """
 
@@ -22,7 +24,7 @@ from typing import Literal
 from netsetest.scenarios import TOPOLOGY_DIR
 
 RING_TAU_S = 0.1  # the rings' sampling period (HEADER)
-RingVariant = Literal["plain", "reference", "max_faulty", "car"]
+RingVariant = Literal["plain", "reference", "max_faulty", "two_groups", "car"]
 FAULTY_PROFILES = (1, 2, 4, 6)  # yaw<p> profiles whose sensors have a fault (yaw3 and yaw5 have none)
 NODES_DIR = TOPOLOGY_DIR.parent / "nodes"  # the bundled node profiles
 
@@ -132,6 +134,16 @@ def health_groups(ids: list[int]) -> list[list[int]]:
     return groups
 
 
+TWO_GROUPS = ((2, 3, 5, 10), (1, 4, 9, 12))  # issue 34's groups on a 12-node ring (at most 2 and 3 faulty)
+TWO_GROUPS_BLOCK = 12  # a larger ring repeats them per block of twelve nodes
+
+
+def two_groups(ids: list[int]) -> list[list[int]]:
+    """The ``two_groups`` variant's groups: :data:`TWO_GROUPS` in every block of :data:`TWO_GROUPS_BLOCK` nodes."""
+    blocks = range(0, len(ids), TWO_GROUPS_BLOCK)
+    return [[b + i for b in blocks for i in group if b + i in ids] for group in TWO_GROUPS]
+
+
 def write_topology(
     path: Path,
     neighbours: dict[int, set[int]],
@@ -145,6 +157,9 @@ def write_topology(
     lines = [CAR_HEADER.format(**fields, car=_car_tables()) if variant == "car" else HEADER.format(**fields)]
     if variant == "max_faulty":  # as many faulty sensors per group as its profiles have faults: the declaration holds
         for group in health_groups(sorted(neighbours)):
+            lines.append(f"[[network.health_groups]]\nnodes = {group}\nmax_faulty = {_faulty(group)}\n")
+    if variant == "two_groups":
+        for group in two_groups(sorted(neighbours)):
             lines.append(f"[[network.health_groups]]\nnodes = {group}\nmax_faulty = {_faulty(group)}\n")
     for i in sorted(neighbours):
         lines.append(f'[[nodes]]\nid = {i}\nprofile = "{_profile(i, variant)}"\n')

@@ -14,6 +14,7 @@ from netsetest.runtime import argtypes
 
 # the parsers a role spec shares (runtime/argtypes.py), under the names every command uses
 positive_int, seed, run_id, endpoint = argtypes.positive_int, argtypes.seed, argtypes.run_id, argtypes.endpoint
+non_negative_seconds = argtypes.non_negative_seconds
 
 SEED_RANGE_RE = re.compile(r"(\d+)\s*-\s*(\d+)")
 SEED_RANGE_MAX = (

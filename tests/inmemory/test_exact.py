@@ -208,7 +208,7 @@ def test_cli_prints_ratios_and_writes_json(tmp: str, capsys: pytest.CaptureFixtu
     text = capsys.readouterr().out
     assert "relative-RMS radius" in text and "overall" in text
     doc = json.load(open(out))
-    assert doc["format"] == "netsetest-exact" and doc["version"] == 2 and doc["fault_bounds"] == "used"
+    assert doc["format"] == "netsetest-exact" and doc["version"] == 3 and doc["fault_bounds"] == "used"
     assert len(doc["exact"]["fault"]["1"]) == STEPS + 1 == len(doc["steps"])
     ex = _exact("nsnim", "paper", 0, tmp)
     assert doc["exact"]["fault"]["2"][5] == pytest.approx(list(ex.fault[2][5]))

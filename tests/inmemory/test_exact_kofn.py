@@ -297,3 +297,68 @@ def test_worst_case_noise_leaves_every_step_feasible() -> None:
         for n, k in enumerate(ex.steps):
             f = truth[int(k)]["faults"][str(i)]
             assert iv[n, 0] - 1e-7 <= f <= iv[n, 1] + 1e-7
+
+
+def test_a_spent_time_budget_relaxes_soundly_against_brute_force() -> None:
+    """``budget_s = 0``: no branch is solved, every end is its relaxation where that does not meet every union.
+    Each relaxed end is a superset of the exact interval (brute force over every hypothesis sequence), each end
+    still called exact agrees with it, and the search says when it ran out."""
+    full, rec = _run(3)
+    full = dataclasses.replace(full, health_groups=(HealthGroup(tuple(full.ids), 1),))
+    ex = exact_bounds(full, rec, "used", nodes=[1, 3, 5], budget_s=0.0)
+    assert ex.health is not None and ex.health.relaxed and ex.health.out_of_time == 0 and ex.health.budget_s == 0.0
+    assert ex.health.exact_ends + len(ex.health.relaxed) == ex.health.ends
+    assert "the time budget ran out at step 0" in health_line(ex.health)
+    relaxed = {(k.coordinate, k.node, k.step, k.side) for k in ex.health.relaxed}
+    sc = dataclasses.replace(full, nodes=[n for n in full.nodes if n.id in (1, 3, 5)])
+    wider = 0
+    for (coord, node, k), (lo, hi) in _brute_force(sc, rec, "used").items():
+        got = ex.interval(coord, node)[k]
+        for side, (g, b) in enumerate(zip(got, (lo, hi))):
+            if (coord, node if coord == "f" else None, k, ("lo", "hi")[side]) in relaxed:
+                assert (g <= b + AGREE) if side == 0 else (g >= b - AGREE), (coord, node, k, side, g, b)  # never narrower
+                wider += abs(g - b) > 1e-6
+            else:
+                assert abs(g - b) <= AGREE, (coord, node, k, side, g, b)
+    assert wider > 0  # the budget did cut the search short somewhere
+
+
+def test_the_search_keeps_a_bounded_number_of_solvers() -> None:
+    """What the branch and bound keeps across the ends of a program: at most ``size`` solvers, least recently used out."""
+    from netsetest.analysis.kofn import Solvers
+
+    cache = Solvers(size=2)
+    a, b, c = ((0, Piece(0.0, 1.0, ())),), ((0, Piece(1.0, 2.0, ())),), ((0, Piece(2.0, 3.0, ())),)
+    cache.put(a, "A")  # type: ignore[arg-type]  # any object stands for a solver here
+    cache.put(b, "B")  # type: ignore[arg-type]  # as above
+    assert cache.get(a) == "A"  # a is now the most recently used
+    cache.put(c, "C")  # type: ignore[arg-type]  # as above
+    assert len(cache) == 2 and cache.get(b) is None and cache.get(a) == "A" and cache.get(c) == "C" and cache.built == 3
+
+
+def test_the_eta_grows_with_the_horizon_and_stops_at_the_budget() -> None:
+    from netsetest.analysis.exact import eta_s
+
+    assert eta_s(5.0, 0, 80, None) is None
+    assert eta_s(10.0, 40, 80, None) == pytest.approx(30.0)  # a step costs its horizon: 10 s for 40 steps, 40 s for 80
+    assert eta_s(10.0, 40, 80, 25.0) == pytest.approx(15.0)
+    assert eta_s(30.0, 40, 80, 25.0) == pytest.approx(90.0)  # past the budget: the pace so far
+
+
+@pytest.mark.parametrize("value", ["-1", "abc", "nan", "inf"])
+def test_a_bad_budget_is_refused(value: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["exact", str(tmp_path / "run.json"), "--budget", value])
+    assert exc.value.code == 2 and "--budget" in capsys.readouterr().err
+
+
+def test_the_command_reports_a_spent_budget(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--budget 0``: the ends the relaxation does not settle are relaxed, the line says so and the JSON counts them."""
+    sc = load_topology(TOPOLOGY, case="nsnim", steps=4)
+    path = tmp_path / "run.json"
+    run_inmemory(sc, "paper", seed=0, record=str(path), keep=False)
+    assert main(["exact", str(path), "--budget", "0", "--json", str(tmp_path / "exact.json")]) == 0
+    assert "the time budget ran out at step 0" in capsys.readouterr().out
+    h = json.loads((tmp_path / "exact.json").read_text())["health"]
+    assert h["budget_s"] == 0.0 and h["out_of_time"] == 0 and h["relaxed_ends"] == len(h["relaxed"]) > 0
+    assert h["exact_ends"] + h["relaxed_ends"] == h["ends"]

@@ -1,0 +1,47 @@
+"""The exact part's report (netsetest/bench/exact_cost.py): issue 34's targets are read from the right rows, and
+memory that grows from the middle step to the last is not called flat."""
+
+from __future__ import annotations
+
+from netsetest.bench.exact_cost import exact_cost_markdown, targets
+
+
+def _row(topology: str, case: str, cpu: float, peak: float, exact: int, rss: list[float]) -> dict:
+    return {
+        "topology": topology,
+        "nodes": 12,
+        "case": case,
+        "signals": "worst",
+        "steps": 80,
+        "budget_s": 600.0,
+        "cpu_s": cpu,
+        "wall_s": 2 * cpu,
+        "peak_mb": peak,
+        "rss_mb": rss,
+        "ends": 100,
+        "exact_ends": exact,
+        "relaxed_ends": 100 - exact,
+        "solves": 500,
+        "out_of_time": None,
+        "infeasible_steps": [],
+    }
+
+
+def test_the_targets_are_issue_34s() -> None:
+    flat = [100.0, 120.0, 130.0, 131.0]
+    met = dict(
+        (what, ok)
+        for what, _, ok in targets([_row("ring12, two groups", "saim", 100.0, 900.0, 96, flat), _row("paper6_max_faulty", "saim", 19.0, 80.0, 100, flat)])
+    )
+    assert met == {
+        "ring12 SAIM worst: CPU": True,
+        "ring12 SAIM worst: peak memory": True,
+        "ring12 SAIM worst: ends exact": True,
+        "paper6_max_faulty SAIM worst: CPU": True,
+        "every run: memory flat": True,
+    }
+    growing = [100.0, 400.0, 700.0, 1000.0]
+    missed = dict((what, ok) for what, _, ok in targets([_row("ring12, two groups", "saim", 130.0, 1100.0, 94, growing)]))
+    assert not any(missed.values())
+    text = exact_cost_markdown({"steps": 80, "rows": [_row("ring12, two groups", "saim", 130.0, 1100.0, 94, growing)], "load": "1 before, 2 after"})
+    assert "| ring12, two groups | 12 | SAIM | 600 | 130.0 (260) | 1100 | +300 | 94 of 100 | 6 | 500 |" in text and "Load average 1 before, 2 after" in text
