@@ -13,6 +13,11 @@
 - ``halved``: paper6_car with its bound halved, and a thousand times too small, on the double lane change
   (the held-out drive nearest the bound): what is not covered, the misses, and that every miss is
   attributed to model mismatch.
+- ``envelopes``: for each CommonRoad car (vehicles 1, 2, 3), the bound ``netsetest calibrate --envelope
+  --ay-max 6 --speed 70-120`` gives on seeds 0-4, declared with that envelope and run on held-out drives
+  (:data:`HELD_OUT_SEEDS`, both signal families, NSNIM and SAIM): a double lane change, the lap and a sine
+  with dwell inside the envelope, and a double lane change outside it (:data:`OUTSIDE_KMH`), whose misses
+  must all be attributed and said in the verdict line.
 """
 
 from __future__ import annotations
@@ -25,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from netsetest.models.manoeuvres import DriveSpec
-from netsetest.models.plant import PlantKind
+from netsetest.models.manoeuvres import DriveSpec, ManoeuvreName
+from netsetest.models.plant import VEHICLE_IDS, VEHICLE_NAMES, PlantKind
 from netsetest.scenarios import TOPOLOGY_DIR
 
 CAR = TOPOLOGY_DIR / "paper6_car.toml"
@@ -34,6 +39,14 @@ LAP = TOPOLOGY_DIR / "paper6_lap.toml"
 ENVELOPE = ("paper", "step-steer", "sine-dwell@0.012", "sine-dwell@0.02", "sine-dwell@0.025", "sine-dwell@0.03")
 MODERATE = ("paper", "step-steer", "sine-dwell@0.012")  # the topology's own amplitude only
 TRAINING_SEEDS = tuple(range(10))
+ENVELOPE_AY = 6.0  # [m/s²] the issue's envelope (issue 29): a_y up to 6 m/s² at 70-120 km/h
+ENVELOPE_KMH = (70.0, 120.0)
+ENVELOPE_SEEDS = tuple(range(5))
+HELD_OUT_SEEDS = tuple(range(100, 105))
+INSIDE_DLC_KMH = 70.0  # the double lane change at the envelope's slowest speed: its peak a_y is the lowest there
+SINE_KMH = 85.0  # the held-out sine with dwell: a speed between the sweep's (70, 95, 120 km/h) ...
+SINE_FRACTION = 0.6  # ... at an amplitude between the sweep's fractions of the one reaching ay_max
+OUTSIDE_KMH = 120.0  # the double lane change at 120 km/h: beyond 6 m/s² on every car
 
 
 def _log(msg: str) -> None:
@@ -231,6 +244,98 @@ def halved(cfg: dict, tmp: Path) -> dict:
     return out
 
 
+def car_topology(tmp: Path, vehicle: int, bound: str | None = None, envelope: str | None = None) -> Path:
+    """paper6_car on CommonRoad vehicle ``vehicle`` with the model range 70-120 km/h (the envelope's speeds),
+    and the given [model_uncertainty] and [envelope] tables (None: the bundled bound, no envelope)."""
+    text = CAR.read_text().replace("vehicle = 2\n", f"vehicle = {vehicle}\n").replace("vx_min_kmh = 80.0", f"vx_min_kmh = {ENVELOPE_KMH[0]}")
+    if bound is not None:
+        text = _with_bound(text, bound.removeprefix("[model_uncertainty]\n").rstrip("\n"))
+    if envelope is not None:
+        text = text.replace("[[nodes]]", envelope + "\n[[nodes]]", 1)
+    return _variant(tmp, f"car{vehicle}", text)
+
+
+def _envelope_drive(sc, signals: str, seed: int, tmp: Path) -> dict:
+    """One held-out drive against its envelope: coverage, misses and how they are attributed and said."""
+    from netsetest.runtime.inmemory import run_inmemory
+    from netsetest.runtime.report import verdict
+
+    s = run_inmemory(sc, signals, "scheduled", seed, record=None, keep=False).summary  # type: ignore[arg-type]  # signals is paper or worst, passed through as str
+    c = s.car
+    assert c is not None  # a nonlinear plant's run
+    return {
+        "signals": signals,
+        "seed": seed,
+        "evaluated": s.node_steps_evaluated,
+        "covered": s.node_steps_covered,
+        "contained": s.node_steps_contained,
+        "violations": s.violations_total,
+        "misses": s.node_steps_evaluated - s.node_steps_contained,
+        "misses_attributed": s.misses_assumption_broken_total,
+        "not_covered": dict(s.node_steps_not_covered),
+        "e_max_ratio": c.e_max_ratio,
+        "e_outside": c.e_outside,
+        "ay_peak": c.ay_peak,
+        "envelope_left": c.envelope_left,
+        "ay_margin": c.ay_margin,
+        "verdict_says": "missed the truth outside the guarantee" in verdict(s) if s.misses_assumption_broken_total else None,
+    }
+
+
+def envelope_car(cfg: dict, tmp: Path, vehicle: int) -> dict:
+    """One car: its envelope's calibration and the held-out drives inside and outside it."""
+    from netsetest.analysis.calibrate import SEARCH_SIGNALS, amplitude_for, at_speed, calibrate, envelope_sweep
+    from netsetest.config.schema import load_topology
+    from netsetest.models.envelope import OperatingEnvelope
+
+    envelope = OperatingEnvelope(ENVELOPE_AY, ENVELOPE_KMH)
+    base = load_topology(car_topology(tmp, vehicle))
+    t0 = time.monotonic()
+    sweep = envelope_sweep(base, envelope)
+    cal = calibrate(sweep, ENVELOPE_SEEDS, ("paper", "worst"), envelope=envelope)
+    _log(f"  vehicle {vehicle}: {len(sweep)} training drives, box {np.diag(cal.box.G).tolist()} ({time.monotonic() - t0:.0f} s)")
+    path = car_topology(tmp, vehicle, cal.box.as_toml(), envelope.as_toml())
+    sine_amp = SINE_FRACTION * amplitude_for(base, SINE_KMH, "sine-dwell", envelope, SEARCH_SIGNALS)
+    plan: list[tuple[str, ManoeuvreName, float | None, float, int, tuple[int, ...]]] = [
+        ("double-lane-change", "double-lane-change", INSIDE_DLC_KMH, 0.0, cfg["plant_steps"], HELD_OUT_SEEDS),
+        ("lap", "lap", None, 0.0, cfg["plant_lap_steps"], HELD_OUT_SEEDS),  # the topology's speed sine, 82-118 km/h
+        ("sine-dwell", "sine-dwell", SINE_KMH, sine_amp, cfg["plant_steps"], HELD_OUT_SEEDS),
+        ("double-lane-change (outside)", "double-lane-change", OUTSIDE_KMH, 0.0, cfg["plant_steps"], HELD_OUT_SEEDS[:1]),
+    ]
+    drives: dict[str, list[dict]] = {}
+    for label, manoeuvre, kmh, amplitude, steps, seeds in plan:
+        for case in ("nsnim", "saim"):
+            sc = load_topology(path, case, steps, manoeuvre=manoeuvre)
+            if kmh is not None:  # a held speed, and the amplitude where the manoeuvre takes one
+                sc = at_speed(sc, kmh, manoeuvre, amplitude or sc.steer_high)
+            for seed in seeds:
+                for sig in ("paper", "worst"):
+                    drives.setdefault(label, []).append(_envelope_drive(sc, sig, seed, tmp) | {"case": case, "kmh": kmh, "steps": steps})
+        rows = drives[label]
+        _log(
+            f"  vehicle {vehicle}, {label}: covered {sum(r['covered'] for r in rows)}/{sum(r['evaluated'] for r in rows)}, "
+            f"violations {sum(r['violations'] for r in rows)}, misses {sum(r['misses'] for r in rows)} "
+            f"(attributed {sum(r['misses_attributed'] for r in rows)}), peak |a_y| {max(r['ay_peak'] for r in rows):.2f}"
+        )
+    return {
+        "vehicle": vehicle,
+        "box": np.diag(cal.box.G).tolist(),
+        "training_drives": len(sweep),
+        "sine_amplitude": sine_amp,
+        "drives": drives,
+    }
+
+
+def envelopes(cfg: dict, tmp: Path) -> dict:
+    return {
+        "ay_max": ENVELOPE_AY,
+        "speed_kmh": list(ENVELOPE_KMH),
+        "seeds": list(ENVELOPE_SEEDS),
+        "held_out_seeds": list(HELD_OUT_SEEDS),
+        "cars": [envelope_car(cfg, tmp, v) for v in VEHICLE_IDS],
+    }
+
+
 def plant_figures(cfg: dict, tmp: Path) -> dict:
     _log("a car as the truth: paper6_car's bound calibrated on its training drives")
     res: dict = {"config": {k: cfg[k] for k in ("plant_steps", "plant_seeds", "plant_lap_steps", "plant_mb_steps")}}
@@ -243,6 +348,8 @@ def plant_figures(cfg: dict, tmp: Path) -> dict:
     res["vehicle_cpu"] = vehicle_cpu(cfg)
     _log("a bound too small: attribution")
     res["halved"] = halved(cfg, tmp)
+    _log("each car's envelope: calibrate --envelope, held-out drives inside and outside it")
+    res["envelopes"] = envelopes(cfg, tmp)
     return res
 
 
@@ -346,7 +453,43 @@ def plant_markdown(res: dict) -> str:
             f"- bound × {r['scale']:g} on the double lane change: covered {covered} of {evaluated} node-steps; {r['misses']} misses, "
             f"{r['misses_attributed']} of them attributed to a broken assumption; violations {r['violations']}."
         )
+    if "envelopes" in res:
+        lines += ["", *envelope_markdown(res["envelopes"])]
     return "\n".join(lines) + "\n"
+
+
+def envelope_markdown(env: dict) -> list[str]:
+    """The three cars' envelopes: the calibrated box and the held-out drives inside and outside it."""
+    seeds = env["held_out_seeds"]
+    lines = [
+        f"Each CommonRoad car with the bound `netsetest calibrate --envelope --ay-max {env['ay_max']:g} --speed "
+        f"{env['speed_kmh'][0]:g}-{env['speed_kmh'][1]:g} --seeds {env['seeds'][0]}-{env['seeds'][-1]}` gives (its sweep of step "
+        "steers and sines with dwell), declared with that `[envelope]`, on held-out drives: seeds "
+        f"{seeds[0]}-{seeds[-1]} of a double lane change at {INSIDE_DLC_KMH:g} km/h, the lap and a sine with dwell at {SINE_KMH:g} km/h "
+        f"({SINE_FRACTION:g} of the amplitude reaching the envelope's a_y), and seed {seeds[0]} of a double lane change at "
+        f"{OUTSIDE_KMH:g} km/h, outside the envelope; paper and worst-case signals, NSNIM and SAIM. Steps outside: transitions "
+        "whose a_y or speed left the envelope; attributed: misses outside the guarantee, each with its cause in the verdict line.",
+        "",
+        "| car | calibrated box | held-out drive | case | runs | peak \\|a_y\\| m/s² | steps outside the envelope | largest e_k / bound | "
+        "covered | violations | misses (attributed, said in the verdict) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for car in env["cars"]:
+        name = f"{car['vehicle']} ({VEHICLE_NAMES[car['vehicle']]})"
+        box = f"[{car['box'][0]:.3g}, {car['box'][1]:.3g}]"
+        for label, rows in car["drives"].items():
+            for case in ("nsnim", "saim"):
+                rs = [r for r in rows if r["case"] == case]
+                misses = sum(r["misses"] for r in rs)
+                said = all(r["verdict_says"] for r in rs if r["misses_attributed"])
+                attributed = sum(r["misses_attributed"] for r in rs)
+                lines.append(
+                    f"| {name} | {box} | {label} | {case} | {len(rs)} | {max(r['ay_peak'] for r in rs):.2f} | "
+                    f"{sum(r['envelope_left'] for r in rs)} | {max(r['e_max_ratio'] for r in rs):.2f} | "
+                    f"{sum(r['covered'] for r in rs)} / {sum(r['evaluated'] for r in rs)} | {sum(r['violations'] for r in rs)} | "
+                    f"{misses} ({attributed}, {'yes' if said else 'no'}) |"
+                )
+    return lines
 
 
 def plant_summary_markdown(res: dict) -> str:
