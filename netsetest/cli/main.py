@@ -178,6 +178,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="instead of --manoeuvres: a sweep of step steers and sines with dwell filling the operating envelope --ay-max, --speed; "
         "prints the bound and the [envelope] it holds for (docs/plant.md)",
     )
+    p.add_argument("--toml", metavar="PATH", help="also write the box (and with --envelope the [envelope] table) to PATH, to append to the topology")
     p.add_argument("--ay-max", type=checks.positive_float, metavar="M/S2", help="the envelope's largest |lateral acceleration| [m/s²] (with --envelope)")
     p.add_argument("--speed", type=checks.speed_range, metavar="LO-HI", help="the envelope's speed range [km/h], e.g. 70-120 (with --envelope)")
 
@@ -453,6 +454,7 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
     from netsetest.runtime.report import Progress
 
     checks.output_file(a.json, "--json")
+    checks.output_file(a.toml, "--toml")
     envelope = _calibration_envelope(a)
     if isinstance(envelope, int):
         return envelope
@@ -496,6 +498,9 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
     if envelope is not None:
         print("# the operating envelope it holds for (declare it beside the bound: the run checks every step against it)")
         print(envelope.as_toml(), end="")
+    if a.toml:
+        with open(a.toml, "w") as fh:
+            fh.write("\n" + cal.box.as_toml() + ("\n" + envelope.as_toml() if envelope is not None else ""))
     if a.json:
         doc = {
             "topology": sc.path,
