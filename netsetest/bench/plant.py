@@ -282,47 +282,76 @@ def _envelope_drive(sc, signals: str, seed: int, tmp: Path) -> dict:
     }
 
 
-def envelope_car(cfg: dict, tmp: Path, vehicle: int) -> dict:
-    """One car: its envelope's calibration and the held-out drives inside and outside it."""
-    from netsetest.analysis.calibrate import SEARCH_SIGNALS, amplitude_for, at_speed, calibrate, envelope_sweep
+HeldOut = tuple[str, ManoeuvreName, float | None, float, int, tuple[int, ...]]  # label, manoeuvre, km/h held, amplitude, steps, seeds
+
+
+def envelope_bound(tmp: Path, vehicle: int) -> tuple[np.ndarray, int]:
+    """The box ``calibrate --envelope`` gives the car (its half-widths), and the number of training drives."""
+    from netsetest.analysis.calibrate import calibrate, envelope_sweep
     from netsetest.config.schema import load_topology
     from netsetest.models.envelope import OperatingEnvelope
 
     envelope = OperatingEnvelope(ENVELOPE_AY, ENVELOPE_KMH)
-    base = load_topology(car_topology(tmp, vehicle))
     t0 = time.monotonic()
-    sweep = envelope_sweep(base, envelope)
+    sweep = envelope_sweep(load_topology(car_topology(tmp, vehicle)), envelope)
     cal = calibrate(sweep, ENVELOPE_SEEDS, ("paper", "worst"), envelope=envelope)
     _log(f"  vehicle {vehicle}: {len(sweep)} training drives, box {np.diag(cal.box.G).tolist()} ({time.monotonic() - t0:.0f} s)")
-    path = car_topology(tmp, vehicle, cal.box.as_toml(), envelope.as_toml())
-    sine_amp = SINE_FRACTION * amplitude_for(base, SINE_KMH, "sine-dwell", envelope, SEARCH_SIGNALS)
-    plan: list[tuple[str, ManoeuvreName, float | None, float, int, tuple[int, ...]]] = [
+    return np.diag(cal.box.G), len(sweep)
+
+
+def held_out_plan(cfg: dict, tmp: Path, vehicle: int) -> list[HeldOut]:
+    """The held-out drives of a car: inside the envelope (a double lane change, the lap, a sine with dwell at a
+    speed and amplitude the sweep did not drive) and outside it (a double lane change at OUTSIDE_KMH)."""
+    from netsetest.analysis.calibrate import SEARCH_SIGNALS, amplitude_for
+    from netsetest.config.schema import load_topology
+    from netsetest.models.envelope import OperatingEnvelope
+
+    envelope = OperatingEnvelope(ENVELOPE_AY, ENVELOPE_KMH)
+    sine_amp = SINE_FRACTION * amplitude_for(load_topology(car_topology(tmp, vehicle)), SINE_KMH, "sine-dwell", envelope, SEARCH_SIGNALS)
+    return [
         ("double-lane-change", "double-lane-change", INSIDE_DLC_KMH, 0.0, cfg["plant_steps"], HELD_OUT_SEEDS),
         ("lap", "lap", None, 0.0, cfg["plant_lap_steps"], HELD_OUT_SEEDS),  # the topology's speed sine, 82-118 km/h
         ("sine-dwell", "sine-dwell", SINE_KMH, sine_amp, cfg["plant_steps"], HELD_OUT_SEEDS),
         ("double-lane-change (outside)", "double-lane-change", OUTSIDE_KMH, 0.0, cfg["plant_steps"], HELD_OUT_SEEDS[:1]),
     ]
-    drives: dict[str, list[dict]] = {}
-    for label, manoeuvre, kmh, amplitude, steps, seeds in plan:
-        for case in ("nsnim", "saim"):
-            sc = load_topology(path, case, steps, manoeuvre=manoeuvre)
-            if kmh is not None:  # a held speed, and the amplitude where the manoeuvre takes one
-                sc = at_speed(sc, kmh, manoeuvre, amplitude or sc.steer_high)
-            for seed in seeds:
-                for sig in ("paper", "worst"):
-                    drives.setdefault(label, []).append(_envelope_drive(sc, sig, seed, tmp) | {"case": case, "kmh": kmh, "steps": steps})
-        rows = drives[label]
-        _log(
-            f"  vehicle {vehicle}, {label}: covered {sum(r['covered'] for r in rows)}/{sum(r['evaluated'] for r in rows)}, "
-            f"violations {sum(r['violations'] for r in rows)}, misses {sum(r['misses'] for r in rows)} "
-            f"(attributed {sum(r['misses_attributed'] for r in rows)}), peak |a_y| {max(r['ay_peak'] for r in rows):.2f}"
-        )
+
+
+def envelope_held_out(tmp: Path, vehicle: int, box: np.ndarray, drive: HeldOut) -> list[dict]:
+    """One held-out drive of a car, with its calibrated box and envelope declared: every seed, signal family
+    and case."""
+    from netsetest.analysis.calibrate import at_speed
+    from netsetest.config.schema import load_topology
+    from netsetest.models.envelope import OperatingEnvelope
+    from netsetest.models.uncertainty import ModelUncertainty
+
+    path = car_topology(tmp, vehicle, ModelUncertainty.box(box).as_toml(), OperatingEnvelope(ENVELOPE_AY, ENVELOPE_KMH).as_toml())
+    label, manoeuvre, kmh, amplitude, steps, seeds = drive
+    rows = []
+    for case in ("nsnim", "saim"):
+        sc = load_topology(path, case, steps, manoeuvre=manoeuvre)
+        if kmh is not None:  # a held speed, and the amplitude where the manoeuvre takes one
+            sc = at_speed(sc, kmh, manoeuvre, amplitude or sc.steer_high)
+        for seed in seeds:
+            for sig in ("paper", "worst"):
+                rows.append(_envelope_drive(sc, sig, seed, tmp) | {"case": case, "kmh": kmh, "steps": steps})
+    _log(
+        f"  vehicle {vehicle}, {label}: covered {sum(r['covered'] for r in rows)}/{sum(r['evaluated'] for r in rows)}, "
+        f"violations {sum(r['violations'] for r in rows)}, misses {sum(r['misses'] for r in rows)} "
+        f"(attributed {sum(r['misses_attributed'] for r in rows)}), peak |a_y| {max(r['ay_peak'] for r in rows):.2f}"
+    )
+    return rows
+
+
+def envelope_car(cfg: dict, tmp: Path, vehicle: int) -> dict:
+    """One car: its envelope's calibration and the held-out drives inside and outside it."""
+    box, training = envelope_bound(tmp, vehicle)
+    plan = held_out_plan(cfg, tmp, vehicle)
     return {
         "vehicle": vehicle,
-        "box": np.diag(cal.box.G).tolist(),
-        "training_drives": len(sweep),
-        "sine_amplitude": sine_amp,
-        "drives": drives,
+        "box": box.tolist(),
+        "training_drives": training,
+        "sine_amplitude": plan[2][3],
+        "drives": {d[0]: envelope_held_out(tmp, vehicle, box, d) for d in plan},
     }
 
 

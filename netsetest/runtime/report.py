@@ -109,18 +109,23 @@ def uncovered_misses(summary: RunSummary) -> str:
     """The misses outside the guarantee in words, with their cause ('' when there are none): a user must not
     read a run whose sets missed the truth as a pass without being told why the guarantee did not hold."""
     from netsetest.models.envelope import MISMATCH_CAUSES
+    from netsetest.roles.judge import INHERITED  # where the summary is printed, the judge has run or is loaded
 
     if not summary.misses_assumption_broken_total:
         return ""
+    inherited = summary.misses_by_cause.get(INHERITED, 0)
+    head = f"; {summary.misses_assumption_broken_total} set(s) missed the truth outside the guarantee"
+    if inherited:
+        head += f" ({inherited} of them resting on an input that missed it)"
     parts = []
     for cause, (what, advice) in MISMATCH_CAUSES.items():
         steps = summary.node_steps_not_covered.get(cause, 0)
         if steps:
             parts.append(f"{what} on {steps} node-steps: the guarantee does not hold there; {advice}")
-    rest = {c: n for c, n in summary.misses_by_cause.items() if c not in MISMATCH_CAUSES}
+    rest = {c: n for c, n in summary.misses_by_cause.items() if c not in MISMATCH_CAUSES and c != INHERITED}
     if rest:
-        parts.append("other causes: " + ", ".join(f"{c} {n}" for c, n in rest.items()))
-    return f"; {summary.misses_assumption_broken_total} set(s) missed the truth outside the guarantee" + (f": {'; '.join(parts)}" if parts else "")
+        parts.append("misses where an assumption of their own step broke: " + ", ".join(f"{c} {n}" for c, n in rest.items()))
+    return head + (f": {'; '.join(parts)}" if parts else "")
 
 
 def strict_verdict(summary: RunSummary, code: int, strict: bool) -> int:

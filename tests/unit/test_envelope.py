@@ -144,10 +144,14 @@ def _summary(**kw: object) -> RunSummary:
 
 def test_the_verdict_says_a_miss_outside_the_guarantee_in_words_with_its_cause() -> None:
     text = verdict(_summary())
-    assert "6 set(s) missed the truth outside the guarantee" in text
+    assert "6 set(s) missed the truth outside the guarantee (6 of them resting on an input that missed it): " in text
     assert "model mismatch exceeded its bound on 30 node-steps: the guarantee does not hold there; recalibrate (docs/plant.md)" in text
     assert "the car left its operating envelope and e_k its bound on 12 node-steps" in text
     assert "outside the guarantee" not in verdict(_summary(misses_assumption_broken_total=0))
+    other = verdict(_summary(misses_by_cause={"noise": 2}, misses_assumption_broken_total=2))
+    assert "2 set(s) missed the truth outside the guarantee: model mismatch" in other and other.endswith(
+        "misses where an assumption of their own step broke: noise 2"
+    )
 
 
 def test_the_header_names_the_car_the_manoeuvre_its_mismatch_and_envelope_margin() -> None:
