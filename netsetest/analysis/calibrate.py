@@ -14,8 +14,18 @@ cause contributes (:func:`simpler_mismatch`): the multi-body model without its s
 single-track drift model, and that without its tyres' nonlinearity is the single track with linear tyres
 of the same slope (``single-track-linear``), whose T-S model is the same.
 
+Beside e_k each drive reports what bounds it in practice (:class:`DriveEnvelope`): its peak lateral
+acceleration, yaw rate, sideslip and steering rate and its speed range.
+
+With an operating envelope (:func:`envelope_sweep`, ``calibrate --envelope --ay-max A --speed LO-HI``) the
+drives are chosen to fill it: a step steer and a sine with dwell at speeds across the range, each at
+amplitudes up to a little beyond the one whose peak lateral acceleration reaches ``ay_max`` (found by
+bisection), and the bound covers the e_k of every transition inside the envelope (those outside it are
+left out: the bound is declared for the envelope, and the collector attributes a step outside it as such).
+
 A bound calibrated on some manoeuvres is only an assumption on others: the collector checks it on every
-step of every run and attributes a miss beyond it to "model mismatch" (docs/plant.md, "Calibration").
+step of every run and attributes a miss beyond it to "model mismatch", or to "outside the operating
+envelope" where the car had left the declared one (docs/plant.md, "Calibration").
 """
 
 from __future__ import annotations
@@ -28,10 +38,12 @@ import numpy as np
 
 from netsetest.config.schema import Scenario
 from netsetest.models.drive import Drive
-from netsetest.models.manoeuvres import WITH_AMPLITUDE, DriveSpec
+from netsetest.models.envelope import OperatingEnvelope
+from netsetest.models.manoeuvres import WITH_AMPLITUDE, DriveSpec, ManoeuvreName
 from netsetest.models.plant import PlantKind
-from netsetest.models.signals import SignalKind
+from netsetest.models.signals import SignalKind, SpeedProfile
 from netsetest.models.uncertainty import DEFAULT_MARGIN, ModelUncertainty
+from netsetest.models.vehicle import KMH
 
 # the same car with one cause of mismatch less at each step down (their derived T-S models are the same)
 SIMPLER: dict[PlantKind, tuple[PlantKind, ...]] = {
@@ -42,20 +54,80 @@ SIMPLER: dict[PlantKind, tuple[PlantKind, ...]] = {
 }
 MVEE_TOL = 1e-7
 MVEE_MAX_ITER = 10_000
+SWEEP_MANOEUVRES: tuple[ManoeuvreName, ...] = ("step-steer", "sine-dwell")  # steered by an amplitude: the envelope's training
+SWEEP_SPEEDS = 3  # speeds across the envelope's range: both ends and the middle
+# amplitudes, as fractions of the one whose steering alone reaches ay_max: the last overfills the envelope
+# (the worst-case wind adds to a_y too), and the transitions beyond it are left out of the bound
+SWEEP_FRACTIONS = (1 / 3, 2 / 3, 1.0, 1.2)
+SEARCH_SIGNALS: tuple[SignalKind, ...] = ("paper",)  # the amplitude search's wind: the paper's, the gentle one
+BISECTION_STEPS = 10  # the amplitude reaching ay_max to 2⁻¹⁰ of the bracket's width (0.5 mrad)
+SEARCH_S = 4.0  # [s] of each drive the bisection looks at: the sine with dwell ends at 3.1 s, a step steer settles by then
+SWEEP_S = 5.0  # [s] of each training drive (at most the topology's steps): the sweep's manoeuvres are over by then
+AMPLITUDE_MAX = 0.5  # [rad] the bracket's upper end: the driver's steering limit (manoeuvres.DELTA_MAX)
+
+
+@dataclass(frozen=True)
+class DriveEnvelope:
+    """What one drive did, as the operating envelope measures it (the transitions k → k+1)."""
+
+    ay_peak: float  # largest |a_y| [m/s²]
+    r_peak: float  # largest |r| [rad/s]
+    beta_peak: float  # largest |β| [rad]
+    speed_kmh: tuple[float, float]  # slowest, fastest
+    steer_rate_peak: float  # largest |δ_k − δ_k−1|/τs [rad/s]
+
+    def merged(self, other: DriveEnvelope) -> DriveEnvelope:
+        return DriveEnvelope(
+            max(self.ay_peak, other.ay_peak),
+            max(self.r_peak, other.r_peak),
+            max(self.beta_peak, other.beta_peak),
+            (min(self.speed_kmh[0], other.speed_kmh[0]), max(self.speed_kmh[1], other.speed_kmh[1])),
+            max(self.steer_rate_peak, other.steer_rate_peak),
+        )
 
 
 @dataclass(frozen=True)
 class DriveMismatch:
-    """The e_k of one training drive."""
+    """The e_k of one training drive, with what the car did on each transition."""
 
     drive: DriveSpec  # the manoeuvre, with its steering amplitude where it has one
     signals: SignalKind
     seed: int
     e: np.ndarray  # (steps, NX)
+    ay: np.ndarray  # (steps,) a_y of each transition [m/s²]
+    speed: np.ndarray  # (steps,) v_k [m/s]
+    x: np.ndarray  # (steps, NX) x_k
+    u: np.ndarray  # (steps,) δ_k [rad]
+    tau_s: float
+    speed_kmh: float | None = None  # the speed held, where a sweep chose it (part of the label)
 
     @property
     def max_abs(self) -> np.ndarray:
         return np.abs(self.e).max(axis=0) if len(self.e) else np.zeros(2)
+
+    @property
+    def label(self) -> str:
+        return self.drive.label if self.speed_kmh is None else f"{self.drive.label} at {self.speed_kmh:g} km/h"
+
+    def inside(self, envelope: OperatingEnvelope | None) -> np.ndarray:
+        """(steps,) bool: the transitions inside ``envelope`` (None: all)."""
+        if envelope is None:
+            return np.ones(len(self.e), dtype=bool)
+        return np.array([envelope.holds(a, v) for a, v in zip(self.ay, self.speed)], dtype=bool)
+
+    @property
+    def envelope(self) -> DriveEnvelope:
+        if not len(self.e):
+            return DriveEnvelope(0.0, 0.0, 0.0, (0.0, 0.0), 0.0)
+        rate = np.abs(np.diff(self.u)).max() / self.tau_s if len(self.u) > 1 else 0.0
+        kmh = self.speed / KMH
+        return DriveEnvelope(
+            float(np.abs(self.ay).max()),
+            float(np.abs(self.x[:, 1]).max()),
+            float(np.abs(self.x[:, 0]).max()),
+            (float(kmh.min()), float(kmh.max())),
+            float(rate),
+        )
 
 
 @dataclass(frozen=True)
@@ -64,19 +136,34 @@ class Calibration:
     margin: float
     box: ModelUncertainty
     ellipsoid: ModelUncertainty
+    envelope: OperatingEnvelope | None = None  # the bounds cover the transitions inside it (None: every one)
+
+    def samples(self) -> np.ndarray:
+        """(m, NX) every training e_k the bounds cover."""
+        return np.vstack([d.e[d.inside(self.envelope)] for d in self.drives])
 
     def covered(self, bound: ModelUncertainty) -> float:
         """Fraction of the training e_k inside ``bound`` (1.0 for both calibrated bounds)."""
-        es = np.vstack([d.e for d in self.drives])
-        return float(np.mean([bound.holds(e) for e in es]))
+        return float(np.mean([bound.holds(e) for e in self.samples()]))
 
 
-def drive_mismatch(sc: Scenario, signals: SignalKind, seed: int) -> DriveMismatch:
-    """e_0..e_{K−1} of one run's truth (no estimator runs)."""
+def drive_mismatch(sc: Scenario, signals: SignalKind, seed: int, speed_kmh: float | None = None) -> DriveMismatch:
+    """e_0..e_{K−1} of one run's truth and what the car did (no estimator runs)."""
     drive = Drive(sc, signals, seed)
-    es = [d.e for d in (drive.step(k) for k in range(sc.steps)) if d.e is not None]
+    steps = [d for d in (drive.step(k) for k in range(sc.steps)) if d.e is not None]
     spec = DriveSpec(sc.manoeuvre, sc.steer_high if sc.manoeuvre in WITH_AMPLITUDE else None)
-    return DriveMismatch(spec, signals, seed, np.array(es))
+    return DriveMismatch(
+        spec,
+        signals,
+        seed,
+        np.array([d.e for d in steps]).reshape(-1, 2),
+        np.array([d.ay for d in steps], dtype=float),
+        np.array([d.speed for d in steps], dtype=float),
+        np.array([d.x for d in steps]).reshape(-1, 2),
+        np.array([d.u for d in steps], dtype=float),
+        sc.tau_s,
+        speed_kmh,
+    )
 
 
 def origin_mvee(points: np.ndarray) -> np.ndarray:
@@ -109,21 +196,84 @@ def calibrate(
     signals: Sequence[SignalKind],
     margin: float = DEFAULT_MARGIN,
     progress: Callable[[int, int], None] | None = None,
+    envelope: OperatingEnvelope | None = None,
 ) -> Calibration:
-    """The box and ellipsoid bounds covering every e_k of every (scenario, seed, signals) drive."""
+    """The box and ellipsoid bounds covering every e_k of every (scenario, seed, signals) drive (with
+    ``envelope``: of every transition inside it).  A scenario from :func:`envelope_sweep` is labelled with
+    the speed it holds."""
     if margin < 0:
         raise ValueError(f"margin must be ≥ 0, got {margin}")
     runs = [(sc, s, sig) for sc in scenarios for s in seeds for sig in signals]
     drives = []
     for n, (sc, seed, sig) in enumerate(runs):
-        drives.append(drive_mismatch(sc, sig, seed))
+        drives.append(drive_mismatch(sc, sig, seed, sc.speed.mean_kmh if envelope is not None else None))
         if progress is not None:
             progress(n + 1, len(runs))
-    es = np.vstack([d.e for d in drives])
+    cal = Calibration(drives, margin, ModelUncertainty.box((1.0, 1.0)), ModelUncertainty.box((1.0, 1.0)), envelope)
+    es = cal.samples()
+    if not len(es):
+        raise ValueError("no transition of the training drives lies inside the envelope: nothing to calibrate on")
     scale = 1.0 + margin
     box = ModelUncertainty.box(np.maximum(np.abs(es).max(axis=0), np.finfo(float).tiny) * scale)
     ellipsoid = ModelUncertainty.ellipsoid(origin_mvee(es) * scale * scale)
-    return Calibration(drives, margin, box, ellipsoid)
+    return dataclasses.replace(cal, box=box, ellipsoid=ellipsoid)
+
+
+def at_speed(sc: Scenario, kmh: float, manoeuvre: ManoeuvreName, amplitude: float) -> Scenario:
+    """The scenario driving ``manoeuvre`` at amplitude ``amplitude`` [rad], holding ``kmh``."""
+    return dataclasses.replace(
+        sc, manoeuvre=manoeuvre, steer_high=amplitude, steer_low=min(sc.steer_low, amplitude), speed=SpeedProfile(kmh, 0.0, sc.speed.period_s)
+    )
+
+
+def peak_ay(sc: Scenario, signals: Sequence[SignalKind]) -> float:
+    """The largest |a_y| of seed 0's drive of ``sc`` over the signal families."""
+    return max(float(np.abs(drive_mismatch(sc, sig, 0).ay).max(initial=0.0)) for sig in signals)
+
+
+def amplitude_for(sc: Scenario, kmh: float, manoeuvre: ManoeuvreName, envelope: OperatingEnvelope, signals: Sequence[SignalKind]) -> float:
+    """The largest steering amplitude [rad] whose drive (seed 0, every signal family) keeps |a_y| ≤ ay_max
+    at ``kmh``, by bisection on [0, AMPLITUDE_MAX] (a_y grows with the amplitude until the tyres saturate)."""
+    lo, hi = 0.0, AMPLITUDE_MAX
+    short = dataclasses.replace(sc, steps=min(sc.steps, round(SEARCH_S / sc.tau_s)))
+    for _ in range(BISECTION_STEPS):
+        mid = 0.5 * (lo + hi)
+        try:
+            inside = peak_ay(at_speed(short, kmh, manoeuvre, mid), signals) <= envelope.ay_max
+        except ArithmeticError:  # the car spun and the integration failed: far outside
+            inside = False
+        lo, hi = (mid, hi) if inside else (lo, mid)
+    return lo
+
+
+def envelope_speeds(envelope: OperatingEnvelope) -> list[float]:
+    """SWEEP_SPEEDS speeds [km/h] spread evenly over the envelope's range (one where it is a point)."""
+    lo, hi = envelope.speed_kmh
+    return [lo] if hi == lo else [float(v) for v in np.linspace(lo, hi, SWEEP_SPEEDS)]
+
+
+def envelope_sweep(sc: Scenario, envelope: OperatingEnvelope, progress: Callable[[int, int], None] | None = None) -> list[Scenario]:
+    """The training drives that fill ``envelope``: each of SWEEP_MANOEUVRES at each of the envelope's speeds,
+    at SWEEP_FRACTIONS of the amplitude whose peak |a_y| reaches ay_max (with the paper's wind).  ValueError where the envelope's
+    speeds leave the topology's model range (the vehicle could not publish them for scheduling)."""
+    p = sc.model.params
+    lo, hi = envelope.speed_kmh
+    if lo * KMH < p.vx_min * (1 - 1e-9) or hi * KMH > p.vx_max * (1 + 1e-9):
+        raise ValueError(
+            f"the envelope's speeds {lo:g}–{hi:g} km/h leave the model's range {p.vx_min / KMH:g}–{p.vx_max / KMH:g} km/h "
+            "([vehicle] vx_min_kmh, vx_max_kmh): widen that range or narrow --speed"
+        )
+    plan = [(kmh, m) for kmh in envelope_speeds(envelope) for m in SWEEP_MANOEUVRES]
+    drive = dataclasses.replace(sc, steps=min(sc.steps, round(SWEEP_S / sc.tau_s)))
+    out = []
+    for n, (kmh, m) in enumerate(plan):
+        top = amplitude_for(sc, kmh, m, envelope, SEARCH_SIGNALS)
+        out += [at_speed(drive, kmh, m, top * f) for f in SWEEP_FRACTIONS if top * f > 0]
+        if progress is not None:
+            progress(n + 1, len(plan))
+    if not out:
+        raise ValueError(f"no amplitude keeps |a_y| ≤ {envelope.ay_max:g} m/s² (the wind alone exceeds it): raise --ay-max")
+    return out
 
 
 def simpler_mismatch(
@@ -131,22 +281,33 @@ def simpler_mismatch(
     seeds: Sequence[int],
     signals: Sequence[SignalKind],
     progress: Callable[[int, int], None] | None = None,
+    swept: bool = False,
 ) -> dict[PlantKind, list[DriveMismatch]]:
-    """The same drives on each simpler model of the car (:data:`SIMPLER`), plant by plant."""
+    """The same drives on each simpler model of the car (:data:`SIMPLER`), plant by plant (``swept``: the
+    drives of :func:`envelope_sweep`, labelled with their speed as :func:`calibrate` labels them)."""
     out: dict[PlantKind, list[DriveMismatch]] = {}
     runs = [(plant, sc, s, sig) for plant in SIMPLER[scenarios[0].plant] for sc in scenarios for s in seeds for sig in signals]
     for n, (plant, sc, seed, sig) in enumerate(runs):
-        out.setdefault(plant, []).append(drive_mismatch(dataclasses.replace(sc, plant=plant), sig, seed))
+        out.setdefault(plant, []).append(drive_mismatch(dataclasses.replace(sc, plant=plant), sig, seed, sc.speed.mean_kmh if swept else None))
         if progress is not None:
             progress(n + 1, len(runs))
     return out
 
 
 def max_by_drive(drives: Sequence[DriveMismatch]) -> dict[str, np.ndarray]:
-    """max_k |e_k| per drive label (a manoeuvre at its amplitude), over seeds and signals, in first-seen order."""
+    """max_k |e_k| per drive label (a manoeuvre at its amplitude, and speed where swept), over seeds and
+    signals, in first-seen order."""
     out: dict[str, np.ndarray] = {}
     for d in drives:
-        out[d.drive.label] = np.maximum(out.get(d.drive.label, np.zeros(2)), d.max_abs)
+        out[d.label] = np.maximum(out.get(d.label, np.zeros(2)), d.max_abs)
+    return out
+
+
+def envelope_by_drive(drives: Sequence[DriveMismatch]) -> dict[str, DriveEnvelope]:
+    """What each drive label did, over seeds and signals, in first-seen order."""
+    out: dict[str, DriveEnvelope] = {}
+    for d in drives:
+        out[d.label] = out[d.label].merged(d.envelope) if d.label in out else d.envelope
     return out
 
 
@@ -158,9 +319,13 @@ def with_uncertainty(sc: Scenario, bound: ModelUncertainty | None) -> Scenario:
 __all__ = [
     "SIMPLER",
     "Calibration",
+    "DriveEnvelope",
     "DriveMismatch",
+    "amplitude_for",
     "calibrate",
     "drive_mismatch",
+    "envelope_by_drive",
+    "envelope_sweep",
     "max_by_drive",
     "origin_mvee",
     "simpler_mismatch",

@@ -13,6 +13,11 @@
 - ``halved``: paper6_car with its bound halved, and a thousand times too small, on the double lane change
   (the held-out drive nearest the bound): what is not covered, the misses, and that every miss is
   attributed to model mismatch.
+- ``envelopes``: for each CommonRoad car (vehicles 1, 2, 3), the bound ``netsetest calibrate --envelope
+  --ay-max 6 --speed 70-120`` gives on seeds 0-4, declared with that envelope and run on held-out drives
+  (:data:`HELD_OUT_SEEDS`, both signal families, NSNIM and SAIM): a double lane change, the lap and a sine
+  with dwell inside the envelope, and a double lane change outside it (:data:`OUTSIDE_KMH`), whose misses
+  must all be attributed and said in the verdict line.
 """
 
 from __future__ import annotations
@@ -25,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from netsetest.models.manoeuvres import DriveSpec
-from netsetest.models.plant import PlantKind
+from netsetest.models.manoeuvres import DriveSpec, ManoeuvreName
+from netsetest.models.plant import VEHICLE_IDS, VEHICLE_NAMES, PlantKind
 from netsetest.scenarios import TOPOLOGY_DIR
 
 CAR = TOPOLOGY_DIR / "paper6_car.toml"
@@ -34,6 +39,14 @@ LAP = TOPOLOGY_DIR / "paper6_lap.toml"
 ENVELOPE = ("paper", "step-steer", "sine-dwell@0.012", "sine-dwell@0.02", "sine-dwell@0.025", "sine-dwell@0.03")
 MODERATE = ("paper", "step-steer", "sine-dwell@0.012")  # the topology's own amplitude only
 TRAINING_SEEDS = tuple(range(10))
+ENVELOPE_AY = 6.0  # [m/s²] the issue's envelope (issue 29): a_y up to 6 m/s² at 70-120 km/h
+ENVELOPE_KMH = (70.0, 120.0)
+ENVELOPE_SEEDS = tuple(range(5))
+HELD_OUT_SEEDS = tuple(range(100, 105))
+INSIDE_DLC_KMH = 75.0  # a little above the envelope's slowest speed (the car slows a little in the lane change), its peak a_y low
+SINE_KMH = 85.0  # the held-out sine with dwell: a speed between the sweep's (70, 95, 120 km/h) ...
+SINE_FRACTION = 0.6  # ... at an amplitude between the sweep's fractions of the one reaching ay_max
+OUTSIDE_KMH = 120.0  # the double lane change at 120 km/h: beyond 6 m/s² on every car
 
 
 def _log(msg: str) -> None:
@@ -231,6 +244,127 @@ def halved(cfg: dict, tmp: Path) -> dict:
     return out
 
 
+def car_topology(tmp: Path, vehicle: int, bound: str | None = None, envelope: str | None = None) -> Path:
+    """paper6_car on CommonRoad vehicle ``vehicle`` with the model range 70-120 km/h (the envelope's speeds),
+    and the given [model_uncertainty] and [envelope] tables (None: the bundled bound, no envelope)."""
+    text = CAR.read_text().replace("vehicle = 2\n", f"vehicle = {vehicle}\n").replace("vx_min_kmh = 80.0", f"vx_min_kmh = {ENVELOPE_KMH[0]}")
+    if bound is not None:
+        text = _with_bound(text, bound.removeprefix("[model_uncertainty]\n").rstrip("\n"))
+    if envelope is not None:
+        text = text.replace("[[nodes]]", envelope + "\n[[nodes]]", 1)
+    return _variant(tmp, f"car{vehicle}", text)
+
+
+def _envelope_drive(sc, signals: str, seed: int, tmp: Path) -> dict:
+    """One held-out drive against its envelope: coverage, misses and how they are attributed and said."""
+    from netsetest.runtime.inmemory import run_inmemory
+    from netsetest.runtime.report import verdict
+
+    s = run_inmemory(sc, signals, "scheduled", seed, record=None, keep=False).summary  # type: ignore[arg-type]  # signals is paper or worst, passed through as str
+    c = s.car
+    assert c is not None  # a nonlinear plant's run
+    return {
+        "signals": signals,
+        "seed": seed,
+        "evaluated": s.node_steps_evaluated,
+        "covered": s.node_steps_covered,
+        "contained": s.node_steps_contained,
+        "violations": s.violations_total,
+        "misses": s.node_steps_evaluated - s.node_steps_contained,
+        "misses_attributed": s.misses_assumption_broken_total,
+        "not_covered": dict(s.node_steps_not_covered),
+        "e_max_ratio": c.e_max_ratio,
+        "e_outside": c.e_outside,
+        "ay_peak": c.ay_peak,
+        "envelope_left": c.envelope_left,
+        "ay_margin": c.ay_margin,
+        "verdict_says": "missed the truth outside the guarantee" in verdict(s) if s.misses_assumption_broken_total else None,
+    }
+
+
+HeldOut = tuple[str, ManoeuvreName, float | None, float, int, tuple[int, ...]]  # label, manoeuvre, km/h held, amplitude, steps, seeds
+
+
+def envelope_bound(tmp: Path, vehicle: int) -> tuple[np.ndarray, int]:
+    """The box ``calibrate --envelope`` gives the car (its half-widths), and the number of training drives."""
+    from netsetest.analysis.calibrate import calibrate, envelope_sweep
+    from netsetest.config.schema import load_topology
+    from netsetest.models.envelope import OperatingEnvelope
+
+    envelope = OperatingEnvelope(ENVELOPE_AY, ENVELOPE_KMH)
+    t0 = time.monotonic()
+    sweep = envelope_sweep(load_topology(car_topology(tmp, vehicle)), envelope)
+    cal = calibrate(sweep, ENVELOPE_SEEDS, ("paper", "worst"), envelope=envelope)
+    _log(f"  vehicle {vehicle}: {len(sweep)} training drives, box {np.diag(cal.box.G).tolist()} ({time.monotonic() - t0:.0f} s)")
+    return np.diag(cal.box.G), len(sweep)
+
+
+def held_out_plan(cfg: dict, tmp: Path, vehicle: int) -> list[HeldOut]:
+    """The held-out drives of a car: inside the envelope (a double lane change, the lap, a sine with dwell at a
+    speed and amplitude the sweep did not drive) and outside it (a double lane change at OUTSIDE_KMH)."""
+    from netsetest.analysis.calibrate import SEARCH_SIGNALS, amplitude_for
+    from netsetest.config.schema import load_topology
+    from netsetest.models.envelope import OperatingEnvelope
+
+    envelope = OperatingEnvelope(ENVELOPE_AY, ENVELOPE_KMH)
+    sine_amp = SINE_FRACTION * amplitude_for(load_topology(car_topology(tmp, vehicle)), SINE_KMH, "sine-dwell", envelope, SEARCH_SIGNALS)
+    return [
+        ("double-lane-change", "double-lane-change", INSIDE_DLC_KMH, 0.0, cfg["plant_steps"], HELD_OUT_SEEDS),
+        ("lap", "lap", None, 0.0, cfg["plant_lap_steps"], HELD_OUT_SEEDS),  # the topology's speed sine, 82-118 km/h
+        ("sine-dwell", "sine-dwell", SINE_KMH, sine_amp, cfg["plant_steps"], HELD_OUT_SEEDS),
+        ("double-lane-change (outside)", "double-lane-change", OUTSIDE_KMH, 0.0, cfg["plant_steps"], HELD_OUT_SEEDS[:1]),
+    ]
+
+
+def envelope_held_out(tmp: Path, vehicle: int, box: np.ndarray, drive: HeldOut) -> list[dict]:
+    """One held-out drive of a car, with its calibrated box and envelope declared: every seed, signal family
+    and case."""
+    from netsetest.analysis.calibrate import at_speed
+    from netsetest.config.schema import load_topology
+    from netsetest.models.envelope import OperatingEnvelope
+    from netsetest.models.uncertainty import ModelUncertainty
+
+    path = car_topology(tmp, vehicle, ModelUncertainty.box(box).as_toml(), OperatingEnvelope(ENVELOPE_AY, ENVELOPE_KMH).as_toml())
+    label, manoeuvre, kmh, amplitude, steps, seeds = drive
+    rows = []
+    for case in ("nsnim", "saim"):
+        sc = load_topology(path, case, steps, manoeuvre=manoeuvre)
+        if kmh is not None:  # a held speed, and the amplitude where the manoeuvre takes one
+            sc = at_speed(sc, kmh, manoeuvre, amplitude or sc.steer_high)
+        for seed in seeds:
+            for sig in ("paper", "worst"):
+                rows.append(_envelope_drive(sc, sig, seed, tmp) | {"case": case, "kmh": kmh, "steps": steps})
+    _log(
+        f"  vehicle {vehicle}, {label}: covered {sum(r['covered'] for r in rows)}/{sum(r['evaluated'] for r in rows)}, "
+        f"violations {sum(r['violations'] for r in rows)}, misses {sum(r['misses'] for r in rows)} "
+        f"(attributed {sum(r['misses_attributed'] for r in rows)}), peak |a_y| {max(r['ay_peak'] for r in rows):.2f}"
+    )
+    return rows
+
+
+def envelope_car(cfg: dict, tmp: Path, vehicle: int) -> dict:
+    """One car: its envelope's calibration and the held-out drives inside and outside it."""
+    box, training = envelope_bound(tmp, vehicle)
+    plan = held_out_plan(cfg, tmp, vehicle)
+    return {
+        "vehicle": vehicle,
+        "box": box.tolist(),
+        "training_drives": training,
+        "sine_amplitude": plan[2][3],
+        "drives": {d[0]: envelope_held_out(tmp, vehicle, box, d) for d in plan},
+    }
+
+
+def envelopes(cfg: dict, tmp: Path) -> dict:
+    return {
+        "ay_max": ENVELOPE_AY,
+        "speed_kmh": list(ENVELOPE_KMH),
+        "seeds": list(ENVELOPE_SEEDS),
+        "held_out_seeds": list(HELD_OUT_SEEDS),
+        "cars": [envelope_car(cfg, tmp, v) for v in VEHICLE_IDS],
+    }
+
+
 def plant_figures(cfg: dict, tmp: Path) -> dict:
     _log("a car as the truth: paper6_car's bound calibrated on its training drives")
     res: dict = {"config": {k: cfg[k] for k in ("plant_steps", "plant_seeds", "plant_lap_steps", "plant_mb_steps")}}
@@ -243,6 +377,8 @@ def plant_figures(cfg: dict, tmp: Path) -> dict:
     res["vehicle_cpu"] = vehicle_cpu(cfg)
     _log("a bound too small: attribution")
     res["halved"] = halved(cfg, tmp)
+    _log("each car's envelope: calibrate --envelope, held-out drives inside and outside it")
+    res["envelopes"] = envelopes(cfg, tmp)
     return res
 
 
@@ -346,7 +482,53 @@ def plant_markdown(res: dict) -> str:
             f"- bound × {r['scale']:g} on the double lane change: covered {covered} of {evaluated} node-steps; {r['misses']} misses, "
             f"{r['misses_attributed']} of them attributed to a broken assumption; violations {r['violations']}."
         )
+    if "envelopes" in res:
+        lines += ["", *envelope_markdown(res["envelopes"])]
     return "\n".join(lines) + "\n"
+
+
+def envelope_markdown(env: dict) -> list[str]:
+    """The three cars' envelopes: the calibrated box and the held-out drives inside and outside it."""
+    seeds = env["held_out_seeds"]
+    kmh = {label: rows[0]["kmh"] for car in env["cars"] for label, rows in car["drives"].items() if rows}  # the speed each was held at
+    what = {
+        "double-lane-change": f"a double lane change at {kmh.get('double-lane-change') or 0:g} km/h",
+        "lap": "the lap (the speed sine, 82-118 km/h)",
+        "sine-dwell": f"a sine with dwell at {kmh.get('sine-dwell') or 0:g} km/h at {SINE_FRACTION:g} of the amplitude reaching the envelope's a_y",
+        "double-lane-change (outside)": f"a double lane change at {kmh.get('double-lane-change (outside)') or 0:g} km/h, outside the envelope (seed {seeds[0]} only)",
+    }
+    measured = [label for label in what if label in kmh]
+    lines = [
+        f"Each CommonRoad car with the bound `netsetest calibrate --envelope --ay-max {env['ay_max']:g} --speed "
+        f"{env['speed_kmh'][0]:g}-{env['speed_kmh'][1]:g} --seeds {env['seeds'][0]}-{env['seeds'][-1]}` gives (its sweep of step "
+        "steers and sines with dwell), declared with that `[envelope]`, on held-out drives, seeds "
+        f"{seeds[0]}-{seeds[-1]}: " + "; ".join(what[label] for label in measured) + ". Paper and worst-case signals, NSNIM and "
+        "SAIM. Steps outside the envelope: transitions whose a_y or speed left it; misses: sets that missed the truth, all "
+        "outside the guarantee where violations are 0, with how many were attributed to a cause and whether the verdict "
+        "line said so in words.",
+        "",
+        "| car | calibrated box | held-out drive | case | runs | peak \\|a_y\\| m/s² | steps outside the envelope | largest e_k / bound | "
+        "covered | violations | misses (attributed, said in the verdict) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for car in env["cars"]:
+        name = f"{car['vehicle']} ({VEHICLE_NAMES[car['vehicle']]})"
+        box = f"[{car['box'][0]:.3g}, {car['box'][1]:.3g}]"
+        for label, rows in car["drives"].items():
+            for case in ("nsnim", "saim"):
+                rs = [r for r in rows if r["case"] == case]
+                if not rs:
+                    continue
+                misses = sum(r["misses"] for r in rs)
+                said = all(r["verdict_says"] for r in rs if r["misses_attributed"])
+                attributed = sum(r["misses_attributed"] for r in rs)
+                lines.append(
+                    f"| {name} | {box} | {label} | {case} | {len(rs)} | {max(r['ay_peak'] for r in rs):.2f} | "
+                    f"{sum(r['envelope_left'] for r in rs)} | {max(r['e_max_ratio'] for r in rs):.2f} | "
+                    f"{sum(r['covered'] for r in rs)} / {sum(r['evaluated'] for r in rs)} | {sum(r['violations'] for r in rs)} | "
+                    f"{misses} ({attributed}, {'yes' if said else 'no'}) |"
+                )
+    return lines
 
 
 def plant_summary_markdown(res: dict) -> str:

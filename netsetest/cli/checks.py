@@ -77,6 +77,26 @@ def non_negative_float(s: str) -> float:
     return v
 
 
+def speed_range(s: str) -> tuple[float, float]:
+    """argparse type: a speed range LO-HI in km/h, 0 ≤ LO ≤ HI (an operating envelope's)."""
+    lo, sep, hi = s.partition("-")
+    try:
+        a, b = float(lo), float(hi)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a speed range is LO-HI in km/h (e.g. 70-120), got {s!r}") from None
+    if not sep or not (math.isfinite(a) and math.isfinite(b) and 0 <= a <= b):
+        raise argparse.ArgumentTypeError(f"a speed range is LO-HI in km/h with 0 ≤ LO ≤ HI (e.g. 70-120), got {s!r}")
+    return a, b
+
+
+def positive_float(s: str) -> float:
+    """argparse type: a finite number > 0."""
+    v = non_negative_float(s)
+    if v == 0:
+        raise argparse.ArgumentTypeError("must be > 0, got 0")
+    return v
+
+
 def output_file(path: str | None, option: str) -> None:
     """Fail now, not after the run, when ``path`` cannot be written as a file (its directory must exist)."""
     if path is None:

@@ -30,6 +30,9 @@ from netsetest.models.uncertainty import DEFAULT_MARGIN
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED
 
 if TYPE_CHECKING:  # a role process never loads the records (memory: docs/performance-history.md)
+    from netsetest.analysis.calibrate import Calibration, DriveMismatch
+    from netsetest.models.envelope import OperatingEnvelope
+    from netsetest.models.plant import PlantKind
     from netsetest.records.record import Record
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
@@ -106,6 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true", help="replace an existing --record file (default: refuse it)")
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON (default: none)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.add_argument("--strict", action="store_true", help="exit 1 where any set missed the truth outside the guarantee too (default: only misses it covered)")
     processes.add_run_options(p)
     processes.add_role_parsers(sub)
 
@@ -151,7 +155,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--manoeuvres",
         type=checks.drive_list,
-        required=True,
         metavar="A,B@AMP,...",
         help=f"training manoeuvres, comma-separated: {', '.join(MANOEUVRES)}; NAME@AMP steers "
         f"{', '.join(WITH_AMPLITUDE)} with amplitude AMP rad instead of [steering] high (e.g. an "
@@ -178,6 +181,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="also drive the same car's simpler models (multi-body → single-track → linear tyres): how much of e_k each cause contributes",
     )
     p.add_argument("--json", metavar="PATH", help="write the bounds and the per-drive maxima as JSON")
+    p.add_argument(
+        "--envelope",
+        action="store_true",
+        help="instead of --manoeuvres: a sweep of step steers and sines with dwell filling the operating envelope --ay-max, --speed; "
+        "prints the bound and the [envelope] it holds for (docs/plant.md)",
+    )
+    p.add_argument("--toml", metavar="PATH", help="also write the box (and with --envelope the [envelope] table) to PATH, to append to the topology")
+    p.add_argument("--ay-max", type=checks.positive_float, metavar="M/S2", help="the envelope's largest |lateral acceleration| [m/s²] (with --envelope)")
+    p.add_argument("--speed", type=checks.speed_range, metavar="LO-HI", help="the envelope's speed range [km/h], e.g. 70-120 (with --envelope)")
 
     p = sub.add_parser("bench", help="the performance benchmark: solve times, tightness, Zenoh overhead, start-up, memory, real-time scale, defences")
     p.add_argument("--quick", action="store_true", help="fewer steps and samples (the report's header says how long the run took)")
@@ -237,13 +249,13 @@ def cmd_run(a: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
-    from netsetest.runtime.report import exit_code, format_table, write_summary
+    from netsetest.runtime.report import exit_code, format_table, strict_verdict, write_summary
 
     sc = load_topology(a.topology, a.case, a.steps, a.estimator)
     res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet, record=a.record, keep=False, objective=a.objective)
     write_summary(res.summary, a.summary_json)
     print(format_table(res.summary))
-    return exit_code(res.summary)
+    return strict_verdict(res.summary, exit_code(res.summary), a.strict)
 
 
 def _note_partial(command: str, rec: Record) -> None:
@@ -271,7 +283,11 @@ def cmd_inspect(a: argparse.Namespace) -> int:
     for i in ids:
         method = rec.meta.estimators.get(str(i), "sdp")
         if method == "sdp":
-            print(f"node {i}: fault estimate and bounds f̂ ± √(ρ P33) of its ellipsoid")
+            cut = rec.nodes[i].fault_range is not None  # the slab of a declared bound or the k-of-N pin (NodeState.fault_range)
+            print(
+                f"node {i}: fault estimate f̂ (its ellipsoid's centre) and bounds: the ellipsoid {{x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ}}'s "
+                "extent in f" + (", cut by its fault range (a declared |f| ≤ F or the k-of-N pin) on the steps that have one" if cut else "")
+            )
         else:  # a set estimator publishes its own set: its bounds are that set's interval hull
             print(f"node {i} ({method}): fault bounds of its published set (interval hull), estimate their midpoint")
         print(f"{'step':>5} {'f_true':>9} {'f_est':>9} {'lower':>9} {'upper':>9} {'E':>7}  {'fault':<9}  status")
@@ -281,6 +297,8 @@ def cmd_inspect(a: argparse.Namespace) -> int:
             flag = "  not judged" if not r["judged"] else ("" if r["contained"] else "  MISS")
             if r["judged"] and r["contained"] and r["continues_contained"] is False:
                 flag = "  MISS (the set it continues from)"
+            if r["cause"] is not None:  # outside the guarantee: why, beside a miss or alone
+                flag += f"  [not covered: {r['cause']}]"
             fdi = r["fdi"] or "-"  # detected: the interval excludes 0 (docs/fdi.md)
             print(f"{r['step']:5d} {ft:>9} {r['fault_estimate']:9.4f} {r['fault_lower']:9.4f} {r['fault_upper']:9.4f} {e:>7}  {fdi:<9}  {r['status']}{flag}")
         print()
@@ -402,16 +420,63 @@ def _seed_text(seeds: Sequence[int]) -> str:
     return f"{seeds[0]}-{seeds[-1]}" if list(seeds) == list(range(seeds[0], seeds[-1] + 1)) and len(seeds) > 1 else ",".join(map(str, seeds))
 
 
+def _calibration_envelope(a: argparse.Namespace) -> OperatingEnvelope | None | int:
+    """The envelope ``calibrate --envelope`` fills (None: --manoeuvres instead), or exit 2 on a wrong mix."""
+    from netsetest.models.envelope import OperatingEnvelope
+
+    if not a.envelope:
+        given = [o for o, v in (("--ay-max", a.ay_max), ("--speed", a.speed)) if v is not None]
+        if given or a.manoeuvres is None:
+            what = f"{', '.join(given)} only go with --envelope" if given else "give --manoeuvres, or --envelope with --ay-max and --speed"
+            print(f"netsetest calibrate: {what}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        return None
+    if a.manoeuvres is not None or a.ay_max is None or a.speed is None:
+        what = "--envelope chooses its own drives: leave out --manoeuvres" if a.manoeuvres is not None else "--envelope needs --ay-max and --speed"
+        print(f"netsetest calibrate: {what}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    return OperatingEnvelope(a.ay_max, a.speed)
+
+
+def _print_drives(cal: Calibration, plant: str, simpler: dict[PlantKind, list[DriveMismatch]]) -> None:
+    """Per training drive: its largest |e_β|, |e_r| on the car (and each simpler model), beside what the car
+    did: peak |a_y|, |r|, |β|, its speed range and peak steering rate (what bounds e_k in practice)."""
+    from netsetest.analysis.calibrate import envelope_by_drive, max_by_drive
+
+    columns = [plant, *simpler]
+    maxima = [max_by_drive(cal.drives), *(max_by_drive(ds) for ds in simpler.values())]
+    did = envelope_by_drive(cal.drives)
+    width = max(26, *(len(label) for label in maxima[0]))
+    print(f"{'plant:':>{width + 8}}" + "".join(f"  {p:^23}" for p in columns))
+    print(
+        f"{'drive':>{width}} {'drives':>7}"
+        + f"  {'max|e_β| rad':>11} {'max|e_r| /s':>11}" * len(columns)
+        + f"  {'|a_y| m/s²':>10} {'|r| rad/s':>9} {'|β| rad':>8} {'speed km/h':>12} {'|δ̇| rad/s':>10}"
+    )
+    for label in maxima[0]:
+        d = did[label]
+        print(
+            f"{label:>{width}} {sum(x.label == label for x in cal.drives):>7}"
+            + "".join(f"  {m[label][0]:>11.3e} {m[label][1]:>11.3e}" for m in maxima)
+            + f"  {d.ay_peak:>10.2f} {d.r_peak:>9.3f} {d.beta_peak:>8.4f} {d.speed_kmh[0]:>5.1f}–{d.speed_kmh[1]:<6.1f} {d.steer_rate_peak:>10.3f}"
+        )
+
+
 def cmd_calibrate(a: argparse.Namespace) -> int:
     import numpy as np
 
-    from netsetest.analysis.calibrate import calibrate, max_by_drive, simpler_mismatch
+    from netsetest.analysis.calibrate import calibrate, envelope_sweep, max_by_drive, simpler_mismatch
     from netsetest.config.schema import load_topology
+    from netsetest.models.plant import VEHICLE_NAMES
     from netsetest.runtime.report import Progress
 
     checks.output_file(a.json, "--json")
-    scenarios = [load_topology(a.topology, steps=a.steps, manoeuvre=d.manoeuvre, steer_high=d.amplitude) for d in a.manoeuvres]
-    if scenarios[0].plant == "ts":
+    checks.output_file(a.toml, "--toml")
+    envelope = _calibration_envelope(a)
+    if isinstance(envelope, int):
+        return envelope
+    base = load_topology(a.topology, steps=a.steps)
+    if base.plant == "ts":
         print(f"netsetest calibrate: {a.topology}: plant 'ts' is the T-S model itself (e_k = 0): nothing to calibrate", file=sys.stderr)
         return EXIT_BAD_INPUT
     bar = Progress(1, "calibrate")
@@ -420,22 +485,39 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
         bar.total = total
         bar.update(n)
 
-    cal = calibrate(scenarios, list(a.seeds), a.signals, a.margin, progress=on_progress)
-    simpler = simpler_mismatch(scenarios, list(a.seeds), a.signals, progress=on_progress) if a.causes else {}
+    if envelope is not None:
+        try:
+            scenarios = envelope_sweep(base, envelope, progress=on_progress)
+        except ValueError as exc:
+            bar.close()
+            print(f"netsetest calibrate: {a.topology}: {exc}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+    else:
+        scenarios = [load_topology(a.topology, steps=a.steps, manoeuvre=d.manoeuvre, steer_high=d.amplitude) for d in a.manoeuvres]
+    try:
+        cal = calibrate(scenarios, list(a.seeds), a.signals, a.margin, progress=on_progress, envelope=envelope)
+    except ValueError as exc:
+        bar.close()
+        print(f"netsetest calibrate: {a.topology}: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    simpler = simpler_mismatch(scenarios, list(a.seeds), a.signals, progress=on_progress, swept=envelope is not None) if a.causes else {}
     bar.close()
     sc = scenarios[0]
     print(
-        f"model mismatch of {sc.name}: plant {sc.plant} (CommonRoad vehicle {sc.vehicle_id}), {sc.steps} steps per drive, "
-        f"seeds {_seed_text(a.seeds)}, signals {','.join(a.signals)}"
+        f"model mismatch of {sc.name}: plant {sc.plant} (CommonRoad vehicle {sc.vehicle_id}, {VEHICLE_NAMES[sc.vehicle_id]}), "
+        f"{sc.steps} steps per drive, seeds {_seed_text(a.seeds)}, signals {','.join(a.signals)}"
+        + (f"; drives filling the envelope {envelope.text}" if envelope is not None else "")
     )
-    columns = [sc.plant, *simpler]
-    maxima = [max_by_drive(cal.drives), *(max_by_drive(ds) for ds in simpler.values())]
-    print(f"{'plant:':>34}" + "".join(f"  {p:^23}" for p in columns))
-    print(f"{'drive':>26} {'drives':>7}" + f"  {'max|e_β| rad':>11} {'max|e_r| /s':>11}" * len(columns))
-    for label in maxima[0]:
-        print(f"{label:>26} {sum(d.drive.label == label for d in cal.drives):>7}" + "".join(f"  {m[label][0]:>11.3e} {m[label][1]:>11.3e}" for m in maxima))
-    print(f"bounds covering every e_k with margin {a.margin:g} (declare one in the topology):")
+    _print_drives(cal, sc.plant, simpler)
+    held = f"every e_k inside the envelope ({len(cal.samples())} transitions)" if envelope is not None else "every e_k"
+    print(f"bounds covering {held} with margin {a.margin:g} (declare one in the topology):")
     print(cal.box.as_toml() + "# or\n" + cal.ellipsoid.as_toml(), end="")
+    if envelope is not None:
+        print("# the operating envelope it holds for (declare it beside the bound: the run checks every step against it)")
+        print(envelope.as_toml(), end="")
+    if a.toml:
+        with open(a.toml, "w") as fh:
+            fh.write("\n" + cal.box.as_toml() + ("\n" + envelope.as_toml() if envelope is not None else ""))
     if a.json:
         doc = {
             "topology": sc.path,
@@ -447,8 +529,17 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
             "signals": a.signals,
             "box": np.diag(cal.box.G).tolist(),
             "ellipsoid": cal.ellipsoid.E.tolist(),
+            "envelope": None if envelope is None else {"ay_max": envelope.ay_max, "speed_kmh": list(envelope.speed_kmh)},
             "drives": [
-                {"manoeuvre": d.drive.manoeuvre, "amplitude": d.drive.amplitude, "signals": d.signals, "seed": d.seed, "max_abs": d.max_abs.tolist()}
+                {
+                    "manoeuvre": d.drive.manoeuvre,
+                    "amplitude": d.drive.amplitude,
+                    "speed_kmh": d.speed_kmh,
+                    "signals": d.signals,
+                    "seed": d.seed,
+                    "max_abs": d.max_abs.tolist(),
+                    **dataclasses.asdict(d.envelope),
+                }
                 for d in cal.drives
             ],
             "simpler": {plant: {label: mx.tolist() for label, mx in max_by_drive(ds).items()} for plant, ds in simpler.items()},

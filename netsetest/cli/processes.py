@@ -224,7 +224,7 @@ COMMANDS.update(vehicle=cmd_vehicle, node=cmd_node, collector=cmd_collector, rou
 
 def cmd_run_zenoh(a: argparse.Namespace) -> int:
     from netsetest.runtime.launcher import LaunchError, LaunchOptions, launch, plan_run
-    from netsetest.runtime.report import format_table
+    from netsetest.runtime.report import format_table, strict_verdict
 
     opts = LaunchOptions(
         topology=a.topology,
@@ -262,4 +262,5 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
     outcome = launch(plan)
     if outcome.summary is not None:
         print(format_table(outcome.summary))  # its last line names the security mode and the verdict
+        return strict_verdict(outcome.summary, outcome.exit_code, a.strict)
     return outcome.exit_code

@@ -37,6 +37,7 @@ from netsetest.models.signals import Fault, NoFault, PiecewiseLinearFault, Speed
 from netsetest.models.manoeuvres import MANOEUVRES, SINE_SPEED, STEERING_MAX_RAD, ManoeuvreName, steering_range
 from netsetest.extras import MissingExtra
 from netsetest.models.plant import PLANTS, VEHICLE_IDS, PlantKind, derived_params
+from netsetest.models.envelope import OperatingEnvelope
 from netsetest.models.uncertainty import ModelUncertainty
 from netsetest.models.vehicle import KMH, TSModel, VehicleParams
 from netsetest.scenarios import bundled_topologies, resolve_topology
@@ -340,6 +341,23 @@ class ModelUncertaintySpec(_Strict, frozen=True, kw_only=True):
         return ModelUncertainty.ellipsoid(np.asarray(self.ellipsoid, dtype=float))
 
 
+AY_LIMIT = 30.0  # [m/s²] an envelope's lateral acceleration: 3 g, beyond any road car's grip
+
+
+class EnvelopeSpec(_Strict, frozen=True, kw_only=True):
+    """The operating envelope the [model_uncertainty] bound was calibrated for (models/envelope.py)."""
+
+    ay_max: Annotated[float, Meta(gt=0, le=AY_LIMIT, description="largest |lateral acceleration| [m/s²]")]
+    speed_kmh: tuple[Annotated[float, Meta(ge=0, le=SPEED_MAX_KMH)], Annotated[float, Meta(ge=0, le=SPEED_MAX_KMH)]]
+
+    def __post_init__(self) -> None:
+        if self.speed_kmh[0] > self.speed_kmh[1]:
+            raise ValueError(f"speed_kmh: [lo, hi] with lo ≤ hi, got {list(self.speed_kmh)}")
+
+    def build(self) -> OperatingEnvelope:
+        return OperatingEnvelope(float(self.ay_max), (float(self.speed_kmh[0]), float(self.speed_kmh[1])))
+
+
 class SpeedSpec(_Strict, frozen=True, kw_only=True):
     mean_kmh: Annotated[float, Meta(gt=0, le=SPEED_MAX_KMH)] = 100.0
     amplitude_kmh: Annotated[float, Meta(ge=0, le=SPEED_MAX_KMH)] = 18.0
@@ -409,9 +427,12 @@ class TopologyFile(_Strict, frozen=True, kw_only=True):
     edges: list[Edge]
     loss: LinkLoss = field(default_factory=LinkLoss)
     model_uncertainty: ModelUncertaintySpec | None = None
+    envelope: EnvelopeSpec | None = None
     network: NetworkSpec = field(default_factory=NetworkSpec)
 
     def __post_init__(self) -> None:
+        if self.envelope is not None and (self.model_uncertainty is None or self.vehicle.plant == "ts"):
+            raise ValueError("envelope: it says where a plant's [model_uncertainty] bound holds; declare a nonlinear plant and that bound with it")
         ids = [n.id for n in self.nodes]
         if not ids:
             raise ValueError("nodes: at least one node is needed")
@@ -504,6 +525,7 @@ class Scenario:
     vehicle_id: int = DEFAULT_VEHICLE  # CommonRoad parameters_vehicle<N> (a nonlinear plant only)
     manoeuvre: ManoeuvreName = "paper"
     uncertainty: ModelUncertainty | None = None  # declared bound on e_k (None: e_k = 0 is assumed)
+    envelope: OperatingEnvelope | None = None  # where that bound was calibrated to hold (None: not declared)
     fault_tolerance: float = 0.0  # |f| ≤ this counts as no fault (fault detection, docs/fdi.md)
     readings: bool = True  # the same-step exchange of the references' readings (docs/network.md)
     health_groups: tuple[HealthGroup, ...] = ()  # declared: at most m of each group's sensors faulty (|f| > fault_tolerance) at any step
@@ -782,6 +804,7 @@ def load_topology(
         vehicle_id=v.car,
         manoeuvre=cast(ManoeuvreName, v.manoeuvre),  # one of MANOEUVRES: VehicleSpec checked it
         uncertainty=topo.model_uncertainty.build() if topo.model_uncertainty is not None else None,
+        envelope=topo.envelope.build() if topo.envelope is not None else None,
         fault_tolerance=topo.network.fault_tolerance,
         readings=topo.network.readings,
         health_groups=_health_groups(path, topo.network, nodes),

@@ -28,7 +28,8 @@ def scheduled_speed(sc: Scenario, vx: float) -> float:
 @dataclass(frozen=True)
 class DriveStep:
     """Step k of the truth: x_k, the inputs held over [k, k+1], the sensors' v_k, γ_k, and e_k (None after
-    the last step) = x_{k+1} − (Ā_k x_k + B̄_k u_k + D̄_k w_k) with the matrices of Vx_k."""
+    the last step) = x_{k+1} − (Ā_k x_k + B̄_k u_k + D̄_k w_k) with the matrices of Vx_k; the car's speed v_k
+    and the transition's lateral acceleration a_y,k (Plant.transition_ay) (None after the last step; models/envelope.py)."""
 
     k: int
     x: np.ndarray  # (NX,)
@@ -38,6 +39,8 @@ class DriveStep:
     v: np.ndarray  # (N,) per node in scenario order
     gamma: np.ndarray  # (N,)
     e: np.ndarray | None
+    speed: float = 0.0  # [m/s] v at the centre of gravity
+    ay: float | None = None  # [m/s²]
 
 
 class Drive:
@@ -66,7 +69,7 @@ class Drive:
         drawn, w, v, gamma = self.signals.draw(k)  # the draw order of every run: u, w, v, γ
         u = self.manoeuvre.steer(k * sc.tau_s, st, drawn)
         vx = sc.vx(k) if sc.plant == "ts" else scheduled_speed(sc, st.vx)
-        e = None
+        e = ay = None
         if k < sc.steps and sc.plant == "ts":  # the truth is the model's own step: e_k = 0 exactly
             self.plant.advance(u, w, k * sc.tau_s, (k + 1) * sc.tau_s, sc.speed)
             e = np.zeros(2)
@@ -74,7 +77,9 @@ class Drive:
             predicted = sc.model.step(st.x, u, w, vx)
             self.plant.advance(u, w, k * sc.tau_s, (k + 1) * sc.tau_s, sc.speed)
             e = self.plant.state().x - predicted
-        return DriveStep(k, st.x, u, w, vx, v, gamma, e)
+        if k < sc.steps:
+            ay = self.plant.transition_ay()
+        return DriveStep(k, st.x, u, w, vx, v, gamma, e, st.speed, ay)
 
 
 __all__ = ["Drive", "DriveStep", "scheduled_speed"]

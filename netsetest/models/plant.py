@@ -41,7 +41,8 @@ from netsetest.models.vehicle import KMH, TSModel, VehicleParams
 
 PlantKind = Literal["ts", "single-track", "single-track-linear", "multi-body"]
 PLANTS: tuple[PlantKind, ...] = ("ts", "single-track", "single-track-linear", "multi-body")
-VEHICLE_IDS = (1, 2, 3)  # CommonRoad parameters_vehicle1..3 (Ford Escort, BMW 320i, VW Vanagon)
+VEHICLE_IDS = (1, 2, 3)  # CommonRoad parameters_vehicle1..3
+VEHICLE_NAMES = {1: "Ford Escort", 2: "BMW 320i", 3: "VW Vanagon"}  # the cars of those parameter sets
 RTOL = 1e-8  # DOPRI5's relative tolerance: x_{k+1} to ~1e-9 relative, far below any mismatch bound
 ATOL = 1e-10
 MAX_STEPS = 100_000  # DOPRI5's step budget per sampling interval (about 20 are used): a bound, not a setting
@@ -107,6 +108,11 @@ class Plant(Protocol):
         """Hold steering u and wind w over [t0, t1] while following the speed reference."""
         ...
 
+    def transition_ay(self) -> float:
+        """The lateral acceleration [m/s²] of the last :meth:`advance` (the operating envelope's measure,
+        models/envelope.py): the larger in magnitude of its values at the interval's two ends."""
+        ...
+
 
 class TSPlant:
     """The T-S model (8) as the truth, scheduled with the reference speed (the paper's setting; e_k ≡ 0).
@@ -125,8 +131,14 @@ class TSPlant:
         tau = t1 - t0
         v = self.vx / math.cos(self.x[0])
         self.pose = (X + tau * v * math.cos(psi + self.x[0]), Y + tau * v * math.sin(psi + self.x[0]), psi + tau * self.x[1])
+        x0, v0 = self.x, v
         self.x = self.model.step(self.x, u, w, self.vx)
         self.vx = speed.kmh(t1) * KMH  # as Scenario.vx: the paper's run, bit for bit
+        # no instantaneous β̇ in a discrete model: the interval's mean, v̄ (Δβ/τ + r̄)
+        self._ay = 0.5 * (v0 + self.vx / math.cos(self.x[0])) * ((self.x[0] - x0[0]) / tau + 0.5 * (x0[1] + self.x[1]))
+
+    def transition_ay(self) -> float:
+        return self._ay
 
 
 class _CommonRoadPlant:
@@ -155,6 +167,13 @@ class _CommonRoadPlant:
     def _wind(self, f: list[float], s: np.ndarray, force: float) -> None:
         raise NotImplementedError
 
+    def _ay(self, s: np.ndarray, f: list[float]) -> float:
+        """The lateral acceleration at the centre of gravity, body frame, at state s with derivative f."""
+        raise NotImplementedError
+
+    def transition_ay(self) -> float:
+        return self._ay_ends[0] if abs(self._ay_ends[0]) >= abs(self._ay_ends[1]) else self._ay_ends[1]
+
     def _rhs(self, t: float, s: np.ndarray, force: float, speed: SpeedProfile) -> list[float]:
         """ṡ = the package's model at s, with the speed-tracking acceleration input and the wind's force."""
         v_ref, dv_ref = speed.ms(t)
@@ -165,12 +184,14 @@ class _CommonRoadPlant:
 
     def advance(self, u: float, w: float, t0: float, t1: float, speed: SpeedProfile) -> None:
         self.s[2] = u  # δ held over the interval (zero-order hold)
+        ay0 = self._ay(self.s, self._rhs(t0, self.s, self.fw * w, speed))  # with the new steering: its tyre force at once
         integrator = self._ode.set_initial_value(self.s, t0).set_f_params(self.fw * w, speed)
         s1 = integrator.integrate(t1)
         if not integrator.successful():
             raise ArithmeticError(f"the plant's integration failed at t = {t0:.3f} s (DOPRI5 status {integrator.get_return_code()})")
         self.s = np.array(s1, dtype=float)
         self.s[2] = u
+        self._ay_ends = (ay0, self._ay(self.s, self._rhs(t1, self.s, self.fw * w, speed)))
 
 
 class SingleTrackPlant(_CommonRoadPlant):
@@ -188,6 +209,10 @@ class SingleTrackPlant(_CommonRoadPlant):
     def state(self) -> PlantState:
         s = self.s
         return PlantState(np.array([s[6], s[5]]), float(s[3]), float(s[3] * math.cos(s[6])), (float(s[0]), float(s[1]), float(s[4])))
+
+    def _ay(self, s: np.ndarray, f: list[float]) -> float:
+        # v_y = v sin β: a_y = v̇_y + r v_x = v̇ sin β + v cos β (β̇ + r)
+        return float(f[3] * math.sin(s[6]) + s[3] * math.cos(s[6]) * (f[6] + s[5]))
 
 
 class LinearTyrePlant(SingleTrackPlant):
@@ -209,6 +234,9 @@ class MultiBodyPlant(_CommonRoadPlant):
         # a lateral body force F at lever arm l_w: v̇_y += F / m, ψ̈ += l_w F / I_z
         f[10] += force / self.m
         f[5] += self.lw * force / self.Iz
+
+    def _ay(self, s: np.ndarray, f: list[float]) -> float:
+        return float(f[10] + s[5] * s[3])  # a_y = v̇_y + r v_x
 
     def state(self) -> PlantState:
         s = self.s
@@ -236,6 +264,7 @@ __all__ = [
     "Plant",
     "PlantKind",
     "PlantState",
+    "VEHICLE_NAMES",
     "derived_params",
     "make_plant",
     "require_plant",

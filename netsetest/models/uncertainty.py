@@ -63,6 +63,11 @@ class ModelUncertainty:
         zeta = np.linalg.solve(self.G, e)  # E⁻¹ = G⁻ᵀG⁻¹: eᵀE⁻¹e = ‖G⁻¹e‖²
         return bool(zeta @ zeta <= 1 + HOLDS_RTOL)
 
+    def ratio(self, e: np.ndarray) -> float:
+        """e in the bound's own norm: max_m |e_m|/b_m for a box, √(eᵀE⁻¹e) for an ellipsoid (≤ 1: inside)."""
+        zeta = np.linalg.solve(self.G, np.asarray(e, dtype=float))
+        return float(np.abs(zeta).max() if self.kind == "box" else np.linalg.norm(zeta))
+
     def support(self, c: np.ndarray) -> float:
         """max_{e ∈ 𝓔} cᵀe (c (NX,)): ‖Gᵀc‖₁ for a box, ‖Gᵀc‖₂ for an ellipsoid."""
         g = self.G.T @ np.asarray(c, dtype=float)

@@ -14,7 +14,7 @@ step::
 ``meta``: run settings (topology, case, signals, variant, seed, steps, tau_s, mode, clock, node ids,
 in-neighbour weights {i: {j: a_ij}}, run id).  Truth entry of step k: x = [β, r], faults {i: f_i}, u,
 w, vx, noise {i}, gamma {i}, y {i}, y_nofault {i}, sector_ok {i}, r {i} = C̄x̄, fault_ok {i}, noise_ok {i},
-dist_ok, lost [[j, i]], alive [i], drops {reason: n}, e [2] | null (model mismatch of k → k+1), mismatch_ok.  State entry: step, xhat [3], P [9, row-major], rho,
+dist_ok, lost [[j, i]], alive [i], drops {reason: n}, e [2] | null (model mismatch of k → k+1), mismatch_ok, speed, ay, envelope_ok (models/envelope.py).  State entry: step, xhat [3], P [9, row-major], rho,
 status, rho_cert, solve_ms, used, missing, late, dropped, drops {reason: n}, sector [h1, h] | null,
 sector_basis, E = eᵀP⁻¹e (null when the truth of the step is unknown), contained
 (E ≤ rho; for a node running a set estimator: the truth in its published set, whose per-coordinate
@@ -244,6 +244,7 @@ class Record:
         """Per step: fault estimate and bounds of node ``node``, with the true fault."""
         tr = self.nodes[node]
         lo, hi = tr.bounds(2)
+        raw = self.raw_nodes.get(str(node), [])
         rows = []
         for n, k in enumerate(tr.steps):
             t = self.truth_at(int(k))
@@ -260,6 +261,7 @@ class Record:
                     "continues_contained": bool(tr.continues_contained[n]) if tr.was_judged(n) and tr.continues_contained is not None else None,
                     "status": tr.status[n],
                     "fdi": tr.fdi[n] if tr.fdi is not None else None,
+                    "cause": None if tr.assumptions_ok[n] or n >= len(raw) else not_covered_cause(raw[n]),
                 }
             )
         return rows
@@ -277,6 +279,15 @@ class Record:
                 row[f"{name}_upper"] = float(hi[n])
                 row[f"{name}_true"] = None if t is None else float(t["x"][comp])
         return rows
+
+
+def not_covered_cause(entry: dict) -> str:
+    """Why a recorded node-step is outside the guarantee, in words: its cause, and for an inherited one the
+    input it rests on (docs/coverage.md); "not covered" where an older record names none."""
+    cause, origin = entry.get("not_covered_cause"), entry.get("inherited_from")
+    if isinstance(origin, list) and len(origin) == 3:
+        return f"inherited: node {origin[0]} step {origin[1]} {origin[2]}"
+    return cause if isinstance(cause, str) else "not covered"
 
 
 def _read(path: Path) -> bytes:

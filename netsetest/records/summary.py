@@ -84,6 +84,32 @@ class InheritedOrigin:
 
 
 @dataclass(frozen=True)
+class CarSummary:
+    """What the car did in a run whose truth is a nonlinear plant (docs/plant.md): the plant and manoeuvre,
+    the model mismatch e_k against its declared bound, and the drive against its declared envelope.
+    ``transitions``: the steps k → k+1 measured; margins are negative where the drive left the envelope."""
+
+    plant: str  # e.g. single-track/3
+    car: str  # the CommonRoad parameter set's car
+    manoeuvre: str  # the manoeuvre with its amplitude and speed reference
+    bound: str | None = None  # the declared [model_uncertainty] in words (None: e_k = 0 assumed)
+    transitions: int = 0
+    e_max: list[float] = field(default_factory=lambda: [0.0, 0.0])  # largest |e_β|, |e_r|
+    e_max_ratio: float | None = None  # largest e_k in the bound's own norm (≤ 1: inside; None: no bound)
+    e_outside: int = 0  # transitions whose e_k left the bound
+    e_outside_first: int | None = None  # the first of them (k of k → k+1)
+    envelope: str | None = None  # the declared [envelope] in words (None: not declared)
+    ay_peak: float = 0.0  # largest |a_y| [m/s²]
+    speed_kmh: list[float] = field(default_factory=lambda: [0.0, 0.0])  # the car's slowest and fastest speed
+    ay_margin: float | None = None  # ay_max − the largest |a_y| [m/s²] (None: no envelope)
+    speed_margin_kmh: float | None = None  # the smallest distance of the speed to the envelope's range's ends
+    envelope_left: int = 0  # transitions outside the envelope
+
+    def to_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(frozen=True)
 class RunSummary:
     """The verdict of a run: totals over node-steps, per-role drop counters and one row per node.
 
@@ -103,6 +129,8 @@ class RunSummary:
     node_steps_covered: int = 0  # evaluated with every assumption held
     node_steps_not_covered: dict[str, int] = field(default_factory=dict)  # evaluated outside the guarantee, by cause
     inherited_from: list[InheritedOrigin] = field(default_factory=list)  # the origins of cause "inherited"
+    misses_by_cause: dict[str, int] = field(default_factory=dict)  # misses outside the guarantee, by their node-step's cause
+    car: CarSummary | None = None  # a nonlinear plant's run: what the car did (None: the T-S plant, older records)
     nodes_missing: list[int] = field(default_factory=list)  # silent at the last step
     nodes_rejoined: list[int] = field(default_factory=list)
     losses: dict[str, int] = field(default_factory=dict)  # scheduled message losses, by kind
@@ -143,6 +171,10 @@ class RunSummary:
         for f in fields(self):
             if f.name not in RUN_FIELDS:
                 v = getattr(self, f.name)
+                if f.name == "car":
+                    if v is not None:  # a T-S run's summary is as before
+                        out[f.name] = v.to_dict()
+                    continue
                 out[f.name] = [n.to_dict() for n in v] if f.name in ("nodes", "inherited_from") else v
         return out
 

@@ -65,10 +65,13 @@ from netsetest.messages import End, Message, NodeState, Ready, RunScope, Truth
 from netsetest.models.sensor import augmented
 from netsetest.records.meta import RunMeta
 from netsetest.records.record import RecordSink
-from netsetest.records.summary import RUN_FIELDS, InheritedOrigin, NodeSummary, RunSummary, StopCause
+from netsetest.models.manoeuvres import SINE_SPEED, WITH_AMPLITUDE
+from netsetest.models.plant import VEHICLE_NAMES
+from netsetest.models.vehicle import KMH
+from netsetest.records.summary import RUN_FIELDS, CarSummary, InheritedOrigin, NodeSummary, RunSummary, StopCause
 from netsetest.roles.fdi import FdiTotals, classify
 from netsetest.roles.judge import INHERITED, NO_CHECKS, TRUTH_UNKNOWN, Judge, NodeVerdict, StepInputs, isclose, state_mismatch
-from netsetest.roles.vehicle import ACK_STRIDE, fault_bound_holds, mismatch_holds
+from netsetest.roles.vehicle import ACK_STRIDE, envelope_holds, fault_bound_holds, mismatch_holds
 
 WINDOW = 50  # steps a step may stay open behind the newest truth (bounds memory against a stalled node)
 CLOSE_LAG = 2  # a step whose alive nodes reported closes this many truths later (late and rejoining states)
@@ -117,6 +120,74 @@ class NodeTotals:
     fdi: FdiTotals = field(default_factory=FdiTotals)  # guaranteed fault detection (roles/fdi.py)
     drops: dict[str, int] = field(default_factory=dict)
     solve: array = field(default_factory=lambda: array("d"))  # 8 bytes per step: the median needs them
+
+
+@dataclass
+class CarTotals:
+    """Running figures of a nonlinear plant's transitions k → k+1 (the summary's CarSummary)."""
+
+    transitions: int = 0
+    e_max: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    ratio_max: float = 0.0
+    e_outside: int = 0
+    e_outside_first: int | None = None
+    ay_peak: float = 0.0
+    speed_lo: float = np.inf
+    speed_hi: float = -np.inf
+    ay_margin: float = np.inf
+    speed_margin: float = np.inf
+    envelope_left: int = 0
+
+    def add(self, sc: Scenario, t: Truth) -> None:
+        if t.speed is not None:
+            self.speed_lo, self.speed_hi = min(self.speed_lo, t.speed / KMH), max(self.speed_hi, t.speed / KMH)
+            if sc.envelope is not None:
+                self.speed_margin = min(self.speed_margin, sc.envelope.speed_margin(t.speed))
+        if t.e is None or t.ay is None:
+            return  # the last step: no transition
+        self.transitions += 1
+        self.e_max = np.maximum(self.e_max, np.abs(t.e))
+        if sc.uncertainty is not None:
+            self.ratio_max = max(self.ratio_max, sc.uncertainty.ratio(np.asarray(t.e)))
+        if not t.mismatch_ok:
+            self.e_outside += 1
+            self.e_outside_first = t.step if self.e_outside_first is None else self.e_outside_first
+        self.ay_peak = max(self.ay_peak, abs(t.ay))
+        if sc.envelope is not None:
+            self.ay_margin = min(self.ay_margin, sc.envelope.ay_margin(t.ay))
+        self.envelope_left += not t.envelope_ok
+
+    def summary(self, sc: Scenario) -> CarSummary:
+        unc, env = sc.uncertainty, sc.envelope
+        bound = None
+        if unc is not None:
+            bound = f"box [{', '.join(f'{b:.3g}' for b in np.diag(unc.G))}]" if unc.kind == "box" else "ellipsoid E = " + str(np.round(unc.E, 8).tolist())
+        seen = self.transitions > 0
+        return CarSummary(
+            plant=sc.plant_label,
+            car=f"CommonRoad vehicle {sc.vehicle_id}, {VEHICLE_NAMES[sc.vehicle_id]}",
+            manoeuvre=manoeuvre_text(sc),
+            bound=bound,
+            transitions=self.transitions,
+            e_max=self.e_max.tolist(),
+            e_max_ratio=self.ratio_max if unc is not None and seen else None,
+            e_outside=self.e_outside,
+            e_outside_first=self.e_outside_first,
+            envelope=env.text if env is not None else None,
+            ay_peak=self.ay_peak,
+            speed_kmh=[self.speed_lo, self.speed_hi] if np.isfinite(self.speed_lo) else [0.0, 0.0],
+            ay_margin=self.ay_margin if env is not None and seen else None,
+            speed_margin_kmh=self.speed_margin if env is not None and seen else None,
+            envelope_left=self.envelope_left,
+        )
+
+
+def manoeuvre_text(sc: Scenario) -> str:
+    """The manoeuvre as it was driven: its name, amplitude where it has one, and its speed reference."""
+    amp = f"@{sc.steer_high:g} rad" if sc.manoeuvre in WITH_AMPLITUDE and sc.manoeuvre != "paper" else ""
+    sp = sc.speed
+    speed = f"{sp.mean_kmh:g} ± {sp.amplitude_kmh:g} km/h" if sc.manoeuvre in SINE_SPEED and sp.amplitude_kmh else f"{sp.mean_kmh:g} km/h"
+    return f"{sc.manoeuvre}{amp} at {speed}"
 
 
 def _fault_interval(st: NodeState, v: NodeVerdict) -> tuple[float, float]:
@@ -196,6 +267,8 @@ class Collector:
         self.losses: Counter[str] = Counter()
         self.vehicle_drops: dict[str, int] = {}
         self.not_covered: Counter[str] = Counter()  # evaluated node-steps outside the guarantee, by cause
+        self.misses_by_cause: Counter[str] = Counter()  # misses outside the guarantee, by their node-step's cause
+        self.car = CarTotals() if scenario.plant != "ts" else None
         self.drops: Counter[str] = Counter()
         self._end: End | None = None
         self._end_early = False  # an End was counted as early already
@@ -435,6 +508,8 @@ class Collector:
             return "truth-flags"
         if t.e is not None and t.mismatch_ok != mismatch_holds(sc, np.asarray(t.e)):
             return "truth-flags"
+        if t.envelope_ok != envelope_holds(sc, t.ay, t.speed):
+            return "truth-flags"
         if t.health_ok != sc.health_holds({n.id: n.fault(k) for n in sc.nodes}):
             return "truth-flags"
         return None
@@ -504,6 +579,8 @@ class Collector:
             self._add(t, k, st, v, interval)
             if tr is not None and v.containment is not None:  # judged rows only: a contested copy may be forged
                 t.fdi.add(k, fdi, tr.faults[str(i)], self.sc.fault_tolerance, v.cone.ok)
+        if tr is not None and self.car is not None:
+            self.car.add(self.sc, tr)
         if tr is not None:
             for j, i in tr.lost:
                 self.losses[f"{j}->{i}"] += 1
@@ -552,6 +629,7 @@ class Collector:
                 t.violations += 1  # the published set, or the one the node continues from, missed on a covered node-step
             elif not c.contained:
                 t.broken_misses += 1
+                self.misses_by_cause[cone.cause or INHERITED] += 1
         if st.status in ("ok", "fallback") and k > 0:
             t.solve.append(st.solve_ms)
         t.fallbacks += st.status == "fallback"
@@ -609,6 +687,8 @@ class Collector:
             node_steps_covered=sum(t.covered for t in totals),
             node_steps_not_covered=dict(sorted(self.not_covered.items())),
             inherited_from=[InheritedOrigin(j, why, first, count) for (j, why), (first, count) in sorted(self.origins.items())],
+            misses_by_cause=dict(sorted(self.misses_by_cause.items())),
+            car=self.car.summary(self.sc) if self.car is not None else None,
             # lost for good: silent at the last step; rejoined: a gap, then heard from up to the last step
             nodes_missing=[i for i, t in self.totals.items() if t.last_heard is None or t.last_heard < last],
             nodes_rejoined=[i for i, t in self.totals.items() if t.missing_from is not None and t.last_heard == last],

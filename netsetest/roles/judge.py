@@ -30,6 +30,7 @@ from netsetest.estimator.names import SDP
 from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.sector import Sector, sector_ok
 from netsetest.messages import NodeState, Truth, state_digest
+from netsetest.models.envelope import MODEL_MISMATCH, OUTSIDE_ENVELOPE
 from netsetest.models.sensor import NX, augmented
 from netsetest.sets import set_from_wire
 
@@ -40,7 +41,6 @@ TRUTH_UNKNOWN = "truth unknown"  # no single consistent truth of that step: noth
 NOT_FROM_INPUT = "not from its true input"  # its γ or innovation is not what the true measurement gives
 MISSED = "missed the truth"
 NOT_JUDGED = "not judged"  # no copy with that digest reached the collector, or several matched the truth
-MODEL_MISMATCH = "model mismatch"  # e_k outside the declared [model_uncertainty] (docs/plant.md)
 HEALTH = "k-of-N health"  # more than [network] max_faulty sensors faulty at a step whose set used it (docs/network.md)
 INHERITED = "inherited"  # the cause of a node-step whose input failed: its Origin says which and why
 
@@ -278,8 +278,12 @@ class Judge:
         )
 
     def own_cause(self, n: NodeConfig, st: NodeState | None, tr: Truth, prev: Truth | None, k: int) -> str | None:
-        """The first of the step's own assumptions that broke (None: all held)."""
+        """The first of the step's own assumptions that broke (None: all held); the plant's transition first,
+        as the cause a user acts on (recalibrate, or drive inside the envelope: docs/plant.md)."""
         s = str(n.id)
+        rejoin = st is not None and st.status == "rejoin"  # no transition crossed (below)
+        if k > 0 and prev is not None and prev.step == k - 1 and not prev.mismatch_ok and not rejoin:
+            return mismatch_cause(prev)
         if not self.sector_premise(n, st, tr):
             return "sector"
         if not tr.noise_ok[s]:
@@ -294,8 +298,6 @@ class Judge:
             return TRUTH_UNKNOWN
         if not prev.dist_ok:
             return "disturbance"
-        if not prev.mismatch_ok:
-            return MODEL_MISMATCH
         return None
 
     def cone(self, n: NodeConfig, inp: StepInputs, checks: StepChecks, prev: StepChecks) -> Cone:
@@ -341,6 +343,12 @@ class Judge:
         return None
 
 
+def mismatch_cause(t: Truth | dict) -> str:
+    """Why a transition's e_k left its bound: the car outside the declared envelope, or the bound too small."""
+    ok = t.get("envelope_ok", True) if isinstance(t, dict) else t.envelope_ok
+    return MODEL_MISMATCH if ok else OUTSIDE_ENVELOPE
+
+
 def _inputs_of(st: NodeState, k: int) -> list[tuple[int, int, str | None, bool]]:
     """(node, step, digest, whether it is the node's own prior) of every input of the step; digest None:
     a state from before digests, whose inputs are its neighbours' sole judged copies (and its own)."""
@@ -360,10 +368,10 @@ def history_cone(sc: Scenario, truth: list[dict], node: int, fault_bound: bool) 
     broken: str | None = None if float(e @ np.linalg.solve(n.P0, e)) <= n.rho else "prior"
     out: list[str | None] = []
     for k, t in enumerate(truth):
+        if broken is None and k > 0 and not truth[k - 1].get("mismatch_ok", True):
+            broken = mismatch_cause(truth[k - 1])  # every estimator uses the declared bound on e_k (docs/plant.md)
         if broken is None and k > 0 and not truth[k - 1]["dist_ok"]:
             broken = "disturbance"
-        if broken is None and k > 0 and not truth[k - 1].get("mismatch_ok", True):
-            broken = MODEL_MISMATCH  # every estimator uses the declared bound on e_k (docs/plant.md)
         if broken is None and not t["noise_ok"][s]:
             broken = "noise"
         if broken is None and fault_bound and not t.get("fault_ok", {}).get(s, True):
@@ -380,6 +388,7 @@ __all__ = [
     "NOT_FROM_INPUT",
     "NOT_JUDGED",
     "NO_CHECKS",
+    "OUTSIDE_ENVELOPE",
     "TRUTH_UNKNOWN",
     "Cone",
     "Containment",
@@ -392,6 +401,7 @@ __all__ = [
     "StepVerdict",
     "history_cone",
     "isclose",
+    "mismatch_cause",
     "published_sector",
     "state_mismatch",
 ]

@@ -54,6 +54,13 @@ def mismatch_holds(sc: Scenario, e: np.ndarray) -> bool:
     return sc.uncertainty.holds(np.asarray(e))
 
 
+def envelope_holds(sc: Scenario, ay: float | None, speed: float | None) -> bool:
+    """The transition inside the declared [envelope] (none declared, or nothing to check: True)."""
+    if sc.envelope is None or ay is None or speed is None:
+        return True
+    return sc.envelope.holds(ay, speed)
+
+
 def fault_bound_holds(n: NodeConfig, k: int) -> bool:
     """The node's declared fault bound at step k: |f_k − f_k−1| ≤ δ (k ≥ 1) and |f_k| ≤ F, where declared."""
     f = n.fault(k)
@@ -183,6 +190,7 @@ class Vehicle:
         u_prev, vx_prev = (self.u, self.vx) if k > 0 else (None, None)
         d = self.drive.step(k)
         self.x, self.u, self.w, self.vx, v, gamma, e = d.x, d.u, d.w, d.vx, d.v, d.gamma, d.e
+        ay, speed = (d.ay, d.speed) if sc.plant != "ts" else (None, None)  # the T-S plant has no envelope
         lost = self.losses.lost_at(k) if k > 0 else []
         deadline = time.time() + sc.tau_s if self.realtime else None
         y, y0, faults, sector_ok, noise_ok, r, fault_ok = {}, {}, {}, {}, {}, {}, {}
@@ -238,5 +246,8 @@ class Vehicle:
                 e=None if e is None else list(map(float, e)),
                 mismatch_ok=e is None or mismatch_holds(sc, e),
                 health_ok=sc.health_holds(faults),
+                speed=speed,
+                ay=ay,
+                envelope_ok=envelope_holds(sc, ay, speed),
             ),
         )

@@ -94,6 +94,69 @@ def outcome(summary: RunSummary) -> Outcome:
     return Outcome("PASS" if full else "PASS (partial coverage)", EXIT_OK)
 
 
+def car_lines(summary: RunSummary) -> list[str]:
+    """The output's header with a nonlinear plant (docs/plant.md): the plant and car, the manoeuvre, the
+    largest e_k against its bound and where it left it, and the drive against the declared envelope."""
+    c = summary.car
+    if c is None:
+        return []
+    out = [f"car: {c.plant} ({c.car}), manoeuvre {c.manoeuvre}"]
+    if c.bound is None:
+        out.append(f"model mismatch: no [model_uncertainty] declared (e_k = 0 assumed); largest |e_β|, |e_r| {c.e_max[0]:.3g}, {c.e_max[1]:.3g}")
+    else:
+        where = (
+            f"; e_k left it on {c.e_outside} of {c.transitions} steps (first k = {c.e_outside_first})"
+            if c.e_outside
+            else f"; inside it on all {c.transitions} steps"
+        )
+        ratio = "-" if c.e_max_ratio is None else f"{c.e_max_ratio:.2f}"
+        out.append(f"model mismatch: largest e_k {ratio} × its bound ({c.bound}; |e_β| {c.e_max[0]:.3g}, |e_r| {c.e_max[1]:.3g}){where}")
+    drive = f"peak |a_y| {c.ay_peak:.2f} m/s², speed {c.speed_kmh[0]:.1f}–{c.speed_kmh[1]:.1f} km/h"
+    if c.envelope is None:
+        out.append(f"envelope: none declared; {drive}")
+    else:
+        left = f"; left on {c.envelope_left} of {c.transitions} steps" if c.envelope_left else "; inside on every step"
+        out.append(f"envelope {c.envelope}: {drive}; margin {_fmt(c.ay_margin, '.2f')} m/s², {_fmt(c.speed_margin_kmh, '.1f')} km/h{left}")
+    from netsetest.models.envelope import MISMATCH_CAUSES
+
+    mismatch = sum(n for cause, n in summary.node_steps_not_covered.items() if cause in MISMATCH_CAUSES)
+    if mismatch:
+        out.append(f"node-steps after a step whose e_k left its bound: {mismatch} (not covered by the guarantee)")
+    return out + [""]
+
+
+def uncovered_misses(summary: RunSummary) -> str:
+    """The misses outside the guarantee in words, with their cause ('' when there are none): a user must not
+    read a run whose sets missed the truth as a pass without being told why the guarantee did not hold."""
+    from netsetest.models.envelope import MISMATCH_CAUSES
+    from netsetest.roles.judge import INHERITED  # where the summary is printed, the judge has run or is loaded
+
+    if not summary.misses_assumption_broken_total:
+        return ""
+    inherited = summary.misses_by_cause.get(INHERITED, 0)
+    head = f"; {summary.misses_assumption_broken_total} set(s) missed the truth outside the guarantee"
+    if inherited:
+        head += f" ({inherited} of them resting on an input that missed it)"
+    parts = []
+    for cause, (what, advice) in MISMATCH_CAUSES.items():
+        steps = summary.node_steps_not_covered.get(cause, 0)
+        if steps:
+            parts.append(f"{what} on {steps} node-steps: the guarantee does not hold there; {advice}")
+    rest = {c: n for c, n in summary.misses_by_cause.items() if c not in MISMATCH_CAUSES and c != INHERITED}
+    if rest:
+        parts.append("misses where an assumption of their own step broke: " + ", ".join(f"{c} {n}" for c, n in rest.items()))
+    return head + (f": {'; '.join(parts)}" if parts else "")
+
+
+def strict_verdict(summary: RunSummary, code: int, strict: bool) -> int:
+    """``run --strict``: any miss outside the guarantee fails the run too (exit 1, for CI users who want it
+    to), said on a last line whose first word matches the exit code; otherwise ``code`` as it is."""
+    if not strict or not summary.misses_assumption_broken_total or code not in (EXIT_OK, EXIT_NODE_LOST):
+        return code
+    print(f"FAIL (--strict): {summary.misses_assumption_broken_total} set(s) missed the truth outside the guarantee (the line above says why).", flush=True)
+    return EXIT_VIOLATION
+
+
 def format_table(summary: RunSummary) -> str:
     mixed = len({r.estimator for r in summary.nodes}) > 1  # name each node's method where they differ
     head = [
@@ -127,7 +190,7 @@ def format_table(summary: RunSummary) -> str:
     ]
     widths = [max(len(h), *(len(r[c]) for r in rows)) for c, h in enumerate(head)]
     line = lambda cells: "  ".join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731  # a one-line local helper
-    out = [line(head), line(["-" * w for w in widths])] + [line(r) for r in rows]
+    out = [*car_lines(summary), line(head), line(["-" * w for w in widths])] + [line(r) for r in rows]
     out.extend(textwrap.wrap(LEGEND, LEGEND_WIDTH))
     out.append("")
     out.extend(fdi_table(summary))
@@ -212,7 +275,7 @@ def verdict(summary: RunSummary) -> str:
         text += "; lost for good: " + ", ".join(f"node {i} from step {'-' if k is None else k}" for i, k in missing.items())
     if summary.stopped == "vehicle gone":
         text += "; the vehicle's End never came (no message for the collector's idle timeout)"
-    return text
+    return text + uncovered_misses(summary)
 
 
 def record_sink(record: str | None, keep: bool = False) -> tuple[RecordSink | None, MemorySink | None]:

@@ -259,7 +259,7 @@ def test_inspect_labels_a_set_estimators_bounds_as_what_they_are(tmp_path: Path,
     run_inmemory(load_topology(mixed_topology(tmp_path), steps=3), "paper", "scheduled", seed=0, record=str(rec))
     assert main(["inspect", str(rec)]) == 0
     out = capsys.readouterr().out
-    assert "node 1: fault estimate and bounds f̂ ± √(ρ P33) of its ellipsoid" in out
+    assert "node 1: fault estimate f̂ (its ellipsoid's centre) and bounds: the ellipsoid {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ}'s extent in f" in out
     for i in MIXED:
         assert f"node {i} ({MIXED[i]}): fault bounds of its published set (interval hull)" in out
 

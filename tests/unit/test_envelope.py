@@ -1,0 +1,205 @@
+"""The operating envelope (models/envelope.py): its check, its declaration, its flag on the wire, the judge's
+attribution of a miss after a transition whose e_k left its bound, and what the verdict says (issue 29)."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from netsetest.config.schema import ConfigError, load_topology
+from netsetest.messages import Truth, decode, encode
+from netsetest.models.envelope import MODEL_MISMATCH, OUTSIDE_ENVELOPE, OperatingEnvelope
+from netsetest.models.uncertainty import ModelUncertainty
+from netsetest.models.vehicle import KMH
+from netsetest.records.summary import CarSummary, RunSummary
+from netsetest.runtime.report import EXIT_NODE_LOST, EXIT_OK, EXIT_VIOLATION, car_lines, strict_verdict, verdict
+
+ROOT = Path(__file__).resolve().parents[2]
+ENV = OperatingEnvelope(6.0, (70.0, 120.0))
+
+
+def test_envelope_holds_inside_and_measures_its_margins() -> None:
+    assert ENV.holds(5.9, 80 * KMH) and ENV.holds(-6.0, 70 * KMH) and ENV.holds(6.0, 120 * KMH)
+    assert not ENV.holds(6.01, 80 * KMH) and not ENV.holds(-6.5, 80 * KMH)
+    assert not ENV.holds(1.0, 69.9 * KMH) and not ENV.holds(1.0, 120.1 * KMH)
+    assert not ENV.holds(float("nan"), 80 * KMH)
+    assert ENV.ay_margin(-4.5) == pytest.approx(1.5) and ENV.ay_margin(7.0) == pytest.approx(-1.0)
+    assert ENV.speed_margin(80 * KMH) == pytest.approx(10.0) and ENV.speed_margin(125 * KMH) == pytest.approx(-5.0)
+
+
+def _truth(**kw: object) -> Truth:
+    one = {"1": 0.0}
+    base: dict[str, object] = dict(
+        step=3,
+        x=[0.01, 0.2],
+        faults=one,
+        u=0.03,
+        w=0.1,
+        vx=27.0,
+        noise=one,
+        gamma={"1": 0.8},
+        y=one,
+        y_nofault=one,
+        sector_ok={"1": True},
+        noise_ok={"1": True},
+        dist_ok=True,
+    )
+    base.update(kw)
+    return Truth(**base)
+
+
+def test_an_older_truth_without_the_envelope_decodes_as_inside_and_a_new_one_round_trips() -> None:
+    old = _truth()
+    payload = encode(old)
+    assert b"envelope_ok" not in payload and b"ay" not in payload  # omitted at their defaults
+    assert decode(payload).envelope_ok is True
+    new = _truth(speed=22.2, ay=-6.5, envelope_ok=False, e=[1e-3, -2e-2], mismatch_ok=False)
+    back = decode(encode(new))
+    assert isinstance(back, Truth) and (back.speed, back.ay, back.envelope_ok) == (22.2, -6.5, False)
+
+
+def _topology(tmp_path: Path, extra: str, plant: bool = True) -> Path:
+    text = (ROOT / "topologies" / ("paper6_car.toml" if plant else "paper6.toml")).read_text()
+    text = text.replace('node_dir = "../nodes"', f'node_dir = "{ROOT / "nodes"}"').replace("[[nodes]]", extra + "\n[[nodes]]", 1)
+    path = tmp_path / "t.toml"
+    path.write_text(text)
+    return path
+
+
+def test_the_topology_declares_an_envelope_beside_its_bound(tmp_path: Path) -> None:
+    pytest.importorskip("vehiclemodels")
+    sc = load_topology(_topology(tmp_path, "[envelope]\nay_max = 6\nspeed_kmh = [70, 120]\n"))
+    assert sc.envelope == ENV
+    assert load_topology("paper6_car").envelope is None  # optional
+
+
+@pytest.mark.parametrize(
+    ("extra", "plant", "says"),
+    [
+        ("[envelope]\nay_max = 6\nspeed_kmh = [120, 70]\n", True, "lo ≤ hi"),
+        ("[envelope]\nay_max = 0\nspeed_kmh = [70, 120]\n", True, "ay_max"),
+        ("[envelope]\nay_max = 6\n", True, "speed_kmh"),
+        ("[envelope]\nay_max = 6\nspeed_kmh = [70, 120]\n", False, "nonlinear plant"),  # the T-S plant: e_k ≡ 0, no bound
+    ],
+)
+def test_a_wrong_envelope_is_refused_in_one_line(tmp_path: Path, extra: str, plant: bool, says: str) -> None:
+    if plant:
+        pytest.importorskip("vehiclemodels")
+    with pytest.raises(ConfigError, match=says):
+        load_topology(_topology(tmp_path, extra, plant))
+
+
+def test_the_judge_names_the_plants_transition_first_and_whether_the_car_left_its_envelope() -> None:
+    pytest.importorskip("vehiclemodels")
+    from netsetest.roles.judge import Judge
+
+    sc = dataclasses.replace(load_topology("paper6_car"), envelope=ENV)
+    judge, n = Judge(sc), sc.nodes[0]
+    ids = {str(i): 0.0 for i in sc.ids}
+    flags = {str(i): True for i in sc.ids}
+    base = dict(faults=ids, noise=ids, gamma={s: 1.0 for s in ids}, y=ids, y_nofault=ids, sector_ok=flags, noise_ok=flags)
+    now = _truth(step=5, **(base | {"noise_ok": {**flags, str(n.id): False}}))  # its own noise bound broke too
+    for envelope_ok, cause in ((True, MODEL_MISMATCH), (False, OUTSIDE_ENVELOPE)):
+        prev = _truth(step=4, **base, e=[0.1, 0.1], mismatch_ok=False, envelope_ok=envelope_ok)
+        assert judge.own_cause(n, None, now, prev, 5) == cause
+    inside = _truth(step=4, **base, e=[0.0, 0.0], envelope_ok=False)  # left the envelope, e_k inside its bound: the guarantee held
+    assert judge.own_cause(n, None, now, inside, 5) == "noise"
+    assert judge.own_cause(n, None, _truth(step=5, **base), inside, 5) is None
+
+
+def _summary(**kw: object) -> RunSummary:
+    car = CarSummary(
+        plant="single-track/3",
+        car="CommonRoad vehicle 3, VW Vanagon",
+        manoeuvre="double-lane-change at 80 km/h",
+        bound="box [0.00263, 0.018]",
+        transitions=80,
+        e_max=[0.003, 0.029],
+        e_max_ratio=1.61,
+        e_outside=7,
+        e_outside_first=8,
+        envelope=ENV.text,
+        ay_peak=7.8,
+        speed_kmh=[79.7, 80.0],
+        ay_margin=-1.8,
+        speed_margin_kmh=9.7,
+        envelope_left=12,
+    )
+    base: dict[str, object] = dict(
+        steps_completed=80,
+        node_steps_evaluated=486,
+        node_steps_contained=480,
+        node_steps_covered=438,
+        node_steps_not_covered={"inherited": 6, MODEL_MISMATCH: 30, OUTSIDE_ENVELOPE: 12},
+        misses_assumption_broken_total=6,
+        misses_by_cause={"inherited": 6},
+        car=car,
+    )
+    base.update(kw)
+    return RunSummary(**base)  # type: ignore[arg-type]  # the fields above, by name
+
+
+def test_the_verdict_says_a_miss_outside_the_guarantee_in_words_with_its_cause() -> None:
+    text = verdict(_summary())
+    assert "6 set(s) missed the truth outside the guarantee (6 of them resting on an input that missed it): " in text
+    assert "model mismatch exceeded its bound on 30 node-steps: the guarantee does not hold there; recalibrate (docs/plant.md)" in text
+    assert "the car left its operating envelope and e_k its bound on 12 node-steps" in text
+    assert "outside the guarantee" not in verdict(_summary(misses_assumption_broken_total=0))
+    other = verdict(_summary(misses_by_cause={"noise": 2}, misses_assumption_broken_total=2))
+    assert "2 set(s) missed the truth outside the guarantee: model mismatch" in other and other.endswith(
+        "misses where an assumption of their own step broke: noise 2"
+    )
+
+
+def test_the_header_names_the_car_the_manoeuvre_its_mismatch_and_envelope_margin() -> None:
+    head = "\n".join(car_lines(_summary()))
+    for part in ("single-track/3 (CommonRoad vehicle 3, VW Vanagon)", "double-lane-change at 80 km/h", "largest e_k 1.61 × its bound"):
+        assert part in head
+    assert "e_k left it on 7 of 80 steps (first k = 8)" in head and "margin -1.80 m/s², 9.7 km/h; left on 12 of 80 steps" in head
+    assert "node-steps after a step whose e_k left its bound: 42" in head
+    assert car_lines(_summary(car=None)) == []  # the T-S plant: no car
+
+
+def test_strict_fails_a_run_with_a_miss_outside_the_guarantee(capsys: pytest.CaptureFixture[str]) -> None:
+    s = _summary()
+    assert strict_verdict(s, EXIT_OK, strict=False) == EXIT_OK and capsys.readouterr().out == ""
+    assert strict_verdict(s, EXIT_OK, strict=True) == EXIT_VIOLATION
+    assert capsys.readouterr().out.startswith("FAIL (--strict): 6 set(s)")
+    assert strict_verdict(s, EXIT_NODE_LOST, strict=True) == EXIT_VIOLATION
+    clean = _summary(misses_assumption_broken_total=0)
+    assert strict_verdict(clean, EXIT_OK, strict=True) == EXIT_OK
+
+
+def test_the_car_summary_round_trips_and_a_ts_summary_has_none() -> None:
+    s = _summary()
+    assert RunSummary.from_dict(s.to_dict()) == s
+    assert "car" not in _summary(car=None).to_dict()
+
+
+def test_the_bound_measures_e_in_its_own_norm() -> None:
+    box = ModelUncertainty.box((0.01, 0.02))
+    assert box.ratio(np.array([0.005, -0.03])) == pytest.approx(1.5)
+    ell = ModelUncertainty.ellipsoid(np.diag([1e-4, 4e-4]))
+    assert ell.ratio(np.array([0.01, 0.0])) == pytest.approx(1.0)
+
+
+def test_the_bench_table_says_per_car_and_drive_what_was_covered_and_attributed() -> None:
+    from netsetest.bench.plant import envelope_markdown
+
+    row = dict(case="nsnim", kmh=70.0, ay_peak=5.5, envelope_left=0, e_max_ratio=0.4, covered=486, evaluated=486, violations=0, misses=0, misses_attributed=0)
+    outside = dict(row, kmh=120.0, ay_peak=9.1, envelope_left=12, e_max_ratio=1.7, covered=400, misses=9, misses_attributed=9, verdict_says=True)
+    env = {
+        "ay_max": 6.0,
+        "speed_kmh": [70.0, 120.0],
+        "seeds": [0, 1, 2, 3, 4],
+        "held_out_seeds": [100, 101],
+        "cars": [{"vehicle": 3, "box": [0.0037, 0.0199], "drives": {"double-lane-change": [row, row], "double-lane-change (outside)": [outside]}}],
+    }
+    lines = envelope_markdown(env)
+    assert "--ay-max 6 --speed 70-120 --seeds 0-4" in lines[0] and "a double lane change at 70 km/h;" in lines[0] and "lap" not in lines[0]
+    assert "a double lane change at 120 km/h, outside the envelope (seed 100 only)" in lines[0]
+    assert "| 3 (VW Vanagon) | [0.0037, 0.0199] | double-lane-change | nsnim | 2 | 5.50 | 0 | 0.40 | 972 / 972 | 0 | 0 (0, yes) |" in lines
+    assert "| 3 (VW Vanagon) | [0.0037, 0.0199] | double-lane-change (outside) | nsnim | 1 | 9.10 | 12 | 1.70 | 400 / 486 | 0 | 9 (9, yes) |" in lines
