@@ -559,15 +559,7 @@ class Collector:
                 if t.missing_from is not None and t.rejoined_at is None:
                     t.rejoined_at = k
             if st is None:
-                if copies.get(i):
-                    t.rejected += 1  # it reported, but nothing it sent can be its own
-                elif i in lost:
-                    t.last_heard = k  # it published; our inbox dropped it: not judged, never missing
-                    self.overloaded_node_steps += 1
-                else:
-                    t.missing_steps += 1
-                    if t.missing_from is None:
-                        t.missing_from = k
+                self._unjudged(t, k, bool(copies.get(i)), i in lost)
                 continue
             t.contested += i in contested
             t.sectors_assumed += st.sector_basis == "assumed"
@@ -591,6 +583,19 @@ class Collector:
         self.prev_truth = tr
         self.prev_checks = verdict.checks
         self.closed = k
+
+    def _unjudged(self, t: NodeTotals, k: int, reported: bool, lost: bool) -> None:
+        """Node-step k with no state to judge: rejected if it reported, the collector's loss if our inbox
+        dropped it, else missing (only then is the node blamed)."""
+        if reported:
+            t.rejected += 1  # it reported, but nothing it sent can be its own
+        elif lost:
+            t.last_heard = k  # it published; our inbox dropped it: not judged, never missing
+            self.overloaded_node_steps += 1
+        else:
+            t.missing_steps += 1
+            if t.missing_from is None:
+                t.missing_from = k
 
     def _forget(self, k: int) -> None:
         self.lost.pop(k, None)
