@@ -74,7 +74,11 @@ class Polygon:
         steps = steps[np.any(steps != 0.0, axis=1)]  # a repeated vertex, a zero segment: no direction
         if len(steps) == 0:
             return Polygon(v.copy())
-        order = sorted(range(len(steps)), key=functools.cmp_to_key(lambda i, j: _compare(steps[i], steps[j])))
+
+        def by_direction(i: int, j: int) -> int:
+            return _compare(steps[i], steps[j])
+
+        order = sorted(range(len(steps)), key=functools.cmp_to_key(by_direction))  # stable: ties in input order
         steps = steps[order]
         walk = v[0] + low + np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)[:-1]])
         turns = [_compare(steps[k - 1], steps[k]) != 0 for k in range(len(steps))]  # else the vertex is on a side
