@@ -69,7 +69,8 @@ class Polygon:
         compared exactly (half-plane, then the sign of the cross product), never by a rounded angle: an edge a few
         ulps below horizontal comes last, not first.  Where a rounding has made a vertex reflex (the edges do not
         turn one way from there), the walk is over the exact hull of the vertices, which holds them all; parallel
-        directions in a row leave no vertex between them."""
+        directions in a row leave no vertex between them.  Sound to the walk's rounding and the merge of vertices
+        closer than DUPLICATE (:func:`_distinct`), which the margin of :meth:`moved` covers."""
         v = _from_lowest(self.vertices)
         edges = np.roll(v, -1, axis=0) - v
         if not _turn_one_way(edges):
