@@ -103,8 +103,12 @@ class Polygon:
 
     def cut(self, c: np.ndarray, lo: float, hi: float) -> Polygon | None:
         """The part with lo ≤ cᵀx ≤ hi, widened outward by the margin (relative to max Σᵢ |cᵢ xᵢ|, which bounds the
-        rounding of cᵀx where its terms cancel); None if empty (flat if this polygon is: a segment's part is one)."""
-        pad = MARGIN * (1.0 + float((np.abs(self.vertices) @ np.abs(c)).max()))
+        rounding of cᵀx where its terms cancel), and at least by what merging its vertices closer than DUPLICATE
+        can leave out along c (a slab thin next to the coordinates' size); None if empty (flat if this polygon
+        is: a segment's part is one)."""
+        a = np.abs(self.vertices)
+        merged = (2 * len(a) + 2) * DUPLICATE * (1.0 + float(a.max())) * float(np.abs(c).sum())
+        pad = max(MARGIN * (1.0 + float((a @ np.abs(c)).max())), merged)
         v = _clip(self.vertices, c, hi + pad)
         if v is not None:
             v = _clip(v, -c, -lo + pad)
@@ -122,7 +126,8 @@ class Polygon:
         while len(v) > max_vertices:
             drops = _cheapest_edges(v, len(v) - max_vertices)
             if not drops:
-                break  # no edge can be dropped without an unbounded extension (cannot happen for n > 4)
+                break  # no edge can be dropped without an unbounded extension (for n > 4 only where a rounding
+                # puts two neighbours' meeting a hair behind an edge: near-duplicate vertices)
             v = _drop_edges(v, drops)
         return Polygon(v)
 
