@@ -96,9 +96,13 @@ class Polygon:
     def moved(self, A: np.ndarray, t: np.ndarray, segments: list[np.ndarray]) -> Polygon:
         """{A x + t} summed with the segments and a square of half-side ROUNDING of the coordinates' size, in one
         merge: every side moves out by at least that, which covers the step's rounding (this move's, the cuts'
-        that follow, each widened by its own margin, and the vertices merged as duplicates)."""
+        that follow, each widened by its own margin, and the vertices merged as duplicates); at least what that
+        merge can leave out where the segments reach far beyond the image (a flat or tiny image)."""
         v = self.affine(A, t)
-        pad = ROUNDING * (1.0 + float(np.abs(v.vertices).max()))
+        size = float(np.abs(v.vertices).max())
+        reach = size + sum(float(np.abs(g).max()) for g in segments)
+        merged = (2 * (len(v.vertices) + 2 * len(segments)) + 8) * DUPLICATE * (1.0 + reach)
+        pad = max(ROUNDING * (1.0 + size), merged)  # (ROUNDING's at every physical state range: bit for bit)
         return v.plus_segments([*segments, np.array([pad, 0.0]), np.array([0.0, pad])])
 
     def cut(self, c: np.ndarray, lo: float, hi: float) -> Polygon | None:

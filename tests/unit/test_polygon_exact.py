@@ -232,7 +232,7 @@ def test_the_move_holds_the_exact_image_within_its_margin(data: st.DataObject) -
     image = v @ A.T + t  # exactly: A v + t in rationals
     want = _sum_points(_image(v, A, t), segments)
     assert _gap(want, _exact(got.vertices)) <= 0  # exactly
-    pad = ROUNDING * (1.0 + float(np.abs(image).max()))
+    pad = max(ROUNDING * (1.0 + float(np.abs(image).max())), 1e-10 * _scale(image, *segments))  # (Polygon.moved)
     tol = Fraction(16 * (len(v) + 2 * len(segments) + 8) * EPS * _scale(image, *segments))
     assert _gap(_exact(got.vertices), want) <= Fraction(pad) * Fraction(1.01) + tol
 
