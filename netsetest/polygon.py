@@ -23,6 +23,7 @@ MIN_VERTICES = 3
 MAX_VERTICES = 24  # the reduction keeps at most this many (each step adds about 8)
 MARGIN = 1e-9  # outward, relative to the polygon's extent: covers the rounding of one step's operations
 ROUNDING = 1e-10  # outward, relative to the coordinates' size: far above one step's rounding (ε·n)
+MAX_REACH = 1e3  # a drop extends a neighbour by at most this many of its lengths (q's rounding stays ≪ DUPLICATE)
 AXES = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 DUPLICATE = 1e-13  # vertices closer than this (relative to the coordinates' size) are one: far below ROUNDING
 
@@ -225,7 +226,8 @@ def _distinct(v: np.ndarray) -> np.ndarray:
 
 def _cheapest_edges(v: np.ndarray, wanted: int) -> dict[int, np.ndarray]:
     """Up to ``wanted`` edges i → q: dropping edge (v_i, v_i+1) by meeting its neighbours' lines at q adds the
-    least area; the edges chosen are at least three apart (cyclically)."""
+    least area, q beyond both ends of the edge along them (the drop then holds the edge's triangle); the edges
+    chosen are at least three apart (cyclically)."""
     n = len(v)
     a0, a1 = np.roll(v, 1, axis=0), v  # the edge before edge i
     b0, b1 = np.roll(v, -1, axis=0), np.roll(v, -2, axis=0)  # the edge after it
@@ -233,8 +235,10 @@ def _cheapest_edges(v: np.ndarray, wanted: int) -> dict[int, np.ndarray]:
     den = da[:, 0] * db[:, 1] - da[:, 1] * db[:, 0]
     ok = den > 1e-300  # else parallel, or meeting behind: dropping that edge is unbounded
     t = np.where(ok, ((b0[:, 0] - a0[:, 0]) * db[:, 1] - (b0[:, 1] - a0[:, 1]) * db[:, 0]) / np.where(ok, den, 1.0), -1.0)
-    ok &= t >= 1.0
+    ok &= (t >= 1.0) & (t <= MAX_REACH)  # (farther, q's rounding could cut the polygon: near-parallel neighbours)
     q = a0 + t[:, None] * da
+    ok &= np.einsum("ij,ij->i", q - b0, db) <= 0.0  # and before b0 on the edge after (else the drop cuts b0 off: where
+    # near-duplicate vertices leave a side whose direction is rounding noise)
     area = 0.5 * np.abs((q[:, 0] - a1[:, 0]) * (b0[:, 1] - a1[:, 1]) - (q[:, 1] - a1[:, 1]) * (b0[:, 0] - a1[:, 0]))
     area = np.where(ok & np.isfinite(area), area, np.inf)
     chosen: dict[int, np.ndarray] = {}

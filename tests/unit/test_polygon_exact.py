@@ -255,7 +255,8 @@ def test_the_cut_holds_the_exact_clip_within_its_margin(data: st.DataObject) -> 
         assert _gap(want, _exact(got.vertices)) <= tol + _merged(got.vertices, 2 * len(v))  # the clip (to its rounding, merge)
     if got is not None:
         assert _gap(_exact(got.vertices), _exact(v)) <= tol  # within the polygon
-        pad = MARGIN * (1.0 + float((np.abs(v) @ np.abs(c)).max()))
+        merged = (2 * len(v) + 2) * DUPLICATE * (1.0 + float(np.abs(v).max())) * float(np.abs(c).sum())
+        pad = max(MARGIN * (1.0 + float((np.abs(v) @ np.abs(c)).max())), merged)  # (Polygon.cut)
         s = [ce[0] * x + ce[1] * y for x, y in _exact(got.vertices)]
         assert min(s) >= Fraction(lo) - Fraction(pad) * Fraction(1.01) and max(s) <= Fraction(hi) + Fraction(pad) * Fraction(1.01)
 
