@@ -6,12 +6,16 @@ A node's *region* (docs/network.md) is such a polygon: the states its prior allo
 step's dynamics and the disturbance's bound, and cut by the step's readings.  Unlike an ellipsoid it keeps
 what every earlier reading proved, as the exact limit does, at a bounded number of vertices.
 
-Vertices are stored counter-clockwise, (n, 2), n ≥ 3 (a cut that leaves fewer is empty: None).
+Vertices are stored counter-clockwise, (n, 2), n ≥ 3; a flat polygon (a segment, a point: fewer distinct
+vertices, or all on one line) only where its input was flat or a cut left a sliver below the rounding.  Every
+operation reads a polygon as the convex hull of its vertices, whatever their order.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 
@@ -19,6 +23,8 @@ MIN_VERTICES = 3
 MAX_VERTICES = 24  # the reduction keeps at most this many (each step adds about 8)
 MARGIN = 1e-9  # outward, relative to the polygon's extent: covers the rounding of one step's operations
 ROUNDING = 1e-10  # outward, relative to the coordinates' size: far above one step's rounding (ε·n)
+MAX_REACH = 1e3  # a drop extends a neighbour by at most this many of its lengths (q's rounding stays ≪ DUPLICATE)
+AXES = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 DUPLICATE = 1e-13  # vertices closer than this (relative to the coordinates' size) are one: far below ROUNDING
 
 
@@ -39,44 +45,75 @@ class Polygon:
         return float(v.min()), float(v.max())
 
     def contains(self, x: np.ndarray) -> bool:
-        """x within every side's supporting line: nᵢᵀx ≤ max_j nᵢᵀv_j, nᵢ the outward normal of side i (no margin:
-        for tests and the judge).  The support over every vertex, not the side's own end, keeps the test sound where
-        a short side's direction is rounding noise: any direction with its support bounds the hull."""
+        """x within the supporting line of every side in both normal directions and along it: dᵀx ≤ max_j dᵀv_j
+        for d = ±nᵢ, ±eᵢ and the axes (eᵢ side i, nᵢ its normal; no margin: for tests and the judge).  Any direction with its
+        support over every vertex bounds the hull, so the test holds whatever the order of the vertices (a
+        clockwise one, a rounding's reflex vertex) and a short side's direction of rounding noise; the outward
+        normals among them make it exact for a convex polygon, the sides' own directions for a flat one."""
         v = self.vertices
         e = np.roll(v, -1, axis=0) - v
-        n = np.stack([e[:, 1], -e[:, 0]], axis=1)  # outward for counter-clockwise vertices
-        return bool(np.all(n @ x <= (v @ n.T).max(axis=0)))
+        n = np.stack([e[:, 1], -e[:, 0]], axis=1)
+        d = np.vstack([n, -n, e, -e, AXES])  # (the axes: a point's box)
+        return bool(np.all(d @ x <= (v @ d.T).max(axis=0)))
 
     def affine(self, A: np.ndarray, t: np.ndarray) -> Polygon:
-        """{A x + t}: A (2, 2) invertible."""
+        """{A x + t}: A (2, 2); the vertices' order reversed where det A < 0 (its sign exact: a rounded determinant
+        of a near-singular A could flip the orientation)."""
         v = self.vertices @ A.T + t
-        return Polygon(v if np.linalg.det(A) > 0 else v[::-1].copy())
+        det = _cross_sign(0.0, 0.0, float(A[0, 0]), float(A[1, 0]), 0.0, 0.0, float(A[0, 1]), float(A[1, 1]))
+        return Polygon(v if det >= 0 else v[::-1].copy())
 
     def plus_segments(self, segments: list[np.ndarray]) -> Polygon:
         """The sum with the segments {s g : |s| ≤ 1} of ``segments`` (each g (2,)): the polygon's edges and every ±2g
-        merged by angle in one pass (two more vertices per segment)."""
-        v = self.vertices
-        first = int(np.lexsort((v[:, 0], v[:, 1]))[0])  # the lowest vertex (then leftmost): edges from it turn by angle
-        v = np.roll(v, -first, axis=0)
+        merged by direction in one pass (two more vertices per segment), walked from the lowest (then leftmost)
+        vertex plus every segment's lowest (then leftmost) end, where that order starts.  The directions are
+        compared exactly (half-plane, then the sign of the cross product), never by a rounded angle: an edge a few
+        ulps below horizontal comes last, not first.  Where a rounding has made a vertex reflex (the edges do not
+        turn one way from there), the walk is over the exact hull of the vertices, which holds them all; parallel
+        directions in a row leave no vertex between them.  Sound to the walk's rounding and the merge of vertices
+        closer than DUPLICATE (:func:`_distinct`), which the margin of :meth:`moved` covers."""
+        v = _from_lowest(self.vertices)
+        edges = np.roll(v, -1, axis=0) - v
+        if not _turn_one_way(edges):
+            v = _hull(v)  # from its lowest (then leftmost) vertex
+            edges = np.roll(v, -1, axis=0) - v
         g = np.array(segments, dtype=float).reshape(-1, 2)
-        edges = np.vstack([np.roll(v, -1, axis=0) - v, 2.0 * g, -2.0 * g])
-        angle = np.mod(np.arctan2(edges[:, 1], edges[:, 0]), 2.0 * np.pi)
         up = (g[:, 1] > 0.0) | ((g[:, 1] == 0.0) & (g[:, 0] > 0.0))
         low = np.where(up[:, None], -g, g).sum(axis=0)  # each segment's lowest (then leftmost) end
-        walk = np.cumsum(edges[np.argsort(angle, kind="stable")], axis=0)
-        return Polygon(_distinct(v[0] + low + np.vstack([np.zeros((1, 2)), walk[:-1]])))
+        steps = np.vstack([edges, 2.0 * g, -2.0 * g])
+        steps = steps[np.any(steps != 0.0, axis=1)]  # a repeated vertex, a zero segment: no direction
+        if len(steps) == 0:
+            return Polygon(v.copy())
+
+        def by_direction(i: int, j: int) -> int:
+            return _compare(steps[i], steps[j])
+
+        order = sorted(range(len(steps)), key=functools.cmp_to_key(by_direction))  # stable: ties in input order
+        steps = steps[order]
+        walk = v[0] + low + np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)[:-1]])
+        turns = [_compare(steps[k - 1], steps[k]) != 0 for k in range(len(steps))]  # else the vertex is on a side
+        return Polygon(_distinct(walk[turns] if any(turns) else walk[:1]))
 
     def moved(self, A: np.ndarray, t: np.ndarray, segments: list[np.ndarray]) -> Polygon:
         """{A x + t} summed with the segments and a square of half-side ROUNDING of the coordinates' size, in one
         merge: every side moves out by at least that, which covers the step's rounding (this move's, the cuts'
-        that follow, each widened by its own margin, and the vertices merged as duplicates)."""
+        that follow, each widened by its own margin, and the vertices merged as duplicates); at least what that
+        merge can leave out where the segments reach far beyond the image (a flat or tiny image)."""
         v = self.affine(A, t)
-        pad = ROUNDING * (1.0 + float(np.abs(v.vertices).max()))
+        size = float(np.abs(v.vertices).max())
+        reach = size + sum(float(np.abs(g).max()) for g in segments)
+        merged = (2 * (len(v.vertices) + 2 * len(segments)) + 8) * DUPLICATE * (1.0 + reach)
+        pad = max(ROUNDING * (1.0 + size), merged)  # (ROUNDING's at every physical state range: bit for bit)
         return v.plus_segments([*segments, np.array([pad, 0.0]), np.array([0.0, pad])])
 
     def cut(self, c: np.ndarray, lo: float, hi: float) -> Polygon | None:
-        """The part with lo ≤ cᵀx ≤ hi, widened outward by the margin; None if empty."""
-        pad = MARGIN * (1.0 + self.extent(c))
+        """The part with lo ≤ cᵀx ≤ hi, widened outward by the margin (relative to max Σᵢ |cᵢ xᵢ|, which bounds the
+        rounding of cᵀx where its terms cancel), and at least by what merging its vertices closer than DUPLICATE
+        can leave out along c (a slab thin next to the coordinates' size); None if empty (flat if this polygon
+        is: a segment's part is one)."""
+        a = np.abs(self.vertices)
+        merged = (2 * len(a) + 2) * DUPLICATE * (1.0 + float(a.max())) * float(np.abs(c).sum())
+        pad = max(MARGIN * (1.0 + float((a @ np.abs(c)).max())), merged)
         v = _clip(self.vertices, c, hi + pad)
         if v is not None:
             v = _clip(v, -c, -lo + pad)
@@ -94,13 +131,79 @@ class Polygon:
         while len(v) > max_vertices:
             drops = _cheapest_edges(v, len(v) - max_vertices)
             if not drops:
-                break  # no edge can be dropped without an unbounded extension (cannot happen for n > 4)
+                break  # no edge can be dropped without an unbounded extension (for n > 4 only where a rounding
+                # puts two neighbours' meeting a hair behind an edge: near-duplicate vertices)
             v = _drop_edges(v, drops)
         return Polygon(v)
 
 
+def _half(x: float, y: float) -> int:
+    """0 for a direction in the upper half-plane, angle in [0, π); 1 for the lower, [π, 2π)."""
+    return 0 if y > 0.0 or (y == 0.0 and x > 0.0) else 1
+
+
+CCW_ERRBOUND = (3.0 + 16.0 * 2.0**-53) * 2.0**-53  # Shewchuk's orient2d error bound A (unit roundoff 2⁻⁵³)
+TINY = 1e-280  # below this the products may have lost precision to underflow: the sign is taken exactly
+
+
+def _cross_sign(p0x: float, p0y: float, p1x: float, p1y: float, q0x: float, q0y: float, q1x: float, q1y: float) -> int:
+    """The exact sign of (p₁ − p₀) × (q₁ − q₀): in floating point where Shewchuk's error bound (for two products of
+    rounded differences) decides it, else in rational arithmetic (every double is a rational)."""
+    left = (p1x - p0x) * (q1y - q0y)
+    right = (p1y - p0y) * (q1x - q0x)
+    det = left - right
+    size = abs(left) + abs(right)
+    if abs(det) > CCW_ERRBOUND * size and size > TINY:  # (near underflow the bound does not hold)
+        return 1 if det > 0.0 else -1
+    F = Fraction
+    exact = (F(p1x) - F(p0x)) * (F(q1y) - F(q0y)) - (F(p1y) - F(p0y)) * (F(q1x) - F(q0x))
+    return (exact > 0) - (exact < 0)
+
+
+def _compare(a: np.ndarray, b: np.ndarray) -> int:
+    """The order of the directions a and b (each (2,), nonzero) by angle in [0, 2π), exactly: −1 if a comes first,
+    0 if they are the same direction, 1 if b comes first."""
+    ha, hb = _half(float(a[0]), float(a[1])), _half(float(b[0]), float(b[1]))
+    if ha != hb:
+        return -1 if ha < hb else 1
+    return -_cross_sign(0.0, 0.0, float(a[0]), float(a[1]), 0.0, 0.0, float(b[0]), float(b[1]))
+
+
+def _turn_one_way(edges: np.ndarray) -> bool:
+    """Whether the edges (from the lowest, then leftmost, vertex) turn counter-clockwise all the way: their
+    directions in [0, 2π) never decrease (a repeated vertex, a zero edge, is skipped)."""
+    e = edges[np.any(edges != 0.0, axis=1)]
+    return all(_compare(e[k], e[k + 1]) <= 0 for k in range(len(e) - 1))
+
+
+def _from_lowest(v: np.ndarray) -> np.ndarray:
+    """The vertices rolled to start at the lowest (then leftmost) one."""
+    return np.roll(v, -int(np.lexsort((v[:, 0], v[:, 1]))[0]), axis=0)
+
+
+def _hull(v: np.ndarray) -> np.ndarray:
+    """The convex hull of the points v (n, 2), exactly (Andrew's monotone chain, exact orientation): its vertices
+    counter-clockwise without collinear ones, from the lowest (then leftmost); one or two rows if it is flat."""
+    pts = sorted({(float(x), float(y)) for x, y in v})
+    if len(pts) <= 2:
+        out = sorted(pts, key=lambda p: (p[1], p[0]))
+        return np.array(out, dtype=float).reshape(-1, 2)
+
+    def chain(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
+        out: list[tuple[float, float]] = []
+        for p in points:
+            while len(out) >= 2 and _cross_sign(*out[-2], *out[-1], *out[-2], *p) <= 0:
+                out.pop()
+            out.append(p)
+        return out
+
+    ring = chain(pts)[:-1] + chain(pts[::-1])[:-1]  # every point on one line: its two ends
+    first = min(range(len(ring)), key=lambda i: (ring[i][1], ring[i][0]))
+    return np.array(ring[first:] + ring[:first], dtype=float)
+
+
 def _clip(v: np.ndarray, c: np.ndarray, b: float) -> np.ndarray | None:
-    """The polygon ∩ {cᵀx ≤ b} (Sutherland–Hodgman against one half-plane); None if fewer than 3 vertices remain."""
+    """The polygon ∩ {cᵀx ≤ b} (Sutherland–Hodgman against one half-plane); None if nothing remains."""
     s = v @ c - b
     if np.all(s <= 0.0):
         return v
@@ -110,8 +213,7 @@ def _clip(v: np.ndarray, c: np.ndarray, b: float) -> np.ndarray | None:
     t = np.where(crosses, s / np.where(crosses, s - s_nxt, 1.0), 0.0)
     points = np.stack([v, v + t[:, None] * (nxt - v)], axis=1).reshape(-1, 2)  # per edge: its start, its crossing
     out = points[np.stack([s <= 0.0, crosses], axis=1).reshape(-1)]
-    out = _distinct(out) if len(out) else out
-    return out if len(out) >= MIN_VERTICES else None
+    return _distinct(out) if len(out) else None
 
 
 def _distinct(v: np.ndarray) -> np.ndarray:
@@ -124,7 +226,8 @@ def _distinct(v: np.ndarray) -> np.ndarray:
 
 def _cheapest_edges(v: np.ndarray, wanted: int) -> dict[int, np.ndarray]:
     """Up to ``wanted`` edges i → q: dropping edge (v_i, v_i+1) by meeting its neighbours' lines at q adds the
-    least area; the edges chosen are at least three apart (cyclically)."""
+    least area, q beyond both ends of the edge along them (the drop then holds the edge's triangle); the edges
+    chosen are at least three apart (cyclically)."""
     n = len(v)
     a0, a1 = np.roll(v, 1, axis=0), v  # the edge before edge i
     b0, b1 = np.roll(v, -1, axis=0), np.roll(v, -2, axis=0)  # the edge after it
@@ -132,8 +235,10 @@ def _cheapest_edges(v: np.ndarray, wanted: int) -> dict[int, np.ndarray]:
     den = da[:, 0] * db[:, 1] - da[:, 1] * db[:, 0]
     ok = den > 1e-300  # else parallel, or meeting behind: dropping that edge is unbounded
     t = np.where(ok, ((b0[:, 0] - a0[:, 0]) * db[:, 1] - (b0[:, 1] - a0[:, 1]) * db[:, 0]) / np.where(ok, den, 1.0), -1.0)
-    ok &= t >= 1.0
+    ok &= (t >= 1.0) & (t <= MAX_REACH)  # (farther, q's rounding could cut the polygon: near-parallel neighbours)
     q = a0 + t[:, None] * da
+    ok &= np.einsum("ij,ij->i", q - b0, db) <= 0.0  # and before b0 on the edge after (else the drop cuts b0 off: where
+    # near-duplicate vertices leave a side whose direction is rounding noise)
     area = 0.5 * np.abs((q[:, 0] - a1[:, 0]) * (b0[:, 1] - a1[:, 1]) - (q[:, 1] - a1[:, 1]) * (b0[:, 0] - a1[:, 0]))
     area = np.where(ok & np.isfinite(area), area, np.inf)
     chosen: dict[int, np.ndarray] = {}

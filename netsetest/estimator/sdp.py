@@ -80,7 +80,7 @@ from netsetest.estimator.slab import cut
 from netsetest.extras import require
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.uncertainty import ModelUncertainty
-from netsetest.polygon import Polygon
+from netsetest.polygon import MIN_VERTICES, Polygon
 from netsetest.sets import ellipsoid_bounds
 from netsetest.models.vehicle import N_RULES, TSModel
 
@@ -639,8 +639,8 @@ class LocalEstimator:
         region: Polygon | None = moved
         for c, iv in refs.values():
             region = region.cut(c[:NX], iv.lo, iv.hi) if region is not None else None
-        if region is None:
-            return
+        if region is None or len(region.vertices) < MIN_VERTICES:
+            return  # (fewer: a sliver below the rounding, kept as empty)
         region = region.reduced()  # the move's margin covers the cuts' rounding (Polygon.moved)
         keys = frozenset(refs)
         res.region = region

@@ -180,6 +180,13 @@ SCHEMAS: dict[str, dict[str, Any]] = {
             "not_covered_cause": {"type": ["string", "null"], "description": "why the guarantee did not apply (docs/coverage.md); null where it did"},
             "inherited_from": {"type": ["array", "null"], "description": "[node, step, why] of the input a not-covered step rests on"},
             "fdi": {"type": ["string", "null"], "description": "detected | healthy | undecided: the fault interval against 0 (docs/fdi.md)"},
+            "own_xhat": {"type": "array", "items": {"type": "number"}, "description": "centre of the set the node continues from, where not the published one"},
+            "own_P": {"type": "array", "items": {"type": "number"}, "description": "its 3×3 shape matrix, row-major (with the published ρ)"},
+            "own_region": {
+                "type": "array",
+                "items": {"type": "number"},
+                "description": "the node's region of (β, r): polygon vertices counter-clockwise, [β₁, r₁, β₂, r₂, …]",
+            },
             **{f"{n}_{s}": {"type": "number", "description": f"{s} bound of {n}: x̂ ∓ √(ρ P)"} for n, _ in COMPONENTS for s in ("lower", "upper")},
         },
         ["step", "xhat", "P", "rho", "status"],

@@ -231,6 +231,9 @@ def _state_entry(st: NodeState, v: NodeVerdict, contested: bool) -> dict:
         "sector_basis": st.sector_basis,
         **({"bounds": c.bounds.tolist()} if c is not None and c.bounds is not None and st.set is not None else {}),
         **({"fault_range": list(st.fault_range)} if st.fault_range is not None else {}),
+        # every other set judged: the one the node continues from and its region (where sent)
+        **({"own_xhat": list(st.own_xhat), "own_P": list(st.own_P)} if st.own_xhat is not None and st.own_P is not None else {}),
+        **({"own_region": list(st.own_region)} if st.own_region is not None else {}),
     }
 
 
