@@ -84,15 +84,10 @@ class Polygon:
         steps = steps[np.any(steps != 0.0, axis=1)]  # a repeated vertex, a zero segment: no direction
         if len(steps) == 0:
             return Polygon(v.copy())
-
-        def by_direction(i: int, j: int) -> int:
-            return _compare(steps[i], steps[j])
-
-        order = sorted(range(len(steps)), key=functools.cmp_to_key(by_direction))  # stable: ties in input order
-        steps = steps[order]
+        steps = steps[_by_direction(steps)]
         walk = v[0] + low + np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)[:-1]])
-        turns = [_compare(steps[k - 1], steps[k]) != 0 for k in range(len(steps))]  # else the vertex is on a side
-        return Polygon(_distinct(walk[turns] if any(turns) else walk[:1]))
+        turns = _pair_order(np.roll(steps, 1, axis=0), steps) != 0  # else the vertex is on a side
+        return Polygon(_distinct(walk[turns] if turns.any() else walk[:1]))
 
     def moved(self, A: np.ndarray, t: np.ndarray, segments: list[np.ndarray]) -> Polygon:
         """{A x + t} summed with the segments and a square of half-side ROUNDING of the coordinates' size, in one
@@ -173,7 +168,39 @@ def _turn_one_way(edges: np.ndarray) -> bool:
     """Whether the edges (from the lowest, then leftmost, vertex) turn counter-clockwise all the way: their
     directions in [0, 2π) never decrease (a repeated vertex, a zero edge, is skipped)."""
     e = edges[np.any(edges != 0.0, axis=1)]
-    return all(_compare(e[k], e[k + 1]) <= 0 for k in range(len(e) - 1))
+    return bool(np.all(_pair_order(e[:-1], e[1:]) <= 0))
+
+
+def _halves(d: np.ndarray) -> np.ndarray:
+    """:func:`_half` of every row of d (m, 2)."""
+    return np.where((d[:, 1] > 0.0) | ((d[:, 1] == 0.0) & (d[:, 0] > 0.0)), 0, 1)
+
+
+def _pair_order(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`_compare` of the rows a[k], b[k] (each (m, 2), nonzero), exactly, as an int array (m,): the float
+    filter of :func:`_cross_sign` decides almost every pair at once; the rest are taken in rational arithmetic."""
+    ha, hb = _halves(a), _halves(b)
+    left, right = a[:, 0] * b[:, 1], a[:, 1] * b[:, 0]
+    det, size = left - right, np.abs(left) + np.abs(right)
+    cross = np.sign(det).astype(int)
+    for k in np.flatnonzero((ha == hb) & ~((np.abs(det) > CCW_ERRBOUND * size) & (size > TINY))):
+        cross[k] = _cross_sign(0.0, 0.0, float(a[k, 0]), float(a[k, 1]), 0.0, 0.0, float(b[k, 0]), float(b[k, 1]))
+    return np.where(ha == hb, -cross, np.where(ha < hb, -1, 1))
+
+
+def _by_direction(d: np.ndarray) -> np.ndarray:
+    """The order of the directions d (m, 2), nonzero, by angle in [0, 2π), exactly, ties in input order: sorted
+    by half-plane and rounded angle (one numpy sort), kept where every neighbouring pair is in order exactly
+    (a total order within a half-plane, so the neighbours decide), else sorted by :func:`_compare` alone."""
+    order = np.lexsort((np.mod(np.arctan2(d[:, 1], d[:, 0]), 2.0 * np.pi), _halves(d)))
+    s = d[order]
+    if np.all(_pair_order(s[:-1], s[1:]) <= 0):
+        return order  # (ties of the same direction may stand in another order: the walk leaves no vertex between them)
+
+    def by_direction(i: int, j: int) -> int:
+        return _compare(d[i], d[j])
+
+    return np.array(sorted(range(len(d)), key=functools.cmp_to_key(by_direction)), dtype=int)  # stable
 
 
 def _from_lowest(v: np.ndarray) -> np.ndarray:
