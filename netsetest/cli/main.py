@@ -294,7 +294,7 @@ def cmd_exact(a: argparse.Namespace) -> int:
     import os
     import time
 
-    from netsetest.analysis.exact import COORDINATES, compare_record, exact_bounds, exact_document, health_line
+    from netsetest.analysis.exact import COORDINATES, CoordinateRatio, compare_record, exact_bounds, exact_document, health_line
     from netsetest.config.schema import load_topology
     from netsetest.records.record import load_record
 
@@ -338,8 +338,13 @@ def cmd_exact(a: argparse.Namespace) -> int:
     def cell(width: float, width_all: float, rms: float) -> str:  # one format for the node rows and the mean
         return f"{width:6.3f} |{width_all:6.3f}  {rms:6.3f}"
 
+    def node_cell(x: CoordinateRatio) -> str:  # a point exact interval: the absolute width over it, no ratio
+        if x.width_excess is None or x.width_excess_all is None:
+            return cell(x.width_ratio, x.width_ratio_all, x.rms_radius_rel)
+        return f"{x.width_excess:+.1e} |{x.width_excess_all:+.1e} abs".rjust(22)
+
     for n in cmp.nodes:
-        print(f"{n.node:>4}  " + "  ".join(cell(x.width_ratio, x.width_ratio_all, x.rms_radius_rel) for x in (n.ratios[c] for c in COORDINATES)))
+        print(f"{n.node:>4}  " + "  ".join(node_cell(n.ratios[c]) for c in COORDINATES))
     print(f"{'mean':>4}  " + "  ".join(cell(cmp.mean_width_ratio[c], cmp.mean_width_ratio_all[c], cmp.mean_rms_radius_rel[c]) for c in COORDINATES))
     print(f"overall: width ratio {cmp.overall_width_ratio:.3f}, relative-RMS radius {cmp.overall_rms_radius_rel:.3f}")
     left = sum(x.left_out for n in cmp.nodes for x in n.ratios.values())

@@ -201,7 +201,7 @@ class NodeTrack:
     assumptions_ok: np.ndarray  # (K,) bool
     status: list[str]
     solve_ms: np.ndarray  # (K,)
-    set_bounds: np.ndarray | None = None  # (K, 3, 2) a set estimator's published per-coordinate bounds
+    set_bounds: np.ndarray | None = None  # (K, 3, 2) the published set's per-coordinate bounds (None: older SDP records, the ellipsoid's)
     judged: np.ndarray | None = None  # (K,) bool: the collector judged the step (None: all were, older records)
     fdi: list[str | None] | None = None  # (K,) detected | healthy | undecided (docs/fdi.md; None: older records)
     fault_range: np.ndarray | None = None  # (K, 2) the SDP's published fault range (±inf where none; None: no step had one)
@@ -211,10 +211,16 @@ class NodeTrack:
         return bool(self.judged[n]) if self.judged is not None else True
 
     def bounds(self, index: int) -> tuple[np.ndarray, np.ndarray]:
-        """Lower/upper bound of component ``index`` (0 β, 1 r, 2 f): the published set's bounds where the
-        node runs a set estimator, else the ellipsoid's x̂ ∓ √(ρ P_ii)."""
+        """Lower/upper bound of component ``index`` (0 β, 1 r, 2 f) of the published set: a set estimator's set,
+        the SDP's ellipsoid ∩ its fault range ∩ its region of x (records before the bounds were written: the
+        ellipsoid's, :meth:`ellipsoid_bounds`)."""
         if self.set_bounds is not None:
             return self.set_bounds[:, index, 0].copy(), self.set_bounds[:, index, 1].copy()
+        return self.ellipsoid_bounds(index)
+
+    def ellipsoid_bounds(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """Lower/upper bound of component ``index`` of the published ellipsoid alone, x̂ ∓ √(ρ P_ii), the fault's
+        within its fault range: the paper's own set (a set estimator's: the ellipsoid around its set)."""
         half = np.sqrt(self.rho * self.P[:, index, index])
         lo, hi = self.xhat[:, index] - half, self.xhat[:, index] + half
         if index == NA - 1 and self.fault_range is not None:  # the ellipsoid ∩ the step's fault range
@@ -441,8 +447,9 @@ def _build(path: Path, meta: dict, truth: list, raw_nodes: dict, summary: object
 
 
 def _set_bounds(entries: list[dict]) -> np.ndarray | None:
-    """(K, 3, 2) from the entries' ``bounds`` (a set estimator's node: every entry has them), else None."""
-    if not entries or "bounds" not in entries[0]:
+    """(K, 3, 2) from the entries' ``bounds`` (every entry has them since the SDP publishes its region; before, a
+    set estimator's node's), else None."""
+    if not entries or any("bounds" not in e for e in entries):
         return None
     b = np.array([e["bounds"] for e in entries], dtype=float)
     if b.shape != (len(entries), 3, 2):

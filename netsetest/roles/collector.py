@@ -57,7 +57,7 @@ from netsetest.records.meta import RunMeta
 from netsetest.records.record import RecordSink
 from netsetest.records.summary import RUN_FIELDS, InheritedOrigin, NodeSummary, RunSummary
 from netsetest.roles.fdi import FdiTotals, classify
-from netsetest.roles.judge import INHERITED, NO_CHECKS, TRUTH_UNKNOWN, Judge, NodeVerdict, StepInputs, isclose, state_mismatch
+from netsetest.roles.judge import INHERITED, NO_CHECKS, TRUTH_UNKNOWN, Containment, Judge, NodeVerdict, StepInputs, isclose, state_mismatch
 from netsetest.roles.vehicle import fault_bound_holds, mismatch_holds
 
 WINDOW = 50  # steps a step may stay open behind the newest truth (bounds memory against a stalled node)
@@ -113,6 +113,14 @@ def _fault_interval(st: NodeState, v: NodeVerdict) -> tuple[float, float]:
     return float(lo[2]), float(hi[2])
 
 
+def _bounds(st: NodeState, c: Containment | None) -> list[list[float]]:
+    """The published set's per-coordinate bounds [[lo, hi] ×3] (the judge's where it computed them)."""
+    if c is not None and c.bounds is not None:
+        return c.bounds.tolist()
+    lo, hi = st.bounds()
+    return np.stack([lo, hi], axis=1).tolist()
+
+
 def _state_entry(st: NodeState, v: NodeVerdict, contested: bool) -> dict:
     """The record's line of a judged node-step."""
     c = v.containment
@@ -142,7 +150,7 @@ def _state_entry(st: NodeState, v: NodeVerdict, contested: bool) -> dict:
         "contested": contested,
         "sector": list(st.sector) if st.sector is not None else None,
         "sector_basis": st.sector_basis,
-        **({"bounds": c.bounds.tolist()} if c is not None and c.bounds is not None and st.set is not None else {}),
+        "bounds": _bounds(st, c),
         **({"fault_range": list(st.fault_range)} if st.fault_range is not None else {}),
     }
 

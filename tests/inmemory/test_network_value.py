@@ -241,8 +241,8 @@ def test_the_region_keeps_every_reading_and_is_judged(monkeypatch: pytest.Monkey
 
     use = LocalEstimator._use_region
 
-    def moved_off(self: LocalEstimator, res, moved, refs, inp, rho):  # the StepResult and its inputs
-        use(self, res, moved, refs, inp, rho)
+    def moved_off(self: LocalEstimator, res, *args, **kwargs):  # the StepResult and the step's data
+        use(self, res, *args, **kwargs)
         if res.region is not None:
             res.region = Polygon(res.region.vertices + np.array([1.0, 0.0]))  # 1 rad of sideslip off
 
@@ -251,6 +251,38 @@ def test_the_region_keeps_every_reading_and_is_judged(monkeypatch: pytest.Monkey
     assert broken.summary.violations_total > 0
     covered = [e for es in broken.parts["nodes"].values() for e in es if e["assumptions_ok"] and e["step"] > 0]
     assert any(e["continues_contained"] is False for e in covered)
+
+
+def test_every_node_publishes_its_region_and_a_region_off_the_truth_is_a_violation(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every node keeps and publishes a region of x, readings or not (paper6: no reading): the published set is
+    the ellipsoid ∩ the fault range ∩ the region, so its yaw-rate and sideslip bounds (the record's ``bounds``)
+    are the region's, narrower than the ellipsoid's on every node from step 10, with every node-step covered and
+    contained.  A region moved off the truth (a deliberate bug) is a violation: the published set misses."""
+    from netsetest.polygon import Polygon
+    from netsetest.estimator.sdp import LocalEstimator
+
+    sc = load_topology("paper6", case="nsnim", steps=30)
+    res = run_inmemory(sc, "paper", seed=0)
+    s = res.summary
+    assert s.violations_total == 0 and s.node_steps_covered == s.node_steps_evaluated == s.node_steps_contained
+    for i, es in res.parts["nodes"].items():
+        for e in es[10:]:
+            half = np.sqrt(e["rho"] * np.diag(np.reshape(e["P"], (3, 3))))
+            width = np.diff(np.asarray(e["bounds"]), axis=1)[:, 0]
+            assert np.all(width[:2] < 0.9 * 2 * half[:2]), (i, e["step"])  # the region's, not the ellipsoid's
+
+    use = LocalEstimator._use_region
+
+    def moved_off(self: LocalEstimator, res, *args, **kwargs):  # the StepResult and the step's data
+        use(self, res, *args, **kwargs)
+        if res.region is not None:
+            res.region = Polygon(res.region.vertices + np.array([0.0, 1.0]))  # 1 rad/s of yaw rate off
+
+    monkeypatch.setattr(LocalEstimator, "_use_region", moved_off)
+    broken = run_inmemory(sc, "paper", seed=0)
+    assert broken.summary.violations_total > 0
+    covered = [e for es in broken.parts["nodes"].values() for e in es if e["assumptions_ok"]]
+    assert covered and all(e["contained"] is False for e in covered)
 
 
 def test_a_false_reference_reading_is_attributed_to_it(tmp_path: Path) -> None:
