@@ -11,7 +11,9 @@ Vertices are stored counter-clockwise, (n, 2), n ≥ 3 (a cut that leaves fewer 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 
@@ -54,17 +56,33 @@ class Polygon:
 
     def plus_segments(self, segments: list[np.ndarray]) -> Polygon:
         """The sum with the segments {s g : |s| ≤ 1} of ``segments`` (each g (2,)): the polygon's edges and every ±2g
-        merged by angle in one pass (two more vertices per segment)."""
-        v = self.vertices
-        first = int(np.lexsort((v[:, 0], v[:, 1]))[0])  # the lowest vertex (then leftmost): edges from it turn by angle
-        v = np.roll(v, -first, axis=0)
+        merged by direction in one pass (two more vertices per segment), walked from the lowest (then leftmost)
+        vertex plus every segment's lowest (then leftmost) end, where that order starts.  The directions are
+        compared exactly (half-plane, then the sign of the cross product), never by a rounded angle: an edge a few
+        ulps below horizontal comes last, not first.  Where a rounding has made a vertex reflex (the edges do not
+        turn one way from there), the walk is over the exact hull of the vertices, which holds them all; parallel
+        directions in a row leave no vertex between them."""
+        v = _from_lowest(self.vertices)
+        edges = np.roll(v, -1, axis=0) - v
+        if not _turn_one_way(edges):
+            v = _hull(v)  # from its lowest (then leftmost) vertex
+            edges = np.roll(v, -1, axis=0) - v
         g = np.array(segments, dtype=float).reshape(-1, 2)
-        edges = np.vstack([np.roll(v, -1, axis=0) - v, 2.0 * g, -2.0 * g])
-        angle = np.mod(np.arctan2(edges[:, 1], edges[:, 0]), 2.0 * np.pi)
         up = (g[:, 1] > 0.0) | ((g[:, 1] == 0.0) & (g[:, 0] > 0.0))
         low = np.where(up[:, None], -g, g).sum(axis=0)  # each segment's lowest (then leftmost) end
-        walk = np.cumsum(edges[np.argsort(angle, kind="stable")], axis=0)
-        return Polygon(_distinct(v[0] + low + np.vstack([np.zeros((1, 2)), walk[:-1]])))
+        steps = np.vstack([edges, 2.0 * g, -2.0 * g])
+        steps = steps[np.any(steps != 0.0, axis=1)]  # a repeated vertex, a zero segment: no direction
+        if len(steps) == 0:
+            return Polygon(v.copy())
+
+        def by_direction(i: int, j: int) -> int:
+            return _compare(steps[i], steps[j])
+
+        order = sorted(range(len(steps)), key=functools.cmp_to_key(by_direction))  # stable: ties in input order
+        steps = steps[order]
+        walk = v[0] + low + np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)[:-1]])
+        turns = [_compare(steps[k - 1], steps[k]) != 0 for k in range(len(steps))]  # else the vertex is on a side
+        return Polygon(_distinct(walk[turns] if any(turns) else walk[:1]))
 
     def moved(self, A: np.ndarray, t: np.ndarray, segments: list[np.ndarray]) -> Polygon:
         """{A x + t} summed with the segments and a square of half-side ROUNDING of the coordinates' size, in one
@@ -97,6 +115,71 @@ class Polygon:
                 break  # no edge can be dropped without an unbounded extension (cannot happen for n > 4)
             v = _drop_edges(v, drops)
         return Polygon(v)
+
+
+def _half(x: float, y: float) -> int:
+    """0 for a direction in the upper half-plane, angle in [0, π); 1 for the lower, [π, 2π)."""
+    return 0 if y > 0.0 or (y == 0.0 and x > 0.0) else 1
+
+
+CCW_ERRBOUND = (3.0 + 16.0 * 2.0**-53) * 2.0**-53  # Shewchuk's orient2d error bound A (unit roundoff 2⁻⁵³)
+TINY = 1e-280  # below this the products may have lost precision to underflow: the sign is taken exactly
+
+
+def _cross_sign(p0x: float, p0y: float, p1x: float, p1y: float, q0x: float, q0y: float, q1x: float, q1y: float) -> int:
+    """The exact sign of (p₁ − p₀) × (q₁ − q₀): in floating point where Shewchuk's error bound (for two products of
+    rounded differences) decides it, else in rational arithmetic (every double is a rational)."""
+    left = (p1x - p0x) * (q1y - q0y)
+    right = (p1y - p0y) * (q1x - q0x)
+    det = left - right
+    size = abs(left) + abs(right)
+    if abs(det) > CCW_ERRBOUND * size and size > TINY:  # (near underflow the bound does not hold)
+        return 1 if det > 0.0 else -1
+    F = Fraction
+    exact = (F(p1x) - F(p0x)) * (F(q1y) - F(q0y)) - (F(p1y) - F(p0y)) * (F(q1x) - F(q0x))
+    return (exact > 0) - (exact < 0)
+
+
+def _compare(a: np.ndarray, b: np.ndarray) -> int:
+    """The order of the directions a and b (each (2,), nonzero) by angle in [0, 2π), exactly: −1 if a comes first,
+    0 if they are the same direction, 1 if b comes first."""
+    ha, hb = _half(float(a[0]), float(a[1])), _half(float(b[0]), float(b[1]))
+    if ha != hb:
+        return -1 if ha < hb else 1
+    return -_cross_sign(0.0, 0.0, float(a[0]), float(a[1]), 0.0, 0.0, float(b[0]), float(b[1]))
+
+
+def _turn_one_way(edges: np.ndarray) -> bool:
+    """Whether the edges (from the lowest, then leftmost, vertex) turn counter-clockwise all the way: their
+    directions in [0, 2π) never decrease (a repeated vertex, a zero edge, is skipped)."""
+    e = edges[np.any(edges != 0.0, axis=1)]
+    return all(_compare(e[k], e[k + 1]) <= 0 for k in range(len(e) - 1))
+
+
+def _from_lowest(v: np.ndarray) -> np.ndarray:
+    """The vertices rolled to start at the lowest (then leftmost) one."""
+    return np.roll(v, -int(np.lexsort((v[:, 0], v[:, 1]))[0]), axis=0)
+
+
+def _hull(v: np.ndarray) -> np.ndarray:
+    """The convex hull of the points v (n, 2), exactly (Andrew's monotone chain, exact orientation): its vertices
+    counter-clockwise without collinear ones, from the lowest (then leftmost); one or two rows if it is flat."""
+    pts = sorted({(float(x), float(y)) for x, y in v})
+    if len(pts) <= 2:
+        out = sorted(pts, key=lambda p: (p[1], p[0]))
+        return np.array(out, dtype=float).reshape(-1, 2)
+
+    def chain(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
+        out: list[tuple[float, float]] = []
+        for p in points:
+            while len(out) >= 2 and _cross_sign(*out[-2], *out[-1], *out[-2], *p) <= 0:
+                out.pop()
+            out.append(p)
+        return out
+
+    ring = chain(pts)[:-1] + chain(pts[::-1])[:-1]  # every point on one line: its two ends
+    first = min(range(len(ring)), key=lambda i: (ring[i][1], ring[i][0]))
+    return np.array(ring[first:] + ring[:first], dtype=float)
 
 
 def _clip(v: np.ndarray, c: np.ndarray, b: float) -> np.ndarray | None:

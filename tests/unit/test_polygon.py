@@ -82,3 +82,14 @@ def test_a_cut_that_misses_the_polygon_is_empty() -> None:
     assert cut is not None
     pad = MARGIN * 2.0  # outward by the margin, relative to the extent (1)
     assert cut.interval(np.array([0.0, 1.0])) == (0.25 - pad, 0.5 + pad) and cut.interval(np.array([1.0, 0.0])) == (0.0, 1.0)
+
+
+def test_a_side_a_rounding_made_reflex_does_not_shift_the_sum() -> None:
+    """Issue 32's reproduction: a vertex 1 ulp above the bottom side made that side's second half point at an angle
+    just below 2π; sorted by the rounded angle it went last and the walk lost a segment's length of the sum."""
+    v = np.array([[0.0, 0.3], [1.0, 0.1 + 0.2], [2.0, 0.3], [2.0, 1.0], [0.0, 1.0]])
+    total = Polygon(v).plus_segments([np.array([0.5, 0.0])])
+    assert total.interval(np.array([1.0, 0.0])) == (-0.5, 2.5)
+    assert total.interval(np.array([0.0, 1.0])) == (0.3, 1.0)
+    for x in ([2.5, 1.0], [-0.5, 0.3], [2.5, 0.3], [-0.5, 1.0]):
+        assert total.contains(np.array(x))
