@@ -112,6 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("record", help="record file (.json, .json.gz or .mcap)")
     p.add_argument("--node", type=int, help="node id (default: all nodes)")
     p.add_argument("--json", action="store_true", help="JSON rows with state bounds and true values")
+    p.add_argument("--state", action="store_true", help="β, r and f bounds per step and the cut each interval rests on")
 
     p = sub.add_parser("plot", help="figures like the paper's Figs. 5-8 from a record")
     p.add_argument("record", nargs="+", help="one record, or several (e.g. an nsnim and a saim run) for Fig. 8")
@@ -256,6 +257,10 @@ def cmd_inspect(a: argparse.Namespace) -> int:
         json.dump({str(i): rec.state_rows(i) for i in ids} if a.node is None else rec.state_rows(ids[0]), sys.stdout, indent=1)
         sys.stdout.write("\n")
         return 0
+    if a.state:
+        for i in ids:
+            _print_state(rec, i)
+        return 0
     for i in ids:
         method = rec.meta.estimators.get(str(i), "sdp")
         if method == "sdp":
@@ -273,6 +278,21 @@ def cmd_inspect(a: argparse.Namespace) -> int:
             print(f"{r['step']:5d} {ft:>9} {r['fault_estimate']:9.4f} {r['fault_lower']:9.4f} {r['fault_upper']:9.4f} {e:>7}  {fdi:<9}  {r['status']}{flag}")
         print()
     return 0
+
+
+def _print_state(rec: Record, i: int) -> None:
+    """``inspect --state``: node i's β, r, f intervals per step, each with the true value and the cut it rests on
+    (ellipsoid, region, fault range; a set estimator's: set)."""
+    print(f"node {i}: published intervals of β [rad], r [rad/s], f [rad/s] (true value; the cut each rests on)")
+    print(f"{'step':>5}  " + "  ".join(f"{name:^41}" for name in ("sideslip β", "yaw rate r", "fault f")) + "  status")
+    for r in rec.state_rows(i):
+        cells = []
+        for name in ("beta", "r", "fault"):
+            t = r[f"{name}_true"]
+            cells.append(f"[{r[f'{name}_lower']:8.4f}, {r[f'{name}_upper']:8.4f}] {'-' if t is None else format(t, '8.4f'):>8} {r[f'{name}_rests_on']:<11}")
+        flag = "" if not r["judged"] or r["contained"] else "  MISS"
+        print(f"{r['step']:5d}  " + "  ".join(cells) + f"  {r['status']}{flag}")
+    print()
 
 
 def cmd_plot(a: argparse.Namespace) -> int:

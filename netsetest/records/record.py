@@ -218,6 +218,17 @@ class NodeTrack:
             return self.set_bounds[:, index, 0].copy(), self.set_bounds[:, index, 1].copy()
         return self.ellipsoid_bounds(index)
 
+    def rests_on(self, index: int) -> list[str]:
+        """Per step, the cut component ``index``'s published interval rests on: ``ellipsoid`` (the interval is the
+        published ellipsoid's), ``region`` (β, r narrower: the region of x) or ``fault range`` (f narrower: the
+        range cut by the own measurement over the region, a declared bound or the k-of-N pin)."""
+        lo, hi = self.bounds(index)
+        half = np.sqrt(self.rho * self.P[:, index, index])
+        e_lo, e_hi = self.xhat[:, index] - half, self.xhat[:, index] + half
+        tol = RESTS_ON_RTOL * (1.0 + np.abs(self.xhat[:, index]) + half)
+        cut = "region" if index < NA - 1 else "fault range"
+        return [cut if narrower else "ellipsoid" for narrower in (lo > e_lo + tol) | (hi < e_hi - tol)]
+
     def ellipsoid_bounds(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """Lower/upper bound of component ``index`` of the published ellipsoid alone, x̂ ∓ √(ρ P_ii), the fault's
         within its fault range: the paper's own set (a set estimator's: the ellipsoid around its set)."""
@@ -281,7 +292,14 @@ class Record:
                 row[f"{name}_lower"] = float(lo[n])
                 row[f"{name}_upper"] = float(hi[n])
                 row[f"{name}_true"] = None if t is None else float(t["x"][comp])
+        set_node = self.meta.estimators.get(str(node), "sdp") != "sdp"  # a set estimator's interval hull
+        for comp, name in ((0, "beta"), (1, "r"), (2, "fault")):
+            for row, on in zip(rows, tr.rests_on(comp)):
+                row[f"{name}_rests_on"] = "set" if set_node else on
         return rows
+
+
+RESTS_ON_RTOL = 1e-12  # a published end within this (relative) of the ellipsoid's is the ellipsoid's: rounding only
 
 
 def _read(path: Path) -> bytes:
