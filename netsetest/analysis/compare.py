@@ -221,7 +221,8 @@ def compare(
         raise CompareError(f"estimator list {','.join(estimators)} names one twice")
     if not estimators or not cases or not signals or not seeds:
         raise CompareError("nothing to compare: give at least one estimator, case, signal kind and seed")
-    acc = {e: _Accumulator() for e in (*estimators, *((SDP_ELLIPSOID,) if SDP in estimators else ()), *(ALONE_ROWS if alone else ()))}
+    names = [r for e in estimators for r in ((e, SDP_ELLIPSOID) if e == SDP else (e,))]  # the paper's own set right after sdp
+    acc = {e: _Accumulator() for e in (*names, *(ALONE_ROWS if alone else ()))}
     runs: list[str] = []
     first_bounds: dict[str, dict[int, np.ndarray]] = {}
     truth_fault: dict[int, np.ndarray] = {}
