@@ -162,6 +162,9 @@ def test_summary_json_fields(nsnim: dict[str, Path]) -> None:
             assert key in n, key
         assert 0.0 <= n["max_E"] <= 1.0
         assert n["violations"] == 0 and n["fault_bound_mean_width"] > 0 and n["solve_ms_median"] > 0
+        rows = load_record(nsnim["record"]).state_rows(n["id"])  # the state widths are the published intervals' mean
+        assert n["r_mean_width"] == pytest.approx(np.mean([r["r_upper"] - r["r_lower"] for r in rows]))
+        assert n["beta_mean_width"] == pytest.approx(np.mean([r["beta_upper"] - r["beta_lower"] for r in rows]))
 
 
 def test_summary_is_typed_and_round_trips(nsnim: dict[str, Path]) -> None:
