@@ -6,7 +6,9 @@ A node's *region* (docs/network.md) is such a polygon: the states its prior allo
 step's dynamics and the disturbance's bound, and cut by the step's readings.  Unlike an ellipsoid it keeps
 what every earlier reading proved, as the exact limit does, at a bounded number of vertices.
 
-Vertices are stored counter-clockwise, (n, 2), n ≥ 3 (a cut that leaves fewer is empty: None).
+Vertices are stored counter-clockwise, (n, 2), n ≥ 3; a flat polygon (a segment, a point: fewer distinct
+vertices, or all on one line) only where its input was flat or a cut left a sliver below the rounding.  Every
+operation reads a polygon as the convex hull of its vertices, whatever their order.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ MIN_VERTICES = 3
 MAX_VERTICES = 24  # the reduction keeps at most this many (each step adds about 8)
 MARGIN = 1e-9  # outward, relative to the polygon's extent: covers the rounding of one step's operations
 ROUNDING = 1e-10  # outward, relative to the coordinates' size: far above one step's rounding (ε·n)
+AXES = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 DUPLICATE = 1e-13  # vertices closer than this (relative to the coordinates' size) are one: far below ROUNDING
 
 
@@ -41,18 +44,23 @@ class Polygon:
         return float(v.min()), float(v.max())
 
     def contains(self, x: np.ndarray) -> bool:
-        """x within every side's supporting line: nᵢᵀx ≤ max_j nᵢᵀv_j, nᵢ the outward normal of side i (no margin:
-        for tests and the judge).  The support over every vertex, not the side's own end, keeps the test sound where
-        a short side's direction is rounding noise: any direction with its support bounds the hull."""
+        """x within the supporting line of every side in both normal directions and along it: dᵀx ≤ max_j dᵀv_j
+        for d = ±nᵢ, ±eᵢ and the axes (eᵢ side i, nᵢ its normal; no margin: for tests and the judge).  Any direction with its
+        support over every vertex bounds the hull, so the test holds whatever the order of the vertices (a
+        clockwise one, a rounding's reflex vertex) and a short side's direction of rounding noise; the outward
+        normals among them make it exact for a convex polygon, the sides' own directions for a flat one."""
         v = self.vertices
         e = np.roll(v, -1, axis=0) - v
-        n = np.stack([e[:, 1], -e[:, 0]], axis=1)  # outward for counter-clockwise vertices
-        return bool(np.all(n @ x <= (v @ n.T).max(axis=0)))
+        n = np.stack([e[:, 1], -e[:, 0]], axis=1)
+        d = np.vstack([n, -n, e, -e, AXES])  # (the axes: a point's box)
+        return bool(np.all(d @ x <= (v @ d.T).max(axis=0)))
 
     def affine(self, A: np.ndarray, t: np.ndarray) -> Polygon:
-        """{A x + t}: A (2, 2) invertible."""
+        """{A x + t}: A (2, 2); the vertices' order reversed where det A < 0 (its sign exact: a rounded determinant
+        of a near-singular A could flip the orientation)."""
         v = self.vertices @ A.T + t
-        return Polygon(v if np.linalg.det(A) > 0 else v[::-1].copy())
+        det = _cross_sign(0.0, 0.0, float(A[0, 0]), float(A[1, 0]), 0.0, 0.0, float(A[0, 1]), float(A[1, 1]))
+        return Polygon(v if det >= 0 else v[::-1].copy())
 
     def plus_segments(self, segments: list[np.ndarray]) -> Polygon:
         """The sum with the segments {s g : |s| ≤ 1} of ``segments`` (each g (2,)): the polygon's edges and every ±2g
@@ -61,7 +69,8 @@ class Polygon:
         compared exactly (half-plane, then the sign of the cross product), never by a rounded angle: an edge a few
         ulps below horizontal comes last, not first.  Where a rounding has made a vertex reflex (the edges do not
         turn one way from there), the walk is over the exact hull of the vertices, which holds them all; parallel
-        directions in a row leave no vertex between them."""
+        directions in a row leave no vertex between them.  Sound to the walk's rounding and the merge of vertices
+        closer than DUPLICATE (:func:`_distinct`), which the margin of :meth:`moved` covers."""
         v = _from_lowest(self.vertices)
         edges = np.roll(v, -1, axis=0) - v
         if not _turn_one_way(edges):
@@ -93,8 +102,9 @@ class Polygon:
         return v.plus_segments([*segments, np.array([pad, 0.0]), np.array([0.0, pad])])
 
     def cut(self, c: np.ndarray, lo: float, hi: float) -> Polygon | None:
-        """The part with lo ≤ cᵀx ≤ hi, widened outward by the margin; None if empty."""
-        pad = MARGIN * (1.0 + self.extent(c))
+        """The part with lo ≤ cᵀx ≤ hi, widened outward by the margin (relative to max Σᵢ |cᵢ xᵢ|, which bounds the
+        rounding of cᵀx where its terms cancel); None if empty (flat if this polygon is: a segment's part is one)."""
+        pad = MARGIN * (1.0 + float((np.abs(self.vertices) @ np.abs(c)).max()))
         v = _clip(self.vertices, c, hi + pad)
         if v is not None:
             v = _clip(v, -c, -lo + pad)
@@ -183,7 +193,7 @@ def _hull(v: np.ndarray) -> np.ndarray:
 
 
 def _clip(v: np.ndarray, c: np.ndarray, b: float) -> np.ndarray | None:
-    """The polygon ∩ {cᵀx ≤ b} (Sutherland–Hodgman against one half-plane); None if fewer than 3 vertices remain."""
+    """The polygon ∩ {cᵀx ≤ b} (Sutherland–Hodgman against one half-plane); None if nothing remains."""
     s = v @ c - b
     if np.all(s <= 0.0):
         return v
@@ -193,8 +203,7 @@ def _clip(v: np.ndarray, c: np.ndarray, b: float) -> np.ndarray | None:
     t = np.where(crosses, s / np.where(crosses, s - s_nxt, 1.0), 0.0)
     points = np.stack([v, v + t[:, None] * (nxt - v)], axis=1).reshape(-1, 2)  # per edge: its start, its crossing
     out = points[np.stack([s <= 0.0, crosses], axis=1).reshape(-1)]
-    out = _distinct(out) if len(out) else out
-    return out if len(out) >= MIN_VERTICES else None
+    return _distinct(out) if len(out) else None
 
 
 def _distinct(v: np.ndarray) -> np.ndarray:

@@ -80,7 +80,7 @@ from netsetest.estimator.slab import cut
 from netsetest.extras import require
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.uncertainty import ModelUncertainty
-from netsetest.polygon import Polygon
+from netsetest.polygon import MIN_VERTICES, Polygon
 from netsetest.sets import ellipsoid_bounds
 from netsetest.models.vehicle import N_RULES, TSModel
 
@@ -656,8 +656,8 @@ class LocalEstimator:
         for s in (res, res.published):
             if region is not None and s is not None:
                 region = _ellipse_cut(region, s.xhat, s.P, rho)
-        if region is None:
-            return
+        if region is None or len(region.vertices) < MIN_VERTICES:
+            return  # (fewer: a sliver below the rounding, kept as empty)
         region = region.reduced()  # the move's margin covers the cuts' rounding (Polygon.moved)
         res.region = region
         res.reading_keys = res.reading_keys | keys

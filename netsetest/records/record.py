@@ -16,7 +16,8 @@ in-neighbour weights {i: {j: a_ij}}, run id).  Truth entry of step k: x = [β, r
 w, vx, noise {i}, gamma {i}, y {i}, y_nofault {i}, sector_ok {i}, r {i} = C̄x̄, fault_ok {i}, noise_ok {i},
 dist_ok, lost [[j, i]], alive [i], drops {reason: n}, e [2] | null (model mismatch of k → k+1), mismatch_ok.  State entry: step, xhat [3], P [9, row-major], rho,
 status, rho_cert, solve_ms, used, missing, late, dropped, drops {reason: n}, sector [h1, h] | null,
-sector_basis, E = eᵀP⁻¹e (null when the truth of the step is unknown), contained
+sector_basis, own_xhat [3] and own_P [9] (the set the node continues from, where not the published one) and
+own_region [β₁, r₁, …] (its region; each absent where the node sent none, and in older records), E = eᵀP⁻¹e (null when the truth of the step is unknown), contained
 (E ≤ rho; for a node running a set estimator: the truth in its published set, whose per-coordinate
 bounds [[lo, hi] ×3] are then in ``bounds`` and the ellipsoid is the enclosing one its neighbours
 use), assumptions_ok (every assumption in the step's dependency cone held), contested (more
@@ -43,7 +44,7 @@ import json
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Literal, Protocol, cast, get_args
+from typing import IO, Any, Literal, Protocol, cast, get_args
 
 import numpy as np
 
@@ -206,6 +207,9 @@ class NodeTrack:
     fdi: list[str | None] | None = None  # (K,) detected | healthy | undecided (docs/fdi.md; None: older records)
     fault_range: np.ndarray | None = None  # (K, 2) the SDP's published fault range (±inf where none; None: no step had one)
     continues_contained: np.ndarray | None = None  # (K,) bool: the set the node continues from held the truth (None: older records)
+    own_xhat: np.ndarray | None = None  # (K, 3) the set the node continues from where not the published one (NaN: it is; None: no step)
+    own_P: np.ndarray | None = None  # (K, 3, 3) its shape, with the published ρ (NaN where none; None: no step had one)
+    own_region: list[np.ndarray | None] | None = None  # (K) the region's vertices (n, 2) (None where none; None: no step had one)
 
     def was_judged(self, n: int) -> bool:
         return bool(self.judged[n]) if self.judged is not None else True
@@ -296,6 +300,12 @@ class Record:
         for comp, name in ((0, "beta"), (1, "r"), (2, "fault")):
             for row, on in zip(rows, tr.rests_on(comp)):
                 row[f"{name}_rests_on"] = "set" if set_node else on
+        for n, row in enumerate(rows):  # every other set the collector judged (None where the step had none)
+            own = tr.own_xhat is not None and not np.isnan(tr.own_xhat[n]).any()
+            row["own_xhat"] = tr.own_xhat[n].tolist() if own and tr.own_xhat is not None else None
+            row["own_P"] = tr.own_P[n].reshape(-1).tolist() if own and tr.own_P is not None else None
+            region = tr.own_region[n] if tr.own_region is not None else None
+            row["own_region"] = None if region is None else region.tolist()
         return rows
 
 
@@ -485,6 +495,24 @@ def _fault_ranges(entries: list[dict]) -> np.ndarray | None:
     return r
 
 
+def _own_sets(entries: list[dict]) -> dict[str, Any]:
+    """``own_xhat``, ``own_P`` and ``own_region`` of the entries (NodeTrack's fields; absent in records before
+    they were written, and where a step has none)."""
+    out: dict[str, Any] = {}
+    if any("own_xhat" in e for e in entries):
+        x = np.array([e.get("own_xhat", [np.nan] * NA) for e in entries], dtype=float)
+        P = np.array([e.get("own_P", [np.nan] * NA * NA) for e in entries], dtype=float)
+        if x.shape != (len(entries), NA) or P.shape != (len(entries), NA * NA):
+            raise ValueError(f"own_xhat/own_P: expected [{NA}] and [{NA * NA}] per entry, got shapes {x.shape}, {P.shape}")
+        out["own_xhat"], out["own_P"] = x, P.reshape(-1, NA, NA)
+    if any("own_region" in e for e in entries):
+        regions = [None if e.get("own_region") is None else np.array(e["own_region"], dtype=float) for e in entries]
+        if any(r is not None and (r.ndim != 1 or len(r) < 2 or len(r) % 2) for r in regions):
+            raise ValueError("own_region: expected [β₁, r₁, β₂, r₂, …] per entry")
+        out["own_region"] = [None if r is None else r.reshape(-1, 2) for r in regions]
+    return out
+
+
 FdiStatus = Literal["detected", "healthy", "undecided"]  # a node-step's fault detection (roles/fdi.py, docs/fdi.md)
 FDI_VALUES: tuple[FdiStatus, ...] = get_args(FdiStatus)
 
@@ -527,6 +555,7 @@ def record_from_parts(
             continues_contained=np.array([e.get("continues_contained") is not False for e in entries], dtype=bool)
             if any("continues_contained" in e for e in entries)
             else None,
+            **_own_sets(entries),
         )
     for t in truth:
         if not isinstance(t, dict) or not isinstance(t.get("step"), int):

@@ -145,6 +145,9 @@ def _state_entry(st: NodeState, v: NodeVerdict, contested: bool, bounds: list[li
         "sector_basis": st.sector_basis,
         "bounds": bounds,
         **({"fault_range": list(st.fault_range)} if st.fault_range is not None else {}),
+        # every other set judged: the one the node continues from and its region (where sent)
+        **({"own_xhat": list(st.own_xhat), "own_P": list(st.own_P)} if st.own_xhat is not None and st.own_P is not None else {}),
+        **({"own_region": list(st.own_region)} if st.own_region is not None else {}),
     }
 
 

@@ -124,7 +124,16 @@ def test_installed_wheel_runs_bundled_scenario_from_any_directory(venv: Path, tm
 
 
 def test_bundled_names_resolve_in_the_checkout(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    assert bundled_topologies() == ["paper6", "paper6_car", "paper6_lap", "paper6_lossy", "paper6_max_faulty", "paper6_reference"]
+    assert bundled_topologies() == [
+        "paper6",
+        "paper6_car",
+        "paper6_car_max_faulty",
+        "paper6_car_reference",
+        "paper6_lap",
+        "paper6_lossy",
+        "paper6_max_faulty",
+        "paper6_reference",
+    ]
     assert resolve_topology("paper6").resolve() == (ROOT / "topologies" / "paper6.toml").resolve()
     assert resolve_topology("paper6.toml").resolve() == (ROOT / "topologies" / "paper6.toml").resolve()
     monkeypatch.chdir(tmp_path)
