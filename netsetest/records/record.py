@@ -220,7 +220,7 @@ class NodeTrack:
         ellipsoid's, :meth:`ellipsoid_bounds`)."""
         if self.set_bounds is not None:
             return self.set_bounds[:, index, 0].copy(), self.set_bounds[:, index, 1].copy()
-        return self.ellipsoid_bounds(index)
+        return self.ellipsoid_bounds(index, within_range=True)
 
     def rests_on(self, index: int) -> list[str]:
         """Per step, the cut component ``index``'s published interval rests on: ``ellipsoid`` (the interval is the
@@ -233,12 +233,13 @@ class NodeTrack:
         cut = "region" if index < NA - 1 else "fault range"
         return [cut if narrower else "ellipsoid" for narrower in (lo > e_lo + tol) | (hi < e_hi - tol)]
 
-    def ellipsoid_bounds(self, index: int) -> tuple[np.ndarray, np.ndarray]:
-        """Lower/upper bound of component ``index`` of the published ellipsoid alone, x̂ ∓ √(ρ P_ii), the fault's
-        within its fault range: the paper's own set (a set estimator's: the ellipsoid around its set)."""
+    def ellipsoid_bounds(self, index: int, within_range: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Lower/upper bound of component ``index`` of the published ellipsoid alone, x̂ ∓ √(ρ P_ii): the paper's own
+        set (a set estimator's: the ellipsoid around its set); ``within_range``: the fault's within its fault range
+        (what records before the published bounds were written show)."""
         half = np.sqrt(self.rho * self.P[:, index, index])
         lo, hi = self.xhat[:, index] - half, self.xhat[:, index] + half
-        if index == NA - 1 and self.fault_range is not None:  # the ellipsoid ∩ the step's fault range
+        if within_range and index == NA - 1 and self.fault_range is not None:  # the ellipsoid ∩ the step's fault range
             lo, hi = np.maximum(lo, self.fault_range[:, 0]), np.minimum(hi, self.fault_range[:, 1])
         return lo, hi
 
