@@ -536,3 +536,21 @@ def test_a_false_group_declaration_is_attributed_to_it() -> None:
     expected = sum(1 for i, ms in states.items() if i <= 3 for m in ms if m.health and m.step in broken)
     assert expected > 0 and s.node_steps_not_covered["k-of-N health"] == expected
     assert any(m.health and m.step in broken for i, ms in states.items() if i > 3 for m in ms)  # used, and covered
+
+
+def test_a_point_exact_interval_is_reported_as_an_absolute_width_not_a_ratio() -> None:
+    """paper6_reference: the exact interval of the reference's fault is a point (its declared zero). ``exact`` gives
+    no ratio there (it printed 4.5e11) but the absolute width over it; the reference publishes f = 0, so that width
+    is nil, and every other coordinate keeps its ratio (the overall ratio was 2.5e10)."""
+    from netsetest.analysis.exact import compare_record, exact_bounds
+    from netsetest.records.record import record_from_parts
+
+    sc = load_topology("paper6_reference", case="nsnim", steps=20)
+    res = run_inmemory(sc, "paper", seed=0)
+    rec = record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
+    cmp = compare_record(rec, exact_bounds(sc, rec, "used"))
+    ref = next(n for n in cmp.nodes if n.node == 3).ratios["f"]
+    assert np.isnan(ref.width_ratio) and ref.width_excess is not None and abs(ref.width_excess) < 1e-9
+    others = [n.ratios[c] for n in cmp.nodes for c in ("beta", "r", "f") if (n.node, c) != (3, "f")]
+    assert all(r.width_excess is None and 0.99 < r.width_ratio < 1.05 for r in others)
+    assert 0.99 < cmp.overall_width_ratio < 1.05
