@@ -23,6 +23,7 @@ MIN_VERTICES = 3
 MAX_VERTICES = 24  # the reduction keeps at most this many (each step adds about 8)
 MARGIN = 1e-9  # outward, relative to the polygon's extent: covers the rounding of one step's operations
 ROUNDING = 1e-10  # outward, relative to the coordinates' size: far above one step's rounding (ε·n)
+MAX_REACH = 1e3  # a drop extends a neighbour by at most this many of its lengths (q's rounding stays ≪ DUPLICATE)
 AXES = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 DUPLICATE = 1e-13  # vertices closer than this (relative to the coordinates' size) are one: far below ROUNDING
 
@@ -96,15 +97,23 @@ class Polygon:
     def moved(self, A: np.ndarray, t: np.ndarray, segments: list[np.ndarray]) -> Polygon:
         """{A x + t} summed with the segments and a square of half-side ROUNDING of the coordinates' size, in one
         merge: every side moves out by at least that, which covers the step's rounding (this move's, the cuts'
-        that follow, each widened by its own margin, and the vertices merged as duplicates)."""
+        that follow, each widened by its own margin, and the vertices merged as duplicates); at least what that
+        merge can leave out where the segments reach far beyond the image (a flat or tiny image)."""
         v = self.affine(A, t)
-        pad = ROUNDING * (1.0 + float(np.abs(v.vertices).max()))
+        size = float(np.abs(v.vertices).max())
+        reach = size + sum(float(np.abs(g).max()) for g in segments)
+        merged = (2 * (len(v.vertices) + 2 * len(segments)) + 8) * DUPLICATE * (1.0 + reach)
+        pad = max(ROUNDING * (1.0 + size), merged)  # (ROUNDING's at every physical state range: bit for bit)
         return v.plus_segments([*segments, np.array([pad, 0.0]), np.array([0.0, pad])])
 
     def cut(self, c: np.ndarray, lo: float, hi: float) -> Polygon | None:
         """The part with lo ≤ cᵀx ≤ hi, widened outward by the margin (relative to max Σᵢ |cᵢ xᵢ|, which bounds the
-        rounding of cᵀx where its terms cancel); None if empty (flat if this polygon is: a segment's part is one)."""
-        pad = MARGIN * (1.0 + float((np.abs(self.vertices) @ np.abs(c)).max()))
+        rounding of cᵀx where its terms cancel), and at least by what merging its vertices closer than DUPLICATE
+        can leave out along c (a slab thin next to the coordinates' size); None if empty (flat if this polygon
+        is: a segment's part is one)."""
+        a = np.abs(self.vertices)
+        merged = (2 * len(a) + 2) * DUPLICATE * (1.0 + float(a.max())) * float(np.abs(c).sum())
+        pad = max(MARGIN * (1.0 + float((a @ np.abs(c)).max())), merged)
         v = _clip(self.vertices, c, hi + pad)
         if v is not None:
             v = _clip(v, -c, -lo + pad)
@@ -122,7 +131,8 @@ class Polygon:
         while len(v) > max_vertices:
             drops = _cheapest_edges(v, len(v) - max_vertices)
             if not drops:
-                break  # no edge can be dropped without an unbounded extension (cannot happen for n > 4)
+                break  # no edge can be dropped without an unbounded extension (for n > 4 only where a rounding
+                # puts two neighbours' meeting a hair behind an edge: near-duplicate vertices)
             v = _drop_edges(v, drops)
         return Polygon(v)
 
@@ -216,7 +226,8 @@ def _distinct(v: np.ndarray) -> np.ndarray:
 
 def _cheapest_edges(v: np.ndarray, wanted: int) -> dict[int, np.ndarray]:
     """Up to ``wanted`` edges i → q: dropping edge (v_i, v_i+1) by meeting its neighbours' lines at q adds the
-    least area; the edges chosen are at least three apart (cyclically)."""
+    least area, q beyond both ends of the edge along them (the drop then holds the edge's triangle); the edges
+    chosen are at least three apart (cyclically)."""
     n = len(v)
     a0, a1 = np.roll(v, 1, axis=0), v  # the edge before edge i
     b0, b1 = np.roll(v, -1, axis=0), np.roll(v, -2, axis=0)  # the edge after it
@@ -224,8 +235,10 @@ def _cheapest_edges(v: np.ndarray, wanted: int) -> dict[int, np.ndarray]:
     den = da[:, 0] * db[:, 1] - da[:, 1] * db[:, 0]
     ok = den > 1e-300  # else parallel, or meeting behind: dropping that edge is unbounded
     t = np.where(ok, ((b0[:, 0] - a0[:, 0]) * db[:, 1] - (b0[:, 1] - a0[:, 1]) * db[:, 0]) / np.where(ok, den, 1.0), -1.0)
-    ok &= t >= 1.0
+    ok &= (t >= 1.0) & (t <= MAX_REACH)  # (farther, q's rounding could cut the polygon: near-parallel neighbours)
     q = a0 + t[:, None] * da
+    ok &= np.einsum("ij,ij->i", q - b0, db) <= 0.0  # and before b0 on the edge after (else the drop cuts b0 off: where
+    # near-duplicate vertices leave a side whose direction is rounding noise)
     area = 0.5 * np.abs((q[:, 0] - a1[:, 0]) * (b0[:, 1] - a1[:, 1]) - (q[:, 1] - a1[:, 1]) * (b0[:, 0] - a1[:, 0]))
     area = np.where(ok & np.isfinite(area), area, np.inf)
     chosen: dict[int, np.ndarray] = {}

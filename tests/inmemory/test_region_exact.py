@@ -37,7 +37,7 @@ CASES: list[tuple[str, str, SignalKind, int]] = (
     else [
         ("paper6_car_reference", "nsnim", "worst", 10),
         ("paper6_car_reference", "saim", "paper", 10),
-        ("paper6_car_max_faulty", "nsnim", "paper", 10),
+        ("paper6_car_max_faulty", "nsnim", "worst", 10),  # with the rounded sort: 108 of 288 region intervals narrower
         ("paper6_car_max_faulty", "saim", "worst", 10),
         ("paper6_reference", "saim", "worst", 10),
         ("paper6_max_faulty", "nsnim", "worst", 10),
