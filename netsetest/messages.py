@@ -176,8 +176,10 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     # covered node-step is a violation) and as the next step's prior
     own_xhat: Vec3 | None = None
     own_P: Mat3 | None = None
-    # and its region: a convex polygon of x = (β, r) that keeps what every earlier reading proved (vertices
-    # counter-clockwise, flattened [β₁, r₁, β₂, r₂, …]; netsetest/polygon.py); the truth's x must lie in it too
+    # and its region: a convex polygon of x = (β, r) that keeps what every earlier step proved (vertices
+    # counter-clockwise, flattened [β₁, r₁, β₂, r₂, …]; netsetest/polygon.py); part of both sets, the published
+    # one (the ellipsoid ∩ the fault range ∩ the region: its β, r bounds are the region's) and the one the node
+    # continues from; the truth's x must lie in it
     own_region: Annotated[list[FiniteF], Meta(min_length=2 * MIN_VERTICES, max_length=2 * MAX_VERTICES)] | None = None
     # the readings of this very step the published set or the one the node continues from used, as
     # (node, ỹ, γ): the collector checks them against the truth and puts their noise and zero-fault
@@ -225,7 +227,12 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
         else the ellipsoid's x̂ ∓ √(ρ P_jj), the fault's within ``fault_range``."""
         if self.set is not None:
             return set_from_wire(self.set, NA).bounds()
-        return ellipsoid_bounds(np.asarray(self.xhat, dtype=float), np.diag(self.P_matrix()), self.rho, self.fault_range)
+        lo, hi = ellipsoid_bounds(np.asarray(self.xhat, dtype=float), np.diag(self.P_matrix()), self.rho, self.fault_range)
+        region = self.region()
+        if region is not None:  # the published set is the ellipsoid ∩ the region (the node's estimator cut one by the other)
+            v = region.vertices
+            lo[: v.shape[1]], hi[: v.shape[1]] = np.maximum(lo[: v.shape[1]], v.min(axis=0)), np.minimum(hi[: v.shape[1]], v.max(axis=0))
+        return lo, hi
 
 
 def state_digest(st: NodeState) -> str:

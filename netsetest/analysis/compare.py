@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from netsetest.analysis.exact import FROM_STEP, ExactBounds, exact_bounds, step_data
+from netsetest.analysis.exact import DEGENERATE_WIDTH, FROM_STEP, ExactBounds, exact_bounds, step_data
 from netsetest.config.schema import Case, ConfigError, Scenario, load_topology
 from netsetest.analysis.errors import CompareError
 from netsetest.estimator.names import DEFAULT_COMPARE, ESTIMATOR_NAMES, EXACT, SDP
@@ -49,6 +49,7 @@ CONTAIN_TOL = 1e-8  # the sets' own membership slack (sets.MEMBERSHIP_TOL) plus 
 EXACT_PINNED = 1e-9  # an exact half-width below this is a coordinate pinned by a declaration (no ratio to it)
 _COLLECTOR: tuple[str, ...] = ("dependency cone (collector)",)  # a node row: judged by the run's collector
 SDP_ALONE, EXACT_LOCAL = "sdp-alone", "exact-local"  # compare(alone=True): the nodes alone, each node's exact local limit
+SDP_ELLIPSOID = "sdp-ellipsoid"  # the SDP's published ellipsoid alone (the paper's own set), scored from the same run as ``sdp``
 ALONE_ROWS = (SDP_ALONE, EXACT_LOCAL)
 
 
@@ -62,6 +63,9 @@ class _Accumulator:
     attributed: Counter = field(default_factory=Counter)
     widths: list[np.ndarray] = field(default_factory=list)  # (3,) per late node-step with a bounded exact
     exact_widths: list[np.ndarray] = field(default_factory=list)
+    # node → (published, exact) mean widths (3,) over its late steps: the per-node ratios, and the coordinates
+    # whose exact interval is a point (a reference's declared fault), which get the absolute excess, no ratio
+    per_node: dict[int, list[tuple[np.ndarray, np.ndarray]]] = field(default_factory=dict)
     rms: list[float] = field(default_factory=list)  # relative-RMS radius per run, node and coordinate
     ms: list[float] = field(default_factory=list)
     fallbacks: int = 0
@@ -84,6 +88,8 @@ class CompareRow:
     r_width_mean: float | None
     ratio_exact: float | None
     ratio_exact_state: list[float | None]
+    ratio_exact_by_node: dict[int, list[float | None]]  # node → [β, r, f] mean published width / exact (None: a point exact interval)
+    pinned_excess: float | None  # mean published width − exact width over (node, coordinate)s whose exact interval is a point
     rms_radius_rel: float | None
     ms_median: float | None
     ms_p95: float | None
@@ -116,17 +122,19 @@ def _centralized_cones(sc: Scenario, rec: Record, ex: ExactBounds) -> dict[int, 
     return cones
 
 
-def _record_bounds(rec: Record, i: int) -> np.ndarray:
+def _record_bounds(rec: Record, i: int, ellipsoid: bool = False) -> np.ndarray:
+    """(K, 3, 2) node i's published set's bounds (``ellipsoid``: its published ellipsoid's alone)."""
     tr = rec.nodes[i]
-    return np.stack([np.stack(tr.bounds(c), axis=1) for c in range(3)], axis=1)
+    of = tr.ellipsoid_bounds if ellipsoid else tr.bounds
+    return np.stack([np.stack(of(c), axis=1) for c in range(3)], axis=1)
 
 
 def _exact_array(ex: ExactBounds, i: int) -> np.ndarray:
     return np.stack([ex.beta, ex.r, ex.fault[i]], axis=1)
 
 
-def _score(acc: _Accumulator, bounds: np.ndarray, steps: np.ndarray, truth: np.ndarray, exact: np.ndarray, broken: list[str | None]) -> None:
-    """Add one node's run: bounds (K, 3, 2) at ``steps``, truth (K, 3), exact (all steps, 3, 2)."""
+def _score(acc: _Accumulator, node: int, bounds: np.ndarray, steps: np.ndarray, truth: np.ndarray, exact: np.ndarray, broken: list[str | None]) -> None:
+    """Add node ``node``'s run: bounds (K, 3, 2) at ``steps``, truth (K, 3), exact (all steps, 3, 2)."""
     ex = exact[steps]
     for n in range(len(steps)):
         acc.node_steps += 1
@@ -140,6 +148,8 @@ def _score(acc: _Accumulator, bounds: np.ndarray, steps: np.ndarray, truth: np.n
     late = ok & (steps >= FROM_STEP)
     acc.widths += list(np.diff(bounds[late], axis=2)[..., 0])
     acc.exact_widths += list(np.diff(ex[late], axis=2)[..., 0])
+    if late.any():
+        acc.per_node.setdefault(node, []).append((np.diff(bounds[late], axis=2)[..., 0].mean(axis=0), np.diff(ex[late], axis=2)[..., 0].mean(axis=0)))
     if ok.any():
         half, ex_half = np.diff(bounds[ok], axis=2)[..., 0] / 2, np.diff(ex[ok], axis=2)[..., 0] / 2
         ex_ms = (ex_half**2).mean(axis=0)
@@ -152,9 +162,17 @@ def _row(name: str, acc: _Accumulator, real_time: bool) -> CompareRow:
         return float(v) if np.isfinite(v) else None
 
     w = np.array(acc.widths).reshape(-1, 3)
-    ew = np.array(acc.exact_widths).reshape(-1, 3)
     mean = w.mean(axis=0) if len(w) else np.full(3, np.nan)
-    ratio = mean / ew.mean(axis=0) if len(ew) else np.full(3, np.nan)
+    by_node = {i: (np.mean([w for w, _ in runs], axis=0), np.mean([e for _, e in runs], axis=0)) for i, runs in sorted(acc.per_node.items())}
+    pinned = {i: e <= DEGENERATE_WIDTH for i, (_, e) in by_node.items()}  # a point exact interval: no ratio to it
+    if by_node:  # pooled over the nodes, without the (node, coordinate)s the exact limit pins
+        keep = np.array([~pinned[i] for i in by_node])
+        w_all, e_all = np.array([w for w, _ in by_node.values()]), np.array([e for _, e in by_node.values()])
+        with np.errstate(invalid="ignore"):
+            ratio = np.where(keep, w_all, 0.0).sum(axis=0) / np.where(keep, e_all, 0.0).sum(axis=0)
+        excess = [float(w[m] - e[m]) for i, (w, e) in by_node.items() for m in range(3) if pinned[i][m]]
+    else:
+        ratio, excess = np.full(3, np.nan), []
     ms = np.array(acc.ms)
     return CompareRow(
         estimator=name,
@@ -169,6 +187,8 @@ def _row(name: str, acc: _Accumulator, real_time: bool) -> CompareRow:
         r_width_mean=num(mean[1]),
         ratio_exact=num(ratio[2]),
         ratio_exact_state=[num(ratio[0]), num(ratio[1])],
+        ratio_exact_by_node={i: [None if pinned[i][m] else num(float(w[m] / e[m])) for m in range(3)] for i, (w, e) in by_node.items()},
+        pinned_excess=float(np.mean(excess)) if excess else None,
         rms_radius_rel=num(float(np.nanmean(acc.rms))) if acc.rms else None,
         ms_median=num(float(np.median(ms))) if len(ms) else None,
         ms_p95=num(float(np.percentile(ms, 95))) if len(ms) else None,
@@ -201,7 +221,8 @@ def compare(
         raise CompareError(f"estimator list {','.join(estimators)} names one twice")
     if not estimators or not cases or not signals or not seeds:
         raise CompareError("nothing to compare: give at least one estimator, case, signal kind and seed")
-    acc = {e: _Accumulator() for e in (*estimators, *(ALONE_ROWS if alone else ()))}
+    names = [r for e in estimators for r in ((e, SDP_ELLIPSOID) if e == SDP else (e,))]  # the paper's own set right after sdp
+    acc = {e: _Accumulator() for e in (*names, *(ALONE_ROWS if alone else ()))}
     runs: list[str] = []
     first_bounds: dict[str, dict[int, np.ndarray]] = {}
     truth_fault: dict[int, np.ndarray] = {}
@@ -231,11 +252,11 @@ def compare(
     return Comparison(str(topology), runs, sc.steps, sc.tau_s, rows, first_bounds, truth_fault, sc.plant_label)
 
 
-def _node_track(rec: Record, i: int, a: _Accumulator) -> tuple[np.ndarray, np.ndarray, list[str | None]]:
-    """Node i's published bounds in a run's record, its steps, and per step None (covered) or the cause the
-    collector named; its solve times and fallbacks go to ``a``."""
+def _node_track(rec: Record, i: int, a: _Accumulator, ellipsoid: bool = False) -> tuple[np.ndarray, np.ndarray, list[str | None]]:
+    """Node i's published bounds in a run's record (``ellipsoid``: its ellipsoid's alone), its steps, and per
+    step None (covered) or the cause the collector named; its solve times and fallbacks go to ``a``."""
     track = rec.nodes[i]
-    bounds, steps = _record_bounds(rec, i), track.steps.astype(int)
+    bounds, steps = _record_bounds(rec, i, ellipsoid), track.steps.astype(int)
     a.ms += [float(m) for m, s, k in zip(track.solve_ms, track.status, steps) if s in ("ok", "fallback") and k > 0]
     a.fallbacks += sum(s == "fallback" for s in track.status)
     a.assumptions.update(_COLLECTOR)
@@ -286,7 +307,7 @@ def _score_alone(
                 broken = history_cone(sc, truth, i, i in local.bounded_nodes)
                 a.assumptions.update(("prior", "noise", "disturbance", *(("fault_bound",) if local.bounded_nodes else ())))
             a.references.add(ex.label)
-            _score(a, bounds, steps, tr_i[steps], _exact_array(ex, i), broken)
+            _score(a, i, bounds, steps, tr_i[steps], _exact_array(ex, i), broken)
             if keep is not None:
                 keep[name][i] = bounds
         report(name)
@@ -345,9 +366,13 @@ def _score_run(
                     ex_all = ex_all or exact_bounds(sc, rec, "all")
                     reference = ex_all
             a.references.add(reference.label)
-            _score(a, bounds, steps, tr_i[steps], _exact_array(reference, i), broken)
+            _score(a, i, bounds, steps, tr_i[steps], _exact_array(reference, i), broken)
             if keep is not None:
                 keep[name][i] = bounds
+            if name == SDP:  # the paper's own set, the published ellipsoid alone, from the same run
+                e_bounds, _, _ = _node_track(run, i, acc[SDP_ELLIPSOID], ellipsoid=True)
+                acc[SDP_ELLIPSOID].references.add(reference.label)
+                _score(acc[SDP_ELLIPSOID], i, e_bounds, steps, tr_i[steps], _exact_array(reference, i), broken)
         report(name)
     return ex
 
@@ -405,6 +430,21 @@ def table_rows(c: Comparison) -> list[tuple[str, ...]]:
             )
         )
     return out
+
+
+def node_ratio_lines(c: Comparison) -> list[str]:
+    """Per estimator and node: mean published width / exact of r, β and f from step FROM_STEP; a coordinate the
+    exact limit pins to a point (a reference's declared fault) shows the absolute width over it instead."""
+    nodes = sorted({i for r in c.rows for i in r.ratio_exact_by_node})
+    lines = [f"per node, r / β / f width over exact (steps ≥ {FROM_STEP}; '–': the exact interval is a point, see 'pinned')"]
+    lines.append(f"{'estimator':<22}" + "".join(f"{'node ' + str(i):>20}" for i in nodes) + "  pinned +width")
+    for r in c.rows:
+        cells = []
+        for i in nodes:
+            v = r.ratio_exact_by_node.get(i)
+            cells.append(f"{'' if v is None else '/'.join(_fmt(v[m], '.3f') for m in (1, 0, 2)):>20}")
+        lines.append(f"{r.estimator:<22}" + "".join(cells) + f"  {_fmt(r.pinned_excess, '.1e')}")
+    return lines
 
 
 def markdown_table(c: Comparison) -> str:

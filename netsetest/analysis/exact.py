@@ -721,7 +721,9 @@ class CoordinateRatio:
     √(mean r²_exact) over every step, r the interval's half-width (1 = exact).  Steps where the exact
     interval is unbounded or empty are left out and counted in ``left_out``.  ``narrower``: steps where
     the published interval does not contain the exact one (beyond NARROWER_TOL): the estimator relied
-    on more than these assumptions there, or one of the two is wrong.
+    on more than these assumptions there, or one of the two is wrong.  Where the exact interval is a point
+    (mean width ≤ DEGENERATE_WIDTH: a reference sensor's declared zero fault) no ratio exists (NaN):
+    ``width_excess`` (``_all``) is then the mean published width minus the mean exact width, absolute.
     """
 
     coordinate: Coordinate
@@ -731,6 +733,8 @@ class CoordinateRatio:
     steps: int
     left_out: int
     narrower: int
+    width_excess: float | None = None
+    width_excess_all: float | None = None
 
 
 @dataclass(frozen=True)
@@ -752,7 +756,13 @@ class ExactComparison:
 
 
 def _ratio(num: np.ndarray, den: np.ndarray) -> float:
-    return float(num.mean() / den.mean()) if len(num) and den.mean() > 0 else float("nan")
+    """mean(num) / mean(den); NaN where den is empty or a point (no ratio to a zero width: :func:`_excess`)."""
+    return float(num.mean() / den.mean()) if len(num) and den.mean() > DEGENERATE_WIDTH else float("nan")
+
+
+def _excess(width: np.ndarray, exact_width: np.ndarray) -> float | None:
+    """mean(width) − mean(exact_width) where the exact interval is a point (no ratio), else None."""
+    return float(width.mean() - exact_width.mean()) if len(width) and not exact_width.mean() > DEGENERATE_WIDTH else None
 
 
 def compare_record(record: Record, exact: ExactBounds) -> ExactComparison:
@@ -780,6 +790,8 @@ def compare_record(record: Record, exact: ExactBounds) -> ExactComparison:
                 steps=int(ok.sum()),
                 left_out=int((~ok).sum()),
                 narrower=int(narrower.sum()),
+                width_excess=_excess(width[late], ex_width[late]),
+                width_excess_all=_excess(width, ex_width),
             )
         rows.append(NodeRatios(i, ratios))
 
@@ -882,6 +894,8 @@ def exact_document(record: Record, exact: ExactBounds, comparison: ExactComparis
             "steps": c.steps,
             "left_out": c.left_out,
             "narrower": c.narrower,
+            "width_excess": c.width_excess,
+            "width_excess_all": c.width_excess_all,
         }
 
     return {

@@ -67,7 +67,7 @@ def folded_table(rows: list[tuple[str, ...]], width: int) -> list[str]:
 
 
 def cmd_compare(a: argparse.Namespace) -> int:
-    from netsetest.analysis.compare import TABLE_HEADER, compare, comparison_document, markdown_table, plot_fault_bounds, table_rows
+    from netsetest.analysis.compare import TABLE_HEADER, compare, comparison_document, markdown_table, node_ratio_lines, plot_fault_bounds, table_rows
 
     checks.output_file(a.json, "--json")
     checks.output_file(a.markdown, "--markdown")
@@ -90,6 +90,8 @@ def cmd_compare(a: argparse.Namespace) -> int:
     bar.close()
     print(f"compare {c.topology}: runs {', '.join(c.runs)}, {c.steps} steps; widths: mean over nodes and steps ≥ 10")
     for line in folded_table([TABLE_HEADER, *table_rows(c)], TERMINAL_WIDTH):
+        print(line)
+    for line in node_ratio_lines(c):
         print(line)
     for row in c.rows:
         for reason in row.refused:

@@ -117,6 +117,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("record", help="record file (.json, .json.gz or .mcap)")
     p.add_argument("--node", type=int, help="node id (default: all nodes)")
     p.add_argument("--json", action="store_true", help="JSON rows with state bounds and true values")
+    p.add_argument("--state", action="store_true", help="β, r and f bounds per step and the cut each interval rests on")
 
     p = sub.add_parser("plot", help="figures like the paper's Figs. 5-8 from a record")
     p.add_argument("record", nargs="+", help="one record, or several (e.g. an nsnim and a saim run) for Fig. 8")
@@ -280,6 +281,10 @@ def cmd_inspect(a: argparse.Namespace) -> int:
         json.dump({str(i): rec.state_rows(i) for i in ids} if a.node is None else rec.state_rows(ids[0]), sys.stdout, indent=1)
         sys.stdout.write("\n")
         return 0
+    if a.state:
+        for i in ids:
+            _print_state(rec, i)
+        return 0
     for i in ids:
         method = rec.meta.estimators.get(str(i), "sdp")
         if method == "sdp":
@@ -305,6 +310,21 @@ def cmd_inspect(a: argparse.Namespace) -> int:
     return 0
 
 
+def _print_state(rec: Record, i: int) -> None:
+    """``inspect --state``: node i's β, r, f intervals per step, each with the true value and the cut it rests on
+    (ellipsoid, region, fault range; a set estimator's: set)."""
+    print(f"node {i}: published intervals of β [rad], r [rad/s], f [rad/s] (true value; the cut each rests on)")
+    print(f"{'step':>5}  " + "  ".join(f"{name:^41}" for name in ("sideslip β", "yaw rate r", "fault f")) + "  status")
+    for r in rec.state_rows(i):
+        cells = []
+        for name in ("beta", "r", "fault"):
+            t = r[f"{name}_true"]
+            cells.append(f"[{r[f'{name}_lower']:8.4f}, {r[f'{name}_upper']:8.4f}] {'-' if t is None else format(t, '8.4f'):>8} {r[f'{name}_rests_on']:<11}")
+        flag = "" if not r["judged"] or r["contained"] else "  MISS"
+        print(f"{r['step']:5d}  " + "  ".join(cells) + f"  {r['status']}{flag}")
+    print()
+
+
 def cmd_plot(a: argparse.Namespace) -> int:
     require("matplotlib", "drawing the figures")
     from netsetest.records.plots import plot_records
@@ -324,7 +344,7 @@ def cmd_exact(a: argparse.Namespace) -> int:
     import os
     import time
 
-    from netsetest.analysis.exact import COORDINATES, compare_record, eta_s, exact_bounds, exact_document, health_line, topology_mismatch
+    from netsetest.analysis.exact import COORDINATES, CoordinateRatio, compare_record, eta_s, exact_bounds, exact_document, health_line, topology_mismatch
     from netsetest.config.schema import load_topology
     from netsetest.records.record import load_record
 
@@ -373,8 +393,13 @@ def cmd_exact(a: argparse.Namespace) -> int:
     def cell(width: float, width_all: float, rms: float) -> str:  # one format for the node rows and the mean
         return f"{width:6.3f} |{width_all:6.3f}  {rms:6.3f}"
 
+    def node_cell(x: CoordinateRatio) -> str:  # a point exact interval: the absolute width over it, no ratio
+        if x.width_excess is None or x.width_excess_all is None:
+            return cell(x.width_ratio, x.width_ratio_all, x.rms_radius_rel)
+        return f"{x.width_excess:+.1e} |{x.width_excess_all:+.1e} abs".rjust(22)
+
     for n in cmp.nodes:
-        print(f"{n.node:>4}  " + "  ".join(cell(x.width_ratio, x.width_ratio_all, x.rms_radius_rel) for x in (n.ratios[c] for c in COORDINATES)))
+        print(f"{n.node:>4}  " + "  ".join(node_cell(n.ratios[c]) for c in COORDINATES))
     print(f"{'mean':>4}  " + "  ".join(cell(cmp.mean_width_ratio[c], cmp.mean_width_ratio_all[c], cmp.mean_rms_radius_rel[c]) for c in COORDINATES))
     print(f"overall: width ratio {cmp.overall_width_ratio:.3f}, relative-RMS radius {cmp.overall_rms_radius_rel:.3f}")
     left = sum(x.left_out for n in cmp.nodes for x in n.ratios.values())

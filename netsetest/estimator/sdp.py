@@ -596,7 +596,7 @@ class LocalEstimator:
         sector, reading = self._own_range(prev, inp)
         data = self.step_data(prev, inp, sector, reading)
         alpha = np.asarray(inp.alpha, dtype=float)
-        moved = self._moved_region(prev, inp) if inp.readings else None
+        moved = self._moved_region(prev, inp)
         health = self._assess_health(prev, inp, moved) if self.health is not None and inp.readings else None
         refs = self.reading_intervals(prev, inp, health)
         facts = FactStack.of(data.facts)
@@ -604,14 +604,15 @@ class LocalEstimator:
         if res is None:
             assert data.own is not None  # a predicting step always has its own update
             P_fb = fallback_shape(data.Mi, data.own, self.W, inp.alpha, self.model, self.uncertainty) / prev.rho
-            return self._fallback(data.x_pred.copy(), P_fb, solve, sector)
+            res = self._fallback(data.x_pred.copy(), P_fb, solve, sector)
+            self._use_region(res, moved, {}, inp.y, inp.gamma, prev.rho)
+            return res
         if not (refs and self._refine(res, self.readings_data(data, inp, refs), prev.rho, alpha)):
             self._bank(res, data, prev.rho, alpha, facts)
         if refs:
             self._carry(res, {key: (c, iv.lo, iv.hi) for key, (c, iv) in refs.items()}, prev.rho)
         self._size_cut(res, prev.rho)
-        if moved is not None and refs:
-            self._use_region(res, moved, refs, inp, prev.rho)
+        self._use_region(res, moved, refs, inp.y, inp.gamma, prev.rho)
         if health is not None and health[1]:
             self._health_pin(res, prev.rho)
         return res
@@ -620,40 +621,56 @@ class LocalEstimator:
         """The states x⁺ the prior allows: its region (else the box of its ellipsoid) through the step's blended
         dynamics (exact for the truth), plus the disturbance's and the declared model mismatch's bounds (a box
         around e = G ζ holds it for either kind)."""
-        region = prev.region
-        if region is None:
-            lo, hi = ellipsoid_bounds(prev.xhat, np.diag(prev.P), prev.rho)
-            region = Polygon.box(lo[:NX], hi[:NX])
+        region = prev.region if prev.region is not None else _seed(prev)
         a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
         segments = [d[:, 0] * np.sqrt(self.W)]  # x⁺ = Ā x + B̄ u + D̄ w (+ e)
         if self.uncertainty is not None:
             segments += [self.uncertainty.G[:, m] for m in range(NX)]  # e = G ζ with |ζ_m| ≤ 1
         return region.moved(a, b[:, 0] * inp.u, segments)
 
-    def _use_region(self, res: StepResult, moved: Polygon, refs: dict[int, tuple[np.ndarray, Interval]], inp: UpdateInput, rho: float) -> None:
-        """Cut the moved region by every reading of the step: the node continues from it (``res.region``, beside
-        its ellipsoid) and cuts the published fault interval by what its own measurement proves over it (C x⁺ +
-        Ds f⁺ within the measurement's interval, C x⁺ within the region's).  The region keeps what every reading
-        so far proved, as the exact limit does (docs/network.md); the ellipsoids keep one step of it.  Where the
-        readings and the region do not meet (an assumption broke), nothing is used."""
+    def _use_region(
+        self, res: StepResult, moved: Polygon, refs: dict[int, tuple[np.ndarray, Interval]], y: float, gamma: float, rho: float, listed: bool = True
+    ) -> None:
+        """Cut the moved region by everything the step proves of x⁺ (docs/estimator.md, "The region"): every
+        reading of the step, the own measurement where the step's sector rests on the declared fault bound (C x⁺ =
+        C̄ x̄⁺ − Ds f⁺ with |f⁺| ≤ F), and the step's certified ellipsoids (the one the node continues from and the
+        published one).  The node continues from it (``res.region``) and publishes it: the published set is the
+        published ellipsoid ∩ the region (its β, r bounds are the region's), and its fault interval is cut by what
+        the own measurement proves over the region (C x⁺ + Ds f⁺ within the measurement's interval, C x⁺ within the
+        region's).  The region keeps what every step so far proved, as the exact limit does (docs/network.md); an
+        ellipsoid keeps one step of it.  Where the cuts leave nothing (an assumption broke), no region is kept.
+
+        A reference (declared fault size 0) cuts by its own measurement too and publishes f⁺ = 0, resting on its own
+        reading (its key joins the step's: the node lists it, so the collector puts its zero fault into the cone);
+        not where the step cannot list readings (``listed`` False: step 0, whose cone is the prior's)."""
         region: Polygon | None = moved
         for c, iv in refs.values():
             region = region.cut(c[:NX], iv.lo, iv.hi) if region is not None else None
+        meas = measurement_interval(self.own, y, gamma)
+        size, sector = self.fault_bound.size, res.sector
+        reference = size == 0.0 and listed  # its own reading rests on its declared zero fault (listed, so judged)
+        keys = frozenset(refs) | ({self.node_id} if reference else frozenset())
+        if region is not None and size is not None and (reference or (sector is not None and sector.basis == "fault-bound")):
+            slack = abs(self.own.Ds) * size  # C x⁺ = C̄ x̄⁺ − Ds f⁺, |f⁺| ≤ F: the step's cone holds the bound
+            region = region.cut(self.own.C, meas.lo - slack, meas.hi + slack)
+        for s in (res, res.published):
+            if region is not None and s is not None:
+                region = _ellipse_cut(region, s.xhat, s.P, rho)
         if region is None or len(region.vertices) < MIN_VERTICES:
             return  # (fewer: a sliver below the rounding, kept as empty)
         region = region.reduced()  # the move's margin covers the cuts' rounding (Polygon.moved)
-        keys = frozenset(refs)
         res.region = region
         res.reading_keys = res.reading_keys | keys
-        fault = self._region_fault(region, inp)
-        if fault is not None and self._cut_fault(res, rho, *fault):
+        fault = (0.0, 0.0) if reference else self._region_fault(region, meas)
+        # with readings the ellipsoid is cut too (as since the region came); without, it stays as solved (what
+        # neighbours use, bit for bit) and only the published fault range narrows: the same published interval
+        if fault is not None and self._cut_fault(res, rho, *fault, reshape=bool(refs)):
             res.published = dataclasses.replace(res.public, reading_keys=res.public.reading_keys | keys)
 
-    def _region_fault(self, region: Polygon, inp: UpdateInput) -> tuple[float, float] | None:
+    def _region_fault(self, region: Polygon, meas: Interval) -> tuple[float, float] | None:
         """f⁺ from the own measurement over the region: C x⁺ + Ds f⁺ ∈ [m_lo, m_hi] and C x⁺ ∈ [c_lo, c_hi]
         give Ds f⁺ ∈ [m_lo − c_hi, m_hi − c_lo]; None where the measurement leaves a side open (saturated)."""
         own = self.own
-        meas = measurement_interval(own, inp.y, inp.gamma)
         if own.Ds == 0.0 or not (np.isfinite(meas.lo) and np.isfinite(meas.hi)):
             return None
         c_lo, c_hi = region.interval(own.C)
@@ -703,17 +720,17 @@ class LocalEstimator:
             res.published = dataclasses.replace(res.public, reading_keys=res.public.reading_keys | {HEALTH_KEY})
         self._carry(res, {HEALTH_KEY: (FAULT_AXIS, -size, size)}, rho)  # and the set the node continues from
 
-    def _cut_fault(self, res: StepResult, rho: float, lo: float, hi: float) -> bool:
-        """Cut the set to publish by lo ≤ f⁺ ≤ hi (:func:`~netsetest.estimator.slab.cut`, certified) and publish
-        it as that ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (NodeState.fault_range: no ellipsoid ends at the slab's flat face);
-        whether it did.  The node recurs on ``res`` as solved."""
+    def _cut_fault(self, res: StepResult, rho: float, lo: float, hi: float, reshape: bool = True) -> bool:
+        """Cut the set to publish by lo ≤ f⁺ ≤ hi (:func:`~netsetest.estimator.slab.cut`, certified; not unless
+        ``reshape``) and publish it as that ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (NodeState.fault_range: no ellipsoid ends at
+        the slab's flat face); whether it did.  The node recurs on ``res`` as solved."""
         pub = res.public
         now_lo, now_hi = ellipsoid_bounds(pub.xhat, np.diag(pub.P), rho, pub.fault_range)  # the published fault interval
         lo, hi = max(lo, now_lo[-1]), min(hi, now_hi[-1])
         if not (lo > now_lo[-1] or hi < now_hi[-1]) or lo > hi:
             return False  # no cut (an empty one means the assumptions broke: the step's set stays as certified)
         wh = self._wh_pub if self._wh_pub is not None else self._wh
-        out = cut(pub.xhat, pub.P, rho, FAULT_AXIS, lo, hi, None if wh is None else wh**2)
+        out = cut(pub.xhat, pub.P, rho, FAULT_AXIS, lo, hi, None if wh is None else wh**2) if reshape else None
         if out is None:  # the ellipsoid gains nothing; the slab still bounds the fault
             res.published = dataclasses.replace(pub, published=None, fault_range=(lo, hi))
         else:  # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
@@ -746,9 +763,10 @@ class LocalEstimator:
         sector = self.initial_sector(prior, y, gamma)
         data = self.initial_data(prior, y, gamma, sector)
         res, solve = self._update(data, prior.rho, np.ones(1))
-        if res is not None:
-            return res
-        return self._fallback(prior.xhat.copy(), prior.P.copy(), solve, sector)
+        if res is None:
+            res = self._fallback(prior.xhat.copy(), prior.P.copy(), solve, sector)
+        self._use_region(res, _seed(prior), {}, y, gamma, prior.rho, listed=False)  # the region starts from the prior (Assumption 1)
+        return res
 
     def _fallback(self, xhat: np.ndarray, P: np.ndarray, solve: _Solve, sector: Sector | None) -> StepResult:
         """The guaranteed set when the solver gave no certificate; FallbackUnavailable if even it is not publishable."""
@@ -835,6 +853,29 @@ class _Solve:
 
     ms: float
     status: str
+
+
+def _seed(prior: NodeSet) -> Polygon:
+    """The region of a set without one: the box of its ellipsoid's x-projection cut by that ellipse's axes."""
+    lo, hi = ellipsoid_bounds(prior.xhat, np.diag(prior.P), prior.rho)
+    box = Polygon.box(lo[:NX], hi[:NX])
+    return _ellipse_cut(box, prior.xhat, prior.P, prior.rho, coordinates=False) or box
+
+
+def _ellipse_cut(region: Polygon, xhat: np.ndarray, P: np.ndarray, rho: float, coordinates: bool = True) -> Polygon | None:
+    """The region cut by the slabs of the ellipsoid {(x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} along β and r (``coordinates``;
+    a box of it needs no such cut) and along the principal axes of its x-projection ρ P_xx: an outer
+    octagon of that ellipse.  Sound wherever the ellipsoid holds the truth; None if nothing is left."""
+    pxx = 0.5 * (P[:NX, :NX] + P[:NX, :NX].T)
+    _, vecs = np.linalg.eigh(pxx)
+    dirs = [*np.eye(NX), *vecs.T] if coordinates else [*vecs.T]
+    out: Polygon | None = region
+    for d in dirs:
+        if out is None:
+            return None
+        centre, half = float(d @ xhat[:NX]), float(np.sqrt(max(rho * float(d @ pxx @ d), 0.0)))
+        out = out.cut(d, centre - half, centre + half)
+    return out
 
 
 def _objective(P: np.ndarray, wh: np.ndarray | None) -> float:

@@ -7,7 +7,7 @@ Channels (message encoding ``json``, schema encoding ``jsonschema``), log time =
                          assumption flags, lost links, alive nodes)
     /node/<i>/input      per step: what node i measured (y, y without fault, γ) and the vehicle's u, Vx
     /node/<i>/state      per published step: the record's node entry (x̂, P, ρ, status, sector, E,
-                         contained, assumptions_ok, contested, …) plus the bounds of β, r and f (a set estimator's own; else x̂ ∓ √(ρ P_jj), f within the fault range) and the time t
+                         contained, assumptions_ok, contested, …) plus the bounds of β, r and f (the published set's: the row's `bounds`) and the time t
     /node/<i>/drops      per published step: neighbours used, expected but missing, late (real time)
     /run/verdict         once, at the last step: the summary (violations, misses, per-node table)
 
@@ -187,7 +187,13 @@ SCHEMAS: dict[str, dict[str, Any]] = {
                 "items": {"type": "number"},
                 "description": "the node's region of (β, r): polygon vertices counter-clockwise, [β₁, r₁, β₂, r₂, …]",
             },
-            **{f"{n}_{s}": {"type": "number", "description": f"{s} bound of {n}: x̂ ∓ √(ρ P)"} for n, _ in COMPONENTS for s in ("lower", "upper")},
+            "bounds": {
+                "type": "array",
+                "items": {"type": "array", "items": {"type": "number"}},
+                "description": "[[lo, hi] ×3] of β, r, f: the published set's",
+            },
+            "fault_range": {"type": "array", "items": {"type": "number"}, "description": "[lo, hi]: the published set is its ellipsoid within it"},
+            **{f"{n}_{s}": {"type": "number", "description": f"{s} bound of {n} of the published set"} for n, _ in COMPONENTS for s in ("lower", "upper")},
         },
         ["step", "xhat", "P", "rho", "status"],
     ),
@@ -313,9 +319,9 @@ class McapRecordWriter:
     def state(self, node: int, entry: dict) -> None:
         t, ns = self._time(int(entry["step"]))
         msg = {**entry, "t": t}
-        if "bounds" in entry:  # a set estimator's own set
+        if "bounds" in entry:  # the published set (a set estimator's; the SDP's ellipsoid ∩ fault range ∩ region)
             lo, hi = np.asarray(entry["bounds"], dtype=float).T
-        else:  # the ellipsoid, the fault within the step's fault range
+        else:  # records before the bounds were written: the ellipsoid, the fault within the step's fault range
             P = np.asarray(entry["P"], dtype=float).reshape(3, 3)
             lo, hi = ellipsoid_bounds(np.asarray(entry["xhat"], dtype=float), np.diag(P), entry["rho"], entry.get("fault_range"))
         for name, j in COMPONENTS:

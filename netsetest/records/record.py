@@ -203,7 +203,7 @@ class NodeTrack:
     assumptions_ok: np.ndarray  # (K,) bool
     status: list[str]
     solve_ms: np.ndarray  # (K,)
-    set_bounds: np.ndarray | None = None  # (K, 3, 2) a set estimator's published per-coordinate bounds
+    set_bounds: np.ndarray | None = None  # (K, 3, 2) the published set's per-coordinate bounds (None: older SDP records, the ellipsoid's)
     judged: np.ndarray | None = None  # (K,) bool: the collector judged the step (None: all were, older records)
     fdi: list[str | None] | None = None  # (K,) detected | healthy | undecided (docs/fdi.md; None: older records)
     fault_range: np.ndarray | None = None  # (K, 2) the SDP's published fault range (±inf where none; None: no step had one)
@@ -216,13 +216,31 @@ class NodeTrack:
         return bool(self.judged[n]) if self.judged is not None else True
 
     def bounds(self, index: int) -> tuple[np.ndarray, np.ndarray]:
-        """Lower/upper bound of component ``index`` (0 β, 1 r, 2 f): the published set's bounds where the
-        node runs a set estimator, else the ellipsoid's x̂ ∓ √(ρ P_ii)."""
+        """Lower/upper bound of component ``index`` (0 β, 1 r, 2 f) of the published set: a set estimator's set,
+        the SDP's ellipsoid ∩ its fault range ∩ its region of x (records before the bounds were written: the
+        ellipsoid's, :meth:`ellipsoid_bounds`)."""
         if self.set_bounds is not None:
             return self.set_bounds[:, index, 0].copy(), self.set_bounds[:, index, 1].copy()
+        return self.ellipsoid_bounds(index, within_range=True)
+
+    def rests_on(self, index: int) -> list[str]:
+        """Per step, the cut component ``index``'s published interval rests on: ``ellipsoid`` (the interval is the
+        published ellipsoid's), ``region`` (β, r narrower: the region of x) or ``fault range`` (f narrower: the
+        range cut by the own measurement over the region, a declared bound or the k-of-N pin)."""
+        lo, hi = self.bounds(index)
+        half = np.sqrt(self.rho * self.P[:, index, index])
+        e_lo, e_hi = self.xhat[:, index] - half, self.xhat[:, index] + half
+        tol = RESTS_ON_RTOL * (1.0 + np.abs(self.xhat[:, index]) + half)
+        cut = "region" if index < NA - 1 else "fault range"
+        return [cut if narrower else "ellipsoid" for narrower in (lo > e_lo + tol) | (hi < e_hi - tol)]
+
+    def ellipsoid_bounds(self, index: int, within_range: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Lower/upper bound of component ``index`` of the published ellipsoid alone, x̂ ∓ √(ρ P_ii): the paper's own
+        set (a set estimator's: the ellipsoid around its set); ``within_range``: the fault's within its fault range
+        (what records before the published bounds were written show)."""
         half = np.sqrt(self.rho * self.P[:, index, index])
         lo, hi = self.xhat[:, index] - half, self.xhat[:, index] + half
-        if index == NA - 1 and self.fault_range is not None:  # the ellipsoid ∩ the step's fault range
+        if within_range and index == NA - 1 and self.fault_range is not None:  # the ellipsoid ∩ the step's fault range
             lo, hi = np.maximum(lo, self.fault_range[:, 0]), np.minimum(hi, self.fault_range[:, 1])
         return lo, hi
 
@@ -282,6 +300,10 @@ class Record:
                 row[f"{name}_lower"] = float(lo[n])
                 row[f"{name}_upper"] = float(hi[n])
                 row[f"{name}_true"] = None if t is None else float(t["x"][comp])
+        set_node = self.meta.estimators.get(str(node), "sdp") != "sdp"  # a set estimator's interval hull
+        for comp, name in ((0, "beta"), (1, "r"), (2, "fault")):
+            for row, on in zip(rows, tr.rests_on(comp)):
+                row[f"{name}_rests_on"] = "set" if set_node else on
         for n, row in enumerate(rows):  # every other set the collector judged (None where the step had none)
             own = tr.own_xhat is not None and not np.isnan(tr.own_xhat[n]).any()
             row["own_xhat"] = tr.own_xhat[n].tolist() if own and tr.own_xhat is not None else None
@@ -298,6 +320,9 @@ def not_covered_cause(entry: dict) -> str:
     if isinstance(origin, list) and len(origin) == 3:
         return f"inherited: node {origin[0]} step {origin[1]} {origin[2]}"
     return cause if isinstance(cause, str) else "not covered"
+
+
+RESTS_ON_RTOL = 1e-12  # a published end within this (relative) of the ellipsoid's is the ellipsoid's: rounding only
 
 
 def _read(path: Path) -> bytes:
@@ -463,8 +488,9 @@ def _build(path: Path, meta: dict, truth: list, raw_nodes: dict, summary: object
 
 
 def _set_bounds(entries: list[dict]) -> np.ndarray | None:
-    """(K, 3, 2) from the entries' ``bounds`` (a set estimator's node: every entry has them), else None."""
-    if not entries or "bounds" not in entries[0]:
+    """(K, 3, 2) from the entries' ``bounds`` (every entry has them since the SDP publishes its region; before, a
+    set estimator's node's), else None."""
+    if not entries or any("bounds" not in e for e in entries):
         return None
     b = np.array([e["bounds"] for e in entries], dtype=float)
     if b.shape != (len(entries), 3, 2):

@@ -41,6 +41,8 @@ class NodeSummary:
     sector_breaks: int = 0
     first_sector_break: int | None = None
     fault_bound_mean_width: float | None = None
+    beta_mean_width: float | None = None  # of the published sideslip and yaw-rate intervals (None: older summaries)
+    r_mean_width: float | None = None
     solve_ms_median: float | None = None
     fallbacks: int = 0
     steps_reported: int = 0

@@ -70,7 +70,7 @@ from netsetest.models.plant import VEHICLE_NAMES
 from netsetest.models.vehicle import KMH
 from netsetest.records.summary import RUN_FIELDS, CarSummary, InheritedOrigin, NodeSummary, RunSummary, StopCause
 from netsetest.roles.fdi import FdiTotals, classify
-from netsetest.roles.judge import INHERITED, NO_CHECKS, TRUTH_UNKNOWN, Judge, NodeVerdict, StepInputs, isclose, state_mismatch
+from netsetest.roles.judge import INHERITED, NO_CHECKS, TRUTH_UNKNOWN, Containment, Judge, NodeVerdict, StepInputs, isclose, state_mismatch
 from netsetest.roles.vehicle import ACK_STRIDE, envelope_holds, fault_bound_holds, mismatch_holds
 
 WINDOW = 50  # steps a step may stay open behind the newest truth (bounds memory against a stalled node)
@@ -102,7 +102,9 @@ class NodeTotals:
     sector_failures: int = 0  # derived sectors that missed C̄ x̄ inside an intact cone
     sectors_assumed: int = 0
     first_sector_break: int | None = None
-    width_sum: float = 0.0
+    width_sum: float = 0.0  # of the published fault interval
+    beta_width_sum: float = 0.0  # and of β, r
+    r_width_sum: float = 0.0
     reported: int = 0
     rejected: int = 0  # states that did not match the truth (forged, or from a forged input)
     contested: int = 0  # node-steps with more than one matching copy: judged on none
@@ -190,17 +192,16 @@ def manoeuvre_text(sc: Scenario) -> str:
     return f"{sc.manoeuvre}{amp} at {speed}"
 
 
-def _fault_interval(st: NodeState, v: NodeVerdict) -> tuple[float, float]:
-    """The published fault interval (NodeState.bounds: a set estimator's own, else the ellipsoid's within its
-    fault range); the judged set's, where the judge computed them (a set is not parsed again)."""
-    b = v.containment.bounds if v.containment is not None else None
-    if b is not None:
-        return float(b[2, 0]), float(b[2, 1])
+def _bounds(st: NodeState, c: Containment | None) -> list[list[float]]:
+    """The published set's per-coordinate bounds [[lo, hi] ×3] (NodeState.bounds: a set estimator's own, else the
+    ellipsoid ∩ its fault range ∩ its region; the judge's where it computed them: a set is not parsed again)."""
+    if c is not None and c.bounds is not None:
+        return c.bounds.tolist()
     lo, hi = st.bounds()
-    return float(lo[2]), float(hi[2])
+    return np.stack([lo, hi], axis=1).tolist()
 
 
-def _state_entry(st: NodeState, v: NodeVerdict, contested: bool) -> dict:
+def _state_entry(st: NodeState, v: NodeVerdict, contested: bool, bounds: list[list[float]]) -> dict:
     """The record's line of a judged node-step."""
     c = v.containment
     unjudged = None if c is not None else ("contested" if contested else TRUTH_UNKNOWN)  # neither contained nor a miss
@@ -229,7 +230,7 @@ def _state_entry(st: NodeState, v: NodeVerdict, contested: bool) -> dict:
         "contested": contested,
         "sector": list(st.sector) if st.sector is not None else None,
         "sector_basis": st.sector_basis,
-        **({"bounds": c.bounds.tolist()} if c is not None and c.bounds is not None and st.set is not None else {}),
+        "bounds": bounds,
         **({"fault_range": list(st.fault_range)} if st.fault_range is not None else {}),
         # every other set judged: the one the node continues from and its region (where sent)
         **({"own_xhat": list(st.own_xhat), "own_P": list(st.own_P)} if st.own_xhat is not None and st.own_P is not None else {}),
@@ -567,11 +568,11 @@ class Collector:
             t.contested += i in contested
             t.sectors_assumed += st.sector_basis == "assumed"
             t.sector_failures += self.judge.sector_failed(i, st, tr, v.cone.ok and i not in contested)
-            interval = _fault_interval(st, v)
-            fdi = classify(*interval, self.sc.fault_tolerance)
+            bounds = _bounds(st, v.containment)
+            fdi = classify(bounds[2][0], bounds[2][1], self.sc.fault_tolerance)
             if self.sink is not None:
-                self.sink.state(i, _state_entry(st, v, i in contested) | {"fdi": fdi})
-            self._add(t, k, st, v, interval)
+                self.sink.state(i, _state_entry(st, v, i in contested, bounds) | {"fdi": fdi})
+            self._add(t, k, st, v, bounds)
             if tr is not None and v.containment is not None:  # judged rows only: a contested copy may be forged
                 t.fdi.add(k, fdi, tr.faults[str(i)], self.sc.fault_tolerance, v.cone.ok)
         if tr is not None and self.car is not None:
@@ -619,7 +620,7 @@ class Collector:
         self.prev_truth, self.prev_checks = None, NO_CHECKS
         self.closed = k
 
-    def _add(self, t: NodeTotals, k: int, st: NodeState, v: NodeVerdict, interval: tuple[float, float]) -> None:
+    def _add(self, t: NodeTotals, k: int, st: NodeState, v: NodeVerdict, bounds: list[list[float]]) -> None:
         t.reported += 1
         cone, c = v.cone, v.containment
         if c is not None:
@@ -645,7 +646,9 @@ class Collector:
         t.neighbour_missing += len(st.missing)
         t.dropped = max(t.dropped, st.dropped)
         t.drops = dict(st.drops)
-        t.width_sum += interval[1] - interval[0]
+        t.width_sum += bounds[2][1] - bounds[2][0]
+        t.beta_width_sum += bounds[0][1] - bounds[0][0]
+        t.r_width_sum += bounds[1][1] - bounds[1][0]
 
     @staticmethod
     def _truth_entry(t: Truth) -> dict:
@@ -730,6 +733,8 @@ class Collector:
             sector_breaks=t.sector_breaks,
             first_sector_break=t.first_sector_break,
             fault_bound_mean_width=t.width_sum / t.reported if t.reported else None,
+            beta_mean_width=t.beta_width_sum / t.reported if t.reported else None,
+            r_mean_width=t.r_width_sum / t.reported if t.reported else None,
             solve_ms_median=statistics.median(t.solve) if t.solve else None,
             fallbacks=t.fallbacks,
             steps_reported=t.reported,

@@ -219,11 +219,13 @@ class Judge:
         E = float(e @ np.linalg.solve(st.P_matrix(), e))
         if st.set is None:
             continues = _continues_in(st, xbar)  # what the next step rests on
-            if st.fault_range is None:
+            region = st.region()
+            if st.fault_range is None and region is None:
                 return Containment(E, E <= st.rho, continues)
-            # the ellipsoid ∩ the fault's declared range: both must hold the truth
+            # the ellipsoid ∩ the fault's range ∩ the region of x: each must hold the truth
             lo, hi = st.bounds()
-            inside = E <= st.rho and st.fault_range[0] <= float(xbar[-1]) <= st.fault_range[1]
+            inside = E <= st.rho and (st.fault_range is None or st.fault_range[0] <= float(xbar[-1]) <= st.fault_range[1])
+            inside = inside and (region is None or region.contains(xbar[:NX]))
             return Containment(E, bool(inside), continues, np.stack([lo, hi], axis=1))
         # a set estimator's node: its own set is judged (and continued from); the ellipsoid is only its neighbour-facing summary
         s = set_from_wire(st.set, len(xbar))

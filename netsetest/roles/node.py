@@ -458,6 +458,7 @@ class Node:
             return
         have = self.inbox.get(self.k, {})
         readings = self.readings.get(inp.step, {})
+        own_reading = {self.id: (inp.y, inp.gamma)}  # a reference's own measurement is one of the step's readings
         neigh = {j: have[j] for j in inp.expect_from if j in have}
         if self.id in self.cfg.in_weights:
             neigh[self.id] = self.own  # type: ignore[assignment]  # the own NodeSet stands in for the NeighbourState the self-loop reads (same fields)
@@ -468,7 +469,7 @@ class Node:
         # cut by (both are judged under the step's cone: docs/coverage.md)
         keys_used = res.public.reading_keys | res.reading_keys
         health = HEALTH_KEY in keys_used
-        refs = sorted(readings) if health else sorted(keys_used)  # the k-of-N facts rest on every reading
+        refs = sorted(set(readings) | (keys_used & {self.id})) if health else sorted(keys_used)  # the k-of-N facts rest on every reading
         if PROFILE is not None:
             PROFILE.add("solve", t)
         used = sorted(j for j in neigh if j != self.id)
@@ -480,7 +481,7 @@ class Node:
                 used=used,
                 missing=self.missing(),
                 inputs=self._inputs(self.k, used, own=True),
-                readings=[(j, *readings[j]) for j in refs],
+                readings=[(j, *(readings | own_reading)[j]) for j in refs],
                 health=health,
             )
         )

@@ -56,7 +56,7 @@ def _fmt(v: object, spec: str) -> str:
 LEGEND = (
     "max E: largest eᵀP⁻¹e (inside while ≤ ρ = 1); viol.: misses where every assumption held (must be 0); "
     "assump.viol: node-steps outside the guarantee; miss(assump.): misses there; fault width: mean width of "
-    "the published fault bounds; missing: first step not reported"
+    "the published fault bounds (β, r width: of the state's); missing: first step not reported"
 )
 
 
@@ -167,6 +167,8 @@ def format_table(summary: RunSummary) -> str:
         "assump.viol",
         "miss(assump.)",
         "fault width",
+        "β width",
+        "r width",
         "solve ms",
         "fallbacks",
         "missing",
@@ -181,6 +183,8 @@ def format_table(summary: RunSummary) -> str:
             str(r.assumption_violations),
             str(r.misses_assumption_broken),
             _fmt(r.fault_bound_mean_width, ".4f"),
+            _fmt(r.beta_mean_width, ".4f"),
+            _fmt(r.r_mean_width, ".4f"),
             _fmt(r.solve_ms_median, ".2f"),
             str(r.fallbacks),
             "-" if r.missing_from is None else f"from {r.missing_from}",

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from netsetest.analysis.compare import compare
+from netsetest.analysis.compare import SDP_ELLIPSOID, compare
 from netsetest.analysis.exact import exact_bounds, step_data
 from netsetest.cli.main import main
 from netsetest.config.schema import Scenario, load_topology
@@ -128,7 +128,7 @@ def test_compare_every_row_is_contained_where_its_assumptions_held(case: str, si
     test_fdi's, each estimator against the exact set test_every_estimator_contains_the_exact_local_set_…'s."""
     names = (SDP, *SET_ESTIMATOR_NAMES, EXACT)
     c = compare(PAPER6, names, (case,), signals, seeds, STEPS)
-    assert [r.estimator for r in c.rows] == list(names)
+    assert [r.estimator for r in c.rows] == [SDP, SDP_ELLIPSOID, *SET_ESTIMATOR_NAMES, EXACT]  # the paper's own set after sdp
     for r in c.rows:
         assert r.violations == 0, r
         assert r.node_steps == len(signals) * len(seeds) * 6 * (STEPS + 1) and r.covered > 0.9 * r.node_steps
@@ -161,7 +161,7 @@ def test_compare_cli_prints_the_rows_and_writes_json(tmp_path: Path, capsys: pyt
     assert main(argv) == 0
     printed = capsys.readouterr().out
     rows = json.loads(out.read_text())
-    assert [r["estimator"] for r in rows] == ["sdp", "zonotope", "interval", "exact"]
+    assert [r["estimator"] for r in rows] == ["sdp", SDP_ELLIPSOID, "zonotope", "interval", "exact"]
     for name in ("sdp", "zonotope", "interval", "exact"):
         assert any(line.startswith(name) for line in printed.splitlines()), name
     for row in rows:
@@ -169,6 +169,10 @@ def test_compare_cli_prints_the_rows_and_writes_json(tmp_path: Path, capsys: pyt
     by = {r["estimator"]: r for r in rows}
     assert abs(by["zonotope"]["fault_width_mean"] / by["exact"]["fault_width_mean"] - 1) < 0.05
     assert by["exact"]["ratio_exact"] == pytest.approx(1.0)
+    # the published set's r and β reach the exact limit on every node; the paper's own ellipsoid does not
+    assert max(max(v) for v in by["sdp"]["ratio_exact_by_node"].values()) <= 1.05
+    assert min(by[SDP_ELLIPSOID]["ratio_exact_state"]) > 1.3
+    assert "per node, r / β / f width over exact" in printed
     assert md.read_text().count("\n| ") >= 5
     assert len(list((tmp_path / "fig").glob("compare_fault_node*.png"))) == 6
 

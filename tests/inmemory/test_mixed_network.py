@@ -62,15 +62,14 @@ def test_mixed_network_contained_where_assumptions_held(mixed_run) -> None:
         for e in entries:
             t = truth[e["step"]]
             xbar = np.r_[t["x"], t["faults"][i]]
-            if int(i) not in MIXED:
-                assert "bounds" not in e
-                continue
-            b = np.asarray(e["bounds"])
+            b = np.asarray(e["bounds"])  # every node's published set: a set estimator's, the SDP's ellipsoid ∩ range ∩ region
             inside = bool(np.all(b[:, 0] <= xbar) and np.all(xbar <= b[:, 1]))
             assert inside or not e["contained"]  # the set is inside its interval hull
             if e["assumptions_ok"]:
                 assert e["contained"], f"node {i} step {e['step']}: missed inside its cone"
-            # the published ellipsoid (the neighbours' summary) encloses the box
+            if int(i) not in MIXED:
+                continue  # an SDP node: its box is of the ellipsoid ∩ its region, within the ellipsoid's box
+            # the published ellipsoid (a set estimator's neighbour-facing summary) encloses the box
             P = np.asarray(e["P"]).reshape(3, 3)
             for corner in np.array(np.meshgrid(*b)).T.reshape(-1, 3):
                 d = corner - np.asarray(e["xhat"])
@@ -119,10 +118,12 @@ def test_record_uses_the_set_bounds(mixed_run) -> None:
         rows = rec.fault_rows(i)
         entries = rec.raw_nodes[str(i)]
         assert [[r["fault_lower"], r["fault_upper"]] for r in rows] == [e["bounds"][2] for e in entries]
-    ellipsoid = rec.nodes[1]
-    assert ellipsoid.set_bounds is None
-    lo, _ = ellipsoid.bounds(2)
-    assert np.allclose(lo, ellipsoid.xhat[:, 2] - np.sqrt(ellipsoid.rho * ellipsoid.P[:, 2, 2]))
+    sdp = rec.nodes[1]  # an SDP node: its published set's bounds, and its ellipsoid's alone beside them
+    assert sdp.set_bounds is not None
+    assert np.array_equal(sdp.bounds(2)[0], [e["bounds"][2][0] for e in rec.raw_nodes["1"]])
+    lo, _ = sdp.ellipsoid_bounds(2)
+    assert np.allclose(lo, sdp.xhat[:, 2] - np.sqrt(sdp.rho * sdp.P[:, 2, 2]))
+    assert np.all(sdp.bounds(2)[0] >= lo - 1e-12)
 
 
 def test_simulate_estimator_and_mcap(tmp_path: Path) -> None:

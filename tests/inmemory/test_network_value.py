@@ -241,8 +241,8 @@ def test_the_region_keeps_every_reading_and_is_judged(monkeypatch: pytest.Monkey
 
     use = LocalEstimator._use_region
 
-    def moved_off(self: LocalEstimator, res, moved, refs, inp, rho):  # the StepResult and its inputs
-        use(self, res, moved, refs, inp, rho)
+    def moved_off(self: LocalEstimator, res, *args, **kwargs):  # the StepResult and the step's data
+        use(self, res, *args, **kwargs)
         if res.region is not None:
             res.region = Polygon(res.region.vertices + np.array([1.0, 0.0]))  # 1 rad of sideslip off
 
@@ -251,6 +251,38 @@ def test_the_region_keeps_every_reading_and_is_judged(monkeypatch: pytest.Monkey
     assert broken.summary.violations_total > 0
     covered = [e for es in broken.parts["nodes"].values() for e in es if e["assumptions_ok"] and e["step"] > 0]
     assert any(e["continues_contained"] is False for e in covered)
+
+
+def test_every_node_publishes_its_region_and_a_region_off_the_truth_is_a_violation(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every node keeps and publishes a region of x, readings or not (paper6: no reading): the published set is
+    the ellipsoid ∩ the fault range ∩ the region, so its yaw-rate and sideslip bounds (the record's ``bounds``)
+    are the region's, narrower than the ellipsoid's on every node from step 10, with every node-step covered and
+    contained.  A region moved off the truth (a deliberate bug) is a violation: the published set misses."""
+    from netsetest.polygon import Polygon
+    from netsetest.estimator.sdp import LocalEstimator
+
+    sc = load_topology("paper6", case="nsnim", steps=30)
+    res = run_inmemory(sc, "paper", seed=0)
+    s = res.summary
+    assert s.violations_total == 0 and s.node_steps_covered == s.node_steps_evaluated == s.node_steps_contained
+    for i, es in res.parts["nodes"].items():
+        for e in es[10:]:
+            half = np.sqrt(e["rho"] * np.diag(np.reshape(e["P"], (3, 3))))
+            width = np.diff(np.asarray(e["bounds"]), axis=1)[:, 0]
+            assert np.all(width[:2] < 0.9 * 2 * half[:2]), (i, e["step"])  # the region's, not the ellipsoid's
+
+    use = LocalEstimator._use_region
+
+    def moved_off(self: LocalEstimator, res, *args, **kwargs):  # the StepResult and the step's data
+        use(self, res, *args, **kwargs)
+        if res.region is not None:
+            res.region = Polygon(res.region.vertices + np.array([0.0, 1.0]))  # 1 rad/s of yaw rate off
+
+    monkeypatch.setattr(LocalEstimator, "_use_region", moved_off)
+    broken = run_inmemory(sc, "paper", seed=0)
+    assert broken.summary.violations_total > 0
+    covered = [e for es in broken.parts["nodes"].values() for e in es if e["assumptions_ok"]]
+    assert covered and all(e["contained"] is False for e in covered)
 
 
 def test_a_false_reference_reading_is_attributed_to_it(tmp_path: Path) -> None:
@@ -504,3 +536,21 @@ def test_a_false_group_declaration_is_attributed_to_it() -> None:
     expected = sum(1 for i, ms in states.items() if i <= 3 for m in ms if m.health and m.step in broken)
     assert expected > 0 and s.node_steps_not_covered["k-of-N health"] == expected
     assert any(m.health and m.step in broken for i, ms in states.items() if i > 3 for m in ms)  # used, and covered
+
+
+def test_a_point_exact_interval_is_reported_as_an_absolute_width_not_a_ratio() -> None:
+    """paper6_reference: the exact interval of the reference's fault is a point (its declared zero). ``exact`` gives
+    no ratio there (it printed 4.5e11) but the absolute width over it; the reference publishes f = 0, so that width
+    is nil, and every other coordinate keeps its ratio (the overall ratio was 2.5e10)."""
+    from netsetest.analysis.exact import compare_record, exact_bounds
+    from netsetest.records.record import record_from_parts
+
+    sc = load_topology("paper6_reference", case="nsnim", steps=20)
+    res = run_inmemory(sc, "paper", seed=0)
+    rec = record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
+    cmp = compare_record(rec, exact_bounds(sc, rec, "used"))
+    ref = next(n for n in cmp.nodes if n.node == 3).ratios["f"]
+    assert np.isnan(ref.width_ratio) and ref.width_excess is not None and abs(ref.width_excess) < 1e-9
+    others = [n.ratios[c] for n in cmp.nodes for c in ("beta", "r", "f") if (n.node, c) != (3, "f")]
+    assert all(r.width_excess is None and 0.99 < r.width_ratio < 1.05 for r in others)
+    assert 0.99 < cmp.overall_width_ratio < 1.05

@@ -134,7 +134,12 @@ def test_fig7_leaves_out_the_initial_transient_like_fig6(saim_record) -> None:
     tau = saim_record.meta.tau_s
     wide = copy.deepcopy(saim_record)
     for track in wide.nodes.values():
-        track.P[track.steps * tau < plots.TRANSIENT_S] *= 100.0
+        early = track.steps * tau < plots.TRANSIENT_S
+        track.P[early] *= 100.0
+        if track.set_bounds is not None:  # the published set's bounds: ten times as wide around their middle
+            b = track.set_bounds[early]
+            mid = b.mean(axis=2, keepdims=True)
+            track.set_bounds[early] = mid + 10.0 * (b - mid)
     fig, fig_wide = plots._fig7(saim_record, "saim"), plots._fig7(wide, "saim")
     for i, track in saim_record.nodes.items():
         ax, ax_wide = (next(a for a in f.axes if a.get_title() == f"fault f{i}") for f in (fig, fig_wide))

@@ -162,6 +162,9 @@ def test_summary_json_fields(nsnim: dict[str, Path]) -> None:
             assert key in n, key
         assert 0.0 <= n["max_E"] <= 1.0
         assert n["violations"] == 0 and n["fault_bound_mean_width"] > 0 and n["solve_ms_median"] > 0
+        rows = load_record(nsnim["record"]).state_rows(n["id"])  # the state widths are the published intervals' mean
+        assert n["r_mean_width"] == pytest.approx(np.mean([r["r_upper"] - r["r_lower"] for r in rows]))
+        assert n["beta_mean_width"] == pytest.approx(np.mean([r["beta_upper"] - r["beta_lower"] for r in rows]))
 
 
 def test_summary_is_typed_and_round_trips(nsnim: dict[str, Path]) -> None:
@@ -262,6 +265,25 @@ def test_inspect_json(nsnim: dict[str, Path], capsys: pytest.CaptureFixture[str]
             for name in ("beta", "r", "fault"):
                 assert r[f"{name}_lower"] - 1e-12 <= r[f"{name}_true"] <= r[f"{name}_upper"] + 1e-12, (r["step"], name)
     assert any(r["contained"] for r in rows)
+
+
+def test_inspect_state_shows_every_interval_and_the_cut_it_rests_on(nsnim: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """``inspect --state``: β, r and f per step with the true value and the cut each interval rests on; the SDP's
+    β and r rest on its region from step 1 (narrower than its ellipsoid's), and the printed ends are the record's."""
+    assert main(["inspect", str(nsnim["record"]), "--node", "2", "--state"]) == 0
+    lines = [ln for ln in capsys.readouterr().out.splitlines() if re.match(r"^\s*\d+\s", ln)]
+    rows = load_record(nsnim["record"]).state_rows(2)
+    assert len(lines) == len(rows) == 13
+    for ln, want in zip(lines, rows):
+        ends = [float(v) for pair in re.findall(r"\[\s*(-?[\d.]+),\s*(-?[\d.]+)\]", ln) for v in pair]
+        assert ends == pytest.approx([want[f"{n}_{s}"] for n in ("beta", "r", "fault") for s in ("lower", "upper")], abs=6e-5)
+        for name in ("beta", "r", "fault"):
+            assert want[f"{name}_rests_on"] in ln
+    assert all(r["beta_rests_on"] == r["r_rests_on"] == "region" for r in rows[1:])
+    tr = load_record(nsnim["record"]).nodes[2]
+    e_lo, e_hi = tr.ellipsoid_bounds(1)
+    lo, hi = tr.bounds(1)
+    assert np.all(hi[1:] - lo[1:] < e_hi[1:] - e_lo[1:])
 
 
 def test_inspect_unknown_node(nsnim: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
