@@ -10,6 +10,7 @@ The browser's profile and temporary files live in the test's directory (nothing 
 from __future__ import annotations
 
 import base64
+import fcntl
 import io
 import json
 import os
@@ -64,6 +65,7 @@ class _Cdp:
         self._buf = b""
         self._id = 0
         self.events: list[dict] = []
+        self.log: Path | None = None  # the browser's stderr (load_page writes it beside the profile)
 
     def _read(self, deadline: float) -> dict:
         while b"\0" not in self._buf:
@@ -71,10 +73,14 @@ class _Cdp:
                 raise TimeoutError("the browser did not answer")
             chunk = self._in.read(65536)
             if not chunk:
-                raise RuntimeError(f"the browser closed the pipe (exit {self.proc.poll()})")
+                raise RuntimeError(f"the browser closed the pipe (exit {self.proc.poll()}): {self._said()}")
             self._buf += chunk
         msg, self._buf = self._buf.split(b"\0", 1)
         return json.loads(msg)
+
+    def _said(self) -> str:
+        """The tail of the browser's stderr (load_page writes it beside the profile)."""
+        return self.log.read_text(errors="replace")[-2000:] if self.log is not None and self.log.exists() else "(no log)"
 
     def send(self, method: str, params: dict | None = None, session: str | None = None, timeout: float | None = None) -> dict:
         self._id += 1
@@ -128,11 +134,14 @@ def load_page(
     to_r, to_w = os.pipe()  # the browser reads commands on its fd 3
     from_r, from_w = os.pipe()  # and writes answers on its fd 4
 
-    def fds() -> None:  # in the child: the two pipe ends where Chromium expects them
-        os.dup2(to_r, 3)
-        os.dup2(from_w, 4)
+    def fds() -> None:  # in the child: the two pipe ends where Chromium expects them, moved above 4 first so
+        # that neither dup2 overwrites the other's source (a pipe end may itself be fd 3 or 4)
+        r, w = fcntl.fcntl(to_r, fcntl.F_DUPFD, 10), fcntl.fcntl(from_w, fcntl.F_DUPFD, 10)
+        os.dup2(r, 3)
+        os.dup2(w, 4)
 
     env = {**os.environ, "TMPDIR": str(workdir), "HOME": str(workdir)}
+    log = (workdir / "chromium.log").open("wb")  # its own words, quoted when it dies (_Cdp._read)
     proc = subprocess.Popen(
         [
             browser,
@@ -151,12 +160,14 @@ def load_page(
         preexec_fn=fds,
         pass_fds=(3, 4),  # kept open across exec (preexec_fn runs before the other fds are closed)
         stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
+        stderr=log,
         env=env,
     )
+    log.close()
     os.close(to_r)
     os.close(from_w)
     cdp = _Cdp(proc, to_w, from_r, timeout)
+    cdp.log = workdir / "chromium.log"
     try:
         target = cdp.send("Target.createTarget", {"url": "about:blank"})["targetId"]
         session = cdp.send("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import hashlib
 import math
 import re
 import stat
@@ -819,6 +818,8 @@ def _settings_digest(topo: TopologyFile, profiles: dict[int, NodeProfile]) -> st
     plain = msgspec.structs.replace
     own = plain(topo, name="", node_dir="", steps=1, case="nsnim", nodes=[plain(n, profile="", estimator=SDP) for n in topo.nodes])
     body = msgspec.json.encode([own, [[i, plain(p, label="")] for i, p in sorted(profiles.items())]])
+    import hashlib  # here, not at the top: a node process loads this module and never digests (hashlib loads OpenSSL)
+
     return hashlib.sha256(body).hexdigest()[:SETTINGS_DIGEST_HEX]
 
 

@@ -60,7 +60,7 @@ LEGEND = (
 )
 
 
-LEGEND_WIDTH = 100  # characters: the legend folds to a terminal's width
+LEGEND_WIDTH = 120  # characters: the legend folds to the width of the table above it (117 with the β and r width columns)
 
 
 class Outcome(NamedTuple):

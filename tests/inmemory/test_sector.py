@@ -270,7 +270,7 @@ def test_the_size_cut_narrows_the_published_fault_only_where_the_sector_rests_on
 
 def test_a_cut_set_is_published_with_the_bound_it_rests_on_and_judged_against_it(tmp_path: Path) -> None:
     """Paper SAIM: a step whose fault interval rests on the declared |f| ≤ F publishes fault_range ⊆ [−F, F]
-    (only there), the record's fault bounds stay inside it and often end on it, and the collector judges
+    (a step whose range rests on the own measurement over the region publishes that one), the record's fault bounds stay inside it and often end on it, and the collector judges
     the truth against the ellipsoid and the range: a range that excludes the true fault is a miss."""
     from netsetest.messages import NodeState, Truth
     from netsetest.roles.judge import Judge
@@ -285,7 +285,9 @@ def test_a_cut_set_is_published_with_the_bound_it_rests_on_and_judged_against_it
                 continue
             ranged += 1
             lo, hi = e["fault_range"]
-            assert e["sector_basis"] == "fault-bound" and -size <= lo <= hi <= size, e
+            assert lo <= hi, e
+            if e["sector_basis"] == "fault-bound":  # else it rests on the own measurement over the region (issue 28)
+                assert -size <= lo <= hi <= size, e
             half = float(np.sqrt(e["rho"] * e["P"][8]))
             clipped += hi < e["xhat"][2] + half or lo > e["xhat"][2] - half
             assert e["contained"], e  # the truth's fault is within the declared bound on the paper profiles

@@ -137,8 +137,9 @@ def test_live_table_matches_the_collector(tmp_path: Path) -> None:
         assert row.step == last["step"] == 12 and row.status == last["status"]
         P = np.asarray(last["P"]).reshape(3, 3)
         half = np.sqrt(last["rho"] * P[2, 2])
-        assert row.fault_lower == pytest.approx(last["xhat"][2] - half, abs=1e-15)
-        assert row.fault_upper == pytest.approx(last["xhat"][2] + half, abs=1e-15)
+        lo, hi = last["bounds"][2]  # the published fault interval: the ellipsoid's, cut by its fault range and region
+        assert row.fault_lower == pytest.approx(lo, abs=1e-15) and row.fault_upper == pytest.approx(hi, abs=1e-15)
+        assert last["xhat"][2] - half - 1e-12 <= lo <= hi <= last["xhat"][2] + half + 1e-12  # within the ellipsoid's
         assert row.E_step == 12 and row.E == pytest.approx(last["E"], rel=1e-12)
         assert row.missing == summary[i].neighbour_messages_missing == sum(len(e["missing"]) for e in entries)
         assert row.deadline_misses == 0 and row.dropped == 0
