@@ -16,6 +16,7 @@ import json
 import os
 import shutil
 import subprocess
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -140,7 +141,10 @@ def load_page(
         os.dup2(r, 3)
         os.dup2(w, 4)
 
-    env = {**os.environ, "TMPDIR": str(workdir), "HOME": str(workdir)}
+    # Chromium's singleton socket lives under TMPDIR, and a socket path has at most 107 bytes: a pytest-xdist
+    # tmp_path is too long ("Socket path too long", then an abort), so a short directory of the session's own
+    short = Path(tempfile.mkdtemp(prefix="cr-"))
+    env = {**os.environ, "TMPDIR": str(short), "HOME": str(workdir)}
     log = (workdir / "chromium.log").open("wb")  # its own words, quoted when it dies (_Cdp._read)
     proc = subprocess.Popen(
         [
@@ -208,6 +212,7 @@ def load_page(
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+        shutil.rmtree(short, ignore_errors=True)
 
 
 BOKEH_READY = (
