@@ -37,11 +37,13 @@ def _vanagon(tmp_path: Path, envelope: str = "") -> Path:
 def vanagon_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     tmp = tmp_path_factory.mktemp("vanagon")
     path = _vanagon(tmp)
-    assert (
-        main(["run", str(path), "--mode", "inmemory", "--steps", str(STEPS), "--seed", "10", "--signals", "worst", "--quiet", "--record", str(tmp / "r.json")])
-        == 0
-    )
+    assert _run(path, "--record", str(tmp / "r.json")) == 0
     return path, tmp / "r.json"
+
+
+def _run(path: Path, *extra: str) -> int:
+    """``netsetest run`` of the Vanagon drive the tests share (in memory, seed 10, worst-case signals)."""
+    return main(["run", str(path), "--mode", "inmemory", "--steps", str(STEPS), "--seed", "10", "--signals", "worst", "--quiet", *extra])
 
 
 def test_the_verdict_says_the_misses_outside_the_guarantee_and_strict_fails_them(
@@ -49,23 +51,7 @@ def test_the_verdict_says_the_misses_outside_the_guarantee_and_strict_fails_them
 ) -> None:
     path, _ = vanagon_run
     capsys.readouterr()
-    code = main(
-        [
-            "run",
-            str(path),
-            "--mode",
-            "inmemory",
-            "--steps",
-            str(STEPS),
-            "--seed",
-            "10",
-            "--signals",
-            "worst",
-            "--quiet",
-            "--summary-json",
-            str(tmp_path / "s.json"),
-        ]
-    )
+    code = _run(path, "--summary-json", str(tmp_path / "s.json"))
     out = capsys.readouterr().out.splitlines()
     s = json.loads((tmp_path / "s.json").read_text())
     mismatch = s["node_steps_not_covered"][MODEL_MISMATCH]
@@ -81,7 +67,7 @@ def test_the_verdict_says_the_misses_outside_the_guarantee_and_strict_fails_them
     assert f"node-steps after a step whose e_k left its bound: {mismatch}" in "\n".join(out[:5])
     assert "envelope: none declared; peak |a_y|" in out[2]
     # --strict: the same run fails, and its last line's first word says so
-    code = main(["run", str(path), "--mode", "inmemory", "--steps", str(STEPS), "--seed", "10", "--signals", "worst", "--quiet", "--strict"])
+    code = _run(path, "--strict")
     out = capsys.readouterr().out.splitlines()
     assert code == 1 and out[-1].startswith("FAIL (--strict): ")
 
@@ -109,26 +95,7 @@ def test_outside_the_envelope_is_the_cause_where_the_car_left_it(tmp_path: Path,
     car was outside it are attributed to the envelope, and the verdict line says so."""
     path = _vanagon(tmp_path, "\n[envelope]\nay_max = 2\nspeed_kmh = [70, 120]\n")
     capsys.readouterr()
-    assert (
-        main(
-            [
-                "run",
-                str(path),
-                "--mode",
-                "inmemory",
-                "--steps",
-                str(STEPS),
-                "--seed",
-                "10",
-                "--signals",
-                "worst",
-                "--summary-json",
-                str(tmp_path / "s.json"),
-                "--quiet",
-            ]
-        )
-        == 0
-    )
+    assert _run(path, "--summary-json", str(tmp_path / "s.json")) == 0
     out = capsys.readouterr().out.splitlines()
     s = json.loads((tmp_path / "s.json").read_text())
     assert s["node_steps_not_covered"].get(OUTSIDE_ENVELOPE, 0) > 0 and MODEL_MISMATCH not in s["node_steps_not_covered"]
