@@ -73,19 +73,26 @@ def test_lazy_message_does_not_wake_but_the_next_pump_delivers_it(pair) -> None:
 def test_lazy_arrival_does_not_end_a_blocking_pump_a_normal_one_does(pair) -> None:
     rx, tx, got = pair
 
-    def publish_later(key: str, steps: int) -> None:
-        threading.Timer(0.1, lambda: tx.publish(key, End(steps=steps))).start()
+    def publish_later(key: str, steps: int) -> threading.Timer:
+        timer = threading.Timer(0.1, lambda: tx.publish(key, End(steps=steps)))
+        timer.start()
+        return timer
 
-    publish_later(LAZY, 3)
+    timer = publish_later(LAZY, 3)
     t0 = time.monotonic()
     rx.pump(timeout=0.6)  # the lazy message arrives after 0.1 s and does not wake us
     waited = time.monotonic() - t0
+    timer.join()
     assert waited >= 0.59 and got == [(LAZY, 3)]  # …but is delivered once the wait ends
     got.clear()
-    publish_later(WAKE, 4)
+    timer = publish_later(WAKE, 4)
     t0 = time.monotonic()
     rx.pump(timeout=3.0)
-    assert got == [(WAKE, 4)] and time.monotonic() - t0 < 1.5
+    elapsed = time.monotonic() - t0
+    # the put may still be returning in the timer's thread after rx has the sample: the fixture's close
+    # must not undeclare the publisher under it (zenoh-python raises "Already borrowed")
+    timer.join()
+    assert got == [(WAKE, 4)] and elapsed < 1.5
 
 
 def test_flood_on_a_lazy_key_is_bounded_and_delays_no_other_key(pair) -> None:
