@@ -20,6 +20,7 @@ from netsetest.bench.plant import plant_markdown, plant_summary_markdown
 from netsetest.bench.run import performance_markdown
 from netsetest.bench.scenario import compare_markdown, exact_markdown, scenario_markdown
 from netsetest.bench.spread import RUNS_DIR, spread_markdown
+from netsetest.bench.view import view_markdown, view_summary_markdown
 
 
 @dataclass(frozen=True)
@@ -35,6 +36,7 @@ class Part:
 
 
 _SCENARIO = "netsetest bench --quick --only scenario --json bench/scenario.json --markdown bench/scenario.md"
+_VIEW = "netsetest bench --quick --only view --json bench/view.json --markdown bench/view.md"
 PARTS: dict[str, Part] = {
     "scenario": Part("The paper's scenario, per node", "bench/scenario.json", "scenario", scenario_markdown, _SCENARIO),
     "compare": Part("The papers' estimators compared", "bench/scenario.json", "scenario", compare_markdown, _SCENARIO),
@@ -76,6 +78,8 @@ PARTS: dict[str, Part] = {
         "netsetest bench --quick --only plant --json bench/plant.json --markdown bench/plant.md",
         in_results=False,
     ),
+    "view": Part("Looking at a run: the live view's cost and lag, the report page in a browser", "bench/view.json", "view", view_markdown, _VIEW),
+    "view-summary": Part("The live view and the report page against their targets", "bench/view.json", "view", view_summary_markdown, _VIEW, in_results=False),
     "performance": Part(
         "Performance",
         "bench/results.json",
@@ -91,7 +95,7 @@ PARTS: dict[str, Part] = {
         f"netsetest bench --spread {RUNS_DIR}/1.json {RUNS_DIR}/2.json {RUNS_DIR}/3.json --json bench/spread.json --markdown bench/spread.md",
     ),
 }
-SECTIONED = ("README.md", "docs/performance.md", "docs/exact.md")  # files with generated sections between markers
+SECTIONED = ("README.md", "docs/performance.md", "docs/exact.md", "docs/records.md")  # files with generated sections between markers
 RESULTS = "docs/results.md"  # written whole
 RENDER_COMMAND = "netsetest bench --render-docs"
 

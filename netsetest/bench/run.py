@@ -56,6 +56,9 @@ QUICK: dict[str, Any] = {
     "flow_soak_runs": 1,
     "flow_soak_steps": 300,
     "flow_ratio_steps": None,  # the topology's 80
+    "view_steps": 300,  # --only view: real-time paper6 runs with the live view and without (bench/view.py)
+    "view_pairs": 3,
+    "page_reps": 5,
     "cpu_steps": 400,
     "plant_steps": 80,
     "plant_seeds": [10, 11],
@@ -91,6 +94,9 @@ FULL: dict[str, Any] = {
     "flow_soak_runs": 5,
     "flow_soak_steps": 3000,
     "flow_ratio_steps": None,
+    "view_steps": 600,
+    "view_pairs": 5,
+    "page_reps": 9,
     "cpu_steps": 800,
     "plant_steps": 80,
     "plant_seeds": list(range(10, 20)),
@@ -354,6 +360,7 @@ def run_bench(
     from netsetest.bench.plant import plant_figures, plant_markdown
     from netsetest.bench.scenario import compare_markdown, scenario_figures, scenario_markdown
     from netsetest.bench.flow import flow_figures, flow_markdown
+    from netsetest.bench.view import view_figures, view_markdown
     from netsetest.bench.zenoh_runs import (
         launch_to_step0,
         node_memory_profile,
@@ -384,6 +391,7 @@ def run_bench(
             "network": (network_figures, network_markdown),
             "scenario": (scenario_figures, lambda r: scenario_markdown(r) + "\n" + compare_markdown(r)),
             "flow": (flow_figures, flow_markdown),
+            "view": (view_figures, view_markdown),
         }[only]
         with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
             res[only] = figures(cfg, Path(tmpd))

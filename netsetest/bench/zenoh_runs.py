@@ -92,7 +92,15 @@ def cli_run(
         if sample:
             cmd += ["--record", str(record_path)]
         t0 = time.perf_counter()
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True, env={**os.environ, **(env or {})})
+        proc = subprocess.Popen(  # stdin not a terminal: `run --view` ends with its run instead of serving until Ctrl-C
+            cmd,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+            env={**os.environ, **(env or {})},
+        )
         sampler = ProcessSampler(proc.pid) if sample else None
         try:
             _, err = proc.communicate(timeout=timeout)

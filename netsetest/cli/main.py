@@ -200,7 +200,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--only",
         choices=SECTIONS,
         help="run one part alone: plant = a car as the truth, network = what the exchange can buy, scenario = the paper's "
-        "scenario per node and every estimator compared, exact = what `netsetest exact` costs under k-of-N health (default: every part)",
+        "scenario per node and every estimator compared, exact = what `netsetest exact` costs under k-of-N health, view = the live "
+        "view's cost and lag and the report page in headless Chromium (default: every part)",
     )
     p.add_argument(
         "--render-docs",
@@ -583,6 +584,16 @@ def cmd_bench(a: argparse.Namespace) -> int:
         require("cvxpy", "the benchmark (its reference formulations)")
     if a.only in (None, "plant"):
         require("vehiclemodels", "the benchmark's car part")
+    if a.only == "view":
+        require("rerun", "the benchmark's view part")
+        require("bokeh", "the benchmark's view part")
+        from netsetest.records.browser import NoBrowser, chromium
+
+        try:
+            chromium()
+        except NoBrowser as e:
+            print(f"netsetest bench: --only view: {e}", file=sys.stderr)
+            return 2
     checks.output_file(a.json, "--json")
     checks.output_file(a.markdown, "--markdown")
     from netsetest.bench.run import run_bench

@@ -268,7 +268,7 @@ def cmd_view(a: argparse.Namespace) -> int:
 
     require("rerun", "the live view")
     from netsetest.runtime.launcher import free_ports
-    from netsetest.runtime.view import LiveView, ViewError, serve
+    from netsetest.runtime.view import LiveView, ViewError, serve, write_lag
 
     end = None if a.duration is None else time.monotonic() + a.duration
     with observing(a, None) as (obs, stop):
@@ -277,9 +277,9 @@ def cmd_view(a: argparse.Namespace) -> int:
             server = serve(a.port or web, grpc)
         except ViewError as exc:
             raise ObserverError(str(exc)) from None
+        view, hint = LiveView(server.rec, a.tau_s), SilenceHint("view", a)
         try:
             print(f"live view of run {a.run_id or '*'}: {server.url}", flush=True)
-            view, hint = LiveView(server.rec, a.tau_s), SilenceHint("view", a)
             while not stop.requested and (end is None or time.monotonic() < end):  # after the run's end it still serves, until Ctrl-C
                 got = obs.get(POLL_S)
                 if got is not None:
@@ -288,6 +288,7 @@ def cmd_view(a: argparse.Namespace) -> int:
                 else:
                     hint.tick()
         finally:
+            write_lag(view)  # first: `run --view` gives the view a few seconds to stop before it kills it
             server.close()
     return 0
 

@@ -10,7 +10,8 @@ work for it.  :class:`LiveView` turns each decoded message into Rerun entities, 
 ``sets/node<i>``, ``sets/truth``          the published set projected on (β, r) (the ellipse of ρP, or a set
                                           estimator's box) and the true (β, r), at the current step
 ``graph``                                 the topology: an edge j → i for every message node i used, each
-                                          node coloured by its step (contained, missed, late, fault detected)
+                                          node coloured by its step (contained, missed, late, fault detected);
+                                          drawn once a step, with its truth (and at the end)
 ``verdict``                               E ≤ ρ so far over the node-steps whose truth was heard, as ``watch``
                                           computes it (the collector's verdict is the run's word)
 ``plant/path``, ``plant/e/{beta,r}``, ``plant/mismatch_ok``   with a plant: the car's path (integrated
@@ -20,10 +21,17 @@ work for it.  :class:`LiveView` turns each decoded message into Rerun entities, 
 A view that falls behind drops frames: while more than :data:`MAX_BACKLOG` messages wait, messages are
 counted (the verdict stays exact) but not drawn, and the verdict says how many were left out.  The run
 never waits for it.
+
+Each step's truth is flushed to the viewer's server as soon as it is drawn (Rerun's batcher would hold it
+up to 0.2 s).  In a real-time run the view knows when the vehicle published step k (the deadline its inputs
+carry, minus τs), so it measures its own lag (:class:`Lag`): the time step k's truth has left the view for
+the viewer's server minus that, per drawn step; the verdict shows the last one, and with
+``NETSETEST_VIEW_LAG=PATH`` (:data:`LAG_ENV`, the benchmark's) the view writes every one to PATH when it stops.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import select
@@ -34,19 +42,24 @@ import subprocess
 import sys
 import tempfile
 import time
+from array import array
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from netsetest.messages import End, Message, NodeState, Truth
+from netsetest.messages import End, Message, NodeInput, NodeState, Truth
 from netsetest.runtime.live import LiveTable
 
 MAX_BACKLOG = 200  # messages waiting: above this the view drops frames (about one step of a 24-node run and its truth ×4)
 ELLIPSE_POINTS = 48  # vertices of a drawn (β, r) ellipse
 SERVER_MEMORY = "256MiB"  # the Rerun server keeps this much of the run for a browser that connects late; older data goes first
 APP_ID = "netsetest"
+FLUSH_TIMEOUT_S = 1.0  # a step's truth not at the viewer's server within this is not waited for (no lag for it)
+LAG_PENDING_STEPS = 50  # a step's publish time waits this many steps for its truth to be drawn (and back)
+LAG_ENV = "NETSETEST_VIEW_LAG"  # a path: the view writes its lag per step there when it stops (netsetest/bench/view.py)
 BOUND_RGB = (31, 119, 180)
 COLOURS = {  # a node's step in the graph (RGB)
     "contained": (44, 160, 44),
@@ -74,6 +87,37 @@ class Coverage:
 
 
 @dataclass
+class Lag:
+    """The view's lag behind a real-time run: per drawn step, when its truth left the view for the viewer's
+    server minus when the vehicle published the step (its inputs' deadline − τs; one machine, one clock).
+    Steps whose truth was dropped (the view behind) or not sent within FLUSH_TIMEOUT_S have none."""
+
+    started: dict[int, float] = field(default_factory=dict)  # step → published, until its truth is sent
+    sent: dict[int, float] = field(default_factory=dict)  # step → its truth sent, until its publish time is known
+    lags_s: array = field(default_factory=lambda: array("d"))  # one per step with both, in the order they completed
+    unsent: int = 0  # truths drawn but not at the server within FLUSH_TIMEOUT_S
+
+    def started_at(self, step: int, t: float) -> None:
+        self.started.setdefault(step, t)
+        self._match(step)
+
+    def sent_at(self, step: int, t: float) -> None:
+        self.sent[step] = t
+        self._match(step)
+
+    def _match(self, step: int) -> None:
+        if step in self.started and step in self.sent:
+            self.lags_s.append(self.sent.pop(step) - self.started[step])
+        for d in (self.started, self.sent):  # bounded memory: a step without its counterpart is given up
+            for k in [k for k in d if k < step - LAG_PENDING_STEPS]:
+                del d[k]
+
+    def to_dict(self) -> dict:
+        """The figures ``NETSETEST_VIEW_LAG`` gets: every lag (s) and the truths not sent in time."""
+        return {"lags_s": list(self.lags_s), "unsent": self.unsent}
+
+
+@dataclass
 class LiveView:
     """Rerun entities from observed messages (module doc); ``rec`` is a ``rerun.RecordingStream``."""
 
@@ -86,6 +130,12 @@ class LiveView:
     path: list[tuple[float, float]] = field(default_factory=lambda: [(0.0, 0.0)])
     heading: float = 0.0
     styled: set[int] = field(default_factory=set)
+    lag: Lag = field(default_factory=Lag)
+    clock: Callable[[], float] = time.time  # wall clock (the inputs' deadlines are the vehicle's time.time())
+    layout_due: bool = False  # nodes appeared since the layout was last sent (it goes with the next step's frame)
+
+    def __post_init__(self) -> None:
+        self.layout()  # Rerun's first blueprint takes a second or more to encode: here, before the run, not in its first step
 
     def layout(self) -> None:
         """The viewer's layout for the nodes seen so far (sent again when a node appears): the graph, the
@@ -124,9 +174,11 @@ class LiveView:
         """Take one message; draw it unless ``backlog`` messages wait behind it (then count only)."""
         known = len(self.table.rows)
         self.table.update(msg)
+        if isinstance(msg, NodeInput) and msg.deadline is not None and self.tau_s is not None:
+            self.lag.started_at(msg.step, msg.deadline - self.tau_s)
         if len(self.table.rows) != known:
             self._styles(set(self.table.rows))
-            self.layout()
+            self.layout_due = True
         judged = self.table.judged or []
         for node, step, E, rho in judged:
             self.coverage.judged += 1
@@ -142,6 +194,8 @@ class LiveView:
         elif isinstance(msg, Truth):
             self._truth(msg)
         elif isinstance(msg, End):
+            self._time(msg.steps)
+            self._graph()
             self._verdict(msg.steps, ended=True)
 
     def _time(self, step: int) -> None:
@@ -169,6 +223,14 @@ class LiveView:
             self.node_colour[m.node] = colour
         self.rec.log(f"sets/node{m.node}", rr.LineStrips2D([pts], labels=[str(m.node)]))
         self.edges |= {(j, m.node) for j in m.used}
+
+    def _graph(self) -> None:
+        """The topology as heard so far, once a step (with the step's truth, and at the end), and the layout if nodes appeared."""
+        import rerun as rr
+
+        if self.layout_due:
+            self.layout()
+            self.layout_due = False
         ids = sorted(self.table.rows)
         self.rec.log(
             "graph",
@@ -194,7 +256,14 @@ class LiveView:
                 self.path.append((x + t.vx * math.cos(self.heading + beta) * self.tau_s, y + t.vx * math.sin(self.heading + beta) * self.tau_s))
                 self.heading += r * self.tau_s
                 self.rec.log("plant/path", rr.LineStrips2D([self.path]))
+        self._graph()
         self._verdict(t.step, ended=False)
+        try:  # the step goes to the viewer now, not at the batcher's next tick
+            self.rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
+        except RuntimeError:  # Rerun's "flush timed out": the viewer's server is slow or gone; the view goes on
+            self.lag.unsent += 1
+            return
+        self.lag.sent_at(t.step, self.clock())
 
     def _verdict(self, step: int, ended: bool) -> None:
         import rerun as rr
@@ -204,10 +273,19 @@ class LiveView:
             f"## {'run ended after' if ended else 'step'} {step}\n\n"
             f"E ≤ ρ on **{c.contained} of {c.judged}** node-steps heard with their truth"
             + (f" — **{c.judged - c.contained} outside**" if c.judged > c.contained else "")
-            + f"\n\nframes dropped (the view was behind): {c.dropped_frames}\n\n"
+            + f"\n\nframes dropped (the view was behind): {c.dropped_frames}"
+            + (f"; the view's lag behind the run: {self.lag.lags_s[-1]:.2f} s" if self.lag.lags_s else "")
+            + "\n\n"
             "As `watch` computes it; the run's verdict (coverage, assumptions) is the collector's."
         )
         self.rec.log("verdict", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
+
+
+def write_lag(view: LiveView) -> None:
+    """With ``NETSETEST_VIEW_LAG=PATH`` in the environment, the view's lag per step and the frames it dropped as JSON to PATH."""
+    path = os.environ.get(LAG_ENV)
+    if path:
+        Path(path).write_text(json.dumps({**view.lag.to_dict(), "dropped_frames": view.coverage.dropped_frames}))
 
 
 class ViewError(Exception):

@@ -8,21 +8,24 @@ from __future__ import annotations
 from collections import defaultdict
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 
 from netsetest.bus.base import MemoryBus
+from netsetest.messages import NodeInput, Truth
 from netsetest.config.schema import load_topology
 from netsetest.records.record import record_from_parts
 from netsetest.runtime.inmemory import run_inmemory
 from netsetest.runtime.live import observed_key
-from netsetest.runtime.view import APP_ID, MAX_BACKLOG, LiveView
+from netsetest.runtime.view import APP_ID, LAG_PENDING_STEPS, MAX_BACKLOG, Lag, LiveView
 
 rr = pytest.importorskip("rerun")
 from rerun.chunk import RrdReader  # noqa: E402  # after the skip: the extra may be missing
 
 ROOT = Path(__file__).resolve().parents[2]
 STEPS = 12
+TAU_S = 0.1  # paper6's
 
 
 def _decode(path: Path) -> dict[str, dict[int, dict]]:
@@ -87,3 +90,44 @@ def test_a_view_behind_drops_frames_but_keeps_counting(tmp_path: Path) -> None:
     assert max(ents["/nodes/1/fault/lower"]) == 5  # nothing drawn from step 6 on
     assert view.coverage.dropped_frames > 0
     assert view.coverage.judged == res.summary.node_steps_evaluated  # the verdict still counts every node-step
+
+
+PUBLISHED_AT = 1000.0  # the fake wall clock of step 0's publication
+LAG_S = 0.03  # how long after its publication each step's truth leaves the view, on that clock
+
+
+def test_the_view_measures_its_lag_behind_a_real_time_run(tmp_path: Path) -> None:
+    """Inputs carrying the deadlines of a real-time run (step k published at PUBLISHED_AT + k·τs) and a clock
+    that reads LAG_S later whenever the view sends a truth: one lag per step, each LAG_S, shown in the verdict."""
+    rec = rr.RecordingStream(APP_ID)
+    rec.save(tmp_path / "view.rrd")
+    view = LiveView(rec, tau_s=TAU_S)
+    now = [0.0]
+    view.clock = lambda: now[0]
+
+    def feed(key: str, msg: object) -> None:
+        if isinstance(msg, NodeInput):
+            msg = msgspec.structs.replace(msg, deadline=PUBLISHED_AT + (msg.step + 1) * TAU_S)
+        if isinstance(msg, Truth):
+            now[0] = PUBLISHED_AT + msg.step * TAU_S + LAG_S
+        view.feed(msg, 0)  # type: ignore[arg-type]  # a decoded message
+
+    bus = MemoryBus()
+    bus.subscribe(observed_key("mem", None), feed)
+    run_inmemory(load_topology(ROOT / "topologies" / "paper6.toml", steps=STEPS), bus=bus)
+    rec.flush()
+    rec.disconnect()
+    assert list(view.lag.lags_s) == pytest.approx([LAG_S] * (STEPS + 1), abs=1e-9)
+    assert view.lag.unsent == 0 and view.lag.sent == {}
+    assert f"lag behind the run: {LAG_S:.2f} s" in str(_decode(tmp_path / "view.rrd")["/verdict"][STEPS]["TextDocument:text"])
+
+
+def test_lag_waits_for_both_ends_and_gives_up_old_steps() -> None:
+    lag = Lag()
+    lag.sent_at(3, 10.5)  # the truth can be drawn before the step's input is heard
+    assert list(lag.lags_s) == []
+    lag.started_at(3, 10.0)
+    assert list(lag.lags_s) == [0.5]
+    for k in range(4, 4 + 3 * LAG_PENDING_STEPS):  # a lockstep run, or inputs the view never heard: no lag, bounded memory
+        lag.sent_at(k, float(k))
+    assert list(lag.lags_s) == [0.5] and len(lag.sent) <= LAG_PENDING_STEPS + 1

@@ -1,4 +1,4 @@
-"""The report page in a real browser (headless Chromium, tests/browser_helpers.py): it renders without a
+"""The report page in a real browser (headless Chromium, netsetest/records/browser.py): it renders without a
 console error, draws one line per node in every per-node figure, the graph's nodes and the verdict, and
 its screenshot is not blank.  Skips, saying why, where Chromium is not installed.
 
@@ -15,10 +15,11 @@ from urllib.parse import urlparse
 
 import pytest
 
-from browser_helpers import BOKEH_READY, chromium, load_page, named
 from zenoh_helpers import PAPER6, ProcessGuard, cli, wait_for
 
 from netsetest.cli.main import main
+from netsetest.records.browser import BOKEH_READY, NoBrowser, load_page, named
+from netsetest.records.browser import chromium as find_chromium
 from netsetest.runtime.report import EXIT_INTERRUPTED
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -28,6 +29,14 @@ FIGURES = ("fig5", "fig6-0", "fig6-1", "fig7", "fig8")
 MIN_PIXEL_STD = 10.0  # grey levels: a blank (or one-colour) page is about 0, the report about 30
 DOCS_SHOT = "NETSETEST_DOCS_SCREENSHOTS"  # set: the screenshots also go to docs/images/ (the README's)
 DOCS_HEIGHT = 1400  # px of the page's top kept for the README
+
+
+def chromium() -> None:
+    """Skip the test, saying why, where there is no browser."""
+    try:
+        find_chromium()
+    except NoBrowser as e:
+        pytest.skip(str(e))
 
 
 def _named_in(prefix: str) -> str:
@@ -66,6 +75,9 @@ def test_report_page_renders_in_chromium(tmp_path: Path) -> None:
     )
     _save(seen.screenshot, tmp_path, "report.png")
     assert seen.errors == []
+    # timed by the page's clock from the navigation's start, which came after this process began to wait
+    assert 0 < seen.timings["ready_ms"] <= 1000 * seen.load_s
+    assert 0 < seen.timings["load_event_ms"] <= 1000 * seen.load_s
     assert "PASS: inmemory run, case nsnim" in seen.values["text"] and "contained on 246 of 246 node-steps" in seen.values["text"]
     assert sorted(seen.values["graph"]) == NODES
     for fig in FIGURES:  # one line per node, each carrying its own node's data

@@ -1,10 +1,13 @@
 """A page in headless Chromium (Debian's ``chromium``, installed by .ci/run), driven over the DevTools
-protocol on a pipe (``--remote-debugging-pipe``: JSON messages separated by NUL on fds 3 and 4), so the
-tests need no websocket client and no browser download.
+protocol on a pipe (``--remote-debugging-pipe``: JSON messages separated by NUL on fds 3 and 4), so it
+needs no websocket client and no browser download.  The browser tests (tests/process/test_browser.py)
+and the benchmark's report-page figures (netsetest/bench/view.py) use it.
 
-:func:`load_page` opens a file, waits until BokehJS has rendered every root, evaluates the test's
-expressions, collects every console error and uncaught exception, and takes a full-page screenshot.
-The browser's profile and temporary files live in the test's directory (nothing in the system's /tmp).
+:func:`load_page` opens a page, waits until a JavaScript condition holds (:data:`BOKEH_READY`: BokehJS
+has rendered every root), evaluates the caller's expressions, collects every console error and uncaught
+exception, times the page (its load event, first contentful paint and the condition; the CPU its renderer
+used), and takes a full-page screenshot.  The browser's profile and temporary files live in the caller's directory
+(nothing in the system's /tmp).
 """
 
 from __future__ import annotations
@@ -23,31 +26,41 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pytest
 
 CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome")
 RENDER_TIMEOUT_S = 60.0  # the machine is shared: a loaded core still renders a 1.5 MB page within this
 PAGE_WIDTH = 1200  # px
+READY_POLL_MS = 5  # the page checks the caller's condition this often (its own timer: the ready time is the page's)
+
+
+class NoBrowser(Exception):
+    """No Chromium on this machine (the message says how to install it)."""
 
 
 def chromium() -> str:
-    """The browser's path, or skip the test saying why."""
+    """The browser's path (:class:`NoBrowser` when none is installed)."""
     for name in CHROMIUM_NAMES:
         path = shutil.which(name)
         if path:
             return path
-    pytest.skip("no Chromium on this machine (.ci/run installs Debian's chromium with apt-get; install it to run the browser tests)")
+    raise NoBrowser("no Chromium on this machine (.ci/run installs Debian's chromium with apt-get; install it to open pages headless)")
 
 
 @dataclass
 class Page:
-    """What the browser saw: the results of the expressions, console errors, the screenshot (PNG)."""
+    """What the browser saw: the results of the expressions, console errors, the screenshot (PNG), and
+    when it got there, in ms from the navigation's start (``timings``: ``load_event_ms`` the load event's
+    end and ``ready_ms`` the first check at which the caller's condition held, by the page's clock;
+    ``first_contentful_paint_ms`` DevTools' lifecycle event; ``main_thread_cpu_ms`` / ``renderer_cpu_ms``
+    the CPU the page's renderer used, its main thread and all its threads: the page's own cost, which a
+    loaded machine does not inflate as it does the times; a value the browser did not report is None)."""
 
     values: dict[str, Any]
     errors: list[str] = field(default_factory=list)
     failed_requests: list[str] = field(default_factory=list)  # URLs the page asked for and did not get
     screenshot: bytes = b""
-    load_s: float = 0.0
+    load_s: float = 0.0  # wall time from navigating to the condition seen true by this process
+    timings: dict[str, float | None] = field(default_factory=dict)
 
     def pixel_std(self) -> float:
         """Standard deviation of the screenshot's grey levels: about 0 for a blank page."""
@@ -122,6 +135,39 @@ def _failed_requests(events: list[dict]) -> list[str]:
     return [urls.get(e["params"]["requestId"], "?") for e in events if e.get("method") == "Network.loadingFailed"]
 
 
+READY_MARK = "__netsetestReadyMs"  # set by the page's own timer once the caller's condition holds
+
+
+def _ready_timer(ready: str) -> str:
+    """A script run before the page's own: every READY_POLL_MS it checks ``ready`` (an exception counts as
+    not yet: the page's libraries may not be there) and, once true, keeps the page's clock in READY_MARK."""
+    return (
+        f"(() => {{ const t = setInterval(() => {{ let ok = false; try {{ ok = !!({ready}); }} catch (e) {{}} "
+        f"if (ok) {{ window.{READY_MARK} = performance.now(); clearInterval(t); }} }}, {READY_POLL_MS}); }})();"
+    )
+
+
+TIMINGS = (
+    "(() => { const n = performance.getEntriesByType('navigation')[0]; "
+    f"return {{load_event_ms: n && n.loadEventEnd > 0 ? n.loadEventEnd : null, ready_ms: window.{READY_MARK} ?? null}}; }})()"
+)
+"""An expression: the load event's end and the ready time (ms from the navigation's start, the page's clock)."""
+
+
+def _devtools_timings(events: list[dict], metrics: list[dict]) -> dict[str, float | None]:
+    """What DevTools reports of the page: its first contentful paint (the lifecycle event, ms from the
+    navigation's start: headless Chromium leaves the page's own paint entries empty) and the CPU its
+    renderer used (main thread, whole process), from the renderer's start to now."""
+    m = {x["name"]: x["value"] for x in metrics}
+    paints = [e["params"]["timestamp"] for e in events if e.get("method") == "Page.lifecycleEvent" and e["params"]["name"] == "firstContentfulPaint"]
+    start = m.get("NavigationStart")
+    return {
+        "first_contentful_paint_ms": 1000.0 * (paints[-1] - start) if paints and start else None,
+        "main_thread_cpu_ms": 1000.0 * m["ThreadTime"] if "ThreadTime" in m else None,
+        "renderer_cpu_ms": 1000.0 * m["ProcessTime"] if "ProcessTime" in m else None,
+    }
+
+
 def load_page(
     url: str, workdir: Path, expressions: dict[str, str], ready: str, height: int | None = None, settle_s: float = 0.0, timeout: float = RENDER_TIMEOUT_S
 ) -> Page:
@@ -175,17 +221,23 @@ def load_page(
     try:
         target = cdp.send("Target.createTarget", {"url": "about:blank"})["targetId"]
         session = cdp.send("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
-        for domain in ("Runtime", "Log", "Page", "Network"):
+        for domain in ("Runtime", "Log", "Page", "Network", "Performance"):
             cdp.send(f"{domain}.enable", session=session)
         cdp.send("Emulation.setDeviceMetricsOverride", {"width": PAGE_WIDTH, "height": 900, "deviceScaleFactor": 1, "mobile": False}, session=session)
+        cdp.send("Page.addScriptToEvaluateOnNewDocument", {"source": _ready_timer(ready)}, session=session)
+        cdp.send("Page.setLifecycleEventsEnabled", {"enabled": True}, session=session)
         start = time.monotonic()
         cdp.send("Page.navigate", {"url": url}, session=session)
         deadline = start + timeout
-        while not cdp.send("Runtime.evaluate", {"expression": f"!!({ready})", "returnByValue": True}, session=session)["result"].get("value"):
+        while not cdp.send("Runtime.evaluate", {"expression": f"window.{READY_MARK} !== undefined", "returnByValue": True}, session=session)["result"].get(
+            "value"
+        ):
             if time.monotonic() > deadline:
                 raise TimeoutError(f"the page did not become ready ({ready}) within {timeout:g} s")
             time.sleep(0.1)
         load_s = time.monotonic() - start
+        timings = cdp.send("Runtime.evaluate", {"expression": TIMINGS, "returnByValue": True}, session=session)["result"].get("value") or {}
+        timings |= _devtools_timings(cdp.events, cdp.send("Performance.getMetrics", session=session)["metrics"])
         time.sleep(settle_s)
         values = {}
         for name, expr in expressions.items():
@@ -204,7 +256,7 @@ def load_page(
             cdp.send("Browser.close", timeout=10)
         except (RuntimeError, TimeoutError):
             pass
-        return Page(values, errors, failed, shot, load_s)
+        return Page(values, errors, failed, shot, load_s, timings)
     finally:
         cdp.close()
         try:
