@@ -199,6 +199,8 @@ def view_summary_markdown(res: dict) -> str:
         f"{_cell(_med(off, 'deadline_misses'), '.0f')} | |",
         f"| the view's lag behind the run (each run's median) | ≤ {LAG_TARGET_S:g} s | {_cell(lag, '.3f', ' s')} | "
         f"{_target(None if lag[0] is None else lag[0] <= LAG_TARGET_S)} |",
+        f"| its 95th percentile (each run's) | | {_cell(_med(on, 'lag_p95_s'), '.3f', ' s')} | |",
+        f"| frames the view dropped (behind) per run | | {_cell(_med(on, 'dropped_frames'), '.0f')} | |",
         f"| the {page['steps']}-step paper6 report page rendered in Chromium | < {OPEN_TARGET_S:g} s | {_cell(ready, '.0f', ' ms')} | {_target(opened)} |",
         f"| the CPU its renderer used by then (the page's own cost) | < {OPEN_TARGET_S:g} s | {_cell(cpu, '.0f', ' ms')} | "
         f"{_target(None if cpu[0] is None else cpu[0] < 1000 * OPEN_TARGET_S)} |",
@@ -213,7 +215,7 @@ def view_summary_markdown(res: dict) -> str:
 def view_markdown(res: dict) -> str:
     """Every run and page opening (docs/results.md)."""
     live, page, big = res["live"], res["page"], res["big_page"]
-    f = lambda v, spec=".2f": "—" if v is None else format(v, spec)  # noqa: E731  # a one-line local helper
+    f = lambda v, spec, unit="": "—" if v is None else format(v, spec) + unit  # noqa: E731  # a one-line local helper
     lines = [
         view_summary_markdown(res).rstrip("\n"),
         "",
@@ -228,8 +230,8 @@ def view_markdown(res: dict) -> str:
     for r in live["runs"]:
         lines.append(
             f"| {'with' if r['view'] else 'without'} | {r['load_before']:.1f} | {r['exit_code']} | {r['deadline_misses']} | {r['late_steps']} | "
-            f"{f(r['node_cpu_ms_per_step'])} ms | {f(r['view_cpu_pct'], '.0f')} % | {f(r['lag_median_s'], '.3f')} s | {f(r['lag_p95_s'], '.3f')} s | "
-            f"{f(r['lag_max_s'], '.3f')} s | {f(r['dropped_frames'], 'd')} | {f(r['other_work_pct'], '.0f')} % |"
+            f"{f(r['node_cpu_ms_per_step'], '.2f', ' ms')} | {f(r['view_cpu_pct'], '.0f', ' %')} | {f(r['lag_median_s'], '.3f', ' s')} | "
+            f"{f(r['lag_p95_s'], '.3f', ' s')} | {f(r['lag_max_s'], '.3f', ' s')} | {f(r['dropped_frames'], 'd')} | {f(r['other_work_pct'], '.0f', ' %')} |"
         )
     lines += [
         "",
@@ -243,9 +245,9 @@ def view_markdown(res: dict) -> str:
     for p, name in ((page, f"paper6, {page['steps']} steps"), (big, f"{big['nodes']}-node ring, {big['steps']} steps")):
         for o in p["opens"]:
             lines.append(
-                f"| {name} | {p['size_mb']:.2f} MB | {o['load_before']:.1f} | {f(o['load_event_ms'], '.0f')} ms | "
-                f"{f(o['first_contentful_paint_ms'], '.0f')} ms | {f(o['ready_ms'], '.0f')} ms | {f(o['main_thread_cpu_ms'], '.0f')} ms | "
-                f"{f(o['renderer_cpu_ms'], '.0f')} ms | {o['errors']} |"
+                f"| {name} | {p['size_mb']:.2f} MB | {o['load_before']:.1f} | {f(o['load_event_ms'], '.0f', ' ms')} | "
+                f"{f(o['first_contentful_paint_ms'], '.0f', ' ms')} | {f(o['ready_ms'], '.0f', ' ms')} | {f(o['main_thread_cpu_ms'], '.0f', ' ms')} | "
+                f"{f(o['renderer_cpu_ms'], '.0f', ' ms')} | {o['errors']} |"
             )
     lines += ["", f"Each line of the pages is drawn from at most {big['max_points']} points; the record and `netsetest export` keep every step.", ""]
     return "\n".join(lines)
