@@ -208,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="?",
         const=".",
         metavar="ROOT",
-        help="measure nothing: rewrite docs/results.md and the generated sections of README.md, docs/performance.md and docs/exact.md "
+        help="measure nothing: rewrite docs/results.md and the generated sections of README.md, docs/performance.md, docs/exact.md, docs/records.md "
         "under ROOT (default: .) from the committed figures, bench/*.json",
     )
     p.add_argument(

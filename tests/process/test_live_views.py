@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import time
 from pathlib import Path
@@ -285,3 +286,24 @@ def test_observer_that_hears_nothing_says_why(command: str) -> None:
     p = subprocess.run([_sys.executable, "-m", "netsetest", command, "--duration", "4"], capture_output=True, text=True, timeout=60)
     assert p.returncode == 0
     assert f"netsetest {command}: nothing heard in 3 s" in p.stderr and "--credentials DIR" in p.stderr, p.stderr
+
+
+LAG_STEPS = 30
+
+
+@pytest.mark.timeout(300)
+def test_run_view_hands_over_its_lag_behind_a_real_time_run(procs: ProcessGuard, tmp_path: Path) -> None:
+    """``run --clock realtime --view`` with NETSETEST_VIEW_LAG: the view writes one lag per step whose truth it
+    drew and sent, each positive (a truth leaves the view after the vehicle published it: a view that dated a
+    step by its deadline instead would show lags below 0 here); the bound on it is the benchmark's
+    (netsetest/bench/view.py), a figure of the machine, not a test."""
+    pytest.importorskip("rerun")
+    from netsetest.runtime.view import LAG_ENV
+
+    lag = tmp_path / "lag.json"
+    procs.start("run", cli("run", PAPER6, "--clock", "realtime", "--steps", str(LAG_STEPS), "--view", "--quiet"), env={**os.environ, LAG_ENV: str(lag)})
+    assert procs.wait("run", 240) == 0, procs.logs()
+    got = json.loads(lag.read_text())
+    if got["dropped_frames"] == 0 and got["unsent"] == 0:  # nothing left out: every step's truth drawn and sent
+        assert len(got["lags_s"]) == LAG_STEPS + 1
+    assert 0 < len(got["lags_s"]) <= LAG_STEPS + 1 and min(got["lags_s"]) > 0

@@ -41,3 +41,13 @@ def test_a_missing_extra_of_the_bench_is_exit_2_before_any_work(monkeypatch: pyt
     monkeypatch.setattr("netsetest.bench.run.run_bench", lambda *a: pytest.fail("the bench ran without its extra"))
     assert main(["bench", "--only", "plant"]) == 2
     assert capsys.readouterr().err == "netsetest bench: the benchmark's car part needs vehiclemodels: pip install 'netsetest[plant]'\n"
+
+
+def test_the_view_part_without_a_browser_is_exit_2_before_any_work(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("rerun")  # with its extras, only the browser is missing
+    pytest.importorskip("bokeh")
+    monkeypatch.setattr("netsetest.records.browser.shutil.which", lambda name: None)  # no Chromium on the PATH
+    monkeypatch.setattr("netsetest.bench.run.run_bench", lambda *a: pytest.fail("the bench ran without a browser"))
+    assert main(["bench", "--only", "view"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("netsetest bench: --only view: no Chromium on this machine") and err.count("\n") == 1
