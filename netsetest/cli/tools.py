@@ -270,7 +270,6 @@ def cmd_view(a: argparse.Namespace) -> int:
     from netsetest.runtime.launcher import free_ports
     from netsetest.runtime.view import LiveView, ViewError, serve, write_lag
 
-    end = None if a.duration is None else time.monotonic() + a.duration
     with observing(a, None) as (obs, stop):
         web, grpc = free_ports(2)
         try:
@@ -278,6 +277,7 @@ def cmd_view(a: argparse.Namespace) -> int:
         except ViewError as exc:
             raise ObserverError(str(exc)) from None
         view, hint = LiveView(server.rec, a.tau_s), SilenceHint("view", a)
+        end = None if a.duration is None else time.monotonic() + a.duration  # from here: the viewer's start-up takes seconds on a busy machine
         try:
             print(f"live view of run {a.run_id or '*'}: {server.url}", flush=True)
             while not stop.requested and (end is None or time.monotonic() < end):  # after the run's end it still serves, until Ctrl-C
