@@ -150,11 +150,11 @@ class Node:
         self.drops: Counter[str] = Counter()
         self.rejoin = rejoin  # started into a running network: initialise from a neighbour's ellipsoid
         self.late_start_evidence = 0
-        bus.subscribe(keys.node_input(run_id, node_id), self.on_message)
+        bus.subscribe(keys.node_input(run_id, node_id), self.on_message, screen=self._passed_input)
         for j in self.others:
-            bus.subscribe(keys.node_state(run_id, j), self.on_message, lazy=lazy)
+            bus.subscribe(keys.node_state(run_id, j), self.on_message, lazy=lazy, screen=self._passed_state)
         for j in self.read_from:
-            bus.subscribe(keys.reading(run_id, j), self.on_message, lazy=lazy)
+            bus.subscribe(keys.reading(run_id, j), self.on_message, lazy=lazy, screen=self._passed_reading)
         bus.subscribe(keys.end(run_id), self.on_message)
         bus.declare_publisher(keys.node_state(run_id, node_id))
         if self.publishes_reading:
@@ -226,6 +226,19 @@ class Node:
             self._on_reading(key, msg)
         else:
             self.drop("unexpected-type")
+
+    # What the bus drops undecoded (a subscription's screen, netsetest/bus/base.py): a copy naming a step after
+    # the run or one we have passed, which the handlers below drop for the same reason whatever it holds; k
+    # only grows, so the reason still holds when the handler would have run.  Called on the transport's thread.
+
+    def _passed_input(self, step: int) -> str | None:
+        return self.scope.beyond(step) or ("node-input-mismatch" if step <= self.k else None)
+
+    def _passed_state(self, step: int) -> str | None:
+        return self.scope.beyond(step) or ("stale" if step < self.k else None)  # k: our next step uses it
+
+    def _passed_reading(self, step: int) -> str | None:
+        return self.scope.beyond(step) or ("stale" if step <= self.k else None)  # a reading serves its own step
 
     def drop(self, reason: str) -> None:
         self.drops[reason] += 1

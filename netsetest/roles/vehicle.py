@@ -115,7 +115,7 @@ class Vehicle:
         self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
         self.drops: Counter[str] = Counter()
         self.acked = -1  # the newest step the collector acknowledged (lockstep flow control)
-        bus.subscribe(keys.node_state(run_id, "*"), self.on_message)
+        bus.subscribe(keys.node_state(run_id, "*"), self.on_message, screen=self.scope.beyond)
         bus.subscribe(keys.end(run_id), self.on_message)
         bus.subscribe(keys.ready_of(run_id, keys.role_name("collector")), self.on_ack)
         for key in [keys.truth(run_id), keys.end(run_id), *(keys.node_input(run_id, i) for i in scenario.ids)]:
