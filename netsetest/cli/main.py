@@ -202,6 +202,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="run one part alone: plant = a car as the truth, network = what the exchange can buy, scenario = the paper's "
         "scenario per node and every estimator compared, exact = what `netsetest exact` costs under k-of-N health (default: every part)",
     )
+    p.add_argument("--baseline", metavar="DIR", help="with --only node: another checkout (say main's) measured alternately beside this one")
     p.add_argument(
         "--render-docs",
         nargs="?",
@@ -585,9 +586,14 @@ def cmd_bench(a: argparse.Namespace) -> int:
         require("vehiclemodels", "the benchmark's car part")
     checks.output_file(a.json, "--json")
     checks.output_file(a.markdown, "--markdown")
+    from pathlib import Path
+
+    if a.baseline is not None and (a.only != "node" or not Path(a.baseline, "netsetest", "__init__.py").is_file()):
+        print(f"netsetest bench: --baseline {a.baseline}: needs --only node and a checkout of netsetest (DIR/netsetest/__init__.py)", file=sys.stderr)
+        return EXIT_BAD_INPUT
     from netsetest.bench.run import run_bench
 
-    return run_bench(a.quick, a.json, a.markdown, a.only)
+    return run_bench(a.quick, a.json, a.markdown, a.only, Path(a.baseline).resolve() if a.baseline is not None else None)
 
 
 def _render_docs(a: argparse.Namespace) -> int:
