@@ -70,11 +70,11 @@ def states_disjoint(x1: np.ndarray, P1: np.ndarray, rho1: float, x2: np.ndarray,
     dᵀ(A₁/(1−λ) + A₂/λ)⁻¹d with d = c₂ − c₁ and A the projected shapes ρ P[:2, :2]; a minimum above 1
     for some λ proves the sets disjoint.  Only such a proof (with a margin) returns True.
     """
+    if _overlap_bound(np.asarray(P1).tolist(), rho1, np.asarray(P2).tolist(), rho2, float(x2[0]) - float(x1[0]), float(x2[1]) - float(x1[1])) <= 1.0:
+        return False  # no λ can prove disjointness (the common case: honest neighbours overlap)
     A1 = rho1 * np.asarray(P1)[:NX, :NX]
     A2 = rho2 * np.asarray(P2)[:NX, :NX]
     d = np.asarray(x2)[:NX] - np.asarray(x1)[:NX]
-    if _overlap_bound(A1, A2, d) <= 1.0:
-        return False  # no λ can prove disjointness (the common case: honest neighbours overlap)
     # S(λ) = A₁/(1−λ) + A₂/λ for every λ of the grid at once; dᵀS⁻¹d by the 2×2 adjugate
     S = A1[None] / (1.0 - LAMBDA_GRID)[:, None, None] + A2[None] / LAMBDA_GRID[:, None, None]
     det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
@@ -85,13 +85,15 @@ def states_disjoint(x1: np.ndarray, P1: np.ndarray, rho1: float, x2: np.ndarray,
     return bool(np.any(val[ok] > 1.0 + DISJOINT_MARGIN))
 
 
-def _overlap_bound(A1: np.ndarray, A2: np.ndarray, d: np.ndarray) -> float:
+def _overlap_bound(p1: list[list[float]], rho1: float, p2: list[list[float]], rho2: float, d0: float, d1: float) -> float:
     """dᵀ(A₁ + A₂)⁻¹d, an upper bound of dᵀS(λ)⁻¹d for every λ ∈ (0, 1): S(λ) = A₁/(1−λ) + A₂/λ ⪰ A₁ + A₂
     ≻ 0, so S(λ)⁻¹ ⪯ (A₁ + A₂)⁻¹.  At most 1: no λ proves the sets disjoint (+inf if A₁ + A₂ is not
-    definite, which leaves the decision to the full test)."""
-    a, b, c, e = (float(v) for v in (A1 + A2).ravel())  # [[a, b], [c, e]]
+    definite, which leaves the decision to the full test).  Plain floats (the P's as nested lists, d = c₂ − c₁
+    over β, r): the same roundings as the arrays' ρP[:2, :2] sums, without numpy's per-call cost, and every
+    node runs it for every neighbour state it keeps."""
+    a, b = rho1 * p1[0][0] + rho2 * p2[0][0], rho1 * p1[0][1] + rho2 * p2[0][1]  # A₁ + A₂ = [[a, b], [c, e]]
+    c, e = rho1 * p1[1][0] + rho2 * p2[1][0], rho1 * p1[1][1] + rho2 * p2[1][1]
     det = a * e - b * c
     if not det > 0.0 or not a > 0.0:
         return math.inf
-    d0, d1 = float(d[0]), float(d[1])
     return (d0 * d0 * e - d0 * d1 * (b + c) + d1 * d1 * a) / det
