@@ -43,12 +43,13 @@ def innovation_interval(sensor: Sensor, xhat: np.ndarray, P: np.ndarray, rho: fl
     produce; ``sector`` None: the sensor's fixed h1, h2 (1, 1 for a sensor without saturation)."""
     # scalar arithmetic on the 3-vectors: a node runs this for every neighbour message, and numpy's
     # per-call overhead on 3×3 data is most of the cost
-    cb = (float(sensor.C[0]), float(sensor.C[1]), float(sensor.Ds))
-    x = [float(a) for a in xhat]
-    Pl = np.asarray(P).tolist()
-    cx = cb[0] * x[0] + cb[1] * x[1] + cb[2] * x[2]
-    Pc = [Pl[i][0] * cb[0] + Pl[i][1] * cb[1] + Pl[i][2] * cb[2] for i in range(3)]
-    cpc = cb[0] * Pc[0] + cb[1] * Pc[1] + cb[2] * Pc[2]
+    # (unrolled, and tolist() rather than a comprehension: the comprehensions were most of its cost)
+    c0, c1, c2 = float(sensor.C[0]), float(sensor.C[1]), float(sensor.Ds)
+    x0, x1, x2 = np.asarray(xhat, dtype=float).tolist()
+    (p00, p01, p02), (p10, p11, p12), (p20, p21, p22) = np.asarray(P, dtype=float).tolist()
+    cx = c0 * x0 + c1 * x1 + c2 * x2
+    pc0, pc1, pc2 = p00 * c0 + p01 * c1 + p02 * c2, p10 * c0 + p11 * c1 + p12 * c2, p20 * c0 + p21 * c1 + p22 * c2
+    cpc = c0 * pc0 + c1 * pc1 + c2 * pc2
     c = math.sqrt(max(rho * cpc, 0.0))
     r_lo, r_hi = cx - c, cx + c
     h1, h2 = (sector.h1, sector.h1 + sector.h) if sector is not None else (sensor.h1, sensor.h2)
