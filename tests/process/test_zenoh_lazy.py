@@ -177,6 +177,9 @@ def test_realtime_run_over_zenoh_uses_its_neighbours(tmp_path: Path) -> None:
             total += 1
             used_all += not e["missing"] and len(e["used"]) == 2  # paper6: two in-neighbours each
     assert used_all >= total // 2, f"only {used_all} of {total} node-steps used both neighbours"
+    # the vehicle hears the states from a ring per node (roles/vehicle.py): every node alive at every step,
+    # past its 20-step window too (states it never collected would have declared the nodes dead by then)
+    assert [t["alive"] for t in rec.truth[1:]] == [[1, 2, 3, 4, 5, 6]] * steps
     reports = {p.name: json.loads(p.read_text()) for p in prof.glob("node-*.json")}
     assert sorted(reports) == [f"node-{i}.json" for i in range(1, 7)]
     for name, r in reports.items():
