@@ -77,6 +77,14 @@ def enclosing_ellipsoid(s: base.GuaranteedSet, rho: float) -> tuple[np.ndarray, 
     return c, np.diag(NA * h**2 / rho)
 
 
+def _symmetric(p: list[float]) -> np.ndarray:
+    """The row-major 3×3 ``p`` made exactly symmetric, ½(P + Pᵀ), in plain floats: the same roundings as
+    the arrays' (numpy's per-call cost on 3×3 was most of it, for every neighbour state a node keeps)."""
+    p0, p1, p2, p3, p4, p5, p6, p7, p8 = p
+    a01, a02, a12 = 0.5 * (p1 + p3), 0.5 * (p2 + p6), 0.5 * (p5 + p7)
+    return np.array([[0.5 * (p0 + p0), a01, a02], [a01, 0.5 * (p4 + p4), a12], [a02, a12, 0.5 * (p8 + p8)]])
+
+
 @dataclass(frozen=True)
 class Publication:
     """What a node publishes for one step: ``res`` (kept as its own set) and what its state message says
@@ -332,8 +340,7 @@ class Node:
         if (msg.sector is not None) != sensor.saturated:
             self._refuse(msg, "sector-mismatch")  # a saturating sensor publishes its sector, no other one does
             return
-        P = msg.P_matrix()  # symmetric positive definite: checked by decode()
-        P = 0.5 * (P + P.T)
+        P = _symmetric(msg.P)  # symmetric positive definite: checked by decode()
         sector = Sector(msg.sector[0], msg.sector[1], msg.sector_basis) if msg.sector is not None else None
         if not innovation_possible(sensor, np.asarray(msg.xhat), P, msg.rho, msg.gamma, sector, msg.innov):
             self._refuse(msg, "neighbour-innovation")
@@ -567,8 +574,8 @@ class Node:
         return NodeState(
             step=inp.step,
             node=self.id,
-            xhat=[float(a) for a in pub.xhat],
-            P=[float(a) for a in pub.P.reshape(NA * NA)],
+            xhat=pub.xhat.tolist(),  # float64 arrays: the floats [float(a) for a in …] gave, without the loop
+            P=pub.P.reshape(NA * NA).tolist(),
             rho=self.rho,
             gamma=inp.gamma,
             innov=innov,
@@ -588,7 +595,7 @@ class Node:
             health=p.health,
             fault_range=list(pub.fault_range) if pub.fault_range is not None else None,
             **self._own_set(res),  # type: ignore[arg-type]  # own_xhat/own_P only: mypy cannot tell the keys of a dict
-            own_region=None if res.region is None else [float(a) for a in res.region.vertices.reshape(-1)],
+            own_region=None if res.region is None else res.region.vertices.reshape(-1).tolist(),
         )
 
     @staticmethod
@@ -596,4 +603,4 @@ class Node:
         """The set we continue from, where it is not the published one (the collector judges it too)."""
         if res.published is None:
             return {}
-        return {"own_xhat": [float(a) for a in res.xhat], "own_P": [float(a) for a in res.P.reshape(NA * NA)]}
+        return {"own_xhat": res.xhat.tolist(), "own_P": res.P.reshape(NA * NA).tolist()}
