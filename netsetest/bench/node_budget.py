@@ -22,6 +22,7 @@ medians: on a machine other work loads, only such side-by-side ratios compare tw
 from __future__ import annotations
 
 import statistics
+import subprocess
 import sys
 from pathlib import Path
 
@@ -70,6 +71,12 @@ def node_budget(report: dict) -> dict[str, float]:
     }
 
 
+def _commit(checkout: Path) -> str | None:
+    """The commit a checkout's code is at (None: not a git checkout), so the table says which code it measured."""
+    out = subprocess.run(["git", "-C", str(checkout), "rev-parse", "--short=12", "HEAD"], capture_output=True, text=True, check=False)
+    return out.stdout.strip() or None if out.returncode == 0 else None
+
+
 def _median_over_nodes(reports: list[dict]) -> dict[str, float]:
     budgets = [node_budget(r) for r in reports]
     return {key: statistics.median(b[key] for b in budgets) for key, _, _ in FIGURES}
@@ -111,6 +118,7 @@ def node_figures(cfg: dict, tmp: Path, baseline: Path | None = None) -> dict:
                 f"{f.get('outside_us', float('nan')):.0f} outside the estimator"
             )
     out: dict = {"nodes": nodes, "steps": steps, "reps": reps, "baseline_code": str(baseline) if baseline is not None else None}
+    out["commits"] = {name: _commit(code or Path(__file__).resolve().parents[2]) for name, code in codes.items()}
     out.update({name: {"runs": rows, "summary": _summary(rows)} for name, rows in runs.items()})
     if baseline is not None and out["this"]["summary"] and out["baseline"]["summary"]:
         this, base = out["this"]["summary"], out["baseline"]["summary"]
@@ -133,7 +141,10 @@ def node_markdown(res: dict) -> str:
     rule = "|---|---|"
     if base:
         bruns = "; ".join(f"load {r['load_before']}, {r['deadline_misses']} misses" for r in res["baseline"]["runs"])
-        lines[0] += f" The baseline, checkout `{Path(res['baseline_code']).name}`, ran alternately with it ({bruns})."
+        commits = res.get("commits", {})
+        lines[0] += (
+            f" The baseline, the code of commit `{commits.get('baseline')}` (this checkout: `{commits.get('this')}`, uncommitted changes aside), ran alternately with it ({bruns})."
+        )
         head += " baseline (range) | this / baseline |"
         rule += "---|---|"
     lines += ["", head, rule]

@@ -557,7 +557,8 @@ def profiled_ring_run(directory: Path, nodes: int, steps: int, objective: str | 
             "realtime",
             timeout=120 + 3 * nodes + steps * 0.2,
             sample_stepping_s=steps * RING_TAU_S,
-            env={"NETSETEST_PROFILE": prof, **({"PYTHONPATH": str(code)} if code is not None else {})},
+            # PYTHONSAFEPATH: `python -m` would put the working directory (a checkout, say) first on sys.path
+            env={"NETSETEST_PROFILE": prof, **({"PYTHONPATH": str(code), "PYTHONSAFEPATH": "1"} if code is not None else {})},
             extra=["--objective", objective] if objective else None,
         )
         reports = [json.loads(p.read_text()) for p in sorted(Path(prof).glob("node-*.json"))]
