@@ -13,11 +13,12 @@ endpoints, scouting, and the security settings of netsetest/runtime/security.py)
 Shared memory is off: it would move payloads outside the (authenticated, encrypted) links.
 
 Subscribers' callbacks run on a Python thread zenoh-python starts per subscriber (fed by Zenoh's rx
-thread); they only queue the raw bytes and wake the role.  A lazy subscription (see netsetest/bus/base.py)
+thread); they screen, decode and queue the message and wake the role (a payload its screen turns away is
+never decoded: bus/base.py).  A lazy subscription (see netsetest/bus/base.py)
 has no callback: Zenoh's rx thread puts its samples into a ring buffer of ``MAX_PER_KEY`` (the oldest
 dropped when full, so a flood never blocks reception of other keys), which the next pump empties — no
-Python thread, no wake-up.  The role's own thread decodes, validates and dispatches everything in
-:meth:`Bus.pump`.  Close the bus explicitly: a process that
+Python thread, no wake-up; the role's own thread screens and decodes those in :meth:`Bus.pump`, and
+dispatches everything there.  Close the bus explicitly: a process that
 exits with an open session can hang.
 """
 
