@@ -133,7 +133,8 @@ def node_markdown(res: dict) -> str:
     runs = "; ".join(f"load {r['load_before']}, {r['deadline_misses']} misses" for r in res["this"]["runs"])
     lines = [
         f"A real-time ring of {res['nodes']} nodes (τs = 0.1 s), {res['steps']} steps, every node profiled (`NETSETEST_PROFILE`); "
-        f"median over the nodes, then over {res['reps']} runs (this checkout: {runs})."
+        f"median over the nodes, then over {res['reps']} runs (this checkout: {runs}; deadline misses of a run's "
+        f"{res['nodes'] * (res['steps'] + 1)} node-steps)."
     ]
     if not this:
         return "\n".join([*lines, "", "No node reported.", ""])
