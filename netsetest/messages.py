@@ -346,6 +346,11 @@ class RunScope:
     ids: frozenset[int]
     steps: int
 
+    def beyond(self, step: int) -> str | None:
+        """Why a payload naming ``step`` is dropped whatever else it holds (:meth:`reject`'s first test), or
+        None: a subscription's screen (netsetest/bus/base.py), which drops it undecoded."""
+        return "step-beyond-run" if step > self.steps else None
+
     def reject(self, msg: Message) -> str | None:
         """A drop reason, or None when the message fits the run."""
         step = msg.steps if isinstance(msg, End) else getattr(msg, "step", None)
@@ -379,7 +384,15 @@ class _Header(Struct):
     v: Any = None
 
 
+class _StepHeader(Struct):
+    """What a transport reads of a payload before decoding it (:func:`peek_step`): the step it names.
+    Every other field is skipped unread (not built, not validated)."""
+
+    step: Any = None
+
+
 _ENCODER = msgspec.msgpack.Encoder(enc_hook=_enc_hook)
+_STEP = msgspec.msgpack.Decoder(_StepHeader)
 _HEADER = msgspec.msgpack.Decoder(_Header)
 _DECODER = msgspec.msgpack.Decoder(Message)
 MAX_DETAIL = 200  # characters of a BadMessage's detail: a forged value must not make a log line huge
@@ -424,6 +437,18 @@ def decode(payload: bytes) -> Message:
         raise
     except _HOSTILE as exc:
         raise BadMessage("undecodable", f"{type(exc).__name__}: {exc}"[:MAX_DETAIL]) from None
+
+
+def peek_step(payload: bytes) -> int | None:
+    """The step ``payload`` names (its ``step``, an integer ≥ 0), read without decoding the rest; None if it
+    names none or the bytes are no map.  Never raises.  It says nothing of the payload's validity: a
+    transport uses it only to drop, undecoded, a copy its role could not use whatever the rest holds (a
+    step the role has passed, or after the run), and decodes whatever it keeps (:func:`decode`)."""
+    try:
+        step = _STEP.decode(payload).step
+    except (msgspec.DecodeError, *_HOSTILE):
+        return None
+    return step if type(step) is int and step >= 0 else None
 
 
 def _decode(payload: bytes) -> Message:

@@ -15,8 +15,12 @@ hook is one ``is None`` test.  Phases (:data:`PHASES`):
 - ``put``: handing the payload to the transport (Zenoh's ``Publisher.put`` in the caller's thread).
 
 What the thread used outside these is reported as ``other`` (the role's loop, deciding to step,
-bookkeeping); what the process's other threads used (Zenoh's runtime, subscriber callbacks) as
-``threads``.  Counted from the node's first solved step to its last, so start-up is left out.
+bookkeeping); what the process's other threads used (Zenoh's runtime, subscriber callbacks, and what those
+callbacks decode) as ``threads``: a phase is charged only on the role's own thread (the one that imported
+this module), since ``other`` is that thread's CPU less its phases.  ``messages`` counts, per step, the
+payloads the bus took from the transport (``received``, on any thread; those dropped before decoding too)
+and those it published (``sent``): the per-message budget of the benchmark (``netsetest bench --only
+node``) divides by them.  Counted from the node's first solved step to its last, so start-up is left out.
 """
 
 from __future__ import annotations
@@ -24,12 +28,14 @@ from __future__ import annotations
 import json
 import os
 import sys
+import threading
 import time
 from collections import Counter
 from pathlib import Path
 
 ENV = "NETSETEST_PROFILE"
 PHASES = ("wait", "decode", "handle", "solve", "build", "encode", "put")
+MESSAGES = ("received", "sent")
 
 
 class PhaseProfile:
@@ -38,6 +44,8 @@ class PhaseProfile:
     def __init__(self) -> None:
         self.cpu_ns: Counter[str] = Counter()
         self.calls: Counter[str] = Counter()
+        self.messages: Counter[str] = Counter()  # MESSAGES, whatever the thread
+        self._owner = threading.get_ident()  # the role's thread: the one that imports this module
         self._window: tuple[int, int, float] | None = None  # thread CPU, process CPU, wall at the start
 
     @staticmethod
@@ -45,16 +53,24 @@ class PhaseProfile:
         return time.thread_time_ns()
 
     def add(self, phase: str, t0: int) -> int:
-        """Charge the thread CPU since ``t0`` to ``phase``; returns now (the next phase's ``t0``)."""
+        """Charge the thread CPU since ``t0`` to ``phase``; returns now (the next phase's ``t0``).  On
+        another thread (a subscriber callback) nothing is charged: that CPU is the process's ``threads``."""
         t = time.thread_time_ns()
+        if threading.get_ident() != self._owner:
+            return t
         self.cpu_ns[phase] += t - t0
         self.calls[phase] += 1
         return t
+
+    def count(self, what: str) -> None:
+        """One more message ``what`` (:data:`MESSAGES`), on any thread."""
+        self.messages[what] += 1  # Counter += is one dict update under the GIL: safe from a callback thread
 
     def start_window(self) -> None:
         """Forget what was charged so far (start-up) and start the measured window."""
         self.cpu_ns.clear()
         self.calls.clear()
+        self.messages.clear()
         self._window = (time.thread_time_ns(), time.process_time_ns(), time.monotonic())
 
     @property
@@ -78,6 +94,7 @@ class PhaseProfile:
             "thread_ms_per_step": per_step(thread_ns),
             "process_ms_per_step": per_step(process_ns),
             "phases": phases,
+            "messages_per_step": {m: self.messages[m] / steps for m in MESSAGES},
         }
 
     def write(self, name: str, steps: int) -> None:

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from netsetest.bench.exact_cost import exact_cost_markdown
 from netsetest.bench.network import network_markdown, network_summary_markdown
+from netsetest.bench.node_budget import node_markdown
 from netsetest.bench.plant import plant_markdown, plant_summary_markdown
 from netsetest.bench.run import performance_markdown
 from netsetest.bench.scenario import compare_markdown, exact_markdown, scenario_markdown
@@ -86,6 +87,13 @@ PARTS: dict[str, Part] = {
         None,
         performance_markdown,
         "netsetest bench --quick --only performance --json bench/results.json --markdown bench/results.md",
+    ),
+    "node": Part(
+        "A node's per-message budget",
+        "bench/node.json",
+        "node",
+        node_markdown,
+        "netsetest bench --quick --only node --baseline MAIN --json bench/node.json --markdown bench/node.md",
     ),
     "spread": Part(
         "How noisy the benchmark is",

@@ -45,6 +45,8 @@ QUICK: dict[str, Any] = {
     "rt_sizes": [12, 24, 48, 64, 80, 96, 128],
     "rt_steps": 50,
     "profile_nodes": 96,
+    "node_budget_nodes": 48,  # --only node: the profiled ring
+    "node_budget_reps": 3,
     "startup_reps": 3,
     "launch_reps": 5,
     "flood_steps": 200,
@@ -83,6 +85,8 @@ FULL: dict[str, Any] = {
     "rt_sizes": [6, 12, 24, 36, 48, 64, 80, 96, 112, 128],
     "rt_steps": 50,
     "profile_nodes": 96,
+    "node_budget_nodes": 96,
+    "node_budget_reps": 3,
     "startup_reps": 5,
     "launch_reps": 9,
     "flood_steps": 400,
@@ -354,13 +358,16 @@ def run_bench(
     json_path: str | None = None,
     markdown_path: str | None = None,
     only: str | None = None,
+    baseline: Path | None = None,
 ) -> int:
+    """``baseline``: a checkout the node part measures alternately beside this one (bench/node_budget.py)."""
     from netsetest.bench.exact_cost import exact_cost_markdown, exact_figures
     from netsetest.bench.network import network_figures, network_markdown
     from netsetest.bench.plant import plant_figures, plant_markdown
     from netsetest.bench.scenario import compare_markdown, scenario_figures, scenario_markdown
     from netsetest.bench.flow import flow_figures, flow_markdown
     from netsetest.bench.view import view_figures, view_markdown
+    from netsetest.bench.node_budget import node_figures, node_markdown
     from netsetest.bench.zenoh_runs import (
         launch_to_step0,
         node_memory_profile,
@@ -392,6 +399,7 @@ def run_bench(
             "scenario": (scenario_figures, lambda r: scenario_markdown(r) + "\n" + compare_markdown(r)),
             "flow": (flow_figures, flow_markdown),
             "view": (view_figures, view_markdown),
+            "node": (lambda c, t: node_figures(c, t, baseline), node_markdown),
         }[only]
         with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
             res[only] = figures(cfg, Path(tmpd))

@@ -549,10 +549,11 @@ def cpu_demand(processes: dict | None, nodes: int) -> dict:
     return {"node_cpu_ms_per_step": per_step_ms, "demand_cores": nodes * per_step_ms / 1000.0 / RING_TAU_S + roles}
 
 
-def realtime_node_profile(directory: Path, nodes: int, steps: int, objective: str | None = None) -> dict:
-    """One real-time ring run with every node profiled (``NETSETEST_PROFILE``, netsetest/profile.py):
-    per phase of the node's own thread the median over nodes of CPU ms per step, and its calls per step.
-    ``objective``: the nodes' ``--objective`` (default: the run's default)."""
+def profiled_ring_run(directory: Path, nodes: int, steps: int, objective: str | None = None, code: Path | None = None) -> tuple[dict, list[dict], str]:
+    """One real-time ring run with every node profiled (``NETSETEST_PROFILE``, netsetest/profile.py): the
+    run (:func:`cli_run`), each node's report (those that stepped) and the load average before it.
+    ``objective``: the nodes' ``--objective``; ``code``: another checkout whose netsetest runs (PYTHONPATH,
+    the benchmark's baseline), this one's by default."""
     from netsetest.bench.topologies import RING_TAU_S, ring_topology
 
     topo = ring_topology(directory, nodes, steps)
@@ -564,11 +565,19 @@ def realtime_node_profile(directory: Path, nodes: int, steps: int, objective: st
             "realtime",
             timeout=120 + 3 * nodes + steps * 0.2,
             sample_stepping_s=steps * RING_TAU_S,
-            env={"NETSETEST_PROFILE": prof},
+            # PYTHONSAFEPATH: `python -m` would put the working directory (a checkout, say) first on sys.path
+            env={"NETSETEST_PROFILE": prof, **({"PYTHONPATH": str(code), "PYTHONSAFEPATH": "1"} if code is not None else {})},
             extra=["--objective", objective] if objective else None,
         )
         reports = [json.loads(p.read_text()) for p in sorted(Path(prof).glob("node-*.json"))]
-    reports = [x for x in reports if x.get("steps")]
+    return r, [x for x in reports if x.get("steps")], load
+
+
+def realtime_node_profile(directory: Path, nodes: int, steps: int, objective: str | None = None) -> dict:
+    """One real-time ring run with every node profiled (:func:`profiled_ring_run`): per phase of the node's
+    own thread the median over nodes of CPU ms per step, and its calls per step.  ``objective``: the nodes'
+    ``--objective`` (default: the run's default)."""
+    r, reports, load = profiled_ring_run(directory, nodes, steps, objective)
     s = r["summary"] or {}
     out: dict = {
         "nodes": nodes,

@@ -13,11 +13,12 @@ endpoints, scouting, and the security settings of netsetest/runtime/security.py)
 Shared memory is off: it would move payloads outside the (authenticated, encrypted) links.
 
 Subscribers' callbacks run on a Python thread zenoh-python starts per subscriber (fed by Zenoh's rx
-thread); they only queue the raw bytes and wake the role.  A lazy subscription (see netsetest/bus/base.py)
+thread); they screen, decode and queue the message and wake the role (a payload its screen turns away is
+never decoded: bus/base.py).  A lazy subscription (see netsetest/bus/base.py)
 has no callback: Zenoh's rx thread puts its samples into a ring buffer of ``MAX_PER_KEY`` (the oldest
 dropped when full, so a flood never blocks reception of other keys), which the next pump empties — no
-Python thread, no wake-up.  The role's own thread decodes, validates and dispatches everything in
-:meth:`Bus.pump`.  Close the bus explicitly: a process that
+Python thread, no wake-up; the role's own thread screens and decodes those in :meth:`Bus.pump`, and
+dispatches everything there.  Close the bus explicitly: a process that
 exits with an open session can hang.
 """
 
@@ -30,7 +31,7 @@ from typing import Literal
 
 import zenoh
 
-from netsetest.bus.base import MAX_PER_KEY, Bus, Handler
+from netsetest.bus.base import MAX_PER_KEY, Bus, Handler, Screen
 
 ZenohMode = Literal["peer", "client", "router"]
 
@@ -114,31 +115,31 @@ class ZenohBus(Bus):
         cfg = zenoh_config(mode, listen, connect, base_file=base_file, settings=settings)
         self.session = open_session(cfg, f"{mode} session (listen {list(listen)}, connect {list(connect)})")
         self._subs: list[zenoh.Subscriber] = []
-        self._lazy: list[tuple[str, zenoh.Subscriber, Handler]] = []  # (exact key, ring-buffered subscriber, handler)
+        self._lazy: list[tuple[str, zenoh.Subscriber, Handler, Screen | None]] = []  # (exact key, ring-buffered subscriber, handler, screen)
         self._pubs: dict[str, zenoh.Publisher] = {}
         self._closed = False
 
-    def subscribe(self, key_expr: str, handler: Handler, lazy: bool = False) -> None:
+    def subscribe(self, key_expr: str, handler: Handler, lazy: bool = False, screen: Screen | None = None) -> None:
         if lazy:
             if "*" in key_expr or "$" in key_expr:
                 raise ValueError(f"a lazy subscription needs an exact key (its ring buffer is per key): {key_expr}")
             sub = self.session.declare_subscriber(key_expr, zenoh.handlers.RingChannel(MAX_PER_KEY))
             self._subs.append(sub)
-            self._lazy.append((key_expr, sub, handler))
+            self._lazy.append((key_expr, sub, handler, screen))
             return
 
         def on_sample(sample: zenoh.Sample) -> None:
-            self._enqueue(str(sample.key_expr), sample.payload.to_bytes(), handler)
+            self._enqueue(str(sample.key_expr), sample.payload.to_bytes(), handler, screen)
 
         self._subs.append(self.session.declare_subscriber(key_expr, on_sample))
 
     def _collect_lazy(self) -> None:
-        for key, sub, handler in self._lazy:
+        for key, sub, handler, screen in self._lazy:
             for _ in range(MAX_PER_KEY):  # what the ring holds at most: this loop ends under a flood too
                 sample = sub.try_recv()
                 if sample is None:
                     break
-                self._enqueue(key, sample.payload.to_bytes(), handler)
+                self._enqueue(key, sample.payload.to_bytes(), handler, screen)
 
     def declare_publisher(self, key: str) -> None:
         """Roles declare the keys they will publish at start-up: the declarations reach the router and the

@@ -203,6 +203,7 @@ def build_parser() -> argparse.ArgumentParser:
         "scenario per node and every estimator compared, exact = what `netsetest exact` costs under k-of-N health, view = the live "
         "view's cost and lag and the report page in headless Chromium (default: every part)",
     )
+    p.add_argument("--baseline", metavar="DIR", help="with --only node: another checkout (say main's) measured alternately beside this one")
     p.add_argument(
         "--render-docs",
         nargs="?",
@@ -580,6 +581,11 @@ def cmd_bench(a: argparse.Namespace) -> int:
         return _render_docs(a)
     if a.spread is not None:
         return _spread(a)
+    from pathlib import Path
+
+    if a.baseline is not None and (a.only != "node" or not Path(a.baseline, "netsetest", "__init__.py").is_file()):
+        print(f"netsetest bench: --baseline {a.baseline}: needs --only node and a checkout of netsetest (DIR/netsetest/__init__.py)", file=sys.stderr)
+        return EXIT_BAD_INPUT
     if a.only in (None, "performance"):
         require("cvxpy", "the benchmark (its reference formulations)")
     if a.only in (None, "plant"):
@@ -598,7 +604,7 @@ def cmd_bench(a: argparse.Namespace) -> int:
     checks.output_file(a.markdown, "--markdown")
     from netsetest.bench.run import run_bench
 
-    return run_bench(a.quick, a.json, a.markdown, a.only)
+    return run_bench(a.quick, a.json, a.markdown, a.only, Path(a.baseline).resolve() if a.baseline is not None else None)
 
 
 def _render_docs(a: argparse.Namespace) -> int:
@@ -606,7 +612,9 @@ def _render_docs(a: argparse.Namespace) -> int:
 
     from netsetest.bench.docs import DocsError, write_docs
 
-    measuring = [opt for opt, given in (("--quick", a.quick), ("--json", a.json), ("--markdown", a.markdown), ("--only", a.only)) if given]
+    measuring = [
+        opt for opt, given in (("--quick", a.quick), ("--json", a.json), ("--markdown", a.markdown), ("--only", a.only), ("--baseline", a.baseline)) if given
+    ]
     if measuring:
         print(f"netsetest bench: --render-docs measures nothing; {measuring[0]} does not go with it", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -624,7 +632,7 @@ def _spread(a: argparse.Namespace) -> int:
 
     from netsetest.bench.spread import SpreadError, write_spread
 
-    measuring = [opt for opt, given in (("--quick", a.quick), ("--only", a.only)) if given]
+    measuring = [opt for opt, given in (("--quick", a.quick), ("--only", a.only), ("--baseline", a.baseline)) if given]
     if measuring:
         print(f"netsetest bench: --spread measures nothing; {measuring[0]} does not go with it", file=sys.stderr)
         return EXIT_BAD_INPUT

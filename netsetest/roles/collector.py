@@ -277,8 +277,8 @@ class Collector:
         self._end: End | None = None
         self._end_early = False  # an End was counted as early already
         self._end_recheck = 0  # Ends handled while truths they followed were still queued here: judged after them
-        bus.subscribe(keys.truth(run_id), self.on_message)
-        bus.subscribe(keys.node_state(run_id, "*"), self.on_message)
+        bus.subscribe(keys.truth(run_id), self.on_message, screen=self.scope.beyond)
+        bus.subscribe(keys.node_state(run_id, "*"), self.on_message, screen=self.scope.beyond)
         bus.subscribe(keys.end(run_id), self.on_message)
         if not realtime:
             bus.declare_publisher(keys.ready_of(run_id, keys.role_name("collector")))

@@ -77,6 +77,14 @@ def enclosing_ellipsoid(s: base.GuaranteedSet, rho: float) -> tuple[np.ndarray, 
     return c, np.diag(NA * h**2 / rho)
 
 
+def _symmetric(p: list[float]) -> np.ndarray:
+    """The row-major 3×3 ``p`` made exactly symmetric, ½(P + Pᵀ), in plain floats: the same roundings as
+    the arrays' (numpy's per-call cost on 3×3 was most of it, for every neighbour state a node keeps)."""
+    p0, p1, p2, p3, p4, p5, p6, p7, p8 = p
+    a01, a02, a12 = 0.5 * (p1 + p3), 0.5 * (p2 + p6), 0.5 * (p5 + p7)
+    return np.array([[0.5 * (p0 + p0), a01, a02], [a01, 0.5 * (p4 + p4), a12], [a02, a12, 0.5 * (p8 + p8)]])
+
+
 @dataclass(frozen=True)
 class Publication:
     """What a node publishes for one step: ``res`` (kept as its own set) and what its state message says
@@ -150,11 +158,11 @@ class Node:
         self.drops: Counter[str] = Counter()
         self.rejoin = rejoin  # started into a running network: initialise from a neighbour's ellipsoid
         self.late_start_evidence = 0
-        bus.subscribe(keys.node_input(run_id, node_id), self.on_message)
+        bus.subscribe(keys.node_input(run_id, node_id), self.on_message, screen=self._passed_input)
         for j in self.others:
-            bus.subscribe(keys.node_state(run_id, j), self.on_message, lazy=lazy)
+            bus.subscribe(keys.node_state(run_id, j), self.on_message, lazy=lazy, screen=self._passed_state)
         for j in self.read_from:
-            bus.subscribe(keys.reading(run_id, j), self.on_message, lazy=lazy)
+            bus.subscribe(keys.reading(run_id, j), self.on_message, lazy=lazy, screen=self._passed_reading)
         bus.subscribe(keys.end(run_id), self.on_message)
         bus.declare_publisher(keys.node_state(run_id, node_id))
         if self.publishes_reading:
@@ -226,6 +234,19 @@ class Node:
             self._on_reading(key, msg)
         else:
             self.drop("unexpected-type")
+
+    # What the bus drops undecoded (a subscription's screen, netsetest/bus/base.py): a copy naming a step after
+    # the run or one we have passed, which the handlers below drop for the same reason whatever it holds; k
+    # only grows, so the reason still holds when the handler would have run.  Called on the transport's thread.
+
+    def _passed_input(self, step: int) -> str | None:
+        return self.scope.beyond(step) or ("node-input-mismatch" if step <= self.k else None)
+
+    def _passed_state(self, step: int) -> str | None:
+        return self.scope.beyond(step) or ("stale" if step < self.k else None)  # k: our next step uses it
+
+    def _passed_reading(self, step: int) -> str | None:
+        return self.scope.beyond(step) or ("stale" if step <= self.k else None)  # a reading serves its own step
 
     def drop(self, reason: str) -> None:
         self.drops[reason] += 1
@@ -319,8 +340,7 @@ class Node:
         if (msg.sector is not None) != sensor.saturated:
             self._refuse(msg, "sector-mismatch")  # a saturating sensor publishes its sector, no other one does
             return
-        P = msg.P_matrix()  # symmetric positive definite: checked by decode()
-        P = 0.5 * (P + P.T)
+        P = _symmetric(msg.P)  # symmetric positive definite: checked by decode()
         sector = Sector(msg.sector[0], msg.sector[1], msg.sector_basis) if msg.sector is not None else None
         if not innovation_possible(sensor, np.asarray(msg.xhat), P, msg.rho, msg.gamma, sector, msg.innov):
             self._refuse(msg, "neighbour-innovation")
@@ -554,8 +574,8 @@ class Node:
         return NodeState(
             step=inp.step,
             node=self.id,
-            xhat=[float(a) for a in pub.xhat],
-            P=[float(a) for a in pub.P.reshape(NA * NA)],
+            xhat=pub.xhat.tolist(),  # float64 arrays: the floats [float(a) for a in …] gave, without the loop
+            P=pub.P.reshape(NA * NA).tolist(),
             rho=self.rho,
             gamma=inp.gamma,
             innov=innov,
@@ -575,7 +595,7 @@ class Node:
             health=p.health,
             fault_range=list(pub.fault_range) if pub.fault_range is not None else None,
             **self._own_set(res),  # type: ignore[arg-type]  # own_xhat/own_P only: mypy cannot tell the keys of a dict
-            own_region=None if res.region is None else [float(a) for a in res.region.vertices.reshape(-1)],
+            own_region=None if res.region is None else res.region.vertices.reshape(-1).tolist(),
         )
 
     @staticmethod
@@ -583,4 +603,4 @@ class Node:
         """The set we continue from, where it is not the published one (the collector judges it too)."""
         if res.published is None:
             return {}
-        return {"own_xhat": [float(a) for a in res.xhat], "own_P": [float(a) for a in res.P.reshape(NA * NA)]}
+        return {"own_xhat": res.xhat.tolist(), "own_P": res.P.reshape(NA * NA).tolist()}

@@ -43,12 +43,13 @@ def innovation_interval(sensor: Sensor, xhat: np.ndarray, P: np.ndarray, rho: fl
     produce; ``sector`` None: the sensor's fixed h1, h2 (1, 1 for a sensor without saturation)."""
     # scalar arithmetic on the 3-vectors: a node runs this for every neighbour message, and numpy's
     # per-call overhead on 3×3 data is most of the cost
-    cb = (float(sensor.C[0]), float(sensor.C[1]), float(sensor.Ds))
-    x = [float(a) for a in xhat]
-    Pl = np.asarray(P).tolist()
-    cx = cb[0] * x[0] + cb[1] * x[1] + cb[2] * x[2]
-    Pc = [Pl[i][0] * cb[0] + Pl[i][1] * cb[1] + Pl[i][2] * cb[2] for i in range(3)]
-    cpc = cb[0] * Pc[0] + cb[1] * Pc[1] + cb[2] * Pc[2]
+    # (unrolled, and tolist() rather than a comprehension: the comprehensions were most of its cost)
+    c0, c1, c2 = float(sensor.C[0]), float(sensor.C[1]), float(sensor.Ds)
+    x0, x1, x2 = np.asarray(xhat, dtype=float).tolist()
+    (p00, p01, p02), (p10, p11, p12), (p20, p21, p22) = np.asarray(P, dtype=float).tolist()
+    cx = c0 * x0 + c1 * x1 + c2 * x2
+    pc0, pc1, pc2 = p00 * c0 + p01 * c1 + p02 * c2, p10 * c0 + p11 * c1 + p12 * c2, p20 * c0 + p21 * c1 + p22 * c2
+    cpc = c0 * pc0 + c1 * pc1 + c2 * pc2
     c = math.sqrt(max(rho * cpc, 0.0))
     r_lo, r_hi = cx - c, cx + c
     h1, h2 = (sector.h1, sector.h1 + sector.h) if sector is not None else (sensor.h1, sensor.h2)
@@ -70,11 +71,11 @@ def states_disjoint(x1: np.ndarray, P1: np.ndarray, rho1: float, x2: np.ndarray,
     dᵀ(A₁/(1−λ) + A₂/λ)⁻¹d with d = c₂ − c₁ and A the projected shapes ρ P[:2, :2]; a minimum above 1
     for some λ proves the sets disjoint.  Only such a proof (with a margin) returns True.
     """
+    if _overlap_bound(np.asarray(P1).tolist(), rho1, np.asarray(P2).tolist(), rho2, float(x2[0]) - float(x1[0]), float(x2[1]) - float(x1[1])) <= 1.0:
+        return False  # no λ can prove disjointness (the common case: honest neighbours overlap)
     A1 = rho1 * np.asarray(P1)[:NX, :NX]
     A2 = rho2 * np.asarray(P2)[:NX, :NX]
     d = np.asarray(x2)[:NX] - np.asarray(x1)[:NX]
-    if _overlap_bound(A1, A2, d) <= 1.0:
-        return False  # no λ can prove disjointness (the common case: honest neighbours overlap)
     # S(λ) = A₁/(1−λ) + A₂/λ for every λ of the grid at once; dᵀS⁻¹d by the 2×2 adjugate
     S = A1[None] / (1.0 - LAMBDA_GRID)[:, None, None] + A2[None] / LAMBDA_GRID[:, None, None]
     det = S[:, 0, 0] * S[:, 1, 1] - S[:, 0, 1] * S[:, 1, 0]
@@ -85,13 +86,15 @@ def states_disjoint(x1: np.ndarray, P1: np.ndarray, rho1: float, x2: np.ndarray,
     return bool(np.any(val[ok] > 1.0 + DISJOINT_MARGIN))
 
 
-def _overlap_bound(A1: np.ndarray, A2: np.ndarray, d: np.ndarray) -> float:
+def _overlap_bound(p1: list[list[float]], rho1: float, p2: list[list[float]], rho2: float, d0: float, d1: float) -> float:
     """dᵀ(A₁ + A₂)⁻¹d, an upper bound of dᵀS(λ)⁻¹d for every λ ∈ (0, 1): S(λ) = A₁/(1−λ) + A₂/λ ⪰ A₁ + A₂
     ≻ 0, so S(λ)⁻¹ ⪯ (A₁ + A₂)⁻¹.  At most 1: no λ proves the sets disjoint (+inf if A₁ + A₂ is not
-    definite, which leaves the decision to the full test)."""
-    a, b, c, e = (float(v) for v in (A1 + A2).ravel())  # [[a, b], [c, e]]
+    definite, which leaves the decision to the full test).  Plain floats (the P's as nested lists, d = c₂ − c₁
+    over β, r): the same roundings as the arrays' ρP[:2, :2] sums, without numpy's per-call cost, and every
+    node runs it for every neighbour state it keeps."""
+    a, b = rho1 * p1[0][0] + rho2 * p2[0][0], rho1 * p1[0][1] + rho2 * p2[0][1]  # A₁ + A₂ = [[a, b], [c, e]]
+    c, e = rho1 * p1[1][0] + rho2 * p2[1][0], rho1 * p1[1][1] + rho2 * p2[1][1]
     det = a * e - b * c
     if not det > 0.0 or not a > 0.0:
         return math.inf
-    d0, d1 = float(d[0]), float(d[1])
     return (d0 * d0 * e - d0 * d1 * (b + c) + d1 * d1 * a) / det

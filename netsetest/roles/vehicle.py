@@ -115,7 +115,13 @@ class Vehicle:
         self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
         self.drops: Counter[str] = Counter()
         self.acked = -1  # the newest step the collector acknowledged (lockstep flow control)
-        bus.subscribe(keys.node_state(run_id, "*"), self.on_message)
+        if realtime:
+            # nothing waits for a state (the clock steps) and every pump collects them: a ring per node's key,
+            # drained in the vehicle's thread, rather than a Python callback and a wake-up per state (N per step)
+            for i in scenario.ids:
+                bus.subscribe(keys.node_state(run_id, i), self.on_message, lazy=True, screen=self.scope.beyond)
+        else:
+            bus.subscribe(keys.node_state(run_id, "*"), self.on_message, screen=self.scope.beyond)
         bus.subscribe(keys.end(run_id), self.on_message)
         bus.subscribe(keys.ready_of(run_id, keys.role_name("collector")), self.on_ack)
         for key in [keys.truth(run_id), keys.end(run_id), *(keys.node_input(run_id, i) for i in scenario.ids)]:

@@ -177,6 +177,9 @@ def test_realtime_run_over_zenoh_uses_its_neighbours(tmp_path: Path) -> None:
             total += 1
             used_all += not e["missing"] and len(e["used"]) == 2  # paper6: two in-neighbours each
     assert used_all >= total // 2, f"only {used_all} of {total} node-steps used both neighbours"
+    # the vehicle hears the states from a ring per node (roles/vehicle.py): every node alive at every step,
+    # past its 20-step window too (states it never collected would have declared the nodes dead by then)
+    assert [t["alive"] for t in rec.truth[1:]] == [[1, 2, 3, 4, 5, 6]] * steps
     reports = {p.name: json.loads(p.read_text()) for p in prof.glob("node-*.json")}
     assert sorted(reports) == [f"node-{i}.json" for i in range(1, 7)]
     for name, r in reports.items():
@@ -221,3 +224,35 @@ def test_realtime_run_over_zenoh_waits_for_the_readings(tmp_path: Path) -> None:
     assert len(rows) == 5 * steps
     with_reading = sum(e["readings"] == [3] for e in rows)
     assert with_reading >= 0.8 * len(rows), f"only {with_reading} of {len(rows)} node-steps used the reading"
+
+
+def test_a_screen_drops_passed_steps_undecoded_on_lazy_and_waking_keys() -> None:
+    """A subscription's screen (bus/base.py) sees the step a payload names before it is decoded: a payload
+    it turns away is counted under the screen's reason, never decoded (one decode() would refuse is counted
+    as the screen's, not as ``invalid``) and never handed over; the others are decoded and delivered."""
+    p_rx, p_tx = free_ports(2)
+    rx = ZenohBus("peer", listen=[f"tcp/127.0.0.1:{p_rx}"], connect=[f"tcp/127.0.0.1:{p_tx}"])
+    tx = ZenohBus("peer", listen=[f"tcp/127.0.0.1:{p_tx}"], connect=[f"tcp/127.0.0.1:{p_rx}"])
+    got: dict[str, list[int]] = {LAZY: [], WAKE: []}
+    first = 5  # the first step the subscriber can still use
+    try:
+        for key, lazy in ((LAZY, True), (WAKE, False)):
+            rx.subscribe(key, lambda k, msg: got[k].append(msg.step), lazy=lazy, screen=lambda step: "stale" if step < first else None)
+        time.sleep(0.5)
+        good = NodeState(step=0, node=2, xhat=[0.0] * 3, P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
+        not_spd = msgspec.msgpack.encode({**msgspec.to_builtins(good), "type": "state", "step": 3, "P": [-1.0] * 9})
+        invalid_kept = msgspec.msgpack.encode({**msgspec.to_builtins(good), "type": "state", "step": 8, "P": [-1.0] * 9})
+        for key in (LAZY, WAKE):
+            for step in (1, 4, 5, 9):
+                tx.publish(key, msgspec.structs.replace(good, step=step))
+            tx.send_raw(key, not_spd)  # a passed step: dropped undecoded, as stale
+            tx.send_raw(key, invalid_kept)  # a step still to come: decoded, and refused as invalid
+        time.sleep(0.5)
+        t0 = time.monotonic()
+        while len(got[LAZY]) + len(got[WAKE]) < 4 and time.monotonic() - t0 < 5.0:
+            rx.pump(timeout=0.05)
+    finally:
+        rx.close()
+        tx.close()
+    assert got == {LAZY: [5, 9], WAKE: [5, 9]}
+    assert rx.dropped == {"stale": 6, "invalid": 2} and rx.received == 12

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -168,3 +170,39 @@ def test_scalar_interval_matches_numpy() -> None:
             hi_ref = gamma * max(s.h1 * (cx + c), s.h2 * (cx + c)) + noise - cx
             lo, hi = innovation_interval(s, xhat, P, rho, gamma, None)
             assert lo == pytest.approx(lo_ref, rel=1e-12, abs=1e-14) and hi == pytest.approx(hi_ref, rel=1e-12, abs=1e-14)
+
+
+def test_overlap_bound_in_floats_is_the_arrays_bound_bit_for_bit() -> None:
+    """The shortcut's plain-float bound rounds as the array formula it replaced (ρP[:2, :2] summed, d over
+    β, r), so every node decides exactly as before: equal, not close, on random pairs."""
+    from netsetest.roles.plausibility import _overlap_bound
+
+    rng = np.random.default_rng(11)
+    for _ in range(300):
+        x1, x2 = rng.normal(size=3), rng.normal(size=3)
+        P1, P2 = _spd(rng, 0.1), _spd(rng, 0.1)
+        r1, r2 = float(rng.uniform(0.2, 1.5)), float(rng.uniform(0.2, 1.5))
+        A, d = r1 * P1[:2, :2] + r2 * P2[:2, :2], x2[:2] - x1[:2]
+        a, b, c, e = (float(v) for v in A.ravel())
+        ref = (float(d[0]) ** 2 * e - float(d[0]) * float(d[1]) * (b + c) + float(d[1]) ** 2 * a) / (a * e - b * c)
+        assert _overlap_bound(P1.tolist(), r1, P2.tolist(), r2, float(x2[0]) - float(x1[0]), float(x2[1]) - float(x1[1])) == ref
+
+
+def test_interval_unrolled_rounds_as_before() -> None:
+    """innovation_interval unrolled rounds exactly as the loops it replaced (every node's decision unchanged)."""
+    rng = np.random.default_rng(13)
+    for saturated in (False, True):
+        for _ in range(200):
+            s = _sensor(rng, saturated)
+            xhat, P, rho, gamma = rng.normal(size=3), _spd(rng), float(rng.uniform(0.2, 2)), float(rng.uniform(0.8, 1.2))
+            cb = (float(s.C[0]), float(s.C[1]), float(s.Ds))
+            x = [float(a) for a in xhat]
+            Pl = P.tolist()
+            cx = cb[0] * x[0] + cb[1] * x[1] + cb[2] * x[2]
+            Pc = [Pl[i][0] * cb[0] + Pl[i][1] * cb[1] + Pl[i][2] * cb[2] for i in range(3)]
+            c = math.sqrt(max(rho * (cb[0] * Pc[0] + cb[1] * Pc[1] + cb[2] * Pc[2]), 0.0))
+            noise = abs(s.Dv) * math.sqrt(s.R)
+            lo = gamma * min(s.h1 * (cx - c), s.h2 * (cx - c)) - noise - cx
+            hi = gamma * max(s.h1 * (cx + c), s.h2 * (cx + c)) + noise - cx
+            assert innovation_interval(s, xhat, P, rho, gamma, None) == (lo, hi)
+            assert innovation_interval(s, list(xhat), P.tolist(), rho, gamma, None) == (lo, hi)  # lists as arrays

@@ -1,0 +1,159 @@
+"""The benchmark's per-message budget of a node (``netsetest bench --only node``, issue 31).
+
+A real-time ring (bench/topologies.py, τs = 0.1 s) with every node profiled (``NETSETEST_PROFILE``,
+netsetest/profile.py), a few runs; per node and run, from its profile:
+
+- the node's CPU per step (``process``: every thread), the estimator's step beside it (``solve``) and
+  what the node spends outside it (``process − solve``), split as the profile splits it (its own
+  thread's phases, ``other``, and ``threads``: Zenoh's runtime and subscriber callbacks);
+- the messages it received (payloads the bus took from the transport, those screened out undecoded
+  too; a checkout whose profile does not count them: its decodes, one per payload) and sent (its puts)
+  per step;
+- per received message: the CPU its own thread spent on them (``decode`` + ``handle``) over their
+  number; per sent message: ``build`` + ``encode`` + ``put`` over theirs; Zenoh's and the callbacks'
+  threads over every message, received or sent (what they do per message: TLS, routing, the callback).
+
+Figures are the median over the nodes of a run, then the median over the runs (with their range).  With
+a baseline (``--baseline DIR``, another checkout, say main's), its runs alternate with this checkout's,
+the same ring and the same number of runs, and each figure is also given as the ratio of the two
+medians: on a machine other work loads, only such side-by-side ratios compare two versions.
+"""
+
+from __future__ import annotations
+
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+from netsetest.bench.zenoh_runs import profiled_ring_run
+
+OUTSIDE = ("wait", "decode", "handle", "build", "encode", "put", "other", "threads")  # profile phases outside the estimator
+FIGURES = (  # key, what, unit: the rows of the table
+    ("process_us", "the node's CPU per step, every thread", "µs"),
+    ("solve_us", "the estimator's step (`solve`)", "µs"),
+    ("outside_us", "outside the estimator (process − solve)", "µs"),
+    ("outside_ratio", "node CPU per step / estimator step", "×"),
+    *((f"{p}_us", f"… of it `{p}`", "µs") for p in OUTSIDE),
+    ("received", "messages received per step", ""),
+    ("sent", "messages sent per step", ""),
+    ("per_received_us", "per received message, the node's thread (decode + handle)", "µs"),
+    ("per_sent_us", "per sent message, the node's thread (build + encode + put)", "µs"),
+    ("threads_per_message_us", "per message received or sent, the other threads (Zenoh, callbacks)", "µs"),
+    ("outside_per_message_us", "per message received or sent, everything outside the estimator", "µs"),
+)
+
+
+def _log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def node_budget(report: dict) -> dict[str, float]:
+    """The budget figures (:data:`FIGURES`) of one node's profile report (netsetest/profile.py)."""
+    us = {p: 1000.0 * v["ms_per_step"] for p, v in report["phases"].items()}
+    process, solve = 1000.0 * report["process_ms_per_step"], us["solve"]
+    counted = report.get("messages_per_step")
+    received = counted["received"] if counted else report["phases"]["decode"]["calls_per_step"]
+    sent = counted["sent"] if counted else report["phases"]["put"]["calls_per_step"]
+    per = lambda cpu, n: cpu / n if n > 0 else float("nan")  # noqa: E731  # a one-line local helper
+    return {
+        "process_us": process,
+        "solve_us": solve,
+        "outside_us": process - solve,
+        "outside_ratio": per(process, solve),
+        **{f"{p}_us": us[p] for p in OUTSIDE},
+        "received": received,
+        "sent": sent,
+        "per_received_us": per(us["decode"] + us["handle"], received),
+        "per_sent_us": per(us["build"] + us["encode"] + us["put"], sent),
+        "threads_per_message_us": per(us["threads"], received + sent),
+        "outside_per_message_us": per(process - solve, received + sent),
+    }
+
+
+def _commit(checkout: Path) -> str | None:
+    """The commit a checkout's code is at (None: not a git checkout), so the table says which code it measured."""
+    out = subprocess.run(["git", "-C", str(checkout), "rev-parse", "--short=12", "HEAD"], capture_output=True, text=True, check=False)
+    return out.stdout.strip() or None if out.returncode == 0 else None
+
+
+def _median_over_nodes(reports: list[dict]) -> dict[str, float]:
+    budgets = [node_budget(r) for r in reports]
+    return {key: statistics.median(b[key] for b in budgets) for key, _, _ in FIGURES}
+
+
+def _profiled(tmp: Path, nodes: int, steps: int, code: Path | None) -> dict:
+    r, reports, load = profiled_ring_run(tmp, nodes, steps, code=code)
+    s = r["summary"] or {}
+    return {
+        "exit_code": r["exit_code"],
+        "load_before": load,
+        "profiled_nodes": len(reports),
+        "deadline_misses": sum(row.get("deadline_misses") or 0 for row in s.get("nodes", [])) if s else None,
+        "figures": _median_over_nodes(reports) if reports else None,
+    }
+
+
+def _summary(runs: list[dict]) -> dict:
+    """Median and range over the runs of each figure (the runs whose nodes reported)."""
+    ok = [r["figures"] for r in runs if r["figures"]]
+    if not ok:
+        return {}
+    return {key: {"median": statistics.median(f[key] for f in ok), "min": min(f[key] for f in ok), "max": max(f[key] for f in ok)} for key, _, _ in FIGURES}
+
+
+def node_figures(cfg: dict, tmp: Path, baseline: Path | None = None) -> dict:
+    """The per-message budget (module doc); ``baseline``: a checkout measured alternately beside this one."""
+    nodes, steps, reps = cfg["node_budget_nodes"], cfg["rt_steps"], cfg["node_budget_reps"]
+    codes: dict[str, Path | None] = {"this": None, **({"baseline": baseline} if baseline is not None else {})}
+    runs: dict[str, list[dict]] = {name: [] for name in codes}
+    for rep in range(reps):
+        for name, code in codes.items():
+            row = _profiled(tmp, nodes, steps, code)
+            runs[name].append(row)
+            f = row["figures"] or {}
+            _log(
+                f"  {name} run {rep + 1}/{reps} ({nodes} nodes, load {row['load_before']}): exit {row['exit_code']}, "
+                f"{row['deadline_misses']} deadline misses; {f.get('process_us', float('nan')):.0f} µs per step, "
+                f"{f.get('outside_us', float('nan')):.0f} outside the estimator"
+            )
+    out: dict = {"nodes": nodes, "steps": steps, "reps": reps, "baseline_code": str(baseline) if baseline is not None else None}
+    out["commits"] = {name: _commit(code or Path(__file__).resolve().parents[2]) for name, code in codes.items()}
+    out.update({name: {"runs": rows, "summary": _summary(rows)} for name, rows in runs.items()})
+    if baseline is not None and out["this"]["summary"] and out["baseline"]["summary"]:
+        this, base = out["this"]["summary"], out["baseline"]["summary"]
+        out["ratio"] = {key: this[key]["median"] / base[key]["median"] if base[key]["median"] else None for key, _, _ in FIGURES}
+    return out
+
+
+def node_markdown(res: dict) -> str:
+    f = lambda v, spec=".0f": "—" if v is None or v != v else format(v, spec)  # noqa: E731  # a one-line local helper
+    this = res["this"]["summary"]
+    base = res["baseline"]["summary"] if "baseline" in res else None
+    runs = "; ".join(f"load {r['load_before']}, {r['deadline_misses']} misses" for r in res["this"]["runs"])
+    lines = [
+        f"A real-time ring of {res['nodes']} nodes (τs = 0.1 s), {res['steps']} steps, every node profiled (`NETSETEST_PROFILE`); "
+        f"median over the nodes, then over {res['reps']} runs (this checkout: {runs}; deadline misses of a run's "
+        f"{res['nodes'] * (res['steps'] + 1)} node-steps)."
+    ]
+    if not this:
+        return "\n".join([*lines, "", "No node reported.", ""])
+    head = "| figure | this checkout (range over runs) |"
+    rule = "|---|---|"
+    if base:
+        bruns = "; ".join(f"load {r['load_before']}, {r['deadline_misses']} misses" for r in res["baseline"]["runs"])
+        commits = res.get("commits", {})
+        lines[0] += (
+            f" The baseline, the code of commit `{commits.get('baseline')}` (this checkout: `{commits.get('this')}`, uncommitted changes aside), ran alternately with it ({bruns})."
+        )
+        head += " baseline (range) | this / baseline |"
+        rule += "---|---|"
+    lines += ["", head, rule]
+    for key, what, unit in FIGURES:
+        spec = ".2f" if unit in ("×", "") else ".0f"
+        cell = lambda s: f"{f(s[key]['median'], spec)} ({f(s[key]['min'], spec)}–{f(s[key]['max'], spec)})"  # noqa: E731  # a one-line local helper
+        row = f"| {what}{f' [{unit}]' if unit else ''} | {cell(this)} |"
+        if base:
+            row += f" {cell(base)} | {f(res['ratio'][key], '.2f')} |"
+        lines.append(row)
+    return "\n".join(lines) + "\n"
