@@ -1,18 +1,24 @@
 """The benchmark's flow-control figures (``netsetest bench --only flow``): a collector that falls behind
-loses nothing, and what the lockstep window costs (roles/vehicle.py ``ACK_WINDOW``, issue 33).
+loses nothing, and what the lockstep window costs (roles/flow.py ``ACK_WINDOW``, issue 33).
 
 - ``paused``: ``netsetest run paper6`` unpaced (lockstep), recording ``.jsonl.gz``, with its collector
   stopped (SIGSTOP) for a few seconds mid-run and then continued (SIGCONT): the exit code, the steps and
   node-steps judged and lost, the nodes reported missing or rejoined (all must be 0), the wall time.
 - ``soak``: unpaced 3000-step paper6 runs, nothing paused, one after another on whatever else loads the
   machine (the soak that failed 2 of 2 before the window): exit code and node-steps lost per run.
-- ``ratio``: the unpaced paper6 lockstep run over Zenoh against the same run in memory, interleaved,
-  medians of three (what the performance part's ``zenoh.ratio`` measures, with the same functions), beside
-  that part's committed figure measured before the window existed: the window's cost is their difference.
+- ``ratio``: the unpaced paper6 lockstep run over Zenoh against the same run in memory (what the
+  performance part's ``zenoh.ratio`` measures, with the same functions), with the window and without it
+  (``NETSETEST_ACK_WINDOW=unbounded``, roles/flow.py: the same ``netsetest run`` launcher, the vehicle never
+  held), the three runs interleaved, medians of three: the window's cost is the difference of the two
+  ratios, measured side by side in one run.  Both arms send the collector's acknowledgments (one small
+  message per ``ACK_STRIDE`` steps, the collector does not know the vehicle's window): the difference is
+  what holding the vehicle costs, the acknowledgments' own (a Ready decoded by each role every other step)
+  is in both.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -20,14 +26,15 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
-from netsetest.roles.vehicle import ACK_STRIDE, ACK_WINDOW
+from netsetest.roles.flow import ACK_STRIDE, ACK_WINDOW, ACK_WINDOW_ENV, UNBOUNDED
 from netsetest.scenarios import TOPOLOGY_DIR
 
 PAPER6 = TOPOLOGY_DIR / "paper6.toml"
 UNDER_WAY_BYTES = 50_000  # the record (gzip) has grown this much: the run is under way, pause its collector now
-COMMITTED_PERFORMANCE = Path(__file__).resolve().parents[2] / "bench" / "results.json"  # read, never written here
+RATIO_REPS = 3  # interleaved repetitions of the ratio's three runs: medians of three
 
 
 def _log(msg: str) -> None:
@@ -90,25 +97,54 @@ def paused_run(tmp: Path, steps: int, pause_s: float, timeout: float = 900.0, se
     }
 
 
-def lockstep_ratio(steps: int | None) -> dict:
-    """The unpaced paper6 lockstep run over Zenoh against in memory (medians of three, interleaved)."""
+@contextlib.contextmanager
+def window_setting(value: str | None) -> Iterator[None]:
+    """``$NETSETEST_ACK_WINDOW`` set to ``value`` (None: unset) while the block runs a launch from this
+    process (the fork server, and so the vehicle, inherits the environment the launcher starts it with)."""
+    before = os.environ.get(ACK_WINDOW_ENV)
+    try:
+        if value is None:
+            os.environ.pop(ACK_WINDOW_ENV, None)
+        else:
+            os.environ[ACK_WINDOW_ENV] = value
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(ACK_WINDOW_ENV, None)
+        else:
+            os.environ[ACK_WINDOW_ENV] = before
+
+
+def lockstep_ratio(steps: int | None, reps: int = RATIO_REPS) -> dict:
+    """The unpaced paper6 lockstep run over Zenoh against in memory, with the window (the default) and
+    without it (``NETSETEST_ACK_WINDOW=unbounded``): the same launcher ``netsetest run`` uses, the three
+    runs interleaved ``reps`` times so that the machine's load falls on each alike; medians."""
     from netsetest.bench.zenoh_runs import observed_lockstep
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
 
     sc = load_topology(PAPER6, "nsnim", steps)
-    mem, zen = [], []
-    for _ in range(3):
+    mem: list[float] = []
+    zen: dict[str, list[float | None]] = {"window": [], "unbounded": []}
+    codes: dict[str, list[int]] = {"window": [], "unbounded": []}
+    for _ in range(reps):
         t0 = time.perf_counter()
         run_inmemory(sc, "paper", "scheduled", 0)
         mem.append(time.perf_counter() - t0)
-        zen.append(observed_lockstep(PAPER6, steps)["stepping_s"])
-    before = None
-    if COMMITTED_PERFORMANCE.exists():
-        before = json.loads(COMMITTED_PERFORMANCE.read_text()).get("zenoh", {}).get("ratio")
-    timed = [z for z in zen if z is not None]  # a run that failed has no stepping time
-    ratio = statistics.median(timed) / statistics.median(mem) if timed else None
-    return {"steps": sc.steps, "inmemory_s": mem, "zenoh_stepping_s": zen, "ratio": ratio, "ratio_before_window": before}
+        for case, setting in (("window", None), ("unbounded", UNBOUNDED)):
+            with window_setting(setting):
+                obs = observed_lockstep(PAPER6, steps)
+            zen[case].append(obs["stepping_s"])
+            codes[case].append(obs["usage"]["run"]["exit_code"])
+    out: dict = {"steps": sc.steps, "reps": reps, "inmemory_s": mem}
+    for case, times in zen.items():
+        timed = [z for z in times if z is not None]  # a run that failed has no stepping time
+        out[f"zenoh_{case}_s"] = times
+        out[f"zenoh_{case}_exit_codes"] = codes[case]
+        out[f"ratio_{case}"] = statistics.median(timed) / statistics.median(mem) if timed else None
+    w, u = out["ratio_window"], out["ratio_unbounded"]
+    out["window_cost"] = None if w is None or u is None else w - u  # in units of the in-memory run's time
+    return out
 
 
 def flow_figures(cfg: dict, tmp: Path) -> dict:
@@ -129,9 +165,9 @@ def flow_figures(cfg: dict, tmp: Path) -> dict:
             f"  exit {r['exit_code']}, node-steps lost {r['node_steps_lost']}, missing {r['nodes_missing']}, rejoined {r['nodes_rejoined']}, {r['wall_s']:.1f} s"
         )
         out["soak"].append(r)
-    _log("the unpaced paper6 lockstep ratio with the window (Zenoh / in memory)")
-    out["ratio"] = lockstep_ratio(cfg.get("flow_ratio_steps"))
-    _log(f"  ratio {out['ratio']['ratio']}, before the window {out['ratio']['ratio_before_window']}")
+    _log("the unpaced paper6 lockstep ratio (Zenoh / in memory), with the window and without it, interleaved")
+    q = out["ratio"] = lockstep_ratio(cfg.get("flow_ratio_steps"))
+    _log(f"  ratio with the window {q['ratio_window']}, without {q['ratio_unbounded']}: the window's cost {q['window_cost']}")
     return out
 
 
@@ -161,8 +197,12 @@ def flow_markdown(res: dict) -> str:
     q = res["ratio"]
     lines += [
         "",
-        f"The unpaced paper6 lockstep run ({q['steps']} steps) over Zenoh takes {f(q['ratio'])}× the in-memory run with the window "
-        f"({f(q['ratio_before_window'])}× in the performance part's committed figures, measured before it).",
+        f"What the window costs: the unpaced paper6 lockstep run ({q['steps']} steps) over Zenoh, with the window and without it "
+        f"({ACK_WINDOW_ENV}={UNBOUNDED}), against the same run in memory, the three interleaved, medians of {q['reps']}:",
+        "",
+        "| Zenoh / in memory, with the window | without it | the window's cost (difference) |",
+        "|---|---|---|",
+        f"| {f(q['ratio_window'])}× | {f(q['ratio_unbounded'])}× | {f(q['window_cost'], '+.2f')}× |",
         "",
     ]
     return "\n".join(lines)

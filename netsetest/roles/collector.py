@@ -21,7 +21,7 @@ is ``WINDOW`` steps further whatever arrived; :meth:`finish` closes the rest.  O
 node remain for the summary.
 
 Keeping up.  In lockstep the collector acknowledges the truths it has taken in (a Ready with ``acked``
-every ``ACK_STRIDE`` steps) and the vehicle stays within ``ACK_WINDOW`` steps of it (roles/vehicle.py), so
+every ``ACK_STRIDE`` steps) and the vehicle stays within ``ACK_WINDOW`` steps of it (roles/flow.py), so
 the run's own messages never exceed the bus's bounded inbox, however slow the collector is.  In real time
 the clock cannot wait: the collector takes every message off the bus first and closes steps when nothing
 is waiting (:meth:`close_ready`), keeping the open steps up to ``budget`` node-steps
@@ -71,7 +71,8 @@ from netsetest.models.vehicle import KMH
 from netsetest.records.summary import RUN_FIELDS, CarSummary, InheritedOrigin, NodeSummary, RunSummary, StopCause
 from netsetest.roles.fdi import FdiTotals, classify
 from netsetest.roles.judge import INHERITED, NO_CHECKS, TRUTH_UNKNOWN, Containment, Judge, NodeVerdict, StepInputs, isclose, state_mismatch
-from netsetest.roles.vehicle import ACK_STRIDE, envelope_holds, fault_bound_holds, mismatch_holds
+from netsetest.roles.flow import ACK_STRIDE
+from netsetest.roles.vehicle import envelope_holds, fault_bound_holds, mismatch_holds
 
 WINDOW = 50  # steps a step may stay open behind the newest truth (bounds memory against a stalled node)
 CLOSE_LAG = 2  # a step whose alive nodes reported closes this many truths later (late and rejoining states)

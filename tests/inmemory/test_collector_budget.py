@@ -71,7 +71,7 @@ def test_the_collector_acknowledges_every_stride_and_the_last_step() -> None:
     """The in-memory run goes through the same acknowledgments as the processes (its collector shares the bus)."""
     from netsetest.bus import keys
     from netsetest.messages import Ready
-    from netsetest.roles.vehicle import ACK_STRIDE
+    from netsetest.roles.flow import ACK_STRIDE
 
     sc = load_topology(ROOT / "topologies" / "paper6.toml", None, 20)
     bus = MemoryBus()

@@ -1,6 +1,6 @@
 """Issue 33: a collector that falls behind loses nothing.  The deterministic trigger: SIGSTOP the collector
 of an unpaced lockstep run for a while, then SIGCONT.  Before the vehicle waited for the collector's
-acknowledgment (roles/vehicle.py, ACK_WINDOW), its inbox bound dropped the run's own truths and states:
+acknowledgment (roles/vehicle.py, roles/flow.py ACK_WINDOW), its inbox bound dropped the run's own truths and states:
 a 3 s pause ended with exit 1 at "steps 0–319" and two nodes falsely reported missing.  Each run also
 writes a slow record (gzip, MCAP), the other way a collector fell behind."""
 
