@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from netsetest.bench.exact_cost import exact_cost_markdown
+from netsetest.bench.flow import flow_markdown
 from netsetest.bench.network import network_markdown, network_summary_markdown
 from netsetest.bench.plant import plant_markdown, plant_summary_markdown
 from netsetest.bench.run import performance_markdown
@@ -76,6 +77,13 @@ PARTS: dict[str, Part] = {
         "netsetest bench --quick --only plant --json bench/plant.json --markdown bench/plant.md",
         in_results=False,
     ),
+    "flow": Part(
+        "A collector that falls behind",
+        "bench/flow.json",
+        "flow",
+        flow_markdown,
+        "netsetest bench --only flow --json bench/flow.json --markdown bench/flow.md",
+    ),
     "performance": Part(
         "Performance",
         "bench/results.json",
@@ -91,7 +99,7 @@ PARTS: dict[str, Part] = {
         f"netsetest bench --spread {RUNS_DIR}/1.json {RUNS_DIR}/2.json {RUNS_DIR}/3.json --json bench/spread.json --markdown bench/spread.md",
     ),
 }
-SECTIONED = ("README.md", "docs/performance.md", "docs/exact.md")  # files with generated sections between markers
+SECTIONED = ("README.md", "docs/performance.md", "docs/exact.md", "docs/summary.md")  # files with generated sections between markers
 RESULTS = "docs/results.md"  # written whole
 RENDER_COMMAND = "netsetest bench --render-docs"
 

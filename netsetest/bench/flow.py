@@ -4,6 +4,8 @@ loses nothing, and what the lockstep window costs (roles/flow.py ``ACK_WINDOW``,
 - ``paused``: ``netsetest run paper6`` unpaced (lockstep), recording ``.jsonl.gz``, with its collector
   stopped (SIGSTOP) for a few seconds mid-run and then continued (SIGCONT): the exit code, the steps and
   node-steps judged and lost, the nodes reported missing or rejoined (all must be 0), the wall time.
+- ``records``: the issue's reproduction, ``netsetest run paper6_lossy --steps 3000 --seed 0 --record r.jsonl.gz``
+  and the same recording ``.mcap`` (the slow records), nothing paused: the same figures.
 - ``soak``: unpaced 3000-step paper6 runs, nothing paused, one after another on whatever else loads the
   machine (the soak that failed 2 of 2 before the window): exit code and node-steps lost per run.
 - ``ratio``: the unpaced paper6 lockstep run over Zenoh against the same run in memory (what the
@@ -33,6 +35,8 @@ from netsetest.roles.flow import ACK_STRIDE, ACK_WINDOW, ACK_WINDOW_ENV, UNBOUND
 from netsetest.scenarios import TOPOLOGY_DIR
 
 PAPER6 = TOPOLOGY_DIR / "paper6.toml"
+PAPER6_LOSSY = TOPOLOGY_DIR / "paper6_lossy.toml"  # the issue's reproduction: scheduled losses, a 3000-step record
+RECORD_SUFFIXES = (".jsonl.gz", ".mcap")  # the slow records (gzip, MCAP) that made a collector fall behind
 UNDER_WAY_BYTES = 50_000  # the record (gzip) has grown this much: the run is under way, pause its collector now
 RATIO_REPS = 3  # interleaved repetitions of the ratio's three runs: medians of three
 
@@ -54,11 +58,12 @@ def _collector_of(run_id: str) -> int | None:
     return None
 
 
-def paused_run(tmp: Path, steps: int, pause_s: float, timeout: float = 900.0, seed: int = 0) -> dict:
-    """One unpaced paper6 run whose collector is stopped for ``pause_s`` once the run is under way (0: never)."""
-    run_id = f"flow{os.getpid()}p{int(pause_s * 1000)}s{seed}"
-    record, summary = tmp / f"{run_id}.jsonl.gz", tmp / f"{run_id}.json"
-    cmd = [sys.executable, "-m", "netsetest.cli.main", "run", str(PAPER6), "--steps", str(steps), "--seed", str(seed), "--quiet"]
+def paused_run(tmp: Path, steps: int, pause_s: float, timeout: float = 900.0, seed: int = 0, topology: Path = PAPER6, record_suffix: str = ".jsonl.gz") -> dict:
+    """One unpaced run of ``topology`` (``netsetest run`` as users start it, recording ``record_suffix``) whose
+    collector is stopped for ``pause_s`` once the run is under way (0: never)."""
+    run_id = f"flow{os.getpid()}p{int(pause_s * 1000)}s{seed}{topology.stem}{record_suffix.replace('.', '_')}"
+    record, summary = tmp / f"{run_id}{record_suffix}", tmp / f"{run_id}.json"
+    cmd = [sys.executable, "-m", "netsetest.cli.main", "run", str(topology), "--steps", str(steps), "--seed", str(seed), "--quiet"]
     cmd += ["--record", str(record), "--summary-json", str(summary), "--run-id", run_id]
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
@@ -81,6 +86,8 @@ def paused_run(tmp: Path, steps: int, pause_s: float, timeout: float = 900.0, se
     expected = (steps + 1) * len(s.get("nodes", []))
     record.unlink(missing_ok=True)  # a 3000-step record is large: the temporary directory holds one at a time
     return {
+        "topology": topology.stem,
+        "record": record_suffix,
         "steps": steps,
         "seed": seed,
         "load_before": os.getloadavg()[0],
@@ -147,47 +154,53 @@ def lockstep_ratio(steps: int | None, reps: int = RATIO_REPS) -> dict:
     return out
 
 
+def _logged(r: dict) -> dict:
+    _log(f"  exit {r['exit_code']}, node-steps lost {r['node_steps_lost']}, missing {r['nodes_missing']}, rejoined {r['nodes_rejoined']}, {r['wall_s']:.1f} s")
+    return r
+
+
 def flow_figures(cfg: dict, tmp: Path) -> dict:
-    pauses = cfg.get("flow_pauses_s", (3.0, 10.0))
-    out: dict = {"ack_window": ACK_WINDOW, "ack_stride": ACK_STRIDE, "paused": []}
-    for pause in pauses:
+    out: dict = {"ack_window": ACK_WINDOW, "ack_stride": ACK_STRIDE, "paused": [], "records": [], "soak": []}
+    for pause in cfg["flow_pauses_s"]:
         _log(f"collector paused {pause:g} s in an unpaced {cfg['flow_steps']}-step paper6 run")
-        r = paused_run(tmp, cfg["flow_steps"], pause)
-        _log(
-            f"  exit {r['exit_code']}, node-steps lost {r['node_steps_lost']}, missing {r['nodes_missing']}, rejoined {r['nodes_rejoined']}, {r['wall_s']:.1f} s"
-        )
-        out["paused"].append(r)
-    out["soak"] = []
+        out["paused"].append(_logged(paused_run(tmp, cfg["flow_steps"], pause)))
+    for suffix in RECORD_SUFFIXES:
+        _log(f"an unpaced {cfg['flow_record_steps']}-step paper6_lossy run recording {suffix}")
+        out["records"].append(_logged(paused_run(tmp, cfg["flow_record_steps"], 0.0, topology=PAPER6_LOSSY, record_suffix=suffix)))
     for seed in range(cfg["flow_soak_runs"]):
         _log(f"soak: an unpaced {cfg['flow_soak_steps']}-step paper6 run, seed {seed}")
-        r = paused_run(tmp, cfg["flow_soak_steps"], 0.0, seed=seed)
-        _log(
-            f"  exit {r['exit_code']}, node-steps lost {r['node_steps_lost']}, missing {r['nodes_missing']}, rejoined {r['nodes_rejoined']}, {r['wall_s']:.1f} s"
-        )
-        out["soak"].append(r)
+        out["soak"].append(_logged(paused_run(tmp, cfg["flow_soak_steps"], 0.0, seed=seed)))
     _log("the unpaced paper6 lockstep ratio (Zenoh / in memory), with the window and without it, interleaved")
     q = out["ratio"] = lockstep_ratio(cfg.get("flow_ratio_steps"))
     _log(f"  ratio with the window {q['ratio_window']}, without {q['ratio_unbounded']}: the window's cost {q['window_cost']}")
     return out
 
 
+def _clean(r: dict) -> bool:
+    """Exit 0, every node-step judged, no node reported missing or rejoined: what the issue's targets ask."""
+    return r["exit_code"] == 0 and r["node_steps_lost"] == 0 and not r["nodes_missing"] and not r["nodes_rejoined"]
+
+
 def flow_markdown(res: dict) -> str:
     f = lambda v, spec=".2f": "—" if v is None else format(v, spec)  # noqa: E731  # a one-line local helper
     lines = [
         f"The vehicle publishes step k + {res['ack_window']} only once the collector has acknowledged step k (every "
-        f"{res['ack_stride']} steps). A collector stopped mid-run (SIGSTOP, then SIGCONT), recording gzip:",
+        f"{res['ack_stride']} steps). Unpaced lockstep runs (`netsetest run` as users start it): the collector stopped "
+        "mid-run (SIGSTOP, then SIGCONT), and the slow records:",
         "",
-        "| pause | steps | exit | node-steps lost | nodes missing | nodes rejoined | collector drops | wall |",
-        "|---|---|---|---|---|---|---|---|",
+        "| run | record | collector paused | exit | node-steps lost | nodes missing | nodes rejoined | collector drops | wall |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
-    for r in res["paused"]:
+    for r in [*res["paused"], *res.get("records", [])]:
         drops = ", ".join(f"{k} {v}" for k, v in r["collector_drops"].items()) or "none"
+        paused = "no" if not r["pause_s"] else "run ended first" if r["paused_at_s"] is None else f"{r['pause_s']:g} s from {r['paused_at_s']:.1f} s"
         lines.append(
-            f"| {r['pause_s']:g} s | {r['steps']} | {r['exit_code']} | {r['node_steps_lost']} | {r['nodes_missing']} | {r['nodes_rejoined']} | {drops} | {f(r['wall_s'], '.1f')} s |"
+            f"| {r['topology']}, {r['steps']} steps | {r['record']} | {paused} "
+            f"| {r['exit_code']} | {r['node_steps_lost']} | {r['nodes_missing']} | {r['nodes_rejoined']} | {drops} | {f(r['wall_s'], '.1f')} s |"
         )
     soak = res.get("soak", [])
     if soak:
-        clean = sum(r["exit_code"] == 0 and r["node_steps_lost"] == 0 and not r["nodes_missing"] and not r["nodes_rejoined"] for r in soak)
+        clean = sum(map(_clean, soak))
         loads = ", ".join(f(r["load_before"], ".1f") for r in soak)
         lines += [
             "",
