@@ -250,7 +250,7 @@ class Collector:
         self.open_node_steps = 0  # states held plus one per open step's truth copies: what the budget bounds
         self.peak_open_node_steps = 0
         self.overloaded_steps = 0  # steps of which we lost something ourselves: past the budget, or our full inbox
-        self.overloaded_node_steps = 0  # published node-steps not judged for that reason
+        self.overloaded_node_steps = 0  # node-steps not judged for that reason (each in no other count)
         self.acked = -1  # the newest truth acknowledged to the vehicle (lockstep)
         # what the bus's full inbox dropped before we saw it: (step, node; None for a truth), noted on the
         # transport's thread (a deque's append is atomic), taken into ``lost`` (step → nodes) on ours
@@ -306,11 +306,13 @@ class Collector:
             self._close_ready()
             self._acknowledge()
 
-    def _overflowed(self, msg: Message) -> None:
-        """The bus dropped ``msg`` for us (inbox full): our loss, never the sender's silence.  Transport thread: note only."""
-        if isinstance(msg, NodeState):
+    def _overflowed(self, key: str, msg: Message) -> None:
+        """The bus dropped ``msg`` (on ``key``) for us (inbox full): our loss, never the sender's silence.  Only
+        on its sender's own key: an insider flooding its state key with another node's states or with truths
+        must not make that node's silence, or a truth never sent, read as our loss.  Transport thread: note only."""
+        if isinstance(msg, NodeState) and key == keys.node_state(self.run, msg.node):
             self._lost_notes.append((msg.step, msg.node))
-        elif isinstance(msg, Truth):
+        elif isinstance(msg, Truth) and key == keys.truth(self.run):
             self._lost_notes.append((msg.step, None))
 
     def _take_lost(self, everything: bool = False) -> None:
@@ -537,6 +539,9 @@ class Collector:
 
     def _close(self, k: int) -> None:
         """Judge step k, stream it to the sink, add it to the totals and forget it."""
+        if not self.truth.get(k) and None in self.lost.get(k, ()):
+            self._close_overloaded(k)  # our inbox dropped its truth: nothing of it can be judged, our trouble
+            return
         tr = self._judged_truth(k)
         judged, contested = {}, set()
         for i in self.sc.ids:
@@ -608,14 +613,16 @@ class Collector:
         self.open_node_steps -= len(self.truth.pop(k, [])) + sum(map(len, held.values()))
 
     def _close_overloaded(self, k: int) -> None:
-        """Close step k unjudged, past the memory budget: nothing recorded, no node counted missing (a node
-        heard at k is heard: it is never reported missing or rejoined for it); the next step's inputs are
-        then not judged, so its node-steps are outside the guarantee, never covered by it."""
+        """Close step k unjudged, past the memory budget or without the truth our inbox dropped: nothing
+        recorded, every node-step of it counted as the collector's overload and nowhere else (we closed it
+        before we could tell who published: no node is counted missing for it; a node heard at k is heard,
+        never reported missing or rejoined for it); the next step's inputs are then not judged, so its
+        node-steps are outside the guarantee, never covered by it."""
         copies, lost = self.states.get(k, {}), self.lost.get(k, set())
         for i in self.sc.ids:
             if copies.get(i) or i in lost:
                 self.totals[i].last_heard = k
-                self.overloaded_node_steps += 1
+        self.overloaded_node_steps += len(self.sc.ids)
         self.overloaded_steps += 1
         self._forget(k)
         self.prev_truth, self.prev_checks = None, NO_CHECKS
