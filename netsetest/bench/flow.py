@@ -15,7 +15,9 @@ loses nothing, and what the lockstep window costs (roles/flow.py ``ACK_WINDOW``,
   ratios, measured side by side in one run.  Both arms send the collector's acknowledgments (one small
   message per ``ACK_STRIDE`` steps, the collector does not know the vehicle's window): the difference is
   what holding the vehicle costs, the acknowledgments' own (a Ready decoded by each role every other step)
-  is in both.
+  is in both.  The stepping time is the collector's (its first to its last step checked, as the performance
+  part times it): a run is done when its steps are judged, so a collector the unbounded vehicle left behind
+  lengthens it by the backlog it still has to take in.
 """
 
 from __future__ import annotations
@@ -125,7 +127,9 @@ def window_setting(value: str | None) -> Iterator[None]:
 def lockstep_ratio(steps: int | None, reps: int = RATIO_REPS) -> dict:
     """The unpaced paper6 lockstep run over Zenoh against in memory, with the window (the default) and
     without it (``NETSETEST_ACK_WINDOW=unbounded``): the same launcher ``netsetest run`` uses, the three
-    runs interleaved ``reps`` times so that the machine's load falls on each alike; medians."""
+    runs interleaved ``reps`` times so that the machine's load falls on each alike, the two Zenoh runs in
+    turn first (a run right after another may pay for its predecessor's teardown); medians, and the load
+    average before each repetition (the spread of the repetitions is the figure's noise)."""
     from netsetest.bench.zenoh_runs import observed_lockstep
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
@@ -134,23 +138,26 @@ def lockstep_ratio(steps: int | None, reps: int = RATIO_REPS) -> dict:
     mem: list[float] = []
     zen: dict[str, list[float | None]] = {"window": [], "unbounded": []}
     codes: dict[str, list[int]] = {"window": [], "unbounded": []}
-    for _ in range(reps):
+    loads: list[float] = []
+    arms = (("window", None), ("unbounded", UNBOUNDED))
+    for rep in range(reps):
+        loads.append(os.getloadavg()[0])
         t0 = time.perf_counter()
         run_inmemory(sc, "paper", "scheduled", 0)
         mem.append(time.perf_counter() - t0)
-        for case, setting in (("window", None), ("unbounded", UNBOUNDED)):
+        for case, setting in arms if rep % 2 == 0 else arms[::-1]:
             with window_setting(setting):
                 obs = observed_lockstep(PAPER6, steps)
             zen[case].append(obs["stepping_s"])
             codes[case].append(obs["usage"]["run"]["exit_code"])
-    out: dict = {"steps": sc.steps, "reps": reps, "inmemory_s": mem}
+    out: dict = {"steps": sc.steps, "reps": reps, "load_before": loads, "inmemory_s": mem}
     for case, times in zen.items():
-        timed = [z for z in times if z is not None]  # a run that failed has no stepping time
         out[f"zenoh_{case}_s"] = times
         out[f"zenoh_{case}_exit_codes"] = codes[case]
-        out[f"ratio_{case}"] = statistics.median(timed) / statistics.median(mem) if timed else None
+        z = _median(times)
+        out[f"ratio_{case}"] = None if z is None else z / statistics.median(mem)
     w, u = out["ratio_window"], out["ratio_unbounded"]
-    out["window_cost"] = None if w is None or u is None else w - u  # in units of the in-memory run's time
+    out["window_cost"] = None if w is None or u is None else w - u  # the medians' ratios' difference: in-memory run times
     return out
 
 
@@ -174,6 +181,11 @@ def flow_figures(cfg: dict, tmp: Path) -> dict:
     q = out["ratio"] = lockstep_ratio(cfg.get("flow_ratio_steps"))
     _log(f"  ratio with the window {q['ratio_window']}, without {q['ratio_unbounded']}: the window's cost {q['window_cost']}")
     return out
+
+
+def _median(xs: list[float | None]) -> float | None:
+    timed = [x for x in xs if x is not None]  # a run that failed has no stepping time
+    return statistics.median(timed) if timed else None
 
 
 def _clean(r: dict) -> bool:
@@ -211,11 +223,20 @@ def flow_markdown(res: dict) -> str:
     lines += [
         "",
         f"What the window costs: the unpaced paper6 lockstep run ({q['steps']} steps) over Zenoh, with the window and without it "
-        f"({ACK_WINDOW_ENV}={UNBOUNDED}), against the same run in memory, the three interleaved, medians of {q['reps']}:",
+        f"({ACK_WINDOW_ENV}={UNBOUNDED}), against the same run in memory, the three interleaved, {q['reps']} times (the ratio: median over median):",
         "",
-        "| Zenoh / in memory, with the window | without it | the window's cost (difference) |",
-        "|---|---|---|",
-        f"| {f(q['ratio_window'])}× | {f(q['ratio_unbounded'])}× | {f(q['window_cost'], '+.2f')}× |",
+        "| | load average | in memory | Zenoh, with the window | without it | ratio with | ratio without |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for n, (m, w, u) in enumerate(zip(q["inmemory_s"], q["zenoh_window_s"], q["zenoh_unbounded_s"])):
+        rw, ru = (None if z is None else z / m for z in (w, u))
+        lines.append(f"| run {n + 1} | {f(q['load_before'][n], '.1f')} | {f(m)} s | {f(w)} s | {f(u)} s | {f(rw)}× | {f(ru)}× |")
+    lines += [
+        f"| **medians** | | {f(_median(q['inmemory_s']))} s | {f(_median(q['zenoh_window_s']))} s | {f(_median(q['zenoh_unbounded_s']))} s "
+        f"| **{f(q['ratio_window'])}×** | **{f(q['ratio_unbounded'])}×** |",
+        "",
+        f"The window's cost, the difference of the two medians: {f(q['window_cost'], '+.2f')}× the in-memory run's time "
+        "(a difference smaller than the spread between repetitions is no measurable cost).",
         "",
     ]
     return "\n".join(lines)
