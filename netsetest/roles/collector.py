@@ -28,7 +28,9 @@ is waiting (:meth:`close_ready`), keeping the open steps up to ``budget`` node-s
 (``OPEN_NODE_STEPS_BUDGET``); past it the oldest steps close unjudged, counted as the collector's
 overload (``steps_overloaded``, ``node_steps_overloaded``; the verdict says *collector overloaded*).  A
 message its full inbox dropped all the same (the bus tells it: ``Bus.overflow_listeners``) counts there
-too.  Neither is ever a node's silence: a node that published is never reported missing or rejoined.
+too; so does a truth or state more than ``WINDOW`` steps past the newest truth once its inbox has turned
+messages away (a collector stopped longer than its inbox holds: :meth:`_catch_up` closes the steps it
+lost and judges on).  Neither is ever a node's silence: a node that published is never reported missing or rejoined.
 
 Defences (the network may be open, or a credentialed peer may lie), each counted by reason:
 
@@ -354,8 +356,10 @@ class Collector:
             self.drops["truth-after-close"] += 1
             return
         if k > max(self.head, self.closed) + WINDOW:
-            self.drops["truth-ahead"] += 1  # never allocate per a step number we were told
-            return
+            if not self._behind() or self._inconsistent(msg):
+                self.drops["truth-ahead"] += 1  # never allocate per a step number we were told
+                return
+            self._catch_up(k)
         why = self._inconsistent(msg)  # checked again at close, when the previous truth is surely known
         if why:
             self.drops[why] += 1
@@ -380,6 +384,8 @@ class Collector:
             return
         if k > max(self.head, self.closed) + WINDOW:
             self.drops["state-ahead"] += 1
+            if self._behind():  # its truth is still to come (we lost the ones between): ours to count, not its silence
+                self._lost_notes.append((k, msg.node))
             return
         copies = self.states.setdefault(k, {}).setdefault(msg.node, [])
         if any(_same_set(msg, c) for c in copies):
@@ -389,6 +395,25 @@ class Collector:
         else:
             copies.append(msg)
             self._held(1)
+
+    def _behind(self) -> bool:
+        """Real time, and our own inbox turned messages away: the clock may have gone on more than WINDOW
+        steps past the newest truth we have (a collector stopped, or far behind)."""
+        return self.realtime and self._overloaded()
+
+    def _catch_up(self, k: int) -> None:
+        """Real time: the truth of step k came more than WINDOW steps past the newest we have, after our inbox
+        turned messages away (checked, and never otherwise: a truth so far ahead is then not the vehicle's).
+        The truths between are ones we lost: close the steps before k − WINDOW, judged where we hold their
+        truth, else as our overload, so that step k is taken in and judging goes on (before, every later truth
+        was 'ahead' too: the collector judged nothing more and reported every node missing)."""
+        self._take_lost()
+        while self.closed < k - WINDOW:
+            j = self.closed + 1
+            if self.truth.get(j):
+                self._close(j)
+            else:
+                self._close_overloaded(j)
 
     def _on_end(self, key: str, msg: End) -> None:
         if key != keys.end(self.run) or msg.steps != self.sc.steps:

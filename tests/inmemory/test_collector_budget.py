@@ -189,3 +189,38 @@ def test_an_insider_flooding_its_own_state_key_cannot_pass_a_silent_node_off_as_
     assert s.node(3).missing_steps == 1 and s.node(3).missing_from == K and s.node(3).rejoined_at == K + 1
     assert all(r.missing_steps == 0 for r in s.nodes if r.id != 3) and s.nodes_missing == []
     _partition_holds(s)
+
+
+LONG_PAUSE_STEPS = 2 * MAX_PER_KEY  # a real-time collector stopped this many steps (12.8 s at τs = 0.1 s)
+
+
+def test_a_realtime_collector_stopped_longer_than_its_inbox_catches_up_and_blames_no_node() -> None:
+    """Real time: the collector stopped for LONG_PAUSE_STEPS steps.  Its inbox kept MAX_PER_KEY steps per
+    key and dropped the rest; when it came back, the next truth was more than WINDOW steps past the newest
+    it had.  Before, it dropped that truth and every later one as 'ahead' (and the states with them): it
+    judged nothing more, and reported every node missing from there.  Now what it lost is its overload,
+    and it judges the steps after the pause again."""
+    from netsetest.roles.collector import WINDOW
+
+    steps = 40 + LONG_PAUSE_STEPS + 2 * WINDOW
+    sc = load_topology(ROOT / "topologies" / "paper6.toml", None, steps)
+    recorded = MemoryBus()
+    sent: list[tuple[str, Message]] = []
+    recorded.subscribe("netsetest/**", lambda key, msg: sent.append((key, msg)) if isinstance(msg, Truth | NodeState) else None)
+    run_inmemory(sc, bus=recorded)
+    bus = MemoryBus()
+    collector = Collector(sc, bus, "mem", None, realtime=True)
+    paused = range(40, 40 + LONG_PAUSE_STEPS)
+    for k in range(steps + 1):
+        for key, msg in sent:
+            if msg.step == k:
+                bus.publish(key, msg)
+        if k not in paused:
+            while bus.pump():
+                collector.close_ready()
+    assert bus.dropped["inbox-full"] > 0
+    s = collector.finish(run_meta(sc, "inmemory", "realtime", "paper", "scheduled", 0, "mem"))
+    assert s.nodes_missing == [] and s.nodes_rejoined == [] and all(r.missing_steps == 0 for r in s.nodes), [(r.id, r.missing_steps) for r in s.nodes]
+    assert s.steps_completed == steps and 0 < s.steps_overloaded <= LONG_PAUSE_STEPS - MAX_PER_KEY + 1, s.steps_overloaded
+    assert s.node_steps_evaluated >= (steps + 1 - LONG_PAUSE_STEPS) * len(sc.ids), "the steps after the pause not judged"
+    _partition_holds(s)
