@@ -577,7 +577,7 @@ class Collector:
                     contested.add(i)
         copies = self.states.get(k, {})
         lost = self.lost.get(k, set())
-        self.overloaded_steps += bool(lost)
+        overloaded_before = self.overloaded_node_steps
         verdict = self.judge.step(StepInputs(k, tr, self.prev_truth, judged, frozenset(contested), copies), self.prev_checks)
         for i in self.sc.ids:
             t, st, v = self.totals[i], judged.get(i), verdict.nodes[i]
@@ -606,6 +606,8 @@ class Collector:
             self._add(t, k, st, v, bounds)
             if tr is not None and v.containment is not None:  # judged rows only: a contested copy may be forged
                 t.fdi.add(k, fdi, tr.faults[str(i)], self.sc.fault_tolerance, v.cone.ok)
+        # a step of which we lost a node-step ourselves (a note of a message that was not the one judged is none)
+        self.overloaded_steps += self.overloaded_node_steps > overloaded_before
         if tr is not None and self.car is not None:
             self.car.add(self.sc, tr)
         if tr is not None:

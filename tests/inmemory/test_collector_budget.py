@@ -95,6 +95,7 @@ def _partition_holds(s: RunSummary) -> None:
     per_node = [r.steps_reported + r.steps_rejected + r.missing_steps for r in s.nodes]
     assert sum(per_node) + s.node_steps_overloaded == (s.steps_completed + 1) * len(s.nodes), (per_node, s.node_steps_overloaded)
     assert s.node_steps_reported == sum(r.steps_reported for r in s.nodes) >= s.node_steps_evaluated + s.node_steps_contested
+    assert s.steps_overloaded <= s.node_steps_overloaded, "a step called overloaded with no node-step lost to it"
 
 
 @functools.cache

@@ -358,3 +358,4 @@ def test_insider_flooding_its_own_state_key_in_real_time_blames_no_honest_node()
     assert s["drops"]["collector"].get("state-not-from-input", 0) > 0, s["drops"]  # the forged copies, seen and dropped
     counted = sum(n["steps_reported"] + n["steps_rejected"] + n["missing_steps"] for n in s["nodes"]) + s["node_steps_overloaded"]
     assert counted == (s["steps_completed"] + 1) * len(s["nodes"]) and s["steps_completed"] == steps, s
+    assert s["steps_overloaded"] <= s["node_steps_overloaded"], "a step called overloaded with no node-step lost to it"
