@@ -7,7 +7,9 @@ process of its own.
   and whether every node is still there at the end.  Secured, the attacker holds node 2's certificate (an
   insider): the router's access control lets it publish on node 2's own keys only, so its input-key flood
   never reaches a role.  The payload is an input of node 2 with NaN values (invalid: it once filled the
-  node's inbox and lost the node for the whole run) or a schema-valid state of a far step.
+  node's inbox and lost the node for the whole run) or a schema-valid state of a far step (``state``), or
+  forged states of node 2 for every step of the run in turn (``state-run``: the copies the collector must
+  reject beside node 2's own, its inbox full of them).
 - ``crash``: the insider sends the payloads that once crashed every role that received them (a msgpack
   string of invalid UTF-8, an array nested 1000 deep, a schema-valid ``Ready`` of another node on its own
   ready key, a huge finite number where a square is taken), on node 2's own keys; figure: how many roles
@@ -50,6 +52,7 @@ class RunResult:
     nodes_missing: list[int]
     drops: dict
     sent: int
+    summary: dict  # the run's --summary-json ({} if it wrote none)
 
 
 def _payloads(kind: str, run_id: str, steps: int) -> list[tuple[str, bytes]]:
@@ -62,9 +65,12 @@ def _payloads(kind: str, run_id: str, steps: int) -> list[tuple[str, bytes]]:
     if kind == "input":
         raw = {"v": 1, "type": "input", "step": 1, "node": VICTIM, "y": math.nan, "gamma": 1.0}
         return [(keys.node_input(run_id, VICTIM), msgspec.msgpack.encode(raw))]
-    if kind == "state":
-        state = NodeState(step=steps + 5, node=VICTIM, xhat=[0.0] * 3, P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
-        return [(keys.node_state(run_id, VICTIM), encode(state))]
+    if kind in ("state", "state-run"):  # a far step's state, or one (forged, not from the true input) per step of the run
+        forged = [
+            NodeState(step=k, node=VICTIM, xhat=[0.0] * 3, P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
+            for k in ([steps + 5] if kind == "state" else range(1, steps + 1))
+        ]
+        return [(keys.node_state(run_id, VICTIM), encode(st)) for st in forged]
     if kind == "crash":
         own = keys.node_state(run_id, VICTIM)
         ready = keys.ready_of(run_id, keys.role_name("node", VICTIM))
@@ -95,7 +101,7 @@ def attacker_main(argv: list[str] | None = None) -> int:
     from netsetest.bus.zenoh_bus import open_session, zenoh_config
 
     p = argparse.ArgumentParser(prog="netsetest.bench.attacks")
-    p.add_argument("--kind", choices=["input", "state", "crash"], required=True)
+    p.add_argument("--kind", choices=["input", "state", "state-run", "crash"], required=True)
     p.add_argument("--run-id", required=True)
     p.add_argument("--steps", type=int, required=True)
     p.add_argument("--rate", type=float, required=True)
@@ -134,8 +140,8 @@ def attacker_main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def attacked_run(topology: Path, steps: int, secured: bool, kind: str | None, rate: float, pace: float) -> RunResult:
-    """``netsetest run`` (paced so the attack overlaps the whole run), attacked by ``kind`` (None: not)."""
+def attacked_run(topology: Path, steps: int, secured: bool, kind: str | None, rate: float, pace: float, clock: str = "lockstep") -> RunResult:
+    """``netsetest run`` (paced so the attack overlaps the whole run; ``clock`` its clock), attacked by ``kind`` (None: not)."""
     with tempfile.TemporaryDirectory(prefix="nsattack-") as tmpd:
         summary = Path(tmpd) / "summary.json"
         run_id = f"attack{int(time.time() * 1000) % 10**9}"
@@ -153,6 +159,8 @@ def attacked_run(topology: Path, steps: int, secured: bool, kind: str | None, ra
             run_id,
             "--summary-json",
             str(summary),
+            "--clock",
+            clock,
             *([] if secured else ["--insecure"]),
         ]
         t0 = time.perf_counter()
@@ -211,7 +219,7 @@ def attacked_run(topology: Path, steps: int, secured: bool, kind: str | None, ra
             except (subprocess.TimeoutExpired, ValueError, KeyError, IndexError):
                 a.kill()
         s = json.loads(summary.read_text()) if summary.exists() else {}
-        return RunResult(code, wall, steps / wall, s.get("nodes_missing", []), s.get("drops", {}), sent)
+        return RunResult(code, wall, steps / wall, s.get("nodes_missing", []), s.get("drops", {}), sent, s)
 
 
 def flood(topology: Path, steps: int, rate: float, target: str, secured: bool, pace: float = 0.0) -> dict:

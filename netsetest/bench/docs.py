@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from netsetest.bench.exact_cost import exact_cost_markdown
+from netsetest.bench.flow import flow_markdown
 from netsetest.bench.network import network_markdown, network_summary_markdown
 from netsetest.bench.node_budget import node_markdown
 from netsetest.bench.plant import plant_markdown, plant_summary_markdown
@@ -81,6 +82,13 @@ PARTS: dict[str, Part] = {
     ),
     "view": Part("Looking at a run: the live view's cost and lag, the report page in a browser", "bench/view.json", "view", view_markdown, _VIEW),
     "view-summary": Part("The live view and the report page against their targets", "bench/view.json", "view", view_summary_markdown, _VIEW, in_results=False),
+    "flow": Part(
+        "A collector that falls behind",
+        "bench/flow.json",
+        "flow",
+        flow_markdown,
+        "netsetest bench --only flow --json bench/flow.json --markdown bench/flow.md",
+    ),
     "performance": Part(
         "Performance",
         "bench/results.json",
@@ -103,7 +111,7 @@ PARTS: dict[str, Part] = {
         f"netsetest bench --spread {RUNS_DIR}/1.json {RUNS_DIR}/2.json {RUNS_DIR}/3.json --json bench/spread.json --markdown bench/spread.md",
     ),
 }
-SECTIONED = ("README.md", "docs/performance.md", "docs/exact.md", "docs/records.md")  # files with generated sections between markers
+SECTIONED = ("README.md", "docs/performance.md", "docs/exact.md", "docs/records.md", "docs/summary.md")  # files with generated sections between markers
 RESULTS = "docs/results.md"  # written whole
 RENDER_COMMAND = "netsetest bench --render-docs"
 

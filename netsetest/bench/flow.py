@@ -1,18 +1,28 @@
 """The benchmark's flow-control figures (``netsetest bench --only flow``): a collector that falls behind
-loses nothing, and what the lockstep window costs (roles/vehicle.py ``ACK_WINDOW``, issue 33).
+loses nothing, and what the lockstep window costs (roles/flow.py ``ACK_WINDOW``, issue 33).
 
 - ``paused``: ``netsetest run paper6`` unpaced (lockstep), recording ``.jsonl.gz``, with its collector
   stopped (SIGSTOP) for a few seconds mid-run and then continued (SIGCONT): the exit code, the steps and
   node-steps judged and lost, the nodes reported missing or rejoined (all must be 0), the wall time.
+- ``records``: the issue's reproduction, ``netsetest run paper6_lossy --steps 3000 --seed 0 --record r.jsonl.gz``
+  and the same recording ``.mcap`` (the slow records), nothing paused: the same figures.
 - ``soak``: unpaced 3000-step paper6 runs, nothing paused, one after another on whatever else loads the
   machine (the soak that failed 2 of 2 before the window): exit code and node-steps lost per run.
-- ``ratio``: the unpaced paper6 lockstep run over Zenoh against the same run in memory, interleaved,
-  medians of three (what the performance part's ``zenoh.ratio`` measures, with the same functions), beside
-  that part's committed figure measured before the window existed: the window's cost is their difference.
+- ``ratio``: the unpaced paper6 lockstep run over Zenoh against the same run in memory (what the
+  performance part's ``zenoh.ratio`` measures, with the same functions), with the window and without it
+  (``NETSETEST_ACK_WINDOW=unbounded``, roles/flow.py: the same ``netsetest run`` launcher, the vehicle never
+  held), the three runs interleaved, medians of three: the window's cost is the difference of the two
+  ratios, measured side by side in one run.  Both arms send the collector's acknowledgments (one small
+  message per ``ACK_STRIDE`` steps, the collector does not know the vehicle's window): the difference is
+  what holding the vehicle costs, the acknowledgments' own (a Ready decoded by each role every other step)
+  is in both.  The stepping time is the collector's (its first to its last step checked, as the performance
+  part times it): a run is done when its steps are judged, so a collector the unbounded vehicle left behind
+  lengthens it by the backlog it still has to take in.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -20,14 +30,17 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
-from netsetest.roles.vehicle import ACK_STRIDE, ACK_WINDOW
+from netsetest.roles.flow import ACK_STRIDE, ACK_WINDOW, ACK_WINDOW_ENV, UNBOUNDED
 from netsetest.scenarios import TOPOLOGY_DIR
 
 PAPER6 = TOPOLOGY_DIR / "paper6.toml"
+PAPER6_LOSSY = TOPOLOGY_DIR / "paper6_lossy.toml"  # the issue's reproduction: scheduled losses, a 3000-step record
+RECORD_SUFFIXES = (".jsonl.gz", ".mcap")  # the slow records (gzip, MCAP) that made a collector fall behind
 UNDER_WAY_BYTES = 50_000  # the record (gzip) has grown this much: the run is under way, pause its collector now
-COMMITTED_PERFORMANCE = Path(__file__).resolve().parents[2] / "bench" / "results.json"  # read, never written here
+RATIO_REPS = 3  # interleaved repetitions of the ratio's three runs: medians of three
 
 
 def _log(msg: str) -> None:
@@ -47,11 +60,12 @@ def _collector_of(run_id: str) -> int | None:
     return None
 
 
-def paused_run(tmp: Path, steps: int, pause_s: float, timeout: float = 900.0, seed: int = 0) -> dict:
-    """One unpaced paper6 run whose collector is stopped for ``pause_s`` once the run is under way (0: never)."""
-    run_id = f"flow{os.getpid()}p{int(pause_s * 1000)}s{seed}"
-    record, summary = tmp / f"{run_id}.jsonl.gz", tmp / f"{run_id}.json"
-    cmd = [sys.executable, "-m", "netsetest.cli.main", "run", str(PAPER6), "--steps", str(steps), "--seed", str(seed), "--quiet"]
+def paused_run(tmp: Path, steps: int, pause_s: float, timeout: float = 900.0, seed: int = 0, topology: Path = PAPER6, record_suffix: str = ".jsonl.gz") -> dict:
+    """One unpaced run of ``topology`` (``netsetest run`` as users start it, recording ``record_suffix``) whose
+    collector is stopped for ``pause_s`` once the run is under way (0: never)."""
+    run_id = f"flow{os.getpid()}p{int(pause_s * 1000)}s{seed}{topology.stem}{record_suffix.replace('.', '_')}"
+    record, summary = tmp / f"{run_id}{record_suffix}", tmp / f"{run_id}.json"
+    cmd = [sys.executable, "-m", "netsetest.cli.main", "run", str(topology), "--steps", str(steps), "--seed", str(seed), "--quiet"]
     cmd += ["--record", str(record), "--summary-json", str(summary), "--run-id", run_id]
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
@@ -74,6 +88,8 @@ def paused_run(tmp: Path, steps: int, pause_s: float, timeout: float = 900.0, se
     expected = (steps + 1) * len(s.get("nodes", []))
     record.unlink(missing_ok=True)  # a 3000-step record is large: the temporary directory holds one at a time
     return {
+        "topology": topology.stem,
+        "record": record_suffix,
         "steps": steps,
         "seed": seed,
         "load_before": os.getloadavg()[0],
@@ -90,68 +106,113 @@ def paused_run(tmp: Path, steps: int, pause_s: float, timeout: float = 900.0, se
     }
 
 
-def lockstep_ratio(steps: int | None) -> dict:
-    """The unpaced paper6 lockstep run over Zenoh against in memory (medians of three, interleaved)."""
+@contextlib.contextmanager
+def window_setting(value: str | None) -> Iterator[None]:
+    """``$NETSETEST_ACK_WINDOW`` set to ``value`` (None: unset) while the block runs a launch from this
+    process (the fork server, and so the vehicle, inherits the environment the launcher starts it with)."""
+    before = os.environ.get(ACK_WINDOW_ENV)
+    try:
+        if value is None:
+            os.environ.pop(ACK_WINDOW_ENV, None)
+        else:
+            os.environ[ACK_WINDOW_ENV] = value
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(ACK_WINDOW_ENV, None)
+        else:
+            os.environ[ACK_WINDOW_ENV] = before
+
+
+def lockstep_ratio(steps: int | None, reps: int = RATIO_REPS) -> dict:
+    """The unpaced paper6 lockstep run over Zenoh against in memory, with the window (the default) and
+    without it (``NETSETEST_ACK_WINDOW=unbounded``): the same launcher ``netsetest run`` uses, the three
+    runs interleaved ``reps`` times so that the machine's load falls on each alike, the two Zenoh runs in
+    turn first (a run right after another may pay for its predecessor's teardown); medians, and the load
+    average before each repetition (the spread of the repetitions is the figure's noise)."""
     from netsetest.bench.zenoh_runs import observed_lockstep
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
 
     sc = load_topology(PAPER6, "nsnim", steps)
-    mem, zen = [], []
-    for _ in range(3):
+    mem: list[float] = []
+    zen: dict[str, list[float | None]] = {"window": [], "unbounded": []}
+    codes: dict[str, list[int]] = {"window": [], "unbounded": []}
+    loads: list[float] = []
+    arms = (("window", None), ("unbounded", UNBOUNDED))
+    for rep in range(reps):
+        loads.append(os.getloadavg()[0])
         t0 = time.perf_counter()
         run_inmemory(sc, "paper", "scheduled", 0)
         mem.append(time.perf_counter() - t0)
-        zen.append(observed_lockstep(PAPER6, steps)["stepping_s"])
-    before = None
-    if COMMITTED_PERFORMANCE.exists():
-        before = json.loads(COMMITTED_PERFORMANCE.read_text()).get("zenoh", {}).get("ratio")
-    timed = [z for z in zen if z is not None]  # a run that failed has no stepping time
-    ratio = statistics.median(timed) / statistics.median(mem) if timed else None
-    return {"steps": sc.steps, "inmemory_s": mem, "zenoh_stepping_s": zen, "ratio": ratio, "ratio_before_window": before}
+        for case, setting in arms if rep % 2 == 0 else arms[::-1]:
+            with window_setting(setting):
+                obs = observed_lockstep(PAPER6, steps)
+            zen[case].append(obs["stepping_s"])
+            codes[case].append(obs["usage"]["run"]["exit_code"])
+    out: dict = {"steps": sc.steps, "reps": reps, "load_before": loads, "inmemory_s": mem}
+    for case, times in zen.items():
+        out[f"zenoh_{case}_s"] = times
+        out[f"zenoh_{case}_exit_codes"] = codes[case]
+        z = _median(times)
+        out[f"ratio_{case}"] = None if z is None else z / statistics.median(mem)
+    w, u = out["ratio_window"], out["ratio_unbounded"]
+    out["window_cost"] = None if w is None or u is None else w - u  # the medians' ratios' difference: in-memory run times
+    return out
+
+
+def _logged(r: dict) -> dict:
+    _log(f"  exit {r['exit_code']}, node-steps lost {r['node_steps_lost']}, missing {r['nodes_missing']}, rejoined {r['nodes_rejoined']}, {r['wall_s']:.1f} s")
+    return r
 
 
 def flow_figures(cfg: dict, tmp: Path) -> dict:
-    pauses = cfg.get("flow_pauses_s", (3.0, 10.0))
-    out: dict = {"ack_window": ACK_WINDOW, "ack_stride": ACK_STRIDE, "paused": []}
-    for pause in pauses:
+    out: dict = {"ack_window": ACK_WINDOW, "ack_stride": ACK_STRIDE, "paused": [], "records": [], "soak": []}
+    for pause in cfg["flow_pauses_s"]:
         _log(f"collector paused {pause:g} s in an unpaced {cfg['flow_steps']}-step paper6 run")
-        r = paused_run(tmp, cfg["flow_steps"], pause)
-        _log(
-            f"  exit {r['exit_code']}, node-steps lost {r['node_steps_lost']}, missing {r['nodes_missing']}, rejoined {r['nodes_rejoined']}, {r['wall_s']:.1f} s"
-        )
-        out["paused"].append(r)
-    out["soak"] = []
+        out["paused"].append(_logged(paused_run(tmp, cfg["flow_steps"], pause)))
+    for suffix in RECORD_SUFFIXES:
+        _log(f"an unpaced {cfg['flow_record_steps']}-step paper6_lossy run recording {suffix}")
+        out["records"].append(_logged(paused_run(tmp, cfg["flow_record_steps"], 0.0, topology=PAPER6_LOSSY, record_suffix=suffix)))
     for seed in range(cfg["flow_soak_runs"]):
         _log(f"soak: an unpaced {cfg['flow_soak_steps']}-step paper6 run, seed {seed}")
-        r = paused_run(tmp, cfg["flow_soak_steps"], 0.0, seed=seed)
-        _log(
-            f"  exit {r['exit_code']}, node-steps lost {r['node_steps_lost']}, missing {r['nodes_missing']}, rejoined {r['nodes_rejoined']}, {r['wall_s']:.1f} s"
-        )
-        out["soak"].append(r)
-    _log("the unpaced paper6 lockstep ratio with the window (Zenoh / in memory)")
-    out["ratio"] = lockstep_ratio(cfg.get("flow_ratio_steps"))
-    _log(f"  ratio {out['ratio']['ratio']}, before the window {out['ratio']['ratio_before_window']}")
+        out["soak"].append(_logged(paused_run(tmp, cfg["flow_soak_steps"], 0.0, seed=seed)))
+    _log("the unpaced paper6 lockstep ratio (Zenoh / in memory), with the window and without it, interleaved")
+    q = out["ratio"] = lockstep_ratio(cfg.get("flow_ratio_steps"))
+    _log(f"  ratio with the window {q['ratio_window']}, without {q['ratio_unbounded']}: the window's cost {q['window_cost']}")
     return out
+
+
+def _median(xs: list[float | None]) -> float | None:
+    timed = [x for x in xs if x is not None]  # a run that failed has no stepping time
+    return statistics.median(timed) if timed else None
+
+
+def _clean(r: dict) -> bool:
+    """Exit 0, every node-step judged, no node reported missing or rejoined: what the issue's targets ask."""
+    return r["exit_code"] == 0 and r["node_steps_lost"] == 0 and not r["nodes_missing"] and not r["nodes_rejoined"]
 
 
 def flow_markdown(res: dict) -> str:
     f = lambda v, spec=".2f": "—" if v is None else format(v, spec)  # noqa: E731  # a one-line local helper
     lines = [
         f"The vehicle publishes step k + {res['ack_window']} only once the collector has acknowledged step k (every "
-        f"{res['ack_stride']} steps). A collector stopped mid-run (SIGSTOP, then SIGCONT), recording gzip:",
+        f"{res['ack_stride']} steps). Unpaced lockstep runs (`netsetest run` as users start it): the collector stopped "
+        "mid-run (SIGSTOP, then SIGCONT), and the slow records:",
         "",
-        "| pause | steps | exit | node-steps lost | nodes missing | nodes rejoined | collector drops | wall |",
-        "|---|---|---|---|---|---|---|---|",
+        "| run | record | collector paused | exit | node-steps lost | nodes missing | nodes rejoined | collector drops | wall |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
-    for r in res["paused"]:
+    for r in [*res["paused"], *res.get("records", [])]:
         drops = ", ".join(f"{k} {v}" for k, v in r["collector_drops"].items()) or "none"
+        paused = "no" if not r["pause_s"] else "run ended first" if r["paused_at_s"] is None else f"{r['pause_s']:g} s from {r['paused_at_s']:.1f} s"
         lines.append(
-            f"| {r['pause_s']:g} s | {r['steps']} | {r['exit_code']} | {r['node_steps_lost']} | {r['nodes_missing']} | {r['nodes_rejoined']} | {drops} | {f(r['wall_s'], '.1f')} s |"
+            f"| {r['topology']}, {r['steps']} steps | {r['record']} | {paused} "
+            f"| {r['exit_code']} | {r['node_steps_lost']} | {r['nodes_missing']} | {r['nodes_rejoined']} | {drops} | {f(r['wall_s'], '.1f')} s |"
         )
     soak = res.get("soak", [])
     if soak:
-        clean = sum(r["exit_code"] == 0 and r["node_steps_lost"] == 0 and not r["nodes_missing"] and not r["nodes_rejoined"] for r in soak)
+        clean = sum(map(_clean, soak))
         loads = ", ".join(f(r["load_before"], ".1f") for r in soak)
         lines += [
             "",
@@ -161,8 +222,21 @@ def flow_markdown(res: dict) -> str:
     q = res["ratio"]
     lines += [
         "",
-        f"The unpaced paper6 lockstep run ({q['steps']} steps) over Zenoh takes {f(q['ratio'])}× the in-memory run with the window "
-        f"({f(q['ratio_before_window'])}× in the performance part's committed figures, measured before it).",
+        f"What the window costs: the unpaced paper6 lockstep run ({q['steps']} steps) over Zenoh, with the window and without it "
+        f"({ACK_WINDOW_ENV}={UNBOUNDED}), against the same run in memory, the three interleaved, {q['reps']} times (the ratio: median over median):",
+        "",
+        "| | load average | in memory | Zenoh, with the window | without it | ratio with | ratio without |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for n, (m, w, u) in enumerate(zip(q["inmemory_s"], q["zenoh_window_s"], q["zenoh_unbounded_s"])):
+        rw, ru = (None if z is None else z / m for z in (w, u))
+        lines.append(f"| run {n + 1} | {f(q['load_before'][n], '.1f')} | {f(m)} s | {f(w)} s | {f(u)} s | {f(rw)}× | {f(ru)}× |")
+    lines += [
+        f"| **medians** | | {f(_median(q['inmemory_s']))} s | {f(_median(q['zenoh_window_s']))} s | {f(_median(q['zenoh_unbounded_s']))} s "
+        f"| **{f(q['ratio_window'])}×** | **{f(q['ratio_unbounded'])}×** |",
+        "",
+        f"The window's cost, the difference of the two medians: {f(q['window_cost'], '+.2f')}× the in-memory run's time "
+        "(a difference smaller than the spread between repetitions is no measurable cost).",
         "",
     ]
     return "\n".join(lines)

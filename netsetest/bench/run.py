@@ -55,6 +55,7 @@ QUICK: dict[str, Any] = {
     "soak_steps": 2000,
     "flow_steps": 300,  # --only flow: the paused-collector runs (unpaced paper6)
     "flow_pauses_s": (3.0,),
+    "flow_record_steps": 300,  # the paper6_lossy runs recording .jsonl.gz and .mcap
     "flow_soak_runs": 1,
     "flow_soak_steps": 300,
     "flow_ratio_steps": None,  # the topology's 80
@@ -95,6 +96,7 @@ FULL: dict[str, Any] = {
     "soak_steps": 20000,
     "flow_steps": 1000,
     "flow_pauses_s": (3.0, 10.0),
+    "flow_record_steps": 3000,
     "flow_soak_runs": 5,
     "flow_soak_steps": 3000,
     "flow_ratio_steps": None,

@@ -154,7 +154,7 @@ class Bus(ABC):
         self.received = 0
         # handler → told of every message the inbox dropped for it (the collector: a node-step it lost
         # itself is not a node's silence); called on the transport's thread, so it must only record
-        self.overflow_listeners: dict[Handler, Callable[[Message], None]] = {}
+        self.overflow_listeners: dict[Handler, Handler] = {}  # told (key, message)
 
     def publish(self, key: str, msg: Message) -> None:
         if PROFILE is None:
@@ -224,7 +224,7 @@ class Bus(ABC):
             self.drop(dropped[0])
             listener = self.overflow_listeners.get(handler)
             if listener is not None:
-                listener(dropped[1])
+                listener(key, dropped[1])
 
     def pump(self, timeout: float | None = 0.0, limit: int | None = None) -> int:
         """Dispatch queued messages, the waiting keys in turn; wait up to ``timeout`` s for the first one.

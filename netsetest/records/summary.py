@@ -143,7 +143,7 @@ class RunSummary:
     stopped: StopCause | None = None  # the collector stopped before the vehicle's End (None: the run ended)
     # the collector keeping up (real time: roles/collector.py; lockstep holds the vehicle instead)
     steps_overloaded: int = 0  # steps closed unjudged, past the collector's memory budget
-    node_steps_overloaded: int = 0  # of them, node-steps whose state had arrived
+    node_steps_overloaded: int = 0  # node-steps not judged for the collector's trouble: of those steps, and those its full inbox dropped
     collector_budget: int | None = None  # open node-steps the collector may hold (real time; None: lockstep, the vehicle waits)
     collector_peak: int = 0  # the most node-steps it held open
     mode: str | None = None

@@ -21,14 +21,16 @@ is ``WINDOW`` steps further whatever arrived; :meth:`finish` closes the rest.  O
 node remain for the summary.
 
 Keeping up.  In lockstep the collector acknowledges the truths it has taken in (a Ready with ``acked``
-every ``ACK_STRIDE`` steps) and the vehicle stays within ``ACK_WINDOW`` steps of it (roles/vehicle.py), so
+every ``ACK_STRIDE`` steps) and the vehicle stays within ``ACK_WINDOW`` steps of it (roles/flow.py), so
 the run's own messages never exceed the bus's bounded inbox, however slow the collector is.  In real time
 the clock cannot wait: the collector takes every message off the bus first and closes steps when nothing
 is waiting (:meth:`close_ready`), keeping the open steps up to ``budget`` node-steps
 (``OPEN_NODE_STEPS_BUDGET``); past it the oldest steps close unjudged, counted as the collector's
 overload (``steps_overloaded``, ``node_steps_overloaded``; the verdict says *collector overloaded*).  A
 message its full inbox dropped all the same (the bus tells it: ``Bus.overflow_listeners``) counts there
-too.  Neither is ever a node's silence: a node that published is never reported missing or rejoined.
+too; so does a truth or state more than ``WINDOW`` steps past the newest truth once its inbox has turned
+messages away (a collector stopped longer than its inbox holds: :meth:`_catch_up` closes the steps it
+lost and judges on).  Neither is ever a node's silence: a node that published is never reported missing or rejoined.
 
 Defences (the network may be open, or a credentialed peer may lie), each counted by reason:
 
@@ -71,7 +73,8 @@ from netsetest.models.vehicle import KMH
 from netsetest.records.summary import RUN_FIELDS, CarSummary, InheritedOrigin, NodeSummary, RunSummary, StopCause
 from netsetest.roles.fdi import FdiTotals, classify
 from netsetest.roles.judge import INHERITED, NO_CHECKS, TRUTH_UNKNOWN, Containment, Judge, NodeVerdict, StepInputs, isclose, state_mismatch
-from netsetest.roles.vehicle import ACK_STRIDE, envelope_holds, fault_bound_holds, mismatch_holds
+from netsetest.roles.flow import ACK_STRIDE
+from netsetest.roles.vehicle import envelope_holds, fault_bound_holds, mismatch_holds
 
 WINDOW = 50  # steps a step may stay open behind the newest truth (bounds memory against a stalled node)
 CLOSE_LAG = 2  # a step whose alive nodes reported closes this many truths later (late and rejoining states)
@@ -249,7 +252,7 @@ class Collector:
         self.open_node_steps = 0  # states held plus one per open step's truth copies: what the budget bounds
         self.peak_open_node_steps = 0
         self.overloaded_steps = 0  # steps of which we lost something ourselves: past the budget, or our full inbox
-        self.overloaded_node_steps = 0  # published node-steps not judged for that reason
+        self.overloaded_node_steps = 0  # node-steps not judged for that reason (each in no other count)
         self.acked = -1  # the newest truth acknowledged to the vehicle (lockstep)
         # what the bus's full inbox dropped before we saw it: (step, node; None for a truth), noted on the
         # transport's thread (a deque's append is atomic), taken into ``lost`` (step → nodes) on ours
@@ -305,11 +308,13 @@ class Collector:
             self._close_ready()
             self._acknowledge()
 
-    def _overflowed(self, msg: Message) -> None:
-        """The bus dropped ``msg`` for us (inbox full): our loss, never the sender's silence.  Transport thread: note only."""
-        if isinstance(msg, NodeState):
+    def _overflowed(self, key: str, msg: Message) -> None:
+        """The bus dropped ``msg`` (on ``key``) for us (inbox full): our loss, never the sender's silence.  Only
+        on its sender's own key: an insider flooding its state key with another node's states or with truths
+        must not make that node's silence, or a truth never sent, read as our loss.  Transport thread: note only."""
+        if isinstance(msg, NodeState) and key == keys.node_state(self.run, msg.node):
             self._lost_notes.append((msg.step, msg.node))
-        elif isinstance(msg, Truth):
+        elif isinstance(msg, Truth) and key == keys.truth(self.run):
             self._lost_notes.append((msg.step, None))
 
     def _take_lost(self, everything: bool = False) -> None:
@@ -351,8 +356,10 @@ class Collector:
             self.drops["truth-after-close"] += 1
             return
         if k > max(self.head, self.closed) + WINDOW:
-            self.drops["truth-ahead"] += 1  # never allocate per a step number we were told
-            return
+            if not self._behind() or self._inconsistent(msg):
+                self.drops["truth-ahead"] += 1  # never allocate per a step number we were told
+                return
+            self._catch_up(k)
         why = self._inconsistent(msg)  # checked again at close, when the previous truth is surely known
         if why:
             self.drops[why] += 1
@@ -377,6 +384,8 @@ class Collector:
             return
         if k > max(self.head, self.closed) + WINDOW:
             self.drops["state-ahead"] += 1
+            if self._behind():  # its truth is still to come (we lost the ones between): ours to count, not its silence
+                self._lost_notes.append((k, msg.node))
             return
         copies = self.states.setdefault(k, {}).setdefault(msg.node, [])
         if any(_same_set(msg, c) for c in copies):
@@ -386,6 +395,25 @@ class Collector:
         else:
             copies.append(msg)
             self._held(1)
+
+    def _behind(self) -> bool:
+        """Real time, and our own inbox turned messages away: the clock may have gone on more than WINDOW
+        steps past the newest truth we have (a collector stopped, or far behind)."""
+        return self.realtime and self._overloaded()
+
+    def _catch_up(self, k: int) -> None:
+        """Real time: the truth of step k came more than WINDOW steps past the newest we have, after our inbox
+        turned messages away (checked, and never otherwise: a truth so far ahead is then not the vehicle's).
+        The truths between are ones we lost: close the steps before k − WINDOW, judged where we hold their
+        truth, else as our overload, so that step k is taken in and judging goes on (before, every later truth
+        was 'ahead' too: the collector judged nothing more and reported every node missing)."""
+        self._take_lost()
+        while self.closed < k - WINDOW:
+            j = self.closed + 1
+            if self.truth.get(j):
+                self._close(j)
+            else:
+                self._close_overloaded(j)
 
     def _on_end(self, key: str, msg: End) -> None:
         if key != keys.end(self.run) or msg.steps != self.sc.steps:
@@ -536,6 +564,9 @@ class Collector:
 
     def _close(self, k: int) -> None:
         """Judge step k, stream it to the sink, add it to the totals and forget it."""
+        if not self.truth.get(k) and None in self.lost.get(k, ()):
+            self._close_overloaded(k)  # our inbox dropped its truth: nothing of it can be judged, our trouble
+            return
         tr = self._judged_truth(k)
         judged, contested = {}, set()
         for i in self.sc.ids:
@@ -546,7 +577,7 @@ class Collector:
                     contested.add(i)
         copies = self.states.get(k, {})
         lost = self.lost.get(k, set())
-        self.overloaded_steps += bool(lost)
+        overloaded_before = self.overloaded_node_steps
         verdict = self.judge.step(StepInputs(k, tr, self.prev_truth, judged, frozenset(contested), copies), self.prev_checks)
         for i in self.sc.ids:
             t, st, v = self.totals[i], judged.get(i), verdict.nodes[i]
@@ -575,6 +606,8 @@ class Collector:
             self._add(t, k, st, v, bounds)
             if tr is not None and v.containment is not None:  # judged rows only: a contested copy may be forged
                 t.fdi.add(k, fdi, tr.faults[str(i)], self.sc.fault_tolerance, v.cone.ok)
+        # a step of which we lost a node-step ourselves (a note of a message that was not the one judged is none)
+        self.overloaded_steps += self.overloaded_node_steps > overloaded_before
         if tr is not None and self.car is not None:
             self.car.add(self.sc, tr)
         if tr is not None:
@@ -607,14 +640,16 @@ class Collector:
         self.open_node_steps -= len(self.truth.pop(k, [])) + sum(map(len, held.values()))
 
     def _close_overloaded(self, k: int) -> None:
-        """Close step k unjudged, past the memory budget: nothing recorded, no node counted missing (a node
-        heard at k is heard: it is never reported missing or rejoined for it); the next step's inputs are
-        then not judged, so its node-steps are outside the guarantee, never covered by it."""
+        """Close step k unjudged, past the memory budget or without the truth our inbox dropped: nothing
+        recorded, every node-step of it counted as the collector's overload and nowhere else (we closed it
+        before we could tell who published: no node is counted missing for it; a node heard at k is heard,
+        never reported missing or rejoined for it); the next step's inputs are then not judged, so its
+        node-steps are outside the guarantee, never covered by it."""
         copies, lost = self.states.get(k, {}), self.lost.get(k, set())
         for i in self.sc.ids:
             if copies.get(i) or i in lost:
                 self.totals[i].last_heard = k
-                self.overloaded_node_steps += 1
+        self.overloaded_node_steps += len(self.sc.ids)
         self.overloaded_steps += 1
         self._forget(k)
         self.prev_truth, self.prev_checks = None, NO_CHECKS

@@ -9,7 +9,7 @@ and the wind; e_k = x_{k+1} − (Ā_k x_k + B̄_k u_k + D̄_k w_k) with the matr
 
 Lockstep: the next step is published once every alive node has published its step-k state (the
 runtime decides what to do with nodes that stay silent) and the step is inside the collector's window:
-step k + ``ACK_WINDOW`` waits until the collector has acknowledged step k (its Ready's ``acked``), so a
+step k + ``ACK_WINDOW`` (roles/flow.py) waits until the collector has acknowledged step k (its Ready's ``acked``), so a
 collector that falls behind (a slow record, a loaded machine, a paused process) holds the run instead of
 losing the run's own messages at its bounded inbox.  Real time: the runtime calls :meth:`advance` every τs
 whatever the nodes did (the collector then keeps up within its memory budget, roles/collector.py).
@@ -27,24 +27,13 @@ from collections import Counter
 import numpy as np
 
 from netsetest.bus import keys
-from netsetest.bus.base import MAX_PER_KEY, Bus
+from netsetest.bus.base import Bus
 from netsetest.config.schema import NodeConfig, Scenario
 from netsetest.messages import End, Message, NodeInput, NodeState, Ready, RunScope, Truth
 from netsetest.models.drive import Drive
 from netsetest.models.sensor import augmented
 from netsetest.models.signals import SignalKind
-
-
-# Lockstep flow control.  An honest role sends one message per key per step (the truth; a node's state),
-# and the collector's inbox holds at most MAX_PER_KEY messages per key (bus/base.py: the bound that stops
-# a flood).  With the vehicle at most ACK_WINDOW steps past the collector's acknowledgment, no key of the
-# collector holds more than ACK_WINDOW (+ a late state or two) unhandled honest messages, whatever the
-# collector's speed: an eighth of the bound, the rest is room for copies a peer repeats.  A few steps of
-# lead are enough for a collector that keeps up (it takes in a step in far less than a node solves one).
-ACK_WINDOW = MAX_PER_KEY // 8
-# The collector acknowledges every ACK_STRIDE steps (one small message to every role per stride): the
-# vehicle's lead stays between ACK_WINDOW − ACK_STRIDE + 1 and ACK_WINDOW steps.
-ACK_STRIDE = ACK_WINDOW // 4
+from netsetest.roles.flow import ACK_WINDOW
 
 
 def mismatch_holds(sc: Scenario, e: np.ndarray) -> bool:
@@ -100,8 +89,12 @@ class Vehicle:
         seed: int = 0,
         realtime: bool = False,
         dead_after_steps: int = 20,
+        window: int | None = ACK_WINDOW,
     ) -> None:
+        """``window``: lockstep, how many steps the vehicle may lead the collector's acknowledgment
+        (roles/flow.py; None: no window, the benchmark's measure of what it costs)."""
         self.sc, self.bus, self.run = scenario, bus, run_id
+        self.window = window
         # lockstep: a node not heard at step k is dead; real time: not heard for dead_after_steps steps
         self.realtime, self.dead_after = realtime, dead_after_steps
         self.drive = Drive(scenario, signals, seed)
@@ -156,10 +149,12 @@ class Vehicle:
             self.acked = max(self.acked, min(msg.acked, self.k))
 
     def window_open(self) -> bool:
-        """Lockstep: the next step is inside the collector's window (step k + ACK_WINDOW needs step k
+        """Lockstep: the next step is inside the collector's window (step k + ``window`` needs step k
         acknowledged); the End needs the last step acknowledged (else it overtakes the truths still on their
         way and the collector counts it early)."""
-        return self.k + 1 <= self.acked + ACK_WINDOW if self.k < self.sc.steps else self.acked >= self.sc.steps
+        if self.k >= self.sc.steps:
+            return self.acked >= self.sc.steps
+        return self.window is None or self.k + 1 <= self.acked + self.window
 
     def _window(self) -> range:
         """Steps whose reports decide who is alive at the next step."""

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import os
 import secrets
 import signal
 import socket
@@ -37,6 +38,7 @@ from netsetest.config.schema import Case, Scenario, load_topology
 from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.records.summary import RunSummary
+from netsetest.roles.flow import ack_window
 from netsetest.runtime.channel import CHANNEL_FD, ChannelReader
 from netsetest.runtime.forkserver import ForkServer, ForkServerError
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress, log
@@ -165,6 +167,10 @@ def plan_run(opts: LaunchOptions) -> RunPlan:
             raise LaunchError(f"--kill/--rejoin {node}@…: node {node} runs {sc.node(node).estimator!r}, which cannot rejoin (only the SDP can)")
     try:
         schedule = kill_schedule(opts.kill, opts.rejoin, sc.steps)
+    except ValueError as exc:
+        raise LaunchError(str(exc)) from None
+    try:
+        ack_window(os.environ)  # the benchmark's window setting, read by the vehicle process (roles/flow.py)
     except ValueError as exc:
         raise LaunchError(str(exc)) from None
     if opts.neighbour_timeout >= opts.node_timeout:

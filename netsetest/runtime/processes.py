@@ -10,7 +10,7 @@ listens to its peers' Ready only: with everyone hearing everyone, N roles' Ready
 messages a second to decode (≈90 000 at 96 nodes), which kept a 96-node run from ever starting.
 
 Lockstep: the vehicle publishes step k+1 once every alive node has published step k and the collector
-has acknowledged step k+1−ACK_WINDOW (roles/vehicle.py; it waits for the collector as long as it takes:
+has acknowledged step k+1−ACK_WINDOW (roles/flow.py; it waits for the collector as long as it takes:
 the launcher ends the run if the collector dies); a node silent for ``node_timeout`` s is declared dead and
 the run goes on without it.  A node waits for its expected
 neighbours at most ``neighbour_timeout`` s, then proceeds without the missing ones.
@@ -154,11 +154,17 @@ def node_peers(sc: Scenario, node_id: int) -> set[tuple[str, int | None]]:
 def run_vehicle(spec: VehicleSpec, sc: Scenario, bus: Bus) -> int:
     """The vehicle's loop.  ``spec.await_rejoin``: (node, step) pairs; in lockstep, step+1 waits (at most
     ``node_timeout``) for the node.  ``spec.quiet``: no line on success (errors are still logged)."""
+    from netsetest.roles.flow import ack_window
     from netsetest.roles.vehicle import Vehicle
 
+    try:
+        window = ack_window(os.environ)  # the benchmark's setting (roles/flow.py); `run` refused a bad one already
+    except ValueError as exc:
+        log("vehicle", str(exc))
+        return EXIT_BAD_INPUT
     run_id, realtime, node_timeout, start_timeout = spec.zenoh.resolved_run_id, spec.clock == "realtime", spec.node_timeout, spec.start_timeout
     signals, seed, pace, await_rejoin, quiet = spec.signals, spec.seed, spec.pace, spec.await_rejoin, spec.quiet
-    vehicle = Vehicle(sc, bus, run_id, signals, seed, realtime=realtime)
+    vehicle = Vehicle(sc, bus, run_id, signals, seed, realtime=realtime, window=window)
     holds = RejoinHolds(await_rejoin)
     dead_at: dict[int, float] = {}  # node → when the vehicle went on without it
     me = ("vehicle", None)

@@ -272,7 +272,7 @@ def verdict(summary: RunSummary) -> str:
         why = f"past its budget of {b} open node-steps" if b is not None and summary.collector_peak > b else "its inbox full"
         text += (
             f"; collector overloaded on {summary.steps_overloaded} step(s) ({why}): "
-            f"{summary.node_steps_overloaded} published node-step(s) not judged, no node blamed"
+            f"{summary.node_steps_overloaded} node-step(s) not judged (collector overloaded), no node blamed"
         )
     missing = {r.id: r.missing_from for r in summary.nodes if r.id in summary.nodes_missing}
     if missing:

@@ -242,7 +242,7 @@ def test_the_first_word_and_the_exit_code_agree() -> None:
     assert "lost for good: node 2 from step 21" in lost
     behind = replace(cases["PASS (partial coverage)"][0], collector_budget=70, node_steps_overloaded=12)
     past_budget = format_table(replace(behind, collector_peak=77)).splitlines()[-1]
-    assert "collector overloaded on 2 step(s) (past its budget of 70 open node-steps): 12 published node-step(s) not judged" in past_budget
+    assert "collector overloaded on 2 step(s) (past its budget of 70 open node-steps): 12 node-step(s) not judged (collector overloaded)" in past_budget
     assert "collector overloaded on 2 step(s) (its inbox full)" in format_table(replace(behind, collector_peak=40)).splitlines()[-1]
 
 

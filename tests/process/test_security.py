@@ -338,3 +338,24 @@ def test_insider_crash_payloads_and_flood_lose_no_role() -> None:
     assert c["drops"]["collector"]["undecodable"] > 0 and c["drops"]["vehicle"]["ready-wrong-key"] > 0, c["drops"]
     f = attacked_run(ROOT / PAPER6, 15, True, "state", 30000, 0.0)
     assert f.exit_code == 0 and f.nodes_missing == [], f
+
+
+@pytest.mark.timeout(240)
+def test_insider_flooding_its_own_state_key_in_real_time_blames_no_honest_node() -> None:
+    """Real time, where nothing waits: node 2's certificate floods node 2's state key with forged states of
+    every step of the run (not from the true input), beside node 2's own.  No honest node is reported
+    missing or rejoined, node 2 is never counted silent, the forged copies are rejected, never judged, and
+    every node-step lands in exactly one count (roles/collector.py; issue 33)."""
+    from netsetest.bench.attacks import attacked_run
+
+    steps = 60
+    r = attacked_run(ROOT / PAPER6, steps, True, "state-run", 3000, 0.0, clock="realtime")
+    s = r.summary
+    assert r.exit_code == 0 and r.sent > 0, r
+    assert s["nodes_missing"] == [] and s["nodes_rejoined"] == [], s
+    assert all(n["missing_steps"] == 0 and n["missing_from"] is None for n in s["nodes"]), [(n["id"], n["missing_steps"]) for n in s["nodes"]]
+    assert all(n["steps_rejected"] == 0 for n in s["nodes"] if n["id"] != 2), "an honest node's state rejected"
+    assert s["drops"]["collector"].get("state-not-from-input", 0) > 0, s["drops"]  # the forged copies, seen and dropped
+    counted = sum(n["steps_reported"] + n["steps_rejected"] + n["missing_steps"] for n in s["nodes"]) + s["node_steps_overloaded"]
+    assert counted == (s["steps_completed"] + 1) * len(s["nodes"]) and s["steps_completed"] == steps, s
+    assert s["steps_overloaded"] <= s["node_steps_overloaded"], "a step called overloaded with no node-step lost to it"

@@ -1,5 +1,5 @@
 """No result in the docs is typed by hand: docs/results.md and the generated sections of README.md and
-docs/performance.md are what ``netsetest bench --render-docs`` makes of the committed bench/*.json, so
+docs/performance.md, docs/exact.md and docs/summary.md are what ``netsetest bench --render-docs`` makes of the committed bench/*.json, so
 editing a figure in either place alone fails here (DEVELOPERS.md, *Generated docs*)."""
 
 from pathlib import Path
@@ -29,6 +29,7 @@ def test_the_committed_doc_is_what_the_committed_figures_make(name: str, rendere
         ("docs/performance.md", ("performance", "spread")),
         ("docs/exact.md", ("exact",)),
         ("docs/records.md", ("view-summary",)),
+        ("docs/summary.md", ("flow",)),
     ],
 )
 def test_the_generated_sections_are_there(name: str, parts: tuple[str, ...]) -> None:

@@ -1,23 +1,29 @@
 """Lockstep flow control (issue 33): the vehicle publishes step k + ACK_WINDOW only once the collector has
-acknowledged step k, and its End only once the last step is acknowledged (roles/vehicle.py)."""
+acknowledged step k, and its End only once the last step is acknowledged (roles/vehicle.py, roles/flow.py)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from netsetest.bus import keys
 from netsetest.bus.base import MAX_PER_KEY, MemoryBus
 from netsetest.config.schema import load_topology
 from netsetest.messages import Ready
-from netsetest.roles.vehicle import ACK_STRIDE, ACK_WINDOW, Vehicle
+from netsetest.cli.main import main
+from netsetest.roles.flow import ACK_STRIDE, ACK_WINDOW, ACK_WINDOW_ENV, MAX_ACK_WINDOW, UNBOUNDED, ack_window
+from netsetest.roles.vehicle import Vehicle
+from netsetest.runtime.launcher import LaunchError, LaunchOptions, plan_run
 
 ROOT = Path(__file__).resolve().parents[2]
+PAPER6 = ROOT / "topologies" / "paper6.toml"
 RUN = "u"
 STEPS = 3 * ACK_WINDOW
 
 
 def test_the_window_fits_the_inbox_bound() -> None:
-    assert 2 <= ACK_STRIDE <= ACK_WINDOW < MAX_PER_KEY // 2  # a few steps, far inside the bound
+    assert 2 <= ACK_STRIDE <= ACK_WINDOW < MAX_ACK_WINDOW <= MAX_PER_KEY // 2  # a few steps, far inside the bound
 
 
 def _ack(bus: MemoryBus, step: int) -> None:
@@ -26,7 +32,7 @@ def _ack(bus: MemoryBus, step: int) -> None:
 
 
 def test_the_vehicle_waits_for_the_collector() -> None:
-    sc = load_topology(ROOT / "topologies" / "paper6.toml", None, STEPS)
+    sc = load_topology(PAPER6, None, STEPS)
     bus = MemoryBus()
     vehicle = Vehicle(sc, bus, RUN, "paper", 0)
     vehicle.advance()  # step 0
@@ -48,3 +54,36 @@ def test_the_vehicle_waits_for_the_collector() -> None:
     assert vehicle.k == STEPS and not vehicle.window_open(), "the End waits until the last step is acknowledged"
     _ack(bus, STEPS)
     assert vehicle.window_open()
+
+
+@pytest.mark.parametrize(
+    ("value", "window"),
+    [(None, ACK_WINDOW), (str(ACK_STRIDE), ACK_STRIDE), (str(MAX_ACK_WINDOW), MAX_ACK_WINDOW), (UNBOUNDED, None), (f" {UNBOUNDED}\n", None)],
+)
+def test_the_benchmarks_window_setting(value: str | None, window: int | None) -> None:
+    assert ack_window({} if value is None else {ACK_WINDOW_ENV: value}) == window
+
+
+@pytest.mark.parametrize("value", [str(ACK_STRIDE - 1), str(MAX_ACK_WINDOW + 1), str(MAX_PER_KEY), "0", "-8", "8.0", "", "none", "1e9"])
+def test_a_window_setting_outside_its_range_is_refused(value: str) -> None:
+    with pytest.raises(ValueError, match=f"^{ACK_WINDOW_ENV}=.*: must be a whole number of steps from {ACK_STRIDE} .* to {MAX_ACK_WINDOW} "):
+        ack_window({ACK_WINDOW_ENV: value})
+
+
+def test_run_refuses_a_bad_window_setting_before_any_role_starts(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setenv(ACK_WINDOW_ENV, str(MAX_PER_KEY))
+    with pytest.raises(LaunchError, match=f"^{ACK_WINDOW_ENV}="):
+        plan_run(LaunchOptions(str(PAPER6), steps=3))
+    assert main(["run", str(PAPER6), "--steps", "3", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"netsetest run: {ACK_WINDOW_ENV}='{MAX_PER_KEY}': ") and "Traceback" not in err
+
+
+def test_an_unbounded_vehicle_never_waits_for_the_collector_but_before_its_end() -> None:
+    sc = load_topology(PAPER6, None, STEPS)
+    vehicle = Vehicle(sc, MemoryBus(), RUN, "paper", 0, window=None)
+    vehicle.advance()
+    while vehicle.window_open():
+        vehicle.advance()
+    assert vehicle.k == STEPS, "nothing acknowledged, and every step went out"
+    assert not vehicle.done, "the End still waits for the last step's acknowledgment"
