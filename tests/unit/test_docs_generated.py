@@ -28,6 +28,7 @@ def test_the_committed_doc_is_what_the_committed_figures_make(name: str, rendere
         ("README.md", ("scenario", "network-summary", "plant-summary", "performance")),
         ("docs/performance.md", ("performance", "spread")),
         ("docs/exact.md", ("exact",)),
+        ("docs/estimator.md", ("widths-summary", "widths-region")),
     ],
 )
 def test_the_generated_sections_are_there(name: str, parts: tuple[str, ...]) -> None:
