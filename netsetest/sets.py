@@ -158,10 +158,15 @@ class SumSet:
         return z + value
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        lo, hi = self._hull
+        return lo.copy(), hi.copy()
+
+    @cached_property
+    def _hull(self) -> tuple[np.ndarray, np.ndarray]:
+        """The interval hull, made once per set (with slabs each side is an SOCP; the node, its region and the
+        enclosing ellipsoid all ask for it)."""
         eye = np.eye(self.dim)
-        lo = np.array([-self.support(-e) for e in eye])
-        hi = np.array([self.support(e) for e in eye])
-        return lo, hi
+        return np.array([-self.support(-e) for e in eye]), np.array([self.support(e) for e in eye])
 
     def _ellipsoid_part(self, g: np.ndarray) -> tuple[float, np.ndarray]:
         """max gᵀe over the sliced ellipsoid, by an SOCP: variables e; cone rows as in analysis/exact."""

@@ -28,7 +28,7 @@ import numpy as np
 
 from netsetest.config.schema import Scenario
 from netsetest.estimator.base import Assumption, EstimatorError, GuaranteedSet, NeighbourSet, ReadingSlabs, SetEstimator, StepInput
-from netsetest.models.sensor import NA, NX
+from netsetest.models.sensor import NX
 from netsetest.polygon import MIN_VERTICES, Polygon
 from netsetest.sets import RegionSet
 
@@ -44,7 +44,7 @@ class WithRegion(SetEstimator):
         self.rests_on_bound = "fault_bound" in inner.assumptions
         sensor = self.node.sensor
         self.C, self.Ds = sensor.Cbar[:NX], float(sensor.Cbar[NX])  # C̄ x̄ = C x + Ds f
-        self.directions = [np.eye(NA)[0], np.eye(NA)[1], np.r_[self.C, 0.0]]  # the own set's cuts of the region
+        self.c_dir = np.r_[self.C, 0.0]  # the own set's C x: a cut of the region beside its β, r hull
         self.region: Polygon | None = None
 
     @property
@@ -73,9 +73,11 @@ class WithRegion(SetEstimator):
             f_lo, f_hi = max(f_lo, -size), min(f_hi, size)
             if region is not None:  # C x = C̄ x̄ − Ds f, |f| ≤ F
                 region = region.cut(self.C, lo - abs(self.Ds) * size, hi + abs(self.Ds) * size)
-        for d in self.directions:
+        for m in range(NX):  # the own set's interval hull (its support along β and r)
             if region is not None:
-                region = region.cut(d[:NX], -s.support(-d), s.support(d))
+                region = region.cut(np.eye(NX)[m], float(s_lo[m]), float(s_hi[m]))
+        if region is not None:
+            region = region.cut(self.C, -s.support(-self.c_dir), s.support(self.c_dir))
         if region is None or len(region.vertices) < MIN_VERTICES:
             self.region = None  # nothing left (an assumption broke): the method's set alone, the region reseeded
             return s
