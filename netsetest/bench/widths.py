@@ -1,10 +1,10 @@
 """Published width over the exact limit, per coordinate (``netsetest bench --only widths``): issue 28's targets.
 
 For every run of :func:`plan`, ``netsetest compare`` (analysis/compare.py, the very computation the CLI prints)
-with the SDP, every set estimator and the exact limit, and on the paper6 runs, paper6_reference and
-paper6_max_faulty every set estimator without its region too (``<name>-noregion``: the method as its paper defines
-it, estimator/region.py): per estimator and per node, the mean published width over the exact one from step
-FROM_STEP for r, β and f; where the exact interval is a point (a reference's declared zero fault) the absolute width
+with the SDP, every set estimator and the exact limit, and on paper6_reference and paper6_max_faulty (readings: the
+runs where the region has the most to cut) every set estimator without its region too (``<name>-noregion``: the
+method as its paper defines it, estimator/region.py): per estimator and per node, the mean published width over
+the exact one from step FROM_STEP for r, β and f; where the exact interval is a point (a reference's declared zero fault) the absolute width
 over it instead; the intervals narrower than exact where the assumptions held (a sound set has none) and the
 violations.  The SDP's target is r, β and f ≤ 1.05 on the listed runs and ≤ 1.10 on every other bundled scenario,
 judged on the worst node; the table says where it is missed.  The comparisons run JOBS at a time in processes of
