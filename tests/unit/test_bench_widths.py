@@ -51,7 +51,7 @@ def test_the_sdp_is_judged_on_its_worst_node_and_a_narrower_interval_fails_the_t
     text = widths_summary_markdown(res)
     a, b, c, d = (_line(text, f"{x} (seed 0; 80 steps)") for x in "abcd")
     assert a[2] == "1.020 / 1.010 / 1.030 (≤ 1.040), +2.0e-03 abs." and a[-1] == "yes"
-    assert b[-1] == "**no**" and c[-1] == "**no**" and c[4] == "1 of 500" and d[-1] == "yes"
+    assert b[-1] == "**no**" and c[-1] == "**no**" and c[5] == "1 of 500" and d[-1] == "yes"
     full = widths_markdown(res)
     assert full.startswith(text) and "| `sdp` | 1.000 / 1.000 / 1.040 | 1.000 / 1.000 / – |" in full
     region = _line(region_markdown(res), "a")
