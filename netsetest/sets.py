@@ -1,10 +1,12 @@
-"""Guaranteed set types a node may publish: ellipsoid, zonotope, interval box.
+"""Guaranteed set types a node may publish: ellipsoid, zonotope, interval box, and any of them cut by a region.
 
 Each offers ``contains(point)`` (membership, with a relative tolerance for points on the boundary) and
 ``bounds()`` (per-coordinate interval hull, lower and upper arrays), so that the collector, records and
 comparisons work for every type.  :class:`SlicedEllipsoid` (an ellipsoid cut by slabs) and
 :class:`SumSet` (a zonotope plus a linear image of a sliced ellipsoid) are what the zonotopic
 estimator needs to carry an ellipsoidal prior exactly (docs/estimators/zonotope_w_radius.md).
+:class:`RegionSet` is a set estimator's own set cut by its region of x = (β, r) and a fault range
+(estimator/region.py).
 :func:`set_to_wire` / :func:`set_from_wire` give every type a checked dict form (with a ``type`` key) for
 messages and records; a malformed one raises :class:`SetFormatError`, so a role can drop it.
 """
@@ -18,6 +20,8 @@ from typing import Any
 
 import clarabel
 import numpy as np
+
+from netsetest.polygon import MAX_VERTICES, MIN_VERTICES, Polygon
 
 MEMBERSHIP_TOL = 1e-9  # relative slack of contains(): a point on the boundary is inside
 
@@ -154,10 +158,15 @@ class SumSet:
         return z + value
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        lo, hi = self._hull
+        return lo.copy(), hi.copy()
+
+    @cached_property
+    def _hull(self) -> tuple[np.ndarray, np.ndarray]:
+        """The interval hull, made once per set (with slabs each side is an SOCP; the node, its region and the
+        enclosing ellipsoid all ask for it)."""
         eye = np.eye(self.dim)
-        lo = np.array([-self.support(-e) for e in eye])
-        hi = np.array([self.support(e) for e in eye])
-        return lo, hi
+        return np.array([-self.support(-e) for e in eye]), np.array([self.support(e) for e in eye])
 
     def _ellipsoid_part(self, g: np.ndarray) -> tuple[float, np.ndarray]:
         """max gᵀe over the sliced ellipsoid, by an SOCP: variables e; cone rows as in analysis/exact."""
@@ -227,6 +236,42 @@ class SumSet:
         return str(sol.status) in ("Solved", "AlmostSolved")
 
 
+@dataclass(frozen=True)
+class RegionSet:
+    """base ∩ (region × ℝ) ∩ {lo ≤ f ≤ hi} over [β, r, f]: a set estimator's own set, its region of x = (β, r)
+    (a convex polygon, netsetest/polygon.py) and the fault range the own measurement proves over that region
+    (estimator/region.py).  The truth must lie in all three."""
+
+    base: Ellipsoid | Zonotope | Box | SumSet
+    region: Polygon
+    fault: tuple[float, float]
+
+    @cached_property
+    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        lo, hi = self.base.bounds()
+        v = self.region.vertices
+        lo[:2], hi[:2] = np.maximum(lo[:2], v.min(axis=0)), np.minimum(hi[:2], v.max(axis=0))
+        lo[2], hi[2] = max(lo[2], self.fault[0]), min(hi[2], self.fault[1])
+        return lo, hi
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each coordinate's interval of the base set intersected with the region's and the fault range (an
+        outer bound of the intersection's interval hull)."""
+        lo, hi = self._bounds
+        return lo.copy(), hi.copy()
+
+    def contains(self, point: np.ndarray) -> bool:
+        slack = MEMBERSHIP_TOL * max(1.0, abs(float(point[2])))
+        in_range = self.fault[0] - slack <= float(point[2]) <= self.fault[1] + slack
+        return bool(in_range and self.region.contains(point[:2]) and self.base.contains(point))
+
+    def support(self, direction: np.ndarray) -> float:
+        """An upper bound of max dᵀx over the set: the least of the base set's and the region × fault range's."""
+        d = np.asarray(direction, dtype=float)
+        _, hi = self.region.interval(d[:2])
+        return min(self.base.support(d), hi + float(d[2]) * (self.fault[1] if d[2] > 0 else self.fault[0]))
+
+
 # ---------------------------------------------------------------- wire form
 
 MAX_GENERATORS = 1024  # a published zonotope with more generators is refused (bounded message size)
@@ -276,8 +321,10 @@ def _spd(P: np.ndarray, key: str) -> np.ndarray:
     return P
 
 
-def set_to_wire(s: Ellipsoid | Zonotope | Box | SumSet) -> dict:
+def set_to_wire(s: Ellipsoid | Zonotope | Box | SumSet | RegionSet) -> dict:
     """A JSON/msgpack-ready dict with a ``type`` key; :func:`set_from_wire` inverts it exactly."""
+    if isinstance(s, RegionSet):
+        return {"type": "region", "set": set_to_wire(s.base), "region": s.region.vertices.reshape(-1).tolist(), "fault": [float(s.fault[0]), float(s.fault[1])]}
     if isinstance(s, Ellipsoid):
         return {"type": "ellipsoid", "center": s.center.tolist(), "P": s.P.tolist(), "rho": float(s.rho)}
     if isinstance(s, Zonotope):
@@ -296,7 +343,7 @@ def _inf_to_none(v: float) -> float | None:
     return float(v) if np.isfinite(v) else None
 
 
-def set_from_wire(d: object, dim: int) -> Ellipsoid | Zonotope | Box | SumSet:
+def set_from_wire(d: object, dim: int) -> Ellipsoid | Zonotope | Box | SumSet | RegionSet:
     """The set of :func:`set_to_wire`'s dict, checked (dimension ``dim``); SetFormatError if malformed."""
     if not isinstance(d, dict):
         raise SetFormatError("a set must be a mapping with a 'type'")
@@ -314,6 +361,8 @@ def set_from_wire(d: object, dim: int) -> Ellipsoid | Zonotope | Box | SumSet:
             if np.any(lo > hi):
                 raise SetFormatError("box: lo > hi")
             return Box(lo, hi)
+        if kind == "region":
+            return _region_set(d, dim)
         if kind == "sum":
             z = set_from_wire(d.get("zonotope"), dim)
             if not isinstance(z, Zonotope) or z.generators.shape[0] != dim:
@@ -337,4 +386,21 @@ def set_from_wire(d: object, dim: int) -> Ellipsoid | Zonotope | Box | SumSet:
         if isinstance(exc, SetFormatError):
             raise
         raise SetFormatError(f"{kind}: {type(exc).__name__}: {exc}") from None
-    raise SetFormatError(f"unknown set type {kind!r} (ellipsoid, zonotope, box or sum)")
+    raise SetFormatError(f"unknown set type {kind!r} (ellipsoid, zonotope, box, sum or region)")
+
+
+def _region_set(d: dict, dim: int) -> RegionSet:
+    """A ``region`` set's parts, checked: a base set that is not itself one, over [β, r, f] (dim 3), a polygon of
+    MIN_VERTICES to MAX_VERTICES finite vertices, and a finite fault range lo ≤ hi."""
+    if dim != 3:
+        raise SetFormatError(f"region: a region set is over [β, r, f] (dimension 3), not {dim}")
+    base = set_from_wire(d.get("set"), dim)
+    if isinstance(base, RegionSet):
+        raise SetFormatError("region: its base set is a region set")
+    v = _vec(d, "region")
+    if len(v) % 2 or not MIN_VERTICES <= len(v) // 2 <= MAX_VERTICES:
+        raise SetFormatError(f"region: expected {MIN_VERTICES} to {MAX_VERTICES} vertices [β₁, r₁, β₂, r₂, …]")
+    fault = _vec(d, "fault", 2)
+    if fault[0] > fault[1]:
+        raise SetFormatError("region: fault range lo > hi")
+    return RegionSet(base, Polygon(v.reshape(-1, 2)), (float(fault[0]), float(fault[1])))

@@ -20,6 +20,9 @@ one's (same steps, bounded exact intervals only), ``ratio_exact_state`` the same
 against the exact limit under the row's own assumptions: a method that relies on the declared fault
 bound of a node where the ``exact`` row does not (every non-saturating node) is compared with the exact
 limit with every declared bound (``exact_reference`` "all");
+``narrower`` counts the intervals (node-step and coordinate) narrower than the exact one where the
+node-step's cone held (beyond exact.NARROWER_TOL; an end the k-of-N search left relaxed is not the limit and
+is left out): a sound set never is;
 ``rms_radius_rel`` is Althoff & Rath's relative-RMS radius (their eq. (9)) with the exact limit as the
 reference observer, mean over nodes and the three coordinates; ms are per node-step.
 """
@@ -35,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from netsetest.analysis.exact import DEGENERATE_WIDTH, FROM_STEP, ExactBounds, exact_bounds, step_data
+from netsetest.analysis.exact import COORDINATES, DEGENERATE_WIDTH, FROM_STEP, NARROWER_TOL, ExactBounds, exact_bounds, step_data
 from netsetest.config.schema import Case, ConfigError, Scenario, load_topology
 from netsetest.analysis.errors import CompareError
 from netsetest.estimator.names import DEFAULT_COMPARE, ESTIMATOR_NAMES, EXACT, SDP
@@ -67,6 +70,8 @@ class _Accumulator:
     # whose exact interval is a point (a reference's declared fault), which get the absolute excess, no ratio
     per_node: dict[int, list[tuple[np.ndarray, np.ndarray]]] = field(default_factory=dict)
     rms: list[float] = field(default_factory=list)  # relative-RMS radius per run, node and coordinate
+    narrower: int = 0  # published intervals not holding the exact one on a covered node-step (must stay 0)
+    compared: int = 0  # the intervals that count was taken over (covered node-steps, exact ends not relaxed)
     ms: list[float] = field(default_factory=list)
     fallbacks: int = 0
     refused: list[str] = field(default_factory=list)
@@ -90,6 +95,8 @@ class CompareRow:
     ratio_exact_state: list[float | None]
     ratio_exact_by_node: dict[int, list[float | None]]  # node → [β, r, f] mean published width / exact (None: a point exact interval)
     pinned_excess: float | None  # mean published width − exact width over (node, coordinate)s whose exact interval is a point
+    narrower: int  # intervals narrower than exact where the assumptions held (beyond NARROWER_TOL; a relaxed exact end left out)
+    compared: int  # the intervals checked for it
     rms_radius_rel: float | None
     ms_median: float | None
     ms_p95: float | None
@@ -133,9 +140,25 @@ def _exact_array(ex: ExactBounds, i: int) -> np.ndarray:
     return np.stack([ex.beta, ex.r, ex.fault[i]], axis=1)
 
 
-def _score(acc: _Accumulator, node: int, bounds: np.ndarray, steps: np.ndarray, truth: np.ndarray, exact: np.ndarray, broken: list[str | None]) -> None:
-    """Add node ``node``'s run: bounds (K, 3, 2) at ``steps``, truth (K, 3), exact (all steps, 3, 2)."""
-    ex = exact[steps]
+def _limit_ends(ex: ExactBounds, i: int) -> np.ndarray:
+    """:func:`_exact_array` with every end the k-of-N search relaxed set to NaN: the ends that are the limit."""
+    out = _exact_array(ex, i).copy()
+    for key in ex.health.relaxed if ex.health is not None else ():
+        if key.node in (None, i):
+            out[key.step, COORDINATES.index(key.coordinate), 0 if key.side == "lo" else 1] = np.nan
+    return out
+
+
+def _score(acc: _Accumulator, node: int, bounds: np.ndarray, steps: np.ndarray, truth: np.ndarray, reference: ExactBounds, broken: list[str | None]) -> None:
+    """Add node ``node``'s run: bounds (K, 3, 2) at ``steps``, truth (K, 3), against the exact limit ``reference``."""
+    ex = _exact_array(reference, node)[steps]
+    limit = _limit_ends(reference, node)[steps]
+    held = np.array([b is None for b in broken], dtype=bool)
+    slack = NARROWER_TOL * np.maximum(1.0, np.abs(limit))
+    with np.errstate(invalid="ignore"):  # (NaN: an unbounded, infeasible or relaxed end, not compared)
+        narrower = (bounds[..., 0] > limit[..., 0] + slack[..., 0]) | (bounds[..., 1] < limit[..., 1] - slack[..., 1])
+    acc.narrower += int(narrower[held].sum())
+    acc.compared += int(np.isfinite(limit[held]).any(axis=-1).sum())
     for n in range(len(steps)):
         acc.node_steps += 1
         inside = bool(np.all(bounds[n, :, 0] <= truth[n] + CONTAIN_TOL) and np.all(truth[n] <= bounds[n, :, 1] + CONTAIN_TOL))
@@ -189,6 +212,8 @@ def _row(name: str, acc: _Accumulator, real_time: bool) -> CompareRow:
         ratio_exact_state=[num(ratio[0]), num(ratio[1])],
         ratio_exact_by_node={i: [None if pinned[i][m] else num(float(w[m] / e[m])) for m in range(3)] for i, (w, e) in by_node.items()},
         pinned_excess=float(np.mean(excess)) if excess else None,
+        narrower=acc.narrower,
+        compared=acc.compared,
         rms_radius_rel=num(float(np.nanmean(acc.rms))) if acc.rms else None,
         ms_median=num(float(np.median(ms))) if len(ms) else None,
         ms_p95=num(float(np.percentile(ms, 95))) if len(ms) else None,
@@ -307,7 +332,7 @@ def _score_alone(
                 broken = history_cone(sc, truth, i, i in local.bounded_nodes)
                 a.assumptions.update(("prior", "noise", "disturbance", *(("fault_bound",) if local.bounded_nodes else ())))
             a.references.add(ex.label)
-            _score(a, i, bounds, steps, tr_i[steps], _exact_array(ex, i), broken)
+            _score(a, i, bounds, steps, tr_i[steps], ex, broken)
             if keep is not None:
                 keep[name][i] = bounds
         report(name)
@@ -366,13 +391,13 @@ def _score_run(
                     ex_all = ex_all or exact_bounds(sc, rec, "all")
                     reference = ex_all
             a.references.add(reference.label)
-            _score(a, i, bounds, steps, tr_i[steps], _exact_array(reference, i), broken)
+            _score(a, i, bounds, steps, tr_i[steps], reference, broken)
             if keep is not None:
                 keep[name][i] = bounds
             if name == SDP:  # the paper's own set, the published ellipsoid alone, from the same run
                 e_bounds, _, _ = _node_track(run, i, acc[SDP_ELLIPSOID], ellipsoid=True)
                 acc[SDP_ELLIPSOID].references.add(reference.label)
-                _score(acc[SDP_ELLIPSOID], i, e_bounds, steps, tr_i[steps], _exact_array(reference, i), broken)
+                _score(acc[SDP_ELLIPSOID], i, e_bounds, steps, tr_i[steps], reference, broken)
         report(name)
     return ex
 

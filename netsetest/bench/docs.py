@@ -23,6 +23,7 @@ from netsetest.bench.run import performance_markdown
 from netsetest.bench.scenario import compare_markdown, exact_markdown, scenario_markdown
 from netsetest.bench.spread import RUNS_DIR, spread_markdown
 from netsetest.bench.view import view_markdown, view_summary_markdown
+from netsetest.bench.widths import region_markdown, widths_markdown, widths_summary_markdown
 
 
 @dataclass(frozen=True)
@@ -39,6 +40,7 @@ class Part:
 
 _SCENARIO = "netsetest bench --quick --only scenario --json bench/scenario.json --markdown bench/scenario.md"
 _VIEW = "netsetest bench --quick --only view --json bench/view.json --markdown bench/view.md"
+_WIDTHS = "netsetest bench --quick --only widths --json bench/widths.json --markdown bench/widths.md"
 PARTS: dict[str, Part] = {
     "scenario": Part("The paper's scenario, per node", "bench/scenario.json", "scenario", scenario_markdown, _SCENARIO),
     "compare": Part("The papers' estimators compared", "bench/scenario.json", "scenario", compare_markdown, _SCENARIO),
@@ -89,6 +91,9 @@ PARTS: dict[str, Part] = {
         flow_markdown,
         "netsetest bench --only flow --json bench/flow.json --markdown bench/flow.md",
     ),
+    "widths": Part("Published width over the exact limit, per coordinate", "bench/widths.json", "widths", widths_markdown, _WIDTHS),
+    "widths-summary": Part("Published width over the exact limit, in short", "bench/widths.json", "widths", widths_summary_markdown, _WIDTHS, in_results=False),
+    "widths-region": Part("What the region buys the set estimators", "bench/widths.json", "widths", region_markdown, _WIDTHS, in_results=False),
     "performance": Part(
         "Performance",
         "bench/results.json",
@@ -111,7 +116,14 @@ PARTS: dict[str, Part] = {
         f"netsetest bench --spread {RUNS_DIR}/1.json {RUNS_DIR}/2.json {RUNS_DIR}/3.json --json bench/spread.json --markdown bench/spread.md",
     ),
 }
-SECTIONED = ("README.md", "docs/performance.md", "docs/exact.md", "docs/records.md", "docs/summary.md")  # files with generated sections between markers
+SECTIONED = (
+    "README.md",
+    "docs/performance.md",
+    "docs/exact.md",
+    "docs/records.md",
+    "docs/summary.md",
+    "docs/estimator.md",
+)  # files with generated sections between markers
 RESULTS = "docs/results.md"  # written whole
 RENDER_COMMAND = "netsetest bench --render-docs"
 

@@ -22,14 +22,14 @@ from typing import TYPE_CHECKING, Literal, Union
 
 import numpy as np
 
-from netsetest.sets import Box, Ellipsoid, Slab, SumSet, Zonotope
+from netsetest.sets import Box, Ellipsoid, RegionSet, Slab, SumSet, Zonotope
 
 if TYPE_CHECKING:
     from netsetest.config.schema import Scenario
     from netsetest.estimator.health import HealthModel
     from netsetest.models.sensor import Sensor
 
-GuaranteedSet = Union[Ellipsoid, Zonotope, Box, SumSet]  # a runtime alias
+GuaranteedSet = Union[Ellipsoid, Zonotope, Box, SumSet, RegionSet]  # a runtime alias
 
 Assumption = Literal["prior", "noise", "disturbance", "fault_bound"]
 """What a guarantee may rest on: the truth x̄_0 in the prior ellipsoid (step 0), the measurement noise

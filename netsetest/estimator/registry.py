@@ -1,7 +1,8 @@
 """The guaranteed estimators a node can run, by name (``netsetest compare --estimators``).
 
 ``sdp`` is this project's ellipsoidal estimator (estimator/sdp.py), run by roles/node.py in the network;
-the others implement estimator/base.py and are stepped per node on a run's data.
+the others implement estimator/base.py and are stepped per node on a run's data, each with a region of x
+(estimator/region.py) unless named ``<name>-noregion`` (the method as its paper defines it).
 """
 
 from __future__ import annotations
@@ -10,6 +11,8 @@ from collections.abc import Callable
 
 from netsetest.config.schema import ConfigError, Scenario
 from netsetest.estimator.base import EstimatorError, SetEstimator
+from netsetest.estimator.names import NO_REGION
+from netsetest.estimator.region import WithRegion
 
 
 # Each method's module is imported when a node runs it: an SDP node never loads the others.
@@ -57,13 +60,16 @@ def node_set_estimator(scenario: Scenario, node_id: int) -> SetEstimator:
     the node (e.g. ``strip`` without a declared fault bound, or ``zonotope`` on a saturating sensor
     without one: it fell back to its previous set at the first saturated reading and failed the run)."""
     node = scenario.node(node_id)
-    name = node.estimator
+    name = node.estimator.removesuffix(NO_REGION)  # ``<name>-noregion``: the method's own set alone
     if name in UNBOUNDED_WHEN_SATURATED and node.sensor.saturated and node.fault_rate is None and node.fault_size is None:
         raise ConfigError(
             f"{scenario.path}: node {node_id}: estimator {name!r} on a saturating sensor needs a declared "
             "[fault_bound] rate or size (a reading at the saturation limit leaves the fault unbounded); sdp copes without"
         )
     try:
-        return SET_ESTIMATORS[name](scenario, node_id)
+        est = SET_ESTIMATORS[name](scenario, node_id)
     except EstimatorError as exc:
         raise ConfigError(f"{scenario.path}: node {node_id}: estimator {name!r}: {exc}") from None
+    if node.estimator.endswith(NO_REGION):
+        return est
+    return WithRegion(est, scenario, node_id)

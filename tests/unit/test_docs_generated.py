@@ -30,6 +30,7 @@ def test_the_committed_doc_is_what_the_committed_figures_make(name: str, rendere
         ("docs/exact.md", ("exact",)),
         ("docs/records.md", ("view-summary",)),
         ("docs/summary.md", ("flow",)),
+        ("docs/estimator.md", ("widths-summary", "widths-region")),
     ],
 )
 def test_the_generated_sections_are_there(name: str, parts: tuple[str, ...]) -> None:

@@ -1,0 +1,199 @@
+"""Published width over the exact limit, per coordinate (``netsetest bench --only widths``): issue 28's targets.
+
+For every run of :func:`plan`, ``netsetest compare`` (analysis/compare.py, the very computation the CLI prints)
+with the SDP, every set estimator and the exact limit, and on paper6_reference and paper6_max_faulty (readings: the
+runs where the region has the most to cut) every set estimator without its region too (``<name>-noregion``: the
+method as its paper defines it, estimator/region.py): per estimator and per node, the mean published width over
+the exact one from step FROM_STEP for r, β and f; where the exact interval is a point (a reference's declared zero fault) the absolute width
+over it instead; the intervals narrower than exact where the assumptions held (a sound set has none) and the
+violations.  The SDP's target is r, β and f ≤ 1.05 on the listed runs and ≤ 1.10 on every other bundled scenario,
+judged on the worst node; the table says where it is missed.  The comparisons run JOBS at a time in processes of
+their own: this part measures widths, no time of it is a figure.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from netsetest.config.schema import Case
+from netsetest.models.signals import SignalKind
+
+LISTED, OTHER = 1.05, 1.10  # the SDP's targets: the listed runs, every other bundled scenario
+ESTIMATORS = ("sdp", "zonotope", "interval", "strip", "setprop", "exact")
+WITHOUT_REGION = ("zonotope-noregion", "interval-noregion", "strip-noregion", "setprop-noregion")  # the before/after runs' too
+JOBS = 2  # comparisons measured at once (tightness only: no time of this part is a figure)
+CAR = "paper6_car"
+TARGETED = ("paper6", CAR, "paper6_reference", "paper6_max_faulty")  # the topologies of the listed runs
+CASES: tuple[Case, ...] = ("nsnim", "saim")
+COORDS = ((1, "r"), (0, "β"), (2, "f"))  # (index in [β, r, f], label): the table's order
+
+
+@dataclass(frozen=True)
+class WidthRun:
+    """One comparison of the part: a topology, case, signal family and seeds, and the SDP's target there."""
+
+    label: str
+    topology: str  # a bundled name
+    case: Case | None  # None: the file's
+    signals: SignalKind
+    seeds: tuple[int, ...]
+    target: float
+    steps: int | None = None  # None: the file's
+    without_region: bool = False  # also every set estimator without its region (what the region buys, side by side)
+
+    @property
+    def estimators(self) -> tuple[str, ...]:
+        return (*ESTIMATORS[:-1], *(WITHOUT_REGION if self.without_region else ()), ESTIMATORS[-1])
+
+
+def plan(cfg: dict) -> list[WidthRun]:
+    """The listed runs (paper6 NSNIM and SAIM with the paper's signals and worst-case ones, the car's held-out drives,
+    paper6_reference, paper6_max_faulty), then every other bundled scenario once."""
+    from netsetest.scenarios import bundled_topologies
+
+    families: tuple[tuple[SignalKind, tuple[int, ...]], ...] = (("paper", (0,)), ("worst", tuple(cfg["widths_worst_seeds"])))
+    runs = [WidthRun(f"paper6 {case.upper()}, {sig} signals", "paper6", case, sig, seeds, LISTED) for case in CASES for sig, seeds in families]
+    runs += [WidthRun(f"{CAR} {case.upper()}, held-out seeds", CAR, case, "paper", tuple(cfg["widths_car_seeds"]), LISTED) for case in CASES]
+    runs += [WidthRun(t, t, None, "paper", (0,), LISTED, without_region=True) for t in ("paper6_reference", "paper6_max_faulty")]
+    runs += [
+        WidthRun(t, t, None, "paper", (0,), OTHER, cfg["widths_lap_steps"] if t == "paper6_lap" else None) for t in bundled_topologies() if t not in TARGETED
+    ]
+    return runs
+
+
+def _log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _measure(run: WidthRun) -> dict:
+    from netsetest.analysis.compare import compare, comparison_document
+
+    t0 = time.perf_counter()
+    c = compare(run.topology, run.estimators, (run.case,), (run.signals,), run.seeds, run.steps)
+    rows = comparison_document(c)
+    sdp = next(r for r in rows if r["estimator"] == "sdp")
+    _log(f"  {run.label}: sdp worst node {_worst(sdp):.3f} (target {run.target}), {time.perf_counter() - t0:.0f} s")
+    return asdict(run) | {"runs": c.runs, "steps": c.steps, "rows": rows}
+
+
+def widths_figures(cfg: dict, tmp: Path) -> dict:
+    """Every run of :func:`plan`, compared (JOBS at once, in processes of their own)."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from netsetest.analysis.exact import FROM_STEP
+
+    with ProcessPoolExecutor(JOBS) as pool:
+        runs = list(pool.map(_measure, plan(cfg)))
+    return {"from_step": FROM_STEP, "runs": runs}
+
+
+# ---------------------------------------------------------------- rendering
+
+
+def _worst(row: dict) -> float:
+    """The largest per-node ratio of the row over r, β and f (a point exact interval has none)."""
+    return max((v for ratios in row["ratio_exact_by_node"].values() for v in ratios if v is not None), default=float("nan"))
+
+
+def _pooled(row: dict) -> list[float | None]:
+    """r, β, f: mean width over exact, pooled over nodes (compare's ratio)."""
+    beta, r = row["ratio_exact_state"]
+    return [r, beta, row["ratio_exact"]]
+
+
+def _f(v: float | None, spec: str = ".3f") -> str:
+    return "–" if v is None else format(v, spec)
+
+
+def _cell(row: dict) -> str:
+    """r / β / f pooled over nodes, with the worst node's largest ratio and the absolute excess where exact is a point."""
+    text = " / ".join(_f(v) for v in _pooled(row)) + f" (≤ {_f(_worst(row))})"
+    return text + (f", {row['pinned_excess']:+.1e} abs." if row.get("pinned_excess") is not None else "")
+
+
+def _met(run: dict, row: dict) -> bool:
+    return _worst(row) <= run["target"] and row["violations"] == 0 and row["narrower"] == 0
+
+
+def _run_label(run: dict) -> str:
+    seeds = ",".join(map(str, run["seeds"]))
+    return f"{run['label']} (seed{'s' if len(run['seeds']) > 1 else ''} {seeds}; {run['steps']} steps)"
+
+
+def _rows(run: dict) -> dict[str, dict]:
+    return {r["estimator"]: r for r in run["rows"]}
+
+
+def widths_summary_markdown(res: dict) -> str:
+    """Every run: the SDP against its target, the paper's own set beside it."""
+    lines = [
+        f"`netsetest compare <topology> --estimators {','.join(ESTIMATORS)}` per run (with `<name>-noregion` too where a "
+        "run compares the set estimators without their region); mean published width over the "
+        f"exact limit from step {res['from_step']}, r / β / f pooled over nodes, and in brackets the largest per-node "
+        "ratio of the three; where the exact interval is a point (a reference's declared zero fault) the absolute width "
+        "over it instead (abs.). Exact limit: the fault bounds it applies and, under k-of-N health, the ends its search "
+        "left relaxed (an outer bound of the limit there, so a ratio may fall below 1; such an end is not counted "
+        "narrower). Target: the SDP's every node and coordinate ≤ the run's target, with no violation and "
+        "no interval narrower than exact where the assumptions held.",
+        "",
+        "| run | target | sdp r / β / f | sdp-ellipsoid (the paper's own set) | exact limit | narrower than exact | violations | met |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for run in res["runs"]:
+        rows = _rows(run)
+        sdp = rows["sdp"]
+        narrower = sum(r["narrower"] for r in run["rows"])
+        compared = sum(r["compared"] for r in run["rows"])
+        lines.append(
+            f"| {_run_label(run)} | ≤ {run['target']:.2f} | {_cell(sdp)} | {_cell(rows['sdp-ellipsoid'])} | "
+            f"{', '.join(sdp.get('exact_reference', []))} | {narrower} of {compared} | {sum(r['violations'] for r in run['rows'])} | {'yes' if _met(run, sdp) else '**no**'} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def widths_markdown(res: dict) -> str:
+    """Every run: the SDP against its target, then every estimator's r / β / f over exact, then per node."""
+    runs = res["runs"]
+    lines = [widths_summary_markdown(res), "Every estimator, r / β / f over exact pooled over nodes (largest per-node ratio):", ""]
+    names = list(dict.fromkeys(r["estimator"] for run in runs for r in run["rows"] if r["estimator"] not in ("sdp", "sdp-ellipsoid", "exact")))
+    lines += ["| run | " + " | ".join(f"`{n}`" for n in names) + " |", "|---|" + "---|" * len(names)]
+    for run in runs:
+        rows = _rows(run)
+        lines.append(f"| {run['label']} | " + " | ".join(_cell(rows[n]) if n in rows else "–" for n in names) + " |")
+    lines += ["", "Per node, r / β / f over exact ('–': the exact interval is a point):", ""]
+    for run in runs:
+        nodes = sorted({int(i) for r in run["rows"] for i in r["ratio_exact_by_node"]})
+        lines += [f"{_run_label(run)}:", "", "| estimator | " + " | ".join(f"node {i}" for i in nodes) + " |", "|---|" + "---|" * len(nodes)]
+        for r in run["rows"]:
+            by = {int(i): v for i, v in r["ratio_exact_by_node"].items()}
+            cells = [" / ".join(_f(by[i][m]) for m, _ in COORDS) if i in by else "" for i in nodes]
+            lines.append(f"| `{r['estimator']}` | " + " | ".join(cells) + " |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def region_markdown(res: dict) -> str:
+    """What the region buys the set estimators: each with and without it, side by side, r / β / f over exact."""
+    runs = res["runs"]
+    methods = [n for n in ("zonotope", "interval", "strip", "setprop") if any(n in _rows(r) for r in runs)]
+    lines = [
+        "r / β / f, mean published width over the exact limit pooled over nodes from step "
+        f"{res['from_step']} (largest per-node ratio), each set estimator without its region (the method as its paper "
+        "defines it, `<name>-noregion`) → with it; violations and intervals narrower than exact where the assumptions "
+        "held, with the region.",
+        "",
+        "| run | " + " | ".join(f"`{m}` without → with" for m in methods) + " | violations, narrower (with) |",
+        "|---|" + "---|" * len(methods) + "---|",
+    ]
+    for run in (r for r in runs if r["without_region"]):
+        rows = _rows(run)
+        cells = [f"{_cell(rows[m + '-noregion'])} → {_cell(rows[m])}" if m in rows and m + "-noregion" in rows else "–" for m in methods]
+        bad = sum(rows[m]["violations"] for m in methods if m in rows), sum(rows[m]["narrower"] for m in methods if m in rows)
+        lines.append(f"| {run['label']} | " + " | ".join(cells) + f" | {bad[0]}, {bad[1]} |")
+    return "\n".join(lines) + "\n"
+
+
+__all__ = ["ESTIMATORS", "WidthRun", "plan", "region_markdown", "widths_figures", "widths_markdown", "widths_summary_markdown"]
