@@ -18,9 +18,11 @@ untied spans cover, with |f_q,j| ≤ τ for q ∈ Q.  :func:`minimise` is a best
 them: the relaxation leaves every unchosen step's union out, a node whose minimiser meets every step's
 union is optimal (it has the least bound of all open nodes), otherwise it branches into the pieces of one
 violated step; before it, one *dive* tries the pieces the same end chose at the previous horizon, all at once
-(one solve where the search would branch once per union), and a child whose piece's interval bounds the objective
-past the incumbent is never solved.  Past the budget of solves, or past the run's deadline (CPU time), it stops
-with the least open bound: an outer bound (sound), reported as relaxed.  The solvers of the nodes are kept for the
+(one solve where the search would branch once per union), a child whose piece's interval bounds the objective
+past the incumbent is never solved, and a minimiser that misses a union only by tied faults is mended, not branched
+on (:func:`_repaired`: the faults clipped to τ where every row still holds; its value is then proven).  Past the
+budget of solves, or past the run's deadline (CPU time), it stops with the least open bound: an outer bound
+(sound), reported as relaxed.  The solvers of the nodes are kept for the
 other ends of the same program (the same rows, another objective), at most :data:`MAX_SOLVERS` of them (least
 recently used out): what the search keeps is bounded, whatever the number of branches.
 """
@@ -208,6 +210,39 @@ class Conic:
         b = np.r_[self.b, [rhs for _, rhs in rows]]
         return Conic(self.cols, sparse.vstack([self.A, extra], format="csc"), b, [*self.cones, clarabel.NonnegativeConeT(len(rows))], self.settings)
 
+    @cached_property
+    def _cone_of_row(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per row: its cone's kind (0 zero, 1 non-negative, 2 second-order, 3 other), first row and dimension."""
+        kinds = {clarabel.ZeroConeT: 0, clarabel.NonnegativeConeT: 1, clarabel.SecondOrderConeT: 2}
+        kind, first, dim, at = [], [], [], 0
+        for cone in self.cones:
+            kind += [kinds.get(type(cone), 3)] * cone.dim
+            first += [at] * cone.dim
+            dim += [cone.dim] * cone.dim
+            at += cone.dim
+        return np.array(kind), np.array(first), np.array(dim)
+
+    def violation(self, s: np.ndarray, rows: np.ndarray | None = None) -> float:
+        """How far the slacks ``s`` = b − A·x are from their cones over ``rows`` (their cones; default every row):
+        the largest residual of an equality, shortfall of an inequality or of a second-order cone (0: none)."""
+        kind, first, dim = self._cone_of_row
+        rows = np.arange(len(s)) if rows is None else rows
+        worst = float(np.abs(s[rows[kind[rows] == 0]]).max(initial=0.0))
+        worst = max(worst, float(-s[rows[kind[rows] == 1]].min(initial=0.0)))
+        for start in np.unique(first[rows[kind[rows] == 2]]):
+            part = s[start : start + dim[start]]
+            worst = max(worst, float(np.linalg.norm(part[1:]) - part[0]))
+        return math.inf if np.any(kind[rows] == 3) else worst
+
+    def moved(self, s: np.ndarray, cols: Sequence[int], delta: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+        """The slacks after x[cols] += delta (positions in ``cols`` of the program), and the rows that changed."""
+        out, rows = s.copy(), []
+        for c, d in zip(cols, delta):
+            span = slice(self.A.indptr[c], self.A.indptr[c + 1])
+            out[self.A.indices[span]] -= self.A.data[span] * d
+            rows.append(self.A.indices[span])
+        return out, np.concatenate(rows) if rows else np.zeros(0, dtype=int)
+
     def solver(self, q: np.ndarray) -> clarabel.DefaultSolver:
         n = len(self.cols)
         return clarabel.DefaultSolver(sparse.csc_matrix((n, n)), q, self.A, self.b, self.cones, self.settings)
@@ -257,6 +292,38 @@ class _Node:
     rows: tuple[Row, ...] = field(compare=False)
     z: np.ndarray | None = field(compare=False, default=None)  # the minimiser (global columns); None: unbounded or lazy
     path: Path = field(compare=False, default=())
+
+
+def _repaired(conic: Conic, unions: Sequence[StepUnion], node: _Node, objective: int) -> np.ndarray | None:
+    """A solved node's minimiser moved into the unions it violates only by tied faults: for each, the first piece
+    (nearest first) whose interval holds its t_j, with that piece's tied faults clipped to [−τ, τ], where the
+    program's rows hold as well as at the solver's minimiser (:meth:`Conic.violation`).  The objective's column
+    is never moved, so the point reaches the node's value: a trajectory that proves it without a solve.  An
+    interior-point minimiser lies in the middle of its optimal face, so where the end does not care about a tied
+    fault (step 0's, tied by the priors: every root of paper6_max_faulty SAIM missed that union) it leaves the
+    fault off zero.  None if some union is not mended (a t_j between pieces needs a solve: the dive's)."""
+    assert node.z is not None
+    z = node.z
+    missed = [union for m, union in enumerate(unions) if m not in node.chosen and not union.holds(z)]
+    ts = [sum(v * z[c] for c, v in union.t.items()) for union in missed]
+    if not all(any(p.lo - HEALTH_TOL <= t <= p.hi + HEALTH_TOL for p in union.pieces) for union, t in zip(missed, ts)):
+        return None  # a t_j between pieces: no clipping of faults mends it
+    slack = conic.b - conic.A @ z[conic.cols]
+    allowed = conic.violation(slack)  # the solver's own precision: mending may not make it worse
+    for union, t in zip(missed, ts):
+        for piece in sorted(union.pieces, key=lambda p: _distance(union, p, z)):
+            cols = [c for c in (union.f_col[n] for n in piece.healthy) if c is not None]
+            if not piece.lo - HEALTH_TOL <= t <= piece.hi + HEALTH_TOL or objective in cols:
+                continue
+            trial = z.copy()
+            trial[cols] = np.clip(trial[cols], -union.tolerance, union.tolerance)
+            moved, rows = conic.moved(slack, [conic.position[c] for c in cols], trial[cols] - z[cols])
+            if union.holds(trial) and conic.violation(moved, rows) <= allowed:
+                z, slack = trial, moved
+                break
+        else:
+            return None
+    return z
 
 
 def _branch_on(unions: Sequence[StepUnion], node: _Node) -> int | None:
@@ -323,11 +390,13 @@ class _Search:
         return kind, _Node(bound, False, next(self.order), node.chosen, node.rows, z, node.path)
 
     def keep(self, solved: _Node) -> bool:
-        """A solved node's minimiser that meets every union is a trajectory (the incumbent if the best): True."""
-        if solved.z is None or _branch_on(self.unions, solved) is not None:
+        """A solved node's minimiser that meets every union, or mended to (:func:`_repaired`), is a trajectory (the
+        incumbent if the best): True."""
+        z = solved.z if solved.z is None or _branch_on(self.unions, solved) is None else _repaired(self.conic, self.unions, solved, self.objective[0])
+        if z is None:
             return False
         if self.best is None or solved.bound < self.best[0]:
-            self.best = (solved.bound, solved.z)
+            self.best = (solved.bound, z)
         return True
 
     def settle_node(self, node: _Node) -> bool:
@@ -422,9 +491,11 @@ def minimise(
         return EndResult("infeasible", math.nan, None, True, 0)
     z = root[1]
     node = _Node(-math.inf if z is None else float(q @ z[conic.cols]), False, 0, frozenset(), (), z)
-    if z is not None and _branch_on(unions, node) is None:
-        return EndResult("solved", node.bound, z, True, 0)
     (at,) = np.flatnonzero(q)  # one coordinate's end
+    if z is not None:
+        mended = z if _branch_on(unions, node) is None else _repaired(conic, unions, node, int(conic.cols[at]))
+        if mended is not None:
+            return EndResult("solved", node.bound, mended, True, 0)
     search = _Search(conic, q, nz, unions, budget, deadline, (int(conic.cols[at]), float(q[at])), order=itertools.count(1))
     search.solvers = Solvers() if solvers is None else solvers
     return search.run(node, guide)
