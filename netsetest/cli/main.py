@@ -250,13 +250,13 @@ def cmd_run(a: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
-    from netsetest.runtime.report import exit_code, format_table, strict_verdict, write_summary
+    from netsetest.runtime.report import exit_code, format_table, write_summary
 
     sc = load_topology(a.topology, a.case, a.steps, a.estimator)
     res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet, record=a.record, keep=False, objective=a.objective)
     write_summary(res.summary, a.summary_json)
-    print(format_table(res.summary))
-    return strict_verdict(res.summary, exit_code(res.summary), a.strict)
+    print(format_table(res.summary, a.strict))
+    return exit_code(res.summary, a.strict)
 
 
 def _note_partial(command: str, rec: Record) -> None:

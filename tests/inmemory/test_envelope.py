@@ -66,10 +66,10 @@ def test_the_verdict_says_the_misses_outside_the_guarantee_and_strict_fails_them
     assert f"largest e_k {car['e_max_ratio']:.2f} × its bound (box [0.00263, 0.018]" in out[1]
     assert f"node-steps after a step whose e_k left its bound: {mismatch}" in "\n".join(out[:5])
     assert "envelope: none declared; peak |a_y|" in out[2]
-    # --strict: the same run fails, and its last line's first word says so
+    # --strict: the same run fails, in its one verdict line (its first word, the same words after it; no line more)
     code = _run(path, "--strict")
-    out = capsys.readouterr().out.splitlines()
-    assert code == 1 and out[-1].startswith("FAIL (--strict): ")
+    strict = capsys.readouterr().out.splitlines()
+    assert code == 1 and len(strict) == len(out) and strict[-1] == out[-1].replace("PASS (partial coverage): ", "FAIL (--strict): ", 1)
 
 
 def test_inspect_names_the_cause_beside_every_miss_and_uncovered_step(vanagon_run: tuple[Path, Path], capsys: pytest.CaptureFixture[str]) -> None:
