@@ -70,7 +70,7 @@ AMPLITUDE_MAX = 0.5  # [rad] the bracket's upper end: the driver's steering limi
 class DriveEnvelope:
     """What one drive did, as the operating envelope measures it (the transitions k → k+1)."""
 
-    ay_peak: float  # largest |a_y| [m/s²]
+    ay_peak: float  # largest |a_y| the tyres carried [m/s²] (Plant.transition_ay)
     r_peak: float  # largest |r| [rad/s]
     beta_peak: float  # largest |β| [rad]
     speed_kmh: tuple[float, float]  # slowest, fastest
