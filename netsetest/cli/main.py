@@ -189,7 +189,9 @@ def build_parser() -> argparse.ArgumentParser:
         "prints the bound and the [envelope] it holds for (docs/plant.md)",
     )
     p.add_argument("--toml", metavar="PATH", help="also write the box (and with --envelope the [envelope] table) to PATH, to append to the topology")
-    p.add_argument("--ay-max", type=checks.positive_float, metavar="M/S2", help="the envelope's largest |lateral acceleration| the tyres carry [m/s²] (with --envelope)")
+    p.add_argument(
+        "--ay-max", type=checks.positive_float, metavar="M/S2", help="the envelope's largest |lateral acceleration| the tyres carry [m/s²] (with --envelope)"
+    )
     p.add_argument("--speed", type=checks.speed_range, metavar="LO-HI", help="the envelope's speed range [km/h], e.g. 70-120 (with --envelope)")
 
     p = sub.add_parser("bench", help="the performance benchmark: solve times, tightness, Zenoh overhead, start-up, memory, real-time scale, defences")
