@@ -507,7 +507,8 @@ def envelope_markdown(env: dict) -> list[str]:
         f"{env['speed_kmh'][0]:g}-{env['speed_kmh'][1]:g} --seeds {env['seeds'][0]}-{env['seeds'][-1]}` gives (its sweep of step "
         "steers and sines with dwell), declared with that `[envelope]`, on held-out drives, seeds "
         f"{seeds[0]}-{seeds[-1]}: " + "; ".join(what[label] for label in measured) + ". Paper and worst-case signals, NSNIM and "
-        "SAIM. Steps outside the envelope: transitions whose a_y or speed left it; misses: sets that missed the truth, all "
+        "SAIM. a_y: the lateral acceleration the tyres carry (docs/plant.md §4); steps outside the envelope: transitions whose "
+        "a_y or speed left it; misses: sets that missed the truth, all "
         "outside the guarantee where violations are 0, with how many were attributed to a cause and whether the verdict "
         "line said so in words.",
         "",
