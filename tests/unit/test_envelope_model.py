@@ -193,3 +193,19 @@ def test_the_bench_table_says_per_car_and_drive_what_was_covered_and_attributed(
     assert "a double lane change at 120 km/h, outside the envelope (seed 100 only)" in lines[0]
     assert "| 3 (VW Vanagon) | [0.0037, 0.0199] | double-lane-change | nsnim | 2 | 5.50 | 0 | 0.40 | 972 / 972 | 0 | 0 (0, yes) |" in lines
     assert "| 3 (VW Vanagon) | [0.0037, 0.0199] | double-lane-change (outside) | nsnim | 1 | 9.10 | 12 | 1.70 | 400 / 486 | 0 | 9 (9, yes) |" in lines
+
+
+@pytest.mark.parametrize(("strict", "code", "word"), [(False, EXIT_OK, "PASS (partial coverage): "), (True, EXIT_VIOLATION, "FAIL (--strict): ")])
+def test_a_zenoh_run_decides_strict_in_the_same_verdict(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], strict: bool, code: int, word: str
+) -> None:
+    """``run --mode zenoh --strict``: the launcher's summary (a collector that exited with its code) goes through
+    the same outcome() as in memory: one verdict line, its word and the exit code together."""
+    from netsetest.cli.main import main
+    from netsetest.runtime import launcher
+
+    monkeypatch.setattr(launcher, "plan_run", lambda opts: None)
+    monkeypatch.setattr(launcher, "launch", lambda plan: launcher.RunOutcome(EXIT_OK, _summary(mode="zenoh")))
+    assert main(["run", "paper6", "--quiet", *(["--strict"] if strict else [])]) == code
+    out = capsys.readouterr().out.splitlines()
+    assert out[-1].startswith(word + "zenoh run") and "6 set(s) missed the truth outside the guarantee" in out[-1]
