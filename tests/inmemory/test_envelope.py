@@ -152,8 +152,8 @@ BODY_AY_BOX = (0.004239544005333856, 0.02275782242598981)
 
 
 def test_the_envelope_measures_the_tyres_load_so_a_wind_against_the_turn_does_not_hide_it(tmp_path: Path) -> None:
-    """Where e_k left that bound the body's a_y was about 4.6 m/s², the worst-case wind (f_w·√W / m, 1.6 m/s²)
-    pushing against the turn: the tyres carried about 6.2 m/s², outside the envelope, which is what the check
+    """Where e_k left that bound the body's a_y was about 4.6 m/s², the worst-case wind (f_w·√W / m, 1.8 m/s²)
+    pushing against the turn: the tyres carried about 6.3 m/s², outside the envelope, which is what the check
     measures (Plant.transition_ay), so the judge attributes those steps to "outside the operating envelope"
     instead of "model mismatch"."""
     import numpy as np
