@@ -292,7 +292,7 @@ class Truth(_Msg, tag="truth", frozen=True, kw_only=True):
     e: Vec2 | None = None  # model mismatch of k → k+1: x_{k+1} − (Ā x_k + B̄ u_k + D̄ w_k) (None: last step, older records)
     mismatch_ok: bool = True  # e_k within the declared [model_uncertainty] (none declared: e_k = 0)
     health_ok: bool = True  # at most max_faulty sensors faulty in every k-of-N group at step k (none declared: True)
-    # the car's speed v_k [m/s] and the mean lateral acceleration of k → k+1 [m/s²] (models/envelope.py;
+    # the car's speed v_k [m/s] and the lateral acceleration the tyres carry over k → k+1 [m/s²] (models/envelope.py;
     # None: the T-S plant, the last step, older records), and whether that transition stayed inside the
     # declared [envelope] (none declared: True)
     speed: FiniteF | None = None

@@ -57,7 +57,7 @@ MVEE_MAX_ITER = 10_000
 SWEEP_MANOEUVRES: tuple[ManoeuvreName, ...] = ("step-steer", "sine-dwell")  # steered by an amplitude: the envelope's training
 SWEEP_SPEEDS = 3  # speeds across the envelope's range: both ends and the middle
 # amplitudes, as fractions of the one whose steering alone reaches ay_max: the last overfills the envelope
-# (the worst-case wind adds to a_y too), and the transitions beyond it are left out of the bound
+# (the worst-case wind moves the tyres' load too), and the transitions beyond it are left out of the bound
 SWEEP_FRACTIONS = (1 / 3, 2 / 3, 1.0, 1.2)
 SEARCH_SIGNALS: tuple[SignalKind, ...] = ("paper",)  # the amplitude search's wind: the paper's, the gentle one
 BISECTION_STEPS = 10  # the amplitude reaching ay_max to 2⁻¹⁰ of the bracket's width (0.5 mrad)
@@ -70,7 +70,7 @@ AMPLITUDE_MAX = 0.5  # [rad] the bracket's upper end: the driver's steering limi
 class DriveEnvelope:
     """What one drive did, as the operating envelope measures it (the transitions k → k+1)."""
 
-    ay_peak: float  # largest |a_y| [m/s²]
+    ay_peak: float  # largest |a_y| the tyres carried [m/s²] (Plant.transition_ay)
     r_peak: float  # largest |r| [rad/s]
     beta_peak: float  # largest |β| [rad]
     speed_kmh: tuple[float, float]  # slowest, fastest

@@ -47,6 +47,9 @@ INSIDE_DLC_KMH = 75.0  # a little above the envelope's slowest speed (the car sl
 SINE_KMH = 85.0  # the held-out sine with dwell: a speed between the sweep's (70, 95, 120 km/h) ...
 SINE_FRACTION = 0.6  # ... at an amplitude between the sweep's fractions of the one reaching ay_max
 OUTSIDE_KMH = 120.0  # the double lane change at 120 km/h: beyond 6 m/s² on every car
+# the held-out lap's steps at least: the quick config's 200 (20 s) end on the first 600 m straight; 300 reach
+# about 40° into the first bend (its entry, where the driver's steering changes)
+LAP_BEND_STEPS = 300
 
 
 def _log(msg: str) -> None:
@@ -310,7 +313,7 @@ def held_out_plan(cfg: dict, tmp: Path, vehicle: int) -> list[HeldOut]:
     sine_amp = SINE_FRACTION * amplitude_for(load_topology(car_topology(tmp, vehicle)), SINE_KMH, "sine-dwell", envelope, SEARCH_SIGNALS)
     return [
         ("double-lane-change", "double-lane-change", INSIDE_DLC_KMH, 0.0, cfg["plant_steps"], HELD_OUT_SEEDS),
-        ("lap", "lap", None, 0.0, cfg["plant_lap_steps"], HELD_OUT_SEEDS),  # the topology's speed sine, 82-118 km/h
+        ("lap", "lap", None, 0.0, max(cfg["plant_lap_steps"], LAP_BEND_STEPS), HELD_OUT_SEEDS),  # the topology's speed sine, 82-118 km/h
         ("sine-dwell", "sine-dwell", SINE_KMH, sine_amp, cfg["plant_steps"], HELD_OUT_SEEDS),
         ("double-lane-change (outside)", "double-lane-change", OUTSIDE_KMH, 0.0, cfg["plant_steps"], HELD_OUT_SEEDS[:1]),
     ]
@@ -491,9 +494,10 @@ def envelope_markdown(env: dict) -> list[str]:
     """The three cars' envelopes: the calibrated box and the held-out drives inside and outside it."""
     seeds = env["held_out_seeds"]
     kmh = {label: rows[0]["kmh"] for car in env["cars"] for label, rows in car["drives"].items() if rows}  # the speed each was held at
+    steps = {label: rows[0]["steps"] for car in env["cars"] for label, rows in car["drives"].items() if rows}  # and its steps
     what = {
         "double-lane-change": f"a double lane change at {kmh.get('double-lane-change') or 0:g} km/h",
-        "lap": "the lap (the speed sine, 82-118 km/h)",
+        "lap": f"the lap's first {steps.get('lap') or 0:g} steps (the first straight and into the first bend; the speed sine, 82-118 km/h)",
         "sine-dwell": f"a sine with dwell at {kmh.get('sine-dwell') or 0:g} km/h at {SINE_FRACTION:g} of the amplitude reaching the envelope's a_y",
         "double-lane-change (outside)": f"a double lane change at {kmh.get('double-lane-change (outside)') or 0:g} km/h, outside the envelope (seed {seeds[0]} only)",
     }
@@ -503,7 +507,8 @@ def envelope_markdown(env: dict) -> list[str]:
         f"{env['speed_kmh'][0]:g}-{env['speed_kmh'][1]:g} --seeds {env['seeds'][0]}-{env['seeds'][-1]}` gives (its sweep of step "
         "steers and sines with dwell), declared with that `[envelope]`, on held-out drives, seeds "
         f"{seeds[0]}-{seeds[-1]}: " + "; ".join(what[label] for label in measured) + ". Paper and worst-case signals, NSNIM and "
-        "SAIM. Steps outside the envelope: transitions whose a_y or speed left it; misses: sets that missed the truth, all "
+        "SAIM. a_y: the lateral acceleration the tyres carry (docs/plant.md §4); steps outside the envelope: transitions whose "
+        "a_y or speed left it; misses: sets that missed the truth, all "
         "outside the guarantee where violations are 0, with how many were attributed to a cause and whether the verdict "
         "line said so in words.",
         "",

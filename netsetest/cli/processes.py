@@ -224,7 +224,7 @@ COMMANDS.update(vehicle=cmd_vehicle, node=cmd_node, collector=cmd_collector, rou
 
 def cmd_run_zenoh(a: argparse.Namespace) -> int:
     from netsetest.runtime.launcher import LaunchError, LaunchOptions, launch, plan_run
-    from netsetest.runtime.report import format_table, strict_verdict
+    from netsetest.runtime.report import exit_code, format_table
 
     opts = LaunchOptions(
         topology=a.topology,
@@ -261,6 +261,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     outcome = launch(plan)
     if outcome.summary is not None:
-        print(format_table(outcome.summary))  # its last line names the security mode and the verdict
-        return strict_verdict(outcome.summary, outcome.exit_code, a.strict)
+        print(format_table(outcome.summary, a.strict))  # its last line names the security mode and the verdict
+        # the collector exits with its summary's code; a role that failed after it keeps its own
+        return exit_code(outcome.summary, a.strict) if outcome.exit_code == exit_code(outcome.summary) else outcome.exit_code
     return outcome.exit_code

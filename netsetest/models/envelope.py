@@ -6,10 +6,14 @@ ones the training held.  ``[envelope]`` declares the region those drives filled:
 
     |a_y,k| ≤ ay_max    and    speed_kmh[0] ≤ 3.6 v_k ≤ speed_kmh[1]
 
-with a_y,k the lateral acceleration of the transition k → k+1 (models/plant.py, ``transition_ay``: the
-larger in magnitude of the car's body-frame a_y at the interval's two ends, the first already with the
-interval's steering, so that a quick steering change shows at once in its front tyre's force) and v_k
-the car's speed at step k.
+with a_y,k the lateral acceleration the tyres carry over the transition k → k+1 (models/plant.py,
+``transition_ay``: the larger in magnitude of its values at the interval's two ends, the first already with
+the interval's steering, so that a quick steering change shows at once in its front tyre's force) and v_k
+the car's speed at step k.  The tyres' a_y is the body's less the side wind's force over the mass, f_w w/m:
+e_k grows with how far the tyres leave their linear range, and a gust against a turn lowers the body's a_y
+by up to f_w √W/m (1.3–1.8 m/s² on CommonRoad's cars with the worst-case wind) while the tyres carry as much as before; measured on
+the body, vehicle 2's held-out double lane change left its bound on transitions the check called inside
+(issue 29).
 The vehicle role checks every transition against it and publishes the check with the truth
 (``Truth.envelope_ok``); a miss after a transition whose e_k left its bound is then attributed to
 "outside the operating envelope" where the car had left it, and to "model mismatch" where it had not

@@ -109,8 +109,10 @@ class Plant(Protocol):
         ...
 
     def transition_ay(self) -> float:
-        """The lateral acceleration [m/s²] of the last :meth:`advance` (the operating envelope's measure,
-        models/envelope.py): the larger in magnitude of its values at the interval's two ends."""
+        """The lateral acceleration the tyres carry [m/s²] over the last :meth:`advance` (the operating
+        envelope's measure, models/envelope.py): the larger in magnitude of its values at the interval's two
+        ends.  The tyres' part of the body's a_y, that is without the side wind's force over the mass: e_k
+        grows with the tyres' load, and a gust against a turn lowers the body's a_y, not that load."""
         ...
 
 
@@ -134,8 +136,9 @@ class TSPlant:
         x0, v0 = self.x, v
         self.x = self.model.step(self.x, u, w, self.vx)
         self.vx = speed.kmh(t1) * KMH  # as Scenario.vx: the paper's run, bit for bit
-        # no instantaneous β̇ in a discrete model: the interval's mean, v̄ (Δβ/τ + r̄)
-        self._ay = 0.5 * (v0 + self.vx / math.cos(self.x[0])) * ((self.x[0] - x0[0]) / tau + 0.5 * (x0[1] + self.x[1]))
+        # no instantaneous β̇ in a discrete model: the interval's mean, v̄ (Δβ/τ + r̄), less the wind's f_w w / m
+        p = self.model.params
+        self._ay = 0.5 * (v0 + self.vx / math.cos(self.x[0])) * ((self.x[0] - x0[0]) / tau + 0.5 * (x0[1] + self.x[1])) - p.fw * w / p.m
 
     def transition_ay(self) -> float:
         return self._ay
@@ -184,14 +187,16 @@ class _CommonRoadPlant:
 
     def advance(self, u: float, w: float, t0: float, t1: float, speed: SpeedProfile) -> None:
         self.s[2] = u  # δ held over the interval (zero-order hold)
-        ay0 = self._ay(self.s, self._rhs(t0, self.s, self.fw * w, speed))  # with the new steering: its tyre force at once
+        # the tyres' a_y (Plant.transition_ay: the derivative without the wind's force), at t0 with the new
+        # steering: its tyre force at once
+        ay0 = self._ay(self.s, self._rhs(t0, self.s, 0.0, speed))
         integrator = self._ode.set_initial_value(self.s, t0).set_f_params(self.fw * w, speed)
         s1 = integrator.integrate(t1)
         if not integrator.successful():
             raise ArithmeticError(f"the plant's integration failed at t = {t0:.3f} s (DOPRI5 status {integrator.get_return_code()})")
         self.s = np.array(s1, dtype=float)
         self.s[2] = u
-        self._ay_ends = (ay0, self._ay(self.s, self._rhs(t1, self.s, self.fw * w, speed)))
+        self._ay_ends = (ay0, self._ay(self.s, self._rhs(t1, self.s, 0.0, speed)))
 
 
 class SingleTrackPlant(_CommonRoadPlant):

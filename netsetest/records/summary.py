@@ -101,7 +101,7 @@ class CarSummary:
     e_outside: int = 0  # transitions whose e_k left the bound
     e_outside_first: int | None = None  # the first of them (k of k → k+1)
     envelope: str | None = None  # the declared [envelope] in words (None: not declared)
-    ay_peak: float = 0.0  # largest |a_y| [m/s²]
+    ay_peak: float = 0.0  # largest |a_y| the tyres carried [m/s²] (Plant.transition_ay)
     speed_kmh: list[float] = field(default_factory=lambda: [0.0, 0.0])  # the car's slowest and fastest speed
     ay_margin: float | None = None  # ay_max − the largest |a_y| [m/s²] (None: no envelope)
     speed_margin_kmh: float | None = None  # the smallest distance of the speed to the envelope's range's ends

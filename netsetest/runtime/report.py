@@ -70,12 +70,14 @@ class Outcome(NamedTuple):
     code: int
 
 
-def outcome(summary: RunSummary) -> Outcome:
+def outcome(summary: RunSummary, strict: bool = False) -> Outcome:
     """The verdict's first word and the exit code, decided together (docs/summary.md):
 
     - ``FAIL`` (exit 1): a miss where every assumption held; ``FAIL (vehicle gone)`` (exit 1): the
       collector stopped waiting for the vehicle before its End;
     - ``INTERRUPTED`` (exit 130): the run was stopped by Ctrl-C or SIGTERM;
+    - ``FAIL (--strict)`` (exit 1, ``strict`` only: ``run --strict``, for CI users who want a run to fail
+      there): a set missed the truth outside the guarantee, where the run would otherwise pass or lose a node;
     - ``NODE LOST`` (exit 3): a node stopped reporting for good;
     - ``PASS (partial coverage)`` (exit 0): the guarantee did not apply to every node-step the run should
       have had judged (not covered, not judged, rejected, a node back after a gap, the collector overloaded);
@@ -87,6 +89,8 @@ def outcome(summary: RunSummary) -> Outcome:
         return Outcome("INTERRUPTED", EXIT_INTERRUPTED)
     if summary.stopped is not None:
         return Outcome(f"FAIL ({summary.stopped})", EXIT_VIOLATION)
+    if strict and summary.misses_assumption_broken_total:
+        return Outcome("FAIL (--strict)", EXIT_VIOLATION)
     if summary.nodes_missing:
         return Outcome("NODE LOST", EXIT_NODE_LOST)
     expected = (summary.steps_completed + 1) * len(summary.nodes)
@@ -148,16 +152,8 @@ def uncovered_misses(summary: RunSummary) -> str:
     return head + (f": {'; '.join(parts)}" if parts else "")
 
 
-def strict_verdict(summary: RunSummary, code: int, strict: bool) -> int:
-    """``run --strict``: any miss outside the guarantee fails the run too (exit 1, for CI users who want it
-    to), said on a last line whose first word matches the exit code; otherwise ``code`` as it is."""
-    if not strict or not summary.misses_assumption_broken_total or code not in (EXIT_OK, EXIT_NODE_LOST):
-        return code
-    print(f"FAIL (--strict): {summary.misses_assumption_broken_total} set(s) missed the truth outside the guarantee (the line above says why).", flush=True)
-    return EXIT_VIOLATION
-
-
-def format_table(summary: RunSummary) -> str:
+def format_table(summary: RunSummary, strict: bool = False) -> str:
+    """The run's output: the car's header, the per-node table, and the verdict line (``strict``: ``run --strict``)."""
     mixed = len({r.estimator for r in summary.nodes}) > 1  # name each node's method where they differ
     head = [
         "node",
@@ -212,7 +208,7 @@ def format_table(summary: RunSummary) -> str:
     security = f" (security: {summary.security})" if summary.security else ""
     seed = f", seed {summary.seed}" if summary.seed is not None else ""
     out.append(
-        f"{outcome(summary).word}: {summary.mode or ''} run{security}, case {summary.case}, signals {summary.signals}, "
+        f"{outcome(summary, strict).word}: {summary.mode or ''} run{security}, case {summary.case}, signals {summary.signals}, "
         f"variant {summary.variant}{seed}, steps 0–{summary.steps_completed}: {verdict(summary)}."
     )
     return "\n".join(out)
@@ -301,6 +297,6 @@ EXIT_OK, EXIT_VIOLATION, EXIT_BAD_INPUT, EXIT_NODE_LOST = 0, 1, 2, 3
 EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM reached the command (128 + SIGINT, as shells report it)
 
 
-def exit_code(summary: RunSummary) -> int:
+def exit_code(summary: RunSummary, strict: bool = False) -> int:
     """The exit code that goes with the verdict's first word (:func:`outcome`)."""
-    return outcome(summary).code
+    return outcome(summary, strict).code

@@ -59,6 +59,6 @@ def test_the_tutorial_runs_end_to_end(tmp_path: Path, monkeypatch: pytest.Monkey
     assert "[model_uncertainty]\nbox = [" in topo and "[envelope]\nay_max = 7.0\nspeed_kmh = [75.0, 85.0]" in topo
     for run in (heldout, other):  # the held-out drives: every node-step covered, e_k well inside the bound
         assert "contained on 243 of 243 node-steps; the guarantee applied on 243." in run.splitlines()[-1]
-        assert "inside it on all 80 steps" in run.splitlines()[1]
+        assert "inside it on all 80 steps" in run.splitlines()[1] and run.splitlines()[2].endswith("; inside on every step")
     assert "detected" in inspect and "not covered" not in inspect
     assert any(line.endswith("mismatch.png") for line in plot.splitlines())

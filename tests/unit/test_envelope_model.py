@@ -14,8 +14,10 @@ from netsetest.messages import Truth, decode, encode
 from netsetest.models.envelope import MODEL_MISMATCH, OUTSIDE_ENVELOPE, OperatingEnvelope
 from netsetest.models.uncertainty import ModelUncertainty
 from netsetest.models.vehicle import KMH
-from netsetest.records.summary import CarSummary, RunSummary
-from netsetest.runtime.report import EXIT_NODE_LOST, EXIT_OK, EXIT_VIOLATION, car_lines, strict_verdict, verdict
+from netsetest.records.summary import CarSummary, NodeSummary, RunSummary
+from netsetest.runtime.report import EXIT_NODE_LOST, EXIT_OK, EXIT_VIOLATION, Outcome, car_lines, exit_code, format_table, outcome, verdict
+
+from message_helpers import truth
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = OperatingEnvelope(6.0, (70.0, 120.0))
@@ -30,33 +32,12 @@ def test_envelope_holds_inside_and_measures_its_margins() -> None:
     assert ENV.speed_margin(80 * KMH) == pytest.approx(10.0) and ENV.speed_margin(125 * KMH) == pytest.approx(-5.0)
 
 
-def _truth(**kw: object) -> Truth:
-    one = {"1": 0.0}
-    base: dict[str, object] = dict(
-        step=3,
-        x=[0.01, 0.2],
-        faults=one,
-        u=0.03,
-        w=0.1,
-        vx=27.0,
-        noise=one,
-        gamma={"1": 0.8},
-        y=one,
-        y_nofault=one,
-        sector_ok={"1": True},
-        noise_ok={"1": True},
-        dist_ok=True,
-    )
-    base.update(kw)
-    return Truth(**base)
-
-
 def test_an_older_truth_without_the_envelope_decodes_as_inside_and_a_new_one_round_trips() -> None:
-    old = _truth()
+    old = truth()
     payload = encode(old)
     assert b"envelope_ok" not in payload and b"ay" not in payload  # omitted at their defaults
     assert decode(payload).envelope_ok is True
-    new = _truth(speed=22.2, ay=-6.5, envelope_ok=False, e=[1e-3, -2e-2], mismatch_ok=False)
+    new = truth(speed=22.2, ay=-6.5, envelope_ok=False, e=[1e-3, -2e-2], mismatch_ok=False)
     back = decode(encode(new))
     assert isinstance(back, Truth) and (back.speed, back.ay, back.envelope_ok) == (22.2, -6.5, False)
 
@@ -100,14 +81,14 @@ def test_the_judge_names_the_plants_transition_first_and_whether_the_car_left_it
     judge, n = Judge(sc), sc.nodes[0]
     ids = {str(i): 0.0 for i in sc.ids}
     flags = {str(i): True for i in sc.ids}
-    base = dict(faults=ids, noise=ids, gamma={s: 1.0 for s in ids}, y=ids, y_nofault=ids, sector_ok=flags, noise_ok=flags)
-    now = _truth(step=5, **(base | {"noise_ok": {**flags, str(n.id): False}}))  # its own noise bound broke too
+    base = dict(faults=ids, noise=ids, gamma={s: 1.0 for s in ids}, y=ids, y_nofault=ids, sector_ok=flags, noise_ok=flags, r=ids, fault_ok=flags)
+    now = truth(step=5, **(base | {"noise_ok": {**flags, str(n.id): False}}))  # its own noise bound broke too
     for envelope_ok, cause in ((True, MODEL_MISMATCH), (False, OUTSIDE_ENVELOPE)):
-        prev = _truth(step=4, **base, e=[0.1, 0.1], mismatch_ok=False, envelope_ok=envelope_ok)
+        prev = truth(step=4, **base, e=[0.1, 0.1], mismatch_ok=False, envelope_ok=envelope_ok)
         assert judge.own_cause(n, None, now, prev, 5) == cause
-    inside = _truth(step=4, **base, e=[0.0, 0.0], envelope_ok=False)  # left the envelope, e_k inside its bound: the guarantee held
+    inside = truth(step=4, **base, e=[0.0, 0.0], envelope_ok=False)  # left the envelope, e_k inside its bound: the guarantee held
     assert judge.own_cause(n, None, now, inside, 5) == "noise"
-    assert judge.own_cause(n, None, _truth(step=5, **base), inside, 5) is None
+    assert judge.own_cause(n, None, truth(step=5, **base), inside, 5) is None
 
 
 def _summary(**kw: object) -> RunSummary:
@@ -137,6 +118,7 @@ def _summary(**kw: object) -> RunSummary:
         misses_assumption_broken_total=6,
         misses_by_cause={"inherited": 6},
         car=car,
+        nodes=[NodeSummary(id=i) for i in range(1, 7)],
     )
     base.update(kw)
     return RunSummary(**base)  # type: ignore[arg-type]  # the fields above, by name
@@ -163,14 +145,18 @@ def test_the_header_names_the_car_the_manoeuvre_its_mismatch_and_envelope_margin
     assert car_lines(_summary(car=None)) == []  # the T-S plant: no car
 
 
-def test_strict_fails_a_run_with_a_miss_outside_the_guarantee(capsys: pytest.CaptureFixture[str]) -> None:
+def test_strict_fails_a_run_with_a_miss_outside_the_guarantee_in_its_one_verdict() -> None:
     s = _summary()
-    assert strict_verdict(s, EXIT_OK, strict=False) == EXIT_OK and capsys.readouterr().out == ""
-    assert strict_verdict(s, EXIT_OK, strict=True) == EXIT_VIOLATION
-    assert capsys.readouterr().out.startswith("FAIL (--strict): 6 set(s)")
-    assert strict_verdict(s, EXIT_NODE_LOST, strict=True) == EXIT_VIOLATION
+    assert outcome(s) == Outcome("PASS (partial coverage)", EXIT_OK) and exit_code(s) == EXIT_OK
+    assert outcome(s, strict=True) == Outcome("FAIL (--strict)", EXIT_VIOLATION) and exit_code(s, strict=True) == EXIT_VIOLATION
+    last = format_table(s, strict=True).splitlines()[-1]
+    assert last.startswith("FAIL (--strict): ") and "6 set(s) missed the truth outside the guarantee" in last
+    assert format_table(s).splitlines()[-1] == last.replace("FAIL (--strict)", "PASS (partial coverage)", 1)
+    lost = dataclasses.replace(s, nodes_missing=[2])
+    assert outcome(lost) == Outcome("NODE LOST", EXIT_NODE_LOST) and outcome(lost, strict=True) == Outcome("FAIL (--strict)", EXIT_VIOLATION)
+    assert outcome(dataclasses.replace(s, stopped="interrupted"), strict=True).word == "INTERRUPTED"  # a stopped run stays stopped
     clean = _summary(misses_assumption_broken_total=0)
-    assert strict_verdict(clean, EXIT_OK, strict=True) == EXIT_OK
+    assert outcome(clean, strict=True) == outcome(clean)
 
 
 def test_the_car_summary_round_trips_and_a_ts_summary_has_none() -> None:
@@ -189,7 +175,9 @@ def test_the_bound_measures_e_in_its_own_norm() -> None:
 def test_the_bench_table_says_per_car_and_drive_what_was_covered_and_attributed() -> None:
     from netsetest.bench.plant import envelope_markdown
 
-    row = dict(case="nsnim", kmh=70.0, ay_peak=5.5, envelope_left=0, e_max_ratio=0.4, covered=486, evaluated=486, violations=0, misses=0, misses_attributed=0)
+    row = dict(
+        case="nsnim", kmh=70.0, steps=80, ay_peak=5.5, envelope_left=0, e_max_ratio=0.4, covered=486, evaluated=486, violations=0, misses=0, misses_attributed=0
+    )
     outside = dict(row, kmh=120.0, ay_peak=9.1, envelope_left=12, e_max_ratio=1.7, covered=400, misses=9, misses_attributed=9, verdict_says=True)
     env = {
         "ay_max": 6.0,
@@ -200,6 +188,24 @@ def test_the_bench_table_says_per_car_and_drive_what_was_covered_and_attributed(
     }
     lines = envelope_markdown(env)
     assert "--ay-max 6 --speed 70-120 --seeds 0-4" in lines[0] and "a double lane change at 70 km/h;" in lines[0] and "lap" not in lines[0]
+    env["cars"][0]["drives"]["lap"] = [dict(row, kmh=None, steps=300)]  # a lap measured: named with its length
+    assert "the lap's first 300 steps (the first straight and into the first bend" in envelope_markdown(env)[0]
     assert "a double lane change at 120 km/h, outside the envelope (seed 100 only)" in lines[0]
     assert "| 3 (VW Vanagon) | [0.0037, 0.0199] | double-lane-change | nsnim | 2 | 5.50 | 0 | 0.40 | 972 / 972 | 0 | 0 (0, yes) |" in lines
     assert "| 3 (VW Vanagon) | [0.0037, 0.0199] | double-lane-change (outside) | nsnim | 1 | 9.10 | 12 | 1.70 | 400 / 486 | 0 | 9 (9, yes) |" in lines
+
+
+@pytest.mark.parametrize(("strict", "code", "word"), [(False, EXIT_OK, "PASS (partial coverage): "), (True, EXIT_VIOLATION, "FAIL (--strict): ")])
+def test_a_zenoh_run_decides_strict_in_the_same_verdict(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], strict: bool, code: int, word: str
+) -> None:
+    """``run --mode zenoh --strict``: the launcher's summary (a collector that exited with its code) goes through
+    the same outcome() as in memory: one verdict line, its word and the exit code together."""
+    from netsetest.cli.main import main
+    from netsetest.runtime import launcher
+
+    monkeypatch.setattr(launcher, "plan_run", lambda opts: None)
+    monkeypatch.setattr(launcher, "launch", lambda plan: launcher.RunOutcome(EXIT_OK, _summary(mode="zenoh")))
+    assert main(["run", "paper6", "--quiet", *(["--strict"] if strict else [])]) == code
+    out = capsys.readouterr().out.splitlines()
+    assert out[-1].startswith(word + "zenoh run") and "6 set(s) missed the truth outside the guarantee" in out[-1]

@@ -26,6 +26,8 @@ from netsetest.messages import (
     encode,
 )
 
+from message_helpers import truth
+
 P_EYE = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
 
 
@@ -35,38 +37,12 @@ def _state(**kw: object) -> NodeState:
     return NodeState(**base)
 
 
-def _truth(**kw: object) -> Truth:
-    one = {"1": 0.5, "2": -0.5}
-    base: dict[str, object] = dict(
-        step=3,
-        x=[0.01, 0.2],
-        faults=one,
-        u=0.03,
-        w=0.1,
-        vx=27.0,
-        noise=one,
-        gamma={"1": 0.8, "2": 0.9},
-        y=one,
-        y_nofault=one,
-        sector_ok={"1": True, "2": True},
-        noise_ok={"1": True, "2": False},
-        dist_ok=True,
-        r={"1": 0.1, "2": 0.2},
-        fault_ok={"1": True, "2": True},
-        lost=[(1, 2)],
-        alive=[1, 2],
-        drops={"stale": 2},
-    )
-    base.update(kw)
-    return Truth(**base)
-
-
 EVERY_KIND = [
     Ready(role="node", node=3, seen_all=True),
     NodeInput(step=2, node=1, y=0.5, gamma=0.9, u_prev=0.02, vx_prev=27.0, expect_from=[2], lost_from=[3], deadline=1e9),
     _state(),
     _state(sector=(0.8, 0.1), sector_basis="measurement", used=[1, 3], missing=[3], late=True, dropped=2, drops={"x": 2}),
-    _truth(),
+    truth(),
     End(steps=5, reason="aborted"),
     Reading(step=4, node=3, y=0.01, gamma=0.7),
     _state(readings=[(3, 0.01, 0.7)]),
@@ -182,7 +158,7 @@ def test_every_float_list_entry_must_be_finite(name):
 
 @pytest.mark.parametrize("name", ["faults", "noise", "gamma", "y", "y_nofault", "r"])
 def test_truth_map_values_must_be_finite(name):
-    d = _truth().model_dump()
+    d = truth().model_dump()
     d[name] = {**d[name], "2": math.inf}
     assert _reason(_pack(d)) == "invalid"
 
@@ -250,7 +226,7 @@ def test_cross_field_checks_run_at_construction():
     with pytest.raises(ValueError, match="positive definite"):
         _state(P=[1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0])
     with pytest.raises(ValueError, match="noise: keys differ"):
-        _truth(noise={"1": 0.0})
+        truth(noise={"1": 0.0})
     with pytest.raises(ValueError):
         _state(set={"type": "box", "lo": [0.0], "hi": [1.0]})
 
@@ -261,7 +237,7 @@ def test_messages_are_frozen():
 
 
 def test_model_copy_is_unchecked_and_model_dump_is_complete():
-    m = _truth()
+    m = truth()
     forged = m.model_copy(update={"noise": {"9": 0.0}})  # as pydantic's: no validation (tests forge with it)
     assert forged.noise == {"9": 0.0} and m.noise != forged.noise
     with pytest.raises(BadMessage):
@@ -272,6 +248,6 @@ def test_model_copy_is_unchecked_and_model_dump_is_complete():
     assert list(py)[:2] == ["v", "type"] == list(js)[:2]
     assert set(py) == {"type", *Truth.__struct_fields__}
     assert py["lost"] == [(1, 2)] and js["lost"] == [[1, 2]]
-    assert set(js) == set(py) and js["r"] == m.r and _truth(r={}, fault_ok={}).model_dump(mode="json")["r"] == {}
+    assert set(js) == set(py) and js["r"] == m.r and truth(r={}, fault_ok={}).model_dump(mode="json")["r"] == {}
     py["x"][0] = 99.0  # a dump is a copy
     assert m.x[0] == 0.01
