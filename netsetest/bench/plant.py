@@ -152,7 +152,7 @@ def held_out(cfg: dict, tmp: Path, moderate_box: list[float]) -> dict:
     plan = [
         ("paper (seeds unseen)", None, cfg["plant_steps"], cfg["plant_seeds"]),
         ("double-lane-change", "double-lane-change", cfg["plant_steps"], cfg["plant_seeds"][:2]),
-        ("lap", "lap", cfg["plant_lap_steps"], cfg["plant_seeds"][:1]),
+        ("lap", "lap", max(cfg["plant_lap_steps"], LAP_BEND_STEPS), cfg["plant_seeds"][:1]),  # into the first bend
     ]
     for which, topo in (("declared", CAR), ("moderate", moderate)):
         drives: dict[str, list[dict]] = {}
