@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -15,6 +16,14 @@ import pytest
 # the Zenoh tests' fixtures (``procs``: every process a test starts is stopped after it), for every module
 pytest_plugins = ["zenoh_helpers"]
 LAYERS = ("unit", "inmemory", "process")  # tests/<layer>/: each test is marked with its folder's layer
+
+
+# A shell starting pytest in the background without job control (`cmd &` in a script, nohup) hands it SIGINT
+# ignored, and an ignored signal stays ignored across exec: every `netsetest run` a test starts would then
+# shrug off the Ctrl-C the shutdown tests send (exit 0 or a timeout). The tests are about netsetest's handling,
+# not the launcher's, so they restore the default disposition for the processes they start.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 # modules that read the same recorded runs (run_helpers.shared_run, cached per worker): one worker runs them
