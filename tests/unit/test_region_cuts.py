@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from netsetest.estimator.sdp import NodeSet, _ellipse_cut, _seed
+from netsetest.estimator.cuts import NodeSet, ellipse_cut, seed
 from netsetest.polygon import Polygon
 
 
@@ -32,7 +32,7 @@ def _ellipsoid(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, float, np.ndarr
 @given(_ellipsoid())
 def test_the_seed_holds_every_point_of_the_ellipsoid(e: tuple[np.ndarray, np.ndarray, float, np.ndarray]) -> None:
     xhat, P, rho, pts = e
-    region = _seed(NodeSet(xhat, P, rho))
+    region = seed(NodeSet(xhat, P, rho))
     assert all(region.contains(p[:2]) for p in pts)
 
 
@@ -47,7 +47,7 @@ def test_the_ellipse_cut_keeps_every_point_of_the_region_the_ellipsoid_holds(e: 
     hi = xhat[:2] + half * b
     region = Polygon.box(lo, hi)
     held = [p for p in pts if np.all(p[:2] >= lo) and np.all(p[:2] <= hi)]
-    cut = _ellipse_cut(region, xhat, P, rho)
+    cut = ellipse_cut(region, xhat, P, rho)
     if cut is None:
         assert not held
         return
