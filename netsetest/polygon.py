@@ -109,6 +109,9 @@ class Polygon:
         a = np.abs(self.vertices)
         merged = (2 * len(a) + 2) * DUPLICATE * (1.0 + float(a.max())) * float(np.abs(c).sum())
         pad = max(MARGIN * (1.0 + float((a @ np.abs(c)).max())), merged)
+        s = self.vertices @ c
+        if s.max() <= hi + pad and -s.min() <= -lo + pad:  # no vertex outside: what both clips below would keep
+            return self  # (most cuts of a step; v @ −c is −(v @ c) exactly: every rounding is symmetric in sign)
         v = _clip(self.vertices, c, hi + pad)
         if v is not None:
             v = _clip(v, -c, -lo + pad)

@@ -30,6 +30,7 @@ from netsetest.estimator.problem import StepData
 from netsetest.estimator.sector import FaultBound, Interval, Sector
 from netsetest.estimator.slab import cut
 from netsetest.models.sensor import NA, NX, Sensor
+from netsetest.models.vehicle import TSModel
 from netsetest.polygon import MIN_VERTICES, Polygon
 from netsetest.sets import ellipsoid_bounds
 
@@ -110,6 +111,27 @@ class CutStatics:
 
 
 @dataclass(frozen=True)
+class Blend:
+    """The step's blended model Σ α_ℓ (A_ℓ, B_ℓ, Dw_ℓ) (exact for the truth), computed once per step: Ā (NX, NX),
+    B̄ and D̄ (NX,), and the augmented ones over x̄ = (x, f): (NA, NA), (NA,), (NA,) (the fault row and column zero)."""
+
+    a: np.ndarray
+    b: np.ndarray
+    d: np.ndarray
+    abar: np.ndarray
+    bbar: np.ndarray
+    dbar: np.ndarray
+
+    @classmethod
+    def of(cls, model: TSModel, alpha: np.ndarray) -> Blend:
+        """The blend of ``model``'s rule matrices for the weights α (TSModel.blend: once per step)."""
+        a, b, d = model.blend(np.asarray(alpha, dtype=float))
+        abar = np.zeros((NA, NA))
+        abar[:NX, :NX] = a
+        return cls(a, b[:, 0], d[:, 0], abar, np.r_[b[:, 0], 0.0], np.r_[d[:, 0], 0.0])
+
+
+@dataclass(frozen=True)
 class StepContext:
     """Everything one step knows before its solve, computed once (docs/estimator.md, "One step")."""
 
@@ -124,6 +146,7 @@ class StepContext:
     slabs: Slabs  # what the step's readings prove
     health: HealthAssessment | None  # the k-of-N assessment (None: no k-of-N group, or no reading)
     listed: bool = True  # the step lists readings (False: step 0, whose cone is the prior's)
+    blend: Blend | None = None  # the step's blended model (None: step 0, no prediction)
 
 
 CutFn = Callable[[StepContext, StepResult], StepResult]
@@ -231,12 +254,16 @@ def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
 
 def region_fault(own: Sensor, region: Polygon, meas: Interval) -> tuple[float, float] | None:
     """f⁺ from the own measurement over the region: C x⁺ + Ds f⁺ ∈ [m_lo, m_hi] and C x⁺ ∈ [c_lo, c_hi]
-    give Ds f⁺ ∈ [m_lo − c_hi, m_hi − c_lo]; None where the measurement leaves a side open (saturated)."""
-    if own.Ds == 0.0 or not (np.isfinite(meas.lo) and np.isfinite(meas.hi)):
+    give Ds f⁺ ∈ [m_lo − c_hi, m_hi − c_lo].  A measurement at the sensor's limit (saturated) leaves one side of
+    C x⁺ + Ds f⁺ open, and the other side still bounds f⁺ (one side of the result infinite); None where both are
+    open or the sensor has no fault term."""
+    finite_lo, finite_hi = bool(np.isfinite(meas.lo)), bool(np.isfinite(meas.hi))
+    if own.Ds == 0.0 or not (finite_lo or finite_hi):
         return None
     c_lo, c_hi = region.interval(own.C)
-    lo, hi = (meas.lo - c_hi) / own.Ds, (meas.hi - c_lo) / own.Ds
-    return (lo, hi) if lo <= hi else (hi, lo)
+    a = (meas.lo - c_hi) / own.Ds if finite_lo else -np.inf * own.Ds  # (an open side stays open, whatever Ds's sign)
+    b = (meas.hi - c_lo) / own.Ds if finite_hi else np.inf * own.Ds
+    return (a, b) if own.Ds > 0.0 else (b, a)
 
 
 def _health_pin(ctx: StepContext, res: StepResult) -> StepResult:
@@ -301,6 +328,7 @@ def apply_cuts(cuts: tuple[Cut, ...], ctx: StepContext, res: StepResult) -> Step
 
 __all__ = [
     "FALLBACK_CUTS",
+    "Blend",
     "FAULT_AXIS",
     "FIRST_CUTS",
     "PIN_FLOOR",

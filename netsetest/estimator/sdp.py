@@ -69,6 +69,7 @@ from netsetest.estimator.cuts import (
     FALLBACK_CUTS,
     FIRST_CUTS,
     STEP_CUTS,
+    Blend,
     Cut,
     CutStatics,
     NodeSet,
@@ -133,26 +134,6 @@ class UpdateInput:
     gamma: float  # γ_i,k+1
     neigh: dict[int, NeighbourState]  # step-k messages of the in-neighbours that arrived (and i's own)
     readings: dict[int, tuple[float, float]] = field(default_factory=dict)  # reference j → (ỹ_j,k+1, γ_j,k+1) of this step
-
-
-@dataclass(frozen=True)
-class Blend:
-    """The step's blended model Σ α_ℓ (A_ℓ, B_ℓ, Dw_ℓ) (exact for the truth), computed once per step: Ā (NX, NX),
-    B̄ and D̄ (NX,), and the augmented ones over x̄ = (x, f): (NA, NA), (NA,), (NA,) (the fault row and column zero)."""
-
-    a: np.ndarray
-    b: np.ndarray
-    d: np.ndarray
-    abar: np.ndarray
-    bbar: np.ndarray
-    dbar: np.ndarray
-
-    @classmethod
-    def of(cls, model: TSModel, alpha: np.ndarray) -> Blend:
-        a, b, d = model.blend(np.asarray(alpha, dtype=float))
-        abar = np.zeros((NA, NA))
-        abar[:NX, :NX] = a
-        return cls(a, b[:, 0], d[:, 0], abar, np.r_[b[:, 0], 0.0], np.r_[d[:, 0], 0.0])
 
 
 def _ball(d: int, slots: list[int], bound: float = 1.0) -> np.ndarray:
@@ -604,7 +585,7 @@ class LocalEstimator:
         moved = self._moved_region(prev, inp, blend)
         health = self._assess_health(prev, inp, blend, moved) if self.health is not None and inp.readings else None
         slabs = self._reading_slabs(prev, inp, blend, health)
-        return StepContext(self.statics, prev.rho, inp.y, inp.gamma, meas, sector, data, moved, slabs, health)
+        return StepContext(self.statics, prev.rho, inp.y, inp.gamma, meas, sector, data, moved, slabs, health, blend=blend)
 
     def _solve_step(self, ctx: StepContext, inp: UpdateInput) -> StepResult:
         """The certified set the node continues from and the one it publishes: the readings' set where it is
@@ -614,7 +595,8 @@ class LocalEstimator:
         res, solve = self._solve_certify(data, rho, alpha, self._wh, facts)  # the set the node recurs on
         if res is None:
             assert data.own is not None  # a predicting step always has its own update
-            P_fb = fallback_shape(data.Mi, data.own, self.W, inp.alpha, self.model, self.uncertainty) / rho
+            assert ctx.blend is not None  # a predicting step's context has its blend
+            P_fb = fallback_shape(data.Mi, data.own, self.W, ctx.blend.abar, ctx.blend.dbar, self.uncertainty) / rho
             return self._fallback(data.x_pred.copy(), P_fb, solve, ctx.sector)
         if ctx.slabs:
             res, refined = self._refine(res, self.readings_data(data, alpha, ctx.slabs), rho, alpha)
