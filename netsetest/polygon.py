@@ -51,7 +51,7 @@ class Polygon:
         clockwise one, a rounding's reflex vertex) and a short side's direction of rounding noise; the outward
         normals among them make it exact for a convex polygon, the sides' own directions for a flat one."""
         v = self.vertices
-        e = np.roll(v, -1, axis=0) - v
+        e = _after(v) - v
         n = np.stack([e[:, 1], -e[:, 0]], axis=1)
         d = np.vstack([n, -n, e, -e, AXES])  # (the axes: a point's box)
         return bool(np.all(d @ x <= (v @ d.T).max(axis=0)))
@@ -73,10 +73,10 @@ class Polygon:
         directions in a row leave no vertex between them.  Sound to the walk's rounding and the merge of vertices
         closer than DUPLICATE (:func:`_distinct`), which the margin of :meth:`moved` covers."""
         v = _from_lowest(self.vertices)
-        edges = np.roll(v, -1, axis=0) - v
+        edges = _after(v) - v
         if not _turn_one_way(edges):
             v = _hull(v)  # from its lowest (then leftmost) vertex
-            edges = np.roll(v, -1, axis=0) - v
+            edges = _after(v) - v
         g = np.array(segments, dtype=float).reshape(-1, 2)
         up = (g[:, 1] > 0.0) | ((g[:, 1] == 0.0) & (g[:, 0] > 0.0))
         low = np.where(up[:, None], -g, g).sum(axis=0)  # each segment's lowest (then leftmost) end
@@ -86,7 +86,7 @@ class Polygon:
             return Polygon(v.copy())
         steps = steps[_by_direction(steps)]
         walk = v[0] + low + np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)[:-1]])
-        turns = _pair_order(np.roll(steps, 1, axis=0), steps) != 0  # else the vertex is on a side
+        turns = _pair_order(_after(steps, -1), steps) != 0  # else the vertex is on a side
         return Polygon(_distinct(walk[turns] if turns.any() else walk[:1]))
 
     def moved(self, A: np.ndarray, t: np.ndarray, segments: list[np.ndarray]) -> Polygon:
@@ -133,6 +133,12 @@ class Polygon:
                 # puts two neighbours' meeting a hair behind an edge: near-duplicate vertices)
             v = _drop_edges(v, drops)
         return Polygon(v)
+
+
+def _after(a: np.ndarray, k: int = 1) -> np.ndarray:
+    """The rows of a rolled to start k after the first (np.roll(a, −k, axis=0) for −n ≤ k ≤ n, without its generic
+    set-up: several calls per polygon operation, every step)."""
+    return np.concatenate((a[k:], a[:k]))
 
 
 def _half(x: float, y: float) -> int:
@@ -208,7 +214,7 @@ def _by_direction(d: np.ndarray) -> np.ndarray:
 
 def _from_lowest(v: np.ndarray) -> np.ndarray:
     """The vertices rolled to start at the lowest (then leftmost) one."""
-    return np.roll(v, -int(np.lexsort((v[:, 0], v[:, 1]))[0]), axis=0)
+    return _after(v, int(np.lexsort((v[:, 0], v[:, 1]))[0]))
 
 
 def _hull(v: np.ndarray) -> np.ndarray:
@@ -235,10 +241,10 @@ def _hull(v: np.ndarray) -> np.ndarray:
 def _clip(v: np.ndarray, c: np.ndarray, b: float) -> np.ndarray | None:
     """The polygon ∩ {cᵀx ≤ b} (Sutherland–Hodgman against one half-plane); None if nothing remains."""
     s = v @ c - b
-    if np.all(s <= 0.0):
+    if (s <= 0.0).all():
         return v
-    nxt = np.roll(v, -1, axis=0)
-    s_nxt = np.roll(s, -1)
+    nxt = _after(v)
+    s_nxt = _after(s)
     crosses = ((s < 0.0) & (s_nxt > 0.0)) | ((s > 0.0) & (s_nxt < 0.0))
     t = np.where(crosses, s / np.where(crosses, s - s_nxt, 1.0), 0.0)
     points = np.stack([v, v + t[:, None] * (nxt - v)], axis=1).reshape(-1, 2)  # per edge: its start, its crossing
@@ -250,7 +256,7 @@ def _distinct(v: np.ndarray) -> np.ndarray:
     """Without the vertices within DUPLICATE (relative to the extent) of the one before: an edge that short has a
     direction of rounding noise, which the containment test would read as a side (the margin covers the move)."""
     tol = DUPLICATE * (1.0 + float(np.abs(v).max()))
-    keep = np.abs(v - np.roll(v, 1, axis=0)).max(axis=1) > tol
+    keep = np.abs(v - _after(v, -1)).max(axis=1) > tol
     return v[keep] if keep.any() else v[:1]
 
 
@@ -259,8 +265,8 @@ def _cheapest_edges(v: np.ndarray, wanted: int) -> dict[int, np.ndarray]:
     least area, q beyond both ends of the edge along them (the drop then holds the edge's triangle); the edges
     chosen are at least three apart (cyclically)."""
     n = len(v)
-    a0, a1 = np.roll(v, 1, axis=0), v  # the edge before edge i
-    b0, b1 = np.roll(v, -1, axis=0), np.roll(v, -2, axis=0)  # the edge after it
+    a0, a1 = _after(v, -1), v  # the edge before edge i
+    b0, b1 = _after(v), _after(v, 2)  # the edge after it
     da, db = a1 - a0, b1 - b0
     den = da[:, 0] * db[:, 1] - da[:, 1] * db[:, 0]
     ok = den > 1e-300  # else parallel, or meeting behind: dropping that edge is unbounded
