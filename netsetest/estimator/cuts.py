@@ -37,6 +37,8 @@ from netsetest.sets import ellipsoid_bounds
 Status = Literal["ok", "fallback"]
 FAULT_AXIS = np.eye(NA)[NA - 1]  # f = e₃ᵀx̄: the direction the fault cuts act along
 PIN_FLOOR = 1e-6  # a fault proved healthy is published as |f| ≤ max(τ, this): an ellipsoid cannot be flat
+COORDINATE_AXES = np.eye(NX)  # β and r: the directions of the region's coordinate cuts (read-only)
+COORDINATE_AXES.flags.writeable = False
 
 
 @dataclass(frozen=True)
@@ -247,8 +249,8 @@ def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
     # with readings the ellipsoid is cut too (as since the region came); without, it stays as solved (what
     # neighbours use, bit for bit) and only the published fault range narrows: the same published interval
     out = cut_fault(ctx, res, *fault, reshape=bool(ctx.slabs)) if fault is not None else None
-    if out is None:
-        return res
+    if out is None or not keys:
+        return res if out is None else out
     return dataclasses.replace(out, published=dataclasses.replace(out.public, reading_keys=out.public.reading_keys | keys))
 
 
@@ -294,7 +296,7 @@ def ellipse_cut(region: Polygon, xhat: np.ndarray, P: np.ndarray, rho: float, co
     octagon of that ellipse.  Sound wherever the ellipsoid holds the truth; None if nothing is left."""
     pxx = 0.5 * (P[:NX, :NX] + P[:NX, :NX].T)
     _, vecs = np.linalg.eigh(pxx)
-    dirs = [*np.eye(NX), *vecs.T] if coordinates else [*vecs.T]
+    dirs = [*COORDINATE_AXES, *vecs.T] if coordinates else [*vecs.T]
     out: Polygon | None = region
     for d in dirs:
         if out is None:

@@ -665,10 +665,8 @@ class LocalEstimator:
         if self._wh_pub is None:
             return res
         pub, solve_pub = self._solve_certify(data, rho, alpha, self._wh_pub, facts)
-        res = dataclasses.replace(res, solve_ms=res.solve_ms + solve_pub.ms)
-        if pub is None:
-            return res
-        return dataclasses.replace(res, published=dataclasses.replace(pub, solve_ms=res.solve_ms))
+        ms = res.solve_ms + solve_pub.ms
+        return dataclasses.replace(res, solve_ms=ms, published=res.published if pub is None else dataclasses.replace(pub, solve_ms=ms))
 
     def _solve_certify(self, data: StepData, rho: float, alpha: np.ndarray, wh: np.ndarray | None, facts: FactStack) -> tuple[StepResult | None, _Solve]:
         """Solve the step's problem for the objective trace(D P), D^½ = diag(wh) (None: trace P), and
