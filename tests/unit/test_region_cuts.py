@@ -14,7 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from netsetest.config.schema import load_topology
-from netsetest.estimator.cuts import PIN_FLOOR, STEP_CUTS, NodeSet, StepContext, StepResult, ellipse_cut, seed
+from netsetest.estimator.cuts import PIN_FLOOR, STEP_CUTS, NodeSet, Rests, StepContext, StepResult, ellipse_cut, seed
+from netsetest.estimator.health import HEALTH_KEY
 from netsetest.estimator.sdp import LocalEstimator, UpdateInput
 from netsetest.estimator.sector import Interval, Sector
 from netsetest.models.sensor import Sensor
@@ -195,3 +196,12 @@ def test_every_cut_keeps_every_point_of_its_input_that_satisfies_its_slab(step: 
     kept = held[[_facts(name, ctx, res, p) for p in held]].reshape(-1, 3)
     inside = _inside(out, kept, ctx.rho)
     assert inside.all(), (name, kept[~inside.all(axis=1)])
+
+
+def test_a_step_rests_on_the_readings_its_sets_were_cut_by() -> None:
+    """What the node lists (StepResult.rests_on): the readings of both sets, the published one's and the continued
+    one's, as node ids, and whether the k-of-N facts are among them (the estimator's key for them is no node)."""
+    pub = StepResult(np.zeros(3), np.eye(3), "ok", 1.0, 0.0, "solved", reading_keys=frozenset({3, HEALTH_KEY}))
+    res = StepResult(np.zeros(3), np.eye(3), "ok", 1.0, 0.0, "solved", published=pub, reading_keys=frozenset({4}))
+    assert res.rests_on == Rests(frozenset({3, 4}), True)
+    assert dataclasses.replace(res, published=None).rests_on == Rests(frozenset({4}), False)
