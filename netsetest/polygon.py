@@ -106,12 +106,14 @@ class Polygon:
         rounding of cᵀx where its terms cancel), and at least by what merging its vertices closer than DUPLICATE
         can leave out along c (a slab thin next to the coordinates' size); None if empty (flat if this polygon
         is: a segment's part is one)."""
+        s = self.vertices @ c
+        if lo <= s.min() and s.max() <= hi:  # inside the slab itself, so inside it widened by any pad ≥ 0: what both
+            return self  # clips below would keep (most cuts of a step)
         a = np.abs(self.vertices)
         merged = (2 * len(a) + 2) * DUPLICATE * (1.0 + float(a.max())) * float(np.abs(c).sum())
         pad = max(MARGIN * (1.0 + float((a @ np.abs(c)).max())), merged)
-        s = self.vertices @ c
-        if s.max() <= hi + pad and -s.min() <= -lo + pad:  # no vertex outside: what both clips below would keep
-            return self  # (most cuts of a step; v @ −c is −(v @ c) exactly: every rounding is symmetric in sign)
+        if s.max() <= hi + pad and -s.min() <= -lo + pad:  # no vertex outside the widened slab: likewise
+            return self  # (v @ −c is −(v @ c) exactly: every rounding is symmetric in sign)
         v = _clip(self.vertices, c, hi + pad)
         if v is not None:
             v = _clip(v, -c, -lo + pad)
@@ -289,14 +291,12 @@ def _cheapest_edges(v: np.ndarray, wanted: int) -> dict[int, np.ndarray]:
 def _drop_edges(v: np.ndarray, drops: dict[int, np.ndarray]) -> np.ndarray:
     """The vertices with each dropped edge's two ends replaced by its q."""
     n = len(v)
-    ends = {(i + 1) % n for i in drops}
-    out = []
-    for k in range(n):
-        if k in drops:
-            out.append(drops[k])
-        elif k not in ends:
-            out.append(v[k])
-    return np.array(out)
+    out = v.copy()
+    keep = np.ones(n, dtype=bool)
+    for i, q in drops.items():  # (dropped edges are at least three apart: no end is another's start)
+        out[i] = q
+        keep[(i + 1) % n] = False
+    return out[keep]
 
 
 __all__ = ["MARGIN", "MAX_VERTICES", "MIN_VERTICES", "Polygon"]
