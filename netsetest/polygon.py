@@ -84,9 +84,12 @@ class Polygon:
         steps = steps[np.any(steps != 0.0, axis=1)]  # a repeated vertex, a zero segment: no direction
         if len(steps) == 0:
             return Polygon(v.copy())
-        steps = steps[_by_direction(steps)]
+        order, pairs = _ordered(steps)
+        steps = steps[order]
         walk = v[0] + low + np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)[:-1]])
-        turns = _pair_order(_after(steps, -1), steps) != 0  # else the vertex is on a side
+        if pairs is None:  # (the exact sort compared no neighbours; the numpy sort's check did: reused)
+            pairs = _pair_order(steps[:-1], steps[1:])
+        turns = np.concatenate([_pair_order(steps[-1:], steps[:1]), pairs]) != 0  # each step against the one before (else the vertex is on a side)
         return Polygon(_distinct(walk[turns] if turns.any() else walk[:1]))
 
     def moved(self, A: np.ndarray, t: np.ndarray, segments: list[np.ndarray]) -> Polygon:
@@ -203,15 +206,22 @@ def _by_direction(d: np.ndarray) -> np.ndarray:
     """The order of the directions d (m, 2), nonzero, by angle in [0, 2π), exactly, ties in input order: sorted
     by half-plane and rounded angle (one numpy sort), kept where every neighbouring pair is in order exactly
     (a total order within a half-plane, so the neighbours decide), else sorted by :func:`_compare` alone."""
+    return _ordered(d)[0]
+
+
+def _ordered(d: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`_by_direction`'s order and, where the numpy sort stood, the :func:`_pair_order` of each sorted
+    neighbour with the next (m − 1,), which the walk of :meth:`Polygon.plus_segments` needs again; else None."""
     order = np.lexsort((np.mod(np.arctan2(d[:, 1], d[:, 0]), 2.0 * np.pi), _halves(d)))
     s = d[order]
-    if np.all(_pair_order(s[:-1], s[1:]) <= 0):
-        return order  # (ties of the same direction may stand in another order: the walk leaves no vertex between them)
+    pairs = _pair_order(s[:-1], s[1:])
+    if (pairs <= 0).all():
+        return order, pairs  # (ties of the same direction may stand in another order: the walk leaves no vertex between them)
 
     def by_direction(i: int, j: int) -> int:
         return _compare(d[i], d[j])
 
-    return np.array(sorted(range(len(d)), key=functools.cmp_to_key(by_direction)), dtype=int)  # stable
+    return np.array(sorted(range(len(d)), key=functools.cmp_to_key(by_direction)), dtype=int), None  # stable
 
 
 def _from_lowest(v: np.ndarray) -> np.ndarray:
