@@ -51,7 +51,7 @@ class Polygon:
         clockwise one, a rounding's reflex vertex) and a short side's direction of rounding noise; the outward
         normals among them make it exact for a convex polygon, the sides' own directions for a flat one."""
         v = self.vertices
-        e = np.roll(v, -1, axis=0) - v
+        e = _after(v) - v
         n = np.stack([e[:, 1], -e[:, 0]], axis=1)
         d = np.vstack([n, -n, e, -e, AXES])  # (the axes: a point's box)
         return bool(np.all(d @ x <= (v @ d.T).max(axis=0)))
@@ -73,10 +73,10 @@ class Polygon:
         directions in a row leave no vertex between them.  Sound to the walk's rounding and the merge of vertices
         closer than DUPLICATE (:func:`_distinct`), which the margin of :meth:`moved` covers."""
         v = _from_lowest(self.vertices)
-        edges = np.roll(v, -1, axis=0) - v
+        edges = _after(v) - v
         if not _turn_one_way(edges):
             v = _hull(v)  # from its lowest (then leftmost) vertex
-            edges = np.roll(v, -1, axis=0) - v
+            edges = _after(v) - v
         g = np.array(segments, dtype=float).reshape(-1, 2)
         up = (g[:, 1] > 0.0) | ((g[:, 1] == 0.0) & (g[:, 0] > 0.0))
         low = np.where(up[:, None], -g, g).sum(axis=0)  # each segment's lowest (then leftmost) end
@@ -84,9 +84,12 @@ class Polygon:
         steps = steps[np.any(steps != 0.0, axis=1)]  # a repeated vertex, a zero segment: no direction
         if len(steps) == 0:
             return Polygon(v.copy())
-        steps = steps[_by_direction(steps)]
+        order, pairs = _ordered(steps)
+        steps = steps[order]
         walk = v[0] + low + np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)[:-1]])
-        turns = _pair_order(np.roll(steps, 1, axis=0), steps) != 0  # else the vertex is on a side
+        if pairs is None:  # (the exact sort compared no neighbours; the numpy sort's check did: reused)
+            pairs = _pair_order(steps[:-1], steps[1:])
+        turns = np.concatenate([_pair_order(steps[-1:], steps[:1]), pairs]) != 0  # each step against the one before (else the vertex is on a side)
         return Polygon(_distinct(walk[turns] if turns.any() else walk[:1]))
 
     def moved(self, A: np.ndarray, t: np.ndarray, segments: list[np.ndarray]) -> Polygon:
@@ -106,9 +109,14 @@ class Polygon:
         rounding of cᵀx where its terms cancel), and at least by what merging its vertices closer than DUPLICATE
         can leave out along c (a slab thin next to the coordinates' size); None if empty (flat if this polygon
         is: a segment's part is one)."""
+        s = self.vertices @ c
+        if lo <= s.min() and s.max() <= hi:  # inside the slab itself, so inside it widened by any pad ≥ 0: what both
+            return self  # clips below would keep (most cuts of a step)
         a = np.abs(self.vertices)
         merged = (2 * len(a) + 2) * DUPLICATE * (1.0 + float(a.max())) * float(np.abs(c).sum())
         pad = max(MARGIN * (1.0 + float((a @ np.abs(c)).max())), merged)
+        if s.max() <= hi + pad and -s.min() <= -lo + pad:  # no vertex outside the widened slab: likewise
+            return self  # (v @ −c is −(v @ c) exactly: every rounding is symmetric in sign)
         v = _clip(self.vertices, c, hi + pad)
         if v is not None:
             v = _clip(v, -c, -lo + pad)
@@ -130,6 +138,12 @@ class Polygon:
                 # puts two neighbours' meeting a hair behind an edge: near-duplicate vertices)
             v = _drop_edges(v, drops)
         return Polygon(v)
+
+
+def _after(a: np.ndarray, k: int = 1) -> np.ndarray:
+    """The rows of a rolled to start k after the first (np.roll(a, −k, axis=0) for −n ≤ k ≤ n, without its generic
+    set-up: several calls per polygon operation, every step)."""
+    return np.concatenate((a[k:], a[:k]))
 
 
 def _half(x: float, y: float) -> int:
@@ -192,20 +206,27 @@ def _by_direction(d: np.ndarray) -> np.ndarray:
     """The order of the directions d (m, 2), nonzero, by angle in [0, 2π), exactly, ties in input order: sorted
     by half-plane and rounded angle (one numpy sort), kept where every neighbouring pair is in order exactly
     (a total order within a half-plane, so the neighbours decide), else sorted by :func:`_compare` alone."""
+    return _ordered(d)[0]
+
+
+def _ordered(d: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`_by_direction`'s order and, where the numpy sort stood, the :func:`_pair_order` of each sorted
+    neighbour with the next (m − 1,), which the walk of :meth:`Polygon.plus_segments` needs again; else None."""
     order = np.lexsort((np.mod(np.arctan2(d[:, 1], d[:, 0]), 2.0 * np.pi), _halves(d)))
     s = d[order]
-    if np.all(_pair_order(s[:-1], s[1:]) <= 0):
-        return order  # (ties of the same direction may stand in another order: the walk leaves no vertex between them)
+    pairs = _pair_order(s[:-1], s[1:])
+    if (pairs <= 0).all():
+        return order, pairs  # (ties of the same direction may stand in another order: the walk leaves no vertex between them)
 
     def by_direction(i: int, j: int) -> int:
         return _compare(d[i], d[j])
 
-    return np.array(sorted(range(len(d)), key=functools.cmp_to_key(by_direction)), dtype=int)  # stable
+    return np.array(sorted(range(len(d)), key=functools.cmp_to_key(by_direction)), dtype=int), None  # stable
 
 
 def _from_lowest(v: np.ndarray) -> np.ndarray:
     """The vertices rolled to start at the lowest (then leftmost) one."""
-    return np.roll(v, -int(np.lexsort((v[:, 0], v[:, 1]))[0]), axis=0)
+    return _after(v, int(np.lexsort((v[:, 0], v[:, 1]))[0]))
 
 
 def _hull(v: np.ndarray) -> np.ndarray:
@@ -232,10 +253,10 @@ def _hull(v: np.ndarray) -> np.ndarray:
 def _clip(v: np.ndarray, c: np.ndarray, b: float) -> np.ndarray | None:
     """The polygon ∩ {cᵀx ≤ b} (Sutherland–Hodgman against one half-plane); None if nothing remains."""
     s = v @ c - b
-    if np.all(s <= 0.0):
+    if (s <= 0.0).all():
         return v
-    nxt = np.roll(v, -1, axis=0)
-    s_nxt = np.roll(s, -1)
+    nxt = _after(v)
+    s_nxt = _after(s)
     crosses = ((s < 0.0) & (s_nxt > 0.0)) | ((s > 0.0) & (s_nxt < 0.0))
     t = np.where(crosses, s / np.where(crosses, s - s_nxt, 1.0), 0.0)
     points = np.stack([v, v + t[:, None] * (nxt - v)], axis=1).reshape(-1, 2)  # per edge: its start, its crossing
@@ -247,7 +268,7 @@ def _distinct(v: np.ndarray) -> np.ndarray:
     """Without the vertices within DUPLICATE (relative to the extent) of the one before: an edge that short has a
     direction of rounding noise, which the containment test would read as a side (the margin covers the move)."""
     tol = DUPLICATE * (1.0 + float(np.abs(v).max()))
-    keep = np.abs(v - np.roll(v, 1, axis=0)).max(axis=1) > tol
+    keep = np.abs(v - _after(v, -1)).max(axis=1) > tol
     return v[keep] if keep.any() else v[:1]
 
 
@@ -256,8 +277,8 @@ def _cheapest_edges(v: np.ndarray, wanted: int) -> dict[int, np.ndarray]:
     least area, q beyond both ends of the edge along them (the drop then holds the edge's triangle); the edges
     chosen are at least three apart (cyclically)."""
     n = len(v)
-    a0, a1 = np.roll(v, 1, axis=0), v  # the edge before edge i
-    b0, b1 = np.roll(v, -1, axis=0), np.roll(v, -2, axis=0)  # the edge after it
+    a0, a1 = _after(v, -1), v  # the edge before edge i
+    b0, b1 = _after(v), _after(v, 2)  # the edge after it
     da, db = a1 - a0, b1 - b0
     den = da[:, 0] * db[:, 1] - da[:, 1] * db[:, 0]
     ok = den > 1e-300  # else parallel, or meeting behind: dropping that edge is unbounded
@@ -280,14 +301,12 @@ def _cheapest_edges(v: np.ndarray, wanted: int) -> dict[int, np.ndarray]:
 def _drop_edges(v: np.ndarray, drops: dict[int, np.ndarray]) -> np.ndarray:
     """The vertices with each dropped edge's two ends replaced by its q."""
     n = len(v)
-    ends = {(i + 1) % n for i in drops}
-    out = []
-    for k in range(n):
-        if k in drops:
-            out.append(drops[k])
-        elif k not in ends:
-            out.append(v[k])
-    return np.array(out)
+    out = v.copy()
+    keep = np.ones(n, dtype=bool)
+    for i, q in drops.items():  # (dropped edges are at least three apart: no end is another's start)
+        out[i] = q
+        keep[(i + 1) % n] = False
+    return out[keep]
 
 
 __all__ = ["MARGIN", "MAX_VERTICES", "MIN_VERTICES", "Polygon"]

@@ -16,7 +16,6 @@ import numpy as np
 from netsetest.estimator.problem import OwnUpdate
 from netsetest.models.sensor import NA, NX
 from netsetest.models.uncertainty import ModelUncertainty
-from netsetest.models.vehicle import TSModel
 
 
 EPS_LADDER = 10.0 ** np.arange(-10.0, -2.0)  # relative nudges of the multipliers, smallest first
@@ -102,16 +101,17 @@ def publishable(xhat: np.ndarray, P: np.ndarray) -> bool:
     if not (np.all(np.isfinite(xhat)) and np.all(np.isfinite(P))) or not np.array_equal(P, P.T):
         return False
     try:
-        np.linalg.cholesky(P)
         eig = np.linalg.eigvalsh(P)
     except np.linalg.LinAlgError:
         return False
+    # (no Cholesky besides: with every eigenvalue > 0 and the ratio ≤ COND_MAX, far below 1/ε, it cannot fail)
     return bool(eig[0] > 0 and eig[-1] <= COND_MAX * eig[0])
 
 
-def fallback_shape(Mi: np.ndarray, own: OwnUpdate, W: float, alpha: np.ndarray, model: TSModel, uncertainty: ModelUncertainty | None = None) -> np.ndarray:
+def fallback_shape(Mi: np.ndarray, own: OwnUpdate, W: float, abar: np.ndarray, dbar: np.ndarray, uncertainty: ModelUncertainty | None = None) -> np.ndarray:
     """A guaranteed shape without the solver: L = 0 and an outer ellipsoid of a Minkowski sum.
 
+    ``abar``, ``dbar``: the step's blended Ā (NA, NA) and D̄ (NA,) over x̄ = (x, f) (the step's Blend).
     e⁺ = T Ā ρ^½ M z + T D̄ w − G Dv v⁺ − G γ⁺ φ⁺ with |z| ≤ 1, |w| ≤ √W, |v⁺| ≤ √R and, under the sector
     assumption |C̄ x̄⁺| ≤ r_max/h1, |φ⁺| ≤ (1 − h1) r_max; plus T [G; 0] ζ for a declared model mismatch
     (one term per ball of ζ, docs/plant.md).  For terms F_k ξ_k with |ξ_k| ≤ 1 the sum lies
@@ -122,10 +122,6 @@ def fallback_shape(Mi: np.ndarray, own: OwnUpdate, W: float, alpha: np.ndarray, 
     or the result is not finite (a profile outside those limits) — never a silently wrong shape.
     """
     T, G, gamma_new, sensor = own.T, own.G, own.gamma, own.sensor
-    a, _, d = model.blend(alpha)
-    abar = np.zeros((NA, NA))
-    abar[:NX, :NX] = a
-    dbar = np.r_[d[:, 0], 0.0]
     terms = [T @ abar @ Mi, (T @ dbar * np.sqrt(W))[:, None], G * sensor.Dv * np.sqrt(sensor.R)]
     if uncertainty is not None:
         ebar = np.zeros((NA, NX))

@@ -38,7 +38,9 @@ each step twice and publishes the fault-weighted set while recurring on the trac
 A step is the prediction (the model part: Π₀, the L-free centre, the own φ⁺ fact; :meth:`LocalEstimator._predict`)
 and the update (the neighbours' innovations ℓ and facts, :meth:`LocalEstimator._innovations`; then the
 solve and the certificate, :meth:`LocalEstimator._update`), the way filterpy's KalmanFilter keeps
-``predict`` and ``update`` apart.  Their data meet in a :class:`~netsetest.estimator.problem.StepData`.
+``predict`` and ``update`` apart.  Their data meet in a :class:`~netsetest.estimator.problem.StepData`, part of the
+step's context (:meth:`LocalEstimator.context`, every quantity of the step computed once); after the solve come the
+declared cuts of :mod:`netsetest.estimator.cuts`, each with the assumption it rests on.
 
 Two backends solve it.  ``clarabel`` (the default, :mod:`netsetest.estimator.conic`) assembles an
 exactly equivalent, smaller conic problem for Clarabel directly from the step data (Π₀, ℓ, Q_m) and
@@ -63,6 +65,20 @@ import numpy as np
 from netsetest.config.schema import Scenario
 from netsetest.estimator.certificate import FactStack, FallbackUnavailable, certify, fallback_shape, publishable
 from netsetest.estimator.conic.closed_form import ClosedFormSolver, clarabel_backend
+from netsetest.estimator.cuts import (
+    FALLBACK_CUTS,
+    FIRST_CUTS,
+    STEP_CUTS,
+    Blend,
+    Cut,
+    CutStatics,
+    NodeSet,
+    Slabs,
+    StepContext,
+    StepResult,
+    apply_cuts,
+    seed,
+)
 from netsetest.estimator.health import HEALTH_KEY, HealthAssessment, HealthModel
 from netsetest.estimator.lmi_cvxpy import CvxpySolver
 from netsetest.estimator.objective import BANK_FAULT_WEIGHT, DEFAULT_OBJECTIVE, FAULT_WEIGHT, OBJECTIVES, Objective
@@ -76,31 +92,16 @@ from netsetest.estimator.sector import (
     prior_interval,
     propagated_interval,
 )
-from netsetest.estimator.slab import cut
 from netsetest.extras import require
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.uncertainty import ModelUncertainty
-from netsetest.polygon import MIN_VERTICES, Polygon
-from netsetest.sets import ellipsoid_bounds
+from netsetest.polygon import Polygon
 from netsetest.models.vehicle import N_RULES, TSModel
 
 Variant = Literal["scheduled", "per-rule"]
 Backend = Literal["clarabel", "cvxpy"]
-Status = Literal["ok", "fallback"]
 BACKENDS = ("clarabel", "cvxpy")
-FAULT_AXIS = np.eye(NA)[NA - 1]  # f = e₃ᵀx̄: the direction the fault cuts act along
 REFINE_RTOL = 1e-6  # the readings' set is published only if it is smaller by more than this (relative): not for rounding
-PIN_FLOOR = 1e-6  # a fault proved healthy is published as |f| ≤ max(τ, this): an ellipsoid cannot be flat
-
-
-@dataclass(frozen=True)
-class NodeSet:
-    """A node's own set {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} in the SDP's (x̂, P, ρ) form (sets.Ellipsoid is the published one)."""
-
-    xhat: np.ndarray  # (3,)
-    P: np.ndarray  # (3, 3)
-    rho: float
-    region: Polygon | None = None  # the states x = (β, r) the earlier readings left (None: none kept; docs/network.md)
 
 
 @dataclass(frozen=True)
@@ -133,29 +134,6 @@ class UpdateInput:
     gamma: float  # γ_i,k+1
     neigh: dict[int, NeighbourState]  # step-k messages of the in-neighbours that arrived (and i's own)
     readings: dict[int, tuple[float, float]] = field(default_factory=dict)  # reference j → (ỹ_j,k+1, γ_j,k+1) of this step
-
-
-@dataclass
-class StepResult:
-    """One step's set {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ_i} and how it was obtained."""
-
-    xhat: np.ndarray  # (NA,)
-    P: np.ndarray  # (NA, NA) published shape: e⁺ᵀ P⁻¹ e⁺ ≤ ρ_i
-    status: Status
-    rho_cert: float  # ρ' certified for the solver's P (P is published as P_solver·ρ'/ρ_i)
-    solve_ms: float
-    solver_status: str
-    L: np.ndarray = field(default_factory=lambda: np.zeros((NA, 1)))  # (NA, 1) the gain of (16)
-    sector: Sector | None = None  # the own sensor's sector of this step (None: no saturation modelled)
-    published: StepResult | None = None  # objective ``bank`` or readings: the set to publish (None: this one)
-    reading_keys: frozenset[int] = frozenset()  # the readings this set used (keys of LocalEstimator.reading_intervals); the recursion's: the ones it was cut by
-    fault_range: tuple[float, float] | None = None  # the set is the ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (a declared bound's cut)
-    region: Polygon | None = None  # the recursion's: the states x⁺ the readings of every step so far leave (NodeSet.region)
-
-    @property
-    def public(self) -> StepResult:
-        """What the node publishes: ``published`` if the bank made one, else this set."""
-        return self.published if self.published is not None else self
 
 
 def _ball(d: int, slots: list[int], bound: float = 1.0) -> np.ndarray:
@@ -209,7 +187,8 @@ class LocalEstimator:
 
     Shapes: NA = 3 (the augmented state [β, r, f_i]), NX = 2, d = the η dimension of a pattern
     (``pattern(...).lay.dim``), n_rules = N_RULES.  Static: ``_abar`` (n_rules, NA, NA) Ā_ℓ,
-    ``_bbar`` and ``_dbar`` (n_rules, NA) B̄_ℓ and D̄_ℓ, ``_cbar[j]`` (NA,) C̄_j.  Per step:
+    ``_dbar`` (n_rules, NA) D̄_ℓ (the per-rule variant's), ``_cbar[j]`` (NA,) C̄_j.  Per step: :meth:`context`
+    (:class:`~netsetest.estimator.cuts.StepContext`, with the step's :class:`Blend`),
     :meth:`step_data` → :class:`~netsetest.estimator.problem.StepData` (Π₀ (NA, d) per LMI, ℓ (d,),
     Q_m (d, d)), :meth:`step` → :class:`StepResult` (x̂ (NA,), P (NA, NA), L (NA, 1)).
     """
@@ -256,8 +235,6 @@ class LocalEstimator:
         nr = model.A.shape[0]
         self._abar = np.zeros((nr, NA, NA))
         self._abar[:, :NX, :NX] = model.A
-        self._bbar = np.zeros((nr, NA))
-        self._bbar[:, :NX] = model.B[:, :, 0]
         self._dbar = np.zeros((nr, NA))
         self._dbar[:, :NX] = model.Dw[:, :, 0]
         self._ebar = np.zeros((NA, NX))  # [G; 0]: e enters the state rows only
@@ -271,6 +248,8 @@ class LocalEstimator:
         # objective weight: trace(D P) is trace(P') for P' = D^½ P D^½ (a congruence of the LMI)
         self._wh = np.sqrt(np.array([1.0, 1.0, FAULT_WEIGHT])) if objective == "fault" else None
         self._wh_pub = np.sqrt(np.array([1.0, 1.0, BANK_FAULT_WEIGHT])) if objective == "bank" else None
+        self.statics = CutStatics(node_id, own, fault_bound, None if health is None else health.tolerance, self._wh, self._wh_pub)
+        self.cuts: tuple[Cut, ...] = STEP_CUTS  # the cuts after every step's solve, in order (a test may leave one out)
 
     def pattern(self, phi_from: frozenset[int], phi_new: bool, predict: bool = True, readings: frozenset[int] = frozenset()) -> _Pattern:
         """Layout and solver for the neighbours in ``phi_from`` (and φ⁺ if ``phi_new``) having a φ slot;
@@ -326,16 +305,15 @@ class LocalEstimator:
 
     def own_sector(self, prev: NodeSet, inp: UpdateInput) -> Sector | None:
         """The own sensor's sector of step k+1 (docs/estimator.md, "Adaptive sector")."""
-        return self._own_range(prev, inp)[0]
+        return self.context(prev, inp).sector
 
-    def _own_range(self, prev: NodeSet, inp: UpdateInput) -> tuple[Sector | None, Interval | None]:
+    def _own_range(self, prev: NodeSet, inp: UpdateInput, blend: Blend, meas: Interval) -> tuple[Sector | None, Interval | None]:
         """The own sector of step k+1 and, where it is derived and the sensor may saturate, the proven
-        interval of r⁺ = C̄ x̄⁺ (the step then uses it as the measurement; see ``step_data``)."""
+        interval of r⁺ = C̄ x̄⁺ (the step then uses it as the measurement; see ``step_data``); ``meas``: the own
+        measurement's interval."""
         if not self.own.saturated:
             return None, None
-        a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
-        meas = measurement_interval(self.own, inp.y, inp.gamma)
-        prop = propagated_interval(self.own, self.fault_bound, prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W, self.uncertainty)
+        prop = propagated_interval(self.own, self.fault_bound, prev.xhat, prev.P, prev.rho, blend.a, blend.b, blend.d, inp.u, self.W, self.uncertainty)
         sector = derive_sector(self.own, self.fault_bound, meas, prop)
         if sector is None or not sector.has_phi or sector.basis == "assumed":
             return sector, None
@@ -348,12 +326,14 @@ class LocalEstimator:
         meas = measurement_interval(self.own, y, gamma)
         return derive_sector(self.own, self.fault_bound, meas, prior_interval(self.own, self.fault_bound, prior.xhat, prior.P, prior.rho))
 
-    def step_data(self, prev: NodeSet, inp: UpdateInput, sector: Sector | None, reading: Interval | None = None) -> StepData:
+    def step_data(self, prev: NodeSet, inp: UpdateInput, sector: Sector | None, reading: Interval | None = None, blend: Blend | None = None) -> StepData:
         """The LMI data of step k → k+1: the prediction (Π₀, x̂ part, own facts) and the neighbours' update (ℓ).
 
         ``reading``: a proven interval [lo, hi] ∋ r⁺ used as the own measurement instead of the sector:
         r⁺ = m + Dv' v with m its centre, Dv' = (hi − lo)/(2√R) and v² ≤ R (so Θ = [E; C̄], no φ⁺).
+        ``blend``: the step's blended model (:meth:`context` passes its own; None: blended here).
         """
+        blend = blend if blend is not None else Blend.of(self.model, inp.alpha)
         neigh = inp.neigh
         phi_from = frozenset(j for j in self.sensors if j in neigh and neigh[j].has_phi)
         phi_new = sector is not None and sector.has_phi and reading is None
@@ -361,17 +341,17 @@ class LocalEstimator:
         pat = self.pattern(*key)
         own = self._own_update(inp, sector, reading, phi_new)
         Mi = np.sqrt(prev.rho) * _chol(prev.P)  # ρ_i^½ M_i
-        pi0, x_pred, own_fact = self._predict(pat.lay, prev, inp, own, Mi, sector)
+        pi0, x_pred, own_fact = self._predict(pat.lay, prev, inp, blend, own, Mi, sector)
         ell, facts = self._innovations(pat.lay, pat.balls, neigh, Mi)
         if own_fact is not None:
             facts.append(own_fact)
         innov_sum = sum(self.weights[j] * neigh[j].innov for j in pat.lay.neigh if j in neigh)  # Σ_j a_ij y̌_j
         return StepData(tuple(pi0), ell, tuple(facts), x_pred, float(innov_sum), Mi, pat.lay, key, sector, own)
 
-    def readings_data(self, data: StepData, inp: UpdateInput, refs: dict[int, tuple[np.ndarray, Interval]]) -> StepData:
-        """The LMI data of step k → k+1 whose only innovation is the readings of step k+1 (``refs``, from
-        :meth:`reading_intervals`): the prediction of the step's ``data`` (:meth:`step_data`) moved to the
-        readings' layout, no neighbour."""
+    def readings_data(self, data: StepData, alpha: np.ndarray, refs: Slabs) -> StepData:
+        """The LMI data of step k → k+1 whose only innovation is the readings of step k+1 (``refs``, the context's
+        slabs): the prediction of the step's ``data`` (:meth:`step_data`) moved to the readings' layout, no
+        neighbour."""
         key: PatternKey = (frozenset(), data.key[1], True, frozenset(refs))
         pat = self.pattern(*key)
         lay = pat.lay
@@ -383,10 +363,10 @@ class LocalEstimator:
             own_fact = np.zeros((lay.dim, lay.dim))
             own_fact[np.ix_(dst, dst)] = data.facts[-1][np.ix_(src, src)]
             facts.append(own_fact)
-        ell, innov = self._reference_innovation(lay, pi0, np.asarray(inp.alpha, dtype=float), data.x_pred, refs)
+        ell, innov = self._reference_innovation(lay, pi0, alpha, data.x_pred, refs)
         return StepData(tuple(pi0), ell, tuple(facts), data.x_pred, innov, data.Mi, lay, key, data.sector, data.own)
 
-    def reading_intervals(self, prev: NodeSet, inp: UpdateInput, health: HealthAssessment | None = None) -> dict[int, tuple[np.ndarray, Interval]]:
+    def _reading_slabs(self, prev: NodeSet, inp: UpdateInput, blend: Blend, health: HealthAssessment | None) -> Slabs:
         """What the step's readings prove, as c̄ (NA,) and c̄ᵀx̄⁺ ∈ [lo, hi], keyed by the reference's id, and
         by :data:`~netsetest.estimator.health.HEALTH_KEY` for the k-of-N interval of every reading (the
         hypotheses pruned by the node's own prediction of uᵀx⁺).
@@ -394,40 +374,37 @@ class LocalEstimator:
         A reference j (fault declared 0): C̄_j x̄_j = C_j x.  A reading at the sensor's limit bounds one
         side only: the other comes from the node's own set propagated through the step (both hold
         wherever the step's cone does); a reading that still leaves a side open is left out."""
-        out: dict[int, tuple[np.ndarray, Interval]] = {}
+        out: Slabs = {}
         for j, (y, gamma) in inp.readings.items():
             sensor = self.references.get(j)
             if sensor is None:
                 continue
             iv = measurement_interval(sensor, y, gamma)
             if not (np.isfinite(iv.lo) and np.isfinite(iv.hi)):
-                a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
-                iv = iv & propagated_interval(sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W, self.uncertainty)
+                iv = iv & propagated_interval(
+                    sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, blend.a, blend.b, blend.d, inp.u, self.W, self.uncertainty
+                )
             if np.isfinite(iv.lo) and np.isfinite(iv.hi) and iv.hi > iv.lo:
                 out[j] = (np.r_[sensor.C, 0.0], iv)
-        if self.health is not None:
-            hull, _ = health if health is not None else self._assess_health(prev, inp)
-            if hull is not None:
-                out[HEALTH_KEY] = (np.r_[self.health.u, 0.0], hull)
+        if self.health is not None and health is not None and health[0] is not None:
+            out[HEALTH_KEY] = (np.r_[self.health.u, 0.0], health[0])
         return out
 
-    def _assess_health(self, prev: NodeSet, inp: UpdateInput, moved: Polygon | None = None) -> HealthAssessment:
+    def _assess_health(self, prev: NodeSet, inp: UpdateInput, blend: Blend, moved: Polygon) -> HealthAssessment:
         """The step's k-of-N interval of uᵀx⁺ and whether the own fault is pinned, once per step (both the
         readings' update and the pin use it).  Hypotheses are pruned by uᵀx⁺ over the node's own set through
         the step: a majority that agrees only outside it is none."""
         assert self.health is not None
-        a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
-        pred = propagated_interval(self._u_sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, a, b[:, 0], d[:, 0], inp.u, self.W, self.uncertainty)
-        if moved is not None:  # and over the moved region (both hold uᵀx⁺ wherever the prior does; disjoint: one broke)
-            both = pred & Interval(*moved.interval(self.health.u))
-            pred = both if both.lo <= both.hi else pred
+        pred = propagated_interval(
+            self._u_sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, blend.a, blend.b, blend.d, inp.u, self.W, self.uncertainty
+        )
+        both = pred & Interval(*moved.interval(self.health.u))  # and over the moved region (both hold uᵀx⁺ wherever
+        pred = both if both.lo <= both.hi else pred  # the prior does; disjoint: one broke)
         return self.health.assess(self.node_id, (inp.y, inp.gamma), inp.readings, (pred.lo, pred.hi), pin=True)
 
-    def _reference_innovation(
-        self, lay: EtaLayout, pi0: np.ndarray, alpha: np.ndarray, x_pred: np.ndarray, refs: dict[int, tuple[np.ndarray, Interval]]
-    ) -> tuple[np.ndarray, float]:
+    def _reference_innovation(self, lay: EtaLayout, pi0: np.ndarray, alpha: np.ndarray, x_pred: np.ndarray, refs: Slabs) -> tuple[np.ndarray, float]:
         """ℓ (d,) and the value of the innovation the gain acts on when readings of this step are here
-        (:meth:`reading_intervals`): y̌ = Σ_j w_j (m_j − c̄_jᵀ x̂_pred), c̄_j = [c_j, 0], m_j the centre of j's interval,
+        (the context's slabs): y̌ = Σ_j w_j (m_j − c̄_jᵀ x̂_pred), c̄_j = [c_j, 0], m_j the centre of j's interval,
         h_j its half-width and w_j ∝ 1/h_j (Σ w_j = 1).  For the truth C_j x⁺ = m_j + h_j ν_j with
         |ν_j| ≤ 1 and x̄⁺ − x̂_pred = Π̄₀ η (Π̄₀ the α-blend of Π₀: the truth's model), so
         y̌(η) = Σ_j w_j (c̄_jᵀ Π̄₀ η − h_j ν_j)."""
@@ -456,17 +433,13 @@ class LocalEstimator:
         return OwnUpdate(T, G, dataclasses.replace(own, Dv=dv_new, saturated=phi_new, h1=h1_new), y_new, gamma_new)
 
     def _predict(
-        self, lay: EtaLayout, prev: NodeSet, inp: UpdateInput, own: OwnUpdate, Mi: np.ndarray, sector: Sector | None
+        self, lay: EtaLayout, prev: NodeSet, inp: UpdateInput, blend: Blend, own: OwnUpdate, Mi: np.ndarray, sector: Sector | None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """The model part of step k → k+1: Π₀ (n_rules, NA, d), the L-free centre x̂ (NA,) and the own
         sensor's φ⁺ sector fact (d, d) (None without φ⁺)."""
         d, T, g = lay.dim, own.T, own.G[:, 0]
-        alpha = np.asarray(inp.alpha, dtype=float)
-        ab = np.tensordot(alpha, self._abar, axes=1)  # the blended Ā, B̄, D̄ (exact for the truth)
-        bb = alpha @ self._bbar
-        db = alpha @ self._dbar
-        TA = T @ ab
-        Td = T @ db
+        TA = T @ blend.abar  # the blended Ā, B̄, D̄ (exact for the truth)
+        Td = T @ blend.dbar
         y_new, dv_new, gamma_new = own.y, own.sensor.Dv, own.gamma
         if self.variant == "scheduled":
             pi0 = np.zeros((1, NA, d))
@@ -482,7 +455,7 @@ class LocalEstimator:
         if lay.phi_new is not None:
             pi0[:, :, lay.phi_new] = -g * gamma_new  # − G γ⁺ φ⁺
         # L-free part of the centre; the blended matrices are exact for the truth in both variants
-        x_pred = TA @ prev.xhat + (T @ bb) * inp.u + g * y_new  # (16): T Ā x̂ + T B̄ u + G ỹ⁺
+        x_pred = TA @ prev.xhat + (T @ blend.bbar) * inp.u + g * y_new  # (16): T Ā x̂ + T B̄ u + G ỹ⁺
         if lay.phi_new is None:
             return pi0, x_pred, None
         cbar = self._own_cbar
@@ -583,8 +556,9 @@ class LocalEstimator:
         )
 
     def step(self, prev: NodeSet, inp: UpdateInput) -> StepResult:
-        """Step k → k+1: the step's data, then the update (solve, certify); the fallback without a certificate.
-        ``observer`` (if set) sees every step: the estimator, its inputs, its result and its time."""
+        """Step k → k+1: the step's context, the solve, then the declared cuts (:mod:`netsetest.estimator.cuts`);
+        the fallback without a certificate.  ``observer`` (if set) sees every step: the estimator, its inputs, its
+        result and its time."""
         if self.observer is None:
             return self._step(prev, inp)
         t0 = time.perf_counter()
@@ -593,180 +567,83 @@ class LocalEstimator:
         return res
 
     def _step(self, prev: NodeSet, inp: UpdateInput) -> StepResult:
-        sector, reading = self._own_range(prev, inp)
-        data = self.step_data(prev, inp, sector, reading)
-        alpha = np.asarray(inp.alpha, dtype=float)
-        moved = self._moved_region(prev, inp)
-        health = self._assess_health(prev, inp, moved) if self.health is not None and inp.readings else None
-        refs = self.reading_intervals(prev, inp, health)
+        """The step read top to bottom: its context (built once), the solve, the cuts."""
+        ctx = self.context(prev, inp)
+        res = self._solve_step(ctx, inp)
+        if res.status == "fallback":  # no certificate: the region of the own measurement alone (no reading listed)
+            return apply_cuts(FALLBACK_CUTS, dataclasses.replace(ctx, slabs={}), res)
+        return apply_cuts(self.cuts, ctx, res)
+
+    def context(self, prev: NodeSet, inp: UpdateInput) -> StepContext:
+        """What step k → k+1 knows before its solve, each quantity computed once: the blended model, the own
+        sector and measurement interval, the LMI data, the moved region, the k-of-N assessment and the readings'
+        slabs."""
+        blend = Blend.of(self.model, inp.alpha)
+        meas = measurement_interval(self.own, inp.y, inp.gamma)
+        sector, reading = self._own_range(prev, inp, blend, meas)
+        data = self.step_data(prev, inp, sector, reading, blend)
+        moved = self._moved_region(prev, inp, blend)
+        health = self._assess_health(prev, inp, blend, moved) if self.health is not None and inp.readings else None
+        slabs = self._reading_slabs(prev, inp, blend, health)
+        return StepContext(self.statics, prev.rho, inp.y, inp.gamma, meas, sector, data, moved, slabs, health, blend=blend)
+
+    def _solve_step(self, ctx: StepContext, inp: UpdateInput) -> StepResult:
+        """The certified set the node continues from and the one it publishes: the readings' set where it is
+        certified and better (:meth:`_refine`), else the bank's; the fallback where the first has no certificate."""
+        data, rho, alpha = ctx.data, ctx.rho, np.asarray(inp.alpha, dtype=float)
         facts = FactStack.of(data.facts)
-        res, solve = self._solve_certify(data, prev.rho, alpha, self._wh, facts)  # the set the node recurs on
+        res, solve = self._solve_certify(data, rho, alpha, self._wh, facts)  # the set the node recurs on
         if res is None:
             assert data.own is not None  # a predicting step always has its own update
-            P_fb = fallback_shape(data.Mi, data.own, self.W, inp.alpha, self.model, self.uncertainty) / prev.rho
-            res = self._fallback(data.x_pred.copy(), P_fb, solve, sector)
-            self._use_region(res, moved, {}, inp.y, inp.gamma, prev.rho)
-            return res
-        if not (refs and self._refine(res, self.readings_data(data, inp, refs), prev.rho, alpha)):
-            self._bank(res, data, prev.rho, alpha, facts)
-        if refs:
-            self._carry(res, {key: (c, iv.lo, iv.hi) for key, (c, iv) in refs.items()}, prev.rho)
-        self._size_cut(res, prev.rho)
-        self._use_region(res, moved, refs, inp.y, inp.gamma, prev.rho)
-        if health is not None and health[1]:
-            self._health_pin(res, prev.rho)
-        return res
+            assert ctx.blend is not None  # a predicting step's context has its blend
+            P_fb = fallback_shape(data.Mi, data.own, self.W, ctx.blend.abar, ctx.blend.dbar, self.uncertainty) / rho
+            return self._fallback(data.x_pred.copy(), P_fb, solve, ctx.sector)
+        if ctx.slabs:
+            res, refined = self._refine(res, self.readings_data(data, alpha, ctx.slabs), rho, alpha)
+            if refined:
+                return res
+        return self._bank(res, data, rho, alpha, facts)
 
-    def _moved_region(self, prev: NodeSet, inp: UpdateInput) -> Polygon:
+    def _moved_region(self, prev: NodeSet, inp: UpdateInput, blend: Blend) -> Polygon:
         """The states x⁺ the prior allows: its region (else the box of its ellipsoid) through the step's blended
         dynamics (exact for the truth), plus the disturbance's and the declared model mismatch's bounds (a box
         around e = G ζ holds it for either kind)."""
-        region = prev.region if prev.region is not None else _seed(prev)
-        a, b, d = self.model.blend(np.asarray(inp.alpha, dtype=float))
-        segments = [d[:, 0] * np.sqrt(self.W)]  # x⁺ = Ā x + B̄ u + D̄ w (+ e)
+        region = prev.region if prev.region is not None else seed(prev)
+        segments = [blend.d * np.sqrt(self.W)]  # x⁺ = Ā x + B̄ u + D̄ w (+ e)
         if self.uncertainty is not None:
             segments += [self.uncertainty.G[:, m] for m in range(NX)]  # e = G ζ with |ζ_m| ≤ 1
-        return region.moved(a, b[:, 0] * inp.u, segments)
+        return region.moved(blend.a, blend.b * inp.u, segments)
 
-    def _use_region(
-        self, res: StepResult, moved: Polygon, refs: dict[int, tuple[np.ndarray, Interval]], y: float, gamma: float, rho: float, listed: bool = True
-    ) -> None:
-        """Cut the moved region by everything the step proves of x⁺ (docs/estimator.md, "The region"): every
-        reading of the step, the own measurement where the step's sector rests on the declared fault bound (C x⁺ =
-        C̄ x̄⁺ − Ds f⁺ with |f⁺| ≤ F), and the step's certified ellipsoids (the one the node continues from and the
-        published one).  The node continues from it (``res.region``) and publishes it: the published set is the
-        published ellipsoid ∩ the region (its β, r bounds are the region's), and its fault interval is cut by what
-        the own measurement proves over the region (C x⁺ + Ds f⁺ within the measurement's interval, C x⁺ within the
-        region's).  The region keeps what every step so far proved, as the exact limit does (docs/network.md); an
-        ellipsoid keeps one step of it.  Where the cuts leave nothing (an assumption broke), no region is kept.
-
-        A reference (declared fault size 0) cuts by its own measurement too and publishes f⁺ = 0, resting on its own
-        reading (its key joins the step's: the node lists it, so the collector puts its zero fault into the cone);
-        not where the step cannot list readings (``listed`` False: step 0, whose cone is the prior's)."""
-        region: Polygon | None = moved
-        for c, iv in refs.values():
-            region = region.cut(c[:NX], iv.lo, iv.hi) if region is not None else None
-        meas = measurement_interval(self.own, y, gamma)
-        size, sector = self.fault_bound.size, res.sector
-        reference = size == 0.0 and listed  # its own reading rests on its declared zero fault (listed, so judged)
-        keys = frozenset(refs) | ({self.node_id} if reference else frozenset())
-        if region is not None and size is not None and (reference or (sector is not None and sector.basis == "fault-bound")):
-            slack = abs(self.own.Ds) * size  # C x⁺ = C̄ x̄⁺ − Ds f⁺, |f⁺| ≤ F: the step's cone holds the bound
-            region = region.cut(self.own.C, meas.lo - slack, meas.hi + slack)
-        for s in (res, res.published):
-            if region is not None and s is not None:
-                region = _ellipse_cut(region, s.xhat, s.P, rho)
-        if region is None or len(region.vertices) < MIN_VERTICES:
-            return  # (fewer: a sliver below the rounding, kept as empty)
-        region = region.reduced()  # the move's margin covers the cuts' rounding (Polygon.moved)
-        res.region = region
-        res.reading_keys = res.reading_keys | keys
-        fault = (0.0, 0.0) if reference else self._region_fault(region, meas)
-        # with readings the ellipsoid is cut too (as since the region came); without, it stays as solved (what
-        # neighbours use, bit for bit) and only the published fault range narrows: the same published interval
-        if fault is not None and self._cut_fault(res, rho, *fault, reshape=bool(refs)):
-            res.published = dataclasses.replace(res.public, reading_keys=res.public.reading_keys | keys)
-
-    def _region_fault(self, region: Polygon, meas: Interval) -> tuple[float, float] | None:
-        """f⁺ from the own measurement over the region: C x⁺ + Ds f⁺ ∈ [m_lo, m_hi] and C x⁺ ∈ [c_lo, c_hi]
-        give Ds f⁺ ∈ [m_lo − c_hi, m_hi − c_lo]; None where the measurement leaves a side open (saturated)."""
-        own = self.own
-        if own.Ds == 0.0 or not (np.isfinite(meas.lo) and np.isfinite(meas.hi)):
-            return None
-        c_lo, c_hi = region.interval(own.C)
-        lo, hi = (meas.lo - c_hi) / own.Ds, (meas.hi - c_lo) / own.Ds
-        return (lo, hi) if lo <= hi else (hi, lo)
-
-    def _carry(self, res: StepResult, slabs: dict[int, tuple[np.ndarray, float, float]], rho: float) -> None:
-        """Cut the set the node continues from by what the step proved beyond its solve, each (c, lo, hi) a
-        slab cᵀx̄⁺ ∈ [lo, hi] that holds wherever the step's assumptions do (keyed like
-        :meth:`reading_intervals`: the readings' intervals; the k-of-N pin under HEALTH_KEY), with
-        :func:`~netsetest.estimator.slab.cut` (certified, in the recursion's objective), so that it carries over
-        to the later steps; what is published does not change.  Without it the recursion forgets the readings at
-        every step while the exact limit keeps them (docs/network.md).  The keys of the slabs that cut it join
-        its ``reading_keys``: the node lists those readings too, so the collector judges the set it continues
-        from under their assumptions (docs/coverage.md)."""
-        xhat, P, rho_cert, used = res.xhat, res.P, res.rho_cert, set()
-        for key, (c, lo, hi) in slabs.items():
-            out = cut(xhat, P, rho, c, lo, hi, None if self._wh is None else self._wh**2)
-            if out is not None:  # ρ' as for a solved set (P = P_s·ρ'/ρ_i)
-                xhat, P, rho_cert = out[0], out[1], out[2] * rho
-                used.add(key)
-        if not used:
-            return  # no slab cuts it
-        if res.published is None:
-            res.published = dataclasses.replace(res)  # published: the step's set as solved
-        res.xhat, res.P, res.rho_cert = xhat, P, rho_cert
-        res.reading_keys = res.reading_keys | used
-
-    def _size_cut(self, res: StepResult, rho: float) -> None:
-        """Where the step's sector rests on the declared fault bound, the truth's f⁺ lies in [−F, F]: the set to
-        publish is cut by that interval (:func:`~netsetest.estimator.slab.cut`, certified; docs/estimator.md).
-        The node recurs on ``res`` as solved."""
-        size, sector = self.fault_bound.size, res.sector
-        if size is None or sector is None or sector.basis != "fault-bound":
-            return
-        self._cut_fault(res, rho, -size, size)
-
-    def _health_pin(self, res: StepResult, rho: float) -> None:
-        """Under ``max_faulty``, where no consistent majority of the step's readings leaves this node's sensor
-        out (:meth:`_assess_health`), its fault is |f⁺| ≤ τ (docs/network.md): the set to publish is cut by that
-        interval, widened to :data:`PIN_FLOOR` (a superset: sound) so that the published ellipsoid stays
-        full-dimensional, and it then rests on every reading (the k-of-N facts do).  The set the node continues
-        from is cut by it too (:meth:`_carry`)."""
-        assert self.health is not None
-        size = max(self.health.tolerance, PIN_FLOOR)
-        if self._cut_fault(res, rho, -size, size):
-            res.published = dataclasses.replace(res.public, reading_keys=res.public.reading_keys | {HEALTH_KEY})
-        self._carry(res, {HEALTH_KEY: (FAULT_AXIS, -size, size)}, rho)  # and the set the node continues from
-
-    def _cut_fault(self, res: StepResult, rho: float, lo: float, hi: float, reshape: bool = True) -> bool:
-        """Cut the set to publish by lo ≤ f⁺ ≤ hi (:func:`~netsetest.estimator.slab.cut`, certified; not unless
-        ``reshape``) and publish it as that ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (NodeState.fault_range: no ellipsoid ends at
-        the slab's flat face); whether it did.  The node recurs on ``res`` as solved."""
-        pub = res.public
-        now_lo, now_hi = ellipsoid_bounds(pub.xhat, np.diag(pub.P), rho, pub.fault_range)  # the published fault interval
-        lo, hi = max(lo, now_lo[-1]), min(hi, now_hi[-1])
-        if not (lo > now_lo[-1] or hi < now_hi[-1]) or lo > hi:
-            return False  # no cut (an empty one means the assumptions broke: the step's set stays as certified)
-        wh = self._wh_pub if self._wh_pub is not None else self._wh
-        out = cut(pub.xhat, pub.P, rho, FAULT_AXIS, lo, hi, None if wh is None else wh**2) if reshape else None
-        if out is None:  # the ellipsoid gains nothing; the slab still bounds the fault
-            res.published = dataclasses.replace(pub, published=None, fault_range=(lo, hi))
-        else:  # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
-            res.published = dataclasses.replace(pub, xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None, fault_range=(lo, hi))
-        return True
-
-    def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> bool:
-        """Publish the readings' set of the step (its only innovation those readings) where it is
-        certified, uses them (L ≠ 0) and is smaller in the published objective than ``res``; whether it
-        did.  The node recurs on ``res`` either way (cut by the readings: :meth:`_carry`).
+    def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> tuple[StepResult, bool]:
+        """``res`` publishing the readings' set of the step (its only innovation those readings) where it is
+        certified, uses them (L ≠ 0) and is smaller in the published objective than ``res``, and whether it does;
+        the node recurs on ``res`` either way (cut by the readings: :data:`~netsetest.estimator.cuts.READINGS`).
 
         Why not recur on it: its trace-optimal shape trades sideslip width for yaw-rate width (the
         reading measures the yaw rate), and later steps predict from the sideslip; recurring on it made
         paper6_reference's SAIM fault intervals wider than without readings (docs/network.md)."""
-        wh = self._wh_pub if self._wh_pub is not None else self._wh
+        wh = self.statics.wh_published
         answer, solve = self._solve(data, alpha, wh, rho)
-        res.solve_ms += solve.ms
+        res = dataclasses.replace(res, solve_ms=res.solve_ms + solve.ms)
         if answer is None or not np.any(answer.L):
-            return False  # no answer, or the readings are of no use (L = 0): nothing to certify
+            return res, False  # no answer, or the readings are of no use (L = 0): nothing to certify
         refined = self._certify(answer, data, rho, FactStack.of(data.facts), solve)
         if refined is None or _objective(refined.P, wh) >= (1 - REFINE_RTOL) * _objective(res.P, wh):
-            return False  # no certificate, or nothing gained: no reason to rest the published set on the readings
-        refined.solve_ms = res.solve_ms
-        refined.reading_keys = frozenset(data.key[3])
-        res.published = refined
-        return True
+            return res, False  # no certificate, or nothing gained: no reason to rest the published set on the readings
+        refined = dataclasses.replace(refined, solve_ms=res.solve_ms, reading_keys=frozenset(data.key[3]))
+        return dataclasses.replace(res, published=refined), True
 
     def first(self, prior: NodeSet, y: float, gamma: float) -> StepResult:
-        """Step 0: the prior updated by ỹ₀, certified like every step; ``fallback``: the prior itself."""
+        """Step 0: the prior updated by ỹ₀, certified like every step (``fallback``: the prior itself), then
+        :data:`~netsetest.estimator.cuts.FIRST_CUTS` (the region starts from the prior: Assumption 1)."""
         sector = self.initial_sector(prior, y, gamma)
         data = self.initial_data(prior, y, gamma, sector)
         res, solve = self._update(data, prior.rho, np.ones(1))
         if res is None:
             res = self._fallback(prior.xhat.copy(), prior.P.copy(), solve, sector)
-        self._use_region(res, _seed(prior), {}, y, gamma, prior.rho, listed=False)  # the region starts from the prior (Assumption 1)
-        return res
+        meas = measurement_interval(self.own, y, gamma)
+        ctx = StepContext(self.statics, prior.rho, y, gamma, meas, sector, data, seed(prior), {}, None, listed=False)
+        return apply_cuts(FIRST_CUTS, ctx, res)
 
     def _fallback(self, xhat: np.ndarray, P: np.ndarray, solve: _Solve, sector: Sector | None) -> StepResult:
         """The guaranteed set when the solver gave no certificate; FallbackUnavailable if even it is not publishable."""
@@ -780,18 +657,16 @@ class LocalEstimator:
         facts = FactStack.of(data.facts)  # shared by both certificates of ``bank``
         res, solve = self._solve_certify(data, rho, alpha, self._wh, facts)
         if res is not None:
-            self._bank(res, data, rho, alpha, facts)
+            res = self._bank(res, data, rho, alpha, facts)
         return res, solve
 
-    def _bank(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray, facts: FactStack) -> None:
-        """Objective ``bank``: the fault-weighted set of the same data is added to ``res`` as the one to publish."""
+    def _bank(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray, facts: FactStack) -> StepResult:
+        """Objective ``bank``: ``res`` with the fault-weighted set of the same data as the one to publish."""
         if self._wh_pub is None:
-            return
+            return res
         pub, solve_pub = self._solve_certify(data, rho, alpha, self._wh_pub, facts)
-        res.solve_ms += solve_pub.ms
-        if pub is not None:
-            pub.solve_ms = res.solve_ms
-            res.published = pub
+        ms = res.solve_ms + solve_pub.ms
+        return dataclasses.replace(res, solve_ms=ms, published=res.published if pub is None else dataclasses.replace(pub, solve_ms=ms))
 
     def _solve_certify(self, data: StepData, rho: float, alpha: np.ndarray, wh: np.ndarray | None, facts: FactStack) -> tuple[StepResult | None, _Solve]:
         """Solve the step's problem for the objective trace(D P), D^½ = diag(wh) (None: trace P), and
@@ -855,29 +730,6 @@ class _Solve:
     status: str
 
 
-def _seed(prior: NodeSet) -> Polygon:
-    """The region of a set without one: the box of its ellipsoid's x-projection cut by that ellipse's axes."""
-    lo, hi = ellipsoid_bounds(prior.xhat, np.diag(prior.P), prior.rho)
-    box = Polygon.box(lo[:NX], hi[:NX])
-    return _ellipse_cut(box, prior.xhat, prior.P, prior.rho, coordinates=False) or box
-
-
-def _ellipse_cut(region: Polygon, xhat: np.ndarray, P: np.ndarray, rho: float, coordinates: bool = True) -> Polygon | None:
-    """The region cut by the slabs of the ellipsoid {(x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} along β and r (``coordinates``;
-    a box of it needs no such cut) and along the principal axes of its x-projection ρ P_xx: an outer
-    octagon of that ellipse.  Sound wherever the ellipsoid holds the truth; None if nothing is left."""
-    pxx = 0.5 * (P[:NX, :NX] + P[:NX, :NX].T)
-    _, vecs = np.linalg.eigh(pxx)
-    dirs = [*np.eye(NX), *vecs.T] if coordinates else [*vecs.T]
-    out: Polygon | None = region
-    for d in dirs:
-        if out is None:
-            return None
-        centre, half = float(d @ xhat[:NX]), float(np.sqrt(max(rho * float(d @ pxx @ d), 0.0)))
-        out = out.cut(d, centre - half, centre + half)
-    return out
-
-
 def _objective(P: np.ndarray, wh: np.ndarray | None) -> float:
     """trace(D P), D^½ = diag(wh) (None: trace P): what a step minimises."""
     return float(np.trace(P)) if wh is None else float(wh**2 @ np.diag(P))
@@ -892,11 +744,13 @@ def _weighted(data: StepData, wh: np.ndarray) -> StepData:
 __all__ = [
     "BACKENDS",
     "Backend",
+    "Blend",
     "NodeSet",
     "LocalEstimator",
     "NeighbourState",
     "Objective",
     "UpdateInput",
+    "StepData",
     "StepResult",
     "Variant",
 ]

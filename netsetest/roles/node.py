@@ -42,7 +42,6 @@ from netsetest.config.schema import Scenario
 from netsetest.estimator import base
 from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE
-from netsetest.estimator.health import HEALTH_KEY
 from netsetest.estimator.registry import node_set_estimator
 from netsetest.polygon import Polygon
 from netsetest.estimator.rejoin import rejoin_ellipsoid
@@ -487,9 +486,9 @@ class Node:
         res = self.estimator.step(self._prior(), step_in)
         # the readings the step's sets rest on: the published one's and the ones the set it continues from was
         # cut by (both are judged under the step's cone: docs/coverage.md)
-        keys_used = res.public.reading_keys | res.reading_keys
-        health = HEALTH_KEY in keys_used
-        refs = sorted(set(readings) | (keys_used & {self.id})) if health else sorted(keys_used)  # the k-of-N facts rest on every reading
+        rests = res.rests_on
+        health = rests.health
+        refs = sorted(set(readings) | (rests.readings & {self.id})) if health else sorted(rests.readings)  # the k-of-N facts rest on every reading
         if PROFILE is not None:
             PROFILE.add("solve", t)
         used = sorted(j for j in neigh if j != self.id)

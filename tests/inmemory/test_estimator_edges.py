@@ -15,7 +15,7 @@ import pytest
 from netsetest.cli.main import main
 from netsetest.config.schema import load_topology
 from netsetest.estimator.certificate import FallbackUnavailable, fallback_shape, publishable
-from netsetest.estimator.sdp import NodeSet, LocalEstimator, UpdateInput
+from netsetest.estimator.sdp import Blend, NodeSet, LocalEstimator, UpdateInput
 from netsetest.runtime.inmemory import run_inmemory
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -110,30 +110,30 @@ def _estimator_data(sc, node: int = 3):
     est = LocalEstimator.for_node(sc, node)
     alpha = sc.model.weights(sc.vx(0))
     data = est.step_data(NodeSet(n.x0_hat, n.P0, n.rho), UpdateInput(alpha, 0.03, 0.01, 1.0, {}), None)
-    return est, n, alpha, data
+    return est, n, Blend.of(sc.model, alpha), data
 
 
 def test_fallback_shape_is_scale_free_and_spd() -> None:
     sc = load_topology(ROOT / "topologies" / "paper6.toml", "saim", 2)
-    est, n, alpha, data = _estimator_data(sc)
-    shape = fallback_shape(data.Mi, dataclasses.replace(data.own, sensor=n.sensor, gamma=0.8), sc.W, alpha, sc.model)
+    est, n, blend, data = _estimator_data(sc)
+    shape = fallback_shape(data.Mi, dataclasses.replace(data.own, sensor=n.sensor, gamma=0.8), sc.W, blend.abar, blend.dbar)
     assert publishable(np.zeros(3), shape)
     # scaling every term (here through Mi and a sensor with scaled Dv·√R, r_max) by c scales the shape by c²
     for c in (1e-100, 1e100):
         sens = type(n.sensor)(n.sensor.C, n.sensor.Ds, n.sensor.Dv * c, n.sensor.R, True, n.sensor.r_max * c, n.sensor.h1, n.sensor.h2)
-        big = fallback_shape(data.Mi * c, dataclasses.replace(data.own, sensor=sens, gamma=0.8), sc.W * c * c, alpha, sc.model)
+        big = fallback_shape(data.Mi * c, dataclasses.replace(data.own, sensor=sens, gamma=0.8), sc.W * c * c, blend.abar, blend.dbar)
         assert np.all(np.isfinite(big))
         np.testing.assert_allclose(big / (c * c), shape, rtol=1e-9)
 
 
 def test_fallback_shape_refuses_what_it_cannot_represent() -> None:
     sc = load_topology(ROOT / "topologies" / "paper6.toml", "nsnim", 2)
-    est, n, alpha, data = _estimator_data(sc)
+    est, n, blend, data = _estimator_data(sc)
     for bad in (np.inf, np.nan):
         with np.errstate(invalid="ignore"), pytest.raises(FallbackUnavailable):
-            fallback_shape(data.Mi * bad, dataclasses.replace(data.own, sensor=n.sensor, gamma=1.0), sc.W, alpha, sc.model)
+            fallback_shape(data.Mi * bad, dataclasses.replace(data.own, sensor=n.sensor, gamma=1.0), sc.W, blend.abar, blend.dbar)
     with pytest.raises(FallbackUnavailable):  # finite terms whose squares overflow
-        fallback_shape(data.Mi * 1e200, dataclasses.replace(data.own, sensor=n.sensor, gamma=1.0), sc.W, alpha, sc.model)
+        fallback_shape(data.Mi * 1e200, dataclasses.replace(data.own, sensor=n.sensor, gamma=1.0), sc.W, blend.abar, blend.dbar)
 
 
 def test_publishable() -> None:

@@ -48,7 +48,7 @@ def _estimator(sc, i, variant="scheduled", backend="clarabel"):
 def _data(est, args):
     """The step data of a captured step (prev, inp) as the node builds it (own reading interval, sectors)."""
     prev, inp = args
-    return est.step_data(prev, inp, *est._own_range(prev, inp))
+    return est.context(prev, inp).data
 
 
 def _sector_data(est, args):

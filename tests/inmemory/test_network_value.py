@@ -132,7 +132,7 @@ def test_the_references_reading_narrows_every_other_node(case: str, gain: float)
 @pytest.mark.parametrize("case, gain", [("nsnim", 2.0), ("saim", 1.3)])
 def test_the_recursion_carries_the_readings(case: str, gain: float) -> None:
     """The set a node continues from is its step's set cut by what the step's readings prove
-    (LocalEstimator._carry), so the readings reach the later steps: node 1 alone (its own loop
+    (the ``readings`` cut, estimator/cuts.py), so the readings reach the later steps: node 1 alone (its own loop
     only, so that nothing but its own recursion differs) starts step 1 from the same prior with and
     without the readings, and from step 2 on from a prior whose yaw rate (what the reference measures) is
     narrower by at least ``gain`` on average (measured 2.9 NSNIM, 1.5 SAIM, 2026-11-28); every prior
@@ -202,10 +202,8 @@ def test_a_recursion_that_misses_on_a_covered_node_step_is_a_violation(
 
     def broken(self: LocalEstimator, prev, inp):
         res = step(self, prev, inp)
-        if res.published is None:
-            res.published = dataclasses.replace(res)
-        res.xhat = res.xhat + np.array([0.0, 0.0, 50.0])  # the recursion's fault centre far off; what is published is intact
-        return res
+        # the recursion's fault centre far off; what is published is intact
+        return dataclasses.replace(res, published=res.public, xhat=res.xhat + np.array([0.0, 0.0, 50.0]))
 
     monkeypatch.setattr(LocalEstimator, "_step", broken)
     sc = load_topology("paper6", case="nsnim", steps=6)
@@ -230,9 +228,6 @@ def test_the_region_keeps_every_reading_and_is_judged(monkeypatch: pytest.Monkey
     published on nearly every step from step 10 (a fault range the run without the region never has: NSNIM
     has no declared bound).  A region moved off the truth (a deliberate bug) is a violation on covered
     node-steps, with ``continues_contained`` false."""
-    from netsetest.polygon import Polygon
-    from netsetest.estimator.sdp import LocalEstimator
-
     sc = load_topology("paper6_reference", case="nsnim", steps=30)
     res = run_inmemory(sc, "worst", seed=0)
     s = res.summary
@@ -241,14 +236,7 @@ def test_the_region_keeps_every_reading_and_is_judged(monkeypatch: pytest.Monkey
     assert all(e["continues_contained"] for e in rows)
     assert sum("fault_range" in e for e in rows) >= 0.9 * len(rows) > 0
 
-    use = LocalEstimator._use_region
-
-    def moved_off(self: LocalEstimator, res, *args, **kwargs):  # the StepResult and the step's data
-        use(self, res, *args, **kwargs)
-        if res.region is not None:
-            res.region = Polygon(res.region.vertices + np.array([1.0, 0.0]))  # 1 rad of sideslip off
-
-    monkeypatch.setattr(LocalEstimator, "_use_region", moved_off)
+    _move_regions_off(monkeypatch, np.array([1.0, 0.0]))  # 1 rad of sideslip off
     broken = run_inmemory(sc, "worst", seed=0)
     assert broken.summary.violations_total > 0
     covered = [e for es in broken.parts["nodes"].values() for e in es if e["assumptions_ok"] and e["step"] > 0]
@@ -260,9 +248,6 @@ def test_every_node_publishes_its_region_and_a_region_off_the_truth_is_a_violati
     the ellipsoid ∩ the fault range ∩ the region, so its yaw-rate and sideslip bounds (the record's ``bounds``)
     are the region's, narrower than the ellipsoid's on every node from step 10, with every node-step covered and
     contained.  A region moved off the truth (a deliberate bug) is a violation: the published set misses."""
-    from netsetest.polygon import Polygon
-    from netsetest.estimator.sdp import LocalEstimator
-
     sc = load_topology("paper6", case="nsnim", steps=30)
     res = run_inmemory(sc, "paper", seed=0)
     s = res.summary
@@ -273,14 +258,7 @@ def test_every_node_publishes_its_region_and_a_region_off_the_truth_is_a_violati
             width = np.diff(np.asarray(e["bounds"]), axis=1)[:, 0]
             assert np.all(width[:2] < 0.9 * 2 * half[:2]), (i, e["step"])  # the region's, not the ellipsoid's
 
-    use = LocalEstimator._use_region
-
-    def moved_off(self: LocalEstimator, res, *args, **kwargs):  # the StepResult and the step's data
-        use(self, res, *args, **kwargs)
-        if res.region is not None:
-            res.region = Polygon(res.region.vertices + np.array([0.0, 1.0]))  # 1 rad/s of yaw rate off
-
-    monkeypatch.setattr(LocalEstimator, "_use_region", moved_off)
+    _move_regions_off(monkeypatch, np.array([0.0, 1.0]))  # 1 rad/s of yaw rate off
     broken = run_inmemory(sc, "paper", seed=0)
     assert broken.summary.violations_total > 0
     covered = [e for es in broken.parts["nodes"].values() for e in es if e["assumptions_ok"]]
@@ -490,7 +468,7 @@ def test_the_sdp_pins_a_fault_that_every_consistent_majority_needs() -> None:
     pinned: dict[int, int] = {}
     for i, prev, inp in captured:
         plain = sdp.LocalEstimator.for_node(sc, i)
-        plain._health_pin = lambda res, rho: None  # type: ignore[method-assign]  # the same estimator without the pin
+        plain.cuts = tuple(c for c in plain.cuts if c.name != "health-pin")  # the same estimator without the pin
         with_pin, without = sdp.LocalEstimator.for_node(sc, i).step(prev, inp), plain.step(prev, inp)
         assert with_pin.P[2, 2] <= without.P[2, 2] * (1 + 1e-9)  # the recursion set: cut by the pin too, never wider in f
         if not np.array_equal(with_pin.public.P, without.public.P):
@@ -556,3 +534,19 @@ def test_a_point_exact_interval_is_reported_as_an_absolute_width_not_a_ratio() -
     others = [n.ratios[c] for n in cmp.nodes for c in ("beta", "r", "f") if (n.node, c) != (3, "f")]
     assert all(r.width_excess is None and 0.99 < r.width_ratio < 1.05 for r in others)
     assert 0.99 < cmp.overall_width_ratio < 1.05
+
+
+def _move_regions_off(monkeypatch: pytest.MonkeyPatch, shift: np.ndarray) -> None:
+    """A deliberate bug: every region the region cut makes (step 0's, every step's, a fallback's) moved by ``shift``."""
+    import dataclasses
+
+    from netsetest.estimator import cuts, sdp
+    from netsetest.polygon import Polygon
+
+    def moved_off(ctx: cuts.StepContext, res: cuts.StepResult) -> cuts.StepResult:
+        res = cuts.REGION.apply(ctx, res)
+        return res if res.region is None else dataclasses.replace(res, region=Polygon(res.region.vertices + shift))
+
+    off = dataclasses.replace(cuts.REGION, apply=moved_off)
+    for name in ("STEP_CUTS", "FIRST_CUTS", "FALLBACK_CUTS"):
+        monkeypatch.setattr(sdp, name, tuple(off if c is cuts.REGION else c for c in getattr(sdp, name)))

@@ -1,4 +1,4 @@
-"""What a node makes of a reference's reading (estimator/sdp.py ``reading_intervals``, docs/network.md)."""
+"""What a node makes of a reference's reading (estimator/sdp.py: the step context's ``slabs``, docs/network.md)."""
 
 from __future__ import annotations
 
@@ -29,12 +29,12 @@ def _inp(sc, readings: dict[int, tuple[float, float]]) -> UpdateInput:
 def test_only_declared_references_are_read() -> None:
     sc, est, prior = _setup("nsnim")
     assert set(est.references) == {3}  # node 2's estimator reads sensor 3, the only reference
-    assert est.reading_intervals(prior, _inp(sc, {4: (0.03, 1.0)})) == {}  # node 4 is no reference: ignored
+    assert est.context(prior, _inp(sc, {4: (0.03, 1.0)})).slabs == {}  # node 4 is no reference: ignored
 
 
 def test_a_reading_inside_the_range_is_its_measurement_interval() -> None:
     sc, est, prior = _setup("nsnim")
-    got = est.reading_intervals(prior, _inp(sc, {3: (0.03, 1.0)}))
+    got = est.context(prior, _inp(sc, {3: (0.03, 1.0)})).slabs
     c, iv = got[3]
     assert list(c) == [0.0, 0.18, 0.0] and iv == measurement_interval(sc.node(3).sensor, 0.03, 1.0)  # c̄ = [C_3, 0]
     assert math.isfinite(iv.lo) and math.isfinite(iv.hi)
@@ -48,7 +48,7 @@ def test_a_reading_at_the_limit_takes_its_open_side_from_the_propagated_set() ->
     y = 0.8 * s3.r_max
     meas = measurement_interval(s3, y, 0.8)
     assert math.isfinite(meas.lo) and meas.hi == math.inf
-    got = est.reading_intervals(prior, _inp(sc, {3: (y, 0.8)}))
+    got = est.context(prior, _inp(sc, {3: (y, 0.8)})).slabs
     iv = got[3][1]
     assert iv.lo == meas.lo and math.isfinite(iv.hi) and iv.hi > iv.lo
     # and the estimator publishes a certified set that uses it (its gain on the reading is not zero)

@@ -1,15 +1,27 @@
-"""The region's cuts in the SDP step (estimator/sdp.py): the seed from an ellipsoid and the cut by an ellipsoid's slabs
-keep every point of their input that the ellipsoid holds (Hypothesis, point by point), so the published set
-ellipsoid ∩ region never loses a point of the ellipsoid that the region held."""
+"""The cuts of the SDP step (estimator/cuts.py): the seed from an ellipsoid and the cut by an ellipsoid's slabs keep
+every point of their input that the ellipsoid holds, so the published set ellipsoid ∩ region never loses a point of
+the ellipsoid that the region held; and every declared cut keeps every point of its input sets that satisfies its
+facts (Hypothesis, point by point)."""
 
 from __future__ import annotations
+
+import dataclasses
+import functools
+from pathlib import Path
 
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from netsetest.estimator.sdp import NodeSet, _ellipse_cut, _seed
+from netsetest.config.schema import load_topology
+from netsetest.estimator.cuts import PIN_FLOOR, STEP_CUTS, NodeSet, Rests, StepContext, StepResult, ellipse_cut, seed
+from netsetest.estimator.health import HEALTH_KEY
+from netsetest.estimator.sdp import LocalEstimator, UpdateInput
+from netsetest.estimator.sector import Interval, Sector
+from netsetest.models.sensor import Sensor
 from netsetest.polygon import Polygon
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @st.composite
@@ -32,7 +44,7 @@ def _ellipsoid(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, float, np.ndarr
 @given(_ellipsoid())
 def test_the_seed_holds_every_point_of_the_ellipsoid(e: tuple[np.ndarray, np.ndarray, float, np.ndarray]) -> None:
     xhat, P, rho, pts = e
-    region = _seed(NodeSet(xhat, P, rho))
+    region = seed(NodeSet(xhat, P, rho))
     assert all(region.contains(p[:2]) for p in pts)
 
 
@@ -47,10 +59,149 @@ def test_the_ellipse_cut_keeps_every_point_of_the_region_the_ellipsoid_holds(e: 
     hi = xhat[:2] + half * b
     region = Polygon.box(lo, hi)
     held = [p for p in pts if np.all(p[:2] >= lo) and np.all(p[:2] <= hi)]
-    cut = _ellipse_cut(region, xhat, P, rho)
+    cut = ellipse_cut(region, xhat, P, rho)
     if cut is None:
         assert not held
         return
     assert all(cut.contains(p[:2]) for p in held)
     v = cut.vertices
     assert np.all(v >= lo - 1e-6 * (1 + np.abs(lo))) and np.all(v <= hi + 1e-6 * (1 + np.abs(hi)))
+
+
+# ---------------------------------------------------------------- every declared cut of the step (estimator/cuts.py)
+
+RTOL = 1e-7  # relative: a point on a set's boundary may round out by this (ρ of the ellipsoids, the fault range)
+
+
+def _inside(res: StepResult, x: np.ndarray, rho: float) -> np.ndarray:
+    """(n, 2): whether each point x̄ (n, 3) lies in the set the node continues from (ellipsoid ∩ region) and in the
+    published one (ellipsoid ∩ fault range ∩ region), with the rounding allowance RTOL."""
+
+    def member(s: StepResult) -> np.ndarray:
+        e = x - s.xhat
+        ok = np.einsum("ij,ij->i", e, np.linalg.solve(s.P, e.T).T) <= rho * (1 + RTOL)
+        if s.fault_range is not None:
+            slack = RTOL * (1 + abs(s.fault_range[0]) + abs(s.fault_range[1]))
+            ok &= (s.fault_range[0] - slack <= x[:, 2]) & (x[:, 2] <= s.fault_range[1] + slack)
+        if s.region is not None:
+            ok &= np.array([_near(s.region, p[:2]) for p in x], dtype=bool)
+        return ok
+
+    return np.stack([member(res), member(res.public)], axis=1)
+
+
+def _near(region: Polygon, x: np.ndarray) -> bool:
+    """x in the region, or within RTOL of its extent from it (a point on a cut face)."""
+    if region.contains(x):
+        return True
+    scale = RTOL * (1 + float(np.abs(region.vertices).max()))
+    return any(region.contains(x + d) for d in scale * np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [-1, -1], [1, -1], [-1, 1]]))
+
+
+@st.composite
+def _step(draw: st.DrawFn) -> tuple[StepContext, StepResult, np.ndarray]:
+    """A step's sets and context, at random: the continued ellipsoid, a published one (a bank-like reshape of it, or
+    itself), a fault range or none, the moved region (a box around part of the ellipsoid's x-projection), the own
+    measurement (finite, or open on one side: saturated), a reading's slab, the sector's basis and the k-of-N pin;
+    and points of every input set (their intersection: the truth lies in all of them)."""
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    own = _context().statics.own
+    m = rng.normal(size=(3, 3)) * np.array([0.02, 0.05, 0.1])
+    P = m @ m.T + 1e-5 * np.eye(3)
+    xhat, rho = rng.normal(size=3) * np.array([0.01, 0.05, 0.1]), float(rng.uniform(0.5, 2.0))
+    half = np.sqrt(rho * np.diag(P))
+    published = None
+    if draw(st.booleans()):  # a published ellipsoid of its own, through the same centre
+        q = rng.normal(size=(3, 3)) * 0.3 + np.eye(3)
+        published = StepResult(xhat + 0.1 * half * rng.normal(size=3), 1.3 * q @ P @ q.T, "ok", rho, 0.0, "solved")
+    fault_range = None
+    if draw(st.booleans()):
+        fault_range = (float(xhat[2] - half[2] * rng.uniform(0.2, 1.2)), float(xhat[2] + half[2] * rng.uniform(0.2, 1.2)))
+        published = dataclasses.replace(published or StepResult(xhat, P, "ok", rho, 0.0, "solved"), fault_range=fault_range)
+    basis = draw(st.sampled_from(["fault-bound", "measurement", "assumed"]))
+    res = StepResult(xhat, P, "ok", rho, 0.0, "solved", sector=Sector(0.8, 0.2, basis), published=published)
+    inner = draw(st.booleans())  # a region and a measurement well inside the ellipsoids: their faces bind, not its
+    reach = (0.05, 0.4) if inner else (0.3, 1.5)
+    moved = Polygon.box(xhat[:2] - half[:2] * rng.uniform(*reach, 2), xhat[:2] + half[:2] * rng.uniform(*reach, 2))
+    pts = xhat + np.sqrt(rho) * _ball(rng, 600) @ np.linalg.cholesky(P).T
+    r = pts[:, :2] @ own.C + own.Ds * pts[:, 2]  # the own measurement's combination C̄ x̄
+    lo, hi = np.quantile(r, sorted(rng.uniform(0.35, 0.65, 2) if inner else rng.uniform(0.0, 1.0, 2)))
+    meas = Interval(float(lo) if draw(st.booleans()) else -np.inf, float(hi) if draw(st.booleans()) else np.inf)
+    c = np.r_[rng.normal(size=2), 0.0]
+    cv = pts @ c
+    slabs = {7: (c, Interval(*np.quantile(cv, sorted(rng.uniform(0.0, 1.0, 2)))))} if draw(st.booleans()) else {}
+    pin = draw(st.booleans())
+    ctx = dataclasses.replace(_context(), rho=rho, meas=meas, sector=res.sector, moved=moved, slabs=slabs, health=(None, pin) if pin else None)
+    pts = np.vstack([pts, _extremes(moved, meas, own, rng)])
+    pts = pts[_inside(res, pts, rho).all(axis=1)]
+    held = pts[[moved.contains(p[:2]) for p in pts]]
+    return ctx, res, held
+
+
+def _extremes(moved: Polygon, meas: Interval, own: Sensor, rng: np.random.Generator) -> np.ndarray:
+    """Points where a cut's faces meet: at the region's vertices and on its sides, the fault at the own measurement's
+    ends (C x + Ds f = m_lo, m_hi), at ±F and at ±(the pin): the extreme points of what the cuts keep, which random
+    points of the ellipsoid almost never reach."""
+    v = moved.vertices
+    x = np.vstack([v, v + rng.uniform(0.0, 1.0, (len(v), 1)) * (np.roll(v, -1, axis=0) - v)])
+    faults = [np.full(len(x), f) for f in (-0.2, 0.2, -0.05, 0.05, -PIN_FLOOR, PIN_FLOOR)]
+    faults += [(m - x @ own.C) / own.Ds for m in (meas.lo, meas.hi) if np.isfinite(m)]
+    return np.vstack([np.column_stack([x, f]) for f in faults])
+
+
+def _ball(rng: np.random.Generator, n: int) -> np.ndarray:
+    """n points of the unit ball in R³, a fifth of them on its sphere."""
+    u = rng.normal(size=(n, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return u * np.where(np.arange(n)[:, None] < n // 5, 1.0, rng.uniform(0.0, 1.0, size=(n, 1)) ** (1 / 3))
+
+
+def _facts(name: str, ctx: StepContext, res: StepResult, p: np.ndarray) -> bool:
+    """Whether the point p satisfies what cut ``name`` rests on (its slabs)."""
+    st_ = ctx.statics
+    readings = all(lo_hi.lo <= float(c @ p) <= lo_hi.hi for c, lo_hi in ctx.slabs.values())
+    size = st_.fault_bound.size
+    bounded = size is None or res.sector is None or res.sector.basis != "fault-bound" or abs(p[2]) <= size
+    pinned = ctx.health is None or not ctx.health[1] or abs(p[2]) <= max(st_.health_tolerance or 0.0, PIN_FLOOR)
+    measured = ctx.meas.lo <= float(p[:2] @ st_.own.C + st_.own.Ds * p[2]) <= ctx.meas.hi
+    return {
+        "readings": readings,
+        "fault-size": bounded,
+        "region": readings and bounded and measured and ctx.moved.contains(p[:2]),
+        "health-pin": pinned,
+    }[name]
+
+
+@functools.cache
+def _context() -> StepContext:
+    """A real step context (paper6 SAIM, node 1, from its prior), whose fields the draws replace; k-of-N tolerance
+    set so that the pin cut has one."""
+    sc = load_topology(ROOT / "topologies" / "paper6.toml", "saim", 5)
+    est = LocalEstimator.for_node(sc, 1)
+    n = sc.node(1)
+    inp = UpdateInput(sc.model.weights(sc.vx(0)), (sc.steer_low + sc.steer_high) / 2, 0.03, 1.0, {})
+    ctx = est.context(NodeSet(n.x0_hat, n.P0, n.rho), inp)
+    return dataclasses.replace(ctx, statics=dataclasses.replace(ctx.statics, health_tolerance=0.05))
+
+
+@settings(max_examples=80, deadline=None)
+@given(_step(), st.sampled_from([c.name for c in STEP_CUTS]))
+def test_every_cut_keeps_every_point_of_its_input_that_satisfies_its_slab(step: tuple[StepContext, StepResult, np.ndarray], name: str) -> None:
+    """Each declared cut (readings, fault-size, region, health-pin), on random sets and contexts: every point of its
+    input sets (the truth lies in all of them) that satisfies the cut's facts lies in both sets it returns (the one
+    the node continues from and the published one)."""
+    ctx, res, held = step
+    cut = next(c for c in STEP_CUTS if c.name == name)
+    out = cut.apply(ctx, res)
+    kept = held[[_facts(name, ctx, res, p) for p in held]].reshape(-1, 3)
+    inside = _inside(out, kept, ctx.rho)
+    assert inside.all(), (name, kept[~inside.all(axis=1)])
+
+
+def test_a_step_rests_on_the_readings_its_sets_were_cut_by() -> None:
+    """What the node lists (StepResult.rests_on): the readings of both sets, the published one's and the continued
+    one's, as node ids, and whether the k-of-N facts are among them (the estimator's key for them is no node)."""
+    pub = StepResult(np.zeros(3), np.eye(3), "ok", 1.0, 0.0, "solved", reading_keys=frozenset({3, HEALTH_KEY}))
+    res = StepResult(np.zeros(3), np.eye(3), "ok", 1.0, 0.0, "solved", published=pub, reading_keys=frozenset({4}))
+    assert res.rests_on == Rests(frozenset({3, 4}), True)
+    assert dataclasses.replace(res, published=None).rests_on == Rests(frozenset({4}), False)

@@ -1,0 +1,351 @@
+"""The SDP step's cuts (docs/estimator.md, "The set and its cuts"): after the solve, a declared list of pure
+functions, each taking the step's sets and returning them cut, each named, each with the assumption it rests on.
+
+A step k → k+1 of :class:`~netsetest.estimator.sdp.LocalEstimator` reads top to bottom:
+
+1. its :class:`StepContext`, built once: the blended model, the own sector and measurement interval, the
+   readings' slabs, the k-of-N assessment, the moved region and the LMI data;
+2. the solve (and certificate) of the set the node continues from, and of the set it publishes (the readings'
+   set, or the bank's fault-weighted one);
+3. the cuts of :data:`STEP_CUTS`, in order (step 0: :data:`FIRST_CUTS`; a step without a certificate:
+   :data:`FALLBACK_CUTS`).
+
+Each cut keeps every point of its input set that satisfies its slab (tests/unit/test_region_cuts.py), so the
+step's sets hold the truth wherever the solve's assumptions and the cuts' assumptions did; the readings a cut
+rests on join the set's keys, which the node lists (:attr:`StepResult.rests_on`) so that the collector judges
+the set under their declarations (docs/coverage.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from netsetest.estimator.health import HEALTH_KEY, HealthAssessment
+from netsetest.estimator.problem import StepData
+from netsetest.estimator.sector import FaultBound, Interval, Sector
+from netsetest.estimator.slab import cut
+from netsetest.models.sensor import NA, NX, Sensor
+from netsetest.models.vehicle import TSModel
+from netsetest.polygon import MIN_VERTICES, Polygon
+from netsetest.sets import ellipsoid_bounds
+
+Status = Literal["ok", "fallback"]
+FAULT_AXIS = np.eye(NA)[NA - 1]  # f = e₃ᵀx̄: the direction the fault cuts act along
+PIN_FLOOR = 1e-6  # a fault proved healthy is published as |f| ≤ max(τ, this): an ellipsoid cannot be flat
+COORDINATE_AXES = np.eye(NX)  # β and r: the directions of the region's coordinate cuts (read-only)
+COORDINATE_AXES.flags.writeable = False
+
+
+@dataclass(frozen=True)
+class NodeSet:
+    """A node's own set {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} in the SDP's (x̂, P, ρ) form (sets.Ellipsoid is the published one)."""
+
+    xhat: np.ndarray  # (3,)
+    P: np.ndarray  # (3, 3)
+    rho: float
+    region: Polygon | None = None  # the states x = (β, r) the earlier steps left (None: none kept; docs/estimator.md)
+
+
+@dataclass(frozen=True)
+class Rests:
+    """What a step's sets rest on beyond the solve's own assumptions: the readings (node ids: a reference's, or
+    the own one of a reference) and whether the k-of-N facts (every reading of the step) are among them."""
+
+    readings: frozenset[int]
+    health: bool
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """One step's sets: the one the node continues from, {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ_i} ∩ ``region``, and the
+    one it publishes (``public``), with how they were obtained."""
+
+    xhat: np.ndarray  # (NA,)
+    P: np.ndarray  # (NA, NA) published shape: e⁺ᵀ P⁻¹ e⁺ ≤ ρ_i
+    status: Status
+    rho_cert: float  # ρ' certified for the solver's P (P is published as P_solver·ρ'/ρ_i)
+    solve_ms: float
+    solver_status: str
+    L: np.ndarray = field(default_factory=lambda: np.zeros((NA, 1)))  # (NA, 1) the gain of (16)
+    sector: Sector | None = None  # the own sensor's sector of this step (None: no saturation modelled)
+    published: StepResult | None = None  # the set to publish where it differs from this one (None: this one)
+    reading_keys: frozenset[int] = frozenset()  # the readings the set rests on (keys of the context's slabs: node ids, and HEALTH_KEY for the k-of-N facts)
+    fault_range: tuple[float, float] | None = None  # the set is the ellipsoid ∩ {lo ≤ f⁺ ≤ hi}
+    region: Polygon | None = None  # the states x⁺ every step so far leaves (NodeSet.region); the published set's too
+
+    @property
+    def public(self) -> StepResult:
+        """What the node publishes: ``published`` if a solve or a cut made one, else this set."""
+        return self.published if self.published is not None else self
+
+    @property
+    def rests_on(self) -> Rests:
+        """The readings both sets rest on (the published one's and the continued one's: both are judged)."""
+        keys = self.public.reading_keys | self.reading_keys
+        return Rests(frozenset(keys - {HEALTH_KEY}), HEALTH_KEY in keys)
+
+
+Slabs = dict[int, tuple[np.ndarray, Interval]]
+"""What the step's readings prove: c̄ (NA,) and c̄ᵀx̄⁺ ∈ [lo, hi], keyed by the reference's id, and by HEALTH_KEY
+for the k-of-N interval (the keys of the readings' ν slots in the LMI; the node reads :attr:`StepResult.rests_on`)."""
+
+
+@dataclass(frozen=True)
+class CutStatics:
+    """What the cuts need of the node, fixed for its run: its id and sensor, its declared fault bound, the k-of-N
+    tolerance (None: no k-of-N group) and the objective weights D^½ of the recursion and of the published set."""
+
+    node_id: int
+    own: Sensor
+    fault_bound: FaultBound
+    health_tolerance: float | None
+    wh: np.ndarray | None  # recursion objective trace(D P) (None: trace P)
+    wh_pub: np.ndarray | None  # objective ``bank``: the published set's (None: the recursion's)
+
+    @property
+    def wh_published(self) -> np.ndarray | None:
+        return self.wh_pub if self.wh_pub is not None else self.wh
+
+
+@dataclass(frozen=True)
+class Blend:
+    """The step's blended model Σ α_ℓ (A_ℓ, B_ℓ, Dw_ℓ) (exact for the truth), computed once per step: Ā (NX, NX),
+    B̄ and D̄ (NX,), and the augmented ones over x̄ = (x, f): (NA, NA), (NA,), (NA,) (the fault row and column zero)."""
+
+    a: np.ndarray
+    b: np.ndarray
+    d: np.ndarray
+    abar: np.ndarray
+    bbar: np.ndarray
+    dbar: np.ndarray
+
+    @classmethod
+    def of(cls, model: TSModel, alpha: np.ndarray) -> Blend:
+        """The blend of ``model``'s rule matrices for the weights α (TSModel.blend: once per step)."""
+        a, b, d = model.blend(np.asarray(alpha, dtype=float))
+        abar = np.zeros((NA, NA))
+        abar[:NX, :NX] = a
+        return cls(a, b[:, 0], d[:, 0], abar, np.r_[b[:, 0], 0.0], np.r_[d[:, 0], 0.0])
+
+
+@dataclass(frozen=True)
+class StepContext:
+    """Everything one step knows before its solve, computed once (docs/estimator.md, "One step")."""
+
+    statics: CutStatics
+    rho: float  # ρ_i
+    y: float  # ỹ_i,k+1
+    gamma: float  # γ_i,k+1
+    meas: Interval  # C̄ x̄⁺ from the own measurement alone (measurement_interval)
+    sector: Sector | None  # the own sensor's sector of the step
+    data: StepData  # the LMI of the step
+    moved: Polygon  # the previous region (or the prior's seed) through the step's dynamics and bounds
+    slabs: Slabs  # what the step's readings prove
+    health: HealthAssessment | None  # the k-of-N assessment (None: no k-of-N group, or no reading)
+    listed: bool = True  # the step lists readings (False: step 0, whose cone is the prior's)
+    blend: Blend | None = None  # the step's blended model (None: step 0, no prediction)
+
+
+CutFn = Callable[[StepContext, StepResult], StepResult]
+
+
+@dataclass(frozen=True)
+class Cut:
+    """One cut of the step: ``apply`` takes the step's sets and returns them cut (pure: it never changes its
+    input); ``rests_on`` names the assumption beyond the solve's under which it keeps the truth."""
+
+    name: str
+    rests_on: str
+    apply: CutFn
+
+
+def cut_fault(ctx: StepContext, res: StepResult, lo: float, hi: float, reshape: bool = True) -> StepResult | None:
+    """The sets with the published one cut by lo ≤ f⁺ ≤ hi (:func:`~netsetest.estimator.slab.cut`, certified; not
+    unless ``reshape``) and published as that ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (NodeState.fault_range: no ellipsoid ends
+    at the slab's flat face); None where the slab does not narrow the published fault interval.  The set the node
+    continues from is unchanged."""
+    pub, rho = res.public, ctx.rho
+    now_lo, now_hi = ellipsoid_bounds(pub.xhat, np.diag(pub.P), rho, pub.fault_range)  # the published fault interval
+    lo, hi = max(lo, now_lo[-1]), min(hi, now_hi[-1])
+    if not (lo > now_lo[-1] or hi < now_hi[-1]) or lo > hi:
+        return None  # no cut (an empty one means the assumptions broke: the step's set stays as certified)
+    wh = ctx.statics.wh_published
+    out = cut(pub.xhat, pub.P, rho, FAULT_AXIS, lo, hi, None if wh is None else wh**2) if reshape else None
+    if out is None:  # the ellipsoid gains nothing; the slab still bounds the fault
+        new = dataclasses.replace(pub, published=None, fault_range=(lo, hi))
+    else:  # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
+        new = dataclasses.replace(pub, xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None, fault_range=(lo, hi))
+    return dataclasses.replace(res, published=new)
+
+
+def carry(ctx: StepContext, res: StepResult, slabs: dict[int, tuple[np.ndarray, float, float]]) -> StepResult:
+    """The set the node continues from cut by slabs cᵀx̄⁺ ∈ [lo, hi] (:func:`~netsetest.estimator.slab.cut`,
+    certified, in the recursion's objective), so that they carry over to the later steps; what is published does
+    not change.  The keys of the slabs that cut it join its ``reading_keys``."""
+    xhat, P, rho_cert, used = res.xhat, res.P, res.rho_cert, set()
+    wh = ctx.statics.wh
+    for key, (c, lo, hi) in slabs.items():
+        out = cut(xhat, P, ctx.rho, c, lo, hi, None if wh is None else wh**2)
+        if out is not None:  # ρ' as for a solved set (P = P_s·ρ'/ρ_i)
+            xhat, P, rho_cert = out[0], out[1], out[2] * ctx.rho
+            used.add(key)
+    if not used:
+        return res  # no slab cuts it
+    published = res.published if res.published is not None else res  # published: the step's set as solved
+    return dataclasses.replace(res, xhat=xhat, P=P, rho_cert=rho_cert, published=published, reading_keys=res.reading_keys | used)
+
+
+def _readings_cut(ctx: StepContext, res: StepResult) -> StepResult:
+    """The set the node continues from cut by every reading's slab (without it the recursion forgets the readings
+    at every step while the exact limit keeps them: docs/network.md)."""
+    if not ctx.slabs:
+        return res
+    return carry(ctx, res, {key: (c, iv.lo, iv.hi) for key, (c, iv) in ctx.slabs.items()})
+
+
+def _size_cut(ctx: StepContext, res: StepResult) -> StepResult:
+    """Where the step's sector rests on the declared fault bound, the truth's f⁺ lies in [−F, F]: the published set
+    is cut by that interval (docs/estimator.md, "SAIM: the size cut")."""
+    size, sector = ctx.statics.fault_bound.size, res.sector
+    if size is None or sector is None or sector.basis != "fault-bound":
+        return res
+    out = cut_fault(ctx, res, -size, size)
+    return res if out is None else out
+
+
+def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
+    """The moved region cut by everything the step proves of x⁺ (docs/estimator.md, "The region"): every reading
+    of the step, the own measurement where the step's sector rests on the declared fault bound (C x⁺ = C̄ x̄⁺ − Ds f⁺
+    with |f⁺| ≤ F), and the step's certified ellipsoids (the one the node continues from and the published one).
+    The node continues from it and publishes it: the published set is the published ellipsoid ∩ the region, and
+    its fault interval is cut by what the own measurement proves over the region.  Where the cuts leave nothing
+    (an assumption broke), no region is kept.
+
+    A reference (declared fault size 0) cuts by its own measurement too and publishes f⁺ = 0, resting on its own
+    reading; not where the step cannot list readings (step 0, whose cone is the prior's)."""
+    st = ctx.statics
+    region: Polygon | None = ctx.moved
+    for c, iv in ctx.slabs.values():
+        region = region.cut(c[:NX], iv.lo, iv.hi) if region is not None else None
+    size, sector = st.fault_bound.size, res.sector
+    reference = size == 0.0 and ctx.listed  # its own reading rests on its declared zero fault (listed, so judged)
+    keys = frozenset(ctx.slabs) | ({st.node_id} if reference else frozenset())
+    if region is not None and size is not None and (reference or (sector is not None and sector.basis == "fault-bound")):
+        slack = abs(st.own.Ds) * size  # C x⁺ = C̄ x̄⁺ − Ds f⁺, |f⁺| ≤ F: the step's cone holds the bound
+        region = region.cut(st.own.C, ctx.meas.lo - slack, ctx.meas.hi + slack)
+    for s in (res, res.published):
+        if region is not None and s is not None:
+            region = ellipse_cut(region, s.xhat, s.P, ctx.rho)
+    if region is None or len(region.vertices) < MIN_VERTICES:
+        return res  # (fewer: a sliver below the rounding, kept as empty)
+    region = region.reduced()  # the move's margin covers the cuts' rounding (Polygon.moved)
+    res = dataclasses.replace(res, region=region, reading_keys=res.reading_keys | keys)
+    fault = (0.0, 0.0) if reference else region_fault(st.own, region, ctx.meas)
+    # with readings the ellipsoid is cut too (as since the region came); without, it stays as solved (what
+    # neighbours use, bit for bit) and only the published fault range narrows: the same published interval
+    out = cut_fault(ctx, res, *fault, reshape=bool(ctx.slabs)) if fault is not None else None
+    if out is None or not keys:
+        return res if out is None else out
+    return dataclasses.replace(out, published=dataclasses.replace(out.public, reading_keys=out.public.reading_keys | keys))
+
+
+def region_fault(own: Sensor, region: Polygon, meas: Interval) -> tuple[float, float] | None:
+    """f⁺ from the own measurement over the region: C x⁺ + Ds f⁺ ∈ [m_lo, m_hi] and C x⁺ ∈ [c_lo, c_hi]
+    give Ds f⁺ ∈ [m_lo − c_hi, m_hi − c_lo].  A measurement at the sensor's limit (saturated) leaves one side of
+    C x⁺ + Ds f⁺ open, and the other side still bounds f⁺ (one side of the result infinite); None where both are
+    open or the sensor has no fault term."""
+    finite_lo, finite_hi = bool(np.isfinite(meas.lo)), bool(np.isfinite(meas.hi))
+    if own.Ds == 0.0 or not (finite_lo or finite_hi):
+        return None
+    c_lo, c_hi = region.interval(own.C)
+    a = (meas.lo - c_hi) / own.Ds if finite_lo else -np.inf * own.Ds  # (an open side stays open, whatever Ds's sign)
+    b = (meas.hi - c_lo) / own.Ds if finite_hi else np.inf * own.Ds
+    return (a, b) if own.Ds > 0.0 else (b, a)
+
+
+def _health_pin(ctx: StepContext, res: StepResult) -> StepResult:
+    """Under ``max_faulty``, where no consistent majority of the step's readings leaves this node's sensor out,
+    its fault is |f⁺| ≤ τ (docs/network.md): the published set is cut by that interval, widened to
+    :data:`PIN_FLOOR` (a superset: sound) so that the published ellipsoid stays full-dimensional, and then rests
+    on every reading (the k-of-N facts do); the set the node continues from is cut by it too."""
+    tol = ctx.statics.health_tolerance
+    if tol is None or ctx.health is None or not ctx.health[1]:
+        return res
+    size = max(tol, PIN_FLOOR)
+    out = cut_fault(ctx, res, -size, size)
+    if out is not None:
+        res = dataclasses.replace(out, published=dataclasses.replace(out.public, reading_keys=out.public.reading_keys | {HEALTH_KEY}))
+    return carry(ctx, res, {HEALTH_KEY: (FAULT_AXIS, -size, size)})
+
+
+def seed(prior: NodeSet) -> Polygon:
+    """The region of a set without one: the box of its ellipsoid's x-projection cut by that ellipse's axes."""
+    lo, hi = ellipsoid_bounds(prior.xhat, np.diag(prior.P), prior.rho)
+    box = Polygon.box(lo[:NX], hi[:NX])
+    return ellipse_cut(box, prior.xhat, prior.P, prior.rho, coordinates=False) or box
+
+
+def ellipse_cut(region: Polygon, xhat: np.ndarray, P: np.ndarray, rho: float, coordinates: bool = True) -> Polygon | None:
+    """The region cut by the slabs of the ellipsoid {(x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} along β and r (``coordinates``;
+    a box of it needs no such cut) and along the principal axes of its x-projection ρ P_xx: an outer
+    octagon of that ellipse.  Sound wherever the ellipsoid holds the truth; None if nothing is left."""
+    pxx = 0.5 * (P[:NX, :NX] + P[:NX, :NX].T)
+    _, vecs = np.linalg.eigh(pxx)
+    dirs = [*COORDINATE_AXES, *vecs.T] if coordinates else [*vecs.T]
+    out: Polygon | None = region
+    for d in dirs:
+        if out is None:
+            return None
+        centre, half = float(d @ xhat[:NX]), float(np.sqrt(max(rho * float(d @ pxx @ d), 0.0)))
+        out = out.cut(d, centre - half, centre + half)
+    return out
+
+
+READINGS = Cut("readings", "each reading's declaration: a reference's zero fault; k-of-N: at most m of N sensors faulty", _readings_cut)
+FAULT_SIZE = Cut("fault-size", "the declared fault size |f| ≤ F, where the step's sector rests on it", _size_cut)
+REGION = Cut(
+    "region",
+    "the prior (Assumption 1), the disturbance and model-mismatch bounds, and the declarations of what cuts it: "
+    "the readings', the fault size's (a reference's: its zero fault)",
+    _region_cut,
+)
+HEALTH_PIN = Cut("health-pin", "k-of-N health ([network] max_faulty): no consistent majority of the step's readings leaves the own sensor out", _health_pin)
+
+STEP_CUTS: tuple[Cut, ...] = (READINGS, FAULT_SIZE, REGION, HEALTH_PIN)  # a step k → k+1, in this order
+FIRST_CUTS: tuple[Cut, ...] = (REGION,)  # step 0: the prior updated by ỹ₀ (no readings listed, no size cut)
+FALLBACK_CUTS: tuple[Cut, ...] = (REGION,)  # a step without a certificate: the region of its own measurement
+
+
+def apply_cuts(cuts: tuple[Cut, ...], ctx: StepContext, res: StepResult) -> StepResult:
+    """The step's sets through ``cuts``, in order."""
+    for c in cuts:
+        res = c.apply(ctx, res)
+    return res
+
+
+__all__ = [
+    "FALLBACK_CUTS",
+    "Blend",
+    "FAULT_AXIS",
+    "FIRST_CUTS",
+    "PIN_FLOOR",
+    "STEP_CUTS",
+    "Cut",
+    "CutStatics",
+    "NodeSet",
+    "Rests",
+    "Slabs",
+    "StepContext",
+    "StepResult",
+    "apply_cuts",
+    "carry",
+    "cut_fault",
+    "ellipse_cut",
+    "region_fault",
+    "seed",
+]
