@@ -60,9 +60,9 @@ def test_a_false_detection_where_the_assumptions_held_is_a_violation(monkeypatch
 
     def shifted(self: LocalEstimator, prev, inp):
         res = orig(self, prev, inp)
-        if self.node_id == 3:
-            pub = res.public
-            pub.xhat = pub.xhat + np.array([0.0, 0.0, 1.0])
+        if self.node_id == 3:  # StepResult is frozen: the published set replaced, moved by 1 along f
+            pub = dataclasses.replace(res.public, xhat=res.public.xhat + np.array([0.0, 0.0, 1.0]))
+            return dataclasses.replace(res, published=pub) if res.published is not None else pub
         return res
 
     monkeypatch.setattr(LocalEstimator, "step", shifted)
