@@ -6,7 +6,11 @@ import re
 from functools import cache
 from pathlib import Path
 
+import numpy as np
+
+from netsetest.analysis.exact import step_data
 from netsetest.config.schema import Scenario, load_topology
+from netsetest.estimator.base import SetEstimator, StepInput
 from netsetest.records.record import Record, load_record, save_record
 from netsetest.runtime.inmemory import RunResult, run_inmemory
 
@@ -45,3 +49,14 @@ def mixed_topology(tmp: Path, estimators: dict[int, str] = MIXED) -> Path:
     path = tmp / "mixed.toml"
     path.write_text(text)
     return path
+
+
+def stepped_bounds(est: SetEstimator, rec: Record, node: int) -> np.ndarray:
+    """(K, 3, 2) the bounds ``est`` publishes stepped through node ``node``'s data of the record."""
+    out, prev = [], None
+    for d in step_data(rec):
+        inp = StepInput(d.step, d.y[node], d.gamma[node], None if prev is None else prev.u, None if prev is None else prev.vx)
+        lo, hi = est.step(inp).bounds()
+        out.append(np.stack([lo, hi], axis=1))
+        prev = d
+    return np.array(out)

@@ -12,6 +12,7 @@ import pytest
 
 from netsetest.analysis.compare import SDP_ELLIPSOID, compare
 from netsetest.analysis.exact import exact_bounds, step_data
+from run_helpers import stepped_bounds
 from netsetest.cli.main import main
 from netsetest.config.schema import Scenario, load_topology
 from netsetest.estimator.base import EstimatorError, StepInput
@@ -38,13 +39,7 @@ def _run(case: str, signals: str, seed: int) -> tuple[Scenario, Record]:
 
 def _bounds(name: str, sc: Scenario, rec: Record, node: int) -> tuple[np.ndarray, tuple[str, ...]]:
     est = SET_ESTIMATORS[name](sc, node)
-    out, prev = [], None
-    for d in step_data(rec):
-        inp = StepInput(d.step, d.y[node], d.gamma[node], None if prev is None else prev.u, None if prev is None else prev.vx)
-        lo, hi = est.step(inp).bounds()
-        out.append(np.stack([lo, hi], axis=1))
-        prev = d
-    return np.array(out), est.assumptions
+    return stepped_bounds(est, rec, node), est.assumptions
 
 
 def test_registry_matches_the_light_name_list() -> None:

@@ -11,9 +11,10 @@ from functools import cache
 import numpy as np
 import pytest
 
-from netsetest.analysis.exact import exact_bounds, step_data
+from netsetest.analysis.exact import exact_bounds
+from run_helpers import stepped_bounds
 from netsetest.config.schema import Scenario, load_topology
-from netsetest.estimator.base import SetEstimator, StepInput
+from netsetest.estimator.base import StepInput
 from netsetest.estimator.names import NO_REGION
 from netsetest.estimator.region import WithRegion
 from netsetest.estimator.registry import SET_ESTIMATORS
@@ -34,17 +35,6 @@ def _run(case: str, signals: str, seed: int) -> tuple[Scenario, Record]:
     return sc, record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
 
 
-def _track(est: SetEstimator, rec: Record, node: int) -> np.ndarray:
-    """(K, 3, 2) the published bounds of ``est`` stepped through node ``node``'s data of the record."""
-    out, prev = [], None
-    for d in step_data(rec):
-        inp = StepInput(d.step, d.y[node], d.gamma[node], None if prev is None else prev.u, None if prev is None else prev.vx)
-        lo, hi = est.step(inp).bounds()
-        out.append(np.stack([lo, hi], axis=1))
-        prev = d
-    return np.array(out)
-
-
 @pytest.mark.parametrize(("case", "signals", "seed"), [("nsnim", "worst", 1), ("saim", "paper", 2), ("saim", "worst", 0)])
 @pytest.mark.parametrize("name", METHODS)
 def test_the_region_keeps_the_exact_local_set_and_never_widens_the_method(name: str, case: str, signals: str, seed: int) -> None:
@@ -55,7 +45,7 @@ def test_the_region_keeps_the_exact_local_set_and_never_widens_the_method(name: 
     for node in (2, 5):
         inner = SET_ESTIMATORS[name](sc, node)
         est = WithRegion(SET_ESTIMATORS[name](sc, node), sc, node)
-        b, own = _track(est, rec, node), _track(inner, rec, node)
+        b, own = stepped_bounds(est, rec, node), stepped_bounds(inner, rec, node)
         mode = "all" if "fault_bound" in est.assumptions else "used"
         ex = exact_bounds(sc, rec, mode, nodes=[node])
         exact = np.stack([ex.beta, ex.r, ex.fault[node]], axis=1)

@@ -19,21 +19,29 @@ NODES = 6
 UNDER_WAY_BYTES = 100_000  # the record has grown this much: the run is under way (about 20–60 steps)
 
 
-@pytest.mark.slow
-@pytest.mark.timeout(300)
-@pytest.mark.parametrize(("pause_s", "suffix"), [(3.0, "jsonl.gz"), (10.0, "mcap")])
-def test_a_paused_collector_loses_no_step(procs, tmp_path: Path, pause_s: float, suffix: str) -> None:
-    record, summary = tmp_path / f"r.{suffix}", tmp_path / "s.json"
-    proc = start_parent(procs, "run", ["paper6", "--steps", str(STEPS), "--record", str(record), "--summary-json", str(summary), "--quiet"])
+def _run_with_collector_paused(procs, args: list[str], record: Path, pause_s: float, outlasts: bool) -> None:
+    """``netsetest run ARGS`` whose collector is stopped (SIGSTOP) for ``pause_s`` once the record has grown
+    (the run under way), then continued; with ``outlasts`` the run must still be going when it is (lockstep waits)."""
+    proc = start_parent(procs, "run", args)
     wait_for(lambda: find_role(parent_run_id(proc), "collector"), 60, what="the collector")
     collector = find_role(parent_run_id(proc), "collector")[0]
     wait_for(lambda: record.exists() and record.stat().st_size > UNDER_WAY_BYTES, 120, interval=0.05, what="the run under way")
     os.kill(collector, signal.SIGSTOP)
     try:
         time.sleep(pause_s)
-        assert proc.poll() is None, "the run ended while its collector was stopped"
+        assert not outlasts or proc.poll() is None, "the run ended while its collector was stopped"
     finally:
         os.kill(collector, signal.SIGCONT)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize(("pause_s", "suffix"), [(3.0, "jsonl.gz"), (10.0, "mcap")])
+def test_a_paused_collector_loses_no_step(procs, tmp_path: Path, pause_s: float, suffix: str) -> None:
+    record, summary = tmp_path / f"r.{suffix}", tmp_path / "s.json"
+    _run_with_collector_paused(
+        procs, ["paper6", "--steps", str(STEPS), "--record", str(record), "--summary-json", str(summary), "--quiet"], record, pause_s, outlasts=True
+    )
     assert procs.wait("run", 240) == 0, procs.logs()
     s = read_json(summary)
     assert s["steps_completed"] == STEPS
@@ -53,15 +61,7 @@ def test_a_paused_realtime_collector_blames_no_node(procs, tmp_path: Path, pause
     after the pause: 'FAIL (vehicle gone)', four nodes 'lost for good', two 'rejoined'."""
     record, summary = tmp_path / "r.jsonl", tmp_path / "s.json"
     args = ["paper6", "--clock", "realtime", "--steps", str(steps), "--record", str(record), "--summary-json", str(summary), "--quiet"]
-    proc = start_parent(procs, "run", args)
-    wait_for(lambda: find_role(parent_run_id(proc), "collector"), 60, what="the collector")
-    collector = find_role(parent_run_id(proc), "collector")[0]
-    wait_for(lambda: record.exists() and record.stat().st_size > UNDER_WAY_BYTES, 120, interval=0.05, what="the run under way")
-    os.kill(collector, signal.SIGSTOP)
-    try:
-        time.sleep(pause_s)
-    finally:
-        os.kill(collector, signal.SIGCONT)
+    _run_with_collector_paused(procs, args, record, pause_s, outlasts=False)
     assert procs.wait("run", 240) == 0, procs.logs()
     s = read_json(summary)
     assert s["steps_completed"] == steps and s["stopped"] is None
