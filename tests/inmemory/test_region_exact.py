@@ -9,7 +9,9 @@ The suite runs a representative subset: the two car variants (where the sum was 
 paper6_max_faulty, both cases, seed 10 (where issue 32 measured it).  The full sweep, seeds 0–9 × every bundled
 topology × both cases × both signal families, is ``NETSETEST_REGION_SWEEP=full pytest -n 0 -q
 tests/inmemory/test_region_exact.py`` (hours on one core: every run's exact limit is one SOCP per bound per
-step).
+step).  Last run of that sweep (the same ``recheck``, 40 steps, 320 runs) on main at 3d3c9f8, 2026-11-28: 236 160
+published and 157 440 region intervals checked, 0 narrower than exact (31 exact ends the k-of-N search relaxed,
+not checked against).
 """
 
 from __future__ import annotations

@@ -17,7 +17,8 @@ A seeded short profile runs in every ``pytest``.  The long run, 10 000 examples 
 what merging near-duplicate vertices leaves out at coordinates 10⁴ beyond the image or the slab, and the
 reduction extending a side of noisy direction or meeting near-parallel neighbours at 10¹⁵ (all fixed in
 netsetest/polygon.py); on the final code the sum, the move, the cut, the reduction and interval/contains
-passed 10 000 examples each.
+passed 10 000 examples each.  Re-run on main at 3d3c9f8 (after the sort's and the cut's speed-ups): all 7 tests
+passed with 10 000 examples each, in one process, 20 min.
 """
 
 from __future__ import annotations
