@@ -2,7 +2,18 @@
 
 from __future__ import annotations
 
-from netsetest.messages import Truth
+from typing import Any
+
+from netsetest.messages import NodeState, Truth
+from netsetest.proven import ProvenSet
+
+SET_FIELDS = ("xhat", "P", "rho", "region", "fault", "set")  # a ProvenSet's: a state's published set
+
+
+def make_state(**kw: Any) -> NodeState:
+    """A NodeState from NodeState's keywords, those of SET_FIELDS making its published set."""
+    pub = {k: kw.pop(k) for k in SET_FIELDS if k in kw}
+    return NodeState(published=ProvenSet(**pub), **kw)
 
 
 def truth(**kw: object) -> Truth:

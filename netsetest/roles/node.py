@@ -50,6 +50,7 @@ from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sect
 from netsetest.messages import End, Message, NodeInput, NodeState, NodeStatus, Reading, RunScope, decode, encode, state_digest
 from netsetest.models.sensor import NA
 from netsetest.profile import PROFILE
+from netsetest.proven import ProvenSet
 from netsetest.roles.plausibility import innovation_possible, states_disjoint
 from netsetest.sets import set_to_wire
 
@@ -339,16 +340,17 @@ class Node:
         if (msg.sector is not None) != sensor.saturated:
             self._refuse(msg, "sector-mismatch")  # a saturating sensor publishes its sector, no other one does
             return
-        P = _symmetric(msg.P)  # symmetric positive definite: checked by decode()
+        pub = msg.published  # neighbours use its ellipsoid alone
+        P = _symmetric(pub.P)  # symmetric positive definite: checked by decode()
         sector = Sector(msg.sector[0], msg.sector[1], msg.sector_basis) if msg.sector is not None else None
-        if not innovation_possible(sensor, np.asarray(msg.xhat), P, msg.rho, msg.gamma, sector, msg.innov):
+        if not innovation_possible(sensor, np.asarray(pub.xhat), P, pub.rho, msg.gamma, sector, msg.innov):
             self._refuse(msg, "neighbour-innovation")
             return
         if self.k < 0 and len(self.inbox) >= MAX_AHEAD and msg.step not in self.inbox:
             oldest = min(self.inbox)  # not started (rejoin): keep the newest steps only
             del self.inbox[oldest]
             self.digests.pop(oldest, None)
-        self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(np.asarray(msg.xhat), P, msg.rho, msg.gamma, msg.innov, sector)
+        self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(np.asarray(pub.xhat), P, pub.rho, msg.gamma, msg.innov, sector)
         self.digests.setdefault(msg.step, {})[msg.node] = state_digest(msg)
         self._screen()
 
@@ -573,9 +575,8 @@ class Node:
         return NodeState(
             step=inp.step,
             node=self.id,
-            xhat=pub.xhat.tolist(),  # float64 arrays: the floats [float(a) for a in …] gave, without the loop
-            P=pub.P.reshape(NA * NA).tolist(),
-            rho=self.rho,
+            published=self._published(p),
+            continues=self._continues(res),
             gamma=inp.gamma,
             innov=innov,
             status=p.status,
@@ -588,18 +589,28 @@ class Node:
             drops=drops,
             sector=(sector.h1, sector.h) if sector is not None else None,
             sector_basis=sector.basis if sector is not None else "none",
-            set=p.wire_set,
             inputs=p.inputs,
             readings=p.readings,
             health=p.health,
-            fault_range=list(pub.fault_range) if pub.fault_range is not None else None,
-            **self._own_set(res),  # type: ignore[arg-type]  # own_xhat/own_P only: mypy cannot tell the keys of a dict
-            own_region=None if res.region is None else res.region.vertices.reshape(-1).tolist(),
         )
 
-    @staticmethod
-    def _own_set(res: StepResult) -> dict[str, list[float]]:
-        """The set we continue from, where it is not the published one (the collector judges it too)."""
+    def _published(self, p: Publication) -> ProvenSet:
+        """The set ``p`` publishes: its ellipsoid ∩ the region ∩ the fault range (the SDP's), or a set estimator's
+        own set with the ellipsoid that encloses it."""
+        pub, region = p.res.public, p.res.region
+        return ProvenSet(
+            xhat=pub.xhat.tolist(),  # float64 arrays: the floats [float(a) for a in …] gave, without the loop
+            P=pub.P.reshape(NA * NA).tolist(),
+            rho=self.rho,
+            region=None if region is None else region.vertices.reshape(-1).tolist(),
+            fault=None if pub.fault_range is None else [float(pub.fault_range[0]), float(pub.fault_range[1])],
+            set=p.wire_set,
+        )
+
+    def _continues(self, res: StepResult) -> ProvenSet | None:
+        """The ellipsoid we continue from, where that set is not the published one (the collector judges it too): the
+        set is it ∩ the published region (one region for both), no fault range (the published one's rests on this
+        step's facts alone)."""
         if res.published is None:
-            return {}
-        return {"own_xhat": res.xhat.tolist(), "own_P": res.P.reshape(NA * NA).tolist()}
+            return None
+        return ProvenSet(xhat=res.xhat.tolist(), P=res.P.reshape(NA * NA).tolist(), rho=self.rho)
