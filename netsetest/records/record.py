@@ -218,11 +218,12 @@ class NodeTrack:
 
     def bounds(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """Lower/upper bound of component ``index`` (0 β, 1 r, 2 f) of the published set: a set estimator's set,
-        the SDP's ellipsoid ∩ its fault range ∩ its region of x (records before the bounds were written: the
-        ellipsoid's, :meth:`ellipsoid_bounds`)."""
+        the SDP's ellipsoid ∩ its fault range ∩ its region of x (as the collector wrote them; records before it did:
+        ProvenSet.bounds of the recorded sets)."""
         if self.set_bounds is not None:
             return self.set_bounds[:, index, 0].copy(), self.set_bounds[:, index, 1].copy()
-        return self.ellipsoid_bounds(index, within_range=True)
+        lo, hi = (np.array([p.bounds()[side][index] for p in self.published], dtype=float) for side in (0, 1))
+        return lo, hi
 
     def rests_on(self, index: int) -> list[str]:
         """Per step, the cut component ``index``'s published interval rests on: ``ellipsoid`` (the interval is the
@@ -235,16 +236,11 @@ class NodeTrack:
         cut = "region" if index < NA - 1 else "fault range"
         return [cut if narrower else "ellipsoid" for narrower in (lo > e_lo + tol) | (hi < e_hi - tol)]
 
-    def ellipsoid_bounds(self, index: int, within_range: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    def ellipsoid_bounds(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """Lower/upper bound of component ``index`` of the published ellipsoid alone, x̂ ∓ √(ρ P_ii): the paper's own
-        set (a set estimator's: the ellipsoid around its set); ``within_range``: the fault's within its fault range
-        (what records before the published bounds were written show)."""
+        set (a set estimator's: the ellipsoid around its set)."""
         half = np.sqrt(self.rho * self.P[:, index, index])
-        lo, hi = self.xhat[:, index] - half, self.xhat[:, index] + half
-        if within_range and index == NA - 1 and self.has_fault_range:  # the ellipsoid ∩ the step's fault range
-            fault = np.array([(-np.inf, np.inf) if p.fault is None else p.fault for p in self.published], dtype=float).reshape(-1, 2)
-            lo, hi = np.maximum(lo, fault[:, 0]), np.minimum(hi, fault[:, 1])
-        return lo, hi
+        return self.xhat[:, index] - half, self.xhat[:, index] + half
 
     @property
     def has_fault_range(self) -> bool:

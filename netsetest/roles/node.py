@@ -50,7 +50,6 @@ from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sect
 from netsetest.messages import End, Message, NodeInput, NodeState, NodeStatus, Reading, RunScope, decode, encode, state_digest
 from netsetest.models.sensor import NA
 from netsetest.profile import PROFILE
-from netsetest.proven import ProvenSet
 from netsetest.roles.plausibility import innovation_possible, states_disjoint
 from netsetest.sets import set_to_wire
 
@@ -575,8 +574,8 @@ class Node:
         return NodeState(
             step=inp.step,
             node=self.id,
-            published=self._published(p),
-            continues=self._continues(res),
+            published=res.published_set(self.rho, p.wire_set),
+            continues=res.continued_ellipsoid(self.rho),
             gamma=inp.gamma,
             innov=innov,
             status=p.status,
@@ -593,24 +592,3 @@ class Node:
             readings=p.readings,
             health=p.health,
         )
-
-    def _published(self, p: Publication) -> ProvenSet:
-        """The set ``p`` publishes: its ellipsoid ∩ the region ∩ the fault range (the SDP's), or a set estimator's
-        own set with the ellipsoid that encloses it."""
-        pub, region = p.res.public, p.res.region
-        return ProvenSet(
-            xhat=pub.xhat.tolist(),  # float64 arrays: the floats [float(a) for a in …] gave, without the loop
-            P=pub.P.reshape(NA * NA).tolist(),
-            rho=self.rho,
-            region=None if region is None else region.vertices.reshape(-1).tolist(),
-            fault=None if pub.fault_range is None else [float(pub.fault_range[0]), float(pub.fault_range[1])],
-            set=p.wire_set,
-        )
-
-    def _continues(self, res: StepResult) -> ProvenSet | None:
-        """The ellipsoid we continue from, where that set is not the published one (the collector judges it too): the
-        set is it ∩ the published region (one region for both), no fault range (the published one's rests on this
-        step's facts alone)."""
-        if res.published is None:
-            return None
-        return ProvenSet(xhat=res.xhat.tolist(), P=res.P.reshape(NA * NA).tolist(), rho=self.rho)

@@ -192,3 +192,21 @@ def test_the_api_hands_out_the_sets(records: Recorded) -> None:
             lo, hi = pub.bounds()
             assert np.array_equal(lo, node.lower[n]) and np.array_equal(hi, node.upper[n])
         assert any(c is not None for c in node.continues)
+
+
+@pytest.mark.parametrize("run", V0_RUNS[:3])
+def test_a_record_without_bounds_takes_them_from_its_sets(run: str) -> None:
+    """Rows without ``bounds`` (records before they were written): NodeTrack.bounds are the recorded sets' (ProvenSet,
+    the region and the fault range included), the very bounds the collector wrote beside them, bit for bit."""
+    from netsetest.records.record import record_from_parts
+
+    v0 = load_record(V0 / f"{run}.jsonl.gz")
+    bare = {k: [{f: v for f, v in e.items() if f != "bounds"} for e in node] for k, node in v0.raw_nodes.items()}
+    rec = record_from_parts(v0.meta, v0.truth, bare, v0.summary)
+    for i, tr in rec.nodes.items():
+        assert tr.set_bounds is None
+        for c in range(3):
+            want = v0.nodes[i].set_bounds
+            assert want is not None
+            lo, hi = tr.bounds(c)
+            assert np.array_equal(lo, want[:, c, 0]) and np.array_equal(hi, want[:, c, 1]), (run, i, c)
