@@ -28,7 +28,7 @@ from zenoh_helpers import (
 from netsetest.bus import keys
 from netsetest.bus.zenoh_bus import ZenohBus
 from netsetest.messages import NodeInput, NodeState, encode
-from message_helpers import make_state
+from message_helpers import make_state, raw_message
 
 pytestmark = pytest.mark.zenoh
 
@@ -49,9 +49,7 @@ def _state(node: int = 2, step: int = 0, **changes: object) -> NodeState:
 
 def _raw(msg: NodeState | NodeInput, **fields: object) -> bytes:
     """The msgpack map of ``msg`` with some fields replaced (bypassing validation)."""
-    d = msg.model_dump(mode="python")
-    d.update(fields)
-    return msgpack.packb(d, use_bin_type=True)
+    return msgpack.packb(raw_message(msg, **fields), use_bin_type=True)
 
 
 GARBAGE = b"\x00\xffthis is not msgpack\xc1"
