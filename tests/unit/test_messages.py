@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 
 import msgpack
-import msgspec
 import numpy as np
 import pytest
 
@@ -24,21 +23,21 @@ from netsetest.messages import (
 )
 from netsetest.proven import SYM_ATOL, SYM_RTOL, ProvenSet, spd_problem
 
+from message_helpers import SET_FIELDS, make_state, raw_message
+
 # floats that a lossy encoding (float32, decimal text) would not preserve
 X = [0.1, 1 / 3, -2.5e-300]
 P = [0.3, 1e-17, -0.1 / 7, 1e-17, 0.3, 2 / 3, -0.1 / 7, 2 / 3, 1.7976931348623157e308]
 
 
-SET_FIELDS = ("xhat", "P", "rho", "region", "fault", "set")  # a ProvenSet's (NodeState.published)
-
-
 def _state(**kw) -> NodeState:
     """A state whose published set takes the keywords of SET_FIELDS (x̂ = X, P = P, ρ = 1/3 unless given)."""
-    pub = dict(xhat=X, P=P, rho=1 / 3) | {k: kw.pop(k) for k in SET_FIELDS if k in kw}
     base = dict(
         step=7,
         node=3,
-        published=ProvenSet(**pub),
+        xhat=X,
+        P=P,
+        rho=1 / 3,
         gamma=0.8123456789012345,
         innov=-0.0123456789,
         status="ok",
@@ -49,7 +48,7 @@ def _state(**kw) -> NodeState:
         late=True,
     )
     base.update(kw)
-    return NodeState(**base)
+    return make_state(**base)
 
 
 MESSAGES = [
@@ -115,18 +114,13 @@ def test_round_trip_float_bits():
 # ---------------------------------------------------------------- rejection
 
 
-def _raw(msg) -> dict:
-    """The message's fields as plain values (a ProvenSet as its dict)."""
-    return {k: msgspec.to_builtins(v) if isinstance(v, msgspec.Struct) else v for k, v in msg.model_dump(mode="python").items()}
-
-
 def _pack(d) -> bytes:
     return msgpack.packb(d, use_bin_type=True)
 
 
 def _mut(msg, **changes) -> bytes:
     """``msg`` packed with ``changes`` (_DEL: the key removed); a key of SET_FIELDS changes its published set."""
-    d = _raw(msg)
+    d = raw_message(msg)
     for k, v in changes.items():
         target = d["published"] if k in SET_FIELDS and "published" in d else d
         if v is _DEL:
@@ -141,7 +135,7 @@ NI = NodeInput(step=3, node=2, y=0.01, gamma=0.9)
 
 BAD = [
     ("garbage", b"\xc1\xc1\xc1", "undecodable", None),
-    ("truncated", _pack(_raw(_state()))[:-3], "undecodable", None),
+    ("truncated", _pack(raw_message(_state()))[:-3], "undecodable", None),
     ("empty", b"", "undecodable", None),
     ("list", _pack([1, "state", 3]), "not-a-map", None),
     ("scalar", _pack(42), "not-a-map", None),
@@ -490,12 +484,11 @@ def test_inbox_bounded_number_of_keys():
 
 
 def test_truth_maps_must_name_the_same_nodes():
-    t = MESSAGES[6]
+    t = next(m for m in MESSAGES if isinstance(m, Truth))  # (it once read MESSAGES[6], a state: refused for another reason)
+    assert decode(_pack(raw_message(t))) == t
     for bad in ({"faults": {}}, {"noise": {"1": 0.0}}, {"faults": {"x": 0.0, "2": 0.0}}, {"faults": {"0": 0.0, "2": 0.0}}):
-        d = _raw(t)
-        d.update(bad)
-        with pytest.raises(BadMessage):
-            decode(_pack(d))
+        with pytest.raises(BadMessage, match="faults|noise"):
+            decode(_pack(raw_message(t, **bad)))
 
 
 def test_run_scope():

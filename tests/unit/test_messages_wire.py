@@ -26,7 +26,7 @@ from netsetest.messages import (
     encode,
 )
 
-from message_helpers import SET_FIELDS, make_state, truth
+from message_helpers import SET_FIELDS, make_state, raw_message, truth
 
 P_EYE = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
 
@@ -35,11 +35,6 @@ def _state(**kw: object) -> NodeState:
     base: dict[str, object] = dict(step=4, node=2, xhat=[0.1, -0.2, 0.3], P=P_EYE, rho=1.0, gamma=0.9, innov=0.01, status="ok")
     base.update(kw)
     return make_state(**base)
-
-
-def _dump(msg: object) -> dict:
-    """Every field of ``msg`` (model_dump), a ProvenSet as the dict it is sent as (its absent parts left out)."""
-    return {k: msgspec.to_builtins(v) if isinstance(v, msgspec.Struct) else v for k, v in msg.model_dump(mode="python").items()}  # type: ignore[attr-defined]  # every message has model_dump
 
 
 EVERY_KIND = [
@@ -85,7 +80,7 @@ def test_previous_wire_format_decodes(msg):
     """The pydantic version sent every field (``v`` first, ``type`` second; a NodeState's published set
     leaves its absent parts out): such a payload decodes to the same message, and what we send decodes the same
     way under the previous rules (every field it leaves out has the default the old schema had)."""
-    full = _dump(msg)
+    full = raw_message(msg)
     assert list(full)[:2] == ["v", "type"]
     back = decode(_pack(full))
     assert back == msg and type(back) is type(msg)
@@ -96,7 +91,7 @@ def test_previous_wire_format_decodes(msg):
 @pytest.mark.parametrize("msg", EVERY_KIND, ids=lambda m: type(m).__name__)
 def test_missing_version_is_rejected(msg):
     """``v`` has a default for constructing messages, but a payload without it is not version 1."""
-    d = _dump(msg)
+    d = raw_message(msg)
     del d["v"]
     assert _reason(_pack(d)) == "schema-version"
     for bad in (None, 0, 2, "1", [1]):
@@ -144,7 +139,7 @@ BY_TYPE = {type(m): m for m in EVERY_KIND}
 @pytest.mark.parametrize("cls,name", FLOAT_FIELDS, ids=[f"{c.__name__}.{n}" for c, n in FLOAT_FIELDS])
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf], ids=["nan", "inf", "-inf"])
 def test_every_float_field_must_be_finite(cls, name, bad):
-    d = _dump(BY_TYPE[cls])
+    d = raw_message(BY_TYPE[cls])
     (d["published"] if cls is NodeState and name in SET_FIELDS else d)[name] = bad
     with pytest.raises(BadMessage) as exc:
         decode(_pack(d))
@@ -153,7 +148,7 @@ def test_every_float_field_must_be_finite(cls, name, bad):
 
 @pytest.mark.parametrize("name", ["xhat", "P", "sector"])
 def test_every_float_list_entry_must_be_finite(name):
-    d = _dump(_state(sector=(0.5, 0.5)))
+    d = raw_message(_state(sector=(0.5, 0.5)))
     target = d["published"] if name in SET_FIELDS else d
     target[name] = list(target[name])
     target[name][1] = math.nan
@@ -162,7 +157,7 @@ def test_every_float_list_entry_must_be_finite(name):
 
 @pytest.mark.parametrize("name", ["faults", "noise", "gamma", "y", "y_nofault", "r"])
 def test_truth_map_values_must_be_finite(name):
-    d = _dump(truth())
+    d = raw_message(truth())
     d[name] = {**d[name], "2": math.inf}
     assert _reason(_pack(d)) == "invalid"
 
@@ -189,25 +184,25 @@ def test_truth_map_values_must_be_finite(name):
     ids=lambda v: v.__name__ if isinstance(v, type) else ",".join(v),
 )
 def test_types_and_sizes_are_strict(cls, change):
-    d = _dump(BY_TYPE[cls])
+    d = raw_message(BY_TYPE[cls])
     d.update(change)
     assert _reason(_pack(d)) == "invalid"
 
 
 def test_detail_is_bounded():
     """A forged value is quoted in the reason, but never at length."""
-    for d in ({**_dump(_state()), "type": "x" * 100_000}, {**_dump(_state()), "v": "x" * 100_000}):
+    for d in ({**raw_message(_state()), "type": "x" * 100_000}, {**raw_message(_state()), "v": "x" * 100_000}):
         with pytest.raises(BadMessage) as exc:
             decode(_pack(d))
         assert len(str(exc.value)) <= MAX_DETAIL + len(exc.value.reason) + 2
 
 
 def test_detail_names_the_field_and_why():
-    d = _dump(_state())
+    d = raw_message(_state())
     d["published"]["xhat"] = [0.0, math.nan, 0.0]
     with pytest.raises(BadMessage, match=r"^invalid: published.xhat\[1\]: Expected finite `float`$"):
         decode(_pack(d))
-    d = _dump(_state())
+    d = raw_message(_state())
     d["published"]["P"] = [1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0]
     with pytest.raises(BadMessage, match=r"^invalid: published: P is not positive definite$"):
         decode(_pack(d))
