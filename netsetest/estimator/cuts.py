@@ -188,7 +188,7 @@ class Cut:
 
 def cut_fault(ctx: StepContext, res: StepResult, lo: float, hi: float, reshape: bool = True) -> StepResult | None:
     """The sets with the published one cut by lo ≤ f⁺ ≤ hi (:func:`~netsetest.estimator.slab.cut`, certified; not
-    unless ``reshape``) and published as that ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (NodeState.fault_range: no ellipsoid ends
+    unless ``reshape``) and published as that ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (ProvenSet.fault: no ellipsoid ends
     at the slab's flat face); None where the slab does not narrow the published fault interval.  The set the node
     continues from is unchanged."""
     pub, rho = res.public, ctx.rho
