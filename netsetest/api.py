@@ -25,6 +25,7 @@ from netsetest.config.schema import Case, ConfigError, load_topology
 from netsetest.estimator.sdp import Variant
 from netsetest.extras import require
 from netsetest.models.signals import SignalKind
+from netsetest.proven import ProvenSet
 from netsetest.records.export import node_table
 from netsetest.records.record import Record, load_record, record_from_parts, save_record
 from netsetest.records.summary import RunSummary
@@ -43,10 +44,11 @@ class SimulationError(RuntimeError):
 
 @dataclass(frozen=True)
 class NodeSeries:
-    """One node's published ellipsoids over the steps it reported (K of them), and their check.
+    """One node's published sets over the steps it reported (K of them), and their check.
 
-    Columns of ``centre``, ``lower``, ``upper`` and ``truth``: β [rad], r [rad/s], f [rad/s];
-    bounds are x̂ ∓ √(ρ P_jj), the ellipsoid's projection on each axis."""
+    Columns of ``centre``, ``lower``, ``upper`` and ``truth``: β [rad], r [rad/s], f [rad/s]; the bounds are the
+    published set's (``published``: the ellipsoid x̂, P, ρ ∩ its region ∩ its fault range, or a set estimator's
+    set; ProvenSet.bounds)."""
 
     id: int
     steps: np.ndarray  # (K,) int
@@ -60,6 +62,8 @@ class NodeSeries:
     contained: np.ndarray  # (K,) bool
     assumptions_ok: np.ndarray  # (K,) bool: every assumption in the step's dependency cone held
     status: tuple[str, ...]  # per step: init, init-prior, ok, fallback or rejoin
+    published: tuple[ProvenSet, ...]  # per step: the set the node proved (contains(), bounds())
+    continues: tuple[ProvenSet | None, ...]  # per step: the set it continued from (None: the published one)
 
 
 @dataclass(frozen=True)
@@ -175,5 +179,7 @@ def result_of(rec: Record) -> SimulationResult:
             contained=tr.contained,
             assumptions_ok=tr.assumptions_ok,
             status=tuple(tr.status),
+            published=tuple(tr.published),
+            continues=tuple(tr.continues),
         )
     return SimulationResult(nodes, rec.summary, rec)

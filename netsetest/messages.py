@@ -16,7 +16,6 @@ the ranges would see it dropped as ``invalid`` by every receiver, as both buses 
 from __future__ import annotations
 
 import copy
-import math
 import re
 from dataclasses import dataclass
 from typing import Annotated, Any, Final, Literal, Self, Union
@@ -30,9 +29,7 @@ except ImportError:  # another interpreter
     from hashlib import blake2b
 from msgspec import Meta, Struct, field
 
-from netsetest.polygon import MAX_VERTICES, MIN_VERTICES, Polygon
-from netsetest.models.sensor import NA
-from netsetest.sets import ellipsoid_bounds, set_from_wire
+from netsetest.proven import ProvenSet, continued_set
 from netsetest.validation import FINITE_BOUND_TEXT, FLOAT_MAX, Finite, Positive, split_error
 
 SCHEMA_VERSION: Final = 1
@@ -42,9 +39,7 @@ Step = Annotated[int, Meta(ge=0)]
 NodeId = Annotated[int, Meta(ge=1)]
 Gamma = Annotated[float, Meta(gt=0, le=1)]
 PositiveF = Positive
-Vec3 = Annotated[list[FiniteF], Meta(min_length=3, max_length=3)]
 Vec2 = Annotated[list[FiniteF], Meta(min_length=2, max_length=2)]
-Mat3 = Annotated[list[FiniteF], Meta(min_length=9, max_length=9)]
 MAX_NODES = 256  # a network larger than this is not a yaw-rate sensor network: bounds every list and map
 MAX_REASON = 64  # characters of a drop-reason key or an End reason
 MAX_DROP_REASONS = 64  # entries of a drop-counter map
@@ -144,16 +139,24 @@ NodeStatus = Literal["init", "init-prior", "ok", "fallback", "rejoin"]  # what a
 
 
 class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
-    """Node i → neighbours and collector: the ellipsoid {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} of step k and y̌_i,k."""
+    """Node i → neighbours and collector: the set it proves at step k (``published``) and y̌_i,k.
+
+    ``published`` (netsetest/proven.py): the SDP's ellipsoid {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} ∩ its region of x ∩ its
+    fault range, or a set estimator's own set with the ellipsoid through its hull's corners; neighbours use the
+    ellipsoid alone.  ``continues``: the ellipsoid the node continues from where that set is not the published one
+    (the objective bank's x̂, P of the trace recursion, cut by the step's readings; without the published fault
+    range, which rests on the step's own facts and is proved again at the next step); the set is that ellipsoid ∩
+    the published region (:attr:`continued`: a node keeps one region, so the wire sends it once, not twice, in
+    every message to every neighbour).  None: the published set itself.  The collector judges both sets (a miss
+    on a covered node-step is a violation), the second also as the next step's prior."""
 
     step: Step
     node: NodeId
-    xhat: Vec3
-    P: Mat3  # row-major 3×3, symmetric positive definite
-    rho: PositiveF
+    published: ProvenSet
     gamma: Gamma
     innov: FiniteF
     status: NodeStatus  # init: prior ⊕ ỹ₀; init-prior: the prior
+    continues: ProvenSet | None = None
     rho_cert: FiniteF | None = None
     solve_ms: Annotated[float, Meta(ge=0, le=FLOAT_MAX)] = 0.0
     used: IdList = []  # neighbours j ≠ i whose message entered this step
@@ -165,107 +168,32 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     # at this step; None: the sensor models no saturation.  sector_basis: what it rests on (estimator/sector.py)
     sector: tuple[SectorH1, SectorH] | None = None
     sector_basis: Literal["none", "measurement", "fault-bound", "assumed"] = "none"
-    # a non-SDP node's own guaranteed set over [β, r, f_i] (sets.set_to_wire); the ellipsoid above then
-    # encloses it and is only the neighbour-facing summary.  Absent (not sent) for the SDP.
-    set: dict[str, Any] | None = None
     # the exact copy of every state this step used, as (node, state_digest of the copy): the in-neighbours'
     # states and the node's own previous one (the collector judges those copies: docs/coverage.md)
     inputs: Annotated[list[tuple[NodeId, Digest]], Meta(max_length=MAX_NODES + 1)] = []
-    # the set the node continues from where it is not the one published (objective bank: x̂, P of the
-    # trace recursion; cut by the step's readings); the collector judges it at its own step (a miss on a
-    # covered node-step is a violation) and as the next step's prior
-    own_xhat: Vec3 | None = None
-    own_P: Mat3 | None = None
-    # and its region: a convex polygon of x = (β, r) that keeps what every earlier step proved (vertices
-    # counter-clockwise, flattened [β₁, r₁, β₂, r₂, …]; netsetest/polygon.py); part of both sets, the published
-    # one (the ellipsoid ∩ the fault range ∩ the region: its β, r bounds are the region's) and the one the node
-    # continues from; the truth's x must lie in it
-    own_region: Annotated[list[FiniteF], Meta(min_length=2 * MIN_VERTICES, max_length=2 * MAX_VERTICES)] | None = None
     # the readings of this very step the published set or the one the node continues from used, as
     # (node, ỹ, γ): the collector checks them against the truth and puts their noise and zero-fault
     # declarations into the step's cone
     readings: Annotated[list[tuple[NodeId, FiniteF, Gamma]], Meta(max_length=MAX_NODES)] = []
     health: bool = False  # either set used the k-of-N interval of the step's readings and its own ([network] max_faulty)
-    # the SDP's published set is the ellipsoid ∩ {lo ≤ f_i ≤ hi} where a step's fault interval rests on a
-    # declared bound (|f| ≤ F: sector_basis "fault-bound"; the k-of-N pin: health): no ellipsoid can end
-    # at the flat face of that slab, so the bound is sent beside it.  Neighbours use the ellipsoid alone.
-    fault_range: Vec2 | None = None
 
     def __post_init__(self) -> None:
-        if self.fault_range is not None and not self.fault_range[0] <= self.fault_range[1]:
-            raise ValueError(f"fault_range: lo > hi ({self.fault_range})")
-        if self.set is not None:
-            set_from_wire(self.set, NA)  # SetFormatError is a ValueError: a malformed set fails decode()
-        problem = spd_problem(self.P)
-        if problem:
-            raise ValueError(problem)
-        if (self.own_xhat is None) != (self.own_P is None):
-            raise ValueError("own_xhat and own_P: both or neither")
-        if self.own_P is not None:
-            problem = spd_problem(self.own_P)
-            if problem:
-                raise ValueError(f"own_P: {problem}")
-        if self.own_region is not None and len(self.own_region) % 2:
-            raise ValueError("own_region: an odd number of coordinates")
+        c = self.continues
+        if c is not None and (c.region is not None or c.fault is not None or c.set is not None):
+            raise ValueError("continues: an ellipsoid alone (its region is the published set's)")
 
-    def region(self) -> Polygon | None:
-        """The region the node continues from (None: none sent)."""
-        return None if self.own_region is None else Polygon(np.asarray(self.own_region, dtype=float).reshape(-1, 2))
-
-    def own_P_matrix(self) -> np.ndarray:
-        """The shape of the set the node continues from (the published one unless own_P is given)."""
-        return np.asarray(self.own_P if self.own_P is not None else self.P, dtype=float).reshape(3, 3)
-
-    def own_centre(self) -> np.ndarray:
-        return np.asarray(self.own_xhat if self.own_xhat is not None else self.xhat, dtype=float)
-
-    def P_matrix(self) -> np.ndarray:
-        return np.asarray(self.P, dtype=float).reshape(3, 3)
-
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Lower and upper bounds (3,) of the published set over [β, r, f_i]: a set estimator's own set's,
-        else the ellipsoid's x̂ ∓ √(ρ P_jj), the fault's within ``fault_range``."""
-        if self.set is not None:
-            return set_from_wire(self.set, NA).bounds()
-        lo, hi = ellipsoid_bounds(np.asarray(self.xhat, dtype=float), np.diag(self.P_matrix()), self.rho, self.fault_range)
-        region = self.region()
-        if region is not None:  # the published set is the ellipsoid ∩ the region (the node's estimator cut one by the other)
-            v = region.vertices
-            lo[: v.shape[1]], hi[: v.shape[1]] = np.maximum(lo[: v.shape[1]], v.min(axis=0)), np.minimum(hi[: v.shape[1]], v.max(axis=0))
-        return lo, hi
+    @property
+    def continued(self) -> ProvenSet:
+        """The whole set the node continues from (the published one unless ``continues`` is sent)."""
+        return continued_set(self.published, self.continues)
 
 
 def state_digest(st: NodeState) -> str:
-    """The identity of a state copy: every field a receiver's step takes from it (the set, the innovation,
-    γ, the sector, and the set the sender continues from).  Two copies with the same digest are one."""
-    content = [st.step, st.node, st.xhat, st.P, st.rho, st.gamma, st.innov, st.sector, st.sector_basis, st.set, st.own_xhat, st.own_P, st.own_region]
+    """The identity of a state copy: every field a receiver's step takes from it (the sets, the innovation,
+    γ, the sector).  Two copies with the same digest are one."""
+    cont = None if st.continues is None else st.continues.digest_content()
+    content = [st.step, st.node, st.published.digest_content(), cont, st.gamma, st.innov, st.sector, st.sector_basis]
     return blake2b(msgspec.msgpack.encode(content), digest_size=DIGEST_BYTES).hexdigest()
-
-
-SYM_RTOL, SYM_ATOL = 1e-9, 1e-15  # P = Pᵀ up to rounding, as np.allclose(P, P.T, rtol, atol)
-
-
-def spd_problem(p: list[float]) -> str | None:
-    """Why the row-major 3×3 ``p`` is not symmetric positive definite (None if it is).
-
-    Plain floats rather than np.allclose and np.linalg.cholesky: the same tests, ten times cheaper
-    (≈3 µs against ≈30 µs), and every role pays them for every state it receives.
-    """
-    for a, b in ((1, 3), (2, 6), (5, 7)):  # (0,1), (0,2), (1,2) against their transposes
-        if abs(p[a] - p[b]) > SYM_ATOL + SYM_RTOL * min(abs(p[a]), abs(p[b])):
-            return "P is not symmetric"
-    # Cholesky of the lower triangle (LAPACK potrf's order): positive definite iff every pivot is > 0
-    if not p[0] > 0:
-        return "P is not positive definite"
-    l00 = math.sqrt(p[0])
-    l10, l20 = p[3] / l00, p[6] / l00
-    d1 = p[4] - l10 * l10
-    if not d1 > 0:
-        return "P is not positive definite"
-    l21 = (p[7] - l20 * l10) / math.sqrt(d1)
-    if not p[8] - l20 * l20 - l21 * l21 > 0:
-        return "P is not positive definite"
-    return None
 
 
 class Truth(_Msg, tag="truth", frozen=True, kw_only=True):

@@ -2,7 +2,29 @@
 
 from __future__ import annotations
 
-from netsetest.messages import Truth
+from typing import Any
+
+import msgspec
+
+from netsetest.messages import NodeState, Truth
+from netsetest.proven import ProvenSet
+
+SET_FIELDS = ("xhat", "P", "rho", "region", "fault", "set")  # a ProvenSet's: a state's published set
+
+
+def make_state(**kw: Any) -> NodeState:
+    """A NodeState from NodeState's keywords, those of SET_FIELDS making its published set."""
+    pub = {k: kw.pop(k) for k in SET_FIELDS if k in kw}
+    return NodeState(published=ProvenSet(**pub), **kw)
+
+
+def raw_message(msg: Any, **changes: Any) -> dict[str, Any]:
+    """``msg``'s fields as plain values (model_dump; a ProvenSet as the map it is sent as) with ``changes``
+    (unchecked: tests forge payloads with it); a key of SET_FIELDS changes a state's published set."""
+    d = {k: msgspec.to_builtins(v) if isinstance(v, msgspec.Struct) else v for k, v in msg.model_dump(mode="python").items()}
+    for k, v in changes.items():
+        (d["published"] if k in SET_FIELDS and "published" in d else d)[k] = v
+    return d
 
 
 def truth(**kw: object) -> Truth:

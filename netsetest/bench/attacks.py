@@ -61,13 +61,16 @@ def _payloads(kind: str, run_id: str, steps: int) -> list[tuple[str, bytes]]:
 
     from netsetest.bus import keys
     from netsetest.messages import NodeState, Ready, encode
+    from netsetest.proven import ProvenSet
+
+    UNIT_SET = ProvenSet(xhat=[0.0] * 3, P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0)  # a forged state's set: the unit ball
 
     if kind == "input":
         raw = {"v": 1, "type": "input", "step": 1, "node": VICTIM, "y": math.nan, "gamma": 1.0}
         return [(keys.node_input(run_id, VICTIM), msgspec.msgpack.encode(raw))]
     if kind in ("state", "state-run"):  # a far step's state, or one (forged, not from the true input) per step of the run
         forged = [
-            NodeState(step=k, node=VICTIM, xhat=[0.0] * 3, P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
+            NodeState(step=k, node=VICTIM, published=UNIT_SET, gamma=1.0, innov=0.0, status="ok")
             for k in ([steps + 5] if kind == "state" else range(1, steps + 1))
         ]
         return [(keys.node_state(run_id, VICTIM), encode(st)) for st in forged]
@@ -79,9 +82,7 @@ def _payloads(kind: str, run_id: str, steps: int) -> list[tuple[str, bytes]]:
             "type": "state",
             "step": 1,
             "node": VICTIM,
-            "xhat": [1.8e154, 0.0, 0.0],
-            "P": [1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0],
-            "rho": 1.0,
+            "published": {"xhat": [1.8e154, 0.0, 0.0], "P": [1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], "rho": 1.0},
             "gamma": 1.0,
             "innov": 1.8e154,
             "status": "ok",

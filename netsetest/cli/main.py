@@ -292,7 +292,7 @@ def cmd_inspect(a: argparse.Namespace) -> int:
     for i in ids:
         method = rec.meta.estimators.get(str(i), "sdp")
         if method == "sdp":
-            cut = rec.nodes[i].fault_range is not None  # the slab of a declared bound or the k-of-N pin (NodeState.fault_range)
+            cut = rec.nodes[i].has_fault_range  # the slab of a declared bound, the k-of-N pin or the region (ProvenSet.fault)
             print(
                 f"node {i}: fault estimate f̂ (its ellipsoid's centre) and bounds: the ellipsoid {{x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ}}'s "
                 "extent in f" + (", cut by its fault range (a declared |f| ≤ F or the k-of-N pin) on the steps that have one" if cut else "")

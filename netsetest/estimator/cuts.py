@@ -32,6 +32,7 @@ from netsetest.estimator.slab import cut
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.vehicle import TSModel
 from netsetest.polygon import MIN_VERTICES, Polygon
+from netsetest.proven import ProvenSet
 from netsetest.sets import ellipsoid_bounds
 
 Status = Literal["ok", "fallback"]
@@ -82,6 +83,27 @@ class StepResult:
     def public(self) -> StepResult:
         """What the node publishes: ``published`` if a solve or a cut made one, else this set."""
         return self.published if self.published is not None else self
+
+    def published_set(self, rho: float, own_set: dict | None = None) -> ProvenSet:
+        """What the node publishes, as sent: the ellipsoid of ``public`` with radius ρ_i ∩ the region ∩ its fault
+        range; or a set estimator's own set (``own_set``, sets.set_to_wire) with the ellipsoid that encloses it."""
+        pub, region = self.public, self.region
+        return ProvenSet(
+            xhat=pub.xhat.tolist(),  # float64 arrays: the floats [float(a) for a in …] gave, without the loop
+            P=pub.P.reshape(NA * NA).tolist(),
+            rho=rho,
+            region=None if region is None else region.vertices.reshape(-1).tolist(),
+            fault=None if pub.fault_range is None else [float(pub.fault_range[0]), float(pub.fault_range[1])],
+            set=own_set,
+        )
+
+    def continued_ellipsoid(self, rho: float) -> ProvenSet | None:
+        """The ellipsoid the node continues from where that set is not the published one (None: it is): the set is it
+        ∩ the same region (proven.continued_set), without the fault range (the published one's rests on this step's
+        facts alone)."""
+        if self.published is None:
+            return None
+        return ProvenSet(xhat=self.xhat.tolist(), P=self.P.reshape(NA * NA).tolist(), rho=rho)
 
     @property
     def rests_on(self) -> Rests:
@@ -166,7 +188,7 @@ class Cut:
 
 def cut_fault(ctx: StepContext, res: StepResult, lo: float, hi: float, reshape: bool = True) -> StepResult | None:
     """The sets with the published one cut by lo ≤ f⁺ ≤ hi (:func:`~netsetest.estimator.slab.cut`, certified; not
-    unless ``reshape``) and published as that ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (NodeState.fault_range: no ellipsoid ends
+    unless ``reshape``) and published as that ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (ProvenSet.fault: no ellipsoid ends
     at the slab's flat face); None where the slab does not narrow the published fault interval.  The set the node
     continues from is unchanged."""
     pub, rho = res.public, ctx.rho

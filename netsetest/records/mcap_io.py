@@ -35,7 +35,7 @@ from mcap.writer import CompressionType, Writer
 from netsetest.records.files import open_locked
 from netsetest.records.meta import RunMeta
 from netsetest.records.summary import RunSummary
-from netsetest.sets import ellipsoid_bounds
+from netsetest.proven import proven_sets
 
 if TYPE_CHECKING:
     from netsetest.records.record import Record
@@ -71,6 +71,19 @@ _NUM = {"type": ["number", "null"]}
 _INT = {"type": "integer"}
 _BOOL = {"type": "boolean"}
 _IDS = {"type": "array", "items": _INT}
+_NUMBERS = {"type": "array", "items": {"type": "number"}}
+_PROVEN_SET = {  # netsetest/proven.py's ProvenSet: absent parts are left out
+    "type": "object",
+    "properties": {
+        "xhat": {**_NUMBERS, "description": "[β rad, r rad/s, f rad/s]"},
+        "P": {**_NUMBERS, "description": "3×3 shape matrix, row-major"},
+        "rho": {"type": "number"},
+        "region": {**_NUMBERS, "description": "the region of (β, r): polygon vertices counter-clockwise, [β₁, r₁, β₂, r₂, …]"},
+        "fault": {**_NUMBERS, "description": "[lo, hi]: the fault range the set is cut by"},
+        "set": {"type": "object", "description": "a set estimator's own set (netsetest/sets.py set_to_wire); the ellipsoid encloses it"},
+    },
+    "required": ["xhat", "P", "rho"],
+}
 _PER_NODE_NUM = {"type": "object", "additionalProperties": _NUM, "description": "node id → value"}
 _PER_NODE_BOOL = {"type": "object", "additionalProperties": _BOOL, "description": "node id → flag"}
 
@@ -149,13 +162,12 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     ),
     "netsetest.NodeState": _schema(
         "netsetest.NodeState",
-        "Node i's ellipsoid {x: (x − x̂)ᵀP⁻¹(x − x̂) ≤ ρ} of step k and its check",
+        "The set node i proves at step k (its ellipsoid {x: (x − x̂)ᵀP⁻¹(x − x̂) ≤ ρ} ∩ its region ∩ its fault range) and its check",
         {
             "step": _INT,
             "t": {"type": "number"},
-            "xhat": {"type": "array", "items": {"type": "number"}, "description": "[β rad, r rad/s, f rad/s]"},
-            "P": {"type": "array", "items": {"type": "number"}, "description": "3×3 shape matrix, row-major"},
-            "rho": {"type": "number"},
+            "published": {**_PROVEN_SET, "description": "the set the node published (netsetest/proven.py)"},
+            "continues": {**_PROVEN_SET, "description": "the set the node continues from, where not the published one"},
             "status": {"type": "string"},
             "rho_cert": _NUM,
             "solve_ms": _NUM,
@@ -180,22 +192,14 @@ SCHEMAS: dict[str, dict[str, Any]] = {
             "not_covered_cause": {"type": ["string", "null"], "description": "why the guarantee did not apply (docs/coverage.md); null where it did"},
             "inherited_from": {"type": ["array", "null"], "description": "[node, step, why] of the input a not-covered step rests on"},
             "fdi": {"type": ["string", "null"], "description": "detected | healthy | undecided: the fault interval against 0 (docs/fdi.md)"},
-            "own_xhat": {"type": "array", "items": {"type": "number"}, "description": "centre of the set the node continues from, where not the published one"},
-            "own_P": {"type": "array", "items": {"type": "number"}, "description": "its 3×3 shape matrix, row-major (with the published ρ)"},
-            "own_region": {
-                "type": "array",
-                "items": {"type": "number"},
-                "description": "the node's region of (β, r): polygon vertices counter-clockwise, [β₁, r₁, β₂, r₂, …]",
-            },
             "bounds": {
                 "type": "array",
                 "items": {"type": "array", "items": {"type": "number"}},
                 "description": "[[lo, hi] ×3] of β, r, f: the published set's",
             },
-            "fault_range": {"type": "array", "items": {"type": "number"}, "description": "[lo, hi]: the published set is its ellipsoid within it"},
             **{f"{n}_{s}": {"type": "number", "description": f"{s} bound of {n} of the published set"} for n, _ in COMPONENTS for s in ("lower", "upper")},
         },
-        ["step", "xhat", "P", "rho", "status"],
+        ["step", "published", "status"],
     ),
     "netsetest.NodeDrops": _schema(
         "netsetest.NodeDrops",
@@ -322,8 +326,7 @@ class McapRecordWriter:
         if "bounds" in entry:  # the published set (a set estimator's; the SDP's ellipsoid ∩ fault range ∩ region)
             lo, hi = np.asarray(entry["bounds"], dtype=float).T
         else:  # records before the bounds were written: the ellipsoid, the fault within the step's fault range
-            P = np.asarray(entry["P"], dtype=float).reshape(3, 3)
-            lo, hi = ellipsoid_bounds(np.asarray(entry["xhat"], dtype=float), np.diag(P), entry["rho"], entry.get("fault_range"))
+            lo, hi = proven_sets(entry)[0].bounds()
         for name, j in COMPONENTS:
             msg[f"{name}_lower"], msg[f"{name}_upper"] = float(lo[j]), float(hi[j])
         self._write(state_topic(node), ns, msg)

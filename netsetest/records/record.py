@@ -15,12 +15,12 @@ step::
 in-neighbour weights {i: {j: a_ij}}, run id).  Truth entry of step k: x = [β, r], faults {i: f_i}, u,
 w, vx, noise {i}, gamma {i}, y {i}, y_nofault {i}, sector_ok {i}, r {i} = C̄x̄, fault_ok {i}, noise_ok {i},
 dist_ok, lost [[j, i]], alive [i], drops {reason: n}, e [2] | null (model mismatch of k → k+1), mismatch_ok, speed, ay, envelope_ok (models/envelope.py).  State entry: step, xhat [3], P [9, row-major], rho,
+published (the set the node proves, netsetest/proven.py: {xhat [3], P [9, row-major], rho, region [β₁, r₁, …],
+fault [lo, hi], set}, absent parts left out), continues (the set it continues from, where not the published one),
 status, rho_cert, solve_ms, used, missing, late, dropped, drops {reason: n}, sector [h1, h] | null,
-sector_basis, own_xhat [3] and own_P [9] (the set the node continues from, where not the published one) and
-own_region [β₁, r₁, …] (its region; each absent where the node sent none, and in older records), E = eᵀP⁻¹e (null when the truth of the step is unknown), contained
-(E ≤ rho; for a node running a set estimator: the truth in its published set, whose per-coordinate
-bounds [[lo, hi] ×3] are then in ``bounds`` and the ellipsoid is the enclosing one its neighbours
-use), assumptions_ok (every assumption in the step's dependency cone held), contested (more
+sector_basis, E = eᵀP⁻¹e of the published ellipsoid (null when the truth of the step is unknown), contained (the
+truth in the published set, whose per-coordinate bounds [[lo, hi] ×3] are in ``bounds``; a set estimator's
+ellipsoid is the enclosing one its neighbours use), continues_contained, assumptions_ok (every assumption in the step's dependency cone held), contested (more
 than one copy matched the truth: not judged).  ``summary``: the
 per-node table and totals (the same object ``--summary-json`` writes; in code a
 :class:`~netsetest.records.summary.RunSummary`, converted at this boundary).
@@ -33,7 +33,8 @@ or the parent was killed) loads as a partial record: ``partial`` is true, ``summ
 are left out, and an incomplete last line is ignored (an MCAP file loads only complete, with its verdict
 message).  A run stopped before its last step (Ctrl-C: the collector writes what it has, and a summary)
 is partial as well, with its summary.
-:func:`load_record` also reads version 1 records (one JSON
+:func:`load_record` also reads state entries written before issue 28 (the published ellipsoid as xhat, P, rho,
+with fault_range, own_xhat, own_P and own_region beside it: :func:`proven_sets`), and version 1 records (one JSON
 document with ``meta``, ``truth``, ``nodes``, ``summary``; optionally gzip-compressed).
 :meth:`Record.fault_rows` gives the fault bounds.
 """
@@ -47,6 +48,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any, Literal, Protocol, cast, get_args
 
+import msgspec
 import numpy as np
 
 from netsetest.extras import require
@@ -54,6 +56,7 @@ from netsetest.models.sensor import NA
 from netsetest.records.errors import RecordError
 from netsetest.records.files import open_locked
 from netsetest.records.meta import RunMeta
+from netsetest.proven import ProvenSet, proven_sets
 from netsetest.records.summary import RunSummary
 
 FORMAT = "netsetest-record"
@@ -203,25 +206,24 @@ class NodeTrack:
     assumptions_ok: np.ndarray  # (K,) bool
     status: list[str]
     solve_ms: np.ndarray  # (K,)
+    published: list[ProvenSet]  # (K) the set the node proved (xhat, P, rho above are its ellipsoids, as arrays)
+    continues: list[ProvenSet | None]  # (K) the set it continued from where not the published one
     set_bounds: np.ndarray | None = None  # (K, 3, 2) the published set's per-coordinate bounds (None: older SDP records, the ellipsoid's)
     judged: np.ndarray | None = None  # (K,) bool: the collector judged the step (None: all were, older records)
     fdi: list[str | None] | None = None  # (K,) detected | healthy | undecided (docs/fdi.md; None: older records)
-    fault_range: np.ndarray | None = None  # (K, 2) the SDP's published fault range (±inf where none; None: no step had one)
     continues_contained: np.ndarray | None = None  # (K,) bool: the set the node continues from held the truth (None: older records)
-    own_xhat: np.ndarray | None = None  # (K, 3) the set the node continues from where not the published one (NaN: it is; None: no step)
-    own_P: np.ndarray | None = None  # (K, 3, 3) its shape, with the published ρ (NaN where none; None: no step had one)
-    own_region: list[np.ndarray | None] | None = None  # (K) the region's vertices (n, 2) (None where none; None: no step had one)
 
     def was_judged(self, n: int) -> bool:
         return bool(self.judged[n]) if self.judged is not None else True
 
     def bounds(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """Lower/upper bound of component ``index`` (0 β, 1 r, 2 f) of the published set: a set estimator's set,
-        the SDP's ellipsoid ∩ its fault range ∩ its region of x (records before the bounds were written: the
-        ellipsoid's, :meth:`ellipsoid_bounds`)."""
+        the SDP's ellipsoid ∩ its fault range ∩ its region of x (as the collector wrote them; records before it did:
+        ProvenSet.bounds of the recorded sets)."""
         if self.set_bounds is not None:
             return self.set_bounds[:, index, 0].copy(), self.set_bounds[:, index, 1].copy()
-        return self.ellipsoid_bounds(index, within_range=True)
+        lo, hi = (np.array([p.bounds()[side][index] for p in self.published], dtype=float) for side in (0, 1))
+        return lo, hi
 
     def rests_on(self, index: int) -> list[str]:
         """Per step, the cut component ``index``'s published interval rests on: ``ellipsoid`` (the interval is the
@@ -234,15 +236,16 @@ class NodeTrack:
         cut = "region" if index < NA - 1 else "fault range"
         return [cut if narrower else "ellipsoid" for narrower in (lo > e_lo + tol) | (hi < e_hi - tol)]
 
-    def ellipsoid_bounds(self, index: int, within_range: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    def ellipsoid_bounds(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """Lower/upper bound of component ``index`` of the published ellipsoid alone, x̂ ∓ √(ρ P_ii): the paper's own
-        set (a set estimator's: the ellipsoid around its set); ``within_range``: the fault's within its fault range
-        (what records before the published bounds were written show)."""
+        set (a set estimator's: the ellipsoid around its set)."""
         half = np.sqrt(self.rho * self.P[:, index, index])
-        lo, hi = self.xhat[:, index] - half, self.xhat[:, index] + half
-        if within_range and index == NA - 1 and self.fault_range is not None:  # the ellipsoid ∩ the step's fault range
-            lo, hi = np.maximum(lo, self.fault_range[:, 0]), np.minimum(hi, self.fault_range[:, 1])
-        return lo, hi
+        return self.xhat[:, index] - half, self.xhat[:, index] + half
+
+    @property
+    def has_fault_range(self) -> bool:
+        """Some published set of the node was cut by a fault range (a declared bound, the k-of-N pin, the region)."""
+        return any(p.fault is not None for p in self.published)
 
 
 @dataclass
@@ -304,12 +307,10 @@ class Record:
         for comp, name in ((0, "beta"), (1, "r"), (2, "fault")):
             for row, on in zip(rows, tr.rests_on(comp)):
                 row[f"{name}_rests_on"] = "set" if set_node else on
-        for n, row in enumerate(rows):  # every other set the collector judged (None where the step had none)
-            own = tr.own_xhat is not None and not np.isnan(tr.own_xhat[n]).any()
-            row["own_xhat"] = tr.own_xhat[n].tolist() if own and tr.own_xhat is not None else None
-            row["own_P"] = tr.own_P[n].reshape(-1).tolist() if own and tr.own_P is not None else None
-            region = tr.own_region[n] if tr.own_region is not None else None
-            row["own_region"] = None if region is None else region.tolist()
+        for n, row in enumerate(rows):  # both sets the collector judged, whole (continues: None where it is the published one)
+            cont = tr.continues[n]
+            row["published"] = msgspec.to_builtins(tr.published[n])
+            row["continues"] = None if cont is None else msgspec.to_builtins(cont)
         return rows
 
 
@@ -498,32 +499,21 @@ def _set_bounds(entries: list[dict]) -> np.ndarray | None:
     return b
 
 
-def _fault_ranges(entries: list[dict]) -> np.ndarray | None:
-    """(K, 2) of the entries' ``fault_range`` (±inf where an entry has none), None if none has one."""
-    if not any("fault_range" in e for e in entries):
-        return None
-    r = np.array([e.get("fault_range", (-np.inf, np.inf)) for e in entries], dtype=float)
-    if r.shape != (len(entries), 2):
-        raise ValueError(f"fault_range: expected [lo, hi] per entry, got shape {r.shape}")
-    return r
-
-
-def _own_sets(entries: list[dict]) -> dict[str, Any]:
-    """``own_xhat``, ``own_P`` and ``own_region`` of the entries (NodeTrack's fields; absent in records before
-    they were written, and where a step has none)."""
-    out: dict[str, Any] = {}
-    if any("own_xhat" in e for e in entries):
-        x = np.array([e.get("own_xhat", [np.nan] * NA) for e in entries], dtype=float)
-        P = np.array([e.get("own_P", [np.nan] * NA * NA) for e in entries], dtype=float)
-        if x.shape != (len(entries), NA) or P.shape != (len(entries), NA * NA):
-            raise ValueError(f"own_xhat/own_P: expected [{NA}] and [{NA * NA}] per entry, got shapes {x.shape}, {P.shape}")
-        out["own_xhat"], out["own_P"] = x, P.reshape(-1, NA, NA)
-    if any("own_region" in e for e in entries):
-        regions = [None if e.get("own_region") is None else np.array(e["own_region"], dtype=float) for e in entries]
-        if any(r is not None and (r.ndim != 1 or len(r) < 2 or len(r) % 2) for r in regions):
-            raise ValueError("own_region: expected [β₁, r₁, β₂, r₂, …] per entry")
-        out["own_region"] = [None if r is None else r.reshape(-1, 2) for r in regions]
-    return out
+def _tracked_sets(entries: list[dict]) -> dict[str, Any]:
+    """NodeTrack's sets of the entries: each step's published set and the one continued from, and the published
+    ellipsoids as arrays (xhat, P, rho)."""
+    try:
+        sets = [proven_sets(e) for e in entries]
+    except msgspec.ValidationError as exc:
+        raise ValueError(f"a state's set: {exc}") from None
+    pub = [p for p, _ in sets]
+    return {
+        "xhat": np.array([p.xhat for p in pub], dtype=float).reshape(-1, NA),
+        "P": np.array([p.P for p in pub], dtype=float).reshape(-1, NA, NA),
+        "rho": np.array([p.rho for p in pub], dtype=float),
+        "published": pub,
+        "continues": [c for _, c in sets],
+    }
 
 
 FdiStatus = Literal["detected", "healthy", "undecided"]  # a node-step's fault detection (roles/fdi.py, docs/fdi.md)
@@ -552,9 +542,7 @@ def record_from_parts(
         tracks[int(key)] = NodeTrack(
             id=int(key),
             steps=np.array([e["step"] for e in entries], dtype=int),
-            xhat=np.array([e["xhat"] for e in entries], dtype=float).reshape(-1, 3),
-            P=np.array([e["P"] for e in entries], dtype=float).reshape(-1, 3, 3),
-            rho=np.array([e["rho"] for e in entries], dtype=float),
+            **_tracked_sets(entries),
             E=np.array([np.nan if e["E"] is None else e["E"] for e in entries], dtype=float),
             contained=np.array([e["contained"] is True for e in entries], dtype=bool),
             assumptions_ok=np.array([bool(e["assumptions_ok"]) for e in entries], dtype=bool),
@@ -564,11 +552,9 @@ def record_from_parts(
             # records before "judged" wrote contained: true on unjudged rows too; say where they could not be
             judged=np.array([e.get("judged", e.get("E") is not None and not e.get("contested", False)) for e in entries], dtype=bool),
             fdi=[_fdi(e.get("fdi")) for e in entries],
-            fault_range=_fault_ranges(entries),
             continues_contained=np.array([e.get("continues_contained") is not False for e in entries], dtype=bool)
             if any("continues_contained" in e for e in entries)
             else None,
-            **_own_sets(entries),
         )
     for t in truth:
         if not isinstance(t, dict) or not isinstance(t.get("step"), int):

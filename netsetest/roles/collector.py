@@ -2,8 +2,8 @@
 writes the record and the summary.
 
 For node i at step k it computes E_i,k = e_i,kᵀ P_i,k⁻¹ e_i,k with e = x̄_i,k − x̂_i,k and declares
-containment when E_i,k ≤ ρ_i; where the node continues from another set (``own_xhat``/``own_P``), that
-set must hold the truth too.  A miss is attributed by the step's *dependency cone*, one step deep over
+containment when its published set (netsetest/proven.py: E_i,k ≤ ρ_i, its region, its fault range) holds the
+truth; where the node continues from another set (``NodeState.continues``), that set must hold it too.  A miss is attributed by the step's *dependency cone*, one step deep over
 judged inputs (docs/coverage.md): the estimate of (i, k) relies on its own sector condition and noise
 bound at k, the disturbance bound at k−1, and on the exact copies of the states it used (its own
 previous set and its neighbours' of k−1, named by digest in ``NodeState.inputs``), each judged directly
@@ -58,6 +58,7 @@ from array import array
 from collections import Counter, deque
 from dataclasses import dataclass, field
 
+import msgspec
 import numpy as np
 
 from netsetest.bus import keys
@@ -89,8 +90,8 @@ LOST_NOTES = 4096  # messages the bus's full inbox dropped, noted until the next
 
 
 def _same_set(a: NodeState, b: NodeState) -> bool:
-    """Copies that publish the same ellipsoid are one for judging (bookkeeping fields may differ)."""
-    return a.xhat == b.xhat and a.P == b.P and a.rho == b.rho and a.innov == b.innov and a.gamma == b.gamma and a.set == b.set
+    """Copies that publish the same sets are one for judging (bookkeeping fields may differ)."""
+    return a.published == b.published and a.continues == b.continues and a.innov == b.innov and a.gamma == b.gamma
 
 
 @dataclass
@@ -196,11 +197,11 @@ def manoeuvre_text(sc: Scenario) -> str:
 
 
 def _bounds(st: NodeState, c: Containment | None) -> list[list[float]]:
-    """The published set's per-coordinate bounds [[lo, hi] ×3] (NodeState.bounds: a set estimator's own, else the
-    ellipsoid ∩ its fault range ∩ its region; the judge's where it computed them: a set is not parsed again)."""
+    """The published set's per-coordinate bounds [[lo, hi] ×3] (ProvenSet.bounds: a set estimator's own, else the
+    ellipsoid ∩ its fault range ∩ its region; the judge's where it computed them)."""
     if c is not None and c.bounds is not None:
         return c.bounds.tolist()
-    lo, hi = st.bounds()
+    lo, hi = st.published.bounds()
     return np.stack([lo, hi], axis=1).tolist()
 
 
@@ -211,9 +212,8 @@ def _state_entry(st: NodeState, v: NodeVerdict, contested: bool, bounds: list[li
     origin = v.cone.origin
     return {
         "step": v.step,
-        "xhat": list(st.xhat),
-        "P": list(st.P),
-        "rho": st.rho,
+        "published": msgspec.to_builtins(st.published),  # the set as sent (netsetest/proven.py; defaults left out)
+        **({"continues": msgspec.to_builtins(st.continues)} if st.continues is not None else {}),  # where not the published one
         "status": st.status,
         "rho_cert": st.rho_cert,
         "solve_ms": st.solve_ms,
@@ -234,10 +234,6 @@ def _state_entry(st: NodeState, v: NodeVerdict, contested: bool, bounds: list[li
         "sector": list(st.sector) if st.sector is not None else None,
         "sector_basis": st.sector_basis,
         "bounds": bounds,
-        **({"fault_range": list(st.fault_range)} if st.fault_range is not None else {}),
-        # every other set judged: the one the node continues from and its region (where sent)
-        **({"own_xhat": list(st.own_xhat), "own_P": list(st.own_P)} if st.own_xhat is not None and st.own_P is not None else {}),
-        **({"own_region": list(st.own_region)} if st.own_region is not None else {}),
     }
 
 

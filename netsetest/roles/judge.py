@@ -31,8 +31,7 @@ from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.sector import Sector, sector_ok
 from netsetest.messages import NodeState, Truth, state_digest
 from netsetest.models.envelope import MODEL_MISMATCH, OUTSIDE_ENVELOPE
-from netsetest.models.sensor import NX, augmented
-from netsetest.sets import set_from_wire
+from netsetest.models.sensor import augmented
 
 INNOV_RTOL = 1e-12  # the node computes ỹ − C̄ x̂ with the same numbers: rounding only across machines
 
@@ -75,7 +74,7 @@ class Cone:
 @dataclass(frozen=True)
 class Containment:
     """A judged state against its step's truth: E = eᵀP⁻¹e of its ellipsoid, whether its set holds the truth,
-    whether the set its node continues from does (the same set unless the state gives ``own_xhat``/``own_P``),
+    whether the set its node continues from does (the same set unless the state sends ``continues``),
     and the set's per-coordinate bounds (3, 2) where it is not the ellipsoid alone (a set estimator's set, or
     the SDP's ellipsoid ∩ its fault range; None: the ellipsoid's)."""
 
@@ -141,20 +140,6 @@ def published_sector(st: NodeState) -> Sector | None:
     return Sector(st.sector[0], st.sector[1], st.sector_basis) if st.sector is not None else None
 
 
-def _in_ellipsoid(x: np.ndarray, c: np.ndarray, P: np.ndarray, rho: float) -> bool:
-    e = x - c
-    return bool(float(e @ np.linalg.solve(P, e)) <= rho)
-
-
-def _continues_in(st: NodeState, xbar: np.ndarray) -> bool:
-    """x̄ lies in the set an SDP node continues from: its own ellipsoid (the published one unless it sends
-    another) and, where it keeps one, its region of x (netsetest/polygon.py)."""
-    region = st.region()
-    if region is not None and not region.contains(xbar[:NX]):
-        return False
-    return _in_ellipsoid(xbar, st.own_centre(), st.own_P_matrix(), st.rho)
-
-
 def _in_prior(n: NodeConfig, tr: Truth) -> bool:
     """Assumption 1: the true x̄_0 lies in node n's prior ellipsoid."""
     e = augmented(tr.x, tr.faults[str(n.id)]) - n.x0_hat
@@ -172,14 +157,15 @@ def state_mismatch(n: NodeConfig, st: NodeState, tr: Truth) -> str | None:
     s = str(n.id)
     if st.gamma != tr.gamma[s]:
         return "state-not-from-input"
-    innov = float(tr.y[s] - n.sensor.Cbar @ np.asarray(st.xhat))
+    innov = float(tr.y[s] - n.sensor.Cbar @ st.published.centre)
     if not isclose(st.innov, innov, INNOV_RTOL):
         return "state-not-from-input"
-    if (st.set is None) != (n.estimator == SDP):
+    if (st.published.set is None) != (n.estimator == SDP):
         return "state-wrong-method"  # a set estimator publishes its set, the SDP none
     if (st.step == 0) != (st.status in ("init", "init-prior")):
         return "state-not-prior"  # step 0 publishes the prior (updated by ỹ₀), no other step does
-    if st.status == "init-prior" and (st.rho != n.rho or not np.array_equal(st.xhat, n.x0_hat) or not np.array_equal(st.P_matrix(), n.P0)):
+    pub = st.published
+    if st.status == "init-prior" and (pub.rho != n.rho or not np.array_equal(pub.xhat, n.x0_hat) or not np.array_equal(pub.P_matrix, n.P0)):
         return "state-not-prior"
     return None
 
@@ -214,23 +200,14 @@ class Judge:
         return StepVerdict(out, checks)
 
     def containment(self, i: int, st: NodeState, tr: Truth) -> Containment:
+        """The state's published set and the set it continues from against the truth (ProvenSet.contains); E is the
+        published ellipsoid's (a set estimator's: the one around its set, its neighbour-facing summary)."""
         xbar = augmented(tr.x, tr.faults[str(i)])
-        e = xbar - np.asarray(st.xhat)
-        E = float(e @ np.linalg.solve(st.P_matrix(), e))
-        if st.set is None:
-            continues = _continues_in(st, xbar)  # what the next step rests on
-            region = st.region()
-            if st.fault_range is None and region is None:
-                return Containment(E, E <= st.rho, continues)
-            # the ellipsoid ∩ the fault's range ∩ the region of x: each must hold the truth
-            lo, hi = st.bounds()
-            inside = E <= st.rho and (st.fault_range is None or st.fault_range[0] <= float(xbar[-1]) <= st.fault_range[1])
-            inside = inside and (region is None or region.contains(xbar[:NX]))
-            return Containment(E, bool(inside), continues, np.stack([lo, hi], axis=1))
-        # a set estimator's node: its own set is judged (and continued from); the ellipsoid is only its neighbour-facing summary
-        s = set_from_wire(st.set, len(xbar))
-        inside = s.contains(xbar)
-        return Containment(E, inside, inside, np.stack(s.bounds(), axis=1))
+        pub = st.published
+        E = pub.E(xbar)
+        inside = pub.contains(xbar, E)
+        continues = inside if st.continues is None else st.continued.contains(xbar)
+        return Containment(E, inside, continues, None if pub.is_ellipsoid else np.stack(pub.bounds(), axis=1))
 
     def sector_premise(self, n: NodeConfig, st: NodeState | None, tr: Truth) -> bool:
         """What the node's step sector rests on held: nothing more than the noise bound (measurement),
@@ -268,11 +245,8 @@ class Judge:
         elif n.sensor.saturated and not (s in tr.r and sector_ok(n.sensor, published_sector(c), tr.r[s])):
             facts = "sector"
         xbar = augmented(tr.x, tr.faults[s])
-        published_in = _in_ellipsoid(xbar, np.asarray(c.xhat), c.P_matrix(), c.rho)
-        if c.set is not None:  # a set estimator continues from the set it published
-            prior_in = set_from_wire(c.set, len(xbar)).contains(xbar)
-        else:
-            prior_in = _continues_in(c, xbar)
+        published_in = c.published.E(xbar) <= c.published.rho  # neighbours use the ellipsoid alone
+        prior_in = c.continued.contains(xbar)
         self_loop = j in n.in_weights  # its own innovation enters its next step: the same facts
         return CopyCheck(
             as_neighbour=facts or (None if published_in else MISSED),
@@ -320,7 +294,7 @@ class Judge:
                 return Cone(False, INHERITED, Origin(j, k, why))
         if st.health and not self.sc.group_health_holds(i, inp.faults):
             return Cone(False, HEALTH)  # its group's k-of-N interval rested on more healthy sensors than there were
-        if st.status == "fallback" and st.set is not None:
+        if st.status == "fallback" and st.published.set is not None:
             return Cone(False, "fallback")  # the previous step's set again: no guarantee for this step
         for j, m, digest, as_prior in _inputs_of(st, k):
             by = checks if m == k else prev

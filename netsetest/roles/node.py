@@ -339,16 +339,17 @@ class Node:
         if (msg.sector is not None) != sensor.saturated:
             self._refuse(msg, "sector-mismatch")  # a saturating sensor publishes its sector, no other one does
             return
-        P = _symmetric(msg.P)  # symmetric positive definite: checked by decode()
+        pub = msg.published  # neighbours use its ellipsoid alone
+        P = _symmetric(pub.P)  # symmetric positive definite: checked by decode()
         sector = Sector(msg.sector[0], msg.sector[1], msg.sector_basis) if msg.sector is not None else None
-        if not innovation_possible(sensor, np.asarray(msg.xhat), P, msg.rho, msg.gamma, sector, msg.innov):
+        if not innovation_possible(sensor, np.asarray(pub.xhat), P, pub.rho, msg.gamma, sector, msg.innov):
             self._refuse(msg, "neighbour-innovation")
             return
         if self.k < 0 and len(self.inbox) >= MAX_AHEAD and msg.step not in self.inbox:
             oldest = min(self.inbox)  # not started (rejoin): keep the newest steps only
             del self.inbox[oldest]
             self.digests.pop(oldest, None)
-        self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(np.asarray(msg.xhat), P, msg.rho, msg.gamma, msg.innov, sector)
+        self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(np.asarray(pub.xhat), P, pub.rho, msg.gamma, msg.innov, sector)
         self.digests.setdefault(msg.step, {})[msg.node] = state_digest(msg)
         self._screen()
 
@@ -573,9 +574,8 @@ class Node:
         return NodeState(
             step=inp.step,
             node=self.id,
-            xhat=pub.xhat.tolist(),  # float64 arrays: the floats [float(a) for a in …] gave, without the loop
-            P=pub.P.reshape(NA * NA).tolist(),
-            rho=self.rho,
+            published=res.published_set(self.rho, p.wire_set),
+            continues=res.continued_ellipsoid(self.rho),
             gamma=inp.gamma,
             innov=innov,
             status=p.status,
@@ -588,18 +588,7 @@ class Node:
             drops=drops,
             sector=(sector.h1, sector.h) if sector is not None else None,
             sector_basis=sector.basis if sector is not None else "none",
-            set=p.wire_set,
             inputs=p.inputs,
             readings=p.readings,
             health=p.health,
-            fault_range=list(pub.fault_range) if pub.fault_range is not None else None,
-            **self._own_set(res),  # type: ignore[arg-type]  # own_xhat/own_P only: mypy cannot tell the keys of a dict
-            own_region=None if res.region is None else res.region.vertices.reshape(-1).tolist(),
         )
-
-    @staticmethod
-    def _own_set(res: StepResult) -> dict[str, list[float]]:
-        """The set we continue from, where it is not the published one (the collector judges it too)."""
-        if res.published is None:
-            return {}
-        return {"own_xhat": res.xhat.tolist(), "own_P": res.P.reshape(NA * NA).tolist()}

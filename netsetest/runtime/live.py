@@ -17,7 +17,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 import zenoh
 
 from netsetest.bus import keys
@@ -168,8 +167,8 @@ class LiveTable:
         if isinstance(msg, NodeState):
             row = self.rows.setdefault(msg.node, NodeRow(msg.node))
             if row.step is None or msg.step >= row.step:
-                row.step, row.status, row.rho = msg.step, msg.status, msg.rho
-                lo, hi = msg.bounds()  # a set estimator's own set; the SDP's ellipsoid within its fault range
+                row.step, row.status, row.rho = msg.step, msg.status, msg.published.rho
+                lo, hi = msg.published.bounds()  # a set estimator's own set; the SDP's ellipsoid ∩ its fault range ∩ its region
                 row.fault_lower, row.fault_upper = float(lo[2]), float(hi[2])
                 row.fdi = classify(row.fault_lower, row.fault_upper)
                 if row.fdi == "detected" and (row.first_detection is None or msg.step < row.first_detection):
@@ -199,12 +198,11 @@ class LiveTable:
             return
         del self.pending[node][step]
         row = self.rows[node]
-        e = augmented(tr.x, tr.faults[str(node)]) - np.asarray(st.xhat)
-        E = float(e @ np.linalg.solve(st.P_matrix(), e))
+        E = st.published.E(augmented(tr.x, tr.faults[str(node)]))
         if row.E_step is None or step >= row.E_step:  # the latest step whose truth is known
             row.E, row.E_step = E, step
         if self.judged is not None:
-            self.judged.append((node, step, E, st.rho))
+            self.judged.append((node, step, E, st.published.rho))
 
     @property
     def complete(self) -> bool:

@@ -53,6 +53,7 @@ import numpy as np
 from netsetest.messages import End, Message, NodeInput, NodeState, Truth
 from netsetest.runtime.live import LiveTable
 
+MAX_TIMELINE = 2**63 - 1  # Rerun's timelines are 64-bit: a sequence number, a duration in ns
 MAX_BACKLOG = 200  # messages waiting: above this the view drops frames (about one step of a 24-node run and its truth ×4)
 ELLIPSE_POINTS = 48  # vertices of a drawn (β, r) ellipse
 SERVER_MEMORY = "256MiB"  # the Rerun server keeps this much of the run for a browser that connects late; older data goes first
@@ -189,6 +190,9 @@ class LiveView:
         if backlog > MAX_BACKLOG:
             self.coverage.dropped_frames += 1
             return
+        step = msg.steps if isinstance(msg, End) else getattr(msg, "step", 0)
+        if not self._on_timeline(step):
+            return  # no run has such a step: a forged message, counted above, not drawn
         if isinstance(msg, NodeState):
             self._state(msg)
         elif isinstance(msg, Truth):
@@ -197,6 +201,10 @@ class LiveView:
             self._time(msg.steps)
             self._graph()
             self._verdict(msg.steps, ended=True)
+
+    def _on_timeline(self, step: int) -> bool:
+        """Rerun's timelines hold the step and its time (ns) as 64-bit integers (half their range: rounding's margin)."""
+        return step <= MAX_TIMELINE // 2 and (self.tau_s is None or step * self.tau_s * 1e9 <= MAX_TIMELINE // 2)
 
     def _time(self, step: int) -> None:
         self.rec.set_time("step", sequence=step)
@@ -207,15 +215,14 @@ class LiveView:
         import rerun as rr
 
         self._time(m.step)
-        lo, hi = m.bounds()
+        pub = m.published
+        lo, hi = pub.bounds()
         base = f"nodes/{m.node}"
         for name, idx in (("fault", 2), ("yaw_rate", 1)):
             self.rec.log(f"{base}/{name}/lower", rr.Scalars(float(lo[idx])))
             self.rec.log(f"{base}/{name}/upper", rr.Scalars(float(hi[idx])))
-        P = m.P_matrix()
-        xhat = np.asarray(m.xhat, dtype=float)
-        if m.set is None:  # the SDP's ellipsoid, projected on (β, r)
-            pts = ellipse(xhat[:2], m.rho * P[:2, :2])
+        if pub.set is None:  # the SDP's ellipsoid, projected on (β, r)
+            pts = ellipse(pub.centre[:2], pub.rho * pub.P_matrix[:2, :2])
         else:  # a set estimator's own set: its box in (β, r)
             pts = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]], [lo[0], lo[1]]])
         colour = COLOURS["late"] if m.late else COLOURS["fault detected"] if self.table.rows[m.node].fdi == "detected" else None

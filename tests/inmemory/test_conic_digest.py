@@ -16,7 +16,7 @@ NSNIM 1.40 → 1.14, SAIM 1.60 → 1.21, sensors 3 and 5 ≈ 2.0 → 1.2–1.3).
 max_faulty and are unchanged.
 
 The paper6_reference SAIM published digests were re-recorded on 2026-11-27 for the fault range: a set cut
-by a declared bound is published as its ellipsoid ∩ that bound (NodeState.fault_range), so the step's fault
+by a declared bound is published as its ellipsoid ∩ that bound (NodeState.fault_range then, ProvenSet.fault now), so the step's fault
 interval, and with it the fdi label, can be narrower.  Every float of every published ellipsoid and every
 backend answer is unchanged (checked against the previous commit for all 24 cases); only fdi labels moved,
 on paper6_reference SAIM (more steps detected).
@@ -79,7 +79,8 @@ from netsetest.runtime.inmemory import run_inmemory
 ROOT = Path(__file__).resolve().parents[2]
 STEPS = 30
 SEED = 3
-PUBLISHED = ("xhat", "P", "rho", "rho_cert", "sector")  # the floats of a published state (the fault bound is xhat, P, ρ)
+PUBLISHED = ("xhat", "P", "rho")  # the floats of a published state's ellipsoid (the record's "published" set; the fault bound is xhat, P, ρ)
+CERTIFIED = ("rho_cert", "sector")  # and of its certificate and sector
 LABELS = ("status", "sector_basis", "fdi")
 
 # (topology, case) → (signals, variant) → (digest of the backend's answers, digest of the published states)
@@ -159,6 +160,8 @@ def _published(nodes: dict[str, list[dict[str, Any]]]) -> str:
         for e in nodes[i]:
             h.update(f"{i}|{e['step']}|".encode() + "|".join(str(e[k]) for k in LABELS).encode())
             for k in PUBLISHED:
+                _floats(h, e["published"][k])
+            for k in CERTIFIED:
                 _floats(h, e[k])
     return h.hexdigest()
 

@@ -35,7 +35,7 @@ def check_every_step(res, expect_all_assumptions: bool) -> None:
         for e in entries:
             assert e["E"] is not None
             if e["assumptions_ok"]:
-                assert e["E"] <= e["rho"], f"node {node} step {e['step']}: E = {e['E']} > ρ with assumptions intact"
+                assert e["E"] <= e["published"]["rho"], f"node {node} step {e['step']}: E = {e['E']} > ρ with assumptions intact"
             elif expect_all_assumptions:
                 pytest.fail(f"node {node} step {e['step']}: an assumption broke where none should")
     assert res.summary.violations_total == 0
@@ -125,7 +125,7 @@ def test_inmemory_runs_are_deterministic():
     b = run_inmemory(load_topology(PAPER6, "saim", steps=10), "worst", "scheduled", seed=7)
     for node in a.parts["nodes"]:
         for ea, eb in zip(a.parts["nodes"][node], b.parts["nodes"][node], strict=True):
-            assert ea["xhat"] == eb["xhat"] and ea["P"] == eb["P"]
+            assert ea["published"]["xhat"] == eb["published"]["xhat"] and ea["published"]["P"] == eb["published"]["P"]
     assert a.parts["truth"] == b.parts["truth"]
     c = run_inmemory(load_topology(PAPER6, "saim", steps=10), "worst", "scheduled", seed=8)
     assert c.parts["truth"] != a.parts["truth"]

@@ -13,8 +13,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import msgpack
+import msgspec
 import numpy as np
 import pytest
+
+from message_helpers import SET_FIELDS
 
 from netsetest.bus import keys
 from netsetest.bus.base import MAX_PER_KEY, Inbox, MemoryBus
@@ -86,6 +89,10 @@ def _state_key(i: int) -> str:
 
 
 def _forged_state(msg: NodeState, **change: object) -> bytes:
+    """``msg`` with ``change``; a key of SET_FIELDS changes its published set (the rest of that set kept)."""
+    pub = {k: change.pop(k) for k in SET_FIELDS if k in change}
+    if pub:
+        change["published"] = msgspec.structs.replace(msg.published, **pub)
     return encode(msg.model_copy(update=change))
 
 
@@ -113,7 +120,7 @@ def assert_same_estimates(a: RunResult, b: RunResult) -> None:
         other = b.parts["nodes"][i]
         assert [e["step"] for e in entries] == [e["step"] for e in other], i
         for ea, eb in zip(entries, other):
-            assert ea["xhat"] == eb["xhat"] and ea["P"] == eb["P"] and ea["E"] == eb["E"], (i, ea["step"])
+            assert ea["published"]["xhat"] == eb["published"]["xhat"] and ea["published"]["P"] == eb["published"]["P"] and ea["E"] == eb["E"], (i, ea["step"])
     assert a.parts["truth"] == b.parts["truth"]
 
 
@@ -174,7 +181,7 @@ def test_forged_step0_status_is_checked() -> None:
 
     def after(key: str, msg: Message) -> list[tuple[str, bytes]]:
         if key == _state_key(ATTACKED) and isinstance(msg, NodeState):
-            P = [2.0 * p for p in msg.P]  # another ellipsoid, the same centre: γ and innovation still match
+            P = [2.0 * p for p in msg.published.P]  # another ellipsoid, the same centre: γ and innovation still match
             return [(key, _forged_state(msg, status="init-prior" if msg.step == 0 else "init", P=P))]
         return []
 
@@ -194,7 +201,7 @@ def test_forged_state_far_away_is_dropped_or_harmless_and_never_judged() -> None
     def before(key: str, msg: Message) -> list[tuple[str, bytes]]:
         if key == _state_key(ATTACKED) and isinstance(msg, NodeState) and msg.step >= 1:
             P = np.diag([1e-8, 1e-8, 1e-8]).reshape(9).tolist()
-            return [(key, _forged_state(msg, xhat=[msg.xhat[0] + 5.0, *msg.xhat[1:]], P=P))]
+            return [(key, _forged_state(msg, xhat=[msg.published.xhat[0] + 5.0, *msg.published.xhat[1:]], P=P))]
         return []
 
     res = _run("nsnim", AttackBus(before=before))
@@ -215,7 +222,7 @@ def test_forged_state_far_away_is_dropped_or_harmless_and_never_judged() -> None
     assert all(e["contested"] and e["E"] is None for e in node3 if e["step"] >= 1)
     # the other nodes never used the forgery: their ellipsoids are those of the clean run
     for i in ("1", "2", "4", "5", "6"):
-        assert [e["xhat"] for e in res.parts["nodes"][i]] == [e["xhat"] for e in clean("nsnim").parts["nodes"][i]]
+        assert [e["published"]["xhat"] for e in res.parts["nodes"][i]] == [e["published"]["xhat"] for e in clean("nsnim").parts["nodes"][i]]
 
 
 FAULTY = 2  # a node whose sensor's fault starts within STEPS (at step 11 with seed 0)
@@ -234,7 +241,7 @@ def test_forged_copies_never_count_as_fault_detections() -> None:
     def before(key: str, msg: Message) -> list[tuple[str, bytes]]:
         if key == _state_key(FAULTY) and isinstance(msg, NodeState) and 1 <= msg.step < onset:
             P = np.diag([1e-8, 1e-8, 1e-8]).reshape(9).tolist()
-            forged = {"xhat": [*msg.xhat[:2], msg.xhat[2] + shift], "P": P, "innov": msg.innov - float(cbar[FAULTY][2]) * shift}
+            forged = {"xhat": [*msg.published.xhat[:2], msg.published.xhat[2] + shift], "P": P, "innov": msg.innov - float(cbar[FAULTY][2]) * shift}
             return [(key, _forged_state(msg, **forged))]
         return []
 

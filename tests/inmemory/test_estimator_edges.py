@@ -97,8 +97,8 @@ def test_corner_profile_runs_contained_or_flagged(name: str, case: str, tmp_path
     for node, entries in res.parts["nodes"].items():
         assert len(entries) == STEPS + 1, node
         for e in entries:
-            P = np.asarray(e["P"]).reshape(3, 3)
-            assert publishable(np.asarray(e["xhat"]), P), (node, e["step"])
+            P = np.asarray(e["published"]["P"]).reshape(3, 3)
+            assert publishable(np.asarray(e["published"]["xhat"]), P), (node, e["step"])
             assert e["contained"] or e["status"] == "fallback" or not e["assumptions_ok"], (node, e)
 
 

@@ -23,7 +23,8 @@ from netsetest.messages import NodeState, decode, encode
 from netsetest.records.record import load_record
 from netsetest.roles.node import enclosing_ellipsoid
 from netsetest.runtime.inmemory import run_inmemory
-from netsetest.sets import Box, Zonotope, set_from_wire, set_to_wire
+from netsetest.sets import Box, Zonotope, set_to_wire
+from message_helpers import make_state
 
 ROOT = Path(__file__).resolve().parents[2]
 STEPS = 40
@@ -70,10 +71,10 @@ def test_mixed_network_contained_where_assumptions_held(mixed_run) -> None:
             if int(i) not in MIXED:
                 continue  # an SDP node: its box is of the ellipsoid ∩ its region, within the ellipsoid's box
             # the published ellipsoid (a set estimator's neighbour-facing summary) encloses the box
-            P = np.asarray(e["P"]).reshape(3, 3)
+            P = np.asarray(e["published"]["P"]).reshape(3, 3)
             for corner in np.array(np.meshgrid(*b)).T.reshape(-1, 3):
-                d = corner - np.asarray(e["xhat"])
-                assert d @ np.linalg.solve(P, d) <= e["rho"] * (1 + 1e-9)
+                d = corner - np.asarray(e["published"]["xhat"])
+                assert d @ np.linalg.solve(P, d) <= e["published"]["rho"] * (1 + 1e-9)
 
 
 def test_inspect_uses_the_set_bounds(mixed_run) -> None:
@@ -98,16 +99,16 @@ def test_enclosing_ellipsoid_contains_the_set() -> None:
 
 def _state(**kw) -> NodeState:
     base = dict(step=1, node=1, xhat=[0.0, 0.0, 0.0], P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
-    return NodeState(**{**base, **kw})
+    return make_state(**{**base, **kw})
 
 
 def test_wire_set_field() -> None:
-    assert "set" not in msgpack.unpackb(encode(_state()), raw=False)  # the SDP's wire format is unchanged
+    assert "set" not in msgpack.unpackb(encode(_state()), raw=False)["published"]  # the SDP sends no set
     box = Box(np.array([-1.0, -1.0, -1.0]), np.array([1.0, 1.0, 1.0]))
     back = decode(encode(_state(set=set_to_wire(box))))
-    assert isinstance(set_from_wire(back.set, 3), Box)
+    assert isinstance(back.published.own_set, Box)
     raw = msgpack.unpackb(encode(_state(set=set_to_wire(box))), raw=False)
-    raw["set"] = {"type": "box", "lo": [0.0, 0.0], "hi": [1.0, 1.0]}  # wrong dimension: dropped at decode
+    raw["published"]["set"] = {"type": "box", "lo": [0.0, 0.0], "hi": [1.0, 1.0]}  # wrong dimension: dropped at decode
     with pytest.raises(Exception, match="invalid"):
         decode(msgpack.packb(raw, use_bin_type=True))
 

@@ -99,7 +99,9 @@ def _fault_widths(sc, signals: str = "paper") -> tuple[dict[int, float], object,
     widths: dict[int, list[float]] = {}
     bus.subscribe(
         keys.node_state("mem", "*"),
-        lambda key, m: isinstance(m, NodeState) and m.step >= 10 and widths.setdefault(m.node, []).append(2 * float(np.sqrt(m.rho * m.P[8]))),
+        lambda key, m: (
+            isinstance(m, NodeState) and m.step >= 10 and widths.setdefault(m.node, []).append(2 * float(np.sqrt(m.published.rho * m.published.P[8])))
+        ),
     )
     s = run_inmemory(sc, signals, seed=0, bus=bus).summary
     return {i: float(np.mean(w)) for i, w in widths.items()}, s, used
@@ -222,7 +224,7 @@ def test_a_recursion_that_misses_on_a_covered_node_step_is_a_violation(
 
 def test_the_region_keeps_every_reading_and_is_judged(monkeypatch: pytest.MonkeyPatch) -> None:
     """A node with readings keeps a region of x (netsetest/polygon.py) moved through every step and cut by
-    every reading, publishes it (NodeState.own_region) and cuts its published fault interval by what its own
+    every reading, publishes it (NodeState.published, its region) and cuts its published fault interval by what its own
     measurement proves over it.  On paper6_reference, worst-case signals, NSNIM: every node-step is covered
     and contained, the set each node continues from (region included) too, and the region's fault interval is
     published on nearly every step from step 10 (a fault range the run without the region never has: NSNIM
@@ -234,7 +236,7 @@ def test_the_region_keeps_every_reading_and_is_judged(monkeypatch: pytest.Monkey
     assert s.violations_total == 0 and s.node_steps_covered == s.node_steps_evaluated == s.node_steps_contained
     rows = [e for i, es in res.parts["nodes"].items() if int(i) != 3 for e in es if e["step"] >= 10]
     assert all(e["continues_contained"] for e in rows)
-    assert sum("fault_range" in e for e in rows) >= 0.9 * len(rows) > 0
+    assert sum("fault" in e["published"] for e in rows) >= 0.9 * len(rows) > 0
 
     _move_regions_off(monkeypatch, np.array([1.0, 0.0]))  # 1 rad of sideslip off
     broken = run_inmemory(sc, "worst", seed=0)
@@ -254,7 +256,7 @@ def test_every_node_publishes_its_region_and_a_region_off_the_truth_is_a_violati
     assert s.violations_total == 0 and s.node_steps_covered == s.node_steps_evaluated == s.node_steps_contained
     for i, es in res.parts["nodes"].items():
         for e in es[10:]:
-            half = np.sqrt(e["rho"] * np.diag(np.reshape(e["P"], (3, 3))))
+            half = np.sqrt(e["published"]["rho"] * np.diag(np.reshape(e["published"]["P"], (3, 3))))
             width = np.diff(np.asarray(e["bounds"]), axis=1)[:, 0]
             assert np.all(width[:2] < 0.9 * 2 * half[:2]), (i, e["step"])  # the region's, not the ellipsoid's
 
@@ -295,8 +297,6 @@ def test_set_estimators_intersect_with_the_references_reading(name: str, gain: f
     (interval) narrower than without it; everything covered and contained."""
     import dataclasses
 
-    from netsetest.sets import set_from_wire
-
     sc = load_topology("paper6_reference", case="nsnim", steps=40)
     sc = dataclasses.replace(sc, nodes=[dataclasses.replace(n, estimator=name) for n in sc.nodes])
     widths: dict[bool, dict[int, list[float]]] = {True: {}, False: {}}
@@ -313,7 +313,7 @@ def test_set_estimators_intersect_with_the_references_reading(name: str, gain: f
                 if on:
                     used.setdefault(m.node, []).append(m.readings)
                 if m.step >= 10:
-                    lo, hi = set_from_wire(m.set, 3).bounds()
+                    lo, hi = m.published.bounds()
                     widths[on].setdefault(m.node, []).append(float(hi[2] - lo[2]))
 
         bus.subscribe(keys.node_state("mem", "*"), seen)
@@ -358,12 +358,10 @@ def _states(sc, signals: str = "paper") -> tuple[object, dict[int, list]]:
 def _fault_width(m) -> float:
     import numpy as np
 
-    if m.set is not None:
-        from netsetest.sets import set_from_wire
-
-        lo, hi = set_from_wire(m.set, 3).bounds()
+    if m.published.set is not None:
+        lo, hi = m.published.bounds()
         return float(hi[2] - lo[2])
-    return 2 * float(np.sqrt(m.rho * m.P[8]))
+    return 2 * float(np.sqrt(m.published.rho * m.published.P[8]))
 
 
 @pytest.mark.parametrize(

@@ -158,8 +158,8 @@ def test_ts_plant_is_bit_identical_to_the_paper_run() -> None:
         h = hashlib.blake2b(digest_size=16)
         for i in sorted(res.parts["nodes"]):
             for e in res.parts["nodes"][i]:
-                h.update(np.asarray(e["xhat"], dtype=float).tobytes())
-                h.update(np.asarray(e["P"], dtype=float).tobytes())
+                h.update(np.asarray(e["published"]["xhat"], dtype=float).tobytes())
+                h.update(np.asarray(e["published"]["P"], dtype=float).tobytes())
         for t in res.parts["truth"]:
             h.update(np.asarray(t["x"], dtype=float).tobytes())
             assert t["e"] is None or t["e"] == [0.0, 0.0]

@@ -79,8 +79,8 @@ def recheck(topology: str, case: str, signals: SignalKind, seed: int, steps: int
                     continue
                 out["published"] += 1
                 out["published narrower"] += _narrower(float(lo[n]), float(hi[n]), exact[k])
-                if coord in AXES and e.get("own_region") is not None:
-                    region = Polygon(np.reshape(e["own_region"], (-1, 2)))
+                if coord in AXES and e["published"].get("region") is not None:
+                    region = Polygon(np.reshape(e["published"]["region"], (-1, 2)))
                     out["region"] += 1
                     out["region narrower"] += _narrower(*region.interval(AXES[coord]), exact[k])
     return out

@@ -38,6 +38,7 @@ from netsetest.estimator.sector import (
 )
 from netsetest.models.sensor import Sensor
 from netsetest.runtime.inmemory import run_inmemory
+from message_helpers import make_state
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER6 = ROOT / "topologies" / "paper6.toml"
@@ -226,7 +227,7 @@ def test_step_zero_uses_the_first_measurement(case):
         e = entries[0]
         assert e["status"] == "init" and e["contained"] and e["assumptions_ok"]
         prior_width = 2 * math.sqrt(n.rho * n.P0[2, 2])
-        width = 2 * math.sqrt(e["rho"] * e["P"][8])
+        width = 2 * math.sqrt(e["published"]["rho"] * e["published"]["P"][8])
         assert width < 0.7 * prior_width, f"node {node}: step-0 fault width {width} vs prior {prior_width}"
 
 
@@ -269,10 +270,10 @@ def test_the_size_cut_narrows_the_published_fault_only_where_the_sector_rests_on
 
 
 def test_a_cut_set_is_published_with_the_bound_it_rests_on_and_judged_against_it(tmp_path: Path) -> None:
-    """Paper SAIM: a step whose fault interval rests on the declared |f| ≤ F publishes fault_range ⊆ [−F, F]
+    """Paper SAIM: a step whose fault interval rests on the declared |f| ≤ F publishes a fault range ⊆ [−F, F]
     (a step whose range rests on the own measurement over the region publishes that one), the record's fault bounds stay inside it and often end on it, and the collector judges
     the truth against the ellipsoid and the range: a range that excludes the true fault is a miss."""
-    from netsetest.messages import NodeState, Truth
+    from netsetest.messages import Truth
     from netsetest.roles.judge import Judge
 
     sc = load_topology(PAPER6, "saim", steps=40)
@@ -281,23 +282,23 @@ def test_a_cut_set_is_published_with_the_bound_it_rests_on_and_judged_against_it
     for i, entries in res.parts["nodes"].items():
         size = sc.node(int(i)).fault_size
         for e in entries:
-            if "fault_range" not in e:
+            if "fault" not in e["published"]:
                 continue
             ranged += 1
-            lo, hi = e["fault_range"]
+            lo, hi = e["published"]["fault"]
             assert lo <= hi, e
             if e["sector_basis"] == "fault-bound":  # else it rests on the own measurement over the region (issue 28)
                 assert -size <= lo <= hi <= size, e
-            half = float(np.sqrt(e["rho"] * e["P"][8]))
-            clipped += hi < e["xhat"][2] + half or lo > e["xhat"][2] - half
+            half = float(np.sqrt(e["published"]["rho"] * e["published"]["P"][8]))
+            clipped += hi < e["published"]["xhat"][2] + half or lo > e["published"]["xhat"][2] - half
             assert e["contained"], e  # the truth's fault is within the declared bound on the paper profiles
     assert ranged > 0 and clipped > 0.5 * ranged
     judge, truth = Judge(sc), res.parts["truth"][20]
     f = truth["faults"]["1"]
-    st = NodeState(step=20, node=1, xhat=[*truth["x"], f], P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
+    st = make_state(step=20, node=1, xhat=[*truth["x"], f], P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
     tr = msgspec.convert({k: truth[k] for k in Truth.__struct_fields__ if k in truth}, Truth)
-    inside = judge.containment(1, msgspec.structs.replace(st, fault_range=[f - 0.01, f + 0.01]), tr)
-    outside = judge.containment(1, msgspec.structs.replace(st, fault_range=[f + 0.01, f + 0.02]), tr)
+    inside = judge.containment(1, msgspec.structs.replace(st, published=msgspec.structs.replace(st.published, fault=[f - 0.01, f + 0.01])), tr)
+    outside = judge.containment(1, msgspec.structs.replace(st, published=msgspec.structs.replace(st.published, fault=[f + 0.01, f + 0.02])), tr)
     assert inside.contained and not outside.contained and outside.E == inside.E
 
 
@@ -306,13 +307,12 @@ def test_a_neighbour_sector_that_contradicts_the_topology_is_dropped(case, secto
     """A saturating sensor always publishes its sector, a sensor without saturation never does."""
     from netsetest.bus import keys
     from netsetest.bus.base import MemoryBus
-    from netsetest.messages import NodeState
     from netsetest.roles.node import Node
 
     sc = load_topology(PAPER6, case)
     bus = MemoryBus()
     node = Node(sc, 1, bus, "t")
-    msg = NodeState(
+    msg = make_state(
         step=0,
         node=2,
         xhat=[0.0, 0.1, 0.0],
@@ -344,7 +344,7 @@ def test_trace_objective_reproduces_the_previous_numbers():
     res = run_inmemory(sc, "paper", "scheduled", 0, objective="trace")
     bank = run_inmemory(sc, "paper", "scheduled", 0)  # the default
     for node, entries in res.parts["nodes"].items():
-        w = np.mean([2 * math.sqrt(e["rho"] * e["P"][8]) for e in entries[10:]])
+        w = np.mean([2 * math.sqrt(e["published"]["rho"] * e["published"]["P"][8]) for e in entries[10:]])
         assert w == pytest.approx(PAPER_OBJECTIVE_WIDTHS_FROM_STEP_10[int(node)], rel=2e-4)
-        wb = np.mean([2 * math.sqrt(e["rho"] * e["P"][8]) for e in bank.parts["nodes"][node][10:]])
+        wb = np.mean([2 * math.sqrt(e["published"]["rho"] * e["published"]["P"][8]) for e in bank.parts["nodes"][node][10:]])
         assert wb < 0.9 * w  # the default publishes markedly narrower fault bounds

@@ -27,10 +27,11 @@ from zenoh_helpers import (
 from netsetest.bus.base import MemoryBus
 from netsetest.cli.main import main
 from netsetest.config.schema import load_topology
-from netsetest.messages import NodeState, encode
+from netsetest.messages import encode
 from netsetest.records.record import load_record
 from netsetest.runtime.inmemory import run_inmemory
 from netsetest.runtime.live import LiveTable, observed_key
+from message_helpers import make_state
 
 ROOT = Path(__file__).resolve().parents[2]
 STEPS = 30
@@ -100,7 +101,7 @@ def test_echo_and_watch_on_a_live_run(procs: ProcessGuard, tmp_path: Path) -> No
     for m in lines:
         assert m["key"] == f"netsetest/{run}/node/2/state" and m["type"] == "state" and m["node"] == 2
         entry = rec.raw_nodes["2"][m["step"]]
-        assert m["xhat"] == entry["xhat"] and m["P"] == entry["P"] and m["rho"] == entry["rho"]
+        assert m["published"] == entry["published"] and m.get("continues") == entry.get("continues")
 
     # echo 2: "key  {json}" lines of this run: the vehicle's inputs and truth
     lines2 = out2.decode().splitlines()
@@ -136,11 +137,11 @@ def test_live_table_matches_the_collector(tmp_path: Path) -> None:
         entries = res.parts["nodes"][str(i)]
         last = entries[-1]
         assert row.step == last["step"] == 12 and row.status == last["status"]
-        P = np.asarray(last["P"]).reshape(3, 3)
-        half = np.sqrt(last["rho"] * P[2, 2])
+        P = np.asarray(last["published"]["P"]).reshape(3, 3)
+        half = np.sqrt(last["published"]["rho"] * P[2, 2])
         lo, hi = last["bounds"][2]  # the published fault interval: the ellipsoid's, cut by its fault range and region
         assert row.fault_lower == pytest.approx(lo, abs=1e-15) and row.fault_upper == pytest.approx(hi, abs=1e-15)
-        assert last["xhat"][2] - half - 1e-12 <= lo <= hi <= last["xhat"][2] + half + 1e-12  # within the ellipsoid's
+        assert last["published"]["xhat"][2] - half - 1e-12 <= lo <= hi <= last["published"]["xhat"][2] + half + 1e-12  # within the ellipsoid's
         assert row.E_step == 12 and row.E == pytest.approx(last["E"], rel=1e-12)
         assert row.missing == summary[i].neighbour_messages_missing == sum(len(e["missing"]) for e in entries)
         assert row.deadline_misses == 0 and row.dropped == 0
@@ -154,7 +155,7 @@ def test_live_table_without_truth_shows_no_E_and_stays_bounded() -> None:
     P = [1.0, 0, 0, 0, 1.0, 0, 0, 0, 0.25]
     for k in range(500):
         table.update(
-            NodeState(
+            make_state(
                 step=k,
                 node=1,
                 xhat=[0.0, 0.0, 0.1],
@@ -223,7 +224,7 @@ def test_observer_decodes_and_reports_undecodable_payloads(tmp_path: Path) -> No
     cfg = observer_config("peer", [], _listening_config(tmp_path / "obs.json5", port))
     obs = Observer(observed_key(run, None), cfg)
     pub = zenoh.open(zenoh_config("peer", (), [f"tcp/127.0.0.1:{port}"]))
-    msg = NodeState(step=1, node=1, xhat=[0.0, 0.0, 0.1], P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
+    msg = make_state(step=1, node=1, xhat=[0.0, 0.0, 0.1], P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
     seen: dict[str, object] = {}
     try:
         deadline = time.monotonic() + 30
@@ -239,7 +240,7 @@ def test_observer_decodes_and_reports_undecodable_payloads(tmp_path: Path) -> No
         obs.close()
     good, bad = seen.get(f"netsetest/{run}/node/1/state"), seen.get(f"netsetest/{run}/node/9/state")
     assert good is not None and bad is not None, seen
-    assert good.message == msg and good.as_json()["xhat"] == [0.0, 0.0, 0.1]
+    assert good.message == msg and good.as_json()["published"]["xhat"] == [0.0, 0.0, 0.1]
     assert bad.message is None and bad.as_json() == {"key": f"netsetest/{run}/node/9/state", "undecodable": bad.error}
     assert bad.error.startswith(("not-a-map", "undecodable"))
 

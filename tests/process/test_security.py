@@ -42,6 +42,8 @@ from zenoh_helpers import (  # after the script-mode path above
     wait_roles,
 )
 
+from message_helpers import make_state
+
 from netsetest.bus import keys
 from netsetest.bus.zenoh_bus import BusError, open_session, zenoh_config
 from netsetest.config.schema import load_topology
@@ -65,7 +67,7 @@ SECURITY_LINE = re.compile(r"security: mtls\+acl \(.*router (tls/127\.0\.0\.1:\d
 
 
 def _state(node: int, step: int) -> NodeState:
-    return NodeState(step=step, node=node, xhat=[5.0, 5.0, 5.0], P=[1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6], rho=1.0, gamma=1.0, innov=1e6, status="ok")
+    return make_state(step=step, node=node, xhat=[5.0, 5.0, 5.0], P=[1e-6, 0, 0, 0, 1e-6, 0, 0, 0, 1e-6], rho=1.0, gamma=1.0, innov=1e6, status="ok")
 
 
 def _input(node: int, step: int) -> NodeInput:
@@ -143,8 +145,8 @@ def _assert_same_as_inmemory(record: dict, steps: int) -> None:
         mentries = mem.parts["nodes"][i]
         assert [e["step"] for e in zentries] == [e["step"] for e in mentries] == list(range(steps + 1)), f"node {i}"
         for ze, me in zip(zentries, mentries):
-            np.testing.assert_allclose(ze["xhat"], me["xhat"], rtol=0, atol=TOL, err_msg=f"node {i} step {ze['step']}")
-            np.testing.assert_allclose(ze["P"], me["P"], rtol=0, atol=TOL, err_msg=f"node {i} step {ze['step']}")
+            np.testing.assert_allclose(ze["published"]["xhat"], me["published"]["xhat"], rtol=0, atol=TOL, err_msg=f"node {i} step {ze['step']}")
+            np.testing.assert_allclose(ze["published"]["P"], me["published"]["P"], rtol=0, atol=TOL, err_msg=f"node {i} step {ze['step']}")
             assert (ze["status"], ze["used"], ze["contained"]) == (me["status"], me["used"], me["contained"])
     assert [t["step"] for t in record["truth"]] == [t["step"] for t in mem.parts["truth"]] == list(range(steps + 1))
     for zt, mt in zip(record["truth"], mem.parts["truth"]):

@@ -16,9 +16,10 @@ import pytest
 
 from netsetest.bus.base import MAX_PER_KEY, MAX_ROUNDS
 from netsetest.bus.zenoh_bus import ZenohBus
-from netsetest.messages import End, Message, NodeState
+from netsetest.messages import End, Message
 from netsetest.records.record import load_record
 from zenoh_helpers import PAPER6, ROOT, cli, free_ports
+from message_helpers import make_state
 
 LAZY, WAKE = "lazytest/a/lazy", "lazytest/a/wake"
 
@@ -125,7 +126,7 @@ def test_a_flood_of_far_steps_loses_the_awaited_state_from_a_ring_not_from_the_i
         rx.subscribe(LAZY, lambda key, msg: got[key].append(msg.step), lazy=True)
         rx.subscribe(WAKE, lambda key, msg: got[key].append(msg.step))
         time.sleep(0.5)
-        far = NodeState(step=10_000, node=2, xhat=[0.0] * 3, P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
+        far = make_state(step=10_000, node=2, xhat=[0.0] * 3, P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
         for key in (LAZY, WAKE):
             for _ in range(4 * MAX_PER_KEY):
                 tx.publish(key, far)
@@ -239,7 +240,7 @@ def test_a_screen_drops_passed_steps_undecoded_on_lazy_and_waking_keys() -> None
         for key, lazy in ((LAZY, True), (WAKE, False)):
             rx.subscribe(key, lambda k, msg: got[k].append(msg.step), lazy=lazy, screen=lambda step: "stale" if step < first else None)
         time.sleep(0.5)
-        good = NodeState(step=0, node=2, xhat=[0.0] * 3, P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
+        good = make_state(step=0, node=2, xhat=[0.0] * 3, P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
         not_spd = msgspec.msgpack.encode({**msgspec.to_builtins(good), "type": "state", "step": 3, "P": [-1.0] * 9})
         invalid_kept = msgspec.msgpack.encode({**msgspec.to_builtins(good), "type": "state", "step": 8, "P": [-1.0] * 9})
         for key in (LAZY, WAKE):

@@ -107,9 +107,9 @@ def test_zenoh_lockstep_equals_inmemory(runs: Runs, name: str) -> None:
         assert _steps_of(zentries) == _steps_of(mentries) == list(range(steps + 1)), f"{name}: node {i} steps"
         for ze, me in zip(zentries, mentries):
             k = ze["step"]
-            np.testing.assert_allclose(ze["xhat"], me["xhat"], rtol=0, atol=TOL, err_msg=f"{name}: node {i} step {k} xhat")
-            np.testing.assert_allclose(ze["P"], me["P"], rtol=0, atol=TOL, err_msg=f"{name}: node {i} step {k} P")
-            assert ze["rho"] == me["rho"]
+            np.testing.assert_allclose(ze["published"]["xhat"], me["published"]["xhat"], rtol=0, atol=TOL, err_msg=f"{name}: node {i} step {k} xhat")
+            np.testing.assert_allclose(ze["published"]["P"], me["published"]["P"], rtol=0, atol=TOL, err_msg=f"{name}: node {i} step {k} P")
+            assert ze["published"]["rho"] == me["published"]["rho"]
             assert ze["status"] == me["status"], f"{name}: node {i} step {k} status"
             assert ze["used"] == me["used"], f"{name}: node {i} step {k} used neighbours"
             assert ze["readings"] == me["readings"], f"{name}: node {i} step {k} used readings"

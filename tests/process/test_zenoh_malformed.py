@@ -28,12 +28,13 @@ from zenoh_helpers import (
 from netsetest.bus import keys
 from netsetest.bus.zenoh_bus import ZenohBus
 from netsetest.messages import NodeInput, NodeState, encode
+from message_helpers import make_state, raw_message
 
 pytestmark = pytest.mark.zenoh
 
 
 def _state(node: int = 2, step: int = 0, **changes: object) -> NodeState:
-    return NodeState(
+    return make_state(
         step=step,
         node=node,
         xhat=[0.0, 0.0, 0.0],
@@ -48,9 +49,7 @@ def _state(node: int = 2, step: int = 0, **changes: object) -> NodeState:
 
 def _raw(msg: NodeState | NodeInput, **fields: object) -> bytes:
     """The msgpack map of ``msg`` with some fields replaced (bypassing validation)."""
-    d = msg.model_dump(mode="python")
-    d.update(fields)
-    return msgpack.packb(d, use_bin_type=True)
+    return msgpack.packb(raw_message(msg, **fields), use_bin_type=True)
 
 
 GARBAGE = b"\x00\xffthis is not msgpack\xc1"
@@ -206,8 +205,8 @@ def test_zenoh_run_ignores_injected_garbage(procs, tmp_path) -> None:
         assert [e["step"] for e in entries] == [e["step"] for e in mem["nodes"][i]] == list(range(steps + 1))
         for ze, me in zip(entries, mem["nodes"][i]):
             where = f"node {i} step {ze['step']}"
-            np.testing.assert_allclose(ze["xhat"], me["xhat"], rtol=0, atol=1e-9, err_msg=where)
-            np.testing.assert_allclose(ze["P"], me["P"], rtol=0, atol=1e-9, err_msg=where)
+            np.testing.assert_allclose(ze["published"]["xhat"], me["published"]["xhat"], rtol=0, atol=1e-9, err_msg=where)
+            np.testing.assert_allclose(ze["published"]["P"], me["published"]["P"], rtol=0, atol=1e-9, err_msg=where)
             assert ze["used"] == me["used"] and ze["missing"] == [], where
 
 

@@ -32,8 +32,8 @@ def test_zenoh_mixed_equals_inmemory(tmp_path: Path) -> None:
         mentries = m.parts["nodes"][i]
         assert [e["step"] for e in zentries] == [e["step"] for e in mentries] == list(range(STEPS + 1))
         for ze, me in zip(zentries, mentries):
-            np.testing.assert_allclose(ze["xhat"], me["xhat"], rtol=0, atol=TOL)
-            np.testing.assert_allclose(ze["P"], me["P"], rtol=0, atol=TOL)
+            np.testing.assert_allclose(ze["published"]["xhat"], me["published"]["xhat"], rtol=0, atol=TOL)
+            np.testing.assert_allclose(ze["published"]["P"], me["published"]["P"], rtol=0, atol=TOL)
             np.testing.assert_allclose(ze["bounds"], me["bounds"], rtol=0, atol=TOL)  # every node's published set
             for f in ("status", "used", "contained", "assumptions_ok", "sector_basis"):
                 assert ze[f] == me[f], f"node {i} step {ze['step']}: {f}"

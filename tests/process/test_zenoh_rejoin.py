@@ -98,7 +98,7 @@ def test_zenoh_kill_and_rejoin(procs, tmp_path) -> None:
     assert sorted(k for k in mine if k >= r) == list(range(r, STEPS + 1)), f"node {KILLED} missed steps after rejoining"
     for k in range(r, STEPS + 1):
         e = mine[k]
-        assert e["E"] is not None and e["contained"] and e["E"] <= e["rho"], (
+        assert e["E"] is not None and e["contained"] and e["E"] <= e["published"]["rho"], (
             f"node {KILLED} step {k}: E={e['E']}, {e.get('not_judged_why')}; drops {s['drops']}"
         )
     assert mine[r]["used"], "the rejoin ellipsoid must come from at least one neighbour"

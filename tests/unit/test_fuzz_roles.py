@@ -134,6 +134,11 @@ def _mutated(draw: st.DrawFn) -> tuple[str, bytes]:
         field = draw(st.sampled_from(sorted(raw, key=str)))
         if field in ("v", "type"):
             continue
+        inner = raw[field]
+        if isinstance(inner, dict) and inner and all(isinstance(k, str) for k in inner) and draw(st.booleans()):
+            part = draw(st.sampled_from(sorted(inner)))  # a part of a set (a state's published or continued one)
+            inner[part] = draw(_value_like(inner[part]))
+            continue
         raw[field] = draw(_value_like(raw[field]))
     try:
         out = msgpack.packb(raw, use_bin_type=True)
@@ -185,6 +190,8 @@ def test_the_fuzz_templates_cover_every_message_type() -> None:
     types = {msgpack.unpackb(p, raw=False)["type"] for _, p in TEMPLATES}
     assert {"input", "state", "truth", "end", "reading"} <= types
     assert any(msgpack.unpackb(p, raw=False).get("readings") for _, p in TEMPLATES)  # states that used a reading
+    states = [msgpack.unpackb(p, raw=False) for _, p in TEMPLATES if msgpack.unpackb(p, raw=False)["type"] == "state"]
+    assert any({"region", "fault"} <= set(s["published"]) for s in states) and any("continues" in s for s in states)  # every part of both sets
     assert not math.isnan(len(TEMPLATES))
 
 

@@ -26,7 +26,7 @@ from netsetest.messages import (
     encode,
 )
 
-from message_helpers import truth
+from message_helpers import SET_FIELDS, make_state, raw_message, truth
 
 P_EYE = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
 
@@ -34,7 +34,7 @@ P_EYE = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
 def _state(**kw: object) -> NodeState:
     base: dict[str, object] = dict(step=4, node=2, xhat=[0.1, -0.2, 0.3], P=P_EYE, rho=1.0, gamma=0.9, innov=0.01, status="ok")
     base.update(kw)
-    return NodeState(**base)
+    return make_state(**base)
 
 
 EVERY_KIND = [
@@ -72,17 +72,15 @@ def test_version_and_type_always_sent(msg):
         default = f.default_factory() if f.default_factory is not msgspec.NODEFAULT else f.default
         if getattr(msg, f.name) != default:
             assert raw[f.encode_name] == js[f.name], f.name
-    assert "set" not in raw and "rho_cert" not in raw if isinstance(msg, NodeState) else True
+    assert "set" not in raw["published"] and "continues" not in raw and "rho_cert" not in raw if isinstance(msg, NodeState) else True
 
 
 @pytest.mark.parametrize("msg", EVERY_KIND, ids=lambda m: type(m).__name__)
 def test_previous_wire_format_decodes(msg):
-    """The pydantic version sent every field (``v`` first, ``type`` second; a NodeState without a set
-    left ``set`` out): such a payload decodes to the same message, and what we send decodes the same
+    """The pydantic version sent every field (``v`` first, ``type`` second; a NodeState's published set
+    leaves its absent parts out): such a payload decodes to the same message, and what we send decodes the same
     way under the previous rules (every field it leaves out has the default the old schema had)."""
-    full = msg.model_dump(mode="python")
-    if isinstance(msg, NodeState) and msg.set is None:
-        del full["set"]
+    full = raw_message(msg)
     assert list(full)[:2] == ["v", "type"]
     back = decode(_pack(full))
     assert back == msg and type(back) is type(msg)
@@ -93,7 +91,7 @@ def test_previous_wire_format_decodes(msg):
 @pytest.mark.parametrize("msg", EVERY_KIND, ids=lambda m: type(m).__name__)
 def test_missing_version_is_rejected(msg):
     """``v`` has a default for constructing messages, but a payload without it is not version 1."""
-    d = msg.model_dump()
+    d = raw_message(msg)
     del d["v"]
     assert _reason(_pack(d)) == "schema-version"
     for bad in (None, 0, 2, "1", [1]):
@@ -141,8 +139,8 @@ BY_TYPE = {type(m): m for m in EVERY_KIND}
 @pytest.mark.parametrize("cls,name", FLOAT_FIELDS, ids=[f"{c.__name__}.{n}" for c, n in FLOAT_FIELDS])
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf], ids=["nan", "inf", "-inf"])
 def test_every_float_field_must_be_finite(cls, name, bad):
-    d = BY_TYPE[cls].model_dump()
-    d[name] = bad
+    d = raw_message(BY_TYPE[cls])
+    (d["published"] if cls is NodeState and name in SET_FIELDS else d)[name] = bad
     with pytest.raises(BadMessage) as exc:
         decode(_pack(d))
     assert exc.value.reason == "invalid" and name in str(exc.value)
@@ -150,15 +148,16 @@ def test_every_float_field_must_be_finite(cls, name, bad):
 
 @pytest.mark.parametrize("name", ["xhat", "P", "sector"])
 def test_every_float_list_entry_must_be_finite(name):
-    d = _state(sector=(0.5, 0.5)).model_dump()
-    d[name] = list(d[name])
-    d[name][1] = math.nan
+    d = raw_message(_state(sector=(0.5, 0.5)))
+    target = d["published"] if name in SET_FIELDS else d
+    target[name] = list(target[name])
+    target[name][1] = math.nan
     assert _reason(_pack(d)) == "invalid"
 
 
 @pytest.mark.parametrize("name", ["faults", "noise", "gamma", "y", "y_nofault", "r"])
 def test_truth_map_values_must_be_finite(name):
-    d = truth().model_dump()
+    d = raw_message(truth())
     d[name] = {**d[name], "2": math.inf}
     assert _reason(_pack(d)) == "invalid"
 
@@ -185,27 +184,27 @@ def test_truth_map_values_must_be_finite(name):
     ids=lambda v: v.__name__ if isinstance(v, type) else ",".join(v),
 )
 def test_types_and_sizes_are_strict(cls, change):
-    d = BY_TYPE[cls].model_dump()
+    d = raw_message(BY_TYPE[cls])
     d.update(change)
     assert _reason(_pack(d)) == "invalid"
 
 
 def test_detail_is_bounded():
     """A forged value is quoted in the reason, but never at length."""
-    for d in ({**_state().model_dump(), "type": "x" * 100_000}, {**_state().model_dump(), "v": "x" * 100_000}):
+    for d in ({**raw_message(_state()), "type": "x" * 100_000}, {**raw_message(_state()), "v": "x" * 100_000}):
         with pytest.raises(BadMessage) as exc:
             decode(_pack(d))
         assert len(str(exc.value)) <= MAX_DETAIL + len(exc.value.reason) + 2
 
 
 def test_detail_names_the_field_and_why():
-    d = _state().model_dump()
-    d["xhat"] = [0.0, math.nan, 0.0]
-    with pytest.raises(BadMessage, match=r"^invalid: xhat\[1\]: Expected finite `float`$"):
+    d = raw_message(_state())
+    d["published"]["xhat"] = [0.0, math.nan, 0.0]
+    with pytest.raises(BadMessage, match=r"^invalid: published.xhat\[1\]: Expected finite `float`$"):
         decode(_pack(d))
-    d = _state().model_dump()
-    d["P"] = [1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0]
-    with pytest.raises(BadMessage, match=r"^invalid: P is not positive definite$"):
+    d = raw_message(_state())
+    d["published"]["P"] = [1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    with pytest.raises(BadMessage, match=r"^invalid: published: P is not positive definite$"):
         decode(_pack(d))
 
 
@@ -216,8 +215,8 @@ def test_numpy_scalars_go_on_the_wire_as_numbers():
     """Roles compute with numpy: float64, int64 and bool_ values encode as the Python numbers they are."""
     m = _state(rho=np.float64(0.5), innov=np.float64(-1e-3), late=np.bool_(True), dropped=np.int64(3))
     back = decode(encode(m))
-    assert back.rho == 0.5 and back.innov == -1e-3 and back.late is True and back.dropped == 3
-    assert type(back.rho) is float and type(back.dropped) is int
+    assert back.published.rho == 0.5 and back.innov == -1e-3 and back.late is True and back.dropped == 3
+    assert type(back.published.rho) is float and type(back.dropped) is int
     with pytest.raises(TypeError, match="ndarray"):
         encode(_state(xhat=np.zeros(3)))
 

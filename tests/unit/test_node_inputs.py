@@ -9,8 +9,9 @@ import numpy as np
 from netsetest.bus import keys
 from netsetest.bus.base import MemoryBus
 from netsetest.config.schema import load_topology
-from netsetest.messages import NodeInput, NodeState
+from netsetest.messages import NodeInput
 from netsetest.roles.node import Node
+from message_helpers import make_state
 
 PAPER6 = Path(__file__).resolve().parents[2] / "topologies" / "paper6.toml"
 
@@ -71,7 +72,7 @@ def test_a_dropped_neighbour_state_answers_the_wait() -> None:
     own = node.own
     assert own is not None
     nb = sc.node(j)
-    forged = NodeState(
+    forged = make_state(
         step=0,
         node=j,
         xhat=[float(a) for a in nb.x0_hat],

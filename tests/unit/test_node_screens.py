@@ -12,8 +12,9 @@ from hypothesis import strategies as st
 from netsetest.bus import keys
 from netsetest.bus.base import MemoryBus
 from netsetest.config.schema import load_topology
-from netsetest.messages import NodeInput, NodeState, Reading
+from netsetest.messages import NodeInput, Reading
 from netsetest.roles.node import Node
+from message_helpers import make_state
 
 REFERENCE = Path(__file__).resolve().parents[2] / "topologies" / "paper6_reference.toml"
 STEPS = 20
@@ -31,7 +32,7 @@ def _messages(node: Node, step: int) -> list[tuple[str, object, str | None]]:
             NodeInput(step=step, node=node.id, y=0.01, gamma=1.0, u_prev=(sc.steer_low + sc.steer_high) / 2, vx_prev=sc.vx(max(step - 1, 0))),
             node._passed_input(step),
         ),
-        (keys.node_state("t", j), NodeState(step=step, node=j, xhat=[0.0] * 3, P=P_ID, rho=1.0, gamma=1.0, innov=0.0, status="ok"), node._passed_state(step)),
+        (keys.node_state("t", j), make_state(step=step, node=j, xhat=[0.0] * 3, P=P_ID, rho=1.0, gamma=1.0, innov=0.0, status="ok"), node._passed_state(step)),
         (keys.reading("t", ref), Reading(step=step, node=ref, y=0.01, gamma=1.0), node._passed_reading(step)),
     ]
 

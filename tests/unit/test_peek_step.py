@@ -8,13 +8,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from netsetest.bus.base import MemoryBus
-from netsetest.messages import End, NodeInput, NodeState, Reading, Ready, decode, encode, peek_step
+from netsetest.messages import End, NodeInput, Reading, Ready, decode, encode, peek_step
+from message_helpers import make_state
 
 P_ID = [1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0]
 
 
 def test_peek_step_reads_the_step_of_every_kind_that_names_one() -> None:
-    state = NodeState(step=12, node=2, xhat=[0.0] * 3, P=P_ID, rho=1.0, gamma=1.0, innov=0.0, status="ok", drops={"stale": 3}, used=[1])
+    state = make_state(step=12, node=2, xhat=[0.0] * 3, P=P_ID, rho=1.0, gamma=1.0, innov=0.0, status="ok", drops={"stale": 3}, used=[1])
     for msg, step in (
         (state, 12),
         (NodeInput(step=0, node=1, y=0.1, gamma=1.0), 0),

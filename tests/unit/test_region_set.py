@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from netsetest.messages import NodeState, decode, encode
 from netsetest.polygon import Polygon
 from netsetest.sets import Box, RegionSet, SetFormatError, Zonotope, set_from_wire, set_to_wire
+from message_helpers import make_state
 
 BASE = Zonotope(np.zeros(3), np.diag([1.0, 1.0, 1.0]))
 REGION = Polygon(np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]]))
@@ -63,8 +64,8 @@ def test_the_wire_form_round_trips_and_malformed_parts_are_refused() -> None:
 
 
 def test_a_node_state_carries_a_region_set_and_its_bounds() -> None:
-    st_ = NodeState(step=1, node=2, xhat=[0.0, 0.0, 0.0], P=np.eye(3).reshape(-1).tolist(), rho=1.0, gamma=1.0, innov=0.0, status="ok", set=set_to_wire(S))
+    st_ = make_state(step=1, node=2, xhat=[0.0, 0.0, 0.0], P=np.eye(3).reshape(-1).tolist(), rho=1.0, gamma=1.0, innov=0.0, status="ok", set=set_to_wire(S))
     back = decode(encode(st_))
     assert isinstance(back, NodeState)
-    lo, hi = back.bounds()
+    lo, hi = back.published.bounds()
     np.testing.assert_array_equal(np.stack([lo, hi]), np.stack(S.bounds()))

@@ -1,0 +1,180 @@
+"""What a node proves at a step, as one typed set: :class:`ProvenSet` (issue 28).
+
+The SDP's set is its ellipsoid {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} ∩ (region × ℝ) ∩ {lo ≤ f ≤ hi}: the region a convex
+polygon of x = (β, r) (netsetest/polygon.py), the slab the fault range a declared bound, the k-of-N pin or the own
+measurement over the region proves (estimator/cuts.py).  A set estimator's set is its own (``set``, in the wire
+form of netsetest/sets.py, itself cut by its region and fault range where it keeps one: sets.RegionSet); its
+ellipsoid is then the one through the corners of that set's interval hull, the summary its neighbours use.
+
+Every layer reads the set through this type: its per-coordinate bounds (made once per set), membership (the
+judge's rule), its wire form (a msgspec Struct, checked on decode: a malformed set fails
+:func:`netsetest.messages.decode`, so a role drops the message) and what a state's digest hashes of it.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import cached_property
+from typing import Annotated, Any
+
+import msgspec
+import numpy as np
+from msgspec import Meta, Struct
+
+from netsetest.models.sensor import NA, NX
+from netsetest.polygon import MAX_VERTICES, MIN_VERTICES, Polygon
+from netsetest.sets import Box, Ellipsoid, RegionSet, SumSet, Zonotope, ellipsoid_bounds, set_from_wire
+from netsetest.validation import Finite, Positive
+
+Vec3 = Annotated[list[Finite], Meta(min_length=NA, max_length=NA)]
+Vec2 = Annotated[list[Finite], Meta(min_length=2, max_length=2)]
+Mat3 = Annotated[list[Finite], Meta(min_length=NA * NA, max_length=NA * NA)]
+RegionCoords = Annotated[list[Finite], Meta(min_length=2 * MIN_VERTICES, max_length=2 * MAX_VERTICES)]
+SYM_RTOL, SYM_ATOL = 1e-9, 1e-15  # P = Pᵀ up to rounding, as np.allclose(P, P.T, rtol, atol)
+
+
+def spd_problem(p: list[float]) -> str | None:
+    """Why the row-major 3×3 ``p`` is not symmetric positive definite (None if it is).
+
+    Plain floats rather than np.allclose and np.linalg.cholesky: the same tests, ten times cheaper
+    (≈3 µs against ≈30 µs), and every role pays them for every state it receives.
+    """
+    for a, b in ((1, 3), (2, 6), (5, 7)):  # (0,1), (0,2), (1,2) against their transposes
+        if abs(p[a] - p[b]) > SYM_ATOL + SYM_RTOL * min(abs(p[a]), abs(p[b])):
+            return "P is not symmetric"
+    # Cholesky of the lower triangle (LAPACK potrf's order): positive definite iff every pivot is > 0
+    if not p[0] > 0:
+        return "P is not positive definite"
+    l00 = math.sqrt(p[0])
+    l10, l20 = p[3] / l00, p[6] / l00
+    d1 = p[4] - l10 * l10
+    if not d1 > 0:
+        return "P is not positive definite"
+    l21 = (p[7] - l20 * l10) / math.sqrt(d1)
+    if not p[8] - l20 * l20 - l21 * l21 > 0:
+        return "P is not positive definite"
+    return None
+
+
+class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, omit_defaults=True, dict=True):
+    """The ellipsoid (x̂, P row-major, ρ) ∩ (``region`` × ℝ) ∩ {fault[0] ≤ f ≤ fault[1]}, or a set estimator's
+    ``set`` (then ``region`` and ``fault`` are absent: its set carries its own, and the ellipsoid encloses it).
+
+    ``region``: the polygon's vertices counter-clockwise, flattened [β₁, r₁, β₂, r₂, …] (None: no region kept).
+    The cross-field checks (P symmetric positive definite, an even number of region coordinates, lo ≤ hi, a set
+    that parses) run on construction and on decode (a ValueError there fails the message's decode).
+    """
+
+    xhat: Vec3
+    P: Mat3
+    rho: Positive
+    region: RegionCoords | None = None
+    fault: Vec2 | None = None
+    set: dict[str, Any] | None = None
+
+    def __post_init__(self) -> None:
+        problem = spd_problem(self.P)
+        if problem:
+            raise ValueError(problem)
+        if self.fault is not None and not self.fault[0] <= self.fault[1]:
+            raise ValueError(f"fault: lo > hi ({self.fault})")
+        if self.region is not None and len(self.region) % 2:
+            raise ValueError("region: an odd number of coordinates")
+        if self.set is not None:
+            if self.region is not None or self.fault is not None:
+                raise ValueError("a set estimator's set carries its own region and fault range")
+            self.own_set  # parsed (SetFormatError, a ValueError, if malformed) and kept for bounds and membership
+
+    @cached_property
+    def own_set(self) -> Ellipsoid | Zonotope | Box | SumSet | RegionSet | None:
+        """A set estimator's set, parsed once (None: the SDP's ellipsoid form)."""
+        return None if self.set is None else set_from_wire(self.set, NA)
+
+    @cached_property
+    def P_matrix(self) -> np.ndarray:
+        """P as a (3, 3) array (read-only: shared by every reader of this set)."""
+        m = np.asarray(self.P, dtype=float).reshape(NA, NA)
+        m.flags.writeable = False
+        return m
+
+    @cached_property
+    def centre(self) -> np.ndarray:
+        """x̂ as a (3,) array (read-only)."""
+        c = np.asarray(self.xhat, dtype=float)
+        c.flags.writeable = False
+        return c
+
+    @cached_property
+    def polygon(self) -> Polygon | None:
+        """The region as a polygon of x = (β, r) (None: none kept)."""
+        return None if self.region is None else Polygon(np.asarray(self.region, dtype=float).reshape(-1, NX))
+
+    @cached_property
+    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.own_set is not None:
+            return self.own_set.bounds()
+        lo, hi = ellipsoid_bounds(np.asarray(self.xhat, dtype=float), np.diag(self.P_matrix), self.rho, self.fault)
+        if self.polygon is not None:  # the ellipsoid ∩ the region: x's bounds are the tighter of the two
+            v = self.polygon.vertices
+            lo[:NX], hi[:NX] = np.maximum(lo[:NX], v.min(axis=0)), np.minimum(hi[:NX], v.max(axis=0))
+        return lo, hi
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bounds (3,) over [β, r, f_i], computed once per set (copies: the caller may change them)."""
+        lo, hi = self._bounds
+        return lo.copy(), hi.copy()
+
+    @property
+    def is_ellipsoid(self) -> bool:
+        """The set is the ellipsoid alone (no region, no fault range, no set estimator's set)."""
+        return self.region is None and self.fault is None and self.set is None
+
+    def E(self, xbar: np.ndarray) -> float:
+        """eᵀP⁻¹e with e = x̄ − x̂: where x̄ lies against the ellipsoid (inside iff ≤ ρ)."""
+        e = xbar - self.centre
+        return float(e @ np.linalg.solve(self.P_matrix, e))
+
+    def contains(self, xbar: np.ndarray, E: float | None = None) -> bool:
+        """x̄ = (β, r, f) lies in the set: the judge's rule.  A set estimator's set by its own ``contains`` (relative
+        tolerance sets.MEMBERSHIP_TOL); the SDP's: E ≤ ρ exactly, lo ≤ f ≤ hi exactly, x in the polygon
+        (Polygon.contains).  ``E``: eᵀP⁻¹e where the caller has it."""
+        if self.own_set is not None:
+            return self.own_set.contains(xbar)
+        if not (self.E(xbar) if E is None else E) <= self.rho:
+            return False
+        if self.fault is not None and not self.fault[0] <= float(xbar[-1]) <= self.fault[1]:
+            return False
+        return self.polygon is None or self.polygon.contains(xbar[:NX])
+
+    def without_fault(self) -> ProvenSet:
+        """The same ellipsoid and region without the fault range."""
+        return ProvenSet(xhat=self.xhat, P=self.P, rho=self.rho, region=self.region)
+
+    def digest_content(self) -> tuple[Any, ...]:
+        """What a state's digest hashes of this set: every field, as sent."""
+        return (self.xhat, self.P, self.rho, self.region, self.fault, self.set)
+
+
+def continued_set(published: ProvenSet, continues: ProvenSet | None) -> ProvenSet:
+    """The whole set a node continues from: the published one, or the ellipsoid ``continues`` gives ∩ the published
+    region (a node keeps one region, and both its sets are cut by it: the wire sends it once)."""
+    if continues is None:
+        return published
+    return ProvenSet(xhat=continues.xhat, P=continues.P, rho=continues.rho, region=published.region)
+
+
+def proven_sets(entry: dict) -> tuple[ProvenSet, ProvenSet | None]:
+    """A record's state entry's published set and the whole set its node continued from (None: the published one),
+    checked (ValueError if malformed).  Entries written before issue 28 name the published ellipsoid xhat, P, rho,
+    with fault_range (its fault range), own_xhat and own_P (the ellipsoid continued from, where not the published
+    one) and own_region (the region of both) beside it: converted here, the only reader of that form.  Their node
+    continued from its ellipsoid ∩ its region without the fault range, so a fault range alone makes the two differ."""
+    if "published" in entry:
+        pub = msgspec.convert(entry["published"], ProvenSet)
+        cont = entry.get("continues")
+        return pub, None if cont is None else continued_set(pub, msgspec.convert(cont, ProvenSet))
+    region, fault = entry.get("own_region"), entry.get("fault_range")
+    pub = msgspec.convert({"xhat": entry["xhat"], "P": entry["P"], "rho": entry["rho"], "region": region, "fault": fault}, ProvenSet)
+    if entry.get("own_xhat") is not None:
+        return pub, msgspec.convert({"xhat": entry["own_xhat"], "P": entry["own_P"], "rho": entry["rho"], "region": region}, ProvenSet)
+    return pub, None if fault is None else pub.without_fault()
