@@ -32,7 +32,7 @@ from msgspec import Meta, Struct, field
 from netsetest.proven import ProvenSet, continued_set
 from netsetest.validation import FINITE_BOUND_TEXT, FLOAT_MAX, Finite, Positive, split_error
 
-SCHEMA_VERSION: Final = 1
+SCHEMA_VERSION: Final = 2  # 2: a state carries its sets as ProvenSets (published, continues); 1 had seven set fields
 
 FiniteF = Finite  # msgspec decodes strictly: no "0.1" or True for a number
 Step = Annotated[int, Meta(ge=0)]
@@ -62,7 +62,7 @@ class BadMessage(ValueError):
         self.reason = reason
 
 
-def _schema_version() -> Literal[1]:
+def _schema_version() -> Literal[2]:
     return SCHEMA_VERSION
 
 
@@ -76,7 +76,7 @@ class _Msg(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, omit_d
     never omitted (tests/unit/test_messages_wire.py checks every kind's payload for ``v``).
     """
 
-    v: Literal[1] = field(default_factory=_schema_version)
+    v: Literal[2] = field(default_factory=_schema_version)
 
     @property
     def type(self) -> str:

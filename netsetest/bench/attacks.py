@@ -60,13 +60,13 @@ def _payloads(kind: str, run_id: str, steps: int) -> list[tuple[str, bytes]]:
     import msgspec  # a default dependency (the bench must not need the dev extra's msgpack)
 
     from netsetest.bus import keys
-    from netsetest.messages import NodeState, Ready, encode
+    from netsetest.messages import SCHEMA_VERSION, NodeState, Ready, encode
     from netsetest.proven import ProvenSet
 
     UNIT_SET = ProvenSet(xhat=[0.0] * 3, P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0)  # a forged state's set: the unit ball
 
     if kind == "input":
-        raw = {"v": 1, "type": "input", "step": 1, "node": VICTIM, "y": math.nan, "gamma": 1.0}
+        raw = {"v": SCHEMA_VERSION, "type": "input", "step": 1, "node": VICTIM, "y": math.nan, "gamma": 1.0}
         return [(keys.node_input(run_id, VICTIM), msgspec.msgpack.encode(raw))]
     if kind in ("state", "state-run"):  # a far step's state, or one (forged, not from the true input) per step of the run
         forged = [
@@ -78,7 +78,7 @@ def _payloads(kind: str, run_id: str, steps: int) -> list[tuple[str, bytes]]:
         own = keys.node_state(run_id, VICTIM)
         ready = keys.ready_of(run_id, keys.role_name("node", VICTIM))
         huge = {
-            "v": 1,
+            "v": SCHEMA_VERSION,
             "type": "state",
             "step": 1,
             "node": VICTIM,

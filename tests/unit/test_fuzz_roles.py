@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 from netsetest.bus import keys
 from netsetest.bus.base import MemoryBus
 from netsetest.config.schema import load_topology
-from netsetest.messages import BadMessage, Message, Ready, decode, encode
+from netsetest.messages import SCHEMA_VERSION, BadMessage, Message, Ready, decode, encode
 from netsetest.roles.collector import Collector
 from netsetest.roles.node import Node
 from netsetest.roles.vehicle import Vehicle
@@ -68,7 +68,7 @@ _MSGPACK = st.recursive(
 @SEEDED
 @given(_MSGPACK, st.sampled_from(["state", "input", "truth", "end", "ready", "x"]))
 def test_decode_arbitrary_msgpack_raises_only_bad_message(value: object, tag: str) -> None:
-    for v in (value, {"v": 1, "type": tag, "x": value}, {"v": 1, "type": tag, **(value if isinstance(value, dict) else {})}):
+    for v in (value, {"v": SCHEMA_VERSION, "type": tag, "x": value}, {"v": SCHEMA_VERSION, "type": tag, **(value if isinstance(value, dict) else {})}):
         try:
             payload = msgpack.packb(v, use_bin_type=True)
         except (TypeError, ValueError, OverflowError):

@@ -139,9 +139,10 @@ BAD = [
     ("empty", b"", "undecodable", None),
     ("list", _pack([1, "state", 3]), "not-a-map", None),
     ("scalar", _pack(42), "not-a-map", None),
-    ("version-2", _mut(_state(), v=2), "schema-version", None),
+    ("version-1", _mut(_state(), v=1), "schema-version", None),  # a node of before the ProvenSets
+    ("version-3", _mut(_state(), v=3), "schema-version", None),
     ("version-missing", _mut(_state(), v=_DEL), "schema-version", None),
-    ("version-str", _mut(_state(), v="1"), "schema-version", None),
+    ("version-str", _mut(_state(), v="2"), "schema-version", None),
     ("unknown-type", _mut(_state(), type="bogus"), "invalid", "bogus"),
     ("type-missing", _mut(End(steps=1), type=_DEL), "invalid", None),
     ("P-8", _mut(_state(), P=P[:8]), "invalid", "P"),

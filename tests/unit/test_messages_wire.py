@@ -90,15 +90,15 @@ def test_previous_wire_format_decodes(msg):
 
 @pytest.mark.parametrize("msg", EVERY_KIND, ids=lambda m: type(m).__name__)
 def test_missing_version_is_rejected(msg):
-    """``v`` has a default for constructing messages, but a payload without it is not version 1."""
+    """``v`` has a default for constructing messages, but a payload without it is not the current version."""
     d = raw_message(msg)
     del d["v"]
     assert _reason(_pack(d)) == "schema-version"
-    for bad in (None, 0, 2, "1", [1]):
+    for bad in (None, 0, 1, SCHEMA_VERSION + 1, str(SCHEMA_VERSION), [SCHEMA_VERSION]):  # (1: before the sets were ProvenSets)
         d["v"] = bad
         assert _reason(_pack(d)) == "schema-version", bad
-    d["v"] = True  # == 1 in Python, but not the integer 1
-    assert _reason(_pack(d)) == "invalid"
+    d["v"] = True  # == 1 in Python: an old version's number, and a bool besides
+    assert _reason(_pack(d)) == "schema-version"
 
 
 @pytest.mark.parametrize(
@@ -107,8 +107,8 @@ def test_missing_version_is_rejected(msg):
         (_pack(None), "not-a-map"),
         (_pack("state"), "not-a-map"),
         (_pack({1: 2}), "schema-version"),  # a map, without v
-        (_pack({1: 2, "v": 1, "type": "end", "steps": 1}), "invalid"),  # a version-1 map with a non-string key
-        (_pack({"v": 1, "type": "end", "steps": 1}) + b"\x00", "undecodable"),  # trailing bytes
+        (_pack({1: 2, "v": SCHEMA_VERSION, "type": "end", "steps": 1}), "invalid"),  # a current-version map with a non-string key
+        (_pack({"v": SCHEMA_VERSION, "type": "end", "steps": 1}) + b"\x00", "undecodable"),  # trailing bytes
         (b"\x81\xa1v", "undecodable"),  # truncated
         (b"\x81\x91\x01\x01", "schema-version"),  # a list as a map key: a map without v
     ],

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from netsetest.bus.base import MemoryBus
-from netsetest.messages import End, NodeInput, Reading, Ready, decode, encode, peek_step
+from netsetest.messages import SCHEMA_VERSION, End, NodeInput, Reading, Ready, decode, encode, peek_step
 from message_helpers import make_state
 
 P_ID = [1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0]
@@ -31,10 +31,10 @@ def test_peek_step_is_none_for_what_names_no_valid_step() -> None:
     for raw in (b"", b"\xc1", b"\x91\x01", msgspec.msgpack.encode([1, 2]), msgspec.msgpack.encode({1: 2, "step": 5})):
         assert peek_step(raw) is None
     for step in (-1, True, 1.0, "3", None, [3]):
-        assert peek_step(msgspec.msgpack.encode({"v": 1, "type": "state", "step": step})) is None
+        assert peek_step(msgspec.msgpack.encode({"v": SCHEMA_VERSION, "type": "state", "step": step})) is None
     assert peek_step(b"\x91" * 100_000 + b"\x01") is None  # nested deeper than any decoder's stack: no RecursionError
     # the rest is not read: a payload decode() refuses still names its step (a screen may drop it undecoded)
-    assert peek_step(msgspec.msgpack.encode({"v": 1, "type": "state", "step": 9, "P": "not a matrix"})) == 9
+    assert peek_step(msgspec.msgpack.encode({"v": SCHEMA_VERSION, "type": "state", "step": 9, "P": "not a matrix"})) == 9
 
 
 @settings(max_examples=300, deadline=None)
