@@ -257,12 +257,13 @@ def fork_server(run_id: str) -> ForkServer:
     return ForkServer([sys.executable, "-m", ROLE_MODULE, "forkserver", "--run-id", run_id], role_env())
 
 
-def router_session(listen: list[str], base_file: str | None, security: dict[str, object] | None):
-    """Open a Zenoh router session (BusError naming the option: a bad --zenoh-config, or cannot --listen)."""
+def router_session(listen: list[str], base_file: str | None, security: dict[str, object] | None, connect: Sequence[str] = ()):
+    """Open a Zenoh router session (BusError naming the option: a bad --zenoh-config, or cannot --listen);
+    ``connect``: the run's other routers (a run spanning hosts)."""
     from netsetest.bus.zenoh_bus import BusError, open_session, zenoh_config
 
     try:
-        cfg = zenoh_config("router", listen, base_file=base_file, settings=security)
+        cfg = zenoh_config("router", listen, connect, base_file=base_file, settings=security)
     except BusError as exc:
         raise BusError(f"--zenoh-config: {exc}") from None
     try:
