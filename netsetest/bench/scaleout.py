@@ -36,7 +36,7 @@ from netsetest.bench.topologies import ring_topology
 from netsetest.bench.zenoh_runs import CLK_TCK, MACHINE_CORES, PY, _kill
 from netsetest.runtime import netns
 from netsetest.runtime.channel import ChannelReader
-from netsetest.runtime.launcher import RUN_ID_BYTES
+from netsetest.runtime.launcher import RUN_ID_BYTES, sigterm_as_interrupt
 from netsetest.runtime.processes import role_env
 from netsetest.runtime.rolespec import CollectorSpec, NodeSpec, RouterSpec, ScenarioSpec, VehicleSpec, ZenohSpec
 
@@ -202,15 +202,16 @@ def scaleout_figures(cfg: dict, tmp: Path) -> dict:
     nodes, steps, reps = cfg["scaleout_nodes"], cfg["scaleout_steps"], cfg["scaleout_reps"]
     topo = ring_topology(tmp, nodes, steps)
     runs: dict[str, list[dict]] = {name: [] for name in LAYOUTS}
-    for rep in range(reps):
-        for name, hosts in LAYOUTS.items():
-            row = scaleout_run(tmp, topo, hosts, steps, timeout=120.0 + 2.0 * nodes + steps)
-            runs[name].append(row)
-            _log(
-                f"  {name} host(s), run {rep + 1}/{reps} (load {row['load_before']}): {row['step_rate'] or float('nan'):.2f} steps/s, "
-                f"CPU per step {row.get('cpu_ms_per_step_by_host')} ms, violations {row['violations']}, missing {row['nodes_missing']}"
-                + (f"; error: {row['error']}" if row["error"] else "")
-            )
+    with sigterm_as_interrupt():  # SIGTERM, like Ctrl-C, stops the run in progress and deletes its namespaces
+        for rep in range(reps):
+            for name, hosts in LAYOUTS.items():
+                row = scaleout_run(tmp, topo, hosts, steps, timeout=120.0 + 2.0 * nodes + steps)
+                runs[name].append(row)
+                _log(
+                    f"  {name} host(s), run {rep + 1}/{reps} (load {row['load_before']}): {row['step_rate'] or float('nan'):.2f} steps/s, "
+                    f"CPU per step {row.get('cpu_ms_per_step_by_host')} ms, violations {row['violations']}, missing {row['nodes_missing']}"
+                    + (f"; error: {row['error']}" if row["error"] else "")
+                )
     return layouts_figures(runs, nodes, steps, reps)
 
 

@@ -526,8 +526,8 @@ class Supervisor:
 
 
 @contextlib.contextmanager
-def _sigterm_as_interrupt() -> Iterator[None]:
-    """SIGTERM stops the launcher as Ctrl-C does (the handler before is restored after)."""
+def sigterm_as_interrupt() -> Iterator[None]:
+    """SIGTERM stops the launcher (and the benchmark's namespaced runs) as Ctrl-C does (the handler before is restored after)."""
 
     def on_term(signum: int, frame: object) -> None:
         raise KeyboardInterrupt
@@ -547,7 +547,7 @@ def launch(plan: RunPlan) -> RunOutcome:
 
     o = plan.options
     run_id = o.run_id or f"run-{secrets.token_hex(RUN_ID_BYTES)}"
-    with tempfile.TemporaryDirectory(prefix="netsetest-") as tmp, _sigterm_as_interrupt():  # mode 0700 (mkdtemp)
+    with tempfile.TemporaryDirectory(prefix="netsetest-") as tmp, sigterm_as_interrupt():  # mode 0700 (mkdtemp)
         server = fork_server(run_id)  # first: it imports while we set up
         children = Children(server.spawn)
         network: Network | None = None
