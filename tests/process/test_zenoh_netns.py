@@ -12,7 +12,10 @@ Every role runs in client mode against the router address on its own link.
 
 from __future__ import annotations
 
+import signal
 import subprocess
+import sys
+import time
 
 import pytest
 from netsetest.bench.scaleout import scaleout_run
@@ -120,3 +123,39 @@ def test_scaleout_bench_runs_across_two_namespaces_and_cleans_up(tmp_path) -> No
     for r in (row, cut):
         assert not pids_with_arg(r["run_id"]), f"processes of {r['run_id']} left behind"
         assert len(r["namespaces"]) == 2 and not set(r["namespaces"]) & set(existing), r
+
+
+@pytest.mark.timeout(180)
+def test_scaleout_bench_stopped_by_sigterm_leaves_nothing_behind(tmp_path) -> None:
+    """SIGTERM to the benchmark in the middle of a namespaced run (as Ctrl-C): its role processes and routers
+    are stopped, its namespaces deleted, its temporary directory removed."""
+    if (why := netns.unavailable()) is not None:
+        pytest.skip(why)
+    script = (
+        "import sys, tempfile\n"
+        "from pathlib import Path\n"
+        "from netsetest.bench.scaleout import scaleout_figures\n"
+        "with tempfile.TemporaryDirectory(dir=sys.argv[1]) as d:\n"
+        "    try:\n"
+        "        scaleout_figures({'scaleout_nodes': 4, 'scaleout_steps': 100000, 'scaleout_reps': 1}, Path(d))\n"
+        "    except KeyboardInterrupt:\n"
+        "        print('interrupted', flush=True)\n"
+    )
+    before = set(subprocess.run(["ip", "netns", "list"], capture_output=True, text=True, check=True).stdout.split())
+    bench = subprocess.Popen([sys.executable, "-c", script, str(tmp_path)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        ours = lambda: {ns for ns in subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout.split() if ns.startswith("nsb")} - before  # noqa: E731
+        assert wait_for(lambda: bool(ours()) or bench.poll() is not None, 60, 0.1, "the run's namespace")
+        made = ours()
+        run_ids = {p.name for p in tmp_path.glob("*/scale-*")}
+        assert made and run_ids and bench.poll() is None
+        time.sleep(3.0)  # its roles are up and stepping
+        bench.send_signal(signal.SIGTERM)
+        out, _ = bench.communicate(timeout=60)
+    finally:
+        if bench.poll() is None:
+            bench.kill()
+    assert "interrupted" in out
+    assert not made & set(subprocess.run(["ip", "netns", "list"], capture_output=True, text=True, check=True).stdout.split())
+    assert not any(pids_with_arg(r) for r in run_ids), "processes of the run left behind"
+    assert not list(tmp_path.iterdir())
