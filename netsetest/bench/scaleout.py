@@ -166,7 +166,10 @@ def scaleout_run(directory: Path, topology: Path, hosts: int, steps: int, timeou
         left = nets.delete()
         if left:
             row["error"] = f"namespaces left behind: {left}"
-    s = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+    try:
+        s = json.loads(summary_path.read_text())
+    except (OSError, ValueError):  # none written, or cut short by the stop
+        s = {}
     row["steps_completed"] = s.get("steps_completed")
     row["violations"] = s.get("violations_total")
     row["nodes_missing"] = s.get("nodes_missing")
