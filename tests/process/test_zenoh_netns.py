@@ -142,9 +142,13 @@ def test_scaleout_bench_stopped_by_sigterm_leaves_nothing_behind(tmp_path) -> No
         "        print('interrupted', flush=True)\n"
     )
     before = set(subprocess.run(["ip", "netns", "list"], capture_output=True, text=True, check=True).stdout.split())
+
+    def ours() -> set[str]:  # the namespaces made since the test began
+        listed = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout.split()
+        return {ns for ns in listed if ns.startswith("nsb")} - before
+
     bench = subprocess.Popen([sys.executable, "-c", script, str(tmp_path)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
-        ours = lambda: {ns for ns in subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout.split() if ns.startswith("nsb")} - before  # noqa: E731
         assert wait_for(lambda: bool(ours()) or bench.poll() is not None, 60, 0.1, "the run's namespace")
         made = ours()
         run_ids = {p.name for p in tmp_path.glob("*/scale-*")}
