@@ -20,6 +20,7 @@ from netsetest.bench.network import network_markdown, network_summary_markdown
 from netsetest.bench.node_budget import node_markdown
 from netsetest.bench.plant import plant_markdown, plant_summary_markdown
 from netsetest.bench.run import performance_markdown
+from netsetest.bench.scaleout import scaleout_markdown
 from netsetest.bench.scenario import compare_markdown, exact_markdown, scenario_markdown
 from netsetest.bench.spread import RUNS_DIR, spread_markdown
 from netsetest.bench.view import view_markdown, view_summary_markdown
@@ -107,6 +108,13 @@ PARTS: dict[str, Part] = {
         "node",
         node_markdown,
         "netsetest bench --quick --only node --baseline MAIN --json bench/node.json --markdown bench/node.md",
+    ),
+    "scaleout": Part(
+        "A run across two hosts",
+        "bench/scaleout.json",
+        "scaleout",
+        scaleout_markdown,
+        "netsetest bench --quick --only scaleout --json bench/scaleout.json --markdown bench/scaleout.md",
     ),
     "spread": Part(
         "How noisy the benchmark is",

@@ -48,6 +48,9 @@ QUICK: dict[str, Any] = {
     "profile_nodes": 96,
     "node_budget_nodes": 48,  # --only node: the profiled ring
     "node_budget_reps": 3,
+    "scaleout_nodes": 24,  # --only scaleout: the lockstep ring across one and two namespaces (bench/scaleout.py)
+    "scaleout_steps": 40,
+    "scaleout_reps": 3,
     "startup_reps": 3,
     "launch_reps": 5,
     "flood_steps": 200,
@@ -92,6 +95,9 @@ FULL: dict[str, Any] = {
     "profile_nodes": 96,
     "node_budget_nodes": 96,
     "node_budget_reps": 3,
+    "scaleout_nodes": 48,
+    "scaleout_steps": 80,
+    "scaleout_reps": 3,
     "startup_reps": 5,
     "launch_reps": 9,
     "flood_steps": 400,
@@ -377,6 +383,7 @@ def run_bench(
     from netsetest.bench.flow import flow_figures, flow_markdown
     from netsetest.bench.view import view_figures, view_markdown
     from netsetest.bench.node_budget import node_figures, node_markdown
+    from netsetest.bench.scaleout import scaleout_figures, scaleout_markdown
     from netsetest.bench.widths import widths_figures, widths_markdown
     from netsetest.bench.zenoh_runs import (
         launch_to_step0,
@@ -411,6 +418,7 @@ def run_bench(
             "view": (view_figures, view_markdown),
             "node": (lambda c, t: node_figures(c, t, baseline), node_markdown),
             "widths": (widths_figures, widths_markdown),
+            "scaleout": (scaleout_figures, scaleout_markdown),
         }[only]
         with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
             res[only] = figures(cfg, Path(tmpd))

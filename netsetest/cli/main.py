@@ -203,7 +203,8 @@ def build_parser() -> argparse.ArgumentParser:
         choices=SECTIONS,
         help="run one part alone: plant = a car as the truth, network = what the exchange can buy, scenario = the paper's "
         "scenario per node and every estimator compared, exact = what `netsetest exact` costs under k-of-N health, view = the live "
-        "view's cost and lag and the report page in headless Chromium (default: every part)",
+        "view's cost and lag and the report page in headless Chromium, scaleout = a run across two network namespaces against one (root) "
+        "(default: every part)",
     )
     p.add_argument("--baseline", metavar="DIR", help="with --only node: another checkout (say main's) measured alternately beside this one")
     p.add_argument(
@@ -588,6 +589,12 @@ def cmd_bench(a: argparse.Namespace) -> int:
     if a.baseline is not None and (a.only != "node" or not Path(a.baseline, "netsetest", "__init__.py").is_file()):
         print(f"netsetest bench: --baseline {a.baseline}: needs --only node and a checkout of netsetest (DIR/netsetest/__init__.py)", file=sys.stderr)
         return EXIT_BAD_INPUT
+    if a.only == "scaleout":
+        from netsetest.runtime.netns import unavailable
+
+        if (why := unavailable()) is not None:
+            print(f"netsetest bench: --only scaleout: {why}", file=sys.stderr)
+            return EXIT_BAD_INPUT
     if a.only in (None, "performance"):
         require("cvxpy", "the benchmark (its reference formulations)")
     if a.only in (None, "plant"):

@@ -176,11 +176,16 @@ def cmd_router(a: argparse.Namespace) -> int:
     listen = spec.endpoints
     install_signal_handlers()
     try:
-        session = router_session(listen, spec.zenoh_config, security)
+        session = router_session(listen, spec.zenoh_config, security, spec.connect)
     except BusError as exc:
         log("router", str(exc))
         return EXIT_BAD_INPUT
-    log("router", f"listening on {', '.join(listen)}" + (f"; mTLS and access control for run {spec.resolved_run_id}" if security else ""))
+    log(
+        "router",
+        f"listening on {', '.join(listen)}"
+        + (f"; connecting to {', '.join(spec.connect)}" if spec.connect else "")
+        + (f"; mTLS and access control for run {spec.resolved_run_id}" if security else ""),
+    )
     try:
         while True:
             time.sleep(3600)

@@ -555,21 +555,35 @@ class LocalEstimator:
             HealthModel.of(scenario, node_id),
         )
 
-    def step(self, prev: NodeSet, inp: UpdateInput) -> StepResult:
+    def step(self, prev: NodeSet, inp: UpdateInput, prepared: Prepared | None = None) -> StepResult:
         """Step k → k+1: the step's context, the solve, then the declared cuts (:mod:`netsetest.estimator.cuts`);
-        the fallback without a certificate.  ``observer`` (if set) sees every step: the estimator, its inputs, its
-        result and its time."""
+        the fallback without a certificate.  ``prepared``: what :meth:`prepare` computed of this step before its
+        readings came (the same ``prev`` and the same input but for the readings); the result is the same
+        with or without it.  ``observer`` (if set) sees every step: the estimator, its inputs, its result and
+        its time (a prepared step's: both parts)."""
         if self.observer is None:
-            return self._step(prev, inp)
+            return self._step(prev, inp, prepared)
         t0 = time.perf_counter()
-        res = self._step(prev, inp)
-        self.observer(self, prev, inp, res, 1e3 * (time.perf_counter() - t0))
+        res = self._step(prev, inp, prepared)
+        self.observer(self, prev, inp, res, 1e3 * (time.perf_counter() - t0) + (prepared.ms if prepared is not None else 0.0))
         return res
 
-    def _step(self, prev: NodeSet, inp: UpdateInput) -> StepResult:
+    def prepare(self, prev: NodeSet, inp: UpdateInput) -> Prepared:
+        """The part of step k → k+1 its readings do not enter: the context before them and the solve of the set
+        the node recurs on.  A node computes it while the step's readings are on their way (the same-step
+        exchange, docs/network.md) and hands it to :meth:`step` with them; ``inp.readings`` is not read."""
+        t0 = time.perf_counter()
+        base = self._base(prev, inp)
+        first = self._solve_certify(base.data, prev.rho, np.asarray(inp.alpha, dtype=float), self._wh, FactStack.of(base.data.facts))
+        return Prepared(prev, inp, base, first, 1e3 * (time.perf_counter() - t0))
+
+    def _step(self, prev: NodeSet, inp: UpdateInput, prepared: Prepared | None = None) -> StepResult:
         """The step read top to bottom: its context (built once), the solve, the cuts."""
-        ctx = self.context(prev, inp)
-        res = self._solve_step(ctx, inp)
+        if prepared is not None:
+            assert prepared.of(prev, inp), "a prepared step of another prior or input"
+        base = prepared.base if prepared is not None else self._base(prev, inp)
+        ctx = self._context(prev, inp, base)
+        res = self._solve_step(ctx, inp, prepared.first if prepared is not None else None)
         if res.status == "fallback":  # no certificate: the region of the own measurement alone (no reading listed)
             return apply_cuts(FALLBACK_CUTS, dataclasses.replace(ctx, slabs={}), res)
         return apply_cuts(self.cuts, ctx, res)
@@ -578,21 +592,29 @@ class LocalEstimator:
         """What step k → k+1 knows before its solve, each quantity computed once: the blended model, the own
         sector and measurement interval, the LMI data, the moved region, the k-of-N assessment and the readings'
         slabs."""
+        return self._context(prev, inp, self._base(prev, inp))
+
+    def _base(self, prev: NodeSet, inp: UpdateInput) -> StepBase:
+        """The context's part the step's readings do not enter (``inp.readings`` is not read)."""
         blend = Blend.of(self.model, inp.alpha)
         meas = measurement_interval(self.own, inp.y, inp.gamma)
         sector, reading = self._own_range(prev, inp, blend, meas)
         data = self.step_data(prev, inp, sector, reading, blend)
-        moved = self._moved_region(prev, inp, blend)
-        health = self._assess_health(prev, inp, blend, moved) if self.health is not None and inp.readings else None
-        slabs = self._reading_slabs(prev, inp, blend, health)
-        return StepContext(self.statics, prev.rho, inp.y, inp.gamma, meas, sector, data, moved, slabs, health, blend=blend)
+        return StepBase(blend, meas, sector, data, self._moved_region(prev, inp, blend))
 
-    def _solve_step(self, ctx: StepContext, inp: UpdateInput) -> StepResult:
+    def _context(self, prev: NodeSet, inp: UpdateInput, base: StepBase) -> StepContext:
+        """The step's context from its ``base`` and its readings: the k-of-N assessment and the readings' slabs."""
+        health = self._assess_health(prev, inp, base.blend, base.moved) if self.health is not None and inp.readings else None
+        slabs = self._reading_slabs(prev, inp, base.blend, health)
+        return StepContext(self.statics, prev.rho, inp.y, inp.gamma, base.meas, base.sector, base.data, base.moved, slabs, health, blend=base.blend)
+
+    def _solve_step(self, ctx: StepContext, inp: UpdateInput, first: tuple[StepResult | None, _Solve] | None = None) -> StepResult:
         """The certified set the node continues from and the one it publishes: the readings' set where it is
-        certified and better (:meth:`_refine`), else the bank's; the fallback where the first has no certificate."""
+        certified and better (:meth:`_refine`), else the bank's; the fallback where the first has no certificate.
+        ``first``: the first solve's outcome, computed before the readings came (:meth:`prepare`)."""
         data, rho, alpha = ctx.data, ctx.rho, np.asarray(inp.alpha, dtype=float)
         facts = FactStack.of(data.facts)
-        res, solve = self._solve_certify(data, rho, alpha, self._wh, facts)  # the set the node recurs on
+        res, solve = first if first is not None else self._solve_certify(data, rho, alpha, self._wh, facts)  # the set the node recurs on
         if res is None:
             assert data.own is not None  # a predicting step always has its own update
             assert ctx.blend is not None  # a predicting step's context has its blend
@@ -708,6 +730,42 @@ class LocalEstimator:
         if not publishable(xhat_new, P_pub):  # a certified set nobody can use: treated as no certificate
             return None
         return StepResult(xhat_new, P_pub, "ok", rho_c, solve.ms, answer.status, L, data.sector)
+
+
+@dataclass(frozen=True)
+class StepBase:
+    """The part of a step's context (:class:`~netsetest.estimator.cuts.StepContext`) its readings do not enter."""
+
+    blend: Blend
+    meas: Interval
+    sector: Sector | None
+    data: StepData
+    moved: Polygon
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A step computed up to its readings (:meth:`LocalEstimator.prepare`): the prior and the input it was
+    computed for (:meth:`of` checks them), its context's base, the first solve's outcome and its time [ms]."""
+
+    prev: NodeSet
+    inp: UpdateInput
+    base: StepBase
+    first: tuple[StepResult | None, _Solve]
+    ms: float
+
+    def of(self, prev: NodeSet, inp: UpdateInput) -> bool:
+        """Whether it was computed for this prior and this input, whatever the input's readings (the
+        neighbours' states: the very same messages)."""
+        p, q = self.prev, self.inp
+        return (
+            all(a is b or np.array_equal(a, b) for a, b in ((p.xhat, prev.xhat), (p.P, prev.P), (q.alpha, inp.alpha)))
+            and p.rho == prev.rho
+            and p.region is prev.region
+            and (q.u, q.y, q.gamma) == (inp.u, inp.y, inp.gamma)
+            and q.neigh.keys() == inp.neigh.keys()
+            and all(q.neigh[j] is inp.neigh[j] for j in q.neigh)
+        )
 
 
 @dataclass(frozen=True)

@@ -45,7 +45,7 @@ from netsetest.estimator.objective import DEFAULT_OBJECTIVE
 from netsetest.estimator.registry import node_set_estimator
 from netsetest.polygon import Polygon
 from netsetest.estimator.rejoin import rejoin_ellipsoid
-from netsetest.estimator.sdp import NodeSet, LocalEstimator, NeighbourState, Objective, UpdateInput, StepResult, Variant
+from netsetest.estimator.sdp import NodeSet, LocalEstimator, NeighbourState, Objective, Prepared, UpdateInput, StepResult, Variant
 from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sector, measurement_interval
 from netsetest.messages import End, Message, NodeInput, NodeState, NodeStatus, Reading, RunScope, decode, encode, state_digest
 from netsetest.models.sensor import NA
@@ -111,9 +111,12 @@ class Node:
         rejoin: bool = False,
         objective: Objective = DEFAULT_OBJECTIVE,
         lazy: bool = False,
+        early: bool = False,
     ) -> None:
         """``lazy``: neighbour states and readings do not wake the node: they are used when its next input
-        arrives, which does wake it (a runtime waiting for one polls; netsetest/bus/base.py, runtime/processes.py)."""
+        arrives, which does wake it (a runtime waiting for one polls; netsetest/bus/base.py, runtime/processes.py).
+        ``early``: while only a step's readings are missing, compute the part of the step they do not enter
+        (:meth:`_prepare`; a process, whose readings cross the network: in memory there is no hop to overlap)."""
         self.sc, self.bus, self.run = scenario, bus, run_id
         self.cfg = scenario.node(node_id)
         self.id = node_id
@@ -150,6 +153,8 @@ class Node:
         # left out of the step, which is always sound) — else we would wait the neighbour timeout for it
         self.refused: dict[int, set[int]] = {}
         self.waiting_since: float | None = None
+        self.early = early
+        self.prepared: tuple[int, Prepared] | None = None  # (step, the part of it its readings do not enter)
         self.give_up = False  # set by the runtime when the neighbour deadline passed
         self.ended = False
         self.end_seen = False  # the scheduled End arrived (perhaps before our last step)
@@ -439,6 +444,7 @@ class Node:
         elif self.missing() and not self.give_up:
             if self.waiting_since is None:
                 self.waiting_since = now if now is not None else time.monotonic()
+            self._prepare(inp)
             return False
         else:
             if self.give_up:  # whoever's reading is still missing: not waited for again until one arrives
@@ -472,19 +478,43 @@ class Node:
         self._publish(Publication(inp, "rejoin", res, used=sorted(have), inputs=self._inputs(inp.step, sorted(have), own=False)))
         return True
 
+    def _neighbours(self, inp: NodeInput) -> dict[int, NeighbourState]:
+        """The states the step of ``inp`` uses: the expected neighbours' that arrived, and our own (self-loop)."""
+        have = self.inbox.get(self.k, {})
+        neigh = {j: have[j] for j in inp.expect_from if j in have}
+        if self.id in self.cfg.in_weights:
+            neigh[self.id] = self.own  # type: ignore[assignment]  # the own NodeSet stands in for the NeighbourState the self-loop reads (same fields)
+        return neigh
+
+    def _prepare(self, inp: NodeInput) -> None:
+        """While only the step's readings are missing (every expected neighbour's state is here or refused):
+        the part of the step they do not enter, once (LocalEstimator.prepare), so that the exchange's hop
+        overlaps the solve instead of preceding it.  The step's result is the same with or without it."""
+        if not self.early or self.set_estimator is not None or self.k < 0 or (self.prepared is not None and self.prepared[0] == inp.step):
+            return
+        have, refused = self.inbox.get(self.k, {}), self.refused.get(self.k, set())
+        if any(j not in have and j not in refused for j in inp.expect_from) or not self._unread(inp):
+            return
+        t = PROFILE.now() if PROFILE is not None else 0
+        self.prepared = (inp.step, self.estimator.prepare(self._prior(), self._step_input(inp, self._neighbours(inp), {})))
+        if PROFILE is not None:
+            PROFILE.add("solve", t)
+
     def _update(self, inp: NodeInput) -> None:
         if self.set_estimator is not None:
             self._publish_set(inp, "ok")
             return
-        have = self.inbox.get(self.k, {})
         readings = self.readings.get(inp.step, {})
         own_reading = {self.id: (inp.y, inp.gamma)}  # a reference's own measurement is one of the step's readings
-        neigh = {j: have[j] for j in inp.expect_from if j in have}
-        if self.id in self.cfg.in_weights:
-            neigh[self.id] = self.own  # type: ignore[assignment]  # the own NodeSet stands in for the NeighbourState the self-loop reads (same fields)
+        neigh = self._neighbours(inp)
         step_in = self._step_input(inp, neigh, readings)
+        prior = self._prior()
+        prepared = self.prepared[1] if self.prepared is not None and self.prepared[0] == inp.step else None
+        self.prepared = None
+        if prepared is not None and not prepared.of(prior, step_in):
+            prepared = None  # the step's neighbours changed since (a state came after all): solved afresh, as sound
         t = PROFILE.now() if PROFILE is not None else 0
-        res = self.estimator.step(self._prior(), step_in)
+        res = self.estimator.step(prior, step_in, prepared)
         # the readings the step's sets rest on: the published one's and the ones the set it continues from was
         # cut by (both are judged under the step's cone: docs/coverage.md)
         rests = res.rests_on

@@ -257,12 +257,13 @@ def fork_server(run_id: str) -> ForkServer:
     return ForkServer([sys.executable, "-m", ROLE_MODULE, "forkserver", "--run-id", run_id], role_env())
 
 
-def router_session(listen: list[str], base_file: str | None, security: dict[str, object] | None):
-    """Open a Zenoh router session (BusError naming the option: a bad --zenoh-config, or cannot --listen)."""
+def router_session(listen: list[str], base_file: str | None, security: dict[str, object] | None, connect: Sequence[str] = ()):
+    """Open a Zenoh router session (BusError naming the option: a bad --zenoh-config, or cannot --listen);
+    ``connect``: the run's other routers (a run spanning hosts)."""
     from netsetest.bus.zenoh_bus import BusError, open_session, zenoh_config
 
     try:
-        cfg = zenoh_config("router", listen, base_file=base_file, settings=security)
+        cfg = zenoh_config("router", listen, connect, base_file=base_file, settings=security)
     except BusError as exc:
         raise BusError(f"--zenoh-config: {exc}") from None
     try:
@@ -525,8 +526,8 @@ class Supervisor:
 
 
 @contextlib.contextmanager
-def _sigterm_as_interrupt() -> Iterator[None]:
-    """SIGTERM stops the launcher as Ctrl-C does (the handler before is restored after)."""
+def sigterm_as_interrupt() -> Iterator[None]:
+    """SIGTERM stops the launcher (and the benchmark's namespaced runs) as Ctrl-C does (the handler before is restored after)."""
 
     def on_term(signum: int, frame: object) -> None:
         raise KeyboardInterrupt
@@ -546,7 +547,7 @@ def launch(plan: RunPlan) -> RunOutcome:
 
     o = plan.options
     run_id = o.run_id or f"run-{secrets.token_hex(RUN_ID_BYTES)}"
-    with tempfile.TemporaryDirectory(prefix="netsetest-") as tmp, _sigterm_as_interrupt():  # mode 0700 (mkdtemp)
+    with tempfile.TemporaryDirectory(prefix="netsetest-") as tmp, sigterm_as_interrupt():  # mode 0700 (mkdtemp)
         server = fork_server(run_id)  # first: it imports while we set up
         children = Children(server.spawn)
         network: Network | None = None

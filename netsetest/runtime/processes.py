@@ -269,7 +269,8 @@ def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
     # its own state key made its neighbours wait out their timeout every step).  Real time never waits for
     # a neighbour and waits for the readings within a budget: both lazy, so the N readings of a step under
     # max_faulty cost the node a few polls, not N callbacks and wake-ups
-    node = Node(sc, node_id, bus, run_id, spec.variant, rejoin=spec.rejoin, objective=spec.objective, lazy=realtime)
+    # the step's part its readings do not enter is solved while they cross the network (the same result)
+    node = Node(sc, node_id, bus, run_id, spec.variant, rejoin=spec.rejoin, objective=spec.objective, lazy=realtime, early=True)
     role = f"node {node_id}"
     barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), node_peers(sc, node_id), lazy=True)
     first_profiled = 0

@@ -350,6 +350,14 @@ class RouterSpec(RoleSpec):
         metavar="ENDPOINT",
         many=True,
     )
+    connect: tuple[str, ...] = _opt(
+        (),
+        "--connect",
+        "another router of the run to connect to, e.g. tls/10.0.0.1:7447: a run spanning hosts, a router on each (repeatable; default: none)",
+        argtypes.endpoint,
+        metavar="ENDPOINT",
+        many=True,
+    )
     run_id: str | None = _opt(None, "--run-id", f"the run whose keys the access control grants (default: ${RUN_ID_ENV} or '{DEFAULT_RUN_ID}')", argtypes.run_id)
     zenoh_config: str | None = _opt(None, "--zenoh-config", ZENOH_CONFIG_HELP, argtypes.readable_file, metavar="FILE")
 

@@ -9,7 +9,9 @@ Everything here configures Zenoh mechanisms; nothing is home-made crypto:
   common names; with ``default_permission: deny`` each role may publish only its own keys and receive
   only what it needs (``acl_config``).  Every set of credentials also holds an ``observer`` certificate
   for ``netsetest echo`` / ``watch``: it may receive every key of the run and publish none.  Because every role is a client of one router, the router sees
-  every message and its rules are authoritative.
+  every message and its rules are authoritative.  A run spanning hosts has a router on each
+  (``netsetest router --connect``): each checks its own clients, and the routers (the ``router``
+  certificate, server and client) forward the run's keys to each other.
 
 Credentials are written by :func:`write_credentials` (the ``cryptography`` package): ``ca.pem``,
 ``NAME.pem`` and ``NAME.key`` (0600) in a directory of mode 0700.  The CA's private key is never
@@ -135,7 +137,8 @@ def write_credentials(
     for name in [ROUTER, OBSERVER, *names]:
         key = ec.generate_private_key(ec.SECP256R1())
         hosts = list(router_hosts) if name == ROUTER else [name]
-        usage = ExtendedKeyUsageOID.SERVER_AUTH if name == ROUTER else ExtendedKeyUsageOID.CLIENT_AUTH
+        # the router also opens links, to the run's other routers (`netsetest router --connect`): a client there
+        usage = [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH] if name == ROUTER else [ExtendedKeyUsageOID.CLIENT_AUTH]
         cert = (
             x509.CertificateBuilder()
             .subject_name(_name(name))
@@ -146,7 +149,7 @@ def write_credentials(
             .not_valid_after(end)
             .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
             .add_extension(x509.SubjectAlternativeName([_san(h) for h in hosts]), critical=False)
-            .add_extension(x509.ExtendedKeyUsage([usage]), critical=False)
+            .add_extension(x509.ExtendedKeyUsage(usage), critical=False)
             .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()), critical=False)
             .sign(ca_key, hashes.SHA256())
         )
@@ -191,6 +194,9 @@ def grants(sc: Scenario, run_id: str) -> dict[str, Grant]:
         ),
     }
     out[OBSERVER] = Grant((), (keys.run_root(run_id),))  # reads everything of the run, publishes nothing
+    # another router of the run (a run spanning hosts, a router on each): forwards what its own clients may
+    # publish and asks for what they may receive; each router checks its own clients against their grants
+    out[ROUTER] = Grant((keys.run_root(run_id),), (keys.run_root(run_id),))
     for n in sc.nodes:
         me = role_name("node", n.id)
         neighbours = tuple(keys.node_state(run_id, j) for j in sorted(n.in_weights) if j != n.id)
@@ -232,8 +238,14 @@ def client_settings(ident: Identity) -> dict[str, object]:
 
 
 def router_settings(ident: Identity, sc: Scenario, run_id: str) -> dict[str, object]:
-    """Zenoh settings of the run's router: TLS links only, client certificates required, the run's ACL."""
-    return {"transport/link/protocols": ["tls"], **_tls_paths(ident, listen=True), "access_control": acl_config(sc, run_id)}
+    """Zenoh settings of the run's router: TLS links only, client certificates required, the run's ACL; its
+    certificate on the links it opens too (to the run's other routers, ``netsetest router --connect``)."""
+    return {
+        "transport/link/protocols": ["tls"],
+        **_tls_paths(ident, listen=True),
+        **_tls_paths(ident, listen=False),
+        "access_control": acl_config(sc, run_id),
+    }
 
 
 @dataclass(frozen=True)

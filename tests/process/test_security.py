@@ -51,6 +51,7 @@ from netsetest.messages import End, NodeInput, NodeState, Truth, encode
 from netsetest.runtime.inmemory import run_inmemory
 from netsetest.runtime.security import (
     CredentialsError,
+    Grant,
     client_settings,
     grants,
     identity,
@@ -158,7 +159,7 @@ def _assert_same_as_inmemory(record: dict, steps: int) -> None:
 
 def test_credentials_are_private_and_name_the_roles(tmp_path: Path) -> None:
     from cryptography import x509
-    from cryptography.x509.oid import NameOID
+    from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
     sc = load_topology(ROOT / PAPER6)
     d = write_credentials(tmp_path / "c", role_names(sc))
@@ -171,6 +172,9 @@ def test_credentials_are_private_and_name_the_roles(tmp_path: Path) -> None:
         cert = x509.load_pem_x509_certificate(ident.cert.read_bytes())
         assert cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value == name
         cert.verify_directly_issued_by(ca)
+        usage = set(cert.extensions.get_extension_for_class(x509.ExtendedKeyUsage).value)
+        # the router serves its clients and is a client of the run's other routers (`router --connect`)
+        assert usage == ({ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH} if name == "router" else {ExtendedKeyUsageOID.CLIENT_AUTH}), name
     assert not list(d.glob("ca.key")) and len(list(d.glob("*.key"))) == len(role_names(sc)) + 2  # no CA key on disk
     (d / "node-2.key").chmod(0o644)
     with pytest.raises(CredentialsError, match="readable by group or others"):
@@ -194,6 +198,8 @@ def test_grants_follow_the_topology() -> None:
     assert [n for n, gr in g.items() if keys.truth("r") in gr.publish] == ["vehicle"]
     assert [n for n, gr in g.items() if keys.end("r") in gr.publish] == ["vehicle"]
     assert g["collector"].publish == ("netsetest/r/control/ready/collector",)
+    # the run's other routers (a run spanning hosts) forward every key of the run, and nothing of another run
+    assert g["router"] == Grant(("netsetest/r/**",), ("netsetest/r/**",))
 
 
 # ------------------------------------------------------------------ a secured run against an outsider

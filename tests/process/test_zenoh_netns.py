@@ -12,18 +12,22 @@ Every role runs in client mode against the router address on its own link.
 
 from __future__ import annotations
 
-import os
-import shutil
+import signal
 import subprocess
-import uuid
+import sys
+import time
 
 import pytest
+from netsetest.bench.scaleout import scaleout_run
+from netsetest.bench.topologies import ring_topology
+from netsetest.runtime import netns
 from zenoh_helpers import (
     PAPER6,
     ProcessGuard,
     cli,
     launch_clients,
     new_run_id,
+    pids_with_arg,
     read_json,
     role_names,
     wait_for,
@@ -35,80 +39,55 @@ pytestmark = pytest.mark.zenoh
 PORT = 7447
 
 
-def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
-    return subprocess.run(["ip", *args], capture_output=True, text=True, timeout=20, check=check)
+class Star:
+    """The test's namespaces (netsetest/runtime/netns.py): the router's, joined to each host's by a veth pair."""
 
-
-class Namespaces:
     def __init__(self, guard: ProcessGuard) -> None:
-        self.tag = "zt" + uuid.uuid4().hex[:5]
-        self.router = f"{self.tag}-r"
-        self.hosts = {f"{self.tag}-vc": 1, f"{self.tag}-na": 2, f"{self.tag}-nb": 3}  # namespace → subnet 10.210.x.0/30
-        self.created: list[str] = []
+        self.nets = netns.Namespaces("zt")
+        self.tag = self.nets.tag
         guard.finalizers.append(self.delete)  # runs after the guard has killed every process
-
-    def create(self) -> None:
-        for ns in [self.router, *self.hosts]:
-            _ip("netns", "add", ns)
-            self.created.append(ns)
-            _ip("-n", ns, "link", "set", "lo", "up")
+        self.router = self.nets.add("r")
+        self.hosts = {self.nets.add(name): x for name, x in (("vc", 1), ("na", 2), ("nb", 3))}  # namespace → subnet 10.210.x.0/30
         for ns, x in self.hosts.items():
-            rside, hside = f"{self.tag}r{x}", f"{self.tag}h{x}"
-            # both ends are created inside the namespaces: nothing appears in the host's namespace
-            _ip("-n", self.router, "link", "add", rside, "type", "veth", "peer", "name", hside, "netns", ns)
-            _ip("-n", self.router, "addr", "add", f"10.210.{x}.1/30", "dev", rside)
-            _ip("-n", self.router, "link", "set", rside, "up")
-            _ip("-n", ns, "addr", "add", f"10.210.{x}.2/30", "dev", hside)
-            _ip("-n", ns, "link", "set", hside, "up")
+            self.nets.link(self.router, f"10.210.{x}.1/30", ns, f"10.210.{x}.2/30")
 
     def router_addr(self, ns: str) -> str:
         return f"10.210.{self.hosts[ns]}.1"
 
     def delete(self) -> None:
-        for ns in reversed(self.created):
-            _ip("netns", "del", ns, check=False)
-        left = set(_ip("netns", "list", check=False).stdout.split()) & set(self.created)
-        self.created.clear()
+        left = self.nets.delete()
         assert not left, f"namespaces left behind: {left}"
-
-    @staticmethod
-    def identify(pid: int) -> str:
-        return _ip("netns", "identify", str(pid), check=False).stdout.strip()
 
 
 @pytest.fixture
-def netns(procs):
-    if os.geteuid() != 0:
-        pytest.skip("network namespaces need root (ip netns add)")
-    if shutil.which("ip") is None:
-        pytest.skip("iproute2 (`ip`) is not installed")
-    nets = Namespaces(procs)
+def star(procs):
+    if (why := netns.unavailable()) is not None:
+        pytest.skip(why)
     try:
-        nets.create()
-    except subprocess.CalledProcessError as exc:
-        pytest.skip(f"cannot set up network namespaces here: `{' '.join(exc.cmd)}` failed: {exc.stderr.strip()}")
-    return nets
+        return Star(procs)
+    except netns.NamespaceError as exc:
+        pytest.skip(f"cannot set up network namespaces here: {exc}")
 
 
 @pytest.mark.timeout(120)
-def test_zenoh_multi_host_namespaces(procs, netns, tmp_path) -> None:
+def test_zenoh_multi_host_namespaces(procs, star, tmp_path) -> None:
     steps = 10
-    vc, na, nb = netns.hosts
+    vc, na, nb = star.hosts
     placement = {"vehicle": vc, "collector": vc, "node1": na, "node2": na, "node3": na, "node4": nb, "node5": nb, "node6": nb}
     assert set(placement) == set(role_names())
-    exec_in = {name: ["ip", "netns", "exec", ns] for name, ns in placement.items()}
+    exec_in = {name: netns.exec_prefix(ns) for name, ns in placement.items()}
 
-    listen = [f"tcp/{netns.router_addr(ns)}:{PORT}" for ns in netns.hosts]
-    router = procs.start("router", ["ip", "netns", "exec", netns.router, *cli("router", *(a for e in listen for a in ("--listen", e)))])
+    listen = [f"tcp/{star.router_addr(ns)}:{PORT}" for ns in star.hosts]
+    router = procs.start("router", [*netns.exec_prefix(star.router), *cli("router", *(a for e in listen for a in ("--listen", e)))])
     wait_for(lambda: "listening on" in procs.stderr("router") or router.poll() is not None, 30, 0.1, "the router")
     assert router.poll() is None, procs.logs()
 
     run_id = new_run_id()
     summary_path = tmp_path / "summary.json"
-    endpoints = {name: f"tcp/{netns.router_addr(ns)}:{PORT}" for name, ns in placement.items()}
+    endpoints = {name: f"tcp/{star.router_addr(ns)}:{PORT}" for name, ns in placement.items()}
     launch_clients(procs, PAPER6, run_id, steps, summary_path, endpoints, exec_in)
     # each process really runs in its namespace
-    assert wait_for(lambda: netns.identify(router.pid) == netns.router, 10, 0.1, "router namespace")
+    assert wait_for(lambda: netns.identify(router.pid) == star.router, 10, 0.1, "router namespace")
     for name, ns in placement.items():
         proc = procs.procs[name]
         wait_for(lambda: proc.poll() is not None or netns.identify(proc.pid) == ns, 10, 0.05, f"{name} in {ns}")
@@ -121,5 +100,66 @@ def test_zenoh_multi_host_namespaces(procs, netns, tmp_path) -> None:
         assert row["steps_reported"] == steps + 1 and row["violations"] == 0, row
 
     # the host's namespace got no interface of ours
-    host_links = _ip("-o", "link", "show").stdout
-    assert netns.tag not in host_links
+    host_links = subprocess.run(["ip", "-o", "link", "show"], capture_output=True, text=True, check=True).stdout
+    assert star.tag not in host_links
+
+
+@pytest.mark.timeout(300)
+def test_scaleout_bench_runs_across_two_namespaces_and_cleans_up(tmp_path) -> None:
+    """The benchmark's run across two "hosts" (bench/scaleout.py) at a tiny size: secured, a router in each
+    namespace, the ring's nodes split between them, every step checked, nothing left behind; and a run cut
+    short (its timeout) leaves no process and no namespace either."""
+    if (why := netns.unavailable()) is not None:
+        pytest.skip(why)
+    topo = ring_topology(tmp_path, 4, 6)
+    row = scaleout_run(tmp_path, topo, 2, 6, timeout=200.0)
+    assert row["error"] is None, row
+    assert row["exit_codes"] == {n: 0 for n in ["collector", "node1", "node2", "node3", "node4", "vehicle"]}, row
+    assert (row["steps_completed"], row["violations"], row["nodes_missing"], row["security"]) == (6, 0, [], "mtls+acl"), row
+    assert row["step_rate"] > 0 and set(row["cpu_ms_per_step_by_host"]) == {"a", "b"}, row
+    cut = scaleout_run(tmp_path, topo, 2, 6, timeout=0.5)
+    assert "did not end within" in cut["error"] and cut["step_rate"] is None and None in cut["exit_codes"].values(), cut
+    existing = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True, check=True).stdout.split()
+    for r in (row, cut):
+        assert not pids_with_arg(r["run_id"]), f"processes of {r['run_id']} left behind"
+        assert len(r["namespaces"]) == 2 and not set(r["namespaces"]) & set(existing), r
+
+
+@pytest.mark.timeout(180)
+def test_scaleout_bench_stopped_by_sigterm_leaves_nothing_behind(tmp_path) -> None:
+    """SIGTERM to the benchmark in the middle of a namespaced run (as Ctrl-C): its role processes and routers
+    are stopped, its namespaces deleted, its temporary directory removed."""
+    if (why := netns.unavailable()) is not None:
+        pytest.skip(why)
+    script = (
+        "import sys, tempfile\n"
+        "from pathlib import Path\n"
+        "from netsetest.bench.scaleout import scaleout_figures\n"
+        "with tempfile.TemporaryDirectory(dir=sys.argv[1]) as d:\n"
+        "    try:\n"
+        "        scaleout_figures({'scaleout_nodes': 4, 'scaleout_steps': 100000, 'scaleout_reps': 1}, Path(d))\n"
+        "    except KeyboardInterrupt:\n"
+        "        print('interrupted', flush=True)\n"
+    )
+    before = set(subprocess.run(["ip", "netns", "list"], capture_output=True, text=True, check=True).stdout.split())
+
+    def ours() -> set[str]:  # the namespaces made since the test began
+        listed = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout.split()
+        return {ns for ns in listed if ns.startswith("nsb")} - before
+
+    bench = subprocess.Popen([sys.executable, "-c", script, str(tmp_path)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        assert wait_for(lambda: bool(ours()) or bench.poll() is not None, 60, 0.1, "the run's namespace")
+        made = ours()
+        run_ids = {p.name for p in tmp_path.glob("*/scale-*")}
+        assert made and run_ids and bench.poll() is None
+        time.sleep(3.0)  # its roles are up and stepping
+        bench.send_signal(signal.SIGTERM)
+        out, _ = bench.communicate(timeout=60)
+    finally:
+        if bench.poll() is None:
+            bench.kill()
+    assert "interrupted" in out
+    assert not made & set(subprocess.run(["ip", "netns", "list"], capture_output=True, text=True, check=True).stdout.split())
+    assert not any(pids_with_arg(r) for r in run_ids), "processes of the run left behind"
+    assert not list(tmp_path.iterdir())

@@ -101,7 +101,13 @@ SPECS: dict[type[RoleSpec], st.SearchStrategy] = {
         zenohs,
     ),
     RouterSpec: st.builds(
-        RouterSpec, maybe(positional), maybe(texts), st.lists(endpoints, max_size=3).map(tuple), maybe(run_ids), maybe(st.sampled_from(READABLE))
+        RouterSpec,
+        maybe(positional),
+        maybe(texts),
+        st.lists(endpoints, max_size=3).map(tuple),
+        st.lists(endpoints, max_size=3).map(tuple),
+        maybe(run_ids),
+        maybe(st.sampled_from(READABLE)),
     ),
 }
 any_spec = st.one_of(*SPECS.values())
