@@ -263,6 +263,7 @@ class Collector:
         self.closed = -1  # last closed step
         self.head = -1  # newest step with a truth copy
         self.prev_truth: Truth | None = None  # the judged truth of the last closed step
+        self.prev_overloaded = False  # the last closed step was closed unjudged for our own loss (no truth read)
         self.judge = Judge(scenario)
         self.prev_checks = NO_CHECKS  # the last closed step's copies, judged as inputs of the next
         self.origins: dict[tuple[int, str], list[int]] = {}  # (node, why) → [first step, node-steps] of "inherited"
@@ -574,7 +575,8 @@ class Collector:
         copies = self.states.get(k, {})
         lost = self.lost.get(k, set())
         overloaded_before = self.overloaded_node_steps
-        verdict = self.judge.step(StepInputs(k, tr, self.prev_truth, judged, frozenset(contested), copies), self.prev_checks)
+        inputs = StepInputs(k, tr, self.prev_truth, judged, frozenset(contested), copies, self.prev_overloaded)
+        verdict = self.judge.step(inputs, self.prev_checks)
         for i in self.sc.ids:
             t, st, v = self.totals[i], judged.get(i), verdict.nodes[i]
             if tr is not None:
@@ -615,6 +617,7 @@ class Collector:
         self._forget(k)
         self.prev_truth = tr
         self.prev_checks = verdict.checks
+        self.prev_overloaded = False
         self.closed = k
 
     def _unjudged(self, t: NodeTotals, k: int, reported: bool, lost: bool) -> None:
@@ -648,7 +651,7 @@ class Collector:
         self.overloaded_node_steps += len(self.sc.ids)
         self.overloaded_steps += 1
         self._forget(k)
-        self.prev_truth, self.prev_checks = None, NO_CHECKS
+        self.prev_truth, self.prev_checks, self.prev_overloaded = None, NO_CHECKS, True
         self.closed = k
 
     def _add(self, t: NodeTotals, k: int, st: NodeState, v: NodeVerdict, bounds: list[list[float]]) -> None:

@@ -37,6 +37,7 @@ INNOV_RTOL = 1e-12  # the node computes ỹ − C̄ x̂ with the same numbers: r
 
 # why an input of a node-step gives it no guarantee (docs/coverage.md)
 TRUTH_UNKNOWN = "truth unknown"  # no single consistent truth of that step: nothing can be judged
+COLLECTOR_OVERLOADED = "collector overloaded"  # the step before was closed unjudged for the collector's own loss
 NOT_FROM_INPUT = "not from its true input"  # its γ or innovation is not what the true measurement gives
 MISSED = "missed the truth"
 NOT_JUDGED = "not judged"  # no copy with that digest reached the collector, or several matched the truth
@@ -113,6 +114,7 @@ class StepInputs:
     judged: dict[int, NodeState]
     contested: frozenset[int]
     copies: dict[int, list[NodeState]]
+    prev_overloaded: bool = False  # the step before was closed unjudged for the collector's own loss (its truth unread)
 
     @functools.cached_property
     def faults(self) -> dict[int, float]:
@@ -253,9 +255,11 @@ class Judge:
             as_prior=(facts if self_loop else None) or (None if prior_in else MISSED),
         )
 
-    def own_cause(self, n: NodeConfig, st: NodeState | None, tr: Truth, prev: Truth | None, k: int) -> str | None:
+    def own_cause(self, n: NodeConfig, st: NodeState | None, tr: Truth, prev: Truth | None, k: int, prev_overloaded: bool = False) -> str | None:
         """The first of the step's own assumptions that broke (None: all held); the plant's transition first,
-        as the cause a user acts on (recalibrate, or drive inside the envelope: docs/plant.md)."""
+        as the cause a user acts on (recalibrate, or drive inside the envelope: docs/plant.md).  Without the
+        previous truth the transition is unknown: the collector's own overload where it closed that step
+        unjudged (``prev_overloaded``), else truth unknown."""
         s = str(n.id)
         rejoin = st is not None and st.status == "rejoin"  # no transition crossed (below)
         if k > 0 and prev is not None and prev.step == k - 1 and not prev.mismatch_ok and not rejoin:
@@ -271,7 +275,7 @@ class Judge:
         if st is not None and st.status == "rejoin":
             return None  # built from the neighbours' sets of this very step: no transition crossed
         if prev is None or prev.step != k - 1:
-            return TRUTH_UNKNOWN
+            return COLLECTOR_OVERLOADED if prev_overloaded else TRUTH_UNKNOWN
         if not prev.dist_ok:
             return "disturbance"
         return None
@@ -283,7 +287,7 @@ class Judge:
         if tr is None:
             return Cone(False, TRUTH_UNKNOWN)
         st = inp.judged.get(i)
-        own = self.own_cause(n, st, tr, inp.prev_truth, k)
+        own = self.own_cause(n, st, tr, inp.prev_truth, k, inp.prev_overloaded)
         if own is not None:
             return Cone(False, own)
         if st is None or k == 0:
@@ -366,6 +370,7 @@ __all__ = [
     "NO_CHECKS",
     "OUTSIDE_ENVELOPE",
     "TRUTH_UNKNOWN",
+    "COLLECTOR_OVERLOADED",
     "Cone",
     "Containment",
     "CopyCheck",

@@ -40,6 +40,9 @@ def test_a_collector_past_its_budget_blames_no_node() -> None:
     assert s.node_steps_overloaded == s.steps_overloaded * len(sc.ids)  # every node published each of them
     assert s.node_steps_evaluated + s.node_steps_overloaded == total  # the rest judged at the end, none lost
     assert s.nodes_missing == [] and s.nodes_rejoined == [] and all(r.missing_from is None for r in s.nodes)
+    # the step judged after one closed unjudged is outside the guarantee for the collector's loss, not the truth's
+    assert s.node_steps_not_covered.get("collector overloaded", 0) >= len(sc.ids), s.node_steps_not_covered
+    assert "truth unknown" not in s.node_steps_not_covered, s.node_steps_not_covered
     assert s.collector_budget == BUDGET_STEPS * per_step and s.collector_peak == behind.peak_open_node_steps
     assert outcome(s) == ("PASS (partial coverage)", EXIT_OK)
     assert f"collector overloaded on {s.steps_overloaded} step(s) (past its budget of {s.collector_budget}" in format_table(s).splitlines()[-1]
