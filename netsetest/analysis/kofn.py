@@ -67,6 +67,7 @@ class Piece:
 
 Path = tuple[tuple[int, Piece], ...]  # the (step, piece) a node chose, in order
 
+RETRY_STEP_FRACTION = 0.95  # a branch the solver stopped on (NumericalError) is solved once more with these shorter steps (default 0.99)
 MAX_SOLVERS = 64  # branch solvers kept per program: each holds its KKT factorisation (~1 MB at 80 steps, 12 nodes)
 
 
@@ -158,6 +159,7 @@ class StepUnion:
     tolerance: float
     need: int
     pieces: tuple[Piece, ...]
+    t_before: dict[int, float] | None = None  # t_(j−1) = Σ t_before[c]·z[c], the same direction a step earlier (None at step 0)
 
     def holds(self, z: np.ndarray) -> bool:
         """Whether the point meets the union: at least ``need`` sensors healthy (to :data:`HEALTH_TOL`)."""
@@ -195,20 +197,22 @@ class Conic:
         """Global column → position in ``cols``."""
         return {int(c): m for m, c in enumerate(self.cols)}
 
-    def with_rows(self, rows: Sequence[Row]) -> Conic:
-        """The same program with ``rows`` (a·z ≤ b) added as one more non-negative cone."""
-        if not rows:
+    def with_rows(self, rows: Sequence[Row], equal: Sequence[Row] = ()) -> Conic:
+        """The same program with ``rows`` (a·z ≤ b) added as one more non-negative cone, then ``equal`` (a·z = b) as
+        a zero cone."""
+        if not rows and not equal:
             return self
         position = self.position
         data, ri, ci = [], [], []
-        for r, (terms, _) in enumerate(rows):
+        for r, (terms, _) in enumerate([*rows, *equal]):
             for c, v in terms.items():
                 ri.append(r)
                 ci.append(position[c])
                 data.append(v)
-        extra = sparse.csc_matrix((data, (ri, ci)), shape=(len(rows), len(self.cols)))
-        b = np.r_[self.b, [rhs for _, rhs in rows]]
-        return Conic(self.cols, sparse.vstack([self.A, extra], format="csc"), b, [*self.cones, clarabel.NonnegativeConeT(len(rows))], self.settings)
+        extra = sparse.csc_matrix((data, (ri, ci)), shape=(len(rows) + len(equal), len(self.cols)))
+        b = np.r_[self.b, [rhs for _, rhs in [*rows, *equal]]]
+        cones = [*self.cones, *([clarabel.NonnegativeConeT(len(rows))] if rows else []), *([clarabel.ZeroConeT(len(equal))] if equal else [])]
+        return Conic(self.cols, sparse.vstack([self.A, extra], format="csc"), b, cones, self.settings)
 
     @cached_property
     def _cone_of_row(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -243,9 +247,16 @@ class Conic:
             rows.append(self.A.indices[span])
         return out, np.concatenate(rows) if rows else np.zeros(0, dtype=int)
 
-    def solver(self, q: np.ndarray) -> clarabel.DefaultSolver:
+    def solver(self, q: np.ndarray, step_fraction: float | None = None) -> clarabel.DefaultSolver:
+        """A solver of min q·z (``step_fraction``: Clarabel's max_step_fraction for this one, else the settings')."""
         n = len(self.cols)
-        return clarabel.DefaultSolver(sparse.csc_matrix((n, n)), q, self.A, self.b, self.cones, self.settings)
+        if step_fraction is None:
+            return clarabel.DefaultSolver(sparse.csc_matrix((n, n)), q, self.A, self.b, self.cones, self.settings)
+        usual, self.settings.max_step_fraction = self.settings.max_step_fraction, step_fraction
+        try:
+            return clarabel.DefaultSolver(sparse.csc_matrix((n, n)), q, self.A, self.b, self.cones, self.settings)
+        finally:
+            self.settings.max_step_fraction = usual
 
 
 @dataclass(frozen=True)
@@ -376,6 +387,9 @@ class _Search:
         else:
             solver.update(q=self.q)
         sol = solver.solve()
+        if settle(str(sol.status)) == "other":  # e.g. NumericalError on a piece that barely meets the program: once more, shorter steps
+            sol = self.conic.with_rows(node.rows).solver(self.q, RETRY_STEP_FRACTION).solve()
+            self.solves += 1
         status, x = str(sol.status), np.asarray(sol.x) if str(sol.status) in _SOLVED else None
         self.solves += 1
         kind = settle(status)
@@ -468,6 +482,97 @@ class _Search:
         return self.result("solved", self.best[0], True) if self.best is not None else self.result("infeasible", math.nan, True)
 
 
+POINT_WIDTH = 1e-9  # relative: a piece this narrow is its midpoint (one equality), not two rows whose multipliers split
+
+
+def _certified_below(union: StepUnion, piece: Piece, duals: np.ndarray) -> float:
+    """What the piece's rows can take off the dual bound over the union: the least of Σ y·(b − a·z) for t_j in the
+    union's hull (every trajectory meeting the union has its t_j in one of its pieces).  Rows: lo ≤ t_j ≤ hi (the
+    order of :func:`interval_rows`, the upper side first; duals y ≥ 0), giving y_hi·(hi − t) + y_lo·(t − lo); or, for
+    a point piece, t_j = its midpoint c (one dual of either sign), giving y·(c − t).  −inf where the hull is
+    unbounded on a side the duals reward."""
+    lo_hull, hi_hull = min(p.lo for p in union.pieces), max(p.hi for p in union.pieces)
+    if _is_point(piece):
+        (y,) = duals
+        y_hi, y_lo, hi, lo = y, 0.0, _midpoint(piece), 0.0
+    else:
+        rest = iter(duals)
+        y_hi = next(rest) if math.isfinite(piece.hi) else 0.0
+        y_lo = next(rest) if math.isfinite(piece.lo) else 0.0
+        hi, lo = piece.hi, piece.lo
+    slope = y_lo - y_hi  # d/dt of y_hi·(hi − t) + y_lo·(t − lo)
+    at = lo_hull if slope >= 0 else hi_hull  # the least of a linear function on the hull: the end its slope points from
+    if not math.isfinite(at):
+        return 0.0 if slope == 0 else -math.inf
+    return (y_hi * (hi - at) if y_hi else 0.0) + (y_lo * (at - lo) if y_lo else 0.0)
+
+
+def _is_point(piece: Piece) -> bool:
+    return math.isfinite(piece.lo) and math.isfinite(piece.hi) and piece.hi - piece.lo <= POINT_WIDTH * max(1.0, abs(piece.lo))
+
+
+def _midpoint(piece: Piece) -> float:
+    return 0.5 * (piece.lo + piece.hi)
+
+
+def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], guide: Guide, solvers: Solvers) -> tuple[EndResult | None, int]:
+    """One solve that may settle an end before its root relaxation: the program with, for every earlier step the guide
+    (the same end's minimiser of the previous horizon) covers, the piece of t_j it chose, and for the current step the
+    piece nearest the guide's last t (t changes little from one step to the next); pieces of t_j alone: a tied fault's
+    pair of rows |f| ≤ τ = 0 splits its multipliers and certifies nothing (docs/exact.md), and a point piece is one
+    equality for the same reason.  Its minimiser, where it meets every union (or is mended to, :func:`_repaired`), is a
+    trajectory: an upper bound.  Its duals y give a lower bound of the end over every union by weak duality: for any z
+    of the root's program, q·z ≥ −b·y + Σ_piece rows y·(b − a·z), the last term bounded below over the union's hull of
+    t_j (:func:`_certified_below`).  When the two meet to :data:`GAP_TOL` the end is the lower one, exact, in one solve
+    where the root and the dive take two; otherwise None (the caller searches from the root).  With the solves spent."""
+    last, ref = guide
+    chosen = []
+    for union in unions:
+        if not union.pieces or union.step > last + 1:
+            continue
+        if union.step <= last:
+            piece = min(union.pieces, key=lambda p: _distance(union, p, ref))
+        elif union.t_before is not None:  # the current step: nearest the guide's t at its last step (t changes little in a step)
+            t_last = sum(v * ref[c] for c, v in union.t_before.items())
+            piece = min(union.pieces, key=lambda p: max(0.0, p.lo - t_last, t_last - p.hi))
+        else:
+            continue
+        if not piece.healthy:
+            chosen.append((union, piece))
+    rows = [row for union, piece in chosen if not _is_point(piece) for row in union.rows(piece)]
+    equal = [(dict(union.t), _midpoint(piece)) for union, piece in chosen if _is_point(piece)]
+    if not chosen:
+        return None, 0
+    path: Path = tuple((union.step, piece) for union, piece in chosen)
+    solver = solvers.get(path)
+    program = conic.with_rows(rows, equal)
+    if solver is None:
+        solver = program.solver(q)
+        solvers.put(path, solver)
+    else:
+        solver.update(q=q)
+    sol = solver.solve()
+    if settle(str(sol.status)) != "solved":
+        return None, 1
+    x, y = np.asarray(sol.x), np.asarray(sol.z)
+    below = -float(program.b @ y)  # the dual objective: a lower bound of q·z over the program without the pieces' rows, once
+    at, at_equal = len(conic.b), len(conic.b) + len(rows)  # the pieces' rows come last, in the order of ``chosen``, then the points
+    for union, piece in chosen:
+        if _is_point(piece):
+            below += _certified_below(union, piece, y[at_equal : at_equal + 1])
+            at_equal += 1
+        else:
+            n = math.isfinite(piece.hi) + math.isfinite(piece.lo)
+            below += _certified_below(union, piece, y[at : at + n])
+            at += n
+    node = _Node(float(q @ x), False, 0, frozenset(), tuple(rows + equal), _expand(conic, x, nz), path)
+    (col,) = conic.cols[np.flatnonzero(q)]
+    z = node.z if _branch_on(unions, node) is None else _repaired(program, unions, node, int(col))
+    if z is None or not node.bound <= below + GAP_TOL * max(1.0, abs(below)):  # also where the bound is −inf or NaN
+        return None, 1
+    return EndResult("solved", min(node.bound, below), z, True, 1), 1
+
+
 def minimise(
     conic: Conic,
     q: np.ndarray,
@@ -514,6 +619,7 @@ __all__ = [
     "Span",
     "StepUnion",
     "covered",
+    "guided",
     "interval_rows",
     "minimise",
     "settle",
