@@ -35,7 +35,22 @@ import numpy as np
 from scipy import sparse
 
 from netsetest.analysis.errors import ExactError
-from netsetest.analysis.kofn import Conic, EndResult, Guide, Piece, Row, Solvers, Span, StepUnion, guided, interval_rows, minimise, settle, step_pieces
+from netsetest.analysis.kofn import (
+    Conic,
+    EndResult,
+    Guide,
+    GuidedStart,
+    Piece,
+    Row,
+    Solvers,
+    Span,
+    StepUnion,
+    guided,
+    interval_rows,
+    minimise,
+    settle,
+    step_pieces,
+)
 from netsetest.config.schema import FaultBoundsMode, NodeConfig, Scenario
 from netsetest.estimator.health import HealthModel
 from netsetest.records.record import Record
@@ -675,11 +690,11 @@ def _end(
     """min sign·z[col]: the root relaxation, then (``unions``: the k-of-N unions and whether they are complete)
     the branch and bound over them; with a ``guide``, first one solve with its pieces that may settle the end
     alone (:func:`kofn.guided`)."""
-    spent = 0
+    first = GuidedStart(None, 0)
     if unions is not None and guide is not None and time.process_time() < deadline:
-        first, spent = guided(horizon.conic, horizon.objective({col: sign}), horizon.nz, unions[0], guide, horizon.guided)
-        if first is not None:
-            return replace(first, exact=unions[1])
+        first = guided(horizon.conic, horizon.objective({col: sign}), horizon.nz, unions[0], guide, horizon.guided)
+        if first.end is not None:
+            return replace(first.end, exact=unions[1])
     q, status, z = horizon.root(col, sign)
     kind = settle(status)
     if kind == "other":
@@ -687,8 +702,8 @@ def _end(
     if unions is None:
         value = {"solved": float(q @ z[horizon.conic.cols]) if z is not None else np.nan, "unbounded": -np.inf, "infeasible": np.nan}[kind]
         return EndResult(kind, value, z, True, 1)
-    result = minimise(horizon.conic, q, horizon.nz, unions[0], (status, z), budget, horizon.branches, deadline, guide)
-    return replace(result, exact=result.exact and unions[1], solves=result.solves + 1 + spent)
+    result = minimise(horizon.conic, q, horizon.nz, unions[0], (status, z), budget, horizon.branches, deadline, guide, first.incumbent)
+    return replace(result, exact=result.exact and unions[1], solves=result.solves + 1 + first.solves)
 
 
 def eta_s(elapsed: float, done: int, total: int, budget_s: float | None) -> float | None:

@@ -464,7 +464,8 @@ class _Search:
         return -math.inf
 
     def run(self, root: _Node, guide: Guide | None = None) -> EndResult:
-        self.dive(root, guide)
+        if self.best is None:  # else a trajectory is known already (:func:`guided`'s): the dive would look for one
+            self.dive(root, guide)
         heapq.heappush(self.heap, root)
         while self.heap:
             node = heapq.heappop(self.heap)
@@ -515,7 +516,17 @@ def _midpoint(piece: Piece) -> float:
     return 0.5 * (piece.lo + piece.hi)
 
 
-def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], guide: Guide, solvers: Solvers) -> tuple[EndResult | None, int]:
+@dataclass(frozen=True)
+class GuidedStart:
+    """What :func:`guided` found: the end settled in one solve, or else the trajectory it found (its q·z and the
+    point), which the search then starts from instead of diving (:meth:`_Search.dive`); and the solves spent."""
+
+    end: EndResult | None
+    solves: int
+    incumbent: tuple[float, np.ndarray] | None = None
+
+
+def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], guide: Guide, solvers: Solvers) -> GuidedStart:
     """One solve that may settle an end before its root relaxation: the program with, for every earlier step the guide
     (the same end's minimiser of the previous horizon) covers, the piece of t_j it chose, and for the current step the
     piece nearest the guide's last t (t changes little from one step to the next); pieces of t_j alone: a tied fault's
@@ -524,7 +535,7 @@ def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], gu
     trajectory: an upper bound.  Its duals y give a lower bound of the end over every union by weak duality: for any z
     of the root's program, q·z ≥ −b·y + Σ_piece rows y·(b − a·z), the last term bounded below over the union's hull of
     t_j (:func:`_certified_below`).  When the two meet to :data:`GAP_TOL` the end is the lower one, exact, in one solve
-    where the root and the dive take two; otherwise None (the caller searches from the root).  With the solves spent."""
+    where the root and the dive take two; otherwise the caller searches from the root, with that trajectory if any."""
     last, ref = guide
     chosen = []
     for union in unions:
@@ -542,7 +553,7 @@ def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], gu
     rows = [row for union, piece in chosen if not _is_point(piece) for row in union.rows(piece)]
     equal = [(dict(union.t), _midpoint(piece)) for union, piece in chosen if _is_point(piece)]
     if not chosen:
-        return None, 0
+        return GuidedStart(None, 0)
     path: Path = tuple((union.step, piece) for union, piece in chosen)
     solver = solvers.get(path)
     program = conic.with_rows(rows, equal)
@@ -553,7 +564,7 @@ def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], gu
         solver.update(q=q)
     sol = solver.solve()
     if settle(str(sol.status)) != "solved":
-        return None, 1
+        return GuidedStart(None, 1)
     x, y = np.asarray(sol.x), np.asarray(sol.z)
     below = -float(program.b @ y)  # the dual objective: a lower bound of q·z over the program without the pieces' rows, once
     at, at_equal = len(conic.b), len(conic.b) + len(rows)  # the pieces' rows come last, in the order of ``chosen``, then the points
@@ -568,9 +579,11 @@ def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], gu
     node = _Node(float(q @ x), False, 0, frozenset(), tuple(rows + equal), _expand(conic, x, nz), path)
     (col,) = conic.cols[np.flatnonzero(q)]
     z = node.z if _branch_on(unions, node) is None else _repaired(program, unions, node, int(col))
-    if z is None or not node.bound <= below + GAP_TOL * max(1.0, abs(below)):  # also where the bound is −inf or NaN
-        return None, 1
-    return EndResult("solved", min(node.bound, below), z, True, 1), 1
+    if z is None:
+        return GuidedStart(None, 1)
+    if not node.bound <= below + GAP_TOL * max(1.0, abs(below)):  # also where the bound is −inf or NaN
+        return GuidedStart(None, 1, (node.bound, z))
+    return GuidedStart(EndResult("solved", min(node.bound, below), z, True, 1), 1)
 
 
 def minimise(
@@ -583,13 +596,15 @@ def minimise(
     solvers: Solvers | None = None,
     deadline: float = math.inf,
     guide: Guide | None = None,
+    incumbent: tuple[float, np.ndarray] | None = None,
 ) -> EndResult:
     """min q·z over the program and every union (module doc), from the root relaxation ``root`` (its status and
     minimiser over the global columns).  At most ``budget`` solves; past it the least open bound, not exact.
     ``solvers``: the nodes' solvers by path, shared by the ends of one program (a path's rows are the same for
     every end, only q changes); ``deadline``: a time.process_time() past which no more nodes are solved (relaxed);
     ``guide``: (its last step, a minimiser over the global columns) of the same end at an earlier horizon, whose
-    pieces are tried first (:meth:`_Search.dive`)."""
+    pieces are tried first (:meth:`_Search.dive`); ``incumbent``: a trajectory known already (its q·z, the point), then
+    no dive."""
     kind = settle(root[0])
     assert kind != "other", root[0]  # the caller reports a root the solver could not settle
     if kind == "infeasible":
@@ -603,6 +618,7 @@ def minimise(
             return EndResult("solved", node.bound, mended, True, 0)
     search = _Search(conic, q, nz, unions, budget, deadline, (int(conic.cols[at]), float(q[at])), order=itertools.count(1))
     search.solvers = Solvers() if solvers is None else solvers
+    search.best = incumbent
     return search.run(node, guide)
 
 
@@ -619,6 +635,7 @@ __all__ = [
     "Span",
     "StepUnion",
     "covered",
+    "GuidedStart",
     "guided",
     "interval_rows",
     "minimise",
