@@ -65,6 +65,7 @@ NARROWER_TOL = 1e-8  # solver precision of the exact ends (measured ≤ 2e-9 ove
 PIECE_MARGIN = 1e-12  # relative widening of each k-of-N interval: ~10⁴ ulps, far below what the witnesses are checked to (1e-8)
 SOLVER_TOL = 1e-10  # Clarabel gap and feasibility tolerances: witnesses meet every constraint to ~1e-9
 HEALTH_BUDGET = 400  # solves per interval end for the k-of-N branch and bound; past it the end is relaxed
+GUIDED_RETRY = 8  # horizons an end's guided solve is not tried after it failed (kofn.guided)
 CUT_MARGIN = 1e-8  # a past step's end is loosened by this (relative) before it bounds later horizons: solver precision
 
 
@@ -445,7 +446,7 @@ class _HealthPlan:
         were found dead, and the unions of a run whose ends settle without their roots (:func:`kofn.guided`) kept
         them all.  The solves spent."""
         solves = 0
-        for union in [u for u in self.unions if len(u.pieces) > 1]:
+        for union in [u for u in self.unions if len(u.pieces) > 1 and u.step > 0]:  # step 0's (the priors tie it) is cut by its own horizon
             ends = []
             for sign in (1.0, -1.0):
                 q = horizon.objective({c: sign * v for c, v in union.t.items()})
@@ -534,6 +535,27 @@ class _Horizon:
         return (q, *self.solve(q))
 
 
+class _Guides:
+    """Per end (coordinate, node, side): its last minimiser (the next horizon's search tries its pieces first, and
+    :func:`kofn.guided` solves with them), and the horizon its guided solve last failed at.  An end whose guided solve
+    failed is not guided again for :data:`GUIDED_RETRY` horizons: on a 12-node ring with two groups most guided solves
+    are not proven and each is one solve more than the search from the root (docs/exact.md, measured)."""
+
+    def __init__(self) -> None:
+        self.last: dict[tuple[Coordinate, int | None, Side], Guide] = {}  # one vector each
+        self.failed: dict[tuple[Coordinate, int | None, Side], int] = {}
+
+    def get(self, key: tuple[Coordinate, int | None, Side], k: int) -> tuple[Guide | None, bool]:
+        """The guide, and whether to try a guided solve first at horizon k."""
+        return self.last.get(key), k - self.failed.get(key, -GUIDED_RETRY) >= GUIDED_RETRY
+
+    def learn(self, key: tuple[Coordinate, int | None, Side], k: int, result: EndResult, tried: bool) -> None:
+        if result.z is not None:
+            self.last[key] = (k, result.z)
+        if tried and not result.guided:
+            self.failed[key] = k
+
+
 @dataclass
 class _HealthTally:
     ends: int = 0
@@ -596,7 +618,7 @@ def exact_bounds(
     witnesses: dict[WitnessKey, Witness] = {}
     infeasible: list[int] = []
     tally = _HealthTally()
-    guides: dict[tuple[Coordinate, int | None, Side], Guide] = {}  # per end: its last minimiser (one vector each)
+    guides = _Guides()
     deadline = math.inf if budget_s is None else time.process_time() + budget_s
     out_of_time: int | None = None
     st = _settings()
@@ -617,7 +639,8 @@ def exact_bounds(
             for end, (side, sign) in enumerate((("lo", 1.0), ("hi", -1.0))):
                 key = WitnessKey(coord, node, k, side)  # type: ignore[arg-type]  # coord is one of COORDINATES and side one of lo, hi: str in the loop
                 end_key = (coord, node, key.side)
-                result = _end(horizon, col, sign, unions, health_budget, f"step {k}: the {coord} bound", deadline, guides.get(end_key))
+                guide, try_guided = guides.get(end_key, k)
+                result = _end(horizon, col, sign, unions, health_budget, f"step {k}: the {coord} bound", deadline, guide, try_guided)
                 if result.status == "infeasible":
                     step_infeasible = True
                     continue
@@ -626,8 +649,7 @@ def exact_bounds(
                     witnesses[key] = prog.witness(result.z, k, eliminate_free_faults)
                 if plans:
                     tally.count(key, result)
-                    if result.z is not None:  # the next horizon's search of this end tries its pieces first
-                        guides[end_key] = (k, result.z)
+                    guides.learn(end_key, k, result, guide is not None and try_guided)
                     for p in plans:
                         p.drop([d for d in result.dead if d[0] < k])
         if out_of_time is None and time.process_time() >= deadline:
@@ -686,15 +708,16 @@ def _end(
     what: str,
     deadline: float = math.inf,
     guide: Guide | None = None,
+    try_guided: bool = True,
 ) -> EndResult:
     """min sign·z[col]: the root relaxation, then (``unions``: the k-of-N unions and whether they are complete)
-    the branch and bound over them; with a ``guide``, first one solve with its pieces that may settle the end
-    alone (:func:`kofn.guided`)."""
+    the branch and bound over them; with a ``guide`` (and ``try_guided``), first one solve with its pieces that may
+    settle the end alone (:func:`kofn.guided`)."""
     first = GuidedStart(None, 0)
-    if unions is not None and guide is not None and time.process_time() < deadline:
+    if unions is not None and guide is not None and try_guided and time.process_time() < deadline:
         first = guided(horizon.conic, horizon.objective({col: sign}), horizon.nz, unions[0], guide, horizon.guided)
         if first.end is not None:
-            return replace(first.end, exact=unions[1])
+            return replace(first.end, exact=unions[1], guided=True)
     q, status, z = horizon.root(col, sign)
     kind = settle(status)
     if kind == "other":

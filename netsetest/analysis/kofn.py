@@ -67,7 +67,7 @@ class Piece:
 
 Path = tuple[tuple[int, Piece], ...]  # the (step, piece) a node chose, in order
 
-RETRY_STEP_FRACTION = 0.95  # a branch the solver stopped on (NumericalError) is solved once more with these shorter steps (default 0.99)
+RETRY_REGULARIZATION = 1e-7  # a branch the solver stopped on (NumericalError) is solved once more with this static regularization (default 1e-8)
 MAX_SOLVERS = 64  # branch solvers kept per program: each holds its KKT factorisation (~1 MB at 80 steps, 12 nodes)
 
 
@@ -78,16 +78,16 @@ class Solvers:
 
     def __init__(self, size: int = MAX_SOLVERS) -> None:
         self.size = size
-        self._kept: OrderedDict[Path, clarabel.DefaultSolver] = OrderedDict()
+        self._kept: OrderedDict[tuple, clarabel.DefaultSolver] = OrderedDict()
         self.built = 0  # solvers made (the others were reused)
 
-    def get(self, path: Path) -> clarabel.DefaultSolver | None:
+    def get(self, path: tuple) -> clarabel.DefaultSolver | None:
         solver = self._kept.get(path)
         if solver is not None:
             self._kept.move_to_end(path)
         return solver
 
-    def put(self, path: Path, solver: clarabel.DefaultSolver) -> None:
+    def put(self, path: tuple, solver: clarabel.DefaultSolver) -> None:
         self.built += 1
         self._kept[path] = solver
         if len(self._kept) > self.size:
@@ -247,16 +247,16 @@ class Conic:
             rows.append(self.A.indices[span])
         return out, np.concatenate(rows) if rows else np.zeros(0, dtype=int)
 
-    def solver(self, q: np.ndarray, step_fraction: float | None = None) -> clarabel.DefaultSolver:
-        """A solver of min q·z (``step_fraction``: Clarabel's max_step_fraction for this one, else the settings')."""
+    def solver(self, q: np.ndarray, regularization: float | None = None) -> clarabel.DefaultSolver:
+        """A solver of min q·z (``regularization``: Clarabel's static regularization for this one, else the settings')."""
         n = len(self.cols)
-        if step_fraction is None:
+        if regularization is None:
             return clarabel.DefaultSolver(sparse.csc_matrix((n, n)), q, self.A, self.b, self.cones, self.settings)
-        usual, self.settings.max_step_fraction = self.settings.max_step_fraction, step_fraction
+        usual, self.settings.static_regularization_constant = self.settings.static_regularization_constant, regularization
         try:
             return clarabel.DefaultSolver(sparse.csc_matrix((n, n)), q, self.A, self.b, self.cones, self.settings)
         finally:
-            self.settings.max_step_fraction = usual
+            self.settings.static_regularization_constant = usual
 
 
 @dataclass(frozen=True)
@@ -270,6 +270,7 @@ class EndResult:
     exact: bool
     solves: int
     dead: tuple[tuple[int, Piece], ...] = ()  # (step, piece) with no trajectory: the root program plus the piece is infeasible
+    guided: bool = False  # settled by :func:`guided`'s one solve, not from the root
 
 
 def settle(status: str) -> Literal["solved", "unbounded", "infeasible", "other"]:
@@ -387,8 +388,8 @@ class _Search:
         else:
             solver.update(q=self.q)
         sol = solver.solve()
-        if settle(str(sol.status)) == "other":  # e.g. NumericalError on a piece that barely meets the program: once more, shorter steps
-            sol = self.conic.with_rows(node.rows).solver(self.q, RETRY_STEP_FRACTION).solve()
+        if settle(str(sol.status)) == "other":  # e.g. NumericalError on a piece that barely meets the program: once more, regularized
+            sol = self.conic.with_rows(node.rows).solver(self.q, RETRY_REGULARIZATION).solve()
             self.solves += 1
         status, x = str(sol.status), np.asarray(sol.x) if str(sol.status) in _SOLVED else None
         self.solves += 1
@@ -537,8 +538,12 @@ def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], gu
     t_j (:func:`_certified_below`).  When the two meet to :data:`GAP_TOL` the end is the lower one, exact, in one solve
     where the root and the dive take two; otherwise the caller searches from the root, with that trajectory if any."""
     last, ref = guide
-    chosen = []
+    chosen = []  # (union, piece) whose rows the duals answer for over the union's hull
+    convex = []  # unions of one piece: every trajectory meets its rows, so their duals take nothing off the bound
     for union in unions:
+        if len(union.pieces) == 1:
+            convex.append(union)
+            continue
         if not union.pieces or union.step > last + 1:
             continue
         if union.step <= last:
@@ -550,16 +555,18 @@ def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], gu
             continue
         if not piece.healthy:
             chosen.append((union, piece))
-    rows = [row for union, piece in chosen if not _is_point(piece) for row in union.rows(piece)]
+    settled = [row for union in convex for row in union.rows(union.pieces[0])]
+    rows = settled + [row for union, piece in chosen if not _is_point(piece) for row in union.rows(piece)]
     equal = [(dict(union.t), _midpoint(piece)) for union, piece in chosen if _is_point(piece)]
-    if not chosen:
+    if not rows and not equal:
         return GuidedStart(None, 0)
-    path: Path = tuple((union.step, piece) for union, piece in chosen)
-    solver = solvers.get(path)
+    path: Path = tuple((union.step, union.pieces[0]) for union in convex) + tuple((union.step, piece) for union, piece in chosen)
+    key = (len(convex), *path)  # a piece of one union's is all its rows, a point chosen is an equality: not the same program
+    solver = solvers.get(key)
     program = conic.with_rows(rows, equal)
     if solver is None:
         solver = program.solver(q)
-        solvers.put(path, solver)
+        solvers.put(key, solver)
     else:
         solver.update(q=q)
     sol = solver.solve()
@@ -567,7 +574,7 @@ def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], gu
         return GuidedStart(None, 1)
     x, y = np.asarray(sol.x), np.asarray(sol.z)
     below = -float(program.b @ y)  # the dual objective: a lower bound of q·z over the program without the pieces' rows, once
-    at, at_equal = len(conic.b), len(conic.b) + len(rows)  # the pieces' rows come last, in the order of ``chosen``, then the points
+    at, at_equal = len(conic.b) + len(settled), len(conic.b) + len(rows)  # after the one-piece unions' rows, the chosen pieces', then the points
     for union, piece in chosen:
         if _is_point(piece):
             below += _certified_below(union, piece, y[at_equal : at_equal + 1])
