@@ -20,7 +20,9 @@ union is optimal (it has the least bound of all open nodes), otherwise it branch
 violated step; before it, one *dive* tries the pieces the same end chose at the previous horizon, all at once
 (one solve where the search would branch once per union), a child whose piece's interval bounds the objective
 past the incumbent is never solved, and a minimiser that misses a union only by tied faults is mended, not branched
-on (:func:`_repaired`: the faults clipped to τ where every row still holds; its value is then proven).  Past the
+on (:func:`_repaired`: the faults clipped to τ where every row still holds; its value is then proven).  Before the
+root, :func:`guided` solves once with the previous horizon's pieces and proves the end by the duals of their rows
+where it can (one solve where the root and the dive take two).  Past the
 budget of solves, or past the run's deadline (CPU time), it stops with the least open bound: an outer bound
 (sound), reported as relaxed.  The solvers of the nodes are kept for the
 other ends of the same program (the same rows, another objective), at most :data:`MAX_SOLVERS` of them (least
