@@ -590,7 +590,7 @@ def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], gu
     z = node.z if _branch_on(unions, node) is None else _repaired(program, unions, node, int(col))
     if z is None:
         return GuidedStart(None, 1)
-    if not node.bound <= below + GAP_TOL * max(1.0, abs(below)):  # also where the bound is −inf or NaN
+    if not (math.isfinite(below) and node.bound <= below + GAP_TOL * max(1.0, abs(below))):  # a bound −inf or NaN proves nothing
         return GuidedStart(None, 1, (node.bound, z))
     return GuidedStart(EndResult("solved", min(node.bound, below), z, True, 1), 1)
 
