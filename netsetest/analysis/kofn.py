@@ -563,7 +563,7 @@ def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], gu
     if not rows and not equal:
         return GuidedStart(None, 0)
     path: Path = tuple((union.step, union.pieces[0]) for union in convex) + tuple((union.step, piece) for union, piece in chosen)
-    key = (len(convex), *path)  # a piece of one union's is all its rows, a point chosen is an equality: not the same program
+    key = (len(convex), *path)  # a one-piece union brings all its rows, a chosen point an equality: the count says which
     solver = solvers.get(key)
     program = conic.with_rows(rows, equal)
     if solver is None:
