@@ -35,7 +35,22 @@ import numpy as np
 from scipy import sparse
 
 from netsetest.analysis.errors import ExactError
-from netsetest.analysis.kofn import Conic, EndResult, Guide, Piece, Row, Solvers, Span, StepUnion, interval_rows, minimise, settle, step_pieces
+from netsetest.analysis.kofn import (
+    Conic,
+    EndResult,
+    Guide,
+    GuidedStart,
+    Piece,
+    Row,
+    Solvers,
+    Span,
+    StepUnion,
+    guided,
+    interval_rows,
+    minimise,
+    settle,
+    step_pieces,
+)
 from netsetest.config.schema import FaultBoundsMode, NodeConfig, Scenario
 from netsetest.estimator.health import HealthModel
 from netsetest.records.record import Record
@@ -50,6 +65,7 @@ NARROWER_TOL = 1e-8  # solver precision of the exact ends (measured ≤ 2e-9 ove
 PIECE_MARGIN = 1e-12  # relative widening of each k-of-N interval: ~10⁴ ulps, far below what the witnesses are checked to (1e-8)
 SOLVER_TOL = 1e-10  # Clarabel gap and feasibility tolerances: witnesses meet every constraint to ~1e-9
 HEALTH_BUDGET = 400  # solves per interval end for the k-of-N branch and bound; past it the end is relaxed
+GUIDED_RETRY = 8  # horizons an end's guided solve is not tried after it failed (kofn.guided)
 CUT_MARGIN = 1e-8  # a past step's end is loosened by this (relative) before it bounds later horizons: solver precision
 
 
@@ -403,7 +419,7 @@ class _HealthPlan:
         if pieces is None:
             return None
         f_col = tuple(self.prog._f(n, j) if t else None for (n, _), t in zip(self.members, tied))
-        return StepUnion(j, self._t(j), self._spans(j), f_col, self.model.tolerance, self.model.need, tuple(pieces))
+        return StepUnion(j, self._t(j), self._spans(j), f_col, self.model.tolerance, self.model.need, tuple(pieces), self._t(j - 1) if j > 0 else None)
 
     def _tied(self, j: int) -> list[bool]:
         """A fault tied to more than its measurement in every horizon after j: by a prior (j = 0), or by a declared
@@ -422,6 +438,27 @@ class _HealthPlan:
         tied = [t or self.prog._f(n, k) == objective for (n, _), t in zip(self.members, self._tied(k))]
         last = self._union(k, tied, [True] * len(tied), window)
         return [*self.unions, *([last] if last is not None else [])], last is not None and not self.incomplete
+
+    def narrow(self, horizon: _Horizon) -> int:
+        """Drop every past step's piece outside the range of its t_j in this horizon's program without the unions
+        (min and max of t_j, loosened by :data:`CUT_MARGIN`): the root plus such a piece has no trajectory, here and
+        in every later horizon (each adds constraints).  Without it only the pieces a root's search happened to try
+        were found dead, and the unions of a run whose ends settle without their roots (:func:`kofn.guided`) kept
+        them all.  The solves spent."""
+        solves = 0
+        for union in [u for u in self.unions if len(u.pieces) > 1 and u.step > 0]:  # step 0's (the priors tie it) is cut by its own horizon
+            ends = []
+            for sign in (1.0, -1.0):
+                q = horizon.objective({c: sign * v for c, v in union.t.items()})
+                status, z = horizon.solve(q)
+                solves += 1
+                if z is None:
+                    break
+                ends.append(sign * float(q @ z[horizon.conic.cols]))
+            if len(ends) == 2:
+                lo, hi = _loosened(*ends)
+                self.drop([(union.step, p) for p in union.pieces if p.hi < lo or p.lo > hi])
+        return solves
 
     def drop(self, dead: Sequence[tuple[int, Piece]]) -> None:
         """Pieces that admit no trajectory in some horizon admit none in any later one (it adds constraints)."""
@@ -469,11 +506,17 @@ class _Horizon:
         self.conic, self.nz = conic, nz
         self.solver: clarabel.DefaultSolver | None = None
         self.branches = Solvers()  # the branch and bound's, shared by the horizon's ends (bounded: kofn.MAX_SOLVERS)
+        self.guided = Solvers()  # kofn.guided's (a point piece is an equality there: not a branch's rows)
 
-    def root(self, col: int, sign: float) -> tuple[np.ndarray, str, np.ndarray | None]:
-        """q, the solver's status and its minimiser (over every column of the program) of sign·z[col]."""
+    def objective(self, terms: dict[int, float]) -> np.ndarray:
+        """q of Σ terms[c]·z[c] over the program's columns."""
         q = np.zeros(len(self.conic.cols))
-        q[self.conic.position[col]] = sign
+        for c, v in terms.items():
+            q[self.conic.position[c]] = v
+        return q
+
+    def solve(self, q: np.ndarray) -> tuple[str, np.ndarray | None]:
+        """The solver's status and its minimiser (over every column of the program) of q·z, without the unions."""
         if self.solver is None:
             self.solver = self.conic.solver(q)
         else:
@@ -481,10 +524,36 @@ class _Horizon:
         sol = self.solver.solve()
         status = str(sol.status)
         if settle(status) != "solved":
-            return q, status, None
+            return status, None
         z = np.zeros(self.nz)
         z[self.conic.cols] = np.asarray(sol.x)
-        return q, status, z
+        return status, z
+
+    def root(self, col: int, sign: float) -> tuple[np.ndarray, str, np.ndarray | None]:
+        """q, the solver's status and its minimiser of sign·z[col]."""
+        q = self.objective({col: sign})
+        return (q, *self.solve(q))
+
+
+class _Guides:
+    """Per end (coordinate, node, side): its last minimiser (the next horizon's search tries its pieces first, and
+    :func:`kofn.guided` solves with them), and the horizon its guided solve last failed at.  An end whose guided solve
+    failed is not guided again for :data:`GUIDED_RETRY` horizons: on a 12-node ring with two groups most guided solves
+    are not proven and each is one solve more than the search from the root (docs/exact.md, measured)."""
+
+    def __init__(self) -> None:
+        self.last: dict[tuple[Coordinate, int | None, Side], Guide] = {}  # one vector each
+        self.failed: dict[tuple[Coordinate, int | None, Side], int] = {}
+
+    def get(self, key: tuple[Coordinate, int | None, Side], k: int) -> tuple[Guide | None, bool]:
+        """The guide, and whether to try a guided solve first at horizon k."""
+        return self.last.get(key), k - self.failed.get(key, -GUIDED_RETRY) >= GUIDED_RETRY
+
+    def learn(self, key: tuple[Coordinate, int | None, Side], k: int, result: EndResult, tried: bool) -> None:
+        if result.z is not None:
+            self.last[key] = (k, result.z)
+        if tried and not result.guided:
+            self.failed[key] = k
 
 
 @dataclass
@@ -549,7 +618,7 @@ def exact_bounds(
     witnesses: dict[WitnessKey, Witness] = {}
     infeasible: list[int] = []
     tally = _HealthTally()
-    guides: dict[tuple[Coordinate, int | None, Side], Guide] = {}  # per end: its last minimiser (one vector each)
+    guides = _Guides()
     deadline = math.inf if budget_s is None else time.process_time() + budget_s
     out_of_time: int | None = None
     st = _settings()
@@ -561,7 +630,8 @@ def exact_bounds(
             continue
         cols, A, b, cones = prog.matrices(k, eliminate_free_faults)
         conic = Conic(cols, A, b, cones, st)
-        horizon = _Horizon(conic.with_rows([row for p in plans for row in p.cuts]) if plans else conic, prog.nz)
+        horizon, narrowing = _horizon(conic, plans, prog.nz, deadline)
+        tally.solves += narrowing
         step_infeasible = False
         for coord, node, col in prog.objectives(k):
             target = fault[node] if node is not None else (beta if coord == "beta" else r)  # node: the fault's only
@@ -569,7 +639,8 @@ def exact_bounds(
             for end, (side, sign) in enumerate((("lo", 1.0), ("hi", -1.0))):
                 key = WitnessKey(coord, node, k, side)  # type: ignore[arg-type]  # coord is one of COORDINATES and side one of lo, hi: str in the loop
                 end_key = (coord, node, key.side)
-                result = _end(horizon, col, sign, unions, health_budget, f"step {k}: the {coord} bound", deadline, guides.get(end_key))
+                guide, try_guided = guides.get(end_key, k)
+                result = _end(horizon, col, sign, unions, health_budget, f"step {k}: the {coord} bound", deadline, guide, try_guided)
                 if result.status == "infeasible":
                     step_infeasible = True
                     continue
@@ -578,8 +649,7 @@ def exact_bounds(
                     witnesses[key] = prog.witness(result.z, k, eliminate_free_faults)
                 if plans:
                     tally.count(key, result)
-                    if result.z is not None:  # the next horizon's search of this end tries its pieces first
-                        guides[end_key] = (k, result.z)
+                    guides.learn(end_key, k, result, guide is not None and try_guided)
                     for p in plans:
                         p.drop([d for d in result.dead if d[0] < k])
         if out_of_time is None and time.process_time() >= deadline:
@@ -610,6 +680,13 @@ def exact_bounds(
     )
 
 
+def _horizon(conic: Conic, plans: list[_HealthPlan], nz: int, deadline: float) -> tuple[_Horizon, int]:
+    """One horizon's program with what the past horizons proved (the plans' cuts), its unions' pieces outside the
+    program's range dropped (:meth:`_HealthPlan.narrow`, before the deadline), and the solves that took."""
+    horizon = _Horizon(conic.with_rows([row for p in plans for row in p.cuts]) if plans else conic, nz)
+    return horizon, sum(p.narrow(horizon) for p in plans) if time.process_time() < deadline else 0
+
+
 def _unions_at(plans: list[_HealthPlan], k: int, col: int, beta: np.ndarray, r: np.ndarray, is_fault: bool) -> tuple[list[StepUnion], bool]:
     """Every group's unions of horizon k for one objective column, by step, and whether all are complete; the
     window of t_k (a group's direction u) from the horizon's β, r ends, which come before the faults'."""
@@ -631,9 +708,16 @@ def _end(
     what: str,
     deadline: float = math.inf,
     guide: Guide | None = None,
+    try_guided: bool = True,
 ) -> EndResult:
     """min sign·z[col]: the root relaxation, then (``unions``: the k-of-N unions and whether they are complete)
-    the branch and bound over them."""
+    the branch and bound over them; with a ``guide`` (and ``try_guided``), first one solve with its pieces that may
+    settle the end alone (:func:`kofn.guided`)."""
+    first = GuidedStart(None, 0)
+    if unions is not None and guide is not None and try_guided and time.process_time() < deadline:
+        first = guided(horizon.conic, horizon.objective({col: sign}), horizon.nz, unions[0], guide, horizon.guided)
+        if first.end is not None:
+            return replace(first.end, exact=unions[1], guided=True)
     q, status, z = horizon.root(col, sign)
     kind = settle(status)
     if kind == "other":
@@ -641,8 +725,8 @@ def _end(
     if unions is None:
         value = {"solved": float(q @ z[horizon.conic.cols]) if z is not None else np.nan, "unbounded": -np.inf, "infeasible": np.nan}[kind]
         return EndResult(kind, value, z, True, 1)
-    result = minimise(horizon.conic, q, horizon.nz, unions[0], (status, z), budget, horizon.branches, deadline, guide)
-    return replace(result, exact=result.exact and unions[1], solves=result.solves + 1)
+    result = minimise(horizon.conic, q, horizon.nz, unions[0], (status, z), budget, horizon.branches, deadline, guide, first.incumbent)
+    return replace(result, exact=result.exact and unions[1], solves=result.solves + 1 + first.solves)
 
 
 def eta_s(elapsed: float, done: int, total: int, budget_s: float | None) -> float | None:

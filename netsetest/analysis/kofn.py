@@ -20,7 +20,9 @@ union is optimal (it has the least bound of all open nodes), otherwise it branch
 violated step; before it, one *dive* tries the pieces the same end chose at the previous horizon, all at once
 (one solve where the search would branch once per union), a child whose piece's interval bounds the objective
 past the incumbent is never solved, and a minimiser that misses a union only by tied faults is mended, not branched
-on (:func:`_repaired`: the faults clipped to τ where every row still holds; its value is then proven).  Past the
+on (:func:`_repaired`: the faults clipped to τ where every row still holds; its value is then proven).  Before the
+root, :func:`guided` solves once with the previous horizon's pieces and proves the end by the duals of their rows
+where it can (one solve where the root and the dive take two).  Past the
 budget of solves, or past the run's deadline (CPU time), it stops with the least open bound: an outer bound
 (sound), reported as relaxed.  The solvers of the nodes are kept for the
 other ends of the same program (the same rows, another objective), at most :data:`MAX_SOLVERS` of them (least
@@ -67,6 +69,7 @@ class Piece:
 
 Path = tuple[tuple[int, Piece], ...]  # the (step, piece) a node chose, in order
 
+RETRY_REGULARIZATION = 1e-7  # a branch the solver stopped on (NumericalError) is solved once more with this static regularization (default 1e-8)
 MAX_SOLVERS = 64  # branch solvers kept per program: each holds its KKT factorisation (~1 MB at 80 steps, 12 nodes)
 
 
@@ -77,16 +80,16 @@ class Solvers:
 
     def __init__(self, size: int = MAX_SOLVERS) -> None:
         self.size = size
-        self._kept: OrderedDict[Path, clarabel.DefaultSolver] = OrderedDict()
+        self._kept: OrderedDict[tuple, clarabel.DefaultSolver] = OrderedDict()
         self.built = 0  # solvers made (the others were reused)
 
-    def get(self, path: Path) -> clarabel.DefaultSolver | None:
+    def get(self, path: tuple) -> clarabel.DefaultSolver | None:
         solver = self._kept.get(path)
         if solver is not None:
             self._kept.move_to_end(path)
         return solver
 
-    def put(self, path: Path, solver: clarabel.DefaultSolver) -> None:
+    def put(self, path: tuple, solver: clarabel.DefaultSolver) -> None:
         self.built += 1
         self._kept[path] = solver
         if len(self._kept) > self.size:
@@ -158,6 +161,7 @@ class StepUnion:
     tolerance: float
     need: int
     pieces: tuple[Piece, ...]
+    t_before: dict[int, float] | None = None  # t_(j−1) = Σ t_before[c]·z[c], the same direction a step earlier (None at step 0)
 
     def holds(self, z: np.ndarray) -> bool:
         """Whether the point meets the union: at least ``need`` sensors healthy (to :data:`HEALTH_TOL`)."""
@@ -195,20 +199,22 @@ class Conic:
         """Global column → position in ``cols``."""
         return {int(c): m for m, c in enumerate(self.cols)}
 
-    def with_rows(self, rows: Sequence[Row]) -> Conic:
-        """The same program with ``rows`` (a·z ≤ b) added as one more non-negative cone."""
-        if not rows:
+    def with_rows(self, rows: Sequence[Row], equal: Sequence[Row] = ()) -> Conic:
+        """The same program with ``rows`` (a·z ≤ b) added as one more non-negative cone, then ``equal`` (a·z = b) as
+        a zero cone."""
+        if not rows and not equal:
             return self
         position = self.position
         data, ri, ci = [], [], []
-        for r, (terms, _) in enumerate(rows):
+        for r, (terms, _) in enumerate([*rows, *equal]):
             for c, v in terms.items():
                 ri.append(r)
                 ci.append(position[c])
                 data.append(v)
-        extra = sparse.csc_matrix((data, (ri, ci)), shape=(len(rows), len(self.cols)))
-        b = np.r_[self.b, [rhs for _, rhs in rows]]
-        return Conic(self.cols, sparse.vstack([self.A, extra], format="csc"), b, [*self.cones, clarabel.NonnegativeConeT(len(rows))], self.settings)
+        extra = sparse.csc_matrix((data, (ri, ci)), shape=(len(rows) + len(equal), len(self.cols)))
+        b = np.r_[self.b, [rhs for _, rhs in [*rows, *equal]]]
+        cones = [*self.cones, *([clarabel.NonnegativeConeT(len(rows))] if rows else []), *([clarabel.ZeroConeT(len(equal))] if equal else [])]
+        return Conic(self.cols, sparse.vstack([self.A, extra], format="csc"), b, cones, self.settings)
 
     @cached_property
     def _cone_of_row(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -243,9 +249,16 @@ class Conic:
             rows.append(self.A.indices[span])
         return out, np.concatenate(rows) if rows else np.zeros(0, dtype=int)
 
-    def solver(self, q: np.ndarray) -> clarabel.DefaultSolver:
+    def solver(self, q: np.ndarray, regularization: float | None = None) -> clarabel.DefaultSolver:
+        """A solver of min q·z (``regularization``: Clarabel's static regularization for this one, else the settings')."""
         n = len(self.cols)
-        return clarabel.DefaultSolver(sparse.csc_matrix((n, n)), q, self.A, self.b, self.cones, self.settings)
+        if regularization is None:
+            return clarabel.DefaultSolver(sparse.csc_matrix((n, n)), q, self.A, self.b, self.cones, self.settings)
+        usual, self.settings.static_regularization_constant = self.settings.static_regularization_constant, regularization
+        try:
+            return clarabel.DefaultSolver(sparse.csc_matrix((n, n)), q, self.A, self.b, self.cones, self.settings)
+        finally:
+            self.settings.static_regularization_constant = usual
 
 
 @dataclass(frozen=True)
@@ -259,6 +272,7 @@ class EndResult:
     exact: bool
     solves: int
     dead: tuple[tuple[int, Piece], ...] = ()  # (step, piece) with no trajectory: the root program plus the piece is infeasible
+    guided: bool = False  # settled by :func:`guided`'s one solve, not from the root
 
 
 def settle(status: str) -> Literal["solved", "unbounded", "infeasible", "other"]:
@@ -376,6 +390,9 @@ class _Search:
         else:
             solver.update(q=self.q)
         sol = solver.solve()
+        if settle(str(sol.status)) == "other":  # e.g. NumericalError on a piece that barely meets the program: once more, regularized
+            sol = self.conic.with_rows(node.rows).solver(self.q, RETRY_REGULARIZATION).solve()
+            self.solves += 1
         status, x = str(sol.status), np.asarray(sol.x) if str(sol.status) in _SOLVED else None
         self.solves += 1
         kind = settle(status)
@@ -450,7 +467,8 @@ class _Search:
         return -math.inf
 
     def run(self, root: _Node, guide: Guide | None = None) -> EndResult:
-        self.dive(root, guide)
+        if self.best is None:  # else a trajectory is known already (:func:`guided`'s): the dive would look for one
+            self.dive(root, guide)
         heapq.heappush(self.heap, root)
         while self.heap:
             node = heapq.heappop(self.heap)
@@ -468,6 +486,115 @@ class _Search:
         return self.result("solved", self.best[0], True) if self.best is not None else self.result("infeasible", math.nan, True)
 
 
+POINT_WIDTH = 1e-9  # relative: a piece this narrow is its midpoint (one equality), not two rows whose multipliers split
+
+
+def _certified_below(union: StepUnion, piece: Piece, duals: np.ndarray) -> float:
+    """What the piece's rows can take off the dual bound over the union: the least of Σ y·(b − a·z) for t_j in the
+    union's hull (every trajectory meeting the union has its t_j in one of its pieces).  Rows: lo ≤ t_j ≤ hi (the
+    order of :func:`interval_rows`, the upper side first; duals y ≥ 0), giving y_hi·(hi − t) + y_lo·(t − lo); or, for
+    a point piece, t_j = its midpoint c (one dual of either sign), giving y·(c − t).  −inf where the hull is
+    unbounded on a side the duals reward."""
+    lo_hull, hi_hull = min(p.lo for p in union.pieces), max(p.hi for p in union.pieces)
+    if _is_point(piece):
+        (y,) = duals
+        y_hi, y_lo, hi, lo = y, 0.0, _midpoint(piece), 0.0
+    else:
+        rest = iter(duals)
+        y_hi = next(rest) if math.isfinite(piece.hi) else 0.0
+        y_lo = next(rest) if math.isfinite(piece.lo) else 0.0
+        hi, lo = piece.hi, piece.lo
+    slope = y_lo - y_hi  # d/dt of y_hi·(hi − t) + y_lo·(t − lo)
+    at = lo_hull if slope >= 0 else hi_hull  # the least of a linear function on the hull: the end its slope points from
+    if not math.isfinite(at):
+        return 0.0 if slope == 0 else -math.inf
+    return (y_hi * (hi - at) if y_hi else 0.0) + (y_lo * (at - lo) if y_lo else 0.0)
+
+
+def _is_point(piece: Piece) -> bool:
+    return math.isfinite(piece.lo) and math.isfinite(piece.hi) and piece.hi - piece.lo <= POINT_WIDTH * max(1.0, abs(piece.lo))
+
+
+def _midpoint(piece: Piece) -> float:
+    return 0.5 * (piece.lo + piece.hi)
+
+
+@dataclass(frozen=True)
+class GuidedStart:
+    """What :func:`guided` found: the end settled in one solve, or else the trajectory it found (its q·z and the
+    point), which the search then starts from instead of diving (:meth:`_Search.dive`); and the solves spent."""
+
+    end: EndResult | None
+    solves: int
+    incumbent: tuple[float, np.ndarray] | None = None
+
+
+def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], guide: Guide, solvers: Solvers) -> GuidedStart:
+    """One solve that may settle an end before its root relaxation: the program with, for every earlier step the guide
+    (the same end's minimiser of the previous horizon) covers, the piece of t_j it chose, and for the current step the
+    piece nearest the guide's last t (t changes little from one step to the next); pieces of t_j alone: a tied fault's
+    pair of rows |f| ≤ τ = 0 splits its multipliers and certifies nothing (docs/exact.md), and a point piece is one
+    equality for the same reason.  Its minimiser, where it meets every union (or is mended to, :func:`_repaired`), is a
+    trajectory: an upper bound.  Its duals y give a lower bound of the end over every union by weak duality: for any z
+    of the root's program, q·z ≥ −b·y + Σ_piece rows y·(b − a·z), the last term bounded below over the union's hull of
+    t_j (:func:`_certified_below`).  When the two meet to :data:`GAP_TOL` the end is the lower one, exact, in one solve
+    where the root and the dive take two; otherwise the caller searches from the root, with that trajectory if any."""
+    last, ref = guide
+    chosen = []  # (union, piece) whose rows the duals answer for over the union's hull
+    convex = []  # unions of one piece: every trajectory meets its rows, so their duals take nothing off the bound
+    for union in unions:
+        if len(union.pieces) == 1:
+            convex.append(union)
+            continue
+        if not union.pieces or union.step > last + 1:
+            continue
+        if union.step <= last:
+            piece = min(union.pieces, key=lambda p: _distance(union, p, ref))
+        elif union.t_before is not None:  # the current step: nearest the guide's t at its last step (t changes little in a step)
+            t_last = sum(v * ref[c] for c, v in union.t_before.items())
+            piece = min(union.pieces, key=lambda p: max(0.0, p.lo - t_last, t_last - p.hi))
+        else:
+            continue
+        if not piece.healthy:
+            chosen.append((union, piece))
+    settled = [row for union in convex for row in union.rows(union.pieces[0])]
+    rows = settled + [row for union, piece in chosen if not _is_point(piece) for row in union.rows(piece)]
+    equal = [(dict(union.t), _midpoint(piece)) for union, piece in chosen if _is_point(piece)]
+    if not rows and not equal:
+        return GuidedStart(None, 0)
+    path: Path = tuple((union.step, union.pieces[0]) for union in convex) + tuple((union.step, piece) for union, piece in chosen)
+    key = (len(convex), *path)  # a one-piece union brings all its rows, a chosen point an equality: the count says which
+    solver = solvers.get(key)
+    program = conic.with_rows(rows, equal)
+    if solver is None:
+        solver = program.solver(q)
+        solvers.put(key, solver)
+    else:
+        solver.update(q=q)
+    sol = solver.solve()
+    if settle(str(sol.status)) != "solved":
+        return GuidedStart(None, 1)
+    x, y = np.asarray(sol.x), np.asarray(sol.z)
+    below = -float(program.b @ y)  # the dual objective: a lower bound of q·z over the program without the pieces' rows, once
+    at, at_equal = len(conic.b) + len(settled), len(conic.b) + len(rows)  # after the one-piece unions' rows, the chosen pieces', then the points
+    for union, piece in chosen:
+        if _is_point(piece):
+            below += _certified_below(union, piece, y[at_equal : at_equal + 1])
+            at_equal += 1
+        else:
+            n = math.isfinite(piece.hi) + math.isfinite(piece.lo)
+            below += _certified_below(union, piece, y[at : at + n])
+            at += n
+    node = _Node(float(q @ x), False, 0, frozenset(), tuple(rows + equal), _expand(conic, x, nz), path)
+    (col,) = conic.cols[np.flatnonzero(q)]
+    z = node.z if _branch_on(unions, node) is None else _repaired(program, unions, node, int(col))
+    if z is None:
+        return GuidedStart(None, 1)
+    if not (math.isfinite(below) and node.bound <= below + GAP_TOL * max(1.0, abs(below))):  # a bound −inf or NaN proves nothing
+        return GuidedStart(None, 1, (node.bound, z))
+    return GuidedStart(EndResult("solved", min(node.bound, below), z, True, 1), 1)
+
+
 def minimise(
     conic: Conic,
     q: np.ndarray,
@@ -478,13 +605,15 @@ def minimise(
     solvers: Solvers | None = None,
     deadline: float = math.inf,
     guide: Guide | None = None,
+    incumbent: tuple[float, np.ndarray] | None = None,
 ) -> EndResult:
     """min q·z over the program and every union (module doc), from the root relaxation ``root`` (its status and
     minimiser over the global columns).  At most ``budget`` solves; past it the least open bound, not exact.
     ``solvers``: the nodes' solvers by path, shared by the ends of one program (a path's rows are the same for
     every end, only q changes); ``deadline``: a time.process_time() past which no more nodes are solved (relaxed);
     ``guide``: (its last step, a minimiser over the global columns) of the same end at an earlier horizon, whose
-    pieces are tried first (:meth:`_Search.dive`)."""
+    pieces are tried first (:meth:`_Search.dive`); ``incumbent``: a trajectory known already (its q·z, the point), then
+    no dive."""
     kind = settle(root[0])
     assert kind != "other", root[0]  # the caller reports a root the solver could not settle
     if kind == "infeasible":
@@ -498,6 +627,7 @@ def minimise(
             return EndResult("solved", node.bound, mended, True, 0)
     search = _Search(conic, q, nz, unions, budget, deadline, (int(conic.cols[at]), float(q[at])), order=itertools.count(1))
     search.solvers = Solvers() if solvers is None else solvers
+    search.best = incumbent
     return search.run(node, guide)
 
 
@@ -514,6 +644,8 @@ __all__ = [
     "Span",
     "StepUnion",
     "covered",
+    "GuidedStart",
+    "guided",
     "interval_rows",
     "minimise",
     "settle",
