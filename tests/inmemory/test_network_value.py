@@ -202,8 +202,8 @@ def test_a_recursion_that_misses_on_a_covered_node_step_is_a_violation(
 
     step = LocalEstimator._step
 
-    def broken(self: LocalEstimator, prev, inp):
-        res = step(self, prev, inp)
+    def broken(self: LocalEstimator, prev, inp, prepared=None):
+        res = step(self, prev, inp, prepared)
         # the recursion's fault centre far off; what is published is intact
         return dataclasses.replace(res, published=res.public, xhat=res.xhat + np.array([0.0, 0.0, 50.0]))
 

@@ -27,7 +27,7 @@ from zenoh_helpers import (
 
 from netsetest.bus import keys
 from netsetest.bus.zenoh_bus import ZenohBus
-from netsetest.messages import NodeInput, NodeState, encode
+from netsetest.messages import SCHEMA_VERSION, NodeInput, NodeState, encode
 from message_helpers import make_state, raw_message
 
 pytestmark = pytest.mark.zenoh
@@ -57,7 +57,8 @@ A_LIST = msgpack.packb([1, 2, 3])
 BAD_STATES = {  # payload → the reason Bus.pump counts it under
     "garbage": (GARBAGE, "undecodable"),
     "list": (A_LIST, "not-a-map"),
-    "version": (_raw(_state(), v=2), "schema-version"),
+    "version": (_raw(_state(), v=SCHEMA_VERSION + 1), "schema-version"),
+    "old-version": (_raw(_state(), v=1), "schema-version"),  # a node of before the ProvenSets
     "nan": (_raw(_state(), xhat=[0.0, math.nan, 0.0]), "invalid"),
     "not-spd": (_raw(_state(), P=[1.0, 2.0, 0, 2.0, 1.0, 0, 0, 0, 1.0]), "invalid"),
 }
@@ -109,8 +110,8 @@ def test_zenoh_bus_drops_and_counts_malformed(bus_pair) -> None:
     assert [m.step for _, m in seen[before:]] == [99], "a malformed payload reached the handler"
     assert all(k == key for k, _ in seen)
     assert rx.dropped == Counter(reason for _, reason in BAD_STATES.values())
-    assert rx.dropped == {"undecodable": 1, "not-a-map": 1, "schema-version": 1, "invalid": 2}
-    assert rx.received == len(seen) + 5
+    assert rx.dropped == {"undecodable": 1, "not-a-map": 1, "schema-version": 2, "invalid": 2}
+    assert rx.received == len(seen) + 6
 
 
 class Injector:
