@@ -113,7 +113,7 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
     def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
         if self.own_set is not None:
             return self.own_set.bounds()
-        lo, hi = ellipsoid_bounds(np.asarray(self.xhat, dtype=float), np.diag(self.P_matrix), self.rho, self.fault)
+        lo, hi = ellipsoid_bounds(self.centre, np.diag(self.P_matrix), self.rho, self.fault)  # (new arrays: x̂ ∓ half)
         if self.polygon is not None:  # the ellipsoid ∩ the region: x's bounds are the tighter of the two
             v = self.polygon.vertices
             lo[:NX], hi[:NX] = np.maximum(lo[:NX], v.min(axis=0)), np.minimum(hi[:NX], v.max(axis=0))

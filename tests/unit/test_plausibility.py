@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -31,6 +32,15 @@ def _sensor(rng: np.random.Generator, saturated: bool) -> Sensor:
         h1=float(rng.uniform(0.5, 0.95)),
         h2=float(rng.uniform(1.0, 1.5)),
     )
+
+
+def _interval_cases(seed: int) -> Iterator[tuple[Sensor, np.ndarray, np.ndarray, float, float]]:
+    """200 random (sensor, x̂, P, ρ, γ) per kind of sensor, unsaturated then saturated, from ``seed``."""
+    rng = np.random.default_rng(seed)
+    for saturated in (False, True):
+        for _ in range(200):
+            s = _sensor(rng, saturated)
+            yield s, rng.normal(size=3), _spd(rng), float(rng.uniform(0.2, 2)), float(rng.uniform(0.8, 1.2))
 
 
 @pytest.mark.parametrize("saturated", [False, True])
@@ -158,18 +168,14 @@ def test_shortcut_decides_as_the_grid() -> None:
 
 def test_scalar_interval_matches_numpy() -> None:
     """innovation_interval's scalar arithmetic equals the matrix formula (C̄x̂, √(ρ C̄PC̄ᵀ)) to rounding."""
-    rng = np.random.default_rng(9)
-    for saturated in (False, True):
-        for _ in range(200):
-            s = _sensor(rng, saturated)
-            xhat, P, rho, gamma = rng.normal(size=3), _spd(rng), float(rng.uniform(0.2, 2)), float(rng.uniform(0.8, 1.2))
-            cx = float(s.Cbar @ xhat)
-            c = float(np.sqrt(rho * s.Cbar @ P @ s.Cbar))
-            noise = abs(s.Dv) * np.sqrt(s.R)
-            lo_ref = gamma * min(s.h1 * (cx - c), s.h2 * (cx - c)) - noise - cx
-            hi_ref = gamma * max(s.h1 * (cx + c), s.h2 * (cx + c)) + noise - cx
-            lo, hi = innovation_interval(s, xhat, P, rho, gamma, None)
-            assert lo == pytest.approx(lo_ref, rel=1e-12, abs=1e-14) and hi == pytest.approx(hi_ref, rel=1e-12, abs=1e-14)
+    for s, xhat, P, rho, gamma in _interval_cases(9):
+        cx = float(s.Cbar @ xhat)
+        c = float(np.sqrt(rho * s.Cbar @ P @ s.Cbar))
+        noise = abs(s.Dv) * np.sqrt(s.R)
+        lo_ref = gamma * min(s.h1 * (cx - c), s.h2 * (cx - c)) - noise - cx
+        hi_ref = gamma * max(s.h1 * (cx + c), s.h2 * (cx + c)) + noise - cx
+        lo, hi = innovation_interval(s, xhat, P, rho, gamma, None)
+        assert lo == pytest.approx(lo_ref, rel=1e-12, abs=1e-14) and hi == pytest.approx(hi_ref, rel=1e-12, abs=1e-14)
 
 
 def test_overlap_bound_in_floats_is_the_arrays_bound_bit_for_bit() -> None:
@@ -190,19 +196,15 @@ def test_overlap_bound_in_floats_is_the_arrays_bound_bit_for_bit() -> None:
 
 def test_interval_unrolled_rounds_as_before() -> None:
     """innovation_interval unrolled rounds exactly as the loops it replaced (every node's decision unchanged)."""
-    rng = np.random.default_rng(13)
-    for saturated in (False, True):
-        for _ in range(200):
-            s = _sensor(rng, saturated)
-            xhat, P, rho, gamma = rng.normal(size=3), _spd(rng), float(rng.uniform(0.2, 2)), float(rng.uniform(0.8, 1.2))
-            cb = (float(s.C[0]), float(s.C[1]), float(s.Ds))
-            x = [float(a) for a in xhat]
-            Pl = P.tolist()
-            cx = cb[0] * x[0] + cb[1] * x[1] + cb[2] * x[2]
-            Pc = [Pl[i][0] * cb[0] + Pl[i][1] * cb[1] + Pl[i][2] * cb[2] for i in range(3)]
-            c = math.sqrt(max(rho * (cb[0] * Pc[0] + cb[1] * Pc[1] + cb[2] * Pc[2]), 0.0))
-            noise = abs(s.Dv) * math.sqrt(s.R)
-            lo = gamma * min(s.h1 * (cx - c), s.h2 * (cx - c)) - noise - cx
-            hi = gamma * max(s.h1 * (cx + c), s.h2 * (cx + c)) + noise - cx
-            assert innovation_interval(s, xhat, P, rho, gamma, None) == (lo, hi)
-            assert innovation_interval(s, list(xhat), P.tolist(), rho, gamma, None) == (lo, hi)  # lists as arrays
+    for s, xhat, P, rho, gamma in _interval_cases(13):
+        cb = (float(s.C[0]), float(s.C[1]), float(s.Ds))
+        x = [float(a) for a in xhat]
+        Pl = P.tolist()
+        cx = cb[0] * x[0] + cb[1] * x[1] + cb[2] * x[2]
+        Pc = [Pl[i][0] * cb[0] + Pl[i][1] * cb[1] + Pl[i][2] * cb[2] for i in range(3)]
+        c = math.sqrt(max(rho * (cb[0] * Pc[0] + cb[1] * Pc[1] + cb[2] * Pc[2]), 0.0))
+        noise = abs(s.Dv) * math.sqrt(s.R)
+        lo = gamma * min(s.h1 * (cx - c), s.h2 * (cx - c)) - noise - cx
+        hi = gamma * max(s.h1 * (cx + c), s.h2 * (cx + c)) + noise - cx
+        assert innovation_interval(s, xhat, P, rho, gamma, None) == (lo, hi)
+        assert innovation_interval(s, list(xhat), P.tolist(), rho, gamma, None) == (lo, hi)  # lists as arrays
