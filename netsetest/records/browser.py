@@ -168,13 +168,26 @@ def _devtools_timings(events: list[dict], metrics: list[dict]) -> dict[str, floa
     }
 
 
+WASM_BASELINE = ("--liftoff", "--no-wasm-tier-up")
+"""V8 flags that keep a WebAssembly module on its baseline compiler: a large module (the Rerun viewer, 30 MB)
+is not compiled a second time by the optimising tier in the background, which on two shared cores took the
+CPU the page's own work needed (a test of the live view: 111 s → 61 s at load 10)."""
+
+
 def load_page(
-    url: str, workdir: Path, expressions: dict[str, str], ready: str, height: int | None = None, settle_s: float = 0.0, timeout: float = RENDER_TIMEOUT_S
+    url: str,
+    workdir: Path,
+    expressions: dict[str, str],
+    ready: str,
+    height: int | None = None,
+    settle_s: float = 0.0,
+    timeout: float = RENDER_TIMEOUT_S,
+    js_flags: tuple[str, ...] = (),
 ) -> Page:
     """Open ``url``, wait until the JavaScript expression ``ready`` is true, evaluate ``expressions``
     (name → expression, JSON-serialisable results) after ``settle_s`` more seconds, and screenshot the whole
     page (or its top ``height`` px); ``timeout`` bounds each step (a page compiling a large WebAssembly module
-    on a loaded machine answers late)."""
+    on a loaded machine answers late); ``js_flags``: V8's flags for the page (:data:`WASM_BASELINE`)."""
     browser = chromium()
     profile = workdir / "chromium-profile"
     profile.mkdir(parents=True, exist_ok=True)
@@ -205,6 +218,7 @@ def load_page(
             "--disable-background-networking",
             "--disable-crash-reporter",
             "--hide-scrollbars",
+            *([f"--js-flags={' '.join(js_flags)}"] if js_flags else []),
             "about:blank",
         ],
         preexec_fn=fds,

@@ -18,7 +18,7 @@ import pytest
 from zenoh_helpers import PAPER6, ProcessGuard, cli, wait_for
 
 from netsetest.cli.main import main
-from netsetest.records.browser import BOKEH_READY, NoBrowser, load_page, named
+from netsetest.records.browser import BOKEH_READY, WASM_BASELINE, NoBrowser, load_page, named
 from netsetest.records.browser import chromium as find_chromium
 from netsetest.runtime.report import EXIT_INTERRUPTED
 
@@ -123,7 +123,15 @@ def test_live_view_renders_in_chromium_during_a_run(procs: ProcessGuard, tmp_pat
     run = procs.start("run", cli("run", PAPER6, "--steps", str(VIEW_STEPS), "--pace", "0.1", "--view", "--quiet"))
     url = wait_for(lambda: next((ln.split("live view: ", 1)[1].strip() for ln in procs.stderr("run").splitlines() if "live view: " in ln), None), 90)
     assert url and url.startswith("http://127.0.0.1:")
-    seen = load_page(url, tmp_path, {"title": "document.title"}, ready="document.querySelector('canvas') !== null", settle_s=10.0, timeout=VIEW_LOAD_S)
+    seen = load_page(
+        url,
+        tmp_path,
+        {"title": "document.title"},
+        ready="document.querySelector('canvas') !== null",
+        settle_s=10.0,
+        timeout=VIEW_LOAD_S,
+        js_flags=WASM_BASELINE,
+    )
     assert run.poll() is None, "the run was still going while the viewer loaded"
     _save(seen.screenshot, tmp_path, "live_view.png")
     assert seen.values["title"] == "Rerun Viewer"
