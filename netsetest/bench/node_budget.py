@@ -13,6 +13,10 @@ netsetest/profile.py), a few runs; per node and run, from its profile:
   number; per sent message: ``build`` + ``encode`` + ``put`` over theirs; Zenoh's and the callbacks'
   threads over every message, received or sent (what they do per message: TLS, routing, the callback).
 
+Beside them, Zenoh's floor (netsetest/bench/bus_floor.py): a bare bus process receiving and sending the ring's
+typical node's messages at the ring's τs, secured as ``netsetest run`` and ``--insecure``, without estimator or
+handling: what the bus alone costs that node per step, every thread, one run of each per run of the ring.
+
 Figures are the median over the nodes of a run, then the median over the runs (with their range).  With
 a baseline (``--baseline DIR``, another checkout, say main's), its runs alternate with this checkout's,
 the same ring and the same number of runs, and each figure is also given as the ratio of the two
@@ -26,6 +30,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+from netsetest.bench import bus_floor
 from netsetest.bench.zenoh_runs import profiled_ring_run
 
 OUTSIDE = ("wait", "decode", "handle", "build", "encode", "put", "other", "threads")  # profile phases outside the estimator
@@ -102,11 +107,29 @@ def _summary(runs: list[dict]) -> dict:
     return {key: {"median": statistics.median(f[key] for f in ok), "min": min(f[key] for f in ok), "max": max(f[key] for f in ok)} for key, _, _ in FIGURES}
 
 
+FLOOR_MODES = {"secured": True, "insecure": False}  # the bare bus process's runs: as `netsetest run`, and `--insecure`
+TARGET_OUTSIDE_US = 300.0  # issue 31's target: a node's CPU per step outside the estimator
+
+
+def _floor_payloads(tmp: Path, nodes: int, steps: int) -> tuple[Path, bus_floor.RingPayloads]:
+    """The ring of the profiled runs and the payloads of its typical node (bus_floor.py)."""
+    from netsetest.bench.topologies import ring_topology
+    from netsetest.config.schema import load_topology
+
+    directory = tmp / "floor"
+    directory.mkdir(exist_ok=True)
+    topo = ring_topology(directory, nodes, steps)
+    sc = load_topology(str(topo))
+    return topo, bus_floor.ring_payloads(sc, bus_floor.median_node(sc))
+
+
 def node_figures(cfg: dict, tmp: Path, baseline: Path | None = None) -> dict:
     """The per-message budget (module doc); ``baseline``: a checkout measured alternately beside this one."""
     nodes, steps, reps = cfg["node_budget_nodes"], cfg["rt_steps"], cfg["node_budget_reps"]
     codes: dict[str, Path | None] = {"this": None, **({"baseline": baseline} if baseline is not None else {})}
     runs: dict[str, list[dict]] = {name: [] for name in codes}
+    floor = _floor_payloads(tmp, nodes, steps)
+    floor_runs: dict[str, list[dict]] = {mode: [] for mode in FLOOR_MODES}
     for rep in range(reps):
         for name, code in codes.items():
             row = _profiled(tmp, nodes, steps, code)
@@ -117,9 +140,21 @@ def node_figures(cfg: dict, tmp: Path, baseline: Path | None = None) -> dict:
                 f"{row['deadline_misses']} deadline misses; {f.get('process_us', float('nan')):.0f} µs per step, "
                 f"{f.get('outside_us', float('nan')):.0f} outside the estimator"
             )
+        for mode, secured in FLOOR_MODES.items():
+            row = bus_floor.floor_run(floor[0], floor[1], secured, tmp)
+            floor_runs[mode].append(row)
+            _log(
+                f"  bare bus ({mode}) run {rep + 1}/{reps} (node {floor[1].node}, load {row['load_before']}): "
+                + (row["error"] if "error" in row else f"{row['process_us']:.0f} µs per step, {row['threads_us']:.0f} of it Zenoh's threads")
+            )
     out: dict = {"nodes": nodes, "steps": steps, "reps": reps, "baseline_code": str(baseline) if baseline is not None else None}
     out["commits"] = {name: _commit(code or Path(__file__).resolve().parents[2]) for name, code in codes.items()}
     out.update({name: {"runs": rows, "summary": _summary(rows)} for name, rows in runs.items()})
+    out["floor"] = {
+        "node": floor[1].node,
+        "in_neighbours": len(floor[1].others),
+        **{m: {"runs": r, "summary": bus_floor.floor_summary(r)} for m, r in floor_runs.items()},
+    }
     if baseline is not None and out["this"]["summary"] and out["baseline"]["summary"]:
         this, base = out["this"]["summary"], out["baseline"]["summary"]
         out["ratio"] = {key: this[key]["median"] / base[key]["median"] if base[key]["median"] else None for key, _, _ in FIGURES}
@@ -156,4 +191,47 @@ def node_markdown(res: dict) -> str:
         if base:
             row += f" {cell(base)} | {f(res['ratio'][key], '.2f')} |"
         lines.append(row)
+    return "\n".join(lines) + "\n" + floor_markdown(res)
+
+
+def floor_markdown(res: dict) -> str:
+    """Zenoh's floor beside the ring's node: the bare bus process's figures, secured and ``--insecure``."""
+    fl = res.get("floor")
+    if not fl:
+        return ""
+    f = lambda v, spec: "—" if v is None or v != v else format(v, spec)  # noqa: E731  # a one-line local helper
+    sec, ins, node = fl["secured"]["summary"], fl["insecure"]["summary"], res["this"]["summary"]
+    loads = "; ".join(
+        f"{m}: " + ", ".join(f"load {r['load_before']}" + (f" ({r['error']})" if "error" in r else "") for r in fl[m]["runs"]) for m in FLOOR_MODES
+    )
+    node_of = {  # the ring's node, the same figure (its profile, above; per message: its solve is in its CPU)
+        **{key: node.get(key) for key in ("process_us", "decode_us", "wait_us", "put_us", "threads_us", "received", "sent")},
+        "thread_us": {k: node["process_us"][k] - node["threads_us"][k] for k in ("median", "min", "max")} if node else None,
+    }
+    lines = [
+        "",
+        f"Zenoh's floor (netsetest/bench/bus_floor.py): a bare bus process, netsetest's ZenohBus opened as node {fl['node']}'s "
+        f"({fl['in_neighbours']} in-neighbours, the ring's median), receiving its input and its in-neighbours' states and "
+        "sending its state every τs, the payloads of an in-memory run of the same ring, with no estimator and no handling; "
+        f"median (range) over its runs, one of each after each run of the ring ({loads}).",
+        "",
+        "| figure | bare bus, secured (mTLS + ACL, through the router) | bare bus, `--insecure` (peer) | the ring's node (above) |",
+        "|---|---|---|---|",
+    ]
+    for key, what, unit in bus_floor.FIGURES:
+        spec = ".2f" if unit == "" else ".0f"
+        cell = lambda s: f"{f(s[key]['median'], spec)} ({f(s[key]['min'], spec)}–{f(s[key]['max'], spec)})" if s and s.get(key) else "—"  # noqa: E731  # a one-line local helper
+        lines.append(f"| {what}{f' [{unit}]' if unit else ''} | {cell(sec)} | {cell(ins)} | {cell(node_of)} |")
+    if sec:
+        above = sec["process_us"]["median"] > TARGET_OUTSIDE_US
+        lines += [
+            "",
+            f"The bus alone, secured, costs the node {f(sec['process_us']['median'], '.0f')} µs of CPU per step "
+            f"({f(sec['threads_us']['median'], '.0f')} of it Zenoh's threads): "
+            + (
+                f"above the {TARGET_OUTSIDE_US:.0f} µs target for everything outside the estimator, before the node's own code runs."
+                if above
+                else f"within the {TARGET_OUTSIDE_US:.0f} µs target for everything outside the estimator."
+            ),
+        ]
     return "\n".join(lines) + "\n"

@@ -30,6 +30,16 @@ import msgspec
 import numpy as np
 from msgspec import Meta, Struct, field
 
+# CPython's own SHA-256, which hashlib.sha256 is: every role loads its topology (the settings digest), and
+# importing hashlib would also load OpenSSL's libcrypto (+3.3 MB resident in every node process)
+try:
+    from _sha2 import sha256  # CPython ≥ 3.12
+except ImportError:
+    try:
+        from _sha256 import sha256  # CPython ≤ 3.11
+    except ImportError:
+        from hashlib import sha256  # another interpreter: the same function
+
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES, SDP
 from netsetest.models.sensor import Sensor
 from netsetest.models.signals import Fault, NoFault, PiecewiseLinearFault, SpeedProfile, SquareFault
@@ -818,9 +828,7 @@ def _settings_digest(topo: TopologyFile, profiles: dict[int, NodeProfile]) -> st
     plain = msgspec.structs.replace
     own = plain(topo, name="", node_dir="", steps=1, case="nsnim", nodes=[plain(n, profile="", estimator=SDP) for n in topo.nodes])
     body = msgspec.json.encode([own, [[i, plain(p, label="")] for i, p in sorted(profiles.items())]])
-    import hashlib  # here, not at the top: a node process loads this module and never digests (hashlib loads OpenSSL)
-
-    return hashlib.sha256(body).hexdigest()[:SETTINGS_DIGEST_HEX]
+    return sha256(body).hexdigest()[:SETTINGS_DIGEST_HEX]
 
 
 SETTINGS_DIGEST_HEX = 16  # 64 bits: tells two files apart, never a security property

@@ -39,6 +39,7 @@ from netsetest.runtime.rolespec import CollectorSpec, NodeSpec, ScenarioSpec, Ve
 from netsetest.runtime.timeouts import READING_POLL, READING_WAIT
 
 if TYPE_CHECKING:  # a node process never loads the vehicle and the collector (memory: docs/performance-history.md)
+    from netsetest.bus.zenoh_bus import ZenohBus
     from netsetest.records.summary import RunSummary, StopCause
     from netsetest.roles.vehicle import Vehicle
 
@@ -381,19 +382,28 @@ def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: RunMeta, on
 # ---------------------------------------------------------------- a role process from its spec
 
 
+def role_bus(who: str, zenoh: ZenohSpec) -> ZenohBus:
+    """The Zenoh bus of role ``who`` (its certificate name, keys.role_name) as ``zenoh`` says: a peer of the open
+    mesh, or an mTLS client of the run's router with its own credentials (BusError, CredentialsError)."""
+    from netsetest.bus.zenoh_bus import ZenohBus
+    from netsetest.runtime.security import client_settings, identity
+
+    settings = client_settings(identity(zenoh.credentials, who)) if zenoh.credentials else None
+    return ZenohBus(zenoh.mode, list(zenoh.listen), list(zenoh.connect), base_file=zenoh.config, settings=settings)
+
+
 def serve_role(name: str, who: str, scenario: ScenarioSpec, zenoh: ZenohSpec, body: Callable[[Scenario, Bus], int]) -> int:
     """Run a role process: load its scenario (ConfigError to the caller), open its bus, run ``body``;
     ``name`` for its log lines, ``who`` its certificate name (keys.role_name).  Exit code: ``body``'s;
     EXIT_BAD_INPUT when the bus cannot open; :data:`EXIT_STOPPED` on SIGTERM/SIGINT."""
-    from netsetest.bus.zenoh_bus import BusError, ZenohBus
-    from netsetest.runtime.security import CredentialsError, client_settings, identity
+    from netsetest.bus.zenoh_bus import BusError
+    from netsetest.runtime.security import CredentialsError
 
     sc = scenario.load()
     install_signal_handlers()
     release_free_memory()
     try:
-        settings = client_settings(identity(zenoh.credentials, who)) if zenoh.credentials else None
-        bus = ZenohBus(zenoh.mode, list(zenoh.listen), list(zenoh.connect), base_file=zenoh.config, settings=settings)
+        bus = role_bus(who, zenoh)
     except (BusError, CredentialsError) as exc:
         log(name, str(exc))
         return EXIT_BAD_INPUT

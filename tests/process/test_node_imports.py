@@ -34,7 +34,7 @@ NEVER_IN_A_NODE = (
     "socket",
     "random",
     "gzip",
-    "_hashlib",  # OpenSSL's libcrypto, +3.5 MB: the state digest's BLAKE2 is CPython's own (messages.py)
+    "_hashlib",  # OpenSSL's libcrypto, +3.5 MB: the state digest's BLAKE2 and the settings digest's SHA-256 are CPython's own
     "netsetest.analysis.calibrate",
     "netsetest.models.drive",
     "netsetest.estimator.zonotope_w_radius",  # the other methods load only in a node that runs them
@@ -45,7 +45,9 @@ NEVER_IN_A_NODE = (
 
 
 def test_node_process_loads_only_what_a_node_needs():
-    code = f"import sys\nfor m in {NODE_MODULES!r}: __import__(m)\nsys.modules['netsetest.cli.main'].build_parser().parse_args({NODE_ARGV!r})\nprint("
+    # what a node does before its session: parse its command line and load its topology (the settings digest)
+    code = f"import sys\nfor m in {NODE_MODULES!r}: __import__(m)\nsys.modules['netsetest.cli.main'].build_parser().parse_args({NODE_ARGV!r})\n"
+    code += f"sys.modules['netsetest.runtime.rolespec'].ScenarioSpec({NODE_ARGV[1]!r}).load()\nprint("
     code += f"sorted(set(sys.modules) & set({NEVER_IN_A_NODE!r})))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and out.stdout.strip() == "[]", (out.stdout, out.stderr[-500:])

@@ -74,3 +74,26 @@ def test_baseline_measures_so_it_does_not_go_with_what_measures_nothing(what: st
     args = ["bench", what, *(["bench/results.json"] if what == "--spread" else []), "--baseline", "."]
     assert main(args) == EXIT_BAD_INPUT
     assert f"{what} measures nothing; --baseline does not go with it" in capsys.readouterr().err
+
+
+def test_the_floor_table_stands_beside_the_node_and_says_whether_the_bus_alone_is_over_the_target() -> None:
+    from netsetest.bench.bus_floor import FIGURES as FLOOR
+
+    figures = node_budget(_report())
+    summary = {k: {"median": v, "min": v, "max": v} for k, v in figures.items()}
+    run = {"load_before": "1.0 1.0 1.0", "deadline_misses": 0, "exit_code": 0, "figures": figures}
+    res = {"nodes": 12, "steps": 40, "reps": 1, "baseline_code": None, "this": {"runs": [run], "summary": summary}}
+    assert "Zenoh's floor" not in node_markdown(res)  # a node.json of before the floor renders as it did
+
+    def floor(process_us: float) -> dict:
+        row = {key: 1.0 for key, _, _ in FLOOR} | {"process_us": process_us, "load_before": "1.0 1.0 1.0"}
+        return {"runs": [row], "summary": {key: {"median": row[key], "min": row[key], "max": row[key]} for key, _, _ in FLOOR}}
+
+    res["floor"] = {"node": 4, "in_neighbours": 3, "secured": floor(700.0), "insecure": floor(1000.0)}
+    text = node_markdown(res)
+    assert "| CPU per step, every thread [µs] | 700 (700–700) | 1000 (1000–1000) | 3000 (3000–3000) |" in text  # the node: its process CPU
+    assert "costs the node 700 µs of CPU per step" in text and "above the 300 µs target" in text
+    res["floor"]["secured"] = floor(250.0)
+    assert "within the 300 µs target" in node_markdown(res)
+    res["floor"]["insecure"] = {"runs": [{"load_before": "9 9 9", "error": "the bare process never reported ready"}], "summary": {}}
+    assert "never reported ready" in node_markdown(res)
