@@ -19,6 +19,7 @@ the set under their declarations (docs/coverage.md).
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
@@ -281,7 +282,7 @@ def region_fault(own: Sensor, region: Polygon, meas: Interval) -> tuple[float, f
     give Ds f⁺ ∈ [m_lo − c_hi, m_hi − c_lo].  A measurement at the sensor's limit (saturated) leaves one side of
     C x⁺ + Ds f⁺ open, and the other side still bounds f⁺ (one side of the result infinite); None where both are
     open or the sensor has no fault term."""
-    finite_lo, finite_hi = bool(np.isfinite(meas.lo)), bool(np.isfinite(meas.hi))
+    finite_lo, finite_hi = math.isfinite(meas.lo), math.isfinite(meas.hi)
     if own.Ds == 0.0 or not (finite_lo or finite_hi):
         return None
     c_lo, c_hi = region.interval(own.C)
@@ -319,11 +320,15 @@ def ellipse_cut(region: Polygon, xhat: np.ndarray, P: np.ndarray, rho: float, co
     pxx = 0.5 * (P[:NX, :NX] + P[:NX, :NX].T)
     _, vecs = np.linalg.eigh(pxx)
     dirs = [*COORDINATE_AXES, *vecs.T] if coordinates else [*vecs.T]
+    (p00, p01), (p10, p11) = pxx.tolist()
+    x0, x1 = float(xhat[0]), float(xhat[1])
     out: Polygon | None = region
     for d in dirs:
         if out is None:
             return None
-        centre, half = float(d @ xhat[:NX]), float(np.sqrt(max(rho * float(d @ pxx @ d), 0.0)))
+        d0, d1 = d.tolist()  # dᵀx̂ and (dᵀP_xx) d in plain floats, each product and sum rounded as numpy's 2-vector products round them
+        w0, w1 = d0 * p00 + d1 * p10, d0 * p01 + d1 * p11
+        centre, half = d0 * x0 + d1 * x1, math.sqrt(max(rho * (w0 * d0 + w1 * d1), 0.0))
         out = out.cut(d, centre - half, centre + half)
     return out
 
