@@ -12,14 +12,14 @@ from typing import Any
 import polygon_reference as ref
 import pytest
 
-from netsetest.config.schema import load_topology
+from netsetest.config.schema import Case, load_topology
 from netsetest.estimator import cuts
 from netsetest.models.signals import SignalKind
 from netsetest.polygon import Polygon
 from netsetest.runtime.inmemory import run_inmemory
 
 STEPS = 20
-RUNS: list[tuple[str, str, SignalKind, int]] = [
+RUNS: list[tuple[str, Case, SignalKind, int]] = [
     ("paper6", "nsnim", "paper", 0),
     ("paper6", "saim", "paper", 0),
     ("paper6", "saim", "worst", 3),
@@ -52,7 +52,7 @@ def _checked(calls: Counter[str], name: str, new: Callable[..., Any], old: Calla
 
 @pytest.mark.parametrize(("topology", "case", "signals", "seed"), RUNS)
 def test_every_region_operation_of_a_run_returns_what_the_numpy_code_did(
-    monkeypatch: pytest.MonkeyPatch, topology: str, case: str, signals: SignalKind, seed: int
+    monkeypatch: pytest.MonkeyPatch, topology: str, case: Case, signals: SignalKind, seed: int
 ) -> None:
     calls: Counter[str] = Counter()
     for name in ("moved", "cut", "reduced", "plus_segments"):
