@@ -75,19 +75,20 @@ class Polygon:
         turn one way from there), the walk is over the exact hull of the vertices, which holds them all; parallel
         directions in a row leave no vertex between them.  Sound to the walk's rounding and the merge of vertices
         closer than DUPLICATE (:func:`_distinct`), which the margin of :meth:`moved` covers."""
-        return Polygon(np.array(_plus(_points(self.vertices), [(float(g[0]), float(g[1])) for g in segments]), dtype=float).reshape(-1, 2))
+        return Polygon(_array(_plus(_points(self.vertices), [(float(x), float(y)) for x, y in segments])))
 
     def moved(self, A: np.ndarray, t: np.ndarray, segments: list[np.ndarray]) -> Polygon:
         """{A x + t} summed with the segments and a square of half-side ROUNDING of the coordinates' size, in one
         merge: every side moves out by at least that, which covers the step's rounding (this move's, the cuts'
         that follow, each widened by its own margin, and the vertices merged as duplicates); at least what that
         merge can leave out where the segments reach far beyond the image (a flat or tiny image)."""
-        v = self.affine(A, t)
-        size = float(np.abs(v.vertices).max())
-        reach = size + sum(float(np.abs(g).max()) for g in segments)
-        merged = (2 * (len(v.vertices) + 2 * len(segments)) + 8) * DUPLICATE * (1.0 + reach)
+        v = _points(self.affine(A, t).vertices)
+        g = [(float(x), float(y)) for x, y in segments]
+        size = max(map(abs, itertools.chain.from_iterable(v)))
+        reach = size + sum(max(abs(x), abs(y)) for x, y in g)
+        merged = (2 * (len(v) + 2 * len(g)) + 8) * DUPLICATE * (1.0 + reach)
         pad = max(ROUNDING * (1.0 + size), merged)  # (ROUNDING's at every physical state range: bit for bit)
-        return v.plus_segments([*segments, np.array([pad, 0.0]), np.array([0.0, pad])])
+        return Polygon(_array(_plus(v, [*g, (pad, 0.0), (0.0, pad)])))
 
     def cut(self, c: np.ndarray, lo: float, hi: float) -> Polygon | None:
         """The part with lo ≤ cᵀx ≤ hi, widened outward by the margin (relative to max Σᵢ |cᵢ xᵢ|, which bounds the
@@ -125,7 +126,7 @@ class Polygon:
                 break  # no edge can be dropped without an unbounded extension (for n > 4 only where a rounding
                 # puts two neighbours' meeting a hair behind an edge: near-duplicate vertices)
             v = _drop_edges(v, drops)
-        return Polygon(np.array(v, dtype=float))
+        return Polygon(_array(v))
 
 
 def _after(a: np.ndarray, k: int = 1) -> np.ndarray:
@@ -146,6 +147,11 @@ Point = tuple[float, float]
 def _points(v: np.ndarray) -> list[Point]:
     """The rows of v (n, 2) as plain floats."""
     return [(x, y) for x, y in v.tolist()]
+
+
+def _array(v: list[Point]) -> np.ndarray:
+    """Plain-float vertices as the (n, 2) array of a Polygon."""
+    return np.array(v, dtype=float).reshape(-1, 2)
 
 
 def _half(x: float, y: float) -> int:
@@ -228,8 +234,8 @@ def _ordered(d: list[Point]) -> tuple[list[int], list[int]]:
     half-plane and numpy's rounded angle, then input order, where that order is exact for every neighbouring pair;
     else in input order.  Without ties every order that passes the check is the one exact order."""
     m = len(d)
-    half = [_half(x, y) for x, y in d]
-    key = [(h, math.atan2(y, x) % TWO_PI) for h, (x, y) in zip(half, d)]
+    half = [0 if y > 0.0 or (y == 0.0 and x > 0.0) else 1 for x, y in d]  # (_half, inline)
+    key = [8.0 * h + math.atan2(y, x) % TWO_PI for h, (x, y) in zip(half, d)]  # half-plane, then angle (< 8)
     order = [i for _, i in sorted(zip(key, range(m)))]  # (ties in input order)
     pairs = _pairs(d, half, order)
 
@@ -290,7 +296,10 @@ def _plus(vertices: list[Point], segments: list[Point]) -> list[Point]:
     cx, cy = steps[order[0]]
     for k in order[1:]:  # each partial sum in turn, as a running (cumulative) sum rounds it
         walk.append((bx + cx, by + cy))
-        cx, cy = cx + steps[k][0], cy + steps[k][1]
+        sx, sy = steps[k]
+        cx, cy = cx + sx, cy + sy
+    if len(order) > 1 and 0 not in pairs:  # every step turns from the one before (the last from the first too:
+        return _distinct(walk)  # the order rises strictly)
     turns = [_compare(steps[order[-1]], steps[order[0]]), *pairs]  # each step against the one before
     kept = [p for p, turn in zip(walk, turns) if turn != 0]  # (else the vertex is on a side)
     return _distinct(kept or walk[:1])
@@ -327,7 +336,7 @@ def _clip(v: np.ndarray, c: np.ndarray, b: float) -> np.ndarray | None:
     t = np.where(crosses, s / np.where(crosses, s - s_nxt, 1.0), 0.0)
     points = np.stack([v, v + t[:, None] * (nxt - v)], axis=1).reshape(-1, 2)  # per edge: its start, its crossing
     out = points[np.stack([s <= 0.0, crosses], axis=1).reshape(-1)]
-    return np.array(_distinct(_points(out)), dtype=float) if len(out) else None
+    return _array(_distinct(_points(out))) if len(out) else None
 
 
 def _distinct(v: list[Point]) -> list[Point]:
@@ -367,11 +376,13 @@ def _cheapest_edges(v: list[Point], wanted: int) -> dict[int, tuple[float, float
         if math.isfinite(a):
             area[i], q[i] = a, (qx, qy)
     chosen: dict[int, tuple[float, float]] = {}
-    for _, i in sorted(zip(area, range(n))):  # (ties in edge order)
-        if len(chosen) == wanted or area[i] == math.inf:
+    near: set[int] = set()  # the edges fewer than three from a chosen one (cyclically)
+    for a, i in sorted(zip(area, range(n))):  # (ties in edge order)
+        if len(chosen) == wanted or a == math.inf:
             break
-        if all(min((i - j) % n, (j - i) % n) >= 3 for j in chosen):
+        if i not in near:
             chosen[i] = q[i]
+            near.update(((i - 2) % n, (i - 1) % n, i, (i + 1) % n, (i + 2) % n))
     return chosen
 
 

@@ -1,6 +1,6 @@
 """The polygon operations as numpy computed them before issue 28's speed-up (netsetest/polygon.py and
 estimator/cuts.py's ``ellipse_cut`` at bb92f3e, unchanged but for what the tests do not call): the reference
-tests/unit/test_polygon_same.py and tests/inmemory/test_polygon_same.py hold the plain-float code to, bit for bit.
+tests/unit/test_polygon_same.py and tests/inmemory/test_polygon_runs_same.py hold the plain-float code to, bit for bit.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 near-collinear, near-axis, flat, slivers, rotated, at 10⁻¹² to 10¹², here also clockwise and with repeated
 vertices) and segments (axis-aligned, parallel to a side: directions that tie exactly), every operation returns
 exactly, bit for bit, what the numpy code before it returned (tests/polygon_reference.py).  Whole runs:
-tests/inmemory/test_polygon_same.py.  The long run: ``NETSETEST_FUZZ_EXAMPLES=10000 pytest -n 0 -q --timeout 0
+tests/inmemory/test_polygon_runs_same.py.  The long run: ``NETSETEST_FUZZ_EXAMPLES=10000 pytest -n 0 -q --timeout 0
 tests/unit/test_polygon_same.py``."""
 
 from __future__ import annotations
