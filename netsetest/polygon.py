@@ -261,7 +261,9 @@ def _ordered(d: list[Point]) -> tuple[list[int], list[int]]:
 
 def _from_lowest(v: list[Point]) -> list[Point]:
     """The vertices rolled to start at the lowest (then leftmost, then first) one."""
-    i = min(range(len(v)), key=lambda k: (v[k][1], v[k][0]))
+    ys = [p[1] for p in v]
+    low = min(ys)
+    i = ys.index(low) if ys.count(low) == 1 else min((v[k][0], k) for k, y in enumerate(ys) if y == low)[1]
     return v[i:] + v[:i]
 
 

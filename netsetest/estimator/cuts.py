@@ -22,7 +22,7 @@ import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -85,6 +85,14 @@ class StepResult:
         """What the node publishes: ``published`` if a solve or a cut made one, else this set."""
         return self.published if self.published is not None else self
 
+    def replaced(self, **changes: Any) -> StepResult:
+        """This result with ``changes``: dataclasses.replace without its per-field set-up (several per step; no field
+        has init=False or a check in __post_init__, so the result is the same)."""
+        assert changes.keys() <= STEP_RESULT_FIELDS, f"not fields of StepResult: {set(changes) - STEP_RESULT_FIELDS}"
+        new = object.__new__(StepResult)
+        new.__dict__.update(self.__dict__, **changes)  # (frozen: set as dataclasses' own __init__ sets them)
+        return new
+
     def published_set(self, rho: float, own_set: dict | None = None) -> ProvenSet:
         """What the node publishes, as sent: the ellipsoid of ``public`` with radius ρ_i ∩ the region ∩ its fault
         range; or a set estimator's own set (``own_set``, sets.set_to_wire) with the ellipsoid that encloses it."""
@@ -112,6 +120,8 @@ class StepResult:
         keys = self.public.reading_keys | self.reading_keys
         return Rests(frozenset(keys - {HEALTH_KEY}), HEALTH_KEY in keys)
 
+
+STEP_RESULT_FIELDS = frozenset(f.name for f in dataclasses.fields(StepResult))
 
 Slabs = dict[int, tuple[np.ndarray, Interval]]
 """What the step's readings prove: c̄ (NA,) and c̄ᵀx̄⁺ ∈ [lo, hi], keyed by the reference's id, and by HEALTH_KEY
@@ -200,10 +210,10 @@ def cut_fault(ctx: StepContext, res: StepResult, lo: float, hi: float, reshape: 
     wh = ctx.statics.wh_published
     out = cut(pub.xhat, pub.P, rho, FAULT_AXIS, lo, hi, None if wh is None else wh**2) if reshape else None
     if out is None:  # the ellipsoid gains nothing; the slab still bounds the fault
-        new = dataclasses.replace(pub, published=None, fault_range=(lo, hi))
+        new = pub.replaced(published=None, fault_range=(lo, hi))
     else:  # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
-        new = dataclasses.replace(pub, xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None, fault_range=(lo, hi))
-    return dataclasses.replace(res, published=new)
+        new = pub.replaced(xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None, fault_range=(lo, hi))
+    return res.replaced(published=new)
 
 
 def carry(ctx: StepContext, res: StepResult, slabs: dict[int, tuple[np.ndarray, float, float]]) -> StepResult:
@@ -220,7 +230,7 @@ def carry(ctx: StepContext, res: StepResult, slabs: dict[int, tuple[np.ndarray, 
     if not used:
         return res  # no slab cuts it
     published = res.published if res.published is not None else res  # published: the step's set as solved
-    return dataclasses.replace(res, xhat=xhat, P=P, rho_cert=rho_cert, published=published, reading_keys=res.reading_keys | used)
+    return res.replaced(xhat=xhat, P=P, rho_cert=rho_cert, published=published, reading_keys=res.reading_keys | used)
 
 
 def _readings_cut(ctx: StepContext, res: StepResult) -> StepResult:
@@ -267,14 +277,14 @@ def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
     if region is None or len(region.vertices) < MIN_VERTICES:
         return res  # (fewer: a sliver below the rounding, kept as empty)
     region = region.reduced()  # the move's margin covers the cuts' rounding (Polygon.moved)
-    res = dataclasses.replace(res, region=region, reading_keys=res.reading_keys | keys)
+    res = res.replaced(region=region, reading_keys=res.reading_keys | keys)
     fault = (0.0, 0.0) if reference else region_fault(st.own, region, ctx.meas)
     # with readings the ellipsoid is cut too (as since the region came); without, it stays as solved (what
     # neighbours use, bit for bit) and only the published fault range narrows: the same published interval
     out = cut_fault(ctx, res, *fault, reshape=bool(ctx.slabs)) if fault is not None else None
     if out is None or not keys:
         return res if out is None else out
-    return dataclasses.replace(out, published=dataclasses.replace(out.public, reading_keys=out.public.reading_keys | keys))
+    return out.replaced(published=out.public.replaced(reading_keys=out.public.reading_keys | keys))
 
 
 def region_fault(own: Sensor, region: Polygon, meas: Interval) -> tuple[float, float] | None:
@@ -302,7 +312,7 @@ def _health_pin(ctx: StepContext, res: StepResult) -> StepResult:
     size = max(tol, PIN_FLOOR)
     out = cut_fault(ctx, res, -size, size)
     if out is not None:
-        res = dataclasses.replace(out, published=dataclasses.replace(out.public, reading_keys=out.public.reading_keys | {HEALTH_KEY}))
+        res = out.replaced(published=out.public.replaced(reading_keys=out.public.reading_keys | {HEALTH_KEY}))
     return carry(ctx, res, {HEALTH_KEY: (FAULT_AXIS, -size, size)})
 
 
