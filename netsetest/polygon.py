@@ -146,12 +146,13 @@ Point = tuple[float, float]
 
 def _points(v: np.ndarray) -> list[Point]:
     """The rows of v (n, 2) as plain floats."""
-    return [(x, y) for x, y in v.tolist()]
+    xs, ys = v.T.tolist()
+    return list(zip(xs, ys))
 
 
 def _array(v: list[Point]) -> np.ndarray:
     """Plain-float vertices as the (n, 2) array of a Polygon."""
-    return np.array(v, dtype=float).reshape(-1, 2)
+    return np.fromiter(itertools.chain.from_iterable(v), float, 2 * len(v)).reshape(-1, 2)
 
 
 def _half(x: float, y: float) -> int:
