@@ -126,7 +126,7 @@ def _region_timers(times: dict[str, list[float]]) -> Iterator[None]:
     try:
         yield
     finally:
-        sdp.LocalEstimator._moved_region = moved  # type: ignore[method-assign]
+        sdp.LocalEstimator._moved_region = moved  # type: ignore[method-assign]  # the method back
         object.__setattr__(cuts.REGION, "apply", cut)
 
 
