@@ -14,6 +14,9 @@ operation reads a polygon as the convex hull of its vertices, whatever their ord
 from __future__ import annotations
 
 import functools
+import itertools
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from fractions import Fraction
 
@@ -72,37 +75,20 @@ class Polygon:
         turn one way from there), the walk is over the exact hull of the vertices, which holds them all; parallel
         directions in a row leave no vertex between them.  Sound to the walk's rounding and the merge of vertices
         closer than DUPLICATE (:func:`_distinct`), which the margin of :meth:`moved` covers."""
-        v = _from_lowest(self.vertices)
-        edges = _after(v) - v
-        if not _turn_one_way(edges):
-            v = _hull(v)  # from its lowest (then leftmost) vertex
-            edges = _after(v) - v
-        g = np.array(segments, dtype=float).reshape(-1, 2)
-        up = (g[:, 1] > 0.0) | ((g[:, 1] == 0.0) & (g[:, 0] > 0.0))
-        low = np.where(up[:, None], -g, g).sum(axis=0)  # each segment's lowest (then leftmost) end
-        steps = np.vstack([edges, 2.0 * g, -2.0 * g])
-        steps = steps[np.any(steps != 0.0, axis=1)]  # a repeated vertex, a zero segment: no direction
-        if len(steps) == 0:
-            return Polygon(v.copy())
-        order, pairs = _ordered(steps)
-        steps = steps[order]
-        walk = v[0] + low + np.vstack([np.zeros((1, 2)), np.cumsum(steps, axis=0)[:-1]])
-        if pairs is None:  # (the exact sort compared no neighbours; the numpy sort's check did: reused)
-            pairs = _pair_order(steps[:-1], steps[1:])
-        turns = np.concatenate([_pair_order(steps[-1:], steps[:1]), pairs]) != 0  # each step against the one before (else the vertex is on a side)
-        return Polygon(_distinct(walk[turns] if turns.any() else walk[:1]))
+        return Polygon(_array(_plus(_points(self.vertices), [(float(x), float(y)) for x, y in segments])))
 
     def moved(self, A: np.ndarray, t: np.ndarray, segments: list[np.ndarray]) -> Polygon:
         """{A x + t} summed with the segments and a square of half-side ROUNDING of the coordinates' size, in one
         merge: every side moves out by at least that, which covers the step's rounding (this move's, the cuts'
         that follow, each widened by its own margin, and the vertices merged as duplicates); at least what that
         merge can leave out where the segments reach far beyond the image (a flat or tiny image)."""
-        v = self.affine(A, t)
-        size = float(np.abs(v.vertices).max())
-        reach = size + sum(float(np.abs(g).max()) for g in segments)
-        merged = (2 * (len(v.vertices) + 2 * len(segments)) + 8) * DUPLICATE * (1.0 + reach)
+        v = _points(self.affine(A, t).vertices)
+        g = [(float(x), float(y)) for x, y in segments]
+        size = max(map(abs, itertools.chain.from_iterable(v)))
+        reach = size + sum(max(abs(x), abs(y)) for x, y in g)
+        merged = (2 * (len(v) + 2 * len(g)) + 8) * DUPLICATE * (1.0 + reach)
         pad = max(ROUNDING * (1.0 + size), merged)  # (ROUNDING's at every physical state range: bit for bit)
-        return v.plus_segments([*segments, np.array([pad, 0.0]), np.array([0.0, pad])])
+        return Polygon(_array(_plus(v, [*g, (pad, 0.0), (0.0, pad)])))
 
     def cut(self, c: np.ndarray, lo: float, hi: float) -> Polygon | None:
         """The part with lo ≤ cᵀx ≤ hi, widened outward by the margin (relative to max Σᵢ |cᵢ xᵢ|, which bounds the
@@ -110,12 +96,13 @@ class Polygon:
         can leave out along c (a slab thin next to the coordinates' size); None if empty (flat if this polygon
         is: a segment's part is one)."""
         s = self.vertices @ c
-        if lo <= s.min() and s.max() <= hi:  # inside the slab itself, so inside it widened by any pad ≥ 0: what both
+        s_min, s_max = min(values := s.tolist()), max(values)  # (plain floats: cheaper than numpy's reductions here)
+        if lo <= s_min and s_max <= hi:  # inside the slab itself, so inside it widened by any pad ≥ 0: what both
             return self  # clips below would keep (most cuts of a step)
         a = np.abs(self.vertices)
         merged = (2 * len(a) + 2) * DUPLICATE * (1.0 + float(a.max())) * float(np.abs(c).sum())
         pad = max(MARGIN * (1.0 + float((a @ np.abs(c)).max())), merged)
-        if s.max() <= hi + pad and -s.min() <= -lo + pad:  # no vertex outside the widened slab: likewise
+        if s_max <= hi + pad and -s_min <= -lo + pad:  # no vertex outside the widened slab: likewise
             return self  # (v @ −c is −(v @ c) exactly: every rounding is symmetric in sign)
         v = _clip(self.vertices, c, hi + pad)
         if v is not None:
@@ -130,20 +117,42 @@ class Polygon:
         """At most ``max_vertices`` vertices, containing this polygon: an edge is dropped by extending its two
         neighbours until they meet, the ones that add the least area first (edges at least three apart at once:
         their neighbours' lines are then untouched)."""
-        v = self.vertices
+        if len(self.vertices) <= max_vertices:
+            return self
+        v = _points(self.vertices)
         while len(v) > max_vertices:
             drops = _cheapest_edges(v, len(v) - max_vertices)
             if not drops:
                 break  # no edge can be dropped without an unbounded extension (for n > 4 only where a rounding
                 # puts two neighbours' meeting a hair behind an edge: near-duplicate vertices)
             v = _drop_edges(v, drops)
-        return Polygon(v)
+        return Polygon(_array(v))
 
 
 def _after(a: np.ndarray, k: int = 1) -> np.ndarray:
     """The rows of a rolled to start k after the first (np.roll(a, −k, axis=0) for −n ≤ k ≤ n, without its generic
-    set-up: several calls per polygon operation, every step)."""
+    set-up)."""
     return np.concatenate((a[k:], a[:k]))
+
+
+# The walk, the merge and the reduction below run on plain floats: at 24–34 vertices numpy's per-call set-up
+# costs more than the arithmetic.  Each computes what its numpy form did, operation by operation (no fused
+# multiply-add: products, sums and differences rounded one at a time, as numpy's elementwise operations round
+# them), so the vertices are the same floats; the dot products of cut, interval and affine stay numpy's
+# (its matrix products may fuse them).
+
+Point = tuple[float, float]
+
+
+def _points(v: np.ndarray) -> list[Point]:
+    """The rows of v (n, 2) as plain floats."""
+    xs, ys = v.T.tolist()
+    return list(zip(xs, ys))
+
+
+def _array(v: list[Point]) -> np.ndarray:
+    """Plain-float vertices as the (n, 2) array of a Polygon."""
+    return np.fromiter(itertools.chain.from_iterable(v), float, 2 * len(v)).reshape(-1, 2)
 
 
 def _half(x: float, y: float) -> int:
@@ -153,6 +162,7 @@ def _half(x: float, y: float) -> int:
 
 CCW_ERRBOUND = (3.0 + 16.0 * 2.0**-53) * 2.0**-53  # Shewchuk's orient2d error bound A (unit roundoff 2⁻⁵³)
 TINY = 1e-280  # below this the products may have lost precision to underflow: the sign is taken exactly
+TWO_PI = 2.0 * math.pi
 
 
 def _cross_sign(p0x: float, p0y: float, p1x: float, p1y: float, q0x: float, q0y: float, q1x: float, q1y: float) -> int:
@@ -169,73 +179,141 @@ def _cross_sign(p0x: float, p0y: float, p1x: float, p1y: float, q0x: float, q0y:
     return (exact > 0) - (exact < 0)
 
 
-def _compare(a: np.ndarray, b: np.ndarray) -> int:
-    """The order of the directions a and b (each (2,), nonzero) by angle in [0, 2π), exactly: −1 if a comes first,
-    0 if they are the same direction, 1 if b comes first."""
-    ha, hb = _half(float(a[0]), float(a[1])), _half(float(b[0]), float(b[1]))
+def _compare(a: Sequence[float], b: Sequence[float]) -> int:
+    """The order of the directions a and b (nonzero) by angle in [0, 2π), exactly: −1 if a comes first, 0 if they
+    are the same direction, 1 if b comes first (half-plane, then :func:`_cross_sign`'s filter inline: almost every
+    pair is decided by it)."""
+    ax, ay = a
+    bx, by = b
+    ha, hb = _half(ax, ay), _half(bx, by)
     if ha != hb:
         return -1 if ha < hb else 1
-    return -_cross_sign(0.0, 0.0, float(a[0]), float(a[1]), 0.0, 0.0, float(b[0]), float(b[1]))
+    left, right = ax * by, ay * bx
+    det, size = left - right, abs(left) + abs(right)
+    if abs(det) > CCW_ERRBOUND * size and size > TINY:
+        return -1 if det > 0.0 else 1
+    return -_cross_sign(0.0, 0.0, ax, ay, 0.0, 0.0, bx, by)
 
 
-def _turn_one_way(edges: np.ndarray) -> bool:
+def _pairs(d: list[Point], half: list[int], order: Sequence[int]) -> list[int]:
+    """:func:`_compare` of each direction of d in ``order`` with the next, given each one's :func:`_half` (its
+    filter inline: the walk's hot loop)."""
+    out = []
+    for i, j in zip(order, order[1:]):
+        if half[i] != half[j]:
+            out.append(-1 if half[i] < half[j] else 1)
+            continue
+        (ax, ay), (bx, by) = d[i], d[j]
+        left, right = ax * by, ay * bx
+        det, size = left - right, abs(left) + abs(right)
+        if abs(det) > CCW_ERRBOUND * size and size > TINY:
+            out.append(-1 if det > 0.0 else 1)
+        else:
+            out.append(-_cross_sign(0.0, 0.0, ax, ay, 0.0, 0.0, bx, by))
+    return out
+
+
+def _turn_one_way(edges: list[Point]) -> bool:
     """Whether the edges (from the lowest, then leftmost, vertex) turn counter-clockwise all the way: their
     directions in [0, 2π) never decrease (a repeated vertex, a zero edge, is skipped)."""
-    e = edges[np.any(edges != 0.0, axis=1)]
-    return bool(np.all(_pair_order(e[:-1], e[1:]) <= 0))
+    e = [d for d in edges if d[0] != 0.0 or d[1] != 0.0]
+    return all(p <= 0 for p in _pairs(e, [_half(x, y) for x, y in e], range(len(e))))
 
 
-def _halves(d: np.ndarray) -> np.ndarray:
-    """:func:`_half` of every row of d (m, 2)."""
-    return np.where((d[:, 1] > 0.0) | ((d[:, 1] == 0.0) & (d[:, 0] > 0.0)), 0, 1)
+def _by_direction(d: np.ndarray) -> list[int]:
+    """The order of the directions d (m, 2), nonzero, by angle in [0, 2π), exactly (:func:`_ordered`)."""
+    return _ordered(_points(d))[0]
 
 
-def _pair_order(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """:func:`_compare` of the rows a[k], b[k] (each (m, 2), nonzero), exactly, as an int array (m,): the float
-    filter of :func:`_cross_sign` decides almost every pair at once; the rest are taken in rational arithmetic."""
-    ha, hb = _halves(a), _halves(b)
-    left, right = a[:, 0] * b[:, 1], a[:, 1] * b[:, 0]
-    det, size = left - right, np.abs(left) + np.abs(right)
-    cross = np.sign(det).astype(int)
-    for k in np.flatnonzero((ha == hb) & ~((np.abs(det) > CCW_ERRBOUND * size) & (size > TINY))):
-        cross[k] = _cross_sign(0.0, 0.0, float(a[k, 0]), float(a[k, 1]), 0.0, 0.0, float(b[k, 0]), float(b[k, 1]))
-    return np.where(ha == hb, -cross, np.where(ha < hb, -1, 1))
+def _ordered(d: list[Point]) -> tuple[list[int], list[int]]:
+    """The order of the directions d (nonzero) by angle in [0, 2π), exactly, and the :func:`_compare` of each with
+    the next in it (which the walk of :meth:`Polygon.plus_segments` needs): sorted by half-plane and rounded angle
+    (one sort of floats), kept where every neighbouring pair is in order exactly (a total order within a
+    half-plane, so the neighbours decide), else sorted by :func:`_compare` alone (stable).
+
+    Ties (the same direction exactly) stand in the order the walk has always summed them, bit for bit: by
+    half-plane and numpy's rounded angle, then input order, where that order is exact for every neighbouring pair;
+    else in input order.  Without ties every order that passes the check is the one exact order."""
+    m = len(d)
+    half = [0 if y > 0.0 or (y == 0.0 and x > 0.0) else 1 for x, y in d]  # (_half, inline)
+    key = [8.0 * h + math.atan2(y, x) % TWO_PI for h, (x, y) in zip(half, d)]  # half-plane, then angle (< 8)
+    order = [i for _, i in sorted(zip(key, range(m)))]  # (ties in input order)
+    pairs = _pairs(d, half, order)
+
+    def exact() -> tuple[list[int], list[int]]:  # by _compare alone, stable
+        def by_direction(i: int, j: int) -> int:
+            return _compare(d[i], d[j])
+
+        order = sorted(range(m), key=functools.cmp_to_key(by_direction))
+        return order, _pairs(d, half, order)
+
+    if any(p > 0 for p in pairs):
+        order, pairs = exact()
+    if 0 in pairs:  # a tie: does numpy's rounded angles' order stand?
+        arr = np.array(d, dtype=float)
+        angle = np.mod(np.arctan2(arr[:, 1], arr[:, 0]), TWO_PI).tolist()
+        fast = [i for *_, i in sorted(zip(half, angle, range(m)))]  # (ties in input order)
+        fast_pairs = _pairs(d, half, fast)
+        if all(p <= 0 for p in fast_pairs):
+            return fast, fast_pairs
+        order, pairs = exact()
+    return order, pairs
 
 
-def _by_direction(d: np.ndarray) -> np.ndarray:
-    """The order of the directions d (m, 2), nonzero, by angle in [0, 2π), exactly, ties in input order: sorted
-    by half-plane and rounded angle (one numpy sort), kept where every neighbouring pair is in order exactly
-    (a total order within a half-plane, so the neighbours decide), else sorted by :func:`_compare` alone."""
-    return _ordered(d)[0]
+def _from_lowest(v: list[Point]) -> list[Point]:
+    """The vertices rolled to start at the lowest (then leftmost, then first) one."""
+    ys = [p[1] for p in v]
+    low = min(ys)
+    i = ys.index(low) if ys.count(low) == 1 else min((v[k][0], k) for k, y in enumerate(ys) if y == low)[1]
+    return v[i:] + v[:i]
 
 
-def _ordered(d: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-    """:func:`_by_direction`'s order and, where the numpy sort stood, the :func:`_pair_order` of each sorted
-    neighbour with the next (m − 1,), which the walk of :meth:`Polygon.plus_segments` needs again; else None."""
-    order = np.lexsort((np.mod(np.arctan2(d[:, 1], d[:, 0]), 2.0 * np.pi), _halves(d)))
-    s = d[order]
-    pairs = _pair_order(s[:-1], s[1:])
-    if (pairs <= 0).all():
-        return order, pairs  # (ties of the same direction may stand in another order: the walk leaves no vertex between them)
-
-    def by_direction(i: int, j: int) -> int:
-        return _compare(d[i], d[j])
-
-    return np.array(sorted(range(len(d)), key=functools.cmp_to_key(by_direction)), dtype=int), None  # stable
+def _steps(v: list[Point], extra: list[Point]) -> tuple[list[Point], int]:
+    """The edges v[i+1] − v[i] (cyclically) and then ``extra``, without zero ones (a repeated vertex, a zero
+    segment: no direction), and how many of them are edges."""
+    edges = [(bx - ax, by - ay) for (ax, ay), (bx, by) in zip(v, [*v[1:], v[0]])]
+    edges = [e for e in edges if e[0] != 0.0 or e[1] != 0.0]
+    return edges + extra, len(edges)
 
 
-def _from_lowest(v: np.ndarray) -> np.ndarray:
-    """The vertices rolled to start at the lowest (then leftmost) one."""
-    return _after(v, int(np.lexsort((v[:, 0], v[:, 1]))[0]))
+def _plus(vertices: list[Point], segments: list[Point]) -> list[Point]:
+    """The vertices of :meth:`Polygon.plus_segments` (its docstring says how)."""
+    v = _from_lowest(vertices)
+    ends = [(-x, -y) if _half(x, y) == 0 else (x, y) for x, y in segments]  # each segment's lowest (then leftmost) end
+    lx, ly = ends[0] if ends else (0.0, 0.0)
+    for x, y in ends[1:]:
+        lx, ly = lx + x, ly + y
+    extra = [s for s in [*((2.0 * x, 2.0 * y) for x, y in segments), *((-2.0 * x, -2.0 * y) for x, y in segments)] if s[0] != 0.0 or s[1] != 0.0]
+    steps, n = _steps(v, extra)
+    order, pairs = _ordered(steps) if steps else ([], [])
+    edge_order = [i for i in order if i < n]
+    if any(i > j for i, j in zip(edge_order, edge_order[1:])) and not _turn_one_way(steps[:n]):  # (edges in the
+        # exact order in their own order turn one way; out of it, a tie may still have swapped two: checked)
+        v = _hull(v)  # from its lowest (then leftmost) vertex: a rounding made a vertex reflex
+        steps, n = _steps(v, extra)
+        order, pairs = _ordered(steps) if steps else ([], [])
+    if not steps:
+        return v
+    bx, by = v[0][0] + lx, v[0][1] + ly
+    walk = [(bx + 0.0, by + 0.0)]  # (+ 0.0: as the walk's zero first row, −0.0 becomes 0.0)
+    cx, cy = steps[order[0]]
+    for k in order[1:]:  # each partial sum in turn, as a running (cumulative) sum rounds it
+        walk.append((bx + cx, by + cy))
+        sx, sy = steps[k]
+        cx, cy = cx + sx, cy + sy
+    if len(order) > 1 and 0 not in pairs:  # every step turns from the one before (the last from the first too:
+        return _distinct(walk)  # the order rises strictly)
+    turns = [_compare(steps[order[-1]], steps[order[0]]), *pairs]  # each step against the one before
+    kept = [p for p, turn in zip(walk, turns) if turn != 0]  # (else the vertex is on a side)
+    return _distinct(kept or walk[:1])
 
 
-def _hull(v: np.ndarray) -> np.ndarray:
-    """The convex hull of the points v (n, 2), exactly (Andrew's monotone chain, exact orientation): its vertices
-    counter-clockwise without collinear ones, from the lowest (then leftmost); one or two rows if it is flat."""
+def _hull(v: list[Point]) -> list[Point]:
+    """The convex hull of the points v, exactly (Andrew's monotone chain, exact orientation): its vertices
+    counter-clockwise without collinear ones, from the lowest (then leftmost); one or two if it is flat."""
     pts = sorted({(float(x), float(y)) for x, y in v})
     if len(pts) <= 2:
-        out = sorted(pts, key=lambda p: (p[1], p[0]))
-        return np.array(out, dtype=float).reshape(-1, 2)
+        return sorted(pts, key=lambda p: (p[1], p[0]))
 
     def chain(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
         out: list[tuple[float, float]] = []
@@ -247,7 +325,7 @@ def _hull(v: np.ndarray) -> np.ndarray:
 
     ring = chain(pts)[:-1] + chain(pts[::-1])[:-1]  # every point on one line: its two ends
     first = min(range(len(ring)), key=lambda i: (ring[i][1], ring[i][0]))
-    return np.array(ring[first:] + ring[:first], dtype=float)
+    return ring[first:] + ring[:first]
 
 
 def _clip(v: np.ndarray, c: np.ndarray, b: float) -> np.ndarray | None:
@@ -261,52 +339,65 @@ def _clip(v: np.ndarray, c: np.ndarray, b: float) -> np.ndarray | None:
     t = np.where(crosses, s / np.where(crosses, s - s_nxt, 1.0), 0.0)
     points = np.stack([v, v + t[:, None] * (nxt - v)], axis=1).reshape(-1, 2)  # per edge: its start, its crossing
     out = points[np.stack([s <= 0.0, crosses], axis=1).reshape(-1)]
-    return _distinct(out) if len(out) else None
+    return _array(_distinct(_points(out))) if len(out) else None
 
 
-def _distinct(v: np.ndarray) -> np.ndarray:
+def _distinct(v: list[Point]) -> list[Point]:
     """Without the vertices within DUPLICATE (relative to the extent) of the one before: an edge that short has a
     direction of rounding noise, which the containment test would read as a side (the margin covers the move)."""
-    tol = DUPLICATE * (1.0 + float(np.abs(v).max()))
-    keep = np.abs(v - _after(v, -1)).max(axis=1) > tol
-    return v[keep] if keep.any() else v[:1]
+    tol = DUPLICATE * (1.0 + max(map(abs, itertools.chain.from_iterable(v))))
+    px, py = v[-1]
+    out = []
+    for x, y in v:
+        if abs(x - px) > tol or abs(y - py) > tol:
+            out.append((x, y))
+        px, py = x, y
+    return out or v[:1]
 
 
-def _cheapest_edges(v: np.ndarray, wanted: int) -> dict[int, np.ndarray]:
+def _cheapest_edges(v: list[Point], wanted: int) -> dict[int, tuple[float, float]]:
     """Up to ``wanted`` edges i → q: dropping edge (v_i, v_i+1) by meeting its neighbours' lines at q adds the
     least area, q beyond both ends of the edge along them (the drop then holds the edge's triangle); the edges
     chosen are at least three apart (cyclically)."""
     n = len(v)
-    a0, a1 = _after(v, -1), v  # the edge before edge i
-    b0, b1 = _after(v), _after(v, 2)  # the edge after it
-    da, db = a1 - a0, b1 - b0
-    den = da[:, 0] * db[:, 1] - da[:, 1] * db[:, 0]
-    ok = den > 1e-300  # else parallel, or meeting behind: dropping that edge is unbounded
-    t = np.where(ok, ((b0[:, 0] - a0[:, 0]) * db[:, 1] - (b0[:, 1] - a0[:, 1]) * db[:, 0]) / np.where(ok, den, 1.0), -1.0)
-    ok &= (t >= 1.0) & (t <= MAX_REACH)  # (farther, q's rounding could cut the polygon: near-parallel neighbours)
-    q = a0 + t[:, None] * da
-    ok &= np.einsum("ij,ij->i", q - b0, db) <= 0.0  # and before b0 on the edge after (else the drop cuts b0 off: where
-    # near-duplicate vertices leave a side whose direction is rounding noise)
-    area = 0.5 * np.abs((q[:, 0] - a1[:, 0]) * (b0[:, 1] - a1[:, 1]) - (q[:, 1] - a1[:, 1]) * (b0[:, 0] - a1[:, 0]))
-    area = np.where(ok & np.isfinite(area), area, np.inf)
-    chosen: dict[int, np.ndarray] = {}
-    for i in np.argsort(area, kind="stable"):
-        if len(chosen) == wanted or not np.isfinite(area[i]):
+    area, q = [math.inf] * n, [(0.0, 0.0)] * n
+    for i in range(n):
+        (a0x, a0y), (a1x, a1y) = v[i - 1], v[i]  # the edge before edge i
+        (b0x, b0y), (b1x, b1y) = v[(i + 1) % n], v[(i + 2) % n]  # the edge after it
+        dax, day, dbx, dby = a1x - a0x, a1y - a0y, b1x - b0x, b1y - b0y
+        den = dax * dby - day * dbx
+        if not den > 1e-300:
+            continue  # parallel, or meeting behind: dropping that edge is unbounded
+        t = ((b0x - a0x) * dby - (b0y - a0y) * dbx) / den
+        if not 1.0 <= t <= MAX_REACH:
+            continue  # (farther, q's rounding could cut the polygon: near-parallel neighbours)
+        qx, qy = a0x + t * dax, a0y + t * day
+        if not (qx - b0x) * dbx + (qy - b0y) * dby <= 0.0:
+            continue  # q must be before b0 on the edge after (else the drop cuts b0 off: where near-duplicate
+            # vertices leave a side whose direction is rounding noise)
+        a = 0.5 * abs((qx - a1x) * (b0y - a1y) - (qy - a1y) * (b0x - a1x))
+        if math.isfinite(a):
+            area[i], q[i] = a, (qx, qy)
+    chosen: dict[int, tuple[float, float]] = {}
+    near: set[int] = set()  # the edges fewer than three from a chosen one (cyclically)
+    for a, i in sorted(zip(area, range(n))):  # (ties in edge order)
+        if len(chosen) == wanted or a == math.inf:
             break
-        if all(min((i - j) % n, (j - i) % n) >= 3 for j in chosen):
-            chosen[int(i)] = q[i]
+        if i not in near:
+            chosen[i] = q[i]
+            near.update(((i - 2) % n, (i - 1) % n, i, (i + 1) % n, (i + 2) % n))
     return chosen
 
 
-def _drop_edges(v: np.ndarray, drops: dict[int, np.ndarray]) -> np.ndarray:
+def _drop_edges(v: list[Point], drops: dict[int, tuple[float, float]]) -> list[Point]:
     """The vertices with each dropped edge's two ends replaced by its q."""
     n = len(v)
-    out = v.copy()
-    keep = np.ones(n, dtype=bool)
+    out = list(v)
+    keep = [True] * n
     for i, q in drops.items():  # (dropped edges are at least three apart: no end is another's start)
         out[i] = q
         keep[(i + 1) % n] = False
-    return out[keep]
+    return [p for p, k in zip(out, keep) if k]
 
 
 __all__ = ["MARGIN", "MAX_VERTICES", "MIN_VERTICES", "Polygon"]

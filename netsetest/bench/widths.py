@@ -8,13 +8,21 @@ the exact one from step FROM_STEP for r, β and f; where the exact interval is a
 over it instead; the intervals narrower than exact where the assumptions held (a sound set has none) and the
 violations.  The SDP's target is r, β and f ≤ 1.05 on the listed runs and ≤ 1.10 on every other bundled scenario,
 judged on the worst node; the table says where it is missed.  The comparisons run JOBS at a time in processes of
-their own: this part measures widths, no time of it is a figure.
+their own: no time of them is a figure.
+
+Then, in this process alone, what the region costs (:func:`region_cost`): the estimator's step per node-step on
+paper6 NSNIM and SAIM, in memory as a node runs it, and the region's part of it, its move and its cut timed in the
+same runs (issue 28's target: the step at most 0.25 ms over the code before every node kept a region, 29290ba,
+measured beside that checkout).
 """
 
 from __future__ import annotations
 
+import statistics
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -29,6 +37,7 @@ CAR = "paper6_car"
 TARGETED = ("paper6", CAR, "paper6_reference", "paper6_max_faulty")  # the topologies of the listed runs
 CASES: tuple[Case, ...] = ("nsnim", "saim")
 COORDS = ((1, "r"), (0, "β"), (2, "f"))  # (index in [β, r, f], label): the table's order
+COST_STEPS, COST_RUNS, COST_WARM_UP = 40, 3, 5  # the region's cost: steps per run, runs per case, warm-up steps
 
 
 @dataclass(frozen=True)
@@ -87,7 +96,67 @@ def widths_figures(cfg: dict, tmp: Path) -> dict:
 
     with ProcessPoolExecutor(JOBS) as pool:
         runs = list(pool.map(_measure, plan(cfg)))
-    return {"from_step": FROM_STEP, "runs": runs}
+    _log("the region's cost per node-step (paper6, in memory, this process alone)")
+    return {"from_step": FROM_STEP, "runs": runs, "cost": region_cost()}
+
+
+@contextmanager
+def _region_timers(times: dict[str, list[float]]) -> Iterator[None]:
+    """Every call of the region's two pieces timed while the block runs (ms into ``times``): the move of the
+    region through the step (``LocalEstimator._moved_region``) and its cut (:data:`~netsetest.estimator.cuts.REGION`)."""
+    from netsetest.estimator import cuts, sdp
+
+    moved, cut = sdp.LocalEstimator._moved_region, cuts.REGION.apply
+
+    def timed_moved(est: sdp.LocalEstimator, *args: object) -> object:
+        t0 = time.perf_counter()
+        out = moved(est, *args)  # type: ignore[arg-type]  # the method's own arguments, passed through
+        times["moved"].append(1e3 * (time.perf_counter() - t0))
+        return out
+
+    def timed_cut(ctx: cuts.StepContext, res: cuts.StepResult) -> cuts.StepResult:
+        t0 = time.perf_counter()
+        out = cut(ctx, res)
+        if ctx.blend is not None:  # (step 0's cut, from the prior, is no step the run times)
+            times["cut"].append(1e3 * (time.perf_counter() - t0))
+        return out
+
+    sdp.LocalEstimator._moved_region = timed_moved  # type: ignore[method-assign,assignment]  # restored below
+    object.__setattr__(cuts.REGION, "apply", timed_cut)  # (the Cut is frozen; every cut list holds this one)
+    try:
+        yield
+    finally:
+        sdp.LocalEstimator._moved_region = moved  # type: ignore[method-assign]  # the method back
+        object.__setattr__(cuts.REGION, "apply", cut)
+
+
+def region_cost(steps: int = COST_STEPS, runs: int = COST_RUNS) -> dict:
+    """Per case (paper6 NSNIM, SAIM): ``runs`` runs of ``steps`` steps after a warm-up run, each the median over its
+    node-steps of the estimator's step (bench/solvers.py's ``capture``: the in-run time of ``LocalEstimator.step``),
+    of the region's move and of its cut, and the region's share of the step time (the move and the cut over all
+    steps, summed); the case's figure is the median over the runs."""
+    from netsetest.bench.solvers import capture
+    from netsetest.config.schema import load_topology
+
+    out: dict = {"steps": steps, "runs": runs}
+    for case in CASES:
+        capture(load_topology("paper6", case, COST_WARM_UP), "scheduled")
+        per_run = []
+        for _ in range(runs):
+            times: dict[str, list[float]] = {"moved": [], "cut": []}
+            with _region_timers(times):
+                cap = capture(load_topology("paper6", case, steps), "scheduled")
+            per_run.append(
+                {
+                    "step_ms": statistics.median(cap.step_ms),
+                    "moved_ms": statistics.median(times["moved"]),
+                    "cut_ms": statistics.median(times["cut"]),
+                    "share": (sum(times["moved"]) + sum(times["cut"])) / sum(cap.step_ms),
+                }
+            )
+        out[case] = {key: statistics.median(r[key] for r in per_run) for key in per_run[0]} | {"per_run": per_run}
+        _log(f"  paper6 {case.upper()}: step {out[case]['step_ms']:.3f} ms per node-step, region {100 * out[case]['share']:.0f} %")
+    return out
 
 
 # ---------------------------------------------------------------- rendering
@@ -154,10 +223,33 @@ def widths_summary_markdown(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def cost_markdown(cost: dict) -> str:
+    """The region's cost per node-step, per case."""
+    lines = [
+        f"The region's cost: paper6 in memory, {cost['runs']} runs of {cost['steps']} steps per case after a warm-up, "
+        "each the median over its node-steps, the median of the runs (per run in brackets). Step: the estimator's step "
+        "as a node runs it; move and cut: the region's, timed in the same runs; share: the two over the step time, "
+        "summed over the run. Target (issue 28): the step at most 0.25 ms over the code before every node kept a "
+        "region (29290ba), measured beside that checkout.",
+        "",
+        "| case | step (ms per node-step) | region move (ms) | region cut (ms) | region share of the step |",
+        "|---|---|---|---|---|",
+    ]
+    for case in CASES:
+        c = cost[case]
+        runs = ", ".join(f"{r['step_ms']:.3f}" for r in c["per_run"])
+        lines.append(f"| paper6 {case.upper()} | {c['step_ms']:.3f} ({runs}) | {c['moved_ms']:.3f} | {c['cut_ms']:.3f} | {100 * c['share']:.0f} % |")
+    return "\n".join(lines) + "\n"
+
+
 def widths_markdown(res: dict) -> str:
-    """Every run: the SDP against its target, then every estimator's r / β / f over exact, then per node."""
+    """Every run: the SDP against its target, then every estimator's r / β / f over exact, then per node; then the
+    region's cost (figures measured before it had one: none)."""
     runs = res["runs"]
-    lines = [widths_summary_markdown(res), "Every estimator, r / β / f over exact pooled over nodes (largest per-node ratio):", ""]
+    lines = [widths_summary_markdown(res)]
+    if "cost" in res:
+        lines += [cost_markdown(res["cost"])]
+    lines += ["Every estimator, r / β / f over exact pooled over nodes (largest per-node ratio):", ""]
     names = list(dict.fromkeys(r["estimator"] for run in runs for r in run["rows"] if r["estimator"] not in ("sdp", "sdp-ellipsoid", "exact")))
     lines += ["| run | " + " | ".join(f"`{n}`" for n in names) + " |", "|---|" + "---|" * len(names)]
     for run in runs:
@@ -196,4 +288,4 @@ def region_markdown(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-__all__ = ["ESTIMATORS", "WidthRun", "plan", "region_markdown", "widths_figures", "widths_markdown", "widths_summary_markdown"]
+__all__ = ["ESTIMATORS", "WidthRun", "cost_markdown", "plan", "region_cost", "region_markdown", "widths_figures", "widths_markdown", "widths_summary_markdown"]

@@ -5,7 +5,7 @@ region table sets each method without its region beside it with."""
 from __future__ import annotations
 
 from netsetest.bench.run import QUICK
-from netsetest.bench.widths import LISTED, OTHER, plan, region_markdown, widths_markdown, widths_summary_markdown
+from netsetest.bench.widths import LISTED, OTHER, cost_markdown, plan, region_markdown, widths_markdown, widths_summary_markdown
 from netsetest.scenarios import bundled_topologies
 
 
@@ -66,3 +66,12 @@ def test_the_plan_covers_the_listed_runs_and_every_other_bundled_scenario() -> N
     assert all(r.seeds == (3, 11) for r in listed if r.signals == "worst")
     assert all(r.seeds[0] >= 10 for r in runs if r.topology == "paper6_car")  # held out of the mismatch calibration
     assert all(r.target == OTHER for r in runs if r.topology not in {x.topology for x in listed})
+
+
+def test_the_cost_table_gives_each_case_its_step_and_the_regions_share() -> None:
+    run = {"step_ms": 0.5, "moved_ms": 0.06, "cut_ms": 0.09, "share": 0.3}
+    cost = {"steps": 40, "runs": 2, "nsnim": run | {"per_run": [run, run | {"step_ms": 0.6}]}, "saim": run | {"per_run": [run]}}
+    line = _line(cost_markdown(cost), "paper6 NSNIM")
+    assert line[1:] == ["0.500 (0.500, 0.600)", "0.060", "0.090", "30 %"]
+    res = {"from_step": 10, "runs": [_run("a", LISTED, {"1": [1.0, 1.0, 1.0]})]}
+    assert "region share" not in widths_markdown(res) and "region share" in widths_markdown(res | {"cost": cost})  # (figures of before it: none)

@@ -1,0 +1,64 @@
+"""Issue 28's speed-up of the region changes no vertex: in whole runs (paper6 NSNIM and SAIM, paper signals and
+worst-case ones, paper6_reference, paper6_car_max_faulty, paper6_max_faulty), every call of the moves, cuts,
+reductions and ellipse cuts returns exactly, bit for bit, what the numpy code before it returned on the same
+input (tests/polygon_reference.py); tests/unit/test_polygon_same.py does the same on random polygons."""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable
+from typing import Any
+
+import polygon_reference as ref
+import pytest
+
+from netsetest.config.schema import Case, load_topology
+from netsetest.estimator import cuts
+from netsetest.models.signals import SignalKind
+from netsetest.polygon import Polygon
+from netsetest.runtime.inmemory import run_inmemory
+
+STEPS = 20
+RUNS: list[tuple[str, Case, SignalKind, int]] = [
+    ("paper6", "nsnim", "paper", 0),
+    ("paper6", "saim", "paper", 0),
+    ("paper6", "saim", "worst", 3),
+    ("paper6_reference", "nsnim", "paper", 0),
+    ("paper6_reference", "saim", "worst", 11),
+    ("paper6_car_max_faulty", "saim", "paper", 0),
+    ("paper6_max_faulty", "nsnim", "worst", 10),
+]
+
+
+def _same(got: Polygon | None, want: ref.Polygon | None) -> bool:
+    if got is None or want is None:
+        return got is None and want is None
+    a, b = got.vertices, want.vertices
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def _checked(calls: Counter[str], name: str, new: Callable[..., Any], old: Callable[..., Any]) -> Callable[..., Any]:
+    """``new`` that also runs ``old`` on the same input (the polygon as the reference's) and asserts the same vertices."""
+
+    def both(region: Polygon, *args: Any, **kwargs: Any) -> Any:
+        got = new(region, *args, **kwargs)
+        want = old(ref.Polygon(region.vertices.copy()), *args, **kwargs)
+        assert _same(got, want), f"{name}{args!r} on {region.vertices.tolist()!r}"
+        calls[name] += 1
+        return got
+
+    return both
+
+
+@pytest.mark.parametrize(("topology", "case", "signals", "seed"), RUNS)
+def test_every_region_operation_of_a_run_returns_what_the_numpy_code_did(
+    monkeypatch: pytest.MonkeyPatch, topology: str, case: Case, signals: SignalKind, seed: int
+) -> None:
+    calls: Counter[str] = Counter()
+    for name in ("moved", "cut", "reduced"):
+        monkeypatch.setattr(Polygon, name, _checked(calls, name, getattr(Polygon, name), getattr(ref.Polygon, name)))
+    monkeypatch.setattr(cuts, "ellipse_cut", _checked(calls, "ellipse_cut", cuts.ellipse_cut, ref.ellipse_cut))
+    run_inmemory(load_topology(topology, case, STEPS), signals, "scheduled", seed)
+    nodes = len(load_topology(topology, case, STEPS).ids)
+    assert calls["moved"] >= nodes * (STEPS - 1) and calls["reduced"] >= nodes * STEPS  # every node, every step
+    assert calls["cut"] > calls["ellipse_cut"] > 0
