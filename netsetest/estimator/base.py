@@ -91,10 +91,10 @@ class ReadingSlabs:
                 out.append(Slab(np.r_[sensor.C, 0.0], float(lo), float(hi)))
         if self.health is not None:
             a = np.r_[self.health.u, 0.0]
-            hull, pinned = self.health.assess(self.node_id, own, readings, extent(a) if extent is not None else None, pin=True)
-            if hull is not None:
-                out.append(Slab(a, hull.lo, hull.hi))
-            if pinned:  # no consistent majority without this sensor: |f| ≤ τ
+            health = self.health.assess(self.node_id, own, readings, extent(a) if extent is not None else None, pin=True)
+            if health.interval is not None:
+                out.append(Slab(a, health.interval.lo, health.interval.hi))
+            if health.pinned:  # no consistent majority without this sensor: |f| ≤ τ
                 out.append(Slab(np.array([0.0, 0.0, 1.0]), -self.health.tolerance, self.health.tolerance))
         return out
 

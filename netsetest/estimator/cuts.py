@@ -281,10 +281,15 @@ def region_fault(own: Sensor, region: Polygon, meas: Interval) -> tuple[float, f
     give Ds f⁺ ∈ [m_lo − c_hi, m_hi − c_lo].  A measurement at the sensor's limit (saturated) leaves one side of
     C x⁺ + Ds f⁺ open, and the other side still bounds f⁺ (one side of the result infinite); None where both are
     open or the sensor has no fault term."""
-    finite_lo, finite_hi = bool(np.isfinite(meas.lo)), bool(np.isfinite(meas.hi))
-    if own.Ds == 0.0 or not (finite_lo or finite_hi):
+    if own.Ds == 0.0 or not (np.isfinite(meas.lo) or np.isfinite(meas.hi)):
         return None
-    c_lo, c_hi = region.interval(own.C)
+    return fault_over(own, *region.interval(own.C), meas)
+
+
+def fault_over(own: Sensor, c_lo: float, c_hi: float, meas: Interval) -> tuple[float, float]:
+    """f⁺ from the own measurement where C x⁺ ∈ [c_lo, c_hi]: Ds f⁺ ∈ [m_lo − c_hi, m_hi − c_lo] (an open side of the
+    measurement leaves that side of the result open); the sensor has a fault term (Ds ≠ 0)."""
+    finite_lo, finite_hi = bool(np.isfinite(meas.lo)), bool(np.isfinite(meas.hi))
     a = (meas.lo - c_hi) / own.Ds if finite_lo else -np.inf * own.Ds  # (an open side stays open, whatever Ds's sign)
     b = (meas.hi - c_lo) / own.Ds if finite_hi else np.inf * own.Ds
     return (a, b) if own.Ds > 0.0 else (b, a)
@@ -296,13 +301,36 @@ def _health_pin(ctx: StepContext, res: StepResult) -> StepResult:
     :data:`PIN_FLOOR` (a superset: sound) so that the published ellipsoid stays full-dimensional, and then rests
     on every reading (the k-of-N facts do); the set the node continues from is cut by it too."""
     tol = ctx.statics.health_tolerance
-    if tol is None or ctx.health is None or not ctx.health[1]:
+    if tol is None or ctx.health is None or not ctx.health.pinned:
         return res
     size = max(tol, PIN_FLOOR)
     out = cut_fault(ctx, res, -size, size)
     if out is not None:
         res = dataclasses.replace(out, published=dataclasses.replace(out.public, reading_keys=out.public.reading_keys | {HEALTH_KEY}))
     return carry(ctx, res, {HEALTH_KEY: (FAULT_AXIS, -size, size)})
+
+
+def _health_fault(ctx: StepContext, res: StepResult) -> StepResult:
+    """Under ``max_faulty``, the own sensor is healthy (|f⁺| ≤ τ) or the other sensors' readings alone supply N − m
+    agreeing ones; then t = uᵀx⁺ lies where they agree within the region, and the own measurement bounds f⁺ over
+    that part of it (C = s uᵀ: C x⁺ = s t).  The published fault range is cut by the hull of the two (docs/network.md):
+    where the others agree nowhere in the region this is the pin's |f⁺| ≤ max(τ, 10⁻⁶), elsewhere the side of the
+    fault interval that only a faulty own sensor could reach.  The ellipsoid is left as solved and the set the node
+    continues from is unchanged (a later fault is free of this one); the published set then rests on every reading."""
+    tol, health, region, own = ctx.statics.health_tolerance, ctx.health, res.region, ctx.statics.own
+    if tol is None or health is None or region is None or own.Ds == 0.0:
+        return res
+    floor = max(tol, PIN_FLOOR)
+    agree = health.others.agree(region.interval(health.others.u))
+    lo, hi = -floor, floor
+    if agree is not None:  # the own sensor may be the faulty one: f⁺ over the region's part where the others agree
+        s = float(own.C @ health.others.u)
+        a, b = fault_over(own, min(s * agree[0], s * agree[1]), max(s * agree[0], s * agree[1]), ctx.meas)
+        lo, hi = min(lo, a), max(hi, b)
+    out = cut_fault(ctx, res, lo, hi, reshape=False)
+    if out is None:
+        return res
+    return dataclasses.replace(out, published=dataclasses.replace(out.public, reading_keys=out.public.reading_keys | {HEALTH_KEY}))
 
 
 def seed(prior: NodeSet) -> Polygon:
@@ -337,8 +365,13 @@ REGION = Cut(
     _region_cut,
 )
 HEALTH_PIN = Cut("health-pin", "k-of-N health ([network] max_faulty): no consistent majority of the step's readings leaves the own sensor out", _health_pin)
+HEALTH_FAULT = Cut(
+    "health-fault",
+    "k-of-N health ([network] max_faulty): the own sensor is healthy, or the other sensors' readings alone supply N − m agreeing ones",
+    _health_fault,
+)
 
-STEP_CUTS: tuple[Cut, ...] = (READINGS, FAULT_SIZE, REGION, HEALTH_PIN)  # a step k → k+1, in this order
+STEP_CUTS: tuple[Cut, ...] = (READINGS, FAULT_SIZE, REGION, HEALTH_PIN, HEALTH_FAULT)  # a step k → k+1, in this order
 FIRST_CUTS: tuple[Cut, ...] = (REGION,)  # step 0: the prior updated by ỹ₀ (no readings listed, no size cut)
 FALLBACK_CUTS: tuple[Cut, ...] = (REGION,)  # a step without a certificate: the region of its own measurement
 
@@ -368,6 +401,7 @@ __all__ = [
     "carry",
     "cut_fault",
     "ellipse_cut",
+    "fault_over",
     "region_fault",
     "seed",
 ]
