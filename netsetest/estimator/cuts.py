@@ -37,6 +37,7 @@ from netsetest.sets import ellipsoid_bounds
 
 Status = Literal["ok", "fallback"]
 FAULT_AXIS = np.eye(NA)[NA - 1]  # f = e₃ᵀx̄: the direction the fault cuts act along
+HEALTH_KEYS = frozenset({HEALTH_KEY})  # what a set cut by the k-of-N facts rests on: every reading of the step
 PIN_FLOOR = 1e-6  # a fault proved healthy is published as |f| ≤ max(τ, this): an ellipsoid cannot be flat
 COORDINATE_AXES = np.eye(NX)  # β and r: the directions of the region's coordinate cuts (read-only)
 COORDINATE_AXES.flags.writeable = False
@@ -186,11 +187,11 @@ class Cut:
     apply: CutFn
 
 
-def cut_fault(ctx: StepContext, res: StepResult, lo: float, hi: float, reshape: bool = True) -> StepResult | None:
+def cut_fault(ctx: StepContext, res: StepResult, lo: float, hi: float, reshape: bool = True, keys: frozenset[int] = frozenset()) -> StepResult | None:
     """The sets with the published one cut by lo ≤ f⁺ ≤ hi (:func:`~netsetest.estimator.slab.cut`, certified; not
     unless ``reshape``) and published as that ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (ProvenSet.fault: no ellipsoid ends
-    at the slab's flat face); None where the slab does not narrow the published fault interval.  The set the node
-    continues from is unchanged."""
+    at the slab's flat face), resting on the readings ``keys`` too; None where the slab does not narrow the published
+    fault interval.  The set the node continues from is unchanged."""
     pub, rho = res.public, ctx.rho
     now_lo, now_hi = ellipsoid_bounds(pub.xhat, np.diag(pub.P), rho, pub.fault_range)  # the published fault interval
     lo, hi = max(lo, now_lo[-1]), min(hi, now_hi[-1])
@@ -199,9 +200,9 @@ def cut_fault(ctx: StepContext, res: StepResult, lo: float, hi: float, reshape: 
     wh = ctx.statics.wh_published
     out = cut(pub.xhat, pub.P, rho, FAULT_AXIS, lo, hi, None if wh is None else wh**2) if reshape else None
     if out is None:  # the ellipsoid gains nothing; the slab still bounds the fault
-        new = dataclasses.replace(pub, published=None, fault_range=(lo, hi))
+        new = dataclasses.replace(pub, published=None, fault_range=(lo, hi), reading_keys=pub.reading_keys | keys)
     else:  # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
-        new = dataclasses.replace(pub, xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None, fault_range=(lo, hi))
+        new = dataclasses.replace(pub, xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None, fault_range=(lo, hi), reading_keys=pub.reading_keys | keys)
     return dataclasses.replace(res, published=new)
 
 
@@ -327,10 +328,8 @@ def _health_fault(ctx: StepContext, res: StepResult) -> StepResult:
         s = float(own.C @ health.others.u)
         a, b = fault_over(own, min(s * agree[0], s * agree[1]), max(s * agree[0], s * agree[1]), ctx.meas)
         lo, hi = min(lo, a), max(hi, b)
-    out = cut_fault(ctx, res, lo, hi, reshape=False)
-    if out is None:
-        return res
-    return dataclasses.replace(out, published=dataclasses.replace(out.public, reading_keys=out.public.reading_keys | {HEALTH_KEY}))
+    out = cut_fault(ctx, res, lo, hi, reshape=False, keys=HEALTH_KEYS)
+    return res if out is None else out
 
 
 def seed(prior: NodeSet) -> Polygon:
