@@ -27,7 +27,7 @@ import numpy as np
 
 from netsetest.estimator.health import HEALTH_KEY, HealthAssessment
 from netsetest.estimator.problem import StepData
-from netsetest.estimator.sector import FaultBound, Interval, Sector
+from netsetest.estimator.sector import FaultBound, Interval, Sector, fault_over
 from netsetest.estimator.slab import cut
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.vehicle import TSModel
@@ -287,15 +287,6 @@ def region_fault(own: Sensor, region: Polygon, meas: Interval) -> tuple[float, f
     return fault_over(own, *region.interval(own.C), meas)
 
 
-def fault_over(own: Sensor, c_lo: float, c_hi: float, meas: Interval) -> tuple[float, float]:
-    """f⁺ from the own measurement where C x⁺ ∈ [c_lo, c_hi]: Ds f⁺ ∈ [m_lo − c_hi, m_hi − c_lo] (an open side of the
-    measurement leaves that side of the result open); the sensor has a fault term (Ds ≠ 0)."""
-    finite_lo, finite_hi = bool(np.isfinite(meas.lo)), bool(np.isfinite(meas.hi))
-    a = (meas.lo - c_hi) / own.Ds if finite_lo else -np.inf * own.Ds  # (an open side stays open, whatever Ds's sign)
-    b = (meas.hi - c_lo) / own.Ds if finite_hi else np.inf * own.Ds
-    return (a, b) if own.Ds > 0.0 else (b, a)
-
-
 def _health_pin(ctx: StepContext, res: StepResult) -> StepResult:
     """Under ``max_faulty``, where no consistent majority of the step's readings leaves this node's sensor out,
     its fault is |f⁺| ≤ τ (docs/network.md): the published set is cut by that interval, widened to
@@ -314,20 +305,15 @@ def _health_pin(ctx: StepContext, res: StepResult) -> StepResult:
 def _health_fault(ctx: StepContext, res: StepResult) -> StepResult:
     """Under ``max_faulty``, the own sensor is healthy (|f⁺| ≤ τ) or the other sensors' readings alone supply N − m
     agreeing ones; then t = uᵀx⁺ lies where they agree within the region, and the own measurement bounds f⁺ over
-    that part of it (C = s uᵀ: C x⁺ = s t).  The published fault range is cut by the hull of the two (docs/network.md):
+    that part of it (:meth:`~netsetest.estimator.health.Others.fault`).  The published fault range is cut by the hull
+    of the two (docs/network.md):
     where the others agree nowhere in the region this is the pin's |f⁺| ≤ max(τ, 10⁻⁶), elsewhere the side of the
     fault interval that only a faulty own sensor could reach.  The ellipsoid is left as solved and the set the node
     continues from is unchanged (a later fault is free of this one); the published set then rests on every reading."""
     tol, health, region, own = ctx.statics.health_tolerance, ctx.health, res.region, ctx.statics.own
     if tol is None or health is None or region is None or own.Ds == 0.0:
         return res
-    floor = max(tol, PIN_FLOOR)
-    agree = health.others.agree(region.interval(health.others.u))
-    lo, hi = -floor, floor
-    if agree is not None:  # the own sensor may be the faulty one: f⁺ over the region's part where the others agree
-        s = float(own.C @ health.others.u)
-        a, b = fault_over(own, min(s * agree[0], s * agree[1]), max(s * agree[0], s * agree[1]), ctx.meas)
-        lo, hi = min(lo, a), max(hi, b)
+    lo, hi = health.others.fault(own, region.interval(health.others.u), ctx.meas, max(tol, PIN_FLOOR))
     out = cut_fault(ctx, res, lo, hi, reshape=False, keys=HEALTH_KEYS)
     return res if out is None else out
 
@@ -400,7 +386,6 @@ __all__ = [
     "carry",
     "cut_fault",
     "ellipse_cut",
-    "fault_over",
     "region_fault",
     "seed",
 ]

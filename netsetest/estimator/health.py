@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from netsetest.estimator.sector import Interval, measurement_interval
+from netsetest.estimator.sector import Interval, fault_over, measurement_interval
 from netsetest.models.sensor import Sensor
 
 if TYPE_CHECKING:
@@ -64,6 +64,17 @@ class Others:
         """The hull of the t in ``within`` that at least ``need`` of the spans hold; None if no t does (then the own
         sensor is healthy in every hypothesis the readings leave)."""
         return healthy_interval(_present(_clipped(list(self.spans), within)), self.need)
+
+    def fault(self, own: Sensor, extent: Span, meas: Interval, floor: float) -> tuple[float, float]:
+        """The own fault where uᵀx lies in ``extent`` (a region's) and ``meas`` holds C x + Ds f: the own sensor is
+        healthy (|f| ≤ ``floor``, at least τ) or uᵀx lies where the others agree, and there the measurement bounds f
+        (C = s uᵀ: C x = s uᵀx); the hull of the two.  The sensor has a fault term (Ds ≠ 0)."""
+        agree = self.agree(extent)
+        if agree is None:  # the others agree nowhere: the own sensor is healthy (the pin)
+            return -floor, floor
+        s = float(own.C @ self.u)
+        a, b = fault_over(own, min(s * agree[0], s * agree[1]), max(s * agree[0], s * agree[1]), meas)
+        return min(a, -floor), max(b, floor)
 
 
 @dataclass(frozen=True)
