@@ -306,10 +306,10 @@ def _health_fault(ctx: StepContext, res: StepResult) -> StepResult:
     """Under ``max_faulty``, the own sensor is healthy (|f⁺| ≤ τ) or the other sensors' readings alone supply N − m
     agreeing ones; then t = uᵀx⁺ lies where they agree within the region, and the own measurement bounds f⁺ over
     that part of it (:meth:`~netsetest.estimator.health.Others.fault`).  The published fault range is cut by the hull
-    of the two (docs/network.md):
-    where the others agree nowhere in the region this is the pin's |f⁺| ≤ max(τ, 10⁻⁶), elsewhere the side of the
-    fault interval that only a faulty own sensor could reach.  The ellipsoid is left as solved and the set the node
-    continues from is unchanged (a later fault is free of this one); the published set then rests on every reading."""
+    of the two (docs/network.md): where the others agree nowhere in the region this is the pin's |f⁺| ≤ max(τ, 10⁻⁶),
+    elsewhere it drops the side of the fault interval that only a healthy own sensor's part of the region reached.
+    The ellipsoid is left as solved and the set the node continues from is unchanged (a later fault is free of this
+    one); the published set then rests on every reading."""
     tol, health, region, own = ctx.statics.health_tolerance, ctx.health, res.region, ctx.statics.own
     if tol is None or health is None or region is None or own.Ds == 0.0:
         return res
