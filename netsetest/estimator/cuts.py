@@ -307,7 +307,7 @@ def _health_fault(ctx: StepContext, res: StepResult) -> StepResult:
     agreeing ones; then t = uᵀx⁺ lies where they agree within the region, and the own measurement bounds f⁺ over
     that part of it (:meth:`~netsetest.estimator.health.Others.fault`).  The published fault range is cut by the hull
     of the two (docs/network.md): where the others agree nowhere in the region this is the pin's |f⁺| ≤ max(τ, 10⁻⁶),
-    elsewhere it drops the side of the fault interval that only a healthy own sensor's part of the region reached.
+    elsewhere it drops the faults the own measurement allows only where the own sensor must be healthy.
     The ellipsoid is left as solved and the set the node continues from is unchanged (a later fault is free of this
     one); the published set then rests on every reading."""
     tol, health, region, own = ctx.statics.health_tolerance, ctx.health, res.region, ctx.statics.own
