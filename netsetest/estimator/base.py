@@ -26,7 +26,7 @@ from netsetest.sets import Box, Ellipsoid, RegionSet, Slab, SumSet, Zonotope
 
 if TYPE_CHECKING:
     from netsetest.config.schema import Scenario
-    from netsetest.estimator.health import HealthModel
+    from netsetest.estimator.health import HealthAssessment, HealthModel
     from netsetest.models.sensor import Sensor
 
 GuaranteedSet = Union[Ellipsoid, Zonotope, Box, SumSet, RegionSet]  # a runtime alias
@@ -83,6 +83,15 @@ class ReadingSlabs:
         node's own (``own``: ỹ, γ), its hypotheses pruned by ``extent`` (the range of aᵀx̄ over the node's
         own set), and the own fault |f| ≤ τ where no consistent majority leaves the node's sensor out
         (estimator/health.py)."""
+        return self.assessed(own, readings, extent)[0]
+
+    def assessed(
+        self,
+        own: tuple[float, float],
+        readings: dict[int, tuple[float, float]],
+        extent: Callable[[np.ndarray], tuple[float, float]] | None = None,
+    ) -> tuple[list[Slab], HealthAssessment | None]:
+        """:meth:`slabs` and the step's k-of-N assessment they came from (None: no k-of-N group)."""
         out = []
         for j, (y, gamma) in sorted(readings.items()):
             sensor = self.references.get(j)
@@ -91,12 +100,13 @@ class ReadingSlabs:
                 out.append(Slab(np.r_[sensor.C, 0.0], float(lo), float(hi)))
         if self.health is not None:
             a = np.r_[self.health.u, 0.0]
-            hull, pinned = self.health.assess(self.node_id, own, readings, extent(a) if extent is not None else None, pin=True)
-            if hull is not None:
-                out.append(Slab(a, hull.lo, hull.hi))
-            if pinned:  # no consistent majority without this sensor: |f| ≤ τ
+            health = self.health.assess(self.node_id, own, readings, extent(a) if extent is not None else None, pin=True)
+            if health.interval is not None:
+                out.append(Slab(a, health.interval.lo, health.interval.hi))
+            if health.pinned:  # no consistent majority without this sensor: |f| ≤ τ
                 out.append(Slab(np.array([0.0, 0.0, 1.0]), -self.health.tolerance, self.health.tolerance))
-        return out
+            return out, health
+        return out, None
 
 
 @dataclass(frozen=True)

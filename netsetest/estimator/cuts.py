@@ -28,7 +28,7 @@ import numpy as np
 
 from netsetest.estimator.health import HEALTH_KEY, HealthAssessment
 from netsetest.estimator.problem import StepData
-from netsetest.estimator.sector import FaultBound, Interval, Sector
+from netsetest.estimator.sector import FaultBound, Interval, Sector, fault_over
 from netsetest.estimator.slab import cut
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.vehicle import TSModel
@@ -38,6 +38,7 @@ from netsetest.sets import ellipsoid_bounds
 
 Status = Literal["ok", "fallback"]
 FAULT_AXIS = np.eye(NA)[NA - 1]  # f = e₃ᵀx̄: the direction the fault cuts act along
+HEALTH_KEYS = frozenset({HEALTH_KEY})  # what a set cut by the k-of-N facts rests on: every reading of the step
 PIN_FLOOR = 1e-6  # a fault proved healthy is published as |f| ≤ max(τ, this): an ellipsoid cannot be flat
 COORDINATE_AXES = np.eye(NX)  # β and r: the directions of the region's coordinate cuts (read-only)
 COORDINATE_AXES.flags.writeable = False
@@ -197,11 +198,11 @@ class Cut:
     apply: CutFn
 
 
-def cut_fault(ctx: StepContext, res: StepResult, lo: float, hi: float, reshape: bool = True) -> StepResult | None:
+def cut_fault(ctx: StepContext, res: StepResult, lo: float, hi: float, reshape: bool = True, keys: frozenset[int] = frozenset()) -> StepResult | None:
     """The sets with the published one cut by lo ≤ f⁺ ≤ hi (:func:`~netsetest.estimator.slab.cut`, certified; not
     unless ``reshape``) and published as that ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (ProvenSet.fault: no ellipsoid ends
-    at the slab's flat face); None where the slab does not narrow the published fault interval.  The set the node
-    continues from is unchanged."""
+    at the slab's flat face), resting on the readings ``keys`` too; None where the slab does not narrow the published
+    fault interval.  The set the node continues from is unchanged."""
     pub, rho = res.public, ctx.rho
     now_lo, now_hi = ellipsoid_bounds(pub.xhat, np.diag(pub.P), rho, pub.fault_range)  # the published fault interval
     lo, hi = max(lo, now_lo[-1]), min(hi, now_hi[-1])
@@ -210,9 +211,9 @@ def cut_fault(ctx: StepContext, res: StepResult, lo: float, hi: float, reshape: 
     wh = ctx.statics.wh_published
     out = cut(pub.xhat, pub.P, rho, FAULT_AXIS, lo, hi, None if wh is None else wh**2) if reshape else None
     if out is None:  # the ellipsoid gains nothing; the slab still bounds the fault
-        new = pub.replaced(published=None, fault_range=(lo, hi))
+        new = pub.replaced(published=None, fault_range=(lo, hi), reading_keys=pub.reading_keys | keys)
     else:  # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
-        new = pub.replaced(xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None, fault_range=(lo, hi))
+        new = pub.replaced(xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None, fault_range=(lo, hi), reading_keys=pub.reading_keys | keys)
     return res.replaced(published=new)
 
 
@@ -292,13 +293,9 @@ def region_fault(own: Sensor, region: Polygon, meas: Interval) -> tuple[float, f
     give Ds f⁺ ∈ [m_lo − c_hi, m_hi − c_lo].  A measurement at the sensor's limit (saturated) leaves one side of
     C x⁺ + Ds f⁺ open, and the other side still bounds f⁺ (one side of the result infinite); None where both are
     open or the sensor has no fault term."""
-    finite_lo, finite_hi = math.isfinite(meas.lo), math.isfinite(meas.hi)
-    if own.Ds == 0.0 or not (finite_lo or finite_hi):
+    if own.Ds == 0.0 or not (math.isfinite(meas.lo) or math.isfinite(meas.hi)):
         return None
-    c_lo, c_hi = region.interval(own.C)
-    a = (meas.lo - c_hi) / own.Ds if finite_lo else -np.inf * own.Ds  # (an open side stays open, whatever Ds's sign)
-    b = (meas.hi - c_lo) / own.Ds if finite_hi else np.inf * own.Ds
-    return (a, b) if own.Ds > 0.0 else (b, a)
+    return fault_over(own, *region.interval(own.C), meas)
 
 
 def _health_pin(ctx: StepContext, res: StepResult) -> StepResult:
@@ -307,13 +304,29 @@ def _health_pin(ctx: StepContext, res: StepResult) -> StepResult:
     :data:`PIN_FLOOR` (a superset: sound) so that the published ellipsoid stays full-dimensional, and then rests
     on every reading (the k-of-N facts do); the set the node continues from is cut by it too."""
     tol = ctx.statics.health_tolerance
-    if tol is None or ctx.health is None or not ctx.health[1]:
+    if tol is None or ctx.health is None or not ctx.health.pinned:
         return res
     size = max(tol, PIN_FLOOR)
     out = cut_fault(ctx, res, -size, size)
     if out is not None:
         res = out.replaced(published=out.public.replaced(reading_keys=out.public.reading_keys | {HEALTH_KEY}))
     return carry(ctx, res, {HEALTH_KEY: (FAULT_AXIS, -size, size)})
+
+
+def _health_fault(ctx: StepContext, res: StepResult) -> StepResult:
+    """Under ``max_faulty``, the own sensor is healthy (|f⁺| ≤ τ) or the other sensors' readings alone supply N − m
+    agreeing ones; then t = uᵀx⁺ lies where they agree within the region, and the own measurement bounds f⁺ over
+    that part of it (:meth:`~netsetest.estimator.health.Others.fault`).  The published fault range is cut by the hull
+    of the two (docs/network.md): where the others agree nowhere in the region this is the pin's |f⁺| ≤ max(τ, 10⁻⁶),
+    elsewhere it drops the faults the own measurement allows only where the own sensor must be healthy.
+    The ellipsoid is left as solved and the set the node continues from is unchanged (a later fault is free of this
+    one); the published set then rests on every reading."""
+    tol, health, region, own = ctx.statics.health_tolerance, ctx.health, res.region, ctx.statics.own
+    if tol is None or health is None or region is None or own.Ds == 0.0:
+        return res
+    lo, hi = health.others.fault(own, region.interval(health.others.u), ctx.meas, max(tol, PIN_FLOOR))
+    out = cut_fault(ctx, res, lo, hi, reshape=False, keys=HEALTH_KEYS)
+    return res if out is None else out
 
 
 def seed(prior: NodeSet) -> Polygon:
@@ -352,8 +365,13 @@ REGION = Cut(
     _region_cut,
 )
 HEALTH_PIN = Cut("health-pin", "k-of-N health ([network] max_faulty): no consistent majority of the step's readings leaves the own sensor out", _health_pin)
+HEALTH_FAULT = Cut(
+    "health-fault",
+    "k-of-N health ([network] max_faulty): the own sensor is healthy, or the other sensors' readings alone supply N − m agreeing ones",
+    _health_fault,
+)
 
-STEP_CUTS: tuple[Cut, ...] = (READINGS, FAULT_SIZE, REGION, HEALTH_PIN)  # a step k → k+1, in this order
+STEP_CUTS: tuple[Cut, ...] = (READINGS, FAULT_SIZE, REGION, HEALTH_PIN, HEALTH_FAULT)  # a step k → k+1, in this order
 FIRST_CUTS: tuple[Cut, ...] = (REGION,)  # step 0: the prior updated by ỹ₀ (no readings listed, no size cut)
 FALLBACK_CUTS: tuple[Cut, ...] = (REGION,)  # a step without a certificate: the region of its own measurement
 

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from netsetest.estimator.sector import Interval, measurement_interval
+from netsetest.estimator.sector import Interval, fault_over, measurement_interval
 from netsetest.models.sensor import Sensor
 
 if TYPE_CHECKING:
@@ -51,7 +51,40 @@ def healthy_interval(spans: Sequence[Span], need: int) -> Span | None:
     return (lo_hull, hi_hull)
 
 
-HealthAssessment = tuple[Interval | None, bool]  # one step: uᵀx's k-of-N interval (None: unbounded or empty), own fault pinned
+@dataclass(frozen=True)
+class Others:
+    """What the other sensors' readings of one step prove if the node's own sensor is faulty: then the N − m healthy
+    ones are among them, so t = uᵀx lies in at least ``need`` of their ``spans``."""
+
+    u: np.ndarray  # (2,) the direction every sensor measures
+    spans: tuple[Span, ...]  # per other sensor, its reading's interval of t as if healthy; (−∞, ∞) if not here
+    need: int
+
+    def agree(self, within: Span | None) -> Span | None:
+        """The hull of the t in ``within`` that at least ``need`` of the spans hold; None if no t does (then the own
+        sensor is healthy in every hypothesis the readings leave)."""
+        return healthy_interval(_present(_clipped(list(self.spans), within)), self.need)
+
+    def fault(self, own: Sensor, extent: Span, meas: Interval, floor: float) -> tuple[float, float]:
+        """The own fault where uᵀx lies in ``extent`` (a region's) and ``meas`` holds C x + Ds f: the own sensor is
+        healthy (|f| ≤ ``floor``, at least τ) or uᵀx lies where the others agree, and there the measurement bounds f
+        (C = s uᵀ: C x = s uᵀx); the hull of the two.  The sensor has a fault term (Ds ≠ 0)."""
+        agree = self.agree(extent)
+        if agree is None:  # the others agree nowhere: the own sensor is healthy (the pin)
+            return -floor, floor
+        s = float(own.C @ self.u)
+        a, b = fault_over(own, min(s * agree[0], s * agree[1]), max(s * agree[0], s * agree[1]), meas)
+        return min(a, -floor), max(b, floor)
+
+
+@dataclass(frozen=True)
+class HealthAssessment:
+    """One step under k-of-N: uᵀx's interval (None: unbounded or empty), whether the own fault is pinned (|f| ≤ τ in
+    every consistent hypothesis), and what the other sensors' readings prove where the own sensor is faulty."""
+
+    interval: Interval | None
+    pinned: bool
+    others: Others
 
 
 @dataclass(frozen=True)
@@ -88,7 +121,7 @@ class HealthModel:
         within: Span | None = None,
         pin: bool = False,
     ) -> HealthAssessment:
-        """(the interval, whether the own fault is pinned) of one step.
+        """The step's assessment: the interval, whether the own fault is pinned, the other sensors' spans.
 
         The interval: uᵀx lies in it wherever at most m sensors are faulty and the readings' noise bounds
         held; None if it is unbounded or empty (an assumption broke: nothing is used).  ``within``: an
@@ -97,12 +130,13 @@ class HealthModel:
         do so far from the truth).  ``pin``: also tell whether the node's own sensor is healthy (|f| ≤ τ) in
         every consistent hypothesis: the others' readings alone cannot supply N − m agreeing sensors (inside
         ``within``), while with its own they can."""
-        spans = _clipped(self._spans(own, own_reading, readings), within)
-        hull = healthy_interval(_present(spans), self.need)
-        pinned = pin and hull is not None and healthy_interval(_present([sp for j, sp in zip(self.sensors, spans) if j != own]), self.need) is None
+        every = self._spans(own, own_reading, readings)
+        others = Others(self.u, tuple(sp for j, sp in zip(self.sensors, every) if j != own), self.need)
+        hull = healthy_interval(_present(_clipped(every, within)), self.need)
+        pinned = pin and hull is not None and others.agree(within) is None
         if hull is None or not (math.isfinite(hull[0]) and math.isfinite(hull[1])) or hull[1] <= hull[0]:
-            return None, pinned
-        return Interval(*hull), pinned
+            return HealthAssessment(None, pinned, others)
+        return HealthAssessment(Interval(*hull), pinned, others)
 
     def _spans(self, own: int, own_reading: tuple[float, float], readings: dict[int, tuple[float, float]]) -> list[Span]:
         """Per sensor (in ``sensors`` order), the interval of uᵀx its reading gives if it is healthy: |f_j| ≤ τ,
@@ -135,4 +169,4 @@ def _present(spans: list[Span | None]) -> list[Span]:
     return [sp for sp in spans if sp is not None]
 
 
-__all__ = ["HEALTH_KEY", "HealthAssessment", "HealthModel", "Span", "healthy_interval"]
+__all__ = ["HEALTH_KEY", "HealthAssessment", "HealthModel", "Others", "Span", "healthy_interval"]

@@ -14,7 +14,8 @@ own set cut by it, the kind of region the SDP keeps (docs/estimator.md, "The set
 The published set is :class:`~netsetest.sets.RegionSet`: the method's set ∩ the region × ℝ ∩ the fault range, that
 range being the method's own fault interval cut by what the own measurement proves over the region (C x + Ds f in
 the measured interval, C x in the region's: Ds f ∈ [m_lo − c_hi, m_hi − c_lo]; only where the measurement is
-two-sided), by |f| ≤ F where the method rests on the declared bound, and by the k-of-N pin.  The method's own
+two-sided), by |f| ≤ F where the method rests on the declared bound, and under k-of-N by the pin and by what the own
+measurement proves where the other readings alone agree (:meth:`~netsetest.estimator.health.Others.fault`).  The method's own
 recursion is untouched: its next step starts from its own set, as its paper defines it; the region is a second
 recursion beside it, resting on the same assumptions (the prior, the noise, the disturbance and mismatch bounds,
 and the fault bound and readings exactly where the method itself uses them), so the node's dependency cone is
@@ -28,6 +29,7 @@ import numpy as np
 
 from netsetest.config.schema import Scenario
 from netsetest.estimator.base import Assumption, EstimatorError, GuaranteedSet, NeighbourSet, ReadingSlabs, SetEstimator, StepInput
+from netsetest.estimator.sector import Interval
 from netsetest.models.sensor import NX
 from netsetest.polygon import MIN_VERTICES, Polygon
 from netsetest.sets import RegionSet
@@ -62,8 +64,10 @@ class WithRegion(SetEstimator):
         lo, hi = self.node.sensor.measured_interval(inp.y, inp.gamma)
         region: Polygon | None = self._moved(s_lo, s_hi, inp)
         f_lo, f_hi = float(s_lo[NX]), float(s_hi[NX])
+        health = None
         if self.uses_readings:
-            for slab in self.reading_slabs.slabs((inp.y, inp.gamma), inp.readings, lambda a: (-s.support(-a), s.support(a))):
+            slabs, health = self.reading_slabs.assessed((inp.y, inp.gamma), inp.readings, lambda a: (-s.support(-a), s.support(a)))
+            for slab in slabs:
                 if not slab.a[:NX].any():  # |f| ≤ τ (the k-of-N pin)
                     f_lo, f_hi = max(f_lo, slab.lo / slab.a[NX]), min(f_hi, slab.hi / slab.a[NX])
                 elif region is not None:  # a reading's C_j x, the k-of-N uᵀx (no fault term)
@@ -85,6 +89,10 @@ class WithRegion(SetEstimator):
         if self.Ds != 0.0 and np.isfinite(lo) and np.isfinite(hi):
             c_lo, c_hi = region.interval(self.C)
             a, b = sorted(((lo - c_hi) / self.Ds, (hi - c_lo) / self.Ds))
+            f_lo, f_hi = max(f_lo, a), min(f_hi, b)
+        model = self.reading_slabs.health
+        if health is not None and model is not None and self.Ds != 0.0:  # the own sensor healthy, or the others agree (cuts.py)
+            a, b = health.others.fault(self.node.sensor, region.interval(health.others.u), Interval(lo, hi), model.tolerance)
             f_lo, f_hi = max(f_lo, a), min(f_hi, b)
         if f_lo > f_hi:
             return s  # (an assumption broke: the own set alone is what is left to publish)

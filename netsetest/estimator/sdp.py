@@ -386,8 +386,8 @@ class LocalEstimator:
                 )
             if np.isfinite(iv.lo) and np.isfinite(iv.hi) and iv.hi > iv.lo:
                 out[j] = (np.r_[sensor.C, 0.0], iv)
-        if self.health is not None and health is not None and health[0] is not None:
-            out[HEALTH_KEY] = (np.r_[self.health.u, 0.0], health[0])
+        if self.health is not None and health is not None and health.interval is not None:
+            out[HEALTH_KEY] = (np.r_[self.health.u, 0.0], health.interval)
         return out
 
     def _assess_health(self, prev: NodeSet, inp: UpdateInput, blend: Blend, moved: Polygon) -> HealthAssessment:

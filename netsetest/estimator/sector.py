@@ -178,8 +178,19 @@ def sector_ok(sensor: Sensor, sector: Sector | None, r: float) -> bool:
     return abs(r) <= limit * (1 + 1e-12)
 
 
+def fault_over(own: Sensor, c_lo: float, c_hi: float, meas: Interval) -> tuple[float, float]:
+    """f from the own measurement where C x ∈ [c_lo, c_hi]: C x + Ds f ∈ [m_lo, m_hi] gives Ds f ∈ [m_lo − c_hi,
+    m_hi − c_lo] (an open side of the measurement, at the sensor's limit, leaves that side of the result open); the
+    sensor has a fault term (Ds ≠ 0)."""
+    finite_lo, finite_hi = bool(np.isfinite(meas.lo)), bool(np.isfinite(meas.hi))
+    a = (meas.lo - c_hi) / own.Ds if finite_lo else -np.inf * own.Ds  # (an open side stays open, whatever Ds's sign)
+    b = (meas.hi - c_lo) / own.Ds if finite_hi else np.inf * own.Ds
+    return (a, b) if own.Ds > 0.0 else (b, a)
+
+
 __all__ = [
     "FaultBound",
+    "fault_over",
     "Sector",
     "SectorBasis",
     "Interval",

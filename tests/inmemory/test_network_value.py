@@ -477,6 +477,36 @@ def test_the_sdp_pins_a_fault_that_every_consistent_majority_needs() -> None:
     assert pinned.get(3, 0) > 10 and pinned.get(5, 0) > 10, pinned
 
 
+def test_the_sdp_cuts_its_fault_to_what_a_faulty_own_sensor_leaves() -> None:
+    """paper6_car_max_faulty: under k-of-N the own sensor is healthy (|f⁺| ≤ τ) or the other readings alone agree
+    (the health-fault cut).  Against the same estimator without that cut, on every node-step: the ellipsoids, the
+    region and the set the node continues from are the same bit for bit, the published fault interval is never wider,
+    and where it is narrower the published set rests on every reading; every node gains on most steps."""
+    from netsetest.estimator import sdp
+    from netsetest.estimator.health import HEALTH_KEY
+    from netsetest.sets import ellipsoid_bounds
+
+    sc = load_topology("paper6_car_max_faulty", case="nsnim", steps=30)
+    captured: list = []
+    run_inmemory(sc, "paper", "scheduled", 0, observer=lambda est, prev, inp, r, ms: captured.append((est.node_id, prev, inp)))
+    narrowed: dict[int, int] = {}
+    for i, prev, inp in captured:
+        plain = sdp.LocalEstimator.for_node(sc, i)
+        plain.cuts = tuple(c for c in plain.cuts if c.name != "health-fault")  # the same estimator without the cut
+        res, without = sdp.LocalEstimator.for_node(sc, i).step(prev, inp), plain.step(prev, inp)
+        for a, b in ((res, without), (res.public, without.public)):
+            assert np.array_equal(a.xhat, b.xhat) and np.array_equal(a.P, b.P)
+        assert res.region is not None and without.region is not None and np.array_equal(res.region.vertices, without.region.vertices)
+        (lo, hi), (lo0, hi0) = (
+            (e[0][2], e[1][2]) for e in (ellipsoid_bounds(s.xhat, np.diag(s.P), prev.rho, s.fault_range) for s in (res.public, without.public))
+        )
+        assert lo0 <= lo <= hi <= hi0
+        if (lo, hi) != (lo0, hi0):
+            narrowed[i] = narrowed.get(i, 0) + 1
+            assert HEALTH_KEY in res.public.reading_keys
+    assert all(narrowed.get(i, 0) >= 15 for i in sc.ids), narrowed
+
+
 def test_health_groups_read_within_their_group() -> None:
     """paper6 with two k-of-N groups (sensors 1–3 and 4–6, at most 2 faulty in each, which the paper's faults
     satisfy): a node rests its set on its own group's readings only, everything is covered and contained, and

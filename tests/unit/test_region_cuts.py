@@ -14,8 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from netsetest.config.schema import load_topology
-from netsetest.estimator.cuts import PIN_FLOOR, STEP_CUTS, NodeSet, Rests, StepContext, StepResult, ellipse_cut, seed
-from netsetest.estimator.health import HEALTH_KEY
+from netsetest.estimator.cuts import HEALTH_FAULT, PIN_FLOOR, STEP_CUTS, NodeSet, Rests, StepContext, StepResult, ellipse_cut, seed
+from netsetest.estimator.health import HEALTH_KEY, HealthAssessment, Others
 from netsetest.estimator.sdp import LocalEstimator, UpdateInput
 from netsetest.estimator.sector import Interval, Sector
 from netsetest.models.sensor import Sensor
@@ -70,6 +70,7 @@ def test_the_ellipse_cut_keeps_every_point_of_the_region_the_ellipsoid_holds(e: 
 
 # ---------------------------------------------------------------- every declared cut of the step (estimator/cuts.py)
 
+TOLERANCE = 0.05  # the k-of-N tolerance τ of the drawn contexts (paper6's is 0: the pin's floor alone)
 RTOL = 1e-7  # relative: a point on a set's boundary may round out by this (ρ of the ellipsoids, the fault range)
 
 
@@ -99,11 +100,12 @@ def _near(region: Polygon, x: np.ndarray) -> bool:
 
 
 @st.composite
-def _step(draw: st.DrawFn) -> tuple[StepContext, StepResult, np.ndarray]:
+def _step(draw: st.DrawFn, kofn: bool = False) -> tuple[StepContext, StepResult, np.ndarray]:
     """A step's sets and context, at random: the continued ellipsoid, a published one (a bank-like reshape of it, or
     itself), a fault range or none, the moved region (a box around part of the ellipsoid's x-projection), the own
     measurement (finite, or open on one side: saturated), a reading's slab, the sector's basis and the k-of-N pin;
-    and points of every input set (their intersection: the truth lies in all of them)."""
+    and points of every input set (their intersection: the truth lies in all of them).  ``kofn``: always a k-of-N
+    assessment and a region (what the health-fault cut needs to act)."""
     rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
     own = _context().statics.own
     m = rng.normal(size=(3, 3)) * np.array([0.02, 0.05, 0.1])
@@ -130,22 +132,44 @@ def _step(draw: st.DrawFn) -> tuple[StepContext, StepResult, np.ndarray]:
     c = np.r_[rng.normal(size=2), 0.0]
     cv = pts @ c
     slabs = {7: (c, Interval(*np.quantile(cv, sorted(rng.uniform(0.0, 1.0, 2)))))} if draw(st.booleans()) else {}
-    pin = draw(st.booleans())
-    ctx = dataclasses.replace(_context(), rho=rho, meas=meas, sector=res.sector, moved=moved, slabs=slabs, health=(None, pin) if pin else None)
-    pts = np.vstack([pts, _extremes(moved, meas, own, rng)])
+    health = _health(draw, rng, pts, own) if kofn or draw(st.booleans()) else None
+    if kofn or draw(st.booleans()):  # the region the step's region cut left (what the health-fault cut reads)
+        res = dataclasses.replace(res, region=moved)
+    ctx = dataclasses.replace(_context(), rho=rho, meas=meas, sector=res.sector, moved=moved, slabs=slabs, health=health)
+    pts = np.vstack([pts, _extremes(moved, meas, own, rng, health)])
     pts = pts[_inside(res, pts, rho).all(axis=1)]
     held = pts[[moved.contains(p[:2]) for p in pts]]
     return ctx, res, held
 
 
-def _extremes(moved: Polygon, meas: Interval, own: Sensor, rng: np.random.Generator) -> np.ndarray:
-    """Points where a cut's faces meet: at the region's vertices and on its sides, the fault at the own measurement's
-    ends (C x + Ds f = m_lo, m_hi), at ±F and at ±(the pin): the extreme points of what the cuts keep, which random
-    points of the ellipsoid almost never reach."""
+def _health(draw: st.DrawFn, rng: np.random.Generator, pts: np.ndarray, own: Sensor) -> HealthAssessment:
+    """A k-of-N assessment at random: the pin or not, and five other sensors' spans of t = uᵀx (between quantiles of
+    the points' t, all below a drawn one so that they may agree on one side only; or (−∞, ∞): a reading not here),
+    two of which must agree."""
+    u = own.C / np.linalg.norm(own.C)
+    t = pts[:, :2] @ u
+    top = draw(st.sampled_from([0.4, 0.7, 1.0]))
+    spans = tuple(
+        (float(a), float(b)) if draw(st.integers(0, 4)) else (-np.inf, np.inf) for a, b in (np.quantile(t, sorted(rng.uniform(0.0, top, 2))) for _ in range(5))
+    )
+    return HealthAssessment(None, draw(st.booleans()), Others(u, spans, 2))
+
+
+def _extremes(moved: Polygon, meas: Interval, own: Sensor, rng: np.random.Generator, health: HealthAssessment | None) -> np.ndarray:
+    """Points where a cut's faces meet: at the region's vertices and on its sides, and where it meets the lines
+    uᵀx = an end of a k-of-N span; the fault at the own measurement's ends (C x + Ds f = m_lo, m_hi), at ±F and at
+    ±(the pin): the extreme points of what the cuts keep, which random points of the ellipsoid almost never reach."""
     v = moved.vertices
     x = np.vstack([v, v + rng.uniform(0.0, 1.0, (len(v), 1)) * (np.roll(v, -1, axis=0) - v)])
+    if health is not None:  # u = (0, 1) for a yaw-rate sensor: the points of the box's sides at t = a span's end
+        (b_lo, t_lo), (b_hi, t_hi) = v.min(axis=0), v.max(axis=0)
+        ends = [e for sp in health.others.spans for e in sp if t_lo <= e <= t_hi]
+        x = np.vstack([x, *([[b_lo, e], [b_hi, e]] for e in ends)])
     faults = [np.full(len(x), f) for f in (-0.2, 0.2, -0.05, 0.05, -PIN_FLOOR, PIN_FLOOR)]
     faults += [(m - x @ own.C) / own.Ds for m in (meas.lo, meas.hi) if np.isfinite(m)]
+    if health is not None:  # the ends of the faults at x that both the measurement and the pin allow (Ds > 0)
+        floor = max(TOLERANCE, PIN_FLOOR)
+        faults += [np.maximum((meas.lo - x @ own.C) / own.Ds, -floor), np.minimum((meas.hi - x @ own.C) / own.Ds, floor)]
     return np.vstack([np.column_stack([x, f]) for f in faults])
 
 
@@ -162,13 +186,18 @@ def _facts(name: str, ctx: StepContext, res: StepResult, p: np.ndarray) -> bool:
     readings = all(lo_hi.lo <= float(c @ p) <= lo_hi.hi for c, lo_hi in ctx.slabs.values())
     size = st_.fault_bound.size
     bounded = size is None or res.sector is None or res.sector.basis != "fault-bound" or abs(p[2]) <= size
-    pinned = ctx.health is None or not ctx.health[1] or abs(p[2]) <= max(st_.health_tolerance or 0.0, PIN_FLOOR)
+    healthy = abs(p[2]) <= max(st_.health_tolerance or 0.0, PIN_FLOOR)
+    pinned = ctx.health is None or not ctx.health.pinned or healthy
     measured = ctx.meas.lo <= float(p[:2] @ st_.own.C + st_.own.Ds * p[2]) <= ctx.meas.hi
+    others = ctx.health.others if ctx.health is not None else None
+    agreeing = others is not None and sum(lo <= float(others.u @ p[:2]) <= hi for lo, hi in others.spans) >= others.need
+    in_region = res.region is None or res.region.contains(p[:2])
     return {
         "readings": readings,
         "fault-size": bounded,
         "region": readings and bounded and measured and ctx.moved.contains(p[:2]),
         "health-pin": pinned,
+        "health-fault": ctx.health is None or (measured and in_region and (healthy or agreeing)),
     }[name]
 
 
@@ -181,13 +210,13 @@ def _context() -> StepContext:
     n = sc.node(1)
     inp = UpdateInput(sc.model.weights(sc.vx(0)), (sc.steer_low + sc.steer_high) / 2, 0.03, 1.0, {})
     ctx = est.context(NodeSet(n.x0_hat, n.P0, n.rho), inp)
-    return dataclasses.replace(ctx, statics=dataclasses.replace(ctx.statics, health_tolerance=0.05))
+    return dataclasses.replace(ctx, statics=dataclasses.replace(ctx.statics, health_tolerance=TOLERANCE))
 
 
 @settings(max_examples=80, deadline=None)
 @given(_step(), st.sampled_from([c.name for c in STEP_CUTS]))
 def test_every_cut_keeps_every_point_of_its_input_that_satisfies_its_slab(step: tuple[StepContext, StepResult, np.ndarray], name: str) -> None:
-    """Each declared cut (readings, fault-size, region, health-pin), on random sets and contexts: every point of its
+    """Each declared cut (readings, fault-size, region, health-pin, health-fault), on random sets and contexts: every point of its
     input sets (the truth lies in all of them) that satisfies the cut's facts lies in both sets it returns (the one
     the node continues from and the published one)."""
     ctx, res, held = step
@@ -196,6 +225,19 @@ def test_every_cut_keeps_every_point_of_its_input_that_satisfies_its_slab(step: 
     kept = held[[_facts(name, ctx, res, p) for p in held]].reshape(-1, 3)
     inside = _inside(out, kept, ctx.rho)
     assert inside.all(), (name, kept[~inside.all(axis=1)])
+
+
+@settings(max_examples=60, deadline=None)
+@given(_step(kofn=True))
+def test_the_health_fault_cut_keeps_every_point_of_its_input_that_a_hypothesis_allows(step: tuple[StepContext, StepResult, np.ndarray]) -> None:
+    """The health-fault cut, on every draw with a k-of-N assessment and a region: every point of its input sets in
+    the region and its own measurement whose fault is within the pin, or whose t = uᵀx at least ``need`` of the
+    other sensors' spans hold, lies in both sets it returns."""
+    ctx, res, held = step
+    out = HEALTH_FAULT.apply(ctx, res)
+    kept = held[[_facts("health-fault", ctx, res, p) for p in held]].reshape(-1, 3)
+    inside = _inside(out, kept, ctx.rho)
+    assert inside.all(), kept[~inside.all(axis=1)]
 
 
 def test_a_step_rests_on_the_readings_its_sets_were_cut_by() -> None:
