@@ -97,9 +97,9 @@ class ReadingSlabs:
             sensor = self.references.get(j)
             if sensor is not None:
                 lo, hi = sensor.measured_interval(y, gamma)
-                out.append(Slab(np.r_[sensor.C, 0.0], float(lo), float(hi)))
+                out.append(Slab(np.append(sensor.C, 0.0), float(lo), float(hi)))
         if self.health is not None:
-            a = np.r_[self.health.u, 0.0]
+            a = np.append(self.health.u, 0.0)
             health = self.health.assess(self.node_id, own, readings, extent(a) if extent is not None else None, pin=True)
             if health.interval is not None:
                 out.append(Slab(a, health.interval.lo, health.interval.hi))

@@ -164,7 +164,7 @@ class Blend:
         a, b, d = model.blend(np.asarray(alpha, dtype=float))
         abar = np.zeros((NA, NA))
         abar[:NX, :NX] = a
-        return cls(a, b[:, 0], d[:, 0], abar, np.r_[b[:, 0], 0.0], np.r_[d[:, 0], 0.0])
+        return cls(a, b[:, 0], d[:, 0], abar, np.append(b[:, 0], 0.0), np.append(d[:, 0], 0.0))  # (np.r_ costs 10 µs a call)
 
 
 @dataclass(frozen=True)

@@ -385,9 +385,9 @@ class LocalEstimator:
                     sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, blend.a, blend.b, blend.d, inp.u, self.W, self.uncertainty
                 )
             if np.isfinite(iv.lo) and np.isfinite(iv.hi) and iv.hi > iv.lo:
-                out[j] = (np.r_[sensor.C, 0.0], iv)
+                out[j] = (np.append(sensor.C, 0.0), iv)
         if self.health is not None and health is not None and health.interval is not None:
-            out[HEALTH_KEY] = (np.r_[self.health.u, 0.0], health.interval)
+            out[HEALTH_KEY] = (np.append(self.health.u, 0.0), health.interval)
         return out
 
     def _assess_health(self, prev: NodeSet, inp: UpdateInput, blend: Blend, moved: Polygon) -> HealthAssessment:

@@ -114,14 +114,14 @@ def propagated_interval(
     (e: the declared model mismatch, docs/plant.md; its support function adds to the wind's.)
     """
     C, Ds = sensor.C, sensor.Ds
-    gx = np.r_[a.T @ C, 0.0]
+    gx = np.append(a.T @ C, 0.0)  # (np.r_ costs 10 µs a call)
     centre_u = float(C @ b) * u
     wind = abs(float(C @ d)) * math.sqrt(W)
     if uncertainty is not None:
         wind += uncertainty.support(C)
     out = UNBOUNDED
     if bound.rate is not None:
-        g = gx + np.r_[np.zeros(NX), Ds]
+        g = gx + np.append(np.zeros(NX), Ds)
         c = float(g @ xhat) + centre_u
         rad = _support(g, P, rho) + wind + abs(Ds) * bound.rate
         out = out & Interval(c - rad, c + rad)
@@ -139,7 +139,7 @@ def prior_interval(sensor: Sensor, bound: FaultBound, xhat: np.ndarray, P: np.nd
     rad = _support(cbar, P, rho)
     out = Interval(c - rad, c + rad)
     if bound.size is not None:
-        gx = np.r_[sensor.C, 0.0]
+        gx = np.append(sensor.C, 0.0)
         cx, radx = float(gx @ xhat), _support(gx, P, rho) + abs(sensor.Ds) * bound.size
         out = out & Interval(cx - radx, cx + radx)
     return out

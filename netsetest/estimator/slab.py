@@ -36,7 +36,7 @@ def _facts(lo: float, hi: float, row: np.ndarray, xk: float) -> list[np.ndarray]
     ball = np.zeros((d, d))
     ball[0, 0] = 1.0
     ball[1:, 1:] = -np.eye(NA)
-    a = np.r_[xk, row]  # cᵀx̄ = aᵀη
+    a = np.append(xk, row)  # cᵀx̄ = aᵀη
     b0 = np.zeros(d)
     b0[0] = 1.0
     # (aᵀη − lo·η₀)(hi·η₀ − aᵀη) = −(aᵀη)² + (lo + hi) η₀ aᵀη − lo·hi η₀²
