@@ -4,34 +4,22 @@ CPU and peak RSS come from its rusage, and the stepping phase from the collector
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
 
 from netsetest.bench.zenoh_runs import observed_lockstep
+from zenoh_helpers import child_pids
 
 pytestmark = pytest.mark.zenoh
 ROOT = Path(__file__).resolve().parents[2]
 ROLES = {"collector", "vehicle", "run", *(f"node{i}" for i in range(1, 7))}
 
 
-def _children() -> set[int]:
-    me = str(os.getpid())
-    out = set()
-    for d in os.listdir("/proc"):
-        try:
-            if d.isdigit() and Path(f"/proc/{d}/stat").read_text().rsplit(")", 1)[1].split()[1] == me:
-                out.add(int(d))
-        except OSError:
-            pass
-    return out
-
-
 @pytest.mark.parametrize("insecure", [False, True], ids=["secured", "insecure"])
 @pytest.mark.timeout(180)
 def test_the_lockstep_row_is_a_run_of_the_launcher(insecure: bool) -> None:
-    before = _children()
+    before = child_pids()
     r = observed_lockstep(ROOT / "topologies" / "paper6.toml", steps=8, insecure=insecure)
     assert r["security"] == ("insecure" if insecure else "mtls+acl")
     assert r["summary"] is not None and r["summary"]["security"] == r["security"] and r["summary"]["violations_total"] == 0
@@ -39,4 +27,4 @@ def test_the_lockstep_row_is_a_run_of_the_launcher(insecure: bool) -> None:
     assert all(u["cpu_s"] and u["cpu_s"] > 0 for u in r["usage"].values())
     assert len(r["node_peak_rss_mb"]) == 6 and all(10 < x < 500 for x in r["node_peak_rss_mb"])
     assert r["stepping_s"] is not None and 0 < r["stepping_s"] < r["total_s"] and 0 < r["startup_s"] < r["total_s"]
-    assert _children() <= before, "the launcher left a child behind"
+    assert child_pids() <= before, "the launcher left a child behind"

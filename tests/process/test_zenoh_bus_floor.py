@@ -4,7 +4,6 @@ itself and leaves no process behind."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
@@ -12,20 +11,9 @@ import pytest
 from netsetest.bench.bus_floor import FIGURES, floor_run, median_node, ring_payloads
 from netsetest.bench.topologies import ring_topology
 from netsetest.config.schema import load_topology
+from zenoh_helpers import child_pids
 
 pytestmark = pytest.mark.zenoh
-
-
-def _children() -> set[int]:
-    me = str(os.getpid())
-    out = set()
-    for d in os.listdir("/proc"):
-        try:
-            if d.isdigit() and Path(f"/proc/{d}/stat").read_text().rsplit(")", 1)[1].split()[1] == me:
-                out.add(int(d))
-        except OSError:
-            pass
-    return out
 
 
 @pytest.mark.parametrize("secured", [True, False], ids=["secured", "insecure"])
@@ -34,7 +22,7 @@ def test_the_bare_bus_receives_and_sends_the_nodes_messages(secured: bool, tmp_p
     topo = ring_topology(tmp_path, 6, 8)
     sc = load_topology(str(topo))
     payloads = ring_payloads(sc, median_node(sc))
-    before = _children()
+    before = child_pids()
     r = floor_run(topo, payloads, secured, tmp_path)
     assert "error" not in r, r
     assert r["secured"] is secured and r["steps"] == sc.steps - 1  # the window: steps 2..8 (WARM_STEPS = 2)
@@ -45,4 +33,4 @@ def test_the_bare_bus_receives_and_sends_the_nodes_messages(secured: bool, tmp_p
     assert abs(r["received"] - per_step) <= per_step / r["steps"] + 1e-9
     assert all(r[key] > 0 for key, _, unit in FIGURES if unit == "µs" and key != "rest_us")
     assert r["process_us"] == pytest.approx(r["thread_us"] + r["threads_us"])
-    assert _children() <= before, "the bare process was left behind"
+    assert child_pids() <= before, "the bare process was left behind"
