@@ -361,10 +361,12 @@ def _cheapest_edges(v: list[Point], wanted: int) -> dict[int, tuple[float, float
     chosen are at least three apart (cyclically)."""
     n = len(v)
     area, q = [math.inf] * n, [(0.0, 0.0)] * n
-    for i in range(n):
-        (a0x, a0y), (a1x, a1y) = v[i - 1], v[i]  # the edge before edge i
-        (b0x, b0y), (b1x, b1y) = v[(i + 1) % n], v[(i + 2) % n]  # the edge after it
-        dax, day, dbx, dby = a1x - a0x, a1y - a0y, b1x - b0x, b1y - b0y
+    ahead = [*v[1:], v[0]]
+    edges = [(bx - ax, by - ay) for (ax, ay), (bx, by) in zip(v, ahead)]  # edge i: v_i → v_i+1
+    before = [v[-1], *v[:-1]]  # v_i−1
+    for i, ((a0x, a0y), (a1x, a1y), (b0x, b0y), (dax, day), (dbx, dby)) in enumerate(
+        zip(before, v, ahead, [edges[-1], *edges[:-1]], [*edges[1:], edges[0]])
+    ):  # the edge before edge i, a0 → a1, and the one after it, b0 → b1 (each difference as it was, once)
         den = dax * dby - day * dbx
         if not den > 1e-300:
             continue  # parallel, or meeting behind: dropping that edge is unbounded

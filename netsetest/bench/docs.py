@@ -41,7 +41,7 @@ class Part:
 
 _SCENARIO = "netsetest bench --quick --only scenario --json bench/scenario.json --markdown bench/scenario.md"
 _VIEW = "netsetest bench --quick --only view --json bench/view.json --markdown bench/view.md"
-_WIDTHS = "netsetest bench --quick --only widths --json bench/widths.json --markdown bench/widths.md"
+_WIDTHS = "netsetest bench --quick --only widths --baseline BEFORE_REGION --json bench/widths.json --markdown bench/widths.md"  # a checkout of 29290ba
 PARTS: dict[str, Part] = {
     "scenario": Part("The paper's scenario, per node", "bench/scenario.json", "scenario", scenario_markdown, _SCENARIO),
     "compare": Part("The papers' estimators compared", "bench/scenario.json", "scenario", compare_markdown, _SCENARIO),

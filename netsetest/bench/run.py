@@ -375,7 +375,8 @@ def run_bench(
     only: str | None = None,
     baseline: Path | None = None,
 ) -> int:
-    """``baseline``: a checkout the node part measures alternately beside this one (bench/node_budget.py)."""
+    """``baseline``: a checkout the node and widths parts measure alternately beside this one (bench/node_budget.py,
+    bench/widths.py)."""
     from netsetest.bench.exact_cost import exact_cost_markdown, exact_figures
     from netsetest.bench.network import network_figures, network_markdown
     from netsetest.bench.plant import plant_figures, plant_markdown
@@ -417,7 +418,7 @@ def run_bench(
             "flow": (flow_figures, flow_markdown),
             "view": (view_figures, view_markdown),
             "node": (lambda c, t: node_figures(c, t, baseline), node_markdown),
-            "widths": (widths_figures, widths_markdown),
+            "widths": (lambda c, t: widths_figures(c, t, baseline), widths_markdown),
             "scaleout": (scaleout_figures, scaleout_markdown),
         }[only]
         with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:

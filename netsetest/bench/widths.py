@@ -12,13 +12,18 @@ their own: no time of them is a figure.
 
 Then, in this process alone, what the region costs (:func:`region_cost`): the estimator's step per node-step on
 paper6 NSNIM and SAIM, in memory as a node runs it, and the region's part of it, its move and its cut timed in the
-same runs (issue 28's target: the step at most 0.25 ms over the code before every node kept a region, 29290ba,
-measured beside that checkout).
+same runs.  With ``--baseline DIR`` (a checkout of 29290ba, the code before every node kept a region), issue 28's
+target side by side (:func:`step_side_by_side`): the step of this checkout and of the baseline, each in processes of
+its own, alternating, one program for both (only ``capture`` and ``load_topology``, which the baseline has too);
+the target is this checkout's median at most ``STEP_TARGET_MS`` over the baseline's.
 """
 
 from __future__ import annotations
 
+import json
+import os
 import statistics
+import subprocess
 import sys
 import time
 from collections.abc import Iterator
@@ -38,6 +43,17 @@ TARGETED = ("paper6", CAR, "paper6_reference", "paper6_max_faulty")  # the topol
 CASES: tuple[Case, ...] = ("nsnim", "saim")
 COORDS = ((1, "r"), (0, "β"), (2, "f"))  # (index in [β, r, f], label): the table's order
 COST_STEPS, COST_RUNS, COST_WARM_UP = 40, 3, 5  # the region's cost: steps per run, runs per case, warm-up steps
+SIDE_RUNS = 5  # side by side with the baseline: processes per checkout and case, alternating
+STEP_TARGET_MS = 0.25  # issue 28: the step at most this much over the code before every node kept a region
+STEP_PROGRAM = """
+import json, statistics, sys
+from netsetest.bench.solvers import capture
+from netsetest.config.schema import load_topology
+from netsetest.scenarios import TOPOLOGY_DIR
+case, steps, warm_up = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+capture(load_topology(str(TOPOLOGY_DIR / "paper6.toml"), case, warm_up), "scheduled")
+print(json.dumps(statistics.median(capture(load_topology(str(TOPOLOGY_DIR / "paper6.toml"), case, steps), "scheduled").step_ms)))
+"""  # one program for this checkout and the baseline: the in-run step median of paper6 (bench/solvers.py's capture)
 
 
 @dataclass(frozen=True)
@@ -88,8 +104,9 @@ def _measure(run: WidthRun) -> dict:
     return asdict(run) | {"runs": c.runs, "steps": c.steps, "rows": rows}
 
 
-def widths_figures(cfg: dict, tmp: Path) -> dict:
-    """Every run of :func:`plan`, compared (JOBS at once, in processes of their own)."""
+def widths_figures(cfg: dict, tmp: Path, baseline: Path | None = None) -> dict:
+    """Every run of :func:`plan`, compared (JOBS at once, in processes of their own); the region's cost; with a
+    ``baseline`` checkout, the step side by side with it."""
     from concurrent.futures import ProcessPoolExecutor
 
     from netsetest.analysis.exact import FROM_STEP
@@ -97,7 +114,11 @@ def widths_figures(cfg: dict, tmp: Path) -> dict:
     with ProcessPoolExecutor(JOBS) as pool:
         runs = list(pool.map(_measure, plan(cfg)))
     _log("the region's cost per node-step (paper6, in memory, this process alone)")
-    return {"from_step": FROM_STEP, "runs": runs, "cost": region_cost()}
+    out = {"from_step": FROM_STEP, "runs": runs, "cost": region_cost()}
+    if baseline is not None:
+        _log(f"the step side by side with the baseline {baseline} (paper6, in memory, processes of their own, alternating)")
+        out["side_by_side"] = step_side_by_side(baseline)
+    return out
 
 
 @contextmanager
@@ -156,6 +177,47 @@ def region_cost(steps: int = COST_STEPS, runs: int = COST_RUNS) -> dict:
             )
         out[case] = {key: statistics.median(r[key] for r in per_run) for key in per_run[0]} | {"per_run": per_run}
         _log(f"  paper6 {case.upper()}: step {out[case]['step_ms']:.3f} ms per node-step, region {100 * out[case]['share']:.0f} %")
+    return out
+
+
+def _step_run(case: Case, steps: int, code: Path | None) -> float:
+    """:data:`STEP_PROGRAM` in a process of its own, on ``code``'s netsetest (None: this checkout's): its step median [ms]."""
+    env = {**os.environ, **({"PYTHONPATH": str(code), "PYTHONSAFEPATH": "1"} if code is not None else {})}
+    out = subprocess.run(
+        [sys.executable, "-c", STEP_PROGRAM, case, str(steps), str(COST_WARM_UP)], env=env, capture_output=True, text=True, timeout=600, check=False
+    )
+    if out.returncode != 0:
+        raise RuntimeError(f"the step program on {code or 'this checkout'} failed: {out.stderr.strip().splitlines()[-1:] or out.returncode}")
+    return float(json.loads(out.stdout.strip().splitlines()[-1]))
+
+
+def step_side_by_side(baseline: Path, steps: int = COST_STEPS, runs: int = SIDE_RUNS) -> dict:
+    """Per case, ``runs`` processes of this checkout and of ``baseline`` in turn (:func:`_step_run`): each one's step
+    medians, the median over its runs, the difference and whether it meets :data:`STEP_TARGET_MS`."""
+    from netsetest.bench.node_budget import checkout_commit
+
+    out: dict = {
+        "steps": steps,
+        "runs": runs,
+        "target_ms": STEP_TARGET_MS,
+        "commits": {"this": checkout_commit(Path(__file__).resolve().parents[2]), "baseline": checkout_commit(baseline)},
+    }
+    for case in CASES:
+        this: list[float] = []
+        base: list[float] = []
+        for _ in range(runs):
+            this.append(_step_run(case, steps, None))
+            base.append(_step_run(case, steps, baseline))
+        diff = statistics.median(this) - statistics.median(base)
+        out[case] = {
+            "this_ms": this,
+            "baseline_ms": base,
+            "this": statistics.median(this),
+            "baseline": statistics.median(base),
+            "over_ms": diff,
+            "met": diff <= STEP_TARGET_MS,
+        }
+        _log(f"  paper6 {case.upper()}: {out[case]['this']:.3f} ms against {out[case]['baseline']:.3f}, {1e3 * diff:+.0f} µs")
     return out
 
 
@@ -242,6 +304,29 @@ def cost_markdown(cost: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def side_by_side_markdown(side: dict) -> str:
+    """Issue 28's cost target: the step of this checkout against the baseline's, side by side."""
+    commits = side["commits"]
+    lines = [
+        f"The step side by side with the code before every node kept a region (`{commits['baseline']}`; this checkout: "
+        f"`{commits['this']}`, uncommitted changes aside): paper6 in memory, {side['steps']} steps after a warm-up, "
+        f"{side['runs']} processes of each alternating, one program for both; each process the median over its "
+        f"node-steps of the estimator's step as a node runs it, the median of the processes (per process in brackets). "
+        f"Target (issue 28): at most {side['target_ms']} ms over the baseline.",
+        "",
+        "| case | this checkout (ms per node-step) | baseline (ms per node-step) | over the baseline | met |",
+        "|---|---|---|---|---|",
+    ]
+    for case in CASES:
+        c = side[case]
+        per = lambda v: ", ".join(f"{x:.3f}" for x in v)  # noqa: E731  # a one-line local helper
+        lines.append(
+            f"| paper6 {case.upper()} | {c['this']:.3f} ({per(c['this_ms'])}) | {c['baseline']:.3f} ({per(c['baseline_ms'])}) | "
+            f"{c['over_ms']:+.3f} ms | {'yes' if c['met'] else 'no'} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
 def widths_markdown(res: dict) -> str:
     """Every run: the SDP against its target, then every estimator's r / β / f over exact, then per node; then the
     region's cost (figures measured before it had one: none)."""
@@ -249,6 +334,8 @@ def widths_markdown(res: dict) -> str:
     lines = [widths_summary_markdown(res)]
     if "cost" in res:
         lines += [cost_markdown(res["cost"])]
+    if "side_by_side" in res:
+        lines += [side_by_side_markdown(res["side_by_side"])]
     lines += ["Every estimator, r / β / f over exact pooled over nodes (largest per-node ratio):", ""]
     names = list(dict.fromkeys(r["estimator"] for run in runs for r in run["rows"] if r["estimator"] not in ("sdp", "sdp-ellipsoid", "exact")))
     lines += ["| run | " + " | ".join(f"`{n}`" for n in names) + " |", "|---|" + "---|" * len(names)]
@@ -288,4 +375,16 @@ def region_markdown(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-__all__ = ["ESTIMATORS", "WidthRun", "cost_markdown", "plan", "region_cost", "region_markdown", "widths_figures", "widths_markdown", "widths_summary_markdown"]
+__all__ = [
+    "ESTIMATORS",
+    "WidthRun",
+    "cost_markdown",
+    "plan",
+    "region_cost",
+    "region_markdown",
+    "side_by_side_markdown",
+    "step_side_by_side",
+    "widths_figures",
+    "widths_markdown",
+    "widths_summary_markdown",
+]

@@ -206,7 +206,11 @@ def build_parser() -> argparse.ArgumentParser:
         "view's cost and lag and the report page in headless Chromium, scaleout = a run across two network namespaces against one (root) "
         "(default: every part)",
     )
-    p.add_argument("--baseline", metavar="DIR", help="with --only node: another checkout (say main's) measured alternately beside this one")
+    p.add_argument(
+        "--baseline",
+        metavar="DIR",
+        help="with --only node or widths: another checkout (node: say main's; widths: 29290ba's) measured alternately beside this one",
+    )
     p.add_argument(
         "--render-docs",
         nargs="?",
@@ -586,8 +590,11 @@ def cmd_bench(a: argparse.Namespace) -> int:
         return _spread(a)
     from pathlib import Path
 
-    if a.baseline is not None and (a.only != "node" or not Path(a.baseline, "netsetest", "__init__.py").is_file()):
-        print(f"netsetest bench: --baseline {a.baseline}: needs --only node and a checkout of netsetest (DIR/netsetest/__init__.py)", file=sys.stderr)
+    if a.baseline is not None and (a.only not in ("node", "widths") or not Path(a.baseline, "netsetest", "__init__.py").is_file()):
+        print(
+            f"netsetest bench: --baseline {a.baseline}: needs --only node or --only widths and a checkout of netsetest (DIR/netsetest/__init__.py)",
+            file=sys.stderr,
+        )
         return EXIT_BAD_INPUT
     if a.only == "scaleout":
         from netsetest.runtime.netns import unavailable

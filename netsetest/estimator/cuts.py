@@ -26,6 +26,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+import netsetest.linalg as linalg
 from netsetest.estimator.health import HEALTH_KEY, HealthAssessment
 from netsetest.estimator.problem import StepData
 from netsetest.estimator.sector import FaultBound, Interval, Sector, fault_over
@@ -339,9 +340,14 @@ def seed(prior: NodeSet) -> Polygon:
 def ellipse_cut(region: Polygon, xhat: np.ndarray, P: np.ndarray, rho: float, coordinates: bool = True) -> Polygon | None:
     """The region cut by the slabs of the ellipsoid {(x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} along β and r (``coordinates``;
     a box of it needs no such cut) and along the principal axes of its x-projection ρ P_xx: an outer
-    octagon of that ellipse.  Sound wherever the ellipsoid holds the truth; None if nothing is left."""
+    octagon of that ellipse.  Sound wherever the ellipsoid holds the truth; None if nothing is left.
+
+    Where the region lies well inside the ellipse (:func:`_well_inside`: most steps) every slab holds it and each
+    cut would return it as it is: it is returned at once, without the eigen decomposition."""
     pxx = 0.5 * (P[:NX, :NX] + P[:NX, :NX].T)
-    _, vecs = np.linalg.eigh(pxx)
+    if coordinates and _well_inside(region, xhat, pxx, rho):
+        return region
+    _, vecs = linalg.eigh(pxx)
     dirs = [*COORDINATE_AXES, *vecs.T] if coordinates else [*vecs.T]
     (p00, p01), (p10, p11) = pxx.tolist()
     x0, x1 = float(xhat[0]), float(xhat[1])
@@ -354,6 +360,30 @@ def ellipse_cut(region: Polygon, xhat: np.ndarray, P: np.ndarray, rho: float, co
         centre, half = d0 * x0 + d1 * x1, math.sqrt(max(rho * (w0 * d0 + w1 * d1), 0.0))
         out = out.cut(d, centre - half, centre + half)
     return out
+
+
+INSIDE = 1e-6  # relative, in ρ: a region this far inside the ellipse is held by every slab of ellipse_cut ...
+INSIDE_COND = 1e8  # ... where P_xx's condition number (at most tr²/det) keeps the test's rounding below a tenth of that
+
+
+def _well_inside(region: Polygon, xhat: np.ndarray, pxx: np.ndarray, rho: float) -> bool:
+    """Whether every vertex v has (v − x̂)ᵀ P_xx⁻¹ (v − x̂) ≤ ρ (1 − INSIDE), tested as det·q ≤ det·ρ (1 − INSIDE)
+    with P_xx's adjugate (no division) where tr²/det ≤ INSIDE_COND.  Then the test's rounding (relative, at most
+    about 12 ε·tr²/det ≈ 1.3·10⁻⁷) leaves every vertex at least ≈ 2·10⁻⁷ of the ellipse's half-width inside each slab
+    of :func:`ellipse_cut`, far beyond the rounding of the slab's own ends and of cᵀv, which the cut's margin covers:
+    each cut would return the region as it is (tests/unit/test_region_cuts.py holds the two to the same vertices)."""
+    (p00, p01), (_, p11) = pxx.tolist()
+    det, tr = p00 * p11 - p01 * p01, p00 + p11
+    if not (det > 0.0 and tr * tr <= INSIDE_COND * det):
+        return False
+    bound = rho * (1.0 - INSIDE) * det
+    x0, x1 = float(xhat[0]), float(xhat[1])
+    xs, ys = region.vertices.T.tolist()
+    for x, y in zip(xs, ys):
+        a, b = x - x0, y - x1
+        if not p11 * a * a - 2.0 * p01 * a * b + p00 * b * b <= bound:  # det · (v − x̂)ᵀ P_xx⁻¹ (v − x̂)
+            return False
+    return True
 
 
 READINGS = Cut("readings", "each reading's declaration: a reference's zero fault; k-of-N: at most m of N sensors faulty", _readings_cut)

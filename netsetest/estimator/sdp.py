@@ -62,6 +62,8 @@ from typing import Literal
 
 import numpy as np
 
+import netsetest.linalg as linalg
+
 from netsetest.config.schema import Scenario
 from netsetest.estimator.certificate import FactStack, FallbackUnavailable, certify, fallback_shape, publishable
 from netsetest.estimator.conic.closed_form import ClosedFormSolver, clarabel_backend
@@ -163,7 +165,7 @@ def _prediction_slots(lay: EtaLayout) -> list[int]:
 
 def _chol(p: np.ndarray) -> np.ndarray:
     """M with M Mᵀ = P (P symmetrised first)."""
-    return np.linalg.cholesky(0.5 * (p + p.T))
+    return linalg.cholesky(0.5 * (p + p.T))
 
 
 @dataclass
@@ -430,7 +432,8 @@ class LocalEstimator:
             y_new, gamma_new, h1_new = 0.5 * (reading.lo + reading.hi), 1.0, 1.0
             dv_new = 0.5 * (reading.hi - reading.lo) / np.sqrt(own.R)
         T, G = self.descriptor_gains(gamma_new, h1_new)
-        return OwnUpdate(T, G, dataclasses.replace(own, Dv=dv_new, saturated=phi_new, h1=h1_new), y_new, gamma_new)
+        same = (dv_new, phi_new, h1_new) == (own.Dv, own.saturated, own.h1)  # (most steps: no copy to make)
+        return OwnUpdate(T, G, own if same else dataclasses.replace(own, Dv=dv_new, saturated=phi_new, h1=h1_new), y_new, gamma_new)
 
     def _predict(
         self, lay: EtaLayout, prev: NodeSet, inp: UpdateInput, blend: Blend, own: OwnUpdate, Mi: np.ndarray, sector: Sector | None

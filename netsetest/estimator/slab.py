@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
+import netsetest.linalg as linalg
+
 from netsetest.estimator.certificate import certify, publishable
 from netsetest.models.sensor import NA
 
@@ -72,7 +74,7 @@ def cut(
     centre = xhat + tb * dd * se
     shape = float(r[best]) * (sigma - tb * np.outer(se, se))  # ρ P' before certification
     # certificate: e = x̄ − x̂' = (x̂ − x̂') + M u over η = [1, u]; eᵀ(ρP')⁻¹e + (1 − uᵀu)/r + λ·slab/r = 1
-    M = np.linalg.cholesky(sigma)
+    M = linalg.cholesky(sigma)
     pi = np.concatenate([(xhat - centre)[:, None], M], axis=1)
     lam = tb / (1.0 - tb * s)
     facts = _facts(lo, hi, c @ M, xc)

@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+import netsetest.linalg as linalg
+
 MAX_NEWTON = 50  # iterations (quadratic convergence near the minimum; damped steps before)
 MAX_HALVINGS = 40  # Armijo backtracking
 WARM_HALVINGS = 10  # from a warm start: a step cut this often means Newton is stalling at a kink (the cold start is tried)
@@ -99,7 +101,7 @@ class SumOfNorms:
                 grad = grad + self.c * u
                 H = H + (self.c / ln) * (eye - np.outer(u, u))
             try:
-                step = np.linalg.solve(H, -grad)
+                step = linalg.solve(H, -grad)
             except np.linalg.LinAlgError:
                 return None
             dec = -float(grad @ step)  # the Newton decrement² (H ≻ 0 for a convex F with no vanished term)

@@ -61,4 +61,4 @@ def test_every_region_operation_of_a_run_returns_what_the_numpy_code_did(
     run_inmemory(load_topology(topology, case, STEPS), signals, "scheduled", seed)
     nodes = len(load_topology(topology, case, STEPS).ids)
     assert calls["moved"] >= nodes * (STEPS - 1) and calls["reduced"] >= nodes * STEPS  # every node, every step
-    assert calls["cut"] > calls["ellipse_cut"] > 0
+    assert calls["cut"] > 0 and calls["ellipse_cut"] > 0  # (most ellipse cuts return the region at once: no cut)

@@ -1,9 +1,13 @@
 """The widths part's region cost (netsetest/bench/widths.py, ``region_cost``) at a tiny size: every node-step's move
-and cut are timed in the run that times the step, their share is a part of it, and the timers are gone after."""
+and cut are timed in the run that times the step, their share is a part of it, and the timers are gone after.  The
+step side by side with a baseline checkout (``step_side_by_side``, here this checkout itself): both measured in
+processes of their own, the difference and the verdict against the target in the table."""
 
 from __future__ import annotations
 
-from netsetest.bench.widths import CASES, region_cost
+from pathlib import Path
+
+from netsetest.bench.widths import CASES, STEP_TARGET_MS, region_cost, side_by_side_markdown, step_side_by_side
 from netsetest.estimator import cuts, sdp
 
 
@@ -15,3 +19,16 @@ def test_the_region_cost_times_its_pieces_within_the_step_and_unhooks_them() -> 
         c = cost[case]
         assert len(c["per_run"]) == 2 and c["step_ms"] > 0.0
         assert all(0.0 < r["share"] < 1.0 and 0.0 < r["moved_ms"] + r["cut_ms"] < r["step_ms"] for r in c["per_run"])
+
+
+def test_the_step_side_by_side_measures_both_checkouts_in_processes_and_judges_the_difference() -> None:
+    root = Path(__file__).resolve().parents[2]  # this checkout as its own baseline: the program runs on both
+    side = step_side_by_side(root, steps=3, runs=1)
+    text = side_by_side_markdown(side)
+    for case in CASES:
+        c = side[case]
+        assert len(c["this_ms"]) == len(c["baseline_ms"]) == 1 and c["this"] > 0.0 and c["baseline"] > 0.0
+        assert c["over_ms"] == c["this"] - c["baseline"] and c["met"] == (c["over_ms"] <= STEP_TARGET_MS)
+        assert f"| paper6 {case.upper()} | {c['this']:.3f} ({c['this']:.3f}) | {c['baseline']:.3f} ({c['baseline']:.3f}) | {c['over_ms']:+.3f} ms |" in text
+    side["nsnim"] |= {"over_ms": 0.3, "met": False}
+    assert "| +0.300 ms | no |" in side_by_side_markdown(side)

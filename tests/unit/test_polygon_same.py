@@ -82,3 +82,44 @@ def test_the_ellipse_cut_is_the_numpy_codes(data: st.DataObject) -> None:
     xhat = rng.normal(size=3) * size
     coordinates = data.draw(st.booleans())
     assert _same(ellipse_cut(Polygon(v), xhat, P, 1.0, coordinates), ref.ellipse_cut(ref.Polygon(v), xhat, P, 1.0, coordinates))
+
+
+@FUZZ
+@given(st.data())
+def test_the_ellipse_cut_at_the_edge_of_its_shortcut_is_the_numpy_codes(data: st.DataObject) -> None:
+    """A region whose farthest vertex is a hair (10⁻¹² … 10⁻²) inside or outside the ellipse, and ellipses up to
+    and beyond the shortcut's condition bound: where ``_well_inside`` returns the region at once, the four slab
+    cuts return it too (the vertices are the numpy code's)."""
+    rng = np.random.default_rng(data.draw(st.integers(0, 2**32 - 1)))
+    cond = 10.0 ** data.draw(st.floats(0.0, 10.0))
+    angle = data.draw(st.floats(0.0, math.pi))
+    rot = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+    scale = 10.0 ** data.draw(st.integers(-6, 3))
+    pxx = scale * rot @ np.diag([1.0, 1.0 / cond]) @ rot.T
+    P = np.eye(3)
+    P[:2, :2] = pxx
+    xhat = np.array([*rng.normal(size=2) * 10.0 ** data.draw(st.integers(-3, 3)), 0.0])
+    theta = rng.uniform(0.0, 2.0 * math.pi, size=data.draw(st.integers(0, 24)))
+    points = [np.stack([np.cos(theta), np.sin(theta)], axis=1) @ np.linalg.cholesky(pxx).T]  # on the ellipse, ρ = 1
+    for d in [*np.eye(2), *rot.T]:  # where the slabs touch it: the points the cuts would cut first
+        touch = pxx @ d / math.sqrt(float(d @ pxx @ d))
+        points.append(np.stack([touch, -touch]))
+    edge = 1.0 + data.draw(st.sampled_from([-1.0, 1.0])) * 10.0 ** data.draw(st.floats(-12.0, -2.0))
+    v = np.asarray(Polygon(xhat[:2] + np.concatenate(points) * edge).plus_segments([]).vertices)  # (counter-clockwise)
+    rho = data.draw(st.sampled_from([1.0, 1.0 - 1e-6, 1.0 + 1e-6]))
+    assert _same(ellipse_cut(Polygon(v), xhat, P, rho), ref.ellipse_cut(ref.Polygon(v), xhat, P, rho))
+
+
+def test_the_ellipse_cut_returns_a_region_well_inside_at_once() -> None:
+    """The shortcut is taken (no eigen decomposition) where the region is well inside a well-conditioned ellipse,
+    and not where a vertex is outside."""
+    from netsetest.estimator import cuts
+
+    P = np.diag([2.0, 0.5, 1.0])
+    xhat = np.array([0.3, -0.1, 0.0])
+    inside = Polygon(np.array([[0.3, -0.2], [0.5, -0.1], [0.3, 0.0], [0.1, -0.1]]))
+    outside = Polygon(inside.vertices * 10.0)
+    assert cuts._well_inside(inside, xhat, P[:2, :2], 1.0)
+    assert ellipse_cut(inside, xhat, P, 1.0) is inside
+    assert not cuts._well_inside(outside, xhat, P[:2, :2], 1.0)
+    assert not cuts._well_inside(inside, xhat, np.diag([1.0, 1e-12]), 1.0)  # beyond the condition bound: the full cut

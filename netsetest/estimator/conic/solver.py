@@ -16,6 +16,8 @@ from typing import Any
 import clarabel
 import numpy as np
 
+import netsetest.linalg as linalg
+
 from netsetest.estimator.conic.reduction import Aggregate, Reduction, smallest_p
 from netsetest.estimator.conic.template import P_ENTRIES, StepValues, Template, TemplateKey, build_template
 from netsetest.estimator.problem import Solution, StepData
@@ -167,7 +169,7 @@ class ConicSolver:
         tpl = self.template((agg.use_xi, red.closed_form and float(data.ell[0]) != 0.0))
         S = data.Mi / math.sqrt(rho)  # congruence of the P rows: P_prev = S Sᵀ (data.Mi = ρ^½ chol(P_prev))
         sc, kappa = red.slot_scales(data.facts)
-        values = StepValues(data.ell, data.facts, data.pi0, S, np.linalg.inv(S) if has_lmi else None, sc, kappa, agg.B, rho)
+        values = StepValues(data.ell, data.facts, data.pi0, S, linalg.inv(S) if has_lmi else None, sc, kappa, agg.B, rho)
         a, b = tpl.fill(values)
         A = CscMatrix(a, tpl.indices, tpl.indptr, (tpl.n_rows, tpl.nv))
         conic = ConicData(CscMatrix.empty(tpl.nv, tpl.nv), tpl.objective(S), A, b, tpl.cones, tpl.key)
