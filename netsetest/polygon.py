@@ -199,11 +199,11 @@ def _pairs(d: list[Point], half: list[int], order: Sequence[int]) -> list[int]:
     """:func:`_compare` of each direction of d in ``order`` with the next, given each one's :func:`_half` (its
     filter inline: the walk's hot loop)."""
     out = []
-    for i, j in zip(order, order[1:]):
-        if half[i] != half[j]:
-            out.append(-1 if half[i] < half[j] else 1)
+    hs, ds = [half[i] for i in order], [d[i] for i in order]
+    for ha, hb, (ax, ay), (bx, by) in zip(hs, hs[1:], ds, ds[1:]):
+        if ha != hb:
+            out.append(-1 if ha < hb else 1)
             continue
-        (ax, ay), (bx, by) = d[i], d[j]
         left, right = ax * by, ay * bx
         det, size = left - right, abs(left) + abs(right)
         if abs(det) > CCW_ERRBOUND * size and size > TINY:
@@ -247,7 +247,7 @@ def _ordered(d: list[Point]) -> tuple[list[int], list[int]]:
         order = sorted(range(m), key=functools.cmp_to_key(by_direction))
         return order, _pairs(d, half, order)
 
-    if any(p > 0 for p in pairs):
+    if 1 in pairs:  # (a pair out of order)
         order, pairs = exact()
     if 0 in pairs:  # a tie: does numpy's rounded angles' order stand?
         arr = np.array(d, dtype=float)
@@ -287,7 +287,7 @@ def _plus(vertices: list[Point], segments: list[Point]) -> list[Point]:
     steps, n = _steps(v, extra)
     order, pairs = _ordered(steps) if steps else ([], [])
     edge_order = [i for i in order if i < n]
-    if any(i > j for i, j in zip(edge_order, edge_order[1:])) and not _turn_one_way(steps[:n]):  # (edges in the
+    if edge_order != sorted(edge_order) and not _turn_one_way(steps[:n]):  # (edges in the
         # exact order in their own order turn one way; out of it, a tie may still have swapped two: checked)
         v = _hull(v)  # from its lowest (then leftmost) vertex: a rounding made a vertex reflex
         steps, n = _steps(v, extra)
@@ -378,7 +378,7 @@ def _cheapest_edges(v: list[Point], wanted: int) -> dict[int, tuple[float, float
             continue  # q must be before b0 on the edge after (else the drop cuts b0 off: where near-duplicate
             # vertices leave a side whose direction is rounding noise)
         a = 0.5 * abs((qx - a1x) * (b0y - a1y) - (qy - a1y) * (b0x - a1x))
-        if math.isfinite(a):
+        if a < math.inf:  # (finite: a ≥ 0 or NaN)
             area[i], q[i] = a, (qx, qy)
     chosen: dict[int, tuple[float, float]] = {}
     near: set[int] = set()  # the edges fewer than three from a chosen one (cyclically)

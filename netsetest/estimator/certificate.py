@@ -64,7 +64,7 @@ def certify(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: Sequence[np.n
     x = linalg.solve(chol, pi)  # Πᵀ P⁻¹ Π = xᵀx
     base = x.T @ x
     tau = np.maximum(tau, 0.0)
-    scale = max(1.0, float(np.max(tau)))
+    scale = max(1.0, float(tau.max()))
     d = base.shape[0]
     K0 = base + np.dot(tau.reshape(1, -1), fs.Qflat).reshape(d, d)  # Σ τ_m Q_m, exactly as np.tensordot(tau, Q, 1)
     for eps in scale * EPS_LADDER:
@@ -100,7 +100,7 @@ class FallbackUnavailable(ArithmeticError):
 
 def publishable(xhat: np.ndarray, P: np.ndarray) -> bool:
     """A centre and shape a node may publish: finite, symmetric positive definite, not degenerate."""
-    if not (np.all(np.isfinite(xhat)) and np.all(np.isfinite(P))) or not np.array_equal(P, P.T):
+    if not (np.isfinite(xhat).all() and np.isfinite(P).all()) or not np.array_equal(P, P.T):
         return False
     try:
         eig = linalg.eigvalsh(P)

@@ -55,6 +55,7 @@ step is flagged.
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -342,7 +343,7 @@ class LocalEstimator:
         key: PatternKey = (phi_from, phi_new, True, frozenset())
         pat = self.pattern(*key)
         own = self._own_update(inp, sector, reading, phi_new)
-        Mi = np.sqrt(prev.rho) * _chol(prev.P)  # ρ_i^½ M_i
+        Mi = math.sqrt(prev.rho) * _chol(prev.P)  # ρ_i^½ M_i
         pi0, x_pred, own_fact = self._predict(pat.lay, prev, inp, blend, own, Mi, sector)
         ell, facts = self._innovations(pat.lay, pat.balls, neigh, Mi)
         if own_fact is not None:
@@ -502,7 +503,7 @@ class LocalEstimator:
                     ell[lay.z] += a * nb.gamma * nb.h1 * row
                     g_r[lay.z] = row
                 else:  # C̄_j M_j z_j = c_j s_j, c_j = (ρ_j C̄_j P_j C̄_jᵀ)^½
-                    c_j = np.sqrt(max(nb.rho * float(cbar @ nb.P @ cbar), 0.0))
+                    c_j = math.sqrt(max(nb.rho * float(cbar @ nb.P @ cbar), 0.0))
                     ell[lay.s[j]] += a * nb.gamma * nb.h1 * c_j
                     g_r[lay.s[j]] = c_j
                 if j in lay.phi:
@@ -634,7 +635,7 @@ class LocalEstimator:
         dynamics (exact for the truth), plus the disturbance's and the declared model mismatch's bounds (a box
         around e = G ζ holds it for either kind)."""
         region = prev.region if prev.region is not None else seed(prev)
-        segments = [blend.d * np.sqrt(self.W)]  # x⁺ = Ā x + B̄ u + D̄ w (+ e)
+        segments = [blend.d * math.sqrt(self.W)]  # x⁺ = Ā x + B̄ u + D̄ w (+ e)
         if self.uncertainty is not None:
             segments += [self.uncertainty.G[:, m] for m in range(NX)]  # e = G ζ with |ζ_m| ≤ 1
         return region.moved(blend.a, blend.b * inp.u, segments)

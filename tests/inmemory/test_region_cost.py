@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from netsetest.bench.widths import CASES, STEP_TARGET_MS, region_cost, side_by_side_markdown, step_side_by_side
+from netsetest.bench.widths import CASES, STEP_FIGURES, STEP_TARGET_MS, region_cost, side_by_side_markdown, step_side_by_side
 from netsetest.estimator import cuts, sdp
 
 
@@ -21,14 +21,16 @@ def test_the_region_cost_times_its_pieces_within_the_step_and_unhooks_them() -> 
         assert all(0.0 < r["share"] < 1.0 and 0.0 < r["moved_ms"] + r["cut_ms"] < r["step_ms"] for r in c["per_run"])
 
 
-def test_the_step_side_by_side_measures_both_checkouts_in_processes_and_judges_the_difference() -> None:
+def test_the_step_side_by_side_measures_both_checkouts_in_processes_and_judges_the_fastest_runs() -> None:
     root = Path(__file__).resolve().parents[2]  # this checkout as its own baseline: the program runs on both
-    side = step_side_by_side(root, steps=3, runs=1)
+    side = step_side_by_side(root, steps=3, processes=1, runs=2)
     text = side_by_side_markdown(side)
     for case in CASES:
-        c = side[case]
-        assert len(c["this_ms"]) == len(c["baseline_ms"]) == 1 and c["this"] > 0.0 and c["baseline"] > 0.0
-        assert c["over_ms"] == c["this"] - c["baseline"] and c["met"] == (c["over_ms"] <= STEP_TARGET_MS)
-        assert f"| paper6 {case.upper()} | {c['this']:.3f} ({c['this']:.3f}) | {c['baseline']:.3f} ({c['baseline']:.3f}) | {c['over_ms']:+.3f} ms |" in text
-    side["nsnim"] |= {"over_ms": 0.3, "met": False}
-    assert "| +0.300 ms | no |" in side_by_side_markdown(side)
+        for key, what in STEP_FIGURES:
+            c = side[case][key]
+            assert len(c["this_ms"]) == len(c["baseline_ms"]) == 2 and min(c["this_ms"] + c["baseline_ms"]) > 0.0
+            assert c["this"] == min(c["this_ms"]) and c["baseline"] == min(c["baseline_ms"]) and c["this_median"] >= c["this"]
+            assert c["over_ms"] == c["this"] - c["baseline"] and c["met"] == (c["over_ms"] <= STEP_TARGET_MS)
+            assert f"| paper6 {case.upper()} | {what} | {c['this']:.3f} / {c['this_median']:.3f} | {c['baseline']:.3f} / {c['baseline_median']:.3f} |" in text
+    side["nsnim"]["in_run"] |= {"over_ms": 0.3, "over_median_ms": 0.4, "met": False}
+    assert "| +0.300 / +0.400 ms | no |" in side_by_side_markdown(side)
