@@ -371,7 +371,7 @@ def _well_inside(region: Polygon, xhat: np.ndarray, pxx: np.ndarray, rho: float)
     with P_xx's adjugate (no division) where tr²/det ≤ INSIDE_COND.  Then the test's rounding (relative, at most
     about 12 ε·tr²/det ≈ 1.3·10⁻⁷) leaves every vertex at least ≈ 2·10⁻⁷ of the ellipse's half-width inside each slab
     of :func:`ellipse_cut`, far beyond the rounding of the slab's own ends and of cᵀv, which the cut's margin covers:
-    each cut would return the region as it is (tests/unit/test_region_cuts.py holds the two to the same vertices)."""
+    each cut would return the region as it is (tests/unit/test_polygon_same.py holds the two to the same vertices)."""
     (p00, p01), (_, p11) = pxx.tolist()
     det, tr = p00 * p11 - p01 * p01, p00 + p11
     if not (det > 0.0 and tr * tr <= INSIDE_COND * det):
