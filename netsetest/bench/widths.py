@@ -305,8 +305,8 @@ def cost_markdown(cost: dict) -> str:
         f"The region's cost: paper6 in memory, {cost['runs']} runs of {cost['steps']} steps per case after a warm-up, "
         "each the median over its node-steps, the median of the runs (per run in brackets). Step: the estimator's step "
         "as a node runs it; move and cut: the region's, timed in the same runs; share: the two over the step time, "
-        "summed over the run. Target (issue 28): the step at most 0.25 ms over the code before every node kept a "
-        "region (29290ba), measured beside that checkout.",
+        "summed over the run. Issue 28's target (the step at most 0.25 ms over the code before every node kept a "
+        "region, 29290ba) is judged side by side with that checkout (`--baseline`).",
         "",
         "| case | step (ms per node-step) | region move (ms) | region cut (ms) | region share of the step |",
         "|---|---|---|---|---|",
