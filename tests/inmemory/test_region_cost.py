@@ -7,7 +7,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from netsetest.bench.widths import CASES, STEP_FIGURES, STEP_TARGET_MS, region_cost, side_by_side_markdown, step_side_by_side
+import pytest
+
+from netsetest.bench.widths import CASES, STEP_FIGURES, STEP_TARGET_MS, SideBySideFailed, region_cost, side_by_side_markdown, step_side_by_side
 from netsetest.estimator import cuts, sdp
 
 
@@ -34,3 +36,11 @@ def test_the_step_side_by_side_measures_both_checkouts_in_processes_and_judges_t
             assert f"| paper6 {case.upper()} | {what} | {c['this']:.3f} / {c['this_median']:.3f} | {c['baseline']:.3f} / {c['baseline_median']:.3f} |" in text
     side["nsnim"]["in_run"] |= {"over_ms": 0.3, "over_median_ms": 0.4, "met": False}
     assert "| +0.300 / +0.400 ms | no |" in side_by_side_markdown(side)
+
+
+def test_a_baseline_the_step_program_fails_on_is_named_not_a_traceback(tmp_path: Path) -> None:
+    (tmp_path / "netsetest").mkdir()
+    (tmp_path / "netsetest" / "__init__.py").write_text("raise ImportError('an old checkout')\n")
+    with pytest.raises(SideBySideFailed, match=f"the step program on {tmp_path} failed .*an old checkout"):
+        step_side_by_side(tmp_path, steps=3, processes=1, runs=1)
+    assert "was not measured: the step program" in side_by_side_markdown({"error": "the step program on X failed"})
