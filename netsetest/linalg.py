@@ -25,56 +25,42 @@ def _square(a: np.ndarray) -> np.ndarray:
     return a
 
 
+def _run(gufunc: np.ufunc, signature: str, failure: str, *args: np.ndarray) -> np.ndarray:
+    """``gufunc`` on ``args`` with LAPACK's invalid flag quiet; LinAlgError(``failure``) where its (first) output is
+    NaN: the routine failed."""
+    with np.errstate(all="ignore"):
+        out = gufunc(*args, signature=signature)
+    first = out[0] if isinstance(out, tuple) else out
+    if first.size and first.flat[0] != first.flat[0]:
+        raise LinAlgError(failure)
+    return out
+
+
 def cholesky(a: np.ndarray) -> np.ndarray:
     """The lower Cholesky factor L of a, L Lᵀ = a (np.linalg.cholesky); LinAlgError where a is not positive definite."""
-    a = _square(a)
-    with np.errstate(all="ignore"):
-        r = _lapack.cholesky_lo(a, signature="d->d")
-    if r.size and r[0, 0] != r[0, 0]:
-        raise LinAlgError("Matrix is not positive definite")
-    return r
+    return _run(_lapack.cholesky_lo, "d->d", "Matrix is not positive definite", _square(a))
 
 
 def solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """x with a x = b (np.linalg.solve; b a vector (n,) or a matrix (n, k)); LinAlgError where a is singular."""
-    a = _square(a)
     b = b if type(b) is np.ndarray and b.dtype == np.float64 else np.asarray(b, dtype=np.float64)
-    with np.errstate(all="ignore"):
-        x = _lapack.solve1(a, b, signature="dd->d") if b.ndim == 1 else _lapack.solve(a, b, signature="dd->d")
-    if x.size and x.flat[0] != x.flat[0]:
-        raise LinAlgError("Singular matrix")
-    return x
+    return _run(_lapack.solve1 if b.ndim == 1 else _lapack.solve, "dd->d", "Singular matrix", _square(a), b)
 
 
 def inv(a: np.ndarray) -> np.ndarray:
     """a⁻¹ (np.linalg.inv); LinAlgError where a is singular."""
-    a = _square(a)
-    with np.errstate(all="ignore"):
-        r = _lapack.inv(a, signature="d->d")
-    if r.size and r[0, 0] != r[0, 0]:
-        raise LinAlgError("Singular matrix")
-    return r
+    return _run(_lapack.inv, "d->d", "Singular matrix", _square(a))
 
 
 def eigvalsh(a: np.ndarray) -> np.ndarray:
     """The eigenvalues of the symmetric a, ascending, from its lower triangle (np.linalg.eigvalsh)."""
-    a = _square(a)
-    with np.errstate(all="ignore"):
-        w = _lapack.eigvalsh_lo(a, signature="d->d")
-    if w.size and w[0] != w[0]:
-        raise LinAlgError("Eigenvalues did not converge")
-    return w
+    return _run(_lapack.eigvalsh_lo, "d->d", "Eigenvalues did not converge", _square(a))
 
 
 def eigh(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The eigenvalues (ascending) and eigenvectors (the columns) of the symmetric a, from its lower triangle
     (np.linalg.eigh)."""
-    a = _square(a)
-    with np.errstate(all="ignore"):
-        w, v = _lapack.eigh_lo(a, signature="d->dd")
-    if w.size and w[0] != w[0]:
-        raise LinAlgError("Eigenvalues did not converge")
-    return w, v
+    return _run(_lapack.eigh_lo, "d->dd", "Eigenvalues did not converge", _square(a))  # type: ignore[return-value]  # the gufunc's two outputs
 
 
 __all__ = ["LinAlgError", "cholesky", "eigh", "eigvalsh", "inv", "solve"]

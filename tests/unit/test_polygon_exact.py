@@ -211,6 +211,18 @@ matrices = st.tuples(*[st.floats(-2.0, 2.0, allow_nan=False)] * 4).map(lambda a:
 car_like = st.tuples(st.floats(0.5, 1.0), st.floats(-0.1, 0.1), st.floats(0.5, 1.0)).map(lambda a: np.array([[a[0], a[1]], [0.0, a[2]]]))
 
 
+@st.composite
+def slabs(draw: st.DrawFn, vertices: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """c and lo ≤ cᵀx ≤ hi for a cut of the polygon ``vertices``: c along any angle (and on the axes, a hair off them)
+    at 10⁻³ to 10³, the slab's ends anywhere from below to beyond the polygon's range."""
+    th = draw(st.one_of(st.floats(0.0, 2.0 * math.pi), st.sampled_from([0.0, math.pi / 2, 1e-17, math.pi / 2 + 1e-16])))
+    c = np.array([math.cos(th), math.sin(th)]) * 10.0 ** draw(st.integers(-3, 3))
+    vals = vertices @ c
+    q = sorted(draw(st.tuples(st.floats(-0.2, 1.2), st.floats(-0.2, 1.2))))
+    lo, hi = (float(vals.min() + qi * (vals.max() - vals.min())) for qi in q)
+    return c, lo, hi
+
+
 # --- the properties ------------------------------------------------------------------------------------------
 
 
@@ -246,11 +258,7 @@ def test_the_move_holds_the_exact_image_within_its_margin(data: st.DataObject) -
 @given(st.data())
 def test_the_cut_holds_the_exact_clip_within_its_margin(data: st.DataObject) -> None:
     v = data.draw(polygons())
-    th = data.draw(st.one_of(st.floats(0.0, 2.0 * math.pi), st.sampled_from([0.0, math.pi / 2, 1e-17, math.pi / 2 + 1e-16])))
-    c = np.array([math.cos(th), math.sin(th)]) * 10.0 ** data.draw(st.integers(-3, 3))
-    vals = v @ c
-    q = sorted(data.draw(st.tuples(st.floats(-0.2, 1.2), st.floats(-0.2, 1.2))))
-    lo, hi = (float(vals.min() + qi * (vals.max() - vals.min())) for qi in q)
+    c, lo, hi = data.draw(slabs(v))
     got = Polygon(v).cut(c, lo, hi)
     ce = _exact(c)[0]
     want = _clip(_clip(_exact(v), ce, Fraction(hi)), (-ce[0], -ce[1]), -Fraction(lo))

@@ -13,7 +13,7 @@ import numpy as np
 import polygon_reference as ref
 from hypothesis import given
 from hypothesis import strategies as st
-from test_polygon_exact import FUZZ, car_like, matrices, polygons, segment_lists
+from test_polygon_exact import FUZZ, car_like, matrices, polygons, segment_lists, slabs
 
 from netsetest.estimator.cuts import ellipse_cut
 from netsetest.polygon import Polygon
@@ -53,11 +53,7 @@ def test_the_sum_and_the_move_are_the_numpy_codes(data: st.DataObject) -> None:
 @given(st.data())
 def test_the_cut_is_the_numpy_codes(data: st.DataObject) -> None:
     v = data.draw(any_polygons())
-    th = data.draw(st.one_of(st.floats(0.0, 2.0 * math.pi), st.sampled_from([0.0, math.pi / 2, 1e-17, math.pi / 2 + 1e-16])))
-    c = np.array([math.cos(th), math.sin(th)]) * 10.0 ** data.draw(st.integers(-3, 3))
-    vals = v @ c
-    q = sorted(data.draw(st.tuples(st.floats(-0.2, 1.2), st.floats(-0.2, 1.2))))
-    lo, hi = (float(vals.min() + qi * (vals.max() - vals.min())) for qi in q)
+    c, lo, hi = data.draw(slabs(v))
     assert _same(Polygon(v).cut(c, lo, hi), ref.Polygon(v).cut(c, lo, hi))
 
 
