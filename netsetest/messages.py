@@ -176,11 +176,17 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     # declarations into the step's cone
     readings: Annotated[list[tuple[NodeId, FiniteF, Gamma]], Meta(max_length=MAX_NODES)] = []
     health: bool = False  # either set used the k-of-N interval of the step's readings and its own ([network] max_faulty)
+    # the in-neighbours whose published set of the step before (its region, its fault range: the whole set) cut this
+    # step's sets (docs/network.md, *Neighbours' sets*): among ``used``; the collector requires each such copy to hold
+    # the truth of its step
+    sets: IdList = []
 
     def __post_init__(self) -> None:
         c = self.continues
         if c is not None and (c.region is not None or c.fault is not None or c.set is not None):
             raise ValueError("continues: an ellipsoid alone (its region is the published set's)")
+        if self.sets and not set(self.sets) <= set(self.used):
+            raise ValueError("sets: a neighbour's set the step did not receive (not in used)")
 
     @property
     def continued(self) -> ProvenSet:
@@ -290,7 +296,7 @@ class RunScope:
         if isinstance(msg, NodeInput):
             named.update(msg.expect_from, msg.lost_from)
         elif isinstance(msg, NodeState):
-            named.update(msg.used, msg.missing, (j for j, _, _ in msg.readings))
+            named.update(msg.used, msg.missing, msg.sets, (j for j, _, _ in msg.readings))
         elif isinstance(msg, Truth):
             if msg.node_ids() != self.ids:
                 return "truth-wrong-nodes"

@@ -109,6 +109,25 @@ class Polygon:
             v = _clip(v, -c, -lo + pad)
         return None if v is None else Polygon(v)
 
+    def within(self, other: Polygon) -> Polygon | None:
+        """This polygon ∩ ``other``: cut by the supporting half-plane of ``other`` along the outward normal of each of
+        its sides (the support over every vertex of ``other``, so the half-plane holds its hull whatever the order or
+        a rounding's reflex vertex), each cut widened by :meth:`cut`'s margin; None if nothing is left.  Sound wherever
+        both hold the point.  Only the sides some vertex of this polygon lies beyond cut (the others would return it
+        as it is): where there is none, this polygon itself."""
+        w = other.vertices
+        e = _after(w) - w
+        n = np.stack([e[:, 1], -e[:, 0]], axis=1)  # outward normals of a counter-clockwise polygon's sides
+        support = (w @ n.T).max(axis=0)
+        beyond = np.flatnonzero((self.vertices @ n.T).max(axis=0) > support)
+        out = self
+        for m in beyond.tolist():
+            cut = out.cut(n[m], -math.inf, float(support[m]))
+            if cut is None:
+                return None
+            out = cut
+        return out
+
     def extent(self, c: np.ndarray) -> float:
         """max |cᵀx| over the polygon."""
         return float(np.abs(self.vertices @ c).max())

@@ -135,11 +135,19 @@ class ExactBounds:
     # node that uses them may be narrower than it (the k-of-N health when not applied: ``health=False``)
     omitted: tuple[str, ...] = ()
     health: HealthSearch | None = None  # the k-of-N branch and bound, where applied
+    # the network limit (exact_bounds(network=True)): node → its own β and r (K, 2) each; ``beta`` and ``r`` are then
+    # unused (NaN), and ``fault[i]`` is node i's own network limit
+    by_node: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+
+    @property
+    def network(self) -> bool:
+        """Whether these are network limits (one per node) rather than the central one."""
+        return bool(self.by_node)
 
     @property
     def label(self) -> str:
         """The reference in a few words: the fault-bounds mode and what else was applied or left out."""
-        applied = " with k-of-N health" if self.health is not None else ""
+        applied = (" network" if self.by_node else "") + (" with k-of-N health" if self.health is not None else "")
         relaxed = f" ({len(self.health.relaxed)} ends relaxed)" if self.health is not None and self.health.relaxed else ""
         return self.fault_bounds + applied + relaxed + "".join(f" without {o}" for o in self.omitted)
 
@@ -149,6 +157,10 @@ class ExactBounds:
             if node is None:
                 raise ValueError("the fault interval needs a node id")
             return self.fault[node]
+        if self.by_node:
+            if node is None:
+                raise ValueError("a network limit's β and r are a node's: give its id")
+            return self.by_node[node][0 if coordinate == "beta" else 1]
         return self.beta if coordinate == "beta" else self.r
 
 
@@ -189,10 +201,15 @@ class _Program:
     ≤ k (the others appear in no kept row).
     """
 
-    def __init__(self, scenario: Scenario, data: list[RecordedStep], bounded: tuple[int, ...]) -> None:
+    def __init__(self, scenario: Scenario, data: list[RecordedStep], bounded: tuple[int, ...], viewer: int | None = None) -> None:
         self.sc, self.data, self.bounded = scenario, data, bounded
         self.ids = scenario.ids
         self.K = K = len(data) - 1
+        # the network limit of node ``viewer``: node j's data of step s is in the horizon-k program iff s ≤ k − d(j→i)
+        # (Scenario.delays; a node whose data never reach the viewer is absent); None: centralized, every datum
+        self.viewer = viewer
+        self.delay: dict[int, int] = scenario.delays(viewer) if viewer is not None else dict.fromkeys(self.ids, 0)
+        self.hold: set[int] = set()  # nodes whose faults stay in the program where not yet measured (kofn: tied health)
         self.ne = 2 if scenario.uncertainty is not None else 0  # e_j columns per step
         self.nz = 2 * (K + 1) + K + self.ne * K + len(self.ids) * (K + 1)
         self.intervals = {(node.id, j): node.sensor.measured_interval(dj.y[node.id], dj.gamma[node.id]) for node in scenario.nodes for j, dj in enumerate(data)}
@@ -202,6 +219,8 @@ class _Program:
         esoc = self._mismatch_rows(lin)
         self.eq, self.lin, self.soc = self._dynamics_rows().build(self.nz), lin.build(self.nz), self._prior_rows().build(self.nz)
         self.esoc = esoc.build(self.nz)
+        for block in (self.lin, self.soc):  # the delay of each row's datum (never: past any horizon)
+            block.delay[:] = [0 if i < 0 else self.delay.get(int(i), 2 * (K + 1)) for i in block.node]
 
     def _dynamics_rows(self) -> _Rows:
         """x_{j+1} − Ā_j x_j − D̄_j w_j − e_j = B̄_j u_j."""
@@ -233,9 +252,9 @@ class _Program:
                 lo, hi = self.intervals[node.id, j]
                 r = {self._x(j, 0): c[0], self._x(j, 1): c[1], self._f(n, j): ds}  # r = C̄_i x̄_i,j
                 if np.isfinite(hi):
-                    lin.add(r, hi, j, j if free else -1)
+                    lin.add(r, hi, j, j if free else -1, node.id)
                 if np.isfinite(lo):
-                    lin.add({col: -v for col, v in r.items()}, -lo, j, j if free else -1)
+                    lin.add({col: -v for col, v in r.items()}, -lo, j, j if free else -1, node.id)
             if free:
                 continue
             for j in range(K + 1):
@@ -268,10 +287,10 @@ class _Program:
         for n, node in enumerate(self.sc.nodes):
             li = np.linalg.inv(np.linalg.cholesky(node.P0))
             prior_cols = (self._x(0, 0), self._x(0, 1), self._f(n, 0))
-            soc.add({}, np.sqrt(node.rho), 0)
+            soc.add({}, np.sqrt(node.rho), 0, node=node.id)
             centre = li @ node.x0_hat
             for row in range(3):
-                soc.add({col: -li[row, m] for m, col in enumerate(prior_cols) if li[row, m] != 0}, -centre[row], 0)
+                soc.add({col: -li[row, m] for m, col in enumerate(prior_cols) if li[row, m] != 0}, -centre[row], 0, node=node.id)
         return soc
 
     def _x(self, j: int, comp: int) -> int:
@@ -289,40 +308,75 @@ class _Program:
     def _eliminated(self, n: int, j: int, k: int, eliminate: bool) -> bool:
         """Whether f_i,j leaves the horizon-k program: a fault without declared bounds at 0 < j < k
         appears only in its own measurement rows, and some f_i,j meets them for every x_j (Ds ≠ 0, the
-        measured interval is not empty), so dropping the variable with its rows is exact."""
+        measured interval is not empty), so dropping the variable with its rows is exact.  (The network limit
+        bounds the viewer's fault alone: there every other node's is eliminated at k too, :meth:`matrices`.)"""
         return eliminate and self.ids[n] not in self.bounded and 0 < j < k
 
+    def available(self, node: int, j: int, k: int) -> bool:
+        """Whether node ``node``'s data of step j (its measurement; at j = 0 also its prior) are in the horizon-k program."""
+        d = self.delay.get(node)
+        return d is not None and j <= k - d
+
+    def _available_rows(self, block: _RowBlock, k: int) -> np.ndarray:
+        """The rows of ``block`` whose data the horizon-k program has (a row of no node's data: always)."""
+        return block.step <= k - block.delay
+
     def columns(self, k: int, eliminate: bool) -> np.ndarray:
-        """Columns of the horizon-k program: x_0..x_k, w_0..w_{k−1}, e_0..e_{k−1}, the f_i,0..k not eliminated."""
+        """Columns of the horizon-k program: x_0..x_k, w_0..w_{k−1}, e_0..e_{k−1}, the f_i,0..k not eliminated (and, in a
+        network limit, measured by the horizon: a fault the viewer knows no datum of is free but for its declared
+        bounds, which some value within them always meets; kept where a k-of-N group ties its health, ``hold``)."""
         cols = [np.arange(2 * (k + 1)), self._w(0) + np.arange(k)]
         if self.ne:
             cols.append(self._e(0, 0) + np.arange(2 * k))
-        for n in range(len(self.ids)):
-            cols.append(np.array([self._f(n, j) for j in range(k + 1) if not self._eliminated(n, j, k, eliminate)]))
+        for n, i in enumerate(self.ids):
+            own = self.viewer is None or i == self.viewer
+            cols.append(
+                np.array(
+                    [
+                        self._f(n, j)
+                        for j in range(k + 1)
+                        if not self._eliminated(n, j, k, eliminate)
+                        and (self.available(i, j, k) or (i in self.hold and i in self.bounded))
+                        and (own or not eliminate or i in self.bounded or j == 0)
+                    ],
+                    dtype=int,
+                )
+            )
         return np.concatenate(cols).astype(int)
 
     def matrices(self, k: int, eliminate: bool) -> tuple[np.ndarray, sparse.csc_matrix, np.ndarray, list]:
         """Columns, A, b and cones of the horizon-k program (A z + s = b, s in the cones)."""
         cols = self.columns(k, eliminate)
         keep_eq = self.eq.step <= k
-        keep_lin = self.lin.step <= k
+        keep_lin = (self.lin.step <= k) & self._available_rows(self.lin, k)
         if eliminate:
-            keep_lin &= (self.lin.free <= 0) | (self.lin.free == k)
+            free_ok = self.lin.free == k
+            if self.viewer is not None:  # the viewer's own fault is the only one bounded at k
+                free_ok &= self.lin.node == self.viewer
+            keep_lin &= (self.lin.free <= 0) | free_ok
+        keep_soc = self._available_rows(self.soc, k)
         keep_esoc = self.esoc.step <= k
+        lin = self.lin.A[keep_lin]
+        if self.viewer is not None:  # a row on a fault that left the program (a declared bound of a fault not yet measured): out
+            inside = np.zeros(self.nz, dtype=bool)
+            inside[cols] = True
+            outside = np.asarray(lin[:, ~inside].getnnz(axis=1)).ravel() > 0
+            keep_lin[np.flatnonzero(keep_lin)[outside]] = False
+            lin = self.lin.A[keep_lin]
         A = sparse.vstack(
-            [self.eq.A[keep_eq][:, cols], self.lin.A[keep_lin][:, cols], self.soc.A[:, cols], self.esoc.A[keep_esoc][:, cols]],
+            [self.eq.A[keep_eq][:, cols], lin[:, cols], self.soc.A[keep_soc][:, cols], self.esoc.A[keep_esoc][:, cols]],
             format="csc",
         )
-        b = np.r_[self.eq.b[keep_eq], self.lin.b[keep_lin], self.soc.b, self.esoc.b[keep_esoc]]
+        b = np.r_[self.eq.b[keep_eq], self.lin.b[keep_lin], self.soc.b[keep_soc], self.esoc.b[keep_esoc]]
         cones = [clarabel.ZeroConeT(int(keep_eq.sum())), clarabel.NonnegativeConeT(int(keep_lin.sum()))]
-        cones += [clarabel.SecondOrderConeT(4)] * len(self.ids)
+        cones += [clarabel.SecondOrderConeT(4)] * (int(keep_soc.sum()) // 4)
         cones += [clarabel.SecondOrderConeT(3)] * (int(keep_esoc.sum()) // 3)
         return cols, A, b, cones
 
     def objectives(self, k: int) -> list[tuple[Coordinate, int | None, int]]:
-        """(coordinate, node, column) of every bounded quantity at step k."""
+        """(coordinate, node, column) of every bounded quantity at step k (a network limit: β, r and the viewer's fault)."""
         out: list[tuple[Coordinate, int | None, int]] = [("beta", None, self._x(k, 0)), ("r", None, self._x(k, 1))]
-        return out + [("f", i, self._f(n, k)) for n, i in enumerate(self.ids)]
+        return out + [("f", i, self._f(n, k)) for n, i in enumerate(self.ids) if self.viewer is None or i == self.viewer]
 
     def witness(self, z: np.ndarray, k: int, eliminate: bool) -> Witness:
         """The trajectory of a solution; an eliminated fault takes the value nearest 0 that meets its
@@ -345,10 +399,11 @@ class _Rows:
     """Sparse constraint rows with the step each belongs to (and, for a free fault's measurement, its step)."""
 
     def __init__(self) -> None:
-        self.entries: list[tuple[dict[int, float], float, int, int]] = []
+        self.entries: list[tuple[dict[int, float], float, int, int, int]] = []
 
-    def add(self, terms: dict[int, float], rhs: float, step: int, free: int = -1) -> None:
-        self.entries.append((terms, float(rhs), step, free))
+    def add(self, terms: dict[int, float], rhs: float, step: int, free: int = -1, node: int = -1) -> None:
+        """``node``: whose datum of ``step`` the row is (a measurement, a prior; −1: an assumption of the model)."""
+        self.entries.append((terms, float(rhs), step, free, node))
 
     def build(self, nz: int) -> _RowBlock:
         data, ri, ci = [], [], []
@@ -363,6 +418,8 @@ class _Rows:
             b=np.array([e[1] for e in self.entries]),
             step=np.array([e[2] for e in self.entries], dtype=int),
             free=np.array([e[3] for e in self.entries], dtype=int),
+            node=np.array([e[4] for e in self.entries], dtype=int),
+            delay=np.zeros(len(self.entries), dtype=int),
         )
 
 
@@ -372,6 +429,8 @@ class _RowBlock:
     b: np.ndarray
     step: np.ndarray
     free: np.ndarray
+    node: np.ndarray  # whose datum the row is (−1: none)
+    delay: np.ndarray  # the steps that datum takes to the viewer (_Program sets it)
 
 
 def _settings() -> clarabel.DefaultSettings:
@@ -388,24 +447,40 @@ class _HealthPlan:
     """The k-of-N unions of one program's steps (netsetest/analysis/kofn.py), and what each finished horizon j
     proved about step j: the interval of t_j = uᵀx_j and the range of every tied fault, loosened by
     :data:`CUT_MARGIN`.  They hold in every later horizon (it only adds constraints), so they become rows of
-    its program; a step left with one piece inside them is convex there and joins those rows."""
+    its program; a step left with one piece inside them is convex there and joins those rows.
+
+    In a network limit a member's reading of step j may reach the viewer only at a later horizon: until then it is
+    a sensor that may be healthy with any value (its span the whole line, untied), and the union of step j is built
+    again at every horizon until every member's datum of j is in (``pending``); then it is kept like any other."""
 
     def __init__(self, prog: _Program, model: HealthModel, group: int = 0) -> None:
         self.prog, self.model, self.group = prog, model, group
         self.members = [(n, node) for n, node in enumerate(prog.sc.nodes) if node.id in model.sensors]  # (program position, node)
         self.cuts: list[Row] = []  # rows valid in every later horizon
         self.unions: list[StepUnion] = []  # past steps with several pieces
+        self.pending: dict[int, tuple[list[bool], Span]] = {}  # past steps whose data are not all in yet: allowed, window
         self.incomplete = False  # a past step's pieces were too many to enumerate: later ends are relaxed
 
     def _t(self, j: int) -> dict[int, float]:
         return {self.prog._x(j, c): float(self.model.u[c]) for c in range(2) if self.model.u[c] != 0}
 
-    def _spans(self, j: int) -> tuple[Span, ...]:
+    def _measured(self, node: NodeConfig, j: int, k: int) -> bool:
+        return self.prog.available(node.id, j, k)
+
+    def _complete(self, j: int, k: int) -> bool:
+        """Whether the horizon-k program has every member's datum of step j that will ever reach the viewer."""
+        return all(self._measured(node, j, k) or node.id not in self.prog.delay for _, node in self.members)
+
+    def _spans(self, j: int, k: int) -> tuple[Span, ...]:
         """Per node: the interval of t_j its measurement gives with |f| ≤ τ (C_i = s_i uᵀ), widened by
         :data:`PIECE_MARGIN` for rounding: with worst-case signals two healthy sensors' noises sit at opposite
-        bounds, their intervals meet in the truth's one point, and an ulp apart they would not."""
+        bounds, their intervals meet in the truth's one point, and an ulp apart they would not.  A measurement the
+        horizon-k program does not have: the whole line."""
         out = []
         for _, node in self.members:
+            if not self._measured(node, j, k):
+                out.append((-math.inf, math.inf))
+                continue
             lo, hi = self.prog.intervals[node.id, j]
             sensor = node.sensor
             pad = PIECE_MARGIN * (abs(sensor.Dv) * math.sqrt(sensor.R) + max((abs(v) for v in (lo, hi) if math.isfinite(v)), default=0.0))
@@ -414,18 +489,24 @@ class _HealthPlan:
             out.append((min(a, b), max(a, b)))
         return tuple(out)
 
-    def _union(self, j: int, tied: list[bool], allowed: list[bool], window: Span) -> StepUnion | None:
-        pieces = step_pieces(self._spans(j), tied, allowed, self.model.need, window, self.group)
+    def _union(self, j: int, tied: list[bool], allowed: list[bool], window: Span, k: int) -> StepUnion | None:
+        spans = self._spans(j, k)
+        pieces = step_pieces(spans, tied, allowed, self.model.need, window, self.group)
         if pieces is None:
             return None
         f_col = tuple(self.prog._f(n, j) if t else None for (n, _), t in zip(self.members, tied))
-        return StepUnion(j, self._t(j), self._spans(j), f_col, self.model.tolerance, self.model.need, tuple(pieces), self._t(j - 1) if j > 0 else None)
+        return StepUnion(j, self._t(j), spans, f_col, self.model.tolerance, self.model.need, tuple(pieces), self._t(j - 1) if j > 0 else None)
 
-    def _tied(self, j: int) -> list[bool]:
+    def _tied(self, j: int, k: int) -> list[bool]:
         """A fault tied to more than its measurement in every horizon after j: by a prior (j = 0), or by a declared
-        bound that a healthy value could break (:func:`_bound_admits_health`)."""
-        tol = self.model.tolerance
-        return [j == 0 or (node.id in self.prog.bounded and not _bound_admits_health(node, tol)) for _, node in self.members]
+        bound that a healthy value could break (:func:`_bound_admits_health`).  Not yet measured (a network limit):
+        tied only where such a bound keeps its fault in the program (``_Program.hold``)."""
+        tol, prog = self.model.tolerance, self.prog
+        out = []
+        for _, node in self.members:
+            strict = node.id in prog.bounded and not _bound_admits_health(node, tol)
+            out.append((j == 0 or strict) if self._measured(node, j, k) else (strict and node.id in prog.hold))
+        return out
 
     def window(self, j: int, beta: np.ndarray, r: np.ndarray) -> Span:
         """The interval of t_j = uᵀx_j over the box of β_j, r_j (loosened), or the whole line."""
@@ -435,9 +516,11 @@ class _HealthPlan:
 
     def unions_at(self, k: int, objective: int, window: Span) -> tuple[list[StepUnion], bool]:
         """The unions of horizon k for one objective column, and whether they are complete (exact ends)."""
-        tied = [t or self.prog._f(n, k) == objective for (n, _), t in zip(self.members, self._tied(k))]
-        last = self._union(k, tied, [True] * len(tied), window)
-        return [*self.unions, *([last] if last is not None else [])], last is not None and not self.incomplete
+        tied = [t or self.prog._f(n, k) == objective for (n, _), t in zip(self.members, self._tied(k, k))]
+        last = self._union(k, tied, [True] * len(tied), window, k)
+        again = [self._union(j, self._tied(j, k), allowed, w, k) for j, (allowed, w) in sorted(self.pending.items())]
+        complete = last is not None and None not in again and not self.incomplete
+        return [*self.unions, *(u for u in again if u is not None), *([last] if last is not None else [])], complete
 
     def narrow(self, horizon: _Horizon) -> int:
         """Drop every past step's piece outside the range of its t_j in this horizon's program without the unions
@@ -466,20 +549,26 @@ class _HealthPlan:
             self.unions = [replace(u, pieces=tuple(p for p in u.pieces if p != piece)) if u.step == step else u for u in self.unions]
 
     def learn(self, k: int, beta: np.ndarray, r: np.ndarray, fault: dict[int, np.ndarray]) -> None:
-        """Horizon k is done: its ends of t_k and of the tied faults bound step k in every later horizon."""
-        window, tied = self.window(k, beta, r), self._tied(k)
+        """Horizon k is done: its ends of t_k and of the tied faults bound step k in every later horizon (a fault this
+        program did not bound, NaN, bounds nothing), and the union of step k, or of a pending step whose data are all
+        in from horizon k + 1 on, holds in every later horizon."""
+        window, tied = self.window(k, beta, r), self._tied(k, k)
         self.cuts += interval_rows(self._t(k), window)
         allowed = []
         for (n, node), is_tied in zip(self.members, tied):
-            lo, hi = _loosened(*fault[node.id])
+            lo, hi = _loosened(*fault[node.id]) if node.id in fault and not np.isnan(fault[node.id]).any() else (-np.inf, np.inf)
             allowed.append(bool(lo <= self.model.tolerance and hi >= -self.model.tolerance))
-            if is_tied:
+            if is_tied and math.isfinite(lo) and math.isfinite(hi):
                 self.cuts += interval_rows({self.prog._f(n, k): 1.0}, (lo, hi))
-        union = self._union(k, tied, allowed, window)
-        if union is None:
-            self.incomplete = True
-        else:
-            self.unions.append(union)
+        self.pending[k] = (allowed, window)
+        for j in [j for j in sorted(self.pending) if self._complete(j, k + 1)]:  # every datum of step j is in from k + 1 on
+            allowed_j, window_j = self.pending.pop(j)
+            union = self._union(j, self._tied(j, k + 1), allowed_j, window_j, k + 1)
+            if union is None:
+                self.incomplete = True
+            else:
+                self.unions.append(union)
+        self.unions.sort(key=lambda u: u.step)
         for u in [u for u in self.unions if len(u.pieces) == 1]:  # convex: one more row set of every later horizon
             self.cuts += u.rows(u.pieces[0])
             self.unions.remove(u)
@@ -582,6 +671,7 @@ def exact_bounds(
     health: bool = True,
     health_budget: int = HEALTH_BUDGET,
     budget_s: float | None = None,
+    network: bool = False,
 ) -> ExactBounds:
     """The exact intervals of every step of ``record`` under ``scenario``'s assumptions (module doc).
 
@@ -595,7 +685,10 @@ def exact_bounds(
     ``budget_s``: CPU seconds of this process for the whole computation (its wall time on an idle core; CPU, so
     that which ends are exact does not depend on what else the machine runs); past them no branch is solved any
     more, and every end its relaxation does not settle is relaxed (sound, labelled: ``HealthSearch.out_of_time``).
-    None: no limit.
+    None: no limit.  ``network``: each node's network limit instead of the central one (docs/exact.md, *The network
+    limit*): its β, r (``ExactBounds.by_node``) and its fault from its own data and node j's data up to step
+    k − d(j→i) (:meth:`Scenario.delays`), one program per node; the witnesses' faults of other nodes are not checked
+    there (a fault the viewer has no datum of is left at 0).
     """
     data = step_data(record)
     for d in data:
@@ -605,66 +698,39 @@ def exact_bounds(
         unknown = sorted(set(nodes) - set(scenario.ids))
         if unknown or not nodes:
             raise ExactError(f"nodes {list(nodes)}: not a non-empty subset of the topology's nodes {scenario.ids}")
+        if network:
+            raise ExactError("the network limit is over every node of the topology: give no node subset")
         scenario = replace(scenario, nodes=[n for n in scenario.nodes if n.id in set(nodes)])
     bounded = scenario.fault_bounded(fault_bounds)
-    prog = _Program(scenario, data, bounded)
-    models = [HealthModel.of_group(scenario, g) for g in scenario.health_groups] if health and scenario.health_declared else []
-    plans = [
-        _HealthPlan(prog, m, k) for k, m in enumerate(models) if m is not None and m.need > 0
-    ]  # a group the nodes leave out (or all but m of it) says nothing
     K1 = len(data)
     beta, r = np.full((K1, 2), np.nan), np.full((K1, 2), np.nan)
     fault = {i: np.full((K1, 2), np.nan) for i in scenario.ids}
-    witnesses: dict[WitnessKey, Witness] = {}
-    infeasible: list[int] = []
-    tally = _HealthTally()
-    guides = _Guides()
-    deadline = math.inf if budget_s is None else time.process_time() + budget_s
-    out_of_time: int | None = None
-    st = _settings()
-    for k in range(K1):
-        if progress is not None:
-            progress(k, K1)
-        if plans and infeasible:  # a later horizon only adds constraints: no trajectory either
-            infeasible.append(k)
-            continue
-        cols, A, b, cones = prog.matrices(k, eliminate_free_faults)
-        conic = Conic(cols, A, b, cones, st)
-        horizon, narrowing = _horizon(conic, plans, prog.nz, deadline)
-        tally.solves += narrowing
-        step_infeasible = False
-        for coord, node, col in prog.objectives(k):
-            target = fault[node] if node is not None else (beta if coord == "beta" else r)  # node: the fault's only
-            unions = _unions_at(plans, k, col, beta[k], r[k], coord == "f") if plans else None
-            for end, (side, sign) in enumerate((("lo", 1.0), ("hi", -1.0))):
-                key = WitnessKey(coord, node, k, side)  # type: ignore[arg-type]  # coord is one of COORDINATES and side one of lo, hi: str in the loop
-                end_key = (coord, node, key.side)
-                guide, try_guided = guides.get(end_key, k)
-                result = _end(horizon, col, sign, unions, health_budget, f"step {k}: the {coord} bound", deadline, guide, try_guided)
-                if result.status == "infeasible":
-                    step_infeasible = True
-                    continue
-                target[k, end] = sign * result.value
-                if keep_witnesses and result.z is not None and result.status == "solved":
-                    witnesses[key] = prog.witness(result.z, k, eliminate_free_faults)
-                if plans:
-                    tally.count(key, result)
-                    guides.learn(end_key, k, result, guide is not None and try_guided)
-                    for p in plans:
-                        p.drop([d for d in result.dead if d[0] < k])
-        if out_of_time is None and time.process_time() >= deadline:
-            out_of_time = k
-        if step_infeasible:
-            infeasible.append(k)
-        elif plans:
-            for p in plans:
-                p.learn(k, beta[k], r[k], {i: fault[i][k] for i in scenario.ids})
-    search = None
-    if plans:
-        needs = tuple(p.model.need for p in plans)
-        applied = tuple(tuple(p.model.sensors) for p in plans)
-        search = HealthSearch(
-            scenario.health_label, needs, applied, health_budget, tally.ends, tally.exact, tuple(tally.relaxed), tally.solves, budget_s, out_of_time
+    by_node: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    search = _Search(keep_witnesses, eliminate_free_faults, health_budget, math.inf if budget_s is None else time.process_time() + budget_s)
+    infeasible: set[int] = set()
+    applied: list[_HealthPlan] = []
+    for n, viewer in enumerate(scenario.ids if network else [None]):
+        prog = _Program(scenario, data, bounded, viewer)
+        plans = _plans(prog, scenario, health)
+        if viewer is None:
+            limits = _Limits(beta, r, fault)
+        else:
+            limits = _Limits(np.full((K1, 2), np.nan), np.full((K1, 2), np.nan), {viewer: fault[viewer]})
+            by_node[viewer] = (limits.beta, limits.r)
+
+        def step_progress(k: int, total: int, n: int = n) -> None:
+            if progress is not None:
+                progress(n * total + k, total * (len(scenario.ids) if network else 1))
+
+        infeasible |= search.run(prog, plans, limits, step_progress)
+        applied = applied or plans
+    health_search = None
+    if applied:
+        tally = search.tally
+        needs = tuple(p.model.need for p in applied)
+        groups = tuple(tuple(p.model.sensors) for p in applied)
+        health_search = HealthSearch(
+            scenario.health_label, needs, groups, health_budget, tally.ends, tally.exact, tuple(tally.relaxed), tally.solves, budget_s, search.out_of_time
         )
     return ExactBounds(
         steps=np.arange(K1),
@@ -673,11 +739,92 @@ def exact_bounds(
         fault=fault,
         fault_bounds=fault_bounds,
         bounded_nodes=bounded,
-        infeasible_steps=tuple(infeasible),
-        witnesses=witnesses,
+        infeasible_steps=tuple(sorted(infeasible)),
+        witnesses=search.witnesses,
         omitted=omitted_assumptions(scenario, health),
-        health=search,
+        health=health_search,
+        by_node=by_node,
     )
+
+
+def _plans(prog: _Program, scenario: Scenario, health: bool) -> list[_HealthPlan]:
+    """The k-of-N plan of every declared group the program's nodes say something about (a group they leave out, or
+    all but m of it, says nothing); a group's members whose declared bound ties their health stay in the program where
+    not yet measured (a network limit: ``_Program.hold``)."""
+    models = [HealthModel.of_group(scenario, g) for g in scenario.health_groups] if health and scenario.health_declared else []
+    plans = [_HealthPlan(prog, m, k) for k, m in enumerate(models) if m is not None and m.need > 0]
+    prog.hold = {node.id for p in plans for _, node in p.members if not _bound_admits_health(node, p.model.tolerance)}
+    return plans
+
+
+@dataclass
+class _Limits:
+    """Where one program's ends go: β, r (K, 2) and the faults it bounds (node → (K, 2))."""
+
+    beta: np.ndarray
+    r: np.ndarray
+    fault: dict[int, np.ndarray]
+
+
+@dataclass
+class _Search:
+    """The horizons of one or more programs (the central one, or each node's network limit), under one budget."""
+
+    keep_witnesses: bool
+    eliminate: bool
+    health_budget: int
+    deadline: float
+    tally: _HealthTally = field(default_factory=lambda: _HealthTally())
+    witnesses: dict[WitnessKey, Witness] = field(default_factory=dict)
+    out_of_time: int | None = None
+
+    def run(self, prog: _Program, plans: list[_HealthPlan], limits: _Limits, progress: Callable[[int, int], None]) -> set[int]:
+        """Every horizon of ``prog`` (its ends into ``limits``); the infeasible steps."""
+        K1 = len(prog.data)
+        infeasible: list[int] = []
+        guides = _Guides()
+        st = _settings()
+        for k in range(K1):
+            progress(k, K1)
+            if plans and infeasible:  # a later horizon only adds constraints: no trajectory either
+                infeasible.append(k)
+                continue
+            cols, A, b, cones = prog.matrices(k, self.eliminate)
+            horizon, narrowing = _horizon(Conic(cols, A, b, cones, st), plans, prog.nz, self.deadline)
+            self.tally.solves += narrowing
+            if not self._horizon(prog, plans, limits, horizon, k, guides):
+                infeasible.append(k)
+            elif plans:
+                for p in plans:
+                    p.learn(k, limits.beta[k], limits.r[k], {i: f[k] for i, f in limits.fault.items()})
+            if self.out_of_time is None and time.process_time() >= self.deadline:
+                self.out_of_time = k
+        return set(infeasible)
+
+    def _horizon(self, prog: _Program, plans: list[_HealthPlan], limits: _Limits, horizon: _Horizon, k: int, guides: _Guides) -> bool:
+        """Every end of horizon k; False if the step has no trajectory."""
+        feasible = True
+        for coord, node, col in prog.objectives(k):
+            target = limits.fault[node] if node is not None else (limits.beta if coord == "beta" else limits.r)  # node: the fault's only
+            unions = _unions_at(plans, k, col, limits.beta[k], limits.r[k], coord == "f") if plans else None
+            who = node if node is not None else prog.viewer  # a network limit's β and r are its viewer's
+            for end, (side, sign) in enumerate((("lo", 1.0), ("hi", -1.0))):
+                key = WitnessKey(coord, who, k, side)  # type: ignore[arg-type]  # coord is one of COORDINATES and side one of lo, hi: str in the loop
+                end_key = (coord, node, key.side)
+                guide, try_guided = guides.get(end_key, k)
+                result = _end(horizon, col, sign, unions, self.health_budget, f"step {k}: the {coord} bound", self.deadline, guide, try_guided)
+                if result.status == "infeasible":
+                    feasible = False
+                    continue
+                target[k, end] = sign * result.value
+                if self.keep_witnesses and result.z is not None and result.status == "solved":
+                    self.witnesses[key] = prog.witness(result.z, k, self.eliminate)
+                if plans:
+                    self.tally.count(key, result)
+                    guides.learn(end_key, k, result, guide is not None and try_guided)
+                    for p in plans:
+                        p.drop([d for d in result.dead if d[0] < k])
+        return feasible
 
 
 def _horizon(conic: Conic, plans: list[_HealthPlan], nz: int, deadline: float) -> tuple[_Horizon, int]:

@@ -12,7 +12,15 @@ paper's six profiles; a short tail joins the group before it), each allowing as 
 profiles have faults (every node reads its group's readings: about 6N messages a step), ``two_groups`` declares
 the two interleaved groups of issue 34 (nodes 2, 3, 5, 10 and 1, 4, 9, 12 of every block of twelve, each allowing
 as many faulty sensors as its profiles have faults; the other nodes in no group), ``car`` puts paper6_car's CommonRoad
-car (single track, its mismatch bound, steering and speed) in the vehicle role.
+car (single track, its mismatch bound, steering and speed) in the vehicle role.  These rings exchange no bounded
+reading (``[network] bounded_readings = false``: N² messages a step at scale; what they measure is the exchange
+they name).
+
+Issue 44's rings are *directed* (:func:`directed_ring_with_chords`: node i hears node i − 1 and the chords' tails),
+and every reading reaches only its sender's out-neighbours (``reading_scope = "neighbours"``, bounded readings on):
+``near_reference`` with node 3 a reference sensor, ``near_groups`` with k-of-N health per group of six consecutive
+sensors (as ``max_faulty``); there what a node can learn is what the network carries to it (``netsetest exact
+--network``).
 """
 
 from __future__ import annotations
@@ -24,7 +32,8 @@ from typing import Literal
 from netsetest.scenarios import TOPOLOGY_DIR
 
 RING_TAU_S = 0.1  # the rings' sampling period (HEADER)
-RingVariant = Literal["plain", "reference", "max_faulty", "two_groups", "car"]
+RingVariant = Literal["plain", "reference", "max_faulty", "two_groups", "car", "near_reference", "near_groups"]
+NEAR: tuple[RingVariant, ...] = ("near_reference", "near_groups")  # issue 44's directed rings, readings to out-neighbours only
 FAULTY_PROFILES = (1, 2, 4, 6)  # yaw<p> profiles whose sensors have a fault (yaw3 and yaw5 have none)
 NODES_DIR = TOPOLOGY_DIR.parent / "nodes"  # the bundled node profiles
 
@@ -114,7 +123,20 @@ def _car_tables() -> str:
 
 def _profile(i: int, variant: RingVariant) -> str:
     p = (i - 1) % 6 + 1
-    return "yaw3_reference" if variant == "reference" and i == 3 else f"yaw{p}"
+    return "yaw3_reference" if variant in ("reference", "near_reference") and i == 3 else f"yaw{p}"
+
+
+def directed_ring_with_chords(n: int, seed: int = 1) -> dict[int, set[int]]:
+    """In-neighbour sets (without self) of a directed ring 1 → 2 → … → n → 1 plus the chords of
+    :func:`ring_with_chords`, each one way: the chord {a, b}, a < b, runs a → b where a + b is odd, else b → a."""
+    chords = ring_with_chords(n, seed)
+    out: dict[int, set[int]] = {i: {(i - 2) % n + 1} - {i} for i in range(1, n + 1)}
+    for a in range(1, n + 1):
+        for b in chords[a]:
+            if a < b and min(b - a, n - (b - a)) >= 2:
+                src, dst = (a, b) if (a + b) % 2 else (b, a)
+                out[dst].add(src)
+    return out
 
 
 HEALTH_GROUP = 6  # sensors per k-of-N group of the max_faulty variant: the paper's six
@@ -155,7 +177,8 @@ def write_topology(
     """Write a topology file (self-loops included) that points at the repository's node profiles."""
     fields = dict(name=name or path.stem, node_dir=NODES_DIR.as_posix(), steps=steps, case=case, tau_s=RING_TAU_S)
     lines = [CAR_HEADER.format(**fields, car=_car_tables()) if variant == "car" else HEADER.format(**fields)]
-    if variant == "max_faulty":  # as many faulty sensors per group as its profiles have faults: the declaration holds
+    lines.append('[network]\nreading_scope = "neighbours"\n' if variant in NEAR else "[network]\nbounded_readings = false\n")
+    if variant in ("max_faulty", "near_groups"):  # as many faulty sensors per group as its profiles have faults: the declaration holds
         for group in health_groups(sorted(neighbours)):
             lines.append(f"[[network.health_groups]]\nnodes = {group}\nmax_faulty = {_faulty(group)}\n")
     if variant == "two_groups":
@@ -172,7 +195,8 @@ def write_topology(
 
 def ring_topology(directory: Path, n: int, steps: int = 80, case: str = "nsnim", variant: RingVariant = "plain") -> Path:
     stem = f"ring{n}" if variant == "plain" else f"ring{n}_{variant}"
-    return write_topology(Path(directory) / f"{stem}.toml", ring_with_chords(n), steps, case, variant=variant)
+    edges = directed_ring_with_chords(n) if variant in NEAR else ring_with_chords(n)
+    return write_topology(Path(directory) / f"{stem}.toml", edges, steps, case, variant=variant)
 
 
 def single_node_topology(directory: Path, steps: int = 3) -> Path:

@@ -285,6 +285,10 @@ TABLE_I = ("m", "Jz", "lf", "lr", "cf", "cr")  # the bicycle model's parameters 
 UNCERTAINTY_MAX = 10.0  # |e_k| components [rad, rad/s] per step: beyond it the model says nothing
 
 
+ReadingScope = Literal["network", "neighbours"]
+NETWORK_DEFAULTS = {"reading_scope": "network", "neighbour_sets": True, "bounded_readings": True}  # (issue 44) left out of the settings digest at these values
+
+
 class HealthGroupSpec(_Strict, frozen=True, kw_only=True):
     """``[[network.health_groups]]``: at most ``max_faulty`` of these sensors faulty at any step."""
 
@@ -321,6 +325,24 @@ class NetworkSpec(_Strict, frozen=True, kw_only=True):
             "node exchanges readings within its group only (docs/network.md); instead of max_faulty"
         ),
     ] = field(default_factory=list)
+    reading_scope: Annotated[
+        ReadingScope,
+        Meta(
+            description="who receives a node's reading (a reference's, a k-of-N group member's, one with a declared "
+            "fault bound): every node (of its group; network), or only the sender's out-neighbours (neighbours) (docs/network.md)"
+        ),
+    ] = "network"
+    neighbour_sets: Annotated[
+        bool,
+        Meta(description="every node cuts its region by its in-neighbours' published sets of the step before (docs/network.md)"),
+    ] = True
+    bounded_readings: Annotated[
+        bool,
+        Meta(
+            description="a node whose sensor declares a fault bound publishes its reading of every step, and the nodes "
+            "it reaches (reading_scope) cut their region by it with that bound (docs/network.md)"
+        ),
+    ] = True
 
 
 class ModelUncertaintySpec(_Strict, frozen=True, kw_only=True):
@@ -539,6 +561,9 @@ class Scenario:
     readings: bool = True  # the same-step exchange of the references' readings (docs/network.md)
     health_groups: tuple[HealthGroup, ...] = ()  # declared: at most m of each group's sensors faulty (|f| > fault_tolerance) at any step
     settings_digest: str | None = None  # the files' values (load_topology's _settings_digest); None: built otherwise
+    reading_scope: ReadingScope = "network"  # a reference's and a group member's reading go to every node (of the group), or to its out-neighbours only
+    neighbour_sets: bool = True  # every node cuts its region by its in-neighbours' published sets (docs/network.md)
+    bounded_readings: bool = True  # the readings of sensors with a declared fault bound used with that bound (docs/network.md)
 
     def node(self, node_id: int) -> NodeConfig:
         n = self._by_id.get(node_id)
@@ -588,7 +613,8 @@ class Scenario:
         declared = [n for n in self.nodes if n.fault_rate is not None or n.fault_size is not None]
         if mode == "none":
             return ()
-        return tuple(n.id for n in declared if mode == "all" or n.sensor.saturated or n.fault_size == 0)
+        read = {j for i in self.ids for j in self.bounded_sources(i)}  # readings some node uses with their bound
+        return tuple(n.id for n in declared if mode == "all" or n.sensor.saturated or n.fault_size == 0 or n.id in read)
 
     def references(self) -> tuple[int, ...]:
         """Reference sensors whose readings are exchanged: declared fault-free (``[fault_bound] size = 0``);
@@ -608,14 +634,54 @@ class Scenario:
         return next((g for g in self.health_groups if i in g.nodes), None)
 
     def publishes_reading(self, i: int) -> bool:
-        """Whether node i publishes its reading of every step: a reference, or a member of a k-of-N group."""
-        return self.health_group(i) is not None or i in self.references()
+        """Whether node i publishes its reading of every step: some node reads it (a reference, a member of a k-of-N
+        group, an in-neighbour of a node that uses its reading with its declared fault bound)."""
+        return any(i in self.reading_sources(j) for j in self.ids if j != i)
 
-    def reading_sources(self, i: int) -> tuple[int, ...]:
-        """The nodes whose readings node i uses (its own reading comes with its input): the references and
-        the other members of its k-of-N group."""
+    def reading_sources(self, i: int, bounded: bool = True) -> tuple[int, ...]:
+        """The nodes whose readings node i uses (its own reading comes with its input): the references, the other
+        members of its k-of-N group and (``bounded``) the sensors whose reading it uses with their declared fault bound
+        (:meth:`bounded_sources`); with ``reading_scope = "neighbours"`` only those among its in-neighbours."""
         group, refs = self.health_group(i), self.references()
-        return tuple(j for j in self.ids if j != i and (j in refs or (group is not None and j in group.nodes)))
+        exchanged = {j for j in self.ids if j != i and (j in refs or (group is not None and j in group.nodes)) and self._reaches(j, i)}
+        return tuple(sorted(exchanged | set(self.bounded_sources(i) if bounded else ())))
+
+    def _reaches(self, j: int, i: int) -> bool:
+        """Whether node j's reading goes to node i at all (``reading_scope``)."""
+        return self.reading_scope == "network" or j in self.node(i).in_weights
+
+    def bounded_sources(self, i: int) -> tuple[int, ...]:
+        """The nodes j ≠ i whose reading of each step node i uses with j's declared fault bound (size and/or rate;
+        not a reference, whose reading is used as fault-free): ``[network] bounded_readings``, within
+        ``reading_scope``."""
+        if not (self.readings and self.bounded_readings):
+            return ()
+        return tuple(
+            n.id for n in self.nodes if n.id != i and n.fault_size != 0 and (n.fault_size is not None or n.fault_rate is not None) and self._reaches(n.id, i)
+        )
+
+    def delays(self, i: int) -> dict[int, int]:
+        """d(j→i) for every node j whose data can reach node i: the steps the runtime needs to carry j's measurement of a
+        step to i (docs/exact.md, *The network limit*).  At step k node i has its own measurement of k, the readings of
+        k of its reading sources and its in-neighbours' states of k − 1, each of which holds what its node knew at
+        k − 1: so one hop per step along the state edges, and a reading's hop in the same step.  d(i→i) = 0; a node
+        whose data never reaches i is left out."""
+        dist = {i: 0}  # state hops from l to i
+        frontier = [i]
+        while frontier:
+            nxt = []
+            for m in frontier:
+                for src in self.node(m).in_weights:
+                    if src not in dist:
+                        dist[src] = dist[m] + 1
+                        nxt.append(src)
+            frontier = nxt
+        out = dict(dist)
+        for reader in self.ids:
+            if reader in dist:
+                for j in self.reading_sources(reader):
+                    out[j] = min(out.get(j, dist[reader]), dist[reader])
+        return dict(sorted(out.items()))
 
     def health_holds(self, faults: dict[int, float]) -> bool:
         """The k-of-N assumption at one step: at most m faults above the tolerance in every declared group
@@ -818,6 +884,9 @@ def load_topology(
         readings=topo.network.readings,
         health_groups=_health_groups(path, topo.network, nodes),
         settings_digest=_settings_digest(topo, profiles),
+        reading_scope=topo.network.reading_scope,
+        neighbour_sets=topo.network.neighbour_sets,
+        bounded_readings=topo.network.bounded_readings,
     )
 
 
@@ -826,7 +895,10 @@ def _settings_digest(topo: TopologyFile, profiles: dict[int, NodeProfile]) -> st
     estimators (which a command line may change). A record keeps it, so that `netsetest exact` knows a
     topology that is not the run's even where its meta holds nothing that differs."""
     plain = msgspec.structs.replace
-    own = plain(topo, name="", node_dir="", steps=1, case="nsnim", nodes=[plain(n, profile="", estimator=SDP) for n in topo.nodes])
+    own = msgspec.to_builtins(plain(topo, name="", node_dir="", steps=1, case="nsnim", nodes=[plain(n, profile="", estimator=SDP) for n in topo.nodes]))
+    for key, default in NETWORK_DEFAULTS.items():  # fields added later: a file that leaves them at their default keeps its digest
+        if own["network"][key] == default:
+            del own["network"][key]
     body = msgspec.json.encode([own, [[i, plain(p, label="")] for i, p in sorted(profiles.items())]])
     return sha256(body).hexdigest()[:SETTINGS_DIGEST_HEX]
 

@@ -62,6 +62,7 @@ class Rests:
 
     readings: frozenset[int]
     health: bool
+    sets: frozenset[int] = frozenset()  # in-neighbours whose published set (region, fault range) cut the step's sets
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,7 @@ class StepResult:
     reading_keys: frozenset[int] = frozenset()  # the readings the set rests on (keys of the context's slabs: node ids, and HEALTH_KEY for the k-of-N facts)
     fault_range: tuple[float, float] | None = None  # the set is the ellipsoid ∩ {lo ≤ f⁺ ≤ hi}
     region: Polygon | None = None  # the states x⁺ every step so far leaves (NodeSet.region); the published set's too
+    set_keys: frozenset[int] = frozenset()  # the in-neighbours whose published sets of step k the set rests on (the region's cuts)
 
     @property
     def public(self) -> StepResult:
@@ -120,7 +122,7 @@ class StepResult:
     def rests_on(self) -> Rests:
         """The readings both sets rest on (the published one's and the continued one's: both are judged)."""
         keys = self.public.reading_keys | self.reading_keys
-        return Rests(frozenset(keys - {HEALTH_KEY}), HEALTH_KEY in keys)
+        return Rests(frozenset(keys - {HEALTH_KEY}), HEALTH_KEY in keys, self.public.set_keys | self.set_keys)
 
 
 STEP_RESULT_FIELDS = frozenset(f.name for f in dataclasses.fields(StepResult))
@@ -184,6 +186,8 @@ class StepContext:
     health: HealthAssessment | None  # the k-of-N assessment (None: no k-of-N group, or no reading)
     listed: bool = True  # the step lists readings (False: step 0, whose cone is the prior's)
     blend: Blend | None = None  # the step's blended model (None: step 0, no prediction)
+    region_slabs: Slabs = field(default_factory=dict)  # what the bounded readings prove: they cut the region alone
+    sets: frozenset[int] = frozenset()  # the in-neighbours whose published sets (region; a bounded reading's rate) ``moved`` and ``region_slabs`` rest on
 
 
 CutFn = Callable[[StepContext, StepResult], StepResult]
@@ -265,11 +269,11 @@ def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
     reading; not where the step cannot list readings (step 0, whose cone is the prior's)."""
     st = ctx.statics
     region: Polygon | None = ctx.moved
-    for c, iv in ctx.slabs.values():
+    for c, iv in (*ctx.slabs.values(), *ctx.region_slabs.values()):
         region = region.cut(c[:NX], iv.lo, iv.hi) if region is not None else None
     size, sector = st.fault_bound.size, res.sector
     reference = size == 0.0 and ctx.listed  # its own reading rests on its declared zero fault (listed, so judged)
-    keys = frozenset(ctx.slabs) | ({st.node_id} if reference else frozenset())
+    keys = frozenset(ctx.slabs) | frozenset(ctx.region_slabs) | ({st.node_id} if reference else frozenset())
     if region is not None and size is not None and (reference or (sector is not None and sector.basis == "fault-bound")):
         slack = abs(st.own.Ds) * size  # C x⁺ = C̄ x̄⁺ − Ds f⁺, |f⁺| ≤ F: the step's cone holds the bound
         region = region.cut(st.own.C, ctx.meas.lo - slack, ctx.meas.hi + slack)
@@ -279,7 +283,7 @@ def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
     if region is None or len(region.vertices) < MIN_VERTICES:
         return res  # (fewer: a sliver below the rounding, kept as empty)
     region = region.reduced()  # the move's margin covers the cuts' rounding (Polygon.moved)
-    res = res.replaced(region=region, reading_keys=res.reading_keys | keys)
+    res = res.replaced(region=region, reading_keys=res.reading_keys | keys, set_keys=res.set_keys | ctx.sets)
     fault = (0.0, 0.0) if reference else region_fault(st.own, region, ctx.meas)
     # with readings the ellipsoid is cut too (as since the region came); without, it stays as solved (what
     # neighbours use, bit for bit) and only the published fault range narrows: the same published interval

@@ -98,7 +98,7 @@ from netsetest.estimator.sector import (
 from netsetest.extras import require
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.uncertainty import ModelUncertainty
-from netsetest.polygon import Polygon
+from netsetest.polygon import MIN_VERTICES, Polygon
 from netsetest.models.vehicle import N_RULES, TSModel
 
 Variant = Literal["scheduled", "per-rule"]
@@ -117,6 +117,8 @@ class NeighbourState:
     gamma: float  # γ_j,k
     innov: float  # y̌_j,k = ỹ_j,k − C̄_j x̂_j,k
     sector: Sector | None = None  # j's sector of step k (None: j models no saturation)
+    region: Polygon | None = None  # j's published region of step k (None: none sent): [network] neighbour_sets
+    fault: tuple[float, float] | None = None  # j's published fault interval of step k (ProvenSet.bounds): a bounded reading's rate
 
     @property
     def h1(self) -> float:
@@ -211,10 +213,15 @@ class LocalEstimator:
         uncertainty: ModelUncertainty | None = None,
         references: dict[int, Sensor] | None = None,
         health: HealthModel | None = None,
+        bounded: dict[int, tuple[Sensor, FaultBound]] | None = None,
+        neighbour_sets: bool = False,
     ) -> None:
         """``references``: the reference sensors (declared fault-free, j ≠ i) whose same-step readings
         a step may use (UpdateInput.readings; docs/network.md); ``health``: the k-of-N assumption
-        (``[network] max_faulty``) under which every node's reading of the step bounds the state."""
+        (``[network] max_faulty``) under which every node's reading of the step bounds the state; ``bounded``: the
+        sensors j ≠ i whose same-step readings cut the region with their declared fault bound (``[network]
+        bounded_readings``); ``neighbour_sets``: the region is cut by the in-neighbours' published regions of the
+        step before (``[network] neighbour_sets``)."""
         if variant not in ("scheduled", "per-rule"):
             raise ValueError(f"variant must be 'scheduled' or 'per-rule', got {variant!r}")
         if backend not in BACKENDS:
@@ -231,6 +238,8 @@ class LocalEstimator:
         self.weights = weights
         self.references = dict(references or {})
         self.health = health
+        self.bounded = dict(bounded or {})
+        self.neighbour_sets = neighbour_sets
         # a sensor of uᵀx alone (no fault, no saturation): what propagated_interval needs for the prediction of uᵀx⁺
         self._u_sensor = dataclasses.replace(own, C=health.u, Ds=0.0, saturated=False) if health is not None else own
         self.n_lmi = N_RULES if variant == "per-rule" else 1
@@ -557,6 +566,8 @@ class LocalEstimator:
             scenario.uncertainty,
             {j: scenario.node(j).sensor for j in scenario.references() if j != node_id},
             HealthModel.of(scenario, node_id),
+            {j: (scenario.node(j).sensor, FaultBound(scenario.node(j).fault_rate, scenario.node(j).fault_size)) for j in scenario.bounded_sources(node_id)},
+            scenario.neighbour_sets,
         )
 
     def step(self, prev: NodeSet, inp: UpdateInput, prepared: Prepared | None = None) -> StepResult:
@@ -589,7 +600,7 @@ class LocalEstimator:
         ctx = self._context(prev, inp, base)
         res = self._solve_step(ctx, inp, prepared.first if prepared is not None else None)
         if res.status == "fallback":  # no certificate: the region of the own measurement alone (no reading listed)
-            return apply_cuts(FALLBACK_CUTS, dataclasses.replace(ctx, slabs={}), res)
+            return apply_cuts(FALLBACK_CUTS, dataclasses.replace(ctx, slabs={}, region_slabs={}), res)
         return apply_cuts(self.cuts, ctx, res)
 
     def context(self, prev: NodeSet, inp: UpdateInput) -> StepContext:
@@ -604,13 +615,59 @@ class LocalEstimator:
         meas = measurement_interval(self.own, inp.y, inp.gamma)
         sector, reading = self._own_range(prev, inp, blend, meas)
         data = self.step_data(prev, inp, sector, reading, blend)
-        return StepBase(blend, meas, sector, data, self._moved_region(prev, inp, blend))
+        moved, sets = self._moved_region(prev, inp, blend)
+        return StepBase(blend, meas, sector, data, moved, sets)
 
     def _context(self, prev: NodeSet, inp: UpdateInput, base: StepBase) -> StepContext:
-        """The step's context from its ``base`` and its readings: the k-of-N assessment and the readings' slabs."""
+        """The step's context from its ``base`` and its readings: the k-of-N assessment and the readings' slabs (the
+        references' and the k-of-N interval; the bounded readings', which cut the region alone)."""
         health = self._assess_health(prev, inp, base.blend, base.moved) if self.health is not None and inp.readings else None
         slabs = self._reading_slabs(prev, inp, base.blend, health)
-        return StepContext(self.statics, prev.rho, inp.y, inp.gamma, base.meas, base.sector, base.data, base.moved, slabs, health, blend=base.blend)
+        region_slabs, rate_from = self._bounded_slabs(inp)
+        return StepContext(
+            self.statics,
+            prev.rho,
+            inp.y,
+            inp.gamma,
+            base.meas,
+            base.sector,
+            base.data,
+            base.moved,
+            slabs,
+            health,
+            blend=base.blend,
+            region_slabs=region_slabs,
+            sets=base.sets | rate_from,
+        )
+
+    def _bounded_slabs(self, inp: UpdateInput) -> tuple[Slabs, frozenset[int]]:
+        """What the step's bounded readings prove of x⁺ (docs/network.md, *Bounded readings*): sensor j's reading
+        gives C̄_j x̄_j⁺ = C_j x⁺ + Ds_j f_j⁺ in its measurement interval (a side at the sensor's limit open), and its
+        declared bound f_j⁺ ∈ [−F_j, F_j], and ∈ j's published fault interval of step k widened by δ_j where its state of
+        step k is in (the rate bound), so C_j x⁺ ∈ [lo − max Ds_j f_j⁺, hi − min Ds_j f_j⁺]; keyed by j.  The nodes whose
+        published set the rate used (their state then names the set: it must hold the truth)."""
+        out: Slabs = {}
+        rate_from: set[int] = set()
+        for j, (y, gamma) in inp.readings.items():
+            src = self.bounded.get(j)
+            if src is None:
+                continue
+            sensor, bound = src
+            f_lo, f_hi = (-bound.size, bound.size) if bound.size is not None else (-math.inf, math.inf)
+            nb = inp.neigh.get(j)
+            if bound.rate is not None and nb is not None and nb.fault is not None:
+                lo, hi = nb.fault[0] - bound.rate, nb.fault[1] + bound.rate
+                if lo > f_lo or hi < f_hi:
+                    f_lo, f_hi = max(f_lo, lo), min(f_hi, hi)
+                    rate_from.add(j)
+            if not (math.isfinite(f_lo) and math.isfinite(f_hi)) or f_lo > f_hi:
+                continue  # no bound on f_j⁺ (or an empty one: an assumption broke), so nothing on C_j x⁺
+            iv = measurement_interval(sensor, y, gamma)
+            ds = (sensor.Ds * f_lo, sensor.Ds * f_hi)
+            lo, hi = iv.lo - max(ds), iv.hi - min(ds)
+            if math.isfinite(lo) or math.isfinite(hi):
+                out[j] = (np.append(sensor.C, 0.0), Interval(lo, hi))
+        return out, frozenset(rate_from & set(out))
 
     def _solve_step(self, ctx: StepContext, inp: UpdateInput, first: tuple[StepResult | None, _Solve] | None = None) -> StepResult:
         """The certified set the node continues from and the one it publishes: the readings' set where it is
@@ -630,15 +687,27 @@ class LocalEstimator:
                 return res
         return self._bank(res, data, rho, alpha, facts)
 
-    def _moved_region(self, prev: NodeSet, inp: UpdateInput, blend: Blend) -> Polygon:
-        """The states x⁺ the prior allows: its region (else the box of its ellipsoid) through the step's blended
-        dynamics (exact for the truth), plus the disturbance's and the declared model mismatch's bounds (a box
-        around e = G ζ holds it for either kind)."""
+    def _moved_region(self, prev: NodeSet, inp: UpdateInput, blend: Blend) -> tuple[Polygon, frozenset[int]]:
+        """The states x⁺ the prior allows: its region (else the box of its ellipsoid), cut by the in-neighbours'
+        published regions of the same step k (``neighbour_sets``: each holds x_k wherever that neighbour's set holds
+        the truth), through the step's blended dynamics (exact for the truth), plus the disturbance's and the declared
+        model mismatch's bounds (a box around e = G ζ holds it for either kind); and the neighbours whose region cut it."""
         region = prev.region if prev.region is not None else seed(prev)
+        used: set[int] = set()
+        if self.neighbour_sets:
+            for j, nb in inp.neigh.items():
+                if j == self.node_id or nb.region is None:
+                    continue
+                cut = region.within(nb.region)
+                if cut is None or len(cut.vertices) < MIN_VERTICES:
+                    break  # the two hold no common point: an assumption broke (one of the sets missed); no more cuts
+                if cut is not region:
+                    region = cut
+                    used.add(j)
         segments = [blend.d * math.sqrt(self.W)]  # x⁺ = Ā x + B̄ u + D̄ w (+ e)
         if self.uncertainty is not None:
             segments += [self.uncertainty.G[:, m] for m in range(NX)]  # e = G ζ with |ζ_m| ≤ 1
-        return region.moved(blend.a, blend.b * inp.u, segments)
+        return region.moved(blend.a, blend.b * inp.u, segments), frozenset(used)
 
     def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> tuple[StepResult, bool]:
         """``res`` publishing the readings' set of the step (its only innovation those readings) where it is
@@ -745,6 +814,7 @@ class StepBase:
     sector: Sector | None
     data: StepData
     moved: Polygon
+    sets: frozenset[int] = frozenset()  # the in-neighbours whose published region cut the moved one
 
 
 @dataclass(frozen=True)

@@ -176,6 +176,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
             "late": _BOOL,
             "readings": {**_IDS, "description": "nodes whose reading of this step the published set or the one the node continues from used (docs/network.md)"},
             "health": {**_BOOL, "description": "either set used the k-of-N interval of the step's readings ([network] max_faulty)"},
+            "sets": {**_IDS, "description": "in-neighbours whose published set of the step before cut this step's sets (docs/network.md)"},
             "sector": {
                 "type": ["array", "null"],
                 "items": {"type": "number"},

@@ -221,6 +221,7 @@ def _state_entry(st: NodeState, v: NodeVerdict, contested: bool, bounds: list[li
         "missing": st.missing,
         "readings": [j for j, _, _ in st.readings],
         "health": st.health,
+        "sets": st.sets,
         "late": st.late,
         "E": c.E if c is not None else None,
         "judged": c is not None,

@@ -52,6 +52,7 @@ class CopyCheck:
 
     as_neighbour: str | None  # its published set held the truth; its innovation's noise and sector facts held
     as_prior: str | None  # the set its node continues from held the truth (self-loop: and those facts)
+    as_set: str | None = None  # its whole published set (region, fault range) held the truth: a neighbour cut by it rests on that
 
 
 @dataclass(frozen=True)
@@ -179,6 +180,7 @@ class Judge:
         self.sc = scenario
         self.node_cfg = {n.id: n for n in scenario.nodes}
         self.references = set(scenario.references())  # whose readings rest on their declared zero fault
+        self.bounded = {n.id: set(scenario.bounded_sources(n.id)) for n in scenario.nodes}  # i → whose readings i uses with their declared bound
         # nodes running a set estimator whose guarantee also rests on the declared fault bound (its cone)
         self.needs_fault_bound = {n.id for n in scenario.nodes if n.estimator != SDP and "fault_bound" in node_set_estimator(scenario, n.id).assumptions}
 
@@ -247,12 +249,14 @@ class Judge:
         elif n.sensor.saturated and not (s in tr.r and sector_ok(n.sensor, published_sector(c), tr.r[s])):
             facts = "sector"
         xbar = augmented(tr.x, tr.faults[s])
-        published_in = c.published.E(xbar) <= c.published.rho  # neighbours use the ellipsoid alone
+        E = c.published.E(xbar)
+        published_in = E <= c.published.rho  # an innovation's facts use the ellipsoid alone
         prior_in = c.continued.contains(xbar)
         self_loop = j in n.in_weights  # its own innovation enters its next step: the same facts
         return CopyCheck(
             as_neighbour=facts or (None if published_in else MISSED),
             as_prior=(facts if self_loop else None) or (None if prior_in else MISSED),
+            as_set=None if c.published.contains(xbar, E) else MISSED,
         )
 
     def own_cause(self, n: NodeConfig, st: NodeState | None, tr: Truth, prev: Truth | None, k: int, prev_overloaded: bool = False) -> str | None:
@@ -293,7 +297,7 @@ class Judge:
         if st is None or k == 0:
             return Cone(True)
         for j, y, gamma in st.readings:  # the readings of this very step
-            why = self.reading_cause(j, y, gamma, tr)
+            why = self.reading_cause(j, y, gamma, tr, j in self.bounded[i])
             if why is not None:
                 return Cone(False, INHERITED, Origin(j, k, why))
         if st.health and not self.sc.group_health_holds(i, inp.faults):
@@ -305,21 +309,22 @@ class Judge:
             if digest is None:
                 digest = by.sole.get(j)
             c = by.copies.get(j, {}).get(digest) if digest is not None else None
-            why = NOT_JUDGED if c is None else (c.as_prior if as_prior else c.as_neighbour)
+            why = NOT_JUDGED if c is None else (c.as_prior if as_prior else c.as_neighbour or (c.as_set if j in st.sets else None))
             if why is not None:
                 return Cone(False, INHERITED, Origin(j, m, why))
         return Cone(True)
 
-    def reading_cause(self, j: int, y: float, gamma: float, tr: Truth) -> str | None:
+    def reading_cause(self, j: int, y: float, gamma: float, tr: Truth, bounded: bool = False) -> str | None:
         """Why node j's reading of the step gives no guarantee (None: it is the true measurement, its noise
-        bound held and, for a reference, its declared fault-free sensor had no fault)."""
+        bound held and, for a reference, its declared fault-free sensor had no fault; ``bounded``: the reader may
+        use it with j's declared fault bound, which then held too)."""
         s = str(j)
         if s not in tr.y or y != tr.y[s] or gamma != tr.gamma[s]:
             return NOT_FROM_INPUT
         if not tr.noise_ok[s]:
             return "noise"
-        if j in self.references and not tr.fault_ok.get(s, False):
-            return "fault bound"  # its declared size 0
+        if (j in self.references or bounded) and not tr.fault_ok.get(s, False):
+            return "fault bound"  # its declared size 0, or the bound its reader used it with
         return None
 
 

@@ -98,6 +98,7 @@ class Publication:
     wire_set: dict | None = None  # a set estimator's own set, on the wire
     readings: list[tuple[int, float, float]] = field(default_factory=list)  # (node, lo, hi) of the step
     health: bool = False  # the k-of-N health assumption was applied
+    sets: list[int] = field(default_factory=list)  # in-neighbours whose published sets cut the step's sets
 
 
 class Node:
@@ -131,7 +132,9 @@ class Node:
         self.publishes_reading = scenario.publishes_reading(node_id)  # a reference, or every node under max_faulty
         # the nodes whose reading of each step this node waits for and uses (its estimator must use them)
         uses = self.set_estimator is None or self.set_estimator.uses_readings
-        self.read_from = list(scenario.reading_sources(node_id)) if uses else []
+        self.read_from = (
+            list(scenario.reading_sources(node_id, bounded=self.set_estimator is None)) if uses else []
+        )  # (a set estimator uses no bounded reading)
         self.readings: dict[int, dict[int, tuple[float, float]]] = {}  # step → sender j → (ỹ_j, γ_j)
         # senders whose reading did not come before we gave up on it: not waited for until one arrives (a
         # dead reference must not cost every later step a timeout; a neighbour's state is not expected once
@@ -354,7 +357,13 @@ class Node:
             oldest = min(self.inbox)  # not started (rejoin): keep the newest steps only
             del self.inbox[oldest]
             self.digests.pop(oldest, None)
-        self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(np.asarray(pub.xhat), P, pub.rho, msg.gamma, msg.innov, sector)
+        est = self.estimator
+        region = pub.polygon if est.neighbour_sets else None  # what the step takes of its set beyond the ellipsoid
+        fault = None
+        if msg.node in est.bounded and est.bounded[msg.node][1].rate is not None:
+            lo, hi = pub.bounds()
+            fault = (float(lo[-1]), float(hi[-1]))
+        self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(np.asarray(pub.xhat), P, pub.rho, msg.gamma, msg.innov, sector, region, fault)
         self.digests.setdefault(msg.step, {})[msg.node] = state_digest(msg)
         self._screen()
 
@@ -533,6 +542,7 @@ class Node:
                 inputs=self._inputs(self.k, used, own=True),
                 readings=[(j, *(readings | own_reading)[j]) for j in refs],
                 health=health,
+                sets=sorted(rests.sets & set(used)),
             )
         )
 
@@ -621,4 +631,5 @@ class Node:
             inputs=p.inputs,
             readings=p.readings,
             health=p.health,
+            sets=p.sets,
         )

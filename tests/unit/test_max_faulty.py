@@ -20,7 +20,7 @@ def _topology(tmp_path: Path, network: str, yaw1_C: str | None = None) -> Path:
         if yaw1_C is not None and prof.name == "yaw1.toml":
             body = body.replace("C = [0.0, 0.12]", f"C = {yaw1_C}")
         (tmp_path / prof.name).write_text(body)
-    (tmp_path / "t.toml").write_text(text + "\n[network]\n" + network + "\n")
+    (tmp_path / "t.toml").write_text(text + "\n[network]\nbounded_readings = false\n" + network + "\n")  # the k-of-N exchange alone
     return tmp_path / "t.toml"
 
 

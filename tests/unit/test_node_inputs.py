@@ -2,18 +2,25 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 from pathlib import Path
 
 import numpy as np
 
 from netsetest.bus import keys
 from netsetest.bus.base import MemoryBus
-from netsetest.config.schema import load_topology
+from netsetest.config.schema import Scenario, load_topology
 from netsetest.messages import NodeInput
 from netsetest.roles.node import Node
 from message_helpers import make_state
 
 PAPER6 = Path(__file__).resolve().parents[2] / "topologies" / "paper6.toml"
+
+
+def _alone(sc: Scenario) -> Scenario:
+    """The topology without its bounded readings and neighbours' sets (tests/unit/test_node_bounded.py): the exchange under test alone."""
+    return dataclasses.replace(sc, bounded_readings=False, neighbour_sets=False)
 
 
 def _input(sc, step: int) -> NodeInput:
@@ -26,7 +33,7 @@ def test_inputs_that_arrive_with_step_0_before_the_node_took_it_are_kept() -> No
     """Real time under load: inputs 0 and 1 reach a node in one pump, before it took step 0.  Input 1 is
     then the next step, not evidence of a run we missed: dropping it left the node stuck at step 0 for the
     whole run (seen at 96 real-time nodes: three nodes lost)."""
-    sc = load_topology(PAPER6, None, 5)
+    sc = _alone(load_topology(PAPER6, None, 5))
     bus = MemoryBus()
     node = Node(sc, 1, bus, "t")
     states: list[int] = []
@@ -44,7 +51,7 @@ def test_inputs_that_arrive_with_step_0_before_the_node_took_it_are_kept() -> No
 def test_a_later_input_without_step_0_is_still_dropped_before_start() -> None:
     """Without step 0 in hand, a later input still means a run we missed (or a forgery): dropped and
     counted as evidence for a rejoin, as before."""
-    sc = load_topology(PAPER6, None, 5)
+    sc = _alone(load_topology(PAPER6, None, 5))
     bus = MemoryBus()
     node = Node(sc, 1, bus, "t")
     bus.publish(keys.node_input("t", 1), _input(sc, 2))
@@ -57,7 +64,7 @@ def test_a_dropped_neighbour_state_answers_the_wait() -> None:
     """A neighbour whose state of our step we dropped as implausible has spoken: the node steps without
     it at once instead of waiting the neighbour timeout for it every step (over Zenoh a false-bound
     mixed run took 289 s against 6.7 s in memory)."""
-    sc = load_topology(PAPER6, None, 5)
+    sc = _alone(load_topology(PAPER6, None, 5))
     bus = MemoryBus()
     node = Node(sc, 1, bus, "t")
     assert node.others, "node 1 needs an in-neighbour for this test"

@@ -4,18 +4,25 @@ the run, never repairs it."""
 
 from __future__ import annotations
 
+import dataclasses
+
 from pathlib import Path
 
 import pytest
 
 from netsetest.bus import keys
 from netsetest.bus.base import MemoryBus
-from netsetest.config.schema import load_topology
+from netsetest.config.schema import Scenario, load_topology
 from netsetest.messages import NodeInput, Reading
 from netsetest.roles.node import Node
 from netsetest.runtime.security import grants
 
 REFERENCE = Path(__file__).resolve().parents[2] / "topologies" / "paper6_reference.toml"
+
+
+def _alone(sc: Scenario) -> Scenario:
+    """The topology without its bounded readings and neighbours' sets (tests/unit/test_node_bounded.py): the exchange under test alone."""
+    return dataclasses.replace(sc, bounded_readings=False, neighbour_sets=False)
 
 
 def _input(sc, node: int, step: int) -> NodeInput:
@@ -26,7 +33,7 @@ def _input(sc, node: int, step: int) -> NodeInput:
 
 def _node_after_step_0(steps: int) -> tuple[object, MemoryBus, Node]:
     """Node 2 of paper6_reference on its own bus, its step 0 taken."""
-    sc = load_topology(REFERENCE, None, steps)
+    sc = _alone(load_topology(REFERENCE, None, steps))
     bus = MemoryBus()
     node = Node(sc, 2, bus, "t")
     bus.publish(keys.node_input("t", 2), _input(sc, 2, 0))
@@ -36,7 +43,7 @@ def _node_after_step_0(steps: int) -> tuple[object, MemoryBus, Node]:
 
 
 def test_a_reference_publishes_its_reading_with_its_input_and_no_other_node_does() -> None:
-    sc = load_topology(REFERENCE, None, 5)
+    sc = _alone(load_topology(REFERENCE, None, 5))
     bus = MemoryBus()
     nodes = {i: Node(sc, i, bus, "t") for i in (2, 3)}
     seen: list[tuple[str, Reading]] = []
@@ -86,7 +93,7 @@ def test_a_reading_that_cannot_be_one_of_the_run_is_dropped(key: str, reading: R
 
 
 def test_a_second_copy_of_a_reading_is_dropped_and_the_first_counts() -> None:
-    sc = load_topology(REFERENCE, None, 5)
+    sc = _alone(load_topology(REFERENCE, None, 5))
     node = Node(sc, 2, MemoryBus(), "t")
     node.on_message(keys.reading("t", 3), Reading(step=1, node=3, y=0.01, gamma=1.0))
     node.on_message(keys.reading("t", 3), Reading(step=1, node=3, y=0.02, gamma=1.0))
@@ -94,13 +101,13 @@ def test_a_second_copy_of_a_reading_is_dropped_and_the_first_counts() -> None:
 
 
 def test_the_access_control_lets_the_reference_publish_and_every_other_node_receive_its_readings() -> None:
-    sc = load_topology(REFERENCE)
+    sc = _alone(load_topology(REFERENCE))
     g = grants(sc, "r1")
     assert keys.reading("r1", 3) in g["node-3"].publish
     for i in sc.ids:
         assert (keys.reading("r1", 3) in g[f"node-{i}"].receive) == (i != 3)
         assert all(keys.reading("r1", j) not in g[f"node-{i}"].publish for j in sc.ids if j != 3)
-    paper6 = load_topology(REFERENCE.with_name("paper6.toml"))
+    paper6 = _alone(load_topology(REFERENCE.with_name("paper6.toml")))
     assert not any("reading" in k for gr in grants(paper6, "r1").values() for k in (*gr.publish, *gr.receive) if "node/" in k)
 
 
