@@ -118,6 +118,8 @@ class Polygon:
         w = other.vertices
         e = _after(w) - w
         n = np.stack([e[:, 1], -e[:, 0]], axis=1)  # outward normals of a counter-clockwise polygon's sides
+        scale = np.abs(n).max(axis=1)
+        n = n[scale > 0.0] / scale[scale > 0.0, None]  # |n|∞ = 1, so that each cut's margin is one of the coordinates' size
         support = (w @ n.T).max(axis=0)
         beyond = np.flatnonzero((self.vertices @ n.T).max(axis=0) > support)
         out = self

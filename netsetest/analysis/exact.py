@@ -24,7 +24,7 @@ Derivation and measured figures: docs/exact.md.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from typing import Literal
 
 import math
@@ -687,8 +687,9 @@ def exact_bounds(
     more, and every end its relaxation does not settle is relaxed (sound, labelled: ``HealthSearch.out_of_time``).
     None: no limit.  ``network``: each node's network limit instead of the central one (docs/exact.md, *The network
     limit*): its β, r (``ExactBounds.by_node``) and its fault from its own data and node j's data up to step
-    k − d(j→i) (:meth:`Scenario.delays`), one program per node; the witnesses' faults of other nodes are not checked
-    there (a fault the viewer has no datum of is left at 0).
+    k − d(j→i) (:meth:`Scenario.delays`), one program per node (one for all where every datum reaches every node in
+    its step: the central program); the witnesses' faults of other nodes are not checked there (a fault the viewer
+    has no datum of is left at 0).
     """
     data = step_data(record)
     for d in data:
@@ -709,7 +710,10 @@ def exact_bounds(
     search = _Search(keep_witnesses, eliminate_free_faults, health_budget, math.inf if budget_s is None else time.process_time() + budget_s)
     infeasible: set[int] = set()
     applied: list[_HealthPlan] = []
-    for n, viewer in enumerate(scenario.ids if network else [None]):
+    everywhere = (
+        network and all(d == 0 for i in scenario.ids for d in scenario.delays(i).values()) and len(scenario.delays(scenario.ids[0])) == len(scenario.ids)
+    )
+    for n, viewer in enumerate(scenario.ids if network and not everywhere else [None]):
         prog = _Program(scenario, data, bounded, viewer)
         plans = _plans(prog, scenario, health)
         if viewer is None:
@@ -724,6 +728,9 @@ def exact_bounds(
 
         infeasible |= search.run(prog, plans, limits, step_progress)
         applied = applied or plans
+    if everywhere:  # every node has every datum in its step: each node's program is the central one
+        by_node = {i: (beta.copy(), r.copy()) for i in scenario.ids}
+        beta[:], r[:] = np.nan, np.nan
     health_search = None
     if applied:
         tally = search.tally
@@ -1042,12 +1049,30 @@ def compare_record(record: Record, exact: ExactBounds) -> ExactComparison:
 @dataclass(frozen=True)
 class LocalLimit:
     """What the network could buy node i at best: its exact limit from its own data alone (``local``) over
-    the exact limit from every node's data (``central``), mean width ratio from step FROM_STEP (docs/network.md)."""
+    the exact limit from every node's data (``central``), mean width ratio from step FROM_STEP (docs/network.md);
+    the same for its network limit (what the topology carries to it: :func:`limit_ratios`)."""
 
     node: int
     fault_ratio: float  # node i's own fault
     r_ratio: float
     beta_ratio: float
+
+
+def limit_ratios(limit: ExactBounds, central: ExactBounds, nodes: Sequence[int]) -> list[LocalLimit]:
+    """Per node: ``limit``'s mean width over ``central``'s from step FROM_STEP, per coordinate; NaN where the central
+    width is solver precision (a reference sensor's own fault is 0)."""
+    keep = central.steps >= FROM_STEP
+    out = []
+    for i in nodes:
+
+        def ratio(coord: Coordinate, i: int = i) -> float:
+            a, b = limit.interval(coord, i)[keep], central.interval(coord, i)[keep]
+            ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+            wa, wb = (a[:, 1] - a[:, 0])[ok], (b[:, 1] - b[:, 0])[ok]
+            return _ratio(wa, wb) if len(wb) and wb.mean() > DEGENERATE_WIDTH else float("nan")
+
+        out.append(LocalLimit(i, ratio("f"), ratio("r"), ratio("beta")))
+    return out
 
 
 def local_limits(
@@ -1059,19 +1084,9 @@ def local_limits(
 ) -> list[LocalLimit]:
     """Per node: the one-node exact limit against the whole network's (``central``: computed unless given)."""
     central = central or exact_bounds(scenario, record, fault_bounds)
-    keep = central.steps >= FROM_STEP
     out = []
     for n, i in enumerate(scenario.ids):
-        local = exact_bounds(scenario, record, fault_bounds, nodes=[i])
-
-        def ratio(coord: Coordinate) -> float:
-            """NaN where the central width is solver precision (a reference sensor's own fault is 0)."""
-            a, b = local.interval(coord, i)[keep], central.interval(coord, i)[keep]
-            ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
-            wa, wb = (a[:, 1] - a[:, 0])[ok], (b[:, 1] - b[:, 0])[ok]
-            return _ratio(wa, wb) if len(wb) and wb.mean() > DEGENERATE_WIDTH else float("nan")
-
-        out.append(LocalLimit(i, ratio("f"), ratio("r"), ratio("beta")))
+        out += limit_ratios(exact_bounds(scenario, record, fault_bounds, nodes=[i]), central, [i])
         if progress is not None:
             progress(n + 1, len(scenario.ids))
     return out
@@ -1110,13 +1125,31 @@ def _health_document(h: HealthSearch | None) -> dict | None:
     }
 
 
-def exact_document(record: Record, exact: ExactBounds, comparison: ExactComparison) -> dict:
-    """The ``--json`` document: per step exact intervals (null: unbounded on that side, or no
-    trajectory at an infeasible step) and the record's ratios."""
+def _limit_ratios_document(limits: list[LocalLimit]) -> list[dict]:
+    return [{k: None if isinstance(v, float) and math.isnan(v) else v for k, v in asdict(lim).items()} for lim in limits]
+
+
+def network_document(scenario: Scenario, network: ExactBounds, comparison: ExactComparison, central: ExactBounds) -> dict:
+    """``exact --network --json``'s ``network`` object: per node the steps each node's data take to it (``delays``:
+    node → {j: d(j→i)}), its network limit's intervals (``exact``: node → beta, r, fault, per step [lower, upper],
+    null = unbounded), the record's ratios against it (``ratios``, the form of the document's own) and the limit over
+    the central one (``over_central``: node, fault_ratio, r_ratio, beta_ratio)."""
 
     def intervals(a: np.ndarray) -> list[list[float | None]]:
         return [[_finite_or_none(lo), _finite_or_none(hi)] for lo, hi in a]
 
+    ids = sorted(network.fault)
+    return {
+        "label": network.label,
+        "delays": {str(i): {str(j): d for j, d in scenario.delays(i).items()} for i in ids},
+        "health": _health_document(network.health),
+        "exact": {str(i): {c: intervals(network.interval(c, i)) for c in ("beta", "r")} | {"fault": intervals(network.fault[i])} for i in ids},
+        "ratios": _ratios_document(comparison),
+        "over_central": _limit_ratios_document(limit_ratios(network, central, ids)),
+    }
+
+
+def _ratios_document(comparison: ExactComparison) -> dict:
     def ratio(c: CoordinateRatio) -> dict:
         return {
             "width_ratio": _finite_or_none(c.width_ratio),
@@ -1128,6 +1161,22 @@ def exact_document(record: Record, exact: ExactBounds, comparison: ExactComparis
             "width_excess": c.width_excess,
             "width_excess_all": c.width_excess_all,
         }
+
+    return {
+        "nodes": {str(n.node): {c: ratio(n.ratios[c]) for c in COORDINATES} for n in comparison.nodes},
+        "mean_width_ratio": {c: _finite_or_none(v) for c, v in comparison.mean_width_ratio.items()},
+        "mean_rms_radius_rel": {c: _finite_or_none(v) for c, v in comparison.mean_rms_radius_rel.items()},
+        "overall_width_ratio": _finite_or_none(comparison.overall_width_ratio),
+        "overall_rms_radius_rel": _finite_or_none(comparison.overall_rms_radius_rel),
+    }
+
+
+def exact_document(record: Record, exact: ExactBounds, comparison: ExactComparison) -> dict:
+    """The ``--json`` document: per step exact intervals (null: unbounded on that side, or no
+    trajectory at an infeasible step) and the record's ratios."""
+
+    def intervals(a: np.ndarray) -> list[list[float | None]]:
+        return [[_finite_or_none(lo), _finite_or_none(hi)] for lo, hi in a]
 
     return {
         "format": "netsetest-exact",
@@ -1145,11 +1194,5 @@ def exact_document(record: Record, exact: ExactBounds, comparison: ExactComparis
             "r": intervals(exact.r),
             "fault": {str(i): intervals(a) for i, a in exact.fault.items()},
         },
-        "ratios": {
-            "nodes": {str(n.node): {c: ratio(n.ratios[c]) for c in COORDINATES} for n in comparison.nodes},
-            "mean_width_ratio": {c: _finite_or_none(v) for c, v in comparison.mean_width_ratio.items()},
-            "mean_rms_radius_rel": {c: _finite_or_none(v) for c, v in comparison.mean_rms_radius_rel.items()},
-            "overall_width_ratio": _finite_or_none(comparison.overall_width_ratio),
-            "overall_rms_radius_rel": _finite_or_none(comparison.overall_rms_radius_rel),
-        },
+        "ratios": _ratios_document(comparison),
     }

@@ -31,6 +31,8 @@ from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED
 
 if TYPE_CHECKING:  # a role process never loads the records (memory: docs/performance-history.md)
     from netsetest.analysis.calibrate import Calibration, DriveMismatch
+    from netsetest.analysis.exact import ExactBounds
+    from netsetest.config.schema import Scenario
     from netsetest.models.envelope import OperatingEnvelope
     from netsetest.models.plant import PlantKind
     from netsetest.records.record import Record
@@ -137,6 +139,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--local",
         action="store_true",
         help="also each node's exact limit from its own data alone, against the whole network's: what the exchange could buy it at best (docs/network.md)",
+    )
+    p.add_argument(
+        "--network",
+        action="store_true",
+        help="also each node's network limit: the tightest it could publish from what the topology carries to it by each "
+        "step (node j's data d(j→i) steps late), against the record and against the central limit (docs/exact.md)",
     )
     p.add_argument(
         "--no-health",
@@ -444,10 +452,49 @@ def cmd_exact(a: argparse.Namespace) -> int:
             cells = ("  declared 0" if math.isnan(v) else f"{v:10.3f}" for v in (lim.fault_ratio, lim.r_ratio, lim.beta_ratio))
             print(f"{lim.node:>4}  " + "  ".join(cells))
         doc["local_over_central"] = [{k: None if isinstance(v, float) and math.isnan(v) else v for k, v in dataclasses.asdict(lim).items()} for lim in limits]
+    if a.network:
+        doc["network"] = _exact_network(a, sc, rec, ex)
     if a.json:
         with open(a.json, "w") as fh:
             json.dump(doc, fh, indent=1)
     return 0
+
+
+def _exact_network(a: argparse.Namespace, sc: Scenario, rec: Record, central: ExactBounds) -> dict:
+    """``exact --network``: each node's network limit, its ratios against the record and against the central limit,
+    printed; the JSON document's ``network`` object."""
+    from netsetest.analysis.exact import COORDINATES, compare_record, exact_bounds, health_line, network_document
+    from netsetest.runtime.report import Progress
+
+    bar = Progress(1, "exact --network")
+
+    def on_progress(k: int, total: int) -> None:
+        bar.total = total
+        bar.update(k)
+
+    net = exact_bounds(sc, rec, a.fault_bounds, progress=on_progress, health=not a.no_health, budget_s=a.budget, network=True)
+    bar.close()
+    doc = network_document(sc, net, compare_record(rec, net), central)
+    print("the network limit (docs/exact.md): node j's data reach node i d(j→i) steps late, one hop a step along the states, a reading's in its step")
+    if net.health is not None:
+        print(f"  {health_line(net.health)}")
+    print(
+        f"{'node':>4}  {'furthest':>8}  "
+        + "  ".join(f"{c + ': published / network':>24}  {'network / central':>17}" for c in ("fault", "yaw rate", "sideslip"))
+    )
+    over = {o["node"]: o for o in doc["over_central"]}
+    for i in sc.ids:
+        ratios = doc["ratios"]["nodes"][str(i)]
+        cells = []
+        for c, key in zip(("f", "r", "beta"), ("fault_ratio", "r_ratio", "beta_ratio")):
+            mine, lim = ratios[c]["width_ratio"], over[i][key]
+            cells.append(f"{'–' if mine is None else format(mine, '.3f'):>24}  {'–' if lim is None else format(lim, '.3f'):>17}")
+        furthest = max(sc.delays(i).values())
+        print(f"{i:>4}  {furthest:>8}  " + "  ".join(cells))
+    narrower = sum(x["narrower"] for n in doc["ratios"]["nodes"].values() for x in n.values())
+    total = sum(len(rec.nodes[i].steps) for i in sc.ids if i in rec.nodes) * len(COORDINATES)
+    print(f"published interval narrower than the network limit on {narrower} of {total} node-step intervals")
+    return doc
 
 
 def _seed_text(seeds: Sequence[int]) -> str:

@@ -613,8 +613,7 @@ class Scenario:
         declared = [n for n in self.nodes if n.fault_rate is not None or n.fault_size is not None]
         if mode == "none":
             return ()
-        read = {j for i in self.ids for j in self.bounded_sources(i)}  # readings some node uses with their bound
-        return tuple(n.id for n in declared if mode == "all" or n.sensor.saturated or n.fault_size == 0 or n.id in read)
+        return tuple(n.id for n in declared if mode == "all" or n.sensor.saturated or n.fault_size == 0 or self.bound_relied(n.id))
 
     def references(self) -> tuple[int, ...]:
         """Reference sensors whose readings are exchanged: declared fault-free (``[fault_bound] size = 0``);
@@ -659,6 +658,11 @@ class Scenario:
         return tuple(
             n.id for n in self.nodes if n.id != i and n.fault_size != 0 and (n.fault_size is not None or n.fault_rate is not None) and self._reaches(n.id, i)
         )
+
+    def bound_relied(self, i: int) -> bool:
+        """Whether node i's declared fault bound is relied on at every step: another node uses its reading with it
+        (:meth:`bounded_sources`); node i's own published set then rests on it too (docs/network.md)."""
+        return any(i in self.bounded_sources(j) for j in self.ids if j != i)
 
     def delays(self, i: int) -> dict[int, int]:
         """d(j→i) for every node j whose data can reach node i: the steps the runtime needs to carry j's measurement of a

@@ -143,6 +143,7 @@ class CutStatics:
     health_tolerance: float | None
     wh: np.ndarray | None  # recursion objective trace(D P) (None: trace P)
     wh_pub: np.ndarray | None  # objective ``bank``: the published set's (None: the recursion's)
+    own_bound: bool = False  # the declared fault bound is relied on at every step (others read the reading with it): cut by it too
 
     @property
     def wh_published(self) -> np.ndarray | None:
@@ -251,7 +252,7 @@ def _size_cut(ctx: StepContext, res: StepResult) -> StepResult:
     """Where the step's sector rests on the declared fault bound, the truth's f⁺ lies in [−F, F]: the published set
     is cut by that interval (docs/estimator.md, "SAIM: the size cut")."""
     size, sector = ctx.statics.fault_bound.size, res.sector
-    if size is None or sector is None or sector.basis != "fault-bound":
+    if size is None or not (ctx.statics.own_bound or (sector is not None and sector.basis == "fault-bound")):
         return res
     out = cut_fault(ctx, res, -size, size)
     return res if out is None else out
@@ -274,7 +275,7 @@ def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
     size, sector = st.fault_bound.size, res.sector
     reference = size == 0.0 and ctx.listed  # its own reading rests on its declared zero fault (listed, so judged)
     keys = frozenset(ctx.slabs) | frozenset(ctx.region_slabs) | ({st.node_id} if reference else frozenset())
-    if region is not None and size is not None and (reference or (sector is not None and sector.basis == "fault-bound")):
+    if region is not None and size is not None and (reference or st.own_bound or (sector is not None and sector.basis == "fault-bound")):
         slack = abs(st.own.Ds) * size  # C x⁺ = C̄ x̄⁺ − Ds f⁺, |f⁺| ≤ F: the step's cone holds the bound
         region = region.cut(st.own.C, ctx.meas.lo - slack, ctx.meas.hi + slack)
     for s in (res, res.published):

@@ -215,13 +215,16 @@ class LocalEstimator:
         health: HealthModel | None = None,
         bounded: dict[int, tuple[Sensor, FaultBound]] | None = None,
         neighbour_sets: bool = False,
+        own_bound: bool = False,
     ) -> None:
         """``references``: the reference sensors (declared fault-free, j ≠ i) whose same-step readings
         a step may use (UpdateInput.readings; docs/network.md); ``health``: the k-of-N assumption
         (``[network] max_faulty``) under which every node's reading of the step bounds the state; ``bounded``: the
         sensors j ≠ i whose same-step readings cut the region with their declared fault bound (``[network]
         bounded_readings``); ``neighbour_sets``: the region is cut by the in-neighbours' published regions of the
-        step before (``[network] neighbour_sets``)."""
+        step before (``[network] neighbour_sets``); ``own_bound``: other nodes use this node's reading with its declared
+        fault bound, so its own sets rest on that bound at every step as well (the ``fault-size`` cut, the region's own
+        measurement)."""
         if variant not in ("scheduled", "per-rule"):
             raise ValueError(f"variant must be 'scheduled' or 'per-rule', got {variant!r}")
         if backend not in BACKENDS:
@@ -260,7 +263,7 @@ class LocalEstimator:
         # objective weight: trace(D P) is trace(P') for P' = D^½ P D^½ (a congruence of the LMI)
         self._wh = np.sqrt(np.array([1.0, 1.0, FAULT_WEIGHT])) if objective == "fault" else None
         self._wh_pub = np.sqrt(np.array([1.0, 1.0, BANK_FAULT_WEIGHT])) if objective == "bank" else None
-        self.statics = CutStatics(node_id, own, fault_bound, None if health is None else health.tolerance, self._wh, self._wh_pub)
+        self.statics = CutStatics(node_id, own, fault_bound, None if health is None else health.tolerance, self._wh, self._wh_pub, own_bound)
         self.cuts: tuple[Cut, ...] = STEP_CUTS  # the cuts after every step's solve, in order (a test may leave one out)
 
     def pattern(self, phi_from: frozenset[int], phi_new: bool, predict: bool = True, readings: frozenset[int] = frozenset()) -> _Pattern:
@@ -568,6 +571,7 @@ class LocalEstimator:
             HealthModel.of(scenario, node_id),
             {j: (scenario.node(j).sensor, FaultBound(scenario.node(j).fault_rate, scenario.node(j).fault_size)) for j in scenario.bounded_sources(node_id)},
             scenario.neighbour_sets,
+            scenario.bound_relied(node_id),
         )
 
     def step(self, prev: NodeSet, inp: UpdateInput, prepared: Prepared | None = None) -> StepResult:

@@ -182,7 +182,12 @@ class Judge:
         self.references = set(scenario.references())  # whose readings rest on their declared zero fault
         self.bounded = {n.id: set(scenario.bounded_sources(n.id)) for n in scenario.nodes}  # i → whose readings i uses with their declared bound
         # nodes running a set estimator whose guarantee also rests on the declared fault bound (its cone)
-        self.needs_fault_bound = {n.id for n in scenario.nodes if n.estimator != SDP and "fault_bound" in node_set_estimator(scenario, n.id).assumptions}
+        # (an SDP node whose reading others use with its declared bound rests on it at every step too: docs/network.md)
+        self.needs_fault_bound = {
+            n.id
+            for n in scenario.nodes
+            if (n.estimator != SDP and "fault_bound" in node_set_estimator(scenario, n.id).assumptions) or (n.estimator == SDP and scenario.bound_relied(n.id))
+        }
 
     def step(self, inp: StepInputs, prev: StepChecks) -> StepVerdict:
         """Every node's verdict of one closed step, and the copy checks its successor judges inputs by."""

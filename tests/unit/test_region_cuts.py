@@ -132,10 +132,15 @@ def _step(draw: st.DrawFn, kofn: bool = False) -> tuple[StepContext, StepResult,
     c = np.r_[rng.normal(size=2), 0.0]
     cv = pts @ c
     slabs = {7: (c, Interval(*np.quantile(cv, sorted(rng.uniform(0.0, 1.0, 2)))))} if draw(st.booleans()) else {}
+    c2 = np.r_[rng.normal(size=2), 0.0]  # a bounded reading's slab (it cuts the region alone), one side open or not
+    ends = np.quantile(pts @ c2, sorted(rng.uniform(0.0, 1.0, 2)))
+    region_slabs = {8: (c2, Interval(float(ends[0]) if draw(st.booleans()) else -np.inf, float(ends[1])))} if draw(st.booleans()) else {}
     health = _health(draw, rng, pts, own) if kofn or draw(st.booleans()) else None
     if kofn or draw(st.booleans()):  # the region the step's region cut left (what the health-fault cut reads)
         res = dataclasses.replace(res, region=moved)
-    ctx = dataclasses.replace(_context(), rho=rho, meas=meas, sector=res.sector, moved=moved, slabs=slabs, health=health)
+    ctx = dataclasses.replace(
+        _context(), rho=rho, meas=meas, sector=res.sector, moved=moved, slabs=slabs, health=health, region_slabs=region_slabs, sets=frozenset({2})
+    )
     pts = np.vstack([pts, _extremes(moved, meas, own, rng, health)])
     pts = pts[_inside(res, pts, rho).all(axis=1)]
     held = pts[[moved.contains(p[:2]) for p in pts]]
@@ -184,6 +189,7 @@ def _facts(name: str, ctx: StepContext, res: StepResult, p: np.ndarray) -> bool:
     """Whether the point p satisfies what cut ``name`` rests on (its slabs)."""
     st_ = ctx.statics
     readings = all(lo_hi.lo <= float(c @ p) <= lo_hi.hi for c, lo_hi in ctx.slabs.values())
+    bounded_readings = all(lo_hi.lo <= float(c @ p) <= lo_hi.hi for c, lo_hi in ctx.region_slabs.values())
     size = st_.fault_bound.size
     bounded = size is None or res.sector is None or res.sector.basis != "fault-bound" or abs(p[2]) <= size
     healthy = abs(p[2]) <= max(st_.health_tolerance or 0.0, PIN_FLOOR)
@@ -195,7 +201,7 @@ def _facts(name: str, ctx: StepContext, res: StepResult, p: np.ndarray) -> bool:
     return {
         "readings": readings,
         "fault-size": bounded,
-        "region": readings and bounded and measured and ctx.moved.contains(p[:2]),
+        "region": readings and bounded_readings and bounded and measured and ctx.moved.contains(p[:2]),
         "health-pin": pinned,
         "health-fault": ctx.health is None or (measured and in_region and (healthy or agreeing)),
     }[name]
@@ -247,3 +253,18 @@ def test_a_step_rests_on_the_readings_its_sets_were_cut_by() -> None:
     res = StepResult(np.zeros(3), np.eye(3), "ok", 1.0, 0.0, "solved", published=pub, reading_keys=frozenset({4}))
     assert res.rests_on == Rests(frozenset({3, 4}), True)
     assert dataclasses.replace(res, published=None).rests_on == Rests(frozenset({4}), False)
+
+
+def test_the_region_cut_rests_on_the_bounded_readings_and_the_neighbours_sets_it_used() -> None:
+    """A region cut by a bounded reading's slab and moved from a neighbour's set names both (the node lists them)."""
+    ctx = _context()
+    res = StepResult(np.zeros(3), 1e-4 * np.eye(3), "ok", 1.0, 0.0, "solved")
+    c = np.array([0.0, 1.0, 0.0])
+    out = next(x for x in STEP_CUTS if x.name == "region").apply(
+        dataclasses.replace(
+            ctx, moved=Polygon.box(np.array([-0.01, -0.01]), np.array([0.01, 0.01])), region_slabs={5: (c, Interval(-0.005, np.inf))}, sets=frozenset({2})
+        ),
+        res,
+    )
+    assert out.region is not None and out.region.interval(c[:2])[0] >= -0.005 - 1e-8  # (the cut's margin)
+    assert 5 in out.rests_on.readings and out.rests_on.sets == {2}
