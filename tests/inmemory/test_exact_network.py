@@ -44,74 +44,82 @@ def _record(case: str, group: bool = False) -> tuple[Scenario, Record]:
     return sc, record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary)
 
 
+Rows = list[tuple[dict[int, float], float]]  # a·z (=, ≤) b
+
+
+def _program(sc: Scenario, data: list, d: dict[int, int], k: int) -> tuple[int, Rows, Rows, list[Rows]]:
+    """Horizon k's columns and rows for a viewer whose data delays are ``d``: z = [x_0..x_k, w_0..w_{k−1}, f_j,0..k of
+    every node j]; the dynamics (equalities), the wind bound, node j's measurement of step s only where s ≤ k − d_j
+    and its prior where 0 ≤ k − d_j (second-order cones), every declared fault bound (``used``: this chain's readings
+    rest on all of them)."""
+    ids, bounded = sc.ids, set(sc.fault_bounded("used"))
+    x = lambda s, c: 2 * s + c  # noqa: E731
+    f = lambda n, s: 2 * (k + 1) + k + n * (k + 1) + s  # noqa: E731
+    eq: Rows = []
+    lin: Rows = []
+    soc: list[Rows] = []
+    for s in range(k):
+        a, b, dw = sc.model.blend(sc.model.weights(data[s].vx))
+        for row in range(2):
+            eq.append(({x(s + 1, row): 1.0, 2 * (k + 1) + s: -dw[row, 0], x(s, 0): -a[row, 0], x(s, 1): -a[row, 1]}, b[row, 0] * data[s].u))
+        lin += [({2 * (k + 1) + s: 1.0}, math.sqrt(sc.W)), ({2 * (k + 1) + s: -1.0}, math.sqrt(sc.W))]
+    for n, node in enumerate(sc.nodes):
+        known = [s for s in range(k + 1) if node.id in d and s <= k - d[node.id]]
+        for s in known:
+            lo, hi = node.sensor.measured_interval(data[s].y[node.id], data[s].gamma[node.id])
+            r = {x(s, 0): node.sensor.C[0], x(s, 1): node.sensor.C[1], f(n, s): node.sensor.Ds}
+            lin += [(r, hi)] if np.isfinite(hi) else []
+            lin += [({c: -v for c, v in r.items()}, -lo)] if np.isfinite(lo) else []
+        if 0 in known:
+            li = np.linalg.inv(np.linalg.cholesky(node.P0))
+            cols, centre = (x(0, 0), x(0, 1), f(n, 0)), li @ node.x0_hat
+            soc.append([({}, math.sqrt(node.rho))] + [({c: -li[r_, m] for m, c in enumerate(cols)}, -centre[r_]) for r_ in range(3)])
+        for s in range(k + 1) if node.id in bounded else ():
+            if node.fault_size is not None:
+                lin += [({f(n, s): 1.0}, node.fault_size), ({f(n, s): -1.0}, node.fault_size)]
+            if node.fault_rate is not None and s > 0:
+                lin += [({f(n, s): 1.0, f(n, s - 1): -1.0}, node.fault_rate), ({f(n, s): -1.0, f(n, s - 1): 1.0}, node.fault_rate)]
+    return 2 * (k + 1) + k + len(ids) * (k + 1), eq, lin, soc
+
+
+def _ends(nz: int, eq: Rows, lin: Rows, soc: list[Rows], cols: dict[str, int]) -> dict[str, list[float]]:
+    """min and max of each column over the program (inf, −inf where it has no trajectory)."""
+    rows = [*eq, *lin, *(r for blk in soc for r in blk)]
+    A = sparse.lil_matrix((len(rows), nz))
+    for r_, (terms, _) in enumerate(rows):
+        for c, v in terms.items():
+            A[r_, c] = v
+    b = np.array([rhs for _, rhs in rows])
+    cones = [clarabel.ZeroConeT(len(eq)), clarabel.NonnegativeConeT(len(lin))] + [clarabel.SecondOrderConeT(4)] * len(soc)
+    out = {}
+    for coord, col in cols.items():
+        out[coord] = [np.inf, -np.inf]
+        for side, sign in ((0, 1.0), (1, -1.0)):
+            q = np.zeros(nz)
+            q[col] = sign
+            sol = clarabel.DefaultSolver(sparse.csc_matrix((nz, nz)), q, A.tocsc(), b, cones, _settings()).solve()
+            if str(sol.status) in ("Solved", "AlmostSolved"):
+                out[coord][side] = sol.x[col]
+    return out
+
+
 def _brute_force(sc: Scenario, rec: Record, viewer: int) -> dict[tuple[str, int], tuple[float, float]]:
-    """(coordinate, step) → the viewer's exact interval, from the definition: variables x_0..x_k, w, f_j,0..k of every
-    node; the dynamics and the wind bound; node j's prior and measurement of step s only where s ≤ k − d(j→viewer)
-    (d from the topology: a reading's hop costs nothing, a state's one step); every declared fault bound (``used``:
-    this chain's readings rest on all of them); under k-of-N, every sequence of hypotheses (need sensors with
-    |f| ≤ τ at each step), the least and greatest value over all of them."""
-    data = step_data(rec)
-    d = sc.delays(viewer)
-    ids = sc.ids
-    bounded = set(sc.fault_bounded("used"))
+    """(coordinate, step) → the viewer's exact interval, from the definition (:func:`_program`, d from the topology: a
+    reading's hop costs nothing, a state's one step); under k-of-N, over every sequence of hypotheses (need sensors of
+    each group with |f| ≤ τ at each step) the least and greatest value."""
+    data, ids = step_data(rec), sc.ids
+    hypotheses: list[tuple[int, ...]] = [()]
+    for g in sc.health_groups:
+        hypotheses = [h + c for h in hypotheses for c in itertools.combinations([ids.index(i) for i in g.nodes], g.need)]
     out: dict[tuple[str, int], tuple[float, float]] = {}
     for k in range(len(data)):
-        nz = 2 * (k + 1) + k + len(ids) * (k + 1)
-
-        def x(s: int, c: int) -> int:
-            return 2 * s + c
-
-        def f(n: int, s: int) -> int:
-            return 2 * (k + 1) + k + n * (k + 1) + s
-
-        eq, lin, soc = [], [], []  # (terms, rhs)
-        for s in range(k):
-            a, b, dw = sc.model.blend(sc.model.weights(data[s].vx))
-            for row in range(2):
-                eq.append(({x(s + 1, row): 1.0, 2 * (k + 1) + s: -dw[row, 0], x(s, 0): -a[row, 0], x(s, 1): -a[row, 1]}, b[row, 0] * data[s].u))
-            lin += [({2 * (k + 1) + s: 1.0}, math.sqrt(sc.W)), ({2 * (k + 1) + s: -1.0}, math.sqrt(sc.W))]
-        for n, node in enumerate(sc.nodes):
-            known = [s for s in range(k + 1) if node.id in d and s <= k - d[node.id]]
-            for s in known:
-                lo, hi = node.sensor.measured_interval(data[s].y[node.id], data[s].gamma[node.id])
-                r = {x(s, 0): node.sensor.C[0], x(s, 1): node.sensor.C[1], f(n, s): node.sensor.Ds}
-                if np.isfinite(hi):
-                    lin.append((r, hi))
-                if np.isfinite(lo):
-                    lin.append(({c: -v for c, v in r.items()}, -lo))
-            if 0 in known:
-                li = np.linalg.inv(np.linalg.cholesky(node.P0))
-                cols = (x(0, 0), x(0, 1), f(n, 0))
-                centre = li @ node.x0_hat
-                soc.append([({}, math.sqrt(node.rho))] + [({c: -li[r_, m] for m, c in enumerate(cols)}, -centre[r_]) for r_ in range(3)])
-            if node.id in bounded:
-                for s in range(k + 1):
-                    if node.fault_size is not None:
-                        lin += [({f(n, s): 1.0}, node.fault_size), ({f(n, s): -1.0}, node.fault_size)]
-                    if node.fault_rate is not None and s > 0:
-                        lin += [({f(n, s): 1.0, f(n, s - 1): -1.0}, node.fault_rate), ({f(n, s): -1.0, f(n, s - 1): 1.0}, node.fault_rate)]
-        hypotheses: list[tuple[int, ...]] = [()]
-        for g in sc.health_groups:
-            hypotheses = [h + c for h in hypotheses for c in itertools.combinations([ids.index(i) for i in g.nodes], g.need)]
-        best = {c: [np.inf, -np.inf] for c in ("beta", "r", "f")}
+        nz, eq, lin, soc = _program(sc, data, sc.delays(viewer), k)
+        cols = {"beta": 2 * k, "r": 2 * k + 1, "f": 2 * (k + 1) + k + ids.index(viewer) * (k + 1) + k}
+        best = {c: [np.inf, -np.inf] for c in cols}
         for seq in itertools.product(hypotheses, repeat=k + 1):
-            rows = eq + lin + [({f(n, s): sign}, sc.fault_tolerance) for s, h in enumerate(seq) for n in h for sign in (1.0, -1.0)]
-            blocks = [rows[: len(eq)], rows[len(eq) :], *soc]
-            A = sparse.lil_matrix((sum(map(len, blocks)), nz))
-            b = []
-            for r_, (terms, rhs) in enumerate(t for blk in blocks for t in blk):
-                for c, v in terms.items():
-                    A[r_, c] = v
-                b.append(rhs)
-            cones = [clarabel.ZeroConeT(len(eq)), clarabel.NonnegativeConeT(len(rows) - len(eq))] + [clarabel.SecondOrderConeT(4)] * len(soc)
-            for coord, col in (("beta", x(k, 0)), ("r", x(k, 1)), ("f", f(ids.index(viewer), k))):
-                for side, sign in ((0, 1.0), (1, -1.0)):
-                    q = np.zeros(nz)
-                    q[col] = sign
-                    sol = clarabel.DefaultSolver(sparse.csc_matrix((nz, nz)), q, A.tocsc(), np.array(b), cones, _settings()).solve()
-                    if str(sol.status) in ("Solved", "AlmostSolved"):
-                        v = sol.x[col]
-                        best[coord][side] = min(best[coord][side], v) if side == 0 else max(best[coord][side], v)
+            healthy = [({2 * (k + 1) + k + n * (k + 1) + s: sign}, sc.fault_tolerance) for s, h in enumerate(seq) for n in h for sign in (1.0, -1.0)]
+            for c, (lo, hi) in _ends(nz, eq, lin + healthy, soc, cols).items():
+                best[c] = [min(best[c][0], lo), max(best[c][1], hi)]
         out.update({(c, k): (lo, hi) for c, (lo, hi) in best.items()})
     return out
 
