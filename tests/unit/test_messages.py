@@ -196,6 +196,8 @@ BAD = [
     ("region-2-vertices", _mut(_state(), region=[0.0, 0.0, 1.0, 0.0]), "invalid", "region"),
     ("region-too-long", _mut(_state(), region=[0.0] * 1000), "invalid", "region"),
     ("region-nan", _mut(_state(), region=[0.0, 0.0, 1.0, float("nan"), 1.0, 1.0]), "invalid", "region"),
+    ("sets-not-used", _mut(_state(), used=[2], sets=[2, 3]), "invalid", "sets"),  # a neighbour's set the step did not receive
+    ("sets-node-0", _mut(_state(), used=[2], sets=[0]), "invalid", "sets"),
 ]
 
 
