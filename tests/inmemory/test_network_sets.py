@@ -12,13 +12,12 @@ import pytest
 
 from netsetest.bench.topologies import ring_topology
 from netsetest.config.schema import load_topology
-from netsetest.models.signals import PiecewiseLinearFault
 from netsetest.runtime.inmemory import run_inmemory
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _published(res) -> dict[int, list[dict]]:  # noqa: ANN001  (an InMemoryResult)
+def _published(res) -> dict[int, list[dict]]:
     assert res.parts is not None
     return {int(i): entries for i, entries in res.parts["nodes"].items()}
 
@@ -65,11 +64,11 @@ def test_a_neighbours_set_that_missed_uncovers_the_step_that_rests_on_it(tmp_pat
 
 
 @pytest.fixture
-def ring(tmp_path: Path):  # noqa: ANN201
+def ring(tmp_path: Path):
     return load_topology(ring_topology(tmp_path, 8, 30, "saim", variant="near_reference"), "saim")
 
 
-def test_the_neighbours_sets_and_readings_narrow_what_a_ring_publishes(ring) -> None:  # noqa: ANN001
+def test_the_neighbours_sets_and_readings_narrow_what_a_ring_publishes(ring) -> None:
     """The directed ring with a reference (node 3) read by its out-neighbours only: with the neighbours' sets and the
     bounded readings every node downstream of the reference publishes a narrower yaw rate than without them; every
     node-step covered, no violation; states name the neighbours whose sets cut them."""
@@ -78,7 +77,7 @@ def test_the_neighbours_sets_and_readings_narrow_what_a_ring_publishes(ring) -> 
     for res in (with_, without):
         assert res.summary.violations_total == 0 and res.summary.node_steps_covered == res.summary.node_steps_evaluated
 
-    def r_width(res, i: int) -> float:  # noqa: ANN001
+    def r_width(res, i: int) -> float:
         entries = [e for e in _published(res)[i] if e["step"] >= 10]
         return float(np.mean([e["bounds"][1][1] - e["bounds"][1][0] for e in entries]))
 

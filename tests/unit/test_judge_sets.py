@@ -15,7 +15,7 @@ from netsetest.models.sensor import augmented
 from netsetest.roles.judge import INHERITED, MISSED, Cone, CopyCheck, Judge, Origin, StepChecks, StepInputs
 
 
-def _two_nodes():  # noqa: ANN202
+def _two_nodes():
     """paper6's sensors 1 and 2, node 1 hearing node 2 (NSNIM)."""
     sc = load_topology("paper6", "nsnim", 5)
     nodes = [dataclasses.replace(n, in_weights={1: {1: 1.0, 2: 1.0}, 2: {2: 1.0}}[n.id]) for n in sc.nodes if n.id in (1, 2)]
