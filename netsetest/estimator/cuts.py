@@ -252,9 +252,11 @@ def _size_cut(ctx: StepContext, res: StepResult) -> StepResult:
     """Where the step's sector rests on the declared fault bound, the truth's f⁺ lies in [−F, F]: the published set
     is cut by that interval (docs/estimator.md, "SAIM: the size cut")."""
     size, sector = ctx.statics.fault_bound.size, res.sector
-    if size is None or not (ctx.statics.own_bound or (sector is not None and sector.basis == "fault-bound")):
+    sector_bound = sector is not None and sector.basis == "fault-bound"
+    if size is None or not (ctx.statics.own_bound or sector_bound):
         return res
-    out = cut_fault(ctx, res, -size, size)
+    # (a bound relied on for the other nodes' sake only: the fault range alone, the ellipsoid as solved, what neighbours use)
+    out = cut_fault(ctx, res, -size, size, reshape=sector_bound)
     return res if out is None else out
 
 

@@ -141,6 +141,11 @@ class UpdateInput:
     readings: dict[int, tuple[float, float]] = field(default_factory=dict)  # reference j → (ỹ_j,k+1, γ_j,k+1) of this step
 
 
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a
+
+
 def _ball(d: int, slots: list[int], bound: float = 1.0) -> np.ndarray:
     """Q of the fact 1 − Σ_slots η²/bound ≥ 0."""
     q = np.zeros((d, d))
@@ -242,6 +247,7 @@ class LocalEstimator:
         self.references = dict(references or {})
         self.health = health
         self.bounded = dict(bounded or {})
+        self._bounded_c = {j: _read_only(np.append(sensor.C, 0.0)) for j, (sensor, _) in self.bounded.items()}  # c̄_j = [C_j, 0], once
         self.neighbour_sets = neighbour_sets
         # a sensor of uᵀx alone (no fault, no saturation): what propagated_interval needs for the prediction of uᵀx⁺
         self._u_sensor = dataclasses.replace(own, C=health.u, Ds=0.0, saturated=False) if health is not None else own
@@ -667,10 +673,10 @@ class LocalEstimator:
             if not (math.isfinite(f_lo) and math.isfinite(f_hi)) or f_lo > f_hi:
                 continue  # no bound on f_j⁺ (or an empty one: an assumption broke), so nothing on C_j x⁺
             iv = measurement_interval(sensor, y, gamma)
-            ds = (sensor.Ds * f_lo, sensor.Ds * f_hi)
-            lo, hi = iv.lo - max(ds), iv.hi - min(ds)
+            ds_lo, ds_hi = sorted((sensor.Ds * f_lo, sensor.Ds * f_hi))
+            lo, hi = iv.lo - ds_hi, iv.hi - ds_lo
             if math.isfinite(lo) or math.isfinite(hi):
-                out[j] = (np.append(sensor.C, 0.0), Interval(lo, hi))
+                out[j] = (self._bounded_c[j], Interval(lo, hi))
         return out, frozenset(rate_from & set(out))
 
     def _solve_step(self, ctx: StepContext, inp: UpdateInput, first: tuple[StepResult | None, _Solve] | None = None) -> StepResult:
