@@ -191,7 +191,8 @@ def _facts(name: str, ctx: StepContext, res: StepResult, p: np.ndarray) -> bool:
     readings = all(lo_hi.lo <= float(c @ p) <= lo_hi.hi for c, lo_hi in ctx.slabs.values())
     bounded_readings = all(lo_hi.lo <= float(c @ p) <= lo_hi.hi for c, lo_hi in ctx.region_slabs.values())
     size = st_.fault_bound.size
-    bounded = size is None or res.sector is None or res.sector.basis != "fault-bound" or abs(p[2]) <= size
+    relied = st_.own_bound or (res.sector is not None and res.sector.basis == "fault-bound")  # the declared size, where the step rests on it
+    bounded = size is None or not relied or abs(p[2]) <= size
     healthy = abs(p[2]) <= max(st_.health_tolerance or 0.0, PIN_FLOOR)
     pinned = ctx.health is None or not ctx.health.pinned or healthy
     measured = ctx.meas.lo <= float(p[:2] @ st_.own.C + st_.own.Ds * p[2]) <= ctx.meas.hi
