@@ -138,8 +138,18 @@ def _step(draw: st.DrawFn, kofn: bool = False) -> tuple[StepContext, StepResult,
     health = _health(draw, rng, pts, own) if kofn or draw(st.booleans()) else None
     if kofn or draw(st.booleans()):  # the region the step's region cut left (what the health-fault cut reads)
         res = dataclasses.replace(res, region=moved)
+    statics = dataclasses.replace(_context().statics, own_bound=draw(st.booleans()))  # other nodes rely on its bound, or not
     ctx = dataclasses.replace(
-        _context(), rho=rho, meas=meas, sector=res.sector, moved=moved, slabs=slabs, health=health, region_slabs=region_slabs, sets=frozenset({2})
+        _context(),
+        statics=statics,
+        rho=rho,
+        meas=meas,
+        sector=res.sector,
+        moved=moved,
+        slabs=slabs,
+        health=health,
+        region_slabs=region_slabs,
+        sets=frozenset({2}),
     )
     pts = np.vstack([pts, _extremes(moved, meas, own, rng, health)])
     pts = pts[_inside(res, pts, rho).all(axis=1)]
