@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from netsetest.analysis.exact import COORDINATES, DEGENERATE_WIDTH, FROM_STEP, NARROWER_TOL, ExactBounds, exact_bounds, step_data
+from netsetest.analysis.exact import COORDINATES, DEGENERATE_WIDTH, FROM_STEP, NARROWER_TOL, ExactBounds, exact_bounds, network_limit, step_data
 from netsetest.config.schema import Case, ConfigError, Scenario, load_topology
 from netsetest.analysis.errors import CompareError
 from netsetest.estimator.names import DEFAULT_COMPARE, ESTIMATOR_NAMES, EXACT, SDP
@@ -52,8 +52,10 @@ CONTAIN_TOL = 1e-8  # the sets' own membership slack (sets.MEMBERSHIP_TOL) plus 
 EXACT_PINNED = 1e-9  # an exact half-width below this is a coordinate pinned by a declaration (no ratio to it)
 _COLLECTOR: tuple[str, ...] = ("dependency cone (collector)",)  # a node row: judged by the run's collector
 SDP_ALONE, EXACT_LOCAL = "sdp-alone", "exact-local"  # compare(alone=True): the nodes alone, each node's exact local limit
+EXACT_NETWORK = "exact-network"  # compare(alone=True): each node's network limit (what the topology carries to it)
 SDP_ELLIPSOID = "sdp-ellipsoid"  # the SDP's published ellipsoid alone (the paper's own set), scored from the same run as ``sdp``
-ALONE_ROWS = (SDP_ALONE, EXACT_LOCAL)
+ALONE_ROWS = (SDP_ALONE, EXACT_LOCAL, EXACT_NETWORK)
+OFFLINE = (EXACT, EXACT_LOCAL, EXACT_NETWORK)  # the rows that are limits, not estimators
 
 
 @dataclass
@@ -77,6 +79,8 @@ class _Accumulator:
     refused: list[str] = field(default_factory=list)
     assumptions: set[str] = field(default_factory=set)
     references: set[str] = field(default_factory=set)  # fault-bounds modes of the exact limits compared with
+    # node → (published, network limit) mean widths (3,) over its late steps: the ratios to what the topology carries
+    per_node_network: dict[int, list[tuple[np.ndarray, np.ndarray]]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -103,6 +107,10 @@ class CompareRow:
     fallbacks: int
     refused: list[str]
     exact_reference: list[str]  # fault-bounds modes of the exact limit its ratios are against
+    # the same mean widths over each node's network limit (compare(network=True): what the topology carries to the node;
+    # docs/exact.md), [β, r, f] pooled over nodes and per node; None where not computed or a point
+    ratio_network: list[float | None] = field(default_factory=lambda: [None, None, None])
+    ratio_network_by_node: dict[int, list[float | None]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -137,7 +145,7 @@ def _record_bounds(rec: Record, i: int, ellipsoid: bool = False) -> np.ndarray:
 
 
 def _exact_array(ex: ExactBounds, i: int) -> np.ndarray:
-    return np.stack([ex.beta, ex.r, ex.fault[i]], axis=1)
+    return np.stack([ex.interval("beta", i), ex.interval("r", i), ex.fault[i]], axis=1)
 
 
 def _limit_ends(ex: ExactBounds, i: int) -> np.ndarray:
@@ -149,8 +157,25 @@ def _limit_ends(ex: ExactBounds, i: int) -> np.ndarray:
     return out
 
 
-def _score(acc: _Accumulator, node: int, bounds: np.ndarray, steps: np.ndarray, truth: np.ndarray, reference: ExactBounds, broken: list[str | None]) -> None:
-    """Add node ``node``'s run: bounds (K, 3, 2) at ``steps``, truth (K, 3), against the exact limit ``reference``."""
+def _score(
+    acc: _Accumulator,
+    node: int,
+    bounds: np.ndarray,
+    steps: np.ndarray,
+    truth: np.ndarray,
+    reference: ExactBounds,
+    broken: list[str | None],
+    network: ExactBounds | None = None,
+) -> None:
+    """Add node ``node``'s run: bounds (K, 3, 2) at ``steps``, truth (K, 3), against the exact limit ``reference`` (and
+    its widths against the node's ``network`` limit)."""
+    if network is not None:
+        net = _exact_array(network, node)[steps]
+        keep = np.isfinite(net).all(axis=(1, 2)) & (steps >= FROM_STEP)
+        if keep.any():
+            acc.per_node_network.setdefault(node, []).append(
+                (np.diff(bounds[keep], axis=2)[..., 0].mean(axis=0), np.diff(net[keep], axis=2)[..., 0].mean(axis=0))
+            )
     ex = _exact_array(reference, node)[steps]
     limit = _limit_ends(reference, node)[steps]
     held = np.array([b is None for b in broken], dtype=bool)
@@ -197,6 +222,7 @@ def _row(name: str, acc: _Accumulator, real_time: bool) -> CompareRow:
     else:
         ratio, excess = np.full(3, np.nan), []
     ms = np.array(acc.ms)
+    net_ratio, net_by_node = _network_ratios(acc.per_node_network)
     return CompareRow(
         estimator=name,
         real_time=real_time,
@@ -220,7 +246,21 @@ def _row(name: str, acc: _Accumulator, real_time: bool) -> CompareRow:
         fallbacks=acc.fallbacks,
         refused=acc.refused[:3],
         exact_reference=sorted(acc.references),
+        ratio_network=net_ratio,
+        ratio_network_by_node=net_by_node,
     )
+
+
+def _network_ratios(per_node: dict[int, list[tuple[np.ndarray, np.ndarray]]]) -> tuple[list[float | None], dict[int, list[float | None]]]:
+    """[β, r, f] mean published width over the network limit's, pooled over the nodes and per node (None: a point)."""
+    if not per_node:
+        return [None, None, None], {}
+    means = {i: (np.mean([w for w, _ in runs], axis=0), np.mean([e for _, e in runs], axis=0)) for i, runs in sorted(per_node.items())}
+    keep = {i: e > DEGENERATE_WIDTH for i, (_, e) in means.items()}
+    w_all = sum(np.where(keep[i], w, 0.0) for i, (w, _) in means.items())
+    e_all = sum(np.where(keep[i], e, 0.0) for i, (_, e) in means.items())
+    pooled = [float(a / b) if b > 0 else None for a, b in zip(w_all, e_all)]  # type: ignore[arg-type]  # sums of (3,) arrays
+    return pooled, {i: [float(w[m] / e[m]) if keep[i][m] else None for m in range(3)] for i, (w, e) in means.items()}
 
 
 def compare(
@@ -232,13 +272,16 @@ def compare(
     steps: int | None = None,
     progress: Callable[[int, int, str], None] | None = None,
     alone: bool = False,
+    network: bool = False,
 ) -> Comparison:
     """Run every (case, signals, seed) and score every estimator (module doc); ``progress(done, total,
     what)`` after each run and each estimator's scoring (a comparison takes tens of seconds).
 
-    ``alone``: two more rows, what the network is worth: ``sdp-alone``, the same nodes run on their own (a
-    self-loop only, no reading: :meth:`Scenario.alone`), and ``exact-local``, each node's exact limit from
-    its own data (the best any node alone can do); both against the central exact limit, like every row."""
+    ``alone``: three more rows, what the network is worth: ``sdp-alone``, the same nodes run on their own (a
+    self-loop only, no reading: :meth:`Scenario.alone`), ``exact-local``, each node's exact limit from
+    its own data (the best any node alone can do), and ``exact-network``, each node's limit from what the topology
+    carries to it (docs/exact.md); all against the central exact limit, like every row.  ``network`` (implied by
+    ``alone``): every row's widths over each node's network limit too (``ratio_network``, ``ratio_network_by_node``)."""
     unknown = [e for e in estimators if e not in ESTIMATOR_NAMES]
     if unknown:
         raise CompareError(f"unknown estimator {unknown[0]!r}; choose from {', '.join(ESTIMATOR_NAMES)}")
@@ -252,7 +295,7 @@ def compare(
     first_bounds: dict[str, dict[int, np.ndarray]] = {}
     truth_fault: dict[int, np.ndarray] = {}
     sc = None
-    total = len(cases) * len(signals) * len(seeds) * (1 + len(estimators) + 2 * alone)  # a run, then each row's scoring
+    total = len(cases) * len(signals) * len(seeds) * (1 + len(estimators) + len(ALONE_ROWS) * alone)  # a run, then each row's scoring
     done = [0]
 
     def report(what: str) -> None:
@@ -266,14 +309,15 @@ def compare(
             for seed in seeds:
                 rec = _run_record(sc, sig, seed)
                 report(f"run {sc.case}/{sig}/{seed}")
-                ex = _score_run(sc, rec, sig, seed, estimators, acc, first_bounds if not runs else None, report)
+                ex, net = _score_run(sc, rec, sig, seed, estimators, acc, first_bounds if not runs else None, report, network or alone)
                 if alone:
-                    _score_alone(sc, rec, _run_record(sc.alone(), sig, seed), ex, acc, first_bounds if not runs else None, report)
+                    assert net is not None
+                    _score_alone(sc, rec, _run_record(sc.alone(), sig, seed), ex, net, acc, first_bounds if not runs else None, report)
                 runs.append(f"{sc.case}/{sig}/{seed}")
                 if len(runs) == 1:
                     truth_fault = {i: np.array([t["faults"][str(i)] for t in sorted(rec.truth, key=lambda t: t["step"])]) for i in sc.ids}
     assert sc is not None
-    rows = [_row(e, a, e not in (EXACT, EXACT_LOCAL)) for e, a in acc.items()]
+    rows = [_row(e, a, e not in OFFLINE) for e, a in acc.items()]
     return Comparison(str(topology), runs, sc.steps, sc.tau_s, rows, first_bounds, truth_fault, sc.plant_label)
 
 
@@ -309,12 +353,15 @@ def _score_alone(
     rec: Record,
     rec_alone: Record,
     ex: ExactBounds,
+    net: ExactBounds,
     acc: dict[str, _Accumulator],
     keep: dict[str, dict[int, np.ndarray]] | None,
     report: Callable[[str], None],
 ) -> None:
     """The rows of ``compare(alone=True)``: the nodes run alone (``rec_alone``, the same truth and
-    measurements) and each node's exact local limit, against the central exact limit ``ex``."""
+    measurements), each node's exact local limit and each node's network limit ``net``, against the central exact
+    limit ``ex``."""
+    cones = _centralized_cones(sc, rec, net)  # (the network limit rests on what reaches the node: a subset of this)
     truth = sorted(rec.truth, key=lambda t: t["step"])
     for name in ALONE_ROWS:
         a = acc[name]
@@ -324,6 +371,10 @@ def _score_alone(
             tr_i = np.array([np.r_[t["x"], t["faults"][str(i)]] for t in truth])
             if name == SDP_ALONE:
                 bounds, steps, broken = _node_track(rec_alone, i, a)
+            elif name == EXACT_NETWORK:
+                bounds, steps = _exact_array(net, i), np.arange(len(truth))
+                broken = [cones[int(k)] for k in steps]
+                a.assumptions.update(("prior", "noise", "disturbance", *(("fault_bound",) if net.bounded_nodes else ()), *((HEALTH,) if net.health else ())))
             else:
                 t0 = time.perf_counter()
                 local = exact_bounds(sc, rec, "used", nodes=[i])
@@ -332,7 +383,7 @@ def _score_alone(
                 broken = history_cone(sc, truth, i, i in local.bounded_nodes)
                 a.assumptions.update(("prior", "noise", "disturbance", *(("fault_bound",) if local.bounded_nodes else ())))
             a.references.add(ex.label)
-            _score(a, i, bounds, steps, tr_i[steps], ex, broken)
+            _score(a, i, bounds, steps, tr_i[steps], ex, broken, net)
             if keep is not None:
                 keep[name][i] = bounds
         report(name)
@@ -354,13 +405,15 @@ def _score_run(
     acc: dict[str, _Accumulator],
     keep: dict[str, dict[int, np.ndarray]] | None,
     report: Callable[[str], None],
-) -> ExactBounds:
+    network: bool = False,
+) -> tuple[ExactBounds, ExactBounds | None]:
     """Score every estimator on one (case, signals, seed): ``rec`` is the SDP network's run; each set
     estimator runs as the network's nodes on the same seed.  Returns the central exact limit (what every
-    row is measured against)."""
+    row is measured against) and, with ``network``, each node's network limit (every row's widths over it too)."""
     data = step_data(rec)
     t0 = time.perf_counter()
     ex = exact_bounds(sc, rec, "used")
+    net = network_limit(sc, rec, ex) if network else None
     exact_ms = 1000 * (time.perf_counter() - t0) / (len(data) * len(sc.ids))
     ex_all: ExactBounds | None = None  # the exact limit with every declared fault bound, if a row uses more
     truth = sorted(rec.truth, key=lambda t: t["step"])
@@ -391,15 +444,15 @@ def _score_run(
                     ex_all = ex_all or exact_bounds(sc, rec, "all")
                     reference = ex_all
             a.references.add(reference.label)
-            _score(a, i, bounds, steps, tr_i[steps], reference, broken)
+            _score(a, i, bounds, steps, tr_i[steps], reference, broken, net)
             if keep is not None:
                 keep[name][i] = bounds
             if name == SDP:  # the paper's own set, the published ellipsoid alone, from the same run
                 e_bounds, _, _ = _node_track(run, i, acc[SDP_ELLIPSOID], ellipsoid=True)
                 acc[SDP_ELLIPSOID].references.add(reference.label)
-                _score(acc[SDP_ELLIPSOID], i, e_bounds, steps, tr_i[steps], reference, broken)
+                _score(acc[SDP_ELLIPSOID], i, e_bounds, steps, tr_i[steps], reference, broken, net)
         report(name)
-    return ex
+    return ex, net
 
 
 def comparison_document(c: Comparison) -> list[dict]:
@@ -423,6 +476,7 @@ TABLE_HEADER = (
     "fault/exact",
     "β, r / exact",
     "exact with fault bounds",
+    "β, r, f / network",
     "rms radius rel.",
     "ms median",
     "ms p95",
@@ -448,6 +502,7 @@ def table_rows(c: Comparison) -> list[tuple[str, ...]]:
                 _fmt(r.ratio_exact, ".3f"),
                 "/".join(_fmt(v, ".3f") for v in r.ratio_exact_state),
                 ",".join(r.exact_reference),
+                "/".join(_fmt(v, ".3f") for v in r.ratio_network),
                 _fmt(r.rms_radius_rel, ".3f"),
                 _fmt(r.ms_median, ".3f"),
                 _fmt(r.ms_p95, ".3f"),
@@ -469,6 +524,15 @@ def node_ratio_lines(c: Comparison) -> list[str]:
             v = r.ratio_exact_by_node.get(i)
             cells.append(f"{'' if v is None else '/'.join(_fmt(v[m], '.3f') for m in (1, 0, 2)):>20}")
         lines.append(f"{r.estimator:<22}" + "".join(cells) + f"  {_fmt(r.pinned_excess, '.1e')}")
+    if any(r.ratio_network_by_node for r in c.rows):
+        lines.append(f"per node, r / β / f width over the node's network limit (steps ≥ {FROM_STEP}; docs/exact.md)")
+        lines.append(f"{'estimator':<22}" + "".join(f"{'node ' + str(i):>20}" for i in nodes))
+        for r in c.rows:
+            cells = []
+            for i in nodes:
+                v = r.ratio_network_by_node.get(i)
+                cells.append(f"{'' if v is None else '/'.join(_fmt(v[m], '.3f') for m in (1, 0, 2)):>20}")
+            lines.append(f"{r.estimator:<22}" + "".join(cells))
     return lines
 
 

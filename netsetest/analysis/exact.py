@@ -209,6 +209,7 @@ class _Program:
         # (Scenario.delays; a node whose data never reach the viewer is absent); None: centralized, every datum
         self.viewer = viewer
         self.delay: dict[int, int] = scenario.delays(viewer) if viewer is not None else dict.fromkeys(self.ids, 0)
+        self.first: dict[int, int] = scenario.delays(viewer, first=True) if viewer is not None else self.delay  # step 0's: no reading carries it
         self.hold: set[int] = set()  # nodes whose faults stay in the program where not yet measured (kofn: tied health)
         self.ne = 2 if scenario.uncertainty is not None else 0  # e_j columns per step
         self.nz = 2 * (K + 1) + K + self.ne * K + len(self.ids) * (K + 1)
@@ -220,7 +221,7 @@ class _Program:
         self.eq, self.lin, self.soc = self._dynamics_rows().build(self.nz), lin.build(self.nz), self._prior_rows().build(self.nz)
         self.esoc = esoc.build(self.nz)
         for block in (self.lin, self.soc):  # the delay of each row's datum (never: past any horizon)
-            block.delay[:] = [0 if i < 0 else self.delay.get(int(i), 2 * (K + 1)) for i in block.node]
+            block.delay[:] = [0 if i < 0 else (self.first if s == 0 else self.delay).get(int(i), 2 * (K + 1)) for i, s in zip(block.node, block.step)]
 
     def _dynamics_rows(self) -> _Rows:
         """x_{j+1} − Ā_j x_j − D̄_j w_j − e_j = B̄_j u_j."""
@@ -314,7 +315,7 @@ class _Program:
 
     def available(self, node: int, j: int, k: int) -> bool:
         """Whether node ``node``'s data of step j (its measurement; at j = 0 also its prior) are in the horizon-k program."""
-        d = self.delay.get(node)
+        d = (self.first if j == 0 else self.delay).get(node)
         return d is not None and j <= k - d
 
     def _available_rows(self, block: _RowBlock, k: int) -> np.ndarray:
@@ -529,7 +530,8 @@ class _HealthPlan:
         were found dead, and the unions of a run whose ends settle without their roots (:func:`kofn.guided`) kept
         them all.  The solves spent."""
         solves = 0
-        for union in [u for u in self.unions if len(u.pieces) > 1 and u.step > 0]:  # step 0's (the priors tie it) is cut by its own horizon
+        first = 0 if self.prog.viewer is None else -1  # step 0's (the priors tie it) is cut by its own horizon, where that has its data
+        for union in [u for u in self.unions if len(u.pieces) > 1 and u.step > first]:
             ends = []
             for sign in (1.0, -1.0):
                 q = horizon.objective({c: sign * v for c, v in union.t.items()})
@@ -710,10 +712,8 @@ def exact_bounds(
     search = _Search(keep_witnesses, eliminate_free_faults, health_budget, math.inf if budget_s is None else time.process_time() + budget_s)
     infeasible: set[int] = set()
     applied: list[_HealthPlan] = []
-    everywhere = (
-        network and all(d == 0 for i in scenario.ids for d in scenario.delays(i).values()) and len(scenario.delays(scenario.ids[0])) == len(scenario.ids)
-    )
-    for n, viewer in enumerate(scenario.ids if network and not everywhere else [None]):
+    shared = network and everywhere(scenario)
+    for n, viewer in enumerate(scenario.ids if network and not shared else [None]):
         prog = _Program(scenario, data, bounded, viewer)
         plans = _plans(prog, scenario, health)
         if viewer is None:
@@ -728,7 +728,7 @@ def exact_bounds(
 
         infeasible |= search.run(prog, plans, limits, step_progress)
         applied = applied or plans
-    if everywhere:  # every node has every datum in its step: each node's program is the central one
+    if shared:  # every node has every datum in its step: each node's program is the central one
         by_node = {i: (beta.copy(), r.copy()) for i in scenario.ids}
         beta[:], r[:] = np.nan, np.nan
     health_search = None
@@ -832,6 +832,23 @@ class _Search:
                     for p in plans:
                         p.drop([d for d in result.dead if d[0] < k])
         return feasible
+
+
+def everywhere(scenario: Scenario) -> bool:
+    """Whether every node has every node's data in its step, step 0's too (every d(j→i) = 0: one node alone, since a
+    neighbour's step-0 data come with its state, a step late): then each node's network limit is the central one."""
+    return all(len(d) == len(scenario.ids) and not any(d.values()) for i in scenario.ids for d in (scenario.delays(i), scenario.delays(i, first=True)))
+
+
+def network_limit(scenario: Scenario, record: Record, central: ExactBounds, **kw: object) -> ExactBounds:
+    """Each node's network limit (:func:`exact_bounds` with ``network=True``, the same ``fault_bounds`` and health as
+    ``central``); where every datum reaches every node in its step, ``central`` itself as every node's (no program
+    solved again).  ``kw``: exact_bounds' other options (budget, progress)."""
+    if everywhere(scenario):
+        nan = np.full_like(central.beta, np.nan)
+        return replace(central, beta=nan, r=nan.copy(), by_node={i: (central.beta, central.r) for i in scenario.ids})
+    health = central.health is not None or not scenario.health_declared
+    return exact_bounds(scenario, record, central.fault_bounds, health=health, network=True, **kw)  # type: ignore[arg-type]  # kw: exact_bounds' keyword options, passed through
 
 
 def _horizon(conic: Conic, plans: list[_HealthPlan], nz: int, deadline: float) -> tuple[_Horizon, int]:

@@ -24,7 +24,7 @@ from netsetest.bench.scaleout import scaleout_markdown
 from netsetest.bench.scenario import compare_markdown, exact_markdown, scenario_markdown
 from netsetest.bench.spread import RUNS_DIR, spread_markdown
 from netsetest.bench.view import view_markdown, view_summary_markdown
-from netsetest.bench.widths import region_markdown, widths_markdown, widths_summary_markdown
+from netsetest.bench.widths import region_markdown, sets_section, widths_markdown, widths_summary_markdown
 
 
 @dataclass(frozen=True)
@@ -95,6 +95,7 @@ PARTS: dict[str, Part] = {
     "widths": Part("Published width over the exact limit, per coordinate", "bench/widths.json", "widths", widths_markdown, _WIDTHS),
     "widths-summary": Part("Published width over the exact limit, in short", "bench/widths.json", "widths", widths_summary_markdown, _WIDTHS, in_results=False),
     "widths-region": Part("What the region buys the set estimators", "bench/widths.json", "widths", region_markdown, _WIDTHS, in_results=False),
+    "widths-sets": Part("What a node takes from its network", "bench/widths.json", "widths", sets_section, _WIDTHS, in_results=False),
     "performance": Part(
         "Performance",
         "bench/results.json",
@@ -131,6 +132,7 @@ SECTIONED = (
     "docs/records.md",
     "docs/summary.md",
     "docs/estimator.md",
+    "docs/network.md",
 )  # files with generated sections between markers
 RESULTS = "docs/results.md"  # written whole
 RENDER_COMMAND = "netsetest bench --render-docs"

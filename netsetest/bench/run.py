@@ -80,6 +80,10 @@ QUICK: dict[str, Any] = {
     "widths_worst_seeds": [3, 11],  # --only widths (issue 28's runs)
     "widths_car_seeds": [10],  # held out: the car's mismatch bound is calibrated on seeds 0-9
     "widths_lap_steps": 100,
+    "sets_seeds": list(range(10)),  # --only widths, issue 44: faults at their bounds, declared bounds true and false
+    "sets_ring_seeds": [0],  # issue 44's directed rings
+    "sets_ring_steps": 80,
+    "sets_declared_steps": 80,
 }
 FULL: dict[str, Any] = {
     "steps": 80,
@@ -127,6 +131,10 @@ FULL: dict[str, Any] = {
     "widths_worst_seeds": [3, 11],
     "widths_car_seeds": [10, 11, 12],
     "widths_lap_steps": 600,
+    "sets_seeds": list(range(10)),
+    "sets_ring_seeds": [0, 1, 2],
+    "sets_ring_steps": 80,
+    "sets_declared_steps": 80,
 }
 
 

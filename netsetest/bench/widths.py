@@ -118,10 +118,12 @@ def widths_figures(cfg: dict, tmp: Path, baseline: Path | None = None) -> dict:
 
     from netsetest.analysis.exact import FROM_STEP
 
+    from netsetest.bench.network_sets import sets_figures
+
     with ProcessPoolExecutor(JOBS) as pool:
         runs = list(pool.map(_measure, plan(cfg)))
     _log("the region's cost per node-step (paper6, in memory, this process alone)")
-    out = {"from_step": FROM_STEP, "runs": runs, "cost": region_cost()}
+    out = {"from_step": FROM_STEP, "runs": runs, "cost": region_cost(), "sets": sets_figures(cfg, tmp)}
     if baseline is not None:
         _log(f"the step side by side with the baseline {baseline} (paper6, in memory, processes of their own, alternating)")
         try:
@@ -361,9 +363,18 @@ def side_by_side_markdown(side: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def sets_section(res: dict) -> str:
+    """Issue 44's tables (bench/network_sets.py), or where the figures are older than them, that they are not there."""
+    from netsetest.bench.network_sets import sets_markdown
+
+    if "sets" not in res:
+        return "Not measured in these figures (they are older than issue 44's part): measure them with the command above.\n"
+    return sets_markdown(res["sets"])
+
+
 def widths_markdown(res: dict) -> str:
     """Every run: the SDP against its target, then every estimator's r / β / f over exact, then per node; then the
-    region's cost (figures measured before it had one: none)."""
+    region's cost (figures measured before it had one: none); then what a node takes from its network (issue 44)."""
     runs = res["runs"]
     lines = [widths_summary_markdown(res)]
     if "cost" in res:
@@ -385,6 +396,8 @@ def widths_markdown(res: dict) -> str:
             cells = [" / ".join(_f(by[i][m]) for m, _ in COORDS) if i in by else "" for i in nodes]
             lines.append(f"| `{r['estimator']}` | " + " | ".join(cells) + " |")
         lines.append("")
+    if "sets" in res:
+        lines += ["What a node takes from its network (issue 44, netsetest/bench/network_sets.py):", "", sets_section(res)]
     return "\n".join(lines)
 
 

@@ -659,17 +659,23 @@ class Scenario:
             n.id for n in self.nodes if n.id != i and n.fault_size != 0 and (n.fault_size is not None or n.fault_rate is not None) and self._reaches(n.id, i)
         )
 
+    def reads_everyone(self, i: int) -> bool:
+        """Whether node i reads every other node's reading in its step (then its neighbours' sets hold nothing it lacks
+        but their priors' first steps: docs/network.md)."""
+        return set(self.reading_sources(i)) >= set(self.ids) - {i}
+
     def bound_relied(self, i: int) -> bool:
         """Whether node i's declared fault bound is relied on at every step: another node uses its reading with it
         (:meth:`bounded_sources`); node i's own published set then rests on it too (docs/network.md)."""
         return any(i in self.bounded_sources(j) for j in self.ids if j != i)
 
-    def delays(self, i: int) -> dict[int, int]:
+    def delays(self, i: int, first: bool = False) -> dict[int, int]:
         """d(j→i) for every node j whose data can reach node i: the steps the runtime needs to carry j's measurement of a
         step to i (docs/exact.md, *The network limit*).  At step k node i has its own measurement of k, the readings of
         k of its reading sources and its in-neighbours' states of k − 1, each of which holds what its node knew at
-        k − 1: so one hop per step along the state edges, and a reading's hop in the same step.  d(i→i) = 0; a node
-        whose data never reaches i is left out."""
+        k − 1: so one hop per step along the state edges, and a reading's hop in the same step.  ``first``: the delays
+        of step 0's data (the prior and the first measurement), which no reading carries (a reading is of a step ≥ 1):
+        state hops only.  d(i→i) = 0; a node whose data never reaches i is left out."""
         dist = {i: 0}  # state hops from l to i
         frontier = [i]
         while frontier:
@@ -681,7 +687,7 @@ class Scenario:
                         nxt.append(src)
             frontier = nxt
         out = dict(dist)
-        for reader in self.ids:
+        for reader in self.ids if not first else ():
             if reader in dist:
                 for j in self.reading_sources(reader):
                     out[j] = min(out.get(j, dist[reader]), dist[reader])

@@ -576,7 +576,7 @@ class LocalEstimator:
             {j: scenario.node(j).sensor for j in scenario.references() if j != node_id},
             HealthModel.of(scenario, node_id),
             {j: (scenario.node(j).sensor, FaultBound(scenario.node(j).fault_rate, scenario.node(j).fault_size)) for j in scenario.bounded_sources(node_id)},
-            scenario.neighbour_sets,
+            scenario.neighbour_sets and not scenario.reads_everyone(node_id),
             scenario.bound_relied(node_id),
         )
 

@@ -47,11 +47,11 @@ def _record(case: str, group: bool = False) -> tuple[Scenario, Record]:
 Rows = list[tuple[dict[int, float], float]]  # a·z (=, ≤) b
 
 
-def _program(sc: Scenario, data: list, d: dict[int, int], k: int) -> tuple[int, Rows, Rows, list[Rows]]:
-    """Horizon k's columns and rows for a viewer whose data delays are ``d``: z = [x_0..x_k, w_0..w_{k−1}, f_j,0..k of
-    every node j]; the dynamics (equalities), the wind bound, node j's measurement of step s only where s ≤ k − d_j
-    and its prior where 0 ≤ k − d_j (second-order cones), every declared fault bound (``used``: this chain's readings
-    rest on all of them)."""
+def _program(sc: Scenario, data: list, d: dict[int, int], d0: dict[int, int], k: int) -> tuple[int, Rows, Rows, list[Rows]]:
+    """Horizon k's columns and rows for a viewer whose data delays are ``d`` (``d0``: step 0's, which no reading
+    carries): z = [x_0..x_k, w_0..w_{k−1}, f_j,0..k of every node j]; the dynamics (equalities), the wind bound, node
+    j's measurement of step s ≥ 1 only where s ≤ k − d_j, its measurement of step 0 and its prior only where
+    0 ≤ k − d0_j (second-order cones), every declared fault bound (``used``: this chain's readings rest on all of them)."""
     ids, bounded = sc.ids, set(sc.fault_bounded("used"))
     x = lambda s, c: 2 * s + c  # noqa: E731
     f = lambda n, s: 2 * (k + 1) + k + n * (k + 1) + s  # noqa: E731
@@ -64,7 +64,7 @@ def _program(sc: Scenario, data: list, d: dict[int, int], k: int) -> tuple[int, 
             eq.append(({x(s + 1, row): 1.0, 2 * (k + 1) + s: -dw[row, 0], x(s, 0): -a[row, 0], x(s, 1): -a[row, 1]}, b[row, 0] * data[s].u))
         lin += [({2 * (k + 1) + s: 1.0}, math.sqrt(sc.W)), ({2 * (k + 1) + s: -1.0}, math.sqrt(sc.W))]
     for n, node in enumerate(sc.nodes):
-        known = [s for s in range(k + 1) if node.id in d and s <= k - d[node.id]]
+        known = [s for s in range(k + 1) if node.id in (d0 if s == 0 else d) and s <= k - (d0 if s == 0 else d)[node.id]]
         for s in known:
             lo, hi = node.sensor.measured_interval(data[s].y[node.id], data[s].gamma[node.id])
             r = {x(s, 0): node.sensor.C[0], x(s, 1): node.sensor.C[1], f(n, s): node.sensor.Ds}
@@ -113,7 +113,7 @@ def _brute_force(sc: Scenario, rec: Record, viewer: int) -> dict[tuple[str, int]
         hypotheses = [h + c for h in hypotheses for c in itertools.combinations([ids.index(i) for i in g.nodes], g.need)]
     out: dict[tuple[str, int], tuple[float, float]] = {}
     for k in range(len(data)):
-        nz, eq, lin, soc = _program(sc, data, sc.delays(viewer), k)
+        nz, eq, lin, soc = _program(sc, data, sc.delays(viewer), sc.delays(viewer, first=True), k)
         cols = {"beta": 2 * k, "r": 2 * k + 1, "f": 2 * (k + 1) + k + ids.index(viewer) * (k + 1) + k}
         best = {c: [np.inf, -np.inf] for c in cols}
         for seq in itertools.product(hypotheses, repeat=k + 1):
@@ -137,6 +137,7 @@ def test_the_network_limit_is_the_definitions(case: str) -> None:
     node 1's a step late (through node 2's state): three different programs, each the brute force's."""
     sc, rec = _record(case)
     assert sc.delays(1) == {1: 0} and sc.delays(2) == {1: 0, 2: 0} and sc.delays(3) == {1: 1, 2: 0, 3: 0}
+    assert sc.delays(3, first=True) == {1: 2, 2: 1, 3: 0}  # step 0's data: no reading, the states alone
     ex = exact_bounds(sc, rec, network=True)
     assert ex.network and ex.label.startswith("used network") and not ex.infeasible_steps
     _agrees(ex, sc, rec)
@@ -155,7 +156,8 @@ def test_the_network_limit_under_k_of_n_is_the_brute_force_over_every_hypothesis
 
 def test_it_lies_between_the_central_and_the_local_limit() -> None:
     """More data for the central limit, less for a node alone: every interval of the network limit holds the central one
-    and lies within the local one; where every reading reaches every node in its step, it is the central one."""
+    and lies within the local one; where every reading reaches every node in its step, it is the central one once step
+    0's data (which only the states carry) are in."""
     sc, rec = _record("saim")
     net, central = exact_bounds(sc, rec, network=True), exact_bounds(sc, rec)
     slack = 1e-7
@@ -168,9 +170,12 @@ def test_it_lies_between_the_central_and_the_local_limit() -> None:
     everywhere = dataclasses.replace(sc, reading_scope="network")
     assert all(v == 0 for i in sc.ids for v in everywhere.delays(i).values())
     same = exact_bounds(everywhere, rec, network=True)
-    for i in sc.ids:
+    whole = [i for i in sc.ids if len(everywhere.delays(i, first=True)) == len(sc.ids)]  # every node's step 0 reaches it (node 3)
+    assert whole == [3]
+    for i in whole:
+        late = max(everywhere.delays(i, first=True).values())
         for c in ("beta", "r", "f"):
-            assert np.allclose(same.interval(c, i), central.interval(c, i), rtol=0, atol=1e-8)  # type: ignore[arg-type]
+            assert np.allclose(same.interval(c, i)[late:], central.interval(c, i)[late:], rtol=0, atol=1e-8)  # type: ignore[arg-type]
 
 
 def test_a_steps_union_is_built_again_as_its_readings_come_in() -> None:
