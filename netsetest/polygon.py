@@ -29,6 +29,8 @@ ROUNDING = 1e-10  # outward, relative to the coordinates' size: far above one st
 MAX_REACH = 1e3  # a drop extends a neighbour by at most this many of its lengths (q's rounding stays ≪ DUPLICATE)
 AXES = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 SLIVER = 1e-4  # Polygon.within cuts by a side of the other polygon only where it takes off more than this of the width
+_OUTWARD = np.array([[0.0, -1.0], [1.0, 0.0]])  # (e_x, e_y) @ this = (e_y, −e_x): a counter-clockwise side's outward normal
+
 DUPLICATE = 1e-13  # vertices closer than this (relative to the coordinates' size) are one: far below ROUNDING
 
 
@@ -119,17 +121,15 @@ class Polygon:
         the sides beyond are slivers of rounding and margins, below 10⁻⁶ of the width, each a cut for nothing): where
         there is none, this polygon itself."""
         w = other.vertices
-        e = _after(w) - w
-        n = np.stack([e[:, 1], -e[:, 0]], axis=1)  # outward normals of a counter-clockwise polygon's sides
-        scale = np.abs(n).max(axis=1)
-        n = n[scale > 0.0] / scale[scale > 0.0, None]  # |n|∞ = 1, so that each cut's margin is one of the coordinates' size
-        support = (w @ n.T).max(axis=0)
-        mine = self.vertices @ n.T
+        m = len(w)
+        n = (w[_successors(m)] - w) @ _OUTWARD  # the sides' outward normals (a counter-clockwise polygon's), unnormalised
+        s = np.concatenate((w, self.vertices)) @ n.T
+        support, mine = s[:m].max(axis=0), s[m:]
         top = mine.max(axis=0)
-        beyond = np.flatnonzero(top - support > sliver * (top - mine.min(axis=0)))
         out = self
-        for m in beyond.tolist():
-            cut = out.cut(n[m], -math.inf, float(support[m]))
+        for k in np.flatnonzero(top - support > sliver * (top - mine.min(axis=0))).tolist():
+            c = n[k] / np.abs(n[k]).max()  # |c|∞ = 1, so that the cut's margin is one of the coordinates' size
+            cut = out.cut(c, -math.inf, float((w @ c).max()))
             if cut is None:
                 return None
             out = cut
@@ -153,6 +153,14 @@ class Polygon:
                 # puts two neighbours' meeting a hair behind an edge: near-duplicate vertices)
             v = _drop_edges(v, drops)
         return Polygon(_array(v))
+
+
+@functools.cache
+def _successors(m: int) -> np.ndarray:
+    """The index of each vertex's successor in a polygon of m vertices (made once per size)."""
+    out = np.r_[1:m, 0]
+    out.flags.writeable = False
+    return out
 
 
 def _after(a: np.ndarray, k: int = 1) -> np.ndarray:

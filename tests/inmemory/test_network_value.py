@@ -25,17 +25,26 @@ def _record(name: str, tmp_path: Path, steps: int = 30, case: str = "nsnim", sig
     return sc, load_record(str(path))
 
 
+def _readings_alone(sc):
+    """The scenario with the exchange these tests are about alone (a reference's, a k-of-N group's readings): no
+    bounded reading, no neighbours' sets (docs/network.md, *What a node takes from its network*)."""
+    import dataclasses
+
+    return dataclasses.replace(sc, bounded_readings=False, neighbour_sets=False)
+
+
 def test_a_reference_sensor_is_declared_and_applied_where_exact_applies_bounds() -> None:
     sc = load_topology("paper6_reference")
     assert sc.node(3).fault_size == 0.0
-    assert sc.fault_bounded("used") == (3,)  # NSNIM: no saturating sensor relies on a bound, the reference counts
+    assert sc.fault_bounded("used") == tuple(sc.ids)  # NSNIM: every bounded reading rests on its sensor's declared bound
+    assert _readings_alone(sc).fault_bounded("used") == (3,)  # without them no saturating sensor relies on a bound, the reference counts
     assert sc.fault_bounded("none") == ()
     assert 3 in sc.fault_bounded("all") and len(sc.fault_bounded("all")) == 6
 
 
 def test_under_the_papers_assumptions_the_network_buys_nothing(tmp_path: Path) -> None:
     sc, rec = _record("paper6", tmp_path)
-    for lim in local_limits(sc, rec):
+    for lim in local_limits(_readings_alone(sc), rec):  # the paper's: no fault bounded (no bounded reading uses one)
         for v in (lim.fault_ratio, lim.r_ratio, lim.beta_ratio):
             assert v == pytest.approx(1.0, abs=0.01), lim
 
@@ -115,7 +124,7 @@ def test_the_references_reading_narrows_every_other_node(case: str, gain: float)
     sides, 2026-11-27; the benchmark states them)."""
     import dataclasses
 
-    sc = load_topology("paper6_reference", case=case, steps=40)
+    sc = _readings_alone(load_topology("paper6_reference", case=case, steps=40))
     with_r, s, used = _fault_widths(sc)
     without, s0, used0 = _fault_widths(dataclasses.replace(sc, readings=False))
     assert s.violations_total == 0 and s.node_steps_covered == s.node_steps_evaluated == s.node_steps_contained
@@ -379,7 +388,7 @@ def test_at_most_four_faulty_sensors_narrow_every_node(case: str, estimator: str
     two other readings agree inside their own set), and everything is covered and contained."""
     import dataclasses
 
-    sc = load_topology("paper6_max_faulty", case=case, steps=40)
+    sc = _readings_alone(load_topology("paper6_max_faulty", case=case, steps=40))
     if estimator != "sdp":
         sc = dataclasses.replace(sc, nodes=[dataclasses.replace(n, estimator=estimator) for n in sc.nodes])
     s, states = _states(sc)
@@ -429,15 +438,17 @@ def _rows(name: str, capsys: pytest.CaptureFixture[str], tmp_path: Path) -> dict
 
 
 def test_compare_alone_reproduces_what_the_network_is_worth(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
-    """``compare --alone``: on paper6 a node's exact local limit is the central one (the network can buy nothing);
-    with a reference it is wider (the issue's local / central table), and the SDP run alone is wider than in the
-    network. No row is ever narrower than the exact limit it rests on, and nothing is violated."""
-    plain = _rows("paper6", capsys, tmp_path)
-    assert plain["exact-local"]["ratio_exact"] == pytest.approx(1.0, abs=0.01)
+    """``compare --alone``: with a reference a node's exact local limit is wider than the central one (the issue's
+    local / central table), and the SDP run alone is wider than in the network; each node's network limit lies between
+    the two and the network's SDP is at it. No row is ever narrower than the exact limit it rests on, and nothing is
+    violated."""
     ref = _rows("paper6_reference", capsys, tmp_path)
     assert ref["exact-local"]["ratio_exact"] > 1.1
     assert ref["sdp-alone"]["fault_width_mean"] > 1.15 * ref["sdp"]["fault_width_mean"]
-    for rows in (plain, ref):
+    assert 1 - 1e-6 <= ref["exact-network"]["ratio_exact"] <= ref["exact-local"]["ratio_exact"]
+    assert all(v is not None and v <= 1.05 for v in ref["sdp"]["ratio_network"]), ref["sdp"]["ratio_network"]
+    assert ref["exact-network"]["ratio_network"] == pytest.approx([1.0, 1.0, 1.0], abs=1e-9)
+    for rows in (ref,):
         assert rows["exact-local"]["fault_width_mean"] <= rows["sdp-alone"]["fault_width_mean"] * (1 + 1e-9)
         for r in rows.values():
             assert r["violations"] == 0 and r["covered"] == r["node_steps"], r
@@ -518,7 +529,7 @@ def test_health_groups_read_within_their_group() -> None:
     import numpy as np
 
     groups = (HealthGroup((1, 2, 3), 2), HealthGroup((4, 5, 6), 2))
-    base = load_topology("paper6_max_faulty", case="nsnim", steps=40)
+    base = _readings_alone(load_topology("paper6_max_faulty", case="nsnim", steps=40))
     s, states = _states(dataclasses.replace(base, health_groups=groups))
     s0, states0 = _states(dataclasses.replace(base, health_groups=()))
     assert s.violations_total == 0 and s.node_steps_covered == s.node_steps_evaluated == s.node_steps_contained

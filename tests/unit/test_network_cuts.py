@@ -146,7 +146,9 @@ def test_the_moved_region_holds_every_successor_of_a_point_of_the_prior_and_the_
 ) -> None:
     """x_k in node 1's region and in its in-neighbour 2's published region: every x_k+1 = Ā x_k + B̄ u + D̄ w with
     |w| ≤ √W lies in the moved region, which names neighbour 2 where its region cut."""
-    est, sc = _estimator()
+    _, sc = _estimator()
+    est = LocalEstimator.for_node(dataclasses.replace(sc, reading_scope="neighbours"), 1)  # (reading everyone, it would not cut by sets)
+    assert est.neighbour_sets
     a, b, both = regions
     rng = np.random.default_rng(seed)
     alpha = sc.model.weights(sc.model.params.vx_min + speed * (sc.model.params.vx_max - sc.model.params.vx_min))
