@@ -126,14 +126,14 @@ class Polygon:
         s = np.concatenate((w, self.vertices)) @ n.T
         support, mine = s[:m].max(axis=0), s[m:]
         top = mine.max(axis=0)
-        out = self
-        for k in np.flatnonzero(top - support > sliver * (top - mine.min(axis=0))).tolist():
-            c = n[k] / np.abs(n[k]).max()  # |c|∞ = 1, so that the cut's margin is one of the coordinates' size
-            cut = out.cut(c, -math.inf, float((w @ c).max()))
-            if cut is None:
-                return None
-            out = cut
-        return out
+        beyond = np.flatnonzero(top - support > sliver * (top - mine.min(axis=0)))
+        if not len(beyond):
+            return self
+        c = n[beyond] / np.abs(n[beyond]).max(axis=1)[:, None]  # |c|∞ = 1, so that each cut's margin is one of the coordinates' size
+        a = np.abs(self.vertices)
+        reach = (a @ np.abs(c).T).max(axis=0)  # max Σᵢ |cᵢ xᵢ| over this polygon: over any part of it no more
+        v = _clipped(_points(self.vertices), c.tolist(), (w @ c.T).max(axis=0).tolist(), reach.tolist(), float(a.max()))
+        return None if v is None else Polygon(_array(v))
 
     def extent(self, c: np.ndarray) -> float:
         """max |cᵀx| over the polygon."""
@@ -374,6 +374,32 @@ def _clip(v: np.ndarray, c: np.ndarray, b: float) -> np.ndarray | None:
     points = np.stack([v, v + t[:, None] * (nxt - v)], axis=1).reshape(-1, 2)  # per edge: its start, its crossing
     out = points[np.stack([s <= 0.0, crosses], axis=1).reshape(-1)]
     return _array(_distinct(_points(out))) if len(out) else None
+
+
+def _clipped(v: list[Point], planes: list[list[float]], ends: list[float], reach: list[float], size: float) -> list[Point] | None:
+    """The polygon ∩ every half-plane cᵀx ≤ end (Sutherland–Hodgman, one plane after the other, on plain floats: a
+    few sides cut a polygon of 24–32 vertices, where numpy's per-call cost is most of a cut), each widened outward by
+    :meth:`Polygon.cut`'s margin for a plane: MARGIN relative to max Σᵢ |cᵢ xᵢ| (``reach``, over the polygon before
+    the first plane: every later part lies in it, so no smaller), at least what merging vertices closer than DUPLICATE
+    can leave out (``size``: max |xᵢ| of the polygon), as :func:`_distinct` does after each plane; None if nothing
+    remains."""
+    for (c0, c1), end, r in zip(planes, ends, reach):
+        lim = end + max(MARGIN * (1.0 + r), (2 * len(v) + 2) * DUPLICATE * (1.0 + size) * (abs(c0) + abs(c1)))
+        out: list[Point] = []
+        px, py = v[-1]
+        sp = c0 * px + c1 * py - lim
+        for x, y in v:
+            sq = c0 * x + c1 * y - lim
+            if (sp < 0.0 < sq) or (sq < 0.0 < sp):  # the side from the previous vertex crosses the line
+                t = sp / (sp - sq)
+                out.append((px + t * (x - px), py + t * (y - py)))
+            if sq <= 0.0:
+                out.append((x, y))
+            px, py, sp = x, y, sq
+        if not out:
+            return None
+        v = _distinct(out)
+    return v
 
 
 def _distinct(v: list[Point]) -> list[Point]:
