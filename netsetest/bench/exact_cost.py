@@ -8,7 +8,9 @@ resident memory of the whole process (imports and the record included), the resi
 (flat: what the search keeps does not grow with it), and how many ends are exact, relaxed, and the solves.
 
 Topologies: ``paper6_max_faulty`` (at most 4 of 6 faulty) and rings with chords of 12 and 24 nodes with issue 34's
-two interleaved groups (netsetest/bench/topologies.py, variant ``two_groups``).
+two interleaved groups (netsetest/bench/topologies.py, variant ``two_groups``).  Then issue 44's target: on the 12-node
+ring with two groups, SAIM, worst-case signals, seeds :data:`NETWORK_SEEDS`, the central limit and each node's network
+limit (``exact --network``, docs/exact.md), each in a process of its own.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ TARGET_RING12_PEAK_MB = 1024.0
 TARGET_RING12_EXACT = 0.95  # share of ends exact
 TARGET_PAPER6_CPU_S = 20.0
 FLAT_MB = 64.0  # resident memory may grow by this from the middle step to the last (the programs grow with the horizon)
+NETWORK_SEEDS = (0, 1, 2)  # issue 44: exact and exact --network on the 12-node ring with two groups, SAIM, worst-case signals
 
 
 def _log(msg: str) -> None:
@@ -48,8 +51,9 @@ def _rss_mb() -> float:
     return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
-def measure_one(topology: str, case: str, record: str, budget_s: float | None) -> dict:
-    """The exact limit of one record in this process: CPU, wall, peak and per-step resident memory, and the search."""
+def measure_one(topology: str, case: str, record: str, budget_s: float | None, network: bool = False) -> dict:
+    """The exact limit of one record in this process (``network``: each node's network limit): CPU, wall, peak and
+    per-step resident memory, and the search."""
     from netsetest.analysis.exact import exact_bounds
     from netsetest.config.schema import load_topology
     from netsetest.records.record import load_record
@@ -58,7 +62,7 @@ def measure_one(topology: str, case: str, record: str, budget_s: float | None) -
     sc = load_topology(topology, case, rec.meta.steps)  # type: ignore[arg-type]  # one of CASES
     rss: list[float] = []
     t0, w0 = time.process_time(), time.perf_counter()
-    ex = exact_bounds(sc, rec, "used", progress=lambda k, total: rss.append(_rss_mb()), budget_s=budget_s)
+    ex = exact_bounds(sc, rec, "used", progress=lambda k, total: rss.append(_rss_mb()), budget_s=budget_s, network=network)
     cpu, wall = time.process_time() - t0, time.perf_counter() - w0
     rss.append(_rss_mb())
     h = ex.health
@@ -77,12 +81,12 @@ def measure_one(topology: str, case: str, record: str, budget_s: float | None) -
     }
 
 
-def _measure(topology: Path, case: str, record: Path, budget_s: float) -> dict:
+def _measure(topology: Path, case: str, record: Path, budget_s: float, network: bool = False) -> dict:
     """:func:`measure_one` in a process of its own (its peak memory is then the exact limit's alone)."""
     from netsetest.runtime.processes import role_env
 
     out = subprocess.run(
-        [sys.executable, "-m", "netsetest.bench.exact_cost", str(topology), case, str(record), repr(budget_s)],
+        [sys.executable, "-m", "netsetest.bench.exact_cost", str(topology), case, str(record), repr(budget_s), *(["network"] if network else [])],
         capture_output=True,
         text=True,
         check=True,
@@ -114,7 +118,37 @@ def exact_figures(cfg: dict, tmp: Path) -> dict:
                 f"  exact {name} {case}: {row['cpu_s']:.1f} s CPU ({row['wall_s']:.0f} s wall), peak {row['peak_mb']:.0f} MB, "
                 f"{row['exact_ends']} of {row['ends']} ends exact"
             )
-    return {"steps": steps, "rows": rows, "load": f"{load_before} before, {_load()} after"}
+    return {
+        "steps": steps,
+        "rows": rows,
+        "network": network_rows(tmp, steps, cfg.get("exact_network_seeds", NETWORK_SEEDS)),
+        "load": f"{load_before} before, {_load()} after",
+    }
+
+
+def network_rows(tmp: Path, steps: int, seeds: list[int] | tuple[int, ...]) -> list[dict]:
+    """Issue 44's target: the 12-node ring with two groups, SAIM, worst-case signals, per seed, the central limit and
+    each node's network limit, each in a process of its own (the command's default budget)."""
+    from netsetest.analysis.errors import DEFAULT_BUDGET_S
+    from netsetest.bench.topologies import ring_topology
+    from netsetest.config.schema import load_topology
+    from netsetest.runtime.inmemory import run_inmemory
+
+    topo = ring_topology(tmp, 12, steps, "saim", variant="two_groups")
+    sc = load_topology(topo, "saim", steps)
+    rows = []
+    for seed in seeds:
+        record = tmp / "exact_record.json"
+        run_inmemory(sc, SIGNALS, "scheduled", seed, record=str(record), keep=False)
+        for network in (False, True):
+            row = {"topology": "ring12, two groups", "nodes": 12, "case": "saim", "signals": SIGNALS, "steps": steps, "seed": seed}
+            row |= {"limit": "network" if network else "central", **_measure(topo, "saim", record, DEFAULT_BUDGET_S, network)}
+            rows.append(row)
+            _log(
+                f"  exact{' --network' if network else ''} ring12 seed {seed}: {row['cpu_s']:.1f} s CPU, peak {row['peak_mb']:.0f} MB, {row['exact_ends']} of {row['ends']} ends exact"
+            )
+        record.unlink()
+    return rows
 
 
 def _load() -> str:
@@ -162,12 +196,29 @@ def exact_cost_markdown(res: dict) -> str:
         )
     lines += ["", "| target | | met |", "|---|---|---|"]
     lines += [f"| {what} | {target} | {'yes' if met else 'no'} |" for what, target, met in targets(res["rows"])]
+    if res.get("network"):
+        rows = res["network"]
+        lines += [
+            "",
+            f"Issue 44: `netsetest exact` and `netsetest exact --network` (each node's network limit, docs/exact.md) on the 12-node ring with "
+            f"two groups, SAIM, worst-case signals, {rows[0]['steps']} steps, per seed, each in a process of its own; target: each at most "
+            f"{TARGET_RING12_CPU_S:g} s of CPU and {TARGET_RING12_PEAK_MB:g} MB.",
+            "",
+            "| seed | limit | CPU s (wall s) | peak MB | ends exact | relaxed | solves | met |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for r in rows:
+            met = r["cpu_s"] <= TARGET_RING12_CPU_S and r["peak_mb"] <= TARGET_RING12_PEAK_MB
+            lines.append(
+                f"| {r['seed']} | {r['limit']} | {r['cpu_s']:.1f} ({r['wall_s']:.0f}) | {r['peak_mb']:.0f} | {r['exact_ends']} of {r['ends']} | "
+                f"{r['relaxed_ends']} | {r['solves']} | {'yes' if met else '**no**'} |"
+            )
     return "\n".join(lines) + "\n"
 
 
-if __name__ == "__main__":  # measure_one in a process of its own: TOPOLOGY CASE RECORD BUDGET_S
+if __name__ == "__main__":  # measure_one in a process of its own: TOPOLOGY CASE RECORD BUDGET_S [network]
     topology, case, record, budget = sys.argv[1:5]
-    print(json.dumps(measure_one(topology, case, record, float(budget))))
+    print(json.dumps(measure_one(topology, case, record, float(budget), sys.argv[5:] == ["network"])))
 
 
 __all__ = ["exact_cost_markdown", "exact_figures", "measure_one", "targets"]

@@ -83,6 +83,8 @@ QUICK: dict[str, Any] = {
     "sets_seeds": list(range(10)),  # --only widths, issue 44: faults at their bounds, declared bounds true and false
     "sets_ring_seeds": [0],  # issue 44's directed rings
     "sets_ring_steps": 80,
+    "sets_network_budget_s": 900.0,  # CPU seconds for each ring's network limit (k-of-N: the ends past it are relaxed, counted)
+    "exact_network_seeds": [0, 1, 2],  # --only exact, issue 44: exact and exact --network on the 12-node ring with two groups
     "sets_declared_steps": 80,
 }
 FULL: dict[str, Any] = {
@@ -134,6 +136,8 @@ FULL: dict[str, Any] = {
     "sets_seeds": list(range(10)),
     "sets_ring_seeds": [0, 1, 2],
     "sets_ring_steps": 80,
+    "sets_network_budget_s": 3600.0,
+    "exact_network_seeds": [0, 1, 2],
     "sets_declared_steps": 80,
 }
 
