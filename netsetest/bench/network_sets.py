@@ -324,7 +324,7 @@ def sets_figures(cfg: dict, tmp: Path) -> dict:
     declared = [declared_bounds(seed, true, cfg["sets_declared_steps"]) for true in (True, False) for seed in cfg["sets_seeds"]]
     _log("issue 44: what the exchange costs per node-step")
     costs = [cost(tmp, "paper6", "paper6", case) for case in ("nsnim", "saim")]
-    costs += [cost(tmp, f"ring{RING_NODES} {v}", ring_topology(tmp, RING_NODES, COST_STEPS, "saim", variant=v), "saim") for v in RINGS]  # type: ignore[arg-type]
+    costs += [cost(tmp, f"ring{RING_NODES} {v}", ring_topology(tmp, RING_NODES, COST_STEPS, "saim", variant=v), "saim") for v in RINGS]  # type: ignore[arg-type]  # v is one of RINGS, RingVariant's values
     return {"at_bounds": bounds, "rings": rings, "declared": declared, "cost": costs, "step_target_ms": STEP_TARGET_MS}
 
 

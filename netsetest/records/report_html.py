@@ -404,18 +404,26 @@ def _ratio(v: object) -> str:
 
 
 def _exact_html(doc: dict) -> str:
-    """The ratios of ``netsetest exact --json``: published width / exact width per node and coordinate."""
+    """The ratios of ``netsetest exact --json``: published width / exact width per node and coordinate; with
+    ``--network``, published width / each node's network limit beside it."""
     nodes = doc["ratios"]["nodes"]
+    network = doc.get("network") if isinstance(doc.get("network"), dict) else None
+    net_nodes = network.get("ratios", {}).get("nodes", {}) if network is not None and isinstance(network.get("ratios"), dict) else {}
     coords = sorted({c for per in nodes.values() if isinstance(per, dict) for c in per})
-    header = ["node", *(f"{c}: width / exact" for c in coords), *(f"{c}: rms radius rel." for c in coords)]
+    header = ["node", *(f"{c}: width / exact" for c in coords), *(f"{c}: width / network" for c in coords if net_nodes)]
+    header += [f"{c}: rms radius rel." for c in coords]
     rows = []
     for i in sorted(nodes, key=lambda s: int(s) if s.isdigit() else 0):
         per = nodes[i] if isinstance(nodes[i], dict) else {}
-        rows.append([i, *(_ratio(per.get(c, {}).get("width_ratio")) for c in coords), *(_ratio(per.get(c, {}).get("rms_radius_rel")) for c in coords)])
+        net = net_nodes[i] if isinstance(net_nodes.get(i), dict) else {}
+        cells = [i, *(_ratio(per.get(c, {}).get("width_ratio")) for c in coords)]
+        cells += [_ratio(net.get(c, {}).get("width_ratio")) for c in coords if net_nodes]
+        rows.append([*cells, *(_ratio(per.get(c, {}).get("rms_radius_rel")) for c in coords)])
     overall = doc["ratios"].get("overall_width_ratio")
+    beside = " and over each node's network limit (what the topology carries to it, `exact --network`)" if net_nodes else ""
     return (
         f"<h3>Exact limit (fault bounds '{html.escape(str(doc.get('fault_bounds')))}', from step {html.escape(str(doc.get('from_step')))})</h3>"
-        f'<p class="note">published width / exact width, mean over steps; 1.000 is the tightest any guaranteed estimator could publish '
+        f'<p class="note">published width / exact width{beside}, mean over steps; 1.000 is the tightest any guaranteed estimator could publish '
         f"(docs/exact.md). Overall: {_ratio(overall)}</p>" + _table(header, rows, "exact")
     )
 

@@ -66,6 +66,9 @@ class NodeSummary:
     healthy_steps: int = 0  # proved fault-free
     false_detections: int = 0  # detected while the true fault was within the tolerance
     false_detections_covered: int = 0  # of them, where every assumption held (each is also a violation)
+    # what the node's sets may rest on beyond its own data and its neighbours' innovations (roles/judge.py, network_rests:
+    # readings and their declarations, its in-neighbours' whole sets, its own bound others rely on); "" where nothing
+    rests_on: str = ""
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}

@@ -73,7 +73,7 @@ from netsetest.models.plant import VEHICLE_NAMES
 from netsetest.models.vehicle import KMH
 from netsetest.records.summary import RUN_FIELDS, CarSummary, InheritedOrigin, NodeSummary, RunSummary, StopCause
 from netsetest.roles.fdi import FdiTotals, classify
-from netsetest.roles.judge import INHERITED, NO_CHECKS, TRUTH_UNKNOWN, Containment, Judge, NodeVerdict, StepInputs, isclose, state_mismatch
+from netsetest.roles.judge import INHERITED, NO_CHECKS, TRUTH_UNKNOWN, Containment, Judge, NodeVerdict, StepInputs, isclose, network_rests, state_mismatch
 from netsetest.roles.flow import ACK_STRIDE
 from netsetest.roles.vehicle import envelope_holds, fault_bound_holds, mismatch_holds
 
@@ -792,4 +792,5 @@ class Collector:
             healthy_steps=t.fdi.healthy_steps,
             false_detections=t.fdi.false_detections,
             false_detections_covered=t.fdi.false_detections_covered,
+            rests_on=network_rests(self.sc, n.id),
         )

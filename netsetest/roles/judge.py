@@ -333,6 +333,38 @@ class Judge:
         return None
 
 
+def _ids(nodes: list[int]) -> str:
+    return ", ".join(map(str, nodes))
+
+
+def network_rests(sc: Scenario, i: int) -> str:
+    """What node i's sets may rest on beyond its own data and its neighbours' innovations, in words (the run's header;
+    docs/network.md): the readings it uses and the declaration each rests on, its in-neighbours' whole published sets,
+    and its own declared bound where other nodes rely on it.  "" where nothing."""
+    n = sc.node(i)
+    if n.estimator != SDP:  # a set estimator uses the references' and its group's readings, no neighbour
+        read = list(sc.reading_sources(i, bounded=False))
+        return f"the readings of {_ids(read)}" if read else ""
+    refs = [j for j in sc.reading_sources(i) if j in sc.references()]
+    group = sc.health_group(i)
+    members = [j for j in sc.reading_sources(i) if group is not None and j in group.nodes]
+    bounded = [j for j in sc.bounded_sources(i) if j not in refs]
+    parts = []
+    if refs:
+        parts.append(f"the reading of {_ids(refs)} (fault-free)")
+    if group is not None:
+        parts.append(f"k-of-N health of {_ids(list(group.nodes))} (max_faulty {group.max_faulty}; readings of {_ids(members) or 'none'})")
+    if bounded:
+        parts.append(f"the readings of {_ids(bounded)} with their declared fault bounds")
+    if sc.neighbour_sets and not sc.reads_everyone(i):
+        sets = [j for j in n.in_weights if j != i]
+        if sets:
+            parts.append(f"the published sets of {_ids(sets)}")
+    if sc.bound_relied(i):
+        parts.append("its own declared fault bound (others read its reading with it)")
+    return "; ".join(parts)
+
+
 def mismatch_cause(t: Truth | dict) -> str:
     """Why a transition's e_k left its bound: the car outside the declared envelope, or the bound too small."""
     ok = t.get("envelope_ok", True) if isinstance(t, dict) else t.envelope_ok
@@ -393,6 +425,7 @@ __all__ = [
     "history_cone",
     "isclose",
     "mismatch_cause",
+    "network_rests",
     "published_sector",
     "state_mismatch",
 ]

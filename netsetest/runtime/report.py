@@ -129,6 +129,22 @@ def car_lines(summary: RunSummary) -> list[str]:
     return out + [""]
 
 
+NETWORK_LINES = 12  # nodes the header lists what they rest on (a large network's others summed up)
+
+
+def network_lines(summary: RunSummary) -> list[str]:
+    """The output's header where nodes rest on what their network proves (docs/network.md): per node, the readings,
+    the neighbours' sets and the declarations its sets may rest on beyond its own data (NodeSummary.rests_on)."""
+    rows = [n for n in summary.nodes if n.rests_on]
+    if not rows:
+        return []
+    out = ["what each node's sets may rest on beyond its own data (the collector judges each where used):"]
+    out += [f"  node {n.id}: {n.rests_on}" for n in rows[:NETWORK_LINES]]
+    if len(rows) > NETWORK_LINES:
+        out.append(f"  … and {len(rows) - NETWORK_LINES} more nodes (the summary's nodes[*].rests_on)")
+    return out + [""]
+
+
 def uncovered_misses(summary: RunSummary) -> str:
     """The misses outside the guarantee in words, with their cause ('' when there are none): a user must not
     read a run whose sets missed the truth as a pass without being told why the guarantee did not hold."""
@@ -190,7 +206,7 @@ def format_table(summary: RunSummary, strict: bool = False) -> str:
     ]
     widths = [max(len(h), *(len(r[c]) for r in rows)) for c, h in enumerate(head)]
     line = lambda cells: "  ".join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731  # a one-line local helper
-    out = [*car_lines(summary), line(head), line(["-" * w for w in widths])] + [line(r) for r in rows]
+    out = [*car_lines(summary), *network_lines(summary), line(head), line(["-" * w for w in widths])] + [line(r) for r in rows]
     out.extend(textwrap.wrap(LEGEND, LEGEND_WIDTH))
     out.append("")
     out.extend(fdi_table(summary))

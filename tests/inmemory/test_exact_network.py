@@ -53,8 +53,8 @@ def _program(sc: Scenario, data: list, d: dict[int, int], d0: dict[int, int], k:
     j's measurement of step s ≥ 1 only where s ≤ k − d_j, its measurement of step 0 and its prior only where
     0 ≤ k − d0_j (second-order cones), every declared fault bound (``used``: this chain's readings rest on all of them)."""
     ids, bounded = sc.ids, set(sc.fault_bounded("used"))
-    x = lambda s, c: 2 * s + c  # noqa: E731
-    f = lambda n, s: 2 * (k + 1) + k + n * (k + 1) + s  # noqa: E731
+    x = lambda s, c: 2 * s + c  # noqa: E731  # the column of x_s's component c
+    f = lambda n, s: 2 * (k + 1) + k + n * (k + 1) + s  # noqa: E731  # the column of f_n,s
     eq: Rows = []
     lin: Rows = []
     soc: list[Rows] = []
@@ -164,7 +164,7 @@ def test_it_lies_between_the_central_and_the_local_limit() -> None:
     for i in sc.ids:
         local = exact_bounds(sc, rec, nodes=[i])
         for c in ("beta", "r", "f"):
-            n, z, lo = net.interval(c, i), central.interval(c, i), local.interval(c, i)  # type: ignore[arg-type]
+            n, z, lo = net.interval(c, i), central.interval(c, i), local.interval(c, i)  # type: ignore[arg-type]  # c is one of COORDINATES
             assert np.all(n[:, 0] <= z[:, 0] + slack) and np.all(n[:, 1] >= z[:, 1] - slack)
             assert np.all(n[:, 0] >= lo[:, 0] - slack) and np.all(n[:, 1] <= lo[:, 1] + slack)
     everywhere = dataclasses.replace(sc, reading_scope="network")
@@ -175,7 +175,7 @@ def test_it_lies_between_the_central_and_the_local_limit() -> None:
     for i in whole:
         late = max(everywhere.delays(i, first=True).values())
         for c in ("beta", "r", "f"):
-            assert np.allclose(same.interval(c, i)[late:], central.interval(c, i)[late:], rtol=0, atol=1e-8)  # type: ignore[arg-type]
+            assert np.allclose(same.interval(c, i)[late:], central.interval(c, i)[late:], rtol=0, atol=1e-8)  # type: ignore[arg-type]  # c is one of COORDINATES
 
 
 def test_a_steps_union_is_built_again_as_its_readings_come_in() -> None:

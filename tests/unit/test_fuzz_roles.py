@@ -90,14 +90,18 @@ def test_decode_deep_nesting_and_invalid_utf8_everywhere() -> None:
 
 
 def _recorded_messages() -> list[tuple[str, bytes]]:
-    """Every (key, payload) of a short in-memory paper6 SAIM run: the templates to mutate."""
+    """Every (key, payload) of two short in-memory paper6 SAIM runs: the templates to mutate; the second with every
+    reading to its sender's out-neighbours only, so that the nodes cut by their neighbours' sets (issue 44)."""
+    import dataclasses
+
     from netsetest.runtime.inmemory import run_inmemory
 
     sc = load_topology(PAPER6, "saim", STEPS)
-    bus = MemoryBus()
     seen: list[tuple[str, bytes]] = []
-    bus.subscribe("netsetest/**", lambda key, msg: seen.append((key, encode(msg))))
-    run_inmemory(sc, bus=bus, keep=False)
+    for run in (sc, dataclasses.replace(sc, reading_scope="neighbours")):
+        bus = MemoryBus()
+        bus.subscribe("netsetest/**", lambda key, msg: seen.append((key, encode(msg))))
+        run_inmemory(run, bus=bus, keep=False)
     return seen
 
 
