@@ -52,7 +52,8 @@ class Runs:
         path = self.tmp.getbasetemp() / "paper6_groups.toml"
         if not path.exists():
             text = (Path(ROOT) / topo).read_text().replace('node_dir = "../nodes"', f'node_dir = "{Path(ROOT) / "nodes"}"')
-            path.write_text(text.replace("max_faulty = 4\n", GROUPS))
+            # (without the bounded readings, so that a node's readings are its group's alone: what the scenario checks)
+            path.write_text(text.replace("max_faulty = 4\n", "bounded_readings = false\n" + GROUPS))
         return str(path)
 
     def zenoh_run(self, name: str) -> dict:
@@ -123,9 +124,11 @@ def test_zenoh_lockstep_equals_inmemory(runs: Runs, name: str) -> None:
     if name == "reference":  # the readings crossed Zenoh (ACL included) and were used in lockstep
         # (published where the readings' update beats the set as solved, whose prior already carries the
         # last steps' readings: 8–9 of these 10 steps; the states above equal the in-memory run's step by step)
+        # the bounded readings crossed Zenoh too, to every node (issue 44, docs/network.md)
         for i, es in zrec["nodes"].items():
             if i != "3":
-                assert all(e["readings"] in ([3], []) for e in es) and sum(e["readings"] == [3] for e in es[1:]) >= 0.7 * steps, i
+                assert sum(3 in e["readings"] for e in es[1:]) >= 0.7 * steps, i
+            assert any(set(e["readings"]) - {3, int(i)} for e in es[1:]), i
     if name == "max_faulty":  # every node's reading crossed Zenoh (ACL included) and the k-of-N interval was used
         assert sum(e["health"] for es in zrec["nodes"].values() for e in es[1:]) >= 0.6 * 6 * steps
     if name == "groups":  # a node's readings came from its own group only, over Zenoh as in memory
