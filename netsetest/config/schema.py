@@ -634,8 +634,16 @@ class Scenario:
 
     def publishes_reading(self, i: int) -> bool:
         """Whether node i publishes its reading of every step: some node reads it (a reference, a member of a k-of-N
-        group, an in-neighbour of a node that uses its reading with its declared fault bound)."""
-        return any(i in self.reading_sources(j) for j in self.ids if j != i)
+        group, a sensor whose reading others use with its declared fault bound)."""
+        return i in self._read
+
+    @functools.cached_property
+    def _read(self) -> frozenset[int]:  # the nodes some node reads (once per scenario: a large ring asks for every node)
+        return frozenset(j for i in self.ids for j in self.reading_sources(i))
+
+    @functools.cached_property
+    def _relied(self) -> frozenset[int]:  # the nodes whose declared bound some node reads their reading with
+        return frozenset(j for i in self.ids for j in self.bounded_sources(i))
 
     def reading_sources(self, i: int, bounded: bool = True) -> tuple[int, ...]:
         """The nodes whose readings node i uses (its own reading comes with its input): the references, the other
@@ -667,7 +675,7 @@ class Scenario:
     def bound_relied(self, i: int) -> bool:
         """Whether node i's declared fault bound is relied on at every step: another node uses its reading with it
         (:meth:`bounded_sources`); node i's own published set then rests on it too (docs/network.md)."""
-        return any(i in self.bounded_sources(j) for j in self.ids if j != i)
+        return i in self._relied
 
     def delays(self, i: int, first: bool = False) -> dict[int, int]:
         """d(j→i) for every node j whose data can reach node i: the steps the runtime needs to carry j's measurement of a
