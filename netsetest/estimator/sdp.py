@@ -32,8 +32,8 @@ sectors come with their messages, so which φ slots exist changes per step (one 
 pattern).  Where the own sector is derived and the sensor may saturate, the proven interval of r⁺ is
 used as the measurement instead of the φ⁺ sector fact, and where that sector rests on the declared
 fault bound the published set is cut by |f⁺| ≤ F (:mod:`netsetest.estimator.slab`).  Step 0 updates the prior with ỹ₀
-(:meth:`LocalEstimator.first`).  The objective is trace(D P) (a congruence of the LMI); ``bank`` solves
-each step twice and publishes the fault-weighted set while recurring on the trace-optimal one.
+(:meth:`LocalEstimator.first`).  The objective is trace(D P) (a congruence of the LMI); ``bank`` recurs on the
+trace-optimal set and weights the fault in what it reshapes for publishing (the cuts, the readings' set).
 
 A step is the prediction (the model part: Π₀, the L-free centre, the own φ⁺ fact; :meth:`LocalEstimator._predict`)
 and the update (the neighbours' innovations ℓ and facts, :meth:`LocalEstimator._innovations`; then the
@@ -614,21 +614,19 @@ class LocalEstimator:
 
     def _solve_step(self, ctx: StepContext, inp: UpdateInput, first: tuple[StepResult | None, _Solve] | None = None) -> StepResult:
         """The certified set the node continues from and the one it publishes: the readings' set where it is
-        certified and better (:meth:`_refine`), else the bank's; the fallback where the first has no certificate.
+        certified and better (:meth:`_refine`), else the same set (the cuts may make another to publish); the
+        fallback where the first has no certificate.
         ``first``: the first solve's outcome, computed before the readings came (:meth:`prepare`)."""
         data, rho, alpha = ctx.data, ctx.rho, np.asarray(inp.alpha, dtype=float)
-        facts = FactStack.of(data.facts)
-        res, solve = first if first is not None else self._solve_certify(data, rho, alpha, self._wh, facts)  # the set the node recurs on
+        res, solve = first if first is not None else self._solve_certify(data, rho, alpha, self._wh, FactStack.of(data.facts))  # the set the node recurs on
         if res is None:
             assert data.own is not None  # a predicting step always has its own update
             assert ctx.blend is not None  # a predicting step's context has its blend
             P_fb = fallback_shape(data.Mi, data.own, self.W, ctx.blend.abar, ctx.blend.dbar, self.uncertainty) / rho
             return self._fallback(data.x_pred.copy(), P_fb, solve, ctx.sector)
         if ctx.slabs:
-            res, refined = self._refine(res, self.readings_data(data, alpha, ctx.slabs), rho, alpha)
-            if refined:
-                return res
-        return self._bank(res, data, rho, alpha, facts)
+            res = self._refine(res, self.readings_data(data, alpha, ctx.slabs), rho, alpha)
+        return res
 
     def _moved_region(self, prev: NodeSet, inp: UpdateInput, blend: Blend) -> Polygon:
         """The states x⁺ the prior allows: its region (else the box of its ellipsoid) through the step's blended
@@ -640,10 +638,10 @@ class LocalEstimator:
             segments += [self.uncertainty.G[:, m] for m in range(NX)]  # e = G ζ with |ζ_m| ≤ 1
         return region.moved(blend.a, blend.b * inp.u, segments)
 
-    def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> tuple[StepResult, bool]:
+    def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> StepResult:
         """``res`` publishing the readings' set of the step (its only innovation those readings) where it is
-        certified, uses them (L ≠ 0) and is smaller in the published objective than ``res``, and whether it does;
-        the node recurs on ``res`` either way (cut by the readings: :data:`~netsetest.estimator.cuts.READINGS`).
+        certified, uses them (L ≠ 0) and is smaller in the published objective than ``res``; the node recurs on
+        ``res`` either way (cut by the readings: :data:`~netsetest.estimator.cuts.READINGS`).
 
         Why not recur on it: its trace-optimal shape trades sideslip width for yaw-rate width (the
         reading measures the yaw rate), and later steps predict from the sideslip; recurring on it made
@@ -652,12 +650,12 @@ class LocalEstimator:
         answer, solve = self._solve(data, alpha, wh, rho)
         res = dataclasses.replace(res, solve_ms=res.solve_ms + solve.ms)
         if answer is None or not np.any(answer.L):
-            return res, False  # no answer, or the readings are of no use (L = 0): nothing to certify
+            return res  # no answer, or the readings are of no use (L = 0): nothing to certify
         refined = self._certify(answer, data, rho, FactStack.of(data.facts), solve)
         if refined is None or _objective(refined.P, wh) >= (1 - REFINE_RTOL) * _objective(res.P, wh):
-            return res, False  # no certificate, or nothing gained: no reason to rest the published set on the readings
+            return res  # no certificate, or nothing gained: no reason to rest the published set on the readings
         refined = dataclasses.replace(refined, solve_ms=res.solve_ms, reading_keys=frozenset(data.key[3]))
-        return dataclasses.replace(res, published=refined), True
+        return dataclasses.replace(res, published=refined)
 
     def first(self, prior: NodeSet, y: float, gamma: float) -> StepResult:
         """Step 0: the prior updated by ỹ₀, certified like every step (``fallback``: the prior itself), then
@@ -678,21 +676,8 @@ class LocalEstimator:
         return StepResult(xhat, P, "fallback", np.nan, solve.ms, solve.status, sector=sector)
 
     def _update(self, data: StepData, rho: float, alpha: np.ndarray) -> tuple[StepResult | None, _Solve]:
-        """The certified set of the step's data (None: no certificate) and the last solve's figures;
-        objective ``bank``: with the set to publish (:meth:`_bank`)."""
-        facts = FactStack.of(data.facts)  # shared by both certificates of ``bank``
-        res, solve = self._solve_certify(data, rho, alpha, self._wh, facts)
-        if res is not None:
-            res = self._bank(res, data, rho, alpha, facts)
-        return res, solve
-
-    def _bank(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray, facts: FactStack) -> StepResult:
-        """Objective ``bank``: ``res`` with the fault-weighted set of the same data as the one to publish."""
-        if self._wh_pub is None:
-            return res
-        pub, solve_pub = self._solve_certify(data, rho, alpha, self._wh_pub, facts)
-        ms = res.solve_ms + solve_pub.ms
-        return dataclasses.replace(res, solve_ms=ms, published=res.published if pub is None else dataclasses.replace(pub, solve_ms=ms))
+        """The certified set of the step's data (None: no certificate) and the solve's figures."""
+        return self._solve_certify(data, rho, alpha, self._wh, FactStack.of(data.facts))
 
     def _solve_certify(self, data: StepData, rho: float, alpha: np.ndarray, wh: np.ndarray | None, facts: FactStack) -> tuple[StepResult | None, _Solve]:
         """Solve the step's problem for the objective trace(D P), D^½ = diag(wh) (None: trace P), and
