@@ -6,7 +6,7 @@ from 1; and :func:`rump_definite` never calls a matrix definite that is not.  A 
 matrix that is not positive semidefinite would publish a set that may miss the truth: the worst bug.
 
 A seeded short profile runs in every ``pytest``; the long run (10 000 examples each, random):
-``NETSETEST_FUZZ_EXAMPLES=10000 pytest -n 0 -q tests/unit/test_certificate.py``.
+``NETSETEST_FUZZ_EXAMPLES=10000 pytest -n 0 -q --timeout 0 tests/unit/test_certificate.py``.
 """
 
 from __future__ import annotations
@@ -145,13 +145,13 @@ def test_every_closed_form_certificate_holds_exactly(step):
 @given(steps(boundary=False))
 def test_the_closed_form_is_the_dense_check_where_both_answer(step):
     """Away from the boundary (random multipliers), where the d×d check and the closed form both certify, their ρ'
-    agree to the widening both apply (the closed form's margins are far below it).  At the boundary the closed form
+    agree to one of the 10⁻⁶ widenings either may take to confirm (the closed form's margins are far below it).  At the boundary the closed form
     may pay more (its margin moves a nearly singular S) or certify nothing: never less than the truth needs."""
     P, pi, tau, facts = step
     fs = FactStack.of(facts)
     dense, closed = _dense_certificate(P, pi, tau, fs), diagonal_certificate(P, pi, tau, fs)
     if dense is not None and closed is not None:
-        assert closed[0] == pytest.approx(dense, rel=1e-8, abs=1e-11)
+        assert closed[0] == pytest.approx(dense, rel=2.1e-6, abs=1e-11)
 
 
 @st.composite
