@@ -226,12 +226,31 @@ def publishable(xhat: np.ndarray, P: np.ndarray) -> bool:
     """A centre and shape a node may publish: finite, symmetric positive definite, not degenerate."""
     if not (np.isfinite(xhat).all() and np.isfinite(P).all()) or not np.array_equal(P, P.T):
         return False
+    if P.shape == (3, 3) and _clearly_conditioned(P.tolist()):
+        return True  # (most shapes: no eigen decomposition then)
     try:
         eig = linalg.eigvalsh(P)
     except np.linalg.LinAlgError:
         return False
     # (no Cholesky besides: with every eigenvalue > 0 and the ratio ≤ COND_MAX, far below 1/ε, it cannot fail)
     return bool(eig[0] > 0 and eig[-1] <= COND_MAX * eig[0])
+
+
+CLEAR = 1e-6  # relative: a leading minor this far above its rounding bound has its computed sign
+
+
+def _clearly_conditioned(p: list[list[float]]) -> bool:
+    """Whether the symmetric 3×3 ``p`` (finite plain floats) is positive definite with an eigenvalue ratio at most half
+    COND_MAX, by its leading minors (Sylvester) and λ_max / λ_min ≤ tr³ / (4 det) (λ_max ≤ tr, and λ_min ≥ 4 det / tr²
+    since the other two multiply to at most (tr/2)²), each minor clearly above its rounding (a sum of k products of
+    3 factors at most is within 8 k u of its terms' magnitude).  True implies what the eigenvalues would say; False
+    says nothing (:func:`publishable` then asks them)."""
+    (a, b, c), (_, d, e), (_, _, f) = p
+    m2, m2_size = a * d - b * b, abs(a * d) + b * b
+    det = a * (d * f - e * e) - b * (b * f - e * c) + c * (b * e - d * c)
+    size = abs(a) * (abs(d * f) + e * e) + abs(b) * (abs(b * f) + abs(e * c)) + abs(c) * (abs(b * e) + abs(d * c))
+    tr = a + d + f
+    return a > 0.0 and m2 > CLEAR * m2_size and det > CLEAR * size and tr * tr * tr <= 2.0 * COND_MAX * det
 
 
 def fallback_shape(Mi: np.ndarray, own: OwnUpdate, W: float, abar: np.ndarray, dbar: np.ndarray, uncertainty: ModelUncertainty | None = None) -> np.ndarray:

@@ -176,6 +176,7 @@ class _Pattern:
     lay: EtaLayout
     balls: list[np.ndarray]  # (d, d) Q of each ball fact, read-only
     solver: ProblemSolver
+    stack: FactStack | None = None  # the balls stacked, once (LocalEstimator._facts)
 
 
 StepObserver = Callable[["LocalEstimator", "NodeSet", "UpdateInput", "StepResult", float], None]
@@ -244,6 +245,7 @@ class LocalEstimator:
         if uncertainty is not None:
             self._ebar[:NX] = uncertainty.G
         self._cbar = {j: s.Cbar for j, s in neighbours.items()} | {node_id: own.Cbar}
+        self._cbar_f = {j: tuple(c.tolist()) for j, c in self._cbar.items()}  # the same as plain floats
         self._own_cbar = own.Cbar
         self._gains: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
         self._patterns: dict[PatternKey, _Pattern] = {}
@@ -485,32 +487,39 @@ class LocalEstimator:
         """
         weights = weights or self.weights
         d = lay.dim
-        ell = np.zeros(d)
+        ell = [0.0] * d  # (plain floats: a handful of scalars per neighbour, cheaper than numpy's per-call set-up)
         facts: list[np.ndarray] = list(balls)
         for j in lay.neigh:
             sj, nb = (self.own if j == self.node_id else self.sensors[j]), neigh.get(j)
-            g_r = np.zeros(d)  # r_j = gᵀη
+            phi = lay.phi.get(j)
+            g_r = np.zeros(d) if phi is not None else None  # r_j = gᵀη (for the sector fact)
             if nb is not None:
                 # y̌_j = (γ_j h1_j − 1) C̄_j x̂_j + γ_j h1_j C̄_j ρ_j^½ M_j z_j + γ_j φ_j + Dv_j v_j
-                a = weights[j]
-                cbar = self._cbar[j]
-                cx = float(cbar @ nb.xhat)
-                ell[0] += a * (nb.gamma * nb.h1 - 1.0) * cx
+                a, gh = weights[j], nb.gamma * nb.h1
+                c0, c1, c2 = self._cbar_f[j]
+                x0, x1, x2 = nb.xhat.tolist()
+                cx = c0 * x0 + c1 * x1 + c2 * x2
+                ell[0] += a * (gh - 1.0) * cx
                 ell[lay.v[j]] += a * sj.Dv
-                g_r[0] = cx
                 if j == self.node_id:
-                    row = cbar @ Mi  # the node's own z_i
-                    ell[lay.z] += a * nb.gamma * nb.h1 * row
-                    g_r[lay.z] = row
+                    row = self._cbar[j] @ Mi  # the node's own z_i
+                    for k, r in zip(lay.z, row.tolist()):
+                        ell[k] += a * gh * r
+                    if g_r is not None:
+                        g_r[lay.z] = row
                 else:  # C̄_j M_j z_j = c_j s_j, c_j = (ρ_j C̄_j P_j C̄_jᵀ)^½
-                    c_j = math.sqrt(max(nb.rho * float(cbar @ nb.P @ cbar), 0.0))
-                    ell[lay.s[j]] += a * nb.gamma * nb.h1 * c_j
-                    g_r[lay.s[j]] = c_j
-                if j in lay.phi:
-                    ell[lay.phi[j]] += a * nb.gamma
-            if j in lay.phi:  # φ_j (h_j r_j − φ_j) ≥ 0
-                facts.append(_sector(d, lay.phi[j], g_r, nb.sector.h))  # type: ignore[union-attr]  # j has a φ slot only with a published sector
-        return ell, facts
+                    (p00, p01, p02), (p10, p11, p12), (p20, p21, p22) = nb.P.tolist()
+                    q = c0 * (p00 * c0 + p01 * c1 + p02 * c2) + c1 * (p10 * c0 + p11 * c1 + p12 * c2) + c2 * (p20 * c0 + p21 * c1 + p22 * c2)
+                    c_j = math.sqrt(max(nb.rho * q, 0.0))
+                    ell[lay.s[j]] += a * gh * c_j
+                    if g_r is not None:
+                        g_r[lay.s[j]] = c_j
+                if g_r is not None:
+                    g_r[0] = cx
+                    ell[phi] += a * nb.gamma  # type: ignore[index]  # phi is set where g_r is
+            if phi is not None:  # φ_j (h_j r_j − φ_j) ≥ 0
+                facts.append(_sector(d, phi, g_r, nb.sector.h))  # type: ignore[union-attr,arg-type]  # j has a φ slot only with a published sector
+        return np.array(ell), facts
 
     def initial_data(self, prior: NodeSet, y: float, gamma: float, sector: Sector | None) -> StepData:
         """Step 0: x̂₀ = x̂ + L(ỹ₀ − C̄x̂), error e = ρ^½Mz − L y̌₀(η) with y̌₀ the own innovation."""
@@ -578,7 +587,7 @@ class LocalEstimator:
         exchange, docs/network.md) and hands it to :meth:`step` with them; ``inp.readings`` is not read."""
         t0 = time.perf_counter()
         base = self._base(prev, inp)
-        first = self._solve_certify(base.data, prev.rho, np.asarray(inp.alpha, dtype=float), self._wh, FactStack.of(base.data.facts))
+        first = self._solve_certify(base.data, prev.rho, np.asarray(inp.alpha, dtype=float), self._wh, self._facts(base.data))
         return Prepared(prev, inp, base, first, 1e3 * (time.perf_counter() - t0))
 
     def _step(self, prev: NodeSet, inp: UpdateInput, prepared: Prepared | None = None) -> StepResult:
@@ -618,7 +627,7 @@ class LocalEstimator:
         fallback where the first has no certificate.
         ``first``: the first solve's outcome, computed before the readings came (:meth:`prepare`)."""
         data, rho, alpha = ctx.data, ctx.rho, np.asarray(inp.alpha, dtype=float)
-        res, solve = first if first is not None else self._solve_certify(data, rho, alpha, self._wh, FactStack.of(data.facts))  # the set the node recurs on
+        res, solve = first if first is not None else self._solve_certify(data, rho, alpha, self._wh, self._facts(data))  # the set the node recurs on
         if res is None:
             assert data.own is not None  # a predicting step always has its own update
             assert ctx.blend is not None  # a predicting step's context has its blend
@@ -651,7 +660,7 @@ class LocalEstimator:
         res = dataclasses.replace(res, solve_ms=res.solve_ms + solve.ms)
         if answer is None or not np.any(answer.L):
             return res  # no answer, or the readings are of no use (L = 0): nothing to certify
-        refined = self._certify(answer, data, rho, FactStack.of(data.facts), solve)
+        refined = self._certify(answer, data, rho, self._facts(data), solve)
         if refined is None or _objective(refined.P, wh) >= (1 - REFINE_RTOL) * _objective(res.P, wh):
             return res  # no certificate, or nothing gained: no reason to rest the published set on the readings
         refined = dataclasses.replace(refined, solve_ms=res.solve_ms, reading_keys=frozenset(data.key[3]))
@@ -677,7 +686,7 @@ class LocalEstimator:
 
     def _update(self, data: StepData, rho: float, alpha: np.ndarray) -> tuple[StepResult | None, _Solve]:
         """The certified set of the step's data (None: no certificate) and the solve's figures."""
-        return self._solve_certify(data, rho, alpha, self._wh, FactStack.of(data.facts))
+        return self._solve_certify(data, rho, alpha, self._wh, self._facts(data))
 
     def _solve_certify(self, data: StepData, rho: float, alpha: np.ndarray, wh: np.ndarray | None, facts: FactStack) -> tuple[StepResult | None, _Solve]:
         """Solve the step's problem for the objective trace(D P), D^½ = diag(wh) (None: trace P), and
@@ -706,6 +715,16 @@ class LocalEstimator:
         tau = sum(a * v for a, v in zip(alpha, sol.tau))
         pi0 = sum(a * p for a, p in zip(alpha, data.pi0))
         return _Answer(sol.P, L, tau, pi0, sol.status), solve
+
+    def _facts(self, data: StepData) -> FactStack:
+        """The step's facts stacked (:class:`~netsetest.estimator.certificate.FactStack`); a pattern whose facts are all
+        its static balls (no φ slot: every NSNIM step) stacks them once."""
+        pat = self._patterns[data.key]
+        if len(data.facts) != len(pat.balls):  # (per-step sector facts after the balls)
+            return FactStack.of(data.facts)
+        if pat.stack is None:
+            pat.stack = FactStack.of(pat.balls)
+        return pat.stack
 
     def _certify(self, answer: _Answer, data: StepData, rho: float, facts: FactStack, solve: _Solve) -> StepResult | None:
         """The published set of an answer where the certificate holds and the set is publishable; else None."""

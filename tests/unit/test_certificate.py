@@ -200,3 +200,30 @@ def test_certify_takes_the_closed_form_for_ball_facts_and_the_dense_check_otherw
     assert closed == pytest.approx(_dense_certificate(P, pi, np.array([2.0]), FactStack.of([ball])), rel=1e-9)
     assert certify(P, pi, np.array([2.0]), [sector]) is not None
     assert calls == [1]
+
+
+@st.composite
+def shapes(draw: st.DrawFn) -> np.ndarray:
+    """A symmetric 3×3 matrix: positive definite of eigenvalue ratio 1…10¹⁵, or with one eigenvalue 0 or negative,
+    scaled by 10^k (k −100…100)."""
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    eig = 10.0 ** rng.uniform(-draw(st.integers(0, 15)), 0.0, size=3)
+    eig[0] *= draw(st.sampled_from([1.0, 1.0, 1.0, 0.0, -1.0, -1e-10]))
+    a = (q * eig) @ q.T * 10.0 ** draw(st.integers(-100, 100))
+    return 0.5 * (a + a.T)
+
+
+@FUZZ
+@given(shapes())
+def test_publishable_answers_as_the_eigenvalues_do(P):
+    """The minors' shortcut of publishable() accepts only what the eigenvalue test accepts (and that one's answer
+    stands everywhere else)."""
+    from netsetest.estimator.certificate import COND_MAX, _clearly_conditioned, publishable
+    from netsetest.linalg import eigvalsh
+
+    eig = eigvalsh(P)
+    by_eigenvalues = bool(eig[0] > 0 and eig[-1] <= COND_MAX * eig[0])
+    assert publishable(np.zeros(3), P) == by_eigenvalues
+    if _clearly_conditioned(P.tolist()):
+        assert _definite(_exact(P)) and eig[-1] <= 0.5 * COND_MAX * eig[0] * (1 + 1e-6)
