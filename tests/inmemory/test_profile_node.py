@@ -30,7 +30,7 @@ def test_an_observed_node_charges_its_solves_and_builds_from_its_first_solved_st
     try:
         run_inmemory(sc, "paper", "scheduled", 0)
     finally:
-        Node.__init__ = real  # type: ignore[method-assign]
+        Node.__init__ = real  # type: ignore[method-assign]  # the real one back
     report = prof.report(nodes[0].k - 1)
     assert prof.started and report["steps"] == 5
     assert prof.calls["solve"] == 5 and prof.calls["build"] == 5  # steps 2..6 after the window opened at step 1
