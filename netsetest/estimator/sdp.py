@@ -729,12 +729,13 @@ class LocalEstimator:
     def _certify(self, answer: _Answer, data: StepData, rho: float, facts: FactStack, solve: _Solve) -> StepResult | None:
         """The published set of an answer where the certificate holds and the set is publishable; else None."""
         L = answer.L
-        pi = answer.pi0 - L @ data.ell[None, :]  # Π(L) = Π₀ − L ℓᵀ
+        gain = bool(L.any())  # (L = 0: Π₀ and x̂_pred as they are, the same floats)
+        pi = answer.pi0 - L @ data.ell[None, :] if gain else answer.pi0  # Π(L) = Π₀ − L ℓᵀ
         rho_c = certify(answer.P, pi, answer.tau, facts)
         if rho_c is None:
             return None
         P_pub = 0.5 * (answer.P + answer.P.T) * rho_c / rho
-        xhat_new = data.x_pred + L[:, 0] * data.innov_sum  # (16): x̂⁺ = x̂_pred + L Σ_j a_ij y̌_j
+        xhat_new = data.x_pred + L[:, 0] * data.innov_sum if gain else data.x_pred.copy()  # (16): x̂⁺ = x̂_pred + L Σ_j a_ij y̌_j
         if not publishable(xhat_new, P_pub):  # a certified set nobody can use: treated as no certificate
             return None
         return StepResult(xhat_new, P_pub, "ok", rho_c, solve.ms, answer.status, L, data.sector)
