@@ -42,7 +42,7 @@ def add_parser(sub: argparse._SubParsersAction, scenario_args: Callable[[argpars
     p.add_argument("--json", metavar="PATH", help="write the rows as a JSON list")
     p.add_argument("--markdown", metavar="PATH", help="write the table as Markdown")
     p.add_argument("--plot", metavar="DIR", help="one figure per node: every estimator's fault bounds and the truth (first run)")
-    p.add_argument("--html", metavar="PATH", help="the table and per node every estimator's fault bounds as one self-contained page (extra view)")
+    p.add_argument("--html", metavar="PATH", help="the table and per node every estimator's fault bounds as one self-contained page, PATH.html (extra view)")
     COMMANDS["compare"] = cmd_compare
 
 
@@ -71,7 +71,7 @@ def cmd_compare(a: argparse.Namespace) -> int:
 
     checks.output_file(a.json, "--json")
     checks.output_file(a.markdown, "--markdown")
-    checks.output_file(a.html, "--html")
+    checks.html_file(a.html)
     if a.html:
         from netsetest.extras import require
 

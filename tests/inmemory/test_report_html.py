@@ -63,6 +63,7 @@ def test_report_without_exact_has_no_exact_section_and_two_records_share_fig8(ru
         (["{record}", "--exact", "{record}"], "not a readable exact document"),
         (["{record}", "--exact", "{other_exact}"], "which is not among the records given"),
         (["{record}", "--html", "{dir}/no/such/dir/x.html"], "does not exist"),
+        (["{record}", "--html", "{dir}/x.pdf"], "x.pdf: the page is HTML; give a name ending in .html or .htm"),  # issue 41 item 11
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(run: dict[str, Path], args: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
@@ -76,6 +77,26 @@ def test_bad_input_is_one_line_and_exit_2(run: dict[str, Path], args: list[str],
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_report_refuses_to_replace_a_page_unless_told(run: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 41 item 11: like ``run --record``, an existing page is replaced only with --overwrite."""
+    out = run["dir"] / "kept.html"
+    out.write_text("mine")
+    assert main(["report", str(run["record"]), "--html", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"--html {out}: the file exists; give --overwrite to replace it" in err and len(err.strip().splitlines()) == 1
+    assert out.read_text() == "mine"
+    assert main(["report", str(run["record"]), "--html", str(out), "--overwrite"]) == 0
+    assert "PASS: inmemory run" in out.read_text()
+
+
+def test_compare_refuses_a_page_that_is_not_html(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The same rule for ``compare --html``, before anything runs."""
+    assert main(["compare", TOPOLOGY, "--steps", "2", "--html", str(tmp_path / "cmp.pdf")]) == 2
+    err = capsys.readouterr().err
+    assert "cmp.pdf: the page is HTML" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "cmp.pdf").exists()
 
 
 def _synthetic(steps: int, n: int) -> object:
