@@ -25,9 +25,12 @@ from netsetest.runtime.rolespec import (
     VehicleSpec,
 )
 from netsetest.runtime.security import RUN_ENV_FILE
+from netsetest.scenarios import topology_help
 from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
+ROLE_COMMANDS: tuple[str, ...] = tuple(spec.ROLE for spec in ROLE_SPECS)  # a role process each (`run` starts them; a deployment by hand)
+INTERNAL_COMMANDS = ("forkserver",)  # started by `run` alone: left out of `netsetest --help`
 
 
 # ---------------------------------------------------------------- option groups
@@ -95,7 +98,7 @@ def add_role_parsers(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("credentials", help="write per-role mTLS credentials (CA, certificates, keys) and run.env for a deployment")
     p.add_argument("dir", help="output directory (created with mode 0700)")
-    p.add_argument("topology", help="topology file or bundled name, e.g. paper6")
+    p.add_argument("topology", help=topology_help())
     p.add_argument("--run-id", type=checks.run_id, help="the deployment's run id (default: a random one)")
     p.add_argument(
         "--router-host",
@@ -106,12 +109,13 @@ def add_role_parsers(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--days", type=checks.positive_int, default=DEFAULT_VALIDITY_DAYS, help="validity of the certificates in days")
 
-    p = sub.add_parser("forkserver", help="internal: the fork server of `netsetest run` (imports once, forks each role process)")
+    # internal, so without help: argparse lists a command only with one (`netsetest forkserver --help` still has its text)
+    p = sub.add_parser("forkserver", description="internal: the fork server of `netsetest run` (imports once, forks each role process)")
     p.add_argument("--run-id", type=checks.run_id, required=True, help="the run it serves (in its command line and its children's, to find them)")
     p.add_argument("--control-fd", type=int, required=True, help="file descriptor of the launcher's control socket")
 
     p = sub.add_parser("compose", help="print a docker-compose.yml for a topology (router + one service per role)")
-    p.add_argument("topology", help="topology file or bundled name, e.g. paper6")
+    p.add_argument("topology", help=topology_help())
     p.add_argument("--image", default="netsetest:latest", help="image with netsetest installed (built from the Dockerfile)")
 
 

@@ -772,6 +772,8 @@ def load_topology(
         node_dir = (path.parent / topo.node_dir).resolve()
     except (RuntimeError, OSError, ValueError) as exc:  # a symlink loop, a NUL byte
         raise ConfigError(f"{path}: node_dir {topo.node_dir!r}: {exc}") from None
+    if not node_dir.is_dir():  # a wrong node_dir once read as a missing profile file
+        raise ConfigError(f"{path}: node_dir {topo.node_dir!r}: no such directory ({node_dir}; relative to the topology file's directory)")
     v = topo.vehicle
     try:
         params = v.params()
@@ -781,6 +783,8 @@ def load_topology(
     profiles: dict[int, NodeProfile] = {}
     for ref in topo.nodes:
         ppath = node_dir / f"{ref.profile}.toml"
+        if not ppath.exists():
+            raise ConfigError(f"{path}: node {ref.id}: profile {ref.profile!r}: no {ppath.name} in node_dir {topo.node_dir!r} ({node_dir})")
         prof = profiles[ref.id] = load_profile(ppath)
         saim = case == "saim"
         if saim and (prof.saturation is None or prof.availability is None):
