@@ -49,6 +49,7 @@ ZENOH_ONLY: dict[str, tuple[str, object]] = {
     "--rejoin": ("rejoin", []),
     "--insecure": ("insecure", False),
     "--run-id": ("run_id", None),
+    "--port": ("port", 0),
     "--zenoh-config": ("zenoh_config", None),
     "--view": ("view", False),
     "--view-port": ("view_port", 0),
@@ -79,6 +80,14 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
         help="no credentials, no access control: an open peer mesh any local process can join (labelled in the summary; default: secured)",
     )
     g.add_argument("--run-id", type=checks.run_id, metavar="ID", help="the run's key-expression namespace (default: a fresh random one, printed)")
+    g.add_argument(
+        "--port",
+        type=argtypes.port,
+        default=0,
+        metavar="N",
+        help="the run's port on 127.0.0.1: its router's, or with --insecure its collector's, the endpoint echo, watch and view "
+        "connect to (default: 0, a free one; the run prints how to watch it)",
+    )
     g.add_argument("--zenoh-config", type=argtypes.readable_file, metavar="FILE", help=ZENOH_CONFIG_HELP)
     g.add_argument(
         "--view",
@@ -258,6 +267,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         run_id=a.run_id,
         view=a.view,
         view_port=a.view_port,
+        port=a.port,
     )
     if a.view:
         from netsetest.extras import require
