@@ -74,6 +74,7 @@ class ComparePage:
     truth_fault: dict[int, np.ndarray]  # node → (K,)
     bounds: dict[str, dict[int, np.ndarray]]  # estimator → node → (K, 3, 2)
     failed: Sequence[str]  # estimators that violated containment where the assumptions held
+    notes: Sequence[str] = ()  # what the rows' assumptions mean for their widths (analysis/compare.py, assumptions_notes)
 
 
 def load_exact(path: str | Path) -> dict:
@@ -548,6 +549,7 @@ def write_compare(path: str | Path, c: ComparePage) -> int:
     )
     parts.append(f'<p class="verdict{" fail" if c.failed else ""}" id="verdict">{html.escape(verdict)}</p>')
     parts.append(_table(c.header, c.rows, "compare"))
+    parts += [f'<p class="note assumptions">{html.escape(note)}</p>' for note in c.notes]
     names = list(c.bounds)
     colours = _palette(len(names))
     for i, truth in sorted(c.truth_fault.items()):
