@@ -784,7 +784,7 @@ def load_topology(
     for ref in topo.nodes:
         ppath = node_dir / f"{ref.profile}.toml"
         if not ppath.exists():
-            raise ConfigError(f"{path}: node {ref.id}: profile {ref.profile!r}: no {ppath.name} in node_dir {topo.node_dir!r} ({node_dir})")
+            raise ConfigError(f"{path}: node {ref.id}: profile {ref.profile!r}: {ppath.name} not found in node_dir {topo.node_dir!r} ({node_dir})")
         prof = profiles[ref.id] = load_profile(ppath)
         saim = case == "saim"
         if saim and (prof.saturation is None or prof.availability is None):

@@ -146,9 +146,9 @@ def test_report_page_opens_on_the_lost_node_marks_detection_and_fits_a_wide_wind
     assert seen.errors == []
     v = seen.values
     assert "NODE LOST: zenoh run (security: mtls+acl)" in v["text"] and "lost for good: node 4" in v["text"]
-    assert "The figures below open on node 4 (lost" in v["text"]
     for fig in FIGURES:
         assert v[f"shown-{fig}"] == [4], fig
+    assert "The figures below open on node 4 (lost" in v["text"]
     detected = {i: summary.node(i).first_detection for i in NODES}
     assert detected[4] is not None, "node 4's fault was detected before it was killed"
     for i in NODES:

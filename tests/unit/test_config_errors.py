@@ -130,4 +130,4 @@ def test_a_wrong_node_dir_is_named(topo, capsys):
     assert "node_dir '../nodez': no such directory" in err and str(topo.parent.parent / "nodez") in err, err
     _edit(topo, 'node_dir = "../nodez"', 'node_dir = "."')  # a directory, without the profiles
     msg = _error(topo)
-    assert msg.startswith(f"{topo}: node 1: profile 'yaw1': no yaw1.toml in node_dir '.'") and len(msg.splitlines()) == 1, msg
+    assert msg.startswith(f"{topo}: node 1: profile 'yaw1': yaw1.toml not found in node_dir '.'") and len(msg.splitlines()) == 1, msg
