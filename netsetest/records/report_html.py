@@ -350,6 +350,23 @@ def focus_node(*records: Record) -> int:
     return best[3] if best is not None else 1
 
 
+def _focus_note(rec: Record) -> str:
+    """The line that says which node the figures open on, and why."""
+    focus = focus_node(rec)
+    outcome, detected = node_outcome(rec, focus), first_detection(rec, focus)
+    why = (
+        outcome
+        if detected is None
+        else f"fault detected at step {detected}"
+        if outcome == "fault detected"
+        else f"{outcome}; fault detected at step {detected}"
+    )
+    return (
+        f'<p class="note" id="focus">The figures below open on node {focus} ({html.escape(why)}): the first node whose run most needs '
+        "a look; click a legend entry to show another.</p>"
+    )
+
+
 def _graph(rec: Record, label: str) -> Any:
     """The topology: node j → node i for every in-neighbour weight a_ij, nodes coloured by their outcome."""
     from bokeh.models import ColumnDataSource, HoverTool, Range1d
@@ -508,12 +525,7 @@ def write_report(path: str | Path, pages: Sequence[RecordPage]) -> int:
             tables = p.tables.removesuffix(p.verdict).rstrip("\n")  # the verdict, the tables' last line, is in its box above
             parts.append(f'<p class="verdict{" fail" if fail else ""}" id="verdict">{html.escape(p.verdict)}</p><pre>{html.escape(tables)}</pre>')
         parts.append(_graph(rec, caption))
-        focus = focus_node(rec)
-        parts.append(
-            f'<p class="note" id="focus">The figures below open on node {focus} ({html.escape(node_outcome(rec, focus))}'
-            f"{'' if first_detection(rec, focus) is None else f', fault detected at step {first_detection(rec, focus)}'}): "
-            "the first node whose run most needs a look; click a legend entry to show another.</p>"
-        )
+        parts.append(_focus_note(rec))
         if p.exact is not None:
             parts.append(_exact_html(p.exact))
         parts += [
