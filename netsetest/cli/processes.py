@@ -25,9 +25,12 @@ from netsetest.runtime.rolespec import (
     VehicleSpec,
 )
 from netsetest.runtime.security import RUN_ENV_FILE
+from netsetest.scenarios import topology_help
 from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
+ROLE_COMMANDS: tuple[str, ...] = tuple(spec.ROLE for spec in ROLE_SPECS)  # a role process each (`run` starts them; a deployment by hand)
+INTERNAL_COMMANDS = ("forkserver",)  # started by `run` alone: left out of `netsetest --help`
 
 
 # ---------------------------------------------------------------- option groups
@@ -46,6 +49,7 @@ ZENOH_ONLY: dict[str, tuple[str, object]] = {
     "--rejoin": ("rejoin", []),
     "--insecure": ("insecure", False),
     "--run-id": ("run_id", None),
+    "--port": ("port", 0),
     "--zenoh-config": ("zenoh_config", None),
     "--view": ("view", False),
     "--view-port": ("view_port", 0),
@@ -76,6 +80,14 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
         help="no credentials, no access control: an open peer mesh any local process can join (labelled in the summary; default: secured)",
     )
     g.add_argument("--run-id", type=checks.run_id, metavar="ID", help="the run's key-expression namespace (default: a fresh random one, printed)")
+    g.add_argument(
+        "--port",
+        type=argtypes.port,
+        default=0,
+        metavar="N",
+        help="the run's port on 127.0.0.1: its router's, or with --insecure its collector's, the endpoint echo, watch and view "
+        "connect to (default: 0, a free one; the run prints how to watch it)",
+    )
     g.add_argument("--zenoh-config", type=argtypes.readable_file, metavar="FILE", help=ZENOH_CONFIG_HELP)
     g.add_argument(
         "--view",
@@ -95,7 +107,7 @@ def add_role_parsers(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("credentials", help="write per-role mTLS credentials (CA, certificates, keys) and run.env for a deployment")
     p.add_argument("dir", help="output directory (created with mode 0700)")
-    p.add_argument("topology", help="topology file or bundled name, e.g. paper6")
+    p.add_argument("topology", help=topology_help())
     p.add_argument("--run-id", type=checks.run_id, help="the deployment's run id (default: a random one)")
     p.add_argument(
         "--router-host",
@@ -106,12 +118,13 @@ def add_role_parsers(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--days", type=checks.positive_int, default=DEFAULT_VALIDITY_DAYS, help="validity of the certificates in days")
 
-    p = sub.add_parser("forkserver", help="internal: the fork server of `netsetest run` (imports once, forks each role process)")
+    # internal, so without help: argparse lists a command only with one (`netsetest forkserver --help` still has its text)
+    p = sub.add_parser("forkserver", description="internal: the fork server of `netsetest run` (imports once, forks each role process)")
     p.add_argument("--run-id", type=checks.run_id, required=True, help="the run it serves (in its command line and its children's, to find them)")
     p.add_argument("--control-fd", type=int, required=True, help="file descriptor of the launcher's control socket")
 
     p = sub.add_parser("compose", help="print a docker-compose.yml for a topology (router + one service per role)")
-    p.add_argument("topology", help="topology file or bundled name, e.g. paper6")
+    p.add_argument("topology", help=topology_help())
     p.add_argument("--image", default="netsetest:latest", help="image with netsetest installed (built from the Dockerfile)")
 
 
@@ -254,6 +267,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         run_id=a.run_id,
         view=a.view,
         view_port=a.view_port,
+        port=a.port,
     )
     if a.view:
         from netsetest.extras import require

@@ -87,6 +87,7 @@ class LaunchOptions:
     run_id: str | None = None  # None: a fresh random one (a guessable id, run<pid>, named every key of the run)
     view: bool = False  # a live view beside the run (runtime/view.py), an observer like `watch`
     view_port: int = 0  # its web port (0: a free one)
+    port: int = 0  # the run's port on loopback: its router's, or (insecure) its collector's, which observers connect to (0: a free one)
 
 
 RUN_ID_BYTES = 8  # of a run's random id (as `netsetest credentials` makes)
@@ -176,6 +177,8 @@ def plan_run(opts: LaunchOptions) -> RunPlan:
     if opts.neighbour_timeout >= opts.node_timeout:
         # else a node waiting for a dead neighbour is itself declared dead by the vehicle
         raise LaunchError(f"--neighbour-timeout ({opts.neighbour_timeout:g} s) must be shorter than --node-timeout ({opts.node_timeout:g} s)")
+    if opts.port and not port_free(opts.port):  # before any role starts (the router, or the collector, could not listen)
+        raise LaunchError(f"--port {opts.port}: 127.0.0.1:{opts.port} is taken (another run or program listens there): choose another, or leave --port out")
     if opts.zenoh_config:
         from netsetest.bus.zenoh_bus import BusError, zenoh_config
 
@@ -200,6 +203,18 @@ def free_ports(n: int) -> list[int]:
     for s in socks:
         s.close()
     return ports
+
+
+def port_free(port: int) -> bool:
+    """Whether a listener could bind TCP ``port`` on loopback now (SO_REUSEADDR, as a listener binds: a closed
+    connection's TIME_WAIT does not take the port)."""
+    with socket.socket() as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
 
 
 class RoleProcess(Protocol):
@@ -287,10 +302,13 @@ class Network:
         router_endpoint: str | None = None,
         credentials: str | None = None,
         router: object | None = None,
+        collector_port: int = 0,
     ) -> None:
         self.names, self.run_id, self.config = names, run_id, config
         self.router_endpoint, self.credentials, self.router = router_endpoint, credentials, router
-        self.ports = dict(zip(names, free_ports(len(names))))
+        self.ports = dict(zip(names, [p for p in free_ports(len(names) + 1) if p != collector_port]))  # one spare: none is the fixed port
+        if collector_port:  # run --insecure --port: the endpoint observers are told to connect to
+            self.ports["collector"] = collector_port
 
     @property
     def secured(self) -> bool:
@@ -342,18 +360,18 @@ def role_names(sc: Scenario) -> list[str]:
 
 
 def open_network(plan: RunPlan, run_id: str, tmp: str) -> Network:
-    """Secured: write the run's credentials into ``tmp`` and open its router (BusError naming the option);
-    insecure: pick a port per role."""
+    """Secured: write the run's credentials into ``tmp`` and open its router on ``--port`` (BusError naming the
+    option); insecure: pick a port per role, ``--port`` the collector's."""
     from netsetest.runtime.security import ROUTER, identity, router_settings, write_credentials, write_observer_access
     from netsetest.runtime.security import role_names as certificate_names
 
     o, sc = plan.options, plan.scenario
     names = role_names(sc)
     if o.insecure:
-        return Network(names, run_id, o.zenoh_config)
+        return Network(names, run_id, o.zenoh_config, collector_port=o.port)
     creds = str(Path(tmp) / "credentials")
     write_credentials(creds, certificate_names(sc))
-    endpoint = f"tls/127.0.0.1:{free_ports(1)[0]}"
+    endpoint = f"tls/127.0.0.1:{o.port or free_ports(1)[0]}"
     router = router_session([endpoint], o.zenoh_config, router_settings(identity(creds, ROUTER), sc, run_id))
     write_observer_access(creds, run_id, [endpoint])
     return Network(names, run_id, o.zenoh_config, endpoint, creds, router)

@@ -28,6 +28,7 @@ from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.runtime import argtypes
 from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, START_TIMEOUT_S
+from netsetest.scenarios import topology_help
 
 if TYPE_CHECKING:  # annotations only: a role process loads the estimator and the models when it needs them
     from netsetest.config.schema import Case, Scenario
@@ -200,7 +201,7 @@ ZENOH_CONFIG_HELP = "a Zenoh configuration (JSON5) to start from; netsetest sets
 class ScenarioSpec:
     """Which run: the topology and what the command line overrides of it."""
 
-    topology: str = _opt(MISSING, None, "topology file (e.g. topologies/paper6.toml) or bundled name (paper6, paper6_lossy)")
+    topology: str = _opt(MISSING, None, topology_help())
     case: Case | None = _opt(None, "--case", "override the topology's case (default: the file's)", choices=("nsnim", "saim"))
     steps: int | None = _opt(None, "--steps", "override the number of steps of τs each (default: the file's)", argtypes.positive_int, metavar="N")
     estimator: str | None = _opt(None, "--estimator", ESTIMATOR_HELP, choices=NODE_ESTIMATOR_NAMES, metavar="NAME")
@@ -338,7 +339,7 @@ class RouterSpec(RoleSpec):
     ROLE: ClassVar[str] = "router"
     HELP: ClassVar[str] = "a Zenoh router in Python (for client-mode roles on several hosts)"
 
-    topology: str | None = _opt(None, None, "topology whose access-control rules the router enforces (with --credentials)", optional=True)
+    topology: str | None = _opt(None, None, topology_help("the topology whose access-control rules the router enforces (with --credentials)"), optional=True)
     credentials: str | None = _opt(
         None, "--credentials", "mTLS with DIR/router.pem and the run's access-control rules (default: none, open router)", metavar="DIR"
     )

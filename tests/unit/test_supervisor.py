@@ -259,6 +259,39 @@ def test_a_secured_network_makes_every_role_a_client_of_the_router() -> None:
     assert "mtls" in net.describe()[0] and "--credentials /creds" in net.describe()[1]
 
 
+def test_an_insecure_run_on_a_fixed_port_listens_and_is_watched_there() -> None:
+    """Issue 41 item 12: ``run --insecure --port N``: the collector listens on N, the other roles connect to it there,
+    the run prints that endpoint and the observers join there; no other role gets N."""
+    import socket
+
+    with socket.socket() as s:  # a port free now, for the plan
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    plan = plan_run(LaunchOptions(PAPER6, steps=5, insecure=True, run_id="demo", port=port))
+    from netsetest.runtime.launcher import open_network
+
+    net = open_network(plan, "demo", "/nonexistent")  # insecure: nothing is written
+    endpoint = f"tcp/127.0.0.1:{port}"
+    assert net.zenoh("collector").listen == (endpoint,) and all(endpoint in net.zenoh(n).connect for n in net.names if n != "collector")
+    assert sorted(net.ports.values()).count(port) == 1
+    assert net.observer_args() == ["--run-id", "demo", "--connect", endpoint]
+    assert f"watch it with: netsetest watch --run-id demo --connect {endpoint}" in net.describe()[1]
+
+
+def test_a_taken_port_is_refused_before_anything_starts() -> None:
+    import socket
+
+    from netsetest.runtime.launcher import LaunchError
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        for insecure in (True, False):
+            with pytest.raises(LaunchError, match=rf"^--port {port}: 127.0.0.1:{port} is taken"):
+                plan_run(LaunchOptions(PAPER6, steps=5, insecure=insecure, port=port))
+
+
 def test_roles_that_do_not_end_on_end_share_one_grace_period() -> None:
     """The collector has finished; nodes that never leave are waited for ROLE_GRACE_S in all, not each (an
     80-node ring whose nodes hung in their Zenoh close held `netsetest run` for 80 × 5 s)."""
