@@ -468,13 +468,20 @@ def _turns(coords: Sequence[float], tol: float) -> tuple[int, bool]:
     across the direction angle 0: from the lower half-plane to the upper counter-clockwise, +1, the other way
     clockwise, −1 (a repeated vertex has no side)."""
     xs, ys = coords[0::2], coords[1::2]
-    sides = [(bx - ax, by - ay) for ax, ay, bx, by in zip(xs, ys, [*xs[1:], xs[0]], [*ys[1:], ys[0]]) if bx != ax or by != ay]
-    if not sides:
+    k = len(xs) - 1
+    while k > 0 and xs[k] == xs[k - 1] and ys[k] == ys[k - 1]:
+        k -= 1  # the last side that is one (a repeated vertex has none)
+    ax, ay = xs[k] - xs[k - 1], ys[k] - ys[k - 1]  # (k = 0: the side into the first vertex from the last)
+    if k == 0 and ax == 0.0 and ay == 0.0:
         return 1, False  # a point
-    ax, ay = sides[-1]
     lower = ay < 0.0 or (ay == 0.0 and ax < 0.0)  # direction angle in [π, 2π)
     winds, reflex = 0, False
-    for bx, by in sides:
+    px, py = xs[-1], ys[-1]
+    for x, y in zip(xs, ys):
+        bx, by = x - px, y - py
+        px, py = x, y
+        if bx == 0.0 and by == 0.0:
+            continue
         cross = ax * by - ay * bx
         if cross <= 0.0 and cross < -tol * (abs(ax) + abs(ay) + abs(bx) + abs(by)):  # (a turn the right way costs no more)
             reflex = True
