@@ -5,7 +5,7 @@ the signal and stops between two turns of its loop (runtime/processes.py ``StopR
 
 Here the collector's own loop (``run_collector``, with the signal handlers a role process has) takes a recorded
 run's messages and is sent SIGINT in the middle of its record: at a random line, before or after the line's
-bytes go out (between its number and its bytes, the old race), 240 times.  Every record loads, holds the steps
+bytes go out (between its number and its bytes, the old race), 200 times.  Every record loads, holds the steps
 checked before the signal exactly once, and ends with the INTERRUPTED summary.  The real processes, Ctrl-C at
 random moments: tests/process/test_record_partial.py.
 """
@@ -30,9 +30,9 @@ from netsetest.runtime.processes import install_signal_handlers, run_collector
 from netsetest.runtime.report import outcome
 from netsetest.runtime.rolespec import CollectorSpec, ScenarioSpec, ZenohSpec
 
-STEPS = 12  # 13 steps of six nodes: 93 record lines to interrupt
+STEPS = 8  # 9 steps of six nodes: 65 record lines to interrupt
 RUN_ID = "mem"  # the in-memory run's
-INTERRUPTIONS = 240
+INTERRUPTIONS = 200  # the issue asks for at least 200
 WANTED = (keys.truth(RUN_ID), *(keys.node_state(RUN_ID, i) for i in range(1, 7)), keys.end(RUN_ID))
 
 
@@ -54,14 +54,17 @@ class ReplayBus(MemoryBus):
 
     def __init__(self, sent: list[tuple[str, bytes]]) -> None:
         super().__init__()
-        self.todo = list(sent)
+        self.chunks: list[list[tuple[str, bytes]]] = [[]]
+        for key, payload in sent:
+            self.chunks[-1].append((key, payload))
+            if key == keys.truth(RUN_ID):
+                self.chunks.append([])
+        self.chunks.reverse()
 
     def pump(self, timeout: float | None = 0.0, limit: int | None = None) -> int:
-        while self.todo and not self.pending():
-            key, payload = self.todo.pop(0)
-            self._send(key, payload)
-            if key == keys.truth(RUN_ID):
-                break
+        if self.chunks and not self.pending():
+            for key, payload in self.chunks.pop():
+                self._send(key, payload)
         return super().pump(0.0, limit)
 
 
@@ -131,11 +134,12 @@ def test_a_collector_interrupted_mid_record_leaves_a_loadable_record(
         rec = load_record(path)  # a damaged record raises RecordError
         s = rec.summary
         where = f"interrupted at write {at} ({'after' if after else 'before'} it)"
-        if s is None or s.stopped is None:  # (the signal came with the summary's own line, or after it)
-            assert at >= lines - 1, where
-            continue
-        assert s.stopped == "interrupted" and outcome(s).word == "INTERRUPTED", where
+        assert s is not None, where  # (the summary is written after the signal is seen)
         last = s.steps_completed
+        if s.stopped is None:  # the signal came with the last step, which the run completed (End with it)
+            assert last == STEPS and at > lines - 8, where
+        else:
+            assert s.stopped == "interrupted" and outcome(s).word == "INTERRUPTED", where
         assert [t["step"] for t in rec.truth] == list(range(last + 1)), where  # each step once, in order
         for i, track in rec.nodes.items():
             assert list(np.asarray(track.steps, dtype=int)) == list(range(last + 1)), (where, i)  # every node-step once

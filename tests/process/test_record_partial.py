@@ -274,7 +274,7 @@ def test_ctrl_c_leaves_a_partial_record(procs: ProcessGuard, tmp_path: Path) -> 
     assert r.partial and r.last_complete_step == r.summary.steps_completed
 
 
-CTRL_C_RUNS = 4  # real runs (the collector's own loop is interrupted 240 times in tests/inmemory/test_interrupted_record.py)
+CTRL_C_RUNS = 4  # real runs (the collector's own loop is interrupted 200 times in tests/inmemory/test_interrupted_record.py)
 
 
 @pytest.mark.zenoh

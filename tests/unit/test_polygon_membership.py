@@ -47,9 +47,9 @@ FLOAT_MAX = 1.7976931348623157e308
 Point = tuple[Fraction, Fraction]
 
 
-def _inside(vertices: np.ndarray, p: np.ndarray) -> bool:
-    """p in the hull of ``vertices``, in rational arithmetic."""
-    hull = _hull(_exact(vertices))
+def _inside(vertices: np.ndarray, p: np.ndarray, hull: list[Point] | None = None) -> bool:
+    """p in the hull of ``vertices`` (``hull``: that hull, exact, if made already), in rational arithmetic."""
+    hull = _hull(_exact(vertices)) if hull is None else hull
     q = _exact(p)[0]
     if len(hull) == 1:
         return hull[0] == q
@@ -64,7 +64,7 @@ def huge_polygons(draw: st.DrawFn) -> np.ndarray:
     """Vertices (n, 2) at the float range's end: random points up to ±FLOAT_MAX, a convex polygon scaled there, or
     ordinary coordinates mixed with some at 10³⁰⁰…10³⁰⁸ (the hostile regions' scale)."""
     rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
-    n = draw(st.integers(3, 24))
+    n = draw(st.integers(3, 12))
     kind = draw(st.sampled_from(["cloud", "convex", "mixed"]))
     if kind == "cloud":
         return rng.uniform(-1.0, 1.0, size=(n, 2)) * FLOAT_MAX
@@ -101,11 +101,11 @@ def _probes(v: np.ndarray, rng: np.random.Generator) -> list[np.ndarray]:
 
 def _check_membership(v: np.ndarray, seed: int) -> None:
     rng = np.random.default_rng(seed)
-    poly, probes = Polygon(v), _probes(v, rng)
+    poly, probes, hull = Polygon(v), _probes(v, rng), _hull(_exact(v))
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # an overflow warning fails the test
         for p in probes:
-            assert poly.contains(p) == _inside(v, p), (v.tolist(), p.tolist())
+            assert poly.contains(p) == _inside(v, p, hull), (v.tolist(), p.tolist())
 
 
 @FUZZ
@@ -121,17 +121,18 @@ def test_contains_is_exact_on_adversarial_polygons(v: np.ndarray, reverse: bool,
     _check_membership(v[::-1].copy() if reverse else v, seed)
 
 
-def test_contains_on_20000_polygons_at_1e308_is_exact() -> None:
+def test_contains_on_random_polygons_at_1e308_is_exact() -> None:
     """The issue's measurement, seeded and shortened: random polygons at the float range's end (before: 594 false
-    "inside" and 483 false "outside" in 20 000); here 500 of them, each against its random points."""
+    "inside" and 483 false "outside" in 20 000); here 200 of them, each against four random points."""
     rng = np.random.default_rng(41)
     wrong = 0
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        for _ in range(500):
+        for _ in range(200):
             v = rng.uniform(-1.0, 1.0, size=(int(rng.integers(3, 9)), 2)) * FLOAT_MAX
+            hull = _hull(_exact(v))
             for p in rng.uniform(-1.0, 1.0, size=(4, 2)) * FLOAT_MAX:
-                wrong += Polygon(v).contains(p) != _inside(v, p)
+                wrong += Polygon(v).contains(p) != _inside(v, p, hull)
     assert wrong == 0
 
 
