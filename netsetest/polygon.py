@@ -441,9 +441,9 @@ def region_problem(coords: Sequence[float]) -> tuple[str, str] | None:
         return REGION_ODD, f"{len(coords)} coordinates"
     if not MIN_VERTICES <= len(coords) // 2 <= MAX_VERTICES:
         return REGION_VERTICES, f"{len(coords) // 2} vertices, not {MIN_VERTICES} to {MAX_VERTICES}"
-    if not math.isfinite(sum(map(abs, coords))) and not all(map(math.isfinite, coords)):  # (a NaN or an inf makes the sum one)
+    if not math.isfinite(sum(coords)) and not all(map(math.isfinite, coords)):  # (a NaN or an inf makes the sum one)
         return REGION_NOT_FINITE, "a coordinate is not finite"
-    size = max(map(abs, coords))
+    size = max(max(coords), -min(coords))
     if size > MAX_COORDINATE:
         return REGION_SCALE, f"a coordinate of size {size:.3g}, beyond ±{MAX_COORDINATE:g}"
     tol = CONVEX_TOLERANCE * (1.0 + size)
