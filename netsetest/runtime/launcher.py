@@ -11,7 +11,9 @@ bad option) and :func:`launch` runs the resulting :class:`RunPlan` in three part
   while the launcher writes credentials and opens the router: 1 collector, one process per node, 1 vehicle;
 - the *supervisor* (:class:`Supervisor`): follows the collector's progress and summary on its channel
   (runtime/channel.py), kills and restarts nodes mid-run (``kill``, ``rejoin``), logs the roles' exits,
-  and stops every child on Ctrl-C, on SIGTERM or when the vehicle or the collector fails.  A node that
+  and stops every child on Ctrl-C, on SIGTERM, when the vehicle or the collector fails, or when the vehicle
+  gave up on a collector stalled past the stall limit (then, and on Ctrl-C, with the summary the collector
+  writes when it is stopped).  A node that
   dies is not a failure of the run: the others go on without it and the summary says so (exit code 3,
   from the collector).  It only polls, signals and restarts processes: tests/unit/test_supervisor.py runs
   it on fake ones.
@@ -125,8 +127,8 @@ class RoleUsage:
 
 @dataclass(frozen=True)
 class RunOutcome:
-    """How a launched run ended: the launcher's exit code and the collector's summary, if it wrote one
-    at the normal end of the run (not when interrupted or when the vehicle failed).  :func:`launch` adds
+    """How a launched run ended: the launcher's exit code and the collector's summary, if it wrote one (at the end
+    of the run, when interrupted, when it stalled past the stall limit; not when the vehicle failed).  :func:`launch` adds
     what the benchmark measures: each role's usage (its last process) and when the launcher heard that
     the collector had checked each step (``time.monotonic()``)."""
 
