@@ -10,7 +10,8 @@
   order of a convex polygon's vertices, and one beyond ``MAX_COORDINATE`` are dropped, each with its reason; the
   hostile regions of the issue each under its own name, in a state's region and in a set estimator's set.
 
-The long run: ``NETSETEST_FUZZ_EXAMPLES=10000 pytest -n 0 -q --timeout 0 tests/unit/test_polygon_membership.py``.
+The long run: ``NETSETEST_FUZZ_EXAMPLES=10000 pytest -n 0 -q --timeout 0 tests/unit/test_polygon_membership.py``; run
+with 2000 examples each on branch i41r (2026-12-07): all passed.
 """
 
 from __future__ import annotations
