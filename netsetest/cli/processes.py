@@ -18,6 +18,7 @@ from netsetest.runtime.rolespec import (
     ESTIMATOR_HELP,
     ROLE_SPECS,
     RUN_ID_ENV,
+    STALL_LIMIT_HELP,
     ZENOH_CONFIG_HELP,
     CollectorSpec,
     NodeSpec,
@@ -26,7 +27,7 @@ from netsetest.runtime.rolespec import (
 )
 from netsetest.runtime.security import RUN_ENV_FILE
 from netsetest.scenarios import topology_help
-from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S
+from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, STALL_LIMIT_S
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 ROLE_COMMANDS: tuple[str, ...] = tuple(spec.ROLE for spec in ROLE_SPECS)  # a role process each (`run` starts them; a deployment by hand)
@@ -45,6 +46,7 @@ ZENOH_ONLY: dict[str, tuple[str, object]] = {
     "--node-timeout": ("node_timeout", NODE_TIMEOUT_S),
     "--neighbour-timeout": ("neighbour_timeout", NEIGHBOUR_TIMEOUT_S),
     "--pace": ("pace", 0.0),
+    "--stall-limit": ("stall_limit", STALL_LIMIT_S),
     "--kill": ("kill", []),
     "--rejoin": ("rejoin", []),
     "--insecure": ("insecure", False),
@@ -68,6 +70,7 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
         "--neighbour-timeout", type=_seconds, default=NEIGHBOUR_TIMEOUT_S, metavar="S", help="lockstep: how long [s] a node waits for a neighbour's message"
     )
     g.add_argument("--pace", type=_non_negative, default=0.0, metavar="S", help="lockstep: at least S seconds per step (default: 0, as fast as possible)")
+    g.add_argument("--stall-limit", type=argtypes.stall_limit, default=STALL_LIMIT_S, metavar="S", help=STALL_LIMIT_HELP)
     g.add_argument(
         "--kill", type=_at, action="append", default=[], metavar="NODE@STEP", help="SIGKILL node NODE once step STEP is checked (repeatable; default: none)"
     )
@@ -189,7 +192,7 @@ def cmd_router(a: argparse.Namespace) -> int:
     listen = spec.endpoints
     install_signal_handlers()
     try:
-        session = router_session(listen, spec.zenoh_config, security, spec.connect)
+        session = router_session(listen, spec.zenoh_config, security, spec.connect, spec.stall_limit)
     except BusError as exc:
         log("router", str(exc))
         return EXIT_BAD_INPUT
@@ -260,6 +263,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         node_timeout=a.node_timeout,
         neighbour_timeout=a.neighbour_timeout,
         pace=a.pace,
+        stall_limit=a.stall_limit,
         kill=tuple(a.kill),
         rejoin=tuple(a.rejoin),
         insecure=a.insecure,
