@@ -226,15 +226,22 @@ class Truth(_Msg, tag="truth", frozen=True, kw_only=True):
     speed: FiniteF | None = None
     ay: FiniteF | None = None
     envelope_ok: bool = True
+    # a recorded drive (docs/your-log.md): the truth is known only to lie in a box: x ± x_acc (None: x is the truth
+    # itself), each node's fault f ± f_acc (absent: exact); reference False: no reference at this step, x unknown
+    x_acc: Vec2 | None = None
+    f_acc: Annotated[dict[str, Annotated[float, Meta(ge=0, le=FLOAT_MAX)]], Meta(max_length=MAX_NODES)] = {}
+    reference: bool = True
 
     def __post_init__(self) -> None:
+        if self.x_acc is not None and min(self.x_acc) < 0:
+            raise ValueError("x_acc: half-widths must not be negative")
         ids = set(self.faults)
         if not all(k.isdecimal() and int(k) >= 1 for k in ids):
             raise ValueError("faults: keys must be node ids (decimal integers ≥ 1)")
         for name in ("noise", "gamma", "y", "y_nofault", "sector_ok", "noise_ok"):
             if set(getattr(self, name)) != ids:
                 raise ValueError(f"{name}: keys differ from the keys of faults")
-        for name in ("r", "fault_ok"):  # absent ({}) in records written before the derived sector
+        for name in ("r", "fault_ok", "f_acc"):  # absent ({}) in records written before the derived sector, and in a model's run
             if getattr(self, name) and set(getattr(self, name)) != ids:
                 raise ValueError(f"{name}: keys differ from the keys of faults")
 

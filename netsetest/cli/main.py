@@ -25,6 +25,7 @@ from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJ
 from netsetest.models.manoeuvres import MANOEUVRES, WITH_AMPLITUDE
 from netsetest.models.signals import SIGNAL_KINDS
 from netsetest.extras import MissingExtra, require
+from netsetest.logs.readers import LogError
 from netsetest.records.errors import RecordError
 from netsetest.models.uncertainty import DEFAULT_MARGIN
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED
@@ -110,6 +111,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON (default: none)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.add_argument("--strict", action="store_true", help="exit 1 where any set missed the truth outside the guarantee too (default: only misses it covered)")
+    p.add_argument("--log", metavar="DRIVE", help="a recorded drive as the world: a ROS 2 bag, an MDF4 file, a Parquet or CSV table (docs/your-log.md)")
+    p.add_argument("--map", metavar="MAP.toml", help="the log's mapping (default: the topology's [vehicle] mapping, else DRIVE's name with .map.toml)")
     processes.add_run_options(p)
     processes.add_role_parsers(sub)
 
@@ -261,7 +264,9 @@ def cmd_run(a: argparse.Namespace) -> int:
     from netsetest.runtime.inmemory import run_inmemory
     from netsetest.runtime.report import exit_code, format_table, write_summary
 
-    sc = load_topology(a.topology, a.case, a.steps, a.estimator)
+    from netsetest.logs.drive import with_log_steps
+
+    sc = with_log_steps(load_topology(a.topology, a.case, a.steps, a.estimator, log=a.log, mapping=a.map))
     res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet, record=a.record, keep=False, objective=a.objective)
     write_summary(res.summary, a.summary_json)
     print(format_table(res.summary, a.strict))
@@ -690,7 +695,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     handler = COMMANDS.get(a.command) or tools.COMMANDS.get(a.command) or compare.COMMANDS.get(a.command) or processes.COMMANDS[a.command]
     try:
         return handler(a)
-    except (ConfigError, RecordError, MissingExtra, ExactError, CompareError, checks.OutputError, tools.ObserverError) as exc:
+    except (ConfigError, RecordError, MissingExtra, ExactError, CompareError, checks.OutputError, tools.ObserverError, LogError) as exc:
         print(f"netsetest {a.command}: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except BrokenPipeError:  # `netsetest inspect R | head`: the reader has gone, which is not an error

@@ -50,6 +50,8 @@ class NodeSummary:
     steps_contested: int = 0
     steps_evaluated: int = 0
     steps_contained: int = 0
+    steps_missed: int = 0  # proven apart from the truth (a model's run: every judged step not contained)
+    steps_undecided: int = 0  # a reference's truth box overlapping the set without lying in it (docs/your-log.md)
     steps_covered: int = 0
     missing_steps: int = 0
     missing_from: int | None = None
@@ -128,6 +130,9 @@ class RunSummary:
     node_steps_contested: int = 0  # more than one matching copy: not judged
     node_steps_evaluated: int = 0
     node_steps_contained: int = 0
+    node_steps_missed: int = 0  # the published set proven apart from the truth
+    node_steps_undecided: int = 0  # neither: a recorded drive's reference cannot tell (docs/your-log.md)
+    reference_accuracy: list[float] | None = None  # a recorded drive's reference: its declared half-widths (β rad, r rad/s); None: a model's run
     node_steps_covered: int = 0  # evaluated with every assumption held
     node_steps_not_covered: dict[str, int] = field(default_factory=dict)  # evaluated outside the guarantee, by cause
     inherited_from: list[InheritedOrigin] = field(default_factory=list)  # the origins of cause "inherited"

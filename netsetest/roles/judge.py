@@ -43,6 +43,8 @@ MISSED = "missed the truth"
 NOT_JUDGED = "not judged"  # no copy with that digest reached the collector, or several matched the truth
 HEALTH = "k-of-N health"  # more than [network] max_faulty sensors faulty at a step whose set used it (docs/network.md)
 INHERITED = "inherited"  # the cause of a node-step whose input failed: its Origin says which and why
+NO_REFERENCE = "no reference"  # a recorded drive's step without a reference: the truth is unknown, nothing is judged
+UNDECIDED = "undecided"  # an input whose set overlapped the reference's truth box without holding all of it: it may have missed
 
 
 @dataclass(frozen=True)
@@ -74,20 +76,33 @@ class Cone:
 
 @dataclass(frozen=True)
 class Containment:
-    """A judged state against its step's truth: E = eᵀP⁻¹e of its ellipsoid, whether its set holds the truth,
-    whether the set its node continues from does (the same set unless the state sends ``continues``),
-    and the set's per-coordinate bounds (3, 2) where it is not the ellipsoid alone (a set estimator's set, or
-    the SDP's ellipsoid ∩ its fault range; None: the ellipsoid's)."""
+    """A judged state against its step's truth: E = eᵀP⁻¹e of its ellipsoid (the largest over a reference's truth
+    box), whether its set holds the truth (all of the box), whether the set its node continues from does (the same
+    set unless the state sends ``continues``), whether each is proven to miss it (disjoint from the box; a point
+    truth: not held), and the set's per-coordinate bounds (3, 2) where it is not the ellipsoid alone (a set
+    estimator's set, or the SDP's ellipsoid ∩ its fault range; None: the ellipsoid's).  Neither held nor missed is
+    *undecided*: a recorded drive's reference cannot tell (docs/your-log.md)."""
 
     E: float
     contained: bool
     continues_contained: bool
     bounds: np.ndarray | None = None
+    missed: bool = False
+    continues_missed: bool = False
 
     @property
     def held(self) -> bool:
-        """Both sets of the step hold the truth: on a covered node-step anything else is a violation."""
+        """Both sets of the step hold the truth."""
         return self.contained and self.continues_contained
+
+    @property
+    def certain_miss(self) -> bool:
+        """A set of the step is proven to miss the truth: on a covered node-step a violation."""
+        return self.missed or self.continues_missed
+
+    @property
+    def undecided(self) -> bool:
+        return not self.held and not self.certain_miss
 
 
 @dataclass(frozen=True)
@@ -142,10 +157,27 @@ def published_sector(st: NodeState) -> Sector | None:
     return Sector(st.sector[0], st.sector[1], st.sector_basis) if st.sector is not None else None
 
 
+def truth_box(tr: Truth, i: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """Node i's x̄ = (β, r, f) as a reference's box (lo, hi), or None where the truth is a point (a model's run, or a
+    reference of accuracy 0 with an exactly known fault: judged as a model's run is)."""
+    if tr.x_acc is None:
+        return None
+    h = np.array([tr.x_acc[0], tr.x_acc[1], tr.f_acc.get(str(i), 0.0)])
+    if not h.any():
+        return None
+    c = augmented(tr.x, tr.faults[str(i)])
+    return c - h, c + h
+
+
 def _in_prior(n: NodeConfig, tr: Truth) -> bool:
-    """Assumption 1: the true x̄_0 lies in node n's prior ellipsoid."""
-    e = augmented(tr.x, tr.faults[str(n.id)]) - n.x0_hat
-    return float(e @ np.linalg.solve(n.P0, e)) <= n.rho
+    """Assumption 1: the true x̄_0 lies in node n's prior ellipsoid (all of a reference's box: else not proven)."""
+    box = truth_box(tr, n.id)
+    points = [augmented(tr.x, tr.faults[str(n.id)])] if box is None else list(_box_corners(*box))
+    return all(float((p - n.x0_hat) @ np.linalg.solve(n.P0, p - n.x0_hat)) <= n.rho for p in points)
+
+
+def _box_corners(lo: np.ndarray, hi: np.ndarray) -> list[np.ndarray]:
+    return [np.where(np.array(m, dtype=bool), hi, lo) for m in np.ndindex(2, 2, 2)]
 
 
 def isclose(a: float, b: float, rtol: float) -> bool:
@@ -192,7 +224,7 @@ class Judge:
         out = {}
         for n in self.sc.nodes:
             st = inp.judged.get(n.id)
-            judged = st is not None and tr is not None and n.id not in inp.contested
+            judged = st is not None and tr is not None and tr.reference and n.id not in inp.contested
             out[n.id] = NodeVerdict(
                 n.id,
                 inp.step,
@@ -204,12 +236,18 @@ class Judge:
     def containment(self, i: int, st: NodeState, tr: Truth) -> Containment:
         """The state's published set and the set it continues from against the truth (ProvenSet.contains); E is the
         published ellipsoid's (a set estimator's: the one around its set, its neighbour-facing summary)."""
-        xbar = augmented(tr.x, tr.faults[str(i)])
         pub = st.published
+        bounds = None if pub.is_ellipsoid else np.stack(pub.bounds(), axis=1)
+        box = truth_box(tr, i)
+        if box is not None:  # a recorded drive's reference: the set against the whole box (proven.ProvenSet.relation)
+            rel = pub.relation(*box)
+            cont = rel if st.continues is None else st.continued.relation(*box)
+            return Containment(pub.E_max(*box), rel == "inside", cont == "inside", bounds, rel == "disjoint", cont == "disjoint")
+        xbar = augmented(tr.x, tr.faults[str(i)])
         E = pub.E(xbar)
         inside = pub.contains(xbar, E)
         continues = inside if st.continues is None else st.continued.contains(xbar)
-        return Containment(E, inside, continues, None if pub.is_ellipsoid else np.stack(pub.bounds(), axis=1))
+        return Containment(E, inside, continues, bounds, not inside, not continues)
 
     def sector_premise(self, n: NodeConfig, st: NodeState | None, tr: Truth) -> bool:
         """What the node's step sector rests on held: nothing more than the noise bound (measurement),
@@ -238,6 +276,8 @@ class Judge:
         """One copy of node j's state of a step, judged as an input of a later step."""
         if tr is None:
             return CopyCheck(TRUTH_UNKNOWN, TRUTH_UNKNOWN)
+        if not tr.reference:
+            return CopyCheck(NO_REFERENCE, NO_REFERENCE)
         n, s = self.node_cfg[j], str(j)
         if state_mismatch(n, c, tr):
             return CopyCheck(NOT_FROM_INPUT, NOT_FROM_INPUT)
@@ -246,13 +286,18 @@ class Judge:
             facts = "noise"
         elif n.sensor.saturated and not (s in tr.r and sector_ok(n.sensor, published_sector(c), tr.r[s])):
             facts = "sector"
-        xbar = augmented(tr.x, tr.faults[s])
-        published_in = c.published.E(xbar) <= c.published.rho  # neighbours use the ellipsoid alone
-        prior_in = c.continued.contains(xbar)
+        box = truth_box(tr, j)
+        if box is None:
+            xbar = augmented(tr.x, tr.faults[s])
+            published_in: str | None = None if c.published.E(xbar) <= c.published.rho else MISSED  # neighbours use the ellipsoid alone
+            prior_in: str | None = None if c.continued.contains(xbar) else MISSED
+        else:  # held only where all of the reference's box lies in it; proven apart: missed; else it may have missed
+            published_in = _held(c.published.ellipsoid_only().relation(*box))
+            prior_in = _held(c.continued.relation(*box))
         self_loop = j in n.in_weights  # its own innovation enters its next step: the same facts
         return CopyCheck(
-            as_neighbour=facts or (None if published_in else MISSED),
-            as_prior=(facts if self_loop else None) or (None if prior_in else MISSED),
+            as_neighbour=facts or published_in,
+            as_prior=(facts if self_loop else None) or prior_in,
         )
 
     def own_cause(self, n: NodeConfig, st: NodeState | None, tr: Truth, prev: Truth | None, k: int, prev_overloaded: bool = False) -> str | None:
@@ -286,6 +331,8 @@ class Judge:
         i, k, tr = n.id, inp.step, inp.truth
         if tr is None:
             return Cone(False, TRUTH_UNKNOWN)
+        if not tr.reference:
+            return Cone(False, NO_REFERENCE)
         st = inp.judged.get(i)
         own = self.own_cause(n, st, tr, inp.prev_truth, k, inp.prev_overloaded)
         if own is not None:
@@ -321,6 +368,11 @@ class Judge:
         if j in self.references and not tr.fault_ok.get(s, False):
             return "fault bound"  # its declared size 0
         return None
+
+
+def _held(rel: str) -> str | None:
+    """A copy's set against a reference's box, as an input's check: held (None), missed or undecided."""
+    return None if rel == "inside" else MISSED if rel == "disjoint" else UNDECIDED
 
 
 def mismatch_cause(t: Truth | dict) -> str:
@@ -365,11 +417,13 @@ __all__ = [
     "INHERITED",
     "MISSED",
     "MODEL_MISMATCH",
+    "NO_REFERENCE",
     "NOT_FROM_INPUT",
     "NOT_JUDGED",
     "NO_CHECKS",
     "OUTSIDE_ENVELOPE",
     "TRUTH_UNKNOWN",
+    "UNDECIDED",
     "COLLECTOR_OVERLOADED",
     "Cone",
     "Containment",
@@ -385,4 +439,5 @@ __all__ = [
     "mismatch_cause",
     "published_sector",
     "state_mismatch",
+    "truth_box",
 ]

@@ -94,7 +94,8 @@ def outcome(summary: RunSummary, strict: bool = False) -> Outcome:
     if summary.nodes_missing:
         return Outcome("NODE LOST", EXIT_NODE_LOST)
     expected = (summary.steps_completed + 1) * len(summary.nodes)
-    full = summary.node_steps_covered == summary.node_steps_evaluated == expected
+    # an undecided node-step (a recorded drive's reference cannot tell) is never counted as contained
+    full = summary.node_steps_covered == summary.node_steps_evaluated == expected and not summary.node_steps_undecided
     return Outcome("PASS" if full else "PASS (partial coverage)", EXIT_OK)
 
 
@@ -247,11 +248,20 @@ def verdict(summary: RunSummary) -> str:
     """The result in words, never more than was checked: how many node-steps the guarantee covered."""
     evaluated, contained = summary.node_steps_evaluated, summary.node_steps_contained
     covered, reported = summary.node_steps_covered, summary.node_steps_reported
-    if summary.violations_total:
-        head = f"CONTAINMENT VIOLATED {summary.violations_total} time(s) where the assumptions held; contained on {contained} of {evaluated} node-steps"
+    acc = summary.reference_accuracy
+    if acc is not None:  # a recorded drive: the truth is a box, and three counts say what the reference proves
+        counts = (
+            f"contained on {contained}, missed on {summary.node_steps_missed}, undecided on {summary.node_steps_undecided} of {evaluated} "
+            f"node-steps (a recorded drive; reference ± {acc[0]:.3g} rad, ± {acc[1]:.3g} rad/s)"
+        )
     else:
-        head = f"contained on {contained} of {evaluated} node-steps"
-    text = f"{head}; the guarantee applied on {covered}"
+        counts = f"contained on {contained} of {evaluated} node-steps"
+    if summary.violations_total:
+        head = f"CONTAINMENT VIOLATED {summary.violations_total} time(s) where the assumptions held; {counts}"
+    else:
+        head = counts
+    applied = "no assumption proven broken on" if acc is not None else "the guarantee applied on"
+    text = f"{head}; {applied} {covered}"
     causes = summary.node_steps_not_covered
     if causes:
         text += f" (not covered {evaluated - covered}: " + ", ".join(f"{c} {n}" for c, n in causes.items()) + ")"
@@ -260,7 +270,8 @@ def verdict(summary: RunSummary) -> str:
         more = len(summary.inherited_from) - MAX_ORIGINS
         text += "; inherited from " + ", ".join(shown) + (f" and {more} more (see the summary)" if more > 0 else "")
     if reported > evaluated:
-        text += f"; {reported - evaluated} node-step(s) not judged (truth unknown or copies contested)"
+        why = "no reference, truth unknown or copies contested" if acc is not None else "truth unknown or copies contested"
+        text += f"; {reported - evaluated} node-step(s) not judged ({why})"
     if summary.node_steps_rejected:
         text += f"; {summary.node_steps_rejected} node-step(s) rejected (no copy matched the truth)"
     if summary.steps_overloaded:
