@@ -313,7 +313,11 @@ def cmd_inspect(a: argparse.Namespace) -> int:
         for r in rec.fault_rows(i):
             ft = "-" if r["fault_true"] is None else f"{r['fault_true']:9.4f}"
             e = "-" if r["E"] is None else f"{r['E']:7.3f}"
-            flag = "  not judged" if not r["judged"] else ("" if r["contained"] else "  MISS")
+            flag = (
+                "  not judged"
+                if not r["judged"]
+                else ("" if r["contained"] else "  MISS" if r["missed"] else "  undecided (the reference's box overlaps the set)")
+            )
             if r["judged"] and r["contained"] and r["continues_contained"] is False:
                 flag = "  MISS (the set it continues from)"
             if r["cause"] is not None:  # outside the guarantee: why, beside a miss or alone
@@ -334,7 +338,7 @@ def _print_state(rec: Record, i: int) -> None:
         for name in ("beta", "r", "fault"):
             t = r[f"{name}_true"]
             cells.append(f"[{r[f'{name}_lower']:8.4f}, {r[f'{name}_upper']:8.4f}] {'-' if t is None else format(t, '8.4f'):>8} {r[f'{name}_rests_on']:<11}")
-        flag = "" if not r["judged"] or r["contained"] else "  MISS"
+        flag = "" if not r["judged"] or r["contained"] else "  MISS" if r["missed"] else "  undecided"
         print(f"{r['step']:5d}  " + "  ".join(cells) + f"  {r['status']}{flag}")
     print()
 

@@ -212,6 +212,20 @@ class NodeTrack:
     judged: np.ndarray | None = None  # (K,) bool: the collector judged the step (None: all were, older records)
     fdi: list[str | None] | None = None  # (K,) detected | healthy | undecided (docs/fdi.md; None: older records)
     continues_contained: np.ndarray | None = None  # (K,) bool: the set the node continues from held the truth (None: older records)
+    missed_flags: np.ndarray | None = None  # (K,) bool: the set proven apart from the truth (None: records before issue 42, not contained)
+
+    @property
+    def missed(self) -> np.ndarray:
+        """(K,) bool: judged and proven to miss the truth (a model's run: judged and not contained; a recorded drive's
+        reference: disjoint from its box, docs/your-log.md)."""
+        judged = self.judged if self.judged is not None else ~np.isnan(self.E)
+        return self.missed_flags & judged if self.missed_flags is not None else judged & ~self.contained
+
+    @property
+    def undecided(self) -> np.ndarray:
+        """(K,) bool: judged, neither contained nor missed (a reference's box overlapping the set)."""
+        judged = self.judged if self.judged is not None else ~np.isnan(self.E)
+        return judged & ~self.contained & ~self.missed
 
     def was_judged(self, n: int) -> bool:
         return bool(self.judged[n]) if self.judged is not None else True
@@ -283,6 +297,8 @@ class Record:
                     "E": None if np.isnan(tr.E[n]) else float(tr.E[n]),
                     "judged": tr.was_judged(n),
                     "contained": bool(tr.contained[n]) if tr.was_judged(n) else None,
+                    "missed": bool(tr.missed[n]) if tr.was_judged(n) else None,
+                    "undecided": bool(tr.undecided[n]) if tr.was_judged(n) else None,
                     "continues_contained": bool(tr.continues_contained[n]) if tr.was_judged(n) and tr.continues_contained is not None else None,
                     "status": tr.status[n],
                     "fdi": tr.fdi[n] if tr.fdi is not None else None,
@@ -555,6 +571,7 @@ def record_from_parts(
             continues_contained=np.array([e.get("continues_contained") is not False for e in entries], dtype=bool)
             if any("continues_contained" in e for e in entries)
             else None,
+            missed_flags=np.array([e.get("missed") is True for e in entries], dtype=bool) if any("missed" in e for e in entries) else None,
         )
     for t in truth:
         if not isinstance(t, dict) or not isinstance(t.get("step"), int):
