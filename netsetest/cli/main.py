@@ -197,6 +197,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--speed", type=checks.speed_range, metavar="LO-HI", help="the envelope's speed range [km/h], e.g. 70-120 (with --envelope)")
 
+    p = sub.add_parser("log-example", help="write the synthetic example drives of docs/your-log.md (every log format, with mappings)")
+    p.add_argument("directory", help="where to write them (created)")
+    p.add_argument("--seconds", type=checks.positive_float, default=10.0, help="the drive's length [s]")
+    p.add_argument("--seed", type=checks.seed, default=1, help="the drive's seed (the same seed writes the same drive)")
+
     p = sub.add_parser("bench", help="the performance benchmark: solve times, tightness, Zenoh overhead, start-up, memory, real-time scale, defences")
     p.add_argument("--quick", action="store_true", help="fewer steps and samples (the report's header says how long the run took)")
     p.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
@@ -592,6 +597,19 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_log_example(a: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    require("vehiclemodels", "the example drives (drawn from a CommonRoad car)")
+    require("rosbags", "the example drives (a ROS 2 bag)")
+    require("asammdf", "the example drives (an MDF4 file)")
+    from netsetest.logs.example import write_examples
+
+    for path in write_examples(Path(a.directory), a.seconds, a.seed):
+        print(path)
+    return 0
+
+
 def cmd_bench(a: argparse.Namespace) -> int:
     if a.render_docs is not None:
         return _render_docs(a)
@@ -685,6 +703,7 @@ COMMANDS.update(
     exact=cmd_exact,
     calibrate=cmd_calibrate,
     bench=cmd_bench,
+    **{"log-example": cmd_log_example},
     forkserver=cmd_forkserver,
 )
 

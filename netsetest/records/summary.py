@@ -132,7 +132,8 @@ class RunSummary:
     node_steps_contained: int = 0
     node_steps_missed: int = 0  # the published set proven apart from the truth
     node_steps_undecided: int = 0  # neither: a recorded drive's reference cannot tell (docs/your-log.md)
-    reference_accuracy: list[float] | None = None  # a recorded drive's reference: its declared half-widths (β rad, r rad/s); None: a model's run
+    reference_accuracy: list[float] | None = None  # a recorded drive's reference: its declared half-widths (β rad, r rad/s); None: none, or a model's run
+    drive_log: str | None = None  # the recorded drive that was the world (docs/your-log.md); None: a model's run
     node_steps_covered: int = 0  # evaluated with every assumption held
     node_steps_not_covered: dict[str, int] = field(default_factory=dict)  # evaluated outside the guarantee, by cause
     inherited_from: list[InheritedOrigin] = field(default_factory=list)  # the origins of cause "inherited"

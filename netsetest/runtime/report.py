@@ -208,9 +208,10 @@ def format_table(summary: RunSummary, strict: bool = False) -> str:
     # the last line: the run, its security mode (Zenoh) and the verdict
     security = f" (security: {summary.security})" if summary.security else ""
     seed = f", seed {summary.seed}" if summary.seed is not None else ""
+    world = f"log {summary.drive_log}" if summary.drive_log is not None else f"signals {summary.signals}"  # a log draws no signals
     out.append(
-        f"{outcome(summary, strict).word}: {summary.mode or ''} run{security}, case {summary.case}, signals {summary.signals}, "
-        f"variant {summary.variant}{seed}, steps 0–{summary.steps_completed}: {verdict(summary)}."
+        f"{outcome(summary, strict).word}: {summary.mode or ''} run{security}, case {summary.case}, {world}, "
+        f"variant {summary.variant}{seed if summary.drive_log is None else ''}, steps 0–{summary.steps_completed}: {verdict(summary)}."
     )
     return "\n".join(out)
 
@@ -249,6 +250,8 @@ def verdict(summary: RunSummary) -> str:
     evaluated, contained = summary.node_steps_evaluated, summary.node_steps_contained
     covered, reported = summary.node_steps_covered, summary.node_steps_reported
     acc = summary.reference_accuracy
+    if summary.drive_log is not None and acc is None:  # a recorded drive without a reference: nothing can be judged
+        return f"no reference in the log: none of {summary.node_steps_reported} node-steps judged (the truth is unknown); violations {summary.violations_total}"
     if acc is not None:  # a recorded drive: the truth is a box, and three counts say what the reference proves
         counts = (
             f"contained on {contained}, missed on {summary.node_steps_missed}, undecided on {summary.node_steps_undecided} of {evaluated} "

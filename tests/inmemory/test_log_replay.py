@@ -9,8 +9,10 @@ log shorter than the run): exit 2 with one clear line, never a traceback.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from netsetest.cli.main import main
@@ -59,7 +61,9 @@ def test_without_the_declared_faults_the_replay_differs(simulated: tuple[RunResu
     logged with their faults and injected again carry them twice: the verdicts are not the simulated run's."""
     res, drive = simulated
     assert res.parts is not None
-    twice = DriveTable(drive.t, drive.speed, drive.steering, {i: [e["y"][str(i)] for e in res.parts["truth"]] for i in drive.yaw}, drive.beta, drive.r)  # type: ignore[misc]
+    twice = DriveTable(
+        drive.t, drive.speed, drive.steering, {i: np.array([e["y"][str(i)] for e in res.parts["truth"]]) for i in drive.yaw}, drive.beta, drive.r
+    )
     log, mapping = _write(twice, tmp_path, "csv", (0.0, 0.0))
     replay = run_inmemory(with_log_steps(load_topology("paper6", steps=STEPS, log=str(log), mapping=str(mapping))), seed=0)
     assert _verdicts(replay) != _verdicts(res)
@@ -121,8 +125,13 @@ def _run(tmp: Path, log: Path, mapping: Path, capsys: pytest.CaptureFixture[str]
     ],
 )
 def test_a_bad_log_exits_2_with_one_line(
-    simulated: tuple[RunResult, DriveTable], tmp_path: Path, capsys: pytest.CaptureFixture[str], fmt, damage, expect
-) -> None:  # type: ignore[no-untyped-def]
+    simulated: tuple[RunResult, DriveTable],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    fmt: str,
+    damage: Callable[[Path, Path], object],
+    expect: str | None,
+) -> None:
     _, drive = simulated
     log, mapping = _write(drive, tmp_path, fmt, (0.0, 0.0))
     damage(log, mapping)

@@ -17,7 +17,7 @@ from netsetest.config.logmap import SignalMap
 from netsetest.logs.align import at_or_before, step_times
 from netsetest.logs.readers import LogError, clean
 
-EXAMPLES = int(os.environ.get("NETSETEST_FUZZ_EXAMPLES", "60"))
+EXAMPLES = int(os.environ.get("NETSETEST_FUZZ_EXAMPLES", "40"))
 
 
 @st.composite
