@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from netsetest.config.logmap import LogMapping
+from netsetest.estimator.names import SDP
 from netsetest.logs.align import Aligned, at_or_before, step_times
 from netsetest.logs.readers import Channel, LogError, read_signals
 
@@ -123,12 +124,16 @@ class LogDrive:
         self.vx = np.clip(self.speed, p.vx_min, p.vx_max)
         self.y = {s.node: al[s.signal.name] for s in m.sensors}
         for i, a in self.y.items():
-            if not a.present.all():
+            if not a.present[0]:
+                raise LogError(
+                    f"{path}: yaw rate of node {i}: no sample within the gap tolerance {tol / 1e9:g} s at step 0 (t = {self.t_s[0]:.6g} s): "
+                    "a run starts with every reading (choose [log] start_s, or leave it to the default: the latest first sample)"
+                )
+            if not a.present.all() and sc.node(i).estimator != SDP:
                 k = int(np.flatnonzero(~a.present)[0])
                 raise LogError(
-                    f"{path}: yaw rate of node {i} missing at step {k} (t = {self.t_s[k]:.6g} s, no sample within the gap tolerance "
-                    f"{tol / 1e9:g} s): a missing measurement (γ = 0), which a run does not take yet; choose the steps around the gap "
-                    "([log] start_s, --steps) or declare a larger gap_tolerance_s (docs/your-log.md)"
+                    f"{path}: yaw rate of node {i} missing at step {k} (t = {self.t_s[k]:.6g} s): node {i} runs {sc.node(i).estimator}, "
+                    "which cannot resume after a missing measurement (the sdp estimator does: docs/your-log.md); choose the steps around the gap"
                 )
         self.healthy = {s.node: np.array([s.healthy_at(ts) for ts in self.t_s]) for s in m.sensors}
         self.ref: tuple[Aligned, Aligned] | None = None if m.beta is None or m.r is None else (al[m.beta.name], al[m.r.name])

@@ -118,6 +118,7 @@ class NodeTotals:
     undecided: int = 0  # a reference's box overlaps the published set without lying in it (docs/your-log.md)
     covered: int = 0
     missing_steps: int = 0
+    no_reading: int = 0  # node-steps without a reading (a gap in a recorded drive): nothing published, nothing covered
     missing_from: int | None = None
     rejoined_at: int | None = None  # first step heard from again after ``missing_from``
     last_heard: int | None = None  # newest step with a state from this node (judged or not)
@@ -217,6 +218,7 @@ def _state_entry(st: NodeState, v: NodeVerdict, contested: bool, bounds: list[li
         "published": msgspec.to_builtins(st.published),  # the set as sent (netsetest/proven.py; defaults left out)
         **({"continues": msgspec.to_builtins(st.continues)} if st.continues is not None else {}),  # where not the published one
         "status": st.status,
+        **({"resumed_from": st.resumed_from} if st.resumed_from is not None else {}),  # carried through steps without a reading
         "rho_cert": st.rho_cert,
         "solve_ms": st.solve_ms,
         "used": st.used,
@@ -467,6 +469,8 @@ class Collector:
             # the next truth's alive list is who the vehicle heard at k: a node it gave up on (killed, to
             # rejoin later) is not waited for, else progress stalls until WINDOW and a rejoin waits on it
             want &= set(self.truth[k + 1][0].alive)
+        if copies:
+            want -= set(copies[0].no_reading)  # without a reading a node publishes nothing for the step
         return want <= set(self.states.get(k, {}))
 
     # ------------------------------------------------------------------ closing steps
@@ -613,7 +617,7 @@ class Collector:
                 if t.missing_from is not None and t.rejoined_at is None:
                     t.rejoined_at = k
             if st is None:
-                self._unjudged(t, k, bool(copies.get(i)), i in lost)
+                self._unjudged(t, k, bool(copies.get(i)), i in lost, tr is not None and i in tr.no_reading)
                 continue
             t.contested += i in contested
             t.sectors_assumed += st.sector_basis == "assumed"
@@ -641,11 +645,15 @@ class Collector:
         self.prev_overloaded = False
         self.closed = k
 
-    def _unjudged(self, t: NodeTotals, k: int, reported: bool, lost: bool) -> None:
+    def _unjudged(self, t: NodeTotals, k: int, reported: bool, lost: bool, no_reading: bool) -> None:
         """Node-step k with no state to judge: rejected if it reported, the collector's loss if our inbox
-        dropped it, else missing (only then is the node blamed)."""
+        dropped it, no reading (a gap in a recorded drive: nothing was due), else missing (only then is the
+        node blamed)."""
         if reported:
             t.rejected += 1  # it reported, but nothing it sent can be its own
+        elif no_reading:
+            t.no_reading += 1
+            t.last_heard = k  # nothing was due: silent, not lost
         elif lost:
             t.last_heard = k  # it published; our inbox dropped it: not judged, never missing
             self.overloaded_node_steps += 1
@@ -754,6 +762,7 @@ class Collector:
             node_steps_contained=sum(t.contained for t in totals),
             node_steps_missed=sum(t.missed for t in totals),
             node_steps_undecided=sum(t.undecided for t in totals),
+            node_steps_no_reading=sum(t.no_reading for t in totals),
             reference_accuracy=None if self.sc.log is None or self.sc.log.mapping.r is None else list(self.sc.log.mapping.accuracy),
             drive_log=None if self.sc.log is None else self.sc.log.path,
             node_steps_covered=sum(t.covered for t in totals),
@@ -805,6 +814,7 @@ class Collector:
             steps_contained=t.contained,
             steps_missed=t.missed,
             steps_undecided=t.undecided,
+            steps_no_reading=t.no_reading,
             steps_covered=t.covered,
             missing_steps=t.missing_steps,
             missing_from=t.missing_from,

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import functools
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -106,12 +106,24 @@ class Containment:
 
 
 @dataclass(frozen=True)
+class HeldOver:
+    """A node silent since step ``step`` (no reading, docs/your-log.md): the checks of its copies of that step, and
+    the first assumption that broke on a transition since (None: none did).  A resumed state carries its own
+    set of that step through them (estimator/rejoin.py), so its cone holds them too."""
+
+    step: int
+    copies: dict[str, CopyCheck]
+    broken: str | None = None
+
+
+@dataclass(frozen=True)
 class StepChecks:
-    """What a step leaves for the next one to judge its inputs by: every copy's check, and each node's sole
-    judged copy (for states from before digests)."""
+    """What a step leaves for the next one to judge its inputs by: every copy's check, each node's sole
+    judged copy (for states from before digests), and what the silent nodes' last states left (:class:`HeldOver`)."""
 
     copies: dict[int, dict[str, CopyCheck]]
     sole: dict[int, str]
+    held: dict[int, HeldOver] = field(default_factory=dict)
 
 
 NO_CHECKS = StepChecks({}, {})
@@ -189,6 +201,8 @@ def isclose(a: float, b: float, rtol: float) -> bool:
 def state_mismatch(n: NodeConfig, st: NodeState, tr: Truth) -> str | None:
     """Why ``st`` cannot be node n's own state computed from its true input (None: it can)."""
     s = str(n.id)
+    if s not in tr.y:
+        return "state-without-reading"  # no reading at this step: its node publishes nothing for it
     if st.gamma != tr.gamma[s]:
         return "state-not-from-input"
     innov = float(tr.y[s] - n.sensor.Cbar @ st.published.centre)
@@ -220,6 +234,7 @@ class Judge:
         checks = StepChecks(
             {j: {state_digest(c): self.copy_check(j, c, tr) for c in copies} for j, copies in inp.copies.items()},
             {i: state_digest(st) for i, st in inp.judged.items() if i not in inp.contested},
+            self._held_over(inp, prev),
         )
         out = {}
         for n in self.sc.nodes:
@@ -232,6 +247,18 @@ class Judge:
                 self.containment(n.id, st, tr) if judged else None,  # type: ignore[arg-type]  # judged: st and tr are set
             )
         return StepVerdict(out, checks)
+
+    def _held_over(self, inp: StepInputs, prev: StepChecks) -> dict[int, HeldOver]:
+        """Every node that sent nothing at this step: its last step's copy checks, and the transition into this
+        step added to what broke since (a node silent for other reasons is carried too: bounded by the nodes)."""
+        out = {}
+        for i in self.node_cfg:
+            if inp.copies.get(i):
+                continue
+            base = prev.held.get(i) or (HeldOver(inp.step - 1, prev.copies[i]) if i in prev.copies else None)
+            if base is not None:
+                out[i] = HeldOver(base.step, base.copies, base.broken or transition_cause(inp))
+        return out
 
     def containment(self, i: int, st: NodeState, tr: Truth) -> Containment:
         """The state's published set and the set it continues from against the truth (ProvenSet.contains); E is the
@@ -348,6 +375,15 @@ class Judge:
         if st.status == "fallback" and st.published.set is not None:
             return Cone(False, "fallback")  # the previous step's set again: no guarantee for this step
         for j, m, digest, as_prior in _inputs_of(st, k):
+            if m < k - 1:  # a resumed state: its own set of step m, carried through the steps without a reading
+                held = prev.held.get(j)
+                c = held.copies.get(digest) if held is not None and held.step == m and digest is not None else None
+                why = NOT_JUDGED if c is None else c.as_prior
+                if why is None and held is not None and held.broken is not None:
+                    return Cone(False, held.broken)
+                if why is not None:
+                    return Cone(False, INHERITED, Origin(j, m, why))
+                continue
             by = checks if m == k else prev
             if digest is None:
                 digest = by.sole.get(j)
@@ -375,6 +411,17 @@ def _held(rel: str) -> str | None:
     return None if rel == "inside" else MISSED if rel == "disjoint" else UNDECIDED
 
 
+def transition_cause(inp: StepInputs) -> str | None:
+    """The first assumption that broke on the transition into ``inp``'s step (the model mismatch, then the wind;
+    None: neither did); unknown without the previous step's truth."""
+    prev = inp.prev_truth
+    if prev is None or prev.step != inp.step - 1:
+        return COLLECTOR_OVERLOADED if inp.prev_overloaded else TRUTH_UNKNOWN
+    if not prev.mismatch_ok:
+        return mismatch_cause(prev)
+    return None if prev.dist_ok else "disturbance"
+
+
 def mismatch_cause(t: Truth | dict) -> str:
     """Why a transition's e_k left its bound: the car outside the declared envelope, or the bound too small."""
     ok = t.get("envelope_ok", True) if isinstance(t, dict) else t.envelope_ok
@@ -384,7 +431,7 @@ def mismatch_cause(t: Truth | dict) -> str:
 def _inputs_of(st: NodeState, k: int) -> list[tuple[int, int, str | None, bool]]:
     """(node, step, digest, whether it is the node's own prior) of every input of the step; digest None:
     a state from before digests, whose inputs are its neighbours' sole judged copies (and its own)."""
-    m = k if st.status == "rejoin" else k - 1
+    m = k if st.status == "rejoin" else st.resumed_from if st.resumed_from is not None else k - 1
     if st.inputs:
         return [(j, m, d, j == st.node) for j, d in st.inputs]
     deps: list[tuple[int, int, str | None, bool]] = [(j, m, None, False) for j in st.used]

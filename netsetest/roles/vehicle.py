@@ -109,6 +109,7 @@ class Vehicle:
         self.u = self.w = self.vx = 0.0
         self.heard: dict[int, set[int]] = {}  # the last dead_after steps (lockstep: 1) only
         self.alive = set(scenario.ids)
+        self.unread: set[int] = set()  # nodes without a reading at the current step: they publish nothing for it
         self.done = False
         self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
         self.drops: Counter[str] = Counter()
@@ -170,8 +171,8 @@ class Vehicle:
         return dict(self.drops + (Counter() if self.bus.shared else self.bus.dropped))
 
     def waiting_for(self) -> set[int]:
-        """Alive nodes whose state of the current step has not arrived."""
-        return self.alive - self.heard.get(self.k, set())
+        """Alive nodes with a reading whose state of the current step has not arrived."""
+        return self.alive - self.unread - self.heard.get(self.k, set())
 
     def ready_to_advance(self) -> bool:
         return self.k >= 0 and not self.done and not self.waiting_for()
@@ -182,7 +183,8 @@ class Vehicle:
             return
         if self.k >= 0:
             window = self._window()
-            self.alive = set().union(*(self.heard.get(s, set()) for s in window))
+            # a node without a reading at step k published nothing and is not dead: it resumes at its next reading
+            self.alive = set().union(*(self.heard.get(s, set()) for s in window)) | (self.alive & self.unread)
             self.heard = {s: self.heard[s] for s in window[1:] if s in self.heard}  # bounded memory
             if self.k == self.sc.steps:
                 self.bus.publish(keys.end(self.run), End(steps=self.sc.steps))
@@ -192,23 +194,27 @@ class Vehicle:
         self._publish_step(self.k)
 
     def _publish_inputs(self, k: int, y: dict[int, float], gamma: dict[int, float], lost: list[tuple[int, int]], deadline: float | None) -> None:
-        """Each node's input of step k: its reading, γ, the inputs held over k−1 → k, the neighbours to expect."""
+        """Each node's input of step k: its reading (absent from ``y``: none at this step), γ, the inputs held over
+        k−1 → k, the neighbours to expect (not those without a reading at k−1: they published nothing)."""
         u_prev, vx_prev = (self.u, self.vx) if k > 0 else (None, None)
+        quiet_before, self.unread = self.unread, {i for i in self.sc.ids if i not in y}
+        unread = sorted(self.unread)
         for n in self.sc.nodes:
             lost_from = sorted(j for (j, i) in lost if i == n.id)
-            expect = sorted(j for j in n.in_weights if j != n.id and j in self.alive and j not in lost_from) if k > 0 else []
+            expect = sorted(j for j in n.in_weights if j != n.id and j in self.alive and j not in lost_from and j not in quiet_before) if k > 0 else []
             self.bus.publish(
                 keys.node_input(self.run, n.id),
                 NodeInput(
                     step=k,
                     node=n.id,
-                    y=y[n.id],
+                    y=y.get(n.id),
                     gamma=gamma[n.id],
                     u_prev=u_prev,
                     vx_prev=vx_prev,
                     expect_from=expect,
                     lost_from=lost_from,
                     deadline=deadline,
+                    unread=unread,
                 ),
             )
 
@@ -280,6 +286,7 @@ class Vehicle:
         self.u, self.w, self.vx = d.u, 0.0, d.vx
         self.x = d.x_ref if d.x_ref is not None else np.zeros(2)
         truth = {str(i): _log_truth(sc.node(i), d, k) for i in sc.ids}
+        read = [i for i in sc.ids if d.y_log[i] is not None]
         faults = {int(i): t.fault for i, t in truth.items()}
         p = sc.model.params
         ay = d.speed * float(d.x_ref[1]) if d.x_ref is not None else None  # v·r: the reference gives no β̇ (docs/your-log.md)
@@ -294,8 +301,8 @@ class Vehicle:
                 vx=self.vx,
                 noise={i: t.noise for i, t in truth.items()},
                 gamma={str(i): 1.0 for i in sc.ids},
-                y={str(i): y[i] for i in sc.ids},
-                y_nofault={str(i): d.y_log[i] for i in sc.ids},  # type: ignore[misc]  # every reading is present: LogDrive refused a run with a gap
+                y={str(i): y[i] for i in read},
+                y_nofault={str(i): float(d.y_log[i]) for i in read},  # type: ignore[arg-type]  # read: a reading is there
                 sector_ok={str(i): True for i in sc.ids},  # the nsnim case: no saturation
                 noise_ok={i: t.noise_ok for i, t in truth.items()},
                 r={i: t.r for i, t in truth.items()},
@@ -313,6 +320,7 @@ class Vehicle:
                 x_acc=list(d.accuracy),
                 f_acc={i: t.f_acc for i, t in truth.items()},
                 reference=d.x_ref is not None,
+                no_reading=[i for i in sc.ids if d.y_log[i] is None],
             ),
         )
 

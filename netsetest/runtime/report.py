@@ -275,6 +275,8 @@ def verdict(summary: RunSummary) -> str:
     if reported > evaluated:
         why = "no reference, truth unknown or copies contested" if acc is not None else "truth unknown or copies contested"
         text += f"; {reported - evaluated} node-step(s) not judged ({why})"
+    if summary.node_steps_no_reading:
+        text += f"; {summary.node_steps_no_reading} node-step(s) without a reading (gaps in the log: nothing published, nothing covered)"
     if summary.node_steps_rejected:
         text += f"; {summary.node_steps_rejected} node-step(s) rejected (no copy matched the truth)"
     if summary.steps_overloaded:
