@@ -29,6 +29,7 @@ from netsetest.logs.readers import LogError
 from netsetest.records.errors import RecordError
 from netsetest.models.uncertainty import DEFAULT_MARGIN
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED
+from netsetest.runtime.rolespec import LOG_HELP, MAP_HELP
 
 if TYPE_CHECKING:  # a role process never loads the records (memory: docs/performance-history.md)
     from netsetest.analysis.calibrate import Calibration, DriveMismatch
@@ -111,8 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON (default: none)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.add_argument("--strict", action="store_true", help="exit 1 where any set missed the truth outside the guarantee too (default: only misses it covered)")
-    p.add_argument("--log", metavar="DRIVE", help="a recorded drive as the world: a ROS 2 bag, an MDF4 file, a Parquet or CSV table (docs/your-log.md)")
-    p.add_argument("--map", metavar="MAP.toml", help="the log's mapping (default: the topology's [vehicle] mapping, else DRIVE's name with .map.toml)")
+    p.add_argument("--log", metavar="DRIVE", help=LOG_HELP)
+    p.add_argument("--map", metavar="MAP.toml", help=MAP_HELP)
     processes.add_run_options(p)
     processes.add_role_parsers(sub)
 

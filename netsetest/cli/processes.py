@@ -254,6 +254,8 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         run_id=a.run_id,
         view=a.view,
         view_port=a.view_port,
+        log=a.log,
+        mapping=a.map,
     )
     if a.view:
         from netsetest.extras import require

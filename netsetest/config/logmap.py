@@ -29,6 +29,8 @@ FORMATS = ("csv", "parquet", "mdf4", "rosbag")
 SUFFIX_FORMATS = {".csv": "csv", ".parquet": "parquet", ".mf4": "mdf4", ".mdf": "mdf4", ".mcap": "rosbag", ".db3": "rosbag"}
 OFFSET_MAX_S = 3600.0  # a channel's time offset: an hour is a wrong clock, not a sensor's latency
 TOLERANCE_MAX_S = 60.0
+REORDER_S = 2.0  # how far out of time order a log may hold a sample by default: a logger's latency, not a sensor's gap
+REORDER_MAX_S = 600.0  # the reader holds this much of the log: more is no stream
 RATIO_RANGE = (1.0, 40.0)  # steering-wheel to road-wheel: a road car's lies in 10–20
 MAX_NAME = 200
 MAX_SIGNALS = 256  # yaw-rate sensors of one mapping (messages.MAX_NODES)
@@ -89,14 +91,16 @@ class ReferenceSpec(_Strict, frozen=True, kw_only=True):
 
 class LogSpec(_Strict, frozen=True, kw_only=True):
     """How the log keeps time: the time column (CSV, Parquet; a bag's and an MDF4's stamps are their own),
-    its unit, the log time of step 0 (default: the latest first sample of the inputs and readings), and the
-    age beyond which a sample is no longer the value at a step (default: 0.5 τs)."""
+    its unit, the log time of step 0 (default: the latest first sample of the inputs and readings), the
+    age beyond which a sample is no longer the value at a step (default: 0.5 τs), and how far out of time order
+    the file may hold a sample (a bag's header stamps against its arrival order; the reader holds that much)."""
 
     format: Literal["csv", "parquet", "mdf4", "rosbag"] | None = None
     time: Name = "t"
     time_unit: Literal["s", "ms", "us", "ns"] = "s"
     start_s: Finite | None = None
     gap_tolerance_s: Annotated[float, Meta(gt=0, le=TOLERANCE_MAX_S)] | None = None
+    reorder_s: Annotated[float, Meta(ge=0, le=REORDER_MAX_S)] = REORDER_S
 
 
 class MappingFile(_Strict, frozen=True, kw_only=True):
@@ -171,6 +175,12 @@ class LogMapping:
     beta: SignalMap | None = None
     r: SignalMap | None = None
     accuracy: tuple[float, float] = (0.0, 0.0)  # (β [rad], r [rad/s]) half-widths of the reference's box
+    reorder_s: float = REORDER_S  # how far out of time order a sample may come in the file
+
+    @property
+    def inputs(self) -> list[SignalMap]:
+        """The model's inputs: needed at every step."""
+        return [self.speed, self.steering]
 
     @property
     def signals(self) -> list[SignalMap]:
@@ -222,6 +232,7 @@ def resolve(path: Path, m: MappingFile) -> LogMapping:
         beta=None if ref is None else _signal("reference β", ref.beta, ANGLE_UNITS[ref.beta.unit]),
         r=None if ref is None else _signal("reference r", ref.r, RATE_UNITS[ref.r.unit]),
         accuracy=(0.0, 0.0) if ref is None else (ref.accuracy.beta * ANGLE_UNITS[ref.beta.unit], ref.accuracy.r * RATE_UNITS[ref.r.unit]),
+        reorder_s=m.log.reorder_s,
     )
 
 

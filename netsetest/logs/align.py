@@ -1,4 +1,4 @@
-"""Putting a channel's samples on the run's steps, one rule for every signal (docs/your-log.md).
+"""Putting a channel's samples on the run's steps as the log streams, one rule for every signal (docs/your-log.md).
 
 Step k is at log time t_k = start + k·τs, in integer nanoseconds (a sample stamped exactly at a step is at it,
 whatever the file's time unit).  The value of a channel at step k is its newest sample stamped at or before t_k
@@ -6,6 +6,10 @@ whatever the file's time unit).  The value of a channel at step k is its newest 
 sample is at most the gap tolerance old; otherwise the channel has no value at step k: a missing measurement for
 a reading, no reference for the truth, and an error for an input the model needs.  A sample is never used at a
 step before it was taken, and a gap is never filled.
+
+:class:`StepAligner` reads the stream (logs/readers.py :class:`~netsetest.logs.readers.SampleStream`) only as far
+as step k needs: until every sample stamped at or before t_k is final, keeping per signal its newest sample at
+or before the step and the few after it already read.  Steps are asked in increasing order.
 """
 
 from __future__ import annotations
@@ -14,29 +18,57 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from netsetest.logs.readers import NEVER, SampleStream
+
 
 @dataclass(frozen=True)
-class Aligned:
-    """A channel on the steps: ``value[k]`` (NaN where missing), ``present[k]``, and the age of the sample used [ns]."""
+class Sample:
+    """A channel at a step: its newest sample at or before the step (``value``; NaN where there is none) and that
+    sample's age [ns] (:data:`~netsetest.logs.readers.NEVER` where there is none); ``present``: within the tolerance."""
 
-    value: np.ndarray
-    present: np.ndarray
-    age_ns: np.ndarray
-
-
-def step_times(start_ns: int, tau_ns: int, steps: int) -> np.ndarray:
-    """t_k = start + k·τs for k = 0..steps, int64 nanoseconds."""
-    return start_ns + tau_ns * np.arange(steps + 1, dtype=np.int64)
+    value: float
+    age_ns: int
+    present: bool
 
 
-def at_or_before(t_ns: np.ndarray, v: np.ndarray, steps_ns: np.ndarray, tolerance_ns: int) -> Aligned:
-    """Each step's newest sample at or before it, no older than ``tolerance_ns`` (``t_ns`` sorted: readers.clean)."""
-    idx = np.searchsorted(t_ns, steps_ns, side="right") - 1
-    have = idx >= 0
-    safe = np.where(have, idx, 0)
-    age = np.where(have, steps_ns - t_ns[safe], np.iinfo(np.int64).max)
-    present = have & (age <= tolerance_ns)
-    return Aligned(np.where(present, v[safe], np.nan), present, age)
+def step_time(start_ns: int, tau_ns: int, k: int) -> int:
+    """t_k = start + k·τs [ns]."""
+    return start_ns + tau_ns * k
 
 
-__all__ = ["Aligned", "at_or_before", "step_times"]
+class StepAligner:
+    """Each step's newest sample of every signal, as the stream goes (module doc)."""
+
+    def __init__(self, stream: SampleStream, tolerance_ns: int) -> None:
+        self.stream, self.tol = stream, tolerance_ns
+        self.newest: dict[str, tuple[int, float] | None] = dict.fromkeys(stream.sigs)  # at or before the last step asked
+        self.ahead: dict[str, tuple[np.ndarray, np.ndarray]] = {n: (np.empty(0, dtype=np.int64), np.empty(0)) for n in stream.sigs}
+        self.t_prev = -NEVER
+
+    def at(self, t_ns: int) -> dict[str, Sample]:
+        """Every signal at step time ``t_ns`` (not earlier than the last one asked)."""
+        if t_ns < self.t_prev:
+            raise ValueError("steps are aligned in increasing order")
+        self.t_prev = t_ns
+        s = self.stream
+        while any(s.horizon(n) < t_ns for n in s.sigs) and s.pull():
+            pass
+        out = {}
+        for name in s.sigs:
+            t, v = s.take(name)
+            at, av = self.ahead[name]
+            if t.size:
+                at, av = (t, v) if not at.size else (np.concatenate([at, t]), np.concatenate([av, v]))
+            i = int(np.searchsorted(at, t_ns, side="right"))
+            if i:
+                self.newest[name] = (int(at[i - 1]), float(av[i - 1]))
+                at, av = at[i:], av[i:]
+            self.ahead[name] = (at, av)
+            last = self.newest[name]
+            age = NEVER if last is None else t_ns - last[0]
+            present = age <= self.tol
+            out[name] = Sample(last[1] if present and last is not None else float("nan"), age, present)
+        return out
+
+
+__all__ = ["Sample", "StepAligner", "step_time"]

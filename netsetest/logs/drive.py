@@ -1,7 +1,8 @@
 """A recorded drive, step by step: what the vehicle role publishes when a log is the world (docs/your-log.md).
 
-:class:`LogDrive` reads the mapped signals once (logs/readers.py), puts them on the run's steps (logs/align.py)
-and keeps only those per-step arrays.  Step k gives the inputs (u_k the road-wheel angle, the speed and the Vx
+:class:`LogDrive` reads the whole log once as a stream to check it and to plan the run (:func:`plan_log`, the
+import), then streams it again as the steps go (logs/readers.py, logs/align.py): a role never holds the log, only
+the samples a step needs and the reorder window.  Step k gives the inputs (u_k the road-wheel angle, the speed and the Vx
 the model is scheduled with), each node's reading ỹ_i,k (None: a missing measurement) with the declared fault
 f_i(k) of its profile injected on top (ỹ = logged + Ds·f: the fault is known, the noise is real), and the truth
 as far as the reference proves it: x_k in the box x_ref ± accuracy, each node's fault exactly the injected one
@@ -27,8 +28,8 @@ import numpy as np
 
 from netsetest.config.logmap import LogMapping
 from netsetest.estimator.names import SDP
-from netsetest.logs.align import Aligned, at_or_before, step_times
-from netsetest.logs.readers import Channel, LogError, read_signals
+from netsetest.logs.align import StepAligner, step_time
+from netsetest.logs.readers import MAX_GAPS, NEVER, LogError, SignalScan, open_stream, scan_signals
 
 if TYPE_CHECKING:
     from netsetest.config.schema import Scenario
@@ -52,39 +53,63 @@ class LogStep:
     accuracy: tuple[float, float]  # the reference's half-widths (β, r)
 
 
-@functools.lru_cache(maxsize=2)
-def _signals(path: str, mapping: LogMapping) -> dict[str, Channel]:
-    """The cleaned mapped signals (one read per process: the steps' count and the drive share it)."""
-    return read_signals(Path(path), mapping)
+@dataclass(frozen=True)
+class LogPlan:
+    """What the whole log gives a run (its import, :func:`plan_log`): step 0's log time [ns], the last step both
+    inputs reach, the first step (if any) at which an input has no sample within the tolerance, and each signal's
+    scan (logs/readers.py)."""
 
+    start_ns: int
+    last_step: int
+    scans: dict[str, SignalScan]
 
-def _start_ns(mapping: LogMapping, ch: dict[str, Channel]) -> int:
-    if mapping.start_s is not None:
-        return round(mapping.start_s * 1e9)
-    firsts = [int(ch[s.name].t_ns[0]) for s in (mapping.speed, mapping.steering, *(m.signal for m in mapping.sensors))]
-    return max(firsts)
-
-
-def log_steps(sc: Scenario) -> int:
-    """The last step the log can give the run: every step up to it has both inputs within the gap tolerance
-    (a gap inside them is reported by the drive itself)."""
-    assert sc.log is not None
-    m = sc.log.mapping
-    ch = _signals(sc.log.path, m)
-    start = _start_ns(m, ch)
-    end = min(int(ch[s.name].t_ns[-1]) for s in (m.speed, m.steering))
-    tau_ns = round(sc.tau_s * 1e9)
-    tol = _tolerance_ns(sc)
-    last = (end + tol - start) // tau_ns  # step times up to the last input sample plus its tolerance
-    if last < 1:
-        raise LogError(f"{sc.log.path}: the log's inputs cover less than two steps of τs = {sc.tau_s:g} s from t = {start / 1e9:.6g} s")
-    return int(last)
+    def first_missing(self, name: str, tau_ns: int, tol: int, steps: int) -> tuple[int, int] | None:
+        """(step, age of its newest sample [ns]) of the first step in 0..``steps`` at which signal ``name`` has no sample
+        within the tolerance, or None: before its first sample, inside a gap (a, b) (the steps strictly inside
+        (a + tol, b)), or after its last sample plus the tolerance."""
+        sc, start = self.scans[name], self.start_ns
+        if start < sc.first_ns:
+            return 0, NEVER
+        if sc.more_gaps:
+            raise LogError(f"{name}: more than {MAX_GAPS} gaps longer than the gap tolerance {tol / 1e9:g} s: is it sampled that slowly?")
+        for a, b in (*sc.gaps, (sc.last_ns, NEVER)):
+            k = max(0, (a + tol - start) // tau_ns + 1)
+            if k <= steps and start + k * tau_ns < b:
+                return int(k), start + k * tau_ns - a
+        return None
 
 
 def _tolerance_ns(sc: Scenario) -> int:
     assert sc.log is not None
     g = sc.log.mapping.gap_tolerance_s
     return round((g if g is not None else DEFAULT_GAP_STEPS * sc.tau_s) * 1e9)
+
+
+@functools.lru_cache(maxsize=4)
+def _plan(path: str, stamp: tuple[int, int], mapping: LogMapping, tau_ns: int, tol: int) -> LogPlan:
+    scans = scan_signals(Path(path), mapping, tol)
+    if mapping.start_s is not None:
+        start = round(mapping.start_s * 1e9)
+    else:  # the latest first sample of the inputs and readings: every one of them has a value at step 0
+        start = max(scans[s.name].first_ns for s in (*mapping.inputs, *(m.signal for m in mapping.sensors)))
+    end = min(scans[s.name].last_ns for s in mapping.inputs)
+    last = (end + tol - start) // tau_ns  # step times up to the last input sample plus its tolerance
+    if last < 1:
+        raise LogError(f"{path}: the log's inputs cover less than two steps of τs = {tau_ns / 1e9:g} s from t = {start / 1e9:.6g} s")
+    return LogPlan(start, int(last), scans)
+
+
+def plan_log(sc: Scenario) -> LogPlan:
+    """The log read once, in this process (cached: the steps' count and the drive share it; a changed file is read again)."""
+    assert sc.log is not None
+    st = Path(sc.log.path).stat()
+    return _plan(sc.log.path, (st.st_mtime_ns, st.st_size), sc.log.mapping, round(sc.tau_s * 1e9), _tolerance_ns(sc))
+
+
+def log_steps(sc: Scenario) -> int:
+    """The last step the log can give the run: every step up to it has both inputs within the gap tolerance
+    (a gap inside them is reported by the drive itself)."""
+    return plan_log(sc).last_step
 
 
 def with_log_steps(sc: Scenario) -> Scenario:
@@ -104,75 +129,77 @@ def with_log_steps(sc: Scenario) -> Scenario:
 
 
 class LogDrive:
-    """The recorded drive of a run (module doc); :meth:`step` gives step k, in any order."""
+    """The recorded drive of a run (module doc): its import checks the whole log (:func:`plan_log`), then
+    :meth:`step` gives step k, in increasing order, reading the log only as far as step k needs."""
 
     def __init__(self, sc: Scenario) -> None:
         assert sc.log is not None
         self.sc, m = sc, sc.log.mapping
         path = sc.log.path
-        ch = _signals(path, m)
-        tau_ns = round(sc.tau_s * 1e9)
-        self.start_ns = _start_ns(m, ch)
-        tol = _tolerance_ns(sc)
-        t = step_times(self.start_ns, tau_ns, sc.steps)
-        self.t_s = t / 1e9
-        al = {name: at_or_before(c.t_ns, c.v, t, tol) for name, c in ch.items()}
-        for s in (m.speed, m.steering):
-            self._inputs_present(path, s.name, al[s.name], tol)
-        self.u, self.speed = al[m.steering.name].value, al[m.speed.name].value
+        plan = plan_log(sc)
+        self.start_ns, self.tau_ns, tol = plan.start_ns, round(sc.tau_s * 1e9), _tolerance_ns(sc)
+        for sig in m.inputs:
+            gap = plan.first_missing(sig.name, self.tau_ns, tol, sc.steps)
+            if gap is not None:
+                k, age = gap
+                seen = "no sample before it" if age == NEVER else f"its newest sample {age / 1e9:.3g} s old"
+                raise LogError(
+                    f"{path}: {sig.name} missing at step {k} (t = {(self.start_ns + k * self.tau_ns) / 1e9:.6g} s: {seen}, gap tolerance {tol / 1e9:g} s): "
+                    "an input the model needs at every step (choose the steps with [log] start_s and --steps, or a larger gap_tolerance_s)"
+                )
         p = sc.model.params
-        self.vx = np.clip(self.speed, p.vx_min, p.vx_max)
-        self.y = {s.node: al[s.signal.name] for s in m.sensors}
-        for i, a in self.y.items():
-            if not a.present[0]:
-                raise LogError(
-                    f"{path}: yaw rate of node {i}: no sample within the gap tolerance {tol / 1e9:g} s at step 0 (t = {self.t_s[0]:.6g} s): "
-                    "a run starts with every reading (choose [log] start_s, or leave it to the default: the latest first sample)"
-                )
-            if not a.present.all() and sc.node(i).estimator != SDP:
-                k = int(np.flatnonzero(~a.present)[0])
-                raise LogError(
-                    f"{path}: yaw rate of node {i} missing at step {k} (t = {self.t_s[k]:.6g} s): node {i} runs {sc.node(i).estimator}, "
-                    "which cannot resume after a missing measurement (the sdp estimator does: docs/your-log.md); choose the steps around the gap"
-                )
-        self.healthy = {s.node: np.array([s.healthy_at(ts) for ts in self.t_s]) for s in m.sensors}
-        self.ref: tuple[Aligned, Aligned] | None = None if m.beta is None or m.r is None else (al[m.beta.name], al[m.r.name])
-        speed_kmh = self.speed * 3.6
-        inside = (self.speed >= p.vx_min) & (self.speed <= p.vx_max)
-        if not inside.any():
+        speed = plan.scans[m.speed.name]
+        if speed.hi < p.vx_min or speed.lo > p.vx_max:
             raise LogError(
-                f"{path}: speed: the log's {speed_kmh.min():.1f}–{speed_kmh.max():.1f} km/h never reaches the model's "
+                f"{path}: speed: the log's {speed.lo * 3.6:.1f}–{speed.hi * 3.6:.1f} km/h never reaches the model's "
                 f"{p.vx_min * 3.6:.0f}–{p.vx_max * 3.6:.0f} km/h: is the mapping's speed unit right (or the topology's vx_min_kmh, vx_max_kmh)?"
             )
+        self.aligner = StepAligner(open_stream(Path(path), m), tol)
+        first = self.step(0)  # every reading at step 0 (a node starts from its prior updated by it)
+        for i, y in first.y_log.items():
+            if y is None:
+                raise LogError(
+                    f"{path}: yaw rate of node {i}: no sample within the gap tolerance {tol / 1e9:g} s at step 0 (t = {first.t_s:.6g} s): "
+                    "a run starts with every reading (choose [log] start_s, or leave it to the default: the latest first sample)"
+                )
+        self._check_resumable(plan, tol)
 
-    def _inputs_present(self, path: str, name: str, a: Aligned, tol: int) -> None:
-        gone = np.flatnonzero(~a.present)
-        if gone.size:
-            k = int(gone[0])
-            age = "no sample before it" if a.age_ns[k] == np.iinfo(np.int64).max else f"its newest sample {a.age_ns[k] / 1e9:.3g} s old"
-            raise LogError(
-                f"{path}: {name} missing at step {k} (t = {self.t_s[k]:.6g} s: {age}, gap tolerance {tol / 1e9:g} s): an input the model needs "
-                "at every step (choose the steps with [log] start_s and --steps, or a larger gap_tolerance_s)"
-            )
+    def _check_resumable(self, plan: LogPlan, tol: int) -> None:
+        """A node running a set estimator cannot resume after a step without its reading: a gap inside the run is refused."""
+        sc = self.sc
+        for s in sc.log.mapping.sensors:  # type: ignore[union-attr]  # a log's drive
+            n = sc.node(s.node)
+            gap = None if n.estimator == SDP else plan.first_missing(s.signal.name, self.tau_ns, tol, sc.steps)
+            if gap is not None:
+                raise LogError(
+                    f"{sc.log.path}: yaw rate of node {s.node} missing at step {gap[0]}: node {s.node} runs {n.estimator}, which cannot "  # type: ignore[union-attr]  # a log's drive
+                    "resume after a missing measurement (the sdp estimator does: docs/your-log.md); choose the steps around the gap"
+                )
 
     def step(self, k: int) -> LogStep:
+        """Step k (k ≥ the last step asked: the log streams)."""
+        sc = self.sc
+        m = sc.log.mapping  # type: ignore[union-attr]  # a log's drive
+        t_ns = step_time(self.start_ns, self.tau_ns, k)
+        at = self.aligner.at(t_ns)
+        t_s = t_ns / 1e9
         ref = None
-        if self.ref is not None and self.ref[0].present[k] and self.ref[1].present[k]:
-            ref = np.array([self.ref[0].value[k], self.ref[1].value[k]])
-        y = {i: (float(a.value[k]) if a.present[k] else None) for i, a in self.y.items()}
-        assert self.sc.log is not None
+        if m.beta is not None and m.r is not None and at[m.beta.name].present and at[m.r.name].present:
+            ref = np.array([at[m.beta.name].value, at[m.r.name].value])
+        speed = at[m.speed.name].value
+        p = sc.model.params
         return LogStep(
             k=k,
-            t_s=float(self.t_s[k]),
-            u=float(self.u[k]),
-            speed=float(self.speed[k]),
-            vx=float(self.vx[k]),
-            y_log=y,
-            faults={n.id: n.fault(k) for n in self.sc.nodes},
-            healthy={i: bool(h[k]) for i, h in self.healthy.items()},
+            t_s=t_s,
+            u=at[m.steering.name].value,
+            speed=speed,
+            vx=min(max(speed, p.vx_min), p.vx_max),
+            y_log={s.node: (at[s.signal.name].value if at[s.signal.name].present else None) for s in m.sensors},
+            faults={n.id: n.fault(k) for n in sc.nodes},
+            healthy={s.node: s.healthy_at(t_s) for s in m.sensors},
             x_ref=ref,
-            accuracy=self.sc.log.mapping.accuracy,
+            accuracy=m.accuracy,
         )
 
 
-__all__ = ["LogDrive", "LogError", "LogStep", "log_steps", "with_log_steps"]
+__all__ = ["LogDrive", "LogError", "LogPlan", "LogStep", "log_steps", "plan_log", "with_log_steps"]
