@@ -320,7 +320,7 @@ def cmd_inspect(a: argparse.Namespace) -> int:
             ft = "-" if r["fault_true"] is None else f"{r['fault_true']:9.4f}"
             e = "-" if r["E"] is None else f"{r['E']:7.3f}"
             flag = (
-                "  not judged"
+                ("  not judged; its own reading contradicts its declared bounds" if r["inconsistent"] else "  not judged")
                 if not r["judged"]
                 else ("" if r["contained"] else "  MISS" if r["missed"] else "  undecided (the reference's box overlaps the set)")
             )

@@ -21,7 +21,8 @@ fault [lo, hi], set}, absent parts left out), continues (the set it continues fr
 status, resumed_from (status resume: the step of the own set it was carried from), rho_cert, solve_ms, used, missing, late, dropped, drops {reason: n}, sector [h1, h] | null,
 sector_basis, E = eᵀP⁻¹e of the published ellipsoid (null when the truth of the step is unknown), contained (the
 truth in the published set, whose per-coordinate bounds [[lo, hi] ×3] are in ``bounds``; a set estimator's
-ellipsoid is the enclosing one its neighbours use), continues_contained, assumptions_ok (every assumption in the step's dependency cone held), contested (more
+ellipsoid is the enclosing one its neighbours use), continues_contained, assumptions_ok (every assumption in the step's dependency cone held), inconsistent (present
+where, without a reference, the node's own reading contradicted its declared bounds), contested (more
 than one copy matched the truth: not judged).  ``summary``: the
 per-node table and totals (the same object ``--summary-json`` writes; in code a
 :class:`~netsetest.records.summary.RunSummary`, converted at this boundary).
@@ -304,6 +305,7 @@ class Record:
                     "status": tr.status[n],
                     "fdi": tr.fdi[n] if tr.fdi is not None else None,
                     "cause": None if tr.assumptions_ok[n] or n >= len(raw) else not_covered_cause(raw[n]),
+                    "inconsistent": n < len(raw) and bool(raw[n].get("inconsistent", False)),  # its own data prove an assumption broken
                 }
             )
         return rows

@@ -119,6 +119,7 @@ class NodeTotals:
     covered: int = 0
     missing_steps: int = 0
     no_reading: int = 0  # node-steps without a reading (a gap in a recorded drive): nothing published, nothing covered
+    inconsistent: int = 0  # without a reference: its own data proved one of its assumptions broken (roles/judge.py Judge.inconsistent)
     missing_from: int | None = None
     rejoined_at: int | None = None  # first step heard from again after ``missing_from``
     last_heard: int | None = None  # newest step with a state from this node (judged or not)
@@ -233,6 +234,7 @@ def _state_entry(st: NodeState, v: NodeVerdict, contested: bool, bounds: list[li
         "missed": None if c is None else bool(c.missed),  # proven apart from the truth (a point truth: not contained)
         "continues_contained": None if c is None else bool(c.continues_contained),  # the set the node continues from
         "assumptions_ok": v.cone.ok,
+        **({"inconsistent": True} if v.inconsistent else {}),  # without a reference: its own data prove an assumption broken
         "not_covered_cause": v.cone.cause,
         "inherited_from": [origin.node, origin.step, origin.why] if origin is not None else None,
         "contested": contested,
@@ -685,6 +687,7 @@ class Collector:
 
     def _add(self, t: NodeTotals, k: int, st: NodeState, v: NodeVerdict, bounds: list[list[float]]) -> None:
         t.reported += 1
+        t.inconsistent += v.inconsistent
         cone, c = v.cone, v.containment
         if c is not None:
             t.evaluated += 1
@@ -763,6 +766,7 @@ class Collector:
             node_steps_missed=sum(t.missed for t in totals),
             node_steps_undecided=sum(t.undecided for t in totals),
             node_steps_no_reading=sum(t.no_reading for t in totals),
+            node_steps_inconsistent=sum(t.inconsistent for t in totals),
             reference_accuracy=None if self.sc.log is None or self.sc.log.mapping.r is None else list(self.sc.log.mapping.accuracy),
             drive_log=None if self.sc.log is None else self.sc.log.path,
             node_steps_covered=sum(t.covered for t in totals),
@@ -815,6 +819,7 @@ class Collector:
             steps_missed=t.missed,
             steps_undecided=t.undecided,
             steps_no_reading=t.no_reading,
+            steps_inconsistent=t.inconsistent,
             steps_covered=t.covered,
             missing_steps=t.missing_steps,
             missing_from=t.missing_from,

@@ -20,6 +20,7 @@ ellipsoid containing x̄_0 (Assumption 1).
 from __future__ import annotations
 
 import functools
+import math
 
 from dataclasses import dataclass, field
 
@@ -28,11 +29,12 @@ import numpy as np
 from netsetest.config.schema import NodeConfig, Scenario
 from netsetest.estimator.names import SDP
 from netsetest.estimator.registry import node_set_estimator
-from netsetest.estimator.sector import Sector, sector_ok
+from netsetest.estimator.sector import FaultBound, Sector, measurement_interval, prior_interval, propagated_interval, sector_ok
 from netsetest.messages import NodeState, Truth, state_digest
 from netsetest.models.envelope import MODEL_MISMATCH, OUTSIDE_ENVELOPE
 from netsetest.models.sensor import augmented
 
+CONSISTENCY_RTOL = 1e-9  # an own-data inconsistency must clear rounding: a certain one, never a near miss
 INNOV_RTOL = 1e-12  # the node computes ỹ − C̄ x̂ with the same numbers: rounding only across machines
 
 # why an input of a node-step gives it no guarantee (docs/coverage.md)
@@ -124,6 +126,7 @@ class StepChecks:
     copies: dict[int, dict[str, CopyCheck]]
     sole: dict[int, str]
     held: dict[int, HeldOver] = field(default_factory=dict)
+    states: dict[int, NodeState] = field(default_factory=dict)  # each node's sole judged state (the next step's own-data check)
 
 
 NO_CHECKS = StepChecks({}, {})
@@ -157,6 +160,7 @@ class NodeVerdict:
     step: int
     cone: Cone
     containment: Containment | None
+    inconsistent: bool = False  # without a reference: its own data prove one of its assumptions broken (Judge.inconsistent)
 
 
 @dataclass(frozen=True)
@@ -235,18 +239,46 @@ class Judge:
             {j: {state_digest(c): self.copy_check(j, c, tr) for c in copies} for j, copies in inp.copies.items()},
             {i: state_digest(st) for i, st in inp.judged.items() if i not in inp.contested},
             self._held_over(inp, prev),
+            {i: st for i, st in inp.judged.items() if i not in inp.contested},
         )
         out = {}
         for n in self.sc.nodes:
             st = inp.judged.get(n.id)
             judged = st is not None and tr is not None and tr.reference and n.id not in inp.contested
+            alone = st is not None and tr is not None and not tr.reference and n.id not in inp.contested  # nothing but its own data to go by
             out[n.id] = NodeVerdict(
                 n.id,
                 inp.step,
                 self.cone(n, inp, checks, prev),
                 self.containment(n.id, st, tr) if judged else None,  # type: ignore[arg-type]  # judged: st and tr are set
+                alone and self.inconsistent(n, prev.states.get(n.id), inp.prev_truth, tr),  # type: ignore[arg-type]  # alone: tr is set
             )
         return StepVerdict(out, checks)
+
+    def inconsistent(self, n: NodeConfig, before: NodeState | None, prev: Truth | None, tr: Truth) -> bool:
+        """Node n's reading of this step is impossible under its declared bounds (noise; wind, model mismatch and fault
+        bound across the transition) and its own set of the step before (step 0: its prior, Assumption 1): a certain
+        broken assumption, or an earlier set that missed the truth, proven from the node's own data with no reference.
+
+        The reading leaves r = C̄ x̄ in :func:`~netsetest.estimator.sector.measurement_interval`; the node's set of
+        the step before, carried through the transition (its ellipsoid, a superset of the set: every detection stays
+        certain), leaves it in :func:`~netsetest.estimator.sector.propagated_interval`; disjoint (beyond rounding):
+        inconsistent.  Without a declared fault bound the fault is free and any reading after step 0 is possible."""
+        s, k, sen = str(n.id), tr.step, n.sensor
+        if s not in tr.y:
+            return False
+        bound = FaultBound(n.fault_rate, n.fault_size)
+        if k == 0:
+            pred = prior_interval(sen, bound, n.x0_hat, n.P0, n.rho)
+        elif before is None or before.step != k - 1 or prev is None or prev.step != k - 1:
+            return False  # nothing of the node's own to carry: no check
+        else:
+            e = before.continued
+            a, b, d = self.sc.model.blend(self.sc.model.weights(prev.vx))
+            pred = propagated_interval(sen, bound, np.asarray(e.xhat), e.P_matrix, e.rho, a, b[:, 0], d[:, 0], prev.u, self.sc.W, self.sc.uncertainty)
+        meas = measurement_interval(sen, tr.y[s], tr.gamma[s])
+        slack = CONSISTENCY_RTOL * max(1.0, abs(pred.lo) if math.isfinite(pred.lo) else 0.0, abs(pred.hi) if math.isfinite(pred.hi) else 0.0)
+        return meas.hi < pred.lo - slack or meas.lo > pred.hi + slack
 
     def _held_over(self, inp: StepInputs, prev: StepChecks) -> dict[int, HeldOver]:
         """Every node that sent nothing at this step: its last step's copy checks, and the transition into this

@@ -245,13 +245,29 @@ def fdi_table(summary: RunSummary) -> list[str]:
 MAX_ORIGINS = 3  # origins of "inherited" named in the verdict line; the summary JSON has them all
 
 
+def own_data(summary: RunSummary) -> str:
+    """What a recorded drive's nodes proved alone where the reference gave no truth (roles/judge.py Judge.inconsistent)."""
+    n = summary.node_steps_inconsistent
+    bad = ", ".join(f"node {r.id}: {r.steps_inconsistent}" for r in summary.nodes if r.steps_inconsistent)
+    return (
+        f"a node's own reading contradicted its declared bounds and its own set of the step before on {n} node-step(s) ({bad}: an assumption "
+        "broke there, or an earlier set missed the truth)"
+        if n
+        else "no node's own reading contradicted its declared bounds"
+    )
+
+
 def verdict(summary: RunSummary) -> str:
     """The result in words, never more than was checked: how many node-steps the guarantee covered."""
     evaluated, contained = summary.node_steps_evaluated, summary.node_steps_contained
     covered, reported = summary.node_steps_covered, summary.node_steps_reported
     acc = summary.reference_accuracy
-    if summary.drive_log is not None and acc is None:  # a recorded drive without a reference: nothing can be judged
-        return f"no reference in the log: none of {summary.node_steps_reported} node-steps judged (the truth is unknown); violations {summary.violations_total}"
+    if summary.drive_log is not None and acc is None:  # a recorded drive without a reference: nothing can be judged against a truth
+        return (
+            f"no reference in the log: none of {summary.node_steps_reported} node-steps judged (the truth is unknown); {own_data(summary)}; "
+            f"violations {summary.violations_total}"
+            + (f"; {summary.node_steps_no_reading} node-step(s) without a reading" if summary.node_steps_no_reading else "")
+        )
     if acc is not None:  # a recorded drive: the truth is a box, and three counts say what the reference proves
         counts = (
             f"contained on {contained}, missed on {summary.node_steps_missed}, undecided on {summary.node_steps_undecided} of {evaluated} "
@@ -277,6 +293,8 @@ def verdict(summary: RunSummary) -> str:
         text += f"; {reported - evaluated} node-step(s) not judged ({why})"
     if summary.node_steps_no_reading:
         text += f"; {summary.node_steps_no_reading} node-step(s) without a reading (gaps in the log: nothing published, nothing covered)"
+    if summary.node_steps_inconsistent:
+        text += f"; at steps without a reference, {own_data(summary)}"
     if summary.node_steps_rejected:
         text += f"; {summary.node_steps_rejected} node-step(s) rejected (no copy matched the truth)"
     if summary.steps_overloaded:

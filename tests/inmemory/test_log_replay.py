@@ -150,13 +150,31 @@ def test_a_log_shorter_than_the_run_is_an_error(simulated: tuple[RunResult, Driv
     assert code == 2 and f"the log holds steps 0–{STEPS}" in err and len(err.strip().splitlines()) == 1, err
 
 
-def test_without_a_reference_nothing_is_judged(simulated: tuple[RunResult, DriveTable], tmp_path: Path) -> None:
+@pytest.mark.parametrize("spike", [0.0, 0.3])
+def test_without_a_reference_only_what_a_node_proves_alone(simulated: tuple[RunResult, DriveTable], tmp_path: Path, spike: float) -> None:
+    """Nothing is judged against a truth, nothing is called contained; what a node's own data prove is counted: its
+    reading impossible under its declared bounds and its own set of the step before.  Every assumption held in the
+    simulated run (its noise at the bound: the worst signals), so none is; a logged spike of 0.3 on node 2 at step 6,
+    beyond its fault bound (|f| ≤ 0.2, Ds = 0.47), is, there (and at step 7, carried from the set it built on it)."""
     _, drive = simulated
-    log, mapping = _write(drive, tmp_path, "csv", None)
+    yaw = dict(drive.yaw)
+    yaw[2] = yaw[2].copy()
+    yaw[2][6] += spike
+    log, mapping = _write(DriveTable(drive.t, drive.speed, drive.steering, yaw, drive.beta, drive.r), tmp_path, "csv", None)
     res = run_inmemory(with_log_steps(load_topology("paper6", steps=STEPS, log=str(log), mapping=str(mapping))), seed=0)
-    s = res.summary
-    assert s.node_steps_evaluated == 0 and s.node_steps_reported == 6 * (STEPS + 1) and s.node_steps_not_covered == {}
+    s, parts = res.summary, res.parts
+    assert parts is not None
+    assert s.node_steps_evaluated == s.node_steps_contained == 0 and s.node_steps_reported == 6 * (STEPS + 1) and s.node_steps_not_covered == {}
     assert s.violations_total == 0
+    flagged = sorted((int(i), e["step"]) for i, es in parts["nodes"].items() for e in es if e.get("inconsistent"))
+    from netsetest.runtime.report import outcome, verdict
+
+    assert outcome(s).word == "PASS (partial coverage)"
+    if not spike:
+        assert flagged == [] and s.node_steps_inconsistent == 0 and "no node's own reading contradicted" in verdict(s)
+    else:
+        assert (2, 6) in flagged and {i for i, _ in flagged} == {2} and s.node_steps_inconsistent == len(flagged) == s.node(2).steps_inconsistent
+        assert f"on {len(flagged)} node-step(s) (node 2: {len(flagged)}" in verdict(s)
 
 
 def _with_gaps(d: DriveTable, gaps: dict[int, range], speed: dict[int, float] | None = None) -> DriveTable:
