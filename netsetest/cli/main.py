@@ -197,6 +197,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--ay-max", type=checks.positive_float, metavar="M/S2", help="the envelope's largest |lateral acceleration| the tyres carry [m/s²] (with --envelope)"
     )
     p.add_argument("--speed", type=checks.speed_range, metavar="LO-HI", help="the envelope's speed range [km/h], e.g. 70-120 (with --envelope)")
+    p.add_argument(
+        "--logs",
+        nargs="+",
+        metavar="TRAIN",
+        help="instead of --manoeuvres: recorded drives with a reference (docs/your-log.md): the mismatch bound from the reference's states "
+        "(its accuracy carried through the model), each sensor's noise bound over its healthy stretches, the envelope they covered",
+    )
+    p.add_argument("--held-out", nargs="+", metavar="TEST", help="with --logs: drives checked against what the training logs gave")
+    p.add_argument("--map", metavar="MAP.toml", help="with --logs: the logs' mapping (default: each log's name with .map.toml, else the topology's)")
 
     p = sub.add_parser("log-example", help="write the synthetic example drives of docs/your-log.md (every log format, with mappings)")
     p.add_argument("directory", help="where to write them (created)")
@@ -521,6 +530,8 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
 
     checks.output_file(a.json, "--json")
     checks.output_file(a.toml, "--toml")
+    if a.logs is not None or a.held_out is not None or a.map is not None:
+        return _calibrate_logs(a)
     envelope = _calibration_envelope(a)
     if isinstance(envelope, int):
         return envelope
@@ -592,6 +603,77 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
                 for d in cal.drives
             ],
             "simpler": {plant: {label: mx.tolist() for label, mx in max_by_drive(ds).items()} for plant, ds in simpler.items()},
+        }
+        with open(a.json, "w") as fh:
+            json.dump(doc, fh, indent=1)
+    return 0
+
+
+def _calibrate_logs(a: argparse.Namespace) -> int:
+    """``calibrate TOPOLOGY --logs TRAIN… [--held-out TEST…]``: the bounds from recorded drives (analysis/calibrate.py)."""
+    import numpy as np
+
+    from netsetest.analysis.calibrate import calibrate_logs, check_held_out
+    from netsetest.config.schema import load_topology
+    from netsetest.logs.drive import with_log_steps
+    from netsetest.runtime.report import Progress
+
+    others = [o for o, v in (("--manoeuvres", a.manoeuvres), ("--envelope", a.envelope or None), ("--causes", a.causes or None), ("--steps", a.steps)) if v]
+    if a.logs is None or others:
+        what = "--held-out and --map go with --logs" if a.logs is None else f"--logs chooses its own drives: leave out {', '.join(others)}"
+        print(f"netsetest calibrate: {what}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    load = lambda log: with_log_steps(load_topology(a.topology, log=log, mapping=a.map), whole=True)  # noqa: E731  # every step of each log
+    train = [load(log) for log in a.logs]
+    held = [load(log) for log in a.held_out or []]
+    bar = Progress(len(train), "calibrate")
+    try:
+        cal = calibrate_logs(train, a.margin, progress=lambda n, total: bar.update(n))
+    except ValueError as exc:
+        bar.close()
+        print(f"netsetest calibrate: {a.topology}: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    checked = [check_held_out(sc, cal) for sc in held]
+    bar.close()
+    sc = train[0]
+    acc = sc.log.mapping.accuracy  # type: ignore[union-attr]  # a log's scenario
+    print(
+        f"calibration of {sc.name} from {len(train)} recorded drive(s): {cal.transitions} transitions with the reference at both ends "
+        f"(its accuracy ± {acc[0]:.3g} rad, ± {acc[1]:.3g} rad/s carried through the model; the wind taken as 0), margin {a.margin:g}"
+    )
+    print("the model-mismatch bound covering every transition's e_k (declare one in the topology):")
+    print(cal.box.as_toml() + "# or\n" + cal.ellipsoid.as_toml(), end="")
+    print("# the operating envelope the logs covered (|a_y| = v·r as the run measures it, the speeds)")
+    print(cal.envelope.as_toml(), end="")
+    print("# each sensor's noise bound over its healthy stretches (v² ≤ R; in its node profile, nodes/<profile>.toml)")
+    for i, R in cal.R.items():
+        n = sc.node(i)
+        print(f"R = {R!r}  # node {i} (profile {n.label}): |v| ≤ {math.sqrt(R):.4g} over {cal.noise_steps[i]} steps; declared now: R = {n.sensor.R:g}")
+    for h in checked:
+        total = sum(h.inside.values())
+        print(
+            f"held out {h.path}: {total} transitions inside the envelope: e_k inside the box on {h.inside['inside']}, possibly outside on "
+            f"{h.inside['overlap']}, certainly outside on {h.inside['disjoint']}; outside the envelope {sum(h.outside.values())} "
+            f"(certainly outside the box on {h.outside['disjoint']})"
+        )
+        for i, c in h.noise.items():
+            if c["overlap"] or c["disjoint"]:
+                print(f"  node {i}: noise possibly beyond its calibrated bound on {c['overlap']} healthy steps, certainly on {c['disjoint']}")
+    if a.toml:
+        with open(a.toml, "w") as fh:
+            fh.write("\n" + cal.box.as_toml() + "\n" + cal.envelope.as_toml())
+    if a.json:
+        doc = {
+            "topology": sc.path,
+            "logs": cal.logs,
+            "margin": a.margin,
+            "transitions": cal.transitions,
+            "box": np.diag(cal.box.G).tolist(),
+            "ellipsoid": cal.ellipsoid.E.tolist(),
+            "envelope": {"ay_max": cal.envelope.ay_max, "speed_kmh": list(cal.envelope.speed_kmh)},
+            "R": {str(i): R for i, R in cal.R.items()},
+            "noise_steps": {str(i): n for i, n in cal.noise_steps.items()},
+            "held_out": [dataclasses.asdict(h) | {"noise": {str(i): c for i, c in h.noise.items()}} for h in checked],
         }
         with open(a.json, "w") as fh:
             json.dump(doc, fh, indent=1)

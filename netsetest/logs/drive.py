@@ -112,13 +112,14 @@ def log_steps(sc: Scenario) -> int:
     return plan_log(sc).last_step
 
 
-def with_log_steps(sc: Scenario) -> Scenario:
-    """The scenario with the run's steps decided against the log: every step it holds when none were given,
-    else the given ones if the log holds them (LogError otherwise)."""
+def with_log_steps(sc: Scenario, whole: bool = False) -> Scenario:
+    """The scenario with the run's steps decided against the log: every step it holds when none were given (or
+    ``whole``: whatever was given, as ``calibrate --logs`` reads each log), else the given ones if the log holds them
+    (LogError otherwise)."""
     if sc.log is None:
         return sc
     have = log_steps(sc)
-    if sc.log.steps_given:
+    if sc.log.steps_given and not whole:
         if sc.steps > have:
             raise LogError(
                 f"{sc.log.path}: the log holds steps 0–{have} of τs = {sc.tau_s:g} s, the run asks 0–{sc.steps}: "

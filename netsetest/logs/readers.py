@@ -245,7 +245,7 @@ def _batches(log: Path, fmt: str, columns: list[str]) -> Iterator[Any]:
             yield from pf.iter_batches(batch_size=BATCH_ROWS, columns=columns)
         else:
             with open(log, "rb") as fh:
-                head = fh.readline().decode("utf-8", "replace").strip().split(",")
+                head = fh.readline().decode("utf-8").strip().split(",")  # not text: UnicodeDecodeError, "cannot read it as csv"
             _columns_present(log, columns, [h.strip().strip('"') for h in head])
             convert = pcsv.ConvertOptions(include_columns=columns, column_types={c: pa.float64() for c in columns})
             reader = pcsv.open_csv(log, read_options=pcsv.ReadOptions(block_size=1 << 20), convert_options=convert)

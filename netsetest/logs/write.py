@@ -191,7 +191,7 @@ def mapping_toml(d: DriveTable, fmt: str, accuracy: tuple[float, float] | None, 
     out = [f"# {note}" if note else "# the mapping of a drive log written by netsetest (logs/write.py)", "[log]"]
     out.append(f'format = "{"rosbag" if bag else fmt}"')
     if gap_tolerance_s is not None:
-        out.append(f"gap_tolerance_s = {gap_tolerance_s!r}")
+        out.append(f"gap_tolerance_s = {float(gap_tolerance_s)!r}")
     if bag:
         out += ["", "[speed]", f'channel = "{SPEED_TOPIC}"', 'field = "twist.twist.linear.x"', 'unit = "m/s"']
         out += ["", "[steering]", f'channel = "{STEERING_TOPIC}"', 'unit = "rad"']
@@ -204,7 +204,7 @@ def mapping_toml(d: DriveTable, fmt: str, accuracy: tuple[float, float] | None, 
     if accuracy is not None and d.beta is not None:
         b, r = (BETA_TOPIC, R_TOPIC) if bag else ("beta_ref", "r_ref")
         out += ["", "[reference]", f'beta = {{ channel = "{b}", unit = "rad" }}', f'r = {{ channel = "{r}", unit = "rad/s" }}']
-        out.append(f"accuracy = {{ beta = {accuracy[0]!r}, r = {accuracy[1]!r} }}")
+        out.append(f"accuracy = {{ beta = {float(accuracy[0])!r}, r = {float(accuracy[1])!r} }}")
     return "\n".join(out) + "\n"
 
 

@@ -32,7 +32,7 @@ def test_the_tutorial_runs_end_to_end(tmp_path: Path, monkeypatch: pytest.Monkey
     shutil.copytree(ROOT / "nodes", tmp_path / "nodes")
     monkeypatch.chdir(tmp_path)
     cmds = commands()
-    assert [c.split()[1] for c in cmds] == ["log-example", "run", "run", "run"]
+    assert [c.split()[1] for c in cmds] == ["log-example", "run", "run", "run", "calibrate"]
     for command in cmds:
         assert command.startswith("netsetest "), command
         assert main(shlex.split(command)[1:]) == 0, command
