@@ -221,7 +221,8 @@ def build_parser() -> argparse.ArgumentParser:
         choices=SECTIONS,
         help="run one part alone: plant = a car as the truth, network = what the exchange can buy, scenario = the paper's "
         "scenario per node and every estimator compared, exact = what `netsetest exact` costs under k-of-N health, view = the live "
-        "view's cost and lag and the report page in headless Chromium, scaleout = a run across two network namespaces against one (root) "
+        "view's cost and lag and the report page in headless Chromium, scaleout = a run across two network namespaces against one (root), "
+        "logs = a recorded drive as the world: a 30-minute bag's import, replay speed, calibration from logs and a held-out drive "
         "(default: every part)",
     )
     p.add_argument(

@@ -33,7 +33,7 @@ from netsetest.config.logmap import LogMapping, SignalMap, log_format
 from netsetest.extras import require
 
 BATCH_ROWS = 16_384  # rows a CSV or Parquet batch holds: what the stream reads ahead at most, per pull
-BAG_CHUNK = 4_096  # messages of a bag per pull
+BAG_CHUNK = 1_024  # messages of a bag per pull: a few ms of work, so that a real-time vehicle's step is never late for it
 MDF_FRAGMENT_BYTES = 1 << 18  # asammdf's read fragment: a channel's samples per pull (a few thousand)
 MAX_GAPS = 4_096  # gaps longer than the tolerance a scan keeps per signal (an input needs none inside the run)
 NEVER = np.iinfo(np.int64).max

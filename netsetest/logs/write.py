@@ -5,12 +5,15 @@ mapping: the round-trip tests write a simulated run's truth and readings with it
 A :class:`DriveTable` holds the channels on one time base (seconds); each writer lays them out as the field records
 them: a CSV or Parquet table with a time column; an MDF4 file with one channel group; a ROS 2 bag (MCAP or sqlite3)
 with a ``sensor_msgs/msg/Imu`` per yaw-rate sensor (``angular_velocity.z``, header-stamped), the speed as a
-``nav_msgs/msg/Odometry`` (``twist.twist.linear.x``), the steering and the reference as ``std_msgs/msg/Float64``.
+``nav_msgs/msg/Odometry`` (``twist.twist.linear.x``), the steering and the reference as ``std_msgs/msg/Float64`` (or
+the reference as one INS topic, a ``geometry_msgs/msg/Vector3Stamped``: ``DriveTable.ins_message``).
 """
 
 from __future__ import annotations
 
+import heapq
 import shutil
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,6 +25,7 @@ from netsetest.extras import require
 WRITE_FORMATS = ("csv", "parquet", "mdf4", "rosbag-mcap", "rosbag-sqlite3")
 SUFFIX = {"csv": ".csv", "parquet": ".parquet", "mdf4": ".mf4", "rosbag-mcap": "", "rosbag-sqlite3": ""}  # a bag is a directory
 SPEED_TOPIC, STEERING_TOPIC, BETA_TOPIC, R_TOPIC = "/vehicle/odom", "/vehicle/steering", "/ins/beta", "/ins/yaw_rate"
+INS_TOPIC = "/ins/state"  # DriveTable.ins_message: one geometry_msgs/msg/Vector3Stamped, β in vector.x, r in vector.z
 
 
 def imu_topic(node: int) -> str:
@@ -41,6 +45,7 @@ class DriveTable:
     r: np.ndarray | None = None
     yaw_t: dict[int, np.ndarray] = field(default_factory=dict)  # a sensor's own stamps (jitter); default t
     description: str = ""  # what the drive is (an MDF4 comment, a bag's metadata: "synthetic: …")
+    ins_message: bool = False  # a bag: the reference as one INS message (INS_TOPIC) instead of a Float64 topic each
 
     def stamps(self, node: int) -> np.ndarray:
         return self.yaw_t.get(node, self.t)
@@ -115,13 +120,15 @@ def _write_mdf4(d: DriveTable, path: Path) -> Path:
 
 
 def _write_bag(d: DriveTable, path: Path, storage: str) -> Path:
+    """The bag, its messages generated topic by topic and merged in time (never held all at once: a 30-minute drive
+    at 100 Hz is millions of messages)."""
     require("rosbags", "writing a ROS 2 bag")
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
     T = ts.types
-    Imu, Odom, F64 = T["sensor_msgs/msg/Imu"], T["nav_msgs/msg/Odometry"], T["std_msgs/msg/Float64"]
+    Imu, Odom, F64, V3S = T["sensor_msgs/msg/Imu"], T["nav_msgs/msg/Odometry"], T["std_msgs/msg/Float64"], T["geometry_msgs/msg/Vector3Stamped"]
     Header, Time, V3, Q = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"], T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
     Twist, TwistCov, Pose, PoseCov, Point = (
         T["geometry_msgs/msg/Twist"],
@@ -131,55 +138,55 @@ def _write_bag(d: DriveTable, path: Path, storage: str) -> Path:
         T["geometry_msgs/msg/Point"],
     )
     zero3, cov9, cov36 = V3(x=0.0, y=0.0, z=0.0), np.zeros(9), np.zeros(36)
+    pose = Pose(position=Point(x=0.0, y=0.0, z=0.0), orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0))
 
     def header(ns: int, frame: str) -> Any:
         return Header(stamp=Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000), frame_id=frame)
 
+    def odom(ns: int, v: float) -> Any:
+        twist = Twist(linear=V3(x=v, y=0.0, z=0.0), angular=zero3)
+        return Odom(
+            header=header(ns, "odom"), child_frame_id="base_link", pose=PoseCov(pose=pose, covariance=cov36), twist=TwistCov(twist=twist, covariance=cov36)
+        )
+
+    def imu(ns: int, i: int, v: float) -> Any:
+        return Imu(
+            header=header(ns, f"imu{i}"),
+            orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0),
+            orientation_covariance=cov9,
+            angular_velocity=V3(x=0.0, y=0.0, z=v),
+            angular_velocity_covariance=cov9,
+            linear_acceleration=zero3,
+            linear_acceleration_covariance=cov9,
+        )
+
+    t_ns = np.round(d.t * 1e9).astype(np.int64).tolist()
+    topics: list[tuple[str, str, Iterator[tuple[int, object]]]] = [
+        (SPEED_TOPIC, Odom.__msgtype__, (((ns, odom(ns, float(v))) for ns, v in zip(t_ns, d.speed.tolist())))),
+        (STEERING_TOPIC, F64.__msgtype__, (((ns, F64(data=v)) for ns, v in zip(t_ns, d.steering.tolist())))),
+    ]
+    if d.beta is not None and d.r is not None:
+        if d.ins_message:  # one INS topic: β in vector.x, r in vector.z, header-stamped
+            ins = ((ns, V3S(header=header(ns, "ins"), vector=V3(x=b, y=0.0, z=r))) for ns, b, r in zip(t_ns, d.beta.tolist(), d.r.tolist()))
+            topics.append((INS_TOPIC, V3S.__msgtype__, ins))
+        else:
+            topics.append((BETA_TOPIC, F64.__msgtype__, ((ns, F64(data=v)) for ns, v in zip(t_ns, d.beta.tolist()))))
+            topics.append((R_TOPIC, F64.__msgtype__, ((ns, F64(data=v)) for ns, v in zip(t_ns, d.r.tolist()))))
+    for i, v in d.yaw.items():
+        stamps = np.round(d.stamps(i) * 1e9).astype(np.int64).tolist()
+        topics.append((imu_topic(i), Imu.__msgtype__, ((ns, imu(ns, i, val)) for ns, val in zip(stamps, v.tolist(), strict=True))))
+
+    def tagged(n: int, it: Iterator[tuple[int, object]]) -> Iterator[tuple[int, int, object]]:
+        return ((ns, n, msg) for ns, msg in it)
+
     if path.exists():
         shutil.rmtree(path)
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
-    msgs: list[tuple[int, str, object, str]] = []
-    t_ns = np.round(d.t * 1e9).astype(np.int64)
-    for k, ns in enumerate(t_ns.tolist()):
-        twist = Twist(linear=V3(x=float(d.speed[k]), y=0.0, z=0.0), angular=zero3)
-        pose = Pose(position=Point(x=0.0, y=0.0, z=0.0), orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0))
-        msgs.append(
-            (
-                ns,
-                SPEED_TOPIC,
-                Odom(
-                    header=header(ns, "odom"),
-                    child_frame_id="base_link",
-                    pose=PoseCov(pose=pose, covariance=cov36),
-                    twist=TwistCov(twist=twist, covariance=cov36),
-                ),
-                Odom.__msgtype__,
-            )
-        )
-        msgs.append((ns, STEERING_TOPIC, F64(data=float(d.steering[k])), F64.__msgtype__))
-        if d.beta is not None and d.r is not None:
-            msgs.append((ns, BETA_TOPIC, F64(data=float(d.beta[k])), F64.__msgtype__))
-            msgs.append((ns, R_TOPIC, F64(data=float(d.r[k])), F64.__msgtype__))
-    for i, v in d.yaw.items():
-        for ns, val in zip(np.round(d.stamps(i) * 1e9).astype(np.int64).tolist(), v.tolist()):
-            imu = Imu(
-                header=header(ns, f"imu{i}"),
-                orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0),
-                orientation_covariance=cov9,
-                angular_velocity=V3(x=0.0, y=0.0, z=float(val)),
-                angular_velocity_covariance=cov9,
-                linear_acceleration=zero3,
-                linear_acceleration_covariance=cov9,
-            )
-            msgs.append((ns, imu_topic(i), imu, Imu.__msgtype__))
-    msgs.sort(key=lambda m: m[0])  # a bag is written in arrival order
     with Writer(path, version=8, storage_plugin=plugin) as w:
-        conns = {}
-        for _, topic, _, mtype in msgs:
-            if topic not in conns:
-                conns[topic] = w.add_connection(topic, mtype, typestore=ts)
-        for ns, topic, msg, mtype in msgs:
-            w.write(conns[topic], ns, ts.serialize_cdr(msg, mtype))
+        conns = [w.add_connection(topic, mtype, typestore=ts) for topic, mtype, _ in topics]
+        # a bag is written in arrival order: the topics merged by stamp (a stable merge, topic order on ties)
+        for ns, n, msg in heapq.merge(*(tagged(n, it) for n, (_, _, it) in enumerate(topics)), key=lambda m: (m[0], m[1])):
+            w.write(conns[n], ns, ts.serialize_cdr(msg, topics[n][1]))
     if d.description:
         (path / "README.txt").write_text(d.description + "\n")
     return path
@@ -203,7 +210,10 @@ def mapping_toml(d: DriveTable, fmt: str, accuracy: tuple[float, float] | None, 
         out.append('unit = "rad/s"')
     if accuracy is not None and d.beta is not None:
         b, r = (BETA_TOPIC, R_TOPIC) if bag else ("beta_ref", "r_ref")
-        out += ["", "[reference]", f'beta = {{ channel = "{b}", unit = "rad" }}', f'r = {{ channel = "{r}", unit = "rad/s" }}']
+        fb, fr = ("", "")
+        if bag and d.ins_message:
+            b, r, fb, fr = INS_TOPIC, INS_TOPIC, ', field = "vector.x"', ', field = "vector.z"'
+        out += ["", "[reference]", f'beta = {{ channel = "{b}"{fb}, unit = "rad" }}', f'r = {{ channel = "{r}"{fr}, unit = "rad/s" }}']
         out.append(f"accuracy = {{ beta = {float(accuracy[0])!r}, r = {float(accuracy[1])!r} }}")
     return "\n".join(out) + "\n"
 

@@ -515,14 +515,8 @@ class Node:
         xc, Sx = predict_x(self.gap.xc, self.gap.Sx, a, b[:, 0], d[:, 0], inp.u_prev, self.sc.W, self.sc.uncertainty)
         if inp.y is None:
             self.gap = Gap(self.gap.since, self.gap.digest, xc, Sx)
-            self.own = None  # no own set of this step: neighbour states are not screened against one
-            self.k = inp.step
-            self.inputs = {s: m for s, m in self.inputs.items() if s > self.k}
-            self.inbox = {s: m for s, m in self.inbox.items() if s > self.k}
-            self.digests = {s: m for s, m in self.digests.items() if s > self.k}
-            self.refused = {s: m for s, m in self.refused.items() if s > self.k}
-            self.readings = {s: r for s, r in self.readings.items() if s > self.k}
-            self.waiting_since, self.give_up, self.prepared = None, False, None
+            self.own, self.prepared = None, None  # no own set of this step: neighbour states are not screened against one
+            self._taken(inp.step)
             return
         xhat, P = resume_ellipsoid(self.cfg.sensor, inp.y, inp.gamma, self.rho, xc, Sx)
         sector = derive_sector(self.cfg.sensor, FaultBound(), measurement_interval(self.cfg.sensor, inp.y, inp.gamma), None)
@@ -638,14 +632,18 @@ class Node:
         self.own_digest = state_digest(msg)
         if PROFILE is not None:
             PROFILE.add("build", t)
-        self.k = inp.step
-        self.inputs = {s: m for s, m in self.inputs.items() if s > self.k}
-        self.inbox = {s: m for s, m in self.inbox.items() if s >= self.k}
-        self.refused = {s: js for s, js in self.refused.items() if s >= self.k}
-        self.digests = {s: d for s, d in self.digests.items() if s >= self.k}
-        self.readings = {s: r for s, r in self.readings.items() if s > self.k}
-        self.waiting_since, self.give_up = None, False
+        self._taken(inp.step)
         self.bus.publish(keys.node_state(self.run, self.id), msg)
+
+    def _taken(self, k: int) -> None:
+        """Step k is taken (published, or passed without a reading): forget what only earlier steps could use."""
+        self.k = k
+        self.inputs = {s: m for s, m in self.inputs.items() if s > k}
+        self.inbox = {s: m for s, m in self.inbox.items() if s >= k}  # the neighbours' states of k serve step k+1
+        self.refused = {s: js for s, js in self.refused.items() if s >= k}
+        self.digests = {s: d for s, d in self.digests.items() if s >= k}
+        self.readings = {s: r for s, r in self.readings.items() if s > k}
+        self.waiting_since, self.give_up = None, False
 
     def _state_message(self, p: Publication) -> NodeState:
         """The state message of ``p.res.public`` for the step of ``p.inp`` (validated)."""
