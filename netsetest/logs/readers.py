@@ -22,8 +22,9 @@ Anything wrong is a :class:`LogError`: one line naming the file, the signal and 
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from operator import attrgetter
 from pathlib import Path
 from typing import Any
 
@@ -372,12 +373,19 @@ def _rosbag(log: Path, mapping: LogMapping, fmt: str) -> Iterator[Chunk]:
             stamps: dict[str, list[int]] = {s.name: [] for s in mapping.signals}
             values: dict[str, list[float]] = {s.name: [] for s in mapping.signals}
             n = 0
+            # a connection has one message type: its field is checked on its first message, then read by an attrgetter
+            getters: dict[tuple[int, str], Callable[[object], float]] = {}
             for conn, t_log, raw in reader.messages(connections=conns):
                 msg = reader.deserialize(raw, conn.msgtype)
                 t = _stamp(msg, t_log)
                 for s in by_topic[conn.topic]:
                     stamps[s.name].append(t)
-                    values[s.name].append(_field(msg, s.field or DEFAULT_FIELD, log, conn.topic))
+                    get = getters.get((conn.id, s.name))
+                    if get is None:
+                        values[s.name].append(_field(msg, s.field or DEFAULT_FIELD, log, conn.topic))
+                        getters[(conn.id, s.name)] = attrgetter(s.field or DEFAULT_FIELD)
+                    else:
+                        values[s.name].append(get(msg))
                 n += 1
                 if n == BAG_CHUNK:
                     yield [(name, np.asarray(stamps[name], dtype=np.int64), np.asarray(values[name])) for name in stamps]
