@@ -272,6 +272,8 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         view=a.view,
         view_port=a.view_port,
         port=a.port,
+        log=a.log,
+        mapping=a.map,
     )
     if a.view:
         from netsetest.extras import require

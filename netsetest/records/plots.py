@@ -375,7 +375,7 @@ def _fig8(records: list[Record], labels: list[str]) -> Figure:
             handles["ρ"] = ax.plot(k, vals[:, 1], color="k", lw=1.0, ls=":")[0]
             if _shade_silent(ax, rec, i, 1.0):
                 handles["not reported"] = Patch(color=SILENT_COLOUR, alpha=SILENT_ALPHA)
-            miss = ~tr.contained & ~np.isnan(tr.E)
+            miss = tr.missed & ~np.isnan(tr.E)  # proven misses only: an undecided step (a reference's box) is neither
             if miss.any():
                 handles["miss (E > ρ)"] = ax.plot(tr.steps[miss], tr.E[miss], "x", color="red", ms=7, mew=2)[0]
             for a, b in _spans(tr.steps, ~tr.assumptions_ok):

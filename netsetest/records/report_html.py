@@ -287,7 +287,7 @@ def _fig8(pages: Sequence[RecordPage]) -> Any:
             rs.append(_line(fig, k, vals[:, 0], i, name=f"fig8-node-{i}" if not rs else None, color=colour, line_width=1.4))
             hover.append(rs[-1])
             rs.append(_line(fig, k, vals[:, 1], i, color=colour, line_dash="dotted"))
-            miss = ~tr.contained & ~np.isnan(tr.E) & tr.judged if tr.judged is not None else ~tr.contained & ~np.isnan(tr.E)
+            miss = tr.missed & ~np.isnan(tr.E)  # proven misses only: an undecided step (a reference's box) is neither
             if miss.any():
                 rs.append(fig.scatter(tr.steps[miss].astype(float), tr.E[miss], marker="x", size=9, color="red", line_width=2))
         items.append((f"node {i}" + ("" if len(pages) == 1 else f" ({', '.join(p.label for p in pages)})"), rs))

@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING, Protocol
 
 from netsetest.config.schema import Case, Scenario, load_topology
+from netsetest.logs.drive import with_log_steps
 from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.records.summary import RunSummary
@@ -91,6 +92,8 @@ class LaunchOptions:
     view: bool = False  # a live view beside the run (runtime/view.py), an observer like `watch`
     view_port: int = 0  # its web port (0: a free one)
     port: int = 0  # the run's port on loopback: its router's, or (insecure) its collector's, which observers connect to (0: a free one)
+    log: str | None = None  # a recorded drive as the world (docs/your-log.md)
+    mapping: str | None = None  # its mapping file
 
 
 RUN_ID_BYTES = 8  # of a run's random id (as `netsetest credentials` makes)
@@ -165,7 +168,8 @@ def run_start_timeout(roles: int) -> float:
 def plan_run(opts: LaunchOptions) -> RunPlan:
     """Load the topology and check the options against it and each other (LaunchError naming the option;
     ConfigError for a bad topology)."""
-    sc = load_topology(opts.topology, opts.case, opts.steps, opts.estimator)
+    # a recorded drive's steps are decided here, from the log, and every role is started with them: only the vehicle reads the log
+    sc = with_log_steps(load_topology(opts.topology, opts.case, opts.steps, opts.estimator, log=opts.log, mapping=opts.mapping))
     for node, _ in (*opts.kill, *opts.rejoin):
         if sc.node(node).estimator != SDP:
             raise LaunchError(f"--kill/--rejoin {node}@…: node {node} runs {sc.node(node).estimator!r}, which cannot rejoin (only the SDP can)")
@@ -393,7 +397,12 @@ class RoleStarter:
     def __init__(self, plan: RunPlan, network: Network, children: Children) -> None:
         o = plan.options
         self.plan, self.network, self.children = plan, network, children
-        self.scenario = ScenarioSpec(o.topology, o.case, o.steps, o.estimator)
+        lg = plan.scenario.log
+        self.scenario = (
+            ScenarioSpec(o.topology, o.case, o.steps, o.estimator)
+            if lg is None  # the roles read their paths from the working directory the run was started in
+            else ScenarioSpec(o.topology, o.case, plan.scenario.steps, o.estimator, os.path.abspath(lg.path), os.path.abspath(lg.mapping.path))
+        )
 
     def collector(self) -> CollectorSpec:
         o = self.plan.options

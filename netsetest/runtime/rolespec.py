@@ -193,6 +193,8 @@ def _argv(spec: object) -> tuple[list[str], list[str]]:
 # ---------------------------------------------------------------- the parts every role shares
 
 
+LOG_HELP = "a recorded drive as the world: a ROS 2 bag, an MDF4 file, a Parquet or CSV table (docs/your-log.md; default: the topology's)"
+MAP_HELP = "the log's mapping (default: the topology's [vehicle] mapping, else DRIVE's name with .map.toml)"
 ESTIMATOR_HELP = f"every node's estimator, overriding the topology's per-node 'estimator' ({', '.join(NODE_ESTIMATOR_NAMES)}; default: the file's, else sdp)"
 ZENOH_CONFIG_HELP = "a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting, security and the lease on top (default: none)"
 STALL_LIMIT_HELP = (
@@ -210,12 +212,16 @@ class ScenarioSpec:
     case: Case | None = _opt(None, "--case", "override the topology's case (default: the file's)", choices=("nsnim", "saim"))
     steps: int | None = _opt(None, "--steps", "override the number of steps of τs each (default: the file's)", argtypes.positive_int, metavar="N")
     estimator: str | None = _opt(None, "--estimator", ESTIMATOR_HELP, choices=NODE_ESTIMATOR_NAMES, metavar="NAME")
+    log: str | None = _opt(None, "--log", LOG_HELP, metavar="DRIVE")
+    mapping: str | None = _opt(None, "--map", MAP_HELP, metavar="MAP.toml")
 
     def load(self) -> Scenario:
-        """The scenario (ConfigError naming what is wrong with the file or an override)."""
+        """The scenario (ConfigError naming what is wrong with the file or an override).  A recorded drive is named
+        and its mapping read, but the log itself is read only by the vehicle (logs/drive.py): a role of a run
+        from a log is started with its steps (``run`` decides them once, from the log)."""
         from netsetest.config.schema import load_topology
 
-        return load_topology(self.topology, self.case, self.steps, self.estimator)
+        return load_topology(self.topology, self.case, self.steps, self.estimator, log=self.log, mapping=self.mapping)
 
 
 def _resolve_run_id(run_id: str | None) -> str:
