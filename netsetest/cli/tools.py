@@ -63,7 +63,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--count", type=checks.positive_int, metavar="N", help="stop after N messages (default: no limit)")
     p.add_argument("--json", action="store_true", help="one JSON object per line: key and message fields")
 
-    p = sub.add_parser("watch", help="live per-node table of a running run: step, fault bound, E, drops, deadline misses")
+    p = sub.add_parser("watch", help="live per-node table of a running run: step, fault bound, whether the truth is in the published set (the collector's rule), E, drops, deadline misses")
     _observer_args(p)
 
     p = sub.add_parser("view", help="live view of a running run in Rerun's web viewer, served from this machine (no internet): intervals, sets, graph, verdict")
@@ -209,11 +209,12 @@ def _render(table, title: str):  # LiveTable → rich Table
     from rich.table import Table
 
     t = Table(title=title)
-    cols = ("node", "step", "status", "fault lower", "fault upper", "fault", "detected from", "E (step)", "ρ", "lost", "missing", "dropped", "deadline")
+    cols = ("node", "step", "status", "fault lower", "fault upper", "fault", "detected from", "truth", "missed", "E (step)", "ρ", "lost", "missing", "dropped", "deadline")
     for col in cols:
         t.add_column(col, justify="right")
     for r in table.sorted_rows():
         E = "-" if r.E is None else f"{r.E:.3f} ({r.E_step})"
+        held = "-" if r.contained is None else "in set" if r.contained else "MISSED"  # at E's step, by the collector's rule (runtime/live.py)
         t.add_row(
             str(r.id),
             _fmt(r.step, "d"),
@@ -222,6 +223,8 @@ def _render(table, title: str):  # LiveTable → rich Table
             _fmt(r.fault_upper, ".4f"),
             r.fdi,
             _fmt(r.first_detection, "d"),
+            held,
+            f"{r.missed} of {r.judged}",
             E,
             _fmt(r.rho, ".3g"),
             str(r.lost),

@@ -201,9 +201,11 @@ class Judge:
             )
         return StepVerdict(out, checks)
 
-    def containment(self, i: int, st: NodeState, tr: Truth) -> Containment:
+    @staticmethod
+    def containment(i: int, st: NodeState, tr: Truth) -> Containment:
         """The state's published set and the set it continues from against the truth (ProvenSet.contains); E is the
-        published ellipsoid's (a set estimator's: the one around its set, its neighbour-facing summary)."""
+        published ellipsoid's (a set estimator's: the one around its set, its neighbour-facing summary).  Needs no
+        scenario: ``watch`` and the live view (runtime/live.py) judge what they hear by it, the collector's rule."""
         xbar = augmented(tr.x, tr.faults[str(i)])
         pub = st.published
         E = pub.E(xbar)

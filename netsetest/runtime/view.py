@@ -12,8 +12,9 @@ work for it.  :class:`LiveView` turns each decoded message into Rerun entities, 
 ``graph``                                 the topology: an edge j → i for every message node i used, each
                                           node coloured by its step (contained, missed, late, fault detected);
                                           drawn once a step, with its truth (and at the end)
-``verdict``                               E ≤ ρ so far over the node-steps whose truth was heard, as ``watch``
-                                          computes it (the collector's verdict is the run's word)
+``verdict``                               how many node-steps' published sets held the truth so far, of those whose
+                                          truth was heard, by the collector's rule (roles/judge.py, as ``watch``
+                                          shows it; the collector's verdict, with its coverage, is the run's word)
 ``plant/path``, ``plant/e/{beta,r}``, ``plant/mismatch_ok``   with a plant: the car's path (integrated
                                           from r, β and v_x) and its model mismatch e_k with the flag whether
                                           it stayed in its declared bound
@@ -80,7 +81,7 @@ def ellipse(centre: np.ndarray, shape: np.ndarray, n: int = ELLIPSE_POINTS) -> n
 
 @dataclass
 class Coverage:
-    """Node-steps whose state and truth the view heard, and how many had E ≤ ρ."""
+    """Node-steps whose state and truth the view heard, and how many of their published sets held the truth."""
 
     judged: int = 0
     contained: int = 0
@@ -181,10 +182,10 @@ class LiveView:
             self._styles(set(self.table.rows))
             self.layout_due = True
         judged = self.table.judged or []
-        for node, step, E, rho in judged:
+        for node, _step, c in judged:  # judged by the collector's rule (LiveTable: Judge.containment)
             self.coverage.judged += 1
-            self.coverage.contained += E <= rho
-            self.node_colour[node] = COLOURS["contained" if E <= rho else "missed"]
+            self.coverage.contained += c.contained
+            self.node_colour[node] = COLOURS["contained" if c.contained else "missed"]
         if judged:
             judged.clear()
         if backlog > MAX_BACKLOG:
@@ -278,12 +279,13 @@ class LiveView:
         c = self.coverage
         text = (
             f"## {'run ended after' if ended else 'step'} {step}\n\n"
-            f"E ≤ ρ on **{c.contained} of {c.judged}** node-steps heard with their truth"
-            + (f" — **{c.judged - c.contained} outside**" if c.judged > c.contained else "")
+            f"the published set held the truth on **{c.contained} of {c.judged}** node-steps heard with their truth"
+            + (f" — **{c.judged - c.contained} missed**" if c.judged > c.contained else "")
             + f"\n\nframes dropped (the view was behind): {c.dropped_frames}"
             + (f"; the view's lag behind the run: {self.lag.lags_s[-1]:.2f} s" if self.lag.lags_s else "")
             + "\n\n"
-            "As `watch` computes it; the run's verdict (coverage, assumptions) is the collector's."
+            "Judged by the collector's rule (the ellipsoid ∩ the region ∩ the fault range), as `watch` shows it; "
+            "the run's verdict (coverage, assumptions) is the collector's."
         )
         self.rec.log("verdict", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
 
