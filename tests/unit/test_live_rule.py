@@ -80,7 +80,7 @@ def test_the_live_view_colours_and_counts_that_step_missed() -> None:
     from netsetest.runtime.view import APP_ID, COLOURS, LiveView
 
     rec = rr.RecordingStream(APP_ID)
-    stream = rec.binary_stream()  # in memory: nothing leaves the test
+    stream = rr.binary_stream(recording=rec)  # in memory: nothing leaves the test
     view = LiveView(rec, tau_s=0.1)
     for m in (_state(FAR, node=1), _state(AROUND, node=2), TRUTH):
         view.feed(m)
