@@ -12,7 +12,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import pytest
 
-from netsetest.runtime.view_server import CSP, EXTERNAL_LINK, STREAM, PortTaken, StreamBuffer, _bind, check_port
+from netsetest.runtime.view_server import CSP, EXTERNAL_LINK, STREAM, PortTaken, StreamBuffer, _bind, _Server, check_port
 
 PAGE = b"""<html><head>
     <link rel="preconnect" href="https://fonts.googleapis.com" />
@@ -59,20 +59,29 @@ TOKEN = "t" * 43
 ASSETS = {"index.html": PAGE, "re_viewer.js": b"js", "re_viewer_bg.wasm": b"\0asm", "favicon.ico": b"ico"}
 
 
-@pytest.fixture
-def server() -> Iterator[tuple[int, StreamBuffer]]:
+@pytest.fixture(scope="module")
+def _http() -> Iterator[_Server]:
+    """One server for the module (its shutdown waits out a poll of half a second)."""
     http_server = _bind(0)
-    buf = StreamBuffer()
-    http_server.token, http_server.assets, http_server.buffer = TOKEN, ASSETS, buf
+    http_server.token, http_server.assets = TOKEN, ASSETS
     t = threading.Thread(target=http_server.serve_forever, daemon=True)
     t.start()
     try:
-        yield http_server.server_address[1], buf
+        yield http_server
     finally:
-        buf.close()
         http_server.shutdown()
         http_server.server_close()
         t.join()
+
+
+@pytest.fixture
+def server(_http: _Server) -> Iterator[tuple[int, StreamBuffer]]:
+    """The server's port and a fresh stream for each test, ended after it."""
+    _http.buffer = buf = StreamBuffer()
+    try:
+        yield _http.server_address[1], buf
+    finally:
+        buf.close()
 
 
 def _ask(port: int, method: str, path: str, headers: dict[str, str] | None = None, body: bytes | None = None) -> tuple[int, dict[str, str], bytes]:
