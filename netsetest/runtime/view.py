@@ -139,18 +139,20 @@ class LiveView:
     layout_due: bool = False  # nodes appeared since the layout was last sent (it goes with the next step's frame)
 
     def __post_init__(self) -> None:
-        if self.outlet is None:
-            self.outlet = lambda pinned, timeout_s: self.rec.flush(timeout_sec=timeout_s)
         self.layout()  # Rerun's first blueprint takes a second or more to encode: here, before the run, not in its first step
         self._send(pinned=True)  # with the recording's start: every browser needs it
 
     def _send(self, pinned: bool) -> bool:
         """What has been logged, to the viewer now; False when it did not get there within FLUSH_TIMEOUT_S."""
         try:
-            self.outlet(pinned, FLUSH_TIMEOUT_S)  # type: ignore[misc]  # set in __post_init__
+            (self.outlet or self._flush)(pinned, FLUSH_TIMEOUT_S)
         except RuntimeError:  # Rerun's "flush timed out": the view goes on
             return False
         return True
+
+    def _flush(self, pinned: bool, timeout_s: float) -> None:
+        """The default outlet: the recording stream's own sink (a file, in the tests) gets everything now."""
+        self.rec.flush(timeout_sec=timeout_s)
 
     def layout(self) -> None:
         """The viewer's layout for the nodes seen so far (sent again when a node appears): the graph, the
