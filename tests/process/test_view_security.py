@@ -31,6 +31,7 @@ RUN_STEPS = 3000  # far more than the test needs: the run is still going when it
 RUN_PACE_S = 0.2  # s a step: the run goes on, at a small cost
 START_S = 120.0  # the view imports Rerun and fetches its page; a loaded machine is slow at it
 FORGED = "FORGED-BY-NOBODY"
+PROBE_S = 240.0  # the second account's whole probe (every port: a few requests of at most 3 s each, a forged log)
 SYSTEM_PYTHONS = ("/usr/bin/python3", "/usr/local/bin/python3")  # outside any home: runnable by another account
 STEP0 = "are ready; clock"  # the vehicle's line right before step 0 (bench/zenoh_runs.py STEP0_LINE)
 
@@ -142,37 +143,61 @@ def test_the_view_serves_on_the_one_port_given_and_a_taken_port_is_one_line(proc
 # ------------------------------------------------------------------------------ another account
 
 PROBE = r"""
-import http.client, json, os, sys
+import json, os, socket, sys, time
 ports, pids, forged = json.loads(sys.argv[1]), json.loads(sys.argv[2]), sys.argv[3]
 out = {"uid": os.getuid(), "http": [], "grpc": [], "fds": {}, "proc": ""}
+
+
+def ask(port, method, path):
+    # [status or None, the body's first bytes, its length]: at most 3 s and 64 KiB of an answer (a stream never ends)
+    body = forged.encode() if method != "GET" else b""
+    end, got = time.monotonic() + 3, b""
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=3) as s:
+            s.sendall(f"{method} {path} HTTP/1.0\r\nHost: 127.0.0.1:{port}\r\nContent-Length: {len(body)}\r\n\r\n".encode() + body)
+            while len(got) < 1 << 16 and (left := end - time.monotonic()) > 0:
+                s.settimeout(left)
+                chunk = s.recv(4096)
+                if not chunk:
+                    break
+                got += chunk
+    except OSError as e:
+        if not got:
+            return [None, type(e).__name__, 0]
+    head, _, rest = got.partition(b"\r\n\r\n")
+    parts = head.split(b" ", 2)
+    status = int(parts[1]) if len(parts) > 1 and parts[0].startswith(b"HTTP/") and parts[1].isdigit() else None
+    return [status, rest[:4].decode(errors="replace"), len(rest)]
+
+
 for port in ports:
     for method in ("GET", "POST"):
         for path in ("/", "/recording.rrd", "/proxy", "/x/recording.rrd"):
-            c = http.client.HTTPConnection("127.0.0.1", port, timeout=3)
-            try:
-                c.request(method, path, body=forged.encode() if method != "GET" else None)
-                r = c.getresponse()
-                body = r.read(1 << 16)
-                out["http"].append([port, method, path, r.status, body[:4].decode(errors="replace"), len(body)])
-            except Exception as e:
-                out["http"].append([port, method, path, None, type(e).__name__, 0])
-            finally:
-                c.close()
+            print("http", port, method, path, file=sys.stderr, flush=True)
+            out["http"].append([port, method, path, *ask(port, method, path)])
+def forge(port, res):
+    rec = rr.RecordingStream("netsetest")
+    rec.connect_grpc(f"rerun+http://127.0.0.1:{port}/proxy")
+    for k in range(50):
+        rec.set_time("step", sequence=k)
+        rec.log("verdict", rr.TextDocument(forged + ": PASS"))
+    try:
+        rec.flush(timeout_sec=5)
+        res.append("flushed")
+    except Exception as e:
+        res.append(type(e).__name__)
+
+
 try:
+    import threading
     import rerun as rr
     for port in ports:  # what the issue's forger did: Rerun's SDK, logging into the view's recording
-        rec = rr.RecordingStream("netsetest")
-        rec.connect_grpc(f"rerun+http://127.0.0.1:{port}/proxy")
-        for k in range(50):
-            rec.set_time("step", sequence=k)
-            rec.log("verdict", rr.TextDocument(forged + ": PASS"))
-        try:
-            rec.flush(timeout_sec=5)
-            res = "flushed"
-        except Exception as e:
-            res = type(e).__name__
-        rec.disconnect()
-        out["grpc"].append([port, res])
+        print("grpc", port, file=sys.stderr, flush=True)
+        res = []
+        t = threading.Thread(target=forge, args=(port, res), daemon=True)  # Rerun's SDK may hang on a port that is no gRPC server
+        t.start()
+        t.join(20)
+        out["grpc"].append([port, res[0] if res else "no answer"])
 except Exception as e:
     out["grpc"].append([None, repr(e)])
 texts = []
@@ -191,12 +216,22 @@ for pid in pids:  # the view's standard output, where it prints its address
             out["fds"][f"{pid}/{fd}"] = "opened"
         except OSError as e:
             out["fds"][f"{pid}/{fd}"] = e.errno
-print(json.dumps(out))
+print(json.dumps(out), flush=True)
+os._exit(0)  # not waiting for a recording stream Rerun could not close
 """
 
 
 def _as(uid: int, gid: int, argv: list[str], timeout: float, pythonpath: str | None = None) -> subprocess.CompletedProcess:
-    """``argv`` as user ``uid`` (no supplementary groups, a home it cannot write, in /)."""
+    """``argv`` as user ``uid`` (no supplementary groups, a home it cannot write, in /); a test failure, with
+    what it said, if it takes longer than ``timeout``."""
+    try:
+        return _run_as(uid, gid, argv, timeout, pythonpath)
+    except subprocess.TimeoutExpired as exc:
+        said = exc.stderr.decode(errors="replace") if isinstance(exc.stderr, bytes) else exc.stderr
+        pytest.fail(f"{argv[0]} as uid {uid} did not finish within {timeout:g} s; its last words: {(said or '')[-500:]}")
+
+
+def _run_as(uid: int, gid: int, argv: list[str], timeout: float, pythonpath: str | None) -> subprocess.CompletedProcess:
     return subprocess.run(
         argv,
         capture_output=True,
@@ -255,7 +290,7 @@ def test_another_account_can_neither_read_nor_write_the_view(procs: ProcessGuard
     ports = sorted(_listening_ports(pids))
     assert port in ports
     python, pythonpath = _python_for(uid, gid)
-    probe = _as(uid, gid, [python, "-c", PROBE, json.dumps(ports), json.dumps(pids), FORGED], timeout=240, pythonpath=pythonpath)
+    probe = _as(uid, gid, [python, "-c", PROBE, json.dumps(ports), json.dumps(pids), FORGED], timeout=PROBE_S, pythonpath=pythonpath)
     assert probe.returncode == 0, probe.stderr[-3000:]
     seen = json.loads(probe.stdout)
     assert seen["uid"] == uid
