@@ -29,6 +29,7 @@ except ImportError:  # another interpreter
     from hashlib import blake2b
 from msgspec import Meta, Struct, field
 
+from netsetest.polygon import REGION_NOT_FINITE, REGION_NOT_NUMBERS, REGION_REASONS, REGION_VERTICES
 from netsetest.proven import ProvenSet, continued_set
 from netsetest.validation import FINITE_BOUND_TEXT, FLOAT_MAX, Finite, Positive, split_error
 
@@ -334,6 +335,22 @@ def _detail(exc: msgspec.ValidationError) -> str:
     return (f"{loc}: {text}" if loc else text)[:MAX_DETAIL]
 
 
+_REGION_AT = re.compile(r"(?:^|\.)region(?:\[\d+\])?$")  # a published set's region, or one of its coordinates
+
+
+def _reason(exc: msgspec.ValidationError) -> str:
+    """The drop reason of a payload that failed validation: a region's own (polygon.REGION_REASONS: its check names
+    it first, through the set's __post_init__; or msgspec's on the region field: its length, a coordinate not
+    finite, not numbers), else ``invalid``."""
+    msg, loc = split_error(exc)
+    head = msg.split(":", 1)[0]
+    if head in REGION_REASONS:
+        return head
+    if _REGION_AT.search(loc):
+        return REGION_VERTICES if "length" in msg else REGION_NOT_FINITE if _FINITE.search(msg) else REGION_NOT_NUMBERS
+    return "invalid"
+
+
 def _version_of_odd_payload(payload: bytes) -> object:
     """``v`` of a msgpack value that is not a map with string keys; BadMessage unless it is a map."""
     try:
@@ -391,6 +408,6 @@ def _decode(payload: bytes) -> Message:
     try:
         return _DECODER.decode(payload)
     except msgspec.ValidationError as exc:
-        raise BadMessage("invalid", _detail(exc)) from None
+        raise BadMessage(_reason(exc), _detail(exc)) from None
     except msgspec.DecodeError as exc:  # e.g. nested too deeply for the typed decoder
         raise BadMessage("undecodable", str(exc)[:MAX_DETAIL]) from None

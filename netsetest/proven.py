@@ -22,7 +22,7 @@ import numpy as np
 from msgspec import Meta, Struct
 
 from netsetest.models.sensor import NA, NX
-from netsetest.polygon import MAX_VERTICES, MIN_VERTICES, Polygon
+from netsetest.polygon import MAX_VERTICES, MIN_VERTICES, Polygon, region_problem
 from netsetest.sets import Box, Ellipsoid, RegionSet, SumSet, Zonotope, ellipsoid_bounds, set_from_wire
 from netsetest.validation import Finite, Positive
 
@@ -61,8 +61,9 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
     ``set`` (then ``region`` and ``fault`` are absent: its set carries its own, and the ellipsoid encloses it).
 
     ``region``: the polygon's vertices counter-clockwise, flattened [β₁, r₁, β₂, r₂, …] (None: no region kept).
-    The cross-field checks (P symmetric positive definite, an even number of region coordinates, lo ≤ hi, a set
-    that parses) run on construction and on decode (a ValueError there fails the message's decode).
+    The cross-field checks (P symmetric positive definite, a region a node may publish: polygon.region_problem, lo ≤
+    hi, a set that parses) run on construction and on decode (a ValueError there fails the message's decode; a
+    region's names its reason first).
     """
 
     xhat: Vec3
@@ -78,8 +79,8 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
             raise ValueError(problem)
         if self.fault is not None and not self.fault[0] <= self.fault[1]:
             raise ValueError(f"fault: lo > hi ({self.fault})")
-        if self.region is not None and len(self.region) % 2:
-            raise ValueError("region: an odd number of coordinates")
+        if self.region is not None and (bad_region := region_problem(self.region)):
+            raise ValueError(": ".join(bad_region))  # the reason first: decode drops the message under it
         if self.set is not None:
             if self.region is not None or self.fault is not None:
                 raise ValueError("a set estimator's set carries its own region and fault range")

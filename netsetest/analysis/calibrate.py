@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from netsetest.config.schema import Scenario
+from netsetest.config.schema import Scenario, check_envelope_speeds
 from netsetest.models.drive import Drive
 from netsetest.models.envelope import OperatingEnvelope
 from netsetest.models.manoeuvres import WITH_AMPLITUDE, DriveSpec, ManoeuvreName
@@ -257,12 +257,7 @@ def envelope_sweep(sc: Scenario, envelope: OperatingEnvelope, progress: Callable
     at SWEEP_FRACTIONS of the amplitude whose peak |a_y| reaches ay_max (with the paper's wind).  ValueError where the envelope's
     speeds leave the topology's model range (the vehicle could not publish them for scheduling)."""
     p = sc.model.params
-    lo, hi = envelope.speed_kmh
-    if lo * KMH < p.vx_min * (1 - 1e-9) or hi * KMH > p.vx_max * (1 + 1e-9):
-        raise ValueError(
-            f"the envelope's speeds {lo:g}–{hi:g} km/h leave the model's range {p.vx_min / KMH:g}–{p.vx_max / KMH:g} km/h "
-            "([vehicle] vx_min_kmh, vx_max_kmh): widen that range or narrow --speed"
-        )
+    check_envelope_speeds(envelope, p.vx_min / KMH, p.vx_max / KMH)
     plan = [(kmh, m) for kmh in envelope_speeds(envelope) for m in SWEEP_MANOEUVRES]
     drive = dataclasses.replace(sc, steps=min(sc.steps, round(SWEEP_S / sc.tau_s)))
     out = []

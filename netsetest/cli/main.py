@@ -1,8 +1,6 @@
-"""``netsetest`` command line: run, inspect, plot, exact, compare (and the role processes of the Zenoh runtime).
+"""``netsetest`` command line: every command's parser (:func:`build_parser`) and handler (:func:`handlers`).
 
-Exit codes: 0 success (every ellipsoid contained where the assumptions held); 1 containment violated
-on a step where the assumptions held; 2 bad input (file, option); 3 a node stopped reporting;
-130 interrupted.
+``netsetest --help`` lists the commands from the parser itself (:func:`describe`), so no command is left out.
 """
 
 from __future__ import annotations
@@ -13,6 +11,7 @@ import json
 import math
 import os
 import sys
+import textwrap
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
@@ -28,6 +27,7 @@ from netsetest.extras import MissingExtra, require
 from netsetest.records.errors import RecordError
 from netsetest.models.uncertainty import DEFAULT_MARGIN
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED
+from netsetest.scenarios import topology_help
 
 if TYPE_CHECKING:  # a role process never loads the records (memory: docs/performance-history.md)
     from netsetest.analysis.calibrate import Calibration, DriveMismatch
@@ -37,9 +37,15 @@ if TYPE_CHECKING:  # a role process never loads the records (memory: docs/perfor
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 
+HELP_WIDTH = 100  # characters: the description's paragraphs (RawDescriptionHelpFormatter keeps the exit codes' lines)
+SUMMARY = "netsetest: guaranteed (set-membership) estimation of a car's state and its yaw-rate sensors' faults by a network of nodes."
+EXIT_CODES = """Exit codes: 0 success (every set contained the truth where the assumptions held); 1 containment violated
+on a step where the assumptions held; 2 bad input (file, option); 3 a node stopped reporting;
+130 interrupted."""
+
 
 def _scenario_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("topology", help="topology file (e.g. topologies/paper6.toml) or bundled name (paper6, paper6_lossy)")
+    p.add_argument("topology", help=topology_help())
     p.add_argument("--case", choices=["nsnim", "saim"], help="override the topology's case (default: the file's)")
     p.add_argument("--steps", type=checks.positive_int, metavar="N", help="override the number of steps of τs each (default: the file's)")
 
@@ -87,10 +93,22 @@ class ShowVersion(argparse.Action):
         parser.exit()
 
 
+def describe(sub: argparse._SubParsersAction) -> str:
+    """``netsetest --help``'s description: every command the parser has (a role process's apart, the
+    internal ones left out), in the order they are listed below it."""
+    from netsetest.cli.processes import INTERNAL_COMMANDS, ROLE_COMMANDS
+
+    users = [c for c in sub.choices if c not in ROLE_COMMANDS and c not in INTERNAL_COMMANDS]
+    commands = (
+        f"commands: {', '.join(users)}; the role processes of a Zenoh run or deployment: {', '.join(ROLE_COMMANDS)} (netsetest COMMAND --help says more)."
+    )
+    return "\n\n".join((textwrap.fill(SUMMARY, HELP_WIDTH), textwrap.fill(commands, HELP_WIDTH), EXIT_CODES))
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="netsetest", description=__doc__, formatter_class=HelpFormatter)
+    ap = argparse.ArgumentParser(prog="netsetest", formatter_class=HelpFormatter)
     ap.add_argument("--version", action=ShowVersion, help="print the version and exit")
-    sub = ap.add_subparsers(dest="command", required=True)
+    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     from netsetest.cli import processes
 
@@ -126,7 +144,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("exact", help="the exact tightest bounds any guaranteed estimator could publish, against a record")
     p.add_argument("record", help="a run record (JSON, JSON Lines, .gz or .mcap)")
     p.add_argument("--json", metavar="PATH", help="write the per-step exact intervals and the ratios as JSON")
-    p.add_argument("--topology", metavar="PATH", help="topology file (default: the one named in the record)")
+    p.add_argument("--topology", metavar="PATH", help=topology_help("the record's topology (default: the one the record names)"))
     p.add_argument(
         "--fault-bounds",
         choices=["used", "all", "none"],
@@ -152,7 +170,7 @@ def build_parser() -> argparse.ArgumentParser:
         "one solve does not settle is relaxed: an outer bound, labelled (docs/exact.md)",
     )
     p = sub.add_parser("calibrate", help="the smallest model-mismatch bound covering a plant's e_k on training manoeuvres")
-    p.add_argument("topology", help="topology with a nonlinear plant (a path, or a bundled name such as paper6_car)")
+    p.add_argument("topology", help=topology_help("a topology with a nonlinear plant ([vehicle] plant, e.g. paper6_car)"))
     p.add_argument(
         "--manoeuvres",
         type=checks.drive_list,
@@ -233,6 +251,7 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_parser(sub, _scenario_args)
     for command in sub.choices.values():
         command.formatter_class = HelpFormatter
+    ap.description = describe(sub)
     return ap
 
 
@@ -680,14 +699,19 @@ COMMANDS.update(
 )
 
 
+def handlers() -> dict[str, Callable[[argparse.Namespace], int]]:
+    """Every command's handler by name: the one registry (each CLI module registers its own)."""
+    from netsetest.cli import compare, processes, tools
+
+    return {**COMMANDS, **tools.COMMANDS, **compare.COMMANDS, **processes.COMMANDS}
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     ap = build_parser()
     a = ap.parse_args(argv)
-    from netsetest.cli import processes
+    handler = handlers()[a.command]
+    from netsetest.cli import tools
 
-    from netsetest.cli import compare, tools
-
-    handler = COMMANDS.get(a.command) or tools.COMMANDS.get(a.command) or compare.COMMANDS.get(a.command) or processes.COMMANDS[a.command]
     try:
         return handler(a)
     except (ConfigError, RecordError, MissingExtra, ExactError, CompareError, checks.OutputError, tools.ObserverError) as exc:

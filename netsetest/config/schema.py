@@ -46,7 +46,7 @@ from netsetest.models.signals import Fault, NoFault, PiecewiseLinearFault, Speed
 from netsetest.models.manoeuvres import MANOEUVRES, SINE_SPEED, STEERING_MAX_RAD, ManoeuvreName, steering_range
 from netsetest.extras import MissingExtra
 from netsetest.models.plant import PLANTS, VEHICLE_IDS, PlantKind, derived_params
-from netsetest.models.envelope import OperatingEnvelope
+from netsetest.models.envelope import HOLDS_RTOL, OperatingEnvelope
 from netsetest.models.uncertainty import ModelUncertainty
 from netsetest.models.vehicle import KMH, TSModel, VehicleParams
 from netsetest.scenarios import bundled_topologies, resolve_topology
@@ -367,6 +367,21 @@ class EnvelopeSpec(_Strict, frozen=True, kw_only=True):
         return OperatingEnvelope(float(self.ay_max), (float(self.speed_kmh[0]), float(self.speed_kmh[1])))
 
 
+def check_envelope_speeds(envelope: OperatingEnvelope, vx_min_kmh: float, vx_max_kmh: float) -> None:
+    """ValueError (one line) where an operating envelope's speeds leave the model's range [vx_min_kmh, vx_max_kmh]:
+    no drive of the run, and none of ``calibrate``'s, leaves that range (the vehicle schedules the model on it),
+    so a bound cannot be calibrated, nor declared, for speeds outside it.  The one rule for the topology's
+    ``[envelope]`` and ``calibrate --envelope --speed`` (HOLDS_RTOL: a range given in m/s and read back in km/h)."""
+    lo, hi = envelope.speed_kmh
+    tol = 1 + HOLDS_RTOL
+    if lo * tol < vx_min_kmh or hi > vx_max_kmh * tol:
+        raise ValueError(
+            f"the envelope's speeds {lo:g}–{hi:g} km/h leave the model's range {vx_min_kmh:g}–{vx_max_kmh:g} km/h "
+            "([vehicle] vx_min_kmh, vx_max_kmh), on which every drive stays: narrow the envelope ([envelope] speed_kmh, "
+            "calibrate --speed) or widen that range"
+        )
+
+
 class SpeedSpec(_Strict, frozen=True, kw_only=True):
     mean_kmh: Annotated[float, Meta(gt=0, le=SPEED_MAX_KMH)] = 100.0
     amplitude_kmh: Annotated[float, Meta(ge=0, le=SPEED_MAX_KMH)] = 18.0
@@ -442,6 +457,11 @@ class TopologyFile(_Strict, frozen=True, kw_only=True):
     def __post_init__(self) -> None:
         if self.envelope is not None and (self.model_uncertainty is None or self.vehicle.plant == "ts"):
             raise ValueError("envelope: it says where a plant's [model_uncertainty] bound holds; declare a nonlinear plant and that bound with it")
+        if self.envelope is not None:
+            try:
+                check_envelope_speeds(self.envelope.build(), self.vehicle.vx_min_kmh, self.vehicle.vx_max_kmh)
+            except ValueError as exc:
+                raise ValueError(f"envelope: {exc}") from None
         ids = [n.id for n in self.nodes]
         if not ids:
             raise ValueError("nodes: at least one node is needed")
@@ -752,6 +772,8 @@ def load_topology(
         node_dir = (path.parent / topo.node_dir).resolve()
     except (RuntimeError, OSError, ValueError) as exc:  # a symlink loop, a NUL byte
         raise ConfigError(f"{path}: node_dir {topo.node_dir!r}: {exc}") from None
+    if not node_dir.is_dir():  # a wrong node_dir once read as a missing profile file
+        raise ConfigError(f"{path}: node_dir {topo.node_dir!r}: no such directory ({node_dir}; relative to the topology file's directory)")
     v = topo.vehicle
     try:
         params = v.params()
@@ -761,6 +783,8 @@ def load_topology(
     profiles: dict[int, NodeProfile] = {}
     for ref in topo.nodes:
         ppath = node_dir / f"{ref.profile}.toml"
+        if not ppath.exists():
+            raise ConfigError(f"{path}: node {ref.id}: profile {ref.profile!r}: {ppath.name} not found in node_dir {topo.node_dir!r} ({node_dir})")
         prof = profiles[ref.id] = load_profile(ppath)
         saim = case == "saim"
         if saim and (prof.saturation is None or prof.availability is None):

@@ -198,16 +198,17 @@ def load_page(
     settle_s: float = 0.0,
     timeout: float = RENDER_TIMEOUT_S,
     js_flags: tuple[str, ...] = (),
+    width: int = PAGE_WIDTH,
     until: Callable[[Callable[[str], Any]], bool] | None = None,
-    size: tuple[int, int] = (PAGE_WIDTH, PAGE_HEIGHT),
+    window_height: int = PAGE_HEIGHT,
 ) -> Page:
     """Open ``url``, wait until the JavaScript expression ``ready`` is true (and then until ``until(evaluate)``
     holds, a check too costly for the page's own timer, made by this process every UNTIL_POLL_S: ``evaluate``
     gives an expression's value, None where it throws), evaluate ``expressions``
     (name → expression, JSON-serialisable results) after ``settle_s`` more seconds, and screenshot the whole
-    page (or its top ``height`` px) in a window of ``size`` px; ``timeout`` bounds each step (a page compiling a
-    large WebAssembly module on a loaded machine answers late); ``js_flags``: V8's flags for the page
-    (:data:`WASM_BASELINE`)."""
+    page (or its top ``height`` px); ``timeout`` bounds each step (a page compiling a large WebAssembly module
+    on a loaded machine answers late); ``js_flags``: V8's flags for the page (:data:`WASM_BASELINE`); ``width``
+    and ``window_height``: the window's, px."""
     browser = chromium()
     profile = workdir / "chromium-profile"
     profile.mkdir(parents=True, exist_ok=True)
@@ -257,8 +258,7 @@ def load_page(
         session = cdp.send("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
         for domain in ("Runtime", "Log", "Page", "Network", "Performance"):
             cdp.send(f"{domain}.enable", session=session)
-        width = size[0]
-        cdp.send("Emulation.setDeviceMetricsOverride", {"width": width, "height": size[1], "deviceScaleFactor": 1, "mobile": False}, session=session)
+        cdp.send("Emulation.setDeviceMetricsOverride", {"width": width, "height": window_height, "deviceScaleFactor": 1, "mobile": False}, session=session)
         cdp.send("Page.addScriptToEvaluateOnNewDocument", {"source": _ready_timer(ready)}, session=session)
         cdp.send("Page.setLifecycleEventsEnabled", {"enabled": True}, session=session)
         start = time.monotonic()

@@ -20,8 +20,9 @@ from netsetest.estimator.names import SDP
 from netsetest.validation import split_error
 
 DEFAULT_ESTIMATOR = SDP  # the node estimator of records written before nodes could run others
-StopCause = Literal["vehicle gone", "interrupted"]
-"""Why a collector wrote its summary before the vehicle's End: no message for its idle timeout, or a signal."""
+StopCause = Literal["vehicle gone", "interrupted", "collector stalled"]
+"""Why a collector wrote its summary before the vehicle's End: no message for its idle timeout, a signal, or its own
+stall past its session's lease (the run's stall limit: the messages then in flight to it were lost)."""
 RUN_FIELDS = ("mode", "security", "variant", "objective", "case", "signals", "steps", "seed", "clock")
 """The run's settings copied from its meta (each only if the meta has it; written in this order)."""
 
@@ -146,6 +147,8 @@ class RunSummary:
     node_steps_overloaded: int = 0  # node-steps not judged for the collector's trouble: of those steps, and those its full inbox dropped
     collector_budget: int | None = None  # open node-steps the collector may hold (real time; None: lockstep, the vehicle waits)
     collector_peak: int = 0  # the most node-steps it held open
+    collector_stall_s: float = 0.0  # the collector's longest stall [s] (its process did not run: stopped, swapping), ≥ 1 s
+    collector_stall_step: int | None = None  # the step it had checked before that stall
     mode: str | None = None
     security: str | None = None
     variant: str | None = None

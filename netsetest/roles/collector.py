@@ -699,14 +699,21 @@ class Collector:
         deadline_misses: dict[int, int] | None = None,
         drops: dict[str, dict[str, int]] | None = None,
         stopped: StopCause | None = None,
+        through: int | None = None,
+        stall: tuple[float, int | None] = (0.0, None),
     ) -> RunSummary:
-        """Close every open step, then the summary (also written to the sink, which is closed).
+        """Close every open step (``through``: those up to that step only; the later ones, cut short by a signal or
+        our own stall, are forgotten: neither judged nor any node's silence), then the summary (also written to the
+        sink, which is closed).
 
         ``drops``: further drop counters by role (the runtime's, e.g. a shared in-memory bus); ``stopped``:
-        why the collector stopped before the vehicle's End (None: the run ended).
+        why the collector stopped before the vehicle's End (None: the run ended); ``stall``: the collector's longest
+        stall [s] and the step checked before it (runtime/processes.py StallWatch).
         """
         self._take_lost(everything=True)
         last = max([self.head, *self.states, *self.lost], default=-1)  # a step we lost whole is still the run's
+        if through is not None:
+            last = min(last, through)
         if self._end is not None and not self._end_early and self.sc.steps not in self.truth and self.closed < self.sc.steps and not self._overloaded():
             self.drops["end-early"] += 1  # the run ends, and the End's last step never came
         for k in range(self.closed + 1, min(last, self.sc.steps) + 1):
@@ -735,7 +742,7 @@ class Collector:
             misses_by_cause=dict(sorted(self.misses_by_cause.items())),
             car=self.car.summary(self.sc) if self.car is not None else None,
             # lost for good: silent at the last step; rejoined: a gap, then heard from up to the last step
-            nodes_missing=[i for i, t in self.totals.items() if t.last_heard is None or t.last_heard < last],
+            nodes_missing=[i for i, t in self.totals.items() if last >= 0 and (t.last_heard is None or t.last_heard < last)],  # (no step: no one)
             nodes_rejoined=[i for i, t in self.totals.items() if t.missing_from is not None and t.last_heard == last],
             losses=dict(sorted(self.losses.items())),
             losses_total=sum(self.losses.values()),
@@ -747,6 +754,8 @@ class Collector:
             node_steps_overloaded=self.overloaded_node_steps,
             collector_budget=self.budget if self.realtime else None,
             collector_peak=self.peak_open_node_steps,
+            collector_stall_s=stall[0],
+            collector_stall_step=stall[1],
         )
         if self.sink is not None:
             self.sink.summary(summary)

@@ -74,7 +74,8 @@ def outcome(summary: RunSummary, strict: bool = False) -> Outcome:
     """The verdict's first word and the exit code, decided together (docs/summary.md):
 
     - ``FAIL`` (exit 1): a miss where every assumption held; ``FAIL (vehicle gone)`` (exit 1): the
-      collector stopped waiting for the vehicle before its End;
+      collector stopped waiting for the vehicle before its End; ``FAIL (collector stalled)`` (exit 1): the
+      collector did not run for longer than its session's lease (the run's stall limit), so the run ended there;
     - ``INTERRUPTED`` (exit 130): the run was stopped by Ctrl-C or SIGTERM;
     - ``FAIL (--strict)`` (exit 1, ``strict`` only: ``run --strict``, for CI users who want a run to fail
       there): a set missed the truth outside the guarantee, where the run would otherwise pass or lose a node;
@@ -275,6 +276,14 @@ def verdict(summary: RunSummary) -> str:
         text += "; lost for good: " + ", ".join(f"node {i} from step {'-' if k is None else k}" for i, k in missing.items())
     if summary.stopped == "vehicle gone":
         text += "; the vehicle's End never came (no message for the collector's idle timeout)"
+    elif summary.stopped == "interrupted":
+        text += f"; interrupted (Ctrl-C or SIGTERM): the counts are of steps 0–{summary.steps_completed} of the run's {summary.steps}"
+    elif summary.stopped == "collector stalled":
+        text += (
+            f"; the collector stalled {summary.collector_stall_s:.0f} s after step {summary.collector_stall_step} (its process did not run: "
+            "stopped, or the machine swapping), long enough to lose its Zenoh session (run --stall-limit) and the messages in flight "
+            "to it: the run ended there, no node blamed"
+        )
     return text + uncovered_misses(summary)
 
 
@@ -295,6 +304,8 @@ def write_summary(summary: RunSummary, summary_json: str | None) -> None:
 
 EXIT_OK, EXIT_VIOLATION, EXIT_BAD_INPUT, EXIT_NODE_LOST = 0, 1, 2, 3
 EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM reached the command (128 + SIGINT, as shells report it)
+EXIT_COLLECTOR_STALLED = 4  # the vehicle process's, never the run's: it ended the run, the collector having acknowledged
+# nothing for the stall limit (the launcher then has the collector write its summary, whose verdict names the stall)
 
 
 def exit_code(summary: RunSummary, strict: bool = False) -> int:

@@ -27,7 +27,8 @@ from typing import TYPE_CHECKING, ClassVar, Literal, TypeVar
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.runtime import argtypes
-from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, START_TIMEOUT_S
+from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, STALL_LIMIT_S, START_TIMEOUT_S
+from netsetest.scenarios import topology_help
 
 if TYPE_CHECKING:  # annotations only: a role process loads the estimator and the models when it needs them
     from netsetest.config.schema import Case, Scenario
@@ -193,14 +194,19 @@ def _argv(spec: object) -> tuple[list[str], list[str]]:
 
 
 ESTIMATOR_HELP = f"every node's estimator, overriding the topology's per-node 'estimator' ({', '.join(NODE_ESTIMATOR_NAMES)}; default: the file's, else sdp)"
-ZENOH_CONFIG_HELP = "a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting and security on top (default: none)"
+ZENOH_CONFIG_HELP = "a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting, security and the lease on top (default: none)"
+STALL_LIMIT_HELP = (
+    "how long [s] a role may not run (stopped, a swapping machine) and the run go on: every session's Zenoh lease, and the "
+    "longest the vehicle waits for the collector; a collector stalled longer ends the run with a verdict naming its stall "
+    f"(default: {STALL_LIMIT_S:g})"
+)
 
 
 @dataclass(frozen=True)
 class ScenarioSpec:
     """Which run: the topology and what the command line overrides of it."""
 
-    topology: str = _opt(MISSING, None, "topology file (e.g. topologies/paper6.toml) or bundled name (paper6, paper6_lossy)")
+    topology: str = _opt(MISSING, None, topology_help())
     case: Case | None = _opt(None, "--case", "override the topology's case (default: the file's)", choices=("nsnim", "saim"))
     steps: int | None = _opt(None, "--steps", "override the number of steps of τs each (default: the file's)", argtypes.positive_int, metavar="N")
     estimator: str | None = _opt(None, "--estimator", ESTIMATOR_HELP, choices=NODE_ESTIMATOR_NAMES, metavar="NAME")
@@ -239,6 +245,7 @@ class ZenohSpec:
         metavar="DIR",
     )
     config: str | None = _opt(None, "--zenoh-config", ZENOH_CONFIG_HELP, argtypes.readable_file, metavar="FILE")
+    stall_limit: float = _opt(STALL_LIMIT_S, "--stall-limit", STALL_LIMIT_HELP, argtypes.stall_limit, metavar="S")
 
     @property
     def resolved_run_id(self) -> str:
@@ -338,7 +345,7 @@ class RouterSpec(RoleSpec):
     ROLE: ClassVar[str] = "router"
     HELP: ClassVar[str] = "a Zenoh router in Python (for client-mode roles on several hosts)"
 
-    topology: str | None = _opt(None, None, "topology whose access-control rules the router enforces (with --credentials)", optional=True)
+    topology: str | None = _opt(None, None, topology_help("the topology whose access-control rules the router enforces (with --credentials)"), optional=True)
     credentials: str | None = _opt(
         None, "--credentials", "mTLS with DIR/router.pem and the run's access-control rules (default: none, open router)", metavar="DIR"
     )
@@ -360,6 +367,7 @@ class RouterSpec(RoleSpec):
     )
     run_id: str | None = _opt(None, "--run-id", f"the run whose keys the access control grants (default: ${RUN_ID_ENV} or '{DEFAULT_RUN_ID}')", argtypes.run_id)
     zenoh_config: str | None = _opt(None, "--zenoh-config", ZENOH_CONFIG_HELP, argtypes.readable_file, metavar="FILE")
+    stall_limit: float = _opt(STALL_LIMIT_S, "--stall-limit", "the Zenoh lease it announces: the run's --stall-limit [s]", argtypes.stall_limit, metavar="S")
 
     @property
     def resolved_run_id(self) -> str:
