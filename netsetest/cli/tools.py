@@ -239,7 +239,9 @@ def _render(table, title: str):  # LiveTable → rich Table
         t.add_column(col, justify="right")
     for r in table.sorted_rows():
         E = "-" if r.E is None else f"{r.E:.3f} ({r.E_step})"
-        held = "-" if r.contained is None else "in set" if r.contained else "MISSED" if r.certain_miss else "undecided"  # at E's step, by the collector's rule (runtime/live.py)
+        held = (
+            "-" if r.contained is None else "in set" if r.contained else "MISSED" if r.certain_miss else "undecided"
+        )  # at E's step, by the collector's rule (runtime/live.py)
         t.add_row(
             str(r.id),
             _fmt(r.step, "d"),
