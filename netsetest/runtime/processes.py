@@ -489,6 +489,9 @@ def serve_role(name: str, who: str, scenario: ScenarioSpec, zenoh: ZenohSpec, bo
     except (BusError, CredentialsError) as exc:
         log(name, str(exc))
         return EXIT_BAD_INPUT
+    except Stop as why:  # Ctrl-C while the run is still starting: no traceback (the process' exit drops a half-open session)
+        log(name, f"stopped by {why} while opening its session")
+        return EXIT_STOPPED
     try:
         return body(sc, bus)
     except Stop as why:

@@ -362,3 +362,26 @@ def test_a_vehicle_that_gave_up_on_a_stalled_collector_ends_the_run_with_the_col
     assert run.supervisor.follow() == RunOutcome(EXIT_VIOLATION, stalled)
     assert "the collector acknowledged nothing for the stall limit" in capsys.readouterr().err
     assert all(p.poll() is not None for p in run.children.procs.values())
+
+
+def test_a_role_stopped_while_it_opens_its_session_exits_quietly(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """Ctrl-C while a run still starts its roles: the signal reaches a role inside role_bus (its session opening);
+    it leaves with EXIT_STOPPED and one log line, no traceback, and its body never runs."""
+    from netsetest.runtime import processes
+    from netsetest.runtime.rolespec import ScenarioSpec, ZenohSpec
+
+    def opening(who: str, zenoh: ZenohSpec) -> None:
+        signal.raise_signal(signal.SIGINT)  # the handler install_signal_handlers set raises Stop here
+        raise AssertionError("unreachable: the signal stops the role")
+
+    monkeypatch.setattr(processes, "role_bus", opening)
+    saved = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        spec = ScenarioSpec(topology="paper6")
+        code = processes.serve_role("node 1", "node-1", spec, ZenohSpec(), lambda sc, bus: pytest.fail("the body ran"))
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+    assert code == processes.EXIT_STOPPED
+    err = capsys.readouterr().err
+    assert "stopped by SIGINT while opening its session" in err and "Traceback" not in err
