@@ -97,7 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="run a whole network (in memory, or as Zenoh processes)")
     _scenario_args(p)
     _run_args(p)
-    processes.estimator_arg(p)
+    processes.scenario_overrides(p)
     p.add_argument("--mode", choices=["inmemory", "zenoh"], default="zenoh", help="one process, or one process per role over Zenoh")
     p.add_argument(
         "--clock",
@@ -227,10 +227,11 @@ def build_parser() -> argparse.ArgumentParser:
         "(how noisy the benchmark is); with --json / --markdown, write them",
     )
 
-    from netsetest.cli import compare, tools
+    from netsetest.cli import campaign, compare, tools
 
     tools.add_parsers(sub)
     compare.add_parser(sub, _scenario_args)
+    campaign.add_parser(sub)
     for command in sub.choices.values():
         command.formatter_class = HelpFormatter
     return ap
@@ -257,12 +258,10 @@ def cmd_run(a: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return EXIT_BAD_INPUT
-    from netsetest.config.schema import load_topology
-    from netsetest.runtime.inmemory import run_inmemory
     from netsetest.runtime.report import exit_code, format_table, write_summary
+    from netsetest.runtime.runspec import RunSpec
 
-    sc = load_topology(a.topology, a.case, a.steps, a.estimator)
-    res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet, record=a.record, keep=False, objective=a.objective)
+    res = RunSpec.from_namespace(a).execute(progress=not a.quiet, record=a.record, keep=False)
     write_summary(res.summary, a.summary_json)
     print(format_table(res.summary, a.strict))
     return exit_code(res.summary, a.strict)
@@ -685,9 +684,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     a = ap.parse_args(argv)
     from netsetest.cli import processes
 
-    from netsetest.cli import compare, tools
+    from netsetest.cli import campaign, compare, tools
 
-    handler = COMMANDS.get(a.command) or tools.COMMANDS.get(a.command) or compare.COMMANDS.get(a.command) or processes.COMMANDS[a.command]
+    handler = (
+        COMMANDS.get(a.command)
+        or tools.COMMANDS.get(a.command)
+        or compare.COMMANDS.get(a.command)
+        or campaign.COMMANDS.get(a.command)
+        or processes.COMMANDS[a.command]
+    )
     try:
         return handler(a)
     except (ConfigError, RecordError, MissingExtra, ExactError, CompareError, checks.OutputError, tools.ObserverError) as exc:

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Protocol
 
-from netsetest.config.schema import Case, Scenario, load_topology
+from netsetest.config.schema import Case, Scenario
 from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.records.summary import RunSummary
@@ -69,6 +69,9 @@ class LaunchOptions:
     case: Case | None = None
     steps: int | None = None
     estimator: str | None = None  # every node's, overriding the topology's
+    manoeuvre: str | None = None  # the drive's overrides (ScenarioSpec)
+    speed: float | None = None
+    fault_scale: float | None = None
     signals: SignalKind = "paper"
     variant: Variant = "scheduled"
     objective: Objective = DEFAULT_OBJECTIVE
@@ -87,6 +90,11 @@ class LaunchOptions:
     run_id: str | None = None  # None: a fresh random one (a guessable id, run<pid>, named every key of the run)
     view: bool = False  # a live view beside the run (runtime/view.py), an observer like `watch`
     view_port: int = 0  # its web port (0: a free one)
+
+    @property
+    def scenario(self) -> ScenarioSpec:
+        """Which run, as every role is told it (the topology and the command line's overrides)."""
+        return ScenarioSpec(self.topology, self.case, self.steps, self.estimator, self.manoeuvre, self.speed, self.fault_scale)
 
 
 RUN_ID_BYTES = 8  # of a run's random id (as `netsetest credentials` makes)
@@ -161,7 +169,7 @@ def run_start_timeout(roles: int) -> float:
 def plan_run(opts: LaunchOptions) -> RunPlan:
     """Load the topology and check the options against it and each other (LaunchError naming the option;
     ConfigError for a bad topology)."""
-    sc = load_topology(opts.topology, opts.case, opts.steps, opts.estimator)
+    sc = opts.scenario.load()
     for node, _ in (*opts.kill, *opts.rejoin):
         if sc.node(node).estimator != SDP:
             raise LaunchError(f"--kill/--rejoin {node}@…: node {node} runs {sc.node(node).estimator!r}, which cannot rejoin (only the SDP can)")
@@ -369,7 +377,7 @@ class RoleStarter:
     def __init__(self, plan: RunPlan, network: Network, children: Children) -> None:
         o = plan.options
         self.plan, self.network, self.children = plan, network, children
-        self.scenario = ScenarioSpec(o.topology, o.case, o.steps, o.estimator)
+        self.scenario = o.scenario
 
     def collector(self) -> CollectorSpec:
         o = self.plan.options

@@ -193,6 +193,12 @@ def _argv(spec: object) -> tuple[list[str], list[str]]:
 
 
 ESTIMATOR_HELP = f"every node's estimator, overriding the topology's per-node 'estimator' ({', '.join(NODE_ESTIMATOR_NAMES)}; default: the file's, else sdp)"
+MANOEUVRE_HELP = (
+    "override the topology's [vehicle] manoeuvre (paper, step-steer, sine-dwell, double-lane-change, lap); NAME@AMP also its "
+    "steering amplitude [rad] ([steering] high) (default: the file's)"
+)
+SPEED_HELP = "override the speed reference's mean, [speed] mean_kmh [km/h] (default: the file's)"
+FAULT_SCALE_HELP = "every faulty node's fault scaled to S × its declared [fault_bound] size at its peak, its shape kept (default: the file's faults)"
 ZENOH_CONFIG_HELP = "a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting and security on top (default: none)"
 
 
@@ -204,12 +210,31 @@ class ScenarioSpec:
     case: Case | None = _opt(None, "--case", "override the topology's case (default: the file's)", choices=("nsnim", "saim"))
     steps: int | None = _opt(None, "--steps", "override the number of steps of τs each (default: the file's)", argtypes.positive_int, metavar="N")
     estimator: str | None = _opt(None, "--estimator", ESTIMATOR_HELP, choices=NODE_ESTIMATOR_NAMES, metavar="NAME")
+    manoeuvre: str | None = _opt(None, "--manoeuvre", MANOEUVRE_HELP, argtypes.drive, metavar="NAME[@AMP]")
+    speed: float | None = _opt(None, "--speed", SPEED_HELP, argtypes.speed_kmh, metavar="KMH")
+    fault_scale: float | None = _opt(None, "--fault-scale", FAULT_SCALE_HELP, argtypes.fault_scale, metavar="S")
 
     def load(self) -> Scenario:
         """The scenario (ConfigError naming what is wrong with the file or an override)."""
         from netsetest.config.schema import load_topology
+        from netsetest.models.manoeuvres import DriveSpec
 
-        return load_topology(self.topology, self.case, self.steps, self.estimator)
+        drive = DriveSpec.parse(self.manoeuvre) if self.manoeuvre is not None else None
+        return load_topology(
+            self.topology,
+            self.case,
+            self.steps,
+            self.estimator,
+            manoeuvre=drive.manoeuvre if drive else None,
+            steer_high=drive.amplitude if drive else None,
+            speed_kmh=self.speed,
+            fault_scale=self.fault_scale,
+        )
+
+    def to_argv(self) -> list[str]:
+        """The topology and the overrides given, as ``run`` and every role take them (``[TOPOLOGY, --case, ...]``)."""
+        pos, opts = _argv(self)
+        return [*pos, *opts]
 
 
 def _resolve_run_id(run_id: str | None) -> str:
