@@ -93,8 +93,9 @@ class LocalPool:
         running: dict[Future, RunTask] = {}
         self._pool = self._pool or self._start()
         while queue or suspects or running:
-            while suspects and not running:
-                running[self._pool.submit(execute, suspects[0])] = suspects.popleft()
+            if suspects and not running:
+                t = suspects.popleft()
+                running[self._pool.submit(execute, t)] = t
             while queue and not suspects and len(running) < self.workers:
                 t = queue.popleft()
                 running[self._pool.submit(execute, t)] = t

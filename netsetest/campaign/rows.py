@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from netsetest.campaign.spec import Campaign, Planned
     from netsetest.campaign.worker import RunOutcome
 
+EXACT_NAMES = {"beta": "beta", "r": "r", "f": "fault"}  # analysis/exact.py's coordinates → the columns' names
 ERROR = "ERROR"  # the verdict column of a run that raised or whose worker died: no verdict exists
 
 
@@ -171,7 +172,7 @@ def rows_of(c: Campaign, p: Planned, o: RunOutcome) -> list[dict]:
             row |= _node_figures(c, s.node(node))
         if o.exact is not None:
             ratios = next(r.ratios for r in o.exact.nodes if r.node == node)
-            row |= {f"{k}_over_exact": _num(ratios[k].width_ratio) for k in ("beta", "r", "fault")}  # type: ignore[index]  # the coordinates' names
+            row |= {f"{EXACT_NAMES[coord]}_over_exact": _num(x.width_ratio) for coord, x in ratios.items()}
             row["narrower_than_exact"] = sum(x.narrower for x in ratios.values())
         rows.append(row)
     return rows
