@@ -161,7 +161,7 @@ class DaskCluster:
             f = self._client.submit(execute, t, key=f"netsetest-run-{t.key}", pure=False, retries=0)
             by_key[f.key] = t
             self._futures.append(f)
-        for f in as_completed(self._futures):
+        for f in as_completed(self._futures, loop=self._client.loop):
             task = by_key[f.key]
             try:
                 yield f.result()

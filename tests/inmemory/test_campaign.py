@@ -2,17 +2,12 @@
 after a worker is killed mid-campaign and after Ctrl-C and a resume, failures as rows.
 
 Runs are tiny (a few steps) to keep the suite's CPU small: what is tested is the campaign, not the runs.
-Rows are compared without the columns that say how and where a run went (rows.VARYING: times, worker);
-integers and strings must be equal, floats within REL_TOL: the pool's workers and this process run the same
-code on the same machine with the same BLAS kernel (OPENBLAS_CORETYPE is inherited), but the workers are
-started with OPENBLAS_NUM_THREADS=1, and a BLAS may sum in another order on another thread count, so the
-floats are held to a bound far below any figure's meaning instead of to the bit.
+How rows are compared (floats within a bound, not to the bit): tests/campaign_helpers.py.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 import signal
 import subprocess
@@ -22,16 +17,16 @@ from pathlib import Path
 
 import pytest
 
+import campaign_helpers
+from campaign_helpers import Rows, assert_same_rows, dataset
 from netsetest.campaign.engines import LocalPool
-from netsetest.campaign.rows import COLUMNS, ERROR, VARYING, rows_of
-from netsetest.campaign.runner import run_campaign, tasks_of
+from netsetest.campaign.rows import COLUMNS, ERROR
+from netsetest.campaign.runner import run_campaign
 from netsetest.campaign.spec import load_campaign
 from netsetest.campaign.store import Store
-from netsetest.campaign.worker import execute
 
 pytest.importorskip("pyarrow")
 
-REL_TOL = 1e-9
 CAMPAIGN = """
 name = "test"
 [grid]
@@ -58,40 +53,8 @@ def campaign_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="module")
-def one_by_one(campaign_file: Path) -> dict[tuple[str, int], dict]:
-    """Every run of the campaign in this process, one after the other: the reference rows."""
-    c = load_campaign(campaign_file)
-    planned = {p.key: p for p in c.runs}
-    return _by_row(r for t in tasks_of(c, set()) for r in rows_of(c, planned[t.key], execute(t)))
-
-
-def _by_row(rows) -> dict[tuple[str, int], dict]:
-    out: dict[tuple[str, int], dict] = {}
-    for r in rows:
-        key = (r["run_key"], r["node"])
-        assert key not in out, f"run {key[0]} node {key[1]} twice"
-        out[key] = r
-    return out
-
-
-def _dataset(out: Path) -> dict[tuple[str, int], dict]:
-    import pyarrow.dataset as ds
-
-    table = ds.dataset(out / "runs", format="parquet", partitioning="hive").to_table()
-    return _by_row(table.to_pylist())
-
-
-def _same(a: object, b: object) -> bool:
-    if isinstance(a, float) and isinstance(b, float):
-        return (math.isnan(a) and math.isnan(b)) or math.isclose(a, b, rel_tol=REL_TOL, abs_tol=1e-300)
-    return a == b
-
-
-def assert_same_rows(got: dict, want: dict) -> None:
-    assert got.keys() == want.keys()
-    for key, row in want.items():
-        for col in (c.name for c in COLUMNS if c.name not in VARYING):
-            assert _same(got[key][col], row[col]), f"run {key[0]} node {key[1]}: {col} {got[key][col]!r} != {row[col]!r}"
+def one_by_one(campaign_file: Path) -> Rows:
+    return campaign_helpers.one_by_one(campaign_file)
 
 
 def test_two_workers_give_the_rows_of_the_runs_one_by_one(campaign_file: Path, one_by_one: dict, tmp_path: Path) -> None:
@@ -101,7 +64,7 @@ def test_two_workers_give_the_rows_of_the_runs_one_by_one(campaign_file: Path, o
     tally = run_campaign(c, store, LocalPool(2))
     store.close()
     assert (tally.done, tally.errors, tally.interrupted) == (len(c.runs), 0, False)
-    got = _dataset(tmp_path / "out")
+    got = dataset(tmp_path / "out")
     assert_same_rows(got, one_by_one)
     assert {r["worker"] for r in got.values()} - {""}, "the rows say which worker ran them"
     assert_readers_read(tmp_path / "out" / "runs", len(got))
@@ -139,7 +102,7 @@ def test_a_worker_killed_mid_campaign_loses_no_run_and_counts_none_twice(campaig
     tally = run_campaign(c, store, pool, kill_one)
     store.close()
     assert killed and (tally.done, tally.errors) == (len(c.runs), 0)
-    assert_same_rows(_dataset(tmp_path / "out"), one_by_one)
+    assert_same_rows(dataset(tmp_path / "out"), one_by_one)
 
 
 def test_a_run_that_fails_is_a_row_with_its_cause_and_the_campaign_goes_on(campaign_file: Path, tmp_path: Path) -> None:
@@ -150,7 +113,7 @@ def test_a_run_that_fails_is_a_row_with_its_cause_and_the_campaign_goes_on(campa
     tally = run_campaign(c, store, LocalPool(2))
     store.close()
     assert (tally.done, tally.errors) == (3, 1)
-    rows = _dataset(tmp_path / "out")
+    rows = dataset(tmp_path / "out")
     bad = [r for r in rows.values() if r["run_key"] == broken.key]
     assert len(bad) == len(broken.info.node_ids)
     assert all(r["verdict"] == ERROR and "differ from the campaign's" in r["cause"] and r["replay"].startswith("netsetest run ") for r in bad)
@@ -185,13 +148,13 @@ def test_ctrl_c_saves_what_is_done_and_a_resume_runs_the_rest_once(campaign_file
             break
         assert time.monotonic() < deadline, "a process of the interrupted campaign is still running"
         time.sleep(0.1)
-    first = {k for k, _ in _dataset(out)}
+    first = {k for k, _ in dataset(out)}
     assert 2 <= len(first) < len({k for k, _ in one_by_one}), "interrupted mid-campaign"
     proc = _campaign_cli(campaign_file, out)
     _, err = proc.communicate(timeout=300)
     assert proc.returncode == 0, err
     assert f"{len(first)} already done" in err
-    assert_same_rows(_dataset(out), one_by_one)
+    assert_same_rows(dataset(out), one_by_one)
     proc = _campaign_cli(campaign_file, out)  # finished: nothing runs again
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 0 and "0 to run" in err
