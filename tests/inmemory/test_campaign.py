@@ -8,6 +8,7 @@ How rows are compared (floats within a bound, not to the bit): tests/campaign_he
 from __future__ import annotations
 
 import dataclasses
+import html
 import os
 import signal
 import subprocess
@@ -68,8 +69,26 @@ def test_two_workers_give_the_rows_of_the_runs_one_by_one(campaign_file: Path, o
     assert_same_rows(got, one_by_one)
     assert {r["worker"] for r in got.values()} - {""}, "the rows say which worker ran them"
     assert_readers_read(tmp_path / "out" / "runs", len(got))
+    assert_report(campaign_file, tmp_path / "out", got)
     ratios = [r[f"{c}_over_exact"] for r in got.values() for c in ("beta", "r", "fault") if r[f"{c}_over_exact"] is not None]
     assert len(ratios) >= 4 * 6 * 2 and min(ratios) >= 1 - 1e-6, "widths over exact of the 12-step runs, never narrower"
+
+
+def assert_report(campaign: Path, out: Path, rows: Rows) -> None:
+    """``campaign --report`` on finished results runs nothing and writes the summary table and the page: a line per
+    estimator, case and signal family, the worst runs with their replay commands."""
+    pytest.importorskip("bokeh")
+    proc = subprocess.run(
+        [sys.executable, "-m", "netsetest", "campaign", str(campaign), "--out", str(out), "--report"], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 0 and "0 to run" in proc.stderr, proc.stderr
+    table = (out / "summary.md").read_text()
+    groups = {(r["estimator"], r["case"], r["signals"]) for r in rows.values()}
+    assert sum(line.startswith(("| sdp |", "| interval |", "| file |")) for line in table.splitlines()) == len(groups)
+    page = (out / "report.html").read_text()
+    assert "width over exact: fault" in page and "detection delay against the fault" in page
+    replays = {r["replay"] for r in rows.values()}
+    assert sum(html.escape(cmd) in page for cmd in replays) == min(len(replays), 20), "the worst runs are listed with their replay commands"
 
 
 def assert_readers_read(runs: Path, rows: int) -> None:
