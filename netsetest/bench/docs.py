@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from netsetest.bench.campaign import campaign_markdown
 from netsetest.bench.exact_cost import exact_cost_markdown
 from netsetest.bench.flow import flow_markdown
 from netsetest.bench.network import network_markdown, network_summary_markdown
@@ -115,6 +116,13 @@ PARTS: dict[str, Part] = {
         "scaleout",
         scaleout_markdown,
         "netsetest bench --quick --only scaleout --json bench/scaleout.json --markdown bench/scaleout.md",
+    ),
+    "campaign": Part(
+        "Campaigns: every core, a cluster, resume",
+        "bench/campaign.json",
+        "campaign",
+        campaign_markdown,
+        "netsetest bench --quick --only campaign --json bench/campaign.json --markdown bench/campaign.md",
     ),
     "spread": Part(
         "How noisy the benchmark is",

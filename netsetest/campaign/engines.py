@@ -33,12 +33,6 @@ from netsetest.campaign.worker import RunOutcome, RunTask, execute
 from netsetest.extras import require
 
 LOST_ALONE = 2  # a run whose worker died this often while it ran alone is an error, not retried for ever
-WORKER_ENV = {  # each worker runs one single-threaded run at a time: no BLAS threads competing for the cores
-    "OPENBLAS_NUM_THREADS": "1",
-    "OMP_NUM_THREADS": "1",
-    "MKL_NUM_THREADS": "1",
-    "MALLOC_ARENA_MAX": "2",
-}
 PRELOAD = ["netsetest.campaign.worker", "netsetest.runtime.inmemory", "netsetest.analysis.exact"]  # imported once, in the fork server
 
 
@@ -71,19 +65,18 @@ class LocalPool:
         self._pool: ProcessPoolExecutor | None = None
 
     def _start(self) -> ProcessPoolExecutor:
+        from netsetest.runtime.processes import ROLE_ENV  # a role's: one BLAS thread, two malloc arenas, unless the user set them
+
         ctx = multiprocessing.get_context("forkserver")
         ctx.set_forkserver_preload(PRELOAD)
-        saved = {k: os.environ.get(k) for k in WORKER_ENV}
-        os.environ.update({k: v for k, v in WORKER_ENV.items() if k not in os.environ or k == "MALLOC_ARENA_MAX"})  # a user's own BLAS setting stands
+        added = [k for k in ROLE_ENV if k not in os.environ]
+        os.environ.update({k: ROLE_ENV[k] for k in added})  # read by the fork server at its start, inherited by every worker
         try:
             pool = ProcessPoolExecutor(self.workers, mp_context=ctx, initializer=_ignore_sigint)
             pool.submit(int).result()  # the fork server starts now, with the workers' environment
         finally:
-            for k, v in saved.items():
-                if v is None:
-                    os.environ.pop(k, None)
-                else:
-                    os.environ[k] = v
+            for k in added:
+                del os.environ[k]
         return pool
 
     def outcomes(self, tasks: Sequence[RunTask]) -> Iterator[RunOutcome]:

@@ -14,9 +14,11 @@ from netsetest.runtime import argtypes
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, EXIT_VIOLATION
 
 if TYPE_CHECKING:
+    import pyarrow as pa
     from rich.progress import Progress, TaskID
 
     from netsetest.campaign.runner import Tally
+    from netsetest.campaign.spec import Campaign
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 RESULTS_SUFFIX = ".results"  # the default results directory: the campaign file's name with this instead of .toml
@@ -99,7 +101,7 @@ def cmd_campaign(a: argparse.Namespace) -> int:
     return _run(a, c, out)
 
 
-def _run(a: argparse.Namespace, c, out: Path) -> int:
+def _run(a: argparse.Namespace, c: Campaign, out: Path) -> int:
     from netsetest.campaign.engines import engine
     from netsetest.campaign.runner import run_campaign
     from netsetest.campaign.spec import CampaignError
@@ -145,7 +147,7 @@ def _run(a: argparse.Namespace, c, out: Path) -> int:
     return code
 
 
-def _print_outcome(c, table) -> int:
+def _print_outcome(c: Campaign, table: pa.Table) -> int:
     """The campaign's verdicts over all its runs (this session's and earlier ones), the worst runs' replay commands."""
     from netsetest.campaign.report import run_verdicts, worst_runs
 

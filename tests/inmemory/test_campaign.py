@@ -25,6 +25,7 @@ from netsetest.campaign.rows import COLUMNS, ERROR
 from netsetest.campaign.runner import run_campaign
 from netsetest.campaign.spec import load_campaign
 from netsetest.campaign.store import Store
+from netsetest.records.record import load_record
 
 pytest.importorskip("pyarrow")
 
@@ -127,7 +128,7 @@ def test_a_worker_killed_mid_campaign_loses_no_run_and_counts_none_twice(campaig
 def test_a_run_that_fails_is_a_row_with_its_cause_and_the_campaign_goes_on(campaign_file: Path, tmp_path: Path) -> None:
     c = load_campaign(campaign_file)
     broken = dataclasses.replace(c.runs[0], info=dataclasses.replace(c.runs[0].info, settings_digest="0" * 16))  # the worker finds other files
-    c = dataclasses.replace(c, runs=(broken, *c.runs[1:3]))
+    c = dataclasses.replace(c, runs=(broken, *c.runs[1:3]), records=True)  # and each run's record kept
     store = Store(tmp_path / "out")
     tally = run_campaign(c, store, LocalPool(2))
     store.close()
@@ -137,6 +138,13 @@ def test_a_run_that_fails_is_a_row_with_its_cause_and_the_campaign_goes_on(campa
     assert len(bad) == len(broken.info.node_ids)
     assert all(r["verdict"] == ERROR and "differ from the campaign's" in r["cause"] and r["replay"].startswith("netsetest run ") for r in bad)
     assert all(r["verdict"] == "PASS" for r in rows.values() if r["run_key"] != broken.key)
+    records = sorted((tmp_path / "out" / "records").iterdir())
+    assert [p.name for p in records] == sorted(f"{p.key}.json.gz" for p in c.runs[1:]), "a record per run that ran, none for the error"
+    for path in records:
+        rec = load_record(path)
+        assert rec.summary is not None and not rec.partial
+        row = rows[(path.name.removesuffix(".json.gz"), 1)]
+        assert (rec.summary.node(1).steps_covered, rec.summary.node(1).fault_bound_mean_width) == (row["steps_covered"], row["fault_width"])
 
 
 def _campaign_cli(campaign: Path, out: Path) -> subprocess.Popen:

@@ -116,3 +116,9 @@ def test_fault_scale_needs_a_declared_size_to_scale_to(tmp_path: Path) -> None:
     load_topology(path)
     with pytest.raises(ConfigError, match="a fault scale needs \\[fault_bound\\] size > 0"):
         load_topology(path, fault_scale=0.5)
+
+
+def test_the_docs_name_every_column() -> None:
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "campaign.md").read_text(encoding="utf-8")
+    missing = [c.name for c in COLUMNS if f"`{c.name}`" not in doc]
+    assert not missing, f"docs/campaign.md does not name the columns {missing}"
