@@ -13,6 +13,7 @@ EXTRAS = {
     "vehiclemodels": "plant",
     "bokeh": "view",
     "rerun": "view",
+    "distributed": "cluster",
 }
 
 

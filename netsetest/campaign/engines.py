@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import re
+import socket
 from collections import deque
 from collections.abc import Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -32,6 +34,8 @@ from netsetest.campaign.spec import CampaignError
 from netsetest.campaign.worker import RunOutcome, RunTask, execute
 from netsetest.extras import require
 
+CONNECT_TIMEOUT_S = 10.0  # a scheduler that does not answer this soon is not there
+ADDRESS_RE = re.compile(r"(?:(tcp|tls)://)?(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):(\d{1,5})")
 LOST_ALONE = 2  # a run whose worker died this often while it ran alone is an error, not retried for ever
 PRELOAD = ["netsetest.campaign.worker", "netsetest.runtime.inmemory", "netsetest.analysis.exact"]  # imported once, in the fork server
 
@@ -135,11 +139,13 @@ def _ignore_sigint() -> None:
 class DaskCluster:
     """An existing Dask distributed cluster (module doc); ``address`` its scheduler's, e.g. tcp://10.0.0.1:8786."""
 
-    def __init__(self, address: str, connect_timeout_s: float = 30.0) -> None:
+    def __init__(self, address: str, connect_timeout_s: float = CONNECT_TIMEOUT_S) -> None:
         require("distributed", "netsetest campaign --cluster")
         from distributed import Client
 
-        try:
+        _, host, port = _parts(address)
+        try:  # a plain TCP connection first: Dask's client would retry for its whole timeout, then leave its loop behind
+            socket.create_connection((host.strip("[]"), port), timeout=connect_timeout_s).close()
             self._client = Client(address, timeout=connect_timeout_s, set_as_default=False)
         except (OSError, TimeoutError, ValueError) as exc:
             raise CampaignError(f"--cluster {address}: cannot reach a Dask scheduler there: {exc}") from None
@@ -170,10 +176,23 @@ class DaskCluster:
         self._client.close()
 
 
+def _parts(text: str) -> tuple[str, str, int]:
+    m = ADDRESS_RE.fullmatch(text.strip())
+    if m is None or not 0 < int(m[3]) < 65536:
+        raise CampaignError(f"--cluster {text!r}: expected a Dask scheduler's address, tcp://HOST:PORT or tls://HOST:PORT (e.g. tcp://10.0.0.1:8786)")
+    return m[1] or "tcp", m[2], int(m[3])
+
+
+def cluster_address(text: str) -> str:
+    """``--cluster``'s value, checked and written out in full (``HOST:PORT`` is ``tcp://HOST:PORT``); CampaignError otherwise."""
+    scheme, host, port = _parts(text)
+    return f"{scheme}://{host}:{port}"
+
+
 def engine(cluster: str | None, workers: int | None) -> Engine:
     """The local pool (``workers`` processes, default one per core), or the Dask cluster at ``cluster``."""
     if cluster is not None:
         if workers is not None:
             raise CampaignError("--workers is the local pool's; a cluster has the workers it was started with")
-        return DaskCluster(cluster)
+        return DaskCluster(cluster_address(cluster))
     return LocalPool(workers)

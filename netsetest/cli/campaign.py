@@ -4,12 +4,14 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from netsetest.extras import MissingExtra, require
 from netsetest.runtime import argtypes
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, EXIT_VIOLATION
 
@@ -17,8 +19,10 @@ if TYPE_CHECKING:
     import pyarrow as pa
     from rich.progress import Progress, TaskID
 
+    from netsetest.campaign.engines import Engine
     from netsetest.campaign.runner import Tally
     from netsetest.campaign.spec import Campaign
+    from netsetest.campaign.store import Store
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 RESULTS_SUFFIX = ".results"  # the default results directory: the campaign file's name with this instead of .toml
@@ -88,13 +92,18 @@ def cmd_campaign(a: argparse.Namespace) -> int:
 
     try:
         c = load_campaign(a.campaign)
-        if a.cluster is not None and a.workers is not None:
-            raise CampaignError("--workers is the local pool's; a cluster has the workers it was started with")
-        if a.report:
-            from netsetest.extras import require
+        if a.cluster is not None:
+            from netsetest.campaign.engines import cluster_address
 
+            if a.workers is not None:
+                raise CampaignError("--workers is the local pool's; a cluster has the workers it was started with")
+            a.cluster = cluster_address(a.cluster)
+            require("distributed", "netsetest campaign --cluster")
+        if a.report:
             require("bokeh", "campaign --report")
-    except CampaignError as exc:
+        require("pyarrow", "netsetest campaign (its Parquet dataset)")
+        require("pandas", "netsetest campaign (its verdicts)")
+    except (CampaignError, MissingExtra) as exc:
         print(f"netsetest campaign: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     out = Path(a.out) if a.out else Path(a.campaign).with_suffix(RESULTS_SUFFIX)
@@ -103,37 +112,28 @@ def cmd_campaign(a: argparse.Namespace) -> int:
 
 def _run(a: argparse.Namespace, c: Campaign, out: Path) -> int:
     from netsetest.campaign.engines import engine
-    from netsetest.campaign.runner import run_campaign
     from netsetest.campaign.spec import CampaignError
     from netsetest.campaign.store import Store
 
+    if a.dry_run:
+        with contextlib.closing(Store(out)) if out.exists() else contextlib.nullcontext() as store:
+            todo = sum(p.key not in (store.written if store else ()) for p in c.runs)
+        print(f"campaign {c.name}: {len(c.runs)} runs, {len(c.runs) - todo} already in {out}, {todo} to run")
+        return EXIT_OK
+    eng = None
     try:
+        eng = engine(a.cluster, a.workers)  # a cluster is reached before anything is written
         store = Store(out)
     except CampaignError as exc:
+        if eng is not None:
+            eng.close()
         print(f"netsetest campaign: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
-        todo = sum(p.key not in store.written for p in c.runs)
-        if a.dry_run:
-            print(f"campaign {c.name}: {len(c.runs)} runs, {len(c.runs) - todo} already in {out}, {todo} to run")
-            return EXIT_OK
-        eng = engine(a.cluster, a.workers) if todo else None
-        where = "nothing to run" if eng is None else f"on {a.cluster}" if a.cluster else f"on {eng.workers} local worker(s)"
-        print(f"campaign {c.name}: {len(c.runs)} runs, {len(c.runs) - todo} already done, {todo} to run {where}; results in {out}", file=sys.stderr)
-        tally = None
-        if eng is not None:
-            bar = _Bar(not a.quiet)
-            t0 = time.monotonic()
-            try:
-                tally = run_campaign(c, store, eng, bar)
-            finally:
-                bar.close()
-            print(f"ran {tally.done} run(s) in {time.monotonic() - t0:.1f} s", file=sys.stderr)
+        tally = _campaign(a, c, out, store, eng)
         table = store.table([p.key for p in c.runs])
-    except CampaignError as exc:
-        print(f"netsetest campaign: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
     finally:
+        eng.close()
         store.close()
     if tally is not None and tally.interrupted:
         print(f"netsetest campaign: interrupted; {tally.done} run(s) of this session saved in {out}, the rest runs on the next start", file=sys.stderr)
@@ -145,6 +145,25 @@ def _run(a: argparse.Namespace, c: Campaign, out: Path) -> int:
         for path in write_report(c, table, out):
             print(f"wrote {path}")
     return code
+
+
+def _campaign(a: argparse.Namespace, c: Campaign, out: Path, store: Store, eng: Engine) -> Tally | None:
+    """The runs ``store`` does not hold yet on ``eng``, with the progress bar (None: nothing to run)."""
+    from netsetest.campaign.runner import run_campaign
+
+    todo = sum(p.key not in store.written for p in c.runs)
+    where = "nothing to run" if not todo else f"on {a.cluster}" if a.cluster else f"on {eng.workers} local worker(s)"
+    print(f"campaign {c.name}: {len(c.runs)} runs, {len(c.runs) - todo} already done, {todo} to run {where}; results in {out}", file=sys.stderr)
+    if not todo:
+        return None
+    bar = _Bar(not a.quiet)
+    t0 = time.monotonic()
+    try:
+        tally = run_campaign(c, store, eng, bar)
+    finally:
+        bar.close()
+    print(f"ran {tally.done} run(s) in {time.monotonic() - t0:.1f} s", file=sys.stderr)
+    return tally
 
 
 def _print_outcome(c: Campaign, table: pa.Table) -> int:

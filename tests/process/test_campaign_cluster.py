@@ -126,3 +126,14 @@ def test_a_dask_cluster_gives_the_rows_of_the_runs_one_by_one_and_survives_a_los
     assert len(workers) == 2, f"both workers ran runs before one was lost: {workers}"
     if cluster.nets is not None:
         assert netns.identify(procs.procs["worker-b"].pid) == cluster.nets.created[-1]
+
+
+def test_a_scheduler_that_is_not_there_is_one_line_and_exit_2_before_anything_is_written(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from netsetest.cli.main import main
+
+    campaign, out = tmp_path / "c.toml", tmp_path / "out"
+    campaign.write_text(CAMPAIGN)
+    assert main(["campaign", str(campaign), "--out", str(out), "--cluster", f"tcp://127.0.0.1:{_free_port()}"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("netsetest campaign: ") and err.count("\n") == 1 and "cannot reach a Dask scheduler there" in err, err
+    assert not out.exists()

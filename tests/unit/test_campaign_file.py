@@ -122,3 +122,17 @@ def test_the_docs_name_every_column() -> None:
     doc = (Path(__file__).resolve().parents[2] / "docs" / "campaign.md").read_text(encoding="utf-8")
     missing = [c.name for c in COLUMNS if f"`{c.name}`" not in doc]
     assert not missing, f"docs/campaign.md does not name the columns {missing}"
+
+
+def test_a_cluster_address_that_is_not_one_is_one_line_and_exit_2_before_anything_is_written(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    assert main(["campaign", str(_file(tmp_path, GRID)), "--out", str(out), "--cluster", "notanaddress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("netsetest campaign: ") and err.count("\n") == 1 and "expected a Dask scheduler's address" in err, err
+    assert not out.exists()
+
+
+def test_dry_run_counts_the_runs_and_writes_nothing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    assert main(["campaign", str(_file(tmp_path, GRID)), "--out", str(out), "--dry-run"]) == 0
+    assert "16 runs, 0 already in" in capsys.readouterr().out and not out.exists()
