@@ -95,7 +95,7 @@ EXACT = tuple(
 TIMING = (
     _c("solve_ms_median", "float64", "the node's median estimator step [ms]"),
     _c("wall_s", "float64", "the run's wall time in its worker [s]"),
-    _c("cpu_s", "float64", "the run's CPU time in its worker [s]"),
+    _c("cpu_s", "float64", "the run's CPU time in its worker (its thread's) [s]"),
     _c("finished_at", "float64", "when the campaign received it [Unix s]"),
 )
 PROVENANCE = (
