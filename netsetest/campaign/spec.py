@@ -19,6 +19,10 @@ Every axis value is checked by the parser ``netsetest run`` uses for its option 
 every scenario is loaded, before any run starts: a bad file is one :class:`CampaignError` line.  A run's key
 is the digest of what it rests on (:func:`run_key`): the files' values (the scenario's ``settings_digest``,
 which covers the overrides), the run's settings, the seed and the figures asked for; not the file names.
+
+A new way to vary a run's scenario (a recorded drive, say ``run --log``) is one field of
+``rolespec.ScenarioSpec`` (the option every role and ``run`` take, and its ``load``), one of :class:`Axes`
+and its line in :func:`_expand`: the key follows from the scenario's settings digest, the row from the spec.
 """
 
 from __future__ import annotations
