@@ -8,6 +8,7 @@
     signals = ["paper", "worst"]
     seeds = "0-49"                    # a seed, a list, or ranges as ``--seeds`` takes them
     fault_scale = [0.5, 0.75, 1.0]    # the fault at that fraction of its declared bound (``run --fault-scale``)
+    # log = ["a.mcap", "b.mf4"]       # recorded drives as the world (``run --log``), map = "car.map.toml" (``--map``)
     [[runs]]                          # and/or runs listed one by one (each table may hold lists too: a small grid)
     topology = "paper6_reference"
     seeds = 3
@@ -18,9 +19,9 @@
 Every axis value is checked by the parser ``netsetest run`` uses for its option (runtime/argtypes.py), and
 every scenario is loaded, before any run starts: a bad file is one :class:`CampaignError` line.  A run's key
 is the digest of what it rests on (:func:`run_key`): the files' values (the scenario's ``settings_digest``,
-which covers the overrides), the run's settings, the seed and the figures asked for; not the file names.
+which covers the overrides; a recorded drive's bytes), the run's settings, the seed and the figures asked for; not the file names.
 
-A new way to vary a run's scenario (a recorded drive, say ``run --log``) is one field of
+A new way to vary a run's scenario (as ``log``/``map`` were: ``run --log``/``--map``) is one field of
 ``rolespec.ScenarioSpec`` (the option every role and ``run`` take, and its ``load``), one of :class:`Axes`
 and its line in :func:`_expand`: the key follows from the scenario's settings digest, the row from the spec.
 """
@@ -40,6 +41,7 @@ import msgspec
 
 from netsetest.config.schema import MAX_CONFIG_BYTES, ConfigError, Scenario
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
+from netsetest.logs.readers import LogError
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVES
 from netsetest.models.signals import SIGNAL_KINDS
 from netsetest.runtime import argtypes
@@ -77,6 +79,8 @@ class Axes(_Table, frozen=True):
     manoeuvre: str | list[str] | None = None
     speed: float | list[float] | None = None
     fault_scale: float | list[float] | None = None
+    log: str | list[str] | None = None  # a recorded drive as the world (run --log; docs/your-log.md)
+    map: str | None = None  # its mapping (run --map)
     variant: str | list[str] = "scheduled"
     objective: str | list[str] = DEFAULT_OBJECTIVE
 
@@ -108,6 +112,7 @@ class ScenarioInfo:
     node_estimators: tuple[str, ...]
     fault_declared: tuple[float | None, ...]  # per node: its declared [fault_bound] size
     fault_peak: tuple[float, ...]  # per node: the largest |f_k| of its true fault over the run's steps
+    drive_digest: str | None = None  # a recorded drive's: its log's and mapping's bytes (None: the model drives)
 
 
 @dataclass(frozen=True)
@@ -162,6 +167,17 @@ def _seeds(v: int | str | list[int]) -> list[int]:
     return list(argtypes.seed_list(str(v)))
 
 
+def _file_path(base: Path):
+    def parse(v: str) -> str:
+        """A file or directory relative to the campaign file, written absolute (the replay command works from anywhere)."""
+        path = (base / v).resolve()
+        if not path.exists():
+            raise argparse.ArgumentTypeError(f"{path}: not found")
+        return str(path)
+
+    return parse
+
+
 def _topology(base: Path):
     def parse(v: str) -> str:
         """A file relative to the campaign file (written absolute: the replay command works from anywhere), or a bundled name."""
@@ -184,6 +200,8 @@ def _expand(where: str, axes: Axes, base: Path) -> list[tuple[RunSpec, str]]:
         "manoeuvre": _checked(where, "manoeuvre", opt(argtypes.drive), _values(axes.manoeuvre)),
         "speed": _checked(where, "speed", opt(num(argtypes.speed_kmh)), _values(axes.speed)),
         "fault_scale": _checked(where, "fault_scale", opt(num(argtypes.fault_scale)), _values(axes.fault_scale)),
+        "log": _checked(where, "log", opt(_file_path(base)), _values(axes.log)),
+        "map": _checked(where, "map", opt(_file_path(base)), _values(axes.map)),
         "variant": _checked(where, "variant", _choice(("scheduled", "per-rule"), "variant"), _values(axes.variant)),
         "objective": _checked(where, "objective", _choice(tuple(OBJECTIVES), "objective"), _values(axes.objective)),
     }
@@ -201,7 +219,17 @@ def _expand(where: str, axes: Axes, base: Path) -> list[tuple[RunSpec, str]]:
     for combo in itertools.product(*axes_values.values()):
         a = dict(zip(names, combo))
         est = a["estimator"]
-        scenario = ScenarioSpec(a["topology"], a["case"], a["steps"], None if est == FILE_ESTIMATORS else est, a["manoeuvre"], a["speed"], a["fault_scale"])
+        scenario = ScenarioSpec(
+            a["topology"],
+            a["case"],
+            a["steps"],
+            None if est == FILE_ESTIMATORS else est,
+            log=a["log"],
+            mapping=a["map"],
+            manoeuvre=a["manoeuvre"],
+            speed=a["speed"],
+            fault_scale=a["fault_scale"],
+        )
         out += [(RunSpec(scenario, a["signals"], a["variant"], a["objective"], s), est) for s in seeds]
     return out
 
@@ -218,7 +246,19 @@ def scenario_info(sc: Scenario) -> ScenarioInfo:
         node_estimators=tuple(n.estimator for n in sc.nodes),
         fault_declared=tuple(n.fault_size for n in sc.nodes),
         fault_peak=peak,
+        drive_digest=None if sc.log is None else _drive_digest(Path(sc.log.path), Path(sc.log.mapping.path)),
     )
+
+
+def _drive_digest(log: Path, mapping: Path) -> str:
+    """The bytes a recorded drive's run rests on: its log (a file, or a bag's directory, every file in it) and its mapping."""
+    h = sha256()
+    for path in [*(sorted(p for p in log.rglob("*") if p.is_file()) if log.is_dir() else [log]), mapping]:
+        h.update(path.name.encode() + b"\0")
+        with open(path, "rb") as fh:
+            for chunk in iter(lambda: fh.read(1 << 20), b""):
+                h.update(chunk)
+    return h.hexdigest()[:KEY_HEX]
 
 
 def run_key(spec: RunSpec, info: ScenarioInfo, figures: tuple[Figure, ...], exact_fault_bounds: FaultBounds) -> str:
@@ -229,6 +269,7 @@ def run_key(spec: RunSpec, info: ScenarioInfo, figures: tuple[Figure, ...], exac
         "case": info.case,
         "steps": info.steps,
         "nodes": list(zip(info.node_ids, info.node_estimators)),
+        "drive": info.drive_digest,
         "signals": spec.signals,
         "variant": spec.variant,
         "objective": spec.objective,
@@ -274,8 +315,8 @@ def load_campaign(path: str | Path) -> Campaign:
         info = infos.get(spec.scenario)
         if info is None:
             try:
-                info = infos[spec.scenario] = scenario_info(spec.scenario.load())
-            except ConfigError as exc:
+                info = infos[spec.scenario] = scenario_info(spec.load())
+            except (ConfigError, LogError) as exc:
                 raise CampaignError(f"{p}: {' '.join(spec.scenario.to_argv())}: {exc}") from None
         key = run_key(spec, info, figures, f.compute.exact_fault_bounds)
         runs.setdefault(key, Planned(key, spec, est, info))  # the same run named twice is run once

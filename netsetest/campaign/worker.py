@@ -59,7 +59,7 @@ def execute(task: RunTask) -> RunOutcome:
     """Run ``task`` and compute its figures; any exception becomes the outcome's error (type: message, where)."""
     t0, c0 = time.perf_counter(), time.thread_time()  # the run's own CPU: a Dask worker's other threads run beside it
     try:
-        sc = task.spec.scenario.load()
+        sc = task.spec.load()
         if sc.settings_digest != task.settings_digest:
             raise RuntimeError(f"the topology files here differ from the campaign's (settings digest {sc.settings_digest}, expected {task.settings_digest})")
         keep = task.record or "exact" in task.figures

@@ -114,6 +114,22 @@ def _cannot_write(p: Path) -> str | None:
     return None
 
 
+HTML_SUFFIXES = (".html", ".htm")  # what a browser opens as a page from a file: report and compare write HTML, nothing else
+
+
+def not_replaced(path: str | None, option: str, overwrite: bool) -> None:
+    """An output that exists is replaced only when asked (``--overwrite``): a run's record, a report's page."""
+    if path is not None and not overwrite and Path(path).exists():
+        raise OutputError(f"{option} {path}: the file exists; give --overwrite to replace it")
+
+
+def html_file(path: str | None, option: str = "--html") -> None:
+    """``--html``: a writable file whose name says it is a page (``x.pdf`` once got HTML)."""
+    if path is not None and not Path(path).name.lower().endswith(HTML_SUFFIXES):
+        raise OutputError(f"{option} {path}: the page is HTML; give a name ending in {' or '.join(HTML_SUFFIXES)}")
+    output_file(path, option)
+
+
 def record_file(path: str | None, overwrite: bool = False) -> None:
     """``--record``: a record name, writable, not an existing file unless ``overwrite``, and its format's
     optional dependency installed (MissingExtra if not)."""
@@ -122,8 +138,7 @@ def record_file(path: str | None, overwrite: bool = False) -> None:
 
     if path is not None and not Path(path).name.endswith(RECORD_SUFFIXES):  # out.csv once got JSON Lines
         raise OutputError(f"--record {path}: the name must end in {', '.join(RECORD_SUFFIXES)} (the suffix chooses the format)")
-    if path is not None and not overwrite and Path(path).exists():  # two runs once interleaved one record
-        raise OutputError(f"--record {path}: the file exists; give --overwrite to replace it")
+    not_replaced(path, "--record", overwrite)  # two runs once interleaved one record
     if path is not None and being_written(path):  # refused before any role starts (once: exit 1, seven roles stopped)
         raise OutputError(f"--record {path}: another run is writing this record")
     output_file(path, "--record")

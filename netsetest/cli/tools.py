@@ -78,7 +78,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("report", help="one self-contained HTML page of one or more records: verdict, tables, graph, interactive Figs. 5-8")
     p.add_argument("record", nargs="+", help="record files (.jsonl, .json.gz or .mcap)")
-    p.add_argument("--html", metavar="PATH", required=True, help="the page to write (needs pip install 'netsetest[view]')")
+    p.add_argument("--html", metavar="PATH", required=True, help="the page to write, PATH.html (needs pip install 'netsetest[view]')")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --html page (default: refuse it)")
     p.add_argument(
         "--exact",
         metavar="JSON",
@@ -311,7 +312,8 @@ def cmd_report(a: argparse.Namespace) -> int:
     from netsetest.records.report_html import RecordPage, attach_exact, load_exact, write_report
     from netsetest.runtime.report import format_table
 
-    checks.output_file(a.html, "--html")
+    checks.html_file(a.html)
+    checks.not_replaced(a.html, "--html", a.overwrite)
     records = [load_record(r) for r in a.record]
     exact = attach_exact(records, [(path, load_exact(path)) for path in a.exact])
     labels = [f"{r.meta.case or '?'}/{r.meta.signals or '?'}" + (f" #{n}" if len(records) > 1 else "") for n, r in enumerate(records)]

@@ -183,11 +183,13 @@ def load_page(
     settle_s: float = 0.0,
     timeout: float = RENDER_TIMEOUT_S,
     js_flags: tuple[str, ...] = (),
+    width: int = PAGE_WIDTH,
 ) -> Page:
     """Open ``url``, wait until the JavaScript expression ``ready`` is true, evaluate ``expressions``
     (name → expression, JSON-serialisable results) after ``settle_s`` more seconds, and screenshot the whole
     page (or its top ``height`` px); ``timeout`` bounds each step (a page compiling a large WebAssembly module
-    on a loaded machine answers late); ``js_flags``: V8's flags for the page (:data:`WASM_BASELINE`)."""
+    on a loaded machine answers late); ``js_flags``: V8's flags for the page (:data:`WASM_BASELINE`); ``width``: the
+    window's, px."""
     browser = chromium()
     profile = workdir / "chromium-profile"
     profile.mkdir(parents=True, exist_ok=True)
@@ -237,7 +239,7 @@ def load_page(
         session = cdp.send("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
         for domain in ("Runtime", "Log", "Page", "Network", "Performance"):
             cdp.send(f"{domain}.enable", session=session)
-        cdp.send("Emulation.setDeviceMetricsOverride", {"width": PAGE_WIDTH, "height": 900, "deviceScaleFactor": 1, "mobile": False}, session=session)
+        cdp.send("Emulation.setDeviceMetricsOverride", {"width": width, "height": 900, "deviceScaleFactor": 1, "mobile": False}, session=session)
         cdp.send("Page.addScriptToEvaluateOnNewDocument", {"source": _ready_timer(ready)}, session=session)
         cdp.send("Page.setLifecycleEventsEnabled", {"enabled": True}, session=session)
         start = time.monotonic()
@@ -261,7 +263,7 @@ def load_page(
             values[name] = res["result"].get("value")
         full = cdp.send("Runtime.evaluate", {"expression": "document.documentElement.scrollHeight", "returnByValue": True}, session=session)["result"]["value"]
         h = min(int(full), height) if height else int(full)
-        cdp.send("Emulation.setDeviceMetricsOverride", {"width": PAGE_WIDTH, "height": h, "deviceScaleFactor": 1, "mobile": False}, session=session)
+        cdp.send("Emulation.setDeviceMetricsOverride", {"width": width, "height": h, "deviceScaleFactor": 1, "mobile": False}, session=session)
         time.sleep(0.5)  # a resize re-renders the canvases
         shot = base64.b64decode(cdp.send("Page.captureScreenshot", {"format": "png"}, session=session)["data"])
         errors = _errors(cdp.events)

@@ -113,6 +113,16 @@ def _seconds_type(allow_zero: bool) -> Callable[[str], float]:
 
 seconds, non_negative_seconds = _seconds_type(False), _seconds_type(True)
 
+MIN_STALL_LIMIT_S = 1.0  # a shorter Zenoh lease (keep-alives every quarter of it) closes sessions on a merely busy machine
+
+
+def stall_limit(s: str) -> float:
+    """argparse type: ``--stall-limit``, seconds ≥ MIN_STALL_LIMIT_S."""
+    v = seconds(s)
+    if v < MIN_STALL_LIMIT_S:
+        raise argparse.ArgumentTypeError(f"must be at least {MIN_STALL_LIMIT_S:g} s (Zenoh's lease), got {v:g}")
+    return v
+
 
 MAX_PORT = 65535
 

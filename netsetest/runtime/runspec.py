@@ -55,8 +55,17 @@ class RunSpec:
     @classmethod
     def from_namespace(cls, a: argparse.Namespace) -> RunSpec:
         """The spec of ``run``'s parsed options (the seed already drawn where none was given)."""
-        scenario = ScenarioSpec(a.topology, a.case, a.steps, a.estimator, a.manoeuvre, a.speed, a.fault_scale)
+        scenario = ScenarioSpec(
+            a.topology, a.case, a.steps, a.estimator, log=a.log, mapping=a.map, manoeuvre=a.manoeuvre, speed=a.speed, fault_scale=a.fault_scale
+        )
         return cls(scenario, a.signals, a.variant, a.objective, a.seed)
+
+    def load(self) -> Scenario:
+        """The run's scenario (ConfigError naming what is wrong): the spec's, a recorded drive's steps decided
+        against its log (logs/drive.py ``with_log_steps``, as ``run`` decides them)."""
+        from netsetest.logs.drive import with_log_steps
+
+        return with_log_steps(self.scenario.load())
 
     def execute(
         self,
@@ -67,8 +76,8 @@ class RunSpec:
         observer: StepObserver | None = None,
         scenario: Scenario | None = None,
     ) -> RunResult:
-        """Load the scenario (ConfigError naming what is wrong) and run it in this process (runtime/inmemory.py);
-        ``scenario``: this spec's, already loaded (a campaign's worker checks its files' digest first)."""
+        """Load the scenario (:meth:`load`) and run it in this process (runtime/inmemory.py); ``scenario``: this
+        spec's, already loaded (a campaign's worker checks its files' digest first)."""
         from netsetest.runtime.inmemory import run_inmemory
 
         return run_inmemory(

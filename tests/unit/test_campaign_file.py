@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from netsetest.campaign.rows import COLUMNS, ERROR, rows_of
-from netsetest.campaign.spec import load_campaign
+from netsetest.campaign.spec import CampaignError, load_campaign
 from netsetest.campaign.worker import RunOutcome
 from netsetest.cli.main import main
 from netsetest.config.schema import ConfigError, load_topology
@@ -136,3 +136,17 @@ def test_dry_run_counts_the_runs_and_writes_nothing(tmp_path: Path, capsys: pyte
     out = tmp_path / "out"
     assert main(["campaign", str(_file(tmp_path, GRID)), "--out", str(out), "--dry-run"]) == 0
     assert "16 runs, 0 already in" in capsys.readouterr().out and not out.exists()
+
+
+def test_a_recorded_drive_is_an_axis_its_bytes_in_the_key(tmp_path: Path) -> None:
+    logs = Path(__file__).resolve().parents[2] / "examples" / "logs"
+    drive = tmp_path / "drive.csv"
+    drive.write_bytes((logs / "drive.csv").read_bytes())
+    text = f"[grid]\ntopology = '{logs / 'car_log.toml'}'\nsteps = 4\nlog = ['drive.csv']\nmap = '{logs / 'drive_csv.map.toml'}'\n"
+    c = load_campaign(_file(tmp_path, text))
+    (p,) = c.runs
+    assert p.spec.command().endswith(f"--log {drive} --map {logs / 'drive_csv.map.toml'} --mode inmemory --seed 0") and p.info.drive_digest
+    drive.write_bytes(drive.read_bytes().replace(b"\n", b"\n", 1) + b"\n")  # the same name, other bytes: another run
+    assert load_campaign(_file(tmp_path, text)).runs[0].key != p.key
+    with pytest.raises(CampaignError, match="grid.log = 'nowhere.csv'"):
+        load_campaign(_file(tmp_path, text.replace("drive.csv", "nowhere.csv")))

@@ -46,7 +46,7 @@ def test_run_parses_the_replay_command_into_the_same_spec(spec: RunSpec) -> None
 
 def test_defaults_are_left_out_but_the_seed_is_always_given() -> None:
     assert RunSpec(ScenarioSpec("paper6")).argv() == ["run", "paper6", "--mode", "inmemory", "--seed", "0"]
-    spec = RunSpec(ScenarioSpec("paper6", "saim", 20, "interval", "sine-dwell@0.03", 90.0, 0.5), "worst", seed=7)
+    spec = RunSpec(ScenarioSpec("paper6", "saim", 20, "interval", manoeuvre="sine-dwell@0.03", speed=90.0, fault_scale=0.5), "worst", seed=7)
     assert spec.argv() == [
         *("run", "paper6", "--case", "saim", "--steps", "20", "--estimator", "interval", "--manoeuvre", "sine-dwell@0.03"),
         *("--speed", "90.0", "--fault-scale", "0.5", "--mode", "inmemory", "--signals", "worst", "--seed", "7"),
