@@ -104,7 +104,7 @@ def describe(sub: argparse._SubParsersAction) -> str:
     commands = (
         f"commands: {', '.join(users)}; the role processes of a Zenoh run or deployment: {', '.join(ROLE_COMMANDS)} (netsetest COMMAND --help says more)."
     )
-    return "\n\n".join((textwrap.fill(SUMMARY, HELP_WIDTH), textwrap.fill(commands, HELP_WIDTH), EXIT_CODES))
+    return "\n\n".join((textwrap.fill(SUMMARY, HELP_WIDTH), textwrap.fill(commands, HELP_WIDTH, break_on_hyphens=False), EXIT_CODES))  # a name stays whole
 
 
 def build_parser() -> argparse.ArgumentParser:

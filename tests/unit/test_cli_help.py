@@ -55,7 +55,7 @@ def test_top_level_help_names_every_command_of_the_registry(capsys: pytest.Captu
         build_parser().parse_args(["--help"])
     text = capsys.readouterr().out
     description, _, listing = text.partition("positional arguments:")
-    named = set(re.findall(r"[a-z]+", " ".join(description.split("commands:", 1)[1].split("\n\n", 1)[0].split())))
+    named = set(re.findall(r"[a-z][a-z-]*[a-z]", " ".join(description.split("commands:", 1)[1].split("\n\n", 1)[0].split())))
     listed = {line.split()[0] for line in listing.splitlines() if re.match(r"^    \S", line)}
     for name in registry - set(INTERNAL_COMMANDS):
         assert name in named, f"{name} is not named in the description"
