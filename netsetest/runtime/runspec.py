@@ -81,7 +81,7 @@ class RunSpec:
         from netsetest.runtime.inmemory import run_inmemory
 
         return run_inmemory(
-            scenario or self.scenario.load(),
+            scenario or self.load(),
             self.signals,
             self.variant,
             self.seed,
