@@ -100,7 +100,13 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="a live view in Rerun's web viewer, served from this machine (`netsetest view` beside the run; extra view); its address is printed",
     )
-    g.add_argument("--view-port", type=argtypes.port, default=0, metavar="N", help="the live view's web port (default: 0, a free one)")
+    g.add_argument(
+        "--view-port",
+        type=argtypes.port,
+        default=0,
+        metavar="N",
+        help="the live view's one port on 127.0.0.1, its page and its stream (default: 0, a free one; fix it to forward it with ssh -L)",
+    )
 
 
 def scenario_overrides(p: argparse.ArgumentParser) -> None:

@@ -292,9 +292,11 @@ class Judge:
                 out[i] = HeldOver(base.step, base.copies, base.broken or transition_cause(inp))
         return out
 
-    def containment(self, i: int, st: NodeState, tr: Truth) -> Containment:
+    @staticmethod
+    def containment(i: int, st: NodeState, tr: Truth) -> Containment:
         """The state's published set and the set it continues from against the truth (ProvenSet.contains); E is the
-        published ellipsoid's (a set estimator's: the one around its set, its neighbour-facing summary)."""
+        published ellipsoid's (a set estimator's: the one around its set, its neighbour-facing summary).  Needs no
+        scenario: ``watch`` and the live view (runtime/live.py) judge what they hear by it, the collector's rule."""
         pub = st.published
         bounds = None if pub.is_ellipsoid else np.stack(pub.bounds(), axis=1)
         box = truth_box(tr, i)

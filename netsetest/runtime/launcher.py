@@ -47,7 +47,8 @@ from netsetest.runtime.forkserver import ForkServer, ForkServerError
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_COLLECTOR_STALLED, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress, exit_code, log
 from netsetest.runtime.rolespec import Clock, CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
 from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, STALL_LIMIT_S, START_TIMEOUT_S
-from netsetest.runtime.view import ViewError, ViewProcess, start_view
+from netsetest.runtime.view import ViewProcess, start_view
+from netsetest.runtime.view_server import PortTaken, ViewError
 
 if TYPE_CHECKING:  # annotations only: the estimator and the models load in the role processes, not in the launcher
     from netsetest.estimator.sdp import Variant
@@ -635,6 +636,9 @@ def launch(plan: RunPlan) -> RunOutcome:
                 log("run", f"the run is over; its live view stays at {view.url} until Ctrl-C")
                 with contextlib.suppress(KeyboardInterrupt):
                     signal.pause()
+        except PortTaken as exc:
+            log("run", f"--view-port {o.view_port}: {exc}")
+            outcome = RunOutcome(EXIT_BAD_INPUT, None)
         except ViewError as exc:
             log("run", str(exc))
             outcome = RunOutcome(EXIT_BAD_INPUT, None)
