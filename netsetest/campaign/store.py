@@ -88,10 +88,15 @@ class Store:
         return sorted(self.runs.rglob(f"{PART_PREFIX}*.parquet"))
 
     def keys(self) -> set[str]:
-        """The run keys in the dataset."""
+        """The run keys in the dataset (CampaignError naming a file that is not one of its Parquet files)."""
+        import pyarrow as pa
+
         if not self.files():
             return set()
-        return set(self.dataset().to_table(columns=["run_key"]).column(0).to_pylist())
+        try:
+            return set(self.dataset().to_table(columns=["run_key"]).column(0).to_pylist())
+        except (pa.ArrowException, OSError) as exc:
+            raise CampaignError(f"{self.runs}: a damaged results file ({exc}); move it away, and its runs run again") from None
 
     def dataset(self):  # pyarrow.dataset.Dataset
         import pyarrow.dataset as ds

@@ -107,7 +107,11 @@ def cmd_campaign(a: argparse.Namespace) -> int:
         print(f"netsetest campaign: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     out = Path(a.out) if a.out else Path(a.campaign).with_suffix(RESULTS_SUFFIX)
-    return _run(a, c, out)
+    try:
+        return _run(a, c, out)
+    except CampaignError as exc:  # the results directory: locked by another campaign, a damaged file
+        print(f"netsetest campaign: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
 
 
 def _run(a: argparse.Namespace, c: Campaign, out: Path) -> int:
@@ -120,15 +124,12 @@ def _run(a: argparse.Namespace, c: Campaign, out: Path) -> int:
             todo = sum(p.key not in (store.written if store else ()) for p in c.runs)
         print(f"campaign {c.name}: {len(c.runs)} runs, {len(c.runs) - todo} already in {out}, {todo} to run")
         return EXIT_OK
-    eng = None
+    eng = engine(a.cluster, a.workers)  # a cluster is reached before anything is written
     try:
-        eng = engine(a.cluster, a.workers)  # a cluster is reached before anything is written
         store = Store(out)
-    except CampaignError as exc:
-        if eng is not None:
-            eng.close()
-        print(f"netsetest campaign: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+    except CampaignError:
+        eng.close()
+        raise
     try:
         tally = _campaign(a, c, out, store, eng)
         table = store.table([p.key for p in c.runs])

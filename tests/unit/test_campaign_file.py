@@ -150,3 +150,13 @@ def test_a_recorded_drive_is_an_axis_its_bytes_in_the_key(tmp_path: Path) -> Non
     assert load_campaign(_file(tmp_path, text)).runs[0].key != p.key
     with pytest.raises(CampaignError, match="grid.log = 'nowhere.csv'"):
         load_campaign(_file(tmp_path, text.replace("drive.csv", "nowhere.csv")))
+
+
+def test_a_damaged_results_file_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("pyarrow")
+    bad = tmp_path / "out" / "runs" / "estimator=sdp" / "case=nsnim" / "part-0.parquet"
+    bad.parent.mkdir(parents=True)
+    bad.write_bytes(b"PAR1 not a parquet file")
+    assert main(["campaign", str(_file(tmp_path, GRID)), "--out", str(tmp_path / "out"), "--dry-run"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("netsetest campaign: ") and err.count("\n") == 1 and "a damaged results file" in err, err
