@@ -146,7 +146,12 @@ class _LocalDask:
             s.bind(("127.0.0.1", 0))
             port = s.getsockname()[1]
         self.address = f"tcp://127.0.0.1:{port}"
-        env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "MALLOC_ARENA_MAX": "2", "DASK_TEMPORARY_DIRECTORY": str(tmp)}  # its scratch and locks in the part's directory
+        env = {
+            **os.environ,
+            "OPENBLAS_NUM_THREADS": "1",
+            "MALLOC_ARENA_MAX": "2",
+            "DASK_TEMPORARY_DIRECTORY": str(tmp),
+        }  # its scratch and locks in the part's directory
         py = sys.executable
         self.procs = [
             subprocess.Popen(
