@@ -48,6 +48,9 @@ QUICK: dict[str, Any] = {
     "profile_nodes": 96,
     "node_budget_nodes": 48,  # --only node: the profiled ring
     "node_budget_reps": 3,
+    "campaign_runs": 24,  # --only campaign: the throughput campaign (bench/campaign.py)
+    "campaign_reps": 2,
+    "campaign_big_runs": 100,  # a tenth of the 1 000-run campaign (the full part runs it whole)
     "scaleout_nodes": 24,  # --only scaleout: the lockstep ring across one and two namespaces (bench/scaleout.py)
     "scaleout_steps": 40,
     "scaleout_reps": 3,
@@ -100,6 +103,9 @@ FULL: dict[str, Any] = {
     "profile_nodes": 96,
     "node_budget_nodes": 96,
     "node_budget_reps": 3,
+    "campaign_runs": 200,
+    "campaign_reps": 2,
+    "campaign_big_runs": 1000,
     "scaleout_nodes": 48,
     "scaleout_steps": 80,
     "scaleout_reps": 3,
@@ -396,6 +402,7 @@ def run_bench(
     from netsetest.bench.view import view_figures, view_markdown
     from netsetest.bench.node_budget import node_figures, node_markdown
     from netsetest.bench.scaleout import scaleout_figures, scaleout_markdown
+    from netsetest.bench.campaign import campaign_figures, campaign_markdown
     from netsetest.bench.widths import widths_figures, widths_markdown
     from netsetest.bench.zenoh_runs import (
         launch_to_step0,
@@ -432,6 +439,7 @@ def run_bench(
             "widths": (lambda c, t: widths_figures(c, t, baseline), widths_markdown),
             "scaleout": (scaleout_figures, scaleout_markdown),
             "logs": (logs_figures, logs_markdown),
+            "campaign": (campaign_figures, campaign_markdown),
         }[only]
         with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
             res[only] = figures(cfg, Path(tmpd))
