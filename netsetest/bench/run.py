@@ -391,8 +391,8 @@ def run_bench(
     only: str | None = None,
     baseline: Path | None = None,
 ) -> int:
-    """``baseline``: a checkout the node and widths parts measure alternately beside this one (bench/node_budget.py,
-    bench/widths.py)."""
+    """``baseline``: a checkout the node, widths and performance parts measure alternately beside this one
+    (bench/node_budget.py, bench/widths.py, bench/baseline.py)."""
     from netsetest.bench.exact_cost import exact_cost_markdown, exact_figures
     from netsetest.bench.network import network_figures, network_markdown
     from netsetest.bench.plant import plant_figures, plant_markdown
@@ -478,6 +478,10 @@ def run_bench(
         for p in (res["node_profile"], res["node_profile_trace"]):
             _log(f"  {p['objective']}: {p.get('process_ms_per_step')} ms per node-step, {p['deadline_misses']} deadline misses")
         res["defences"] = defences(cfg)
+        if baseline is not None:
+            from netsetest.bench.baseline import performance_side_by_side
+
+            res["baseline"] = performance_side_by_side(cfg, tmp, baseline, quick)
         if only is None:  # every part too; --only performance leaves them out
             res["plant"] = plant_figures(cfg, tmp)
             res["network"] = network_figures(cfg, tmp)
@@ -488,6 +492,10 @@ def run_bench(
     res["meta"]["duration_s"] = time.perf_counter() - t_all
     res.update(headline(res))
     md = markdown(res)
+    if "baseline" in res:
+        from netsetest.bench.baseline import baseline_markdown
+
+        md += "\n## Side by side with the baseline (netsetest/bench/baseline.py)\n\n" + baseline_markdown(res["baseline"])
     if only is None:
         md += "\n## A car as the truth (netsetest/bench/plant.py)\n\n" + plant_markdown(res["plant"])
         md += "\n## What the exchange can buy (netsetest/bench/network.py)\n\n" + network_markdown(res["network"])

@@ -246,7 +246,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--baseline",
         metavar="DIR",
-        help="with --only node or widths: another checkout (node: say main's; widths: 29290ba's) measured alternately beside this one",
+        help="with --only node, widths or performance: another checkout (node: say main's; widths: 29290ba's; performance: "
+        "16f81b4's, issue 45's figures) measured alternately beside this one",
     )
     p.add_argument(
         "--render-docs",
@@ -717,9 +718,9 @@ def cmd_bench(a: argparse.Namespace) -> int:
         return _spread(a)
     from pathlib import Path
 
-    if a.baseline is not None and (a.only not in ("node", "widths") or not Path(a.baseline, "netsetest", "__init__.py").is_file()):
+    if a.baseline is not None and (a.only not in ("node", "widths", "performance") or not Path(a.baseline, "netsetest", "__init__.py").is_file()):
         print(
-            f"netsetest bench: --baseline {a.baseline}: needs --only node or --only widths and a checkout of netsetest (DIR/netsetest/__init__.py)",
+            f"netsetest bench: --baseline {a.baseline}: needs --only node, widths or performance and a checkout of netsetest (DIR/netsetest/__init__.py)",
             file=sys.stderr,
         )
         return EXIT_BAD_INPUT
