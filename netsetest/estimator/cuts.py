@@ -33,7 +33,7 @@ from netsetest.estimator.sector import FaultBound, Interval, Sector, fault_over
 from netsetest.estimator.slab import cut
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.vehicle import TSModel
-from netsetest.polygon import MIN_VERTICES, Polygon
+from netsetest.polygon import MIN_VERTICES, REGION_REASONS, Polygon
 from netsetest.proven import ProvenSet
 from netsetest.sets import ellipsoid_bounds
 
@@ -97,16 +97,23 @@ class StepResult:
 
     def published_set(self, rho: float, own_set: dict | None = None) -> ProvenSet:
         """What the node publishes, as sent: the ellipsoid of ``public`` with radius ρ_i ∩ the region ∩ its fault
-        range; or a set estimator's own set (``own_set``, sets.set_to_wire) with the ellipsoid that encloses it."""
-        pub, region = self.public, self.region
-        return ProvenSet(
+        range; or a set estimator's own set (``own_set``, sets.set_to_wire) with the ellipsoid that encloses it.  A
+        region no receiver would take (polygon.region_problem, which ProvenSet runs) is left out: a superset, sound."""
+        pub = self.public
+        fields = dict(
             xhat=pub.xhat.tolist(),  # float64 arrays: the floats [float(a) for a in …] gave, without the loop
             P=pub.P.reshape(NA * NA).tolist(),
             rho=rho,
-            region=None if region is None else region.vertices.reshape(-1).tolist(),
             fault=None if pub.fault_range is None else [float(pub.fault_range[0]), float(pub.fault_range[1])],
             set=own_set,
         )
+        if self.region is not None:
+            try:
+                return ProvenSet(region=self.region.vertices.reshape(-1).tolist(), **fields)
+            except ValueError as exc:
+                if str(exc).split(":", 1)[0] not in REGION_REASONS:
+                    raise
+        return ProvenSet(**fields)
 
     def continued_ellipsoid(self, rho: float) -> ProvenSet | None:
         """The ellipsoid the node continues from where that set is not the published one (None: it is): the set is it
