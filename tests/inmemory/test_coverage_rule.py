@@ -6,7 +6,6 @@ rule covers more where only an unjudgeable or broken step lies upstream."""
 from __future__ import annotations
 
 import dataclasses
-
 import shutil
 from pathlib import Path
 

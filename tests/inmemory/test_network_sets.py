@@ -84,3 +84,41 @@ def test_the_neighbours_sets_and_readings_narrow_what_a_ring_publishes(ring) -> 
     far = [i for i in ring.ids if i not in (3, *[j for j in ring.ids if 3 in ring.node(j).in_weights])]  # not the reference's readers
     assert far and all(r_width(with_, i) < 0.9 * r_width(without, i) for i in far), {i: (r_width(with_, i), r_width(without, i)) for i in far}
     assert any(e["sets"] for i in far for e in _published(with_)[i])
+
+
+def test_the_header_exact_network_and_the_report_say_what_each_node_rests_on(ring, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The run's header names, per node, the in-neighbours whose published sets its sets may rest on (and the
+    reference's reading where it reads it); `netsetest exact --network` measures the same record against each node's
+    network limit, with no published interval narrower than it, and the report page shows that ratio beside exact's."""
+    import json
+
+    from netsetest.cli.main import main
+    from netsetest.records.report_html import _exact_html
+    from netsetest.roles.judge import network_rests
+    from netsetest.runtime.report import network_lines
+
+    path = tmp_path / "ring.json"
+    res = run_inmemory(ring, "worst", seed=0, record=str(path))
+    rests = {n.id: n.rests_on for n in res.summary.nodes}
+    for i in ring.ids:
+        others = sorted(j for j in ring.node(i).in_weights if j != i)
+        assert f"the published sets of {', '.join(map(str, others))}" in rests[i], (i, rests[i])
+    readers = [j for j in ring.ids if 3 in ring.node(j).in_weights and j != 3]
+    assert readers and all("the reading of 3 (fault-free)" in rests[j] for j in readers)
+    assert all("the reading of 3" not in rests[j] for j in ring.ids if j not in (3, *readers))  # its readers only
+    header = network_lines(res.summary)
+    assert header and all(any(ln.startswith(f"  node {i}: ") for ln in header) for i in ring.ids[:8])
+    out_json = tmp_path / "exact.json"
+    assert main(["exact", str(path), "--network", "--json", str(out_json)]) == 0
+    assert "the network limit" in capsys.readouterr().out
+    doc = json.loads(out_json.read_text())
+    net = doc["network"]
+    assert max(max(d.values()) for d in net["delays"].values()) >= 2  # a directed ring: some data travel more than a hop
+    assert all(x["narrower"] == 0 for per in net["ratios"]["nodes"].values() for x in per.values())  # sound: never below the limit
+    assert all(x["width_ratio"] is None or x["width_ratio"] >= 1 - 1e-9 for per in net["ratios"]["nodes"].values() for x in per.values())
+    assert "width / network" in _exact_html(doc)
+    paper6 = load_topology("paper6", "saim")  # every node reads every bounded reading in its step: no neighbour's set cuts
+    assert all(paper6.reads_everyone(i) for i in paper6.ids)
+    for i in paper6.ids:
+        words = network_rests(paper6, i)
+        assert "published sets" not in words and ("its own declared fault bound" in words) == paper6.bound_relied(i), (i, words)
