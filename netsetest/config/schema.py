@@ -524,6 +524,10 @@ class TopologyFile(_Strict, frozen=True, kw_only=True):
         if not self.network.readings and (self.network.max_faulty is not None or self.network.health_groups):
             what = "max_faulty" if self.network.max_faulty is not None else "health_groups"
             raise ValueError(f"network.{what}: the k-of-N declaration rests on the readings' exchange, which readings = false turns off; remove one of the two")
+        if not self.network.readings and self.network.reading_scope != "network":
+            raise ValueError(
+                f"network.reading_scope: {self.network.reading_scope!r} says who receives the readings, which readings = false turns off; remove one of the two"
+            )
 
 
 # ---------------------------------------------------------------- resolved scenario

@@ -69,6 +69,15 @@ def test_readings_off_with_a_declaration_is_refused(tmp_path: Path, declaration:
     assert off.health_group(1) is None and off.reading_sources(1) == ()
 
 
+def test_readings_off_with_a_reading_scope_is_refused(tmp_path: Path) -> None:
+    """``reading_scope`` says who receives the readings; with ``readings = false`` there are none: refused in one line
+    rather than ignored (issue 44's [network] options, docs/configuration.md)."""
+    with pytest.raises(ConfigError, match="network.reading_scope: 'neighbours' says who receives the readings, which readings = false") as exc:
+        load_topology(_topology(tmp_path, 'readings = false\nreading_scope = "neighbours"'))
+    assert len(str(exc.value).splitlines()) == 1
+    assert load_topology(_topology(tmp_path, 'reading_scope = "neighbours"')).reading_scope == "neighbours"
+
+
 GROUPS = "[[network.health_groups]]\nnodes = [1, 2, 3]\nmax_faulty = 2\n[[network.health_groups]]\nnodes = [4, 5, 6]\nmax_faulty = 2"
 
 
