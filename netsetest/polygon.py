@@ -52,6 +52,10 @@ class Polygon:
         """The box lo ≤ x ≤ hi."""
         return cls(np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]], dtype=float))
 
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The interval hull: each coordinate's lowest and highest vertex, (2,) each (exact: no rounding)."""
+        return self.vertices.min(axis=0), self.vertices.max(axis=0)
+
     def interval(self, c: np.ndarray) -> tuple[float, float]:
         """[min cᵀx, max cᵀx] over the polygon."""
         v = self.vertices @ c

@@ -249,8 +249,8 @@ class RegionSet:
     @cached_property
     def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = self.base.bounds()
-        v = self.region.vertices
-        lo[:2], hi[:2] = np.maximum(lo[:2], v.min(axis=0)), np.minimum(hi[:2], v.max(axis=0))
+        low, high = self.region.bounds()
+        lo[:2], hi[:2] = np.maximum(lo[:2], low), np.minimum(hi[:2], high)
         lo[2], hi[2] = max(lo[2], self.fault[0]), min(hi[2], self.fault[1])
         return lo, hi
 

@@ -106,3 +106,18 @@ def test_the_fast_direction_order_falls_back_to_the_exact_one_where_a_rounded_an
     assert list(_by_direction(np.array([a, b]))) == [1, 0]
     d = np.array([[0.0, -1.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [1.0, -1e-17]])
     assert list(_by_direction(d)) == [1, 3, 2, 0, 4]
+
+
+@settings(max_examples=60, deadline=None)
+@given(_cloud())
+def test_the_bounds_are_the_interval_hull(cloud: tuple[Polygon, np.ndarray]) -> None:
+    """Each coordinate's bounds are its lowest and highest vertex, exactly: every vertex lies within them, each is
+    attained, and each is the support along its axis (what the published set's bounds are cut by, proven.py and sets.py)."""
+    poly, _ = cloud
+    lo, hi = poly.bounds()
+    v = poly.vertices
+    assert lo.shape == hi.shape == (2,)
+    assert np.all(v >= lo) and np.all(v <= hi) and np.all(np.any(v == lo, axis=0)) and np.all(np.any(v == hi, axis=0))
+    for axis in range(2):
+        e = np.eye(2)[axis]
+        assert poly.interval(e) == (lo[axis], hi[axis])
