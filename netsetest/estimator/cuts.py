@@ -1,4 +1,4 @@
-"""The SDP step's cuts (docs/estimator.md, "The set and its cuts"): after the solve, a declared list of pure
+"""The SDP step's cuts (docs/estimator.md, "One step"): after the solve, a declared list of pure
 functions, each taking the step's sets and returning them cut, each named, each with the assumption it rests on.
 
 A step k → k+1 of :class:`~netsetest.estimator.sdp.LocalEstimator` reads top to bottom:
@@ -245,7 +245,7 @@ def _readings_cut(ctx: StepContext, res: StepResult) -> StepResult:
 
 def _size_cut(ctx: StepContext, res: StepResult) -> StepResult:
     """Where the step's sector rests on the declared fault bound, the truth's f⁺ lies in [−F, F]: the published set
-    is cut by that interval (docs/estimator.md, "SAIM: the size cut")."""
+    is cut by that interval (docs/estimator.md, "One step": `fault-size`)."""
     size, sector = ctx.statics.fault_bound.size, res.sector
     if size is None or sector is None or sector.basis != "fault-bound":
         return res
@@ -254,7 +254,7 @@ def _size_cut(ctx: StepContext, res: StepResult) -> StepResult:
 
 
 def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
-    """The moved region cut by everything the step proves of x⁺ (docs/estimator.md, "The region"): every reading
+    """The moved region cut by everything the step proves of x⁺ (docs/estimator.md, "The set a node proves"): every reading
     of the step, the own measurement where the step's sector rests on the declared fault bound (C x⁺ = C̄ x̄⁺ − Ds f⁺
     with |f⁺| ≤ F), and the step's certified ellipsoids (the one the node continues from and the published one).
     The node continues from it and publishes it: the published set is the published ellipsoid ∩ the region, and

@@ -5,7 +5,7 @@ D = diag(1, 1, FAULT_WEIGHT): aimed at the fault bound users inspect, the state 
 ``bank``: two ellipsoids from the same certified data each step: the node recurs on the trace-optimal
 one (a good state set for the next step) and publishes the one minimising trace(diag(1, 1, BANK_FAULT_WEIGHT)·P),
 solved from the same previous set (so it is certified under the same assumptions).
-Measured in docs/estimator.md ("Tightness").
+Measured in docs/estimator.md ("Objectives").
 """
 
 from __future__ import annotations
