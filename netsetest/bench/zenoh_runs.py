@@ -38,6 +38,7 @@ from pathlib import Path
 import msgspec  # a default dependency (the bench must not need the dev extra's msgpack)
 
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE
+from netsetest.roles.flow import ACK_WINDOW
 from netsetest.runtime.forkserver import NAME_PREFIX
 from netsetest.runtime.launcher import free_ports
 from netsetest.runtime.processes import role_env
@@ -354,10 +355,11 @@ def _role_argv(topology: Path, run_id: str, steps: int | None, name: str, ports:
     return NodeSpec(scenario, int(name.removeprefix("node")), clock=clock, zenoh=zenoh).to_argv()
 
 
-def observed_lockstep(topology: Path, steps: int | None = None, insecure: bool = False) -> dict:
+def observed_lockstep(topology: Path, steps: int | None = None, insecure: bool = False, ack_window: int | None = ACK_WINDOW) -> dict:
     """One lockstep run of ``topology`` through the launcher ``netsetest run`` uses (runtime/launcher.py, in
     this process): secured by default (mTLS, every role a client of the run's router, roles forked by the
-    fork server); ``insecure``: the open peer mesh of ``run --insecure``.
+    fork server); ``insecure``: the open peer mesh of ``run --insecure``; ``ack_window``: ``run --ack-window``'s
+    (None: unbounded, roles/flow.py).
 
     The stepping phase is timed by the collector's progress on the launcher's channel: from the first step
     it reports checked to the last, scaled to the run's N+1 steps (the first step's own time is not in it);
@@ -369,7 +371,7 @@ def observed_lockstep(topology: Path, steps: int | None = None, insecure: bool =
     from netsetest.runtime.launcher import LaunchOptions, launch, plan_run
     from netsetest.runtime.report import EXIT_INTERRUPTED
 
-    plan = plan_run(LaunchOptions(str(topology), steps=steps, seed=0, quiet=True, insecure=insecure))
+    plan = plan_run(LaunchOptions(str(topology), steps=steps, seed=0, quiet=True, insecure=insecure, ack_window=ack_window))
     n_steps = plan.scenario.steps
     cpu0, t_start = time.process_time(), time.monotonic()
     out = launch(plan)

@@ -14,7 +14,9 @@ from netsetest.cli import checks
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.runtime import argtypes
 from netsetest.runtime.report import EXIT_BAD_INPUT
+from netsetest.roles.flow import ACK_WINDOW
 from netsetest.runtime.rolespec import (
+    ACK_WINDOW_HELP,
     ESTIMATOR_HELP,
     ROLE_SPECS,
     RUN_ID_ENV,
@@ -47,6 +49,7 @@ ZENOH_ONLY: dict[str, tuple[str, object]] = {
     "--neighbour-timeout": ("neighbour_timeout", NEIGHBOUR_TIMEOUT_S),
     "--pace": ("pace", 0.0),
     "--stall-limit": ("stall_limit", STALL_LIMIT_S),
+    "--ack-window": ("ack_window", ACK_WINDOW),
     "--kill": ("kill", []),
     "--rejoin": ("rejoin", []),
     "--insecure": ("insecure", False),
@@ -71,6 +74,7 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument("--pace", type=_non_negative, default=0.0, metavar="S", help="lockstep: at least S seconds per step (default: 0, as fast as possible)")
     g.add_argument("--stall-limit", type=argtypes.stall_limit, default=STALL_LIMIT_S, metavar="S", help=STALL_LIMIT_HELP)
+    g.add_argument("--ack-window", type=argtypes.ack_window, default=ACK_WINDOW, metavar="N", help=ACK_WINDOW_HELP)
     g.add_argument(
         "--kill", type=_at, action="append", default=[], metavar="NODE@STEP", help="SIGKILL node NODE once step STEP is checked (repeatable; default: none)"
     )
@@ -270,6 +274,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         neighbour_timeout=a.neighbour_timeout,
         pace=a.pace,
         stall_limit=a.stall_limit,
+        ack_window=a.ack_window,
         kill=tuple(a.kill),
         rejoin=tuple(a.rejoin),
         insecure=a.insecure,

@@ -74,7 +74,7 @@ from netsetest.models.vehicle import KMH
 from netsetest.records.summary import RUN_FIELDS, CarSummary, InheritedOrigin, NodeSummary, RunSummary, StopCause
 from netsetest.roles.fdi import FdiTotals, classify
 from netsetest.roles.judge import INHERITED, NO_CHECKS, NO_REFERENCE, TRUTH_UNKNOWN, Containment, Judge, NodeVerdict, StepInputs, isclose, state_mismatch
-from netsetest.roles.flow import ACK_STRIDE
+from netsetest.roles.flow import Acknowledgments
 from netsetest.roles.vehicle import envelope_holds, fault_bound_holds, mismatch_holds
 
 WINDOW = 50  # steps a step may stay open behind the newest truth (bounds memory against a stalled node)
@@ -256,7 +256,7 @@ class Collector:
         self.peak_open_node_steps = 0
         self.overloaded_steps = 0  # steps of which we lost something ourselves: past the budget, or our full inbox
         self.overloaded_node_steps = 0  # node-steps not judged for that reason (each in no other count)
-        self.acked = -1  # the newest truth acknowledged to the vehicle (lockstep)
+        self.acks = Acknowledgments(scenario.steps)  # lockstep flow control, the collector's side (roles/flow.py)
         # what the bus's full inbox dropped before we saw it: (step, node; None for a truth), noted on the
         # transport's thread (a deque's append is atomic), taken into ``lost`` (step → nodes) on ours
         self._lost_notes: deque[tuple[int, int | None]] = deque(maxlen=LOST_NOTES)
@@ -335,10 +335,10 @@ class Collector:
         self._lost_notes.extend(later)
 
     def _acknowledge(self) -> None:
-        """Lockstep: tell the vehicle the newest truth taken in, every ACK_STRIDE steps (its window, roles/vehicle.py)."""
-        if self.head >= self.acked + ACK_STRIDE or self.head == self.sc.steps > self.acked:  # the last: the vehicle's End waits for it
-            self.acked = self.head
-            self.bus.publish(keys.ready_of(self.run, keys.role_name("collector")), Ready(role="collector", seen_all=True, acked=self.head))
+        """Lockstep: tell the vehicle the newest truth taken in, when the flow protocol says (its window, roles/flow.py)."""
+        step = self.acks.due(self.head)
+        if step is not None:
+            self.bus.publish(keys.ready_of(self.run, keys.role_name("collector")), Ready(role="collector", seen_all=True, acked=step))
 
     def close_ready(self, most: int | None = None) -> None:
         """Real time, called when the bus is drained: close what is ready (at most ``most`` steps, so that

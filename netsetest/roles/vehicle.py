@@ -36,7 +36,7 @@ from netsetest.logs.drive import LogDrive, LogStep
 from netsetest.models.drive import Drive
 from netsetest.models.sensor import augmented
 from netsetest.models.signals import SignalKind
-from netsetest.roles.flow import ACK_WINDOW
+from netsetest.roles.flow import ACK_WINDOW, Window
 
 
 def mismatch_holds(sc: Scenario, e: np.ndarray) -> bool:
@@ -97,7 +97,7 @@ class Vehicle:
         """``window``: lockstep, how many steps the vehicle may lead the collector's acknowledgment
         (roles/flow.py; None: no window, the benchmark's measure of what it costs)."""
         self.sc, self.bus, self.run = scenario, bus, run_id
-        self.window = window
+        self.flow = Window(window, scenario.steps)  # lockstep flow control, the vehicle's side
         # lockstep: a node not heard at step k is dead; real time: not heard for dead_after_steps steps
         self.realtime, self.dead_after = realtime, dead_after_steps
         # the world: the model's drive (the plant, the manoeuvre, the seeded signals) or a recorded one (docs/your-log.md)
@@ -113,7 +113,6 @@ class Vehicle:
         self.done = False
         self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
         self.drops: Counter[str] = Counter()
-        self.acked = -1  # the newest step the collector acknowledged (lockstep flow control)
         if realtime:
             # nothing waits for a state (the clock steps) and every pump collects them: a ring per node's key,
             # drained in the vehicle's thread, rather than a Python callback and a wake-up per state (N per step)
@@ -147,20 +146,20 @@ class Vehicle:
             self.drops["state-ahead"] += 1  # a step not published yet cannot have been computed
 
     def on_ack(self, key: str, msg: Message) -> None:
-        """The collector's acknowledgment (a Ready on its key with ``acked``); never beyond the step we
-        published (a forged one cannot open the window past what the collector could have seen)."""
+        """The collector's acknowledgment: a Ready on its key with ``acked`` (roles/flow.py)."""
         if not isinstance(msg, Ready) or msg.role != "collector":
             self.drops["unexpected-type"] += 1
         elif msg.acked is not None:
-            self.acked = max(self.acked, min(msg.acked, self.k))
+            self.flow.acknowledged(msg.acked, self.k)
+
+    @property
+    def acked(self) -> int:
+        """The newest step the collector acknowledged."""
+        return self.flow.acked
 
     def window_open(self) -> bool:
-        """Lockstep: the next step is inside the collector's window (step k + ``window`` needs step k
-        acknowledged); the End needs the last step acknowledged (else it overtakes the truths still on their
-        way and the collector counts it early)."""
-        if self.k >= self.sc.steps:
-            return self.acked >= self.sc.steps
-        return self.window is None or self.k + 1 <= self.acked + self.window
+        """Lockstep: the next step, or the End, is inside the collector's window (roles/flow.py)."""
+        return self.flow.open(self.k)
 
     def _window(self) -> range:
         """Steps whose reports decide who is alive at the next step."""

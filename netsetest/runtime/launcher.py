@@ -41,7 +41,7 @@ from netsetest.logs.drive import with_log_steps
 from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.records.summary import RunSummary
-from netsetest.roles.flow import ack_window
+from netsetest.roles.flow import ACK_WINDOW, check_window, show_window
 from netsetest.runtime.channel import CHANNEL_FD, ChannelReader
 from netsetest.runtime.forkserver import ForkServer, ForkServerError
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_COLLECTOR_STALLED, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress, exit_code, log
@@ -85,6 +85,7 @@ class LaunchOptions:
     neighbour_timeout: float = NEIGHBOUR_TIMEOUT_S
     pace: float = 0.0
     stall_limit: float = STALL_LIMIT_S  # every session's Zenoh lease; the vehicle's wait for the collector
+    ack_window: int | None = ACK_WINDOW  # lockstep: the vehicle's lead on the collector's acknowledgment (None: unbounded; roles/flow.py)
     kill: tuple[tuple[int, int], ...] = ()  # (node, step): SIGKILL the node right after that step
     rejoin: tuple[tuple[int, int], ...] = ()  # (node, step): restart the node with --rejoin at that step
     insecure: bool = False
@@ -179,9 +180,9 @@ def plan_run(opts: LaunchOptions) -> RunPlan:
     except ValueError as exc:
         raise LaunchError(str(exc)) from None
     try:
-        ack_window(os.environ)  # the benchmark's window setting, read by the vehicle process (roles/flow.py)
+        check_window(opts.ack_window)  # (the command line's is checked as it is parsed; a caller's here)
     except ValueError as exc:
-        raise LaunchError(str(exc)) from None
+        raise LaunchError(f"--ack-window {show_window(opts.ack_window)}: {exc}") from None
     if opts.neighbour_timeout >= opts.node_timeout:
         # else a node waiting for a dead neighbour is itself declared dead by the vehicle
         raise LaunchError(f"--neighbour-timeout ({opts.neighbour_timeout:g} s) must be shorter than --node-timeout ({opts.node_timeout:g} s)")
@@ -439,6 +440,7 @@ class RoleStarter:
             run_start_timeout(len(self.network.names)),
             o.quiet,
             awaits,
+            o.ack_window,
             self.network.zenoh("vehicle"),
         )
 

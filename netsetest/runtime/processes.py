@@ -10,7 +10,7 @@ listens to its peers' Ready only: with everyone hearing everyone, N roles' Ready
 messages a second to decode (≈90 000 at 96 nodes), which kept a 96-node run from ever starting.
 
 Lockstep: the vehicle publishes step k+1 once every alive node has published step k and the collector
-has acknowledged step k+1−ACK_WINDOW (roles/flow.py; it waits for the collector as long as it takes:
+has acknowledged step k+1−``ack_window`` (roles/flow.py; it waits for the collector up to the stall limit:
 the launcher ends the run if the collector dies); a node silent for ``node_timeout`` s is declared dead and
 the run goes on without it.  A node waits for its expected
 neighbours at most ``neighbour_timeout`` s, then proceeds without the missing ones.
@@ -215,23 +215,26 @@ def node_peers(sc: Scenario, node_id: int) -> set[tuple[str, int | None]]:
 def run_vehicle(spec: VehicleSpec, sc: Scenario, bus: Bus) -> int:
     """The vehicle's loop.  ``spec.await_rejoin``: (node, step) pairs; in lockstep, step+1 waits (at most
     ``node_timeout``) for the node.  ``spec.quiet``: no line on success (errors are still logged).  Lockstep waits
-    for the collector's acknowledgments at most ``spec.zenoh.stall_limit`` without one: past it the collector is
-    stopped or has lost its session, and the vehicle ends the run (:data:`EXIT_COLLECTOR_STALLED`)."""
-    from netsetest.roles.flow import ack_window
+    for the collector's acknowledgments (``spec.ack_window``, roles/flow.py) at most ``spec.zenoh.stall_limit`` without
+    one: past it the collector is stopped or has lost its session, and the vehicle ends the run (:data:`EXIT_COLLECTOR_STALLED`)."""
     from netsetest.roles.vehicle import Vehicle
 
-    try:
-        window = ack_window(os.environ)  # the benchmark's setting (roles/flow.py); `run` refused a bad one already
-    except ValueError as exc:
-        log("vehicle", str(exc))
-        return EXIT_BAD_INPUT
-    run_id, realtime, node_timeout, start_timeout = spec.zenoh.resolved_run_id, spec.clock == "realtime", spec.node_timeout, spec.start_timeout
-    signals, seed, pace, await_rejoin, quiet = spec.signals, spec.seed, spec.pace, spec.await_rejoin, spec.quiet
-    vehicle = Vehicle(sc, bus, run_id, signals, seed, realtime=realtime, window=window)
-    holds = RejoinHolds(await_rejoin)
-    dead_at: dict[int, float] = {}  # node → when the vehicle went on without it
-    me = ("vehicle", None)
-    barrier = Barrier(bus, run_id, Ready(role="vehicle"), _all_roles(sc) - {me})
+    run_id, realtime = spec.zenoh.resolved_run_id, spec.clock == "realtime"
+    vehicle = Vehicle(sc, bus, run_id, spec.signals, spec.seed, realtime=realtime, window=spec.ack_window)
+    barrier = Barrier(bus, run_id, Ready(role="vehicle"), _all_roles(sc) - {("vehicle", None)})
+    if not _everyone_ready(barrier, bus, spec.start_timeout):
+        return EXIT_VIOLATION
+    barrier.tick(time.monotonic() + READY_PERIOD_S)  # a last Ready with seen_all for everyone
+    if not spec.quiet:
+        log("vehicle", f"all {len(sc.ids)} nodes and the collector are ready; clock {spec.clock}")
+    code = _realtime(vehicle, bus, sc.tau_s) if realtime else _lockstep(spec, vehicle, barrier, bus)
+    if code == 0:
+        time.sleep(0.2)  # let End reach everyone before the session closes
+    return code
+
+
+def _everyone_ready(barrier: Barrier, bus: Bus, start_timeout: float) -> bool:
+    """The start-up barrier: until every other role reported ``seen_all`` (False, and logged, after ``start_timeout``)."""
     t0 = time.monotonic()
     while not (barrier.others <= barrier.complete):
         barrier.tick(time.monotonic())
@@ -239,55 +242,62 @@ def run_vehicle(spec: VehicleSpec, sc: Scenario, bus: Bus) -> int:
         if time.monotonic() - t0 > start_timeout:
             missing = sorted(f"{r}{'' if n is None else ' ' + str(n)}" for r, n in barrier.others - barrier.complete)
             log("vehicle", f"start-up timed out after {start_timeout:.0f} s; not ready: {', '.join(missing)}")
-            return EXIT_VIOLATION
-    barrier.tick(time.monotonic() + READY_PERIOD_S)  # a last Ready with seen_all for everyone
-    if not quiet:
-        log("vehicle", f"all {len(sc.ids)} nodes and the collector are ready; clock {'realtime' if realtime else 'lockstep'}")
-    if realtime:
-        # the machine is still busy with the start-up (the last roles' warm-up, their sessions, the Ready
-        # traffic) when everyone is ready; a real-time clock must not start into that (a hundred nodes
-        # missed step 0 and 1 by tens of ms): the deadlines count from step 0
-        settle_until = time.monotonic() + REALTIME_SETTLE_S
-        while (left := settle_until - time.monotonic()) > 0:
-            bus.pump(timeout=min(left, 0.05))
+            return False
+    return True
+
+
+def _realtime(vehicle: Vehicle, bus: Bus, tau_s: float) -> int:
+    """A step every ``tau_s`` whatever the nodes did."""
+    # the machine is still busy with the start-up (the last roles' warm-up, their sessions, the Ready traffic)
+    # when everyone is ready; a real-time clock must not start into that (a hundred nodes missed step 0 and 1 by
+    # tens of ms): the deadlines count from step 0
+    settle_until = time.monotonic() + REALTIME_SETTLE_S
+    while (left := settle_until - time.monotonic()) > 0:
+        bus.pump(timeout=min(left, 0.05))
     vehicle.advance()
-    t_step = next_tick = time.monotonic()
-    held_since: float | None = None  # lockstep: since when the collector's window holds the next step, with no acknowledgment
-    held_acked, held_logged = -1, False
+    next_tick = time.monotonic()
     while not vehicle.done:
+        bus.pump(timeout=max(0.0, min(next_tick + tau_s - time.monotonic(), 0.05)))
+        if time.monotonic() >= next_tick + tau_s:
+            next_tick += tau_s
+            vehicle.advance()
+    return 0
+
+
+def _lockstep(spec: VehicleSpec, vehicle: Vehicle, barrier: Barrier, bus: Bus) -> int:
+    """The next step once every alive node published this one (a node silent ``node_timeout`` is dead), a
+    rejoining node is back (:class:`RejoinHolds`), the collector's window is open (roles/flow.py; the run ends
+    once it held past the stall limit) and ``pace`` has passed."""
+    from netsetest.roles.flow import Hold
+
+    node_timeout = spec.node_timeout
+    holds, hold = RejoinHolds(spec.await_rejoin), Hold(node_timeout, spec.zenoh.stall_limit)
+    dead_at: dict[int, float] = {}  # node → when the vehicle went on without it
+    vehicle.advance()
+    t_step = time.monotonic()
+    while not vehicle.done:
+        bus.pump(timeout=min(0.05, max(0.0, t_step + node_timeout - time.monotonic())))
         now = time.monotonic()
-        if realtime:
-            bus.pump(timeout=max(0.0, min(next_tick + sc.tau_s - now, 0.05)))
-        else:
-            bus.pump(timeout=min(0.05, max(0.0, t_step + node_timeout - now)))
-        now = time.monotonic()
-        if realtime:
-            if now >= next_tick + sc.tau_s:
-                next_tick += sc.tau_s
+        if not vehicle.ready_to_advance():
+            if now - t_step > node_timeout:
+                log("vehicle", f"step {vehicle.k}: no state from node(s) {sorted(vehicle.waiting_for())} in {node_timeout:g} s; going on without")
+                dead_at.update((n, now) for n in vehicle.waiting_for())
                 vehicle.advance()
-        elif vehicle.ready_to_advance() and holds.holding(vehicle, barrier, dead_at, now - t_step, node_timeout):
+                t_step = now
+        elif holds.holding(vehicle, barrier, dead_at, now - t_step, node_timeout):
             pass
-        elif vehicle.ready_to_advance() and not vehicle.window_open():  # the collector is behind: hold, blame no node
-            if held_since is None or vehicle.acked != held_acked:  # (still acknowledging: alive, only behind)
-                held_since, held_acked = now, vehicle.acked
-            if now - held_since > node_timeout and not held_logged:
+        elif not vehicle.window_open():  # the collector is behind: hold, blame no node
+            held = hold.held(now, vehicle.acked)
+            if held == "tell":
                 log("vehicle", f"step {vehicle.k + 1}: waiting for the collector (it acknowledged step {vehicle.acked})")
-                held_logged = True
-            if now - held_since > spec.zenoh.stall_limit:
+            elif held == "stalled":
                 log("vehicle", f"step {vehicle.k + 1}: the collector acknowledged nothing for {spec.zenoh.stall_limit:g} s (--stall-limit): ending the run")
                 return EXIT_COLLECTOR_STALLED
             t_step = now  # the nodes' time starts when the step is published
-        elif vehicle.ready_to_advance():
-            if now - t_step >= pace:  # lockstep paced for watching
-                vehicle.advance()
-                t_step = now
-                held_since, held_logged = None, False
-        elif now - t_step > node_timeout:
-            log("vehicle", f"step {vehicle.k}: no state from node(s) {sorted(vehicle.waiting_for())} in {node_timeout:g} s; going on without")
-            dead_at.update((n, now) for n in vehicle.waiting_for())
+        elif now - t_step >= spec.pace:  # lockstep paced for watching
             vehicle.advance()
             t_step = now
-    time.sleep(0.2)  # let End reach everyone before the session closes
+            hold.released()
     return 0
 
 

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, ClassVar, Literal, TypeVar
 
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
+from netsetest.roles.flow import ACK_WINDOW, MAX_ACK_WINDOW, UNBOUNDED, show_window
 from netsetest.runtime import argtypes
 from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, STALL_LIMIT_S, START_TIMEOUT_S
 from netsetest.scenarios import topology_help
@@ -197,6 +198,11 @@ LOG_HELP = "a recorded drive as the world: a ROS 2 bag, an MDF4 file, a Parquet 
 MAP_HELP = "the log's mapping (default: the topology's [vehicle] mapping, else DRIVE's name with .map.toml)"
 ESTIMATOR_HELP = f"every node's estimator, overriding the topology's per-node 'estimator' ({', '.join(NODE_ESTIMATOR_NAMES)}; default: the file's, else sdp)"
 ZENOH_CONFIG_HELP = "a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting, security and the lease on top (default: none)"
+ACK_WINDOW_HELP = (
+    f"lockstep: how many steps the vehicle may lead the collector's acknowledgment, up to {MAX_ACK_WINDOW} (a paused "
+    f"collector's backlog stays within its inbox); {UNBOUNDED}: no window, a slow collector may then lose messages "
+    f"(the benchmark's measure of what the window costs) (default: {ACK_WINDOW})"
+)
 STALL_LIMIT_HELP = (
     "how long [s] a role may not run (stopped, a swapping machine) and the run go on: every session's Zenoh lease, and the "
     "longest the vehicle waits for the collector; a collector stalled longer ends the run with a verdict naming its stall "
@@ -293,6 +299,7 @@ class VehicleSpec(RoleSpec):
         metavar="NODE@STEP",
         many=True,
     )
+    ack_window: int | None = _opt(ACK_WINDOW, "--ack-window", ACK_WINDOW_HELP, argtypes.ack_window, show_window, metavar="N")  # roles/flow.py
     zenoh: ZenohSpec = _group(ZenohSpec, "zenoh")
 
 

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from netsetest.cli.main import build_parser
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.estimator.objective import OBJECTIVES
+from netsetest.roles.flow import ACK_STRIDE, MAX_ACK_WINDOW
 from netsetest.runtime.argtypes import SEED_MAX
 from netsetest.runtime.rolespec import (
     DEFAULT_RUN_ID,
@@ -78,6 +79,7 @@ SPECS: dict[type[RoleSpec], st.SearchStrategy] = {
         seconds,
         st.booleans(),
         st.lists(pairs, max_size=3).map(tuple),
+        maybe(st.integers(ACK_STRIDE, MAX_ACK_WINDOW)),  # --ack-window N, or unbounded (roles/flow.py)
         zenohs,
     ),
     NodeSpec: st.builds(
