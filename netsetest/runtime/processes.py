@@ -41,7 +41,9 @@ from netsetest.runtime.timeouts import READING_POLL, READING_WAIT
 if TYPE_CHECKING:  # a node process never loads the vehicle and the collector (memory: docs/performance-history.md)
     from netsetest.bus.zenoh_bus import ZenohBus
     from netsetest.records.summary import RunSummary, StopCause
+    from netsetest.roles.collector import Collector
     from netsetest.roles.vehicle import Vehicle
+    from netsetest.runtime.channel import ChannelWriter
 
 READY_PERIOD_S = 0.1
 IDLE_WAIT_S = 1.0  # a started node with nothing due sleeps until a message arrives (or this long)
@@ -49,6 +51,7 @@ REALTIME_SETTLE_S = 0.5  # real time: from "all ready" to step 0, for the start-
 EXIT_STOPPED = 128 + signal.SIGTERM  # a role stopped by SIGTERM/SIGINT
 REALTIME_CLOSE_BATCH = 10  # real time: steps the collector closes between two looks at its bus (a few ms each)
 REALTIME_DRAIN_PUMPS = 50  # real time: pumps that empty the collector's bus before it judges (a flood cannot hold it there)
+END_GRACE_S = 2.0  # the collector's wait, after the End, for the last states (they travel on other keys)
 CRASH_FLUSH_S = 0.2  # --crash-after: time for the last state to leave before SIGKILL
 STALL_S = 1.0  # a turn of the collector's loop this late (it pumps every 0.05 s) is a stall: the process did not run
 STALL_LOG_S = 10.0  # a stall this long is logged
@@ -404,71 +407,100 @@ def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: RunMeta, on
 
 
 def _collect(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: RunMeta, on_summary: Callable[[RunSummary], None] | None, stop: StopRequests) -> int:
-    """:func:`run_collector`'s loop, ``stop`` the signals it was sent."""
+    """:func:`run_collector`'s set-up, loop and summary, ``stop`` the signals it was sent."""
     from netsetest.roles.collector import Collector
-
     from netsetest.runtime.channel import ChannelWriter, RunFinished
 
-    run_id, record, summary_json, idle_timeout = spec.zenoh.resolved_run_id, spec.record, spec.summary_json, spec.idle_timeout
-    sink, _ = record_sink(record)  # opened now: the record grows step by step and survives a crash
-    realtime = spec.clock == "realtime"
-    collector = Collector(sc, bus, run_id, sink, realtime=realtime)
+    run_id = spec.zenoh.resolved_run_id
+    sink, _ = record_sink(spec.record)  # opened now: the record grows step by step and survives a crash
+    collector = Collector(sc, bus, run_id, sink, realtime=spec.clock == "realtime")
     if sink is not None:
         sink.meta(meta)
     barrier = Barrier(bus, run_id, Ready(role="collector"), _all_roles(sc) - {("collector", None)})
     channel = ChannelWriter(spec.channel_fd) if spec.channel_fd is not None else None  # to the launcher: progress, summary
-    last_msg = time.monotonic()
-    stalls = StallWatch(spec.zenoh.stall_limit, last_msg)
-    stopped: StopCause | None = None
-    while True:
-        now = time.monotonic()
-        gap = stalls.turn(now, collector.progress)
-        last_msg += gap  # our own stall is not the vehicle's silence
-        if gap >= stalls.lease:  # the router closed our session, and what was in flight to us is lost: the run cannot go on
-            log("collector", f"stalled {gap:.0f} s, past the stall limit ({stalls.lease:g} s, Zenoh's lease): ending the run")
-            stopped = "collector stalled"
-            break
-        if stop.signal is not None:  # (the parent's stop; after a stall that may have cost our session, the stall is the cause)
-            stopped = "collector stalled" if stalls.session_at_risk else "interrupted"
-            log("collector", f"stopped by {stop.signal}; writing what was checked")
-            break
-        if not collector.started:
-            barrier.tick(now)
-        if bus.pump(timeout=0.05):
-            last_msg = time.monotonic()
-            stalls.heard()
-            for _ in range(REALTIME_DRAIN_PUMPS if realtime else 0):  # real time: all off the bus first (its inbox is bounded), then judge
-                if not bus.pump(timeout=0.0):
-                    break
-        if realtime:
-            collector.close_ready(REALTIME_CLOSE_BATCH)
-        if channel is not None:
-            channel.step(collector.progress)
-        if collector.ended is not None:
-            # End overtakes the last states on other paths: wait until they are in (or a grace period)
-            t_end = time.monotonic()
-            while collector.progress < collector.ended.steps and time.monotonic() - t_end < 2.0:
-                bus.pump(timeout=0.05)
-                if realtime:
-                    collector.close_ready()
-            if channel is not None:
-                channel.step(collector.progress)
-            break
-        if now - last_msg > idle_timeout:
-            stopped = "collector stalled" if stalls.session_at_risk else "vehicle gone"  # (nothing came since: it was lost)
-            why = "our session was lost while we stalled" if stopped == "collector stalled" else "the vehicle is gone"
-            log("collector", f"no message for {idle_timeout:g} s: {why}; writing what was received")
-            break
+    stalls = StallWatch(spec.zenoh.stall_limit, time.monotonic())
+    stopped = _judge_until_end(collector, bus, barrier, channel, stalls, stop, spec.idle_timeout)
     # stopped by a signal or our stall: the steps checked so far (the later ones are cut short, not a node's silence)
     through = collector.progress if stopped in ("interrupted", "collector stalled") else None
     summary = collector.finish(meta, stopped=stopped, through=through, stall=(stalls.longest, stalls.step))
-    write_summary(summary, summary_json)
+    write_summary(summary, spec.summary_json)
     if channel is not None:
         channel.send(RunFinished(summary))
         channel.close()
     if on_summary:
         on_summary(summary)
     return EXIT_STOPPED if stopped == "interrupted" else exit_code(summary)
+
+
+def _judge_until_end(
+    collector: Collector, bus: Bus, barrier: Barrier, channel: ChannelWriter | None, stalls: StallWatch, stop: StopRequests, idle_timeout: float
+) -> StopCause | None:
+    """The collector's loop: messages in, ready steps judged, progress out, until the vehicle's End (None), or why
+    it stopped before: a signal, its own stall past the lease, no message for ``idle_timeout`` s."""
+    last_msg = stalls.last
+    while True:
+        now = time.monotonic()
+        gap = stalls.turn(now, collector.progress)
+        last_msg += gap  # our own stall is not the vehicle's silence
+        stopped = _stop_requested(gap, stalls, stop)
+        if stopped is not None:
+            return stopped
+        if not collector.started:
+            barrier.tick(now)
+        if _take_messages(bus, collector.realtime):
+            last_msg = time.monotonic()
+            stalls.heard()
+        if collector.realtime:
+            collector.close_ready(REALTIME_CLOSE_BATCH)
+        if channel is not None:
+            channel.step(collector.progress)
+        if (end := collector.ended) is not None:
+            _await_last_states(collector, bus, end.steps)
+            if channel is not None:
+                channel.step(collector.progress)
+            return None
+        if now - last_msg > idle_timeout:
+            return _gone_quiet(stalls, idle_timeout)
+
+
+def _stop_requested(gap: float, stalls: StallWatch, stop: StopRequests) -> StopCause | None:
+    """Our stall of ``gap`` s past the lease (the router closed our session, and what was in flight to us is lost:
+    the run cannot go on), or a signal (after a stall that may have cost our session, the stall is the cause)."""
+    if gap >= stalls.lease:
+        log("collector", f"stalled {gap:.0f} s, past the stall limit ({stalls.lease:g} s, Zenoh's lease): ending the run")
+        return "collector stalled"
+    if stop.signal is not None:
+        log("collector", f"stopped by {stop.signal}; writing what was checked")
+        return "collector stalled" if stalls.session_at_risk else "interrupted"
+    return None
+
+
+def _take_messages(bus: Bus, realtime: bool) -> bool:
+    """A pump of at most 0.05 s; real time, then all off the bus before judging (its inbox is bounded).  Whether a
+    message came."""
+    if not bus.pump(timeout=0.05):
+        return False
+    for _ in range(REALTIME_DRAIN_PUMPS if realtime else 0):
+        if not bus.pump(timeout=0.0):
+            break
+    return True
+
+
+def _await_last_states(collector: Collector, bus: Bus, last: int) -> None:
+    """The End overtakes the last states on other paths: wait until they are in (or END_GRACE_S)."""
+    t_end = time.monotonic()
+    while collector.progress < last and time.monotonic() - t_end < END_GRACE_S:
+        bus.pump(timeout=0.05)
+        if collector.realtime:
+            collector.close_ready()
+
+
+def _gone_quiet(stalls: StallWatch, idle_timeout: float) -> StopCause:
+    """No message for ``idle_timeout`` s: the vehicle is gone, or our session was lost while we stalled."""
+    stopped: StopCause = "collector stalled" if stalls.session_at_risk else "vehicle gone"  # (nothing came since: it was lost)
+    why = "our session was lost while we stalled" if stopped == "collector stalled" else "the vehicle is gone"
+    log("collector", f"no message for {idle_timeout:g} s: {why}; writing what was received")
+    return stopped
 
 
 # ---------------------------------------------------------------- a role process from its spec
