@@ -58,6 +58,7 @@ ZENOH_ONLY: dict[str, tuple[str, object]] = {
     "--zenoh-config": ("zenoh_config", None),
     "--view": ("view", False),
     "--view-port": ("view_port", 0),
+    "--view-lag-json": ("view_lag_json", None),
 }
 
 
@@ -107,6 +108,12 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
         default=0,
         metavar="N",
         help="the live view's one port on 127.0.0.1, its page and its stream (default: 0, a free one; fix it to forward it with ssh -L)",
+    )
+    g.add_argument(
+        "--view-lag-json",
+        metavar="PATH",
+        help="with --view: the view writes its lag behind a real-time run per step, and the frames it dropped, as JSON to PATH "
+        "when it stops (the benchmark's measure; default: none)",
     )
 
 
@@ -257,6 +264,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
     from netsetest.runtime.launcher import LaunchError, LaunchOptions, launch, plan_run
     from netsetest.runtime.report import exit_code, format_table
 
+    checks.output_file(a.view_lag_json, "--view-lag-json")
     opts = LaunchOptions(
         topology=a.topology,
         case=a.case,
@@ -282,6 +290,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         run_id=a.run_id,
         view=a.view,
         view_port=a.view_port,
+        view_lag_json=a.view_lag_json,
         port=a.port,
         log=a.log,
         mapping=a.map,

@@ -47,7 +47,7 @@ from netsetest.runtime.forkserver import ForkServer, ForkServerError
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_COLLECTOR_STALLED, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress, exit_code, log
 from netsetest.runtime.rolespec import Clock, CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
 from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, STALL_LIMIT_S, START_TIMEOUT_S
-from netsetest.runtime.view import ViewProcess, start_view
+from netsetest.runtime.view_process import ViewProcess, start_view
 from netsetest.runtime.view_server import PortTaken, ViewError
 
 if TYPE_CHECKING:  # annotations only: the estimator and the models load in the role processes, not in the launcher
@@ -91,8 +91,9 @@ class LaunchOptions:
     insecure: bool = False
     zenoh_config: str | None = None
     run_id: str | None = None  # None: a fresh random one (a guessable id, run<pid>, named every key of the run)
-    view: bool = False  # a live view beside the run (runtime/view.py), an observer like `watch`
+    view: bool = False  # a live view beside the run (runtime/view_process.py), an observer like `watch`
     view_port: int = 0  # its web port (0: a free one)
+    view_lag_json: str | None = None  # where the view writes its lag behind the run when it stops (the benchmark's)
     port: int = 0  # the run's port on loopback: its router's, or (insecure) its collector's, which observers connect to (0: a free one)
     log: str | None = None  # a recorded drive as the world (docs/your-log.md)
     mapping: str | None = None  # its mapping file
@@ -183,6 +184,8 @@ def plan_run(opts: LaunchOptions) -> RunPlan:
         check_window(opts.ack_window)  # (the command line's is checked as it is parsed; a caller's here)
     except ValueError as exc:
         raise LaunchError(f"--ack-window {show_window(opts.ack_window)}: {exc}") from None
+    if opts.view_lag_json is not None and not opts.view:
+        raise LaunchError("--view-lag-json: the live view's lag needs a live view (--view)")
     if opts.neighbour_timeout >= opts.node_timeout:
         # else a node waiting for a dead neighbour is itself declared dead by the vehicle
         raise LaunchError(f"--neighbour-timeout ({opts.neighbour_timeout:g} s) must be shorter than --node-timeout ({opts.node_timeout:g} s)")
@@ -610,7 +613,7 @@ def launch(plan: RunPlan) -> RunOutcome:
                 for line in network.describe():
                     log("run", line)
             if o.view:  # subscribed before the first role starts: it sees step 0
-                view = start_view(network.observer_args(), plan.scenario.tau_s, o.view_port)
+                view = start_view(network.observer_args(), plan.scenario.tau_s, o.view_port, o.view_lag_json)
                 log("run", f"live view: {view.url}")
             starter = RoleStarter(plan, network, children)
             bar = Progress(plan.scenario.steps, f"zenoh ({len(plan.scenario.ids)} nodes + vehicle + collector)", enabled=not o.quiet)
