@@ -280,13 +280,13 @@ class Vehicle:
         d = self.log.step(k)
         lost = self.losses.lost_at(k) if k > 0 else []
         deadline = time.time() + sc.tau_s if self.realtime else None
-        y = {i: float(yl) + sc.node(i).sensor.Ds * d.faults[i] for i, yl in d.y_log.items() if yl is not None}
+        y = _with_faults(sc, d)
         self._publish_inputs(k, y, {n.id: 1.0 for n in sc.nodes}, lost, deadline)
         self.u, self.w, self.vx = d.u, 0.0, d.vx
         self.x = d.x_ref if d.x_ref is not None else np.zeros(2)
         truth = {str(i): _log_truth(sc.node(i), d, k) for i in sc.ids}
+        of = {name: {i: getattr(t, name) for i, t in truth.items()} for name in _NodeTruth._fields}  # each part, by node
         read = [i for i in sc.ids if d.y_log[i] is not None]
-        faults = {int(i): t.fault for i, t in truth.items()}
         p = sc.model.params
         ay = d.speed * float(d.x_ref[1]) if d.x_ref is not None else None  # v·r: the reference gives no β̇ (docs/your-log.md)
         self.bus.publish(
@@ -294,34 +294,39 @@ class Vehicle:
             Truth(
                 step=k,
                 x=list(map(float, self.x)),
-                faults={i: t.fault for i, t in truth.items()},
+                faults=of["fault"],
                 u=self.u,
                 w=0.0,  # the side wind of a recorded drive is unknown: its bound is declared, never checked
                 vx=self.vx,
-                noise={i: t.noise for i, t in truth.items()},
-                gamma={str(i): 1.0 for i in sc.ids},
+                noise=of["noise"],
+                gamma=dict.fromkeys(map(str, sc.ids), 1.0),
                 y={str(i): y[i] for i in read},
                 y_nofault={str(i): float(d.y_log[i]) for i in read},  # type: ignore[arg-type]  # read: a reading is there
-                sector_ok={str(i): True for i in sc.ids},  # the nsnim case: no saturation
-                noise_ok={i: t.noise_ok for i, t in truth.items()},
-                r={i: t.r for i, t in truth.items()},
-                fault_ok={i: t.fault_ok for i, t in truth.items()},
+                sector_ok=dict.fromkeys(map(str, sc.ids), True),  # the nsnim case: no saturation
+                noise_ok=of["noise_ok"],
+                r=of["r"],
+                fault_ok=of["fault_ok"],
                 dist_ok=True,
                 lost=lost,
                 alive=sorted(self.alive),
                 drops=self.drop_report(),
-                health_ok=sc.health_holds(faults),
+                health_ok=sc.health_holds({int(i): f for i, f in of["fault"].items()}),
                 speed=d.speed,
                 ay=ay,
                 # the model scheduled at a speed it does not cover describes no transition of the car
                 mismatch_ok=p.vx_min <= d.speed <= p.vx_max,
                 envelope_ok=envelope_holds(sc, ay, d.speed),
                 x_acc=list(d.accuracy),
-                f_acc={i: t.f_acc for i, t in truth.items()},
+                f_acc=of["f_acc"],
                 reference=d.x_ref is not None,
                 no_reading=[i for i in sc.ids if d.y_log[i] is None],
             ),
         )
+
+
+def _with_faults(sc: Scenario, d: LogStep) -> dict[int, float]:
+    """A recorded step's readings with the declared faults on top (a node without a reading: absent)."""
+    return {i: float(yl) + sc.node(i).sensor.Ds * d.faults[i] for i, yl in d.y_log.items() if yl is not None}
 
 
 class _NodeTruth(NamedTuple):
