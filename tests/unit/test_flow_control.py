@@ -12,7 +12,7 @@ from netsetest.bus.base import MAX_PER_KEY, MemoryBus
 from netsetest.config.schema import load_topology
 from netsetest.messages import Ready
 from netsetest.cli.main import main
-from netsetest.roles.flow import ACK_STRIDE, ACK_WINDOW, MAX_ACK_WINDOW, UNBOUNDED, parse_window
+from netsetest.roles.flow import ACK_STRIDE, ACK_WINDOW, MAX_ACK_WINDOW, UNBOUNDED, Acknowledgments, Hold, parse_window
 from netsetest.roles.vehicle import Vehicle
 from netsetest.runtime.launcher import LaunchError, LaunchOptions, plan_run
 from netsetest.runtime.rolespec import VehicleSpec
@@ -97,3 +97,23 @@ def test_an_unbounded_vehicle_never_waits_for_the_collector_but_before_its_end()
         vehicle.advance()
     assert vehicle.k == STEPS, "nothing acknowledged, and every step went out"
     assert not vehicle.done, "the End still waits for the last step's acknowledgment"
+
+
+def test_the_collector_acknowledges_every_stride_and_the_last_step_at_once() -> None:
+    """The collector's side (roles/flow.py Acknowledgments): with every truth up to ``head`` taken in."""
+    acks = Acknowledgments(last=STEPS)
+    assert acks.due(-1) is None and acks.due(ACK_STRIDE - 2) is None
+    assert acks.due(ACK_STRIDE - 1) == ACK_STRIDE - 1, "the first stride's step"
+    assert acks.due(ACK_STRIDE) is None and acks.due(2 * ACK_STRIDE - 1) == 2 * ACK_STRIDE - 1
+    assert acks.due(STEPS - 1) == STEPS - 1 and acks.due(STEPS) == STEPS, "the last step at once: the vehicle's End waits for it"
+    assert acks.due(STEPS) is None
+
+
+def test_a_held_vehicle_says_so_once_and_gives_up_past_the_stall_limit() -> None:
+    """The vehicle held by a shut window (roles/flow.py Hold): a collector that still acknowledges is only behind."""
+    hold = Hold(tell_after=10.0, limit=60.0)
+    assert hold.held(0.0, acked=4) == "waiting" and hold.held(10.5, acked=4) == "tell" and hold.held(11.0, acked=4) == "waiting"
+    assert hold.held(50.0, acked=6) == "waiting", "a new acknowledgment: the wait starts again"
+    assert hold.held(109.0, acked=6) == "waiting" and hold.held(110.5, acked=6) == "stalled"
+    hold.released()
+    assert hold.held(200.0, acked=8) == "waiting" and hold.held(210.5, acked=8) == "tell", "a new hold is said again"
