@@ -472,7 +472,7 @@ def run_bench(
         res["realtime"] = realtime_ladder(tmp, cfg["rt_sizes"], cfg["rt_steps"], log=_log)
         _log("real time with a reference's readings, k-of-N health per group of six (max_faulty) and the car as the truth: the largest ring that fits")
         res["realtime"]["variants"] = realtime_fit(tmp, RT_VARIANTS, cfg["rt_sizes"], res["realtime"]["max_nodes"], cfg["rt_steps"], log=_log)
-        _log(f"a node's CPU per step by phase (real time, {cfg['profile_nodes']} nodes, NETSETEST_PROFILE), default and trace objective")
+        _log(f"a node's CPU per step by phase (real time, {cfg['profile_nodes']} nodes, run --profile), default and trace objective")
         res["node_profile"] = realtime_node_profile(tmp, cfg["profile_nodes"], cfg["rt_steps"])
         res["node_profile_trace"] = realtime_node_profile(tmp, cfg["profile_nodes"], cfg["rt_steps"], objective="trace")
         for p in (res["node_profile"], res["node_profile_trace"]):
@@ -869,7 +869,7 @@ def _profile_lines(*profiles: dict) -> list[str]:
     lines = [
         "",
         f"Where a node's CPU goes per step: real-time ring of {p0['nodes']} nodes, {p0['steps']} steps, every node "
-        "profiled (`NETSETEST_PROFILE`, thread CPU; median over the nodes; "
+        "profiled (`run --profile`, thread CPU; median over the nodes; "
         + "; ".join(f"{p['objective']}: load before {p['load_before']}, {p['deadline_misses']} deadline misses" for p in ok)
         + "):",
         "",

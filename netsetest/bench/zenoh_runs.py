@@ -558,15 +558,28 @@ def cpu_demand(processes: dict | None, nodes: int) -> dict:
     return {"node_cpu_ms_per_step": per_step_ms, "demand_cores": nodes * per_step_ms / 1000.0 / RING_TAU_S + roles}
 
 
+def profiling(code: Path | None, directory: str) -> tuple[dict[str, str], list[str]]:
+    """The environment and the ``netsetest run`` options that have ``code``'s nodes (:func:`code_env`) write their
+    profiles to ``directory``: ``run --profile DIR``; a baseline from before that option (its ``run --help`` does not
+    name it) read ``$NETSETEST_PROFILE`` instead, which is what it is given."""
+    env = code_env(code)
+    if code is not None:
+        usage = subprocess.run([*PY, "run", "--help"], capture_output=True, text=True, timeout=60, env={**os.environ, **env}).stdout
+        if "--profile" not in usage:
+            return {**env, "NETSETEST_PROFILE": directory}, []
+    return env, ["--profile", directory]
+
+
 def profiled_ring_run(directory: Path, nodes: int, steps: int, objective: str | None = None, code: Path | None = None) -> tuple[dict, list[dict], str]:
-    """One real-time ring run with every node profiled (``NETSETEST_PROFILE``, netsetest/profile.py): the
-    run (:func:`cli_run`), each node's report (those that stepped) and the load average before it.
+    """One real-time ring run with every node profiled (``run --profile``, netsetest/profile.py; :func:`profiling`):
+    the run (:func:`cli_run`), each node's report (those that stepped) and the load average before it.
     ``objective``: the nodes' ``--objective``; ``code``: another checkout whose netsetest runs (PYTHONPATH,
     the benchmark's baseline), this one's by default."""
     from netsetest.bench.topologies import RING_TAU_S, ring_topology
 
     topo = ring_topology(directory, nodes, steps)
     with tempfile.TemporaryDirectory(prefix="nsprofile-") as prof:
+        env, extra = profiling(code, prof)
         load = _loadavg()
         r = cli_run(
             topo,
@@ -574,8 +587,8 @@ def profiled_ring_run(directory: Path, nodes: int, steps: int, objective: str | 
             "realtime",
             timeout=120 + 3 * nodes + steps * 0.2,
             sample_stepping_s=steps * RING_TAU_S,
-            env={"NETSETEST_PROFILE": prof, **code_env(code)},
-            extra=["--objective", objective] if objective else None,
+            env=env,
+            extra=[*extra, "--objective", objective] if objective else extra,
         )
         reports = [json.loads(p.read_text()) for p in sorted(Path(prof).glob("node-*.json"))]
     return r, [x for x in reports if x.get("steps")], load

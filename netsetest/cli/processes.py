@@ -20,6 +20,7 @@ from netsetest.runtime.rolespec import (
     ESTIMATOR_HELP,
     FAULT_SCALE_HELP,
     MANOEUVRE_HELP,
+    PROFILE_HELP,
     SPEED_HELP,
     ROLE_SPECS,
     RUN_ID_ENV,
@@ -62,6 +63,7 @@ ZENOH_ONLY: dict[str, tuple[str, object]] = {
     "--view": ("view", False),
     "--view-port": ("view_port", 0),
     "--view-lag-json": ("view_lag_json", None),
+    "--profile": ("profile", None),
 }
 
 
@@ -118,6 +120,7 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
         help="with --view: the view writes its lag behind a real-time run per step, and the frames it dropped, as JSON to PATH "
         "when it stops (the benchmark's measure; default: none)",
     )
+    g.add_argument("--profile", type=argtypes.writable_dir, metavar="DIR", help=f"every node's --profile: {PROFILE_HELP}")
 
 
 def scenario_overrides(p: argparse.ArgumentParser) -> None:
@@ -301,6 +304,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         view=a.view,
         view_port=a.view_port,
         view_lag_json=a.view_lag_json,
+        profile=a.profile,
         port=a.port,
         log=a.log,
         mapping=a.map,

@@ -87,6 +87,13 @@ def readable_file(s: str) -> str:
     return s
 
 
+def writable_dir(s: str) -> str:
+    """argparse type: an existing directory this process can write in (``--profile``)."""
+    if not os.path.isdir(s) or not os.access(s, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"{s}: not a directory this process can write in")
+    return s
+
+
 def node_at(s: str) -> tuple[int, int]:
     """argparse type of ``NODE@STEP`` (``--kill``, ``--rejoin``, ``--await-rejoin``)."""
     try:

@@ -97,6 +97,7 @@ class LaunchOptions:
     view: bool = False  # a live view beside the run (runtime/view_process.py), an observer like `watch`
     view_port: int = 0  # its web port (0: a free one)
     view_lag_json: str | None = None  # where the view writes its lag behind the run when it stops (the benchmark's)
+    profile: str | None = None  # a directory every node writes its CPU per step by phase to (netsetest/profile.py; the benchmark's)
     port: int = 0  # the run's port on loopback: its router's, or (insecure) its collector's, which observers connect to (0: a free one)
     log: str | None = None  # a recorded drive as the world (docs/your-log.md)
     mapping: str | None = None  # its mapping file
@@ -445,6 +446,7 @@ class RoleStarter:
             o.neighbour_timeout,
             rejoin,
             self.plan.schedule.next_kill(i, after),
+            o.profile,
             self.network.zenoh(f"node{i}"),
         )
 

@@ -31,7 +31,7 @@ from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import Scenario
 from netsetest.messages import Message, Ready
-from netsetest.profile import PROFILE, observe_bus, observe_node
+from netsetest.profile import PhaseProfile, observe_bus, observe_node
 from netsetest.records.meta import RunMeta
 from netsetest.roles.node import Node
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_COLLECTOR_STALLED, EXIT_VIOLATION, exit_code, log, record_sink, write_summary
@@ -350,7 +350,7 @@ def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
     # a neighbour and waits for the readings within a budget: both lazy, so the N readings of a step under
     # max_faulty cost the node a few polls, not N callbacks and wake-ups
     # the step's part its readings do not enter is solved while they cross the network (the same result)
-    prof = PROFILE  # NETSETEST_PROFILE: the bus and the node observed (netsetest/profile.py); else nothing on their path
+    prof = PhaseProfile() if spec.profile is not None else None  # --profile: the bus and the node observed (netsetest/profile.py); else nothing on their path
     if prof is not None:
         observe_bus(bus, prof)  # (before the node subscribes)
     node = Node(sc, node_id, bus, run_id, spec.variant, rejoin=spec.rejoin, objective=spec.objective, lazy=realtime, early=True)
@@ -377,8 +377,8 @@ def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
                 time.sleep(CRASH_FLUSH_S)  # the state of step k leaves before the crash
                 log(role, f"killing myself (SIGKILL) after step {node.k} as asked")
                 os.kill(os.getpid(), signal.SIGKILL)
-    if prof is not None and profiled is not None:
-        prof.write(f"node-{node_id}", profiled())
+    if spec.profile is not None and prof is not None and profiled is not None:
+        prof.write(spec.profile, f"node-{node_id}", profiled())
     return 0
 
 

@@ -209,6 +209,10 @@ ACK_WINDOW_HELP = (
     f"collector's backlog stays within its inbox); {UNBOUNDED}: no window, a slow collector may then lose messages "
     f"(the benchmark's measure of what the window costs) (default: {ACK_WINDOW})"
 )
+PROFILE_HELP = (
+    "write the node's CPU per step by phase of its own thread to DIR/node-<id>.json when it ends (netsetest/profile.py; "
+    "the benchmark's; default: not profiled, nothing on the hot path)"
+)
 STALL_LIMIT_HELP = (
     "how long [s] a role may not run (stopped, a swapping machine) and the run go on: every session's Zenoh lease, and the "
     "longest the vehicle waits for the collector; a collector stalled longer ends the run with a verdict naming its stall "
@@ -347,6 +351,7 @@ class NodeSpec(RoleSpec):
     )
     rejoin: bool = _opt(False, "--rejoin", "join a running network (after a crash or restart)", switch=True)
     crash_after: int | None = _opt(None, "--crash-after", "SIGKILL itself right after publishing step STEP (run --kill; default: never)", int, metavar="STEP")
+    profile: str | None = _opt(None, "--profile", PROFILE_HELP, argtypes.writable_dir, metavar="DIR")  # netsetest/profile.py
     zenoh: ZenohSpec = _group(ZenohSpec, "zenoh")
 
 

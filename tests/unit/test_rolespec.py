@@ -32,6 +32,7 @@ from netsetest.runtime.rolespec import (
 EXAMPLES = int(os.environ.get("NETSETEST_FUZZ_EXAMPLES", "0")) or None
 ROUND_TRIP = settings(max_examples=EXAMPLES or 100, derandomize=EXAMPLES is None, deadline=None, database=None)
 READABLE = ("pyproject.toml", "README.md")  # --zenoh-config is checked to be a readable file when parsed
+WRITABLE = ("docs", "tests")  # --profile: a directory the node can write in, checked when parsed
 
 # any text a path or name may be, as long as it is one argv entry (no NUL); a positional cannot start with '-',
 # and no value can be '--' (argparse drops it; to_argv refuses it)
@@ -98,6 +99,7 @@ SPECS: dict[type[RoleSpec], st.SearchStrategy] = {
         seconds,
         st.booleans(),
         maybe(st.integers(-10, 10**6)),
+        maybe(st.sampled_from(WRITABLE)),  # --profile DIR (netsetest/profile.py)
         zenohs,
     ),
     CollectorSpec: st.builds(
