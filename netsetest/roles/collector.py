@@ -38,7 +38,9 @@ messages away (a collector stopped longer than its inbox holds: :meth:`Collector
 it lost and judges on).  Neither is ever a node's silence: a node that published is never reported missing
 or rejoined.
 
-A miss the verdict counts therefore comes from a state the node itself computed from its true input.
+With the admission's defences (a truth must follow from the one before through the vehicle model; a state must
+match the truth of its step where an honest node's must; two copies that both pass are judged on neither), a miss
+the verdict counts comes from a state the node itself computed from its true input.
 """
 
 from __future__ import annotations
