@@ -15,6 +15,7 @@ EXTRAS = {
     "rerun": "view",
     "rosbags": "logs",
     "asammdf": "logs",
+    "distributed": "cluster",
 }
 
 

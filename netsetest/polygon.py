@@ -29,8 +29,9 @@ ROUNDING = 1e-10  # outward, relative to the coordinates' size: far above one st
 MAX_REACH = 1e3  # a drop extends a neighbour by at most this many of its lengths (q's rounding stays ≪ DUPLICATE)
 DUPLICATE = 1e-13  # vertices closer than this (relative to the coordinates' size) are one: far below ROUNDING
 # A published region (docs/network.md): what decode accepts (:func:`region_problem`), a reason each for what it drops
-MAX_COORDINATE = 1e6  # |β| [rad], |r| [rad/s]: hundreds of times a scenario's prior box (|x̂0| ≤ 10³, P0 ≤ 10⁶), and
-# far inside the float range (every product the checks and the judge form is finite)
+MAX_COORDINATE = 1e10  # |β| [rad], |r| [rad/s]: over a thousand times the largest prior box a topology may declare (|x̂0| ≤ 10³,
+# √(ρ·P0) ≤ 10⁶: config/schema.py, tests/unit/test_polygon_membership.py holds the tie), and far inside the float range
+# (every product the checks and the judge form is finite)
 CONVEX_TOLERANCE = ROUNDING  # a turn the wrong way this shallow (relative to the coordinates' size) is a rounding's: the
 # region is read as its hull, which it holds to within the move's own pad
 REGION_ODD, REGION_VERTICES, REGION_NOT_NUMBERS = "region-odd", "region-vertices", "region-not-numbers"

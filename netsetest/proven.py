@@ -22,6 +22,7 @@ import numpy as np
 from msgspec import Meta, Struct
 
 from netsetest.models.sensor import NA, NX
+import netsetest.linalg as linalg
 from netsetest.polygon import MAX_VERTICES, MIN_VERTICES, Polygon, region_problem
 from netsetest.sets import Box, Ellipsoid, RegionSet, SumSet, Zonotope, ellipsoid_bounds, set_from_wire
 from netsetest.validation import Finite, Positive
@@ -133,7 +134,7 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
     def E(self, xbar: np.ndarray) -> float:
         """eᵀP⁻¹e with e = x̄ − x̂: where x̄ lies against the ellipsoid (inside iff ≤ ρ)."""
         e = xbar - self.centre
-        return float(e @ np.linalg.solve(self.P_matrix, e))
+        return float(e @ linalg.solve(self.P_matrix, e))  # (numpy.linalg's own LAPACK call, the same floats, without its set-up)
 
     def contains(self, xbar: np.ndarray, E: float | None = None) -> bool:
         """x̄ = (β, r, f) lies in the set: the judge's rule.  A set estimator's set by its own ``contains`` (relative

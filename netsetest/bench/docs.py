@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from netsetest.bench.campaign import campaign_markdown
 from netsetest.bench.exact_cost import exact_cost_markdown
 from netsetest.bench.flow import flow_markdown
 from netsetest.bench.logs import logs_markdown, logs_summary_markdown
@@ -120,6 +121,13 @@ PARTS: dict[str, Part] = {
     ),
     "logs": Part("A recorded drive as the world", "bench/logs.json", "logs", logs_markdown, _LOGS),
     "logs-summary": Part("A recorded drive as the world, against its targets", "bench/logs.json", "logs", logs_summary_markdown, _LOGS, in_results=False),
+    "campaign": Part(
+        "Campaigns: every core, a cluster, resume",
+        "bench/campaign.json",
+        "campaign",
+        campaign_markdown,
+        "netsetest bench --quick --only campaign --json bench/campaign.json --markdown bench/campaign.md",
+    ),
     "spread": Part(
         "How noisy the benchmark is",
         "bench/spread.json",

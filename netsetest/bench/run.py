@@ -48,6 +48,9 @@ QUICK: dict[str, Any] = {
     "profile_nodes": 96,
     "node_budget_nodes": 48,  # --only node: the profiled ring
     "node_budget_reps": 3,
+    "campaign_runs": 24,  # --only campaign: the throughput campaign (bench/campaign.py)
+    "campaign_reps": 2,
+    "campaign_big_runs": 100,  # a tenth of the issue's 1 000-run campaign (the full part runs it whole)
     "scaleout_nodes": 24,  # --only scaleout: the lockstep ring across one and two namespaces (bench/scaleout.py)
     "scaleout_steps": 40,
     "scaleout_reps": 3,
@@ -100,6 +103,9 @@ FULL: dict[str, Any] = {
     "profile_nodes": 96,
     "node_budget_nodes": 96,
     "node_budget_reps": 3,
+    "campaign_runs": 200,
+    "campaign_reps": 2,
+    "campaign_big_runs": 1000,
     "scaleout_nodes": 48,
     "scaleout_steps": 80,
     "scaleout_reps": 3,
@@ -385,8 +391,8 @@ def run_bench(
     only: str | None = None,
     baseline: Path | None = None,
 ) -> int:
-    """``baseline``: a checkout the node and widths parts measure alternately beside this one (bench/node_budget.py,
-    bench/widths.py)."""
+    """``baseline``: a checkout the node, widths and performance parts measure alternately beside this one
+    (bench/node_budget.py, bench/widths.py, bench/baseline.py)."""
     from netsetest.bench.exact_cost import exact_cost_markdown, exact_figures
     from netsetest.bench.network import network_figures, network_markdown
     from netsetest.bench.plant import plant_figures, plant_markdown
@@ -396,6 +402,7 @@ def run_bench(
     from netsetest.bench.view import view_figures, view_markdown
     from netsetest.bench.node_budget import node_figures, node_markdown
     from netsetest.bench.scaleout import scaleout_figures, scaleout_markdown
+    from netsetest.bench.campaign import campaign_figures, campaign_markdown
     from netsetest.bench.widths import widths_figures, widths_markdown
     from netsetest.bench.zenoh_runs import (
         launch_to_step0,
@@ -432,6 +439,7 @@ def run_bench(
             "widths": (lambda c, t: widths_figures(c, t, baseline), widths_markdown),
             "scaleout": (scaleout_figures, scaleout_markdown),
             "logs": (logs_figures, logs_markdown),
+            "campaign": (campaign_figures, campaign_markdown),
         }[only]
         with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
             res[only] = figures(cfg, Path(tmpd))
@@ -470,6 +478,10 @@ def run_bench(
         for p in (res["node_profile"], res["node_profile_trace"]):
             _log(f"  {p['objective']}: {p.get('process_ms_per_step')} ms per node-step, {p['deadline_misses']} deadline misses")
         res["defences"] = defences(cfg)
+        if baseline is not None:
+            from netsetest.bench.baseline import performance_side_by_side
+
+            res["baseline"] = performance_side_by_side(cfg, tmp, baseline, quick)
         if only is None:  # every part too; --only performance leaves them out
             res["plant"] = plant_figures(cfg, tmp)
             res["network"] = network_figures(cfg, tmp)
@@ -480,6 +492,10 @@ def run_bench(
     res["meta"]["duration_s"] = time.perf_counter() - t_all
     res.update(headline(res))
     md = markdown(res)
+    if "baseline" in res:
+        from netsetest.bench.baseline import baseline_markdown
+
+        md += "\n## Side by side with the baseline (netsetest/bench/baseline.py)\n\n" + baseline_markdown(res["baseline"])
     if only is None:
         md += "\n## A car as the truth (netsetest/bench/plant.py)\n\n" + plant_markdown(res["plant"])
         md += "\n## What the exchange can buy (netsetest/bench/network.py)\n\n" + network_markdown(res["network"])

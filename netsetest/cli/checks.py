@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -14,12 +13,7 @@ from netsetest.runtime import argtypes
 
 # the parsers a role spec shares (runtime/argtypes.py), under the names every command uses
 positive_int, seed, run_id, endpoint = argtypes.positive_int, argtypes.seed, argtypes.run_id, argtypes.endpoint
-non_negative_seconds = argtypes.non_negative_seconds
-
-SEED_RANGE_RE = re.compile(r"(\d+)\s*-\s*(\d+)")
-SEED_RANGE_MAX = (
-    10_000  # seeds one range may name (a typo like 0-99999999 is not a request)  # numpy's SeedSequence takes any non-negative integer; keep it to 64 bits
-)
+non_negative_seconds, seed_list = argtypes.non_negative_seconds, argtypes.seed_list
 DRAWN_SEED_BITS = 32  # a run's own seed: unguessable by another local user, short enough to type back
 
 
@@ -49,21 +43,6 @@ def drive_list(s: str) -> tuple[DriveSpec, ...]:
         return tuple(DriveSpec.parse(x) for x in items)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def seed_list(s: str) -> tuple[int, ...]:
-    """argparse type: comma-separated seeds and ranges A-B (inclusive), e.g. ``0-4,9``."""
-    out: list[int] = []
-    for part in s.split(","):
-        m = SEED_RANGE_RE.fullmatch(part.strip())
-        if m is None:  # one seed (a negative number is a seed, and an error, not a range)
-            out.append(seed(part))
-            continue
-        a, b = seed(m[1]), seed(m[2])
-        if b < a or b - a >= SEED_RANGE_MAX:
-            raise argparse.ArgumentTypeError(f"seed range {part.strip()!r}: must be A-B with A ≤ B and at most {SEED_RANGE_MAX} seeds")
-        out.extend(range(a, b + 1))
-    return tuple(out)
 
 
 def non_negative_float(s: str) -> float:

@@ -104,7 +104,7 @@ def describe(sub: argparse._SubParsersAction) -> str:
     commands = (
         f"commands: {', '.join(users)}; the role processes of a Zenoh run or deployment: {', '.join(ROLE_COMMANDS)} (netsetest COMMAND --help says more)."
     )
-    return "\n\n".join((textwrap.fill(SUMMARY, HELP_WIDTH), textwrap.fill(commands, HELP_WIDTH), EXIT_CODES))
+    return "\n\n".join((textwrap.fill(SUMMARY, HELP_WIDTH), textwrap.fill(commands, HELP_WIDTH, break_on_hyphens=False), EXIT_CODES))  # a name stays whole
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -117,7 +117,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="run a whole network (in memory, or as Zenoh processes)")
     _scenario_args(p)
     _run_args(p)
-    processes.estimator_arg(p)
+    processes.scenario_overrides(p)
     p.add_argument("--mode", choices=["inmemory", "zenoh"], default="zenoh", help="one process, or one process per role over Zenoh")
     p.add_argument(
         "--clock",
@@ -246,7 +246,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--baseline",
         metavar="DIR",
-        help="with --only node or widths: another checkout (node: say main's; widths: 29290ba's) measured alternately beside this one",
+        help="with --only node, widths or performance: another checkout (node: say main's; widths: 29290ba's; performance: "
+        "16f81b4's, issue 45's figures) measured alternately beside this one",
     )
     p.add_argument(
         "--render-docs",
@@ -264,10 +265,11 @@ def build_parser() -> argparse.ArgumentParser:
         "(how noisy the benchmark is); with --json / --markdown, write them",
     )
 
-    from netsetest.cli import compare, tools
+    from netsetest.cli import campaign, compare, tools
 
     tools.add_parsers(sub)
     compare.add_parser(sub, _scenario_args)
+    campaign.add_parser(sub)
     for command in sub.choices.values():
         command.formatter_class = HelpFormatter
     ap.description = describe(sub)
@@ -295,14 +297,10 @@ def cmd_run(a: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return EXIT_BAD_INPUT
-    from netsetest.config.schema import load_topology
-    from netsetest.runtime.inmemory import run_inmemory
     from netsetest.runtime.report import exit_code, format_table, write_summary
+    from netsetest.runtime.runspec import RunSpec
 
-    from netsetest.logs.drive import with_log_steps
-
-    sc = with_log_steps(load_topology(a.topology, a.case, a.steps, a.estimator, log=a.log, mapping=a.map))
-    res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet, record=a.record, keep=False, objective=a.objective)
+    res = RunSpec.from_namespace(a).execute(progress=not a.quiet, record=a.record, keep=False)
     write_summary(res.summary, a.summary_json)
     print(format_table(res.summary, a.strict))
     return exit_code(res.summary, a.strict)
@@ -720,9 +718,9 @@ def cmd_bench(a: argparse.Namespace) -> int:
         return _spread(a)
     from pathlib import Path
 
-    if a.baseline is not None and (a.only not in ("node", "widths") or not Path(a.baseline, "netsetest", "__init__.py").is_file()):
+    if a.baseline is not None and (a.only not in ("node", "widths", "performance") or not Path(a.baseline, "netsetest", "__init__.py").is_file()):
         print(
-            f"netsetest bench: --baseline {a.baseline}: needs --only node or --only widths and a checkout of netsetest (DIR/netsetest/__init__.py)",
+            f"netsetest bench: --baseline {a.baseline}: needs --only node, widths or performance and a checkout of netsetest (DIR/netsetest/__init__.py)",
             file=sys.stderr,
         )
         return EXIT_BAD_INPUT
@@ -813,9 +811,9 @@ COMMANDS.update(
 
 def handlers() -> dict[str, Callable[[argparse.Namespace], int]]:
     """Every command's handler by name: the one registry (each CLI module registers its own)."""
-    from netsetest.cli import compare, processes, tools
+    from netsetest.cli import campaign, compare, processes, tools
 
-    return {**COMMANDS, **tools.COMMANDS, **compare.COMMANDS, **processes.COMMANDS}
+    return {**COMMANDS, **tools.COMMANDS, **compare.COMMANDS, **campaign.COMMANDS, **processes.COMMANDS}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -16,6 +16,9 @@ from netsetest.runtime import argtypes
 from netsetest.runtime.report import EXIT_BAD_INPUT
 from netsetest.runtime.rolespec import (
     ESTIMATOR_HELP,
+    FAULT_SCALE_HELP,
+    MANOEUVRE_HELP,
+    SPEED_HELP,
     ROLE_SPECS,
     RUN_ID_ENV,
     STALL_LIMIT_HELP,
@@ -106,8 +109,12 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-def estimator_arg(p: argparse.ArgumentParser) -> None:
+def scenario_overrides(p: argparse.ArgumentParser) -> None:
+    """``run``'s overrides of the topology: the options of rolespec.ScenarioSpec, which every role is told."""
     p.add_argument("--estimator", choices=list(NODE_ESTIMATOR_NAMES), metavar="NAME", help=ESTIMATOR_HELP)
+    p.add_argument("--manoeuvre", type=argtypes.drive, metavar="NAME[@AMP]", help=MANOEUVRE_HELP)
+    p.add_argument("--speed", type=argtypes.speed_kmh, metavar="KMH", help=SPEED_HELP)
+    p.add_argument("--fault-scale", type=argtypes.fault_scale, metavar="S", help=FAULT_SCALE_HELP)
 
 
 def add_role_parsers(sub: argparse._SubParsersAction) -> None:
@@ -258,6 +265,9 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         case=a.case,
         steps=a.steps,
         estimator=a.estimator,
+        manoeuvre=a.manoeuvre,
+        speed=a.speed,
+        fault_scale=a.fault_scale,
         signals=a.signals,
         variant=a.variant,
         objective=a.objective,

@@ -784,6 +784,28 @@ def _check_log_nodes(path: Path, src: LogSource, ids: list[int], case: str) -> N
         raise ConfigError(f"{path}: case {case!r} on a log: a logged reading is the sensor's own (γ = 1, no saturation model of it), which is the nsnim case")
 
 
+FAULT_SCALE_MAX = 10.0  # --fault-scale: a fault ten times its declared bound is already far outside every assumption
+
+
+def scaled_fault(path: Path, prof: NodeProfile, scale: float) -> NodeProfile:
+    """``prof`` with its fault's largest |f_k| set to ``scale`` × its declared ``[fault_bound] size`` (the shape
+    kept: a square fault's amplitude, a piecewise fault's values scaled together); a fault-free profile as it
+    is.  A faulty profile that declares no size has nothing to scale by: ConfigError naming it."""
+    if not (math.isfinite(scale) and 0 <= scale <= FAULT_SCALE_MAX):
+        raise ConfigError(f"fault scale must be between 0 and {FAULT_SCALE_MAX:g}, got {scale!r}")
+    f = prof.fault
+    peak = abs(f.amplitude or 0.0) if f.kind == "square" else max((abs(v) for _, v in f.points or ()), default=0.0)
+    if f.kind == "none" or peak == 0.0:
+        return prof
+    size = prof.fault_bound.size
+    if not size:  # None: no bound declared; 0: a reference sensor, declared fault-free (its fault breaks that)
+        raise ConfigError(f"{path}: a fault scale needs [fault_bound] size > 0 for its {f.kind} fault (it scales the fault to a fraction of it)")
+    k = scale * size / peak
+    if f.kind == "square":
+        return msgspec.structs.replace(prof, fault=msgspec.structs.replace(f, amplitude=k * f.amplitude))  # type: ignore[operator]  # a square fault has an amplitude: peak > 0
+    return msgspec.structs.replace(prof, fault=msgspec.structs.replace(f, points=[(s, k * v) for s, v in f.points or ()]))
+
+
 def load_topology(
     path: str | Path,
     case: Case | None = None,
@@ -791,12 +813,17 @@ def load_topology(
     estimator: str | None = None,
     manoeuvre: str | None = None,
     steer_high: float | None = None,
+    speed_kmh: float | None = None,
+    fault_scale: float | None = None,
     log: str | None = None,
     mapping: str | None = None,
 ) -> Scenario:
     """Read and validate a topology (a path, or the name of a bundled one such as ``paper6``) and its node
     profiles; ``case``/``steps``/``estimator`` (every node's)/``manoeuvre``/``steer_high`` (``[steering]
-    high``) override the file; ``log``/``mapping`` make a recorded drive the world (docs/your-log.md)."""
+    high``)/``speed_kmh`` (``[speed] mean_kmh``) override the file; ``fault_scale`` sets every node's fault to
+    that fraction of its declared ``[fault_bound] size`` (:func:`scaled_fault`); ``log``/``mapping`` make a
+    recorded drive the world (docs/your-log.md).  The overrides are applied to the files' values before
+    validation, so the scenario's ``settings_digest`` covers them."""
     path = resolve_topology(path)
     if not path.exists():
         raise ConfigError(f"{path}: file not found (bundled topologies: {', '.join(bundled_topologies())})")
@@ -815,6 +842,10 @@ def load_topology(
         steering = data.get("steering", {})
         if isinstance(steering, dict):  # anything else fails validation as it is
             data["steering"] = {**steering, "high": steer_high}
+    if speed_kmh is not None:  # validated with the file: the range, and the model's speed range at load
+        speed = data.get("speed", {})
+        if isinstance(speed, dict):  # anything else fails validation as it is
+            data["speed"] = {**speed, "mean_kmh": speed_kmh}
     topo = _validated(path, data, TopologyFile)
     case = case or topo.case
     try:
@@ -835,7 +866,7 @@ def load_topology(
         ppath = node_dir / f"{ref.profile}.toml"
         if not ppath.exists():
             raise ConfigError(f"{path}: node {ref.id}: profile {ref.profile!r}: {ppath.name} not found in node_dir {topo.node_dir!r} ({node_dir})")
-        prof = profiles[ref.id] = load_profile(ppath)
+        prof = profiles[ref.id] = load_profile(ppath) if fault_scale is None else scaled_fault(ppath, load_profile(ppath), fault_scale)
         saim = case == "saim"
         if saim and (prof.saturation is None or prof.availability is None):
             raise ConfigError(f"{ppath}: the saim case needs [saturation] and [availability] sections")

@@ -589,3 +589,77 @@ def write_compare(path: str | Path, c: ComparePage) -> int:
             fig.y_range = Range1d(start=float(np.nanmin(truth)) - 2 * span, end=float(np.nanmax(truth)) + 2 * span)
         parts.append(fig)
     return _render(path, c.title, parts)
+
+
+@dataclass(frozen=True)
+class CampaignPage:
+    """``campaign --report``: the summary table, distributions over the runs' nodes per estimator, detection
+    delay against fault size, and the worst runs with the command that replays each (netsetest/campaign/report.py)."""
+
+    title: str
+    verdict: str
+    failed: bool  # a run failed its verdict or errored
+    header: Sequence[str]
+    rows: Sequence[Sequence[str]]
+    distributions: dict[str, dict[str, np.ndarray]]  # a figure's title (its quantity) → estimator → values over its runs' nodes
+    delays: dict[str, tuple[np.ndarray, np.ndarray]]  # estimator → (fault size / declared bound, detection delay [steps]) per detected node
+    worst_header: Sequence[str]
+    worst_rows: Sequence[Sequence[str]]
+
+
+HISTOGRAM_BINS = 30
+DEGENERATE_SPAN, HISTOGRAM_PAD = 1e-6, 0.05  # a histogram of values closer than this (relative) spans ±HISTOGRAM_PAD around them
+
+
+def _histograms(title: str, per_estimator: dict[str, np.ndarray]) -> Any:
+    """One step line per estimator: the share of its values in each bin (bins shared by every estimator)."""
+    values = np.concatenate([v[np.isfinite(v)] for v in per_estimator.values()] or [np.zeros(0)])
+    lo, hi = (float(values.min()), float(values.max())) if len(values) else (0.0, 1.0)
+    if hi - lo < DEGENERATE_SPAN * max(1.0, abs(hi)):  # every value alike (say every coverage 1): a readable axis around it
+        lo, hi = lo - HISTOGRAM_PAD, hi + HISTOGRAM_PAD
+    edges = np.linspace(lo, hi, HISTOGRAM_BINS + 1)
+    fig = _figure(title, title.split(": ")[-1], "share of the estimator's nodes × runs", len(per_estimator))
+    items = []
+    for (name, v), colour in zip(per_estimator.items(), _palette(len(per_estimator))):
+        v = v[np.isfinite(v)]
+        counts = np.histogram(v, edges)[0] / max(len(v), 1)
+        items.append((f"{name} ({len(v)})", [fig.step(edges, np.append(counts, 0.0), mode="after", color=colour, line_width=2)]))
+    _legend(fig, items)
+    for _, rs in items:  # every estimator shown at first: the distributions are compared side by side
+        for r in rs:
+            r.visible = True
+    return fig
+
+
+def _delay_fig(delays: dict[str, tuple[np.ndarray, np.ndarray]]) -> Any:
+    from bokeh.models import ColumnDataSource, HoverTool
+
+    fig = _figure("detection delay against the fault's size", "the fault's peak / its declared bound", "detection delay [steps]", len(delays))
+    items, renderers = [], []
+    for (name, (size, delay)), colour in zip(delays.items(), _palette(len(delays))):
+        jitter = np.linspace(-0.004, 0.004, len(size)) if len(size) > 1 else np.zeros(len(size))  # equal sizes stay apart
+        src = ColumnDataSource({"x": size + jitter, "y": delay, "size": size})
+        r = fig.scatter("x", "y", source=src, color=colour, alpha=0.6, size=6)
+        items.append((name, [r]))
+        renderers.append(r)
+    fig.add_tools(HoverTool(renderers=renderers, tooltips=[("size / bound", "@size{0.000}"), ("delay", "@y")]))
+    _legend(fig, items)
+    for _, rs in items:
+        for r in rs:
+            r.visible = True
+    return fig
+
+
+def write_campaign(path: str | Path, c: CampaignPage) -> int:
+    """The campaign's page (:class:`CampaignPage`); returns its size in bytes."""
+    require("bokeh", "the campaign report")
+    parts: list[Any] = [f"<h1>{html.escape(c.title)}</h1>", f'<p class="verdict{" fail" if c.failed else ""}" id="verdict">{html.escape(c.verdict)}</p>']
+    parts.append(_table(c.header, c.rows, "summary"))
+    parts += [_histograms(title, per) for title, per in c.distributions.items() if per]
+    if c.delays:
+        parts.append(_delay_fig(c.delays))
+    else:
+        parts.append('<p class="note">no fault was detected in these runs: no detection delay to draw</p>')
+    if c.worst_rows:
+        parts.append("<h2>The worst runs, each with the command that replays it</h2>" + _table(c.worst_header, c.worst_rows, "worst"))
+    return _render(path, c.title, parts)

@@ -49,7 +49,6 @@ from netsetest.estimator.sdp import NodeSet, LocalEstimator, NeighbourState, Obj
 from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sector, measurement_interval
 from netsetest.messages import End, Message, NodeInput, NodeState, NodeStatus, Reading, RunScope, decode, encode, state_digest
 from netsetest.models.sensor import NA, NX
-from netsetest.profile import PROFILE
 from netsetest.roles.plausibility import innovation_possible, states_disjoint
 from netsetest.sets import set_to_wire
 
@@ -542,10 +541,7 @@ class Node:
         have, refused = self.inbox.get(self.k, {}), self.refused.get(self.k, set())
         if any(j not in have and j not in refused for j in inp.expect_from) or not self._unread(inp):
             return
-        t = PROFILE.now() if PROFILE is not None else 0
         self.prepared = (inp.step, self.estimator.prepare(self._prior(), self._step_input(inp, self._neighbours(inp), {})))
-        if PROFILE is not None:
-            PROFILE.add("solve", t)
 
     def _update(self, inp: NodeInput) -> None:
         if self.set_estimator is not None:
@@ -560,15 +556,12 @@ class Node:
         self.prepared = None
         if prepared is not None and not prepared.of(prior, step_in):
             prepared = None  # the step's neighbours changed since (a state came after all): solved afresh, as sound
-        t = PROFILE.now() if PROFILE is not None else 0
         res = self.estimator.step(prior, step_in, prepared)
         # the readings the step's sets rest on: the published one's and the ones the set it continues from was
         # cut by (both are judged under the step's cone: docs/coverage.md)
         rests = res.rests_on
         health = rests.health
         refs = sorted(set(readings) | (rests.readings & {self.id})) if health else sorted(rests.readings)  # the k-of-N facts rest on every reading
-        if PROFILE is not None:
-            PROFILE.add("solve", t)
         used = sorted(j for j in neigh if j != self.id)
         self._publish(
             Publication(
@@ -627,13 +620,14 @@ class Node:
         sector = res.sector
         cbar = self.cfg.sensor.Cbar
         self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, float(inp.y - cbar @ self.xhat), sector)
-        t = PROFILE.now() if PROFILE is not None else 0
-        msg = self._state_message(pub)
-        self.own_digest = state_digest(msg)
-        if PROFILE is not None:
-            PROFILE.add("build", t)
+        msg, self.own_digest = self._built(pub)
         self._taken(inp.step)
         self.bus.publish(keys.node_state(self.run, self.id), msg)
+
+    def _built(self, p: Publication) -> tuple[NodeState, str]:
+        """The state message of ``p`` and its digest."""
+        msg = self._state_message(p)
+        return msg, state_digest(msg)
 
     def _taken(self, k: int) -> None:
         """Step k is taken (published, or passed without a reading): forget what only earlier steps could use."""

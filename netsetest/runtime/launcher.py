@@ -36,7 +36,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Protocol
 
-from netsetest.config.schema import Case, Scenario, load_topology
+from netsetest.config.schema import Case, Scenario
 from netsetest.logs.drive import with_log_steps
 from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
@@ -73,6 +73,9 @@ class LaunchOptions:
     case: Case | None = None
     steps: int | None = None
     estimator: str | None = None  # every node's, overriding the topology's
+    manoeuvre: str | None = None  # the drive's overrides (ScenarioSpec)
+    speed: float | None = None
+    fault_scale: float | None = None
     signals: SignalKind = "paper"
     variant: Variant = "scheduled"
     objective: Objective = DEFAULT_OBJECTIVE
@@ -95,6 +98,21 @@ class LaunchOptions:
     port: int = 0  # the run's port on loopback: its router's, or (insecure) its collector's, which observers connect to (0: a free one)
     log: str | None = None  # a recorded drive as the world (docs/your-log.md)
     mapping: str | None = None  # its mapping file
+
+    @property
+    def scenario(self) -> ScenarioSpec:
+        """Which run, as every role is told it (the topology and the command line's overrides)."""
+        return ScenarioSpec(
+            self.topology,
+            self.case,
+            self.steps,
+            self.estimator,
+            log=self.log,
+            mapping=self.mapping,
+            manoeuvre=self.manoeuvre,
+            speed=self.speed,
+            fault_scale=self.fault_scale,
+        )
 
 
 RUN_ID_BYTES = 8  # of a run's random id (as `netsetest credentials` makes)
@@ -170,7 +188,7 @@ def plan_run(opts: LaunchOptions) -> RunPlan:
     """Load the topology and check the options against it and each other (LaunchError naming the option;
     ConfigError for a bad topology)."""
     # a recorded drive's steps are decided here, from the log, and every role is started with them: only the vehicle reads the log
-    sc = with_log_steps(load_topology(opts.topology, opts.case, opts.steps, opts.estimator, log=opts.log, mapping=opts.mapping))
+    sc = with_log_steps(opts.scenario.load())
     for node, _ in (*opts.kill, *opts.rejoin):
         if sc.node(node).estimator != SDP:
             raise LaunchError(f"--kill/--rejoin {node}@…: node {node} runs {sc.node(node).estimator!r}, which cannot rejoin (only the SDP can)")
@@ -400,9 +418,9 @@ class RoleStarter:
         self.plan, self.network, self.children = plan, network, children
         lg = plan.scenario.log
         self.scenario = (
-            ScenarioSpec(o.topology, o.case, o.steps, o.estimator)
+            o.scenario
             if lg is None  # the roles read their paths from the working directory the run was started in
-            else ScenarioSpec(o.topology, o.case, plan.scenario.steps, o.estimator, os.path.abspath(lg.path), os.path.abspath(lg.mapping.path))
+            else replace(o.scenario, steps=plan.scenario.steps, log=os.path.abspath(lg.path), mapping=os.path.abspath(lg.mapping.path))
         )
 
     def collector(self) -> CollectorSpec:

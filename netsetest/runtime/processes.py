@@ -31,7 +31,7 @@ from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import Scenario
 from netsetest.messages import Message, Ready
-from netsetest.profile import PROFILE
+from netsetest.profile import PROFILE, observe_bus, observe_node
 from netsetest.records.meta import RunMeta
 from netsetest.roles.node import Node
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_COLLECTOR_STALLED, EXIT_VIOLATION, exit_code, log, record_sink, write_summary
@@ -337,10 +337,13 @@ def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
     # a neighbour and waits for the readings within a budget: both lazy, so the N readings of a step under
     # max_faulty cost the node a few polls, not N callbacks and wake-ups
     # the step's part its readings do not enter is solved while they cross the network (the same result)
+    prof = PROFILE  # NETSETEST_PROFILE: the bus and the node observed (netsetest/profile.py); else nothing on their path
+    if prof is not None:
+        observe_bus(bus, prof)  # (before the node subscribes)
     node = Node(sc, node_id, bus, run_id, spec.variant, rejoin=spec.rejoin, objective=spec.objective, lazy=realtime, early=True)
+    profiled = observe_node(node, prof) if prof is not None else None
     role = f"node {node_id}"
     barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), node_peers(sc, node_id), lazy=True)
-    first_profiled = 0
     reading_wait = (READING_WAIT * sc.tau_s, READING_POLL * sc.tau_s) if realtime else None  # budget, poll period
     barrier.tick(time.monotonic())  # announce ourselves first: the others start meanwhile
     node.warm_up()  # before we can report seen_all, so before the run can start
@@ -357,15 +360,12 @@ def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
                 node.give_up = True
             if not node.try_step(now):
                 break
-            if PROFILE is not None and node.k >= 1 and not PROFILE.started:
-                PROFILE.start_window()  # from the first solved step: start-up and step 0 left out
-                first_profiled = node.k
             if node.k == crash_after:
                 time.sleep(CRASH_FLUSH_S)  # the state of step k leaves before the crash
                 log(role, f"killing myself (SIGKILL) after step {node.k} as asked")
                 os.kill(os.getpid(), signal.SIGKILL)
-    if PROFILE is not None:
-        PROFILE.write(f"node-{node_id}", node.k - first_profiled if PROFILE.started else 0)
+    if prof is not None and profiled is not None:
+        prof.write(f"node-{node_id}", profiled())
     return 0
 
 

@@ -196,6 +196,12 @@ def _argv(spec: object) -> tuple[list[str], list[str]]:
 LOG_HELP = "a recorded drive as the world: a ROS 2 bag, an MDF4 file, a Parquet or CSV table (docs/your-log.md; default: the topology's)"
 MAP_HELP = "the log's mapping (default: the topology's [vehicle] mapping, else DRIVE's name with .map.toml)"
 ESTIMATOR_HELP = f"every node's estimator, overriding the topology's per-node 'estimator' ({', '.join(NODE_ESTIMATOR_NAMES)}; default: the file's, else sdp)"
+MANOEUVRE_HELP = (
+    "override the topology's [vehicle] manoeuvre (paper, step-steer, sine-dwell, double-lane-change, lap); NAME@AMP also its "
+    "steering amplitude [rad] ([steering] high) (default: the file's)"
+)
+SPEED_HELP = "override the speed reference's mean, [speed] mean_kmh [km/h] (default: the file's)"
+FAULT_SCALE_HELP = "every faulty node's fault scaled to S × its declared [fault_bound] size at its peak, its shape kept (default: the file's faults)"
 ZENOH_CONFIG_HELP = "a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting, security and the lease on top (default: none)"
 STALL_LIMIT_HELP = (
     "how long [s] a role may not run (stopped, a swapping machine) and the run go on: every session's Zenoh lease, and the "
@@ -214,14 +220,35 @@ class ScenarioSpec:
     estimator: str | None = _opt(None, "--estimator", ESTIMATOR_HELP, choices=NODE_ESTIMATOR_NAMES, metavar="NAME")
     log: str | None = _opt(None, "--log", LOG_HELP, metavar="DRIVE")
     mapping: str | None = _opt(None, "--map", MAP_HELP, metavar="MAP.toml")
+    manoeuvre: str | None = _opt(None, "--manoeuvre", MANOEUVRE_HELP, argtypes.drive, metavar="NAME[@AMP]")
+    speed: float | None = _opt(None, "--speed", SPEED_HELP, argtypes.speed_kmh, metavar="KMH")
+    fault_scale: float | None = _opt(None, "--fault-scale", FAULT_SCALE_HELP, argtypes.fault_scale, metavar="S")
 
     def load(self) -> Scenario:
         """The scenario (ConfigError naming what is wrong with the file or an override).  A recorded drive is named
         and its mapping read, but the log itself is read only by the vehicle (logs/drive.py): a role of a run
         from a log is started with its steps (``run`` decides them once, from the log)."""
         from netsetest.config.schema import load_topology
+        from netsetest.models.manoeuvres import DriveSpec
 
-        return load_topology(self.topology, self.case, self.steps, self.estimator, log=self.log, mapping=self.mapping)
+        drive = DriveSpec.parse(self.manoeuvre) if self.manoeuvre is not None else None
+        return load_topology(
+            self.topology,
+            self.case,
+            self.steps,
+            self.estimator,
+            manoeuvre=drive.manoeuvre if drive else None,
+            steer_high=drive.amplitude if drive else None,
+            speed_kmh=self.speed,
+            fault_scale=self.fault_scale,
+            log=self.log,
+            mapping=self.mapping,
+        )
+
+    def to_argv(self) -> list[str]:
+        """The topology and the overrides given, as ``run`` and every role take them (``[TOPOLOGY, --case, ...]``)."""
+        pos, opts = _argv(self)
+        return [*pos, *opts]
 
 
 def _resolve_run_id(run_id: str | None) -> str:

@@ -259,3 +259,26 @@ def test_a_hostile_region_is_dropped_at_decode_under_its_own_name(region: object
             decode(payload)
         assert exc.value.reason == reason, str(exc.value)
     assert decode(_payload(region=SQUARE)).published.region == SQUARE  # the same state with an honest region: kept
+
+
+def test_the_scale_decode_takes_holds_every_prior_a_topology_may_declare() -> None:
+    """MAX_COORDINATE is tied to the configuration's bounds: a prior box |x̂0| + √(ρ·P0) at their largest, a thousand
+    times over (a node's honest region at step 0 is inside it; P0 = 10⁶ with ρ = 10⁶ once published a region of
+    size 10⁶ that a bound of 10⁶ refused, and the node raised on its own set)."""
+    from netsetest.config.schema import MAGNITUDE_MAX, P0_MAX, RHO_MAX
+
+    assert MAX_COORDINATE >= 1000 * (MAGNITUDE_MAX + math.sqrt(RHO_MAX * P0_MAX))
+
+
+def test_a_node_publishes_without_a_region_no_receiver_would_take() -> None:
+    """StepResult.published_set leaves out a region decode would drop (here beyond MAX_COORDINATE): the ellipsoid ∩
+    the fault range is a superset (sound), and the node never raises on its own set."""
+    from netsetest.estimator.cuts import StepResult
+    from netsetest.polygon import Polygon
+
+    huge = Polygon.box(np.array([-2 * MAX_COORDINATE, -1.0]), np.array([2 * MAX_COORDINATE, 1.0]))
+    res = StepResult(np.zeros(3), np.eye(3), "ok", 1.0, 0.0, "solved", fault_range=(-0.5, 0.5), region=huge)
+    pub = res.published_set(1.0)
+    assert pub.region is None and pub.fault == [-0.5, 0.5]
+    inside = Polygon.box(np.array([-0.5, -0.5]), np.array([0.5, 0.5]))
+    assert res.replaced(region=inside).published_set(1.0).region == inside.vertices.reshape(-1).tolist()

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from netsetest.cli.main import build_parser
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.estimator.objective import OBJECTIVES
+from netsetest.models.manoeuvres import MANOEUVRES, WITH_AMPLITUDE
 from netsetest.runtime.argtypes import SEED_MAX
 from netsetest.runtime.rolespec import (
     DEFAULT_RUN_ID,
@@ -48,6 +49,8 @@ non_negative = st.just(0.0) | seconds
 pairs = st.tuples(st.integers(-5, 200), st.integers(-5, 10_000))
 clocks = st.sampled_from(["lockstep", "realtime"])
 
+finite = lambda lo, hi: st.floats(min_value=lo, max_value=hi, allow_nan=False, allow_infinity=False)  # noqa: E731  # a one-line local helper
+drives = st.sampled_from(MANOEUVRES) | st.builds(lambda m, a: f"{m}@{a!r}", st.sampled_from(WITH_AMPLITUDE), finite(1e-6, 1.0))
 scenarios = st.builds(
     ScenarioSpec,
     positional,
@@ -56,6 +59,9 @@ scenarios = st.builds(
     maybe(st.sampled_from(NODE_ESTIMATOR_NAMES)),
     maybe(texts),  # --log DRIVE (a recorded drive, docs/your-log.md)
     maybe(texts),  # --map MAP.toml
+    maybe(drives),
+    maybe(finite(1e-3, 500.0)),
+    maybe(finite(0.0, 10.0)),
 )
 zenohs = st.builds(
     ZenohSpec,
