@@ -27,7 +27,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from itertools import islice
-from operator import attrgetter
+from operator import attrgetter, itemgetter
 from pathlib import Path
 from typing import Any
 
@@ -43,7 +43,7 @@ BAG_CHECK_EVERY = 256  # of a connection's messages read at their CDR offsets, e
 MDF_FRAGMENT_BYTES = 1 << 18  # asammdf's read fragment: a channel's samples per pull (a few thousand)
 MAX_GAPS = 4_096  # gaps longer than the tolerance a scan keeps per signal (an input needs none inside the run)
 NEVER = np.iinfo(np.int64).max
-_CONN_ID = attrgetter("id")
+_CONN, _LOG_TIME, _RAW, _CONN_ID = itemgetter(0), itemgetter(1), itemgetter(2), attrgetter("id")  # of rosbags' (connection, log time, raw payload)
 # the physical range of each kind of signal, SI: a sample beyond it is a wrong unit (deg/s read as rad/s), not a car
 PLAUSIBLE = {
     "speed": 500.0 / 3.6,  # m/s
@@ -481,12 +481,12 @@ def _rosbag(log: Path, mapping: LogMapping, fmt: str) -> Iterator[Chunk]:
             conns = {c.id: _Topic(reader, c, by_topic[c.topic], log) for c in reader.connections if c.topic in by_topic}
             messages = reader.messages(connections=[t.conn for t in conns.values()])
             while batch := list(islice(messages, BAG_CHUNK)):
-                of, t_log, raws = zip(*batch)
-                ids, t = np.fromiter(map(_CONN_ID, of), np.int64, len(batch)), np.fromiter(t_log, np.int64, len(batch))
+                ids = np.fromiter(map(_CONN_ID, map(_CONN, batch)), np.int64, len(batch))  # (maps: zip(*batch) costs more than the decoding)
+                t, raws = np.fromiter(map(_LOG_TIME, batch), np.int64, len(batch)), list(map(_RAW, batch))
                 chunk: Chunk = []
                 for cid, conn in conns.items():
                     idx = np.flatnonzero(ids == cid)
-                    stamps, values = conn.read([raws[i] for i in idx.tolist()] if idx.size < len(batch) else list(raws), t[idx])
+                    stamps, values = conn.read([raws[i] for i in idx.tolist()] if idx.size < len(batch) else raws, t[idx])
                     chunk += [(s.name, stamps, v) for s, v in zip(conn.sigs, values)]
                 yield chunk
     except LogError:
