@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import os
 import tempfile
+from collections.abc import Callable
 from operator import attrgetter
 from pathlib import Path
 from unittest import mock
@@ -25,6 +26,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from netsetest.cli.main import main
 from netsetest.config.logmap import LogMapping, SensorMap, SignalMap
 from netsetest.config.schema import load_mapping
 from netsetest.logs import cdr, readers
@@ -176,7 +178,7 @@ values = st.floats(width=64)  # NaN and infinities too: read at the offset they 
 message = st.tuples(st.sampled_from(sorted(TOPICS)), st.integers(0, 2**31 - 1), st.integers(0, 999_999_999), frames, frames, values, values)
 
 
-def _write(bag: Path, storage: str, msgs: list[tuple], big_endian: set[int]) -> None:
+def _write(bag: Path, storage: str, msgs: list[tuple], big_endian: set[int], damage: Callable[[int, bytes], bytes] = lambda k, raw: raw) -> None:
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
     with Writer(bag, version=8, storage_plugin=plugin) as w:
         conns = {topic: w.add_connection(topic, typ, typestore=TS) for topic, (typ, _) in TOPICS.items()}
@@ -187,7 +189,7 @@ def _write(bag: Path, storage: str, msgs: list[tuple], big_endian: set[int]) -> 
                 "/imu": lambda: _imu(sec, nsec, frame, a),
                 "/ins": lambda: _ins(sec, nsec, frame, a, b),
             }[topic]()
-            w.write(conns[topic], 1_000 + k, bytes(TS.serialize_cdr(msg, TOPICS[topic][0], little_endian=k not in big_endian)))
+            w.write(conns[topic], 1_000 + k, damage(k, bytes(TS.serialize_cdr(msg, TOPICS[topic][0], little_endian=k not in big_endian))))
 
 
 @settings(max_examples=EXAMPLES, deadline=None, derandomize=True)
@@ -254,3 +256,89 @@ def test_every_nth_message_is_checked(monkeypatch: pytest.MonkeyPatch) -> None:
             match=rf"topic /steer: message {readers.BAG_CHECK_EVERY} \(12 bytes\): data read at its offset .* is {readers.BAG_CHECK_EVERY + 1.0!r}, rosbags reads {float(readers.BAG_CHECK_EVERY)!r}",
         ):
             _read(bag, m)
+
+
+damages = st.one_of(
+    st.tuples(st.just("cut"), st.integers(0, 400)),  # the payload's first n bytes only
+    st.tuples(st.just("add"), st.binary(min_size=1, max_size=24)),  # bytes after the message's end
+    st.tuples(st.just("head"), st.binary(min_size=2, max_size=2)),  # another encapsulation header
+    st.tuples(st.just("flip"), st.integers(0, 400)),  # one byte inverted, the size kept
+)
+
+
+def _damaged(how: tuple[str, object], raw: bytes) -> bytes:
+    kind, arg = how
+    if kind == "cut":
+        return raw[: int(arg) % len(raw)]  # type: ignore[call-overload]  # an int for cut and flip
+    if kind == "add":
+        return raw + arg  # type: ignore[operator]  # bytes for add and head
+    if kind == "head":
+        return arg + raw[2:]  # type: ignore[operator]
+    i = int(arg) % len(raw)  # type: ignore[call-overload]
+    return raw[:i] + bytes([raw[i] ^ 0xFF]) + raw[i + 1 :]
+
+
+@settings(max_examples=EXAMPLES, deadline=None, derandomize=True)
+@given(
+    st.lists(st.tuples(st.sampled_from(sorted(TOPICS)), st.integers(0, 2**31 - 1), st.integers(0, 999_999_999), values), min_size=1, max_size=60),
+    st.sampled_from(["mcap", "sqlite3"]),
+    st.data(),
+    damages,
+    st.integers(1, 256),
+)
+def test_a_damaged_payload_is_an_error_or_read_as_rosbags_reads_it(
+    msgs: list[tuple], storage: str, data: st.DataObject, how: tuple[str, object], every: int
+) -> None:
+    """One message's payload damaged (cut short, bytes added after it, its encapsulation header changed, a byte
+    inverted): the reader raises nothing but a LogError of one line naming the bag.  A damage that changes the size or
+    the header reads as rosbags' full deserialisation reads it, or is that error (rosbags refusing it, or reading it
+    otherwise than its offsets): a size not seen is checked, a header not CDR little-endian is rosbags' to read.  A
+    byte inverted keeps the size: a message not checked is read at the offsets of its size, as rosbags would read it
+    unless the byte was a string's length (docs/your-log.md).  Every frame_id here has one length, so a cut or added
+    payload is of a size its connection has not had."""
+    full = [(topic, 0, 0, "base_link", "odom", 0.0, 0.0) for topic in sorted(TOPICS)]  # each topic's first, whole
+    full += [(topic, sec, nsec, "base_link", "odom", v, -v) for topic, sec, nsec, v in msgs]
+    k = data.draw(st.integers(len(TOPICS), len(full) - 1), label="damaged message")  # never its connection's first
+    with tempfile.TemporaryDirectory(prefix="netsetest-bag-") as tmp:
+        bag = Path(tmp) / "bag"
+        _write(bag, storage, full, set(), lambda i, raw: _damaged(how, raw) if i == k else raw)
+        m = _mapping(bag)
+        try:
+            want: dict[str, tuple[np.ndarray, np.ndarray]] | None = _oracle(bag, m)
+        except Exception:  # whatever rosbags raises on it: the reader must say LogError
+            want = None
+        with mock.patch.object(readers, "BAG_CHECK_EVERY", every):
+            try:
+                got: dict[str, tuple[np.ndarray, np.ndarray]] | None = _read(bag, m)
+            except LogError as exc:
+                assert str(exc).startswith(str(bag)) and "\n" not in str(exc), str(exc)
+                got = None
+    if how[0] != "flip":  # a size not seen (checked) or a header not CDR little-endian (rosbags reads it): never another value
+        assert got is None or (want is not None and _equal(got, want)), how
+
+
+def _equal(got: dict[str, tuple[np.ndarray, np.ndarray]], want: dict[str, tuple[np.ndarray, np.ndarray]]) -> bool:
+    try:
+        _assert_same(got, want)
+    except AssertionError:
+        return False
+    return True
+
+
+def test_a_disagreement_exits_2_with_one_line(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """``netsetest run`` on a bag whose offsets disagree with rosbags (here: a layout spoiled as above) stops before
+    the run with one line and exit 2, never a traceback."""
+    right = cdr.layout
+
+    def wrong(ts: object, msgtype: str) -> cdr.Layout:
+        lay = right(ts, msgtype)  # type: ignore[arg-type]  # the typestore, passed on
+        if msgtype == "std_msgs/msg/Float64":
+            lay.fields["data"] = cdr.FieldAt("<f4", 0, None)
+        return lay
+
+    monkeypatch.setattr(readers, "layout", wrong)
+    log, mapping = EXAMPLE_LOGS / "drive_mcap", EXAMPLE_LOGS / "drive_mcap.map.toml"
+    code = main(["run", str(EXAMPLE_LOGS / "car_log.toml"), "--mode", "inmemory", "--quiet", "--log", str(log), "--map", str(mapping)])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert "read at its offset in the std_msgs/msg/Float64 layout" in err and "rosbags reads" in err, err
