@@ -266,16 +266,12 @@ damages = st.one_of(
 )
 
 
-def _damaged(how: tuple[str, object], raw: bytes) -> bytes:
+def _damaged(how: tuple[str, int | bytes], raw: bytes) -> bytes:
     kind, arg = how
-    if kind == "cut":
-        return raw[: int(arg) % len(raw)]  # type: ignore[call-overload]  # an int for cut and flip
-    if kind == "add":
-        return raw + arg  # type: ignore[operator]  # bytes for add and head
-    if kind == "head":
-        return arg + raw[2:]  # type: ignore[operator]
-    i = int(arg) % len(raw)  # type: ignore[call-overload]
-    return raw[:i] + bytes([raw[i] ^ 0xFF]) + raw[i + 1 :]
+    if isinstance(arg, bytes):  # add: after the message's end; head: instead of the encapsulation header
+        return raw + arg if kind == "add" else arg + raw[2:]
+    i = arg % len(raw)  # cut: the first i bytes; flip: byte i inverted
+    return raw[:i] if kind == "cut" else raw[:i] + bytes([raw[i] ^ 0xFF]) + raw[i + 1 :]
 
 
 @settings(max_examples=EXAMPLES, deadline=None, derandomize=True)
@@ -287,7 +283,7 @@ def _damaged(how: tuple[str, object], raw: bytes) -> bytes:
     st.integers(1, 256),
 )
 def test_a_damaged_payload_is_an_error_or_read_as_rosbags_reads_it(
-    msgs: list[tuple], storage: str, data: st.DataObject, how: tuple[str, object], every: int
+    msgs: list[tuple], storage: str, data: st.DataObject, how: tuple[str, int | bytes], every: int
 ) -> None:
     """One message's payload damaged (cut short, bytes added after it, its encapsulation header changed, a byte
     inverted): the reader raises nothing but a LogError of one line naming the bag.  A damage that changes the size or
