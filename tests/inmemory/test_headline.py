@@ -29,6 +29,8 @@ from netsetest.bench.docs import PARTS, RENDER_COMMAND
 from netsetest.config.schema import Case, load_topology
 from netsetest.records.record import load_record, save_record
 
+pytestmark = pytest.mark.blas  # (.ci/run runs it under every OpenBLAS kernel the CPU runs)
+
 RTOL = 2e-3  # relative: far above the kernels' 10⁻⁶, five times below a 1 % change
 SEED = 0
 CASES: tuple[Case, ...] = ("nsnim", "saim")

@@ -140,6 +140,7 @@ def test_mismatch_published_by_the_vehicle_is_recomputed_from_the_record(tmp_pat
     assert np.abs(es).max() > 1e-4  # a car is not its T-S model
 
 
+@pytest.mark.blas
 def test_the_ts_plant_drives_the_paper_run_as_recorded() -> None:
     """The T-S plant is the paper's model: e_k = 0 exactly at every step (NSNIM and SAIM, paper and worst-case
     signals, seed 3, 30 steps of paper6), and its truth x_k is the committed record's (tests/recorded_runs.py, within

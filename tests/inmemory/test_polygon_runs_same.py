@@ -21,6 +21,8 @@ from netsetest.models.signals import SignalKind
 from netsetest.polygon import Polygon
 from netsetest.runtime.inmemory import run_inmemory
 
+pytestmark = pytest.mark.blas  # (.ci/run runs it under every OpenBLAS kernel the CPU runs)
+
 STEPS = 20
 RUNS: list[tuple[str, Case, SignalKind, int]] = [
     ("paper6", "nsnim", "paper", 0),

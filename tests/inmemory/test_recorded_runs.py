@@ -76,6 +76,8 @@ import recorded_runs as rr
 
 from netsetest.config.schema import Case
 
+pytestmark = pytest.mark.blas  # (.ci/run runs it under every OpenBLAS kernel the CPU runs)
+
 
 @pytest.mark.parametrize(("topology", "case"), [(t, c) for t in rr.TOPOLOGIES for c in rr.CASES])
 def test_the_runs_are_as_recorded(topology: str, case: Case) -> None:

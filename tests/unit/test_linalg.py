@@ -16,6 +16,8 @@ from test_polygon_exact import FUZZ
 
 from netsetest import linalg
 
+pytestmark = pytest.mark.blas  # (.ci/run runs it under every OpenBLAS kernel the CPU runs)
+
 
 @st.composite
 def square(draw: st.DrawFn) -> np.ndarray:

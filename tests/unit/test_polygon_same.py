@@ -17,12 +17,15 @@ from typing import Any
 
 import numpy as np
 import polygon_reference as ref
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from test_polygon_exact import FUZZ, car_like, matrices, polygons, segment_lists, slabs
 
 from netsetest.estimator.cuts import ellipse_cut
 from netsetest.polygon import Polygon
+
+pytestmark = pytest.mark.blas  # (.ci/run runs it under every OpenBLAS kernel the CPU runs)
 
 
 def _check(name: str, v: np.ndarray, got: Polygon | None, want: ref.Polygon | None, *args: Any) -> None:
