@@ -115,9 +115,10 @@ def simulate(
     """Run ``topology`` (a file, or a bundled name such as ``"paper6"``); ``case`` and ``steps`` override
     the file, ``estimator`` every node's (default: each node's in the file, else ``"sdp"``).  Raises :class:`~netsetest.config.schema.ConfigError` on a bad file or argument."""
     if mode == "inmemory":
-        from netsetest.runtime.inmemory import run_inmemory
+        from netsetest.runtime.rolespec import ScenarioSpec
+        from netsetest.runtime.runspec import RunSpec
 
-        res = run_inmemory(load_topology(topology, case, steps, estimator), signals, variant, seed)
+        res = RunSpec(ScenarioSpec(str(topology), case, steps, estimator), signals, variant, seed=seed).execute()
         assert res.parts is not None  # kept in memory (run_inmemory's default)
         return result_of(record_from_parts(res.meta, res.parts["truth"], res.parts["nodes"], res.summary))
     if mode == "zenoh":

@@ -13,6 +13,9 @@ EXTRAS = {
     "vehiclemodels": "plant",
     "bokeh": "view",
     "rerun": "view",
+    "rosbags": "logs",
+    "asammdf": "logs",
+    "distributed": "cluster",
 }
 
 
@@ -20,9 +23,10 @@ class MissingExtra(Exception):
     """An optional dependency is not installed; the message names the feature and what to install."""
 
 
-def require(module: str, what: str) -> None:
-    """Raise :class:`MissingExtra` unless ``module`` (a key of :data:`EXTRAS`) can be imported."""
+def require(module: str, what: str, extra: str | None = None) -> None:
+    """Raise :class:`MissingExtra` unless ``module`` (a key of :data:`EXTRAS`) can be imported; ``extra``: the
+    extra to name where it is not the module's own (pyarrow reads drive logs too: ``logs``)."""
     try:
         importlib.import_module(module)
     except ImportError:
-        raise MissingExtra(f"{what} needs {module}: pip install 'netsetest[{EXTRAS[module]}]'") from None
+        raise MissingExtra(f"{what} needs {module}: pip install 'netsetest[{extra or EXTRAS[module]}]'") from None

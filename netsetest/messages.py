@@ -29,6 +29,7 @@ except ImportError:  # another interpreter
     from hashlib import blake2b
 from msgspec import Meta, Struct, field
 
+from netsetest.polygon import REGION_NOT_FINITE, REGION_NOT_NUMBERS, REGION_REASONS, REGION_VERTICES
 from netsetest.proven import ProvenSet, continued_set
 from netsetest.validation import FINITE_BOUND_TEXT, FLOAT_MAX, Finite, Positive, split_error
 
@@ -45,6 +46,7 @@ MAX_REASON = 64  # characters of a drop-reason key or an End reason
 MAX_DROP_REASONS = 64  # entries of a drop-counter map
 IdList = Annotated[list[NodeId], Meta(max_length=MAX_NODES)]
 NodeMap = Annotated[dict[str, FiniteF], Meta(min_length=1, max_length=MAX_NODES)]
+ReadingMap = Annotated[dict[str, FiniteF], Meta(max_length=MAX_NODES)]  # a step's readings: a node without one is absent
 FlagMap = Annotated[dict[str, bool], Meta(min_length=1, max_length=MAX_NODES)]
 Reason = Annotated[str, Meta(max_length=MAX_REASON)]
 Drops = Annotated[dict[Reason, Annotated[int, Meta(ge=0)]], Meta(max_length=MAX_DROP_REASONS)]
@@ -122,20 +124,25 @@ class NodeInput(_Msg, tag="input", frozen=True, kw_only=True):
 
     ``expect_from``: in-neighbours j ≠ i whose step k−1 message node i should wait for (alive, not lost);
     ``lost_from``: in-neighbours whose step k−1 message is lost by the scheduled packet-loss model.
+    ``y`` None: no reading at this step (a gap in a recorded drive, docs/your-log.md): the node publishes
+    nothing for it and resumes at its next reading (estimator/rejoin.py); ``unread``: the nodes without a
+    reading at this step (whose readings of the step no one waits for).
     """
 
     step: Step
     node: NodeId
-    y: FiniteF
+    y: FiniteF | None
     gamma: Gamma
     u_prev: FiniteF | None = None
     vx_prev: PositiveF | None = None
     expect_from: IdList = []
     lost_from: IdList = []
     deadline: FiniteF | None = None  # real-time clock: wall-clock time (s since epoch) the step is due
+    unread: IdList = []
 
 
-NodeStatus = Literal["init", "init-prior", "ok", "fallback", "rejoin"]  # what a node's published set is (NodeState.status)
+# what a node's published set is (NodeState.status); resume: its first after steps without a reading
+NodeStatus = Literal["init", "init-prior", "ok", "fallback", "rejoin", "resume"]
 
 
 class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
@@ -176,11 +183,15 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     # declarations into the step's cone
     readings: Annotated[list[tuple[NodeId, FiniteF, Gamma]], Meta(max_length=MAX_NODES)] = []
     health: bool = False  # either set used the k-of-N interval of the step's readings and its own ([network] max_faulty)
+    # status "resume": the step of the node's own set this one was carried from through the steps without a reading
+    resumed_from: Step | None = None
 
     def __post_init__(self) -> None:
         c = self.continues
         if c is not None and (c.region is not None or c.fault is not None or c.set is not None):
             raise ValueError("continues: an ellipsoid alone (its region is the published set's)")
+        if (self.status == "resume") != (self.resumed_from is not None) or (self.resumed_from is not None and self.resumed_from >= self.step):
+            raise ValueError("resumed_from: the earlier step a resumed state was carried from (and only a resumed state has one)")
 
     @property
     def continued(self) -> ProvenSet:
@@ -207,8 +218,8 @@ class Truth(_Msg, tag="truth", frozen=True, kw_only=True):
     vx: FiniteF
     noise: NodeMap  # v_i,k
     gamma: NodeMap
-    y: NodeMap
-    y_nofault: NodeMap
+    y: ReadingMap
+    y_nofault: ReadingMap
     sector_ok: FlagMap  # |C̄_i x̄_i,k| ≤ r_max/h1 of the profile (the paper's fixed sector)
     r: Annotated[dict[str, FiniteF], Meta(max_length=MAX_NODES)] = {}  # C̄_i x̄_i,k: the collector checks each node's published sector with it
     fault_ok: Annotated[dict[str, bool], Meta(max_length=MAX_NODES)] = {}  # the declared fault bound held: |f_k − f_k−1| ≤ δ_i, |f_k| ≤ F_i
@@ -226,15 +237,30 @@ class Truth(_Msg, tag="truth", frozen=True, kw_only=True):
     speed: FiniteF | None = None
     ay: FiniteF | None = None
     envelope_ok: bool = True
+    # a recorded drive (docs/your-log.md): the truth is known only to lie in a box: x ± x_acc (None: x is the truth
+    # itself), each node's fault f ± f_acc (absent: exact); reference False: no reference at this step, x unknown
+    x_acc: Vec2 | None = None
+    f_acc: Annotated[dict[str, Annotated[float, Meta(ge=0, le=FLOAT_MAX)]], Meta(max_length=MAX_NODES)] = {}
+    reference: bool = True
+    # nodes without a reading at this step (a gap in a recorded drive): absent from y and y_nofault; they publish nothing
+    no_reading: IdList = []
 
     def __post_init__(self) -> None:
+        if self.x_acc is not None and min(self.x_acc) < 0:
+            raise ValueError("x_acc: half-widths must not be negative")
         ids = set(self.faults)
         if not all(k.isdecimal() and int(k) >= 1 for k in ids):
             raise ValueError("faults: keys must be node ids (decimal integers ≥ 1)")
-        for name in ("noise", "gamma", "y", "y_nofault", "sector_ok", "noise_ok"):
+        for name in ("noise", "gamma", "sector_ok", "noise_ok"):
             if set(getattr(self, name)) != ids:
                 raise ValueError(f"{name}: keys differ from the keys of faults")
-        for name in ("r", "fault_ok"):  # absent ({}) in records written before the derived sector
+        read = ids - {str(i) for i in self.no_reading}
+        if len(read) != len(ids) - len(self.no_reading) or len(set(self.no_reading)) != len(self.no_reading):
+            raise ValueError("no_reading: nodes of the step")
+        for name in ("y", "y_nofault"):
+            if set(getattr(self, name)) != read:
+                raise ValueError(f"{name}: keys differ from the nodes with a reading")
+        for name in ("r", "fault_ok", "f_acc"):  # absent ({}) in records written before the derived sector, and in a model's run
             if getattr(self, name) and set(getattr(self, name)) != ids:
                 raise ValueError(f"{name}: keys differ from the keys of faults")
 
@@ -334,6 +360,22 @@ def _detail(exc: msgspec.ValidationError) -> str:
     return (f"{loc}: {text}" if loc else text)[:MAX_DETAIL]
 
 
+_REGION_AT = re.compile(r"(?:^|\.)region(?:\[\d+\])?$")  # a published set's region, or one of its coordinates
+
+
+def _reason(exc: msgspec.ValidationError) -> str:
+    """The drop reason of a payload that failed validation: a region's own (polygon.REGION_REASONS: its check names
+    it first, through the set's __post_init__; or msgspec's on the region field: its length, a coordinate not
+    finite, not numbers), else ``invalid``."""
+    msg, loc = split_error(exc)
+    head = msg.split(":", 1)[0]
+    if head in REGION_REASONS:
+        return head
+    if _REGION_AT.search(loc):
+        return REGION_VERTICES if "length" in msg else REGION_NOT_FINITE if _FINITE.search(msg) else REGION_NOT_NUMBERS
+    return "invalid"
+
+
 def _version_of_odd_payload(payload: bytes) -> object:
     """``v`` of a msgpack value that is not a map with string keys; BadMessage unless it is a map."""
     try:
@@ -391,6 +433,6 @@ def _decode(payload: bytes) -> Message:
     try:
         return _DECODER.decode(payload)
     except msgspec.ValidationError as exc:
-        raise BadMessage("invalid", _detail(exc)) from None
+        raise BadMessage(_reason(exc), _detail(exc)) from None
     except msgspec.DecodeError as exc:  # e.g. nested too deeply for the typed decoder
         raise BadMessage("undecodable", str(exc)[:MAX_DETAIL]) from None

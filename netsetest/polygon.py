@@ -27,8 +27,19 @@ MAX_VERTICES = 24  # the reduction keeps at most this many (each step adds about
 MARGIN = 1e-9  # outward, relative to the polygon's extent: covers the rounding of one step's operations
 ROUNDING = 1e-10  # outward, relative to the coordinates' size: far above one step's rounding (ε·n)
 MAX_REACH = 1e3  # a drop extends a neighbour by at most this many of its lengths (q's rounding stays ≪ DUPLICATE)
-AXES = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 DUPLICATE = 1e-13  # vertices closer than this (relative to the coordinates' size) are one: far below ROUNDING
+# A published region (docs/network.md): what decode accepts (:func:`region_problem`), a reason each for what it drops
+MAX_COORDINATE = 1e10  # |β| [rad], |r| [rad/s]: over a thousand times the largest prior box a topology may declare (|x̂0| ≤ 10³,
+# √(ρ·P0) ≤ 10⁶: config/schema.py, tests/unit/test_polygon_membership.py holds the tie), and far inside the float range
+# (every product the checks and the judge form is finite)
+CONVEX_TOLERANCE = ROUNDING  # a turn the wrong way this shallow (relative to the coordinates' size) is a rounding's: the
+# region is read as its hull, which it holds to within the move's own pad
+REGION_ODD, REGION_VERTICES, REGION_NOT_NUMBERS = "region-odd", "region-vertices", "region-not-numbers"
+REGION_NOT_FINITE, REGION_SCALE = "region-not-finite", "region-scale"
+REGION_NOT_CONVEX, REGION_SELF_INTERSECTING, REGION_CLOCKWISE = "region-not-convex", "region-self-intersecting", "region-clockwise"
+REGION_REASONS = frozenset(
+    (REGION_ODD, REGION_VERTICES, REGION_NOT_NUMBERS, REGION_NOT_FINITE, REGION_SCALE, REGION_NOT_CONVEX, REGION_SELF_INTERSECTING, REGION_CLOCKWISE)
+)
 
 
 @dataclass(frozen=True)
@@ -48,16 +59,20 @@ class Polygon:
         return float(v.min()), float(v.max())
 
     def contains(self, x: np.ndarray) -> bool:
-        """x within the supporting line of every side in both normal directions and along it: dᵀx ≤ max_j dᵀv_j
-        for d = ±nᵢ, ±eᵢ and the axes (eᵢ side i, nᵢ its normal; no margin: for tests and the judge).  Any direction with its
-        support over every vertex bounds the hull, so the test holds whatever the order of the vertices (a
-        clockwise one, a rounding's reflex vertex) and a short side's direction of rounding noise; the outward
-        normals among them make it exact for a convex polygon, the sides' own directions for a flat one."""
-        v = self.vertices
-        e = _after(v) - v
-        n = np.stack([e[:, 1], -e[:, 0]], axis=1)
-        d = np.vstack([n, -n, e, -e, AXES])  # (the axes: a point's box)
-        return bool(np.all(d @ x <= (v @ d.T).max(axis=0)))
+        """x in the convex hull of the vertices, exactly, whatever their order (a clockwise one, a rounding's reflex
+        vertex) and at any finite scale (no margin: for tests and the judge).  Strictly left of every side in turn
+        already proves it (each side then sweeps a positive angle seen from x, so the closed path winds around x,
+        which no point outside the hull has); else x is checked against the sides of the exact hull.  Every sign is
+        :func:`_cross_sign`'s, exact where floating point cannot decide it (rounding, an overflow at 1e308), so a
+        point a rounding would put on the wrong side of a side, or an overflow make NaN, is never misjudged."""
+        px, py = float(x[0]), float(x[1])
+        v = _points(self.vertices)
+        ax, ay = v[-1]
+        for bx, by in v:
+            if _cross_sign(ax, ay, bx, by, ax, ay, px, py) <= 0:
+                return _in_hull(_hull(v), px, py)
+            ax, ay = bx, by
+        return True
 
     def affine(self, A: np.ndarray, t: np.ndarray) -> Polygon:
         """{A x + t}: A (2, 2); the vertices' order reversed where det A < 0 (its sign exact: a rounded determinant
@@ -328,6 +343,18 @@ def _hull(v: list[Point]) -> list[Point]:
     return ring[first:] + ring[:first]
 
 
+def _in_hull(hull: list[Point], px: float, py: float) -> bool:
+    """(px, py) in the hull :func:`_hull` returned (counter-clockwise, no collinear vertices; a point or a segment
+    if flat), exactly."""
+    if len(hull) == 1:
+        return hull[0] == (px, py)
+    if len(hull) == 2:  # on the segment: on its line, within its box
+        (ax, ay), (bx, by) = hull
+        on_line = _cross_sign(ax, ay, bx, by, ax, ay, px, py) == 0
+        return on_line and min(ax, bx) <= px <= max(ax, bx) and min(ay, by) <= py <= max(ay, by)
+    return all(_cross_sign(ax, ay, bx, by, ax, ay, px, py) >= 0 for (ax, ay), (bx, by) in zip(hull, [*hull[1:], hull[0]]))
+
+
 def _clip(v: np.ndarray, c: np.ndarray, b: float) -> np.ndarray | None:
     """The polygon ∩ {cᵀx ≤ b} (Sutherland–Hodgman against one half-plane); None if nothing remains."""
     s = v @ c - b
@@ -402,4 +429,105 @@ def _drop_edges(v: list[Point], drops: dict[int, tuple[float, float]]) -> list[P
     return [p for p, k in zip(out, keep) if k]
 
 
-__all__ = ["MARGIN", "MAX_VERTICES", "MIN_VERTICES", "Polygon"]
+def region_problem(coords: Sequence[float]) -> tuple[str, str] | None:
+    """Why the flattened vertices [β₁, r₁, β₂, r₂, …] are no region a node may publish, as (reason, detail); None if
+    they are one: MIN_VERTICES to MAX_VERTICES finite vertices within ±MAX_COORDINATE, counter-clockwise and convex
+    to the rounding: the sides wind once around, counter-clockwise, and turn the wrong way nowhere by more than
+    CONVEX_TOLERANCE of the coordinates' size (:func:`_turns`).  A region flat to that tolerance (a segment, a point,
+    a sliver a cut left) is one whatever its order: its hull is within the tolerance of it.  What is dropped is
+    named exactly (only a dropped region pays for it): self-intersecting where two sides meet (exact
+    orientations), else clockwise or not convex.  Every role runs it on every region it decodes: one pass, plain
+    floats (a few µs at 24 vertices)."""
+    if len(coords) % 2:
+        return REGION_ODD, f"{len(coords)} coordinates"
+    if not MIN_VERTICES <= len(coords) // 2 <= MAX_VERTICES:
+        return REGION_VERTICES, f"{len(coords) // 2} vertices, not {MIN_VERTICES} to {MAX_VERTICES}"
+    if not math.isfinite(sum(coords)) and not all(map(math.isfinite, coords)):  # (a NaN or an inf makes the sum one)
+        return REGION_NOT_FINITE, "a coordinate is not finite"
+    size = max(max(coords), -min(coords))
+    if size > MAX_COORDINATE:
+        return REGION_SCALE, f"a coordinate of size {size:.3g}, beyond ±{MAX_COORDINATE:g}"
+    tol = CONVEX_TOLERANCE * (1.0 + size)
+    winds, reflex = _turns(coords, tol)
+    if winds == 1 and not reflex:
+        return None
+    v = list(zip(map(float, coords[0::2]), map(float, coords[1::2])))
+    if _flat(v, tol):
+        return None
+    if _sides_meet(v):
+        return REGION_SELF_INTERSECTING, f"two sides cross (they wind {winds} times around)"
+    if winds == -1:
+        return REGION_CLOCKWISE, "the vertices go round clockwise"
+    return REGION_NOT_CONVEX, "a vertex turns clockwise"
+
+
+def _turns(coords: Sequence[float], tol: float) -> tuple[int, bool]:
+    """How many times the sides of the closed path [x₁, y₁, x₂, y₂, …] wind around (counter-clockwise positive), and
+    whether one turns clockwise from the one before by more than ``tol`` times their lengths (|x| + |y|: a cross
+    product's rounding is the coordinates' size times the sides' lengths, in units of the coordinates' ε).  Each
+    turn is taken as the smaller angle (where a side doubles back exactly, by +π); the winding counts the turns
+    across the direction angle 0: from the lower half-plane to the upper counter-clockwise, +1, the other way
+    clockwise, −1 (a repeated vertex has no side)."""
+    xs, ys = coords[0::2], coords[1::2]
+    k = len(xs) - 1
+    while k > 0 and xs[k] == xs[k - 1] and ys[k] == ys[k - 1]:
+        k -= 1  # the last side that is one (a repeated vertex has none)
+    ax, ay = xs[k] - xs[k - 1], ys[k] - ys[k - 1]  # (k = 0: the side into the first vertex from the last)
+    if k == 0 and ax == 0.0 and ay == 0.0:
+        return 1, False  # a point
+    lower = ay < 0.0 or (ay == 0.0 and ax < 0.0)  # direction angle in [π, 2π)
+    winds, reflex = 0, False
+    px, py = xs[-1], ys[-1]
+    for x, y in zip(xs, ys):
+        bx, by = x - px, y - py
+        px, py = x, y
+        if bx == 0.0 and by == 0.0:
+            continue
+        cross = ax * by - ay * bx
+        if cross <= 0.0 and cross < -tol * (abs(ax) + abs(ay) + abs(bx) + abs(by)):  # (a turn the right way costs no more)
+            reflex = True
+        b_lower = by < 0.0 or (by == 0.0 and bx < 0.0)
+        if lower is not b_lower:
+            winds += lower if cross >= 0.0 else -b_lower  # across 0 (the other crossings are across π)
+        ax, ay, lower = bx, by, b_lower
+    return winds, reflex
+
+
+def _flat(v: list[Point], tol: float) -> bool:
+    """Whether every vertex is within ``tol`` of the line through the first lowest-leftmost one and the vertex
+    farthest from it (then the hull of v is a segment to ``tol``; a point if every vertex is that one)."""
+    ax, ay = min(v)
+    bx, by = max(v, key=lambda p: abs(p[0] - ax) + abs(p[1] - ay))
+    length = math.hypot(bx - ax, by - ay)
+    return length == 0.0 or all(abs((bx - ax) * (y - ay) - (by - ay) * (x - ax)) <= tol * length for x, y in v)
+
+
+def _sides_meet(v: list[Point]) -> bool:
+    """Whether two sides of the closed path v meet other than where they follow each other (exact orientations)."""
+    sides = [(a, b) for a, b in zip(v, [*v[1:], v[0]]) if a != b]
+    n = len(sides)
+    for i, j in itertools.combinations(range(n), 2):
+        (a, b), (c, d) = sides[i], sides[j]
+        if j == i + 1 or (i == 0 and j == n - 1):  # consecutive: they share a vertex; they meet beyond it only if
+            if _cross_sign(*a, *b, *c, *d) == 0 and _dot_sign(a, b, c, d) < 0:
+                return True  # the path doubles back along the same line
+            continue
+        o1, o2 = _cross_sign(*a, *b, *a, *c), _cross_sign(*a, *b, *a, *d)
+        o3, o4 = _cross_sign(*c, *d, *c, *a), _cross_sign(*c, *d, *c, *b)
+        if o1 * o2 > 0 or o3 * o4 > 0:
+            continue
+        if o1 or o2 or o3 or o4:
+            return True
+        if all(min(a[k], b[k]) <= max(c[k], d[k]) and min(c[k], d[k]) <= max(a[k], b[k]) for k in (0, 1)):
+            return True  # on one line, and overlapping
+    return False
+
+
+def _dot_sign(a: Point, b: Point, c: Point, d: Point) -> int:
+    """The exact sign of (b − a) · (d − c)."""
+    F = Fraction
+    exact = (F(b[0]) - F(a[0])) * (F(d[0]) - F(c[0])) + (F(b[1]) - F(a[1])) * (F(d[1]) - F(c[1]))
+    return (exact > 0) - (exact < 0)
+
+
+__all__ = ["MARGIN", "MAX_VERTICES", "MIN_VERTICES", "REGION_REASONS", "Polygon", "region_problem"]

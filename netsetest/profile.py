@@ -1,9 +1,10 @@
 """Where a role process's CPU goes, per phase of its own thread (off unless asked; for the benchmark).
 
-``NETSETEST_PROFILE=DIR`` in a role process's environment turns it on: the bus and the node charge
-the CPU time of the calling thread (``time.thread_time_ns``, robust to other work on the machine,
-unlike wall time) to named phases, and a node writes ``DIR/node-<id>.json`` when it ends.  Off, every
-hook is one ``is None`` test.  Phases (:data:`PHASES`):
+``NETSETEST_PROFILE=DIR`` in a role process's environment turns it on: an observer (:func:`observe_bus`,
+:func:`observe_node`) wraps the bus's and the node's methods of each phase on their instances, so that they charge
+the CPU time of the calling thread (``time.thread_time_ns``, robust to other work on the machine, unlike wall
+time) to named phases, and a node writes ``DIR/node-<id>.json`` when it ends.  Off, nothing is wrapped and the hot
+path has no profiling code at all.  Phases (:data:`PHASES`):
 
 - ``wait``: blocking for the next message — the CPU of going to sleep and of being woken (the
   Condition, the futex, taking the GIL back); ``calls`` counts the blocking waits, i.e. wake-ups;
@@ -31,7 +32,15 @@ import sys
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from netsetest.messages import encode
+
+if TYPE_CHECKING:  # (types only: the observer wraps what it is handed)
+    from netsetest.bus.base import Bus, Handler, Screen
+    from netsetest.roles.node import Node
 
 ENV = "NETSETEST_PROFILE"
 PHASES = ("wait", "decode", "handle", "solve", "build", "encode", "put")
@@ -110,3 +119,65 @@ class PhaseProfile:
 
 #: The process's profile, or None (the default): set from the environment once, at import.
 PROFILE: PhaseProfile | None = PhaseProfile() if os.environ.get(ENV) else None
+
+
+def _timed(prof: PhaseProfile, phase: str, fn: Callable[..., Any]) -> Callable[..., Any]:
+    """``fn`` charging its calling thread's CPU to ``phase``."""
+
+    def timed(*args: Any, **kwargs: Any) -> Any:
+        t = prof.now()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            prof.add(phase, t)
+
+    return timed
+
+
+def observe_bus(bus: Bus, prof: PhaseProfile) -> None:
+    """Profile ``bus`` (before anything subscribes): its publishing (``encode``, ``put``: the transport's send), its
+    decoding, every handler's run (``handle``), its blocking waits (``wait``) and the messages it takes and sends.
+    The instance's own methods are wrapped; the class is untouched."""
+    send, decoded, arrived, subscribe, wait = bus._send, bus._decoded, bus._arrived, bus.subscribe, bus._inbox.wait
+
+    def publish(key: str, msg: Any) -> None:
+        prof.count("sent")
+        t = prof.now()
+        payload = encode(msg)
+        t = prof.add("encode", t)
+        send(key, payload)
+        prof.add("put", t)
+
+    def counted() -> None:
+        arrived()
+        prof.count("received")
+
+    def observed_subscribe(key_expr: str, handler: Handler, lazy: bool = False, screen: Screen | None = None) -> None:
+        subscribe(key_expr, _timed(prof, "handle", handler), lazy, screen)
+
+    bus.publish = publish  # type: ignore[method-assign]  # the instance's own, wrapped
+    bus._decoded = _timed(prof, "decode", decoded)  # type: ignore[method-assign]  # (likewise)
+    bus._arrived = counted  # type: ignore[method-assign]  # (likewise)
+    bus.subscribe = observed_subscribe  # type: ignore[method-assign]  # (likewise)
+    bus._inbox.wait = _timed(prof, "wait", wait)  # type: ignore[method-assign]  # (likewise)
+
+
+def observe_node(node: Node, prof: PhaseProfile) -> Callable[[], int]:
+    """Profile ``node``: its estimator's steps (``solve``: the step and the part prepared before its readings) and the
+    building of its state (``build``), from its first solved step on (:meth:`PhaseProfile.start_window` when it has
+    one); returns how many steps it has stepped in the window."""
+    est = node.estimator
+    est.step = _timed(prof, "solve", est.step)  # type: ignore[method-assign]  # the instance's own, wrapped
+    est.prepare = _timed(prof, "solve", est.prepare)  # type: ignore[method-assign]  # (likewise)
+    node._built = _timed(prof, "build", node._built)  # type: ignore[method-assign]  # (likewise)
+    try_step, first = node.try_step, [0]
+
+    def observed_try_step(now: float | None = None) -> bool:
+        stepped = try_step(now)
+        if stepped and node.k >= 1 and not prof.started:
+            prof.start_window()  # from the first solved step: start-up and step 0 left out
+            first[0] = node.k
+        return stepped
+
+    node.try_step = observed_try_step  # type: ignore[method-assign]  # (likewise)
+    return lambda: node.k - first[0] if prof.started else 0

@@ -15,14 +15,15 @@ from __future__ import annotations
 
 import math
 from functools import cached_property
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import msgspec
 import numpy as np
 from msgspec import Meta, Struct
 
 from netsetest.models.sensor import NA, NX
-from netsetest.polygon import MAX_VERTICES, MIN_VERTICES, Polygon
+import netsetest.linalg as linalg
+from netsetest.polygon import MAX_VERTICES, MIN_VERTICES, Polygon, region_problem
 from netsetest.sets import Box, Ellipsoid, RegionSet, SumSet, Zonotope, ellipsoid_bounds, set_from_wire
 from netsetest.validation import Finite, Positive
 
@@ -61,8 +62,9 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
     ``set`` (then ``region`` and ``fault`` are absent: its set carries its own, and the ellipsoid encloses it).
 
     ``region``: the polygon's vertices counter-clockwise, flattened [β₁, r₁, β₂, r₂, …] (None: no region kept).
-    The cross-field checks (P symmetric positive definite, an even number of region coordinates, lo ≤ hi, a set
-    that parses) run on construction and on decode (a ValueError there fails the message's decode).
+    The cross-field checks (P symmetric positive definite, a region a node may publish: polygon.region_problem, lo ≤
+    hi, a set that parses) run on construction and on decode (a ValueError there fails the message's decode; a
+    region's names its reason first).
     """
 
     xhat: Vec3
@@ -78,8 +80,8 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
             raise ValueError(problem)
         if self.fault is not None and not self.fault[0] <= self.fault[1]:
             raise ValueError(f"fault: lo > hi ({self.fault})")
-        if self.region is not None and len(self.region) % 2:
-            raise ValueError("region: an odd number of coordinates")
+        if self.region is not None and (bad_region := region_problem(self.region)):
+            raise ValueError(": ".join(bad_region))  # the reason first: decode drops the message under it
         if self.set is not None:
             if self.region is not None or self.fault is not None:
                 raise ValueError("a set estimator's set carries its own region and fault range")
@@ -132,7 +134,7 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
     def E(self, xbar: np.ndarray) -> float:
         """eᵀP⁻¹e with e = x̄ − x̂: where x̄ lies against the ellipsoid (inside iff ≤ ρ)."""
         e = xbar - self.centre
-        return float(e @ np.linalg.solve(self.P_matrix, e))
+        return float(e @ linalg.solve(self.P_matrix, e))  # (numpy.linalg's own LAPACK call, the same floats, without its set-up)
 
     def contains(self, xbar: np.ndarray, E: float | None = None) -> bool:
         """x̄ = (β, r, f) lies in the set: the judge's rule.  A set estimator's set by its own ``contains`` (relative
@@ -146,6 +148,32 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
             return False
         return self.polygon is None or self.polygon.contains(xbar[:NX])
 
+    def relation(self, lo: np.ndarray, hi: np.ndarray) -> Relation:
+        """Where the box [lo, hi] (3,) of x̄ lies against the set (a recorded drive's truth, docs/your-log.md):
+        ``inside`` when the set holds the whole box (every corner: the set is convex), ``disjoint`` when it is proven
+        apart (a separating coordinate of the set's bounds or a side of its region, or the ellipsoid's least
+        eᵀP⁻¹e over the box above ρ with a margin for rounding), else ``overlap``.  Sound both ways: a box called
+        disjoint never meets the set, one called inside lies in it; some disjoint boxes may be called overlap."""
+        corners = _corners(lo, hi)
+        if all(self.contains(c) for c in corners):
+            return "inside"
+        slo, shi = self.bounds()
+        if np.any(lo > shi) or np.any(hi < slo):
+            return "disjoint"
+        if self.polygon is not None and _separated(self.polygon, lo[:NX], hi[:NX]):
+            return "disjoint"
+        if self.own_set is None and box_min_E(self.centre, self.P_matrix, lo, hi) > self.rho * (1 + DISJOINT_RTOL):
+            return "disjoint"
+        return "overlap"
+
+    def E_max(self, lo: np.ndarray, hi: np.ndarray) -> float:
+        """The largest eᵀP⁻¹e over the box [lo, hi]: at a corner (a convex function); ≤ ρ iff the ellipsoid holds the box."""
+        return max(self.E(c) for c in _corners(lo, hi))
+
+    def ellipsoid_only(self) -> ProvenSet:
+        """The ellipsoid alone (what a neighbour uses of a state)."""
+        return ProvenSet(xhat=self.xhat, P=self.P, rho=self.rho)
+
     def without_fault(self) -> ProvenSet:
         """The same ellipsoid and region without the fault range."""
         return ProvenSet(xhat=self.xhat, P=self.P, rho=self.rho, region=self.region)
@@ -153,6 +181,50 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
     def digest_content(self) -> tuple[Any, ...]:
         """What a state's digest hashes of this set: every field, as sent."""
         return (self.xhat, self.P, self.rho, self.region, self.fault, self.set)
+
+
+DISJOINT_RTOL = 1e-9  # the least eᵀP⁻¹e over a box must exceed ρ by this (relative) before the two are called disjoint
+Relation = Literal["inside", "disjoint", "overlap"]
+
+
+def _corners(lo: np.ndarray, hi: np.ndarray) -> list[np.ndarray]:
+    """The box's distinct corners (a flat coordinate gives one, a point box one corner)."""
+    out = [np.empty(0)]
+    for a, b in zip(lo, hi):
+        out = [np.append(c, v) for c in out for v in ((a,) if a == b else (a, b))]
+    return out
+
+
+def _separated(poly: Polygon, lo: np.ndarray, hi: np.ndarray) -> bool:
+    """Whether a side's outward or inward normal (or a side's direction) separates the box of x from the polygon."""
+    v = poly.vertices
+    e = np.roll(v, -1, axis=0) - v
+    n = np.stack([e[:, 1], -e[:, 0]], axis=1)
+    d = np.vstack([n, -n, e, -e])
+    box_min = np.minimum(d[:, 0] * lo[0], d[:, 0] * hi[0]) + np.minimum(d[:, 1] * lo[1], d[:, 1] * hi[1])
+    return bool(np.any(box_min > (v @ d.T).max(axis=0)))
+
+
+def box_min_E(c: np.ndarray, P: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
+    """min (x − c)ᵀP⁻¹(x − c) over lo ≤ x ≤ hi, exactly: at the minimum every coordinate is at a bound or free with
+    zero gradient (KKT), so the least value over the 3ⁿ patterns whose free coordinates solve Q_FF x_F = Q_FF c_F −
+    Q_FX (x_X − c_X) inside their bounds is it."""
+    Q = np.linalg.inv(P)
+    n = c.size
+    best = np.inf
+    for pattern in np.ndindex(*(3,) * n):  # 0: at lo, 1: at hi, 2: free
+        x = np.where(np.array(pattern) == 0, lo, hi).astype(float)
+        free = [i for i in range(n) if pattern[i] == 2]
+        fixed = [i for i in range(n) if pattern[i] != 2]
+        if free:
+            rhs = Q[np.ix_(free, free)] @ c[free] - Q[np.ix_(free, fixed)] @ (x[fixed] - c[fixed])
+            xf = np.linalg.solve(Q[np.ix_(free, free)], rhs)
+            if np.any(xf < lo[free]) or np.any(xf > hi[free]):
+                continue
+            x[free] = xf
+        e = x - c
+        best = min(best, float(e @ Q @ e))
+    return best
 
 
 def continued_set(published: ProvenSet, continues: ProvenSet | None) -> ProvenSet:

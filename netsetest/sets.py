@@ -21,7 +21,7 @@ from typing import Any
 import clarabel
 import numpy as np
 
-from netsetest.polygon import MAX_VERTICES, MIN_VERTICES, Polygon
+from netsetest.polygon import REGION_NOT_NUMBERS, Polygon, region_problem
 
 MEMBERSHIP_TOL = 1e-9  # relative slack of contains(): a point on the boundary is inside
 
@@ -390,16 +390,20 @@ def set_from_wire(d: object, dim: int) -> Ellipsoid | Zonotope | Box | SumSet | 
 
 
 def _region_set(d: dict, dim: int) -> RegionSet:
-    """A ``region`` set's parts, checked: a base set that is not itself one, over [β, r, f] (dim 3), a polygon of
-    MIN_VERTICES to MAX_VERTICES finite vertices, and a finite fault range lo ≤ hi."""
+    """A ``region`` set's parts, checked: a base set that is not itself one, over [β, r, f] (dim 3), a region a node
+    may publish (polygon.region_problem), and a finite fault range lo ≤ hi."""
     if dim != 3:
         raise SetFormatError(f"region: a region set is over [β, r, f] (dimension 3), not {dim}")
     base = set_from_wire(d.get("set"), dim)
     if isinstance(base, RegionSet):
         raise SetFormatError("region: its base set is a region set")
-    v = _vec(d, "region")
-    if len(v) % 2 or not MIN_VERTICES <= len(v) // 2 <= MAX_VERTICES:
-        raise SetFormatError(f"region: expected {MIN_VERTICES} to {MAX_VERTICES} vertices [β₁, r₁, β₂, r₂, …]")
+    coords = d.get("region")
+    if not isinstance(coords, list) or not all(type(c) in (int, float) for c in coords):
+        raise SetFormatError(f"{REGION_NOT_NUMBERS}: expected a list of numbers [β₁, r₁, β₂, r₂, …]")
+    problem = region_problem(coords)
+    if problem:
+        raise SetFormatError(": ".join(problem))  # the reason first: decode drops the message under it
+    v = np.asarray(coords, dtype=float)
     fault = _vec(d, "fault", 2)
     if fault[0] > fault[1]:
         raise SetFormatError("region: fault range lo > hi")

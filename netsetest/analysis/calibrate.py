@@ -6,7 +6,7 @@ collected.  Two bounds cover all of them, each enlarged by the stated margin:
 
 - the box: |e_m| ≤ (1 + margin) · max_k |e_m,k|;
 - the ellipsoid: the minimum-area origin-centred ellipse {e: eᵀE⁻¹e ≤ 1} around the e_k (Khachiyan's
-  algorithm on the symmetric set ±e_k, to relative tolerance :data:`MVEE_TOL`, then scaled so that every
+  algorithm on the symmetric set ±e_k, to relative tolerance :data:`~netsetest.models.uncertainty.MVEE_TOL`, then scaled so that every
   e_k lies inside), its semi-axes enlarged by (1 + margin).
 
 Where the package has a simpler model of the same car, the same drives on it say how much of e_k each
@@ -36,13 +36,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from netsetest.config.schema import Scenario
+from netsetest.config.schema import Scenario, check_envelope_speeds
 from netsetest.models.drive import Drive
 from netsetest.models.envelope import OperatingEnvelope
 from netsetest.models.manoeuvres import WITH_AMPLITUDE, DriveSpec, ManoeuvreName
 from netsetest.models.plant import PlantKind
 from netsetest.models.signals import SignalKind, SpeedProfile
-from netsetest.models.uncertainty import DEFAULT_MARGIN, ModelUncertainty
+from netsetest.models.uncertainty import DEFAULT_MARGIN, HOLDS_RTOL, ModelUncertainty, origin_mvee
 from netsetest.models.vehicle import KMH
 
 # the same car with one cause of mismatch less at each step down (their derived T-S models are the same)
@@ -52,8 +52,6 @@ SIMPLER: dict[PlantKind, tuple[PlantKind, ...]] = {
     "single-track": ("single-track-linear",),
     "multi-body": ("single-track", "single-track-linear"),
 }
-MVEE_TOL = 1e-7
-MVEE_MAX_ITER = 10_000
 SWEEP_MANOEUVRES: tuple[ManoeuvreName, ...] = ("step-steer", "sine-dwell")  # steered by an amplitude: the envelope's training
 SWEEP_SPEEDS = 3  # speeds across the envelope's range: both ends and the middle
 # amplitudes, as fractions of the one whose steering alone reaches ay_max: the last overfills the envelope
@@ -166,30 +164,6 @@ def drive_mismatch(sc: Scenario, signals: SignalKind, seed: int, speed_kmh: floa
     )
 
 
-def origin_mvee(points: np.ndarray) -> np.ndarray:
-    """E of the minimum-volume ellipsoid {eᵀE⁻¹e ≤ 1} centred at 0 containing ``points`` (m, n).
-
-    Khachiyan's algorithm on the symmetric set ±points (whose minimum ellipsoid is centred at 0), then
-    E scaled up so that every point satisfies eᵀE⁻¹e ≤ 1 exactly (the iteration stops at a tolerance)."""
-    pts = np.vstack([points, -points])
-    m, n = pts.shape
-    if np.linalg.matrix_rank(pts) < n:
-        raise ValueError("the mismatch samples span fewer than two directions: no ellipsoid is bounded")
-    u = np.full(m, 1.0 / m)
-    for _ in range(MVEE_MAX_ITER):
-        X = pts.T @ (u[:, None] * pts)  # Σ u_i p_i p_iᵀ
-        g = np.einsum("ij,jk,ik->i", pts, np.linalg.inv(X), pts)  # p_iᵀ X⁻¹ p_i
-        j = int(np.argmax(g))
-        step = (g[j] - n) / (n * (g[j] - 1.0))
-        if step < MVEE_TOL:
-            break
-        u *= 1.0 - step
-        u[j] += step
-    E = n * (pts.T @ (u[:, None] * pts))
-    worst = float(np.max(np.einsum("ij,jk,ik->i", pts, np.linalg.inv(E), pts)))
-    return E * max(worst, 1.0)
-
-
 def calibrate(
     scenarios: Sequence[Scenario],
     seeds: Sequence[int],
@@ -257,12 +231,7 @@ def envelope_sweep(sc: Scenario, envelope: OperatingEnvelope, progress: Callable
     at SWEEP_FRACTIONS of the amplitude whose peak |a_y| reaches ay_max (with the paper's wind).  ValueError where the envelope's
     speeds leave the topology's model range (the vehicle could not publish them for scheduling)."""
     p = sc.model.params
-    lo, hi = envelope.speed_kmh
-    if lo * KMH < p.vx_min * (1 - 1e-9) or hi * KMH > p.vx_max * (1 + 1e-9):
-        raise ValueError(
-            f"the envelope's speeds {lo:g}–{hi:g} km/h leave the model's range {p.vx_min / KMH:g}–{p.vx_max / KMH:g} km/h "
-            "([vehicle] vx_min_kmh, vx_max_kmh): widen that range or narrow --speed"
-        )
+    check_envelope_speeds(envelope, p.vx_min / KMH, p.vx_max / KMH)
     plan = [(kmh, m) for kmh in envelope_speeds(envelope) for m in SWEEP_MANOEUVRES]
     drive = dataclasses.replace(sc, steps=min(sc.steps, round(SWEEP_S / sc.tau_s)))
     out = []
@@ -311,6 +280,178 @@ def envelope_by_drive(drives: Sequence[DriveMismatch]) -> dict[str, DriveEnvelop
     return out
 
 
+# ---------------------------------------------------------------- from recorded drives (calibrate --logs)
+
+
+@dataclass(frozen=True)
+class LogRecording:
+    """One recorded drive on the run's steps 0..K (logs/drive.py, streamed): what ``calibrate --logs`` reads of it."""
+
+    path: str
+    tau_s: float
+    x_ref: np.ndarray  # (K+1, NX) the reference's β, r (NaN where there is none)
+    u: np.ndarray  # (K+1,) road-wheel angle [rad]
+    speed: np.ndarray  # (K+1,) the logged speed [m/s]
+    vx: np.ndarray  # (K+1,) the speed the model is scheduled with (the logged one held inside the model's range)
+    y: dict[int, np.ndarray]  # node → (K+1,) its logged reading (NaN: none)
+    healthy: dict[int, np.ndarray]  # node → (K+1,) bool: declared fault-free there
+    accuracy: np.ndarray  # (NX,) the reference's half-widths
+
+
+def log_recording(sc: Scenario) -> LogRecording:
+    """Every step of ``sc``'s log (its steps decided: logs/drive.py with_log_steps); LogError where it has no reference."""
+    from netsetest.logs.drive import LogDrive
+    from netsetest.logs.readers import LogError
+
+    assert sc.log is not None
+    if sc.log.mapping.r is None:
+        raise LogError(f"{sc.log.mapping.path}: no [reference]: calibrating from a log needs the reference's β and r")
+    drive = LogDrive(sc)
+    steps = [drive.step(k) for k in range(sc.steps + 1)]
+    nan2 = np.full(2, np.nan)
+    return LogRecording(
+        sc.log.path,
+        sc.tau_s,
+        np.array([d.x_ref if d.x_ref is not None else nan2 for d in steps]),
+        np.array([d.u for d in steps]),
+        np.array([d.speed for d in steps]),
+        np.array([d.vx for d in steps]),
+        {i: np.array([np.nan if d.y_log[i] is None else d.y_log[i] for d in steps]) for i in sc.ids},
+        {i: np.array([d.healthy[i] for d in steps]) for i in sc.ids},
+        np.asarray(sc.log.mapping.accuracy, dtype=float),
+    )
+
+
+@dataclass(frozen=True)
+class LoggedMismatch:
+    """The transitions k → k+1 of a recorded drive with the reference at both ends: e_k = x_{k+1} − Ā_k x_k − B̄_k u_k
+    (the wind taken as 0: the log does not know it, so the bound covers it too) known to lie in the box
+    ``centre`` ± ``half``, the reference's accuracy a carried through the model (half = a + |Ā_k| a), with the
+    transition's |a_y| = v r (as the run measures it) and speed."""
+
+    centre: np.ndarray  # (m, NX)
+    half: np.ndarray  # (m, NX)
+    ay: np.ndarray  # (m,)
+    speed: np.ndarray  # (m,) [m/s]
+
+
+def logged_mismatch(sc: Scenario, rec: LogRecording) -> LoggedMismatch:
+    """e_k's boxes of the drive's transitions with the reference at both ends (module doc of :class:`LoggedMismatch`)."""
+    ok = ~np.isnan(rec.x_ref).any(axis=1)
+    ks = np.flatnonzero(ok[:-1] & ok[1:])
+    centre, half = np.zeros((ks.size, 2)), np.zeros((ks.size, 2))
+    for n, k in enumerate(ks):
+        a, b, _ = sc.model.blend(sc.model.weights(rec.vx[k]))
+        centre[n] = rec.x_ref[k + 1] - a @ rec.x_ref[k] - b[:, 0] * rec.u[k]
+        half[n] = rec.accuracy + np.abs(a) @ rec.accuracy
+    return LoggedMismatch(centre, half, rec.speed[ks] * rec.x_ref[ks, 1], rec.speed[ks])
+
+
+@dataclass(frozen=True)
+class SensorNoise:
+    """A sensor's noise v = (ỹ − C x)/Dv over the steps its log declares it healthy (f = 0), known to lie within
+    ``v_centre`` ± ``v_half`` per step (the reference's accuracy through C); ``steps``: how many."""
+
+    node: int
+    steps: int
+    v_centre: np.ndarray  # (steps,)
+    v_half: float
+
+    @property
+    def worst(self) -> float:
+        """max |v| the reference allows on these steps (0 where there are none)."""
+        return float((np.abs(self.v_centre) + self.v_half).max()) if self.steps else 0.0
+
+
+def sensor_noise(sc: Scenario, rec: LogRecording) -> dict[int, SensorNoise]:
+    """Each sensor's noise over its healthy steps with a reading and the reference."""
+    out = {}
+    for i in sc.ids:
+        sen = sc.node(i).sensor
+        use = rec.healthy[i] & ~np.isnan(rec.y[i]) & ~np.isnan(rec.x_ref).any(axis=1)
+        v = (rec.y[i][use] - rec.x_ref[use] @ sen.C) / sen.Dv
+        out[i] = SensorNoise(i, int(use.sum()), v, float(np.abs(sen.C) @ rec.accuracy / abs(sen.Dv)))
+    return out
+
+
+@dataclass(frozen=True)
+class LogCalibration:
+    """What ``calibrate --logs`` derives from training drives: the mismatch bounds (box, ellipsoid) holding every
+    transition's e_k box, the operating envelope they covered, and each sensor's noise bound R (v² ≤ R) over its
+    healthy stretches, every one enlarged by the margin (R: its half-width √R)."""
+
+    logs: list[str]
+    margin: float
+    box: ModelUncertainty
+    ellipsoid: ModelUncertainty
+    envelope: OperatingEnvelope
+    R: dict[int, float]  # node → the noise bound (None-free: a sensor with no healthy step is refused)
+    transitions: int
+    noise_steps: dict[int, int]
+
+
+def calibrate_logs(scenarios: Sequence[Scenario], margin: float = DEFAULT_MARGIN, progress: Callable[[int, int], None] | None = None) -> LogCalibration:
+    """The bounds and the envelope of the training drives (one scenario per log, steps decided); ValueError where
+    they hold no transition with the reference at both ends, or a sensor no healthy step."""
+    if margin < 0:
+        raise ValueError(f"margin must be ≥ 0, got {margin}")
+    mism, noise = [], []
+    for n, sc in enumerate(scenarios):
+        rec = log_recording(sc)
+        mism.append(logged_mismatch(sc, rec))
+        noise.append(sensor_noise(sc, rec))
+        if progress is not None:
+            progress(n + 1, len(scenarios))
+    centre, half = np.vstack([m.centre for m in mism]), np.vstack([m.half for m in mism])
+    if not len(centre):
+        raise ValueError("no transition of the logs has the reference at both ends: nothing to calibrate on")
+    R, counts = {}, {}
+    for i in scenarios[0].ids:
+        counts[i] = sum(ns[i].steps for ns in noise)
+        if not counts[i]:
+            raise ValueError(f"node {i}: no step declared healthy with a reading and the reference: its noise bound cannot be calibrated")
+        R[i] = (max(ns[i].worst for ns in noise) * (1 + margin)) ** 2
+    return LogCalibration(
+        [sc.log.path for sc in scenarios if sc.log is not None],
+        margin,
+        ModelUncertainty.covering_boxes("box", centre, half, margin),
+        ModelUncertainty.covering_boxes("ellipsoid", centre, half, margin),
+        OperatingEnvelope.covering(np.concatenate([m.ay for m in mism]), np.concatenate([m.speed for m in mism])),
+        R,
+        len(centre),
+        counts,
+    )
+
+
+@dataclass(frozen=True)
+class HeldOutLog:
+    """A held-out drive against a calibration, as ``calibrate --envelope``'s held-out drives are judged: its
+    transitions inside and outside the envelope, and for each set whether e_k's box lies inside the box bound, may
+    lie outside it (the reference cannot tell) or certainly does; per sensor, its healthy steps whose noise is
+    inside, may be outside, or certainly is outside the calibrated R."""
+
+    path: str
+    inside: dict[str, int]  # inside the envelope: "inside" / "overlap" / "disjoint" → transitions
+    outside: dict[str, int]  # outside it
+    noise: dict[int, dict[str, int]]  # node → the same three → healthy steps
+
+
+def check_held_out(sc: Scenario, cal: LogCalibration) -> HeldOutLog:
+    """One held-out drive against ``cal`` (:class:`HeldOutLog`)."""
+    rec = log_recording(sc)
+    m = logged_mismatch(sc, rec)
+    inside: dict[str, int] = dict.fromkeys(("inside", "overlap", "disjoint"), 0)
+    outside = dict(inside)
+    for c, h, ay, v in zip(m.centre, m.half, m.ay, m.speed):
+        (inside if cal.envelope.holds(float(ay), float(v)) else outside)[cal.box.box_relation(c, h)] += 1
+    noise = {}
+    for i, ns in sensor_noise(sc, rec).items():
+        bound = np.sqrt(cal.R[i]) * (1 + HOLDS_RTOL)
+        lo, hi = np.maximum(np.abs(ns.v_centre) - ns.v_half, 0.0), np.abs(ns.v_centre) + ns.v_half
+        noise[i] = {"inside": int((hi <= bound).sum()), "overlap": int(((hi > bound) & (lo <= bound)).sum()), "disjoint": int((lo > bound).sum())}
+    return HeldOutLog(rec.path, inside, outside, noise)
+
+
 def with_uncertainty(sc: Scenario, bound: ModelUncertainty | None) -> Scenario:
     """The scenario with another declared mismatch bound (e.g. a calibrated one, or a halved one)."""
     return dataclasses.replace(sc, uncertainty=bound)
@@ -319,6 +460,16 @@ def with_uncertainty(sc: Scenario, bound: ModelUncertainty | None) -> Scenario:
 __all__ = [
     "SIMPLER",
     "Calibration",
+    "HeldOutLog",
+    "LogCalibration",
+    "LogRecording",
+    "LoggedMismatch",
+    "SensorNoise",
+    "calibrate_logs",
+    "check_held_out",
+    "log_recording",
+    "logged_mismatch",
+    "sensor_noise",
     "DriveEnvelope",
     "DriveMismatch",
     "amplitude_for",

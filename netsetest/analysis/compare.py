@@ -23,6 +23,10 @@ limit with every declared bound (``exact_reference`` "all");
 ``narrower`` counts the intervals (node-step and coordinate) narrower than the exact one where the
 node-step's cone held (beyond exact.NARROWER_TOL; an end the k-of-N search left relaxed is not the limit and
 is left out): a sound set never is;
+``rests_on`` says in words what the row's sets rest on (the declared fault bound at which nodes: the SDP and the
+exact row where the SDP relies on it, strip and setprop at every node), and :func:`assumptions_notes` what that means
+for the widths: a row resting on more than the ``exact`` row (the limit under the SDP's assumptions) may be narrower
+than it, never than the limit under its own;
 ``rms_radius_rel`` is Althoff & Rath's relative-RMS radius (their eq. (9)) with the exact limit as the
 reference observer, mean over nodes and the three coordinates; ms are per node-step.
 """
@@ -77,6 +81,19 @@ class _Accumulator:
     refused: list[str] = field(default_factory=list)
     assumptions: set[str] = field(default_factory=set)
     references: set[str] = field(default_factory=set)  # fault-bounds modes of the exact limits compared with
+    # what the row's sets rest on, for its ``rests_on``: the nodes scored, those where it relies on the declared fault
+    # bound (|f_k+1 − f_k| ≤ δ, |f_k| ≤ F), and whether on the k-of-N health
+    nodes: set[int] = field(default_factory=set)
+    fault_bound_nodes: set[int] = field(default_factory=set)
+    health: bool = False
+
+    def rests_on(self, node: int, fault_bound: bool, health: bool) -> None:
+        """Node ``node``'s sets in this row rest on the base assumptions, and on the declared fault bound and the
+        k-of-N health where told."""
+        self.nodes.add(node)
+        if fault_bound:
+            self.fault_bound_nodes.add(node)
+        self.health |= health
 
 
 @dataclass(frozen=True)
@@ -103,6 +120,8 @@ class CompareRow:
     fallbacks: int
     refused: list[str]
     exact_reference: list[str]  # fault-bounds modes of the exact limit its ratios are against
+    rests_on: str = ""  # the assumptions its sets rest on, in words (:func:`_rests_on_text`)
+    fault_bound_nodes: list[int] = field(default_factory=list)  # the nodes where it relies on the declared fault bound
 
 
 @dataclass(frozen=True)
@@ -180,6 +199,21 @@ def _score(acc: _Accumulator, node: int, bounds: np.ndarray, steps: np.ndarray, 
             acc.rms += list(np.where(ex_ms > EXACT_PINNED**2, np.sqrt((half**2).mean(axis=0) / ex_ms), np.nan))
 
 
+BASE_WORDS = "prior, noise, disturbance"  # estimator/base.py BASE_ASSUMPTIONS: x̄_0 in the prior, v² ≤ R, w² ≤ W (and e_k where declared)
+
+
+def _rests_on_text(acc: _Accumulator) -> str:
+    """The row's assumptions in words: the base ones, the declared fault bound at which nodes, the k-of-N health."""
+    words = [BASE_WORDS]
+    bound = sorted(acc.fault_bound_nodes)
+    if bound:
+        where = "every node" if acc.nodes <= acc.fault_bound_nodes else f"node{'s' if len(bound) > 1 else ''} {', '.join(map(str, bound))}"
+        words.append(f"declared fault bound at {where}")
+    if acc.health:
+        words.append(HEALTH)
+    return ", ".join(words)
+
+
 def _row(name: str, acc: _Accumulator, real_time: bool) -> CompareRow:
     def num(v: float) -> float | None:
         return float(v) if np.isfinite(v) else None
@@ -220,6 +254,8 @@ def _row(name: str, acc: _Accumulator, real_time: bool) -> CompareRow:
         fallbacks=acc.fallbacks,
         refused=acc.refused[:3],
         exact_reference=sorted(acc.references),
+        rests_on=_rests_on_text(acc),
+        fault_bound_nodes=sorted(acc.fault_bound_nodes),
     )
 
 
@@ -324,6 +360,7 @@ def _score_alone(
             tr_i = np.array([np.r_[t["x"], t["faults"][str(i)]] for t in truth])
             if name == SDP_ALONE:
                 bounds, steps, broken = _node_track(rec_alone, i, a)
+                a.rests_on(i, i in ex.bounded_nodes, False)  # alone: no reading, so no k-of-N pin
             else:
                 t0 = time.perf_counter()
                 local = exact_bounds(sc, rec, "used", nodes=[i])
@@ -331,6 +368,7 @@ def _score_alone(
                 a.ms += [1000 * (time.perf_counter() - t0) / len(steps)] * len(steps)
                 broken = history_cone(sc, truth, i, i in local.bounded_nodes)
                 a.assumptions.update(("prior", "noise", "disturbance", *(("fault_bound",) if local.bounded_nodes else ())))
+                a.rests_on(i, i in local.bounded_nodes, local.health is not None)
             a.references.add(ex.label)
             _score(a, i, bounds, steps, tr_i[steps], ex, broken)
             if keep is not None:
@@ -385,8 +423,11 @@ def _score_run(
                 broken = [cones[int(k)] for k in steps]
                 a.ms += [exact_ms] * len(steps)
                 a.assumptions.update(("prior", "noise", "disturbance", *(("fault_bound",) if ex.bounded_nodes else ()), *((HEALTH,) if ex.health else ())))
+                a.rests_on(i, i in ex.bounded_nodes, ex.health is not None)  # the SDP's assumptions ("used")
             else:
                 bounds, steps, broken = _node_track(run, i, a)
+                # the SDP relies on a node's declared bound where "used" applies it; a set estimator where it says so
+                a.rests_on(i, i in ex.bounded_nodes if name == SDP else "fault_bound" in accepted[i], ex.health is not None)
                 if "fault_bound" in accepted[i] and i not in ex.bounded_nodes:
                     ex_all = ex_all or exact_bounds(sc, rec, "all")
                     reference = ex_all
@@ -396,6 +437,7 @@ def _score_run(
                 keep[name][i] = bounds
             if name == SDP:  # the paper's own set, the published ellipsoid alone, from the same run
                 e_bounds, _, _ = _node_track(run, i, acc[SDP_ELLIPSOID], ellipsoid=True)
+                acc[SDP_ELLIPSOID].rests_on(i, i in ex.bounded_nodes, ex.health is not None)
                 acc[SDP_ELLIPSOID].references.add(reference.label)
                 _score(acc[SDP_ELLIPSOID], i, e_bounds, steps, tr_i[steps], reference, broken)
         report(name)
@@ -427,6 +469,7 @@ TABLE_HEADER = (
     "ms median",
     "ms p95",
     "fallbacks",
+    "rests on",
 )
 
 
@@ -452,9 +495,34 @@ def table_rows(c: Comparison) -> list[tuple[str, ...]]:
                 _fmt(r.ms_median, ".3f"),
                 _fmt(r.ms_p95, ".3f"),
                 str(r.fallbacks),
+                r.rests_on,
             )
         )
     return out
+
+
+def assumptions_notes(c: Comparison) -> list[str]:
+    """What the rows' assumptions mean for their widths, under every table (terminal, Markdown, page): the ``exact``
+    row is the limit under the SDP's assumptions; a row resting on a declared fault bound where the SDP does not
+    (strip, setprop: their fault model) may be narrower than that row, and is measured against the limit under its own."""
+    by = {r.estimator: r for r in c.rows}
+    sdp_like = by.get(EXACT) or by.get(SDP)
+    notes = [
+        "rests on: the assumptions a row's sets are guaranteed under (docs/comparison.md); its ratios are against the exact "
+        "limit under the same ('exact with fault bounds': used = where the SDP relies on a declared fault bound, all = every declared bound)."
+    ]
+    if EXACT in by:
+        notes.append(f"The exact row is the limit under the SDP's assumptions ({by[EXACT].rests_on}): no estimator resting on no more can be narrower.")
+    if sdp_like is not None:
+        more = [r.estimator for r in c.rows if r.estimator not in ALONE_ROWS and not set(r.fault_bound_nodes) <= set(sdp_like.fault_bound_nodes)]
+        if more:
+            its = "its" if len(more) == 1 else "their"
+            notes.append(
+                f"{', '.join(more)} rest{'s' if len(more) == 1 else ''} on a declared fault bound (|f_k+1 − f_k| ≤ δ, |f_k| ≤ F) where the SDP "
+                f"does not: more than the exact row assumes, so {its} widths may be narrower than that row's and still sound, though never "
+                f"narrower than the exact limit under {its} own assumptions, which {its} ratios are against."
+            )
+    return notes
 
 
 def node_ratio_lines(c: Comparison) -> list[str]:
@@ -477,6 +545,7 @@ def markdown_table(c: Comparison) -> str:
     lines.append("| " + " | ".join(TABLE_HEADER) + " |")
     lines.append("|" + "---|" * len(TABLE_HEADER))
     lines += ["| " + " | ".join(row) + " |" for row in table_rows(c)]
+    lines += ["", *assumptions_notes(c)]
     return "\n".join(lines) + "\n"
 
 

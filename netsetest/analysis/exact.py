@@ -162,6 +162,8 @@ def step_data(record: Record) -> list[RecordedStep]:
         for k, t in enumerate(sorted(record.truth, key=lambda t: t["step"])):
             if t["step"] != k:
                 raise ExactError(f"{record.path}: truth entries are not the contiguous steps 0..K (step {k} missing)")
+            if t.get("no_reading"):
+                raise ExactError(f"{record.path}: node {t['no_reading'][0]} has no reading at step {k} (a gap in the log): the exact limit takes every reading")
             out.append(
                 RecordedStep(
                     step=k,

@@ -38,7 +38,7 @@ from netsetest.bus.base import Bus, Handler, MemoryBus
 from netsetest.config.schema import Scenario
 from netsetest.messages import Message, Ready
 from netsetest.profile import ENV as PROFILE_ENV
-from netsetest.profile import PROFILE
+from netsetest.profile import PROFILE, observe_bus
 from netsetest.runtime.processes import IDLE_WAIT_S, READY_PERIOD_S, REALTIME_SETTLE_S  # the node's and the real-time clock's
 
 if TYPE_CHECKING:
@@ -140,6 +140,8 @@ def bare_node(bus: ZenohBus, run_id: str, payloads: RingPayloads) -> dict:
     def on_input(key: str, msg: Message) -> None:
         inputs.append(getattr(msg, "step", -1))
 
+    if PROFILE is not None:
+        observe_bus(bus, PROFILE)  # its decodes and waits, as a profiled node's (before it subscribes)
     own = subscribe_as_node(bus, run_id, node, payloads.others, on_input)
     ready_due = 0.0
     sent = 0

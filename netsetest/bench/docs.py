@@ -14,8 +14,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from netsetest.bench.campaign import campaign_markdown
 from netsetest.bench.exact_cost import exact_cost_markdown
 from netsetest.bench.flow import flow_markdown
+from netsetest.bench.logs import logs_markdown, logs_summary_markdown
 from netsetest.bench.network import network_markdown, network_summary_markdown
 from netsetest.bench.node_budget import node_markdown
 from netsetest.bench.plant import plant_markdown, plant_summary_markdown
@@ -42,6 +44,7 @@ class Part:
 _SCENARIO = "netsetest bench --quick --only scenario --json bench/scenario.json --markdown bench/scenario.md"
 _VIEW = "netsetest bench --quick --only view --json bench/view.json --markdown bench/view.md"
 _WIDTHS = "netsetest bench --quick --only widths --baseline BEFORE_REGION --json bench/widths.json --markdown bench/widths.md"  # a checkout of 29290ba
+_LOGS = "netsetest bench --quick --only logs --json bench/logs.json --markdown bench/logs.md"
 PARTS: dict[str, Part] = {
     "scenario": Part("The paper's scenario, per node", "bench/scenario.json", "scenario", scenario_markdown, _SCENARIO),
     "compare": Part("The papers' estimators compared", "bench/scenario.json", "scenario", compare_markdown, _SCENARIO),
@@ -116,6 +119,15 @@ PARTS: dict[str, Part] = {
         scaleout_markdown,
         "netsetest bench --quick --only scaleout --json bench/scaleout.json --markdown bench/scaleout.md",
     ),
+    "logs": Part("A recorded drive as the world", "bench/logs.json", "logs", logs_markdown, _LOGS),
+    "logs-summary": Part("A recorded drive as the world, against its targets", "bench/logs.json", "logs", logs_summary_markdown, _LOGS, in_results=False),
+    "campaign": Part(
+        "Campaigns: every core, a cluster, resume",
+        "bench/campaign.json",
+        "campaign",
+        campaign_markdown,
+        "netsetest bench --quick --only campaign --json bench/campaign.json --markdown bench/campaign.md",
+    ),
     "spread": Part(
         "How noisy the benchmark is",
         "bench/spread.json",
@@ -131,6 +143,7 @@ SECTIONED = (
     "docs/records.md",
     "docs/summary.md",
     "docs/estimator.md",
+    "docs/your-log.md",
 )  # files with generated sections between markers
 RESULTS = "docs/results.md"  # written whole
 RENDER_COMMAND = "netsetest bench --render-docs"

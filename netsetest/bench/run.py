@@ -48,6 +48,9 @@ QUICK: dict[str, Any] = {
     "profile_nodes": 96,
     "node_budget_nodes": 48,  # --only node: the profiled ring
     "node_budget_reps": 3,
+    "campaign_runs": 24,  # --only campaign: the throughput campaign (bench/campaign.py)
+    "campaign_reps": 2,
+    "campaign_big_runs": 100,  # a tenth of the issue's 1 000-run campaign (the full part runs it whole)
     "scaleout_nodes": 24,  # --only scaleout: the lockstep ring across one and two namespaces (bench/scaleout.py)
     "scaleout_steps": 40,
     "scaleout_reps": 3,
@@ -80,6 +83,11 @@ QUICK: dict[str, Any] = {
     "widths_worst_seeds": [3, 11],  # --only widths (issue 28's runs)
     "widths_car_seeds": [10],  # held out: the car's mismatch bound is calibrated on seeds 0-9
     "widths_lap_steps": 100,
+    "logs_replay_steps": 300,  # --only logs: paper6 replayed from a log (30 s of drive)
+    "logs_reps": 3,
+    "logs_train_seeds": [1, 2, 3],  # synthetic training drives of paper6_car's car
+    "logs_train_s": 30.0,
+    "logs_held_s": 30.0,
 }
 FULL: dict[str, Any] = {
     "steps": 80,
@@ -95,6 +103,9 @@ FULL: dict[str, Any] = {
     "profile_nodes": 96,
     "node_budget_nodes": 96,
     "node_budget_reps": 3,
+    "campaign_runs": 200,
+    "campaign_reps": 2,
+    "campaign_big_runs": 1000,
     "scaleout_nodes": 48,
     "scaleout_steps": 80,
     "scaleout_reps": 3,
@@ -127,6 +138,11 @@ FULL: dict[str, Any] = {
     "widths_worst_seeds": [3, 11],
     "widths_car_seeds": [10, 11, 12],
     "widths_lap_steps": 600,
+    "logs_replay_steps": 1200,
+    "logs_reps": 5,
+    "logs_train_seeds": [1, 2, 3, 4, 5],
+    "logs_train_s": 60.0,
+    "logs_held_s": 60.0,
 }
 
 
@@ -378,16 +394,18 @@ def run_bench(
     only: str | None = None,
     baseline: Path | None = None,
 ) -> int:
-    """``baseline``: a checkout the node and widths parts measure alternately beside this one (bench/node_budget.py,
-    bench/widths.py)."""
+    """``baseline``: a checkout the node, widths and performance parts measure alternately beside this one
+    (bench/node_budget.py, bench/widths.py, bench/baseline.py)."""
     from netsetest.bench.exact_cost import exact_cost_markdown, exact_figures
     from netsetest.bench.network import network_figures, network_markdown
     from netsetest.bench.plant import plant_figures, plant_markdown
     from netsetest.bench.scenario import compare_markdown, scenario_figures, scenario_markdown
     from netsetest.bench.flow import flow_figures, flow_markdown
+    from netsetest.bench.logs import logs_figures, logs_markdown
     from netsetest.bench.view import view_figures, view_markdown
     from netsetest.bench.node_budget import node_figures, node_markdown
     from netsetest.bench.scaleout import scaleout_figures, scaleout_markdown
+    from netsetest.bench.campaign import campaign_figures, campaign_markdown
     from netsetest.bench.widths import widths_figures, widths_markdown
     from netsetest.bench.zenoh_runs import (
         launch_to_step0,
@@ -423,6 +441,8 @@ def run_bench(
             "node": (lambda c, t: node_figures(c, t, baseline), node_markdown),
             "widths": (lambda c, t: widths_figures(c, t, baseline), widths_markdown),
             "scaleout": (scaleout_figures, scaleout_markdown),
+            "logs": (logs_figures, logs_markdown),
+            "campaign": (campaign_figures, campaign_markdown),
         }[only]
         with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
             res[only] = figures(cfg, Path(tmpd))
@@ -461,6 +481,10 @@ def run_bench(
         for p in (res["node_profile"], res["node_profile_trace"]):
             _log(f"  {p['objective']}: {p.get('process_ms_per_step')} ms per node-step, {p['deadline_misses']} deadline misses")
         res["defences"] = defences(cfg)
+        if baseline is not None:
+            from netsetest.bench.baseline import performance_side_by_side
+
+            res["baseline"] = performance_side_by_side(cfg, tmp, baseline, quick)
         if only is None:  # every part too; --only performance leaves them out
             res["plant"] = plant_figures(cfg, tmp)
             res["network"] = network_figures(cfg, tmp)
@@ -471,6 +495,10 @@ def run_bench(
     res["meta"]["duration_s"] = time.perf_counter() - t_all
     res.update(headline(res))
     md = markdown(res)
+    if "baseline" in res:
+        from netsetest.bench.baseline import baseline_markdown
+
+        md += "\n## Side by side with the baseline (netsetest/bench/baseline.py)\n\n" + baseline_markdown(res["baseline"])
     if only is None:
         md += "\n## A car as the truth (netsetest/bench/plant.py)\n\n" + plant_markdown(res["plant"])
         md += "\n## What the exchange can buy (netsetest/bench/network.py)\n\n" + network_markdown(res["network"])

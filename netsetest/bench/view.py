@@ -4,10 +4,10 @@
   with ``--view`` and without, in pairs run back to back (the pair's order alternates), each run sampled
   by the real-time runs' own machinery (netsetest/bench/zenoh_runs.py: ``cli_run`` and its
   ``ProcessSampler``): the nodes' deadline misses, a node's CPU per step (its median share of a core over
-  the stepping phase × τs), the view's CPU (its process and Rerun's server), and the view's lag behind the
-  run, which the view measures itself (runtime/view.py ``Lag``: per step, when the step's truth left the
-  view for the viewer's server minus when the vehicle published the step; ``NETSETEST_VIEW_LAG`` hands it
-  over) with the frames it dropped.
+  the stepping phase × τs), the view's CPU (its process, which also serves the page and the stream:
+  runtime/view_server.py), and the view's lag behind the run, which the view measures itself (runtime/view.py
+  ``Lag``: per step, when the step's truth was handed to the browsers' connections minus when the vehicle
+  published the step; ``NETSETEST_VIEW_LAG`` hands it over) with the frames it dropped.
 - ``page``: ``netsetest report RECORD --html`` of an 80-step paper6 record, opened ``page_reps`` times in
   headless Chromium (netsetest/records/browser.py, a fresh browser each time): the page's load event, first
   contentful paint and the moment BokehJS had rendered every root, from the navigation's start; the CPU its
@@ -91,7 +91,7 @@ def live_run(steps: int, view: bool, tmp: Path) -> dict:
         "late_steps": len(r.get("late_per_step") or {}),
         "nodes_missing": s.get("nodes_missing") if s else None,
         "node_cpu_ms_per_step": None if share is None else share / 100.0 * PAPER6_TAU_S * 1000.0,
-        "view_cpu_pct": (pr.get("role_cpu_pct") or {}).get("?"),  # the view process and Rerun's server (not netsetest roles)
+        "view_cpu_pct": (pr.get("role_cpu_pct") or {}).get("?"),  # the view process, its server included (not a netsetest role)
         "other_work_pct": pr.get("other_work_pct"),
         "lag_steps": len(lags),
         "lag_median_s": statistics.median(lags) if lags else None,
@@ -241,8 +241,8 @@ def view_markdown(res: dict) -> str:
         "",
         f"Real-time paper6 runs (τs = {live['tau_s']:g} s, {live['steps']} steps, secured), in pairs with the live view and without, "
         "in the order run. A node's CPU per step is its median share of a core over the stepping phase × τs; the view's CPU is its "
-        "process and Rerun's server; its lag is per step the time the step's truth left the view for the viewer's server minus the "
-        "time the vehicle published the step; other work is what the rest of the machine used meanwhile (two cores: 200 %).",
+        "process, which serves the page and the stream itself; its lag is per step the time the step's truth was handed to the "
+        "browsers' connections minus the time the vehicle published the step; other work is what the rest of the machine used meanwhile (two cores: 200 %).",
         "",
         "| view | load before | exit | deadline misses | late steps | node CPU per step | view CPU | lag median | lag p95 | lag max | frames dropped | other work |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",

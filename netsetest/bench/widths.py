@@ -198,7 +198,9 @@ class SideBySideFailed(RuntimeError):
 def _step_runs(case: Case, steps: int, runs: int, code: Path | None) -> list[dict[str, float]]:
     """:data:`STEP_PROGRAM` in a process of its own, on ``code``'s netsetest (None: this checkout's): after a run of
     the same length, ``runs`` runs, each the step median per node-step [ms] in the run and replayed (:data:`STEP_FIGURES`)."""
-    env = {**os.environ, **({"PYTHONPATH": str(code), "PYTHONSAFEPATH": "1"} if code is not None else {})}
+    from netsetest.bench.zenoh_runs import code_env
+
+    env = {**os.environ, **code_env(code)}
     where = code or "this checkout"
     try:
         out = subprocess.run(

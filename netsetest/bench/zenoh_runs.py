@@ -456,15 +456,22 @@ def _loadavg() -> str:
     return " ".join(Path("/proc/loadavg").read_text().split()[:3])
 
 
-def _realtime_run(topo: Path, n: int, steps: int, retries: int, log, label: str = "") -> tuple[bool, list[dict]]:
+def code_env(code: Path | None) -> dict[str, str]:
+    """The environment that runs ``code``'s netsetest (another checkout, the benchmark's baseline; None: this one's):
+    PYTHONPATH first, and PYTHONSAFEPATH so that `python -m` does not put the working directory (a checkout, say)
+    before it."""
+    return {"PYTHONPATH": str(code), "PYTHONSAFEPATH": "1"} if code is not None else {}
+
+
+def realtime_run(topo: Path, n: int, steps: int, retries: int, log, label: str = "", env: dict[str, str] | None = None) -> tuple[bool, list[dict]]:
     """Real-time runs of one topology (up to ``1 + retries``): whether one ran without a deadline miss or a
-    lost node, and every attempt's row."""
+    lost node, and every attempt's row.  ``env``: added to the run's environment (:func:`code_env`)."""
     from netsetest.bench.topologies import RING_TAU_S
 
     rows = []
     for attempt in range(retries + 1):
         load = _loadavg()
-        r = cli_run(topo, "zenoh", "realtime", timeout=120 + 3 * n + steps * 0.2, sample_stepping_s=steps * RING_TAU_S)
+        r = cli_run(topo, "zenoh", "realtime", timeout=120 + 3 * n + steps * 0.2, sample_stepping_s=steps * RING_TAU_S, env=env)
         s = r["summary"] or {}
         misses = sum(row.get("deadline_misses") or 0 for row in s.get("nodes", [])) if s else None
         late = r.get("late_per_step") or {}
@@ -504,7 +511,7 @@ def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int 
     runs: list[dict] = []
     best = None
     for n in sizes:
-        ok, rows = _realtime_run(ring_topology(directory, n, steps), n, steps, retries, log)
+        ok, rows = realtime_run(ring_topology(directory, n, steps), n, steps, retries, log)
         runs += rows
         if not ok:
             break
@@ -523,7 +530,7 @@ def realtime_fit(directory: Path, variants: tuple[RingVariant, ...], sizes: list
         runs: list[dict] = []
         best = None
         for n in sorted((m for m in sizes if start is not None and m <= start), reverse=True):
-            ok, rows = _realtime_run(ring_topology(directory, n, steps, variant=variant), n, steps, retries, log, f" ({variant})")
+            ok, rows = realtime_run(ring_topology(directory, n, steps, variant=variant), n, steps, retries, log, f" ({variant})")
             runs += rows
             if ok:
                 best = n
@@ -565,8 +572,7 @@ def profiled_ring_run(directory: Path, nodes: int, steps: int, objective: str | 
             "realtime",
             timeout=120 + 3 * nodes + steps * 0.2,
             sample_stepping_s=steps * RING_TAU_S,
-            # PYTHONSAFEPATH: `python -m` would put the working directory (a checkout, say) first on sys.path
-            env={"NETSETEST_PROFILE": prof, **({"PYTHONPATH": str(code), "PYTHONSAFEPATH": "1"} if code is not None else {})},
+            env={"NETSETEST_PROFILE": prof, **code_env(code)},
             extra=["--objective", objective] if objective else None,
         )
         reports = [json.loads(p.read_text()) for p in sorted(Path(prof).glob("node-*.json"))]

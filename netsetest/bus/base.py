@@ -42,7 +42,6 @@ from collections.abc import Callable
 
 from netsetest.bus.keys import matches
 from netsetest.messages import BadMessage, Message, decode, encode, peek_step
-from netsetest.profile import PROFILE
 
 Handler = Callable[[str, Message], None]
 Screen = Callable[[int], str | None]  # the step a payload names → why the subscriber drops it undecoded, or None
@@ -157,15 +156,7 @@ class Bus(ABC):
         self.overflow_listeners: dict[Handler, Handler] = {}  # told (key, message)
 
     def publish(self, key: str, msg: Message) -> None:
-        if PROFILE is None:
-            self._send(key, encode(msg))
-            return
-        PROFILE.count("sent")
-        t = PROFILE.now()
-        payload = encode(msg)
-        t = PROFILE.add("encode", t)
-        self._send(key, payload)
-        PROFILE.add("put", t)
+        self._send(key, encode(msg))
 
     @abstractmethod
     def _send(self, key: str, payload: bytes) -> None: ...
@@ -190,20 +181,14 @@ class Bus(ABC):
     def _arrived(self) -> None:
         """Count a payload taken from the transport (any thread)."""
         self.received += 1
-        if PROFILE is not None:
-            PROFILE.count("received")
 
     def _decoded(self, payload: bytes) -> Message | None:
         """The message in ``payload``, or None (dropped and counted) if it is not a valid message."""
-        t = PROFILE.now() if PROFILE is not None else 0
         try:
             return decode(payload)
         except BadMessage as exc:
             self.drop(exc.reason)
             return None
-        finally:
-            if PROFILE is not None:
-                PROFILE.add("decode", t)
 
     def _enqueue(self, key: str, payload: bytes, handler: Handler, screen: Screen | None = None) -> None:
         """Take a payload from the transport: screened, then decoded and queued (or dropped and counted)."""
@@ -234,10 +219,7 @@ class Bus(ABC):
         """
         self._collect_lazy()
         if not len(self._inbox) and (timeout is None or timeout > 0):
-            t = PROFILE.now() if PROFILE is not None else 0
             self._inbox.wait(timeout)
-            if PROFILE is not None:
-                PROFILE.add("wait", t)
             self._collect_lazy()
         budget = len(self._inbox)
         done = rounds = 0
@@ -248,10 +230,7 @@ class Bus(ABC):
                 break
             for key, msg, handler in batch:
                 budget -= 1
-                t = PROFILE.now() if PROFILE is not None else 0
                 handler(key, msg)
-                if PROFILE is not None:
-                    PROFILE.add("handle", t)
                 done += 1
         return done
 

@@ -45,11 +45,14 @@ RUST_ERROR_BACKTRACE_ENV = "RUST_LIB_BACKTRACE"
 os.environ.setdefault(RUST_ERROR_BACKTRACE_ENV, "0")
 
 
-# How long a session's links outlive a silent peer (Zenoh's ``transport/link/tx/lease``; its default is 10 s).
-# A role process paused that long (SIGSTOP, a loaded or swapping machine) had its session closed by the
-# router, and every message queued for it was lost: a collector paused for 10 s never caught up.  A role
-# that dies closes its links with its sockets at once, and a silent role is detected by netsetest's own
-# timeouts (the vehicle's node timeout, the collector's idle timeout), not by the lease.
+# How long a session's links outlive a silent peer (Zenoh's ``transport/link/tx/lease``, its default 10 s): each side
+# closes a link after the *other* side's announced lease without a message from it.  A process stopped longer
+# (SIGSTOP, a loaded or swapping machine) had its session closed by the router, and every message in flight to
+# it was lost: a collector paused for 10 s never caught up; paused past 60 s, the run ended "vehicle gone"
+# (issue 41).  A run's roles and router announce the run's ``--stall-limit`` (runtime/timeouts.py STALL_LIMIT_S);
+# this is the lease of the other sessions netsetest opens (echo, watch, view, the benchmark's).  A role that
+# dies closes its links with its sockets at once, and a silent role is detected by netsetest's own timeouts
+# (the vehicle's node timeout, the collector's idle timeout), not by the lease.
 LEASE_S = 60.0
 
 
@@ -64,10 +67,13 @@ def zenoh_config(
     connect_timeout_s: float = 10.0,
     base_file: str | None = None,
     settings: Mapping[str, object] | None = None,
+    lease_s: float = LEASE_S,
 ) -> zenoh.Config:
-    """A Zenoh configuration with multicast scouting off, explicit endpoints and ``settings`` (path → value).
+    """A Zenoh configuration with multicast scouting off, explicit endpoints, the lease ``lease_s`` and ``settings``
+    (path → value).
 
-    ``base_file``: a user's Zenoh configuration (JSON5) to start from.
+    ``base_file``: a user's Zenoh configuration (JSON5) to start from (its lease is replaced: a run's roles must
+    announce the run's stall limit).
     """
     try:
         cfg = zenoh.Config.from_file(base_file) if base_file else zenoh.Config()
@@ -77,8 +83,7 @@ def zenoh_config(
     cfg.insert_json5("scouting/multicast/enabled", "false")  # runs on one host must not find each other
     cfg.insert_json5("scouting/delay", "0")  # else open() blocks 0.5 s while a peer is not up yet
     cfg.insert_json5("transport/shared_memory/enabled", "false")
-    if not base_file:  # a user's own file keeps its own lease
-        cfg.insert_json5("transport/link/tx/lease", str(int(LEASE_S * 1000)))
+    cfg.insert_json5("transport/link/tx/lease", str(round(lease_s * 1000)))
     if listen or not base_file:
         cfg.insert_json5("listen/endpoints", json.dumps(list(listen)))
     if connect or not base_file:
@@ -110,9 +115,10 @@ class ZenohBus(Bus):
         connect: Sequence[str] = (),
         base_file: str | None = None,
         settings: Mapping[str, object] | None = None,
+        lease_s: float = LEASE_S,
     ) -> None:
         super().__init__()
-        cfg = zenoh_config(mode, listen, connect, base_file=base_file, settings=settings)
+        cfg = zenoh_config(mode, listen, connect, base_file=base_file, settings=settings, lease_s=lease_s)
         self.session = open_session(cfg, f"{mode} session (listen {list(listen)}, connect {list(connect)})")
         self._subs: list[zenoh.Subscriber] = []
         self._lazy: list[tuple[str, zenoh.Subscriber, Handler, Screen | None]] = []  # (exact key, ring-buffered subscriber, handler, screen)

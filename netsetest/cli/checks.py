@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -14,12 +13,7 @@ from netsetest.runtime import argtypes
 
 # the parsers a role spec shares (runtime/argtypes.py), under the names every command uses
 positive_int, seed, run_id, endpoint = argtypes.positive_int, argtypes.seed, argtypes.run_id, argtypes.endpoint
-non_negative_seconds = argtypes.non_negative_seconds
-
-SEED_RANGE_RE = re.compile(r"(\d+)\s*-\s*(\d+)")
-SEED_RANGE_MAX = (
-    10_000  # seeds one range may name (a typo like 0-99999999 is not a request)  # numpy's SeedSequence takes any non-negative integer; keep it to 64 bits
-)
+non_negative_seconds, seed_list = argtypes.non_negative_seconds, argtypes.seed_list
 DRAWN_SEED_BITS = 32  # a run's own seed: unguessable by another local user, short enough to type back
 
 
@@ -49,21 +43,6 @@ def drive_list(s: str) -> tuple[DriveSpec, ...]:
         return tuple(DriveSpec.parse(x) for x in items)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def seed_list(s: str) -> tuple[int, ...]:
-    """argparse type: comma-separated seeds and ranges A-B (inclusive), e.g. ``0-4,9``."""
-    out: list[int] = []
-    for part in s.split(","):
-        m = SEED_RANGE_RE.fullmatch(part.strip())
-        if m is None:  # one seed (a negative number is a seed, and an error, not a range)
-            out.append(seed(part))
-            continue
-        a, b = seed(m[1]), seed(m[2])
-        if b < a or b - a >= SEED_RANGE_MAX:
-            raise argparse.ArgumentTypeError(f"seed range {part.strip()!r}: must be A-B with A ≤ B and at most {SEED_RANGE_MAX} seeds")
-        out.extend(range(a, b + 1))
-    return tuple(out)
 
 
 def non_negative_float(s: str) -> float:
@@ -135,6 +114,22 @@ def _cannot_write(p: Path) -> str | None:
     return None
 
 
+HTML_SUFFIXES = (".html", ".htm")  # what a browser opens as a page from a file: report and compare write HTML, nothing else
+
+
+def not_replaced(path: str | None, option: str, overwrite: bool) -> None:
+    """An output that exists is replaced only when asked (``--overwrite``): a run's record, a report's page."""
+    if path is not None and not overwrite and Path(path).exists():
+        raise OutputError(f"{option} {path}: the file exists; give --overwrite to replace it")
+
+
+def html_file(path: str | None, option: str = "--html") -> None:
+    """``--html``: a writable file whose name says it is a page (``x.pdf`` once got HTML)."""
+    if path is not None and not Path(path).name.lower().endswith(HTML_SUFFIXES):
+        raise OutputError(f"{option} {path}: the page is HTML; give a name ending in {' or '.join(HTML_SUFFIXES)}")
+    output_file(path, option)
+
+
 def record_file(path: str | None, overwrite: bool = False) -> None:
     """``--record``: a record name, writable, not an existing file unless ``overwrite``, and its format's
     optional dependency installed (MissingExtra if not)."""
@@ -143,8 +138,7 @@ def record_file(path: str | None, overwrite: bool = False) -> None:
 
     if path is not None and not Path(path).name.endswith(RECORD_SUFFIXES):  # out.csv once got JSON Lines
         raise OutputError(f"--record {path}: the name must end in {', '.join(RECORD_SUFFIXES)} (the suffix chooses the format)")
-    if path is not None and not overwrite and Path(path).exists():  # two runs once interleaved one record
-        raise OutputError(f"--record {path}: the file exists; give --overwrite to replace it")
+    not_replaced(path, "--record", overwrite)  # two runs once interleaved one record
     if path is not None and being_written(path):  # refused before any role starts (once: exit 1, seven roles stopped)
         raise OutputError(f"--record {path}: another run is writing this record")
     output_file(path, "--record")

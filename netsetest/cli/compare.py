@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import textwrap
 from collections.abc import Callable
 
 from netsetest.cli import checks
@@ -42,7 +43,7 @@ def add_parser(sub: argparse._SubParsersAction, scenario_args: Callable[[argpars
     p.add_argument("--json", metavar="PATH", help="write the rows as a JSON list")
     p.add_argument("--markdown", metavar="PATH", help="write the table as Markdown")
     p.add_argument("--plot", metavar="DIR", help="one figure per node: every estimator's fault bounds and the truth (first run)")
-    p.add_argument("--html", metavar="PATH", help="the table and per node every estimator's fault bounds as one self-contained page (extra view)")
+    p.add_argument("--html", metavar="PATH", help="the table and per node every estimator's fault bounds as one self-contained page, PATH.html (extra view)")
     COMMANDS["compare"] = cmd_compare
 
 
@@ -67,11 +68,20 @@ def folded_table(rows: list[tuple[str, ...]], width: int) -> list[str]:
 
 
 def cmd_compare(a: argparse.Namespace) -> int:
-    from netsetest.analysis.compare import TABLE_HEADER, compare, comparison_document, markdown_table, node_ratio_lines, plot_fault_bounds, table_rows
+    from netsetest.analysis.compare import (
+        TABLE_HEADER,
+        assumptions_notes,
+        compare,
+        comparison_document,
+        markdown_table,
+        node_ratio_lines,
+        plot_fault_bounds,
+        table_rows,
+    )
 
     checks.output_file(a.json, "--json")
     checks.output_file(a.markdown, "--markdown")
-    checks.output_file(a.html, "--html")
+    checks.html_file(a.html)
     if a.html:
         from netsetest.extras import require
 
@@ -91,6 +101,8 @@ def cmd_compare(a: argparse.Namespace) -> int:
     print(f"compare {c.topology}: runs {', '.join(c.runs)}, {c.steps} steps; widths: mean over nodes and steps ≥ 10")
     for line in folded_table([TABLE_HEADER, *table_rows(c)], TERMINAL_WIDTH):
         print(line)
+    for note in assumptions_notes(c):
+        print(textwrap.fill(note, TERMINAL_WIDTH, subsequent_indent="  "))
     for line in node_ratio_lines(c):
         print(line)
     for row in c.rows:
@@ -110,7 +122,7 @@ def cmd_compare(a: argparse.Namespace) -> int:
         from netsetest.records.report_html import ComparePage, write_compare
 
         title = f"netsetest compare {c.topology}: runs {', '.join(c.runs)}, {c.steps} steps"
-        write_compare(a.html, ComparePage(title, TABLE_HEADER, table_rows(c), c.tau_s, c.truth_fault, c.bounds, failed))
+        write_compare(a.html, ComparePage(title, TABLE_HEADER, table_rows(c), c.tau_s, c.truth_fault, c.bounds, failed, assumptions_notes(c)))
         print(f"wrote {a.html}")
     if failed:
         print(f"containment violated where the assumptions held: {', '.join(failed)}", file=sys.stderr)

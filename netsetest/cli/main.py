@@ -1,8 +1,6 @@
-"""``netsetest`` command line: run, inspect, plot, exact, compare (and the role processes of the Zenoh runtime).
+"""``netsetest`` command line: every command's parser (:func:`build_parser`) and handler (:func:`handlers`).
 
-Exit codes: 0 success (every ellipsoid contained where the assumptions held); 1 containment violated
-on a step where the assumptions held; 2 bad input (file, option); 3 a node stopped reporting;
-130 interrupted.
+``netsetest --help`` lists the commands from the parser itself (:func:`describe`), so no command is left out.
 """
 
 from __future__ import annotations
@@ -13,6 +11,7 @@ import json
 import math
 import os
 import sys
+import textwrap
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
@@ -25,9 +24,12 @@ from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJ
 from netsetest.models.manoeuvres import MANOEUVRES, WITH_AMPLITUDE
 from netsetest.models.signals import SIGNAL_KINDS
 from netsetest.extras import MissingExtra, require
+from netsetest.logs.readers import LogError
 from netsetest.records.errors import RecordError
 from netsetest.models.uncertainty import DEFAULT_MARGIN
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED
+from netsetest.scenarios import topology_help
+from netsetest.runtime.rolespec import LOG_HELP, MAP_HELP
 
 if TYPE_CHECKING:  # a role process never loads the records (memory: docs/performance-history.md)
     from netsetest.analysis.calibrate import Calibration, DriveMismatch
@@ -37,9 +39,15 @@ if TYPE_CHECKING:  # a role process never loads the records (memory: docs/perfor
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 
+HELP_WIDTH = 100  # characters: the description's paragraphs (RawDescriptionHelpFormatter keeps the exit codes' lines)
+SUMMARY = "netsetest: guaranteed (set-membership) estimation of a car's state and its yaw-rate sensors' faults by a network of nodes."
+EXIT_CODES = """Exit codes: 0 success (every set contained the truth where the assumptions held); 1 containment violated
+on a step where the assumptions held; 2 bad input (file, option); 3 a node stopped reporting;
+130 interrupted."""
+
 
 def _scenario_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("topology", help="topology file (e.g. topologies/paper6.toml) or bundled name (paper6, paper6_lossy)")
+    p.add_argument("topology", help=topology_help())
     p.add_argument("--case", choices=["nsnim", "saim"], help="override the topology's case (default: the file's)")
     p.add_argument("--steps", type=checks.positive_int, metavar="N", help="override the number of steps of τs each (default: the file's)")
 
@@ -87,17 +95,29 @@ class ShowVersion(argparse.Action):
         parser.exit()
 
 
+def describe(sub: argparse._SubParsersAction) -> str:
+    """``netsetest --help``'s description: every command the parser has (a role process's apart, the
+    internal ones left out), in the order they are listed below it."""
+    from netsetest.cli.processes import INTERNAL_COMMANDS, ROLE_COMMANDS
+
+    users = [c for c in sub.choices if c not in ROLE_COMMANDS and c not in INTERNAL_COMMANDS]
+    commands = (
+        f"commands: {', '.join(users)}; the role processes of a Zenoh run or deployment: {', '.join(ROLE_COMMANDS)} (netsetest COMMAND --help says more)."
+    )
+    return "\n\n".join((textwrap.fill(SUMMARY, HELP_WIDTH), textwrap.fill(commands, HELP_WIDTH, break_on_hyphens=False), EXIT_CODES))  # a name stays whole
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="netsetest", description=__doc__, formatter_class=HelpFormatter)
+    ap = argparse.ArgumentParser(prog="netsetest", formatter_class=HelpFormatter)
     ap.add_argument("--version", action=ShowVersion, help="print the version and exit")
-    sub = ap.add_subparsers(dest="command", required=True)
+    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     from netsetest.cli import processes
 
     p = sub.add_parser("run", help="run a whole network (in memory, or as Zenoh processes)")
     _scenario_args(p)
     _run_args(p)
-    processes.estimator_arg(p)
+    processes.scenario_overrides(p)
     p.add_argument("--mode", choices=["inmemory", "zenoh"], default="zenoh", help="one process, or one process per role over Zenoh")
     p.add_argument(
         "--clock",
@@ -110,6 +130,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--summary-json", metavar="PATH", help="write the summary as JSON (default: none)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.add_argument("--strict", action="store_true", help="exit 1 where any set missed the truth outside the guarantee too (default: only misses it covered)")
+    p.add_argument("--log", metavar="DRIVE", help=LOG_HELP)
+    p.add_argument("--map", metavar="MAP.toml", help=MAP_HELP)
     processes.add_run_options(p)
     processes.add_role_parsers(sub)
 
@@ -126,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("exact", help="the exact tightest bounds any guaranteed estimator could publish, against a record")
     p.add_argument("record", help="a run record (JSON, JSON Lines, .gz or .mcap)")
     p.add_argument("--json", metavar="PATH", help="write the per-step exact intervals and the ratios as JSON")
-    p.add_argument("--topology", metavar="PATH", help="topology file (default: the one named in the record)")
+    p.add_argument("--topology", metavar="PATH", help=topology_help("the record's topology (default: the one the record names)"))
     p.add_argument(
         "--fault-bounds",
         choices=["used", "all", "none"],
@@ -152,7 +174,7 @@ def build_parser() -> argparse.ArgumentParser:
         "one solve does not settle is relaxed: an outer bound, labelled (docs/exact.md)",
     )
     p = sub.add_parser("calibrate", help="the smallest model-mismatch bound covering a plant's e_k on training manoeuvres")
-    p.add_argument("topology", help="topology with a nonlinear plant (a path, or a bundled name such as paper6_car)")
+    p.add_argument("topology", help=topology_help("a topology with a nonlinear plant ([vehicle] plant, e.g. paper6_car)"))
     p.add_argument(
         "--manoeuvres",
         type=checks.drive_list,
@@ -193,6 +215,20 @@ def build_parser() -> argparse.ArgumentParser:
         "--ay-max", type=checks.positive_float, metavar="M/S2", help="the envelope's largest |lateral acceleration| the tyres carry [m/s²] (with --envelope)"
     )
     p.add_argument("--speed", type=checks.speed_range, metavar="LO-HI", help="the envelope's speed range [km/h], e.g. 70-120 (with --envelope)")
+    p.add_argument(
+        "--logs",
+        nargs="+",
+        metavar="TRAIN",
+        help="instead of --manoeuvres: recorded drives with a reference (docs/your-log.md): the mismatch bound from the reference's states "
+        "(its accuracy carried through the model), each sensor's noise bound over its healthy stretches, the envelope they covered",
+    )
+    p.add_argument("--held-out", nargs="+", metavar="TEST", help="with --logs: drives checked against what the training logs gave")
+    p.add_argument("--map", metavar="MAP.toml", help="with --logs: the logs' mapping (default: each log's name with .map.toml, else the topology's)")
+
+    p = sub.add_parser("log-example", help="write the synthetic example drives of docs/your-log.md (every log format, with mappings)")
+    p.add_argument("directory", help="where to write them (created)")
+    p.add_argument("--seconds", type=checks.positive_float, default=10.0, help="the drive's length [s]")
+    p.add_argument("--seed", type=checks.seed, default=1, help="the drive's seed (the same seed writes the same drive)")
 
     p = sub.add_parser("bench", help="the performance benchmark: solve times, tightness, Zenoh overhead, start-up, memory, real-time scale, defences")
     p.add_argument("--quick", action="store_true", help="fewer steps and samples (the report's header says how long the run took)")
@@ -203,13 +239,15 @@ def build_parser() -> argparse.ArgumentParser:
         choices=SECTIONS,
         help="run one part alone: plant = a car as the truth, network = what the exchange can buy, scenario = the paper's "
         "scenario per node and every estimator compared, exact = what `netsetest exact` costs under k-of-N health, view = the live "
-        "view's cost and lag and the report page in headless Chromium, scaleout = a run across two network namespaces against one (root) "
+        "view's cost and lag and the report page in headless Chromium, scaleout = a run across two network namespaces against one (root), "
+        "logs = a recorded drive as the world: a 30-minute bag's import, replay speed, calibration from logs and a held-out drive "
         "(default: every part)",
     )
     p.add_argument(
         "--baseline",
         metavar="DIR",
-        help="with --only node or widths: another checkout (node: say main's; widths: 29290ba's) measured alternately beside this one",
+        help="with --only node, widths or performance: another checkout (node: say main's; widths: 29290ba's; performance: "
+        "16f81b4's, issue 45's figures) measured alternately beside this one",
     )
     p.add_argument(
         "--render-docs",
@@ -227,12 +265,14 @@ def build_parser() -> argparse.ArgumentParser:
         "(how noisy the benchmark is); with --json / --markdown, write them",
     )
 
-    from netsetest.cli import compare, tools
+    from netsetest.cli import campaign, compare, tools
 
     tools.add_parsers(sub)
     compare.add_parser(sub, _scenario_args)
+    campaign.add_parser(sub)
     for command in sub.choices.values():
         command.formatter_class = HelpFormatter
+    ap.description = describe(sub)
     return ap
 
 
@@ -257,12 +297,10 @@ def cmd_run(a: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return EXIT_BAD_INPUT
-    from netsetest.config.schema import load_topology
-    from netsetest.runtime.inmemory import run_inmemory
     from netsetest.runtime.report import exit_code, format_table, write_summary
+    from netsetest.runtime.runspec import RunSpec
 
-    sc = load_topology(a.topology, a.case, a.steps, a.estimator)
-    res = run_inmemory(sc, a.signals, a.variant, a.seed, progress=not a.quiet, record=a.record, keep=False, objective=a.objective)
+    res = RunSpec.from_namespace(a).execute(progress=not a.quiet, record=a.record, keep=False)
     write_summary(res.summary, a.summary_json)
     print(format_table(res.summary, a.strict))
     return exit_code(res.summary, a.strict)
@@ -308,7 +346,11 @@ def cmd_inspect(a: argparse.Namespace) -> int:
         for r in rec.fault_rows(i):
             ft = "-" if r["fault_true"] is None else f"{r['fault_true']:9.4f}"
             e = "-" if r["E"] is None else f"{r['E']:7.3f}"
-            flag = "  not judged" if not r["judged"] else ("" if r["contained"] else "  MISS")
+            flag = (
+                ("  not judged; its own reading contradicts its declared bounds" if r["inconsistent"] else "  not judged")
+                if not r["judged"]
+                else ("" if r["contained"] else "  MISS" if r["missed"] else "  undecided (the reference's box overlaps the set)")
+            )
             if r["judged"] and r["contained"] and r["continues_contained"] is False:
                 flag = "  MISS (the set it continues from)"
             if r["cause"] is not None:  # outside the guarantee: why, beside a miss or alone
@@ -329,7 +371,7 @@ def _print_state(rec: Record, i: int) -> None:
         for name in ("beta", "r", "fault"):
             t = r[f"{name}_true"]
             cells.append(f"[{r[f'{name}_lower']:8.4f}, {r[f'{name}_upper']:8.4f}] {'-' if t is None else format(t, '8.4f'):>8} {r[f'{name}_rests_on']:<11}")
-        flag = "" if not r["judged"] or r["contained"] else "  MISS"
+        flag = "" if not r["judged"] or r["contained"] else "  MISS" if r["missed"] else "  undecided"
         print(f"{r['step']:5d}  " + "  ".join(cells) + f"  {r['status']}{flag}")
     print()
 
@@ -506,6 +548,8 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
 
     checks.output_file(a.json, "--json")
     checks.output_file(a.toml, "--toml")
+    if a.logs is not None or a.held_out is not None or a.map is not None:
+        return _calibrate_logs(a)
     envelope = _calibration_envelope(a)
     if isinstance(envelope, int):
         return envelope
@@ -583,6 +627,90 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
     return 0
 
 
+def _calibrate_logs(a: argparse.Namespace) -> int:
+    """``calibrate TOPOLOGY --logs TRAIN… [--held-out TEST…]``: the bounds from recorded drives (analysis/calibrate.py)."""
+    import numpy as np
+
+    from netsetest.analysis.calibrate import calibrate_logs, check_held_out
+    from netsetest.config.schema import load_topology
+    from netsetest.logs.drive import with_log_steps
+    from netsetest.runtime.report import Progress
+
+    others = [o for o, v in (("--manoeuvres", a.manoeuvres), ("--envelope", a.envelope or None), ("--causes", a.causes or None), ("--steps", a.steps)) if v]
+    if a.logs is None or others:
+        what = "--held-out and --map go with --logs" if a.logs is None else f"--logs chooses its own drives: leave out {', '.join(others)}"
+        print(f"netsetest calibrate: {what}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    load = lambda log: with_log_steps(load_topology(a.topology, log=log, mapping=a.map), whole=True)  # noqa: E731  # every step of each log
+    train = [load(log) for log in a.logs]
+    held = [load(log) for log in a.held_out or []]
+    bar = Progress(len(train), "calibrate")
+    try:
+        cal = calibrate_logs(train, a.margin, progress=lambda n, total: bar.update(n))
+    except ValueError as exc:
+        bar.close()
+        print(f"netsetest calibrate: {a.topology}: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    checked = [check_held_out(sc, cal) for sc in held]
+    bar.close()
+    sc = train[0]
+    acc = sc.log.mapping.accuracy  # type: ignore[union-attr]  # a log's scenario
+    print(
+        f"calibration of {sc.name} from {len(train)} recorded drive(s): {cal.transitions} transitions with the reference at both ends "
+        f"(its accuracy ± {acc[0]:.3g} rad, ± {acc[1]:.3g} rad/s carried through the model; the wind taken as 0), margin {a.margin:g}"
+    )
+    print("the model-mismatch bound covering every transition's e_k (declare one in the topology):")
+    print(cal.box.as_toml() + "# or\n" + cal.ellipsoid.as_toml(), end="")
+    print("# the operating envelope the logs covered (|a_y| = v·r as the run measures it, the speeds)")
+    print(cal.envelope.as_toml(), end="")
+    print("# each sensor's noise bound over its healthy stretches (v² ≤ R; in its node profile, nodes/<profile>.toml)")
+    for i, R in cal.R.items():
+        n = sc.node(i)
+        print(f"R = {R!r}  # node {i} (profile {n.label}): |v| ≤ {math.sqrt(R):.4g} over {cal.noise_steps[i]} steps; declared now: R = {n.sensor.R:g}")
+    for h in checked:
+        total = sum(h.inside.values())
+        print(
+            f"held out {h.path}: {total} transitions inside the envelope: e_k inside the box on {h.inside['inside']}, possibly outside on "
+            f"{h.inside['overlap']}, certainly outside on {h.inside['disjoint']}; outside the envelope {sum(h.outside.values())} "
+            f"(certainly outside the box on {h.outside['disjoint']})"
+        )
+        for i, c in h.noise.items():
+            if c["overlap"] or c["disjoint"]:
+                print(f"  node {i}: noise possibly beyond its calibrated bound on {c['overlap']} healthy steps, certainly on {c['disjoint']}")
+    if a.toml:
+        with open(a.toml, "w") as fh:
+            fh.write("\n" + cal.box.as_toml() + "\n" + cal.envelope.as_toml())
+    if a.json:
+        doc = {
+            "topology": sc.path,
+            "logs": cal.logs,
+            "margin": a.margin,
+            "transitions": cal.transitions,
+            "box": np.diag(cal.box.G).tolist(),
+            "ellipsoid": cal.ellipsoid.E.tolist(),
+            "envelope": {"ay_max": cal.envelope.ay_max, "speed_kmh": list(cal.envelope.speed_kmh)},
+            "R": {str(i): R for i, R in cal.R.items()},
+            "noise_steps": {str(i): n for i, n in cal.noise_steps.items()},
+            "held_out": [dataclasses.asdict(h) | {"noise": {str(i): c for i, c in h.noise.items()}} for h in checked],
+        }
+        with open(a.json, "w") as fh:
+            json.dump(doc, fh, indent=1)
+    return 0
+
+
+def cmd_log_example(a: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    require("vehiclemodels", "the example drives (drawn from a CommonRoad car)")
+    require("rosbags", "the example drives (a ROS 2 bag)")
+    require("asammdf", "the example drives (an MDF4 file)")
+    from netsetest.logs.example import write_examples
+
+    for path in write_examples(Path(a.directory), a.seconds, a.seed):
+        print(path)
+    return 0
+
+
 def cmd_bench(a: argparse.Namespace) -> int:
     if a.render_docs is not None:
         return _render_docs(a)
@@ -590,9 +718,9 @@ def cmd_bench(a: argparse.Namespace) -> int:
         return _spread(a)
     from pathlib import Path
 
-    if a.baseline is not None and (a.only not in ("node", "widths") or not Path(a.baseline, "netsetest", "__init__.py").is_file()):
+    if a.baseline is not None and (a.only not in ("node", "widths", "performance") or not Path(a.baseline, "netsetest", "__init__.py").is_file()):
         print(
-            f"netsetest bench: --baseline {a.baseline}: needs --only node or --only widths and a checkout of netsetest (DIR/netsetest/__init__.py)",
+            f"netsetest bench: --baseline {a.baseline}: needs --only node, widths or performance and a checkout of netsetest (DIR/netsetest/__init__.py)",
             file=sys.stderr,
         )
         return EXIT_BAD_INPUT
@@ -676,21 +804,27 @@ COMMANDS.update(
     exact=cmd_exact,
     calibrate=cmd_calibrate,
     bench=cmd_bench,
+    **{"log-example": cmd_log_example},
     forkserver=cmd_forkserver,
 )
+
+
+def handlers() -> dict[str, Callable[[argparse.Namespace], int]]:
+    """Every command's handler by name: the one registry (each CLI module registers its own)."""
+    from netsetest.cli import campaign, compare, processes, tools
+
+    return {**COMMANDS, **tools.COMMANDS, **compare.COMMANDS, **campaign.COMMANDS, **processes.COMMANDS}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     ap = build_parser()
     a = ap.parse_args(argv)
-    from netsetest.cli import processes
+    handler = handlers()[a.command]
+    from netsetest.cli import tools
 
-    from netsetest.cli import compare, tools
-
-    handler = COMMANDS.get(a.command) or tools.COMMANDS.get(a.command) or compare.COMMANDS.get(a.command) or processes.COMMANDS[a.command]
     try:
         return handler(a)
-    except (ConfigError, RecordError, MissingExtra, ExactError, CompareError, checks.OutputError, tools.ObserverError) as exc:
+    except (ConfigError, RecordError, MissingExtra, ExactError, CompareError, checks.OutputError, tools.ObserverError, LogError) as exc:
         print(f"netsetest {a.command}: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except BrokenPipeError:  # `netsetest inspect R | head`: the reader has gone, which is not an error

@@ -16,8 +16,12 @@ from netsetest.runtime import argtypes
 from netsetest.runtime.report import EXIT_BAD_INPUT
 from netsetest.runtime.rolespec import (
     ESTIMATOR_HELP,
+    FAULT_SCALE_HELP,
+    MANOEUVRE_HELP,
+    SPEED_HELP,
     ROLE_SPECS,
     RUN_ID_ENV,
+    STALL_LIMIT_HELP,
     ZENOH_CONFIG_HELP,
     CollectorSpec,
     NodeSpec,
@@ -25,9 +29,12 @@ from netsetest.runtime.rolespec import (
     VehicleSpec,
 )
 from netsetest.runtime.security import RUN_ENV_FILE
-from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S
+from netsetest.scenarios import topology_help
+from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, STALL_LIMIT_S
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
+ROLE_COMMANDS: tuple[str, ...] = tuple(spec.ROLE for spec in ROLE_SPECS)  # a role process each (`run` starts them; a deployment by hand)
+INTERNAL_COMMANDS = ("forkserver",)  # started by `run` alone: left out of `netsetest --help`
 
 
 # ---------------------------------------------------------------- option groups
@@ -42,10 +49,12 @@ ZENOH_ONLY: dict[str, tuple[str, object]] = {
     "--node-timeout": ("node_timeout", NODE_TIMEOUT_S),
     "--neighbour-timeout": ("neighbour_timeout", NEIGHBOUR_TIMEOUT_S),
     "--pace": ("pace", 0.0),
+    "--stall-limit": ("stall_limit", STALL_LIMIT_S),
     "--kill": ("kill", []),
     "--rejoin": ("rejoin", []),
     "--insecure": ("insecure", False),
     "--run-id": ("run_id", None),
+    "--port": ("port", 0),
     "--zenoh-config": ("zenoh_config", None),
     "--view": ("view", False),
     "--view-port": ("view_port", 0),
@@ -64,6 +73,7 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
         "--neighbour-timeout", type=_seconds, default=NEIGHBOUR_TIMEOUT_S, metavar="S", help="lockstep: how long [s] a node waits for a neighbour's message"
     )
     g.add_argument("--pace", type=_non_negative, default=0.0, metavar="S", help="lockstep: at least S seconds per step (default: 0, as fast as possible)")
+    g.add_argument("--stall-limit", type=argtypes.stall_limit, default=STALL_LIMIT_S, metavar="S", help=STALL_LIMIT_HELP)
     g.add_argument(
         "--kill", type=_at, action="append", default=[], metavar="NODE@STEP", help="SIGKILL node NODE once step STEP is checked (repeatable; default: none)"
     )
@@ -76,17 +86,35 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
         help="no credentials, no access control: an open peer mesh any local process can join (labelled in the summary; default: secured)",
     )
     g.add_argument("--run-id", type=checks.run_id, metavar="ID", help="the run's key-expression namespace (default: a fresh random one, printed)")
+    g.add_argument(
+        "--port",
+        type=argtypes.port,
+        default=0,
+        metavar="N",
+        help="the run's port on 127.0.0.1: its router's, or with --insecure its collector's, the endpoint echo, watch and view "
+        "connect to (default: 0, a free one; the run prints how to watch it)",
+    )
     g.add_argument("--zenoh-config", type=argtypes.readable_file, metavar="FILE", help=ZENOH_CONFIG_HELP)
     g.add_argument(
         "--view",
         action="store_true",
         help="a live view in Rerun's web viewer, served from this machine (`netsetest view` beside the run; extra view); its address is printed",
     )
-    g.add_argument("--view-port", type=argtypes.port, default=0, metavar="N", help="the live view's web port (default: 0, a free one)")
+    g.add_argument(
+        "--view-port",
+        type=argtypes.port,
+        default=0,
+        metavar="N",
+        help="the live view's one port on 127.0.0.1, its page and its stream (default: 0, a free one; fix it to forward it with ssh -L)",
+    )
 
 
-def estimator_arg(p: argparse.ArgumentParser) -> None:
+def scenario_overrides(p: argparse.ArgumentParser) -> None:
+    """``run``'s overrides of the topology: the options of rolespec.ScenarioSpec, which every role is told."""
     p.add_argument("--estimator", choices=list(NODE_ESTIMATOR_NAMES), metavar="NAME", help=ESTIMATOR_HELP)
+    p.add_argument("--manoeuvre", type=argtypes.drive, metavar="NAME[@AMP]", help=MANOEUVRE_HELP)
+    p.add_argument("--speed", type=argtypes.speed_kmh, metavar="KMH", help=SPEED_HELP)
+    p.add_argument("--fault-scale", type=argtypes.fault_scale, metavar="S", help=FAULT_SCALE_HELP)
 
 
 def add_role_parsers(sub: argparse._SubParsersAction) -> None:
@@ -95,7 +123,7 @@ def add_role_parsers(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("credentials", help="write per-role mTLS credentials (CA, certificates, keys) and run.env for a deployment")
     p.add_argument("dir", help="output directory (created with mode 0700)")
-    p.add_argument("topology", help="topology file or bundled name, e.g. paper6")
+    p.add_argument("topology", help=topology_help())
     p.add_argument("--run-id", type=checks.run_id, help="the deployment's run id (default: a random one)")
     p.add_argument(
         "--router-host",
@@ -106,12 +134,13 @@ def add_role_parsers(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--days", type=checks.positive_int, default=DEFAULT_VALIDITY_DAYS, help="validity of the certificates in days")
 
-    p = sub.add_parser("forkserver", help="internal: the fork server of `netsetest run` (imports once, forks each role process)")
+    # internal, so without help: argparse lists a command only with one (`netsetest forkserver --help` still has its text)
+    p = sub.add_parser("forkserver", description="internal: the fork server of `netsetest run` (imports once, forks each role process)")
     p.add_argument("--run-id", type=checks.run_id, required=True, help="the run it serves (in its command line and its children's, to find them)")
     p.add_argument("--control-fd", type=int, required=True, help="file descriptor of the launcher's control socket")
 
     p = sub.add_parser("compose", help="print a docker-compose.yml for a topology (router + one service per role)")
-    p.add_argument("topology", help="topology file or bundled name, e.g. paper6")
+    p.add_argument("topology", help=topology_help())
     p.add_argument("--image", default="netsetest:latest", help="image with netsetest installed (built from the Dockerfile)")
 
 
@@ -176,7 +205,7 @@ def cmd_router(a: argparse.Namespace) -> int:
     listen = spec.endpoints
     install_signal_handlers()
     try:
-        session = router_session(listen, spec.zenoh_config, security, spec.connect)
+        session = router_session(listen, spec.zenoh_config, security, spec.connect, spec.stall_limit)
     except BusError as exc:
         log("router", str(exc))
         return EXIT_BAD_INPUT
@@ -236,6 +265,9 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         case=a.case,
         steps=a.steps,
         estimator=a.estimator,
+        manoeuvre=a.manoeuvre,
+        speed=a.speed,
+        fault_scale=a.fault_scale,
         signals=a.signals,
         variant=a.variant,
         objective=a.objective,
@@ -247,6 +279,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         node_timeout=a.node_timeout,
         neighbour_timeout=a.neighbour_timeout,
         pace=a.pace,
+        stall_limit=a.stall_limit,
         kill=tuple(a.kill),
         rejoin=tuple(a.rejoin),
         insecure=a.insecure,
@@ -254,6 +287,9 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         run_id=a.run_id,
         view=a.view,
         view_port=a.view_port,
+        port=a.port,
+        log=a.log,
+        mapping=a.map,
     )
     if a.view:
         from netsetest.extras import require

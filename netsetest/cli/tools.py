@@ -63,7 +63,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--count", type=checks.positive_int, metavar="N", help="stop after N messages (default: no limit)")
     p.add_argument("--json", action="store_true", help="one JSON object per line: key and message fields")
 
-    p = sub.add_parser("watch", help="live per-node table of a running run: step, fault bound, E, drops, deadline misses")
+    p = sub.add_parser(
+        "watch",
+        help="live per-node table of a running run: step, fault bound, whether the truth is in the published set (the collector's rule), E, drops, deadline misses",
+    )
     _observer_args(p)
 
     p = sub.add_parser("view", help="live view of a running run in Rerun's web viewer, served from this machine (no internet): intervals, sets, graph, verdict")
@@ -78,7 +81,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("report", help="one self-contained HTML page of one or more records: verdict, tables, graph, interactive Figs. 5-8")
     p.add_argument("record", nargs="+", help="record files (.jsonl, .json.gz or .mcap)")
-    p.add_argument("--html", metavar="PATH", required=True, help="the page to write (needs pip install 'netsetest[view]')")
+    p.add_argument("--html", metavar="PATH", required=True, help="the page to write, PATH.html (needs pip install 'netsetest[view]')")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --html page (default: refuse it)")
     p.add_argument(
         "--exact",
         metavar="JSON",
@@ -91,7 +95,12 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
 def view_args(p: argparse.ArgumentParser) -> None:
     """The live view's options (``view``, and ``run --view`` hands them to the view it starts)."""
     p.add_argument(
-        "--port", type=argtypes.port, default=0, metavar="N", help="the web viewer's port on 127.0.0.1 (default: 0, a free one; the address is printed)"
+        "--port",
+        type=argtypes.port,
+        default=0,
+        metavar="N",
+        help="the view's one port on 127.0.0.1: its page and its stream (default: 0, a free one; fix it to forward it with ssh -L; "
+        "the address printed is the key to the view)",
     )
     p.add_argument("--tau-s", type=_seconds, metavar="S", help="the run's sampling period: a time axis and the car's path (default: steps only)")
 
@@ -209,11 +218,30 @@ def _render(table, title: str):  # LiveTable → rich Table
     from rich.table import Table
 
     t = Table(title=title)
-    cols = ("node", "step", "status", "fault lower", "fault upper", "fault", "detected from", "E (step)", "ρ", "lost", "missing", "dropped", "deadline")
+    cols = (
+        "node",
+        "step",
+        "status",
+        "fault lower",
+        "fault upper",
+        "fault",
+        "detected from",
+        "truth",
+        "missed",
+        "E (step)",
+        "ρ",
+        "lost",
+        "missing",
+        "dropped",
+        "deadline",
+    )
     for col in cols:
         t.add_column(col, justify="right")
     for r in table.sorted_rows():
         E = "-" if r.E is None else f"{r.E:.3f} ({r.E_step})"
+        held = (
+            "-" if r.contained is None else "in set" if r.contained else "MISSED" if r.certain_miss else "undecided"
+        )  # at E's step, by the collector's rule (runtime/live.py)
         t.add_row(
             str(r.id),
             _fmt(r.step, "d"),
@@ -222,6 +250,8 @@ def _render(table, title: str):  # LiveTable → rich Table
             _fmt(r.fault_upper, ".4f"),
             r.fdi,
             _fmt(r.first_detection, "d"),
+            held,
+            f"{r.missed} of {r.judged}" + (f" ({r.undecided} undecided)" if r.undecided else ""),
             E,
             _fmt(r.rho, ".3g"),
             str(r.lost),
@@ -267,30 +297,34 @@ def cmd_view(a: argparse.Namespace) -> int:
     from netsetest.extras import require
 
     require("rerun", "the live view")
-    from netsetest.runtime.launcher import free_ports
-    from netsetest.runtime.view import LiveView, ViewError, serve, write_lag
+    from netsetest.runtime.report import EXIT_INTERRUPTED
+    from netsetest.runtime.view import APP_ID, LiveView, write_lag
+    from netsetest.runtime.view_server import PortTaken, ViewError, serve
 
     with observing(a, None) as (obs, stop):
-        web, grpc = free_ports(2)
         try:
-            server = serve(a.port or web, grpc)
+            server = serve(a.port, APP_ID)
+        except PortTaken as exc:
+            raise ObserverError(f"--port {a.port}: {exc}") from None
         except ViewError as exc:
             raise ObserverError(str(exc)) from None
-        view, hint = LiveView(server.rec, a.tau_s), SilenceHint("view", a)
-        end = None if a.duration is None else time.monotonic() + a.duration  # from here: the viewer's start-up takes seconds on a busy machine
         try:
-            print(f"live view of run {a.run_id or '*'}: {server.url}", flush=True)
-            while not stop.requested and (end is None or time.monotonic() < end):  # after the run's end it still serves, until Ctrl-C
-                got = obs.get(POLL_S)
-                if got is not None:
-                    hint.heard()
-                    view.feed(got.message, obs.backlog())
-                else:
-                    hint.tick()
+            view, hint = LiveView(server.rec, a.tau_s, outlet=server.send), SilenceHint("view", a)
+            end = None if a.duration is None else time.monotonic() + a.duration  # from here: the viewer's start-up takes seconds on a busy machine
+            try:
+                print(f"live view of run {a.run_id or '*'}: {server.url}", flush=True)  # stdout only: the address is the key to the view
+                while not stop.requested and (end is None or time.monotonic() < end):  # after the run's end it still serves, until Ctrl-C
+                    got = obs.get(POLL_S)
+                    if got is not None:
+                        hint.heard()
+                        view.feed(got.message, obs.backlog())
+                    else:
+                        hint.tick()
+            finally:
+                write_lag(view)  # first: `run --view` gives the view a few seconds to stop before it kills it
         finally:
-            write_lag(view)  # first: `run --view` gives the view a few seconds to stop before it kills it
             server.close()
-    return 0
+    return EXIT_INTERRUPTED if stop.requested else 0  # Ctrl-C or SIGTERM ended it, as `run` reports it
 
 
 def cmd_export(a: argparse.Namespace) -> int:
@@ -311,7 +345,8 @@ def cmd_report(a: argparse.Namespace) -> int:
     from netsetest.records.report_html import RecordPage, attach_exact, load_exact, write_report
     from netsetest.runtime.report import format_table
 
-    checks.output_file(a.html, "--html")
+    checks.html_file(a.html)
+    checks.not_replaced(a.html, "--html", a.overwrite)
     records = [load_record(r) for r in a.record]
     exact = attach_exact(records, [(path, load_exact(path)) for path in a.exact])
     labels = [f"{r.meta.case or '?'}/{r.meta.signals or '?'}" + (f" #{n}" if len(records) > 1 else "") for n, r in enumerate(records)]

@@ -45,8 +45,9 @@ from netsetest.models.sensor import Sensor
 from netsetest.models.signals import Fault, NoFault, PiecewiseLinearFault, SpeedProfile, SquareFault
 from netsetest.models.manoeuvres import MANOEUVRES, SINE_SPEED, STEERING_MAX_RAD, ManoeuvreName, steering_range
 from netsetest.extras import MissingExtra
+from netsetest.config.logmap import LogMapping, LogSource, MappingFile, resolve as resolve_mapping
 from netsetest.models.plant import PLANTS, VEHICLE_IDS, PlantKind, derived_params
-from netsetest.models.envelope import OperatingEnvelope
+from netsetest.models.envelope import HOLDS_RTOL, OperatingEnvelope
 from netsetest.models.uncertainty import ModelUncertainty
 from netsetest.models.vehicle import KMH, TSModel, VehicleParams
 from netsetest.scenarios import bundled_topologies, resolve_topology
@@ -248,8 +249,15 @@ class VehicleSpec(_Strict, frozen=True, kw_only=True):
     vx_min_kmh: Annotated[float, Meta(gt=0, le=SPEED_MAX_KMH)] = 80.0
     vx_max_kmh: Annotated[float, Meta(gt=0, le=SPEED_MAX_KMH)] = 120.0
     x0: tuple[_between(-STATE_MAX, STATE_MAX), _between(-STATE_MAX, STATE_MAX)] = (0.0, 0.0)  # type: ignore[valid-type]  # an Annotated type built by _between: valid at run time, opaque to mypy
+    source: Annotated[
+        Literal["model", "log"], Meta(description="model: the plant drives the manoeuvre; log: a recorded drive is the world (docs/your-log.md)")
+    ] = "model"
+    log: Annotated[str, Meta(min_length=1, max_length=4096, description='the drive log (source = "log"), relative to this file')] | None = None
+    mapping: Annotated[str, Meta(min_length=1, max_length=4096, description="the log's mapping file, relative to this file")] | None = None
 
     def __post_init__(self) -> None:
+        if (self.log is not None or self.mapping is not None) and self.source != "log":
+            raise ValueError('log, mapping: they name a recorded drive, which source = "log" uses; add it or remove them')
         if self.vx_min_kmh >= self.vx_max_kmh:
             raise ValueError("vx_min_kmh must be below vx_max_kmh")
         if self.plant not in PLANTS:
@@ -367,6 +375,21 @@ class EnvelopeSpec(_Strict, frozen=True, kw_only=True):
         return OperatingEnvelope(float(self.ay_max), (float(self.speed_kmh[0]), float(self.speed_kmh[1])))
 
 
+def check_envelope_speeds(envelope: OperatingEnvelope, vx_min_kmh: float, vx_max_kmh: float) -> None:
+    """ValueError (one line) where an operating envelope's speeds leave the model's range [vx_min_kmh, vx_max_kmh]:
+    no drive of the run, and none of ``calibrate``'s, leaves that range (the vehicle schedules the model on it),
+    so a bound cannot be calibrated, nor declared, for speeds outside it.  The one rule for the topology's
+    ``[envelope]`` and ``calibrate --envelope --speed`` (HOLDS_RTOL: a range given in m/s and read back in km/h)."""
+    lo, hi = envelope.speed_kmh
+    tol = 1 + HOLDS_RTOL
+    if lo * tol < vx_min_kmh or hi > vx_max_kmh * tol:
+        raise ValueError(
+            f"the envelope's speeds {lo:g}–{hi:g} km/h leave the model's range {vx_min_kmh:g}–{vx_max_kmh:g} km/h "
+            "([vehicle] vx_min_kmh, vx_max_kmh), on which every drive stays: narrow the envelope ([envelope] speed_kmh, "
+            "calibrate --speed) or widen that range"
+        )
+
+
 class SpeedSpec(_Strict, frozen=True, kw_only=True):
     mean_kmh: Annotated[float, Meta(gt=0, le=SPEED_MAX_KMH)] = 100.0
     amplitude_kmh: Annotated[float, Meta(ge=0, le=SPEED_MAX_KMH)] = 18.0
@@ -442,6 +465,11 @@ class TopologyFile(_Strict, frozen=True, kw_only=True):
     def __post_init__(self) -> None:
         if self.envelope is not None and (self.model_uncertainty is None or self.vehicle.plant == "ts"):
             raise ValueError("envelope: it says where a plant's [model_uncertainty] bound holds; declare a nonlinear plant and that bound with it")
+        if self.envelope is not None:
+            try:
+                check_envelope_speeds(self.envelope.build(), self.vehicle.vx_min_kmh, self.vehicle.vx_max_kmh)
+            except ValueError as exc:
+                raise ValueError(f"envelope: {exc}") from None
         ids = [n.id for n in self.nodes]
         if not ids:
             raise ValueError("nodes: at least one node is needed")
@@ -539,6 +567,7 @@ class Scenario:
     readings: bool = True  # the same-step exchange of the references' readings (docs/network.md)
     health_groups: tuple[HealthGroup, ...] = ()  # declared: at most m of each group's sensors faulty (|f| > fault_tolerance) at any step
     settings_digest: str | None = None  # the files' values (load_topology's _settings_digest); None: built otherwise
+    log: LogSource | None = None  # a recorded drive is the world ([vehicle] source = "log"; docs/your-log.md)
 
     def node(self, node_id: int) -> NodeConfig:
         n = self._by_id.get(node_id)
@@ -559,14 +588,16 @@ class Scenario:
         return self.speed.kmh(k * self.tau_s) * KMH
 
     def speed_plausible(self, k: int, vx: float) -> bool:
-        """Whether Vx_k can be the truth's: the reference itself (T-S plant) or inside the model's range."""
-        if self.plant == "ts":
+        """Whether Vx_k can be the truth's: the reference itself (T-S plant) or inside the model's range (a plant, a log)."""
+        if self.plant == "ts" and self.log is None:
             return vx == self.vx(k)
         return self.model.params.vx_min <= vx <= self.model.params.vx_max
 
     @property
     def plant_label(self) -> str:
-        """The truth's vehicle in a few characters: ``ts``, or e.g. ``single-track/2`` (CommonRoad vehicle 2)."""
+        """The truth's vehicle in a few characters: ``ts``, e.g. ``single-track/2`` (CommonRoad vehicle 2), or ``log``."""
+        if self.log is not None:
+            return "log"
         return self.plant if self.plant == "ts" else f"{self.plant}/{self.vehicle_id}"
 
     @property
@@ -576,7 +607,9 @@ class Scenario:
         return self.uncertainty.G if self.uncertainty is not None else np.zeros((2, 0))
 
     def steering_range(self) -> tuple[float, float]:
-        """Every steering angle the manoeuvre can command."""
+        """Every steering angle the manoeuvre can command (a log's: a road car's whole range)."""
+        if self.log is not None:
+            return -STEERING_MAX_RAD, STEERING_MAX_RAD
         return steering_range(self.manoeuvre, self.steer_low, self.steer_high)
 
     def fault_bounded(self, mode: FaultBoundsMode) -> tuple[int, ...]:
@@ -717,6 +750,62 @@ def load_profile(path: Path) -> NodeProfile:
     return _validated(path, _read_toml(path), NodeProfile)
 
 
+def load_mapping(path: Path) -> LogMapping:
+    """A drive log's mapping file (config/logmap.py), validated; ConfigError naming the file, the field and why."""
+    return resolve_mapping(path, _validated(path, _read_toml(path), MappingFile))
+
+
+def _log_source(path: Path, v: VehicleSpec, log: str | None, mapping: str | None, steps_given: bool) -> LogSource | None:
+    """The run's recorded drive: ``log``/``mapping`` (the command line's, relative to the working directory) over
+    the topology's ``[vehicle] log``/``mapping`` (relative to the file); the mapping defaults to the log's name with
+    ``.map.toml``.  None: the model drives."""
+    if log is None and mapping is None and v.source != "log":
+        return None
+    if log is None and v.log is None:
+        raise ConfigError(f'{path}: vehicle.source = "log" names no log: give vehicle.log, or run with --log DRIVE')
+    log_path = Path(log) if log is not None else path.parent / str(v.log)
+    if not log_path.exists():
+        raise ConfigError(f"{log_path}: drive log not found")
+    map_path = Path(mapping) if mapping is not None else path.parent / v.mapping if v.mapping is not None else log_path.with_suffix(".map.toml")
+    if not map_path.exists():
+        raise ConfigError(f"{map_path}: the log's mapping file not found (give --map MAP.toml, or vehicle.mapping in the topology)")
+    return LogSource(str(log_path), load_mapping(map_path), steps_given)
+
+
+def _check_log_nodes(path: Path, src: LogSource, ids: list[int], case: str) -> None:
+    """Every node is mapped to one yaw-rate channel and every mapped node is one of the topology's."""
+    m = src.mapping
+    mapped = [s.node for s in m.sensors]
+    if unknown := sorted(set(mapped) - set(ids)):
+        raise ConfigError(f"{m.path}: yaw_rate: node {unknown[0]} is not a node of {path} (ids: {ids})")
+    if unmapped := sorted(set(ids) - set(mapped)):
+        raise ConfigError(f"{m.path}: yaw_rate: no channel for node {unmapped[0]} of {path}: every node needs its reading")
+    if case != "nsnim":
+        raise ConfigError(f"{path}: case {case!r} on a log: a logged reading is the sensor's own (γ = 1, no saturation model of it), which is the nsnim case")
+
+
+FAULT_SCALE_MAX = 10.0  # --fault-scale: a fault ten times its declared bound is already far outside every assumption
+
+
+def scaled_fault(path: Path, prof: NodeProfile, scale: float) -> NodeProfile:
+    """``prof`` with its fault's largest |f_k| set to ``scale`` × its declared ``[fault_bound] size`` (the shape
+    kept: a square fault's amplitude, a piecewise fault's values scaled together); a fault-free profile as it
+    is.  A faulty profile that declares no size has nothing to scale by: ConfigError naming it."""
+    if not (math.isfinite(scale) and 0 <= scale <= FAULT_SCALE_MAX):
+        raise ConfigError(f"fault scale must be between 0 and {FAULT_SCALE_MAX:g}, got {scale!r}")
+    f = prof.fault
+    peak = abs(f.amplitude or 0.0) if f.kind == "square" else max((abs(v) for _, v in f.points or ()), default=0.0)
+    if f.kind == "none" or peak == 0.0:
+        return prof
+    size = prof.fault_bound.size
+    if not size:  # None: no bound declared; 0: a reference sensor, declared fault-free (its fault breaks that)
+        raise ConfigError(f"{path}: a fault scale needs [fault_bound] size > 0 for its {f.kind} fault (it scales the fault to a fraction of it)")
+    k = scale * size / peak
+    if f.kind == "square":
+        return msgspec.structs.replace(prof, fault=msgspec.structs.replace(f, amplitude=k * f.amplitude))  # type: ignore[operator]  # a square fault has an amplitude: peak > 0
+    return msgspec.structs.replace(prof, fault=msgspec.structs.replace(f, points=[(s, k * v) for s, v in f.points or ()]))
+
+
 def load_topology(
     path: str | Path,
     case: Case | None = None,
@@ -724,10 +813,17 @@ def load_topology(
     estimator: str | None = None,
     manoeuvre: str | None = None,
     steer_high: float | None = None,
+    speed_kmh: float | None = None,
+    fault_scale: float | None = None,
+    log: str | None = None,
+    mapping: str | None = None,
 ) -> Scenario:
     """Read and validate a topology (a path, or the name of a bundled one such as ``paper6``) and its node
     profiles; ``case``/``steps``/``estimator`` (every node's)/``manoeuvre``/``steer_high`` (``[steering]
-    high``) override the file."""
+    high``)/``speed_kmh`` (``[speed] mean_kmh``) override the file; ``fault_scale`` sets every node's fault to
+    that fraction of its declared ``[fault_bound] size`` (:func:`scaled_fault`); ``log``/``mapping`` make a
+    recorded drive the world (docs/your-log.md).  The overrides are applied to the files' values before
+    validation, so the scenario's ``settings_digest`` covers them."""
     path = resolve_topology(path)
     if not path.exists():
         raise ConfigError(f"{path}: file not found (bundled topologies: {', '.join(bundled_topologies())})")
@@ -746,13 +842,20 @@ def load_topology(
         steering = data.get("steering", {})
         if isinstance(steering, dict):  # anything else fails validation as it is
             data["steering"] = {**steering, "high": steer_high}
+    if speed_kmh is not None:  # validated with the file: the range, and the model's speed range at load
+        speed = data.get("speed", {})
+        if isinstance(speed, dict):  # anything else fails validation as it is
+            data["speed"] = {**speed, "mean_kmh": speed_kmh}
     topo = _validated(path, data, TopologyFile)
     case = case or topo.case
     try:
         node_dir = (path.parent / topo.node_dir).resolve()
     except (RuntimeError, OSError, ValueError) as exc:  # a symlink loop, a NUL byte
         raise ConfigError(f"{path}: node_dir {topo.node_dir!r}: {exc}") from None
+    if not node_dir.is_dir():  # a wrong node_dir once read as a missing profile file
+        raise ConfigError(f"{path}: node_dir {topo.node_dir!r}: no such directory ({node_dir}; relative to the topology file's directory)")
     v = topo.vehicle
+    log_source = _log_source(path, v, log, mapping, steps is not None or "steps" in data)
     try:
         params = v.params()
     except MissingExtra as exc:
@@ -761,7 +864,9 @@ def load_topology(
     profiles: dict[int, NodeProfile] = {}
     for ref in topo.nodes:
         ppath = node_dir / f"{ref.profile}.toml"
-        prof = profiles[ref.id] = load_profile(ppath)
+        if not ppath.exists():
+            raise ConfigError(f"{path}: node {ref.id}: profile {ref.profile!r}: {ppath.name} not found in node_dir {topo.node_dir!r} ({node_dir})")
+        prof = profiles[ref.id] = load_profile(ppath) if fault_scale is None else scaled_fault(ppath, load_profile(ppath), fault_scale)
         saim = case == "saim"
         if saim and (prof.saturation is None or prof.availability is None):
             raise ConfigError(f"{ppath}: the saim case needs [saturation] and [availability] sections")
@@ -794,7 +899,7 @@ def load_topology(
                 estimator=estimator or ref.estimator,
             )
         )
-    return Scenario(
+    scenario = Scenario(
         path=str(path),
         name=topo.name,
         case=case,
@@ -818,7 +923,11 @@ def load_topology(
         readings=topo.network.readings,
         health_groups=_health_groups(path, topo.network, nodes),
         settings_digest=_settings_digest(topo, profiles),
+        log=log_source,
     )
+    if log_source is not None:
+        _check_log_nodes(path, log_source, scenario.ids, scenario.case)
+    return scenario
 
 
 def _settings_digest(topo: TopologyFile, profiles: dict[int, NodeProfile]) -> str:
@@ -826,11 +935,14 @@ def _settings_digest(topo: TopologyFile, profiles: dict[int, NodeProfile]) -> st
     estimators (which a command line may change). A record keeps it, so that `netsetest exact` knows a
     topology that is not the run's even where its meta holds nothing that differs."""
     plain = msgspec.structs.replace
-    own = plain(topo, name="", node_dir="", steps=1, case="nsnim", nodes=[plain(n, profile="", estimator=SDP) for n in topo.nodes])
+    own = msgspec.to_builtins(plain(topo, name="", node_dir="", steps=1, case="nsnim", nodes=[plain(n, profile="", estimator=SDP) for n in topo.nodes]))
+    for key in LOG_KEYS:  # where the drive comes from is no setting a run rests on (and a model run's digest stays as before)
+        own["vehicle"].pop(key)
     body = msgspec.json.encode([own, [[i, plain(p, label="")] for i, p in sorted(profiles.items())]])
     return sha256(body).hexdigest()[:SETTINGS_DIGEST_HEX]
 
 
+LOG_KEYS = ("source", "log", "mapping")  # [vehicle]'s keys that name the drive's source
 SETTINGS_DIGEST_HEX = 16  # 64 bits: tells two files apart, never a security property
 
 

@@ -8,6 +8,7 @@ Nothing here trusts a solver: a set is published only with a certificate or as t
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -26,17 +27,24 @@ EPS_LADDER = 10.0 ** np.arange(-10.0, -2.0)  # relative nudges of the multiplier
 @dataclass(frozen=True)
 class FactStack:
     """A step's facts Q_m stacked once, for every certificate of that step (objective ``bank`` certifies
-    two answers of the same data): Q (m, d, d), Q reshaped (m, d²), Σ_m Q_m, and whether all are finite."""
+    two answers of the same data): Q (m, d, d), Q reshaped (m, d²), Σ_m Q_m, whether all are finite, each
+    Q_m's diagonal (m, d) and whether every Q_m is diagonal (the ball facts: then :func:`certify` takes its
+    closed form)."""
 
     Q: np.ndarray
     Qflat: np.ndarray
     Qsum: np.ndarray
     finite: bool
+    diag: np.ndarray
+    diagonal: bool
 
     @classmethod
     def of(cls, facts: Sequence[np.ndarray]) -> FactStack:
         Q = np.asarray(facts)
-        return cls(Q, Q.reshape(Q.shape[0], -1), Q.sum(axis=0), bool(np.isfinite(Q).all()))
+        m, d = Q.shape[0], Q.shape[-1]
+        flat = Q.reshape(m, -1)
+        diag = flat[:, :: d + 1]
+        return cls(Q, flat, Q.sum(axis=0), bool(np.isfinite(Q).all()), diag, np.count_nonzero(flat) == np.count_nonzero(diag))
 
 
 def _finite(*arrays: np.ndarray) -> bool:
@@ -52,11 +60,127 @@ def certify(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: Sequence[np.n
     strictly negative: every η slot other than the first has a strictly negative diagonal in some Q_m,
     so a solver answer that is feasible up to its tolerance becomes strictly feasible there, at a cost
     of O(ε) in ρ'.
+
+    Where every fact is diagonal (the ball facts: every step without a φ slot), the condition is checked on
+    a 4×4 matrix with outward rounding margins (:func:`diagonal_certificate`), else on the d×d one
+    (:func:`_dense_certificate`).
     """
     fs = facts if isinstance(facts, FactStack) else FactStack.of(facts)
     if not (fs.finite and _finite(P, pi, tau)):
         return None  # a NaN passes Cholesky silently
     P = 0.5 * (P + P.T)
+    if fs.diagonal and P.shape == (3, 3):
+        out = diagonal_certificate(P, pi, tau, fs)
+        return None if out is None else out[0]
+    return _dense_certificate(P, pi, tau, fs)
+
+
+U = 2.0**-53  # the unit roundoff of float64
+RUMP_C = 8.0  # the shift of :func:`rump_definite` is RUMP_C (n + 2) u tr(a): Rump's γ_{n+1}/(1 − 2γ_{n+1}) tr(a) ≈ (n + 1) u tr(a), and then some
+RUMP_FLOOR = 1e-290  # its absolute part: Rump's underflow term (a few multiples of the smallest subnormal), and then some
+RUMP_MAX = 1e300  # a diagonal entry beyond this: refused (far from any step; no overflow in the scaling)
+
+
+def rump_definite(a: list[list[float]]) -> bool:
+    """Whether the symmetric 4×4 matrix ``a`` (plain floats, its lower triangle read) is proven positive definite.
+
+    First scaled by a power of two per row and column (D a D, exact: no rounding unless an entry becomes subnormal,
+    an absolute error far below RUMP_FLOOR) so that its diagonal lies in [1/4, 4); then the floating-point Cholesky
+    factorisation of the scaled matrix less cI must run to completion, c = RUMP_C (n + 2) u tr + RUMP_FLOOR (n = 4).
+    S. M. Rump, "Verification of positive definiteness", BIT 46 (2006) 433–452: if the floating-point Cholesky
+    factorisation of a − cI runs to completion for a c ≥ γ_{n+1}/(1 − 2γ_{n+1}) tr(a) (plus an underflow term), a
+    is positive definite, whatever the order of the operations (fused or not).  False is no proof of the opposite.
+    Unrolled: the certificate's hot path."""
+    (a00, _, _, _), (a10, a11, _, _), (a20, a21, a22, _), (a30, a31, a32, a33) = a
+    if not (a00 > 0.0 and a11 > 0.0 and a22 > 0.0 and a33 > 0.0 and max(a00, a11, a22, a33) < RUMP_MAX):
+        return False  # (a NaN fails here too)
+    k0, k1, k2, k3 = (-(math.frexp(x)[1] // 2) for x in (a00, a11, a22, a33))
+    ld = math.ldexp
+    a00, a11, a22, a33 = ld(a00, 2 * k0), ld(a11, 2 * k1), ld(a22, 2 * k2), ld(a33, 2 * k3)
+    a10, a20, a30 = ld(a10, k1 + k0), ld(a20, k2 + k0), ld(a30, k3 + k0)
+    a21, a31, a32 = ld(a21, k2 + k1), ld(a31, k3 + k1), ld(a32, k3 + k2)
+    c = RUMP_C * 6 * U * (a00 + a11 + a22 + a33) + RUMP_FLOOR
+    s = a00 - c
+    if not s > 0.0:
+        return False
+    l00 = math.sqrt(s)
+    l10, l20, l30 = a10 / l00, a20 / l00, a30 / l00
+    s = a11 - c - l10 * l10
+    if not s > 0.0:
+        return False
+    l11 = math.sqrt(s)
+    l21, l31 = (a21 - l20 * l10) / l11, (a31 - l30 * l10) / l11
+    s = a22 - c - l20 * l20 - l21 * l21
+    if not s > 0.0:
+        return False
+    l22 = math.sqrt(s)
+    l32 = (a32 - l30 * l20 - l31 * l21) / l22
+    return a33 - c - l30 * l30 - l31 * l31 - l32 * l32 > 0.0
+
+
+def diagonal_certificate(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, fs: FactStack) -> tuple[float, np.ndarray] | None:
+    """:func:`certify` where every Q_m is diagonal, P (3, 3) symmetric: (ρ', τ') with, in exact arithmetic on
+    these floats, Πᵀ P⁻¹ Π + Σ τ'_m Q_m ⪯ ρ' e₁e₁ᵀ; None where that is not proven.
+
+    With δ = Σ τ'_m diag(Q_m) and E_k = −δ_k > 0 (k ≥ 1), the condition is, by two Schur complements
+    (over P, then over the diagonal block E),
+
+        [[S, π₀], [π₀ᵀ, ρ' − δ₀]] ⪰ 0,   S = P − G,   G = Σ_{k≥1} π_k π_kᵀ / E_k   (π_k: column k of Π),
+
+    and the lower block of the LMI is strictly negative exactly where S ≻ 0.  Rounding: each entry of S as
+    computed is within γ (|P_ij| + Σ_k |π_ik||π_jk|/E_k) of the exact one, γ = 2 (d + m + 8) u (E_k's own sum of
+    m terms, the quotients, G's sum of d terms, the difference), and Σ_k |π_ik||π_jk|/E_k ≤ (G_ii G_jj)^½ (Cauchy–
+    Schwarz), so the error's spectral norm is at most γ (max_i Σ_j |P_ij| + tr G); S is moved down by twice that
+    (μ I), δ₀ up by twice its own bound and ρ' − δ₀ rounded down, so the exact matrix is at least the one
+    checked, which :func:`rump_definite` proves positive definite.  The multipliers are nudged as :func:`certify`
+    says (the first ε whose S has a Cholesky factor in floating point), and ρ' is widened as the d×d check widens
+    it.  tests/unit/test_certificate.py holds every answer to an exact rational check."""
+    tau = np.maximum(tau, 0.0)
+    d, m = pi.shape[1], len(tau)
+    gamma2 = 4.0 * (d + m + 8) * U  # 2γ
+    rest = pi[:, 1:]
+    (p00, p01, p02), (_, p11, p12), (_, _, p22) = P.tolist()
+    prow = max(abs(p00) + abs(p01) + abs(p02), abs(p01) + abs(p11) + abs(p12), abs(p02) + abs(p12) + abs(p22))
+    for eps in max(1.0, float(tau.max())) * EPS_LADDER:
+        t = tau + eps  # τ' (the statement is about these floats)
+        delta = t @ fs.diag
+        e = -delta[1:]
+        if not e.min() > 0.0:
+            continue
+        (g00, g01, g02), (_, g11, g12), (_, _, g22) = ((rest / e) @ rest.T).tolist()
+        mu = gamma2 * (prow + g00 + g11 + g22)
+        s00, s01, s02, s11, s12, s22 = p00 - g00 - mu, p01 - g01, p02 - g02, p11 - g11 - mu, p12 - g12, p22 - g22 - mu
+        if not s00 > 0.0:  # a Cholesky factor of S in floating point (the proof is the bordered check below)
+            continue
+        l00 = math.sqrt(s00)
+        l10, l20 = s01 / l00, s02 / l00
+        a = s11 - l10 * l10
+        if not a > 0.0:
+            continue
+        l11 = math.sqrt(a)
+        l21 = (s12 - l20 * l10) / l11
+        b = s22 - l20 * l20 - l21 * l21
+        if b > 0.0:
+            l22 = math.sqrt(b)
+            break
+    else:
+        return None
+    q0, q1, q2 = pi[:, 0].tolist()
+    y0 = q0 / l00  # π₀ᵀ S⁻¹ π₀ = ‖L⁻¹π₀‖²: an estimate, proven below
+    y1 = (q1 - l10 * y0) / l11
+    y2 = (q2 - l20 * y0 - l21 * y1) / l22
+    delta0 = float(delta[0]) + gamma2 * float(t @ np.abs(fs.diag[:, 0]))  # δ₀ rounded up
+    rho_c = (delta0 + (y0 * y0 + y1 * y1 + y2 * y2)) * (1 + 1e-9) + 1e-12
+    for _ in range(60):
+        corner = rho_c - delta0 - 4.0 * U * (abs(rho_c) + abs(delta0))  # ρ' − δ₀ rounded down
+        if rump_definite([[s00, s01, s02, q0], [s01, s11, s12, q1], [s02, s12, s22, q2], [q0, q1, q2, corner]]):
+            return (rho_c, t) if rho_c > 0 else None
+        rho_c *= 1 + 1e-6
+    return None
+
+
+def _dense_certificate(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, fs: FactStack) -> float | None:
+    """:func:`certify` on the d×d matrix (any facts): LAPACK's Cholesky, solve and eigenvalues."""
     try:
         chol = linalg.cholesky(P)
     except np.linalg.LinAlgError:
@@ -102,12 +226,31 @@ def publishable(xhat: np.ndarray, P: np.ndarray) -> bool:
     """A centre and shape a node may publish: finite, symmetric positive definite, not degenerate."""
     if not (np.isfinite(xhat).all() and np.isfinite(P).all()) or not np.array_equal(P, P.T):
         return False
+    if P.shape == (3, 3) and _clearly_conditioned(P.tolist()):
+        return True  # (most shapes: no eigen decomposition then)
     try:
         eig = linalg.eigvalsh(P)
     except np.linalg.LinAlgError:
         return False
     # (no Cholesky besides: with every eigenvalue > 0 and the ratio ≤ COND_MAX, far below 1/ε, it cannot fail)
     return bool(eig[0] > 0 and eig[-1] <= COND_MAX * eig[0])
+
+
+CLEAR = 1e-6  # relative: a leading minor this far above its rounding bound has its computed sign
+
+
+def _clearly_conditioned(p: list[list[float]]) -> bool:
+    """Whether the symmetric 3×3 ``p`` (finite plain floats) is positive definite with an eigenvalue ratio at most half
+    COND_MAX, by its leading minors (Sylvester) and λ_max / λ_min ≤ tr³ / (4 det) (λ_max ≤ tr, and λ_min ≥ 4 det / tr²
+    since the other two multiply to at most (tr/2)²), each minor clearly above its rounding (a sum of k products of
+    3 factors at most is within 8 k u of its terms' magnitude).  True implies what the eigenvalues would say; False
+    says nothing (:func:`publishable` then asks them)."""
+    (a, b, c), (_, d, e), (_, _, f) = p
+    m2, m2_size = a * d - b * b, abs(a * d) + b * b
+    det = a * (d * f - e * e) - b * (b * f - e * c) + c * (b * e - d * c)
+    size = abs(a) * (abs(d * f) + e * e) + abs(b) * (abs(b * f) + abs(e * c)) + abs(c) * (abs(b * e) + abs(d * c))
+    tr = a + d + f
+    return a > 0.0 and m2 > CLEAR * m2_size and det > CLEAR * size and tr * tr * tr <= 2.0 * COND_MAX * det
 
 
 def fallback_shape(Mi: np.ndarray, own: OwnUpdate, W: float, abar: np.ndarray, dbar: np.ndarray, uncertainty: ModelUncertainty | None = None) -> np.ndarray:

@@ -33,7 +33,7 @@ from netsetest.estimator.sector import FaultBound, Interval, Sector, fault_over
 from netsetest.estimator.slab import cut
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.vehicle import TSModel
-from netsetest.polygon import MIN_VERTICES, Polygon
+from netsetest.polygon import MIN_VERTICES, REGION_REASONS, Polygon
 from netsetest.proven import ProvenSet
 from netsetest.sets import ellipsoid_bounds
 
@@ -97,16 +97,23 @@ class StepResult:
 
     def published_set(self, rho: float, own_set: dict | None = None) -> ProvenSet:
         """What the node publishes, as sent: the ellipsoid of ``public`` with radius ρ_i ∩ the region ∩ its fault
-        range; or a set estimator's own set (``own_set``, sets.set_to_wire) with the ellipsoid that encloses it."""
-        pub, region = self.public, self.region
-        return ProvenSet(
+        range; or a set estimator's own set (``own_set``, sets.set_to_wire) with the ellipsoid that encloses it.  A
+        region no receiver would take (polygon.region_problem, which ProvenSet runs) is left out: a superset, sound."""
+        pub = self.public
+        fields = dict(
             xhat=pub.xhat.tolist(),  # float64 arrays: the floats [float(a) for a in …] gave, without the loop
             P=pub.P.reshape(NA * NA).tolist(),
             rho=rho,
-            region=None if region is None else region.vertices.reshape(-1).tolist(),
             fault=None if pub.fault_range is None else [float(pub.fault_range[0]), float(pub.fault_range[1])],
             set=own_set,
         )
+        if self.region is not None:
+            try:
+                return ProvenSet(region=self.region.vertices.reshape(-1).tolist(), **fields)
+            except ValueError as exc:
+                if str(exc).split(":", 1)[0] not in REGION_REASONS:
+                    raise
+        return ProvenSet(**fields)
 
     def continued_ellipsoid(self, rho: float) -> ProvenSet | None:
         """The ellipsoid the node continues from where that set is not the published one (None: it is): the set is it
@@ -205,9 +212,9 @@ def cut_fault(ctx: StepContext, res: StepResult, lo: float, hi: float, reshape: 
     at the slab's flat face), resting on the readings ``keys`` too; None where the slab does not narrow the published
     fault interval.  The set the node continues from is unchanged."""
     pub, rho = res.public, ctx.rho
-    now_lo, now_hi = ellipsoid_bounds(pub.xhat, np.diag(pub.P), rho, pub.fault_range)  # the published fault interval
-    lo, hi = max(lo, now_lo[-1]), min(hi, now_hi[-1])
-    if not (lo > now_lo[-1] or hi < now_hi[-1]) or lo > hi:
+    now_lo, now_hi = _fault_interval(pub, rho)  # the published fault interval
+    lo, hi = max(lo, now_lo), min(hi, now_hi)
+    if not (lo > now_lo or hi < now_hi) or lo > hi:
         return None  # no cut (an empty one means the assumptions broke: the step's set stays as certified)
     wh = ctx.statics.wh_published
     out = cut(pub.xhat, pub.P, rho, FAULT_AXIS, lo, hi, None if wh is None else wh**2) if reshape else None
@@ -216,6 +223,16 @@ def cut_fault(ctx: StepContext, res: StepResult, lo: float, hi: float, reshape: 
     else:  # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
         new = pub.replaced(xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None, fault_range=(lo, hi), reading_keys=pub.reading_keys | keys)
     return res.replaced(published=new)
+
+
+def _fault_interval(s: StepResult, rho: float) -> tuple[float, float]:
+    """The fault interval of ``s``'s set with radius ρ: x̂_f ∓ √(ρ P_ff) within its fault range (sets.ellipsoid_bounds'
+    last coordinate, the same floats, without the other two)."""
+    x, half = float(s.xhat[-1]), math.sqrt(rho * float(s.P[-1, -1]))
+    lo, hi = x - half, x + half
+    if s.fault_range is not None:
+        lo, hi = max(lo, s.fault_range[0]), min(hi, s.fault_range[1])
+    return lo, hi
 
 
 def carry(ctx: StepContext, res: StepResult, slabs: dict[int, tuple[np.ndarray, float, float]]) -> StepResult:

@@ -32,8 +32,8 @@ sectors come with their messages, so which φ slots exist changes per step (one 
 pattern).  Where the own sector is derived and the sensor may saturate, the proven interval of r⁺ is
 used as the measurement instead of the φ⁺ sector fact, and where that sector rests on the declared
 fault bound the published set is cut by |f⁺| ≤ F (:mod:`netsetest.estimator.slab`).  Step 0 updates the prior with ỹ₀
-(:meth:`LocalEstimator.first`).  The objective is trace(D P) (a congruence of the LMI); ``bank`` solves
-each step twice and publishes the fault-weighted set while recurring on the trace-optimal one.
+(:meth:`LocalEstimator.first`).  The objective is trace(D P) (a congruence of the LMI); ``bank`` recurs on the
+trace-optimal set and weights the fault in what it reshapes for publishing (the cuts, the readings' set).
 
 A step is the prediction (the model part: Π₀, the L-free centre, the own φ⁺ fact; :meth:`LocalEstimator._predict`)
 and the update (the neighbours' innovations ℓ and facts, :meth:`LocalEstimator._innovations`; then the
@@ -176,6 +176,7 @@ class _Pattern:
     lay: EtaLayout
     balls: list[np.ndarray]  # (d, d) Q of each ball fact, read-only
     solver: ProblemSolver
+    stack: FactStack | None = None  # the balls stacked, once (LocalEstimator._facts)
 
 
 StepObserver = Callable[["LocalEstimator", "NodeSet", "UpdateInput", "StepResult", float], None]
@@ -244,6 +245,7 @@ class LocalEstimator:
         if uncertainty is not None:
             self._ebar[:NX] = uncertainty.G
         self._cbar = {j: s.Cbar for j, s in neighbours.items()} | {node_id: own.Cbar}
+        self._cbar_f = {j: tuple(c.tolist()) for j, c in self._cbar.items()}  # the same as plain floats
         self._own_cbar = own.Cbar
         self._gains: dict[tuple[float, float], tuple[np.ndarray, np.ndarray]] = {}
         self._patterns: dict[PatternKey, _Pattern] = {}
@@ -485,32 +487,39 @@ class LocalEstimator:
         """
         weights = weights or self.weights
         d = lay.dim
-        ell = np.zeros(d)
+        ell = [0.0] * d  # (plain floats: a handful of scalars per neighbour, cheaper than numpy's per-call set-up)
         facts: list[np.ndarray] = list(balls)
         for j in lay.neigh:
             sj, nb = (self.own if j == self.node_id else self.sensors[j]), neigh.get(j)
-            g_r = np.zeros(d)  # r_j = gᵀη
+            phi = lay.phi.get(j)
+            g_r = np.zeros(d) if phi is not None else None  # r_j = gᵀη (for the sector fact)
             if nb is not None:
                 # y̌_j = (γ_j h1_j − 1) C̄_j x̂_j + γ_j h1_j C̄_j ρ_j^½ M_j z_j + γ_j φ_j + Dv_j v_j
-                a = weights[j]
-                cbar = self._cbar[j]
-                cx = float(cbar @ nb.xhat)
-                ell[0] += a * (nb.gamma * nb.h1 - 1.0) * cx
+                a, gh = weights[j], nb.gamma * nb.h1
+                c0, c1, c2 = self._cbar_f[j]
+                x0, x1, x2 = nb.xhat.tolist()
+                cx = c0 * x0 + c1 * x1 + c2 * x2
+                ell[0] += a * (gh - 1.0) * cx
                 ell[lay.v[j]] += a * sj.Dv
-                g_r[0] = cx
                 if j == self.node_id:
-                    row = cbar @ Mi  # the node's own z_i
-                    ell[lay.z] += a * nb.gamma * nb.h1 * row
-                    g_r[lay.z] = row
+                    row = self._cbar[j] @ Mi  # the node's own z_i
+                    for k, r in zip(lay.z, row.tolist()):
+                        ell[k] += a * gh * r
+                    if g_r is not None:
+                        g_r[lay.z] = row
                 else:  # C̄_j M_j z_j = c_j s_j, c_j = (ρ_j C̄_j P_j C̄_jᵀ)^½
-                    c_j = math.sqrt(max(nb.rho * float(cbar @ nb.P @ cbar), 0.0))
-                    ell[lay.s[j]] += a * nb.gamma * nb.h1 * c_j
-                    g_r[lay.s[j]] = c_j
-                if j in lay.phi:
-                    ell[lay.phi[j]] += a * nb.gamma
-            if j in lay.phi:  # φ_j (h_j r_j − φ_j) ≥ 0
-                facts.append(_sector(d, lay.phi[j], g_r, nb.sector.h))  # type: ignore[union-attr]  # j has a φ slot only with a published sector
-        return ell, facts
+                    (p00, p01, p02), (p10, p11, p12), (p20, p21, p22) = nb.P.tolist()
+                    q = c0 * (p00 * c0 + p01 * c1 + p02 * c2) + c1 * (p10 * c0 + p11 * c1 + p12 * c2) + c2 * (p20 * c0 + p21 * c1 + p22 * c2)
+                    c_j = math.sqrt(max(nb.rho * q, 0.0))
+                    ell[lay.s[j]] += a * gh * c_j
+                    if g_r is not None:
+                        g_r[lay.s[j]] = c_j
+                if g_r is not None:
+                    g_r[0] = cx
+                    ell[phi] += a * nb.gamma  # type: ignore[index]  # phi is set where g_r is
+            if phi is not None:  # φ_j (h_j r_j − φ_j) ≥ 0
+                facts.append(_sector(d, phi, g_r, nb.sector.h))  # type: ignore[union-attr,arg-type]  # j has a φ slot only with a published sector
+        return np.array(ell), facts
 
     def initial_data(self, prior: NodeSet, y: float, gamma: float, sector: Sector | None) -> StepData:
         """Step 0: x̂₀ = x̂ + L(ỹ₀ − C̄x̂), error e = ρ^½Mz − L y̌₀(η) with y̌₀ the own innovation."""
@@ -578,7 +587,7 @@ class LocalEstimator:
         exchange, docs/network.md) and hands it to :meth:`step` with them; ``inp.readings`` is not read."""
         t0 = time.perf_counter()
         base = self._base(prev, inp)
-        first = self._solve_certify(base.data, prev.rho, np.asarray(inp.alpha, dtype=float), self._wh, FactStack.of(base.data.facts))
+        first = self._solve_certify(base.data, prev.rho, np.asarray(inp.alpha, dtype=float), self._wh, self._facts(base.data))
         return Prepared(prev, inp, base, first, 1e3 * (time.perf_counter() - t0))
 
     def _step(self, prev: NodeSet, inp: UpdateInput, prepared: Prepared | None = None) -> StepResult:
@@ -614,21 +623,19 @@ class LocalEstimator:
 
     def _solve_step(self, ctx: StepContext, inp: UpdateInput, first: tuple[StepResult | None, _Solve] | None = None) -> StepResult:
         """The certified set the node continues from and the one it publishes: the readings' set where it is
-        certified and better (:meth:`_refine`), else the bank's; the fallback where the first has no certificate.
+        certified and better (:meth:`_refine`), else the same set (the cuts may make another to publish); the
+        fallback where the first has no certificate.
         ``first``: the first solve's outcome, computed before the readings came (:meth:`prepare`)."""
         data, rho, alpha = ctx.data, ctx.rho, np.asarray(inp.alpha, dtype=float)
-        facts = FactStack.of(data.facts)
-        res, solve = first if first is not None else self._solve_certify(data, rho, alpha, self._wh, facts)  # the set the node recurs on
+        res, solve = first if first is not None else self._solve_certify(data, rho, alpha, self._wh, self._facts(data))  # the set the node recurs on
         if res is None:
             assert data.own is not None  # a predicting step always has its own update
             assert ctx.blend is not None  # a predicting step's context has its blend
             P_fb = fallback_shape(data.Mi, data.own, self.W, ctx.blend.abar, ctx.blend.dbar, self.uncertainty) / rho
             return self._fallback(data.x_pred.copy(), P_fb, solve, ctx.sector)
         if ctx.slabs:
-            res, refined = self._refine(res, self.readings_data(data, alpha, ctx.slabs), rho, alpha)
-            if refined:
-                return res
-        return self._bank(res, data, rho, alpha, facts)
+            res = self._refine(res, self.readings_data(data, alpha, ctx.slabs), rho, alpha)
+        return res
 
     def _moved_region(self, prev: NodeSet, inp: UpdateInput, blend: Blend) -> Polygon:
         """The states x⁺ the prior allows: its region (else the box of its ellipsoid) through the step's blended
@@ -640,10 +647,10 @@ class LocalEstimator:
             segments += [self.uncertainty.G[:, m] for m in range(NX)]  # e = G ζ with |ζ_m| ≤ 1
         return region.moved(blend.a, blend.b * inp.u, segments)
 
-    def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> tuple[StepResult, bool]:
+    def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> StepResult:
         """``res`` publishing the readings' set of the step (its only innovation those readings) where it is
-        certified, uses them (L ≠ 0) and is smaller in the published objective than ``res``, and whether it does;
-        the node recurs on ``res`` either way (cut by the readings: :data:`~netsetest.estimator.cuts.READINGS`).
+        certified, uses them (L ≠ 0) and is smaller in the published objective than ``res``; the node recurs on
+        ``res`` either way (cut by the readings: :data:`~netsetest.estimator.cuts.READINGS`).
 
         Why not recur on it: its trace-optimal shape trades sideslip width for yaw-rate width (the
         reading measures the yaw rate), and later steps predict from the sideslip; recurring on it made
@@ -652,12 +659,12 @@ class LocalEstimator:
         answer, solve = self._solve(data, alpha, wh, rho)
         res = dataclasses.replace(res, solve_ms=res.solve_ms + solve.ms)
         if answer is None or not np.any(answer.L):
-            return res, False  # no answer, or the readings are of no use (L = 0): nothing to certify
-        refined = self._certify(answer, data, rho, FactStack.of(data.facts), solve)
+            return res  # no answer, or the readings are of no use (L = 0): nothing to certify
+        refined = self._certify(answer, data, rho, self._facts(data), solve)
         if refined is None or _objective(refined.P, wh) >= (1 - REFINE_RTOL) * _objective(res.P, wh):
-            return res, False  # no certificate, or nothing gained: no reason to rest the published set on the readings
+            return res  # no certificate, or nothing gained: no reason to rest the published set on the readings
         refined = dataclasses.replace(refined, solve_ms=res.solve_ms, reading_keys=frozenset(data.key[3]))
-        return dataclasses.replace(res, published=refined), True
+        return dataclasses.replace(res, published=refined)
 
     def first(self, prior: NodeSet, y: float, gamma: float) -> StepResult:
         """Step 0: the prior updated by ỹ₀, certified like every step (``fallback``: the prior itself), then
@@ -678,21 +685,8 @@ class LocalEstimator:
         return StepResult(xhat, P, "fallback", np.nan, solve.ms, solve.status, sector=sector)
 
     def _update(self, data: StepData, rho: float, alpha: np.ndarray) -> tuple[StepResult | None, _Solve]:
-        """The certified set of the step's data (None: no certificate) and the last solve's figures;
-        objective ``bank``: with the set to publish (:meth:`_bank`)."""
-        facts = FactStack.of(data.facts)  # shared by both certificates of ``bank``
-        res, solve = self._solve_certify(data, rho, alpha, self._wh, facts)
-        if res is not None:
-            res = self._bank(res, data, rho, alpha, facts)
-        return res, solve
-
-    def _bank(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray, facts: FactStack) -> StepResult:
-        """Objective ``bank``: ``res`` with the fault-weighted set of the same data as the one to publish."""
-        if self._wh_pub is None:
-            return res
-        pub, solve_pub = self._solve_certify(data, rho, alpha, self._wh_pub, facts)
-        ms = res.solve_ms + solve_pub.ms
-        return dataclasses.replace(res, solve_ms=ms, published=res.published if pub is None else dataclasses.replace(pub, solve_ms=ms))
+        """The certified set of the step's data (None: no certificate) and the solve's figures."""
+        return self._solve_certify(data, rho, alpha, self._wh, self._facts(data))
 
     def _solve_certify(self, data: StepData, rho: float, alpha: np.ndarray, wh: np.ndarray | None, facts: FactStack) -> tuple[StepResult | None, _Solve]:
         """Solve the step's problem for the objective trace(D P), D^½ = diag(wh) (None: trace P), and
@@ -722,15 +716,26 @@ class LocalEstimator:
         pi0 = sum(a * p for a, p in zip(alpha, data.pi0))
         return _Answer(sol.P, L, tau, pi0, sol.status), solve
 
+    def _facts(self, data: StepData) -> FactStack:
+        """The step's facts stacked (:class:`~netsetest.estimator.certificate.FactStack`); a pattern whose facts are all
+        its static balls (no φ slot: every NSNIM step) stacks them once."""
+        pat = self._patterns[data.key]
+        if len(data.facts) != len(pat.balls):  # (per-step sector facts after the balls)
+            return FactStack.of(data.facts)
+        if pat.stack is None:
+            pat.stack = FactStack.of(pat.balls)
+        return pat.stack
+
     def _certify(self, answer: _Answer, data: StepData, rho: float, facts: FactStack, solve: _Solve) -> StepResult | None:
         """The published set of an answer where the certificate holds and the set is publishable; else None."""
         L = answer.L
-        pi = answer.pi0 - L @ data.ell[None, :]  # Π(L) = Π₀ − L ℓᵀ
+        gain = bool(L.any())  # (L = 0: Π₀ and x̂_pred as they are, the same floats)
+        pi = answer.pi0 - L @ data.ell[None, :] if gain else answer.pi0  # Π(L) = Π₀ − L ℓᵀ
         rho_c = certify(answer.P, pi, answer.tau, facts)
         if rho_c is None:
             return None
         P_pub = 0.5 * (answer.P + answer.P.T) * rho_c / rho
-        xhat_new = data.x_pred + L[:, 0] * data.innov_sum  # (16): x̂⁺ = x̂_pred + L Σ_j a_ij y̌_j
+        xhat_new = data.x_pred + L[:, 0] * data.innov_sum if gain else data.x_pred.copy()  # (16): x̂⁺ = x̂_pred + L Σ_j a_ij y̌_j
         if not publishable(xhat_new, P_pub):  # a certified set nobody can use: treated as no certificate
             return None
         return StepResult(xhat_new, P_pub, "ok", rho_c, solve.ms, answer.status, L, data.sector)

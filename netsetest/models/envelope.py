@@ -26,6 +26,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from netsetest.models.vehicle import KMH
 
 HOLDS_RTOL = 1e-12  # the check against the envelope, with the rounding tolerance of every other bound check
@@ -55,6 +57,13 @@ class OperatingEnvelope:
         lo, hi = self.speed_kmh
         tol = 1 + HOLDS_RTOL
         return abs(ay) <= self.ay_max * tol and lo / tol <= kmh <= hi * tol
+
+    @classmethod
+    def covering(cls, ay: np.ndarray, speed: np.ndarray) -> OperatingEnvelope:
+        """The smallest envelope holding every transition's |a_y| [m/s²] and speed [m/s] (what recorded drives covered,
+        measured as the run measures it: ``calibrate --logs``)."""
+        kmh = np.asarray(speed, dtype=float) / KMH
+        return cls(float(np.abs(ay).max()), (float(kmh.min()), float(kmh.max())))
 
     def ay_margin(self, ay: float) -> float:
         """ay_max − |a_y| [m/s²]: negative where the transition is outside."""

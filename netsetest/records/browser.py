@@ -21,6 +21,7 @@ import shutil
 import subprocess
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -30,6 +31,8 @@ import numpy as np
 CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome")
 RENDER_TIMEOUT_S = 60.0  # the machine is shared: a loaded core still renders a 1.5 MB page within this
 PAGE_WIDTH = 1200  # px
+PAGE_HEIGHT = 900  # px: the window's height (a screenshot takes the whole page's)
+UNTIL_POLL_S = 0.5  # how often this process evaluates the caller's ``until`` condition
 READY_POLL_MS = 5  # the page checks the caller's condition this often (its own timer: the ready time is the page's)
 
 
@@ -58,6 +61,7 @@ class Page:
     values: dict[str, Any]
     errors: list[str] = field(default_factory=list)
     failed_requests: list[str] = field(default_factory=list)  # URLs the page asked for and did not get
+    requests: list[str] = field(default_factory=list)  # every URL the page asked for (DevTools' Network domain), in order
     screenshot: bytes = b""
     load_s: float = 0.0  # wall time from navigating to the condition seen true by this process
     timings: dict[str, float | None] = field(default_factory=dict)
@@ -130,6 +134,17 @@ def _errors(events: list[dict]) -> list[str]:
     return out
 
 
+def _requests(events: list[dict]) -> list[str]:
+    """Every request the page made, as the browser's network stack saw it: fetches, scripts, styles, fonts,
+    images, workers (``Network.requestWillBeSent``) and WebSockets (``Network.webSocketCreated``)."""
+    return [
+        e["params"]["request"]["url"] if e["method"] == "Network.requestWillBeSent" else e["params"]["url"] for e in events if e.get("method") in REQUEST_EVENTS
+    ]
+
+
+REQUEST_EVENTS = ("Network.requestWillBeSent", "Network.webSocketCreated")
+
+
 def _failed_requests(events: list[dict]) -> list[str]:
     urls = {e["params"]["requestId"]: e["params"]["request"]["url"] for e in events if e.get("method") == "Network.requestWillBeSent"}
     return [urls.get(e["params"]["requestId"], "?") for e in events if e.get("method") == "Network.loadingFailed"]
@@ -183,11 +198,17 @@ def load_page(
     settle_s: float = 0.0,
     timeout: float = RENDER_TIMEOUT_S,
     js_flags: tuple[str, ...] = (),
+    width: int = PAGE_WIDTH,
+    until: Callable[[Callable[[str], Any]], bool] | None = None,
+    window_height: int = PAGE_HEIGHT,
 ) -> Page:
-    """Open ``url``, wait until the JavaScript expression ``ready`` is true, evaluate ``expressions``
+    """Open ``url``, wait until the JavaScript expression ``ready`` is true (and then until ``until(evaluate)``
+    holds, a check too costly for the page's own timer, made by this process every UNTIL_POLL_S: ``evaluate``
+    gives an expression's value, None where it throws), evaluate ``expressions``
     (name → expression, JSON-serialisable results) after ``settle_s`` more seconds, and screenshot the whole
     page (or its top ``height`` px); ``timeout`` bounds each step (a page compiling a large WebAssembly module
-    on a loaded machine answers late); ``js_flags``: V8's flags for the page (:data:`WASM_BASELINE`)."""
+    on a loaded machine answers late); ``js_flags``: V8's flags for the page (:data:`WASM_BASELINE`); ``width``
+    and ``window_height``: the window's, px."""
     browser = chromium()
     profile = workdir / "chromium-profile"
     profile.mkdir(parents=True, exist_ok=True)
@@ -237,7 +258,7 @@ def load_page(
         session = cdp.send("Target.attachToTarget", {"targetId": target, "flatten": True})["sessionId"]
         for domain in ("Runtime", "Log", "Page", "Network", "Performance"):
             cdp.send(f"{domain}.enable", session=session)
-        cdp.send("Emulation.setDeviceMetricsOverride", {"width": PAGE_WIDTH, "height": 900, "deviceScaleFactor": 1, "mobile": False}, session=session)
+        cdp.send("Emulation.setDeviceMetricsOverride", {"width": width, "height": window_height, "deviceScaleFactor": 1, "mobile": False}, session=session)
         cdp.send("Page.addScriptToEvaluateOnNewDocument", {"source": _ready_timer(ready)}, session=session)
         cdp.send("Page.setLifecycleEventsEnabled", {"enabled": True}, session=session)
         start = time.monotonic()
@@ -252,6 +273,15 @@ def load_page(
         load_s = time.monotonic() - start
         timings = cdp.send("Runtime.evaluate", {"expression": TIMINGS, "returnByValue": True}, session=session)["result"].get("value") or {}
         timings |= _devtools_timings(cdp.events, cdp.send("Performance.getMetrics", session=session)["metrics"])
+
+        def evaluate(expr: str) -> Any:
+            res = cdp.send("Runtime.evaluate", {"expression": expr, "returnByValue": True}, session=session)
+            return None if "exceptionDetails" in res else res["result"].get("value")
+
+        while until is not None and not until(evaluate):
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"the page was ready, but the caller's condition did not hold within {timeout:g} s")
+            time.sleep(UNTIL_POLL_S)
         time.sleep(settle_s)
         values = {}
         for name, expr in expressions.items():
@@ -261,16 +291,17 @@ def load_page(
             values[name] = res["result"].get("value")
         full = cdp.send("Runtime.evaluate", {"expression": "document.documentElement.scrollHeight", "returnByValue": True}, session=session)["result"]["value"]
         h = min(int(full), height) if height else int(full)
-        cdp.send("Emulation.setDeviceMetricsOverride", {"width": PAGE_WIDTH, "height": h, "deviceScaleFactor": 1, "mobile": False}, session=session)
+        cdp.send("Emulation.setDeviceMetricsOverride", {"width": width, "height": h, "deviceScaleFactor": 1, "mobile": False}, session=session)
         time.sleep(0.5)  # a resize re-renders the canvases
         shot = base64.b64decode(cdp.send("Page.captureScreenshot", {"format": "png"}, session=session)["data"])
         errors = _errors(cdp.events)
         failed = _failed_requests(cdp.events)
+        requests = _requests(cdp.events)
         try:
             cdp.send("Browser.close", timeout=10)
         except (RuntimeError, TimeoutError):
             pass
-        return Page(values, errors, failed, shot, load_s, timings)
+        return Page(values, errors, failed, requests, shot, load_s, timings)
     finally:
         cdp.close()
         try:

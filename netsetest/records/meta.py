@@ -41,12 +41,15 @@ class RunMeta:
     started_ns: int | None = None  # the run's start on the wall clock (an MCAP record's log times start here)
     security: str | None = None  # a Zenoh run's: mtls+acl | insecure
     settings_digest: str | None = None  # the topology's and profiles' values (config/schema.py); None: not from files
+    log: dict | None = None  # a recorded drive: {"path", "mapping", "accuracy": [β rad, r rad/s]} (docs/your-log.md); None: a model's run
 
     def to_dict(self) -> dict:
         """The record's meta object: every field in order, ``security`` only for a Zenoh run."""
         out = {f.name: getattr(self, f.name) for f in fields(self)}
         if out["security"] is None:
             del out["security"]
+        if out["log"] is None:  # a model's run: the meta as before
+            del out["log"]
         return out
 
     @classmethod
@@ -85,7 +88,7 @@ _SCALARS: dict[str, tuple[type, ...]] = {
     "security": (str,),
     "settings_digest": (str,),
 }
-_DICTS = frozenset({"in_weights", "r_max", "h1", "C", "estimators", "model_uncertainty"})
+_DICTS = frozenset({"in_weights", "r_max", "h1", "C", "estimators", "model_uncertainty", "log"})
 
 
 def _checked(name: str, value: Any) -> Any:

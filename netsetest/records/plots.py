@@ -3,10 +3,13 @@
 ``fig5_measurements.png``  per node: the measurement ỹ_i with the fault (``y``) and the same measurement
                            without it (``y_nofault``), against time t = k·τs.
 ``fig6_states.png``        one row per node, β [rad] left and r [rad/s] right: the true state, the node's
-                           estimate x̂ and its bounds x̂ ± √(ρ P_kk) (shaded).  The y axes leave out the
-                           first :data:`TRANSIENT_S` s of the bounds (the initial ellipsoid is far wider
-                           than everything after it); every true value stays inside, and a note says so.
-``fig7_faults.png``        per node: the true fault f_i, the estimate f̂_i and its bounds f̂_i ± √(ρ P_33).
+                           estimate x̂, the bounds of its published set (shaded: the ellipsoid ∩ region ∩ fault
+                           range, what the guarantee is about) and, for an SDP node, the bounds of the paper's
+                           ellipsoid alone, x̂ ± √(ρ P_kk) (dotted; the region can only narrow it).  The y axes
+                           leave out the first :data:`TRANSIENT_S` s of the bounds (the initial ellipsoid is far
+                           wider than everything after it); every true value stays inside, and a note says so.
+``fig7_faults.png``        per node: the true fault f_i, the estimate f̂_i, the published set's bounds (shaded)
+                           and the paper's ellipsoid's, f̂_i ± √(ρ P_33) (dotted), as in Fig. 6.
 ``fig8_E.png``             per node: E_i,k = eᵀP⁻¹e against the step k with the radius ρ_i (dotted); one
                            curve per record, labelled ``case/signals``; red crosses mark misses (E > ρ) and
                            shaded bands the steps whose assumptions did not hold (colour of the record).
@@ -38,6 +41,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
+from netsetest.estimator.names import SDP
 from netsetest.records.record import Record, mismatch
 
 MAX_PANELS = 12
@@ -140,6 +144,15 @@ def _shade_silent(ax: Axes, rec: Record, node: int, scale: float) -> bool:
     return bool(spans)
 
 
+PUBLISHED_LABEL = "published set (ellipsoid ∩ region ∩ fault range)"  # Figs. 6-7's band: what the guarantee is about
+ELLIPSOID_LABEL = "paper's ellipsoid x̂ ± √(ρP_kk)"  # the SDP's ellipsoid alone, as the paper draws it
+
+
+def _is_sdp(rec: Record, node: int) -> bool:
+    """Whether the node ran the SDP (a set estimator's ellipsoid is only the wire's summary of its set, not a paper's)."""
+    return rec.meta.estimators.get(str(node), SDP) == SDP
+
+
 def _estimate(ax: Axes, rec: Record, node: int, comp: int, truth: tuple[np.ndarray, np.ndarray]) -> None:
     ax.plot(*truth, color="k", lw=1.6, label="true")
     tau = rec.meta.tau_s
@@ -149,14 +162,19 @@ def _estimate(ax: Axes, rec: Record, node: int, comp: int, truth: tuple[np.ndarr
         ax.text(0.5, 0.5, "no ellipsoids published", transform=ax.transAxes, ha="center", color="r")
         return
     lo, hi = tr.bounds(comp)
-    k, vals = _gapped(tr.steps, np.column_stack([lo, hi, tr.xhat[:, comp]]))
+    e_lo, e_hi = tr.ellipsoid_bounds(comp)
+    k, vals = _gapped(tr.steps, np.column_stack([lo, hi, tr.xhat[:, comp], e_lo, e_hi]))
     t = k * tau
-    ax.fill_between(t, vals[:, 0], vals[:, 1], color="tab:blue", alpha=0.2, lw=0, label="bounds")
+    ax.fill_between(t, vals[:, 0], vals[:, 1], color="tab:blue", alpha=0.2, lw=0, label=PUBLISHED_LABEL)
+    if _is_sdp(rec, node):
+        for side, label in ((3, ELLIPSOID_LABEL), (4, None)):
+            ax.plot(t, vals[:, side], color="tab:blue", lw=0.9, ls=":", label=label)
     ax.plot(t, vals[:, 2], color="tab:blue", lw=1.2, ls="--", label="estimate")
 
 
 def _settled_limits(rec: Record, ids: list[int], comp: int, truth: np.ndarray) -> tuple[float, float] | None:
-    """y limits covering every true value and the bounds after :data:`TRANSIENT_S`; None if the run is too
+    """y limits covering every true value and the bounds (the published set's and an SDP node's ellipsoid's) after
+    :data:`TRANSIENT_S`; None if the run is too
     short to have a transient worth leaving out."""
     tau = rec.meta.tau_s
     vals = [truth[np.isfinite(truth)]]
@@ -169,6 +187,9 @@ def _settled_limits(rec: Record, ids: list[int], comp: int, truth: np.ndarray) -
             return None
         lo, hi = tr.bounds(comp)
         vals += [lo[late], hi[late]]
+        if _is_sdp(rec, i):  # the paper's ellipsoid is drawn too: in view beside the published set
+            e_lo, e_hi = tr.ellipsoid_bounds(comp)
+            vals += [e_lo[late], e_hi[late]]
     v = np.concatenate(vals)
     if v.size == 0:
         return None
@@ -354,7 +375,7 @@ def _fig8(records: list[Record], labels: list[str]) -> Figure:
             handles["ρ"] = ax.plot(k, vals[:, 1], color="k", lw=1.0, ls=":")[0]
             if _shade_silent(ax, rec, i, 1.0):
                 handles["not reported"] = Patch(color=SILENT_COLOUR, alpha=SILENT_ALPHA)
-            miss = ~tr.contained & ~np.isnan(tr.E)
+            miss = tr.missed & ~np.isnan(tr.E)  # proven misses only: an undecided step (a reference's box) is neither
             if miss.any():
                 handles["miss (E > ρ)"] = ax.plot(tr.steps[miss], tr.E[miss], "x", color="red", ms=7, mew=2)[0]
             for a, b in _spans(tr.steps, ~tr.assumptions_ok):

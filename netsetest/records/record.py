@@ -14,13 +14,15 @@ step::
 ``meta``: run settings (topology, case, signals, variant, seed, steps, tau_s, mode, clock, node ids,
 in-neighbour weights {i: {j: a_ij}}, run id).  Truth entry of step k: x = [β, r], faults {i: f_i}, u,
 w, vx, noise {i}, gamma {i}, y {i}, y_nofault {i}, sector_ok {i}, r {i} = C̄x̄, fault_ok {i}, noise_ok {i},
-dist_ok, lost [[j, i]], alive [i], drops {reason: n}, e [2] | null (model mismatch of k → k+1), mismatch_ok, speed, ay, envelope_ok (models/envelope.py).  State entry: step, xhat [3], P [9, row-major], rho,
+dist_ok, lost [[j, i]], alive [i], drops {reason: n}, e [2] | null (model mismatch of k → k+1), mismatch_ok, speed, ay, envelope_ok (models/envelope.py);
+a recorded drive's also x_acc, f_acc {i}, reference, and no_reading [i] (nodes without a reading: absent from y, y_nofault).  State entry: step, xhat [3], P [9, row-major], rho,
 published (the set the node proves, netsetest/proven.py: {xhat [3], P [9, row-major], rho, region [β₁, r₁, …],
 fault [lo, hi], set}, absent parts left out), continues (the set it continues from, where not the published one),
-status, rho_cert, solve_ms, used, missing, late, dropped, drops {reason: n}, sector [h1, h] | null,
+status, resumed_from (status resume: the step of the own set it was carried from), rho_cert, solve_ms, used, missing, late, dropped, drops {reason: n}, sector [h1, h] | null,
 sector_basis, E = eᵀP⁻¹e of the published ellipsoid (null when the truth of the step is unknown), contained (the
 truth in the published set, whose per-coordinate bounds [[lo, hi] ×3] are in ``bounds``; a set estimator's
-ellipsoid is the enclosing one its neighbours use), continues_contained, assumptions_ok (every assumption in the step's dependency cone held), contested (more
+ellipsoid is the enclosing one its neighbours use), continues_contained, assumptions_ok (every assumption in the step's dependency cone held), inconsistent (present
+where, without a reference, the node's own reading contradicted its declared bounds), contested (more
 than one copy matched the truth: not judged).  ``summary``: the
 per-node table and totals (the same object ``--summary-json`` writes; in code a
 :class:`~netsetest.records.summary.RunSummary`, converted at this boundary).
@@ -212,6 +214,20 @@ class NodeTrack:
     judged: np.ndarray | None = None  # (K,) bool: the collector judged the step (None: all were, older records)
     fdi: list[str | None] | None = None  # (K,) detected | healthy | undecided (docs/fdi.md; None: older records)
     continues_contained: np.ndarray | None = None  # (K,) bool: the set the node continues from held the truth (None: older records)
+    missed_flags: np.ndarray | None = None  # (K,) bool: the set proven apart from the truth (None: records before issue 42, not contained)
+
+    @property
+    def missed(self) -> np.ndarray:
+        """(K,) bool: judged and proven to miss the truth (a model's run: judged and not contained; a recorded drive's
+        reference: disjoint from its box, docs/your-log.md)."""
+        judged = self.judged if self.judged is not None else ~np.isnan(self.E)
+        return self.missed_flags & judged if self.missed_flags is not None else judged & ~self.contained
+
+    @property
+    def undecided(self) -> np.ndarray:
+        """(K,) bool: judged, neither contained nor missed (a reference's box overlapping the set)."""
+        judged = self.judged if self.judged is not None else ~np.isnan(self.E)
+        return judged & ~self.contained & ~self.missed
 
     def was_judged(self, n: int) -> bool:
         return bool(self.judged[n]) if self.judged is not None else True
@@ -283,10 +299,13 @@ class Record:
                     "E": None if np.isnan(tr.E[n]) else float(tr.E[n]),
                     "judged": tr.was_judged(n),
                     "contained": bool(tr.contained[n]) if tr.was_judged(n) else None,
+                    "missed": bool(tr.missed[n]) if tr.was_judged(n) else None,
+                    "undecided": bool(tr.undecided[n]) if tr.was_judged(n) else None,
                     "continues_contained": bool(tr.continues_contained[n]) if tr.was_judged(n) and tr.continues_contained is not None else None,
                     "status": tr.status[n],
                     "fdi": tr.fdi[n] if tr.fdi is not None else None,
                     "cause": None if tr.assumptions_ok[n] or n >= len(raw) else not_covered_cause(raw[n]),
+                    "inconsistent": n < len(raw) and bool(raw[n].get("inconsistent", False)),  # its own data prove an assumption broken
                 }
             )
         return rows
@@ -555,6 +574,7 @@ def record_from_parts(
             continues_contained=np.array([e.get("continues_contained") is not False for e in entries], dtype=bool)
             if any("continues_contained" in e for e in entries)
             else None,
+            missed_flags=np.array([e.get("missed") is True for e in entries], dtype=bool) if any("missed" in e for e in entries) else None,
         )
     for t in truth:
         if not isinstance(t, dict) or not isinstance(t.get("step"), int):

@@ -6,8 +6,10 @@ as the terminal prints them, the topology graph with each node coloured by its r
 Figs. 5–8 like ``netsetest plot`` draws them (:mod:`netsetest.records.plots`), the exact-limit ratios when
 ``netsetest exact --json`` was run on the record, and the plant's e_k against its bound where a plant drove.
 
-Every per-node figure has one legend entry per node: a click shows or hides that node (only the first
-is shown when the page opens, so one node at a time); the wheel zooms, hovering a line shows its values.
+Every per-node figure has one legend entry per node: a click shows or hides that node (one node is shown when
+the page opens, the one whose run most needs a look, :func:`focus_node`); the wheel zooms, hovering a line shows
+its values.  Fig. 7 marks each node's first detection.  The verdict stands once, in its box; no text scrolls
+sideways (long lines wrap).
 What the page draws is decimated to :data:`MAX_POINTS` per line (every NaN gap kept, so a node that did
 not report still breaks its line); the record itself and ``netsetest export`` keep every step.
 
@@ -72,6 +74,7 @@ class ComparePage:
     truth_fault: dict[int, np.ndarray]  # node → (K,)
     bounds: dict[str, dict[int, np.ndarray]]  # estimator → node → (K, 3, 2)
     failed: Sequence[str]  # estimators that violated containment where the assumptions held
+    notes: Sequence[str] = ()  # what the rows' assumptions mean for their widths (analysis/compare.py, assumptions_notes)
 
 
 def load_exact(path: str | Path) -> dict:
@@ -153,13 +156,14 @@ def _figure(title: str, x_label: str, y_label: str, legend_rows: int, **kw: Any)
     return fig
 
 
-def _legend(fig: Any, items: list[tuple[str, list[Any]]]) -> None:
-    """One legend entry per node (click: show or hide); only the first node is shown at first."""
+def _legend(fig: Any, items: list[tuple[str, list[Any]]], shown: Sequence[int] = (0,)) -> None:
+    """One legend entry per node (click: show or hide); only the entries ``shown`` (their positions) are shown at
+    first: the node the page opens on (:func:`focus_node`), and the truth where it is an entry of its own."""
     from bokeh.models.annotations.legends import Legend, LegendItem
 
     for n, (_, renderers) in enumerate(items):
         for r in renderers:
-            r.visible = n == 0
+            r.visible = n in shown
     legend = Legend(items=[LegendItem(label=label, renderers=rs) for label, rs in items], click_policy="hide", label_text_font_size="8pt")
     fig.add_layout(legend, "right")
 
@@ -206,6 +210,7 @@ def _y_range(rec: Record, ids: list[int], comp: int, truth: np.ndarray) -> tuple
 
 def _fig5(rec: Record, label: str) -> Any:
     ids, tau = _node_ids(rec), rec.meta.tau_s
+    focus = ids.index(focus_node(rec))
     fig = _figure(f"Fig. 5: measurements with fault (solid) and without (dashed) ({label})", "t [s]", "ỹ [rad/s]", len(ids))
     t = np.array([e["step"] for e in rec.truth], dtype=float) * tau
     items, lines = [], []
@@ -216,12 +221,13 @@ def _fig5(rec: Record, label: str) -> Any:
         items.append((f"sensor {i}", rs))
         lines += rs
     _hover(fig, lines, "ỹ [rad/s]")
-    _legend(fig, items)
+    _legend(fig, items, (focus,))
     return fig
 
 
 def _estimate_fig(rec: Record, label: str, comp: int, title: str, y_label: str, per_node_truth: bool) -> Any:
-    """Figs. 6 (β, r) and 7 (f): per node its bounds (band) and estimate (dashed), against the truth."""
+    """Figs. 6 (β, r) and 7 (f): per node its bounds (band) and estimate (dashed), against the truth; Fig. 7 marks
+    the step at which each node's fault was first detected (a dotted vertical line, shown and hidden with the node)."""
     from bokeh.models import Range1d
 
     ids, tau = _node_ids(rec), rec.meta.tau_s
@@ -239,22 +245,24 @@ def _estimate_fig(rec: Record, label: str, comp: int, title: str, y_label: str, 
             rs.append(_band(fig, k * tau, vals[:, 0], vals[:, 1], color=colour, alpha=0.2))
             rs.append(_line(fig, k * tau, vals[:, 2], i, name=f"{'fig7' if per_node_truth else f'fig6-{comp}'}-node-{i}", color=colour, line_dash="dashed"))
             hover.append(rs[-1])
+        entry = f"node {i}"
         if per_node_truth:
             f = np.array([e.get("faults", {}).get(str(i), np.nan) for e in rec.truth], dtype=float)
             rs.append(_line(fig, t, f, i, color="black", line_width=1.6))
             hover.append(rs[-1])
             truth_all = np.concatenate([truth_all, f])
-        items.append((f"node {i}", rs))
+            detected = first_detection(rec, i)
+            if detected is not None:  # where the published fault interval first excluded 0 (docs/fdi.md)
+                rs.append(fig.vspan(x=[detected * tau], line_color=colour, line_width=2, line_dash="dotted", name=f"detect-node-{i}"))
+                entry += f" (detected at step {detected})"
+        items.append((entry, rs))
+    focus = ids.index(focus_node(rec))
     if not per_node_truth:
         truth = _line(fig, t, truth_all, -1, color="black", line_width=1.6)
         items.insert(0, ("true", [truth]))
         hover.append(truth)
     _hover(fig, hover, y_label)
-    _legend(fig, items)
-    if not per_node_truth:
-        items[0][1][0].visible = True
-        for r in items[1][1] if len(items) > 1 else []:  # the truth is not a node: the first node is still shown
-            r.visible = True
+    _legend(fig, items, (focus,) if per_node_truth else (0, focus + 1))  # the truth is an entry of its own in Fig. 6
     limits = _y_range(rec, ids, comp, truth_all)
     if limits is not None:
         fig.y_range = Range1d(start=limits[0], end=limits[1])
@@ -263,6 +271,7 @@ def _estimate_fig(rec: Record, label: str, comp: int, title: str, y_label: str, 
 
 def _fig8(pages: Sequence[RecordPage]) -> Any:
     ids = sorted(set().union(*(_node_ids(p.record) for p in pages)))
+    focus = ids.index(focus_node(*(p.record for p in pages)))
     tops = [np.nanmax(tr.E / np.maximum(tr.rho, 1e-300)) for p in pages for tr in p.record.nodes.values() if len(tr.steps) and np.isfinite(tr.E).any()]
     log = bool(tops) and max(tops) > 10.0
     fig = _figure("Fig. 8: E = eᵀP⁻¹e (solid) and radius ρ (dotted); × a miss", "step k", "E [–]", len(ids), y_axis_type="log" if log else "linear")
@@ -278,12 +287,12 @@ def _fig8(pages: Sequence[RecordPage]) -> Any:
             rs.append(_line(fig, k, vals[:, 0], i, name=f"fig8-node-{i}" if not rs else None, color=colour, line_width=1.4))
             hover.append(rs[-1])
             rs.append(_line(fig, k, vals[:, 1], i, color=colour, line_dash="dotted"))
-            miss = ~tr.contained & ~np.isnan(tr.E) & tr.judged if tr.judged is not None else ~tr.contained & ~np.isnan(tr.E)
+            miss = tr.missed & ~np.isnan(tr.E)  # proven misses only: an undecided step (a reference's box) is neither
             if miss.any():
                 rs.append(fig.scatter(tr.steps[miss].astype(float), tr.E[miss], marker="x", size=9, color="red", line_width=2))
         items.append((f"node {i}" + ("" if len(pages) == 1 else f" ({', '.join(p.label for p in pages)})"), rs))
     _hover(fig, hover, "E", x_label="k")
-    _legend(fig, items)
+    _legend(fig, items, (focus,))
     return fig
 
 
@@ -304,6 +313,58 @@ def node_outcome(rec: Record, node: int) -> str:
     if row.first_detection is not None:
         return "fault detected"
     return "covered"
+
+
+def first_detection(rec: Record, node: int) -> int | None:
+    """The first step at which the node's published fault interval excluded 0 (the summary's; a partial record's
+    from its rows), None where there was none."""
+    if rec.summary is not None:
+        try:
+            return rec.summary.node(node).first_detection
+        except KeyError:
+            return None
+    tr = rec.nodes.get(node)
+    detected = [int(k) for k, f in zip(tr.steps, tr.fdi) if f == "detected"] if tr is not None and tr.fdi is not None else []
+    return detected[0] if detected else None
+
+
+def _had_fault(rec: Record, node: int) -> bool:
+    if rec.summary is None:
+        return False
+    try:
+        return rec.summary.node(node).fault_onset is not None
+    except KeyError:
+        return False
+
+
+def focus_node(*records: Record) -> int:
+    """The node the page's figures open on: the first whose run most needs a look (OUTCOME_COLOURS' order: it
+    missed the truth, was lost, was late, its fault was detected), then one whose sensor had a fault (an onset the
+    summary names), over ``records`` in turn; else the first node."""
+    rank = list(OUTCOME_COLOURS)
+    best: tuple[int, int, int, int] | None = None
+    for n, rec in enumerate(records):
+        for i in _node_ids(rec):
+            key = (rank.index(node_outcome(rec, i)), 0 if _had_fault(rec, i) else 1, n, i)
+            best = key if best is None or key < best else best
+    return best[3] if best is not None else 1
+
+
+def _focus_note(rec: Record) -> str:
+    """The line that says which node the figures open on, and why."""
+    focus = focus_node(rec)
+    outcome, detected = node_outcome(rec, focus), first_detection(rec, focus)
+    why = (
+        outcome
+        if detected is None
+        else f"fault detected at step {detected}"
+        if outcome == "fault detected"
+        else f"{outcome}; fault detected at step {detected}"
+    )
+    return (
+        f'<p class="note" id="focus">The figures below open on node {focus} ({html.escape(why)}): the first node whose run most needs '
+        "a look; click a legend entry to show another.</p>"
+    )
 
 
 def _graph(rec: Record, label: str) -> Any:
@@ -386,8 +447,9 @@ def _mismatch_fig(rec: Record, label: str) -> Any | None:
 # ------------------------------------------------------------------------------------- HTML
 
 
+# pre-wrap: a line longer than the page (a Zenoh run's verdict, a drops line) wraps instead of scrolling sideways
 _STYLE = """body{font-family:system-ui,sans-serif;margin:1.5em;max-width:1200px;color:#222}
-pre{background:#f6f6f6;padding:.6em;overflow-x:auto;font-size:12px}
+pre{background:#f6f6f6;padding:.6em;white-space:pre-wrap;overflow-wrap:anywhere;font-size:12px}
 table{border-collapse:collapse;font-size:13px;margin:.5em 0}td,th{border:1px solid #ccc;padding:2px 8px;text-align:right}
 th{background:#eee}.verdict{font-size:1.1em;font-weight:bold;padding:.4em .6em;border-left:6px solid #2ca02c;background:#f1f8f1}
 .verdict.fail{border-color:#d62728;background:#fbeeee}.note{color:#555;font-size:.9em}"""
@@ -452,6 +514,7 @@ def write_report(path: str | Path, pages: Sequence[RecordPage]) -> int:
     parts: list[Any] = [f"<h1>{html.escape(title)}</h1>"]
     for p in pages:
         rec, fail = p.record, p.verdict.startswith("FAIL")
+        caption = f"{rec.meta.name}, {p.label}"  # the figures' titles: plain text (Bokeh draws it), never HTML-escaped
         parts.append(
             f'<h2>{html.escape(p.label)}</h2><p class="note">{html.escape(Path(rec.path).name)}: topology {html.escape(str(rec.meta.name))}, '
             f"{len(_node_ids(rec))} nodes, τs = {rec.meta.tau_s:g} s, plant {html.escape(rec.meta.plant)}</p>"
@@ -459,17 +522,26 @@ def write_report(path: str | Path, pages: Sequence[RecordPage]) -> int:
         if rec.partial:
             parts.append(f'<p class="verdict fail">partial record: the run did not finish (last complete step {rec.last_complete_step}); no verdict</p>')
         else:
-            parts.append(f'<p class="verdict{" fail" if fail else ""}" id="verdict">{html.escape(p.verdict)}</p><pre>{html.escape(p.tables)}</pre>')
-        parts.append(_graph(rec, p.label))
+            tables = p.tables.removesuffix(p.verdict).rstrip("\n")  # the verdict, the tables' last line, is in its box above
+            parts.append(f'<p class="verdict{" fail" if fail else ""}" id="verdict">{html.escape(p.verdict)}</p><pre>{html.escape(tables)}</pre>')
+        parts.append(_graph(rec, caption))
+        parts.append(_focus_note(rec))
         if p.exact is not None:
             parts.append(_exact_html(p.exact))
         parts += [
-            _fig5(rec, p.label),
-            _estimate_fig(rec, p.label, 0, "Fig. 6: sideslip β, bounds (band), estimate (dashed) and truth (black)", "β [rad]", per_node_truth=False),
-            _estimate_fig(rec, p.label, 1, "Fig. 6: yaw rate r, bounds (band), estimate (dashed) and truth (black)", "r [rad/s]", per_node_truth=False),
-            _estimate_fig(rec, p.label, 2, "Fig. 7: fault f_i, bounds (band), estimate (dashed) and truth (black)", "f [rad/s]", per_node_truth=True),
+            _fig5(rec, caption),
+            _estimate_fig(rec, caption, 0, "Fig. 6: sideslip β, bounds (band), estimate (dashed) and truth (black)", "β [rad]", per_node_truth=False),
+            _estimate_fig(rec, caption, 1, "Fig. 6: yaw rate r, bounds (band), estimate (dashed) and truth (black)", "r [rad/s]", per_node_truth=False),
+            _estimate_fig(
+                rec,
+                caption,
+                2,
+                "Fig. 7: fault f_i, bounds (band), estimate (dashed), truth (black), first detection (dotted)",
+                "f [rad/s]",
+                per_node_truth=True,
+            ),
         ]
-        m = _mismatch_fig(rec, p.label)
+        m = _mismatch_fig(rec, caption)
         if m is not None:
             parts.append(m)
     parts.append(_fig8(pages))
@@ -489,6 +561,7 @@ def write_compare(path: str | Path, c: ComparePage) -> int:
     )
     parts.append(f'<p class="verdict{" fail" if c.failed else ""}" id="verdict">{html.escape(verdict)}</p>')
     parts.append(_table(c.header, c.rows, "compare"))
+    parts += [f'<p class="note assumptions">{html.escape(note)}</p>' for note in c.notes]
     names = list(c.bounds)
     colours = _palette(len(names))
     for i, truth in sorted(c.truth_fault.items()):
@@ -515,4 +588,78 @@ def write_compare(path: str | Path, c: ComparePage) -> int:
 
             fig.y_range = Range1d(start=float(np.nanmin(truth)) - 2 * span, end=float(np.nanmax(truth)) + 2 * span)
         parts.append(fig)
+    return _render(path, c.title, parts)
+
+
+@dataclass(frozen=True)
+class CampaignPage:
+    """``campaign --report``: the summary table, distributions over the runs' nodes per estimator, detection
+    delay against fault size, and the worst runs with the command that replays each (netsetest/campaign/report.py)."""
+
+    title: str
+    verdict: str
+    failed: bool  # a run failed its verdict or errored
+    header: Sequence[str]
+    rows: Sequence[Sequence[str]]
+    distributions: dict[str, dict[str, np.ndarray]]  # a figure's title (its quantity) → estimator → values over its runs' nodes
+    delays: dict[str, tuple[np.ndarray, np.ndarray]]  # estimator → (fault size / declared bound, detection delay [steps]) per detected node
+    worst_header: Sequence[str]
+    worst_rows: Sequence[Sequence[str]]
+
+
+HISTOGRAM_BINS = 30
+DEGENERATE_SPAN, HISTOGRAM_PAD = 1e-6, 0.05  # a histogram of values closer than this (relative) spans ±HISTOGRAM_PAD around them
+
+
+def _histograms(title: str, per_estimator: dict[str, np.ndarray]) -> Any:
+    """One step line per estimator: the share of its values in each bin (bins shared by every estimator)."""
+    values = np.concatenate([v[np.isfinite(v)] for v in per_estimator.values()] or [np.zeros(0)])
+    lo, hi = (float(values.min()), float(values.max())) if len(values) else (0.0, 1.0)
+    if hi - lo < DEGENERATE_SPAN * max(1.0, abs(hi)):  # every value alike (say every coverage 1): a readable axis around it
+        lo, hi = lo - HISTOGRAM_PAD, hi + HISTOGRAM_PAD
+    edges = np.linspace(lo, hi, HISTOGRAM_BINS + 1)
+    fig = _figure(title, title.split(": ")[-1], "share of the estimator's nodes × runs", len(per_estimator))
+    items = []
+    for (name, v), colour in zip(per_estimator.items(), _palette(len(per_estimator))):
+        v = v[np.isfinite(v)]
+        counts = np.histogram(v, edges)[0] / max(len(v), 1)
+        items.append((f"{name} ({len(v)})", [fig.step(edges, np.append(counts, 0.0), mode="after", color=colour, line_width=2)]))
+    _legend(fig, items)
+    for _, rs in items:  # every estimator shown at first: the distributions are compared side by side
+        for r in rs:
+            r.visible = True
+    return fig
+
+
+def _delay_fig(delays: dict[str, tuple[np.ndarray, np.ndarray]]) -> Any:
+    from bokeh.models import ColumnDataSource, HoverTool
+
+    fig = _figure("detection delay against the fault's size", "the fault's peak / its declared bound", "detection delay [steps]", len(delays))
+    items, renderers = [], []
+    for (name, (size, delay)), colour in zip(delays.items(), _palette(len(delays))):
+        jitter = np.linspace(-0.004, 0.004, len(size)) if len(size) > 1 else np.zeros(len(size))  # equal sizes stay apart
+        src = ColumnDataSource({"x": size + jitter, "y": delay, "size": size})
+        r = fig.scatter("x", "y", source=src, color=colour, alpha=0.6, size=6)
+        items.append((name, [r]))
+        renderers.append(r)
+    fig.add_tools(HoverTool(renderers=renderers, tooltips=[("size / bound", "@size{0.000}"), ("delay", "@y")]))
+    _legend(fig, items)
+    for _, rs in items:
+        for r in rs:
+            r.visible = True
+    return fig
+
+
+def write_campaign(path: str | Path, c: CampaignPage) -> int:
+    """The campaign's page (:class:`CampaignPage`); returns its size in bytes."""
+    require("bokeh", "the campaign report")
+    parts: list[Any] = [f"<h1>{html.escape(c.title)}</h1>", f'<p class="verdict{" fail" if c.failed else ""}" id="verdict">{html.escape(c.verdict)}</p>']
+    parts.append(_table(c.header, c.rows, "summary"))
+    parts += [_histograms(title, per) for title, per in c.distributions.items() if per]
+    if c.delays:
+        parts.append(_delay_fig(c.delays))
+    else:
+        parts.append('<p class="note">no fault was detected in these runs: no detection delay to draw</p>')
+    if c.worst_rows:
+        parts.append("<h2>The worst runs, each with the command that replays it</h2>" + _table(c.worst_header, c.worst_rows, "worst"))
     return _render(path, c.title, parts)

@@ -20,8 +20,9 @@ from netsetest.estimator.names import SDP
 from netsetest.validation import split_error
 
 DEFAULT_ESTIMATOR = SDP  # the node estimator of records written before nodes could run others
-StopCause = Literal["vehicle gone", "interrupted"]
-"""Why a collector wrote its summary before the vehicle's End: no message for its idle timeout, or a signal."""
+StopCause = Literal["vehicle gone", "interrupted", "collector stalled"]
+"""Why a collector wrote its summary before the vehicle's End: no message for its idle timeout, a signal, or its own
+stall past its session's lease (the run's stall limit: the messages then in flight to it were lost)."""
 RUN_FIELDS = ("mode", "security", "variant", "objective", "case", "signals", "steps", "seed", "clock")
 """The run's settings copied from its meta (each only if the meta has it; written in this order)."""
 
@@ -50,6 +51,10 @@ class NodeSummary:
     steps_contested: int = 0
     steps_evaluated: int = 0
     steps_contained: int = 0
+    steps_missed: int = 0  # proven apart from the truth (a model's run: every judged step not contained)
+    steps_undecided: int = 0  # a reference's truth box overlapping the set without lying in it (docs/your-log.md)
+    steps_no_reading: int = 0  # without a reading (a gap in a recorded drive): nothing published, nothing covered
+    steps_inconsistent: int = 0  # without a reference: its own data proved one of its assumptions broken
     steps_covered: int = 0
     missing_steps: int = 0
     missing_from: int | None = None
@@ -128,6 +133,12 @@ class RunSummary:
     node_steps_contested: int = 0  # more than one matching copy: not judged
     node_steps_evaluated: int = 0
     node_steps_contained: int = 0
+    node_steps_missed: int = 0  # the published set proven apart from the truth
+    node_steps_undecided: int = 0  # neither: a recorded drive's reference cannot tell (docs/your-log.md)
+    node_steps_no_reading: int = 0  # a gap in a recorded drive: the node had no reading and published nothing
+    node_steps_inconsistent: int = 0  # without a reference: a node's own data proved one of its assumptions broken (never "contained")
+    reference_accuracy: list[float] | None = None  # a recorded drive's reference: its declared half-widths (β rad, r rad/s); None: none, or a model's run
+    drive_log: str | None = None  # the recorded drive that was the world (docs/your-log.md); None: a model's run
     node_steps_covered: int = 0  # evaluated with every assumption held
     node_steps_not_covered: dict[str, int] = field(default_factory=dict)  # evaluated outside the guarantee, by cause
     inherited_from: list[InheritedOrigin] = field(default_factory=list)  # the origins of cause "inherited"
@@ -146,6 +157,8 @@ class RunSummary:
     node_steps_overloaded: int = 0  # node-steps not judged for the collector's trouble: of those steps, and those its full inbox dropped
     collector_budget: int | None = None  # open node-steps the collector may hold (real time; None: lockstep, the vehicle waits)
     collector_peak: int = 0  # the most node-steps it held open
+    collector_stall_s: float = 0.0  # the collector's longest stall [s] (its process did not run: stopped, swapping), ≥ 1 s
+    collector_stall_step: int | None = None  # the step it had checked before that stall
     mode: str | None = None
     security: str | None = None
     variant: str | None = None

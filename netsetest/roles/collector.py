@@ -73,7 +73,7 @@ from netsetest.models.plant import VEHICLE_NAMES
 from netsetest.models.vehicle import KMH
 from netsetest.records.summary import RUN_FIELDS, CarSummary, InheritedOrigin, NodeSummary, RunSummary, StopCause
 from netsetest.roles.fdi import FdiTotals, classify
-from netsetest.roles.judge import INHERITED, NO_CHECKS, TRUTH_UNKNOWN, Containment, Judge, NodeVerdict, StepInputs, isclose, state_mismatch
+from netsetest.roles.judge import INHERITED, NO_CHECKS, NO_REFERENCE, TRUTH_UNKNOWN, Containment, Judge, NodeVerdict, StepInputs, isclose, state_mismatch
 from netsetest.roles.flow import ACK_STRIDE
 from netsetest.roles.vehicle import envelope_holds, fault_bound_holds, mismatch_holds
 
@@ -114,8 +114,12 @@ class NodeTotals:
     contested: int = 0  # node-steps with more than one matching copy: judged on none
     evaluated: int = 0
     contained: int = 0
+    missed: int = 0  # proven: the published set and the truth (a reference's box) are disjoint
+    undecided: int = 0  # a reference's box overlaps the published set without lying in it (docs/your-log.md)
     covered: int = 0
     missing_steps: int = 0
+    no_reading: int = 0  # node-steps without a reading (a gap in a recorded drive): nothing published, nothing covered
+    inconsistent: int = 0  # without a reference: its own data proved one of its assumptions broken (roles/judge.py Judge.inconsistent)
     missing_from: int | None = None
     rejoined_at: int | None = None  # first step heard from again after ``missing_from``
     last_heard: int | None = None  # newest step with a state from this node (judged or not)
@@ -205,16 +209,17 @@ def _bounds(st: NodeState, c: Containment | None) -> list[list[float]]:
     return np.stack([lo, hi], axis=1).tolist()
 
 
-def _state_entry(st: NodeState, v: NodeVerdict, contested: bool, bounds: list[list[float]]) -> dict:
+def _state_entry(st: NodeState, v: NodeVerdict, contested: bool, bounds: list[list[float]], no_reference: bool = False) -> dict:
     """The record's line of a judged node-step."""
     c = v.containment
-    unjudged = None if c is not None else ("contested" if contested else TRUTH_UNKNOWN)  # neither contained nor a miss
+    unjudged = None if c is not None else ("contested" if contested else NO_REFERENCE if no_reference else TRUTH_UNKNOWN)  # neither contained nor a miss
     origin = v.cone.origin
     return {
         "step": v.step,
         "published": msgspec.to_builtins(st.published),  # the set as sent (netsetest/proven.py; defaults left out)
         **({"continues": msgspec.to_builtins(st.continues)} if st.continues is not None else {}),  # where not the published one
         "status": st.status,
+        **({"resumed_from": st.resumed_from} if st.resumed_from is not None else {}),  # carried through steps without a reading
         "rho_cert": st.rho_cert,
         "solve_ms": st.solve_ms,
         "used": st.used,
@@ -226,8 +231,10 @@ def _state_entry(st: NodeState, v: NodeVerdict, contested: bool, bounds: list[li
         "judged": c is not None,
         "not_judged_why": unjudged,
         "contained": None if c is None else bool(c.contained),
+        "missed": None if c is None else bool(c.missed),  # proven apart from the truth (a point truth: not contained)
         "continues_contained": None if c is None else bool(c.continues_contained),  # the set the node continues from
         "assumptions_ok": v.cone.ok,
+        **({"inconsistent": True} if v.inconsistent else {}),  # without a reference: its own data prove an assumption broken
         "not_covered_cause": v.cone.cause,
         "inherited_from": [origin.node, origin.step, origin.why] if origin is not None else None,
         "contested": contested,
@@ -272,7 +279,7 @@ class Collector:
         self.vehicle_drops: dict[str, int] = {}
         self.not_covered: Counter[str] = Counter()  # evaluated node-steps outside the guarantee, by cause
         self.misses_by_cause: Counter[str] = Counter()  # misses outside the guarantee, by their node-step's cause
-        self.car = CarTotals() if scenario.plant != "ts" else None
+        self.car = CarTotals() if scenario.plant != "ts" and scenario.log is None else None  # a plant's drive (a log's car is its own)
         self.drops: Counter[str] = Counter()
         self._end: End | None = None
         self._end_early = False  # an End was counted as early already
@@ -464,6 +471,8 @@ class Collector:
             # the next truth's alive list is who the vehicle heard at k: a node it gave up on (killed, to
             # rejoin later) is not waited for, else progress stalls until WINDOW and a rejoin waits on it
             want &= set(self.truth[k + 1][0].alive)
+        if copies:
+            want -= set(copies[0].no_reading)  # without a reading a node publishes nothing for the step
         return want <= set(self.states.get(k, {}))
 
     # ------------------------------------------------------------------ closing steps
@@ -502,6 +511,8 @@ class Collector:
         return good[0] if good else None
 
     def _inconsistent(self, t: Truth) -> str | None:
+        if self.sc.log is not None:
+            return self._inconsistent_log(t)
         sc, k = self.sc, t.step
         x = np.asarray(t.x)
         prev = self.prev_truth if self.prev_truth is not None and self.prev_truth.step == k - 1 else None
@@ -541,6 +552,22 @@ class Collector:
             return "truth-flags"
         if t.health_ok != sc.health_holds({n.id: n.fault(k) for n in sc.nodes}):
             return "truth-flags"
+        return None
+
+    def _inconsistent_log(self, t: Truth) -> str | None:
+        """A recorded drive's truth: what the scenario fixes of it (the reference's declared accuracy, the injected
+        faults where the logged sensor is declared healthy, a speed the model covers); the logged values themselves
+        are the vehicle's, authenticated by the transport (docs/your-log.md)."""
+        sc = self.sc
+        assert sc.log is not None
+        if t.x_acc is None or tuple(t.x_acc) != sc.log.mapping.accuracy:
+            return "truth-accuracy"
+        if not sc.speed_plausible(t.step, t.vx):
+            return "truth-speed"
+        for n in sc.nodes:
+            s = str(n.id)
+            if t.f_acc.get(s, 0.0) == 0.0 and t.faults[s] != n.fault(t.step):
+                return "truth-fault"
         return None
 
     def _judge_state(self, i: int, k: int, tr: Truth | None) -> tuple[NodeState | None, bool]:
@@ -592,7 +619,7 @@ class Collector:
                 if t.missing_from is not None and t.rejoined_at is None:
                     t.rejoined_at = k
             if st is None:
-                self._unjudged(t, k, bool(copies.get(i)), i in lost)
+                self._unjudged(t, k, bool(copies.get(i)), i in lost, tr is not None and i in tr.no_reading)
                 continue
             t.contested += i in contested
             t.sectors_assumed += st.sector_basis == "assumed"
@@ -600,7 +627,7 @@ class Collector:
             bounds = _bounds(st, v.containment)
             fdi = classify(bounds[2][0], bounds[2][1], self.sc.fault_tolerance)
             if self.sink is not None:
-                self.sink.state(i, _state_entry(st, v, i in contested, bounds) | {"fdi": fdi})
+                self.sink.state(i, _state_entry(st, v, i in contested, bounds, tr is not None and not tr.reference) | {"fdi": fdi})
             self._add(t, k, st, v, bounds)
             if tr is not None and v.containment is not None:  # judged rows only: a contested copy may be forged
                 t.fdi.add(k, fdi, tr.faults[str(i)], self.sc.fault_tolerance, v.cone.ok)
@@ -620,11 +647,15 @@ class Collector:
         self.prev_overloaded = False
         self.closed = k
 
-    def _unjudged(self, t: NodeTotals, k: int, reported: bool, lost: bool) -> None:
+    def _unjudged(self, t: NodeTotals, k: int, reported: bool, lost: bool, no_reading: bool) -> None:
         """Node-step k with no state to judge: rejected if it reported, the collector's loss if our inbox
-        dropped it, else missing (only then is the node blamed)."""
+        dropped it, no reading (a gap in a recorded drive: nothing was due), else missing (only then is the
+        node blamed)."""
         if reported:
             t.rejected += 1  # it reported, but nothing it sent can be its own
+        elif no_reading:
+            t.no_reading += 1
+            t.last_heard = k  # nothing was due: silent, not lost
         elif lost:
             t.last_heard = k  # it published; our inbox dropped it: not judged, never missing
             self.overloaded_node_steps += 1
@@ -656,11 +687,14 @@ class Collector:
 
     def _add(self, t: NodeTotals, k: int, st: NodeState, v: NodeVerdict, bounds: list[list[float]]) -> None:
         t.reported += 1
+        t.inconsistent += v.inconsistent
         cone, c = v.cone, v.containment
         if c is not None:
             t.evaluated += 1
             t.E_max = c.E if t.E_max is None else max(t.E_max, c.E)
             t.contained += c.contained
+            t.missed += c.missed
+            t.undecided += not c.contained and not c.missed
             if cone.ok:
                 t.covered += 1
             else:
@@ -668,9 +702,9 @@ class Collector:
                 if cone.origin is not None:
                     o = self.origins.setdefault((cone.origin.node, cone.origin.why), [cone.origin.step, 0])
                     o[1] += 1
-            if cone.ok and not c.held:
+            if cone.ok and c.certain_miss:
                 t.violations += 1  # the published set, or the one the node continues from, missed on a covered node-step
-            elif not c.contained:
+            elif c.missed:
                 t.broken_misses += 1
                 self.misses_by_cause[cone.cause or INHERITED] += 1
         if st.status in ("ok", "fallback") and k > 0:
@@ -699,14 +733,21 @@ class Collector:
         deadline_misses: dict[int, int] | None = None,
         drops: dict[str, dict[str, int]] | None = None,
         stopped: StopCause | None = None,
+        through: int | None = None,
+        stall: tuple[float, int | None] = (0.0, None),
     ) -> RunSummary:
-        """Close every open step, then the summary (also written to the sink, which is closed).
+        """Close every open step (``through``: those up to that step only; the later ones, cut short by a signal or
+        our own stall, are forgotten: neither judged nor any node's silence), then the summary (also written to the
+        sink, which is closed).
 
         ``drops``: further drop counters by role (the runtime's, e.g. a shared in-memory bus); ``stopped``:
-        why the collector stopped before the vehicle's End (None: the run ended).
+        why the collector stopped before the vehicle's End (None: the run ended); ``stall``: the collector's longest
+        stall [s] and the step checked before it (runtime/processes.py StallWatch).
         """
         self._take_lost(everything=True)
         last = max([self.head, *self.states, *self.lost], default=-1)  # a step we lost whole is still the run's
+        if through is not None:
+            last = min(last, through)
         if self._end is not None and not self._end_early and self.sc.steps not in self.truth and self.closed < self.sc.steps and not self._overloaded():
             self.drops["end-early"] += 1  # the run ends, and the End's last step never came
         for k in range(self.closed + 1, min(last, self.sc.steps) + 1):
@@ -729,13 +770,19 @@ class Collector:
             node_steps_contested=sum(t.contested for t in totals),
             node_steps_evaluated=sum(t.evaluated for t in totals),
             node_steps_contained=sum(t.contained for t in totals),
+            node_steps_missed=sum(t.missed for t in totals),
+            node_steps_undecided=sum(t.undecided for t in totals),
+            node_steps_no_reading=sum(t.no_reading for t in totals),
+            node_steps_inconsistent=sum(t.inconsistent for t in totals),
+            reference_accuracy=None if self.sc.log is None or self.sc.log.mapping.r is None else list(self.sc.log.mapping.accuracy),
+            drive_log=None if self.sc.log is None else self.sc.log.path,
             node_steps_covered=sum(t.covered for t in totals),
             node_steps_not_covered=dict(sorted(self.not_covered.items())),
             inherited_from=[InheritedOrigin(j, why, first, count) for (j, why), (first, count) in sorted(self.origins.items())],
             misses_by_cause=dict(sorted(self.misses_by_cause.items())),
             car=self.car.summary(self.sc) if self.car is not None else None,
             # lost for good: silent at the last step; rejoined: a gap, then heard from up to the last step
-            nodes_missing=[i for i, t in self.totals.items() if t.last_heard is None or t.last_heard < last],
+            nodes_missing=[i for i, t in self.totals.items() if last >= 0 and (t.last_heard is None or t.last_heard < last)],  # (no step: no one)
             nodes_rejoined=[i for i, t in self.totals.items() if t.missing_from is not None and t.last_heard == last],
             losses=dict(sorted(self.losses.items())),
             losses_total=sum(self.losses.values()),
@@ -747,6 +794,8 @@ class Collector:
             node_steps_overloaded=self.overloaded_node_steps,
             collector_budget=self.budget if self.realtime else None,
             collector_peak=self.peak_open_node_steps,
+            collector_stall_s=stall[0],
+            collector_stall_step=stall[1],
         )
         if self.sink is not None:
             self.sink.summary(summary)
@@ -776,6 +825,10 @@ class Collector:
             steps_contested=t.contested,
             steps_evaluated=t.evaluated,
             steps_contained=t.contained,
+            steps_missed=t.missed,
+            steps_undecided=t.undecided,
+            steps_no_reading=t.no_reading,
+            steps_inconsistent=t.inconsistent,
             steps_covered=t.covered,
             missing_steps=t.missing_steps,
             missing_from=t.missing_from,

@@ -20,19 +20,21 @@ ellipsoid containing x̄_0 (Assumption 1).
 from __future__ import annotations
 
 import functools
+import math
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from netsetest.config.schema import NodeConfig, Scenario
 from netsetest.estimator.names import SDP
 from netsetest.estimator.registry import node_set_estimator
-from netsetest.estimator.sector import Sector, sector_ok
+from netsetest.estimator.sector import FaultBound, Sector, measurement_interval, prior_interval, propagated_interval, sector_ok
 from netsetest.messages import NodeState, Truth, state_digest
 from netsetest.models.envelope import MODEL_MISMATCH, OUTSIDE_ENVELOPE
 from netsetest.models.sensor import augmented
 
+CONSISTENCY_RTOL = 1e-9  # an own-data inconsistency must clear rounding: a certain one, never a near miss
 INNOV_RTOL = 1e-12  # the node computes ỹ − C̄ x̂ with the same numbers: rounding only across machines
 
 # why an input of a node-step gives it no guarantee (docs/coverage.md)
@@ -43,6 +45,8 @@ MISSED = "missed the truth"
 NOT_JUDGED = "not judged"  # no copy with that digest reached the collector, or several matched the truth
 HEALTH = "k-of-N health"  # more than [network] max_faulty sensors faulty at a step whose set used it (docs/network.md)
 INHERITED = "inherited"  # the cause of a node-step whose input failed: its Origin says which and why
+NO_REFERENCE = "no reference"  # a recorded drive's step without a reference: the truth is unknown, nothing is judged
+UNDECIDED = "undecided"  # an input whose set overlapped the reference's truth box without holding all of it: it may have missed
 
 
 @dataclass(frozen=True)
@@ -74,29 +78,55 @@ class Cone:
 
 @dataclass(frozen=True)
 class Containment:
-    """A judged state against its step's truth: E = eᵀP⁻¹e of its ellipsoid, whether its set holds the truth,
-    whether the set its node continues from does (the same set unless the state sends ``continues``),
-    and the set's per-coordinate bounds (3, 2) where it is not the ellipsoid alone (a set estimator's set, or
-    the SDP's ellipsoid ∩ its fault range; None: the ellipsoid's)."""
+    """A judged state against its step's truth: E = eᵀP⁻¹e of its ellipsoid (the largest over a reference's truth
+    box), whether its set holds the truth (all of the box), whether the set its node continues from does (the same
+    set unless the state sends ``continues``), whether each is proven to miss it (disjoint from the box; a point
+    truth: not held), and the set's per-coordinate bounds (3, 2) where it is not the ellipsoid alone (a set
+    estimator's set, or the SDP's ellipsoid ∩ its fault range; None: the ellipsoid's).  Neither held nor missed is
+    *undecided*: a recorded drive's reference cannot tell (docs/your-log.md)."""
 
     E: float
     contained: bool
     continues_contained: bool
     bounds: np.ndarray | None = None
+    missed: bool = False
+    continues_missed: bool = False
 
     @property
     def held(self) -> bool:
-        """Both sets of the step hold the truth: on a covered node-step anything else is a violation."""
+        """Both sets of the step hold the truth."""
         return self.contained and self.continues_contained
+
+    @property
+    def certain_miss(self) -> bool:
+        """A set of the step is proven to miss the truth: on a covered node-step a violation."""
+        return self.missed or self.continues_missed
+
+    @property
+    def undecided(self) -> bool:
+        return not self.held and not self.certain_miss
+
+
+@dataclass(frozen=True)
+class HeldOver:
+    """A node silent since step ``step`` (no reading, docs/your-log.md): the checks of its copies of that step, and
+    the first assumption that broke on a transition since (None: none did).  A resumed state carries its own
+    set of that step through them (estimator/rejoin.py), so its cone holds them too."""
+
+    step: int
+    copies: dict[str, CopyCheck]
+    broken: str | None = None
 
 
 @dataclass(frozen=True)
 class StepChecks:
-    """What a step leaves for the next one to judge its inputs by: every copy's check, and each node's sole
-    judged copy (for states from before digests)."""
+    """What a step leaves for the next one to judge its inputs by: every copy's check, each node's sole
+    judged copy (for states from before digests), and what the silent nodes' last states left (:class:`HeldOver`)."""
 
     copies: dict[int, dict[str, CopyCheck]]
     sole: dict[int, str]
+    held: dict[int, HeldOver] = field(default_factory=dict)
+    states: dict[int, NodeState] = field(default_factory=dict)  # each node's sole judged state (the next step's own-data check)
 
 
 NO_CHECKS = StepChecks({}, {})
@@ -130,6 +160,7 @@ class NodeVerdict:
     step: int
     cone: Cone
     containment: Containment | None
+    inconsistent: bool = False  # without a reference: its own data prove one of its assumptions broken (Judge.inconsistent)
 
 
 @dataclass(frozen=True)
@@ -142,10 +173,27 @@ def published_sector(st: NodeState) -> Sector | None:
     return Sector(st.sector[0], st.sector[1], st.sector_basis) if st.sector is not None else None
 
 
+def truth_box(tr: Truth, i: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """Node i's x̄ = (β, r, f) as a reference's box (lo, hi), or None where the truth is a point (a model's run, or a
+    reference of accuracy 0 with an exactly known fault: judged as a model's run is)."""
+    if tr.x_acc is None:
+        return None
+    h = np.array([tr.x_acc[0], tr.x_acc[1], tr.f_acc.get(str(i), 0.0)])
+    if not h.any():
+        return None
+    c = augmented(tr.x, tr.faults[str(i)])
+    return c - h, c + h
+
+
 def _in_prior(n: NodeConfig, tr: Truth) -> bool:
-    """Assumption 1: the true x̄_0 lies in node n's prior ellipsoid."""
-    e = augmented(tr.x, tr.faults[str(n.id)]) - n.x0_hat
-    return float(e @ np.linalg.solve(n.P0, e)) <= n.rho
+    """Assumption 1: the true x̄_0 lies in node n's prior ellipsoid (all of a reference's box: else not proven)."""
+    box = truth_box(tr, n.id)
+    points = [augmented(tr.x, tr.faults[str(n.id)])] if box is None else list(_box_corners(*box))
+    return all(float((p - n.x0_hat) @ np.linalg.solve(n.P0, p - n.x0_hat)) <= n.rho for p in points)
+
+
+def _box_corners(lo: np.ndarray, hi: np.ndarray) -> list[np.ndarray]:
+    return [np.where(np.array(m, dtype=bool), hi, lo) for m in np.ndindex(2, 2, 2)]
 
 
 def isclose(a: float, b: float, rtol: float) -> bool:
@@ -157,6 +205,8 @@ def isclose(a: float, b: float, rtol: float) -> bool:
 def state_mismatch(n: NodeConfig, st: NodeState, tr: Truth) -> str | None:
     """Why ``st`` cannot be node n's own state computed from its true input (None: it can)."""
     s = str(n.id)
+    if s not in tr.y:
+        return "state-without-reading"  # no reading at this step: its node publishes nothing for it
     if st.gamma != tr.gamma[s]:
         return "state-not-from-input"
     innov = float(tr.y[s] - n.sensor.Cbar @ st.published.centre)
@@ -188,28 +238,77 @@ class Judge:
         checks = StepChecks(
             {j: {state_digest(c): self.copy_check(j, c, tr) for c in copies} for j, copies in inp.copies.items()},
             {i: state_digest(st) for i, st in inp.judged.items() if i not in inp.contested},
+            self._held_over(inp, prev),
+            {i: st for i, st in inp.judged.items() if i not in inp.contested},
         )
         out = {}
         for n in self.sc.nodes:
             st = inp.judged.get(n.id)
-            judged = st is not None and tr is not None and n.id not in inp.contested
+            judged = st is not None and tr is not None and tr.reference and n.id not in inp.contested
+            alone = st is not None and tr is not None and not tr.reference and n.id not in inp.contested  # nothing but its own data to go by
             out[n.id] = NodeVerdict(
                 n.id,
                 inp.step,
                 self.cone(n, inp, checks, prev),
                 self.containment(n.id, st, tr) if judged else None,  # type: ignore[arg-type]  # judged: st and tr are set
+                alone and self.inconsistent(n, prev.states.get(n.id), inp.prev_truth, tr),  # type: ignore[arg-type]  # alone: tr is set
             )
         return StepVerdict(out, checks)
 
-    def containment(self, i: int, st: NodeState, tr: Truth) -> Containment:
+    def inconsistent(self, n: NodeConfig, before: NodeState | None, prev: Truth | None, tr: Truth) -> bool:
+        """Node n's reading of this step is impossible under its declared bounds (noise; wind, model mismatch and fault
+        bound across the transition) and its own set of the step before (step 0: its prior, Assumption 1): a certain
+        broken assumption, or an earlier set that missed the truth, proven from the node's own data with no reference.
+
+        The reading leaves r = C̄ x̄ in :func:`~netsetest.estimator.sector.measurement_interval`; the node's set of
+        the step before, carried through the transition (its ellipsoid, a superset of the set: every detection stays
+        certain), leaves it in :func:`~netsetest.estimator.sector.propagated_interval`; disjoint (beyond rounding):
+        inconsistent.  Without a declared fault bound the fault is free and any reading after step 0 is possible."""
+        s, k, sen = str(n.id), tr.step, n.sensor
+        if s not in tr.y:
+            return False
+        bound = FaultBound(n.fault_rate, n.fault_size)
+        if k == 0:
+            pred = prior_interval(sen, bound, n.x0_hat, n.P0, n.rho)
+        elif before is None or before.step != k - 1 or prev is None or prev.step != k - 1:
+            return False  # nothing of the node's own to carry: no check
+        else:
+            e = before.continued
+            a, b, d = self.sc.model.blend(self.sc.model.weights(prev.vx))
+            pred = propagated_interval(sen, bound, np.asarray(e.xhat), e.P_matrix, e.rho, a, b[:, 0], d[:, 0], prev.u, self.sc.W, self.sc.uncertainty)
+        meas = measurement_interval(sen, tr.y[s], tr.gamma[s])
+        slack = CONSISTENCY_RTOL * max(1.0, abs(pred.lo) if math.isfinite(pred.lo) else 0.0, abs(pred.hi) if math.isfinite(pred.hi) else 0.0)
+        return meas.hi < pred.lo - slack or meas.lo > pred.hi + slack
+
+    def _held_over(self, inp: StepInputs, prev: StepChecks) -> dict[int, HeldOver]:
+        """Every node that sent nothing at this step: its last step's copy checks, and the transition into this
+        step added to what broke since (a node silent for other reasons is carried too: bounded by the nodes)."""
+        out = {}
+        for i in self.node_cfg:
+            if inp.copies.get(i):
+                continue
+            base = prev.held.get(i) or (HeldOver(inp.step - 1, prev.copies[i]) if i in prev.copies else None)
+            if base is not None:
+                out[i] = HeldOver(base.step, base.copies, base.broken or transition_cause(inp))
+        return out
+
+    @staticmethod
+    def containment(i: int, st: NodeState, tr: Truth) -> Containment:
         """The state's published set and the set it continues from against the truth (ProvenSet.contains); E is the
-        published ellipsoid's (a set estimator's: the one around its set, its neighbour-facing summary)."""
-        xbar = augmented(tr.x, tr.faults[str(i)])
+        published ellipsoid's (a set estimator's: the one around its set, its neighbour-facing summary).  Needs no
+        scenario: ``watch`` and the live view (runtime/live.py) judge what they hear by it, the collector's rule."""
         pub = st.published
+        bounds = None if pub.is_ellipsoid else np.stack(pub.bounds(), axis=1)
+        box = truth_box(tr, i)
+        if box is not None:  # a recorded drive's reference: the set against the whole box (proven.ProvenSet.relation)
+            rel = pub.relation(*box)
+            cont = rel if st.continues is None else st.continued.relation(*box)
+            return Containment(pub.E_max(*box), rel == "inside", cont == "inside", bounds, rel == "disjoint", cont == "disjoint")
+        xbar = augmented(tr.x, tr.faults[str(i)])
         E = pub.E(xbar)
         inside = pub.contains(xbar, E)
         continues = inside if st.continues is None else st.continued.contains(xbar)
-        return Containment(E, inside, continues, None if pub.is_ellipsoid else np.stack(pub.bounds(), axis=1))
+        return Containment(E, inside, continues, bounds, not inside, not continues)
 
     def sector_premise(self, n: NodeConfig, st: NodeState | None, tr: Truth) -> bool:
         """What the node's step sector rests on held: nothing more than the noise bound (measurement),
@@ -238,6 +337,8 @@ class Judge:
         """One copy of node j's state of a step, judged as an input of a later step."""
         if tr is None:
             return CopyCheck(TRUTH_UNKNOWN, TRUTH_UNKNOWN)
+        if not tr.reference:
+            return CopyCheck(NO_REFERENCE, NO_REFERENCE)
         n, s = self.node_cfg[j], str(j)
         if state_mismatch(n, c, tr):
             return CopyCheck(NOT_FROM_INPUT, NOT_FROM_INPUT)
@@ -246,13 +347,18 @@ class Judge:
             facts = "noise"
         elif n.sensor.saturated and not (s in tr.r and sector_ok(n.sensor, published_sector(c), tr.r[s])):
             facts = "sector"
-        xbar = augmented(tr.x, tr.faults[s])
-        published_in = c.published.E(xbar) <= c.published.rho  # neighbours use the ellipsoid alone
-        prior_in = c.continued.contains(xbar)
+        box = truth_box(tr, j)
+        if box is None:
+            xbar = augmented(tr.x, tr.faults[s])
+            published_in: str | None = None if c.published.E(xbar) <= c.published.rho else MISSED  # neighbours use the ellipsoid alone
+            prior_in: str | None = None if c.continued.contains(xbar) else MISSED
+        else:  # held only where all of the reference's box lies in it; proven apart: missed; else it may have missed
+            published_in = _held(c.published.ellipsoid_only().relation(*box))
+            prior_in = _held(c.continued.relation(*box))
         self_loop = j in n.in_weights  # its own innovation enters its next step: the same facts
         return CopyCheck(
-            as_neighbour=facts or (None if published_in else MISSED),
-            as_prior=(facts if self_loop else None) or (None if prior_in else MISSED),
+            as_neighbour=facts or published_in,
+            as_prior=(facts if self_loop else None) or prior_in,
         )
 
     def own_cause(self, n: NodeConfig, st: NodeState | None, tr: Truth, prev: Truth | None, k: int, prev_overloaded: bool = False) -> str | None:
@@ -286,6 +392,8 @@ class Judge:
         i, k, tr = n.id, inp.step, inp.truth
         if tr is None:
             return Cone(False, TRUTH_UNKNOWN)
+        if not tr.reference:
+            return Cone(False, NO_REFERENCE)
         st = inp.judged.get(i)
         own = self.own_cause(n, st, tr, inp.prev_truth, k, inp.prev_overloaded)
         if own is not None:
@@ -301,6 +409,15 @@ class Judge:
         if st.status == "fallback" and st.published.set is not None:
             return Cone(False, "fallback")  # the previous step's set again: no guarantee for this step
         for j, m, digest, as_prior in _inputs_of(st, k):
+            if m < k - 1:  # a resumed state: its own set of step m, carried through the steps without a reading
+                held = prev.held.get(j)
+                c = held.copies.get(digest) if held is not None and held.step == m and digest is not None else None
+                why = NOT_JUDGED if c is None else c.as_prior
+                if why is None and held is not None and held.broken is not None:
+                    return Cone(False, held.broken)
+                if why is not None:
+                    return Cone(False, INHERITED, Origin(j, m, why))
+                continue
             by = checks if m == k else prev
             if digest is None:
                 digest = by.sole.get(j)
@@ -323,6 +440,22 @@ class Judge:
         return None
 
 
+def _held(rel: str) -> str | None:
+    """A copy's set against a reference's box, as an input's check: held (None), missed or undecided."""
+    return None if rel == "inside" else MISSED if rel == "disjoint" else UNDECIDED
+
+
+def transition_cause(inp: StepInputs) -> str | None:
+    """The first assumption that broke on the transition into ``inp``'s step (the model mismatch, then the wind;
+    None: neither did); unknown without the previous step's truth."""
+    prev = inp.prev_truth
+    if prev is None or prev.step != inp.step - 1:
+        return COLLECTOR_OVERLOADED if inp.prev_overloaded else TRUTH_UNKNOWN
+    if not prev.mismatch_ok:
+        return mismatch_cause(prev)
+    return None if prev.dist_ok else "disturbance"
+
+
 def mismatch_cause(t: Truth | dict) -> str:
     """Why a transition's e_k left its bound: the car outside the declared envelope, or the bound too small."""
     ok = t.get("envelope_ok", True) if isinstance(t, dict) else t.envelope_ok
@@ -332,7 +465,7 @@ def mismatch_cause(t: Truth | dict) -> str:
 def _inputs_of(st: NodeState, k: int) -> list[tuple[int, int, str | None, bool]]:
     """(node, step, digest, whether it is the node's own prior) of every input of the step; digest None:
     a state from before digests, whose inputs are its neighbours' sole judged copies (and its own)."""
-    m = k if st.status == "rejoin" else k - 1
+    m = k if st.status == "rejoin" else st.resumed_from if st.resumed_from is not None else k - 1
     if st.inputs:
         return [(j, m, d, j == st.node) for j, d in st.inputs]
     deps: list[tuple[int, int, str | None, bool]] = [(j, m, None, False) for j in st.used]
@@ -365,11 +498,13 @@ __all__ = [
     "INHERITED",
     "MISSED",
     "MODEL_MISMATCH",
+    "NO_REFERENCE",
     "NOT_FROM_INPUT",
     "NOT_JUDGED",
     "NO_CHECKS",
     "OUTSIDE_ENVELOPE",
     "TRUTH_UNKNOWN",
+    "UNDECIDED",
     "COLLECTOR_OVERLOADED",
     "Cone",
     "Containment",
@@ -385,4 +520,5 @@ __all__ = [
     "mismatch_cause",
     "published_sector",
     "state_mismatch",
+    "truth_box",
 ]

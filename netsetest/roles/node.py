@@ -44,12 +44,11 @@ from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE
 from netsetest.estimator.registry import node_set_estimator
 from netsetest.polygon import Polygon
-from netsetest.estimator.rejoin import rejoin_ellipsoid
+from netsetest.estimator.rejoin import predict_x, rejoin_ellipsoid, resume_ellipsoid
 from netsetest.estimator.sdp import NodeSet, LocalEstimator, NeighbourState, Objective, Prepared, UpdateInput, StepResult, Variant
 from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sector, measurement_interval
 from netsetest.messages import End, Message, NodeInput, NodeState, NodeStatus, Reading, RunScope, decode, encode, state_digest
-from netsetest.models.sensor import NA
-from netsetest.profile import PROFILE
+from netsetest.models.sensor import NA, NX
 from netsetest.roles.plausibility import innovation_possible, states_disjoint
 from netsetest.sets import set_to_wire
 
@@ -98,6 +97,18 @@ class Publication:
     wire_set: dict | None = None  # a set estimator's own set, on the wire
     readings: list[tuple[int, float, float]] = field(default_factory=list)  # (node, lo, hi) of the step
     health: bool = False  # the k-of-N health assumption was applied
+    resumed_from: int | None = None  # status "resume": the step of the own set it was carried from
+
+
+@dataclass(frozen=True)
+class Gap:
+    """Steps without a reading (docs/your-log.md): the node's last published step ``since`` and that state's digest,
+    and the x set its own set is carried to, {x: (x − xc)ᵀSx⁻¹(x − xc) ≤ 1} (estimator/rejoin.py)."""
+
+    since: int
+    digest: str
+    xc: np.ndarray  # (NX,)
+    Sx: np.ndarray  # (NX, NX)
 
 
 class Node:
@@ -161,6 +172,7 @@ class Node:
         self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
         self.drops: Counter[str] = Counter()
         self.rejoin = rejoin  # started into a running network: initialise from a neighbour's ellipsoid
+        self.gap: Gap | None = None  # in steps without a reading: where the own set is carried (_carry)
         self.late_start_evidence = 0
         bus.subscribe(keys.node_input(run_id, node_id), self.on_message, screen=self._passed_input)
         for j in self.others:
@@ -296,7 +308,9 @@ class Node:
         self.inputs[msg.step] = msg
         if len(self.inputs) > MAX_AHEAD:  # a rejoining node before it re-entered: keep the newest
             del self.inputs[min(self.inputs)]
-        if self.publishes_reading and msg.step > 0:  # the same-step exchange phase (step 0 uses none): our reading goes out before we estimate
+        if (
+            self.publishes_reading and msg.step > 0 and msg.y is not None
+        ):  # the same-step exchange phase (step 0 uses none): our reading goes out before we estimate
             self.bus.publish(keys.reading(self.run, self.id), Reading(step=msg.step, node=self.id, y=msg.y, gamma=msg.gamma))
 
     def _implausible_input(self, msg: NodeInput) -> str | None:
@@ -304,6 +318,10 @@ class Node:
         sc = self.sc
         if not set(msg.expect_from) | set(msg.lost_from) <= set(self.others):
             return "input-not-neighbours"
+        if (msg.y is None) != (self.id in msg.unread) or not set(msg.unread) <= set(self.sc.ids):
+            return "input-unread"
+        if msg.y is None and self.set_estimator is not None:
+            return "input-unread"  # a set estimator cannot resume after a step without its reading (a log run refuses one)
         if msg.step > 0:
             if msg.u_prev is None or msg.vx_prev is None:
                 return "input-incomplete"
@@ -404,9 +422,9 @@ class Node:
 
     def missing(self) -> list[int]:
         """Expected messages for the next step that have not arrived: the neighbours' states of our step and
-        the references' readings of the next one."""
+        the references' readings of the next one (none without a reading, or resuming: that step uses neither)."""
         inp = self.next_input()
-        if inp is None or self.k < 0:
+        if inp is None or self.k < 0 or inp.y is None or self.gap is not None:
             return []
         unread = self._unread(inp)
         if self.set_estimator is not None:  # it uses no neighbour state
@@ -421,9 +439,10 @@ class Node:
         return inp is not None and self.k >= 0 and bool(self._unread(inp))
 
     def _unread(self, inp: NodeInput) -> list[int]:
-        """The senders whose reading of ``inp``'s step we still wait for (not the silent ones)."""
+        """The senders whose reading of ``inp``'s step we still wait for (not the silent ones, nor those the vehicle
+        says have none at that step)."""
         readings = self.readings.get(inp.step, {})
-        return [j for j in self.read_from if j not in readings and j not in self.silent]
+        return [j for j in self.read_from if j not in readings and j not in self.silent and j not in inp.unread]
 
     def _prior(self) -> NodeSet:
         """The set the next step starts from."""
@@ -431,7 +450,7 @@ class Node:
 
     def _step_input(self, inp: NodeInput, neigh: dict[int, NeighbourState], readings: dict[int, tuple[float, float]]) -> UpdateInput:
         """The estimator's input of a step > 0 (its u and Vx are there: _implausible_input dropped inputs without them)."""
-        assert inp.u_prev is not None and inp.vx_prev is not None
+        assert inp.u_prev is not None and inp.vx_prev is not None and inp.y is not None  # a step without a reading is _carry's
         return UpdateInput(self.sc.model.weights(inp.vx_prev), inp.u_prev, inp.y, inp.gamma, neigh, readings)
 
     def try_step(self, now: float | None = None) -> bool:
@@ -441,6 +460,9 @@ class Node:
             return False
         if self.k < 0:
             stepped = self._start(inp)
+        elif inp.y is None or self.gap is not None:
+            self._carry(inp)  # no reading: nothing published; the first reading after resumes (estimator/rejoin.py)
+            stepped = True
         elif self.missing() and not self.give_up:
             if self.waiting_since is None:
                 self.waiting_since = now if now is not None else time.monotonic()
@@ -464,6 +486,8 @@ class Node:
                 return False  # a set estimator starts from its prior at step 0 only: no rejoin
             self._publish_set(inp, "init")
             return True
+        if inp.y is None:
+            return False  # step 0 needs a reading (the vehicle sends one: logs/drive.py), a rejoin its own
         if inp.step == 0:
             res = self.estimator.first(NodeSet(self.xhat, self.P, self.rho), inp.y, inp.gamma)
             status: NodeStatus = "init" if res.status == "ok" else "init-prior"
@@ -477,6 +501,28 @@ class Node:
         res = StepResult(xhat, P, "ok", float("nan"), 0.0, "rejoin", sector=sector)
         self._publish(Publication(inp, "rejoin", res, used=sorted(have), inputs=self._inputs(inp.step, sorted(have), own=False)))
         return True
+
+    def _carry(self, inp: NodeInput) -> None:
+        """A step after one without a reading, or without one itself: the own set's x part carried through the
+        transition by the model alone (:func:`~netsetest.estimator.rejoin.predict_x`); with a reading, the
+        node resumes from it and the reading (:func:`~netsetest.estimator.rejoin.resume_ellipsoid`) and
+        publishes ``resume``; without, it publishes nothing (its neighbours are told it has no state)."""
+        assert inp.u_prev is not None and inp.vx_prev is not None and self.own_digest is not None
+        if self.gap is None:  # the own set of the last step with a reading
+            self.gap = Gap(self.k, self.own_digest, self.xhat[:NX].copy(), self.rho * self.P[:NX, :NX])
+        a, b, d = self.sc.model.blend(self.sc.model.weights(inp.vx_prev))
+        xc, Sx = predict_x(self.gap.xc, self.gap.Sx, a, b[:, 0], d[:, 0], inp.u_prev, self.sc.W, self.sc.uncertainty)
+        if inp.y is None:
+            self.gap = Gap(self.gap.since, self.gap.digest, xc, Sx)
+            self.own, self.prepared = None, None  # no own set of this step: neighbour states are not screened against one
+            self._taken(inp.step)
+            return
+        xhat, P = resume_ellipsoid(self.cfg.sensor, inp.y, inp.gamma, self.rho, xc, Sx)
+        sector = derive_sector(self.cfg.sensor, FaultBound(), measurement_interval(self.cfg.sensor, inp.y, inp.gamma), None)
+        res = StepResult(xhat, P, "ok", float("nan"), 0.0, "resume", sector=sector)
+        since, digest = self.gap.since, self.gap.digest
+        self.gap = None
+        self._publish(Publication(inp, "resume", res, inputs=[(self.id, digest)], resumed_from=since))
 
     def _neighbours(self, inp: NodeInput) -> dict[int, NeighbourState]:
         """The states the step of ``inp`` uses: the expected neighbours' that arrived, and our own (self-loop)."""
@@ -495,10 +541,7 @@ class Node:
         have, refused = self.inbox.get(self.k, {}), self.refused.get(self.k, set())
         if any(j not in have and j not in refused for j in inp.expect_from) or not self._unread(inp):
             return
-        t = PROFILE.now() if PROFILE is not None else 0
         self.prepared = (inp.step, self.estimator.prepare(self._prior(), self._step_input(inp, self._neighbours(inp), {})))
-        if PROFILE is not None:
-            PROFILE.add("solve", t)
 
     def _update(self, inp: NodeInput) -> None:
         if self.set_estimator is not None:
@@ -513,15 +556,12 @@ class Node:
         self.prepared = None
         if prepared is not None and not prepared.of(prior, step_in):
             prepared = None  # the step's neighbours changed since (a state came after all): solved afresh, as sound
-        t = PROFILE.now() if PROFILE is not None else 0
         res = self.estimator.step(prior, step_in, prepared)
         # the readings the step's sets rest on: the published one's and the ones the set it continues from was
         # cut by (both are judged under the step's cone: docs/coverage.md)
         rests = res.rests_on
         health = rests.health
         refs = sorted(set(readings) | (rests.readings & {self.id})) if health else sorted(rests.readings)  # the k-of-N facts rest on every reading
-        if PROFILE is not None:
-            PROFILE.add("solve", t)
         used = sorted(j for j in neigh if j != self.id)
         self._publish(
             Publication(
@@ -547,7 +587,7 @@ class Node:
     def _publish_set(self, inp: NodeInput, status: NodeStatus) -> None:
         """Step the set estimator and publish its set with an enclosing ellipsoid (the neighbour-facing
         summary: SDP neighbours and the plausibility checks use it unchanged) and the step's sector."""
-        assert self.set_estimator is not None
+        assert self.set_estimator is not None and inp.y is not None  # _implausible_input: a set estimator's input has its reading
         t0 = time.perf_counter()
         readings = self.readings.get(inp.step, {}) if inp.step > 0 else {}
         try:
@@ -580,19 +620,24 @@ class Node:
         sector = res.sector
         cbar = self.cfg.sensor.Cbar
         self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, float(inp.y - cbar @ self.xhat), sector)
-        t = PROFILE.now() if PROFILE is not None else 0
-        msg = self._state_message(pub)
-        self.own_digest = state_digest(msg)
-        if PROFILE is not None:
-            PROFILE.add("build", t)
-        self.k = inp.step
-        self.inputs = {s: m for s, m in self.inputs.items() if s > self.k}
-        self.inbox = {s: m for s, m in self.inbox.items() if s >= self.k}
-        self.refused = {s: js for s, js in self.refused.items() if s >= self.k}
-        self.digests = {s: d for s, d in self.digests.items() if s >= self.k}
-        self.readings = {s: r for s, r in self.readings.items() if s > self.k}
-        self.waiting_since, self.give_up = None, False
+        msg, self.own_digest = self._built(pub)
+        self._taken(inp.step)
         self.bus.publish(keys.node_state(self.run, self.id), msg)
+
+    def _built(self, p: Publication) -> tuple[NodeState, str]:
+        """The state message of ``p`` and its digest."""
+        msg = self._state_message(p)
+        return msg, state_digest(msg)
+
+    def _taken(self, k: int) -> None:
+        """Step k is taken (published, or passed without a reading): forget what only earlier steps could use."""
+        self.k = k
+        self.inputs = {s: m for s, m in self.inputs.items() if s > k}
+        self.inbox = {s: m for s, m in self.inbox.items() if s >= k}  # the neighbours' states of k serve step k+1
+        self.refused = {s: js for s, js in self.refused.items() if s >= k}
+        self.digests = {s: d for s, d in self.digests.items() if s >= k}
+        self.readings = {s: r for s, r in self.readings.items() if s > k}
+        self.waiting_since, self.give_up = None, False
 
     def _state_message(self, p: Publication) -> NodeState:
         """The state message of ``p.res.public`` for the step of ``p.inp`` (validated)."""
@@ -621,4 +666,5 @@ class Node:
             inputs=p.inputs,
             readings=p.readings,
             health=p.health,
+            resumed_from=p.resumed_from,
         )

@@ -21,8 +21,10 @@ on its key); its drop counters travel in every Truth.
 
 from __future__ import annotations
 
+import math
 import time
 from collections import Counter
+from typing import NamedTuple
 
 import numpy as np
 
@@ -30,6 +32,7 @@ from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import NodeConfig, Scenario
 from netsetest.messages import End, Message, NodeInput, NodeState, Ready, RunScope, Truth
+from netsetest.logs.drive import LogDrive, LogStep
 from netsetest.models.drive import Drive
 from netsetest.models.sensor import augmented
 from netsetest.models.signals import SignalKind
@@ -97,13 +100,16 @@ class Vehicle:
         self.window = window
         # lockstep: a node not heard at step k is dead; real time: not heard for dead_after_steps steps
         self.realtime, self.dead_after = realtime, dead_after_steps
-        self.drive = Drive(scenario, signals, seed)
+        # the world: the model's drive (the plant, the manoeuvre, the seeded signals) or a recorded one (docs/your-log.md)
+        self.log = LogDrive(scenario) if scenario.log is not None else None
+        self.drive = Drive(scenario, signals, seed) if self.log is None else None
         self.losses = LossSchedule(scenario, seed)
         self.x = scenario.x0.copy()
         self.k = -1  # last published step
         self.u = self.w = self.vx = 0.0
         self.heard: dict[int, set[int]] = {}  # the last dead_after steps (lockstep: 1) only
         self.alive = set(scenario.ids)
+        self.unread: set[int] = set()  # nodes without a reading at the current step: they publish nothing for it
         self.done = False
         self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
         self.drops: Counter[str] = Counter()
@@ -165,8 +171,8 @@ class Vehicle:
         return dict(self.drops + (Counter() if self.bus.shared else self.bus.dropped))
 
     def waiting_for(self) -> set[int]:
-        """Alive nodes whose state of the current step has not arrived."""
-        return self.alive - self.heard.get(self.k, set())
+        """Alive nodes with a reading whose state of the current step has not arrived."""
+        return self.alive - self.unread - self.heard.get(self.k, set())
 
     def ready_to_advance(self) -> bool:
         return self.k >= 0 and not self.done and not self.waiting_for()
@@ -177,7 +183,8 @@ class Vehicle:
             return
         if self.k >= 0:
             window = self._window()
-            self.alive = set().union(*(self.heard.get(s, set()) for s in window))
+            # a node without a reading at step k published nothing and is not dead: it resumes at its next reading
+            self.alive = set().union(*(self.heard.get(s, set()) for s in window)) | (self.alive & self.unread)
             self.heard = {s: self.heard[s] for s in window[1:] if s in self.heard}  # bounded memory
             if self.k == self.sc.steps:
                 self.bus.publish(keys.end(self.run), End(steps=self.sc.steps))
@@ -186,11 +193,39 @@ class Vehicle:
         self.k += 1
         self._publish_step(self.k)
 
-    def _publish_step(self, k: int) -> None:
-        sc = self.sc
+    def _publish_inputs(self, k: int, y: dict[int, float], gamma: dict[int, float], lost: list[tuple[int, int]], deadline: float | None) -> None:
+        """Each node's input of step k: its reading (absent from ``y``: none at this step), γ, the inputs held over
+        k−1 → k, the neighbours to expect (not those without a reading at k−1: they published nothing)."""
         u_prev, vx_prev = (self.u, self.vx) if k > 0 else (None, None)
+        quiet_before, self.unread = self.unread, {i for i in self.sc.ids if i not in y}
+        unread = sorted(self.unread)
+        for n in self.sc.nodes:
+            lost_from = sorted(j for (j, i) in lost if i == n.id)
+            expect = sorted(j for j in n.in_weights if j != n.id and j in self.alive and j not in lost_from and j not in quiet_before) if k > 0 else []
+            self.bus.publish(
+                keys.node_input(self.run, n.id),
+                NodeInput(
+                    step=k,
+                    node=n.id,
+                    y=y.get(n.id),
+                    gamma=gamma[n.id],
+                    u_prev=u_prev,
+                    vx_prev=vx_prev,
+                    expect_from=expect,
+                    lost_from=lost_from,
+                    deadline=deadline,
+                    unread=unread,
+                ),
+            )
+
+    def _publish_step(self, k: int) -> None:
+        if self.log is not None:
+            self._publish_log_step(k)
+            return
+        sc = self.sc
+        assert self.drive is not None
         d = self.drive.step(k)
-        self.x, self.u, self.w, self.vx, v, gamma, e = d.x, d.u, d.w, d.vx, d.v, d.gamma, d.e
+        self.x, w, v, gamma, e = d.x, d.w, d.v, d.gamma, d.e
         ay, speed = (d.ay, d.speed) if sc.plant != "ts" else (None, None)  # the T-S plant has no envelope
         lost = self.losses.lost_at(k) if k > 0 else []
         deadline = time.time() + sc.tau_s if self.realtime else None
@@ -205,23 +240,8 @@ class Vehicle:
             faults[n.id] = f
             sector_ok[n.id] = n.sensor.sector_holds(xbar)
             noise_ok[n.id] = bool(v[idx] ** 2 <= n.sensor.R * (1 + 1e-12))
-        for idx, n in enumerate(sc.nodes):
-            lost_from = sorted(j for (j, i) in lost if i == n.id)
-            expect = sorted(j for j in n.in_weights if j != n.id and j in self.alive and j not in lost_from) if k > 0 else []
-            self.bus.publish(
-                keys.node_input(self.run, n.id),
-                NodeInput(
-                    step=k,
-                    node=n.id,
-                    y=y[n.id],
-                    gamma=float(gamma[idx]),
-                    u_prev=u_prev,
-                    vx_prev=vx_prev,
-                    expect_from=expect,
-                    lost_from=lost_from,
-                    deadline=deadline,
-                ),
-            )
+        self._publish_inputs(k, y, {n.id: float(gamma[idx]) for idx, n in enumerate(sc.nodes)}, lost, deadline)
+        self.u, self.w, self.vx = d.u, w, d.vx
         s = lambda d: {str(i): val for i, val in d.items()}  # noqa: E731  # a one-line local helper
         self.bus.publish(
             keys.truth(self.run),
@@ -252,3 +272,82 @@ class Vehicle:
                 envelope_ok=envelope_holds(sc, ay, speed),
             ),
         )
+
+    def _publish_log_step(self, k: int) -> None:
+        """Step k of a recorded drive: the logged readings with the declared faults on top, and the truth as far as
+        the reference proves it (logs/drive.py; the flags say an assumption broke only where the reference proves it)."""
+        sc = self.sc
+        assert self.log is not None
+        d = self.log.step(k)
+        lost = self.losses.lost_at(k) if k > 0 else []
+        deadline = time.time() + sc.tau_s if self.realtime else None
+        y = {i: float(yl) + sc.node(i).sensor.Ds * d.faults[i] for i, yl in d.y_log.items() if yl is not None}
+        self._publish_inputs(k, y, {n.id: 1.0 for n in sc.nodes}, lost, deadline)
+        self.u, self.w, self.vx = d.u, 0.0, d.vx
+        self.x = d.x_ref if d.x_ref is not None else np.zeros(2)
+        truth = {str(i): _log_truth(sc.node(i), d, k) for i in sc.ids}
+        read = [i for i in sc.ids if d.y_log[i] is not None]
+        faults = {int(i): t.fault for i, t in truth.items()}
+        p = sc.model.params
+        ay = d.speed * float(d.x_ref[1]) if d.x_ref is not None else None  # v·r: the reference gives no β̇ (docs/your-log.md)
+        self.bus.publish(
+            keys.truth(self.run),
+            Truth(
+                step=k,
+                x=list(map(float, self.x)),
+                faults={i: t.fault for i, t in truth.items()},
+                u=self.u,
+                w=0.0,  # the side wind of a recorded drive is unknown: its bound is declared, never checked
+                vx=self.vx,
+                noise={i: t.noise for i, t in truth.items()},
+                gamma={str(i): 1.0 for i in sc.ids},
+                y={str(i): y[i] for i in read},
+                y_nofault={str(i): float(d.y_log[i]) for i in read},  # type: ignore[arg-type]  # read: a reading is there
+                sector_ok={str(i): True for i in sc.ids},  # the nsnim case: no saturation
+                noise_ok={i: t.noise_ok for i, t in truth.items()},
+                r={i: t.r for i, t in truth.items()},
+                fault_ok={i: t.fault_ok for i, t in truth.items()},
+                dist_ok=True,
+                lost=lost,
+                alive=sorted(self.alive),
+                drops=self.drop_report(),
+                health_ok=sc.health_holds(faults),
+                speed=d.speed,
+                ay=ay,
+                # the model scheduled at a speed it does not cover describes no transition of the car
+                mismatch_ok=p.vx_min <= d.speed <= p.vx_max,
+                envelope_ok=envelope_holds(sc, ay, d.speed),
+                x_acc=list(d.accuracy),
+                f_acc={i: t.f_acc for i, t in truth.items()},
+                reference=d.x_ref is not None,
+                no_reading=[i for i in sc.ids if d.y_log[i] is None],
+            ),
+        )
+
+
+class _NodeTruth(NamedTuple):
+    fault: float  # the fault's centre
+    f_acc: float  # its half-width
+    noise: float  # v's centre
+    noise_ok: bool  # the noise bound not proven broken
+    r: float  # C̄ x̄ at the centre
+    fault_ok: bool  # the declared fault bound not proven broken
+
+
+def _log_truth(n: NodeConfig, d: LogStep, k: int) -> _NodeTruth:
+    """Node n's truth at a recorded step (:class:`_NodeTruth`).  Declared healthy: the fault is the injected one and
+    the noise v = (ỹ_log − C x)/Dv an interval the reference's box leaves (broken only if all of it lies beyond √R);
+    not declared healthy: the logged fault is what the reading less the reference leaves within the noise bound."""
+    sen, f_inj, y_log = n.sensor, d.faults[n.id], d.y_log[n.id]
+    if d.x_ref is None or y_log is None:
+        return _NodeTruth(f_inj, 0.0, 0.0, True, float(sen.Cbar @ augmented(np.zeros(2), f_inj)), fault_bound_holds(n, k))
+    cx = float(sen.C @ d.x_ref)
+    cx_half = float(np.abs(sen.C) @ np.asarray(d.accuracy))
+    if d.healthy[n.id]:
+        v = (y_log - cx) / sen.Dv
+        v_min = max(abs(v) - cx_half / abs(sen.Dv), 0.0)
+        return _NodeTruth(f_inj, 0.0, v, v_min * v_min <= sen.R * (1 + 1e-12), float(sen.Cbar @ augmented(d.x_ref, f_inj)), fault_bound_holds(n, k))
+    f_c = f_inj + (y_log - cx) / sen.Ds
+    f_half = (cx_half + abs(sen.Dv) * math.sqrt(sen.R)) / abs(sen.Ds)
+    size_ok = n.fault_size is None or abs(f_c) - f_half <= n.fault_size * (1 + 1e-12)
+    return _NodeTruth(f_c, f_half, 0.0, True, float(sen.Cbar @ augmented(d.x_ref, f_c)), size_ok)

@@ -42,6 +42,27 @@ def seed(s: str) -> int:
     return v
 
 
+SEED_RANGE_RE = re.compile(r"(\d+)\s*-\s*(\d+)")
+SEED_RANGE_MAX = (
+    10_000  # seeds one range may name (a typo like 0-99999999 is not a request)  # numpy's SeedSequence takes any non-negative integer; keep it to 64 bits
+)
+
+
+def seed_list(s: str) -> tuple[int, ...]:
+    """argparse type: comma-separated seeds and ranges A-B (inclusive), e.g. ``0-4,9`` (``--seeds``, a campaign's seeds)."""
+    out: list[int] = []
+    for part in s.split(","):
+        m = SEED_RANGE_RE.fullmatch(part.strip())
+        if m is None:  # one seed (a negative number is a seed, and an error, not a range)
+            out.append(seed(part))
+            continue
+        a, b = seed(m[1]), seed(m[2])
+        if b < a or b - a >= SEED_RANGE_MAX:
+            raise argparse.ArgumentTypeError(f"seed range {part.strip()!r}: must be A-B with A ≤ B and at most {SEED_RANGE_MAX} seeds")
+        out.extend(range(a, b + 1))
+    return tuple(out)
+
+
 def run_id(s: str) -> str:
     """argparse type of ``--run-id``: one key-expression chunk (no '/', '*', '$': they would widen the keys)."""
     if not RUN_ID_RE.fullmatch(s):
@@ -92,6 +113,16 @@ def _seconds_type(allow_zero: bool) -> Callable[[str], float]:
 
 seconds, non_negative_seconds = _seconds_type(False), _seconds_type(True)
 
+MIN_STALL_LIMIT_S = 1.0  # a shorter Zenoh lease (keep-alives every quarter of it) closes sessions on a merely busy machine
+
+
+def stall_limit(s: str) -> float:
+    """argparse type: ``--stall-limit``, seconds ≥ MIN_STALL_LIMIT_S."""
+    v = seconds(s)
+    if v < MIN_STALL_LIMIT_S:
+        raise argparse.ArgumentTypeError(f"must be at least {MIN_STALL_LIMIT_S:g} s (Zenoh's lease), got {v:g}")
+    return v
+
 
 MAX_PORT = 65535
 
@@ -105,3 +136,39 @@ def port(s: str) -> int:
     if not 0 <= v <= MAX_PORT:
         raise argparse.ArgumentTypeError(f"must be 0-{MAX_PORT}, got {v}")
     return v
+
+
+def drive(s: str) -> str:
+    """argparse type of ``--manoeuvre``: ``NAME`` or ``NAME@AMPLITUDE`` (models/manoeuvres.py ``DriveSpec``),
+    returned in one canonical spelling (the amplitude's repr: the replayed run gets the same float)."""
+    from netsetest.models.manoeuvres import AMPLITUDE_SEP, DriveSpec
+
+    try:
+        d = DriveSpec.parse(s.strip())
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return d.manoeuvre if d.amplitude is None else f"{d.manoeuvre}{AMPLITUDE_SEP}{d.amplitude!r}"
+
+
+def _number(s: str, what: str, ok: Callable[[float], bool], rule: str) -> float:
+    try:
+        v = float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {s!r}") from None
+    if not (math.isfinite(v) and ok(v)):
+        raise argparse.ArgumentTypeError(f"{what} must be {rule}, got {s!r}")
+    return v
+
+
+def speed_kmh(s: str) -> float:
+    """argparse type of ``--speed``: the speed reference's mean [km/h], in the configuration's range."""
+    from netsetest.config.schema import SPEED_MAX_KMH
+
+    return _number(s, "a speed [km/h]", lambda v: 0 < v <= SPEED_MAX_KMH, f"> 0 and ≤ {SPEED_MAX_KMH:g}")
+
+
+def fault_scale(s: str) -> float:
+    """argparse type of ``--fault-scale``: a fraction of the declared ``[fault_bound] size`` (config/schema.py)."""
+    from netsetest.config.schema import FAULT_SCALE_MAX
+
+    return _number(s, "a fault scale", lambda v: 0 <= v <= FAULT_SCALE_MAX, f"between 0 and {FAULT_SCALE_MAX:g}")

@@ -53,6 +53,7 @@ def run_meta(
         model_uncertainty=None if (u := scenario.uncertainty) is None else {"kind": u.kind, "G": u.G.tolist()},
         started_ns=time.time_ns(),  # the run's start on the wall clock (an MCAP record's log times start here)
         settings_digest=scenario.settings_digest,
+        log=None if (lg := scenario.log) is None else {"path": lg.path, "mapping": lg.mapping.path, "accuracy": list(lg.mapping.accuracy)},
     )
 
 

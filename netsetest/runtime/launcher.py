@@ -11,7 +11,9 @@ bad option) and :func:`launch` runs the resulting :class:`RunPlan` in three part
   while the launcher writes credentials and opens the router: 1 collector, one process per node, 1 vehicle;
 - the *supervisor* (:class:`Supervisor`): follows the collector's progress and summary on its channel
   (runtime/channel.py), kills and restarts nodes mid-run (``kill``, ``rejoin``), logs the roles' exits,
-  and stops every child on Ctrl-C, on SIGTERM or when the vehicle or the collector fails.  A node that
+  and stops every child on Ctrl-C, on SIGTERM, when the vehicle or the collector fails, or when the vehicle
+  gave up on a collector stalled past the stall limit (then, and on Ctrl-C, with the summary the collector
+  writes when it is stopped).  A node that
   dies is not a failure of the run: the others go on without it and the summary says so (exit code 3,
   from the collector).  It only polls, signals and restarts processes: tests/unit/test_supervisor.py runs
   it on fake ones.
@@ -34,17 +36,19 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Protocol
 
-from netsetest.config.schema import Case, Scenario, load_topology
+from netsetest.config.schema import Case, Scenario
+from netsetest.logs.drive import with_log_steps
 from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.records.summary import RunSummary
 from netsetest.roles.flow import ack_window
 from netsetest.runtime.channel import CHANNEL_FD, ChannelReader
 from netsetest.runtime.forkserver import ForkServer, ForkServerError
-from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress, log
+from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_COLLECTOR_STALLED, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress, exit_code, log
 from netsetest.runtime.rolespec import Clock, CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
-from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, START_TIMEOUT_S
-from netsetest.runtime.view import ViewError, ViewProcess, start_view
+from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, STALL_LIMIT_S, START_TIMEOUT_S
+from netsetest.runtime.view import ViewProcess, start_view
+from netsetest.runtime.view_server import PortTaken, ViewError
 
 if TYPE_CHECKING:  # annotations only: the estimator and the models load in the role processes, not in the launcher
     from netsetest.estimator.sdp import Variant
@@ -69,6 +73,9 @@ class LaunchOptions:
     case: Case | None = None
     steps: int | None = None
     estimator: str | None = None  # every node's, overriding the topology's
+    manoeuvre: str | None = None  # the drive's overrides (ScenarioSpec)
+    speed: float | None = None
+    fault_scale: float | None = None
     signals: SignalKind = "paper"
     variant: Variant = "scheduled"
     objective: Objective = DEFAULT_OBJECTIVE
@@ -80,6 +87,7 @@ class LaunchOptions:
     node_timeout: float = NODE_TIMEOUT_S
     neighbour_timeout: float = NEIGHBOUR_TIMEOUT_S
     pace: float = 0.0
+    stall_limit: float = STALL_LIMIT_S  # every session's Zenoh lease; the vehicle's wait for the collector
     kill: tuple[tuple[int, int], ...] = ()  # (node, step): SIGKILL the node right after that step
     rejoin: tuple[tuple[int, int], ...] = ()  # (node, step): restart the node with --rejoin at that step
     insecure: bool = False
@@ -87,6 +95,24 @@ class LaunchOptions:
     run_id: str | None = None  # None: a fresh random one (a guessable id, run<pid>, named every key of the run)
     view: bool = False  # a live view beside the run (runtime/view.py), an observer like `watch`
     view_port: int = 0  # its web port (0: a free one)
+    port: int = 0  # the run's port on loopback: its router's, or (insecure) its collector's, which observers connect to (0: a free one)
+    log: str | None = None  # a recorded drive as the world (docs/your-log.md)
+    mapping: str | None = None  # its mapping file
+
+    @property
+    def scenario(self) -> ScenarioSpec:
+        """Which run, as every role is told it (the topology and the command line's overrides)."""
+        return ScenarioSpec(
+            self.topology,
+            self.case,
+            self.steps,
+            self.estimator,
+            log=self.log,
+            mapping=self.mapping,
+            manoeuvre=self.manoeuvre,
+            speed=self.speed,
+            fault_scale=self.fault_scale,
+        )
 
 
 RUN_ID_BYTES = 8  # of a run's random id (as `netsetest credentials` makes)
@@ -124,8 +150,8 @@ class RoleUsage:
 
 @dataclass(frozen=True)
 class RunOutcome:
-    """How a launched run ended: the launcher's exit code and the collector's summary, if it wrote one
-    at the normal end of the run (not when interrupted or when the vehicle failed).  :func:`launch` adds
+    """How a launched run ended: the launcher's exit code and the collector's summary, if it wrote one (at the end
+    of the run, when interrupted, when it stalled past the stall limit; not when the vehicle failed).  :func:`launch` adds
     what the benchmark measures: each role's usage (its last process) and when the launcher heard that
     the collector had checked each step (``time.monotonic()``)."""
 
@@ -161,7 +187,8 @@ def run_start_timeout(roles: int) -> float:
 def plan_run(opts: LaunchOptions) -> RunPlan:
     """Load the topology and check the options against it and each other (LaunchError naming the option;
     ConfigError for a bad topology)."""
-    sc = load_topology(opts.topology, opts.case, opts.steps, opts.estimator)
+    # a recorded drive's steps are decided here, from the log, and every role is started with them: only the vehicle reads the log
+    sc = with_log_steps(opts.scenario.load())
     for node, _ in (*opts.kill, *opts.rejoin):
         if sc.node(node).estimator != SDP:
             raise LaunchError(f"--kill/--rejoin {node}@…: node {node} runs {sc.node(node).estimator!r}, which cannot rejoin (only the SDP can)")
@@ -176,6 +203,8 @@ def plan_run(opts: LaunchOptions) -> RunPlan:
     if opts.neighbour_timeout >= opts.node_timeout:
         # else a node waiting for a dead neighbour is itself declared dead by the vehicle
         raise LaunchError(f"--neighbour-timeout ({opts.neighbour_timeout:g} s) must be shorter than --node-timeout ({opts.node_timeout:g} s)")
+    if opts.port and not port_free(opts.port):  # before any role starts (the router, or the collector, could not listen)
+        raise LaunchError(f"--port {opts.port}: 127.0.0.1:{opts.port} is taken (another run or program listens there): choose another, or leave --port out")
     if opts.zenoh_config:
         from netsetest.bus.zenoh_bus import BusError, zenoh_config
 
@@ -200,6 +229,18 @@ def free_ports(n: int) -> list[int]:
     for s in socks:
         s.close()
     return ports
+
+
+def port_free(port: int) -> bool:
+    """Whether a listener could bind TCP ``port`` on loopback now (SO_REUSEADDR, as a listener binds: a closed
+    connection's TIME_WAIT does not take the port)."""
+    with socket.socket() as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return False
+    return True
 
 
 class RoleProcess(Protocol):
@@ -237,10 +278,12 @@ class Children:
         self.procs.pop(name).wait()
 
     def stop_all(self, grace: float, keep: Sequence[str] = ()) -> None:
-        """SIGTERM every live child except ``keep``, SIGKILL those still alive after ``grace`` s."""
+        """SIGTERM every live child except ``keep``, SIGKILL those still alive after ``grace`` s.  Each is also
+        continued (SIGCONT): a stopped process acts on nothing else (a collector stopped could not write its summary)."""
         live = [p for n, p in self.procs.items() if p.poll() is None and n not in keep]
         for p in live:
             p.send_signal(signal.SIGTERM)
+            p.send_signal(signal.SIGCONT)
         deadline = time.monotonic() + grace
         for p in live:
             try:
@@ -257,13 +300,13 @@ def fork_server(run_id: str) -> ForkServer:
     return ForkServer([sys.executable, "-m", ROLE_MODULE, "forkserver", "--run-id", run_id], role_env())
 
 
-def router_session(listen: list[str], base_file: str | None, security: dict[str, object] | None, connect: Sequence[str] = ()):
+def router_session(listen: list[str], base_file: str | None, security: dict[str, object] | None, connect: Sequence[str] = (), lease_s: float = STALL_LIMIT_S):
     """Open a Zenoh router session (BusError naming the option: a bad --zenoh-config, or cannot --listen);
-    ``connect``: the run's other routers (a run spanning hosts)."""
+    ``connect``: the run's other routers (a run spanning hosts); ``lease_s``: the run's stall limit."""
     from netsetest.bus.zenoh_bus import BusError, open_session, zenoh_config
 
     try:
-        cfg = zenoh_config("router", listen, connect, base_file=base_file, settings=security)
+        cfg = zenoh_config("router", listen, connect, base_file=base_file, settings=security, lease_s=lease_s)
     except BusError as exc:
         raise BusError(f"--zenoh-config: {exc}") from None
     try:
@@ -287,10 +330,14 @@ class Network:
         router_endpoint: str | None = None,
         credentials: str | None = None,
         router: object | None = None,
+        collector_port: int = 0,
+        stall_limit: float = STALL_LIMIT_S,
     ) -> None:
-        self.names, self.run_id, self.config = names, run_id, config
+        self.names, self.run_id, self.config, self.stall_limit = names, run_id, config, stall_limit
         self.router_endpoint, self.credentials, self.router = router_endpoint, credentials, router
-        self.ports = dict(zip(names, free_ports(len(names))))
+        self.ports = dict(zip(names, [p for p in free_ports(len(names) + 1) if p != collector_port]))  # one spare: none is the fixed port
+        if collector_port:  # run --insecure --port: the endpoint observers are told to connect to
+            self.ports["collector"] = collector_port
 
     @property
     def secured(self) -> bool:
@@ -302,9 +349,9 @@ class Network:
     def zenoh(self, name: str) -> ZenohSpec:
         """How role ``name`` connects."""
         if self.router_endpoint is not None:
-            return ZenohSpec(self.run_id, "client", (), (self.router_endpoint,), self.credentials, self.config)
+            return ZenohSpec(self.run_id, "client", (), (self.router_endpoint,), self.credentials, self.config, self.stall_limit)
         others = tuple(self.endpoint(other) for other in self.names if other != name)
-        return ZenohSpec(self.run_id, "peer", (self.endpoint(name),), others, None, self.config)
+        return ZenohSpec(self.run_id, "peer", (self.endpoint(name),), others, None, self.config, self.stall_limit)
 
     def renew(self, name: str) -> None:
         """A fresh port for a restarted role (its old one may linger in TIME_WAIT)."""
@@ -342,21 +389,21 @@ def role_names(sc: Scenario) -> list[str]:
 
 
 def open_network(plan: RunPlan, run_id: str, tmp: str) -> Network:
-    """Secured: write the run's credentials into ``tmp`` and open its router (BusError naming the option);
-    insecure: pick a port per role."""
+    """Secured: write the run's credentials into ``tmp`` and open its router on ``--port`` (BusError naming the
+    option); insecure: pick a port per role, ``--port`` the collector's."""
     from netsetest.runtime.security import ROUTER, identity, router_settings, write_credentials, write_observer_access
     from netsetest.runtime.security import role_names as certificate_names
 
     o, sc = plan.options, plan.scenario
     names = role_names(sc)
     if o.insecure:
-        return Network(names, run_id, o.zenoh_config)
+        return Network(names, run_id, o.zenoh_config, collector_port=o.port, stall_limit=o.stall_limit)
     creds = str(Path(tmp) / "credentials")
     write_credentials(creds, certificate_names(sc))
-    endpoint = f"tls/127.0.0.1:{free_ports(1)[0]}"
-    router = router_session([endpoint], o.zenoh_config, router_settings(identity(creds, ROUTER), sc, run_id))
+    endpoint = f"tls/127.0.0.1:{o.port or free_ports(1)[0]}"
+    router = router_session([endpoint], o.zenoh_config, router_settings(identity(creds, ROUTER), sc, run_id), lease_s=o.stall_limit)
     write_observer_access(creds, run_id, [endpoint])
-    return Network(names, run_id, o.zenoh_config, endpoint, creds, router)
+    return Network(names, run_id, o.zenoh_config, endpoint, creds, router, stall_limit=o.stall_limit)
 
 
 # ---------------------------------------------------------------- role start
@@ -369,7 +416,12 @@ class RoleStarter:
     def __init__(self, plan: RunPlan, network: Network, children: Children) -> None:
         o = plan.options
         self.plan, self.network, self.children = plan, network, children
-        self.scenario = ScenarioSpec(o.topology, o.case, o.steps, o.estimator)
+        lg = plan.scenario.log
+        self.scenario = (
+            o.scenario
+            if lg is None  # the roles read their paths from the working directory the run was started in
+            else replace(o.scenario, steps=plan.scenario.steps, log=os.path.abspath(lg.path), mapping=os.path.abspath(lg.mapping.path))
+        )
 
     def collector(self) -> CollectorSpec:
         o = self.plan.options
@@ -449,7 +501,8 @@ class Supervisor:
         self.reported: set[str] = set()  # nodes whose exit was logged
 
     def follow(self) -> RunOutcome:
-        """Until the collector exits (its exit code and summary) or the vehicle fails (EXIT_VIOLATION)."""
+        """Until the collector exits (its exit code and summary), the vehicle ends the run for a collector stalled
+        past the stall limit (the collector's summary, which names its stall) or fails (EXIT_VIOLATION)."""
         while True:
             self.sleep(FOLLOW_PERIOD_S)
             self._show_progress()
@@ -457,6 +510,10 @@ class Supervisor:
             if self.children.procs["collector"].poll() is not None:
                 return self._finish()
             veh = self.children.procs["vehicle"].poll()
+            if veh == EXIT_COLLECTOR_STALLED:
+                log("run", "the collector acknowledged nothing for the stall limit; stopping the run and continuing the collector to write its summary")
+                summary = self._wind_down()
+                return RunOutcome(exit_code(summary) if summary is not None else EXIT_VIOLATION, summary)
             if veh not in (None, 0):
                 log("run", f"the vehicle process failed (exit {veh}); stopping the run")
                 return RunOutcome(EXIT_VIOLATION, None)
@@ -513,13 +570,23 @@ class Supervisor:
         return cls(children, Schedule({}, {}), ChannelReader(io.BytesIO(b"")), lambda node, step: None)
 
     def interrupted(self, summary_json: str | None) -> RunOutcome:
-        """Ctrl-C/SIGTERM: stop the vehicle and the nodes, then let the collector write what it has."""
+        """Ctrl-C/SIGTERM: stop the vehicle and the nodes, then let the collector write what it has; its summary (the
+        counts so far, the verdict INTERRUPTED) when it wrote one."""
         log("run", "interrupted: stopping the vehicle and the nodes, then letting the collector write what it has")
-        self.children.stop_all(ROLE_GRACE_S, keep=["collector"])
-        self.children.stop_all(COLLECTOR_GRACE_S)
+        summary = self._wind_down()
         if summary_json and Path(summary_json).exists():
             log("run", f"partial summary written to {summary_json}")
-        return RunOutcome(EXIT_INTERRUPTED, None)
+        return RunOutcome(EXIT_INTERRUPTED, summary)
+
+    def _wind_down(self) -> RunSummary | None:
+        """Stop the vehicle and the nodes, then the collector (it writes its record and summary on SIGTERM); the
+        summary it sent on its channel (None: it wrote none in its grace period, or never started)."""
+        self.children.stop_all(ROLE_GRACE_S, keep=["collector"])
+        self.children.stop_all(COLLECTOR_GRACE_S)
+        self.channel.wait_closed(ROLE_GRACE_S)  # its write end closed with it: every message is in
+        if self.bar is not None:
+            self.bar.close()
+        return self.channel.summary
 
 
 # ---------------------------------------------------------------- the run
@@ -569,6 +636,9 @@ def launch(plan: RunPlan) -> RunOutcome:
                 log("run", f"the run is over; its live view stays at {view.url} until Ctrl-C")
                 with contextlib.suppress(KeyboardInterrupt):
                     signal.pause()
+        except PortTaken as exc:
+            log("run", f"--view-port {o.view_port}: {exc}")
+            outcome = RunOutcome(EXIT_BAD_INPUT, None)
         except ViewError as exc:
             log("run", str(exc))
             outcome = RunOutcome(EXIT_BAD_INPUT, None)

@@ -22,8 +22,8 @@ import zenoh
 from netsetest.bus import keys
 from netsetest.bus.zenoh_bus import BusError, ZenohMode, zenoh_config
 from netsetest.messages import BadMessage, End, Message, NodeInput, NodeState, Truth, decode
-from netsetest.models.sensor import augmented
 from netsetest.roles.fdi import classify
+from netsetest.roles.judge import Containment, Judge
 from netsetest.runtime.security import ObserverAccess, client_settings
 
 ANY_RUN = "*"
@@ -140,6 +140,11 @@ class NodeRow:
     fault_upper: float | None = None
     E: float | None = None  # eᵀP⁻¹e of step E_step, the latest whose truth is known (None: none seen)
     E_step: int | None = None
+    contained: bool | None = None  # the published set of step E_step held the truth (the collector's rule: Judge.containment)
+    certain_miss: bool = False  # ... and if not, it certainly missed it (a point truth; a recorded drive's box: disjoint)
+    judged: int = 0  # node-steps heard with their truth
+    missed: int = 0  # of them, those whose published set certainly missed the truth
+    undecided: int = 0  # of them, neither held nor missed (a recorded drive's reference box overlaps the set: docs/your-log.md)
     rho: float | None = None
     lost: int = 0  # in-neighbour messages the loss model dropped on the way to this node (NodeInput.lost_from)
     dropped: int = 0  # messages this node has dropped as invalid (its own counter)
@@ -161,7 +166,7 @@ class LiveTable:
     truth: dict[int, Truth] = field(default_factory=dict)
     pending: dict[int, dict[int, NodeState]] = field(default_factory=dict)  # node → step → state
     ended: End | None = None
-    judged: list[tuple[int, int, float, float]] | None = None  # a list: every node-step judged, (node, step, E, ρ), for its reader to take
+    judged: list[tuple[int, int, Containment]] | None = None  # a list: every node-step judged, (node, step, containment), for its reader to take
 
     def update(self, msg: Message | None) -> None:
         if isinstance(msg, NodeState):
@@ -198,11 +203,14 @@ class LiveTable:
             return
         del self.pending[node][step]
         row = self.rows[node]
-        E = st.published.E(augmented(tr.x, tr.faults[str(node)]))
+        c = Judge.containment(node, st, tr)  # the collector's rule: the ellipsoid ∩ the region ∩ the fault range (or the set estimator's set)
+        row.judged += 1
+        row.missed += c.missed
+        row.undecided += not c.contained and not c.missed
         if row.E_step is None or step >= row.E_step:  # the latest step whose truth is known
-            row.E, row.E_step = E, step
+            row.E, row.E_step, row.contained, row.certain_miss = c.E, step, c.contained, c.missed
         if self.judged is not None:
-            self.judged.append((node, step, E, st.published.rho))
+            self.judged.append((node, step, c))
 
     @property
     def complete(self) -> bool:

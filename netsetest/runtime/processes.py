@@ -31,10 +31,10 @@ from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import Scenario
 from netsetest.messages import Message, Ready
-from netsetest.profile import PROFILE
+from netsetest.profile import PROFILE, observe_bus, observe_node
 from netsetest.records.meta import RunMeta
 from netsetest.roles.node import Node
-from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_VIOLATION, exit_code, log, record_sink, write_summary
+from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_COLLECTOR_STALLED, EXIT_VIOLATION, exit_code, log, record_sink, write_summary
 from netsetest.runtime.rolespec import CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
 from netsetest.runtime.timeouts import READING_POLL, READING_WAIT
 
@@ -50,6 +50,10 @@ EXIT_STOPPED = 128 + signal.SIGTERM  # a role stopped by SIGTERM/SIGINT
 REALTIME_CLOSE_BATCH = 10  # real time: steps the collector closes between two looks at its bus (a few ms each)
 REALTIME_DRAIN_PUMPS = 50  # real time: pumps that empty the collector's bus before it judges (a flood cannot hold it there)
 CRASH_FLUSH_S = 0.2  # --crash-after: time for the last state to leave before SIGKILL
+STALL_S = 1.0  # a turn of the collector's loop this late (it pumps every 0.05 s) is a stall: the process did not run
+STALL_LOG_S = 10.0  # a stall this long is logged
+LEASE_RISK = 0.75  # a process silent this part of the lease may have lost its session: Zenoh sends a keep-alive only
+# every quarter of it when nothing else goes out, so the router may have heard nothing for up to a quarter more
 
 
 # The environment of every role process, set by the launchers (``netsetest run``, the benchmark); a
@@ -78,6 +82,62 @@ def install_signal_handlers() -> None:
 
     signal.signal(signal.SIGTERM, handler)
     signal.signal(signal.SIGINT, handler)
+
+
+class StopRequests:
+    """SIGTERM/SIGINT noted, not raised, while this context is open (the handlers before are restored after): for
+    a loop that must stop only where it is safe.  The collector's: an exception raised by the handler in the middle
+    of a step it was writing (between two node-states, or between a line's number and the line) left the step
+    half-written, and closing the run then wrote it again: a Ctrl-C'd record was damaged 1 time in 8 (issue 41)."""
+
+    def __init__(self) -> None:
+        self.signal: str | None = None  # the last signal's name (None: none came)
+        self._before: dict[int, object] = {}
+
+    def _note(self, signum: int, frame: object) -> None:
+        self.signal = signal.Signals(signum).name
+
+    def __enter__(self) -> StopRequests:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            self._before[sig] = signal.signal(sig, self._note)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for sig, handler in self._before.items():
+            signal.signal(sig, handler)  # type: ignore[arg-type]  # what signal.signal returned: a handler or a constant
+
+
+class StallWatch:
+    """The collector's own stalls: turns of its loop that came :data:`STALL_S` or more late (SIGSTOP, a swapping
+    machine).  A stall is not the vehicle's silence (:meth:`turn` returns it, to be left out of the idle time); one
+    of ``lease`` s or more lost the collector's session (the router closed it, with what was in flight to it), and
+    one of :data:`LEASE_RISK` of it may have (:attr:`session_at_risk`, until a message comes)."""
+
+    def __init__(self, lease: float, now: float) -> None:
+        self.lease, self.last = lease, now
+        self.longest = 0.0  # the longest stall of the run [s]
+        self.step: int | None = None  # the step checked before it
+        self.since_message = 0.0  # the longest stall since a message last came
+
+    def turn(self, now: float, step: int) -> float:
+        """A turn of the loop at ``now``, ``step`` checked: the stall before it [s] (0.0: none)."""
+        gap, self.last = now - self.last, now
+        if gap < STALL_S:
+            return 0.0
+        if gap > self.longest:
+            self.longest, self.step = gap, step
+        self.since_message = max(self.since_message, gap)
+        if gap >= STALL_LOG_S:
+            log("collector", f"stalled {gap:.0f} s after step {step} (the process was stopped, or the machine swapping)")
+        return gap
+
+    def heard(self) -> None:
+        """A message came: whatever stalled before, the session works."""
+        self.since_message = 0.0
+
+    @property
+    def session_at_risk(self) -> bool:
+        return self.since_message >= LEASE_RISK * self.lease
 
 
 def release_free_memory() -> None:
@@ -154,7 +214,9 @@ def node_peers(sc: Scenario, node_id: int) -> set[tuple[str, int | None]]:
 
 def run_vehicle(spec: VehicleSpec, sc: Scenario, bus: Bus) -> int:
     """The vehicle's loop.  ``spec.await_rejoin``: (node, step) pairs; in lockstep, step+1 waits (at most
-    ``node_timeout``) for the node.  ``spec.quiet``: no line on success (errors are still logged)."""
+    ``node_timeout``) for the node.  ``spec.quiet``: no line on success (errors are still logged).  Lockstep waits
+    for the collector's acknowledgments at most ``spec.zenoh.stall_limit`` without one: past it the collector is
+    stopped or has lost its session, and the vehicle ends the run (:data:`EXIT_COLLECTOR_STALLED`)."""
     from netsetest.roles.flow import ack_window
     from netsetest.roles.vehicle import Vehicle
 
@@ -190,8 +252,8 @@ def run_vehicle(spec: VehicleSpec, sc: Scenario, bus: Bus) -> int:
             bus.pump(timeout=min(left, 0.05))
     vehicle.advance()
     t_step = next_tick = time.monotonic()
-    held_since: float | None = None  # lockstep: since when the collector's window holds the next step
-    held_logged = False
+    held_since: float | None = None  # lockstep: since when the collector's window holds the next step, with no acknowledgment
+    held_acked, held_logged = -1, False
     while not vehicle.done:
         now = time.monotonic()
         if realtime:
@@ -205,11 +267,15 @@ def run_vehicle(spec: VehicleSpec, sc: Scenario, bus: Bus) -> int:
                 vehicle.advance()
         elif vehicle.ready_to_advance() and holds.holding(vehicle, barrier, dead_at, now - t_step, node_timeout):
             pass
-        elif vehicle.ready_to_advance() and not vehicle.window_open():
-            held_since = now if held_since is None else held_since  # the collector is behind: hold, blame no node
+        elif vehicle.ready_to_advance() and not vehicle.window_open():  # the collector is behind: hold, blame no node
+            if held_since is None or vehicle.acked != held_acked:  # (still acknowledging: alive, only behind)
+                held_since, held_acked = now, vehicle.acked
             if now - held_since > node_timeout and not held_logged:
                 log("vehicle", f"step {vehicle.k + 1}: waiting for the collector (it acknowledged step {vehicle.acked})")
                 held_logged = True
+            if now - held_since > spec.zenoh.stall_limit:
+                log("vehicle", f"step {vehicle.k + 1}: the collector acknowledged nothing for {spec.zenoh.stall_limit:g} s (--stall-limit): ending the run")
+                return EXIT_COLLECTOR_STALLED
             t_step = now  # the nodes' time starts when the step is published
         elif vehicle.ready_to_advance():
             if now - t_step >= pace:  # lockstep paced for watching
@@ -271,10 +337,13 @@ def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
     # a neighbour and waits for the readings within a budget: both lazy, so the N readings of a step under
     # max_faulty cost the node a few polls, not N callbacks and wake-ups
     # the step's part its readings do not enter is solved while they cross the network (the same result)
+    prof = PROFILE  # NETSETEST_PROFILE: the bus and the node observed (netsetest/profile.py); else nothing on their path
+    if prof is not None:
+        observe_bus(bus, prof)  # (before the node subscribes)
     node = Node(sc, node_id, bus, run_id, spec.variant, rejoin=spec.rejoin, objective=spec.objective, lazy=realtime, early=True)
+    profiled = observe_node(node, prof) if prof is not None else None
     role = f"node {node_id}"
     barrier = Barrier(bus, run_id, Ready(role="node", node=node_id), node_peers(sc, node_id), lazy=True)
-    first_profiled = 0
     reading_wait = (READING_WAIT * sc.tau_s, READING_POLL * sc.tau_s) if realtime else None  # budget, poll period
     barrier.tick(time.monotonic())  # announce ourselves first: the others start meanwhile
     node.warm_up()  # before we can report seen_all, so before the run can start
@@ -291,15 +360,12 @@ def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
                 node.give_up = True
             if not node.try_step(now):
                 break
-            if PROFILE is not None and node.k >= 1 and not PROFILE.started:
-                PROFILE.start_window()  # from the first solved step: start-up and step 0 left out
-                first_profiled = node.k
             if node.k == crash_after:
                 time.sleep(CRASH_FLUSH_S)  # the state of step k leaves before the crash
                 log(role, f"killing myself (SIGKILL) after step {node.k} as asked")
                 os.kill(os.getpid(), signal.SIGKILL)
-    if PROFILE is not None:
-        PROFILE.write(f"node-{node_id}", node.k - first_profiled if PROFILE.started else 0)
+    if prof is not None and profiled is not None:
+        prof.write(f"node-{node_id}", profiled())
     return 0
 
 
@@ -321,7 +387,14 @@ def _node_wait(node: Node, ready_due: float | None, neighbour_timeout: float, re
 
 
 def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: RunMeta, on_summary: Callable[[RunSummary], None] | None = None) -> int:
-    """The collector's loop: judge until End (or the vehicle is gone, or SIGTERM), then write the summary."""
+    """The collector's loop: judge until End (or the vehicle is gone, or SIGTERM, or it stalled past its session's
+    lease, ``spec.zenoh.stall_limit``), then write the summary (the steps checked before a signal or a stall)."""
+    with StopRequests() as stop:  # from here a signal is acted on between two turns of the loop, never mid-step
+        return _collect(spec, sc, bus, meta, on_summary, stop)
+
+
+def _collect(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: RunMeta, on_summary: Callable[[RunSummary], None] | None, stop: StopRequests) -> int:
+    """:func:`run_collector`'s loop, ``stop`` the signals it was sent."""
     from netsetest.roles.collector import Collector
 
     from netsetest.runtime.channel import ChannelWriter, RunFinished
@@ -335,41 +408,50 @@ def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: RunMeta, on
     barrier = Barrier(bus, run_id, Ready(role="collector"), _all_roles(sc) - {("collector", None)})
     channel = ChannelWriter(spec.channel_fd) if spec.channel_fd is not None else None  # to the launcher: progress, summary
     last_msg = time.monotonic()
+    stalls = StallWatch(spec.zenoh.stall_limit, last_msg)
     stopped: StopCause | None = None
-    try:
-        while True:
-            now = time.monotonic()
-            if not collector.started:
-                barrier.tick(now)
-            if bus.pump(timeout=0.05):
-                last_msg = time.monotonic()
-                for _ in range(REALTIME_DRAIN_PUMPS if realtime else 0):  # real time: all off the bus first (its inbox is bounded), then judge
-                    if not bus.pump(timeout=0.0):
-                        break
-            if realtime:
-                collector.close_ready(REALTIME_CLOSE_BATCH)
+    while True:
+        now = time.monotonic()
+        gap = stalls.turn(now, collector.progress)
+        last_msg += gap  # our own stall is not the vehicle's silence
+        if gap >= stalls.lease:  # the router closed our session, and what was in flight to us is lost: the run cannot go on
+            log("collector", f"stalled {gap:.0f} s, past the stall limit ({stalls.lease:g} s, Zenoh's lease): ending the run")
+            stopped = "collector stalled"
+            break
+        if stop.signal is not None:  # (the parent's stop; after a stall that may have cost our session, the stall is the cause)
+            stopped = "collector stalled" if stalls.session_at_risk else "interrupted"
+            log("collector", f"stopped by {stop.signal}; writing what was checked")
+            break
+        if not collector.started:
+            barrier.tick(now)
+        if bus.pump(timeout=0.05):
+            last_msg = time.monotonic()
+            stalls.heard()
+            for _ in range(REALTIME_DRAIN_PUMPS if realtime else 0):  # real time: all off the bus first (its inbox is bounded), then judge
+                if not bus.pump(timeout=0.0):
+                    break
+        if realtime:
+            collector.close_ready(REALTIME_CLOSE_BATCH)
+        if channel is not None:
+            channel.step(collector.progress)
+        if collector.ended is not None:
+            # End overtakes the last states on other paths: wait until they are in (or a grace period)
+            t_end = time.monotonic()
+            while collector.progress < collector.ended.steps and time.monotonic() - t_end < 2.0:
+                bus.pump(timeout=0.05)
+                if realtime:
+                    collector.close_ready()
             if channel is not None:
                 channel.step(collector.progress)
-            if collector.ended is not None:
-                # End overtakes the last states on other paths: wait until they are in (or a grace period)
-                t_end = time.monotonic()
-                while collector.progress < collector.ended.steps and time.monotonic() - t_end < 2.0:
-                    bus.pump(timeout=0.05)
-                    if realtime:
-                        collector.close_ready()
-                if channel is not None:
-                    channel.step(collector.progress)
-                break
-            if now - last_msg > idle_timeout:
-                log("collector", f"no message for {idle_timeout:g} s: the vehicle is gone; writing what was received")
-                stopped = "vehicle gone"
-                break
-    except Stop as why:  # the parent was interrupted: write what was received, then leave
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            signal.signal(sig, signal.SIG_IGN)  # a second signal must not cut the writing short
-        log("collector", f"stopped by {why}; writing what was received")
-        stopped = "interrupted"
-    summary = collector.finish(meta, stopped=stopped)
+            break
+        if now - last_msg > idle_timeout:
+            stopped = "collector stalled" if stalls.session_at_risk else "vehicle gone"  # (nothing came since: it was lost)
+            why = "our session was lost while we stalled" if stopped == "collector stalled" else "the vehicle is gone"
+            log("collector", f"no message for {idle_timeout:g} s: {why}; writing what was received")
+            break
+    # stopped by a signal or our stall: the steps checked so far (the later ones are cut short, not a node's silence)
+    through = collector.progress if stopped in ("interrupted", "collector stalled") else None
+    summary = collector.finish(meta, stopped=stopped, through=through, stall=(stalls.longest, stalls.step))
     write_summary(summary, summary_json)
     if channel is not None:
         channel.send(RunFinished(summary))
@@ -389,7 +471,7 @@ def role_bus(who: str, zenoh: ZenohSpec) -> ZenohBus:
     from netsetest.runtime.security import client_settings, identity
 
     settings = client_settings(identity(zenoh.credentials, who)) if zenoh.credentials else None
-    return ZenohBus(zenoh.mode, list(zenoh.listen), list(zenoh.connect), base_file=zenoh.config, settings=settings)
+    return ZenohBus(zenoh.mode, list(zenoh.listen), list(zenoh.connect), base_file=zenoh.config, settings=settings, lease_s=zenoh.stall_limit)
 
 
 def serve_role(name: str, who: str, scenario: ScenarioSpec, zenoh: ZenohSpec, body: Callable[[Scenario, Bus], int]) -> int:
@@ -407,12 +489,17 @@ def serve_role(name: str, who: str, scenario: ScenarioSpec, zenoh: ZenohSpec, bo
     except (BusError, CredentialsError) as exc:
         log(name, str(exc))
         return EXIT_BAD_INPUT
+    except Stop as why:  # Ctrl-C while the run is still starting: no traceback (the process' exit drops a half-open session)
+        log(name, f"stopped by {why} while opening its session")
+        return EXIT_STOPPED
     try:
         return body(sc, bus)
     except Stop as why:
         log(name, f"stopped by {why}")
         return EXIT_STOPPED
     finally:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, signal.SIG_IGN)  # leaving: a late signal must not cut the session's close short
         bus.close()
 
 

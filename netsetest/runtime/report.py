@@ -74,7 +74,8 @@ def outcome(summary: RunSummary, strict: bool = False) -> Outcome:
     """The verdict's first word and the exit code, decided together (docs/summary.md):
 
     - ``FAIL`` (exit 1): a miss where every assumption held; ``FAIL (vehicle gone)`` (exit 1): the
-      collector stopped waiting for the vehicle before its End;
+      collector stopped waiting for the vehicle before its End; ``FAIL (collector stalled)`` (exit 1): the
+      collector did not run for longer than its session's lease (the run's stall limit), so the run ended there;
     - ``INTERRUPTED`` (exit 130): the run was stopped by Ctrl-C or SIGTERM;
     - ``FAIL (--strict)`` (exit 1, ``strict`` only: ``run --strict``, for CI users who want a run to fail
       there): a set missed the truth outside the guarantee, where the run would otherwise pass or lose a node;
@@ -94,7 +95,8 @@ def outcome(summary: RunSummary, strict: bool = False) -> Outcome:
     if summary.nodes_missing:
         return Outcome("NODE LOST", EXIT_NODE_LOST)
     expected = (summary.steps_completed + 1) * len(summary.nodes)
-    full = summary.node_steps_covered == summary.node_steps_evaluated == expected
+    # an undecided node-step (a recorded drive's reference cannot tell) is never counted as contained
+    full = summary.node_steps_covered == summary.node_steps_evaluated == expected and not summary.node_steps_undecided
     return Outcome("PASS" if full else "PASS (partial coverage)", EXIT_OK)
 
 
@@ -207,9 +209,10 @@ def format_table(summary: RunSummary, strict: bool = False) -> str:
     # the last line: the run, its security mode (Zenoh) and the verdict
     security = f" (security: {summary.security})" if summary.security else ""
     seed = f", seed {summary.seed}" if summary.seed is not None else ""
+    world = f"log {summary.drive_log}" if summary.drive_log is not None else f"signals {summary.signals}"  # a log draws no signals
     out.append(
-        f"{outcome(summary, strict).word}: {summary.mode or ''} run{security}, case {summary.case}, signals {summary.signals}, "
-        f"variant {summary.variant}{seed}, steps 0–{summary.steps_completed}: {verdict(summary)}."
+        f"{outcome(summary, strict).word}: {summary.mode or ''} run{security}, case {summary.case}, {world}, "
+        f"variant {summary.variant}{seed if summary.drive_log is None else ''}, steps 0–{summary.steps_completed}: {verdict(summary)}."
     )
     return "\n".join(out)
 
@@ -243,15 +246,42 @@ def fdi_table(summary: RunSummary) -> list[str]:
 MAX_ORIGINS = 3  # origins of "inherited" named in the verdict line; the summary JSON has them all
 
 
+def own_data(summary: RunSummary) -> str:
+    """What a recorded drive's nodes proved alone where the reference gave no truth (roles/judge.py Judge.inconsistent)."""
+    n = summary.node_steps_inconsistent
+    bad = ", ".join(f"node {r.id}: {r.steps_inconsistent}" for r in summary.nodes if r.steps_inconsistent)
+    return (
+        f"a node's own reading contradicted its declared bounds and its own set of the step before on {n} node-step(s) ({bad}: an assumption "
+        "broke there, or an earlier set missed the truth)"
+        if n
+        else "no node's own reading contradicted its declared bounds"
+    )
+
+
 def verdict(summary: RunSummary) -> str:
     """The result in words, never more than was checked: how many node-steps the guarantee covered."""
     evaluated, contained = summary.node_steps_evaluated, summary.node_steps_contained
     covered, reported = summary.node_steps_covered, summary.node_steps_reported
-    if summary.violations_total:
-        head = f"CONTAINMENT VIOLATED {summary.violations_total} time(s) where the assumptions held; contained on {contained} of {evaluated} node-steps"
+    acc = summary.reference_accuracy
+    if summary.drive_log is not None and acc is None:  # a recorded drive without a reference: nothing can be judged against a truth
+        return (
+            f"no reference in the log: none of {summary.node_steps_reported} node-steps judged (the truth is unknown); {own_data(summary)}; "
+            f"violations {summary.violations_total}"
+            + (f"; {summary.node_steps_no_reading} node-step(s) without a reading" if summary.node_steps_no_reading else "")
+        )
+    if acc is not None:  # a recorded drive: the truth is a box, and three counts say what the reference proves
+        counts = (
+            f"contained on {contained}, missed on {summary.node_steps_missed}, undecided on {summary.node_steps_undecided} of {evaluated} "
+            f"node-steps (a recorded drive; reference ± {acc[0]:.3g} rad, ± {acc[1]:.3g} rad/s)"
+        )
     else:
-        head = f"contained on {contained} of {evaluated} node-steps"
-    text = f"{head}; the guarantee applied on {covered}"
+        counts = f"contained on {contained} of {evaluated} node-steps"
+    if summary.violations_total:
+        head = f"CONTAINMENT VIOLATED {summary.violations_total} time(s) where the assumptions held; {counts}"
+    else:
+        head = counts
+    applied = "no assumption proven broken on" if acc is not None else "the guarantee applied on"
+    text = f"{head}; {applied} {covered}"
     causes = summary.node_steps_not_covered
     if causes:
         text += f" (not covered {evaluated - covered}: " + ", ".join(f"{c} {n}" for c, n in causes.items()) + ")"
@@ -260,7 +290,12 @@ def verdict(summary: RunSummary) -> str:
         more = len(summary.inherited_from) - MAX_ORIGINS
         text += "; inherited from " + ", ".join(shown) + (f" and {more} more (see the summary)" if more > 0 else "")
     if reported > evaluated:
-        text += f"; {reported - evaluated} node-step(s) not judged (truth unknown or copies contested)"
+        why = "no reference, truth unknown or copies contested" if acc is not None else "truth unknown or copies contested"
+        text += f"; {reported - evaluated} node-step(s) not judged ({why})"
+    if summary.node_steps_no_reading:
+        text += f"; {summary.node_steps_no_reading} node-step(s) without a reading (gaps in the log: nothing published, nothing covered)"
+    if summary.node_steps_inconsistent:
+        text += f"; at steps without a reference, {own_data(summary)}"
     if summary.node_steps_rejected:
         text += f"; {summary.node_steps_rejected} node-step(s) rejected (no copy matched the truth)"
     if summary.steps_overloaded:
@@ -275,6 +310,14 @@ def verdict(summary: RunSummary) -> str:
         text += "; lost for good: " + ", ".join(f"node {i} from step {'-' if k is None else k}" for i, k in missing.items())
     if summary.stopped == "vehicle gone":
         text += "; the vehicle's End never came (no message for the collector's idle timeout)"
+    elif summary.stopped == "interrupted":
+        text += f"; interrupted (Ctrl-C or SIGTERM): the counts are of steps 0–{summary.steps_completed} of the run's {summary.steps}"
+    elif summary.stopped == "collector stalled":
+        text += (
+            f"; the collector stalled {summary.collector_stall_s:.0f} s after step {summary.collector_stall_step} (its process did not run: "
+            "stopped, or the machine swapping), long enough to lose its Zenoh session (run --stall-limit) and the messages in flight "
+            "to it: the run ended there, no node blamed"
+        )
     return text + uncovered_misses(summary)
 
 
@@ -295,6 +338,8 @@ def write_summary(summary: RunSummary, summary_json: str | None) -> None:
 
 EXIT_OK, EXIT_VIOLATION, EXIT_BAD_INPUT, EXIT_NODE_LOST = 0, 1, 2, 3
 EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM reached the command (128 + SIGINT, as shells report it)
+EXIT_COLLECTOR_STALLED = 4  # the vehicle process's, never the run's: it ended the run, the collector having acknowledged
+# nothing for the stall limit (the launcher then has the collector write its summary, whose verdict names the stall)
 
 
 def exit_code(summary: RunSummary, strict: bool = False) -> int:

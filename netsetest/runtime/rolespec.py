@@ -27,7 +27,8 @@ from typing import TYPE_CHECKING, ClassVar, Literal, TypeVar
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.runtime import argtypes
-from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, START_TIMEOUT_S
+from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, STALL_LIMIT_S, START_TIMEOUT_S
+from netsetest.scenarios import topology_help
 
 if TYPE_CHECKING:  # annotations only: a role process loads the estimator and the models when it needs them
     from netsetest.config.schema import Case, Scenario
@@ -192,24 +193,62 @@ def _argv(spec: object) -> tuple[list[str], list[str]]:
 # ---------------------------------------------------------------- the parts every role shares
 
 
+LOG_HELP = "a recorded drive as the world: a ROS 2 bag, an MDF4 file, a Parquet or CSV table (docs/your-log.md; default: the topology's)"
+MAP_HELP = "the log's mapping (default: the topology's [vehicle] mapping, else DRIVE's name with .map.toml)"
 ESTIMATOR_HELP = f"every node's estimator, overriding the topology's per-node 'estimator' ({', '.join(NODE_ESTIMATOR_NAMES)}; default: the file's, else sdp)"
-ZENOH_CONFIG_HELP = "a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting and security on top (default: none)"
+MANOEUVRE_HELP = (
+    "override the topology's [vehicle] manoeuvre (paper, step-steer, sine-dwell, double-lane-change, lap); NAME@AMP also its "
+    "steering amplitude [rad] ([steering] high) (default: the file's)"
+)
+SPEED_HELP = "override the speed reference's mean, [speed] mean_kmh [km/h] (default: the file's)"
+FAULT_SCALE_HELP = "every faulty node's fault scaled to S × its declared [fault_bound] size at its peak, its shape kept (default: the file's faults)"
+ZENOH_CONFIG_HELP = "a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting, security and the lease on top (default: none)"
+STALL_LIMIT_HELP = (
+    "how long [s] a role may not run (stopped, a swapping machine) and the run go on: every session's Zenoh lease, and the "
+    "longest the vehicle waits for the collector; a collector stalled longer ends the run with a verdict naming its stall "
+    f"(default: {STALL_LIMIT_S:g})"
+)
 
 
 @dataclass(frozen=True)
 class ScenarioSpec:
     """Which run: the topology and what the command line overrides of it."""
 
-    topology: str = _opt(MISSING, None, "topology file (e.g. topologies/paper6.toml) or bundled name (paper6, paper6_lossy)")
+    topology: str = _opt(MISSING, None, topology_help())
     case: Case | None = _opt(None, "--case", "override the topology's case (default: the file's)", choices=("nsnim", "saim"))
     steps: int | None = _opt(None, "--steps", "override the number of steps of τs each (default: the file's)", argtypes.positive_int, metavar="N")
     estimator: str | None = _opt(None, "--estimator", ESTIMATOR_HELP, choices=NODE_ESTIMATOR_NAMES, metavar="NAME")
+    log: str | None = _opt(None, "--log", LOG_HELP, metavar="DRIVE")
+    mapping: str | None = _opt(None, "--map", MAP_HELP, metavar="MAP.toml")
+    manoeuvre: str | None = _opt(None, "--manoeuvre", MANOEUVRE_HELP, argtypes.drive, metavar="NAME[@AMP]")
+    speed: float | None = _opt(None, "--speed", SPEED_HELP, argtypes.speed_kmh, metavar="KMH")
+    fault_scale: float | None = _opt(None, "--fault-scale", FAULT_SCALE_HELP, argtypes.fault_scale, metavar="S")
 
     def load(self) -> Scenario:
-        """The scenario (ConfigError naming what is wrong with the file or an override)."""
+        """The scenario (ConfigError naming what is wrong with the file or an override).  A recorded drive is named
+        and its mapping read, but the log itself is read only by the vehicle (logs/drive.py): a role of a run
+        from a log is started with its steps (``run`` decides them once, from the log)."""
         from netsetest.config.schema import load_topology
+        from netsetest.models.manoeuvres import DriveSpec
 
-        return load_topology(self.topology, self.case, self.steps, self.estimator)
+        drive = DriveSpec.parse(self.manoeuvre) if self.manoeuvre is not None else None
+        return load_topology(
+            self.topology,
+            self.case,
+            self.steps,
+            self.estimator,
+            manoeuvre=drive.manoeuvre if drive else None,
+            steer_high=drive.amplitude if drive else None,
+            speed_kmh=self.speed,
+            fault_scale=self.fault_scale,
+            log=self.log,
+            mapping=self.mapping,
+        )
+
+    def to_argv(self) -> list[str]:
+        """The topology and the overrides given, as ``run`` and every role take them (``[TOPOLOGY, --case, ...]``)."""
+        pos, opts = _argv(self)
+        return [*pos, *opts]
 
 
 def _resolve_run_id(run_id: str | None) -> str:
@@ -239,6 +278,7 @@ class ZenohSpec:
         metavar="DIR",
     )
     config: str | None = _opt(None, "--zenoh-config", ZENOH_CONFIG_HELP, argtypes.readable_file, metavar="FILE")
+    stall_limit: float = _opt(STALL_LIMIT_S, "--stall-limit", STALL_LIMIT_HELP, argtypes.stall_limit, metavar="S")
 
     @property
     def resolved_run_id(self) -> str:
@@ -338,7 +378,7 @@ class RouterSpec(RoleSpec):
     ROLE: ClassVar[str] = "router"
     HELP: ClassVar[str] = "a Zenoh router in Python (for client-mode roles on several hosts)"
 
-    topology: str | None = _opt(None, None, "topology whose access-control rules the router enforces (with --credentials)", optional=True)
+    topology: str | None = _opt(None, None, topology_help("the topology whose access-control rules the router enforces (with --credentials)"), optional=True)
     credentials: str | None = _opt(
         None, "--credentials", "mTLS with DIR/router.pem and the run's access-control rules (default: none, open router)", metavar="DIR"
     )
@@ -360,6 +400,7 @@ class RouterSpec(RoleSpec):
     )
     run_id: str | None = _opt(None, "--run-id", f"the run whose keys the access control grants (default: ${RUN_ID_ENV} or '{DEFAULT_RUN_ID}')", argtypes.run_id)
     zenoh_config: str | None = _opt(None, "--zenoh-config", ZENOH_CONFIG_HELP, argtypes.readable_file, metavar="FILE")
+    stall_limit: float = _opt(STALL_LIMIT_S, "--stall-limit", "the Zenoh lease it announces: the run's --stall-limit [s]", argtypes.stall_limit, metavar="S")
 
     @property
     def resolved_run_id(self) -> str:

@@ -1,5 +1,6 @@
 """The live view (``netsetest view``, ``netsetest run … --view``; extra ``view``): what an observer hears,
-streamed to Rerun, whose web viewer the installed package serves on this machine (no internet needed).
+as a Rerun stream, shown by the web viewer of the installed package, both served from this machine to whoever
+holds the address the view prints (:mod:`netsetest.runtime.view_server`; no internet needed).
 
 It is one more subscribe-only session, like ``watch`` (:mod:`netsetest.runtime.live`): the nodes do no
 work for it.  :class:`LiveView` turns each decoded message into Rerun entities, timed by the step
@@ -12,8 +13,9 @@ work for it.  :class:`LiveView` turns each decoded message into Rerun entities, 
 ``graph``                                 the topology: an edge j → i for every message node i used, each
                                           node coloured by its step (contained, missed, late, fault detected);
                                           drawn once a step, with its truth (and at the end)
-``verdict``                               E ≤ ρ so far over the node-steps whose truth was heard, as ``watch``
-                                          computes it (the collector's verdict is the run's word)
+``verdict``                               how many node-steps' published sets held the truth so far, of those whose
+                                          truth was heard, by the collector's rule (roles/judge.py, as ``watch``
+                                          shows it; the collector's verdict, with its coverage, is the run's word)
 ``plant/path``, ``plant/e/{beta,r}``, ``plant/mismatch_ok``   with a plant: the car's path (integrated
                                           from r, β and v_x) and its model mismatch e_k with the flag whether
                                           it stayed in its declared bound
@@ -22,10 +24,11 @@ A view that falls behind drops frames: while more than :data:`MAX_BACKLOG` messa
 counted (the verdict stays exact) but not drawn, and the verdict says how many were left out.  The run
 never waits for it.
 
-Each step's truth is flushed to the viewer's server as soon as it is drawn (Rerun's batcher would hold it
-up to 0.2 s).  In a real-time run the view knows when the vehicle published step k (the deadline its inputs
-carry, minus τs), so it measures its own lag (:class:`Lag`): the time step k's truth has left the view for
-the viewer's server minus that, per drawn step; the verdict shows the last one, and with
+Each step goes to the browsers as soon as its truth is drawn (Rerun's batcher would hold it up to 0.2 s): the
+view's ``outlet`` (the server's :meth:`~netsetest.runtime.view_server.ViewerServer.send`; by default a flush of
+the recording stream).  In a real-time run the view knows when the vehicle published step k (the deadline its
+inputs carry, minus τs), so it measures its own lag (:class:`Lag`): the time step k's truth was handed to the
+browsers' connections minus that, per drawn step; the verdict shows the last one, and with
 ``NETSETEST_VIEW_LAG=PATH`` (:data:`LAG_ENV`, the benchmark's) the view writes every one to PATH when it stops.
 """
 
@@ -35,12 +38,9 @@ import json
 import math
 import os
 import select
-import shutil
 import signal
-import socket
 import subprocess
 import sys
-import tempfile
 import time
 from array import array
 from collections.abc import Callable
@@ -52,19 +52,20 @@ import numpy as np
 
 from netsetest.messages import End, Message, NodeInput, NodeState, Truth
 from netsetest.runtime.live import LiveTable
+from netsetest.runtime.view_server import ViewError, check_port, die_with_parent
 
 MAX_TIMELINE = 2**63 - 1  # Rerun's timelines are 64-bit: a sequence number, a duration in ns
 MAX_BACKLOG = 200  # messages waiting: above this the view drops frames (about one step of a 24-node run and its truth ×4)
 ELLIPSE_POINTS = 48  # vertices of a drawn (β, r) ellipse
-SERVER_MEMORY = "256MiB"  # the Rerun server keeps this much of the run for a browser that connects late; older data goes first
 APP_ID = "netsetest"
-FLUSH_TIMEOUT_S = 1.0  # a step's truth not at the viewer's server within this is not waited for (no lag for it)
+FLUSH_TIMEOUT_S = 1.0  # a step's truth not encoded for the browsers within this is not waited for (no lag for it)
 LAG_PENDING_STEPS = 50  # a step's publish time waits this many steps for its truth to be drawn (and back)
 LAG_ENV = "NETSETEST_VIEW_LAG"  # a path: the view writes its lag per step there when it stops (netsetest/bench/view.py)
 BOUND_RGB = (31, 119, 180)
 COLOURS = {  # a node's step in the graph (RGB)
     "contained": (44, 160, 44),
     "missed": (214, 39, 40),
+    "undecided": (188, 189, 34),
     "late": (255, 127, 14),
     "fault detected": (148, 103, 189),
     "no truth yet": (127, 127, 127),
@@ -80,23 +81,24 @@ def ellipse(centre: np.ndarray, shape: np.ndarray, n: int = ELLIPSE_POINTS) -> n
 
 @dataclass
 class Coverage:
-    """Node-steps whose state and truth the view heard, and how many had E ≤ ρ."""
+    """Node-steps whose state and truth the view heard, and how many of their published sets held the truth."""
 
     judged: int = 0
     contained: int = 0
+    missed: int = 0  # certainly (a point truth outside the set; a recorded drive's reference box disjoint from it)
     dropped_frames: int = 0
 
 
 @dataclass
 class Lag:
-    """The view's lag behind a real-time run: per drawn step, when its truth left the view for the viewer's
-    server minus when the vehicle published the step (its inputs' deadline − τs; one machine, one clock).
+    """The view's lag behind a real-time run: per drawn step, when its truth was handed to the browsers'
+    connections minus when the vehicle published the step (its inputs' deadline − τs; one machine, one clock).
     Steps whose truth was dropped (the view behind) or not sent within FLUSH_TIMEOUT_S have none."""
 
     started: dict[int, float] = field(default_factory=dict)  # step → published, until its truth is sent
     sent: dict[int, float] = field(default_factory=dict)  # step → its truth sent, until its publish time is known
     lags_s: array = field(default_factory=lambda: array("d"))  # one per step with both, in the order they completed
-    unsent: int = 0  # truths drawn but not at the server within FLUSH_TIMEOUT_S
+    unsent: int = 0  # truths drawn but not encoded for the browsers within FLUSH_TIMEOUT_S
 
     def started_at(self, step: int, t: float) -> None:
         self.started.setdefault(step, t)
@@ -120,10 +122,13 @@ class Lag:
 
 @dataclass
 class LiveView:
-    """Rerun entities from observed messages (module doc); ``rec`` is a ``rerun.RecordingStream``."""
+    """Rerun entities from observed messages (module doc); ``rec`` is a ``rerun.RecordingStream``; ``outlet(pinned,
+    timeout_s)`` hands what has been logged to the viewer now (``pinned``: the layout and styles, kept for every
+    browser that connects later), RuntimeError if not within ``timeout_s``: by default a flush of ``rec``."""
 
     rec: Any
     tau_s: float | None = None
+    outlet: Callable[[bool, float], None] | None = None
     table: LiveTable = field(default_factory=lambda: LiveTable(judged=[]))
     coverage: Coverage = field(default_factory=Coverage)
     node_colour: dict[int, tuple[int, int, int]] = field(default_factory=dict)
@@ -137,6 +142,19 @@ class LiveView:
 
     def __post_init__(self) -> None:
         self.layout()  # Rerun's first blueprint takes a second or more to encode: here, before the run, not in its first step
+        self._send(pinned=True)  # with the recording's start: every browser needs it
+
+    def _send(self, pinned: bool) -> bool:
+        """What has been logged, to the viewer now; False when it did not get there within FLUSH_TIMEOUT_S."""
+        try:
+            (self.outlet or self._flush)(pinned, FLUSH_TIMEOUT_S)
+        except RuntimeError:  # Rerun's "flush timed out": the view goes on
+            return False
+        return True
+
+    def _flush(self, pinned: bool, timeout_s: float) -> None:
+        """The default outlet: the recording stream's own sink (a file, in the tests) gets everything now."""
+        self.rec.flush(timeout_sec=timeout_s)
 
     def layout(self) -> None:
         """The viewer's layout for the nodes seen so far (sent again when a node appears): the graph, the
@@ -159,7 +177,13 @@ class LiveView:
             rrb.TextDocumentView(origin="verdict", name="verdict"),
             rrb.Spatial2DView(origin="sets", name="(β, r) sets and truth"),
         )
-        self.rec.send_blueprint(rrb.Blueprint(rrb.Horizontal(left, rrb.Tabs(*per_node, *plant), column_shares=[1, 2]), collapse_panels=True))
+        self.rec.send_blueprint(
+            rrb.Blueprint(
+                rrb.Horizontal(left, rrb.Tabs(*per_node, *plant), column_shares=[1, 2]),
+                rrb.TimePanel(state="collapsed", play_state="following"),  # a stream over HTTP would otherwise play from step 0
+                collapse_panels=True,
+            )
+        )
 
     def _styles(self, ids: set[int]) -> None:
         """Once per node: the bounds blue, the truth black (as the report's figures draw them)."""
@@ -181,10 +205,11 @@ class LiveView:
             self._styles(set(self.table.rows))
             self.layout_due = True
         judged = self.table.judged or []
-        for node, step, E, rho in judged:
+        for node, _step, c in judged:  # judged by the collector's rule (LiveTable: Judge.containment)
             self.coverage.judged += 1
-            self.coverage.contained += E <= rho
-            self.node_colour[node] = COLOURS["contained" if E <= rho else "missed"]
+            self.coverage.contained += c.contained
+            self.coverage.missed += c.missed
+            self.node_colour[node] = COLOURS["contained" if c.contained else "missed" if c.missed else "undecided"]
         if judged:
             judged.clear()
         if backlog > MAX_BACKLOG:
@@ -238,6 +263,7 @@ class LiveView:
         if self.layout_due:
             self.layout()
             self.layout_due = False
+            self._send(pinned=True)  # the layout and the new nodes' styles: kept for every browser that connects later
         ids = sorted(self.table.rows)
         self.rec.log(
             "graph",
@@ -265,9 +291,7 @@ class LiveView:
                 self.rec.log("plant/path", rr.LineStrips2D([self.path]))
         self._graph()
         self._verdict(t.step, ended=False)
-        try:  # the step goes to the viewer now, not at the batcher's next tick
-            self.rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
-        except RuntimeError:  # Rerun's "flush timed out": the viewer's server is slow or gone; the view goes on
+        if not self._send(pinned=False):  # the step goes to the viewer now, not at the batcher's next tick
             self.lag.unsent += 1
             return
         self.lag.sent_at(t.step, self.clock())
@@ -278,12 +302,14 @@ class LiveView:
         c = self.coverage
         text = (
             f"## {'run ended after' if ended else 'step'} {step}\n\n"
-            f"E ≤ ρ on **{c.contained} of {c.judged}** node-steps heard with their truth"
-            + (f" — **{c.judged - c.contained} outside**" if c.judged > c.contained else "")
+            f"the published set held the truth on **{c.contained} of {c.judged}** node-steps heard with their truth"
+            + (f" — **{c.missed} missed**" if c.missed else "")
+            + (f", {c.judged - c.contained - c.missed} undecided (the reference's box overlaps the set)" if c.judged > c.contained + c.missed else "")
             + f"\n\nframes dropped (the view was behind): {c.dropped_frames}"
             + (f"; the view's lag behind the run: {self.lag.lags_s[-1]:.2f} s" if self.lag.lags_s else "")
             + "\n\n"
-            "As `watch` computes it; the run's verdict (coverage, assumptions) is the collector's."
+            "Judged by the collector's rule (the ellipsoid ∩ the region ∩ the fault range), as `watch` shows it; "
+            "the run's verdict (coverage, assumptions) is the collector's."
         )
         self.rec.log("verdict", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
 
@@ -293,74 +319,6 @@ def write_lag(view: LiveView) -> None:
     path = os.environ.get(LAG_ENV)
     if path:
         Path(path).write_text(json.dumps({**view.lag.to_dict(), "dropped_frames": view.coverage.dropped_frames}))
-
-
-class ViewError(Exception):
-    """The live view did not start (its viewer, or the view process of ``run --view``)."""
-
-
-LOOPBACK = "127.0.0.1"  # the viewer shows the truth: it listens on this machine only
-SERVER_START_TIMEOUT_S = 60.0
-
-
-@dataclass
-class ViewerServer:
-    """Rerun's server (its ``rerun --serve-web``: the gRPC proxy and the web viewer, both bound to the
-    loopback address) and the recording stream connected to it."""
-
-    proc: subprocess.Popen
-    rec: Any
-    url: str
-    home: str  # its configuration (usage statistics off) and data, removed on close
-
-    def close(self) -> None:
-        self.rec.flush()
-        self.rec.disconnect()
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(VIEW_STOP_S)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        shutil.rmtree(self.home, ignore_errors=True)
-
-
-def serve(web_port: int, grpc_port: int) -> ViewerServer:
-    """Start Rerun's web viewer and its gRPC proxy on this machine (the package's own ``rerun`` binary, bound
-    to the loopback address: the SDK's in-process servers listen on every interface) and connect a
-    recording stream to it."""
-    import rerun as rr
-
-    import rerun_cli
-
-    exe = Path(rerun_cli.__file__).parent / "rerun"  # the binary itself (its Python wrapper would leave it orphaned when stopped)
-    home = tempfile.mkdtemp(prefix="netsetest-view-")  # the viewer's configuration and data: not the user's home
-    env = {**os.environ, "RERUN_APP_ONLY": "true", "XDG_CONFIG_HOME": f"{home}/config", "XDG_DATA_HOME": f"{home}/data"}
-    subprocess.run(
-        [str(exe), "analytics", "disable"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=SERVER_START_TIMEOUT_S, check=False
-    )
-    argv = [str(exe), "--serve-web", "--bind", LOOPBACK, "--port", str(grpc_port), "--web-viewer-port", str(web_port)]
-    proc = subprocess.Popen(
-        [*argv, "--server-memory-limit", SERVER_MEMORY], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, preexec_fn=_die_with_parent
-    )
-    deadline = time.monotonic() + SERVER_START_TIMEOUT_S
-    while not all(_listening(p) for p in (grpc_port, web_port)):
-        if proc.poll() is not None or time.monotonic() > deadline:
-            proc.kill()
-            proc.wait()
-            shutil.rmtree(home, ignore_errors=True)
-            raise ViewError(f"Rerun's viewer did not start on ports {web_port} and {grpc_port} (exit {proc.returncode}): is a port taken?")
-        time.sleep(0.1)
-    uri = f"rerun+http://{LOOPBACK}:{grpc_port}/proxy"
-    rec = rr.RecordingStream(APP_ID)
-    rec.connect_grpc(uri)
-    return ViewerServer(proc, rec, f"http://{LOOPBACK}:{web_port}/?url={uri.replace('+', '%2B')}", home)
-
-
-def _listening(port: int) -> bool:
-    with socket.socket() as s:
-        return s.connect_ex((LOOPBACK, port)) == 0
 
 
 VIEW_START_TIMEOUT_S = 60.0  # the view process imports Rerun and opens its session and servers
@@ -388,9 +346,11 @@ class ViewProcess:
 
 def start_view(observer_args: list[str], tau_s: float, port: int) -> ViewProcess:
     """Start ``netsetest view`` with the run's observer options; return once it subscribes and serves
-    (its first line is the address).  ViewError when it does not start."""
+    (its first line is the address, read on a pipe: the address is the capability to the view, so never on a
+    command line).  PortTaken at once when ``port`` is taken, ViewError when the view does not start."""
+    check_port(port)  # one clear line before any role starts (the view itself would say it on its own stderr)
     argv = [sys.executable, "-m", "netsetest", "view", *observer_args, "--tau-s", repr(tau_s), "--port", str(port)]
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, text=True, preexec_fn=_die_with_parent)
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, text=True, preexec_fn=die_with_parent)
     assert proc.stdout is not None
     ready, _, _ = select.select([proc.stdout], [], [], VIEW_START_TIMEOUT_S)
     line = proc.stdout.readline() if ready else ""
@@ -398,13 +358,3 @@ def start_view(observer_args: list[str], tau_s: float, port: int) -> ViewProcess
         ViewProcess(proc, "").stop()
         raise ViewError(f"the live view did not start (exit {proc.returncode}); run `netsetest view` by hand to see why")
     return ViewProcess(proc, line[line.index("http://") :].strip())
-
-
-def _die_with_parent() -> None:
-    """In the view's process: SIGTERM when the run's parent dies (no orphan serving a finished run)."""
-    import ctypes
-
-    ctypes.CDLL("libc.so.6", use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
-
-
-PR_SET_PDEATHSIG = 1  # prctl(2)

@@ -18,6 +18,11 @@ def bundled_topologies() -> list[str]:
     return sorted(p.stem for p in TOPOLOGY_DIR.glob(f"*{TOPOLOGY_SUFFIX}"))
 
 
+def topology_help(what: str = "the topology") -> str:
+    """The help text of an argument naming a topology: a file, or a bundled one, every name listed (from the files)."""
+    return f"{what}: a file (e.g. topologies/paper6.toml) or the name of a bundled one: {', '.join(bundled_topologies())}"
+
+
 def resolve_topology(arg: str | Path) -> Path:
     """``arg`` itself when it names an existing file, else the bundled topology of that name (``paper6``
     or ``paper6.toml``), else ``arg`` unchanged (the loader then reports the missing file)."""

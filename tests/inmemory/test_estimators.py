@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import json
 from dataclasses import replace
 from functools import cache
@@ -170,6 +171,27 @@ def test_compare_cli_prints_the_rows_and_writes_json(tmp_path: Path, capsys: pyt
     assert "per node, r / β / f width over exact" in printed
     assert md.read_text().count("\n| ") >= 5
     assert len(list((tmp_path / "fig").glob("compare_fault_node*.png"))) == 6
+
+
+def test_compare_says_which_assumptions_each_row_rests_on(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 41 item 15: strip and setprop's fault widths came out narrower than the ``exact`` row's with no word why.
+    Each row says what it rests on (the table, the Markdown, the JSON and the page), and a note under the table says
+    that the exact row is the limit under the SDP's assumptions, which strip rests on more than."""
+    md, page, js = tmp_path / "c.md", tmp_path / "c.html", tmp_path / "c.json"
+    argv = ["compare", PAPER6, "--steps", "12", "--estimators", "sdp,strip,exact", "--markdown", str(md), "--html", str(page), "--json", str(js)]
+    assert main(argv) == 0
+    printed = " ".join(capsys.readouterr().out.split())
+    rows = {r["estimator"]: r for r in json.loads(js.read_text())}
+    base = "prior, noise, disturbance"
+    assert rows["sdp"]["rests_on"] == rows["exact"]["rests_on"] == base and rows["sdp"]["fault_bound_nodes"] == []
+    assert rows["strip"]["rests_on"] == f"{base}, declared fault bound at every node" and rows["strip"]["exact_reference"] == ["all"]
+    table = md.read_text()
+    assert "| rests on |" in table.splitlines()[2]
+    assert "| strip | " in table and table.count(f"| {base}, declared fault bound at every node |") == 1
+    why = "strip rests on a declared fault bound (|f_k+1 − f_k| ≤ δ, |f_k| ≤ F) where the SDP does not"
+    limit = f"The exact row is the limit under the SDP's assumptions ({base})"
+    for text in (table, printed, html.unescape(page.read_text())):
+        assert why in text and limit in text, text[-800:]
 
 
 @pytest.mark.parametrize(

@@ -260,7 +260,7 @@ def test_default_backend_does_not_import_cvxpy():
 
 @pytest.mark.parametrize("case", ["nsnim", "saim"])
 def test_certificate_of_stacked_facts_is_the_certificate(case, saim_steps, nsnim_steps):
-    """``bank`` stacks a step's facts once for its two certificates (FactStack): the same ρ' bit for bit as
+    """A step stacks its facts once for its certificates (FactStack): the same ρ' bit for bit as
     from the list of facts, and still no certificate when a fact or the answer is not finite."""
     sc = load_topology(PAPER6, case, 12)
     steps = saim_steps if case == "saim" else nsnim_steps

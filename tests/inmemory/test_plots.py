@@ -152,3 +152,37 @@ def test_fig7_leaves_out_the_initial_transient_like_fig6(saim_record) -> None:
         assert ax_wide.get_ylim() == (y0, y1), f"node {i}: the initial bounds still set the range"
     plt.close(fig)
     plt.close(fig_wide)
+
+
+@pytest.mark.parametrize(("fig_fn", "comps"), [(plots._fig6, (0, 1)), (plots._fig7, (2,))])
+def test_figs_6_and_7_draw_the_published_set_and_the_papers_ellipsoid_labelled(gap_record, fig_fn, comps) -> None:
+    """Issue 41 item 16: the figures drew the region-cut set while their docstring said x̂ ± √(ρP_kk).  Each SDP node's
+    panel now draws both, labelled: the published set's bounds (the band: Record.bounds, what the guarantee is about)
+    and the paper's ellipsoid's (dotted lines: Record.ellipsoid_bounds), and the region narrows the first somewhere."""
+    fig = fig_fn(gap_record, "x")
+    legend = next(iter([ax.get_legend() for ax in fig.axes if ax.get_legend()] + list(fig.legends)))
+    labels = [t.get_text() for t in legend.get_texts()]
+    assert plots.PUBLISHED_LABEL in labels and plots.ELLIPSOID_LABEL in labels
+    narrower = False
+    for i in (1, 3):  # node 3: with the steps it did not report
+        tr = gap_record.nodes[i]
+        # Fig. 6: node i's row, β then r (row-major); Fig. 7: its panel
+        axes = fig.axes[2 * (i - 1) : 2 * i] if len(comps) == 2 else [ax for ax in fig.axes if ax.get_title() == f"fault f{i}"]
+        assert len(axes) == len(comps) and (len(comps) == 1 or axes[0].get_ylabel().startswith(f"node {i}"))
+        for ax, comp in zip(axes, comps):
+            dotted = [ln for ln in ax.get_lines() if ln.get_linestyle() == ":"]
+            assert len(dotted) == 2 and dotted[0].get_label() == plots.ELLIPSOID_LABEL
+            t = tr.steps * gap_record.meta.tau_s
+            for line, want in zip(dotted, tr.ellipsoid_bounds(comp)):
+                x, y = np.asarray(line.get_xdata(), float), np.asarray(line.get_ydata(), float)
+                drawn = dict(zip(np.round(x[np.isfinite(y)], 9), y[np.isfinite(y)]))
+                np.testing.assert_allclose([drawn[round(v, 9)] for v in t], want, rtol=1e-12, atol=0)
+            (band,) = [c for c in ax.collections if c.get_label() == plots.PUBLISHED_LABEL]
+            lo, hi = tr.bounds(comp)
+            verts = np.concatenate([p.vertices for p in band.get_paths()])
+            assert np.isin(np.round(lo, 12), np.round(verts[:, 1], 12)).all() and np.isin(np.round(hi, 12), np.round(verts[:, 1], 12)).all()
+            e_lo, e_hi = tr.ellipsoid_bounds(comp)
+            assert (lo >= e_lo - 1e-12).all() and (hi <= e_hi + 1e-12).all()  # the region only narrows the ellipsoid
+            narrower |= bool(((lo > e_lo + 1e-9) | (hi < e_hi - 1e-9)).any())
+    assert narrower, "the two sets coincide everywhere: this record shows no difference"
+    plt.close(fig)

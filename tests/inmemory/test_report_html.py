@@ -12,7 +12,7 @@ import pytest
 
 from netsetest.cli.main import main
 from netsetest.records.meta import RunMeta
-from netsetest.records.record import record_from_parts
+from netsetest.records.record import Record, record_from_parts
 from netsetest.records.report_html import MAX_POINTS, RecordPage, write_report
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -63,6 +63,7 @@ def test_report_without_exact_has_no_exact_section_and_two_records_share_fig8(ru
         (["{record}", "--exact", "{record}"], "not a readable exact document"),
         (["{record}", "--exact", "{other_exact}"], "which is not among the records given"),
         (["{record}", "--html", "{dir}/no/such/dir/x.html"], "does not exist"),
+        (["{record}", "--html", "{dir}/x.pdf"], "x.pdf: the page is HTML; give a name ending in .html or .htm"),  # issue 41 item 11
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(run: dict[str, Path], args: list[str], message: str, capsys: pytest.CaptureFixture[str]) -> None:
@@ -76,6 +77,49 @@ def test_bad_input_is_one_line_and_exit_2(run: dict[str, Path], args: list[str],
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_report_refuses_to_replace_a_page_unless_told(run: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 41 item 11: like ``run --record``, an existing page is replaced only with --overwrite."""
+    out = run["dir"] / "kept.html"
+    out.write_text("mine")
+    assert main(["report", str(run["record"]), "--html", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"--html {out}: the file exists; give --overwrite to replace it" in err and len(err.strip().splitlines()) == 1
+    assert out.read_text() == "mine"
+    assert main(["report", str(run["record"]), "--html", str(out), "--overwrite"]) == 0
+    assert "PASS: inmemory run" in out.read_text()
+
+
+def test_the_page_opens_on_the_node_whose_run_most_needs_a_look(run: dict[str, Path]) -> None:
+    """Issue 41 item 14 (the page in Chromium: tests/process/test_browser.py): the node the figures open on is the
+    first by outcome (a miss, lost, late, a detected fault), then a node with a fault; node 1 only when all are alike."""
+    import dataclasses
+
+    from netsetest.records.record import load_record
+    from netsetest.records.report_html import first_detection, focus_node
+
+    rec = load_record(run["record"])
+    assert rec.summary is not None
+    detected = [i for i in range(1, 7) if rec.summary.node(i).first_detection is not None]
+    assert focus_node(rec) == detected[0] and first_detection(rec, detected[0]) == rec.summary.node(detected[0]).first_detection
+
+    def with_rows(**changes: dict) -> Record:
+        nodes = [dataclasses.replace(r, **changes.get(str(r.id), {})) for r in rec.summary.nodes]
+        return dataclasses.replace(rec, summary=dataclasses.replace(rec.summary, nodes=nodes))
+
+    assert focus_node(with_rows(**{"5": {"missing_from": 12}})) == 5
+    assert focus_node(with_rows(**{"5": {"missing_from": 12}, "6": {"violations": 1}})) == 6
+    calm = with_rows(**{str(i): {"first_detection": None, "fault_onset": None} for i in range(1, 7)} | {"3": {"first_detection": None, "fault_onset": 9}})
+    assert focus_node(calm) == 3
+
+
+def test_compare_refuses_a_page_that_is_not_html(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The same rule for ``compare --html``, before anything runs."""
+    assert main(["compare", TOPOLOGY, "--steps", "2", "--html", str(tmp_path / "cmp.pdf")]) == 2
+    err = capsys.readouterr().err
+    assert "cmp.pdf: the page is HTML" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "cmp.pdf").exists()
 
 
 def _synthetic(steps: int, n: int) -> object:
@@ -116,7 +160,7 @@ def _synthetic(steps: int, n: int) -> object:
 
 def test_1000_steps_of_24_nodes_stay_under_5_mb_and_lines_are_decimated(tmp_path: Path) -> None:
     rec = _synthetic(1000, 24)
-    size = write_report(tmp_path / "big.html", [RecordPage(rec, "ring24", "", "")])  # type: ignore[arg-type]  # a Record
+    size = write_report(tmp_path / "big.html", [RecordPage(rec, "ring24", "", "")])
     assert size < SIZE_LIMIT, f"{size} bytes"
     assert 1000 > MAX_POINTS  # the test decimates, so it checks that the data shown is cut
 

@@ -272,3 +272,32 @@ def test_ctrl_c_leaves_a_partial_record(procs: ProcessGuard, tmp_path: Path) -> 
     r = load_record(rec)
     assert r.summary is not None and 4 <= r.summary.steps_completed < 2000
     assert r.partial and r.last_complete_step == r.summary.steps_completed
+
+
+CTRL_C_RUNS = 4  # real runs (the collector's own loop is interrupted 200 times in tests/inmemory/test_interrupted_record.py)
+
+
+@pytest.mark.zenoh
+@pytest.mark.timeout(300)
+def test_ctrl_c_at_random_moments_leaves_a_loadable_record_and_prints_the_interrupted_verdict(procs: ProcessGuard, tmp_path: Path) -> None:
+    """Issue 41, items 7 and 8: unpaced runs (the collector busiest) interrupted (SIGINT, as Ctrl-C sends) at a
+    random moment.  Every record loads (before, 1 in 8 was damaged: a step's states twice, a line number
+    missing), holds each step checked once, and the run prints its table and the verdict line INTERRUPTED with the
+    counts so far (before, a Zenoh run printed no verdict), exit 130, no node blamed for the cut."""
+    from zenoh_helpers import start_parent
+
+    rng = random.Random(41)
+    for n in range(CTRL_C_RUNS):
+        rec, name = tmp_path / f"r{n}.jsonl", f"run{n}"
+        parent = start_parent(procs, name, [PAPER6, "--steps", "1000", "--record", str(rec), "--quiet"])
+        at = rng.randint(1, 150)
+        wait_for(lambda rec=rec, at=at: rec.exists() and rec.read_bytes().count(b'"kind":"truth"') >= at, 90, interval=0.01, what=f"{at} steps")
+        time.sleep(rng.uniform(0.0, 0.05))
+        parent.send_signal(signal.SIGINT)
+        assert procs.wait(name, 60) == 130, procs.logs()
+        r = load_record(rec)  # RecordError if damaged
+        s = r.summary
+        assert s is not None and s.stopped == "interrupted" and s.nodes_missing == [], (at, s)
+        assert [t["step"] for t in r.truth] == list(range(s.steps_completed + 1)) and r.partial
+        last = (procs.logdir / f"{name}.out").read_text().splitlines()[-1]
+        assert last.startswith("INTERRUPTED: zenoh run") and f"steps 0–{s.steps_completed}: contained on" in last, last

@@ -1,5 +1,5 @@
 """Stopping a Zenoh run: Ctrl-C / SIGTERM to the parent stops every child (exit 130) — the vehicle and the
-nodes first, then the collector, which writes its summary and record of what it received — SIGKILL of the parent
+nodes first, then the collector, which writes its summary and record of the steps it had checked — SIGKILL of the parent
 takes the children with it (PR_SET_PDEATHSIG), and a failing vehicle stops the run (exit 1)."""
 
 from __future__ import annotations
@@ -68,8 +68,8 @@ def test_zenoh_signal_to_parent_stops_every_child(procs, sig, tmp_path) -> None:
     assert not left, f"left after {sig.name}: {describe(left)}"
     err = procs.stderr("run")
     assert "interrupted: stopping the vehicle and the nodes, then letting the collector write" in err
-    # the collector was stopped last and wrote what it had received
-    assert "[collector] stopped by SIGTERM; writing what was received" in err, err
+    # the collector was stopped last and wrote the steps it had checked
+    assert "[collector] stopped by SIGTERM; writing what was checked" in err, err
     s = json.loads(summary.read_text())
     assert 2 < s["steps_completed"] < 400 and s["security"] == "mtls+acl"
 

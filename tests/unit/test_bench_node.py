@@ -67,10 +67,13 @@ def test_the_table_has_the_ratio_column_only_beside_a_baseline() -> None:
         ["--baseline", "."],
         ["--only", "node", "--baseline", "/nonexistent"],
         ["--only", "widths", "--baseline", "/nonexistent"],
+        ["--only", "performance", "--baseline", "/nonexistent"],
         ["--only", "plant", "--baseline", "."],
     ],
 )
-def test_baseline_needs_the_node_or_widths_part_and_a_checkout(args: list[str], capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+def test_baseline_needs_the_node_widths_or_performance_part_and_a_checkout(
+    args: list[str], capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setattr(sys, "argv", ["netsetest", "bench", *args])
     assert main(["bench", *args]) == EXIT_BAD_INPUT
     err = capsys.readouterr().err

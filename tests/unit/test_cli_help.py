@@ -40,3 +40,40 @@ def test_help_shows_defaults_and_units(name: str) -> None:
         if a.metavar == "S":  # a duration: the unit is named
             assert re.search(r"\[s\]|seconds", helptext), (name, a.option_strings, helptext)
     assert "Traceback" not in text
+
+
+def test_top_level_help_names_every_command_of_the_registry(capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 41 item 13: ``netsetest --help`` named 5 of its commands.  Every command with a handler (the
+    registry, main.handlers()) has a parser and is named in the description and listed with its help, except the
+    internal ones, which are neither."""
+    from netsetest.cli.main import handlers
+    from netsetest.cli.processes import INTERNAL_COMMANDS
+
+    registry = set(handlers())
+    assert registry == set(_commands()), "a command without a parser, or a parser without a handler"
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["--help"])
+    text = capsys.readouterr().out
+    description, _, listing = text.partition("positional arguments:")
+    named = set(re.findall(r"[a-z][a-z-]*[a-z]", " ".join(description.split("commands:", 1)[1].split("\n\n", 1)[0].split())))
+    listed = {line.split()[0] for line in listing.splitlines() if re.match(r"^    \S", line)}
+    for name in registry - set(INTERNAL_COMMANDS):
+        assert name in named, f"{name} is not named in the description"
+        assert name in listed, f"{name} is not listed with its help"
+    for name in INTERNAL_COMMANDS:
+        assert name not in named and name not in listed
+
+
+def test_every_topology_argument_names_every_bundled_topology() -> None:
+    """Issue 41 item 13: ``run --help`` named 2 of the bundled topologies; every command taking a topology
+    names all of them, as the package holds them (scenarios.bundled_topologies)."""
+    from netsetest.scenarios import bundled_topologies
+
+    bundled = bundled_topologies()
+    assert len(bundled) > 2
+    takers = {name: p for name, p in _commands().items() for a in _actions(p) if a.dest.split(".")[-1] == "topology"}
+    assert {"run", "compare", "calibrate", "exact", "vehicle", "node", "collector", "router", "credentials", "compose"} <= set(takers)
+    for name, p in takers.items():
+        text = " ".join(p.format_help().split())
+        missing = [t for t in bundled if not re.search(rf"\b{re.escape(t)}\b", text)]
+        assert not missing, (name, missing)

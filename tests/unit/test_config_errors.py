@@ -118,3 +118,16 @@ def test_cli_exit_2_without_traceback(topo, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "Traceback" not in err
     assert "tau_s: Input should be a finite number" in err
+
+
+def test_a_wrong_node_dir_is_named(topo, capsys):
+    """Issue 41 item 13: a wrong node_dir said only "file not found" (of a profile); the line names node_dir,
+    what it resolved to, and, where the directory exists but lacks a profile, the node and its profile."""
+    _edit(topo, 'node_dir = "../nodes"', 'node_dir = "../nodez"')
+    code = main(["run", str(topo), "--mode", "inmemory", "--steps", "1", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert "node_dir '../nodez': no such directory" in err and str(topo.parent.parent / "nodez") in err, err
+    _edit(topo, 'node_dir = "../nodez"', 'node_dir = "."')  # a directory, without the profiles
+    msg = _error(topo)
+    assert msg.startswith(f"{topo}: node 1: profile 'yaw1': yaw1.toml not found in node_dir '.'") and len(msg.splitlines()) == 1, msg

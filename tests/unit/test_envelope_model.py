@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from netsetest.cli.main import main
 from netsetest.config.schema import ConfigError, load_topology
 from netsetest.messages import Truth, decode, encode
 from netsetest.models.envelope import MODEL_MISMATCH, OUTSIDE_ENVELOPE, OperatingEnvelope
@@ -52,8 +53,8 @@ def _topology(tmp_path: Path, extra: str, plant: bool = True) -> Path:
 
 def test_the_topology_declares_an_envelope_beside_its_bound(tmp_path: Path) -> None:
     pytest.importorskip("vehiclemodels")
-    sc = load_topology(_topology(tmp_path, "[envelope]\nay_max = 6\nspeed_kmh = [70, 120]\n"))
-    assert sc.envelope == ENV
+    sc = load_topology(_topology(tmp_path, "[envelope]\nay_max = 6\nspeed_kmh = [80, 120]\n"))  # paper6_car's model range: 80–120 km/h
+    assert sc.envelope == OperatingEnvelope(6.0, (80.0, 120.0))
     assert load_topology("paper6_car").envelope is None  # optional
 
 
@@ -64,6 +65,8 @@ def test_the_topology_declares_an_envelope_beside_its_bound(tmp_path: Path) -> N
         ("[envelope]\nay_max = 0\nspeed_kmh = [70, 120]\n", True, "ay_max"),
         ("[envelope]\nay_max = 6\n", True, "speed_kmh"),
         ("[envelope]\nay_max = 6\nspeed_kmh = [70, 120]\n", False, "nonlinear plant"),  # the T-S plant: e_k ≡ 0, no bound
+        ("[envelope]\nay_max = 6\nspeed_kmh = [60, 130]\n", True, "leave the model's range 80–120 km/h"),  # issue 41 item 10
+        ("[envelope]\nay_max = 6\nspeed_kmh = [80, 120.5]\n", True, "leave the model's range"),
     ],
 )
 def test_a_wrong_envelope_is_refused_in_one_line(tmp_path: Path, extra: str, plant: bool, says: str) -> None:
@@ -71,6 +74,23 @@ def test_a_wrong_envelope_is_refused_in_one_line(tmp_path: Path, extra: str, pla
         pytest.importorskip("vehiclemodels")
     with pytest.raises(ConfigError, match=says):
         load_topology(_topology(tmp_path, extra, plant))
+
+
+def test_run_and_calibrate_refuse_an_envelope_beyond_the_model_range_with_the_same_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 41 item 10: one rule (config/schema.py, check_envelope_speeds) for the topology's [envelope], which
+    `run` reads, and `calibrate --envelope --speed`; each refuses before any drive, exit 2, one line."""
+    pytest.importorskip("vehiclemodels")
+    topology = _topology(tmp_path, "[envelope]\nay_max = 6\nspeed_kmh = [60, 130]\n")
+    assert main(["run", str(topology), "--mode", "inmemory", "--steps", "2", "--quiet"]) == 2
+    run_err = capsys.readouterr().err
+    bare = _topology(tmp_path, "")
+    assert main(["calibrate", str(bare), "--envelope", "--ay-max", "6", "--speed", "60-130", "--steps", "2"]) == 2
+    calibrate_err = capsys.readouterr().err
+    for err in (run_err, calibrate_err):
+        assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    why = "the envelope's speeds 60–130 km/h leave the model's range 80–120 km/h"
+    assert why in run_err and why in calibrate_err
+    assert run_err.split(why)[1] == calibrate_err.split(why)[1]  # the same rule's words
 
 
 def test_the_judge_names_the_plants_transition_first_and_whether_the_car_left_its_envelope() -> None:

@@ -192,10 +192,10 @@ BAD = [
     ("fault-range-reversed", _mut(_state(), fault=[0.2, -0.2]), "invalid", "fault"),
     ("fault-range-inf", _mut(_state(), fault=[-float("inf"), 0.2]), "invalid", "fault"),
     ("fault-range-3", _mut(_state(), fault=[-0.2, 0.0, 0.2]), "invalid", "fault"),
-    ("region-odd", _mut(_state(), region=[0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.5]), "invalid", "region"),
-    ("region-2-vertices", _mut(_state(), region=[0.0, 0.0, 1.0, 0.0]), "invalid", "region"),
-    ("region-too-long", _mut(_state(), region=[0.0] * 1000), "invalid", "region"),
-    ("region-nan", _mut(_state(), region=[0.0, 0.0, 1.0, float("nan"), 1.0, 1.0]), "invalid", "region"),
+    ("region-odd", _mut(_state(), region=[0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.5]), "region-odd", "region"),
+    ("region-2-vertices", _mut(_state(), region=[0.0, 0.0, 1.0, 0.0]), "region-vertices", "region"),
+    ("region-too-long", _mut(_state(), region=[0.0] * 1000), "region-vertices", "region"),
+    ("region-nan", _mut(_state(), region=[0.0, 0.0, 1.0, float("nan"), 1.0, 1.0]), "region-not-finite", "region"),
 ]
 
 

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from netsetest.cli.main import build_parser
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.estimator.objective import OBJECTIVES
+from netsetest.models.manoeuvres import MANOEUVRES, WITH_AMPLITUDE
 from netsetest.runtime.argtypes import SEED_MAX
 from netsetest.runtime.rolespec import (
     DEFAULT_RUN_ID,
@@ -48,8 +49,19 @@ non_negative = st.just(0.0) | seconds
 pairs = st.tuples(st.integers(-5, 200), st.integers(-5, 10_000))
 clocks = st.sampled_from(["lockstep", "realtime"])
 
+finite = lambda lo, hi: st.floats(min_value=lo, max_value=hi, allow_nan=False, allow_infinity=False)  # noqa: E731  # a one-line local helper
+drives = st.sampled_from(MANOEUVRES) | st.builds(lambda m, a: f"{m}@{a!r}", st.sampled_from(WITH_AMPLITUDE), finite(1e-6, 1.0))
 scenarios = st.builds(
-    ScenarioSpec, positional, maybe(st.sampled_from(["nsnim", "saim"])), maybe(st.integers(1, 10**6)), maybe(st.sampled_from(NODE_ESTIMATOR_NAMES))
+    ScenarioSpec,
+    positional,
+    maybe(st.sampled_from(["nsnim", "saim"])),
+    maybe(st.integers(1, 10**6)),
+    maybe(st.sampled_from(NODE_ESTIMATOR_NAMES)),
+    maybe(texts),  # --log DRIVE (a recorded drive, docs/your-log.md)
+    maybe(texts),  # --map MAP.toml
+    maybe(drives),
+    maybe(finite(1e-3, 500.0)),
+    maybe(finite(0.0, 10.0)),
 )
 zenohs = st.builds(
     ZenohSpec,
@@ -188,3 +200,27 @@ def test_a_collector_refuses_a_channel_that_is_not_open(capsys: pytest.CaptureFi
 
     assert main(["collector", "paper6", "--channel-fd", "987"]) == 2
     assert "--channel-fd 987: not an open file descriptor" in capsys.readouterr().err
+
+
+def test_only_the_vehicle_of_a_run_from_a_log_reads_it(tmp_path) -> None:
+    """A role started from a log's spec (with the steps `run` decided) loads its mapping but never the log: the nodes
+    and the collector build on a file that is no log at all; the vehicle reads it and says why it cannot."""
+    from pathlib import Path
+
+    from netsetest.bus.base import MemoryBus
+    from netsetest.logs.readers import LogError
+    from netsetest.roles.collector import Collector
+    from netsetest.roles.node import Node
+    from netsetest.roles.vehicle import Vehicle
+
+    examples = Path(__file__).resolve().parents[2] / "examples" / "logs"
+    log = tmp_path / "drive.csv"
+    log.write_text("not,a,log\n")
+    spec = ScenarioSpec("paper6", steps=5, log=str(log), mapping=str(examples / "drive_csv.map.toml"))
+    sc = spec.load()
+    assert sc.log is not None and sc.steps == 5
+    bus = MemoryBus()
+    Collector(sc, bus, "t")
+    [Node(sc, i, bus, "t") for i in sc.ids]
+    with pytest.raises(LogError, match="no column"):
+        Vehicle(sc, bus, "t")

@@ -28,7 +28,7 @@ from netsetest.runtime.launcher import (
     plan_run,
     role_names,
 )
-from netsetest.runtime.report import EXIT_INTERRUPTED, EXIT_NODE_LOST, EXIT_OK, EXIT_VIOLATION
+from netsetest.runtime.report import EXIT_COLLECTOR_STALLED, EXIT_INTERRUPTED, EXIT_NODE_LOST, EXIT_OK, EXIT_VIOLATION
 from netsetest.runtime.rolespec import CollectorSpec, NodeSpec, VehicleSpec
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -259,6 +259,39 @@ def test_a_secured_network_makes_every_role_a_client_of_the_router() -> None:
     assert "mtls" in net.describe()[0] and "--credentials /creds" in net.describe()[1]
 
 
+def test_an_insecure_run_on_a_fixed_port_listens_and_is_watched_there() -> None:
+    """Issue 41 item 12: ``run --insecure --port N``: the collector listens on N, the other roles connect to it there,
+    the run prints that endpoint and the observers join there; no other role gets N."""
+    import socket
+
+    with socket.socket() as s:  # a port free now, for the plan
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    plan = plan_run(LaunchOptions(PAPER6, steps=5, insecure=True, run_id="demo", port=port))
+    from netsetest.runtime.launcher import open_network
+
+    net = open_network(plan, "demo", "/nonexistent")  # insecure: nothing is written
+    endpoint = f"tcp/127.0.0.1:{port}"
+    assert net.zenoh("collector").listen == (endpoint,) and all(endpoint in net.zenoh(n).connect for n in net.names if n != "collector")
+    assert sorted(net.ports.values()).count(port) == 1
+    assert net.observer_args() == ["--run-id", "demo", "--connect", endpoint]
+    assert f"watch it with: netsetest watch --run-id demo --connect {endpoint}" in net.describe()[1]
+
+
+def test_a_taken_port_is_refused_before_anything_starts() -> None:
+    import socket
+
+    from netsetest.runtime.launcher import LaunchError
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        for insecure in (True, False):
+            with pytest.raises(LaunchError, match=rf"^--port {port}: 127.0.0.1:{port} is taken"):
+                plan_run(LaunchOptions(PAPER6, steps=5, insecure=insecure, port=port))
+
+
 def test_roles_that_do_not_end_on_end_share_one_grace_period() -> None:
     """The collector has finished; nodes that never leave are waited for ROLE_GRACE_S in all, not each (an
     80-node ring whose nodes hung in their Zenoh close held `netsetest run` for 80 × 5 s)."""
@@ -283,3 +316,72 @@ def test_roles_that_do_not_end_on_end_share_one_grace_period() -> None:
     run.script[1] = lambda: run.proc("collector").exit(EXIT_OK)
     run.supervisor.follow()
     assert waited and sum(waited) <= launcher.ROLE_GRACE_S + 1e-9, waited
+
+
+def test_an_interrupt_returns_the_summary_the_collector_writes_on_sigterm() -> None:
+    """Issue 41, item 8: Ctrl-C on a Zenoh run printed no verdict; the launcher now hands on the summary the
+    collector writes when it is stopped (the CLI prints its table and verdict, INTERRUPTED)."""
+    run = Run()
+    partial = summary(stopped="interrupted", steps_completed=4)
+    collector = run.proc("collector")
+    told = collector.send_signal
+
+    def write_and_leave(sig: int) -> None:
+        if sig == signal.SIGTERM:
+            run.channel.receive(encode(RunFinished(partial)))
+        told(sig)
+
+    collector.send_signal = write_and_leave  # type: ignore[method-assign]  # this fake writes its summary when stopped
+    assert run.supervisor.interrupted(None) == RunOutcome(EXIT_INTERRUPTED, partial)
+    assert run.bar.closed
+
+
+def test_every_stopped_role_is_also_continued() -> None:
+    """A stopped (SIGSTOP) process acts on SIGTERM only once continued: stop_all sends SIGCONT after it."""
+    run = Run(stubborn=["collector"])
+    run.children.stop_all(0.0)
+    collector = [sig for name, sig in run.events if name == "collector"]
+    assert collector[:2] == [signal.SIGTERM, signal.SIGCONT] and collector[-1] == signal.SIGKILL
+
+
+def test_a_vehicle_that_gave_up_on_a_stalled_collector_ends_the_run_with_the_collectors_verdict(capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 41, item 6: the vehicle waits for the collector's acknowledgment at most the stall limit, then exits
+    EXIT_COLLECTOR_STALLED; the launcher stops the nodes and continues the collector, whose summary names its stall."""
+    run = Run()
+    stalled = summary(stopped="collector stalled", steps_completed=51, collector_stall_s=70.0, collector_stall_step=51)
+    collector = run.proc("collector")
+    told = collector.send_signal
+
+    def write_and_leave(sig: int) -> None:
+        if sig == signal.SIGCONT:
+            run.channel.receive(encode(RunFinished(stalled)))
+        told(sig)
+
+    collector.send_signal = write_and_leave  # type: ignore[method-assign]  # this fake writes its summary once continued
+    run.script = {3: lambda: run.proc("vehicle").exit(EXIT_COLLECTOR_STALLED)}
+    assert run.supervisor.follow() == RunOutcome(EXIT_VIOLATION, stalled)
+    assert "the collector acknowledged nothing for the stall limit" in capsys.readouterr().err
+    assert all(p.poll() is not None for p in run.children.procs.values())
+
+
+def test_a_role_stopped_while_it_opens_its_session_exits_quietly(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """Ctrl-C while a run still starts its roles: the signal reaches a role inside role_bus (its session opening);
+    it leaves with EXIT_STOPPED and one log line, no traceback, and its body never runs."""
+    from netsetest.runtime import processes
+    from netsetest.runtime.rolespec import ScenarioSpec, ZenohSpec
+
+    def opening(who: str, zenoh: ZenohSpec) -> None:
+        signal.raise_signal(signal.SIGINT)  # the handler install_signal_handlers set raises Stop here
+        raise AssertionError("unreachable: the signal stops the role")
+
+    monkeypatch.setattr(processes, "role_bus", opening)
+    saved = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        spec = ScenarioSpec(topology="paper6")
+        code = processes.serve_role("node 1", "node-1", spec, ZenohSpec(), lambda sc, bus: pytest.fail("the body ran"))
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+    assert code == processes.EXIT_STOPPED
+    err = capsys.readouterr().err
+    assert "stopped by SIGINT while opening its session" in err and "Traceback" not in err

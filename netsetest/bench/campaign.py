@@ -1,0 +1,317 @@
+"""The campaign figures (``netsetest bench --only campaign``, issue 43's targets): what ``netsetest campaign``
+costs and buys, measured with the campaign's own code (netsetest/campaign/: the file, the engines, the store).
+
+- ``throughput``: a paper6 campaign (both cases and signal families, the SDP, 80 steps) on the local pool with
+  1 worker, with 2, and on a Dask cluster of 2 single-threaded workers on this machine (a scheduler and two
+  ``dask worker`` processes, the same cores), in turn, ``reps`` times; runs per second of each, medians; the
+  ratios 2 workers / 1 (target ≥ 1.8) and cluster / 2 local workers (target ≥ 0.9).  A run's CPU is beside
+  its wall time: on a machine other jobs load, the wall ratio shows the cores the campaign got, not what it
+  can do, and the CPU per run (the same in every arm when the pool adds nothing) says which.
+- ``overhead``: the same runs one after the other in this process (``RunSpec.execute``: the run ``netsetest
+  run --mode inmemory`` makes, without the interpreter's start) against the 1-worker campaign of them, in
+  turn: the CPU the campaign spends outside the runs (its process and its workers' beyond what the runs took)
+  per run's CPU (target ≤ 5 %: what a run costs more in a campaign, whatever else loads the machine), and the
+  campaign's wall per run over the direct one, less 1 (the same where the machine is quiet; here the cores'
+  share the other jobs leave decides it).
+- ``big``: the 1 000-run paper6 campaign (both cases and signal families, every real-time estimator, 80
+  steps) on the local pool: its wall time, CPU, the load around it; every worker's resident memory sampled
+  as it goes (after the first tenth of the runs, at the end: target flat); then ``netsetest campaign`` on
+  the finished results again, as a user resumes (a process of its own: start, the file, the keys read,
+  nothing to run), its wall time (target ≤ 5 s).  ``--quick`` runs a tenth of it.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from netsetest.campaign.engines import LocalPool
+from netsetest.campaign.runner import Tally, run_campaign, tasks_of
+from netsetest.campaign.spec import load_campaign
+from netsetest.campaign.store import Store
+
+ESTIMATORS = ("sdp", "zonotope", "interval", "strip", "setprop")  # every real-time node estimator of `compare`
+MEMORY_SAMPLES = 10  # worker memory sampled this many times over the big campaign
+CLUSTER_START_S = 60.0  # a scheduler and two workers ready within this, or the cluster figures are None
+
+
+def _log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _load() -> str:
+    try:
+        return " ".join(Path("/proc/loadavg").read_text().split()[:3])
+    except OSError:
+        return "?"
+
+
+def _file(tmp: Path, name: str, runs: int, estimators: tuple[str, ...], steps: int) -> Path:
+    """A paper6 campaign of ``runs`` runs: both cases and signal families, ``estimators``, seeds to fill it; one
+    ``[[runs]]`` table per seed, so the runs go seed by seed, every estimator in each (a worker's memory after
+    the first seeds has met every estimator's code: what grows after that is what a run leaves behind)."""
+    per_seed = 4 * len(estimators)
+    est = ", ".join(f'"{e}"' for e in estimators)
+    table = f'[[runs]]\ntopology = "paper6"\nestimator = [{est}]\ncase = ["nsnim", "saim"]\nsignals = ["paper", "worst"]\nsteps = {steps}\n'
+    path = tmp / f"{name}.toml"
+    path.write_text(f'name = "{name}"\n' + "".join(f"{table}seeds = {s}\n" for s in range(max(1, runs // per_seed))))
+    return path
+
+
+def _cpu_of(pids: list[int]) -> float:
+    import psutil
+
+    total = 0.0
+    for pid in pids:
+        try:
+            t = psutil.Process(pid).cpu_times()
+            total += t.user + t.system
+        except psutil.Error:
+            pass
+    return total
+
+
+def _rss_mb(pids: list[int]) -> dict[int, float]:
+    import psutil
+
+    out = {}
+    for pid in pids:
+        try:
+            out[pid] = psutil.Process(pid).memory_info().rss / 2**20
+        except psutil.Error:
+            pass
+    return out
+
+
+def _campaign(path: Path, out: Path, engine: Any, sample_every: int = 0) -> dict:
+    """Run the campaign at ``path`` into a fresh ``out`` on ``engine``: wall, CPU, its runs' own CPU and wall,
+    and (``sample_every`` runs) the local pool's workers' resident memory."""
+    c = load_campaign(path)
+    store = Store(out)
+    samples: list[dict[int, float]] = []
+    worker_cpu: dict[int, float] = {}
+
+    def on_progress(t: Tally) -> None:
+        pids = list(getattr(getattr(engine, "_pool", None), "_processes", {}) or {})
+        if pids:
+            worker_cpu.update({p: c for p in pids if (c := _cpu_of([p]))})
+        if sample_every and t.done and t.done % sample_every == 0:
+            samples.append(_rss_mb(pids))
+
+    load = _load()
+    cpu0, t0 = time.process_time(), time.perf_counter()
+    tally = run_campaign(c, store, engine, on_progress)
+    wall, cpu_main = time.perf_counter() - t0, time.process_time() - cpu0
+    table = store.table()
+    store.close()
+    per_run = {}  # run key → (wall, CPU) in its worker (a run's rows, one per node, all carry its times)
+    for key, w, cp in zip(table.column("run_key").to_pylist(), table.column("wall_s").to_pylist(), table.column("cpu_s").to_pylist()):
+        per_run[key] = (w, cp)
+    return {
+        "runs": tally.done,
+        "errors": tally.errors,
+        "failed": tally.failed,
+        "wall_s": wall,
+        "runs_per_s": tally.done / wall if wall else None,
+        "cpu_main_s": cpu_main,
+        "run_wall_s": sum(w for w, _ in per_run.values()),
+        "run_cpu_s": sum(cp for _, cp in per_run.values()),
+        "worker_cpu_s": sum(worker_cpu.values()) or None,
+        "memory_mb": samples,
+        "load": load,
+    }
+
+
+def _direct(path: Path) -> dict:
+    """The campaign's runs one after the other in this process, as ``netsetest run --mode inmemory`` makes each."""
+    c = load_campaign(path)
+    load = _load()
+    cpu0, t0 = time.process_time(), time.perf_counter()
+    for t in tasks_of(c, set()):
+        t.spec.execute(keep=False)
+    return {"runs": len(c.runs), "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - cpu0, "load": load}
+
+
+class _LocalDask:
+    """A Dask scheduler and ``workers`` single-threaded workers as processes of their own on this machine."""
+
+    def __init__(self, tmp: Path, workers: int) -> None:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        self.address = f"tcp://127.0.0.1:{port}"
+        env = {
+            **os.environ,
+            "OPENBLAS_NUM_THREADS": "1",
+            "MALLOC_ARENA_MAX": "2",
+            "DASK_TEMPORARY_DIRECTORY": str(tmp),
+        }  # its scratch and locks in the part's directory
+        py = sys.executable
+        self.procs = [
+            subprocess.Popen(
+                [py, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", str(port), "--dashboard-address", ":0", "--no-show"],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                env=env,
+            )
+        ]
+        for n in range(workers):
+            argv = [py, "-m", "distributed.cli.dask_worker", self.address, "--nthreads", "1", "--no-dashboard", "--local-directory", str(tmp / f"dask{n}")]
+            self.procs.append(
+                subprocess.Popen([*argv, "--preload", "netsetest.campaign.worker"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+            )
+        from distributed import Client
+
+        with Client(self.address, timeout=CLUSTER_START_S) as c:
+            c.wait_for_workers(workers, timeout=CLUSTER_START_S)
+
+    def close(self) -> None:
+        for p in reversed(self.procs):
+            p.terminate()
+        for p in self.procs:
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+
+
+def _median(rows: list[dict], key: str) -> float | None:
+    vals = [r[key] for r in rows if r.get(key) is not None]
+    return statistics.median(vals) if vals else None
+
+
+def _throughput(tmp: Path, runs: int, reps: int) -> dict:
+    path = _file(tmp, "throughput", runs, ("sdp",), 80)
+    arms: dict[str, list[dict]] = {"local_1": [], "local_2": [], "cluster_2": [], "direct": []}
+    cluster_error = None
+    for rep in range(reps):
+        for arm in arms:
+            out = tmp / f"{arm}-{rep}"
+            _log(f"campaign: {arm}, rep {rep + 1} of {reps}, {runs} runs (load {_load()})")
+            if arm == "direct":
+                arms[arm].append(_direct(path))
+            elif arm == "cluster_2":
+                try:
+                    cluster = _LocalDask(tmp, 2)
+                except Exception as exc:  # no distributed (the cluster extra), or the cluster did not start: no cluster figures
+                    cluster_error = f"{type(exc).__name__}: {exc}"
+                    continue
+                try:
+                    from netsetest.campaign.engines import DaskCluster
+
+                    arms[arm].append(_campaign(path, out, DaskCluster(cluster.address)))
+                finally:
+                    cluster.close()
+            else:
+                arms[arm].append(_campaign(path, out, LocalPool(int(arm[-1]))))
+    med = {arm: _median(rows, "runs_per_s") for arm, rows in arms.items() if arm != "direct"}
+    local_1, direct = arms["local_1"], arms["direct"]
+    overhead_wall = [c["wall_s"] / d["wall_s"] - 1 for c, d in zip(local_1, direct)]
+    overhead_cpu = [(c["cpu_main_s"] + (c["worker_cpu_s"] or c["run_cpu_s"]) - c["run_cpu_s"]) / c["run_cpu_s"] for c in local_1 if c["run_cpu_s"]]
+    return {
+        "runs": runs,
+        "reps": reps,
+        "arms": arms,
+        "cluster_error": cluster_error,
+        "runs_per_s": med,
+        "ratio_2_over_1": (med["local_2"] / med["local_1"]) if med["local_2"] and med["local_1"] else None,
+        "ratio_cluster_over_local": (med["cluster_2"] / med["local_2"]) if med["cluster_2"] and med["local_2"] else None,
+        "cpu_per_run_s": {
+            arm: _median([{"x": r["run_cpu_s"] / r["runs"]} for r in rows if r.get("runs")], "x") for arm, rows in arms.items() if arm != "direct"
+        },
+        "overhead_wall_pct": 100 * statistics.median(overhead_wall) if overhead_wall else None,
+        "overhead_cpu_pct": 100 * statistics.median(overhead_cpu) if overhead_cpu else None,
+    }
+
+
+def _resume(path: Path, out: Path) -> dict:
+    """``netsetest campaign`` on finished results, as a user starts it again: its wall time and what it said."""
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "netsetest", "campaign", str(path), "--out", str(out), "--quiet"], capture_output=True, text=True)
+    return {
+        "wall_s": time.perf_counter() - t0,
+        "exit_code": proc.returncode,
+        "nothing_to_run": " 0 to run" in proc.stderr,
+        "files": len(list((out / "runs").rglob("*.parquet"))),
+    }
+
+
+def _big(tmp: Path, runs: int) -> dict:
+    path = _file(tmp, "big", runs, ESTIMATORS, 80)
+    _log(f"campaign: the {runs}-run paper6 campaign, every estimator, both cases and signal families (load {_load()})")
+    pool = LocalPool()
+    fig = _campaign(path, tmp / "big", pool, sample_every=max(1, runs // MEMORY_SAMPLES))
+    fig["workers"] = pool.workers
+    fig["load_before"] = fig.pop("load")
+    fig["load_after"] = _load()
+    samples = fig["memory_mb"]
+    first, last = (samples[0], samples[-1]) if samples else ({}, {})
+    fig["memory_growth_mb"] = max((last[p] - first[p] for p in first if p in last), default=None)
+    fig["memory_first_mb"] = max(first.values(), default=None)
+    fig["memory_last_mb"] = max(last.values(), default=None)
+    fig["resume"] = _resume(path, tmp / "big")
+    return fig
+
+
+def campaign_figures(cfg: dict, tmp: Path) -> dict:
+    """Every figure of the part (module doc)."""
+    return {
+        "throughput": _throughput(tmp, cfg["campaign_runs"], cfg["campaign_reps"]),
+        "big": _big(tmp, cfg["campaign_big_runs"]),
+        "cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+    }
+
+
+def _f(v: float | None, spec: str) -> str:
+    return "–" if v is None else format(v, spec)
+
+
+def _meets(v: float | None, target: float, above: bool) -> str:
+    return "–" if v is None else ("yes" if (v >= target if above else v <= target) else "no")
+
+
+def campaign_markdown(r: dict) -> str:
+    """The targets' table, then what each arm measured."""
+    t, b = r["throughput"], r["big"]
+    res = b["resume"]
+    lines = [
+        "| figure | measured | target | met |",
+        "|---|---|---|---|",
+        f"| 2 local workers over 1, a {t['runs']}-run paper6 campaign (runs per second, median of {t['reps']}) | {_f(t['ratio_2_over_1'], '.2f')}× "
+        f"| ≥ 1.8× | {_meets(t['ratio_2_over_1'], 1.8, True)} |",
+        f"| a Dask cluster's throughput over the local pool's, 2 workers each | {_f(t['ratio_cluster_over_local'], '.2f')}× | ≥ 0.9× "
+        f"| {_meets(t['ratio_cluster_over_local'], 0.9, True)} |",
+        f"| task overhead per 80-step paper6 run: the CPU the campaign spends outside the runs (its process, its workers) per run's CPU | "
+        f"{_f(t['overhead_cpu_pct'], '.1f')} % | ≤ 5 % | {_meets(t['overhead_cpu_pct'], 5.0, False)} |",
+        f"| the same in wall time: 1 worker against the runs one by one in one process (the load's share of the cores decides it here) "
+        f"| {_f(t['overhead_wall_pct'], '+.1f')} % | | |",
+        f"| resume of the finished {b['runs']}-run campaign (`netsetest campaign` again, {res['files']} files) | {_f(res['wall_s'], '.2f')} s | ≤ 5 s "
+        f"| {_meets(res['wall_s'], 5.0, False)} |",
+        f"| a worker's resident memory over the {b['runs']} runs, after the first tenth → at the end | {_f(b['memory_first_mb'], '.0f')} → "
+        f"{_f(b['memory_last_mb'], '.0f')} MB (growth {_f(b['memory_growth_mb'], '+.1f')} MB) | flat | |",
+        "",
+        f"The {b['runs']}-run paper6 campaign (both cases and signal families, {', '.join(ESTIMATORS)}, 80 steps) on {b['workers']} local "
+        f"workers: {_f(b['wall_s'], '.0f')} s wall, {_f(b['runs_per_s'], '.2f')} runs/s, {_f(b['run_cpu_s'], '.0f')} s CPU in the runs; "
+        f"{b['errors']} errors, {b['failed']} failed their verdict; load average {b['load_before']} before, {b['load_after']} after "
+        f"(this machine has {r['cpus']} cores).",
+        "",
+        "| arm | runs/s (median) | CPU per run [s] (median) | each rep: wall [s] (load average at its start) |",
+        "|---|---|---|---|",
+    ]
+    for arm, rows in t["arms"].items():
+        if arm == "direct":
+            continue
+        reps = ", ".join(f"{x['wall_s']:.1f} ({x['load']})" for x in rows) or "–"
+        lines.append(f"| {arm.replace('_', ', ')} worker(s) | {_f(t['runs_per_s'].get(arm), '.3f')} | {_f(t['cpu_per_run_s'].get(arm), '.3f')} | {reps} |")
+    direct = ", ".join(f"{x['wall_s']:.1f} ({x['load']})" for x in t["arms"]["direct"])
+    lines.append(f"| the runs one by one in one process | | | {direct} |")
+    if t["cluster_error"]:
+        lines += ["", f"The cluster did not start: {t['cluster_error']}."]
+    return "\n".join(lines) + "\n"
