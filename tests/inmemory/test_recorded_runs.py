@@ -67,7 +67,13 @@ range's cut reshapes the published ellipsoid, so paper6_reference and paper6_max
 Every NSNIM digest is unchanged (no saturation), which also checks that the SDP step rebuilt as a pipeline
 (StepContext, the declared cuts) and the cut's no-clip fast path (Polygon.cut) answer bit for bit as before.  Mean
 fault width / exact from step 10, paper6 SAIM: paper signals seed 0, 1.062 → 1.003 (worst node 1.015); worst-case
-signals seed 3, → 1.002 (worst node 1.006)."""
+signals seed 3, → 1.002 (worst node 1.006).
+
+Re-recorded on 2026-12-07 after merging issue 45 (levers 1 and 2: objective ``bank`` solves once, the certificate of
+a step whose facts are all balls in closed form), which the digests had been re-recorded for on its branch.  Checked
+against the parent of that merge (45db4c2^1) and the merge itself on this machine: the fault widths move, by up to
++0.78 % on paper6_reference SAIM worst-case node 3 (0.012057 → 0.012152) and about +0.05–0.14 % on the other nodes
+with readings, β and r by 10⁻⁹ relative."""
 
 from __future__ import annotations
 
