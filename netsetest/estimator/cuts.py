@@ -372,7 +372,8 @@ def ellipse_cut(region: Polygon, xhat: np.ndarray, P: np.ndarray, rho: float, co
     for d in dirs:
         if out is None:
             return None
-        d0, d1 = d.tolist()  # dᵀx̂ and (dᵀP_xx) d in plain floats, each product and sum rounded as numpy's 2-vector products round them
+        d0, d1 = d.tolist()  # dᵀx̂ and (dᵀP_xx) d in plain floats, each product and sum rounded (numpy's 2-vector products go
+        # through OpenBLAS, whose kernel may fuse them: the same to a few ulps, tests/unit/test_polygon_same.py)
         w0, w1 = d0 * p00 + d1 * p10, d0 * p01 + d1 * p11
         centre, half = d0 * x0 + d1 * x1, math.sqrt(max(rho * (w0 * d0 + w1 * d1), 0.0))
         out = out.cut(d, centre - half, centre + half)
@@ -388,7 +389,7 @@ def _well_inside(region: Polygon, xhat: np.ndarray, pxx: np.ndarray, rho: float)
     with P_xx's adjugate (no division) where tr²/det ≤ INSIDE_COND.  Then the test's rounding (relative, at most
     about 12 ε·tr²/det ≈ 1.3·10⁻⁷) leaves every vertex at least ≈ 2·10⁻⁷ of the ellipse's half-width inside each slab
     of :func:`ellipse_cut`, far beyond the rounding of the slab's own ends and of cᵀv, which the cut's margin covers:
-    each cut would return the region as it is (tests/unit/test_polygon_same.py holds the two to the same vertices)."""
+    each cut would return the region as it is (tests/unit/test_polygon_same.py holds the two to the same set)."""
     (p00, p01), (_, p11) = pxx.tolist()
     det, tr = p00 * p11 - p01 * p01, p00 + p11
     if not (det > 0.0 and tr * tr <= INSIDE_COND * det):
