@@ -67,6 +67,11 @@ class Polygon:
         return out
 
     @classmethod
+    def from_flat(cls, coords: Sequence[float]) -> Polygon:
+        """From the flattened vertices [β₁, r₁, β₂, r₂, …] (as published)."""
+        return cls._of(list(zip(map(float, coords[0::2]), map(float, coords[1::2]))))
+
+    @classmethod
     def box(cls, lo: np.ndarray, hi: np.ndarray) -> Polygon:
         """The box lo ≤ x ≤ hi."""
         (x0, y0), (x1, y1) = (float(lo[0]), float(lo[1])), (float(hi[0]), float(hi[1]))

@@ -109,15 +109,15 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
     @cached_property
     def polygon(self) -> Polygon | None:
         """The region as a polygon of x = (β, r) (None: none kept)."""
-        return None if self.region is None else Polygon(np.asarray(self.region, dtype=float).reshape(-1, NX))
+        return None if self.region is None else Polygon.from_flat(self.region)
 
     @cached_property
     def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
         if self.own_set is not None:
             return self.own_set.bounds()
         lo, hi = ellipsoid_bounds(self.centre, np.diag(self.P_matrix), self.rho, self.fault)  # (new arrays: x̂ ∓ half)
-        if self.polygon is not None:  # the ellipsoid ∩ the region: x's bounds are the tighter of the two
-            v = self.polygon.vertices
+        if self.region is not None:  # the ellipsoid ∩ the region: x's bounds are the tighter of the two
+            v = np.asarray(self.region, dtype=float).reshape(-1, NX)
             lo[:NX], hi[:NX] = np.maximum(lo[:NX], v.min(axis=0)), np.minimum(hi[:NX], v.max(axis=0))
         return lo, hi
 

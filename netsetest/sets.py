@@ -249,8 +249,9 @@ class RegionSet:
     @cached_property
     def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = self.base.bounds()
-        v = self.region.vertices
-        lo[:2], hi[:2] = np.maximum(lo[:2], v.min(axis=0)), np.minimum(hi[:2], v.max(axis=0))
+        xs, ys = zip(*self.region.points)
+        lo[0], hi[0] = max(lo[0], min(xs)), min(hi[0], max(xs))
+        lo[1], hi[1] = max(lo[1], min(ys)), min(hi[1], max(ys))
         lo[2], hi[2] = max(lo[2], self.fault[0]), min(hi[2], self.fault[1])
         return lo, hi
 
@@ -403,8 +404,7 @@ def _region_set(d: dict, dim: int) -> RegionSet:
     problem = region_problem(coords)
     if problem:
         raise SetFormatError(": ".join(problem))  # the reason first: decode drops the message under it
-    v = np.asarray(coords, dtype=float)
     fault = _vec(d, "fault", 2)
     if fault[0] > fault[1]:
         raise SetFormatError("region: fault range lo > hi")
-    return RegionSet(base, Polygon(v.reshape(-1, 2)), (float(fault[0]), float(fault[1])))
+    return RegionSet(base, Polygon.from_flat(coords), (float(fault[0]), float(fault[1])))
