@@ -145,7 +145,7 @@ class Polygon:
         rounding of cᵀx where its terms cancel), and at least by what merging its vertices closer than DUPLICATE
         can leave out along c (a slab thin next to the coordinates' size); None if empty (flat if this polygon
         is: a segment's part is one)."""
-        c0, c1 = float(c[0]), float(c[1])
+        c0, c1, lo, hi = float(c[0]), float(c[1]), float(lo), float(hi)  # (numpy scalars would make the vertices theirs)
         v = self.points
         s = [c0 * x + c1 * y for x, y in v]
         s_min, s_max = min(s), max(s)

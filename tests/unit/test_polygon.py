@@ -106,3 +106,14 @@ def test_the_direction_order_falls_back_to_the_exact_one_where_a_rounded_angle_t
     assert _ordered([a, b]) == ([1, 0], [-1])
     d = [(0.0, -1.0), (1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (1.0, -1e-17)]
     assert _ordered(d)[0] == [1, 3, 2, 0, 4]
+
+
+def test_the_vertices_stay_plain_floats_whatever_numpy_scalars_come_in() -> None:
+    """Every operation builds its vertices from plain floats (a numpy scalar bound or matrix would otherwise make them
+    numpy's: slower arithmetic, and a published region that decode refuses as not numbers)."""
+    poly = Polygon.box(np.array([-1.0, -1.0]), np.array([1.0, 1.0]))
+    A, t = np.array([[0.9, 0.1], [-0.2, 0.8]]), np.array([0.01, -0.02])
+    out = poly.moved(A, t, [np.array([0.1, 0.05])]).reduced(6).cut(np.array([1.0, 0.5]), np.float64(-0.5), np.float64(0.25))
+    assert out is not None and len(out) >= 3
+    assert all(type(x) is float for x in out.flat())
+    assert Polygon.from_flat(out.flat()) == out and Polygon(out.vertices) == out
