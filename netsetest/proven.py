@@ -109,7 +109,7 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
     @cached_property
     def polygon(self) -> Polygon | None:
         """The region as a polygon of x = (β, r) (None: none kept)."""
-        return None if self.region is None else Polygon(np.asarray(self.region, dtype=float).reshape(-1, NX))
+        return None if self.region is None else Polygon.from_flat(self.region)
 
     @cached_property
     def _bounds(self) -> tuple[np.ndarray, np.ndarray]:

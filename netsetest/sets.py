@@ -324,7 +324,7 @@ def _spd(P: np.ndarray, key: str) -> np.ndarray:
 def set_to_wire(s: Ellipsoid | Zonotope | Box | SumSet | RegionSet) -> dict:
     """A JSON/msgpack-ready dict with a ``type`` key; :func:`set_from_wire` inverts it exactly."""
     if isinstance(s, RegionSet):
-        return {"type": "region", "set": set_to_wire(s.base), "region": s.region.vertices.reshape(-1).tolist(), "fault": [float(s.fault[0]), float(s.fault[1])]}
+        return {"type": "region", "set": set_to_wire(s.base), "region": s.region.flat(), "fault": [float(s.fault[0]), float(s.fault[1])]}
     if isinstance(s, Ellipsoid):
         return {"type": "ellipsoid", "center": s.center.tolist(), "P": s.P.tolist(), "rho": float(s.rho)}
     if isinstance(s, Zonotope):
@@ -403,8 +403,7 @@ def _region_set(d: dict, dim: int) -> RegionSet:
     problem = region_problem(coords)
     if problem:
         raise SetFormatError(": ".join(problem))  # the reason first: decode drops the message under it
-    v = np.asarray(coords, dtype=float)
     fault = _vec(d, "fault", 2)
     if fault[0] > fault[1]:
         raise SetFormatError("region: fault range lo > hi")
-    return RegionSet(base, Polygon(v.reshape(-1, 2)), (float(fault[0]), float(fault[1])))
+    return RegionSet(base, Polygon.from_flat(coords), (float(fault[0]), float(fault[1])))

@@ -109,7 +109,7 @@ class StepResult:
         )
         if self.region is not None:
             try:
-                return ProvenSet(region=self.region.vertices.reshape(-1).tolist(), **fields)
+                return ProvenSet(region=self.region.flat(), **fields)
             except ValueError as exc:
                 if str(exc).split(":", 1)[0] not in REGION_REASONS:
                     raise
@@ -293,7 +293,7 @@ def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
     for s in (res, res.published):
         if region is not None and s is not None:
             region = ellipse_cut(region, s.xhat, s.P, ctx.rho)
-    if region is None or len(region.vertices) < MIN_VERTICES:
+    if region is None or len(region) < MIN_VERTICES:
         return res  # (fewer: a sliver below the rounding, kept as empty)
     region = region.reduced()  # the move's margin covers the cuts' rounding (Polygon.moved)
     res = res.replaced(region=region, reading_keys=res.reading_keys | keys)
@@ -396,8 +396,7 @@ def _well_inside(region: Polygon, xhat: np.ndarray, pxx: np.ndarray, rho: float)
         return False
     bound = rho * (1.0 - INSIDE) * det
     x0, x1 = float(xhat[0]), float(xhat[1])
-    xs, ys = region.vertices.T.tolist()
-    for x, y in zip(xs, ys):
+    for x, y in region.points:
         a, b = x - x0, y - x1
         if not p11 * a * a - 2.0 * p01 * a * b + p00 * b * b <= bound:  # det · (v − x̂)ᵀ P_xx⁻¹ (v − x̂)
             return False

@@ -1,5 +1,5 @@
-"""Issue 28's speed-up of the region keeps every set: in whole runs (paper6 NSNIM and SAIM, paper signals and
-worst-case ones, paper6_reference, paper6_car_max_faulty, paper6_max_faulty), every call of the moves, cuts,
+"""The plain-float polygon code (issue 28's speed-up, issue 45's plain floats end to end) keeps every set:
+in whole runs (paper6 NSNIM and SAIM, paper signals and worst-case ones, paper6_reference, paper6_car_max_faulty, paper6_max_faulty), every call of the moves, cuts,
 reductions and ellipse cuts returns what the numpy code before it returned on the same input
 (tests/polygon_reference.py), to the roundings of the operation (polygon_reference.bound), both ways: the fast set
 holds the numpy one shrunk by that bound, and is no larger than it grown by it.  Not bit for bit: the ellipse cut's

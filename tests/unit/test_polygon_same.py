@@ -1,5 +1,5 @@
-"""Issue 28's speed-up of the region keeps every set: on adversarial polygons (tests/unit/test_polygon_exact.py's:
-near-collinear, near-axis, flat, slivers, rotated, at 10⁻¹² to 10¹², here also clockwise and with repeated
+"""The plain-float polygon code (issue 28's speed-up, issue 45's plain floats end to end) keeps every set:
+on adversarial polygons (tests/unit/test_polygon_exact.py's: near-collinear, near-axis, flat, slivers, rotated, at 10⁻¹² to 10¹², here also clockwise and with repeated
 vertices) and segments (axis-aligned, parallel to a side: directions that tie exactly), every operation returns
 what the numpy code before it returned (tests/polygon_reference.py), to the roundings of the operation
 (polygon_reference.bound: a few ulps of the coordinates' size, far below any margin), in both directions: the fast
