@@ -7,7 +7,8 @@ raise :class:`numpy.linalg.LinAlgError` where numpy.linalg does.  A routine that
 NaN (that is how numpy.linalg's own error check learns of it), so the failure is read off the output's first entry;
 on a non-finite input, whose output starts with NaN too, these raise where numpy.linalg returns the NaN (every
 caller treats LinAlgError as no answer).  tests/unit/test_linalg.py holds each to numpy.linalg, bit for bit and
-error for error, on finite inputs.
+error for error, on finite inputs: on any CPU, since it is the same LAPACK call, run by whichever OpenBLAS kernel the
+CPU gets (which floats that gives differs between kernels in the last bits; that both agree does not).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ A node's *region* (docs/network.md) is such a polygon: the states its prior allo
 step's dynamics and the disturbance's bound, and cut by the step's readings.  Unlike an ellipsoid it keeps
 what every earlier reading proved, as the exact limit does, at a bounded number of vertices.
 
-Vertices are stored counter-clockwise, (n, 2), n ≥ 3; a flat polygon (a segment, a point: fewer distinct
+Vertices are stored counter-clockwise as plain floats, n ≥ 3; a flat polygon (a segment, a point: fewer distinct
 vertices, or all on one line) only where its input was flat or a cut left a sliver below the rounding.  Every
 operation reads a polygon as the convex hull of its vertices, whatever their order.
 """
@@ -44,21 +44,63 @@ REGION_REASONS = frozenset(
 )
 
 
-@dataclass(frozen=True)
-class Polygon:
-    """A convex polygon, vertices (n, 2) counter-clockwise."""
+Point = tuple[float, float]
 
-    vertices: np.ndarray
+
+@dataclass(frozen=True, init=False)
+class Polygon:
+    """A convex polygon: its vertices counter-clockwise as plain floats, ``points`` ((β, r) pairs).  Every operation
+    works on them as they are (at 24–34 vertices numpy's per-call set-up costs more than the arithmetic), and its
+    result is built from its own lists, never converted; ``vertices`` is the (n, 2) array, for the readers who want
+    one."""
+
+    points: tuple[Point, ...]
+
+    def __init__(self, vertices: np.ndarray | Sequence[Sequence[float]]) -> None:
+        """From the vertices (n, 2), counter-clockwise."""
+        xs, ys = np.asarray(vertices, dtype=float).reshape(-1, 2).T.tolist()
+        object.__setattr__(self, "points", tuple(zip(xs, ys)))
+
+    @classmethod
+    def _of(cls, points: Sequence[Point]) -> Polygon:
+        """The polygon of plain-float vertices an operation made (as they are)."""
+        out = object.__new__(cls)
+        object.__setattr__(out, "points", tuple(points))
+        return out
+
+    @classmethod
+    def from_flat(cls, coords: Sequence[float]) -> Polygon:
+        """From the flattened vertices [β₁, r₁, β₂, r₂, …] (as published)."""
+        return cls._of(list(zip(map(float, coords[0::2]), map(float, coords[1::2]))))
 
     @classmethod
     def box(cls, lo: np.ndarray, hi: np.ndarray) -> Polygon:
         """The box lo ≤ x ≤ hi."""
-        return cls(np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]], dtype=float))
+        (x0, y0), (x1, y1) = (float(lo[0]), float(lo[1])), (float(hi[0]), float(hi[1]))
+        return cls._of([(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
+
+    @property
+    def vertices(self) -> np.ndarray:
+        """The vertices as an (n, 2) array (a new one)."""
+        return np.array(self.points, dtype=float).reshape(-1, 2)
+
+    def flat(self) -> list[float]:
+        """The vertices flattened, [β₁, r₁, β₂, r₂, …] (as published: proven.ProvenSet's ``region``)."""
+        return list(itertools.chain.from_iterable(self.points))
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The interval hull: each coordinate's lowest and highest vertex, (2,) each (exact: no rounding)."""
+        xs, ys = zip(*self.points)
+        return np.array([min(xs), min(ys)]), np.array([max(xs), max(ys)])
 
     def interval(self, c: np.ndarray) -> tuple[float, float]:
         """[min cᵀx, max cᵀx] over the polygon."""
-        v = self.vertices @ c
-        return float(v.min()), float(v.max())
+        c0, c1 = float(c[0]), float(c[1])
+        s = [c0 * x + c1 * y for x, y in self.points]
+        return min(s), max(s)
 
     def contains(self, x: np.ndarray) -> bool:
         """x in the convex hull of the vertices, exactly, whatever their order (a clockwise one, a rounding's reflex
@@ -68,7 +110,7 @@ class Polygon:
         :func:`_cross_sign`'s, exact where floating point cannot decide it (rounding, an overflow at 1e308), so a
         point a rounding would put on the wrong side of a side, or an overflow make NaN, is never misjudged."""
         px, py = float(x[0]), float(x[1])
-        v = _points(self.vertices)
+        v = self.points
         ax, ay = v[-1]
         for bx, by in v:
             if _cross_sign(ax, ay, bx, by, ax, ay, px, py) <= 0:
@@ -79,52 +121,52 @@ class Polygon:
     def affine(self, A: np.ndarray, t: np.ndarray) -> Polygon:
         """{A x + t}: A (2, 2); the vertices' order reversed where det A < 0 (its sign exact: a rounded determinant
         of a near-singular A could flip the orientation)."""
-        v = self.vertices @ A.T + t
-        det = _cross_sign(0.0, 0.0, float(A[0, 0]), float(A[1, 0]), 0.0, 0.0, float(A[0, 1]), float(A[1, 1]))
-        return Polygon(v if det >= 0 else v[::-1].copy())
+        return Polygon._of(_affine(self.points, A, t))
 
     def plus_segments(self, segments: list[np.ndarray]) -> Polygon:
         """The sum with the segments {s g : |s| ≤ 1} of ``segments`` (each g (2,)): the polygon's edges and every ±2g
         merged by direction in one pass (two more vertices per segment), walked from the lowest (then leftmost)
         vertex plus every segment's lowest (then leftmost) end, where that order starts.  The directions are
-        compared exactly (half-plane, then the sign of the cross product), never by a rounded angle: an edge a few
-        ulps below horizontal comes last, not first.  Where a rounding has made a vertex reflex (the edges do not
-        turn one way from there), the walk is over the exact hull of the vertices, which holds them all; parallel
-        directions in a row leave no vertex between them.  Sound to the walk's rounding and the merge of vertices
-        closer than DUPLICATE (:func:`_distinct`), which the margin of :meth:`moved` covers."""
-        return Polygon(_array(_plus(_points(self.vertices), [(float(x), float(y)) for x, y in segments])))
+        ordered exactly (:func:`_ordered`: half-plane, then the sign of the cross product), never by a rounded
+        angle alone: an edge a few ulps below horizontal comes last, not first.  Where a rounding has made a vertex
+        reflex (the edges do not turn one way from there), the walk is over the exact hull of the vertices, which
+        holds them all; parallel directions in a row leave no vertex between them.  Sound to the walk's rounding and
+        the merge of vertices closer than DUPLICATE (:func:`_distinct`), which the margin of :meth:`moved` covers."""
+        return Polygon._of(_plus(list(self.points), [(float(x), float(y)) for x, y in segments]))
 
     def moved(self, A: np.ndarray, t: np.ndarray, segments: list[np.ndarray]) -> Polygon:
         """{A x + t} summed with the segments and a square of half-side ROUNDING of the coordinates' size, in one
         merge: every side moves out by at least that, which covers the step's rounding (this move's, the cuts'
         that follow, each widened by its own margin, and the vertices merged as duplicates); at least what that
         merge can leave out where the segments reach far beyond the image (a flat or tiny image)."""
-        v = _points(self.affine(A, t).vertices)
+        v = _affine(self.points, A, t)
         g = [(float(x), float(y)) for x, y in segments]
         size = max(map(abs, itertools.chain.from_iterable(v)))
         reach = size + sum(max(abs(x), abs(y)) for x, y in g)
         merged = (2 * (len(v) + 2 * len(g)) + 8) * DUPLICATE * (1.0 + reach)
-        pad = max(ROUNDING * (1.0 + size), merged)  # (ROUNDING's at every physical state range: bit for bit)
-        return Polygon(_array(_plus(v, [*g, (pad, 0.0), (0.0, pad)])))
+        pad = max(ROUNDING * (1.0 + size), merged)
+        return Polygon._of(_plus(v, [*g, (pad, 0.0), (0.0, pad)]))
 
     def cut(self, c: np.ndarray, lo: float, hi: float) -> Polygon | None:
         """The part with lo ≤ cᵀx ≤ hi, widened outward by the margin (relative to max Σᵢ |cᵢ xᵢ|, which bounds the
         rounding of cᵀx where its terms cancel), and at least by what merging its vertices closer than DUPLICATE
         can leave out along c (a slab thin next to the coordinates' size); None if empty (flat if this polygon
         is: a segment's part is one)."""
-        s = self.vertices @ c
-        s_min, s_max = min(values := s.tolist()), max(values)  # (plain floats: cheaper than numpy's reductions here)
+        c0, c1, lo, hi = float(c[0]), float(c[1]), float(lo), float(hi)  # (numpy scalars would make the vertices theirs)
+        v = self.points
+        s = [c0 * x + c1 * y for x, y in v]
+        s_min, s_max = min(s), max(s)
         if lo <= s_min and s_max <= hi:  # inside the slab itself, so inside it widened by any pad ≥ 0: what both
             return self  # clips below would keep (most cuts of a step)
-        a = np.abs(self.vertices)
-        merged = (2 * len(a) + 2) * DUPLICATE * (1.0 + float(a.max())) * float(np.abs(c).sum())
-        pad = max(MARGIN * (1.0 + float((a @ np.abs(c)).max())), merged)
+        size = max(map(abs, itertools.chain.from_iterable(v)))
+        merged = (2 * len(v) + 2) * DUPLICATE * (1.0 + size) * (abs(c0) + abs(c1))
+        pad = max(MARGIN * (1.0 + max(abs(c0 * x) + abs(c1 * y) for x, y in v)), merged)
         if s_max <= hi + pad and -s_min <= -lo + pad:  # no vertex outside the widened slab: likewise
-            return self  # (v @ −c is −(v @ c) exactly: every rounding is symmetric in sign)
-        v = _clip(self.vertices, c, hi + pad)
-        if v is not None:
-            v = _clip(v, -c, -lo + pad)
-        return None if v is None else Polygon(v)
+            return self  # (−c0 x − c1 y is −(c0 x + c1 y) exactly: every rounding is symmetric in sign)
+        out = _clip(list(v), s, c0, c1, hi + pad)
+        if out is not None:
+            out = _clip(out, None, -c0, -c1, -lo + pad)
+        return None if out is None else Polygon._of(out)
 
     def within(self, other: Polygon, sliver: float = SLIVER) -> Polygon | None:
         """This polygon ∩ ``other``: cut by the supporting half-plane of ``other`` along the outward normal of each of
@@ -146,27 +188,28 @@ class Polygon:
         c = n[beyond] / np.abs(n[beyond]).max(axis=1)[:, None]  # |c|∞ = 1, so that each cut's margin is one of the coordinates' size
         a = np.abs(self.vertices)
         reach = (a @ np.abs(c).T).max(axis=0)  # max Σᵢ |cᵢ xᵢ| over this polygon: over any part of it no more
-        v = _clipped(_points(self.vertices), c.tolist(), (w @ c.T).max(axis=0).tolist(), reach.tolist(), float(a.max()))
-        return None if v is None else Polygon(_array(v))
+        v = _clipped(list(self.points), c.tolist(), (w @ c.T).max(axis=0).tolist(), reach.tolist(), float(a.max()))
+        return None if v is None else Polygon._of(v)
 
     def extent(self, c: np.ndarray) -> float:
         """max |cᵀx| over the polygon."""
-        return float(np.abs(self.vertices @ c).max())
+        c0, c1 = float(c[0]), float(c[1])
+        return max(abs(c0 * x + c1 * y) for x, y in self.points)
 
     def reduced(self, max_vertices: int = MAX_VERTICES) -> Polygon:
         """At most ``max_vertices`` vertices, containing this polygon: an edge is dropped by extending its two
         neighbours until they meet, the ones that add the least area first (edges at least three apart at once:
         their neighbours' lines are then untouched)."""
-        if len(self.vertices) <= max_vertices:
+        if len(self.points) <= max_vertices:
             return self
-        v = _points(self.vertices)
+        v = list(self.points)
         while len(v) > max_vertices:
             drops = _cheapest_edges(v, len(v) - max_vertices)
             if not drops:
                 break  # no edge can be dropped without an unbounded extension (for n > 4 only where a rounding
                 # puts two neighbours' meeting a hair behind an edge: near-duplicate vertices)
             v = _drop_edges(v, drops)
-        return Polygon(_array(v))
+        return Polygon._of(v)
 
 
 @functools.cache
@@ -177,30 +220,12 @@ def _successors(m: int) -> np.ndarray:
     return out
 
 
-def _after(a: np.ndarray, k: int = 1) -> np.ndarray:
-    """The rows of a rolled to start k after the first (np.roll(a, −k, axis=0) for −n ≤ k ≤ n, without its generic
-    set-up)."""
-    return np.concatenate((a[k:], a[:k]))
-
-
-# The walk, the merge and the reduction below run on plain floats: at 24–34 vertices numpy's per-call set-up
-# costs more than the arithmetic.  Each computes what its numpy form did, operation by operation (no fused
-# multiply-add: products, sums and differences rounded one at a time, as numpy's elementwise operations round
-# them), so the vertices are the same floats; the dot products of cut, interval and affine stay numpy's
-# (its matrix products may fuse them).
-
-Point = tuple[float, float]
-
-
-def _points(v: np.ndarray) -> list[Point]:
-    """The rows of v (n, 2) as plain floats."""
-    xs, ys = v.T.tolist()
-    return list(zip(xs, ys))
-
-
-def _array(v: list[Point]) -> np.ndarray:
-    """Plain-float vertices as the (n, 2) array of a Polygon."""
-    return np.fromiter(itertools.chain.from_iterable(v), float, 2 * len(v)).reshape(-1, 2)
+def _affine(v: Sequence[Point], A: np.ndarray, t: np.ndarray) -> list[Point]:
+    """The vertices {A x + t}, counter-clockwise (reversed where det A < 0: its sign exact, :func:`_cross_sign`)."""
+    (a00, a01), (a10, a11) = A.tolist()
+    t0, t1 = float(t[0]), float(t[1])
+    out = [(a00 * x + a01 * y + t0, a10 * x + a11 * y + t1) for x, y in v]
+    return out if _cross_sign(0.0, 0.0, a00, a10, 0.0, 0.0, a01, a11) >= 0 else out[::-1]
 
 
 def _half(x: float, y: float) -> int:
@@ -227,28 +252,13 @@ def _cross_sign(p0x: float, p0y: float, p1x: float, p1y: float, q0x: float, q0y:
     return (exact > 0) - (exact < 0)
 
 
-def _compare(a: Sequence[float], b: Sequence[float]) -> int:
-    """The order of the directions a and b (nonzero) by angle in [0, 2π), exactly: −1 if a comes first, 0 if they
-    are the same direction, 1 if b comes first (half-plane, then :func:`_cross_sign`'s filter inline: almost every
-    pair is decided by it)."""
-    ax, ay = a
-    bx, by = b
-    ha, hb = _half(ax, ay), _half(bx, by)
-    if ha != hb:
-        return -1 if ha < hb else 1
-    left, right = ax * by, ay * bx
-    det, size = left - right, abs(left) + abs(right)
-    if abs(det) > CCW_ERRBOUND * size and size > TINY:
-        return -1 if det > 0.0 else 1
-    return -_cross_sign(0.0, 0.0, ax, ay, 0.0, 0.0, bx, by)
-
-
-def _pairs(d: list[Point], half: list[int], order: Sequence[int]) -> list[int]:
-    """:func:`_compare` of each direction of d in ``order`` with the next, given each one's :func:`_half` (its
-    filter inline: the walk's hot loop)."""
+def _pairs(d: Sequence[Point]) -> list[int]:
+    """The order of each direction of d (nonzero) and the next by angle in [0, 2π), exactly: −1 if the first comes
+    first, 0 if they are the same direction, 1 if the next comes first (half-plane, then the sign of the cross
+    product: :func:`_cross_sign`'s float filter inline, which decides almost every pair, else its exact sign)."""
     out = []
-    hs, ds = [half[i] for i in order], [d[i] for i in order]
-    for ha, hb, (ax, ay), (bx, by) in zip(hs, hs[1:], ds, ds[1:]):
+    hs = [0 if y > 0.0 or (y == 0.0 and x > 0.0) else 1 for x, y in d]  # (_half)
+    for ha, hb, (ax, ay), (bx, by) in zip(hs, hs[1:], d, d[1:]):
         if ha != hb:
             out.append(-1 if ha < hb else 1)
             continue
@@ -261,50 +271,33 @@ def _pairs(d: list[Point], half: list[int], order: Sequence[int]) -> list[int]:
     return out
 
 
+def _compare(a: Point, b: Point) -> int:
+    """:func:`_pairs` of the two directions a, b."""
+    return _pairs((a, b))[0]
+
+
 def _turn_one_way(edges: list[Point]) -> bool:
     """Whether the edges (from the lowest, then leftmost, vertex) turn counter-clockwise all the way: their
     directions in [0, 2π) never decrease (a repeated vertex, a zero edge, is skipped)."""
-    e = [d for d in edges if d[0] != 0.0 or d[1] != 0.0]
-    return all(p <= 0 for p in _pairs(e, [_half(x, y) for x, y in e], range(len(e))))
-
-
-def _by_direction(d: np.ndarray) -> list[int]:
-    """The order of the directions d (m, 2), nonzero, by angle in [0, 2π), exactly (:func:`_ordered`)."""
-    return _ordered(_points(d))[0]
+    return all(p <= 0 for p in _pairs([d for d in edges if d[0] != 0.0 or d[1] != 0.0]))
 
 
 def _ordered(d: list[Point]) -> tuple[list[int], list[int]]:
-    """The order of the directions d (nonzero) by angle in [0, 2π), exactly, and the :func:`_compare` of each with
-    the next in it (which the walk of :meth:`Polygon.plus_segments` needs): sorted by half-plane and rounded angle
-    (one sort of floats), kept where every neighbouring pair is in order exactly (a total order within a
-    half-plane, so the neighbours decide), else sorted by :func:`_compare` alone (stable).
+    """The order of the directions d (nonzero) by angle in [0, 2π), exactly, and the :func:`_pairs` of it (which the
+    walk of :meth:`Polygon.plus_segments` needs): one sort of floats by half-plane and rounded angle, which stands
+    where every neighbouring pair is in order exactly (a total order within a half-plane, so the neighbours decide);
+    else (a rounded angle a hair off: rare) sorted by :func:`_compare` alone.  Directions that are the same exactly
+    may stand in any order: the walk leaves no vertex between them."""
+    key = [(8.0 if y < 0.0 or (y == 0.0 and x <= 0.0) else 0.0) + math.atan2(y, x) % TWO_PI for x, y in d]  # (_half·8)
+    order = sorted(range(len(d)), key=key.__getitem__)
+    pairs = _pairs([d[i] for i in order])
+    if 1 in pairs:  # (a pair out of order)
 
-    Ties (the same direction exactly) stand in the order the walk has always summed them, bit for bit: by
-    half-plane and numpy's rounded angle, then input order, where that order is exact for every neighbouring pair;
-    else in input order.  Without ties every order that passes the check is the one exact order."""
-    m = len(d)
-    half = [0 if y > 0.0 or (y == 0.0 and x > 0.0) else 1 for x, y in d]  # (_half, inline)
-    key = [8.0 * h + math.atan2(y, x) % TWO_PI for h, (x, y) in zip(half, d)]  # half-plane, then angle (< 8)
-    order = [i for _, i in sorted(zip(key, range(m)))]  # (ties in input order)
-    pairs = _pairs(d, half, order)
-
-    def exact() -> tuple[list[int], list[int]]:  # by _compare alone, stable
         def by_direction(i: int, j: int) -> int:
             return _compare(d[i], d[j])
 
-        order = sorted(range(m), key=functools.cmp_to_key(by_direction))
-        return order, _pairs(d, half, order)
-
-    if 1 in pairs:  # (a pair out of order)
-        order, pairs = exact()
-    if 0 in pairs:  # a tie: does numpy's rounded angles' order stand?
-        arr = np.array(d, dtype=float)
-        angle = np.mod(np.arctan2(arr[:, 1], arr[:, 0]), TWO_PI).tolist()
-        fast = [i for *_, i in sorted(zip(half, angle, range(m)))]  # (ties in input order)
-        fast_pairs = _pairs(d, half, fast)
-        if all(p <= 0 for p in fast_pairs):
-            return fast, fast_pairs
-        order, pairs = exact()
+        order = sorted(range(len(d)), key=functools.cmp_to_key(by_direction))
+        pairs = _pairs([d[i] for i in order])
     return order, pairs
 
 
@@ -343,9 +336,9 @@ def _plus(vertices: list[Point], segments: list[Point]) -> list[Point]:
     if not steps:
         return v
     bx, by = v[0][0] + lx, v[0][1] + ly
-    walk = [(bx + 0.0, by + 0.0)]  # (+ 0.0: as the walk's zero first row, −0.0 becomes 0.0)
+    walk = [(bx, by)]
     cx, cy = steps[order[0]]
-    for k in order[1:]:  # each partial sum in turn, as a running (cumulative) sum rounds it
+    for k in order[1:]:  # each partial sum in turn
         walk.append((bx + cx, by + cy))
         sx, sy = steps[k]
         cx, cy = cx + sx, cy + sy
@@ -356,15 +349,15 @@ def _plus(vertices: list[Point], segments: list[Point]) -> list[Point]:
     return _distinct(kept or walk[:1])
 
 
-def _hull(v: list[Point]) -> list[Point]:
+def _hull(v: Sequence[Point]) -> list[Point]:
     """The convex hull of the points v, exactly (Andrew's monotone chain, exact orientation): its vertices
     counter-clockwise without collinear ones, from the lowest (then leftmost); one or two if it is flat."""
-    pts = sorted({(float(x), float(y)) for x, y in v})
+    pts = sorted(set(v))
     if len(pts) <= 2:
         return sorted(pts, key=lambda p: (p[1], p[0]))
 
-    def chain(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
-        out: list[tuple[float, float]] = []
+    def chain(points: list[Point]) -> list[Point]:
+        out: list[Point] = []
         for p in points:
             while len(out) >= 2 and _cross_sign(*out[-2], *out[-1], *out[-2], *p) <= 0:
                 out.pop()
@@ -388,18 +381,22 @@ def _in_hull(hull: list[Point], px: float, py: float) -> bool:
     return all(_cross_sign(ax, ay, bx, by, ax, ay, px, py) >= 0 for (ax, ay), (bx, by) in zip(hull, [*hull[1:], hull[0]]))
 
 
-def _clip(v: np.ndarray, c: np.ndarray, b: float) -> np.ndarray | None:
-    """The polygon ∩ {cᵀx ≤ b} (Sutherland–Hodgman against one half-plane); None if nothing remains."""
-    s = v @ c - b
-    if (s <= 0.0).all():
+def _clip(v: list[Point], s: list[float] | None, c0: float, c1: float, b: float) -> list[Point] | None:
+    """The polygon ∩ {c0 x + c1 y ≤ b} (Sutherland–Hodgman against one half-plane; ``s``: each vertex's c0 x + c1 y,
+    if known); None if nothing remains."""
+    d = [c0 * x + c1 * y - b for x, y in v] if s is None else [e - b for e in s]
+    if max(d) <= 0.0:
         return v
-    nxt = _after(v)
-    s_nxt = _after(s)
-    crosses = ((s < 0.0) & (s_nxt > 0.0)) | ((s > 0.0) & (s_nxt < 0.0))
-    t = np.where(crosses, s / np.where(crosses, s - s_nxt, 1.0), 0.0)
-    points = np.stack([v, v + t[:, None] * (nxt - v)], axis=1).reshape(-1, 2)  # per edge: its start, its crossing
-    out = points[np.stack([s <= 0.0, crosses], axis=1).reshape(-1)]
-    return _array(_distinct(_points(out))) if len(out) else None
+    out: list[Point] = []
+    (px, py), sp = v[-1], d[-1]
+    for (x, y), sq in zip(v, d):
+        if (sp < 0.0 < sq) or (sq < 0.0 < sp):  # the side from the previous vertex crosses the line
+            t = sp / (sp - sq)
+            out.append((px + t * (x - px), py + t * (y - py)))
+        if sq <= 0.0:
+            out.append((x, y))
+        px, py, sp = x, y, sq
+    return _distinct(out) if out else None
 
 
 def _clipped(v: list[Point], planes: list[list[float]], ends: list[float], reach: list[float], size: float) -> list[Point] | None:

@@ -1,10 +1,10 @@
 """Where a role process's CPU goes, per phase of its own thread (off unless asked; for the benchmark).
 
-``NETSETEST_PROFILE=DIR`` in a role process's environment turns it on: an observer (:func:`observe_bus`,
-:func:`observe_node`) wraps the bus's and the node's methods of each phase on their instances, so that they charge
-the CPU time of the calling thread (``time.thread_time_ns``, robust to other work on the machine, unlike wall
-time) to named phases, and a node writes ``DIR/node-<id>.json`` when it ends.  Off, nothing is wrapped and the hot
-path has no profiling code at all.  Phases (:data:`PHASES`):
+A node's ``--profile DIR`` (``netsetest run --profile DIR`` passes it to every node; runtime/rolespec.py) turns it
+on: an observer (:func:`observe_bus`, :func:`observe_node`) wraps the bus's and the node's methods of each phase on
+their instances, so that they charge the CPU time of the calling thread (``time.thread_time_ns``, robust to other
+work on the machine, unlike wall time) to named phases, and the node writes ``DIR/node-<id>.json`` when it ends
+(:meth:`PhaseProfile.write`).  Off, nothing is wrapped and the hot path has no profiling code at all.  Phases (:data:`PHASES`):
 
 - ``wait``: blocking for the next message — the CPU of going to sleep and of being woken (the
   Condition, the futex, taking the GIL back); ``calls`` counts the blocking waits, i.e. wake-ups;
@@ -17,8 +17,8 @@ path has no profiling code at all.  Phases (:data:`PHASES`):
 
 What the thread used outside these is reported as ``other`` (the role's loop, deciding to step,
 bookkeeping); what the process's other threads used (Zenoh's runtime, subscriber callbacks, and what those
-callbacks decode) as ``threads``: a phase is charged only on the role's own thread (the one that imported
-this module), since ``other`` is that thread's CPU less its phases.  ``messages`` counts, per step, the
+callbacks decode) as ``threads``: a phase is charged only on the role's own thread (the one that made the
+:class:`PhaseProfile`), since ``other`` is that thread's CPU less its phases.  ``messages`` counts, per step, the
 payloads the bus took from the transport (``received``, on any thread; those dropped before decoding too)
 and those it published (``sent``): the per-message budget of the benchmark (``netsetest bench --only
 node``) divides by them.  Counted from the node's first solved step to its last, so start-up is left out.
@@ -27,7 +27,6 @@ node``) divides by them.  Counted from the node's first solved step to its last,
 from __future__ import annotations
 
 import json
-import os
 import sys
 import threading
 import time
@@ -42,7 +41,6 @@ if TYPE_CHECKING:  # (types only: the observer wraps what it is handed)
     from netsetest.bus.base import Bus, Handler, Screen
     from netsetest.roles.node import Node
 
-ENV = "NETSETEST_PROFILE"
 PHASES = ("wait", "decode", "handle", "solve", "build", "encode", "put")
 MESSAGES = ("received", "sent")
 
@@ -54,7 +52,7 @@ class PhaseProfile:
         self.cpu_ns: Counter[str] = Counter()
         self.calls: Counter[str] = Counter()
         self.messages: Counter[str] = Counter()  # MESSAGES, whatever the thread
-        self._owner = threading.get_ident()  # the role's thread: the one that imports this module
+        self._owner = threading.get_ident()  # the role's thread: the one that makes the profile
         self._window: tuple[int, int, float] | None = None  # thread CPU, process CPU, wall at the start
 
     @staticmethod
@@ -106,19 +104,12 @@ class PhaseProfile:
             "messages_per_step": {m: self.messages[m] / steps for m in MESSAGES},
         }
 
-    def write(self, name: str, steps: int) -> None:
-        """Write the report to ``$NETSETEST_PROFILE/<name>.json`` (a failure to write only warns)."""
-        directory = os.environ.get(ENV)
-        if not directory:
-            return
+    def write(self, directory: str, name: str, steps: int) -> None:
+        """Write the report to ``directory/<name>.json`` (a failure to write only warns: the run is not the profile's)."""
         try:
             Path(directory, f"{name}.json").write_text(json.dumps(self.report(steps)))
         except OSError as exc:
             print(f"[profile] cannot write {name}.json in {directory}: {exc}", file=sys.stderr, flush=True)
-
-
-#: The process's profile, or None (the default): set from the environment once, at import.
-PROFILE: PhaseProfile | None = PhaseProfile() if os.environ.get(ENV) else None
 
 
 def _timed(prof: PhaseProfile, phase: str, fn: Callable[..., Any]) -> Callable[..., Any]:

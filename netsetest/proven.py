@@ -109,7 +109,7 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
     @cached_property
     def polygon(self) -> Polygon | None:
         """The region as a polygon of x = (β, r) (None: none kept)."""
-        return None if self.region is None else Polygon(np.asarray(self.region, dtype=float).reshape(-1, NX))
+        return None if self.region is None else Polygon.from_flat(self.region)
 
     @cached_property
     def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -117,8 +117,8 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
             return self.own_set.bounds()
         lo, hi = ellipsoid_bounds(self.centre, np.diag(self.P_matrix), self.rho, self.fault)  # (new arrays: x̂ ∓ half)
         if self.polygon is not None:  # the ellipsoid ∩ the region: x's bounds are the tighter of the two
-            v = self.polygon.vertices
-            lo[:NX], hi[:NX] = np.maximum(lo[:NX], v.min(axis=0)), np.minimum(hi[:NX], v.max(axis=0))
+            low, high = self.polygon.bounds()
+            lo[:NX], hi[:NX] = np.maximum(lo[:NX], low), np.minimum(hi[:NX], high)
         return lo, hi
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:

@@ -249,8 +249,8 @@ class RegionSet:
     @cached_property
     def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
         lo, hi = self.base.bounds()
-        v = self.region.vertices
-        lo[:2], hi[:2] = np.maximum(lo[:2], v.min(axis=0)), np.minimum(hi[:2], v.max(axis=0))
+        low, high = self.region.bounds()
+        lo[:2], hi[:2] = np.maximum(lo[:2], low), np.minimum(hi[:2], high)
         lo[2], hi[2] = max(lo[2], self.fault[0]), min(hi[2], self.fault[1])
         return lo, hi
 
@@ -324,7 +324,7 @@ def _spd(P: np.ndarray, key: str) -> np.ndarray:
 def set_to_wire(s: Ellipsoid | Zonotope | Box | SumSet | RegionSet) -> dict:
     """A JSON/msgpack-ready dict with a ``type`` key; :func:`set_from_wire` inverts it exactly."""
     if isinstance(s, RegionSet):
-        return {"type": "region", "set": set_to_wire(s.base), "region": s.region.vertices.reshape(-1).tolist(), "fault": [float(s.fault[0]), float(s.fault[1])]}
+        return {"type": "region", "set": set_to_wire(s.base), "region": s.region.flat(), "fault": [float(s.fault[0]), float(s.fault[1])]}
     if isinstance(s, Ellipsoid):
         return {"type": "ellipsoid", "center": s.center.tolist(), "P": s.P.tolist(), "rho": float(s.rho)}
     if isinstance(s, Zonotope):
@@ -403,8 +403,7 @@ def _region_set(d: dict, dim: int) -> RegionSet:
     problem = region_problem(coords)
     if problem:
         raise SetFormatError(": ".join(problem))  # the reason first: decode drops the message under it
-    v = np.asarray(coords, dtype=float)
     fault = _vec(d, "fault", 2)
     if fault[0] > fault[1]:
         raise SetFormatError("region: fault range lo > hi")
-    return RegionSet(base, Polygon(v.reshape(-1, 2)), (float(fault[0]), float(fault[1])))
+    return RegionSet(base, Polygon.from_flat(coords), (float(fault[0]), float(fault[1])))

@@ -27,7 +27,7 @@ if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
 
 
 # modules that read the same recorded runs (run_helpers.shared_run, cached per worker): one worker runs them
-SHARED_RUN_MODULES = frozenset({"test_fdi.py", "test_sector.py", "test_containment.py"})
+SHARED_RUN_MODULES = frozenset({"test_fdi.py", "test_sector.py", "test_containment.py", "test_headline.py"})
 
 
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the groups

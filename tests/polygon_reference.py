@@ -1,15 +1,23 @@
 """The polygon operations as numpy computed them before issue 28's speed-up (netsetest/polygon.py and
-estimator/cuts.py's ``ellipse_cut`` at bb92f3e, unchanged but for what the tests do not call): the reference
-tests/unit/test_polygon_same.py and tests/inmemory/test_polygon_runs_same.py hold the plain-float code to, bit for bit.
+estimator/cuts.py's ``ellipse_cut`` at bb92f3e, unchanged but for what the tests do not call), the reference
+tests/unit/test_polygon_same.py and tests/inmemory/test_polygon_runs_same.py hold the plain-float code to; and how
+close it must stay (:func:`differs`): the same set to the roundings of the operation, not bit for bit, since
+numpy's products here go through OpenBLAS, whose kernel (picked by CPU: ``OPENBLAS_CORETYPE``) may round them
+otherwise than plain floats do (with a fused multiply-add or without).
 """
 
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 from fractions import Fraction
+from typing import Any
 
 import numpy as np
+from exact_polygons import EPS, cut_rounding, exact, gap, merged, move_rounding, reduction_rounding, sum_rounding
+
+from netsetest import polygon as fast
 
 from netsetest.polygon import CCW_ERRBOUND, DUPLICATE, MARGIN, MAX_REACH, MAX_VERTICES, ROUNDING, TINY
 
@@ -270,3 +278,79 @@ def ellipse_cut(region: Polygon, xhat: np.ndarray, P: np.ndarray, rho: float, co
         centre, half = float(d @ xhat[:2]), float(np.sqrt(max(rho * float(d @ pxx @ d), 0.0)))
         out = out.cut(d, centre - half, centre + half)
     return out
+
+
+# --- how close the plain-float code must stay to it -----------------------------------------------------------
+
+
+def differs(got: fast.Polygon | None, want: Polygon | None, bound: Fraction) -> str | None:
+    """Why ``got`` (netsetest/polygon.py's answer) is not ``want`` (this module's) to ``bound``, None if it is: each
+    holds the other shrunk by ``bound`` (gap ≤ bound both ways).  ``got`` holding ``want`` shrunk is the direction
+    soundness needs (the fast code drops no point the numpy code kept, beyond the rounding); the other, that it
+    keeps no more.  Both or neither empty.  (Equal vertices: at once.)"""
+    if got is None or want is None:
+        return None if got is None and want is None else f"empty on one side only: got {got}, want {want}"
+    a, b = got.vertices, want.vertices
+    if a.shape == b.shape and a.tobytes() == b.tobytes():
+        return None
+    lost, added = gap(exact(b), exact(a)), gap(exact(a), exact(b))
+    if lost > bound:
+        return f"the numpy code's set reaches {float(lost):.3g} beyond the fast code's (bound {float(bound):.3g})"
+    if added > bound:
+        return f"the fast code's set reaches {float(added):.3g} beyond the numpy code's (bound {float(bound):.3g})"
+    return None
+
+
+def bound(name: str, v: np.ndarray, *args: Any, **kwargs: Any) -> Fraction:
+    """:func:`differs`'s bound for the operation ``name`` (a method of Polygon, or ``ellipse_cut``) with ``args`` on the
+    polygon ``v`` (``kwargs``: ellipse_cut's ``coordinates``).  Each code holds the exact result to within its operation's rounding, from both sides
+    (tests/exact_polygons.py: tests/unit/test_polygon_exact.py holds netsetest/polygon.py to it, the reference does
+    the same arithmetic) and may merge near-duplicate vertices the other keeps; so the two are within twice that of
+    each other.  Their differences on this machine's OpenBLAS kernels are a few ulps; a change of the operation, say
+    a margin left out (10⁻⁹ of the coordinates' size for a cut, 10⁻¹⁰ for a move), is far beyond."""
+    n = len(v)
+    if name == "plus_segments":
+        segments = args[0]
+        return 2 * sum_rounding(v, segments) + 2 * merged(v, n + 2 * len(segments))
+    if name == "moved":
+        A, t, segments = args
+        image = v @ A.T + t
+        return 2 * move_rounding(image, segments) + 2 * merged(image, n + 2 * len(segments) + 4)
+    if name == "cut":
+        return 2 * cut_rounding(v) + 2 * merged(v, 2 * n)
+    if name == "reduced":
+        return 2 * reduction_rounding(v)
+    if name == "ellipse_cut":
+        return ellipse_cut_bound(v, *args, **kwargs)
+    raise ValueError(name)
+
+
+def ellipse_cut_bound(v: np.ndarray, xhat: np.ndarray, P: np.ndarray, rho: float, coordinates: bool = True) -> Fraction:
+    """How far the two codes' :func:`ellipse_cut` of the polygon ``v`` may differ (the gap, both ways).
+
+    They cut by the same slabs (the same directions: numpy.linalg.eigh's, which netsetest.linalg.eigh is), but round
+    each slab's ends dᵀx̂ ± √(ρ dᵀP_xx d) otherwise: numpy's 2-vector products (OpenBLAS's kernel) against plain
+    floats, each product and sum rounded.  A 2-term dot product is within 2ε of its exact value relative to the sum
+    of its terms' magnitudes, whichever way it is rounded, so the two centres differ by at most 4ε Σ|dᵢx̂ᵢ| and the two
+    dᵀP_xx d (two such products in turn) by 8ε |d|ᵀ|P_xx||d|; then ρ· and √ (each rounded: 2ε more relative) and the
+    end's sum (2ε of its terms).  A √ of values a, b: |√a − √b| ≤ min(√|a − b|, |a − b| / √max(a, b)), which for a
+    thin ellipse (P_xx's condition up to 10¹⁰) makes the end of its short axis differ by far more ulps than the
+    inputs did.  A slab's end moved by δ moves the cut set by at most δ (in the gap's ∞-norm, d a unit vector); on
+    top of that each cut of either code rounds its crossings and may merge vertices (:func:`cut_rounding`,
+    :func:`merged`), at most two vertices more per cut."""
+    pxx = 0.5 * (P[:2, :2] + P[:2, :2].T)
+    _, vecs = np.linalg.eigh(pxx)
+    dirs = [*np.eye(2), *vecs.T] if coordinates else [*vecs.T]
+    total = Fraction(0)
+    n = len(v)
+    for d in dirs:
+        n += 2
+        centre_terms = float(np.abs(d) @ np.abs(xhat[:2]))
+        q_terms = float(np.abs(d) @ np.abs(pxx) @ np.abs(d))
+        q = rho * float(d @ pxx @ d)
+        dq = rho * 9.0 * EPS * q_terms + 2.0 * EPS * abs(q)  # (9 for 8: the products' own second order)
+        dhalf = min(math.sqrt(dq), dq / math.sqrt(q)) if q > 0.0 else math.sqrt(dq)
+        half = math.sqrt(max(q, 0.0))
+        ends = 5.0 * EPS * centre_terms + dhalf + 2.0 * EPS * half + 2.0 * EPS * (abs(float(d @ xhat[:2])) + half)
+        total += Fraction(ends) + 2 * cut_rounding(v, n) + 2 * merged(v, 2 * n)
+    return total

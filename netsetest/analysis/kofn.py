@@ -233,12 +233,13 @@ class Conic:
         the largest residual of an equality, shortfall of an inequality or of a second-order cone (0: none)."""
         kind, first, dim = self._cone_of_row
         rows = np.arange(len(s)) if rows is None else rows
-        worst = float(np.abs(s[rows[kind[rows] == 0]]).max(initial=0.0))
-        worst = max(worst, float(-s[rows[kind[rows] == 1]].min(initial=0.0)))
-        for start in np.unique(first[rows[kind[rows] == 2]]):
+        k: np.ndarray = kind[rows]  # (typed once: mypy spent over a second resolving numpy's overloads on kind[rows] inferred four times)
+        worst = float(np.abs(s[rows[k == 0]]).max(initial=0.0))
+        worst = max(worst, float(-s[rows[k == 1]].min(initial=0.0)))
+        for start in np.unique(first[rows[k == 2]]):
             part = s[start : start + dim[start]]
             worst = max(worst, float(np.linalg.norm(part[1:]) - part[0]))
-        return math.inf if np.any(kind[rows] == 3) else worst
+        return math.inf if np.any(k == 3) else worst
 
     def moved(self, s: np.ndarray, cols: Sequence[int], delta: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
         """The slacks after x[cols] += delta (positions in ``cols`` of the program), and the rows that changed."""

@@ -45,7 +45,9 @@ PY = [sys.executable, "-m", "netsetest"]
 
 
 @dataclass(frozen=True)
-class RunResult:
+class AttackedRun:
+    """What an attacked ``netsetest run`` gave (runtime/inmemory.py's ``RunResult`` is an in-memory run's)."""
+
     exit_code: int | None
     wall_s: float
     steps_per_s: float
@@ -141,7 +143,7 @@ def attacker_main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def attacked_run(topology: Path, steps: int, secured: bool, kind: str | None, rate: float, pace: float, clock: str = "lockstep") -> RunResult:
+def attacked_run(topology: Path, steps: int, secured: bool, kind: str | None, rate: float, pace: float, clock: str = "lockstep") -> AttackedRun:
     """``netsetest run`` (paced so the attack overlaps the whole run; ``clock`` its clock), attacked by ``kind`` (None: not)."""
     with tempfile.TemporaryDirectory(prefix="nsattack-") as tmpd:
         summary = Path(tmpd) / "summary.json"
@@ -220,7 +222,7 @@ def attacked_run(topology: Path, steps: int, secured: bool, kind: str | None, ra
             except (subprocess.TimeoutExpired, ValueError, KeyError, IndexError):
                 a.kill()
         s = json.loads(summary.read_text()) if summary.exists() else {}
-        return RunResult(code, wall, steps / wall, s.get("nodes_missing", []), s.get("drops", {}), sent, s)
+        return AttackedRun(code, wall, steps / wall, s.get("nodes_missing", []), s.get("drops", {}), sent, s)
 
 
 def flood(topology: Path, steps: int, rate: float, target: str, secured: bool, pace: float = 0.0) -> dict:

@@ -37,8 +37,7 @@ from netsetest.bus import keys
 from netsetest.bus.base import Bus, Handler, MemoryBus
 from netsetest.config.schema import Scenario
 from netsetest.messages import Message, Ready
-from netsetest.profile import ENV as PROFILE_ENV
-from netsetest.profile import PROFILE, observe_bus
+from netsetest.profile import PhaseProfile, observe_bus
 from netsetest.runtime.processes import IDLE_WAIT_S, READY_PERIOD_S, REALTIME_SETTLE_S  # the node's and the real-time clock's
 
 if TYPE_CHECKING:
@@ -140,8 +139,8 @@ def bare_node(bus: ZenohBus, run_id: str, payloads: RingPayloads) -> dict:
     def on_input(key: str, msg: Message) -> None:
         inputs.append(getattr(msg, "step", -1))
 
-    if PROFILE is not None:
-        observe_bus(bus, PROFILE)  # its decodes and waits, as a profiled node's (before it subscribes)
+    prof = PhaseProfile()  # its thread's phases, as in the node's profiled runs (nothing written)
+    observe_bus(bus, prof)  # its decodes and waits, as a profiled node's (before it subscribes)
     own = subscribe_as_node(bus, run_id, node, payloads.others, on_input)
     ready_due = 0.0
     sent = 0
@@ -155,21 +154,19 @@ def bare_node(bus: ZenohBus, run_id: str, payloads: RingPayloads) -> dict:
             k = inputs.pop(0)
             if not 0 <= k <= payloads.steps:
                 continue
-            t = PROFILE.now() if PROFILE is not None else 0
+            t = prof.now()
             bus.send_raw(own, payloads.sent(k))  # the node's payload, encoded already
-            if PROFILE is not None:
-                PROFILE.add("put", t)
+            prof.add("put", t)
             sent += 1
             if k == WARM_STEPS - 1:
                 start = (time.process_time_ns(), time.thread_time_ns(), bus.received, sent)
-                if PROFILE is not None:
-                    PROFILE.start_window()
+                prof.start_window()
             if k == payloads.steps and start is not None:
                 n = payloads.steps - WARM_STEPS + 1
                 process, thread = time.process_time_ns() - start[0], time.thread_time_ns() - start[1]
                 received, out = (bus.received - start[2]) / n, (sent - start[3]) / n
-                phases = PROFILE.report(n)["phases"] if PROFILE is not None else {}
-                mine = {f"{p}_us": 1e3 * phases[p]["ms_per_step"] if p in phases else float("nan") for p in PROFILED}
+                phases = prof.report(n)["phases"]
+                mine = {f"{p}_us": 1e3 * phases[p]["ms_per_step"] for p in PROFILED}
                 return {
                     "steps": n,
                     "process_us": process / 1e3 / n,
@@ -246,7 +243,7 @@ def floor_run(topology: Path, payloads: RingPayloads, secured: bool, tmp: Path) 
             stderr=subprocess.PIPE,
             stdin=subprocess.DEVNULL,
             text=True,
-            env={**role_env(), PROFILE_ENV: str(tmp)},  # its thread's phases, as in the node's profiled runs (nothing written)
+            env=role_env(),
         )
         deadline = time.monotonic() + START_TIMEOUT_S
         while not heard and time.monotonic() < deadline and proc.poll() is None:

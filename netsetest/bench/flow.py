@@ -10,8 +10,7 @@ loses nothing, and what the lockstep window costs (roles/flow.py ``ACK_WINDOW``,
   machine (the soak that failed 2 of 2 before the window): exit code and node-steps lost per run.
 - ``ratio``: the unpaced paper6 lockstep run over Zenoh against the same run in memory (what the
   performance part's ``zenoh.ratio`` measures, with the same functions), with the window and without it
-  (``NETSETEST_ACK_WINDOW=unbounded``, roles/flow.py: the same ``netsetest run`` launcher, the vehicle never
-  held), the three runs interleaved, medians of three: the window's cost is the difference of the two
+  (``netsetest run --ack-window unbounded``, roles/flow.py: the same launcher, the vehicle never held), the three runs interleaved, medians of three: the window's cost is the difference of the two
   ratios, measured side by side in one run.  Both arms send the collector's acknowledgments (one small
   message per ``ACK_STRIDE`` steps, the collector does not know the vehicle's window): the difference is
   what holding the vehicle costs, the acknowledgments' own (a Ready decoded by each role every other step)
@@ -22,7 +21,6 @@ loses nothing, and what the lockstep window costs (roles/flow.py ``ACK_WINDOW``,
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import signal
@@ -30,10 +28,9 @@ import statistics
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
-from netsetest.roles.flow import ACK_STRIDE, ACK_WINDOW, ACK_WINDOW_ENV, UNBOUNDED
+from netsetest.roles.flow import ACK_STRIDE, ACK_WINDOW, show_window
 from netsetest.scenarios import TOPOLOGY_DIR
 
 PAPER6 = TOPOLOGY_DIR / "paper6.toml"
@@ -106,27 +103,9 @@ def paused_run(tmp: Path, steps: int, pause_s: float, timeout: float = 900.0, se
     }
 
 
-@contextlib.contextmanager
-def window_setting(value: str | None) -> Iterator[None]:
-    """``$NETSETEST_ACK_WINDOW`` set to ``value`` (None: unset) while the block runs a launch from this
-    process (the fork server, and so the vehicle, inherits the environment the launcher starts it with)."""
-    before = os.environ.get(ACK_WINDOW_ENV)
-    try:
-        if value is None:
-            os.environ.pop(ACK_WINDOW_ENV, None)
-        else:
-            os.environ[ACK_WINDOW_ENV] = value
-        yield
-    finally:
-        if before is None:
-            os.environ.pop(ACK_WINDOW_ENV, None)
-        else:
-            os.environ[ACK_WINDOW_ENV] = before
-
-
 def lockstep_ratio(steps: int | None, reps: int = RATIO_REPS) -> dict:
     """The unpaced paper6 lockstep run over Zenoh against in memory, with the window (the default) and
-    without it (``NETSETEST_ACK_WINDOW=unbounded``): the same launcher ``netsetest run`` uses, the three
+    without it (``--ack-window unbounded``): the same launcher ``netsetest run`` uses, the three
     runs interleaved ``reps`` times so that the machine's load falls on each alike, the two Zenoh runs in
     turn first (a run right after another may pay for its predecessor's teardown); medians, and the load
     average before each repetition (the spread of the repetitions is the figure's noise)."""
@@ -139,15 +118,14 @@ def lockstep_ratio(steps: int | None, reps: int = RATIO_REPS) -> dict:
     zen: dict[str, list[float | None]] = {"window": [], "unbounded": []}
     codes: dict[str, list[int]] = {"window": [], "unbounded": []}
     loads: list[float] = []
-    arms = (("window", None), ("unbounded", UNBOUNDED))
+    arms: tuple[tuple[str, int | None], ...] = (("window", ACK_WINDOW), ("unbounded", None))
     for rep in range(reps):
         loads.append(os.getloadavg()[0])
         t0 = time.perf_counter()
         run_inmemory(sc, "paper", "scheduled", 0)
         mem.append(time.perf_counter() - t0)
-        for case, setting in arms if rep % 2 == 0 else arms[::-1]:
-            with window_setting(setting):
-                obs = observed_lockstep(PAPER6, steps)
+        for case, window in arms if rep % 2 == 0 else arms[::-1]:
+            obs = observed_lockstep(PAPER6, steps, ack_window=window)
             zen[case].append(obs["stepping_s"])
             codes[case].append(obs["usage"]["run"]["exit_code"])
     out: dict = {"steps": sc.steps, "reps": reps, "load_before": loads, "inmemory_s": mem}
@@ -223,7 +201,7 @@ def flow_markdown(res: dict) -> str:
     lines += [
         "",
         f"What the window costs: the unpaced paper6 lockstep run ({q['steps']} steps) over Zenoh, with the window and without it "
-        f"({ACK_WINDOW_ENV}={UNBOUNDED}), against the same run in memory, the three interleaved, {q['reps']} times (the ratio: median over median):",
+        f"(`--ack-window {show_window(None)}`), against the same run in memory, the three interleaved, {q['reps']} times (the ratio: median over median):",
         "",
         "| | load average | in memory | Zenoh, with the window | without it | ratio with | ratio without |",
         "|---|---|---|---|---|---|---|",

@@ -68,6 +68,7 @@ def _sdp_figures(sc: Scenario, sig: str, seed: int, path: Path) -> tuple[dict, R
 
 
 def network_figures(cfg: dict, tmp: Path) -> dict:
+    from netsetest.analysis.exact import DEGENERATE_WIDTH
     from netsetest.config.schema import load_topology
 
     rows = []
@@ -83,14 +84,15 @@ def network_figures(cfg: dict, tmp: Path) -> dict:
                     for i in sc.ids:
                         nodes[i] = {
                             **exact[i],
-                            "sdp_alone_over_network": alone[i]["fault_width"] / sdp[i]["fault_width"],
+                            # None where the network publishes a point (a reference's declared zero fault): no ratio
+                            "sdp_alone_over_network": alone[i]["fault_width"] / sdp[i]["fault_width"] if sdp[i]["fault_width"] > DEGENERATE_WIDTH else None,
                             "delay_network": sdp[i]["delay"],
                             "delay_alone": alone[i]["delay"],
                             "false_detections": sdp[i]["false_detections"],
                             "false_detections_covered": sdp[i]["false_detections_covered"],
                         }
                     rows.append({"topology": name, "case": case, "signals": sig, "seed": seed, "nodes": nodes, "exact": not sc.health_groups})
-                    gain = [v["sdp_alone_over_network"] for v in nodes.values()]
+                    gain = [v["sdp_alone_over_network"] for v in nodes.values() if v["sdp_alone_over_network"] is not None]
                     _log(f"  {name} {case} {sig} seed {seed}: SDP alone/network {min(gain):.3f}–{max(gain):.3f}")
     return {
         "steps": cfg["network_steps"],
@@ -245,11 +247,12 @@ def network_markdown(res: dict) -> str:
         "",
         "What the nodes reach today: each node's SDP fault width run alone (a self-loop only, no reading) over the same "
         "node in the network (its neighbours' states and the readings of the same step: sensor 3's in `paper6_reference`, "
+        "whose own fault, declared 0, is a point in both and left out of every ratio here; "
         "everyone's under `max_faulty = 4` in `paper6_max_faulty`), the network's over the exact central limit with the same "
         "assumptions (`netsetest exact`, k-of-N health included: docs/exact.md), the same for its yaw rate and sideslip intervals "
         "(what a yaw-rate sensor's fault interval follows: docs/network.md, *What is left against exact*), the ceiling of "
         "alone / network per node, the node alone over the exact limit (no sound set in the network is narrower than that "
-        "limit, so no network can make alone / network larger; the reference's own fault, declared 0, left out), and the "
+        "limit, so no network can make alone / network larger), and the "
         "detection delay in steps after the fault's onset, in the network / alone (`-`: no fault, never detected):",
         "",
         "| topology | case | signals | alone / network | network / exact | ceiling: alone / exact | yaw rate · sideslip, network / exact | delay, network / alone (node 1 … 6) |",
@@ -257,12 +260,12 @@ def network_markdown(res: dict) -> str:
     ]
     for (topo, case, sig), runs in groups.items():
         ids = sorted(runs[0]["nodes"], key=int)
-        gain = [r["nodes"][i]["sdp_alone_over_network"] for r in runs for i in ids]  # the reference's own 1.000 included
+        gain = [r["nodes"][i]["sdp_alone_over_network"] for r in runs for i in ids]  # (None: the reference's own fault, a point)
         over = [r["nodes"][i]["sdp_network_over_exact"] for r in runs for i in ids if r["nodes"][i]["sdp_network_over_exact"] is not None]
         delays = " · ".join(f"{_d(runs[0]['nodes'][i]['delay_network'])}/{_d(runs[0]['nodes'][i]['delay_alone'])}" for i in ids)
         states = " · ".join(_span([r["nodes"][i].get(key) for r in runs for i in ids]) for key in ("sdp_r_over_exact", "sdp_beta_over_exact"))
         ceiling = _span([_ceiling(r["nodes"][i]) for r in runs for i in ids])
-        lines.append(f"| `{topo}` | {case} | {sig} | {min(gain):.3f}–{max(gain):.3f} | {_span(over)} | {ceiling} | {states} | {delays} |")
+        lines.append(f"| `{topo}` | {case} | {sig} | {_span(gain, '.3f')} | {_span(over)} | {ceiling} | {states} | {delays} |")
     runs = res["runs"]
     false = sum(v.get("false_detections", 0) for r in runs for v in r["nodes"].values())
     false_cov = sum(v.get("false_detections_covered", 0) for r in runs for v in r["nodes"].values())
@@ -305,14 +308,14 @@ def network_markdown(res: dict) -> str:
 
 def _ceiling(node: dict) -> float | None:
     """The node alone over the exact central limit: alone / network times network / exact (None: no exact width)."""
-    over = node["sdp_network_over_exact"]
-    return None if over is None else node["sdp_alone_over_network"] * over
+    over, gain = node["sdp_network_over_exact"], node["sdp_alone_over_network"]
+    return None if over is None or gain is None else gain * over
 
 
-def _span(values: list[float | None]) -> str:
+def _span(values: list[float | None], spec: str = ".2f") -> str:
     """min–max of the values there are (``-``: none; an older JSON without them)."""
     have = [v for v in values if v is not None]
-    return f"{min(have):.2f}–{max(have):.2f}" if have else "-"
+    return f"{min(have):{spec}}–{max(have):{spec}}" if have else "-"
 
 
 def _d(v: int | None) -> str:
@@ -337,7 +340,7 @@ def network_summary_markdown(res: dict) -> str:
         gain = [r["nodes"][i]["sdp_alone_over_network"] for r in runs for i in ids]
         over = [r["nodes"][i]["sdp_network_over_exact"] for r in runs for i in ids if r["nodes"][i]["sdp_network_over_exact"] is not None]
         over_s = f"{min(over):.2f}–{max(over):.2f}" if over else "- (no exact limit with this assumption)"
-        lines.append(f"| `{topo}` | {case} | {min(gain):.2f}–{max(gain):.2f} | {over_s} |")
+        lines.append(f"| `{topo}` | {case} | {_span(gain)} | {over_s} |")
     false = sum(v.get("false_detections", 0) for r in res["runs"] for v in r["nodes"].values())
     lines += ["", f"False detections over the benchmark's {len(res['runs'])} runs (both signal families): {false}."]
     return "\n".join(lines) + "\n"

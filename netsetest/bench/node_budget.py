@@ -1,6 +1,6 @@
 """The benchmark's per-message budget of a node (``netsetest bench --only node``, issue 31).
 
-A real-time ring (bench/topologies.py, τs = 0.1 s) with every node profiled (``NETSETEST_PROFILE``,
+A real-time ring (bench/topologies.py, τs = 0.1 s) with every node profiled (``run --profile``,
 netsetest/profile.py), a few runs; per node and run, from its profile:
 
 - the node's CPU per step (``process``: every thread), the estimator's step beside it (``solve``) and
@@ -167,7 +167,7 @@ def node_markdown(res: dict) -> str:
     base = res["baseline"]["summary"] if "baseline" in res else None
     runs = "; ".join(f"load {r['load_before']}, {r['deadline_misses']} misses" for r in res["this"]["runs"])
     lines = [
-        f"A real-time ring of {res['nodes']} nodes (τs = 0.1 s), {res['steps']} steps, every node profiled (`NETSETEST_PROFILE`); "
+        f"A real-time ring of {res['nodes']} nodes (τs = 0.1 s), {res['steps']} steps, every node profiled (`run --profile`); "
         f"median over the nodes, then over {res['reps']} runs (this checkout: {runs}; deadline misses of a run's "
         f"{res['nodes'] * (res['steps'] + 1)} node-steps)."
     ]

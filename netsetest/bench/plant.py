@@ -102,6 +102,7 @@ def _drive(sc, signals: str, seed: int, tmp: Path, exact: bool = True) -> dict:
         "steps": sc.steps,
         "e_max_in_bound_norm": float(size.max()),
         "e_outside_steps": int((size > 1 + 1e-12).sum()),
+        "ay_peak": max(abs(t["ay"]) for t in rec.truth if t.get("ay") is not None),  # [m/s²] the tyres' largest a_y
         "evaluated": s.node_steps_evaluated,
         "covered": s.node_steps_covered,
         "contained": s.node_steps_contained,
@@ -113,10 +114,11 @@ def _drive(sc, signals: str, seed: int, tmp: Path, exact: bool = True) -> dict:
     }
 
 
-def _calibration(drives: tuple[str, ...], causes: bool = False) -> tuple[np.ndarray, dict[str, dict[str, list[float]]]]:
+def _calibration(drives: tuple[str, ...], causes: bool = False) -> tuple[np.ndarray, dict[str, dict[str, list[float]]], dict[str, float]]:
     """The box ``netsetest calibrate paper6_car --manoeuvres <drives> --seeds 0-9`` prints (default margin),
-    and with ``causes`` the largest |e_k| per drive on the car and on each simpler model of it (``--causes``)."""
-    from netsetest.analysis.calibrate import calibrate, max_by_drive, simpler_mismatch
+    with ``causes`` the largest |e_k| per drive on the car and on each simpler model of it (``--causes``), and
+    the largest |a_y| of each drive (what calibrate prints beside it)."""
+    from netsetest.analysis.calibrate import calibrate, envelope_by_drive, max_by_drive, simpler_mismatch
     from netsetest.config.schema import load_topology
 
     specs = [DriveSpec.parse(d) for d in drives]
@@ -124,20 +126,21 @@ def _calibration(drives: tuple[str, ...], causes: bool = False) -> tuple[np.ndar
     cal = calibrate(scenarios, TRAINING_SEEDS, ("paper", "worst"))
     plants = {scenarios[0].plant: cal.drives} | (simpler_mismatch(scenarios, TRAINING_SEEDS, ("paper", "worst")) if causes else {})
     maxima = {str(plant): {label: mx.tolist() for label, mx in max_by_drive(ds).items()} for plant, ds in plants.items()}
-    return np.diag(cal.box.G), maxima
+    return np.diag(cal.box.G), maxima, {label: env.ay_peak for label, env in envelope_by_drive(cal.drives).items()}
 
 
 def training() -> dict:
     from netsetest.config.schema import load_topology
 
     declared = np.diag(load_topology(CAR).uncertainty.G)  # type: ignore[union-attr]  # paper6_car declares a bound
-    (envelope, causes), (moderate, _) = _calibration(ENVELOPE, causes=True), _calibration(MODERATE)
+    (envelope, causes, ay_peak), (moderate, _, _) = _calibration(ENVELOPE, causes=True), _calibration(MODERATE)
     _log(f"  calibrated box: envelope {envelope.tolist()}, moderate {moderate.tolist()}; declared {declared.tolist()}")
     return {
         "seeds": list(TRAINING_SEEDS),
         "envelope": {"drives": list(ENVELOPE), "box": envelope.tolist()},
         "moderate": {"drives": list(MODERATE), "box": moderate.tolist()},
         "causes": causes,
+        "ay_peak": ay_peak,
         "declared": declared.tolist(),
         "declared_covers_envelope": bool(np.all(declared >= envelope)),
     }
@@ -428,15 +431,16 @@ def plant_markdown(res: dict) -> str:
         f"seed {seeds[0]} of the lap; paper and worst-case signals each; the SDP (default objective); fault / exact: mean "
         "fault width from step 10 over the exact limit with the same bound.",
         "",
-        "| held-out drive | bound | case | drives | largest e_k / bound | steps with e_k outside | covered | contained | "
-        "violations | misses (all attributed) | SDP fault width | fault / exact |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| held-out drive | bound | case | drives | peak \\|a_y\\| m/s² | largest e_k / bound | steps with e_k outside | covered | "
+        "contained | violations | misses (all attributed) | SDP fault width | fault / exact |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for which in ("declared", "moderate"):
         for label, rows in h[which].items():
             for case, rs, judged in _by_case(rows):
                 lines.append(
-                    f"| {label} ({rs[0]['steps']} steps) | {which} | {case} | {len(rs)} | {max(r['e_max_in_bound_norm'] for r in rs):.2f} | "
+                    f"| {label} ({rs[0]['steps']} steps) | {which} | {case} | {len(rs)} | {max(r['ay_peak'] for r in rs):.2f} | "
+                    f"{max(r['e_max_in_bound_norm'] for r in rs):.2f} | "
                     f"{sum(r['e_outside_steps'] for r in rs)} | {judged} | "
                     f"{statistics.mean(r['fault_width'] for r in rs):.4f} | {_mean_ratio(rs)} |"
                 )
@@ -444,17 +448,21 @@ def plant_markdown(res: dict) -> str:
     car, *simpler = causes
     lines += [
         "",
-        f"Where e_k comes from: the largest |e_β|, |e_r| of each training drive (seeds 0-{t['seeds'][-1]}, both signal "
-        "families) on the car and on the same car with linear tyres of the same slope at zero slip (CommonRoad's "
+        f"Where e_k comes from: the largest |a_y| the tyres carried and the largest |e_β|, |e_r| of each training drive "
+        f"(seeds 0-{t['seeds'][-1]}, both signal families) on the car and on the same car with linear tyres of the same slope at zero slip (CommonRoad's "
         "`vehicle_dynamics_st`; `netsetest calibrate --causes`); the rest is the speed's change within a step, load "
         "transfer and the single track's large-angle kinematics:",
         "",
-        "| training drive | " + " | ".join(f"{p}: e_β, e_r" for p in causes) + " | e_r, linear tyres / car |",
-        "|---|" + "---|" * (len(causes) + 1),
+        "| training drive | peak \\|a_y\\| m/s² | " + " | ".join(f"{p}: e_β, e_r" for p in causes) + " | e_r, linear tyres / car |",
+        "|---|---|" + "---|" * (len(causes) + 1),
     ]
     for label, mx in causes[car].items():
         lin = causes[simpler[-1]][label] if simpler else mx
-        lines.append(f"| {label} | " + " | ".join(f"{causes[p][label][0]:.2e}, {causes[p][label][1]:.2e}" for p in causes) + f" | {lin[1] / mx[1]:.2f} |")
+        lines.append(
+            f"| {label} | {t['ay_peak'][label]:.2f} | "
+            + " | ".join(f"{causes[p][label][0]:.2e}, {causes[p][label][1]:.2e}" for p in causes)
+            + f" | {lin[1] / mx[1]:.2f} |"
+        )
     c = res["cost"]
     lines += [
         "",

@@ -358,8 +358,10 @@ def defences(cfg: dict) -> dict:
     return out
 
 
-def tightness(cfg: dict, tmp: Path) -> dict:
-    """The paper run's published intervals against the exact limit (``netsetest exact``), per case."""
+def tightness(tmp: Path) -> dict:
+    """The paper run's published intervals against the exact limit (``netsetest exact``), per case: the headline
+    run (paper6, its 80 steps, seed 0, paper signals), the one of the scenario part and the README's table, whatever
+    ``--quick`` says (tests/inmemory/test_headline.py holds the committed figures to it)."""
     from netsetest.analysis.exact import COORDINATES, compare_record, exact_bounds
     from netsetest.config.schema import load_topology
     from netsetest.records.record import load_record, save_record
@@ -367,7 +369,7 @@ def tightness(cfg: dict, tmp: Path) -> dict:
 
     out = {}
     for case in ("nsnim", "saim"):
-        sc = load_topology(PAPER6, case, cfg["steps"])
+        sc = load_topology(PAPER6, case)
         run = run_inmemory(sc, "paper", "scheduled", 0)
         assert run.parts is not None  # kept in memory (run_inmemory's default)
         path = tmp / f"tightness-{case}.json"
@@ -377,6 +379,7 @@ def tightness(cfg: dict, tmp: Path) -> dict:
         ex = exact_bounds(sc, rec, "used")
         cmp = compare_record(rec, ex)
         out[case] = {
+            "steps": sc.steps,
             "exact_s": time.perf_counter() - t0,
             "fault_bounds": ex.fault_bounds,
             "bounded_nodes": list(ex.bounded_nodes),
@@ -465,7 +468,7 @@ def run_bench(
         _log("paper scenario: per-node per-step times, side by side")
         res["paper"] = paper_solve_times(cfg)
         _log("tightness: published intervals against the exact limit (paper run, steps ≥ 10)")
-        res["tightness"] = tightness(cfg, tmp)
+        res["tightness"] = tightness(tmp)
         _log("in-memory cost per node-step vs network size")
         res["inmemory_scaling"] = scaling(cfg, tmp)
         _log("Zenoh lockstep vs in memory (paper scenario)")
@@ -484,7 +487,7 @@ def run_bench(
         res["realtime"] = realtime_ladder(tmp, cfg["rt_sizes"], cfg["rt_steps"], log=_log)
         _log("real time with a reference's readings, k-of-N health per group of six (max_faulty) and the car as the truth: the largest ring that fits")
         res["realtime"]["variants"] = realtime_fit(tmp, RT_VARIANTS, cfg["rt_sizes"], res["realtime"]["max_nodes"], cfg["rt_steps"], log=_log)
-        _log(f"a node's CPU per step by phase (real time, {cfg['profile_nodes']} nodes, NETSETEST_PROFILE), default and trace objective")
+        _log(f"a node's CPU per step by phase (real time, {cfg['profile_nodes']} nodes, run --profile), default and trace objective")
         res["node_profile"] = realtime_node_profile(tmp, cfg["profile_nodes"], cfg["rt_steps"])
         res["node_profile_trace"] = realtime_node_profile(tmp, cfg["profile_nodes"], cfg["rt_steps"], objective="trace")
         for p in (res["node_profile"], res["node_profile_trace"]):
@@ -623,7 +626,7 @@ def performance_markdown(res: dict) -> str:
         ),
         ("vs. the previous cvxpy-Parameters estimator, NSNIM / SAIM", f"×{f(res['previous_default_ratio'], '.0f')} / ×{f(sa['prev']['ratio'], '.0f')}", "", ""),
         (
-            f"mean fault width / exact limit, NSNIM / SAIM (paper signals, seed 0, {meta['config']['steps']} steps)",
+            f"mean fault width / exact limit, NSNIM / SAIM (paper signals, seed 0, {res['tightness']['nsnim']['steps']} steps)",
             f"{f(res['fault_width_ratio_exact_nsnim'], '.3f')} / {f(res['fault_width_ratio_exact_saim'], '.3f')}",
             "≤ 1.15 / ≤ 1.25",
             yes("fault_width_ratio_exact_nsnim", "fault_width_ratio_exact_saim"),
@@ -881,7 +884,7 @@ def _profile_lines(*profiles: dict) -> list[str]:
     lines = [
         "",
         f"Where a node's CPU goes per step: real-time ring of {p0['nodes']} nodes, {p0['steps']} steps, every node "
-        "profiled (`NETSETEST_PROFILE`, thread CPU; median over the nodes; "
+        "profiled (`run --profile`, thread CPU; median over the nodes; "
         + "; ".join(f"{p['objective']}: load before {p['load_before']}, {p['deadline_misses']} deadline misses" for p in ok)
         + "):",
         "",

@@ -7,7 +7,7 @@
   the stepping phase × τs), the view's CPU (its process, which also serves the page and the stream:
   runtime/view_server.py), and the view's lag behind the run, which the view measures itself (runtime/view.py
   ``Lag``: per step, when the step's truth was handed to the browsers' connections minus when the vehicle
-  published the step; ``NETSETEST_VIEW_LAG`` hands it over) with the frames it dropped.
+  published the step; ``run --view-lag-json`` hands it over) with the frames it dropped.
 - ``page``: ``netsetest report RECORD --html`` of an 80-step paper6 record, opened ``page_reps`` times in
   headless Chromium (netsetest/records/browser.py, a fresh browser each time): the page's load event, first
   contentful paint and the moment BokehJS had rendered every root, from the navigation's start; the CPU its
@@ -63,7 +63,6 @@ def _quantile(values: list[float], q: float) -> float | None:
 def live_run(steps: int, view: bool, tmp: Path) -> dict:
     """One real-time paper6 run (``netsetest run``, secured default), with its live view or without."""
     from netsetest.bench.zenoh_runs import cli_run
-    from netsetest.runtime.view import LAG_ENV
 
     lag_file = tmp / "lag.json"
     lag_file.unlink(missing_ok=True)
@@ -75,8 +74,7 @@ def live_run(steps: int, view: bool, tmp: Path) -> dict:
         steps=steps,
         timeout=300 + steps * PAPER6_TAU_S,
         sample_stepping_s=steps * PAPER6_TAU_S,
-        env={LAG_ENV: str(lag_file)} if view else None,
-        extra=["--view"] if view else None,
+        extra=["--view", "--view-lag-json", str(lag_file)] if view else None,
     )
     s, pr = r["summary"] or {}, r["processes"] or {}
     share = pr.get("node_cpu_pct_median")

@@ -38,6 +38,7 @@ from pathlib import Path
 import msgspec  # a default dependency (the bench must not need the dev extra's msgpack)
 
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE
+from netsetest.roles.flow import ACK_WINDOW
 from netsetest.runtime.forkserver import NAME_PREFIX
 from netsetest.runtime.launcher import free_ports
 from netsetest.runtime.processes import role_env
@@ -354,10 +355,11 @@ def _role_argv(topology: Path, run_id: str, steps: int | None, name: str, ports:
     return NodeSpec(scenario, int(name.removeprefix("node")), clock=clock, zenoh=zenoh).to_argv()
 
 
-def observed_lockstep(topology: Path, steps: int | None = None, insecure: bool = False) -> dict:
+def observed_lockstep(topology: Path, steps: int | None = None, insecure: bool = False, ack_window: int | None = ACK_WINDOW) -> dict:
     """One lockstep run of ``topology`` through the launcher ``netsetest run`` uses (runtime/launcher.py, in
     this process): secured by default (mTLS, every role a client of the run's router, roles forked by the
-    fork server); ``insecure``: the open peer mesh of ``run --insecure``.
+    fork server); ``insecure``: the open peer mesh of ``run --insecure``; ``ack_window``: ``run --ack-window``'s
+    (None: unbounded, roles/flow.py).
 
     The stepping phase is timed by the collector's progress on the launcher's channel: from the first step
     it reports checked to the last, scaled to the run's N+1 steps (the first step's own time is not in it);
@@ -369,7 +371,7 @@ def observed_lockstep(topology: Path, steps: int | None = None, insecure: bool =
     from netsetest.runtime.launcher import LaunchOptions, launch, plan_run
     from netsetest.runtime.report import EXIT_INTERRUPTED
 
-    plan = plan_run(LaunchOptions(str(topology), steps=steps, seed=0, quiet=True, insecure=insecure))
+    plan = plan_run(LaunchOptions(str(topology), steps=steps, seed=0, quiet=True, insecure=insecure, ack_window=ack_window))
     n_steps = plan.scenario.steps
     cpu0, t_start = time.process_time(), time.monotonic()
     out = launch(plan)
@@ -556,15 +558,28 @@ def cpu_demand(processes: dict | None, nodes: int) -> dict:
     return {"node_cpu_ms_per_step": per_step_ms, "demand_cores": nodes * per_step_ms / 1000.0 / RING_TAU_S + roles}
 
 
+def profiling(code: Path | None, directory: str) -> tuple[dict[str, str], list[str]]:
+    """The environment and the ``netsetest run`` options that have ``code``'s nodes (:func:`code_env`) write their
+    profiles to ``directory``: ``run --profile DIR``; a baseline from before that option (its ``run --help`` does not
+    name it) read ``$NETSETEST_PROFILE`` instead, which is what it is given."""
+    env = code_env(code)
+    if code is not None:
+        usage = subprocess.run([*PY, "run", "--help"], capture_output=True, text=True, timeout=60, env={**os.environ, **env}).stdout
+        if "--profile" not in usage:
+            return {**env, "NETSETEST_PROFILE": directory}, []
+    return env, ["--profile", directory]
+
+
 def profiled_ring_run(directory: Path, nodes: int, steps: int, objective: str | None = None, code: Path | None = None) -> tuple[dict, list[dict], str]:
-    """One real-time ring run with every node profiled (``NETSETEST_PROFILE``, netsetest/profile.py): the
-    run (:func:`cli_run`), each node's report (those that stepped) and the load average before it.
+    """One real-time ring run with every node profiled (``run --profile``, netsetest/profile.py; :func:`profiling`):
+    the run (:func:`cli_run`), each node's report (those that stepped) and the load average before it.
     ``objective``: the nodes' ``--objective``; ``code``: another checkout whose netsetest runs (PYTHONPATH,
     the benchmark's baseline), this one's by default."""
     from netsetest.bench.topologies import RING_TAU_S, ring_topology
 
     topo = ring_topology(directory, nodes, steps)
     with tempfile.TemporaryDirectory(prefix="nsprofile-") as prof:
+        env, extra = profiling(code, prof)
         load = _loadavg()
         r = cli_run(
             topo,
@@ -572,8 +587,8 @@ def profiled_ring_run(directory: Path, nodes: int, steps: int, objective: str | 
             "realtime",
             timeout=120 + 3 * nodes + steps * 0.2,
             sample_stepping_s=steps * RING_TAU_S,
-            env={"NETSETEST_PROFILE": prof, **code_env(code)},
-            extra=["--objective", objective] if objective else None,
+            env=env,
+            extra=[*extra, "--objective", objective] if objective else extra,
         )
         reports = [json.loads(p.read_text()) for p in sorted(Path(prof).glob("node-*.json"))]
     return r, [x for x in reports if x.get("steps")], load

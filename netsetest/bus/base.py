@@ -41,13 +41,13 @@ from collections import Counter, deque
 from collections.abc import Callable
 
 from netsetest.bus.keys import matches
+from netsetest.bus.limits import MAX_PER_KEY
 from netsetest.messages import BadMessage, Message, decode, encode, peek_step
 
 Handler = Callable[[str, Message], None]
 Screen = Callable[[int], str | None]  # the step a payload names → why the subscriber drops it undecoded, or None
 
 
-MAX_PER_KEY = 64  # a role handles ~1 message per key per step and pumps many times a step: more is a flood
 MAX_ROUNDS = 16  # payloads per key one pump handles: a flooded key's decoding cost per pump is bounded
 MAX_KEYS = 1024  # distinct (key, subscriber) queues: a wildcard subscription must not allocate per forged key
 NO_STEP = -1  # the service rank of a message that names no step (Ready, End): never evicted for a step's

@@ -14,10 +14,13 @@ from netsetest.cli import checks
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.runtime import argtypes
 from netsetest.runtime.report import EXIT_BAD_INPUT
+from netsetest.roles.flow import ACK_WINDOW
 from netsetest.runtime.rolespec import (
+    ACK_WINDOW_HELP,
     ESTIMATOR_HELP,
     FAULT_SCALE_HELP,
     MANOEUVRE_HELP,
+    PROFILE_HELP,
     SPEED_HELP,
     ROLE_SPECS,
     RUN_ID_ENV,
@@ -50,6 +53,7 @@ ZENOH_ONLY: dict[str, tuple[str, object]] = {
     "--neighbour-timeout": ("neighbour_timeout", NEIGHBOUR_TIMEOUT_S),
     "--pace": ("pace", 0.0),
     "--stall-limit": ("stall_limit", STALL_LIMIT_S),
+    "--ack-window": ("ack_window", ACK_WINDOW),
     "--kill": ("kill", []),
     "--rejoin": ("rejoin", []),
     "--insecure": ("insecure", False),
@@ -58,6 +62,8 @@ ZENOH_ONLY: dict[str, tuple[str, object]] = {
     "--zenoh-config": ("zenoh_config", None),
     "--view": ("view", False),
     "--view-port": ("view_port", 0),
+    "--view-lag-json": ("view_lag_json", None),
+    "--profile": ("profile", None),
 }
 
 
@@ -74,6 +80,7 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument("--pace", type=_non_negative, default=0.0, metavar="S", help="lockstep: at least S seconds per step (default: 0, as fast as possible)")
     g.add_argument("--stall-limit", type=argtypes.stall_limit, default=STALL_LIMIT_S, metavar="S", help=STALL_LIMIT_HELP)
+    g.add_argument("--ack-window", type=argtypes.ack_window, default=ACK_WINDOW, metavar="N", help=ACK_WINDOW_HELP)
     g.add_argument(
         "--kill", type=_at, action="append", default=[], metavar="NODE@STEP", help="SIGKILL node NODE once step STEP is checked (repeatable; default: none)"
     )
@@ -107,6 +114,13 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
         metavar="N",
         help="the live view's one port on 127.0.0.1, its page and its stream (default: 0, a free one; fix it to forward it with ssh -L)",
     )
+    g.add_argument(
+        "--view-lag-json",
+        metavar="PATH",
+        help="with --view: the view writes its lag behind a real-time run per step, and the frames it dropped, as JSON to PATH "
+        "when it stops (the benchmark's measure; default: none)",
+    )
+    g.add_argument("--profile", type=argtypes.writable_dir, metavar="DIR", help=f"every node's --profile: {PROFILE_HELP}")
 
 
 def scenario_overrides(p: argparse.ArgumentParser) -> None:
@@ -260,6 +274,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
     from netsetest.runtime.launcher import LaunchError, LaunchOptions, launch, plan_run
     from netsetest.runtime.report import exit_code, format_table
 
+    checks.output_file(a.view_lag_json, "--view-lag-json")
     opts = LaunchOptions(
         topology=a.topology,
         case=a.case,
@@ -280,6 +295,7 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         neighbour_timeout=a.neighbour_timeout,
         pace=a.pace,
         stall_limit=a.stall_limit,
+        ack_window=a.ack_window,
         kill=tuple(a.kill),
         rejoin=tuple(a.rejoin),
         insecure=a.insecure,
@@ -287,6 +303,8 @@ def cmd_run_zenoh(a: argparse.Namespace) -> int:
         run_id=a.run_id,
         view=a.view,
         view_port=a.view_port,
+        view_lag_json=a.view_lag_json,
+        profile=a.profile,
         port=a.port,
         log=a.log,
         mapping=a.map,

@@ -103,6 +103,12 @@ def view_args(p: argparse.ArgumentParser) -> None:
         "the address printed is the key to the view)",
     )
     p.add_argument("--tau-s", type=_seconds, metavar="S", help="the run's sampling period: a time axis and the car's path (default: steps only)")
+    p.add_argument(
+        "--lag-json",
+        metavar="PATH",
+        help="write the view's lag behind a real-time run per step, and the frames it dropped, as JSON to PATH when it stops "
+        "(the benchmark's measure; default: none)",
+    )
 
 
 class ObserverError(Exception):
@@ -298,9 +304,11 @@ def cmd_view(a: argparse.Namespace) -> int:
 
     require("rerun", "the live view")
     from netsetest.runtime.report import EXIT_INTERRUPTED
-    from netsetest.runtime.view import APP_ID, LiveView, write_lag
+    from netsetest.runtime.view import APP_ID, LiveView
+    from netsetest.runtime.view_process import write_lag
     from netsetest.runtime.view_server import PortTaken, ViewError, serve
 
+    checks.output_file(a.lag_json, "--lag-json")
     with observing(a, None) as (obs, stop):
         try:
             server = serve(a.port, APP_ID)
@@ -321,7 +329,8 @@ def cmd_view(a: argparse.Namespace) -> int:
                     else:
                         hint.tick()
             finally:
-                write_lag(view)  # first: `run --view` gives the view a few seconds to stop before it kills it
+                if a.lag_json is not None:
+                    write_lag(view, a.lag_json)  # first: `run --view` gives the view a few seconds to stop before it kills it
         finally:
             server.close()
     return EXIT_INTERRUPTED if stop.requested else 0  # Ctrl-C or SIGTERM ended it, as `run` reports it

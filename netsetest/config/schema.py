@@ -223,8 +223,9 @@ def _between(lo: float, hi: float) -> object:
     return Annotated[float, Meta(ge=lo, le=hi)]
 
 
-class VehicleSpec(_Strict, frozen=True, kw_only=True):
-    """The car: the plant that generates the truth, its manoeuvre, and the T-S model's parameters.
+class CarSpec(_Strict, frozen=True, kw_only=True):
+    """The topology's ``[vehicle]`` section, the car: the plant that generates the truth, its manoeuvre, and the T-S
+    model's parameters (the vehicle *role*'s command line is runtime/rolespec.py's ``VehicleSpec``).
 
     ``plant = "ts"`` (default): the truth is the T-S model of m..cr (the paper's Table I by default).
     A nonlinear plant (``single-track``, ``single-track-linear``, ``multi-body``; the ``plant`` extra) is CommonRoad vehicle
@@ -474,7 +475,7 @@ class TopologyFile(_Strict, frozen=True, kw_only=True):
     tau_s: _between(*SAMPLING_PERIOD_S) = 0.1  # type: ignore[valid-type]  # an Annotated type built by _between: valid at run time, opaque to mypy
     case: Case = "nsnim"
     W: Annotated[float, Meta(ge=W_MIN, le=W_MAX, description="side-wind bound w² ≤ W")] = 2.0
-    vehicle: VehicleSpec = field(default_factory=VehicleSpec)
+    vehicle: CarSpec = field(default_factory=CarSpec)
     speed: SpeedSpec = field(default_factory=SpeedSpec)
     steering: SteeringSpec = field(default_factory=SteeringSpec)
     nodes: list[NodeRef]
@@ -843,7 +844,7 @@ def load_mapping(path: Path) -> LogMapping:
     return resolve_mapping(path, _validated(path, _read_toml(path), MappingFile))
 
 
-def _log_source(path: Path, v: VehicleSpec, log: str | None, mapping: str | None, steps_given: bool) -> LogSource | None:
+def _log_source(path: Path, v: CarSpec, log: str | None, mapping: str | None, steps_given: bool) -> LogSource | None:
     """The run's recorded drive: ``log``/``mapping`` (the command line's, relative to the working directory) over
     the topology's ``[vehicle] log``/``mapping`` (relative to the file); the mapping defaults to the log's name with
     ``.map.toml``.  None: the model drives."""
@@ -1002,9 +1003,9 @@ def load_topology(
         steer_high=topo.steering.high,
         nodes=nodes,
         loss=topo.loss,
-        plant=cast(PlantKind, v.plant),  # one of PLANTS: VehicleSpec checked it
+        plant=cast(PlantKind, v.plant),  # one of PLANTS: CarSpec checked it
         vehicle_id=v.car,
-        manoeuvre=cast(ManoeuvreName, v.manoeuvre),  # one of MANOEUVRES: VehicleSpec checked it
+        manoeuvre=cast(ManoeuvreName, v.manoeuvre),  # one of MANOEUVRES: CarSpec checked it
         uncertainty=topo.model_uncertainty.build() if topo.model_uncertainty is not None else None,
         envelope=topo.envelope.build() if topo.envelope is not None else None,
         fault_tolerance=topo.network.fault_tolerance,

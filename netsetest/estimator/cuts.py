@@ -1,4 +1,4 @@
-"""The SDP step's cuts (docs/estimator.md, "The set and its cuts"): after the solve, a declared list of pure
+"""The SDP step's cuts (docs/estimator.md, "One step"): after the solve, a declared list of pure
 functions, each taking the step's sets and returning them cut, each named, each with the assumption it rests on.
 
 A step k → k+1 of :class:`~netsetest.estimator.sdp.LocalEstimator` reads top to bottom:
@@ -111,7 +111,7 @@ class StepResult:
         )
         if self.region is not None:
             try:
-                return ProvenSet(region=self.region.vertices.reshape(-1).tolist(), **fields)
+                return ProvenSet(region=self.region.flat(), **fields)
             except ValueError as exc:
                 if str(exc).split(":", 1)[0] not in REGION_REASONS:
                     raise
@@ -267,7 +267,7 @@ def _readings_cut(ctx: StepContext, res: StepResult) -> StepResult:
 
 def _size_cut(ctx: StepContext, res: StepResult) -> StepResult:
     """Where the step's sector rests on the declared fault bound, the truth's f⁺ lies in [−F, F]: the published set
-    is cut by that interval (docs/estimator.md, "SAIM: the size cut")."""
+    is cut by that interval (docs/estimator.md, "One step": `fault-size`)."""
     size, sector = ctx.statics.fault_bound.size, res.sector
     sector_bound = sector is not None and sector.basis == "fault-bound"
     if size is None or not (ctx.statics.own_bound or sector_bound):
@@ -278,7 +278,7 @@ def _size_cut(ctx: StepContext, res: StepResult) -> StepResult:
 
 
 def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
-    """The moved region cut by everything the step proves of x⁺ (docs/estimator.md, "The region"): every reading
+    """The moved region cut by everything the step proves of x⁺ (docs/estimator.md, "The set a node proves"): every reading
     of the step, the own measurement where the step's sector rests on the declared fault bound (C x⁺ = C̄ x̄⁺ − Ds f⁺
     with |f⁺| ≤ F), and the step's certified ellipsoids (the one the node continues from and the published one).
     The node continues from it and publishes it: the published set is the published ellipsoid ∩ the region, and
@@ -300,7 +300,7 @@ def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
     for s in (res, res.published):
         if region is not None and s is not None:
             region = ellipse_cut(region, s.xhat, s.P, ctx.rho)
-    if region is None or len(region.vertices) < MIN_VERTICES:
+    if region is None or len(region) < MIN_VERTICES:
         return res  # (fewer: a sliver below the rounding, kept as empty)
     region = region.reduced()  # the move's margin covers the cuts' rounding (Polygon.moved)
     res = res.replaced(region=region, reading_keys=res.reading_keys | keys, set_keys=res.set_keys | ctx.sets)
@@ -379,7 +379,8 @@ def ellipse_cut(region: Polygon, xhat: np.ndarray, P: np.ndarray, rho: float, co
     for d in dirs:
         if out is None:
             return None
-        d0, d1 = d.tolist()  # dᵀx̂ and (dᵀP_xx) d in plain floats, each product and sum rounded as numpy's 2-vector products round them
+        d0, d1 = d.tolist()  # dᵀx̂ and (dᵀP_xx) d in plain floats, each product and sum rounded (numpy's 2-vector products go
+        # through OpenBLAS, whose kernel may fuse them: the same to a few ulps, tests/unit/test_polygon_same.py)
         w0, w1 = d0 * p00 + d1 * p10, d0 * p01 + d1 * p11
         centre, half = d0 * x0 + d1 * x1, math.sqrt(max(rho * (w0 * d0 + w1 * d1), 0.0))
         out = out.cut(d, centre - half, centre + half)
@@ -395,15 +396,14 @@ def _well_inside(region: Polygon, xhat: np.ndarray, pxx: np.ndarray, rho: float)
     with P_xx's adjugate (no division) where tr²/det ≤ INSIDE_COND.  Then the test's rounding (relative, at most
     about 12 ε·tr²/det ≈ 1.3·10⁻⁷) leaves every vertex at least ≈ 2·10⁻⁷ of the ellipse's half-width inside each slab
     of :func:`ellipse_cut`, far beyond the rounding of the slab's own ends and of cᵀv, which the cut's margin covers:
-    each cut would return the region as it is (tests/unit/test_polygon_same.py holds the two to the same vertices)."""
+    each cut would return the region as it is (tests/unit/test_polygon_same.py holds the two to the same set)."""
     (p00, p01), (_, p11) = pxx.tolist()
     det, tr = p00 * p11 - p01 * p01, p00 + p11
     if not (det > 0.0 and tr * tr <= INSIDE_COND * det):
         return False
     bound = rho * (1.0 - INSIDE) * det
     x0, x1 = float(xhat[0]), float(xhat[1])
-    xs, ys = region.vertices.T.tolist()
-    for x, y in zip(xs, ys):
+    for x, y in region.points:
         a, b = x - x0, y - x1
         if not p11 * a * a - 2.0 * p01 * a * b + p00 * b * b <= bound:  # det · (v − x̂)ᵀ P_xx⁻¹ (v − x̂)
             return False

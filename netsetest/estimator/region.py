@@ -82,7 +82,7 @@ class WithRegion(SetEstimator):
                 region = region.cut(np.eye(NX)[m], float(s_lo[m]), float(s_hi[m]))
         if region is not None:
             region = region.cut(self.C, -s.support(-self.c_dir), s.support(self.c_dir))
-        if region is None or len(region.vertices) < MIN_VERTICES:
+        if region is None or len(region) < MIN_VERTICES:
             self.region = None  # nothing left (an assumption broke): the method's set alone, the region reseeded
             return s
         self.region = region = region.reduced()

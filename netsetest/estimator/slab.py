@@ -1,5 +1,5 @@
-"""A certified ellipsoid cut by a proven interval of one combination cᵀx̄ (docs/estimator.md, "SAIM: the size
-cut"; docs/network.md, "How the SDP uses it": the readings carried in the recursion).
+"""A certified ellipsoid cut by a proven interval of one combination cᵀx̄ (docs/estimator.md, "One step": the
+`fault-size` cut; docs/network.md, "How the SDP uses it": the readings carried in the recursion).
 
 Given the step's certified set E = {x̄: (x̄ − x̂)ᵀ(ρP)⁻¹(x̄ − x̂) ≤ 1} and an interval l ≤ cᵀx̄ ≤ u that the
 truth is proven to lie in (the declared fault size |f⁺| ≤ F: c = e₃; a reading's interval of C̄ x̄), every

@@ -6,7 +6,9 @@
 - ROS 2 bags (MCAP or sqlite3, a bag directory or its one storage file): rosbags, which needs no ROS install,
   the mapped topics only, each message's field (``angular_velocity.z`` of a ``sensor_msgs/msg/Imu``,
   ``twist.twist.linear.x`` of a ``nav_msgs/msg/Odometry``, ``data`` of a ``std_msgs/msg/Float64``), stamped by
-  its header where it has one, else by its log time.
+  its header where it has one, else by its log time; rosbags gives the raw payloads, and the stamp and fields are
+  read at the offsets its typestore's layout gives (logs/cdr.py), a batch of messages at once, checked against its
+  full deserialisation on the first message of every size and every :data:`BAG_CHECK_EVERY`-th (:class:`_Topic`).
 
 A role never holds the log: :class:`SampleStream` reads it a chunk at a time and holds only the samples not yet
 used, the few seconds the file may hold out of time order (``[log] reorder_s``) and a step's worth ahead.  Every
@@ -24,7 +26,8 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from operator import attrgetter
+from itertools import islice
+from operator import attrgetter, itemgetter
 from pathlib import Path
 from typing import Any
 
@@ -32,12 +35,15 @@ import numpy as np
 
 from netsetest.config.logmap import LogMapping, SignalMap, log_format
 from netsetest.extras import require
+from netsetest.logs.cdr import FieldAt, Layout, layout, read_fields
 
 BATCH_ROWS = 16_384  # rows a CSV or Parquet batch holds: what the stream reads ahead at most, per pull
-BAG_CHUNK = 1_024  # messages of a bag per pull: a few ms of work, so that a real-time vehicle's step is never late for it
+BAG_CHUNK = 4_096  # messages of a bag per pull: ~15 ms of rosbags' reading, so that a real-time vehicle's step is never late for it
+BAG_CHECK_EVERY = 256  # of a connection's messages read at their CDR offsets, every this-many-th is also deserialised by rosbags and compared
 MDF_FRAGMENT_BYTES = 1 << 18  # asammdf's read fragment: a channel's samples per pull (a few thousand)
 MAX_GAPS = 4_096  # gaps longer than the tolerance a scan keeps per signal (an input needs none inside the run)
 NEVER = np.iinfo(np.int64).max
+_CONN, _LOG_TIME, _RAW, _CONN_ID = itemgetter(0), itemgetter(1), itemgetter(2), attrgetter("id")  # of rosbags' (connection, log time, raw payload)
 # the physical range of each kind of signal, SI: a sample beyond it is a wrong unit (deg/s read as rad/s), not a car
 PLAUSIBLE = {
     "speed": 500.0 / 3.6,  # m/s
@@ -173,14 +179,20 @@ class SampleStream:
         return (t[1:], v[1:]) if last is not None else (t, v)
 
 
-def open_stream(log: Path, mapping: LogMapping) -> SampleStream:
-    """The stream of every mapped signal of ``log`` (LogError: a format it cannot be, a file it cannot read)."""
+def read_chunks(log: Path, mapping: LogMapping) -> Iterator[Chunk]:
+    """Every mapped signal's raw samples (stamps without their offset, values without their scale), in file order, a
+    chunk at a time, by the reader of the log's format (LogError: a format it cannot be, a file it cannot read)."""
     try:
         fmt = log_format(log, mapping)
     except ValueError as exc:
         raise LogError(str(exc)) from None
     reader = {"csv": _table, "parquet": _table, "mdf4": _mdf4, "rosbag": _rosbag}[fmt]
-    return SampleStream(log, mapping.signals, reader(log, mapping, fmt), round(mapping.reorder_s * 1e9))
+    return reader(log, mapping, fmt)
+
+
+def open_stream(log: Path, mapping: LogMapping) -> SampleStream:
+    """The stream of every mapped signal of ``log`` (LogError: a format it cannot be, a file it cannot read)."""
+    return SampleStream(log, mapping.signals, read_chunks(log, mapping), round(mapping.reorder_s * 1e9))
 
 
 @dataclass(frozen=True)
@@ -350,11 +362,108 @@ def _stamp(msg: object, t_log: int) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
+def _same(a: float, b: float) -> bool:
+    return a == b or (a != a and b != b)  # NaN read both ways is NaN (dropped later either way)
+
+
 DEFAULT_FIELD = "data"  # a std_msgs number's field, for a topic mapped without one
+STAMP_FIELDS = ("header.stamp.sec", "header.stamp.nanosec")  # a header-stamped type's stamp, as _stamp reads it
+
+
+class _Topic:
+    """One connection of the bag and the signals mapped on it.  Its messages' stamps and fields are read at their CDR
+    offsets (logs/cdr.py) where its type's layout gives them; rosbags deserialises in full the messages of a size not
+    yet seen (their offsets then checked against it), every :data:`BAG_CHECK_EVERY`-th message (checked likewise), and
+    every message whose fields have no offset (a mismatch: LogError, never a value)."""
+
+    def __init__(self, reader: Any, conn: Any, sigs: list[SignalMap], log: Path) -> None:
+        self.reader, self.conn, self.sigs, self.log = reader, conn, sigs, log
+        self.paths = [s.field or DEFAULT_FIELD for s in sigs]
+        self.getters: list[Callable[[object], float]] | None = None  # after the first message's fields were checked
+        self.sizes: set[int] = set()  # sizes whose offsets rosbags' deserialisation confirmed
+        self.count = 0  # messages of the connection so far
+        self.stamped = any(name == "header" for name, _ in reader.typestore.get_msgdef(conn.msgtype).fields)
+        self.places = self._places()
+
+    def _places(self) -> tuple[Layout, list[FieldAt]] | None:
+        """The layout and, in order, the stamp's seconds and nanoseconds (if the type has a header) and each mapped
+        field; None: some have no offset."""
+        ts = self.reader.typestore
+        lay = layout(ts, self.conn.msgtype)
+        ats = [lay.fields.get(p) for p in ((*STAMP_FIELDS, *self.paths) if self.stamped else self.paths)]
+        return None if any(a is None for a in ats) else (lay, [a for a in ats if a is not None])
+
+    def _full(self, raw: bytes, t_log: int) -> tuple[int, list[float]]:
+        """rosbags' reading of one message: its stamp and mapped fields."""
+        msg = self.reader.deserialize(raw, self.conn.msgtype)
+        if self.getters is None:  # a connection has one message type: its fields are checked on its first message
+            values = [_field(msg, p, self.log, self.conn.topic) for p in self.paths]
+            self.getters = [attrgetter(p) for p in self.paths]
+            return _stamp(msg, t_log), values
+        return _stamp(msg, t_log), [float(get(msg)) for get in self.getters]
+
+    def read(self, raws: list[bytes], t_log: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+        """Stamps [ns] and each mapped field's values of the connection's next messages (in file order)."""
+        n = len(raws)
+        stamps, values = t_log.copy(), [np.empty(n) for _ in self.sigs]
+        for i in self._at_offsets_checked(raws, t_log, stamps, values) if self.places is not None and n else range(n):
+            stamps[i], row = self._full(raws[i], int(t_log[i]))
+            for v, x in zip(values, row):
+                v[i] = x
+        self.count += n
+        return stamps, values
+
+    def _at_offsets_checked(self, raws: list[bytes], t_log: np.ndarray, stamps: np.ndarray, values: list[np.ndarray]) -> list[int]:
+        """Read the messages at their offsets, size by size, the first of a size not seen and every
+        :data:`BAG_CHECK_EVERY`-th checked; the ones left for rosbags (a big-endian payload, a size no offset fits)."""
+        n = len(raws)
+        sizes = np.fromiter(map(len, raws), np.int64, n)
+        one = bool((sizes == sizes[0]).all())  # the usual: a connection's messages all of one size
+        left: list[int] = []
+        check = set(range(-self.count % BAG_CHECK_EVERY, n, BAG_CHECK_EVERY))
+        for size in [int(sizes[0])] if one else np.unique(sizes).tolist():
+            sel = np.arange(n) if one else np.flatnonzero(sizes == size)
+            read = self._at_offsets(raws if one else [raws[i] for i in sel.tolist()], size, sel, stamps, values)
+            left += sel[~read].tolist()
+            if size not in self.sizes and read.any():  # a size not seen: its first message confirms the offsets
+                check.add(int(sel[read][0]))
+        for i in sorted(check.difference(left)):
+            self._check(i, raws[i], int(t_log[i]), stamps, values)
+        return left
+
+    def _at_offsets(self, raws: list[bytes], size: int, sel: np.ndarray, stamps: np.ndarray, values: list[np.ndarray]) -> np.ndarray:
+        """Read messages of one size at their offsets into ``stamps`` and ``values`` at ``sel``; which ones were (a
+        little-endian payload large enough for every field)."""
+        assert self.places is not None
+        lay, ats = self.places
+        offsets = [lay.offset(a, size) for a in ats]
+        if any(o is None for o in offsets):
+            return np.zeros(sel.size, dtype=bool)
+        little, cols = read_fields(raws, size, [(o, a.dtype) for o, a in zip(offsets, ats) if o is not None])
+        if self.stamped:  # the header's stamp first
+            stamps[sel] = cols[0].astype(np.int64) * 1_000_000_000 + cols[1]
+            cols = cols[2:]
+        for v, c in zip(values, cols):
+            v[sel] = c
+        return little
+
+    def _check(self, i: int, raw: bytes, t_log: int, stamps: np.ndarray, values: list[np.ndarray]) -> None:
+        """rosbags' full deserialisation of message ``i`` against what its offsets gave (a mismatch is an error); its
+        size confirmed."""
+        stamp, row = self._full(raw, t_log)
+        got = [("header.stamp", stamp, int(stamps[i]))] + [(p, x, float(v[i])) for p, x, v in zip(self.paths, row, values)]
+        for what, want, fast in got:
+            if not _same(want, fast):
+                raise LogError(
+                    f"{self.log}: topic {self.conn.topic}: message {self.count + i} ({len(raw)} bytes): {what} read at its offset in the "
+                    f"{self.conn.msgtype} layout is {fast!r}, rosbags reads {want!r}: the payload is not laid out as its type says"
+                )
+        self.sizes.add(len(raw))
 
 
 def _rosbag(log: Path, mapping: LogMapping, fmt: str) -> Iterator[Chunk]:
-    """The mapped topics' messages in the bag's order, :data:`BAG_CHUNK` per chunk."""
+    """The mapped topics' messages in the bag's order, :data:`BAG_CHUNK` per chunk, each connection's read by
+    :class:`_Topic`."""
     require("rosbags", "reading a ROS 2 bag")
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
@@ -369,32 +478,21 @@ def _rosbag(log: Path, mapping: LogMapping, fmt: str) -> Iterator[Chunk]:
             for topic in by_topic:
                 if topic not in topics:
                     raise LogError(f"{log}: the bag has no topic {topic} (topics: {', '.join(sorted(topics)[:12])})")
-            conns = [c for c in reader.connections if c.topic in by_topic]
-            stamps: dict[str, list[int]] = {s.name: [] for s in mapping.signals}
-            values: dict[str, list[float]] = {s.name: [] for s in mapping.signals}
-            n = 0
-            # a connection has one message type: its field is checked on its first message, then read by an attrgetter
-            getters: dict[tuple[int, str], Callable[[object], float]] = {}
-            for conn, t_log, raw in reader.messages(connections=conns):
-                msg = reader.deserialize(raw, conn.msgtype)
-                t = _stamp(msg, t_log)
-                for s in by_topic[conn.topic]:
-                    stamps[s.name].append(t)
-                    get = getters.get((conn.id, s.name))
-                    if get is None:
-                        values[s.name].append(_field(msg, s.field or DEFAULT_FIELD, log, conn.topic))
-                        getters[(conn.id, s.name)] = attrgetter(s.field or DEFAULT_FIELD)
-                    else:
-                        values[s.name].append(get(msg))
-                n += 1
-                if n == BAG_CHUNK:
-                    yield [(name, np.asarray(stamps[name], dtype=np.int64), np.asarray(values[name])) for name in stamps]
-                    stamps, values, n = {k: [] for k in stamps}, {k: [] for k in values}, 0
-            yield [(name, np.asarray(stamps[name], dtype=np.int64), np.asarray(values[name], dtype=float)) for name in stamps]
+            conns = {c.id: _Topic(reader, c, by_topic[c.topic], log) for c in reader.connections if c.topic in by_topic}
+            messages = reader.messages(connections=[t.conn for t in conns.values()])
+            while batch := list(islice(messages, BAG_CHUNK)):
+                ids = np.fromiter(map(_CONN_ID, map(_CONN, batch)), np.int64, len(batch))  # (maps: zip(*batch) costs more than the decoding)
+                t, raws = np.fromiter(map(_LOG_TIME, batch), np.int64, len(batch)), list(map(_RAW, batch))
+                chunk: Chunk = []
+                for cid, conn in conns.items():
+                    idx = np.flatnonzero(ids == cid)
+                    stamps, values = conn.read([raws[i] for i in idx.tolist()] if idx.size < len(batch) else raws, t[idx])
+                    chunk += [(s.name, stamps, v) for s, v in zip(conn.sigs, values)]
+                yield chunk
     except LogError:
         raise
     except Exception as exc:  # rosbags raises its own and the storage's errors on a damaged bag: each is "cannot read"
         raise LogError(f"{log}: cannot read it as a ROS 2 bag: {_why(exc)}") from None
 
 
-__all__ = ["PLAUSIBLE", "Chunk", "LogError", "SampleStream", "SignalScan", "open_stream", "scan_signals"]
+__all__ = ["BAG_CHECK_EVERY", "PLAUSIBLE", "Chunk", "LogError", "SampleStream", "SignalScan", "open_stream", "read_chunks", "scan_signals"]

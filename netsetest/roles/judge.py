@@ -421,21 +421,11 @@ class Judge:
             return Cone(False, "fallback")  # the previous step's set again: no guarantee for this step
         for j, m, digest, as_prior in _inputs_of(st, k):
             if m < k - 1:  # a resumed state: its own set of step m, carried through the steps without a reading
-                held = prev.held.get(j)
-                c = held.copies.get(digest) if held is not None and held.step == m and digest is not None else None
-                why = NOT_JUDGED if c is None else c.as_prior
-                if why is None and held is not None and held.broken is not None:
-                    return Cone(False, held.broken)
-                if why is not None:
-                    return Cone(False, INHERITED, Origin(j, m, why))
-                continue
-            by = checks if m == k else prev
-            if digest is None:
-                digest = by.sole.get(j)
-            c = by.copies.get(j, {}).get(digest) if digest is not None else None
-            why = NOT_JUDGED if c is None else (c.as_prior if as_prior else c.as_neighbour or (c.as_set if j in st.sets else None))
-            if why is not None:
-                return Cone(False, INHERITED, Origin(j, m, why))
+                broken = _resumed_input_cause(prev, j, m, digest)
+            else:
+                broken = _input_cause(checks if m == k else prev, j, m, digest, as_prior, j in st.sets)
+            if broken is not None:
+                return broken
         return Cone(True)
 
     def reading_cause(self, j: int, y: float, gamma: float, tr: Truth, bounded: bool = False) -> str | None:
@@ -482,6 +472,28 @@ def network_rests(sc: Scenario, i: int) -> str:
     if sc.bound_relied(i):
         parts.append("its own declared fault bound (others read its reading with it)")
     return "; ".join(parts)
+
+
+def _resumed_input_cause(prev: StepChecks, j: int, m: int, digest: str | None) -> Cone | None:
+    """Why node j's own set of step m, which a resumed state carried through the steps without a reading, is no
+    covered input (None: that very copy was judged at m and held, and nothing broke while it was carried)."""
+    held = prev.held.get(j)
+    c = held.copies.get(digest) if held is not None and held.step == m and digest is not None else None
+    why = NOT_JUDGED if c is None else c.as_prior
+    if why is None and held is not None and held.broken is not None:
+        return Cone(False, held.broken)
+    return None if why is None else Cone(False, INHERITED, Origin(j, m, why))
+
+
+def _input_cause(by: StepChecks, j: int, m: int, digest: str | None, as_prior: bool, as_set: bool = False) -> Cone | None:
+    """Why node j's state of step m, used as the node's prior (``as_prior``) or as a neighbour's set, is no covered
+    input (None: the copy it names, or j's sole judged copy where it names none, was judged in ``by`` and held;
+    ``as_set``: the state's region was cut by that whole set (``NodeState.sets``), which must have held too)."""
+    if digest is None:
+        digest = by.sole.get(j)
+    c = by.copies.get(j, {}).get(digest) if digest is not None else None
+    why = NOT_JUDGED if c is None else (c.as_prior if as_prior else c.as_neighbour or (c.as_set if as_set else None))
+    return None if why is None else Cone(False, INHERITED, Origin(j, m, why))
 
 
 def _held(rel: str) -> str | None:

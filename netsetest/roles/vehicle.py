@@ -36,7 +36,7 @@ from netsetest.logs.drive import LogDrive, LogStep
 from netsetest.models.drive import Drive
 from netsetest.models.sensor import augmented
 from netsetest.models.signals import SignalKind
-from netsetest.roles.flow import ACK_WINDOW
+from netsetest.roles.flow import ACK_WINDOW, Window
 
 
 def mismatch_holds(sc: Scenario, e: np.ndarray) -> bool:
@@ -97,7 +97,7 @@ class Vehicle:
         """``window``: lockstep, how many steps the vehicle may lead the collector's acknowledgment
         (roles/flow.py; None: no window, the benchmark's measure of what it costs)."""
         self.sc, self.bus, self.run = scenario, bus, run_id
-        self.window = window
+        self.flow = Window(window, scenario.steps)  # lockstep flow control, the vehicle's side
         # lockstep: a node not heard at step k is dead; real time: not heard for dead_after_steps steps
         self.realtime, self.dead_after = realtime, dead_after_steps
         # the world: the model's drive (the plant, the manoeuvre, the seeded signals) or a recorded one (docs/your-log.md)
@@ -113,7 +113,6 @@ class Vehicle:
         self.done = False
         self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
         self.drops: Counter[str] = Counter()
-        self.acked = -1  # the newest step the collector acknowledged (lockstep flow control)
         if realtime:
             # nothing waits for a state (the clock steps) and every pump collects them: a ring per node's key,
             # drained in the vehicle's thread, rather than a Python callback and a wake-up per state (N per step)
@@ -147,20 +146,20 @@ class Vehicle:
             self.drops["state-ahead"] += 1  # a step not published yet cannot have been computed
 
     def on_ack(self, key: str, msg: Message) -> None:
-        """The collector's acknowledgment (a Ready on its key with ``acked``); never beyond the step we
-        published (a forged one cannot open the window past what the collector could have seen)."""
+        """The collector's acknowledgment: a Ready on its key with ``acked`` (roles/flow.py)."""
         if not isinstance(msg, Ready) or msg.role != "collector":
             self.drops["unexpected-type"] += 1
         elif msg.acked is not None:
-            self.acked = max(self.acked, min(msg.acked, self.k))
+            self.flow.acknowledged(msg.acked, self.k)
+
+    @property
+    def acked(self) -> int:
+        """The newest step the collector acknowledged."""
+        return self.flow.acked
 
     def window_open(self) -> bool:
-        """Lockstep: the next step is inside the collector's window (step k + ``window`` needs step k
-        acknowledged); the End needs the last step acknowledged (else it overtakes the truths still on their
-        way and the collector counts it early)."""
-        if self.k >= self.sc.steps:
-            return self.acked >= self.sc.steps
-        return self.window is None or self.k + 1 <= self.acked + self.window
+        """Lockstep: the next step, or the End, is inside the collector's window (roles/flow.py)."""
+        return self.flow.open(self.k)
 
     def _window(self) -> range:
         """Steps whose reports decide who is alive at the next step."""
@@ -281,13 +280,13 @@ class Vehicle:
         d = self.log.step(k)
         lost = self.losses.lost_at(k) if k > 0 else []
         deadline = time.time() + sc.tau_s if self.realtime else None
-        y = {i: float(yl) + sc.node(i).sensor.Ds * d.faults[i] for i, yl in d.y_log.items() if yl is not None}
+        y = _with_faults(sc, d)
         self._publish_inputs(k, y, {n.id: 1.0 for n in sc.nodes}, lost, deadline)
         self.u, self.w, self.vx = d.u, 0.0, d.vx
         self.x = d.x_ref if d.x_ref is not None else np.zeros(2)
         truth = {str(i): _log_truth(sc.node(i), d, k) for i in sc.ids}
+        of = {name: {i: getattr(t, name) for i, t in truth.items()} for name in _NodeTruth._fields}  # each part, by node
         read = [i for i in sc.ids if d.y_log[i] is not None]
-        faults = {int(i): t.fault for i, t in truth.items()}
         p = sc.model.params
         ay = d.speed * float(d.x_ref[1]) if d.x_ref is not None else None  # v·r: the reference gives no β̇ (docs/your-log.md)
         self.bus.publish(
@@ -295,34 +294,39 @@ class Vehicle:
             Truth(
                 step=k,
                 x=list(map(float, self.x)),
-                faults={i: t.fault for i, t in truth.items()},
+                faults=of["fault"],
                 u=self.u,
                 w=0.0,  # the side wind of a recorded drive is unknown: its bound is declared, never checked
                 vx=self.vx,
-                noise={i: t.noise for i, t in truth.items()},
-                gamma={str(i): 1.0 for i in sc.ids},
+                noise=of["noise"],
+                gamma=dict.fromkeys(map(str, sc.ids), 1.0),
                 y={str(i): y[i] for i in read},
                 y_nofault={str(i): float(d.y_log[i]) for i in read},  # type: ignore[arg-type]  # read: a reading is there
-                sector_ok={str(i): True for i in sc.ids},  # the nsnim case: no saturation
-                noise_ok={i: t.noise_ok for i, t in truth.items()},
-                r={i: t.r for i, t in truth.items()},
-                fault_ok={i: t.fault_ok for i, t in truth.items()},
+                sector_ok=dict.fromkeys(map(str, sc.ids), True),  # the nsnim case: no saturation
+                noise_ok=of["noise_ok"],
+                r=of["r"],
+                fault_ok=of["fault_ok"],
                 dist_ok=True,
                 lost=lost,
                 alive=sorted(self.alive),
                 drops=self.drop_report(),
-                health_ok=sc.health_holds(faults),
+                health_ok=sc.health_holds({int(i): f for i, f in of["fault"].items()}),
                 speed=d.speed,
                 ay=ay,
                 # the model scheduled at a speed it does not cover describes no transition of the car
                 mismatch_ok=p.vx_min <= d.speed <= p.vx_max,
                 envelope_ok=envelope_holds(sc, ay, d.speed),
                 x_acc=list(d.accuracy),
-                f_acc={i: t.f_acc for i, t in truth.items()},
+                f_acc=of["f_acc"],
                 reference=d.x_ref is not None,
                 no_reading=[i for i in sc.ids if d.y_log[i] is None],
             ),
         )
+
+
+def _with_faults(sc: Scenario, d: LogStep) -> dict[int, float]:
+    """A recorded step's readings with the declared faults on top (a node without a reading: absent)."""
+    return {i: float(yl) + sc.node(i).sensor.Ds * d.faults[i] for i, yl in d.y_log.items() if yl is not None}
 
 
 class _NodeTruth(NamedTuple):

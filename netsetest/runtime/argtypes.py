@@ -13,6 +13,8 @@ import os
 import re
 from collections.abc import Callable
 
+from netsetest.roles.flow import parse_window
+
 SEED_MAX = 2**63 - 1
 RUN_ID_RE = re.compile(r"[A-Za-z0-9_-]{1,64}")
 # proto/host:port with an optional Zenoh suffix (?metadata, #config); host a name, an IPv4 or a [IPv6]
@@ -85,6 +87,13 @@ def readable_file(s: str) -> str:
     return s
 
 
+def writable_dir(s: str) -> str:
+    """argparse type: an existing directory this process can write in (``--profile``)."""
+    if not os.path.isdir(s) or not os.access(s, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"{s}: not a directory this process can write in")
+    return s
+
+
 def node_at(s: str) -> tuple[int, int]:
     """argparse type of ``NODE@STEP`` (``--kill``, ``--rejoin``, ``--await-rejoin``)."""
     try:
@@ -122,6 +131,14 @@ def stall_limit(s: str) -> float:
     if v < MIN_STALL_LIMIT_S:
         raise argparse.ArgumentTypeError(f"must be at least {MIN_STALL_LIMIT_S:g} s (Zenoh's lease), got {v:g}")
     return v
+
+
+def ack_window(s: str) -> int | None:
+    """argparse type of ``--ack-window``: the lockstep window in steps, or ``unbounded`` (None; roles/flow.py)."""
+    try:
+        return parse_window(s)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 MAX_PORT = 65535

@@ -41,13 +41,13 @@ from netsetest.logs.drive import with_log_steps
 from netsetest.estimator.names import SDP
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, Objective
 from netsetest.records.summary import RunSummary
-from netsetest.roles.flow import ack_window
+from netsetest.roles.flow import ACK_WINDOW, check_window, show_window
 from netsetest.runtime.channel import CHANNEL_FD, ChannelReader
 from netsetest.runtime.forkserver import ForkServer, ForkServerError
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_COLLECTOR_STALLED, EXIT_INTERRUPTED, EXIT_VIOLATION, Progress, exit_code, log
 from netsetest.runtime.rolespec import Clock, CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
 from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, STALL_LIMIT_S, START_TIMEOUT_S
-from netsetest.runtime.view import ViewProcess, start_view
+from netsetest.runtime.view_process import ViewProcess, start_view
 from netsetest.runtime.view_server import PortTaken, ViewError
 
 if TYPE_CHECKING:  # annotations only: the estimator and the models load in the role processes, not in the launcher
@@ -88,13 +88,16 @@ class LaunchOptions:
     neighbour_timeout: float = NEIGHBOUR_TIMEOUT_S
     pace: float = 0.0
     stall_limit: float = STALL_LIMIT_S  # every session's Zenoh lease; the vehicle's wait for the collector
+    ack_window: int | None = ACK_WINDOW  # lockstep: the vehicle's lead on the collector's acknowledgment (None: unbounded; roles/flow.py)
     kill: tuple[tuple[int, int], ...] = ()  # (node, step): SIGKILL the node right after that step
     rejoin: tuple[tuple[int, int], ...] = ()  # (node, step): restart the node with --rejoin at that step
     insecure: bool = False
     zenoh_config: str | None = None
     run_id: str | None = None  # None: a fresh random one (a guessable id, run<pid>, named every key of the run)
-    view: bool = False  # a live view beside the run (runtime/view.py), an observer like `watch`
+    view: bool = False  # a live view beside the run (runtime/view_process.py), an observer like `watch`
     view_port: int = 0  # its web port (0: a free one)
+    view_lag_json: str | None = None  # where the view writes its lag behind the run when it stops (the benchmark's)
+    profile: str | None = None  # a directory every node writes its CPU per step by phase to (netsetest/profile.py; the benchmark's)
     port: int = 0  # the run's port on loopback: its router's, or (insecure) its collector's, which observers connect to (0: a free one)
     log: str | None = None  # a recorded drive as the world (docs/your-log.md)
     mapping: str | None = None  # its mapping file
@@ -197,9 +200,11 @@ def plan_run(opts: LaunchOptions) -> RunPlan:
     except ValueError as exc:
         raise LaunchError(str(exc)) from None
     try:
-        ack_window(os.environ)  # the benchmark's window setting, read by the vehicle process (roles/flow.py)
+        check_window(opts.ack_window)  # (the command line's is checked as it is parsed; a caller's here)
     except ValueError as exc:
-        raise LaunchError(str(exc)) from None
+        raise LaunchError(f"--ack-window {show_window(opts.ack_window)}: {exc}") from None
+    if opts.view_lag_json is not None and not opts.view:
+        raise LaunchError("--view-lag-json: the live view's lag needs a live view (--view)")
     if opts.neighbour_timeout >= opts.node_timeout:
         # else a node waiting for a dead neighbour is itself declared dead by the vehicle
         raise LaunchError(f"--neighbour-timeout ({opts.neighbour_timeout:g} s) must be shorter than --node-timeout ({opts.node_timeout:g} s)")
@@ -441,6 +446,7 @@ class RoleStarter:
             o.neighbour_timeout,
             rejoin,
             self.plan.schedule.next_kill(i, after),
+            o.profile,
             self.network.zenoh(f"node{i}"),
         )
 
@@ -457,6 +463,7 @@ class RoleStarter:
             run_start_timeout(len(self.network.names)),
             o.quiet,
             awaits,
+            o.ack_window,
             self.network.zenoh("vehicle"),
         )
 
@@ -626,7 +633,7 @@ def launch(plan: RunPlan) -> RunOutcome:
                 for line in network.describe():
                     log("run", line)
             if o.view:  # subscribed before the first role starts: it sees step 0
-                view = start_view(network.observer_args(), plan.scenario.tau_s, o.view_port)
+                view = start_view(network.observer_args(), plan.scenario.tau_s, o.view_port, o.view_lag_json)
                 log("run", f"live view: {view.url}")
             starter = RoleStarter(plan, network, children)
             bar = Progress(plan.scenario.steps, f"zenoh ({len(plan.scenario.ids)} nodes + vehicle + collector)", enabled=not o.quiet)

@@ -10,7 +10,7 @@ listens to its peers' Ready only: with everyone hearing everyone, N roles' Ready
 messages a second to decode (≈90 000 at 96 nodes), which kept a 96-node run from ever starting.
 
 Lockstep: the vehicle publishes step k+1 once every alive node has published step k and the collector
-has acknowledged step k+1−ACK_WINDOW (roles/flow.py; it waits for the collector as long as it takes:
+has acknowledged step k+1−``ack_window`` (roles/flow.py; it waits for the collector up to the stall limit:
 the launcher ends the run if the collector dies); a node silent for ``node_timeout`` s is declared dead and
 the run goes on without it.  A node waits for its expected
 neighbours at most ``neighbour_timeout`` s, then proceeds without the missing ones.
@@ -31,7 +31,7 @@ from netsetest.bus import keys
 from netsetest.bus.base import Bus
 from netsetest.config.schema import Scenario
 from netsetest.messages import Message, Ready
-from netsetest.profile import PROFILE, observe_bus, observe_node
+from netsetest.profile import PhaseProfile, observe_bus, observe_node
 from netsetest.records.meta import RunMeta
 from netsetest.roles.node import Node
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_COLLECTOR_STALLED, EXIT_VIOLATION, exit_code, log, record_sink, write_summary
@@ -41,7 +41,9 @@ from netsetest.runtime.timeouts import READING_POLL, READING_WAIT
 if TYPE_CHECKING:  # a node process never loads the vehicle and the collector (memory: docs/performance-history.md)
     from netsetest.bus.zenoh_bus import ZenohBus
     from netsetest.records.summary import RunSummary, StopCause
+    from netsetest.roles.collector import Collector
     from netsetest.roles.vehicle import Vehicle
+    from netsetest.runtime.channel import ChannelWriter
 
 READY_PERIOD_S = 0.1
 IDLE_WAIT_S = 1.0  # a started node with nothing due sleeps until a message arrives (or this long)
@@ -49,6 +51,7 @@ REALTIME_SETTLE_S = 0.5  # real time: from "all ready" to step 0, for the start-
 EXIT_STOPPED = 128 + signal.SIGTERM  # a role stopped by SIGTERM/SIGINT
 REALTIME_CLOSE_BATCH = 10  # real time: steps the collector closes between two looks at its bus (a few ms each)
 REALTIME_DRAIN_PUMPS = 50  # real time: pumps that empty the collector's bus before it judges (a flood cannot hold it there)
+END_GRACE_S = 2.0  # the collector's wait, after the End, for the last states (they travel on other keys)
 CRASH_FLUSH_S = 0.2  # --crash-after: time for the last state to leave before SIGKILL
 STALL_S = 1.0  # a turn of the collector's loop this late (it pumps every 0.05 s) is a stall: the process did not run
 STALL_LOG_S = 10.0  # a stall this long is logged
@@ -215,23 +218,26 @@ def node_peers(sc: Scenario, node_id: int) -> set[tuple[str, int | None]]:
 def run_vehicle(spec: VehicleSpec, sc: Scenario, bus: Bus) -> int:
     """The vehicle's loop.  ``spec.await_rejoin``: (node, step) pairs; in lockstep, step+1 waits (at most
     ``node_timeout``) for the node.  ``spec.quiet``: no line on success (errors are still logged).  Lockstep waits
-    for the collector's acknowledgments at most ``spec.zenoh.stall_limit`` without one: past it the collector is
-    stopped or has lost its session, and the vehicle ends the run (:data:`EXIT_COLLECTOR_STALLED`)."""
-    from netsetest.roles.flow import ack_window
+    for the collector's acknowledgments (``spec.ack_window``, roles/flow.py) at most ``spec.zenoh.stall_limit`` without
+    one: past it the collector is stopped or has lost its session, and the vehicle ends the run (:data:`EXIT_COLLECTOR_STALLED`)."""
     from netsetest.roles.vehicle import Vehicle
 
-    try:
-        window = ack_window(os.environ)  # the benchmark's setting (roles/flow.py); `run` refused a bad one already
-    except ValueError as exc:
-        log("vehicle", str(exc))
-        return EXIT_BAD_INPUT
-    run_id, realtime, node_timeout, start_timeout = spec.zenoh.resolved_run_id, spec.clock == "realtime", spec.node_timeout, spec.start_timeout
-    signals, seed, pace, await_rejoin, quiet = spec.signals, spec.seed, spec.pace, spec.await_rejoin, spec.quiet
-    vehicle = Vehicle(sc, bus, run_id, signals, seed, realtime=realtime, window=window)
-    holds = RejoinHolds(await_rejoin)
-    dead_at: dict[int, float] = {}  # node → when the vehicle went on without it
-    me = ("vehicle", None)
-    barrier = Barrier(bus, run_id, Ready(role="vehicle"), _all_roles(sc) - {me})
+    run_id, realtime = spec.zenoh.resolved_run_id, spec.clock == "realtime"
+    vehicle = Vehicle(sc, bus, run_id, spec.signals, spec.seed, realtime=realtime, window=spec.ack_window)
+    barrier = Barrier(bus, run_id, Ready(role="vehicle"), _all_roles(sc) - {("vehicle", None)})
+    if not _everyone_ready(barrier, bus, spec.start_timeout):
+        return EXIT_VIOLATION
+    barrier.tick(time.monotonic() + READY_PERIOD_S)  # a last Ready with seen_all for everyone
+    if not spec.quiet:
+        log("vehicle", f"all {len(sc.ids)} nodes and the collector are ready; clock {spec.clock}")
+    code = _realtime(vehicle, bus, sc.tau_s) if realtime else _lockstep(spec, vehicle, barrier, bus)
+    if code == 0:
+        time.sleep(0.2)  # let End reach everyone before the session closes
+    return code
+
+
+def _everyone_ready(barrier: Barrier, bus: Bus, start_timeout: float) -> bool:
+    """The start-up barrier: until every other role reported ``seen_all`` (False, and logged, after ``start_timeout``)."""
     t0 = time.monotonic()
     while not (barrier.others <= barrier.complete):
         barrier.tick(time.monotonic())
@@ -239,55 +245,62 @@ def run_vehicle(spec: VehicleSpec, sc: Scenario, bus: Bus) -> int:
         if time.monotonic() - t0 > start_timeout:
             missing = sorted(f"{r}{'' if n is None else ' ' + str(n)}" for r, n in barrier.others - barrier.complete)
             log("vehicle", f"start-up timed out after {start_timeout:.0f} s; not ready: {', '.join(missing)}")
-            return EXIT_VIOLATION
-    barrier.tick(time.monotonic() + READY_PERIOD_S)  # a last Ready with seen_all for everyone
-    if not quiet:
-        log("vehicle", f"all {len(sc.ids)} nodes and the collector are ready; clock {'realtime' if realtime else 'lockstep'}")
-    if realtime:
-        # the machine is still busy with the start-up (the last roles' warm-up, their sessions, the Ready
-        # traffic) when everyone is ready; a real-time clock must not start into that (a hundred nodes
-        # missed step 0 and 1 by tens of ms): the deadlines count from step 0
-        settle_until = time.monotonic() + REALTIME_SETTLE_S
-        while (left := settle_until - time.monotonic()) > 0:
-            bus.pump(timeout=min(left, 0.05))
+            return False
+    return True
+
+
+def _realtime(vehicle: Vehicle, bus: Bus, tau_s: float) -> int:
+    """A step every ``tau_s`` whatever the nodes did."""
+    # the machine is still busy with the start-up (the last roles' warm-up, their sessions, the Ready traffic)
+    # when everyone is ready; a real-time clock must not start into that (a hundred nodes missed step 0 and 1 by
+    # tens of ms): the deadlines count from step 0
+    settle_until = time.monotonic() + REALTIME_SETTLE_S
+    while (left := settle_until - time.monotonic()) > 0:
+        bus.pump(timeout=min(left, 0.05))
     vehicle.advance()
-    t_step = next_tick = time.monotonic()
-    held_since: float | None = None  # lockstep: since when the collector's window holds the next step, with no acknowledgment
-    held_acked, held_logged = -1, False
+    next_tick = time.monotonic()
     while not vehicle.done:
+        bus.pump(timeout=max(0.0, min(next_tick + tau_s - time.monotonic(), 0.05)))
+        if time.monotonic() >= next_tick + tau_s:
+            next_tick += tau_s
+            vehicle.advance()
+    return 0
+
+
+def _lockstep(spec: VehicleSpec, vehicle: Vehicle, barrier: Barrier, bus: Bus) -> int:
+    """The next step once every alive node published this one (a node silent ``node_timeout`` is dead), a
+    rejoining node is back (:class:`RejoinHolds`), the collector's window is open (roles/flow.py; the run ends
+    once it held past the stall limit) and ``pace`` has passed."""
+    from netsetest.roles.flow import Hold
+
+    node_timeout = spec.node_timeout
+    holds, hold = RejoinHolds(spec.await_rejoin), Hold(node_timeout, spec.zenoh.stall_limit)
+    dead_at: dict[int, float] = {}  # node → when the vehicle went on without it
+    vehicle.advance()
+    t_step = time.monotonic()
+    while not vehicle.done:
+        bus.pump(timeout=min(0.05, max(0.0, t_step + node_timeout - time.monotonic())))
         now = time.monotonic()
-        if realtime:
-            bus.pump(timeout=max(0.0, min(next_tick + sc.tau_s - now, 0.05)))
-        else:
-            bus.pump(timeout=min(0.05, max(0.0, t_step + node_timeout - now)))
-        now = time.monotonic()
-        if realtime:
-            if now >= next_tick + sc.tau_s:
-                next_tick += sc.tau_s
+        if not vehicle.ready_to_advance():
+            if now - t_step > node_timeout:
+                log("vehicle", f"step {vehicle.k}: no state from node(s) {sorted(vehicle.waiting_for())} in {node_timeout:g} s; going on without")
+                dead_at.update((n, now) for n in vehicle.waiting_for())
                 vehicle.advance()
-        elif vehicle.ready_to_advance() and holds.holding(vehicle, barrier, dead_at, now - t_step, node_timeout):
+                t_step = now
+        elif holds.holding(vehicle, barrier, dead_at, now - t_step, node_timeout):
             pass
-        elif vehicle.ready_to_advance() and not vehicle.window_open():  # the collector is behind: hold, blame no node
-            if held_since is None or vehicle.acked != held_acked:  # (still acknowledging: alive, only behind)
-                held_since, held_acked = now, vehicle.acked
-            if now - held_since > node_timeout and not held_logged:
+        elif not vehicle.window_open():  # the collector is behind: hold, blame no node
+            held = hold.held(now, vehicle.acked)
+            if held == "tell":
                 log("vehicle", f"step {vehicle.k + 1}: waiting for the collector (it acknowledged step {vehicle.acked})")
-                held_logged = True
-            if now - held_since > spec.zenoh.stall_limit:
+            elif held == "stalled":
                 log("vehicle", f"step {vehicle.k + 1}: the collector acknowledged nothing for {spec.zenoh.stall_limit:g} s (--stall-limit): ending the run")
                 return EXIT_COLLECTOR_STALLED
             t_step = now  # the nodes' time starts when the step is published
-        elif vehicle.ready_to_advance():
-            if now - t_step >= pace:  # lockstep paced for watching
-                vehicle.advance()
-                t_step = now
-                held_since, held_logged = None, False
-        elif now - t_step > node_timeout:
-            log("vehicle", f"step {vehicle.k}: no state from node(s) {sorted(vehicle.waiting_for())} in {node_timeout:g} s; going on without")
-            dead_at.update((n, now) for n in vehicle.waiting_for())
+        elif now - t_step >= spec.pace:  # lockstep paced for watching
             vehicle.advance()
             t_step = now
-    time.sleep(0.2)  # let End reach everyone before the session closes
+            hold.released()
     return 0
 
 
@@ -337,7 +350,7 @@ def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
     # a neighbour and waits for the readings within a budget: both lazy, so the N readings of a step under
     # max_faulty cost the node a few polls, not N callbacks and wake-ups
     # the step's part its readings do not enter is solved while they cross the network (the same result)
-    prof = PROFILE  # NETSETEST_PROFILE: the bus and the node observed (netsetest/profile.py); else nothing on their path
+    prof = PhaseProfile() if spec.profile is not None else None  # --profile: the bus and the node observed (netsetest/profile.py); else nothing on their path
     if prof is not None:
         observe_bus(bus, prof)  # (before the node subscribes)
     node = Node(sc, node_id, bus, run_id, spec.variant, rejoin=spec.rejoin, objective=spec.objective, lazy=realtime, early=True)
@@ -364,8 +377,8 @@ def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
                 time.sleep(CRASH_FLUSH_S)  # the state of step k leaves before the crash
                 log(role, f"killing myself (SIGKILL) after step {node.k} as asked")
                 os.kill(os.getpid(), signal.SIGKILL)
-    if prof is not None and profiled is not None:
-        prof.write(f"node-{node_id}", profiled())
+    if spec.profile is not None and prof is not None and profiled is not None:
+        prof.write(spec.profile, f"node-{node_id}", profiled())
     return 0
 
 
@@ -394,71 +407,100 @@ def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: RunMeta, on
 
 
 def _collect(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: RunMeta, on_summary: Callable[[RunSummary], None] | None, stop: StopRequests) -> int:
-    """:func:`run_collector`'s loop, ``stop`` the signals it was sent."""
+    """:func:`run_collector`'s set-up, loop and summary, ``stop`` the signals it was sent."""
     from netsetest.roles.collector import Collector
-
     from netsetest.runtime.channel import ChannelWriter, RunFinished
 
-    run_id, record, summary_json, idle_timeout = spec.zenoh.resolved_run_id, spec.record, spec.summary_json, spec.idle_timeout
-    sink, _ = record_sink(record)  # opened now: the record grows step by step and survives a crash
-    realtime = spec.clock == "realtime"
-    collector = Collector(sc, bus, run_id, sink, realtime=realtime)
+    run_id = spec.zenoh.resolved_run_id
+    sink, _ = record_sink(spec.record)  # opened now: the record grows step by step and survives a crash
+    collector = Collector(sc, bus, run_id, sink, realtime=spec.clock == "realtime")
     if sink is not None:
         sink.meta(meta)
     barrier = Barrier(bus, run_id, Ready(role="collector"), _all_roles(sc) - {("collector", None)})
     channel = ChannelWriter(spec.channel_fd) if spec.channel_fd is not None else None  # to the launcher: progress, summary
-    last_msg = time.monotonic()
-    stalls = StallWatch(spec.zenoh.stall_limit, last_msg)
-    stopped: StopCause | None = None
-    while True:
-        now = time.monotonic()
-        gap = stalls.turn(now, collector.progress)
-        last_msg += gap  # our own stall is not the vehicle's silence
-        if gap >= stalls.lease:  # the router closed our session, and what was in flight to us is lost: the run cannot go on
-            log("collector", f"stalled {gap:.0f} s, past the stall limit ({stalls.lease:g} s, Zenoh's lease): ending the run")
-            stopped = "collector stalled"
-            break
-        if stop.signal is not None:  # (the parent's stop; after a stall that may have cost our session, the stall is the cause)
-            stopped = "collector stalled" if stalls.session_at_risk else "interrupted"
-            log("collector", f"stopped by {stop.signal}; writing what was checked")
-            break
-        if not collector.started:
-            barrier.tick(now)
-        if bus.pump(timeout=0.05):
-            last_msg = time.monotonic()
-            stalls.heard()
-            for _ in range(REALTIME_DRAIN_PUMPS if realtime else 0):  # real time: all off the bus first (its inbox is bounded), then judge
-                if not bus.pump(timeout=0.0):
-                    break
-        if realtime:
-            collector.close_ready(REALTIME_CLOSE_BATCH)
-        if channel is not None:
-            channel.step(collector.progress)
-        if collector.ended is not None:
-            # End overtakes the last states on other paths: wait until they are in (or a grace period)
-            t_end = time.monotonic()
-            while collector.progress < collector.ended.steps and time.monotonic() - t_end < 2.0:
-                bus.pump(timeout=0.05)
-                if realtime:
-                    collector.close_ready()
-            if channel is not None:
-                channel.step(collector.progress)
-            break
-        if now - last_msg > idle_timeout:
-            stopped = "collector stalled" if stalls.session_at_risk else "vehicle gone"  # (nothing came since: it was lost)
-            why = "our session was lost while we stalled" if stopped == "collector stalled" else "the vehicle is gone"
-            log("collector", f"no message for {idle_timeout:g} s: {why}; writing what was received")
-            break
+    stalls = StallWatch(spec.zenoh.stall_limit, time.monotonic())
+    stopped = _judge_until_end(collector, bus, barrier, channel, stalls, stop, spec.idle_timeout)
     # stopped by a signal or our stall: the steps checked so far (the later ones are cut short, not a node's silence)
     through = collector.progress if stopped in ("interrupted", "collector stalled") else None
     summary = collector.finish(meta, stopped=stopped, through=through, stall=(stalls.longest, stalls.step))
-    write_summary(summary, summary_json)
+    write_summary(summary, spec.summary_json)
     if channel is not None:
         channel.send(RunFinished(summary))
         channel.close()
     if on_summary:
         on_summary(summary)
     return EXIT_STOPPED if stopped == "interrupted" else exit_code(summary)
+
+
+def _judge_until_end(
+    collector: Collector, bus: Bus, barrier: Barrier, channel: ChannelWriter | None, stalls: StallWatch, stop: StopRequests, idle_timeout: float
+) -> StopCause | None:
+    """The collector's loop: messages in, ready steps judged, progress out, until the vehicle's End (None), or why
+    it stopped before: a signal, its own stall past the lease, no message for ``idle_timeout`` s."""
+    last_msg = stalls.last
+    while True:
+        now = time.monotonic()
+        gap = stalls.turn(now, collector.progress)
+        last_msg += gap  # our own stall is not the vehicle's silence
+        stopped = _stop_requested(gap, stalls, stop)
+        if stopped is not None:
+            return stopped
+        if not collector.started:
+            barrier.tick(now)
+        if _take_messages(bus, collector.realtime):
+            last_msg = time.monotonic()
+            stalls.heard()
+        if collector.realtime:
+            collector.close_ready(REALTIME_CLOSE_BATCH)
+        if channel is not None:
+            channel.step(collector.progress)
+        if (end := collector.ended) is not None:
+            _await_last_states(collector, bus, end.steps)
+            if channel is not None:
+                channel.step(collector.progress)
+            return None
+        if now - last_msg > idle_timeout:
+            return _gone_quiet(stalls, idle_timeout)
+
+
+def _stop_requested(gap: float, stalls: StallWatch, stop: StopRequests) -> StopCause | None:
+    """Our stall of ``gap`` s past the lease (the router closed our session, and what was in flight to us is lost:
+    the run cannot go on), or a signal (after a stall that may have cost our session, the stall is the cause)."""
+    if gap >= stalls.lease:
+        log("collector", f"stalled {gap:.0f} s, past the stall limit ({stalls.lease:g} s, Zenoh's lease): ending the run")
+        return "collector stalled"
+    if stop.signal is not None:
+        log("collector", f"stopped by {stop.signal}; writing what was checked")
+        return "collector stalled" if stalls.session_at_risk else "interrupted"
+    return None
+
+
+def _take_messages(bus: Bus, realtime: bool) -> bool:
+    """A pump of at most 0.05 s; real time, then all off the bus before judging (its inbox is bounded).  Whether a
+    message came."""
+    if not bus.pump(timeout=0.05):
+        return False
+    for _ in range(REALTIME_DRAIN_PUMPS if realtime else 0):
+        if not bus.pump(timeout=0.0):
+            break
+    return True
+
+
+def _await_last_states(collector: Collector, bus: Bus, last: int) -> None:
+    """The End overtakes the last states on other paths: wait until they are in (or END_GRACE_S)."""
+    t_end = time.monotonic()
+    while collector.progress < last and time.monotonic() - t_end < END_GRACE_S:
+        bus.pump(timeout=0.05)
+        if collector.realtime:
+            collector.close_ready()
+
+
+def _gone_quiet(stalls: StallWatch, idle_timeout: float) -> StopCause:
+    """No message for ``idle_timeout`` s: the vehicle is gone, or our session was lost while we stalled."""
+    stopped: StopCause = "collector stalled" if stalls.session_at_risk else "vehicle gone"  # (nothing came since: it was lost)
+    why = "our session was lost while we stalled" if stopped == "collector stalled" else "the vehicle is gone"
+    log("collector", f"no message for {idle_timeout:g} s: {why}; writing what was received")
+    return stopped
 
 
 # ---------------------------------------------------------------- a role process from its spec

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, ClassVar, Literal, TypeVar
 
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
+from netsetest.roles.flow import ACK_WINDOW, MAX_ACK_WINDOW, UNBOUNDED, show_window
 from netsetest.runtime import argtypes
 from netsetest.runtime.timeouts import NEIGHBOUR_TIMEOUT_S, NODE_TIMEOUT_S, STALL_LIMIT_S, START_TIMEOUT_S
 from netsetest.scenarios import topology_help
@@ -203,6 +204,15 @@ MANOEUVRE_HELP = (
 SPEED_HELP = "override the speed reference's mean, [speed] mean_kmh [km/h] (default: the file's)"
 FAULT_SCALE_HELP = "every faulty node's fault scaled to S × its declared [fault_bound] size at its peak, its shape kept (default: the file's faults)"
 ZENOH_CONFIG_HELP = "a Zenoh configuration (JSON5) to start from; netsetest sets mode, endpoints, scouting, security and the lease on top (default: none)"
+ACK_WINDOW_HELP = (
+    f"lockstep: how many steps the vehicle may lead the collector's acknowledgment, up to {MAX_ACK_WINDOW} (a paused "
+    f"collector's backlog stays within its inbox); {UNBOUNDED}: no window, a slow collector may then lose messages "
+    f"(the benchmark's measure of what the window costs) (default: {ACK_WINDOW})"
+)
+PROFILE_HELP = (
+    "write the node's CPU per step by phase of its own thread to DIR/node-<id>.json when it ends (netsetest/profile.py; "
+    "the benchmark's; default: not profiled, nothing on the hot path)"
+)
 STALL_LIMIT_HELP = (
     "how long [s] a role may not run (stopped, a swapping machine) and the run go on: every session's Zenoh lease, and the "
     "longest the vehicle waits for the collector; a collector stalled longer ends the run with a verdict naming its stall "
@@ -320,6 +330,7 @@ class VehicleSpec(RoleSpec):
         metavar="NODE@STEP",
         many=True,
     )
+    ack_window: int | None = _opt(ACK_WINDOW, "--ack-window", ACK_WINDOW_HELP, argtypes.ack_window, show_window, metavar="N")  # roles/flow.py
     zenoh: ZenohSpec = _group(ZenohSpec, "zenoh")
 
 
@@ -340,6 +351,7 @@ class NodeSpec(RoleSpec):
     )
     rejoin: bool = _opt(False, "--rejoin", "join a running network (after a crash or restart)", switch=True)
     crash_after: int | None = _opt(None, "--crash-after", "SIGKILL itself right after publishing step STEP (run --kill; default: never)", int, metavar="STEP")
+    profile: str | None = _opt(None, "--profile", PROFILE_HELP, argtypes.writable_dir, metavar="DIR")  # netsetest/profile.py
     zenoh: ZenohSpec = _group(ZenohSpec, "zenoh")
 
 

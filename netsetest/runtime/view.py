@@ -28,31 +28,26 @@ Each step goes to the browsers as soon as its truth is drawn (Rerun's batcher wo
 view's ``outlet`` (the server's :meth:`~netsetest.runtime.view_server.ViewerServer.send`; by default a flush of
 the recording stream).  In a real-time run the view knows when the vehicle published step k (the deadline its
 inputs carry, minus τs), so it measures its own lag (:class:`Lag`): the time step k's truth was handed to the
-browsers' connections minus that, per drawn step; the verdict shows the last one, and with
-``NETSETEST_VIEW_LAG=PATH`` (:data:`LAG_ENV`, the benchmark's) the view writes every one to PATH when it stops.
+browsers' connections minus that, per drawn step; the verdict shows the last one, and with ``--lag-json PATH``
+(the benchmark's) the view writes every one to PATH when it stops.
+
+This module maps messages to Rerun; the server is runtime/view_server.py, the view's process (started beside a
+run, its lag handed over) runtime/view_process.py.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
-import select
-import signal
-import subprocess
-import sys
 import time
 from array import array
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from netsetest.messages import End, Message, NodeInput, NodeState, Truth
 from netsetest.runtime.live import LiveTable
-from netsetest.runtime.view_server import ViewError, check_port, die_with_parent
 
 MAX_TIMELINE = 2**63 - 1  # Rerun's timelines are 64-bit: a sequence number, a duration in ns
 MAX_BACKLOG = 200  # messages waiting: above this the view drops frames (about one step of a 24-node run and its truth ×4)
@@ -60,7 +55,6 @@ ELLIPSE_POINTS = 48  # vertices of a drawn (β, r) ellipse
 APP_ID = "netsetest"
 FLUSH_TIMEOUT_S = 1.0  # a step's truth not encoded for the browsers within this is not waited for (no lag for it)
 LAG_PENDING_STEPS = 50  # a step's publish time waits this many steps for its truth to be drawn (and back)
-LAG_ENV = "NETSETEST_VIEW_LAG"  # a path: the view writes its lag per step there when it stops (netsetest/bench/view.py)
 BOUND_RGB = (31, 119, 180)
 COLOURS = {  # a node's step in the graph (RGB)
     "contained": (44, 160, 44),
@@ -116,7 +110,7 @@ class Lag:
                 del d[k]
 
     def to_dict(self) -> dict:
-        """The figures ``NETSETEST_VIEW_LAG`` gets: every lag (s) and the truths not sent in time."""
+        """The figures ``--lag-json`` gets (runtime/view_process.py): every lag (s) and the truths not sent in time."""
         return {"lags_s": list(self.lags_s), "unsent": self.unsent}
 
 
@@ -312,49 +306,3 @@ class LiveView:
             "the run's verdict (coverage, assumptions) is the collector's."
         )
         self.rec.log("verdict", rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN))
-
-
-def write_lag(view: LiveView) -> None:
-    """With ``NETSETEST_VIEW_LAG=PATH`` in the environment, the view's lag per step and the frames it dropped as JSON to PATH."""
-    path = os.environ.get(LAG_ENV)
-    if path:
-        Path(path).write_text(json.dumps({**view.lag.to_dict(), "dropped_frames": view.coverage.dropped_frames}))
-
-
-VIEW_START_TIMEOUT_S = 60.0  # the view process imports Rerun and opens its session and servers
-VIEW_STOP_S = 5.0
-
-
-@dataclass
-class ViewProcess:
-    """``run --view``: a ``netsetest view`` process beside the run (an observer like ``watch``), and its address."""
-
-    proc: subprocess.Popen
-    url: str
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)  # the view closes its session and servers
-            try:
-                self.proc.wait(VIEW_STOP_S)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        if self.proc.stdout is not None:
-            self.proc.stdout.close()
-
-
-def start_view(observer_args: list[str], tau_s: float, port: int) -> ViewProcess:
-    """Start ``netsetest view`` with the run's observer options; return once it subscribes and serves
-    (its first line is the address, read on a pipe: the address is the capability to the view, so never on a
-    command line).  PortTaken at once when ``port`` is taken, ViewError when the view does not start."""
-    check_port(port)  # one clear line before any role starts (the view itself would say it on its own stderr)
-    argv = [sys.executable, "-m", "netsetest", "view", *observer_args, "--tau-s", repr(tau_s), "--port", str(port)]
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, text=True, preexec_fn=die_with_parent)
-    assert proc.stdout is not None
-    ready, _, _ = select.select([proc.stdout], [], [], VIEW_START_TIMEOUT_S)
-    line = proc.stdout.readline() if ready else ""
-    if "http://" not in line:
-        ViewProcess(proc, "").stop()
-        raise ViewError(f"the live view did not start (exit {proc.returncode}); run `netsetest view` by hand to see why")
-    return ViewProcess(proc, line[line.index("http://") :].strip())

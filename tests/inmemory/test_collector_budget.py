@@ -33,7 +33,7 @@ def test_a_collector_past_its_budget_blames_no_node() -> None:
         steps_seen.append(k)
 
     run_inmemory(sc, bus=bus, on_step=overloaded_now)
-    assert behind.peak_open_node_steps <= BUDGET_STEPS * per_step + per_step  # the budget holds, give or take the step arriving
+    assert behind.admission.peak_open_node_steps <= BUDGET_STEPS * per_step + per_step  # the budget holds, give or take the step arriving
     s = behind.finish(run_meta(sc, "inmemory", "realtime", "paper", "scheduled", 0, "mem"))
     total = (STEPS + 1) * len(sc.ids)
     assert s.steps_overloaded > STEPS - 2 * BUDGET_STEPS, s.steps_overloaded  # most steps closed past the budget
@@ -43,7 +43,7 @@ def test_a_collector_past_its_budget_blames_no_node() -> None:
     # the step judged after one closed unjudged is outside the guarantee for the collector's loss, not the truth's
     assert s.node_steps_not_covered.get("collector overloaded", 0) >= len(sc.ids), s.node_steps_not_covered
     assert "truth unknown" not in s.node_steps_not_covered, s.node_steps_not_covered
-    assert s.collector_budget == BUDGET_STEPS * per_step and s.collector_peak == behind.peak_open_node_steps
+    assert s.collector_budget == BUDGET_STEPS * per_step and s.collector_peak == behind.admission.peak_open_node_steps
     assert outcome(s) == ("PASS (partial coverage)", EXIT_OK)
     assert f"collector overloaded on {s.steps_overloaded} step(s) (past its budget of {s.collector_budget}" in format_table(s).splitlines()[-1]
 

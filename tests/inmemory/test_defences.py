@@ -524,14 +524,14 @@ def test_vehicle_and_collector_keep_only_open_steps(monkeypatch: pytest.MonkeyPa
 
     def on_step(k: int) -> None:
         v, c = made["Vehicle"], made["Collector"]
-        sizes.append((len(v.heard), len(c.states), len(c.truth)))
+        sizes.append((len(v.heard), len(c.admission.states), len(c.admission.truth)))
 
     res = run_inmemory(_scenario("nsnim"), keep=False, on_step=on_step)
     assert res.summary.steps_completed == STEPS and res.parts is None
     assert max(h for h, _, _ in sizes) <= 1
     assert max(s for _, s, _ in sizes) <= CLOSE_LAG + 1 and max(t for _, _, t in sizes) <= CLOSE_LAG + 1
     c = made["Collector"]
-    assert c.states == {} and c.truth == {}  # the judge keeps nothing per step (roles/judge.py)
+    assert c.admission.states == {} and c.admission.truth == {}  # the judge keeps nothing per step (roles/judge.py)
 
 
 def test_an_end_handled_before_the_truths_queued_ahead_of_it_is_not_hostile() -> None:
@@ -560,8 +560,8 @@ def test_an_end_handled_before_the_truths_queued_ahead_of_it_is_not_hostile() ->
         for t in truths[len(sent) :]:  # hostile: the vehicle goes on after the End
             bus.publish(keys.truth(RUN), t)
             bus.pump()
-        assert collector.head == STEPS and collector.ended is not None
-        assert collector.drops["end-early"] == early
+        assert collector.admission.head == STEPS and collector.ended is not None
+        assert collector.admission.drops["end-early"] == early
     # a collector so far behind that its own inbox turned truths away: the last truth it lost is its trouble
     # (counted as inbox-full), not the End's (a loaded machine's zonotope run still said end-early 1)
     bus = MemoryBus()
@@ -573,7 +573,7 @@ def test_an_end_handled_before_the_truths_queued_ahead_of_it_is_not_hostile() ->
     while bus.pump():
         pass
     collector.finish(RunMeta())
-    assert bus.dropped["inbox-full"] == STEPS + 1 - 4 and "end-early" not in collector.drops
+    assert bus.dropped["inbox-full"] == STEPS + 1 - 4 and "end-early" not in collector.admission.drops
 
 
 def test_an_end_that_overtakes_the_last_truth_is_not_hostile() -> None:

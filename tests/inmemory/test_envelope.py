@@ -105,17 +105,15 @@ def test_outside_the_envelope_is_the_cause_where_the_car_left_it(tmp_path: Path,
 
 
 def test_the_collector_refuses_a_truth_whose_envelope_flag_is_not_its_own(vanagon_run: tuple[Path, Path]) -> None:
-    from netsetest.bus.base import MemoryBus
-    from netsetest.roles.collector import Collector
+    from netsetest.roles.admission import truth_problem
 
     path, record = vanagon_run
     sc = dataclasses.replace(load_topology(path), envelope=OperatingEnvelope(2.0, (70.0, 120.0)))
-    collector = Collector(sc, MemoryBus(), "run", None)
     truth = next(t for t in load_record(str(record)).truth if t["step"] == 9)
     honest = Truth(**(truth | {"envelope_ok": sc.envelope.holds(truth["ay"], truth["speed"])}))
-    collector.prev_truth = None  # its x is not checked without the previous truth; its flags are
-    assert collector._inconsistent(honest) is None
-    assert collector._inconsistent(honest.model_copy({"envelope_ok": not honest.envelope_ok})) == "truth-flags"
+    prev_truth = None  # its x is not checked without the previous truth; its flags are
+    assert truth_problem(sc, honest, prev_truth) is None
+    assert truth_problem(sc, honest.model_copy({"envelope_ok": not honest.envelope_ok}), prev_truth) == "truth-flags"
 
 
 def test_calibrate_envelope_prints_the_drives_and_a_bound_with_its_envelope(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

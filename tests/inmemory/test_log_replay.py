@@ -121,6 +121,7 @@ def _run(tmp: Path, log: Path, mapping: Path, capsys: pytest.CaptureFixture[str]
         ("parquet", lambda log, m: log.write_bytes(log.read_bytes()[: len(log.read_bytes()) // 2]), "cannot read it as parquet"),
         ("mdf4", lambda log, m: log.write_bytes(b"\x00garbage" * 64), "cannot read it as MDF4"),
         ("rosbag-sqlite3", lambda log, m: next(log.glob("*.db3")).write_bytes(b"not a database" * 64), "cannot read it as a ROS 2 bag"),
+        ("rosbag-mcap", lambda log, m: (f := next(log.glob("*.mcap"))).write_bytes(f.read_bytes()[: f.stat().st_size // 2]), "cannot read it as a ROS 2 bag"),
         ("csv", lambda log, m: m.write_text(m.read_text() + "bogus = 1\n"), "Extra inputs are not permitted"),
     ],
 )

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import re
 import time
 from pathlib import Path
@@ -329,15 +328,13 @@ LAG_STEPS = 30
 
 @pytest.mark.timeout(300)
 def test_run_view_hands_over_its_lag_behind_a_real_time_run(procs: ProcessGuard, tmp_path: Path) -> None:
-    """``run --clock realtime --view`` with NETSETEST_VIEW_LAG: the view writes one lag per step whose truth it
+    """``run --clock realtime --view --view-lag-json PATH``: the view writes one lag per step whose truth it
     drew and sent, each positive (a truth leaves the view after the vehicle published it: a view that dated a
     step by its deadline instead would show lags below 0 here); the bound on it is the benchmark's
     (netsetest/bench/view.py), a figure of the machine, not a test."""
     pytest.importorskip("rerun")
-    from netsetest.runtime.view import LAG_ENV
-
     lag = tmp_path / "lag.json"
-    procs.start("run", cli("run", PAPER6, "--clock", "realtime", "--steps", str(LAG_STEPS), "--view", "--quiet"), env={**os.environ, LAG_ENV: str(lag)})
+    procs.start("run", cli("run", PAPER6, "--clock", "realtime", "--steps", str(LAG_STEPS), "--view", "--view-lag-json", str(lag), "--quiet"))
     assert procs.wait("run", 240) == 0, procs.logs()
     got = json.loads(lag.read_text())
     if got["dropped_frames"] == 0 and got["unsent"] == 0:  # nothing left out: every step's truth drawn and sent

@@ -1,4 +1,4 @@
-"""What a node process loads (its memory, docs/performance.md *Imports and memory*): no pydantic (the
+"""What a node process loads (its memory, docs/performance-history.md, *Imports and memory*): no pydantic (the
 messages and the configuration are msgspec), no msgpack (msgspec encodes), no terminal UI, and not the
 vehicle's or the collector's role code, nor the launcher's and the records' modules (with their standard
 library: subprocess, tempfile, socket, random, gzip) that parsing a node's command line used to pull in."""

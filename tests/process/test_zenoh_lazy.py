@@ -5,7 +5,6 @@ other key; and a real-time run over Zenoh, whose nodes hear their neighbours laz
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import threading
 import time
@@ -154,18 +153,33 @@ def test_lazy_subscription_needs_an_exact_key(pair) -> None:
 def test_realtime_run_over_zenoh_uses_its_neighbours(tmp_path: Path) -> None:
     """A real-time secured paper run: every node publishes every step, the truth is contained, and the
     nodes, which hear their neighbours lazily, use them (a broken lazy path would leave ``used`` empty)
-    and wake about once per step (``NETSETEST_PROFILE``: blocking waits per step; ≈3 if every neighbour
+    and wake about once per step (``run --profile``: blocking waits per step; ≈3 if every neighbour
     state woke the node)."""
     steps = 30
     summary, record, prof = tmp_path / "s.json", tmp_path / "r.jsonl", tmp_path / "profile"
     prof.mkdir()
     out = subprocess.run(
-        cli("run", PAPER6, "--mode", "zenoh", "--clock", "realtime", "--steps", str(steps), "--quiet", "--summary-json", str(summary), "--record", str(record)),
+        cli(
+            "run",
+            PAPER6,
+            "--mode",
+            "zenoh",
+            "--clock",
+            "realtime",
+            "--steps",
+            str(steps),
+            "--quiet",
+            "--summary-json",
+            str(summary),
+            "--record",
+            str(record),
+            "--profile",
+            str(prof),
+        ),
         cwd=ROOT,
         capture_output=True,
         text=True,
         timeout=170,
-        env={**os.environ, "NETSETEST_PROFILE": str(prof)},
     )
     assert out.returncode == 0, out.stderr[-2000:]
     s = json.loads(summary.read_text())

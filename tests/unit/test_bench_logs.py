@@ -80,6 +80,14 @@ def test_every_target_met_is_said_so() -> None:
     assert "missed 0, undecided 40 of 600 (6.7 %)" in logs_summary_markdown(RES)
 
 
+def test_the_bag_s_floor_is_said_where_measured() -> None:
+    """rosbags' own reading of the bag (nothing decoded), measured beside its import, in the table's note and the target."""
+    res = copy.deepcopy(RES)
+    res["import"]["rows"][0]["rosbags_cpu_s"] = 3.25
+    assert "took 3.2 s of CPU of the import's 4.0 s" in logs_markdown(res) and "rosbags' own reading" not in logs_markdown(RES)
+    assert targets(res)[0][2] == "8.0 s (4.0 s CPU, of which rosbags' own reading 3.2 s; load 3.00 3.00 3.00)"
+
+
 def test_a_target_missed_is_said_so() -> None:
     res = copy.deepcopy(RES)
     res["import"]["rows"][0] |= {"import_s": 40.0, "peak_mb": 400.0}  # the bag's row decides, not the CSV's

@@ -1,6 +1,8 @@
 """netsetest/linalg.py is numpy.linalg without its per-call set-up: on finite matrices of the estimator's sizes
 (positive definite, indefinite, singular, badly scaled, tiny and huge) each function returns numpy.linalg's floats
-bit for bit and raises LinAlgError exactly where numpy.linalg does, without a warning."""
+bit for bit and raises LinAlgError exactly where numpy.linalg does, without a warning.  Bit for bit holds on any CPU:
+both run the same LAPACK gufunc on the same matrix in one process, so whichever OpenBLAS kernel the CPU gets
+(``OPENBLAS_CORETYPE``), both get it."""
 
 from __future__ import annotations
 
@@ -13,6 +15,8 @@ from hypothesis import strategies as st
 from test_polygon_exact import FUZZ
 
 from netsetest import linalg
+
+pytestmark = pytest.mark.blas  # (.ci/run runs it under every OpenBLAS kernel the CPU runs)
 
 
 @st.composite

@@ -95,14 +95,40 @@ def test_a_side_a_rounding_made_reflex_does_not_shift_the_sum() -> None:
         assert total.contains(np.array(x))
 
 
-def test_the_fast_direction_order_falls_back_to_the_exact_one_where_a_rounded_angle_ties() -> None:
-    """b is a hair clockwise of a, below arctan2's resolution: the rounded angles tie, the fast sort keeps the
+def test_the_direction_order_falls_back_to_the_exact_one_where_a_rounded_angle_ties() -> None:
+    """b is a hair clockwise of a, below arctan2's resolution: the rounded angles tie, the float sort keeps the
     input order (a first), the exact check of the neighbours rejects it and the exact sort puts b first;
-    directions the rounded angle does order stay as the one numpy sort put them."""
-    from netsetest.polygon import _by_direction
+    directions the rounded angle does order stay as the float sort put them."""
+    from netsetest.polygon import _ordered
 
-    a, b = [-0.7364540870016669, -0.16290994799305278], [-0.7364540870016669, -0.16290994799305272]
+    a, b = (-0.7364540870016669, -0.16290994799305278), (-0.7364540870016669, -0.16290994799305272)
     assert np.arctan2(a[1], a[0]) == np.arctan2(b[1], b[0])
-    assert list(_by_direction(np.array([a, b]))) == [1, 0]
-    d = np.array([[0.0, -1.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [1.0, -1e-17]])
-    assert list(_by_direction(d)) == [1, 3, 2, 0, 4]
+    assert _ordered([a, b]) == ([1, 0], [-1])
+    d = [(0.0, -1.0), (1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (1.0, -1e-17)]
+    assert _ordered(d)[0] == [1, 3, 2, 0, 4]
+
+
+def test_the_vertices_stay_plain_floats_whatever_numpy_scalars_come_in() -> None:
+    """Every operation builds its vertices from plain floats (a numpy scalar bound or matrix would otherwise make them
+    numpy's: slower arithmetic, and a published region that decode refuses as not numbers)."""
+    poly = Polygon.box(np.array([-1.0, -1.0]), np.array([1.0, 1.0]))
+    A, t = np.array([[0.9, 0.1], [-0.2, 0.8]]), np.array([0.01, -0.02])
+    out = poly.moved(A, t, [np.array([0.1, 0.05])]).reduced(6).cut(np.array([1.0, 0.5]), np.float64(-0.5), np.float64(0.25))
+    assert out is not None and len(out) >= 3
+    assert all(type(x) is float for x in out.flat())
+    assert Polygon.from_flat(out.flat()) == out and Polygon(out.vertices) == out
+
+
+@settings(max_examples=60, deadline=None)
+@given(_cloud())
+def test_the_bounds_are_the_interval_hull(cloud: tuple[Polygon, np.ndarray]) -> None:
+    """Each coordinate's bounds are its lowest and highest vertex, exactly: every vertex lies within them, each is
+    attained, and each is the support along its axis (what the published set's bounds are cut by, proven.py and sets.py)."""
+    poly, _ = cloud
+    lo, hi = poly.bounds()
+    v = poly.vertices
+    assert lo.shape == hi.shape == (2,)
+    assert np.all(v >= lo) and np.all(v <= hi) and np.all(np.any(v == lo, axis=0)) and np.all(np.any(v == hi, axis=0))
+    for axis in range(2):
+        e = np.eye(2)[axis]
+        assert poly.interval(e) == (lo[axis], hi[axis])

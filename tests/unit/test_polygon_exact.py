@@ -29,6 +29,14 @@ import os
 from fractions import Fraction
 
 import numpy as np
+from exact_polygons import EPS, Point, cut_rounding, move_rounding, reduction_rounding, sum_rounding
+from exact_polygons import exact as _exact
+from exact_polygons import gap as _gap
+from exact_polygons import hull as _hull
+from exact_polygons import merged as _merged
+from exact_polygons import normals as _normals
+from exact_polygons import scale as _scale
+from exact_polygons import support as _support
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -42,64 +50,9 @@ FUZZ = settings(
     database=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
 )
-EPS = 2.0**-53
-Point = tuple[Fraction, Fraction]
 
 
-# --- the exact references ------------------------------------------------------------------------------------
-
-
-def _exact(v: np.ndarray) -> list[Point]:
-    return [(Fraction(float(x)), Fraction(float(y))) for x, y in np.asarray(v, dtype=float).reshape(-1, 2)]
-
-
-def _cross(o: Point, a: Point, b: Point) -> Fraction:
-    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
-
-
-def _hull(points: list[Point]) -> list[Point]:
-    """The convex hull, counter-clockwise, without collinear vertices (one or two points if flat)."""
-    pts = sorted(set(points))
-    if len(pts) <= 2:
-        return pts
-
-    def chain(ps: list[Point]) -> list[Point]:
-        out: list[Point] = []
-        for p in ps:
-            while len(out) >= 2 and _cross(out[-2], out[-1], p) <= 0:
-                out.pop()
-            out.append(p)
-        return out
-
-    return chain(pts)[:-1] + chain(pts[::-1])[:-1]
-
-
-def _normals(hull: list[Point]) -> list[Point]:
-    """The outward normals of the hull's sides, and both normals and directions of a flat one's."""
-    if len(hull) == 1:
-        return [(Fraction(1), Fraction(0)), (Fraction(-1), Fraction(0)), (Fraction(0), Fraction(1)), (Fraction(0), Fraction(-1))]
-    out = []
-    for a, b in zip(hull, hull[1:] + hull[:1]):
-        e = (b[0] - a[0], b[1] - a[1])
-        out.append((e[1], -e[0]))
-        if len(hull) == 2:
-            out += [(-e[1], e[0]), e]
-    return out
-
-
-def _support(points: list[Point], d: Point) -> Fraction:
-    return max(d[0] * p[0] + d[1] * p[1] for p in points)
-
-
-def _gap(inner: list[Point], outer: list[Point]) -> Fraction:
-    """How far (in the ∞-norm, over the sides' directions of both) ``inner`` reaches beyond ``outer``: ≤ 0 if the
-    hull of ``outer`` holds it (for a full-dimensional ``outer``, exactly)."""
-    worst = Fraction(-(10**400))
-    for d in _normals(_hull(outer)) + _normals(_hull(inner)):
-        size = abs(d[0]) + abs(d[1])
-        if size:
-            worst = max(worst, (_support(inner, d) - _support(outer, d)) / size)
-    return worst
+# --- the exact clip (the other exact references: tests/exact_polygons.py) -----------------------------------
 
 
 def _clip(points: list[Point], c: Point, b: Fraction) -> list[Point]:
@@ -114,16 +67,6 @@ def _clip(points: list[Point], c: Point, b: Fraction) -> list[Point]:
             t = sp / (sp - sq)
             out.append((p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])))
     return out
-
-
-def _merged(v: np.ndarray, count: int) -> Fraction:
-    """What merging vertices closer than DUPLICATE (polygon._distinct, relative to the coordinates' size) may leave
-    out of ``count`` vertices: a chain of them, each that close to the one before (the move's margin covers it)."""
-    return Fraction(DUPLICATE) * Fraction(1.0 + float(np.abs(v).max())) * count
-
-
-def _scale(*arrays: np.ndarray) -> float:
-    return 1.0 + sum(float(np.abs(a).max()) if np.size(a) else 0.0 for a in arrays)
 
 
 # --- the adversarial polygons ----------------------------------------------------------------------------------
@@ -233,7 +176,7 @@ def test_the_sum_is_the_exact_minkowski_sum(data: st.DataObject) -> None:
     segments = data.draw(segment_lists(v))
     got = Polygon(v).plus_segments(segments)
     want = _sum_points(v, segments)
-    tol = Fraction(16 * (len(v) + 2 * len(segments) + 2) * EPS * _scale(v, *segments))
+    tol = sum_rounding(v, segments)
     assert _gap(want, _exact(got.vertices)) <= tol + _merged(got.vertices, len(v) + 2 * len(segments))  # the true sum (to its rounding, merge)
     assert _gap(_exact(got.vertices), want) <= tol  # and nothing more
 
@@ -250,7 +193,7 @@ def test_the_move_holds_the_exact_image_within_its_margin(data: st.DataObject) -
     want = _sum_points(_image(v, A, t), segments)
     assert _gap(want, _exact(got.vertices)) <= 0  # exactly
     pad = max(ROUNDING * (1.0 + float(np.abs(image).max())), 1e-10 * _scale(image, *segments))  # (Polygon.moved)
-    tol = Fraction(16 * (len(v) + 2 * len(segments) + 8) * EPS * _scale(image, *segments))
+    tol = move_rounding(image, segments)
     assert _gap(_exact(got.vertices), want) <= Fraction(pad) * Fraction(1.01) + tol
 
 
@@ -262,7 +205,7 @@ def test_the_cut_holds_the_exact_clip_within_its_margin(data: st.DataObject) -> 
     got = Polygon(v).cut(c, lo, hi)
     ce = _exact(c)[0]
     want = _clip(_clip(_exact(v), ce, Fraction(hi)), (-ce[0], -ce[1]), -Fraction(lo))
-    tol = Fraction(64 * len(v) * EPS * _scale(v))
+    tol = cut_rounding(v)
     if want:
         assert got is not None  # not empty where the slab meets the polygon
         assert _gap(want, _exact(got.vertices)) <= tol + _merged(got.vertices, 2 * len(v))  # the clip (to its rounding, merge)
@@ -312,7 +255,7 @@ def test_the_reduction_holds_its_input(data: st.DataObject) -> None:
     small = grown.reduced(limit)  # (its vertex count: tests/unit/test_polygon.py; here near-duplicate vertices can
     # leave one more, where a rounding puts neighbours' meeting a hair behind the edge: Polygon.reduced)
     assert np.all(np.isfinite(small.vertices))
-    tol = Fraction(64 * len(grown.vertices) * EPS * _scale(grown.vertices))
+    tol = reduction_rounding(grown.vertices)
     assert _gap(_exact(grown.vertices), _exact(small.vertices)) <= tol
 
 

@@ -26,7 +26,10 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 from message_helpers import make_state, raw_message
-from test_polygon_exact import FUZZ, _cross, _exact, _hull, car_like, matrices, polygons, segment_lists, slabs
+from exact_polygons import cross as _cross
+from exact_polygons import exact as _exact
+from exact_polygons import hull as _hull
+from test_polygon_exact import FUZZ, car_like, matrices, polygons, segment_lists, slabs
 
 from netsetest.messages import BadMessage, decode
 from netsetest.polygon import (

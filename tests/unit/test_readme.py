@@ -18,6 +18,12 @@ def test_readme_starts_with_run_and_test_commands():
 
 
 def test_ci_runs_the_readme_test_command_verbatim():
+    """.ci/run runs it as its first command after the system packages, then the blas tests under every other
+    OpenBLAS kernel the CPU runs (.ci/blas_kernels.py)."""
     _, test = readme_commands()
-    ci = [ln for ln in (ROOT / ".ci" / "run").read_text().splitlines() if ln and not ln.startswith("#")]
-    assert ci[-1] == test
+    text = (ROOT / ".ci" / "run").read_text()
+    ci = [ln for ln in text.splitlines() if ln and not ln.startswith(("#", " "))]
+    assert test in ci and ci[ci.index(test) - 1] == "fi"  # the README's command right after the system packages' block
+    after = ci[ci.index(test) + 1 :]
+    assert after == ["for kernel in $(python .ci/blas_kernels.py); do", "done"]
+    assert "OPENBLAS_CORETYPE=$kernel pytest -q -m blas" in text

@@ -1,5 +1,5 @@
 """A node without a reading carries its own set's x part by the model alone and resumes at its next reading
-(estimator/rejoin.py: predict_x, resume_ellipsoid; docs/estimator.md#resume).  Soundness, drawn by Hypothesis: every
+(estimator/rejoin.py: predict_x, resume_ellipsoid; docs/estimator.md#resume-after-steps-without-a-reading).  Soundness, drawn by Hypothesis: every
 x of the set, every wind w² ≤ W and every mismatch ζ of the declared box or ball lands in the predicted set, and every
 (x, f) the resumed ellipsoid must hold (x in the carried set, f any fault the reading leaves within the noise bound)
 lies in it.  And the construction is not vacuous: a point outside what the model can reach lies outside."""

@@ -14,6 +14,7 @@ from netsetest.cli.main import build_parser
 from netsetest.estimator.names import NODE_ESTIMATOR_NAMES
 from netsetest.estimator.objective import OBJECTIVES
 from netsetest.models.manoeuvres import MANOEUVRES, WITH_AMPLITUDE
+from netsetest.roles.flow import ACK_STRIDE, MAX_ACK_WINDOW
 from netsetest.runtime.argtypes import SEED_MAX
 from netsetest.runtime.rolespec import (
     DEFAULT_RUN_ID,
@@ -31,6 +32,7 @@ from netsetest.runtime.rolespec import (
 EXAMPLES = int(os.environ.get("NETSETEST_FUZZ_EXAMPLES", "0")) or None
 ROUND_TRIP = settings(max_examples=EXAMPLES or 100, derandomize=EXAMPLES is None, deadline=None, database=None)
 READABLE = ("pyproject.toml", "README.md")  # --zenoh-config is checked to be a readable file when parsed
+WRITABLE = ("docs", "tests")  # --profile: a directory the node can write in, checked when parsed
 
 # any text a path or name may be, as long as it is one argv entry (no NUL); a positional cannot start with '-',
 # and no value can be '--' (argparse drops it; to_argv refuses it)
@@ -84,6 +86,7 @@ SPECS: dict[type[RoleSpec], st.SearchStrategy] = {
         seconds,
         st.booleans(),
         st.lists(pairs, max_size=3).map(tuple),
+        maybe(st.integers(ACK_STRIDE, MAX_ACK_WINDOW)),  # --ack-window N, or unbounded (roles/flow.py)
         zenohs,
     ),
     NodeSpec: st.builds(
@@ -96,6 +99,7 @@ SPECS: dict[type[RoleSpec], st.SearchStrategy] = {
         seconds,
         st.booleans(),
         maybe(st.integers(-10, 10**6)),
+        maybe(st.sampled_from(WRITABLE)),  # --profile DIR (netsetest/profile.py)
         zenohs,
     ),
     CollectorSpec: st.builds(

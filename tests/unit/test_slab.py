@@ -1,5 +1,5 @@
 """The cut of a certified set by a proven interval of cᵀx̄ (netsetest/estimator/slab.py): the size cut of a
-published set (c = e₃, docs/estimator.md "SAIM") and a reading's cut of the recursion (c = C̄ⱼ, docs/network.md).
+published set (c = e₃, docs/estimator.md "One step") and a reading's cut of the recursion (c = C̄ⱼ, docs/network.md).
 
 - The cut ellipsoid contains every point of the certified ellipsoid inside the interval (random
   ellipsoids, a coordinate and random directions, points on the boundary of both and inside), and its
