@@ -73,7 +73,16 @@ Re-recorded on 2026-12-07 after merging issue 45 (levers 1 and 2: objective ``ba
 a step whose facts are all balls in closed form), which the digests had been re-recorded for on its branch.  Checked
 against the parent of that merge (45db4c2^1) and the merge itself on this machine: the fault widths move, by up to
 +0.78 % on paper6_reference SAIM worst-case node 3 (0.012057 → 0.012152) and about +0.05–0.14 % on the other nodes
-with readings, β and r by 10⁻⁹ relative."""
+with readings, β and r by 10⁻⁹ relative.
+
+Re-recorded on 2026-12-07 (issue 44, branch i44) for one change by design: a sensor with a declared ``[fault_bound]``
+publishes its reading of every step and every node reads it with that bound (``[network] bounded_readings``, default
+true; the bundled profiles declare one), and the sensor's own sets rest on its bound too (the fault-size cut at every
+step); a node that does not hear every reading cuts its region by its in-neighbours' published sets.  Every recorded
+mean width narrows or stays: new / old over the 30 steps, β r f, paper6 0.87–0.92, 0.70–0.79, 0.69–0.96;
+paper6_reference 0.98–1, 0.95–1, 0.87–1; paper6_max_faulty 0.90–1, 0.77–1, 0.88–1; the labels of 2 node-runs move
+(fault detection), the truth is unchanged.  The widths against the exact limit stay ≤ 1.007 with 0 intervals narrower
+than it (bench/widths.json, docs/results.md)."""
 
 from __future__ import annotations
 
