@@ -184,7 +184,7 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     readings: Annotated[list[tuple[NodeId, FiniteF, Gamma]], Meta(max_length=MAX_NODES)] = []
     health: bool = False  # either set used the k-of-N interval of the step's readings and its own ([network] max_faulty)
     # the in-neighbours whose published set of the step before (its region, its fault range: the whole set) cut this
-    # step's sets (docs/network.md, *Neighbours' sets*): among ``used``; the collector requires each such copy to hold
+    # step's sets (docs/network.md, *What a node takes from its network*): among ``used``; the collector requires each such copy to hold
     # the truth of its step
     sets: IdList = []
     # status "resume": the step of the node's own set this one was carried from through the steps without a reading

@@ -660,7 +660,7 @@ class LocalEstimator:
         )
 
     def _bounded_slabs(self, inp: UpdateInput) -> tuple[Slabs, frozenset[int]]:
-        """What the step's bounded readings prove of x⁺ (docs/network.md, *Bounded readings*): sensor j's reading
+        """What the step's bounded readings prove of x⁺ (docs/network.md, *What a node takes from its network*): sensor j's reading
         gives C̄_j x̄_j⁺ = C_j x⁺ + Ds_j f_j⁺ in its measurement interval (a side at the sensor's limit open), and its
         declared bound f_j⁺ ∈ [−F_j, F_j], and ∈ j's published fault interval of step k widened by δ_j where its state of
         step k is in (the rate bound), so C_j x⁺ ∈ [lo − max Ds_j f_j⁺, hi − min Ds_j f_j⁺]; keyed by j.  The nodes whose
