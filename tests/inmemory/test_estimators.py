@@ -176,9 +176,20 @@ def test_compare_cli_prints_the_rows_and_writes_json(tmp_path: Path, capsys: pyt
 def test_compare_says_which_assumptions_each_row_rests_on(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Issue 41 item 15: strip and setprop's fault widths came out narrower than the ``exact`` row's with no word why.
     Each row says what it rests on (the table, the Markdown, the JSON and the page), and a note under the table says
-    that the exact row is the limit under the SDP's assumptions, which strip rests on more than."""
+    that the exact row is the limit under the SDP's assumptions, which strip rests on more than.  On paper6 without the
+    bounded readings (issue 44: with them, the bundled default, every SDP node rests on the declared bounds too, and
+    says so)."""
     md, page, js = tmp_path / "c.md", tmp_path / "c.html", tmp_path / "c.json"
-    argv = ["compare", PAPER6, "--steps", "12", "--estimators", "sdp,strip,exact", "--markdown", str(md), "--html", str(page), "--json", str(js)]
+    bundled = ["compare", PAPER6, "--steps", "12", "--estimators", "sdp,strip", "--json", str(js)]
+    assert main(bundled) == 0
+    capsys.readouterr()
+    assert {r["estimator"]: r["rests_on"] for r in json.loads(js.read_text())} == dict.fromkeys(
+        ("sdp", "sdp-ellipsoid", "strip"), "prior, noise, disturbance, declared fault bound at every node"
+    )
+    topology = tmp_path / "paper6_innovations.toml"
+    text = Path(PAPER6).read_text().replace('node_dir = "../nodes"', f"node_dir = {str(ROOT / 'nodes')!r}")
+    topology.write_text(text + "\n[network]\nbounded_readings = false\n")
+    argv = ["compare", str(topology), "--steps", "12", "--estimators", "sdp,strip,exact", "--markdown", str(md), "--html", str(page), "--json", str(js)]
     assert main(argv) == 0
     printed = " ".join(capsys.readouterr().out.split())
     rows = {r["estimator"]: r for r in json.loads(js.read_text())}
