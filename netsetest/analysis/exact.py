@@ -705,8 +705,12 @@ def exact_bounds(
             raise ExactError(f"nodes {list(nodes)}: not a non-empty subset of the topology's nodes {scenario.ids}")
         if network:
             raise ExactError("the network limit is over every node of the topology: give no node subset")
+        # (the bounds the whole network's estimators rely on: a node's own bound is relied on where others read its reading)
+        relied = scenario.fault_bounded(fault_bounds)
         scenario = replace(scenario, nodes=[n for n in scenario.nodes if n.id in set(nodes)])
-    bounded = scenario.fault_bounded(fault_bounds)
+        bounded = tuple(i for i in relied if i in scenario.ids)
+    else:
+        bounded = scenario.fault_bounded(fault_bounds)
     K1 = len(data)
     beta, r = np.full((K1, 2), np.nan), np.full((K1, 2), np.nan)
     fault = {i: np.full((K1, 2), np.nan) for i in scenario.ids}
