@@ -450,8 +450,13 @@ class Node:
     def _unread(self, inp: NodeInput) -> list[int]:
         """The senders whose reading of ``inp``'s step we still wait for (not the silent ones, nor those the vehicle
         says have none at that step)."""
-        readings = self.readings.get(inp.step, {})
+        readings = self._readings_of(inp.step)
         return [j for j in self.read_from if j not in readings and j not in self.silent and j not in inp.unread]
+
+    def _readings_of(self, step: int) -> dict[int, tuple[float, float]]:
+        """The readings of ``step`` that arrived, by sender: in id order, not arrival order, so that a step's cuts (whose
+        rounding follows their order) give over Zenoh what they give in memory."""
+        return dict(sorted(self.readings.get(step, {}).items()))
 
     def _prior(self) -> NodeSet:
         """The set the next step starts from."""
@@ -556,7 +561,7 @@ class Node:
         if self.set_estimator is not None:
             self._publish_set(inp, "ok")
             return
-        readings = self.readings.get(inp.step, {})
+        readings = self._readings_of(inp.step)
         own_reading = {self.id: (inp.y, inp.gamma)}  # a reference's own measurement is one of the step's readings
         neigh = self._neighbours(inp)
         step_in = self._step_input(inp, neigh, readings)
@@ -599,7 +604,7 @@ class Node:
         summary: SDP neighbours and the plausibility checks use it unchanged) and the step's sector."""
         assert self.set_estimator is not None and inp.y is not None  # _implausible_input: a set estimator's input has its reading
         t0 = time.perf_counter()
-        readings = self.readings.get(inp.step, {}) if inp.step > 0 else {}
+        readings = self._readings_of(inp.step) if inp.step > 0 else {}
         try:
             s = self.set_estimator.step(base.StepInput(inp.step, inp.y, inp.gamma, inp.u_prev, inp.vx_prev, readings))
         except base.EstimatorError:

@@ -142,4 +142,5 @@ def test_roles_declare_their_publishers_before_the_run():
     assert set(bus.declared) == {keys.truth("t"), keys.end("t"), *(keys.node_input("t", i) for i in sc.ids)}
     bus.declared.clear()
     Node(sc, 3, bus, "t")
-    assert bus.declared == [keys.node_state("t", 3)]
+    # paper6's sensors declare fault bounds, so every node reads the others' readings with them ([network] bounded_readings)
+    assert bus.declared == [keys.node_state("t", 3), keys.reading("t", 3)]

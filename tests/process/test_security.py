@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
 
+import dataclasses
 import os
 import re
 import stat
@@ -186,14 +187,19 @@ def test_credentials_are_private_and_name_the_roles(tmp_path: Path) -> None:
 def test_grants_follow_the_topology() -> None:
     sc = load_topology(ROOT / PAPER6)
     g = grants(sc, "r")
-    assert g["node-3"].publish == ("netsetest/r/node/3/state", "netsetest/r/control/ready/node-3")
+    # paper6's sensors declare fault bounds: node 3 publishes its reading and reads every other's ([network] bounded_readings)
+    assert g["node-3"].publish == ("netsetest/r/node/3/state", "netsetest/r/node/3/reading", "netsetest/r/control/ready/node-3")
     assert set(g["node-3"].receive) == {
         "netsetest/r/vehicle/input/3",
         "netsetest/r/node/2/state",
         "netsetest/r/node/4/state",
+        *(f"netsetest/r/node/{j}/reading" for j in (1, 2, 4, 5, 6)),
         "netsetest/r/control/ready/*",
         "netsetest/r/control/end",
     }
+    # read by in-neighbours only (reading_scope = "neighbours"): node 3 reads nodes 2's and 4's readings alone
+    near = grants(dataclasses.replace(sc, reading_scope="neighbours"), "r")
+    assert {k for k in near["node-3"].receive if k.endswith("/reading")} == {"netsetest/r/node/2/reading", "netsetest/r/node/4/reading"}
     assert [n for n, gr in g.items() if keys.truth("r") in gr.receive] == ["collector"]
     assert [n for n, gr in g.items() if keys.truth("r") in gr.publish] == ["vehicle"]
     assert [n for n, gr in g.items() if keys.end("r") in gr.publish] == ["vehicle"]

@@ -181,8 +181,7 @@ class Lockstep:
         """Every node not in ``hold`` computes what it can (nobody gives up waiting)."""
         busy = True
         while busy:
-            busy = False
-            self.bus.pump()
+            busy = self.bus.pump() > 0  # a handler may publish (a node's reading goes out as its input comes in)
             for i, n in self.nodes.items():
                 if i not in hold:
                     while n.try_step():
