@@ -308,7 +308,10 @@ def cmd_run(a: argparse.Namespace) -> int:
     from netsetest.runtime.report import exit_code, format_table, write_summary
     from netsetest.runtime.runspec import RunSpec
 
-    res = RunSpec.from_namespace(a).execute(progress=not a.quiet, record=a.record, keep=False)
+    from netsetest.runtime.stops import StopRequests
+
+    with StopRequests() as stop:  # Ctrl-C or SIGTERM: the steps judged so far, the verdict INTERRUPTED (exit 130)
+        res = RunSpec.from_namespace(a).execute(progress=not a.quiet, record=a.record, keep=False, stop=stop)
     write_summary(res.summary, a.summary_json)
     print(format_table(res.summary, a.strict))
     return exit_code(res.summary, a.strict)

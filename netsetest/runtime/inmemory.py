@@ -17,6 +17,7 @@ from netsetest.roles.collector import Collector
 from netsetest.roles.node import Node
 from netsetest.roles.vehicle import Vehicle
 from netsetest.runtime.report import Progress, record_sink
+from netsetest.runtime.stops import StopRequests
 
 
 @dataclass
@@ -79,13 +80,17 @@ def run_inmemory(
     on_step: Callable[[int], None] | None = None,
     objective: Objective = DEFAULT_OBJECTIVE,
     observer: StepObserver | None = None,
+    stop: StopRequests | None = None,
 ) -> RunResult:
     """Run vehicle, nodes and collector in lockstep; the same role code as the Zenoh processes.
 
     ``record``: stream the record to this file as the run goes; ``keep``: also keep it in memory
     (``RunResult.parts``; a long soak turns it off to run in constant memory); ``on_step(k)``: called
     each time the vehicle publishes step k (the soak benchmark samples memory with it); ``observer``: called
-    after every SDP step of every node (estimator/sdp.py ``StepObserver``; the benchmark captures steps with it).
+    after every SDP step of every node (estimator/sdp.py ``StepObserver``; the benchmark captures steps with it);
+    ``stop``: SIGINT/SIGTERM noted there end the run between two rounds of the loop (``run``'s Ctrl-C): the steps
+    closed so far are judged, the summary says "interrupted" and the record is a partial one; without it a signal
+    raises as usual (a campaign's worker must not count a run it did not finish).
     """
     run_id = "mem"
     bus = bus or MemoryBus()
@@ -101,6 +106,8 @@ def run_inmemory(
     bar = Progress(scenario.steps, "inmemory", enabled=progress)
     vehicle.advance()
     while not vehicle.done:
+        if stop is not None and stop.signal is not None:
+            break
         bus.pump()
         stepped = _step_all(nodes, bus)
         bus.pump()
@@ -120,5 +127,10 @@ def run_inmemory(
                 vehicle.advance()
     bus.pump()
     bar.close()
-    summary = collector.finish(meta, drops={"bus": dict(bus.dropped)} if bus.dropped else None)
+    drops = {"bus": dict(bus.dropped)} if bus.dropped else None
+    if not vehicle.done:  # stopped by a signal: the steps after the last closed one were cut short, not lost
+        return RunResult(
+            collector.finish(meta, drops=drops, stopped="interrupted", through=collector.progress), meta, memory.parts() if memory is not None else None
+        )
+    summary = collector.finish(meta, drops=drops)
     return RunResult(summary, meta, memory.parts() if memory is not None else None)

@@ -24,6 +24,7 @@ if TYPE_CHECKING:
     from netsetest.estimator.sdp import StepObserver, Variant
     from netsetest.models.signals import SignalKind
     from netsetest.runtime.inmemory import RunResult
+    from netsetest.runtime.stops import StopRequests
 
 DEFAULT_SIGNALS: SignalKind = "paper"
 DEFAULT_VARIANT: Variant = "scheduled"
@@ -75,9 +76,11 @@ class RunSpec:
         on_step: Callable[[int], None] | None = None,
         observer: StepObserver | None = None,
         scenario: Scenario | None = None,
+        stop: StopRequests | None = None,
     ) -> RunResult:
         """Load the scenario (:meth:`load`) and run it in this process (runtime/inmemory.py); ``scenario``: this
-        spec's, already loaded (a campaign's worker checks its files' digest first)."""
+        spec's, already loaded (a campaign's worker checks its files' digest first); ``stop``: signals noted there end the
+        run early with an "interrupted" summary (``run``'s Ctrl-C: runtime/inmemory.py)."""
         from netsetest.runtime.inmemory import run_inmemory
 
         return run_inmemory(
@@ -91,4 +94,5 @@ class RunSpec:
             on_step=on_step,
             objective=self.objective,
             observer=observer,
+            stop=stop,
         )

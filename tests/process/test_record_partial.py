@@ -301,3 +301,27 @@ def test_ctrl_c_at_random_moments_leaves_a_loadable_record_and_prints_the_interr
         assert [t["step"] for t in r.truth] == list(range(s.steps_completed + 1)) and r.partial
         last = (procs.logdir / f"{name}.out").read_text().splitlines()[-1]
         assert last.startswith("INTERRUPTED: zenoh run") and f"steps 0–{s.steps_completed}: contained on" in last, last
+
+
+@pytest.mark.timeout(180)
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_an_inmemory_run_stopped_by_a_signal_prints_the_interrupted_verdict(procs: ProcessGuard, tmp_path: Path, sig: signal.Signals) -> None:
+    """``run --mode inmemory`` stopped by Ctrl-C (SIGINT) or SIGTERM mid-run: like a Zenoh run, it judges the steps
+    closed so far and prints the table and the verdict INTERRUPTED with their counts, exit 130, a loadable partial
+    record and the summary JSON saying so (before, it printed a traceback-free "interrupted" and no verdict, and the
+    record had no summary)."""
+    rec, summ = tmp_path / "r.jsonl", tmp_path / "s.json"
+    proc = procs.start(
+        "run", cli("run", TOPOLOGY, "--mode", "inmemory", "--steps", "2000", "--seed", "0", "--record", str(rec), "--summary-json", str(summ), "--quiet")
+    )
+    wait_for(lambda: rec.exists() and rec.read_bytes().count(b'"kind":"truth"') >= 20, 90, interval=0.01, what="20 steps")
+    proc.send_signal(sig)
+    assert procs.wait("run", 60) == 130, procs.logs()
+    r = load_record(rec)  # RecordError if damaged
+    s = r.summary
+    assert s is not None and s.stopped == "interrupted" and s.nodes_missing == [] and s.violations_total == 0, s
+    assert 19 <= s.steps_completed < 2000 and r.partial
+    assert [t["step"] for t in r.truth] == list(range(s.steps_completed + 1))
+    assert json.loads(summ.read_text())["stopped"] == "interrupted"
+    last = (procs.logdir / "run.out").read_text().splitlines()[-1]
+    assert last.startswith("INTERRUPTED: inmemory run") and f"steps 0–{s.steps_completed}: contained on" in last, last

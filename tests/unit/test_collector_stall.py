@@ -10,7 +10,8 @@ import signal
 import pytest
 
 from netsetest.records.summary import RunSummary
-from netsetest.runtime.processes import LEASE_RISK, STALL_S, StallWatch, StopRequests
+from netsetest.runtime.processes import LEASE_RISK, STALL_S, StallWatch
+from netsetest.runtime.stops import StopRequests
 from netsetest.runtime.report import EXIT_INTERRUPTED, EXIT_VIOLATION, format_table, outcome, verdict
 
 LEASE = 60.0
