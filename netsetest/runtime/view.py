@@ -8,7 +8,7 @@ work for it.  :class:`LiveView` turns each decoded message into Rerun entities, 
 
 ``nodes/<i>/fault/{lower,upper,true}``    the published fault interval and the true fault (Fig. 7 live)
 ``nodes/<i>/yaw_rate/{lower,upper,true}`` the same for r
-``sets/node<i>``, ``sets/truth``          the published set projected on (β, r) (the ellipse of ρP, or a set
+``sets/node<i>``, ``sets/truth``          the published set projected on (β, r) (the ellipse of ρP ∩ the region, or a set
                                           estimator's box) and the true (β, r), at the current step
 ``graph``                                 the topology: an edge j → i for every message node i used, each
                                           node coloured by its step (contained, missed, late, fault detected);
@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from netsetest.messages import End, Message, NodeInput, NodeState, Truth
+from netsetest.polygon import Polygon
 from netsetest.runtime.live import LiveTable
 
 MAX_TIMELINE = 2**63 - 1  # Rerun's timelines are 64-bit: a sequence number, a duration in ns
@@ -71,6 +72,24 @@ def ellipse(centre: np.ndarray, shape: np.ndarray, n: int = ELLIPSE_POINTS) -> n
     w, v = np.linalg.eigh(0.5 * (shape + shape.T))
     a = np.linspace(0.0, 2 * math.pi, n + 1)
     return np.asarray(centre, dtype=float) + ((v * np.sqrt(np.maximum(w, 0.0))) @ np.vstack([np.cos(a), np.sin(a)])).T
+
+
+def outline(centre: np.ndarray, shape: np.ndarray, region: Polygon | None, n: int = ELLIPSE_POINTS) -> np.ndarray:
+    """Closed (m, 2) outline of {x : (x − c)ᵀ shape⁻¹ (x − c) ≤ 1} ∩ ``region`` (the published set's (β, r) part;
+    the collector judges this intersection, so the view draws it, not the ellipse alone): the region cut by the
+    ellipse's supporting slabs along n/2 directions, an outline holding the set; the ellipse where no region is kept."""
+    if region is None:
+        return ellipse(centre, shape, n)
+    shape = 0.5 * (shape + shape.T)
+    cut: Polygon | None = region
+    for a in np.linspace(0.0, math.pi, n // 2, endpoint=False):
+        c = np.array([math.cos(a), math.sin(a)])
+        mid, half = float(c @ centre), math.sqrt(max(float(c @ shape @ c), 0.0))  # the ellipse's extent along c
+        cut = cut.cut(c, mid - half, mid + half)
+        if cut is None:  # no common point: a set no node publishes (decode refuses it); draw the ellipse
+            return ellipse(centre, shape, n)
+    v = cut.vertices
+    return np.vstack([v, v[:1]])
 
 
 @dataclass
@@ -240,8 +259,8 @@ class LiveView:
         for name, idx in (("fault", 2), ("yaw_rate", 1)):
             self.rec.log(f"{base}/{name}/lower", rr.Scalars(float(lo[idx])))
             self.rec.log(f"{base}/{name}/upper", rr.Scalars(float(hi[idx])))
-        if pub.set is None:  # the SDP's ellipsoid, projected on (β, r)
-            pts = ellipse(pub.centre[:2], pub.rho * pub.P_matrix[:2, :2])
+        if pub.set is None:  # the SDP's ellipsoid ∩ its region, projected on (β, r)
+            pts = outline(pub.centre[:2], pub.rho * pub.P_matrix[:2, :2], pub.polygon)
         else:  # a set estimator's own set: its box in (β, r)
             pts = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]], [lo[0], lo[1]]])
         colour = COLOURS["late"] if m.late else COLOURS["fault detected"] if self.table.rows[m.node].fdi == "detected" else None
