@@ -81,14 +81,14 @@ def outline(centre: np.ndarray, shape: np.ndarray, region: Polygon | None, n: in
     if region is None:
         return ellipse(centre, shape, n)
     shape = 0.5 * (shape + shape.T)
-    cut: Polygon | None = region
     for a in np.linspace(0.0, math.pi, n // 2, endpoint=False):
         c = np.array([math.cos(a), math.sin(a)])
         mid, half = float(c @ centre), math.sqrt(max(float(c @ shape @ c), 0.0))  # the ellipse's extent along c
-        cut = cut.cut(c, mid - half, mid + half)
+        cut = region.cut(c, mid - half, mid + half)
         if cut is None:  # no common point: a set no node publishes (decode refuses it); draw the ellipse
             return ellipse(centre, shape, n)
-    v = cut.vertices
+        region = cut
+    v = region.vertices
     return np.vstack([v, v[:1]])
 
 
