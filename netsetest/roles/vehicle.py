@@ -346,8 +346,9 @@ def _log_truth(n: NodeConfig, d: LogStep, k: int) -> _NodeTruth:
     the noise v = (ỹ_log − C x)/Dv an interval the reference's box leaves (broken only if all of it lies beyond √R);
     not declared healthy: the logged fault is what the reading less the reference leaves within the noise bound."""
     sen, f_inj, y_log = n.sensor, d.faults[n.id], d.y_log[n.id]
-    if d.x_ref is None or y_log is None:
-        return _NodeTruth(f_inj, 0.0, 0.0, True, float(sen.Cbar @ augmented(np.zeros(2), f_inj)), fault_bound_holds(n, k))
+    if d.x_ref is None or y_log is None:  # (not declared healthy: the injected fault is not the truth, which nothing tells)
+        ok = fault_bound_holds(n, k) or not d.healthy[n.id]
+        return _NodeTruth(f_inj, 0.0, 0.0, True, float(sen.Cbar @ augmented(np.zeros(2), f_inj)), ok)
     cx = float(sen.C @ d.x_ref)
     cx_half = float(np.abs(sen.C) @ np.asarray(d.accuracy))
     if d.healthy[n.id]:
