@@ -733,7 +733,7 @@ def _calibrate_logs(a: argparse.Namespace) -> int:
     for t, h in zip(held, checked):
         total = sum(h.inside.values())
         print(
-            f"held out {h.path} (mapping {t.log.mapping.path}): {total} transitions inside the envelope: e_k inside the box on {h.inside['inside']}, possibly outside on "
+            f"held out {h.path} (mapping {t.log.mapping.path}): {total} transitions inside the envelope: e_k inside the box on {h.inside['inside']}, possibly outside on "  # type: ignore[union-attr]  # a log's scenario
             f"{h.inside['overlap']}, certainly outside on {h.inside['disjoint']}; outside the envelope {sum(h.outside.values())} "
             f"(certainly outside the box on {h.outside['disjoint']})"
         )
