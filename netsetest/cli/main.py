@@ -701,7 +701,7 @@ def _calibrate_logs(a: argparse.Namespace) -> int:
         print(f"netsetest calibrate: {what}", file=sys.stderr)
         return EXIT_BAD_INPUT
     # every step of each log, read with its own mapping, else --map's, else the default (its name with .map.toml, the topology's)
-    load = lambda log, own: with_log_steps(load_topology(a.topology, log=log, mapping=own or a.map), whole=True)  # noqa: E731
+    load = lambda log, own: with_log_steps(load_topology(a.topology, log=log, mapping=own or a.map), whole=True)  # noqa: E731  # a one-line local helper
     train = [load(log, own) for log, own in a.logs]
     held = [load(log, own) for log, own in a.held_out or []]
     bar = Progress(len(train), "calibrate")
