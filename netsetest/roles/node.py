@@ -443,9 +443,9 @@ class Node:
 
     def awaiting_readings(self) -> bool:
         """Whether a reading of the next step has not arrived (the real-time clock waits a budget for it:
-        runtime/processes.py)."""
+        runtime/processes.py); never for a step without our own reading or resuming, which uses none (:meth:`missing`)."""
         inp = self.next_input()
-        return inp is not None and self.k >= 0 and bool(self._unread(inp))
+        return inp is not None and self.k >= 0 and inp.y is not None and self.gap is None and bool(self._unread(inp))
 
     def _unread(self, inp: NodeInput) -> list[int]:
         """The senders whose reading of ``inp``'s step we still wait for (not the silent ones, nor those the vehicle
@@ -483,7 +483,8 @@ class Node:
             self._prepare(inp)
             return False
         else:
-            if self.give_up:  # whoever's reading is still missing: not waited for again until one arrives
+            # whoever's reading is still missing: not waited for again until one arrives (a step without ours waited for none)
+            if self.give_up and inp.y is not None:
                 self.silent |= set(self._unread(inp))
             self._update(inp)
             stepped = True

@@ -135,3 +135,21 @@ def test_a_realtime_zenoh_run_from_a_log(drive: tuple[Path, Path], tmp_path: Pat
     assert s["clock"] == "realtime" and s["violations_total"] == 0 and s["node_steps_no_reading"] == 4
     judged = s["node_steps_evaluated"] + s["node_steps_overloaded"] + s["node_steps_no_reading"] + sum(r["missing_steps"] for r in s["nodes"])
     assert judged == 6 * (STEPS + 1), s
+
+
+@pytest.mark.timeout(150)
+def test_every_family_without_readings_in_real_time(tmp_path: Path) -> None:
+    """The same mixed network and gaps on the real-time clock: no node waits for a reading at a step without its own
+    (nor counts a reference silent for it), every node-step is judged or counted, no violation."""
+    from gaps_helpers import EVERY_FAMILY, GAPS, STEPS as GAP_STEPS, gapped_drive
+    from run_helpers import mixed_topology
+
+    log, mapping = gapped_drive(tmp_path)
+    summ = tmp_path / "summary.json"
+    argv = [str(mixed_topology(tmp_path, EVERY_FAMILY)), "--steps", str(GAP_STEPS), "--clock", "realtime", "--log", str(log), "--map", str(mapping)]
+    run_to_success(tmp_path / "logs", [*argv, "--summary-json", str(summ)], timeout=100)
+    s = read_json(summ)
+    assert s["violations_total"] == 0 and s["node_steps_no_reading"] == sum(map(len, GAPS.values()))
+    silent_sdp = sum(1 for i, ks in GAPS.items() if i not in EVERY_FAMILY for k in ks if k > 0)
+    accounted = s["node_steps_evaluated"] + s["node_steps_overloaded"] + silent_sdp + sum(r["missing_steps"] for r in s["nodes"])
+    assert accounted == 6 * (GAP_STEPS + 1), s
