@@ -61,7 +61,7 @@ class NodeSeries:
     rho: np.ndarray  # (K,) the radius: contained ⇔ E ≤ ρ
     contained: np.ndarray  # (K,) bool
     assumptions_ok: np.ndarray  # (K,) bool: every assumption in the step's dependency cone held
-    status: tuple[str, ...]  # per step: init, init-prior, ok, fallback or rejoin
+    status: tuple[str, ...]  # per step: init, init-prior, ok, fallback, rejoin, resume or no-reading
     published: tuple[ProvenSet, ...]  # per step: the set the node proved (contains(), bounds())
     continues: tuple[ProvenSet | None, ...]  # per step: the set it continued from (None: the published one)
 

@@ -124,9 +124,10 @@ class NodeInput(_Msg, tag="input", frozen=True, kw_only=True):
 
     ``expect_from``: in-neighbours j ≠ i whose step k−1 message node i should wait for (alive, not lost);
     ``lost_from``: in-neighbours whose step k−1 message is lost by the scheduled packet-loss model.
-    ``y`` None: no reading at this step (a gap in a recorded drive, docs/your-log.md): the node publishes
-    nothing for it and resumes at its next reading (estimator/rejoin.py); ``unread``: the nodes without a
-    reading at this step (whose readings of the step no one waits for).
+    ``y`` None: no reading at this step (a gap in a recorded drive, docs/your-log.md): a node running a set
+    estimator publishes its prediction-only set (status ``no-reading``), an SDP node publishes nothing for it and
+    resumes at its next reading (estimator/rejoin.py), every node at step 0 publishes its prior; ``unread``: the
+    nodes without a reading at this step (whose readings of the step no one waits for).
     """
 
     step: Step
@@ -141,8 +142,10 @@ class NodeInput(_Msg, tag="input", frozen=True, kw_only=True):
     unread: IdList = []
 
 
-# what a node's published set is (NodeState.status); resume: its first after steps without a reading
-NodeStatus = Literal["init", "init-prior", "ok", "fallback", "rejoin", "resume"]
+# what a node's published set is (NodeState.status); resume: its first after steps without a reading; no-reading: a
+# step without the node's reading (a gap in a recorded drive): its last set moved through the model and the declared
+# bounds alone (a set estimator's), or at step 0 the prior (Assumption 1), for every estimator
+NodeStatus = Literal["init", "init-prior", "ok", "fallback", "rejoin", "resume", "no-reading"]
 
 
 class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
@@ -161,7 +164,7 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     node: NodeId
     published: ProvenSet
     gamma: Gamma
-    innov: FiniteF
+    innov: FiniteF | None  # ỹ_i,k − C̄ x̂; None: the node had no reading at this step (neighbours use nothing of it)
     status: NodeStatus  # init: prior ⊕ ỹ₀; init-prior: the prior
     continues: ProvenSet | None = None
     rho_cert: FiniteF | None = None
@@ -198,11 +201,16 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
             raise ValueError("sets: a neighbour's set the step did not receive (not in used)")
         if (self.status == "resume") != (self.resumed_from is not None) or (self.resumed_from is not None and self.resumed_from >= self.step):
             raise ValueError("resumed_from: the earlier step a resumed state was carried from (and only a resumed state has one)")
+        if self.status == "no-reading" and self.innov is not None or self.innov is None and self.status not in WITHOUT_READING:
+            raise ValueError("innov: None exactly where the node had no reading (status no-reading, or a set estimator's fallback)")
 
     @property
     def continued(self) -> ProvenSet:
         """The whole set the node continues from (the published one unless ``continues`` is sent)."""
         return continued_set(self.published, self.continues)
+
+
+WITHOUT_READING = ("no-reading", "fallback")  # the statuses of a state without a reading (innov None)
 
 
 def state_digest(st: NodeState) -> str:
@@ -248,8 +256,11 @@ class Truth(_Msg, tag="truth", frozen=True, kw_only=True):
     x_acc: Vec2 | None = None
     f_acc: Annotated[dict[str, Annotated[float, Meta(ge=0, le=FLOAT_MAX)]], Meta(max_length=MAX_NODES)] = {}
     reference: bool = True
-    # nodes without a reading at this step (a gap in a recorded drive): absent from y and y_nofault; they publish nothing
+    # nodes without a reading at this step (a gap in a recorded drive): absent from y and y_nofault (Scenario.silent_without_reading)
     no_reading: IdList = []
+    # among them, those whose fault nothing of the step tells (the logged sensor not declared healthy: its reading less
+    # the reference is what bounds it): their fault's truth is unknown, so no set is proven to hold it
+    fault_unknown: IdList = []
 
     def __post_init__(self) -> None:
         if self.x_acc is not None and min(self.x_acc) < 0:
@@ -263,6 +274,8 @@ class Truth(_Msg, tag="truth", frozen=True, kw_only=True):
         read = ids - {str(i) for i in self.no_reading}
         if len(read) != len(ids) - len(self.no_reading) or len(set(self.no_reading)) != len(self.no_reading):
             raise ValueError("no_reading: nodes of the step")
+        if not set(self.fault_unknown) <= set(self.no_reading) or len(set(self.fault_unknown)) != len(self.fault_unknown):
+            raise ValueError("fault_unknown: nodes without a reading at the step")
         for name in ("y", "y_nofault"):
             if set(getattr(self, name)) != read:
                 raise ValueError(f"{name}: keys differ from the nodes with a reading")

@@ -45,6 +45,25 @@ def drive_list(s: str) -> tuple[DriveSpec, ...]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+MAP_SEPARATOR = ":"  # DRIVE:MAP.toml, as scp's and docker's SRC:DST; a drive log never ends in .toml
+
+
+def log_with_map(s: str) -> tuple[str, str | None]:
+    """argparse type: ``DRIVE`` or ``DRIVE:MAP.toml`` (``calibrate --logs``, ``--held-out``), a recorded drive and its
+    own mapping (None: ``--map``, else the drive's name with .map.toml, else the topology's; docs/your-log.md).  Split
+    at the last ``:`` that a name ending in .toml follows, so a drive's own ``:`` stays its own."""
+    drive, sep, mapping = s.rpartition(MAP_SEPARATOR)
+    if sep and mapping.endswith(".toml"):
+        if not drive.strip() or mapping == ".toml":
+            raise argparse.ArgumentTypeError(f"{s!r}: expected DRIVE or DRIVE:MAP.toml, with both names given")
+        return drive, mapping
+    if s.endswith(".toml"):
+        raise argparse.ArgumentTypeError(f"{s!r} is a mapping, not a drive: give it with its drive as DRIVE:MAP.toml (or as --map for every drive)")
+    if not s.strip():
+        raise argparse.ArgumentTypeError("an empty drive name")
+    return s, None
+
+
 def non_negative_float(s: str) -> float:
     """argparse type: a finite number ≥ 0."""
     try:

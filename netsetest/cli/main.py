@@ -226,12 +226,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--logs",
         nargs="+",
-        metavar="TRAIN",
-        help="instead of --manoeuvres: recorded drives with a reference (docs/your-log.md): the mismatch bound from the reference's states "
-        "(its accuracy carried through the model), each sensor's noise bound over its healthy stretches, the envelope they covered",
+        type=checks.log_with_map,
+        metavar="TRAIN[:MAP.toml]",
+        help="instead of --manoeuvres: recorded drives with a reference (docs/your-log.md), each with its own mapping after a ':' where "
+        "it has one: the mismatch bound from the reference's states (its accuracy carried through the model), each sensor's noise bound "
+        "over its healthy stretches, the envelope they covered",
     )
-    p.add_argument("--held-out", nargs="+", metavar="TEST", help="with --logs: drives checked against what the training logs gave")
-    p.add_argument("--map", metavar="MAP.toml", help="with --logs: the logs' mapping (default: each log's name with .map.toml, else the topology's)")
+    p.add_argument(
+        "--held-out",
+        nargs="+",
+        type=checks.log_with_map,
+        metavar="TEST[:MAP.toml]",
+        help="with --logs: drives checked against what the training logs gave (each with its own mapping after a ':' where it has one)",
+    )
+    p.add_argument(
+        "--map",
+        metavar="MAP.toml",
+        help="with --logs: the mapping of every drive named without its own (default: each log's name with .map.toml, else the topology's)",
+    )
 
     p = sub.add_parser("log-example", help="write the synthetic example drives of docs/your-log.md (every log format, with mappings)")
     p.add_argument("directory", help="where to write them (created)")
@@ -691,9 +703,10 @@ def _calibrate_logs(a: argparse.Namespace) -> int:
         what = "--held-out and --map go with --logs" if a.logs is None else f"--logs chooses its own drives: leave out {', '.join(others)}"
         print(f"netsetest calibrate: {what}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    load = lambda log: with_log_steps(load_topology(a.topology, log=log, mapping=a.map), whole=True)  # noqa: E731  # every step of each log
-    train = [load(log) for log in a.logs]
-    held = [load(log) for log in a.held_out or []]
+    # every step of each log, read with its own mapping, else --map's, else the default (its name with .map.toml, the topology's)
+    load = lambda log, own: with_log_steps(load_topology(a.topology, log=log, mapping=own or a.map), whole=True)  # noqa: E731  # a one-line local helper
+    train = [load(log, own) for log, own in a.logs]
+    held = [load(log, own) for log, own in a.held_out or []]
     bar = Progress(len(train), "calibrate")
     try:
         cal = calibrate_logs(train, a.margin, progress=lambda n, total: bar.update(n))
@@ -704,11 +717,14 @@ def _calibrate_logs(a: argparse.Namespace) -> int:
     checked = [check_held_out(sc, cal) for sc in held]
     bar.close()
     sc = train[0]
-    acc = sc.log.mapping.accuracy  # type: ignore[union-attr]  # a log's scenario
+    accuracies = dict.fromkeys(t.log.mapping.accuracy for t in train)  # type: ignore[union-attr]  # a log's scenario
+    acc = "; ".join(f"± {b:.3g} rad, ± {r:.3g} rad/s" for b, r in accuracies)
     print(
         f"calibration of {sc.name} from {len(train)} recorded drive(s): {cal.transitions} transitions with the reference at both ends "
-        f"(its accuracy ± {acc[0]:.3g} rad, ± {acc[1]:.3g} rad/s carried through the model; the wind taken as 0), margin {a.margin:g}"
+        f"(its accuracy {acc} carried through the model; the wind taken as 0), margin {a.margin:g}"
     )
+    for t in train:
+        print(f"  {t.log.path}: mapping {t.log.mapping.path}")  # type: ignore[union-attr]  # a log's scenario
     print("the model-mismatch bound covering every transition's e_k (declare one in the topology):")
     print(cal.box.as_toml() + "# or\n" + cal.ellipsoid.as_toml(), end="")
     print("# the operating envelope the logs covered (|a_y| = v·r as the run measures it, the speeds)")
@@ -717,10 +733,10 @@ def _calibrate_logs(a: argparse.Namespace) -> int:
     for i, R in cal.R.items():
         n = sc.node(i)
         print(f"R = {R!r}  # node {i} (profile {n.label}): |v| ≤ {math.sqrt(R):.4g} over {cal.noise_steps[i]} steps; declared now: R = {n.sensor.R:g}")
-    for h in checked:
+    for t, h in zip(held, checked):
         total = sum(h.inside.values())
         print(
-            f"held out {h.path}: {total} transitions inside the envelope: e_k inside the box on {h.inside['inside']}, possibly outside on "
+            f"held out {h.path} (mapping {t.log.mapping.path}): {total} transitions inside the envelope: e_k inside the box on {h.inside['inside']}, possibly outside on "  # type: ignore[union-attr]  # a log's scenario
             f"{h.inside['overlap']}, certainly outside on {h.inside['disjoint']}; outside the envelope {sum(h.outside.values())} "
             f"(certainly outside the box on {h.outside['disjoint']})"
         )
@@ -734,6 +750,7 @@ def _calibrate_logs(a: argparse.Namespace) -> int:
         doc = {
             "topology": sc.path,
             "logs": cal.logs,
+            "maps": [t.log.mapping.path for t in train],  # type: ignore[union-attr]  # a log's scenario
             "margin": a.margin,
             "transitions": cal.transitions,
             "box": np.diag(cal.box.G).tolist(),

@@ -569,6 +569,14 @@ class NodeConfig:
     fault_size: float | None = None  # declared F_i: |f_k| ≤ F_i (None: not declared; 0: a reference sensor)
     estimator: str = SDP  # estimator/names.py: NODE_ESTIMATOR_NAMES
 
+    def gap_problem(self) -> str | None:
+        """Why a set estimator of this node cannot bound its fault at a step > 0 without its reading (None: it can):
+        nothing but a declared fault bound (|f⁺ − f| ≤ δ, |f| ≤ F) carries the fault through a step without a
+        measurement (estimator/base.py StepInput; the SDP publishes nothing there instead)."""
+        if self.fault_rate is None and self.fault_size is None:
+            return f"node {self.id}: without a reading nothing bounds its fault; declare a [fault_bound] rate or size in its profile"
+        return None
+
 
 @dataclass(frozen=True)
 class Scenario:
@@ -669,6 +677,12 @@ class Scenario:
         if not self.health_declared:
             return None
         return next((g for g in self.health_groups if i in g.nodes), None)
+
+    def silent_without_reading(self, i: int, k: int) -> bool:
+        """Whether node i publishes nothing at step k when it has no reading there (a gap in a recorded drive,
+        docs/your-log.md): an SDP node after step 0 (it resumes at its next reading); a set estimator publishes its
+        prediction-only set, and every node at step 0 its prior."""
+        return k > 0 and self.node(i).estimator == SDP
 
     def publishes_reading(self, i: int) -> bool:
         """Whether node i publishes its reading of every step: some node reads it (a reference, a member of a k-of-N

@@ -46,10 +46,14 @@ class EstimatorError(ValueError):
 @dataclass(frozen=True)
 class StepInput:
     """What node i knows at step k: its own measurement and availability, and the vehicle's previous
-    input and speed (None at step 0, where the prior is cut by the first measurement)."""
+    input and speed (None at step 0, where the prior is cut by the first measurement).
+
+    ``y`` None: no reading at this step (a gap in a recorded drive, docs/your-log.md): a prediction-only step, the
+    last set moved through the model, the disturbance and mismatch bounds and the declared fault bound alone (at
+    step 0 the prior, Assumption 1), with no measurement and no reading cut."""
 
     step: int
-    y: float
+    y: float | None
     gamma: float
     u_prev: float | None = None
     vx_prev: float | None = None

@@ -39,8 +39,9 @@ DEFAULT_WINDOW = 40  # steps a disturbance set is propagated exactly (|Φ| contr
 
 
 def step0_set(node: NodeConfig, lo: float, hi: float, bounded: bool) -> SumSet:
-    """The prior ellipsoid cut by the first measurement C̄ x̄_0 ∈ [lo, hi] (and |f_0| ≤ F where bounded)."""
-    slabs = [Slab(node.sensor.Cbar, lo, hi)]
+    """The prior ellipsoid cut by the first measurement C̄ x̄_0 ∈ [lo, hi] (none without a reading: both sides
+    infinite) and |f_0| ≤ F where bounded."""
+    slabs = [Slab(node.sensor.Cbar, lo, hi)] if np.isfinite(lo) or np.isfinite(hi) else []
     if bounded and node.fault_size is not None:
         slabs.append(Slab(_E3, -node.fault_size, node.fault_size))
     prior = SlicedEllipsoid(Ellipsoid(node.x0_hat, node.P0, node.rho), tuple(slabs))
@@ -78,9 +79,14 @@ class IntervalObserver(SetEstimator):
         return BASE_ASSUMPTIONS + (("fault_bound",) if self.bounded else ())
 
     def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> Box:
-        lo, hi = self.node.sensor.measured_interval(inp.y, inp.gamma)
+        """The step's box; without a reading (``inp.y`` None) the prediction alone: the one-sided step with both
+        sides open, the fault carried by the declared bound."""
+        lo, hi = (-np.inf, np.inf) if inp.y is None else self.node.sensor.measured_interval(inp.y, inp.gamma)
         two_sided = bool(np.isfinite(lo) and np.isfinite(hi))
-        if not two_sided and not self.bounded:
+        problem = self.node.gap_problem() if inp.y is None and self.center is not None else None
+        if problem:
+            raise EstimatorError(problem)
+        if not two_sided and not self.bounded and inp.y is not None:
             raise EstimatorError(f"node {self.node.id}: a saturated measurement leaves the fault unbounded; a declared fault bound is needed")
         if self.center is None:
             blo, bhi = step0_set(self.node, lo, hi, self.bounded).bounds()
@@ -134,9 +140,11 @@ class IntervalObserver(SetEstimator):
             for d in self.dist:
                 radius = radius + np.abs(d).sum(axis=1)
         lo, hi = self.center - radius, self.center + radius
-        if self.bounded and self.node.fault_size is not None:
+        if (self.bounded or inp.y is None and inp.step > 0) and self.node.fault_size is not None:  # (a step without a reading rests on it)
             lo[2], hi[2] = max(lo[2], -self.node.fault_size), min(hi[2], self.node.fault_size)
         box = Box(lo, hi)
+        if inp.y is None:
+            return box  # no measurement, no reading: the prediction alone
         slabs = self.reading_slabs.slabs((inp.y, inp.gamma), inp.readings, lambda a: (-box.support(-a), box.support(a)))
         for slab in slabs:
             box = box.cut(slab)

@@ -61,11 +61,11 @@ class WithRegion(SetEstimator):
             raise
         assert not isinstance(s, RegionSet)  # a method's own set (a WithRegion never wraps another)
         s_lo, s_hi = s.bounds()
-        lo, hi = self.node.sensor.measured_interval(inp.y, inp.gamma)
+        lo, hi = (-np.inf, np.inf) if inp.y is None else self.node.sensor.measured_interval(inp.y, inp.gamma)  # None: no reading
         region: Polygon | None = self._moved(s_lo, s_hi, inp)
         f_lo, f_hi = float(s_lo[NX]), float(s_hi[NX])
         health = None
-        if self.uses_readings:
+        if self.uses_readings and inp.y is not None:
             slabs, health = self.reading_slabs.assessed((inp.y, inp.gamma), inp.readings, lambda a: (-s.support(-a), s.support(a)))
             for slab in slabs:
                 if not slab.a[:NX].any():  # |f| ≤ τ (the k-of-N pin)
@@ -73,9 +73,9 @@ class WithRegion(SetEstimator):
                 elif region is not None:  # a reading's C_j x, the k-of-N uᵀx (no fault term)
                     region = region.cut(slab.a[:NX], slab.lo, slab.hi)
         size = self.node.fault_size
-        if self.rests_on_bound and size is not None:
+        if (self.rests_on_bound or inp.y is None and inp.step > 0) and size is not None:  # (a step without a reading rests on it)
             f_lo, f_hi = max(f_lo, -size), min(f_hi, size)
-            if region is not None:  # C x = C̄ x̄ − Ds f, |f| ≤ F
+            if region is not None and inp.y is not None:  # C x = C̄ x̄ − Ds f, |f| ≤ F
                 region = region.cut(self.C, lo - abs(self.Ds) * size, hi + abs(self.Ds) * size)
         for m in range(NX):  # the own set's interval hull (its support along β and r)
             if region is not None:

@@ -9,7 +9,8 @@ recomputed every step; order reduction ↓q.  Derivation: docs/estimators/set_pr
 The augmented random-walk model of strip_althoff_rath (the declared fault rate, or f⁺ ∈ [−F, F] with
 only a size declared) gives A, B, W.  The measurement is C̄ x̄ ∈ [lo, hi]: y = the interval's midpoint,
 V = [−σ, σ] its half-width.  (8) is a one-step predictor: the set published at step k uses ỹ up to
-k − 1 (003, Sec. 2.7: it is ready before y_k arrives); step 0 publishes the prior box.  Where a
+k − 1 (003, Sec. 2.7: it is ready before y_k arrives); step 0 publishes the prior box.  A step without a
+reading is one without its measurement: the step after it takes L = 0.  Where a
 saturated measurement is one-sided, L = 0 on that step (the measurement is not used).  The declared
 |f| ≤ F is not used (no intersection in this form).  It ignores the neighbours' sets.
 """
@@ -36,7 +37,8 @@ class SetPropagationObserver(RandomWalkObserver):
 
     def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> Zonotope:
         z = self._predicted(inp)
-        self.last_interval = self.node.sensor.measured_interval(inp.y, inp.gamma)
+        # without a reading (``inp.y`` None) the next step gains nothing from this one: L = 0 there
+        self.last_interval = (-np.inf, np.inf) if inp.y is None else self.node.sensor.measured_interval(inp.y, inp.gamma)
         self.set = z
         return z
 

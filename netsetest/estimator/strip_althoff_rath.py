@@ -125,11 +125,12 @@ class StripObserver(RandomWalkObserver):
     uses_readings = True  # a reference's reading is one more strip of the same step
 
     def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> Zonotope:
+        """The step's set; without a reading (``inp.y`` None) the prediction cut by the declared |f| ≤ F alone."""
         z = self._predicted(inp)
-        lo, hi = self.node.sensor.measured_interval(inp.y, inp.gamma)
-        z = intersect_strip(z, self.node.sensor.Cbar, lo, hi)
-        for slab in self.reading_slabs.slabs((inp.y, inp.gamma), inp.readings, lambda a: (-z.support(-a), z.support(a))):
-            z = intersect_strip(z, slab.a, slab.lo, slab.hi)
+        if inp.y is not None:
+            z = intersect_strip(z, self.node.sensor.Cbar, *self.node.sensor.measured_interval(inp.y, inp.gamma))
+            for slab in self.reading_slabs.slabs((inp.y, inp.gamma), inp.readings, lambda a: (-z.support(-a), z.support(a))):
+                z = intersect_strip(z, slab.a, slab.lo, slab.hi)
         if self.node.fault_size is not None:
             z = intersect_strip(z, _E3, -self.node.fault_size, self.node.fault_size)
         self.set = self._reduced(z)

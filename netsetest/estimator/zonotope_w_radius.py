@@ -133,22 +133,23 @@ class ZonotopeEstimator(SetEstimator):
 
     def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> SumSet:
         s = self.advance(inp.y, inp.gamma, inp.u_prev, inp.vx_prev)
-        if inp.readings and inp.u_prev is not None:  # the references' readings: one more strip each (Theorem 1)
+        if inp.readings and inp.u_prev is not None and inp.y is not None:  # the references' readings: one more strip each (Theorem 1)
             for slab in self.reading_slabs.slabs((inp.y, inp.gamma), inp.readings, lambda a: (-s.support(-a), s.support(a))):
                 s = self._intersect(s, slab)
             self.set = s
         return s
 
-    def _slabs(self, y: float, gamma: float) -> list[Slab]:
-        lo, hi = self.node.sensor.measured_interval(y, gamma)
-        slabs = [Slab(self.node.sensor.Cbar, lo, hi)]
+    def _slabs(self, y: float | None, gamma: float) -> list[Slab]:
+        """Step 0's: the first measurement (none without a reading: the prior alone) and the declared |f₀| ≤ F where bounded."""
+        slabs = [] if y is None else [Slab(self.node.sensor.Cbar, *self.node.sensor.measured_interval(y, gamma))]
         if self.bounded and self.node.fault_size is not None:
             slabs.append(Slab(_E3, -self.node.fault_size, self.node.fault_size))
         return slabs
 
-    def advance(self, y: float, gamma: float, u_prev: float | None = None, vx_prev: float | None = None) -> SumSet:
+    def advance(self, y: float | None, gamma: float, u_prev: float | None = None, vx_prev: float | None = None) -> SumSet:
         """Step 0 (``u_prev`` None): the prior cut by the first measurement.  Step k > 0: predict with
-        u_{k−1}, Vx_{k−1}, then use ỹ_k (γ_k)."""
+        u_{k−1}, Vx_{k−1}, then use ỹ_k (γ_k).  ``y`` None (no reading): the prediction alone, the fault carried by
+        the declared bound (the lifted step of :meth:`_bounded_step` with no measurement)."""
         if self.set is None:
             n = self.node
             prior = SlicedEllipsoid(Ellipsoid(n.x0_hat, n.P0, n.rho), tuple(self._slabs(y, gamma)))
@@ -157,8 +158,13 @@ class ZonotopeEstimator(SetEstimator):
         if u_prev is None or vx_prev is None:
             raise EstimatorError("a step after step 0 needs u and Vx of the previous step")
         a, b, d = self.sc.model.blend(self.sc.model.weights(vx_prev))
-        if self.bounded:
-            new = self._bounded_step(a, b[:, 0] * u_prev, d[:, 0], y, gamma)
+        if y is None:
+            problem = self.node.gap_problem()
+            if problem:
+                raise EstimatorError(problem)
+            new = self._bounded_step(a, b[:, 0] * u_prev, d[:, 0], -np.inf, np.inf)
+        elif self.bounded:
+            new = self._bounded_step(a, b[:, 0] * u_prev, d[:, 0], *self.node.sensor.measured_interval(y, gamma))
         else:
             new = self._free_step(a, b[:, 0] * u_prev, d[:, 0], y, gamma)
         if self.order is not None:
@@ -187,13 +193,13 @@ class ZonotopeEstimator(SetEstimator):
         )
         return SumSet(Zonotope(center, gens), L @ self.set.M, self.set.sliced)
 
-    def _bounded_step(self, a: np.ndarray, bu: np.ndarray, d: np.ndarray, y: float, gamma: float) -> SumSet:
-        """In the lifted space [x̄⁺; f_k]: the descriptor step where the measurement is two-sided (exact),
-        else the dynamics with f⁺ = f + δ s (or f⁺ ∈ [−F, F]) cut by the one-sided measurement strip;
-        then the declared-bound strips, then f_k is projected out (exact for a zonotope)."""
+    def _bounded_step(self, a: np.ndarray, bu: np.ndarray, d: np.ndarray, lo: float, hi: float) -> SumSet:
+        """In the lifted space [x̄⁺; f_k]: the descriptor step where the measurement C̄ x̄⁺ ∈ [lo, hi] is two-sided
+        (exact), else the dynamics with f⁺ = f + δ s (or f⁺ ∈ [−F, F]) cut by the one-sided measurement strip (none
+        without a reading: both sides open); then the declared-bound strips, then f_k is projected out (exact for a
+        zonotope)."""
         assert self.set is not None and self.set.M is not None
         z, sq_w, n = self.set.zonotope, np.sqrt(self.sc.W), self.node
-        lo, hi = n.sensor.measured_interval(y, gamma)
         two_sided = bool(np.isfinite(lo) and np.isfinite(hi))
         lift = np.zeros((NA + 1, NA))  # [x̄⁺; f_k] = lift · x̄_k + …
         lift[NA, 2] = 1.0
@@ -217,7 +223,7 @@ class ZonotopeEstimator(SetEstimator):
         gens = np.hstack([lift @ z.generators, np.array(extra).T])
         out = SumSet(Zonotope(lift @ z.center + shift, gens), lift @ self.set.M, self.set.sliced)
         slabs = []
-        if not two_sided:
+        if not two_sided and (np.isfinite(lo) or np.isfinite(hi)):
             slabs.append(Slab(np.r_[n.sensor.Cbar, 0.0], lo, hi))
         if n.fault_rate is not None and two_sided:
             slabs.append(Slab(np.array([0.0, 0.0, 1.0, -1.0]), -n.fault_rate, n.fault_rate))

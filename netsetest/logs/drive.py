@@ -63,17 +63,17 @@ class LogPlan:
     last_step: int
     scans: dict[str, SignalScan]
 
-    def first_missing(self, name: str, tau_ns: int, tol: int, steps: int) -> tuple[int, int] | None:
-        """(step, age of its newest sample [ns]) of the first step in 0..``steps`` at which signal ``name`` has no sample
-        within the tolerance, or None: before its first sample, inside a gap (a, b) (the steps strictly inside
+    def first_missing(self, name: str, tau_ns: int, tol: int, steps: int, first: int = 0) -> tuple[int, int] | None:
+        """(step, age of its newest sample [ns]) of the first step in ``first``..``steps`` at which signal ``name`` has no
+        sample within the tolerance, or None: before its first sample, inside a gap (a, b) (the steps strictly inside
         (a + tol, b)), or after its last sample plus the tolerance."""
         sc, start = self.scans[name], self.start_ns
-        if start < sc.first_ns:
-            return 0, NEVER
+        if start + first * tau_ns < sc.first_ns:
+            return first, NEVER
         if sc.more_gaps:
             raise LogError(f"{name}: more than {MAX_GAPS} gaps longer than the gap tolerance {tol / 1e9:g} s: is it sampled that slowly?")
         for a, b in (*sc.gaps, (sc.last_ns, NEVER)):
-            k = max(0, (a + tol - start) // tau_ns + 1)
+            k = max(first, (a + tol - start) // tau_ns + 1)
             if k <= steps and start + k * tau_ns < b:
                 return int(k), start + k * tau_ns - a
         return None
@@ -155,26 +155,22 @@ class LogDrive:
                 f"{path}: speed: the log's {speed.lo * 3.6:.1f}–{speed.hi * 3.6:.1f} km/h never reaches the model's "
                 f"{p.vx_min * 3.6:.0f}–{p.vx_max * 3.6:.0f} km/h: is the mapping's speed unit right (or the topology's vx_min_kmh, vx_max_kmh)?"
             )
+        self._check_gaps(plan, tol)
         self.aligner = StepAligner(open_stream(Path(path), m), tol)
-        first = self.step(0)  # every reading at step 0 (a node starts from its prior updated by it)
-        for i, y in first.y_log.items():
-            if y is None:
-                raise LogError(
-                    f"{path}: yaw rate of node {i}: no sample within the gap tolerance {tol / 1e9:g} s at step 0 (t = {first.t_s:.6g} s): "
-                    "a run starts with every reading (choose [log] start_s, or leave it to the default: the latest first sample)"
-                )
-        self._check_resumable(plan, tol)
 
-    def _check_resumable(self, plan: LogPlan, tol: int) -> None:
-        """A node running a set estimator cannot resume after a step without its reading: a gap inside the run is refused."""
+    def _check_gaps(self, plan: LogPlan, tol: int) -> None:
+        """A node running a set estimator carries its fault through a step > 0 without its reading by its declared fault
+        bound alone (estimator/base.py): without one, a gap after step 0 is refused (step 0's is the prior's)."""
         sc = self.sc
-        for s in sc.log.mapping.sensors:  # type: ignore[union-attr]  # a log's drive
+        assert sc.log is not None
+        for s in sc.log.mapping.sensors:
             n = sc.node(s.node)
-            gap = None if n.estimator == SDP else plan.first_missing(s.signal.name, self.tau_ns, tol, sc.steps)
+            problem = None if n.estimator == SDP else n.gap_problem()
+            gap = None if problem is None else plan.first_missing(s.signal.name, self.tau_ns, tol, sc.steps, first=1)  # step 0's: the prior
             if gap is not None:
                 raise LogError(
-                    f"{sc.log.path}: yaw rate of node {s.node} missing at step {gap[0]}: node {s.node} runs {n.estimator}, which cannot "  # type: ignore[union-attr]  # a log's drive
-                    "resume after a missing measurement (the sdp estimator does: docs/your-log.md); choose the steps around the gap"
+                    f"{sc.log.path}: yaw rate of node {s.node} missing at step {gap[0]}: node {s.node} runs {n.estimator}; {problem} "
+                    "(or choose the steps around the gap: docs/your-log.md)"
                 )
 
     def step(self, k: int) -> LogStep:

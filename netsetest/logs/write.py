@@ -192,13 +192,18 @@ def _write_bag(d: DriveTable, path: Path, storage: str) -> Path:
     return path
 
 
-def mapping_toml(d: DriveTable, fmt: str, accuracy: tuple[float, float] | None, gap_tolerance_s: float | None = None, note: str = "") -> str:
-    """The mapping of a log ``write_log`` wrote (units as written: SI; ``accuracy``: the reference's, None: no reference)."""
+def mapping_toml(
+    d: DriveTable, fmt: str, accuracy: tuple[float, float] | None, gap_tolerance_s: float | None = None, note: str = "", start_s: float | None = None
+) -> str:
+    """The mapping of a log ``write_log`` wrote (units as written: SI; ``accuracy``: the reference's, None: no reference;
+    ``start_s``: step 0's log time, None: the default)."""
     bag = fmt.startswith("rosbag")
     out = [f"# {note}" if note else "# the mapping of a drive log written by netsetest (logs/write.py)", "[log]"]
     out.append(f'format = "{"rosbag" if bag else fmt}"')
     if gap_tolerance_s is not None:
         out.append(f"gap_tolerance_s = {float(gap_tolerance_s)!r}")
+    if start_s is not None:
+        out.append(f"start_s = {float(start_s)!r}")
     if bag:
         out += ["", "[speed]", f'channel = "{SPEED_TOPIC}"', 'field = "twist.twist.linear.x"', 'unit = "m/s"']
         out += ["", "[steering]", f'channel = "{STEERING_TOPIC}"', 'unit = "rad"']

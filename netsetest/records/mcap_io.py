@@ -159,6 +159,7 @@ SCHEMAS: dict[str, dict[str, Any]] = {
             "f_acc": {**_PER_NODE_NUM, "description": "node id → a recorded drive's fault known to ± this (absent: exactly)"},
             "reference": {**_BOOL, "description": "false: a recorded drive without its reference at this step (x unknown)"},
             "no_reading": {**_IDS, "description": "nodes without a reading at this step (a recorded drive's gap)"},
+            "fault_unknown": {**_IDS, "description": "among them, those whose fault's truth nothing of the step tells (not declared healthy)"},
         },
         ["step", "x", "faults"],
     ),

@@ -15,10 +15,11 @@ step::
 in-neighbour weights {i: {j: a_ij}}, run id).  Truth entry of step k: x = [β, r], faults {i: f_i}, u,
 w, vx, noise {i}, gamma {i}, y {i}, y_nofault {i}, sector_ok {i}, r {i} = C̄x̄, fault_ok {i}, noise_ok {i},
 dist_ok, lost [[j, i]], alive [i], drops {reason: n}, e [2] | null (model mismatch of k → k+1), mismatch_ok, speed, ay, envelope_ok (models/envelope.py);
-a recorded drive's also x_acc, f_acc {i}, reference, and no_reading [i] (nodes without a reading: absent from y, y_nofault).  State entry: step, xhat [3], P [9, row-major], rho,
+a recorded drive's also x_acc, f_acc {i}, reference, no_reading [i] (nodes without a reading: absent from y, y_nofault) and fault_unknown [i] (among them, those whose
+fault's truth nothing of the step tells).  State entry: step, xhat [3], P [9, row-major], rho,
 published (the set the node proves, netsetest/proven.py: {xhat [3], P [9, row-major], rho, region [β₁, r₁, …],
 fault [lo, hi], set}, absent parts left out), continues (the set it continues from, where not the published one),
-status, resumed_from (status resume: the step of the own set it was carried from), rho_cert, solve_ms, used, missing, late, dropped, drops {reason: n}, sector [h1, h] | null,
+status (no-reading: the step had no reading of the node's), resumed_from (status resume: the step of the own set it was carried from), rho_cert, solve_ms, used, missing, late, dropped, drops {reason: n}, sector [h1, h] | null,
 sector_basis, E = eᵀP⁻¹e of the published ellipsoid (null when the truth of the step is unknown), contained (the
 truth in the published set, whose per-coordinate bounds [[lo, hi] ×3] are in ``bounds``; a set estimator's
 ellipsoid is the enclosing one its neighbours use), continues_contained, assumptions_ok (every assumption in the step's dependency cone held), inconsistent (present

@@ -53,7 +53,7 @@ class NodeSummary:
     steps_contained: int = 0
     steps_missed: int = 0  # proven apart from the truth (a model's run: every judged step not contained)
     steps_undecided: int = 0  # a reference's truth box overlapping the set without lying in it (docs/your-log.md)
-    steps_no_reading: int = 0  # without a reading (a gap in a recorded drive): nothing published, nothing covered
+    steps_no_reading: int = 0  # without a reading (a gap in a recorded drive): an SDP node's after step 0 published nothing (uncovered), the others judged
     steps_inconsistent: int = 0  # without a reference: its own data proved one of its assumptions broken
     steps_covered: int = 0
     missing_steps: int = 0
@@ -138,7 +138,7 @@ class RunSummary:
     node_steps_contained: int = 0
     node_steps_missed: int = 0  # the published set proven apart from the truth
     node_steps_undecided: int = 0  # neither: a recorded drive's reference cannot tell (docs/your-log.md)
-    node_steps_no_reading: int = 0  # a gap in a recorded drive: the node had no reading and published nothing
+    node_steps_no_reading: int = 0  # a log's gap: no reading (an SDP node after step 0 published nothing; other sets judged)
     node_steps_inconsistent: int = 0  # without a reference: a node's own data proved one of its assumptions broken (never "contained")
     reference_accuracy: list[float] | None = None  # a recorded drive's reference: its declared half-widths (β rad, r rad/s); None: none, or a model's run
     drive_log: str | None = None  # the recorded drive that was the world (docs/your-log.md); None: a model's run

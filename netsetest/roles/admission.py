@@ -305,7 +305,7 @@ class Admission:
             # rejoin later) is not waited for, else progress stalls until WINDOW and a rejoin waits on it
             want &= set(self.truth[k + 1][0].alive)
         if copies:
-            want -= set(copies[0].no_reading)  # without a reading a node publishes nothing for the step
+            want -= {i for i in copies[0].no_reading if self.sc.silent_without_reading(i, k)}  # it publishes nothing for the step
         return want <= set(self.states.get(k, {}))
 
     def lost_truth(self, k: int) -> bool:

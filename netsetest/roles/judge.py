@@ -31,8 +31,9 @@ from netsetest.estimator.names import SDP
 from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.sector import FaultBound, Sector, measurement_interval, prior_interval, propagated_interval, sector_ok
 from netsetest.messages import NodeState, Truth, state_digest
+from netsetest.proven import ProvenSet, Relation
 from netsetest.models.envelope import MODEL_MISMATCH, OUTSIDE_ENVELOPE
-from netsetest.models.sensor import augmented
+from netsetest.models.sensor import NX, augmented
 
 CONSISTENCY_RTOL = 1e-9  # an own-data inconsistency must clear rounding: a certain one, never a near miss
 INNOV_RTOL = 1e-12  # the node computes ỹ − C̄ x̂ with the same numbers: rounding only across machines
@@ -180,14 +181,29 @@ def truth_box(tr: Truth, i: int) -> tuple[np.ndarray, np.ndarray] | None:
     if tr.x_acc is None:
         return None
     h = np.array([tr.x_acc[0], tr.x_acc[1], tr.f_acc.get(str(i), 0.0)])
-    if not h.any():
+    if not h.any() and i not in tr.fault_unknown:
         return None
     c = augmented(tr.x, tr.faults[str(i)])
     return c - h, c + h
 
 
+def relation(s: ProvenSet, tr: Truth, i: int, box: tuple[np.ndarray, np.ndarray]) -> Relation:
+    """Where node i's truth box ``box`` (:func:`truth_box`) lies against ``s`` (ProvenSet.relation).  A fault nothing
+    of the step tells (``Truth.fault_unknown``) may be any value: the box's fault side is then taken as the set's own
+    fault range, which the set never leaves, so the truth is proven apart exactly where x is, and never held whole."""
+    lo, hi = box
+    if i not in tr.fault_unknown:
+        return s.relation(lo, hi)
+    f_lo, f_hi = (b[NX] for b in s.bounds())
+    rel = s.relation(np.r_[lo[:NX], f_lo], np.r_[hi[:NX], f_hi])
+    return "overlap" if rel == "inside" else rel
+
+
 def _in_prior(n: NodeConfig, tr: Truth) -> bool:
-    """Assumption 1: the true x̄_0 lies in node n's prior ellipsoid (all of a reference's box: else not proven)."""
+    """Assumption 1: the true x̄_0 lies in node n's prior ellipsoid (all of a reference's box: else not proven; an
+    unknown fault never is)."""
+    if n.id in tr.fault_unknown:
+        return False
     box = truth_box(tr, n.id)
     points = [augmented(tr.x, tr.faults[str(n.id)])] if box is None else list(_box_corners(*box))
     return all(float((p - n.x0_hat) @ np.linalg.solve(n.P0, p - n.x0_hat)) <= n.rho for p in points)
@@ -206,19 +222,21 @@ def isclose(a: float, b: float, rtol: float) -> bool:
 def state_mismatch(n: NodeConfig, st: NodeState, tr: Truth) -> str | None:
     """Why ``st`` cannot be node n's own state computed from its true input (None: it can)."""
     s = str(n.id)
-    if s not in tr.y:
-        return "state-without-reading"  # no reading at this step: its node publishes nothing for it
+    if (s in tr.y) == (st.innov is None):  # (the state says whether its node had a reading, as the truth does)
+        return "state-not-from-input"
+    if s not in tr.y and tr.step > 0 and n.estimator == SDP:
+        return "state-without-reading"  # an SDP node publishes nothing at a later step without a reading (Scenario.silent_without_reading)
     if st.gamma != tr.gamma[s]:
         return "state-not-from-input"
-    innov = float(tr.y[s] - n.sensor.Cbar @ st.published.centre)
-    if not isclose(st.innov, innov, INNOV_RTOL):
+    if s in tr.y and not isclose(st.innov, float(tr.y[s] - n.sensor.Cbar @ st.published.centre), INNOV_RTOL):  # type: ignore[arg-type]  # a reading: innov is set
         return "state-not-from-input"
     if (st.published.set is None) != (n.estimator == SDP):
         return "state-wrong-method"  # a set estimator publishes its set, the SDP none
-    if (st.step == 0) != (st.status in ("init", "init-prior")):
-        return "state-not-prior"  # step 0 publishes the prior (updated by ỹ₀), no other step does
+    if (st.step == 0) != (st.status in ("init", "init-prior") or st.step == 0 and st.status == "no-reading"):
+        return "state-not-prior"  # step 0 publishes the prior (updated by ỹ₀, where there is one), no other step does
     pub = st.published
-    if st.status == "init-prior" and (pub.rho != n.rho or not np.array_equal(pub.xhat, n.x0_hat) or not np.array_equal(pub.P_matrix, n.P0)):
+    prior = st.status == "init-prior" or st.status == "no-reading" and st.step == 0 and n.estimator == SDP
+    if prior and (pub.rho != n.rho or not np.array_equal(pub.xhat, n.x0_hat) or not np.array_equal(pub.P_matrix, n.P0)):
         return "state-not-prior"
     return None
 
@@ -308,8 +326,8 @@ class Judge:
         bounds = None if pub.is_ellipsoid else np.stack(pub.bounds(), axis=1)
         box = truth_box(tr, i)
         if box is not None:  # a recorded drive's reference: the set against the whole box (proven.ProvenSet.relation)
-            rel = pub.relation(*box)
-            cont = rel if st.continues is None else st.continued.relation(*box)
+            rel = relation(pub, tr, i, box)
+            cont = rel if st.continues is None else relation(st.continued, tr, i, box)
             return Containment(pub.E_max(*box), rel == "inside", cont == "inside", bounds, rel == "disjoint", cont == "disjoint")
         xbar = augmented(tr.x, tr.faults[str(i)])
         E = pub.E(xbar)
@@ -362,9 +380,9 @@ class Judge:
             prior_in: str | None = None if c.continued.contains(xbar) else MISSED
             set_in: str | None = None if c.published.contains(xbar, E) else MISSED
         else:  # held only where all of the reference's box lies in it; proven apart: missed; else it may have missed
-            published_in = _held(c.published.ellipsoid_only().relation(*box))
-            prior_in = _held(c.continued.relation(*box))
-            set_in = _held(c.published.relation(*box))
+            published_in = _held(relation(c.published.ellipsoid_only(), tr, j, box))
+            prior_in = _held(relation(c.continued, tr, j, box))
+            set_in = _held(relation(c.published, tr, j, box))
         self_loop = j in n.in_weights  # its own innovation enters its next step: the same facts
         return CopyCheck(
             as_neighbour=facts or published_in,
@@ -381,11 +399,13 @@ class Judge:
         rejoin = st is not None and st.status == "rejoin"  # no transition crossed (below)
         if k > 0 and prev is not None and prev.step == k - 1 and not prev.mismatch_ok and not rejoin:
             return mismatch_cause(prev)
-        if not self.sector_premise(n, st, tr):
+        read = s in tr.y  # without a reading no measurement, so no noise bound or sector, enters the step
+        if read and not self.sector_premise(n, st, tr):
             return "sector"
-        if not tr.noise_ok[s]:
+        if read and not tr.noise_ok[s]:
             return "noise"
-        if n.id in self.needs_fault_bound and not tr.fault_ok.get(s, False):
+        # a set estimator's step > 0 without a reading carries its fault by the declared bound alone (estimator/base.py)
+        if (n.id in self.needs_fault_bound or not read and k > 0 and n.estimator != SDP) and not tr.fault_ok.get(s, False):
             return "fault bound"
         if k == 0:
             return None if _in_prior(n, tr) else "initial set"

@@ -323,8 +323,6 @@ class Node:
             return "input-not-neighbours"
         if (msg.y is None) != (self.id in msg.unread) or not set(msg.unread) <= set(self.sc.ids):
             return "input-unread"
-        if msg.y is None and self.set_estimator is not None:
-            return "input-unread"  # a set estimator cannot resume after a step without its reading (a log run refuses one)
         if msg.step > 0:
             if msg.u_prev is None or msg.vx_prev is None:
                 return "input-incomplete"
@@ -360,6 +358,8 @@ class Node:
         why = self._out_of_window(msg.step, msg.node, self.k, self.inbox, "duplicate-state")  # k: our next step uses it
         if why is not None:
             self.drop(why)
+            return
+        if msg.innov is None:  # its node had no reading: no innovation to use (the vehicle told us not to expect it)
             return
         sensor = self.sensors[msg.node]
         if (msg.sector is not None) != sensor.saturated:
@@ -443,9 +443,9 @@ class Node:
 
     def awaiting_readings(self) -> bool:
         """Whether a reading of the next step has not arrived (the real-time clock waits a budget for it:
-        runtime/processes.py)."""
+        runtime/processes.py); never for a step without our own reading or resuming, which uses none (:meth:`missing`)."""
         inp = self.next_input()
-        return inp is not None and self.k >= 0 and bool(self._unread(inp))
+        return inp is not None and self.k >= 0 and inp.y is not None and self.gap is None and bool(self._unread(inp))
 
     def _unread(self, inp: NodeInput) -> list[int]:
         """The senders whose reading of ``inp``'s step we still wait for (not the silent ones, nor those the vehicle
@@ -474,7 +474,7 @@ class Node:
             return False
         if self.k < 0:
             stepped = self._start(inp)
-        elif inp.y is None or self.gap is not None:
+        elif self.set_estimator is None and (inp.y is None or self.gap is not None):
             self._carry(inp)  # no reading: nothing published; the first reading after resumes (estimator/rejoin.py)
             stepped = True
         elif self.missing() and not self.give_up:
@@ -483,7 +483,8 @@ class Node:
             self._prepare(inp)
             return False
         else:
-            if self.give_up:  # whoever's reading is still missing: not waited for again until one arrives
+            # whoever's reading is still missing: not waited for again until one arrives (a step without ours waited for none)
+            if self.give_up and inp.y is not None:
                 self.silent |= set(self._unread(inp))
             self._update(inp)
             stepped = True
@@ -494,14 +495,21 @@ class Node:
 
     def _start(self, inp: NodeInput) -> bool:
         """Step 0: the prior ellipsoid (Assumption 1) updated by ỹ₀, certified like every step (the prior
-        itself if that fails).  Rejoin: see :mod:`netsetest.estimator.rejoin`."""
+        itself if that fails); without ỹ₀ the prior itself (status no-reading), from which the node resumes at its
+        next reading as after any step without one (:meth:`_carry`).  Rejoin: see :mod:`netsetest.estimator.rejoin`."""
         if self.set_estimator is not None:
             if inp.step != 0:
                 return False  # a set estimator starts from its prior at step 0 only: no rejoin
-            self._publish_set(inp, "init")
+            self._publish_set(inp, "init" if inp.y is not None else "no-reading")
             return True
         if inp.y is None:
-            return False  # step 0 needs a reading (the vehicle sends one: logs/drive.py), a rejoin its own
+            if inp.step != 0:
+                return False  # a rejoin needs its own reading
+            sector = derive_sector(self.cfg.sensor, FaultBound(), Interval(-np.inf, np.inf), None)
+            self._publish(Publication(inp, "no-reading", StepResult(self.xhat, self.P, "ok", float("nan"), 0.0, "no-reading", sector=sector)))
+            assert self.own_digest is not None
+            self.gap = Gap(0, self.own_digest, self.xhat[:NX].copy(), self.rho * self.P[:NX, :NX])  # the next step resumes from the prior
+            return True
         if inp.step == 0:
             res = self.estimator.first(NodeSet(self.xhat, self.P, self.rho), inp.y, inp.gamma)
             status: NodeStatus = "init" if res.status == "ok" else "init-prior"
@@ -559,7 +567,7 @@ class Node:
 
     def _update(self, inp: NodeInput) -> None:
         if self.set_estimator is not None:
-            self._publish_set(inp, "ok")
+            self._publish_set(inp, "ok" if inp.y is not None else "no-reading")
             return
         readings = self._readings_of(inp.step)
         own_reading = {self.id: (inp.y, inp.gamma)}  # a reference's own measurement is one of the step's readings
@@ -602,9 +610,9 @@ class Node:
     def _publish_set(self, inp: NodeInput, status: NodeStatus) -> None:
         """Step the set estimator and publish its set with an enclosing ellipsoid (the neighbour-facing
         summary: SDP neighbours and the plausibility checks use it unchanged) and the step's sector."""
-        assert self.set_estimator is not None and inp.y is not None  # _implausible_input: a set estimator's input has its reading
+        assert self.set_estimator is not None
         t0 = time.perf_counter()
-        readings = self._readings_of(inp.step) if inp.step > 0 else {}
+        readings = self._readings_of(inp.step) if inp.step > 0 and inp.y is not None else {}  # no reading: prediction only
         try:
             s = self.set_estimator.step(base.StepInput(inp.step, inp.y, inp.gamma, inp.u_prev, inp.vx_prev, readings))
         except base.EstimatorError:
@@ -622,7 +630,8 @@ class Node:
         # also requires it) from C̄ x̄ over the node's own set
         r_set = Interval(-s.support(-sensor.Cbar), s.support(sensor.Cbar))
         fault_bound = FaultBound(self.cfg.fault_rate, self.cfg.fault_size)
-        sector = derive_sector(sensor, fault_bound, measurement_interval(sensor, inp.y, inp.gamma), r_set)
+        meas = Interval(-np.inf, np.inf) if inp.y is None else measurement_interval(sensor, inp.y, inp.gamma)
+        sector = derive_sector(sensor, fault_bound, meas, r_set)
         res = StepResult(xhat, P, "ok", float("nan"), solve_ms, status, sector=sector)
         used_readings = [(j, *readings[j]) for j in sorted(readings)] if status == "ok" else []  # "fallback": the last set
         health = bool(used_readings) and self.sc.health_group(self.id) is not None
@@ -634,7 +643,8 @@ class Node:
         self.xhat, self.P, self.region = res.xhat, res.P, res.region
         sector = res.sector
         cbar = self.cfg.sensor.Cbar
-        self.own = NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, float(inp.y - cbar @ self.xhat), sector)
+        # (no reading: no innovation, so nothing of this step is a neighbour state, our own self-loop's either)
+        self.own = None if inp.y is None else NeighbourState(self.xhat.copy(), self.P.copy(), self.rho, inp.gamma, float(inp.y - cbar @ self.xhat), sector)
         msg, self.own_digest = self._built(pub)
         self._taken(inp.step)
         self.bus.publish(keys.node_state(self.run, self.id), msg)
@@ -658,7 +668,7 @@ class Node:
         """The state message of ``p.res.public`` for the step of ``p.inp`` (validated)."""
         inp, res = p.inp, p.res
         pub, sector = res.public, res.sector
-        innov = float(inp.y - self.cfg.sensor.Cbar @ pub.xhat)
+        innov = None if inp.y is None else float(inp.y - self.cfg.sensor.Cbar @ pub.xhat)
         rho_cert = pub.rho_cert if np.isfinite(pub.rho_cert) else None
         drops = self.drop_report()
         return NodeState(

@@ -112,7 +112,7 @@ class NodeTotals:
     undecided: int = 0  # a reference's box overlaps the published set without lying in it (docs/your-log.md)
     covered: int = 0
     missing_steps: int = 0
-    no_reading: int = 0  # node-steps without a reading (a gap in a recorded drive): nothing published, nothing covered
+    no_reading: int = 0  # node-steps without a reading (a gap in a recorded drive): an SDP node's after step 0 published nothing, the others are judged
     inconsistent: int = 0  # without a reference: its own data proved one of its assumptions broken (roles/judge.py Judge.inconsistent)
     missing_from: int | None = None
     rejoined_at: int | None = None  # first step heard from again after ``missing_from``
@@ -309,6 +309,7 @@ class RunTotals:
         t.sectors_assumed += st.sector_basis == "assumed"
         t.sector_failures += sector_failed
         t.reported += 1
+        t.no_reading += st.innov is None  # a prediction-only set, or a prior (Scenario.silent_without_reading): judged like any
         t.inconsistent += v.inconsistent
         cone, c = v.cone, v.containment
         if c is not None:

@@ -109,7 +109,7 @@ class Vehicle:
         self.u = self.w = self.vx = 0.0
         self.heard: dict[int, set[int]] = {}  # the last dead_after steps (lockstep: 1) only
         self.alive = set(scenario.ids)
-        self.unread: set[int] = set()  # nodes without a reading at the current step: they publish nothing for it
+        self.unread: set[int] = set()  # nodes without a reading at the current step (an SDP node's after step 0: it publishes nothing)
         self.done = False
         self.scope = RunScope(frozenset(scenario.ids), scenario.steps)
         self.drops: Counter[str] = Counter()
@@ -170,8 +170,10 @@ class Vehicle:
         return dict(self.drops + (Counter() if self.bus.shared else self.bus.dropped))
 
     def waiting_for(self) -> set[int]:
-        """Alive nodes with a reading whose state of the current step has not arrived."""
-        return self.alive - self.unread - self.heard.get(self.k, set())
+        """Alive nodes that publish at the current step (with a reading, or running a set estimator, or at step 0:
+        Scenario.silent_without_reading) whose state of it has not arrived."""
+        silent = {i for i in self.unread if self.sc.silent_without_reading(i, self.k)}
+        return self.alive - silent - self.heard.get(self.k, set())
 
     def ready_to_advance(self) -> bool:
         return self.k >= 0 and not self.done and not self.waiting_for()
@@ -182,7 +184,7 @@ class Vehicle:
             return
         if self.k >= 0:
             window = self._window()
-            # a node without a reading at step k published nothing and is not dead: it resumes at its next reading
+            # a node without a reading at step k may have published nothing and is not dead: it resumes at its next reading
             self.alive = set().union(*(self.heard.get(s, set()) for s in window)) | (self.alive & self.unread)
             self.heard = {s: self.heard[s] for s in window[1:] if s in self.heard}  # bounded memory
             if self.k == self.sc.steps:
@@ -320,6 +322,7 @@ class Vehicle:
                 f_acc=of["f_acc"],
                 reference=d.x_ref is not None,
                 no_reading=[i for i in sc.ids if d.y_log[i] is None],
+                fault_unknown=[i for i in sc.ids if d.y_log[i] is None and d.x_ref is not None and not d.healthy[i]],
             ),
         )
 
@@ -343,8 +346,9 @@ def _log_truth(n: NodeConfig, d: LogStep, k: int) -> _NodeTruth:
     the noise v = (ỹ_log − C x)/Dv an interval the reference's box leaves (broken only if all of it lies beyond √R);
     not declared healthy: the logged fault is what the reading less the reference leaves within the noise bound."""
     sen, f_inj, y_log = n.sensor, d.faults[n.id], d.y_log[n.id]
-    if d.x_ref is None or y_log is None:
-        return _NodeTruth(f_inj, 0.0, 0.0, True, float(sen.Cbar @ augmented(np.zeros(2), f_inj)), fault_bound_holds(n, k))
+    if d.x_ref is None or y_log is None:  # (not declared healthy: the injected fault is not the truth, which nothing tells)
+        ok = fault_bound_holds(n, k) or not d.healthy[n.id]
+        return _NodeTruth(f_inj, 0.0, 0.0, True, float(sen.Cbar @ augmented(np.zeros(2), f_inj)), ok)
     cx = float(sen.C @ d.x_ref)
     cx_half = float(np.abs(sen.C) @ np.asarray(d.accuracy))
     if d.healthy[n.id]:

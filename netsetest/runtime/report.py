@@ -309,7 +309,7 @@ def verdict(summary: RunSummary) -> str:
         why = "no reference, truth unknown or copies contested" if acc is not None else "truth unknown or copies contested"
         text += f"; {reported - evaluated} node-step(s) not judged ({why})"
     if summary.node_steps_no_reading:
-        text += f"; {summary.node_steps_no_reading} node-step(s) without a reading (gaps in the log: nothing published, nothing covered)"
+        text += f"; {summary.node_steps_no_reading} node-step(s) without a reading (gaps in the log: an SDP node publishes nothing after step 0, uncovered; a set estimator its prediction and every node at step 0 its prior, judged)"
     if summary.node_steps_inconsistent:
         text += f"; at steps without a reference, {own_data(summary)}"
     if summary.node_steps_rejected:

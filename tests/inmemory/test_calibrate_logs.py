@@ -7,6 +7,7 @@ drive whose e_k leave the bound is said to."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -114,6 +115,76 @@ def test_held_out_drives_are_checked_against_the_calibration(run: tuple[list[dic
     out = capsys.readouterr().out
     assert "[model_uncertainty]\nbox = [" in out and "[envelope]\nay_max = " in out and "R = " in out and out.count("held out ") == 2
     assert "[model_uncertainty]" in toml.read_text() and "[envelope]" in toml.read_text()
+
+
+def test_each_log_carries_its_own_mapping(run: tuple[list[dict], DriveTable], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--logs DRIVE:MAP.toml``: each drive read with its own mapping (here the faulty drive's declares node 2 healthy
+    only before its fault), the others with --map or their default; ``--held-out`` alike.  The same drives under one
+    mapping calibrate differently: node 2's fault becomes noise."""
+    _, d = run
+    yaw = dict(d.yaw)
+    yaw[2] = np.where(d.t > 0.55, yaw[2] + 0.5, yaw[2])
+    faulty = DriveTable(d.t, d.speed, d.steering, yaw, d.beta, d.r)
+    plain = _log(d, tmp_path, "plain", (0.0, 0.0))  # its default mapping: plain.map.toml
+    log = _log(faulty, tmp_path, "faulty", (0.0, 0.0))
+    own = tmp_path / "faulty_healthy_before.toml"
+    own.write_text(
+        (tmp_path / "faulty.map.toml").read_text().replace('channel = "yaw2"\nunit = "rad/s"', 'channel = "yaw2"\nunit = "rad/s"\nhealthy = [[0.0, 0.55]]')
+    )
+    expected = calibrate_logs([_scenario(plain), with_log_steps(load_topology("paper6", log=str(log), mapping=str(own)), whole=True)], MARGIN)
+    js = tmp_path / "cal.json"
+    argv = ["calibrate", "paper6", "--logs", str(plain), f"{log}:{own}", "--held-out", f"{log}:{own}", "--json", str(js)]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    doc = json.loads(js.read_text())
+    assert doc["maps"] == [str(tmp_path / "plain.map.toml"), str(own)] and doc["R"] == {str(i): R for i, R in expected.R.items()}
+    assert doc["noise_steps"]["2"] == STEPS + 1 + 6 and f"mapping {own}" in out and f"held out {log} (mapping {own})" in out
+    assert main(["calibrate", "paper6", "--logs", str(plain), str(log), "--json", str(js)]) == 0  # faulty.map.toml: healthy throughout
+    capsys.readouterr()
+    assert json.loads(js.read_text())["R"]["2"] > 10 * expected.R[2]
+
+
+@pytest.mark.parametrize(
+    "args, expect",
+    [
+        (["--logs", "LOG:MISSING.toml"], "MISSING.toml: the log's mapping file not found"),
+        (["--logs", "LOG", "--held-out", "LOG:BAD.toml"], "BAD.toml"),
+    ],
+)
+def test_a_log_s_own_mapping_that_is_not_one_exits_2(
+    run: tuple[list[dict], DriveTable], tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], expect: str
+) -> None:
+    _, d = run
+    (tmp_path / "BAD.toml").write_text("[log]\nformat = 'csv'\n[speed]\n")
+    paths = {"LOG": str(_log(d, tmp_path, "train", (0.0, 0.0))), "MISSING.toml": str(tmp_path / "MISSING.toml"), "BAD.toml": str(tmp_path / "BAD.toml")}
+    argv = [":".join(paths.get(p, p) for p in a.split(":")) for a in args]
+    assert main(["calibrate", "paper6", *argv]) == 2
+    err = capsys.readouterr().err
+    assert expect in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+
+
+@pytest.mark.parametrize(
+    "arg, expect",
+    [
+        ("drive.map.toml", "'drive.map.toml' is a mapping, not a drive: give it with its drive as DRIVE:MAP.toml"),
+        (":drive.map.toml", "expected DRIVE or DRIVE:MAP.toml, with both names given"),
+        ("drive.csv:.toml", "expected DRIVE or DRIVE:MAP.toml, with both names given"),
+    ],
+)
+def test_a_drive_and_mapping_pair_that_is_not_one_exits_2(arg: str, expect: str, capsys: pytest.CaptureFixture[str]) -> None:
+    for option in ("--logs", "--held-out"):
+        with pytest.raises(SystemExit) as exc:
+            main(["calibrate", "paper6", "--logs", "x.csv", option, arg] if option == "--held-out" else ["calibrate", "paper6", option, arg])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err
+        assert f"argument {option}: " in err and expect in err, err
+
+
+def test_a_drive_s_own_colon_stays_its_own() -> None:
+    from netsetest.cli.checks import log_with_map
+
+    assert log_with_map("run:3.mf4") == ("run:3.mf4", None) and log_with_map("run:3.mf4:m.toml") == ("run:3.mf4", "m.toml")
+    assert log_with_map("bags/drive_mcap") == ("bags/drive_mcap", None)
 
 
 @pytest.mark.parametrize(

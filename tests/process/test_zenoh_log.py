@@ -87,6 +87,42 @@ def test_a_lockstep_zenoh_run_from_a_log_gives_the_in_memory_verdicts(drive: tup
 
 
 @pytest.mark.timeout(150)
+def test_every_family_without_readings_over_zenoh_gives_the_in_memory_verdicts(tmp_path: Path) -> None:
+    """Every estimator family in one network (nodes 1 and 6 the SDP, 2 zonotope, 3 interval, 4 strip, 5 setprop), readings
+    missing at step 0 (nodes 1, 3: the prior) and mid-drive (3: a set estimator's prediction-only steps, published;
+    5 likewise): a lockstep Zenoh run gives the in-memory verdicts node-step for node-step, the steps without a reading
+    named in the record (status no-reading, the truth's no_reading), containment on every one (accuracy 0)."""
+    from gaps_helpers import EVERY_FAMILY, GAPS, STEPS as GAP_STEPS, check_gapped_run, gapped_drive
+
+    from netsetest.config.schema import load_topology
+    from netsetest.logs.drive import with_log_steps
+    from netsetest.runtime.inmemory import run_inmemory
+    from run_helpers import mixed_topology
+
+    log, mapping = gapped_drive(tmp_path)
+    topo = mixed_topology(tmp_path, EVERY_FAMILY)
+    rec, summ = tmp_path / "record.jsonl", tmp_path / "summary.json"
+    argv = [str(topo), "--steps", str(GAP_STEPS), "--log", str(log), "--map", str(mapping), "--record", str(rec), "--summary-json", str(summ)]
+    logs = run_to_success(tmp_path / "logs", argv, timeout=100)
+    z, zs = read_record(rec), read_json(summ)
+    m = run_inmemory(with_log_steps(load_topology(topo, steps=GAP_STEPS, log=str(log), mapping=str(mapping))), seed=0)
+    assert m.parts is not None
+    check_gapped_run(m, {i: EVERY_FAMILY.get(i, "sdp") for i in range(1, 7)})
+    assert [t["no_reading"] for t in z["truth"]] == [t["no_reading"] for t in m.parts["truth"]]
+    verdict = ("status", "resumed_from", "contained", "missed", "judged", "assumptions_ok", "not_covered_cause", "used", "missing")
+    assert sorted(z["nodes"]) == sorted(m.parts["nodes"])
+    for i, zes in z["nodes"].items():
+        mes = m.parts["nodes"][i]
+        assert [e["step"] for e in zes] == [e["step"] for e in mes], f"node {i}"
+        for ze, me in zip(zes, mes):
+            assert {f: ze.get(f) for f in verdict} == {f: me.get(f) for f in verdict}, f"node {i} step {ze['step']}"
+            np.testing.assert_allclose(ze["bounds"], me["bounds"], rtol=0, atol=TOL)
+    counts = ("node_steps_evaluated", "node_steps_contained", "node_steps_covered", "node_steps_no_reading", "violations_total")
+    assert {c: zs[c] for c in counts} == {c: m.summary.to_dict()[c] for c in counts}, logs
+    assert zs["node_steps_no_reading"] == sum(map(len, GAPS.values())) and zs["violations_total"] == 0 and zs["nodes_missing"] == []
+
+
+@pytest.mark.timeout(150)
 def test_a_realtime_zenoh_run_from_a_log(drive: tuple[Path, Path], tmp_path: Path) -> None:
     bag, mapping = drive
     summ = tmp_path / "summary.json"
@@ -99,3 +135,21 @@ def test_a_realtime_zenoh_run_from_a_log(drive: tuple[Path, Path], tmp_path: Pat
     assert s["clock"] == "realtime" and s["violations_total"] == 0 and s["node_steps_no_reading"] == 4
     judged = s["node_steps_evaluated"] + s["node_steps_overloaded"] + s["node_steps_no_reading"] + sum(r["missing_steps"] for r in s["nodes"])
     assert judged == 6 * (STEPS + 1), s
+
+
+@pytest.mark.timeout(150)
+def test_every_family_without_readings_in_real_time(tmp_path: Path) -> None:
+    """The same mixed network and gaps on the real-time clock: no node waits for a reading at a step without its own
+    (nor counts a reference silent for it), every node-step is judged or counted, no violation."""
+    from gaps_helpers import EVERY_FAMILY, GAPS, STEPS as GAP_STEPS, gapped_drive
+    from run_helpers import mixed_topology
+
+    log, mapping = gapped_drive(tmp_path)
+    summ = tmp_path / "summary.json"
+    argv = [str(mixed_topology(tmp_path, EVERY_FAMILY)), "--steps", str(GAP_STEPS), "--clock", "realtime", "--log", str(log), "--map", str(mapping)]
+    run_to_success(tmp_path / "logs", [*argv, "--summary-json", str(summ)], timeout=100)
+    s = read_json(summ)
+    assert s["violations_total"] == 0 and s["node_steps_no_reading"] == sum(map(len, GAPS.values()))
+    silent_sdp = sum(1 for i, ks in GAPS.items() if i not in EVERY_FAMILY for k in ks if k > 0)
+    accounted = s["node_steps_evaluated"] + s["node_steps_overloaded"] + silent_sdp + sum(r["missing_steps"] for r in s["nodes"])
+    assert accounted == 6 * (GAP_STEPS + 1), s

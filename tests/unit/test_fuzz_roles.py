@@ -118,7 +118,25 @@ def _value_like(v: object) -> st.SearchStrategy:
         return st.floats(allow_nan=True, allow_infinity=True) | st.sampled_from([0.0, -0.0, 1e-300, 1e300, 5e-324, 1.0, -1.0])
     if isinstance(v, str):
         return st.sampled_from(
-            ["ok", "init", "init-prior", "fallback", "rejoin", "node", "vehicle", "collector", "none", "measurement", "fault-bound", "assumed", "1", "7", ""]
+            [
+                "ok",
+                "init",
+                "init-prior",
+                "fallback",
+                "rejoin",
+                "resume",
+                "no-reading",
+                "node",
+                "vehicle",
+                "collector",
+                "none",
+                "measurement",
+                "fault-bound",
+                "assumed",
+                "1",
+                "7",
+                "",
+            ]
         ) | st.text(max_size=6)
     if isinstance(v, list):
         inner = _value_like(v[0]) if v else st.integers(-1, 8)

@@ -62,6 +62,8 @@ MESSAGES = [
     _state(sector=(0.5, 0.5), sector_basis="fault-bound", fault=[-0.2, 0.2]),
     _state(region=[0.0, 0.0, 1.0, 0.0, 1.0, 1.0], fault=[-0.2, 0.2], continues=ProvenSet(xhat=X, P=P, rho=1 / 3)),
     _state(status="init-prior", sector=(1.0, 0.0), sector_basis="measurement"),
+    _state(status="no-reading", innov=None, rho_cert=None, used=[], missing=[]),  # a step without the node's reading
+    _state(status="fallback", innov=None),  # a set estimator's last set again, at a step without its reading
     Truth(
         step=80,
         x=[1e-3 / 7, -0.2 / 3],
@@ -198,6 +200,10 @@ BAD = [
     ("region-nan", _mut(_state(), region=[0.0, 0.0, 1.0, float("nan"), 1.0, 1.0]), "region-not-finite", "region"),
     ("sets-not-used", _mut(_state(), used=[2], sets=[2, 3]), "invalid", "sets"),  # a neighbour's set the step did not receive
     ("sets-node-0", _mut(_state(), used=[2], sets=[0]), "invalid", "sets"),
+    # y̌ none exactly where the node had no reading: status no-reading (or a set estimator's fallback)
+    ("innov-none-ok", _mut(_state(), innov=None), "invalid", "innov"),
+    ("innov-none-resume", _mut(_state(), innov=None, status="resume", resumed_from=3), "invalid", "innov"),
+    ("no-reading-with-innov", _mut(_state(), status="no-reading"), "invalid", "innov"),
 ]
 
 
@@ -492,6 +498,16 @@ def test_truth_maps_must_name_the_same_nodes():
     for bad in ({"faults": {}}, {"noise": {"1": 0.0}}, {"faults": {"x": 0.0, "2": 0.0}}, {"faults": {"0": 0.0, "2": 0.0}}):
         with pytest.raises(BadMessage, match="faults|noise"):
             decode(_pack(raw_message(t, **bad)))
+
+
+def test_truth_fault_unknown_only_without_a_reading():
+    """Truth.fault_unknown names nodes without a reading of the step, each once."""
+    t = next(m for m in MESSAGES if isinstance(m, Truth))
+    gap = raw_message(t, no_reading=[2], y={"1": 0.1}, y_nofault={"1": 0.1})
+    assert decode(_pack({**gap, "fault_unknown": [2]})).fault_unknown == [2]
+    for bad in ([1], [2, 2]):
+        with pytest.raises(BadMessage, match="fault_unknown"):
+            decode(_pack({**gap, "fault_unknown": bad}))
 
 
 def test_run_scope():
