@@ -15,7 +15,7 @@ process of its own.
   ready key, a huge finite number where a square is taken), on node 2's own keys; figure: how many roles
   were lost (exit code 0 and no node missing: 0).
 
-The attacker (``python -m netsetest.bench.attacks``) is a Zenoh client of the run's router with node 2's
+The attacker (``python -m netsetest_bench.attacks``) is a Zenoh client of the run's router with node 2's
 identity (secured) or a peer of the mesh that joins through the collector's endpoint (insecure); every
 message it sends goes to loopback only, and it stops after ``duration`` seconds.
 """
@@ -103,7 +103,7 @@ def attacker_main(argv: list[str] | None = None) -> int:
     """The attacking process: publish the payloads of ``--kind`` at ``--rate`` for ``--duration`` s."""
     from netsetest.bus.zenoh_bus import open_session, zenoh_config
 
-    p = argparse.ArgumentParser(prog="netsetest.bench.attacks")
+    p = argparse.ArgumentParser(prog="netsetest_bench.attacks")
     p.add_argument("--kind", choices=["input", "state", "state-run", "crash"], required=True)
     p.add_argument("--run-id", required=True)
     p.add_argument("--steps", type=int, required=True)
@@ -183,7 +183,7 @@ def attacked_run(topology: Path, steps: int, secured: bool, kind: str | None, ra
                                 [
                                     sys.executable,
                                     "-m",
-                                    "netsetest.bench.attacks",
+                                    "netsetest_bench.attacks",
                                     "--kind",
                                     kind,
                                     "--run-id",

@@ -23,13 +23,13 @@ import subprocess
 import sys
 from pathlib import Path
 
-from netsetest.bench.zenoh_runs import code_env, realtime_run
+from netsetest_bench.zenoh_runs import code_env, realtime_run
 
 SCALING_PROCESSES = 2  # processes of each checkout for the in-memory rings, alternating
 SCALING_PROGRAM = """
 import json, sys, tempfile
 from pathlib import Path
-from netsetest.bench.run import FULL, QUICK, scaling
+from netsetest_bench.run import FULL, QUICK, scaling
 cfg = dict(QUICK if sys.argv[1] == "quick" else FULL)
 with tempfile.TemporaryDirectory(prefix="nsbench-") as tmp:
     print(json.dumps(scaling(cfg, Path(tmp))))
@@ -102,7 +102,7 @@ def _figure(this: list[float], base: list[float]) -> dict:
 def realtime_side_by_side(directory: Path, sizes: list[int], steps: int, baseline: Path, retries: int = 1) -> dict:
     """The real-time ladder of both checkouts, each size run by this one and then by the baseline; each ladder stops at
     its first size that misses (after ``retries``); per checkout its largest size and every run's row."""
-    from netsetest.bench.topologies import ring_topology
+    from netsetest_bench.topologies import ring_topology
 
     out: dict = {name: {"max_nodes": None, "runs": [], "going": True} for name in ("this", "baseline")}
     for n in sizes:
@@ -127,8 +127,8 @@ def realtime_side_by_side(directory: Path, sizes: list[int], steps: int, baselin
 
 def performance_side_by_side(cfg: dict, directory: Path, baseline: Path, quick: bool) -> dict:
     """Issue 45's figures of this checkout and ``baseline`` side by side (module doc)."""
-    from netsetest.bench.node_budget import checkout_commit
-    from netsetest.bench.widths import SideBySideFailed, step_side_by_side
+    from netsetest_bench.node_budget import checkout_commit
+    from netsetest_bench.widths import SideBySideFailed, step_side_by_side
 
     out: dict = {"commits": {"this": checkout_commit(Path(__file__).resolve().parents[2]), "baseline": checkout_commit(baseline)}}
     _log(f"side by side with {baseline}: the estimator's step (paper6, processes of their own, alternating)")
@@ -192,7 +192,7 @@ def baseline_markdown(side: dict) -> str:
     commits = side["commits"]
     lines = [
         f"Side by side with `{commits['baseline']}` (this checkout: `{commits['this']}`, uncommitted changes aside), in one run, "
-        "alternating, one program for both (netsetest/bench/baseline.py): fastest / median run of each; the ratio of the fastest.",
+        "alternating, one program for both (netsetest_bench/baseline.py): fastest / median run of each; the ratio of the fastest.",
         "",
         "| figure | this checkout | baseline | this / baseline | target | met |",
         "|---|---|---|---|---|---|",

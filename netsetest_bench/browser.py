@@ -1,7 +1,7 @@
 """A page in headless Chromium (Debian's ``chromium``, installed by .ci/run), driven over the DevTools
 protocol on a pipe (``--remote-debugging-pipe``: JSON messages separated by NUL on fds 3 and 4), so it
 needs no websocket client and no browser download.  The browser tests (tests/process/test_browser.py)
-and the benchmark's report-page figures (netsetest/bench/view.py) use it.
+and the benchmark's report-page figures (netsetest_bench/view.py) use it.
 
 :func:`load_page` opens a page, waits until a JavaScript condition holds (:data:`BOKEH_READY`: BokehJS
 has rendered every root), evaluates the caller's expressions, collects every console error and uncaught

@@ -15,7 +15,7 @@ The rest of the node's world is played by this (the benchmark's) process: one bu
 its neighbours' states every τs and subscribed to the node's state (so the node's puts go where they go in a run:
 to the router, or to each subscriber of the peer mesh).  The bare process measures itself (``time.process_time_ns``
 and its own thread's ``time.thread_time_ns``) from its :data:`WARM_STEPS`-th step to its last and prints one JSON
-line; ``python -m netsetest.bench.bus_floor PAYLOADS NODE-ARGV…`` is that process (the node's own command line,
+line; ``python -m netsetest_bench.bus_floor PAYLOADS NODE-ARGV…`` is that process (the node's own command line,
 ``NodeSpec.to_argv``).
 """
 
@@ -190,7 +190,7 @@ def _payloads_from_file(path: Path) -> RingPayloads:
 
 
 def bare_main(argv: list[str]) -> int:
-    """``python -m netsetest.bench.bus_floor PAYLOADS NODE-ARGV…``: the bare process; its figures on stdout."""
+    """``python -m netsetest_bench.bus_floor PAYLOADS NODE-ARGV…``: the bare process; its figures on stdout."""
     from netsetest.bus.zenoh_bus import ZenohBus
     from netsetest.runtime.processes import serve_role
     from netsetest.runtime.rolespec import NodeSpec
@@ -238,7 +238,7 @@ def floor_run(topology: Path, payloads: RingPayloads, secured: bool, tmp: Path) 
         _payloads_to_file(payloads, file)
         spec = NodeSpec(ScenarioSpec(str(topology)), node, clock="realtime", zenoh=network.zenoh(f"node{node}"))
         proc = subprocess.Popen(
-            [sys.executable, "-m", "netsetest.bench.bus_floor", str(file), *spec.to_argv()],
+            [sys.executable, "-m", "netsetest_bench.bus_floor", str(file), *spec.to_argv()],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             stdin=subprocess.DEVNULL,

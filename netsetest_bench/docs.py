@@ -14,19 +14,19 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from netsetest.bench.campaign import campaign_markdown
-from netsetest.bench.exact_cost import exact_cost_markdown
-from netsetest.bench.flow import flow_markdown
-from netsetest.bench.logs import logs_markdown, logs_summary_markdown
-from netsetest.bench.network import network_markdown, network_summary_markdown
-from netsetest.bench.node_budget import node_markdown
-from netsetest.bench.plant import plant_markdown, plant_summary_markdown
-from netsetest.bench.run import performance_markdown
-from netsetest.bench.scaleout import scaleout_markdown
-from netsetest.bench.scenario import compare_markdown, exact_markdown, scenario_markdown
-from netsetest.bench.spread import RUNS_DIR, spread_markdown
-from netsetest.bench.view import view_markdown, view_summary_markdown
-from netsetest.bench.widths import region_markdown, sets_section, widths_markdown, widths_summary_markdown
+from netsetest_bench.campaign import campaign_markdown
+from netsetest_bench.exact_cost import exact_cost_markdown
+from netsetest_bench.flow import flow_markdown
+from netsetest_bench.logs import logs_markdown, logs_summary_markdown
+from netsetest_bench.network import network_markdown, network_summary_markdown
+from netsetest_bench.node_budget import node_markdown
+from netsetest_bench.plant import plant_markdown, plant_summary_markdown
+from netsetest_bench.run import performance_markdown
+from netsetest_bench.scaleout import scaleout_markdown
+from netsetest_bench.scenario import compare_markdown, exact_markdown, scenario_markdown
+from netsetest_bench.spread import RUNS_DIR, spread_markdown
+from netsetest_bench.view import view_markdown, view_summary_markdown
+from netsetest_bench.widths import region_markdown, sets_section, widths_markdown, widths_summary_markdown
 
 
 @dataclass(frozen=True)

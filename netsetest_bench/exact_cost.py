@@ -2,13 +2,13 @@
 
 Per topology and case, worst-case signals, seed 0: the run's record (in memory, not timed), then the exact limit
 with every declared health group applied (analysis/exact.py, its branch and bound analysis/kofn.py) in a process of
-its own (:func:`measure_one`, ``python -m netsetest.bench.exact_cost``), so that its CPU time and its peak resident
+its own (:func:`measure_one`, ``python -m netsetest_bench.exact_cost``), so that its CPU time and its peak resident
 memory are its own: CPU seconds of the exact limit alone (the machine is shared: wall time says little), peak
 resident memory of the whole process (imports and the record included), the resident memory after every step
 (flat: what the search keeps does not grow with it), and how many ends are exact, relaxed, and the solves.
 
 Topologies: ``paper6_max_faulty`` (at most 4 of 6 faulty) and rings with chords of 12 and 24 nodes with issue 34's
-two interleaved groups (netsetest/bench/topologies.py, variant ``two_groups``).  Then issue 44's target: on the 12-node
+two interleaved groups (netsetest_bench/topologies.py, variant ``two_groups``).  Then issue 44's target: on the 12-node
 ring with two groups, SAIM, worst-case signals, seeds :data:`NETWORK_SEEDS`, the central limit and each node's network
 limit (``exact --network``, docs/exact.md), each in a process of its own.
 """
@@ -86,7 +86,7 @@ def _measure(topology: Path, case: str, record: Path, budget_s: float, network: 
     from netsetest.runtime.processes import role_env
 
     out = subprocess.run(
-        [sys.executable, "-m", "netsetest.bench.exact_cost", str(topology), case, str(record), repr(budget_s), *(["network"] if network else [])],
+        [sys.executable, "-m", "netsetest_bench.exact_cost", str(topology), case, str(record), repr(budget_s), *(["network"] if network else [])],
         capture_output=True,
         text=True,
         check=True,
@@ -97,7 +97,7 @@ def _measure(topology: Path, case: str, record: Path, budget_s: float, network: 
 
 def exact_figures(cfg: dict, tmp: Path) -> dict:
     from netsetest.analysis.errors import DEFAULT_BUDGET_S
-    from netsetest.bench.topologies import ring_topology
+    from netsetest_bench.topologies import ring_topology
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
 
@@ -130,7 +130,7 @@ def network_rows(tmp: Path, steps: int, seeds: list[int] | tuple[int, ...]) -> l
     """Issue 44's target: the 12-node ring with two groups, SAIM, worst-case signals, per seed, the central limit and
     each node's network limit, each in a process of its own (the command's default budget)."""
     from netsetest.analysis.errors import DEFAULT_BUDGET_S
-    from netsetest.bench.topologies import ring_topology
+    from netsetest_bench.topologies import ring_topology
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
 

@@ -109,7 +109,7 @@ def lockstep_ratio(steps: int | None, reps: int = RATIO_REPS) -> dict:
     runs interleaved ``reps`` times so that the machine's load falls on each alike, the two Zenoh runs in
     turn first (a run right after another may pay for its predecessor's teardown); medians, and the load
     average before each repetition (the spread of the repetitions is the figure's noise)."""
-    from netsetest.bench.zenoh_runs import observed_lockstep
+    from netsetest_bench.zenoh_runs import observed_lockstep
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
 

@@ -4,7 +4,7 @@
   steering, one INS message with β and r), generated here (never committed) as a ROS 2 bag (MCAP) and, for
   comparison, as MDF4, Parquet and CSV; each read as the vehicle role reads it (logs/drive.py ``LogDrive``: the
   import checks the whole log and plans the run, then every step streams), in a process of its own
-  (:func:`measure_import`, ``python -m netsetest.bench.logs``), so that its time and peak resident memory are the
+  (:func:`measure_import`, ``python -m netsetest_bench.logs``), so that its time and peak resident memory are the
   reading's alone (with the imports a role has anyway).  The nodes and the collector never read the log.  For the
   bag, then, rosbags' own reading of every mapped message with nothing decoded, timed alone in the same process:
   the floor under a bag's import, which reads the whole log once.
@@ -158,7 +158,7 @@ def _measure(topology: str, log: Path, mapping: Path) -> dict:
     from netsetest.runtime.processes import role_env
 
     out = subprocess.run(
-        [sys.executable, "-m", "netsetest.bench.logs", topology, str(log), str(mapping)], capture_output=True, text=True, check=True, env=role_env()
+        [sys.executable, "-m", "netsetest_bench.logs", topology, str(log), str(mapping)], capture_output=True, text=True, check=True, env=role_env()
     )
     return json.loads(out.stdout.splitlines()[-1])  # the last line: asammdf 8.8 prints a line of its own when a fragment took over 10 s
 

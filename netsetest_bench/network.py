@@ -221,7 +221,7 @@ def _num(v: float) -> float | None:
 
 
 def network_markdown(res: dict) -> str:
-    """The network section of docs/results.md (netsetest/bench/docs.py)."""
+    """The network section of docs/results.md (netsetest_bench/docs.py)."""
     seeds = ", ".join(map(str, res["seeds"]))
     lines = [
         f"Exact limit from the node's own data over the exact limit from every node's data (mean width from step 10; "

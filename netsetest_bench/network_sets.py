@@ -5,7 +5,7 @@ node's network limit (``netsetest exact --network``, docs/exact.md).
 - *Faults at their bounds* (:func:`at_bounds`): paper6, paper6_max_faulty and paper6_reference, SAIM, worst-case
   signals, every faulty sensor's fault at ±F switching sign at δ a step (:func:`faults_at_bounds`): the published
   width over the central exact limit per node and coordinate, from step FROM_STEP; target ≤ :data:`CENTRAL_TARGET`.
-- *Directed rings* (:func:`ring`): issue 44's 12-node rings, readings to out-neighbours only (netsetest/bench/
+- *Directed rings* (:func:`ring`): issue 44's 12-node rings, readings to out-neighbours only (netsetest_bench/
   topologies.py, ``near_reference`` and ``near_groups``), SAIM, worst-case signals: the published width over each
   node's network limit from step :data:`RING_FROM`, target ≤ :data:`NETWORK_TARGET`, the central limit beside it; the
   CPU the two limits took.
@@ -168,7 +168,7 @@ def ring(directory: Path, variant: str, seed: int, steps: int, budget_s: float |
     """One directed ring, SAIM, worst-case signals: the SDP's widths over each node's network limit and over the central
     limit from step RING_FROM, and the CPU seconds each limit took (in this process)."""
     from netsetest.analysis.exact import exact_bounds, network_limit
-    from netsetest.bench.topologies import ring_topology
+    from netsetest_bench.topologies import ring_topology
     from netsetest.config.schema import load_topology
 
     sc = load_topology(ring_topology(directory, RING_NODES, steps, "saim", variant=variant), "saim")  # type: ignore[arg-type]  # one of RINGS
@@ -314,7 +314,7 @@ def cost(directory: Path, label: str, topology: Path | str, case: str, steps: in
 
 def sets_figures(cfg: dict, tmp: Path) -> dict:
     """Every figure of the module doc."""
-    from netsetest.bench.topologies import ring_topology
+    from netsetest_bench.topologies import ring_topology
 
     _log("issue 44: faults at their bounds (SAIM, worst-case signals), against the central exact limit")
     bounds = [at_bounds(tmp, t, cfg["sets_seeds"]) for t in AT_BOUNDS]
@@ -359,7 +359,7 @@ def sets_markdown(res: dict) -> str:
         )
     lines += [
         "",
-        "Issue 44's directed 12-node rings (netsetest/bench/topologies.py; every reading reaches only its sender's out-neighbours), "
+        "Issue 44's directed 12-node rings (netsetest_bench/topologies.py; every reading reaches only its sender's out-neighbours), "
         "SAIM, worst-case signals: per node r / β / f, mean published width over the node's network limit (what the topology carries "
         "to it, `netsetest exact --network`) and over the central limit, from step "
         f"{RING_FROM}; the furthest node's data take up to the steps in brackets; CPU seconds of the two limits.",

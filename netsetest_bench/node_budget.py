@@ -13,7 +13,7 @@ netsetest/profile.py), a few runs; per node and run, from its profile:
   number; per sent message: ``build`` + ``encode`` + ``put`` over theirs; Zenoh's and the callbacks'
   threads over every message, received or sent (what they do per message: TLS, routing, the callback).
 
-Beside them, Zenoh's floor (netsetest/bench/bus_floor.py): a bare bus process receiving and sending the ring's
+Beside them, Zenoh's floor (netsetest_bench/bus_floor.py): a bare bus process receiving and sending the ring's
 typical node's messages at the ring's τs, secured as ``netsetest run`` and ``--insecure``, without estimator or
 handling: what the bus alone costs that node per step, every thread, one run of each per run of the ring.
 
@@ -30,8 +30,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from netsetest.bench import bus_floor
-from netsetest.bench.zenoh_runs import profiled_ring_run
+from netsetest_bench import bus_floor
+from netsetest_bench.zenoh_runs import profiled_ring_run
 
 OUTSIDE = ("wait", "decode", "handle", "build", "encode", "put", "other", "threads")  # profile phases outside the estimator
 FIGURES = (  # key, what, unit: the rows of the table
@@ -113,7 +113,7 @@ TARGET_OUTSIDE_US = 300.0  # issue 31's target: a node's CPU per step outside th
 
 def _floor_payloads(tmp: Path, nodes: int, steps: int) -> tuple[Path, bus_floor.RingPayloads]:
     """The ring of the profiled runs and the payloads of its typical node (bus_floor.py)."""
-    from netsetest.bench.topologies import ring_topology
+    from netsetest_bench.topologies import ring_topology
     from netsetest.config.schema import load_topology
 
     directory = tmp / "floor"
@@ -210,7 +210,7 @@ def floor_markdown(res: dict) -> str:
     }
     lines = [
         "",
-        f"Zenoh's floor (netsetest/bench/bus_floor.py): a bare bus process, netsetest's ZenohBus opened as node {fl['node']}'s "
+        f"Zenoh's floor (netsetest_bench/bus_floor.py): a bare bus process, netsetest's ZenohBus opened as node {fl['node']}'s "
         f"({fl['in_neighbours']} in-neighbours, the ring's median), receiving its input and its in-neighbours' states and "
         "sending its state every τs, the payloads of an in-memory run of the same ring, with no estimator and no handling; "
         f"median (range) over its runs, one of each after each run of the ring ({loads}).",

@@ -414,7 +414,7 @@ def _mean_ratio(rs: list[dict]) -> str:
 
 
 def plant_markdown(res: dict) -> str:
-    """The car section of docs/results.md (netsetest/bench/docs.py), from the benchmark's ``plant`` figures."""
+    """The car section of docs/results.md (netsetest_bench/docs.py), from the benchmark's ``plant`` figures."""
     h, t, cfg = res["held_out"], res["training"], res["config"]
     seeds = cfg["plant_seeds"]
 

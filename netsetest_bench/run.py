@@ -6,8 +6,8 @@ published intervals of the paper run against the exact limit (``netsetest exact`
 run against the in-memory run of the paper scenario; ``netsetest run`` of the paper network from
 launch to step 0; one node process's peak RSS and start-up time; the largest real-time network without a
 deadline miss; the defences (``netsetest run`` secured and ``--insecure`` under a 30 000 msg/s flood on
-one node's input and state key and under an insider's crash payloads, netsetest/bench/attacks.py; RSS
-slope over a long run, netsetest/bench/soak.py); the car as the truth (bench/plant.py), what the exchange
+one node's input and state key and under an insider's crash payloads, netsetest_bench/attacks.py; RSS
+slope over a long run, netsetest_bench/soak.py); the car as the truth (bench/plant.py), what the exchange
 buys (bench/network.py), the paper's scenario per node and every estimator compared (bench/scenario.py), the published
 width over the exact limit per coordinate, estimator and node (bench/widths.py).
 ``--quick`` uses fewer steps and samples (a few minutes); the default takes longer.  Times are wall-clock milliseconds on this
@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from netsetest.bench.sections import PARTS
-from netsetest.bench.topologies import RingVariant
+from netsetest_bench.sections import PARTS
+from netsetest_bench.topologies import RingVariant
 from netsetest.config.schema import Scenario
 from netsetest.scenarios import TOPOLOGY_DIR
 
@@ -187,7 +187,7 @@ def _med(v: list[float]) -> float | None:
 def paper_solve_times(cfg: dict) -> dict:
     from netsetest.config.schema import load_topology
 
-    from netsetest.bench.solvers import capture, side_by_side
+    from netsetest_bench.solvers import capture, side_by_side
 
     out = {}
     for case in ("nsnim", "saim"):
@@ -217,8 +217,8 @@ def paper_solve_times(cfg: dict) -> dict:
 def scaling(cfg: dict, tmp: Path) -> dict:
     from netsetest.config.schema import load_topology
 
-    from netsetest.bench.solvers import capture
-    from netsetest.bench.topologies import degrees, ring_topology, ring_with_chords
+    from netsetest_bench.solvers import capture
+    from netsetest_bench.topologies import degrees, ring_topology, ring_with_chords
 
     capture(load_topology(PAPER6, "nsnim", 5), "scheduled")  # warm-up
     rows = []
@@ -251,7 +251,7 @@ def zenoh_overhead(cfg: dict) -> dict:
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
 
-    from netsetest.bench.zenoh_runs import cli_run, observed_lockstep
+    from netsetest_bench.zenoh_runs import cli_run, observed_lockstep
 
     sc = load_topology(PAPER6, "nsnim")
     mem, zen, zen_open = [], [], []
@@ -308,7 +308,7 @@ def lockstep_cpu_floor(sc: Scenario, short: dict | None, steps: int) -> dict | N
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
 
-    from netsetest.bench.zenoh_runs import MACHINE_CORES, observed_lockstep
+    from netsetest_bench.zenoh_runs import MACHINE_CORES, observed_lockstep
 
     if short is None or short["stepping_s"] is None:
         return None
@@ -340,8 +340,8 @@ def lockstep_cpu_floor(sc: Scenario, short: dict | None, steps: int) -> dict | N
 
 
 def defences(cfg: dict) -> dict:
-    from netsetest.bench.attacks import crash, flood
-    from netsetest.bench.soak import soak
+    from netsetest_bench.attacks import crash, flood
+    from netsetest_bench.soak import soak
 
     out: dict = {}
     for secured, label in ((True, "secured"), (False, "insecure")):
@@ -408,18 +408,18 @@ def run_bench(
 ) -> int:
     """``baseline``: a checkout the node, widths and performance parts measure alternately beside this one
     (bench/node_budget.py, bench/widths.py, bench/baseline.py)."""
-    from netsetest.bench.exact_cost import exact_cost_markdown, exact_figures
-    from netsetest.bench.network import network_figures, network_markdown
-    from netsetest.bench.plant import plant_figures, plant_markdown
-    from netsetest.bench.scenario import compare_markdown, scenario_figures, scenario_markdown
-    from netsetest.bench.flow import flow_figures, flow_markdown
-    from netsetest.bench.logs import logs_figures, logs_markdown
-    from netsetest.bench.view import view_figures, view_markdown
-    from netsetest.bench.node_budget import node_figures, node_markdown
-    from netsetest.bench.scaleout import scaleout_figures, scaleout_markdown
-    from netsetest.bench.campaign import campaign_figures, campaign_markdown
-    from netsetest.bench.widths import widths_figures, widths_markdown
-    from netsetest.bench.zenoh_runs import (
+    from netsetest_bench.exact_cost import exact_cost_markdown, exact_figures
+    from netsetest_bench.network import network_figures, network_markdown
+    from netsetest_bench.plant import plant_figures, plant_markdown
+    from netsetest_bench.scenario import compare_markdown, scenario_figures, scenario_markdown
+    from netsetest_bench.flow import flow_figures, flow_markdown
+    from netsetest_bench.logs import logs_figures, logs_markdown
+    from netsetest_bench.view import view_figures, view_markdown
+    from netsetest_bench.node_budget import node_figures, node_markdown
+    from netsetest_bench.scaleout import scaleout_figures, scaleout_markdown
+    from netsetest_bench.campaign import campaign_figures, campaign_markdown
+    from netsetest_bench.widths import widths_figures, widths_markdown
+    from netsetest_bench.zenoh_runs import (
         launch_to_step0,
         node_memory_profile,
         node_startup,
@@ -494,7 +494,7 @@ def run_bench(
             _log(f"  {p['objective']}: {p.get('process_ms_per_step')} ms per node-step, {p['deadline_misses']} deadline misses")
         res["defences"] = defences(cfg)
         if baseline is not None:
-            from netsetest.bench.baseline import performance_side_by_side
+            from netsetest_bench.baseline import performance_side_by_side
 
             res["baseline"] = performance_side_by_side(cfg, tmp, baseline, quick)
         if only is None:  # every part too; --only performance leaves them out
@@ -508,16 +508,16 @@ def run_bench(
     res.update(headline(res))
     md = markdown(res)
     if "baseline" in res:
-        from netsetest.bench.baseline import baseline_markdown
+        from netsetest_bench.baseline import baseline_markdown
 
-        md += "\n## Side by side with the baseline (netsetest/bench/baseline.py)\n\n" + baseline_markdown(res["baseline"])
+        md += "\n## Side by side with the baseline (netsetest_bench/baseline.py)\n\n" + baseline_markdown(res["baseline"])
     if only is None:
-        md += "\n## A car as the truth (netsetest/bench/plant.py)\n\n" + plant_markdown(res["plant"])
-        md += "\n## What the exchange can buy (netsetest/bench/network.py)\n\n" + network_markdown(res["network"])
-        md += "\n## The paper's scenario (netsetest/bench/scenario.py)\n\n" + scenario_markdown(res["scenario"])
+        md += "\n## A car as the truth (netsetest_bench/plant.py)\n\n" + plant_markdown(res["plant"])
+        md += "\n## What the exchange can buy (netsetest_bench/network.py)\n\n" + network_markdown(res["network"])
+        md += "\n## The paper's scenario (netsetest_bench/scenario.py)\n\n" + scenario_markdown(res["scenario"])
         md += "\n" + compare_markdown(res["scenario"])
-        md += "\n## What `netsetest exact` costs under k-of-N health (netsetest/bench/exact_cost.py)\n\n" + exact_cost_markdown(res["exact"])
-        md += "\n## Published width over the exact limit, per coordinate (netsetest/bench/widths.py)\n\n" + widths_markdown(res["widths"])
+        md += "\n## What `netsetest exact` costs under k-of-N health (netsetest_bench/exact_cost.py)\n\n" + exact_cost_markdown(res["exact"])
+        md += "\n## Published width over the exact limit, per coordinate (netsetest_bench/widths.py)\n\n" + widths_markdown(res["widths"])
     _write(res, md, json_path, markdown_path)
     return 0
 
@@ -823,7 +823,7 @@ def markdown(res: dict) -> str:
     d = res["defences"]
     lines += [
         "",
-        "## Defences (netsetest/bench/attacks.py, netsetest/bench/soak.py)",
+        "## Defences (netsetest_bench/attacks.py, netsetest_bench/soak.py)",
         "",
         "`netsetest run` of the paper network as users start it, attacked from a process of its own (secured: with node 2's "
         "certificate, an insider; insecure: a peer of the open mesh):",

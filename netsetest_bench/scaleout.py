@@ -32,8 +32,8 @@ import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from netsetest.bench.topologies import ring_topology
-from netsetest.bench.zenoh_runs import CLK_TCK, MACHINE_CORES, PY, _kill
+from netsetest_bench.topologies import ring_topology
+from netsetest_bench.zenoh_runs import CLK_TCK, MACHINE_CORES, PY, _kill
 from netsetest.runtime import netns
 from netsetest.runtime.channel import ChannelReader
 from netsetest.runtime.launcher import RUN_ID_BYTES, sigterm_as_interrupt

@@ -1,5 +1,5 @@
 """Memory soak: a long in-memory run must keep its resident memory flat (vehicle and collector prune
-their per-step maps, the record streams to disk).  ``python -m netsetest.bench.soak --steps N`` prints JSON:
+their per-step maps, the record streams to disk).  ``python -m netsetest_bench.soak --steps N`` prints JSON:
 RSS samples and the least-squares slope in MB per 10 000 steps after a warm-up.
 """
 

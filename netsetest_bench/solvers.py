@@ -84,7 +84,7 @@ def _stats(v: list[float]) -> dict:
 
 def side_by_side(cap: Capture, n_ref: int, n_naive: int, n_cvxpy: int) -> dict:
     """Solve the captured steps with every formulation, interleaved; times in ms (wall and CPU)."""
-    from netsetest.bench.reference import NaiveSDP, StraightforwardSDP
+    from netsetest_bench.reference import NaiveSDP, StraightforwardSDP
 
     sc, variant = cap.scenario, cap.variant
     ids = sc.ids

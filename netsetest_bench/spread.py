@@ -2,7 +2,7 @@
 
 ``netsetest bench --spread A.json B.json C.json --json bench/spread.json`` measures nothing: it reads the
 figures files of repeated ``netsetest bench --quick --only performance`` runs and reports, per headline
-figure (:data:`netsetest.bench.run.TARGETS`), every run's value, the median, the relative spread
+figure (:data:`netsetest_bench.run.TARGETS`), every run's value, the median, the relative spread
 (max − min) / median and whether the target was met in every run.  A figure whose spread is wider than
 the distance to its target is not a result on this machine, only a range.
 """
@@ -13,7 +13,7 @@ import json
 import statistics
 from pathlib import Path
 
-from netsetest.bench.run import TARGETS
+from netsetest_bench.run import TARGETS
 
 MIN_RUNS = 2  # a spread needs two runs at least
 NEGLIGIBLE = 1e-9  # a median this close to 0 (a slope of nothing) has no relative spread

@@ -2,14 +2,14 @@
 
 - ``live``: ``netsetest run paper6 --clock realtime`` (τs = 0.1 s, secured default, roles as processes)
   with ``--view`` and without, in pairs run back to back (the pair's order alternates), each run sampled
-  by the real-time runs' own machinery (netsetest/bench/zenoh_runs.py: ``cli_run`` and its
+  by the real-time runs' own machinery (netsetest_bench/zenoh_runs.py: ``cli_run`` and its
   ``ProcessSampler``): the nodes' deadline misses, a node's CPU per step (its median share of a core over
   the stepping phase × τs), the view's CPU (its process, which also serves the page and the stream:
   runtime/view_server.py), and the view's lag behind the run, which the view measures itself (runtime/view.py
   ``Lag``: per step, when the step's truth was handed to the browsers' connections minus when the vehicle
   published the step; ``run --view-lag-json`` hands it over) with the frames it dropped.
 - ``page``: ``netsetest report RECORD --html`` of an 80-step paper6 record, opened ``page_reps`` times in
-  headless Chromium (netsetest/records/browser.py, a fresh browser each time): the page's load event, first
+  headless Chromium (netsetest_bench/browser.py, a fresh browser each time): the page's load event, first
   contentful paint and the moment BokehJS had rendered every root, from the navigation's start; the CPU its
   renderer used by then (main thread and whole process: what the page costs, which load on the machine
   does not inflate, so a slow opening can be told from a slow page); the page's size.
@@ -62,7 +62,7 @@ def _quantile(values: list[float], q: float) -> float | None:
 
 def live_run(steps: int, view: bool, tmp: Path) -> dict:
     """One real-time paper6 run (``netsetest run``, secured default), with its live view or without."""
-    from netsetest.bench.zenoh_runs import cli_run
+    from netsetest_bench.zenoh_runs import cli_run
 
     lag_file = tmp / "lag.json"
     lag_file.unlink(missing_ok=True)
@@ -125,7 +125,7 @@ def _cli(*args: str) -> None:
 
 def page_figures(topology: Path, reps: int, tmp: Path, name: str) -> dict:
     """A record of ``topology`` (in memory, seed 0), its report page, and ``reps`` openings in Chromium."""
-    from netsetest.records.browser import BOKEH_READY, load_page
+    from netsetest_bench.browser import BOKEH_READY, load_page
 
     record, page = tmp / f"{name}.jsonl", tmp / f"{name}.html"
     t0 = time.perf_counter()
@@ -147,7 +147,7 @@ def page_figures(topology: Path, reps: int, tmp: Path, name: str) -> dict:
 
 
 def view_figures(cfg: dict, tmp: Path) -> dict:
-    from netsetest.bench.topologies import ring_topology
+    from netsetest_bench.topologies import ring_topology
     from netsetest.config.schema import load_topology
     from netsetest.records.report_html import MAX_POINTS
 

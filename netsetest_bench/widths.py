@@ -48,7 +48,7 @@ SIDE_PROCESSES, SIDE_RUNS = 4, 3  # side by side with the baseline: processes pe
 STEP_TARGET_MS = 0.25  # issue 28: the step at most this much over the code before every node kept a region
 STEP_PROGRAM = """
 import json, statistics, sys
-from netsetest.bench.solvers import capture, side_by_side
+from netsetest_bench.solvers import capture, side_by_side
 from netsetest.config.schema import load_topology
 from netsetest.scenarios import TOPOLOGY_DIR
 case, steps, runs = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
@@ -118,7 +118,7 @@ def widths_figures(cfg: dict, tmp: Path, baseline: Path | None = None) -> dict:
 
     from netsetest.analysis.exact import FROM_STEP
 
-    from netsetest.bench.network_sets import sets_figures
+    from netsetest_bench.network_sets import sets_figures
 
     with ProcessPoolExecutor(JOBS) as pool:
         runs = list(pool.map(_measure, plan(cfg)))
@@ -169,7 +169,7 @@ def region_cost(steps: int = COST_STEPS, runs: int = COST_RUNS) -> dict:
     node-steps of the estimator's step (bench/solvers.py's ``capture``: the in-run time of ``LocalEstimator.step``),
     of the region's move and of its cut, and the region's share of the step time (the move and the cut over all
     steps, summed); the case's figure is the median over the runs."""
-    from netsetest.bench.solvers import capture
+    from netsetest_bench.solvers import capture
     from netsetest.config.schema import load_topology
 
     out: dict = {"steps": steps, "runs": runs}
@@ -200,7 +200,7 @@ class SideBySideFailed(RuntimeError):
 def _step_runs(case: Case, steps: int, runs: int, code: Path | None) -> list[dict[str, float]]:
     """:data:`STEP_PROGRAM` in a process of its own, on ``code``'s netsetest (None: this checkout's): after a run of
     the same length, ``runs`` runs, each the step median per node-step [ms] in the run and replayed (:data:`STEP_FIGURES`)."""
-    from netsetest.bench.zenoh_runs import code_env
+    from netsetest_bench.zenoh_runs import code_env
 
     env = {**os.environ, **code_env(code)}
     where = code or "this checkout"
@@ -222,7 +222,7 @@ def step_side_by_side(baseline: Path, steps: int = COST_STEPS, processes: int = 
     checkout, and the fastest runs' difference against :data:`STEP_TARGET_MS`.  The fastest run is the code's cost
     where nothing else took the machine: this host has episodes of seconds in which a run is 1.5 times slower
     (docs/performance-history.md), which a median of a few runs does not hide."""
-    from netsetest.bench.node_budget import checkout_commit
+    from netsetest_bench.node_budget import checkout_commit
 
     out: dict = {
         "steps": steps,
@@ -367,7 +367,7 @@ def side_by_side_markdown(side: dict) -> str:
 
 def sets_section(res: dict) -> str:
     """Issue 44's tables (bench/network_sets.py), or where the figures are older than them, that they are not there."""
-    from netsetest.bench.network_sets import sets_markdown
+    from netsetest_bench.network_sets import sets_markdown
 
     if "sets" not in res:
         return "Not measured in these figures (they are older than issue 44's part): measure them with the command above.\n"
@@ -399,7 +399,7 @@ def widths_markdown(res: dict) -> str:
             lines.append(f"| `{r['estimator']}` | " + " | ".join(cells) + " |")
         lines.append("")
     if "sets" in res:
-        lines += ["What a node takes from its network (issue 44, netsetest/bench/network_sets.py):", "", sets_section(res)]
+        lines += ["What a node takes from its network (issue 44, netsetest_bench/network_sets.py):", "", sets_section(res)]
     return "\n".join(lines)
 
 

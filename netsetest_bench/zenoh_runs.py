@@ -43,7 +43,7 @@ from netsetest.runtime.forkserver import NAME_PREFIX
 from netsetest.runtime.launcher import free_ports
 from netsetest.runtime.processes import role_env
 from netsetest.runtime.rolespec import Clock, CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
-from netsetest.bench.topologies import RingVariant
+from netsetest_bench.topologies import RingVariant
 
 PY = [sys.executable, "-m", "netsetest.cli.main"]
 
@@ -400,7 +400,7 @@ def observed_lockstep(topology: Path, steps: int | None = None, insecure: bool =
 
 def node_startup(directory: Path, reps: int = 3, timeout: float = 120.0) -> dict:
     """One node process launched into a waiting one-node network: start-up time and peak RSS."""
-    from netsetest.bench.topologies import single_node_topology
+    from netsetest_bench.topologies import single_node_topology
 
     topo = single_node_topology(directory, steps=3)
     rows = []
@@ -468,7 +468,7 @@ def code_env(code: Path | None) -> dict[str, str]:
 def realtime_run(topo: Path, n: int, steps: int, retries: int, log, label: str = "", env: dict[str, str] | None = None) -> tuple[bool, list[dict]]:
     """Real-time runs of one topology (up to ``1 + retries``): whether one ran without a deadline miss or a
     lost node, and every attempt's row.  ``env``: added to the run's environment (:func:`code_env`)."""
-    from netsetest.bench.topologies import RING_TAU_S
+    from netsetest_bench.topologies import RING_TAU_S
 
     rows = []
     for attempt in range(retries + 1):
@@ -508,7 +508,7 @@ def realtime_run(topo: Path, n: int, steps: int, retries: int, log, label: str =
 
 def realtime_ladder(directory: Path, sizes: list[int], steps: int, retries: int = 1, log=print) -> dict:
     """Real-time runs of ring networks of growing size; the largest without a deadline miss."""
-    from netsetest.bench.topologies import ring_topology
+    from netsetest_bench.topologies import ring_topology
 
     runs: list[dict] = []
     best = None
@@ -525,7 +525,7 @@ def realtime_fit(directory: Path, variants: tuple[RingVariant, ...], sizes: list
     """Per ring variant (bench/topologies.py: a reference sensor, k-of-N health per group of six, the
     CommonRoad car as the truth): the largest of ``sizes`` up to ``start`` (the plain ladder's largest) that
     still runs in real time, walking down from ``start``, and its ratio to ``start``."""
-    from netsetest.bench.topologies import ring_topology
+    from netsetest_bench.topologies import ring_topology
 
     out: dict = {}
     for variant in variants:
@@ -548,7 +548,7 @@ def cpu_demand(processes: dict | None, nodes: int) -> dict:
     """What a real-time run asks of the machine: a node's CPU per step (its share of a core over the
     stepping phase × τs, robust to other work as long as the node keeps up), and the cores the run
     needs at that cost — N nodes × CPU per step / τs, plus what vehicle, collector and router used."""
-    from netsetest.bench.topologies import RING_TAU_S
+    from netsetest_bench.topologies import RING_TAU_S
 
     share = (processes or {}).get("node_cpu_pct_median")
     if share is None:
@@ -575,7 +575,7 @@ def profiled_ring_run(directory: Path, nodes: int, steps: int, objective: str | 
     the run (:func:`cli_run`), each node's report (those that stepped) and the load average before it.
     ``objective``: the nodes' ``--objective``; ``code``: another checkout whose netsetest runs (PYTHONPATH,
     the benchmark's baseline), this one's by default."""
-    from netsetest.bench.topologies import RING_TAU_S, ring_topology
+    from netsetest_bench.topologies import RING_TAU_S, ring_topology
 
     topo = ring_topology(directory, nodes, steps)
     with tempfile.TemporaryDirectory(prefix="nsprofile-") as prof:

@@ -1,9 +1,9 @@
-"""The exact part's report (netsetest/bench/exact_cost.py): issue 34's targets are read from the right rows, and
+"""The exact part's report (netsetest_bench/exact_cost.py): issue 34's targets are read from the right rows, and
 memory that grows from the middle step to the last is not called flat."""
 
 from __future__ import annotations
 
-from netsetest.bench.exact_cost import exact_cost_markdown, targets
+from netsetest_bench.exact_cost import exact_cost_markdown, targets
 
 
 def _row(topology: str, case: str, cpu: float, peak: float, exact: int, rss: list[float]) -> dict:

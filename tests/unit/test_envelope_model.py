@@ -193,7 +193,7 @@ def test_the_bound_measures_e_in_its_own_norm() -> None:
 
 
 def test_the_bench_table_says_per_car_and_drive_what_was_covered_and_attributed() -> None:
-    from netsetest.bench.plant import envelope_markdown
+    from netsetest_bench.plant import envelope_markdown
 
     row = dict(
         case="nsnim", kmh=70.0, steps=80, ay_peak=5.5, envelope_left=0, e_max_ratio=0.4, covered=486, evaluated=486, violations=0, misses=0, misses_attributed=0
