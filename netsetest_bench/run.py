@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from netsetest_bench.performance_figures import YARDSTICKS, Defences, NodeProfile, Performance, fit_cpu, performance_figures
+from netsetest_bench.render import MISSING, figure, fill
 from netsetest_bench.sections import PARTS
 from netsetest_bench.topologies import RingVariant
 from netsetest.config.schema import Scenario
@@ -506,7 +508,7 @@ def run_bench(
     res["meta"]["load_after"] = _load()
     res["meta"]["duration_s"] = time.perf_counter() - t_all
     res.update(headline(res))
-    md = markdown(res)
+    md = markdown(json.loads(json.dumps(res, default=_jsonable)))  # rendered from what the figures file holds
     if "baseline" in res:
         from netsetest_bench.baseline import baseline_markdown
 
@@ -594,259 +596,118 @@ TARGETS = [
 ]
 
 
-def _fit_cpu(runs: list[dict], nodes: int | None) -> float | None:
-    """A node's CPU ms per step in the run of ``nodes`` nodes that kept every deadline (None: there is none)."""
-    return next((r.get("node_cpu_ms_per_step") for r in runs if r["nodes"] == nodes and r["deadline_misses"] == 0 and not r["nodes_missing"]), None)
+def verdicts(p: Performance) -> dict[str, str]:
+    """Each target's verdict: yes, no, or — where the run did not measure the figure."""
+    out = {}
+    for key, _, ok in TARGETS:
+        v = getattr(p, key)
+        out[key] = MISSING if v is None else ("yes" if ok(v) else "no")
+    return out
 
 
-def performance_markdown(res: dict) -> str:
+def _scaling_spread(p: Performance) -> float:
+    return max(abs(x) for x in p.inmemory_scaling.spread_vs_smallest)
+
+
+def performance_markdown(doc: dict) -> str:
     """The headline figures of a whole benchmark (README, docs/results.md, docs/performance.md)."""
-    f = lambda v, spec=".2f": "—" if v is None else format(v, spec)  # noqa: E731  # a one-line local helper
-    meta, z, sa = res["meta"], res["zenoh"], res["paper"]["saim/scheduled"]
-    floor = res.get("zenoh_overhead_ratio_cpu_floor")
-    scale = res["scaling"]
-    spread = max(abs(x) for x in res["inmemory_scaling"]["spread_vs_smallest"])
-    met = {key: ok(res[key]) for key, _, ok in TARGETS if res.get(key) is not None}
-
-    def yes(*keys: str) -> str:
-        return " / ".join("—" if k not in met else ("yes" if met[k] else "no") for k in keys)
-
-    rows = [
-        (
-            "median node-step, NSNIM / SAIM (scheduled, incl. certification)",
-            f"{f(res['solve_ms_median'])} ms / {f(res['solve_ms_median_saim'])} ms",
-            "≤ 2 ms / ≤ 5 ms",
-            yes("solve_ms_median", "solve_ms_median_saim"),
-        ),
-        (
-            "vs. the straightforward / the naive formulation (NSNIM)",
-            f"×{f(res['straightforward_ratio'], '.0f')} / ×{f(res['naive_ratio'], '.0f')}",
-            "≥ 10 / ≥ 20",
-            yes("straightforward_ratio", "naive_ratio"),
-        ),
-        ("vs. the previous cvxpy-Parameters estimator, NSNIM / SAIM", f"×{f(res['previous_default_ratio'], '.0f')} / ×{f(sa['prev']['ratio'], '.0f')}", "", ""),
-        (
-            f"mean fault width / exact limit, NSNIM / SAIM (paper signals, seed 0, {res['tightness']['nsnim']['steps']} steps)",
-            f"{f(res['fault_width_ratio_exact_nsnim'], '.3f')} / {f(res['fault_width_ratio_exact_saim'], '.3f')}",
-            "≤ 1.15 / ≤ 1.25",
-            yes("fault_width_ratio_exact_nsnim", "fault_width_ratio_exact_saim"),
-        ),
-        (
-            "in memory, ms per node-step at " + " / ".join(str(r["nodes"]) for r in scale) + " nodes",
-            " / ".join(f(r["ms_per_node_step"]) for r in scale),
-            "flat ±30 %",
-            "yes" if spread <= 0.3 else "no",
-        ),
-        (
-            "Zenoh lockstep / in-memory wall time of the stepping phase (the lowest ratio the cores allow at the measured CPU per step)",
-            f"{f(res['zenoh_overhead_ratio'])} ({f(_med(z['zenoh_stepping_s']))} s against {f(_med(z['inmemory_s']))} s; floor {f(floor)})",
-            "≤ 1.0",
-            yes("zenoh_overhead_ratio"),
-        ),
-        ("largest real-time network (τs = 0.1 s) without a deadline miss", f"{f(res['realtime_max_nodes'], '.0f')} nodes", "≥ 96", yes("realtime_max_nodes")),
-        *(
-            (
-                f"largest real-time network with {what}, against the plain one (a node's CPU per step there, and the plain ring's)",
-                f"{f(v.get('max_nodes'), '.0f')} nodes ({f(v.get('ratio_to_plain'))}; {f(_fit_cpu(v['runs'], v.get('max_nodes')))} ms against "
-                f"{f(_fit_cpu(res['realtime']['runs'], res['realtime_max_nodes']))} ms)",
-                target,
-                yes(key) if target else "",
-            )
-            for variant, what, target, key in RT_VARIANT_ROWS
-            if (v := (res["realtime"].get("variants") or {}).get(variant)) is not None
-        ),
-        (
-            "node peak RSS: in `netsetest run` (forked, median) / a `netsetest node` started on its own",
-            f"{f(_med(z['node_peak_rss_mb_in_run']), '.1f')} MB / {f(res['node_rss_mb'], '.1f')} MB",
-            "≤ 50 MB",
-            yes("node_rss_mb"),
-        ),
-        ("one node process into a waiting network, launch → first estimate", f"{f(res['node_first_estimate_s'])} s", "< 1 s", yes("node_startup_s")),
-        (
-            "`netsetest run` of the paper network (8 processes, mTLS + ACL), launch → step 0",
-            f"{f(res['launch_to_step0_s'])} s",
-            "< 1 s",
-            yes("launch_to_step0_s"),
-        ),
-        (
-            f"a flood of {meta['config']['flood_rate']:,} msg/s at node 2 (secured run): step rate against the unflooded run".replace(",", " "),
-            f"{f(res.get('flood_step_rate_ratio'))}",
-            "≥ 0.5",
-            yes("flood_step_rate_ratio"),
-        ),
-        ("RSS slope over a long run", f"{f(res.get('soak_rss_slope_mb_per_10k_steps'))} MB per 10 000 steps", "< 5 MB", yes("soak_rss_slope_mb_per_10k_steps")),
-    ]
-    lines = [
-        f"`netsetest bench{' --quick' if meta['quick'] else ''}` of {meta['date']} ({meta['cpus']} CPUs, Python {meta['python']}, "
-        f"load average {meta['load_before']} before, {meta['duration_s'] / 60:.0f} minutes in all):",
-        "",
-        "| figure | value | target | met |",
-        "|---|---|---|---|",
-    ]
-    lines += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
-    return "\n".join(lines) + "\n"
-
-
-def markdown(res: dict) -> str:
-    f = lambda v, spec=".2f": "—" if v is None else format(v, spec)  # noqa: E731  # a one-line local helper
-    lines = [f"# netsetest benchmark ({'quick' if res['meta']['quick'] else 'full'}, {res['meta']['date']})", ""]
-    lines += [
-        f"Machine: {res['meta']['cpus']} CPUs, Python {res['meta']['python']}; load average before/after: "
-        f"{res['meta']['load_before']} / {res['meta']['load_after']}; {res['meta']['duration_s']:.0f} s in all.",
-        "",
-    ]
-    lines += ["## Targets", "", "| figure | value | target | met |", "|---|---|---|---|"]
-    for key, target, ok in TARGETS:
-        v = res.get(key)
-        lines.append(f"| {key} | {f(v)} | {target} | {'—' if v is None else ('yes' if ok(v) else 'no')} |")
-    sc = res["inmemory_scaling"]
-    floor = res.get("zenoh_overhead_ratio_cpu_floor")
-    if floor is not None:  # why zenoh_overhead_ratio is what it is (section Zenoh)
-        lines.append(f"| zenoh_overhead_ratio_cpu_floor (the lowest ratio this machine's cores allow at the measured CPU per step) | {f(floor)} | — | — |")
-    spread = max(abs(x) for x in sc["spread_vs_smallest"])
-    lines.append(f"| scaling spread 6→96 nodes | {spread * 100:.0f} % | ≤ ±30 % | {'yes' if spread <= 0.3 else 'no'} |")
-    lines += [
-        "",
-        "## Paper scenario, per node-step (wall ms; whole estimator step incl. certification)",
-        "",
-        "| case / variant | fast median | fast p95 | solve part | CPU median | iters | previous default (cvxpy) | straightforward | naive | fallbacks |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for key, r in res["paper"].items():
-
-        def cell(name: str) -> str:
-            if name not in r:
-                return "—"
-            x = r[name]
-            return f"{f(x['median'])} ms (×{x['ratio']:.1f}, n={x['n']})"
-
-        lines.append(
-            f"| {key} | {f(r['fast_ms']['median'])} | {f(r['fast_ms']['p95'])} | {f(r['fast_solve_ms']['median'])} | "
-            f"{f(r['fast_cpu_ms']['median'])} | {f(r['iterations_median'], '.0f')} | {cell('prev')} | {cell('straightforward')} | "
-            f"{cell('naive')} | {r['fallbacks']} |"
-        )
-    lines += ["", "Fault-bound width of the same step, fast / yardstick − 1 (negative: the fast path is tighter):", ""]
-    for key, r in res["paper"].items():
-        parts = [
-            f"{n} [{f(r[n]['width_rel_diff_min'], '.1e')}, {f(r[n]['width_rel_diff_max'], '.1e')}]" for n in ("prev", "straightforward", "naive") if n in r
-        ]
-        lines.append(f"- {key}: " + "; ".join(parts))
-    lines += [
-        "",
-        "## Tightness against the exact limit (`netsetest exact`, paper signals, seed 0)",
-        "",
-        "Mean over nodes of published width / exact width (steps ≥ 10), and Althoff & Rath's relative-RMS radius (all steps). "
-        "Where the published interval is narrower than exact, the estimator relied on more than the exact program's assumptions "
-        "(the SAIM estimator's fixed sector) and the ratio there is not a tightness figure.",
-        "",
-        "| case | fault bounds | fault | yaw rate | sideslip | RMS radius f / r / β | narrower than exact | exact solve |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for case, t in res["tightness"].items():
-        w, rr = t["width_ratio"], t["rms_radius_rel"]
-        lines.append(
-            f"| {case} | {t['fault_bounds']} | {f(w['f'], '.3f')} | {f(w['r'], '.3f')} | {f(w['beta'], '.3f')} | "
-            f"{f(rr['f'], '.3f')} / {f(rr['r'], '.3f')} / {f(rr['beta'], '.3f')} | {t['narrower']} of {t['intervals']} | "
-            f"{f(t['exact_s'], '.1f')} s |"
-        )
-    lines += [
-        "",
-        "## In memory, ring with chords (|N_i| = 3, 4, 5 in equal shares)",
-        "",
-        "| nodes | ms per node-step | estimator median | by degree 3 / 4 / 5 |",
-        "|---|---|---|---|",
-    ]
-    for r in sc["rows"]:
-        bd = r["estimator_ms_median_by_degree"]
-        lines.append(f"| {r['nodes']} | {f(r['ms_per_node_step'])} | {f(r['estimator_ms_median'])} | {' / '.join(f(bd.get(k)) for k in (3, 4, 5))} |")
-    z = res["zenoh"]
-    lines += [
-        "",
-        "## Zenoh",
-        "",
-        f"- lockstep stepping phase of `netsetest run` (secured: mTLS, router star, forked roles) {f(_med(z['zenoh_stepping_s']))} s "
-        f"vs in memory {f(_med(z['inmemory_s']))} s: ratio {f(z['ratio'])} (start-up before step 0: {f(z['zenoh_startup_s'])} s)",
-        f"- the same with `--insecure` (open peer mesh): {f(_med(z.get('zenoh_insecure_stepping_s') or []))} s: ratio {f(z.get('ratio_insecure'))}",
-        *_cpu_floor_lines(z.get("cpu_floor")),
-        f"- end to end through `netsetest run`: {f(z['cli_end_to_end']['zenoh_s'])} s vs {f(z['cli_end_to_end']['inmemory_s'])} s "
-        f"(ratio {f(z['cli_end_to_end']['ratio'])})",
-        "- `netsetest run` of the paper network (8 processes, mTLS + ACL), launch → step 0: "
-        + ", ".join("—" if r["launch_to_step0_s"] is None else f"{f(r['launch_to_step0_s'])} s (load {r['load_before']:.1f})" for r in res["launch"]["reps"])
-        + f"; median {f(res['launch']['median_s'])} s",
-        f"- node peak RSS in the paper run: {', '.join(f(x, '.0f') for x in z['node_peak_rss_mb_in_run'])} MB",
-        "- one node launched into a waiting network: "
-        + "; ".join(
-            f"first state {f(r['first_state_s'])} s, first estimate {f(r['first_estimate_s'])} s, peak RSS {f(r['peak_rss_mb'], '.0f')} MB"
-            for r in res["node"]["reps"]
-        ),
-        "",
-        "Where a node process's memory and start-up go (RSS after each import stage, wall ms):",
-        "",
-        "| stage | RSS MB | added MB | ms |",
-        "|---|---|---|---|",
-    ]
-    for r in res["node"].get("memory_by_stage", []):
-        lines.append(f"| {r['stage']} | {f(r.get('rss_mb'), '.1f')} | {f(r.get('added_mb'), '.1f')} | {f(r.get('ms'), '.0f')} |")
-    lines += [
-        "",
-        f"Real time ({res['realtime']['steps']} steps at τs = 0.1 s; CPU in % of one core, steady state, the machine has 2 cores = 200 %):",
-        "",
-        "| nodes | attempt | load before | exit | deadline misses | late steps (first) | nodes missing | wall s | "
-        "CPU per node | ms per node-step | all nodes | run (router) / vehicle / collector | cores needed | other work on the machine | node peak RSS MB |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in res["realtime"]["runs"]:
-        pr = r.get("processes") or {}
-        roles = pr.get("role_cpu_pct") or {}
-        lines.append(
-            f"| {r['nodes']} | {r['attempt']} | {r.get('load_before')} | {r['exit_code']} | {r['deadline_misses']} | "
-            f"{r.get('late_steps')} ({r.get('first_late_step')}) | {r['nodes_missing']} | {f(r['wall_s'], '.0f')} | "
-            f"{f(pr.get('node_cpu_pct_median'))} | {f(r.get('node_cpu_ms_per_step'))} | {f(pr.get('nodes_cpu_pct_total'), '.0f')} | "
-            f"{' / '.join(f(roles.get(k), '.1f') for k in ('run', 'vehicle', 'collector'))} | {f(r.get('demand_cores'))} | "
-            f"{f(pr.get('other_work_pct'), '.0f')} | {f(pr.get('node_peak_rss_mb_median'), '.1f')} |"
-        )
-    variants = res["realtime"].get("variants") or {}
-    if variants:
-        lines += [
-            "",
-            f"The largest ring that still runs in real time with each variant, walking down from the plain ladder's "
-            f"{res['realtime']['max_nodes']} nodes (bench/topologies.py: `reference` = node 3's reading read by every node, "
-            "`max_faulty` = k-of-N health per group of six sensors, a node reading its group's readings, `car` = the CommonRoad car as the truth):",
-            "",
-            "| variant | largest ring | / plain | deadline misses in the runs tried (nodes) |",
-            "|---|---|---|---|",
-        ]
-        for v, r in variants.items():
-            tried = ", ".join(f"{x['deadline_misses']} ({x['nodes']})" for x in r["runs"])
-            lines.append(f"| {v} | {r['max_nodes'] if r['max_nodes'] is not None else '—'} | {f(r['ratio_to_plain'])} | {tried} |")
-    lines += _profile_lines(res.get("node_profile") or {}, res.get("node_profile_trace") or {})
-    d = res["defences"]
-    lines += [
-        "",
-        "## Defences (netsetest_bench/attacks.py, netsetest_bench/soak.py)",
-        "",
-        "`netsetest run` of the paper network as users start it, attacked from a process of its own (secured: with node 2's "
-        "certificate, an insider; insecure: a peer of the open mesh):",
-        "",
-    ]
-    for m in ("secured", "insecure"):
-        for target, what in (("input", "node 2's input key"), ("state", "node 2's state key")):
-            r = d[f"flood_{target}_{m}"]
-            lines.append(
-                f"- {m}: flood of {f(r['sent_per_s'], '.0f')} msg/s on {what}: step rate ratio {f(r['ratio'])}, "
-                f"nodes lost {r['nodes_lost']}, exit {r['exit_code']}"
-            )
-        r = d[f"crash_{m}"]
-        lines.append(
-            f"- {m}: the crash payloads (invalid UTF-8, deep nesting, a foreign Ready, a huge number) on node 2's keys: "
-            f"roles lost {'0' if r['roles_lost'] == 0 else 'some'} (exit {r['exit_code']}, nodes missing {r['nodes_missing']})"
-        )
-    r = d["soak"]
-    lines.append(
-        f"- soak of {r['steps']} steps in memory: RSS {f(r['rss_start_mb'], '.1f')} → {f(r['rss_end_mb'], '.1f')} MB, "
-        f"slope {f(r['slope_mb_per_10k_steps'])} MB per 10 000 steps ({f(r['steps_per_s'], '.0f')} steps/s)"
+    p = performance_figures(doc)
+    met = verdicts(p)
+    plain_cpu = fit_cpu(p.realtime.runs, p.realtime_max_nodes)
+    variant_rows = "".join(
+        fill("performance", "variant-row", what=what, v=v, cpu=fit_cpu(v.runs, v.max_nodes), plain_cpu=plain_cpu, target=target, met=met[key] if target else "")
+        + "\n"
+        for variant, what, target, key in RT_VARIANT_ROWS
+        if (v := p.realtime.variants.get(variant)) is not None
     )
+    saim_prev = p.paper["saim/scheduled"].prev
+    return fill(
+        "performance",
+        "doc",
+        p=p,
+        met=met,
+        quick=" --quick" if p.meta.quick else "",
+        minutes=p.meta.duration_s / 60,
+        saim_prev_ratio=None if saim_prev is None else saim_prev.ratio,
+        tightness_steps=p.tightness["nsnim"].steps,
+        scaling_nodes=" / ".join(str(r.nodes) for r in p.scaling),
+        scaling_ms=" / ".join(figure(r.ms_per_node_step) for r in p.scaling),
+        scaling_flat="yes" if _scaling_spread(p) <= 0.3 else "no",
+        zenoh_s=_med(p.zenoh.zenoh_stepping_s),
+        inmemory_s=_med(p.zenoh.inmemory_s),
+        node_rss_in_run=_med(p.zenoh.node_peak_rss_mb_in_run),
+        variant_rows=variant_rows,
+    )
+
+
+def markdown(doc: dict) -> str:
+    """A performance run's whole report (its --markdown; bench/results.md), from its figures."""
+    p = performance_figures(doc)
+    met = verdicts(p)
+    R = "report"
+    lines = [fill(R, "head", p=p, kind="quick" if p.meta.quick else "full")]
+    lines += [fill(R, "target-row", key=key, value=getattr(p, key), target=target, met=met[key]) for key, target, _ in TARGETS]
+    if p.zenoh_overhead_ratio_cpu_floor is not None:  # why zenoh_overhead_ratio is what it is (section Zenoh)
+        lines.append(fill(R, "floor-row", floor=p.zenoh_overhead_ratio_cpu_floor))
+    spread = _scaling_spread(p)
+    lines.append(fill(R, "spread-row", spread_pct=spread * 100, flat="yes" if spread <= 0.3 else "no"))
+    lines.append(fill(R, "paper-head"))
+    for key, r in p.paper.items():
+        cells = {name: MISSING if y is None else fill(R, "yardstick-cell", y=y) for name in YARDSTICKS for y in (getattr(r, name),)}
+        lines.append(fill(R, "paper-row", key=key, r=r, **cells))
+    lines.append(fill(R, "widths-head"))
+    for key, r in p.paper.items():
+        lines.append(fill(R, "widths-row", key=key, parts="; ".join(fill(R, "widths-part", name=n, y=y) for n, y in r.yardsticks())))
+    lines.append(fill(R, "tightness-head"))
+    lines += [fill(R, "tightness-row", case=case, t=tt) for case, tt in p.tightness.items()]
+    lines.append(fill(R, "scaling-head"))
+    for row in p.inmemory_scaling.rows:
+        by_degree = " / ".join(figure(row.estimator_ms_median_by_degree.get(k)) for k in (3, 4, 5))
+        lines.append(fill(R, "scaling-row", r=row, by_degree=by_degree))
+    lines += _zenoh_lines(p)
+    lines += _realtime_lines(p)
+    lines += _profile_lines(p.node_profile, p.node_profile_trace)
+    lines += _defence_lines(p.defences)
     return "\n".join(lines) + "\n"
+
+
+def _zenoh_lines(p: Performance) -> list[str]:
+    """The Zenoh section: the lockstep ratio and why, start-up, and where a node's memory goes."""
+    z, R = p.zenoh, "report"
+    fl = z.cpu_floor
+    floor = ""
+    if fl is not None:
+        roles = ", ".join(f"{r} {figure(v[0])}" + (f" × {v[1]}" if v[1] > 1 else "") for r, v in fl.cpu_ms_per_step_by_role.items())
+        floor = fill(R, "cpu-floor", fl=fl, roles=roles) + "\n"
+    text = fill(
+        R,
+        "zenoh",
+        p=p,
+        z=z,
+        zenoh_s=_med(z.zenoh_stepping_s),
+        inmemory_s=_med(z.inmemory_s),
+        insecure_s=_med(z.zenoh_insecure_stepping_s),
+        cpu_floor=floor,
+        launches=", ".join(MISSING if r.launch_to_step0_s is None else fill(R, "launch", r=r) for r in p.launch.reps),
+        rss_in_run=", ".join(figure(x, ".0f") for x in z.node_peak_rss_mb_in_run),
+        node_reps="; ".join(fill(R, "node-rep", r=r) for r in p.node.reps),
+    )
+    return [text] + [fill(R, "stage-row", r=r) for r in p.node.memory_by_stage]
+
+
+def _realtime_lines(p: Performance) -> list[str]:
+    """The real-time ladder, run by run, and the largest ring each variant keeps."""
+    rt, R = p.realtime, "report"
+    lines = [fill(R, "realtime-head", rt=rt)]
+    for r in rt.runs:
+        pr = r.processes
+        roles = " / ".join(figure(pr.role_cpu_pct.get(k), ".1f") for k in ("run", "vehicle", "collector"))
+        lines.append(fill(R, "realtime-row", r=r, pr=pr, roles=roles))
+    if rt.variants:
+        lines.append(fill(R, "variants-head", rt=rt))
+        for name, v in rt.variants.items():
+            lines.append(fill(R, "variant-row", name=name, v=v, tried=", ".join(fill(R, "variant-try", r=r) for r in v.runs)))
+    return lines
 
 
 PROFILE_ROWS = (
@@ -862,48 +723,44 @@ PROFILE_ROWS = (
 )
 
 
-def _cpu_floor_lines(fl: dict | None) -> list[str]:
-    """Why the lockstep ratio is what it is: the CPU one step costs in the run's processes."""
-    if not fl:
-        return []
-    roles = ", ".join(f"{r} {v[0]:.2f}" + (f" × {v[1]}" if v[1] > 1 else "") for r, v in fl["cpu_ms_per_step_by_role"].items())
-    return [
-        f"- CPU per lockstep step (paper run, {fl['steps']} against its 80 steps, start-up cancels): {fl['zenoh_cpu_ms_per_step']:.2f} ms "
-        f"in the Zenoh run's processes ({roles} ms) against {fl['inmemory_ms_per_step']:.2f} ms per step in memory; stepping "
-        f"{fl['zenoh_stepping_ms_per_step']:.2f} ms per step.  On {fl['cores']} cores a step cannot take less than CPU/{fl['cores']}, "
-        f"so the ratio cannot fall below **{fl['ratio_floor']:.2f}** at these costs, however well the processes overlap"
-    ]
-
-
-def _profile_lines(*profiles: dict) -> list[str]:
+def _profile_lines(*profiles: NodeProfile) -> list[str]:
     """The per-step node profile table (``realtime_node_profile``), one column pair per objective."""
-    ok = [p for p in profiles if p.get("phases")]
+    ok = [p for p in profiles if p.phases]
+    R = "report"
     if not ok:
-        return ["", "Node profile: no report (exit " + ", ".join(str(p.get("exit_code")) for p in profiles) + ")."]
-    p0 = ok[0]
+        return [fill(R, "no-profile", exits=", ".join(str(p.exit_code) for p in profiles))]
     lines = [
-        "",
-        f"Where a node's CPU goes per step: real-time ring of {p0['nodes']} nodes, {p0['steps']} steps, every node "
-        "profiled (`run --profile`, thread CPU; median over the nodes; "
-        + "; ".join(f"{p['objective']}: load before {p['load_before']}, {p['deadline_misses']} deadline misses" for p in ok)
-        + "):",
-        "",
-        "| phase | " + " | ".join(f"{p['objective']}: µs per step | calls" for p in ok) + " | what |",
-        "|---|" + "---|---|" * len(ok) + "---|",
+        fill(
+            R,
+            "profile-head",
+            p0=ok[0],
+            loads="; ".join(fill(R, "profile-load", p=p) for p in ok),
+            columns=" | ".join(fill(R, "profile-column", p=p) for p in ok),
+            dashes="---|---|" * len(ok),
+        )
     ]
     for name, what in PROFILE_ROWS:
         cells = []
         for p in ok:
-            ph = p["phases"][name]
-            cells += [f"{1000 * ph['ms_per_step']:.0f}", f"{ph['calls_per_step']:.2f}" if name not in ("other", "threads") else ""]
-        lines.append(f"| {name} | " + " | ".join(cells) + f" | {what} |")
-    lines.append(
-        "| **process** | "
-        + " | ".join(f"**{1000 * p['process_ms_per_step']:.0f}** | " for p in ok)
-        + "the node's whole CPU per step; at 10 Hz "
-        + ", ".join(f"{p['objective']}: {p['nodes']} nodes need {p['nodes'] * p['process_ms_per_step'] / 100:.2f} cores" for p in ok)
-        + " |"
-    )
+            ph = (p.phases or {})[name]
+            cells += [figure(1000 * ph.ms_per_step, ".0f"), figure(ph.calls_per_step) if name not in ("other", "threads") else ""]
+        lines.append(fill(R, "profile-row", name=name, cells=" | ".join(cells), what=what))
+    totals = " | ".join(f"**{figure(1000 * p.process_ms_per_step, '.0f')}** | " for p in ok)
+    cores = ", ".join(fill(R, "profile-cores", p=p, cores=p.nodes * p.process_ms_per_step / 100) for p in ok)
+    lines.append(fill(R, "profile-process", cells=totals, cores=cores))
+    return lines
+
+
+def _defence_lines(d: Defences) -> list[str]:
+    """Floods and crash payloads against `netsetest run`, and the soak."""
+    R = "report"
+    lines = [fill(R, "defences")]
+    for mode in ("secured", "insecure"):
+        for target, what in (("input", "node 2's input key"), ("state", "node 2's state key")):
+            lines.append(fill(R, "flood", mode=mode, what=what, r=d.flood(target, mode)))
+        crash = d.crash(mode)
+        lines.append(fill(R, "crash", mode=mode, r=crash, lost="0" if crash.roles_lost == 0 else "some"))
+    lines.append(fill(R, "soak", r=d.soak))
     return lines
 
 
