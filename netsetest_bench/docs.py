@@ -21,6 +21,7 @@ from netsetest_bench.logs import logs_markdown, logs_summary_markdown
 from netsetest_bench.network import network_markdown, network_summary_markdown
 from netsetest_bench.node_budget import node_markdown
 from netsetest_bench.plant import plant_markdown, plant_summary_markdown
+from netsetest_bench.render import FiguresError
 from netsetest_bench.run import performance_markdown
 from netsetest_bench.scaleout import scaleout_markdown
 from netsetest_bench.scenario import compare_markdown, exact_markdown, scenario_markdown
@@ -217,7 +218,10 @@ def render_docs(root: Path) -> dict[str, str]:
         figures = docs[p.source] if p.key is None else docs[p.source].get(p.key)
         if figures is None:
             raise DocsError(f"{root / p.source}: no {p.key!r} figures in it; measure them with `{p.measure}`")
-        sections[part] = p.draw(figures)
+        try:
+            sections[part] = p.draw(figures)
+        except FiguresError as e:  # a file whose figures do not have their part's types
+            raise DocsError(f"{root / p.source}: {e}") from None
     out = {name: render((root / name).read_text(encoding="utf-8"), sections, name) for name in SECTIONED}
     out[RESULTS] = results_document(docs, sections)
     return out

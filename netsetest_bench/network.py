@@ -29,6 +29,9 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from netsetest.config.schema import Scenario
+from netsetest_bench.figures.network import NetworkRun
+from netsetest_bench.figures.network import load as load_network
+from netsetest_bench.render import figure, fill
 from netsetest.records.record import Record
 from netsetest.roles.judge import HEALTH
 from netsetest.scenarios import TOPOLOGY_DIR
@@ -220,129 +223,86 @@ def _num(v: float) -> float | None:
     return None if math.isnan(v) else v
 
 
-def network_markdown(res: dict) -> str:
+def network_markdown(doc: dict) -> str:
     """The network section of docs/results.md (netsetest_bench/docs.py)."""
-    seeds = ", ".join(map(str, res["seeds"]))
-    lines = [
-        f"Exact limit from the node's own data over the exact limit from every node's data (mean width from step 10; "
-        f"{res['steps']} steps, seeds {seeds}, mean over the seeds; `declared 0`: the reference's own fault):",
-        "",
-        "| topology | case | signals | own fault, node 1 … 6 | yaw rate, every node |",
-        "|---|---|---|---|---|",
-    ]
-    groups: dict[tuple[str, str, str], list[dict]] = {}
-    for r in res["runs"]:
-        groups.setdefault((r["topology"], r["case"], r["signals"]), []).append(r)
-    for (topo, case, sig), runs in groups.items():
-        if not runs[0].get("exact", True):
-            continue  # no exact limit with this assumption
-        ids = sorted(runs[0]["nodes"], key=int)
-        faults = []
-        for i in ids:
-            vals = [r["nodes"][i]["fault"] for r in runs]
-            faults.append("declared 0" if any(v is None for v in vals) else f"{sum(vals) / len(vals):.2f}")
-        rs = [r["nodes"][i]["r"] for r in runs for i in ids if r["nodes"][i]["r"] is not None]
-        lines.append(f"| `{topo}` | {case} | {sig} | {' / '.join(faults)} | {min(rs):.2f}–{max(rs):.2f} |")
-    lines += [
-        "",
-        "What the nodes reach today: each node's SDP fault width run alone (a self-loop only, no reading) over the same "
-        "node in the network (its neighbours' states and the readings of the same step: sensor 3's in `paper6_reference`, "
-        "whose own fault, declared 0, is a point in both and left out of every ratio here; "
-        "everyone's under `max_faulty = 4` in `paper6_max_faulty`), the network's over the exact central limit with the same "
-        "assumptions (`netsetest exact`, k-of-N health included: docs/exact.md), the same for its yaw rate and sideslip intervals "
-        "(what a yaw-rate sensor's fault interval follows: docs/network.md, *What is left against exact*), the ceiling of "
-        "alone / network per node, the node alone over the exact limit (no sound set in the network is narrower than that "
-        "limit, so no network can make alone / network larger), and the "
-        "detection delay in steps after the fault's onset, in the network / alone (`-`: no fault, never detected):",
-        "",
-        "| topology | case | signals | alone / network | network / exact | ceiling: alone / exact | yaw rate · sideslip, network / exact | delay, network / alone (node 1 … 6) |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for (topo, case, sig), runs in groups.items():
-        ids = sorted(runs[0]["nodes"], key=int)
-        gain = [r["nodes"][i]["sdp_alone_over_network"] for r in runs for i in ids]  # (None: the reference's own fault, a point)
-        over = [r["nodes"][i]["sdp_network_over_exact"] for r in runs for i in ids if r["nodes"][i]["sdp_network_over_exact"] is not None]
-        delays = " · ".join(f"{_d(runs[0]['nodes'][i]['delay_network'])}/{_d(runs[0]['nodes'][i]['delay_alone'])}" for i in ids)
-        states = " · ".join(_span([r["nodes"][i].get(key) for r in runs for i in ids]) for key in ("sdp_r_over_exact", "sdp_beta_over_exact"))
-        ceiling = _span([_ceiling(r["nodes"][i]) for r in runs for i in ids])
-        lines.append(f"| `{topo}` | {case} | {sig} | {_span(gain, '.3f')} | {_span(over)} | {ceiling} | {states} | {delays} |")
-    runs = res["runs"]
-    false = sum(v.get("false_detections", 0) for r in runs for v in r["nodes"].values())
-    false_cov = sum(v.get("false_detections_covered", 0) for r in runs for v in r["nodes"].values())
-    lines += [
-        "",
-        f"False detections (a fault interval excluding 0 while the true fault was 0) over these {len(runs)} runs "
-        f"in the network: {false}, of them where every assumption held: {false_cov}.",
-    ]
-    sweep = res.get("sweep")
-    if sweep:
-        seeds = sweep["seeds"]
-        lines += [
-            "",
-            f"Containment and detection over seeds {seeds[0]}–{seeds[-1]} in memory (node-steps summed over the seeds; a false detection "
-            "where every assumption held would also be a violation; `max_faulty = 3` is false for the paper's faults, four of "
-            "which are on at once from step 20):",
-            "",
-            "| topology | declared | case | signals | violations | covered / evaluated | contained | misses where an assumption broke | uncovered by k-of-N health | false detections (covered) |",
-            "|---|---|---|---|---|---|---|---|---|---|",
-        ]
-        for r in sweep["rows"]:
-            lines.append(
-                f"| `{r['topology']}` | {r['declared']} | {r['case']} | {r['signals']} | {r['violations']} | {r['covered']} / {r['evaluated']} | "
-                f"{r['contained']} | {r['misses_broken']} | {r['uncovered_health']} | {r['false_detections']} ({r['false_detections_covered']}) |"
+    n = load_network(doc)
+    T = "network"
+    groups = n.groups()
+    lines = [fill(T, "limits-head", n=n, seeds=", ".join(map(str, n.seeds)))]
+    for (topology, case, signals), runs in groups.items():
+        if runs[0].exact:  # else no exact limit with this assumption
+            lines.append(_limits_row(topology, case, signals, runs))
+    lines.append(fill(T, "reach-head"))
+    for (topology, case, signals), runs in groups.items():
+        nodes = [r.nodes[i] for r in runs for i in sorted(runs[0].nodes)]
+        first = [runs[0].nodes[i] for i in sorted(runs[0].nodes)]
+        lines.append(
+            fill(
+                T,
+                "reach-row",
+                topology=topology,
+                case=case,
+                signals=signals,
+                gain=_span([v.sdp_alone_over_network for v in nodes], ".3f"),  # (None: the reference's own fault, a point)
+                over=_span([v.sdp_network_over_exact for v in nodes]),
+                ceiling=_span([v.ceiling() for v in nodes]),
+                states=" · ".join((_span([v.sdp_r_over_exact for v in nodes]), _span([v.sdp_beta_over_exact for v in nodes]))),
+                delays=" · ".join(fill(T, "delay", network=_d(v.delay_network), alone=_d(v.delay_alone)) for v in first),
             )
-    cost = res.get("exchange_cost")
-    if cost and "paper6_reference" in cost["ms_per_step"]:
-        parts = []
-        for name, ms in cost["ms_per_step"].items():
-            on, off = ms["readings"], ms["no_readings"]
-            parts.append(f"`{name}` {on:.1f} ms per step with the readings and {off:.1f} ms without ({100 * (on / off - 1):+.0f} %)")
-        lines += [
-            "",
-            "The same-step phase's cost, `netsetest run … --mode zenoh` (secured, lockstep) against the same file with "
-            f"`[network] readings = false`: {'; '.join(parts)} (medians of {cost['reps']} interleaved runs of "
-            f"{cost['steps'][0]} and {cost['steps'][1]} steps each, the per-step time from their difference).",
-        ]
+        )
+    every = [v for r in n.runs for v in r.nodes.values()]
+    lines.append(
+        fill(
+            T,
+            "false",
+            runs=len(n.runs),
+            false=sum(v.false_detections for v in every),
+            false_covered=sum(v.false_detections_covered for v in every),
+        )
+    )
+    if n.sweep:
+        lines.append(fill(T, "sweep-head", first=n.sweep.seeds[0], last=n.sweep.seeds[-1]))
+        lines += [fill(T, "sweep-row", r=r) for r in n.sweep.rows]
+    cost = n.exchange_cost
+    if cost and "paper6_reference" in cost.ms_per_step:
+        parts = "; ".join(fill(T, "cost-part", name=name, c=c, change=100 * (c.readings / c.no_readings - 1)) for name, c in cost.ms_per_step.items())
+        lines.append(fill(T, "cost", cost=cost, parts=parts))
     return "\n".join(lines) + "\n"
 
 
-def _ceiling(node: dict) -> float | None:
-    """The node alone over the exact central limit: alone / network times network / exact (None: no exact width)."""
-    over, gain = node["sdp_network_over_exact"], node["sdp_alone_over_network"]
-    return None if over is None or gain is None else gain * over
+def _limits_row(topology: str, case: str, signals: str, runs: list[NetworkRun]) -> str:
+    """Each node's exact limit alone over the central one, mean over the seeds (a reference's declared zero fault named)."""
+    ids = sorted(runs[0].nodes)
+    faults = []
+    for i in ids:
+        vals = [r.nodes[i].fault for r in runs]
+        have = [v for v in vals if v is not None]
+        faults.append(fill("network", "declared-zero") if len(have) < len(vals) else figure(sum(have) / len(have)))
+    rs = [v for r in runs for i in ids if (v := r.nodes[i].r) is not None]
+    return fill("network", "limits-row", topology=topology, case=case, signals=signals, faults=" / ".join(faults), r_min=min(rs), r_max=max(rs))
 
 
 def _span(values: list[float | None], spec: str = ".2f") -> str:
     """min–max of the values there are (``-``: none; an older JSON without them)."""
     have = [v for v in values if v is not None]
-    return f"{min(have):{spec}}–{max(have):{spec}}" if have else "-"
+    return f"{figure(min(have), spec)}–{figure(max(have), spec)}" if have else "-"
 
 
 def _d(v: int | None) -> str:
     return "-" if v is None else str(v)
 
 
-def network_summary_markdown(res: dict) -> str:
+def network_summary_markdown(doc: dict) -> str:
     """The README's network section: per topology and case (paper signals), what the exchange buys a node."""
-    lines = [
-        "Each node's SDP fault width run alone over the same node in the network (range over nodes; > 1: the "
-        "exchange narrows it), and the network's over the exact central limit with the same assumptions, paper signals:",
-        "",
-        "| topology | case | alone / network | network / exact |",
-        "|---|---|---|---|",
-    ]
-    groups: dict[tuple[str, str], list[dict]] = {}
-    for r in res["runs"]:
-        if r["signals"] == "paper":
-            groups.setdefault((r["topology"], r["case"]), []).append(r)
-    for (topo, case), runs in groups.items():
-        ids = sorted(runs[0]["nodes"], key=int)
-        gain = [r["nodes"][i]["sdp_alone_over_network"] for r in runs for i in ids]
-        over = [r["nodes"][i]["sdp_network_over_exact"] for r in runs for i in ids if r["nodes"][i]["sdp_network_over_exact"] is not None]
-        over_s = f"{min(over):.2f}–{max(over):.2f}" if over else "- (no exact limit with this assumption)"
-        lines.append(f"| `{topo}` | {case} | {_span(gain)} | {over_s} |")
-    false = sum(v.get("false_detections", 0) for r in res["runs"] for v in r["nodes"].values())
-    lines += ["", f"False detections over the benchmark's {len(res['runs'])} runs (both signal families): {false}."]
+    n = load_network(doc)
+    T = "network"
+    lines = [fill(T, "summary-head")]
+    for (topology, case, _), runs in n.groups("paper").items():
+        nodes = [r.nodes[i] for r in runs for i in sorted(runs[0].nodes)]
+        over = [x for v in nodes if (x := v.sdp_network_over_exact) is not None]
+        over_s = _span(list(over)) if over else fill(T, "summary-no-exact")
+        lines.append(fill(T, "summary-row", topology=topology, case=case, gain=_span([v.sdp_alone_over_network for v in nodes]), over=over_s))
+    lines.append(fill(T, "summary-false", runs=len(n.runs), false=sum(v.false_detections for r in n.runs for v in r.nodes.values())))
     return "\n".join(lines) + "\n"
 
 

@@ -27,7 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from netsetest_bench.performance_figures import YARDSTICKS, Defences, NodeProfile, Performance, fit_cpu, performance_figures
+from netsetest_bench.figures.performance import YARDSTICKS, Defences, NodeProfile, Performance, fit_cpu
+from netsetest_bench.figures.performance import load as load_performance
 from netsetest_bench.render import MISSING, figure, fill
 from netsetest_bench.sections import PARTS
 from netsetest_bench.topologies import RingVariant
@@ -611,7 +612,7 @@ def _scaling_spread(p: Performance) -> float:
 
 def performance_markdown(doc: dict) -> str:
     """The headline figures of a whole benchmark (README, docs/results.md, docs/performance.md)."""
-    p = performance_figures(doc)
+    p = load_performance(doc)
     met = verdicts(p)
     plain_cpu = fit_cpu(p.realtime.runs, p.realtime_max_nodes)
     variant_rows = "".join(
@@ -642,7 +643,7 @@ def performance_markdown(doc: dict) -> str:
 
 def markdown(doc: dict) -> str:
     """A performance run's whole report (its --markdown; bench/results.md), from its figures."""
-    p = performance_figures(doc)
+    p = load_performance(doc)
     met = verdicts(p)
     R = "report"
     lines = [fill(R, "head", p=p, kind="quick" if p.meta.quick else "full")]

@@ -2,7 +2,7 @@
 
 Field names are the JSON's keys; a figure a run did not measure is None (older files lack some).  The run
 builds its figures as a dict and writes them (netsetest_bench/run.py); every renderer reads them through
-:func:`performance_figures`, once.
+:func:`load`, once.
 """
 
 from __future__ import annotations
@@ -335,6 +335,6 @@ class Performance:
     soak_rss_slope_mb_per_10k_steps: float | None = None
 
 
-def performance_figures(doc: dict, what: str = "the performance figures") -> Performance:
+def load(doc: dict, what: str = "the performance figures") -> Performance:
     """``doc`` (bench/results.json as loaded, or a run's figures) as :class:`Performance`."""
     return typed(Performance, doc, what)

@@ -1,0 +1,56 @@
+"""The benchmark's figures load into typed data and its prose comes from templates (netsetest_bench/render.py):
+a missing figure prints as —, a file that does not fit its part's types is a one-line error naming the field."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from netsetest_bench.docs import PARTS, DocsError, render_docs
+from netsetest_bench.figures import network, performance
+from netsetest_bench.render import TEMPLATES, FiguresError, blocks, figure, fill
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_a_missing_figure_prints_as_a_dash_whatever_its_format() -> None:
+    assert figure(None) == figure(None, ".0f") == "—"
+    assert figure(1.234) == "1.23" and figure(30000, "thousands") == "30 000"
+
+
+def test_every_template_block_fills_and_names_only_fields() -> None:
+    names = sorted(p.stem for p in TEMPLATES.glob("*.md"))
+    assert {"performance", "report", "network"} <= set(names)
+    for name in names:
+        assert blocks(name), name  # each file is blocks, nothing outside them
+    with pytest.raises(KeyError):
+        fill("network", "delay", network="1")  # a field the block names and nobody gave: an error, not a blank
+
+
+def test_the_committed_figures_load_into_their_types() -> None:
+    p = performance.load(json.loads((ROOT / "bench" / "results.json").read_text()))
+    assert p.meta.config.flood_rate and p.paper["nsnim/scheduled"].fast_ms.median is not None
+    assert all(isinstance(k, int) for row in p.inmemory_scaling.rows for k in row.estimator_ms_median_by_degree)  # JSON's "3" is degree 3
+    n = network.load(json.loads((ROOT / "bench" / "network.json").read_text())["network"])
+    assert n.runs and all(isinstance(i, int) for r in n.runs for i in r.nodes)
+
+
+def test_figures_of_the_wrong_type_name_the_field() -> None:
+    doc = json.loads((ROOT / "bench" / "network.json").read_text())["network"]
+    doc["runs"][0]["nodes"]["1"]["delay_network"] = "soon"
+    with pytest.raises(FiguresError, match=r"delay_network"):
+        network.load(doc)
+
+
+def test_render_docs_names_the_file_whose_figures_do_not_fit(tmp_path: Path) -> None:
+    for source in {p.source for p in PARTS.values()}:
+        (tmp_path / source).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(ROOT / source, tmp_path / source)
+    bad = json.loads((ROOT / "bench" / "results.json").read_text())
+    bad["launch"]["reps"] = "none"
+    (tmp_path / "bench" / "results.json").write_text(json.dumps(bad))
+    with pytest.raises(DocsError, match=r"bench/results.json: .*launch"):
+        render_docs(tmp_path)
