@@ -33,6 +33,9 @@ import numpy as np
 from netsetest.models.manoeuvres import DriveSpec, ManoeuvreName
 from netsetest.models.plant import VEHICLE_IDS, VEHICLE_NAMES, PlantKind
 from netsetest.scenarios import TOPOLOGY_DIR
+from netsetest_bench.figures.plant import CASES, Drive, Envelopes, Training, by_case, mean_ratio
+from netsetest_bench.figures.plant import load as load_plant
+from netsetest_bench.render import fill
 
 CAR = TOPOLOGY_DIR / "paper6_car.toml"
 LAP = TOPOLOGY_DIR / "paper6_lap.toml"
@@ -388,182 +391,161 @@ def plant_figures(cfg: dict, tmp: Path) -> dict:
     return res
 
 
-def _f(v: float | None, spec: str = ".3f") -> str:
-    return "—" if v is None else format(v, spec)
+def _judged(rs: list[Drive]) -> str:
+    """A drive's runs of one case: "covered | contained | violations | misses (all attributed)"."""
+    misses = sum(r.evaluated - r.contained for r in rs)
+    return fill(
+        "plant",
+        "judged",
+        covered=sum(r.covered for r in rs),
+        evaluated=sum(r.evaluated for r in rs),
+        contained=sum(r.contained for r in rs),
+        violations=sum(r.violations for r in rs),
+        misses=misses,
+        attributed="yes" if sum(r.misses_attributed for r in rs) == misses else "no",
+    )
 
 
-def _by_case(rows: list[dict]) -> list[tuple[str, list[dict], str]]:
-    """A held-out drive's runs per case, with their cells "covered | contained | violations | misses (all attributed)"."""
-    out = []
-    for case in ("nsnim", "saim"):
-        rs = [r for r in rows if r["case"] == case]
-        if rs:
-            misses = sum(r["evaluated"] - r["contained"] for r in rs)
-            attributed = "yes" if sum(r["misses_attributed"] for r in rs) == misses else "no"
-            judged = (
-                f"{sum(r['covered'] for r in rs)} / {sum(r['evaluated'] for r in rs)} | {sum(r['contained'] for r in rs)} | "
-                f"{sum(r['violations'] for r in rs)} | {misses} ({attributed})"
-            )
-            out.append((case, rs, judged))
-    return out
-
-
-def _mean_ratio(rs: list[dict]) -> str:
-    ratios = [r["fault_ratio_exact"] for r in rs if r["fault_ratio_exact"] is not None]
-    return _f(statistics.mean(ratios) if ratios else None)
-
-
-def plant_markdown(res: dict) -> str:
+def plant_markdown(doc: dict) -> str:
     """The car section of docs/results.md (netsetest_bench/docs.py), from the benchmark's ``plant`` figures."""
-    h, t, cfg = res["held_out"], res["training"], res["config"]
-    seeds = cfg["plant_seeds"]
-
-    def box(b: list[float]) -> str:
-        return f"[{b[0]:.3g}, {b[1]:.3g}]"
-
+    p = load_plant(doc)
+    h, t, seeds, T = p.held_out, p.training, p.config.plant_seeds, "plant"
     lines = [
-        f"`paper6_car` declares `{h['bound'].splitlines()[-1]}`. `netsetest calibrate paper6_car --manoeuvres "
-        f"{','.join(t['envelope']['drives'])} --seeds 0-{t['seeds'][-1]}` (the envelope: the FMVSS 126 series of sines with "
-        f"dwell up to 0.03 rad) gives the box {box(t['envelope']['box'])}, which the declared bound "
-        f"{'covers' if t['declared_covers_envelope'] else 'does NOT cover'}; the moderate drives alone "
-        f"({','.join(t['moderate']['drives'])}) give {box(t['moderate']['box'])}. Held-out drives: seeds "
-        f"{', '.join(map(str, seeds))} of the paper steering, seeds {', '.join(map(str, seeds[:2]))} of the double lane change, "
-        f"seed {seeds[0]} of the lap; paper and worst-case signals each; the SDP (default objective); fault / exact: mean "
-        "fault width from step 10 over the exact limit with the same bound.",
-        "",
-        "| held-out drive | bound | case | drives | peak \\|a_y\\| m/s² | largest e_k / bound | steps with e_k outside | covered | "
-        "contained | violations | misses (all attributed) | SDP fault width | fault / exact |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        fill(
+            T,
+            "head",
+            bound=h.bound.splitlines()[-1],
+            envelope_drives=",".join(t.envelope.drives),
+            last_seed=t.seeds[-1],
+            envelope_box=fill(T, "box", b=t.envelope.box),
+            covers=fill(T, "covers" if t.declared_covers_envelope else "does-not-cover"),
+            moderate_drives=",".join(t.moderate.drives),
+            moderate_box=fill(T, "box", b=t.moderate.box),
+            seeds=", ".join(map(str, seeds)),
+            dlc_seeds=", ".join(map(str, seeds[:2])),
+            lap_seed=seeds[0],
+        )
     ]
-    for which in ("declared", "moderate"):
-        for label, rows in h[which].items():
-            for case, rs, judged in _by_case(rows):
+    for which, drives in (("declared", h.declared), ("moderate", h.moderate)):
+        for label, rows in drives.items():
+            for case, rs in by_case(rows):
                 lines.append(
-                    f"| {label} ({rs[0]['steps']} steps) | {which} | {case} | {len(rs)} | {max(r['ay_peak'] for r in rs):.2f} | "
-                    f"{max(r['e_max_in_bound_norm'] for r in rs):.2f} | "
-                    f"{sum(r['e_outside_steps'] for r in rs)} | {judged} | "
-                    f"{statistics.mean(r['fault_width'] for r in rs):.4f} | {_mean_ratio(rs)} |"
+                    fill(
+                        T,
+                        "held-out-row",
+                        label=label,
+                        steps=rs[0].steps,
+                        which=which,
+                        case=case,
+                        runs=len(rs),
+                        ay_peak=max(r.ay_peak for r in rs),
+                        e_max=max(r.e_max_in_bound_norm for r in rs),
+                        e_outside=sum(r.e_outside_steps for r in rs),
+                        judged=_judged(rs),
+                        fault_width=statistics.mean(r.fault_width for r in rs),
+                        ratio=mean_ratio(rs),
+                    )
                 )
-    causes = t["causes"]
-    car, *simpler = causes
-    lines += [
-        "",
-        f"Where e_k comes from: the largest |a_y| the tyres carried and the largest |e_β|, |e_r| of each training drive "
-        f"(seeds 0-{t['seeds'][-1]}, both signal families) on the car and on the same car with linear tyres of the same slope at zero slip (CommonRoad's "
-        "`vehicle_dynamics_st`; `netsetest calibrate --causes`); the rest is the speed's change within a step, load "
-        "transfer and the single track's large-angle kinematics:",
-        "",
-        "| training drive | peak \\|a_y\\| m/s² | " + " | ".join(f"{p}: e_β, e_r" for p in causes) + " | e_r, linear tyres / car |",
-        "|---|---|" + "---|" * (len(causes) + 1),
-    ]
-    for label, mx in causes[car].items():
-        lin = causes[simpler[-1]][label] if simpler else mx
-        lines.append(
-            f"| {label} | {t['ay_peak'][label]:.2f} | "
-            + " | ".join(f"{causes[p][label][0]:.2e}, {causes[p][label][1]:.2e}" for p in causes)
-            + f" | {lin[1] / mx[1]:.2f} |"
-        )
-    c = res["cost"]
-    lines += [
-        "",
-        "The width the mismatch costs: every estimator on `paper6_car` and on the same car's own T-S model as the "
-        "truth (same signals, steering and seeds; NSNIM, mean fault width from step 10):",
-        "",
-        "| estimator | fault width, car | fault width, T-S twin | car / twin | fault / exact, car | violations |",
-        "|---|---|---|---|---|---|",
-    ]
-    for est, row in c["car"].items():
-        twin = c["ts_twin"][est]
-        lines.append(
-            f"| {est} | {_f(row['fault_width'], '.4f')} | {_f(twin['fault_width'], '.4f')} | {_f(row['width_vs_ts_twin'])} | "
-            f"{_f(row['fault_ratio_exact'])} | {row['violations']} |"
-        )
-    v = res["vehicle_cpu"]
-    lines += [
-        "",
-        "The vehicle role's CPU per step (signals, driver, plant and e_k): "
-        + ", ".join(f"{p} {r['ms_median']:.2f} ms (p95 {r['ms_p95']:.2f})" for p, r in v.items())
-        + " at τs = 0.1 s.",
-        "",
-    ]
-    for label, r in res["halved"].items():
-        covered = sum(d["covered"] for d in r["drives"])
-        evaluated = sum(d["evaluated"] for d in r["drives"])
-        lines.append(
-            f"- bound × {r['scale']:g} on the double lane change: covered {covered} of {evaluated} node-steps; {r['misses']} misses, "
-            f"{r['misses_attributed']} of them attributed to a broken assumption; violations {r['violations']}."
-        )
-    if "envelopes" in res:
-        lines += ["", *envelope_markdown(res["envelopes"])]
+    lines += _causes_lines(t)
+    lines.append(fill(T, "cost-head"))
+    lines += [fill(T, "cost-row", estimator=est, car=row, twin=p.cost.ts_twin[est]) for est, row in p.cost.car.items()]
+    lines.append(fill(T, "cpu", parts=", ".join(fill(T, "cpu-part", plant=name, r=r) for name, r in p.vehicle_cpu.items())))
+    for r in p.halved.values():
+        lines.append(fill(T, "halved", r=r, covered=sum(d.covered for d in r.drives), evaluated=sum(d.evaluated for d in r.drives)))
+    if p.envelopes is not None:
+        lines += ["", *envelope_markdown(p.envelopes)]
     return "\n".join(lines) + "\n"
 
 
-def envelope_markdown(env: dict) -> list[str]:
-    """The three cars' envelopes: the calibrated box and the held-out drives inside and outside it."""
-    seeds = env["held_out_seeds"]
-    kmh = {label: rows[0]["kmh"] for car in env["cars"] for label, rows in car["drives"].items() if rows}  # the speed each was held at
-    steps = {label: rows[0]["steps"] for car in env["cars"] for label, rows in car["drives"].items() if rows}  # and its steps
-    what = {
-        "double-lane-change": f"a double lane change at {kmh.get('double-lane-change') or 0:g} km/h",
-        "lap": f"the lap's first {steps.get('lap') or 0:g} steps (the first straight and into the first bend; the speed sine, 82-118 km/h)",
-        "sine-dwell": f"a sine with dwell at {kmh.get('sine-dwell') or 0:g} km/h at {SINE_FRACTION:g} of the amplitude reaching the envelope's a_y",
-        "double-lane-change (outside)": f"a double lane change at {kmh.get('double-lane-change (outside)') or 0:g} km/h, outside the envelope (seed {seeds[0]} only)",
-    }
-    measured = [label for label in what if label in kmh]
+def _causes_lines(t: Training) -> list[str]:
+    """Where e_k comes from: each training drive's peak a_y and largest e_β, e_r on each plant."""
+    causes, T = t.causes, "plant"
+    car, *simpler = causes
     lines = [
-        f"Each CommonRoad car with the bound `netsetest calibrate --envelope --ay-max {env['ay_max']:g} --speed "
-        f"{env['speed_kmh'][0]:g}-{env['speed_kmh'][1]:g} --seeds {env['seeds'][0]}-{env['seeds'][-1]}` gives (its sweep of step "
-        "steers and sines with dwell), declared with that `[envelope]`, on held-out drives, seeds "
-        f"{seeds[0]}-{seeds[-1]}: " + "; ".join(what[label] for label in measured) + ". Paper and worst-case signals, NSNIM and "
-        "SAIM. a_y: the lateral acceleration the tyres carry (docs/plant.md §4); steps outside the envelope: transitions whose "
-        "a_y or speed left it; misses: sets that missed the truth, all "
-        "outside the guarantee where violations are 0, with how many were attributed to a cause and whether the verdict "
-        "line said so in words.",
-        "",
-        "| car | calibrated box | held-out drive | case | runs | peak \\|a_y\\| m/s² | steps outside the envelope | largest e_k / bound | "
-        "covered | violations | misses (attributed, said in the verdict) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        fill(
+            T,
+            "causes-head",
+            last_seed=t.seeds[-1],
+            plants=" | ".join(fill(T, "causes-plant", plant=name) for name in causes),
+            dashes="---|" * (len(causes) + 1),
+        )
     ]
-    for car in env["cars"]:
-        name = f"{car['vehicle']} ({VEHICLE_NAMES[car['vehicle']]})"
-        box = f"[{car['box'][0]:.3g}, {car['box'][1]:.3g}]"
-        for label, rows in car["drives"].items():
-            for case in ("nsnim", "saim"):
-                rs = [r for r in rows if r["case"] == case]
-                if not rs:
-                    continue
-                misses = sum(r["misses"] for r in rs)
-                said = all(r["verdict_says"] for r in rs if r["misses_attributed"])
-                attributed = sum(r["misses_attributed"] for r in rs)
-                lines.append(
-                    f"| {name} | {box} | {label} | {case} | {len(rs)} | {max(r['ay_peak'] for r in rs):.2f} | "
-                    f"{sum(r['envelope_left'] for r in rs)} | {max(r['e_max_ratio'] for r in rs):.2f} | "
-                    f"{sum(r['covered'] for r in rs)} / {sum(r['evaluated'] for r in rs)} | {sum(r['violations'] for r in rs)} | "
-                    f"{misses} ({attributed}, {'yes' if said else 'no'}) |"
-                )
+    for label, mx in causes[car].items():
+        lin = causes[simpler[-1]][label] if simpler else mx
+        cells = " | ".join(fill(T, "causes-cell", e=causes[name][label]) for name in causes)
+        lines.append(fill(T, "causes-row", label=label, ay_peak=t.ay_peak[label], cells=cells, linear_over_car=lin[1] / mx[1]))
     return lines
 
 
-def plant_summary_markdown(res: dict) -> str:
-    """The README's car section: the held-out drives with the declared bound, and what a too-small bound does."""
-    h, sdp = res["held_out"], res["cost"]["car"]["sdp"]
-    lines = [
-        f"`paper6_car` (`{h['bound'].splitlines()[-1]}`, calibrated on other drives), held-out drives, paper and worst-case signals, the SDP:",
-        "",
-        "| held-out drive | case | covered | contained | violations | misses (all attributed) | fault / exact |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for label, rows in h["declared"].items():
-        for case, rs, judged in _by_case(rows):
-            lines.append(f"| {label} | {case} | {judged} | {_mean_ratio(rs)} |")
-    small = "; ".join(
-        f"× {r['scale']:g}: {r['misses']} misses, {r['misses_attributed']} attributed, violations {r['violations']}" for r in res["halved"].values()
+ENVELOPE_DRIVES = {  # a held-out drive → its block in templates/plant.md
+    "double-lane-change": "envelope-double-lane-change",
+    "lap": "envelope-lap",
+    "sine-dwell": "envelope-sine-dwell",
+    "double-lane-change (outside)": "envelope-outside",
+}
+
+
+def envelope_markdown(env: Envelopes) -> list[str]:
+    """The three cars' envelopes: the calibrated box and the held-out drives inside and outside it."""
+    seeds, T = env.held_out_seeds, "plant"
+    kmh = {label: rows[0].kmh for car in env.cars for label, rows in car.drives.items() if rows}  # the speed each was held at
+    steps = {label: rows[0].steps for car in env.cars for label, rows in car.drives.items() if rows}  # and its steps
+    drives = "; ".join(
+        fill(T, block, kmh=kmh[label] or 0, steps=steps[label] or 0, fraction=SINE_FRACTION, seed=seeds[0])
+        for label, block in ENVELOPE_DRIVES.items()
+        if label in kmh
     )
-    lines += [
-        "",
-        f"The car's mismatch widens the SDP's fault intervals {_f(sdp['width_vs_ts_twin'], '.2f')}× over the same car's own "
-        f"T-S model as the truth (NSNIM). The bound scaled down on the double lane change: {small}.",
+    lines = [
+        fill(
+            T,
+            "envelope-head",
+            env=env,
+            first_seed=env.seeds[0],
+            last_seed=env.seeds[-1],
+            first_held_out=seeds[0],
+            last_held_out=seeds[-1],
+            drives=drives,
+        )
     ]
+    for car in env.cars:
+        box = fill(T, "box", b=car.box)
+        for label, rows in car.drives.items():
+            for case in CASES:
+                rs = [r for r in rows if r.case == case]
+                if rs:
+                    lines.append(
+                        fill(
+                            T,
+                            "envelope-row",
+                            vehicle=car.vehicle,
+                            name=VEHICLE_NAMES[car.vehicle],
+                            box=box,
+                            label=label,
+                            case=case,
+                            runs=len(rs),
+                            ay_peak=max(r.ay_peak for r in rs),
+                            left=sum(r.envelope_left for r in rs),
+                            e_max=max(r.e_max_ratio for r in rs),
+                            covered=sum(r.covered for r in rs),
+                            evaluated=sum(r.evaluated for r in rs),
+                            violations=sum(r.violations for r in rs),
+                            misses=sum(r.misses for r in rs),
+                            attributed=sum(r.misses_attributed for r in rs),
+                            said="yes" if all(r.verdict_says for r in rs if r.misses_attributed) else "no",
+                        )
+                    )
+    return lines
+
+
+def plant_summary_markdown(doc: dict) -> str:
+    """The README's car section: the held-out drives with the declared bound, and what a too-small bound does."""
+    p = load_plant(doc)
+    T = "plant"
+    lines = [fill(T, "summary-head", bound=p.held_out.bound.splitlines()[-1])]
+    for label, rows in p.held_out.declared.items():
+        lines += [fill(T, "summary-row", label=label, case=case, judged=_judged(rs), ratio=mean_ratio(rs)) for case, rs in by_case(rows)]
+    small = "; ".join(fill(T, "summary-small", r=r) for r in p.halved.values())
+    lines.append(fill(T, "summary-tail", sdp=p.cost.car["sdp"], small=small))
     return "\n".join(lines) + "\n"
 
 
