@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from netsetest_bench.figures.performance import YARDSTICKS, Defences, NodeProfile, Performance, fit_cpu
+from netsetest_bench.figures.performance import YARDSTICKS, Defences, NodeProfile, Performance, Yardstick, fit_cpu
 from netsetest_bench.figures.performance import load as load_performance
 from netsetest_bench.render import MISSING, figure, fill
 from netsetest_bench.sections import PARTS
@@ -182,7 +182,7 @@ def _ratio(a: float | None, b: float | None) -> float | None:
     return a / b if a and b else None
 
 
-def _med(v: list[float]) -> float | None:
+def _med(v: list[float] | list[float | None]) -> float | None:
     v = [x for x in v if x is not None]
     return statistics.median(v) if v else None
 
@@ -508,8 +508,8 @@ def run_bench(
             res["widths"] = widths_figures(cfg, tmp)
     res["meta"]["load_after"] = _load()
     res["meta"]["duration_s"] = time.perf_counter() - t_all
-    res.update(headline(res))
-    md = markdown(json.loads(json.dumps(res, default=_jsonable)))  # rendered from what the figures file holds
+    res.update(headline(load_performance(json.loads(json.dumps(res, default=_jsonable)))))  # from the figures as the file holds them
+    md = markdown(json.loads(json.dumps(res, default=_jsonable)))
     if "baseline" in res:
         from netsetest_bench.baseline import baseline_markdown
 
@@ -539,40 +539,44 @@ def _write(res: dict, md: str, json_path: str | None, markdown_path: str | None)
     print(md)
 
 
-def headline(res: dict) -> dict:
-    p = res["paper"]
-    ns, sa = p["nsnim/scheduled"], p["saim/scheduled"]
-    node = res["node"]["reps"]
+def headline(p: Performance) -> dict[str, object]:
+    """The headline figures (the top-level keys of bench/results.json: TARGETS and netsetest_bench/spread.py read them)."""
+    ns, sa = p.paper["nsnim/scheduled"], p.paper["saim/scheduled"]
+    d = p.defences
+
+    def ratio(y: Yardstick | None) -> float | None:
+        return None if y is None else y.ratio
+
     return {
-        "solve_ms_median": ns["fast_ms"]["median"],
-        "solve_ms_p95": ns["fast_ms"]["p95"],
-        "solve_ms_median_saim": sa["fast_ms"]["median"],
-        "solve_ms_p95_saim": sa["fast_ms"]["p95"],
-        "solve_ms_median_per_rule": p["nsnim/per-rule"]["fast_ms"]["median"],
-        "solve_ms_median_saim_per_rule": p["saim/per-rule"]["fast_ms"]["median"],
-        "straightforward_ratio": ns["straightforward"]["ratio"],
-        "naive_ratio": ns["naive"]["ratio"],
-        "previous_default_ratio": ns["prev"]["ratio"],
-        "zenoh_overhead_ratio": res["zenoh"]["ratio"],
-        "zenoh_overhead_ratio_insecure": res["zenoh"].get("ratio_insecure"),
-        "zenoh_overhead_ratio_cpu_floor": (res["zenoh"].get("cpu_floor") or {}).get("ratio_floor"),
-        "scaling": [{"nodes": r["nodes"], "ms_per_node_step": r["ms_per_node_step"]} for r in res["inmemory_scaling"]["rows"]],
-        "realtime_max_nodes": res["realtime"]["max_nodes"],
-        **{f"realtime_max_nodes_{v}_ratio": r["ratio_to_plain"] for v, r in res["realtime"].get("variants", {}).items()},
-        "realtime_node_cpu_ms_per_step": (res.get("node_profile") or {}).get("process_ms_per_step"),
-        "realtime_node_cpu_ms_per_step_trace": (res.get("node_profile_trace") or {}).get("process_ms_per_step"),
-        "fault_width_ratio_exact_nsnim": res["tightness"]["nsnim"]["width_ratio"]["f"],
-        "fault_width_ratio_exact_saim": res["tightness"]["saim"]["width_ratio"]["f"],
-        "node_rss_mb": _med([r["peak_rss_mb"] for r in node]),
-        "node_startup_s": _med([r["first_state_s"] for r in node]),
-        "node_first_estimate_s": _med([r["first_estimate_s"] for r in node]),
-        "launch_to_step0_s": res["launch"]["median_s"],
-        "flood_step_rate_ratio": min(res["defences"][f"flood_{t}_secured"]["ratio"] for t in ("input", "state")),
-        "flood_step_rate_ratio_insecure_input": res["defences"]["flood_input_insecure"]["ratio"],
-        "flood_step_rate_ratio_insecure_state": res["defences"]["flood_state_insecure"]["ratio"],
-        "flood_nodes_lost": sum(res["defences"][f"flood_{t}_{m}"]["nodes_lost"] for t in ("input", "state") for m in ("secured", "insecure")),
-        "crash_roles_lost": sum(1 if res["defences"][f"crash_{m}"]["roles_lost"] is None else 0 for m in ("secured", "insecure")),
-        "soak_rss_slope_mb_per_10k_steps": res["defences"]["soak"]["slope_mb_per_10k_steps"],
+        "solve_ms_median": ns.fast_ms.median,
+        "solve_ms_p95": ns.fast_ms.p95,
+        "solve_ms_median_saim": sa.fast_ms.median,
+        "solve_ms_p95_saim": sa.fast_ms.p95,
+        "solve_ms_median_per_rule": p.paper["nsnim/per-rule"].fast_ms.median,
+        "solve_ms_median_saim_per_rule": p.paper["saim/per-rule"].fast_ms.median,
+        "straightforward_ratio": ratio(ns.straightforward),
+        "naive_ratio": ratio(ns.naive),
+        "previous_default_ratio": ratio(ns.prev),
+        "zenoh_overhead_ratio": p.zenoh.ratio,
+        "zenoh_overhead_ratio_insecure": p.zenoh.ratio_insecure,
+        "zenoh_overhead_ratio_cpu_floor": None if p.zenoh.cpu_floor is None else p.zenoh.cpu_floor.ratio_floor,
+        "scaling": [{"nodes": r.nodes, "ms_per_node_step": r.ms_per_node_step} for r in p.inmemory_scaling.rows],
+        "realtime_max_nodes": p.realtime.max_nodes,
+        **{f"realtime_max_nodes_{name}_ratio": v.ratio_to_plain for name, v in p.realtime.variants.items()},
+        "realtime_node_cpu_ms_per_step": p.node_profile.process_ms_per_step,
+        "realtime_node_cpu_ms_per_step_trace": p.node_profile_trace.process_ms_per_step,
+        "fault_width_ratio_exact_nsnim": p.tightness["nsnim"].width_ratio.f,
+        "fault_width_ratio_exact_saim": p.tightness["saim"].width_ratio.f,
+        "node_rss_mb": _med([r.peak_rss_mb for r in p.node.reps]),
+        "node_startup_s": _med([r.first_state_s for r in p.node.reps]),
+        "node_first_estimate_s": _med([r.first_estimate_s for r in p.node.reps]),
+        "launch_to_step0_s": p.launch.median_s,
+        "flood_step_rate_ratio": min((r for t in ("input", "state") if (r := d.flood(t, "secured").ratio) is not None), default=None),
+        "flood_step_rate_ratio_insecure_input": d.flood("input", "insecure").ratio,
+        "flood_step_rate_ratio_insecure_state": d.flood("state", "insecure").ratio,
+        "flood_nodes_lost": sum(d.flood(target, mode).nodes_lost for target in ("input", "state") for mode in ("secured", "insecure")),
+        "crash_roles_lost": sum(1 if d.crash(mode).roles_lost is None else 0 for mode in ("secured", "insecure")),
+        "soak_rss_slope_mb_per_10k_steps": d.soak.slope_mb_per_10k_steps,
     }
 
 
@@ -746,8 +750,8 @@ def _profile_lines(*profiles: NodeProfile) -> list[str]:
             ph = (p.phases or {})[name]
             cells += [figure(1000 * ph.ms_per_step, ".0f"), figure(ph.calls_per_step) if name not in ("other", "threads") else ""]
         lines.append(fill(R, "profile-row", name=name, cells=" | ".join(cells), what=what))
-    totals = " | ".join(f"**{figure(1000 * p.process_ms_per_step, '.0f')}** | " for p in ok)
-    cores = ", ".join(fill(R, "profile-cores", p=p, cores=p.nodes * p.process_ms_per_step / 100) for p in ok)
+    totals = " | ".join(f"**{figure(1000 * p.process_ms(), '.0f')}** | " for p in ok)
+    cores = ", ".join(fill(R, "profile-cores", p=p, cores=p.nodes * p.process_ms() / 100) for p in ok)
     lines.append(fill(R, "profile-process", cells=totals, cores=cores))
     return lines
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from netsetest_bench.render import typed
+from netsetest_bench.render import FiguresError, typed
 
 
 @dataclass(frozen=True)
@@ -239,7 +239,13 @@ class NodeProfile:
     objective: str = ""
     load_before: str = ""
     deadline_misses: int = 0
-    process_ms_per_step: float = 0.0
+    process_ms_per_step: float | None = None
+
+    def process_ms(self) -> float:
+        """The node's whole CPU per step [ms]; a report (its phases) always has it."""
+        if self.process_ms_per_step is None:
+            raise FiguresError("a node profile with phases but no process_ms_per_step")
+        return self.process_ms_per_step
 
 
 @dataclass(frozen=True)
