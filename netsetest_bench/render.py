@@ -5,7 +5,8 @@ part's frozen dataclasses (:func:`typed`: msgspec checks every field's type on t
 fills the part's template with them.  A template file holds named blocks, each opened by a line
 ``<!-- NAME -->`` and running to the next; a block is Python's format string syntax over the named fields it is
 given (``{figures.solve_ms_median:.2f}``, ``{met[naive_ratio]}``), with two rules of the docs: a missing figure
-(None) prints as ``—`` whatever its format, and the format ``thousands`` groups digits with spaces (10 000).
+(None) prints as ``—`` whatever its format (a template's block ``missing``, if it has one, says what it prints
+instead), and the format ``thousands`` groups digits with spaces (10 000).
 """
 
 from __future__ import annotations
@@ -38,20 +39,20 @@ def typed(kind: type[T], doc: object, what: str = "the figures") -> T:
 
 
 class _Formatter(string.Formatter):
+    def __init__(self, missing: str = MISSING) -> None:
+        self.missing = missing
+
     def format_field(self, value: Any, format_spec: str) -> str:
         if value is None:
-            return MISSING
+            return self.missing
         if format_spec == "thousands":
             return format(value, ",").replace(",", " ")
         return super().format_field(value, format_spec)
 
 
-_FORMATTER = _Formatter()
-
-
-def figure(value: object, spec: str = ".2f") -> str:
+def figure(value: object, spec: str = ".2f", missing: str = MISSING) -> str:
     """One figure as a template prints it (for the lists a renderer joins itself)."""
-    return _FORMATTER.format_field(value, spec)
+    return _Formatter(missing).format_field(value, spec)
 
 
 @functools.cache
@@ -64,9 +65,14 @@ def blocks(name: str) -> dict[str, str]:
     return {parts[i]: parts[i + 1].removesuffix("\n") for i in range(1, len(parts), 2)}
 
 
+@functools.cache
+def _formatter(template: str) -> _Formatter:
+    return _Formatter(blocks(template).get("missing", MISSING))
+
+
 def fill(template: str, block: str, /, **fields: object) -> str:
     """Block ``block`` of ``templates/<template>.md`` with ``fields`` filled in."""
-    return _FORMATTER.vformat(blocks(template)[block], (), fields)
+    return _formatter(template).vformat(blocks(template)[block], (), fields)
 
 
 __all__ = ["MISSING", "TEMPLATES", "FiguresError", "blocks", "figure", "fill", "typed"]

@@ -20,6 +20,9 @@ from typing import get_args
 from netsetest.config.schema import Case
 from netsetest.models.signals import SIGNAL_KINDS, SignalKind
 from netsetest.scenarios import TOPOLOGY_DIR
+from netsetest_bench.figures.scenario import Scenario
+from netsetest_bench.figures.scenario import load as load_scenario
+from netsetest_bench.render import figure, fill
 
 PAPER6 = TOPOLOGY_DIR / "paper6.toml"
 CASES: tuple[Case, ...] = get_args(Case)
@@ -86,13 +89,12 @@ def scenario_figures(cfg: dict, tmp: Path) -> dict:
 # ---------------------------------------------------------------- rendering
 
 
-def _f(v: float | None, spec: str) -> str:
-    return "–" if v is None else format(v, spec)
+MISSING = "–"  # what this part prints for a figure it lacks (templates/scenario.md, its block ``missing``)
 
 
 def _ms(v: float | None) -> str:
     """A time in ms with two significant figures' worth of resolution, however large."""
-    return "–" if v is None else format(v, ".0f" if v >= 10 else ".1f" if v >= 1 else ".2f")
+    return MISSING if v is None else format(v, ".0f" if v >= 10 else ".1f" if v >= 1 else ".2f")
 
 
 def _span(vals: list[float], spec: str) -> str:
@@ -100,75 +102,70 @@ def _span(vals: list[float], spec: str) -> str:
     return format(lo, spec) if format(lo, spec) == format(hi, spec) else f"{format(lo, spec)}–{format(hi, spec)}"
 
 
-def _run(res: dict, case: str, signals: str) -> dict:
-    return next(r for r in res["runs"] if r["case"] == case and r["signals"] == signals)
+def _mean(xs: list[float]) -> float:
+    return sum(xs) / len(xs)
 
 
-def reproduce_line(res: dict) -> str:
-    r = res["runs"][0]
-    return (
-        f"`netsetest run paper6 --mode inmemory --case nsnim|saim [--signals worst] --seed {r['seed']}` "
-        f"(scheduled variant, objective `{r['objective']}`, {r['steps']} steps)"
-    )
+def reproduce_line(s: Scenario) -> str:
+    return fill("scenario", "reproduce", r=s.runs[0])
 
 
-def scenario_markdown(res: dict) -> str:
+def scenario_markdown(doc: dict) -> str:
     """The per-node table of the paper's scenario and what the worst-case signals change."""
-    ns, sa = _run(res, "nsnim", "paper"), _run(res, "saim", "paper")
-    lines = [
-        f"{reproduce_line(res)}, paper signals; fault width: mean from step 10; / exact: the mean fault width over "
-        "the exact limit's (`netsetest exact`); breaks: the steps on which the paper's fixed sector would be false "
-        "(first one); delay: steps from the fault's onset to its guaranteed detection (`-`: no fault).",
-        "",
-        "| node | NSNIM max E | NSNIM fault width | NSNIM / exact | SAIM max E | SAIM fault width | SAIM / exact "
-        "| SAIM covered | breaks (first) | delay NSNIM / SAIM |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for i in sorted(ns["nodes"], key=int):
-        a, b = ns["nodes"][i], sa["nodes"][i]
-        first = "" if b["first_sector_break"] is None else f" (k = {b['first_sector_break']})"
-        delay = (
-            f"{_f(a['detection_delay'], 'd') if a['detection_delay'] is not None else '-'} / "
-            f"{_f(b['detection_delay'], 'd') if b['detection_delay'] is not None else '-'}"
-        )
-        lines.append(
-            f"| {i} | {a['max_E']:.3f} | {a['fault_width']:.3f} | {a['ratio_exact']['f']:.2f} | {b['max_E']:.3f} "
-            f"| {b['fault_width']:.3f} | {b['ratio_exact']['f']:.2f} | {b['steps_covered']} of {b['steps_evaluated']} "
-            f"| {b['sector_breaks']}{first} | {delay} |"
-        )
+    s = load_scenario(doc)
+    T = "scenario"
+    ns, sa = s.run("nsnim", "paper"), s.run("saim", "paper")
+    lines = [fill(T, "nodes-head", reproduce=reproduce_line(s))]
+    for i in sorted(ns.nodes):
+        a, b = ns.nodes[i], sa.nodes[i]
+        first = "" if b.first_sector_break is None else fill(T, "first-break", k=b.first_sector_break)
+        delays = {f"delay_{n}": "-" if x.detection_delay is None else format(x.detection_delay, "d") for n, x in (("a", a), ("b", b))}
+        lines.append(fill(T, "node-row", i=i, a=a, b=b, first=first, **delays))
     lines.append("")
-    for r in res["runs"]:
-        v = list(r["nodes"].values())
+    for r in s.runs:
+        v = list(r.nodes.values())
         lines.append(
-            f"- {r['case'].upper()}, {r['signals']} signals: contained on {sum(x['steps_contained'] for x in v)} of "
-            f"{sum(x['steps_evaluated'] for x in v)} node-steps, covered by the guarantee on "
-            f"{sum(x['steps_covered'] for x in v)}, violations {sum(x['violations'] for x in v)}, false detections "
-            f"{sum(x['false_detections'] for x in v)}; max E {_span([x['max_E'] for x in v], '.2f')}; fault width at "
-            f"step 0 {_span([x['fault_width_step0'] for x in v], '.2f')}, from step 10 "
-            f"{_span([x['fault_width'] for x in v], '.3f')}; over the exact limit: fault "
-            f"{_span([x['ratio_exact']['f'] for x in v], '.2f')}, yaw rate {_span([x['ratio_exact']['r'] for x in v], '.2f')}, "
-            f"sideslip {_span([x['ratio_exact']['beta'] for x in v], '.2f')}."
+            fill(
+                T,
+                "run-line",
+                case=r.case.upper(),
+                r=r,
+                contained=sum(x.steps_contained for x in v),
+                evaluated=sum(x.steps_evaluated for x in v),
+                covered=sum(x.steps_covered for x in v),
+                violations=sum(x.violations for x in v),
+                false=sum(x.false_detections for x in v),
+                max_e=_span([x.max_E for x in v], ".2f"),
+                width0=_span([x.fault_width_step0 for x in v], ".2f"),
+                width=_span([x.fault_width for x in v], ".3f"),
+                over_f=_span([x.ratio_exact.f for x in v], ".2f"),
+                over_r=_span([x.ratio_exact.r for x in v], ".2f"),
+                over_beta=_span([x.ratio_exact.beta for x in v], ".2f"),
+            )
         )
     return "\n".join(lines) + "\n"
 
 
-def exact_markdown(res: dict) -> str:
+def exact_markdown(doc: dict) -> str:
     """The SDP's published widths over the exact limit, per node and coordinate (docs/exact.md)."""
-    lines = [
-        f"{reproduce_line(res)}, then `netsetest exact` on each record (`--fault-bounds used`): mean published width "
-        "over the exact width from step 10, fault per node 1…6, and the range (mean) over nodes of the yaw rate and "
-        "sideslip ratios.",
-        "",
-        "| case, signals | fault, nodes 1…6 | fault, mean | yaw rate r | sideslip β |",
-        "|---|---|---|---|---|",
-    ]
-    mean = lambda xs: sum(xs) / len(xs)  # noqa: E731  # a one-line local helper
-    for r in res["runs"]:
-        v = [r["nodes"][i]["ratio_exact"] for i in sorted(r["nodes"], key=int)]
-        f, yaw, beta = [x["f"] for x in v], [x["r"] for x in v], [x["beta"] for x in v]
+    s = load_scenario(doc)
+    lines = [fill("scenario", "exact-head", reproduce=reproduce_line(s))]
+    for r in s.runs:
+        v = [r.nodes[i].ratio_exact for i in sorted(r.nodes)]
+        f, yaw, beta = [x.f for x in v], [x.r for x in v], [x.beta for x in v]
         lines.append(
-            f"| {r['case'].upper()}, {r['signals']} | {' '.join(format(x, '.2f') for x in f)} | **{mean(f):.3f}** "
-            f"| {_span(yaw, '.2f')} ({mean(yaw):.2f}) | {_span(beta, '.2f')} ({mean(beta):.2f}) |"
+            fill(
+                "scenario",
+                "exact-row",
+                case=r.case.upper(),
+                r=r,
+                faults=" ".join(format(x, ".2f") for x in f),
+                mean_f=_mean(f),
+                span_r=_span(yaw, ".2f"),
+                mean_r=_mean(yaw),
+                span_beta=_span(beta, ".2f"),
+                mean_beta=_mean(beta),
+            )
         )
     return "\n".join(lines) + "\n"
 
@@ -184,31 +181,35 @@ LABELS = {  # the paper each estimator is after (docs/references.md); interval-c
 }
 
 
-def compare_markdown(res: dict) -> str:
+def compare_markdown(doc: dict) -> str:
     """Every estimator on the paper network, one table per case."""
-    first = res["compare"][0]
+    s = load_scenario(doc)
+    T = "scenario"
+    first = s.compare[0]
     lines = [
-        f"`netsetest compare paper6 --case nsnim|saim --estimators {','.join(first['estimators'])} --signals "
-        f"{','.join(SIGNALS)} --seeds {','.join(map(str, res['compare_seeds']))}`: {len(first['runs'])} runs per case of "
-        f"{first['steps']} steps. Widths: mean interval-hull width over nodes and steps ≥ 10; ratios against the exact limit "
-        "under the row's own assumptions; rms radius: Althoff & Rath's relative-RMS radius (exact = 1); ms per node-step "
-        "(the exact row: its offline solve) on this 2-core machine shared with other work: medians repeat within about "
-        "±20 %, p95 does not.",
-        "",
+        fill(
+            T,
+            "compare-head",
+            c=first,
+            estimators=",".join(first.estimators),
+            signals=",".join(SIGNALS),
+            seeds=",".join(map(str, s.compare_seeds)),
+            runs=len(first.runs),
+        )
     ]
-    for c in res["compare"]:
-        lines += [
-            f"| {c['case'].upper()} | violations | covered | fault width | β, r width | fault / exact | β, r / exact | rms radius | ms median / p95 |",
-            "|---|---|---|---|---|---|---|---|---|",
-        ]
-        for r in c["rows"]:
-            state = ", ".join(_f(v, ".3f") for v in r["ratio_exact_state"])
-            label = f" ({LABELS[r['estimator']]})" if r["estimator"] in LABELS else ""
+    for c in s.compare:
+        lines.append(fill(T, "compare-table", case=c.case.upper()))
+        for r in c.rows:
             lines.append(
-                f"| `{r['estimator']}`{label} | {r['violations']} | {r['covered']} / {r['node_steps']} | "
-                f"{_f(r['fault_width_mean'], '.4f')} | {_f(r['beta_width_mean'], '.4f')}, {_f(r['r_width_mean'], '.3f')} | "
-                f"{_f(r['ratio_exact'], '.3f')} | {state} | {_f(r['rms_radius_rel'], '.3f')} | "
-                f"{_ms(r['ms_median'])} / {_ms(r['ms_p95'])} |"
+                fill(
+                    T,
+                    "compare-row",
+                    r=r,
+                    label=fill(T, "compare-label", label=LABELS[r.estimator]) if r.estimator in LABELS else "",
+                    state=", ".join(figure(v, ".3f", MISSING) for v in r.ratio_exact_state),
+                    ms_median=_ms(r.ms_median),
+                    ms_p95=_ms(r.ms_p95),
+                )
             )
         lines.append("")
     return "\n".join(lines)
