@@ -25,6 +25,9 @@ from pathlib import Path
 from typing import Literal
 
 from netsetest.scenarios import TOPOLOGY_DIR
+from netsetest_bench.figures.exact_cost import ExactRun
+from netsetest_bench.figures.exact_cost import load as load_exact_cost
+from netsetest_bench.render import fill
 
 CASES = ("nsnim", "saim")
 RINGS = (12, 24)  # ring sizes with two groups
@@ -156,63 +159,36 @@ def _load() -> str:
     return " ".join(f"{v:.2f}" for v in os.getloadavg())
 
 
-def _growth(rss: list[float]) -> float:
-    """Resident memory after the last step over that before the middle step (MB)."""
-    return rss[-1] - rss[len(rss) // 2]
-
-
-def targets(rows: list[dict]) -> list[tuple[str, str, bool]]:
+def targets(rows: list[ExactRun]) -> list[tuple[str, str, bool]]:
     """(what, target, met) for issue 34's targets, from the rows that have them."""
     out = []
     for r in rows:
-        if r["topology"] == "ring12, two groups" and r["case"] == "saim" and r["steps"] >= 80:
-            share = r["exact_ends"] / r["ends"]
+        if r.topology == "ring12, two groups" and r.case == "saim" and r.steps >= 80:
+            share = r.exact_ends / r.ends
             out += [
-                ("ring12 SAIM worst: CPU", f"≤ {TARGET_RING12_CPU_S:g} s", r["cpu_s"] <= TARGET_RING12_CPU_S),
-                ("ring12 SAIM worst: peak memory", f"≤ {TARGET_RING12_PEAK_MB:g} MB", r["peak_mb"] <= TARGET_RING12_PEAK_MB),
+                ("ring12 SAIM worst: CPU", f"≤ {TARGET_RING12_CPU_S:g} s", r.cpu_s <= TARGET_RING12_CPU_S),
+                ("ring12 SAIM worst: peak memory", f"≤ {TARGET_RING12_PEAK_MB:g} MB", r.peak_mb <= TARGET_RING12_PEAK_MB),
                 ("ring12 SAIM worst: ends exact", f"≥ {100 * TARGET_RING12_EXACT:g} %", share >= TARGET_RING12_EXACT),
             ]
-        if r["topology"] == "paper6_max_faulty" and r["case"] == "saim":
-            out.append(("paper6_max_faulty SAIM worst: CPU", f"≤ {TARGET_PAPER6_CPU_S:g} s", r["cpu_s"] <= TARGET_PAPER6_CPU_S))
-    out.append(("every run: memory flat", f"≤ {FLAT_MB:g} MB from the middle step to the last", all(_growth(r["rss_mb"]) <= FLAT_MB for r in rows)))
+        if r.topology == "paper6_max_faulty" and r.case == "saim":
+            out.append(("paper6_max_faulty SAIM worst: CPU", f"≤ {TARGET_PAPER6_CPU_S:g} s", r.cpu_s <= TARGET_PAPER6_CPU_S))
+    out.append(("every run: memory flat", f"≤ {FLAT_MB:g} MB from the middle step to the last", all(r.growth() <= FLAT_MB for r in rows)))
     return out
 
 
-def exact_cost_markdown(res: dict) -> str:
+def exact_cost_markdown(doc: dict) -> str:
     """One row per run: CPU, peak and growth of resident memory, the ends; then the targets."""
-    lines = [
-        "`netsetest exact` (fault bounds `used`, every declared health group applied, `--budget` as given) on the record "
-        f"of a {res['steps']}-step run, worst-case signals, seed 0, in a process of its own: CPU seconds of the exact limit "
-        "alone, peak resident memory of the process, how much resident memory grew from the middle step to the last, and the ends. "
-        f"Load average {res.get('load', '?')}.",
-        "",
-        "| topology | nodes | case | `--budget` s | CPU s (wall s) | peak MB | growth MB | ends exact | relaxed | solves |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in res["rows"]:
-        lines.append(
-            f"| {r['topology']} | {r['nodes']} | {r['case'].upper()} | {r['budget_s']:g} | {r['cpu_s']:.1f} ({r['wall_s']:.0f}) | {r['peak_mb']:.0f} | "
-            f"{_growth(r['rss_mb']):+.0f} | {r['exact_ends']} of {r['ends']} | {r['relaxed_ends']} | {r['solves']} |"
-        )
-    lines += ["", "| target | | met |", "|---|---|---|"]
-    lines += [f"| {what} | {target} | {'yes' if met else 'no'} |" for what, target, met in targets(res["rows"])]
-    if res.get("network"):
-        rows = res["network"]
-        lines += [
-            "",
-            f"Issue 44: `netsetest exact` and `netsetest exact --network` (each node's network limit, docs/exact.md) on the 12-node ring with "
-            f"two groups, SAIM, worst-case signals, {rows[0]['steps']} steps, per seed, each in a process of its own; target: each at most "
-            f"{TARGET_RING12_CPU_S:g} s of CPU and {TARGET_RING12_PEAK_MB:g} MB.",
-            "",
-            "| seed | limit | CPU s (wall s) | peak MB | ends exact | relaxed | solves | met |",
-            "|---|---|---|---|---|---|---|---|",
-        ]
-        for r in rows:
-            met = r["cpu_s"] <= TARGET_RING12_CPU_S and r["peak_mb"] <= TARGET_RING12_PEAK_MB
-            lines.append(
-                f"| {r['seed']} | {r['limit']} | {r['cpu_s']:.1f} ({r['wall_s']:.0f}) | {r['peak_mb']:.0f} | {r['exact_ends']} of {r['ends']} | "
-                f"{r['relaxed_ends']} | {r['solves']} | {'yes' if met else '**no**'} |"
-            )
+    e = load_exact_cost(doc)
+    T = "exact_cost"
+    lines = [fill(T, "head", e=e)]
+    lines += [fill(T, "row", r=r, case=r.case.upper(), growth=r.growth()) for r in e.rows]
+    lines.append(fill(T, "targets-head"))
+    lines += [fill(T, "target-row", what=what, target=target, met="yes" if met else "no") for what, target, met in targets(e.rows)]
+    if e.network:
+        lines.append(fill(T, "network-head", steps=e.network[0].steps, cpu_s=TARGET_RING12_CPU_S, peak_mb=TARGET_RING12_PEAK_MB))
+        for r in e.network:
+            met = r.cpu_s <= TARGET_RING12_CPU_S and r.peak_mb <= TARGET_RING12_PEAK_MB
+            lines.append(fill(T, "network-row", r=r, met="yes" if met else fill(T, "not-met")))
     return "\n".join(lines) + "\n"
 
 

@@ -32,6 +32,8 @@ from pathlib import Path
 
 from netsetest.roles.flow import ACK_STRIDE, ACK_WINDOW, show_window
 from netsetest.scenarios import TOPOLOGY_DIR
+from netsetest_bench.figures.flow import load as load_flow
+from netsetest_bench.render import figure, fill
 
 PAPER6 = TOPOLOGY_DIR / "paper6.toml"
 PAPER6_LOSSY = TOPOLOGY_DIR / "paper6_lossy.toml"  # the issue's reproduction: scheduled losses, a 3000-step record
@@ -166,55 +168,20 @@ def _median(xs: list[float | None]) -> float | None:
     return statistics.median(timed) if timed else None
 
 
-def _clean(r: dict) -> bool:
-    """Exit 0, every node-step judged, no node reported missing or rejoined: what the issue's targets ask."""
-    return r["exit_code"] == 0 and r["node_steps_lost"] == 0 and not r["nodes_missing"] and not r["nodes_rejoined"]
-
-
-def flow_markdown(res: dict) -> str:
-    f = lambda v, spec=".2f": "—" if v is None else format(v, spec)  # noqa: E731  # a one-line local helper
-    lines = [
-        f"The vehicle publishes step k + {res['ack_window']} only once the collector has acknowledged step k (every "
-        f"{res['ack_stride']} steps). Unpaced lockstep runs (`netsetest run` as users start it): the collector stopped "
-        "mid-run (SIGSTOP, then SIGCONT), and the slow records:",
-        "",
-        "| run | record | collector paused | exit | node-steps lost | nodes missing | nodes rejoined | collector drops | wall |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in [*res["paused"], *res.get("records", [])]:
-        drops = ", ".join(f"{k} {v}" for k, v in r["collector_drops"].items()) or "none"
-        paused = "no" if not r["pause_s"] else "run ended first" if r["paused_at_s"] is None else f"{r['pause_s']:g} s from {r['paused_at_s']:.1f} s"
-        lines.append(
-            f"| {r['topology']}, {r['steps']} steps | {r['record']} | {paused} "
-            f"| {r['exit_code']} | {r['node_steps_lost']} | {r['nodes_missing']} | {r['nodes_rejoined']} | {drops} | {f(r['wall_s'], '.1f')} s |"
-        )
-    soak = res.get("soak", [])
-    if soak:
-        clean = sum(map(_clean, soak))
-        loads = ", ".join(f(r["load_before"], ".1f") for r in soak)
-        lines += [
-            "",
-            f"Soak: {clean} of {len(soak)} unpaced {soak[0]['steps']}-step paper6 runs ended with exit 0, every node-step judged and "
-            f"no node reported missing or rejoined (load average before each: {loads}).",
-        ]
-    q = res["ratio"]
-    lines += [
-        "",
-        f"What the window costs: the unpaced paper6 lockstep run ({q['steps']} steps) over Zenoh, with the window and without it "
-        f"(`--ack-window {show_window(None)}`), against the same run in memory, the three interleaved, {q['reps']} times (the ratio: median over median):",
-        "",
-        "| | load average | in memory | Zenoh, with the window | without it | ratio with | ratio without |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for n, (m, w, u) in enumerate(zip(q["inmemory_s"], q["zenoh_window_s"], q["zenoh_unbounded_s"])):
+def flow_markdown(doc: dict) -> str:
+    f, T = load_flow(doc), "flow"
+    lines = [fill(T, "head", f=f)]
+    for r in [*f.paused, *f.records]:
+        drops = ", ".join(f"{k} {v}" for k, v in r.collector_drops.items()) or fill(T, "no-drops")
+        paused = fill(T, "not-paused" if not r.pause_s else "ended-first" if r.paused_at_s is None else "paused", r=r)
+        lines.append(fill(T, "run-row", r=r, paused=paused, drops=drops))
+    if f.soak:
+        loads = ", ".join(figure(r.load_before, ".1f") for r in f.soak)
+        lines.append(fill(T, "soak", clean=sum(r.clean() for r in f.soak), runs=len(f.soak), steps=f.soak[0].steps, loads=loads))
+    q = f.ratio
+    lines.append(fill(T, "ratio-head", q=q, unbounded=show_window(None)))
+    for n, (m, w, u) in enumerate(zip(q.inmemory_s, q.zenoh_window_s, q.zenoh_unbounded_s)):
         rw, ru = (None if z is None else z / m for z in (w, u))
-        lines.append(f"| run {n + 1} | {f(q['load_before'][n], '.1f')} | {f(m)} s | {f(w)} s | {f(u)} s | {f(rw)}× | {f(ru)}× |")
-    lines += [
-        f"| **medians** | | {f(_median(q['inmemory_s']))} s | {f(_median(q['zenoh_window_s']))} s | {f(_median(q['zenoh_unbounded_s']))} s "
-        f"| **{f(q['ratio_window'])}×** | **{f(q['ratio_unbounded'])}×** |",
-        "",
-        f"The window's cost, the difference of the two medians: {f(q['window_cost'], '+.2f')}× the in-memory run's time "
-        "(a difference smaller than the spread between repetitions is no measurable cost).",
-        "",
-    ]
+        lines.append(fill(T, "ratio-row", n=n + 1, load=q.load_before[n], inmemory=m, window=w, unbounded=u, ratio_window=rw, ratio_unbounded=ru))
+    lines.append(fill(T, "ratio-medians", q=q, inmemory=_median(list(q.inmemory_s)), window=_median(q.zenoh_window_s), unbounded=_median(q.zenoh_unbounded_s)))
     return "\n".join(lines)
