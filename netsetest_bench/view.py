@@ -32,6 +32,9 @@ import time
 from pathlib import Path
 
 from netsetest.scenarios import TOPOLOGY_DIR
+from netsetest_bench.figures.view import Spread, spread
+from netsetest_bench.figures.view import load as load_view
+from netsetest_bench.render import MISSING, figure, fill
 
 PAPER6 = TOPOLOGY_DIR / "paper6.toml"
 PAPER6_TAU_S = 0.1  # paper6.toml's τs (the issue's: the live view at 10 steps a second)
@@ -161,111 +164,114 @@ def view_figures(cfg: dict, tmp: Path) -> dict:
     return out
 
 
-def _med(runs: list[dict], key: str) -> tuple[float | None, float | None, float | None]:
-    v = [r[key] for r in runs if r.get(key) is not None]
-    return (statistics.median(v), min(v), max(v)) if v else (None, None, None)
+def _cell(m: Spread, spec: str, unit: str = "") -> str:
+    return MISSING if m.median is None else fill("view", "spread", m=m, spec=spec, unit=unit)
 
 
-def _cell(m: tuple[float | None, float | None, float | None], spec: str, unit: str = "") -> str:
-    med, lo, hi = m
-    if med is None or lo is None or hi is None:
-        return "—"
-    return f"{med:{spec}}{unit} ({lo:{spec}}–{hi:{spec}})"
-
-
-def _side(res: dict, view: bool) -> list[dict]:
-    return [r for r in res["live"]["runs"] if r["view"] == view]
+def _unit(v: float | None, spec: str, unit: str) -> str:
+    return MISSING if v is None else figure(v, spec) + unit
 
 
 def _target(ok: bool | None) -> str:
-    return "—" if ok is None else "met" if ok else "**missed**"
+    return MISSING if ok is None else fill("view", "met" if ok else "missed")
 
 
-def _within_noise(on: list[dict], off: list[dict], key: str) -> str:
-    """Whether the runs with the view and without overlap in ``key`` (the noise is the spread between runs alike)."""
-    a, b = _med(on, key), _med(off, key)
-    if None in (a[1], a[2], b[1], b[2]):
-        return "—"
-    return "met (the ranges overlap)" if a[1] <= b[2] and b[1] <= a[2] else "**missed** (the ranges are apart)"  # type: ignore[operator]  # checked above
+def _within_noise(a: Spread, b: Spread) -> str:
+    """Whether the runs with the view and without overlap (the noise is the spread between runs alike)."""
+    if a.lo is None or a.hi is None or b.lo is None or b.hi is None:
+        return MISSING
+    return fill("view", "overlap" if a.lo <= b.hi and b.lo <= a.hi else "apart")
 
 
-def view_summary_markdown(res: dict) -> str:
+def view_summary_markdown(doc: dict) -> str:
     """The targets of issue 30 against the measured figures (docs/records.md)."""
-    live, page, big = res["live"], res["page"], res["big_page"]
-    on, off = _side(res, True), _side(res, False)
-    lag = _med(on, "lag_median_s")
-    ready, cpu = _med(page["opens"], "ready_ms"), _med(page["opens"], "renderer_cpu_ms")
-    opened = None if ready[0] is None else ready[0] < 1000 * OPEN_TARGET_S
+    v = load_view(doc)
+    live, page, big = v.live, v.page, v.big_page
+    on, off = live.side(True), live.side(False)
+    cpu_on, cpu_off = spread([r.node_cpu_ms_per_step for r in on]), spread([r.node_cpu_ms_per_step for r in off])
+    misses_on, misses_off = spread([r.deadline_misses for r in on]), spread([r.deadline_misses for r in off])
+    lag = spread([r.lag_median_s for r in on])
+    ready, cpu = spread([o.ready_ms for o in page.opens]), spread([o.renderer_cpu_ms for o in page.opens])
+    opened = None if ready.median is None else ready.median < 1000 * OPEN_TARGET_S
+    loads = [r.load_before for r in live.runs]
+    page_loads = [o.load_before for o in page.opens]
     lines = [
-        "| what | target | measured (median, range) | |",
-        "|---|---|---|---|",
-        f"| a node's CPU per step, real-time paper6 at τs = {live['tau_s']:g} s, with the view / without | within noise | "
-        f"{_cell(_med(on, 'node_cpu_ms_per_step'), '.2f', ' ms')} / {_cell(_med(off, 'node_cpu_ms_per_step'), '.2f', ' ms')} | "
-        f"{_within_noise(on, off, 'node_cpu_ms_per_step')} |",
-        f"| deadline misses per run, with the view / without | within noise | {_cell(_med(on, 'deadline_misses'), '.0f')} / "
-        f"{_cell(_med(off, 'deadline_misses'), '.0f')} | {_within_noise(on, off, 'deadline_misses')} |",
-        f"| the view's lag behind the run (each run's median) | ≤ {LAG_TARGET_S:g} s | {_cell(lag, '.3f', ' s')} | "
-        f"{_target(None if lag[0] is None else lag[0] <= LAG_TARGET_S)} |",
-        f"| its 95th percentile (each run's) | | {_cell(_med(on, 'lag_p95_s'), '.3f', ' s')} | |",
-        f"| frames the view dropped (behind) per run | | {_cell(_med(on, 'dropped_frames'), '.0f')} | |",
-        f"| the {page['steps']}-step paper6 report page rendered in Chromium | < {OPEN_TARGET_S:g} s | {_cell(ready, '.0f', ' ms')} | {_target(opened)} |",
-        f"| the CPU its renderer used by then (the page's own cost) | < {OPEN_TARGET_S:g} s | {_cell(cpu, '.0f', ' ms')} | "
-        f"{_target(None if cpu[0] is None else cpu[0] < 1000 * OPEN_TARGET_S)} |",
-        f"| the {big['steps']}-step, {big['nodes']}-node report page's size | < {PAGE_LIMIT_MB:g} MB | {big['size_mb']:.2f} MB | "
-        f"{_target(big['size_mb'] < PAGE_LIMIT_MB)} |",
-    ]
-    loads = [r["load_before"] for r in live["runs"]]
-    page_loads = [o["load_before"] for o in page["opens"]]
-    lines += [
-        "",
-        f"{len(on)} + {len(off)} runs of {live['steps']} steps, the machine's load average before them {min(loads):.1f}–{max(loads):.1f} "
-        f"(two cores); the page opened {len(page['opens'])} times at load average {min(page_loads):.1f}–{max(page_loads):.1f}.",
-    ]
-    if opened is False and cpu[0] is not None and cpu[0] < 1000 * OPEN_TARGET_S and ready[0] is not None:
-        lines.append(
-            f"What the page costs is under the target: its renderer needed {cpu[0]:.0f} ms of CPU to render it. Rendering took "
-            f"{ready[0] / cpu[0]:.1f}× that, the rest waiting for cores that other work held: the miss is the loaded machine's."
+        fill(
+            "view",
+            "summary",
+            live=live,
+            page=page,
+            big=big,
+            cpu_on=_cell(cpu_on, ".2f", " ms"),
+            cpu_off=_cell(cpu_off, ".2f", " ms"),
+            cpu_noise=_within_noise(cpu_on, cpu_off),
+            misses_on=_cell(misses_on, ".0f"),
+            misses_off=_cell(misses_off, ".0f"),
+            misses_noise=_within_noise(misses_on, misses_off),
+            lag_target=LAG_TARGET_S,
+            lag=_cell(lag, ".3f", " s"),
+            lag_met=_target(None if lag.median is None else lag.median <= LAG_TARGET_S),
+            lag_p95=_cell(spread([r.lag_p95_s for r in on]), ".3f", " s"),
+            dropped=_cell(spread([r.dropped_frames for r in on]), ".0f"),
+            open_target=OPEN_TARGET_S,
+            ready=_cell(ready, ".0f", " ms"),
+            ready_met=_target(opened),
+            cpu=_cell(cpu, ".0f", " ms"),
+            cpu_met=_target(None if cpu.median is None else cpu.median < 1000 * OPEN_TARGET_S),
+            page_limit=PAGE_LIMIT_MB,
+            size_met=_target(big.size_mb < PAGE_LIMIT_MB),
+            on=len(on),
+            off=len(off),
+            load_lo=min(loads),
+            load_hi=max(loads),
+            opens=len(page.opens),
+            page_load_lo=min(page_loads),
+            page_load_hi=max(page_loads),
         )
+    ]
+    if opened is False and cpu.median is not None and cpu.median < 1000 * OPEN_TARGET_S and ready.median is not None:
+        lines.append(fill("view", "machine", cpu=cpu.median, slower=ready.median / cpu.median))
     lines.append("")
     return "\n".join(lines)
 
 
-def view_markdown(res: dict) -> str:
+def view_markdown(doc: dict) -> str:
     """Every run and page opening (docs/results.md)."""
-    live, page, big = res["live"], res["page"], res["big_page"]
-    f = lambda v, spec, unit="": "—" if v is None else format(v, spec) + unit  # noqa: E731  # a one-line local helper
-    lines = [
-        view_summary_markdown(res).rstrip("\n"),
-        "",
-        f"Real-time paper6 runs (τs = {live['tau_s']:g} s, {live['steps']} steps, secured), in pairs with the live view and without, "
-        "in the order run. A node's CPU per step is its median share of a core over the stepping phase × τs; the view's CPU is its "
-        "process, which serves the page and the stream itself; its lag is per step the time the step's truth was handed to the "
-        "browsers' connections minus the time the vehicle published the step; other work is what the rest of the machine used meanwhile (two cores: 200 %).",
-        "",
-        "| view | load before | exit | deadline misses | late steps | node CPU per step | view CPU | lag median | lag p95 | lag max | frames dropped | other work |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in live["runs"]:
+    v = load_view(doc)
+    T = "view"
+    lines = [view_summary_markdown(doc).rstrip("\n"), fill(T, "runs-head", live=v.live)]
+    for r in v.live.runs:
         lines.append(
-            f"| {'with' if r['view'] else 'without'} | {r['load_before']:.1f} | {r['exit_code']} | {r['deadline_misses']} | {r['late_steps']} | "
-            f"{f(r['node_cpu_ms_per_step'], '.2f', ' ms')} | {f(r['view_cpu_pct'], '.0f', ' %')} | {f(r['lag_median_s'], '.3f', ' s')} | "
-            f"{f(r['lag_p95_s'], '.3f', ' s')} | {f(r['lag_max_s'], '.3f', ' s')} | {f(r['dropped_frames'], 'd')} | {f(r['other_work_pct'], '.0f', ' %')} |"
-        )
-    lines += [
-        "",
-        "`netsetest report --html` pages opened in headless Chromium (a fresh browser each time), ms from the navigation's start by the "
-        "page's clock: its load event, first contentful paint, and BokehJS done rendering every root (the page as a user sees it); "
-        "the CPU the page's renderer used by then, its main thread and all its threads.",
-        "",
-        "| page | size | load before | load event | first contentful paint | rendered | main-thread CPU | renderer CPU | console errors |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for p, name in ((page, f"paper6, {page['steps']} steps"), (big, f"{big['nodes']}-node ring, {big['steps']} steps")):
-        for o in p["opens"]:
-            lines.append(
-                f"| {name} | {p['size_mb']:.2f} MB | {o['load_before']:.1f} | {f(o['load_event_ms'], '.0f', ' ms')} | "
-                f"{f(o['first_contentful_paint_ms'], '.0f', ' ms')} | {f(o['ready_ms'], '.0f', ' ms')} | {f(o['main_thread_cpu_ms'], '.0f', ' ms')} | "
-                f"{f(o['renderer_cpu_ms'], '.0f', ' ms')} | {o['errors']} |"
+            fill(
+                T,
+                "run-row",
+                side=fill(T, "with" if r.view else "without"),
+                r=r,
+                node_cpu=_unit(r.node_cpu_ms_per_step, ".2f", " ms"),
+                view_cpu=_unit(r.view_cpu_pct, ".0f", " %"),
+                lag_median=_unit(r.lag_median_s, ".3f", " s"),
+                lag_p95=_unit(r.lag_p95_s, ".3f", " s"),
+                lag_max=_unit(r.lag_max_s, ".3f", " s"),
+                other=_unit(r.other_work_pct, ".0f", " %"),
             )
-    lines += ["", f"Each line of the pages is drawn from at most {big['max_points']} points; the record and `netsetest export` keep every step.", ""]
+        )
+    lines.append(fill(T, "pages-head"))
+    for p, block in ((v.page, "page-name"), (v.big_page, "big-page-name")):
+        name = fill(T, block, p=p)
+        for o in p.opens:
+            lines.append(
+                fill(
+                    T,
+                    "opening-row",
+                    name=name,
+                    p=p,
+                    o=o,
+                    load_event=_unit(o.load_event_ms, ".0f", " ms"),
+                    paint=_unit(o.first_contentful_paint_ms, ".0f", " ms"),
+                    ready=_unit(o.ready_ms, ".0f", " ms"),
+                    main=_unit(o.main_thread_cpu_ms, ".0f", " ms"),
+                    renderer=_unit(o.renderer_cpu_ms, ".0f", " ms"),
+                )
+            )
+    lines.append(fill(T, "tail", big=v.big_page))
     return "\n".join(lines)
