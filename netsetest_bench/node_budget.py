@@ -31,6 +31,9 @@ import sys
 from pathlib import Path
 
 from netsetest_bench import bus_floor
+from netsetest_bench.figures.node import Node, Range
+from netsetest_bench.figures.node import load as load_node
+from netsetest_bench.render import MISSING, fill
 from netsetest_bench.zenoh_runs import profiled_ring_run
 
 OUTSIDE = ("wait", "decode", "handle", "build", "encode", "put", "other", "threads")  # profile phases outside the estimator
@@ -161,77 +164,69 @@ def node_figures(cfg: dict, tmp: Path, baseline: Path | None = None) -> dict:
     return out
 
 
-def node_markdown(res: dict) -> str:
-    f = lambda v, spec=".0f": "—" if v is None or v != v else format(v, spec)  # noqa: E731  # a one-line local helper
-    this = res["this"]["summary"]
-    base = res["baseline"]["summary"] if "baseline" in res else None
-    runs = "; ".join(f"load {r['load_before']}, {r['deadline_misses']} misses" for r in res["this"]["runs"])
-    lines = [
-        f"A real-time ring of {res['nodes']} nodes (τs = 0.1 s), {res['steps']} steps, every node profiled (`run --profile`); "
-        f"median over the nodes, then over {res['reps']} runs (this checkout: {runs}; deadline misses of a run's "
-        f"{res['nodes'] * (res['steps'] + 1)} node-steps)."
-    ]
+def _number(v: float | None) -> float | None:
+    """A figure the table prints; NaN (no messages to divide by) is one it lacks."""
+    return None if v is None or v != v else v
+
+
+def _range(r: Range | None, spec: str) -> str:
+    if r is None:
+        return MISSING
+    return fill("node", "range", median=_number(r.median), lo=_number(r.min), hi=_number(r.max), spec=spec)
+
+
+def node_markdown(doc: dict) -> str:
+    n = load_node(doc)
+    T = "node"
+    this, base = n.this.summary, n.baseline.summary if n.baseline is not None else None
+    runs = "; ".join(fill(T, "run", r=r) for r in n.this.runs)
+    head = fill(T, "head", n=n, runs=runs, node_steps=n.nodes * (n.steps + 1))
+    if base and n.baseline is not None:
+        head += fill(T, "with-baseline", n=n, runs="; ".join(fill(T, "run", r=r) for r in n.baseline.runs))
     if not this:
-        return "\n".join([*lines, "", "No node reported.", ""])
-    head = "| figure | this checkout (range over runs) |"
-    rule = "|---|---|"
-    if base:
-        bruns = "; ".join(f"load {r['load_before']}, {r['deadline_misses']} misses" for r in res["baseline"]["runs"])
-        commits = res.get("commits", {})
-        lines[0] += (
-            f" The baseline, the code of commit `{commits.get('baseline')}` (this checkout: `{commits.get('this')}`, uncommitted changes aside), ran alternately with it ({bruns})."
-        )
-        head += " baseline (range) | this / baseline |"
-        rule += "---|---|"
-    lines += ["", head, rule]
+        return "\n".join([head, fill(T, "none")])
+    lines = [
+        head,
+        fill(T, "table-head", baseline_head=fill(T, "baseline-head") if base else "", baseline_rule=fill(T, "baseline-rule") if base else ""),
+    ]
     for key, what, unit in FIGURES:
         spec = ".2f" if unit in ("×", "") else ".0f"
-        cell = lambda s: f"{f(s[key]['median'], spec)} ({f(s[key]['min'], spec)}–{f(s[key]['max'], spec)})"  # noqa: E731  # a one-line local helper
-        row = f"| {what}{f' [{unit}]' if unit else ''} | {cell(this)} |"
-        if base:
-            row += f" {cell(base)} | {f(res['ratio'][key], '.2f')} |"
-        lines.append(row)
-    return "\n".join(lines) + "\n" + floor_markdown(res)
+        baseline = fill(T, "baseline-cells", cell=_range(base[key], spec), ratio=_number(n.ratio.get(key))) if base else ""
+        lines.append(fill(T, "row", what=what, unit=fill(T, "unit", unit=unit) if unit else "", this=_range(this[key], spec), baseline=baseline))
+    return "\n".join(lines) + "\n" + floor_markdown(n)
 
 
-def floor_markdown(res: dict) -> str:
+def floor_markdown(n: Node) -> str:
     """Zenoh's floor beside the ring's node: the bare bus process's figures, secured and ``--insecure``."""
-    fl = res.get("floor")
+    fl, T = n.floor, "node"
     if not fl:
         return ""
-    f = lambda v, spec: "—" if v is None or v != v else format(v, spec)  # noqa: E731  # a one-line local helper
-    sec, ins, node = fl["secured"]["summary"], fl["insecure"]["summary"], res["this"]["summary"]
+    sec, ins, node = fl.secured.summary, fl.insecure.summary, n.this.summary
     loads = "; ".join(
-        f"{m}: " + ", ".join(f"load {r['load_before']}" + (f" ({r['error']})" if "error" in r else "") for r in fl[m]["runs"]) for m in FLOOR_MODES
+        fill(
+            T,
+            "floor-loads",
+            mode=m,
+            runs=", ".join(fill(T, "floor-run", r=r) + (fill(T, "floor-error", error=r.error) if r.error else "") for r in fl.mode(m).runs),
+        )
+        for m in FLOOR_MODES
     )
-    node_of = {  # the ring's node, the same figure (its profile, above; per message: its solve is in its CPU)
+    node_of: dict[str, Range | None] = {  # the ring's node, the same figure (its profile, above; per message: its solve is in its CPU)
         **{key: node.get(key) for key in ("process_us", "decode_us", "wait_us", "put_us", "threads_us", "received", "sent")},
-        "thread_us": {k: node["process_us"][k] - node["threads_us"][k] for k in ("median", "min", "max")} if node else None,
+        "thread_us": _difference(node["process_us"], node["threads_us"]) if node else None,
     }
-    lines = [
-        "",
-        f"Zenoh's floor (netsetest_bench/bus_floor.py): a bare bus process, netsetest's ZenohBus opened as node {fl['node']}'s "
-        f"({fl['in_neighbours']} in-neighbours, the ring's median), receiving its input and its in-neighbours' states and "
-        "sending its state every τs, the payloads of an in-memory run of the same ring, with no estimator and no handling; "
-        f"median (range) over its runs, one of each after each run of the ring ({loads}).",
-        "",
-        "| figure | bare bus, secured (mTLS + ACL, through the router) | bare bus, `--insecure` (peer) | the ring's node (above) |",
-        "|---|---|---|---|",
-    ]
+    lines = [fill(T, "floor-head", fl=fl, loads=loads)]
     for key, what, unit in bus_floor.FIGURES:
         spec = ".2f" if unit == "" else ".0f"
-        cell = lambda s: f"{f(s[key]['median'], spec)} ({f(s[key]['min'], spec)}–{f(s[key]['max'], spec)})" if s and s.get(key) else "—"  # noqa: E731  # a one-line local helper
-        lines.append(f"| {what}{f' [{unit}]' if unit else ''} | {cell(sec)} | {cell(ins)} | {cell(node_of)} |")
+        cells = {name: _range(s.get(key), spec) if s else MISSING for name, s in (("secured", sec), ("insecure", ins), ("node", node_of))}
+        lines.append(fill(T, "floor-row", what=what, unit=fill(T, "unit", unit=unit) if unit else "", **cells))
     if sec:
-        above = sec["process_us"]["median"] > TARGET_OUTSIDE_US
-        lines += [
-            "",
-            f"The bus alone, secured, costs the node {f(sec['process_us']['median'], '.0f')} µs of CPU per step "
-            f"({f(sec['threads_us']['median'], '.0f')} of it Zenoh's threads): "
-            + (
-                f"above the {TARGET_OUTSIDE_US:.0f} µs target for everything outside the estimator, before the node's own code runs."
-                if above
-                else f"within the {TARGET_OUTSIDE_US:.0f} µs target for everything outside the estimator."
-            ),
-        ]
+        process = sec["process_us"].median
+        verdict = fill(T, "above" if process > TARGET_OUTSIDE_US else "within", target=TARGET_OUTSIDE_US)
+        lines.append(fill(T, "floor-tail", process=_number(process), threads=_number(sec["threads_us"].median), verdict=verdict))
     return "\n".join(lines) + "\n"
+
+
+def _difference(a: Range, b: Range) -> Range:
+    """One figure less another, median, least and largest each (the node's own thread: its process less its other threads)."""
+    return Range(a.median - b.median, a.min - b.min, a.max - b.max)
