@@ -32,6 +32,9 @@ import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+from netsetest_bench.figures.scaleout import Range
+from netsetest_bench.figures.scaleout import load as load_scaleout
+from netsetest_bench.render import MISSING, figure, fill
 from netsetest_bench.topologies import ring_topology
 from netsetest_bench.zenoh_runs import CLK_TCK, MACHINE_CORES, PY, _kill
 from netsetest.runtime import netns
@@ -228,32 +231,43 @@ def layouts_figures(runs: Mapping[str, list[dict]], nodes: int, steps: int, reps
     return out
 
 
-def scaleout_markdown(res: dict) -> str:
-    f = lambda v, spec=".2f": "—" if v is None else format(v, spec)  # noqa: E731  # a one-line local helper
-    lines = [
-        f"A lockstep ring of {res['nodes']} nodes (bench/topologies.py), {res['steps']} steps, secured (mTLS, access control at "
-        f"every router), in each layout {res['reps']} times, the layouts alternately, on this machine's {res['cores']} cores. "
-        f"Step rate: steps checked per second from step {res['warm_steps']} on; CPU: every process of the run (roles and routers) "
-        "from that step to the last but one; ceiling: the step rate at which that CPU would keep every core busy. Medians over the runs (range):",
-        "",
-        "| layout | step rate [steps/s] | CPU per step [ms] | … on host a / host b | ceiling of the cores [steps/s] | step rate / ceiling | runs (load before; violations, nodes missing) |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    what = {"one": "one host: one namespace, one router", "two": "two hosts: two namespaces, a router in each, linked"}
-    for name, lay in res["layouts"].items():
-        s = lay["summary"]
+def _range(r: Range, spec: str = ".2f") -> str:
+    return fill("scaleout", "range", r=r, spec=spec)
+
+
+def scaleout_markdown(doc: dict) -> str:
+    s, T = load_scaleout(doc), "scaleout"
+    lines = [fill(T, "head", s=s)]
+    for name, lay in s.layouts.items():
         runs = "; ".join(
-            f"{r['load_before'].split()[0]}: {r['violations']}, {len(r['nodes_missing']) if r['nodes_missing'] is not None else '—'}"
-            + (" (failed)" if r["error"] or not r.get("step_rate") else "")
-            for r in lay["runs"]
+            fill(
+                T,
+                "run",
+                load=r.load_before.split()[0],
+                r=r,
+                missing=MISSING if r.nodes_missing is None else len(r.nodes_missing),
+                failed=fill(T, "failed") if r.failed() else "",
+            )
+            for r in lay.runs
         )
-        if not s:
-            lines.append(f"| {what[name]} | — | — | — | — | — | {runs} |")
+        layout = fill(T, name)
+        m = lay.summary
+        if m is None:
+            lines.append(fill(T, "no-summary", layout=layout, runs=runs))
             continue
-        cell = lambda k, spec=".2f": f"{f(s[k]['median'], spec)} ({f(s[k]['min'], spec)}–{f(s[k]['max'], spec)})"  # noqa: E731  # a one-line local helper
-        hosts = " / ".join(f(s["cpu_ms_per_step_by_host"].get(h), ".1f") for h in HOST_NAMES[: lay["hosts"]])
+        hosts = " / ".join(figure(m.cpu_ms_per_step_by_host.get(h), ".1f") for h in HOST_NAMES[: lay.hosts])
         lines.append(
-            f"| {what[name]} | {cell('step_rate')} | {cell('cpu_ms_per_step', '.1f')} | {hosts} | {cell('ceiling_step_rate')} | {cell('of_ceiling')} | {runs} |"
+            fill(
+                T,
+                "row",
+                layout=layout,
+                step_rate=_range(m.step_rate),
+                cpu=_range(m.cpu_ms_per_step, ".1f"),
+                hosts=hosts,
+                ceiling=_range(m.ceiling_step_rate),
+                of_ceiling=_range(m.of_ceiling),
+                runs=runs,
+            )
         )
-    lines += ["", f"Two hosts / one host, step rate: **{f(res['ratio'])}**."]
+    lines.append(fill(T, "ratio", s=s))
     return "\n".join(lines) + "\n"
