@@ -13,6 +13,8 @@ import json
 import statistics
 from pathlib import Path
 
+from netsetest_bench.figures.spread import load as load_spread
+from netsetest_bench.render import MISSING, fill
 from netsetest_bench.run import TARGETS
 
 MIN_RUNS = 2  # a spread needs two runs at least
@@ -64,30 +66,29 @@ def spread_figures(paths: list[Path]) -> dict:
 
 def _num(v: float | None) -> str:
     if v is None:
-        return "—"
+        return MISSING
     return format(v, ".0f") if abs(v) >= 100 else format(v, ".3g")
 
 
-def spread_markdown(res: dict) -> str:
+def spread_markdown(doc: dict) -> str:
     """One row per headline figure: each run's value, the median, the spread and the target."""
-    runs = res["meta"]["runs"]
-    loads = "; ".join(f"{r['date']} (load average {r['load_before']} before)" for r in runs)
-    files = ", ".join(f"`{r['file']}`" for r in runs)
+    s, T = load_spread(doc), "spread"
+    runs = s.meta.runs
     lines = [
-        f"`netsetest bench --quick --only performance` run {len(runs)} times, one after another ({files}): {loads}. "
-        "Spread = (max − min) / median; a figure whose spread is wider than its distance to the target is a range on "
-        "this shared 2-core machine, not a result.",
-        "",
-        "| figure | " + " | ".join(f"run {i}" for i in range(1, len(runs) + 1)) + " | median | spread | target | met in every run |",
-        "|---|" + "---|" * len(runs) + "---|---|---|---|",
-    ]
-    for f in res["figures"]:
-        spread = "—" if f["relative_spread"] is None else f"{100 * f['relative_spread']:.0f} %"
-        lines.append(
-            f"| `{f['key']}` | "
-            + " | ".join(_num(v) for v in f["values"])
-            + f" | {_num(f['median'])} | {spread} | {f['target']} | {'yes' if f['met_in_every_run'] else 'no'} |"
+        fill(
+            T,
+            "head",
+            n=len(runs),
+            files=", ".join(fill(T, "file", r=r) for r in runs),
+            loads="; ".join(fill(T, "run-load", r=r) for r in runs),
+            columns=" | ".join(fill(T, "column", i=i) for i in range(1, len(runs) + 1)),
+            dashes="---|" * len(runs),
         )
+    ]
+    for f in s.figures:
+        spread = MISSING if f.relative_spread is None else fill(T, "percent", pct=100 * f.relative_spread)
+        values = " | ".join(_num(v) for v in f.values)
+        lines.append(fill(T, "row", f=f, values=values, median=_num(f.median), spread=spread, met="yes" if f.met_in_every_run else "no"))
     return "\n".join(lines) + "\n"
 
 
