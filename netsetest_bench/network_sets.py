@@ -31,6 +31,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from netsetest_bench.figures.network_sets import Ratios
+from netsetest_bench.figures.network_sets import load as load_sets
+from netsetest_bench.render import fill
 from netsetest.scenarios import TOPOLOGY_DIR
 
 if TYPE_CHECKING:  # (the benchmark imports its parts lazily)
@@ -332,91 +335,86 @@ def _f(v: float | None, spec: str = ".3f") -> str:
     return "–" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, spec)
 
 
-def _cells(ratios: dict) -> str:
+def _cells(ratios: Ratios | None) -> str:
     """r / β / f per node (the worst of the three in brackets), compact."""
-    return "; ".join(f"{i}: {'/'.join(_f(r[m]) for m in (1, 0, 2))}" for i, r in sorted(ratios.items(), key=lambda kv: int(kv[0])))
+    return "; ".join(f"{i}: {'/'.join(_f(r[m]) for m in (1, 0, 2))}" for i, r in sorted((ratios or {}).items()))
 
 
-def sets_markdown(res: dict) -> str:
+def _narrower(ratios: Ratios | None) -> int:
+    return sum(int(v[3] or 0) for v in (ratios or {}).values())
+
+
+def _met(ok: bool) -> str:
+    return fill("network_sets", "yes" if ok else "no")
+
+
+def sets_markdown(doc: dict) -> str:
     """Issue 44's tables: faults at their bounds, the directed rings, the declared bounds, the cost."""
-    lines = [
-        "Faults at their declared bounds (every faulty sensor at ±F, switching sign at δ a step), SAIM, worst-case signals: "
-        "the SDP's mean published width over the central exact limit from step "
-        f"{res['at_bounds'][0]['from_step'] if res['at_bounds'] else 10}, per coordinate and node (the worst of all), over the seeds; "
-        "target: every coordinate of every node ≤ the run's target, no violation, no interval narrower than exact.",
-        "",
-        "| topology | seeds | worst node and coordinate (per seed) | narrower than exact | violations | covered | met |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for b in res["at_bounds"]:
-        runs = b["runs"]
-        worst = max(r["worst"] for r in runs)
-        met = worst <= b["target"] and all(r["violations"] == 0 and r["narrower"] == 0 for r in runs)
+    s, T = load_sets(doc), "network_sets"
+    lines = [fill(T, "at-bounds-head", from_step=s.at_bounds[0].from_step if s.at_bounds else 10)]
+    for b in s.at_bounds:
+        runs = b.runs
+        worst = max(r.worst for r in runs)
         lines.append(
-            f"| {b['topology']} | {','.join(str(r['seed']) for r in runs)} | {_f(worst)} ({', '.join(_f(r['worst']) for r in runs)}) | "
-            f"{sum(r['narrower'] for r in runs)} | {sum(r['violations'] for r in runs)} | {sum(r['covered'] for r in runs)} of "
-            f"{sum(r['evaluated'] for r in runs)} | {'yes' if met else '**no**'} (≤ {b['target']:.2f}) |"
+            fill(
+                T,
+                "at-bounds-row",
+                b=b,
+                seeds=",".join(str(r.seed) for r in runs),
+                worst=_f(worst),
+                per_seed=", ".join(_f(r.worst) for r in runs),
+                narrower=sum(r.narrower for r in runs),
+                violations=sum(r.violations for r in runs),
+                covered=sum(r.covered for r in runs),
+                evaluated=sum(r.evaluated for r in runs),
+                met=_met(worst <= b.target and all(r.violations == 0 and r.narrower == 0 for r in runs)),
+            )
         )
-    lines += [
-        "",
-        "Issue 44's directed 12-node rings (netsetest_bench/topologies.py; every reading reaches only its sender's out-neighbours), "
-        "SAIM, worst-case signals: per node r / β / f, mean published width over the node's network limit (what the topology carries "
-        "to it, `netsetest exact --network`) and over the central limit, from step "
-        f"{RING_FROM}; the furthest node's data take up to the steps in brackets; CPU seconds of the two limits.",
-        "",
-        "| ring | seed | worst over the network limit | per node over the network limit | per node over the central limit | narrower (network, central) | violations | CPU s (central, network) | ends relaxed (central, network) | met |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in res["rings"]:
-        narrower = (sum(int(v[3]) for v in r["network"].values()), sum(int(v[3]) for v in r["central"].values()))
-        met = r["worst"] <= r["target"] and r["violations"] == 0 and narrower[0] == 0
+    lines.append(fill(T, "rings-head", from_step=RING_FROM))
+    for r in s.rings:
+        narrower = (_narrower(r.network), _narrower(r.central))
         lines.append(
-            f"| {r['variant']} (furthest {max(r['furthest'].values())}) | {r['seed']} | {_f(r['worst'])} | {_cells(r['network'])} | {_cells(r['central'])} | "
-            f"{narrower[0]}, {narrower[1]} | {r['violations']} | {_f(r['central_cpu_s'], '.0f')}, {_f(r['network_cpu_s'], '.0f')} | "
-            f"{', '.join('–' if v is None else str(v) for v in r['relaxed'].values())} | {'yes' if met else '**no**'} (≤ {r['target']:.2f}) |"
+            fill(
+                T,
+                "ring-row",
+                r=r,
+                furthest=max((r.furthest or {}).values()),
+                worst=_f(r.worst),
+                network=_cells(r.network),
+                central=_cells(r.central),
+                narrower_network=narrower[0],
+                narrower_central=narrower[1],
+                central_cpu=_f(r.central_cpu_s, ".0f"),
+                network_cpu=_f(r.network_cpu_s, ".0f"),
+                relaxed=", ".join("–" if v is None else str(v) for v in (r.relaxed or {}).values()),
+                met=_met(r.worst <= r.target and r.violations == 0 and narrower[0] == 0),
+            )
         )
-    lines += [
-        "",
-        "Declared bounds drawn at random (paper6, SAIM, worst-case signals): every sensor's size and rate above its fault's (true), or "
-        "some below it (false); target: no violation, every miss on a node-step the guarantee did not cover (attributed).",
-        "",
-        "| declared | seeds | false on nodes | violations | misses, attributed | covered | met |",
-        "|---|---|---|---|---|---|---|",
-    ]
+    lines.append(fill(T, "declared-head"))
     for kind in ("true", "false"):
-        runs = [d for d in res["declared"] if d["declared"] == kind]
-        if not runs:
-            continue
-        met = all(d["violations"] == 0 and d["misses_attributed"] == d["misses"] for d in runs)
-        false_on = "; ".join(",".join(map(str, d["false_nodes"])) for d in runs) or "–"
-        lines.append(
-            f"| {kind} | {','.join(str(d['seed']) for d in runs)} | {false_on} | {sum(d['violations'] for d in runs)} | "
-            f"{sum(d['misses'] for d in runs)}, {sum(d['misses_attributed'] for d in runs)} | {sum(d['covered'] for d in runs)} of "
-            f"{sum(d['evaluated'] for d in runs)} | {'yes' if met else '**no**'} |"
-        )
-    lines += [
-        "",
-        "What the exchange costs, per node-step, with it and without it on the same topology (`neighbour_sets` and "
-        "`bounded_readings` off): the messages a node publishes, their bytes and the deliveries they make (each state to its "
-        "out-neighbours and the collector, each reading to its readers), and the estimator's step replayed on the same inputs "
-        f"(CPU time; the fastest of {res['cost'][0]['rounds'] if res['cost'] else COST_ROUNDS} alternating rounds, the median beside it); "
-        f"target: at most +{res['step_target_ms']} ms.",
-        "",
-        "| topology | case | states: messages, bytes, deliveries (with / without) | readings: messages, bytes, deliveries (with / without) | step ms: with / without, fastest (median) | over | met |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for c in res["cost"]:
-        w, wo = c["wire"]["with"], c["wire"]["without"]
-
-        def wire(kind: str, w: dict = w, wo: dict = wo) -> str:
-            return " / ".join(f"{x[kind]['messages']:.2f}, {x[kind]['bytes']:.0f} B, {x[kind]['deliveries']:.2f}" for x in (w, wo))
-
-        s = c["step"]
-        lines.append(
-            f"| {c['label']} | {c['case'].upper()} | {wire('state')} | {wire('reading')} | {s['with']:.3f} / {s['without']:.3f} "
-            f"({s['with_median']:.3f} / {s['without_median']:.3f}) | {s['over_ms']:+.3f} ms ({s['over_median_ms']:+.3f}) | "
-            f"{'yes' if s['met'] else '**no**'} |"
-        )
+        drawn = [d for d in s.declared if d.declared == kind]
+        if drawn:
+            lines.append(
+                fill(
+                    T,
+                    "declared-row",
+                    kind=kind,
+                    seeds=",".join(str(d.seed) for d in drawn),
+                    false_on="; ".join(",".join(map(str, d.false_nodes or [])) for d in drawn) or "–",
+                    violations=sum(d.violations for d in drawn),
+                    misses=sum(d.misses for d in drawn),
+                    attributed=sum(d.misses_attributed for d in drawn),
+                    covered=sum(d.covered for d in drawn),
+                    evaluated=sum(d.evaluated for d in drawn),
+                    met=_met(all(d.violations == 0 and d.misses_attributed == d.misses for d in drawn)),
+                )
+            )
+    lines.append(fill(T, "cost-head", rounds=s.cost[0].rounds if s.cost else COST_ROUNDS, target=s.step_target_ms))
+    for c in s.cost:
+        w, wo = c.wire["with"], c.wire["without"]
+        states = " / ".join(fill(T, "traffic", t=x.state) for x in (w, wo))
+        readings = " / ".join(fill(T, "traffic", t=x.reading) for x in (w, wo))
+        lines.append(fill(T, "cost-row", c=c, case=c.case.upper(), states=states, readings=readings, s=c.step, met=_met(c.step.met)))
     return "\n".join(lines) + "\n"
 
 
