@@ -411,7 +411,7 @@ def sets_markdown(doc: dict) -> str:
             )
     lines.append(fill(T, "cost-head", rounds=s.cost[0].rounds if s.cost else COST_ROUNDS, target=s.step_target_ms))
     for c in s.cost:
-        w, wo = c.wire["with"], c.wire["without"]
+        w, wo = c.wire.with_, c.wire.without
         states = " / ".join(fill(T, "traffic", t=x.state) for x in (w, wo))
         readings = " / ".join(fill(T, "traffic", t=x.reading) for x in (w, wo))
         lines.append(fill(T, "cost-row", c=c, case=c.case.upper(), states=states, readings=readings, s=c.step, met=_met(c.step.met)))

@@ -31,7 +31,7 @@ import sys
 from pathlib import Path
 
 from netsetest_bench import bus_floor
-from netsetest_bench.figures.node import Node, Range
+from netsetest_bench.figures.node import FloorSummary, Node, NodeSummary, Range
 from netsetest_bench.figures.node import load as load_node
 from netsetest_bench.render import MISSING, fill
 from netsetest_bench.zenoh_runs import profiled_ring_run
@@ -181,9 +181,9 @@ def node_markdown(doc: dict) -> str:
     this, base = n.this.summary, n.baseline.summary if n.baseline is not None else None
     runs = "; ".join(fill(T, "run", r=r) for r in n.this.runs)
     head = fill(T, "head", n=n, runs=runs, node_steps=n.nodes * (n.steps + 1))
-    if base and n.baseline is not None:
+    if base is not None and n.baseline is not None:
         head += fill(T, "with-baseline", n=n, runs="; ".join(fill(T, "run", r=r) for r in n.baseline.runs))
-    if not this:
+    if this is None:
         return "\n".join([head, fill(T, "none")])
     lines = [
         head,
@@ -191,8 +191,8 @@ def node_markdown(doc: dict) -> str:
     ]
     for key, what, unit in FIGURES:
         spec = ".2f" if unit in ("×", "") else ".0f"
-        baseline = fill(T, "baseline-cells", cell=_range(base[key], spec), ratio=_number(n.ratio.get(key))) if base else ""
-        lines.append(fill(T, "row", what=what, unit=fill(T, "unit", unit=unit) if unit else "", this=_range(this[key], spec), baseline=baseline))
+        baseline = fill(T, "baseline-cells", cell=_range(getattr(base, key), spec), ratio=_number(n.ratio.get(key))) if base else ""
+        lines.append(fill(T, "row", what=what, unit=fill(T, "unit", unit=unit) if unit else "", this=_range(getattr(this, key), spec), baseline=baseline))
     return "\n".join(lines) + "\n" + floor_markdown(n)
 
 
@@ -211,22 +211,32 @@ def floor_markdown(n: Node) -> str:
         )
         for m in FLOOR_MODES
     )
-    node_of: dict[str, Range | None] = {  # the ring's node, the same figure (its profile, above; per message: its solve is in its CPU)
-        **{key: node.get(key) for key in ("process_us", "decode_us", "wait_us", "put_us", "threads_us", "received", "sent")},
-        "thread_us": _difference(node["process_us"], node["threads_us"]) if node else None,
-    }
+    node_of = _as_floor(node)  # the ring's node, the same figures (its profile, above; per message: its solve is in its CPU)
     lines = [fill(T, "floor-head", fl=fl, loads=loads)]
     for key, what, unit in bus_floor.FIGURES:
         spec = ".2f" if unit == "" else ".0f"
-        cells = {name: _range(s.get(key), spec) if s else MISSING for name, s in (("secured", sec), ("insecure", ins), ("node", node_of))}
+        cells = {name: _range(getattr(s, key), spec) if s else MISSING for name, s in (("secured", sec), ("insecure", ins), ("node", node_of))}
         lines.append(fill(T, "floor-row", what=what, unit=fill(T, "unit", unit=unit) if unit else "", **cells))
-    if sec:
-        process = sec["process_us"].median
+    if sec is not None and sec.process_us is not None:
+        process = sec.process_us.median
         verdict = fill(T, "above" if process > TARGET_OUTSIDE_US else "within", target=TARGET_OUTSIDE_US)
-        lines.append(fill(T, "floor-tail", process=_number(process), threads=_number(sec["threads_us"].median), verdict=verdict))
+        lines.append(fill(T, "floor-tail", process=_number(process), threads=_number(sec.threads_us.median if sec.threads_us else None), verdict=verdict))
     return "\n".join(lines) + "\n"
 
 
-def _difference(a: Range, b: Range) -> Range:
-    """One figure less another, median, least and largest each (the node's own thread: its process less its other threads)."""
-    return Range(a.median - b.median, a.min - b.min, a.max - b.max)
+def _as_floor(node: NodeSummary | None) -> FloorSummary | None:
+    """The ring's node's figures under the bare bus's names; its own thread: its process less its other threads."""
+    if node is None:
+        return None
+    p, t = node.process_us, node.threads_us
+    thread = Range(p.median - t.median, p.min - t.min, p.max - t.max) if p is not None and t is not None else None
+    return FloorSummary(
+        process_us=p,
+        thread_us=thread,
+        decode_us=node.decode_us,
+        wait_us=node.wait_us,
+        put_us=node.put_us,
+        threads_us=t,
+        received=node.received,
+        sent=node.sent,
+    )

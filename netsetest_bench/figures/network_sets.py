@@ -79,6 +79,14 @@ class Wire:
 
 
 @dataclass(frozen=True)
+class Sides:
+    """The same topology with the exchange (``with``) and without it."""
+
+    with_: Wire
+    without: Wire
+
+
+@dataclass(frozen=True)
 class Step:
     """The estimator's step replayed on the same inputs, with the exchange and without [ms CPU]."""
 
@@ -96,7 +104,7 @@ class Cost:
     label: str
     case: str
     rounds: int
-    wire: dict[str, Wire]  # with, without
+    wire: Sides
     step: Step
 
 
@@ -110,9 +118,11 @@ class Sets:
 
 
 def load(doc: dict, what: str = "the network sets' figures") -> Sets:
-    """``doc`` as :class:`Sets` (a step's ``with`` is the field ``with_``: a keyword in Python)."""
+    """``doc`` as :class:`Sets` (``with``, a keyword in Python, is the field ``with_``)."""
     if isinstance(doc, dict) and isinstance(doc.get("cost"), list):
-        doc = doc | {
-            "cost": [c | {"step": {("with_" if k == "with" else k): v for k, v in c["step"].items()}} if isinstance(c, dict) else c for c in doc["cost"]]
-        }
+        doc = doc | {"cost": [{k: _with(v) if k in ("step", "wire") else v for k, v in c.items()} if isinstance(c, dict) else c for c in doc["cost"]]}
     return typed(Sets, doc, what)
+
+
+def _with(d: object) -> object:
+    return {("with_" if k == "with" else k): v for k, v in d.items()} if isinstance(d, dict) else d

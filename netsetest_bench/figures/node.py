@@ -17,6 +17,46 @@ class Range:
 
 
 @dataclass(frozen=True)
+class NodeSummary:
+    """The ring's node, each figure of node_budget.FIGURES over the runs (None: not in these figures)."""
+
+    process_us: Range | None = None
+    solve_us: Range | None = None
+    outside_us: Range | None = None
+    outside_ratio: Range | None = None
+    wait_us: Range | None = None
+    decode_us: Range | None = None
+    handle_us: Range | None = None
+    build_us: Range | None = None
+    encode_us: Range | None = None
+    put_us: Range | None = None
+    other_us: Range | None = None
+    threads_us: Range | None = None
+    received: Range | None = None
+    sent: Range | None = None
+    per_received_us: Range | None = None
+    per_sent_us: Range | None = None
+    threads_per_message_us: Range | None = None
+    outside_per_message_us: Range | None = None
+
+
+@dataclass(frozen=True)
+class FloorSummary:
+    """The bare bus process (or the ring's node, the same figures), each figure of bus_floor.FIGURES over the runs."""
+
+    process_us: Range | None = None
+    thread_us: Range | None = None
+    decode_us: Range | None = None
+    wait_us: Range | None = None
+    put_us: Range | None = None
+    rest_us: Range | None = None
+    threads_us: Range | None = None
+    received: Range | None = None
+    sent: Range | None = None
+    per_message_us: Range | None = None
+
+
+@dataclass(frozen=True)
 class RingRun:
     load_before: str
     deadline_misses: int
@@ -27,7 +67,7 @@ class Checkout:
     """One checkout's runs of the profiled ring, and each figure over them (node_budget.FIGURES' keys)."""
 
     runs: list[RingRun]
-    summary: dict[str, Range]
+    summary: NodeSummary | None = None  # None: no node reported
 
 
 @dataclass(frozen=True)
@@ -41,7 +81,7 @@ class FloorMode:
     """The bare bus process's runs in one mode, and each figure over them (bus_floor.FIGURES' keys)."""
 
     runs: list[FloorRun]
-    summary: dict[str, Range] = field(default_factory=dict)
+    summary: FloorSummary | None = None  # None: no run reported
 
 
 @dataclass(frozen=True)
@@ -74,4 +114,11 @@ class Node:
 
 
 def load(doc: dict, what: str = "the node figures") -> Node:
-    return typed(Node, doc, what)
+    """``doc`` as :class:`Node`; an empty summary (nothing reported) is None."""
+    return typed(Node, _no_empty_summary(doc), what)
+
+
+def _no_empty_summary(d: object) -> object:
+    if isinstance(d, dict):
+        return {k: None if k == "summary" and not v else _no_empty_summary(v) for k, v in d.items()}
+    return d
