@@ -23,13 +23,18 @@ import subprocess
 import sys
 from pathlib import Path
 
+from netsetest_bench.figures.baseline import load as load_side
+from netsetest_bench.render import MISSING, fill
 from netsetest_bench.zenoh_runs import code_env, realtime_run
 
 SCALING_PROCESSES = 2  # processes of each checkout for the in-memory rings, alternating
 SCALING_PROGRAM = """
 import json, sys, tempfile
 from pathlib import Path
-from netsetest_bench.run import FULL, QUICK, scaling
+try:  # a checkout from before issue 46 keeps the benchmark inside the package
+    from netsetest.bench.run import FULL, QUICK, scaling
+except ImportError:
+    from netsetest_bench.run import FULL, QUICK, scaling
 cfg = dict(QUICK if sys.argv[1] == "quick" else FULL)
 with tempfile.TemporaryDirectory(prefix="nsbench-") as tmp:
     print(json.dumps(scaling(cfg, Path(tmp))))
@@ -186,38 +191,31 @@ FIGURE_ROWS = (
 )
 
 
-def baseline_markdown(side: dict) -> str:
+def _value(v: int | float | None) -> str:
+    """A figure of the table: a count as it is, a time to three decimals."""
+    return MISSING if v is None else str(v) if isinstance(v, int) else format(v, ".3f")
+
+
+def baseline_markdown(doc: dict) -> str:
     """The side-by-side table: per figure this checkout and the baseline (fastest / median run), their ratio, the target."""
-    f = lambda v, spec=".3f": "—" if v is None else (str(v) if isinstance(v, int) else format(v, spec))  # noqa: E731  # a one-line local helper
-    commits = side["commits"]
-    lines = [
-        f"Side by side with `{commits['baseline']}` (this checkout: `{commits['this']}`, uncommitted changes aside), in one run, "
-        "alternating, one program for both (netsetest_bench/baseline.py): fastest / median run of each; the ratio of the fastest.",
-        "",
-        "| figure | this checkout | baseline | this / baseline | target | met |",
-        "|---|---|---|---|---|---|",
-    ]
-    figs = side.get("figures") or {}
+    side, T = load_side(doc), "baseline"
+    lines = [fill(T, "head", c=side.commits)]
     for key, what in FIGURE_ROWS:
-        c = figs.get(key)
-        if c is None:
-            lines.append(f"| {what} | — | — | — | | |")
+        f = side.figures.get(key)
+        if f is None:
+            lines.append(fill(T, "not-measured-row", what=what))
             continue
-        cells = [f"{f(c.get('this'))} / {f(c.get('this_median'))}" if "this_median" in c else f(c.get("this"))]
-        cells.append(f"{f(c.get('baseline'))} / {f(c.get('baseline_median'))}" if "baseline_median" in c else f(c.get("baseline")))
-        met = c.get("met")
-        lines.append(
-            f"| {what} | {cells[0]} | {cells[1]} | {f(c.get('ratio'), '.2f')} | {c.get('target', '')} | {'' if met is None else ('yes' if met else 'no')} |"
-        )
-    for part in ("step", "scaling"):
-        if "error" in (side.get(part) or {}):
-            lines.append(f"\n{part}: not measured: {side[part]['error']}")
-    rt = side.get("realtime") or {}
-    if rt:
-        lines += ["", "Real-time runs (deadline misses, node CPU ms per step):", ""]
-        for name in ("this", "baseline"):
-            runs = ", ".join(f"{r['nodes']}: {r['deadline_misses']} ({f(r['node_cpu_ms_per_step'], '.2f')})" for r in rt[name]["runs"])
-            lines.append(f"- {name}: {runs}")
+        this = fill(T, "pair", fastest=_value(f.this), median=_value(f.this_median)) if f.this_median is not None else _value(f.this)
+        base = fill(T, "pair", fastest=_value(f.baseline), median=_value(f.baseline_median)) if f.baseline_median is not None else _value(f.baseline)
+        met = "" if f.met is None else ("yes" if f.met else "no")
+        lines.append(fill(T, "row", what=what, this=this, baseline=base, f=f, met=met))
+    for name, part in (("step", side.step), ("scaling", side.scaling)):
+        if part.error is not None:
+            lines.append(fill(T, "not-measured", part=name, error=part.error))
+    if side.realtime is not None:
+        lines.append(fill(T, "realtime-head"))
+        for name, ladder in (("this", side.realtime.this), ("baseline", side.realtime.baseline)):
+            lines.append(fill(T, "realtime-line", name=name, runs=", ".join(fill(T, "realtime-run", r=r) for r in ladder.runs)))
     return "\n".join(lines) + "\n"
 
 

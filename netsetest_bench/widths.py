@@ -48,7 +48,10 @@ SIDE_PROCESSES, SIDE_RUNS = 4, 3  # side by side with the baseline: processes pe
 STEP_TARGET_MS = 0.25  # issue 28: the step at most this much over the code before every node kept a region
 STEP_PROGRAM = """
 import json, statistics, sys
-from netsetest_bench.solvers import capture, side_by_side
+try:  # a checkout from before issue 46 keeps the benchmark inside the package
+    from netsetest.bench.solvers import capture, side_by_side
+except ImportError:
+    from netsetest_bench.solvers import capture, side_by_side
 from netsetest.config.schema import load_topology
 from netsetest.scenarios import TOPOLOGY_DIR
 case, steps, runs = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
