@@ -463,7 +463,7 @@ def run_bench(
             res[only] = figures(cfg, Path(tmpd))
         res["meta"]["load_after"] = _load()
         res["meta"]["duration_s"] = time.perf_counter() - t_all
-        md = f"# netsetest benchmark: {only} ({'quick' if quick else 'full'}, {res['meta']['date']})\n\n" + render(res[only])
+        md = f"# netsetest benchmark: {only} ({'quick' if quick else 'full'}, {res['meta']['date']})\n\n" + render(_as_written(res)[only])
         _write(res, md, json_path, markdown_path)
         return 0
     with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
@@ -508,19 +508,20 @@ def run_bench(
             res["widths"] = widths_figures(cfg, tmp)
     res["meta"]["load_after"] = _load()
     res["meta"]["duration_s"] = time.perf_counter() - t_all
-    res.update(headline(load_performance(json.loads(json.dumps(res, default=_jsonable)))))  # from the figures as the file holds them
-    md = markdown(json.loads(json.dumps(res, default=_jsonable)))
+    res.update(headline(load_performance(_as_written(res))))
+    written = _as_written(res)
+    md = markdown(written)
     if "baseline" in res:
         from netsetest_bench.baseline import baseline_markdown
 
-        md += "\n## Side by side with the baseline (netsetest_bench/baseline.py)\n\n" + baseline_markdown(res["baseline"])
+        md += "\n## Side by side with the baseline (netsetest_bench/baseline.py)\n\n" + baseline_markdown(written["baseline"])
     if only is None:
-        md += "\n## A car as the truth (netsetest_bench/plant.py)\n\n" + plant_markdown(res["plant"])
-        md += "\n## What the exchange can buy (netsetest_bench/network.py)\n\n" + network_markdown(res["network"])
-        md += "\n## The paper's scenario (netsetest_bench/scenario.py)\n\n" + scenario_markdown(res["scenario"])
-        md += "\n" + compare_markdown(res["scenario"])
-        md += "\n## What `netsetest exact` costs under k-of-N health (netsetest_bench/exact_cost.py)\n\n" + exact_cost_markdown(res["exact"])
-        md += "\n## Published width over the exact limit, per coordinate (netsetest_bench/widths.py)\n\n" + widths_markdown(res["widths"])
+        md += "\n## A car as the truth (netsetest_bench/plant.py)\n\n" + plant_markdown(written["plant"])
+        md += "\n## What the exchange can buy (netsetest_bench/network.py)\n\n" + network_markdown(written["network"])
+        md += "\n## The paper's scenario (netsetest_bench/scenario.py)\n\n" + scenario_markdown(written["scenario"])
+        md += "\n" + compare_markdown(written["scenario"])
+        md += "\n## What `netsetest exact` costs under k-of-N health (netsetest_bench/exact_cost.py)\n\n" + exact_cost_markdown(written["exact"])
+        md += "\n## Published width over the exact limit, per coordinate (netsetest_bench/widths.py)\n\n" + widths_markdown(written["widths"])
     _write(res, md, json_path, markdown_path)
     return 0
 
@@ -780,6 +781,12 @@ def _load() -> str:
         return " ".join(Path("/proc/loadavg").read_text().split()[:3])
     except OSError:
         return "?"
+
+
+def _as_written(res: dict) -> dict:
+    """The figures as their file holds them (numpy's numbers as Python's, keys as strings): what every renderer reads,
+    so that a run's report is what ``--render-docs`` makes of its file."""
+    return json.loads(json.dumps(res, default=_jsonable))
 
 
 def _jsonable(o: object) -> object:

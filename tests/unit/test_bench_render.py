@@ -90,3 +90,33 @@ def test_no_renderer_indexes_the_figures_by_string_keys() -> None:
                 checked += 1
                 assert _string_keyed(fn) == [], f"{path.name}: {fn.name}"
     assert checked >= 15
+
+
+@pytest.mark.parametrize("part", ["plant", "network", "scenario", "exact", "flow", "view", "node", "scaleout", "logs"])
+def test_a_part_run_alone_reports_what_render_docs_makes_of_its_file(
+    part: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``netsetest bench --only PART --json F --markdown M`` (its measuring faked: the committed figures, numbers as numpy's)
+    renders its report from the figures as F holds them, the same text --render-docs makes of that file."""
+    import numpy as np
+
+    import netsetest_bench.run as run
+    from netsetest_bench.docs import PARTS as DOC_PARTS
+
+    committed = json.loads((ROOT / "bench" / f"{part}.json").read_text())[part]
+
+    def numpy(o: object) -> object:  # a live run's figures: numpy's numbers where the measurements made them
+        if isinstance(o, dict):
+            return {k: numpy(v) for k, v in o.items()}
+        if isinstance(o, list):
+            return [numpy(v) for v in o]
+        return np.float64(o) if type(o) is float else np.int64(o) if type(o) is int else o
+
+    module = {"exact": "exact_cost", "node": "node_budget"}.get(part, part)
+    monkeypatch.setattr(f"netsetest_bench.{module}.{part}_figures", lambda *a: numpy(committed))
+    assert run.run_bench(True, str(tmp_path / f"{part}.json"), str(tmp_path / f"{part}.md"), part) == 0
+    capsys.readouterr()
+    report = (tmp_path / f"{part}.md").read_text()
+    written = json.loads((tmp_path / f"{part}.json").read_text())[part]
+    doc_part = DOC_PARTS["exact-cost" if part == "exact" else part]  # the section of docs/results.md the part's run measures
+    assert doc_part.source == f"bench/{part}.json" and doc_part.draw(written) in report
