@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib.util
 import json
 import math
 import os
@@ -237,14 +238,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seconds", type=checks.positive_float, default=10.0, help="the drive's length [s]")
     p.add_argument("--seed", type=checks.seed, default=1, help="the drive's seed (the same seed writes the same drive)")
 
-    sections = _bench_sections()
     p = sub.add_parser("bench", help="the performance benchmark: solve times, tightness, Zenoh overhead, start-up, memory, real-time scale, defences")
     p.add_argument("--quick", action="store_true", help="fewer steps and samples (the report's header says how long the run took)")
     p.add_argument("--json", metavar="PATH", help="write every figure as JSON (default: none)")
     p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown (default: none)")
     p.add_argument(
         "--only",
-        choices=sections,
+        choices=_bench_sections(),
         help="run one part alone: plant = a car as the truth, network = what the exchange can buy, scenario = the paper's "
         "scenario per node and every estimator compared, exact = what `netsetest exact` costs under k-of-N health, view = the live "
         "view's cost and lag and the report page in headless Chromium, scaleout = a run across two network namespaces against one (root), "
@@ -758,16 +758,11 @@ def cmd_log_example(a: argparse.Namespace) -> int:
     return 0
 
 
-BENCH_MISSING = (
-    "netsetest bench: the benchmark (netsetest_bench) is not installed; it ships with a checkout of netsetest, not in the wheel: "
-    "pip install -e '.[bench]' in the checkout"
-)
+BENCH_MISSING = "netsetest bench: the benchmark (netsetest_bench) is not installed, it is not in the wheel: pip install -e '.[bench]' in a checkout"
 
 
 def _bench_sections() -> tuple[str, ...] | None:
-    """The parts ``bench --only`` may name, from the benchmark; None where it is not installed (a wheel's install)."""
-    import importlib.util
-
+    """The parts ``bench --only`` may name; None where the benchmark is not installed (an install of the wheel)."""
     if importlib.util.find_spec("netsetest_bench") is None:
         return None
     from netsetest_bench.sections import SECTIONS
