@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import importlib.util
 import json
 import math
 import os
@@ -19,7 +20,6 @@ from netsetest.analysis.errors import DEFAULT_BUDGET_S as DEFAULT_EXACT_BUDGET_S
 from netsetest.analysis.errors import CompareError, ExactError
 from netsetest.cli import checks
 from netsetest.config.schema import ConfigError
-from netsetest.bench.sections import SECTIONS
 from netsetest.estimator.objective import DEFAULT_OBJECTIVE, OBJECTIVE_HELP, OBJECTIVES
 from netsetest.models.manoeuvres import MANOEUVRES, WITH_AMPLITUDE
 from netsetest.models.signals import SIGNAL_KINDS
@@ -256,7 +256,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--markdown", metavar="PATH", help="write the report as Markdown (default: none)")
     p.add_argument(
         "--only",
-        choices=SECTIONS,
+        choices=_bench_sections(),
         help="run one part alone: plant = a car as the truth, network = what the exchange can buy, scenario = the paper's "
         "scenario per node and every estimator compared, exact = what `netsetest exact` costs under k-of-N health, view = the live "
         "view's cost and lag and the report page in headless Chromium, scaleout = a run across two network namespaces against one (root), "
@@ -778,7 +778,22 @@ def cmd_log_example(a: argparse.Namespace) -> int:
     return 0
 
 
+BENCH_MISSING = "netsetest bench: the benchmark (netsetest_bench) is not installed, it is not in the wheel: pip install -e '.[bench]' in a checkout"
+
+
+def _bench_sections() -> tuple[str, ...] | None:
+    """The parts ``bench --only`` may name; None where the benchmark is not installed (an install of the wheel)."""
+    if importlib.util.find_spec("netsetest_bench") is None:
+        return None
+    from netsetest_bench.sections import SECTIONS
+
+    return SECTIONS
+
+
 def cmd_bench(a: argparse.Namespace) -> int:
+    if _bench_sections() is None:
+        print(BENCH_MISSING, file=sys.stderr)
+        return EXIT_BAD_INPUT
     if a.render_docs is not None:
         return _render_docs(a)
     if a.spread is not None:
@@ -804,7 +819,7 @@ def cmd_bench(a: argparse.Namespace) -> int:
     if a.only == "view":
         require("rerun", "the benchmark's view part")
         require("bokeh", "the benchmark's view part")
-        from netsetest.records.browser import NoBrowser, chromium
+        from netsetest_bench.browser import NoBrowser, chromium
 
         try:
             chromium()
@@ -813,7 +828,7 @@ def cmd_bench(a: argparse.Namespace) -> int:
             return 2
     checks.output_file(a.json, "--json")
     checks.output_file(a.markdown, "--markdown")
-    from netsetest.bench.run import run_bench
+    from netsetest_bench.run import run_bench
 
     return run_bench(a.quick, a.json, a.markdown, a.only, Path(a.baseline).resolve() if a.baseline is not None else None)
 
@@ -821,7 +836,7 @@ def cmd_bench(a: argparse.Namespace) -> int:
 def _render_docs(a: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from netsetest.bench.docs import DocsError, write_docs
+    from netsetest_bench.docs import DocsError, write_docs
 
     measuring = [
         opt for opt, given in (("--quick", a.quick), ("--json", a.json), ("--markdown", a.markdown), ("--only", a.only), ("--baseline", a.baseline)) if given
@@ -841,7 +856,7 @@ def _render_docs(a: argparse.Namespace) -> int:
 def _spread(a: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from netsetest.bench.spread import SpreadError, write_spread
+    from netsetest_bench.spread import SpreadError, write_spread
 
     measuring = [opt for opt, given in (("--quick", a.quick), ("--only", a.only), ("--baseline", a.baseline)) if given]
     if measuring:

@@ -23,7 +23,7 @@ The window is an option of the vehicle's spec (``netsetest vehicle --ack-window`
 steps: a deadlock) to ``MAX_ACK_WINDOW`` (half the inbox bound: beyond, a paused collector's inbox would turn the
 run's own messages away, the loss this window exists to prevent); or ``unbounded``, no window at all (the
 vehicle never waits for the collector before its End), the run as it was before the window, which a slow
-collector can make lose messages: the benchmark's (netsetest/bench/flow.py) measure of what the window costs,
+collector can make lose messages: the benchmark's (netsetest_bench/flow.py) measure of what the window costs,
 the same ``netsetest run`` with and without it.
 
 No bus, no messages here (a spec's default window is read by every command line): the roles do the I/O.

@@ -1,7 +1,7 @@
 """The live view as a process of its own: ``run --view`` starts ``netsetest view`` beside the run (an observer like
 ``watch``) and reads its address (:func:`start_view`, :class:`ViewProcess`); the view hands its lag behind a
 real-time run to whoever asked for it (``netsetest view --lag-json PATH``, ``run --view-lag-json PATH``: the
-benchmark's, netsetest/bench/view.py) when it stops (:func:`write_lag`).
+benchmark's, netsetest_bench/view.py) when it stops (:func:`write_lag`).
 
 What the view draws is runtime/view.py (messages to Rerun entities); what it serves, runtime/view_server.py.
 """

@@ -504,7 +504,7 @@ def test_flood_on_one_key(when: str) -> None:
 
 def test_vehicle_and_collector_keep_only_open_steps(monkeypatch: pytest.MonkeyPatch) -> None:
     """What the issue measured growing (vehicle 0.8 MB, collector 20 MB per 1000 steps): per-step maps.
-    During the run they hold a few open steps; the full RSS figure is netsetest/bench/soak.py."""
+    During the run they hold a few open steps; the full RSS figure is netsetest_bench/soak.py."""
     import netsetest.runtime.inmemory as inmemory
     from netsetest.roles.collector import CLOSE_LAG, Collector
     from netsetest.roles.vehicle import Vehicle

@@ -157,7 +157,7 @@ def test_the_envelope_measures_the_tyres_load_so_a_wind_against_the_turn_does_no
     import numpy as np
 
     from netsetest.analysis.calibrate import at_speed
-    from netsetest.bench.plant import car_topology
+    from netsetest_bench.plant import car_topology
     from netsetest.models.drive import Drive
 
     env = OperatingEnvelope(6.0, (70.0, 120.0))

@@ -134,13 +134,13 @@ def test_compare_every_row_is_contained_where_its_assumptions_held(case: str, si
 
 
 def _bench_topologies():  # the benchmark's ring builder
-    from netsetest.bench import topologies
+    from netsetest_bench import topologies
 
     return topologies
 
 
 def test_compare_on_a_non_paper_topology(tmp_path: Path) -> None:
-    """A ring of 8 with chords (netsetest/bench/topologies.py), SAIM, worst-case signals."""
+    """A ring of 8 with chords (netsetest_bench/topologies.py), SAIM, worst-case signals."""
     topo = _bench_topologies().ring_topology(tmp_path, 8, steps=25, case="saim")
     c = compare(topo, (SDP, "zonotope", "interval", "strip", EXACT), (None,), ("worst",), (2,), None)
     for r in c.rows:

@@ -317,7 +317,7 @@ def test_the_benchmark_solves_the_nodes_own_problem(case: str) -> None:
     answer is bit for bit the state the node published (its hand-built copy had no fault bound and solved
     another SAIM problem: 55 of 120 steps came out with an `assumed` sector where the node's had
     `fault-bound`)."""
-    from netsetest.bench.solvers import capture, fast_estimators
+    from netsetest_bench.solvers import capture, fast_estimators
 
     sc = load_topology(PAPER6, case, steps=12)
     cap = capture(sc, "scheduled")

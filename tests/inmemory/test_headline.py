@@ -25,7 +25,7 @@ import pytest
 from run_helpers import ROOT, shared_run
 
 from netsetest.analysis.exact import COORDINATES, FROM_STEP, compare_record, exact_bounds
-from netsetest.bench.docs import PARTS, RENDER_COMMAND
+from netsetest_bench.docs import PARTS, RENDER_COMMAND
 from netsetest.config.schema import Case, load_topology
 from netsetest.records.record import load_record, save_record
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from netsetest.bench.topologies import ring_topology
+from netsetest_bench.topologies import ring_topology
 from netsetest.config.schema import load_topology
 from netsetest.runtime.inmemory import run_inmemory
 

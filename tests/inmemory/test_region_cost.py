@@ -1,4 +1,4 @@
-"""The widths part's region cost (netsetest/bench/widths.py, ``region_cost``) at a tiny size: every node-step's move
+"""The widths part's region cost (netsetest_bench/widths.py, ``region_cost``) at a tiny size: every node-step's move
 and cut are timed in the run that times the step, their share is a part of it, and the timers are gone after.  The
 step side by side with a baseline checkout (``step_side_by_side``, here this checkout itself): both measured in
 processes of their own, the difference and the verdict against the target in the table."""
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from netsetest.bench.widths import CASES, STEP_FIGURES, STEP_TARGET_MS, SideBySideFailed, region_cost, side_by_side_markdown, step_side_by_side
+from netsetest_bench.widths import CASES, STEP_FIGURES, STEP_TARGET_MS, SideBySideFailed, region_cost, side_by_side_markdown, step_side_by_side
 from netsetest.estimator import cuts, sdp
 
 

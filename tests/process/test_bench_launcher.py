@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from netsetest.bench.zenoh_runs import observed_lockstep
+from netsetest_bench.zenoh_runs import observed_lockstep
 from zenoh_helpers import child_pids
 
 pytestmark = pytest.mark.zenoh

@@ -1,4 +1,4 @@
-"""The report page in a real browser (headless Chromium, netsetest/records/browser.py): it renders without a
+"""The report page in a real browser (headless Chromium, netsetest_bench/browser.py): it renders without a
 console error, draws one line per node in every per-node figure, the graph's nodes and the verdict, and
 its screenshot is not blank.  Skips, saying why, where Chromium is not installed.
 
@@ -20,8 +20,8 @@ from zenoh_helpers import PAPER6, ProcessGuard, cli, wait_for
 
 from netsetest.cli.main import main
 from netsetest.records.record import load_record
-from netsetest.records.browser import BOKEH_READY, WASM_BASELINE, NoBrowser, load_page, named
-from netsetest.records.browser import chromium as find_chromium
+from netsetest_bench.browser import BOKEH_READY, WASM_BASELINE, NoBrowser, load_page, named
+from netsetest_bench.browser import chromium as find_chromium
 from netsetest.runtime.report import EXIT_INTERRUPTED
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -1,4 +1,4 @@
-"""``campaign --report``'s page in a real browser (headless Chromium, netsetest/records/browser.py): it renders
+"""``campaign --report``'s page in a real browser (headless Chromium, netsetest_bench/browser.py): it renders
 without a console error, with the summary table, the distributions, the detection delay against the fault's
 size and the worst runs' replay commands; its screenshot is not blank.  Skips where Chromium is not installed."""
 
@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from netsetest.cli.main import main
-from netsetest.records.browser import BOKEH_READY, NoBrowser, chromium, load_page
+from netsetest_bench.browser import BOKEH_READY, NoBrowser, chromium, load_page
 
 ROOTS = "(() => { const d = Bokeh.documents[0]; return (typeof d.roots === 'function' ? d.roots() : d.roots).length; })()"  # the page's figures
 MIN_PIXEL_STD = 10.0  # grey levels: a blank (or one-colour) page is about 0

@@ -1,5 +1,5 @@
 """Layering: the command line sits on top.  Nothing below netsetest/cli imports it (the launcher of a
-Zenoh run is runtime/launcher.py; the benchmark, netsetest/bench, uses the runtime, never the command
+Zenoh run is runtime/launcher.py; the benchmark, netsetest_bench, uses the runtime, never the command
 line), and nothing in the package reaches outside it (the old top-level bench/ is gone)."""
 
 from __future__ import annotations
@@ -9,8 +9,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
-PACKAGE, CLI, BENCH = ROOT / "netsetest", ROOT / "netsetest" / "cli", ROOT / "netsetest" / "bench"
+PACKAGE, CLI, BENCH = ROOT / "netsetest", ROOT / "netsetest" / "cli", ROOT / "netsetest_bench"
 
 
 def _imported(path: Path) -> set[str]:
@@ -52,9 +54,11 @@ def test_nothing_below_the_cli_imports_it() -> None:
     assert _offenders(below, "netsetest.cli") == {}
 
 
-def test_bench_is_below_the_cli_and_nothing_imports_outside_the_package() -> None:
+def test_bench_is_below_the_cli_and_the_product_never_imports_it() -> None:
     assert len(list(BENCH.glob("*.py"))) >= 5 and _offenders(sorted(BENCH.glob("*.py")), "netsetest.cli") == {}
-    assert _offenders(sorted(PACKAGE.rglob("*.py")), "bench") == {}  # a top-level bench/ would not be in the wheel
+    below = [f for f in PACKAGE.rglob("*.py") if CLI not in f.parents]
+    assert _offenders(below, "netsetest_bench") == {}  # not in the wheel: only the CLI's `bench` reaches it
+    assert _offenders(sorted(PACKAGE.rglob("*.py")), "bench") == {}  # a top-level bench/ would not be in the wheel either
 
 
 def test_bench_without_cvxpy_exits_2_before_any_work() -> None:
@@ -63,3 +67,14 @@ def test_bench_without_cvxpy_exits_2_before_any_work() -> None:
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert out.returncode == 2, out.stderr[-500:]
     assert "needs cvxpy" in out.stderr and "pip install 'netsetest[cvxpy]'" in out.stderr and "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize("args", [["--quick"], ["--only", "widths", "--baseline", "x"], ["--render-docs"], ["--spread", "a.json"], ["--only", "nosuch"]])
+def test_bench_not_installed_exits_2_naming_its_extra(args: list[str]) -> None:
+    """Where netsetest_bench is missing (an install of the wheel, which does not hold it), every form of ``netsetest
+    bench`` says so on one line, naming the extra and that it needs a checkout, before any work, with no traceback."""
+    code = f"import sys; sys.modules['netsetest_bench'] = None; from netsetest.cli.main import main; sys.exit(main(['bench', *{args!r}]))"
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2, out.stderr[-500:]
+    assert out.stderr.count("\n") == 1 and "Traceback" not in out.stderr
+    assert out.stderr.startswith("netsetest bench: the benchmark (netsetest_bench) is not installed") and "pip install -e '.[bench]'" in out.stderr

@@ -331,7 +331,7 @@ def test_run_view_hands_over_its_lag_behind_a_real_time_run(procs: ProcessGuard,
     """``run --clock realtime --view --view-lag-json PATH``: the view writes one lag per step whose truth it
     drew and sent, each positive (a truth leaves the view after the vehicle published it: a view that dated a
     step by its deadline instead would show lags below 0 here); the bound on it is the benchmark's
-    (netsetest/bench/view.py), a figure of the machine, not a test."""
+    (netsetest_bench/view.py), a figure of the machine, not a test."""
     pytest.importorskip("rerun")
     lag = tmp_path / "lag.json"
     procs.start("run", cli("run", PAPER6, "--clock", "realtime", "--steps", str(LAG_STEPS), "--view", "--view-lag-json", str(lag), "--quiet"))

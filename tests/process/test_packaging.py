@@ -24,7 +24,7 @@ from netsetest.cli.main import main
 from netsetest.scenarios import bundled_topologies, resolve_topology
 
 ROOT = Path(__file__).resolve().parents[2]
-SOURCES = ("pyproject.toml", "README.md", "LICENSE", "netsetest", "topologies", "nodes")
+SOURCES = ("pyproject.toml", "setup.py", "README.md", "LICENSE", "netsetest", "netsetest_bench", "topologies", "nodes")
 OPTIONAL = ("scipy", "cvxpy", "pyarrow", "pandas", "matplotlib", "mcap")  # never a plain dependency
 
 
@@ -84,6 +84,8 @@ def test_wheel_contents_and_dependencies(wheel: Path) -> None:
             info = z.getinfo(f"netsetest/scenarios/nodes/yaw{i}.toml")
             assert info.file_size > 100  # the file itself, not a symlink
         assert any(n.endswith(".dist-info/licenses/LICENSE") or n.endswith(".dist-info/LICENSE") for n in names)
+        assert {n.split("/")[0] for n in names if not n.startswith("netsetest-")} == {"netsetest"}  # the product alone: no netsetest_bench/
+        assert not any("bench" in n or "browser" in n for n in names), sorted(n for n in names if "bench" in n or "browser" in n)
     requires = [ln.split(":", 1)[1].strip() for ln in meta.splitlines() if ln.startswith("Requires-Dist:")]
     plain = [r for r in requires if "extra ==" not in r]
     for dep in OPTIONAL:
@@ -119,6 +121,9 @@ def test_installed_wheel_runs_bundled_scenario_from_any_directory(venv: Path, tm
         cwd=tmp_path,
     )
     assert m.returncode == 0, m.stderr
+    # the benchmark is not in the wheel: `bench` names the extra (from a checkout), one line, exit 2
+    bench = _run(str(exe), "bench", "--quick", cwd=tmp_path)
+    assert bench.returncode == 2 and bench.stderr.count("\n") == 1 and "pip install -e '.[bench]'" in bench.stderr, bench
     bad = _run(str(exe), "run", "nosuch", "--mode", "inmemory", cwd=tmp_path)
     assert bad.returncode == 2 and f"bundled topologies: {', '.join(bundled_topologies())}" in bad.stderr and "Traceback" not in bad.stderr
 

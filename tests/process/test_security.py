@@ -345,7 +345,7 @@ def test_insider_crash_payloads_and_flood_lose_no_role() -> None:
     huge number), then a 30 000 msg/s flood on its state key. The run ends with exit 0 and no node
     missing; the receivers counted the drops. (Speed figures: `netsetest bench`, not here: so the flooded run
     alone, without bench.attacks.flood's unflooded run, which only gives the step-rate ratio.)"""
-    from netsetest.bench.attacks import attacked_run, crash
+    from netsetest_bench.attacks import attacked_run, crash
 
     c = crash(ROOT / PAPER6, steps=25, secured=True, pace=0.1)
     assert c["exit_code"] == 0 and c["nodes_missing"] == [] and c["roles_lost"] == 0, c
@@ -360,7 +360,7 @@ def test_insider_flooding_its_own_state_key_in_real_time_blames_no_honest_node()
     every step of the run (not from the true input), beside node 2's own.  No honest node is reported
     missing or rejoined, node 2 is never counted silent, the forged copies are rejected, never judged, and
     every node-step lands in exactly one count (roles/collector.py; issue 33)."""
-    from netsetest.bench.attacks import attacked_run
+    from netsetest_bench.attacks import attacked_run
 
     steps = 60
     r = attacked_run(ROOT / PAPER6, steps, True, "state-run", 3000, 0.0, clock="realtime")

@@ -20,7 +20,7 @@ MAX_SLOPE_MB_PER_10K = 5.0  # the issue's bound
 @pytest.mark.timeout(600)
 def test_rss_stays_flat() -> None:
     out = subprocess.run(
-        [sys.executable, "-m", "netsetest.bench.soak", "--steps", str(STEPS)], cwd=ROOT, capture_output=True, text=True, timeout=560, check=True
+        [sys.executable, "-m", "netsetest_bench.soak", "--steps", str(STEPS)], cwd=ROOT, capture_output=True, text=True, timeout=560, check=True
     ).stdout
     d = json.loads(out)
     assert d["violations"] == 0

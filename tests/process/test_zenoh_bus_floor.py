@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from netsetest.bench.bus_floor import FIGURES, floor_run, median_node, ring_payloads
-from netsetest.bench.topologies import ring_topology
+from netsetest_bench.bus_floor import FIGURES, floor_run, median_node, ring_payloads
+from netsetest_bench.topologies import ring_topology
 from netsetest.config.schema import load_topology
 from zenoh_helpers import child_pids
 

@@ -18,8 +18,8 @@ import sys
 import time
 
 import pytest
-from netsetest.bench.scaleout import scaleout_run
-from netsetest.bench.topologies import ring_topology
+from netsetest_bench.scaleout import scaleout_run
+from netsetest_bench.topologies import ring_topology
 from netsetest.runtime import netns
 from zenoh_helpers import (
     PAPER6,
@@ -134,7 +134,7 @@ def test_scaleout_bench_stopped_by_sigterm_leaves_nothing_behind(tmp_path) -> No
     script = (
         "import sys, tempfile\n"
         "from pathlib import Path\n"
-        "from netsetest.bench.scaleout import scaleout_figures\n"
+        "from netsetest_bench.scaleout import scaleout_figures\n"
         "with tempfile.TemporaryDirectory(dir=sys.argv[1]) as d:\n"
         "    try:\n"
         "        scaleout_figures({'scaleout_nodes': 4, 'scaleout_steps': 100000, 'scaleout_reps': 1}, Path(d))\n"

@@ -1,4 +1,4 @@
-"""The performance part side by side with a baseline checkout (netsetest/bench/baseline.py): issue 45's figures read
+"""The performance part side by side with a baseline checkout (netsetest_bench/baseline.py): issue 45's figures read
 off each part's runs (the fastest run of each checkout judged, the median beside it), the real-time ladder of each
 checkout ending at its own first miss, and the table."""
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from netsetest.bench import baseline
+from netsetest_bench import baseline
 
 
 def _step(this: float, base: float) -> dict:
@@ -67,7 +67,7 @@ def test_the_ladders_stop_each_at_their_own_first_miss(monkeypatch: pytest.Monke
         return ok, [{"nodes": n, "deadline_misses": 0 if ok else 3, "node_cpu_ms_per_step": 1.0 if name == "this" else 2.0}]
 
     monkeypatch.setattr(baseline, "realtime_run", fake_run)
-    monkeypatch.setattr("netsetest.bench.topologies.ring_topology", lambda d, n, steps: tmp_path / f"ring{n}.toml")
+    monkeypatch.setattr("netsetest_bench.topologies.ring_topology", lambda d, n, steps: tmp_path / f"ring{n}.toml")
     out = baseline.realtime_side_by_side(tmp_path, [12, 24, 48, 64, 80, 96], 10, Path("/base"))
     assert calls == [(12, "this"), (12, "baseline"), (24, "this"), (24, "baseline"), (48, "this"), (48, "baseline"), (64, "this"), (80, "this")]
     assert out["this"]["max_nodes"] == 64 and out["baseline"]["max_nodes"] == 24

@@ -1,9 +1,17 @@
-"""The exact part's report (netsetest/bench/exact_cost.py): issue 34's targets are read from the right rows, and
+"""The exact part's report (netsetest_bench/exact_cost.py): issue 34's targets are read from the right rows, and
 memory that grows from the middle step to the last is not called flat."""
 
 from __future__ import annotations
 
-from netsetest.bench.exact_cost import exact_cost_markdown, targets
+from netsetest_bench.exact_cost import exact_cost_markdown
+from netsetest_bench.exact_cost import targets as typed_targets
+from netsetest_bench.figures.exact_cost import ExactRun
+from netsetest_bench.render import typed
+
+
+def targets(rows: list[dict]) -> list[tuple[str, str, bool]]:
+    """The targets of rows as a figures file holds them."""
+    return typed_targets(typed(list[ExactRun], rows))
 
 
 def _row(topology: str, case: str, cpu: float, peak: float, exact: int, rss: list[float]) -> dict:

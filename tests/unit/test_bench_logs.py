@@ -1,11 +1,11 @@
-"""The logs part's report (netsetest/bench/logs.py): issue 42's targets are read from the right figures (the bag's row,
+"""The logs part's report (netsetest_bench/logs.py): issue 42's targets are read from the right figures (the bag's row,
 wall time for the replay, the exact and the INS runs of the held-out drive), and a target missed is said to be."""
 
 from __future__ import annotations
 
 import copy
 
-from netsetest.bench.logs import logs_markdown, logs_summary_markdown, targets
+from netsetest_bench.logs import logs_markdown, logs_summary_markdown, targets
 
 
 def _run(contained: int, missed: int, undecided: int, acc: list[float]) -> dict:

@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 
-from netsetest.bench.network import network_markdown
+from netsetest_bench.network import network_markdown
 
 ROOT = Path(__file__).resolve().parents[2]
 

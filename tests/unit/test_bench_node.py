@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from netsetest.bench.node_budget import FIGURES, OUTSIDE, node_budget, node_markdown
+from netsetest_bench.node_budget import FIGURES, OUTSIDE, node_budget, node_markdown
 from netsetest.cli.main import main
 from netsetest.runtime.report import EXIT_BAD_INPUT
 
@@ -88,7 +88,7 @@ def test_baseline_measures_so_it_does_not_go_with_what_measures_nothing(what: st
 
 
 def test_the_floor_table_stands_beside_the_node_and_says_whether_the_bus_alone_is_over_the_target() -> None:
-    from netsetest.bench.bus_floor import FIGURES as FLOOR
+    from netsetest_bench.bus_floor import FIGURES as FLOOR
 
     figures = node_budget(_report())
     summary = {k: {"median": v, "min": v, "max": v} for k, v in figures.items()}

@@ -8,8 +8,8 @@ from __future__ import annotations
 import pytest
 
 import netsetest.runtime.netns as netns
-from netsetest.bench.scaleout import LAYOUTS, WARM_STEPS, layouts_figures, placement, scaleout_markdown, step_rate
-from netsetest.bench.zenoh_runs import MACHINE_CORES
+from netsetest_bench.scaleout import LAYOUTS, WARM_STEPS, layouts_figures, placement, scaleout_markdown, step_rate
+from netsetest_bench.zenoh_runs import MACHINE_CORES
 from netsetest.cli.main import main
 from netsetest.runtime.report import EXIT_BAD_INPUT
 

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from netsetest.bench.run import TARGETS
-from netsetest.bench.spread import SpreadError, spread_figures, spread_markdown
+from netsetest_bench.run import TARGETS
+from netsetest_bench.spread import SpreadError, spread_figures, spread_markdown
 from netsetest.runtime.report import EXIT_BAD_INPUT
 
 ROOT = Path(__file__).resolve().parents[2]

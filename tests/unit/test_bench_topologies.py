@@ -1,4 +1,4 @@
-"""The benchmark's ring variants (netsetest/bench/topologies.py) are the topologies they claim to be: the
+"""The benchmark's ring variants (netsetest_bench/topologies.py) are the topologies they claim to be: the
 real-time figures per variant (``realtime_fit``) measure a reference's readings, k-of-N health per group of
 six sensors and the car, and nothing else."""
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from netsetest.bench.topologies import FAULTY_PROFILES, ring_topology
+from netsetest_bench.topologies import FAULTY_PROFILES, ring_topology
 from netsetest.config.schema import Scenario, load_topology
 
 

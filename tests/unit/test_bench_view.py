@@ -1,9 +1,9 @@
-"""The view part's tables (netsetest/bench/view.py): what they conclude follows from the figures, and the
+"""The view part's tables (netsetest_bench/view.py): what they conclude follows from the figures, and the
 page's miss is put on the machine only when the page's own CPU was under the target."""
 
 from __future__ import annotations
 
-from netsetest.bench.view import view_markdown, view_summary_markdown
+from netsetest_bench.view import view_markdown, view_summary_markdown
 
 
 def _res(ready_ms: float, cpu_ms: float, cpu_with: float = 3.0) -> dict:

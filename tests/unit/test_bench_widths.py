@@ -1,11 +1,11 @@
-"""The widths part's report (netsetest/bench/widths.py): the SDP is judged on its worst node against the run's
+"""The widths part's report (netsetest_bench/widths.py): the SDP is judged on its worst node against the run's
 target, a point exact interval shows its absolute excess, narrower intervals and violations fail the target, and the
 region table sets each method without its region beside it with."""
 
 from __future__ import annotations
 
-from netsetest.bench.run import QUICK
-from netsetest.bench.widths import LISTED, OTHER, cost_markdown, plan, region_markdown, widths_markdown, widths_summary_markdown
+from netsetest_bench.run import QUICK
+from netsetest_bench.widths import LISTED, OTHER, cost_markdown, plan, region_markdown, widths_markdown, widths_summary_markdown
 from netsetest.scenarios import bundled_topologies
 
 

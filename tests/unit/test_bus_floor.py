@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from netsetest.bench.bus_floor import PAYLOAD_RUN, median_node, ring_payloads, subscribe_as_node
-from netsetest.bench.topologies import ring_topology
+from netsetest_bench.bus_floor import PAYLOAD_RUN, median_node, ring_payloads, subscribe_as_node
+from netsetest_bench.topologies import ring_topology
 from netsetest.bus import keys
 from netsetest.bus.base import Handler, MemoryBus, Screen
 from netsetest.config.schema import load_topology

@@ -58,7 +58,9 @@ def test_every_relative_link_resolves(doc: Path) -> None:
 # Markdown (bench/) and the docs themselves.  A citation is PATH#anchor, PATH "Heading", PATH, "Heading",
 # PATH ("Heading"), PATH *Heading*, PATH, *Heading* (also after "section"), or PATH §N; PATH is docs/….md,
 # README.md or DEVELOPERS.md, from the repository's root.
-CITING = sorted([*(ROOT / "netsetest").rglob("*.py"), *(ROOT / "tests").rglob("*.py"), *(ROOT / "bench").rglob("*.md"), *DOCS])
+CITING = sorted(
+    [*(ROOT / "netsetest").rglob("*.py"), *(ROOT / "netsetest_bench").rglob("*.py"), *(ROOT / "tests").rglob("*.py"), *(ROOT / "bench").rglob("*.md"), *DOCS]
+)
 CITATION = re.compile(
     r"(?P<doc>(?:docs/[\w./-]+|README|DEVELOPERS)\.md)"
     r"(?:#(?P<anchor>[\w-]+)"

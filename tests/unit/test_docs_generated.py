@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from netsetest.bench.docs import PARTS, RESULTS, SECTIONED, DocsError, begin, end, render, render_docs
+from netsetest_bench.docs import PARTS, RESULTS, SECTIONED, DocsError, begin, end, render, render_docs
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -193,7 +193,9 @@ def test_the_bound_measures_e_in_its_own_norm() -> None:
 
 
 def test_the_bench_table_says_per_car_and_drive_what_was_covered_and_attributed() -> None:
-    from netsetest.bench.plant import envelope_markdown
+    from netsetest_bench.figures.plant import Envelopes
+    from netsetest_bench.plant import envelope_markdown
+    from netsetest_bench.render import typed
 
     row = dict(
         case="nsnim", kmh=70.0, steps=80, ay_peak=5.5, envelope_left=0, e_max_ratio=0.4, covered=486, evaluated=486, violations=0, misses=0, misses_attributed=0
@@ -206,10 +208,10 @@ def test_the_bench_table_says_per_car_and_drive_what_was_covered_and_attributed(
         "held_out_seeds": [100, 101],
         "cars": [{"vehicle": 3, "box": [0.0037, 0.0199], "drives": {"double-lane-change": [row, row], "double-lane-change (outside)": [outside]}}],
     }
-    lines = envelope_markdown(env)
+    lines = envelope_markdown(typed(Envelopes, env))
     assert "--ay-max 6 --speed 70-120 --seeds 0-4" in lines[0] and "a double lane change at 70 km/h;" in lines[0] and "lap" not in lines[0]
     env["cars"][0]["drives"]["lap"] = [dict(row, kmh=None, steps=300)]  # a lap measured: named with its length
-    assert "the lap's first 300 steps (the first straight and into the first bend" in envelope_markdown(env)[0]
+    assert "the lap's first 300 steps (the first straight and into the first bend" in envelope_markdown(typed(Envelopes, env))[0]
     assert "a double lane change at 120 km/h, outside the envelope (seed 100 only)" in lines[0]
     assert "| 3 (VW Vanagon) | [0.0037, 0.0199] | double-lane-change | nsnim | 2 | 5.50 | 0 | 0.40 | 972 / 972 | 0 | 0 (0, yes) |" in lines
     assert "| 3 (VW Vanagon) | [0.0037, 0.0199] | double-lane-change (outside) | nsnim | 1 | 9.10 | 12 | 1.70 | 400 / 486 | 0 | 9 (9, yes) |" in lines

@@ -3,8 +3,11 @@
 - No import cycles: no module imports (directly or through others) a module that imports it back.
   Every import counts, also one inside a function (a lazy import still ties the two modules); only
   ``if TYPE_CHECKING:`` blocks are left out (never executed: annotations only).
-- Nothing below the CLI imports it: no module of netsetest/ outside netsetest/cli/ imports
-  netsetest.cli, except ``python -m netsetest`` (netsetest/__main__.py), which is the CLI's entry point.
+- Nothing below the CLI imports it: no module of netsetest/ outside netsetest/cli/, nor of the benchmark
+  (netsetest_bench/), imports netsetest.cli, except ``python -m netsetest`` (netsetest/__main__.py), which is
+  the CLI's entry point.
+- The product never imports the benchmark: netsetest_bench/ is not in the wheel, so only the CLI's ``bench``
+  command reaches it (and says so when it is not installed).
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ import functools
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[2] / "netsetest"
+BENCH = PACKAGE.with_name("netsetest_bench")  # the benchmark beside the product (a checkout's, not the wheel's)
 ENTRY_POINTS = {"netsetest.__main__"}  # the CLI itself, under another name
 
 
@@ -50,9 +54,9 @@ def _imported(tree: ast.AST, module: str, is_package: bool) -> set[str]:
     return out
 
 
-def import_graph(package: Path = PACKAGE) -> dict[str, set[str]]:
-    """Module → the package's modules it imports (itself excluded)."""
-    files = {_module_name(p, package): p for p in package.rglob("*.py")}
+def import_graph(*packages: Path) -> dict[str, set[str]]:
+    """Module → the packages' modules it imports (itself excluded); the packages side by side in one folder."""
+    files = {_module_name(p, package): p for package in packages for p in package.rglob("*.py")}
     graph = {}
     for name, path in files.items():
         deps = _imported(ast.parse(path.read_text(encoding="utf-8")), name, path.name == "__init__.py")
@@ -118,8 +122,8 @@ def test_the_checker_finds_a_cycle_and_a_lazy_one(tmp_path: Path) -> None:
 
 @functools.cache
 def _graph() -> dict[str, set[str]]:
-    """netsetest's import graph, parsed once for the tests below (they only read it)."""
-    return import_graph()
+    """The import graph of netsetest and its benchmark, parsed once for the tests below (they only read it)."""
+    return import_graph(PACKAGE, BENCH)
 
 
 def test_no_import_cycles() -> None:
@@ -133,5 +137,18 @@ def _is_cli(module: str) -> bool:
 def test_nothing_below_the_cli_imports_it() -> None:
     graph = _graph()
     assert any(_is_cli(d) for d in graph["netsetest.__main__"])  # the walk sees the entry point's import
+    assert sum(m.startswith("netsetest_bench.") for m in graph) >= 20  # the benchmark's modules are in the walk, below the CLI
     offenders = {m: sorted(filter(_is_cli, deps)) for m, deps in graph.items() if not _is_cli(m) and m not in ENTRY_POINTS}
     assert {m: d for m, d in offenders.items() if d} == {}
+
+
+def _is_bench(module: str) -> bool:
+    return module == "netsetest_bench" or module.startswith("netsetest_bench.")
+
+
+def test_the_product_never_imports_the_benchmark() -> None:
+    """Only the CLI (its ``bench`` command) imports netsetest_bench/; every other module of netsetest/ works without it."""
+    graph = _graph()
+    assert any(_is_bench(d) for d in graph["netsetest.cli.main"])  # the walk sees the CLI's import of it
+    product = {m: sorted(filter(_is_bench, deps)) for m, deps in graph.items() if m.startswith("netsetest.") and not _is_cli(m)}
+    assert {m: d for m, d in product.items() if d} == {}
