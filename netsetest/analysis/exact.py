@@ -181,8 +181,8 @@ def step_data(record: Record) -> list[RecordedStep]:
                     step=k,
                     u=float(t["u"]),
                     vx=float(t["vx"]),
-                    y={int(i): float(v) for i, v in t["y"].items()},
-                    gamma={int(i): float(v) for i, v in t["gamma"].items()},
+                    y={i: float(v) for i, v in t["y"].items()},
+                    gamma={i: float(v) for i, v in t["gamma"].items()},
                 )
             )
     except (KeyError, TypeError, ValueError, AttributeError) as exc:

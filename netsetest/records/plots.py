@@ -117,7 +117,7 @@ def _times(rec: Record, steps: np.ndarray | None = None) -> np.ndarray:
 
 def _truth_series(rec: Record, field: str, node: int) -> tuple[np.ndarray, np.ndarray]:
     """Time and value of a per-node truth field (NaN where the entry lacks the node)."""
-    return _times(rec), np.array([e.get(field, {}).get(str(node), np.nan) for e in rec.truth], dtype=float)
+    return _times(rec), np.array([e.get(field, {}).get(node, np.nan) for e in rec.truth], dtype=float)
 
 
 def _gapped(steps: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

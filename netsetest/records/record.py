@@ -60,6 +60,7 @@ from netsetest.records.files import open_locked
 from netsetest.records.meta import RunMeta
 from netsetest.proven import ProvenSet, proven_sets
 from netsetest.records.summary import RunSummary
+from netsetest.records.truth import truth_entry, truth_json
 
 FORMAT = "netsetest-record"
 VERSION = 2
@@ -112,7 +113,7 @@ class JsonlSink:
         self._flush()
 
     def truth(self, entry: dict) -> None:
-        self._line({"kind": "truth", "entry": entry})
+        self._line({"kind": "truth", "entry": truth_json(entry)})
         self._flush()
 
     def state(self, node: int, entry: dict) -> None:
@@ -295,7 +296,7 @@ class Record:
                     "fault_estimate": float(tr.xhat[n, 2]),
                     "fault_lower": float(lo[n]),
                     "fault_upper": float(hi[n]),
-                    "fault_true": None if t is None or str(node) not in t["faults"] else float(t["faults"][str(node)]),
+                    "fault_true": None if t is None or node not in t["faults"] else float(t["faults"][node]),
                     "E": None if np.isnan(tr.E[n]) else float(tr.E[n]),
                     "judged": tr.was_judged(n),
                     "contained": bool(tr.contained[n]) if tr.was_judged(n) else None,
@@ -579,6 +580,7 @@ def record_from_parts(
     for t in truth:
         if not isinstance(t, dict) or not isinstance(t.get("step"), int):
             raise ValueError("a truth entry without a step")
+    truth = [truth_entry(t) for t in truth]
     if last_complete_step is None:
         last_complete_step = max((t["step"] for t in truth), default=-1)
     # a run stopped early (Ctrl-C: the collector writes what it has, summary included) is partial too

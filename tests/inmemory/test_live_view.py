@@ -69,7 +69,7 @@ def test_the_stream_decodes_to_every_nodes_intervals_truth_graph_and_verdict(tmp
                 assert ents[f"/nodes/{i}/{name}/lower"][int(k)]["Scalars:scalars"] == pytest.approx([lo[n]], abs=1e-12)
                 assert ents[f"/nodes/{i}/{name}/upper"][int(k)]["Scalars:scalars"] == pytest.approx([hi[n]], abs=1e-12)
         for t in record.truth:
-            assert ents[f"/nodes/{i}/fault/true"][t["step"]]["Scalars:scalars"] == pytest.approx([t["faults"][str(i)]])
+            assert ents[f"/nodes/{i}/fault/true"][t["step"]]["Scalars:scalars"] == pytest.approx([t["faults"][i]])
             assert ents[f"/nodes/{i}/yaw_rate/true"][t["step"]]["Scalars:scalars"] == pytest.approx([t["x"][1]])
         ring = ents[f"/sets/node{i}"][STEPS]["LineStrips2D:strips"][0]
         assert len(ring) > 10 and np.allclose(ring[0], ring[-1])  # a closed ellipse around x̂
