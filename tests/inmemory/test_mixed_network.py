@@ -62,7 +62,7 @@ def test_mixed_network_contained_where_assumptions_held(mixed_run) -> None:
     for i, entries in rec.raw_nodes.items():
         for e in entries:
             t = truth[e["step"]]
-            xbar = np.r_[t["x"], t["faults"][i]]
+            xbar = np.r_[t["x"], t["faults"][int(i)]]
             b = np.asarray(e["bounds"])  # every node's published set: a set estimator's, the SDP's ellipsoid ∩ range ∩ region
             inside = bool(np.all(b[:, 0] <= xbar) and np.all(xbar <= b[:, 1]))
             assert inside or not e["contained"]  # the set is inside its interval hull
