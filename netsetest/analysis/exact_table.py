@@ -24,7 +24,6 @@ from netsetest.analysis.exact import (
     limit_ratios,
 )
 from netsetest.config.schema import Scenario
-from netsetest.records.record import Record
 
 COLUMN_NAMES = {"f": "fault", "r": "yaw rate", "beta": "sideslip"}
 CELL = 22  # characters of a coordinate's column in the main table
@@ -123,8 +122,13 @@ def _narrower_why(exact: ExactBounds) -> str:
     return "the estimator relied on more than these assumptions there, or one of the two is wrong"
 
 
-def exact_table(record: Record, label: str, case: str, exact: ExactBounds, comparison: ExactComparison, seconds: float) -> ExactTable:
-    """The main table of ``record`` (``label``: its path as the user gave it) against ``exact`` (``comparison``: the
+def _intervals(comparison: ExactComparison) -> int:
+    """The node-step intervals compared: every step of every node's track, per coordinate (left out or not)."""
+    return sum(x.steps + x.left_out for n in comparison.nodes for x in n.ratios.values())
+
+
+def exact_table(label: str, case: str, exact: ExactBounds, comparison: ExactComparison, seconds: float) -> ExactTable:
+    """The main table of a record (``label``: its path as the user gave it) against ``exact`` (``comparison``: the
     record's ratios against it, :func:`~netsetest.analysis.exact.compare_record`); ``seconds``: the time it took."""
     c = comparison
     rows = [WidthRow(str(n.node), tuple(WidthCell.of(n.ratios[k]) for k in COORDINATES)) for n in c.nodes]
@@ -142,7 +146,7 @@ def exact_table(record: Record, label: str, case: str, exact: ExactBounds, compa
         overall_rms_radius_rel=c.overall_rms_radius_rel,
         left_out=sum(x.left_out for n in c.nodes for x in n.ratios.values()),
         narrower=sum(x.narrower for n in c.nodes for x in n.ratios.values()),
-        intervals=sum(len(record.nodes[n.node].steps) for n in c.nodes) * len(COORDINATES),
+        intervals=_intervals(c),
         narrower_why=_narrower_why(exact),
     )
 
@@ -218,8 +222,8 @@ class NetworkTable:
         return out
 
 
-def network_table(scenario: Scenario, record: Record, network: ExactBounds, comparison: ExactComparison, central: ExactBounds) -> NetworkTable:
-    """The ``--network`` table of ``record`` (``comparison``: its ratios against ``network``, each node's network limit)."""
+def network_table(scenario: Scenario, network: ExactBounds, comparison: ExactComparison, central: ExactBounds) -> NetworkTable:
+    """The ``--network`` table of a record (``comparison``: its ratios against ``network``, each node's network limit)."""
     over = {lim.node: lim for lim in limit_ratios(network, central, sorted(network.fault))}
     mine = {n.node: n.ratios for n in comparison.nodes}
     rows = []
@@ -231,5 +235,5 @@ def network_table(scenario: Scenario, record: Record, network: ExactBounds, comp
         health=None if network.health is None else health_line(network.health),
         rows=tuple(rows),
         narrower=sum(x.narrower for n in comparison.nodes for x in n.ratios.values()),
-        intervals=sum(len(record.nodes[i].steps) for i in scenario.ids if i in record.nodes) * len(COORDINATES),
+        intervals=_intervals(comparison),
     )

@@ -432,7 +432,7 @@ def cmd_exact(a: argparse.Namespace) -> int:
     ex = exact_bounds(sc, rec, a.fault_bounds, progress=on_progress, health=not a.no_health, budget_s=a.budget)
     bar.close()
     cmp = compare_record(rec, ex)
-    print("\n".join(exact_table(rec, a.record, sc.case, ex, cmp, time.perf_counter() - t0).lines()))
+    print("\n".join(exact_table(a.record, sc.case, ex, cmp, time.perf_counter() - t0).lines()))
     doc = exact_document(rec, ex, cmp)
     if a.local:
         doc["local_over_central"] = _exact_local(a, sc, rec, ex)
@@ -474,7 +474,7 @@ def _exact_network(a: argparse.Namespace, sc: Scenario, rec: Record, central: Ex
     net = exact_bounds(sc, rec, a.fault_bounds, progress=on_progress, health=not a.no_health, budget_s=a.budget, network=True)
     bar.close()
     cmp = compare_record(rec, net)
-    print("\n".join(network_table(sc, rec, net, cmp, central).lines()))
+    print("\n".join(network_table(sc, net, cmp, central).lines()))
     return network_document(sc, net, cmp, central)
 
 
