@@ -341,7 +341,7 @@ def cmd_inspect(a: argparse.Namespace) -> int:
             _print_state(rec, i)
         return 0
     for i in ids:
-        method = rec.meta.estimators.get(str(i), "sdp")
+        method = rec.meta.estimators.get(i, "sdp")
         if method == "sdp":
             cut = rec.nodes[i].has_fault_range  # the slab of a declared bound, the k-of-N pin or the region (ProvenSet.fault)
             print(

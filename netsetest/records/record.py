@@ -323,7 +323,7 @@ class Record:
                 row[f"{name}_lower"] = float(lo[n])
                 row[f"{name}_upper"] = float(hi[n])
                 row[f"{name}_true"] = None if t is None else float(t["x"][comp])
-        set_node = self.meta.estimators.get(str(node), "sdp") != "sdp"  # a set estimator's interval hull
+        set_node = self.meta.estimators.get(node, "sdp") != "sdp"  # a set estimator's interval hull
         for comp, name in ((0, "beta"), (1, "r"), (2, "fault")):
             for row, on in zip(rows, tr.rests_on(comp)):
                 row[f"{name}_rests_on"] = "set" if set_node else on

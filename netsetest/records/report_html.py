@@ -389,9 +389,8 @@ def _graph(rec: Record, label: str) -> Any:
     fig.grid.visible = False
     shrink = 0.12  # arrows stop short of the node discs
     edges: dict[str, list[float]] = {"x0": [], "y0": [], "x1": [], "y1": []}
-    for i, row in rec.meta.in_weights.items():
-        for j in row:
-            a, b = int(j), int(i)
+    for b, row in rec.meta.in_weights.items():
+        for a in row:
             if a == b or a not in pos or b not in pos:
                 continue
             (x0, y0), (x1, y1) = pos[a], pos[b]

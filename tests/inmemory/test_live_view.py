@@ -77,7 +77,7 @@ def test_the_stream_decodes_to_every_nodes_intervals_truth_graph_and_verdict(tmp
     graph = ents["/graph"][STEPS]
     assert sorted(graph["GraphNodes:node_ids"]) == [str(i) for i in sorted(record.nodes)]
     in_weights = res.meta.in_weights
-    expected = {(j, i) for i, row in in_weights.items() for j in row if j != i}
+    expected = {(str(j), str(i)) for i, row in in_weights.items() for j in row if j != i}
     assert {(e["first"], e["second"]) for e in graph["GraphEdges:edges"]} == expected  # lockstep, no loss: every message used
     # the coverage counts what the collector counted (every node-step judged, all inside here)
     assert view.coverage.judged == res.summary.node_steps_evaluated and view.coverage.contained == res.summary.node_steps_contained

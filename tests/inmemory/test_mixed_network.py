@@ -57,7 +57,7 @@ def test_mixed_network_contained_where_assumptions_held(mixed_run) -> None:
     assert s.node_steps_covered > 0.9 * s.node_steps_evaluated  # the guarantee actually covered them
     rows = {r.id: r for r in s.nodes}
     assert {i: rows[i].estimator for i in MIXED} == MIXED
-    assert rec.meta.estimators == {str(n.id): n.estimator for n in sc.nodes}
+    assert rec.meta.estimators == {n.id: n.estimator for n in sc.nodes}
     truth = {t["step"]: t for t in rec.truth}
     for i, entries in rec.raw_nodes.items():
         for e in entries:
