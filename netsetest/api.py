@@ -165,8 +165,8 @@ def result_of(rec: Record) -> SimulationResult:
         truth = np.full((len(tr.steps), 3), np.nan)
         for n, k in enumerate(tr.steps):
             t = rec.truth_at(int(k))
-            if t is not None and str(i) in t["faults"]:
-                truth[n] = [t["x"][0], t["x"][1], t["faults"][str(i)]]
+            if t is not None and i in t["faults"]:
+                truth[n] = [t["x"][0], t["x"][1], t["faults"][i]]
         nodes[i] = NodeSeries(
             id=i,
             steps=tr.steps,

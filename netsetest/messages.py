@@ -33,7 +33,9 @@ from netsetest.polygon import REGION_NOT_FINITE, REGION_NOT_NUMBERS, REGION_REAS
 from netsetest.proven import ProvenSet, continued_set
 from netsetest.validation import FINITE_BOUND_TEXT, FLOAT_MAX, Finite, Positive, split_error
 
-SCHEMA_VERSION: Final = 2  # 2: a state carries its sets as ProvenSets (published, continues); 1 had seven set fields
+# 3: a truth's maps are keyed by node id (int keys: msgpack allows them); 2: a state carries its sets as ProvenSets
+# (published, continues); 1 had seven set fields
+SCHEMA_VERSION: Final = 3
 
 FiniteF = Finite  # msgspec decodes strictly: no "0.1" or True for a number
 Step = Annotated[int, Meta(ge=0)]
@@ -45,9 +47,9 @@ MAX_NODES = 256  # a network larger than this is not a yaw-rate sensor network: 
 MAX_REASON = 64  # characters of a drop-reason key or an End reason
 MAX_DROP_REASONS = 64  # entries of a drop-counter map
 IdList = Annotated[list[NodeId], Meta(max_length=MAX_NODES)]
-NodeMap = Annotated[dict[str, FiniteF], Meta(min_length=1, max_length=MAX_NODES)]
-ReadingMap = Annotated[dict[str, FiniteF], Meta(max_length=MAX_NODES)]  # a step's readings: a node without one is absent
-FlagMap = Annotated[dict[str, bool], Meta(min_length=1, max_length=MAX_NODES)]
+NodeMap = Annotated[dict[NodeId, FiniteF], Meta(min_length=1, max_length=MAX_NODES)]  # node id → value (records keep JSON's string keys: records/record.py)
+ReadingMap = Annotated[dict[NodeId, FiniteF], Meta(max_length=MAX_NODES)]  # a step's readings: a node without one is absent
+FlagMap = Annotated[dict[NodeId, bool], Meta(min_length=1, max_length=MAX_NODES)]
 Reason = Annotated[str, Meta(max_length=MAX_REASON)]
 Drops = Annotated[dict[Reason, Annotated[int, Meta(ge=0)]], Meta(max_length=MAX_DROP_REASONS)]
 SectorH1 = Annotated[float, Meta(gt=0, le=1)]
@@ -64,7 +66,7 @@ class BadMessage(ValueError):
         self.reason = reason
 
 
-def _schema_version() -> Literal[2]:
+def _schema_version() -> Literal[3]:
     return SCHEMA_VERSION
 
 
@@ -78,7 +80,7 @@ class _Msg(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, omit_d
     never omitted (tests/unit/test_messages_wire.py checks every kind's payload for ``v``).
     """
 
-    v: Literal[2] = field(default_factory=_schema_version)
+    v: Literal[3] = field(default_factory=_schema_version)
 
     @property
     def type(self) -> str:
@@ -226,7 +228,7 @@ class Truth(_Msg, tag="truth", frozen=True, kw_only=True):
 
     step: Step
     x: Vec2
-    faults: NodeMap  # node id → f_i,k (msgpack keys are strings)
+    faults: NodeMap  # node id → f_i,k
     u: FiniteF
     w: FiniteF
     vx: FiniteF
@@ -235,8 +237,8 @@ class Truth(_Msg, tag="truth", frozen=True, kw_only=True):
     y: ReadingMap
     y_nofault: ReadingMap
     sector_ok: FlagMap  # |C̄_i x̄_i,k| ≤ r_max/h1 of the profile (the paper's fixed sector)
-    r: Annotated[dict[str, FiniteF], Meta(max_length=MAX_NODES)] = {}  # C̄_i x̄_i,k: the collector checks each node's published sector with it
-    fault_ok: Annotated[dict[str, bool], Meta(max_length=MAX_NODES)] = {}  # the declared fault bound held: |f_k − f_k−1| ≤ δ_i, |f_k| ≤ F_i
+    r: Annotated[dict[NodeId, FiniteF], Meta(max_length=MAX_NODES)] = {}  # C̄_i x̄_i,k: the collector checks each node's published sector with it
+    fault_ok: Annotated[dict[NodeId, bool], Meta(max_length=MAX_NODES)] = {}  # the declared fault bound held: |f_k − f_k−1| ≤ δ_i, |f_k| ≤ F_i
     noise_ok: FlagMap  # v_i,k² ≤ R_i
     dist_ok: bool  # w_k² ≤ W
     lost: Annotated[list[tuple[NodeId, NodeId]], Meta(max_length=MAX_NODES * MAX_NODES)] = []  # (j, i): j's k−1 message to i lost
@@ -254,7 +256,7 @@ class Truth(_Msg, tag="truth", frozen=True, kw_only=True):
     # a recorded drive (docs/your-log.md): the truth is known only to lie in a box: x ± x_acc (None: x is the truth
     # itself), each node's fault f ± f_acc (absent: exact); reference False: no reference at this step, x unknown
     x_acc: Vec2 | None = None
-    f_acc: Annotated[dict[str, Annotated[float, Meta(ge=0, le=FLOAT_MAX)]], Meta(max_length=MAX_NODES)] = {}
+    f_acc: Annotated[dict[NodeId, Annotated[float, Meta(ge=0, le=FLOAT_MAX)]], Meta(max_length=MAX_NODES)] = {}
     reference: bool = True
     # nodes without a reading at this step (a gap in a recorded drive): absent from y and y_nofault (Scenario.silent_without_reading)
     no_reading: IdList = []
@@ -266,12 +268,10 @@ class Truth(_Msg, tag="truth", frozen=True, kw_only=True):
         if self.x_acc is not None and min(self.x_acc) < 0:
             raise ValueError("x_acc: half-widths must not be negative")
         ids = set(self.faults)
-        if not all(k.isdecimal() and int(k) >= 1 for k in ids):
-            raise ValueError("faults: keys must be node ids (decimal integers ≥ 1)")
         for name in ("noise", "gamma", "sector_ok", "noise_ok"):
             if set(getattr(self, name)) != ids:
                 raise ValueError(f"{name}: keys differ from the keys of faults")
-        read = ids - {str(i) for i in self.no_reading}
+        read = ids - set(self.no_reading)
         if len(read) != len(ids) - len(self.no_reading) or len(set(self.no_reading)) != len(self.no_reading):
             raise ValueError("no_reading: nodes of the step")
         if not set(self.fault_unknown) <= set(self.no_reading) or len(set(self.fault_unknown)) != len(self.fault_unknown):
@@ -284,7 +284,7 @@ class Truth(_Msg, tag="truth", frozen=True, kw_only=True):
                 raise ValueError(f"{name}: keys differ from the keys of faults")
 
     def node_ids(self) -> set[int]:
-        return {int(k) for k in self.faults}
+        return set(self.faults)
 
 
 class Reading(_Msg, tag="reading", frozen=True, kw_only=True):

@@ -29,7 +29,7 @@ def raw_message(msg: Any, **changes: Any) -> dict[str, Any]:
 
 def truth(**kw: object) -> Truth:
     """A valid truth of step 3 for nodes 1 and 2 (node 2's noise bound broke), with ``kw`` replacing fields."""
-    one = {"1": 0.5, "2": -0.5}
+    one = {1: 0.5, 2: -0.5}
     base: dict[str, object] = dict(
         step=3,
         x=[0.01, 0.2],
@@ -38,14 +38,14 @@ def truth(**kw: object) -> Truth:
         w=0.1,
         vx=27.0,
         noise=one,
-        gamma={"1": 0.8, "2": 0.9},
+        gamma={1: 0.8, 2: 0.9},
         y=one,
         y_nofault=one,
-        sector_ok={"1": True, "2": True},
-        noise_ok={"1": True, "2": False},
+        sector_ok={1: True, 2: True},
+        noise_ok={1: True, 2: False},
         dist_ok=True,
-        r={"1": 0.1, "2": 0.2},
-        fault_ok={"1": True, "2": True},
+        r={1: 0.1, 2: 0.2},
+        fault_ok={1: True, 2: True},
         lost=[(1, 2)],
         alive=[1, 2],
         drops={"stale": 2},

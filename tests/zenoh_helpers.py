@@ -88,12 +88,14 @@ def read_json(path: str | Path) -> dict:
 
 
 def read_record(path: str | Path) -> dict:
-    """A run record as one dict: meta, truth, nodes {i: entries}, summary, partial."""
+    """A run record as one dict: meta, truth, nodes {i: entries}, summary, partial; its truth entries as the file holds
+    them (node ids as strings), as an in-memory run's parts hold them."""
     from netsetest.records.record import load_record
+    from netsetest.records.truth import truth_json
 
     rec = load_record(path)
     summary = rec.summary.to_dict() if rec.summary is not None else None
-    return {"meta": rec.meta, "truth": rec.truth, "nodes": rec.raw_nodes, "summary": summary, "partial": rec.partial}
+    return {"meta": rec.meta, "truth": [truth_json(t) for t in rec.truth], "nodes": rec.raw_nodes, "summary": summary, "partial": rec.partial}
 
 
 # ------------------------------------------------------------------------------ processes via /proc

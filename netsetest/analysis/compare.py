@@ -351,7 +351,7 @@ def compare(
                     _score_alone(sc, rec, _run_record(sc.alone(), sig, seed), ex, net, acc, first_bounds if not runs else None, report)
                 runs.append(f"{sc.case}/{sig}/{seed}")
                 if len(runs) == 1:
-                    truth_fault = {i: np.array([t["faults"][str(i)] for t in sorted(rec.truth, key=lambda t: t["step"])]) for i in sc.ids}
+                    truth_fault = {i: np.array([t["faults"][i] for t in sorted(rec.truth, key=lambda t: t["step"])]) for i in sc.ids}
     assert sc is not None
     rows = [_row(e, a, e not in OFFLINE) for e, a in acc.items()]
     return Comparison(str(topology), runs, sc.steps, sc.tau_s, rows, first_bounds, truth_fault, sc.plant_label)
@@ -404,7 +404,7 @@ def _score_alone(
         if keep is not None:
             keep[name] = {}
         for i in sc.ids:
-            tr_i = np.array([np.r_[t["x"], t["faults"][str(i)]] for t in truth])
+            tr_i = np.array([np.r_[t["x"], t["faults"][i]] for t in truth])
             if name == SDP_ALONE:
                 bounds, steps, broken = _node_track(rec_alone, i, a)
                 a.rests_on(i, i in ex.bounded_nodes, False)  # alone: no reading, so no k-of-N pin
@@ -469,7 +469,7 @@ def _score_run(
             a.refused += refused
             run = _run_record(sc_run, signals, seed)
         for i in accepted:
-            tr_i = np.array([np.r_[t["x"], t["faults"][str(i)]] for t in truth])
+            tr_i = np.array([np.r_[t["x"], t["faults"][i]] for t in truth])
             reference = ex
             if name == EXACT:
                 bounds, steps = _exact_array(ex, i), all_steps

@@ -181,8 +181,8 @@ def step_data(record: Record) -> list[RecordedStep]:
                     step=k,
                     u=float(t["u"]),
                     vx=float(t["vx"]),
-                    y={int(i): float(v) for i, v in t["y"].items()},
-                    gamma={int(i): float(v) for i, v in t["gamma"].items()},
+                    y={i: float(v) for i, v in t["y"].items()},
+                    gamma={i: float(v) for i, v in t["gamma"].items()},
                 )
             )
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
@@ -622,10 +622,21 @@ class _Horizon:
         z[self.conic.cols] = np.asarray(sol.x)
         return status, z
 
-    def root(self, col: int, sign: float) -> tuple[np.ndarray, str, np.ndarray | None]:
-        """q, the solver's status and its minimiser of sign·z[col]."""
+    def root(self, col: int, sign: float, what: str) -> tuple[np.ndarray, str, np.ndarray | None]:
+        """q, the solver's status and its minimiser of sign·z[col]; a status that settles nothing is an error (``what``
+        names the end)."""
         q = self.objective({col: sign})
-        return (q, *self.solve(q))
+        status, z = self.solve(q)
+        if settle(status) == "other":
+            raise ExactError(f"{what}: the solver stopped with status {status}")
+        return q, status, z
+
+    def end(self, col: int, sign: float, what: str) -> EndResult:
+        """min sign·z[col] over the program: one solve (no k-of-N health)."""
+        q, status, z = self.root(col, sign, what)
+        kind = settle(status)
+        value = {"solved": float(q @ z[self.conic.cols]) if z is not None else np.nan, "unbounded": -np.inf, "infeasible": np.nan}[kind]
+        return EndResult(kind, value, z, True, 1)  # type: ignore[arg-type]  # kind is not "other": root raised
 
 
 class _Guides:
@@ -651,10 +662,15 @@ class _Guides:
 
 @dataclass
 class _HealthTally:
+    """What the k-of-N search spent and settled over every program of one computation, and its one deadline (CPU
+    seconds of this process, :func:`time.process_time`; past it no branch is solved any more)."""
+
+    deadline: float
     ends: int = 0
     exact: int = 0
     solves: int = 0
     relaxed: list[WitnessKey] = field(default_factory=list)
+    out_of_time: int | None = None  # the horizon during which the deadline passed
 
     def count(self, key: WitnessKey, end: EndResult) -> None:
         self.ends += 1
@@ -662,6 +678,106 @@ class _HealthTally:
         self.solves += end.solves
         if not end.exact:
             self.relaxed.append(key)
+
+    def in_time(self) -> bool:
+        return time.process_time() < self.deadline
+
+    def clock(self, k: int) -> None:
+        """Horizon k is done: note it if the deadline passed during it."""
+        if self.out_of_time is None and not self.in_time():
+            self.out_of_time = k
+
+
+class KofNSearch:
+    """A declared ``[network] max_faulty`` applied to one program by branch and bound (analysis/kofn.py, docs/exact.md).
+
+    Its state: the plans (per k-of-N group: the unions of the past steps and what the past horizons proved about them),
+    the guides (each end's last minimiser), and the tally and deadline it shares with the other programs of the same
+    computation (each node's network limit is a program of its own).  The exact step loop (:class:`_StepLoop`) asks it
+    for each horizon's program (:meth:`horizon`) and each end (:meth:`end`), and tells it when a horizon is done
+    (:meth:`learn`); without it the loop solves each end once.
+    """
+
+    def __init__(self, prog: _Program, plans: list[_HealthPlan], tally: _HealthTally, budget: int) -> None:
+        self.prog, self.plans, self.tally, self.budget = prog, plans, tally, budget
+        self.guides = _Guides()
+
+    @classmethod
+    def of(cls, prog: _Program, scenario: Scenario, health: bool, tally: _HealthTally, budget: int) -> KofNSearch | None:
+        """The search of ``prog`` where ``health`` applies a declared group its nodes say something about; else None."""
+        plans = _plans(prog, scenario, health)
+        return cls(prog, plans, tally, budget) if plans else None
+
+    def horizon(self, conic: Conic) -> _Horizon:
+        """Horizon k's program with what the past horizons proved (the plans' cuts), its unions' pieces outside the
+        program's range dropped before the deadline (:meth:`_HealthPlan.narrow`, the solves counted)."""
+        horizon = _Horizon(conic.with_rows([row for p in self.plans for row in p.cuts]), self.prog.nz)
+        if self.tally.in_time():
+            self.tally.solves += sum(p.narrow(horizon) for p in self.plans)
+        return horizon
+
+    def end(self, horizon: _Horizon, key: WitnessKey, col: int, sign: float, limits: _Limits) -> EndResult:
+        """min sign·z[col] over horizon ``key.step`` and every group's unions; a feasible end is counted, its minimiser
+        guides the same end at the next horizon, and the pieces it found dead leave the plans."""
+        k = key.step
+        unions, complete = self._unions(k, col, limits.window(k) if key.coordinate == "f" else None)
+        which = (key.coordinate, key.node, key.side)
+        guide, try_guided = self.guides.get(which, k)
+        result = self._search(horizon, col, sign, (unions, complete), guide, try_guided, f"step {k}: the {key.coordinate} bound")
+        if result.status != "infeasible":
+            self.tally.count(key, result)
+            self.guides.learn(which, k, result, guide is not None and try_guided)
+            for p in self.plans:
+                p.drop([d for d in result.dead if d[0] < k])
+        return result
+
+    def learn(self, k: int, limits: _Limits) -> None:
+        """Horizon k is done and feasible: its ends bound step k in every later horizon (:meth:`_HealthPlan.learn`)."""
+        for p in self.plans:
+            p.learn(k, limits.beta[k], limits.r[k], {i: f[k] for i, f in limits.fault.items()})
+
+    def summary(self, declared: str, budget_s: float | None) -> HealthSearch:
+        """How the computation applied the assumption (its tally is every program's)."""
+        t = self.tally
+        needs = tuple(p.model.need for p in self.plans)
+        groups = tuple(tuple(p.model.sensors) for p in self.plans)
+        return HealthSearch(declared, needs, groups, self.budget, t.ends, t.exact, tuple(t.relaxed), t.solves, budget_s, t.out_of_time)
+
+    def _unions(self, k: int, col: int, box: tuple[np.ndarray, np.ndarray] | None) -> tuple[list[StepUnion], bool]:
+        """Every group's unions of horizon k for one objective column, by step, and whether all are complete; a fault's
+        window of t_k (a group's direction u) from the horizon's β, r ends (``box``), which come before the faults'."""
+        unions: list[StepUnion] = []
+        complete = True
+        for p in self.plans:
+            got, done = p.unions_at(k, col, p.window(k, *box) if box is not None else (-np.inf, np.inf))
+            unions += got
+            complete = complete and done
+        return sorted(unions, key=lambda u: u.step), complete
+
+    def _search(
+        self, horizon: _Horizon, col: int, sign: float, unions: tuple[list[StepUnion], bool], guide: Guide | None, try_guided: bool, what: str
+    ) -> EndResult:
+        """With a ``guide`` (and ``try_guided``), first one solve with its pieces that may settle the end alone
+        (:func:`kofn.guided`); else the root relaxation, then the branch and bound over the unions (``unions``: they
+        and whether they are complete, i.e. the end can be exact)."""
+        first = GuidedStart(None, 0)
+        if guide is not None and try_guided and self.tally.in_time():
+            first = guided(horizon.conic, horizon.objective({col: sign}), horizon.nz, unions[0], guide, horizon.guided)
+            if first.end is not None:
+                return replace(first.end, exact=unions[1], guided=True)
+        q, status, z = horizon.root(col, sign, what)
+        result = minimise(horizon.conic, q, horizon.nz, unions[0], (status, z), self.budget, horizon.branches, self.tally.deadline, guide, first.incumbent)
+        return replace(result, exact=result.exact and unions[1], solves=result.solves + 1 + first.solves)
+
+
+def _plans(prog: _Program, scenario: Scenario, health: bool) -> list[_HealthPlan]:
+    """The k-of-N plan of every declared group the program's nodes say something about (a group they leave out, or
+    all but m of it, says nothing); a group's members whose declared bound ties their health stay in the program where
+    not yet measured (a network limit: ``_Program.hold``)."""
+    models = [HealthModel.of_group(scenario, g) for g in scenario.health_groups] if health and scenario.health_declared else []
+    plans = [_HealthPlan(prog, m, k) for k, m in enumerate(models) if m is not None and m.need > 0]
+    prog.hold = {node.id for p in plans for _, node in p.members if not _bound_admits_health(node, p.model.tolerance)}
+    return plans
 
 
 def exact_bounds(
@@ -685,9 +801,9 @@ def exact_bounds(
     local estimator); default every node (centralized).  ``eliminate_free_faults`` drops the past
     faults that no declared bound ties (exact, see :meth:`_Program._eliminated`; False keeps the
     whole program, for checking that).  ``health``: apply a declared ``[network] max_faulty`` by branch
-    and bound (at most ``health_budget`` solves per end, docs/exact.md); False leaves it out (an outer bound).
-    ``budget_s``: CPU seconds of this process for the whole computation (its wall time on an idle core; CPU, so
-    that which ends are exact does not depend on what else the machine runs); past them no branch is solved any
+    and bound (at most ``health_budget`` solves per end, docs/exact.md: :class:`KofNSearch`); False leaves it out (an
+    outer bound).  ``budget_s``: CPU seconds of this process for the whole computation (its wall time on an idle core;
+    CPU, so that which ends are exact does not depend on what else the machine runs); past them no branch is solved any
     more, and every end its relaxation does not settle is relaxed (sound, labelled: ``HealthSearch.out_of_time``).
     None: no limit.  ``network``: each node's network limit instead of the central one (docs/exact.md, *The network
     limit*): its β, r (``ExactBounds.by_node``) and its fault from its own data and node j's data up to step
@@ -696,32 +812,20 @@ def exact_bounds(
     has no datum of is left at 0).
     """
     data = step_data(record)
-    for d in data:
-        if set(d.y) != set(scenario.ids) or set(d.gamma) != set(scenario.ids):
-            raise ExactError(f"{record.path}: step {d.step} has measurements of nodes {sorted(d.y)}, the topology has nodes {scenario.ids}")
-    if nodes is not None:
-        unknown = sorted(set(nodes) - set(scenario.ids))
-        if unknown or not nodes:
-            raise ExactError(f"nodes {list(nodes)}: not a non-empty subset of the topology's nodes {scenario.ids}")
-        if network:
-            raise ExactError("the network limit is over every node of the topology: give no node subset")
-        # (the bounds the whole network's estimators rely on: a node's own bound is relied on where others read its reading)
-        relied = scenario.fault_bounded(fault_bounds)
-        scenario = replace(scenario, nodes=[n for n in scenario.nodes if n.id in set(nodes)])
-        bounded = tuple(i for i in relied if i in scenario.ids)
-    else:
-        bounded = scenario.fault_bounded(fault_bounds)
+    scenario, bounded = _program_nodes(scenario, record, data, fault_bounds, nodes, network)
     K1 = len(data)
     beta, r = np.full((K1, 2), np.nan), np.full((K1, 2), np.nan)
     fault = {i: np.full((K1, 2), np.nan) for i in scenario.ids}
     by_node: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    search = _Search(keep_witnesses, eliminate_free_faults, health_budget, math.inf if budget_s is None else time.process_time() + budget_s)
+    loop = _StepLoop(keep_witnesses, eliminate_free_faults)
+    tally = _HealthTally(math.inf if budget_s is None else time.process_time() + budget_s)
+    searches: list[KofNSearch] = []
     infeasible: set[int] = set()
-    applied: list[_HealthPlan] = []
     shared = network and everywhere(scenario)
     for n, viewer in enumerate(scenario.ids if network and not shared else [None]):
         prog = _Program(scenario, data, bounded, viewer)
-        plans = _plans(prog, scenario, health)
+        kofn = KofNSearch.of(prog, scenario, health, tally, health_budget)
+        searches += [kofn] if kofn is not None else []
         if viewer is None:
             limits = _Limits(beta, r, fault)
         else:
@@ -732,19 +836,10 @@ def exact_bounds(
             if progress is not None:
                 progress(n * total + k, total * (len(scenario.ids) if network else 1))
 
-        infeasible |= search.run(prog, plans, limits, step_progress)
-        applied = applied or plans
+        infeasible |= loop.run(prog, limits, kofn, step_progress)
     if shared:  # every node has every datum in its step: each node's program is the central one
         by_node = {i: (beta.copy(), r.copy()) for i in scenario.ids}
         beta[:], r[:] = np.nan, np.nan
-    health_search = None
-    if applied:
-        tally = search.tally
-        needs = tuple(p.model.need for p in applied)
-        groups = tuple(tuple(p.model.sensors) for p in applied)
-        health_search = HealthSearch(
-            scenario.health_label, needs, groups, health_budget, tally.ends, tally.exact, tuple(tally.relaxed), tally.solves, budget_s, search.out_of_time
-        )
     return ExactBounds(
         steps=np.arange(K1),
         beta=beta,
@@ -753,21 +848,32 @@ def exact_bounds(
         fault_bounds=fault_bounds,
         bounded_nodes=bounded,
         infeasible_steps=tuple(sorted(infeasible)),
-        witnesses=search.witnesses,
+        witnesses=loop.witnesses,
         omitted=omitted_assumptions(scenario, health),
-        health=health_search,
+        health=searches[0].summary(scenario.health_label, budget_s) if searches else None,
         by_node=by_node,
     )
 
 
-def _plans(prog: _Program, scenario: Scenario, health: bool) -> list[_HealthPlan]:
-    """The k-of-N plan of every declared group the program's nodes say something about (a group they leave out, or
-    all but m of it, says nothing); a group's members whose declared bound ties their health stay in the program where
-    not yet measured (a network limit: ``_Program.hold``)."""
-    models = [HealthModel.of_group(scenario, g) for g in scenario.health_groups] if health and scenario.health_declared else []
-    plans = [_HealthPlan(prog, m, k) for k, m in enumerate(models) if m is not None and m.need > 0]
-    prog.hold = {node.id for p in plans for _, node in p.members if not _bound_admits_health(node, p.model.tolerance)}
-    return plans
+def _program_nodes(
+    scenario: Scenario, record: Record, data: list[RecordedStep], fault_bounds: FaultBoundsMode, nodes: Sequence[int] | None, network: bool
+) -> tuple[Scenario, tuple[int, ...]]:
+    """The scenario of the program's nodes (``nodes``, default all) and the nodes whose declared fault bounds it applies;
+    a record or a node subset that does not fit the topology is refused (ExactError)."""
+    for d in data:
+        if set(d.y) != set(scenario.ids) or set(d.gamma) != set(scenario.ids):
+            raise ExactError(f"{record.path}: step {d.step} has measurements of nodes {sorted(d.y)}, the topology has nodes {scenario.ids}")
+    if nodes is None:
+        return scenario, scenario.fault_bounded(fault_bounds)
+    unknown = sorted(set(nodes) - set(scenario.ids))
+    if unknown or not nodes:
+        raise ExactError(f"nodes {list(nodes)}: not a non-empty subset of the topology's nodes {scenario.ids}")
+    if network:
+        raise ExactError("the network limit is over every node of the topology: give no node subset")
+    # (the bounds the whole network's estimators rely on: a node's own bound is relied on where others read its reading)
+    relied = scenario.fault_bounded(fault_bounds)
+    scenario = replace(scenario, nodes=[n for n in scenario.nodes if n.id in set(nodes)])
+    return scenario, tuple(i for i in relied if i in scenario.ids)
 
 
 @dataclass
@@ -778,65 +884,62 @@ class _Limits:
     r: np.ndarray
     fault: dict[int, np.ndarray]
 
+    def target(self, coordinate: Coordinate, node: int | None) -> np.ndarray:
+        return self.fault[node] if node is not None else (self.beta if coordinate == "beta" else self.r)
+
+    def window(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Step k's β and r ends so far (a horizon bounds them before the faults)."""
+        return self.beta[k], self.r[k]
+
+
+SIDES: tuple[tuple[Side, float], ...] = (("lo", 1.0), ("hi", -1.0))  # an end and the sign of its objective: lo = min z, hi = −min −z
+
 
 @dataclass
-class _Search:
-    """The horizons of one or more programs (the central one, or each node's network limit), under one budget."""
+class _StepLoop:
+    """The exact program's horizons, one after another: at each step k the horizon-k program, and per bounded quantity
+    (β, r, each fault) two solves, its least and its greatest value; a :class:`KofNSearch` (where the k-of-N health is
+    applied) makes the horizon's program and each end."""
 
     keep_witnesses: bool
     eliminate: bool
-    health_budget: int
-    deadline: float
-    tally: _HealthTally = field(default_factory=lambda: _HealthTally())
     witnesses: dict[WitnessKey, Witness] = field(default_factory=dict)
-    out_of_time: int | None = None
 
-    def run(self, prog: _Program, plans: list[_HealthPlan], limits: _Limits, progress: Callable[[int, int], None]) -> set[int]:
+    def run(self, prog: _Program, limits: _Limits, kofn: KofNSearch | None, progress: Callable[[int, int], None]) -> set[int]:
         """Every horizon of ``prog`` (its ends into ``limits``); the infeasible steps."""
         K1 = len(prog.data)
         infeasible: list[int] = []
-        guides = _Guides()
         st = _settings()
         for k in range(K1):
             progress(k, K1)
-            if plans and infeasible:  # a later horizon only adds constraints: no trajectory either
+            if kofn is not None and infeasible:  # a later horizon only adds constraints: no trajectory either
                 infeasible.append(k)
                 continue
-            cols, A, b, cones = prog.matrices(k, self.eliminate)
-            horizon, narrowing = _horizon(Conic(cols, A, b, cones, st), plans, prog.nz, self.deadline)
-            self.tally.solves += narrowing
-            if not self._horizon(prog, plans, limits, horizon, k, guides):
+            conic = Conic(*prog.matrices(k, self.eliminate), st)
+            horizon = kofn.horizon(conic) if kofn is not None else _Horizon(conic, prog.nz)
+            if not self._ends(prog, k, horizon, limits, kofn):
                 infeasible.append(k)
-            elif plans:
-                for p in plans:
-                    p.learn(k, limits.beta[k], limits.r[k], {i: f[k] for i, f in limits.fault.items()})
-            if self.out_of_time is None and time.process_time() >= self.deadline:
-                self.out_of_time = k
+            elif kofn is not None:
+                kofn.learn(k, limits)
+            if kofn is not None:
+                kofn.tally.clock(k)
         return set(infeasible)
 
-    def _horizon(self, prog: _Program, plans: list[_HealthPlan], limits: _Limits, horizon: _Horizon, k: int, guides: _Guides) -> bool:
+    def _ends(self, prog: _Program, k: int, horizon: _Horizon, limits: _Limits, kofn: KofNSearch | None) -> bool:
         """Every end of horizon k; False if the step has no trajectory."""
         feasible = True
         for coord, node, col in prog.objectives(k):
-            target = limits.fault[node] if node is not None else (limits.beta if coord == "beta" else limits.r)  # node: the fault's only
-            unions = _unions_at(plans, k, col, limits.beta[k], limits.r[k], coord == "f") if plans else None
+            target = limits.target(coord, node)  # node: the fault's only
             who = node if node is not None else prog.viewer  # a network limit's β and r are its viewer's
-            for end, (side, sign) in enumerate((("lo", 1.0), ("hi", -1.0))):
-                key = WitnessKey(coord, who, k, side)  # type: ignore[arg-type]  # coord is one of COORDINATES and side one of lo, hi: str in the loop
-                end_key = (coord, node, key.side)
-                guide, try_guided = guides.get(end_key, k)
-                result = _end(horizon, col, sign, unions, self.health_budget, f"step {k}: the {coord} bound", self.deadline, guide, try_guided)
+            for end, (side, sign) in enumerate(SIDES):
+                key = WitnessKey(coord, who, k, side)
+                result = kofn.end(horizon, key, col, sign, limits) if kofn is not None else horizon.end(col, sign, f"step {k}: the {coord} bound")
                 if result.status == "infeasible":
                     feasible = False
                     continue
                 target[k, end] = sign * result.value
                 if self.keep_witnesses and result.z is not None and result.status == "solved":
                     self.witnesses[key] = prog.witness(result.z, k, self.eliminate)
-                if plans:
-                    self.tally.count(key, result)
-                    guides.learn(end_key, k, result, guide is not None and try_guided)
-                    for p in plans:
-                        p.drop([d for d in result.dead if d[0] < k])
         return feasible
 
 
@@ -855,55 +958,6 @@ def network_limit(scenario: Scenario, record: Record, central: ExactBounds, **kw
         return replace(central, beta=nan, r=nan.copy(), by_node={i: (central.beta, central.r) for i in scenario.ids})
     health = central.health is not None or not scenario.health_declared
     return exact_bounds(scenario, record, central.fault_bounds, health=health, network=True, **kw)  # type: ignore[arg-type]  # kw: exact_bounds' keyword options, passed through
-
-
-def _horizon(conic: Conic, plans: list[_HealthPlan], nz: int, deadline: float) -> tuple[_Horizon, int]:
-    """One horizon's program with what the past horizons proved (the plans' cuts), its unions' pieces outside the
-    program's range dropped (:meth:`_HealthPlan.narrow`, before the deadline), and the solves that took."""
-    horizon = _Horizon(conic.with_rows([row for p in plans for row in p.cuts]) if plans else conic, nz)
-    return horizon, sum(p.narrow(horizon) for p in plans) if time.process_time() < deadline else 0
-
-
-def _unions_at(plans: list[_HealthPlan], k: int, col: int, beta: np.ndarray, r: np.ndarray, is_fault: bool) -> tuple[list[StepUnion], bool]:
-    """Every group's unions of horizon k for one objective column, by step, and whether all are complete; the
-    window of t_k (a group's direction u) from the horizon's β, r ends, which come before the faults'."""
-    unions: list[StepUnion] = []
-    complete = True
-    for p in plans:
-        got, done = p.unions_at(k, col, p.window(k, beta, r) if is_fault else (-np.inf, np.inf))
-        unions += got
-        complete = complete and done
-    return sorted(unions, key=lambda u: u.step), complete
-
-
-def _end(
-    horizon: _Horizon,
-    col: int,
-    sign: float,
-    unions: tuple[list[StepUnion], bool] | None,
-    budget: int,
-    what: str,
-    deadline: float = math.inf,
-    guide: Guide | None = None,
-    try_guided: bool = True,
-) -> EndResult:
-    """min sign·z[col]: the root relaxation, then (``unions``: the k-of-N unions and whether they are complete)
-    the branch and bound over them; with a ``guide`` (and ``try_guided``), first one solve with its pieces that may
-    settle the end alone (:func:`kofn.guided`)."""
-    first = GuidedStart(None, 0)
-    if unions is not None and guide is not None and try_guided and time.process_time() < deadline:
-        first = guided(horizon.conic, horizon.objective({col: sign}), horizon.nz, unions[0], guide, horizon.guided)
-        if first.end is not None:
-            return replace(first.end, exact=unions[1], guided=True)
-    q, status, z = horizon.root(col, sign)
-    kind = settle(status)
-    if kind == "other":
-        raise ExactError(f"{what}: the solver stopped with status {status}")
-    if unions is None:
-        value = {"solved": float(q @ z[horizon.conic.cols]) if z is not None else np.nan, "unbounded": -np.inf, "infeasible": np.nan}[kind]
-        return EndResult(kind, value, z, True, 1)
-    result = minimise(horizon.conic, q, horizon.nz, unions[0], (status, z), budget, horizon.branches, deadline, guide, first.incumbent)
-    return replace(result, exact=result.exact and unions[1], solves=result.solves + 1 + first.solves)
 
 
 def eta_s(elapsed: float, done: int, total: int, budget_s: float | None) -> float | None:
@@ -1148,7 +1202,8 @@ def _health_document(h: HealthSearch | None) -> dict | None:
     }
 
 
-def _limit_ratios_document(limits: list[LocalLimit]) -> list[dict]:
+def limit_ratios_document(limits: list[LocalLimit]) -> list[dict]:
+    """Per node, its LocalLimit as JSON (NaN: null)."""
     return [{k: None if isinstance(v, float) and math.isnan(v) else v for k, v in asdict(lim).items()} for lim in limits]
 
 
@@ -1168,7 +1223,7 @@ def network_document(scenario: Scenario, network: ExactBounds, comparison: Exact
         "health": _health_document(network.health),
         "exact": {str(i): {c: intervals(network.interval(c, i)) for c in ("beta", "r")} | {"fault": intervals(network.fault[i])} for i in ids},
         "ratios": _ratios_document(comparison),
-        "over_central": _limit_ratios_document(limit_ratios(network, central, ids)),
+        "over_central": limit_ratios_document(limit_ratios(network, central, ids)),
     }
 
 

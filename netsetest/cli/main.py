@@ -356,7 +356,7 @@ def cmd_inspect(a: argparse.Namespace) -> int:
             _print_state(rec, i)
         return 0
     for i in ids:
-        method = rec.meta.estimators.get(str(i), "sdp")
+        method = rec.meta.estimators.get(i, "sdp")
         if method == "sdp":
             cut = rec.nodes[i].has_fault_range  # the slab of a declared bound, the k-of-N pin or the region (ProvenSet.fault)
             print(
@@ -418,7 +418,8 @@ def cmd_exact(a: argparse.Namespace) -> int:
     import os
     import time
 
-    from netsetest.analysis.exact import COORDINATES, CoordinateRatio, compare_record, eta_s, exact_bounds, exact_document, health_line, topology_mismatch
+    from netsetest.analysis.exact import compare_record, eta_s, exact_bounds, exact_document, topology_mismatch
+    from netsetest.analysis.exact_table import exact_table
     from netsetest.config.schema import load_topology
     from netsetest.records.record import load_record
 
@@ -446,69 +447,10 @@ def cmd_exact(a: argparse.Namespace) -> int:
     ex = exact_bounds(sc, rec, a.fault_bounds, progress=on_progress, health=not a.no_health, budget_s=a.budget)
     bar.close()
     cmp = compare_record(rec, ex)
-    bounded = ", ".join(map(str, ex.bounded_nodes)) or "none"
-    print(
-        f"exact bounds for {a.record}: case {sc.case}, {len(ex.steps)} steps, fault bounds '{a.fault_bounds}' "
-        f"(applied on nodes: {bounded}), {time.perf_counter() - t0:.1f} s"
-    )
-    if ex.infeasible_steps:
-        print(f"  no trajectory meets the assumptions at steps {list(ex.infeasible_steps)} (an assumption was broken)")
-    if ex.health is not None:
-        print(f"  {health_line(ex.health)}")
-    if ex.omitted:
-        print(
-            f"  not applied: {', '.join(ex.omitted)} (--no-health): these bounds are an outer bound of the "
-            "exact limit, and a node that uses the assumption may be narrower (docs/exact.md)"
-        )
-    names = {"f": "fault", "r": "yaw rate", "beta": "sideslip"}
-    print("published width / exact width: mean over steps ≥ 10 | all steps; relative-RMS radius (Althoff & Rath (9), exact = 1)")
-    print(f"{'node':>4}  " + "  ".join(f"{names[c]:>22}" for c in COORDINATES))
-
-    def cell(width: float, width_all: float, rms: float) -> str:  # one format for the node rows and the mean
-        return f"{width:6.3f} |{width_all:6.3f}  {rms:6.3f}"
-
-    def node_cell(x: CoordinateRatio) -> str:  # a point exact interval: the absolute width over it, no ratio
-        if x.width_excess is None or x.width_excess_all is None:
-            return cell(x.width_ratio, x.width_ratio_all, x.rms_radius_rel)
-        return f"{x.width_excess:+.1e} |{x.width_excess_all:+.1e} abs".rjust(22)
-
-    for n in cmp.nodes:
-        print(f"{n.node:>4}  " + "  ".join(node_cell(n.ratios[c]) for c in COORDINATES))
-    print(f"{'mean':>4}  " + "  ".join(cell(cmp.mean_width_ratio[c], cmp.mean_width_ratio_all[c], cmp.mean_rms_radius_rel[c]) for c in COORDINATES))
-    print(f"overall: width ratio {cmp.overall_width_ratio:.3f}, relative-RMS radius {cmp.overall_rms_radius_rel:.3f}")
-    left = sum(x.left_out for n in cmp.nodes for x in n.ratios.values())
-    if left:
-        print(f"  {left} node-step intervals left out: the exact interval is unbounded there (inf) or empty")
-    narrower = sum(x.narrower for n in cmp.nodes for x in n.ratios.values())
-    total = sum(len(rec.nodes[n.node].steps) for n in cmp.nodes) * len(COORDINATES)
-    print(
-        f"published interval narrower than exact on {narrower} of {total} node-step intervals"
-        + (
-            f" (the nodes used {', '.join(ex.omitted)}, which these bounds leave out)"
-            if narrower and ex.omitted
-            else " (some ends are relaxed: an outer bound there)"
-            if narrower and ex.health is not None and ex.health.relaxed
-            else " (the estimator relied on more than these assumptions there, or one of the two is wrong)"
-            if narrower
-            else ""
-        )
-    )
+    print("\n".join(exact_table(a.record, sc.case, ex, cmp, time.perf_counter() - t0).lines()))
     doc = exact_document(rec, ex, cmp)
     if a.local:
-        from netsetest.analysis.exact import local_limits
-
-        bar = Progress(len(sc.ids), "exact --local")
-        limits = local_limits(sc, rec, a.fault_bounds, central=ex, progress=lambda n, total: bar.update(n))
-        bar.close()
-        print(
-            "the exchange's value at best: exact limit from the node's own data / from every node's data "
-            "(mean width from step 10; 1.000: the network cannot help this node)"
-        )
-        print(f"{'node':>4}  {'own fault':>10}  {'yaw rate':>10}  {'sideslip':>10}")
-        for lim in limits:
-            cells = ("  declared 0" if math.isnan(v) else f"{v:10.3f}" for v in (lim.fault_ratio, lim.r_ratio, lim.beta_ratio))
-            print(f"{lim.node:>4}  " + "  ".join(cells))
-        doc["local_over_central"] = [{k: None if isinstance(v, float) and math.isnan(v) else v for k, v in dataclasses.asdict(lim).items()} for lim in limits]
+        doc["local_over_central"] = _exact_local(a, sc, rec, ex)
     if a.network:
         doc["network"] = _exact_network(a, sc, rec, ex)
     if a.json:
@@ -517,10 +459,25 @@ def cmd_exact(a: argparse.Namespace) -> int:
     return 0
 
 
+def _exact_local(a: argparse.Namespace, sc: Scenario, rec: Record, central: ExactBounds) -> list[dict]:
+    """``exact --local``: each node's exact limit from its own data over the central one, printed; the JSON document's
+    ``local_over_central`` list."""
+    from netsetest.analysis.exact import limit_ratios_document, local_limits
+    from netsetest.analysis.exact_table import local_table
+    from netsetest.runtime.report import Progress
+
+    bar = Progress(len(sc.ids), "exact --local")
+    limits = local_limits(sc, rec, a.fault_bounds, central=central, progress=lambda n, total: bar.update(n))
+    bar.close()
+    print("\n".join(local_table(limits).lines()))
+    return limit_ratios_document(limits)
+
+
 def _exact_network(a: argparse.Namespace, sc: Scenario, rec: Record, central: ExactBounds) -> dict:
     """``exact --network``: each node's network limit, its ratios against the record and against the central limit,
     printed; the JSON document's ``network`` object."""
-    from netsetest.analysis.exact import COORDINATES, compare_record, exact_bounds, health_line, network_document
+    from netsetest.analysis.exact import compare_record, exact_bounds, network_document
+    from netsetest.analysis.exact_table import network_table
     from netsetest.runtime.report import Progress
 
     bar = Progress(1, "exact --network")
@@ -531,27 +488,9 @@ def _exact_network(a: argparse.Namespace, sc: Scenario, rec: Record, central: Ex
 
     net = exact_bounds(sc, rec, a.fault_bounds, progress=on_progress, health=not a.no_health, budget_s=a.budget, network=True)
     bar.close()
-    doc = network_document(sc, net, compare_record(rec, net), central)
-    print("the network limit (docs/exact.md): node j's data reach node i d(j→i) steps late, one hop a step along the states, a reading's in its step")
-    if net.health is not None:
-        print(f"  {health_line(net.health)}")
-    print(
-        f"{'node':>4}  {'furthest':>8}  "
-        + "  ".join(f"{c + ': published / network':>24}  {'network / central':>17}" for c in ("fault", "yaw rate", "sideslip"))
-    )
-    over = {o["node"]: o for o in doc["over_central"]}
-    for i in sc.ids:
-        ratios = doc["ratios"]["nodes"][str(i)]
-        cells = []
-        for c, key in zip(("f", "r", "beta"), ("fault_ratio", "r_ratio", "beta_ratio")):
-            mine, lim = ratios[c]["width_ratio"], over[i][key]
-            cells.append(f"{'–' if mine is None else format(mine, '.3f'):>24}  {'–' if lim is None else format(lim, '.3f'):>17}")
-        furthest = max(sc.delays(i).values())
-        print(f"{i:>4}  {furthest:>8}  " + "  ".join(cells))
-    narrower = sum(x["narrower"] for n in doc["ratios"]["nodes"].values() for x in n.values())
-    total = sum(len(rec.nodes[i].steps) for i in sc.ids if i in rec.nodes) * len(COORDINATES)
-    print(f"published interval narrower than the network limit on {narrower} of {total} node-step intervals")
-    return doc
+    cmp = compare_record(rec, net)
+    print("\n".join(network_table(sc, net, cmp, central).lines()))
+    return network_document(sc, net, cmp, central)
 
 
 def _seed_text(seeds: Sequence[int]) -> str:

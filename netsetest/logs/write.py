@@ -52,15 +52,16 @@ class DriveTable:
 
 
 def from_truth(truth: list[dict], tau_s: float, description: str = "") -> DriveTable:
-    """A simulated run's truth entries (a record's, in step order) as a drive: each sensor's reading without its fault
-    (``y_nofault``: the run injects the profile's fault again), the speed and steering, and x as the reference."""
+    """A simulated run's truth entries (a record's, in step order; their node maps keyed by id, as the record's JSON
+    or a loaded record has them) as a drive: each sensor's reading without its fault (``y_nofault``: the run injects
+    the profile's fault again), the speed and steering, and x as the reference."""
     t = np.arange(len(truth)) * tau_s
-    nodes = sorted(int(i) for i in truth[0]["y_nofault"])
+    keys = sorted(truth[0]["y_nofault"], key=int)
     return DriveTable(
         t=t,
         speed=np.array([e["vx"] for e in truth]),
         steering=np.array([e["u"] for e in truth]),
-        yaw={i: np.array([e["y_nofault"][str(i)] for e in truth]) for i in nodes},
+        yaw={int(i): np.array([e["y_nofault"][i] for e in truth]) for i in keys},
         beta=np.array([e["x"][0] for e in truth]),
         r=np.array([e["x"][1] for e in truth]),
         description=description,

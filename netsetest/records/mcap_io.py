@@ -35,6 +35,7 @@ from mcap.writer import CompressionType, Writer
 from netsetest.records.files import open_locked
 from netsetest.records.meta import RunMeta
 from netsetest.records.summary import RunSummary
+from netsetest.records.truth import truth_json
 from netsetest.proven import proven_sets
 
 if TYPE_CHECKING:
@@ -317,6 +318,7 @@ class McapRecordWriter:
 
     def truth(self, entry: dict) -> None:
         t, ns = self._time(int(entry["step"]))
+        entry = truth_json(entry)
         self._write(TOPIC_TRUTH, ns, {**entry, "t": t})
         for node, y in entry.get("y", {}).items():
             self._write(

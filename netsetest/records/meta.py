@@ -30,11 +30,12 @@ class RunMeta:
     tau_s: float = DEFAULT_TAU_S
     run_id: str | None = None
     node_ids: list[int] = field(default_factory=list)
-    in_weights: dict[str, dict[str, float]] = field(default_factory=dict)  # i → {j: a_ij}
-    r_max: dict[str, float | None] = field(default_factory=dict)  # i → saturation limit (None: not saturating)
-    h1: dict[str, float] = field(default_factory=dict)
-    C: dict[str, list[float]] = field(default_factory=dict)  # i → C̄_i
-    estimators: dict[str, str] = field(default_factory=dict)  # i → the node's estimator
+    # per node i (int ids; the record's JSON keys them by the id's string: to_dict, from_dict)
+    in_weights: dict[int, dict[int, float]] = field(default_factory=dict)  # i → {j: a_ij}
+    r_max: dict[int, float | None] = field(default_factory=dict)  # i → saturation limit (None: not saturating)
+    h1: dict[int, float] = field(default_factory=dict)
+    C: dict[int, list[float]] = field(default_factory=dict)  # i → C̄_i
+    estimators: dict[int, str] = field(default_factory=dict)  # i → the node's estimator
     plant: str = "ts"  # what generated the truth (Scenario.plant_label)
     manoeuvre: str = "paper"
     model_uncertainty: dict | None = None  # {"kind": box | ellipsoid, "G": [[..]]} (docs/plant.md)
@@ -46,6 +47,7 @@ class RunMeta:
     def to_dict(self) -> dict:
         """The record's meta object: every field in order, ``security`` only for a Zenoh run."""
         out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out.update({name: _json_keys(out[name]) for name in _NODE_MAPS})
         if out["security"] is None:
             del out["security"]
         if out["log"] is None:  # a model's run: the meta as before
@@ -89,6 +91,20 @@ _SCALARS: dict[str, tuple[type, ...]] = {
     "settings_digest": (str,),
 }
 _DICTS = frozenset({"in_weights", "r_max", "h1", "C", "estimators", "model_uncertainty", "log"})
+_NODE_MAPS = ("in_weights", "r_max", "h1", "C", "estimators")  # keyed by node id (in_weights: both levels)
+
+
+def _json_keys(value: dict) -> dict:
+    """A node map with the ids as strings (JSON's keys), nested maps too (in_weights)."""
+    return {str(i): _json_keys(v) if isinstance(v, dict) else v for i, v in value.items()}
+
+
+def _int_keys(name: str, value: dict) -> dict:
+    """A node map of the record's JSON with int ids, nested maps too; a key that is no integer is a ValueError naming the field."""
+    try:
+        return {int(i): _int_keys(name, v) if isinstance(v, dict) else v for i, v in value.items()}
+    except (TypeError, ValueError):
+        raise ValueError(f"meta.{name}: a key is not a node id ({value!r:.60})") from None
 
 
 def _checked(name: str, value: Any) -> Any:
@@ -103,6 +119,8 @@ def _checked(name: str, value: Any) -> Any:
         ok = name in _DICTS and isinstance(value, dict)
     if not ok:
         raise ValueError(f"meta.{name}: unexpected value {value!r:.60}")
+    if name in _NODE_MAPS:
+        return _int_keys(name, value)
     return float(value) if name == "tau_s" else value
 
 

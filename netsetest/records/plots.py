@@ -117,7 +117,7 @@ def _times(rec: Record, steps: np.ndarray | None = None) -> np.ndarray:
 
 def _truth_series(rec: Record, field: str, node: int) -> tuple[np.ndarray, np.ndarray]:
     """Time and value of a per-node truth field (NaN where the entry lacks the node)."""
-    return _times(rec), np.array([e.get(field, {}).get(str(node), np.nan) for e in rec.truth], dtype=float)
+    return _times(rec), np.array([e.get(field, {}).get(node, np.nan) for e in rec.truth], dtype=float)
 
 
 def _gapped(steps: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -150,7 +150,7 @@ ELLIPSOID_LABEL = "paper's ellipsoid x̂ ± √(ρP_kk)"  # the SDP's ellipsoid 
 
 def _is_sdp(rec: Record, node: int) -> bool:
     """Whether the node ran the SDP (a set estimator's ellipsoid is only the wire's summary of its set, not a paper's)."""
-    return rec.meta.estimators.get(str(node), SDP) == SDP
+    return rec.meta.estimators.get(node, SDP) == SDP
 
 
 def _estimate(ax: Axes, rec: Record, node: int, comp: int, truth: tuple[np.ndarray, np.ndarray]) -> None:
@@ -222,7 +222,7 @@ def _fig5(rec: Record, label: str) -> Figure:
     for i, ax in panels:
         ax.plot(*_truth_series(rec, "y", i), color="tab:red", lw=1.2, label="with fault")
         ax.plot(*_truth_series(rec, "y_nofault", i), color="tab:blue", lw=1.2, ls="--", label="without fault")
-        r_max = rec.meta.r_max.get(str(i))
+        r_max = rec.meta.r_max.get(i)
         if isinstance(r_max, (int, float)):  # SAIM: the saturation limits a reading cannot pass (times γ ≤ 1)
             for sign in (1, -1):
                 ax.axhline(sign * r_max, color="0.4", lw=0.8, ls=":", label="saturation limit ±r_max")

@@ -61,6 +61,7 @@ from netsetest.records.files import open_locked
 from netsetest.records.meta import RunMeta
 from netsetest.proven import ProvenSet, proven_sets
 from netsetest.records.summary import RunSummary
+from netsetest.records.truth import truth_entry, truth_json
 
 FORMAT = "netsetest-record"
 VERSION = 2
@@ -113,7 +114,7 @@ class JsonlSink:
         self._flush()
 
     def truth(self, entry: dict) -> None:
-        self._line({"kind": "truth", "entry": entry})
+        self._line({"kind": "truth", "entry": truth_json(entry)})
         self._flush()
 
     def state(self, node: int, entry: dict) -> None:
@@ -296,7 +297,7 @@ class Record:
                     "fault_estimate": float(tr.xhat[n, 2]),
                     "fault_lower": float(lo[n]),
                     "fault_upper": float(hi[n]),
-                    "fault_true": None if t is None or str(node) not in t["faults"] else float(t["faults"][str(node)]),
+                    "fault_true": None if t is None or node not in t["faults"] else float(t["faults"][node]),
                     "E": None if np.isnan(tr.E[n]) else float(tr.E[n]),
                     "judged": tr.was_judged(n),
                     "contained": bool(tr.contained[n]) if tr.was_judged(n) else None,
@@ -323,7 +324,7 @@ class Record:
                 row[f"{name}_lower"] = float(lo[n])
                 row[f"{name}_upper"] = float(hi[n])
                 row[f"{name}_true"] = None if t is None else float(t["x"][comp])
-        set_node = self.meta.estimators.get(str(node), "sdp") != "sdp"  # a set estimator's interval hull
+        set_node = self.meta.estimators.get(node, "sdp") != "sdp"  # a set estimator's interval hull
         for comp, name in ((0, "beta"), (1, "r"), (2, "fault")):
             for row, on in zip(rows, tr.rests_on(comp)):
                 row[f"{name}_rests_on"] = "set" if set_node else on
@@ -580,6 +581,7 @@ def record_from_parts(
     for t in truth:
         if not isinstance(t, dict) or not isinstance(t.get("step"), int):
             raise ValueError("a truth entry without a step")
+    truth = [truth_entry(t) for t in truth]
     if last_complete_step is None:
         last_complete_step = max((t["step"] for t in truth), default=-1)
     # a run stopped early (Ctrl-C: the collector writes what it has, summary included) is partial too

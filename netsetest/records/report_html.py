@@ -215,8 +215,8 @@ def _fig5(rec: Record, label: str) -> Any:
     t = np.array([e["step"] for e in rec.truth], dtype=float) * tau
     items, lines = [], []
     for i, colour in zip(ids, _palette(len(ids))):
-        y = np.array([e.get("y", {}).get(str(i), np.nan) for e in rec.truth], dtype=float)
-        y0 = np.array([e.get("y_nofault", {}).get(str(i), np.nan) for e in rec.truth], dtype=float)
+        y = np.array([e.get("y", {}).get(i, np.nan) for e in rec.truth], dtype=float)
+        y0 = np.array([e.get("y_nofault", {}).get(i, np.nan) for e in rec.truth], dtype=float)
         rs = [_line(fig, t, y, i, name=f"fig5-node-{i}", color=colour, line_width=1.4), _line(fig, t, y0, i, color=colour, line_dash="dashed")]
         items.append((f"sensor {i}", rs))
         lines += rs
@@ -247,7 +247,7 @@ def _estimate_fig(rec: Record, label: str, comp: int, title: str, y_label: str, 
             hover.append(rs[-1])
         entry = f"node {i}"
         if per_node_truth:
-            f = np.array([e.get("faults", {}).get(str(i), np.nan) for e in rec.truth], dtype=float)
+            f = np.array([e.get("faults", {}).get(i, np.nan) for e in rec.truth], dtype=float)
             rs.append(_line(fig, t, f, i, color="black", line_width=1.6))
             hover.append(rs[-1])
             truth_all = np.concatenate([truth_all, f])
@@ -389,9 +389,8 @@ def _graph(rec: Record, label: str) -> Any:
     fig.grid.visible = False
     shrink = 0.12  # arrows stop short of the node discs
     edges: dict[str, list[float]] = {"x0": [], "y0": [], "x1": [], "y1": []}
-    for i, row in rec.meta.in_weights.items():
-        for j in row:
-            a, b = int(j), int(i)
+    for b, row in rec.meta.in_weights.items():
+        for a in row:
             if a == b or a not in pos or b not in pos:
                 continue
             (x0, y0), (x1, y1) = pos[a], pos[b]

@@ -80,18 +80,18 @@ def truth_problem(sc: Scenario, t: Truth, prev: Truth | None) -> str | None:
 
 def _node_problem(n: NodeConfig, t: Truth, x: np.ndarray) -> str | None:
     """Node ``n``'s part of truth ``t``: its fault, its sensor input C̄ x̄ and its flags as the scenario makes them."""
-    s, k = str(n.id), t.step
+    i, k = n.id, t.step
     f = n.fault(k)
-    if t.faults[s] != f:
+    if t.faults[i] != f:
         return "truth-fault"
     xf = augmented(x, f)
-    if t.sector_ok[s] != n.sensor.sector_holds(xf) or t.fault_ok.get(s) != fault_bound_holds(n, k):
+    if t.sector_ok[i] != n.sensor.sector_holds(xf) or t.fault_ok.get(i) != fault_bound_holds(n, k):
         return "truth-flags"
-    r = t.r.get(s)
+    r = t.r.get(i)
     if r is None or not isclose(r, float(n.sensor.Cbar @ xf), CHAIN_RTOL):
         return "truth-sensor-input"
     # v·v, not v**2: a forged huge value squares to inf (a float's ** raises OverflowError instead)
-    if t.noise_ok[s] != bool(t.noise[s] * t.noise[s] <= n.sensor.R * (1 + 1e-12)):
+    if t.noise_ok[i] != bool(t.noise[i] * t.noise[i] <= n.sensor.R * (1 + 1e-12)):
         return "truth-flags"
     return None
 
@@ -119,8 +119,7 @@ def _log_truth_problem(sc: Scenario, t: Truth) -> str | None:
     if not sc.speed_plausible(t.step, t.vx):
         return "truth-speed"
     for n in sc.nodes:
-        s = str(n.id)
-        if t.f_acc.get(s, 0.0) == 0.0 and t.faults[s] != n.fault(t.step):
+        if t.f_acc.get(n.id, 0.0) == 0.0 and t.faults[n.id] != n.fault(t.step):
             return "truth-fault"
     return None
 

@@ -180,10 +180,10 @@ def truth_box(tr: Truth, i: int) -> tuple[np.ndarray, np.ndarray] | None:
     reference of accuracy 0 with an exactly known fault: judged as a model's run is)."""
     if tr.x_acc is None:
         return None
-    h = np.array([tr.x_acc[0], tr.x_acc[1], tr.f_acc.get(str(i), 0.0)])
+    h = np.array([tr.x_acc[0], tr.x_acc[1], tr.f_acc.get(i, 0.0)])
     if not h.any() and i not in tr.fault_unknown:
         return None
-    c = augmented(tr.x, tr.faults[str(i)])
+    c = augmented(tr.x, tr.faults[i])
     return c - h, c + h
 
 
@@ -205,7 +205,7 @@ def _in_prior(n: NodeConfig, tr: Truth) -> bool:
     if n.id in tr.fault_unknown:
         return False
     box = truth_box(tr, n.id)
-    points = [augmented(tr.x, tr.faults[str(n.id)])] if box is None else list(_box_corners(*box))
+    points = [augmented(tr.x, tr.faults[n.id])] if box is None else list(_box_corners(*box))
     return all(float((p - n.x0_hat) @ np.linalg.solve(n.P0, p - n.x0_hat)) <= n.rho for p in points)
 
 
@@ -221,14 +221,14 @@ def isclose(a: float, b: float, rtol: float) -> bool:
 
 def state_mismatch(n: NodeConfig, st: NodeState, tr: Truth) -> str | None:
     """Why ``st`` cannot be node n's own state computed from its true input (None: it can)."""
-    s = str(n.id)
-    if (s in tr.y) == (st.innov is None):  # (the state says whether its node had a reading, as the truth does)
+    i = n.id
+    if (i in tr.y) == (st.innov is None):  # (the state says whether its node had a reading, as the truth does)
         return "state-not-from-input"
-    if s not in tr.y and tr.step > 0 and n.estimator == SDP:
+    if i not in tr.y and tr.step > 0 and n.estimator == SDP:
         return "state-without-reading"  # an SDP node publishes nothing at a later step without a reading (Scenario.silent_without_reading)
-    if st.gamma != tr.gamma[s]:
+    if st.gamma != tr.gamma[i]:
         return "state-not-from-input"
-    if s in tr.y and not isclose(st.innov, float(tr.y[s] - n.sensor.Cbar @ st.published.centre), INNOV_RTOL):  # type: ignore[arg-type]  # a reading: innov is set
+    if i in tr.y and not isclose(st.innov, float(tr.y[i] - n.sensor.Cbar @ st.published.centre), INNOV_RTOL):  # type: ignore[arg-type]  # a reading: innov is set
         return "state-not-from-input"
     if (st.published.set is None) != (n.estimator == SDP):
         return "state-wrong-method"  # a set estimator publishes its set, the SDP none
@@ -289,8 +289,8 @@ class Judge:
         the step before, carried through the transition (its ellipsoid, a superset of the set: every detection stays
         certain), leaves it in :func:`~netsetest.estimator.sector.propagated_interval`; disjoint (beyond rounding):
         inconsistent.  Without a declared fault bound the fault is free and any reading after step 0 is possible."""
-        s, k, sen = str(n.id), tr.step, n.sensor
-        if s not in tr.y:
+        k, sen = tr.step, n.sensor
+        if n.id not in tr.y:
             return False
         bound = FaultBound(n.fault_rate, n.fault_size)
         if k == 0:
@@ -301,7 +301,7 @@ class Judge:
             e = before.continued
             a, b, d = self.sc.model.blend(self.sc.model.weights(prev.vx))
             pred = propagated_interval(sen, bound, np.asarray(e.xhat), e.P_matrix, e.rho, a, b[:, 0], d[:, 0], prev.u, self.sc.W, self.sc.uncertainty)
-        meas = measurement_interval(sen, tr.y[s], tr.gamma[s])
+        meas = measurement_interval(sen, tr.y[n.id], tr.gamma[n.id])
         slack = CONSISTENCY_RTOL * max(1.0, abs(pred.lo) if math.isfinite(pred.lo) else 0.0, abs(pred.hi) if math.isfinite(pred.hi) else 0.0)
         return meas.hi < pred.lo - slack or meas.lo > pred.hi + slack
 
@@ -329,7 +329,7 @@ class Judge:
             rel = relation(pub, tr, i, box)
             cont = rel if st.continues is None else relation(st.continued, tr, i, box)
             return Containment(pub.E_max(*box), rel == "inside", cont == "inside", bounds, rel == "disjoint", cont == "disjoint")
-        xbar = augmented(tr.x, tr.faults[str(i)])
+        xbar = augmented(tr.x, tr.faults[i])
         E = pub.E(xbar)
         inside = pub.contains(xbar, E)
         continues = inside if st.continues is None else st.continued.contains(xbar)
@@ -339,15 +339,14 @@ class Judge:
         """What the node's step sector rests on held: nothing more than the noise bound (measurement),
         the declared fault bound (fault-bound), or the sector itself against the truth (assumed); without
         a judged state, the profile's fixed sector."""
-        s = str(n.id)
         if not n.sensor.saturated:
             return True
         if st is None:
-            return tr.sector_ok[s]
+            return tr.sector_ok[n.id]
         if st.sector_basis == "assumed":
-            return sector_ok(n.sensor, published_sector(st), tr.r[s])
+            return sector_ok(n.sensor, published_sector(st), tr.r[n.id])
         if st.sector_basis == "fault-bound":
-            return tr.fault_ok[s]
+            return tr.fault_ok[n.id]
         return True
 
     def sector_failed(self, i: int, st: NodeState, tr: Truth | None, covered: bool) -> bool:
@@ -356,7 +355,7 @@ class Judge:
         n = self.node_cfg[i]
         if tr is None or not covered or not n.sensor.saturated or st.sector_basis in ("none", "assumed"):
             return False
-        return not sector_ok(n.sensor, published_sector(st), tr.r[str(i)])
+        return not sector_ok(n.sensor, published_sector(st), tr.r[i])
 
     def copy_check(self, j: int, c: NodeState, tr: Truth | None) -> CopyCheck:
         """One copy of node j's state of a step, judged as an input of a later step."""
@@ -364,17 +363,17 @@ class Judge:
             return CopyCheck(TRUTH_UNKNOWN, TRUTH_UNKNOWN, TRUTH_UNKNOWN)
         if not tr.reference:
             return CopyCheck(NO_REFERENCE, NO_REFERENCE, NO_REFERENCE)
-        n, s = self.node_cfg[j], str(j)
+        n = self.node_cfg[j]
         if state_mismatch(n, c, tr):
             return CopyCheck(NOT_FROM_INPUT, NOT_FROM_INPUT, NOT_FROM_INPUT)
         facts = None
-        if not tr.noise_ok[s]:
+        if not tr.noise_ok[j]:
             facts = "noise"
-        elif n.sensor.saturated and not (s in tr.r and sector_ok(n.sensor, published_sector(c), tr.r[s])):
+        elif n.sensor.saturated and not (j in tr.r and sector_ok(n.sensor, published_sector(c), tr.r[j])):
             facts = "sector"
         box = truth_box(tr, j)
         if box is None:
-            xbar = augmented(tr.x, tr.faults[s])
+            xbar = augmented(tr.x, tr.faults[j])
             E = c.published.E(xbar)
             published_in: str | None = None if E <= c.published.rho else MISSED  # neighbours use the ellipsoid alone
             prior_in: str | None = None if c.continued.contains(xbar) else MISSED
@@ -395,17 +394,16 @@ class Judge:
         as the cause a user acts on (recalibrate, or drive inside the envelope: docs/plant.md).  Without the
         previous truth the transition is unknown: the collector's own overload where it closed that step
         unjudged (``prev_overloaded``), else truth unknown."""
-        s = str(n.id)
         rejoin = st is not None and st.status == "rejoin"  # no transition crossed (below)
         if k > 0 and prev is not None and prev.step == k - 1 and not prev.mismatch_ok and not rejoin:
             return mismatch_cause(prev)
-        read = s in tr.y  # without a reading no measurement, so no noise bound or sector, enters the step
+        read = n.id in tr.y  # without a reading no measurement, so no noise bound or sector, enters the step
         if read and not self.sector_premise(n, st, tr):
             return "sector"
-        if read and not tr.noise_ok[s]:
+        if read and not tr.noise_ok[n.id]:
             return "noise"
         # a set estimator's step > 0 without a reading carries its fault by the declared bound alone (estimator/base.py)
-        if (n.id in self.needs_fault_bound or not read and k > 0 and n.estimator != SDP) and not tr.fault_ok.get(s, False):
+        if (n.id in self.needs_fault_bound or not read and k > 0 and n.estimator != SDP) and not tr.fault_ok.get(n.id, False):
             return "fault bound"
         if k == 0:
             return None if _in_prior(n, tr) else "initial set"
@@ -452,12 +450,11 @@ class Judge:
         """Why node j's reading of the step gives no guarantee (None: it is the true measurement, its noise
         bound held and, for a reference, its declared fault-free sensor had no fault; ``bounded``: the reader may
         use it with j's declared fault bound, which then held too)."""
-        s = str(j)
-        if s not in tr.y or y != tr.y[s] or gamma != tr.gamma[s]:
+        if j not in tr.y or y != tr.y[j] or gamma != tr.gamma[j]:
             return NOT_FROM_INPUT
-        if not tr.noise_ok[s]:
+        if not tr.noise_ok[j]:
             return "noise"
-        if (j in self.references or bounded) and not tr.fault_ok.get(s, False):
+        if (j in self.references or bounded) and not tr.fault_ok.get(j, False):
             return "fault bound"  # its declared size 0, or the bound its reader used it with
         return None
 
@@ -552,8 +549,8 @@ def history_cone(sc: Scenario, truth: list[dict], node: int, fault_bound: bool) 
     """Per step of a recorded run (``truth``: its truth entries in step order), for an exact limit of one
     node's data: None where every assumption of the whole history held, else the first broken one (an exact
     limit uses every datum up to the step, so its cone is never one step deep)."""
-    n, s = sc.node(node), str(node)
-    e = np.r_[truth[0]["x"], truth[0]["faults"][s]] - n.x0_hat
+    n = sc.node(node)
+    e = np.r_[truth[0]["x"], truth[0]["faults"][node]] - n.x0_hat
     broken: str | None = None if float(e @ np.linalg.solve(n.P0, e)) <= n.rho else "prior"
     out: list[str | None] = []
     for k, t in enumerate(truth):
@@ -561,9 +558,9 @@ def history_cone(sc: Scenario, truth: list[dict], node: int, fault_bound: bool) 
             broken = mismatch_cause(truth[k - 1])  # every estimator uses the declared bound on e_k (docs/plant.md)
         if broken is None and k > 0 and not truth[k - 1]["dist_ok"]:
             broken = "disturbance"
-        if broken is None and not t["noise_ok"][s]:
+        if broken is None and not t["noise_ok"][node]:
             broken = "noise"
-        if broken is None and fault_bound and not t.get("fault_ok", {}).get(s, True):
+        if broken is None and fault_bound and not t.get("fault_ok", {}).get(node, True):
             broken = "fault_bound"
         out.append(broken)
     return out

@@ -290,8 +290,8 @@ class RunTotals:
         """Node i's step k closed, judged or not: the truth's fault and sector, the cone, whether it was heard."""
         t = self.nodes[i]
         if tr is not None:
-            t.fdi.truth(k, tr.faults[str(i)], self.sc.fault_tolerance)
-            if not tr.sector_ok[str(i)]:
+            t.fdi.truth(k, tr.faults[i], self.sc.fault_tolerance)
+            if not tr.sector_ok[i]:
                 t.sector_breaks += 1
                 if t.first_sector_break is None:
                     t.first_sector_break = k
@@ -343,7 +343,7 @@ class RunTotals:
 
     def fdi(self, i: int, k: int, status: FdiStatus, tr: Truth, covered: bool) -> None:
         """Node i's judged step k's detection status (judged rows only: a contested copy may be forged)."""
-        self.nodes[i].fdi.add(k, status, tr.faults[str(i)], self.sc.fault_tolerance, covered)
+        self.nodes[i].fdi.add(k, status, tr.faults[i], self.sc.fault_tolerance, covered)
 
     def unjudged(self, i: int, k: int, reported: bool, lost: bool, no_reading: bool) -> None:
         """Node i's step k with no state to judge: rejected if it reported, the collector's loss if our inbox

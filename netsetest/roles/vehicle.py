@@ -243,24 +243,23 @@ class Vehicle:
             noise_ok[n.id] = bool(v[idx] ** 2 <= n.sensor.R * (1 + 1e-12))
         self._publish_inputs(k, y, {n.id: float(gamma[idx]) for idx, n in enumerate(sc.nodes)}, lost, deadline)
         self.u, self.w, self.vx = d.u, w, d.vx
-        s = lambda d: {str(i): val for i, val in d.items()}  # noqa: E731  # a one-line local helper
         self.bus.publish(
             keys.truth(self.run),
             Truth(
                 step=k,
                 x=list(map(float, self.x)),
-                faults=s(faults),
+                faults=faults,
                 u=self.u,
                 w=self.w,
                 vx=self.vx,
-                noise={str(n.id): float(v[i]) for i, n in enumerate(sc.nodes)},
-                gamma={str(n.id): float(gamma[i]) for i, n in enumerate(sc.nodes)},
-                y=s(y),
-                y_nofault=s(y0),
-                sector_ok=s(sector_ok),
-                noise_ok=s(noise_ok),
-                r=s(r),
-                fault_ok=s(fault_ok),
+                noise={n.id: float(v[i]) for i, n in enumerate(sc.nodes)},
+                gamma={n.id: float(gamma[i]) for i, n in enumerate(sc.nodes)},
+                y=y,
+                y_nofault=y0,
+                sector_ok=sector_ok,
+                noise_ok=noise_ok,
+                r=r,
+                fault_ok=fault_ok,
                 dist_ok=bool(self.w**2 <= sc.W * (1 + 1e-12)),
                 lost=lost,
                 alive=sorted(self.alive),
@@ -286,7 +285,7 @@ class Vehicle:
         self._publish_inputs(k, y, {n.id: 1.0 for n in sc.nodes}, lost, deadline)
         self.u, self.w, self.vx = d.u, 0.0, d.vx
         self.x = d.x_ref if d.x_ref is not None else np.zeros(2)
-        truth = {str(i): _log_truth(sc.node(i), d, k) for i in sc.ids}
+        truth = {i: _log_truth(sc.node(i), d, k) for i in sc.ids}
         of = {name: {i: getattr(t, name) for i, t in truth.items()} for name in _NodeTruth._fields}  # each part, by node
         read = [i for i in sc.ids if d.y_log[i] is not None]
         p = sc.model.params
@@ -301,10 +300,10 @@ class Vehicle:
                 w=0.0,  # the side wind of a recorded drive is unknown: its bound is declared, never checked
                 vx=self.vx,
                 noise=of["noise"],
-                gamma=dict.fromkeys(map(str, sc.ids), 1.0),
-                y={str(i): y[i] for i in read},
-                y_nofault={str(i): float(d.y_log[i]) for i in read},  # type: ignore[arg-type]  # read: a reading is there
-                sector_ok=dict.fromkeys(map(str, sc.ids), True),  # the nsnim case: no saturation
+                gamma=dict.fromkeys(sc.ids, 1.0),
+                y={i: y[i] for i in read},
+                y_nofault={i: float(d.y_log[i]) for i in read},  # type: ignore[arg-type]  # read: a reading is there
+                sector_ok=dict.fromkeys(sc.ids, True),  # the nsnim case: no saturation
                 noise_ok=of["noise_ok"],
                 r=of["r"],
                 fault_ok=of["fault_ok"],
@@ -312,7 +311,7 @@ class Vehicle:
                 lost=lost,
                 alive=sorted(self.alive),
                 drops=self.drop_report(),
-                health_ok=sc.health_holds({int(i): f for i, f in of["fault"].items()}),
+                health_ok=sc.health_holds(of["fault"]),
                 speed=d.speed,
                 ay=ay,
                 # the model scheduled at a speed it does not cover describes no transition of the car

@@ -199,7 +199,7 @@ class LiveTable:
 
     def _evaluate(self, node: int, step: int) -> None:
         st, tr = self.pending.get(node, {}).get(step), self.truth.get(step)
-        if st is None or tr is None or str(node) not in tr.faults:
+        if st is None or tr is None or node not in tr.faults:
             return
         del self.pending[node][step]
         row = self.rows[node]

@@ -83,7 +83,7 @@ def _max_abs_output(scenario, signals: str, seed: int) -> dict[int, float]:
 
     def on_truth(key, msg: Truth) -> None:
         for n in scenario.nodes:
-            xbar = np.r_[msg.x, msg.faults[str(n.id)]]
+            xbar = np.r_[msg.x, msg.faults[n.id]]
             out[n.id] = max(out[n.id], abs(float(n.sensor.Cbar @ xbar)))
 
     bus.subscribe(keys.truth("t"), on_truth)

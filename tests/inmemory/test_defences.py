@@ -108,7 +108,7 @@ def assert_record_consistent(path: Path, steps: int) -> None:
             if np.isnan(track.E[n]):
                 continue
             t = truth[int(k)]
-            e = np.r_[t["x"], t["faults"][str(i)]] - track.xhat[n]
+            e = np.r_[t["x"], t["faults"][i]] - track.xhat[n]
             E = float(e @ np.linalg.solve(track.P[n], e))
             assert abs(E - track.E[n]) <= 1e-12 * max(1.0, E), (i, k)
             assert track.contained[n] == (E <= track.rho[n]), (i, k)
@@ -376,36 +376,36 @@ def test_forged_truth_is_checked_against_the_model() -> None:
     def before(key: str, msg: Message) -> list[tuple[str, bytes]]:
         if key != keys.truth(RUN) or not isinstance(msg, Truth):
             return []
-        s = {str(i): 0.0 for i in range(1, 7)}
+        s = dict.fromkeys(range(1, 7), 0.0)
         out = [
             (key, encode(msg.model_copy(update={"x": [msg.x[0] + 0.5, msg.x[1]]}))),
-            (key, encode(msg.model_copy(update={"faults": {**msg.faults, "2": msg.faults["2"] + 1.0}}))),
-            (key, encode(msg.model_copy(update={"sector_ok": {**msg.sector_ok, "1": False}}))),
+            (key, encode(msg.model_copy(update={"faults": {**msg.faults, 2: msg.faults[2] + 1.0}}))),
+            (key, encode(msg.model_copy(update={"sector_ok": {**msg.sector_ok, 1: False}}))),
             (key, encode(msg.model_copy(update={"step": 2**62}))),
             (key, encode(msg.model_copy(update={"step": 10_000_000}))),
             (key, _raw_truth(msg, faults={}, noise={}, gamma={}, y={}, y_nofault={}, sector_ok={}, noise_ok={})),
-            (key, _raw_truth(msg, faults={**s, "7": 0.0})),
+            (key, _raw_truth(msg, faults={**s, 7: 0.0})),
             (
                 key,
                 encode(
                     msg.model_copy(
                         update={
-                            "faults": {"9": 0.0},
-                            "noise": {"9": 0.0},
-                            "gamma": {"9": 1.0},
-                            "y": {"9": 0.0},
-                            "y_nofault": {"9": 0.0},
-                            "sector_ok": {"9": True},
-                            "noise_ok": {"9": True},
-                            "r": {"9": 0.0},
-                            "fault_ok": {"9": True},
+                            "faults": {9: 0.0},
+                            "noise": {9: 0.0},
+                            "gamma": {9: 1.0},
+                            "y": {9: 0.0},
+                            "y_nofault": {9: 0.0},
+                            "sector_ok": {9: True},
+                            "noise_ok": {9: True},
+                            "r": {9: 0.0},
+                            "fault_ok": {9: True},
                         }
                     )
                 ),
             ),
             # what the collector's cone reads for a derived sector: C̄x̄ and the fault-bound flag
-            (key, encode(msg.model_copy(update={"r": {**msg.r, "3": msg.r["3"] + 1e-3}}))),
-            (key, encode(msg.model_copy(update={"fault_ok": {**msg.fault_ok, "4": not msg.fault_ok["4"]}}))),
+            (key, encode(msg.model_copy(update={"r": {**msg.r, 3: msg.r[3] + 1e-3}}))),
+            (key, encode(msg.model_copy(update={"fault_ok": {**msg.fault_ok, 4: not msg.fault_ok[4]}}))),
         ]
         if msg.step == 0:
             out.append((key, encode(msg.model_copy(update={"step": STEPS}))))  # in the run, far ahead: x unchecked yet

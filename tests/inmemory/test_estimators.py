@@ -62,7 +62,7 @@ def test_every_estimator_contains_the_exact_local_set_under_its_own_assumptions(
         assert np.all(b[:, :, 0] <= exact[:, :, 0] + slack[:, :, 0]), f"{name} node {node} narrower than exact (lower)"
         assert np.all(b[:, :, 1] >= exact[:, :, 1] - slack[:, :, 1]), f"{name} node {node} narrower than exact (upper)"
         for t in rec.truth:
-            truth = np.r_[t["x"], t["faults"][str(node)]]
+            truth = np.r_[t["x"], t["faults"][node]]
             assert np.all(b[t["step"], :, 0] <= truth + TOL) and np.all(truth <= b[t["step"], :, 1] + TOL)
 
 

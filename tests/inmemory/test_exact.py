@@ -106,7 +106,7 @@ def test_truth_inside_every_exact_interval(case: str, signals: str, seed: int, m
     for t in rec.truth:
         k = t["step"]
         assert all(t["noise_ok"].values()) and t["dist_ok"]
-        for coord, value, node in [("beta", t["x"][0], None), ("r", t["x"][1], None)] + [("f", t["faults"][str(i)], i) for i in sc.ids]:
+        for coord, value, node in [("beta", t["x"][0], None), ("r", t["x"][1], None)] + [("f", t["faults"][i], i) for i in sc.ids]:
             lo, hi = ex.interval(coord, node)[k]
             assert lo - CONTAIN_TOL <= value <= hi + CONTAIN_TOL, f"{coord} node {node} step {k}: {value} ∉ [{lo}, {hi}]"
 
@@ -114,7 +114,7 @@ def test_truth_inside_every_exact_interval(case: str, signals: str, seed: int, m
 def test_declared_fault_bounds_hold_in_the_paper_profiles(tmp: str) -> None:
     """The truth must satisfy the declared bounds the exact program uses (else the tests above mean little)."""
     sc, rec = _run("saim", "paper", 0, tmp)
-    faults = {i: np.array([t["faults"][str(i)] for t in rec.truth]) for i in sc.ids}
+    faults = {i: np.array([t["faults"][i] for t in rec.truth]) for i in sc.ids}
     for n in sc.nodes:
         assert np.abs(faults[n.id]).max() <= n.fault_size
         assert np.abs(np.diff(faults[n.id])).max() <= n.fault_rate

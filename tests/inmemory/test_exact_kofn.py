@@ -119,7 +119,7 @@ def test_k_of_n_bounds_lie_inside_the_bounds_without_and_hold_the_truth() -> Non
         assert ex.beta[k, 0] - 1e-8 <= t["x"][0] <= ex.beta[k, 1] + 1e-8
         assert ex.r[k, 0] - 1e-8 <= t["x"][1] <= ex.r[k, 1] + 1e-8
         for i in sc.ids:
-            assert ex.fault[i][k, 0] - 1e-8 <= t["faults"][str(i)] <= ex.fault[i][k, 1] + 1e-8, (i, k)
+            assert ex.fault[i][k, 0] - 1e-8 <= t["faults"][i] <= ex.fault[i][k, 1] + 1e-8, (i, k)
 
 
 @pytest.mark.parametrize(("estimator", "fault_bounds"), [(None, "used"), ("zonotope", "used"), ("strip", "all")])

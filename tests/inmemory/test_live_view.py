@@ -70,7 +70,7 @@ def test_the_stream_decodes_to_every_nodes_intervals_truth_graph_and_verdict(tmp
                 assert ents[f"/nodes/{i}/{name}/lower"][int(k)]["Scalars:scalars"] == pytest.approx([lo[n]], abs=1e-12)
                 assert ents[f"/nodes/{i}/{name}/upper"][int(k)]["Scalars:scalars"] == pytest.approx([hi[n]], abs=1e-12)
         for t in record.truth:
-            assert ents[f"/nodes/{i}/fault/true"][t["step"]]["Scalars:scalars"] == pytest.approx([t["faults"][str(i)]])
+            assert ents[f"/nodes/{i}/fault/true"][t["step"]]["Scalars:scalars"] == pytest.approx([t["faults"][i]])
             assert ents[f"/nodes/{i}/yaw_rate/true"][t["step"]]["Scalars:scalars"] == pytest.approx([t["x"][1]])
         ring = np.asarray(ents[f"/sets/node{i}"][STEPS]["LineStrips2D:strips"][0])
         assert len(ring) > 4 and np.allclose(ring[0], ring[-1])  # a closed outline
@@ -86,7 +86,7 @@ def test_the_stream_decodes_to_every_nodes_intervals_truth_graph_and_verdict(tmp
     graph = ents["/graph"][STEPS]
     assert sorted(graph["GraphNodes:node_ids"]) == [str(i) for i in sorted(record.nodes)]
     in_weights = res.meta.in_weights
-    expected = {(j, i) for i, row in in_weights.items() for j in row if j != i}
+    expected = {(str(j), str(i)) for i, row in in_weights.items() for j in row if j != i}
     assert {(e["first"], e["second"]) for e in graph["GraphEdges:edges"]} == expected  # lockstep, no loss: every message used
     # the coverage counts what the collector counted (every node-step judged, all inside here)
     assert view.coverage.judged == res.summary.node_steps_evaluated and view.coverage.contained == res.summary.node_steps_contained

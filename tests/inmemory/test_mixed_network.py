@@ -57,12 +57,12 @@ def test_mixed_network_contained_where_assumptions_held(mixed_run) -> None:
     assert s.node_steps_covered > 0.9 * s.node_steps_evaluated  # the guarantee actually covered them
     rows = {r.id: r for r in s.nodes}
     assert {i: rows[i].estimator for i in MIXED} == MIXED
-    assert rec.meta.estimators == {str(n.id): n.estimator for n in sc.nodes}
+    assert rec.meta.estimators == {n.id: n.estimator for n in sc.nodes}
     truth = {t["step"]: t for t in rec.truth}
     for i, entries in rec.raw_nodes.items():
         for e in entries:
             t = truth[e["step"]]
-            xbar = np.r_[t["x"], t["faults"][i]]
+            xbar = np.r_[t["x"], t["faults"][int(i)]]
             b = np.asarray(e["bounds"])  # every node's published set: a set estimator's, the SDP's ellipsoid ∩ range ∩ region
             inside = bool(np.all(b[:, 0] <= xbar) and np.all(xbar <= b[:, 1]))
             assert inside or not e["contained"]  # the set is inside its interval hull

@@ -118,7 +118,7 @@ def saim_record(tmp_path_factory: pytest.TempPathFactory):
 def test_fig5_shows_the_saturation_limit_and_gamma(saim_record) -> None:
     """Fig. 5 drew neither the saturation limit nor γ (SAIM)."""
     fig = plots._fig5(saim_record, "saim")
-    r_max = saim_record.meta.r_max["1"]
+    r_max = saim_record.meta.r_max[1]
     first = next(ax for ax in fig.axes if ax.get_title() == "sensor 1")
     levels = {round(float(ln.get_ydata()[0]), 12) for ln in first.get_lines() if ln.get_label().startswith("saturation")}
     assert levels == {round(r_max, 12), round(-r_max, 12)}

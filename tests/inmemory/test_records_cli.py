@@ -57,7 +57,7 @@ def _check_record(path: Path, steps: int, summary_path: Path) -> None:
         assert tr.contained.dtype == bool and tr.assumptions_ok.dtype == bool
         for n, k in enumerate(tr.steps):
             t = rec.truth_at(int(k))
-            e = np.r_[t["x"], t["faults"][str(i)]] - tr.xhat[n]
+            e = np.r_[t["x"], t["faults"][i]] - tr.xhat[n]
             E = float(e @ np.linalg.solve(tr.P[n], e))
             assert abs(E - tr.E[n]) <= 1e-12 * max(1.0, E), (i, k)
             assert tr.contained[n] == (tr.E[n] <= tr.rho[n])
@@ -260,7 +260,7 @@ def test_inspect_json(nsnim: dict[str, Path], capsys: pytest.CaptureFixture[str]
         ):
             assert key in r, key
         t = rec.truth_at(r["step"])
-        assert r["beta_true"] == t["x"][0] and r["r_true"] == t["x"][1] and r["fault_true"] == t["faults"]["2"]
+        assert r["beta_true"] == t["x"][0] and r["r_true"] == t["x"][1] and r["fault_true"] == t["faults"][2]
         if r["contained"]:  # inside the ellipsoid ⇒ every coordinate inside x̂ ± √(ρ P_ii)
             for name in ("beta", "r", "fault"):
                 assert r[f"{name}_lower"] - 1e-12 <= r[f"{name}_true"] <= r[f"{name}_upper"] + 1e-12, (r["step"], name)

@@ -80,7 +80,7 @@ def test_the_judgement_can_be_rechecked_from_the_record(records: Recorded) -> No
                 continue
             t = rec.truth_at(e["step"])
             assert t is not None
-            xbar = augmented(np.array(t["x"], dtype=float), t["faults"][str(i)])
+            xbar = augmented(np.array(t["x"], dtype=float), t["faults"][i])
             assert tr.published[n].contains(xbar) == e["contained"], (i, e["step"])
             cont = tr.continues[n] if tr.continues[n] is not None else tr.published[n]
             assert cont.contains(xbar) == e["continues_contained"], (i, e["step"])
@@ -95,7 +95,7 @@ def test_a_region_moved_off_the_truth_is_recorded_as_a_miss(records: Recorded) -
     n = next(n for n, e in enumerate(raw) if e["judged"] and e["contained"])
     t = rec.truth_at(raw[n]["step"])
     assert t is not None
-    xbar = augmented(np.array(t["x"], dtype=float), t["faults"]["1"])
+    xbar = augmented(np.array(t["x"], dtype=float), t["faults"][1])
     pub = tr.published[n]
     assert pub.region is not None and pub.contains(xbar)
     moved = msgspec.structs.replace(pub, region=[v + (1.0 if j % 2 == 0 else 0.0) for j, v in enumerate(pub.region)])
@@ -137,7 +137,7 @@ def test_a_record_written_before_issue_28_loads_with_the_same_bounds_and_verdict
             assert cont is not None and cont.xhat == e["own_xhat"] and cont.P == e["own_P"] and cont.region == e["own_region"] and cont.fault is None
             t = jsonl.truth_at(e["step"])
             assert t is not None and e["judged"]
-            xbar = augmented(np.array(t["x"], dtype=float), t["faults"][str(i)])
+            xbar = augmented(np.array(t["x"], dtype=float), t["faults"][i])
             assert pub.contains(xbar) == e["contained"] and cont.contains(xbar) == e["continues_contained"]
     assert main(["inspect", str(V0 / f"{run}.jsonl.gz"), "--node", "1", "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)

@@ -126,7 +126,7 @@ def _synthetic(steps: int, n: int) -> object:
     """A record of ``steps`` × ``n`` nodes on a ring, made from parts (no run: the page's size is what is tested)."""
     rng = np.random.default_rng(0)
     ids = list(range(1, n + 1))
-    meta = RunMeta(name="ring24", case="nsnim", signals="paper", steps=steps, tau_s=0.1, node_ids=ids, in_weights={str(i): {str(i % n + 1): 0.5} for i in ids})
+    meta = RunMeta(name="ring24", case="nsnim", signals="paper", steps=steps, tau_s=0.1, node_ids=ids, in_weights={i: {i % n + 1: 0.5} for i in ids})
     truth = [
         {
             "step": k,

@@ -298,7 +298,7 @@ def test_a_cut_set_is_published_with_the_bound_it_rests_on_and_judged_against_it
     judge, truth = Judge(sc), res.parts["truth"][20]
     f = truth["faults"]["1"]
     st = make_state(step=20, node=1, xhat=[*truth["x"], f], P=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], rho=1.0, gamma=1.0, innov=0.0, status="ok")
-    tr = msgspec.convert({k: truth[k] for k in Truth.__struct_fields__ if k in truth}, Truth)
+    tr = msgspec.convert({k: truth[k] for k in Truth.__struct_fields__ if k in truth}, Truth, str_keys=True)  # the record's JSON form
     inside = judge.containment(1, msgspec.structs.replace(st, published=msgspec.structs.replace(st.published, fault=[f - 0.01, f + 0.01])), tr)
     outside = judge.containment(1, msgspec.structs.replace(st, published=msgspec.structs.replace(st.published, fault=[f + 0.01, f + 0.02])), tr)
     assert inside.contained and not outside.contained and outside.E == inside.E

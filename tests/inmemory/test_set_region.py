@@ -54,7 +54,7 @@ def test_the_region_keeps_the_exact_local_set_and_never_widens_the_method(name: 
         assert np.all(b[:, :, 1] >= exact[:, :, 1] - slack[:, :, 1]), f"{name} node {node} narrower than exact (upper)"
         assert np.all(b[:, :, 0] >= own[:, :, 0] - TOL) and np.all(b[:, :, 1] <= own[:, :, 1] + TOL)
         for t in rec.truth:
-            truth = np.r_[t["x"], t["faults"][str(node)]]
+            truth = np.r_[t["x"], t["faults"][node]]
             assert np.all(b[t["step"], :, 0] <= truth + TOL) and np.all(truth <= b[t["step"], :, 1] + TOL)
 
 

@@ -68,7 +68,7 @@ def test_never_narrower_than_exact_and_contains_the_truth(case: str, signals: st
         ex = _exact_array(exact_bounds(sc, rec, "used", nodes=[node]), node)
         assert np.all(z[:, :, 0] <= ex[:, :, 0] + CONTAIN_TOL) and np.all(z[:, :, 1] >= ex[:, :, 1] - CONTAIN_TOL)
         for t in rec.truth:
-            truth = np.r_[t["x"], t["faults"][str(node)]]
+            truth = np.r_[t["x"], t["faults"][node]]
             assert np.all(z[t["step"], :, 0] <= truth + CONTAIN_TOL) and np.all(truth <= z[t["step"], :, 1] + CONTAIN_TOL)
 
 

@@ -50,7 +50,7 @@ def test_simulate_arrays_match_the_record(tmp_path: Path) -> None:
             assert np.array_equal(s.lower[:, j], lo) and np.array_equal(s.upper[:, j], hi)
         for n, k in enumerate(s.steps):
             t = rec.truth_at(int(k))
-            assert list(s.truth[n]) == [t["x"][0], t["x"][1], t["faults"][str(i)]]
+            assert list(s.truth[n]) == [t["x"][0], t["x"][1], t["faults"][i]]
         assert np.allclose(s.t, s.steps * 0.1, rtol=0, atol=1e-12)
         # covered steps are counted from the record's flags; with the derived sector SAIM is covered throughout
         assert res.covered_steps[i] == int(tr.assumptions_ok.sum()) == len(s.steps)

@@ -77,7 +77,7 @@ def _input(node: int, step: int) -> NodeInput:
 
 
 def _truth(step: int) -> Truth:
-    ids = [str(i) for i in range(1, 7)]
+    ids = list(range(1, 7))
     z = {i: 0.0 for i in ids}
     return Truth(
         step=step,

@@ -99,10 +99,10 @@ def test_the_judge_names_the_plants_transition_first_and_whether_the_car_left_it
 
     sc = dataclasses.replace(load_topology("paper6_car"), envelope=ENV)
     judge, n = Judge(sc), sc.nodes[0]
-    ids = {str(i): 0.0 for i in sc.ids}
-    flags = {str(i): True for i in sc.ids}
+    ids = dict.fromkeys(sc.ids, 0.0)
+    flags = dict.fromkeys(sc.ids, True)
     base = dict(faults=ids, noise=ids, gamma={s: 1.0 for s in ids}, y=ids, y_nofault=ids, sector_ok=flags, noise_ok=flags, r=ids, fault_ok=flags)
-    now = truth(step=5, **(base | {"noise_ok": {**flags, str(n.id): False}}))  # its own noise bound broke too
+    now = truth(step=5, **(base | {"noise_ok": {**flags, n.id: False}}))  # its own noise bound broke too
     for envelope_ok, cause in ((True, MODEL_MISMATCH), (False, OUTSIDE_ENVELOPE)):
         prev = truth(step=4, **base, e=[0.1, 0.1], mismatch_ok=False, envelope_ok=envelope_ok)
         assert judge.own_cause(n, None, now, prev, 5) == cause

@@ -209,10 +209,12 @@ def test_every_role_handler_drops_never_raises(deliveries: list[tuple[tuple[str,
 
 
 def test_the_fuzz_templates_cover_every_message_type() -> None:
-    types = {msgpack.unpackb(p, raw=False)["type"] for _, p in TEMPLATES}
+    types = {msgpack.unpackb(p, raw=False, strict_map_key=False)["type"] for _, p in TEMPLATES}
     assert {"input", "state", "truth", "end", "reading"} <= types
-    assert any(msgpack.unpackb(p, raw=False).get("readings") for _, p in TEMPLATES)  # states that used a reading
-    states = [msgpack.unpackb(p, raw=False) for _, p in TEMPLATES if msgpack.unpackb(p, raw=False)["type"] == "state"]
+    assert any(msgpack.unpackb(p, raw=False, strict_map_key=False).get("readings") for _, p in TEMPLATES)  # states that used a reading
+    states = [
+        msgpack.unpackb(p, raw=False, strict_map_key=False) for _, p in TEMPLATES if msgpack.unpackb(p, raw=False, strict_map_key=False)["type"] == "state"
+    ]
     assert any({"region", "fault"} <= set(s["published"]) for s in states) and any("continues" in s for s in states)  # every part of both sets
     assert any(s.get("sets") for s in states)  # states cut by their neighbours' sets (issue 44)
     assert not math.isnan(len(TEMPLATES))

@@ -25,9 +25,9 @@ def _two_nodes():
 def test_a_step_cut_by_a_neighbours_set_rests_on_that_whole_set() -> None:
     sc = _two_nodes()
     judge = Judge(sc)
-    ok = {"1": True, "2": True}
+    ok = {1: True, 2: True}
     prev_tr, tr = truth(step=2, noise_ok=ok), truth(step=3, noise_ok=ok)
-    xbar = augmented(np.asarray(prev_tr.x), prev_tr.faults["2"])
+    xbar = augmented(np.asarray(prev_tr.x), prev_tr.faults[2])
     x, r = prev_tr.x
     off = [x + 0.1, r + 0.1, x + 0.2, r + 0.1, x + 0.2, r + 0.2]  # a region beside the truth; the ellipsoid around it
     cbar = sc.node(2).sensor.Cbar
@@ -38,17 +38,15 @@ def test_a_step_cut_by_a_neighbours_set_rests_on_that_whole_set() -> None:
         P=np.eye(3).ravel().tolist(),
         rho=1.0,
         region=off,
-        gamma=prev_tr.gamma["2"],
-        innov=float(prev_tr.y["2"] - cbar @ xbar),
+        gamma=prev_tr.gamma[2],
+        innov=float(prev_tr.y[2] - cbar @ xbar),
         status="ok",
     )
     check = judge.copy_check(2, copy, prev_tr)
     assert check.as_neighbour is None and check.as_set == MISSED  # its innovation's facts held, its set missed
     prev = StepChecks({2: {state_digest(copy): check}, 1: {"0" * 32: CopyCheck(None, None)}}, {})
     inputs = [(2, state_digest(copy)), (1, "0" * 32)]
-    base = dict(
-        step=3, node=1, xhat=[0.0, 0.0, 0.0], P=np.eye(3).ravel().tolist(), rho=1.0, gamma=tr.gamma["1"], innov=0.0, status="ok", used=[2], inputs=inputs
-    )
+    base = dict(step=3, node=1, xhat=[0.0, 0.0, 0.0], P=np.eye(3).ravel().tolist(), rho=1.0, gamma=tr.gamma[1], innov=0.0, status="ok", used=[2], inputs=inputs)
     n1 = sc.node(1)
     for sets, cone in (([2], Cone(False, INHERITED, Origin(2, 2, MISSED))), ([], Cone(True))):
         st = make_state(**base, sets=sets)

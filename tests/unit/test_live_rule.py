@@ -18,7 +18,7 @@ from netsetest.runtime.live import LiveTable
 
 TRUTH = truth()  # step 3: x = (0.01, 0.2), node 1's fault 0.5
 X = [0.01, 0.2]
-F1 = TRUTH.faults["1"]
+F1 = TRUTH.faults[1]
 FAR = [0.5, 0.5, 0.6, 0.5, 0.6, 0.6, 0.5, 0.6]  # a square of (β, r) counter-clockwise, away from the true x
 AROUND = [0.0, 0.1, 0.1, 0.1, 0.1, 0.3, 0.0, 0.3]  # one holding it
 
@@ -26,7 +26,7 @@ AROUND = [0.0, 0.1, 0.1, 0.1, 0.1, 0.3, 0.0, 0.3]  # one holding it
 def _state(region: list[float] | None, node: int = 1) -> NodeState:
     """Node ``node``'s state of the truth's step: an ellipsoid centred on the truth (E = 0 ≤ ρ) and a fault range
     around its true fault, cut by ``region``."""
-    f = TRUTH.faults[str(node)]
+    f = TRUTH.faults[node]
     return make_state(
         step=TRUTH.step,
         node=node,
@@ -100,7 +100,7 @@ def test_watch_and_the_view_call_a_box_across_the_sets_edge_undecided() -> None:
     from netsetest.runtime.view import APP_ID, COLOURS, LiveView
 
     edge = [0.005, 0.1, 0.1, 0.1, 0.1, 0.3, 0.005, 0.3]  # its left side at β = 0.005, inside the box β ∈ 0.01 ± 0.02
-    box_truth = msgspec.structs.replace(TRUTH, x_acc=[0.02, 0.0], f_acc={"1": 0.0, "2": 0.0})
+    box_truth = msgspec.structs.replace(TRUTH, x_acc=[0.02, 0.0], f_acc={1: 0.0, 2: 0.0})
     st = _state(edge)
     c = Judge.containment(1, st, box_truth)
     assert not c.contained and not c.missed  # the premise: the collector's judge leaves it undecided

@@ -67,21 +67,21 @@ MESSAGES = [
     Truth(
         step=80,
         x=[1e-3 / 7, -0.2 / 3],
-        faults={"1": 0.1745, "2": 0.08725},
+        faults={1: 0.1745, 2: 0.08725},
         u=0.03,
         w=-0.99,
         vx=27.77777777777778,
-        noise={"1": math.cos(0.2 * math.pi), "2": 0.5},
-        gamma={"1": 0.77, "2": 1.0},
-        y={"1": 0.01 / 3, "2": 0.1},
-        y_nofault={"1": -0.0, "2": 0.0},
-        sector_ok={"1": True, "2": False},
-        noise_ok={"1": True, "2": True},
+        noise={1: math.cos(0.2 * math.pi), 2: 0.5},
+        gamma={1: 0.77, 2: 1.0},
+        y={1: 0.01 / 3, 2: 0.1},
+        y_nofault={1: -0.0, 2: 0.0},
+        sector_ok={1: True, 2: False},
+        noise_ok={1: True, 2: True},
         dist_ok=False,
         lost=[(2, 1), (6, 1)],
         alive=[1, 2, 3],
-        r={"1": -0.0312345678901, "2": 0.5},
-        fault_ok={"1": True, "2": False},
+        r={1: -0.0312345678901, 2: 0.5},
+        fault_ok={1: True, 2: False},
     ),
     End(steps=80),
     End(steps=3, reason="aborted: node 4 silent"),
@@ -142,7 +142,8 @@ BAD = [
     ("list", _pack([1, "state", 3]), "not-a-map", None),
     ("scalar", _pack(42), "not-a-map", None),
     ("version-1", _mut(_state(), v=1), "schema-version", None),  # a node of before the ProvenSets
-    ("version-3", _mut(_state(), v=3), "schema-version", None),
+    ("version-2", _mut(_state(), v=2), "schema-version", None),  # a truth of before the int node ids
+    ("version-4", _mut(_state(), v=4), "schema-version", None),
     ("version-missing", _mut(_state(), v=_DEL), "schema-version", None),
     ("version-str", _mut(_state(), v="2"), "schema-version", None),
     ("unknown-type", _mut(_state(), type="bogus"), "invalid", "bogus"),
@@ -183,8 +184,8 @@ BAD = [
         "continues",
     ),
     ("missing-field-input", _mut(NI, node=_DEL), "invalid", "node"),
-    ("truth-faults-nan", _mut(next(m for m in MESSAGES if isinstance(m, Truth)), faults={"1": float("nan")}), "invalid", "faults"),
-    ("truth-r-inf", _mut(next(m for m in MESSAGES if isinstance(m, Truth)), r={"1": float("inf")}), "invalid", "r"),
+    ("truth-faults-nan", _mut(next(m for m in MESSAGES if isinstance(m, Truth)), faults={1: float("nan")}), "invalid", "faults"),
+    ("truth-r-inf", _mut(next(m for m in MESSAGES if isinstance(m, Truth)), r={1: float("inf")}), "invalid", "r"),
     ("sector-h1-0", _mut(_state(), sector=[0.0, 0.5]), "invalid", "sector"),
     ("sector-h1-big", _mut(_state(), sector=[1.5, 0.5]), "invalid", "sector"),
     ("sector-h-negative", _mut(_state(), sector=[0.5, -0.1]), "invalid", "sector"),
@@ -495,7 +496,7 @@ def test_inbox_bounded_number_of_keys():
 def test_truth_maps_must_name_the_same_nodes():
     t = next(m for m in MESSAGES if isinstance(m, Truth))  # (it once read MESSAGES[6], a state: refused for another reason)
     assert decode(_pack(raw_message(t))) == t
-    for bad in ({"faults": {}}, {"noise": {"1": 0.0}}, {"faults": {"x": 0.0, "2": 0.0}}, {"faults": {"0": 0.0, "2": 0.0}}):
+    for bad in ({"faults": {}}, {"noise": {1: 0.0}}, {"faults": {"x": 0.0, 2: 0.0}}, {"faults": {0: 0.0, 2: 0.0}}):
         with pytest.raises(BadMessage, match="faults|noise"):
             decode(_pack(raw_message(t, **bad)))
 

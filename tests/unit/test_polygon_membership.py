@@ -31,7 +31,7 @@ from exact_polygons import exact as _exact
 from exact_polygons import hull as _hull
 from test_polygon_exact import FUZZ, car_like, matrices, polygons, segment_lists, slabs
 
-from netsetest.messages import BadMessage, decode
+from netsetest.messages import SCHEMA_VERSION, BadMessage, decode
 from netsetest.polygon import (
     CONVEX_TOLERANCE,
     MAX_COORDINATE,
@@ -252,7 +252,7 @@ BOX = {"type": "box", "lo": [0.0, 0.0, -1.0], "hi": [1.0, 1.0, 1.0]}
 
 def _payload(**published: object) -> bytes:
     d = raw_message(STATE, **published)
-    return msgspec.msgpack.encode({**d, "type": "state", "v": 2})
+    return msgspec.msgpack.encode({**d, "type": "state", "v": SCHEMA_VERSION})
 
 
 @pytest.mark.parametrize(("region", "reason"), [h[1:] for h in HOSTILE], ids=[h[0] for h in HOSTILE])
