@@ -504,7 +504,7 @@ def test_truth_maps_must_name_the_same_nodes():
 def test_truth_fault_unknown_only_without_a_reading():
     """Truth.fault_unknown names nodes without a reading of the step, each once."""
     t = next(m for m in MESSAGES if isinstance(m, Truth))
-    gap = raw_message(t, no_reading=[2], y={"1": 0.1}, y_nofault={"1": 0.1})
+    gap = raw_message(t, no_reading=[2], y={1: 0.1}, y_nofault={1: 0.1})
     assert decode(_pack({**gap, "fault_unknown": [2]})).fault_unknown == [2]
     for bad in ([1], [2, 2]):
         with pytest.raises(BadMessage, match="fault_unknown"):
