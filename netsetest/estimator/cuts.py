@@ -29,13 +29,13 @@ import numpy as np
 import netsetest.linalg as linalg
 from netsetest.estimator.health import HEALTH_KEY, HealthAssessment
 from netsetest.estimator.problem import StepData
-from netsetest.estimator.sector import FaultBound, Interval, Sector, fault_over
+from netsetest.estimator.region_engine import Blend, cut_by_own, cut_by_slabs, region_fault
+from netsetest.estimator.sector import FaultBound, Interval, Sector
 from netsetest.estimator.slab import cut
 from netsetest.models.sensor import NA, NX, Sensor
-from netsetest.models.vehicle import TSModel
 from netsetest.polygon import MIN_VERTICES, REGION_REASONS, Polygon
 from netsetest.proven import ProvenSet
-from netsetest.sets import ellipsoid_bounds
+from netsetest.sets import NO_CUTS, CutName, IntervalCuts, Slab, ellipsoid_bounds
 
 Status = Literal["ok", "fallback"]
 FAULT_AXIS = np.eye(NA)[NA - 1]  # f = e₃ᵀx̄: the direction the fault cuts act along
@@ -83,6 +83,7 @@ class StepResult:
     fault_range: tuple[float, float] | None = None  # the set is the ellipsoid ∩ {lo ≤ f⁺ ≤ hi}
     region: Polygon | None = None  # the states x⁺ every step so far leaves (NodeSet.region); the published set's too
     set_keys: frozenset[int] = frozenset()  # the in-neighbours whose published sets of step k the set rests on (the region's cuts)
+    cuts: IntervalCuts = NO_CUTS  # per coordinate, the cuts that narrowed the interval of this set as published (apply_cuts)
 
     @property
     def public(self) -> StepResult:
@@ -158,27 +159,6 @@ class CutStatics:
 
 
 @dataclass(frozen=True)
-class Blend:
-    """The step's blended model Σ α_ℓ (A_ℓ, B_ℓ, Dw_ℓ) (exact for the truth), computed once per step: Ā (NX, NX),
-    B̄ and D̄ (NX,), and the augmented ones over x̄ = (x, f): (NA, NA), (NA,), (NA,) (the fault row and column zero)."""
-
-    a: np.ndarray
-    b: np.ndarray
-    d: np.ndarray
-    abar: np.ndarray
-    bbar: np.ndarray
-    dbar: np.ndarray
-
-    @classmethod
-    def of(cls, model: TSModel, alpha: np.ndarray) -> Blend:
-        """The blend of ``model``'s rule matrices for the weights α (TSModel.blend: once per step)."""
-        a, b, d = model.blend(np.asarray(alpha, dtype=float))
-        abar = np.zeros((NA, NA))
-        abar[:NX, :NX] = a
-        return cls(a, b[:, 0], d[:, 0], abar, np.append(b[:, 0], 0.0), np.append(d[:, 0], 0.0))  # (np.r_ costs 10 µs a call)
-
-
-@dataclass(frozen=True)
 class StepContext:
     """Everything one step knows before its solve, computed once (docs/estimator.md, "One step")."""
 
@@ -206,7 +186,7 @@ class Cut:
     """One cut of the step: ``apply`` takes the step's sets and returns them cut (pure: it never changes its
     input); ``rests_on`` names the assumption beyond the solve's under which it keeps the truth."""
 
-    name: str
+    name: CutName
     rests_on: str
     apply: CutFn
 
@@ -289,14 +269,12 @@ def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
     reading; not where the step cannot list readings (step 0, whose cone is the prior's)."""
     st = ctx.statics
     region: Polygon | None = ctx.moved
-    for c, iv in (*ctx.slabs.values(), *ctx.region_slabs.values()):
-        region = region.cut(c[:NX], iv.lo, iv.hi) if region is not None else None
+    region = cut_by_slabs(region, (Slab(c, iv.lo, iv.hi) for c, iv in (*ctx.slabs.values(), *ctx.region_slabs.values())))
     size, sector = st.fault_bound.size, res.sector
     reference = size == 0.0 and ctx.listed  # its own reading rests on its declared zero fault (listed, so judged)
     keys = frozenset(ctx.slabs) | frozenset(ctx.region_slabs) | ({st.node_id} if reference else frozenset())
-    if region is not None and size is not None and (reference or st.own_bound or (sector is not None and sector.basis == "fault-bound")):
-        slack = abs(st.own.Ds) * size  # C x⁺ = C̄ x̄⁺ − Ds f⁺, |f⁺| ≤ F: the step's cone holds the bound
-        region = region.cut(st.own.C, ctx.meas.lo - slack, ctx.meas.hi + slack)
+    if size is not None and (reference or st.own_bound or (sector is not None and sector.basis == "fault-bound")):
+        region = cut_by_own(region, st.own, ctx.meas, size)  # C x⁺ = C̄ x̄⁺ − Ds f⁺, |f⁺| ≤ F: the step's cone holds the bound
     for s in (res, res.published):
         if region is not None and s is not None:
             region = ellipse_cut(region, s.xhat, s.P, ctx.rho)
@@ -311,16 +289,6 @@ def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
     if out is None or not keys:
         return res if out is None else out
     return out.replaced(published=out.public.replaced(reading_keys=out.public.reading_keys | keys))
-
-
-def region_fault(own: Sensor, region: Polygon, meas: Interval) -> tuple[float, float] | None:
-    """f⁺ from the own measurement over the region: C x⁺ + Ds f⁺ ∈ [m_lo, m_hi] and C x⁺ ∈ [c_lo, c_hi]
-    give Ds f⁺ ∈ [m_lo − c_hi, m_hi − c_lo].  A measurement at the sensor's limit (saturated) leaves one side of
-    C x⁺ + Ds f⁺ open, and the other side still bounds f⁺ (one side of the result infinite); None where both are
-    open or the sensor has no fault term."""
-    if own.Ds == 0.0 or not (math.isfinite(meas.lo) or math.isfinite(meas.hi)):
-        return None
-    return fault_over(own, *region.interval(own.C), meas)
 
 
 def _health_pin(ctx: StepContext, res: StepResult) -> StepResult:
@@ -431,15 +399,42 @@ FALLBACK_CUTS: tuple[Cut, ...] = (REGION,)  # a step without a certificate: the 
 
 
 def apply_cuts(cuts: tuple[Cut, ...], ctx: StepContext, res: StepResult) -> StepResult:
-    """The step's sets through ``cuts``, in order."""
+    """The step's sets through ``cuts``, in order; the published set's ``cuts`` name, per coordinate, every cut that
+    narrowed its interval (the ellipsoid's, within the fault range and the region: what the node publishes)."""
+    bounds = published_bounds(res, ctx.rho)
     for c in cuts:
-        res = c.apply(ctx, res)
+        out = c.apply(ctx, res)
+        if out is res:
+            continue
+        now = published_bounds(out, ctx.rho)
+        narrowed = [now[0][m] > bounds[0][m] or now[1][m] < bounds[1][m] for m in range(NA)]
+        if any(narrowed):
+            pub = out.public
+            b, r, f = (pub.cuts[m] + (c.name,) if narrowed[m] else pub.cuts[m] for m in range(NA))
+            named: IntervalCuts = (b, r, f)
+            out = out.replaced(cuts=named) if out.published is None else out.replaced(published=pub.replaced(cuts=named))
+        res, bounds = out, now
     return res
+
+
+def published_bounds(res: StepResult, rho: float) -> tuple[list[float], list[float]]:
+    """Each coordinate's interval of what ``res`` publishes: its ellipsoid's x̂ ∓ √(ρ P_ii), within its fault range
+    and the region's intervals of β and r (ProvenSet.bounds, without making the set)."""
+    pub = res.public
+    half = np.sqrt(np.maximum(rho * np.diag(pub.P), 0.0)).tolist()
+    x = pub.xhat.tolist()
+    lo, hi = [x[m] - half[m] for m in range(NA)], [x[m] + half[m] for m in range(NA)]
+    if pub.fault_range is not None:
+        lo[NA - 1], hi[NA - 1] = max(lo[NA - 1], pub.fault_range[0]), min(hi[NA - 1], pub.fault_range[1])
+    if res.region is not None:
+        r_lo, r_hi = res.region.bounds()
+        for m in range(NX):
+            lo[m], hi[m] = max(lo[m], float(r_lo[m])), min(hi[m], float(r_hi[m]))
+    return lo, hi
 
 
 __all__ = [
     "FALLBACK_CUTS",
-    "Blend",
     "FAULT_AXIS",
     "FIRST_CUTS",
     "PIN_FLOOR",
@@ -452,9 +447,9 @@ __all__ = [
     "StepContext",
     "StepResult",
     "apply_cuts",
+    "published_bounds",
     "carry",
     "cut_fault",
     "ellipse_cut",
-    "region_fault",
     "seed",
 ]

@@ -72,7 +72,6 @@ from netsetest.estimator.cuts import (
     FALLBACK_CUTS,
     FIRST_CUTS,
     STEP_CUTS,
-    Blend,
     Cut,
     CutStatics,
     NodeSet,
@@ -86,14 +85,16 @@ from netsetest.estimator.health import HEALTH_KEY, HealthAssessment, HealthModel
 from netsetest.estimator.lmi_cvxpy import CvxpySolver
 from netsetest.estimator.objective import BANK_FAULT_WEIGHT, DEFAULT_OBJECTIVE, FAULT_WEIGHT, OBJECTIVES, Objective
 from netsetest.estimator.problem import EtaLayout, OwnUpdate, PatternKey, ProblemSolver, Solution, StepData
+from netsetest.estimator import region_engine
+from netsetest.estimator.region_engine import Blend
 from netsetest.estimator.sector import (
     FaultBound,
     Interval,
     Sector,
     derive_sector,
+    Propagation,
     measurement_interval,
     prior_interval,
-    propagated_interval,
 )
 from netsetest.extras import require
 from netsetest.models.sensor import NA, NX, Sensor
@@ -250,7 +251,7 @@ class LocalEstimator:
         self.bounded = dict(bounded or {})
         self._bounded_c = {j: _read_only(np.append(sensor.C, 0.0)) for j, (sensor, _) in self.bounded.items()}  # c̄_j = [C_j, 0], once
         self.neighbour_sets = neighbour_sets
-        # a sensor of uᵀx alone (no fault, no saturation): what propagated_interval needs for the prediction of uᵀx⁺
+        # a sensor of uᵀx alone (no fault, no saturation): what Propagation.interval needs for the prediction of uᵀx⁺
         self._u_sensor = dataclasses.replace(own, C=health.u, Ds=0.0, saturated=False) if health is not None else own
         self.n_lmi = N_RULES if variant == "per-rule" else 1
         # static data, prepared once: augmented rule matrices Ā_ℓ, B̄_ℓ, D̄_ℓ
@@ -330,17 +331,17 @@ class LocalEstimator:
         """The own sensor's sector of step k+1 (docs/estimator.md, "Adaptive sector")."""
         return self.context(prev, inp).sector
 
-    def _own_range(self, prev: NodeSet, inp: UpdateInput, blend: Blend, meas: Interval) -> tuple[Sector | None, Interval | None]:
+    def _own_range(self, prop: Propagation, meas: Interval) -> tuple[Sector | None, Interval | None]:
         """The own sector of step k+1 and, where it is derived and the sensor may saturate, the proven
         interval of r⁺ = C̄ x̄⁺ (the step then uses it as the measurement; see ``step_data``); ``meas``: the own
         measurement's interval."""
         if not self.own.saturated:
             return None, None
-        prop = propagated_interval(self.own, self.fault_bound, prev.xhat, prev.P, prev.rho, blend.a, blend.b, blend.d, inp.u, self.W, self.uncertainty)
-        sector = derive_sector(self.own, self.fault_bound, meas, prop)
+        r_set = prop.interval(self.own, self.fault_bound)
+        sector = derive_sector(self.own, self.fault_bound, meas, r_set)
         if sector is None or not sector.has_phi or sector.basis == "assumed":
             return sector, None
-        return sector, (meas & prop if sector.basis == "fault-bound" else meas)
+        return sector, (meas & r_set if sector.basis == "fault-bound" else meas)
 
     def initial_sector(self, prior: NodeSet, y: float, gamma: float) -> Sector | None:
         """The own sensor's sector of step 0: the prior (Assumption 1), |f₀| ≤ F and the measurement."""
@@ -389,7 +390,7 @@ class LocalEstimator:
         ell, innov = self._reference_innovation(lay, pi0, alpha, data.x_pred, refs)
         return StepData(tuple(pi0), ell, tuple(facts), data.x_pred, innov, data.Mi, lay, key, data.sector, data.own)
 
-    def _reading_slabs(self, prev: NodeSet, inp: UpdateInput, blend: Blend, health: HealthAssessment | None) -> Slabs:
+    def _reading_slabs(self, inp: UpdateInput, prop: Propagation, health: HealthAssessment | None) -> Slabs:
         """What the step's readings prove, as c̄ (NA,) and c̄ᵀx̄⁺ ∈ [lo, hi], keyed by the reference's id, and
         by :data:`~netsetest.estimator.health.HEALTH_KEY` for the k-of-N interval of every reading (the
         hypotheses pruned by the node's own prediction of uᵀx⁺).
@@ -404,23 +405,19 @@ class LocalEstimator:
                 continue
             iv = measurement_interval(sensor, y, gamma)
             if not (np.isfinite(iv.lo) and np.isfinite(iv.hi)):
-                iv = iv & propagated_interval(
-                    sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, blend.a, blend.b, blend.d, inp.u, self.W, self.uncertainty
-                )
+                iv = iv & prop.interval(sensor, FaultBound(size=0.0))
             if np.isfinite(iv.lo) and np.isfinite(iv.hi) and iv.hi > iv.lo:
                 out[j] = (np.append(sensor.C, 0.0), iv)
         if self.health is not None and health is not None and health.interval is not None:
             out[HEALTH_KEY] = (np.append(self.health.u, 0.0), health.interval)
         return out
 
-    def _assess_health(self, prev: NodeSet, inp: UpdateInput, blend: Blend, moved: Polygon) -> HealthAssessment:
+    def _assess_health(self, inp: UpdateInput, prop: Propagation, moved: Polygon) -> HealthAssessment:
         """The step's k-of-N interval of uᵀx⁺ and whether the own fault is pinned, once per step (both the
         readings' update and the pin use it).  Hypotheses are pruned by uᵀx⁺ over the node's own set through
         the step: a majority that agrees only outside it is none."""
         assert self.health is not None
-        pred = propagated_interval(
-            self._u_sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, blend.a, blend.b, blend.d, inp.u, self.W, self.uncertainty
-        )
+        pred = prop.interval(self._u_sensor, FaultBound(size=0.0))
         both = pred & Interval(*moved.interval(self.health.u))  # and over the moved region (both hold uᵀx⁺ wherever
         pred = both if both.lo <= both.hi else pred  # the prior does; disjoint: one broke)
         return self.health.assess(self.node_id, (inp.y, inp.gamma), inp.readings, (pred.lo, pred.hi), pin=True)
@@ -632,16 +629,17 @@ class LocalEstimator:
         """The context's part the step's readings do not enter (``inp.readings`` is not read)."""
         blend = Blend.of(self.model, inp.alpha)
         meas = measurement_interval(self.own, inp.y, inp.gamma)
-        sector, reading = self._own_range(prev, inp, blend, meas)
+        prop = Propagation(prev.xhat, prev.P, prev.rho, blend.a, blend.b, blend.d, inp.u, self.W, self.uncertainty)  # the step's one
+        sector, reading = self._own_range(prop, meas)
         data = self.step_data(prev, inp, sector, reading, blend)
         moved, sets = self._moved_region(prev, inp, blend)
-        return StepBase(blend, meas, sector, data, moved, sets)
+        return StepBase(blend, meas, sector, data, moved, prop, sets)
 
     def _context(self, prev: NodeSet, inp: UpdateInput, base: StepBase) -> StepContext:
         """The step's context from its ``base`` and its readings: the k-of-N assessment and the readings' slabs (the
         references' and the k-of-N interval; the bounded readings', which cut the region alone)."""
-        health = self._assess_health(prev, inp, base.blend, base.moved) if self.health is not None and inp.readings else None
-        slabs = self._reading_slabs(prev, inp, base.blend, health)
+        health = self._assess_health(inp, base.prop, base.moved) if self.health is not None and inp.readings else None
+        slabs = self._reading_slabs(inp, base.prop, health)
         region_slabs, rate_from = self._bounded_slabs(inp)
         return StepContext(
             self.statics,
@@ -721,10 +719,7 @@ class LocalEstimator:
                 if cut is not region:
                     region = cut
                     used.add(j)
-        segments = [blend.d * math.sqrt(self.W)]  # x⁺ = Ā x + B̄ u + D̄ w (+ e)
-        if self.uncertainty is not None:
-            segments += [self.uncertainty.G[:, m] for m in range(NX)]  # e = G ζ with |ζ_m| ≤ 1
-        return region.moved(blend.a, blend.b * inp.u, segments), frozenset(used)
+        return region_engine.moved(region, blend, inp.u, self.W, self.uncertainty), frozenset(used)
 
     def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> StepResult:
         """``res`` publishing the readings' set of the step (its only innovation those readings) where it is
@@ -829,6 +824,7 @@ class StepBase:
     sector: Sector | None
     data: StepData
     moved: Polygon
+    prop: Propagation  # the node's set of step k through the step: what it proves of any sensor's r⁺
     sets: frozenset[int] = frozenset()  # the in-neighbours whose published region cut the moved one
 
 

@@ -50,7 +50,7 @@ from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sect
 from netsetest.messages import End, Message, NodeInput, NodeState, NodeStatus, Reading, RunScope, decode, encode, state_digest
 from netsetest.models.sensor import NA, NX
 from netsetest.roles.plausibility import innovation_possible, states_disjoint
-from netsetest.sets import set_to_wire
+from netsetest.sets import NO_CUTS, RegionSet, set_to_wire
 
 
 MAX_AHEAD = 50  # steps ahead of our own: more is a corrupt or hostile message (bounds the buffers)
@@ -623,7 +623,7 @@ class Node:
         r_set = Interval(-s.support(-sensor.Cbar), s.support(sensor.Cbar))
         fault_bound = FaultBound(self.cfg.fault_rate, self.cfg.fault_size)
         sector = derive_sector(sensor, fault_bound, measurement_interval(sensor, inp.y, inp.gamma), r_set)
-        res = StepResult(xhat, P, "ok", float("nan"), solve_ms, status, sector=sector)
+        res = StepResult(xhat, P, "ok", float("nan"), solve_ms, status, sector=sector, cuts=s.cuts if isinstance(s, RegionSet) else NO_CUTS)
         used_readings = [(j, *readings[j]) for j in sorted(readings)] if status == "ok" else []  # "fallback": the last set
         health = bool(used_readings) and self.sc.health_group(self.id) is not None
         self._publish(Publication(inp, status, res, missing=self.missing(), inputs=inputs, wire_set=set_to_wire(s), readings=used_readings, health=health))
@@ -683,4 +683,5 @@ class Node:
             health=p.health,
             sets=p.sets,
             resumed_from=p.resumed_from,
+            cuts=[list(c) for c in pub.cuts] if any(pub.cuts) else [],
         )

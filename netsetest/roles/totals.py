@@ -74,6 +74,7 @@ def state_row(st: NodeState, v: NodeVerdict, contested: bool, bounds: list[list[
         "sector": list(st.sector) if st.sector is not None else None,
         "sector_basis": st.sector_basis,
         "bounds": bounds,
+        "cuts": st.cuts or [[], [], []],  # per coordinate β, r, f: the cuts that narrowed the published interval
     }
 
 

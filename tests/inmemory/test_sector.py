@@ -33,7 +33,7 @@ from netsetest.estimator.sector import (
     derive_sector,
     measurement_interval,
     prior_interval,
-    propagated_interval,
+    Propagation,
     sector_ok,
 )
 from netsetest.models.sensor import Sensor
@@ -74,7 +74,7 @@ def _random_spd(rng: np.random.Generator) -> np.ndarray:
 
 
 @pytest.mark.parametrize("bound", [FaultBound(rate=0.2), FaultBound(size=0.2), FaultBound(0.2, 0.2)])
-def test_propagated_interval_contains_and_attains(bound):
+def test_propagation_interval_contains_and_attains(bound):
     rng = np.random.default_rng(2)
     sc = load_topology(PAPER6, "saim")
     W = sc.W
@@ -82,7 +82,7 @@ def test_propagated_interval_contains_and_attains(bound):
         xhat, P, rho = rng.normal(size=3) * 0.1, _random_spd(rng), rng.uniform(0.5, 2.0)
         a, b, d = sc.model.blend(sc.model.weights(rng.uniform(22.3, 33.3)))
         u = rng.uniform(0.0175, 0.0542)
-        iv = propagated_interval(SENSOR, bound, xhat, P, rho, a, b[:, 0], d[:, 0], u, W)
+        iv = Propagation(xhat, P, rho, a, b[:, 0], d[:, 0], u, W).interval(SENSOR, bound)
         chol = np.linalg.cholesky(rho * P)
         best = -math.inf
         for _ in range(400):
