@@ -135,8 +135,8 @@ class StepResult:
 
 STEP_RESULT_FIELDS = frozenset(f.name for f in dataclasses.fields(StepResult))
 
-Slabs = dict[int, tuple[np.ndarray, Interval]]
-"""What the step's readings prove: c̄ (NA,) and c̄ᵀx̄⁺ ∈ [lo, hi], keyed by the reference's id, and by HEALTH_KEY
+Slabs = dict[int, Slab]
+"""What the step's readings prove: slabs lo ≤ c̄ᵀx̄⁺ ≤ hi (sets.Slab, c̄ (NA,)), keyed by the reference's id, and by HEALTH_KEY
 for the k-of-N interval (the keys of the readings' ν slots in the LMI; the node reads :attr:`StepResult.rests_on`)."""
 
 
@@ -202,7 +202,7 @@ def cut_fault(ctx: StepContext, res: StepResult, lo: float, hi: float, reshape: 
     if not (lo > now_lo or hi < now_hi) or lo > hi:
         return None  # no cut (an empty one means the assumptions broke: the step's set stays as certified)
     wh = ctx.statics.wh_published
-    out = cut(pub.xhat, pub.P, rho, FAULT_AXIS, lo, hi, None if wh is None else wh**2) if reshape else None
+    out = cut(pub.xhat, pub.P, rho, Slab(FAULT_AXIS, lo, hi), None if wh is None else wh**2) if reshape else None
     if out is None:  # the ellipsoid gains nothing; the slab still bounds the fault
         new = pub.replaced(published=None, fault_range=(lo, hi), reading_keys=pub.reading_keys | keys)
     else:  # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
@@ -220,14 +220,14 @@ def _fault_interval(s: StepResult, rho: float) -> tuple[float, float]:
     return lo, hi
 
 
-def carry(ctx: StepContext, res: StepResult, slabs: dict[int, tuple[np.ndarray, float, float]]) -> StepResult:
+def carry(ctx: StepContext, res: StepResult, slabs: Slabs) -> StepResult:
     """The set the node continues from cut by slabs cᵀx̄⁺ ∈ [lo, hi] (:func:`~netsetest.estimator.slab.cut`,
     certified, in the recursion's objective), so that they carry over to the later steps; what is published does
     not change.  The keys of the slabs that cut it join its ``reading_keys``."""
     xhat, P, rho_cert, used = res.xhat, res.P, res.rho_cert, set()
     wh = ctx.statics.wh
-    for key, (c, lo, hi) in slabs.items():
-        out = cut(xhat, P, ctx.rho, c, lo, hi, None if wh is None else wh**2)
+    for key, slab in slabs.items():
+        out = cut(xhat, P, ctx.rho, slab, None if wh is None else wh**2)
         if out is not None:  # ρ' as for a solved set (P = P_s·ρ'/ρ_i)
             xhat, P, rho_cert = out[0], out[1], out[2] * ctx.rho
             used.add(key)
@@ -242,7 +242,7 @@ def _readings_cut(ctx: StepContext, res: StepResult) -> StepResult:
     at every step while the exact limit keeps them: docs/network.md)."""
     if not ctx.slabs:
         return res
-    return carry(ctx, res, {key: (c, iv.lo, iv.hi) for key, (c, iv) in ctx.slabs.items()})
+    return carry(ctx, res, ctx.slabs)
 
 
 def _size_cut(ctx: StepContext, res: StepResult) -> StepResult:
@@ -269,7 +269,7 @@ def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
     reading; not where the step cannot list readings (step 0, whose cone is the prior's)."""
     st = ctx.statics
     region: Polygon | None = ctx.moved
-    region = cut_by_slabs(region, (Slab(c, iv.lo, iv.hi) for c, iv in (*ctx.slabs.values(), *ctx.region_slabs.values())))
+    region = cut_by_slabs(region, (*ctx.slabs.values(), *ctx.region_slabs.values()))
     size, sector = st.fault_bound.size, res.sector
     reference = size == 0.0 and ctx.listed  # its own reading rests on its declared zero fault (listed, so judged)
     keys = frozenset(ctx.slabs) | frozenset(ctx.region_slabs) | ({st.node_id} if reference else frozenset())
@@ -303,7 +303,7 @@ def _health_pin(ctx: StepContext, res: StepResult) -> StepResult:
     out = cut_fault(ctx, res, -size, size)
     if out is not None:
         res = out.replaced(published=out.public.replaced(reading_keys=out.public.reading_keys | {HEALTH_KEY}))
-    return carry(ctx, res, {HEALTH_KEY: (FAULT_AXIS, -size, size)})
+    return carry(ctx, res, {HEALTH_KEY: Slab(FAULT_AXIS, -size, size)})
 
 
 def _health_fault(ctx: StepContext, res: StepResult) -> StepResult:

@@ -100,6 +100,7 @@ from netsetest.extras import require
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.uncertainty import ModelUncertainty
 from netsetest.polygon import MIN_VERTICES, Polygon
+from netsetest.sets import Slab
 from netsetest.models.vehicle import N_RULES, TSModel
 
 Variant = Literal["scheduled", "per-rule"]
@@ -391,7 +392,7 @@ class LocalEstimator:
         return StepData(tuple(pi0), ell, tuple(facts), data.x_pred, innov, data.Mi, lay, key, data.sector, data.own)
 
     def _reading_slabs(self, inp: UpdateInput, prop: Propagation, health: HealthAssessment | None) -> Slabs:
-        """What the step's readings prove, as c̄ (NA,) and c̄ᵀx̄⁺ ∈ [lo, hi], keyed by the reference's id, and
+        """What the step's readings prove, as slabs lo ≤ c̄ᵀx̄⁺ ≤ hi (c̄ (NA,)), keyed by the reference's id, and
         by :data:`~netsetest.estimator.health.HEALTH_KEY` for the k-of-N interval of every reading (the
         hypotheses pruned by the node's own prediction of uᵀx⁺).
 
@@ -407,9 +408,9 @@ class LocalEstimator:
             if not (np.isfinite(iv.lo) and np.isfinite(iv.hi)):
                 iv = iv & prop.interval(sensor, FaultBound(size=0.0))
             if np.isfinite(iv.lo) and np.isfinite(iv.hi) and iv.hi > iv.lo:
-                out[j] = (np.append(sensor.C, 0.0), iv)
+                out[j] = Slab(np.append(sensor.C, 0.0), iv.lo, iv.hi)
         if self.health is not None and health is not None and health.interval is not None:
-            out[HEALTH_KEY] = (np.append(self.health.u, 0.0), health.interval)
+            out[HEALTH_KEY] = Slab(np.append(self.health.u, 0.0), health.interval.lo, health.interval.hi)
         return out
 
     def _assess_health(self, inp: UpdateInput, prop: Propagation, moved: Polygon) -> HealthAssessment:
@@ -429,13 +430,13 @@ class LocalEstimator:
         |ν_j| ≤ 1 and x̄⁺ − x̂_pred = Π̄₀ η (Π̄₀ the α-blend of Π₀: the truth's model), so
         y̌(η) = Σ_j w_j (c̄_jᵀ Π̄₀ η − h_j ν_j)."""
         pi_truth = np.tensordot(alpha, pi0, axes=1) if len(pi0) > 1 else pi0[0]
-        inv_h = {j: 1.0 / (0.5 * (iv.hi - iv.lo)) for j, (_, iv) in refs.items()}
+        inv_h = {j: 1.0 / (0.5 * (sl.hi - sl.lo)) for j, sl in refs.items()}
         total = sum(inv_h.values())
         ell = np.zeros(lay.dim)
         innov = 0.0
-        for j, (c, iv) in refs.items():
-            w, h, m = inv_h[j] / total, 0.5 * (iv.hi - iv.lo), 0.5 * (iv.hi + iv.lo)
-            cj = c
+        for j, sl in refs.items():
+            w, h, m = inv_h[j] / total, 0.5 * (sl.hi - sl.lo), 0.5 * (sl.hi + sl.lo)
+            cj = sl.a
             ell += w * (cj @ pi_truth)  # c̄_jᵀ Π̄₀ η
             ell[lay.nu[j]] -= w * h  # − h_j ν_j
             innov += w * (m - float(cj @ x_pred))
@@ -683,7 +684,7 @@ class LocalEstimator:
             ds_lo, ds_hi = sorted((sensor.Ds * f_lo, sensor.Ds * f_hi))
             lo, hi = iv.lo - ds_hi, iv.hi - ds_lo
             if math.isfinite(lo) or math.isfinite(hi):
-                out[j] = (self._bounded_c[j], Interval(lo, hi))
+                out[j] = Slab(self._bounded_c[j], lo, hi)
         return out, frozenset(rate_from & set(out))
 
     def _solve_step(self, ctx: StepContext, inp: UpdateInput, first: tuple[StepResult | None, _Solve] | None = None) -> StepResult:

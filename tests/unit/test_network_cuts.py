@@ -19,9 +19,9 @@ from hypothesis import strategies as st
 from netsetest.config.schema import load_topology
 from netsetest.estimator.cuts import NodeSet, StepResult
 from netsetest.estimator.sdp import Blend, LocalEstimator, NeighbourState, UpdateInput
-from netsetest.estimator.sector import Interval
 from netsetest.models.sensor import NA
 from netsetest.polygon import Polygon
+from netsetest.sets import Slab
 
 ROOT = Path(__file__).resolve().parents[2]
 NARROWED = 0.05  # the deliberately unsound cut: 5 % narrower than the one under test
@@ -201,8 +201,8 @@ def _slab_keeps(slabs: Callable[[UpdateInput], dict], reading: tuple[UpdateInput
     out = slabs(inp)
     if j not in out:
         return  # no slab: nothing cut
-    c, iv = out[j]
-    v = xs @ c[:2]
+    iv = out[j]
+    v = xs @ iv.a[:2]
     slack = RTOL * (1.0 + np.abs(v).max(initial=0.0))
     assert np.all((iv.lo - slack <= v) & (v <= iv.hi + slack)), "a truth the reading allows was cut"
 
@@ -224,7 +224,7 @@ def test_the_slab_test_fails_on_a_slab_narrowed_by_5_percent() -> None:
 
     def narrowed(inp: UpdateInput) -> dict:
         out = {}
-        for key, (c, iv) in est._bounded_slabs(inp)[0].items():
+        for key, iv in est._bounded_slabs(inp)[0].items():
             w = (
                 NARROWED * (iv.hi - iv.lo) / 2
                 if math.isfinite(iv.hi - iv.lo)
@@ -232,7 +232,7 @@ def test_the_slab_test_fails_on_a_slab_narrowed_by_5_percent() -> None:
                 if math.isfinite(iv.lo) or math.isfinite(iv.hi)
                 else 0.0
             )
-            out[key] = (c, Interval(iv.lo + w, iv.hi - w))
+            out[key] = Slab(iv.a, iv.lo + w, iv.hi - w)
         return out
 
     @settings(

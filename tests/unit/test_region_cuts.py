@@ -20,6 +20,7 @@ from netsetest.estimator.sdp import LocalEstimator, UpdateInput
 from netsetest.estimator.sector import Interval, Sector
 from netsetest.models.sensor import Sensor
 from netsetest.polygon import Polygon
+from netsetest.sets import Slab
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -134,10 +135,10 @@ def _step(draw: st.DrawFn, kofn: bool = False) -> tuple[StepContext, StepResult,
     meas = Interval(float(lo) if draw(st.booleans()) else -np.inf, float(hi) if draw(st.booleans()) else np.inf)
     c = np.r_[rng.normal(size=2), 0.0]
     cv = pts @ c
-    slabs = {7: (c, Interval(*np.quantile(cv, sorted(rng.uniform(0.0, 1.0, 2)))))} if draw(st.booleans()) else {}
+    slabs = {7: Slab(c, *np.quantile(cv, sorted(rng.uniform(0.0, 1.0, 2))))} if draw(st.booleans()) else {}
     c2 = np.r_[rng.normal(size=2), 0.0]  # a bounded reading's slab (it cuts the region alone), one side open or not
     ends = np.quantile(pts @ c2, sorted(rng.uniform(0.0, 1.0, 2)))
-    region_slabs = {8: (c2, Interval(float(ends[0]) if draw(st.booleans()) else -np.inf, float(ends[1])))} if draw(st.booleans()) else {}
+    region_slabs = {8: Slab(c2, float(ends[0]) if draw(st.booleans()) else -np.inf, float(ends[1]))} if draw(st.booleans()) else {}
     health = _health(draw, rng, pts, own) if kofn or draw(st.booleans()) else None
     if kofn or draw(st.booleans()):  # the region the step's region cut left (what the health-fault cut reads)
         res = dataclasses.replace(res, region=moved)
@@ -203,11 +204,11 @@ def _facts(name: str, ctx: StepContext, res: StepResult, x: np.ndarray) -> np.nd
     st_ = ctx.statics
     every = np.ones(len(x), dtype=bool)
     readings = every.copy()
-    for c, lo_hi in ctx.slabs.values():
-        readings &= (lo_hi.lo <= x @ c) & (x @ c <= lo_hi.hi)
+    for sl in ctx.slabs.values():
+        readings &= (sl.lo <= x @ sl.a) & (x @ sl.a <= sl.hi)
     bounded_readings = every.copy()
-    for c, lo_hi in ctx.region_slabs.values():
-        bounded_readings &= (lo_hi.lo <= x @ c) & (x @ c <= lo_hi.hi)
+    for sl in ctx.region_slabs.values():
+        bounded_readings &= (sl.lo <= x @ sl.a) & (x @ sl.a <= sl.hi)
     size = st_.fault_bound.size
     relied = st_.own_bound or (res.sector is not None and res.sector.basis == "fault-bound")  # the declared size, where the step rests on it
     bounded = every if size is None or not relied else np.abs(x[:, 2]) <= size
@@ -286,7 +287,7 @@ def test_the_region_cut_rests_on_the_bounded_readings_and_the_neighbours_sets_it
     c = np.array([0.0, 1.0, 0.0])
     out = next(x for x in STEP_CUTS if x.name == "region").apply(
         dataclasses.replace(
-            ctx, moved=Polygon.box(np.array([-0.01, -0.01]), np.array([0.01, 0.01])), region_slabs={5: (c, Interval(-0.005, np.inf))}, sets=frozenset({2})
+            ctx, moved=Polygon.box(np.array([-0.01, -0.01]), np.array([0.01, 0.01])), region_slabs={5: Slab(c, -0.005, np.inf)}, sets=frozenset({2})
         ),
         res,
     )
