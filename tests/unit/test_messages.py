@@ -62,6 +62,7 @@ MESSAGES = [
     _state(sector=(0.5, 0.5), sector_basis="fault-bound", fault=[-0.2, 0.2]),
     _state(region=[0.0, 0.0, 1.0, 0.0, 1.0, 1.0], fault=[-0.2, 0.2], continues=ProvenSet(xhat=X, P=P, rho=1 / 3)),
     _state(status="init-prior", sector=(1.0, 0.0), sector_basis="measurement"),
+    _state(region=[0.0, 0.0, 1.0, 0.0, 1.0, 1.0], fault=[-0.2, 0.2], cuts=[["region"], ["region"], ["fault-size", "region", "health-fault"]]),
     Truth(
         step=80,
         x=[1e-3 / 7, -0.2 / 3],
@@ -198,6 +199,8 @@ BAD = [
     ("region-nan", _mut(_state(), region=[0.0, 0.0, 1.0, float("nan"), 1.0, 1.0]), "region-not-finite", "region"),
     ("sets-not-used", _mut(_state(), used=[2], sets=[2, 3]), "invalid", "sets"),  # a neighbour's set the step did not receive
     ("sets-node-0", _mut(_state(), used=[2], sets=[0]), "invalid", "sets"),
+    ("cuts-unknown", _mut(_state(), cuts=[["region"], [], ["luck"]]), "invalid", "cuts"),  # only the cuts there are
+    ("cuts-2", _mut(_state(), cuts=[["region"], ["region"]]), "invalid", "cuts"),  # one list per coordinate β, r, f
 ]
 
 
