@@ -404,33 +404,34 @@ def apply_cuts(cuts: tuple[Cut, ...], ctx: StepContext, res: StepResult) -> Step
     bounds = published_bounds(res, ctx.rho)
     for c in cuts:
         out = c.apply(ctx, res)
-        if out is res:
+        if out.public is res.public and out.region is res.region:
+            res = out  # what is published did not change (the set the node continues from may have)
             continue
         now = published_bounds(out, ctx.rho)
-        narrowed = [now[0][m] > bounds[0][m] or now[1][m] < bounds[1][m] for m in range(NA)]
+        narrowed = [now[m] > bounds[m] for m in range(NA)] + [now[NA + m] < bounds[NA + m] for m in range(NA)]
         if any(narrowed):
             pub = out.public
-            b, r, f = (pub.cuts[m] + (c.name,) if narrowed[m] else pub.cuts[m] for m in range(NA))
+            b, r, f = (pub.cuts[m] + (c.name,) if narrowed[m] or narrowed[NA + m] else pub.cuts[m] for m in range(NA))
             named: IntervalCuts = (b, r, f)
             out = out.replaced(cuts=named) if out.published is None else out.replaced(published=pub.replaced(cuts=named))
         res, bounds = out, now
     return res
 
 
-def published_bounds(res: StepResult, rho: float) -> tuple[list[float], list[float]]:
-    """Each coordinate's interval of what ``res`` publishes: its ellipsoid's x̂ ∓ √(ρ P_ii), within its fault range
-    and the region's intervals of β and r (ProvenSet.bounds, without making the set)."""
+def published_bounds(res: StepResult, rho: float) -> list[float]:
+    """[lo_β, lo_r, lo_f, hi_β, hi_r, hi_f] of what ``res`` publishes: its ellipsoid's x̂ ∓ √(ρ P_ii), within its fault
+    range and the region's intervals of β and r (ProvenSet.bounds, without making the set; plain floats: several a step)."""
     pub = res.public
-    half = np.sqrt(np.maximum(rho * np.diag(pub.P), 0.0)).tolist()
-    x = pub.xhat.tolist()
-    lo, hi = [x[m] - half[m] for m in range(NA)], [x[m] + half[m] for m in range(NA)]
+    x, d = pub.xhat.tolist(), pub.P.diagonal().tolist()
+    half = [math.sqrt(max(rho * v, 0.0)) for v in d]
+    out = [x[0] - half[0], x[1] - half[1], x[2] - half[2], x[0] + half[0], x[1] + half[1], x[2] + half[2]]
     if pub.fault_range is not None:
-        lo[NA - 1], hi[NA - 1] = max(lo[NA - 1], pub.fault_range[0]), min(hi[NA - 1], pub.fault_range[1])
+        out[2], out[5] = max(out[2], pub.fault_range[0]), min(out[5], pub.fault_range[1])
     if res.region is not None:
-        r_lo, r_hi = res.region.bounds()
-        for m in range(NX):
-            lo[m], hi[m] = max(lo[m], float(r_lo[m])), min(hi[m], float(r_hi[m]))
-    return lo, hi
+        pts = res.region.points
+        xs, ys = [p[0] for p in pts], [p[1] for p in pts]
+        out[0], out[1], out[3], out[4] = max(out[0], min(xs)), max(out[1], min(ys)), min(out[3], max(xs)), min(out[4], max(ys))
+    return out
 
 
 __all__ = [
