@@ -77,7 +77,9 @@ from netsetest.estimator.cuts import (
     NodeSet,
     Slabs,
     StepContext,
+    StepFigures,
     StepResult,
+    StepSet,
     apply_cuts,
     seed,
 )
@@ -203,7 +205,7 @@ class LocalEstimator:
     ``_dbar`` (n_rules, NA) D̄_ℓ (the per-rule variant's), ``_cbar[j]`` (NA,) C̄_j.  Per step: :meth:`context`
     (:class:`~netsetest.estimator.cuts.StepContext`, with the step's :class:`Blend`),
     :meth:`step_data` → :class:`~netsetest.estimator.problem.StepData` (Π₀ (NA, d) per LMI, ℓ (d,),
-    Q_m (d, d)), :meth:`step` → :class:`StepResult` (x̂ (NA,), P (NA, NA), L (NA, 1)).
+    Q_m (d, d)), :meth:`step` → :class:`StepResult` (two StepSets: x̂ (NA,), P (NA, NA), L (NA, 1)).
     """
 
     def __init__(
@@ -616,7 +618,7 @@ class LocalEstimator:
         base = prepared.base if prepared is not None else self._base(prev, inp)
         ctx = self._context(prev, inp, base)
         res = self._solve_step(ctx, inp, prepared.first if prepared is not None else None)
-        if res.status == "fallback":  # no certificate: the region of the own measurement alone (no reading listed)
+        if res.figures.status == "fallback":  # no certificate: the region of the own measurement alone (no reading listed)
             return apply_cuts(FALLBACK_CUTS, dataclasses.replace(ctx, slabs={}, region_slabs={}), res)
         return apply_cuts(self.cuts, ctx, res)
 
@@ -732,14 +734,13 @@ class LocalEstimator:
         paper6_reference's SAIM fault intervals wider than without readings (docs/network.md)."""
         wh = self.statics.wh_published
         answer, solve = self._solve(data, alpha, wh, rho)
-        res = dataclasses.replace(res, solve_ms=res.solve_ms + solve.ms)
+        res = res.replaced(figures=dataclasses.replace(res.figures, solve_ms=res.figures.solve_ms + solve.ms))
         if answer is None or not np.any(answer.L):
             return res  # no answer, or the readings are of no use (L = 0): nothing to certify
         refined = self._certify(answer, data, rho, self._facts(data), solve)
-        if refined is None or _objective(refined.P, wh) >= (1 - REFINE_RTOL) * _objective(res.P, wh):
+        if refined is None or _objective(refined.continued.P, wh) >= (1 - REFINE_RTOL) * _objective(res.continued.P, wh):
             return res  # no certificate, or nothing gained: no reason to rest the published set on the readings
-        refined = dataclasses.replace(refined, solve_ms=res.solve_ms, reading_keys=frozenset(data.key[3]))
-        return dataclasses.replace(res, published=refined)
+        return res.replaced(published=refined.continued.replaced(reading_keys=frozenset(data.key[3])))
 
     def first(self, prior: NodeSet, y: float, gamma: float) -> StepResult:
         """Step 0: the prior updated by ỹ₀, certified like every step (``fallback``: the prior itself), then
@@ -757,7 +758,7 @@ class LocalEstimator:
         """The guaranteed set when the solver gave no certificate; FallbackUnavailable if even it is not publishable."""
         if not publishable(xhat, P):
             raise FallbackUnavailable(f"node {self.node_id}: the fallback ellipsoid is not finite and positive definite")
-        return StepResult(xhat, P, "fallback", np.nan, solve.ms, solve.status, sector=sector)
+        return StepResult.of(StepSet(xhat, P, np.nan), StepFigures("fallback", solve.ms, solve.status), sector)
 
     def _update(self, data: StepData, rho: float, alpha: np.ndarray) -> tuple[StepResult | None, _Solve]:
         """The certified set of the step's data (None: no certificate) and the solve's figures."""
@@ -813,7 +814,7 @@ class LocalEstimator:
         xhat_new = data.x_pred + L[:, 0] * data.innov_sum if gain else data.x_pred.copy()  # (16): x̂⁺ = x̂_pred + L Σ_j a_ij y̌_j
         if not publishable(xhat_new, P_pub):  # a certified set nobody can use: treated as no certificate
             return None
-        return StepResult(xhat_new, P_pub, "ok", rho_c, solve.ms, answer.status, L, data.sector)
+        return StepResult.of(StepSet(xhat_new, P_pub, rho_c, L), StepFigures("ok", solve.ms, answer.status), data.sector)
 
 
 @dataclass(frozen=True)
@@ -895,6 +896,8 @@ __all__ = [
     "Objective",
     "UpdateInput",
     "StepData",
+    "StepFigures",
     "StepResult",
+    "StepSet",
     "Variant",
 ]

@@ -242,8 +242,8 @@ def test_bank_recurs_on_and_publishes_the_trace_set_where_no_cut_reshapes_it():
     for i, prev, inp in captured[::7]:
         make = lambda obj: sdp.LocalEstimator.for_node(sc, i, objective=obj)  # noqa: E731  # a one-line local helper
         bank, trace = make("bank").step(prev, inp), make("trace").step(prev, inp)
-        assert bank.status == trace.status == "ok"
-        for a, b in ((bank, trace), (bank.public, trace.public)):
+        assert bank.figures.status == trace.figures.status == "ok"
+        for a, b in ((bank.continued, trace.continued), (bank.published, trace.published)):
             np.testing.assert_array_equal(a.P, b.P)
             np.testing.assert_array_equal(a.xhat, b.xhat)
             assert a.fault_range == b.fault_range
@@ -260,14 +260,14 @@ def test_the_size_cut_narrows_the_published_fault_only_where_the_sector_rests_on
         plain = sdp.LocalEstimator.for_node(sc, i)
         plain.cuts = tuple(c for c in plain.cuts if c.name != "fault-size")  # the same estimator without the cut
         with_cut, without = sdp.LocalEstimator.for_node(sc, i).step(prev, inp), plain.step(prev, inp)
-        np.testing.assert_array_equal(with_cut.P, without.P)  # the recursion set is the solved one
+        np.testing.assert_array_equal(with_cut.continued.P, without.continued.P)  # the recursion set is the solved one
         if with_cut.sector is None or with_cut.sector.basis != "fault-bound":
-            np.testing.assert_array_equal(with_cut.public.P, without.public.P)
+            np.testing.assert_array_equal(with_cut.published.P, without.published.P)
             continue
         bound += 1
-        if with_cut.public is not without.public and not np.array_equal(with_cut.public.P, without.public.P):
+        if with_cut.published is not without.published and not np.array_equal(with_cut.published.P, without.published.P):
             cut += 1
-            assert with_cut.public.P[2, 2] < without.public.P[2, 2]
+            assert with_cut.published.P[2, 2] < without.published.P[2, 2]
     assert cut > 0.5 * bound > 0
 
 

@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from netsetest.config.schema import load_topology
-from netsetest.estimator.cuts import NodeSet, StepResult
+from netsetest.estimator.cuts import NodeSet, StepFigures, StepResult, StepSet
 from netsetest.estimator.sdp import Blend, LocalEstimator, NeighbourState, UpdateInput
 from netsetest.models.sensor import NA
 from netsetest.polygon import Polygon
@@ -248,6 +248,6 @@ def test_the_slab_test_fails_on_a_slab_narrowed_by_5_percent() -> None:
 
 def test_a_step_rests_on_the_neighbours_whose_sets_cut_it() -> None:
     """What the node lists (StepResult.rests_on): the neighbours' sets of both sets, the published one's and the continued one's."""
-    pub = StepResult(np.zeros(3), np.eye(3), "ok", 1.0, 0.0, "solved", set_keys=frozenset({2}))
-    res = StepResult(np.zeros(3), np.eye(3), "ok", 1.0, 0.0, "solved", published=pub, set_keys=frozenset({6}))
-    assert res.rests_on.sets == {2, 6} and dataclasses.replace(res, published=None).rests_on.sets == {6}
+    pub = StepSet(np.zeros(3), np.eye(3), 1.0, set_keys=frozenset({2}))
+    res = StepResult(StepSet(np.zeros(3), np.eye(3), 1.0, set_keys=frozenset({6})), pub, StepFigures("ok", 0.0, "solved"))
+    assert res.rests_on.sets == {2, 6} and dataclasses.replace(res, published=res.continued).rests_on.sets == {6}

@@ -53,5 +53,5 @@ def test_a_reading_at_the_limit_takes_its_open_side_from_the_propagated_set() ->
     assert iv.lo == meas.lo and math.isfinite(iv.hi) and iv.hi > iv.lo
     # and the estimator publishes a certified set that uses it (its gain on the reading is not zero)
     res = est.step(prior, _inp(sc, {3: (y, 0.8)}))
-    assert res.status == "ok"
-    assert res.public.reading_keys == {3} and np.any(res.public.L)
+    assert res.figures.status == "ok"
+    assert res.published.reading_keys == {3} and np.any(res.published.L)
