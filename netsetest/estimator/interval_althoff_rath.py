@@ -78,7 +78,7 @@ class IntervalObserver(SetEstimator):
         return BASE_ASSUMPTIONS + (("fault_bound",) if self.bounded else ())
 
     def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> Box:
-        lo, hi = self.node.sensor.measured_interval(inp.y, inp.gamma)
+        lo, hi = self.node.sensor.measured_interval(inp.y, inp.gamma, outward=True)
         two_sided = bool(np.isfinite(lo) and np.isfinite(hi))
         if not two_sided and not self.bounded:
             raise EstimatorError(f"node {self.node.id}: a saturated measurement leaves the fault unbounded; a declared fault bound is needed")
@@ -141,5 +141,5 @@ class IntervalObserver(SetEstimator):
         for slab in slabs:
             box = box.cut(slab)
         if slabs:  # a box keeps no tie between x and f: the own measurement C̄ x̄ ∈ [lo, hi] carries the cut to f
-            box = box.cut(Slab(self.node.sensor.Cbar, *self.node.sensor.measured_interval(inp.y, inp.gamma)))
+            box = box.cut(Slab(self.node.sensor.Cbar, *self.node.sensor.measured_interval(inp.y, inp.gamma, outward=True)))
         return box

@@ -79,8 +79,8 @@ UNBOUNDED = Interval(-math.inf, math.inf)
 
 def measurement_interval(sensor: Sensor, y: float, gamma: float) -> Interval:
     """r ∈ this interval for every r with γσ(r) + Dv v = y, v² ≤ R: :meth:`~netsetest.models.sensor.Sensor.measured_interval`
-    (the one rule, rounded outward; one-sided where σ is at the limit) as an :class:`Interval`."""
-    return Interval(*sensor.measured_interval(y, gamma))
+    rounded outward (one-sided where σ is at the limit), as an :class:`Interval`: what every estimator uses."""
+    return Interval(*sensor.measured_interval(y, gamma, outward=True))
 
 
 def _support(g: np.ndarray, P: np.ndarray, rho: float) -> float:

@@ -36,7 +36,7 @@ class SetPropagationObserver(RandomWalkObserver):
 
     def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> Zonotope:
         z = self._predicted(inp)
-        self.last_interval = self.node.sensor.measured_interval(inp.y, inp.gamma)
+        self.last_interval = self.node.sensor.measured_interval(inp.y, inp.gamma, outward=True)
         self.set = z
         return z
 

@@ -126,7 +126,7 @@ class StripObserver(RandomWalkObserver):
 
     def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> Zonotope:
         z = self._predicted(inp)
-        lo, hi = self.node.sensor.measured_interval(inp.y, inp.gamma)
+        lo, hi = self.node.sensor.measured_interval(inp.y, inp.gamma, outward=True)
         z = intersect_strip(z, self.node.sensor.Cbar, lo, hi)
         for slab in self.reading_slabs.slabs((inp.y, inp.gamma), inp.readings, lambda a: (-z.support(-a), z.support(a))):
             z = intersect_strip(z, slab.a, slab.lo, slab.hi)

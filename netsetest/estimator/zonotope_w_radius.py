@@ -140,7 +140,7 @@ class ZonotopeEstimator(SetEstimator):
         return s
 
     def _slabs(self, y: float, gamma: float) -> list[Slab]:
-        lo, hi = self.node.sensor.measured_interval(y, gamma)
+        lo, hi = self.node.sensor.measured_interval(y, gamma, outward=True)
         slabs = [Slab(self.node.sensor.Cbar, lo, hi)]
         if self.bounded and self.node.fault_size is not None:
             slabs.append(Slab(_E3, -self.node.fault_size, self.node.fault_size))
@@ -168,7 +168,7 @@ class ZonotopeEstimator(SetEstimator):
 
     def _free_step(self, a: np.ndarray, bu: np.ndarray, d: np.ndarray, y: float, gamma: float) -> SumSet:
         """x̄⁺ = T_x(Ā [I 0] x̄ + B̄u + D̄w) + G r⁺: exact (module doc)."""
-        lo, hi = self.node.sensor.measured_interval(y, gamma)
+        lo, hi = self.node.sensor.measured_interval(y, gamma, outward=True)
         if not (np.isfinite(lo) and np.isfinite(hi)):
             raise EstimatorError(
                 f"node {self.node.id}: a saturated measurement leaves the fault unbounded; a declared fault bound is needed (fault_bounds 'used' or 'all')"
@@ -193,7 +193,7 @@ class ZonotopeEstimator(SetEstimator):
         then the declared-bound strips, then f_k is projected out (exact for a zonotope)."""
         assert self.set is not None and self.set.M is not None
         z, sq_w, n = self.set.zonotope, np.sqrt(self.sc.W), self.node
-        lo, hi = n.sensor.measured_interval(y, gamma)
+        lo, hi = n.sensor.measured_interval(y, gamma, outward=True)
         two_sided = bool(np.isfinite(lo) and np.isfinite(hi))
         lift = np.zeros((NA + 1, NA))  # [x̄⁺; f_k] = lift · x̄_k + …
         lift[NA, 2] = 1.0

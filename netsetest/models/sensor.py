@@ -84,19 +84,21 @@ class Sensor:
         """ỹ = γ σ(C̄ x̄) + Dv v (12)."""
         return gamma * self.sigma(float(self.Cbar @ xbar)) + self.Dv * v
 
-    def measured_interval(self, y: float, gamma: float) -> tuple[float, float]:
+    def measured_interval(self, y: float, gamma: float, outward: bool = False) -> tuple[float, float]:
         """The interval of r = C̄ x̄ consistent with ỹ = γ σ(r) + Dv v, v² ≤ R; ±inf is an open side.  The one
-        measurement interval of every estimator, their regions and ``exact`` (estimator/sector.py's
-        ``measurement_interval`` is this as an Interval).
+        measurement interval: ``outward`` for every estimator and region (estimator/sector.py's
+        ``measurement_interval`` is that one as an Interval); not for the exact limit (analysis/exact.py), whose bounds
+        a witness trajectory attains within the noise bound (docs/estimator.md, "The measurement interval").
 
         σ(r) ∈ [(ỹ − |Dv|√R)/γ, (ỹ + |Dv|√R)/γ] = [a, b]; σ is non-decreasing and the identity on
         [−r_max, r_max], so σ(r) ≥ a ⇔ r ≥ a unless a ≤ −r_max (then every r), and likewise for b.
-        Rounded outward: the half-width grows by ROUNDING_MARGIN (relative, and of |ỹ|), and an end within
-        ROUNDING_MARGIN of ±r_max is open.  With v at its bound a saturated reading puts b at r_max up to one ulp,
-        and a one-ulp "below the limit" would wrongly prove that the sensor does not saturate (seen with
-        worst-case signals); an interval that was not widened could also miss r = C̄ x̄ by an ulp.
+        An end within ROUNDING_MARGIN of ±r_max is open: with v at its bound a saturated reading puts b at r_max up
+        to one ulp, and a one-ulp "below the limit" would wrongly prove that the sensor does not saturate (seen with
+        worst-case signals).  ``outward``: the half-width grows by ROUNDING_MARGIN (relative, and of |ỹ|) too, so
+        that the rounding of ỹ ∓ |Dv|√R never leaves the truth out of an estimator's set.
         """
-        half = abs(self.Dv) * math.sqrt(self.R) * (1 + ROUNDING_MARGIN) + ROUNDING_MARGIN * abs(y)
+        margin = ROUNDING_MARGIN if outward else 0.0
+        half = abs(self.Dv) * math.sqrt(self.R) * (1 + margin) + margin * abs(y)
         lo, hi = (y - half) / gamma, (y + half) / gamma
         edge = self.r_max * (1 - ROUNDING_MARGIN)  # (inf without saturation: never open)
         return (lo if lo > -edge else -math.inf), (hi if hi < edge else math.inf)

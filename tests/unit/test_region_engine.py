@@ -183,12 +183,15 @@ def test_the_fault_over_the_region_holds_every_fault_the_reading_allows(r: tuple
 @settings(max_examples=300, deadline=None)
 @given(st.floats(-1.0, 1.0), st.floats(-1.0, 1.0), st.sampled_from([1.0, 0.6, 0.1]))
 def test_the_measurement_interval_holds_every_r_its_reading_allows(r: float, v: float, gamma: float) -> None:
-    """ỹ = γσ(r) + Dv v with v² ≤ R (v at its bound too): r lies in the one measurement interval, rounded outward,
-    and an end within the sensor's range is never open (only a side at the limit is)."""
+    """ỹ = γσ(r) + Dv v with v² ≤ R (v at its bound too): r lies in the one measurement interval, rounded outward (what
+    every estimator uses), which holds the exact interval (the exact limit's: the same open sides), and an end within
+    the sensor's range is never open (only a side at the limit is)."""
     v = float(np.clip(v, -1.0, 1.0))
     y = gamma * SENSOR.sigma(r) + SENSOR.Dv * v * math.sqrt(SENSOR.R)
-    lo, hi = SENSOR.measured_interval(y, gamma)
+    lo, hi = SENSOR.measured_interval(y, gamma, outward=True)
     assert lo <= r <= hi
     assert Interval(lo, hi) == measurement_interval(SENSOR, y, gamma)
+    e_lo, e_hi = SENSOR.measured_interval(y, gamma)
+    assert lo <= e_lo <= e_hi <= hi and math.isfinite(lo) == math.isfinite(e_lo) and math.isfinite(hi) == math.isfinite(e_hi)
     if abs(r) < 0.4 * SENSOR.r_max and gamma == 1.0:
         assert math.isfinite(lo) and math.isfinite(hi)
