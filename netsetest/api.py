@@ -64,6 +64,9 @@ class NodeSeries:
     status: tuple[str, ...]  # per step: init, init-prior, ok, fallback, rejoin, resume or no-reading
     published: tuple[ProvenSet, ...]  # per step: the set the node proved (contains(), bounds())
     continues: tuple[ProvenSet | None, ...]  # per step: the set it continued from (None: the published one)
+    # per step, per coordinate β, r, f: the cuts that narrowed the published interval, as the node sent them
+    # (docs/estimator.md, "One step"; empty: the solve's ellipsoid or the method's own set alone; None: an older record)
+    cuts: tuple[tuple[tuple[str, ...], ...] | None, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -182,5 +185,6 @@ def result_of(rec: Record) -> SimulationResult:
             status=tuple(tr.status),
             published=tuple(tr.published),
             continues=tuple(tr.continues),
+            cuts=tuple(tr.cuts) if tr.cuts is not None else (None,) * len(tr.steps),
         )
     return SimulationResult(nodes, rec.summary, rec)

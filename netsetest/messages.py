@@ -31,6 +31,7 @@ from msgspec import Meta, Struct, field
 
 from netsetest.polygon import REGION_NOT_FINITE, REGION_NOT_NUMBERS, REGION_REASONS, REGION_VERTICES
 from netsetest.proven import ProvenSet, continued_set
+from netsetest.sets import CUT_NAMES, CutName
 from netsetest.validation import FINITE_BOUND_TEXT, FLOAT_MAX, Finite, Positive, split_error
 
 # 3: a truth's maps are keyed by node id (int keys: msgpack allows them); 2: a state carries its sets as ProvenSets
@@ -55,6 +56,7 @@ Drops = Annotated[dict[Reason, Annotated[int, Meta(ge=0)]], Meta(max_length=MAX_
 SectorH1 = Annotated[float, Meta(gt=0, le=1)]
 SectorH = Annotated[float, Meta(ge=0, le=FLOAT_MAX)]
 DIGEST_BYTES = 16  # a state copy's identity (not a security mechanism: the transport authenticates)
+CutNames = Annotated[list[CutName], Meta(max_length=len(CUT_NAMES))]  # the cuts that narrowed one published interval
 Digest = Annotated[str, Meta(pattern=f"^[0-9a-f]{{{2 * DIGEST_BYTES}}}$")]
 
 
@@ -194,11 +196,16 @@ class NodeState(_Msg, tag="state", frozen=True, kw_only=True):
     sets: IdList = []
     # status "resume": the step of the node's own set this one was carried from through the steps without a reading
     resumed_from: Step | None = None
+    # per coordinate β, r, f: the cuts that narrowed the published interval, in order (docs/estimator.md, "One step";
+    # an empty list each: the solve's ellipsoid, or a set estimator's own set, alone; [] all three)
+    cuts: Annotated[list[CutNames], Meta(max_length=3)] = []
 
     def __post_init__(self) -> None:
         c = self.continues
         if c is not None and (c.region is not None or c.fault is not None or c.set is not None):
             raise ValueError("continues: an ellipsoid alone (its region is the published set's)")
+        if len(self.cuts) not in (0, 3):
+            raise ValueError("cuts: one list of names per coordinate β, r, f (or none)")
         if self.sets and not set(self.sets) <= set(self.used):
             raise ValueError("sets: a neighbour's set the step did not receive (not in used)")
         if (self.status == "resume") != (self.resumed_from is not None) or (self.resumed_from is not None and self.resumed_from >= self.step):

@@ -16,12 +16,20 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any
+from typing import Any, Literal, get_args
 
 import clarabel
 import numpy as np
 
 from netsetest.polygon import REGION_NOT_NUMBERS, Polygon, region_problem
+
+CutName = Literal["readings", "fault-size", "region", "health-pin", "health-fault"]
+"""A cut of a step's sets (docs/estimator.md, "One step"; estimator/cuts.py for the SDP, estimator/region.py for the
+set estimators): the names a published interval carries of the cuts that narrowed it (none: the solve's set alone)."""
+CUT_NAMES: tuple[CutName, ...] = get_args(CutName)
+IntervalCuts = tuple[tuple[CutName, ...], tuple[CutName, ...], tuple[CutName, ...]]
+"""Per coordinate β, r, f: the cuts that narrowed the published interval, in the order they did."""
+NO_CUTS: IntervalCuts = ((), (), ())
 
 MEMBERSHIP_TOL = 1e-9  # relative slack of contains(): a point on the boundary is inside
 
@@ -245,6 +253,7 @@ class RegionSet:
     base: Ellipsoid | Zonotope | Box | SumSet
     region: Polygon
     fault: tuple[float, float]
+    cuts: IntervalCuts = NO_CUTS  # per coordinate, the cuts that narrowed the base set's interval (estimator/region.py)
 
     @cached_property
     def _bounds(self) -> tuple[np.ndarray, np.ndarray]:

@@ -111,16 +111,16 @@ def side_by_side(cap: Capture, n_ref: int, n_naive: int, n_cvxpy: int) -> dict:
         old_args = (prev_set.xhat, prev_set.P, prev_set.rho, inp.alpha, inp.u, inp.y, inp.gamma, inp.neigh)  # the yardsticks' form
         out["fast"][k] = 1e3 * (time.perf_counter() - t0)
         out["fast_cpu"][k] = 1e3 * (time.thread_time() - c0)
-        out["fast_solve"][k] = r.solve_ms
+        out["fast_solve"][k] = r.figures.solve_ms
         iters.append(fast[c.node].last_iterations)
-        fallbacks += r.status != "ok"
+        fallbacks += r.figures.status != "ok"
         rho = prev_set.rho
-        width["fast"][k] = 2.0 * np.sqrt(rho * r.P[2, 2])
+        width["fast"][k] = 2.0 * np.sqrt(rho * r.continued.P[2, 2])
         if k in sub_prev:
             t0 = time.perf_counter()
             rp = prev[c.node].step(*c.args)
             out["prev"][k] = 1e3 * (time.perf_counter() - t0)
-            width["prev"][k] = 2.0 * np.sqrt(rho * rp.P[2, 2])
+            width["prev"][k] = 2.0 * np.sqrt(rho * rp.continued.P[2, 2])
         if k in sub_ref:
             rr = ref[c.node].step(*old_args)
             out["straightforward"][k] = rr.step_ms

@@ -385,8 +385,8 @@ def cmd_inspect(a: argparse.Namespace) -> int:
 
 
 def _print_state(rec: Record, i: int) -> None:
-    """``inspect --state``: node i's β, r, f intervals per step, each with the true value and the cut it rests on
-    (ellipsoid, region, fault range; a set estimator's: set)."""
+    """``inspect --state``: node i's β, r, f intervals per step, each with the true value and what it rests on, from the
+    cuts the node named (ellipsoid, region, fault range; a set estimator's: set; ``--json``: the cuts' names)."""
     print(f"node {i}: published intervals of β [rad], r [rad/s], f [rad/s] (true value; the cut each rests on)")
     print(f"{'step':>5}  " + "  ".join(f"{name:^41}" for name in ("sideslip β", "yaw rate r", "fault f")) + "  status")
     for r in rec.state_rows(i):

@@ -100,7 +100,7 @@ class ReadingSlabs:
         for j, (y, gamma) in sorted(readings.items()):
             sensor = self.references.get(j)
             if sensor is not None:
-                lo, hi = sensor.measured_interval(y, gamma)
+                lo, hi = sensor.measured_interval(y, gamma, outward=True)
                 out.append(Slab(np.append(sensor.C, 0.0), float(lo), float(hi)))
         if self.health is not None:
             a = np.append(self.health.u, 0.0)

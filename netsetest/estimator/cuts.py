@@ -29,13 +29,13 @@ import numpy as np
 import netsetest.linalg as linalg
 from netsetest.estimator.health import HEALTH_KEY, HealthAssessment
 from netsetest.estimator.problem import StepData
-from netsetest.estimator.sector import FaultBound, Interval, Sector, fault_over
+from netsetest.estimator.region_engine import Blend, cut_by_own, cut_by_slabs, region_fault
+from netsetest.estimator.sector import FaultBound, Interval, Sector
 from netsetest.estimator.slab import cut
 from netsetest.models.sensor import NA, NX, Sensor
-from netsetest.models.vehicle import TSModel
 from netsetest.polygon import MIN_VERTICES, REGION_REASONS, Polygon
 from netsetest.proven import ProvenSet
-from netsetest.sets import ellipsoid_bounds
+from netsetest.sets import NO_CUTS, CutName, IntervalCuts, Slab, ellipsoid_bounds
 
 Status = Literal["ok", "fallback"]
 FAULT_AXIS = np.eye(NA)[NA - 1]  # f = e₃ᵀx̄: the direction the fault cuts act along
@@ -66,42 +66,70 @@ class Rests:
 
 
 @dataclass(frozen=True)
-class StepResult:
-    """One step's sets: the one the node continues from, {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ_i} ∩ ``region``, and the
-    one it publishes (``public``), with how they were obtained."""
+class StepSet:
+    """One certified set of a step, {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ_i} ∩ {lo ≤ f⁺ ≤ hi} (``fault_range``), with the gain and
+    the certified radius that made it, what it rests on beyond the solve, and the cuts that narrowed its intervals."""
 
     xhat: np.ndarray  # (NA,)
     P: np.ndarray  # (NA, NA) published shape: e⁺ᵀ P⁻¹ e⁺ ≤ ρ_i
-    status: Status
-    rho_cert: float  # ρ' certified for the solver's P (P is published as P_solver·ρ'/ρ_i)
-    solve_ms: float
-    solver_status: str
+    rho_cert: float  # ρ' certified for the solver's P (P is published as P_solver·ρ'/ρ_i); NaN: none (fallback, rejoin)
     L: np.ndarray = field(default_factory=lambda: np.zeros((NA, 1)))  # (NA, 1) the gain of (16)
-    sector: Sector | None = None  # the own sensor's sector of this step (None: no saturation modelled)
-    published: StepResult | None = None  # the set to publish where it differs from this one (None: this one)
-    reading_keys: frozenset[int] = frozenset()  # the readings the set rests on (keys of the context's slabs: node ids, and HEALTH_KEY for the k-of-N facts)
     fault_range: tuple[float, float] | None = None  # the set is the ellipsoid ∩ {lo ≤ f⁺ ≤ hi}
-    region: Polygon | None = None  # the states x⁺ every step so far leaves (NodeSet.region); the published set's too
+    reading_keys: frozenset[int] = frozenset()  # the readings the set rests on (keys of the context's slabs: node ids, and HEALTH_KEY for the k-of-N facts)
     set_keys: frozenset[int] = frozenset()  # the in-neighbours whose published sets of step k the set rests on (the region's cuts)
+    cuts: IntervalCuts = NO_CUTS  # per coordinate, the cuts that narrowed the interval of this set as published (apply_cuts)
 
-    @property
-    def public(self) -> StepResult:
-        """What the node publishes: ``published`` if a solve or a cut made one, else this set."""
-        return self.published if self.published is not None else self
-
-    def replaced(self, **changes: Any) -> StepResult:
-        """This result with ``changes``: dataclasses.replace without its per-field set-up (several per step; no field
-        has init=False or a check in __post_init__, so the result is the same)."""
-        assert changes.keys() <= STEP_RESULT_FIELDS, f"not fields of StepResult: {set(changes) - STEP_RESULT_FIELDS}"
-        new = object.__new__(StepResult)
+    def replaced(self, **changes: Any) -> StepSet:
+        """This set with ``changes``: dataclasses.replace without its per-field set-up (several per step; no field has
+        init=False or a check in __post_init__, so the result is the same)."""
+        assert changes.keys() <= STEP_SET_FIELDS, f"not fields of StepSet: {set(changes) - STEP_SET_FIELDS}"
+        new = object.__new__(StepSet)
         new.__dict__.update(self.__dict__, **changes)  # (frozen: set as dataclasses' own __init__ sets them)
         return new
 
+
+@dataclass(frozen=True)
+class StepFigures:
+    """How a step's sets were obtained: ``ok`` (certified) or ``fallback``, the solves' wall time and the solver's status."""
+
+    status: Status
+    solve_ms: float
+    solver_status: str
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """One step's two sets and its figures: the set the node continues from, ``continued`` ∩ ``region``, and the one
+    it publishes, ``published`` ∩ ``region`` (the very same object where the node publishes the set it continues
+    from), the own sensor's sector of the step and how the sets were obtained."""
+
+    continued: StepSet
+    published: StepSet
+    figures: StepFigures
+    sector: Sector | None = None  # the own sensor's sector of this step (None: no saturation modelled)
+    region: Polygon | None = None  # the states x⁺ every step so far leaves (NodeSet.region): both sets'
+
+    @classmethod
+    def of(cls, s: StepSet, figures: StepFigures, sector: Sector | None = None) -> StepResult:
+        """A step whose node publishes the set it continues from, ``s``."""
+        return cls(s, s, figures, sector)
+
+    def replaced(self, **changes: Any) -> StepResult:
+        """This result with ``changes`` (as :meth:`StepSet.replaced`)."""
+        assert changes.keys() <= STEP_RESULT_FIELDS, f"not fields of StepResult: {set(changes) - STEP_RESULT_FIELDS}"
+        new = object.__new__(StepResult)
+        new.__dict__.update(self.__dict__, **changes)
+        return new
+
+    def continuing(self, s: StepSet) -> StepResult:
+        """This result continuing from ``s`` instead, and publishing it too where it published the set it continued from."""
+        return self.replaced(continued=s, published=s if self.published is self.continued else self.published)
+
     def published_set(self, rho: float, own_set: dict | None = None) -> ProvenSet:
-        """What the node publishes, as sent: the ellipsoid of ``public`` with radius ρ_i ∩ the region ∩ its fault
+        """What the node publishes, as sent: the ellipsoid of ``published`` with radius ρ_i ∩ the region ∩ its fault
         range; or a set estimator's own set (``own_set``, sets.set_to_wire) with the ellipsoid that encloses it.  A
         region no receiver would take (polygon.region_problem, which ProvenSet runs) is left out: a superset, sound."""
-        pub = self.public
+        pub = self.published
         fields = dict(
             xhat=pub.xhat.tolist(),  # float64 arrays: the floats [float(a) for a in …] gave, without the loop
             P=pub.P.reshape(NA * NA).tolist(),
@@ -121,21 +149,23 @@ class StepResult:
         """The ellipsoid the node continues from where that set is not the published one (None: it is): the set is it
         ∩ the same region (proven.continued_set), without the fault range (the published one's rests on this step's
         facts alone)."""
-        if self.published is None:
+        if self.published is self.continued:
             return None
-        return ProvenSet(xhat=self.xhat.tolist(), P=self.P.reshape(NA * NA).tolist(), rho=rho)
+        return ProvenSet(xhat=self.continued.xhat.tolist(), P=self.continued.P.reshape(NA * NA).tolist(), rho=rho)
 
     @property
     def rests_on(self) -> Rests:
         """The readings both sets rest on (the published one's and the continued one's: both are judged)."""
-        keys = self.public.reading_keys | self.reading_keys
-        return Rests(frozenset(keys - {HEALTH_KEY}), HEALTH_KEY in keys, self.public.set_keys | self.set_keys)
+        pub, cont = self.published, self.continued
+        keys = pub.reading_keys | cont.reading_keys
+        return Rests(frozenset(keys - {HEALTH_KEY}), HEALTH_KEY in keys, pub.set_keys | cont.set_keys)
 
 
+STEP_SET_FIELDS = frozenset(f.name for f in dataclasses.fields(StepSet))
 STEP_RESULT_FIELDS = frozenset(f.name for f in dataclasses.fields(StepResult))
 
-Slabs = dict[int, tuple[np.ndarray, Interval]]
-"""What the step's readings prove: c̄ (NA,) and c̄ᵀx̄⁺ ∈ [lo, hi], keyed by the reference's id, and by HEALTH_KEY
+Slabs = dict[int, Slab]
+"""What the step's readings prove: slabs lo ≤ c̄ᵀx̄⁺ ≤ hi (sets.Slab, c̄ (NA,)), keyed by the reference's id, and by HEALTH_KEY
 for the k-of-N interval (the keys of the readings' ν slots in the LMI; the node reads :attr:`StepResult.rests_on`)."""
 
 
@@ -155,27 +185,6 @@ class CutStatics:
     @property
     def wh_published(self) -> np.ndarray | None:
         return self.wh_pub if self.wh_pub is not None else self.wh
-
-
-@dataclass(frozen=True)
-class Blend:
-    """The step's blended model Σ α_ℓ (A_ℓ, B_ℓ, Dw_ℓ) (exact for the truth), computed once per step: Ā (NX, NX),
-    B̄ and D̄ (NX,), and the augmented ones over x̄ = (x, f): (NA, NA), (NA,), (NA,) (the fault row and column zero)."""
-
-    a: np.ndarray
-    b: np.ndarray
-    d: np.ndarray
-    abar: np.ndarray
-    bbar: np.ndarray
-    dbar: np.ndarray
-
-    @classmethod
-    def of(cls, model: TSModel, alpha: np.ndarray) -> Blend:
-        """The blend of ``model``'s rule matrices for the weights α (TSModel.blend: once per step)."""
-        a, b, d = model.blend(np.asarray(alpha, dtype=float))
-        abar = np.zeros((NA, NA))
-        abar[:NX, :NX] = a
-        return cls(a, b[:, 0], d[:, 0], abar, np.append(b[:, 0], 0.0), np.append(d[:, 0], 0.0))  # (np.r_ costs 10 µs a call)
 
 
 @dataclass(frozen=True)
@@ -206,7 +215,7 @@ class Cut:
     """One cut of the step: ``apply`` takes the step's sets and returns them cut (pure: it never changes its
     input); ``rests_on`` names the assumption beyond the solve's under which it keeps the truth."""
 
-    name: str
+    name: CutName
     rests_on: str
     apply: CutFn
 
@@ -216,21 +225,21 @@ def cut_fault(ctx: StepContext, res: StepResult, lo: float, hi: float, reshape: 
     unless ``reshape``) and published as that ellipsoid ∩ {lo ≤ f⁺ ≤ hi} (ProvenSet.fault: no ellipsoid ends
     at the slab's flat face), resting on the readings ``keys`` too; None where the slab does not narrow the published
     fault interval.  The set the node continues from is unchanged."""
-    pub, rho = res.public, ctx.rho
+    pub, rho = res.published, ctx.rho
     now_lo, now_hi = _fault_interval(pub, rho)  # the published fault interval
     lo, hi = max(lo, now_lo), min(hi, now_hi)
     if not (lo > now_lo or hi < now_hi) or lo > hi:
         return None  # no cut (an empty one means the assumptions broke: the step's set stays as certified)
     wh = ctx.statics.wh_published
-    out = cut(pub.xhat, pub.P, rho, FAULT_AXIS, lo, hi, None if wh is None else wh**2) if reshape else None
+    out = cut(pub.xhat, pub.P, rho, Slab(FAULT_AXIS, lo, hi), None if wh is None else wh**2) if reshape else None
     if out is None:  # the ellipsoid gains nothing; the slab still bounds the fault
-        new = pub.replaced(published=None, fault_range=(lo, hi), reading_keys=pub.reading_keys | keys)
+        new = pub.replaced(fault_range=(lo, hi), reading_keys=pub.reading_keys | keys)
     else:  # ρ' as for a solved set (P published = P_s·ρ'/ρ_i): the cut certifies ρ_i·P_s with radius out[2]
-        new = pub.replaced(xhat=out[0], P=out[1], rho_cert=out[2] * rho, published=None, fault_range=(lo, hi), reading_keys=pub.reading_keys | keys)
+        new = pub.replaced(xhat=out[0], P=out[1], rho_cert=out[2] * rho, fault_range=(lo, hi), reading_keys=pub.reading_keys | keys)
     return res.replaced(published=new)
 
 
-def _fault_interval(s: StepResult, rho: float) -> tuple[float, float]:
+def _fault_interval(s: StepSet, rho: float) -> tuple[float, float]:
     """The fault interval of ``s``'s set with radius ρ: x̂_f ∓ √(ρ P_ff) within its fault range (sets.ellipsoid_bounds'
     last coordinate, the same floats, without the other two)."""
     x, half = float(s.xhat[-1]), math.sqrt(rho * float(s.P[-1, -1]))
@@ -240,21 +249,22 @@ def _fault_interval(s: StepResult, rho: float) -> tuple[float, float]:
     return lo, hi
 
 
-def carry(ctx: StepContext, res: StepResult, slabs: dict[int, tuple[np.ndarray, float, float]]) -> StepResult:
+def carry(ctx: StepContext, res: StepResult, slabs: Slabs) -> StepResult:
     """The set the node continues from cut by slabs cᵀx̄⁺ ∈ [lo, hi] (:func:`~netsetest.estimator.slab.cut`,
     certified, in the recursion's objective), so that they carry over to the later steps; what is published does
     not change.  The keys of the slabs that cut it join its ``reading_keys``."""
-    xhat, P, rho_cert, used = res.xhat, res.P, res.rho_cert, set()
+    cont = res.continued
+    xhat, P, rho_cert, used = cont.xhat, cont.P, cont.rho_cert, set()
     wh = ctx.statics.wh
-    for key, (c, lo, hi) in slabs.items():
-        out = cut(xhat, P, ctx.rho, c, lo, hi, None if wh is None else wh**2)
+    for key, slab in slabs.items():
+        out = cut(xhat, P, ctx.rho, slab, None if wh is None else wh**2)
         if out is not None:  # ρ' as for a solved set (P = P_s·ρ'/ρ_i)
             xhat, P, rho_cert = out[0], out[1], out[2] * ctx.rho
             used.add(key)
     if not used:
         return res  # no slab cuts it
-    published = res.published if res.published is not None else res  # published: the step's set as solved
-    return res.replaced(xhat=xhat, P=P, rho_cert=rho_cert, published=published, reading_keys=res.reading_keys | used)
+    # the published set stays as it was (where it was this one: the step's set as solved)
+    return res.replaced(continued=cont.replaced(xhat=xhat, P=P, rho_cert=rho_cert, reading_keys=cont.reading_keys | used))
 
 
 def _readings_cut(ctx: StepContext, res: StepResult) -> StepResult:
@@ -262,7 +272,7 @@ def _readings_cut(ctx: StepContext, res: StepResult) -> StepResult:
     at every step while the exact limit keeps them: docs/network.md)."""
     if not ctx.slabs:
         return res
-    return carry(ctx, res, {key: (c, iv.lo, iv.hi) for key, (c, iv) in ctx.slabs.items()})
+    return carry(ctx, res, ctx.slabs)
 
 
 def _size_cut(ctx: StepContext, res: StepResult) -> StepResult:
@@ -289,38 +299,27 @@ def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
     reading; not where the step cannot list readings (step 0, whose cone is the prior's)."""
     st = ctx.statics
     region: Polygon | None = ctx.moved
-    for c, iv in (*ctx.slabs.values(), *ctx.region_slabs.values()):
-        region = region.cut(c[:NX], iv.lo, iv.hi) if region is not None else None
+    region = cut_by_slabs(region, (*ctx.slabs.values(), *ctx.region_slabs.values()))
     size, sector = st.fault_bound.size, res.sector
     reference = size == 0.0 and ctx.listed  # its own reading rests on its declared zero fault (listed, so judged)
     keys = frozenset(ctx.slabs) | frozenset(ctx.region_slabs) | ({st.node_id} if reference else frozenset())
-    if region is not None and size is not None and (reference or st.own_bound or (sector is not None and sector.basis == "fault-bound")):
-        slack = abs(st.own.Ds) * size  # C x⁺ = C̄ x̄⁺ − Ds f⁺, |f⁺| ≤ F: the step's cone holds the bound
-        region = region.cut(st.own.C, ctx.meas.lo - slack, ctx.meas.hi + slack)
-    for s in (res, res.published):
-        if region is not None and s is not None:
+    if size is not None and (reference or st.own_bound or (sector is not None and sector.basis == "fault-bound")):
+        region = cut_by_own(region, st.own, ctx.meas, size)  # C x⁺ = C̄ x̄⁺ − Ds f⁺, |f⁺| ≤ F: the step's cone holds the bound
+    for s in (res.continued,) if res.published is res.continued else (res.continued, res.published):
+        if region is not None:
             region = ellipse_cut(region, s.xhat, s.P, ctx.rho)
     if region is None or len(region) < MIN_VERTICES:
         return res  # (fewer: a sliver below the rounding, kept as empty)
     region = region.reduced()  # the move's margin covers the cuts' rounding (Polygon.moved)
-    res = res.replaced(region=region, reading_keys=res.reading_keys | keys, set_keys=res.set_keys | ctx.sets)
+    cont = res.continued
+    res = res.continuing(cont.replaced(reading_keys=cont.reading_keys | keys, set_keys=cont.set_keys | ctx.sets)).replaced(region=region)
     fault = (0.0, 0.0) if reference else region_fault(st.own, region, ctx.meas)
     # with readings the ellipsoid is cut too (as since the region came); without, it stays as solved (what
     # neighbours use, bit for bit) and only the published fault range narrows: the same published interval
     out = cut_fault(ctx, res, *fault, reshape=bool(ctx.slabs)) if fault is not None else None
     if out is None or not keys:
         return res if out is None else out
-    return out.replaced(published=out.public.replaced(reading_keys=out.public.reading_keys | keys))
-
-
-def region_fault(own: Sensor, region: Polygon, meas: Interval) -> tuple[float, float] | None:
-    """f⁺ from the own measurement over the region: C x⁺ + Ds f⁺ ∈ [m_lo, m_hi] and C x⁺ ∈ [c_lo, c_hi]
-    give Ds f⁺ ∈ [m_lo − c_hi, m_hi − c_lo].  A measurement at the sensor's limit (saturated) leaves one side of
-    C x⁺ + Ds f⁺ open, and the other side still bounds f⁺ (one side of the result infinite); None where both are
-    open or the sensor has no fault term."""
-    if own.Ds == 0.0 or not (math.isfinite(meas.lo) or math.isfinite(meas.hi)):
-        return None
-    return fault_over(own, *region.interval(own.C), meas)
+    return out.replaced(published=out.published.replaced(reading_keys=out.published.reading_keys | keys))
 
 
 def _health_pin(ctx: StepContext, res: StepResult) -> StepResult:
@@ -334,8 +333,8 @@ def _health_pin(ctx: StepContext, res: StepResult) -> StepResult:
     size = max(tol, PIN_FLOOR)
     out = cut_fault(ctx, res, -size, size)
     if out is not None:
-        res = out.replaced(published=out.public.replaced(reading_keys=out.public.reading_keys | {HEALTH_KEY}))
-    return carry(ctx, res, {HEALTH_KEY: (FAULT_AXIS, -size, size)})
+        res = out.replaced(published=out.published.replaced(reading_keys=out.published.reading_keys | {HEALTH_KEY}))
+    return carry(ctx, res, {HEALTH_KEY: Slab(FAULT_AXIS, -size, size)})
 
 
 def _health_fault(ctx: StepContext, res: StepResult) -> StepResult:
@@ -431,15 +430,43 @@ FALLBACK_CUTS: tuple[Cut, ...] = (REGION,)  # a step without a certificate: the 
 
 
 def apply_cuts(cuts: tuple[Cut, ...], ctx: StepContext, res: StepResult) -> StepResult:
-    """The step's sets through ``cuts``, in order."""
+    """The step's sets through ``cuts``, in order; the published set's ``cuts`` name, per coordinate, every cut that
+    narrowed its interval (the ellipsoid's, within the fault range and the region: what the node publishes)."""
+    bounds = published_bounds(res, ctx.rho)
     for c in cuts:
-        res = c.apply(ctx, res)
+        out = c.apply(ctx, res)
+        if out.published is res.published and out.region is res.region:
+            res = out  # what is published did not change (the set the node continues from may have)
+            continue
+        now = published_bounds(out, ctx.rho)
+        narrowed = [now[m] > bounds[m] for m in range(NA)] + [now[NA + m] < bounds[NA + m] for m in range(NA)]
+        if any(narrowed):
+            pub = out.published
+            b, r, f = (pub.cuts[m] + (c.name,) if narrowed[m] or narrowed[NA + m] else pub.cuts[m] for m in range(NA))
+            named = pub.replaced(cuts=(b, r, f))
+            out = out.continuing(named) if pub is out.continued else out.replaced(published=named)
+        res, bounds = out, now
     return res
+
+
+def published_bounds(res: StepResult, rho: float) -> list[float]:
+    """[lo_β, lo_r, lo_f, hi_β, hi_r, hi_f] of what ``res`` publishes: its ellipsoid's x̂ ∓ √(ρ P_ii), within its fault
+    range and the region's intervals of β and r (ProvenSet.bounds, without making the set; plain floats: several a step)."""
+    pub = res.published
+    x, d = pub.xhat.tolist(), pub.P.diagonal().tolist()
+    half = [math.sqrt(max(rho * v, 0.0)) for v in d]
+    out = [x[0] - half[0], x[1] - half[1], x[2] - half[2], x[0] + half[0], x[1] + half[1], x[2] + half[2]]
+    if pub.fault_range is not None:
+        out[2], out[5] = max(out[2], pub.fault_range[0]), min(out[5], pub.fault_range[1])
+    if res.region is not None:
+        pts = res.region.points
+        xs, ys = [p[0] for p in pts], [p[1] for p in pts]
+        out[0], out[1], out[3], out[4] = max(out[0], min(xs)), max(out[1], min(ys)), min(out[3], max(xs)), min(out[4], max(ys))
+    return out
 
 
 __all__ = [
     "FALLBACK_CUTS",
-    "Blend",
     "FAULT_AXIS",
     "FIRST_CUTS",
     "PIN_FLOOR",
@@ -450,11 +477,13 @@ __all__ = [
     "Rests",
     "Slabs",
     "StepContext",
+    "StepFigures",
     "StepResult",
+    "StepSet",
     "apply_cuts",
+    "published_bounds",
     "carry",
     "cut_fault",
     "ellipse_cut",
-    "region_fault",
     "seed",
 ]

@@ -81,7 +81,7 @@ class IntervalObserver(SetEstimator):
     def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> Box:
         """The step's box; without a reading (``inp.y`` None) the prediction alone: the one-sided step with both
         sides open, the fault carried by the declared bound."""
-        lo, hi = (-np.inf, np.inf) if inp.y is None else self.node.sensor.measured_interval(inp.y, inp.gamma)
+        lo, hi = (-np.inf, np.inf) if inp.y is None else self.node.sensor.measured_interval(inp.y, inp.gamma, outward=True)
         two_sided = bool(np.isfinite(lo) and np.isfinite(hi))
         problem = self.node.gap_problem() if inp.y is None and self.center is not None else None
         if problem:
@@ -149,5 +149,5 @@ class IntervalObserver(SetEstimator):
         for slab in slabs:
             box = box.cut(slab)
         if slabs:  # a box keeps no tie between x and f: the own measurement C̄ x̄ ∈ [lo, hi] carries the cut to f
-            box = box.cut(Slab(self.node.sensor.Cbar, *self.node.sensor.measured_interval(inp.y, inp.gamma)))
+            box = box.cut(Slab(self.node.sensor.Cbar, *self.node.sensor.measured_interval(inp.y, inp.gamma, outward=True)))
         return box

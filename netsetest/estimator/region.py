@@ -25,14 +25,18 @@ unchanged.  ``netsetest compare`` shows each method with the region (``zonotope`
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from netsetest.config.schema import Scenario
 from netsetest.estimator.base import Assumption, EstimatorError, GuaranteedSet, NeighbourSet, ReadingSlabs, SetEstimator, StepInput
-from netsetest.estimator.sector import Interval
+from netsetest.estimator import region_engine
+from netsetest.estimator.region_engine import Blend
+from netsetest.estimator.sector import Interval, measurement_interval
 from netsetest.models.sensor import NX
 from netsetest.polygon import MIN_VERTICES, Polygon
-from netsetest.sets import RegionSet
+from netsetest.sets import CutName, RegionSet, Slab
 
 
 class WithRegion(SetEstimator):
@@ -47,6 +51,7 @@ class WithRegion(SetEstimator):
         sensor = self.node.sensor
         self.C, self.Ds = sensor.Cbar[:NX], float(sensor.Cbar[NX])  # C̄ x̄ = C x + Ds f
         self.c_dir = np.r_[self.C, 0.0]  # the own set's C x: a cut of the region beside its β, r hull
+        self.axes = np.eye(NX + 1)[:NX]  # β and r over x̄ = (x, f)
         self.region: Polygon | None = None
 
     @property
@@ -61,51 +66,59 @@ class WithRegion(SetEstimator):
             raise
         assert not isinstance(s, RegionSet)  # a method's own set (a WithRegion never wraps another)
         s_lo, s_hi = s.bounds()
-        lo, hi = (-np.inf, np.inf) if inp.y is None else self.node.sensor.measured_interval(inp.y, inp.gamma)  # None: no reading
+        # the own measurement's interval (none without a reading: both sides open, so it cuts nothing)
+        meas = Interval(-math.inf, math.inf) if inp.y is None else measurement_interval(self.node.sensor, inp.y, inp.gamma)
         region: Polygon | None = self._moved(s_lo, s_hi, inp)
-        f_lo, f_hi = float(s_lo[NX]), float(s_hi[NX])
+        fault = _FaultRange(float(s_lo[NX]), float(s_hi[NX]))
         health = None
         if self.uses_readings and inp.y is not None:
             slabs, health = self.reading_slabs.assessed((inp.y, inp.gamma), inp.readings, lambda a: (-s.support(-a), s.support(a)))
             for slab in slabs:
                 if not slab.a[:NX].any():  # |f| ≤ τ (the k-of-N pin)
-                    f_lo, f_hi = max(f_lo, slab.lo / slab.a[NX]), min(f_hi, slab.hi / slab.a[NX])
-                elif region is not None:  # a reading's C_j x, the k-of-N uᵀx (no fault term)
-                    region = region.cut(slab.a[:NX], slab.lo, slab.hi)
+                    fault.cut("health-pin", slab.lo / slab.a[NX], slab.hi / slab.a[NX])
+            region = region_engine.cut_by_slabs(region, slabs)  # a reading's C_j x, the k-of-N uᵀx (no fault term)
         size = self.node.fault_size
         if (self.rests_on_bound or inp.y is None and inp.step > 0) and size is not None:  # (a step without a reading rests on it)
-            f_lo, f_hi = max(f_lo, -size), min(f_hi, size)
-            if region is not None and inp.y is not None:  # C x = C̄ x̄ − Ds f, |f| ≤ F
-                region = region.cut(self.C, lo - abs(self.Ds) * size, hi + abs(self.Ds) * size)
-        for m in range(NX):  # the own set's interval hull (its support along β and r)
-            if region is not None:
-                region = region.cut(np.eye(NX)[m], float(s_lo[m]), float(s_hi[m]))
-        if region is not None:
-            region = region.cut(self.C, -s.support(-self.c_dir), s.support(self.c_dir))
+            fault.cut("fault-size", -size, size)
+            if inp.y is not None:
+                region = region_engine.cut_by_own(region, self.node.sensor, meas, size)  # C x = C̄ x̄ − Ds f, |f| ≤ F
+        hull = [Slab(self.axes[m], float(s_lo[m]), float(s_hi[m])) for m in range(NX)]  # the own set's interval hull
+        region = region_engine.cut_by_slabs(region, [*hull, Slab(self.c_dir, -s.support(-self.c_dir), s.support(self.c_dir))])
         if region is None or len(region) < MIN_VERTICES:
             self.region = None  # nothing left (an assumption broke): the method's set alone, the region reseeded
             return s
         self.region = region = region.reduced()
-        if self.Ds != 0.0 and np.isfinite(lo) and np.isfinite(hi):
-            c_lo, c_hi = region.interval(self.C)
-            a, b = sorted(((lo - c_hi) / self.Ds, (hi - c_lo) / self.Ds))
-            f_lo, f_hi = max(f_lo, a), min(f_hi, b)
+        own = region_engine.region_fault(self.node.sensor, region, meas)  # one-sided where the reading is at the limit
+        if own is not None:
+            fault.cut("region", *own)
         model = self.reading_slabs.health
         if health is not None and model is not None and self.Ds != 0.0:  # the own sensor healthy, or the others agree (cuts.py)
-            a, b = health.others.fault(self.node.sensor, region.interval(health.others.u), Interval(lo, hi), model.tolerance)
-            f_lo, f_hi = max(f_lo, a), min(f_hi, b)
-        if f_lo > f_hi:
+            fault.cut("health-fault", *health.others.fault(self.node.sensor, region.interval(health.others.u), meas, model.tolerance))
+        if fault.lo > fault.hi:
             return s  # (an assumption broke: the own set alone is what is left to publish)
-        return RegionSet(s, region, (f_lo, f_hi))
+        r_lo, r_hi = region.bounds()
+        xs: tuple[tuple[CutName, ...], ...] = tuple(("region",) if r_lo[m] > s_lo[m] or r_hi[m] < s_hi[m] else () for m in range(NX))
+        return RegionSet(s, region, (fault.lo, fault.hi), (xs[0], xs[1], tuple(fault.names)))
 
     def _moved(self, s_lo: np.ndarray, s_hi: np.ndarray, inp: StepInput) -> Polygon:
         """The last region through the step's blended dynamics, the disturbance and the mismatch bound (step 0, or
         without one: the interval hull s_lo..s_hi of the own set's x)."""
         if self.region is None or inp.u_prev is None or inp.vx_prev is None:
             return Polygon.box(s_lo[:NX], s_hi[:NX])
-        a, b, d = self.sc.model.blend(self.sc.model.weights(inp.vx_prev))
-        segments = [d[:, 0] * np.sqrt(self.sc.W), *self.sc.mismatch_generators.T]  # x⁺ = Ā x + B̄ u + D̄ w + e
-        return self.region.moved(a, b[:, 0] * inp.u_prev, segments)
+        blend = Blend.of(self.sc.model, self.sc.model.weights(inp.vx_prev))  # x⁺ = Ā x + B̄ u + D̄ w + e
+        return region_engine.moved(self.region, blend, inp.u_prev, self.sc.W, self.sc.uncertainty)
+
+
+class _FaultRange:
+    """The fault range of one step as its cuts narrow it, with the names of those that did."""
+
+    def __init__(self, lo: float, hi: float) -> None:
+        self.lo, self.hi, self.names = lo, hi, list[CutName]()
+
+    def cut(self, name: CutName, lo: float, hi: float) -> None:
+        if lo > self.lo or hi < self.hi:
+            self.lo, self.hi = max(self.lo, lo), min(self.hi, hi)
+            self.names.append(name)
 
 
 __all__ = ["WithRegion"]

@@ -72,13 +72,14 @@ from netsetest.estimator.cuts import (
     FALLBACK_CUTS,
     FIRST_CUTS,
     STEP_CUTS,
-    Blend,
     Cut,
     CutStatics,
     NodeSet,
     Slabs,
     StepContext,
+    StepFigures,
     StepResult,
+    StepSet,
     apply_cuts,
     seed,
 )
@@ -86,19 +87,22 @@ from netsetest.estimator.health import HEALTH_KEY, HealthAssessment, HealthModel
 from netsetest.estimator.lmi_cvxpy import CvxpySolver
 from netsetest.estimator.objective import BANK_FAULT_WEIGHT, DEFAULT_OBJECTIVE, FAULT_WEIGHT, OBJECTIVES, Objective
 from netsetest.estimator.problem import EtaLayout, OwnUpdate, PatternKey, ProblemSolver, Solution, StepData
+from netsetest.estimator import region_engine
+from netsetest.estimator.region_engine import Blend
 from netsetest.estimator.sector import (
     FaultBound,
     Interval,
     Sector,
     derive_sector,
+    Propagation,
     measurement_interval,
     prior_interval,
-    propagated_interval,
 )
 from netsetest.extras import require
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.uncertainty import ModelUncertainty
 from netsetest.polygon import MIN_VERTICES, Polygon
+from netsetest.sets import Slab
 from netsetest.models.vehicle import N_RULES, TSModel
 
 Variant = Literal["scheduled", "per-rule"]
@@ -201,7 +205,7 @@ class LocalEstimator:
     ``_dbar`` (n_rules, NA) D̄_ℓ (the per-rule variant's), ``_cbar[j]`` (NA,) C̄_j.  Per step: :meth:`context`
     (:class:`~netsetest.estimator.cuts.StepContext`, with the step's :class:`Blend`),
     :meth:`step_data` → :class:`~netsetest.estimator.problem.StepData` (Π₀ (NA, d) per LMI, ℓ (d,),
-    Q_m (d, d)), :meth:`step` → :class:`StepResult` (x̂ (NA,), P (NA, NA), L (NA, 1)).
+    Q_m (d, d)), :meth:`step` → :class:`StepResult` (two StepSets: x̂ (NA,), P (NA, NA), L (NA, 1)).
     """
 
     def __init__(
@@ -250,7 +254,7 @@ class LocalEstimator:
         self.bounded = dict(bounded or {})
         self._bounded_c = {j: _read_only(np.append(sensor.C, 0.0)) for j, (sensor, _) in self.bounded.items()}  # c̄_j = [C_j, 0], once
         self.neighbour_sets = neighbour_sets
-        # a sensor of uᵀx alone (no fault, no saturation): what propagated_interval needs for the prediction of uᵀx⁺
+        # a sensor of uᵀx alone (no fault, no saturation): what Propagation.interval needs for the prediction of uᵀx⁺
         self._u_sensor = dataclasses.replace(own, C=health.u, Ds=0.0, saturated=False) if health is not None else own
         self.n_lmi = N_RULES if variant == "per-rule" else 1
         # static data, prepared once: augmented rule matrices Ā_ℓ, B̄_ℓ, D̄_ℓ
@@ -330,17 +334,17 @@ class LocalEstimator:
         """The own sensor's sector of step k+1 (docs/estimator.md, "Adaptive sector")."""
         return self.context(prev, inp).sector
 
-    def _own_range(self, prev: NodeSet, inp: UpdateInput, blend: Blend, meas: Interval) -> tuple[Sector | None, Interval | None]:
+    def _own_range(self, prop: Propagation, meas: Interval) -> tuple[Sector | None, Interval | None]:
         """The own sector of step k+1 and, where it is derived and the sensor may saturate, the proven
         interval of r⁺ = C̄ x̄⁺ (the step then uses it as the measurement; see ``step_data``); ``meas``: the own
         measurement's interval."""
         if not self.own.saturated:
             return None, None
-        prop = propagated_interval(self.own, self.fault_bound, prev.xhat, prev.P, prev.rho, blend.a, blend.b, blend.d, inp.u, self.W, self.uncertainty)
-        sector = derive_sector(self.own, self.fault_bound, meas, prop)
+        r_set = prop.interval(self.own, self.fault_bound)
+        sector = derive_sector(self.own, self.fault_bound, meas, r_set)
         if sector is None or not sector.has_phi or sector.basis == "assumed":
             return sector, None
-        return sector, (meas & prop if sector.basis == "fault-bound" else meas)
+        return sector, (meas & r_set if sector.basis == "fault-bound" else meas)
 
     def initial_sector(self, prior: NodeSet, y: float, gamma: float) -> Sector | None:
         """The own sensor's sector of step 0: the prior (Assumption 1), |f₀| ≤ F and the measurement."""
@@ -389,8 +393,8 @@ class LocalEstimator:
         ell, innov = self._reference_innovation(lay, pi0, alpha, data.x_pred, refs)
         return StepData(tuple(pi0), ell, tuple(facts), data.x_pred, innov, data.Mi, lay, key, data.sector, data.own)
 
-    def _reading_slabs(self, prev: NodeSet, inp: UpdateInput, blend: Blend, health: HealthAssessment | None) -> Slabs:
-        """What the step's readings prove, as c̄ (NA,) and c̄ᵀx̄⁺ ∈ [lo, hi], keyed by the reference's id, and
+    def _reading_slabs(self, inp: UpdateInput, prop: Propagation, health: HealthAssessment | None) -> Slabs:
+        """What the step's readings prove, as slabs lo ≤ c̄ᵀx̄⁺ ≤ hi (c̄ (NA,)), keyed by the reference's id, and
         by :data:`~netsetest.estimator.health.HEALTH_KEY` for the k-of-N interval of every reading (the
         hypotheses pruned by the node's own prediction of uᵀx⁺).
 
@@ -404,23 +408,19 @@ class LocalEstimator:
                 continue
             iv = measurement_interval(sensor, y, gamma)
             if not (np.isfinite(iv.lo) and np.isfinite(iv.hi)):
-                iv = iv & propagated_interval(
-                    sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, blend.a, blend.b, blend.d, inp.u, self.W, self.uncertainty
-                )
+                iv = iv & prop.interval(sensor, FaultBound(size=0.0))
             if np.isfinite(iv.lo) and np.isfinite(iv.hi) and iv.hi > iv.lo:
-                out[j] = (np.append(sensor.C, 0.0), iv)
+                out[j] = Slab(np.append(sensor.C, 0.0), iv.lo, iv.hi)
         if self.health is not None and health is not None and health.interval is not None:
-            out[HEALTH_KEY] = (np.append(self.health.u, 0.0), health.interval)
+            out[HEALTH_KEY] = Slab(np.append(self.health.u, 0.0), health.interval.lo, health.interval.hi)
         return out
 
-    def _assess_health(self, prev: NodeSet, inp: UpdateInput, blend: Blend, moved: Polygon) -> HealthAssessment:
+    def _assess_health(self, inp: UpdateInput, prop: Propagation, moved: Polygon) -> HealthAssessment:
         """The step's k-of-N interval of uᵀx⁺ and whether the own fault is pinned, once per step (both the
         readings' update and the pin use it).  Hypotheses are pruned by uᵀx⁺ over the node's own set through
         the step: a majority that agrees only outside it is none."""
         assert self.health is not None
-        pred = propagated_interval(
-            self._u_sensor, FaultBound(size=0.0), prev.xhat, prev.P, prev.rho, blend.a, blend.b, blend.d, inp.u, self.W, self.uncertainty
-        )
+        pred = prop.interval(self._u_sensor, FaultBound(size=0.0))
         both = pred & Interval(*moved.interval(self.health.u))  # and over the moved region (both hold uᵀx⁺ wherever
         pred = both if both.lo <= both.hi else pred  # the prior does; disjoint: one broke)
         return self.health.assess(self.node_id, (inp.y, inp.gamma), inp.readings, (pred.lo, pred.hi), pin=True)
@@ -432,13 +432,13 @@ class LocalEstimator:
         |ν_j| ≤ 1 and x̄⁺ − x̂_pred = Π̄₀ η (Π̄₀ the α-blend of Π₀: the truth's model), so
         y̌(η) = Σ_j w_j (c̄_jᵀ Π̄₀ η − h_j ν_j)."""
         pi_truth = np.tensordot(alpha, pi0, axes=1) if len(pi0) > 1 else pi0[0]
-        inv_h = {j: 1.0 / (0.5 * (iv.hi - iv.lo)) for j, (_, iv) in refs.items()}
+        inv_h = {j: 1.0 / (0.5 * (sl.hi - sl.lo)) for j, sl in refs.items()}
         total = sum(inv_h.values())
         ell = np.zeros(lay.dim)
         innov = 0.0
-        for j, (c, iv) in refs.items():
-            w, h, m = inv_h[j] / total, 0.5 * (iv.hi - iv.lo), 0.5 * (iv.hi + iv.lo)
-            cj = c
+        for j, sl in refs.items():
+            w, h, m = inv_h[j] / total, 0.5 * (sl.hi - sl.lo), 0.5 * (sl.hi + sl.lo)
+            cj = sl.a
             ell += w * (cj @ pi_truth)  # c̄_jᵀ Π̄₀ η
             ell[lay.nu[j]] -= w * h  # − h_j ν_j
             innov += w * (m - float(cj @ x_pred))
@@ -618,7 +618,7 @@ class LocalEstimator:
         base = prepared.base if prepared is not None else self._base(prev, inp)
         ctx = self._context(prev, inp, base)
         res = self._solve_step(ctx, inp, prepared.first if prepared is not None else None)
-        if res.status == "fallback":  # no certificate: the region of the own measurement alone (no reading listed)
+        if res.figures.status == "fallback":  # no certificate: the region of the own measurement alone (no reading listed)
             return apply_cuts(FALLBACK_CUTS, dataclasses.replace(ctx, slabs={}, region_slabs={}), res)
         return apply_cuts(self.cuts, ctx, res)
 
@@ -632,16 +632,17 @@ class LocalEstimator:
         """The context's part the step's readings do not enter (``inp.readings`` is not read)."""
         blend = Blend.of(self.model, inp.alpha)
         meas = measurement_interval(self.own, inp.y, inp.gamma)
-        sector, reading = self._own_range(prev, inp, blend, meas)
+        prop = Propagation(prev.xhat, prev.P, prev.rho, blend.a, blend.b, blend.d, inp.u, self.W, self.uncertainty)  # the step's one
+        sector, reading = self._own_range(prop, meas)
         data = self.step_data(prev, inp, sector, reading, blend)
         moved, sets = self._moved_region(prev, inp, blend)
-        return StepBase(blend, meas, sector, data, moved, sets)
+        return StepBase(blend, meas, sector, data, moved, prop, sets)
 
     def _context(self, prev: NodeSet, inp: UpdateInput, base: StepBase) -> StepContext:
         """The step's context from its ``base`` and its readings: the k-of-N assessment and the readings' slabs (the
         references' and the k-of-N interval; the bounded readings', which cut the region alone)."""
-        health = self._assess_health(prev, inp, base.blend, base.moved) if self.health is not None and inp.readings else None
-        slabs = self._reading_slabs(prev, inp, base.blend, health)
+        health = self._assess_health(inp, base.prop, base.moved) if self.health is not None and inp.readings else None
+        slabs = self._reading_slabs(inp, base.prop, health)
         region_slabs, rate_from = self._bounded_slabs(inp)
         return StepContext(
             self.statics,
@@ -685,7 +686,7 @@ class LocalEstimator:
             ds_lo, ds_hi = sorted((sensor.Ds * f_lo, sensor.Ds * f_hi))
             lo, hi = iv.lo - ds_hi, iv.hi - ds_lo
             if math.isfinite(lo) or math.isfinite(hi):
-                out[j] = (self._bounded_c[j], Interval(lo, hi))
+                out[j] = Slab(self._bounded_c[j], lo, hi)
         return out, frozenset(rate_from & set(out))
 
     def _solve_step(self, ctx: StepContext, inp: UpdateInput, first: tuple[StepResult | None, _Solve] | None = None) -> StepResult:
@@ -721,10 +722,7 @@ class LocalEstimator:
                 if cut is not region:
                     region = cut
                     used.add(j)
-        segments = [blend.d * math.sqrt(self.W)]  # x⁺ = Ā x + B̄ u + D̄ w (+ e)
-        if self.uncertainty is not None:
-            segments += [self.uncertainty.G[:, m] for m in range(NX)]  # e = G ζ with |ζ_m| ≤ 1
-        return region.moved(blend.a, blend.b * inp.u, segments), frozenset(used)
+        return region_engine.moved(region, blend, inp.u, self.W, self.uncertainty), frozenset(used)
 
     def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> StepResult:
         """``res`` publishing the readings' set of the step (its only innovation those readings) where it is
@@ -736,14 +734,13 @@ class LocalEstimator:
         paper6_reference's SAIM fault intervals wider than without readings (docs/network.md)."""
         wh = self.statics.wh_published
         answer, solve = self._solve(data, alpha, wh, rho)
-        res = dataclasses.replace(res, solve_ms=res.solve_ms + solve.ms)
+        res = res.replaced(figures=dataclasses.replace(res.figures, solve_ms=res.figures.solve_ms + solve.ms))
         if answer is None or not np.any(answer.L):
             return res  # no answer, or the readings are of no use (L = 0): nothing to certify
         refined = self._certify(answer, data, rho, self._facts(data), solve)
-        if refined is None or _objective(refined.P, wh) >= (1 - REFINE_RTOL) * _objective(res.P, wh):
+        if refined is None or _objective(refined.continued.P, wh) >= (1 - REFINE_RTOL) * _objective(res.continued.P, wh):
             return res  # no certificate, or nothing gained: no reason to rest the published set on the readings
-        refined = dataclasses.replace(refined, solve_ms=res.solve_ms, reading_keys=frozenset(data.key[3]))
-        return dataclasses.replace(res, published=refined)
+        return res.replaced(published=refined.continued.replaced(reading_keys=frozenset(data.key[3])))
 
     def first(self, prior: NodeSet, y: float, gamma: float) -> StepResult:
         """Step 0: the prior updated by ỹ₀, certified like every step (``fallback``: the prior itself), then
@@ -761,7 +758,7 @@ class LocalEstimator:
         """The guaranteed set when the solver gave no certificate; FallbackUnavailable if even it is not publishable."""
         if not publishable(xhat, P):
             raise FallbackUnavailable(f"node {self.node_id}: the fallback ellipsoid is not finite and positive definite")
-        return StepResult(xhat, P, "fallback", np.nan, solve.ms, solve.status, sector=sector)
+        return StepResult.of(StepSet(xhat, P, np.nan), StepFigures("fallback", solve.ms, solve.status), sector)
 
     def _update(self, data: StepData, rho: float, alpha: np.ndarray) -> tuple[StepResult | None, _Solve]:
         """The certified set of the step's data (None: no certificate) and the solve's figures."""
@@ -817,7 +814,7 @@ class LocalEstimator:
         xhat_new = data.x_pred + L[:, 0] * data.innov_sum if gain else data.x_pred.copy()  # (16): x̂⁺ = x̂_pred + L Σ_j a_ij y̌_j
         if not publishable(xhat_new, P_pub):  # a certified set nobody can use: treated as no certificate
             return None
-        return StepResult(xhat_new, P_pub, "ok", rho_c, solve.ms, answer.status, L, data.sector)
+        return StepResult.of(StepSet(xhat_new, P_pub, rho_c, L), StepFigures("ok", solve.ms, answer.status), data.sector)
 
 
 @dataclass(frozen=True)
@@ -829,6 +826,7 @@ class StepBase:
     sector: Sector | None
     data: StepData
     moved: Polygon
+    prop: Propagation  # the node's set of step k through the step: what it proves of any sensor's r⁺
     sets: frozenset[int] = frozenset()  # the in-neighbours whose published region cut the moved one
 
 
@@ -898,6 +896,8 @@ __all__ = [
     "Objective",
     "UpdateInput",
     "StepData",
+    "StepFigures",
     "StepResult",
+    "StepSet",
     "Variant",
 ]

@@ -29,7 +29,7 @@ from typing import Literal
 
 import numpy as np
 
-from netsetest.models.sensor import NX, ROUNDING_MARGIN, Sensor
+from netsetest.models.sensor import NX, Sensor
 from netsetest.models.uncertainty import ModelUncertainty
 
 SATURATION_UPPER_SLOPE = 1.0  # sup σ(r)/r of a saturation: the exact h2
@@ -78,14 +78,9 @@ UNBOUNDED = Interval(-math.inf, math.inf)
 
 
 def measurement_interval(sensor: Sensor, y: float, gamma: float) -> Interval:
-    """r ∈ this interval for every r with γσ(r) + Dv v = y, v² ≤ R (one-sided where σ is at the limit)."""
-    # widened for rounding: with v at its bound a saturated reading puts s_hi at r_max up to one ulp,
-    # and a one-ulp "below the limit" would wrongly prove that the sensor does not saturate (seen
-    # with worst-case signals)
-    half = abs(sensor.Dv) * math.sqrt(sensor.R) * (1 + ROUNDING_MARGIN) + ROUNDING_MARGIN * abs(y)
-    s_lo, s_hi = (y - half) / gamma, (y + half) / gamma
-    limit = sensor.r_max * (1 - ROUNDING_MARGIN)
-    return Interval(s_lo if s_lo > -limit else -math.inf, s_hi if s_hi < limit else math.inf)
+    """r ∈ this interval for every r with γσ(r) + Dv v = y, v² ≤ R: :meth:`~netsetest.models.sensor.Sensor.measured_interval`
+    rounded outward (one-sided where σ is at the limit), as an :class:`Interval`: what every estimator uses."""
+    return Interval(*sensor.measured_interval(y, gamma, outward=True))
 
 
 def _support(g: np.ndarray, P: np.ndarray, rho: float) -> float:
@@ -93,43 +88,46 @@ def _support(g: np.ndarray, P: np.ndarray, rho: float) -> float:
     return math.sqrt(max(rho * float(g @ P @ g), 0.0))
 
 
-def propagated_interval(
-    sensor: Sensor,
-    bound: FaultBound,
-    xhat: np.ndarray,
-    P: np.ndarray,
-    rho: float,
-    a: np.ndarray,
-    b: np.ndarray,
-    d: np.ndarray,
-    u: float,
-    W: float,
-    uncertainty: ModelUncertainty | None = None,
-) -> Interval:
-    """r⁺ = C(a x + b u + d w) + Ds f⁺ over x̄ in the ellipsoid of step k, w² ≤ W, f⁺ by the fault bound.
+@dataclass(frozen=True)
+class Propagation:
+    """The node's certified set of step k, {x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ}, through step k → k+1: the blended Ā (2×2), B̄,
+    D̄ (2,), the input u, the wind bound w² ≤ W and the declared model mismatch (None: e = 0).  Built once per step;
+    :meth:`interval` gives what it proves of any sensor's r⁺ = C̄ x̄⁺."""
 
-    ``a``, ``b``, ``d``: the step's blended Ā (2×2), B̄, D̄ (2,).  Rate: r⁺ = (gₓ + Ds e₃)ᵀx̄ + C b u
-    + C d w + C e + Ds(f⁺ − f), one support function over the joint set (x and f correlated).  Size:
-    r⁺ = gₓᵀx̄ + C b u + C d w + C e + Ds f⁺ with |f⁺| ≤ F.  Both hold; the result is their intersection.
-    (e: the declared model mismatch, docs/plant.md; its support function adds to the wind's.)
-    """
-    C, Ds = sensor.C, sensor.Ds
-    gx = np.append(a.T @ C, 0.0)  # (np.r_ costs 10 µs a call)
-    centre_u = float(C @ b) * u
-    wind = abs(float(C @ d)) * math.sqrt(W)
-    if uncertainty is not None:
-        wind += uncertainty.support(C)
-    out = UNBOUNDED
-    if bound.rate is not None:
-        g = gx + np.append(np.zeros(NX), Ds)
-        c = float(g @ xhat) + centre_u
-        rad = _support(g, P, rho) + wind + abs(Ds) * bound.rate
-        out = out & Interval(c - rad, c + rad)
-    if bound.size is not None:
-        c = float(gx @ xhat) + centre_u
-        rad = _support(gx, P, rho) + wind + abs(Ds) * bound.size
-        out = out & Interval(c - rad, c + rad)
-    return out
+    xhat: np.ndarray
+    P: np.ndarray
+    rho: float
+    a: np.ndarray
+    b: np.ndarray
+    d: np.ndarray
+    u: float
+    W: float
+    uncertainty: ModelUncertainty | None = None
+
+    def interval(self, sensor: Sensor, bound: FaultBound) -> Interval:
+        """r⁺ = C(a x + b u + d w) + Ds f⁺ over x̄ in the ellipsoid of step k, w² ≤ W, f⁺ by the fault bound.
+
+        Rate: r⁺ = (gₓ + Ds e₃)ᵀx̄ + C b u + C d w + C e + Ds(f⁺ − f), one support function over the joint set (x and
+        f correlated).  Size: r⁺ = gₓᵀx̄ + C b u + C d w + C e + Ds f⁺ with |f⁺| ≤ F.  Both hold; the result is their
+        intersection.  (e: the declared model mismatch, docs/plant.md; its support function adds to the wind's.)
+        """
+        C, Ds = sensor.C, sensor.Ds
+        gx = np.append(self.a.T @ C, 0.0)  # (np.r_ costs 10 µs a call)
+        centre_u = float(C @ self.b) * self.u
+        wind = abs(float(C @ self.d)) * math.sqrt(self.W)
+        if self.uncertainty is not None:
+            wind += self.uncertainty.support(C)
+        out = UNBOUNDED
+        if bound.rate is not None:
+            g = gx + np.append(np.zeros(NX), Ds)
+            c = float(g @ self.xhat) + centre_u
+            rad = _support(g, self.P, self.rho) + wind + abs(Ds) * bound.rate
+            out = out & Interval(c - rad, c + rad)
+        if bound.size is not None:
+            c = float(gx @ self.xhat) + centre_u
+            rad = _support(gx, self.P, self.rho) + wind + abs(Ds) * bound.size
+            out = out & Interval(c - rad, c + rad)
+        return out
 
 
 def prior_interval(sensor: Sensor, bound: FaultBound, xhat: np.ndarray, P: np.ndarray, rho: float) -> Interval:
@@ -195,7 +193,7 @@ __all__ = [
     "SectorBasis",
     "Interval",
     "measurement_interval",
-    "propagated_interval",
+    "Propagation",
     "prior_interval",
     "derive_sector",
     "sector_ok",

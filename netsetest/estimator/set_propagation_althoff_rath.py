@@ -38,7 +38,7 @@ class SetPropagationObserver(RandomWalkObserver):
     def step(self, inp: StepInput, neighbours: tuple[NeighbourSet, ...] = ()) -> Zonotope:
         z = self._predicted(inp)
         # without a reading (``inp.y`` None) the next step gains nothing from this one: L = 0 there
-        self.last_interval = (-np.inf, np.inf) if inp.y is None else self.node.sensor.measured_interval(inp.y, inp.gamma)
+        self.last_interval = (-np.inf, np.inf) if inp.y is None else self.node.sensor.measured_interval(inp.y, inp.gamma, outward=True)
         self.set = z
         return z
 

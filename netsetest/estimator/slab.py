@@ -27,6 +27,7 @@ import netsetest.linalg as linalg
 
 from netsetest.estimator.certificate import certify, publishable
 from netsetest.models.sensor import NA
+from netsetest.sets import Slab
 
 GRID = np.linspace(0.0, 1.0, 257)[:-1]  # t·s over [0, 1): the grid the objective is minimised on
 MIN_GAIN = 1e-6  # relative: a cut that gains less than this in the objective is not worth a new set
@@ -46,12 +47,11 @@ def _facts(lo: float, hi: float, row: np.ndarray, xk: float) -> list[np.ndarray]
     return [ball, slab]
 
 
-def cut(
-    xhat: np.ndarray, P: np.ndarray, rho: float, c: np.ndarray, lo: float, hi: float, weights: np.ndarray | None
-) -> tuple[np.ndarray, np.ndarray, float] | None:
+def cut(xhat: np.ndarray, P: np.ndarray, rho: float, slab: Slab, weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, float] | None:
     """(x̂', P', ρ') with E' = {(x̄ − x̂')ᵀP'⁻¹(x̄ − x̂') ≤ ρ} ⊇ E ∩ {lo ≤ cᵀx̄ ≤ hi} (c (NA,); a coordinate k:
     c = e_k), certified, minimising trace(D ρP') (ρ' the certified radius of the closed form's shape,
     P' = shape·ρ'/ρ) (D = diag(weights), None: I); None if the interval does not cut E or nothing is gained."""
+    c, lo, hi = slab.a, slab.lo, slab.hi
     sigma = rho * 0.5 * (P + P.T)
     se = sigma @ c  # Σc
     s = float(c @ se)

@@ -128,7 +128,7 @@ class StripObserver(RandomWalkObserver):
         """The step's set; without a reading (``inp.y`` None) the prediction cut by the declared |f| ≤ F alone."""
         z = self._predicted(inp)
         if inp.y is not None:
-            z = intersect_strip(z, self.node.sensor.Cbar, *self.node.sensor.measured_interval(inp.y, inp.gamma))
+            z = intersect_strip(z, self.node.sensor.Cbar, *self.node.sensor.measured_interval(inp.y, inp.gamma, outward=True))
             for slab in self.reading_slabs.slabs((inp.y, inp.gamma), inp.readings, lambda a: (-z.support(-a), z.support(a))):
                 z = intersect_strip(z, slab.a, slab.lo, slab.hi)
         if self.node.fault_size is not None:

@@ -141,7 +141,7 @@ class ZonotopeEstimator(SetEstimator):
 
     def _slabs(self, y: float | None, gamma: float) -> list[Slab]:
         """Step 0's: the first measurement (none without a reading: the prior alone) and the declared |f₀| ≤ F where bounded."""
-        slabs = [] if y is None else [Slab(self.node.sensor.Cbar, *self.node.sensor.measured_interval(y, gamma))]
+        slabs = [] if y is None else [Slab(self.node.sensor.Cbar, *self.node.sensor.measured_interval(y, gamma, outward=True))]
         if self.bounded and self.node.fault_size is not None:
             slabs.append(Slab(_E3, -self.node.fault_size, self.node.fault_size))
         return slabs
@@ -164,7 +164,7 @@ class ZonotopeEstimator(SetEstimator):
                 raise EstimatorError(problem)
             new = self._bounded_step(a, b[:, 0] * u_prev, d[:, 0], -np.inf, np.inf)
         elif self.bounded:
-            new = self._bounded_step(a, b[:, 0] * u_prev, d[:, 0], *self.node.sensor.measured_interval(y, gamma))
+            new = self._bounded_step(a, b[:, 0] * u_prev, d[:, 0], *self.node.sensor.measured_interval(y, gamma, outward=True))
         else:
             new = self._free_step(a, b[:, 0] * u_prev, d[:, 0], y, gamma)
         if self.order is not None:
@@ -174,7 +174,7 @@ class ZonotopeEstimator(SetEstimator):
 
     def _free_step(self, a: np.ndarray, bu: np.ndarray, d: np.ndarray, y: float, gamma: float) -> SumSet:
         """x̄⁺ = T_x(Ā [I 0] x̄ + B̄u + D̄w) + G r⁺: exact (module doc)."""
-        lo, hi = self.node.sensor.measured_interval(y, gamma)
+        lo, hi = self.node.sensor.measured_interval(y, gamma, outward=True)
         if not (np.isfinite(lo) and np.isfinite(hi)):
             raise EstimatorError(
                 f"node {self.node.id}: a saturated measurement leaves the fault unbounded; a declared fault bound is needed (fault_bounds 'used' or 'all')"

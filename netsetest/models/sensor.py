@@ -14,6 +14,7 @@ h1 = h2 = 1, σ = identity and φ ≡ 0.
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -83,18 +84,24 @@ class Sensor:
         """ỹ = γ σ(C̄ x̄) + Dv v (12)."""
         return gamma * self.sigma(float(self.Cbar @ xbar)) + self.Dv * v
 
-    def measured_interval(self, y: float, gamma: float) -> tuple[float, float]:
-        """The interval of r = C̄ x̄ consistent with ỹ = γ σ(r) + Dv v, v² ≤ R; ±inf is an open side.
+    def measured_interval(self, y: float, gamma: float, outward: bool = False) -> tuple[float, float]:
+        """The interval of r = C̄ x̄ consistent with ỹ = γ σ(r) + Dv v, v² ≤ R; ±inf is an open side.  The one
+        measurement interval: ``outward`` for every estimator and region (estimator/sector.py's
+        ``measurement_interval`` is that one as an Interval); not for the exact limit (analysis/exact.py), whose bounds
+        a witness trajectory attains within the noise bound (docs/estimator.md, "The measurement interval").
 
         σ(r) ∈ [(ỹ − |Dv|√R)/γ, (ỹ + |Dv|√R)/γ] = [a, b]; σ is non-decreasing and the identity on
         [−r_max, r_max], so σ(r) ≥ a ⇔ r ≥ a unless a ≤ −r_max (then every r), and likewise for b.
+        An end within ROUNDING_MARGIN of ±r_max is open: with v at its bound a saturated reading puts b at r_max up
+        to one ulp, and a one-ulp "below the limit" would wrongly prove that the sensor does not saturate (seen with
+        worst-case signals).  ``outward``: the half-width grows by ROUNDING_MARGIN (relative, and of |ỹ|) too, so
+        that the rounding of ỹ ∓ |Dv|√R never leaves the truth out of an estimator's set.
         """
-        half = abs(self.Dv) * np.sqrt(self.R)
+        margin = ROUNDING_MARGIN if outward else 0.0
+        half = abs(self.Dv) * math.sqrt(self.R) * (1 + margin) + margin * abs(y)
         lo, hi = (y - half) / gamma, (y + half) / gamma
-        if not self.saturated:
-            return lo, hi
-        edge = self.r_max * (1 - ROUNDING_MARGIN)
-        return (-np.inf if lo <= -edge else lo), (np.inf if hi >= edge else hi)
+        edge = self.r_max * (1 - ROUNDING_MARGIN)  # (inf without saturation: never open)
+        return (lo if lo > -edge else -math.inf), (hi if hi < edge else math.inf)
 
     def sector_holds(self, xbar: np.ndarray) -> bool:
         """Whether φ(C̄ x̄) satisfies the sector condition (15) that the estimator assumes."""

@@ -213,6 +213,11 @@ SCHEMAS: dict[str, dict[str, Any]] = {
                 "items": {"type": "array", "items": {"type": "number"}},
                 "description": "[[lo, hi] ×3] of β, r, f: the published set's",
             },
+            "cuts": {
+                "type": "array",
+                "items": {"type": "array", "items": {"type": "string"}},
+                "description": "[names ×3] of β, r, f: the cuts that narrowed the published interval (docs/estimator.md, One step)",
+            },
             **{f"{n}_{s}": {"type": "number", "description": f"{s} bound of {n} of the published set"} for n, _ in COMPONENTS for s in ("lower", "upper")},
         },
         ["step", "published", "status"],

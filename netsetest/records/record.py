@@ -217,6 +217,7 @@ class NodeTrack:
     fdi: list[str | None] | None = None  # (K,) detected | healthy | undecided (docs/fdi.md; None: older records)
     continues_contained: np.ndarray | None = None  # (K,) bool: the set the node continues from held the truth (None: older records)
     missed_flags: np.ndarray | None = None  # (K,) bool: the set proven apart from the truth (None: records before issue 42, not contained)
+    cuts: list[tuple[tuple[str, ...], ...] | None] | None = None  # (K) per coordinate, the cuts the node named (None: older records)
 
     @property
     def missed(self) -> np.ndarray:
@@ -243,16 +244,12 @@ class NodeTrack:
         lo, hi = (np.array([p.bounds()[side][index] for p in self.published], dtype=float) for side in (0, 1))
         return lo, hi
 
-    def rests_on(self, index: int) -> list[str]:
-        """Per step, the cut component ``index``'s published interval rests on: ``ellipsoid`` (the interval is the
-        published ellipsoid's), ``region`` (β, r narrower: the region of x) or ``fault range`` (f narrower: the
-        range cut by the own measurement over the region, a declared bound or the k-of-N pin)."""
-        lo, hi = self.bounds(index)
-        half = np.sqrt(self.rho * self.P[:, index, index])
-        e_lo, e_hi = self.xhat[:, index] - half, self.xhat[:, index] + half
-        tol = RESTS_ON_RTOL * (1.0 + np.abs(self.xhat[:, index]) + half)
-        cut = "region" if index < NA - 1 else "fault range"
-        return [cut if narrower else "ellipsoid" for narrower in (lo > e_lo + tol) | (hi < e_hi - tol)]
+    def interval_cuts(self, index: int) -> list[tuple[str, ...] | None]:
+        """Per step, the cuts that narrowed component ``index``'s published interval, as the node sent them (NodeState.cuts;
+        empty: its solve's ellipsoid or its method's own set alone; None: a record before states carried them)."""
+        if self.cuts is None:
+            return [None] * len(self.steps)
+        return [None if c is None else c[index] for c in self.cuts]
 
     def ellipsoid_bounds(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """Lower/upper bound of component ``index`` of the published ellipsoid alone, x̂ ∓ √(ρ P_ii): the paper's own
@@ -324,10 +321,11 @@ class Record:
                 row[f"{name}_lower"] = float(lo[n])
                 row[f"{name}_upper"] = float(hi[n])
                 row[f"{name}_true"] = None if t is None else float(t["x"][comp])
-        set_node = self.meta.estimators.get(node, "sdp") != "sdp"  # a set estimator's interval hull
+        own = "ellipsoid" if self.meta.estimators.get(node, "sdp") == "sdp" else "set"  # what the solve published
         for comp, name in ((0, "beta"), (1, "r"), (2, "fault")):
-            for row, on in zip(rows, tr.rests_on(comp)):
-                row[f"{name}_rests_on"] = "set" if set_node else on
+            for row, cuts in zip(rows, tr.interval_cuts(comp)):
+                row[f"{name}_cuts"] = None if cuts is None else list(cuts)
+                row[f"{name}_rests_on"] = _rests_on(comp, cuts, own)
         for n, row in enumerate(rows):  # both sets the collector judged, whole (continues: None where it is the published one)
             cont = tr.continues[n]
             row["published"] = msgspec.to_builtins(tr.published[n])
@@ -344,7 +342,15 @@ def not_covered_cause(entry: dict) -> str:
     return cause if isinstance(cause, str) else "not covered"
 
 
-RESTS_ON_RTOL = 1e-12  # a published end within this (relative) of the ellipsoid's is the ellipsoid's: rounding only
+def _rests_on(index: int, cuts: tuple[str, ...] | None, own: str) -> str:
+    """In a word, what a published interval rests on, from the cuts the node named: ``region`` (β, r: the region cut
+    it), ``fault range`` (f: a cut narrowed it), else ``own`` (the solve's ellipsoid, a set estimator's set);
+    ``unknown`` in a record before states named them."""
+    if cuts is None:
+        return "unknown"
+    if index < NA - 1:
+        return "region" if "region" in cuts else own
+    return "fault range" if cuts else own
 
 
 def _read(path: Path) -> bytes:
@@ -520,6 +526,19 @@ def _set_bounds(entries: list[dict]) -> np.ndarray | None:
     return b
 
 
+def _cuts(entries: list[dict]) -> list[tuple[tuple[str, ...], ...] | None] | None:
+    """Per entry, the cuts of β, r, f its state named (None where a row has none: older records)."""
+    if not any("cuts" in e for e in entries):
+        return None
+    out: list[tuple[tuple[str, ...], ...] | None] = []
+    for e in entries:
+        c = e.get("cuts")
+        if c is not None and not (isinstance(c, list) and len(c) == NA and all(isinstance(n, list) and all(isinstance(x, str) for x in n) for n in c)):
+            raise ValueError(f"state cuts: expected [names ×3] per entry, got {c!r}")
+        out.append(None if c is None else tuple(tuple(n) for n in c))
+    return out
+
+
 def _tracked_sets(entries: list[dict]) -> dict[str, Any]:
     """NodeTrack's sets of the entries: each step's published set and the one continued from, and the published
     ellipsoids as arrays (xhat, P, rho)."""
@@ -577,6 +596,7 @@ def record_from_parts(
             if any("continues_contained" in e for e in entries)
             else None,
             missed_flags=np.array([e.get("missed") is True for e in entries], dtype=bool) if any("missed" in e for e in entries) else None,
+            cuts=_cuts(entries),
         )
     for t in truth:
         if not isinstance(t, dict) or not isinstance(t.get("step"), int):

@@ -74,6 +74,9 @@ class NodeSummary:
     # what the node's sets may rest on beyond its own data and its neighbours' innovations (roles/judge.py, network_rests:
     # readings and their declarations, its in-neighbours' whole sets, its own bound others rely on); "" where nothing
     rests_on: str = ""
+    # per cut (docs/estimator.md, "One step"), how many of the node's published intervals (β, r and f of every step
+    # it reported) it narrowed, as the node named them (NodeState.cuts)
+    cuts: dict[str, int] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}

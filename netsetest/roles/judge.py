@@ -29,7 +29,7 @@ import numpy as np
 from netsetest.config.schema import NodeConfig, Scenario
 from netsetest.estimator.names import SDP
 from netsetest.estimator.registry import node_set_estimator
-from netsetest.estimator.sector import FaultBound, Sector, measurement_interval, prior_interval, propagated_interval, sector_ok
+from netsetest.estimator.sector import FaultBound, Propagation, Sector, measurement_interval, prior_interval, sector_ok
 from netsetest.messages import NodeState, Truth, state_digest
 from netsetest.proven import ProvenSet, Relation
 from netsetest.models.envelope import MODEL_MISMATCH, OUTSIDE_ENVELOPE
@@ -287,7 +287,7 @@ class Judge:
 
         The reading leaves r = C̄ x̄ in :func:`~netsetest.estimator.sector.measurement_interval`; the node's set of
         the step before, carried through the transition (its ellipsoid, a superset of the set: every detection stays
-        certain), leaves it in :func:`~netsetest.estimator.sector.propagated_interval`; disjoint (beyond rounding):
+        certain), leaves it in :meth:`~netsetest.estimator.sector.Propagation.interval`; disjoint (beyond rounding):
         inconsistent.  Without a declared fault bound the fault is free and any reading after step 0 is possible."""
         k, sen = tr.step, n.sensor
         if n.id not in tr.y:
@@ -300,7 +300,7 @@ class Judge:
         else:
             e = before.continued
             a, b, d = self.sc.model.blend(self.sc.model.weights(prev.vx))
-            pred = propagated_interval(sen, bound, np.asarray(e.xhat), e.P_matrix, e.rho, a, b[:, 0], d[:, 0], prev.u, self.sc.W, self.sc.uncertainty)
+            pred = Propagation(np.asarray(e.xhat), e.P_matrix, e.rho, a, b[:, 0], d[:, 0], prev.u, self.sc.W, self.sc.uncertainty).interval(sen, bound)
         meas = measurement_interval(sen, tr.y[n.id], tr.gamma[n.id])
         slack = CONSISTENCY_RTOL * max(1.0, abs(pred.lo) if math.isfinite(pred.lo) else 0.0, abs(pred.hi) if math.isfinite(pred.hi) else 0.0)
         return meas.hi < pred.lo - slack or meas.lo > pred.hi + slack

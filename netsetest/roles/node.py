@@ -45,12 +45,12 @@ from netsetest.estimator.objective import DEFAULT_OBJECTIVE
 from netsetest.estimator.registry import node_set_estimator
 from netsetest.polygon import Polygon
 from netsetest.estimator.rejoin import predict_x, rejoin_ellipsoid, resume_ellipsoid
-from netsetest.estimator.sdp import NodeSet, LocalEstimator, NeighbourState, Objective, Prepared, UpdateInput, StepResult, Variant
+from netsetest.estimator.sdp import NodeSet, LocalEstimator, NeighbourState, Objective, Prepared, UpdateInput, StepFigures, StepResult, StepSet, Variant
 from netsetest.estimator.sector import FaultBound, Interval, Sector, derive_sector, measurement_interval
 from netsetest.messages import End, Message, NodeInput, NodeState, NodeStatus, Reading, RunScope, decode, encode, state_digest
 from netsetest.models.sensor import NA, NX
 from netsetest.roles.plausibility import innovation_possible, states_disjoint
-from netsetest.sets import set_to_wire
+from netsetest.sets import NO_CUTS, RegionSet, set_to_wire
 
 
 MAX_AHEAD = 50  # steps ahead of our own: more is a corrupt or hostile message (bounds the buffers)
@@ -218,7 +218,7 @@ class Node:
         prior = NodeSet(cfg.x0_hat.copy(), cfg.P0.copy(), self.rho)
         y = float(cfg.sensor.Cbar @ prior.xhat)
         first = est.first(prior, y, gamma)
-        own = NodeSet(first.xhat, first.P, self.rho)
+        own = NodeSet(first.continued.xhat, first.continued.P, self.rho)
         neigh = {j: prior_state(j, NodeSet(sc.node(j).x0_hat, sc.node(j).P0, sc.node(j).rho), None) for j in self.others}
         if self.id in cfg.in_weights:
             neigh[self.id] = prior_state(self.id, own, first.sector)
@@ -231,11 +231,11 @@ class Node:
             est.forget_warm_starts()  # the readings' solver would start the run from this made-up gain
         inp = NodeInput(step=1, node=self.id, y=y, gamma=gamma, u_prev=u, vx_prev=vx, expect_from=self.others)
         decode(encode(inp))
-        decode(encode(self._state_message(Publication(inp, res.status, res, used=self.others))))
+        decode(encode(self._state_message(Publication(inp, res.figures.status, res, used=self.others))))
         for j in self.others:  # the checks every neighbour state of step 1 goes through (results unused)
             nb = neigh[j]
             innovation_possible(self.sensors[j], nb.xhat, nb.P, nb.rho, nb.gamma, nb.sector, nb.innov)
-            states_disjoint(res.xhat, res.P, self.rho, nb.xhat, nb.P, nb.rho)
+            states_disjoint(res.continued.xhat, res.continued.P, self.rho, nb.xhat, nb.P, nb.rho)
 
     # ------------------------------------------------------------------ receiving
 
@@ -506,13 +506,13 @@ class Node:
             if inp.step != 0:
                 return False  # a rejoin needs its own reading
             sector = derive_sector(self.cfg.sensor, FaultBound(), Interval(-np.inf, np.inf), None)
-            self._publish(Publication(inp, "no-reading", StepResult(self.xhat, self.P, "ok", float("nan"), 0.0, "no-reading", sector=sector)))
+            self._publish(Publication(inp, "no-reading", StepResult.of(StepSet(self.xhat, self.P, float("nan")), StepFigures("ok", 0.0, "no-reading"), sector)))
             assert self.own_digest is not None
             self.gap = Gap(0, self.own_digest, self.xhat[:NX].copy(), self.rho * self.P[:NX, :NX])  # the next step resumes from the prior
             return True
         if inp.step == 0:
             res = self.estimator.first(NodeSet(self.xhat, self.P, self.rho), inp.y, inp.gamma)
-            status: NodeStatus = "init" if res.status == "ok" else "init-prior"
+            status: NodeStatus = "init" if res.figures.status == "ok" else "init-prior"
             self._publish(Publication(inp, status, res))
             return True
         have = self.inbox.get(inp.step, {})
@@ -520,7 +520,7 @@ class Node:
             return False  # wait for a neighbour's ellipsoid of this step
         xhat, P = rejoin_ellipsoid(self.cfg.sensor, inp.y, inp.gamma, self.rho, list(have.values()))
         sector = derive_sector(self.cfg.sensor, FaultBound(), measurement_interval(self.cfg.sensor, inp.y, inp.gamma), None)
-        res = StepResult(xhat, P, "ok", float("nan"), 0.0, "rejoin", sector=sector)
+        res = StepResult.of(StepSet(xhat, P, float("nan")), StepFigures("ok", 0.0, "rejoin"), sector)
         self._publish(Publication(inp, "rejoin", res, used=sorted(have), inputs=self._inputs(inp.step, sorted(have), own=False)))
         return True
 
@@ -541,7 +541,7 @@ class Node:
             return
         xhat, P = resume_ellipsoid(self.cfg.sensor, inp.y, inp.gamma, self.rho, xc, Sx)
         sector = derive_sector(self.cfg.sensor, FaultBound(), measurement_interval(self.cfg.sensor, inp.y, inp.gamma), None)
-        res = StepResult(xhat, P, "ok", float("nan"), 0.0, "resume", sector=sector)
+        res = StepResult.of(StepSet(xhat, P, float("nan")), StepFigures("ok", 0.0, "resume"), sector)
         since, digest = self.gap.since, self.gap.digest
         self.gap = None
         self._publish(Publication(inp, "resume", res, inputs=[(self.id, digest)], resumed_from=since))
@@ -588,7 +588,7 @@ class Node:
         self._publish(
             Publication(
                 inp,
-                res.status,
+                res.figures.status,
                 res,
                 used=used,
                 missing=self.missing(),
@@ -632,15 +632,16 @@ class Node:
         fault_bound = FaultBound(self.cfg.fault_rate, self.cfg.fault_size)
         meas = Interval(-np.inf, np.inf) if inp.y is None else measurement_interval(sensor, inp.y, inp.gamma)
         sector = derive_sector(sensor, fault_bound, meas, r_set)
-        res = StepResult(xhat, P, "ok", float("nan"), solve_ms, status, sector=sector)
+        own = StepSet(xhat, P, float("nan"), cuts=s.cuts if isinstance(s, RegionSet) else NO_CUTS)
+        res = StepResult.of(own, StepFigures("ok", solve_ms, status), sector)
         used_readings = [(j, *readings[j]) for j in sorted(readings)] if status == "ok" else []  # "fallback": the last set
         health = bool(used_readings) and self.sc.health_group(self.id) is not None
         self._publish(Publication(inp, status, res, missing=self.missing(), inputs=inputs, wire_set=set_to_wire(s), readings=used_readings, health=health))
 
     def _publish(self, pub: Publication) -> None:
-        """Keep ``pub.res`` as the node's own set (its next step starts from it) and publish ``res.public``."""
+        """Keep ``pub.res`` as the node's own set (its next step starts from it) and publish ``res.published``."""
         inp, res = pub.inp, pub.res
-        self.xhat, self.P, self.region = res.xhat, res.P, res.region
+        self.xhat, self.P, self.region = res.continued.xhat, res.continued.P, res.region
         sector = res.sector
         cbar = self.cfg.sensor.Cbar
         # (no reading: no innovation, so nothing of this step is a neighbour state, our own self-loop's either)
@@ -665,9 +666,9 @@ class Node:
         self.waiting_since, self.give_up = None, False
 
     def _state_message(self, p: Publication) -> NodeState:
-        """The state message of ``p.res.public`` for the step of ``p.inp`` (validated)."""
+        """The state message of ``p.res.published`` for the step of ``p.inp`` (validated)."""
         inp, res = p.inp, p.res
-        pub, sector = res.public, res.sector
+        pub, sector = res.published, res.sector
         innov = None if inp.y is None else float(inp.y - self.cfg.sensor.Cbar @ pub.xhat)
         rho_cert = pub.rho_cert if np.isfinite(pub.rho_cert) else None
         drops = self.drop_report()
@@ -680,7 +681,7 @@ class Node:
             innov=innov,
             status=p.status,
             rho_cert=rho_cert,
-            solve_ms=res.solve_ms,
+            solve_ms=res.figures.solve_ms,
             used=p.used,
             missing=p.missing,
             late=inp.deadline is not None and time.time() > inp.deadline,
@@ -693,4 +694,5 @@ class Node:
             health=p.health,
             sets=p.sets,
             resumed_from=p.resumed_from,
+            cuts=[list(c) for c in pub.cuts] if any(pub.cuts) else [],
         )

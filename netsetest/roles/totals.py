@@ -74,6 +74,7 @@ def state_row(st: NodeState, v: NodeVerdict, contested: bool, bounds: list[list[
         "sector": list(st.sector) if st.sector is not None else None,
         "sector_basis": st.sector_basis,
         "bounds": bounds,
+        "cuts": st.cuts or [[], [], []],  # per coordinate β, r, f: the cuts that narrowed the published interval
     }
 
 
@@ -123,6 +124,7 @@ class NodeTotals:
     dropped: int = 0
     fdi: FdiTotals = field(default_factory=FdiTotals)  # guaranteed fault detection (roles/fdi.py)
     drops: dict[str, int] = field(default_factory=dict)
+    cuts: dict[str, int] = field(default_factory=dict)  # per cut, the published intervals (β, r, f per step) it narrowed
     solve: array = field(default_factory=lambda: array("d"))  # 8 bytes per step: the median needs them
 
     def summary(self, n: NodeConfig, deadline_misses: int, rests_on: str = "") -> NodeSummary:
@@ -168,6 +170,7 @@ class NodeTotals:
             false_detections=self.fdi.false_detections,
             false_detections_covered=self.fdi.false_detections_covered,
             rests_on=rests_on,
+            cuts=dict(sorted(self.cuts.items())),
         )
 
 
@@ -340,6 +343,9 @@ class RunTotals:
         t.width_sum += bounds[2][1] - bounds[2][0]
         t.beta_width_sum += bounds[0][1] - bounds[0][0]
         t.r_width_sum += bounds[1][1] - bounds[1][0]
+        for names in st.cuts:
+            for name in names:
+                t.cuts[name] = t.cuts.get(name, 0) + 1
 
     def fdi(self, i: int, k: int, status: FdiStatus, tr: Truth, covered: bool) -> None:
         """Node i's judged step k's detection status (judged rows only: a contested copy may be forged)."""

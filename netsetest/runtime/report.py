@@ -134,6 +134,20 @@ def car_lines(summary: RunSummary) -> list[str]:
 NETWORK_LINES = 12  # nodes the header lists what they rest on (a large network's others summed up)
 
 
+def cut_lines(summary: RunSummary) -> list[str]:
+    """The cuts behind the published intervals, as the nodes named them (NodeState.cuts), summed over the nodes: how
+    many intervals (β, r, f of every reported step) each cut narrowed; the rest are the solve's or the method's own."""
+    total: dict[str, int] = {}
+    for n in summary.nodes:
+        for name, count in n.cuts.items():
+            total[name] = total.get(name, 0) + count
+    intervals = 3 * sum(n.steps_reported for n in summary.nodes)
+    if not total or not intervals:
+        return []
+    counts = ", ".join(f"{name} {count}" for name, count in sorted(total.items(), key=lambda kv: -kv[1]))
+    return [f"published intervals narrowed by each cut (of {intervals}; the nodes' cuts per node in the summary): {counts}", ""]
+
+
 def network_lines(summary: RunSummary) -> list[str]:
     """The output's header where nodes rest on what their network proves (docs/network.md): per node, the readings,
     the neighbours' sets and the declarations its sets may rest on beyond its own data (NodeSummary.rests_on)."""
@@ -212,6 +226,7 @@ def format_table(summary: RunSummary, strict: bool = False) -> str:
     out.extend(textwrap.wrap(LEGEND, LEGEND_WIDTH))
     out.append("")
     out.extend(fdi_table(summary))
+    out.extend(cut_lines(summary))
     if summary.misses_assumption_broken_total:
         out.append(f"{summary.misses_assumption_broken_total} miss(es) after a broken assumption (not covered by the guarantee).")
     if summary.nodes_missing:

@@ -236,8 +236,8 @@ def test_fast_path_is_never_above_the_cvxpy_optimum_on_saim_data(saim_steps):
     for node, args in saim_steps[::3]:
         a = _estimator(sc, node).step(*args)
         b = _estimator(sc, node, backend="cvxpy").step(*args)
-        assert a.status == b.status == "ok"
-        assert np.trace(a.P) <= np.trace(b.P) * (1 + 1e-5)
+        assert a.figures.status == b.figures.status == "ok"
+        assert np.trace(a.continued.P) <= np.trace(b.continued.P) * (1 + 1e-5)
 
 
 def test_default_backend_does_not_import_cvxpy():
@@ -326,9 +326,10 @@ def test_the_benchmark_solves_the_nodes_own_problem(case: str) -> None:
     est = fast_estimators(sc, "scheduled")  # what the benchmark times
     bases = set()
     for n, c in enumerate(cap.cases):
-        r = est[c.node].step(*c.args).public
+        res = est[c.node].step(*c.args)
+        r = res.published
         e = published[(c.node, n // 6 + 1)]
         assert r.xhat.tolist() == e["published"]["xhat"] and r.P.reshape(9).tolist() == e["published"]["P"], (c.node, n)
-        assert (r.sector.basis if r.sector is not None else "none") == e["sector_basis"]
+        assert (res.sector.basis if res.sector is not None else "none") == e["sector_basis"]
         bases.add(e["sector_basis"])
     assert case == "nsnim" or "fault-bound" in bases

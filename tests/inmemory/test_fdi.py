@@ -61,8 +61,8 @@ def test_a_false_detection_where_the_assumptions_held_is_a_violation(monkeypatch
     def shifted(self: LocalEstimator, prev, inp, prepared=None):
         res = orig(self, prev, inp, prepared)
         if self.node_id == 3:  # StepResult is frozen: the published set replaced, moved by 1 along f
-            pub = dataclasses.replace(res.public, xhat=res.public.xhat + np.array([0.0, 0.0, 1.0]))
-            return dataclasses.replace(res, published=pub) if res.published is not None else pub
+            pub = dataclasses.replace(res.published, xhat=res.published.xhat + np.array([0.0, 0.0, 1.0]))
+            return res.continuing(pub) if res.published is res.continued else dataclasses.replace(res, published=pub)
         return res
 
     monkeypatch.setattr(LocalEstimator, "step", shifted)

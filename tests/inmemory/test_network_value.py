@@ -183,7 +183,7 @@ def test_a_state_lists_the_readings_its_recursion_rests_on() -> None:
 
     def observe(est, prev, inp, res, ms) -> None:  # the StepObserver signature
         k = steps[est.node_id] = steps.get(est.node_id, 0) + 1
-        carried[(est.node_id, k)] = (res.reading_keys, res.public.reading_keys)
+        carried[(est.node_id, k)] = (res.continued.reading_keys, res.published.reading_keys)
 
     res = run_inmemory(sc, "worst", seed=0, observer=observe)
     listed = {(int(i), e["step"]): set(e["readings"]) for i, entries in res.parts["nodes"].items() for e in entries}
@@ -214,7 +214,7 @@ def test_a_recursion_that_misses_on_a_covered_node_step_is_a_violation(
     def broken(self: LocalEstimator, prev, inp, prepared=None):
         res = step(self, prev, inp, prepared)
         # the recursion's fault centre far off; what is published is intact
-        return dataclasses.replace(res, published=res.public, xhat=res.xhat + np.array([0.0, 0.0, 50.0]))
+        return dataclasses.replace(res, continued=dataclasses.replace(res.continued, xhat=res.continued.xhat + np.array([0.0, 0.0, 50.0])))
 
     monkeypatch.setattr(LocalEstimator, "_step", broken)
     sc = load_topology("paper6", case="nsnim", steps=6)
@@ -488,12 +488,12 @@ def test_the_sdp_pins_a_fault_that_every_consistent_majority_needs() -> None:
 
     pinned: dict[int, int] = {}
     for i, _, with_pin, without in _with_and_without("paper6_max_faulty", "health-pin"):
-        assert with_pin.P[2, 2] <= without.P[2, 2] * (1 + 1e-9)  # the recursion set: cut by the pin too, never wider in f
-        if not np.array_equal(with_pin.public.P, without.public.P):
-            assert with_pin.P[2, 2] < without.P[2, 2]
+        assert with_pin.continued.P[2, 2] <= without.continued.P[2, 2] * (1 + 1e-9)  # the recursion set: cut by the pin too, never wider in f
+        if not np.array_equal(with_pin.published.P, without.published.P):
+            assert with_pin.continued.P[2, 2] < without.continued.P[2, 2]
             pinned[i] = pinned.get(i, 0) + 1
-            assert with_pin.public.P[2, 2] < 0.1 * without.public.P[2, 2]
-            assert HEALTH_KEY in with_pin.public.reading_keys
+            assert with_pin.published.P[2, 2] < 0.1 * without.published.P[2, 2]
+            assert HEALTH_KEY in with_pin.published.reading_keys
     assert pinned.get(3, 0) > 10 and pinned.get(5, 0) > 10, pinned
 
 
@@ -507,16 +507,16 @@ def test_the_sdp_cuts_its_fault_to_what_a_faulty_own_sensor_leaves() -> None:
 
     narrowed: dict[int, int] = {}
     for i, prev, res, without in _with_and_without("paper6_car_max_faulty", "health-fault"):
-        for a, b in ((res, without), (res.public, without.public)):
+        for a, b in ((res.continued, without.continued), (res.published, without.published)):
             assert np.array_equal(a.xhat, b.xhat) and np.array_equal(a.P, b.P)
         assert res.region is not None and without.region is not None and np.array_equal(res.region.vertices, without.region.vertices)
         (lo, hi), (lo0, hi0) = (
-            (e[0][2], e[1][2]) for e in (ellipsoid_bounds(s.xhat, np.diag(s.P), prev.rho, s.fault_range) for s in (res.public, without.public))
+            (e[0][2], e[1][2]) for e in (ellipsoid_bounds(s.xhat, np.diag(s.P), prev.rho, s.fault_range) for s in (res.published, without.published))
         )
         assert lo0 <= lo <= hi <= hi0
         if (lo, hi) != (lo0, hi0):
             narrowed[i] = narrowed.get(i, 0) + 1
-            assert HEALTH_KEY in res.public.reading_keys
+            assert HEALTH_KEY in res.published.reading_keys
     assert all(narrowed.get(i, 0) >= 15 for i in range(1, 7)), narrowed
 
 

@@ -290,6 +290,32 @@ def test_inspect_state_shows_every_interval_and_the_cut_it_rests_on(nsnim: dict[
         assert np.all(hi[5:] - lo[5:] < e_hi[5:] - e_lo[5:])
 
 
+def test_every_published_interval_carries_the_cuts_that_made_it(saim: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """The cuts' names travel from the node (NodeState.cuts) to the record, ``inspect --json``, the summary and the
+    API, and ``rests_on`` is read from them (no bounds compared downstream): every row names its β, r, f cuts, a β or
+    r interval rests on the region exactly where the region cut narrowed it, and the summary counts what the rows name."""
+    from netsetest.api import result_of
+    from netsetest.sets import CUT_NAMES
+
+    rec = load_record(saim["record"])
+    assert main(["inspect", str(saim["record"]), "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    summary = RunSummary.from_dict(json.loads(saim["summary"].read_text()))
+    for node, node_rows in rows.items():
+        counts: dict[str, int] = {}
+        for r in node_rows:
+            for name in ("beta", "r", "fault"):
+                cuts = r[f"{name}_cuts"]
+                assert isinstance(cuts, list) and set(cuts) <= set(CUT_NAMES), (node, r["step"], cuts)
+                for c in cuts:
+                    counts[c] = counts.get(c, 0) + 1
+            assert all(r[f"{c}_rests_on"] == ("region" if "region" in r[f"{c}_cuts"] else "ellipsoid") for c in ("beta", "r"))
+            assert r["fault_rests_on"] == ("fault range" if r["fault_cuts"] else "ellipsoid")
+        assert counts == next(n for n in summary.nodes if n.id == int(node)).cuts
+        assert [list(c[2]) for c in result_of(rec).nodes[int(node)].cuts] == [r["fault_cuts"] for r in node_rows]
+    assert any(r["fault_cuts"] for rs in rows.values() for r in rs)  # SAIM: the region and the size cut narrow the fault
+
+
 def test_inspect_unknown_node(nsnim: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["inspect", str(nsnim["record"]), "--node", "99"]) == 2
     assert "no node 99" in capsys.readouterr().err

@@ -33,7 +33,7 @@ from netsetest.estimator.sector import (
     derive_sector,
     measurement_interval,
     prior_interval,
-    propagated_interval,
+    Propagation,
     sector_ok,
 )
 from netsetest.models.sensor import Sensor
@@ -74,7 +74,7 @@ def _random_spd(rng: np.random.Generator) -> np.ndarray:
 
 
 @pytest.mark.parametrize("bound", [FaultBound(rate=0.2), FaultBound(size=0.2), FaultBound(0.2, 0.2)])
-def test_propagated_interval_contains_and_attains(bound):
+def test_propagation_interval_contains_and_attains(bound):
     rng = np.random.default_rng(2)
     sc = load_topology(PAPER6, "saim")
     W = sc.W
@@ -82,7 +82,7 @@ def test_propagated_interval_contains_and_attains(bound):
         xhat, P, rho = rng.normal(size=3) * 0.1, _random_spd(rng), rng.uniform(0.5, 2.0)
         a, b, d = sc.model.blend(sc.model.weights(rng.uniform(22.3, 33.3)))
         u = rng.uniform(0.0175, 0.0542)
-        iv = propagated_interval(SENSOR, bound, xhat, P, rho, a, b[:, 0], d[:, 0], u, W)
+        iv = Propagation(xhat, P, rho, a, b[:, 0], d[:, 0], u, W).interval(SENSOR, bound)
         chol = np.linalg.cholesky(rho * P)
         best = -math.inf
         for _ in range(400):
@@ -242,8 +242,8 @@ def test_bank_recurs_on_and_publishes_the_trace_set_where_no_cut_reshapes_it():
     for i, prev, inp in captured[::7]:
         make = lambda obj: sdp.LocalEstimator.for_node(sc, i, objective=obj)  # noqa: E731  # a one-line local helper
         bank, trace = make("bank").step(prev, inp), make("trace").step(prev, inp)
-        assert bank.status == trace.status == "ok"
-        for a, b in ((bank, trace), (bank.public, trace.public)):
+        assert bank.figures.status == trace.figures.status == "ok"
+        for a, b in ((bank.continued, trace.continued), (bank.published, trace.published)):
             np.testing.assert_array_equal(a.P, b.P)
             np.testing.assert_array_equal(a.xhat, b.xhat)
             assert a.fault_range == b.fault_range
@@ -260,14 +260,14 @@ def test_the_size_cut_narrows_the_published_fault_only_where_the_sector_rests_on
         plain = sdp.LocalEstimator.for_node(sc, i)
         plain.cuts = tuple(c for c in plain.cuts if c.name != "fault-size")  # the same estimator without the cut
         with_cut, without = sdp.LocalEstimator.for_node(sc, i).step(prev, inp), plain.step(prev, inp)
-        np.testing.assert_array_equal(with_cut.P, without.P)  # the recursion set is the solved one
+        np.testing.assert_array_equal(with_cut.continued.P, without.continued.P)  # the recursion set is the solved one
         if with_cut.sector is None or with_cut.sector.basis != "fault-bound":
-            np.testing.assert_array_equal(with_cut.public.P, without.public.P)
+            np.testing.assert_array_equal(with_cut.published.P, without.published.P)
             continue
         bound += 1
-        if with_cut.public is not without.public and not np.array_equal(with_cut.public.P, without.public.P):
+        if with_cut.published is not without.published and not np.array_equal(with_cut.published.P, without.published.P):
             cut += 1
-            assert with_cut.public.P[2, 2] < without.public.P[2, 2]
+            assert with_cut.published.P[2, 2] < without.published.P[2, 2]
     assert cut > 0.5 * bound > 0
 
 

@@ -64,6 +64,7 @@ MESSAGES = [
     _state(status="init-prior", sector=(1.0, 0.0), sector_basis="measurement"),
     _state(status="no-reading", innov=None, rho_cert=None, used=[], missing=[]),  # a step without the node's reading
     _state(status="fallback", innov=None),  # a set estimator's last set again, at a step without its reading
+    _state(region=[0.0, 0.0, 1.0, 0.0, 1.0, 1.0], fault=[-0.2, 0.2], cuts=[["region"], ["region"], ["fault-size", "region", "health-fault"]]),
     Truth(
         step=80,
         x=[1e-3 / 7, -0.2 / 3],
@@ -205,6 +206,8 @@ BAD = [
     ("innov-none-ok", _mut(_state(), innov=None), "invalid", "innov"),
     ("innov-none-resume", _mut(_state(), innov=None, status="resume", resumed_from=3), "invalid", "innov"),
     ("no-reading-with-innov", _mut(_state(), status="no-reading"), "invalid", "innov"),
+    ("cuts-unknown", _mut(_state(), cuts=[["region"], [], ["luck"]]), "invalid", "cuts"),  # only the cuts there are
+    ("cuts-2", _mut(_state(), cuts=[["region"], ["region"]]), "invalid", "cuts"),  # one list per coordinate β, r, f
 ]
 
 

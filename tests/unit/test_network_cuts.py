@@ -17,11 +17,11 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from netsetest.config.schema import load_topology
-from netsetest.estimator.cuts import NodeSet, StepResult
+from netsetest.estimator.cuts import NodeSet, StepFigures, StepResult, StepSet
 from netsetest.estimator.sdp import Blend, LocalEstimator, NeighbourState, UpdateInput
-from netsetest.estimator.sector import Interval
 from netsetest.models.sensor import NA
 from netsetest.polygon import Polygon
+from netsetest.sets import Slab
 
 ROOT = Path(__file__).resolve().parents[2]
 NARROWED = 0.05  # the deliberately unsound cut: 5 % narrower than the one under test
@@ -201,8 +201,8 @@ def _slab_keeps(slabs: Callable[[UpdateInput], dict], reading: tuple[UpdateInput
     out = slabs(inp)
     if j not in out:
         return  # no slab: nothing cut
-    c, iv = out[j]
-    v = xs @ c[:2]
+    iv = out[j]
+    v = xs @ iv.a[:2]
     slack = RTOL * (1.0 + np.abs(v).max(initial=0.0))
     assert np.all((iv.lo - slack <= v) & (v <= iv.hi + slack)), "a truth the reading allows was cut"
 
@@ -224,7 +224,7 @@ def test_the_slab_test_fails_on_a_slab_narrowed_by_5_percent() -> None:
 
     def narrowed(inp: UpdateInput) -> dict:
         out = {}
-        for key, (c, iv) in est._bounded_slabs(inp)[0].items():
+        for key, iv in est._bounded_slabs(inp)[0].items():
             w = (
                 NARROWED * (iv.hi - iv.lo) / 2
                 if math.isfinite(iv.hi - iv.lo)
@@ -232,7 +232,7 @@ def test_the_slab_test_fails_on_a_slab_narrowed_by_5_percent() -> None:
                 if math.isfinite(iv.lo) or math.isfinite(iv.hi)
                 else 0.0
             )
-            out[key] = (c, Interval(iv.lo + w, iv.hi - w))
+            out[key] = Slab(iv.a, iv.lo + w, iv.hi - w)
         return out
 
     @settings(
@@ -248,6 +248,6 @@ def test_the_slab_test_fails_on_a_slab_narrowed_by_5_percent() -> None:
 
 def test_a_step_rests_on_the_neighbours_whose_sets_cut_it() -> None:
     """What the node lists (StepResult.rests_on): the neighbours' sets of both sets, the published one's and the continued one's."""
-    pub = StepResult(np.zeros(3), np.eye(3), "ok", 1.0, 0.0, "solved", set_keys=frozenset({2}))
-    res = StepResult(np.zeros(3), np.eye(3), "ok", 1.0, 0.0, "solved", published=pub, set_keys=frozenset({6}))
-    assert res.rests_on.sets == {2, 6} and dataclasses.replace(res, published=None).rests_on.sets == {6}
+    pub = StepSet(np.zeros(3), np.eye(3), 1.0, set_keys=frozenset({2}))
+    res = StepResult(StepSet(np.zeros(3), np.eye(3), 1.0, set_keys=frozenset({6})), pub, StepFigures("ok", 0.0, "solved"))
+    assert res.rests_on.sets == {2, 6} and dataclasses.replace(res, published=res.continued).rests_on.sets == {6}

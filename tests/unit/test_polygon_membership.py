@@ -276,11 +276,11 @@ def test_the_scale_decode_takes_holds_every_prior_a_topology_may_declare() -> No
 def test_a_node_publishes_without_a_region_no_receiver_would_take() -> None:
     """StepResult.published_set leaves out a region decode would drop (here beyond MAX_COORDINATE): the ellipsoid ∩
     the fault range is a superset (sound), and the node never raises on its own set."""
-    from netsetest.estimator.cuts import StepResult
+    from netsetest.estimator.cuts import StepFigures, StepResult, StepSet
     from netsetest.polygon import Polygon
 
     huge = Polygon.box(np.array([-2 * MAX_COORDINATE, -1.0]), np.array([2 * MAX_COORDINATE, 1.0]))
-    res = StepResult(np.zeros(3), np.eye(3), "ok", 1.0, 0.0, "solved", fault_range=(-0.5, 0.5), region=huge)
+    res = StepResult.of(StepSet(np.zeros(3), np.eye(3), 1.0, fault_range=(-0.5, 0.5)), StepFigures("ok", 0.0, "solved")).replaced(region=huge)
     pub = res.published_set(1.0)
     assert pub.region is None and pub.fault == [-0.5, 0.5]
     inside = Polygon.box(np.array([-0.5, -0.5]), np.array([0.5, 0.5]))

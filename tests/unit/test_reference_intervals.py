@@ -9,7 +9,7 @@ import numpy as np
 
 from netsetest.config.schema import load_topology
 from netsetest.estimator.sdp import NodeSet, LocalEstimator, UpdateInput
-from netsetest.estimator.sector import measurement_interval
+from netsetest.estimator.sector import Interval, measurement_interval
 
 REFERENCE = Path(__file__).resolve().parents[2] / "topologies" / "paper6_reference.toml"
 
@@ -35,7 +35,7 @@ def test_only_declared_references_are_read() -> None:
 def test_a_reading_inside_the_range_is_its_measurement_interval() -> None:
     sc, est, prior = _setup("nsnim")
     got = est.context(prior, _inp(sc, {3: (0.03, 1.0)})).slabs
-    c, iv = got[3]
+    c, iv = got[3].a, Interval(got[3].lo, got[3].hi)
     assert list(c) == [0.0, 0.18, 0.0] and iv == measurement_interval(sc.node(3).sensor, 0.03, 1.0)  # c̄ = [C_3, 0]
     assert math.isfinite(iv.lo) and math.isfinite(iv.hi)
 
@@ -49,9 +49,9 @@ def test_a_reading_at_the_limit_takes_its_open_side_from_the_propagated_set() ->
     meas = measurement_interval(s3, y, 0.8)
     assert math.isfinite(meas.lo) and meas.hi == math.inf
     got = est.context(prior, _inp(sc, {3: (y, 0.8)})).slabs
-    iv = got[3][1]
+    iv = got[3]
     assert iv.lo == meas.lo and math.isfinite(iv.hi) and iv.hi > iv.lo
     # and the estimator publishes a certified set that uses it (its gain on the reading is not zero)
     res = est.step(prior, _inp(sc, {3: (y, 0.8)}))
-    assert res.status == "ok"
-    assert res.public.reading_keys == {3} and np.any(res.public.L)
+    assert res.figures.status == "ok"
+    assert res.published.reading_keys == {3} and np.any(res.published.L)

@@ -14,12 +14,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from netsetest.config.schema import load_topology
-from netsetest.estimator.cuts import HEALTH_FAULT, PIN_FLOOR, STEP_CUTS, NodeSet, Rests, StepContext, StepResult, ellipse_cut, seed
+from netsetest.estimator.cuts import HEALTH_FAULT, PIN_FLOOR, STEP_CUTS, NodeSet, Rests, StepContext, StepFigures, StepResult, StepSet, ellipse_cut, seed
 from netsetest.estimator.health import HEALTH_KEY, HealthAssessment, Others
 from netsetest.estimator.sdp import LocalEstimator, UpdateInput
 from netsetest.estimator.sector import Interval, Sector
 from netsetest.models.sensor import Sensor
 from netsetest.polygon import Polygon
+from netsetest.sets import Slab
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -78,17 +79,17 @@ def _inside(res: StepResult, x: np.ndarray, rho: float) -> np.ndarray:
     """(n, 2): whether each point x̄ (n, 3) lies in the set the node continues from (ellipsoid ∩ region) and in the
     published one (ellipsoid ∩ fault range ∩ region), with the rounding allowance RTOL."""
 
-    def member(s: StepResult) -> np.ndarray:
+    def member(s: StepSet) -> np.ndarray:
         e = x - s.xhat
         ok = np.einsum("ij,ij->i", e, np.linalg.solve(s.P, e.T).T) <= rho * (1 + RTOL)
         if s.fault_range is not None:
             slack = RTOL * (1 + abs(s.fault_range[0]) + abs(s.fault_range[1]))
             ok &= (s.fault_range[0] - slack <= x[:, 2]) & (x[:, 2] <= s.fault_range[1] + slack)
-        if s.region is not None:  # in it, or within RTOL of its extent from it (a point on a cut face)
-            ok &= _within(s.region, x[:, :2], RTOL * (1 + float(np.abs(s.region.vertices).max())))
+        if res.region is not None:  # in it, or within RTOL of its extent from it (a point on a cut face)
+            ok &= _within(res.region, x[:, :2], RTOL * (1 + float(np.abs(res.region.vertices).max())))
         return ok
 
-    return np.stack([member(res), member(res.public)], axis=1)
+    return np.stack([member(res.continued), member(res.published)], axis=1)
 
 
 def _within(region: Polygon, x: np.ndarray, slack: float = 0.0) -> np.ndarray:
@@ -118,13 +119,14 @@ def _step(draw: st.DrawFn, kofn: bool = False) -> tuple[StepContext, StepResult,
     published = None
     if draw(st.booleans()):  # a published ellipsoid of its own, through the same centre
         q = rng.normal(size=(3, 3)) * 0.3 + np.eye(3)
-        published = StepResult(xhat + 0.1 * half * rng.normal(size=3), 1.3 * q @ P @ q.T, "ok", rho, 0.0, "solved")
+        published = StepSet(xhat + 0.1 * half * rng.normal(size=3), 1.3 * q @ P @ q.T, rho)
     fault_range = None
     if draw(st.booleans()):
         fault_range = (float(xhat[2] - half[2] * rng.uniform(0.2, 1.2)), float(xhat[2] + half[2] * rng.uniform(0.2, 1.2)))
-        published = dataclasses.replace(published or StepResult(xhat, P, "ok", rho, 0.0, "solved"), fault_range=fault_range)
+        published = dataclasses.replace(published or StepSet(xhat, P, rho), fault_range=fault_range)
     basis = draw(st.sampled_from(["fault-bound", "measurement", "assumed"]))
-    res = StepResult(xhat, P, "ok", rho, 0.0, "solved", sector=Sector(0.8, 0.2, basis), published=published)
+    continued = StepSet(xhat, P, rho)
+    res = StepResult(continued, published or continued, StepFigures("ok", 0.0, "solved"), sector=Sector(0.8, 0.2, basis))
     inner = draw(st.booleans())  # a region and a measurement well inside the ellipsoids: their faces bind, not its
     reach = (0.05, 0.4) if inner else (0.3, 1.5)
     moved = Polygon.box(xhat[:2] - half[:2] * rng.uniform(*reach, 2), xhat[:2] + half[:2] * rng.uniform(*reach, 2))
@@ -134,10 +136,10 @@ def _step(draw: st.DrawFn, kofn: bool = False) -> tuple[StepContext, StepResult,
     meas = Interval(float(lo) if draw(st.booleans()) else -np.inf, float(hi) if draw(st.booleans()) else np.inf)
     c = np.r_[rng.normal(size=2), 0.0]
     cv = pts @ c
-    slabs = {7: (c, Interval(*np.quantile(cv, sorted(rng.uniform(0.0, 1.0, 2)))))} if draw(st.booleans()) else {}
+    slabs = {7: Slab(c, *np.quantile(cv, sorted(rng.uniform(0.0, 1.0, 2))))} if draw(st.booleans()) else {}
     c2 = np.r_[rng.normal(size=2), 0.0]  # a bounded reading's slab (it cuts the region alone), one side open or not
     ends = np.quantile(pts @ c2, sorted(rng.uniform(0.0, 1.0, 2)))
-    region_slabs = {8: (c2, Interval(float(ends[0]) if draw(st.booleans()) else -np.inf, float(ends[1])))} if draw(st.booleans()) else {}
+    region_slabs = {8: Slab(c2, float(ends[0]) if draw(st.booleans()) else -np.inf, float(ends[1]))} if draw(st.booleans()) else {}
     health = _health(draw, rng, pts, own) if kofn or draw(st.booleans()) else None
     if kofn or draw(st.booleans()):  # the region the step's region cut left (what the health-fault cut reads)
         res = dataclasses.replace(res, region=moved)
@@ -203,11 +205,11 @@ def _facts(name: str, ctx: StepContext, res: StepResult, x: np.ndarray) -> np.nd
     st_ = ctx.statics
     every = np.ones(len(x), dtype=bool)
     readings = every.copy()
-    for c, lo_hi in ctx.slabs.values():
-        readings &= (lo_hi.lo <= x @ c) & (x @ c <= lo_hi.hi)
+    for sl in ctx.slabs.values():
+        readings &= (sl.lo <= x @ sl.a) & (x @ sl.a <= sl.hi)
     bounded_readings = every.copy()
-    for c, lo_hi in ctx.region_slabs.values():
-        bounded_readings &= (lo_hi.lo <= x @ c) & (x @ c <= lo_hi.hi)
+    for sl in ctx.region_slabs.values():
+        bounded_readings &= (sl.lo <= x @ sl.a) & (x @ sl.a <= sl.hi)
     size = st_.fault_bound.size
     relied = st_.own_bound or (res.sector is not None and res.sector.basis == "fault-bound")  # the declared size, where the step rests on it
     bounded = every if size is None or not relied else np.abs(x[:, 2]) <= size
@@ -273,20 +275,20 @@ def test_the_health_fault_cut_keeps_every_point_of_its_input_that_a_hypothesis_a
 def test_a_step_rests_on_the_readings_its_sets_were_cut_by() -> None:
     """What the node lists (StepResult.rests_on): the readings of both sets, the published one's and the continued
     one's, as node ids, and whether the k-of-N facts are among them (the estimator's key for them is no node)."""
-    pub = StepResult(np.zeros(3), np.eye(3), "ok", 1.0, 0.0, "solved", reading_keys=frozenset({3, HEALTH_KEY}))
-    res = StepResult(np.zeros(3), np.eye(3), "ok", 1.0, 0.0, "solved", published=pub, reading_keys=frozenset({4}))
+    pub = StepSet(np.zeros(3), np.eye(3), 1.0, reading_keys=frozenset({3, HEALTH_KEY}))
+    res = StepResult(StepSet(np.zeros(3), np.eye(3), 1.0, reading_keys=frozenset({4})), pub, StepFigures("ok", 0.0, "solved"))
     assert res.rests_on == Rests(frozenset({3, 4}), True)
-    assert dataclasses.replace(res, published=None).rests_on == Rests(frozenset({4}), False)
+    assert dataclasses.replace(res, published=res.continued).rests_on == Rests(frozenset({4}), False)
 
 
 def test_the_region_cut_rests_on_the_bounded_readings_and_the_neighbours_sets_it_used() -> None:
     """A region cut by a bounded reading's slab and moved from a neighbour's set names both (the node lists them)."""
     ctx = _context()
-    res = StepResult(np.zeros(3), 1e-4 * np.eye(3), "ok", 1.0, 0.0, "solved")
+    res = StepResult.of(StepSet(np.zeros(3), 1e-4 * np.eye(3), 1.0), StepFigures("ok", 0.0, "solved"))
     c = np.array([0.0, 1.0, 0.0])
     out = next(x for x in STEP_CUTS if x.name == "region").apply(
         dataclasses.replace(
-            ctx, moved=Polygon.box(np.array([-0.01, -0.01]), np.array([0.01, 0.01])), region_slabs={5: (c, Interval(-0.005, np.inf))}, sets=frozenset({2})
+            ctx, moved=Polygon.box(np.array([-0.01, -0.01]), np.array([0.01, 0.01])), region_slabs={5: Slab(c, -0.005, np.inf)}, sets=frozenset({2})
         ),
         res,
     )

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from netsetest.estimator.slab import cut
+from netsetest.sets import Slab
 
 
 def _points(rng: np.random.Generator, xhat: np.ndarray, P: np.ndarray, rho: float, n: int) -> np.ndarray:
@@ -37,7 +38,7 @@ def test_the_cut_contains_the_ellipsoid_inside_the_interval(seed: int, direction
     else:  # both faces inside: a shallow cut across a short axis may gain nothing in the trace
         lo, hi = xc - half * rng.uniform(0.2, 0.5), xc + half * rng.uniform(0.0, 0.3)
     weights = np.array([1.0, 1.0, float(rng.choice([1.0, 30.0]))])
-    out = cut(xhat, P, rho, c, lo, hi, weights)
+    out = cut(xhat, P, rho, Slab(c, lo, hi), weights)
     assert out is not None
     centre, P_new, rho_c = out
     assert np.isfinite(rho_c)
@@ -60,6 +61,6 @@ def test_the_cut_contains_the_ellipsoid_inside_the_interval(seed: int, direction
 def test_an_interval_that_does_not_cut_leaves_the_set_alone() -> None:
     P, xhat = np.diag([1.0, 2.0, 0.5]), np.array([0.1, -0.2, 0.3])
     half, e3 = np.sqrt(0.5), np.array([0.0, 0.0, 1.0])
-    assert cut(xhat, P, 1.0, e3, xhat[2] - 2 * half, xhat[2] + 2 * half, None) is None  # wider than the set
-    assert cut(xhat, P, 1.0, e3, xhat[2] + 2 * half, xhat[2] + 3 * half, None) is None  # disjoint: not a cut
-    assert cut(xhat, P, 1.0, e3, -np.inf, np.inf, None) is None
+    assert cut(xhat, P, 1.0, Slab(e3, xhat[2] - 2 * half, xhat[2] + 2 * half), None) is None  # wider than the set
+    assert cut(xhat, P, 1.0, Slab(e3, xhat[2] + 2 * half, xhat[2] + 3 * half), None) is None  # disjoint: not a cut
+    assert cut(xhat, P, 1.0, Slab(e3, -np.inf, np.inf), None) is None
