@@ -94,7 +94,7 @@ def test_a_saturated_reading_still_bounds_the_fault_on_its_open_side(name: str) 
             narrower = s.fault[0] > o_lo[2] + 1e-9 if side == 0 else s.fault[1] < o_hi[2] - 1e-9
             if narrower and "region" in s.cuts[2]:
                 cut += 1
-            truth = next(t for t in rec.truth if t["step"] == d.step)["faults"][str(node)]
+            truth = next(t for t in rec.truth if t["step"] == d.step)["faults"][node]
             assert s.fault[0] - 1e-9 <= truth <= s.fault[1] + 1e-9
     assert cut > 0, f"{name}: no saturated step's fault range cut by the region"
 
