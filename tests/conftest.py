@@ -12,10 +12,24 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from fuzzing import THOROUGH, THOROUGH_EXAMPLES
+from hypothesis import HealthCheck, settings
 
 # the Zenoh tests' fixtures (``procs``: every process a test starts is stopped after it), for every module
 pytest_plugins = ["zenoh_helpers"]
 LAYERS = ("unit", "inmemory", "process")  # tests/<layer>/: each test is marked with its folder's layer
+
+# HYPOTHESIS_PROFILE=thorough: the long run of the cuts' and the polygon operations' properties (DEVELOPERS.md), random
+# examples, no database; the tests that set their own count take it from fuzzing.examples
+settings.register_profile(
+    THOROUGH,
+    max_examples=THOROUGH_EXAMPLES,
+    derandomize=False,
+    database=None,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
+)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
 
 
 # A shell starting pytest in the background without job control (`cmd &` in a script, nohup) hands it SIGINT

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fuzzing import examples
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
@@ -107,7 +108,7 @@ def _keeps_the_intersection(within: Callable[[Polygon, Polygon], Polygon | None]
     assert all(_near(cut, p) for p in both), "a point of both regions was cut"
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=examples(100), deadline=None)
 @given(_two_regions())
 def test_a_region_cut_by_a_neighbours_keeps_every_point_of_both(regions: tuple[Polygon, Polygon, np.ndarray]) -> None:
     """Polygon.within: every point both regions hold (the truth, where both sets held it) is kept."""
@@ -139,7 +140,7 @@ def _estimator() -> tuple[LocalEstimator, object]:
     return LocalEstimator.for_node(sc, 1), sc
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(_two_regions(), st.floats(0.0, 1.0), st.integers(0, 2**32 - 1))
 def test_the_moved_region_holds_every_successor_of_a_point_of_the_prior_and_the_neighbours_sets(
     regions: tuple[Polygon, Polygon, np.ndarray], speed: float, seed: int
@@ -207,7 +208,7 @@ def _slab_keeps(slabs: Callable[[UpdateInput], dict], reading: tuple[UpdateInput
     assert np.all((iv.lo - slack <= v) & (v <= iv.hi + slack)), "a truth the reading allows was cut"
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=examples(150), deadline=None)
 @given(_reading())
 def test_a_bounded_readings_slab_keeps_every_state_its_hypotheses_allow(reading: tuple[UpdateInput, int, np.ndarray]) -> None:
     """C_j x⁺ of every truth whose measurement is the reading, with f_j⁺ within the declared size and rate of j's
