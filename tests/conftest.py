@@ -15,6 +15,8 @@ import pytest
 from fuzzing import THOROUGH, THOROUGH_EXAMPLES
 from hypothesis import HealthCheck, settings
 
+from netsetest import polygon
+
 # the Zenoh tests' fixtures (``procs``: every process a test starts is stopped after it), for every module
 pytest_plugins = ["zenoh_helpers"]
 LAYERS = ("unit", "inmemory", "process")  # tests/<layer>/: each test is marked with its folder's layer
@@ -30,6 +32,22 @@ settings.register_profile(
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
+
+# The polygon operations' backend (netsetest/polygon.py): the plain-Python one for the session and every process it
+# starts (each compiled one would pay numba's import and cache load, about a second, at its start: DEVELOPERS.md),
+# unless the environment chose; the polygon tests run on both (the polygon_backend fixture)
+os.environ.setdefault(polygon.BACKEND_ENV, "python")
+
+
+@pytest.fixture(scope="module", params=polygon.BACKENDS)
+def polygon_backend(request: pytest.FixtureRequest) -> Iterator[str]:
+    """Each of the polygon operations' backends in turn (module-scoped: Hypothesis's tests take no function-scoped
+    fixture); the compiled one skipped where numba is not installed (the ``fast`` extra)."""
+    if request.param == "compiled":
+        pytest.importorskip("numba", reason="the compiled polygon backend needs numba (the fast extra)")
+    before = polygon._use(request.param)
+    yield request.param
+    polygon._use(before)
 
 
 # A shell starting pytest in the background without job control (`cmd &` in a script, nohup) hands it SIGINT

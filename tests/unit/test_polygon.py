@@ -5,11 +5,14 @@ the cuts after it, then the cuts), and the cut and the reduction give what they 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from fuzzing import examples
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from netsetest.polygon import MARGIN, MAX_VERTICES, Polygon
+
+pytestmark = pytest.mark.usefixtures("polygon_backend")  # both backends: compiled (numba) and plain Python
 
 finite = st.floats(-1.0, 1.0, allow_nan=False)
 

@@ -28,6 +28,7 @@ import math
 from fractions import Fraction
 
 import numpy as np
+import pytest
 from exact_polygons import EPS, Point, cut_rounding, move_rounding, reduction_rounding, sum_rounding
 from exact_polygons import exact as _exact
 from exact_polygons import gap as _gap
@@ -41,6 +42,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from netsetest.polygon import DUPLICATE, MARGIN, ROUNDING, Polygon
+
+pytestmark = pytest.mark.usefixtures("polygon_backend")  # both backends: compiled (numba) and plain Python
 
 EXAMPLES = long_run()  # None: the short seeded run (fuzzing.py)
 FUZZ = settings(
