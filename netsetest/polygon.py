@@ -9,6 +9,10 @@ what every earlier reading proved, as the exact limit does, at a bounded number 
 Vertices are stored counter-clockwise as plain floats, n ≥ 3; a flat polygon (a segment, a point: fewer distinct
 vertices, or all on one line) only where its input was flat or a cut left a sliver below the rounding.  Every
 operation reads a polygon as the convex hull of its vertices, whatever their order.
+
+The move, the cut and the reduction run here in plain Python, or compiled (``NETSETEST_POLYGON=compiled``, the
+``fast`` extra: netsetest/polygon_compiled.py), step for step the same operations and the same vertices; whatever
+the compiled move cannot decide in floating point it hands to the plain-Python one here.
 """
 
 from __future__ import annotations
@@ -22,6 +26,8 @@ from fractions import Fraction
 from types import ModuleType
 
 import numpy as np
+
+from netsetest.extras import require
 
 MIN_VERTICES = 3
 MAX_VERTICES = 24  # the reduction keeps at most this many (each step adds about 8)
@@ -268,36 +274,36 @@ class Polygon:
         return Polygon._of(v)
 
 
-BACKEND_ENV = "NETSETEST_POLYGON"  # "python": the plain-Python operations even where numba is installed
+BACKEND_ENV = "NETSETEST_POLYGON"  # "compiled": the move, the cut and the reduction compiled (the fast extra)
 BACKENDS = ("compiled", "python")
-_kernels: ModuleType | None = None  # netsetest.polygon_compiled once loaded (the compiled backend)
-_backend: str | None = None  # None: not chosen yet (on first use: the environment's, else compiled where numba is)
+# Plain Python unless chosen: a process's first compiled operation costs about 0.5 s of CPU (numba's import and its
+# on-disk cache; 12 s to compile where nothing is cached), which a node process's start-up pays and a short run
+# never wins back (about 0.1 ms per NSNIM step; DEVELOPERS.md, "Dependencies")
+_kernels: ModuleType | None = None  # netsetest.polygon_compiled once loaded
+_backend: str | None = None  # None: not chosen yet (on first use: BACKEND_ENV's, else python)
 
 
 def _compiled() -> ModuleType | None:
     """The compiled kernels where they are the backend, else None (the plain-Python operations)."""
     if _backend is None:
-        _use(os.environ.get(BACKEND_ENV) or None)
+        _use(os.environ.get(BACKEND_ENV) or "python")
     return _kernels if _backend == "compiled" else None
 
 
-def _use(backend: str | None) -> str:
-    """Choose the backend of the hot operations: ``compiled`` (numba: netsetest/polygon_compiled.py), ``python``, or
-    None (compiled where numba is installed, else python); returns the one before.  ``compiled`` without numba is
-    an ImportError (the ``fast`` extra); any other name a ValueError naming the choices."""
+def _use(backend: str) -> str:
+    """Choose the backend of the hot operations, ``compiled`` (numba: netsetest/polygon_compiled.py) or ``python``;
+    returns the one before.  ``compiled`` without numba is extras.MissingExtra (the ``fast`` extra: one line, exit
+    2 in the CLI); any other name a ValueError naming the choices."""
     global _backend, _kernels
-    if backend not in (None, *BACKENDS):
+    if backend not in BACKENDS:
         raise ValueError(f"{BACKEND_ENV}={backend!r}: the polygon backend is one of {', '.join(BACKENDS)}")
     before = _backend or "python"
-    if backend != "python" and _kernels is None:
-        try:
-            from netsetest import polygon_compiled
+    if backend == "compiled" and _kernels is None:
+        require("numba", f"{BACKEND_ENV}=compiled")
+        from netsetest import polygon_compiled
 
-            _kernels = polygon_compiled
-        except ImportError:
-            if backend == "compiled":
-                raise ImportError("the compiled polygon backend needs numba: pip install 'netsetest[fast]'") from None
-    _backend = backend or ("compiled" if _kernels is not None else "python")
+        _kernels = polygon_compiled
+    _backend = backend
     return before
 
 

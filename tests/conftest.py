@@ -33,10 +33,8 @@ settings.register_profile(
 )
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
 
-# The polygon operations' backend (netsetest/polygon.py): the plain-Python one for the session and every process it
-# starts (each compiled one would pay numba's import and cache load, about a second, at its start: DEVELOPERS.md),
-# unless the environment chose; the polygon tests run on both (the polygon_backend fixture)
-os.environ.setdefault(polygon.BACKEND_ENV, "python")
+# The polygon operations' backend (netsetest/polygon.py): NETSETEST_POLYGON's if set (the whole suite compiled:
+# NETSETEST_POLYGON=compiled pytest), else plain Python; the polygon tests run on both (the polygon_backend fixture)
 
 
 @pytest.fixture(scope="module", params=polygon.BACKENDS)

@@ -9,6 +9,7 @@ tests/inmemory/test_polygon_runs_same.py."""
 
 from __future__ import annotations
 
+import sys
 import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -20,6 +21,7 @@ from hypothesis import strategies as st
 from test_polygon_exact import FUZZ, car_like, matrices, polygons, segment_lists, slabs
 
 from netsetest import polygon
+from netsetest.extras import MissingExtra
 from netsetest.polygon import Polygon
 
 kernels = pytest.importorskip("netsetest.polygon_compiled", reason="the compiled polygon backend needs numba (the fast extra)")
@@ -104,3 +106,9 @@ def test_the_machine_code_is_cached_outside_the_temporary_directory() -> None:
 def test_an_unknown_backend_is_named_with_the_choices() -> None:
     with pytest.raises(ValueError, match="NETSETEST_POLYGON='fortran': the polygon backend is one of compiled, python"):
         polygon._use("fortran")
+
+
+def test_the_compiled_backend_without_numba_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "numba", None)  # (importing it fails, as where it is not installed)
+    with pytest.raises(MissingExtra, match=r"NETSETEST_POLYGON=compiled needs numba: pip install 'netsetest\[fast\]'"):
+        polygon._use("compiled")
