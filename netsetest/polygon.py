@@ -300,7 +300,7 @@ def _use(backend: str) -> str:
     before = _backend or "python"
     if backend == "compiled" and _kernels is None:
         require("numba", f"{BACKEND_ENV}=compiled")
-        from netsetest import polygon_compiled
+        import netsetest.polygon_compiled as polygon_compiled  # (not `from netsetest import`: that names the package, whose api imports this)
 
         _kernels = polygon_compiled
     _backend = backend

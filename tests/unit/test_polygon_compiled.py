@@ -110,5 +110,6 @@ def test_an_unknown_backend_is_named_with_the_choices() -> None:
 
 def test_the_compiled_backend_without_numba_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "numba", None)  # (importing it fails, as where it is not installed)
+    monkeypatch.setattr(polygon, "_kernels", None)  # (not loaded yet)
     with pytest.raises(MissingExtra, match=r"NETSETEST_POLYGON=compiled needs numba: pip install 'netsetest\[fast\]'"):
         polygon._use("compiled")
