@@ -22,7 +22,7 @@ from netsetest.estimator.cuts import NodeSet, StepResult
 from netsetest.estimator.sdp import Blend, LocalEstimator, NeighbourState, UpdateInput
 from netsetest.estimator.sector import Interval
 from netsetest.models.sensor import NA
-from netsetest.polygon import Polygon
+from netsetest.polygon import SLIVER, Polygon
 
 ROOT = Path(__file__).resolve().parents[2]
 NARROWED = 0.05  # the deliberately unsound cut: 5 % narrower than the one under test
@@ -115,8 +115,23 @@ def test_a_region_cut_by_a_neighbours_keeps_every_point_of_both(regions: tuple[P
     _keeps_the_intersection(Polygon.within, regions)
     a, b, _ = regions
     cut = a.within(b)
-    if cut is not None:  # and it is the intersection: nothing outside either region (to the cuts' margins)
-        assert all(_near(a, v, 10 * RTOL) and _near(b, v, 10 * RTOL) for v in cut.vertices)
+    if cut is not None:  # and it is the intersection: nothing outside a (to the cuts' margins), nothing outside b
+        assert all(_near(a, v, 10 * RTOL) for v in cut.vertices)  # beyond the slivers within leaves uncut
+        assert _beyond_slivers(a, b, cut) <= 10 * RTOL * (1.0 + float(np.abs(b.vertices).max()))
+
+
+def _beyond_slivers(a: Polygon, b: Polygon, cut: Polygon) -> float:
+    """How far ``cut`` (a.within(b)) lies beyond a side of b (along its unit outward normal) past what Polygon.within
+    leaves uncut by design: a side a lies beyond by at most SLIVER of a's width along its normal (found by the thorough
+    profile at 10 000 examples: a vertex of a 1.5·10⁻⁷ beyond b, 4·10⁻⁵ of a's width, failed the plain 10⁻⁸ bound)."""
+    w = b.vertices
+    e = np.roll(w, -1, axis=0) - w
+    n = np.stack([e[:, 1], -e[:, 0]], axis=1)
+    length = np.linalg.norm(n, axis=1)
+    d = n[length > 0] / length[length > 0, None]
+    mine = a.vertices @ d.T
+    allowed = (w @ d.T).max(axis=0) + SLIVER * (mine.max(axis=0) - mine.min(axis=0))
+    return float(((cut.vertices @ d.T) - allowed).max())
 
 
 def test_the_region_test_fails_on_a_cut_narrowed_by_5_percent() -> None:
