@@ -16,6 +16,7 @@ EXTRAS = {
     "rosbags": "logs",
     "asammdf": "logs",
     "distributed": "cluster",
+    "numba": "fast",
 }
 
 

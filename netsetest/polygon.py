@@ -9,6 +9,10 @@ what every earlier reading proved, as the exact limit does, at a bounded number 
 Vertices are stored counter-clockwise as plain floats, n ≥ 3; a flat polygon (a segment, a point: fewer distinct
 vertices, or all on one line) only where its input was flat or a cut left a sliver below the rounding.  Every
 operation reads a polygon as the convex hull of its vertices, whatever their order.
+
+The move, the cut and the reduction run here in plain Python, or compiled (``NETSETEST_POLYGON=compiled``, the
+``fast`` extra: netsetest/polygon_compiled.py), step for step the same operations and the same vertices; whatever
+the compiled move cannot decide in floating point it hands to the plain-Python one here.
 """
 
 from __future__ import annotations
@@ -16,11 +20,14 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+import os
 from collections.abc import Sequence
-from dataclasses import dataclass
 from fractions import Fraction
+from types import ModuleType
 
 import numpy as np
+
+from netsetest.extras import require
 
 MIN_VERTICES = 3
 MAX_VERTICES = 24  # the reduction keeps at most this many (each step adds about 8)
@@ -47,26 +54,67 @@ REGION_REASONS = frozenset(
 Point = tuple[float, float]
 
 
-@dataclass(frozen=True, init=False)
 class Polygon:
-    """A convex polygon: its vertices counter-clockwise as plain floats, ``points`` ((β, r) pairs).  Every operation
-    works on them as they are (at 24–34 vertices numpy's per-call set-up costs more than the arithmetic), and its
-    result is built from its own lists, never converted; ``vertices`` is the (n, 2) array, for the readers who want
-    one."""
+    """A convex polygon: its vertices counter-clockwise as plain floats, ``points`` ((β, r) pairs), or as the (n, 2)
+    array the compiled operations work on (netsetest/polygon_compiled.py), whichever an operation made: the other
+    is made from it when first asked for, once (at 24–34 vertices numpy's per-call set-up costs more than the
+    arithmetic of a plain-float operation, and a conversion in every operation costs more than a compiled one).
+    Immutable; ``vertices`` is the (n, 2) array, a new one, for the readers who want one."""
 
-    points: tuple[Point, ...]
+    __slots__ = ("_points", "_xy")
+    _points: tuple[Point, ...] | None
+    _xy: np.ndarray | None
 
     def __init__(self, vertices: np.ndarray | Sequence[Sequence[float]]) -> None:
         """From the vertices (n, 2), counter-clockwise."""
         xs, ys = np.asarray(vertices, dtype=float).reshape(-1, 2).T.tolist()
-        object.__setattr__(self, "points", tuple(zip(xs, ys)))
+        object.__setattr__(self, "_points", tuple(zip(xs, ys)))
+        object.__setattr__(self, "_xy", None)
+
+    def __setattr__(self, name: str, value: object) -> None:
+        raise AttributeError(f"Polygon is immutable: cannot set {name}")
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Polygon) and self.points == other.points
+
+    def __hash__(self) -> int:
+        return hash(self.points)
+
+    def __repr__(self) -> str:
+        return f"Polygon(points={self.points!r})"
+
+    def __reduce__(self) -> tuple[object, tuple[tuple[Point, ...]]]:
+        return Polygon._of, (self.points,)
 
     @classmethod
     def _of(cls, points: Sequence[Point]) -> Polygon:
         """The polygon of plain-float vertices an operation made (as they are)."""
         out = object.__new__(cls)
-        object.__setattr__(out, "points", tuple(points))
+        object.__setattr__(out, "_points", tuple(points))
+        object.__setattr__(out, "_xy", None)
         return out
+
+    @classmethod
+    def _of_array(cls, xy: np.ndarray) -> Polygon:
+        """The polygon of the (n, 2) float64 array a compiled operation made (its own: no one else writes it)."""
+        out = object.__new__(cls)
+        object.__setattr__(out, "_points", None)
+        object.__setattr__(out, "_xy", xy)
+        return out
+
+    @property
+    def points(self) -> tuple[Point, ...]:
+        """The vertices as (β, r) pairs of plain floats."""
+        if self._points is None:
+            xs, ys = self._xy.T.tolist()  # type: ignore[union-attr]  # one of the two is always set
+            object.__setattr__(self, "_points", tuple(zip(xs, ys)))
+        return self._points  # type: ignore[return-value]  # set just above
+
+    def _array(self) -> np.ndarray:
+        """The vertices as the (n, 2) float64 array the compiled operations take (made once; not to be written)."""
+        if self._xy is None:
+            object.__setattr__(self, "_xy", np.array(self._points, dtype=float).reshape(-1, 2))
+        return self._xy  # type: ignore[return-value]  # set just above
 
     @classmethod
     def from_flat(cls, coords: Sequence[float]) -> Polygon:
@@ -82,14 +130,16 @@ class Polygon:
     @property
     def vertices(self) -> np.ndarray:
         """The vertices as an (n, 2) array (a new one)."""
-        return np.array(self.points, dtype=float).reshape(-1, 2)
+        return self._array().copy()
 
     def flat(self) -> list[float]:
         """The vertices flattened, [β₁, r₁, β₂, r₂, …] (as published: proven.ProvenSet's ``region``)."""
-        return list(itertools.chain.from_iterable(self.points))
+        if self._points is None:
+            return self._xy.ravel().tolist()  # type: ignore[union-attr]  # one of the two is always set
+        return list(itertools.chain.from_iterable(self._points))
 
     def __len__(self) -> int:
-        return len(self.points)
+        return len(self._points) if self._points is not None else len(self._xy)  # type: ignore[arg-type]  # one is set
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """The interval hull: each coordinate's lowest and highest vertex, (2,) each (exact: no rounding)."""
@@ -139,6 +189,11 @@ class Polygon:
         merge: every side moves out by at least that, which covers the step's rounding (this move's, the cuts'
         that follow, each widened by its own margin, and the vertices merged as duplicates); at least what that
         merge can leave out where the segments reach far beyond the image (a flat or tiny image)."""
+        kernels = _compiled()
+        if kernels is not None:
+            out = kernels.moved(self._array(), np.asarray(A, dtype=float), np.asarray(t, dtype=float), _segment_array(segments), _CONSTANTS)
+            if out is not None:  # (None: a sign, an order or a hull only exact arithmetic decides, below)
+                return Polygon._of_array(out)
         v = _affine(self.points, A, t)
         g = [(float(x), float(y)) for x, y in segments]
         size = max(map(abs, itertools.chain.from_iterable(v)))
@@ -153,6 +208,10 @@ class Polygon:
         can leave out along c (a slab thin next to the coordinates' size); None if empty (flat if this polygon
         is: a segment's part is one)."""
         c0, c1, lo, hi = float(c[0]), float(c[1]), float(lo), float(hi)  # (numpy scalars would make the vertices theirs)
+        kernels = _compiled()
+        if kernels is not None:
+            kept, out = kernels.cut(self._array(), c0, c1, lo, hi, _CONSTANTS)
+            return self if kept == 0 else None if kept < 0 else Polygon._of_array(out)
         v = self.points
         s = [c0 * x + c1 * y for x, y in v]
         s_min, s_max = min(s), max(s)
@@ -200,8 +259,11 @@ class Polygon:
         """At most ``max_vertices`` vertices, containing this polygon: an edge is dropped by extending its two
         neighbours until they meet, the ones that add the least area first (edges at least three apart at once:
         their neighbours' lines are then untouched)."""
-        if len(self.points) <= max_vertices:
+        if len(self) <= max_vertices:
             return self
+        kernels = _compiled()
+        if kernels is not None:
+            return Polygon._of_array(kernels.reduced(self._array(), max_vertices, _CONSTANTS))
         v = list(self.points)
         while len(v) > max_vertices:
             drops = _cheapest_edges(v, len(v) - max_vertices)
@@ -210,6 +272,54 @@ class Polygon:
                 # puts two neighbours' meeting a hair behind an edge: near-duplicate vertices)
             v = _drop_edges(v, drops)
         return Polygon._of(v)
+
+
+BACKEND_ENV = "NETSETEST_POLYGON"  # "compiled": the move, the cut and the reduction compiled (the fast extra)
+BACKENDS = ("compiled", "python")
+# Plain Python unless chosen: a process's first compiled operation costs about 0.5 s of CPU (numba's import and its
+# on-disk cache; 12 s to compile where nothing is cached), which a node process's start-up pays and a short run
+# never wins back (about 0.1 ms per NSNIM step; DEVELOPERS.md, "Dependencies")
+_kernels: ModuleType | None = None  # netsetest.polygon_compiled once loaded
+_backend: str | None = None  # None: not chosen yet (on first use: BACKEND_ENV's, else python)
+
+
+def _compiled() -> ModuleType | None:
+    """The compiled kernels where they are the backend, else None (the plain-Python operations)."""
+    if _backend is None:
+        _use(os.environ.get(BACKEND_ENV) or "python")
+    return _kernels if _backend == "compiled" else None
+
+
+class BackendError(ValueError):
+    """``NETSETEST_POLYGON`` names no backend."""
+
+
+def use_backend_from_env() -> None:
+    """Choose the backend now, from ``NETSETEST_POLYGON`` (else python): the CLI does before any command, so that a
+    bad value is one line and exit 2 there, not a failure in a run's first step (BackendError, MissingExtra)."""
+    _use(os.environ.get(BACKEND_ENV) or "python")
+
+
+def _use(backend: str) -> str:
+    """Choose the backend of the hot operations, ``compiled`` (numba: netsetest/polygon_compiled.py) or ``python``;
+    returns the one before.  ``compiled`` without numba is extras.MissingExtra (the ``fast`` extra: one line, exit
+    2 in the CLI); any other name a BackendError naming the choices."""
+    global _backend, _kernels
+    if backend not in BACKENDS:
+        raise BackendError(f"{BACKEND_ENV}={backend!r}: the polygon backend is one of {', '.join(BACKENDS)}")
+    before = _backend or "python"
+    if backend == "compiled" and _kernels is None:
+        require("numba", f"{BACKEND_ENV}=compiled")
+        import netsetest.polygon_compiled as polygon_compiled  # (not `from netsetest import`: that names the package, whose api imports this)
+
+        _kernels = polygon_compiled
+    _backend = backend
+    return before
+
+
+def _segment_array(segments: list[np.ndarray]) -> np.ndarray:
+    """The segments g as an (m, 2) float64 array (m may be 0)."""
+    return np.array(segments, dtype=float).reshape(-1, 2)
 
 
 @functools.cache
@@ -236,6 +346,7 @@ def _half(x: float, y: float) -> int:
 CCW_ERRBOUND = (3.0 + 16.0 * 2.0**-53) * 2.0**-53  # Shewchuk's orient2d error bound A (unit roundoff 2⁻⁵³)
 TINY = 1e-280  # below this the products may have lost precision to underflow: the sign is taken exactly
 TWO_PI = 2.0 * math.pi
+_CONSTANTS = np.array([CCW_ERRBOUND, TINY, TWO_PI, DUPLICATE, ROUNDING, MARGIN, MAX_REACH])  # the kernels' k (polygon_compiled.py)
 
 
 def _cross_sign(p0x: float, p0y: float, p1x: float, p1y: float, q0x: float, q0y: float, q1x: float, q1y: float) -> int:

@@ -12,10 +12,40 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from fuzzing import THOROUGH, THOROUGH_EXAMPLES
+from hypothesis import HealthCheck, settings
+
+from netsetest import polygon
 
 # the Zenoh tests' fixtures (``procs``: every process a test starts is stopped after it), for every module
 pytest_plugins = ["zenoh_helpers"]
 LAYERS = ("unit", "inmemory", "process")  # tests/<layer>/: each test is marked with its folder's layer
+
+# HYPOTHESIS_PROFILE=thorough: the long run of the cuts' and the polygon operations' properties (DEVELOPERS.md), random
+# examples, no database; the tests that set their own count take it from fuzzing.examples
+settings.register_profile(
+    THOROUGH,
+    max_examples=THOROUGH_EXAMPLES,
+    derandomize=False,
+    database=None,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
+)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
+
+# The polygon operations' backend (netsetest/polygon.py): NETSETEST_POLYGON's if set (the whole suite compiled:
+# NETSETEST_POLYGON=compiled pytest), else plain Python; the polygon tests run on both (the polygon_backend fixture)
+
+
+@pytest.fixture(scope="module", params=polygon.BACKENDS)
+def polygon_backend(request: pytest.FixtureRequest) -> Iterator[str]:
+    """Each of the polygon operations' backends in turn (module-scoped: Hypothesis's tests take no function-scoped
+    fixture); the compiled one skipped where numba is not installed (the ``fast`` extra)."""
+    if request.param == "compiled":
+        pytest.importorskip("numba", reason="the compiled polygon backend needs numba (the fast extra)")
+    before = polygon._use(request.param)
+    yield request.param
+    polygon._use(before)
 
 
 # A shell starting pytest in the background without job control (`cmd &` in a script, nohup) hands it SIGINT

@@ -843,9 +843,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     handler = handlers()[a.command]
     from netsetest.cli import tools
 
+    from netsetest import polygon
+
     try:
+        polygon.use_backend_from_env()  # a bad NETSETEST_POLYGON: one line here, not a failure in a run's first step
         return handler(a)
-    except (ConfigError, RecordError, MissingExtra, ExactError, CompareError, checks.OutputError, tools.ObserverError, LogError) as exc:
+    except (ConfigError, RecordError, MissingExtra, ExactError, CompareError, checks.OutputError, tools.ObserverError, LogError, polygon.BackendError) as exc:
         print(f"netsetest {a.command}: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except BrokenPipeError:  # `netsetest inspect R | head`: the reader has gone, which is not an error

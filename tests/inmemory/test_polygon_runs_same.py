@@ -16,6 +16,7 @@ import polygon_reference as ref
 import pytest
 
 from netsetest.config.schema import Case, load_topology
+from netsetest import polygon
 from netsetest.estimator import cuts
 from netsetest.models.signals import SignalKind
 from netsetest.polygon import Polygon
@@ -62,3 +63,37 @@ def test_every_region_operation_of_a_run_returns_what_the_numpy_code_did(
     nodes = len(load_topology(topology, case, STEPS).ids)
     assert calls["moved"] >= nodes * (STEPS - 1) and calls["reduced"] >= nodes * STEPS  # every node, every step
     assert calls["cut"] > 0 and calls["ellipse_cut"] > 0  # (most ellipse cuts return the region at once: no cut)
+
+
+def _same_on_both(calls: Counter[str], name: str, op: Callable[..., Any]) -> Callable[..., Any]:
+    """``op`` on the compiled backend that also runs it on the plain-Python one and asserts the same vertices."""
+
+    def both(region: Polygon, *args: Any, **kwargs: Any) -> Any:
+        got = op(region, *args, **kwargs)
+        polygon._use("python")
+        want = op(Polygon._of(region.points), *args, **kwargs)
+        polygon._use("compiled")
+        assert (got and got.points) == (want and want.points), f"{name}{args!r} on {region.points!r}"
+        calls[name] += 1
+        return got
+
+    return both
+
+
+@pytest.mark.parametrize(("topology", "case", "signals", "seed"), [RUNS[0], RUNS[2], RUNS[6]])
+def test_every_region_operation_of_a_run_is_the_same_compiled(
+    monkeypatch: pytest.MonkeyPatch, topology: str, case: Case, signals: SignalKind, seed: int
+) -> None:
+    """The compiled moves, cuts and reductions (netsetest/polygon_compiled.py) return the plain-Python ones' vertices
+    bit for bit on every call of a run (tests/unit/test_polygon_compiled.py on adversarial polygons)."""
+    pytest.importorskip("numba", reason="the compiled polygon backend needs numba (the fast extra)")
+    calls: Counter[str] = Counter()
+    for name in ("moved", "cut", "reduced"):
+        monkeypatch.setattr(Polygon, name, _same_on_both(calls, name, getattr(Polygon, name)))
+    before = polygon._use("compiled")
+    try:
+        run_inmemory(load_topology(topology, case, STEPS), signals, "scheduled", seed)
+    finally:
+        polygon._use(before)
+    nodes = len(load_topology(topology, case, STEPS).ids)
+    assert calls["moved"] >= nodes * (STEPS - 1) and calls["reduced"] >= nodes * STEPS and calls["cut"] > 0

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fuzzing import examples
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
@@ -20,7 +21,7 @@ from netsetest.config.schema import load_topology
 from netsetest.estimator.cuts import NodeSet, StepFigures, StepResult, StepSet
 from netsetest.estimator.sdp import Blend, LocalEstimator, NeighbourState, UpdateInput
 from netsetest.models.sensor import NA
-from netsetest.polygon import Polygon
+from netsetest.polygon import SLIVER, Polygon
 from netsetest.sets import Slab
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -107,15 +108,30 @@ def _keeps_the_intersection(within: Callable[[Polygon, Polygon], Polygon | None]
     assert all(_near(cut, p) for p in both), "a point of both regions was cut"
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=examples(100), deadline=None)
 @given(_two_regions())
 def test_a_region_cut_by_a_neighbours_keeps_every_point_of_both(regions: tuple[Polygon, Polygon, np.ndarray]) -> None:
     """Polygon.within: every point both regions hold (the truth, where both sets held it) is kept."""
     _keeps_the_intersection(Polygon.within, regions)
     a, b, _ = regions
     cut = a.within(b)
-    if cut is not None:  # and it is the intersection: nothing outside either region (to the cuts' margins)
-        assert all(_near(a, v, 10 * RTOL) and _near(b, v, 10 * RTOL) for v in cut.vertices)
+    if cut is not None:  # and it is the intersection: nothing outside a (to the cuts' margins), nothing outside b
+        assert all(_near(a, v, 10 * RTOL) for v in cut.vertices)  # beyond the slivers within leaves uncut
+        assert _beyond_slivers(a, b, cut) <= 10 * RTOL * (1.0 + float(np.abs(b.vertices).max()))
+
+
+def _beyond_slivers(a: Polygon, b: Polygon, cut: Polygon) -> float:
+    """How far ``cut`` (a.within(b)) lies beyond a side of b (along its unit outward normal) past what Polygon.within
+    leaves uncut by design: a side a lies beyond by at most SLIVER of a's width along its normal (found by the thorough
+    profile at 10 000 examples: a vertex of a 1.5·10⁻⁷ beyond b, 4·10⁻⁵ of a's width, failed the plain 10⁻⁸ bound)."""
+    w = b.vertices
+    e = np.roll(w, -1, axis=0) - w
+    n = np.stack([e[:, 1], -e[:, 0]], axis=1)
+    length = np.linalg.norm(n, axis=1)
+    d = n[length > 0] / length[length > 0, None]
+    mine = a.vertices @ d.T
+    allowed = (w @ d.T).max(axis=0) + SLIVER * (mine.max(axis=0) - mine.min(axis=0))
+    return float(((cut.vertices @ d.T) - allowed).max())
 
 
 def test_the_region_test_fails_on_a_cut_narrowed_by_5_percent() -> None:
@@ -139,7 +155,7 @@ def _estimator() -> tuple[LocalEstimator, object]:
     return LocalEstimator.for_node(sc, 1), sc
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(_two_regions(), st.floats(0.0, 1.0), st.integers(0, 2**32 - 1))
 def test_the_moved_region_holds_every_successor_of_a_point_of_the_prior_and_the_neighbours_sets(
     regions: tuple[Polygon, Polygon, np.ndarray], speed: float, seed: int
@@ -207,7 +223,7 @@ def _slab_keeps(slabs: Callable[[UpdateInput], dict], reading: tuple[UpdateInput
     assert np.all((iv.lo - slack <= v) & (v <= iv.hi + slack)), "a truth the reading allows was cut"
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=examples(150), deadline=None)
 @given(_reading())
 def test_a_bounded_readings_slab_keeps_every_state_its_hypotheses_allow(reading: tuple[UpdateInput, int, np.ndarray]) -> None:
     """C_j x⁺ of every truth whose measurement is the reading, with f_j⁺ within the declared size and rate of j's

@@ -5,10 +5,14 @@ the cuts after it, then the cuts), and the cut and the reduction give what they 
 from __future__ import annotations
 
 import numpy as np
+import pytest
+from fuzzing import examples
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from netsetest.polygon import MARGIN, MAX_VERTICES, Polygon
+
+pytestmark = pytest.mark.usefixtures("polygon_backend")  # both backends: compiled (numba) and plain Python
 
 finite = st.floats(-1.0, 1.0, allow_nan=False)
 
@@ -28,7 +32,7 @@ def _cloud(draw: st.DrawFn) -> tuple[Polygon, np.ndarray]:
     return poly, inside
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=examples(150), deadline=None)
 @given(_cloud(), finite, finite, finite, finite, finite, finite)
 def test_affine_and_segment_keep_every_point(cloud: tuple[Polygon, np.ndarray], a: float, b: float, c: float, d: float, gx: float, gy: float) -> None:
     poly, pts = cloud
@@ -43,7 +47,7 @@ def test_affine_and_segment_keep_every_point(cloud: tuple[Polygon, np.ndarray], 
         assert moved.contains(x)
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=examples(150), deadline=None)
 @given(_cloud(), finite, finite, st.floats(0.05, 0.95), st.floats(0.05, 0.95))
 def test_the_cut_keeps_the_points_in_the_slab_and_drops_the_rest(cloud: tuple[Polygon, np.ndarray], cx: float, cy: float, q1: float, q2: float) -> None:
     poly, pts = cloud
@@ -62,7 +66,7 @@ def test_the_cut_keeps_the_points_in_the_slab_and_drops_the_rest(cloud: tuple[Po
         assert v_lo >= lo - pad and v_hi <= hi + pad  # nothing of it outside the slab but the margin
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=examples(100), deadline=None)
 @given(_cloud(), st.integers(4, MAX_VERTICES))
 def test_the_reduction_keeps_every_point_within_its_vertex_count(cloud: tuple[Polygon, np.ndarray], limit: int) -> None:
     poly, pts = cloud
@@ -119,7 +123,7 @@ def test_the_vertices_stay_plain_floats_whatever_numpy_scalars_come_in() -> None
     assert Polygon.from_flat(out.flat()) == out and Polygon(out.vertices) == out
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(_cloud())
 def test_the_bounds_are_the_interval_hull(cloud: tuple[Polygon, np.ndarray]) -> None:
     """Each coordinate's bounds are its lowest and highest vertex, exactly: every vertex lies within them, each is

@@ -25,10 +25,10 @@ from __future__ import annotations
 
 import itertools
 import math
-import os
 from fractions import Fraction
 
 import numpy as np
+import pytest
 from exact_polygons import EPS, Point, cut_rounding, move_rounding, reduction_rounding, sum_rounding
 from exact_polygons import exact as _exact
 from exact_polygons import gap as _gap
@@ -37,12 +37,15 @@ from exact_polygons import merged as _merged
 from exact_polygons import normals as _normals
 from exact_polygons import scale as _scale
 from exact_polygons import support as _support
+from fuzzing import long_run
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from netsetest.polygon import DUPLICATE, MARGIN, ROUNDING, Polygon
 
-EXAMPLES = int(os.environ.get("NETSETEST_FUZZ_EXAMPLES", "0")) or None
+pytestmark = pytest.mark.usefixtures("polygon_backend")  # both backends: compiled (numba) and plain Python
+
+EXAMPLES = long_run()  # None: the short seeded run (fuzzing.py)
 FUZZ = settings(
     max_examples=EXAMPLES or 60,
     derandomize=EXAMPLES is None,

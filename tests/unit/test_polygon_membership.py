@@ -147,6 +147,7 @@ def _flat(v: np.ndarray) -> list[float]:
     return [float(c) for c in np.asarray(v, dtype=float).reshape(-1)]
 
 
+@pytest.mark.usefixtures("polygon_backend")  # both backends: compiled (numba) and plain Python
 @FUZZ
 @given(st.data())
 def test_every_region_a_step_leaves_is_accepted(data: st.DataObject) -> None:

@@ -25,7 +25,10 @@ from test_polygon_exact import FUZZ, car_like, matrices, polygons, segment_lists
 from netsetest.estimator.cuts import ellipse_cut
 from netsetest.polygon import Polygon
 
-pytestmark = pytest.mark.blas  # (.ci/run runs it under every OpenBLAS kernel the CPU runs)
+pytestmark = [
+    pytest.mark.blas,  # (.ci/run runs it under every OpenBLAS kernel the CPU runs)
+    pytest.mark.usefixtures("polygon_backend"),  # both backends: compiled (numba) and plain Python
+]
 
 
 def _check(name: str, v: np.ndarray, got: Polygon | None, want: ref.Polygon | None, *args: Any) -> None:

@@ -10,6 +10,7 @@ import functools
 from pathlib import Path
 
 import numpy as np
+from fuzzing import examples
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -41,7 +42,7 @@ def _ellipsoid(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, float, np.ndarr
     return xhat, P, rho, pts
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=examples(150), deadline=None)
 @given(_ellipsoid())
 def test_the_seed_holds_every_point_of_the_ellipsoid(e: tuple[np.ndarray, np.ndarray, float, np.ndarray]) -> None:
     xhat, P, rho, pts = e
@@ -49,7 +50,7 @@ def test_the_seed_holds_every_point_of_the_ellipsoid(e: tuple[np.ndarray, np.nda
     assert _within(region, pts[:, :2]).all()
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=examples(150), deadline=None)
 @given(_ellipsoid(), st.floats(0.0, 1.0), st.floats(0.0, 1.0))
 def test_the_ellipse_cut_keeps_every_point_of_the_region_the_ellipsoid_holds(e: tuple[np.ndarray, np.ndarray, float, np.ndarray], a: float, b: float) -> None:
     """A region that holds part of the ellipsoid (a box through its centre, offset by a and b of its extent): the cut
@@ -245,7 +246,7 @@ def _context() -> StepContext:
     return dataclasses.replace(ctx, statics=dataclasses.replace(ctx.statics, health_tolerance=TOLERANCE))
 
 
-@settings(max_examples=80, deadline=None)
+@settings(max_examples=examples(80), deadline=None)
 @given(_step(), st.sampled_from([c.name for c in STEP_CUTS]))
 def test_every_cut_keeps_every_point_of_its_input_that_satisfies_its_slab(step: tuple[StepContext, StepResult, np.ndarray], name: str) -> None:
     """Each declared cut (readings, fault-size, region, health-pin, health-fault), on random sets and contexts: every point of its
@@ -259,7 +260,7 @@ def test_every_cut_keeps_every_point_of_its_input_that_satisfies_its_slab(step: 
     assert inside.all(), (name, kept[~inside.all(axis=1)])
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(_step(kofn=True))
 def test_the_health_fault_cut_keeps_every_point_of_its_input_that_a_hypothesis_allows(step: tuple[StepContext, StepResult, np.ndarray]) -> None:
     """The health-fault cut, on every draw with a k-of-N assessment and a region: every point of its input sets in

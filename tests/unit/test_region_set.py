@@ -8,6 +8,7 @@ import json
 
 import numpy as np
 import pytest
+from fuzzing import examples
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -32,7 +33,7 @@ def test_membership_needs_the_base_set_the_region_and_the_fault_range() -> None:
     np.testing.assert_array_equal(hi, [0.5, 0.5, 0.3])
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3), st.lists(st.floats(-2.0, 2.0), min_size=3, max_size=3))
 def test_support_bounds_every_member(point: list[float], direction: list[float]) -> None:
     """support(d) is an upper bound of dᵀx over the set (the least of two outer bounds)."""
