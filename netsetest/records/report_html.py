@@ -454,6 +454,33 @@ th{background:#eee}.verdict{font-size:1.1em;font-weight:bold;padding:.4em .6em;b
 .verdict.fail{border-color:#d62728;background:#fbeeee}.note{color:#555;font-size:.9em}"""
 
 
+COORDINATES = ("β", "r", "f")  # the published set's intervals, in NodeState.cuts' order
+
+
+def cuts_html(rec: Record) -> str:
+    """Per node and coordinate, the cuts that narrowed the published interval (NodeState.cuts, as the node named them)
+    and on how many of its steps; "own set" where none did (the solve's ellipsoid or the method's own set)."""
+    rows = []
+    for i in _node_ids(rec):
+        tr, cells = rec.nodes[i], [str(i)]
+        for comp in range(len(COORDINATES)):
+            named = tr.interval_cuts(comp)
+            if any(c is None for c in named):
+                cells.append("not recorded")  # a record from before states carried their cuts
+                continue
+            counts: dict[str, int] = {}
+            for cuts in named:
+                for name in cuts or ("own set",):
+                    counts[name] = counts.get(name, 0) + 1
+            cells.append(", ".join(f"{name} {n}" for name, n in sorted(counts.items(), key=lambda kv: -kv[1])))
+        rows.append(cells)
+    return (
+        '<h3>What narrowed each published interval</h3><p class="note">Per node, the cuts the node named for each '
+        "coordinate (docs/estimator.md) and on how many of its steps; own set: the solve's ellipsoid or the method's set alone.</p>"
+        + _table(["node", *COORDINATES], rows, "cuts")
+    )
+
+
 def _table(header: Sequence[str], rows: Sequence[Sequence[str]], cls: str = "") -> str:
     head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>" for r in rows)
@@ -533,6 +560,7 @@ def write_report(path: str | Path, pages: Sequence[RecordPage]) -> int:
             parts.append(f'<p class="verdict{" fail" if fail else ""}" id="verdict">{html.escape(p.verdict)}</p><pre>{html.escape(tables)}</pre>')
         parts.append(_graph(rec, caption))
         parts.append(_focus_note(rec))
+        parts.append(cuts_html(rec))
         if p.exact is not None:
             parts.append(_exact_html(p.exact))
         parts += [

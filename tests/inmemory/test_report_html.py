@@ -12,7 +12,7 @@ import pytest
 
 from netsetest.cli.main import main
 from netsetest.records.meta import RunMeta
-from netsetest.records.record import Record, record_from_parts
+from netsetest.records.record import Record, load_record, record_from_parts
 from netsetest.records.report_html import MAX_POINTS, RecordPage, write_report
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -43,6 +43,14 @@ def test_report_page_holds_verdict_tables_graph_figures_and_exact_ratios(run: di
         for fig in ("fig5", "fig6-0", "fig6-1", "fig7", "fig8"):
             assert f'"{fig}-node-{i}"' in page
     assert '"graph-nodes"' in page
+    # the cuts each node named for its published intervals, per coordinate, counted over its steps (issue 46)
+    rec = load_record(run["record"])
+    table = re.search(r'<table class="cuts">(.*?)</table>', page, re.S)
+    assert table is not None
+    for i, tr in rec.nodes.items():
+        named = [name for cuts in tr.interval_cuts(2) for name in cuts or ("own set",)]
+        top = max(set(named), key=named.count)
+        assert f"<td>{i}</td>" in table.group(1) and f"{top} {named.count(top)}" in table.group(1)
     assert not re.search(r"<script[^>]+src=", page), "every script is inline: the page opens offline"
     assert not re.search(r'<link[^>]+href="https?:', page), "no stylesheet from the network"
 
