@@ -27,7 +27,9 @@ if TYPE_CHECKING:
     from netsetest.records.meta import RunMeta
     from netsetest.records.summary import RunSummary
 
-PRELOAD = ("netsetest.campaign.worker", "netsetest.runtime.inmemory", "netsetest.analysis.exact")  # with these, a run imports nothing more
+# with these an SDP run imports nothing more (scipy.linalg: Clarabel's solve imports it at the first of some
+# problems, in a SAIM run); another estimator's module loads at its first run in each worker
+PRELOAD = ("netsetest.campaign.worker", "netsetest.runtime.inmemory", "netsetest.analysis.exact", "scipy.linalg")
 CAUSE_MAX = 500  # characters of an error kept in a row (the replay command reproduces the whole traceback)
 
 
