@@ -80,6 +80,7 @@ class Cluster:
         for name in ("a", "b"):
             argv = [py, "-m", "distributed.cli.dask_worker", f"tcp://{scheduler[name]}:{port}", "--host", host[name], "--nthreads", "1", "--no-nanny"]
             argv += ["--no-dashboard", "--name", name, "--local-directory", str(tmp / f"dask-{name}")]
+            argv += ["--preload", "netsetest.campaign.worker"]  # as docs/campaign.md starts a worker: the run's code imported at its start
             procs.start(f"worker-{name}", [*self.prefix[name], *argv], env=env)
         for name in ("a", "b"):
             wait_for(lambda: "Registered to" in procs.stderr(f"worker-{name}") or procs.procs[f"worker-{name}"].poll() is not None, 60, 0.2, f"worker {name}")
