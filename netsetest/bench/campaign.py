@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from netsetest.campaign.engines import LocalPool
+from netsetest.campaign.engines import DASK_ENV, LocalPool
 from netsetest.campaign.runner import Tally, run_campaign, tasks_of
 from netsetest.campaign.spec import load_campaign
 from netsetest.campaign.store import Store
@@ -154,7 +154,7 @@ class _LocalDask:
         self.address = f"tcp://127.0.0.1:{port}"
         env = {
             **os.environ,
-            "OPENBLAS_NUM_THREADS": "1",
+            **DASK_ENV,  # as docs/campaign.md starts them
             "MALLOC_ARENA_MAX": "2",
             "DASK_TEMPORARY_DIRECTORY": str(tmp),
         }  # its scratch and locks in the part's directory

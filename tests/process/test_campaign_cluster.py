@@ -23,6 +23,7 @@ import pytest
 from campaign_helpers import assert_same_rows, dataset, one_by_one
 from zenoh_helpers import ProcessGuard, wait_for
 
+from netsetest.campaign.engines import DASK_ENV
 from netsetest.runtime import netns
 
 pytest.importorskip("distributed")
@@ -39,7 +40,7 @@ seeds = "0-2"
 steps = 5
 """
 PORT = 8786
-WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "MALLOC_ARENA_MAX": "2"}  # as docs/campaign.md starts a worker
+WORKER_ENV = {**DASK_ENV, "MALLOC_ARENA_MAX": "2"}  # as docs/campaign.md starts a worker
 
 
 class Cluster:
