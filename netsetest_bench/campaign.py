@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from netsetest.campaign.engines import LocalPool
+from netsetest.campaign.engines import DASK_ENV, LocalPool
 from netsetest.campaign.runner import Tally, run_campaign, tasks_of
 from netsetest.campaign.spec import load_campaign
 from netsetest.campaign.store import Store
@@ -89,9 +89,10 @@ def _rss_mb(pids: list[int]) -> dict[int, float]:
     return out
 
 
-def _campaign(path: Path, out: Path, engine: Any, sample_every: int = 0) -> dict:
+def _campaign(path: Path, out: Path, engine: Any, sample_every: int = 0, pids: list[int] | None = None) -> dict:
     """Run the campaign at ``path`` into a fresh ``out`` on ``engine``: wall, CPU, its runs' own CPU and wall,
-    and (``sample_every`` runs) the local pool's workers' resident memory."""
+    and (``sample_every`` runs) the local pool's workers' resident memory; ``pids``: the engine's processes (a
+    Dask cluster's scheduler, nannies, workers), their CPU over the campaign."""
     c = load_campaign(path)
     store = Store(out)
     samples: list[dict[int, float]] = []
@@ -105,9 +106,12 @@ def _campaign(path: Path, out: Path, engine: Any, sample_every: int = 0) -> dict
             samples.append(_rss_mb(pids))
 
     load = _load()
+    procs0 = _cpu_of(pids or [])
     cpu0, t0 = time.process_time(), time.perf_counter()
     tally = run_campaign(c, store, engine, on_progress)
     wall, cpu_main = time.perf_counter() - t0, time.process_time() - cpu0
+    if pids:
+        worker_cpu = {0: _cpu_of(pids) - procs0}
     table = store.table()
     store.close()
     per_run = {}  # run key → (wall, CPU) in its worker (a run's rows, one per node, all carry its times)
@@ -123,6 +127,8 @@ def _campaign(path: Path, out: Path, engine: Any, sample_every: int = 0) -> dict
         "run_wall_s": sum(w for w, _ in per_run.values()),
         "run_cpu_s": sum(cp for _, cp in per_run.values()),
         "worker_cpu_s": sum(worker_cpu.values()) or None,
+        "runs_per_cpu_s": tally.done / (cpu_main + sum(worker_cpu.values())) if worker_cpu else None,  # every process's CPU: what load cannot change
+        "cores_used": (cpu_main + sum(worker_cpu.values())) / wall if worker_cpu and wall else None,  # the share of the cores it got
         "memory_mb": samples,
         "load": load,
     }
@@ -148,7 +154,7 @@ class _LocalDask:
         self.address = f"tcp://127.0.0.1:{port}"
         env = {
             **os.environ,
-            "OPENBLAS_NUM_THREADS": "1",
+            **DASK_ENV,  # as docs/campaign.md starts them
             "MALLOC_ARENA_MAX": "2",
             "DASK_TEMPORARY_DIRECTORY": str(tmp),
         }  # its scratch and locks in the part's directory
@@ -170,6 +176,12 @@ class _LocalDask:
 
         with Client(self.address, timeout=CLUSTER_START_S) as c:
             c.wait_for_workers(workers, timeout=CLUSTER_START_S)
+
+    def pids(self) -> list[int]:
+        """The scheduler's, the nannies' and the workers' (each nanny's child) process ids."""
+        import psutil
+
+        return [q.pid for p in self.procs for q in [psutil.Process(p.pid), *psutil.Process(p.pid).children(recursive=True)]]
 
     def close(self) -> None:
         for p in reversed(self.procs):
@@ -206,7 +218,7 @@ def _throughput(tmp: Path, runs: int, reps: int) -> dict:
                 try:
                     from netsetest.campaign.engines import DaskCluster
 
-                    arms[arm].append(_campaign(path, out, DaskCluster(cluster.address)))
+                    arms[arm].append(_campaign(path, out, DaskCluster(cluster.address), pids=cluster.pids()))
                 finally:
                     cluster.close()
             else:
@@ -223,6 +235,10 @@ def _throughput(tmp: Path, runs: int, reps: int) -> dict:
         "runs_per_s": med,
         "ratio_2_over_1": (med["local_2"] / med["local_1"]) if med["local_2"] and med["local_1"] else None,
         "ratio_cluster_over_local": (med["cluster_2"] / med["local_2"]) if med["cluster_2"] and med["local_2"] else None,
+        "runs_per_cpu_s": (cpu := {arm: _median(rows, "runs_per_cpu_s") for arm, rows in arms.items() if arm != "direct"}),
+        "cpu_ratio_2_over_1": (cpu["local_2"] / cpu["local_1"]) if cpu["local_2"] and cpu["local_1"] else None,
+        "cpu_ratio_cluster_over_local": (cpu["cluster_2"] / cpu["local_2"]) if cpu["cluster_2"] and cpu["local_2"] else None,
+        "cores_used": {arm: _median(rows, "cores_used") for arm, rows in arms.items() if arm != "direct"},
         "cpu_per_run_s": {
             arm: _median([{"x": r["run_cpu_s"] / r["runs"]} for r in rows if r.get("runs")], "x") for arm, rows in arms.items() if arm != "direct"
         },
@@ -288,6 +304,10 @@ def campaign_markdown(r: dict) -> str:
         f"| ≥ 1.8× | {_meets(t['ratio_2_over_1'], 1.8, True)} |",
         f"| a Dask cluster's throughput over the local pool's, 2 workers each | {_f(t['ratio_cluster_over_local'], '.2f')}× | ≥ 0.9× "
         f"| {_meets(t['ratio_cluster_over_local'], 0.9, True)} |",
+        f"| the same by CPU: runs per CPU-second (every process's), 2 workers over 1 (the cores' share the load left aside) "
+        f"| {_f(t.get('cpu_ratio_2_over_1'), '.2f')} | ≥ 0.9 (1.8× on free cores) | {_meets(t.get('cpu_ratio_2_over_1'), 0.9, True)} |",
+        f"| the same by CPU, the Dask cluster over the local pool | {_f(t.get('cpu_ratio_cluster_over_local'), '.2f')} | ≥ 0.9 "
+        f"| {_meets(t.get('cpu_ratio_cluster_over_local'), 0.9, True)} |",
         f"| task overhead per 80-step paper6 run: the CPU the campaign spends outside the runs (its process, its workers) per run's CPU | "
         f"{_f(t['overhead_cpu_pct'], '.1f')} % | ≤ 5 % | {_meets(t['overhead_cpu_pct'], 5.0, False)} |",
         f"| the same in wall time: 1 worker against the runs one by one in one process (the load's share of the cores decides it here) "
@@ -302,16 +322,20 @@ def campaign_markdown(r: dict) -> str:
         f"{b['errors']} errors, {b['failed']} failed their verdict; load average {b['load_before']} before, {b['load_after']} after "
         f"(this machine has {r['cpus']} cores).",
         "",
-        "| arm | runs/s (median) | CPU per run [s] (median) | each rep: wall [s] (load average at its start) |",
-        "|---|---|---|---|",
+        "| arm | runs/s (median) | runs per CPU-second (median) | cores it got (median) | CPU per run [s] (median) | each rep: wall [s] (load average at its start) |",
+        "|---|---|---|---|---|---|",
     ]
     for arm, rows in t["arms"].items():
         if arm == "direct":
             continue
         reps = ", ".join(f"{x['wall_s']:.1f} ({x['load']})" for x in rows) or "–"
-        lines.append(f"| {arm.replace('_', ', ')} worker(s) | {_f(t['runs_per_s'].get(arm), '.3f')} | {_f(t['cpu_per_run_s'].get(arm), '.3f')} | {reps} |")
+        per_cpu, cores = t.get("runs_per_cpu_s", {}).get(arm), t.get("cores_used", {}).get(arm)
+        lines.append(
+            f"| {arm.replace('_', ', ')} worker(s) | {_f(t['runs_per_s'].get(arm), '.3f')} | {_f(per_cpu, '.3f')} | {_f(cores, '.2f')} "
+            f"| {_f(t['cpu_per_run_s'].get(arm), '.3f')} | {reps} |"
+        )
     direct = ", ".join(f"{x['wall_s']:.1f} ({x['load']})" for x in t["arms"]["direct"])
-    lines.append(f"| the runs one by one in one process | | | {direct} |")
+    lines.append(f"| the runs one by one in one process | | | | | {direct} |")
     if t["cluster_error"]:
         lines += ["", f"The cluster did not start: {t['cluster_error']}."]
     return "\n".join(lines) + "\n"

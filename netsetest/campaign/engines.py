@@ -5,7 +5,7 @@ Both hand back each task's :class:`~netsetest.campaign.worker.RunOutcome` as it 
 runs a task twice (a worker lost after it finished) never counts it twice.
 
 **Local pool** (:class:`LocalPool`): the standard library's ``ProcessPoolExecutor``, one worker per core,
-started by a fork server that has imported the run's code once (``multiprocessing``'s ``forkserver``: no
+started by a fork server that has imported the run's code (``worker.PRELOAD``) once (``multiprocessing``'s ``forkserver``: no
 thread of this process is forked).  The pool holds one run per worker, so a worker that dies takes its own
 run with it and the runs it was not yet given stay queued.  When one dies the executor is broken as a
 whole: it is replaced, and every run that was in flight runs again, alone (one at a time), so the run that
@@ -31,13 +31,23 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Protocol
 
 from netsetest.campaign.spec import CampaignError
-from netsetest.campaign.worker import RunOutcome, RunTask, execute
+from netsetest.campaign.worker import PRELOAD, RunOutcome, RunTask, execute
 from netsetest.extras import require
 
 CONNECT_TIMEOUT_S = 10.0  # a scheduler that does not answer this soon is not there
 ADDRESS_RE = re.compile(r"(?:(tcp|tls)://)?(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9.-]+):(\d{1,5})")
 LOST_ALONE = 2  # a run whose worker died this often while it ran alone is an error, not retried for ever
-PRELOAD = ["netsetest.campaign.worker", "netsetest.runtime.inmemory", "netsetest.analysis.exact"]  # imported once, in the fork server
+# The environment docs/campaign.md starts a Dask scheduler and its workers with: one BLAS thread, and Dask's
+# clocks slowed (its event loops' tick, the memory and system monitors; the profiler off), which run whether
+# tasks do or not: idle, a scheduler and two workers took 6.5 % of a core with Dask's defaults, 1.1 % with
+# these (performance-history.md).  A worker's memory is checked every second instead of every 0.1 s.
+DASK_ENV = {
+    "OPENBLAS_NUM_THREADS": "1",
+    "DASK_DISTRIBUTED__ADMIN__TICK__INTERVAL": "1s",
+    "DASK_DISTRIBUTED__ADMIN__SYSTEM_MONITOR__INTERVAL": "2s",
+    "DASK_DISTRIBUTED__WORKER__MEMORY__MONITOR_INTERVAL": "1s",
+    "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False",
+}
 
 
 class Engine(Protocol):
@@ -72,7 +82,7 @@ class LocalPool:
         from netsetest.runtime.processes import ROLE_ENV  # a role's: one BLAS thread, two malloc arenas, unless the user set them
 
         ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(PRELOAD)
+        ctx.set_forkserver_preload(list(PRELOAD))  # imported once, in the fork server
         added = [k for k in ROLE_ENV if k not in os.environ]
         os.environ.update({k: ROLE_ENV[k] for k in added})  # read by the fork server at its start, inherited by every worker
         try:

@@ -22,7 +22,7 @@ import campaign_helpers
 from campaign_helpers import Rows, assert_same_rows, dataset
 from netsetest.campaign.engines import LocalPool
 from netsetest.campaign.rows import COLUMNS, ERROR
-from netsetest.campaign.runner import run_campaign
+from netsetest.campaign.runner import run_campaign, tasks_of
 from netsetest.campaign.spec import load_campaign
 from netsetest.campaign.store import Store
 from netsetest.records.record import load_record
@@ -123,6 +123,47 @@ def test_a_worker_killed_mid_campaign_loses_no_run_and_counts_none_twice(campaig
     store.close()
     assert killed and (tally.done, tally.errors) == (len(c.runs), 0)
     assert_same_rows(dataset(tmp_path / "out"), one_by_one)
+
+
+def test_a_local_worker_is_one_thread(campaign_file: Path) -> None:
+    """Two workers on two cores scale only if neither starts threads of its own beside its run: OpenBLAS starts
+    one per extra core unless told otherwise (docs/campaign.md#why-2-workers-gave-116-here); every worker is one
+    thread, sampled as each run comes back."""
+    psutil = pytest.importorskip("psutil")
+    pool = LocalPool(2)
+    threads: dict[int, int] = {}
+    try:
+        for _ in pool.outcomes(tasks_of(load_campaign(campaign_file), set())[:4]):
+            for pid in pool._pool._processes:  # type: ignore[union-attr]  # started: a run is back
+                threads[pid] = max(threads.get(pid, 0), psutil.Process(pid).num_threads())
+    finally:
+        pool.close()
+    assert len(threads) == 2 and set(threads.values()) == {1}, f"threads per worker: {threads}"
+
+
+PRELOADED_RUNS = """
+import sys
+from pathlib import Path
+from netsetest.campaign.runner import tasks_of
+from netsetest.campaign.spec import load_campaign
+from netsetest.campaign.worker import dask_setup, execute
+dask_setup(None)
+c = load_campaign(Path(sys.argv[1]))
+before = set(sys.modules)
+for t in tasks_of(c, set()):
+    assert execute(t).error is None
+print(*sorted(set(sys.modules) - before))
+"""
+
+
+def test_a_worker_that_preloaded_imports_nothing_in_its_sdp_runs(tmp_path: Path) -> None:
+    """What the fork server and a Dask worker's ``--preload`` import (worker.PRELOAD, dask_setup) is all an SDP run
+    needs, both cases and signal families: no run pays an import (about 0.45 s of CPU in a worker's first run)."""
+    path = tmp_path / "sdp.toml"
+    path.write_text('[grid]\ntopology = "paper6"\nestimator = "sdp"\ncase = ["nsnim", "saim"]\nsignals = ["paper", "worst"]\nsteps = 3\n')
+    proc = subprocess.run([sys.executable, "-c", PRELOADED_RUNS, str(path)], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == [], f"imported by the runs: {proc.stdout}"
 
 
 def test_a_run_that_fails_is_a_row_with_its_cause_and_the_campaign_goes_on(campaign_file: Path, tmp_path: Path) -> None:

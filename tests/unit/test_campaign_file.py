@@ -160,3 +160,14 @@ def test_a_damaged_results_file_is_one_line_and_exit_2(tmp_path: Path, capsys: p
     assert main(["campaign", str(_file(tmp_path, GRID)), "--out", str(tmp_path / "out"), "--dry-run"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("netsetest campaign: ") and err.count("\n") == 1 and "a damaged results file" in err, err
+
+
+def test_the_docs_start_a_dask_cluster_with_the_environment_the_benchmark_measured() -> None:
+    """docs/campaign.md's start lines set every variable of ``engines.DASK_ENV`` (the benchmark's cluster and
+    the cluster test start with it) and preload the run's code (``worker.dask_setup``)."""
+    from netsetest.campaign.engines import DASK_ENV
+
+    text = (Path(__file__).parents[2] / "docs" / "campaign.md").read_text()
+    start = text[text.index("## Where the runs go") : text.index("### Why Dask distributed, not Ray")]
+    assert [f"{k}={v}" for k, v in DASK_ENV.items() if f"{k}={v}" not in start] == []
+    assert "dask worker tcp://HOST:8786 --nthreads 1 --nworkers N --preload netsetest.campaign.worker" in start
