@@ -16,7 +16,7 @@ import pytest
 from netsetest.bus.base import MAX_PER_KEY, MAX_ROUNDS
 from netsetest.bus.zenoh_bus import ZenohBus
 from netsetest.messages import End, Message
-from netsetest.records.record import load_record
+from netsetest.records.record import Record, load_record
 from zenoh_helpers import PAPER6, ROOT, cli, free_ports
 from message_helpers import make_state
 
@@ -149,6 +149,33 @@ def test_lazy_subscription_needs_an_exact_key(pair) -> None:
         rx.subscribe("lazytest/*/state", lambda k, m: None, lazy=True)
 
 
+def _realtime_run(topology: Path, steps: int, tmp_path: Path, *extra: str) -> Record:
+    """``netsetest run TOPOLOGY --mode zenoh --clock realtime`` (secured), whose summary must say no violation and no
+    node missing: its record."""
+    summary, record = tmp_path / "s.json", tmp_path / "r.jsonl"
+    argv = cli(
+        "run",
+        topology,
+        "--mode",
+        "zenoh",
+        "--clock",
+        "realtime",
+        "--steps",
+        str(steps),
+        "--quiet",
+        "--summary-json",
+        str(summary),
+        "--record",
+        str(record),
+        *extra,
+    )
+    out = subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=170)
+    assert out.returncode == 0, out.stderr[-2000:]
+    s = json.loads(summary.read_text())
+    assert s["violations_total"] == 0 and not s.get("nodes_missing")
+    return load_record(record)
+
+
 @pytest.mark.timeout(180)
 def test_realtime_run_over_zenoh_uses_its_neighbours(tmp_path: Path) -> None:
     """A real-time secured paper run: every node publishes every step, the truth is contained, and the
@@ -157,38 +184,12 @@ def test_realtime_run_over_zenoh_uses_its_neighbours(tmp_path: Path) -> None:
     state woke the node).  The innovations alone (``bounded_readings = false``): a node waiting for the step's
     readings polls for them (test_realtime_run_over_zenoh_waits_for_the_readings)."""
     steps = 30
-    summary, record, prof = tmp_path / "s.json", tmp_path / "r.jsonl", tmp_path / "profile"
+    prof = tmp_path / "profile"
     prof.mkdir()
     topology = tmp_path / "paper6_innovations.toml"
     text = Path(PAPER6).read_text().replace('node_dir = "../nodes"', f"node_dir = {str(ROOT / 'nodes')!r}")
     topology.write_text(text + "\n[network]\nbounded_readings = false\n")
-    out = subprocess.run(
-        cli(
-            "run",
-            topology,
-            "--mode",
-            "zenoh",
-            "--clock",
-            "realtime",
-            "--steps",
-            str(steps),
-            "--quiet",
-            "--summary-json",
-            str(summary),
-            "--record",
-            str(record),
-            "--profile",
-            str(prof),
-        ),
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=170,
-    )
-    assert out.returncode == 0, out.stderr[-2000:]
-    s = json.loads(summary.read_text())
-    assert s["violations_total"] == 0 and not s.get("nodes_missing")
-    rec = load_record(record)
+    rec = _realtime_run(topology, steps, tmp_path, "--profile", str(prof))
     used_all = total = 0
     for rows in rec.raw_nodes.values():
         assert [e["step"] for e in rows] == list(range(steps + 1))
@@ -213,32 +214,7 @@ def test_realtime_run_over_zenoh_waits_for_the_readings(tmp_path: Path) -> None:
     """A real-time secured paper6_reference run: sensor 3's reading of each step reaches the other nodes
     within their budget (a quarter period) and they use it nearly every step (docs/network.md)."""
     steps = 20
-    summary, record = tmp_path / "s.json", tmp_path / "r.jsonl"
-    out = subprocess.run(
-        cli(
-            "run",
-            ROOT / "topologies" / "paper6_reference.toml",
-            "--mode",
-            "zenoh",
-            "--clock",
-            "realtime",
-            "--steps",
-            str(steps),
-            "--quiet",
-            "--summary-json",
-            str(summary),
-            "--record",
-            str(record),
-        ),
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=170,
-    )
-    assert out.returncode == 0, out.stderr[-2000:]
-    s = json.loads(summary.read_text())
-    assert s["violations_total"] == 0 and not s.get("nodes_missing")
-    rec = load_record(record)
+    rec = _realtime_run(ROOT / "topologies" / "paper6_reference.toml", steps, tmp_path)
     rows = [e for i, es in rec.raw_nodes.items() if i != "3" for e in es[1:]]
     assert len(rows) == 5 * steps
     with_reading = sum(3 in e["readings"] for e in rows)  # the reference's (beside the others' bounded readings)
