@@ -63,12 +63,9 @@ def measure_one(topology: str, case: str, record: str, budget_s: float | None, n
 
     rec = load_record(record)
     sc = load_topology(topology, case, rec.meta.steps)  # type: ignore[arg-type]  # one of CASES
-    # ``exact --network`` computes the central limit first and hands it to the network limit (its boxes spare solves):
-    # so here too, untimed (the central row beside it is that part of the command's time)
-    central = exact_bounds(sc, rec, "used", budget_s=budget_s) if network else None
     rss: list[float] = []
     t0, w0 = time.process_time(), time.perf_counter()
-    ex = exact_bounds(sc, rec, "used", progress=lambda k, total: rss.append(_rss_mb()), budget_s=budget_s, network=network, central=central)
+    ex = exact_bounds(sc, rec, "used", progress=lambda k, total: rss.append(_rss_mb()), budget_s=budget_s, network=network)
     cpu, wall = time.process_time() - t0, time.perf_counter() - w0
     rss.append(_rss_mb())
     h = ex.health
