@@ -757,9 +757,10 @@ class KofNSearch:
         return cls(prog, plans, tally, budget, ledger) if plans else None
 
     def horizon(self, conic: Conic, k: int) -> _Horizon:
-        """Horizon k's program with what the past horizons proved (the plans' cuts; the box of β_j, r_j of every past step,
-        its own horizons' and the other programs' of the ledger whose data this horizon holds), its unions' pieces outside
-        the program's range dropped before the deadline (:meth:`_HealthPlan.narrow`, the solves counted)."""
+        """Horizon k's program with what the past horizons proved (the plans' cuts; in a network limit the box of β_j, r_j
+        of every past step, its own horizons' and the other programs' of the ledger whose data this horizon holds), its
+        unions' pieces outside the program's range dropped before the deadline (:meth:`_HealthPlan.narrow`, the solves
+        counted)."""
         self._import(k)
         rows = [row for p in self.plans for row in p.cuts]
         for j, (b_lo, b_hi, r_lo, r_hi) in sorted(self.box.items()):
@@ -788,7 +789,8 @@ class KofNSearch:
         """Horizon k is done and feasible: its ends bound step k in every later horizon (:meth:`_HealthPlan.learn`)."""
         for p in self.plans:
             p.learn(k, limits.beta[k], limits.r[k], {i: f[k] for i, f in limits.fault.items()})
-        self._proved(k, limits.beta[k], limits.r[k])
+        if self.prog.viewer is not None:  # (the central program's own boxes: no fewer solves, one end relaxed on a ring, measured)
+            self._proved(k, limits.beta[k], limits.r[k])
 
     def _import(self, k: int) -> None:
         """Every horizon h ≤ k of the ledger's other programs whose data horizon k holds (:meth:`_Program.holds`; a
