@@ -486,7 +486,7 @@ def _exact_network(a: argparse.Namespace, sc: Scenario, rec: Record, central: Ex
         bar.total = total
         bar.update(k)
 
-    net = exact_bounds(sc, rec, a.fault_bounds, progress=on_progress, health=not a.no_health, budget_s=a.budget, network=True)
+    net = exact_bounds(sc, rec, a.fault_bounds, progress=on_progress, health=not a.no_health, budget_s=a.budget, network=True, central=central)
     bar.close()
     cmp = compare_record(rec, net)
     print("\n".join(network_table(sc, net, cmp, central).lines()))
