@@ -42,6 +42,7 @@ from netsetest.runtime.channel import ChannelReader
 from netsetest.runtime.launcher import RUN_ID_BYTES, sigterm_as_interrupt
 from netsetest.runtime.processes import role_env
 from netsetest.runtime.rolespec import CollectorSpec, NodeSpec, RouterSpec, ScenarioSpec, VehicleSpec, ZenohSpec
+from netsetest_bench.config import BenchConfig
 
 LAYOUTS = {"one": 1, "two": 2}  # layout → hosts
 HOST_NAMES = "ab"  # host index → its name in the tables
@@ -203,9 +204,9 @@ def _summary(runs: list[dict]) -> dict:
     }
 
 
-def scaleout_figures(cfg: dict, tmp: Path) -> dict:
+def scaleout_figures(cfg: BenchConfig, tmp: Path) -> dict:
     """Both layouts of one ring, alternately (module doc)."""
-    nodes, steps, reps = cfg["scaleout_nodes"], cfg["scaleout_steps"], cfg["scaleout_reps"]
+    nodes, steps, reps = cfg.scaleout_nodes, cfg.scaleout_steps, cfg.scaleout_reps
     topo = ring_topology(tmp, nodes, steps)
     runs: dict[str, list[dict]] = {name: [] for name in LAYOUTS}
     with sigterm_as_interrupt():  # SIGTERM, like Ctrl-C, stops the run in progress and deletes its namespaces
