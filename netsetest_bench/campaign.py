@@ -329,7 +329,7 @@ class Met:
 
 def campaign_markdown(doc: dict | Campaign) -> str:
     """The targets' table, then what each arm measured (templates/campaign.md)."""
-    r = doc if isinstance(doc, Campaign) else load_figures(doc)
+    r = load_figures(doc) if isinstance(doc, dict) else doc  # (a dict: as the file holds it)
     t, b, T = r.throughput, r.big, "campaign"
     met = Met(
         ratio_2_over_1=_meets(t.ratio_2_over_1, 1.8, True),

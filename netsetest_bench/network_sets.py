@@ -353,7 +353,7 @@ def _met(ok: bool) -> str:
 
 def sets_markdown(doc: dict | Sets) -> str:
     """Issue 44's tables: faults at their bounds, the directed rings, the declared bounds, the cost."""
-    s, T = doc if isinstance(doc, Sets) else load_sets(doc), "network_sets"
+    s, T = load_sets(doc) if isinstance(doc, dict) else doc, "network_sets"
     lines = [fill(T, "at-bounds-head", from_step=s.at_bounds[0].from_step if s.at_bounds else 10)]
     for b in s.at_bounds:
         runs = b.runs

@@ -42,7 +42,7 @@ def typed(kind: type[T], doc: object, what: str = "the figures") -> T:
 def as_fields(figures: object) -> dict[str, object]:
     """A figures dataclass as its file holds it, one level (the inverse of :func:`typed`): its fields by name, a field
     whose ``json`` metadata names another key under that key (``with``, a keyword in Python)."""
-    return {f.metadata.get("json", f.name): getattr(figures, f.name) for f in dataclasses.fields(figures)}  # type: ignore[arg-type]
+    return {f.metadata.get("json", f.name): getattr(figures, f.name) for f in dataclasses.fields(figures)}  # type: ignore[arg-type]  # a dataclass instance: run.py's _jsonable checks
 
 
 class _Formatter(string.Formatter):

@@ -316,7 +316,7 @@ def _run_label(run: Run) -> str:
 
 
 def _widths(res: dict | Widths) -> Widths:
-    return res if isinstance(res, Widths) else load_widths(res)
+    return load_widths(res) if isinstance(res, dict) else res  # (not isinstance Widths: a test may import the module twice)
 
 
 W = "widths"  # the part's template (templates/widths.md)
@@ -349,7 +349,7 @@ def widths_summary_markdown(res: dict | Widths) -> str:
 
 def cost_markdown(cost: dict | RegionCost) -> str:
     """The region's cost per node-step, per case."""
-    rc = cost if isinstance(cost, RegionCost) else typed(RegionCost, cost, "the region's cost")
+    rc = typed(RegionCost, cost, "the region's cost") if isinstance(cost, dict) else cost
     lines = [fill(W, "cost-head", c=rc)]
     for case in CASES:
         c = rc.case(case)
@@ -360,7 +360,7 @@ def cost_markdown(cost: dict | RegionCost) -> str:
 
 def side_by_side_markdown(side: dict | SideBySide) -> str:
     """Issue 28's cost target: the step of this checkout against the baseline's, side by side, in a run and replayed."""
-    s = side if isinstance(side, SideBySide) else typed(SideBySide, side, "the step side by side")
+    s = typed(SideBySide, side, "the step side by side") if isinstance(side, dict) else side
     if s.error is not None or s.commits is None:
         return fill(W, "side-error", error=s.error) + "\n"
     lines = [fill(W, "side-head", s=s)]
