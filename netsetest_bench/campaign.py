@@ -208,8 +208,9 @@ def _ratio(a: float | None, b: float | None) -> float | None:
     return a / b if a and b else None
 
 
-def _throughput(tmp: Path, runs: int, reps: int) -> Throughput:
-    path = _file(tmp, "throughput", runs, ("sdp",), 80)
+def _arms(path: Path, tmp: Path, runs: int, reps: int) -> tuple[Arms, str | None]:
+    """Every arm ``reps`` times, in turn (the local pool with 1 and 2 workers, a Dask cluster of 2, the runs one by one
+    in this process); why the cluster did not start (None: it did)."""
     engines: dict[str, list[CampaignRun]] = {"local_1": [], "local_2": [], "cluster_2": []}
     direct: list[Direct] = []
     cluster_error = None
@@ -233,11 +234,16 @@ def _throughput(tmp: Path, runs: int, reps: int) -> Throughput:
                     cluster.close()
             else:
                 engines[arm].append(_campaign(path, out, LocalPool(int(arm[-1]))))
-    arms = Arms(**engines, direct=direct)
+    return Arms(**engines, direct=direct), cluster_error
+
+
+def _throughput(tmp: Path, runs: int, reps: int) -> Throughput:
+    """The arms' medians and their ratios (module doc)."""
+    arms, cluster_error = _arms(_file(tmp, "throughput", runs, ("sdp",), 80), tmp, runs, reps)
     per_s = {arm: _median([r.runs_per_s for r in rows]) for arm, rows in arms.engines()}
     cpu = {arm: _median([r.runs_per_cpu_s for r in rows]) for arm, rows in arms.engines()}
-    local_1, local_2, cluster_2 = (per_s[a] for a in engines)
-    cpu_1, cpu_2, cpu_cluster = (cpu[a] for a in engines)
+    local_1, local_2, cluster_2 = (per_s[a] for a, _ in arms.engines())
+    cpu_1, cpu_2, cpu_cluster = (cpu[a] for a, _ in arms.engines())
     overhead_wall = [c.wall_s / d.wall_s - 1 for c, d in zip(arms.local_1, arms.direct)]
     overhead_cpu = [(c.cpu_main_s + (c.worker_cpu_s or c.run_cpu_s) - c.run_cpu_s) / c.run_cpu_s for c in arms.local_1 if c.run_cpu_s]
     return Throughput(

@@ -334,6 +334,9 @@ def sets_figures(cfg: BenchConfig, tmp: Path) -> Sets:
     return Sets(at_bounds=bounds, rings=rings, declared=declared, cost=costs, step_target_ms=STEP_TARGET_MS)
 
 
+T = "network_sets"  # the tables' template (templates/network_sets.md)
+
+
 def _f(v: float | None, spec: str = ".3f") -> str:
     return "–" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, spec)
 
@@ -348,12 +351,16 @@ def _narrower(ratios: Ratios | None) -> int:
 
 
 def _met(ok: bool) -> str:
-    return fill("network_sets", "yes" if ok else "no")
+    return fill(T, "yes" if ok else "no")
 
 
 def sets_markdown(doc: dict | Sets) -> str:
     """Issue 44's tables: faults at their bounds, the directed rings, the declared bounds, the cost."""
-    s, T = load_sets(doc) if isinstance(doc, dict) else doc, "network_sets"
+    s = load_sets(doc) if isinstance(doc, dict) else doc
+    return "\n".join([*_at_bounds_lines(s), *_ring_lines(s), *_declared_lines(s), *_cost_lines(s)]) + "\n"
+
+
+def _at_bounds_lines(s: Sets) -> list[str]:
     lines = [fill(T, "at-bounds-head", from_step=s.at_bounds[0].from_step if s.at_bounds else 10)]
     for b in s.at_bounds:
         runs = b.runs
@@ -373,7 +380,11 @@ def sets_markdown(doc: dict | Sets) -> str:
                 met=_met(worst <= b.target and all(r.violations == 0 and r.narrower == 0 for r in runs)),
             )
         )
-    lines.append(fill(T, "rings-head", from_step=RING_FROM))
+    return lines
+
+
+def _ring_lines(s: Sets) -> list[str]:
+    lines = [fill(T, "rings-head", from_step=RING_FROM)]
     for r in s.rings:
         narrower = (_narrower(r.network), _narrower(r.central))
         lines.append(
@@ -393,7 +404,11 @@ def sets_markdown(doc: dict | Sets) -> str:
                 met=_met(r.worst <= r.target and r.violations == 0 and narrower[0] == 0),
             )
         )
-    lines.append(fill(T, "declared-head"))
+    return lines
+
+
+def _declared_lines(s: Sets) -> list[str]:
+    lines = [fill(T, "declared-head")]
     for kind in ("true", "false"):
         drawn = [d for d in s.declared if d.declared == kind]
         if drawn:
@@ -412,13 +427,17 @@ def sets_markdown(doc: dict | Sets) -> str:
                     met=_met(all(d.violations == 0 and d.misses_attributed == d.misses for d in drawn)),
                 )
             )
-    lines.append(fill(T, "cost-head", rounds=s.cost[0].rounds if s.cost else COST_ROUNDS, target=s.step_target_ms))
+    return lines
+
+
+def _cost_lines(s: Sets) -> list[str]:
+    lines = [fill(T, "cost-head", rounds=s.cost[0].rounds if s.cost else COST_ROUNDS, target=s.step_target_ms)]
     for c in s.cost:
         w, wo = c.wire.with_, c.wire.without
         states = " / ".join(fill(T, "traffic", t=x.state) for x in (w, wo))
         readings = " / ".join(fill(T, "traffic", t=x.reading) for x in (w, wo))
         lines.append(fill(T, "cost-row", c=c, case=c.case.upper(), states=states, readings=readings, s=c.step, met=_met(c.step.met)))
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 __all__ = ["AT_BOUNDS", "RINGS", "at_bounds", "cost", "declared_bounds", "faults_at_bounds", "ring", "sets_figures", "sets_markdown"]
