@@ -234,23 +234,7 @@ def network_markdown(doc: dict) -> str:
         if runs[0].exact:  # else no exact limit with this assumption
             lines.append(_limits_row(topology, case, signals, runs))
     lines.append(fill(T, "reach-head"))
-    for (topology, case, signals), runs in groups.items():
-        nodes = [r.nodes[i] for r in runs for i in sorted(runs[0].nodes)]
-        first = [runs[0].nodes[i] for i in sorted(runs[0].nodes)]
-        lines.append(
-            fill(
-                T,
-                "reach-row",
-                topology=topology,
-                case=case,
-                signals=signals,
-                gain=_span([v.sdp_alone_over_network for v in nodes], ".3f"),  # (None: the reference's own fault, a point)
-                over=_span([v.sdp_network_over_exact for v in nodes]),
-                ceiling=_span([v.ceiling() for v in nodes]),
-                states=" · ".join((_span([v.sdp_r_over_exact for v in nodes]), _span([v.sdp_beta_over_exact for v in nodes]))),
-                delays=" · ".join(fill(T, "delay", network=_d(v.delay_network), alone=_d(v.delay_alone)) for v in first),
-            )
-        )
+    lines += [_reach_row(topology, case, signals, runs) for (topology, case, signals), runs in groups.items()]
     every = [v for r in n.runs for v in r.nodes.values()]
     lines.append(
         fill(
@@ -269,6 +253,24 @@ def network_markdown(doc: dict) -> str:
         parts = "; ".join(fill(T, "cost-part", name=name, c=c, change=100 * (c.readings / c.no_readings - 1)) for name, c in cost.ms_per_step.items())
         lines.append(fill(T, "cost", cost=cost, parts=parts))
     return "\n".join(lines) + "\n"
+
+
+def _reach_row(topology: str, case: str, signals: str, runs: list[NetworkRun]) -> str:
+    """What the exchange buys one topology, case and signal family, over its runs' nodes; each node's delays."""
+    nodes = [r.nodes[i] for r in runs for i in sorted(runs[0].nodes)]
+    first = [runs[0].nodes[i] for i in sorted(runs[0].nodes)]
+    return fill(
+        "network",
+        "reach-row",
+        topology=topology,
+        case=case,
+        signals=signals,
+        gain=_span([v.sdp_alone_over_network for v in nodes], ".3f"),  # (None: the reference's own fault, a point)
+        over=_span([v.sdp_network_over_exact for v in nodes]),
+        ceiling=_span([v.ceiling() for v in nodes]),
+        states=" · ".join((_span([v.sdp_r_over_exact for v in nodes]), _span([v.sdp_beta_over_exact for v in nodes]))),
+        delays=" · ".join(fill("network", "delay", network=_d(v.delay_network), alone=_d(v.delay_alone)) for v in first),
+    )
 
 
 def _limits_row(topology: str, case: str, signals: str, runs: list[NetworkRun]) -> str:

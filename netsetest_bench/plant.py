@@ -33,7 +33,7 @@ import numpy as np
 from netsetest.models.manoeuvres import DriveSpec, ManoeuvreName
 from netsetest.models.plant import VEHICLE_IDS, VEHICLE_NAMES, PlantKind
 from netsetest.scenarios import TOPOLOGY_DIR
-from netsetest_bench.figures.plant import CASES, Drive, Envelopes, Training, by_case, mean_ratio
+from netsetest_bench.figures.plant import CASES, Drive, EnvelopeCar, EnvelopeDrive, Envelopes, Training, by_case, mean_ratio
 from netsetest_bench.figures.plant import load as load_plant
 from netsetest_bench.render import fill
 from netsetest_bench.config import BenchConfig
@@ -511,31 +511,31 @@ def envelope_markdown(env: Envelopes) -> list[str]:
     for car in env.cars:
         box = fill(T, "box", b=car.box)
         for label, rows in car.drives.items():
-            for case in CASES:
-                rs = [r for r in rows if r.case == case]
-                if rs:
-                    lines.append(
-                        fill(
-                            T,
-                            "envelope-row",
-                            vehicle=car.vehicle,
-                            name=VEHICLE_NAMES[car.vehicle],
-                            box=box,
-                            label=label,
-                            case=case,
-                            runs=len(rs),
-                            ay_peak=max(r.ay_peak for r in rs),
-                            left=sum(r.envelope_left for r in rs),
-                            e_max=max(r.e_max_ratio for r in rs),
-                            covered=sum(r.covered for r in rs),
-                            evaluated=sum(r.evaluated for r in rs),
-                            violations=sum(r.violations for r in rs),
-                            misses=sum(r.misses for r in rs),
-                            attributed=sum(r.misses_attributed for r in rs),
-                            said="yes" if all(r.verdict_says for r in rs if r.misses_attributed) else "no",
-                        )
-                    )
+            lines += [_envelope_row(car, box, label, case, rs) for case in CASES if (rs := [r for r in rows if r.case == case])]
     return lines
+
+
+def _envelope_row(car: EnvelopeCar, box: str, label: str, case: str, rs: list[EnvelopeDrive]) -> str:
+    """One car's held-out drives of one kind and case, over their seeds."""
+    return fill(
+        "plant",
+        "envelope-row",
+        vehicle=car.vehicle,
+        name=VEHICLE_NAMES[car.vehicle],
+        box=box,
+        label=label,
+        case=case,
+        runs=len(rs),
+        ay_peak=max(r.ay_peak for r in rs),
+        left=sum(r.envelope_left for r in rs),
+        e_max=max(r.e_max_ratio for r in rs),
+        covered=sum(r.covered for r in rs),
+        evaluated=sum(r.evaluated for r in rs),
+        violations=sum(r.violations for r in rs),
+        misses=sum(r.misses for r in rs),
+        attributed=sum(r.misses_attributed for r in rs),
+        said="yes" if all(r.verdict_says for r in rs if r.misses_attributed) else "no",
+    )
 
 
 def plant_summary_markdown(doc: dict) -> str:
