@@ -407,6 +407,18 @@ def load_record(path: str | Path) -> Record:
 
 def _load_lines(path: Path, data: bytes) -> Record:
     """Version 2: JSON Lines; without the summary line a partial record."""
+    objs = _entries(path, data)
+    meta = _header(path, objs)
+    _check_sequence(path, objs)
+    truth, nodes, summary = _body(path, objs, meta.get("node_ids", []))
+    last = _check_order(path, truth, nodes)
+    if summary is None:  # a partial record: the states of the step being written when it stopped are not a step
+        nodes = {i: [e for e in es if e["step"] <= last] for i, es in nodes.items()}
+    return _build(path, meta, truth, nodes, summary, partial=summary is None, last_complete=last)
+
+
+def _entries(path: Path, data: bytes) -> list[dict]:
+    """Every line as its record entry; the last line cut short (the writer died writing it) left out."""
     lines = data.split(b"\n")
     if lines and lines[-1] == b"":
         lines.pop()
@@ -421,6 +433,11 @@ def _load_lines(path: Path, data: bytes) -> Record:
         if not isinstance(obj, dict) or "kind" not in obj:
             raise RecordError(f"{path}: malformed record (line {n + 1} is not a record entry)")
         objs.append(obj)
+    return objs
+
+
+def _header(path: Path, objs: list[dict]) -> dict:
+    """The meta line's meta, checked: this format and version, a dict."""
     if not objs or objs[0].get("kind") != "meta" or objs[0].get("format") != FORMAT:
         raise RecordError(f"{path}: not a netsetest record (no meta line)")
     if objs[0].get("version") != VERSION:
@@ -428,11 +445,15 @@ def _load_lines(path: Path, data: bytes) -> Record:
     meta = objs[0].get("meta")
     if not isinstance(meta, dict):
         raise RecordError(f"{path}: malformed record (meta must be a dict)")
-    _check_sequence(path, objs)
-    truth: list[dict] = []
-    node_ids = meta.get("node_ids", [])
+    return meta
+
+
+def _body(path: Path, objs: list[dict], node_ids: object) -> tuple[list[dict], dict[str, list[dict]], dict | None]:
+    """The lines after the meta line: the truth entries, each node's states (``node_ids``: meta's, checked), the
+    summary (None: a partial record)."""
     if not isinstance(node_ids, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in node_ids):
         raise RecordError(f"{path}: malformed record (meta.node_ids must be a list of node ids)")
+    truth: list[dict] = []
     nodes: dict[str, list[dict]] = {str(i): [] for i in node_ids}
     summary: dict | None = None
     try:
@@ -450,10 +471,7 @@ def _load_lines(path: Path, data: bytes) -> Record:
                 raise RecordError(f"{path}: malformed record (line {n}: unknown kind {kind!r})")
     except (KeyError, TypeError, ValueError, OverflowError) as exc:
         raise RecordError(f"{path}: malformed record ({type(exc).__name__}: {exc})") from None
-    last = _check_order(path, truth, nodes)
-    if summary is None:  # a partial record: the states of the step being written when it stopped are not a step
-        nodes = {i: [e for e in es if e["step"] <= last] for i, es in nodes.items()}
-    return _build(path, meta, truth, nodes, summary, partial=summary is None, last_complete=last)
+    return truth, nodes, summary
 
 
 def _check_sequence(path: Path, objs: list[dict]) -> None:
