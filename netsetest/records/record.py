@@ -47,6 +47,7 @@ from __future__ import annotations
 import gzip
 import json
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any, Literal, Protocol, cast, get_args
@@ -595,27 +596,7 @@ def record_from_parts(
 ) -> Record:
     """A :class:`Record` from the parts a run returns (or a file holds); raises KeyError/TypeError/ValueError
     on malformed entries.  ``last_complete_step`` defaults to the last step of ``truth``."""
-    tracks = {}
-    for key, entries in nodes.items():
-        tracks[int(key)] = NodeTrack(
-            id=int(key),
-            steps=np.array([e["step"] for e in entries], dtype=int),
-            **_tracked_sets(entries),
-            E=np.array([np.nan if e["E"] is None else e["E"] for e in entries], dtype=float),
-            contained=np.array([e["contained"] is True for e in entries], dtype=bool),
-            assumptions_ok=np.array([bool(e["assumptions_ok"]) for e in entries], dtype=bool),
-            status=[e["status"] for e in entries],
-            solve_ms=np.array([e["solve_ms"] for e in entries], dtype=float),
-            set_bounds=_set_bounds(entries),
-            # records before "judged" wrote contained: true on unjudged rows too; say where they could not be
-            judged=np.array([e.get("judged", e.get("E") is not None and not e.get("contested", False)) for e in entries], dtype=bool),
-            fdi=[_fdi(e.get("fdi")) for e in entries],
-            continues_contained=np.array([e.get("continues_contained") is not False for e in entries], dtype=bool)
-            if any("continues_contained" in e for e in entries)
-            else None,
-            missed_flags=np.array([e.get("missed") is True for e in entries], dtype=bool) if any("missed" in e for e in entries) else None,
-            cuts=_cuts(entries),
-        )
+    tracks = {int(key): _track(int(key), entries) for key, entries in nodes.items()}
     for t in truth:
         if not isinstance(t, dict) or not isinstance(t.get("step"), int):
             raise ValueError("a truth entry without a step")
@@ -625,6 +606,34 @@ def record_from_parts(
     # a run stopped early (Ctrl-C: the collector writes what it has, summary included) is partial too
     stopped = summary is not None and meta.steps is not None and summary.steps_completed < meta.steps
     return Record(path, meta, truth, tracks, summary, nodes, partial or stopped, last_complete_step)
+
+
+def _track(node: int, entries: list[dict]) -> NodeTrack:
+    """One node's state lines as its track (KeyError/TypeError/ValueError on a malformed entry)."""
+    return NodeTrack(
+        id=node,
+        steps=np.array([e["step"] for e in entries], dtype=int),
+        **_tracked_sets(entries),
+        E=np.array([np.nan if e["E"] is None else e["E"] for e in entries], dtype=float),
+        contained=np.array([e["contained"] is True for e in entries], dtype=bool),
+        assumptions_ok=np.array([bool(e["assumptions_ok"]) for e in entries], dtype=bool),
+        status=[e["status"] for e in entries],
+        solve_ms=np.array([e["solve_ms"] for e in entries], dtype=float),
+        set_bounds=_set_bounds(entries),
+        # records before "judged" wrote contained: true on unjudged rows too; say where they could not be
+        judged=np.array([e.get("judged", e.get("E") is not None and not e.get("contested", False)) for e in entries], dtype=bool),
+        fdi=[_fdi(e.get("fdi")) for e in entries],
+        continues_contained=_flags(entries, "continues_contained", lambda v: v is not False),
+        missed_flags=_flags(entries, "missed", lambda v: v is True),
+        cuts=_cuts(entries),
+    )
+
+
+def _flags(entries: list[dict], key: str, flag: Callable[[object], bool]) -> np.ndarray | None:
+    """A per-step flag the state lines carry since some version (None: a record older than it)."""
+    if not any(key in e for e in entries):
+        return None
+    return np.array([flag(e.get(key)) for e in entries], dtype=bool)
 
 
 def save_record(path: str | Path, meta: RunMeta, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None) -> None:
