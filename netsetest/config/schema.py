@@ -486,6 +486,14 @@ class TopologyFile(_Strict, frozen=True, kw_only=True):
     network: NetworkSpec = field(default_factory=NetworkSpec)
 
     def __post_init__(self) -> None:
+        self._check_envelope()
+        self._check_graph()
+        self._check_speed()
+        self._check_model_uncertainty()
+        self._check_network()
+
+    def _check_envelope(self) -> None:
+        """An envelope only with a nonlinear plant and its declared bound, within the model's speeds."""
         if self.envelope is not None and (self.model_uncertainty is None or self.vehicle.plant == "ts"):
             raise ValueError("envelope: it says where a plant's [model_uncertainty] bound holds; declare a nonlinear plant and that bound with it")
         if self.envelope is not None:
@@ -493,6 +501,17 @@ class TopologyFile(_Strict, frozen=True, kw_only=True):
                 check_envelope_speeds(self.envelope.build(), self.vehicle.vx_min_kmh, self.vehicle.vx_max_kmh)
             except ValueError as exc:
                 raise ValueError(f"envelope: {exc}") from None
+
+    def _check_model_uncertainty(self) -> None:
+        """No declared model mismatch on a T-S plant (it is its own model)."""
+        if self.vehicle.plant == "ts" and self.model_uncertainty is not None:
+            raise ValueError(
+                'model_uncertainty: a T-S plant (plant = "ts") is its own model, so e_k = 0 and a declared bound only widens '
+                "every set; remove [model_uncertainty], or choose a nonlinear plant (docs/plant.md)"
+            )
+
+    def _check_graph(self) -> None:
+        """Nodes with distinct ids; edges between them, each once; loss bursts on edges."""
         ids = [n.id for n in self.nodes]
         if not ids:
             raise ValueError("nodes: at least one node is needed")
@@ -509,6 +528,9 @@ class TopologyFile(_Strict, frozen=True, kw_only=True):
         for b in self.loss.bursts:
             if (b.to, b.from_) not in seen or b.to == b.from_:
                 raise ValueError(f"loss.bursts: {b.from_}→{b.to} is not an edge between two nodes")
+
+    def _check_speed(self) -> None:
+        """The speed reference within the model's speed range."""
         lo, hi = self.speed.mean_kmh - self.speed.amplitude_kmh, self.speed.mean_kmh + self.speed.amplitude_kmh
         if self.vehicle.manoeuvre not in SINE_SPEED:  # held at the mean speed
             lo = hi = self.speed.mean_kmh
@@ -517,11 +539,9 @@ class TopologyFile(_Strict, frozen=True, kw_only=True):
                 f"speed: manoeuvre {self.vehicle.manoeuvre!r}: its speed reference spans [{lo}, {hi}] km/h, "
                 f"outside the model's [{self.vehicle.vx_min_kmh}, {self.vehicle.vx_max_kmh}] km/h"
             )
-        if self.vehicle.plant == "ts" and self.model_uncertainty is not None:
-            raise ValueError(
-                'model_uncertainty: a T-S plant (plant = "ts") is its own model, so e_k = 0 and a declared bound only widens '
-                "every set; remove [model_uncertainty], or choose a nonlinear plant (docs/plant.md)"
-            )
+
+    def _check_network(self) -> None:
+        """No k-of-N declaration and no reading scope where the readings' exchange is off."""
         if not self.network.readings and (self.network.max_faulty is not None or self.network.health_groups):
             what = "max_faulty" if self.network.max_faulty is not None else "health_groups"
             raise ValueError(f"network.{what}: the k-of-N declaration rests on the readings' exchange, which readings = false turns off; remove one of the two")
