@@ -370,7 +370,7 @@ class Performance:
     node: NodeStartup
     realtime: Realtime
     defences: Defences
-    scaling: list[ScalingPoint]
+    scaling: list[ScalingPoint] = field(default_factory=list)  # the headline's (run.headline): none before the run computes it
     node_profile: NodeProfile = field(default_factory=NodeProfile)
     node_profile_trace: NodeProfile = field(default_factory=NodeProfile)
     # the headline (run.headline; run.TARGETS names them)
