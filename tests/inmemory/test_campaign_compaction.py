@@ -30,6 +30,7 @@ from netsetest.cli.main import main
 pytest.importorskip("pyarrow")
 
 NODES = 3
+MAX_STEPS = 100  # a compaction of LAYOUT makes about 20 changes on disk
 # partition → flushes of (run keys): a run's rows are written by one flush, as the campaign writes them
 LAYOUT = {
     ("sdp", "nsnim"): [[f"s{i}" for i in range(8)], ["s8"], ["s9"], ["s10"]],  # 4 files, the first the largest
@@ -205,6 +206,7 @@ def test_a_kill_at_each_step_of_a_compaction_loses_no_row_and_counts_none_twice(
     small = max(f.stat().st_size for f in _files(written[0])[("sdp", "nsnim")])  # the largest file, left as it is: a link made too
     step, total = 0, None
     while total is None:
+        assert step < MAX_STEPS, "the compaction never ran to its end"
         out = tmp_path / f"k{step}"
         shutil.copytree(written[0], out)
         said = _compact_killed_at(out, step, small)
