@@ -146,8 +146,33 @@ REQUEST_EVENTS = ("Network.requestWillBeSent", "Network.webSocketCreated")
 
 
 def _failed_requests(events: list[dict]) -> list[str]:
+    """The URLs of the requests the page did not get: ``Network.loadingFailed``, except one the browser reports as
+    cancelled after the page had every byte its response declared (its Content-Length, the sum of its
+    ``Network.dataReceived``).  Measured with the live view's 43 MB viewer on two loaded cores: the page read the
+    whole body (43 166 975 bytes of 43 166 975) and started, and Chromium then reported the fetch as
+    ``net::ERR_ABORTED``, cancelled: its renderer had finished with the body before the network service's word
+    that the load was complete reached it.  That is a load the page completed; one short of its length, or failed
+    for any other reason, is not."""
     urls = {e["params"]["requestId"]: e["params"]["request"]["url"] for e in events if e.get("method") == "Network.requestWillBeSent"}
-    return [urls.get(e["params"]["requestId"], "?") for e in events if e.get("method") == "Network.loadingFailed"]
+    declared: dict[str, int] = {}
+    got: dict[str, int] = {}
+    for e in events:
+        p = e.get("params", {})
+        if e.get("method") == "Network.responseReceived":
+            length = next((v for k, v in p["response"].get("headers", {}).items() if k.lower() == "content-length"), None)
+            if length is not None and str(length).isdigit():
+                declared[p["requestId"]] = int(length)
+        elif e.get("method") == "Network.dataReceived":
+            got[p["requestId"]] = got.get(p["requestId"], 0) + p.get("dataLength", 0)
+
+    def whole(rid: str) -> bool:
+        return rid in declared and got.get(rid, 0) >= declared[rid]
+
+    return [
+        urls.get(e["params"]["requestId"], "?")
+        for e in events
+        if e.get("method") == "Network.loadingFailed" and not (e["params"].get("canceled") and whole(e["params"]["requestId"]))
+    ]
 
 
 READY_MARK = "__netsetestReadyMs"  # set by the page's own timer once the caller's condition holds

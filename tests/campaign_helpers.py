@@ -1,5 +1,6 @@
-"""Shared by the campaign tests (tests/inmemory/test_campaign.py, tests/process/test_campaign_cluster.py):
-the rows of a campaign's runs made one by one in this process, a results directory's rows, and their comparison.
+"""Shared by the campaign tests (tests/inmemory/test_campaign*.py, tests/process/test_campaign*.py): a module's
+campaign file, the rows of a campaign's runs made one by one in this process, a results directory's rows, and
+their comparison.
 
 Rows are compared without the columns that say how and where a run went (rows.VARYING: times, worker);
 integers and strings must be equal, floats within REL_TOL: the workers and this process run the same code on
@@ -11,8 +12,10 @@ bound far below any figure's meaning instead of to the bit.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
+
+import pytest
 
 from netsetest.campaign.rows import COLUMNS, VARYING, rows_of
 from netsetest.campaign.runner import tasks_of
@@ -21,6 +24,18 @@ from netsetest.campaign.worker import execute
 
 REL_TOL = 1e-9
 Rows = dict[tuple[str, int], dict]
+
+
+def campaign_file_fixture(text: str) -> Callable[..., Path]:
+    """A module's ``campaign_file`` fixture: ``text`` written once as c.toml in a directory of its own."""
+
+    @pytest.fixture(scope="module")
+    def campaign_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+        path = tmp_path_factory.mktemp("campaign") / "c.toml"
+        path.write_text(text)
+        return path
+
+    return campaign_file
 
 
 def by_row(rows: Iterable[dict]) -> Rows:

@@ -2,19 +2,21 @@
 
 Rows are written every ``FLUSH_S`` seconds or ``FLUSH_RUNS`` runs, and at the end; on Ctrl-C (a
 KeyboardInterrupt here) the engine is stopped, what came back is written, and :func:`run_campaign`
-returns with ``interrupted`` set: the next campaign on the same directory runs only the rest.
+returns with ``interrupted`` set: the next campaign on the same directory runs only the rest.  The
+results are compacted (store.py, :meth:`Store.compact`) before the runs, where an earlier session left
+its files as they were (a Ctrl-C, a crash), and once every run is back.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from netsetest.campaign.engines import Engine
 from netsetest.campaign.rows import ERROR, rows_of
 from netsetest.campaign.spec import Campaign
-from netsetest.campaign.store import Store
+from netsetest.campaign.store import Compaction, Store
 from netsetest.campaign.worker import RunTask
 
 FLUSH_S = 10.0  # a crash loses at most this much finished work (its runs run again on resume)
@@ -24,7 +26,8 @@ FLUSH_RUNS = 200  # nor more runs than this: a few files per flush keep resume's
 @dataclass
 class Tally:
     """Where a campaign stands: ``total`` runs, ``skipped`` already in the results when it started, ``done``
-    this time (of them ``failed``: a verdict other than PASS, and ``errors``: no verdict at all)."""
+    this time (of them ``failed``: a verdict other than PASS, and ``errors``: no verdict at all); the results'
+    compactions (before the runs, and after them unless interrupted)."""
 
     total: int
     skipped: int
@@ -33,6 +36,7 @@ class Tally:
     errors: int = 0
     interrupted: bool = False
     started: float = 0.0
+    compactions: list[Compaction] = field(default_factory=list)
 
     @property
     def todo(self) -> int:
@@ -59,6 +63,7 @@ def run_campaign(c: Campaign, store: Store, engine: Engine, progress: Callable[[
         progress(tally)
     last_flush, unflushed = time.monotonic(), 0
     try:
+        tally.compactions.append(store.compact())  # on resume: what an interrupted session left in many files
         for o in engine.outcomes(tasks):
             p = planned[o.key]
             rows = rows_of(c, p, o)
@@ -80,4 +85,9 @@ def run_campaign(c: Campaign, store: Store, engine: Engine, progress: Callable[[
     finally:
         engine.close()
         store.flush()
+    if not tally.interrupted:
+        try:
+            tally.compactions.append(store.compact())
+        except KeyboardInterrupt:  # the results are whole either way; the next session compacts them
+            tally.interrupted = True
     return tally

@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from netsetest.campaign.engines import Engine
     from netsetest.campaign.runner import Tally
     from netsetest.campaign.spec import Campaign
-    from netsetest.campaign.store import Store
+    from netsetest.campaign.store import Compaction, Store
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {}
 RESULTS_SUFFIX = ".results"  # the default results directory: the campaign file's name with this instead of .toml
@@ -156,6 +156,7 @@ def _campaign(a: argparse.Namespace, c: Campaign, out: Path, store: Store, eng: 
     where = "nothing to run" if not todo else f"on {a.cluster}" if a.cluster else f"on {eng.workers} local worker(s)"
     print(f"campaign {c.name}: {len(c.runs)} runs, {len(c.runs) - todo} already done, {todo} to run {where}; results in {out}", file=sys.stderr)
     if not todo:
+        _say_compacted(store.compact())  # an earlier session's, interrupted after its last run
         return None
     bar = _Bar(not a.quiet)
     t0 = time.monotonic()
@@ -164,7 +165,17 @@ def _campaign(a: argparse.Namespace, c: Campaign, out: Path, store: Store, eng: 
     finally:
         bar.close()
     print(f"ran {tally.done} run(s) in {time.monotonic() - t0:.1f} s", file=sys.stderr)
+    for comp in tally.compactions:
+        _say_compacted(comp)
     return tally
+
+
+def _say_compacted(comp: Compaction) -> None:
+    """A line where the results were compacted, or could not be (the files are as they were)."""
+    if comp.skipped is not None:
+        print(f"campaign: the results stay in {comp.files_after} files, not compacted: {comp.skipped}", file=sys.stderr)
+    elif comp.partitions:
+        print(f"campaign: compacted the results, {comp.files_before} files into {comp.files_after} ({comp.wall_s:.1f} s)", file=sys.stderr)
 
 
 def _print_outcome(c: Campaign, table: pa.Table) -> int:

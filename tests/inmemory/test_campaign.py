@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 import campaign_helpers
-from campaign_helpers import Rows, assert_same_rows, dataset
+from campaign_helpers import Rows, assert_same_rows, campaign_file_fixture, dataset
 from netsetest.campaign.engines import LocalPool
 from netsetest.campaign.rows import COLUMNS, ERROR
 from netsetest.campaign.runner import run_campaign, tasks_of
@@ -47,11 +47,7 @@ figures = ["verdict", "widths", "detection", "exact"]
 """
 
 
-@pytest.fixture(scope="module")
-def campaign_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("campaign") / "c.toml"
-    path.write_text(CAMPAIGN)
-    return path
+campaign_file = campaign_file_fixture(CAMPAIGN)
 
 
 @pytest.fixture(scope="module")

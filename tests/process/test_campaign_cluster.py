@@ -20,9 +20,10 @@ import sys
 from pathlib import Path
 
 import pytest
-from campaign_helpers import assert_same_rows, dataset, one_by_one
+from campaign_helpers import assert_same_rows, campaign_file_fixture, dataset, one_by_one
 from zenoh_helpers import ProcessGuard, wait_for
 
+from netsetest.campaign.engines import DASK_ENV
 from netsetest.runtime import netns
 
 pytest.importorskip("distributed")
@@ -39,9 +40,7 @@ seeds = "0-2"
 steps = 5
 """
 PORT = 8786
-# Dask's own clocks (not docs/campaign.md's DASK_ENV, nor its --preload): with them one worker ran every run before the
-# other was killed in 2 of 4 CI runs under load (the test's premise, not the product's bookkeeping); to be made deterministic
-WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "MALLOC_ARENA_MAX": "2"}
+WORKER_ENV = {**DASK_ENV, "MALLOC_ARENA_MAX": "2"}  # as docs/campaign.md starts a worker
 
 
 class Cluster:
@@ -82,6 +81,7 @@ class Cluster:
         for name in ("a", "b"):
             argv = [py, "-m", "distributed.cli.dask_worker", f"tcp://{scheduler[name]}:{port}", "--host", host[name], "--nthreads", "1", "--no-nanny"]
             argv += ["--no-dashboard", "--name", name, "--local-directory", str(tmp / f"dask-{name}")]
+            argv += ["--preload", "netsetest.campaign.worker"]  # as docs/campaign.md starts a worker: the run's code imported at its start
             procs.start(f"worker-{name}", [*self.prefix[name], *argv], env=env)
         for name in ("a", "b"):
             wait_for(lambda: "Registered to" in procs.stderr(f"worker-{name}") or procs.procs[f"worker-{name}"].poll() is not None, 60, 0.2, f"worker {name}")
@@ -106,21 +106,32 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-@pytest.fixture(scope="module")
-def campaign_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("cluster") / "c.toml"
-    path.write_text(CAMPAIGN)
-    return path
+campaign_file = campaign_file_fixture(CAMPAIGN)
+
+
+@pytest.fixture
+def cluster(procs: ProcessGuard, tmp_path: Path) -> Cluster:
+    return Cluster(procs, tmp_path)
 
 
 @pytest.mark.timeout(300)
-def test_a_dask_cluster_gives_the_rows_of_the_runs_one_by_one_and_survives_a_lost_worker(procs: ProcessGuard, campaign_file: Path, tmp_path: Path) -> None:
+def test_a_dask_cluster_gives_the_rows_of_the_runs_one_by_one_and_survives_a_lost_worker(
+    procs: ProcessGuard, campaign_file: Path, cluster: Cluster, tmp_path: Path
+) -> None:
+    """Worker b is stopped (SIGSTOP) before the campaign starts: the runs the scheduler hands it wait, so the runs that
+    come back first are worker a's, and the campaign cannot end before b goes on.  Once two runs are back, a is
+    SIGKILLed (mid-campaign whatever the machine's load: b still holds runs) and b continues (SIGCONT): it runs its
+    own runs, and again those a held.  Dask's work stealing takes no run from b while it is stopped: a steal
+    needs the victim's answer."""
     want = one_by_one(campaign_file)
-    cluster = Cluster(procs, tmp_path)
     out = tmp_path / "out"
+    b = procs.procs["worker-b"].pid
+    os.kill(b, signal.SIGSTOP)
     cluster.campaign(campaign_file, out)
-    wait_for(lambda: "campaign: 2/" in procs.stderr("campaign") or procs.procs["campaign"].poll() is not None, 120, 0.05, "two runs back")
-    os.kill(procs.procs["worker-a"].pid, signal.SIGKILL)  # mid-campaign: its runs go to worker b
+    wait_for(lambda: "campaign: 2/" in procs.stderr("campaign") or procs.procs["campaign"].poll() is not None, 120, 0.05, "two runs back (worker a's)")
+    assert procs.procs["campaign"].poll() is None, procs.logs()
+    os.kill(procs.procs["worker-a"].pid, signal.SIGKILL)  # mid-campaign: its runs in flight go to worker b
+    os.kill(b, signal.SIGCONT)
     assert procs.wait("campaign", 240) == 0, procs.logs()
     got = dataset(out)
     assert_same_rows(got, want)
@@ -130,12 +141,13 @@ def test_a_dask_cluster_gives_the_rows_of_the_runs_one_by_one_and_survives_a_los
         assert netns.identify(procs.procs["worker-b"].pid) == cluster.nets.created[-1]
 
 
-def test_a_scheduler_that_is_not_there_is_one_line_and_exit_2_before_anything_is_written(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_scheduler_that_is_not_there_is_one_line_and_exit_2_before_anything_is_written(
+    campaign_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     from netsetest.cli.main import main
 
-    campaign, out = tmp_path / "c.toml", tmp_path / "out"
-    campaign.write_text(CAMPAIGN)
-    assert main(["campaign", str(campaign), "--out", str(out), "--cluster", f"tcp://127.0.0.1:{_free_port()}"]) == 2
+    out = tmp_path / "out"
+    assert main(["campaign", str(campaign_file), "--out", str(out), "--cluster", f"tcp://127.0.0.1:{_free_port()}"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("netsetest campaign: ") and err.count("\n") == 1 and "cannot reach a Dask scheduler there" in err, err
     assert not out.exists()

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from campaign_helpers import campaign_file_fixture
 from netsetest.cli.main import main
 from netsetest_bench.browser import BOKEH_READY, NoBrowser, chromium, load_page
 
@@ -26,15 +27,16 @@ figures = ["verdict", "widths", "detection", "exact"]
 """
 
 
-def test_campaign_page_renders_in_chromium(tmp_path: Path) -> None:
+campaign_file = campaign_file_fixture(CAMPAIGN)
+
+
+def test_campaign_page_renders_in_chromium(campaign_file: Path, tmp_path: Path) -> None:
     pytest.importorskip("bokeh")
     try:
         chromium()
     except NoBrowser as e:
         pytest.skip(str(e))
-    campaign = tmp_path / "c.toml"
-    campaign.write_text(CAMPAIGN)
-    assert main(["campaign", str(campaign), "--out", str(tmp_path / "out"), "--workers", "2", "--report", "--quiet"]) == 0
+    assert main(["campaign", str(campaign_file), "--out", str(tmp_path / "out"), "--workers", "2", "--report", "--quiet"]) == 0
     page = tmp_path / "out" / "report.html"
     seen = load_page(page.resolve().as_uri(), tmp_path, {"text": "document.body.innerText", "figures": ROOTS}, ready=BOKEH_READY)
     assert seen.errors == [] and seen.failed_requests == []

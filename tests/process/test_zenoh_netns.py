@@ -143,17 +143,17 @@ def test_scaleout_bench_stopped_by_sigterm_leaves_nothing_behind(tmp_path) -> No
         "    except KeyboardInterrupt:\n"
         "        print('interrupted', flush=True)\n"
     )
-    before = set(subprocess.run(["ip", "netns", "list"], capture_output=True, text=True, check=True).stdout.split())
 
-    def ours() -> set[str]:  # the namespaces made since the test began
-        listed = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout.split()
-        return {ns for ns in listed if ns.startswith("nsb")} - before
+    def ours() -> tuple[set[str], set[str]]:
+        """This benchmark's run ids (its run directories, in this test's directory) and the namespaces its processes
+        run in: namespaces are the machine's, and another benchmark or test may be making its own "nsb" ones now."""
+        run_ids = {p.name for p in tmp_path.glob("*/scale-*")}
+        return run_ids, {ns for r in run_ids for pid in pids_with_arg(r) if (ns := netns.identify(pid))}
 
     bench = subprocess.Popen([sys.executable, "-c", script, str(tmp_path)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
-        assert wait_for(lambda: bool(ours()) or bench.poll() is not None, 60, 0.1, "the run's namespace")
-        made = ours()
-        run_ids = {p.name for p in tmp_path.glob("*/scale-*")}
+        assert wait_for(lambda: all(ours()) or bench.poll() is not None, 60, 0.1, "the run's first process in its namespace")
+        run_ids, made = ours()
         assert made and run_ids and bench.poll() is None
         time.sleep(3.0)  # its roles are up and stepping
         bench.send_signal(signal.SIGTERM)
