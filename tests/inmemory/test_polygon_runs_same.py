@@ -17,7 +17,6 @@ import pytest
 
 from netsetest.config.schema import Case, load_topology
 from netsetest import polygon
-from netsetest.estimator import cuts
 from netsetest.models.signals import SignalKind
 from netsetest.polygon import Polygon
 from netsetest.runtime.inmemory import run_inmemory
@@ -58,7 +57,7 @@ def test_every_region_operation_of_a_run_returns_what_the_numpy_code_did(
     calls: Counter[str] = Counter()
     for name in ("moved", "cut", "reduced"):
         monkeypatch.setattr(Polygon, name, _checked(calls, name, getattr(Polygon, name), getattr(ref.Polygon, name)))
-    monkeypatch.setattr(cuts, "ellipse_cut", _checked(calls, "ellipse_cut", cuts.ellipse_cut, ref.ellipse_cut))
+    monkeypatch.setattr(Polygon, "ellipse_cut", _checked(calls, "ellipse_cut", Polygon.ellipse_cut, ref.ellipse_cut))
     run_inmemory(load_topology(topology, case, STEPS), signals, "scheduled", seed)
     nodes = len(load_topology(topology, case, STEPS).ids)
     assert calls["moved"] >= nodes * (STEPS - 1) and calls["reduced"] >= nodes * STEPS  # every node, every step

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from netsetest.config.schema import load_topology
 from netsetest.estimator.cuts import NodeSet, StepFigures, StepResult, StepSet
-from netsetest.estimator.sdp import Blend, LocalEstimator, NeighbourState, UpdateInput
+from netsetest.estimator.sdp import LocalEstimator, NeighbourState, UpdateInput
 from netsetest.models.sensor import NA
 from netsetest.polygon import SLIVER, Polygon
 from netsetest.sets import Slab
@@ -171,8 +171,8 @@ def test_the_moved_region_holds_every_successor_of_a_point_of_the_prior_and_the_
     u = float(rng.uniform(sc.steer_low, sc.steer_high))
     nb = NeighbourState(np.zeros(NA), np.eye(NA), 1.0, 1.0, 0.0, None, b)
     prev = NodeSet(np.r_[a.vertices.mean(axis=0), 0.0], np.eye(NA), 1.0, a)
-    blend = Blend.of(sc.model, alpha)
-    moved, sets = est._moved_region(prev, UpdateInput(alpha, u, 0.0, 1.0, {2: nb}), blend)
+    step = est._moved_region(prev, UpdateInput(alpha, u, 0.0, 1.0, {2: nb}))
+    blend, moved, sets = step.blend, step.region, step.sets
     w = rng.uniform(-1.0, 1.0, (len(both), 1)) * math.sqrt(est.W)
     w[::5] = np.sign(w[::5]) * math.sqrt(est.W)  # the bound itself
     nxt = both @ blend.a.T + blend.b * u + w * blend.d
