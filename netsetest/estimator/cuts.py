@@ -5,8 +5,8 @@ A step k → k+1 of :class:`~netsetest.estimator.sdp.LocalEstimator` reads top t
 
 1. its :class:`StepContext`, built once: the blended model, the own sector and measurement interval, the
    readings' slabs, the k-of-N assessment, the moved region and the LMI data;
-2. the solve (and certificate) of the set the node continues from, and of the set it publishes (the readings'
-   set, or the bank's fault-weighted one);
+2. the solve (and certificate) of the set the node continues from and publishes (the cuts may make another to
+   publish);
 3. the cuts of :data:`STEP_CUTS`, in order (step 0: :data:`FIRST_CUTS`; a step without a certificate:
    :data:`FALLBACK_CUTS`).
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from netsetest import polygon
+import netsetest.polygon as polygon
 from netsetest.estimator.health import Others
 from netsetest.estimator.sector import Interval
 from netsetest.models.sensor import NA, NX, Sensor

@@ -33,7 +33,7 @@ pattern).  Where the own sector is derived and the sensor may saturate, the prov
 used as the measurement instead of the φ⁺ sector fact, and where that sector rests on the declared
 fault bound the published set is cut by |f⁺| ≤ F (:mod:`netsetest.estimator.slab`).  Step 0 updates the prior with ỹ₀
 (:meth:`LocalEstimator.first`).  The objective is trace(D P) (a congruence of the LMI); ``bank`` recurs on the
-trace-optimal set and weights the fault in what it reshapes for publishing (the cuts, the readings' set).
+trace-optimal set and weights the fault in what it reshapes for publishing (the cuts).
 
 A step is the prediction (the model part: Π₀, the L-free centre, the own φ⁺ fact; :meth:`LocalEstimator._predict`)
 and the update (the neighbours' innovations ℓ and facts, :meth:`LocalEstimator._innovations`; then the
@@ -57,7 +57,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -592,7 +592,7 @@ class LocalEstimator:
         ranges = base.ranges.readings if base.ranges.readings is not None else reading_ranges(base.prop, inp.readings, self._reads)
         health = self._assess_health(ranges, base) if self.health is not None and inp.readings else None
         slabs = self._reading_slabs(ranges, health)
-        region_slabs, rate_from = self._bounded_slabs(inp, ranges)
+        region_slabs, rate_from = self._bounded_slabs(inp, ranges.measured)
         return StepContext(
             self.statics,
             prev.rho,
@@ -609,7 +609,7 @@ class LocalEstimator:
             sets=base.sets | rate_from,
         )
 
-    def _bounded_slabs(self, inp: UpdateInput, ranges: ReadingRanges) -> tuple[Slabs, frozenset[int]]:
+    def _bounded_slabs(self, inp: UpdateInput, measured: Mapping[int, Interval]) -> tuple[Slabs, frozenset[int]]:
         """What the step's bounded readings prove of x⁺ (docs/network.md, *What a node takes from its network*): sensor j's reading
         gives C̄_j x̄_j⁺ = C_j x⁺ + Ds_j f_j⁺ in its measurement interval (a side at the sensor's limit open), and its
         declared bound f_j⁺ ∈ [−F_j, F_j], and ∈ j's published fault interval of step k widened by δ_j where its state of
@@ -631,7 +631,7 @@ class LocalEstimator:
                     rate_from.add(j)
             if not (math.isfinite(f_lo) and math.isfinite(f_hi)) or f_lo > f_hi:
                 continue  # no bound on f_j⁺ (or an empty one: an assumption broke), so nothing on C_j x⁺
-            iv = ranges.measured[j]
+            iv = measured[j]  # (every bounded reading's measurement interval: sector.step_ranges)
             ds_lo, ds_hi = sorted((sensor.Ds * f_lo, sensor.Ds * f_hi))
             lo, hi = iv.lo - ds_hi, iv.hi - ds_lo
             if math.isfinite(lo) or math.isfinite(hi):

@@ -97,7 +97,7 @@ def test_a_step_enters_each_module_at_most_twice(topology: str, case: str) -> No
     assert not over, f"modules a {topology} {case.upper()} step enters more than {MOST} times (or than NOT_YET says): {over}"
 
 
-def test_the_count_sees_a_module_entered_again() -> None:
+def test_the_count_sees_a_module_entered_again(monkeypatch: pytest.MonkeyPatch) -> None:
     """A step whose input goes into a module three times is counted three times (the count is no stub): the region
     engine's cut called twice more from outside it, as a step that cut its region piece by piece would."""
     from netsetest.estimator import region_engine
@@ -111,9 +111,6 @@ def test_the_count_sees_a_module_entered_again() -> None:
         cut(*args, **kwargs)
         return cut(*args, **kwargs)
 
-    region_engine.cut = twice  # type: ignore[assignment]  # restored below
-    try:
-        got = entries(est, prev, inp)
-    finally:
-        region_engine.cut = cut  # type: ignore[assignment]
+    monkeypatch.setattr(region_engine, "cut", twice)
+    got = entries(est, prev, inp)
     assert calls and got["estimator/region_engine.py"] == 1 + 2 * len(calls)
