@@ -12,6 +12,7 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 import polygon_reference as ref
 import pytest
 
@@ -41,6 +42,7 @@ def _checked(calls: Counter[str], name: str, new: Callable[..., Any], old: Calla
 
     def both(region: Polygon, *args: Any, **kwargs: Any) -> Any:
         got = new(region, *args, **kwargs)
+        args = tuple(np.asarray(a, dtype=float) if isinstance(a, tuple) else a for a in args)  # (a direction as plain floats: the numpy code's array)
         want = old(ref.Polygon(region.vertices.copy()), *args, **kwargs)
         why = ref.differs(got, want, ref.bound(name, region.vertices, *args, **kwargs))
         assert why is None, f"{name}{args!r} on {region.vertices.tolist()!r}: {why}"
