@@ -22,11 +22,13 @@ import itertools
 import math
 import os
 from collections.abc import Sequence
+from dataclasses import dataclass
 from fractions import Fraction
 from types import ModuleType
 
 import numpy as np
 
+import netsetest.linalg as linalg
 from netsetest.extras import require
 
 MIN_VERTICES = 3
@@ -52,6 +54,13 @@ REGION_REASONS = frozenset(
 
 
 Point = tuple[float, float]
+Span = tuple[float, float]  # [min cᵀx, max cᵀx] over a polygon
+Direction = np.ndarray | Sequence[float]  # c = (c_β, c_r)
+PlaneSlab = tuple[float, float, float, float]  # (c0, c1, lo, hi): lo ≤ c0 β + c1 r ≤ hi, plain floats
+Ellipse = tuple[np.ndarray, np.ndarray, float]  # (x̂, P, ρ) of {(x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ}, x̄ = (β, r, …)
+INSIDE = 1e-6  # relative, in ρ: a region this far inside the ellipse is held by every slab of Polygon.ellipse_cut ...
+INSIDE_COND = 1e8  # ... where P_xx's condition number (at most tr²/det) keeps the test's rounding below a tenth of that
+_AXES = ((1.0, 0.0), (0.0, 1.0))  # β and r: the directions of an ellipse cut's coordinate slabs
 
 
 class Polygon:
@@ -146,11 +155,9 @@ class Polygon:
         xs, ys = zip(*self.points)
         return np.array([min(xs), min(ys)]), np.array([max(xs), max(ys)])
 
-    def interval(self, c: np.ndarray) -> tuple[float, float]:
+    def interval(self, c: Direction) -> tuple[float, float]:
         """[min cᵀx, max cᵀx] over the polygon."""
-        c0, c1 = float(c[0]), float(c[1])
-        s = [c0 * x + c1 * y for x, y in self.points]
-        return min(s), max(s)
+        return _spans(self.points, (c,))[0]
 
     def contains(self, x: np.ndarray) -> bool:
         """x in the convex hull of the vertices, exactly, whatever their order (a clockwise one, a rounding's reflex
@@ -202,7 +209,7 @@ class Polygon:
         pad = max(ROUNDING * (1.0 + size), merged)
         return Polygon._of(_plus(v, [*g, (pad, 0.0), (0.0, pad)]))
 
-    def cut(self, c: np.ndarray, lo: float, hi: float) -> Polygon | None:
+    def cut(self, c: Direction, lo: float, hi: float) -> Polygon | None:
         """The part with lo ≤ cᵀx ≤ hi, widened outward by the margin (relative to max Σᵢ |cᵢ xᵢ|, which bounds the
         rounding of cᵀx where its terms cancel), and at least by what merging its vertices closer than DUPLICATE
         can leave out along c (a slab thin next to the coordinates' size); None if empty (flat if this polygon
@@ -250,6 +257,32 @@ class Polygon:
         v = _clipped(list(self.points), c.tolist(), (w @ c.T).max(axis=0).tolist(), reach.tolist(), float(a.max()))
         return None if v is None else Polygon._of(v)
 
+    def ellipse_cut(self, xhat: np.ndarray, P: np.ndarray, rho: float, coordinates: bool = True) -> Polygon | None:
+        """This polygon cut by the slabs of the ellipsoid {(x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} (x̄'s first two coordinates β, r)
+        along β and r (``coordinates``; a box of it needs no such cut) and along the principal axes of its
+        x-projection ρ P_xx: an outer octagon of that ellipse.  Sound wherever the ellipsoid holds the truth; None if
+        nothing is left.
+
+        Where the polygon lies well inside the ellipse (:func:`_well_inside`: most steps) every slab holds it and each
+        cut would return it as it is: it is returned at once, without the eigen decomposition."""
+        pxx = 0.5 * (P[:2, :2] + P[:2, :2].T)
+        (p00, p01), (p10, p11) = pxx.tolist()
+        x0, x1 = float(xhat[0]), float(xhat[1])
+        if coordinates and _well_inside(self.points, x0, x1, p00, p01, p11, rho):
+            return self
+        _, vecs = linalg.eigh(pxx)
+        axes = [tuple(d) for d in vecs.T.tolist()]
+        out: Polygon | None = self
+        for d0, d1 in [*_AXES, *axes] if coordinates else axes:
+            if out is None:
+                return None
+            # dᵀx̂ and (dᵀP_xx) d in plain floats, each product and sum rounded (numpy's 2-vector products go through
+            # OpenBLAS, whose kernel may fuse them: the same to a few ulps, tests/unit/test_polygon_same.py)
+            w0, w1 = d0 * p00 + d1 * p10, d0 * p01 + d1 * p11
+            centre, half = d0 * x0 + d1 * x1, math.sqrt(max(rho * (w0 * d0 + w1 * d1), 0.0))
+            out = out.cut((d0, d1), centre - half, centre + half)
+        return out
+
     def extent(self, c: np.ndarray) -> float:
         """max |cᵀx| over the polygon."""
         c0, c1 = float(c[0]), float(c[1])
@@ -272,6 +305,94 @@ class Polygon:
                 # puts two neighbours' meeting a hair behind an edge: near-duplicate vertices)
             v = _drop_edges(v, drops)
         return Polygon._of(v)
+
+
+def _well_inside(points: Sequence[Point], x0: float, x1: float, p00: float, p01: float, p11: float, rho: float) -> bool:
+    """Whether every vertex v has (v − x̂)ᵀ P_xx⁻¹ (v − x̂) ≤ ρ (1 − INSIDE), tested as det·q ≤ det·ρ (1 − INSIDE)
+    with P_xx's adjugate (no division) where tr²/det ≤ INSIDE_COND.  Then the test's rounding (relative, at most
+    about 12 ε·tr²/det ≈ 1.3·10⁻⁷) leaves every vertex at least ≈ 2·10⁻⁷ of the ellipse's half-width inside each slab
+    of :meth:`Polygon.ellipse_cut`, far beyond the rounding of the slab's own ends and of cᵀv, which the cut's margin
+    covers: each cut would return the polygon as it is (tests/unit/test_polygon_same.py holds the two to the same set)."""
+    det, tr = p00 * p11 - p01 * p01, p00 + p11
+    if not (det > 0.0 and tr * tr <= INSIDE_COND * det):
+        return False
+    bound = rho * (1.0 - INSIDE) * det
+    for x, y in points:
+        a, b = x - x0, y - x1
+        if not p11 * a * a - 2.0 * p01 * a * b + p00 * b * b <= bound:  # det · (v − x̂)ᵀ P_xx⁻¹ (v − x̂)
+            return False
+    return True
+
+
+def _spans(points: Sequence[Point], directions: Sequence[Direction]) -> list[Span]:
+    """[min cᵀx, max cᵀx] over the points for each direction c (:meth:`Polygon.interval`)."""
+    out = []
+    for c in directions:
+        c0, c1 = float(c[0]), float(c[1])
+        s = [c0 * x + c1 * y for x, y in points]
+        out.append((min(s), max(s)))
+    return out
+
+
+@dataclass(frozen=True)
+class Advanced:
+    """A region through one step (:func:`advance`): the moved polygon, which of the other polygons cut it before the
+    move (their indices), and its spans along the directions asked for."""
+
+    polygon: Polygon
+    used: tuple[int, ...]
+    spans: tuple[Span, ...]
+
+
+def advance(
+    region: Polygon, others: Sequence[Polygon], A: np.ndarray, t: np.ndarray, segments: list[np.ndarray], directions: Sequence[Direction] = ()
+) -> Advanced:
+    """One step of a region in one call: the region cut by each of ``others`` in turn (:meth:`Polygon.within`; at the
+    first that leaves no polygon, an assumption broke: no more cuts), then moved (:meth:`Polygon.moved`), and the moved
+    polygon's spans along ``directions``."""
+    used: list[int] = []
+    for k, other in enumerate(others):
+        cut = region.within(other)
+        if cut is None or len(cut) < MIN_VERTICES:
+            break  # the two hold no common point: an assumption broke (one of the sets missed); no more cuts
+        if cut is not region:
+            region, used = cut, [*used, k]
+    moved = region.moved(A, t, segments)
+    return Advanced(moved, tuple(used), tuple(_spans(moved.points, directions)) if directions else ())
+
+
+@dataclass(frozen=True)
+class Cut:
+    """A region after the step's cuts and its reduction (:func:`cut_all`): the polygon, its interval hull (β lo, r lo,
+    β hi, r hi: its vertices' extremes, exact) and its spans along the directions asked for."""
+
+    polygon: Polygon
+    box: tuple[float, float, float, float]
+    spans: tuple[Span, ...]
+
+
+def cut_all(
+    region: Polygon, slabs: Sequence[PlaneSlab], ellipses: Sequence[Ellipse] = (), directions: Sequence[Direction] = (), max_vertices: int = MAX_VERTICES
+) -> Cut | None:
+    """The step's cuts of a region in one call: by every slab in turn (:meth:`Polygon.cut`), then by every ellipse's
+    octagon (:meth:`Polygon.ellipse_cut`), then reduced to ``max_vertices`` (:meth:`Polygon.reduced`; the move's
+    margin covers the cuts' rounding), with its box and its spans along ``directions``; None where the cuts leave
+    nothing, or fewer than MIN_VERTICES vertices (a sliver below the rounding, kept as empty)."""
+    out: Polygon | None = region
+    for c0, c1, lo, hi in slabs:
+        if out is None:
+            return None
+        out = out.cut((c0, c1), lo, hi)
+    for xhat, P, rho in ellipses:
+        if out is None:
+            return None
+        out = out.ellipse_cut(xhat, P, rho)
+    if out is None or len(out) < MIN_VERTICES:
+        return None
+    out = out.reduced(max_vertices)
+    pts = out.points
+    xs, ys = [p[0] for p in pts], [p[1] for p in pts]
+    return Cut(out, (min(xs), min(ys), max(xs), max(ys)), tuple(_spans(pts, directions)))
 
 
 BACKEND_ENV = "NETSETEST_POLYGON"  # "compiled": the move, the cut and the reduction compiled (the fast extra)
@@ -697,4 +818,4 @@ def _dot_sign(a: Point, b: Point, c: Point, d: Point) -> int:
     return (exact > 0) - (exact < 0)
 
 
-__all__ = ["MARGIN", "MAX_VERTICES", "MIN_VERTICES", "REGION_REASONS", "Polygon", "region_problem"]
+__all__ = ["MARGIN", "MAX_VERTICES", "MIN_VERTICES", "REGION_REASONS", "Advanced", "Cut", "Polygon", "advance", "cut_all", "region_problem"]

@@ -104,7 +104,9 @@ class ReadingSlabs:
                 out.append(Slab(np.append(sensor.C, 0.0), float(lo), float(hi)))
         if self.health is not None:
             a = np.append(self.health.u, 0.0)
-            health = self.health.assess(self.node_id, own, readings, extent(a) if extent is not None else None, pin=True)
+            every = {**readings, self.node_id: own}
+            measured = {j: sensor.measured_interval(*every[j], outward=True) for j, sensor in self.health.sensors.items() if j in every}
+            health = self.health.assess(self.node_id, measured, extent(a) if extent is not None else None, pin=True)
             if health.interval is not None:
                 out.append(Slab(a, health.interval.lo, health.interval.hi))
             if health.pinned:  # no consistent majority without this sensor: |f| ≤ τ

@@ -5,8 +5,8 @@ A step k → k+1 of :class:`~netsetest.estimator.sdp.LocalEstimator` reads top t
 
 1. its :class:`StepContext`, built once: the blended model, the own sector and measurement interval, the
    readings' slabs, the k-of-N assessment, the moved region and the LMI data;
-2. the solve (and certificate) of the set the node continues from, and of the set it publishes (the readings'
-   set, or the bank's fault-weighted one);
+2. the solve (and certificate) of the set the node continues from and publishes (the cuts may make another to
+   publish);
 3. the cuts of :data:`STEP_CUTS`, in order (step 0: :data:`FIRST_CUTS`; a step without a certificate:
    :data:`FALLBACK_CUTS`).
 
@@ -26,14 +26,14 @@ from typing import Any, Literal
 
 import numpy as np
 
-import netsetest.linalg as linalg
 from netsetest.estimator.health import HEALTH_KEY, HealthAssessment
 from netsetest.estimator.problem import StepData
-from netsetest.estimator.region_engine import Blend, cut_by_own, cut_by_slabs, region_fault
+from netsetest.estimator import region_engine
+from netsetest.estimator.region_engine import Blend, RegionFacts
 from netsetest.estimator.sector import FaultBound, Interval, Sector
 from netsetest.estimator.slab import cut
 from netsetest.models.sensor import NA, NX, Sensor
-from netsetest.polygon import MIN_VERTICES, REGION_REASONS, Polygon
+from netsetest.polygon import REGION_REASONS, Polygon
 from netsetest.proven import ProvenSet
 from netsetest.sets import NO_CUTS, CutName, IntervalCuts, Slab, ellipsoid_bounds
 
@@ -41,8 +41,6 @@ Status = Literal["ok", "fallback"]
 FAULT_AXIS = np.eye(NA)[NA - 1]  # f = e₃ᵀx̄: the direction the fault cuts act along
 HEALTH_KEYS = frozenset({HEALTH_KEY})  # what a set cut by the k-of-N facts rests on: every reading of the step
 PIN_FLOOR = 1e-6  # a fault proved healthy is published as |f| ≤ max(τ, this): an ellipsoid cannot be flat
-COORDINATE_AXES = np.eye(NX)  # β and r: the directions of the region's coordinate cuts (read-only)
-COORDINATE_AXES.flags.writeable = False
 
 
 @dataclass(frozen=True)
@@ -108,6 +106,7 @@ class StepResult:
     figures: StepFigures
     sector: Sector | None = None  # the own sensor's sector of this step (None: no saturation modelled)
     region: Polygon | None = None  # the states x⁺ every step so far leaves (NodeSet.region): both sets'
+    region_facts: RegionFacts | None = None  # what the region cut proved of it (its box, the faults over it), with it
 
     @classmethod
     def of(cls, s: StepSet, figures: StepFigures, sector: Sector | None = None) -> StepResult:
@@ -298,22 +297,28 @@ def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
     A reference (declared fault size 0) cuts by its own measurement too and publishes f⁺ = 0, resting on its own
     reading; not where the step cannot list readings (step 0, whose cone is the prior's)."""
     st = ctx.statics
-    region: Polygon | None = ctx.moved
-    region = cut_by_slabs(region, (*ctx.slabs.values(), *ctx.region_slabs.values()))
     size, sector = st.fault_bound.size, res.sector
     reference = size == 0.0 and ctx.listed  # its own reading rests on its declared zero fault (listed, so judged)
     keys = frozenset(ctx.slabs) | frozenset(ctx.region_slabs) | ({st.node_id} if reference else frozenset())
-    if size is not None and (reference or st.own_bound or (sector is not None and sector.basis == "fault-bound")):
-        region = cut_by_own(region, st.own, ctx.meas, size)  # C x⁺ = C̄ x̄⁺ − Ds f⁺, |f⁺| ≤ F: the step's cone holds the bound
-    for s in (res.continued,) if res.published is res.continued else (res.continued, res.published):
-        if region is not None:
-            region = ellipse_cut(region, s.xhat, s.P, ctx.rho)
-    if region is None or len(region) < MIN_VERTICES:
-        return res  # (fewer: a sliver below the rounding, kept as empty)
-    region = region.reduced()  # the move's margin covers the cuts' rounding (Polygon.moved)
+    own = size is not None and (reference or st.own_bound or (sector is not None and sector.basis == "fault-bound"))
+    sets = (res.continued,) if res.published is res.continued else (res.continued, res.published)
+    health = ctx.health if st.health_tolerance is not None and st.own.Ds != 0.0 else None  # (the health-fault cut's, computed here)
+    facts = region_engine.cut(
+        ctx.moved,
+        (*ctx.slabs.values(), *ctx.region_slabs.values()),
+        st.own,
+        ctx.meas,
+        size if own else None,  # C x⁺ = C̄ x̄⁺ − Ds f⁺, |f⁺| ≤ F: the step's cone holds the bound
+        ellipses=[(s.xhat, s.P, ctx.rho) for s in sets],
+        others=None if health is None else health.others,
+        floor=max(st.health_tolerance or 0.0, PIN_FLOOR),
+    )  # reduced: the move's margin covers the cuts' rounding (Polygon.moved)
+    if facts is None:
+        return res  # (fewer than three vertices: a sliver below the rounding, kept as empty)
     cont = res.continued
-    res = res.continuing(cont.replaced(reading_keys=cont.reading_keys | keys, set_keys=cont.set_keys | ctx.sets)).replaced(region=region)
-    fault = (0.0, 0.0) if reference else region_fault(st.own, region, ctx.meas)
+    res = res.continuing(cont.replaced(reading_keys=cont.reading_keys | keys, set_keys=cont.set_keys | ctx.sets))
+    res = res.replaced(region=facts.region, region_facts=facts)
+    fault = (0.0, 0.0) if reference else facts.fault
     # with readings the ellipsoid is cut too (as since the region came); without, it stays as solved (what
     # neighbours use, bit for bit) and only the published fault range narrows: the same published interval
     out = cut_fault(ctx, res, *fault, reshape=bool(ctx.slabs)) if fault is not None else None
@@ -345,11 +350,10 @@ def _health_fault(ctx: StepContext, res: StepResult) -> StepResult:
     elsewhere it drops the faults the own measurement allows only where the own sensor must be healthy.
     The ellipsoid is left as solved and the set the node continues from is unchanged (a later fault is free of this
     one); the published set then rests on every reading."""
-    tol, health, region, own = ctx.statics.health_tolerance, ctx.health, res.region, ctx.statics.own
-    if tol is None or health is None or region is None or own.Ds == 0.0:
+    facts = res.region_facts  # (the region cut computed it over the region: region_engine.health_fault)
+    if facts is None or facts.health is None:
         return res
-    lo, hi = health.others.fault(own, region.interval(health.others.u), ctx.meas, max(tol, PIN_FLOOR))
-    out = cut_fault(ctx, res, lo, hi, reshape=False, keys=HEALTH_KEYS)
+    out = cut_fault(ctx, res, *facts.health, reshape=False, keys=HEALTH_KEYS)
     return res if out is None else out
 
 
@@ -357,56 +361,7 @@ def seed(prior: NodeSet) -> Polygon:
     """The region of a set without one: the box of its ellipsoid's x-projection cut by that ellipse's axes."""
     lo, hi = ellipsoid_bounds(prior.xhat, np.diag(prior.P), prior.rho)
     box = Polygon.box(lo[:NX], hi[:NX])
-    return ellipse_cut(box, prior.xhat, prior.P, prior.rho, coordinates=False) or box
-
-
-def ellipse_cut(region: Polygon, xhat: np.ndarray, P: np.ndarray, rho: float, coordinates: bool = True) -> Polygon | None:
-    """The region cut by the slabs of the ellipsoid {(x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ} along β and r (``coordinates``;
-    a box of it needs no such cut) and along the principal axes of its x-projection ρ P_xx: an outer
-    octagon of that ellipse.  Sound wherever the ellipsoid holds the truth; None if nothing is left.
-
-    Where the region lies well inside the ellipse (:func:`_well_inside`: most steps) every slab holds it and each
-    cut would return it as it is: it is returned at once, without the eigen decomposition."""
-    pxx = 0.5 * (P[:NX, :NX] + P[:NX, :NX].T)
-    if coordinates and _well_inside(region, xhat, pxx, rho):
-        return region
-    _, vecs = linalg.eigh(pxx)
-    dirs = [*COORDINATE_AXES, *vecs.T] if coordinates else [*vecs.T]
-    (p00, p01), (p10, p11) = pxx.tolist()
-    x0, x1 = float(xhat[0]), float(xhat[1])
-    out: Polygon | None = region
-    for d in dirs:
-        if out is None:
-            return None
-        d0, d1 = d.tolist()  # dᵀx̂ and (dᵀP_xx) d in plain floats, each product and sum rounded (numpy's 2-vector products go
-        # through OpenBLAS, whose kernel may fuse them: the same to a few ulps, tests/unit/test_polygon_same.py)
-        w0, w1 = d0 * p00 + d1 * p10, d0 * p01 + d1 * p11
-        centre, half = d0 * x0 + d1 * x1, math.sqrt(max(rho * (w0 * d0 + w1 * d1), 0.0))
-        out = out.cut(d, centre - half, centre + half)
-    return out
-
-
-INSIDE = 1e-6  # relative, in ρ: a region this far inside the ellipse is held by every slab of ellipse_cut ...
-INSIDE_COND = 1e8  # ... where P_xx's condition number (at most tr²/det) keeps the test's rounding below a tenth of that
-
-
-def _well_inside(region: Polygon, xhat: np.ndarray, pxx: np.ndarray, rho: float) -> bool:
-    """Whether every vertex v has (v − x̂)ᵀ P_xx⁻¹ (v − x̂) ≤ ρ (1 − INSIDE), tested as det·q ≤ det·ρ (1 − INSIDE)
-    with P_xx's adjugate (no division) where tr²/det ≤ INSIDE_COND.  Then the test's rounding (relative, at most
-    about 12 ε·tr²/det ≈ 1.3·10⁻⁷) leaves every vertex at least ≈ 2·10⁻⁷ of the ellipse's half-width inside each slab
-    of :func:`ellipse_cut`, far beyond the rounding of the slab's own ends and of cᵀv, which the cut's margin covers:
-    each cut would return the region as it is (tests/unit/test_polygon_same.py holds the two to the same set)."""
-    (p00, p01), (_, p11) = pxx.tolist()
-    det, tr = p00 * p11 - p01 * p01, p00 + p11
-    if not (det > 0.0 and tr * tr <= INSIDE_COND * det):
-        return False
-    bound = rho * (1.0 - INSIDE) * det
-    x0, x1 = float(xhat[0]), float(xhat[1])
-    for x, y in region.points:
-        a, b = x - x0, y - x1
-        if not p11 * a * a - 2.0 * p01 * a * b + p00 * b * b <= bound:  # det · (v − x̂)ᵀ P_xx⁻¹ (v − x̂)
-            return False
-    return True
+    return box.ellipse_cut(prior.xhat, prior.P, prior.rho, coordinates=False) or box
 
 
 READINGS = Cut("readings", "each reading's declaration: a reference's zero fault; k-of-N: at most m of N sensors faulty", _readings_cut)
@@ -459,9 +414,12 @@ def published_bounds(res: StepResult, rho: float) -> list[float]:
     if pub.fault_range is not None:
         out[2], out[5] = max(out[2], pub.fault_range[0]), min(out[5], pub.fault_range[1])
     if res.region is not None:
-        pts = res.region.points
-        xs, ys = [p[0] for p in pts], [p[1] for p in pts]
-        out[0], out[1], out[3], out[4] = max(out[0], min(xs)), max(out[1], min(ys)), min(out[3], max(xs)), min(out[4], max(ys))
+        facts = res.region_facts
+        if facts is not None and facts.region is res.region:
+            b0, b1, b3, b4 = facts.box  # (the region cut's: its vertices' extremes)
+        else:
+            (b0, b1), (b3, b4) = (v.tolist() for v in res.region.bounds())
+        out[0], out[1], out[3], out[4] = max(out[0], b0), max(out[1], b1), min(out[3], b3), min(out[4], b4)
     return out
 
 
@@ -484,6 +442,5 @@ __all__ = [
     "published_bounds",
     "carry",
     "cut_fault",
-    "ellipse_cut",
     "seed",
 ]

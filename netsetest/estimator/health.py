@@ -13,13 +13,13 @@ or not, which is always sound.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from netsetest.estimator.sector import Interval, fault_over, measurement_interval
+from netsetest.estimator.sector import Interval
 from netsetest.models.sensor import Sensor
 
 if TYPE_CHECKING:
@@ -65,17 +65,6 @@ class Others:
         sensor is healthy in every hypothesis the readings leave)."""
         return healthy_interval(_present(_clipped(list(self.spans), within)), self.need)
 
-    def fault(self, own: Sensor, extent: Span, meas: Interval, floor: float) -> tuple[float, float]:
-        """The own fault where uᵀx lies in ``extent`` (a region's) and ``meas`` holds C x + Ds f: the own sensor is
-        healthy (|f| ≤ ``floor``, at least τ) or uᵀx lies where the others agree, and there the measurement bounds f
-        (C = s uᵀ: C x = s uᵀx); the hull of the two.  The sensor has a fault term (Ds ≠ 0)."""
-        agree = self.agree(extent)
-        if agree is None:  # the others agree nowhere: the own sensor is healthy (the pin)
-            return -floor, floor
-        s = float(own.C @ self.u)
-        a, b = fault_over(own, min(s * agree[0], s * agree[1]), max(s * agree[0], s * agree[1]), meas)
-        return min(a, -floor), max(b, floor)
-
 
 @dataclass(frozen=True)
 class HealthAssessment:
@@ -116,13 +105,14 @@ class HealthModel:
     def assess(
         self,
         own: int,
-        own_reading: tuple[float, float],
-        readings: dict[int, tuple[float, float]],
+        measured: Mapping[int, tuple[float, float]],
         within: Span | None = None,
         pin: bool = False,
     ) -> HealthAssessment:
         """The step's assessment: the interval, whether the own fault is pinned, the other sensors' spans.
 
+        ``measured``: each reading's measurement interval of C̄_j x̄_j (outward: Sensor.measured_interval), keyed by its
+        sensor's id, the node's own (``own``) among them; a sensor of the group without one did not send a reading.
         The interval: uᵀx lies in it wherever at most m sensors are faulty and the readings' noise bounds
         held; None if it is unbounded or empty (an assumption broke: nothing is used).  ``within``: an
         interval known to hold uᵀx (the node's own prediction): hypotheses that agree only outside it are no
@@ -130,7 +120,7 @@ class HealthModel:
         do so far from the truth).  ``pin``: also tell whether the node's own sensor is healthy (|f| ≤ τ) in
         every consistent hypothesis: the others' readings alone cannot supply N − m agreeing sensors (inside
         ``within``), while with its own they can."""
-        every = self._spans(own, own_reading, readings)
+        every = self._spans(measured)
         others = Others(self.u, tuple(sp for j, sp in zip(self.sensors, every) if j != own), self.need)
         hull = healthy_interval(_present(_clipped(every, within)), self.need)
         pinned = pin and hull is not None and others.agree(within) is None
@@ -138,19 +128,18 @@ class HealthModel:
             return HealthAssessment(None, pinned, others)
         return HealthAssessment(Interval(*hull), pinned, others)
 
-    def _spans(self, own: int, own_reading: tuple[float, float], readings: dict[int, tuple[float, float]]) -> list[Span]:
+    def _spans(self, measured: Mapping[int, tuple[float, float]]) -> list[Span]:
         """Per sensor (in ``sensors`` order), the interval of uᵀx its reading gives if it is healthy: |f_j| ≤ τ,
         so C_j x lies within |Ds_j| τ of its measurement interval of C̄_j x̄_j; (−∞, ∞) if it did not arrive."""
         spans: list[Span] = []
         for j, sensor in self.sensors.items():
-            r = own_reading if j == own else readings.get(j)
-            if r is None:  # not here: it may be healthy with any value
+            iv = measured.get(j)
+            if iv is None:  # not here: it may be healthy with any value
                 spans.append((-math.inf, math.inf))
                 continue
-            iv = measurement_interval(sensor, *r)
             slack = abs(sensor.Ds) * self.tolerance
             s = float(sensor.C @ self.u)  # C_j x = s_j uᵀx
-            a, b = (iv.lo - slack) / s, (iv.hi + slack) / s
+            a, b = (iv[0] - slack) / s, (iv[1] + slack) / s
             spans.append((min(a, b), max(a, b)))
         return spans
 

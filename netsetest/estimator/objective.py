@@ -3,7 +3,7 @@
 ``trace``: trace(P), the paper's objective (reproduces its numbers).  ``fault``: trace(D P) with
 D = diag(1, 1, FAULT_WEIGHT): aimed at the fault bound users inspect, the state as a secondary term.
 ``bank``: the node recurs on the trace-optimal set (a good state set for the next step) and weights the fault by
-BANK_FAULT_WEIGHT in what it reshapes for publishing (the size and readings' cuts, the readings' set).  Until issue
+BANK_FAULT_WEIGHT in what it reshapes for publishing (the size and readings' cuts).  Until issue
 45 it also solved each step a second time for the trace(diag(1, 1, BANK_FAULT_WEIGHT)·P) set and published that
 ellipsoid; with the region in the published set that bought nothing on any coordinate against the exact limit.
 Measured in docs/estimator.md ("Objectives").

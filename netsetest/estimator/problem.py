@@ -19,7 +19,7 @@ from netsetest.estimator.sector import Sector
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.uncertainty import ModelUncertainty
 
-PatternKey = tuple[frozenset[int], bool, bool, frozenset[int]]
+PatternKey = tuple[frozenset[int], bool, bool]
 """Which η slots exist this step: (neighbours with a φ slot, φ⁺ exists, predict (False: step 0), the reference
 sensors whose reading of this very step the update uses (docs/network.md; non-empty: no neighbour slots))."""
 
@@ -60,23 +60,20 @@ class EtaLayout:
         W: float = 1.0,
         predict: bool = True,
         uncertainty: ModelUncertainty | None = None,
-        readings: tuple[int, ...] = (),
     ) -> None:
         """``saturated`` of each sensor says whether it has a φ slot; ``predict`` False: the step-0 update
         (the prior updated by the own measurement through the self slot: no w, e, v⁺ or φ⁺); ``uncertainty``:
-        the declared model mismatch e = G ζ (one ζ slot per column of G, after w; None: no e slots);
-        ``readings``: the reference sensors whose same-step reading interval C_j x⁺ = m_j + h_j ν_j enters,
-        one slot ν_j each with the fact 1 − ν_j² ≥ 0 (after v⁺; they enter e⁺ through ℓ only)."""
+        the declared model mismatch e = G ζ (one ζ slot per column of G, after w; None: no e slots)."""
         self.node_id = node_id
         self.neigh = list(neighbours)  # j ∈ N_i in a fixed order (may include i)
-        self._place(neighbours, own, predict, uncertainty is not None, readings)
+        self._place(neighbours, own, predict, uncertainty is not None)
         self.facts = self._facts(neighbours, own, W, uncertainty)
         self.n_facts = len(self.facts)
         # slots whose column of Π₀ is zero in every rule: they enter e⁺ only through L ℓᵀη
-        self.pi0_zero = set(self.s.values()) | set(self.v.values()) | set(self.phi.values()) | set(self.nu.values())
+        self.pi0_zero = set(self.s.values()) | set(self.v.values()) | set(self.phi.values())
 
-    def _place(self, neighbours: dict[int, Sensor], own: Sensor, predict: bool, mismatch: bool, readings: tuple[int, ...]) -> None:
-        """η's slots in order: 1 (slot 0), z_i, s_j (j ≠ i), w, e, v_j, v⁺, ν_j, φ_j, φ⁺."""
+    def _place(self, neighbours: dict[int, Sensor], own: Sensor, predict: bool, mismatch: bool) -> None:
+        """η's slots in order: 1 (slot 0), z_i, s_j (j ≠ i), w, e, v_j, v⁺, φ_j, φ⁺."""
         slots = itertools.count(1)
         self.z = [next(slots) for _ in range(NA)]
         self.s = {j: next(slots) for j in self.neigh if j != self.node_id}
@@ -84,7 +81,6 @@ class EtaLayout:
         self.e = [next(slots) for _ in range(NX)] if predict and mismatch else []
         self.v = {j: next(slots) for j in self.neigh}
         self.v_new = next(slots) if predict else None
-        self.nu = {j: next(slots) for j in readings}
         # no saturation ⇒ φ_j ≡ 0: no slot (docs/design.md §2)
         self.phi = {j: next(slots) for j, sens in neighbours.items() if sens.saturated}
         self.phi_new = next(slots) if own.saturated and predict else None
@@ -101,7 +97,6 @@ class EtaLayout:
         facts += [FactInfo("ball", (self.v[j],), neighbours[j].R) for j in self.v]
         if self.v_new is not None:
             facts.append(FactInfo("ball", (self.v_new,), own.R))
-        facts += [FactInfo("ball", (self.nu[j],)) for j in self.nu]
         for j in self.neigh:
             if j in self.phi:
                 r_slots = tuple(self.z) if j == self.node_id else (self.s[j],)

@@ -35,7 +35,7 @@ from netsetest.estimator import region_engine
 from netsetest.estimator.region_engine import Blend
 from netsetest.estimator.sector import Interval, measurement_interval
 from netsetest.models.sensor import NX
-from netsetest.polygon import MIN_VERTICES, Polygon
+from netsetest.polygon import Polygon
 from netsetest.sets import CutName, RegionSet, Slab
 
 
@@ -68,35 +68,44 @@ class WithRegion(SetEstimator):
         s_lo, s_hi = s.bounds()
         # the own measurement's interval (none without a reading: both sides open, so it cuts nothing)
         meas = Interval(-math.inf, math.inf) if inp.y is None else measurement_interval(self.node.sensor, inp.y, inp.gamma)
-        region: Polygon | None = self._moved(s_lo, s_hi, inp)
+        region = self._moved(s_lo, s_hi, inp)
         fault = _FaultRange(float(s_lo[NX]), float(s_hi[NX]))
         health = None
+        slabs: list[Slab] = []
         if self.uses_readings and inp.y is not None:
             slabs, health = self.reading_slabs.assessed((inp.y, inp.gamma), inp.readings, lambda a: (-s.support(-a), s.support(a)))
             for slab in slabs:
                 if not slab.a[:NX].any():  # |f| ≤ τ (the k-of-N pin)
                     fault.cut("health-pin", slab.lo / slab.a[NX], slab.hi / slab.a[NX])
-            region = region_engine.cut_by_slabs(region, slabs)  # a reading's C_j x, the k-of-N uᵀx (no fault term)
-        size = self.node.fault_size
+        size, own_size = self.node.fault_size, None
         if (self.rests_on_bound or inp.y is None and inp.step > 0) and size is not None:  # (a step without a reading rests on it)
             fault.cut("fault-size", -size, size)
-            if inp.y is not None:
-                region = region_engine.cut_by_own(region, self.node.sensor, meas, size)  # C x = C̄ x̄ − Ds f, |f| ≤ F
+            own_size = size if inp.y is not None else None  # C x = C̄ x̄ − Ds f, |f| ≤ F
         hull = [Slab(self.axes[m], float(s_lo[m]), float(s_hi[m])) for m in range(NX)]  # the own set's interval hull
-        region = region_engine.cut_by_slabs(region, [*hull, Slab(self.c_dir, -s.support(-self.c_dir), s.support(self.c_dir))])
-        if region is None or len(region) < MIN_VERTICES:
+        model = self.reading_slabs.health
+        others = health.others if health is not None and model is not None and self.Ds != 0.0 else None  # (cuts.py's health-fault)
+        # the readings' C_j x and k-of-N uᵀx (no fault term), the own measurement, the own set's hull and C x; reduced
+        facts = region_engine.cut(
+            region,
+            slabs,
+            self.node.sensor,
+            meas,
+            own_size,
+            after=[*hull, Slab(self.c_dir, -s.support(-self.c_dir), s.support(self.c_dir))],
+            others=others,
+            floor=0.0 if model is None else model.tolerance,
+        )
+        if facts is None:
             self.region = None  # nothing left (an assumption broke): the method's set alone, the region reseeded
             return s
-        self.region = region = region.reduced()
-        own = region_engine.region_fault(self.node.sensor, region, meas)  # one-sided where the reading is at the limit
-        if own is not None:
-            fault.cut("region", *own)
-        model = self.reading_slabs.health
-        if health is not None and model is not None and self.Ds != 0.0:  # the own sensor healthy, or the others agree (cuts.py)
-            fault.cut("health-fault", *health.others.fault(self.node.sensor, region.interval(health.others.u), meas, model.tolerance))
+        self.region = region = facts.region
+        if facts.fault is not None:  # one-sided where the reading is at the limit
+            fault.cut("region", *facts.fault)
+        if facts.health is not None:  # the own sensor healthy, or the others agree
+            fault.cut("health-fault", *facts.health)
         if fault.lo > fault.hi:
             return s  # (an assumption broke: the own set alone is what is left to publish)
-        r_lo, r_hi = region.bounds()
+        r_lo, r_hi = facts.box[:NX], facts.box[NX:]
         xs: tuple[tuple[CutName, ...], ...] = tuple(("region",) if r_lo[m] > s_lo[m] or r_hi[m] < s_hi[m] else () for m in range(NX))
         return RegionSet(s, region, (fault.lo, fault.hi), (xs[0], xs[1], tuple(fault.names)))
 

@@ -33,7 +33,7 @@ pattern).  Where the own sector is derived and the sensor may saturate, the prov
 used as the measurement instead of the φ⁺ sector fact, and where that sector rests on the declared
 fault bound the published set is cut by |f⁺| ≤ F (:mod:`netsetest.estimator.slab`).  Step 0 updates the prior with ỹ₀
 (:meth:`LocalEstimator.first`).  The objective is trace(D P) (a congruence of the LMI); ``bank`` recurs on the
-trace-optimal set and weights the fault in what it reshapes for publishing (the cuts, the readings' set).
+trace-optimal set and weights the fault in what it reshapes for publishing (the cuts).
 
 A step is the prediction (the model part: Π₀, the L-free centre, the own φ⁺ fact; :meth:`LocalEstimator._predict`)
 and the update (the neighbours' innovations ℓ and facts, :meth:`LocalEstimator._innovations`; then the
@@ -57,7 +57,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -67,7 +67,7 @@ import netsetest.linalg as linalg
 
 from netsetest.config.schema import Scenario
 from netsetest.estimator.certificate import FactStack, FallbackUnavailable, certify, fallback_shape, publishable
-from netsetest.estimator.conic.closed_form import ClosedFormSolver, clarabel_backend
+from netsetest.estimator.conic.closed_form import clarabel_backend
 from netsetest.estimator.cuts import (
     FALLBACK_CUTS,
     FIRST_CUTS,
@@ -88,27 +88,31 @@ from netsetest.estimator.lmi_cvxpy import CvxpySolver
 from netsetest.estimator.objective import BANK_FAULT_WEIGHT, DEFAULT_OBJECTIVE, FAULT_WEIGHT, OBJECTIVES, Objective
 from netsetest.estimator.problem import EtaLayout, OwnUpdate, PatternKey, ProblemSolver, Solution, StepData
 from netsetest.estimator import region_engine
-from netsetest.estimator.region_engine import Blend
+from netsetest.estimator.region_engine import Blend, Moved
 from netsetest.estimator.sector import (
     FaultBound,
     Interval,
+    ReadingRanges,
+    Reads,
     Sector,
+    StepRanges,
     derive_sector,
     Propagation,
     measurement_interval,
     prior_interval,
+    reading_ranges,
+    step_ranges,
 )
 from netsetest.extras import require
 from netsetest.models.sensor import NA, NX, Sensor
 from netsetest.models.uncertainty import ModelUncertainty
-from netsetest.polygon import MIN_VERTICES, Polygon
+from netsetest.polygon import Polygon
 from netsetest.sets import Slab
 from netsetest.models.vehicle import N_RULES, TSModel
 
 Variant = Literal["scheduled", "per-rule"]
 Backend = Literal["clarabel", "cvxpy"]
 BACKENDS = ("clarabel", "cvxpy")
-REFINE_RTOL = 1e-6  # the readings' set is published only if it is smaller by more than this (relative): not for rounding
 
 
 @dataclass(frozen=True)
@@ -167,12 +171,6 @@ def _sector(d: int, slot: int, g: np.ndarray, h: float) -> np.ndarray:
     q[:, slot] += hg
     q[slot, slot] -= 1.0
     return q
-
-
-def _prediction_slots(lay: EtaLayout) -> list[int]:
-    """The η slots the prediction (Π₀ and the own φ⁺ fact) fills, in a fixed order: 1, z, w, e, v⁺, φ⁺."""
-    assert lay.w is not None and lay.v_new is not None  # a predicting step's layout
-    return [0, *lay.z, lay.w, *lay.e, lay.v_new, *([] if lay.phi_new is None else [lay.phi_new])]
 
 
 def _chol(p: np.ndarray) -> np.ndarray:
@@ -253,9 +251,12 @@ class LocalEstimator:
         self.health = health
         self.bounded = dict(bounded or {})
         self._bounded_c = {j: _read_only(np.append(sensor.C, 0.0)) for j, (sensor, _) in self.bounded.items()}  # c̄_j = [C_j, 0], once
+        self._reference_c = {j: _read_only(np.append(sensor.C, 0.0)) for j, sensor in self.references.items()}  # likewise
         self.neighbour_sets = neighbour_sets
         # a sensor of uᵀx alone (no fault, no saturation): what Propagation.interval needs for the prediction of uᵀx⁺
         self._u_sensor = dataclasses.replace(own, C=health.u, Ds=0.0, saturated=False) if health is not None else own
+        read = {**self.references, **{j: sensor for j, (sensor, _) in self.bounded.items()}, **(health.sensors if health is not None else {})}
+        self._reads = Reads(read, self.references, self._u_sensor if health is not None else None)  # whose readings a step uses
         self.n_lmi = N_RULES if variant == "per-rule" else 1
         # static data, prepared once: augmented rule matrices Ā_ℓ, B̄_ℓ, D̄_ℓ
         nr = model.A.shape[0]
@@ -276,22 +277,20 @@ class LocalEstimator:
         self._wh = np.sqrt(np.array([1.0, 1.0, FAULT_WEIGHT])) if objective == "fault" else None
         self._wh_pub = np.sqrt(np.array([1.0, 1.0, BANK_FAULT_WEIGHT])) if objective == "bank" else None
         self.statics = CutStatics(node_id, own, fault_bound, None if health is None else health.tolerance, self._wh, self._wh_pub, own_bound)
+        self._wh_published = self.statics.wh_published  # (the published set's objective weights, once)
         self.cuts: tuple[Cut, ...] = STEP_CUTS  # the cuts after every step's solve, in order (a test may leave one out)
 
-    def pattern(self, phi_from: frozenset[int], phi_new: bool, predict: bool = True, readings: frozenset[int] = frozenset()) -> _Pattern:
-        """Layout and solver for the neighbours in ``phi_from`` (and φ⁺ if ``phi_new``) having a φ slot;
-        with ``readings`` the update uses those references' same-step readings and no neighbour."""
-        key = (phi_from, phi_new, predict, readings)
+    def pattern(self, phi_from: frozenset[int], phi_new: bool, predict: bool = True) -> _Pattern:
+        """Layout and solver for the neighbours in ``phi_from`` (and φ⁺ if ``phi_new``) having a φ slot."""
+        key = (phi_from, phi_new, predict)
         pat = self._patterns.get(key)
         if pat is None:
-            if readings:
-                sens: dict[int, Sensor] = {}
-            elif predict:
+            if predict:
                 sens = {j: dataclasses.replace(s, saturated=j in phi_from) for j, s in self.sensors.items()}
             else:  # step 0: the prior and the own measurement, through the self slot
                 sens = {self.node_id: dataclasses.replace(self.own, saturated=self.node_id in phi_from)}
             own = dataclasses.replace(self.own, saturated=phi_new)
-            lay = EtaLayout(self.node_id, sens, own, self.W, predict, self.uncertainty, tuple(sorted(readings)))
+            lay = EtaLayout(self.node_id, sens, own, self.W, predict, self.uncertainty)
             balls = []
             for f in lay.facts:
                 if f.kind == "ball":
@@ -306,12 +305,6 @@ class LocalEstimator:
                 solver = CvxpySolver(lay.dim, lay.n_facts, n_lmi)
             pat = self._patterns[key] = _Pattern(lay, balls, solver)
         return pat
-
-    def forget_warm_starts(self) -> None:
-        """Every solver starts its next solve afresh (the node's warm-up leaves no trace in results)."""
-        for pat in self._patterns.values():
-            if isinstance(pat.solver, ClosedFormSolver):
-                pat.solver.forget_warm_start()
 
     @property
     def lay(self) -> EtaLayout:
@@ -334,18 +327,6 @@ class LocalEstimator:
         """The own sensor's sector of step k+1 (docs/estimator.md, "Adaptive sector")."""
         return self.context(prev, inp).sector
 
-    def _own_range(self, prop: Propagation, meas: Interval) -> tuple[Sector | None, Interval | None]:
-        """The own sector of step k+1 and, where it is derived and the sensor may saturate, the proven
-        interval of r⁺ = C̄ x̄⁺ (the step then uses it as the measurement; see ``step_data``); ``meas``: the own
-        measurement's interval."""
-        if not self.own.saturated:
-            return None, None
-        r_set = prop.interval(self.own, self.fault_bound)
-        sector = derive_sector(self.own, self.fault_bound, meas, r_set)
-        if sector is None or not sector.has_phi or sector.basis == "assumed":
-            return sector, None
-        return sector, (meas & r_set if sector.basis == "fault-bound" else meas)
-
     def initial_sector(self, prior: NodeSet, y: float, gamma: float) -> Sector | None:
         """The own sensor's sector of step 0: the prior (Assumption 1), |f₀| ≤ F and the measurement."""
         if not self.own.saturated:
@@ -353,18 +334,28 @@ class LocalEstimator:
         meas = measurement_interval(self.own, y, gamma)
         return derive_sector(self.own, self.fault_bound, meas, prior_interval(self.own, self.fault_bound, prior.xhat, prior.P, prior.rho))
 
-    def step_data(self, prev: NodeSet, inp: UpdateInput, sector: Sector | None, reading: Interval | None = None, blend: Blend | None = None) -> StepData:
+    def step_data(
+        self,
+        prev: NodeSet,
+        inp: UpdateInput,
+        sector: Sector | None,
+        reading: Interval | None = None,
+        blend: Blend | None = None,
+        phi_from: frozenset[int] | None = None,
+    ) -> StepData:
         """The LMI data of step k → k+1: the prediction (Π₀, x̂ part, own facts) and the neighbours' update (ℓ).
 
         ``reading``: a proven interval [lo, hi] ∋ r⁺ used as the own measurement instead of the sector:
         r⁺ = m + Dv' v with m its centre, Dv' = (hi − lo)/(2√R) and v² ≤ R (so Θ = [E; C̄], no φ⁺).
-        ``blend``: the step's blended model (:meth:`context` passes its own; None: blended here).
+        ``blend``: the step's blended model (:meth:`context` passes its own; None: blended here); ``phi_from``: the
+        in-neighbours whose published sector has a φ slot (:meth:`context` passes the step's; None: read here).
         """
         blend = blend if blend is not None else Blend.of(self.model, inp.alpha)
         neigh = inp.neigh
-        phi_from = frozenset(j for j in self.sensors if j in neigh and neigh[j].has_phi)
+        if phi_from is None:
+            phi_from = frozenset(j for j in self.sensors if j in neigh and neigh[j].has_phi)
         phi_new = sector is not None and sector.has_phi and reading is None
-        key: PatternKey = (phi_from, phi_new, True, frozenset())
+        key: PatternKey = (phi_from, phi_new, True)
         pat = self.pattern(*key)
         own = self._own_update(inp, sector, reading, phi_new)
         Mi = math.sqrt(prev.rho) * _chol(prev.P)  # ρ_i^½ M_i
@@ -375,74 +366,29 @@ class LocalEstimator:
         innov_sum = sum(self.weights[j] * neigh[j].innov for j in pat.lay.neigh if j in neigh)  # Σ_j a_ij y̌_j
         return StepData(tuple(pi0), ell, tuple(facts), x_pred, float(innov_sum), Mi, pat.lay, key, sector, own)
 
-    def readings_data(self, data: StepData, alpha: np.ndarray, refs: Slabs) -> StepData:
-        """The LMI data of step k → k+1 whose only innovation is the readings of step k+1 (``refs``, the context's
-        slabs): the prediction of the step's ``data`` (:meth:`step_data`) moved to the readings' layout, no
-        neighbour."""
-        key: PatternKey = (frozenset(), data.key[1], True, frozenset(refs))
-        pat = self.pattern(*key)
-        lay = pat.lay
-        src, dst = _prediction_slots(data.lay), _prediction_slots(lay)
-        pi0 = np.zeros((len(data.pi0), NA, lay.dim))
-        pi0[:, :, dst] = np.asarray(data.pi0)[:, :, src]  # Π₀'s columns are the prediction's: z, w, e, v⁺, φ⁺
-        facts = list(pat.balls)
-        if lay.phi_new is not None:  # the own φ⁺ sector fact, the last of the step's facts (EtaLayout._facts)
-            own_fact = np.zeros((lay.dim, lay.dim))
-            own_fact[np.ix_(dst, dst)] = data.facts[-1][np.ix_(src, src)]
-            facts.append(own_fact)
-        ell, innov = self._reference_innovation(lay, pi0, alpha, data.x_pred, refs)
-        return StepData(tuple(pi0), ell, tuple(facts), data.x_pred, innov, data.Mi, lay, key, data.sector, data.own)
-
-    def _reading_slabs(self, inp: UpdateInput, prop: Propagation, health: HealthAssessment | None) -> Slabs:
+    def _reading_slabs(self, ranges: ReadingRanges, health: HealthAssessment | None) -> Slabs:
         """What the step's readings prove, as slabs lo ≤ c̄ᵀx̄⁺ ≤ hi (c̄ (NA,)), keyed by the reference's id, and
         by :data:`~netsetest.estimator.health.HEALTH_KEY` for the k-of-N interval of every reading (the
         hypotheses pruned by the node's own prediction of uᵀx⁺).
 
         A reference j (fault declared 0): C̄_j x̄_j = C_j x.  A reading at the sensor's limit bounds one
         side only: the other comes from the node's own set propagated through the step (both hold
-        wherever the step's cone does); a reading that still leaves a side open is left out."""
-        out: Slabs = {}
-        for j, (y, gamma) in inp.readings.items():
-            sensor = self.references.get(j)
-            if sensor is None:
-                continue
-            iv = measurement_interval(sensor, y, gamma)
-            if not (np.isfinite(iv.lo) and np.isfinite(iv.hi)):
-                iv = iv & prop.interval(sensor, FaultBound(size=0.0))
-            if np.isfinite(iv.lo) and np.isfinite(iv.hi) and iv.hi > iv.lo:
-                out[j] = Slab(np.append(sensor.C, 0.0), iv.lo, iv.hi)
+        wherever the step's cone does; ``ranges.closed``); a reading that still leaves a side open is left out."""
+        out: Slabs = {j: Slab(self._reference_c[j], iv.lo, iv.hi) for j, iv in ranges.closed.items()}
         if self.health is not None and health is not None and health.interval is not None:
             out[HEALTH_KEY] = Slab(np.append(self.health.u, 0.0), health.interval.lo, health.interval.hi)
         return out
 
-    def _assess_health(self, inp: UpdateInput, prop: Propagation, moved: Polygon) -> HealthAssessment:
+    def _assess_health(self, ranges: ReadingRanges, base: StepBase) -> HealthAssessment:
         """The step's k-of-N interval of uᵀx⁺ and whether the own fault is pinned, once per step (both the
         readings' update and the pin use it).  Hypotheses are pruned by uᵀx⁺ over the node's own set through
         the step: a majority that agrees only outside it is none."""
-        assert self.health is not None
-        pred = prop.interval(self._u_sensor, FaultBound(size=0.0))
-        both = pred & Interval(*moved.interval(self.health.u))  # and over the moved region (both hold uᵀx⁺ wherever
-        pred = both if both.lo <= both.hi else pred  # the prior does; disjoint: one broke)
-        return self.health.assess(self.node_id, (inp.y, inp.gamma), inp.readings, (pred.lo, pred.hi), pin=True)
-
-    def _reference_innovation(self, lay: EtaLayout, pi0: np.ndarray, alpha: np.ndarray, x_pred: np.ndarray, refs: Slabs) -> tuple[np.ndarray, float]:
-        """ℓ (d,) and the value of the innovation the gain acts on when readings of this step are here
-        (the context's slabs): y̌ = Σ_j w_j (m_j − c̄_jᵀ x̂_pred), c̄_j = [c_j, 0], m_j the centre of j's interval,
-        h_j its half-width and w_j ∝ 1/h_j (Σ w_j = 1).  For the truth C_j x⁺ = m_j + h_j ν_j with
-        |ν_j| ≤ 1 and x̄⁺ − x̂_pred = Π̄₀ η (Π̄₀ the α-blend of Π₀: the truth's model), so
-        y̌(η) = Σ_j w_j (c̄_jᵀ Π̄₀ η − h_j ν_j)."""
-        pi_truth = np.tensordot(alpha, pi0, axes=1) if len(pi0) > 1 else pi0[0]
-        inv_h = {j: 1.0 / (0.5 * (sl.hi - sl.lo)) for j, sl in refs.items()}
-        total = sum(inv_h.values())
-        ell = np.zeros(lay.dim)
-        innov = 0.0
-        for j, sl in refs.items():
-            w, h, m = inv_h[j] / total, 0.5 * (sl.hi - sl.lo), 0.5 * (sl.hi + sl.lo)
-            cj = sl.a
-            ell += w * (cj @ pi_truth)  # c̄_jᵀ Π̄₀ η
-            ell[lay.nu[j]] -= w * h  # − h_j ν_j
-            innov += w * (m - float(cj @ x_pred))
-        return ell, innov
+        assert self.health is not None and ranges.u_pred is not None and base.span is not None
+        pred, (a, b) = ranges.u_pred, base.span  # and over the moved region (both hold uᵀx⁺ wherever
+        lo, hi = max(pred.lo, a), min(pred.hi, b)  # the prior does; disjoint: one broke)
+        within = (lo, hi) if lo <= hi else (pred.lo, pred.hi)
+        measured = {j: (iv.lo, iv.hi) for j, iv in ranges.measured.items()} | {self.node_id: (base.meas.lo, base.meas.hi)}
+        return self.health.assess(self.node_id, measured, within, pin=True)
 
     def _own_update(self, inp: UpdateInput, sector: Sector | None, reading: Interval | None, phi_new: bool) -> OwnUpdate:
         """How step k+1 uses the own measurement: ỹ⁺ (or the reading's centre), its γ⁺, h1, Dv and T, G."""
@@ -543,7 +489,7 @@ class LocalEstimator:
         """Step 0: x̂₀ = x̂ + L(ỹ₀ − C̄x̂), error e = ρ^½Mz − L y̌₀(η) with y̌₀ the own innovation."""
         i = self.node_id
         phi = sector is not None and sector.has_phi
-        key: PatternKey = (frozenset([i]) if phi else frozenset(), False, False, frozenset())
+        key: PatternKey = (frozenset([i]) if phi else frozenset(), False, False)
         pat = self.pattern(*key)
         lay = pat.lay
         Mi = np.sqrt(prior.rho) * _chol(prior.P)
@@ -615,7 +561,7 @@ class LocalEstimator:
         """The step read top to bottom: its context (built once), the solve, the cuts."""
         if prepared is not None:
             assert prepared.of(prev, inp), "a prepared step of another prior or input"
-        base = prepared.base if prepared is not None else self._base(prev, inp)
+        base = prepared.base if prepared is not None else self._base(prev, inp, inp.readings)
         ctx = self._context(prev, inp, base)
         res = self._solve_step(ctx, inp, prepared.first if prepared is not None else None)
         if res.figures.status == "fallback":  # no certificate: the region of the own measurement alone (no reading listed)
@@ -626,24 +572,27 @@ class LocalEstimator:
         """What step k → k+1 knows before its solve, each quantity computed once: the blended model, the own
         sector and measurement interval, the LMI data, the moved region, the k-of-N assessment and the readings'
         slabs."""
-        return self._context(prev, inp, self._base(prev, inp))
+        return self._context(prev, inp, self._base(prev, inp, inp.readings))
 
-    def _base(self, prev: NodeSet, inp: UpdateInput) -> StepBase:
-        """The context's part the step's readings do not enter (``inp.readings`` is not read)."""
-        blend = Blend.of(self.model, inp.alpha)
-        meas = measurement_interval(self.own, inp.y, inp.gamma)
+    def _base(self, prev: NodeSet, inp: UpdateInput, readings: dict[int, tuple[float, float]] | None = None) -> StepBase:
+        """The context's part the step's readings do not enter, and what the readings prove where they are here
+        (``readings``; None: not read, :meth:`prepare`): the region through the step (one call into the region engine),
+        the sectors and intervals (one call into :mod:`~netsetest.estimator.sector`), the LMI data."""
+        moved = self._moved_region(prev, inp)
+        blend = moved.blend
         prop = Propagation(prev.xhat, prev.P, prev.rho, blend.a, blend.b, blend.d, inp.u, self.W, self.uncertainty)  # the step's one
-        sector, reading = self._own_range(prop, meas)
-        data = self.step_data(prev, inp, sector, reading, blend)
-        moved, sets = self._moved_region(prev, inp, blend)
-        return StepBase(blend, meas, sector, data, moved, prop, sets)
+        neighbours = {j: inp.neigh[j].sector for j in self.sensors if j in inp.neigh}
+        ranges = step_ranges(self.own, self.fault_bound, inp.y, inp.gamma, prop, neighbours, readings, self._reads)
+        data = self.step_data(prev, inp, ranges.sector, ranges.reading, blend, ranges.phi_from)
+        return StepBase(blend, ranges.meas, ranges.sector, data, moved.region, prop, moved.sets, ranges, moved.span)
 
     def _context(self, prev: NodeSet, inp: UpdateInput, base: StepBase) -> StepContext:
         """The step's context from its ``base`` and its readings: the k-of-N assessment and the readings' slabs (the
         references' and the k-of-N interval; the bounded readings', which cut the region alone)."""
-        health = self._assess_health(inp, base.prop, base.moved) if self.health is not None and inp.readings else None
-        slabs = self._reading_slabs(inp, base.prop, health)
-        region_slabs, rate_from = self._bounded_slabs(inp)
+        ranges = base.ranges.readings if base.ranges.readings is not None else reading_ranges(base.prop, inp.readings, self._reads)
+        health = self._assess_health(ranges, base) if self.health is not None and inp.readings else None
+        slabs = self._reading_slabs(ranges, health)
+        region_slabs, rate_from = self._bounded_slabs(inp, ranges.measured)
         return StepContext(
             self.statics,
             prev.rho,
@@ -660,7 +609,7 @@ class LocalEstimator:
             sets=base.sets | rate_from,
         )
 
-    def _bounded_slabs(self, inp: UpdateInput) -> tuple[Slabs, frozenset[int]]:
+    def _bounded_slabs(self, inp: UpdateInput, measured: Mapping[int, Interval]) -> tuple[Slabs, frozenset[int]]:
         """What the step's bounded readings prove of x⁺ (docs/network.md, *What a node takes from its network*): sensor j's reading
         gives C̄_j x̄_j⁺ = C_j x⁺ + Ds_j f_j⁺ in its measurement interval (a side at the sensor's limit open), and its
         declared bound f_j⁺ ∈ [−F_j, F_j], and ∈ j's published fault interval of step k widened by δ_j where its state of
@@ -668,7 +617,7 @@ class LocalEstimator:
         published set the rate used (their state then names the set: it must hold the truth)."""
         out: Slabs = {}
         rate_from: set[int] = set()
-        for j, (y, gamma) in inp.readings.items():
+        for j in inp.readings:
             src = self.bounded.get(j)
             if src is None:
                 continue
@@ -682,7 +631,7 @@ class LocalEstimator:
                     rate_from.add(j)
             if not (math.isfinite(f_lo) and math.isfinite(f_hi)) or f_lo > f_hi:
                 continue  # no bound on f_j⁺ (or an empty one: an assumption broke), so nothing on C_j x⁺
-            iv = measurement_interval(sensor, y, gamma)
+            iv = measured[j]  # (every bounded reading's measurement interval: sector.step_ranges)
             ds_lo, ds_hi = sorted((sensor.Ds * f_lo, sensor.Ds * f_hi))
             lo, hi = iv.lo - ds_hi, iv.hi - ds_lo
             if math.isfinite(lo) or math.isfinite(hi):
@@ -690,10 +639,11 @@ class LocalEstimator:
         return out, frozenset(rate_from & set(out))
 
     def _solve_step(self, ctx: StepContext, inp: UpdateInput, first: tuple[StepResult | None, _Solve] | None = None) -> StepResult:
-        """The certified set the node continues from and the one it publishes: the readings' set where it is
-        certified and better (:meth:`_refine`), else the same set (the cuts may make another to publish); the
-        fallback where the first has no certificate.
-        ``first``: the first solve's outcome, computed before the readings came (:meth:`prepare`)."""
+        """The certified set the node continues from and publishes (the cuts may make another to publish; the readings
+        cut both, :data:`~netsetest.estimator.cuts.READINGS` and the region); the fallback where it has no certificate.
+        One solve: a second one of the readings alone, published where smaller in the published objective, made every
+        published coordinate the same or wider on every reading topology (issue 45, docs/network.md).
+        ``first``: the solve's outcome, computed before the readings came (:meth:`prepare`)."""
         data, rho, alpha = ctx.data, ctx.rho, np.asarray(inp.alpha, dtype=float)
         res, solve = first if first is not None else self._solve_certify(data, rho, alpha, self._wh, self._facts(data))  # the set the node recurs on
         if res is None:
@@ -701,46 +651,18 @@ class LocalEstimator:
             assert ctx.blend is not None  # a predicting step's context has its blend
             P_fb = fallback_shape(data.Mi, data.own, self.W, ctx.blend.abar, ctx.blend.dbar, self.uncertainty) / rho
             return self._fallback(data.x_pred.copy(), P_fb, solve, ctx.sector)
-        if ctx.slabs:
-            res = self._refine(res, self.readings_data(data, alpha, ctx.slabs), rho, alpha)
         return res
 
-    def _moved_region(self, prev: NodeSet, inp: UpdateInput, blend: Blend) -> tuple[Polygon, frozenset[int]]:
+    def _moved_region(self, prev: NodeSet, inp: UpdateInput) -> Moved:
         """The states x⁺ the prior allows: its region (else the box of its ellipsoid), cut by the in-neighbours'
         published regions of the same step k (``neighbour_sets``: each holds x_k wherever that neighbour's set holds
         the truth), through the step's blended dynamics (exact for the truth), plus the disturbance's and the declared
-        model mismatch's bounds (a box around e = G ζ holds it for either kind); and the neighbours whose region cut it."""
+        model mismatch's bounds (a box around e = G ζ holds it for either kind); the neighbours whose region cut it, the
+        step's blend and, under k-of-N, the moved region's interval of uᵀx⁺ (:func:`~netsetest.estimator.region_engine.advance`)."""
         region = prev.region if prev.region is not None else seed(prev)
-        used: set[int] = set()
-        if self.neighbour_sets:
-            for j, nb in inp.neigh.items():
-                if j == self.node_id or nb.region is None:
-                    continue
-                cut = region.within(nb.region)
-                if cut is None or len(cut.vertices) < MIN_VERTICES:
-                    break  # the two hold no common point: an assumption broke (one of the sets missed); no more cuts
-                if cut is not region:
-                    region = cut
-                    used.add(j)
-        return region_engine.moved(region, blend, inp.u, self.W, self.uncertainty), frozenset(used)
-
-    def _refine(self, res: StepResult, data: StepData, rho: float, alpha: np.ndarray) -> StepResult:
-        """``res`` publishing the readings' set of the step (its only innovation those readings) where it is
-        certified, uses them (L ≠ 0) and is smaller in the published objective than ``res``; the node recurs on
-        ``res`` either way (cut by the readings: :data:`~netsetest.estimator.cuts.READINGS`).
-
-        Why not recur on it: its trace-optimal shape trades sideslip width for yaw-rate width (the
-        reading measures the yaw rate), and later steps predict from the sideslip; recurring on it made
-        paper6_reference's SAIM fault intervals wider than without readings (docs/network.md)."""
-        wh = self.statics.wh_published
-        answer, solve = self._solve(data, alpha, wh, rho)
-        res = res.replaced(figures=dataclasses.replace(res.figures, solve_ms=res.figures.solve_ms + solve.ms))
-        if answer is None or not np.any(answer.L):
-            return res  # no answer, or the readings are of no use (L = 0): nothing to certify
-        refined = self._certify(answer, data, rho, self._facts(data), solve)
-        if refined is None or _objective(refined.continued.P, wh) >= (1 - REFINE_RTOL) * _objective(res.continued.P, wh):
-            return res  # no certificate, or nothing gained: no reason to rest the published set on the readings
-        return res.replaced(published=refined.continued.replaced(reading_keys=frozenset(data.key[3])))
+        others = {j: nb.region for j, nb in inp.neigh.items() if j != self.node_id and nb.region is not None} if self.neighbour_sets else {}
+        u = None if self.health is None else self.health.u
+        return region_engine.advance(self.model, inp.alpha, region, others, inp.u, self.W, self.uncertainty, u)
 
     def first(self, prior: NodeSet, y: float, gamma: float) -> StepResult:
         """Step 0: the prior updated by ỹ₀, certified like every step (``fallback``: the prior itself), then
@@ -758,7 +680,8 @@ class LocalEstimator:
         """The guaranteed set when the solver gave no certificate; FallbackUnavailable if even it is not publishable."""
         if not publishable(xhat, P):
             raise FallbackUnavailable(f"node {self.node_id}: the fallback ellipsoid is not finite and positive definite")
-        return StepResult.of(StepSet(xhat, P, np.nan), StepFigures("fallback", solve.ms, solve.status), sector)
+        s = StepSet(xhat, P, np.nan, np.zeros((NA, 1)))
+        return StepResult(s, s, StepFigures("fallback", solve.ms, solve.status), sector)
 
     def _update(self, data: StepData, rho: float, alpha: np.ndarray) -> tuple[StepResult | None, _Solve]:
         """The certified set of the step's data (None: no certificate) and the solve's figures."""
@@ -768,7 +691,10 @@ class LocalEstimator:
         """Solve the step's problem for the objective trace(D P), D^½ = diag(wh) (None: trace P), and
         certify the answer; None if there is no certificate."""
         answer, solve = self._solve(data, alpha, wh, rho)
-        return (None if answer is None else self._certify(answer, data, rho, facts, solve)), solve
+        if answer is None:
+            return None, solve
+        s = self._certify(answer, data, rho, facts)
+        return (None if s is None else StepResult(s, s, StepFigures("ok", solve.ms, answer.status), data.sector)), solve
 
     def _solve(self, data: StepData, alpha: np.ndarray, wh: np.ndarray | None, rho: float) -> tuple[_Answer | None, _Solve]:
         """The backend's answer to the step's problem for the objective trace(D P), D^½ = diag(wh) (None:
@@ -802,8 +728,8 @@ class LocalEstimator:
             pat.stack = FactStack.of(pat.balls)
         return pat.stack
 
-    def _certify(self, answer: _Answer, data: StepData, rho: float, facts: FactStack, solve: _Solve) -> StepResult | None:
-        """The published set of an answer where the certificate holds and the set is publishable; else None."""
+    def _certify(self, answer: _Answer, data: StepData, rho: float, facts: FactStack) -> StepSet | None:
+        """The set of an answer where the certificate holds and the set is publishable; else None."""
         L = answer.L
         gain = bool(L.any())  # (L = 0: Π₀ and x̂_pred as they are, the same floats)
         pi = answer.pi0 - L @ data.ell[None, :] if gain else answer.pi0  # Π(L) = Π₀ − L ℓᵀ
@@ -814,7 +740,7 @@ class LocalEstimator:
         xhat_new = data.x_pred + L[:, 0] * data.innov_sum if gain else data.x_pred.copy()  # (16): x̂⁺ = x̂_pred + L Σ_j a_ij y̌_j
         if not publishable(xhat_new, P_pub):  # a certified set nobody can use: treated as no certificate
             return None
-        return StepResult.of(StepSet(xhat_new, P_pub, rho_c, L), StepFigures("ok", solve.ms, answer.status), data.sector)
+        return StepSet(xhat_new, P_pub, rho_c, L)
 
 
 @dataclass(frozen=True)
@@ -827,7 +753,9 @@ class StepBase:
     data: StepData
     moved: Polygon
     prop: Propagation  # the node's set of step k through the step: what it proves of any sensor's r⁺
-    sets: frozenset[int] = frozenset()  # the in-neighbours whose published region cut the moved one
+    sets: frozenset[int]  # the in-neighbours whose published region cut the moved one
+    ranges: StepRanges  # what the step needs of sector.py (its readings' part None where computed before them)
+    span: tuple[float, float] | None  # under k-of-N: the moved region's interval of uᵀx⁺
 
 
 @dataclass(frozen=True)
@@ -873,11 +801,6 @@ class _Solve:
 
     ms: float
     status: str
-
-
-def _objective(P: np.ndarray, wh: np.ndarray | None) -> float:
-    """trace(D P), D^½ = diag(wh) (None: trace P): what a step minimises."""
-    return float(np.trace(P)) if wh is None else float(wh**2 @ np.diag(P))
 
 
 def _weighted(data: StepData, wh: np.ndarray) -> StepData:

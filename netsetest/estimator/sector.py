@@ -24,12 +24,13 @@ fixed sector (h1, h2 − h1 of the profile) is used and marked ``assumed``: it h
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
-from netsetest.models.sensor import NX, Sensor
+from netsetest.models.sensor import NX, Sensor, measured_intervals
 from netsetest.models.uncertainty import ModelUncertainty
 
 SATURATION_UPPER_SLOPE = 1.0  # sup σ(r)/r of a saturation: the exact h2
@@ -176,19 +177,103 @@ def sector_ok(sensor: Sensor, sector: Sector | None, r: float) -> bool:
     return abs(r) <= limit * (1 + 1e-12)
 
 
-def fault_over(own: Sensor, c_lo: float, c_hi: float, meas: Interval) -> tuple[float, float]:
-    """f from the own measurement where C x ∈ [c_lo, c_hi]: C x + Ds f ∈ [m_lo, m_hi] gives Ds f ∈ [m_lo − c_hi,
-    m_hi − c_lo] (an open side of the measurement, at the sensor's limit, leaves that side of the result open); the
-    sensor has a fault term (Ds ≠ 0)."""
-    finite_lo, finite_hi = bool(np.isfinite(meas.lo)), bool(np.isfinite(meas.hi))
-    a = (meas.lo - c_hi) / own.Ds if finite_lo else -np.inf * own.Ds  # (an open side stays open, whatever Ds's sign)
-    b = (meas.hi - c_lo) / own.Ds if finite_hi else np.inf * own.Ds
-    return (a, b) if own.Ds > 0.0 else (b, a)
+@dataclass(frozen=True)
+class Reads:
+    """The sensors whose readings of a step a node may use, by id (``sensors``: references, bounded readings, its k-of-N
+    group), the references among them (declared fault-free) and a sensor of uᵀx alone (the k-of-N direction; None:
+    no k-of-N group), fixed for the node's run."""
+
+    sensors: Mapping[int, Sensor]
+    references: Mapping[int, Sensor]
+    u_sensor: Sensor | None = None
+
+
+@dataclass(frozen=True)
+class ReadingRanges:
+    """What a step's readings prove (:func:`reading_ranges`): each reading's measurement interval (outward, a side at
+    the sensor's limit open), keyed by its sensor's id; each reference's interval with an open side closed by the
+    node's set through the step, where that leaves it finite and not empty; and uᵀx⁺ over the node's set through the
+    step (the k-of-N prediction; None without a k-of-N group)."""
+
+    measured: dict[int, Interval]
+    closed: dict[int, Interval]
+    u_pred: Interval | None
+
+
+@dataclass(frozen=True)
+class StepRanges:
+    """Everything a step needs of this module, in one call (:func:`step_ranges`): the own measurement's interval, the
+    own sector, the proven interval of r⁺ used as the measurement where the sector is derived and the sensor may
+    saturate (None: the measurement itself), the in-neighbours whose published sector has a φ slot, and what the
+    readings prove (None: not read yet, :meth:`LocalEstimator.prepare`)."""
+
+    meas: Interval
+    sector: Sector | None
+    reading: Interval | None
+    phi_from: frozenset[int]
+    readings: ReadingRanges | None
+
+
+FAULT_FREE = FaultBound(size=0.0)  # a reference's, and uᵀx's (no fault term)
+
+
+def step_ranges(
+    own: Sensor,
+    bound: FaultBound,
+    y: float,
+    gamma: float,
+    prop: Propagation,
+    neighbours: Mapping[int, Sector | None],
+    readings: Mapping[int, tuple[float, float]] | None,
+    reads: Reads,
+) -> StepRanges:
+    """The step's :class:`StepRanges` from the own reading (ỹ⁺, γ⁺), the node's set through the step (``prop``), the
+    in-neighbours' published sectors of step k and the readings of the step (None: not read yet)."""
+    used = [] if readings is None else [j for j in readings if j in reads.sensors]
+    intervals = measured_intervals([(own, y, gamma), *((reads.sensors[j], *readings[j]) for j in used)], outward=True)  # type: ignore[index]  # (used is empty where readings is None)
+    meas = Interval(*intervals[0])
+    sector: Sector | None = None
+    reading: Interval | None = None
+    if own.saturated:
+        r_set = prop.interval(own, bound)
+        sector = derive_sector(own, bound, meas, r_set)
+        if sector is not None and sector.has_phi and sector.basis != "assumed":
+            reading = meas & r_set if sector.basis == "fault-bound" else meas
+    phi_from = frozenset(j for j, s in neighbours.items() if s is not None and s.has_phi)
+    ranges = None if readings is None else _reading_ranges(prop, reads, {j: Interval(*iv) for j, iv in zip(used, intervals[1:])})
+    return StepRanges(meas, sector, reading, phi_from, ranges)
+
+
+def reading_ranges(prop: Propagation, readings: Mapping[int, tuple[float, float]], reads: Reads) -> ReadingRanges:
+    """What the step's readings prove (:class:`ReadingRanges`), for a step whose :func:`step_ranges` did not read them."""
+    used = [j for j in readings if j in reads.sensors]
+    intervals = measured_intervals([(reads.sensors[j], *readings[j]) for j in used], outward=True)
+    return _reading_ranges(prop, reads, {j: Interval(*iv) for j, iv in zip(used, intervals)})
+
+
+def _reading_ranges(prop: Propagation, reads: Reads, measured: dict[int, Interval]) -> ReadingRanges:
+    """:class:`ReadingRanges` from the readings' measurement intervals (in the readings' order)."""
+    closed: dict[int, Interval] = {}
+    for j, iv in measured.items():
+        sensor = reads.references.get(j)
+        if sensor is None:
+            continue
+        if not (math.isfinite(iv.lo) and math.isfinite(iv.hi)):
+            iv = iv & prop.interval(sensor, FAULT_FREE)
+        if math.isfinite(iv.lo) and math.isfinite(iv.hi) and iv.hi > iv.lo:
+            closed[j] = iv
+    u_pred = None if reads.u_sensor is None else prop.interval(reads.u_sensor, FAULT_FREE)
+    return ReadingRanges(measured, closed, u_pred)
 
 
 __all__ = [
+    "FAULT_FREE",
     "FaultBound",
-    "fault_over",
+    "ReadingRanges",
+    "Reads",
+    "StepRanges",
+    "reading_ranges",
+    "step_ranges",
     "Sector",
     "SectorBasis",
     "Interval",

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -97,11 +97,7 @@ class Sensor:
         worst-case signals).  ``outward``: the half-width grows by ROUNDING_MARGIN (relative, and of |ỹ|) too, so
         that the rounding of ỹ ∓ |Dv|√R never leaves the truth out of an estimator's set.
         """
-        margin = ROUNDING_MARGIN if outward else 0.0
-        half = abs(self.Dv) * math.sqrt(self.R) * (1 + margin) + margin * abs(y)
-        lo, hi = (y - half) / gamma, (y + half) / gamma
-        edge = self.r_max * (1 - ROUNDING_MARGIN)  # (inf without saturation: never open)
-        return (lo if lo > -edge else -math.inf), (hi if hi < edge else math.inf)
+        return measured_intervals([(self, y, gamma)], outward)[0]
 
     def sector_holds(self, xbar: np.ndarray) -> bool:
         """Whether φ(C̄ x̄) satisfies the sector condition (15) that the estimator assumes."""
@@ -116,3 +112,15 @@ class Sensor:
         theta = np.vstack([E_DESCRIPTOR, gamma * h1 * self.Cbar[None, :]])
         pinv = np.linalg.pinv(theta)  # (3, 4)
         return pinv[:, :NA], pinv[:, NA:]
+
+
+def measured_intervals(readings: Iterable[tuple[Sensor, float, float]], outward: bool = False) -> list[tuple[float, float]]:
+    """:meth:`Sensor.measured_interval` of each (sensor, ỹ, γ), in order: a step reads several sensors in one call."""
+    margin = ROUNDING_MARGIN if outward else 0.0
+    out = []
+    for s, y, gamma in readings:
+        half = abs(s.Dv) * math.sqrt(s.R) * (1 + margin) + margin * abs(y)
+        lo, hi = (y - half) / gamma, (y + half) / gamma
+        edge = s.r_max * (1 - ROUNDING_MARGIN)  # (inf without saturation: never open)
+        out.append(((lo if lo > -edge else -math.inf), (hi if hi < edge else math.inf)))
+    return out

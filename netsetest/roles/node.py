@@ -224,11 +224,10 @@ class Node:
             neigh[self.id] = prior_state(self.id, own, first.sector)
         u, vx = (sc.steer_low + sc.steer_high) / 2, sc.vx(0)
         res = est.step(own, UpdateInput(sc.model.weights(vx), u, y, gamma, neigh))
-        if self.read_from:  # the pattern of a step that uses readings
+        if self.read_from:  # a step that uses readings (their slabs and cuts)
             readings = {j: (float(sc.node(j).sensor.Cbar @ cfg.x0_hat), gamma) for j in self.read_from}
             est.step(own, UpdateInput(sc.model.weights(vx), u, y, gamma, {}, readings))
             decode(encode(Reading(step=1, node=self.id, y=y, gamma=gamma)))
-            est.forget_warm_starts()  # the readings' solver would start the run from this made-up gain
         inp = NodeInput(step=1, node=self.id, y=y, gamma=gamma, u_prev=u, vx_prev=vx, expect_from=self.others)
         decode(encode(inp))
         decode(encode(self._state_message(Publication(inp, res.figures.status, res, used=self.others))))

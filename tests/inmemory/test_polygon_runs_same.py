@@ -12,12 +12,12 @@ from collections import Counter
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 import polygon_reference as ref
 import pytest
 
 from netsetest.config.schema import Case, load_topology
 from netsetest import polygon
-from netsetest.estimator import cuts
 from netsetest.models.signals import SignalKind
 from netsetest.polygon import Polygon
 from netsetest.runtime.inmemory import run_inmemory
@@ -42,6 +42,7 @@ def _checked(calls: Counter[str], name: str, new: Callable[..., Any], old: Calla
 
     def both(region: Polygon, *args: Any, **kwargs: Any) -> Any:
         got = new(region, *args, **kwargs)
+        args = tuple(np.asarray(a, dtype=float) if isinstance(a, tuple) else a for a in args)  # (a direction as plain floats: the numpy code's array)
         want = old(ref.Polygon(region.vertices.copy()), *args, **kwargs)
         why = ref.differs(got, want, ref.bound(name, region.vertices, *args, **kwargs))
         assert why is None, f"{name}{args!r} on {region.vertices.tolist()!r}: {why}"
@@ -58,7 +59,7 @@ def test_every_region_operation_of_a_run_returns_what_the_numpy_code_did(
     calls: Counter[str] = Counter()
     for name in ("moved", "cut", "reduced"):
         monkeypatch.setattr(Polygon, name, _checked(calls, name, getattr(Polygon, name), getattr(ref.Polygon, name)))
-    monkeypatch.setattr(cuts, "ellipse_cut", _checked(calls, "ellipse_cut", cuts.ellipse_cut, ref.ellipse_cut))
+    monkeypatch.setattr(Polygon, "ellipse_cut", _checked(calls, "ellipse_cut", Polygon.ellipse_cut, ref.ellipse_cut))
     run_inmemory(load_topology(topology, case, STEPS), signals, "scheduled", seed)
     nodes = len(load_topology(topology, case, STEPS).ids)
     assert calls["moved"] >= nodes * (STEPS - 1) and calls["reduced"] >= nodes * STEPS  # every node, every step

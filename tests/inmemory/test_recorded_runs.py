@@ -82,7 +82,15 @@ step); a node that does not hear every reading cuts its region by its in-neighbo
 mean width narrows or stays: new / old over the 30 steps, β r f, paper6 0.87–0.92, 0.70–0.79, 0.69–0.96;
 paper6_reference 0.98–1, 0.95–1, 0.87–1; paper6_max_faulty 0.90–1, 0.77–1, 0.88–1; the labels of 2 node-runs move
 (fault detection), the truth is unchanged.  The widths against the exact limit stay ≤ 1.007 with 0 intervals narrower
-than it (bench/widths.json, docs/results.md)."""
+than it (bench/widths.json, docs/results.md).
+
+Re-recorded on 2026-12-07 (issue 45, branch h45) for one change by design: the readings' second solve is gone (a set
+of the readings alone, published where smaller in the published objective; LocalEstimator._refine).  Measured before
+dropping it (paper6_reference and paper6_max_faulty, NSNIM and SAIM, paper signals seed 0 and worst-case seed 3, 40
+steps): every node's mean published width the same or narrower on every coordinate, β by up to 1.8 % (SAIM), r by up
+to 0.3 %, f by up to 0.1 %, never wider (docs/network.md).  The record, new / old over the 30 steps: paper6 unchanged
+within the tolerances (the step's region is cut in one polygon call now: the same operations in the same order);
+paper6_reference 0.9986–1, paper6_max_faulty 0.9912–1 (SAIM paper signals, scheduled); no label moved."""
 
 from __future__ import annotations
 

@@ -19,7 +19,8 @@ from hypothesis import strategies as st
 
 from netsetest.config.schema import load_topology
 from netsetest.estimator.cuts import NodeSet, StepFigures, StepResult, StepSet
-from netsetest.estimator.sdp import Blend, LocalEstimator, NeighbourState, UpdateInput
+from netsetest.estimator.sdp import LocalEstimator, NeighbourState, UpdateInput
+from netsetest.estimator.sector import Interval, measurement_interval
 from netsetest.models.sensor import NA
 from netsetest.polygon import SLIVER, Polygon
 from netsetest.sets import Slab
@@ -171,8 +172,8 @@ def test_the_moved_region_holds_every_successor_of_a_point_of_the_prior_and_the_
     u = float(rng.uniform(sc.steer_low, sc.steer_high))
     nb = NeighbourState(np.zeros(NA), np.eye(NA), 1.0, 1.0, 0.0, None, b)
     prev = NodeSet(np.r_[a.vertices.mean(axis=0), 0.0], np.eye(NA), 1.0, a)
-    blend = Blend.of(sc.model, alpha)
-    moved, sets = est._moved_region(prev, UpdateInput(alpha, u, 0.0, 1.0, {2: nb}), blend)
+    step = est._moved_region(prev, UpdateInput(alpha, u, 0.0, 1.0, {2: nb}))
+    blend, moved, sets = step.blend, step.region, step.sets
     w = rng.uniform(-1.0, 1.0, (len(both), 1)) * math.sqrt(est.W)
     w[::5] = np.sign(w[::5]) * math.sqrt(est.W)  # the bound itself
     nxt = both @ blend.a.T + blend.b * u + w * blend.d
@@ -212,6 +213,11 @@ def _reading(draw: st.DrawFn) -> tuple[UpdateInput, int, np.ndarray]:
     return inp, j, x[allowed]
 
 
+def _measured(est: LocalEstimator, inp: UpdateInput) -> dict[int, Interval]:
+    """The bounded readings' measurement intervals (what sector.step_ranges gives the step)."""
+    return {j: measurement_interval(est.bounded[j][0], *r) for j, r in inp.readings.items() if j in est.bounded}
+
+
 def _slab_keeps(slabs: Callable[[UpdateInput], dict], reading: tuple[UpdateInput, int, np.ndarray]) -> None:
     inp, j, xs = reading
     out = slabs(inp)
@@ -229,9 +235,9 @@ def test_a_bounded_readings_slab_keeps_every_state_its_hypotheses_allow(reading:
     """C_j x⁺ of every truth whose measurement is the reading, with f_j⁺ within the declared size and rate of j's
     published fault interval, lies in the slab; it rests on that set where the rate narrowed it."""
     est, _ = _estimator()
-    _slab_keeps(lambda inp: est._bounded_slabs(inp)[0], reading)
+    _slab_keeps(lambda inp: est._bounded_slabs(inp, _measured(est, inp))[0], reading)
     inp, j, _ = reading
-    _, rate_from = est._bounded_slabs(inp)
+    _, rate_from = est._bounded_slabs(inp, _measured(est, inp))
     assert rate_from <= {j} and (not rate_from or j in inp.neigh)
 
 
@@ -240,7 +246,7 @@ def test_the_slab_test_fails_on_a_slab_narrowed_by_5_percent() -> None:
 
     def narrowed(inp: UpdateInput) -> dict:
         out = {}
-        for key, iv in est._bounded_slabs(inp)[0].items():
+        for key, iv in est._bounded_slabs(inp, _measured(est, inp))[0].items():
             w = (
                 NARROWED * (iv.hi - iv.lo) / 2
                 if math.isfinite(iv.hi - iv.lo)

@@ -22,7 +22,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from test_polygon_exact import FUZZ, car_like, matrices, polygons, segment_lists, slabs
 
-from netsetest.estimator.cuts import ellipse_cut
+from netsetest import polygon
 from netsetest.polygon import Polygon
 
 pytestmark = [
@@ -87,7 +87,7 @@ def test_the_ellipse_cut_is_the_numpy_codes(data: st.DataObject) -> None:
     P = root @ root.T + (np.diag([0.0, 0.0, 1.0]) if data.draw(st.booleans()) else 0.0)  # (sometimes a flat x-projection)
     xhat = rng.normal(size=3) * size
     coordinates = data.draw(st.booleans())
-    got, want = ellipse_cut(Polygon(v), xhat, P, 1.0, coordinates), ref.ellipse_cut(ref.Polygon(v), xhat, P, 1.0, coordinates)
+    got, want = Polygon(v).ellipse_cut(xhat, P, 1.0, coordinates), ref.ellipse_cut(ref.Polygon(v), xhat, P, 1.0, coordinates)
     _check("ellipse_cut", v, got, want, xhat, P, 1.0, coordinates)
 
 
@@ -114,19 +114,17 @@ def test_the_ellipse_cut_at_the_edge_of_its_shortcut_is_the_numpy_codes(data: st
     edge = 1.0 + data.draw(st.sampled_from([-1.0, 1.0])) * 10.0 ** data.draw(st.floats(-12.0, -2.0))
     v = np.asarray(Polygon(xhat[:2] + np.concatenate(points) * edge).plus_segments([]).vertices)  # (counter-clockwise)
     rho = data.draw(st.sampled_from([1.0, 1.0 - 1e-6, 1.0 + 1e-6]))
-    _check("ellipse_cut", v, ellipse_cut(Polygon(v), xhat, P, rho), ref.ellipse_cut(ref.Polygon(v), xhat, P, rho), xhat, P, rho)
+    _check("ellipse_cut", v, Polygon(v).ellipse_cut(xhat, P, rho), ref.ellipse_cut(ref.Polygon(v), xhat, P, rho), xhat, P, rho)
 
 
 def test_the_ellipse_cut_returns_a_region_well_inside_at_once() -> None:
     """The shortcut is taken (no eigen decomposition) where the region is well inside a well-conditioned ellipse,
     and not where a vertex is outside."""
-    from netsetest.estimator import cuts
-
     P = np.diag([2.0, 0.5, 1.0])
     xhat = np.array([0.3, -0.1, 0.0])
     inside = Polygon(np.array([[0.3, -0.2], [0.5, -0.1], [0.3, 0.0], [0.1, -0.1]]))
     outside = Polygon(inside.vertices * 10.0)
-    assert cuts._well_inside(inside, xhat, P[:2, :2], 1.0)
-    assert ellipse_cut(inside, xhat, P, 1.0) is inside
-    assert not cuts._well_inside(outside, xhat, P[:2, :2], 1.0)
-    assert not cuts._well_inside(inside, xhat, np.diag([1.0, 1e-12]), 1.0)  # beyond the condition bound: the full cut
+    assert polygon._well_inside(inside.points, 0.3, -0.1, 2.0, 0.0, 0.5, 1.0)
+    assert inside.ellipse_cut(xhat, P, 1.0) is inside
+    assert not polygon._well_inside(outside.points, 0.3, -0.1, 2.0, 0.0, 0.5, 1.0)
+    assert not polygon._well_inside(inside.points, 0.3, -0.1, 1.0, 0.0, 1e-12, 1.0)  # beyond the condition bound: the full cut

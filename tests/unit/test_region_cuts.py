@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from netsetest.config.schema import load_topology
-from netsetest.estimator.cuts import HEALTH_FAULT, PIN_FLOOR, STEP_CUTS, NodeSet, Rests, StepContext, StepFigures, StepResult, StepSet, ellipse_cut, seed
+from netsetest.estimator.cuts import HEALTH_FAULT, PIN_FLOOR, STEP_CUTS, NodeSet, Rests, StepContext, StepFigures, StepResult, StepSet, seed
 from netsetest.estimator.health import HEALTH_KEY, HealthAssessment, Others
 from netsetest.estimator.sdp import LocalEstimator, UpdateInput
 from netsetest.estimator.sector import Interval, Sector
@@ -61,7 +61,7 @@ def test_the_ellipse_cut_keeps_every_point_of_the_region_the_ellipsoid_holds(e: 
     hi = xhat[:2] + half * b
     region = Polygon.box(lo, hi)
     held = [p for p in pts if np.all(p[:2] >= lo) and np.all(p[:2] <= hi)]
-    cut = ellipse_cut(region, xhat, P, rho)
+    cut = region.ellipse_cut(xhat, P, rho)
     if cut is None:
         assert not held
         return

@@ -108,7 +108,7 @@ def test_the_cut_by_slabs_keeps_every_state_of_the_region_in_the_slab(
     hi = max(hi, lo + 1e-3 * (hi_r - lo_r))
     if open_side:
         hi = math.inf
-    cut = region_engine.cut_by_slabs(region, [Slab(np.array([0.0, 0.0, 1.0]), -1.0, 1.0), Slab(np.append(c, fault_part), lo, hi)])
+    cut = _cut(region, [Slab(np.array([0.0, 0.0, 1.0]), -1.0, 1.0), Slab(np.append(c, fault_part), lo, hi)])
     assert cut is not None
     xs = _inner(region, rng, 200)
     s = xs @ c
@@ -116,10 +116,17 @@ def test_the_cut_by_slabs_keeps_every_state_of_the_region_in_the_slab(
     pts = np.reshape(kept, (-1, 2))
     assert _within(cut, pts).all()
     assert not _within(_narrowed(cut), pts).all()
-    assert region_engine.cut_by_slabs(region, [Slab(np.array([0.0, 0.0, 1.0]), -1.0, 1.0)]) is region
+    assert _cut(region, [Slab(np.array([0.0, 0.0, 1.0]), -1.0, 1.0)]) is region
 
 
 SENSOR = Sensor(C=np.array([0.3, 1.0]), Ds=1.0, Dv=0.01, R=1.0, saturated=True, r_max=0.5, h1=0.5, h2=1.0)
+NOTHING = Interval(-math.inf, math.inf)  # a measurement that bounds nothing
+
+
+def _cut(region: Polygon, slabs: list[Slab] | None = None, meas: Interval = NOTHING, size: float | None = None) -> Polygon | None:
+    """The region engine's cut (one call: the slabs, then the own measurement with the fault size where given) alone."""
+    facts = region_engine.cut(region, slabs or [], SENSOR, meas, size)
+    return None if facts is None else facts.region
 
 
 def _yaw_region(r: tuple[Polygon, np.random.Generator, float]) -> tuple[Polygon, np.random.Generator]:
@@ -145,7 +152,7 @@ def test_the_own_measurement_cut_keeps_every_state_some_allowed_fault_explains(
         *(_edge_points(region, SENSOR.C, lo) if math.isfinite(lo) else []),
         *(_edge_points(region, SENSOR.C, hi) if math.isfinite(hi) else []),
     ]
-    cut = region_engine.cut_by_own(region, SENSOR, meas, size)
+    cut = _cut(region, meas=meas, size=size)
     if not kept:
         return
     pts = np.reshape(kept, (-1, 2))
@@ -162,7 +169,9 @@ def test_the_fault_over_the_region_holds_every_fault_the_reading_allows(r: tuple
     loses the extreme f."""
     region, rng = _yaw_region(r)
     meas = measurement_interval(SENSOR, y, gamma)
-    fault = region_engine.region_fault(SENSOR, region, meas)
+    facts = region_engine.cut(region, [], SENSOR, meas)
+    assert facts is not None and facts.region is region
+    fault = facts.fault
     assert fault is not None  # |y| ≤ 0.6: a reading bounds at least one side of C x + Ds f
     lo, hi = fault
     cx = _inner(region, rng, 200) @ SENSOR.C

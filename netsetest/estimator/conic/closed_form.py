@@ -33,15 +33,6 @@ class ClosedFormSolver:
         self._onehot = np.zeros((len(self._cols), len(red.groups)))
         self._onehot[np.arange(len(self._cols)), [k for k, g in enumerate(red.groups) for _ in g.slots]] = 1.0
         self._facts = [g.fact for g in red.groups]
-        # the readings' update (ν slots) has a non-zero gain every step, close to the last one: Newton
-        # starts there (2–3 iterations instead of 6–8); everywhere else it starts as it always did
-        self._warm_start = bool(red.lay.nu)
-        self._last_L: np.ndarray | None = None
-
-    def forget_warm_start(self) -> None:
-        """Start the next solve afresh (after a warm-up on made-up data: a node that warmed up must answer
-        bit for bit like one that did not)."""
-        self._last_L = None
 
     def solve(self, data: StepData, rho: float) -> Solution:
         """The step's answer in closed form, else from Clarabel (the step's ξ computed once for both)."""
@@ -50,21 +41,16 @@ class ClosedFormSolver:
         return sol if sol is not None else self.fallback.solve(data, rho, agg)
 
     def _closed_form(self, data: StepData, rho: float, agg: Aggregate) -> Solution | None:
-        """Newton over L (warm-started where it pays), then τ_g = ρ a_g / Σ a and the smallest P; None if
-        there is no minimum to trust."""
+        """Newton over L, then τ_g = ρ a_g / Σ a and the smallest P; None if there is no minimum to trust."""
         ell, pi0 = data.ell, data.pi0[0]
         ell0 = abs(float(ell[0]))
         B = agg.B if agg.use_xi else 0.0
         sqrtb = self._col_sqrtb
         problem = SumOfNorms(pi0[:, self._cols] * sqrtb, ell[self._cols] * sqrtb, self._onehot, B + ell0)
-        found = problem.minimise(self._last_L) if self._last_L is not None else None
-        if found is None:
-            found = problem.minimise()
+        found = problem.minimise()
         if found is None:
             return None
         L, a, ln, iterations = found
-        if self._warm_start and ln > 0.0:
-            self._last_L = L.copy()
         a_xi, a0 = B * ln, ell0 * ln
         total = float(a.sum()) + a_xi + a0
         tc = np.zeros(self.red.n_tau)  # compact multipliers, as Clarabel's answer holds them

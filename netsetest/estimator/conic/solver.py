@@ -148,6 +148,7 @@ class ConicSolver:
 
     def __init__(self, red: Reduction, settings: clarabel.DefaultSettings | None = None) -> None:
         self.red = red
+        self._slot0 = red.closed_form  # (a pure SOCP: the η₁ slot gets a cone of its own where ℓ₀ ≠ 0)
         self.settings = settings or default_settings()
         self.settings_decomposed = _decomposed_settings(self.settings)
         self._templates: dict[TemplateKey, Template] = {}
@@ -166,13 +167,13 @@ class ConicSolver:
         red = self.red
         agg = red.aggregate(data.ell) if agg is None else agg
         has_lmi = bool(red.lmi_slots)
-        tpl = self.template((agg.use_xi, red.closed_form and float(data.ell[0]) != 0.0))
+        tpl = self.template((agg.use_xi, self._slot0 and float(data.ell[0]) != 0.0))
         S = data.Mi / math.sqrt(rho)  # congruence of the P rows: P_prev = S Sᵀ (data.Mi = ρ^½ chol(P_prev))
         sc, kappa = red.slot_scales(data.facts)
         values = StepValues(data.ell, data.facts, data.pi0, S, linalg.inv(S) if has_lmi else None, sc, kappa, agg.B, rho)
-        a, b = tpl.fill(values)
+        a, b, q = tpl.fill(values)
         A = CscMatrix(a, tpl.indices, tpl.indptr, (tpl.n_rows, tpl.nv))
-        conic = ConicData(CscMatrix.empty(tpl.nv, tpl.nv), tpl.objective(S), A, b, tpl.cones, tpl.key)
+        conic = ConicData(CscMatrix.empty(tpl.nv, tpl.nv), q, A, b, tpl.cones, tpl.key)
         return conic, InverseData(tpl, values, agg)
 
     def solve(self, data: StepData, rho: float, agg: Aggregate | None = None) -> Solution:
@@ -216,19 +217,20 @@ class ConicSolver:
         if self.red.socp:
             L, v = pt.L[0], inv.values
             lam0 = v.rho - float(pt.tau[0][self.red.balls].sum()) if inv.slot0_cone else 0.0
-            P = smallest_p(P, L, v.pi0[0] - L @ v.ell[None, :], inv.tpl.groups, pt.tau_compact[0], v.B, v.ell[0], lam0)
+            P = smallest_p(P, L, v.pi0[0] - L @ v.ell[None, :], inv.tpl.var.groups, pt.tau_compact[0], v.B, v.ell[0], lam0)
         return Solution(P, pt.L, pt.tau, status, sol.iterations)
 
     def unpack(self, x: np.ndarray, inv: InverseData) -> ConicPoint:
         """P_c, L_ℓ and τ_ℓ over the original facts from a conic point x (L = S L̃, τ = τ̂/κ clipped at 0)."""
-        tpl, S = inv.tpl, inv.values.S
-        Ls = [S @ x[i][:, None] for i in tpl.iL]
-        tcs = [np.maximum(x[tpl.iT[r]], 0.0) / inv.values.kappa for r in range(self.red.n_lmi)]
+        var, S = inv.tpl.var, inv.values.S  # (the template's variables: attributes, read once)
+        Ls = [S @ x[i][:, None] for i in var.iL]
+        tcs = [np.maximum(x[var.iT[r]], 0.0) / inv.values.kappa for r in range(self.red.n_lmi)]
         taus = [self.red.fact_tau(tc, inv.agg) for tc in tcs]
         P = np.zeros((NA, NA))
         if self.red.lmi_slots:
+            iP = var.iP
             for k, (i, j) in enumerate(P_ENTRIES):
-                P[i, j] = P[j, i] = x[tpl.iP[k]]
+                P[i, j] = P[j, i] = x[iP[k]]
             P = S @ P @ S.T
         return ConicPoint(P, Ls, taus, tcs)
 

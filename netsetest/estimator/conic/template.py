@@ -226,13 +226,13 @@ class Template:
     def groups(self) -> list[Group]:
         return self.var.groups
 
-    def fill(self, s: StepValues) -> tuple[np.ndarray, np.ndarray]:
-        """The step's entries of A (in csc order) and b."""
+    def fill(self, s: StepValues) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The step's entries of A (in csc order), b and q (:meth:`objective`): one call a solve."""
         values = np.concatenate([blk.values(s) for blk in self.a_blocks])
         b = np.zeros(self.n_rows)
         for blk in self.b_blocks:
             blk.fill(b, s)
-        return values[self.order], b
+        return values[self.order], b, self.objective(s.S)
 
     def objective(self, S: np.ndarray) -> np.ndarray:
         """q of trace(P_c) = trace(S P̃ Sᵀ) (with an LMI) plus Σ t (the cones' epigraphs)."""
