@@ -61,8 +61,6 @@ RADON_ABOVE_20 = {
     "netsetest/polygon.py:_plus",
     "netsetest/runtime/inmemory.py:run_inmemory",
     "netsetest/estimator/region.py:WithRegion.step",
-    "netsetest/cli/main.py:_calibrate_logs",
-    "netsetest/cli/main.py:cmd_calibrate",
     "netsetest/roles/judge.py:Judge.own_cause",
     "netsetest/analysis/kofn.py:guided",
     "netsetest/analysis/kofn.py:_repaired",
