@@ -64,7 +64,6 @@ RADON_ABOVE_20 = {
     "netsetest/roles/judge.py:Judge.own_cause",
     "netsetest/analysis/kofn.py:guided",
     "netsetest/analysis/kofn.py:_repaired",
-    "netsetest/analysis/compare.py:compare",
 }
 
 
