@@ -62,8 +62,6 @@ RADON_ABOVE_20 = {
     "netsetest/runtime/inmemory.py:run_inmemory",
     "netsetest/estimator/region.py:WithRegion.step",
     "netsetest/roles/judge.py:Judge.own_cause",
-    "netsetest/analysis/kofn.py:guided",
-    "netsetest/analysis/kofn.py:_repaired",
 }
 
 
