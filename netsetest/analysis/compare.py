@@ -339,8 +339,10 @@ def compare(
         if progress is not None:
             progress(done[0], total, what)
 
+    from netsetest.logs.drive import with_log_steps  # (a recorded drive's steps are decided against its log, as run's)
+
     for case in cases:
-        sc = load_topology(topology, case, steps, SDP)  # the run (row sdp) is all-SDP, whatever the file's nodes say
+        sc = with_log_steps(load_topology(topology, case, steps, SDP))  # the run (row sdp) is all-SDP, whatever the file's nodes say
         for sig in signals:
             for seed in seeds:
                 rec = _run_record(sc, sig, seed)
