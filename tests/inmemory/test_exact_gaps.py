@@ -166,7 +166,7 @@ def test_the_limit_is_the_program_written_out(sdp: tuple[Scenario, Record], limi
     ex = limits[mode]
     for k in (0, 4, 6, 8, STEPS):
         for (coord, node), (lo, hi) in _direct(sc, rec, k, ex.bounded_nodes).items():
-            got = ex.interval(coord, node)[k]  # type: ignore[arg-type]
+            got = ex.interval(coord, node)[k]  # type: ignore[arg-type]  # coord: one of COORDINATES
             for a, b in zip(got, (lo, hi)):
                 assert (np.isinf(a) and a == b) or abs(a - b) <= DIRECT_TOL * max(1.0, abs(b)), (mode, k, coord, node, got, (lo, hi))
 
@@ -199,7 +199,7 @@ def test_the_truth_is_inside_and_no_published_set_is_narrower(
         k = t["step"]
         for mode, ex in limits.items():
             for coord, value, node in [("beta", t["x"][0], None), ("r", t["x"][1], None), *(("f", t["faults"][i], i) for i in sc.ids)]:
-                lo, hi = ex.interval(coord, node)[k]  # type: ignore[arg-type]
+                lo, hi = ex.interval(coord, node)[k]  # type: ignore[arg-type]  # coord: one of COORDINATES
                 assert lo - CONTAIN_TOL <= value <= hi + CONTAIN_TOL, (mode, coord, node, k)
     mixed_sc, mixed = _replay(mixed_topology(tmp, EVERY_FAMILY), *gapped)
     for record, ex in ((rec, limits["used"]), (mixed, exact_bounds(mixed_sc, mixed, "all"))):
@@ -226,7 +226,7 @@ def test_k_of_n_with_gaps_is_brute_force_over_every_hypothesis_sequence(drive: D
     for coord, node in [("beta", None), ("r", None), *(("f", i) for i in sc.ids)]:
         for k in range(4):
             lo, hi = brute.get((coord, node, k), (np.inf, -np.inf))  # none solved: unbounded (a free fault at its gap)
-            got = ex.interval(coord, node)[k]  # type: ignore[arg-type]
+            got = ex.interval(coord, node)[k]  # type: ignore[arg-type]  # coord: one of COORDINATES
             want = (lo if np.isfinite(lo) else -np.inf, hi if np.isfinite(hi) else np.inf)
             for a, b in zip(got, want):
                 assert (np.isinf(a) and a == b) or abs(a - b) <= AGREE, (coord, node, k, got, want)
