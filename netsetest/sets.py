@@ -373,29 +373,36 @@ def set_from_wire(d: object, dim: int) -> Ellipsoid | Zonotope | Box | SumSet | 
         if kind == "region":
             return _region_set(d, dim)
         if kind == "sum":
-            z = set_from_wire(d.get("zonotope"), dim)
-            if not isinstance(z, Zonotope) or z.generators.shape[0] != dim:
-                raise SetFormatError("sum: 'zonotope' must be a zonotope of the set's dimension")
-            if "M" not in d:
-                return SumSet(z)
-            el = set_from_wire(d.get("ellipsoid"), len(d.get("M")[0]))  # type: ignore[index]  # a missing M raises TypeError, caught below as a malformed set
-            if not isinstance(el, Ellipsoid):
-                raise SetFormatError("sum: 'ellipsoid' must be an ellipsoid")
-            M = _mat(d, "M", dim)
-            slabs = []
-            for item in d.get("slabs") or []:
-                a = np.asarray(item[0], dtype=float)
-                s_lo = -np.inf if item[1] is None else float(item[1])
-                s_hi = np.inf if item[2] is None else float(item[2])
-                if a.shape != el.center.shape or not np.all(np.isfinite(a)) or np.isnan(s_lo) or np.isnan(s_hi) or s_lo > s_hi:
-                    raise SetFormatError("sum: a malformed slab")
-                slabs.append(Slab(a, s_lo, s_hi))
-            return SumSet(z, M, SlicedEllipsoid(el, tuple(slabs)))
+            return _sum_set(d, dim)
     except (TypeError, ValueError, IndexError, np.linalg.LinAlgError) as exc:
         if isinstance(exc, SetFormatError):
             raise
         raise SetFormatError(f"{kind}: {type(exc).__name__}: {exc}") from None
     raise SetFormatError(f"unknown set type {kind!r} (ellipsoid, zonotope, box, sum or region)")
+
+
+def _sum_set(d: dict, dim: int) -> SumSet:
+    """A ``sum`` set's parts, checked: a zonotope of the set's dimension, and where ``M`` is given an ellipsoid sliced
+    by well-formed slabs (lo ≤ hi, a finite normal of the ellipsoid's dimension).  A missing or malformed part raises
+    TypeError, ValueError or IndexError, which :func:`set_from_wire` reports as a malformed set."""
+    z = set_from_wire(d.get("zonotope"), dim)
+    if not isinstance(z, Zonotope) or z.generators.shape[0] != dim:
+        raise SetFormatError("sum: 'zonotope' must be a zonotope of the set's dimension")
+    if "M" not in d:
+        return SumSet(z)
+    el = set_from_wire(d.get("ellipsoid"), len(d.get("M")[0]))  # type: ignore[index]  # a missing M raises TypeError, caught by set_from_wire as a malformed set
+    if not isinstance(el, Ellipsoid):
+        raise SetFormatError("sum: 'ellipsoid' must be an ellipsoid")
+    M = _mat(d, "M", dim)
+    slabs = []
+    for item in d.get("slabs") or []:
+        a = np.asarray(item[0], dtype=float)
+        s_lo = -np.inf if item[1] is None else float(item[1])
+        s_hi = np.inf if item[2] is None else float(item[2])
+        if a.shape != el.center.shape or not np.all(np.isfinite(a)) or np.isnan(s_lo) or np.isnan(s_hi) or s_lo > s_hi:
+            raise SetFormatError("sum: a malformed slab")
+        slabs.append(Slab(a, s_lo, s_hi))
+    return SumSet(z, M, SlicedEllipsoid(el, tuple(slabs)))
 
 
 def _region_set(d: dict, dim: int) -> RegionSet:

@@ -26,6 +26,7 @@ from pathlib import Path
 from netsetest_bench.figures.baseline import load as load_side
 from netsetest_bench.render import MISSING, fill
 from netsetest_bench.zenoh_runs import code_env, realtime_run
+from netsetest_bench.config import BenchConfig
 
 SCALING_PROCESSES = 2  # processes of each checkout for the in-memory rings, alternating
 SCALING_PROGRAM = """
@@ -35,7 +36,7 @@ try:  # a checkout from before issue 46 keeps the benchmark inside the package
     from netsetest.bench.run import FULL, QUICK, scaling
 except ImportError:
     from netsetest_bench.run import FULL, QUICK, scaling
-cfg = dict(QUICK if sys.argv[1] == "quick" else FULL)
+cfg = QUICK if sys.argv[1] == "quick" else FULL
 with tempfile.TemporaryDirectory(prefix="nsbench-") as tmp:
     print(json.dumps(scaling(cfg, Path(tmp))))
 """  # one program for this checkout and the baseline (bench/run.py's scaling, which 16f81b4 has)
@@ -130,7 +131,7 @@ def realtime_side_by_side(directory: Path, sizes: list[int], steps: int, baselin
     return out
 
 
-def performance_side_by_side(cfg: dict, directory: Path, baseline: Path, quick: bool) -> dict:
+def performance_side_by_side(cfg: BenchConfig, directory: Path, baseline: Path, quick: bool) -> dict:
     """Issue 45's figures of this checkout and ``baseline`` side by side (module doc)."""
     from netsetest_bench.node_budget import checkout_commit
     from netsetest_bench.widths import SideBySideFailed, step_side_by_side
@@ -147,7 +148,7 @@ def performance_side_by_side(cfg: dict, directory: Path, baseline: Path, quick: 
     except BaselineFailed as e:
         out["scaling"] = {"error": str(e)}
     _log("side by side: real time (τs = 0.1 s), every size by this checkout and then the baseline")
-    out["realtime"] = realtime_side_by_side(directory, cfg["rt_sizes"], cfg["rt_steps"], baseline)
+    out["realtime"] = realtime_side_by_side(directory, cfg.rt_sizes, cfg.rt_steps, baseline)
     out["figures"] = figures(out)
     return out
 

@@ -28,6 +28,7 @@ import statistics
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +36,10 @@ from netsetest.campaign.engines import DASK_ENV, LocalPool
 from netsetest.campaign.runner import Tally, run_campaign, tasks_of
 from netsetest.campaign.spec import load_campaign
 from netsetest.campaign.store import Store
+from netsetest_bench.config import BenchConfig
+from netsetest_bench.figures.campaign import Arms, Big, Campaign, CampaignRun, Direct, Resume, Throughput
+from netsetest_bench.figures.campaign import load as load_figures
+from netsetest_bench.render import fill
 
 ESTIMATORS = ("sdp", "zonotope", "interval", "strip", "setprop")  # every real-time node estimator of `compare`
 MEMORY_SAMPLES = 10  # worker memory sampled this many times over the big campaign
@@ -89,7 +94,7 @@ def _rss_mb(pids: list[int]) -> dict[int, float]:
     return out
 
 
-def _campaign(path: Path, out: Path, engine: Any, sample_every: int = 0, pids: list[int] | None = None) -> dict:
+def _campaign(path: Path, out: Path, engine: Any, sample_every: int = 0, pids: list[int] | None = None) -> CampaignRun:
     """Run the campaign at ``path`` into a fresh ``out`` on ``engine``: wall, CPU, its runs' own CPU and wall,
     and (``sample_every`` runs) the local pool's workers' resident memory; ``pids``: the engine's processes (a
     Dask cluster's scheduler, nannies, workers), their CPU over the campaign."""
@@ -117,31 +122,31 @@ def _campaign(path: Path, out: Path, engine: Any, sample_every: int = 0, pids: l
     per_run = {}  # run key → (wall, CPU) in its worker (a run's rows, one per node, all carry its times)
     for key, w, cp in zip(table.column("run_key").to_pylist(), table.column("wall_s").to_pylist(), table.column("cpu_s").to_pylist()):
         per_run[key] = (w, cp)
-    return {
-        "runs": tally.done,
-        "errors": tally.errors,
-        "failed": tally.failed,
-        "wall_s": wall,
-        "runs_per_s": tally.done / wall if wall else None,
-        "cpu_main_s": cpu_main,
-        "run_wall_s": sum(w for w, _ in per_run.values()),
-        "run_cpu_s": sum(cp for _, cp in per_run.values()),
-        "worker_cpu_s": sum(worker_cpu.values()) or None,
-        "runs_per_cpu_s": tally.done / (cpu_main + sum(worker_cpu.values())) if worker_cpu else None,  # every process's CPU: what load cannot change
-        "cores_used": (cpu_main + sum(worker_cpu.values())) / wall if worker_cpu and wall else None,  # the share of the cores it got
-        "memory_mb": samples,
-        "load": load,
-    }
+    return CampaignRun(
+        runs=tally.done,
+        errors=tally.errors,
+        failed=tally.failed,
+        wall_s=wall,
+        runs_per_s=tally.done / wall if wall else None,
+        cpu_main_s=cpu_main,
+        run_wall_s=sum(w for w, _ in per_run.values()),
+        run_cpu_s=sum(cp for _, cp in per_run.values()),
+        worker_cpu_s=sum(worker_cpu.values()) or None,
+        runs_per_cpu_s=tally.done / (cpu_main + sum(worker_cpu.values())) if worker_cpu else None,  # every process's CPU: what load cannot change
+        cores_used=(cpu_main + sum(worker_cpu.values())) / wall if worker_cpu and wall else None,  # the share of the cores it got
+        memory_mb=samples,
+        load=load,
+    )
 
 
-def _direct(path: Path) -> dict:
+def _direct(path: Path) -> Direct:
     """The campaign's runs one after the other in this process, as ``netsetest run --mode inmemory`` makes each."""
     c = load_campaign(path)
     load = _load()
     cpu0, t0 = time.process_time(), time.perf_counter()
     for t in tasks_of(c, set()):
         t.spec.execute(keep=False)
-    return {"runs": len(c.runs), "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - cpu0, "load": load}
+    return Direct(runs=len(c.runs), wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - cpu0, load=load)
 
 
 class _LocalDask:
@@ -194,21 +199,27 @@ class _LocalDask:
                 p.wait()
 
 
-def _median(rows: list[dict], key: str) -> float | None:
-    vals = [r[key] for r in rows if r.get(key) is not None]
+def _median(values: list[float | None]) -> float | None:
+    vals = [v for v in values if v is not None]
     return statistics.median(vals) if vals else None
 
 
-def _throughput(tmp: Path, runs: int, reps: int) -> dict:
-    path = _file(tmp, "throughput", runs, ("sdp",), 80)
-    arms: dict[str, list[dict]] = {"local_1": [], "local_2": [], "cluster_2": [], "direct": []}
+def _ratio(a: float | None, b: float | None) -> float | None:
+    return a / b if a and b else None
+
+
+def _arms(path: Path, tmp: Path, runs: int, reps: int) -> tuple[Arms, str | None]:
+    """Every arm ``reps`` times, in turn (the local pool with 1 and 2 workers, a Dask cluster of 2, the runs one by one
+    in this process); why the cluster did not start (None: it did)."""
+    engines: dict[str, list[CampaignRun]] = {"local_1": [], "local_2": [], "cluster_2": []}
+    direct: list[Direct] = []
     cluster_error = None
     for rep in range(reps):
-        for arm in arms:
+        for arm in (*engines, "direct"):
             out = tmp / f"{arm}-{rep}"
             _log(f"campaign: {arm}, rep {rep + 1} of {reps}, {runs} runs (load {_load()})")
             if arm == "direct":
-                arms[arm].append(_direct(path))
+                direct.append(_direct(path))
             elif arm == "cluster_2":
                 try:
                     cluster = _LocalDask(tmp, 2)
@@ -218,124 +229,137 @@ def _throughput(tmp: Path, runs: int, reps: int) -> dict:
                 try:
                     from netsetest.campaign.engines import DaskCluster
 
-                    arms[arm].append(_campaign(path, out, DaskCluster(cluster.address), pids=cluster.pids()))
+                    engines[arm].append(_campaign(path, out, DaskCluster(cluster.address), pids=cluster.pids()))
                 finally:
                     cluster.close()
             else:
-                arms[arm].append(_campaign(path, out, LocalPool(int(arm[-1]))))
-    med = {arm: _median(rows, "runs_per_s") for arm, rows in arms.items() if arm != "direct"}
-    local_1, direct = arms["local_1"], arms["direct"]
-    overhead_wall = [c["wall_s"] / d["wall_s"] - 1 for c, d in zip(local_1, direct)]
-    overhead_cpu = [(c["cpu_main_s"] + (c["worker_cpu_s"] or c["run_cpu_s"]) - c["run_cpu_s"]) / c["run_cpu_s"] for c in local_1 if c["run_cpu_s"]]
-    return {
-        "runs": runs,
-        "reps": reps,
-        "arms": arms,
-        "cluster_error": cluster_error,
-        "runs_per_s": med,
-        "ratio_2_over_1": (med["local_2"] / med["local_1"]) if med["local_2"] and med["local_1"] else None,
-        "ratio_cluster_over_local": (med["cluster_2"] / med["local_2"]) if med["cluster_2"] and med["local_2"] else None,
-        "runs_per_cpu_s": (cpu := {arm: _median(rows, "runs_per_cpu_s") for arm, rows in arms.items() if arm != "direct"}),
-        "cpu_ratio_2_over_1": (cpu["local_2"] / cpu["local_1"]) if cpu["local_2"] and cpu["local_1"] else None,
-        "cpu_ratio_cluster_over_local": (cpu["cluster_2"] / cpu["local_2"]) if cpu["cluster_2"] and cpu["local_2"] else None,
-        "cores_used": {arm: _median(rows, "cores_used") for arm, rows in arms.items() if arm != "direct"},
-        "cpu_per_run_s": {
-            arm: _median([{"x": r["run_cpu_s"] / r["runs"]} for r in rows if r.get("runs")], "x") for arm, rows in arms.items() if arm != "direct"
-        },
-        "overhead_wall_pct": 100 * statistics.median(overhead_wall) if overhead_wall else None,
-        "overhead_cpu_pct": 100 * statistics.median(overhead_cpu) if overhead_cpu else None,
-    }
+                engines[arm].append(_campaign(path, out, LocalPool(int(arm[-1]))))
+    return Arms(**engines, direct=direct), cluster_error
 
 
-def _resume(path: Path, out: Path) -> dict:
+def _throughput(tmp: Path, runs: int, reps: int) -> Throughput:
+    """The arms' medians and their ratios (module doc)."""
+    arms, cluster_error = _arms(_file(tmp, "throughput", runs, ("sdp",), 80), tmp, runs, reps)
+    per_s = {arm: _median([r.runs_per_s for r in rows]) for arm, rows in arms.engines()}
+    cpu = {arm: _median([r.runs_per_cpu_s for r in rows]) for arm, rows in arms.engines()}
+    local_1, local_2, cluster_2 = (per_s[a] for a, _ in arms.engines())
+    cpu_1, cpu_2, cpu_cluster = (cpu[a] for a, _ in arms.engines())
+    overhead_wall = [c.wall_s / d.wall_s - 1 for c, d in zip(arms.local_1, arms.direct)]
+    overhead_cpu = [(c.cpu_main_s + (c.worker_cpu_s or c.run_cpu_s) - c.run_cpu_s) / c.run_cpu_s for c in arms.local_1 if c.run_cpu_s]
+    return Throughput(
+        runs=runs,
+        reps=reps,
+        arms=arms,
+        cluster_error=cluster_error,
+        runs_per_s=per_s,
+        ratio_2_over_1=_ratio(local_2, local_1),
+        ratio_cluster_over_local=_ratio(cluster_2, local_2),
+        runs_per_cpu_s=cpu,
+        cpu_ratio_2_over_1=_ratio(cpu_2, cpu_1),
+        cpu_ratio_cluster_over_local=_ratio(cpu_cluster, cpu_2),
+        cores_used={arm: _median([r.cores_used for r in rows]) for arm, rows in arms.engines()},
+        cpu_per_run_s={arm: _median([r.run_cpu_s / r.runs for r in rows if r.runs]) for arm, rows in arms.engines()},
+        overhead_wall_pct=100 * statistics.median(overhead_wall) if overhead_wall else None,
+        overhead_cpu_pct=100 * statistics.median(overhead_cpu) if overhead_cpu else None,
+    )
+
+
+def _resume(path: Path, out: Path) -> Resume:
     """``netsetest campaign`` on finished results, as a user starts it again: its wall time and what it said."""
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "netsetest", "campaign", str(path), "--out", str(out), "--quiet"], capture_output=True, text=True)
-    return {
-        "wall_s": time.perf_counter() - t0,
-        "exit_code": proc.returncode,
-        "nothing_to_run": " 0 to run" in proc.stderr,
-        "files": len(list((out / "runs").rglob("*.parquet"))),
-    }
+    return Resume(
+        wall_s=time.perf_counter() - t0,
+        exit_code=proc.returncode,
+        nothing_to_run=" 0 to run" in proc.stderr,
+        files=len(list((out / "runs").rglob("*.parquet"))),
+    )
 
 
-def _big(tmp: Path, runs: int) -> dict:
+def _big(tmp: Path, runs: int) -> Big:
     path = _file(tmp, "big", runs, ESTIMATORS, 80)
     _log(f"campaign: the {runs}-run paper6 campaign, every estimator, both cases and signal families (load {_load()})")
     pool = LocalPool()
     fig = _campaign(path, tmp / "big", pool, sample_every=max(1, runs // MEMORY_SAMPLES))
-    fig["workers"] = pool.workers
-    fig["load_before"] = fig.pop("load")
-    fig["load_after"] = _load()
-    samples = fig["memory_mb"]
+    load_after = _load()
+    samples = fig.memory_mb
     first, last = (samples[0], samples[-1]) if samples else ({}, {})
-    fig["memory_growth_mb"] = max((last[p] - first[p] for p in first if p in last), default=None)
-    fig["memory_first_mb"] = max(first.values(), default=None)
-    fig["memory_last_mb"] = max(last.values(), default=None)
-    fig["resume"] = _resume(path, tmp / "big")
-    return fig
+    return Big(
+        runs=fig.runs,
+        errors=fig.errors,
+        failed=fig.failed,
+        wall_s=fig.wall_s,
+        runs_per_s=fig.runs_per_s,
+        cpu_main_s=fig.cpu_main_s,
+        run_wall_s=fig.run_wall_s,
+        run_cpu_s=fig.run_cpu_s,
+        worker_cpu_s=fig.worker_cpu_s,
+        runs_per_cpu_s=fig.runs_per_cpu_s,
+        cores_used=fig.cores_used,
+        memory_mb=samples,
+        workers=pool.workers,
+        load_before=fig.load,
+        load_after=load_after,
+        memory_growth_mb=max((last[p] - first[p] for p in first if p in last), default=None),
+        memory_first_mb=max(first.values(), default=None),
+        memory_last_mb=max(last.values(), default=None),
+        resume=_resume(path, tmp / "big"),
+    )
 
 
-def campaign_figures(cfg: dict, tmp: Path) -> dict:
+def campaign_figures(cfg: BenchConfig, tmp: Path) -> Campaign:
     """Every figure of the part (module doc)."""
-    return {
-        "throughput": _throughput(tmp, cfg["campaign_runs"], cfg["campaign_reps"]),
-        "big": _big(tmp, cfg["campaign_big_runs"]),
-        "cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
-    }
+    return Campaign(
+        throughput=_throughput(tmp, cfg.campaign_runs, cfg.campaign_reps),
+        big=_big(tmp, cfg.campaign_big_runs),
+        cpus=len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+    )
 
 
-def _f(v: float | None, spec: str) -> str:
-    return "–" if v is None else format(v, spec)
+def _meets(v: float | None, target: float, above: bool) -> str | None:
+    """yes or no (None: not measured, the template's dash)."""
+    return None if v is None else ("yes" if (v >= target if above else v <= target) else "no")
 
 
-def _meets(v: float | None, target: float, above: bool) -> str:
-    return "–" if v is None else ("yes" if (v >= target if above else v <= target) else "no")
+@dataclass(frozen=True)
+class Met:
+    """Each target's verdict (:func:`_meets`)."""
+
+    ratio_2_over_1: str | None
+    ratio_cluster_over_local: str | None
+    cpu_ratio_2_over_1: str | None
+    cpu_ratio_cluster_over_local: str | None
+    overhead_cpu_pct: str | None
+    resume_s: str | None
 
 
-def campaign_markdown(r: dict) -> str:
-    """The targets' table, then what each arm measured."""
-    t, b = r["throughput"], r["big"]
-    res = b["resume"]
-    lines = [
-        "| figure | measured | target | met |",
-        "|---|---|---|---|",
-        f"| 2 local workers over 1, a {t['runs']}-run paper6 campaign (runs per second, median of {t['reps']}) | {_f(t['ratio_2_over_1'], '.2f')}× "
-        f"| ≥ 1.8× | {_meets(t['ratio_2_over_1'], 1.8, True)} |",
-        f"| a Dask cluster's throughput over the local pool's, 2 workers each | {_f(t['ratio_cluster_over_local'], '.2f')}× | ≥ 0.9× "
-        f"| {_meets(t['ratio_cluster_over_local'], 0.9, True)} |",
-        f"| the same by CPU: runs per CPU-second (every process's), 2 workers over 1 (the cores' share the load left aside) "
-        f"| {_f(t.get('cpu_ratio_2_over_1'), '.2f')} | ≥ 0.9 (1.8× on free cores) | {_meets(t.get('cpu_ratio_2_over_1'), 0.9, True)} |",
-        f"| the same by CPU, the Dask cluster over the local pool | {_f(t.get('cpu_ratio_cluster_over_local'), '.2f')} | ≥ 0.9 "
-        f"| {_meets(t.get('cpu_ratio_cluster_over_local'), 0.9, True)} |",
-        f"| task overhead per 80-step paper6 run: the CPU the campaign spends outside the runs (its process, its workers) per run's CPU | "
-        f"{_f(t['overhead_cpu_pct'], '.1f')} % | ≤ 5 % | {_meets(t['overhead_cpu_pct'], 5.0, False)} |",
-        f"| the same in wall time: 1 worker against the runs one by one in one process (the load's share of the cores decides it here) "
-        f"| {_f(t['overhead_wall_pct'], '+.1f')} % | | |",
-        f"| resume of the finished {b['runs']}-run campaign (`netsetest campaign` again, {res['files']} files) | {_f(res['wall_s'], '.2f')} s | ≤ 5 s "
-        f"| {_meets(res['wall_s'], 5.0, False)} |",
-        f"| a worker's resident memory over the {b['runs']} runs, after the first tenth → at the end | {_f(b['memory_first_mb'], '.0f')} → "
-        f"{_f(b['memory_last_mb'], '.0f')} MB (growth {_f(b['memory_growth_mb'], '+.1f')} MB) | flat | |",
-        "",
-        f"The {b['runs']}-run paper6 campaign (both cases and signal families, {', '.join(ESTIMATORS)}, 80 steps) on {b['workers']} local "
-        f"workers: {_f(b['wall_s'], '.0f')} s wall, {_f(b['runs_per_s'], '.2f')} runs/s, {_f(b['run_cpu_s'], '.0f')} s CPU in the runs; "
-        f"{b['errors']} errors, {b['failed']} failed their verdict; load average {b['load_before']} before, {b['load_after']} after "
-        f"(this machine has {r['cpus']} cores).",
-        "",
-        "| arm | runs/s (median) | runs per CPU-second (median) | cores it got (median) | CPU per run [s] (median) | each rep: wall [s] (load average at its start) |",
-        "|---|---|---|---|---|---|",
-    ]
-    for arm, rows in t["arms"].items():
-        if arm == "direct":
-            continue
-        reps = ", ".join(f"{x['wall_s']:.1f} ({x['load']})" for x in rows) or "–"
-        per_cpu, cores = t.get("runs_per_cpu_s", {}).get(arm), t.get("cores_used", {}).get(arm)
+def campaign_markdown(doc: dict | Campaign) -> str:
+    """The targets' table, then what each arm measured (templates/campaign.md)."""
+    r = load_figures(doc) if isinstance(doc, dict) else doc  # (a dict: as the file holds it)
+    t, b, T = r.throughput, r.big, "campaign"
+    met = Met(
+        ratio_2_over_1=_meets(t.ratio_2_over_1, 1.8, True),
+        ratio_cluster_over_local=_meets(t.ratio_cluster_over_local, 0.9, True),
+        cpu_ratio_2_over_1=_meets(t.cpu_ratio_2_over_1, 0.9, True),
+        cpu_ratio_cluster_over_local=_meets(t.cpu_ratio_cluster_over_local, 0.9, True),
+        overhead_cpu_pct=_meets(t.overhead_cpu_pct, 5.0, False),
+        resume_s=_meets(b.resume.wall_s, 5.0, False),
+    )
+    lines = [fill(T, "head", t=t, b=b, met=met, estimators=", ".join(ESTIMATORS), cpus=r.cpus)]
+    for arm, rows in t.arms.engines():
         lines.append(
-            f"| {arm.replace('_', ', ')} worker(s) | {_f(t['runs_per_s'].get(arm), '.3f')} | {_f(per_cpu, '.3f')} | {_f(cores, '.2f')} "
-            f"| {_f(t['cpu_per_run_s'].get(arm), '.3f')} | {reps} |"
+            fill(
+                T,
+                "arm-row",
+                name=arm.replace("_", ", "),
+                runs_per_s=t.runs_per_s.get(arm),
+                runs_per_cpu_s=t.runs_per_cpu_s.get(arm),
+                cores=t.cores_used.get(arm),
+                cpu_per_run_s=t.cpu_per_run_s.get(arm),
+                reps=", ".join(fill(T, "rep", x=x) for x in rows) or fill(T, "missing"),
+            )
         )
-    direct = ", ".join(f"{x['wall_s']:.1f} ({x['load']})" for x in t["arms"]["direct"])
-    lines.append(f"| the runs one by one in one process | | | | | {direct} |")
-    if t["cluster_error"]:
-        lines += ["", f"The cluster did not start: {t['cluster_error']}."]
+    lines.append(fill(T, "direct-row", reps=", ".join(fill(T, "rep", x=x) for x in t.arms.direct)))
+    if t.cluster_error:
+        lines.append(fill(T, "cluster-error", error=t.cluster_error))
     return "\n".join(lines) + "\n"

@@ -9,7 +9,7 @@ resident memory of the whole process (imports and the record included), the resi
 
 Topologies: ``paper6_max_faulty`` (at most 4 of 6 faulty) and rings with chords of 12 and 24 nodes with issue 34's
 two interleaved groups (netsetest_bench/topologies.py, variant ``two_groups``).  Then issue 44's target: on the 12-node
-ring with two groups, SAIM, worst-case signals, seeds :data:`NETWORK_SEEDS`, the central limit and each node's network
+ring with two groups, SAIM, worst-case signals, the config's seeds (``exact_network_seeds``), the central limit and each node's network
 limit (``exact --network``, docs/exact.md), each in a process of its own.
 """
 
@@ -28,6 +28,7 @@ from netsetest.scenarios import TOPOLOGY_DIR
 from netsetest_bench.figures.exact_cost import ExactRun
 from netsetest_bench.figures.exact_cost import load as load_exact_cost
 from netsetest_bench.render import fill
+from netsetest_bench.config import BenchConfig
 
 CASES = ("nsnim", "saim")
 RINGS = (12, 24)  # ring sizes with two groups
@@ -38,7 +39,6 @@ TARGET_RING12_PEAK_MB = 1024.0
 TARGET_RING12_EXACT = 0.95  # share of ends exact
 TARGET_PAPER6_CPU_S = 20.0
 FLAT_MB = 64.0  # resident memory may grow by this from the middle step to the last (the programs grow with the horizon)
-NETWORK_SEEDS = (0, 1, 2)  # issue 44: exact and exact --network on the 12-node ring with two groups, SAIM, worst-case signals
 
 
 def _log(msg: str) -> None:
@@ -98,16 +98,16 @@ def _measure(topology: Path, case: str, record: Path, budget_s: float, network: 
     return json.loads(out.stdout)
 
 
-def exact_figures(cfg: dict, tmp: Path) -> dict:
+def exact_figures(cfg: BenchConfig, tmp: Path) -> dict:
     from netsetest.analysis.errors import DEFAULT_BUDGET_S
     from netsetest_bench.topologies import ring_topology
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
 
-    steps = cfg["exact_steps"]
+    steps = cfg.exact_steps
     load_before = _load()
     rows = []
-    runs = [("paper6_max_faulty", 0, DEFAULT_BUDGET_S), *((f"ring{n}, two groups", n, budget) for n, budget in cfg["exact_rings"])]
+    runs = [("paper6_max_faulty", 0, DEFAULT_BUDGET_S), *((f"ring{n}, two groups", n, budget) for n, budget in cfg.exact_rings)]
     for name, n, budget in runs:  # smallest first
         for case in CASES:
             topo = TOPOLOGY_DIR / f"{name}.toml" if not n else ring_topology(tmp, n, steps, case, variant="two_groups")
@@ -124,7 +124,7 @@ def exact_figures(cfg: dict, tmp: Path) -> dict:
     return {
         "steps": steps,
         "rows": rows,
-        "network": network_rows(tmp, steps, cfg.get("exact_network_seeds", NETWORK_SEEDS)),
+        "network": network_rows(tmp, steps, cfg.exact_network_seeds),
         "load": f"{load_before} before, {_load()} after",
     }
 

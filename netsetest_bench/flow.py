@@ -34,6 +34,7 @@ from netsetest.roles.flow import ACK_STRIDE, ACK_WINDOW, show_window
 from netsetest.scenarios import TOPOLOGY_DIR
 from netsetest_bench.figures.flow import load as load_flow
 from netsetest_bench.render import figure, fill
+from netsetest_bench.config import BenchConfig
 
 PAPER6 = TOPOLOGY_DIR / "paper6.toml"
 PAPER6_LOSSY = TOPOLOGY_DIR / "paper6_lossy.toml"  # the reproduction: scheduled losses, a 3000-step record
@@ -118,7 +119,7 @@ def lockstep_ratio(steps: int | None, reps: int = RATIO_REPS) -> dict:
     sc = load_topology(PAPER6, "nsnim", steps)
     mem: list[float] = []
     zen: dict[str, list[float | None]] = {"window": [], "unbounded": []}
-    codes: dict[str, list[int]] = {"window": [], "unbounded": []}
+    codes: dict[str, list[int | None]] = {"window": [], "unbounded": []}
     loads: list[float] = []
     arms: tuple[tuple[str, int | None], ...] = (("window", ACK_WINDOW), ("unbounded", None))
     for rep in range(reps):
@@ -128,8 +129,8 @@ def lockstep_ratio(steps: int | None, reps: int = RATIO_REPS) -> dict:
         mem.append(time.perf_counter() - t0)
         for case, window in arms if rep % 2 == 0 else arms[::-1]:
             obs = observed_lockstep(PAPER6, steps, ack_window=window)
-            zen[case].append(obs["stepping_s"])
-            codes[case].append(obs["usage"]["run"]["exit_code"])
+            zen[case].append(obs.stepping_s)
+            codes[case].append(obs.usage["run"].exit_code)
     out: dict = {"steps": sc.steps, "reps": reps, "load_before": loads, "inmemory_s": mem}
     for case, times in zen.items():
         out[f"zenoh_{case}_s"] = times
@@ -146,19 +147,19 @@ def _logged(r: dict) -> dict:
     return r
 
 
-def flow_figures(cfg: dict, tmp: Path) -> dict:
+def flow_figures(cfg: BenchConfig, tmp: Path) -> dict:
     out: dict = {"ack_window": ACK_WINDOW, "ack_stride": ACK_STRIDE, "paused": [], "records": [], "soak": []}
-    for pause in cfg["flow_pauses_s"]:
-        _log(f"collector paused {pause:g} s in an unpaced {cfg['flow_steps']}-step paper6 run")
-        out["paused"].append(_logged(paused_run(tmp, cfg["flow_steps"], pause)))
+    for pause in cfg.flow_pauses_s:
+        _log(f"collector paused {pause:g} s in an unpaced {cfg.flow_steps}-step paper6 run")
+        out["paused"].append(_logged(paused_run(tmp, cfg.flow_steps, pause)))
     for suffix in RECORD_SUFFIXES:
-        _log(f"an unpaced {cfg['flow_record_steps']}-step paper6_lossy run recording {suffix}")
-        out["records"].append(_logged(paused_run(tmp, cfg["flow_record_steps"], 0.0, topology=PAPER6_LOSSY, record_suffix=suffix)))
-    for seed in range(cfg["flow_soak_runs"]):
-        _log(f"soak: an unpaced {cfg['flow_soak_steps']}-step paper6 run, seed {seed}")
-        out["soak"].append(_logged(paused_run(tmp, cfg["flow_soak_steps"], 0.0, seed=seed)))
+        _log(f"an unpaced {cfg.flow_record_steps}-step paper6_lossy run recording {suffix}")
+        out["records"].append(_logged(paused_run(tmp, cfg.flow_record_steps, 0.0, topology=PAPER6_LOSSY, record_suffix=suffix)))
+    for seed in range(cfg.flow_soak_runs):
+        _log(f"soak: an unpaced {cfg.flow_soak_steps}-step paper6 run, seed {seed}")
+        out["soak"].append(_logged(paused_run(tmp, cfg.flow_soak_steps, 0.0, seed=seed)))
     _log("the unpaced paper6 lockstep ratio (Zenoh / in memory), with the window and without it, interleaved")
-    q = out["ratio"] = lockstep_ratio(cfg.get("flow_ratio_steps"))
+    q = out["ratio"] = lockstep_ratio(cfg.flow_ratio_steps)
     _log(f"  ratio with the window {q['ratio_window']}, without {q['ratio_unbounded']}: the window's cost {q['window_cost']}")
     return out
 

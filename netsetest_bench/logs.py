@@ -35,6 +35,7 @@ import numpy as np
 from netsetest_bench.figures.logs import Logs
 from netsetest_bench.figures.logs import load as load_logs
 from netsetest_bench.render import fill
+from netsetest_bench.config import BenchConfig
 
 BIG_MINUTES = 30.0
 BIG_HZ = 100.0
@@ -199,14 +200,14 @@ def import_figures(tmp: Path) -> dict:
 # ---------------------------------------------------------------- replay speed
 
 
-def replay_figures(cfg: dict, tmp: Path) -> dict:
+def replay_figures(cfg: BenchConfig, tmp: Path) -> dict:
     """paper6 from a log of its own run and from the model, alternately (:data:`cfg` logs_replay_steps, logs_reps)."""
     from netsetest.config.schema import load_topology
     from netsetest.logs.drive import with_log_steps
     from netsetest.logs.write import from_truth, mapping_toml, write_log
     from netsetest.runtime.inmemory import run_inmemory
 
-    steps, reps = cfg["logs_replay_steps"], cfg["logs_reps"]
+    steps, reps = cfg.logs_replay_steps, cfg.logs_reps
     sc = load_topology("paper6", steps=steps)
     res = run_inmemory(sc, "paper", seed=1)
     assert res.parts is not None
@@ -298,14 +299,14 @@ def _counts(s) -> dict:
     }
 
 
-def calibration_figures(cfg: dict, tmp: Path) -> dict:
+def calibration_figures(cfg: BenchConfig, tmp: Path) -> dict:
     from netsetest.analysis.calibrate import calibrate_logs, check_held_out
     from netsetest.config.schema import load_topology
     from netsetest.logs.drive import with_log_steps
     from netsetest.logs.example import EXAMPLE_TOPOLOGY, example_drive
     from netsetest.runtime.inmemory import run_inmemory
 
-    seeds, train_s, held_s = cfg["logs_train_seeds"], cfg["logs_train_s"], cfg["logs_held_s"]
+    seeds, train_s, held_s = cfg.logs_train_seeds, cfg.logs_train_s, cfg.logs_held_s
     train = [_write_drive(example_drive(train_s, s, (0.0, 0.0)), tmp, f"train{s}", (0.0, 0.0)) for s in seeds]
     load = lambda topo, log: with_log_steps(load_topology(topo, log=str(log)), whole=True)  # noqa: E731  # a one-line local helper
     cal = calibrate_logs([load(EXAMPLE_TOPOLOGY, log) for log in train])
@@ -334,7 +335,7 @@ def calibration_figures(cfg: dict, tmp: Path) -> dict:
     }
 
 
-def logs_figures(cfg: dict, tmp: Path) -> dict:
+def logs_figures(cfg: BenchConfig, tmp: Path) -> dict:
     load_before = _load()
     out: dict[str, object] = {"import": import_figures(tmp)}
     _log("logs: paper6 replayed from a log, beside the model")

@@ -35,6 +35,7 @@ from netsetest_bench.render import figure, fill
 from netsetest.records.record import Record
 from netsetest.roles.judge import HEALTH
 from netsetest.scenarios import TOPOLOGY_DIR
+from netsetest_bench.config import BenchConfig
 
 SCENARIOS = ("paper6", "paper6_reference", "paper6_max_faulty")
 
@@ -70,16 +71,16 @@ def _sdp_figures(sc: Scenario, sig: str, seed: int, path: Path) -> tuple[dict, R
     return out, rec
 
 
-def network_figures(cfg: dict, tmp: Path) -> dict:
+def network_figures(cfg: BenchConfig, tmp: Path) -> dict:
     from netsetest.analysis.exact import DEGENERATE_WIDTH
     from netsetest.config.schema import load_topology
 
     rows = []
     for name in SCENARIOS:
         for case in ("nsnim", "saim"):
-            sc = load_topology(TOPOLOGY_DIR / f"{name}.toml", case, cfg["network_steps"])
+            sc = load_topology(TOPOLOGY_DIR / f"{name}.toml", case, cfg.network_steps)
             for sig in ("paper", "worst"):
-                for seed in cfg["network_seeds"]:
+                for seed in cfg.network_seeds:
                     sdp, rec = _sdp_figures(sc, sig, seed, tmp / "network.json")
                     alone, _ = _sdp_figures(sc.alone(), sig, seed, tmp / "alone.json")
                     nodes = {}
@@ -98,10 +99,10 @@ def network_figures(cfg: dict, tmp: Path) -> dict:
                     gain = [v["sdp_alone_over_network"] for v in nodes.values() if v["sdp_alone_over_network"] is not None]
                     _log(f"  {name} {case} {sig} seed {seed}: SDP alone/network {min(gain):.3f}–{max(gain):.3f}")
     return {
-        "steps": cfg["network_steps"],
-        "seeds": cfg["network_seeds"],
+        "steps": cfg.network_steps,
+        "seeds": cfg.network_seeds,
         "runs": rows,
-        "sweep": containment_sweep(cfg["network_steps"], SWEEP_SEEDS),
+        "sweep": containment_sweep(cfg.network_steps, SWEEP_SEEDS),
         "exchange_cost": exchange_cost(cfg, tmp),
     }
 
@@ -163,7 +164,7 @@ def _run_seconds(topology: Path, steps: int) -> float:
     return time.perf_counter() - t0
 
 
-def exchange_cost(cfg: dict, tmp: Path) -> dict:
+def exchange_cost(cfg: BenchConfig, tmp: Path) -> dict:
     """Lockstep time per step over Zenoh with the readings and without them (the same file with
     ``[network] readings = false``), for ``paper6_reference`` (one reading per step) and
     ``paper6_max_faulty`` (every node's): medians over ``cost_reps`` runs of each length, the variants
@@ -180,14 +181,14 @@ def exchange_cost(cfg: dict, tmp: Path) -> dict:
             text += "\n[network]\nreadings = false\n"
         off.write_text(text)
         times: dict[tuple[str, int], list[float]] = {}
-        for _ in range(cfg["cost_reps"]):
+        for _ in range(cfg.cost_reps):
             for variant, topo in (("readings", base), ("no_readings", off)):
                 for n in COST_STEPS:
                     times.setdefault((variant, n), []).append(_run_seconds(topo, n))
         med = {key: statistics.median(v) for key, v in times.items()}
         out[name] = {v: 1e3 * (med[(v, COST_STEPS[1])] - med[(v, COST_STEPS[0])]) / (COST_STEPS[1] - COST_STEPS[0]) for v in ("readings", "no_readings")}
         _log(f"  {name} over Zenoh: {out[name]['readings']:.1f} ms per lockstep step with the readings, {out[name]['no_readings']:.1f} without")
-    return {"ms_per_step": out, "reps": cfg["cost_reps"], "steps": list(COST_STEPS)}
+    return {"ms_per_step": out, "reps": cfg.cost_reps, "steps": list(COST_STEPS)}
 
 
 def _exact_figures(sc: Scenario, rec: Record, sdp: dict, local: bool = True) -> dict[int, dict]:
@@ -233,23 +234,7 @@ def network_markdown(doc: dict) -> str:
         if runs[0].exact:  # else no exact limit with this assumption
             lines.append(_limits_row(topology, case, signals, runs))
     lines.append(fill(T, "reach-head"))
-    for (topology, case, signals), runs in groups.items():
-        nodes = [r.nodes[i] for r in runs for i in sorted(runs[0].nodes)]
-        first = [runs[0].nodes[i] for i in sorted(runs[0].nodes)]
-        lines.append(
-            fill(
-                T,
-                "reach-row",
-                topology=topology,
-                case=case,
-                signals=signals,
-                gain=_span([v.sdp_alone_over_network for v in nodes], ".3f"),  # (None: the reference's own fault, a point)
-                over=_span([v.sdp_network_over_exact for v in nodes]),
-                ceiling=_span([v.ceiling() for v in nodes]),
-                states=" · ".join((_span([v.sdp_r_over_exact for v in nodes]), _span([v.sdp_beta_over_exact for v in nodes]))),
-                delays=" · ".join(fill(T, "delay", network=_d(v.delay_network), alone=_d(v.delay_alone)) for v in first),
-            )
-        )
+    lines += [_reach_row(topology, case, signals, runs) for (topology, case, signals), runs in groups.items()]
     every = [v for r in n.runs for v in r.nodes.values()]
     lines.append(
         fill(
@@ -268,6 +253,24 @@ def network_markdown(doc: dict) -> str:
         parts = "; ".join(fill(T, "cost-part", name=name, c=c, change=100 * (c.readings / c.no_readings - 1)) for name, c in cost.ms_per_step.items())
         lines.append(fill(T, "cost", cost=cost, parts=parts))
     return "\n".join(lines) + "\n"
+
+
+def _reach_row(topology: str, case: str, signals: str, runs: list[NetworkRun]) -> str:
+    """What the exchange buys one topology, case and signal family, over its runs' nodes; each node's delays."""
+    nodes = [r.nodes[i] for r in runs for i in sorted(runs[0].nodes)]
+    first = [runs[0].nodes[i] for i in sorted(runs[0].nodes)]
+    return fill(
+        "network",
+        "reach-row",
+        topology=topology,
+        case=case,
+        signals=signals,
+        gain=_span([v.sdp_alone_over_network for v in nodes], ".3f"),  # (None: the reference's own fault, a point)
+        over=_span([v.sdp_network_over_exact for v in nodes]),
+        ceiling=_span([v.ceiling() for v in nodes]),
+        states=" · ".join((_span([v.sdp_r_over_exact for v in nodes]), _span([v.sdp_beta_over_exact for v in nodes]))),
+        delays=" · ".join(fill("network", "delay", network=_d(v.delay_network), alone=_d(v.delay_alone)) for v in first),
+    )
 
 
 def _limits_row(topology: str, case: str, signals: str, runs: list[NetworkRun]) -> str:

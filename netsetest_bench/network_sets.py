@@ -27,14 +27,16 @@ import sys
 import time
 from collections import Counter
 from pathlib import Path
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 
-from netsetest_bench.figures.network_sets import Ratios
+from netsetest_bench.figures.network_sets import AtBounds, AtBoundsRun, Cost, Declared, Judged, Ratios, Ring, Sets, Sides, Step, Traffic, Wire
 from netsetest_bench.figures.network_sets import load as load_sets
 from netsetest_bench.render import fill
 from netsetest.scenarios import TOPOLOGY_DIR
+from netsetest_bench.config import BenchConfig
 
 if TYPE_CHECKING:  # (the benchmark imports its parts lazily)
     from netsetest.analysis.exact import ExactBounds
@@ -50,6 +52,7 @@ STEP_TARGET_MS = 0.1
 HOLD = 8  # steps a fault at its bound holds its sign before it switches (through 0, at δ a step)
 COST_STEPS, COST_ROUNDS = 40, 5
 COORDS = ("beta", "r", "f")
+J = TypeVar("J", bound=Judged)
 
 
 def _log(msg: str) -> None:
@@ -137,7 +140,7 @@ def _worst(ratios: dict[int, list[float | None]]) -> float:
     return max((v for r in ratios.values() for v in r[:3] if v is not None), default=float("nan"))
 
 
-def at_bounds(directory: Path, topology: str, seeds: list[int], steps: int = 80) -> dict:
+def at_bounds(directory: Path, topology: str, seeds: list[int], steps: int = 80) -> AtBounds:
     """One bundled topology with faults at their bounds, SAIM, worst-case signals, per seed: the SDP's widths over the
     central exact limit (:func:`_ratios`, from step FROM_STEP), violations, covered node-steps."""
     from netsetest.analysis.exact import FROM_STEP, exact_bounds
@@ -149,25 +152,29 @@ def at_bounds(directory: Path, topology: str, seeds: list[int], steps: int = 80)
         rec, summary = _record(sc, seed)
         central = exact_bounds(sc, rec)
         ratios = _ratios(rec, central, sc.ids, FROM_STEP)
-        runs.append({"seed": seed, "ratios": ratios, "worst": _worst(ratios), "narrower": sum(int(r[3] or 0) for r in ratios.values()), **_verdict(summary)})
-        _log(f"  {topology} at its bounds, seed {seed}: worst {runs[-1]['worst']:.3f} of central exact")
-    return {"topology": topology, "case": "saim", "signals": "worst", "from_step": FROM_STEP, "target": CENTRAL_TARGET, "runs": runs}
+        run = _judged(AtBoundsRun, summary, seed=seed, ratios=ratios, worst=_worst(ratios), narrower=sum(int(r[3] or 0) for r in ratios.values()))
+        runs.append(run)
+        _log(f"  {topology} at its bounds, seed {seed}: worst {run.worst:.3f} of central exact")
+    return AtBounds(topology=topology, case="saim", signals="worst", from_step=FROM_STEP, target=CENTRAL_TARGET, runs=runs)
 
 
-def _verdict(s: RunSummary) -> dict:
-    return {
-        "violations": s.violations_total,
-        "covered": s.node_steps_covered,
-        "evaluated": s.node_steps_evaluated,
-        "misses_attributed": s.misses_assumption_broken_total,
-        "misses": s.node_steps_evaluated - s.node_steps_contained,
-    }
+def _judged(kind: Callable[..., J], s: RunSummary, **figures: object) -> J:
+    """A run's figures of ``kind`` (a :class:`~netsetest_bench.figures.network_sets.Judged`): its verdict from its
+    summary, and ``figures``."""
+    return kind(
+        violations=s.violations_total,
+        covered=s.node_steps_covered,
+        evaluated=s.node_steps_evaluated,
+        misses_attributed=s.misses_assumption_broken_total,
+        misses=s.node_steps_evaluated - s.node_steps_contained,
+        **figures,
+    )
 
 
 # ---------------------------------------------------------------- issue 44's directed rings
 
 
-def ring(directory: Path, variant: str, seed: int, steps: int, budget_s: float | None = None) -> dict:
+def ring(directory: Path, variant: str, seed: int, steps: int, budget_s: float | None = None) -> Ring:
     """One directed ring, SAIM, worst-case signals: the SDP's widths over each node's network limit and over the central
     limit from step RING_FROM, and the CPU seconds each limit took (in this process)."""
     from netsetest.analysis.exact import exact_bounds, network_limit
@@ -181,30 +188,32 @@ def ring(directory: Path, variant: str, seed: int, steps: int, budget_s: float |
     t1 = time.process_time()
     net = network_limit(sc, rec, central, budget_s=budget_s)  # (under k-of-N an end past the budget is relaxed: counted below)
     t2 = time.process_time()
-    out = {
-        "variant": variant,
-        "nodes": len(sc.ids),
-        "steps": steps,
-        "seed": seed,
-        "from_step": RING_FROM,
-        "target": NETWORK_TARGET,
-        "furthest": {i: max(sc.delays(i).values()) for i in sc.ids},
-        "network": _ratios(rec, net, sc.ids, RING_FROM),
-        "central": _ratios(rec, central, sc.ids, RING_FROM),
-        "central_cpu_s": t1 - t0,
-        "network_cpu_s": t2 - t1,
-        "relaxed": {k: None if e.health is None else len(e.health.relaxed) for k, e in (("central", central), ("network", net))},
-        **_verdict(summary),
-    }
-    out["worst"] = _worst(out["network"])
-    _log(f"  ring {variant}, seed {seed}: worst {out['worst']:.3f} of the network limit ({out['network_cpu_s']:.0f} s CPU), central beside it")
+    network = _ratios(rec, net, sc.ids, RING_FROM)
+    out = _judged(
+        Ring,
+        summary,
+        variant=variant,
+        nodes=len(sc.ids),
+        steps=steps,
+        seed=seed,
+        from_step=RING_FROM,
+        target=NETWORK_TARGET,
+        worst=_worst(network),
+        furthest={i: max(sc.delays(i).values()) for i in sc.ids},
+        network=network,
+        central=_ratios(rec, central, sc.ids, RING_FROM),
+        central_cpu_s=t1 - t0,
+        network_cpu_s=t2 - t1,
+        relaxed={k: None if e.health is None else len(e.health.relaxed) for k, e in (("central", central), ("network", net))},
+    )
+    _log(f"  ring {variant}, seed {seed}: worst {out.worst:.3f} of the network limit ({t2 - t1:.0f} s CPU), central beside it")
     return out
 
 
 # ---------------------------------------------------------------- declared bounds true and false
 
 
-def declared_bounds(seed: int, true: bool, steps: int) -> dict:
+def declared_bounds(seed: int, true: bool, steps: int) -> Declared:
     """paper6 SAIM, worst-case signals: every sensor's declared size and rate drawn at random (seed ``seed``): above
     its fault's largest size and step (``true``), or some of them below (a sensor with a fault, at random: false).
     The verdict (violations must be 0; every miss attributed) and which declarations were false."""
@@ -225,13 +234,13 @@ def declared_bounds(seed: int, true: bool, steps: int) -> dict:
             size_d, rate_d = max(size, 0.01) * rng.uniform(1.0, 2.0), max(rate, 0.01) * rng.uniform(1.0, 2.0)
         nodes.append(dataclasses.replace(n, fault_size=size_d, fault_rate=rate_d))
     _, summary = _record(dataclasses.replace(sc, nodes=nodes), seed)
-    return {"seed": seed, "declared": "true" if true else "false", "false_nodes": sorted(false), **_verdict(summary)}
+    return _judged(Declared, summary, seed=seed, declared="true" if true else "false", false_nodes=sorted(false))
 
 
 # ---------------------------------------------------------------- what it costs
 
 
-def _wire(sc: Scenario, steps: int) -> dict:
+def _wire(sc: Scenario, steps: int) -> Wire:
     """One in-memory run: per node-step, the states and readings published, their bytes, and their deliveries (each
     state to its out-neighbours and the collector, each reading to the nodes that read it)."""
     from netsetest.bus.base import MemoryBus
@@ -255,10 +264,11 @@ def _wire(sc: Scenario, steps: int) -> dict:
     bus.subscribe("netsetest/**", seen)
     run_inmemory(sc, bus=bus, keep=False)
     node_steps = len(sc.ids) * (steps + 1)
-    return {k: {"messages": count[k] / node_steps, "bytes": size[k] / node_steps, "deliveries": deliveries[k] / node_steps} for k in ("state", "reading")}
+    state, reading = (Traffic(messages=count[k] / node_steps, bytes=size[k] / node_steps, deliveries=deliveries[k] / node_steps) for k in ("state", "reading"))
+    return Wire(state=state, reading=reading)
 
 
-def _replay(sc_on: Scenario, sc_off: Scenario, rounds: int) -> dict:
+def _replay(sc_on: Scenario, sc_off: Scenario, rounds: int) -> Step:
     """The estimator's step per node-step (CPU ms), with the exchange and without, replayed on the same inputs (those
     of the run with it), the two alternating ``rounds`` times after one round each to warm up: every round's mean,
     the fastest and the median."""
@@ -281,54 +291,50 @@ def _replay(sc_on: Scenario, sc_off: Scenario, rounds: int) -> dict:
     for _ in range(rounds):
         with_.append(replay(on))
         without.append(replay(off))
-    return {
-        "with_ms": with_,
-        "without_ms": without,
-        "with": min(with_),
-        "without": min(without),
-        "with_median": statistics.median(with_),
-        "without_median": statistics.median(without),
-        "over_ms": min(with_) - min(without),
-        "over_median_ms": statistics.median(with_) - statistics.median(without),
-        "met": min(with_) - min(without) <= STEP_TARGET_MS,
-    }
+    return Step(
+        with_ms=with_,
+        without_ms=without,
+        with_=min(with_),
+        without=min(without),
+        with_median=statistics.median(with_),
+        without_median=statistics.median(without),
+        over_ms=min(with_) - min(without),
+        over_median_ms=statistics.median(with_) - statistics.median(without),
+        met=min(with_) - min(without) <= STEP_TARGET_MS,
+    )
 
 
-def cost(directory: Path, label: str, topology: Path | str, case: str, steps: int = COST_STEPS, rounds: int = COST_ROUNDS) -> dict:
+def cost(directory: Path, label: str, topology: Path | str, case: str, steps: int = COST_STEPS, rounds: int = COST_ROUNDS) -> Cost:
     """The exchange's cost on one topology: the wire per node-step and the estimator's step, with it and without."""
     from netsetest.config.schema import load_topology
 
     on = load_topology(topology, case, steps)  # type: ignore[arg-type]  # one of the cases
     off = dataclasses.replace(on, neighbour_sets=False, bounded_readings=False)
-    out: dict = {
-        "label": label,
-        "case": case,
-        "steps": steps,
-        "rounds": rounds,
-        "wire": {"with": _wire(on, steps), "without": _wire(off, steps)},
-        "step": _replay(on, off, rounds),
-    }
-    _log(f"  cost {label} {case}: step {out['step']['over_ms']:+.3f} ms per node-step (fastest rounds)")
+    out = Cost(label=label, case=case, steps=steps, rounds=rounds, wire=Sides(with_=_wire(on, steps), without=_wire(off, steps)), step=_replay(on, off, rounds))
+    _log(f"  cost {label} {case}: step {out.step.over_ms:+.3f} ms per node-step (fastest rounds)")
     return out
 
 
 # ---------------------------------------------------------------- the part
 
 
-def sets_figures(cfg: dict, tmp: Path) -> dict:
+def sets_figures(cfg: BenchConfig, tmp: Path) -> Sets:
     """Every figure of the module doc."""
     from netsetest_bench.topologies import ring_topology
 
     _log("issue 44: faults at their bounds (SAIM, worst-case signals), against the central exact limit")
-    bounds = [at_bounds(tmp, t, cfg["sets_seeds"]) for t in AT_BOUNDS]
+    bounds = [at_bounds(tmp, t, cfg.sets_seeds) for t in AT_BOUNDS]
     _log("issue 44: directed rings, readings to out-neighbours only, against each node's network limit")
-    rings = [ring(tmp, v, seed, cfg["sets_ring_steps"], cfg["sets_network_budget_s"]) for v in RINGS for seed in cfg["sets_ring_seeds"]]
+    rings = [ring(tmp, v, seed, cfg.sets_ring_steps, cfg.sets_network_budget_s) for v in RINGS for seed in cfg.sets_ring_seeds]
     _log("issue 44: declared bounds at random, true and false")
-    declared = [declared_bounds(seed, true, cfg["sets_declared_steps"]) for true in (True, False) for seed in cfg["sets_seeds"]]
+    declared = [declared_bounds(seed, true, cfg.sets_declared_steps) for true in (True, False) for seed in cfg.sets_seeds]
     _log("issue 44: what the exchange costs per node-step")
     costs = [cost(tmp, "paper6", "paper6", case) for case in ("nsnim", "saim")]
     costs += [cost(tmp, f"ring{RING_NODES} {v}", ring_topology(tmp, RING_NODES, COST_STEPS, "saim", variant=v), "saim") for v in RINGS]  # type: ignore[arg-type]  # v is one of RINGS, RingVariant's values
-    return {"at_bounds": bounds, "rings": rings, "declared": declared, "cost": costs, "step_target_ms": STEP_TARGET_MS}
+    return Sets(at_bounds=bounds, rings=rings, declared=declared, cost=costs, step_target_ms=STEP_TARGET_MS)
+
+
+T = "network_sets"  # the tables' template (templates/network_sets.md)
 
 
 def _f(v: float | None, spec: str = ".3f") -> str:
@@ -345,12 +351,16 @@ def _narrower(ratios: Ratios | None) -> int:
 
 
 def _met(ok: bool) -> str:
-    return fill("network_sets", "yes" if ok else "no")
+    return fill(T, "yes" if ok else "no")
 
 
-def sets_markdown(doc: dict) -> str:
+def sets_markdown(doc: dict | Sets) -> str:
     """Issue 44's tables: faults at their bounds, the directed rings, the declared bounds, the cost."""
-    s, T = load_sets(doc), "network_sets"
+    s = load_sets(doc) if isinstance(doc, dict) else doc
+    return "\n".join([*_at_bounds_lines(s), *_ring_lines(s), *_declared_lines(s), *_cost_lines(s)]) + "\n"
+
+
+def _at_bounds_lines(s: Sets) -> list[str]:
     lines = [fill(T, "at-bounds-head", from_step=s.at_bounds[0].from_step if s.at_bounds else 10)]
     for b in s.at_bounds:
         runs = b.runs
@@ -370,7 +380,11 @@ def sets_markdown(doc: dict) -> str:
                 met=_met(worst <= b.target and all(r.violations == 0 and r.narrower == 0 for r in runs)),
             )
         )
-    lines.append(fill(T, "rings-head", from_step=RING_FROM))
+    return lines
+
+
+def _ring_lines(s: Sets) -> list[str]:
+    lines = [fill(T, "rings-head", from_step=RING_FROM)]
     for r in s.rings:
         narrower = (_narrower(r.network), _narrower(r.central))
         lines.append(
@@ -390,7 +404,11 @@ def sets_markdown(doc: dict) -> str:
                 met=_met(r.worst <= r.target and r.violations == 0 and narrower[0] == 0),
             )
         )
-    lines.append(fill(T, "declared-head"))
+    return lines
+
+
+def _declared_lines(s: Sets) -> list[str]:
+    lines = [fill(T, "declared-head")]
     for kind in ("true", "false"):
         drawn = [d for d in s.declared if d.declared == kind]
         if drawn:
@@ -409,13 +427,17 @@ def sets_markdown(doc: dict) -> str:
                     met=_met(all(d.violations == 0 and d.misses_attributed == d.misses for d in drawn)),
                 )
             )
-    lines.append(fill(T, "cost-head", rounds=s.cost[0].rounds if s.cost else COST_ROUNDS, target=s.step_target_ms))
+    return lines
+
+
+def _cost_lines(s: Sets) -> list[str]:
+    lines = [fill(T, "cost-head", rounds=s.cost[0].rounds if s.cost else COST_ROUNDS, target=s.step_target_ms)]
     for c in s.cost:
         w, wo = c.wire.with_, c.wire.without
         states = " / ".join(fill(T, "traffic", t=x.state) for x in (w, wo))
         readings = " / ".join(fill(T, "traffic", t=x.reading) for x in (w, wo))
         lines.append(fill(T, "cost-row", c=c, case=c.case.upper(), states=states, readings=readings, s=c.step, met=_met(c.step.met)))
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 __all__ = ["AT_BOUNDS", "RINGS", "at_bounds", "cost", "declared_bounds", "faults_at_bounds", "ring", "sets_figures", "sets_markdown"]

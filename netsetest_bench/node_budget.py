@@ -35,6 +35,7 @@ from netsetest_bench.figures.node import FloorSummary, Node, NodeSummary, Range
 from netsetest_bench.figures.node import load as load_node
 from netsetest_bench.render import MISSING, fill
 from netsetest_bench.zenoh_runs import profiled_ring_run
+from netsetest_bench.config import BenchConfig
 
 OUTSIDE = ("wait", "decode", "handle", "build", "encode", "put", "other", "threads")  # profile phases outside the estimator
 FIGURES = (  # key, what, unit: the rows of the table
@@ -126,9 +127,9 @@ def _floor_payloads(tmp: Path, nodes: int, steps: int) -> tuple[Path, bus_floor.
     return topo, bus_floor.ring_payloads(sc, bus_floor.median_node(sc))
 
 
-def node_figures(cfg: dict, tmp: Path, baseline: Path | None = None) -> dict:
+def node_figures(cfg: BenchConfig, tmp: Path, baseline: Path | None = None) -> dict:
     """The per-message budget (module doc); ``baseline``: a checkout measured alternately beside this one."""
-    nodes, steps, reps = cfg["node_budget_nodes"], cfg["rt_steps"], cfg["node_budget_reps"]
+    nodes, steps, reps = cfg.node_budget_nodes, cfg.rt_steps, cfg.node_budget_reps
     codes: dict[str, Path | None] = {"this": None, **({"baseline": baseline} if baseline is not None else {})}
     runs: dict[str, list[dict]] = {name: [] for name in codes}
     floor = _floor_payloads(tmp, nodes, steps)

@@ -33,9 +33,10 @@ import numpy as np
 from netsetest.models.manoeuvres import DriveSpec, ManoeuvreName
 from netsetest.models.plant import VEHICLE_IDS, VEHICLE_NAMES, PlantKind
 from netsetest.scenarios import TOPOLOGY_DIR
-from netsetest_bench.figures.plant import CASES, Drive, Envelopes, Training, by_case, mean_ratio
+from netsetest_bench.figures.plant import CASES, Drive, EnvelopeCar, EnvelopeDrive, Envelopes, Training, by_case, mean_ratio
 from netsetest_bench.figures.plant import load as load_plant
 from netsetest_bench.render import fill
+from netsetest_bench.config import BenchConfig
 
 CAR = TOPOLOGY_DIR / "paper6_car.toml"
 LAP = TOPOLOGY_DIR / "paper6_lap.toml"
@@ -149,16 +150,16 @@ def training() -> dict:
     }
 
 
-def held_out(cfg: dict, tmp: Path, moderate_box: list[float]) -> dict:
+def held_out(cfg: BenchConfig, tmp: Path, moderate_box: list[float]) -> dict:
     """The held-out drives with the declared bound (scored against exact) and with the moderate one."""
     from netsetest.config.schema import load_topology
 
     moderate = _variant(tmp, "paper6_car_moderate", _with_bound(CAR.read_text(), f"box = [{moderate_box[0]!r}, {moderate_box[1]!r}]"))
     out: dict = {"bound": load_topology(CAR).uncertainty.as_toml()}  # type: ignore[union-attr]  # paper6_car declares a bound
     plan = [
-        ("paper (seeds unseen)", None, cfg["plant_steps"], cfg["plant_seeds"]),
-        ("double-lane-change", "double-lane-change", cfg["plant_steps"], cfg["plant_seeds"][:2]),
-        ("lap", "lap", max(cfg["plant_lap_steps"], LAP_BEND_STEPS), cfg["plant_seeds"][:1]),  # into the first bend
+        ("paper (seeds unseen)", None, cfg.plant_steps, cfg.plant_seeds),
+        ("double-lane-change", "double-lane-change", cfg.plant_steps, cfg.plant_seeds[:2]),
+        ("lap", "lap", max(cfg.plant_lap_steps, LAP_BEND_STEPS), cfg.plant_seeds[:1]),  # into the first bend
     ]
     for which, topo in (("declared", CAR), ("moderate", moderate)):
         drives: dict[str, list[dict]] = {}
@@ -177,7 +178,7 @@ def held_out(cfg: dict, tmp: Path, moderate_box: list[float]) -> dict:
     return out
 
 
-def cost(cfg: dict, tmp: Path) -> dict:
+def cost(cfg: BenchConfig, tmp: Path) -> dict:
     """Every estimator's mean fault width on the car and on its T-S twin (same signals and steering)."""
     from netsetest.analysis.compare import compare
     from netsetest.estimator.names import DEFAULT_COMPARE
@@ -185,7 +186,7 @@ def cost(cfg: dict, tmp: Path) -> dict:
     twin = _variant(tmp, "paper6_car_ts", _ts_twin(CAR.read_text()))
     out = {}
     for label, topo in (("car", CAR), ("ts_twin", twin)):
-        c = compare(topo, DEFAULT_COMPARE, (None,), ("paper", "worst"), tuple(cfg["plant_seeds"][:2]), cfg["plant_steps"])
+        c = compare(topo, DEFAULT_COMPARE, (None,), ("paper", "worst"), tuple(cfg.plant_seeds[:2]), cfg.plant_steps)
         out[label] = {
             r.estimator: {
                 "fault_width": r.fault_width_mean,
@@ -203,7 +204,7 @@ def cost(cfg: dict, tmp: Path) -> dict:
     return out
 
 
-def vehicle_cpu(cfg: dict) -> dict:
+def vehicle_cpu(cfg: BenchConfig) -> dict:
     """The vehicle's CPU per step (Drive.step: signals, driver, plant, e_k) with each plant."""
     import dataclasses
 
@@ -211,7 +212,7 @@ def vehicle_cpu(cfg: dict) -> dict:
     from netsetest.models.drive import Drive
 
     out = {}
-    plan: tuple[tuple[PlantKind, int], ...] = (("ts", cfg["plant_steps"]), ("single-track", cfg["plant_steps"]), ("multi-body", cfg["plant_mb_steps"]))
+    plan: tuple[tuple[PlantKind, int], ...] = (("ts", cfg.plant_steps), ("single-track", cfg.plant_steps), ("multi-body", cfg.plant_mb_steps))
     for plant, steps in plan:
         sc = dataclasses.replace(load_topology(CAR, steps=steps), plant=plant)
         drive = Drive(sc, "paper", 0)
@@ -225,7 +226,7 @@ def vehicle_cpu(cfg: dict) -> dict:
     return out
 
 
-def halved(cfg: dict, tmp: Path) -> dict:
+def halved(cfg: BenchConfig, tmp: Path) -> dict:
     from netsetest.config.schema import load_topology
 
     base = load_topology(CAR).uncertainty
@@ -235,7 +236,7 @@ def halved(cfg: dict, tmp: Path) -> dict:
         path = _variant(tmp, f"car_{label}", _with_bound(CAR.read_text(), f"box = [{float(b[0]) * scale!r}, {float(b[1]) * scale!r}]"))
         rows = []
         for case in ("nsnim", "saim"):
-            sc = load_topology(path, case, cfg["plant_steps"], manoeuvre="double-lane-change")  # the drive nearest the bound
+            sc = load_topology(path, case, cfg.plant_steps, manoeuvre="double-lane-change")  # the drive nearest the bound
             for sig in ("paper", "worst"):
                 rows.append(_drive(sc, sig, 0, tmp, exact=False) | {"case": case})
         misses = sum(r["evaluated"] - r["contained"] for r in rows)
@@ -308,7 +309,7 @@ def envelope_bound(tmp: Path, vehicle: int) -> tuple[np.ndarray, int]:
     return np.diag(cal.box.G), len(sweep)
 
 
-def held_out_plan(cfg: dict, tmp: Path, vehicle: int) -> list[HeldOut]:
+def held_out_plan(cfg: BenchConfig, tmp: Path, vehicle: int) -> list[HeldOut]:
     """The held-out drives of a car: inside the envelope (a double lane change, the lap, a sine with dwell at a
     speed and amplitude the sweep did not drive) and outside it (a double lane change at OUTSIDE_KMH)."""
     from netsetest.analysis.calibrate import SEARCH_SIGNALS, amplitude_for
@@ -318,10 +319,10 @@ def held_out_plan(cfg: dict, tmp: Path, vehicle: int) -> list[HeldOut]:
     envelope = OperatingEnvelope(ENVELOPE_AY, ENVELOPE_KMH)
     sine_amp = SINE_FRACTION * amplitude_for(load_topology(car_topology(tmp, vehicle)), SINE_KMH, "sine-dwell", envelope, SEARCH_SIGNALS)
     return [
-        ("double-lane-change", "double-lane-change", INSIDE_DLC_KMH, 0.0, cfg["plant_steps"], HELD_OUT_SEEDS),
-        ("lap", "lap", None, 0.0, max(cfg["plant_lap_steps"], LAP_BEND_STEPS), HELD_OUT_SEEDS),  # the topology's speed sine, 82-118 km/h
-        ("sine-dwell", "sine-dwell", SINE_KMH, sine_amp, cfg["plant_steps"], HELD_OUT_SEEDS),
-        ("double-lane-change (outside)", "double-lane-change", OUTSIDE_KMH, 0.0, cfg["plant_steps"], HELD_OUT_SEEDS[:1]),
+        ("double-lane-change", "double-lane-change", INSIDE_DLC_KMH, 0.0, cfg.plant_steps, HELD_OUT_SEEDS),
+        ("lap", "lap", None, 0.0, max(cfg.plant_lap_steps, LAP_BEND_STEPS), HELD_OUT_SEEDS),  # the topology's speed sine, 82-118 km/h
+        ("sine-dwell", "sine-dwell", SINE_KMH, sine_amp, cfg.plant_steps, HELD_OUT_SEEDS),
+        ("double-lane-change (outside)", "double-lane-change", OUTSIDE_KMH, 0.0, cfg.plant_steps, HELD_OUT_SEEDS[:1]),
     ]
 
 
@@ -351,7 +352,7 @@ def envelope_held_out(tmp: Path, vehicle: int, box: np.ndarray, drive: HeldOut) 
     return rows
 
 
-def envelope_car(cfg: dict, tmp: Path, vehicle: int) -> dict:
+def envelope_car(cfg: BenchConfig, tmp: Path, vehicle: int) -> dict:
     """One car: its envelope's calibration and the held-out drives inside and outside it."""
     box, training = envelope_bound(tmp, vehicle)
     plan = held_out_plan(cfg, tmp, vehicle)
@@ -364,7 +365,7 @@ def envelope_car(cfg: dict, tmp: Path, vehicle: int) -> dict:
     }
 
 
-def envelopes(cfg: dict, tmp: Path) -> dict:
+def envelopes(cfg: BenchConfig, tmp: Path) -> dict:
     return {
         "ay_max": ENVELOPE_AY,
         "speed_kmh": list(ENVELOPE_KMH),
@@ -374,9 +375,9 @@ def envelopes(cfg: dict, tmp: Path) -> dict:
     }
 
 
-def plant_figures(cfg: dict, tmp: Path) -> dict:
+def plant_figures(cfg: BenchConfig, tmp: Path) -> dict:
     _log("a car as the truth: paper6_car's bound calibrated on its training drives")
-    res: dict = {"config": {k: cfg[k] for k in ("plant_steps", "plant_seeds", "plant_lap_steps", "plant_mb_steps")}}
+    res: dict = {"config": {k: getattr(cfg, k) for k in ("plant_steps", "plant_seeds", "plant_lap_steps", "plant_mb_steps")}}
     res["training"] = training()
     _log("held-out drives with the declared bound and with the moderate drives' bound")
     res["held_out"] = held_out(cfg, tmp, res["training"]["moderate"]["box"])
@@ -510,31 +511,31 @@ def envelope_markdown(env: Envelopes) -> list[str]:
     for car in env.cars:
         box = fill(T, "box", b=car.box)
         for label, rows in car.drives.items():
-            for case in CASES:
-                rs = [r for r in rows if r.case == case]
-                if rs:
-                    lines.append(
-                        fill(
-                            T,
-                            "envelope-row",
-                            vehicle=car.vehicle,
-                            name=VEHICLE_NAMES[car.vehicle],
-                            box=box,
-                            label=label,
-                            case=case,
-                            runs=len(rs),
-                            ay_peak=max(r.ay_peak for r in rs),
-                            left=sum(r.envelope_left for r in rs),
-                            e_max=max(r.e_max_ratio for r in rs),
-                            covered=sum(r.covered for r in rs),
-                            evaluated=sum(r.evaluated for r in rs),
-                            violations=sum(r.violations for r in rs),
-                            misses=sum(r.misses for r in rs),
-                            attributed=sum(r.misses_attributed for r in rs),
-                            said="yes" if all(r.verdict_says for r in rs if r.misses_attributed) else "no",
-                        )
-                    )
+            lines += [_envelope_row(car, box, label, case, rs) for case in CASES if (rs := [r for r in rows if r.case == case])]
     return lines
+
+
+def _envelope_row(car: EnvelopeCar, box: str, label: str, case: str, rs: list[EnvelopeDrive]) -> str:
+    """One car's held-out drives of one kind and case, over their seeds."""
+    return fill(
+        "plant",
+        "envelope-row",
+        vehicle=car.vehicle,
+        name=VEHICLE_NAMES[car.vehicle],
+        box=box,
+        label=label,
+        case=case,
+        runs=len(rs),
+        ay_peak=max(r.ay_peak for r in rs),
+        left=sum(r.envelope_left for r in rs),
+        e_max=max(r.e_max_ratio for r in rs),
+        covered=sum(r.covered for r in rs),
+        evaluated=sum(r.evaluated for r in rs),
+        violations=sum(r.violations for r in rs),
+        misses=sum(r.misses for r in rs),
+        attributed=sum(r.misses_attributed for r in rs),
+        said="yes" if all(r.verdict_says for r in rs if r.misses_attributed) else "no",
+    )
 
 
 def plant_summary_markdown(doc: dict) -> str:

@@ -11,6 +11,7 @@ instead), and the format ``thousands`` groups digits with spaces (10 000).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import re
 import string
@@ -36,6 +37,12 @@ def typed(kind: type[T], doc: object, what: str = "the figures") -> T:
         return msgspec.convert(doc, kind, strict=False)  # strict=False: JSON's string keys become the int keys the types declare
     except msgspec.ValidationError as e:
         raise FiguresError(f"{what}: {e}") from None
+
+
+def as_fields(figures: object) -> dict[str, object]:
+    """A figures dataclass as its file holds it, one level (the inverse of :func:`typed`): its fields by name, a field
+    whose ``json`` metadata names another key under that key (``with``, a keyword in Python)."""
+    return {f.metadata.get("json", f.name): getattr(figures, f.name) for f in dataclasses.fields(figures)}  # type: ignore[arg-type]  # a dataclass instance: run.py's _jsonable checks
 
 
 class _Formatter(string.Formatter):
@@ -75,4 +82,4 @@ def fill(template: str, block: str, /, **fields: object) -> str:
     return _formatter(template).vformat(blocks(template)[block], (), fields)
 
 
-__all__ = ["MISSING", "TEMPLATES", "FiguresError", "blocks", "figure", "fill", "typed"]
+__all__ = ["MISSING", "TEMPLATES", "FiguresError", "as_fields", "blocks", "figure", "fill", "typed"]

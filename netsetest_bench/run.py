@@ -16,149 +16,56 @@ machine, measured side by side in one run; medians and ratios, not single runs, 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import platform
 import statistics
 import sys
 import tempfile
 import time
-from typing import Any
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any, TypeVar
 from pathlib import Path
 
 import numpy as np
 
-from netsetest_bench.figures.performance import YARDSTICKS, Defences, NodeProfile, Performance, Yardstick, fit_cpu
+from netsetest_bench.figures.performance import (
+    YARDSTICKS,
+    Coordinates,
+    CpuFloor,
+    Crash,
+    Defences,
+    EndToEnd,
+    Flood,
+    Launch,
+    NodeProfile,
+    NodeStartup,
+    PaperCase,
+    Performance,
+    Realtime,
+    RunCheck,
+    Scaling,
+    ScalingRow,
+    Soak,
+    Tightness,
+    Yardstick,
+    Zenoh,
+    fit_cpu,
+)
 from netsetest_bench.figures.performance import load as load_performance
-from netsetest_bench.render import MISSING, figure, fill
+from netsetest_bench.render import MISSING, as_fields, figure, fill, typed
 from netsetest_bench.sections import PARTS
 from netsetest_bench.topologies import RingVariant
 from netsetest.config.schema import Scenario
 from netsetest.scenarios import TOPOLOGY_DIR
+from netsetest_bench.config import FULL, QUICK, BenchConfig
+
+if TYPE_CHECKING:  # (the benchmark imports its parts lazily)
+    from netsetest_bench.zenoh_runs import Lockstep
+
+T = TypeVar("T")
 
 PAPER6 = TOPOLOGY_DIR / "paper6.toml"
-
-QUICK: dict[str, Any] = {
-    "steps": 40,
-    "ref_sched": 24,
-    "ref_rule": 8,
-    "naive": 12,
-    "prev_sched": 24,
-    "prev_rule": 8,
-    "scaling_steps": 20,
-    "scaling_sizes": [6, 24, 96],
-    "rt_sizes": [12, 24, 48, 64, 80, 96, 128],
-    "rt_steps": 50,
-    "profile_nodes": 96,
-    "node_budget_nodes": 48,  # --only node: the profiled ring
-    "node_budget_reps": 3,
-    "campaign_runs": 24,  # --only campaign: the throughput campaign (bench/campaign.py)
-    "campaign_reps": 2,
-    "campaign_big_runs": 100,  # a tenth of the issue's 1 000-run campaign (the full part runs it whole)
-    "scaleout_nodes": 24,  # --only scaleout: the lockstep ring across one and two namespaces (bench/scaleout.py)
-    "scaleout_steps": 40,
-    "scaleout_reps": 3,
-    "startup_reps": 3,
-    "launch_reps": 5,
-    "flood_steps": 200,
-    "flood_rate": 30000,
-    "crash_steps": 30,
-    "soak_steps": 2000,
-    "flow_steps": 300,  # --only flow: the paused-collector runs (unpaced paper6)
-    "flow_pauses_s": (3.0,),
-    "flow_record_steps": 300,  # the paper6_lossy runs recording .jsonl.gz and .mcap
-    "flow_soak_runs": 1,
-    "flow_soak_steps": 300,
-    "flow_ratio_steps": None,  # the topology's 80
-    "view_steps": 300,  # --only view: real-time paper6 runs with the live view and without (bench/view.py)
-    "view_pairs": 3,
-    "page_reps": 5,
-    "cpu_steps": 400,
-    "plant_steps": 80,
-    "plant_seeds": [10, 11],
-    "plant_lap_steps": 200,
-    "plant_mb_steps": 10,
-    "network_steps": 80,
-    "exact_steps": 80,  # issue 34's record length
-    "exact_rings": [[12, 600.0], [24, 30.0]],  # ring size, CPU budget (s): quick cuts the 24-node search short
-    "network_seeds": [0],
-    "cost_reps": 5,
-    "compare_seeds": [0, 1],
-    "widths_worst_seeds": [3, 11],  # --only widths (issue 28's runs)
-    "widths_car_seeds": [10],  # held out: the car's mismatch bound is calibrated on seeds 0-9
-    "widths_lap_steps": 100,
-    "sets_seeds": list(range(10)),  # --only widths, issue 44: faults at their bounds, declared bounds true and false
-    "sets_ring_seeds": [0],  # issue 44's directed rings
-    "sets_ring_steps": 80,
-    "sets_network_budget_s": 900.0,  # CPU seconds for each ring's network limit (k-of-N: the ends past it are relaxed, counted)
-    "exact_network_seeds": [0, 1, 2],  # --only exact, issue 44: exact and exact --network on the 12-node ring with two groups
-    "sets_declared_steps": 80,
-    "logs_replay_steps": 300,  # --only logs: paper6 replayed from a log (30 s of drive)
-    "logs_reps": 3,
-    "logs_train_seeds": [1, 2, 3],  # synthetic training drives of paper6_car's car
-    "logs_train_s": 30.0,
-    "logs_held_s": 30.0,
-}
-FULL: dict[str, Any] = {
-    "steps": 80,
-    "ref_sched": 80,
-    "ref_rule": 24,
-    "naive": 40,
-    "prev_sched": 80,
-    "prev_rule": 24,
-    "scaling_steps": 40,
-    "scaling_sizes": [6, 24, 96],
-    "rt_sizes": [6, 12, 24, 36, 48, 64, 80, 96, 112, 128],
-    "rt_steps": 50,
-    "profile_nodes": 96,
-    "node_budget_nodes": 96,
-    "node_budget_reps": 3,
-    "campaign_runs": 200,
-    "campaign_reps": 2,
-    "campaign_big_runs": 1000,
-    "scaleout_nodes": 48,
-    "scaleout_steps": 80,
-    "scaleout_reps": 3,
-    "startup_reps": 5,
-    "launch_reps": 9,
-    "flood_steps": 400,
-    "flood_rate": 30000,
-    "crash_steps": 60,
-    "soak_steps": 20000,
-    "flow_steps": 1000,
-    "flow_pauses_s": (3.0, 10.0),
-    "flow_record_steps": 3000,
-    "flow_soak_runs": 5,
-    "flow_soak_steps": 3000,
-    "flow_ratio_steps": None,
-    "view_steps": 600,
-    "view_pairs": 5,
-    "page_reps": 9,
-    "cpu_steps": 800,
-    "plant_steps": 80,
-    "plant_seeds": list(range(10, 20)),
-    "plant_lap_steps": 600,
-    "plant_mb_steps": 30,
-    "network_steps": 80,
-    "exact_steps": 80,  # issue 34's record length
-    "exact_rings": [[12, 600.0], [24, 600.0]],  # ring size, CPU budget (s)
-    "network_seeds": [0, 1, 2],
-    "cost_reps": 9,
-    "compare_seeds": [0, 1, 2],
-    "widths_worst_seeds": [3, 11],
-    "widths_car_seeds": [10, 11, 12],
-    "widths_lap_steps": 600,
-    "sets_seeds": list(range(10)),
-    "sets_ring_seeds": [0, 1, 2],
-    "sets_ring_steps": 80,
-    "sets_network_budget_s": 3600.0,
-    "exact_network_seeds": [0, 1, 2],
-    "sets_declared_steps": 80,
-    "logs_replay_steps": 1200,
-    "logs_reps": 5,
-    "logs_train_seeds": [1, 2, 3, 4, 5],
-    "logs_train_s": 60.0,
-    "logs_held_s": 60.0,
-}
 
 
 RT_VARIANTS: tuple[RingVariant, ...] = ("reference", "max_faulty", "car")
@@ -187,7 +94,9 @@ def _med(v: list[float] | list[float | None]) -> float | None:
     return statistics.median(v) if v else None
 
 
-def paper_solve_times(cfg: dict) -> dict:
+def paper_solve_times(cfg: BenchConfig) -> dict[str, PaperCase]:
+    """Per case and variant (``nsnim/scheduled`` …): the fast path's step and the reference formulations on the same
+    node-steps (bench/solvers.py's ``side_by_side``), with the captured run's verdict."""
     from netsetest.config.schema import load_topology
 
     from netsetest_bench.solvers import capture, side_by_side
@@ -195,29 +104,25 @@ def paper_solve_times(cfg: dict) -> dict:
     out = {}
     for case in ("nsnim", "saim"):
         for variant in ("scheduled", "per-rule"):
-            sc = load_topology(PAPER6, case, cfg["steps"])
+            sc = load_topology(PAPER6, case, cfg.steps)
             cap = capture(sc, variant)
             sched = variant == "scheduled"
-            n_ref = cfg["ref_sched"] if sched else cfg["ref_rule"]
-            n_prev = cfg["prev_sched"] if sched else cfg["prev_rule"]
-            n_naive = cfg["naive"] if sched else 0
+            n_ref = cfg.ref_sched if sched else cfg.ref_rule
+            n_prev = cfg.prev_sched if sched else cfg.prev_rule
+            n_naive = cfg.naive if sched else 0
             t0 = time.perf_counter()
-            res = side_by_side(cap, n_ref, n_naive, n_prev)
-            res["run_summary"] = {
-                "violations_total": cap.summary.violations_total,
-                "fallbacks": cap.summary.fallbacks,
-                "fault_bound_mean_width": [r.fault_bound_mean_width for r in cap.summary.nodes],
-            }
+            check = RunCheck(cap.summary.violations_total, cap.summary.fallbacks, [r.fault_bound_mean_width for r in cap.summary.nodes])
+            res = replace(_typed(PaperCase, side_by_side(cap, n_ref, n_naive, n_prev), "side_by_side"), run_summary=check)
             out[f"{case}/{variant}"] = res
             _log(
-                f"  {case} {variant}: fast {res['fast_ms']['median']:.2f} ms (p95 {res['fast_ms']['p95']:.2f}), "
-                + ", ".join(f"{k} ×{res[k]['ratio']:.1f}" for k in ("prev", "straightforward", "naive") if k in res)
+                f"  {case} {variant}: fast {res.fast_ms.median:.2f} ms (p95 {res.fast_ms.p95:.2f}), "
+                + ", ".join(f"{k} ×{y.ratio:.1f}" for k, y in res.yardsticks())
                 + f"  [{time.perf_counter() - t0:.0f} s]"
             )
     return out
 
 
-def scaling(cfg: dict, tmp: Path) -> dict:
+def scaling(cfg: BenchConfig, tmp: Path) -> Scaling:
     from netsetest.config.schema import load_topology
 
     from netsetest_bench.solvers import capture
@@ -225,85 +130,95 @@ def scaling(cfg: dict, tmp: Path) -> dict:
 
     capture(load_topology(PAPER6, "nsnim", 5), "scheduled")  # warm-up
     rows = []
-    for n in cfg["scaling_sizes"]:
-        sc = load_topology(ring_topology(tmp, n, cfg["scaling_steps"]))
+    for n in cfg.scaling_sizes:
+        sc = load_topology(ring_topology(tmp, n, cfg.scaling_steps))
         deg = degrees(ring_with_chords(n))
         ns = n * sc.steps
         cap = capture(sc, "scheduled")
         by_deg: dict[int, list[float]] = {}
         for c, t in zip(cap.cases, cap.step_ms):
             by_deg.setdefault(deg[c.node], []).append(t)
-        rows.append(
-            {
-                "nodes": n,
-                "node_steps": ns,
-                "ms_per_node_step": 1e3 * cap.wall_s / ns,
-                "estimator_ms_median": statistics.median(cap.step_ms),
-                "estimator_ms_mean": statistics.fmean(cap.step_ms),
-                "estimator_ms_median_by_degree": {d: statistics.median(v) for d, v in sorted(by_deg.items())},
-                "fallbacks": cap.summary.fallbacks,
-                "violations": cap.summary.violations_total,
-            }
+        row = ScalingRow(
+            nodes=n,
+            node_steps=ns,
+            ms_per_node_step=1e3 * cap.wall_s / ns,
+            estimator_ms_median=statistics.median(cap.step_ms),
+            estimator_ms_mean=statistics.fmean(cap.step_ms),
+            estimator_ms_median_by_degree={d: statistics.median(v) for d, v in sorted(by_deg.items())},
+            fallbacks=cap.summary.fallbacks,
+            violations=cap.summary.violations_total,
         )
-        _log(f"  {n} nodes: {rows[-1]['ms_per_node_step']:.2f} ms per node-step (estimator {rows[-1]['estimator_ms_median']:.2f} ms)")
-    base = rows[0]["ms_per_node_step"]
-    return {"rows": rows, "spread_vs_smallest": [r["ms_per_node_step"] / base - 1 for r in rows]}
+        rows.append(row)
+        _log(f"  {n} nodes: {row.ms_per_node_step:.2f} ms per node-step (estimator {row.estimator_ms_median:.2f} ms)")
+    base = rows[0].ms_per_node_step or float("nan")
+    return Scaling(rows=rows, spread_vs_smallest=[(r.ms_per_node_step or float("nan")) / base - 1 for r in rows])
 
 
-def zenoh_overhead(cfg: dict) -> dict:
+def zenoh_overhead(cfg: BenchConfig) -> Zenoh:
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
 
     from netsetest_bench.zenoh_runs import cli_run, observed_lockstep
 
     sc = load_topology(PAPER6, "nsnim")
-    mem, zen, zen_open = [], [], []
-    obs = obs_open = None
+    mem: list[float] = []
+    zen: list[float | None] = []
+    zen_open: list[float | None] = []
+    obs: Lockstep | None = None
+    obs_open: Lockstep | None = None
     for _ in range(3):  # interleaved, medians of three (the lockstep run shares two cores with everything else)
         t0 = time.perf_counter()
         run_inmemory(sc, "paper", "scheduled", 0)
         mem.append(time.perf_counter() - t0)
         obs = observed_lockstep(PAPER6)  # what `netsetest run` runs: secured, router star, forked roles
-        zen.append(obs["stepping_s"])
+        zen.append(obs.stepping_s)
         obs_open = observed_lockstep(PAPER6, insecure=True)  # `netsetest run --insecure`: the open peer mesh
-        zen_open.append(obs_open["stepping_s"])
-    floor = lockstep_cpu_floor(sc, obs, cfg["cpu_steps"])
-    cli_z = cli_run(PAPER6, "zenoh", "lockstep")
-    cli_m = cli_run(PAPER6, "inmemory", "lockstep")
-    res = {
-        "inmemory_s": mem,
-        "zenoh_stepping_s": zen,
-        "ratio": _ratio(_med(zen), _med(mem)),
-        "zenoh_insecure_stepping_s": zen_open,
-        "ratio_insecure": _ratio(_med(zen_open), _med(mem)),
-        "zenoh_insecure_exit_codes": obs_open["exit_codes"] if obs_open else None,
-        "zenoh_startup_s": obs["startup_s"] if obs else None,
-        "zenoh_exit_codes": obs["exit_codes"] if obs else None,
-        "zenoh_violations": (obs["summary"] or {}).get("violations_total") if obs else None,
-        "node_peak_rss_mb_in_run": obs["node_peak_rss_mb"] if obs else [],
-        "cpu_floor": floor,
-        "cli_end_to_end": {
-            "zenoh_s": cli_z["wall_s"],
-            "inmemory_s": cli_m["wall_s"],
-            "zenoh_exit": cli_z["exit_code"],
-            "inmemory_exit": cli_m["exit_code"],
-            "ratio": cli_z["wall_s"] / cli_m["wall_s"],
-        },
-    }
+        zen_open.append(obs_open.stepping_s)
+    floor = lockstep_cpu_floor(sc, obs, cfg.cpu_steps)
+    cli_z = _typed(CliRun, cli_run(PAPER6, "zenoh", "lockstep"), "cli_run")
+    cli_m = _typed(CliRun, cli_run(PAPER6, "inmemory", "lockstep"), "cli_run")
+    res = Zenoh(
+        inmemory_s=mem,
+        zenoh_stepping_s=zen,
+        ratio=_ratio(_med(zen), _med(mem)),
+        zenoh_insecure_stepping_s=zen_open,
+        ratio_insecure=_ratio(_med(zen_open), _med(mem)),
+        zenoh_insecure_exit_codes=obs_open.exit_codes if obs_open else None,
+        zenoh_startup_s=obs.startup_s if obs else None,
+        zenoh_exit_codes=obs.exit_codes if obs else None,
+        zenoh_violations=obs.summary.violations_total if obs and obs.summary else None,
+        node_peak_rss_mb_in_run=obs.node_peak_rss_mb if obs else [],
+        cpu_floor=floor,
+        cli_end_to_end=EndToEnd(
+            zenoh_s=cli_z.wall_s,
+            inmemory_s=cli_m.wall_s,
+            zenoh_exit=cli_z.exit_code,
+            inmemory_exit=cli_m.exit_code,
+            ratio=cli_z.wall_s / cli_m.wall_s,
+        ),
+    )
     _log(
-        f"  in memory {_med(mem):.2f} s, Zenoh lockstep stepping {_med(zen) or float('nan'):.2f} s (ratio {res['ratio'] or float('nan'):.2f}), "
-        f"--insecure {_med(zen_open) or float('nan'):.2f} s (ratio {res['ratio_insecure'] or float('nan'):.2f}); "
-        f"end to end {cli_z['wall_s']:.1f} s vs {cli_m['wall_s']:.1f} s"
+        f"  in memory {_med(mem):.2f} s, Zenoh lockstep stepping {_med(zen) or float('nan'):.2f} s (ratio {res.ratio or float('nan'):.2f}), "
+        f"--insecure {_med(zen_open) or float('nan'):.2f} s (ratio {res.ratio_insecure or float('nan'):.2f}); "
+        f"end to end {cli_z.wall_s:.1f} s vs {cli_m.wall_s:.1f} s"
     )
     if floor:
         _log(
-            f"  CPU per step: Zenoh {floor['zenoh_cpu_ms_per_step']:.2f} ms in its processes, in memory {floor['inmemory_ms_per_step']:.2f} ms; "
-            f"on {floor['cores']} cores the lockstep ratio cannot fall below {floor['ratio_floor']:.2f}"
+            f"  CPU per step: Zenoh {floor.zenoh_cpu_ms_per_step:.2f} ms in its processes, in memory {floor.inmemory_ms_per_step:.2f} ms; "
+            f"on {floor.cores} cores the lockstep ratio cannot fall below {floor.ratio_floor:.2f}"
         )
     return res
 
 
-def lockstep_cpu_floor(sc: Scenario, short: dict | None, steps: int) -> dict | None:
+@dataclasses.dataclass(frozen=True)
+class CliRun:
+    """What run.py reads of bench/zenoh_runs.py's ``cli_run``: one ``netsetest run`` as a user starts it."""
+
+    wall_s: float
+    exit_code: int | None
+
+
+def lockstep_cpu_floor(sc: Scenario, short: Lockstep | None, steps: int) -> CpuFloor | None:
     """Why the lockstep Zenoh run cannot beat one process on this machine, in numbers: the CPU a step costs
     in the run's processes (per role), from the difference of a long and the short run (start-up cancels),
     against the in-memory run's time per step measured the same way; with ``cores`` cores the stepping
@@ -311,57 +226,74 @@ def lockstep_cpu_floor(sc: Scenario, short: dict | None, steps: int) -> dict | N
     from netsetest.config.schema import load_topology
     from netsetest.runtime.inmemory import run_inmemory
 
-    from netsetest_bench.zenoh_runs import MACHINE_CORES, observed_lockstep
+    from netsetest_bench.zenoh_runs import MACHINE_CORES, RoleUsage, observed_lockstep
 
-    if short is None or short["stepping_s"] is None:
+    if short is None or short.stepping_s is None:
         return None
     long = observed_lockstep(PAPER6, steps=steps)
-    extra = steps - short["steps"]
-    if long["stepping_s"] is None or extra <= 0:
+    extra = steps - short.steps
+    if long.stepping_s is None or extra <= 0:
         return None
     per_role: dict[str, list[float]] = {}
-    for name, u in long["usage"].items():
-        before = short["usage"].get(name, {}).get("cpu_s")
-        if u.get("cpu_s") is None or before is None:
+    for name, u in long.usage.items():
+        before = short.usage.get(name, RoleUsage(None, None, None)).cpu_s
+        if u.cpu_s is None or before is None:
             return None
-        per_role.setdefault(name.rstrip("0123456789"), []).append(1e3 * (u["cpu_s"] - before) / extra)
+        per_role.setdefault(name.rstrip("0123456789"), []).append(1e3 * (u.cpu_s - before) / extra)
     t0 = time.perf_counter()
     run_inmemory(sc, "paper", "scheduled", 0)
     t1 = time.perf_counter()
     run_inmemory(load_topology(PAPER6, sc.case, steps), "paper", "scheduled", 0)
     mem_ms = 1e3 * ((time.perf_counter() - t1) - (t1 - t0)) / extra
     zen_cpu = sum(sum(v) for v in per_role.values())
-    return {
-        "steps": steps,
-        "cores": MACHINE_CORES,
-        "inmemory_ms_per_step": mem_ms,
-        "zenoh_cpu_ms_per_step": zen_cpu,
-        "cpu_ms_per_step_by_role": {r: (statistics.median(v), len(v)) for r, v in per_role.items()},
-        "zenoh_stepping_ms_per_step": 1e3 * (long["stepping_s"] - short["stepping_s"]) / extra,
-        "ratio_floor": zen_cpu / MACHINE_CORES / mem_ms,
-    }
+    return CpuFloor(
+        steps=steps,
+        cores=MACHINE_CORES,
+        inmemory_ms_per_step=mem_ms,
+        zenoh_cpu_ms_per_step=zen_cpu,
+        cpu_ms_per_step_by_role={r: (statistics.median(v), len(v)) for r, v in per_role.items()},
+        zenoh_stepping_ms_per_step=1e3 * (long.stepping_s - short.stepping_s) / extra,
+        ratio_floor=zen_cpu / MACHINE_CORES / mem_ms,
+    )
 
 
-def defences(cfg: dict) -> dict:
+def defences(cfg: BenchConfig) -> Defences:
     from netsetest_bench.attacks import crash, flood
     from netsetest_bench.soak import soak
 
-    out: dict = {}
+    floods: list[Flood] = []  # input and state key, secured, then the same insecure
+    crashes: list[Crash] = []  # secured, insecure
     for secured, label in ((True, "secured"), (False, "insecure")):
         for target in ("input", "state"):
-            _log(f"flood ({label} run): {cfg['flood_rate']} msg/s on node 2's {target} key from a process of its own")
-            r = out[f"flood_{target}_{label}"] = flood(PAPER6, cfg["flood_steps"], cfg["flood_rate"], target, secured)
-            _log(f"  step rate ratio {r['ratio']:.2f} ({r['sent_per_s']:.0f} msg/s sent), nodes lost {r['nodes_lost']}, exit {r['exit_code']}")
+            _log(f"flood ({label} run): {cfg.flood_rate} msg/s on node 2's {target} key from a process of its own")
+            r = _typed(Flood, flood(PAPER6, cfg.flood_steps, cfg.flood_rate, target, secured), "flood")
+            floods.append(r)
+            _log(
+                f"  step rate ratio {r.ratio or float('nan'):.2f} ({r.sent_per_s or float('nan'):.0f} msg/s sent), nodes lost {r.nodes_lost}, exit {r.exit_code}"
+            )
         _log(f"crash payloads ({label} run): node 2's insider sends what once crashed every receiving role")
-        r = out[f"crash_{label}"] = crash(PAPER6, cfg["crash_steps"], secured, pace=0.1)
-        _log(f"  roles lost {r['roles_lost']}, exit {r['exit_code']}, nodes missing {r['nodes_missing']}")
-    _log(f"soak: {cfg['soak_steps']} steps in memory, RSS sampled every 250 steps")
-    r = out["soak"] = soak(cfg["soak_steps"])
-    _log(f"  RSS {r['rss_start_mb']:.1f} → {r['rss_end_mb']:.1f} MB, slope {r['slope_mb_per_10k_steps']:.2f} MB per 10 000 steps")
-    return out
+        c = _typed(Crash, crash(PAPER6, cfg.crash_steps, secured, pace=0.1), "crash")
+        crashes.append(c)
+        _log(f"  roles lost {c.roles_lost}, exit {c.exit_code}, nodes missing {c.nodes_missing}")
+    _log(f"soak: {cfg.soak_steps} steps in memory, RSS sampled every 250 steps")
+    so = _typed(Soak, soak(cfg.soak_steps), "soak")
+    _log(
+        f"  RSS {so.rss_start_mb or float('nan'):.1f} → {so.rss_end_mb or float('nan'):.1f} MB, slope {so.slope_mb_per_10k_steps or float('nan'):.2f} MB per 10 000 steps"
+    )
+    input_secured, state_secured, input_insecure, state_insecure = floods
+    crash_secured, crash_insecure = crashes
+    return Defences(
+        flood_input_secured=input_secured,
+        flood_state_secured=state_secured,
+        flood_input_insecure=input_insecure,
+        flood_state_insecure=state_insecure,
+        crash_secured=crash_secured,
+        crash_insecure=crash_insecure,
+        soak=so,
+    )
 
 
-def tightness(tmp: Path) -> dict:
+def tightness(tmp: Path) -> dict[str, Tightness]:
     """The paper run's published intervals against the exact limit (``netsetest exact``), per case: the headline
     run (paper6, its 80 steps, seed 0, paper signals), the one of the scenario part and the README's table, whatever
     ``--quick`` says (tests/inmemory/test_headline.py holds the committed figures to it)."""
@@ -381,23 +313,24 @@ def tightness(tmp: Path) -> dict:
         t0 = time.perf_counter()
         ex = exact_bounds(sc, rec, "used")
         cmp = compare_record(rec, ex)
-        out[case] = {
-            "steps": sc.steps,
-            "exact_s": time.perf_counter() - t0,
-            "fault_bounds": ex.fault_bounds,
-            "bounded_nodes": list(ex.bounded_nodes),
-            "width_ratio": {c: cmp.mean_width_ratio[c] for c in COORDINATES},
-            "rms_radius_rel": {c: cmp.mean_rms_radius_rel[c] for c in COORDINATES},
-            "fault_width_ratio_by_node": {n.node: n.ratios["f"].width_ratio for n in cmp.nodes},
+        by_coordinate = [n.ratios[c] for n in cmp.nodes for c in COORDINATES]
+        t = out[case] = Tightness(
+            steps=sc.steps,
+            exact_s=time.perf_counter() - t0,
+            fault_bounds=ex.fault_bounds,
+            bounded_nodes=list(ex.bounded_nodes),
+            width_ratio=Coordinates(**{c: cmp.mean_width_ratio[c] for c in COORDINATES}),
+            rms_radius_rel=Coordinates(**{c: cmp.mean_rms_radius_rel[c] for c in COORDINATES}),
+            fault_width_ratio_by_node={n.node: n.ratios["f"].width_ratio for n in cmp.nodes},
             # published intervals not containing the exact one: the ratio is not a tightness figure there
-            "narrower": sum(n.ratios[c].narrower for n in cmp.nodes for c in COORDINATES),
-            "intervals": sum(n.ratios[c].steps + n.ratios[c].left_out for n in cmp.nodes for c in COORDINATES),
-        }
+            narrower=sum(r.narrower for r in by_coordinate),
+            intervals=sum(r.steps + r.left_out for r in by_coordinate),
+        )
         _log(
-            f"  {case}: fault width / exact {cmp.mean_width_ratio['f']:.3f} (nodes "
+            f"  {case}: fault width / exact {t.width_ratio.f:.3f} (nodes "
             + ", ".join(f"{n.ratios['f'].width_ratio:.2f}" for n in cmp.nodes)
-            + f"), r {cmp.mean_width_ratio['r']:.3f}, β {cmp.mean_width_ratio['beta']:.3f}; "
-            f"narrower than exact on {out[case]['narrower']} of {out[case]['intervals']} intervals; exact in {out[case]['exact_s']:.1f} s"
+            + f"), r {t.width_ratio.r:.3f}, β {t.width_ratio.beta:.3f}; "
+            f"narrower than exact on {t.narrower} of {t.intervals} intervals; exact in {t.exact_s:.1f} s"
         )
     return out
 
@@ -433,18 +366,9 @@ def run_bench(
 
     cfg = QUICK if quick else FULL
     t_all = time.perf_counter()
-    res: dict = {
-        "meta": {
-            "quick": quick,
-            "python": platform.python_version(),
-            "machine": platform.machine(),
-            "cpus": _cpus(),
-            "date": time.strftime("%Y-%m-%d %H:%M:%S"),
-            "config": cfg,
-            "load_before": _load(),
-            "only": only,
-        }
-    }
+    date = time.strftime("%Y-%m-%d %H:%M:%S")
+    started = dict(quick=quick, python=platform.python_version(), machine=platform.machine(), cpus=_cpus(), date=date, config=cfg)
+    started |= dict(load_before=_load(), only=only)
     if only is not None and only != "performance":  # one part alone: its figures and its Markdown
         figures, render = {
             "exact": (exact_figures, exact_cost_markdown),
@@ -460,80 +384,80 @@ def run_bench(
             "campaign": (campaign_figures, campaign_markdown),
         }[only]
         with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
-            res[only] = figures(cfg, Path(tmpd))
-        res["meta"]["load_after"] = _load()
-        res["meta"]["duration_s"] = time.perf_counter() - t_all
-        md = f"# netsetest benchmark: {only} ({'quick' if quick else 'full'}, {res['meta']['date']})\n\n" + render(_as_written(res)[only])
-        _write(res, md, json_path, markdown_path)
+            part = figures(cfg, Path(tmpd))
+        meta = started | dict(load_after=_load(), duration_s=time.perf_counter() - t_all)
+        md = f"# netsetest benchmark: {only} ({'quick' if quick else 'full'}, {date})\n\n" + render(_as_written(part))
+        _write(meta, {only: part}, md, json_path, markdown_path)
         return 0
+    parts: dict[str, object] = {}
     with tempfile.TemporaryDirectory(prefix="nsbench-") as tmpd:
         tmp = Path(tmpd)
         _log("paper scenario: per-node per-step times, side by side")
-        res["paper"] = paper_solve_times(cfg)
+        paper = paper_solve_times(cfg)
         _log("tightness: published intervals against the exact limit (paper run, steps ≥ 10)")
-        res["tightness"] = tightness(tmp)
+        tight = tightness(tmp)
         _log("in-memory cost per node-step vs network size")
-        res["inmemory_scaling"] = scaling(cfg, tmp)
+        inmemory = scaling(cfg, tmp)
         _log("Zenoh lockstep vs in memory (paper scenario)")
-        res["zenoh"] = zenoh_overhead(cfg)
-        _log(f"the 8-process paper run (secured): launch → step 0, {cfg['launch_reps']} runs")
-        res["launch"] = launch_to_step0(PAPER6, cfg["launch_reps"])
-        _log(
-            f"  median {res['launch']['median_s'] or float('nan'):.2f} s: "
-            + ", ".join("—" if r["launch_to_step0_s"] is None else f"{r['launch_to_step0_s']:.2f}" for r in res["launch"]["reps"])
-        )
+        zen = zenoh_overhead(cfg)
+        _log(f"the 8-process paper run (secured): launch → step 0, {cfg.launch_reps} runs")
+        launch = _typed(Launch, launch_to_step0(PAPER6, cfg.launch_reps), "launch_to_step0")
+        _log(f"  median {figure(launch.median_s)} s: " + ", ".join(figure(r.launch_to_step0_s) for r in launch.reps))
         _log("one node process: start-up and peak RSS")
-        res["node"] = node_startup(tmp, cfg["startup_reps"])
-        res["node"]["memory_by_stage"] = node_memory_profile()
-        _log(f"  {res['node']}")
+        node = _typed(NodeStartup, node_startup(tmp, cfg.startup_reps) | {"memory_by_stage": node_memory_profile()}, "node_startup")
+        _log(f"  {node}")
         _log("real time (τs = 0.1 s, nodes as processes): growing networks")
-        res["realtime"] = realtime_ladder(tmp, cfg["rt_sizes"], cfg["rt_steps"], log=_log)
+        ladder = realtime_ladder(tmp, cfg.rt_sizes, cfg.rt_steps, log=_log)
         _log("real time with a reference's readings, k-of-N health per group of six (max_faulty) and the car as the truth: the largest ring that fits")
-        res["realtime"]["variants"] = realtime_fit(tmp, RT_VARIANTS, cfg["rt_sizes"], res["realtime"]["max_nodes"], cfg["rt_steps"], log=_log)
-        _log(f"a node's CPU per step by phase (real time, {cfg['profile_nodes']} nodes, run --profile), default and trace objective")
-        res["node_profile"] = realtime_node_profile(tmp, cfg["profile_nodes"], cfg["rt_steps"])
-        res["node_profile_trace"] = realtime_node_profile(tmp, cfg["profile_nodes"], cfg["rt_steps"], objective="trace")
-        for p in (res["node_profile"], res["node_profile_trace"]):
-            _log(f"  {p['objective']}: {p.get('process_ms_per_step')} ms per node-step, {p['deadline_misses']} deadline misses")
-        res["defences"] = defences(cfg)
+        fit = realtime_fit(tmp, RT_VARIANTS, cfg.rt_sizes, _typed(Realtime, ladder, "realtime_ladder").max_nodes, cfg.rt_steps, log=_log)
+        realtime = _typed(Realtime, ladder | {"variants": fit}, "realtime_fit")
+        _log(f"a node's CPU per step by phase (real time, {cfg.profile_nodes} nodes, run --profile), default and trace objective")
+        profiles = [
+            _typed(NodeProfile, realtime_node_profile(tmp, cfg.profile_nodes, cfg.rt_steps, objective=o), "realtime_node_profile") for o in (None, "trace")
+        ]
+        for pr in profiles:
+            _log(f"  {pr.objective}: {pr.process_ms_per_step} ms per node-step, {pr.deadline_misses} deadline misses")
+        defs = defences(cfg)
+        parts |= dict(paper=paper, tightness=tight, inmemory_scaling=inmemory, zenoh=zen, launch=launch, node=node, realtime=realtime)
+        parts |= dict(node_profile=profiles[0], node_profile_trace=profiles[1], defences=defs)
+        side = None
         if baseline is not None:
             from netsetest_bench.baseline import performance_side_by_side
 
-            res["baseline"] = performance_side_by_side(cfg, tmp, baseline, quick)
+            side = performance_side_by_side(cfg, tmp, baseline, quick)
+            parts |= dict(baseline=side)
         if only is None:  # every part too; --only performance leaves them out
-            res["plant"] = plant_figures(cfg, tmp)
-            res["network"] = network_figures(cfg, tmp)
-            res["scenario"] = scenario_figures(cfg, tmp)
-            res["exact"] = exact_figures(cfg, tmp)
-            res["widths"] = widths_figures(cfg, tmp)
-    res["meta"]["load_after"] = _load()
-    res["meta"]["duration_s"] = time.perf_counter() - t_all
-    res.update(headline(load_performance(_as_written(res))))
-    written = _as_written(res)
-    md = markdown(written)
-    if "baseline" in res:
+            parts |= dict(plant=plant_figures(cfg, tmp), network=network_figures(cfg, tmp), scenario=scenario_figures(cfg, tmp))
+            parts |= dict(exact=exact_figures(cfg, tmp), widths=widths_figures(cfg, tmp))
+    meta = started | dict(load_after=_load(), duration_s=time.perf_counter() - t_all)
+    parts |= headline(load_performance(_as_written({"meta": meta, **parts})))
+    md = markdown(_as_written({"meta": meta, **parts}))
+    if side is not None:
         from netsetest_bench.baseline import baseline_markdown
 
-        md += "\n## Side by side with the baseline (netsetest_bench/baseline.py)\n\n" + baseline_markdown(written["baseline"])
+        md += "\n## Side by side with the baseline (netsetest_bench/baseline.py)\n\n" + baseline_markdown(_as_written(side))
     if only is None:
-        md += "\n## A car as the truth (netsetest_bench/plant.py)\n\n" + plant_markdown(written["plant"])
-        md += "\n## What the exchange can buy (netsetest_bench/network.py)\n\n" + network_markdown(written["network"])
-        md += "\n## The paper's scenario (netsetest_bench/scenario.py)\n\n" + scenario_markdown(written["scenario"])
-        md += "\n" + compare_markdown(written["scenario"])
-        md += "\n## What `netsetest exact` costs under k-of-N health (netsetest_bench/exact_cost.py)\n\n" + exact_cost_markdown(written["exact"])
-        md += "\n## Published width over the exact limit, per coordinate (netsetest_bench/widths.py)\n\n" + widths_markdown(written["widths"])
-    _write(res, md, json_path, markdown_path)
+        for title, draw, key in (
+            ("A car as the truth (netsetest_bench/plant.py)", plant_markdown, "plant"),
+            ("What the exchange can buy (netsetest_bench/network.py)", network_markdown, "network"),
+            ("The paper's scenario (netsetest_bench/scenario.py)", lambda r: scenario_markdown(r) + "\n" + compare_markdown(r), "scenario"),
+            ("What `netsetest exact` costs under k-of-N health (netsetest_bench/exact_cost.py)", exact_cost_markdown, "exact"),
+            ("Published width over the exact limit, per coordinate (netsetest_bench/widths.py)", widths_markdown, "widths"),
+        ):
+            md += f"\n## {title}\n\n" + draw(_as_written(parts[key]))
+    _write(meta, parts, md, json_path, markdown_path, whole=only is None)
     return 0
 
 
-def _write(res: dict, md: str, json_path: str | None, markdown_path: str | None) -> None:
-    """The figures and the report; a whole run also writes each part's figures beside its JSON
-    (<dir>/<part>.json, what ``--only PART --json`` writes), so that one run refreshes every generated doc."""
+def _write(meta: dict[str, object], parts: dict[str, object], md: str, json_path: str | None, markdown_path: str | None, whole: bool = False) -> None:
+    """The figures (``meta`` and ``parts``: the file's keys but its meta) and the report; a ``whole`` run also writes
+    each part's figures beside its JSON (<dir>/<part>.json, what ``--only PART --json`` writes), so that one run
+    refreshes every generated doc."""
     if json_path:
-        Path(json_path).write_text(json.dumps(res, indent=1, default=_jsonable) + "\n")
+        Path(json_path).write_text(json.dumps({"meta": meta, **parts}, indent=1, default=_jsonable) + "\n")
         for part in PARTS:
-            if part in res and res["meta"]["only"] is None:
-                doc = {"meta": res["meta"], part: res[part]}
+            if part in parts and whole:
+                doc = {"meta": meta, part: parts[part]}
                 (Path(json_path).parent / f"{part}.json").write_text(json.dumps(doc, indent=1, default=_jsonable) + "\n")
     if markdown_path:
         Path(markdown_path).write_text(md)
@@ -783,13 +707,22 @@ def _load() -> str:
         return "?"
 
 
-def _as_written(res: dict) -> dict:
+def _typed(kind: type[T], doc: object, what: str) -> T:
+    """A measuring helper's dict (numpy's numbers, int keys) as ``kind``: through JSON, as the file will hold it."""
+    return typed(kind, _as_written(doc), f"{what}'s figures")
+
+
+def _as_written(res: object) -> Any:
     """The figures as their file holds them (numpy's numbers as Python's, keys as strings): what every renderer reads,
     so that a run's report is what ``--render-docs`` makes of its file."""
     return json.loads(json.dumps(res, default=_jsonable))
 
 
 def _jsonable(o: object) -> object:
+    """What JSON holds of ``o``: a figures dataclass as its fields (under the name a field's ``json`` metadata gives,
+    figures/network_sets.py's ``with``), numpy's numbers and arrays as Python's; anything else as its text."""
+    if dataclasses.is_dataclass(o) and not isinstance(o, type):
+        return as_fields(o)
     if isinstance(o, (np.floating, np.integer)):
         return o.item()
     if isinstance(o, np.ndarray):

@@ -42,6 +42,7 @@ from netsetest.runtime.channel import ChannelReader
 from netsetest.runtime.launcher import RUN_ID_BYTES, sigterm_as_interrupt
 from netsetest.runtime.processes import role_env
 from netsetest.runtime.rolespec import CollectorSpec, NodeSpec, RouterSpec, ScenarioSpec, VehicleSpec, ZenohSpec
+from netsetest_bench.config import BenchConfig
 
 LAYOUTS = {"one": 1, "two": 2}  # layout → hosts
 HOST_NAMES = "ab"  # host index → its name in the tables
@@ -120,18 +121,7 @@ def scaleout_run(directory: Path, topology: Path, hosts: int, steps: int, timeou
         if hosts > 1:
             nets.link(names[0], f"{LINK_ADDR[0]}/30", names[1], f"{LINK_ADDR[1]}/30")
         creds = str(write_credentials(run_dir / "credentials", certificate_names(sc), [*ROUTER_HOSTS, LINK_ADDR[0]]))
-        linked = f"tls/{LINK_ADDR[0]}:{ROUTER_PORT}"  # host a's router, as host b's router reaches it
-        for h, ns in enumerate(names):
-            listen = (LOCAL, linked) if h == 0 and hosts > 1 else (LOCAL,)
-            spec = RouterSpec(topology=str(topology), credentials=creds, listen=listen, connect=(linked,) if h > 0 else (), run_id=run_id)
-            procs[f"router{h}"], host[f"router{h}"] = _start(ns, spec.to_argv(), run_dir / f"router{h}.err"), h
-        up = time.monotonic() + ROUTER_START_S
-        while not all("listening on" in (run_dir / f"router{h}.err").read_text(errors="replace") for h in range(hosts)):
-            if time.monotonic() > up or any(procs[f"router{h}"].poll() is not None for h in range(hosts)):
-                raise RuntimeError(
-                    "a router did not start: " + " | ".join((run_dir / f"router{h}.err").read_text(errors="replace")[-300:] for h in range(hosts))
-                )
-            time.sleep(0.05)
+        _start_routers(names, topology, creds, run_id, run_dir, procs, host)
         scenario = ScenarioSpec(str(topology), steps=steps)
         zenoh = ZenohSpec(run_id, "client", (), (LOCAL,), creds)
         r_fd, w_fd = os.pipe()
@@ -146,14 +136,7 @@ def scaleout_run(directory: Path, topology: Path, hosts: int, steps: int, timeou
         procs["vehicle"] = _start(names[where["vehicle"]], VehicleSpec(scenario, zenoh=zenoh).to_argv(), run_dir / "vehicle.err")
         host.update(where)
         roles = [n for n in procs if not n.startswith("router")]
-        last: dict[str, float] = {}  # each process's CPU seconds when last read (a process gone: its last reading)
-        cpu: list[tuple[int, dict[int, float]]] = []  # (step checked, CPU seconds by host) at the window's two ends
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline and any(procs[n].poll() is None for n in roles):
-            last.update((name, c) for name, p in procs.items() if (c := _cpu_s(p.pid)) is not None)
-            if len(cpu) < 2 and reader.step >= (WARM_STEPS, steps - 1)[len(cpu)] and len(last) == len(procs):
-                cpu.append((reader.step, {h: sum(c for name, c in last.items() if host[name] == h) for h in range(hosts)}))
-            time.sleep(POLL_S)
+        cpu = _watch(procs, host, roles, reader, hosts, steps, timeout)
         row["exit_codes"] = {n: procs[n].poll() for n in roles}
         if None in row["exit_codes"].values():
             raise TimeoutError(f"the run did not end within {timeout:g} s")
@@ -169,15 +152,51 @@ def scaleout_run(directory: Path, topology: Path, hosts: int, steps: int, timeou
         left = nets.delete()
         if left:
             row["error"] = f"namespaces left behind: {left}"
+    return row | _verdict(summary_path)
+
+
+def _start_routers(names: list[str], topology: Path, creds: str, run_id: str, run_dir: Path, procs: dict[str, subprocess.Popen], host: dict[str, int]) -> None:
+    """A router in each namespace of ``names`` (host a's listening on the link too, host b's connected to it there),
+    into ``procs`` and ``host``; back when each says it listens, RuntimeError where one did not start."""
+    hosts = len(names)
+    linked = f"tls/{LINK_ADDR[0]}:{ROUTER_PORT}"  # host a's router, as host b's router reaches it
+    for h, ns in enumerate(names):
+        listen = (LOCAL, linked) if h == 0 and hosts > 1 else (LOCAL,)
+        spec = RouterSpec(topology=str(topology), credentials=creds, listen=listen, connect=(linked,) if h > 0 else (), run_id=run_id)
+        procs[f"router{h}"], host[f"router{h}"] = _start(ns, spec.to_argv(), run_dir / f"router{h}.err"), h
+    up = time.monotonic() + ROUTER_START_S
+    while not all("listening on" in (run_dir / f"router{h}.err").read_text(errors="replace") for h in range(hosts)):
+        if time.monotonic() > up or any(procs[f"router{h}"].poll() is not None for h in range(hosts)):
+            raise RuntimeError("a router did not start: " + " | ".join((run_dir / f"router{h}.err").read_text(errors="replace")[-300:] for h in range(hosts)))
+        time.sleep(0.05)
+
+
+def _watch(
+    procs: dict[str, subprocess.Popen], host: dict[str, int], roles: list[str], reader: ChannelReader, hosts: int, steps: int, timeout: float
+) -> list[tuple[int, dict[int, float]]]:
+    """Until the roles end (or ``timeout``): each process's CPU, read every POLL_S; the CPU seconds by host when the
+    collector has checked WARM_STEPS and the last step but one, with the step (the window the CPU per step is over)."""
+    last: dict[str, float] = {}  # each process's CPU seconds when last read (a process gone: its last reading)
+    cpu: list[tuple[int, dict[int, float]]] = []  # (step checked, CPU seconds by host) at the window's two ends
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and any(procs[n].poll() is None for n in roles):
+        last.update((name, c) for name, p in procs.items() if (c := _cpu_s(p.pid)) is not None)
+        if len(cpu) < 2 and reader.step >= (WARM_STEPS, steps - 1)[len(cpu)] and len(last) == len(procs):
+            cpu.append((reader.step, {h: sum(c for name, c in last.items() if host[name] == h) for h in range(hosts)}))
+        time.sleep(POLL_S)
+    return cpu
+
+
+def _verdict(summary_path: Path) -> dict:
+    """What the run's summary says of it (every figure None where none was written, or it was cut short by the stop)."""
     try:
         s = json.loads(summary_path.read_text())
     except (OSError, ValueError):  # none written, or cut short by the stop
         s = {}
-    row["steps_completed"] = s.get("steps_completed")
-    row["violations"] = s.get("violations_total")
-    row["nodes_missing"] = s.get("nodes_missing")
-    row["security"] = s.get("security")
-    return row
+    return {
+        k: s.get(key)
+        for k, key in (("steps_completed", "steps_completed"), ("violations", "violations_total"), ("nodes_missing", "nodes_missing"), ("security", "security"))
+    }
 
 
 def _summary(runs: list[dict]) -> dict:
@@ -203,9 +222,9 @@ def _summary(runs: list[dict]) -> dict:
     }
 
 
-def scaleout_figures(cfg: dict, tmp: Path) -> dict:
+def scaleout_figures(cfg: BenchConfig, tmp: Path) -> dict:
     """Both layouts of one ring, alternately (module doc)."""
-    nodes, steps, reps = cfg["scaleout_nodes"], cfg["scaleout_steps"], cfg["scaleout_reps"]
+    nodes, steps, reps = cfg.scaleout_nodes, cfg.scaleout_steps, cfg.scaleout_reps
     topo = ring_topology(tmp, nodes, steps)
     runs: dict[str, list[dict]] = {name: [] for name in LAYOUTS}
     with sigterm_as_interrupt():  # SIGTERM, like Ctrl-C, stops the run in progress and deletes its namespaces

@@ -23,6 +23,7 @@ from netsetest.scenarios import TOPOLOGY_DIR
 from netsetest_bench.figures.scenario import Scenario
 from netsetest_bench.figures.scenario import load as load_scenario
 from netsetest_bench.render import figure, fill
+from netsetest_bench.config import BenchConfig
 
 PAPER6 = TOPOLOGY_DIR / "paper6.toml"
 CASES: tuple[Case, ...] = get_args(Case)
@@ -81,9 +82,9 @@ def _comparison(case: Case, seeds: list[int]) -> dict:
     return {"case": case, "runs": c.runs, "steps": c.steps, "estimators": list(ESTIMATOR_NAMES), "rows": comparison_document(c)}
 
 
-def scenario_figures(cfg: dict, tmp: Path) -> dict:
+def scenario_figures(cfg: BenchConfig, tmp: Path) -> dict:
     runs = [_per_node(case, sig, tmp) for case in CASES for sig in SIGNALS]
-    return {"runs": runs, "compare_seeds": cfg["compare_seeds"], "compare": [_comparison(case, cfg["compare_seeds"]) for case in CASES]}
+    return {"runs": runs, "compare_seeds": cfg.compare_seeds, "compare": [_comparison(case, cfg.compare_seeds) for case in CASES]}
 
 
 # ---------------------------------------------------------------- rendering

@@ -84,22 +84,12 @@ def _stats(v: list[float]) -> dict:
 
 def side_by_side(cap: Capture, n_ref: int, n_naive: int, n_cvxpy: int) -> dict:
     """Solve the captured steps with every formulation, interleaved; times in ms (wall and CPU)."""
-    from netsetest_bench.reference import NaiveSDP, StraightforwardSDP
-
     sc, variant = cap.scenario, cap.variant
     ids = sc.ids
     fast = fast_estimators(sc, variant)
-    prev = {i: sdp.LocalEstimator.for_node(sc, i, variant, "trace", backend="cvxpy") for i in ids} if n_cvxpy else {}  # type: ignore[arg-type]  # variant is one of the Literal's values, passed through as str
-    ref = {i: StraightforwardSDP(*_yardstick_args(sc, i, variant)) for i in ids} if n_ref else {}
-    naive = {i: NaiveSDP(*_yardstick_args(sc, i, variant)) for i in ids} if n_naive else {}
+    prev, ref, naive = _yardstick_estimators(sc, variant, n_cvxpy, n_ref, n_naive)
     cases = cap.cases
-
-    def subset(k: int) -> set[int]:
-        if k <= 0:
-            return set()
-        return set(np.linspace(0, len(cases) - 1, min(k, len(cases))).round().astype(int).tolist())
-
-    sub_ref, sub_naive, sub_prev = subset(n_ref), subset(n_naive), subset(n_cvxpy)
+    sub_ref, sub_naive, sub_prev = (_spread(k, len(cases)) for k in (n_ref, n_naive, n_cvxpy))
     out: dict[str, dict[int, float]] = {k: {} for k in ("fast", "fast_cpu", "fast_solve", "prev", "straightforward", "naive")}
     width: dict[str, dict[int, float]] = {k: {} for k in ("fast", "prev", "straightforward", "naive")}
     iters: list[int] = []
@@ -146,18 +136,41 @@ def side_by_side(cap: Capture, n_ref: int, n_naive: int, n_cvxpy: int) -> dict:
         "degree_of_nodes": {i: len(sc.node(i).in_weights) for i in ids},
     }
     for name in ("prev", "straightforward", "naive"):
-        ks = sorted(out[name])
-        if not ks:
-            continue
-        fast_same = statistics.median([out["fast"][k] for k in ks])
-        other = statistics.median([out[name][k] for k in ks])
-        rel = [width["fast"][k] / width[name][k] - 1.0 for k in ks if k in width[name]]
-        res[name] = {
-            **_stats([out[name][k] for k in ks]),
-            "fast_median_same_steps": fast_same,
-            "ratio": other / fast_same,
-            "uncertified": len(ks) - len(rel),
-            "width_rel_diff_min": min(rel) if rel else None,
-            "width_rel_diff_max": max(rel) if rel else None,
-        }
+        if out[name]:
+            res[name] = _yardstick(out[name], width[name], out["fast"], width["fast"])
     return res
+
+
+def _yardstick_estimators(sc: Scenario, variant: str, n_cvxpy: int, n_ref: int, n_naive: int) -> tuple[dict, dict, dict]:
+    """Per node, the yardsticks asked for (a count of 0: none): the previous default (cvxpy), the straightforward and the
+    naive formulation."""
+    from netsetest_bench.reference import NaiveSDP, StraightforwardSDP
+
+    ids = sc.ids
+    prev = {i: sdp.LocalEstimator.for_node(sc, i, variant, "trace", backend="cvxpy") for i in ids} if n_cvxpy else {}  # type: ignore[arg-type]  # variant is one of the Literal's values, passed through as str
+    ref = {i: StraightforwardSDP(*_yardstick_args(sc, i, variant)) for i in ids} if n_ref else {}
+    naive = {i: NaiveSDP(*_yardstick_args(sc, i, variant)) for i in ids} if n_naive else {}
+    return prev, ref, naive
+
+
+def _spread(k: int, n: int) -> set[int]:
+    """``k`` of the ``n`` captured steps, spread evenly (none for k ≤ 0)."""
+    if k <= 0:
+        return set()
+    return set(np.linspace(0, n - 1, min(k, n)).round().astype(int).tolist())
+
+
+def _yardstick(times: dict[int, float], widths: dict[int, float], fast: dict[int, float], fast_widths: dict[int, float]) -> dict:
+    """A yardstick's figures on the steps it solved (step → ms, step → fault width), against the fast path's on the
+    same steps: its times, how many times slower, its fault width relative to the fast path's, its uncertified steps."""
+    ks = sorted(times)
+    fast_same = statistics.median([fast[k] for k in ks])
+    rel = [fast_widths[k] / widths[k] - 1.0 for k in ks if k in widths]
+    return {
+        **_stats([times[k] for k in ks]),
+        "fast_median_same_steps": fast_same,
+        "ratio": statistics.median([times[k] for k in ks]) / fast_same,
+        "uncertified": len(ks) - len(rel),
+        "width_rel_diff_min": min(rel) if rel else None,
+        "width_rel_diff_max": max(rel) if rel else None,
+    }

@@ -35,6 +35,7 @@ from netsetest.scenarios import TOPOLOGY_DIR
 from netsetest_bench.figures.view import Spread, spread
 from netsetest_bench.figures.view import load as load_view
 from netsetest_bench.render import MISSING, figure, fill
+from netsetest_bench.config import BenchConfig
 
 PAPER6 = TOPOLOGY_DIR / "paper6.toml"
 PAPER6_TAU_S = 0.1  # paper6.toml's τs (the issue's: the live view at 10 steps a second)
@@ -149,15 +150,15 @@ def page_figures(topology: Path, reps: int, tmp: Path, name: str) -> dict:
     return {"record_run_s": run_s, "report_s": report_s, "size_mb": size / 1e6, "opens": opens}
 
 
-def view_figures(cfg: dict, tmp: Path) -> dict:
+def view_figures(cfg: BenchConfig, tmp: Path) -> dict:
     from netsetest_bench.topologies import ring_topology
     from netsetest.config.schema import load_topology
     from netsetest.records.report_html import MAX_POINTS
 
     assert load_topology(PAPER6).tau_s == PAPER6_TAU_S, "paper6.toml's τs changed: the lag and CPU per step are read at PAPER6_TAU_S"
-    out: dict = {"live": live_figures(cfg["view_steps"], cfg["view_pairs"], tmp)}
-    _log(f"the report page of an {PAGE_STEPS}-step paper6 record in headless Chromium, {cfg['page_reps']} times")
-    out["page"] = {"nodes": 6, "steps": PAGE_STEPS, **page_figures(PAPER6, cfg["page_reps"], tmp, "paper6")}
+    out: dict = {"live": live_figures(cfg.view_steps, cfg.view_pairs, tmp)}
+    _log(f"the report page of an {PAGE_STEPS}-step paper6 record in headless Chromium, {cfg.page_reps} times")
+    out["page"] = {"nodes": 6, "steps": PAGE_STEPS, **page_figures(PAPER6, cfg.page_reps, tmp, "paper6")}
     _log(f"the report page of a {BIG_STEPS}-step, {BIG_NODES}-node ring record")
     big = ring_topology(tmp, BIG_NODES, BIG_STEPS)
     out["big_page"] = {"nodes": BIG_NODES, "steps": BIG_STEPS, "max_points": MAX_POINTS, **page_figures(big, 1, tmp, "ring")}

@@ -29,11 +29,15 @@ import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 from netsetest.config.schema import Case
 from netsetest.models.signals import SignalKind
+from netsetest_bench.config import BenchConfig
+from netsetest_bench.figures.widths import Commits, RegionCase, RegionCost, RegionRun, Row, Run, SideBySide, SideCase, StepFigure, Widths
+from netsetest_bench.figures.widths import load as load_widths
+from netsetest_bench.render import fill, typed
 
 LISTED, OTHER = 1.05, 1.10  # the SDP's targets: the listed runs, every other bundled scenario
 ESTIMATORS = ("sdp", "zonotope", "interval", "strip", "setprop", "exact")
@@ -84,18 +88,16 @@ class WidthRun:
         return (*ESTIMATORS[:-1], *(WITHOUT_REGION if self.without_region else ()), ESTIMATORS[-1])
 
 
-def plan(cfg: dict) -> list[WidthRun]:
+def plan(cfg: BenchConfig) -> list[WidthRun]:
     """The listed runs (paper6 NSNIM and SAIM with the paper's signals and worst-case ones, the car's held-out drives,
     paper6_reference, paper6_max_faulty), then every other bundled scenario once."""
     from netsetest.scenarios import bundled_topologies
 
-    families: tuple[tuple[SignalKind, tuple[int, ...]], ...] = (("paper", (0,)), ("worst", tuple(cfg["widths_worst_seeds"])))
+    families: tuple[tuple[SignalKind, tuple[int, ...]], ...] = (("paper", (0,)), ("worst", tuple(cfg.widths_worst_seeds)))
     runs = [WidthRun(f"paper6 {case.upper()}, {sig} signals", "paper6", case, sig, seeds, LISTED) for case in CASES for sig, seeds in families]
-    runs += [WidthRun(f"{CAR} {case.upper()}, held-out seeds", CAR, case, "paper", tuple(cfg["widths_car_seeds"]), LISTED) for case in CASES]
+    runs += [WidthRun(f"{CAR} {case.upper()}, held-out seeds", CAR, case, "paper", tuple(cfg.widths_car_seeds), LISTED) for case in CASES]
     runs += [WidthRun(t, t, None, "paper", (0,), LISTED, without_region=True) for t in ("paper6_reference", "paper6_max_faulty")]
-    runs += [
-        WidthRun(t, t, None, "paper", (0,), OTHER, cfg["widths_lap_steps"] if t == "paper6_lap" else None) for t in bundled_topologies() if t not in TARGETED
-    ]
+    runs += [WidthRun(t, t, None, "paper", (0,), OTHER, cfg.widths_lap_steps if t == "paper6_lap" else None) for t in bundled_topologies() if t not in TARGETED]
     return runs
 
 
@@ -103,18 +105,29 @@ def _log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def _measure(run: WidthRun) -> dict:
-    from netsetest.analysis.compare import compare, comparison_document
+def _measure(run: WidthRun) -> Run:
+    from netsetest.analysis.compare import compare
 
     t0 = time.perf_counter()
     c = compare(run.topology, run.estimators, (run.case,), (run.signals,), run.seeds, run.steps)
-    rows = comparison_document(c)
-    sdp = next(r for r in rows if r["estimator"] == "sdp")
-    _log(f"  {run.label}: sdp worst node {_worst(sdp):.3f} (target {run.target}), {time.perf_counter() - t0:.0f} s")
-    return asdict(run) | {"runs": c.runs, "steps": c.steps, "rows": rows}
+    rows = [Row(**{f.name: getattr(r, f.name) for f in fields(r)}, plant=c.plant) for r in c.rows]  # compare --json's rows
+    fig = Run(
+        label=run.label,
+        topology=run.topology,
+        case=run.case,
+        signals=run.signals,
+        seeds=list(run.seeds),
+        target=run.target,
+        steps=c.steps,
+        without_region=run.without_region,
+        runs=c.runs,
+        rows=rows,
+    )
+    _log(f"  {run.label}: sdp worst node {_worst(fig.by_estimator()['sdp']):.3f} (target {run.target}), {time.perf_counter() - t0:.0f} s")
+    return fig
 
 
-def widths_figures(cfg: dict, tmp: Path, baseline: Path | None = None) -> dict:
+def widths_figures(cfg: BenchConfig, tmp: Path, baseline: Path | None = None) -> Widths:
     """Every run of :func:`plan`, compared (JOBS at once, in processes of their own); the region's cost; with a
     ``baseline`` checkout, the step side by side with it."""
     from concurrent.futures import ProcessPoolExecutor
@@ -126,21 +139,23 @@ def widths_figures(cfg: dict, tmp: Path, baseline: Path | None = None) -> dict:
     with ProcessPoolExecutor(JOBS) as pool:
         runs = list(pool.map(_measure, plan(cfg)))
     _log("the region's cost per node-step (paper6, in memory, this process alone)")
-    out = {"from_step": FROM_STEP, "runs": runs, "cost": region_cost(), "sets": sets_figures(cfg, tmp)}
+    cost, sets = region_cost(), sets_figures(cfg, tmp)
+    side = None
     if baseline is not None:
         _log(f"the step side by side with the baseline {baseline} (paper6, in memory, processes of their own, alternating)")
         try:
-            out["side_by_side"] = step_side_by_side(baseline)
+            side = step_side_by_side(baseline)
         except SideBySideFailed as e:  # (the comparisons above stand: the table says what failed)
             _log(f"  {e}")
-            out["side_by_side"] = {"error": str(e)}
-    return out
+            side = SideBySide(error=str(e))
+    return Widths(from_step=FROM_STEP, runs=runs, cost=cost, sets=sets, side_by_side=side)
 
 
 @contextmanager
-def _region_timers(times: dict[str, list[float]]) -> Iterator[None]:
-    """Every call of the region's two pieces timed while the block runs (ms into ``times``): the move of the
-    region through the step (``LocalEstimator._moved_region``) and its cut (:data:`~netsetest.estimator.cuts.REGION`)."""
+def _region_timers(moves: list[float], cuts_ms: list[float]) -> Iterator[None]:
+    """Every call of the region's two pieces timed while the block runs [ms]: the move of the region through the step
+    (``LocalEstimator._moved_region``, into ``moves``) and its cut (:data:`~netsetest.estimator.cuts.REGION`, into
+    ``cuts_ms``)."""
     from netsetest.estimator import cuts, sdp
 
     moved, cut = sdp.LocalEstimator._moved_region, cuts.REGION.apply
@@ -148,14 +163,14 @@ def _region_timers(times: dict[str, list[float]]) -> Iterator[None]:
     def timed_moved(est: sdp.LocalEstimator, *args: object) -> object:
         t0 = time.perf_counter()
         out = moved(est, *args)  # type: ignore[arg-type]  # the method's own arguments, passed through
-        times["moved"].append(1e3 * (time.perf_counter() - t0))
+        moves.append(1e3 * (time.perf_counter() - t0))
         return out
 
     def timed_cut(ctx: cuts.StepContext, res: cuts.StepResult) -> cuts.StepResult:
         t0 = time.perf_counter()
         out = cut(ctx, res)
         if ctx.blend is not None:  # (step 0's cut, from the prior, is no step the run times)
-            times["cut"].append(1e3 * (time.perf_counter() - t0))
+            cuts_ms.append(1e3 * (time.perf_counter() - t0))
         return out
 
     sdp.LocalEstimator._moved_region = timed_moved  # type: ignore[method-assign,assignment]  # restored below
@@ -167,7 +182,7 @@ def _region_timers(times: dict[str, list[float]]) -> Iterator[None]:
         object.__setattr__(cuts.REGION, "apply", cut)
 
 
-def region_cost(steps: int = COST_STEPS, runs: int = COST_RUNS) -> dict:
+def region_cost(steps: int = COST_STEPS, runs: int = COST_RUNS) -> RegionCost:
     """Per case (paper6 NSNIM, SAIM): ``runs`` runs of ``steps`` steps after a warm-up run, each the median over its
     node-steps of the estimator's step (bench/solvers.py's ``capture``: the in-run time of ``LocalEstimator.step``),
     of the region's move and of its cut, and the region's share of the step time (the move and the cut over all
@@ -175,32 +190,41 @@ def region_cost(steps: int = COST_STEPS, runs: int = COST_RUNS) -> dict:
     from netsetest_bench.solvers import capture
     from netsetest.config.schema import load_topology
 
-    out: dict = {"steps": steps, "runs": runs}
+    out: list[RegionCase] = []
     for case in CASES:
         capture(load_topology("paper6", case, COST_WARM_UP), "scheduled")
         per_run = []
         for _ in range(runs):
-            times: dict[str, list[float]] = {"moved": [], "cut": []}
-            with _region_timers(times):
+            moves: list[float] = []
+            cuts_ms: list[float] = []
+            with _region_timers(moves, cuts_ms):
                 cap = capture(load_topology("paper6", case, steps), "scheduled")
             per_run.append(
-                {
-                    "step_ms": statistics.median(cap.step_ms),
-                    "moved_ms": statistics.median(times["moved"]),
-                    "cut_ms": statistics.median(times["cut"]),
-                    "share": (sum(times["moved"]) + sum(times["cut"])) / sum(cap.step_ms),
-                }
+                RegionRun(
+                    step_ms=statistics.median(cap.step_ms),
+                    moved_ms=statistics.median(moves),
+                    cut_ms=statistics.median(cuts_ms),
+                    share=(sum(moves) + sum(cuts_ms)) / sum(cap.step_ms),
+                )
             )
-        out[case] = {key: statistics.median(r[key] for r in per_run) for key in per_run[0]} | {"per_run": per_run}
-        _log(f"  paper6 {case.upper()}: step {out[case]['step_ms']:.3f} ms per node-step, region {100 * out[case]['share']:.0f} %")
-    return out
+        c = RegionCase(
+            step_ms=statistics.median(r.step_ms for r in per_run),
+            moved_ms=statistics.median(r.moved_ms for r in per_run),
+            cut_ms=statistics.median(r.cut_ms for r in per_run),
+            share=statistics.median(r.share for r in per_run),
+            per_run=per_run,
+        )
+        out.append(c)
+        _log(f"  paper6 {case.upper()}: step {c.step_ms:.3f} ms per node-step, region {100 * c.share:.0f} %")
+    nsnim, saim = out  # CASES' order
+    return RegionCost(steps=steps, runs=runs, nsnim=nsnim, saim=saim)
 
 
 class SideBySideFailed(RuntimeError):
     """The step program failed or hung on a checkout (say, a baseline without bench/solvers.py's side_by_side)."""
 
 
-def _step_runs(case: Case, steps: int, runs: int, code: Path | None) -> list[dict[str, float]]:
+def _step_runs(case: Case, steps: int, runs: int, code: Path | None) -> list[tuple[float, float]]:
     """:data:`STEP_PROGRAM` in a process of its own, on ``code``'s netsetest (None: this checkout's): after a run of
     the same length, ``runs`` runs, each the step median per node-step [ms] in the run and replayed (:data:`STEP_FIGURES`)."""
     from netsetest_bench.zenoh_runs import code_env
@@ -216,10 +240,10 @@ def _step_runs(case: Case, steps: int, runs: int, code: Path | None) -> list[dic
     if out.returncode != 0:
         last = out.stderr.strip().splitlines()[-1:]
         raise SideBySideFailed(f"the step program on {where} failed (exit {out.returncode}): {last[0] if last else 'no message'}")
-    return [dict(zip((key for key, _ in STEP_FIGURES), run)) for run in json.loads(out.stdout.strip().splitlines()[-1])]
+    return [(in_run, replayed) for in_run, replayed in json.loads(out.stdout.strip().splitlines()[-1])]
 
 
-def step_side_by_side(baseline: Path, steps: int = COST_STEPS, processes: int = SIDE_PROCESSES, runs: int = SIDE_RUNS) -> dict:
+def step_side_by_side(baseline: Path, steps: int = COST_STEPS, processes: int = SIDE_PROCESSES, runs: int = SIDE_RUNS) -> SideBySide:
     """Per case and figure of :data:`STEP_FIGURES`, ``processes`` processes of this checkout and of ``baseline`` in
     turn, ``runs`` runs in each (:func:`_step_runs`): every run's figure, the fastest run and the median run of each
     checkout, and the fastest runs' difference against :data:`STEP_TARGET_MS`.  The fastest run is the code's cost
@@ -227,203 +251,174 @@ def step_side_by_side(baseline: Path, steps: int = COST_STEPS, processes: int = 
     (docs/performance-history.md), which a median of a few runs does not hide."""
     from netsetest_bench.node_budget import checkout_commit
 
-    out: dict = {
-        "steps": steps,
-        "processes": processes,
-        "runs": runs,
-        "target_ms": STEP_TARGET_MS,
-        "commits": {"this": checkout_commit(Path(__file__).resolve().parents[2]), "baseline": checkout_commit(baseline)},
-    }
+    commits = Commits(this=checkout_commit(Path(__file__).resolve().parents[2]), baseline=checkout_commit(baseline))
+    out: list[SideCase] = []
     for case in CASES:
-        rows: dict[str, list[dict[str, float]]] = {"this": [], "baseline": []}
+        this: list[tuple[float, float]] = []
+        base: list[tuple[float, float]] = []
         for _ in range(processes):
-            rows["this"] += _step_runs(case, steps, runs, None)
-            rows["baseline"] += _step_runs(case, steps, runs, baseline)
-        out[case] = {}
-        for key, _ in STEP_FIGURES:
-            this, base = [r[key] for r in rows["this"]], [r[key] for r in rows["baseline"]]
-            over = min(this) - min(base)
-            out[case][key] = {
-                "this_ms": this,
-                "baseline_ms": base,
-                "this": min(this),
-                "baseline": min(base),
-                "this_median": statistics.median(this),
-                "baseline_median": statistics.median(base),
-                "over_ms": over,
-                "over_median_ms": statistics.median(this) - statistics.median(base),
-                "met": over <= STEP_TARGET_MS,
-            }
-        _log(f"  paper6 {case.upper()}: " + "; ".join(f"{key} {1e3 * out[case][key]['over_ms']:+.0f} µs" for key, _ in STEP_FIGURES))
-    return out
+            this += _step_runs(case, steps, runs, None)
+            base += _step_runs(case, steps, runs, baseline)
+        c = SideCase(*(_step_figure([r[n] for r in this], [r[n] for r in base]) for n, _ in enumerate(STEP_FIGURES)))
+        out.append(c)
+        _log(f"  paper6 {case.upper()}: " + "; ".join(f"{key} {1e3 * c.figure(key).over_ms:+.0f} µs" for key, _ in STEP_FIGURES))
+    nsnim, saim = out  # CASES' order
+    return SideBySide(steps=steps, processes=processes, runs=runs, target_ms=STEP_TARGET_MS, commits=commits, nsnim=nsnim, saim=saim)
+
+
+def _step_figure(this: list[float], base: list[float]) -> StepFigure:
+    """One figure of :data:`STEP_FIGURES` from every run of each checkout: the fastest runs judged against the target."""
+    over = min(this) - min(base)
+    return StepFigure(
+        this_ms=this,
+        baseline_ms=base,
+        this=min(this),
+        baseline=min(base),
+        this_median=statistics.median(this),
+        baseline_median=statistics.median(base),
+        over_ms=over,
+        over_median_ms=statistics.median(this) - statistics.median(base),
+        met=over <= STEP_TARGET_MS,
+    )
 
 
 # ---------------------------------------------------------------- rendering
 
 
-def _worst(row: dict) -> float:
+def _worst(row: Row) -> float:
     """The largest per-node ratio of the row over r, β and f (a point exact interval has none)."""
-    return max((v for ratios in row["ratio_exact_by_node"].values() for v in ratios if v is not None), default=float("nan"))
+    return max((v for ratios in row.ratio_exact_by_node.values() for v in ratios if v is not None), default=float("nan"))
 
 
-def _pooled(row: dict) -> list[float | None]:
+def _pooled(row: Row) -> list[float | None]:
     """r, β, f: mean width over exact, pooled over nodes (compare's ratio)."""
-    beta, r = row["ratio_exact_state"]
-    return [r, beta, row["ratio_exact"]]
+    beta, r = row.ratio_exact_state
+    return [r, beta, row.ratio_exact]
 
 
 def _f(v: float | None, spec: str = ".3f") -> str:
     return "–" if v is None else format(v, spec)
 
 
-def _cell(row: dict) -> str:
+def _cell(row: Row) -> str:
     """r / β / f pooled over nodes, with the worst node's largest ratio and the absolute excess where exact is a point."""
     text = " / ".join(_f(v) for v in _pooled(row)) + f" (≤ {_f(_worst(row))})"
-    return text + (f", {row['pinned_excess']:+.1e} abs." if row.get("pinned_excess") is not None else "")
+    return text + (f", {row.pinned_excess:+.1e} abs." if row.pinned_excess is not None else "")
 
 
-def _met(run: dict, row: dict) -> bool:
-    return _worst(row) <= run["target"] and row["violations"] == 0 and row["narrower"] == 0
+def _met(run: Run, row: Row) -> bool:
+    return _worst(row) <= run.target and row.violations == 0 and row.narrower == 0
 
 
-def _run_label(run: dict) -> str:
-    seeds = ",".join(map(str, run["seeds"]))
-    return f"{run['label']} (seed{'s' if len(run['seeds']) > 1 else ''} {seeds}; {run['steps']} steps)"
+def _run_label(run: Run) -> str:
+    seeds = ",".join(map(str, run.seeds))
+    return f"{run.label} (seed{'s' if len(run.seeds) > 1 else ''} {seeds}; {run.steps} steps)"
 
 
-def _rows(run: dict) -> dict[str, dict]:
-    return {r["estimator"]: r for r in run["rows"]}
+def _widths(res: dict | Widths) -> Widths:
+    return load_widths(res) if isinstance(res, dict) else res  # (not isinstance Widths: a test may import the module twice)
 
 
-def widths_summary_markdown(res: dict) -> str:
+W = "widths"  # the part's template (templates/widths.md)
+
+
+def widths_summary_markdown(res: dict | Widths) -> str:
     """Every run: the SDP against its target, the paper's own set beside it."""
-    lines = [
-        f"`netsetest compare <topology> --estimators {','.join(ESTIMATORS)}` per run (with `<name>-noregion` too where a "
-        "run compares the set estimators without their region); mean published width over the "
-        f"exact limit from step {res['from_step']}, r / β / f pooled over nodes, and in brackets the largest per-node "
-        "ratio of the three; where the exact interval is a point (a reference's declared zero fault) the absolute width "
-        "over it instead (abs.). Exact limit: the fault bounds it applies and, under k-of-N health, the ends its search "
-        "left relaxed (an outer bound of the limit there, so a ratio may fall below 1; such an end is not counted "
-        "narrower). Target: the SDP's every node and coordinate ≤ the run's target, with no violation and "
-        "no interval narrower than exact where the assumptions held.",
-        "",
-        "| run | target | sdp r / β / f | sdp-ellipsoid (the paper's own set) | exact limit | narrower than exact | violations | met |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for run in res["runs"]:
-        rows = _rows(run)
+    w = _widths(res)
+    lines = [fill(W, "summary-head", estimators=",".join(ESTIMATORS), from_step=w.from_step)]
+    for run in w.runs:
+        rows = run.by_estimator()
         sdp = rows["sdp"]
-        narrower = sum(r["narrower"] for r in run["rows"])
-        compared = sum(r["compared"] for r in run["rows"])
         lines.append(
-            f"| {_run_label(run)} | ≤ {run['target']:.2f} | {_cell(sdp)} | {_cell(rows['sdp-ellipsoid'])} | "
-            f"{', '.join(sdp.get('exact_reference', []))} | {narrower} of {compared} | {sum(r['violations'] for r in run['rows'])} | {'yes' if _met(run, sdp) else '**no**'} |"
+            fill(
+                W,
+                "summary-row",
+                label=_run_label(run),
+                run=run,
+                sdp=_cell(sdp),
+                ellipsoid=_cell(rows["sdp-ellipsoid"]),
+                exact=", ".join(sdp.exact_reference),
+                narrower=sum(r.narrower for r in run.rows),
+                compared=sum(r.compared for r in run.rows),
+                violations=sum(r.violations for r in run.rows),
+                met=fill(W, "yes" if _met(run, sdp) else "not-met"),
+            )
         )
     return "\n".join(lines) + "\n"
 
 
-def cost_markdown(cost: dict) -> str:
+def cost_markdown(cost: dict | RegionCost) -> str:
     """The region's cost per node-step, per case."""
-    lines = [
-        f"The region's cost: paper6 in memory, {cost['runs']} runs of {cost['steps']} steps per case after a warm-up, "
-        "each the median over its node-steps, the median of the runs (per run in brackets). Step: the estimator's step "
-        "as a node runs it; move and cut: the region's, timed in the same runs; share: the two over the step time, "
-        "summed over the run. Issue 28's target (the step at most 0.25 ms over the code before every node kept a "
-        "region, 29290ba) is judged side by side with that checkout (`--baseline`).",
-        "",
-        "| case | step (ms per node-step) | region move (ms) | region cut (ms) | region share of the step |",
-        "|---|---|---|---|---|",
-    ]
+    rc = typed(RegionCost, cost, "the region's cost") if isinstance(cost, dict) else cost
+    lines = [fill(W, "cost-head", c=rc)]
     for case in CASES:
-        c = cost[case]
-        runs = ", ".join(f"{r['step_ms']:.3f}" for r in c["per_run"])
-        lines.append(f"| paper6 {case.upper()} | {c['step_ms']:.3f} ({runs}) | {c['moved_ms']:.3f} | {c['cut_ms']:.3f} | {100 * c['share']:.0f} % |")
+        c = rc.case(case)
+        runs = ", ".join(f"{r.step_ms:.3f}" for r in c.per_run)
+        lines.append(fill(W, "cost-row", case=case.upper(), c=c, runs=runs, share=100 * c.share))
     return "\n".join(lines) + "\n"
 
 
-def side_by_side_markdown(side: dict) -> str:
+def side_by_side_markdown(side: dict | SideBySide) -> str:
     """Issue 28's cost target: the step of this checkout against the baseline's, side by side, in a run and replayed."""
-    if "error" in side:
-        return f"The step side by side with the baseline was not measured: {side['error']}.\n"
-    commits = side["commits"]
-    lines = [
-        f"The step side by side with the code before every node kept a region (`{commits['baseline']}`; this checkout: "
-        f"`{commits['this']}`, uncommitted changes aside): paper6 in memory, {side['processes']} processes of each "
-        f"alternating, one program for both; each process runs {side['steps']} steps once to warm up, then "
-        f"{side['runs']} times: per run the median over its node-steps of the estimator's step as a node runs it (in "
-        "the run), and of the same steps replayed back to back, as the performance part times its median node-step "
-        "(replayed). The fastest run of each checkout (the code's cost where nothing else took the machine) and the "
-        f"median run; target (issue 28): the fastest at most {side['target_ms']} ms over the baseline's.",
-        "",
-        "| case | figure | this checkout: fastest / median run (ms per node-step) | baseline: fastest / median run | over the baseline: fastest / median | within the target |",
-        "|---|---|---|---|---|---|",
-    ]
+    s = typed(SideBySide, side, "the step side by side") if isinstance(side, dict) else side
+    if s.error is not None or s.commits is None:
+        return fill(W, "side-error", error=s.error) + "\n"
+    lines = [fill(W, "side-head", s=s)]
     for case in CASES:
         for key, what in STEP_FIGURES:
-            c = side[case][key]
-            lines.append(
-                f"| paper6 {case.upper()} | {what} | {c['this']:.3f} / {c['this_median']:.3f} | {c['baseline']:.3f} / {c['baseline_median']:.3f} | "
-                f"{c['over_ms']:+.3f} / {c['over_median_ms']:+.3f} ms | {'yes' if c['met'] else 'no'} |"
-            )
+            c = s.case(case).figure(key)
+            lines.append(fill(W, "side-row", case=case.upper(), what=what, c=c, met=fill(W, "side-met" if c.met else "side-not-met")))
     return "\n".join(lines) + "\n"
 
 
-def sets_section(res: dict) -> str:
+def sets_section(res: dict | Widths) -> str:
     """Issue 44's tables (bench/network_sets.py), or where the figures are older than them, that they are not there."""
     from netsetest_bench.network_sets import sets_markdown
 
-    if "sets" not in res:
-        return "Not measured in these figures (they are older than issue 44's part): measure them with the command above.\n"
-    return sets_markdown(res["sets"])
+    sets = _widths(res).sets
+    return fill(W, "no-sets") + "\n" if sets is None else sets_markdown(sets)
 
 
-def widths_markdown(res: dict) -> str:
+def widths_markdown(res: dict | Widths) -> str:
     """Every run: the SDP against its target, then every estimator's r / β / f over exact, then per node; then the
     region's cost (figures measured before it had one: none); then what a node takes from its network (issue 44)."""
-    runs = res["runs"]
-    lines = [widths_summary_markdown(res)]
-    if "cost" in res:
-        lines += [cost_markdown(res["cost"])]
-    if "side_by_side" in res:
-        lines += [side_by_side_markdown(res["side_by_side"])]
-    lines += ["Every estimator, r / β / f over exact pooled over nodes (largest per-node ratio):", ""]
-    names = list(dict.fromkeys(r["estimator"] for run in runs for r in run["rows"] if r["estimator"] not in ("sdp", "sdp-ellipsoid", "exact")))
+    w = _widths(res)
+    lines = [widths_summary_markdown(w)]
+    if w.cost is not None:
+        lines += [cost_markdown(w.cost)]
+    if w.side_by_side is not None:
+        lines += [side_by_side_markdown(w.side_by_side)]
+    lines += [fill(W, "every-head"), ""]
+    names = list(dict.fromkeys(r.estimator for run in w.runs for r in run.rows if r.estimator not in ("sdp", "sdp-ellipsoid", "exact")))
     lines += ["| run | " + " | ".join(f"`{n}`" for n in names) + " |", "|---|" + "---|" * len(names)]
-    for run in runs:
-        rows = _rows(run)
-        lines.append(f"| {run['label']} | " + " | ".join(_cell(rows[n]) if n in rows else "–" for n in names) + " |")
-    lines += ["", "Per node, r / β / f over exact ('–': the exact interval is a point):", ""]
-    for run in runs:
-        nodes = sorted({int(i) for r in run["rows"] for i in r["ratio_exact_by_node"]})
+    for run in w.runs:
+        rows = run.by_estimator()
+        lines.append(f"| {run.label} | " + " | ".join(_cell(rows[n]) if n in rows else "–" for n in names) + " |")
+    lines += ["", fill(W, "per-node-head"), ""]
+    for run in w.runs:
+        nodes = sorted({i for r in run.rows for i in r.ratio_exact_by_node})
         lines += [f"{_run_label(run)}:", "", "| estimator | " + " | ".join(f"node {i}" for i in nodes) + " |", "|---|" + "---|" * len(nodes)]
-        for r in run["rows"]:
-            by = {int(i): v for i, v in r["ratio_exact_by_node"].items()}
+        for r in run.rows:
+            by = r.ratio_exact_by_node
             cells = [" / ".join(_f(by[i][m]) for m, _ in COORDS) if i in by else "" for i in nodes]
-            lines.append(f"| `{r['estimator']}` | " + " | ".join(cells) + " |")
+            lines.append(f"| `{r.estimator}` | " + " | ".join(cells) + " |")
         lines.append("")
-    if "sets" in res:
-        lines += ["What a node takes from its network (issue 44, netsetest_bench/network_sets.py):", "", sets_section(res)]
+    if w.sets is not None:
+        lines += [fill(W, "sets-head"), "", sets_section(w)]
     return "\n".join(lines)
 
 
-def region_markdown(res: dict) -> str:
+def region_markdown(res: dict | Widths) -> str:
     """What the region buys the set estimators: each with and without it, side by side, r / β / f over exact."""
-    runs = res["runs"]
-    methods = [n for n in ("zonotope", "interval", "strip", "setprop") if any(n in _rows(r) for r in runs)]
-    lines = [
-        "r / β / f, mean published width over the exact limit pooled over nodes from step "
-        f"{res['from_step']} (largest per-node ratio), each set estimator without its region (the method as its paper "
-        "defines it, `<name>-noregion`) → with it; violations and intervals narrower than exact where the assumptions "
-        "held, with the region.",
-        "",
-        "| run | " + " | ".join(f"`{m}` without → with" for m in methods) + " | violations, narrower (with) |",
-        "|---|" + "---|" * len(methods) + "---|",
-    ]
-    for run in (r for r in runs if r["without_region"]):
-        rows = _rows(run)
+    w = _widths(res)
+    methods = [n for n in ("zonotope", "interval", "strip", "setprop") if any(n in r.by_estimator() for r in w.runs)]
+    columns = " | ".join(fill(W, "region-column", method=m) for m in methods)
+    lines = [fill(W, "region-head", from_step=w.from_step, columns=columns, dashes="---|" * len(methods))]
+    for run in (r for r in w.runs if r.without_region):
+        rows = run.by_estimator()
         cells = [f"{_cell(rows[m + '-noregion'])} → {_cell(rows[m])}" if m in rows and m + "-noregion" in rows else "–" for m in methods]
-        bad = sum(rows[m]["violations"] for m in methods if m in rows), sum(rows[m]["narrower"] for m in methods if m in rows)
-        lines.append(f"| {run['label']} | " + " | ".join(cells) + f" | {bad[0]}, {bad[1]} |")
+        violations, narrower = sum(rows[m].violations for m in methods if m in rows), sum(rows[m].narrower for m in methods if m in rows)
+        lines.append(fill(W, "region-row", run=run, cells=" | ".join(cells), violations=violations, narrower=narrower))
     return "\n".join(lines) + "\n"
 
 

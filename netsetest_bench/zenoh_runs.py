@@ -33,7 +33,9 @@ import sys
 import tempfile
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import msgspec  # a default dependency (the bench must not need the dev extra's msgpack)
 
@@ -44,6 +46,9 @@ from netsetest.runtime.launcher import free_ports
 from netsetest.runtime.processes import role_env
 from netsetest.runtime.rolespec import Clock, CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
 from netsetest_bench.topologies import RingVariant
+
+if TYPE_CHECKING:
+    from netsetest.records.summary import RunSummary
 
 PY = [sys.executable, "-m", "netsetest.cli.main"]
 
@@ -355,7 +360,38 @@ def _role_argv(topology: Path, run_id: str, steps: int | None, name: str, ports:
     return NodeSpec(scenario, int(name.removeprefix("node")), clock=clock, zenoh=zenoh).to_argv()
 
 
-def observed_lockstep(topology: Path, steps: int | None = None, insecure: bool = False, ack_window: int | None = ACK_WINDOW) -> dict:
+@dataclass(frozen=True)
+class RoleUsage:
+    """A role process's rusage at its exit (``run``: the launching process's while it launched)."""
+
+    exit_code: int | None
+    peak_rss_mb: float | None
+    cpu_s: float | None
+
+
+@dataclass(frozen=True)
+class Lockstep:
+    """One lockstep run through the launcher (:func:`observed_lockstep`)."""
+
+    security: str  # mtls+acl or insecure
+    nodes: int
+    steps: int
+    stepping_s: float | None  # None: the collector reported too few steps to time it
+    total_s: float
+    startup_s: float | None
+    usage: dict[str, RoleUsage]  # role name (node1, collector, vehicle, run, …) → its usage
+    summary: RunSummary | None
+
+    @property
+    def node_peak_rss_mb(self) -> list[float]:
+        return [u.peak_rss_mb for n, u in self.usage.items() if n.startswith("node") and u.peak_rss_mb is not None]
+
+    @property
+    def exit_codes(self) -> dict[str, int | None]:
+        return {n: u.exit_code for n, u in self.usage.items()}
+
+
+def observed_lockstep(topology: Path, steps: int | None = None, insecure: bool = False, ack_window: int | None = ACK_WINDOW) -> Lockstep:
     """One lockstep run of ``topology`` through the launcher ``netsetest run`` uses (runtime/launcher.py, in
     this process): secured by default (mTLS, every role a client of the run's router, roles forked by the
     fork server); ``insecure``: the open peer mesh of ``run --insecure``; ``ack_window``: ``run --ack-window``'s
@@ -378,24 +414,22 @@ def observed_lockstep(topology: Path, steps: int | None = None, insecure: bool =
     t_done = time.monotonic()
     if out.exit_code == EXIT_INTERRUPTED:  # Ctrl-C reached the launcher: the benchmark stops too
         raise KeyboardInterrupt
-    usage = {name: {"exit_code": u.exit_code, "peak_rss_mb": u.peak_rss_mb, "cpu_s": u.cpu_s} for name, u in out.roles.items()}
-    usage["run"] = {"exit_code": out.exit_code, "peak_rss_mb": None, "cpu_s": time.process_time() - cpu0}
+    usage = {name: RoleUsage(u.exit_code, u.peak_rss_mb, u.cpu_s) for name, u in out.roles.items()}
+    usage["run"] = RoleUsage(out.exit_code, None, time.process_time() - cpu0)
     first = min(out.checked_at, default=None)
     stepping = None
     if first is not None and n_steps in out.checked_at and n_steps > first:
         stepping = (out.checked_at[n_steps] - out.checked_at[first]) * (n_steps + 1) / (n_steps - first)
-    return {
-        "security": "insecure" if insecure else "mtls+acl",
-        "nodes": len(plan.scenario.ids),
-        "steps": n_steps,
-        "stepping_s": stepping,
-        "total_s": t_done - t_start,
-        "startup_s": None if first is None else out.checked_at[first] - t_start,
-        "node_peak_rss_mb": [u["peak_rss_mb"] for n, u in usage.items() if n.startswith("node") and u["peak_rss_mb"] is not None],
-        "usage": usage,
-        "summary": out.summary.to_dict() if out.summary else None,
-        "exit_codes": {n: u["exit_code"] for n, u in usage.items()},
-    }
+    return Lockstep(
+        security="insecure" if insecure else "mtls+acl",
+        nodes=len(plan.scenario.ids),
+        steps=n_steps,
+        stepping_s=stepping,
+        total_s=t_done - t_start,
+        startup_s=None if first is None else out.checked_at[first] - t_start,
+        usage=usage,
+        summary=out.summary,
+    )
 
 
 def node_startup(directory: Path, reps: int = 3, timeout: float = 120.0) -> dict:

@@ -24,7 +24,7 @@ Derivation and measured figures: docs/exact.md.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from typing import Literal
 
@@ -333,6 +333,17 @@ class _Program:
         d = (self.first if j == 0 else self.delay).get(node)
         return d is not None and j <= k - d
 
+    def holds(self, other: _Program, h: int, k: int) -> bool:
+        """Whether this program's horizon k has every datum ``other``'s horizon h has (both of one scenario and record):
+        then the same assumptions over at least those data, so whatever that horizon proved holds here (and later)."""
+        for j in self.ids:
+            if other.available(j, 0, h) and not self.available(j, 0, k):
+                return False
+            last = h - other.delay[j] if j in other.delay else 0  # its data of steps 1..last (a threshold in the step)
+            if last >= 1 and not (j in self.delay and last <= k - self.delay[j]):
+                return False
+        return True
+
     def _available_rows(self, block: _RowBlock, k: int) -> np.ndarray:
         """The rows of ``block`` whose data the horizon-k program has (a row of no node's data: always)."""
         return block.step <= k - block.delay
@@ -476,6 +487,7 @@ class _HealthPlan:
         self.unions: list[StepUnion] = []  # past steps with several pieces
         self.pending: dict[int, tuple[list[bool], Span]] = {}  # past steps whose data are not all in yet: allowed, window
         self.incomplete = False  # a past step's pieces were too many to enumerate: later ends are relaxed
+        self.dead: dict[int, list[Piece]] = {}  # pending steps' pieces some horizon found without a trajectory (drop)
 
     def _t(self, j: int) -> dict[int, float]:
         return {self.prog._x(j, c): float(self.model.u[c]) for c in range(2) if self.model.u[c] != 0}
@@ -534,7 +546,7 @@ class _HealthPlan:
         """The unions of horizon k for one objective column, and whether they are complete (exact ends)."""
         tied = [t or self.prog._f(n, k) == objective for (n, _), t in zip(self.members, self._tied(k, k))]
         last = self._union(k, tied, [True] * len(tied), window, k)
-        again = [self._union(j, self._tied(j, k), allowed, w, k) for j, (allowed, w) in sorted(self.pending.items())]
+        again = [self._alive(self._union(j, self._tied(j, k), allowed, w, k)) for j, (allowed, w) in sorted(self.pending.items())]
         complete = last is not None and None not in again and not self.incomplete
         return [*self.unions, *(u for u in again if u is not None), *([last] if last is not None else [])], complete
 
@@ -560,9 +572,31 @@ class _HealthPlan:
                 self.drop([(union.step, p) for p in union.pieces if p.hi < lo or p.lo > hi])
         return solves
 
+    def tighten(self, j: int, window: Span) -> None:
+        """Step j's t_j lies in ``window`` in this horizon and every later one (another program proved it, :class:`_Ledger`):
+        a pending union is built inside it from now on, a kept one loses the pieces outside it (one piece left: convex,
+        its rows join the cuts)."""
+        if j in self.pending:
+            allowed, w = self.pending[j]
+            self.pending[j] = (allowed, (max(w[0], window[0]), min(w[1], window[1])))
+        self.drop([(j, p) for u in self.unions if u.step == j for p in u.pieces if p.hi < window[0] or p.lo > window[1]])
+        for u in [u for u in self.unions if u.step == j and len(u.pieces) == 1]:
+            self.cuts += u.rows(u.pieces[0])
+            self.unions.remove(u)
+
+    def _alive(self, union: StepUnion | None) -> StepUnion | None:
+        """A pending step's union built again without the pieces inside one found dead (:meth:`drop`)."""
+        if union is None or not self.dead.get(union.step):
+            return union
+        return replace(union, pieces=tuple(p for p in union.pieces if not any(p.within(d) for d in self.dead[union.step])))
+
     def drop(self, dead: Sequence[tuple[int, Piece]]) -> None:
-        """Pieces that admit no trajectory in some horizon admit none in any later one (it adds constraints)."""
+        """Pieces that admit no trajectory in some horizon admit none in any later one (it adds constraints); nor does
+        any piece inside one (its interval of t_j within, at least its tied sensors healthy), which is how a pending
+        step's union, built again at every horizon, forgets them."""
         for step, piece in dead:
+            if step in self.pending and piece.group == self.group:
+                self.dead.setdefault(step, []).append(piece)
             self.unions = [replace(u, pieces=tuple(p for p in u.pieces if p != piece)) if u.step == step else u for u in self.unions]
 
     def learn(self, k: int, beta: np.ndarray, r: np.ndarray, fault: dict[int, np.ndarray]) -> None:
@@ -580,7 +614,8 @@ class _HealthPlan:
         self.pending[k] = (allowed, window)
         for j in [j for j in sorted(self.pending) if self._complete(j, k + 1)]:  # every datum of step j is in from k + 1 on
             allowed_j, window_j = self.pending.pop(j)
-            union = self._union(j, self._tied(j, k + 1), allowed_j, window_j, k + 1)
+            union = self._alive(self._union(j, self._tied(j, k + 1), allowed_j, window_j, k + 1))
+            self.dead.pop(j, None)
             if union is None:
                 self.incomplete = True
             else:
@@ -701,6 +736,16 @@ class _HealthTally:
             self.out_of_time = k
 
 
+@dataclass
+class _Ledger:
+    """The programs of one computation and where their ends go (a network limit: one per node): a horizon of one program
+    holds in a horizon of another whose data it holds (:meth:`_Program.holds`), so each search imports what the others
+    proved about the states of past steps (:meth:`KofNSearch._import`): rows that leave its limit as it is and cut its
+    relaxations and pieces (docs/exact.md, *The network limit*)."""
+
+    entries: list[tuple[_Program, _Limits]] = field(default_factory=list)
+
+
 class KofNSearch:
     """A declared ``[network] max_faulty`` applied to one program by branch and bound (analysis/kofn.py, docs/exact.md).
 
@@ -711,20 +756,29 @@ class KofNSearch:
     (:meth:`learn`); without it the loop solves each end once.
     """
 
-    def __init__(self, prog: _Program, plans: list[_HealthPlan], tally: _HealthTally, budget: int) -> None:
+    def __init__(self, prog: _Program, plans: list[_HealthPlan], tally: _HealthTally, budget: int, ledger: _Ledger | None = None) -> None:
         self.prog, self.plans, self.tally, self.budget = prog, plans, tally, budget
         self.guides = _Guides()
+        self.ledger = ledger if ledger is not None else _Ledger()
+        self.box: dict[int, list[float]] = {}  # step → [β lo, β hi, r lo, r hi]: the tightest proven of it (own horizons, imports)
+        self.upto: dict[int, int] = {}  # per other program of the ledger (its position): the last of its horizons imported
 
     @classmethod
-    def of(cls, prog: _Program, scenario: Scenario, health: bool, tally: _HealthTally, budget: int) -> KofNSearch | None:
+    def of(cls, prog: _Program, scenario: Scenario, health: bool, tally: _HealthTally, budget: int, ledger: _Ledger | None = None) -> KofNSearch | None:
         """The search of ``prog`` where ``health`` applies a declared group its nodes say something about; else None."""
         plans = _plans(prog, scenario, health)
-        return cls(prog, plans, tally, budget) if plans else None
+        return cls(prog, plans, tally, budget, ledger) if plans else None
 
-    def horizon(self, conic: Conic) -> _Horizon:
-        """Horizon k's program with what the past horizons proved (the plans' cuts), its unions' pieces outside the
-        program's range dropped before the deadline (:meth:`_HealthPlan.narrow`, the solves counted)."""
-        horizon = _Horizon(conic.with_rows([row for p in self.plans for row in p.cuts]), self.prog.nz)
+    def horizon(self, conic: Conic, k: int) -> _Horizon:
+        """Horizon k's program with what the past horizons proved (the plans' cuts; in a network limit the box of β_j, r_j
+        of every past step, its own horizons' and the other programs' of the ledger whose data this horizon holds), its
+        unions' pieces outside the program's range dropped before the deadline (:meth:`_HealthPlan.narrow`, the solves
+        counted)."""
+        self._import(k)
+        rows = [row for p in self.plans for row in p.cuts]
+        for j, (b_lo, b_hi, r_lo, r_hi) in sorted(self.box.items()):
+            rows += interval_rows({self.prog._x(j, 0): 1.0}, _loosened(b_lo, b_hi)) + interval_rows({self.prog._x(j, 1): 1.0}, _loosened(r_lo, r_hi))
+        horizon = _Horizon(conic.with_rows(rows), self.prog.nz)
         if self.tally.in_time():
             self.tally.solves += sum(p.narrow(horizon) for p in self.plans)
         return horizon
@@ -748,6 +802,32 @@ class KofNSearch:
         """Horizon k is done and feasible: its ends bound step k in every later horizon (:meth:`_HealthPlan.learn`)."""
         for p in self.plans:
             p.learn(k, limits.beta[k], limits.r[k], {i: f[k] for i, f in limits.fault.items()})
+        if self.prog.viewer is not None:  # (the central program's own boxes: no fewer solves, one end relaxed on a ring, measured)
+            self._proved(k, limits.beta[k], limits.r[k])
+
+    def _import(self, k: int) -> None:
+        """Every horizon h ≤ k of the ledger's other programs whose data horizon k holds (:meth:`_Program.holds`; a
+        threshold in h) and not imported yet: its β_h, r_h ends bound step h here."""
+        for n, (prog, limits) in enumerate(self.ledger.entries):
+            if prog is self.prog:
+                continue
+            h = self.upto.get(n, -1) + 1
+            while h <= min(k, limits.done) and self.prog.holds(prog, h, k):
+                self._proved(h, limits.beta[h], limits.r[h])
+                h += 1
+            self.upto[n] = h - 1
+
+    def _proved(self, j: int, beta: np.ndarray, r: np.ndarray) -> None:
+        """β_j and r_j lie in these ends (loosened where they become rows) in every later horizon: the box of step j
+        narrows, and so do the unions' windows of t_j (:meth:`_HealthPlan.tighten`)."""
+        old = self.box.get(j, [-math.inf, math.inf, -math.inf, math.inf])
+        ends = [float(v) if not math.isnan(v) else d for v, d in zip((beta[0], beta[1], r[0], r[1]), old)]
+        new = [max(old[0], ends[0]), min(old[1], ends[1]), max(old[2], ends[2]), min(old[3], ends[3])]
+        if new == old or new[0] > new[1] or new[2] > new[3]:
+            return  # nothing new (or two programs disagree: the rows would leave no trajectory, so none are added)
+        self.box[j] = new
+        for p in self.plans:
+            p.tighten(j, p.window(j, np.array(new[:2]), np.array(new[2:])))
 
     def summary(self, declared: str, budget_s: float | None) -> HealthSearch:
         """How the computation applied the assumption (its tally is every program's)."""
@@ -805,6 +885,7 @@ def exact_bounds(
     health_budget: int = HEALTH_BUDGET,
     budget_s: float | None = None,
     network: bool = False,
+    central: ExactBounds | None = None,
 ) -> ExactBounds:
     """The exact intervals of every step of ``record`` under ``scenario``'s assumptions (module doc).
 
@@ -822,7 +903,9 @@ def exact_bounds(
     limit*): its β, r (``ExactBounds.by_node``) and its fault from its own data and node j's data up to step
     k − d(j→i) (:meth:`Scenario.delays`), one program per node (one for all where every datum reaches every node in
     its step: the central program); the witnesses' faults of other nodes are not checked there (a fault the viewer
-    has no datum of is left at 0).
+    has no datum of is left at 0).  ``central``: the central limit of the same record and assumptions, where it is at
+    hand (``exact --network`` computes it first): each node's program takes its box of every step whose data it holds
+    (:class:`_Ledger`), which leaves the limits as they are and spares solves.
     """
     data = step_data(record)
     scenario, bounded = _program_nodes(scenario, record, data, fault_bounds, nodes, network)
@@ -835,21 +918,29 @@ def exact_bounds(
     searches: list[KofNSearch] = []
     infeasible: set[int] = set()
     shared = network and everywhere(scenario)
-    for n, viewer in enumerate(scenario.ids if network and not shared else [None]):
+    viewers: list[int | None] = list(scenario.ids) if network and not shared else [None]
+    ledger = _Ledger()
+    if network and not shared and central is not None and _same_assumptions(central, fault_bounds, health, scenario):
+        ledger.entries.append((_Program(scenario, data, bounded), _Limits(central.beta, central.r, central.fault, done=K1 - 1)))
+    runs = []
+    for n, viewer in enumerate(viewers):
         prog = _Program(scenario, data, bounded, viewer)
-        kofn = KofNSearch.of(prog, scenario, health, tally, health_budget)
+        kofn = KofNSearch.of(prog, scenario, health, tally, health_budget, ledger)
         searches += [kofn] if kofn is not None else []
         if viewer is None:
             limits = _Limits(beta, r, fault)
         else:
             limits = _Limits(np.full((K1, 2), np.nan), np.full((K1, 2), np.nan), {viewer: fault[viewer]})
             by_node[viewer] = (limits.beta, limits.r)
+        ledger.entries.append((prog, limits))
 
         def step_progress(k: int, total: int, n: int = n) -> None:
             if progress is not None:
-                progress(n * total + k, total * (len(scenario.ids) if network else 1))
+                progress(k * len(viewers) + n, total * len(viewers))
 
-        infeasible |= loop.run(prog, limits, kofn, step_progress)
+        runs.append(loop.horizons(prog, limits, kofn, step_progress))
+    for horizon in zip(*runs):  # side by side, horizon by horizon: each program imports what the others proved so far
+        infeasible |= {k for k, feasible in horizon if not feasible}
     if shared:  # every node has every datum in its step: each node's program is the central one
         by_node = {i: (beta.copy(), r.copy()) for i in scenario.ids}
         beta[:], r[:] = np.nan, np.nan
@@ -867,6 +958,13 @@ def exact_bounds(
         by_node=by_node,
         no_reading=tuple((i, d.step) for d in data for i in d.no_reading if i in scenario.ids),
     )
+
+
+def _same_assumptions(central: ExactBounds, fault_bounds: FaultBoundsMode, health: bool, scenario: Scenario) -> bool:
+    """Whether ``central`` is the central limit under the assumptions a network limit is asked for (else it bounds
+    nothing there and is not used)."""
+    applied = health and scenario.health_declared
+    return not central.network and central.fault_bounds == fault_bounds and (central.health is not None) == applied and not central.infeasible_steps
 
 
 def _program_nodes(
@@ -898,6 +996,7 @@ class _Limits:
     beta: np.ndarray
     r: np.ndarray
     fault: dict[int, np.ndarray]
+    done: int = -1  # the last horizon whose ends are in (the programs of a network limit run side by side)
 
     def target(self, coordinate: Coordinate, node: int | None) -> np.ndarray:
         return self.fault[node] if node is not None else (self.beta if coordinate == "beta" else self.r)
@@ -922,23 +1021,31 @@ class _StepLoop:
 
     def run(self, prog: _Program, limits: _Limits, kofn: KofNSearch | None, progress: Callable[[int, int], None]) -> set[int]:
         """Every horizon of ``prog`` (its ends into ``limits``); the infeasible steps."""
+        return {k for k, feasible in self.horizons(prog, limits, kofn, progress) if not feasible}
+
+    def horizons(self, prog: _Program, limits: _Limits, kofn: KofNSearch | None, progress: Callable[[int, int], None]) -> Iterator[tuple[int, bool]]:
+        """The horizons of ``prog`` one at a time (each step k and whether it has a trajectory), so that the programs of a
+        network limit can run side by side, each importing what the others proved (:class:`_Ledger`)."""
         K1 = len(prog.data)
-        infeasible: list[int] = []
         st = _settings()
+        infeasible = False
         for k in range(K1):
             progress(k, K1)
             if kofn is not None and infeasible:  # a later horizon only adds constraints: no trajectory either
-                infeasible.append(k)
+                limits.done = k
+                yield k, False
                 continue
             conic = Conic(*prog.matrices(k, self.eliminate), st)
-            horizon = kofn.horizon(conic) if kofn is not None else _Horizon(conic, prog.nz)
-            if not self._ends(prog, k, horizon, limits, kofn):
-                infeasible.append(k)
-            elif kofn is not None:
+            horizon = kofn.horizon(conic, k) if kofn is not None else _Horizon(conic, prog.nz)
+            feasible = self._ends(prog, k, horizon, limits, kofn)
+            del horizon  # (its solvers: a suspended program keeps none)
+            if feasible and kofn is not None:
                 kofn.learn(k, limits)
             if kofn is not None:
                 kofn.tally.clock(k)
-        return set(infeasible)
+            infeasible = infeasible or not feasible
+            limits.done = k
+            yield k, feasible
 
     def _ends(self, prog: _Program, k: int, horizon: _Horizon, limits: _Limits, kofn: KofNSearch | None) -> bool:
         """Every end of horizon k; False if the step has no trajectory."""
@@ -972,7 +1079,7 @@ def network_limit(scenario: Scenario, record: Record, central: ExactBounds, **kw
         nan = np.full_like(central.beta, np.nan)
         return replace(central, beta=nan, r=nan.copy(), by_node={i: (central.beta, central.r) for i in scenario.ids})
     health = central.health is not None or not scenario.health_declared
-    return exact_bounds(scenario, record, central.fault_bounds, health=health, network=True, **kw)  # type: ignore[arg-type]  # kw: exact_bounds' keyword options, passed through
+    return exact_bounds(scenario, record, central.fault_bounds, health=health, network=True, central=central, **kw)  # type: ignore[arg-type]  # kw: exact_bounds' keyword options, passed through
 
 
 def eta_s(elapsed: float, done: int, total: int, budget_s: float | None) -> float | None:

@@ -356,32 +356,42 @@ def cmd_inspect(a: argparse.Namespace) -> int:
             _print_state(rec, i)
         return 0
     for i in ids:
-        method = rec.meta.estimators.get(i, "sdp")
-        if method == "sdp":
-            cut = rec.nodes[i].has_fault_range  # the slab of a declared bound, the k-of-N pin or the region (ProvenSet.fault)
-            print(
-                f"node {i}: fault estimate f̂ (its ellipsoid's centre) and bounds: the ellipsoid {{x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ}}'s "
-                "extent in f" + (", cut by its fault range (a declared |f| ≤ F or the k-of-N pin) on the steps that have one" if cut else "")
-            )
-        else:  # a set estimator publishes its own set: its bounds are that set's interval hull
-            print(f"node {i} ({method}): fault bounds of its published set (interval hull), estimate their midpoint")
-        print(f"{'step':>5} {'f_true':>9} {'f_est':>9} {'lower':>9} {'upper':>9} {'E':>7}  {'fault':<9}  status")
-        for r in rec.fault_rows(i):
-            ft = "-" if r["fault_true"] is None else f"{r['fault_true']:9.4f}"
-            e = "-" if r["E"] is None else f"{r['E']:7.3f}"
-            flag = (
-                ("  not judged; its own reading contradicts its declared bounds" if r["inconsistent"] else "  not judged")
-                if not r["judged"]
-                else ("" if r["contained"] else "  MISS" if r["missed"] else "  undecided (the reference's box overlaps the set)")
-            )
-            if r["judged"] and r["contained"] and r["continues_contained"] is False:
-                flag = "  MISS (the set it continues from)"
-            if r["cause"] is not None:  # outside the guarantee: why, beside a miss or alone
-                flag += f"  [not covered: {r['cause']}]"
-            fdi = r["fdi"] or "-"  # detected: the interval excludes 0 (docs/fdi.md)
-            print(f"{r['step']:5d} {ft:>9} {r['fault_estimate']:9.4f} {r['fault_lower']:9.4f} {r['fault_upper']:9.4f} {e:>7}  {fdi:<9}  {r['status']}{flag}")
-        print()
+        _print_faults(rec, i)
     return 0
+
+
+def _print_faults(rec: Record, i: int) -> None:
+    """``inspect``'s table of node ``i``: its fault estimate and bounds per step, and what the collector found."""
+    method = rec.meta.estimators.get(i, "sdp")
+    if method == "sdp":
+        cut = rec.nodes[i].has_fault_range  # the slab of a declared bound, the k-of-N pin or the region (ProvenSet.fault)
+        print(
+            f"node {i}: fault estimate f̂ (its ellipsoid's centre) and bounds: the ellipsoid {{x̄: (x̄ − x̂)ᵀP⁻¹(x̄ − x̂) ≤ ρ}}'s "
+            "extent in f" + (", cut by its fault range (a declared |f| ≤ F or the k-of-N pin) on the steps that have one" if cut else "")
+        )
+    else:  # a set estimator publishes its own set: its bounds are that set's interval hull
+        print(f"node {i} ({method}): fault bounds of its published set (interval hull), estimate their midpoint")
+    print(f"{'step':>5} {'f_true':>9} {'f_est':>9} {'lower':>9} {'upper':>9} {'E':>7}  {'fault':<9}  status")
+    for r in rec.fault_rows(i):
+        ft = "-" if r["fault_true"] is None else f"{r['fault_true']:9.4f}"
+        e = "-" if r["E"] is None else f"{r['E']:7.3f}"
+        fdi = r["fdi"] or "-"  # detected: the interval excludes 0 (docs/fdi.md)
+        print(f"{r['step']:5d} {ft:>9} {r['fault_estimate']:9.4f} {r['fault_lower']:9.4f} {r['fault_upper']:9.4f} {e:>7}  {fdi:<9}  {r['status']}{_flag(r)}")
+    print()
+
+
+def _flag(r: dict) -> str:
+    """What the collector found of a fault row's step: not judged (and why), a miss, undecided, not covered (why)."""
+    flag = (
+        ("  not judged; its own reading contradicts its declared bounds" if r["inconsistent"] else "  not judged")
+        if not r["judged"]
+        else ("" if r["contained"] else "  MISS" if r["missed"] else "  undecided (the reference's box overlaps the set)")
+    )
+    if r["judged"] and r["contained"] and r["continues_contained"] is False:
+        flag = "  MISS (the set it continues from)"
+    if r["cause"] is not None:  # outside the guarantee: why, beside a miss or alone
+        flag += f"  [not covered: {r['cause']}]"
+    return flag
 
 
 def _print_state(rec: Record, i: int) -> None:
@@ -487,7 +497,7 @@ def _exact_network(a: argparse.Namespace, sc: Scenario, rec: Record, central: Ex
         bar.total = total
         bar.update(k)
 
-    net = exact_bounds(sc, rec, a.fault_bounds, progress=on_progress, health=not a.no_health, budget_s=a.budget, network=True)
+    net = exact_bounds(sc, rec, a.fault_bounds, progress=on_progress, health=not a.no_health, budget_s=a.budget, network=True, central=central)
     bar.close()
     cmp = compare_record(rec, net)
     print("\n".join(network_table(sc, net, cmp, central).lines()))

@@ -486,6 +486,14 @@ class TopologyFile(_Strict, frozen=True, kw_only=True):
     network: NetworkSpec = field(default_factory=NetworkSpec)
 
     def __post_init__(self) -> None:
+        self._check_envelope()
+        self._check_graph()
+        self._check_speed()
+        self._check_model_uncertainty()
+        self._check_network()
+
+    def _check_envelope(self) -> None:
+        """An envelope only with a nonlinear plant and its declared bound, within the model's speeds."""
         if self.envelope is not None and (self.model_uncertainty is None or self.vehicle.plant == "ts"):
             raise ValueError("envelope: it says where a plant's [model_uncertainty] bound holds; declare a nonlinear plant and that bound with it")
         if self.envelope is not None:
@@ -493,6 +501,17 @@ class TopologyFile(_Strict, frozen=True, kw_only=True):
                 check_envelope_speeds(self.envelope.build(), self.vehicle.vx_min_kmh, self.vehicle.vx_max_kmh)
             except ValueError as exc:
                 raise ValueError(f"envelope: {exc}") from None
+
+    def _check_model_uncertainty(self) -> None:
+        """No declared model mismatch on a T-S plant (it is its own model)."""
+        if self.vehicle.plant == "ts" and self.model_uncertainty is not None:
+            raise ValueError(
+                'model_uncertainty: a T-S plant (plant = "ts") is its own model, so e_k = 0 and a declared bound only widens '
+                "every set; remove [model_uncertainty], or choose a nonlinear plant (docs/plant.md)"
+            )
+
+    def _check_graph(self) -> None:
+        """Nodes with distinct ids; edges between them, each once; loss bursts on edges."""
         ids = [n.id for n in self.nodes]
         if not ids:
             raise ValueError("nodes: at least one node is needed")
@@ -509,6 +528,9 @@ class TopologyFile(_Strict, frozen=True, kw_only=True):
         for b in self.loss.bursts:
             if (b.to, b.from_) not in seen or b.to == b.from_:
                 raise ValueError(f"loss.bursts: {b.from_}→{b.to} is not an edge between two nodes")
+
+    def _check_speed(self) -> None:
+        """The speed reference within the model's speed range."""
         lo, hi = self.speed.mean_kmh - self.speed.amplitude_kmh, self.speed.mean_kmh + self.speed.amplitude_kmh
         if self.vehicle.manoeuvre not in SINE_SPEED:  # held at the mean speed
             lo = hi = self.speed.mean_kmh
@@ -517,11 +539,9 @@ class TopologyFile(_Strict, frozen=True, kw_only=True):
                 f"speed: manoeuvre {self.vehicle.manoeuvre!r}: its speed reference spans [{lo}, {hi}] km/h, "
                 f"outside the model's [{self.vehicle.vx_min_kmh}, {self.vehicle.vx_max_kmh}] km/h"
             )
-        if self.vehicle.plant == "ts" and self.model_uncertainty is not None:
-            raise ValueError(
-                'model_uncertainty: a T-S plant (plant = "ts") is its own model, so e_k = 0 and a declared bound only widens '
-                "every set; remove [model_uncertainty], or choose a nonlinear plant (docs/plant.md)"
-            )
+
+    def _check_network(self) -> None:
+        """No k-of-N declaration and no reading scope where the readings' exchange is off."""
         if not self.network.readings and (self.network.max_faulty is not None or self.network.health_groups):
             what = "max_faulty" if self.network.max_faulty is not None else "health_groups"
             raise ValueError(f"network.{what}: the k-of-N declaration rests on the readings' exchange, which readings = false turns off; remove one of the two")
@@ -928,35 +948,11 @@ def load_topology(
     recorded drive the world (docs/your-log.md).  The overrides are applied to the files' values before
     validation, so the scenario's ``settings_digest`` covers them."""
     path = resolve_topology(path)
-    if not path.exists():
-        raise ConfigError(f"{path}: file not found (bundled topologies: {', '.join(bundled_topologies())})")
-    if case is not None and case not in ("nsnim", "saim"):
-        raise ConfigError(f"{path}: case must be 'nsnim' or 'saim', got {case!r}")
-    if steps is not None and steps < 1:
-        raise ConfigError(f"{path}: steps must be ≥ 1, got {steps}")
-    if estimator is not None and estimator not in NODE_ESTIMATOR_NAMES:
-        raise ConfigError(f"estimator must be one of {', '.join(NODE_ESTIMATOR_NAMES)}, got {estimator!r}")
-    data = _read_toml(path)
-    if manoeuvre is not None:  # validated with the file: the speed range depends on the manoeuvre
-        vehicle = data.get("vehicle", {})
-        if isinstance(vehicle, dict):  # anything else fails validation as it is
-            data["vehicle"] = {**vehicle, "manoeuvre": manoeuvre}
-    if steer_high is not None:  # validated with the file: low ≤ high, the physical range
-        steering = data.get("steering", {})
-        if isinstance(steering, dict):  # anything else fails validation as it is
-            data["steering"] = {**steering, "high": steer_high}
-    if speed_kmh is not None:  # validated with the file: the range, and the model's speed range at load
-        speed = data.get("speed", {})
-        if isinstance(speed, dict):  # anything else fails validation as it is
-            data["speed"] = {**speed, "mean_kmh": speed_kmh}
+    _check_arguments(path, case, steps, estimator)
+    data = _overridden(_read_toml(path), manoeuvre, steer_high, speed_kmh)
     topo = _validated(path, data, TopologyFile)
     case = case or topo.case
-    try:
-        node_dir = (path.parent / topo.node_dir).resolve()
-    except (RuntimeError, OSError, ValueError) as exc:  # a symlink loop, a NUL byte
-        raise ConfigError(f"{path}: node_dir {topo.node_dir!r}: {exc}") from None
-    if not node_dir.is_dir():  # a wrong node_dir once read as a missing profile file
-        raise ConfigError(f"{path}: node_dir {topo.node_dir!r}: no such directory ({node_dir}; relative to the topology file's directory)")
+    node_dir = _node_dir(path, topo)
     v = topo.vehicle
     log_source = _log_source(path, v, log, mapping, steps is not None or "steps" in data)
     try:
@@ -970,38 +966,7 @@ def load_topology(
         if not ppath.exists():
             raise ConfigError(f"{path}: node {ref.id}: profile {ref.profile!r}: {ppath.name} not found in node_dir {topo.node_dir!r} ({node_dir})")
         prof = profiles[ref.id] = load_profile(ppath) if fault_scale is None else scaled_fault(ppath, load_profile(ppath), fault_scale)
-        saim = case == "saim"
-        if saim and (prof.saturation is None or prof.availability is None):
-            raise ConfigError(f"{ppath}: the saim case needs [saturation] and [availability] sections")
-        sat = prof.saturation if saim else None
-        sensor = Sensor(
-            C=np.array(prof.C, dtype=float),
-            Ds=prof.Ds,
-            Dv=prof.Dv,
-            R=prof.R,
-            saturated=sat is not None,
-            r_max=sat.r_max if sat else np.inf,
-            h1=sat.h1 if sat else 1.0,
-            h2=sat.h2 if sat else 1.0,
-        )
-        in_w = {e.from_: e.weight for e in topo.edges if e.to == ref.id}
-        nodes.append(
-            NodeConfig(
-                id=ref.id,
-                label=prof.label or ref.profile,
-                sensor=sensor,
-                noise_frequency=prof.noise_frequency,
-                gamma_range=(prof.availability.gamma_min, prof.availability.gamma_max) if saim else None,  # type: ignore[union-attr]  # saim: the check above raised unless both sections exist
-                fault=prof.fault.build(),
-                x0_hat=np.array(prof.x0_hat, dtype=float),
-                P0=prof.P0_matrix(),
-                rho=prof.rho,
-                in_weights=dict(sorted(in_w.items())),
-                fault_rate=prof.fault_bound.rate,
-                fault_size=prof.fault_bound.size,
-                estimator=estimator or ref.estimator,
-            )
-        )
+        nodes.append(_node_config(ppath, prof, ref, topo, case, estimator))
     scenario = Scenario(
         path=str(path),
         name=topo.name,
@@ -1034,6 +999,73 @@ def load_topology(
     if log_source is not None:
         _check_log_nodes(path, log_source, scenario.ids, scenario.case)
     return scenario
+
+
+def _check_arguments(path: Path, case: str | None, steps: int | None, estimator: str | None) -> None:
+    """:func:`load_topology`'s file and overrides that need no file to refuse."""
+    if not path.exists():
+        raise ConfigError(f"{path}: file not found (bundled topologies: {', '.join(bundled_topologies())})")
+    if case is not None and case not in ("nsnim", "saim"):
+        raise ConfigError(f"{path}: case must be 'nsnim' or 'saim', got {case!r}")
+    if steps is not None and steps < 1:
+        raise ConfigError(f"{path}: steps must be ≥ 1, got {steps}")
+    if estimator is not None and estimator not in NODE_ESTIMATOR_NAMES:
+        raise ConfigError(f"estimator must be one of {', '.join(NODE_ESTIMATOR_NAMES)}, got {estimator!r}")
+
+
+def _overridden(data: dict, manoeuvre: str | None, steer_high: float | None, speed_kmh: float | None) -> dict:
+    """The file's tables with the overrides in, validated with the file (a table that is no table fails validation as
+    it is): the manoeuvre (the speed range depends on it), ``[steering] high`` (low ≤ high, the physical range),
+    ``[speed] mean_kmh`` (the range, and the model's speed range at load)."""
+    for table, key, value in (("vehicle", "manoeuvre", manoeuvre), ("steering", "high", steer_high), ("speed", "mean_kmh", speed_kmh)):
+        if value is not None and isinstance(current := data.get(table, {}), dict):
+            data[table] = {**current, key: value}
+    return data
+
+
+def _node_dir(path: Path, topo: TopologyFile) -> Path:
+    """The topology's node directory, resolved against the file's directory; a ConfigError where there is none."""
+    try:
+        node_dir = (path.parent / topo.node_dir).resolve()
+    except (RuntimeError, OSError, ValueError) as exc:  # a symlink loop, a NUL byte
+        raise ConfigError(f"{path}: node_dir {topo.node_dir!r}: {exc}") from None
+    if not node_dir.is_dir():  # a wrong node_dir once read as a missing profile file
+        raise ConfigError(f"{path}: node_dir {topo.node_dir!r}: no such directory ({node_dir}; relative to the topology file's directory)")
+    return node_dir
+
+
+def _node_config(ppath: Path, prof: NodeProfile, ref: NodeRef, topo: TopologyFile, case: str, estimator: str | None) -> NodeConfig:
+    """One node of the topology from its profile (``ppath``), for ``case``: its sensor, fault, prior and in-weights."""
+    saim = case == "saim"
+    if saim and (prof.saturation is None or prof.availability is None):
+        raise ConfigError(f"{ppath}: the saim case needs [saturation] and [availability] sections")
+    sat = prof.saturation if saim else None
+    sensor = Sensor(
+        C=np.array(prof.C, dtype=float),
+        Ds=prof.Ds,
+        Dv=prof.Dv,
+        R=prof.R,
+        saturated=sat is not None,
+        r_max=sat.r_max if sat else np.inf,
+        h1=sat.h1 if sat else 1.0,
+        h2=sat.h2 if sat else 1.0,
+    )
+    in_w = {e.from_: e.weight for e in topo.edges if e.to == ref.id}
+    return NodeConfig(
+        id=ref.id,
+        label=prof.label or ref.profile,
+        sensor=sensor,
+        noise_frequency=prof.noise_frequency,
+        gamma_range=(prof.availability.gamma_min, prof.availability.gamma_max) if saim else None,  # type: ignore[union-attr]  # saim: the check above raised unless both sections exist
+        fault=prof.fault.build(),
+        x0_hat=np.array(prof.x0_hat, dtype=float),
+        P0=prof.P0_matrix(),
+        rho=prof.rho,
+        in_weights=dict(sorted(in_w.items())),
+        fault_rate=prof.fault_bound.rate,
+        fault_size=prof.fault_bound.size,
+        estimator=estimator or ref.estimator,
+    )
 
 
 def _settings_digest(topo: TopologyFile, profiles: dict[int, NodeProfile]) -> str:

@@ -47,6 +47,7 @@ from __future__ import annotations
 import gzip
 import json
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any, Literal, Protocol, cast, get_args
@@ -407,6 +408,18 @@ def load_record(path: str | Path) -> Record:
 
 def _load_lines(path: Path, data: bytes) -> Record:
     """Version 2: JSON Lines; without the summary line a partial record."""
+    objs = _entries(path, data)
+    meta = _header(path, objs)
+    _check_sequence(path, objs)
+    truth, nodes, summary = _body(path, objs, meta.get("node_ids", []))
+    last = _check_order(path, truth, nodes)
+    if summary is None:  # a partial record: the states of the step being written when it stopped are not a step
+        nodes = {i: [e for e in es if e["step"] <= last] for i, es in nodes.items()}
+    return _build(path, meta, truth, nodes, summary, partial=summary is None, last_complete=last)
+
+
+def _entries(path: Path, data: bytes) -> list[dict]:
+    """Every line as its record entry; the last line cut short (the writer died writing it) left out."""
     lines = data.split(b"\n")
     if lines and lines[-1] == b"":
         lines.pop()
@@ -421,6 +434,11 @@ def _load_lines(path: Path, data: bytes) -> Record:
         if not isinstance(obj, dict) or "kind" not in obj:
             raise RecordError(f"{path}: malformed record (line {n + 1} is not a record entry)")
         objs.append(obj)
+    return objs
+
+
+def _header(path: Path, objs: list[dict]) -> dict:
+    """The meta line's meta, checked: this format and version, a dict."""
     if not objs or objs[0].get("kind") != "meta" or objs[0].get("format") != FORMAT:
         raise RecordError(f"{path}: not a netsetest record (no meta line)")
     if objs[0].get("version") != VERSION:
@@ -428,11 +446,15 @@ def _load_lines(path: Path, data: bytes) -> Record:
     meta = objs[0].get("meta")
     if not isinstance(meta, dict):
         raise RecordError(f"{path}: malformed record (meta must be a dict)")
-    _check_sequence(path, objs)
-    truth: list[dict] = []
-    node_ids = meta.get("node_ids", [])
+    return meta
+
+
+def _body(path: Path, objs: list[dict], node_ids: object) -> tuple[list[dict], dict[str, list[dict]], dict | None]:
+    """The lines after the meta line: the truth entries, each node's states (``node_ids``: meta's, checked), the
+    summary (None: a partial record)."""
     if not isinstance(node_ids, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in node_ids):
         raise RecordError(f"{path}: malformed record (meta.node_ids must be a list of node ids)")
+    truth: list[dict] = []
     nodes: dict[str, list[dict]] = {str(i): [] for i in node_ids}
     summary: dict | None = None
     try:
@@ -450,10 +472,7 @@ def _load_lines(path: Path, data: bytes) -> Record:
                 raise RecordError(f"{path}: malformed record (line {n}: unknown kind {kind!r})")
     except (KeyError, TypeError, ValueError, OverflowError) as exc:
         raise RecordError(f"{path}: malformed record ({type(exc).__name__}: {exc})") from None
-    last = _check_order(path, truth, nodes)
-    if summary is None:  # a partial record: the states of the step being written when it stopped are not a step
-        nodes = {i: [e for e in es if e["step"] <= last] for i, es in nodes.items()}
-    return _build(path, meta, truth, nodes, summary, partial=summary is None, last_complete=last)
+    return truth, nodes, summary
 
 
 def _check_sequence(path: Path, objs: list[dict]) -> None:
@@ -577,27 +596,7 @@ def record_from_parts(
 ) -> Record:
     """A :class:`Record` from the parts a run returns (or a file holds); raises KeyError/TypeError/ValueError
     on malformed entries.  ``last_complete_step`` defaults to the last step of ``truth``."""
-    tracks = {}
-    for key, entries in nodes.items():
-        tracks[int(key)] = NodeTrack(
-            id=int(key),
-            steps=np.array([e["step"] for e in entries], dtype=int),
-            **_tracked_sets(entries),
-            E=np.array([np.nan if e["E"] is None else e["E"] for e in entries], dtype=float),
-            contained=np.array([e["contained"] is True for e in entries], dtype=bool),
-            assumptions_ok=np.array([bool(e["assumptions_ok"]) for e in entries], dtype=bool),
-            status=[e["status"] for e in entries],
-            solve_ms=np.array([e["solve_ms"] for e in entries], dtype=float),
-            set_bounds=_set_bounds(entries),
-            # records before "judged" wrote contained: true on unjudged rows too; say where they could not be
-            judged=np.array([e.get("judged", e.get("E") is not None and not e.get("contested", False)) for e in entries], dtype=bool),
-            fdi=[_fdi(e.get("fdi")) for e in entries],
-            continues_contained=np.array([e.get("continues_contained") is not False for e in entries], dtype=bool)
-            if any("continues_contained" in e for e in entries)
-            else None,
-            missed_flags=np.array([e.get("missed") is True for e in entries], dtype=bool) if any("missed" in e for e in entries) else None,
-            cuts=_cuts(entries),
-        )
+    tracks = {int(key): _track(int(key), entries) for key, entries in nodes.items()}
     for t in truth:
         if not isinstance(t, dict) or not isinstance(t.get("step"), int):
             raise ValueError("a truth entry without a step")
@@ -607,6 +606,34 @@ def record_from_parts(
     # a run stopped early (Ctrl-C: the collector writes what it has, summary included) is partial too
     stopped = summary is not None and meta.steps is not None and summary.steps_completed < meta.steps
     return Record(path, meta, truth, tracks, summary, nodes, partial or stopped, last_complete_step)
+
+
+def _track(node: int, entries: list[dict]) -> NodeTrack:
+    """One node's state lines as its track (KeyError/TypeError/ValueError on a malformed entry)."""
+    return NodeTrack(
+        id=node,
+        steps=np.array([e["step"] for e in entries], dtype=int),
+        **_tracked_sets(entries),
+        E=np.array([np.nan if e["E"] is None else e["E"] for e in entries], dtype=float),
+        contained=np.array([e["contained"] is True for e in entries], dtype=bool),
+        assumptions_ok=np.array([bool(e["assumptions_ok"]) for e in entries], dtype=bool),
+        status=[e["status"] for e in entries],
+        solve_ms=np.array([e["solve_ms"] for e in entries], dtype=float),
+        set_bounds=_set_bounds(entries),
+        # records before "judged" wrote contained: true on unjudged rows too; say where they could not be
+        judged=np.array([e.get("judged", e.get("E") is not None and not e.get("contested", False)) for e in entries], dtype=bool),
+        fdi=[_fdi(e.get("fdi")) for e in entries],
+        continues_contained=_flags(entries, "continues_contained", lambda v: v is not False),
+        missed_flags=_flags(entries, "missed", lambda v: v is True),
+        cuts=_cuts(entries),
+    )
+
+
+def _flags(entries: list[dict], key: str, flag: Callable[[object], bool]) -> np.ndarray | None:
+    """A per-step flag the state lines carry since some version (None: a record older than it)."""
+    if not any(key in e for e in entries):
+        return None
+    return np.array([flag(e.get(key)) for e in entries], dtype=bool)
 
 
 def save_record(path: str | Path, meta: RunMeta, truth: list[dict], nodes: dict[str, list[dict]], summary: RunSummary | None) -> None:

@@ -227,6 +227,14 @@ def format_table(summary: RunSummary, strict: bool = False) -> str:
     out.append("")
     out.extend(fdi_table(summary))
     out.extend(cut_lines(summary))
+    out.extend(_notes(summary))
+    out.append(_last_line(summary, strict))
+    return "\n".join(out)
+
+
+def _notes(summary: RunSummary) -> list[str]:
+    """The lines under the tables: misses after a broken assumption, nodes missing or rejoined, losses, drops."""
+    out = []
     if summary.misses_assumption_broken_total:
         out.append(f"{summary.misses_assumption_broken_total} miss(es) after a broken assumption (not covered by the guarantee).")
     if summary.nodes_missing:
@@ -237,15 +245,18 @@ def format_table(summary: RunSummary, strict: bool = False) -> str:
         out.append(f"scheduled message losses: {summary.losses_total}")
     for role, reasons in summary.drops.items():
         out.append(f"dropped by {role}: " + ", ".join(f"{r} {n}" for r, n in reasons.items()))
-    # the last line: the run, its security mode (Zenoh) and the verdict
+    return out
+
+
+def _last_line(summary: RunSummary, strict: bool) -> str:
+    """The last line: the run, its security mode (Zenoh) and the verdict."""
     security = f" (security: {summary.security})" if summary.security else ""
     seed = f", seed {summary.seed}" if summary.seed is not None else ""
     world = f"log {summary.drive_log}" if summary.drive_log is not None else f"signals {summary.signals}"  # a log draws no signals
-    out.append(
+    return (
         f"{outcome(summary, strict).word}: {summary.mode or ''} run{security}, case {summary.case}, {world}, "
         f"variant {summary.variant}{seed if summary.drive_log is None else ''}, steps 0–{summary.steps_completed}: {verdict(summary)}."
     )
-    return "\n".join(out)
 
 
 def fdi_table(summary: RunSummary) -> list[str]:
@@ -291,15 +302,20 @@ def own_data(summary: RunSummary) -> str:
 
 def verdict(summary: RunSummary) -> str:
     """The result in words, never more than was checked: how many node-steps the guarantee covered."""
-    evaluated, contained = summary.node_steps_evaluated, summary.node_steps_contained
-    covered, reported = summary.node_steps_covered, summary.node_steps_reported
-    acc = summary.reference_accuracy
-    if summary.drive_log is not None and acc is None:  # a recorded drive without a reference: nothing can be judged against a truth
+    if summary.drive_log is not None and summary.reference_accuracy is None:  # a recorded drive without a reference: nothing can be judged against a truth
         return (
             f"no reference in the log: none of {summary.node_steps_reported} node-steps judged (the truth is unknown); {own_data(summary)}; "
             f"violations {summary.violations_total}"
             + (f"; {summary.node_steps_no_reading} node-step(s) without a reading" if summary.node_steps_no_reading else "")
         )
+    return _covered(summary) + _not_judged(summary) + _ended(summary) + uncovered_misses(summary)
+
+
+def _covered(summary: RunSummary) -> str:
+    """The verdict's head: violations, the node-steps contained of those judged, those the guarantee covered and why the
+    others were not, whose sets they inherited that from."""
+    evaluated, contained, covered = summary.node_steps_evaluated, summary.node_steps_contained, summary.node_steps_covered
+    acc = summary.reference_accuracy
     if acc is not None:  # a recorded drive: the truth is a box, and three counts say what the reference proves
         counts = (
             f"contained on {contained}, missed on {summary.node_steps_missed}, undecided on {summary.node_steps_undecided} of {evaluated} "
@@ -320,9 +336,15 @@ def verdict(summary: RunSummary) -> str:
         shown = [f"node {o.node} {o.why} from step {o.first_step} ({o.node_steps})" for o in summary.inherited_from[:MAX_ORIGINS]]
         more = len(summary.inherited_from) - MAX_ORIGINS
         text += "; inherited from " + ", ".join(shown) + (f" and {more} more (see the summary)" if more > 0 else "")
-    if reported > evaluated:
-        why = "no reference, truth unknown or copies contested" if acc is not None else "truth unknown or copies contested"
-        text += f"; {reported - evaluated} node-step(s) not judged ({why})"
+    return text
+
+
+def _not_judged(summary: RunSummary) -> str:
+    """The node-steps reported but not judged, and why: no truth, no reading, no copy that matched, an overloaded collector."""
+    text = ""
+    if summary.node_steps_reported > summary.node_steps_evaluated:
+        why = "no reference, truth unknown or copies contested" if summary.reference_accuracy is not None else "truth unknown or copies contested"
+        text += f"; {summary.node_steps_reported - summary.node_steps_evaluated} node-step(s) not judged ({why})"
     if summary.node_steps_no_reading:
         text += f"; {summary.node_steps_no_reading} node-step(s) without a reading (gaps in the log: an SDP node publishes nothing after step 0, uncovered; a set estimator its prediction and every node at step 0 its prior, judged)"
     if summary.node_steps_inconsistent:
@@ -336,6 +358,12 @@ def verdict(summary: RunSummary) -> str:
             f"; collector overloaded on {summary.steps_overloaded} step(s) ({why}): "
             f"{summary.node_steps_overloaded} node-step(s) not judged (collector overloaded), no node blamed"
         )
+    return text
+
+
+def _ended(summary: RunSummary) -> str:
+    """The nodes lost for good, and how the run ended where it did not end with the vehicle's End."""
+    text = ""
     missing = {r.id: r.missing_from for r in summary.nodes if r.id in summary.nodes_missing}
     if missing:
         text += "; lost for good: " + ", ".join(f"node {i} from step {'-' if k is None else k}" for i, k in missing.items())
@@ -349,7 +377,7 @@ def verdict(summary: RunSummary) -> str:
             "stopped, or the machine swapping), long enough to lose its Zenoh session (run --stall-limit) and the messages in flight "
             "to it: the run ended there, no node blamed"
         )
-    return text + uncovered_misses(summary)
+    return text
 
 
 def record_sink(record: str | None, keep: bool = False) -> tuple[RecordSink | None, MemorySink | None]:

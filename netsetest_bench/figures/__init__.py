@@ -1,5 +1,7 @@
 """Each bench part's figures as frozen dataclasses, one module per part (field names are its JSON's keys).
 
-A run builds its figures as a dict and writes them (bench/<part>.json); every renderer reads them through the
-part's ``load`` (netsetest_bench/render.py, ``typed``), once, and never indexes the dict itself.
+Every renderer reads a part's figures through its ``load`` (netsetest_bench/render.py, ``typed``), once, and never
+indexes the dict itself.  The performance, widths and campaign parts build their figures as these dataclasses from
+the measurement on (tests/unit/test_bench_render.py checks that their measuring code reads no figure by its key, and
+that their committed files round-trip through the types); the other parts still build a dict and write it.
 """

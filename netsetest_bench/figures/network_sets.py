@@ -3,10 +3,11 @@ as typed data."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from netsetest_bench.render import typed
 
+WITH = {"json": "with"}  # the JSON's key of a field named with_ (``with`` is a keyword in Python): load reads it, run.py writes it
 Ratios = dict[int, list[float | None]]  # node → published width over the limit: β, r, f, and how many intervals were narrower
 
 
@@ -24,6 +25,7 @@ class Judged:
 @dataclass(frozen=True)
 class AtBoundsRun(Judged):
     seed: int = 0
+    ratios: Ratios | None = None  # per node over the central limit
     worst: float = 0.0  # the worst coordinate of the worst node
     narrower: int = 0
 
@@ -36,6 +38,8 @@ class AtBounds:
     from_step: int
     target: float
     runs: list[AtBoundsRun]
+    case: str = "saim"
+    signals: str = "worst"
 
 
 @dataclass(frozen=True)
@@ -43,7 +47,10 @@ class Ring(Judged):
     """A directed 12-node ring: each node's widths over its network limit and over the central one."""
 
     variant: str = ""
+    nodes: int = 0
+    steps: int = 0
     seed: int = 0
+    from_step: int = 0
     target: float = 0.0
     worst: float = 0.0
     furthest: dict[int, int] | None = None  # node → steps the furthest node's data take to reach it
@@ -82,7 +89,7 @@ class Wire:
 class Sides:
     """The same topology with the exchange (``with``) and without it."""
 
-    with_: Wire
+    with_: Wire = field(metadata=WITH)
     without: Wire
 
 
@@ -90,13 +97,15 @@ class Sides:
 class Step:
     """The estimator's step replayed on the same inputs, with the exchange and without [ms CPU]."""
 
-    with_: float
+    with_: float = field(metadata=WITH)
     without: float
     with_median: float
     without_median: float
     over_ms: float
     over_median_ms: float
     met: bool
+    with_ms: list[float] = field(default_factory=list)  # every round's mean
+    without_ms: list[float] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -106,6 +115,7 @@ class Cost:
     rounds: int
     wire: Sides
     step: Step
+    steps: int = 0
 
 
 @dataclass(frozen=True)

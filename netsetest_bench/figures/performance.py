@@ -29,6 +29,8 @@ class Meta:
     duration_s: float
     config: Config = field(default_factory=Config)
     load_after: str | None = None
+    machine: str = ""
+    only: str | None = None  # the part a run measured alone (None: the whole benchmark)
 
 
 @dataclass(frozen=True)
@@ -38,6 +40,7 @@ class Stat:
     median: float | None
     p95: float | None = None
     n: int = 0
+    mean: float | None = None
 
 
 @dataclass(frozen=True)
@@ -47,6 +50,17 @@ class Yardstick(Stat):
     ratio: float = 0.0
     width_rel_diff_min: float | None = None
     width_rel_diff_max: float | None = None
+    fast_median_same_steps: float | None = None  # the fast path's median on the same node-steps (the ratio's denominator)
+    uncertified: int = 0  # node-steps the yardstick's answer failed the certificate
+
+
+@dataclass(frozen=True)
+class RunCheck:
+    """The captured run's verdict beside its times."""
+
+    violations_total: int
+    fallbacks: int
+    fault_bound_mean_width: list[float | None]
 
 
 YARDSTICKS = ("prev", "straightforward", "naive")  # the reference formulations, in the report's order
@@ -64,6 +78,13 @@ class PaperCase:
     prev: Yardstick | None = None
     straightforward: Yardstick | None = None
     naive: Yardstick | None = None
+    variant: str = ""
+    case: str = ""
+    node_steps: int = 0
+    iterations_max: float | None = None
+    in_run_fast_ms: Stat | None = None  # the same steps as the run timed them
+    degree_of_nodes: dict[int, int] = field(default_factory=dict)
+    run_summary: RunCheck | None = None
 
     def yardsticks(self) -> list[tuple[str, Yardstick]]:
         return [(name, y) for name in YARDSTICKS if (y := getattr(self, name)) is not None]
@@ -87,6 +108,8 @@ class Tightness:
     intervals: int
     exact_s: float | None
     steps: int
+    bounded_nodes: list[int] = field(default_factory=list)
+    fault_width_ratio_by_node: dict[int, float | None] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -95,6 +118,10 @@ class ScalingRow:
     ms_per_node_step: float | None
     estimator_ms_median: float | None = None
     estimator_ms_median_by_degree: dict[int, float] = field(default_factory=dict)
+    node_steps: int = 0
+    estimator_ms_mean: float | None = None
+    fallbacks: int = 0
+    violations: int = 0
 
 
 @dataclass(frozen=True)
@@ -121,31 +148,38 @@ class EndToEnd:
     zenoh_s: float | None
     inmemory_s: float | None
     ratio: float | None
+    zenoh_exit: int | None = None
+    inmemory_exit: int | None = None
 
 
 @dataclass(frozen=True)
 class Zenoh:
-    zenoh_stepping_s: list[float]
+    zenoh_stepping_s: list[float | None]  # None: a run whose stepping was not timed
     inmemory_s: list[float]
     ratio: float | None
     zenoh_startup_s: float | None
     cli_end_to_end: EndToEnd
     node_peak_rss_mb_in_run: list[float]
-    zenoh_insecure_stepping_s: list[float] = field(default_factory=list)
+    zenoh_insecure_stepping_s: list[float | None] = field(default_factory=list)
     ratio_insecure: float | None = None
     cpu_floor: CpuFloor | None = None
+    zenoh_exit_codes: dict[str, int | None] | None = None  # role → exit code, the last secured run
+    zenoh_insecure_exit_codes: dict[str, int | None] | None = None
+    zenoh_violations: int | None = None
 
 
 @dataclass(frozen=True)
 class LaunchRep:
     launch_to_step0_s: float | None
     load_before: float
+    exit_code: int | None = None
 
 
 @dataclass(frozen=True)
 class Launch:
     reps: list[LaunchRep]
     median_s: float | None
+    steps: int = 0
 
 
 @dataclass(frozen=True)
@@ -153,6 +187,7 @@ class NodeRep:
     first_state_s: float | None
     first_estimate_s: float | None
     peak_rss_mb: float | None
+    exit_code: int | None = None
 
 
 @dataclass(frozen=True)
@@ -178,6 +213,8 @@ class Processes:
     nodes_cpu_pct_total: float | None = None
     other_work_pct: float | None = None
     node_peak_rss_mb_median: float | None = None
+    window_s: float | None = None
+    machine_busy_pct: float | None = None
 
 
 @dataclass(frozen=True)
@@ -194,6 +231,8 @@ class RealtimeRun:
     node_cpu_ms_per_step: float | None = None
     demand_cores: float | None = None
     processes: Processes = field(default_factory=Processes)
+    fallbacks: int | None = None
+    violations: int | None = None
 
     def fits(self) -> bool:
         """Every deadline kept and every node there."""
@@ -240,6 +279,11 @@ class NodeProfile:
     load_before: str = ""
     deadline_misses: int = 0
     process_ms_per_step: float | None = None
+    profiled_nodes: int | None = None
+    processes: Processes | None = None
+    node_cpu_ms_per_step: float | None = None
+    demand_cores: float | None = None
+    thread_ms_per_step: float | None = None
 
     def process_ms(self) -> float:
         """The node's whole CPU per step [ms]; a report (its phases) always has it."""
@@ -254,6 +298,12 @@ class Flood:
     ratio: float | None
     nodes_lost: int
     exit_code: int | None
+    target: str = ""  # node 2's input or state key
+    secured: bool = True
+    rate: int | None = None  # msg/s asked
+    steps: int | None = None
+    base_exit_code: int | None = None  # the run without the flood
+    drops: dict[str, dict[str, int]] = field(default_factory=dict)  # role → reason → messages dropped
 
 
 @dataclass(frozen=True)
@@ -261,6 +311,9 @@ class Crash:
     roles_lost: int | None
     exit_code: int | None
     nodes_missing: list[int]
+    secured: bool = True
+    sent: int | None = None
+    drops: dict[str, dict[str, int]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -270,6 +323,9 @@ class Soak:
     rss_end_mb: float | None
     slope_mb_per_10k_steps: float | None
     steps_per_s: float | None
+    wall_s: float | None = None
+    rss_mb: list[tuple[int, float]] = field(default_factory=list)  # (step, MB) samples
+    violations: int | None = None
 
 
 @dataclass(frozen=True)
@@ -314,7 +370,7 @@ class Performance:
     node: NodeStartup
     realtime: Realtime
     defences: Defences
-    scaling: list[ScalingPoint]
+    scaling: list[ScalingPoint] = field(default_factory=list)  # the headline's (run.headline): none before the run computes it
     node_profile: NodeProfile = field(default_factory=NodeProfile)
     node_profile_trace: NodeProfile = field(default_factory=NodeProfile)
     # the headline (run.headline; run.TARGETS names them)
@@ -339,6 +395,15 @@ class Performance:
     flood_nodes_lost: int | None = None
     crash_roles_lost: int | None = None
     soak_rss_slope_mb_per_10k_steps: float | None = None
+    solve_ms_p95: float | None = None
+    solve_ms_p95_saim: float | None = None
+    solve_ms_median_per_rule: float | None = None
+    solve_ms_median_saim_per_rule: float | None = None
+    zenoh_overhead_ratio_insecure: float | None = None
+    realtime_node_cpu_ms_per_step: float | None = None
+    realtime_node_cpu_ms_per_step_trace: float | None = None
+    flood_step_rate_ratio_insecure_input: float | None = None
+    flood_step_rate_ratio_insecure_state: float | None = None
 
 
 def load(doc: dict, what: str = "the performance figures") -> Performance:

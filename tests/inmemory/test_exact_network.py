@@ -143,13 +143,15 @@ def test_the_network_limit_is_the_definitions(case: str) -> None:
     _agrees(ex, sc, rec)
 
 
-def test_the_network_limit_under_k_of_n_is_the_brute_force_over_every_hypothesis_sequence() -> None:
+@pytest.mark.parametrize("with_central", [False, True])
+def test_the_network_limit_under_k_of_n_is_the_brute_force_over_every_hypothesis_sequence(with_central: bool) -> None:
     """One group of four on the chain, at most one faulty: a member's reading the viewer does not have yet is a sensor
     that may be healthy with any value, and the union of a step is built again as its readings come in (node 4 has
-    node 1's two steps late: 4^(k+1) hypothesis sequences per horizon, brute-forced for nodes 3 and 4)."""
+    node 1's two steps late: 4^(k+1) hypothesis sequences per horizon, brute-forced for nodes 3 and 4); the same with
+    the central limit's boxes imported where a node holds their data (``central=``, as ``exact --network`` runs it)."""
     sc, rec = _record("nsnim", group=True)
     assert sc.delays(4) == {1: 2, 2: 1, 3: 0, 4: 0}
-    ex = exact_bounds(sc, rec, network=True)
+    ex = exact_bounds(sc, rec, network=True, central=exact_bounds(sc, rec) if with_central else None)
     assert ex.health is not None and ex.health.exact_ends == ex.health.ends and not ex.health.relaxed
     _agrees(ex, sc, rec, (3, 4))
 
@@ -197,3 +199,73 @@ def test_a_steps_union_is_built_again_as_its_readings_come_in() -> None:
     assert spans[2] is not None and spans[2][0] == (-np.inf, np.inf) and all(np.isfinite(s).all() for s in spans[2][1:])
     kept = [u for u in plan.unions if u.step == 1]  # several pieces (a union), or one (rows of every later horizon)
     assert all(np.isfinite(u.spans[0]).all() for u in kept) and (kept or plan.cuts)
+
+
+def _data_set(prog: _Program, k: int) -> set[tuple[int, int]]:
+    """Every (node, step) whose datum the horizon-k program has, listed from its availability."""
+    return {(j, s) for j in prog.ids for s in range(k + 1) if prog.available(j, s, k)}
+
+
+def test_a_program_holds_another_where_it_has_every_datum_it_has() -> None:
+    """_Program.holds, which decides what one node's limit may take from another's (the ledger), against the data sets
+    listed one by one: on the chain (node 4 has node 1's data two steps late, step 0's three) every viewer against every
+    other, every pair of horizons."""
+    sc, rec = _record("nsnim", group=True)
+    data, bounded = step_data(rec), sc.fault_bounded("used")
+    progs = {i: _Program(sc, data, bounded, viewer=i) for i in sc.ids}
+    held = 0
+    for i, mine in progs.items():
+        for m, other in progs.items():
+            for h in range(len(data)):
+                for k in range(len(data)):
+                    expected = _data_set(other, h) <= _data_set(mine, k)
+                    assert mine.holds(other, h, k) == expected, (i, m, h, k)
+                    held += expected and i != m
+    assert held > 0
+
+
+def test_what_one_program_imports_from_another_leaves_every_limit_as_it_is(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The programs of a network limit run side by side and each takes the others' proven boxes of past states where it
+    holds their data: every end the same as without any import (to the brute force's agreement), some imported."""
+    import netsetest.analysis.exact as exact
+
+    sc, rec = _record("nsnim", group=True)
+    imported: list[int] = []
+    proved = exact.KofNSearch._proved
+
+    def spy(self: exact.KofNSearch, j: int, beta: np.ndarray, r: np.ndarray) -> None:
+        imported.append(j)
+        proved(self, j, beta, r)
+
+    monkeypatch.setattr(exact.KofNSearch, "_proved", spy)
+    with_imports = exact_bounds(sc, rec, network=True)
+    own = len(imported)
+    monkeypatch.setattr(exact._Program, "holds", lambda self, other, h, k: False)
+    imported.clear()
+    alone = exact_bounds(sc, rec, network=True)
+    assert own > len(imported)  # the imports (each program's own horizons are the rest)
+    for i in sc.ids:
+        for c in ("beta", "r", "f"):
+            a, b = with_imports.interval(c, i), alone.interval(c, i)  # type: ignore[arg-type]  # c is one of COORDINATES
+            assert np.allclose(a, b, rtol=AGREE, atol=AGREE), (i, c)
+
+
+def test_a_pending_steps_dead_piece_stays_dropped_as_its_union_is_built_again() -> None:
+    """Node 4's union of step 1 is built again at horizon 2 (node 1's reading of step 1 is not in yet): a piece a search
+    found without a trajectory (and any piece inside it) is left out of it from then on, the others kept; once every
+    reading of step 1 is in, the union kept is built without it too."""
+    sc, rec = _record("nsnim", group=True)
+    prog = _Program(sc, step_data(rec), sc.fault_bounded("used"), viewer=4)
+    (plan,) = _plans(prog, sc, True)
+    wide = np.array([-10.0, 10.0])
+    for k in range(2):
+        plan.unions_at(k, prog._f(3, k), (-np.inf, np.inf))
+        plan.learn(k, wide, wide, {4: wide})
+    (before,) = [u for u in plan.unions_at(2, prog._f(3, 2), (-np.inf, np.inf))[0] if u.step == 1]
+    assert 1 in plan.pending and before.pieces
+    victim = before.pieces[0]
+    plan.drop([(1, victim)])
+    (after,) = [u for u in plan.unions_at(2, prog._f(3, 2), (-np.inf, np.inf))[0] if u.step == 1]
+    assert victim not in after.pieces and set(after.pieces) == set(before.pieces) - {victim}
+    plan.learn(2, wide, wide, {4: wide})  # step 1 complete from horizon 3 on
+    assert 1 not in plan.pending and not any(victim == p for u in plan.unions if u.step == 1 for p in u.pieces)

@@ -5,6 +5,7 @@ processes of their own, the difference and the verdict against the target in the
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -18,9 +19,9 @@ def test_the_region_cost_times_its_pieces_within_the_step_and_unhooks_them() -> 
     cost = region_cost(steps=3, runs=2)
     assert sdp.LocalEstimator._moved_region is moved and cuts.REGION.apply is cut
     for case in CASES:
-        c = cost[case]
-        assert len(c["per_run"]) == 2 and c["step_ms"] > 0.0
-        assert all(0.0 < r["share"] < 1.0 and 0.0 < r["moved_ms"] + r["cut_ms"] < r["step_ms"] for r in c["per_run"])
+        c = cost.case(case)
+        assert len(c.per_run) == 2 and c.step_ms > 0.0
+        assert all(0.0 < r.share < 1.0 and 0.0 < r.moved_ms + r.cut_ms < r.step_ms for r in c.per_run)
 
 
 def test_the_step_side_by_side_measures_both_checkouts_in_processes_and_judges_the_fastest_runs() -> None:
@@ -29,12 +30,13 @@ def test_the_step_side_by_side_measures_both_checkouts_in_processes_and_judges_t
     text = side_by_side_markdown(side)
     for case in CASES:
         for key, what in STEP_FIGURES:
-            c = side[case][key]
-            assert len(c["this_ms"]) == len(c["baseline_ms"]) == 2 and min(c["this_ms"] + c["baseline_ms"]) > 0.0
-            assert c["this"] == min(c["this_ms"]) and c["baseline"] == min(c["baseline_ms"]) and c["this_median"] >= c["this"]
-            assert c["over_ms"] == c["this"] - c["baseline"] and c["met"] == (c["over_ms"] <= STEP_TARGET_MS)
-            assert f"| paper6 {case.upper()} | {what} | {c['this']:.3f} / {c['this_median']:.3f} | {c['baseline']:.3f} / {c['baseline_median']:.3f} |" in text
-    side["nsnim"]["in_run"] |= {"over_ms": 0.3, "over_median_ms": 0.4, "met": False}
+            c = side.case(case).figure(key)
+            assert len(c.this_ms) == len(c.baseline_ms) == 2 and min(c.this_ms + c.baseline_ms) > 0.0
+            assert c.this == min(c.this_ms) and c.baseline == min(c.baseline_ms) and c.this_median >= c.this
+            assert c.over_ms == c.this - c.baseline and c.met == (c.over_ms <= STEP_TARGET_MS)
+            assert f"| paper6 {case.upper()} | {what} | {c.this:.3f} / {c.this_median:.3f} | {c.baseline:.3f} / {c.baseline_median:.3f} |" in text
+    nsnim = side.case("nsnim")
+    side = replace(side, nsnim=replace(nsnim, in_run=replace(nsnim.in_run, over_ms=0.3, over_median_ms=0.4, met=False)))
     assert "| +0.300 / +0.400 ms | no |" in side_by_side_markdown(side)
 
 

@@ -133,11 +133,13 @@ def test_scaleout_bench_stopped_by_sigterm_leaves_nothing_behind(tmp_path) -> No
         pytest.skip(why)
     script = (
         "import sys, tempfile\n"
+        "from dataclasses import replace\n"
         "from pathlib import Path\n"
+        "from netsetest_bench.config import QUICK\n"
         "from netsetest_bench.scaleout import scaleout_figures\n"
         "with tempfile.TemporaryDirectory(dir=sys.argv[1]) as d:\n"
         "    try:\n"
-        "        scaleout_figures({'scaleout_nodes': 4, 'scaleout_steps': 100000, 'scaleout_reps': 1}, Path(d))\n"
+        "        scaleout_figures(replace(QUICK, scaleout_nodes=4, scaleout_steps=100000, scaleout_reps=1), Path(d))\n"
         "    except KeyboardInterrupt:\n"
         "        print('interrupted', flush=True)\n"
     )

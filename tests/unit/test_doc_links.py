@@ -54,12 +54,19 @@ def test_every_relative_link_resolves(doc: Path) -> None:
 
 # ---------------------------------------------------------------- headings the code and the docs cite in prose
 
-# Every text that names a doc's part, wherever it is written: the package, the tests, the generated figures'
-# Markdown (bench/) and the docs themselves.  A citation is PATH#anchor, PATH "Heading", PATH, "Heading",
+# Every text that names a doc's part, wherever it is written: the package, the tests, the benchmark's code and its
+# prose templates (netsetest_bench/templates/), the generated figures' Markdown (bench/) and the docs themselves.  A citation is PATH#anchor, PATH "Heading", PATH, "Heading",
 # PATH ("Heading"), PATH *Heading*, PATH, *Heading* (also after "section"), or PATH §N; PATH is docs/….md,
 # README.md or DEVELOPERS.md, from the repository's root.
 CITING = sorted(
-    [*(ROOT / "netsetest").rglob("*.py"), *(ROOT / "netsetest_bench").rglob("*.py"), *(ROOT / "tests").rglob("*.py"), *(ROOT / "bench").rglob("*.md"), *DOCS]
+    [
+        *(ROOT / "netsetest").rglob("*.py"),
+        *(ROOT / "netsetest_bench").rglob("*.py"),
+        *(ROOT / "netsetest_bench" / "templates").glob("*.md"),
+        *(ROOT / "tests").rglob("*.py"),
+        *(ROOT / "bench").rglob("*.md"),
+        *DOCS,
+    ]
 )
 CITATION = re.compile(
     r"(?P<doc>(?:docs/[\w./-]+|README|DEVELOPERS)\.md)"

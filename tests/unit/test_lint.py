@@ -53,3 +53,33 @@ def test_every_suppression_says_why() -> None:
             if path.name != "test_lint.py" and (typed or noqa or FMT_SKIP in line):
                 bare.append(f"{path.relative_to(ROOT)}:{n}")
     assert not bare, "a suppression without a reason: " + ", ".join(bare)
+
+
+# functions radon still counts above 20 (issue 46's "done when": none, outside generated tables): each to be split along
+# its seams; a function not listed here that grows past 20, or one listed that no longer does, fails the test below
+RADON_ABOVE_20 = {
+    "netsetest/polygon.py:_plus",
+    "netsetest/runtime/inmemory.py:run_inmemory",
+    "netsetest/estimator/region.py:WithRegion.step",
+    "netsetest/cli/main.py:_calibrate_logs",
+    "netsetest/cli/main.py:cmd_calibrate",
+    "netsetest/roles/judge.py:Judge.own_cause",
+    "netsetest/analysis/kofn.py:guided",
+    "netsetest/analysis/kofn.py:_repaired",
+    "netsetest/analysis/compare.py:compare",
+}
+
+
+def test_no_function_grows_past_radon_20() -> None:
+    """Cyclomatic complexity as radon counts it (ruff's C901 at 20 leaves out boolean operators and comprehensions'
+    conditions, which radon counts) for every function of the package and the benchmark: at most 20, but those listed."""
+    from radon.complexity import cc_visit
+
+    above = set()
+    for path in sorted((ROOT / "netsetest").rglob("*.py")) + sorted((ROOT / "netsetest_bench").rglob("*.py")):
+        for block in cc_visit(path.read_text(encoding="utf-8")):
+            if block.letter != "C" and block.complexity > 20:  # functions and methods (a class's figure sums its methods)
+                name = f"{block.classname}.{block.name}" if getattr(block, "classname", None) else block.name
+                above.add(f"{path.relative_to(ROOT)}:{name}")
+    assert above - RADON_ABOVE_20 == set(), "above 20 (split it): " + ", ".join(sorted(above - RADON_ABOVE_20))
+    assert RADON_ABOVE_20 - above == set(), "no longer above 20 (remove it from RADON_ABOVE_20): " + ", ".join(sorted(RADON_ABOVE_20 - above))

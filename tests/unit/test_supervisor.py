@@ -128,6 +128,26 @@ class FakeBar:
         self.closed = True
 
 
+@pytest.fixture
+def run() -> Run:
+    """A fake run of the paper network: every role started, nothing scripted, the plain schedule."""
+    return Run()
+
+
+def writes_summary_on(run: Run, sig: int, written: RunSummary) -> None:
+    """The fake collector hands ``written`` to the channel when it gets ``sig`` (as the real one writes its summary when
+    stopped, or once continued), then acts on the signal as before."""
+    collector = run.proc("collector")
+    told = collector.send_signal
+
+    def write_and_leave(s: int) -> None:
+        if s == sig:
+            run.channel.receive(encode(RunFinished(written)))
+        told(s)
+
+    collector.send_signal = write_and_leave  # type: ignore[method-assign]  # this fake writes its summary on sig
+
+
 def role_names_of(ids: list[int]) -> list[str]:
     return ["collector", *(f"node{i}" for i in ids), "vehicle"]
 
@@ -136,8 +156,7 @@ def summary(**kw: object) -> RunSummary:
     return RunSummary.from_dict({"steps": 10, "mode": "zenoh", **kw})
 
 
-def test_a_run_that_ends_gives_the_collectors_exit_code_and_summary() -> None:
-    run = Run()
+def test_a_run_that_ends_gives_the_collectors_exit_code_and_summary(run: Run) -> None:
     run.script = {1: lambda: run.progress(3), 2: lambda: run.progress(7), 3: lambda: (run.progress(10), run.end(EXIT_NODE_LOST, summary(violations_total=0)))}
     out = run.supervisor.follow()
     assert out == RunOutcome(EXIT_NODE_LOST, summary(violations_total=0))
@@ -145,22 +164,19 @@ def test_a_run_that_ends_gives_the_collectors_exit_code_and_summary() -> None:
     assert run.events == []  # nobody was signalled
 
 
-def test_the_collector_ending_without_a_summary_fails_the_run(capsys: pytest.CaptureFixture[str]) -> None:
-    run = Run()
+def test_the_collector_ending_without_a_summary_fails_the_run(run: Run, capsys: pytest.CaptureFixture[str]) -> None:
     run.script = {2: lambda: run.end(EXIT_OK, None)}
     assert run.supervisor.follow() == RunOutcome(EXIT_VIOLATION, None)
     assert "the collector exited with code 0 without a summary" in capsys.readouterr().err
 
 
-def test_a_failed_vehicle_stops_the_run(capsys: pytest.CaptureFixture[str]) -> None:
-    run = Run()
+def test_a_failed_vehicle_stops_the_run(run: Run, capsys: pytest.CaptureFixture[str]) -> None:
     run.script = {3: lambda: run.proc("vehicle").exit(1)}
     assert run.supervisor.follow() == RunOutcome(EXIT_VIOLATION, None)
     assert "the vehicle process failed (exit 1)" in capsys.readouterr().err
 
 
-def test_a_dead_node_is_reported_once_and_the_run_goes_on(capsys: pytest.CaptureFixture[str]) -> None:
-    run = Run()
+def test_a_dead_node_is_reported_once_and_the_run_goes_on(run: Run, capsys: pytest.CaptureFixture[str]) -> None:
     run.script = {2: lambda: run.proc("node4").exit(1), 6: lambda: run.end(EXIT_NODE_LOST, summary())}
     assert run.supervisor.follow().exit_code == EXIT_NODE_LOST
     err = capsys.readouterr().err
@@ -200,16 +216,14 @@ def test_an_interrupt_stops_vehicle_and_nodes_before_the_collector() -> None:
     assert all(p.poll() is not None for p in run.children.procs.values())
 
 
-def test_an_interrupt_names_the_partial_summary(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    run = Run()
+def test_an_interrupt_names_the_partial_summary(run: Run, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "s.json"
     path.write_text("{}")
     run.supervisor.interrupted(str(path))
     assert f"partial summary written to {path}" in capsys.readouterr().err
 
 
-def test_stop_all_leaves_what_is_kept_and_what_has_ended() -> None:
-    run = Run()
+def test_stop_all_leaves_what_is_kept_and_what_has_ended(run: Run) -> None:
     run.proc("node1").exit(0)
     run.children.stop_all(0.0, keep=["collector"])
     assert {name for name, _ in run.events} == {"vehicle", *(f"node{i}" for i in NODES[1:])}
@@ -292,12 +306,11 @@ def test_a_taken_port_is_refused_before_anything_starts() -> None:
                 plan_run(LaunchOptions(PAPER6, steps=5, insecure=insecure, port=port))
 
 
-def test_roles_that_do_not_end_on_end_share_one_grace_period() -> None:
+def test_roles_that_do_not_end_on_end_share_one_grace_period(run: Run) -> None:
     """The collector has finished; nodes that never leave are waited for ROLE_GRACE_S in all, not each (an
     80-node ring whose nodes hung in their Zenoh close held `netsetest run` for 80 × 5 s)."""
     from netsetest.runtime import launcher
 
-    run = Run()
     now = [0.0]
     waited: list[float] = []
 
@@ -318,20 +331,11 @@ def test_roles_that_do_not_end_on_end_share_one_grace_period() -> None:
     assert waited and sum(waited) <= launcher.ROLE_GRACE_S + 1e-9, waited
 
 
-def test_an_interrupt_returns_the_summary_the_collector_writes_on_sigterm() -> None:
+def test_an_interrupt_returns_the_summary_the_collector_writes_on_sigterm(run: Run) -> None:
     """Issue 41, item 8: Ctrl-C on a Zenoh run printed no verdict; the launcher now hands on the summary the
     collector writes when it is stopped (the CLI prints its table and verdict, INTERRUPTED)."""
-    run = Run()
     partial = summary(stopped="interrupted", steps_completed=4)
-    collector = run.proc("collector")
-    told = collector.send_signal
-
-    def write_and_leave(sig: int) -> None:
-        if sig == signal.SIGTERM:
-            run.channel.receive(encode(RunFinished(partial)))
-        told(sig)
-
-    collector.send_signal = write_and_leave  # type: ignore[method-assign]  # this fake writes its summary when stopped
+    writes_summary_on(run, signal.SIGTERM, partial)
     assert run.supervisor.interrupted(None) == RunOutcome(EXIT_INTERRUPTED, partial)
     assert run.bar.closed
 
@@ -344,20 +348,11 @@ def test_every_stopped_role_is_also_continued() -> None:
     assert collector[:2] == [signal.SIGTERM, signal.SIGCONT] and collector[-1] == signal.SIGKILL
 
 
-def test_a_vehicle_that_gave_up_on_a_stalled_collector_ends_the_run_with_the_collectors_verdict(capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_vehicle_that_gave_up_on_a_stalled_collector_ends_the_run_with_the_collectors_verdict(run: Run, capsys: pytest.CaptureFixture[str]) -> None:
     """Issue 41, item 6: the vehicle waits for the collector's acknowledgment at most the stall limit, then exits
     EXIT_COLLECTOR_STALLED; the launcher stops the nodes and continues the collector, whose summary names its stall."""
-    run = Run()
     stalled = summary(stopped="collector stalled", steps_completed=51, collector_stall_s=70.0, collector_stall_step=51)
-    collector = run.proc("collector")
-    told = collector.send_signal
-
-    def write_and_leave(sig: int) -> None:
-        if sig == signal.SIGCONT:
-            run.channel.receive(encode(RunFinished(stalled)))
-        told(sig)
-
-    collector.send_signal = write_and_leave  # type: ignore[method-assign]  # this fake writes its summary once continued
+    writes_summary_on(run, signal.SIGCONT, stalled)
     run.script = {3: lambda: run.proc("vehicle").exit(EXIT_COLLECTOR_STALLED)}
     assert run.supervisor.follow() == RunOutcome(EXIT_VIOLATION, stalled)
     assert "the collector acknowledged nothing for the stall limit" in capsys.readouterr().err
