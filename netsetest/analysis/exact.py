@@ -956,7 +956,7 @@ def exact_bounds(
         omitted=omitted_assumptions(scenario, health),
         health=searches[0].summary(scenario.health_label, budget_s) if searches else None,
         by_node=by_node,
-        no_reading=tuple((i, d.step) for d in data for i in d.no_reading if i in scenario.ids),
+        no_reading=_no_reading(data, scenario),
     )
 
 
@@ -965,6 +965,11 @@ def _same_assumptions(central: ExactBounds, fault_bounds: FaultBoundsMode, healt
     nothing there and is not used)."""
     applied = health and scenario.health_declared
     return not central.network and central.fault_bounds == fault_bounds and (central.health is not None) == applied and not central.infeasible_steps
+
+
+def _no_reading(data: list[RecordedStep], scenario: Scenario) -> tuple[tuple[int, int], ...]:
+    """(node, step) of the program's nodes without a reading (a recorded drive's gaps)."""
+    return tuple((i, d.step) for d in data for i in d.no_reading if i in scenario.ids)
 
 
 def _program_nodes(
