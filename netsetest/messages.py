@@ -336,6 +336,8 @@ class RunScope:
         step = msg.steps if isinstance(msg, End) else getattr(msg, "step", None)
         if step is not None and step > self.steps:
             return "step-beyond-run"
+        if type(msg) is Reading:  # the most frequent message (every reading to every node of a network): one id
+            return None if msg.node in self.ids else "unknown-node"
         named: set[int] = set()
         if isinstance(msg, (NodeInput, NodeState, Ready, Reading)) and msg.node is not None:
             named.add(msg.node)

@@ -235,6 +235,13 @@ def continued_set(published: ProvenSet, continues: ProvenSet | None) -> ProvenSe
     return ProvenSet(xhat=continues.xhat, P=continues.P, rho=continues.rho, region=published.region)
 
 
+def continued_contains(published: ProvenSet, continues: ProvenSet, xbar: np.ndarray) -> bool:
+    """``continued_set(published, continues).contains(xbar)`` without building that set (a new set, its region checked
+    and parsed again): the ellipsoid ``continues`` gives holds x̄ and the published region, parsed once with the
+    published set, holds x; the same floats, the same rule."""
+    return continues.contains(xbar) and (published.polygon is None or published.polygon.contains(xbar[:NX]))
+
+
 def proven_sets(entry: dict) -> tuple[ProvenSet, ProvenSet | None]:
     """A record's state entry's published set and the whole set its node continued from (None: the published one),
     checked (ValueError if malformed).  Entries written before issue 28 name the published ellipsoid xhat, P, rho,

@@ -9,7 +9,9 @@
   bag, then, rosbags' own reading of every mapped message with nothing decoded, timed alone in the same process:
   the floor under a bag's import, which reads the whole log once.
 - ``replay``: paper6 in memory from a log of its own simulated run (accuracy 0), beside the same run from the model,
-  alternately: how many times faster than real time, and that the replay's verdict is the run's.
+  alternately: how many times faster than real time, and that the replay's verdict is the run's; of the replay's time,
+  the nodes' estimator steps (each step's time as the estimator's observer gets it, estimator/sdp.py ``StepObserver``),
+  the rest being the roles, the bus, the judge and the log around them.
 - ``calibration``: synthetic drives of paper6_car's car (logs/example.py, the sensors' biases the car's), training
   drives calibrated with ``calibrate --logs`` (analysis/calibrate.py), and a held-out drive (another seed, gentler
   steering) declared with the calibrated mismatch box, envelope and noise bounds, replayed with a reference of
@@ -215,17 +217,28 @@ def replay_figures(cfg: BenchConfig, tmp: Path) -> dict:
     mapping.write_text(mapping_toml(d, "parquet", (0.0, 0.0)))
     scl = with_log_steps(load_topology("paper6", steps=steps, log=str(log), mapping=str(mapping)))
     times: dict[str, list[tuple[float, float]]] = {"log": [], "model": []}
+    estimator: list[float] = []  # per log run: the wall seconds of every node's estimator step (its observer's figure)
     same = True
     for _ in range(reps):
         for name, scenario, seed in (("log", scl, 0), ("model", sc, 1)):
+            spent = [0.0]
+
+            def observe(est: object, prev: object, inp: object, res: object, ms: float, spent: list[float] = spent) -> None:
+                spent[0] += ms / 1e3
+
             t0, c0 = time.perf_counter(), time.process_time()
-            out = run_inmemory(scenario, "paper", seed=seed, keep=False)
+            out = run_inmemory(scenario, "paper", seed=seed, keep=False, observer=observe)
             times[name].append((time.perf_counter() - t0, time.process_time() - c0))
             if name == "log":
+                estimator.append(spent[0])
                 same &= out.summary.node_steps_contained == out.summary.node_steps_evaluated == res.summary.node_steps_evaluated
     drive_s = steps * sc.tau_s
     med = {n: (statistics.median(w for w, _ in ts), statistics.median(c for _, c in ts)) for n, ts in times.items()}
-    _log(f"  replay of {drive_s:g} s: log {med['log'][0]:.2f} s wall ({med['log'][1]:.2f} s CPU), model {med['model'][0]:.2f} s")
+    est_s = statistics.median(estimator)
+    _log(
+        f"  replay of {drive_s:g} s: log {med['log'][0]:.2f} s wall ({med['log'][1]:.2f} s CPU; the estimators' steps {est_s:.2f} s), "
+        f"model {med['model'][0]:.2f} s"
+    )
     return {
         "steps": steps,
         "drive_s": drive_s,
@@ -236,6 +249,7 @@ def replay_figures(cfg: BenchConfig, tmp: Path) -> dict:
         "model_cpu_s": med["model"][1],
         "realtime_wall": drive_s / med["log"][0],
         "realtime_cpu": drive_s / med["log"][1],
+        "estimator_s": est_s,
         "same_verdict": same,
         "load": _load(),
     }
@@ -382,6 +396,11 @@ def logs_markdown(doc: dict) -> str:
             T,
             "replay",
             rp=rp,
+            split=fill(
+                T, "replay-split", rp=rp, share=100 * rp.estimator_s / rp.log_wall_s, rest=rp.log_wall_s - rp.estimator_s, need=rp.drive_s / TARGET_REALTIME
+            )
+            if rp.estimator_s is not None
+            else "",
             cal=cal,
             same=fill(T, "yes" if rp.same_verdict else "no"),
             drives=len(cal.train_seeds),

@@ -47,6 +47,7 @@ from netsetest.config.schema import Case, ConfigError, Scenario, load_topology
 from netsetest.analysis.errors import CompareError
 from netsetest.estimator.names import DEFAULT_COMPARE, ESTIMATOR_NAMES, EXACT, SDP
 from netsetest.estimator.registry import node_set_estimator
+from netsetest.logs.drive import with_log_steps
 from netsetest.models.signals import SignalKind
 from netsetest.records.record import Record, record_from_parts
 from netsetest.roles.judge import HEALTH, history_cone
@@ -345,7 +346,8 @@ def compare(
             progress(done[0], total, what)
 
     for case in cases:
-        sc = load_topology(topology, case, steps, SDP)  # the run (row sdp) is all-SDP, whatever the file's nodes say
+        # the run (row sdp) is all-SDP, whatever the file's nodes say; a recorded drive's steps decided against its log, as run's
+        sc = with_log_steps(load_topology(topology, case, steps, SDP))
         for sig in signals:
             for seed in seeds:
                 rec = _run_record(sc, sig, seed)

@@ -11,6 +11,7 @@ declares a ``[model_uncertainty]``, docs/plant.md), and the noise is eliminated:
     wind:                  |w_j| ≤ √W
     model mismatch:        e_j in the declared box (linear) or ellipsoid (SOC(3)), where one is declared
     measurement (i, j):    σ(C̄_i x̄_i,j) ∈ [(ỹ − |Dv|√R)/γ, (ỹ + |Dv|√R)/γ]  ⇔  C̄_i x̄_i,j ∈ [lo, hi]
+                           (only where node i has a reading at step j: a recorded drive's gap has no row)
     declared fault bounds: |f_i,j+1 − f_i,j| ≤ δ_i,  |f_i,j| ≤ F_i   (where ``fault_bounds`` applies them)
 
 σ is the identity in NSNIM; in SAIM it is the saturation sign(r)·min(r_max, |r|), monotone and the
@@ -71,13 +72,15 @@ CUT_MARGIN = 1e-8  # a past step's end is loosened by this (relative) before it 
 
 @dataclass(frozen=True)
 class RecordedStep:
-    """What every node knows at step k (the vehicle publishes it): u_k, Vx_k, and each ỹ_i,k, γ_i,k."""
+    """What every node knows at step k (the vehicle publishes it): u_k, Vx_k, and each ỹ_i,k, γ_i,k; a node in
+    ``no_reading`` (a recorded drive's gap, docs/your-log.md) has no ỹ_i,k: its measurement constraint is absent."""
 
     step: int
     u: float
     vx: float
     y: dict[int, float]
     gamma: dict[int, float]
+    no_reading: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -138,6 +141,8 @@ class ExactBounds:
     # the network limit (exact_bounds(network=True)): node → its own β and r (K, 2) each; ``beta`` and ``r`` are then
     # unused (NaN), and ``fault[i]`` is node i's own network limit
     by_node: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    # (node, step) of the program's nodes without a reading (a recorded drive's gaps): no measurement row there
+    no_reading: tuple[tuple[int, int], ...] = ()
 
     @property
     def network(self) -> bool:
@@ -174,8 +179,6 @@ def step_data(record: Record) -> list[RecordedStep]:
         for k, t in enumerate(sorted(record.truth, key=lambda t: t["step"])):
             if t["step"] != k:
                 raise ExactError(f"{record.path}: truth entries are not the contiguous steps 0..K (step {k} missing)")
-            if t.get("no_reading"):
-                raise ExactError(f"{record.path}: node {t['no_reading'][0]} has no reading at step {k} (a gap in the log): the exact limit takes every reading")
             out.append(
                 RecordedStep(
                     step=k,
@@ -183,6 +186,7 @@ def step_data(record: Record) -> list[RecordedStep]:
                     vx=float(t["vx"]),
                     y={i: float(v) for i, v in t["y"].items()},
                     gamma={i: float(v) for i, v in t["gamma"].items()},
+                    no_reading=tuple(sorted(int(i) for i in t.get("no_reading", ()))),
                 )
             )
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
@@ -215,7 +219,13 @@ class _Program:
         self.hold: set[int] = set()  # nodes whose faults stay in the program where not yet measured (kofn: tied health)
         self.ne = 2 if scenario.uncertainty is not None else 0  # e_j columns per step
         self.nz = 2 * (K + 1) + K + self.ne * K + len(self.ids) * (K + 1)
-        self.intervals = {(node.id, j): node.sensor.measured_interval(dj.y[node.id], dj.gamma[node.id]) for node in scenario.nodes for j, dj in enumerate(data)}
+        # the measured intervals of the readings there are (a node without one at a step: no measurement row there)
+        self.intervals = {
+            (node.id, j): node.sensor.measured_interval(dj.y[node.id], dj.gamma[node.id])
+            for node in scenario.nodes
+            for j, dj in enumerate(data)
+            if node.id in dj.y
+        }
         lin = _Rows()  # a z ≤ b
         self._wind_rows(lin)
         self._sensor_rows(lin)
@@ -246,12 +256,15 @@ class _Program:
             lin.add({self._w(j): -1.0}, sqrt_w, j + 1)
 
     def _sensor_rows(self, lin: _Rows) -> None:
-        """lo ≤ C̄_i x̄_i,j ≤ hi (the measured interval), and the declared fault bounds of the bounded nodes."""
+        """lo ≤ C̄_i x̄_i,j ≤ hi (the measured interval) where node i has a reading at step j, and the declared fault
+        bounds of the bounded nodes at every step (a step without the reading keeps them: the fault is still there)."""
         K = self.K
         for n, node in enumerate(self.sc.nodes):
             free = node.id not in self.bounded
             c, ds = node.sensor.C, node.sensor.Ds
             for j in range(K + 1):
+                if (node.id, j) not in self.intervals:
+                    continue  # no reading (a recorded drive's gap): no measurement constraint, never an invented one
                 lo, hi = self.intervals[node.id, j]
                 r = {self._x(j, 0): c[0], self._x(j, 1): c[1], self._f(n, j): ds}  # r = C̄_i x̄_i,j
                 if np.isfinite(hi):
@@ -394,14 +407,14 @@ class _Program:
 
     def witness(self, z: np.ndarray, k: int, eliminate: bool) -> Witness:
         """The trajectory of a solution; an eliminated fault takes the value nearest 0 that meets its
-        measurement (C̄_i x̄_i,j in the measured interval)."""
+        measurement (C̄_i x̄_i,j in the measured interval; 0 at a step without a reading, where no row holds it)."""
         f = {}
         for n, node in enumerate(self.sc.nodes):
             fi = z[self._f(n, 0) : self._f(n, k) + 1].copy()
             for j in range(k + 1):
                 if self._eliminated(n, j, k, eliminate):
                     cx = float(node.sensor.C @ z[self._x(j, 0) : self._x(j, 1) + 1])
-                    lo, hi = self.intervals[node.id, j]
+                    lo, hi = self.intervals.get((node.id, j), (-math.inf, math.inf))
                     ends = sorted(((lo - cx) / node.sensor.Ds, (hi - cx) / node.sensor.Ds))
                     fi[j] = float(np.clip(0.0, ends[0], ends[1]))
             f[node.id] = fi
@@ -493,7 +506,7 @@ class _HealthPlan:
         horizon-k program does not have: the whole line."""
         out = []
         for _, node in self.members:
-            if not self._measured(node, j, k):
+            if not self._measured(node, j, k) or (node.id, j) not in self.prog.intervals:  # (none: a recorded drive's gap)
                 out.append((-math.inf, math.inf))
                 continue
             lo, hi = self.prog.intervals[node.id, j]
@@ -943,6 +956,7 @@ def exact_bounds(
         omitted=omitted_assumptions(scenario, health),
         health=searches[0].summary(scenario.health_label, budget_s) if searches else None,
         by_node=by_node,
+        no_reading=_no_reading(data, scenario),
     )
 
 
@@ -953,14 +967,20 @@ def _same_assumptions(central: ExactBounds, fault_bounds: FaultBoundsMode, healt
     return not central.network and central.fault_bounds == fault_bounds and (central.health is not None) == applied and not central.infeasible_steps
 
 
+def _no_reading(data: list[RecordedStep], scenario: Scenario) -> tuple[tuple[int, int], ...]:
+    """(node, step) of the program's nodes without a reading (a recorded drive's gaps)."""
+    return tuple((i, d.step) for d in data for i in d.no_reading if i in scenario.ids)
+
+
 def _program_nodes(
     scenario: Scenario, record: Record, data: list[RecordedStep], fault_bounds: FaultBoundsMode, nodes: Sequence[int] | None, network: bool
 ) -> tuple[Scenario, tuple[int, ...]]:
     """The scenario of the program's nodes (``nodes``, default all) and the nodes whose declared fault bounds it applies;
     a record or a node subset that does not fit the topology is refused (ExactError)."""
     for d in data:
-        if set(d.y) != set(scenario.ids) or set(d.gamma) != set(scenario.ids):
-            raise ExactError(f"{record.path}: step {d.step} has measurements of nodes {sorted(d.y)}, the topology has nodes {scenario.ids}")
+        if set(d.y) | set(d.no_reading) != set(scenario.ids) or set(d.y) & set(d.no_reading) or set(d.gamma) != set(scenario.ids):
+            without = f" and none of nodes {list(d.no_reading)}" if d.no_reading else ""
+            raise ExactError(f"{record.path}: step {d.step} has measurements of nodes {sorted(d.y)}{without}, the topology has nodes {scenario.ids}")
     if nodes is None:
         return scenario, scenario.fault_bounded(fault_bounds)
     unknown = sorted(set(nodes) - set(scenario.ids))
@@ -1372,6 +1392,7 @@ def exact_document(record: Record, exact: ExactBounds, comparison: ExactComparis
         "from_step": FROM_STEP,
         "steps": [int(k) for k in exact.steps],
         "infeasible_steps": list(exact.infeasible_steps),
+        "no_reading": [list(p) for p in exact.no_reading],
         "omitted": list(exact.omitted),
         "health": _health_document(exact.health),
         "exact": {

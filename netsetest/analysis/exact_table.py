@@ -103,6 +103,12 @@ def _notes(exact: ExactBounds) -> tuple[str, ...]:
     notes = []
     if exact.infeasible_steps:
         notes.append(f"no trajectory meets the assumptions at steps {list(exact.infeasible_steps)} (an assumption was broken)")
+    if exact.no_reading:
+        nodes = sorted({i for i, _ in exact.no_reading})
+        notes.append(
+            f"{len(exact.no_reading)} node-step(s) without a reading (gaps in the log; nodes {', '.join(map(str, nodes))}): "
+            "no measurement there, the declared fault bounds still hold"
+        )
     if exact.health is not None:
         notes.append(health_line(exact.health))
     if exact.omitted:

@@ -439,7 +439,8 @@ def cmd_exact(a: argparse.Namespace) -> int:
     if not a.topology and not (isinstance(topology, str) and os.path.exists(topology)):
         print(f"netsetest exact: {a.record} names topology {topology!r}, not found from here (give --topology PATH)", file=sys.stderr)
         return EXIT_BAD_INPUT
-    sc = load_topology(str(topology), rec.meta.case, rec.meta.steps)  # type: ignore[arg-type]  # an unknown case is refused by load_topology
+    drive = rec.meta.log or {}  # a recorded drive's run: its topology with that log (plant "log"; the log itself is not read)
+    sc = load_topology(str(topology), rec.meta.case, rec.meta.steps, log=drive.get("path"), mapping=drive.get("mapping"))  # type: ignore[arg-type]  # an unknown case is refused by load_topology
     if differs := topology_mismatch(sc, rec):
         print(f"netsetest exact: {a.record} was not run on topology {topology}: {differs}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
+from typing import Any
 
 from dataclasses import dataclass, field
 
@@ -31,7 +33,7 @@ from netsetest.estimator.names import SDP
 from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.sector import FaultBound, Propagation, Sector, measurement_interval, prior_interval, sector_ok
 from netsetest.messages import NodeState, Truth, state_digest
-from netsetest.proven import ProvenSet, Relation
+from netsetest.proven import ProvenSet, Relation, continued_contains
 from netsetest.models.envelope import MODEL_MISMATCH, OUTSIDE_ENVELOPE
 from netsetest.models.sensor import NX, augmented
 
@@ -165,6 +167,48 @@ class NodeVerdict:
     inconsistent: bool = False  # without a reference: its own data prove one of its assumptions broken (Judge.inconsistent)
 
 
+class StepSets:
+    """What one closed step asks of each state copy, computed once: a judged state is also one of its node's copies, so
+    its containment and its copy check ask the same memberships, and the set its node continues from
+    (:attr:`NodeState.continued`, a new set, checked, each time it is asked) is built once.  Keyed by the copy's
+    identity: valid while the step's inputs hold the copies (:meth:`Judge.step`)."""
+
+    def __init__(self, tr: Truth) -> None:
+        self.tr = tr
+        self._got: dict[tuple[int, str], object] = {}
+
+    def _once(self, st: NodeState, what: str, make: Callable[[], object]) -> Any:
+        key = (id(st), what)
+        if key not in self._got:
+            self._got[key] = make()
+        return self._got[key]
+
+    def continued(self, st: NodeState) -> ProvenSet:
+        return self._once(st, "continued", lambda: st.continued)
+
+    def point(self, i: int, st: NodeState) -> tuple[float, bool, bool]:
+        """Against a point truth x̄ (node i's): E of the published ellipsoid, whether the published set holds x̄, whether
+        the set the node continues from does."""
+
+        def make() -> tuple[float, bool, bool]:
+            xbar = augmented(self.tr.x, self.tr.faults[i])
+            pub = st.published
+            E = pub.E(xbar)
+            inside = pub.contains(xbar, E)
+            return E, inside, inside if st.continues is None else continued_contains(pub, st.continues, xbar)
+
+        return self._once(st, "point", make)
+
+    def relations(self, i: int, st: NodeState, box: tuple[np.ndarray, np.ndarray]) -> tuple[Relation, Relation]:
+        """Against node i's truth box: where the published set and the set the node continues from lie."""
+
+        def make() -> tuple[Relation, Relation]:
+            rel = relation(st.published, self.tr, i, box)
+            return rel, rel if st.continues is None else relation(self.continued(st), self.tr, i, box)
+
+        return self._once(st, "box", make)
+
+
 @dataclass(frozen=True)
 class StepVerdict:
     nodes: dict[int, NodeVerdict]
@@ -260,9 +304,11 @@ class Judge:
     def step(self, inp: StepInputs, prev: StepChecks) -> StepVerdict:
         """Every node's verdict of one closed step, and the copy checks its successor judges inputs by."""
         tr = inp.truth
+        sets = None if tr is None else StepSets(tr)
+        digests = {id(c): state_digest(c) for copies in inp.copies.values() for c in copies}  # (a judged state is one of them)
         checks = StepChecks(
-            {j: {state_digest(c): self.copy_check(j, c, tr) for c in copies} for j, copies in inp.copies.items()},
-            {i: state_digest(st) for i, st in inp.judged.items() if i not in inp.contested},
+            {j: {digests[id(c)]: self.copy_check(j, c, tr, sets) for c in copies} for j, copies in inp.copies.items()},
+            {i: digests.get(id(st)) or state_digest(st) for i, st in inp.judged.items() if i not in inp.contested},
             self._held_over(inp, prev),
             {i: st for i, st in inp.judged.items() if i not in inp.contested},
         )
@@ -275,7 +321,7 @@ class Judge:
                 n.id,
                 inp.step,
                 self.cone(n, inp, checks, prev),
-                self.containment(n.id, st, tr) if judged else None,  # type: ignore[arg-type]  # judged: st and tr are set
+                self.containment(n.id, st, tr, sets) if judged else None,  # type: ignore[arg-type]  # judged: st and tr are set
                 alone and self.inconsistent(n, prev.states.get(n.id), inp.prev_truth, tr),  # type: ignore[arg-type]  # alone: tr is set
             )
         return StepVerdict(out, checks)
@@ -318,21 +364,19 @@ class Judge:
         return out
 
     @staticmethod
-    def containment(i: int, st: NodeState, tr: Truth) -> Containment:
+    def containment(i: int, st: NodeState, tr: Truth, sets: StepSets | None = None) -> Containment:
         """The state's published set and the set it continues from against the truth (ProvenSet.contains); E is the
         published ellipsoid's (a set estimator's: the one around its set, its neighbour-facing summary).  Needs no
-        scenario: ``watch`` and the live view (runtime/live.py) judge what they hear by it, the collector's rule."""
+        scenario: ``watch`` and the live view (runtime/live.py) judge what they hear by it, the collector's rule.
+        ``sets``: the step's (:meth:`step`: what the copy checks computed already)."""
+        sets = sets or StepSets(tr)
         pub = st.published
         bounds = None if pub.is_ellipsoid else np.stack(pub.bounds(), axis=1)
         box = truth_box(tr, i)
         if box is not None:  # a recorded drive's reference: the set against the whole box (proven.ProvenSet.relation)
-            rel = relation(pub, tr, i, box)
-            cont = rel if st.continues is None else relation(st.continued, tr, i, box)
+            rel, cont = sets.relations(i, st, box)
             return Containment(pub.E_max(*box), rel == "inside", cont == "inside", bounds, rel == "disjoint", cont == "disjoint")
-        xbar = augmented(tr.x, tr.faults[i])
-        E = pub.E(xbar)
-        inside = pub.contains(xbar, E)
-        continues = inside if st.continues is None else st.continued.contains(xbar)
+        E, inside, continues = sets.point(i, st)
         return Containment(E, inside, continues, bounds, not inside, not continues)
 
     def sector_premise(self, n: NodeConfig, st: NodeState | None, tr: Truth) -> bool:
@@ -357,8 +401,9 @@ class Judge:
             return False
         return not sector_ok(n.sensor, published_sector(st), tr.r[i])
 
-    def copy_check(self, j: int, c: NodeState, tr: Truth | None) -> CopyCheck:
-        """One copy of node j's state of a step, judged as an input of a later step."""
+    def copy_check(self, j: int, c: NodeState, tr: Truth | None, sets: StepSets | None = None) -> CopyCheck:
+        """One copy of node j's state of a step, judged as an input of a later step (``sets``: the step's, shared with the
+        containment of the judged copy)."""
         if tr is None:
             return CopyCheck(TRUTH_UNKNOWN, TRUTH_UNKNOWN, TRUTH_UNKNOWN)
         if not tr.reference:
@@ -371,17 +416,17 @@ class Judge:
             facts = "noise"
         elif n.sensor.saturated and not (j in tr.r and sector_ok(n.sensor, published_sector(c), tr.r[j])):
             facts = "sector"
+        sets = sets or StepSets(tr)
         box = truth_box(tr, j)
         if box is None:
-            xbar = augmented(tr.x, tr.faults[j])
-            E = c.published.E(xbar)
+            E, inside, continues = sets.point(j, c)
             published_in: str | None = None if E <= c.published.rho else MISSED  # neighbours use the ellipsoid alone
-            prior_in: str | None = None if c.continued.contains(xbar) else MISSED
-            set_in: str | None = None if c.published.contains(xbar, E) else MISSED
+            prior_in: str | None = None if continues else MISSED
+            set_in: str | None = None if inside else MISSED
         else:  # held only where all of the reference's box lies in it; proven apart: missed; else it may have missed
+            rel, cont = sets.relations(j, c, box)
             published_in = _held(relation(c.published.ellipsoid_only(), tr, j, box))
-            prior_in = _held(relation(c.continued, tr, j, box))
-            set_in = _held(relation(c.published, tr, j, box))
+            prior_in, set_in = _held(cont), _held(rel)
         self_loop = j in n.in_weights  # its own innovation enters its next step: the same facts
         return CopyCheck(
             as_neighbour=facts or published_in,
@@ -587,6 +632,7 @@ __all__ = [
     "Origin",
     "StepChecks",
     "StepInputs",
+    "StepSets",
     "StepVerdict",
     "history_cone",
     "isclose",

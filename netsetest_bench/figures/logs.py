@@ -49,6 +49,7 @@ class Replay:
     realtime_cpu: float
     same_verdict: bool
     load: str
+    estimator_s: float | None = None  # of log_wall_s: the nodes' estimator steps (None: measured before it was)
 
 
 @dataclass(frozen=True)

@@ -84,8 +84,18 @@ def test_the_bag_s_floor_is_said_where_measured() -> None:
     """rosbags' own reading of the bag (nothing decoded), measured beside its import, in the table's note and the target."""
     res = copy.deepcopy(RES)
     res["import"]["rows"][0]["rosbags_cpu_s"] = 3.25
-    assert "took 3.2 s of CPU of the import's 4.0 s" in logs_markdown(res) and "rosbags' own reading" not in logs_markdown(RES)
-    assert targets(res)[0][2] == "8.0 s (4.0 s CPU, of which rosbags' own reading 3.2 s; load 3.00 3.00 3.00)"
+    assert "took 3.2 s of CPU, against the whole import's 4.0 s" in logs_markdown(res) and "rosbags' own `messages()`" not in logs_markdown(RES)
+    assert targets(res)[0][2] == "8.0 s (4.0 s CPU; rosbags' own `messages()` alone 3.2 s; load 3.00 3.00 3.00)"
+
+
+def test_the_estimators_share_of_the_replay_is_said_where_measured() -> None:
+    """The nodes' estimator steps' time beside the whole replay's, and the time 20x real time allows, once measured."""
+    res = copy.deepcopy(RES)
+    res["replay"]["estimator_s"] = 0.75 * res["replay"]["log_wall_s"]
+    text = logs_markdown(res)
+    assert "the nodes' estimator steps took" in text and "(75 %;" in text
+    assert f"20× real time needs the whole replay in {res['replay']['drive_s'] / 20:.2f} s" in text
+    assert "the nodes' estimator steps took" not in logs_markdown(RES)
 
 
 def test_a_target_missed_is_said_so() -> None:
