@@ -549,14 +549,33 @@ def _steps(v: list[Point], extra: list[Point]) -> tuple[list[Point], int]:
     return edges + extra, len(edges)
 
 
-def _plus(vertices: list[Point], segments: list[Point]) -> list[Point]:
-    """The vertices of :meth:`Polygon.plus_segments` (its docstring says how)."""
-    v = _from_lowest(vertices)
+def _segment_steps(segments: list[Point]) -> tuple[Point, list[Point]]:
+    """The sum of the segments' lowest (then leftmost) ends, where the walk of :func:`_plus` starts from the lowest
+    vertex, and each segment's two steps ±2s (without zero ones)."""
     ends = [(-x, -y) if _half(x, y) == 0 else (x, y) for x, y in segments]  # each segment's lowest (then leftmost) end
     lx, ly = ends[0] if ends else (0.0, 0.0)
     for x, y in ends[1:]:
         lx, ly = lx + x, ly + y
     extra = [s for s in [*((2.0 * x, 2.0 * y) for x, y in segments), *((-2.0 * x, -2.0 * y) for x, y in segments)] if s[0] != 0.0 or s[1] != 0.0]
+    return (lx, ly), extra
+
+
+def _walk(start: Point, steps: list[Point], order: list[int]) -> list[Point]:
+    """The points start + the partial sums of the steps in ``order`` (the last step's sum, back at start, left out)."""
+    bx, by = start
+    walk = [(bx, by)]
+    cx, cy = steps[order[0]]
+    for k in order[1:]:  # each partial sum in turn
+        walk.append((bx + cx, by + cy))
+        sx, sy = steps[k]
+        cx, cy = cx + sx, cy + sy
+    return walk
+
+
+def _plus(vertices: list[Point], segments: list[Point]) -> list[Point]:
+    """The vertices of :meth:`Polygon.plus_segments` (its docstring says how)."""
+    v = _from_lowest(vertices)
+    (lx, ly), extra = _segment_steps(segments)
     steps, n = _steps(v, extra)
     order, pairs = _ordered(steps) if steps else ([], [])
     edge_order = [i for i in order if i < n]
@@ -567,13 +586,7 @@ def _plus(vertices: list[Point], segments: list[Point]) -> list[Point]:
         order, pairs = _ordered(steps) if steps else ([], [])
     if not steps:
         return v
-    bx, by = v[0][0] + lx, v[0][1] + ly
-    walk = [(bx, by)]
-    cx, cy = steps[order[0]]
-    for k in order[1:]:  # each partial sum in turn
-        walk.append((bx + cx, by + cy))
-        sx, sy = steps[k]
-        cx, cy = cx + sx, cy + sy
+    walk = _walk((v[0][0] + lx, v[0][1] + ly), steps, order)
     if len(order) > 1 and 0 not in pairs:  # every step turns from the one before (the last from the first too:
         return _distinct(walk)  # the order rises strictly)
     turns = [_compare(steps[order[-1]], steps[order[0]]), *pairs]  # each step against the one before

@@ -300,6 +300,17 @@ def _network_ratios(per_node: dict[int, list[tuple[np.ndarray, np.ndarray]]]) ->
     return pooled, {i: [float(w[m] / e[m]) if keep[i][m] else None for m in range(3)] for i, (w, e) in means.items()}
 
 
+def _check_lists(estimators: tuple[str, ...], cases: tuple[Case | None, ...], signals: tuple[SignalKind, ...], seeds: tuple[int, ...]) -> None:
+    """CompareError where ``compare``'s lists name an unknown estimator, one twice, or leave nothing to compare."""
+    unknown = [e for e in estimators if e not in ESTIMATOR_NAMES]
+    if unknown:
+        raise CompareError(f"unknown estimator {unknown[0]!r}; choose from {', '.join(ESTIMATOR_NAMES)}")
+    if len(set(estimators)) != len(estimators):
+        raise CompareError(f"estimator list {','.join(estimators)} names one twice")
+    if not estimators or not cases or not signals or not seeds:
+        raise CompareError("nothing to compare: give at least one estimator, case, signal kind and seed")
+
+
 def compare(
     topology: str | Path,
     estimators: tuple[str, ...] = DEFAULT_COMPARE,
@@ -319,13 +330,7 @@ def compare(
     its own data (the best any node alone can do), and ``exact-network``, each node's limit from what the topology
     carries to it (docs/exact.md); all against the central exact limit, like every row.  ``network`` (implied by
     ``alone``): every row's widths over each node's network limit too (``ratio_network``, ``ratio_network_by_node``)."""
-    unknown = [e for e in estimators if e not in ESTIMATOR_NAMES]
-    if unknown:
-        raise CompareError(f"unknown estimator {unknown[0]!r}; choose from {', '.join(ESTIMATOR_NAMES)}")
-    if len(set(estimators)) != len(estimators):
-        raise CompareError(f"estimator list {','.join(estimators)} names one twice")
-    if not estimators or not cases or not signals or not seeds:
-        raise CompareError("nothing to compare: give at least one estimator, case, signal kind and seed")
+    _check_lists(estimators, cases, signals, seeds)
     names = [r for e in estimators for r in ((e, SDP_ELLIPSOID) if e == SDP else (e,))]  # the paper's own set right after sdp
     acc = {e: _Accumulator() for e in (*names, *(ALONE_ROWS if alone else ()))}
     runs: list[str] = []

@@ -326,19 +326,26 @@ def _repaired(conic: Conic, unions: Sequence[StepUnion], node: _Node, objective:
     slack = conic.b - conic.A @ z[conic.cols]
     allowed = conic.violation(slack)  # the solver's own precision: mending may not make it worse
     for union, t in zip(missed, ts):
-        for piece in sorted(union.pieces, key=lambda p: _distance(union, p, z)):
-            cols = [c for c in (union.f_col[n] for n in piece.healthy) if c is not None]
-            if not piece.lo - HEALTH_TOL <= t <= piece.hi + HEALTH_TOL or objective in cols:
-                continue
-            trial = z.copy()
-            trial[cols] = np.clip(trial[cols], -union.tolerance, union.tolerance)
-            moved, rows = conic.moved(slack, [conic.position[c] for c in cols], trial[cols] - z[cols])
-            if union.holds(trial) and conic.violation(moved, rows) <= allowed:
-                z, slack = trial, moved
-                break
-        else:
+        mended = _mended(conic, union, t, z, slack, allowed, objective)
+        if mended is None:
             return None
+        z, slack = mended
     return z
+
+
+def _mended(conic: Conic, union: StepUnion, t: float, z: np.ndarray, slack: np.ndarray, allowed: float, objective: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """One union :func:`_repaired` mends: the point and the rows' slack with the first piece (nearest first) holding
+    t whose tied faults clipped to [−τ, τ] meet the union, the rows no worse than ``allowed``; None if no piece does."""
+    for piece in sorted(union.pieces, key=lambda p: _distance(union, p, z)):
+        cols = [c for c in (union.f_col[n] for n in piece.healthy) if c is not None]
+        if not piece.lo - HEALTH_TOL <= t <= piece.hi + HEALTH_TOL or objective in cols:
+            continue
+        trial = z.copy()
+        trial[cols] = np.clip(trial[cols], -union.tolerance, union.tolerance)
+        moved, rows = conic.moved(slack, [conic.position[c] for c in cols], trial[cols] - z[cols])
+        if union.holds(trial) and conic.violation(moved, rows) <= allowed:
+            return trial, moved
+    return None
 
 
 def _branch_on(unions: Sequence[StepUnion], node: _Node) -> int | None:
@@ -530,16 +537,10 @@ class GuidedStart:
     incumbent: tuple[float, np.ndarray] | None = None
 
 
-def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], guide: Guide, solvers: Solvers) -> GuidedStart:
-    """One solve that may settle an end before its root relaxation: the program with, for every earlier step the guide
-    (the same end's minimiser of the previous horizon) covers, the piece of t_j it chose, and for the current step the
-    piece nearest the guide's last t (t changes little from one step to the next); pieces of t_j alone: a tied fault's
-    pair of rows |f| ≤ τ = 0 splits its multipliers and certifies nothing (docs/exact.md), and a point piece is one
-    equality for the same reason.  Its minimiser, where it meets every union (or is mended to, :func:`_repaired`), is a
-    trajectory: an upper bound.  Its duals y give a lower bound of the end over every union by weak duality: for any z
-    of the root's program, q·z ≥ −b·y + Σ_piece rows y·(b − a·z), the last term bounded below over the union's hull of
-    t_j (:func:`_certified_below`).  When the two meet to :data:`GAP_TOL` the end is the lower one, exact, in one solve
-    where the root and the dive take two; otherwise the caller searches from the root, with that trajectory if any."""
+def _guided_pieces(unions: Sequence[StepUnion], guide: Guide) -> tuple[list[tuple[StepUnion, Piece]], list[StepUnion]]:
+    """:func:`guided`'s pieces: (union, piece) for every union of several pieces the guide covers (at an earlier step
+    the piece nearest its minimiser, at the current one the piece nearest its last t) where that piece has a tied
+    fault, and the unions of one piece."""
     last, ref = guide
     chosen = []  # (union, piece) whose rows the duals answer for over the union's hull
     convex = []  # unions of one piece: every trajectory meets its rows, so their duals take nothing off the bound
@@ -558,6 +559,20 @@ def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], gu
             continue
         if not piece.healthy:
             chosen.append((union, piece))
+    return chosen, convex
+
+
+def guided(conic: Conic, q: np.ndarray, nz: int, unions: Sequence[StepUnion], guide: Guide, solvers: Solvers) -> GuidedStart:
+    """One solve that may settle an end before its root relaxation: the program with, for every earlier step the guide
+    (the same end's minimiser of the previous horizon) covers, the piece of t_j it chose, and for the current step the
+    piece nearest the guide's last t (t changes little from one step to the next); pieces of t_j alone: a tied fault's
+    pair of rows |f| ≤ τ = 0 splits its multipliers and certifies nothing (docs/exact.md), and a point piece is one
+    equality for the same reason.  Its minimiser, where it meets every union (or is mended to, :func:`_repaired`), is a
+    trajectory: an upper bound.  Its duals y give a lower bound of the end over every union by weak duality: for any z
+    of the root's program, q·z ≥ −b·y + Σ_piece rows y·(b − a·z), the last term bounded below over the union's hull of
+    t_j (:func:`_certified_below`).  When the two meet to :data:`GAP_TOL` the end is the lower one, exact, in one solve
+    where the root and the dive take two; otherwise the caller searches from the root, with that trajectory if any."""
+    chosen, convex = _guided_pieces(unions, guide)
     settled = [row for union in convex for row in union.rows(union.pieces[0])]
     rows = settled + [row for union, piece in chosen if not _is_point(piece) for row in union.rows(piece)]
     equal = [(dict(union.t), _midpoint(piece)) for union, piece in chosen if _is_point(piece)]

@@ -32,7 +32,7 @@ from netsetest.scenarios import topology_help
 from netsetest.runtime.rolespec import LOG_HELP, MAP_HELP
 
 if TYPE_CHECKING:  # a role process never loads the records (memory: docs/performance-history.md)
-    from netsetest.analysis.calibrate import Calibration, DriveMismatch
+    from netsetest.analysis.calibrate import Calibration, DriveMismatch, HeldOutLog, LogCalibration
     from netsetest.analysis.exact import ExactBounds
     from netsetest.config.schema import Scenario
     from netsetest.models.envelope import OperatingEnvelope
@@ -550,10 +550,44 @@ def _print_drives(cal: Calibration, plant: str, simpler: dict[PlantKind, list[Dr
         )
 
 
-def cmd_calibrate(a: argparse.Namespace) -> int:
+def _calibration_doc(
+    a: argparse.Namespace, cal: Calibration, sc: Scenario, envelope: OperatingEnvelope | None, simpler: dict[PlantKind, list[DriveMismatch]]
+) -> dict[str, object]:
+    """``calibrate --json``'s document: the bounds, the envelope they hold for, and each drive's figures."""
     import numpy as np
 
-    from netsetest.analysis.calibrate import calibrate, envelope_sweep, max_by_drive, simpler_mismatch
+    from netsetest.analysis.calibrate import max_by_drive
+
+    return {
+        "topology": sc.path,
+        "plant": sc.plant,
+        "vehicle": sc.vehicle_id,
+        "steps": sc.steps,
+        "margin": a.margin,
+        "seeds": list(a.seeds),
+        "signals": a.signals,
+        "box": np.diag(cal.box.G).tolist(),
+        "ellipsoid": cal.ellipsoid.E.tolist(),
+        "envelope": None if envelope is None else {"ay_max": envelope.ay_max, "speed_kmh": list(envelope.speed_kmh)},
+        "drives": [
+            {
+                "manoeuvre": d.drive.manoeuvre,
+                "amplitude": d.drive.amplitude,
+                "speed_kmh": d.speed_kmh,
+                "signals": d.signals,
+                "seed": d.seed,
+                "max_abs": d.max_abs.tolist(),
+                **dataclasses.asdict(d.envelope),
+            }
+            for d in cal.drives
+        ],
+        "simpler": {plant: {label: mx.tolist() for label, mx in max_by_drive(ds).items()} for plant, ds in simpler.items()},
+    }
+
+
+def cmd_calibrate(a: argparse.Namespace) -> int:
+
+    from netsetest.analysis.calibrate import calibrate, envelope_sweep, simpler_mismatch
     from netsetest.config.schema import load_topology
     from netsetest.models.plant import VEHICLE_NAMES
     from netsetest.runtime.report import Progress
@@ -609,48 +643,62 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
         with open(a.toml, "w") as fh:
             fh.write("\n" + cal.box.as_toml() + ("\n" + envelope.as_toml() if envelope is not None else ""))
     if a.json:
-        doc = {
-            "topology": sc.path,
-            "plant": sc.plant,
-            "vehicle": sc.vehicle_id,
-            "steps": sc.steps,
-            "margin": a.margin,
-            "seeds": list(a.seeds),
-            "signals": a.signals,
-            "box": np.diag(cal.box.G).tolist(),
-            "ellipsoid": cal.ellipsoid.E.tolist(),
-            "envelope": None if envelope is None else {"ay_max": envelope.ay_max, "speed_kmh": list(envelope.speed_kmh)},
-            "drives": [
-                {
-                    "manoeuvre": d.drive.manoeuvre,
-                    "amplitude": d.drive.amplitude,
-                    "speed_kmh": d.speed_kmh,
-                    "signals": d.signals,
-                    "seed": d.seed,
-                    "max_abs": d.max_abs.tolist(),
-                    **dataclasses.asdict(d.envelope),
-                }
-                for d in cal.drives
-            ],
-            "simpler": {plant: {label: mx.tolist() for label, mx in max_by_drive(ds).items()} for plant, ds in simpler.items()},
-        }
         with open(a.json, "w") as fh:
-            json.dump(doc, fh, indent=1)
+            json.dump(_calibration_doc(a, cal, sc, envelope, simpler), fh, indent=1)
     return 0
+
+
+def _logs_options_wrong(a: argparse.Namespace) -> str | None:
+    """What is wrong with ``calibrate --logs``'s options (None: nothing): --held-out and --map need --logs, which
+    chooses its own drives."""
+    others = [o for o, v in (("--manoeuvres", a.manoeuvres), ("--envelope", a.envelope or None), ("--causes", a.causes or None), ("--steps", a.steps)) if v]
+    if a.logs is None:
+        return "--held-out and --map go with --logs"
+    return f"--logs chooses its own drives: leave out {', '.join(others)}" if others else None
+
+
+def _print_held_out(held: list[Scenario], checked: list[HeldOutLog]) -> None:
+    """Per held-out drive: its transitions inside and outside the envelope, e_k against the box, each sensor's noise."""
+    for t, h in zip(held, checked):
+        total = sum(h.inside.values())
+        print(
+            f"held out {h.path} (mapping {t.log.mapping.path}): {total} transitions inside the envelope: e_k inside the box on {h.inside['inside']}, possibly outside on "  # type: ignore[union-attr]  # a log's scenario
+            f"{h.inside['overlap']}, certainly outside on {h.inside['disjoint']}; outside the envelope {sum(h.outside.values())} "
+            f"(certainly outside the box on {h.outside['disjoint']})"
+        )
+        for i, c in h.noise.items():
+            if c["overlap"] or c["disjoint"]:
+                print(f"  node {i}: noise possibly beyond its calibrated bound on {c['overlap']} healthy steps, certainly on {c['disjoint']}")
+
+
+def _calibration_logs_doc(a: argparse.Namespace, cal: LogCalibration, train: list[Scenario], checked: list[HeldOutLog]) -> dict[str, object]:
+    """``calibrate --logs --json``'s document: the bounds, the envelope and noise bounds, the held-out drives' checks."""
+    import numpy as np
+
+    return {
+        "topology": train[0].path,
+        "logs": cal.logs,
+        "maps": [t.log.mapping.path for t in train],  # type: ignore[union-attr]  # a log's scenario
+        "margin": a.margin,
+        "transitions": cal.transitions,
+        "box": np.diag(cal.box.G).tolist(),
+        "ellipsoid": cal.ellipsoid.E.tolist(),
+        "envelope": {"ay_max": cal.envelope.ay_max, "speed_kmh": list(cal.envelope.speed_kmh)},
+        "R": {str(i): R for i, R in cal.R.items()},
+        "noise_steps": {str(i): n for i, n in cal.noise_steps.items()},
+        "held_out": [dataclasses.asdict(h) | {"noise": {str(i): c for i, c in h.noise.items()}} for h in checked],
+    }
 
 
 def _calibrate_logs(a: argparse.Namespace) -> int:
     """``calibrate TOPOLOGY --logs TRAIN… [--held-out TEST…]``: the bounds from recorded drives (analysis/calibrate.py)."""
-    import numpy as np
 
     from netsetest.analysis.calibrate import calibrate_logs, check_held_out
     from netsetest.config.schema import load_topology
     from netsetest.logs.drive import with_log_steps
     from netsetest.runtime.report import Progress
 
-    others = [o for o, v in (("--manoeuvres", a.manoeuvres), ("--envelope", a.envelope or None), ("--causes", a.causes or None), ("--steps", a.steps)) if v]
-    if a.logs is None or others:
-        what = "--held-out and --map go with --logs" if a.logs is None else f"--logs chooses its own drives: leave out {', '.join(others)}"
+    if what := _logs_options_wrong(a):
         print(f"netsetest calibrate: {what}", file=sys.stderr)
         return EXIT_BAD_INPUT
     # every step of each log, read with its own mapping, else --map's, else the default (its name with .map.toml, the topology's)
@@ -683,35 +731,13 @@ def _calibrate_logs(a: argparse.Namespace) -> int:
     for i, R in cal.R.items():
         n = sc.node(i)
         print(f"R = {R!r}  # node {i} (profile {n.label}): |v| ≤ {math.sqrt(R):.4g} over {cal.noise_steps[i]} steps; declared now: R = {n.sensor.R:g}")
-    for t, h in zip(held, checked):
-        total = sum(h.inside.values())
-        print(
-            f"held out {h.path} (mapping {t.log.mapping.path}): {total} transitions inside the envelope: e_k inside the box on {h.inside['inside']}, possibly outside on "  # type: ignore[union-attr]  # a log's scenario
-            f"{h.inside['overlap']}, certainly outside on {h.inside['disjoint']}; outside the envelope {sum(h.outside.values())} "
-            f"(certainly outside the box on {h.outside['disjoint']})"
-        )
-        for i, c in h.noise.items():
-            if c["overlap"] or c["disjoint"]:
-                print(f"  node {i}: noise possibly beyond its calibrated bound on {c['overlap']} healthy steps, certainly on {c['disjoint']}")
+    _print_held_out(held, checked)
     if a.toml:
         with open(a.toml, "w") as fh:
             fh.write("\n" + cal.box.as_toml() + "\n" + cal.envelope.as_toml())
     if a.json:
-        doc = {
-            "topology": sc.path,
-            "logs": cal.logs,
-            "maps": [t.log.mapping.path for t in train],  # type: ignore[union-attr]  # a log's scenario
-            "margin": a.margin,
-            "transitions": cal.transitions,
-            "box": np.diag(cal.box.G).tolist(),
-            "ellipsoid": cal.ellipsoid.E.tolist(),
-            "envelope": {"ay_max": cal.envelope.ay_max, "speed_kmh": list(cal.envelope.speed_kmh)},
-            "R": {str(i): R for i, R in cal.R.items()},
-            "noise_steps": {str(i): n for i, n in cal.noise_steps.items()},
-            "held_out": [dataclasses.asdict(h) | {"noise": {str(i): c for i, c in h.noise.items()}} for h in checked],
-        }
         with open(a.json, "w") as fh:
-            json.dump(doc, fh, indent=1)
+            json.dump(_calibration_logs_doc(a, cal, train, checked), fh, indent=1)
     return 0
 
 

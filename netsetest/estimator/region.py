@@ -26,6 +26,7 @@ unchanged.  ``netsetest compare`` shows each method with the region (``zonotope`
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -37,6 +38,9 @@ from netsetest.estimator.sector import Interval, measurement_interval
 from netsetest.models.sensor import NX
 from netsetest.polygon import Polygon
 from netsetest.sets import CutName, RegionSet, Slab
+
+if TYPE_CHECKING:
+    from netsetest.estimator.health import HealthAssessment
 
 
 class WithRegion(SetEstimator):
@@ -70,17 +74,8 @@ class WithRegion(SetEstimator):
         meas = Interval(-math.inf, math.inf) if inp.y is None else measurement_interval(self.node.sensor, inp.y, inp.gamma)
         region = self._moved(s_lo, s_hi, inp)
         fault = _FaultRange(float(s_lo[NX]), float(s_hi[NX]))
-        health = None
-        slabs: list[Slab] = []
-        if self.uses_readings and inp.y is not None:
-            slabs, health = self.reading_slabs.assessed((inp.y, inp.gamma), inp.readings, lambda a: (-s.support(-a), s.support(a)))
-            for slab in slabs:
-                if not slab.a[:NX].any():  # |f| ≤ τ (the k-of-N pin)
-                    fault.cut("health-pin", slab.lo / slab.a[NX], slab.hi / slab.a[NX])
-        size, own_size = self.node.fault_size, None
-        if (self.rests_on_bound or inp.y is None and inp.step > 0) and size is not None:  # (a step without a reading rests on it)
-            fault.cut("fault-size", -size, size)
-            own_size = size if inp.y is not None else None  # C x = C̄ x̄ − Ds f, |f| ≤ F
+        slabs, health = self._readings(s, inp, fault)
+        own_size = self._fault_size(inp, fault)
         hull = [Slab(self.axes[m], float(s_lo[m]), float(s_hi[m])) for m in range(NX)]  # the own set's interval hull
         model = self.reading_slabs.health
         others = health.others if health is not None and model is not None and self.Ds != 0.0 else None  # (cuts.py's health-fault)
@@ -108,6 +103,26 @@ class WithRegion(SetEstimator):
         r_lo, r_hi = facts.box[:NX], facts.box[NX:]
         xs: tuple[tuple[CutName, ...], ...] = tuple(("region",) if r_lo[m] > s_lo[m] or r_hi[m] < s_hi[m] else () for m in range(NX))
         return RegionSet(s, region, (fault.lo, fault.hi), (xs[0], xs[1], tuple(fault.names)))
+
+    def _readings(self, s: GuaranteedSet, inp: StepInput, fault: _FaultRange) -> tuple[list[Slab], HealthAssessment | None]:
+        """The readings' slabs the method uses and their health assessment (none without the own reading); the
+        k-of-N pin |f| ≤ τ among them cuts ``fault``."""
+        if not self.uses_readings or inp.y is None:
+            return [], None
+        slabs, health = self.reading_slabs.assessed((inp.y, inp.gamma), inp.readings, lambda a: (-s.support(-a), s.support(a)))
+        for slab in slabs:
+            if not slab.a[:NX].any():  # |f| ≤ τ (the k-of-N pin)
+                fault.cut("health-pin", slab.lo / slab.a[NX], slab.hi / slab.a[NX])
+        return slabs, health
+
+    def _fault_size(self, inp: StepInput, fault: _FaultRange) -> float | None:
+        """The declared fault bound F cuts ``fault`` where the method rests on it (and on a step without a reading);
+        F for the own measurement's cut (C x = C̄ x̄ − Ds f, |f| ≤ F) where it has a reading, else None."""
+        size = self.node.fault_size
+        if (self.rests_on_bound or inp.y is None and inp.step > 0) and size is not None:  # (a step without a reading rests on it)
+            fault.cut("fault-size", -size, size)
+            return size if inp.y is not None else None
+        return None
 
     def _moved(self, s_lo: np.ndarray, s_hi: np.ndarray, inp: StepInput) -> Polygon:
         """The last region through the step's blended dynamics, the disturbance and the mismatch bound (step 0, or

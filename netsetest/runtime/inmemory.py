@@ -68,6 +68,33 @@ def _step_all(nodes: list[Node], bus: MemoryBus) -> bool:
     return stepped
 
 
+def _lockstep(vehicle: Vehicle, nodes: list[Node], bus: MemoryBus, bar: Progress, on_step: Callable[[int], None] | None, stop: StopRequests | None) -> None:
+    """:func:`run_inmemory`'s loop: the vehicle's steps, each once every node has taken what it can, until the last
+    or a signal noted in ``stop``; what is still on the bus delivered at the end."""
+    vehicle.advance()
+    while not vehicle.done:
+        if stop is not None and stop.signal is not None:
+            break
+        bus.pump()
+        stepped = _step_all(nodes, bus)
+        bus.pump()
+        stepped = _step_all(nodes, bus) or stepped  # what that pump delivered (the step's readings) may let a node step
+        if vehicle.ready_to_advance() and vehicle.window_open():  # the collector shares the bus: its window never holds
+            bar.update(vehicle.k)
+            vehicle.advance()
+            if on_step is not None:
+                on_step(vehicle.k)
+        elif not stepped and not bus.pending():
+            # in one process a message that has not arrived never will (lost, or dropped as hostile):
+            # nodes proceed without the missing neighbours, the vehicle without the silent nodes
+            waiting = [n for n in nodes if n.missing()]
+            for n in waiting:
+                n.give_up = True
+            if not waiting:
+                vehicle.advance()
+    bus.pump()
+
+
 def run_inmemory(
     scenario: Scenario,
     signals: SignalKind = "paper",
@@ -104,28 +131,7 @@ def run_inmemory(
     if sink is not None:
         sink.meta(meta)
     bar = Progress(scenario.steps, "inmemory", enabled=progress)
-    vehicle.advance()
-    while not vehicle.done:
-        if stop is not None and stop.signal is not None:
-            break
-        bus.pump()
-        stepped = _step_all(nodes, bus)
-        bus.pump()
-        stepped = _step_all(nodes, bus) or stepped  # what that pump delivered (the step's readings) may let a node step
-        if vehicle.ready_to_advance() and vehicle.window_open():  # the collector shares the bus: its window never holds
-            bar.update(vehicle.k)
-            vehicle.advance()
-            if on_step is not None:
-                on_step(vehicle.k)
-        elif not stepped and not bus.pending():
-            # in one process a message that has not arrived never will (lost, or dropped as hostile):
-            # nodes proceed without the missing neighbours, the vehicle without the silent nodes
-            waiting = [n for n in nodes if n.missing()]
-            for n in waiting:
-                n.give_up = True
-            if not waiting:
-                vehicle.advance()
-    bus.pump()
+    _lockstep(vehicle, nodes, bus, bar, on_step, stop)
     bar.close()
     drops = {"bus": dict(bus.dropped)} if bus.dropped else None
     if not vehicle.done:  # stopped by a signal: the steps after the last closed one were cut short, not lost

@@ -58,15 +58,7 @@ def test_every_suppression_says_why() -> None:
 # functions radon still counts above 20 (issue 46's "done when": none, outside generated tables): each to be split along
 # its seams; a function not listed here that grows past 20, or one listed that no longer does, fails the test below
 RADON_ABOVE_20 = {
-    "netsetest/polygon.py:_plus",
-    "netsetest/runtime/inmemory.py:run_inmemory",
-    "netsetest/estimator/region.py:WithRegion.step",
-    "netsetest/cli/main.py:_calibrate_logs",
-    "netsetest/cli/main.py:cmd_calibrate",
     "netsetest/roles/judge.py:Judge.own_cause",
-    "netsetest/analysis/kofn.py:guided",
-    "netsetest/analysis/kofn.py:_repaired",
-    "netsetest/analysis/compare.py:compare",
 }
 
 
