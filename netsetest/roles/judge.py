@@ -243,6 +243,16 @@ def relation(s: ProvenSet, tr: Truth, i: int, box: tuple[np.ndarray, np.ndarray]
     return "overlap" if rel == "inside" else rel
 
 
+def _transition_cause(prev: Truth | None, k: int, prev_overloaded: bool) -> str | None:
+    """Why the transition k − 1 → k gives no guarantee (None: the disturbance bound held over it); without the
+    previous truth it is unknown: the collector's own overload where it closed that step unjudged."""
+    if prev is None or prev.step != k - 1:
+        return COLLECTOR_OVERLOADED if prev_overloaded else TRUTH_UNKNOWN
+    if not prev.dist_ok:
+        return "disturbance"
+    return None
+
+
 def _in_prior(n: NodeConfig, tr: Truth) -> bool:
     """Assumption 1: the true x̄_0 lies in node n's prior ellipsoid (all of a reference's box: else not proven; an
     unknown fault never is)."""
@@ -442,6 +452,18 @@ class Judge:
         rejoin = st is not None and st.status == "rejoin"  # no transition crossed (below)
         if k > 0 and prev is not None and prev.step == k - 1 and not prev.mismatch_ok and not rejoin:
             return mismatch_cause(prev)
+        own = self._measurement_cause(n, st, tr, k)
+        if own is not None:
+            return own
+        if k == 0:
+            return None if _in_prior(n, tr) else "initial set"
+        if rejoin:
+            return None  # built from the neighbours' sets of this very step: no transition crossed
+        return _transition_cause(prev, k, prev_overloaded)
+
+    def _measurement_cause(self, n: NodeConfig, st: NodeState | None, tr: Truth, k: int) -> str | None:
+        """The first of the step's measurement assumptions that broke: the sector, the noise bound, the declared fault
+        bound where the step rests on it (None: they held)."""
         read = n.id in tr.y  # without a reading no measurement, so no noise bound or sector, enters the step
         if read and not self.sector_premise(n, st, tr):
             return "sector"
@@ -450,14 +472,6 @@ class Judge:
         # a set estimator's step > 0 without a reading carries its fault by the declared bound alone (estimator/base.py)
         if (n.id in self.needs_fault_bound or not read and k > 0 and n.estimator != SDP) and not tr.fault_ok.get(n.id, False):
             return "fault bound"
-        if k == 0:
-            return None if _in_prior(n, tr) else "initial set"
-        if st is not None and st.status == "rejoin":
-            return None  # built from the neighbours' sets of this very step: no transition crossed
-        if prev is None or prev.step != k - 1:
-            return COLLECTOR_OVERLOADED if prev_overloaded else TRUTH_UNKNOWN
-        if not prev.dist_ok:
-            return "disturbance"
         return None
 
     def cone(self, n: NodeConfig, inp: StepInputs, checks: StepChecks, prev: StepChecks) -> Cone:

@@ -55,16 +55,9 @@ def test_every_suppression_says_why() -> None:
     assert not bare, "a suppression without a reason: " + ", ".join(bare)
 
 
-# functions radon still counts above 20 (issue 46's "done when": none, outside generated tables): each to be split along
-# its seams; a function not listed here that grows past 20, or one listed that no longer does, fails the test below
-RADON_ABOVE_20 = {
-    "netsetest/roles/judge.py:Judge.own_cause",
-}
-
-
-def test_no_function_grows_past_radon_20() -> None:
+def test_no_function_is_above_radon_20() -> None:
     """Cyclomatic complexity as radon counts it (ruff's C901 at 20 leaves out boolean operators and comprehensions'
-    conditions, which radon counts) for every function of the package and the benchmark: at most 20, but those listed."""
+    conditions, which radon counts) for every function of the package and the benchmark: at most 20 (issue 46)."""
     from radon.complexity import cc_visit
 
     above = set()
@@ -73,5 +66,4 @@ def test_no_function_grows_past_radon_20() -> None:
             if block.letter != "C" and block.complexity > 20:  # functions and methods (a class's figure sums its methods)
                 name = f"{block.classname}.{block.name}" if getattr(block, "classname", None) else block.name
                 above.add(f"{path.relative_to(ROOT)}:{name}")
-    assert above - RADON_ABOVE_20 == set(), "above 20 (split it): " + ", ".join(sorted(above - RADON_ABOVE_20))
-    assert RADON_ABOVE_20 - above == set(), "no longer above 20 (remove it from RADON_ABOVE_20): " + ", ".join(sorted(RADON_ABOVE_20 - above))
+    assert not above, "above 20 (split it along its seams): " + ", ".join(sorted(above))
