@@ -24,7 +24,7 @@ import sys
 from pathlib import Path
 
 from netsetest_bench.figures.baseline import load as load_side
-from netsetest_bench.render import MISSING, fill
+from netsetest_bench.render import MISSING, as_fields, fill
 from netsetest_bench.zenoh_runs import code_env, realtime_run
 from netsetest_bench.config import BenchConfig
 
@@ -139,7 +139,7 @@ def performance_side_by_side(cfg: BenchConfig, directory: Path, baseline: Path, 
     out: dict = {"commits": {"this": checkout_commit(Path(__file__).resolve().parents[2]), "baseline": checkout_commit(baseline)}}
     _log(f"side by side with {baseline}: the estimator's step (paper6, processes of their own, alternating)")
     try:
-        out["step"] = step_side_by_side(baseline)
+        out["step"] = json.loads(json.dumps(step_side_by_side(baseline), default=as_fields))  # as its file holds it, like the rest of ``out``
     except SideBySideFailed as e:
         out["step"] = {"error": str(e)}
     _log("side by side: in-memory rings of 6, 24 and 96 nodes (processes of their own, alternating)")

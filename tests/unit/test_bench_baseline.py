@@ -72,3 +72,23 @@ def test_the_ladders_stop_each_at_their_own_first_miss(monkeypatch: pytest.Monke
     assert calls == [(12, "this"), (12, "baseline"), (24, "this"), (24, "baseline"), (48, "this"), (48, "baseline"), (64, "this"), (80, "this")]
     assert out["this"]["max_nodes"] == 64 and out["baseline"]["max_nodes"] == 24
     assert out["this"]["node_cpu_ms_per_step"] == {"median": 1.0, "min": 1.0, "runs": 3}  # rings of 48 nodes and more
+
+
+def test_the_side_by_side_takes_the_typed_step_as_its_file_holds_it(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """performance_side_by_side with widths.step_side_by_side's typed result (a SideBySide since the figures were
+    typed): its figures and its table, as `bench --only performance --baseline` makes them (it crashed there)."""
+    from netsetest_bench import widths
+    from netsetest_bench.config import QUICK
+    from netsetest_bench.figures.widths import Commits, SideBySide, SideCase, StepFigure
+
+    def fig(this: float, base: float) -> StepFigure:
+        return StepFigure([this], [base], this, base, this * 1.1, base * 1.1, this - base, 1.1 * (this - base), this <= 0.25)
+
+    typed = SideBySide(steps=40, processes=1, runs=1, target_ms=0.25, commits=Commits("aaa", "16f81b4"))
+    typed = SideBySide(**{**typed.__dict__, "nsnim": SideCase(fig(0.3, 0.45), fig(0.24, 0.45)), "saim": SideCase(fig(2.0, 2.3), fig(1.7, 2.3))})
+    monkeypatch.setattr(widths, "step_side_by_side", lambda b: typed)
+    monkeypatch.setattr(baseline, "scaling_side_by_side", lambda quick, b: SIDE["scaling"])
+    monkeypatch.setattr(baseline, "realtime_side_by_side", lambda d, sizes, steps, b: SIDE["realtime"])
+    side = baseline.performance_side_by_side(QUICK, tmp_path, tmp_path, True)
+    assert side["figures"]["step_nsnim"] == baseline.figures(SIDE)["step_nsnim"]
+    assert "| NSNIM estimator step, median node-step replayed (ms) | 0.240 / 0.264 | 0.450 / 0.495 | 0.53 | ≤ 0.25 | yes |" in baseline.baseline_markdown(side)
