@@ -430,6 +430,8 @@ def run_bench(
             parts |= dict(plant=plant_figures(cfg, tmp), network=network_figures(cfg, tmp), scenario=scenario_figures(cfg, tmp))
             parts |= dict(exact=exact_figures(cfg, tmp), widths=widths_figures(cfg, tmp))
     meta = started | dict(load_after=_load(), duration_s=time.perf_counter() - t_all)
+    if json_path:  # the measurements first, as measured: a figure no renderer reads back loses no run (written again below)
+        Path(json_path).write_text(json.dumps({"meta": meta, **parts}, indent=1, default=_jsonable) + "\n")
     parts |= headline(load_performance(_as_written({"meta": meta, **parts})))
     md = markdown(_as_written({"meta": meta, **parts}))
     if side is not None:

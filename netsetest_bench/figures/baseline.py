@@ -29,7 +29,7 @@ class Part:
 @dataclass(frozen=True)
 class RealtimeRun:
     nodes: int
-    deadline_misses: int
+    deadline_misses: int | None  # None: the run gave no summary (it failed; the bench's log says how)
     node_cpu_ms_per_step: float | None = None
 
 

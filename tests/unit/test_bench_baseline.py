@@ -88,7 +88,11 @@ def test_the_side_by_side_takes_the_typed_step_as_its_file_holds_it(monkeypatch:
     typed = SideBySide(**{**typed.__dict__, "nsnim": SideCase(fig(0.3, 0.45), fig(0.24, 0.45)), "saim": SideCase(fig(2.0, 2.3), fig(1.7, 2.3))})
     monkeypatch.setattr(widths, "step_side_by_side", lambda b: typed)
     monkeypatch.setattr(baseline, "scaling_side_by_side", lambda quick, b: SIDE["scaling"])
-    monkeypatch.setattr(baseline, "realtime_side_by_side", lambda d, sizes, steps, b: SIDE["realtime"])
+    failed = {"nodes": 12, "deadline_misses": None, "node_cpu_ms_per_step": None}  # the baseline's first run gave no summary
+    realtime = {**SIDE["realtime"], "baseline": {"max_nodes": None, "runs": [failed], "node_cpu_ms_per_step": {"min": None, "median": None, "runs": 0}}}
+    monkeypatch.setattr(baseline, "realtime_side_by_side", lambda d, sizes, steps, b: realtime)
     side = baseline.performance_side_by_side(QUICK, tmp_path, tmp_path, True)
     assert side["figures"]["step_nsnim"] == baseline.figures(SIDE)["step_nsnim"]
-    assert "| NSNIM estimator step, median node-step replayed (ms) | 0.240 / 0.264 | 0.450 / 0.495 | 0.53 | ≤ 0.25 | yes |" in baseline.baseline_markdown(side)
+    text = baseline.baseline_markdown(side)
+    assert "| NSNIM estimator step, median node-step replayed (ms) | 0.240 / 0.264 | 0.450 / 0.495 | 0.53 | ≤ 0.25 | yes |" in text
+    assert "12: — (—)" in text  # a run without a summary is shown as not measured, not a crash
