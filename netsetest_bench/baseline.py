@@ -30,7 +30,7 @@ from netsetest_bench.config import BenchConfig
 
 SCALING_PROCESSES = 2  # processes of each checkout for the in-memory rings, alternating
 SCALING_PROGRAM = """
-import json, sys, tempfile
+import dataclasses, json, sys, tempfile
 from pathlib import Path
 try:  # a checkout from before issue 46 keeps the benchmark inside the package
     from netsetest.bench.run import FULL, QUICK, scaling
@@ -38,7 +38,7 @@ except ImportError:
     from netsetest_bench.run import FULL, QUICK, scaling
 cfg = QUICK if sys.argv[1] == "quick" else FULL
 with tempfile.TemporaryDirectory(prefix="nsbench-") as tmp:
-    print(json.dumps(scaling(cfg, Path(tmp))))
+    print(json.dumps(scaling(cfg, Path(tmp)), default=dataclasses.asdict))  # typed figures (since issue 46) as their file holds them
 """  # one program for this checkout and the baseline (bench/run.py's scaling, which 16f81b4 has)
 TARGETS = {  # issue 45, ms (or nodes): the figure's key → (at most / at least, value)
     "step_nsnim": ("≤", 0.25),
@@ -133,10 +133,10 @@ def realtime_side_by_side(directory: Path, sizes: list[int], steps: int, baselin
 
 def performance_side_by_side(cfg: BenchConfig, directory: Path, baseline: Path, quick: bool) -> dict:
     """Issue 45's figures of this checkout and ``baseline`` side by side (module doc)."""
-    from netsetest_bench.node_budget import checkout_commit
+    from netsetest_bench.node_budget import THIS_CHECKOUT, checkout_commit
     from netsetest_bench.widths import SideBySideFailed, step_side_by_side
 
-    out: dict = {"commits": {"this": checkout_commit(Path(__file__).resolve().parents[2]), "baseline": checkout_commit(baseline)}}
+    out: dict = {"commits": {"this": checkout_commit(THIS_CHECKOUT), "baseline": checkout_commit(baseline)}}
     _log(f"side by side with {baseline}: the estimator's step (paper6, processes of their own, alternating)")
     try:
         out["step"] = json.loads(json.dumps(step_side_by_side(baseline), default=as_fields))  # as its file holds it, like the rest of ``out``

@@ -80,6 +80,9 @@ def node_budget(report: dict) -> dict[str, float]:
     }
 
 
+THIS_CHECKOUT = Path(__file__).resolve().parents[1]  # the repository the benchmark runs from (netsetest_bench/ is at its top)
+
+
 def checkout_commit(checkout: Path) -> str | None:
     """The commit a checkout's code is at (None: not a git checkout), so the table says which code it measured."""
     out = subprocess.run(["git", "-C", str(checkout), "rev-parse", "--short=12", "HEAD"], capture_output=True, text=True, check=False)
@@ -152,7 +155,7 @@ def node_figures(cfg: BenchConfig, tmp: Path, baseline: Path | None = None) -> d
                 + (row["error"] if "error" in row else f"{row['process_us']:.0f} µs per step, {row['threads_us']:.0f} of it Zenoh's threads")
             )
     out: dict = {"nodes": nodes, "steps": steps, "reps": reps, "baseline_code": str(baseline) if baseline is not None else None}
-    out["commits"] = {name: checkout_commit(code or Path(__file__).resolve().parents[2]) for name, code in codes.items()}
+    out["commits"] = {name: checkout_commit(code or THIS_CHECKOUT) for name, code in codes.items()}
     out.update({name: {"runs": rows, "summary": _summary(rows)} for name, rows in runs.items()})
     out["floor"] = {
         "node": floor[1].node,

@@ -249,9 +249,9 @@ def step_side_by_side(baseline: Path, steps: int = COST_STEPS, processes: int = 
     checkout, and the fastest runs' difference against :data:`STEP_TARGET_MS`.  The fastest run is the code's cost
     where nothing else took the machine: this host has episodes of seconds in which a run is 1.5 times slower
     (docs/performance-history.md), which a median of a few runs does not hide."""
-    from netsetest_bench.node_budget import checkout_commit
+    from netsetest_bench.node_budget import THIS_CHECKOUT, checkout_commit
 
-    commits = Commits(this=checkout_commit(Path(__file__).resolve().parents[2]), baseline=checkout_commit(baseline))
+    commits = Commits(this=checkout_commit(THIS_CHECKOUT), baseline=checkout_commit(baseline))
     out: list[SideCase] = []
     for case in CASES:
         this: list[tuple[float, float]] = []

@@ -96,3 +96,11 @@ def test_the_side_by_side_takes_the_typed_step_as_its_file_holds_it(monkeypatch:
     text = baseline.baseline_markdown(side)
     assert "| NSNIM estimator step, median node-step replayed (ms) | 0.240 / 0.264 | 0.450 / 0.495 | 0.53 | ≤ 0.25 | yes |" in text
     assert "12: — (—)" in text  # a run without a summary is shown as not measured, not a crash
+
+
+def test_this_checkout_is_the_repository_the_benchmark_runs_from() -> None:
+    """The tables name this checkout's commit: the repository holding netsetest_bench/ (it named none after the move)."""
+    from netsetest_bench.node_budget import THIS_CHECKOUT, checkout_commit
+
+    assert (THIS_CHECKOUT / "pyproject.toml").is_file() and (THIS_CHECKOUT / "netsetest_bench").is_dir()
+    assert checkout_commit(THIS_CHECKOUT) is not None
