@@ -28,8 +28,8 @@ EPS_LADDER = 10.0 ** np.arange(-10.0, -2.0)  # relative nudges of the multiplier
 class FactStack:
     """A step's facts Q_m stacked once, for every certificate of that step (objective ``bank`` certifies
     two answers of the same data): Q (m, d, d), Q reshaped (m, d²), Σ_m Q_m, whether all are finite, each
-    Q_m's diagonal (m, d) and whether every Q_m is diagonal (the ball facts: then :func:`certify` takes its
-    closed form)."""
+    Q_m's diagonal (m, d), whether every Q_m is diagonal (the ball facts: then :func:`certify` takes its
+    closed form) and each |Q_m|'s row sums (m, d)."""
 
     Q: np.ndarray
     Qflat: np.ndarray
@@ -37,6 +37,7 @@ class FactStack:
     finite: bool
     diag: np.ndarray
     diagonal: bool
+    rows: np.ndarray  # (m, d): each |Q_m|'s row sums (:func:`lmi_proven`'s rounding bound)
 
     @classmethod
     def of(cls, facts: Sequence[np.ndarray]) -> FactStack:
@@ -44,7 +45,8 @@ class FactStack:
         m, d = Q.shape[0], Q.shape[-1]
         flat = Q.reshape(m, -1)
         diag = flat[:, :: d + 1]
-        return cls(Q, flat, Q.sum(axis=0), bool(np.isfinite(Q).all()), diag, np.count_nonzero(flat) == np.count_nonzero(diag))
+        diagonal = np.count_nonzero(flat) == np.count_nonzero(diag)
+        return cls(Q, flat, Q.sum(axis=0), bool(np.isfinite(Q).all()), diag, diagonal, np.abs(Q).sum(axis=2))
 
 
 def _finite(*arrays: np.ndarray) -> bool:
@@ -72,7 +74,8 @@ def certify(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: Sequence[np.n
     if fs.diagonal and P.shape == (3, 3):
         out = diagonal_certificate(P, pi, tau, fs)
         return None if out is None else out[0]
-    return _dense_certificate(P, pi, tau, fs)
+    out = _dense_certificate(P, pi, tau, fs)
+    return None if out is None else out[0]
 
 
 U = 2.0**-53  # the unit roundoff of float64
@@ -90,7 +93,7 @@ def rump_definite(a: list[list[float]]) -> bool:
     S. M. Rump, "Verification of positive definiteness", BIT 46 (2006) 433–452: if the floating-point Cholesky
     factorisation of a − cI runs to completion for a c ≥ γ_{n+1}/(1 − 2γ_{n+1}) tr(a) (plus an underflow term), a
     is positive definite, whatever the order of the operations (fused or not).  False is no proof of the opposite.
-    Unrolled: the certificate's hot path."""
+    Unrolled: the certificate's hot path (:func:`rump_proven`: any n, by one LAPACK Cholesky)."""
     (a00, _, _, _), (a10, a11, _, _), (a20, a21, a22, _), (a30, a31, a32, a33) = a
     if not (a00 > 0.0 and a11 > 0.0 and a22 > 0.0 and a33 > 0.0 and max(a00, a11, a22, a33) < RUMP_MAX):
         return False  # (a NaN fails here too)
@@ -179,8 +182,32 @@ def diagonal_certificate(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, fs: Fac
     return None
 
 
-def _dense_certificate(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, fs: FactStack) -> float | None:
-    """:func:`certify` on the d×d matrix (any facts): LAPACK's Cholesky, solve and eigenvalues."""
+def rump_proven(a: np.ndarray) -> bool:
+    """:func:`rump_definite` of a symmetric n×n float64 array (its lower triangle read), by LAPACK's Cholesky: the same
+    power-of-two scaling (exact), the same shift c = RUMP_C (n + 2) u tr + RUMP_FLOOR; Rump's theorem holds for a
+    floating-point Cholesky factorisation in any order of its operations, LAPACK's blocked or fused ones too."""
+    diag = a.diagonal()
+    if not (float(diag.min()) > 0.0 and float(diag.max()) < RUMP_MAX):
+        return False  # (a NaN fails here too)
+    k = -(np.frexp(diag)[1] >> 1)
+    s = np.ldexp(a, k[:, None] + k[None, :])  # D a D, exact
+    n = len(diag)
+    c = RUMP_C * (n + 2) * U * float(s.trace()) + RUMP_FLOOR
+    s.flat[:: n + 1] -= c
+    try:
+        linalg.cholesky(s)  # (the lower triangle: numpy's cholesky reads it)
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
+def _dense_certificate(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, fs: FactStack) -> tuple[float, np.ndarray] | None:
+    """:func:`certify` on the d×d matrix (any facts): (ρ', τ') as :func:`diagonal_certificate` gives them.
+
+    Estimate (LAPACK's Cholesky and solves), as the S-procedure's Schur complements say: K = Πᵀ P⁻¹ Π + Σ τ'_m Q_m
+    (Πᵀ P⁻¹ Π = XᵀX, X = C⁻¹Π with C Cᵀ = P), the first ε of the ladder whose lower block −K₂₂ has a Cholesky factor
+    in floating point, and ρ' = k₁₁ − kᵀK₂₂⁻¹k widened by a hair.  Proof, on these floats (P, Π, τ' = τ + ε, ρ'),
+    :func:`lmi_proven`; where it fails, ρ' is widened by 10⁻⁶ up to 60 times."""
     try:
         chol = linalg.cholesky(P)
     except np.linalg.LinAlgError:
@@ -190,9 +217,9 @@ def _dense_certificate(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, fs: FactS
     tau = np.maximum(tau, 0.0)
     scale = max(1.0, float(tau.max()))
     d = base.shape[0]
-    K0 = base + np.dot(tau.reshape(1, -1), fs.Qflat).reshape(d, d)  # Σ τ_m Q_m, exactly as np.tensordot(tau, Q, 1)
     for eps in scale * EPS_LADDER:
-        K = K0 + eps * fs.Qsum
+        t = tau + eps  # τ' (the statement is about these floats)
+        K = base + (t @ fs.Qflat).reshape(d, d)
         K = 0.5 * (K + K.T)
         k11, k, K22 = K[0, 0], K[1:, 0], K[1:, 1:]
         try:
@@ -205,13 +232,42 @@ def _dense_certificate(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, fs: FactS
     y = linalg.solve(c22, k)
     rho_c = float(k11 + y @ y)  # Schur complement: K − ρ' e₁e₁ᵀ ⪯ 0 ⇔ K22 ≺ 0 and ρ' ≥ k11 − kᵀK22⁻¹k
     rho_c = rho_c * (1 + 1e-9) + 1e-12
-    for _ in range(60):  # confirm with eigenvalues; widen by a hair if rounding says otherwise
-        Kc = K.copy()
-        Kc[0, 0] -= rho_c
-        if linalg.eigvalsh(Kc)[-1] <= 0.0:
-            return rho_c if rho_c > 0 else None
+    for _ in range(60):
+        if lmi_proven(P, pi, t, fs, rho_c):
+            return (rho_c, t) if rho_c > 0 else None
         rho_c *= 1 + 1e-6
     return None
+
+
+def lmi_proven(P: np.ndarray, pi: np.ndarray, t: np.ndarray, fs: FactStack, rho: float, margin: float | None = None) -> bool:
+    """Whether, in exact arithmetic on these floats, M = [[P, Π], [Πᵀ, N]] ≻ 0 with N = ρ e₁e₁ᵀ − Σ_m t_m Q_m: the
+    S-procedure condition Πᵀ P⁻¹ Π + Σ t_m Q_m ⪯ ρ e₁e₁ᵀ (its Schur complement over P), strictly.
+
+    P and Π enter M exactly.  Each computed entry of N is within γ_{m+1} A_ij of the exact one, A = Σ_m t_m |Q_m| +
+    ρ e₁e₁ᵀ (a sum of m + 1 terms, any order, fused or not), so the error's spectral norm is at most
+    γ_{m+1} max_i Σ_j A_ij (a symmetric matrix's norm is at most its largest row sum; every Q_m built here is
+    symmetric).  N's diagonal is moved down by μ = :data:`DENSE_MARGIN` (m + 2) u (A's largest row sum as computed),
+    at least twice that bound (γ_{m+1} < 2 (m + 2) u; the computed row sums are within (m + d) u of theirs), and each
+    moved entry by a further 8u of its terms (its own rounding); :func:`rump_proven` proves the moved matrix positive
+    definite, and M is at least it.  ``margin``: DENSE_MARGIN unless given (tests/unit/test_certificate.py shrinks
+    it to show that it is needed)."""
+    n, d = P.shape[0], pi.shape[1]
+    low = -(t @ fs.Qflat).reshape(d, d)  # N without ρ
+    size = float((t @ fs.rows).max()) + abs(rho)
+    mu = (DENSE_MARGIN if margin is None else margin) * (len(t) + 2) * U * size
+    m = np.empty((n + d, n + d))
+    m[:n, :n], m[n:, :n], m[:n, n:] = P, pi.T, pi
+    m[n:, n:] = low
+    dg = low.diagonal().copy()
+    dg[0] += rho
+    slack = 8.0 * U if margin is None else 8.0 * U * (margin / DENSE_MARGIN)
+    dg -= mu * (1.0 + 4.0 * U) + slack * np.abs(low.diagonal())
+    dg[0] -= slack * abs(rho)
+    m.flat[n * (n + d + 1) :: n + d + 1] = dg
+    return rump_proven(m)
+
+
+DENSE_MARGIN = 4.0  # μ = DENSE_MARGIN (m + 2) u (row sum of A): γ_{m+1} < 2 (m + 2) u, so at least twice the error bound
 
 
 COND_MAX = 1e13  # largest eigenvalue ratio of a published shape: beyond it E = eᵀP⁻¹e is rounding noise

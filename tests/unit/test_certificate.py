@@ -151,7 +151,7 @@ def test_the_closed_form_is_the_dense_check_where_both_answer(step):
     fs = FactStack.of(facts)
     dense, closed = _dense_certificate(P, pi, tau, fs), diagonal_certificate(P, pi, tau, fs)
     if dense is not None and closed is not None:
-        assert closed[0] == pytest.approx(dense, rel=2.1e-6, abs=1e-11)
+        assert closed[0] == pytest.approx(dense[0], rel=2.1e-6, abs=1e-11)
 
 
 @st.composite
@@ -197,7 +197,7 @@ def test_certify_takes_the_closed_form_for_ball_facts_and_the_dense_check_otherw
     monkeypatch.setattr(cert, "diagonal_certificate", lambda *a: calls.append(1) or real(*a))
     closed = certify(P, pi, np.array([2.0]), [ball])
     assert calls == [1]
-    assert closed == pytest.approx(_dense_certificate(P, pi, np.array([2.0]), FactStack.of([ball])), rel=1e-9)
+    assert closed == pytest.approx(_dense_certificate(P, pi, np.array([2.0]), FactStack.of([ball]))[0], rel=1e-9)
     assert certify(P, pi, np.array([2.0]), [sector]) is not None
     assert calls == [1]
 
@@ -227,3 +227,120 @@ def test_publishable_answers_as_the_eigenvalues_do(P):
     assert publishable(np.zeros(3), P) == by_eigenvalues
     if _clearly_conditioned(P.tolist()):
         assert _definite(_exact(P)) and eig[-1] <= 0.5 * COND_MAX * eig[0] * (1 + 1e-6)
+
+
+def _slab_fact(a: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """(aᵀη − lo η₀)(hi η₀ − aᵀη) ≥ 0 as a symmetric Q (a dense fact: the slab cuts' and the sector facts' kind)."""
+    d = len(a)
+    b0 = np.zeros(d)
+    b0[0] = 1.0
+    return -np.outer(a, a) + 0.5 * (lo + hi) * (np.outer(a, b0) + np.outer(b0, a)) - lo * hi * np.outer(b0, b0)
+
+
+@st.composite
+def dense_steps(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[np.ndarray]]:
+    """A step with a dense fact: (P, Π, τ, facts) as :func:`steps` draws them (d 3–6, P of condition up to 10¹², scaled
+    by 10^k), the facts a ball over every slot but the first and one or two slab facts, τ random or put where the
+    lower block of the LMI is singular up to a relative ±10⁻¹⁵…10⁻⁶ (the ball's multiplier moved)."""
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    d = draw(st.integers(3, 6))
+    scale = 10.0 ** draw(st.integers(-6, 6))
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    P = scale * (q * 10.0 ** rng.uniform(-draw(st.integers(0, 12)), 0.0, size=3)) @ q.T
+    P = 0.5 * (P + P.T)
+    pi = rng.normal(size=(3, d)) * 10.0 ** rng.uniform(-2, 2, size=d) * np.sqrt(scale)
+    ball = np.zeros((d, d))
+    ball[0, 0] = 1.0
+    ball[range(1, d), range(1, d)] = -1.0
+    facts = [ball]
+    for _ in range(draw(st.integers(1, 2))):
+        a = rng.normal(size=d)
+        lo = float(rng.normal())
+        facts.append(_slab_fact(a, lo, lo + float(rng.uniform(0.01, 3.0))))
+    tau = 10.0 ** rng.uniform(-2, 1, size=len(facts))
+    # the ball's multiplier where the lower block of K is singular: −K₂₂ = τ_b I − (XᵀX + Σ_slab τ Q)₂₂
+    x = np.linalg.solve(np.linalg.cholesky(P), pi)
+    rest = (x.T @ x + sum(t * f for t, f in zip(tau[1:], facts[1:])))[1:, 1:]
+    top = float(np.linalg.eigvalsh(rest)[-1])
+    delta = draw(st.sampled_from([-1e-6, -1e-12, -1e-15, 0.0, 1e-15, 1e-12, 1e-6, 1.0]))
+    tau[0] = max(top, 1e-3) * (1.0 + delta)
+    return P, pi, tau, facts
+
+
+@FUZZ
+@given(dense_steps())
+def test_every_dense_certificate_holds_exactly(step):
+    """Whatever the d×d certificate certifies, (ρ', τ') satisfies the S-procedure condition in exact arithmetic."""
+    P, pi, tau, facts = step
+    out = _dense_certificate(P, pi, tau, FactStack.of(facts))
+    if out is not None:
+        rho, tau_used = out
+        assert np.all(tau_used >= np.maximum(tau, 0.0))
+        assert _holds(P, pi, tau_used, facts, rho)
+
+
+def _threshold(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: list[np.ndarray]) -> Fraction | None:
+    """The exact smallest ρ of the condition (k₁₁ − kᵀK₂₂⁻¹k, K = ΠᵀP⁻¹Π + Σ τ_m Q_m), None where K₂₂ is not negative
+    definite."""
+    p, x = _exact(P), _exact(pi)
+    pinv, d = _inverse3(p), len(x[0])
+    q, t = [_exact(f) for f in facts], [Fraction(float(v)) for v in tau]
+    k = [[sum((x[a][i] * pinv[a][b] * x[b][j] for a in range(3) for b in range(3)), Fraction(0)) + sum((t[m] * q[m][i][j] for m in range(len(q))), Fraction(0)) for j in range(d)] for i in range(d)]
+    neg = [[-v for v in row[1:]] for row in k[1:]]
+    if not _definite(neg):
+        return None
+    # kᵀ(−K₂₂)⁻¹k by Gaussian elimination on [−K₂₂ | k]
+    a = [row[:] + [k[i + 1][0]] for i, row in enumerate(neg)]
+    n = len(a)
+    for c in range(n):
+        for r in range(c + 1, n):
+            f = a[r][c] / a[c][c]
+            for j in range(c, n + 1):
+                a[r][j] -= f * a[c][j]
+    sol = [Fraction(0)] * n
+    for r in reversed(range(n)):
+        sol[r] = (a[r][n] - sum((a[r][j] * sol[j] for j in range(r + 1, n)), Fraction(0))) / a[r][r]
+    return k[0][0] + sum((k[i + 1][0] * sol[i] for i in range(n)), Fraction(0))
+
+
+def _near_threshold(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, FactStack, list[float]] | None:
+    """A random dense step (d = 4, a ball and a slab fact) and the floats just below its exact threshold ρ*."""
+    rng = np.random.default_rng(seed)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    P = (q * 10.0 ** rng.uniform(-3, 0, size=3)) @ q.T
+    P = 0.5 * (P + P.T)
+    pi = rng.normal(size=(3, 4))
+    ball = np.diag([1.0, -1.0, -1.0, -1.0])
+    facts = [ball, _slab_fact(rng.normal(size=4), -1.0, 1.0)]
+    x = np.linalg.solve(np.linalg.cholesky(P), pi)
+    tau = np.array([0.0, float(rng.uniform(0.1, 1.0))])
+    tau[0] = float(np.linalg.eigvalsh((x.T @ x + tau[1] * facts[1])[1:, 1:])[-1]) * 2.0
+    star = _threshold(P, pi, tau, facts)
+    if star is None:
+        return None
+    below = [float(star)]
+    while Fraction(below[-1]) >= star:
+        below.append(float(np.nextafter(below[-1], -np.inf)))
+    below = below[-1:]
+    for _ in range(6):
+        below.append(float(np.nextafter(below[-1], -np.inf)))
+    return P, pi, tau, FactStack.of(facts), below
+
+
+def test_the_dense_proof_refuses_below_the_exact_threshold_and_needs_its_margins(monkeypatch):
+    """lmi_proven() never proves a ρ below the exact threshold ρ* (where the condition fails); with its margins
+    shrunk to nothing (N's rounding bound and Rump's shift) it does, on some of the same steps: the margins are
+    what makes it sound."""
+    import netsetest.estimator.certificate as cert
+    from netsetest.estimator.certificate import lmi_proven
+
+    cases = [c for c in (_near_threshold(s) for s in range(40)) if c is not None]
+    assert len(cases) >= 30
+    for P, pi, tau, fs, below in cases:
+        assert not any(lmi_proven(P, pi, tau, fs, r) for r in below)
+        rho = float(_threshold(P, pi, tau, list(fs.Q))) * (1 + 1e-9) + 1e-12  # what the certificate asks, widened
+        assert lmi_proven(P, pi, tau, fs, rho)
+    monkeypatch.setattr(cert, "RUMP_C", 0.0)
+    monkeypatch.setattr(cert, "RUMP_FLOOR", 0.0)
+    wrong = sum(any(lmi_proven(P, pi, tau, fs, r, margin=0.0) for r in below) for P, pi, tau, fs, below in cases)
+    assert wrong > 0
