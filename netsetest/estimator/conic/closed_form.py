@@ -2,7 +2,7 @@
 L (:class:`~netsetest.estimator.sum_of_norms.SumOfNorms`), with Clarabel where that finds no answer; and the
 choice of the ``clarabel`` backend's solver for a node (:func:`clarabel_backend`).
 
-The answer is mapped back as Clarabel's is (:func:`~netsetest.estimator.conic.reduction.smallest_p`) and
+The answer is mapped back as Clarabel's is (:meth:`~netsetest.estimator.conic.reduction.Reduction.after`) and
 certified like every answer: τ_g = ρ a_g / Σ a, P = Σ_g β_g Π_gΠ_gᵀ/τ_g + (B²/τ_ξ + ℓ₀²/λ₀) L Lᵀ.
 """
 
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from netsetest.estimator.conic.reduction import Aggregate, Reduction, smallest_p
+from netsetest.estimator.conic.reduction import Aggregate, Reduction
 from netsetest.estimator.conic.solver import ConicSolver
 from netsetest.estimator.problem import EtaLayout, Solution, StepData
 from netsetest.estimator.sum_of_norms import SumOfNorms
@@ -35,10 +35,11 @@ class ClosedFormSolver:
         self._facts = [g.fact for g in red.groups]
 
     def solve(self, data: StepData, rho: float) -> Solution:
-        """The step's answer in closed form, else from Clarabel (the step's ξ computed once for both)."""
-        agg = self.red.aggregate(data.ell)
-        sol = self._closed_form(data, rho, agg)
-        return sol if sol is not None else self.fallback.solve(data, rho, agg)
+        """The step's answer in closed form, else from Clarabel (the step's ξ and scales computed once for both: one call
+        into the reduction before the solve, one after it)."""
+        scales = self.red.before(data.ell, data.facts)
+        sol = self._closed_form(data, rho, scales.agg)
+        return sol if sol is not None else self.fallback.solve(data, rho, scales)
 
     def _closed_form(self, data: StepData, rho: float, agg: Aggregate) -> Solution | None:
         """Newton over L, then τ_g = ρ a_g / Σ a and the smallest P; None if there is no minimum to trust."""
@@ -60,8 +61,8 @@ class ClosedFormSolver:
             tc[self.red.xi] = rho * a_xi / total
         lam0 = rho * a0 / total if a0 > 0.0 else 0.0  # the η₁ slot's multiplier
         Lc = L[:, None]
-        P = smallest_p(np.zeros((NA, NA)), Lc, pi0 - Lc @ ell[None, :], self.red.cone_groups(agg.use_xi), tc, agg.B, ell0, lam0)
-        return Solution(P, [Lc], [self.red.fact_tau(tc, agg)], CLOSED_FORM_STATUS, iterations)
+        P, taus = self.red.after(np.zeros((NA, NA)), [Lc], [tc], agg, pi0, ell, lam0, rho)
+        return Solution(P, [Lc], taus, CLOSED_FORM_STATUS, iterations)
 
 
 def clarabel_backend(lay: EtaLayout, n_lmi: int) -> ConicSolver | ClosedFormSolver:

@@ -39,6 +39,16 @@ class Aggregate:
     use_xi: bool  # ξ exists and B > 0 (else its multiplier is pinned to 0)
 
 
+@dataclass(frozen=True)
+class StepScales:
+    """What a step needs of the reduction before its solve, in one call (:meth:`Reduction.before`): ξ's weights (step 1)
+    and the LMI slots' and multipliers' scales (step 3)."""
+
+    agg: Aggregate
+    sc: np.ndarray  # (len(lmi_slots),)
+    kappa: np.ndarray  # (n_tau,)
+
+
 class Reduction:
     """The static structure of one node's reduced problem (``n_lmi`` LMIs over the layout ``lay``).
 
@@ -127,7 +137,28 @@ class Reduction:
             return [*self.ball_compact, self.xi]
         return self.ball_compact
 
-    # ------------------------------------------------------------------ per step
+    # ------------------------------------------------------------------ per step: before the solve and after it
+
+    def before(self, ell: np.ndarray, facts: tuple[np.ndarray, ...]) -> StepScales:
+        """Everything the step needs of the reduction before its solve: ξ (:meth:`aggregate`) and the scales
+        (:meth:`slot_scales`)."""
+        sc, kappa = self.slot_scales(facts)
+        return StepScales(self.aggregate(ell), sc, kappa)
+
+    def after(
+        self, P: np.ndarray, Ls: list[np.ndarray], tcs: list[np.ndarray], agg: Aggregate, pi0: np.ndarray, ell: np.ndarray, lam0: float | None, rho: float
+    ) -> tuple[np.ndarray, list[np.ndarray]]:
+        """Everything an answer needs of the reduction after the solve: τ over the original facts per LMI
+        (:meth:`fact_tau`) and, in ``scheduled``, the smallest P for (L, τ) (:func:`smallest_p`, over this step's cone
+        groups).  ``lam0``: the η₁ slot's multiplier (None: ρ less the balls' τ where the step gives that slot a cone, ℓ₀ ≠ 0
+        in a pure SOCP; else 0)."""
+        taus = [self.fact_tau(tc, agg) for tc in tcs]
+        if not self.socp:
+            return P, taus
+        L = Ls[0]
+        if lam0 is None:
+            lam0 = rho - float(taus[0][self.balls].sum()) if self.closed_form and float(ell[0]) != 0.0 else 0.0
+        return smallest_p(P, L, pi0 - L @ ell[None, :], self.cone_groups(agg.use_xi), tcs[0], agg.B, float(ell[0]), lam0), taus
 
     def aggregate(self, ell: np.ndarray) -> Aggregate:
         """ξ's weights and bound for the step's ℓ."""
@@ -241,4 +272,4 @@ def _running_intersection(blocks: list[set[int]]) -> bool:
     return weight == sum(len(b) for b in blocks) - len(set().union(*blocks))
 
 
-__all__ = ["Aggregate", "Group", "Reduction", "smallest_p"]
+__all__ = ["Aggregate", "Group", "Reduction", "StepScales", "smallest_p"]

@@ -18,7 +18,7 @@ import numpy as np
 
 import netsetest.linalg as linalg
 
-from netsetest.estimator.conic.reduction import Aggregate, Reduction, smallest_p
+from netsetest.estimator.conic.reduction import Aggregate, Reduction, StepScales
 from netsetest.estimator.conic.template import P_ENTRIES, StepValues, Template, TemplateKey, build_template
 from netsetest.estimator.problem import Solution, StepData
 from netsetest.models.sensor import NA
@@ -161,24 +161,24 @@ class ConicSolver:
             tpl = self._templates[key] = build_template(self.red, key)
         return tpl
 
-    def apply(self, data: StepData, rho: float, agg: Aggregate | None = None) -> tuple[ConicData, InverseData]:
+    def apply(self, data: StepData, rho: float, scales: StepScales | None = None) -> tuple[ConicData, InverseData]:
         """Clarabel's data for one step and what maps its answer back to (P, L, τ) (cvxpy's ``apply``);
-        ``agg``: the step's ξ where the caller has it already (the closed form's fallback)."""
+        ``scales``: the step's ξ and scales where the caller has them already (the closed form's fallback)."""
         red = self.red
-        agg = red.aggregate(data.ell) if agg is None else agg
+        scales = red.before(data.ell, data.facts) if scales is None else scales  # (one call into the reduction)
+        agg, sc, kappa = scales.agg, scales.sc, scales.kappa
         has_lmi = bool(red.lmi_slots)
         tpl = self.template((agg.use_xi, self._slot0 and float(data.ell[0]) != 0.0))
         S = data.Mi / math.sqrt(rho)  # congruence of the P rows: P_prev = S Sᵀ (data.Mi = ρ^½ chol(P_prev))
-        sc, kappa = red.slot_scales(data.facts)
         values = StepValues(data.ell, data.facts, data.pi0, S, linalg.inv(S) if has_lmi else None, sc, kappa, agg.B, rho)
         a, b, q = tpl.fill(values)
         A = CscMatrix(a, tpl.indices, tpl.indptr, (tpl.n_rows, tpl.nv))
         conic = ConicData(CscMatrix.empty(tpl.nv, tpl.nv), q, A, b, tpl.cones, tpl.key)
         return conic, InverseData(tpl, values, agg)
 
-    def solve(self, data: StepData, rho: float, agg: Aggregate | None = None) -> Solution:
-        """The step's answer from Clarabel (``agg`` as for :meth:`apply`)."""
-        conic, inv = self.apply(data, rho, agg)
+    def solve(self, data: StepData, rho: float, scales: StepScales | None = None) -> Solution:
+        """The step's answer from Clarabel (``scales`` as for :meth:`apply`)."""
+        conic, inv = self.apply(data, rho, scales)
         try:
             sol = self.solve_via_data(conic)
         except Exception as exc:  # a solver failure is a fallback step, not a crash
@@ -212,27 +212,28 @@ class ConicSolver:
         x = np.asarray(sol.x)
         if not np.all(np.isfinite(x)):
             return Solution(None, [], [], "non-finite", sol.iterations)
-        pt = self.unpack(x, inv)
-        P = pt.P
-        if self.red.socp:
-            L, v = pt.L[0], inv.values
-            lam0 = v.rho - float(pt.tau[0][self.red.balls].sum()) if inv.slot0_cone else 0.0
-            P = smallest_p(P, L, v.pi0[0] - L @ v.ell[None, :], inv.tpl.var.groups, pt.tau_compact[0], v.B, v.ell[0], lam0)
-        return Solution(P, pt.L, pt.tau, status, sol.iterations)
+        Pc, Ls, tcs = self._point(x, inv)
+        v = inv.values
+        P, taus = self.red.after(Pc, Ls, tcs, inv.agg, v.pi0[0], v.ell, None, v.rho)  # (one call into the reduction)
+        return Solution(P, Ls, taus, status, sol.iterations)
 
     def unpack(self, x: np.ndarray, inv: InverseData) -> ConicPoint:
         """P_c, L_ℓ and τ_ℓ over the original facts from a conic point x (L = S L̃, τ = τ̂/κ clipped at 0)."""
+        P, Ls, tcs = self._point(x, inv)
+        return ConicPoint(P, Ls, [self.red.fact_tau(tc, inv.agg) for tc in tcs], tcs)
+
+    def _point(self, x: np.ndarray, inv: InverseData) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
+        """P_c, L_ℓ and the compact multipliers of a conic point x (:meth:`unpack`, without τ over the facts)."""
         var, S = inv.tpl.var, inv.values.S  # (the template's variables: attributes, read once)
         Ls = [S @ x[i][:, None] for i in var.iL]
         tcs = [np.maximum(x[var.iT[r]], 0.0) / inv.values.kappa for r in range(self.red.n_lmi)]
-        taus = [self.red.fact_tau(tc, inv.agg) for tc in tcs]
         P = np.zeros((NA, NA))
         if self.red.lmi_slots:
             iP = var.iP
             for k, (i, j) in enumerate(P_ENTRIES):
                 P[i, j] = P[j, i] = x[iP[k]]
             P = S @ P @ S.T
-        return ConicPoint(P, Ls, taus, tcs)
+        return P, Ls, tcs
 
 
 __all__ = ["STATUS_MAP", "ConicData", "ConicPoint", "ConicSolver", "CscMatrix", "InverseData", "default_settings"]
