@@ -78,6 +78,17 @@ def certify(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: Sequence[np.n
     return None if out is None else out[0]
 
 
+def certified(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: Sequence[np.ndarray] | FactStack, xhat: np.ndarray, rho: float) -> tuple[float, np.ndarray] | None:
+    """A set's certificate in one call: ρ' of :func:`certify` and the shape published with it, P·ρ'/ρ (P symmetrised),
+    where that set (centre ``xhat``) is :func:`publishable`; None where either fails (a certified set nobody can use is
+    no certificate).  The step's solved set and every slab cut are certified here."""
+    rho_c = certify(P, pi, tau, facts)
+    if rho_c is None:
+        return None
+    shape = 0.5 * (P + P.T) * rho_c / rho
+    return (rho_c, shape) if publishable(xhat, shape) else None
+
+
 U = 2.0**-53  # the unit roundoff of float64
 RUMP_C = 8.0  # the shift of :func:`rump_definite` is RUMP_C (n + 2) u tr(a): Rump's γ_{n+1}/(1 − 2γ_{n+1}) tr(a) ≈ (n + 1) u tr(a), and then some
 RUMP_FLOOR = 1e-290  # its absolute part: Rump's underflow term (a few multiples of the smallest subnormal), and then some
@@ -349,4 +360,4 @@ def fallback_shape(Mi: np.ndarray, own: OwnUpdate, W: float, abar: np.ndarray, d
     return shape + FALLBACK_INFLATE * max(trace, np.finfo(float).tiny / FALLBACK_INFLATE) * np.eye(NA)
 
 
-__all__ = ["COND_MAX", "FactStack", "FallbackUnavailable", "certify", "fallback_shape", "publishable"]
+__all__ = ["COND_MAX", "FactStack", "FallbackUnavailable", "certified", "certify", "fallback_shape", "publishable"]

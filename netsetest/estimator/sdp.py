@@ -66,7 +66,7 @@ import numpy as np
 import netsetest.linalg as linalg
 
 from netsetest.config.schema import Scenario
-from netsetest.estimator.certificate import FactStack, FallbackUnavailable, certify, fallback_shape, publishable
+from netsetest.estimator.certificate import FactStack, FallbackUnavailable, certified, fallback_shape, publishable
 from netsetest.estimator.conic.closed_form import clarabel_backend
 from netsetest.estimator.cuts import (
     FALLBACK_CUTS,
@@ -687,7 +687,9 @@ class LocalEstimator:
         """The certified set of the step's data (None: no certificate) and the solve's figures."""
         return self._solve_certify(data, rho, alpha, self._wh, self._facts(data))
 
-    def _solve_certify(self, data: StepData, rho: float, alpha: np.ndarray, wh: np.ndarray | None, facts: FactStack) -> tuple[StepResult | None, _Solve]:
+    def _solve_certify(
+        self, data: StepData, rho: float, alpha: np.ndarray, wh: np.ndarray | None, facts: FactStack | tuple[np.ndarray, ...]
+    ) -> tuple[StepResult | None, _Solve]:
         """Solve the step's problem for the objective trace(D P), D^½ = diag(wh) (None: trace P), and
         certify the answer; None if there is no certificate."""
         answer, solve = self._solve(data, alpha, wh, rho)
@@ -718,29 +720,25 @@ class LocalEstimator:
         pi0 = sum(a * p for a, p in zip(alpha, data.pi0))
         return _Answer(sol.P, L, tau, pi0, sol.status), solve
 
-    def _facts(self, data: StepData) -> FactStack:
-        """The step's facts stacked (:class:`~netsetest.estimator.certificate.FactStack`); a pattern whose facts are all
-        its static balls (no φ slot: every NSNIM step) stacks them once."""
+    def _facts(self, data: StepData) -> FactStack | tuple[np.ndarray, ...]:
+        """The step's facts: a pattern whose facts are all its static balls (no φ slot: every NSNIM step) stacks them
+        once (:class:`~netsetest.estimator.certificate.FactStack`); else they are stacked by the certificate."""
         pat = self._patterns[data.key]
         if len(data.facts) != len(pat.balls):  # (per-step sector facts after the balls)
-            return FactStack.of(data.facts)
+            return data.facts
         if pat.stack is None:
             pat.stack = FactStack.of(pat.balls)
         return pat.stack
 
-    def _certify(self, answer: _Answer, data: StepData, rho: float, facts: FactStack) -> StepSet | None:
-        """The set of an answer where the certificate holds and the set is publishable; else None."""
+    def _certify(self, answer: _Answer, data: StepData, rho: float, facts: FactStack | tuple[np.ndarray, ...]) -> StepSet | None:
+        """The set of an answer where the certificate holds and the set is publishable (one call into the
+        certificate); else None."""
         L = answer.L
         gain = bool(L.any())  # (L = 0: Π₀ and x̂_pred as they are, the same floats)
         pi = answer.pi0 - L @ data.ell[None, :] if gain else answer.pi0  # Π(L) = Π₀ − L ℓᵀ
-        rho_c = certify(answer.P, pi, answer.tau, facts)
-        if rho_c is None:
-            return None
-        P_pub = 0.5 * (answer.P + answer.P.T) * rho_c / rho
         xhat_new = data.x_pred + L[:, 0] * data.innov_sum if gain else data.x_pred.copy()  # (16): x̂⁺ = x̂_pred + L Σ_j a_ij y̌_j
-        if not publishable(xhat_new, P_pub):  # a certified set nobody can use: treated as no certificate
-            return None
-        return StepSet(xhat_new, P_pub, rho_c, L)
+        out = certified(answer.P, pi, answer.tau, facts, xhat_new, rho)  # P published = P_solver·ρ'/ρ_i
+        return None if out is None else StepSet(xhat_new, out[1], out[0], L)
 
 
 @dataclass(frozen=True)

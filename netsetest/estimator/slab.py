@@ -15,7 +15,7 @@ t = λ/(1 + λs) ∈ [0, 1/s):
 
 whose half-width along c tends to h as t → 1/s while the other directions grow with r.  :func:`cut` picks t
 minimising the step's objective trace(D Σ') on a grid and certifies the answer with the estimator's own
-:func:`~netsetest.estimator.certificate.certify` (η = [1, u], x̄ = x̂ + (ρP)^½ u, facts 1 − uᵀu ≥ 0 and
+:func:`~netsetest.estimator.certificate.certified` (η = [1, u], x̄ = x̂ + (ρP)^½ u, facts 1 − uᵀu ≥ 0 and
 the slab), so a rounding error in the closed form costs a larger ρ', never a set that misses the truth.
 """
 
@@ -25,7 +25,7 @@ import numpy as np
 
 import netsetest.linalg as linalg
 
-from netsetest.estimator.certificate import certify, publishable
+from netsetest.estimator.certificate import certified
 from netsetest.models.sensor import NA
 from netsetest.sets import Slab
 
@@ -80,13 +80,8 @@ def cut(xhat: np.ndarray, P: np.ndarray, rho: float, slab: Slab, weights: np.nda
     facts = _facts(lo, hi, c @ M, xc)
     shape = 0.5 * (shape + shape.T)
     rb = float(r[best])
-    rho_c = certify(shape, pi, np.array([1.0 / rb, lam / rb]), facts)
-    if rho_c is None:
-        return None
-    P_new = shape * rho_c / rho
-    if not publishable(centre, P_new):
-        return None
-    return centre, P_new, rho_c
+    out = certified(shape, pi, np.array([1.0 / rb, lam / rb]), facts, centre, rho)  # P' = shape·ρ'/ρ, publishable
+    return None if out is None else (centre, out[1], out[0])
 
 
 __all__ = ["cut"]
