@@ -78,7 +78,9 @@ def certify(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: Sequence[np.n
     return None if out is None else out[0]
 
 
-def certified(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: Sequence[np.ndarray] | FactStack, xhat: np.ndarray, rho: float) -> tuple[float, np.ndarray] | None:
+def certified(
+    P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: Sequence[np.ndarray] | FactStack, xhat: np.ndarray, rho: float
+) -> tuple[float, np.ndarray] | None:
     """A set's certificate in one call: ρ' of :func:`certify` and the shape published with it, P·ρ'/ρ (P symmetrised),
     where that set (centre ``xhat``) is :func:`publishable`; None where either fails (a certified set nobody can use is
     no certificate).  The step's solved set and every slab cut are certified here."""

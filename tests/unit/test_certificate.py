@@ -285,7 +285,14 @@ def _threshold(P: np.ndarray, pi: np.ndarray, tau: np.ndarray, facts: list[np.nd
     p, x = _exact(P), _exact(pi)
     pinv, d = _inverse3(p), len(x[0])
     q, t = [_exact(f) for f in facts], [Fraction(float(v)) for v in tau]
-    k = [[sum((x[a][i] * pinv[a][b] * x[b][j] for a in range(3) for b in range(3)), Fraction(0)) + sum((t[m] * q[m][i][j] for m in range(len(q))), Fraction(0)) for j in range(d)] for i in range(d)]
+    k = [
+        [
+            sum((x[a][i] * pinv[a][b] * x[b][j] for a in range(3) for b in range(3)), Fraction(0))
+            + sum((t[m] * q[m][i][j] for m in range(len(q))), Fraction(0))
+            for j in range(d)
+        ]
+        for i in range(d)
+    ]
     neg = [[-v for v in row[1:]] for row in k[1:]]
     if not _definite(neg):
         return None
