@@ -257,17 +257,18 @@ def lmi_proven(P: np.ndarray, pi: np.ndarray, t: np.ndarray, fs: FactStack, rho:
     S-procedure condition Πᵀ P⁻¹ Π + Σ t_m Q_m ⪯ ρ e₁e₁ᵀ (its Schur complement over P), strictly.
 
     P and Π enter M exactly.  Each computed entry of N is within γ_{m+1} A_ij of the exact one, A = Σ_m t_m |Q_m| +
-    ρ e₁e₁ᵀ (a sum of m + 1 terms, any order, fused or not), so the error's spectral norm is at most
-    γ_{m+1} max_i Σ_j A_ij (a symmetric matrix's norm is at most its largest row sum; every Q_m built here is
-    symmetric).  N's diagonal is moved down by μ = :data:`DENSE_MARGIN` (m + 2) u (A's largest row sum as computed),
-    at least twice that bound (γ_{m+1} < 2 (m + 2) u; the computed row sums are within (m + d) u of theirs), and each
-    moved entry by a further 8u of its terms (its own rounding); :func:`rump_proven` proves the moved matrix positive
-    definite, and M is at least it.  ``margin``: DENSE_MARGIN unless given (tests/unit/test_certificate.py shrinks
-    it to show that it is needed)."""
+    ρ e₁e₁ᵀ (a sum of m + 1 terms, any order, fused or not), so the exact N less the computed one is ⪰ −diag(γ_{m+1} Σ_j
+    A_ij) (their difference is diagonally dominant with a non-negative diagonal; every Q_m built here is symmetric).  N's diagonal
+    is moved down, row by row, by μ_i = :data:`DENSE_MARGIN` (m + 2) u (A's row sum as computed), at least twice that
+    bound (γ_{m+1} < 2 (m + 2) u; the computed row sums are within (m + d) u of theirs), and each moved entry by a
+    further 8u of its terms (its own rounding); :func:`rump_proven` proves the moved matrix positive definite, and M
+    is at least it.  ``margin``: DENSE_MARGIN unless given (tests/unit/test_certificate.py shrinks it to show that
+    it is needed)."""
     n, d = P.shape[0], pi.shape[1]
     low = -(t @ fs.Qflat).reshape(d, d)  # N without ρ
-    size = float((t @ fs.rows).max()) + abs(rho)
-    mu = (DENSE_MARGIN if margin is None else margin) * (len(t) + 2) * U * size
+    size = t @ fs.rows  # A's row sums without ρ
+    size[0] += abs(rho)
+    mu = (DENSE_MARGIN if margin is None else margin) * (len(t) + 2) * U * size  # per row
     m = np.empty((n + d, n + d))
     m[:n, :n], m[n:, :n], m[:n, n:] = P, pi.T, pi
     m[n:, n:] = low
@@ -280,7 +281,7 @@ def lmi_proven(P: np.ndarray, pi: np.ndarray, t: np.ndarray, fs: FactStack, rho:
     return rump_proven(m)
 
 
-DENSE_MARGIN = 4.0  # μ = DENSE_MARGIN (m + 2) u (row sum of A): γ_{m+1} < 2 (m + 2) u, so at least twice the error bound
+DENSE_MARGIN = 4.0  # μ_i = DENSE_MARGIN (m + 2) u (row i's sum of A): γ_{m+1} < 2 (m + 2) u, so at least twice the error bound
 
 
 COND_MAX = 1e13  # largest eigenvalue ratio of a published shape: beyond it E = eᵀP⁻¹e is rounding noise
