@@ -67,7 +67,14 @@ def test_the_cut_keeps_the_points_in_the_slab_and_drops_the_rest(cloud: tuple[Po
 
 
 @settings(max_examples=examples(150), deadline=None)
-@given(_cloud(), st.lists(st.tuples(finite, finite, st.integers(-2, 2), st.integers(-2, 2), st.sampled_from([0.0, 0.0, 0.2]), st.sampled_from([0.0, 0.0, 0.2])), min_size=1, max_size=8))
+@given(
+    _cloud(),
+    st.lists(
+        st.tuples(finite, finite, st.integers(-2, 2), st.integers(-2, 2), st.sampled_from([0.0, 0.0, 0.2]), st.sampled_from([0.0, 0.0, 0.2])),
+        min_size=1,
+        max_size=8,
+    ),
+)
 def test_the_slabs_skipped_by_their_box_are_the_cuts_that_keep_the_polygon(cloud: tuple[Polygon, np.ndarray], planes: list) -> None:
     """cut_all skips a slab the region's box lies inside (issue 45): only where Polygon.cut would keep the polygon
     itself, so cut_all's polygon is the slabs' cuts in turn, float for float.  Slabs at the vertices' own extremes
