@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from netsetest.messages import state_digest
 from netsetest.polygon import Polygon
-from netsetest.proven import ProvenSet, continued_contains, continued_set
+from netsetest.proven import ProvenSet, contains_both, continued_set
 from netsetest.sets import Box, RegionSet, Zonotope, set_to_wire
 
 from message_helpers import make_state
@@ -117,11 +117,14 @@ def test_the_continued_set_is_its_ellipsoid_within_the_published_region() -> Non
 @given(st.lists(st.floats(-0.3, 0.3), min_size=3, max_size=3), st.floats(0.05, 2.0), st.sampled_from([SQUARE, None]))
 def test_the_continued_sets_membership_without_building_it(point: list[float], rho: float, region: list[float] | None) -> None:
     """The judge asks the set a node continues from without building it (a new set, its region checked and parsed
-    again): the same answer as the built one's, at random points and at the region's corners and edges."""
+    again), and the region both sets share once: the same answers as the built sets', at random points and at the
+    region's corners and edges (inside either ellipsoid, both, or neither); without ``continues``, the published set's."""
     pub = ProvenSet(xhat=[0.0, 0.01, 0.1], P=P_DIAG, rho=1.0, region=region, fault=[-0.2, 0.3])
     own = ProvenSet(xhat=[0.01, 0.0, -0.1], P=P_DIAG, rho=rho)
     for x in (np.array(point), np.array([0.1, 0.1, point[2]]), np.array([0.1, point[1], point[2]])):
-        assert continued_contains(pub, own, x) == continued_set(pub, own).contains(x)
+        assert contains_both(pub, own, x) == (pub.contains(x), continued_set(pub, own).contains(x))
+        assert contains_both(pub, own, x, pub.E(x)) == contains_both(pub, own, x)
+        assert contains_both(pub, None, x) == (pub.contains(x), pub.contains(x))
 
 
 @pytest.mark.parametrize("part", ["xhat", "P", "rho", "region", "fault", "continues"])
