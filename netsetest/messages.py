@@ -336,8 +336,12 @@ class RunScope:
         step = msg.steps if isinstance(msg, End) else getattr(msg, "step", None)
         if step is not None and step > self.steps:
             return "step-beyond-run"
+        ids = self.ids
         if type(msg) is Reading:  # the most frequent message (every reading to every node of a network): one id
-            return None if msg.node in self.ids else "unknown-node"
+            return None if msg.node in ids else "unknown-node"
+        if type(msg) is NodeState:  # every state to every out-neighbour and the collector: no set built per message
+            ok = msg.node in ids and ids.issuperset(msg.used) and ids.issuperset(msg.missing) and ids.issuperset(msg.sets)
+            return None if ok and all(r[0] in ids for r in msg.readings) else "unknown-node"
         named: set[int] = set()
         if isinstance(msg, (NodeInput, NodeState, Ready, Reading)) and msg.node is not None:
             named.add(msg.node)
@@ -349,7 +353,7 @@ class RunScope:
             if msg.node_ids() != self.ids:
                 return "truth-wrong-nodes"
             named.update(msg.alive, *msg.lost)
-        return "unknown-node" if not named <= self.ids else None
+        return "unknown-node" if not named <= ids else None
 
 
 def _enc_hook(obj: object) -> object:
