@@ -126,6 +126,18 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
         lo, hi = self._bounds
         return lo.copy(), hi.copy()
 
+    def fault_bounds(self) -> tuple[float, float]:
+        """:meth:`bounds`' last coordinate, the fault's, alone: what a node takes of a neighbour's set whose reading it
+        uses with its declared bound.  The region, over x, leaves it as the ellipsoid ∩ the fault range has it, so it
+        needs neither the region parsed nor the other coordinates (the same floats: √ and the products correctly
+        rounded in both)."""
+        if self.own_set is not None or "_bounds" in self.__dict__:
+            lo, hi = self._bounds
+            return float(lo[-1]), float(hi[-1])
+        half = math.sqrt(self.rho * self.P[-1])
+        lo_f, hi_f = self.xhat[-1] - half, self.xhat[-1] + half
+        return (lo_f, hi_f) if self.fault is None else (max(lo_f, self.fault[0]), min(hi_f, self.fault[1]))
+
     @property
     def is_ellipsoid(self) -> bool:
         """The set is the ellipsoid alone (no region, no fault range, no set estimator's set)."""

@@ -379,8 +379,7 @@ class Node:
         region = pub.polygon if est.neighbour_sets else None  # what the step takes of its set beyond the ellipsoid
         fault = None
         if msg.node in est.bounded and est.bounded[msg.node][1].rate is not None:
-            lo, hi = pub.bounds()
-            fault = (float(lo[-1]), float(hi[-1]))
+            fault = pub.fault_bounds()
         self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(np.asarray(pub.xhat), P, pub.rho, msg.gamma, msg.innov, sector, region, fault)
         self.digests.setdefault(msg.step, {})[msg.node] = state_digest(msg)
         self._screen()

@@ -65,6 +65,27 @@ def test_membership_is_the_judges_rule(point: list[float], rho: float) -> None:
     assert s.contains(x) == want
 
 
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(st.floats(-1e3, 1e3), min_size=3, max_size=3),
+    st.lists(st.floats(1e-6, 1e3), min_size=3, max_size=3),
+    st.floats(1e-6, 1e3),
+    st.one_of(st.none(), st.tuples(st.floats(-1e3, 1e3), st.floats(0.0, 1e3))),
+    st.sampled_from([SQUARE, None]),
+)
+def test_the_fault_bounds_alone_are_the_bounds_last_coordinate(
+    xhat: list[float], diag: list[float], rho: float, fault: tuple[float, float] | None, region: list[float] | None
+) -> None:
+    """What a node takes of a neighbour's set (its fault's bounds) without the region or the other coordinates: the same
+    floats as the whole bounds' last coordinate, asked before them or after (then read from them)."""
+    P = [diag[0], 0.0, 0.0, 0.0, diag[1], 0.0, 0.0, 0.0, diag[2]]
+    fr = None if fault is None else [fault[0], fault[0] + fault[1]]
+    s = ProvenSet(xhat=xhat, P=P, rho=rho, region=region, fault=fr)
+    first = s.fault_bounds()
+    lo, hi = s.bounds()
+    assert first == (lo[-1], hi[-1]) == s.fault_bounds()
+
+
 def test_a_set_estimators_set_is_its_own() -> None:
     own = RegionSet(Zonotope(np.zeros(3), np.diag([1.0, 1.0, 1.0])), Polygon(np.reshape(SQUARE, (-1, 2))), (-0.2, 0.3))
     s = ProvenSet(xhat=[0.0, 0.0, 0.0], P=[9.0, 0, 0, 0, 9.0, 0, 0, 0, 9.0], rho=1.0, set=set_to_wire(own))
@@ -72,6 +93,7 @@ def test_a_set_estimators_set_is_its_own() -> None:
     for x in ([0.05, 0.0, 0.0], [0.5, 0.0, 0.0], [0.0, 0.0, 0.5]):
         assert s.contains(np.array(x)) == own.contains(np.array(x))
     assert isinstance(s.own_set, RegionSet)
+    assert s.fault_bounds() == (own.bounds()[0][-1], own.bounds()[1][-1])
 
 
 @pytest.mark.parametrize(
