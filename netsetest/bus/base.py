@@ -73,7 +73,9 @@ class _KeyQueue(deque[Message]):
 
     def pop_first(self) -> Message:
         msg = self.popleft()
-        if _rank(msg) == self.far:
+        if not self:
+            self.far = NO_STEP - 1  # (as _refresh leaves an empty queue: most queues hold one message)
+        elif _rank(msg) == self.far:
             self._refresh()
         return msg
 

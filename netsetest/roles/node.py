@@ -450,7 +450,7 @@ class Node:
     def _unread(self, inp: NodeInput) -> list[int]:
         """The senders whose reading of ``inp``'s step we still wait for (not the silent ones, nor those the vehicle
         says have none at that step)."""
-        readings = self._readings_of(inp.step)
+        readings = self.readings.get(inp.step, {})  # (who sent one: their order is _readings_of's business)
         return [j for j in self.read_from if j not in readings and j not in self.silent and j not in inp.unread]
 
     def _readings_of(self, step: int) -> dict[int, tuple[float, float]]:
