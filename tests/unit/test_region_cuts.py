@@ -310,7 +310,7 @@ def _contradicting(ctx: StepContext, gap: float) -> dict[int, Slab]:
 
 @settings(max_examples=examples(80), deadline=None)
 @given(_step(), st.sampled_from([0.05, 0.5, 3.0]))
-def test_a_region_the_readings_leave_empty_is_the_own_datas_and_holds_every_point_they_allow(step: tuple[StepContext, StepResult, np.ndarray], gap: float) -> None:
+def test_a_region_the_readings_leave_empty_is_the_own_datas(step: tuple[StepContext, StepResult, np.ndarray], gap: float) -> None:
     """A step whose reading (a reference's slab) misses the moved region: the region is the moved one cut by the own
     data alone (the own measurement with the fault bound where the step rests on it, the step's ellipsoids), so it holds
     every point of the step's sets that those allow; it rests on no reading of the step (the published set rests on
@@ -349,7 +349,8 @@ def test_a_region_the_readings_leave_empty_keeps_no_more_than_the_own_data_allow
     assert out.contradicted is not None and out.contradicted.by == "readings" and out.contradicted.readings == {7} and out.region is not None
     lo, hi = out.region.interval(own.C)
     slack = abs(own.Ds) * size
-    assert -0.01 - slack - 1e-8 <= lo <= -0.01 - slack and 0.01 + slack <= hi <= 0.01 + slack + 1e-8  # the own measurement's (out by the cut's margin), not ±0.06
+    # the own measurement's (out by the cut's margin), not ±0.06
+    assert -0.01 - slack - 1e-8 <= lo <= -0.01 - slack and 0.01 + slack <= hi <= 0.01 + slack + 1e-8
     gone = cut(dataclasses.replace(ctx, meas=Interval(0.5, 0.6)), res)  # the own reading beyond the moved region too
     assert gone.contradicted is not None and gone.contradicted.by == "own-data" and gone.region is None
     assert cut(dataclasses.replace(ctx, slabs={}), res).contradicted is None
