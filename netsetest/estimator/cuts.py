@@ -51,6 +51,7 @@ class NodeSet:
     P: np.ndarray  # (3, 3)
     rho: float
     region: Polygon | None = None  # the states x = (β, r) the earlier steps left (None: none kept; docs/estimator.md)
+    region_without: frozenset[int] = frozenset()  # the readings the region was cut without at its last step (Contradicted.readings)
 
 
 @dataclass(frozen=True)
@@ -219,6 +220,7 @@ class StepContext:
     blend: Blend | None = None  # the step's blended model (None: step 0, no prediction)
     region_slabs: Slabs = field(default_factory=dict)  # what the bounded readings prove: they cut the region alone
     sets: frozenset[int] = frozenset()  # the in-neighbours whose published sets (region; a bounded reading's rate) ``moved`` and ``region_slabs`` rest on
+    region_without: frozenset[int] = frozenset()  # the readings ``moved`` was cut without at the step before (NodeSet.region_without)
 
 
 CutFn = Callable[[StepContext, StepResult], StepResult]
@@ -363,7 +365,14 @@ def _region_without_readings(ctx: StepContext, res: StepResult, readings: frozen
     readings dropped the region keeps cutting at every later step instead of restarting, every step, from the box of
     the ellipsoid (what a gross false reading did: tests/inmemory/test_network_value.py).  The result names what was
     contradicted (:class:`Contradicted`): the readings (the region is this one), or the node's own data (nothing is
-    left even without them: no region, and the facts are None)."""
+    left even without them: no region, and the facts are None).
+
+    Where the moved region was cut by those readings at the step before (the first step they contradict), its memory
+    may rest on them (a false reading that fitted earlier misled it): the region then starts from the box of the
+    step's own set instead (:func:`seed`), as it did before it was kept, and keeps its memory from there on while the
+    readings go on contradicting it."""
+    if readings and not readings <= ctx.region_without:
+        ctx = dataclasses.replace(ctx, moved=seed(NodeSet(res.continued.xhat, res.continued.P, ctx.rho)))
     facts = _region_facts(ctx, res, (), size, None) if readings else None
     if facts is None:
         return None, res.replaced(contradicted=Contradicted("own-data"))

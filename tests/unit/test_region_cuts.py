@@ -333,9 +333,10 @@ def test_a_region_the_readings_leave_empty_is_the_own_datas(step: tuple[StepCont
 
 
 def test_a_region_the_readings_leave_empty_keeps_no_more_than_the_own_data_allow() -> None:
-    """The region kept without the readings is the own data's, not the moved one: its C x is the own measurement's
-    interval widened by |Ds| F (C x = C̄ x̄ − Ds f, |f| ≤ F), not the moved region's; a region the own data leave
-    empty too is none, named so; a step whose readings fit names nothing."""
+    """The region kept without the readings is the own data's: its C x is the own measurement's interval widened by
+    |Ds| F (C x = C̄ x̄ − Ds f, |f| ≤ F), not the moved region's; at the first step the readings contradict it starts
+    from the step's own set, after that from the moved region; a region the own data leave empty too is none, named
+    so; a step whose readings fit names nothing."""
     ctx = _context()
     size = 0.01
     statics = dataclasses.replace(ctx.statics, fault_bound=dataclasses.replace(ctx.statics.fault_bound, size=size))
@@ -351,6 +352,11 @@ def test_a_region_the_readings_leave_empty_keeps_no_more_than_the_own_data_allow
     slack = abs(own.Ds) * size
     # the own measurement's (out by the cut's margin), not ±0.06
     assert -0.01 - slack - 1e-8 <= lo <= -0.01 - slack and 0.01 + slack <= hi <= 0.01 + slack + 1e-8
+    # the first step they contradict: from the box of the step's own set (|β| ≤ 1); while they go on contradicting it,
+    # from the moved region (|β| ≤ 0.01): its memory since rests on none of them
+    assert out.region.interval(np.array([1.0, 0.0]))[1] > 0.9
+    streak = cut(dataclasses.replace(ctx, region_without=frozenset({7})), res)
+    assert streak.region is not None and streak.region.interval(np.array([1.0, 0.0]))[1] <= 0.01 + 1e-8
     gone = cut(dataclasses.replace(ctx, meas=Interval(0.5, 0.6)), res)  # the own reading beyond the moved region too
     assert gone.contradicted is not None and gone.contradicted.by == "own-data" and gone.region is None
     assert cut(dataclasses.replace(ctx, slabs={}), res).contradicted is None
