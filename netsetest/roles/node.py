@@ -155,6 +155,7 @@ class Node:
         self.xhat = self.cfg.x0_hat.copy()
         self.P = self.cfg.P0.copy()
         self.region: Polygon | None = None  # the region of x the readings left (netsetest/polygon.py)
+        self.region_without: frozenset[int] = frozenset()  # the readings the region was last cut without (cuts.Contradicted)
         self.rho = self.cfg.rho
         self.k = -1  # last published step
         self.own: NeighbourState | None = None
@@ -460,7 +461,7 @@ class Node:
 
     def _prior(self) -> NodeSet:
         """The set the next step starts from."""
-        return NodeSet(self.xhat, self.P, self.rho, self.region)
+        return NodeSet(self.xhat, self.P, self.rho, self.region, self.region_without)
 
     def _step_input(self, inp: NodeInput, neigh: dict[int, NeighbourState], readings: dict[int, tuple[float, float]]) -> UpdateInput:
         """The estimator's input of a step > 0 (its u and Vx are there: _implausible_input dropped inputs without them)."""
@@ -642,6 +643,7 @@ class Node:
         """Keep ``pub.res`` as the node's own set (its next step starts from it) and publish ``res.published``."""
         inp, res = pub.inp, pub.res
         self.xhat, self.P, self.region = res.continued.xhat, res.continued.P, res.region
+        self.region_without = res.contradicted.readings if res.contradicted is not None else frozenset()
         sector = res.sector
         cbar = self.cfg.sensor.Cbar
         # (no reading: no innovation, so nothing of this step is a neighbour state, our own self-loop's either)
