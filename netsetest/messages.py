@@ -336,20 +336,26 @@ class RunScope:
         step = msg.steps if isinstance(msg, End) else getattr(msg, "step", None)
         if step is not None and step > self.steps:
             return "step-beyond-run"
+        ids = self.ids
         if type(msg) is Reading:  # the most frequent message (every reading to every node of a network): one id
-            return None if msg.node in self.ids else "unknown-node"
+            return None if msg.node in ids else "unknown-node"
+        if type(msg) is NodeState:  # every state to every out-neighbour and the collector: no set built per message
+            return None if self._knows_every_node_of(msg) else "unknown-node"
         named: set[int] = set()
-        if isinstance(msg, (NodeInput, NodeState, Ready, Reading)) and msg.node is not None:
+        if isinstance(msg, (NodeInput, Ready)) and msg.node is not None:
             named.add(msg.node)
         if isinstance(msg, NodeInput):
             named.update(msg.expect_from, msg.lost_from)
-        elif isinstance(msg, NodeState):
-            named.update(msg.used, msg.missing, msg.sets, (j for j, _, _ in msg.readings))
         elif isinstance(msg, Truth):
             if msg.node_ids() != self.ids:
                 return "truth-wrong-nodes"
             named.update(msg.alive, *msg.lost)
-        return "unknown-node" if not named <= self.ids else None
+        return "unknown-node" if not named <= ids else None
+
+    def _knows_every_node_of(self, st: NodeState) -> bool:
+        """Every node a state names (its sender, used, missing, sets, readings) is one of the run's."""
+        ids = self.ids
+        return st.node in ids and ids.issuperset(st.used) and ids.issuperset(st.missing) and ids.issuperset(st.sets) and all(r[0] in ids for r in st.readings)
 
 
 def _enc_hook(obj: object) -> object:

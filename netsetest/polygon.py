@@ -371,6 +371,17 @@ class Cut:
     spans: tuple[Span, ...]
 
 
+def _box_inside(box: tuple[float, float, float, float], c0: float, c1: float, lo: float, hi: float) -> bool:
+    """Whether lo ≤ c0 x + c1 y ≤ hi at every vertex, decided from the vertices' extremes (x₀, y₀, x₁, y₁) alone:
+    the box's corner with the largest (smallest) c0 x + c1 y, rounded as :meth:`Polygon.cut` rounds each vertex's,
+    is at least (at most) every vertex's, since rounding is monotone; True only where :meth:`Polygon.cut` would return
+    the polygon itself."""
+    x0, y0, x1, y1 = box
+    s_max = c0 * (x1 if c0 >= 0.0 else x0) + c1 * (y1 if c1 >= 0.0 else y0)
+    s_min = c0 * (x0 if c0 >= 0.0 else x1) + c1 * (y0 if c1 >= 0.0 else y1)
+    return lo <= s_min and s_max <= hi
+
+
 def cut_all(
     region: Polygon, slabs: Sequence[PlaneSlab], ellipses: Sequence[Ellipse] = (), directions: Sequence[Direction] = (), max_vertices: int = MAX_VERTICES
 ) -> Cut | None:
@@ -379,10 +390,19 @@ def cut_all(
     margin covers the cuts' rounding), with its box and its spans along ``directions``; None where the cuts leave
     nothing, or fewer than MIN_VERTICES vertices (a sliver below the rounding, kept as empty)."""
     out: Polygon | None = region
+    box: tuple[float, float, float, float] | None = None  # out's vertices' extremes, while out is unchanged
     for c0, c1, lo, hi in slabs:
         if out is None:
             return None
-        out = out.cut((c0, c1), lo, hi)
+        if box is None:
+            pts = out.points
+            xs, ys = [p[0] for p in pts], [p[1] for p in pts]
+            box = (min(xs), min(ys), max(xs), max(ys))
+        if _box_inside(box, c0, c1, lo, hi):
+            continue  # every vertex inside the slab: the cut would keep this polygon itself (most slabs of a step)
+        cut = out.cut((c0, c1), lo, hi)
+        if cut is not out:
+            out, box = cut, None
     for xhat, P, rho in ellipses:
         if out is None:
             return None

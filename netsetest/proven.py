@@ -126,6 +126,18 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
         lo, hi = self._bounds
         return lo.copy(), hi.copy()
 
+    def fault_bounds(self) -> tuple[float, float]:
+        """:meth:`bounds`' last coordinate, the fault's, alone: what a node takes of a neighbour's set whose reading it
+        uses with its declared bound.  The region, over x, leaves it as the ellipsoid ∩ the fault range has it, so it
+        needs neither the region parsed nor the other coordinates (the same floats: √ and the products correctly
+        rounded in both)."""
+        if self.own_set is not None or "_bounds" in self.__dict__:
+            lo, hi = self._bounds
+            return float(lo[-1]), float(hi[-1])
+        half = math.sqrt(self.rho * self.P[-1])
+        lo_f, hi_f = self.xhat[-1] - half, self.xhat[-1] + half
+        return (lo_f, hi_f) if self.fault is None else (max(lo_f, self.fault[0]), min(hi_f, self.fault[1]))
+
     @property
     def is_ellipsoid(self) -> bool:
         """The set is the ellipsoid alone (no region, no fault range, no set estimator's set)."""
@@ -142,11 +154,13 @@ class ProvenSet(Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, o
         (Polygon.contains).  ``E``: eᵀP⁻¹e where the caller has it."""
         if self.own_set is not None:
             return self.own_set.contains(xbar)
+        return self._outside_region_holds(xbar, E) and (self.polygon is None or self.polygon.contains(xbar[:NX]))
+
+    def _outside_region_holds(self, xbar: np.ndarray, E: float | None = None) -> bool:
+        """The SDP's set less its region holds x̄: E ≤ ρ, lo ≤ f ≤ hi (exactly)."""
         if not (self.E(xbar) if E is None else E) <= self.rho:
             return False
-        if self.fault is not None and not self.fault[0] <= float(xbar[-1]) <= self.fault[1]:
-            return False
-        return self.polygon is None or self.polygon.contains(xbar[:NX])
+        return self.fault is None or self.fault[0] <= float(xbar[-1]) <= self.fault[1]
 
     def relation(self, lo: np.ndarray, hi: np.ndarray) -> Relation:
         """Where the box [lo, hi] (3,) of x̄ lies against the set (a recorded drive's truth, docs/your-log.md):
@@ -235,11 +249,19 @@ def continued_set(published: ProvenSet, continues: ProvenSet | None) -> ProvenSe
     return ProvenSet(xhat=continues.xhat, P=continues.P, rho=continues.rho, region=published.region)
 
 
-def continued_contains(published: ProvenSet, continues: ProvenSet, xbar: np.ndarray) -> bool:
-    """``continued_set(published, continues).contains(xbar)`` without building that set (a new set, its region checked
-    and parsed again): the ellipsoid ``continues`` gives holds x̄ and the published region, parsed once with the
-    published set, holds x; the same floats, the same rule."""
-    return continues.contains(xbar) and (published.polygon is None or published.polygon.contains(xbar[:NX]))
+def contains_both(published: ProvenSet, continues: ProvenSet | None, xbar: np.ndarray, E: float | None = None) -> tuple[bool, bool]:
+    """``published.contains(xbar, E)`` and ``continued_set(published, continues).contains(xbar)``, without building
+    that set (a new set, its region checked and parsed again) and with x's membership in the one region both sets
+    share (the published one, parsed once with it) asked once: the exact polygon test is most of the judge's
+    membership.  The same floats, the same rules (``continues`` None: the published set, whose answer is both)."""
+    if continues is None:
+        inside = published.contains(xbar, E)
+        return inside, inside
+    if published.own_set is not None:  # (a set estimator continues from the set it publishes: not sent so)
+        return published.contains(xbar, E), continues.contains(xbar) and (published.polygon is None or published.polygon.contains(xbar[:NX]))
+    pub_holds, cont_holds = published._outside_region_holds(xbar, E), continues.contains(xbar)
+    in_region = (pub_holds or cont_holds) and (published.polygon is None or published.polygon.contains(xbar[:NX]))
+    return pub_holds and in_region, cont_holds and in_region
 
 
 def proven_sets(entry: dict) -> tuple[ProvenSet, ProvenSet | None]:

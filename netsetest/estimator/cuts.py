@@ -51,6 +51,7 @@ class NodeSet:
     P: np.ndarray  # (3, 3)
     rho: float
     region: Polygon | None = None  # the states x = (β, r) the earlier steps left (None: none kept; docs/estimator.md)
+    region_without: frozenset[int] = frozenset()  # the readings the region was cut without at its last step (Contradicted.readings)
 
 
 @dataclass(frozen=True)
@@ -96,6 +97,20 @@ class StepFigures:
 
 
 @dataclass(frozen=True)
+class Contradicted:
+    """A step whose region cut left nothing: its data contradict what the node assumes (docs/estimator.md, "The set a node
+    proves").  ``by``: ``readings``, the step's readings (``readings``: the node ids, HEALTH_KEY for the k-of-N interval)
+    leave nothing of the region the node's own data leave, so a declaration they rest on, or an assumption the
+    region rests on, broke (the region is kept without them); ``own-data``, the node's own measurement (with the
+    fault bound where the step rests on it) leaves nothing of its moved region and ellipsoids, so one of the node's
+    own assumptions, or a set its region rests on, broke (no region is kept: the next step seeds one from the set
+    the node continues from).  Either way the node publishes a set resting on nothing the contradicted data proved."""
+
+    by: Literal["readings", "own-data"]
+    readings: frozenset[int] = frozenset()
+
+
+@dataclass(frozen=True)
 class StepResult:
     """One step's two sets and its figures: the set the node continues from, ``continued`` ∩ ``region``, and the one
     it publishes, ``published`` ∩ ``region`` (the very same object where the node publishes the set it continues
@@ -107,6 +122,7 @@ class StepResult:
     sector: Sector | None = None  # the own sensor's sector of this step (None: no saturation modelled)
     region: Polygon | None = None  # the states x⁺ every step so far leaves (NodeSet.region): both sets'
     region_facts: RegionFacts | None = None  # what the region cut proved of it (its box, the faults over it), with it
+    contradicted: Contradicted | None = None  # the step's data contradicted its assumptions: its region cut left nothing (None: it did not)
 
     @classmethod
     def of(cls, s: StepSet, figures: StepFigures, sector: Sector | None = None) -> StepResult:
@@ -204,6 +220,7 @@ class StepContext:
     blend: Blend | None = None  # the step's blended model (None: step 0, no prediction)
     region_slabs: Slabs = field(default_factory=dict)  # what the bounded readings prove: they cut the region alone
     sets: frozenset[int] = frozenset()  # the in-neighbours whose published sets (region; a bounded reading's rate) ``moved`` and ``region_slabs`` rest on
+    region_without: frozenset[int] = frozenset()  # the readings ``moved`` was cut without at the step before (NodeSet.region_without)
 
 
 CutFn = Callable[[StepContext, StepResult], StepResult]
@@ -291,40 +308,75 @@ def _region_cut(ctx: StepContext, res: StepResult) -> StepResult:
     of the step, the own measurement where the step's sector rests on the declared fault bound (C x⁺ = C̄ x̄⁺ − Ds f⁺
     with |f⁺| ≤ F), and the step's certified ellipsoids (the one the node continues from and the published one).
     The node continues from it and publishes it: the published set is the published ellipsoid ∩ the region, and
-    its fault interval is cut by what the own measurement proves over the region.  Where the cuts leave nothing
-    (an assumption broke), no region is kept.
+    its fault interval is cut by what the own measurement proves over the region.  Where the readings leave nothing,
+    the region is cut without them (:func:`_region_without_readings`); where even that leaves nothing, no region is
+    kept (the next step seeds one from the set the node continues from).  Either is named in the step's result
+    (:class:`Contradicted`).
 
     A reference (declared fault size 0) cuts by its own measurement too and publishes f⁺ = 0, resting on its own
     reading; not where the step cannot list readings (step 0, whose cone is the prior's)."""
     st = ctx.statics
     size, sector = st.fault_bound.size, res.sector
     reference = size == 0.0 and ctx.listed  # its own reading rests on its declared zero fault (listed, so judged)
-    keys = frozenset(ctx.slabs) | frozenset(ctx.region_slabs) | ({st.node_id} if reference else frozenset())
     own = size is not None and (reference or st.own_bound or (sector is not None and sector.basis == "fault-bound"))
-    sets = (res.continued,) if res.published is res.continued else (res.continued, res.published)
-    health = ctx.health if st.health_tolerance is not None and st.own.Ds != 0.0 else None  # (the health-fault cut's, computed here)
-    facts = region_engine.cut(
-        ctx.moved,
-        (*ctx.slabs.values(), *ctx.region_slabs.values()),
-        st.own,
-        ctx.meas,
-        size if own else None,  # C x⁺ = C̄ x̄⁺ − Ds f⁺, |f⁺| ≤ F: the step's cone holds the bound
-        ellipses=[(s.xhat, s.P, ctx.rho) for s in sets],
-        others=None if health is None else health.others,
-        floor=max(st.health_tolerance or 0.0, PIN_FLOOR),
-    )  # reduced: the move's margin covers the cuts' rounding (Polygon.moved)
+    readings = frozenset(ctx.slabs) | frozenset(ctx.region_slabs)
+    facts = _region_facts(ctx, res, (*ctx.slabs.values(), *ctx.region_slabs.values()), size if own else None, ctx.health)
     if facts is None:
-        return res  # (fewer than three vertices: a sliver below the rounding, kept as empty)
+        facts, res = _region_without_readings(ctx, res, readings, size if own else None)
+        if facts is None:
+            return res
+        readings = frozenset()
+    keys = readings | ({st.node_id} if reference else frozenset())
     cont = res.continued
     res = res.continuing(cont.replaced(reading_keys=cont.reading_keys | keys, set_keys=cont.set_keys | ctx.sets))
     res = res.replaced(region=facts.region, region_facts=facts)
     fault = (0.0, 0.0) if reference else facts.fault
     # with readings the ellipsoid is cut too (as since the region came); without, it stays as solved (what
     # neighbours use, bit for bit) and only the published fault range narrows: the same published interval
-    out = cut_fault(ctx, res, *fault, reshape=bool(ctx.slabs)) if fault is not None else None
+    out = cut_fault(ctx, res, *fault, reshape=bool(readings & ctx.slabs.keys())) if fault is not None else None
     if out is None or not keys:
         return res if out is None else out
     return out.replaced(published=out.published.replaced(reading_keys=out.published.reading_keys | keys))
+
+
+def _region_facts(ctx: StepContext, res: StepResult, slabs: tuple[Slab, ...], size: float | None, health: HealthAssessment | None) -> RegionFacts | None:
+    """The moved region cut by ``slabs``, the own measurement with the fault size ``size`` (None: not) and the step's
+    ellipsoids, reduced (:func:`~netsetest.estimator.region_engine.cut`); under k-of-N (``health``), the own fault where
+    the own sensor is healthy or the others agree.  None where nothing is left."""
+    st = ctx.statics
+    sets = (res.continued,) if res.published is res.continued else (res.continued, res.published)
+    health = health if st.health_tolerance is not None and st.own.Ds != 0.0 else None  # (the health-fault cut's, computed here)
+    return region_engine.cut(
+        ctx.moved,
+        slabs,
+        st.own,
+        ctx.meas,
+        size,  # C x⁺ = C̄ x̄⁺ − Ds f⁺, |f⁺| ≤ F: the step's cone holds the bound
+        ellipses=[(s.xhat, s.P, ctx.rho) for s in sets],
+        others=None if health is None else health.others,
+        floor=max(st.health_tolerance or 0.0, PIN_FLOOR),
+    )  # reduced: the move's margin covers the cuts' rounding (Polygon.moved); None: fewer than three vertices left
+
+
+def _region_without_readings(ctx: StepContext, res: StepResult, readings: frozenset[int], size: float | None) -> tuple[RegionFacts | None, StepResult]:
+    """The region of a step whose cut by ``readings`` left nothing: the moved region cut by the node's own data alone
+    (the own measurement with ``size``, the step's ellipsoids), which rests on nothing the published set does not
+    (no reading of the step; the moved region's prior and in-neighbours' sets, which the sets name).  With the
+    readings dropped the region keeps cutting at every later step instead of restarting, every step, from the box of
+    the ellipsoid (what a gross false reading did: tests/inmemory/test_network_value.py).  The result names what was
+    contradicted (:class:`Contradicted`): the readings (the region is this one), or the node's own data (nothing is
+    left even without them: no region, and the facts are None).
+
+    Where the moved region was cut by those readings at the step before (the first step they contradict), its memory
+    may rest on them (a false reading that fitted earlier misled it): the region then starts from the box of the
+    step's own set instead (:func:`seed`), as it did before it was kept, and keeps its memory from there on while the
+    readings go on contradicting it."""
+    if readings and not readings <= ctx.region_without:
+        ctx = dataclasses.replace(ctx, moved=seed(NodeSet(res.continued.xhat, res.continued.P, ctx.rho)))
+    facts = _region_facts(ctx, res, (), size, None) if readings else None
+    if facts is None:
+        return None, res.replaced(contradicted=Contradicted("own-data"))
+    return facts, res.replaced(contradicted=Contradicted("readings", readings))
 
 
 def _health_pin(ctx: StepContext, res: StepResult) -> StepResult:
@@ -430,6 +482,7 @@ __all__ = [
     "PIN_FLOOR",
     "STEP_CUTS",
     "Cut",
+    "Contradicted",
     "CutStatics",
     "NodeSet",
     "Rests",

@@ -607,6 +607,7 @@ class LocalEstimator:
             blend=base.blend,
             region_slabs=region_slabs,
             sets=base.sets | rate_from,
+            region_without=prev.region_without,
         )
 
     def _bounded_slabs(self, inp: UpdateInput, measured: Mapping[int, Interval]) -> tuple[Slabs, frozenset[int]]:

@@ -52,8 +52,14 @@ def same_set(a: NodeState, b: NodeState) -> bool:
 def truth_problem(sc: Scenario, t: Truth, prev: Truth | None) -> str | None:
     """Why truth ``t`` cannot be the vehicle's (a drop reason), or None; ``prev``: the judged truth of the step
     before (None: unknown, then x cannot be checked, the rest can)."""
+    return chain_problem(sc, t, prev) or own_truth_problem(sc, t)
+
+
+def chain_problem(sc: Scenario, t: Truth, prev: Truth | None) -> str | None:
+    """:func:`truth_problem`'s part that rests on the truth before (``prev``): x_k from x_{k−1} through the model (a
+    recorded drive's reference follows no model: none); the rest is :func:`own_truth_problem`'s."""
     if sc.log is not None:
-        return _log_truth_problem(sc, t)
+        return None
     k = t.step
     x = np.asarray(t.x)
     prev = prev if prev is not None and prev.step == k - 1 else None
@@ -67,6 +73,16 @@ def truth_problem(sc: Scenario, t: Truth, prev: Truth | None) -> str | None:
         expect = None
     if expect is not None and not np.allclose(x, expect, rtol=CHAIN_RTOL, atol=1e-300):
         return "truth-not-from-model"
+    return None
+
+
+def own_truth_problem(sc: Scenario, t: Truth) -> str | None:
+    """:func:`truth_problem`'s part that rests on the scenario alone (speed, every node's fault, sensor input and flags,
+    the run's flags; a recorded drive's, what the scenario fixes of it): a frozen truth that passed it passes it again."""
+    if sc.log is not None:
+        return _log_truth_problem(sc, t)
+    k = t.step
+    x = np.asarray(t.x)
     if sc.plant == "ts" and not np.isclose(t.vx, sc.vx(k), rtol=CHAIN_RTOL, atol=0.0):
         return "truth-speed"
     if sc.plant != "ts" and not sc.speed_plausible(k, t.vx):
@@ -298,14 +314,14 @@ class Admission:
     def reported(self, k: int, alive_only: bool) -> bool:
         """Every node (``alive_only``: every one the vehicle heard, with a reading) has a state of step k here."""
         copies = self.truth.get(k)
-        want = set(copies[0].alive) if alive_only and copies and k > 0 else set(self.sc.ids)
+        want = frozenset(copies[0].alive) if alive_only and copies and k > 0 else self.scope.ids
         if alive_only and self.truth.get(k + 1):
             # the next truth's alive list is who the vehicle heard at k: a node it gave up on (killed, to
             # rejoin later) is not waited for, else progress stalls until WINDOW and a rejoin waits on it
-            want &= set(self.truth[k + 1][0].alive)
-        if copies:
-            want -= {i for i in copies[0].no_reading if self.sc.silent_without_reading(i, k)}  # it publishes nothing for the step
-        return want <= set(self.states.get(k, {}))
+            want = want.intersection(self.truth[k + 1][0].alive)
+        if copies and copies[0].no_reading:
+            want = want - {i for i in copies[0].no_reading if self.sc.silent_without_reading(i, k)}  # it publishes nothing for the step
+        return want <= self.states.get(k, {}).keys()  # (asked per message in lockstep: no set built of the run's ids)
 
     def lost_truth(self, k: int) -> bool:
         """Our inbox dropped step k's truth and no copy came: nothing of the step can be judged."""
@@ -315,7 +331,7 @@ class Admission:
         """The one copy of step k's truth consistent with the scenario and the previous truth, or None."""
         good = []
         for t in self.truth.get(k, []):
-            why = truth_problem(self.sc, t, self.prev_truth)
+            why = chain_problem(self.sc, t, self.prev_truth)  # (its own part it passed when taken in: _take_truth)
             if why:
                 self.drops[why] += 1
             else:

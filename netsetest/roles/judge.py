@@ -33,7 +33,7 @@ from netsetest.estimator.names import SDP
 from netsetest.estimator.registry import node_set_estimator
 from netsetest.estimator.sector import FaultBound, Propagation, Sector, measurement_interval, prior_interval, sector_ok
 from netsetest.messages import NodeState, Truth, state_digest
-from netsetest.proven import ProvenSet, Relation, continued_contains
+from netsetest.proven import ProvenSet, Relation, contains_both
 from netsetest.models.envelope import MODEL_MISMATCH, OUTSIDE_ENVELOPE
 from netsetest.models.sensor import NX, augmented
 
@@ -194,8 +194,7 @@ class StepSets:
             xbar = augmented(self.tr.x, self.tr.faults[i])
             pub = st.published
             E = pub.E(xbar)
-            inside = pub.contains(xbar, E)
-            return E, inside, inside if st.continues is None else continued_contains(pub, st.continues, xbar)
+            return E, *contains_both(pub, st.continues, xbar, E)
 
         return self._once(st, "point", make)
 

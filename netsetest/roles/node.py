@@ -155,6 +155,7 @@ class Node:
         self.xhat = self.cfg.x0_hat.copy()
         self.P = self.cfg.P0.copy()
         self.region: Polygon | None = None  # the region of x the readings left (netsetest/polygon.py)
+        self.region_without: frozenset[int] = frozenset()  # the readings the region was last cut without (cuts.Contradicted)
         self.rho = self.cfg.rho
         self.k = -1  # last published step
         self.own: NeighbourState | None = None
@@ -162,7 +163,8 @@ class Node:
         self.inbox: dict[int, dict[int, NeighbourState]] = {}  # step → j → state
         self.digests: dict[int, dict[int, str]] = {}  # step → j → state_digest of the copy in the inbox
         self.own_digest: str | None = None  # of our last published state: the next step's prior
-        self.screened: set[tuple[int, int]] = set()  # (step, j) compared with our own set of that step
+        self.screened: set[int] = set()  # neighbours whose state of screened_step was compared with our own set of it
+        self.screened_step = -1
         # step → neighbours whose state of that step we dropped: it spoke, so it answers our wait (it is
         # left out of the step, which is always sound) — else we would wait the neighbour timeout for it
         self.refused: dict[int, set[int]] = {}
@@ -378,8 +380,7 @@ class Node:
         region = pub.polygon if est.neighbour_sets else None  # what the step takes of its set beyond the ellipsoid
         fault = None
         if msg.node in est.bounded and est.bounded[msg.node][1].rate is not None:
-            lo, hi = pub.bounds()
-            fault = (float(lo[-1]), float(hi[-1]))
+            fault = pub.fault_bounds()
         self.inbox.setdefault(msg.step, {})[msg.node] = NeighbourState(np.asarray(pub.xhat), P, pub.rho, msg.gamma, msg.innov, sector, region, fault)
         self.digests.setdefault(msg.step, {})[msg.node] = state_digest(msg)
         self._screen()
@@ -410,14 +411,15 @@ class Node:
         if self.own is None or self.k < 0:
             return
         have = self.inbox.get(self.k, {})
-        for j in [j for j in have if (self.k, j) not in self.screened]:
+        if self.screened_step != self.k:  # what was screened before our step: no longer asked
+            self.screened_step, self.screened = self.k, set()
+        for j in [j for j in have if j not in self.screened]:
             nb = have[j]
-            self.screened.add((self.k, j))
+            self.screened.add(j)
             if states_disjoint(self.own.xhat, self.own.P, self.own.rho, nb.xhat, nb.P, nb.rho):
                 del have[j]
                 self.drop("neighbour-disjoint")
                 self.refused.setdefault(self.k, set()).add(j)
-        self.screened = {(s, j) for s, j in self.screened if s >= self.k}
 
     # ------------------------------------------------------------------ stepping
 
@@ -449,7 +451,7 @@ class Node:
     def _unread(self, inp: NodeInput) -> list[int]:
         """The senders whose reading of ``inp``'s step we still wait for (not the silent ones, nor those the vehicle
         says have none at that step)."""
-        readings = self._readings_of(inp.step)
+        readings = self.readings.get(inp.step, {})  # (who sent one: their order is _readings_of's business)
         return [j for j in self.read_from if j not in readings and j not in self.silent and j not in inp.unread]
 
     def _readings_of(self, step: int) -> dict[int, tuple[float, float]]:
@@ -459,7 +461,7 @@ class Node:
 
     def _prior(self) -> NodeSet:
         """The set the next step starts from."""
-        return NodeSet(self.xhat, self.P, self.rho, self.region)
+        return NodeSet(self.xhat, self.P, self.rho, self.region, self.region_without)
 
     def _step_input(self, inp: NodeInput, neigh: dict[int, NeighbourState], readings: dict[int, tuple[float, float]]) -> UpdateInput:
         """The estimator's input of a step > 0 (its u and Vx are there: _implausible_input dropped inputs without them)."""
@@ -476,7 +478,7 @@ class Node:
         elif self.set_estimator is None and (inp.y is None or self.gap is not None):
             self._carry(inp)  # no reading: nothing published; the first reading after resumes (estimator/rejoin.py)
             stepped = True
-        elif self.missing() and not self.give_up:
+        elif not self.give_up and self.missing():
             if self.waiting_since is None:
                 self.waiting_since = now if now is not None else time.monotonic()
             self._prepare(inp)
@@ -641,6 +643,7 @@ class Node:
         """Keep ``pub.res`` as the node's own set (its next step starts from it) and publish ``res.published``."""
         inp, res = pub.inp, pub.res
         self.xhat, self.P, self.region = res.continued.xhat, res.continued.P, res.region
+        self.region_without = res.contradicted.readings if res.contradicted is not None else frozenset()
         sector = res.sector
         cbar = self.cfg.sensor.Cbar
         # (no reading: no innovation, so nothing of this step is a neighbour state, our own self-loop's either)

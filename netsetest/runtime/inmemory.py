@@ -16,6 +16,7 @@ from netsetest.records.summary import RunSummary
 from netsetest.roles.collector import Collector
 from netsetest.roles.node import Node
 from netsetest.roles.vehicle import Vehicle
+from netsetest.runtime.gc_policy import long_run
 from netsetest.runtime.report import Progress, record_sink
 from netsetest.runtime.stops import StopRequests
 
@@ -95,6 +96,7 @@ def _lockstep(vehicle: Vehicle, nodes: list[Node], bus: MemoryBus, bar: Progress
     bus.pump()
 
 
+@long_run()  # the garbage collector's policy for a run (runtime/gc_policy.py)
 def run_inmemory(
     scenario: Scenario,
     signals: SignalKind = "paper",

@@ -34,6 +34,7 @@ from netsetest.messages import Message, Ready
 from netsetest.profile import PhaseProfile, observe_bus, observe_node
 from netsetest.records.meta import RunMeta
 from netsetest.roles.node import Node
+from netsetest.runtime.gc_policy import long_run
 from netsetest.runtime.report import EXIT_BAD_INPUT, EXIT_COLLECTOR_STALLED, EXIT_VIOLATION, exit_code, log, record_sink, write_summary
 from netsetest.runtime.rolespec import CollectorSpec, NodeSpec, ScenarioSpec, VehicleSpec, ZenohSpec
 from netsetest.runtime.stops import StopRequests
@@ -193,6 +194,7 @@ def node_peers(sc: Scenario, node_id: int) -> set[tuple[str, int | None]]:
     return {("vehicle", None), ("collector", None)} | {("node", j) for j in neighbours - {node_id}}
 
 
+@long_run()  # the garbage collector's policy for a run (runtime/gc_policy.py)
 def run_vehicle(spec: VehicleSpec, sc: Scenario, bus: Bus) -> int:
     """The vehicle's loop.  ``spec.await_rejoin``: (node, step) pairs; in lockstep, step+1 waits (at most
     ``node_timeout``) for the node.  ``spec.quiet``: no line on success (errors are still logged).  Lockstep waits
@@ -313,6 +315,7 @@ class RejoinHolds:
         return True
 
 
+@long_run()  # the garbage collector's policy for a run (runtime/gc_policy.py)
 def run_node(spec: NodeSpec, sc: Scenario, bus: Bus) -> int:
     """A node's loop.  ``spec.crash_after``: SIGKILL this process right after publishing that step (``run --kill``: exactly there)."""
     node_id, run_id, realtime, neighbour_timeout, crash_after = (
@@ -377,6 +380,7 @@ def _node_wait(node: Node, ready_due: float | None, neighbour_timeout: float, re
     return IDLE_WAIT_S
 
 
+@long_run()  # the garbage collector's policy for a run (runtime/gc_policy.py)
 def run_collector(spec: CollectorSpec, sc: Scenario, bus: Bus, meta: RunMeta, on_summary: Callable[[RunSummary], None] | None = None) -> int:
     """The collector's loop: judge until End (or the vehicle is gone, or SIGTERM, or it stalled past its session's
     lease, ``spec.zenoh.stall_limit``), then write the summary (the steps checked before a signal or a stall)."""

@@ -34,7 +34,7 @@ from netsetest.estimator import sdp
 from netsetest.estimator.certificate import FactStack, certify
 from netsetest.estimator.conic.closed_form import ClosedFormSolver
 from netsetest.estimator.conic.reduction import Reduction
-from netsetest.estimator.conic.solver import ConicSolver
+from netsetest.estimator.conic.solver import CHORDAL_FROM, ConicSolver
 from netsetest.runtime.inmemory import run_inmemory
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -201,6 +201,27 @@ def test_reductions_leave_the_optimum_unchanged(case, saim_steps, nsnim_steps):
             assert rho_c is not None
             traces.append(np.trace(sol.P) * rho_c / rho)
         assert traces[0] == pytest.approx(traces[1], rel=1e-5)
+
+
+def test_the_solver_is_kept_below_an_lmi_of_chordal_from(saim_steps):
+    """SAIM, scheduled, an LMI not split into cliques: below an LMI of CHORDAL_FROM the node keeps one Clarabel
+    solver per template and updates its data in place (Clarabel's own chordal decomposition, which refuses updates,
+    off); from CHORDAL_FROM on Clarabel decomposes it and a new solver solves each step.  The node-steps of 12 steps
+    of paper6 replayed on each node's estimator, as the node builds it; fails where every LMI is decomposed."""
+    sc = load_topology(PAPER6, "saim", 12)
+    ests = {i: _estimator(sc, i) for i in sc.ids}
+    for node, args in saim_steps:
+        ests[node].step(*args)
+    seen: dict[bool, int] = {True: 0, False: 0}
+    for est in ests.values():
+        for pat in est._patterns.values():
+            solver = pat.solver.fallback if isinstance(pat.solver, ClosedFormSolver) else pat.solver
+            for key, tpl in solver._templates.items():
+                if tpl.lmi_n and not tpl.decomposed:
+                    small = tpl.lmi_n < CHORDAL_FROM
+                    seen[small] += 1
+                    assert (key in solver._solvers) == small, (tpl.lmi_n, key)
+    assert seen[True] >= 3 and seen[False] >= 1, seen
 
 
 def _run(sc, backend, monkeypatch):

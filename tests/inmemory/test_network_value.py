@@ -11,7 +11,7 @@ import pytest
 
 from netsetest.analysis.exact import local_limits
 from netsetest.cli.main import main
-from netsetest.config.schema import HealthGroup, load_topology
+from netsetest.config.schema import HealthGroup, Scenario, load_topology
 from netsetest.records.record import load_record
 from netsetest.runtime.inmemory import run_inmemory
 
@@ -276,6 +276,18 @@ def test_every_node_publishes_its_region_and_a_region_off_the_truth_is_a_violati
     assert covered and all(e["contained"] is False for e in covered)
 
 
+def _false_reference(tmp_path: Path, amplitude: float) -> Scenario:
+    """paper6_reference, NSNIM, 40 steps, with sensor 3 (the reference) false by ``amplitude`` from step 20 on."""
+    text = (ROOT / "topologies" / "paper6_reference.toml").read_text().replace('node_dir = "../nodes"', f'node_dir = "{tmp_path}"')
+    for prof in (ROOT / "nodes").glob("*.toml"):
+        body = prof.read_text()
+        if prof.name == "yaw3_reference.toml":
+            body = body.replace('[fault]\nkind = "none"', f'[fault]\nkind = "square"\namplitude = {amplitude}\nperiod = 90\nstart = 20\nend = 70')
+        (tmp_path / prof.name).write_text(body)
+    (tmp_path / "t.toml").write_text(text)
+    return load_topology(tmp_path / "t.toml", case="nsnim", steps=40)
+
+
 def test_a_false_reference_reading_is_attributed_to_it(tmp_path: Path) -> None:
     """paper6_reference with sensor 3 (the reference) given a fault from step 20: every other node uses
     its readings, so their published sets miss; every such miss is attributed to sensor 3's broken
@@ -284,16 +296,9 @@ def test_a_false_reference_reading_is_attributed_to_it(tmp_path: Path) -> None:
     The fault is 0.01 rad/s, small enough that the false reading stays consistent with what the nodes know, so
     it misleads them, every one directly (from 0.02 on, some misses also pass from node to node through the
     neighbours' published sets, attributed as 'missed the truth': another test's subject).  A gross one (0.1745, this test's until issue 45) no longer does: the reading's slab
-    misses the node's region, the region is dropped, and since issue 45 dropped the readings' own set the
-    node publishes the set it continues from, which does not rest on the reading (0 misses, 0 violations)."""
-    text = (ROOT / "topologies" / "paper6_reference.toml").read_text().replace('node_dir = "../nodes"', f'node_dir = "{tmp_path}"')
-    for prof in (ROOT / "nodes").glob("*.toml"):
-        body = prof.read_text()
-        if prof.name == "yaw3_reference.toml":
-            body = body.replace('[fault]\nkind = "none"', '[fault]\nkind = "square"\namplitude = 0.01\nperiod = 90\nstart = 20\nend = 70')
-        (tmp_path / prof.name).write_text(body)
-    (tmp_path / "t.toml").write_text(text)
-    sc = load_topology(tmp_path / "t.toml", case="nsnim", steps=40)
+    misses the node's region, which is then cut by the node's own data alone, resting on no reading of the step
+    (0 misses, 0 violations: test_a_gross_false_reference_reading_leaves_the_region_to_the_own_data)."""
+    sc = _false_reference(tmp_path, 0.01)
     assert sc.references() == (3,) and sc.node(3).fault(25) != 0.0
     s = run_inmemory(sc, "paper", seed=0).summary
     assert s.violations_total == 0
@@ -597,3 +602,48 @@ def _move_regions_off(monkeypatch: pytest.MonkeyPatch, shift: np.ndarray) -> Non
     off = dataclasses.replace(cuts.REGION, apply=moved_off)
     for name in ("STEP_CUTS", "FIRST_CUTS", "FALLBACK_CUTS"):
         monkeypatch.setattr(sdp, name, tuple(off if c is cuts.REGION else c for c in getattr(sdp, name)))
+
+
+def test_a_gross_false_reference_reading_leaves_the_region_to_the_own_data(tmp_path: Path) -> None:
+    """Sensor 3 (the reference) false by 0.1745 rad/s from step 20: its reading's slab misses every other node's region
+    at every later step.  The region is then cut by the node's own data alone (cuts._region_without_readings): at step
+    20 from the box of the step's own set (the region may rest on the reading's earlier use), from then on from the
+    moved region, so the cuts keep working after the drop: from step 21 every other node's β and r are the region's.
+    Before, the region restarted from its ellipsoid's box at every step and was dropped again (cuts [] from step 20
+    to 40).
+
+    Measured against the exact limit of what those sets rest on, the run's own data without sensor 3's readings
+    from step 20 (`netsetest exact` on the record with them taken out), mean from step 20 over nodes 1, 2, 4, 5, 6:
+    before β 1.92–2.35, r 1.42–1.68, f 1.26–1.46 of it; now β 1.17–1.22, r 1.09–1.11, f 1.03–1.05; none narrower,
+    0 violations, every node-step covered and contained."""
+    from netsetest.analysis.exact import COORDINATES, exact_bounds
+
+    sc = _false_reference(tmp_path, 0.1745)
+    path = tmp_path / "run.json"
+    s = run_inmemory(sc, "paper", seed=0, record=str(path), keep=False).summary
+    assert s.violations_total == 0 and s.node_steps_covered == s.node_steps_evaluated == s.node_steps_contained
+    rec = load_record(str(path))
+    for i, track in rec.nodes.items():
+        if i != 3:
+            assert track.cuts is not None
+            late = [track.cuts[n] for n, k in enumerate(track.steps) if k >= 21]
+            assert late and all("region" in c[0] and "region" in c[1] for c in late if c is not None), (i, late)
+    lines = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    for line in lines:  # the data without sensor 3's readings from step 20 (an incomplete measurement)
+        t = line.get("entry", {})
+        if line["kind"] == "truth" and t["step"] >= 20:
+            t["y"].pop("3")
+            t["no_reading"] = sorted({*t.get("no_reading", ()), 3})
+    without = tmp_path / "without3.json"
+    without.write_text("".join(json.dumps(line) + "\n" for line in lines))
+    ex = exact_bounds(sc, load_record(str(without)), "used")
+    for i, track in rec.nodes.items():
+        if i == 3:  # its own reading is its data: its sets rest on it
+            continue
+        late = track.steps >= 20
+        for idx, coord in enumerate(COORDINATES):
+            lo, hi = (b[late] for b in track.bounds(idx))
+            e = ex.interval(coord, i)[track.steps[late]]
+            assert np.all(lo <= e[:, 0] + 1e-9) and np.all(hi >= e[:, 1] - 1e-9), (i, coord)  # never narrower than the limit
+            ratio = float(np.mean((hi - lo) / (e[:, 1] - e[:, 0])))
+            assert ratio <= {"beta": 1.3, "r": 1.2, "f": 1.1}[coord], (i, coord, ratio)  # before: β ≥ 1.92, r ≥ 1.42, f ≥ 1.26

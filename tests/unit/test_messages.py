@@ -530,3 +530,9 @@ def test_run_scope():
     assert scope.reject(t.model_copy(update={"lost": [(6, 1)]})) == "unknown-node"
     assert RunScope(frozenset({1, 2, 3}), 99).reject(t) == "truth-wrong-nodes"
     assert scope.reject(_state(node=2, step=3, used=[1], missing=[5])) == "unknown-node"
+    # a state names nodes in its sender, used, missing, sets and readings: an unknown one anywhere drops it
+    fits = {"node": 2, "step": 3, "used": [1], "missing": [1], "sets": [1], "readings": [(1, 0.1, 1.0)]}
+    assert scope.reject(_state(**fits)) is None
+    for named in ({"node": 3}, {"used": [1, 7], "sets": []}, {"missing": [7]}, {"sets": [7], "used": [1, 7]}, {"readings": [(1, 0.1, 1.0), (7, 0.1, 1.0)]}):
+        assert scope.reject(_state(**(fits | named))) == "unknown-node", named
+    assert scope.reject(_state(**(fits | {"step": 11}))) == "step-beyond-run"

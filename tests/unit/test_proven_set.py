@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from netsetest.messages import state_digest
 from netsetest.polygon import Polygon
-from netsetest.proven import ProvenSet, continued_contains, continued_set
+from netsetest.proven import ProvenSet, contains_both, continued_set
 from netsetest.sets import Box, RegionSet, Zonotope, set_to_wire
 
 from message_helpers import make_state
@@ -65,6 +65,27 @@ def test_membership_is_the_judges_rule(point: list[float], rho: float) -> None:
     assert s.contains(x) == want
 
 
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(st.floats(-1e3, 1e3), min_size=3, max_size=3),
+    st.lists(st.floats(1e-6, 1e3), min_size=3, max_size=3),
+    st.floats(1e-6, 1e3),
+    st.one_of(st.none(), st.tuples(st.floats(-1e3, 1e3), st.floats(0.0, 1e3))),
+    st.sampled_from([SQUARE, None]),
+)
+def test_the_fault_bounds_alone_are_the_bounds_last_coordinate(
+    xhat: list[float], diag: list[float], rho: float, fault: tuple[float, float] | None, region: list[float] | None
+) -> None:
+    """What a node takes of a neighbour's set (its fault's bounds) without the region or the other coordinates: the same
+    floats as the whole bounds' last coordinate, asked before them or after (then read from them)."""
+    P = [diag[0], 0.0, 0.0, 0.0, diag[1], 0.0, 0.0, 0.0, diag[2]]
+    fr = None if fault is None else [fault[0], fault[0] + fault[1]]
+    s = ProvenSet(xhat=xhat, P=P, rho=rho, region=region, fault=fr)
+    first = s.fault_bounds()
+    lo, hi = s.bounds()
+    assert first == (lo[-1], hi[-1]) == s.fault_bounds()
+
+
 def test_a_set_estimators_set_is_its_own() -> None:
     own = RegionSet(Zonotope(np.zeros(3), np.diag([1.0, 1.0, 1.0])), Polygon(np.reshape(SQUARE, (-1, 2))), (-0.2, 0.3))
     s = ProvenSet(xhat=[0.0, 0.0, 0.0], P=[9.0, 0, 0, 0, 9.0, 0, 0, 0, 9.0], rho=1.0, set=set_to_wire(own))
@@ -72,6 +93,7 @@ def test_a_set_estimators_set_is_its_own() -> None:
     for x in ([0.05, 0.0, 0.0], [0.5, 0.0, 0.0], [0.0, 0.0, 0.5]):
         assert s.contains(np.array(x)) == own.contains(np.array(x))
     assert isinstance(s.own_set, RegionSet)
+    assert s.fault_bounds() == (own.bounds()[0][-1], own.bounds()[1][-1])
 
 
 @pytest.mark.parametrize(
@@ -117,11 +139,14 @@ def test_the_continued_set_is_its_ellipsoid_within_the_published_region() -> Non
 @given(st.lists(st.floats(-0.3, 0.3), min_size=3, max_size=3), st.floats(0.05, 2.0), st.sampled_from([SQUARE, None]))
 def test_the_continued_sets_membership_without_building_it(point: list[float], rho: float, region: list[float] | None) -> None:
     """The judge asks the set a node continues from without building it (a new set, its region checked and parsed
-    again): the same answer as the built one's, at random points and at the region's corners and edges."""
+    again), and the region both sets share once: the same answers as the built sets', at random points and at the
+    region's corners and edges (inside either ellipsoid, both, or neither); without ``continues``, the published set's."""
     pub = ProvenSet(xhat=[0.0, 0.01, 0.1], P=P_DIAG, rho=1.0, region=region, fault=[-0.2, 0.3])
     own = ProvenSet(xhat=[0.01, 0.0, -0.1], P=P_DIAG, rho=rho)
     for x in (np.array(point), np.array([0.1, 0.1, point[2]]), np.array([0.1, point[1], point[2]])):
-        assert continued_contains(pub, own, x) == continued_set(pub, own).contains(x)
+        assert contains_both(pub, own, x) == (pub.contains(x), continued_set(pub, own).contains(x))
+        assert contains_both(pub, own, x, pub.E(x)) == contains_both(pub, own, x)
+        assert contains_both(pub, None, x) == (pub.contains(x), pub.contains(x))
 
 
 @pytest.mark.parametrize("part", ["xhat", "P", "rho", "region", "fault", "continues"])

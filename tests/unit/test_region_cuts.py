@@ -295,3 +295,68 @@ def test_the_region_cut_rests_on_the_bounded_readings_and_the_neighbours_sets_it
     )
     assert out.region is not None and out.region.interval(c[:2])[0] >= -0.005 - 1e-8  # (the cut's margin)
     assert 5 in out.rests_on.readings and out.rests_on.sets == {2}
+
+
+# ---------------------------------------------------------------- a region cut the readings leave empty (cuts._region_without_readings)
+
+
+def _contradicting(ctx: StepContext, gap: float) -> dict[int, Slab]:
+    """A reading's slab beyond the moved region by ``gap`` (of the region's extent along it): it leaves nothing."""
+    c = np.array([0.0, 1.0, 0.0])
+    top = float(ctx.moved.vertices[:, 1].max())
+    extent = float(np.ptp(ctx.moved.vertices[:, 1]))
+    return {7: Slab(c, top + gap * extent + 1e-6, top + (gap + 1.0) * extent + 1e-6)}
+
+
+@settings(max_examples=examples(80), deadline=None)
+@given(_step(), st.sampled_from([0.05, 0.5, 3.0]))
+def test_a_region_the_readings_leave_empty_is_the_own_datas(step: tuple[StepContext, StepResult, np.ndarray], gap: float) -> None:
+    """A step whose reading (a reference's slab) misses the moved region: the region is the moved one cut by the own
+    data alone (the own measurement with the fault bound where the step rests on it, the step's ellipsoids), so it holds
+    every point of the step's sets that those allow; it rests on no reading of the step (the published set rests on
+    none either), and the step's result says the readings contradicted the node's own data.  The region is kept, so the
+    next step's cuts work again (tests/inmemory/test_network_value.py, the gross false reference reading)."""
+    ctx, res, held = step
+    ctx = dataclasses.replace(ctx, slabs=_contradicting(ctx, gap))
+    region = next(c for c in STEP_CUTS if c.name == "region")
+    out = region.apply(ctx, res)
+    own = dataclasses.replace(ctx, slabs={}, region_slabs={})
+    kept = held[_facts("region", own, res, held)]  # what the own data allow of the step's sets
+    inside = _inside(out, kept, ctx.rho)
+    assert inside.all(), kept[~inside.all(axis=1)]
+    assert out.contradicted is not None
+    if out.contradicted.by == "readings":
+        assert out.region is not None and out.contradicted.readings == {7, *ctx.region_slabs}
+        assert not out.rests_on.readings and out.rests_on.sets == ctx.sets  # the moved region's in-neighbours only
+    else:  # the own data leave nothing either: no region of the step's (its input's stays), nothing the own data allow
+        assert out.region is res.region and out.published is res.published and not len(kept)
+
+
+def test_a_region_the_readings_leave_empty_keeps_no_more_than_the_own_data_allow() -> None:
+    """The region kept without the readings is the own data's: its C x is the own measurement's interval widened by
+    |Ds| F (C x = C̄ x̄ − Ds f, |f| ≤ F), not the moved region's; at the first step the readings contradict it starts
+    from the step's own set, after that from the moved region; a region the own data leave empty too is none, named
+    so; a step whose readings fit names nothing."""
+    ctx = _context()
+    size = 0.01
+    statics = dataclasses.replace(ctx.statics, fault_bound=dataclasses.replace(ctx.statics.fault_bound, size=size))
+    moved = Polygon.box(np.array([-0.01, -0.5]), np.array([0.01, 0.5]))
+    res = StepResult.of(StepSet(np.zeros(3), np.eye(3), 1.0), StepFigures("ok", 0.0, "solved"), Sector(0.8, 0.2, "fault-bound"))
+    cut = next(c for c in STEP_CUTS if c.name == "region").apply
+    own = ctx.statics.own
+    ctx = dataclasses.replace(ctx, statics=statics, moved=moved, sector=res.sector, region_slabs={}, sets=frozenset(), meas=Interval(-0.01, 0.01))
+    ctx = dataclasses.replace(ctx, slabs=_contradicting(ctx, 0.5))
+    out = cut(ctx, res)
+    assert out.contradicted is not None and out.contradicted.by == "readings" and out.contradicted.readings == {7} and out.region is not None
+    lo, hi = out.region.interval(own.C)
+    slack = abs(own.Ds) * size
+    # the own measurement's (out by the cut's margin), not ±0.06
+    assert -0.01 - slack - 1e-8 <= lo <= -0.01 - slack and 0.01 + slack <= hi <= 0.01 + slack + 1e-8
+    # the first step they contradict: from the box of the step's own set (|β| ≤ 1); while they go on contradicting it,
+    # from the moved region (|β| ≤ 0.01): its memory since rests on none of them
+    assert out.region.interval(np.array([1.0, 0.0]))[1] > 0.9
+    streak = cut(dataclasses.replace(ctx, region_without=frozenset({7})), res)
+    assert streak.region is not None and streak.region.interval(np.array([1.0, 0.0]))[1] <= 0.01 + 1e-8
+    gone = cut(dataclasses.replace(ctx, meas=Interval(0.5, 0.6)), res)  # the own reading beyond the moved region too
+    assert gone.contradicted is not None and gone.contradicted.by == "own-data" and gone.region is None
+    assert cut(dataclasses.replace(ctx, slabs={}), res).contradicted is None

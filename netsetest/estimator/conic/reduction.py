@@ -198,18 +198,27 @@ class Reduction:
 def smallest_p(P: np.ndarray, L: np.ndarray, pi: np.ndarray, groups: list[Group], tc: np.ndarray, B: float, ell0: float, lam0: float) -> np.ndarray:
     """The smallest P for (L, τ) in ``scheduled`` (step 2): P_c + Σ_k β_k Π_k Π_kᵀ / τ_k over the groups with
     τ_k = tc[k.fact] > 0 (ξ: column −L, bound B²), plus ℓ₀² L Lᵀ / λ₀ for the η₁ slot's cone when λ₀ > 0.
-    ``L`` (NA, 1), ``pi`` = Π(L) (NA, d)."""
+    ``L`` (NA, 1), ``pi`` = Π(L) (NA, d).  The groups' terms as one product C Cᵀ, C = the groups' columns of Π
+    each scaled by √(β_k / τ_k) (numpy's A Aᵀ is exactly symmetric), the L Lᵀ terms with one factor."""
+    cols: list[int] = []
+    scale: list[float] = []
+    ll = 0.0  # the factor of L Lᵀ
     for g in groups:
-        t = tc[g.fact]
+        t = float(tc[g.fact])
         if t <= 0.0:
             continue
         if g.slots:
-            cols = pi[:, list(g.slots)]
-            P = P + g.bound * (cols @ cols.T) / t
+            cols += g.slots
+            scale += [math.sqrt(g.bound / t)] * len(g.slots)
         else:
-            P = P + B**2 * (L @ L.T) / t
+            ll += B**2 / t
     if lam0 > 0.0:
-        P = P + (ell0**2 / lam0) * (L @ L.T)
+        ll += ell0**2 / lam0
+    if cols:
+        C = pi[:, cols] * scale
+        P = P + C @ C.T
+    if ll > 0.0:
+        P = P + ll * (L @ L.T)
     return P
 
 

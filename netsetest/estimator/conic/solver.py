@@ -87,10 +87,16 @@ def default_settings() -> clarabel.DefaultSettings:
     return st
 
 
-def _decomposed_settings(st: clarabel.DefaultSettings) -> clarabel.DefaultSettings:
-    """``st`` for the clique problems (saturation): the cliques are ours, and iterative refinement of the KKT
-    solves bought nothing there (same widths to 1e-7, no fallback in 1440 SAIM node-steps with paper and
-    worst-case signals) for 12-15 % of the time; the SOCP keeps it (one fallback without)."""
+# The smallest LMI whose PSD cone Clarabel's own chordal decomposition is left to split.  A decomposed problem's
+# data cannot be updated in place, so each step sets up a new solver (about 0.25 ms); below this size that set-up
+# costs more than the decomposition saves.  Measured per solve on paper6 and paper6_max_faulty SAIM (434 solves,
+# each the fastest of 3, alternating): LMI 8 0.96 → 0.64 ms and 1.06 → 0.80, LMI 10 1.42 → 1.21, LMI 12 1.89 →
+# 2.31 (so 12 keeps it); LMI 6 has nothing to decompose (its solver was kept already).
+CHORDAL_FROM = 12
+
+
+def _copied(st: clarabel.DefaultSettings) -> clarabel.DefaultSettings:
+    """A copy of ``st`` (Clarabel's settings have no copy of their own)."""
     out = clarabel.DefaultSettings()
     for name in dir(st):
         if not name.startswith("_") and not callable(getattr(st, name)):
@@ -98,7 +104,22 @@ def _decomposed_settings(st: clarabel.DefaultSettings) -> clarabel.DefaultSettin
                 setattr(out, name, getattr(st, name))
             except (AttributeError, TypeError):
                 pass
+    return out
+
+
+def _kept_settings(st: clarabel.DefaultSettings) -> clarabel.DefaultSettings:
+    """``st`` without Clarabel's chordal decomposition, so that the solver's data can be updated in place
+    (:data:`CHORDAL_FROM`)."""
+    out = _copied(st)
     out.chordal_decomposition_enable = False
+    return out
+
+
+def _decomposed_settings(st: clarabel.DefaultSettings) -> clarabel.DefaultSettings:
+    """``st`` for the clique problems (saturation): the cliques are ours, and iterative refinement of the KKT
+    solves bought nothing there (same widths to 1e-7, no fallback in 1440 SAIM node-steps with paper and
+    worst-case signals) for 12-15 % of the time; the SOCP keeps it (one fallback without)."""
+    out = _kept_settings(st)
     out.iterative_refinement_enable = False
     return out
 
@@ -151,6 +172,7 @@ class ConicSolver:
         self._slot0 = red.closed_form  # (a pure SOCP: the η₁ slot gets a cone of its own where ℓ₀ ≠ 0)
         self.settings = settings or default_settings()
         self.settings_decomposed = _decomposed_settings(self.settings)
+        self.settings_kept = _kept_settings(self.settings)
         self._templates: dict[TemplateKey, Template] = {}
         self._solvers: dict[TemplateKey, clarabel.DefaultSolver] = {}
 
@@ -188,8 +210,8 @@ class ConicSolver:
 
     def solve_via_data(self, conic: ConicData) -> Any:  # clarabel's DefaultSolution (untyped)
         """Solve with the node's solver for this template, its data updated in place where Clarabel
-        allows it (no chordal decomposition of its own, no presolve, no equilibration): the set-up
-        (KKT symbolic factorisation) is then paid once per node, not per step."""
+        allows it (no chordal decomposition of its own, :data:`CHORDAL_FROM`; no presolve, no equilibration):
+        the set-up (KKT symbolic factorisation) is then paid once per node, not per step."""
         solver = self._solvers.get(conic.key)
         if solver is not None:
             try:
@@ -197,7 +219,8 @@ class ConicSolver:
                 return solver.solve()
             except Exception:  # refused update: set up a fresh solver below
                 del self._solvers[conic.key]
-        st = self.settings_decomposed if self._templates[conic.key].decomposed else self.settings
+        tpl = self._templates[conic.key]
+        st = self.settings_decomposed if tpl.decomposed else self.settings_kept if tpl.lmi_n < CHORDAL_FROM else self.settings
         solver = clarabel.DefaultSolver(conic.P, conic.q, conic.A, conic.b, conic.cones, st)
         if solver.is_data_update_allowed():
             self._solvers[conic.key] = solver
@@ -236,4 +259,4 @@ class ConicSolver:
         return P, Ls, tcs
 
 
-__all__ = ["STATUS_MAP", "ConicData", "ConicPoint", "ConicSolver", "CscMatrix", "InverseData", "default_settings"]
+__all__ = ["CHORDAL_FROM", "STATUS_MAP", "ConicData", "ConicPoint", "ConicSolver", "CscMatrix", "InverseData", "default_settings"]
