@@ -91,7 +91,7 @@ def certified(
     return (rho_c, shape) if publishable(xhat, shape) else None
 
 
-U = 2.0**-53  # the unit roundoff of float64
+U = linalg.U  # the unit roundoff of float64
 RUMP_C = 8.0  # the shift of :func:`rump_definite` is RUMP_C (n + 2) u tr(a): Rump's γ_{n+1}/(1 − 2γ_{n+1}) tr(a) ≈ (n + 1) u tr(a), and then some
 RUMP_FLOOR = 1e-290  # its absolute part: Rump's underflow term (a few multiples of the smallest subnormal), and then some
 RUMP_MAX = 1e300  # a diagonal entry beyond this: refused (far from any step; no overflow in the scaling)

@@ -173,11 +173,6 @@ def _sector(d: int, slot: int, g: np.ndarray, h: float) -> np.ndarray:
     return q
 
 
-def _chol(p: np.ndarray) -> np.ndarray:
-    """M with M Mᵀ = P (P symmetrised first)."""
-    return linalg.cholesky(0.5 * (p + p.T))
-
-
 @dataclass
 class _Pattern:
     """η layout, static ball facts and solver of one φ-slot pattern (which sensors saturate this step)."""
@@ -358,7 +353,7 @@ class LocalEstimator:
         key: PatternKey = (phi_from, phi_new, True)
         pat = self.pattern(*key)
         own = self._own_update(inp, sector, reading, phi_new)
-        Mi = math.sqrt(prev.rho) * _chol(prev.P)  # ρ_i^½ M_i
+        Mi = linalg.covering_factor(prev.P, prev.rho)  # ρ_i^½ M_i, M_i M_iᵀ ⪰ P_i exactly
         pi0, x_pred, own_fact = self._predict(pat.lay, prev, inp, blend, own, Mi, sector)
         ell, facts = self._innovations(pat.lay, pat.balls, neigh, Mi)
         if own_fact is not None:
@@ -492,7 +487,7 @@ class LocalEstimator:
         key: PatternKey = (frozenset([i]) if phi else frozenset(), False, False)
         pat = self.pattern(*key)
         lay = pat.lay
-        Mi = np.sqrt(prior.rho) * _chol(prior.P)
+        Mi = linalg.covering_factor(prior.P, prior.rho)  # ρ^½ M, M Mᵀ ⪰ P exactly
         pi0 = np.zeros((1, NA, lay.dim))
         pi0[0][:, lay.z] = Mi  # e = ρ^½ M z − L y̌₀(η)
         innov = float(y - self._own_cbar @ prior.xhat)  # y̌₀ = ỹ₀ − C̄ x̂

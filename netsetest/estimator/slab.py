@@ -74,7 +74,7 @@ def cut(xhat: np.ndarray, P: np.ndarray, rho: float, slab: Slab, weights: np.nda
     centre = xhat + tb * dd * se
     shape = float(r[best]) * (sigma - tb * np.outer(se, se))  # ρ P' before certification
     # certificate: e = x̄ − x̂' = (x̂ − x̂') + M u over η = [1, u]; eᵀ(ρP')⁻¹e + (1 − uᵀu)/r + λ·slab/r = 1
-    M = linalg.cholesky(sigma)
+    M = linalg.covering_factor(P, rho)  # M Mᵀ ⪰ ρP exactly: x̄ = x̂ + M u covers the whole of E
     pi = np.concatenate([(xhat - centre)[:, None], M], axis=1)
     lam = tb / (1.0 - tb * s)
     facts = _facts(lo, hi, c @ M, xc)

@@ -7,6 +7,7 @@ both run the same LAPACK gufunc on the same matrix in one process, so whichever 
 from __future__ import annotations
 
 import warnings
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -86,3 +87,76 @@ def test_the_failures_raise_as_numpys_do() -> None:
     for name, args in (("solve", (np.zeros((2, 2)), np.ones(2))), ("inv", (np.zeros((2, 2)),)), ("cholesky", (np.ones((2, 3)),))):
         with pytest.raises(np.linalg.LinAlgError):
             getattr(linalg, name)(*args)
+
+
+def _exactly_positive_definite(a: list[list[Fraction]]) -> bool:
+    """Every leading principal minor of the rational symmetric ``a`` positive (Sylvester), by exact elimination."""
+    m = [row[:] for row in a]
+    for k in range(len(m)):
+        if m[k][k] <= 0:
+            return False
+        for i in range(k + 1, len(m)):
+            f = m[i][k] / m[k][k]
+            for j in range(k, len(m)):
+                m[i][j] -= f * m[k][j]
+    return True
+
+
+def _cover_gap(M: np.ndarray, P: np.ndarray, rho: float) -> list[list[Fraction]]:
+    """M Mᵀ − ρP in exact rationals (every float is one)."""
+    n = len(P)
+    m = [[Fraction(float(v)) for v in row] for row in M]
+    r = Fraction(rho)
+    return [[sum((m[i][k] * m[j][k] for k in range(n)), Fraction(0)) - r * Fraction(float(P[i][j])) for j in range(n)] for i in range(n)]
+
+
+@st.composite
+def published_shapes(draw: st.DrawFn) -> tuple[np.ndarray, float]:
+    """(P, ρ) as a node publishes them: P symmetric positive definite n×n (n 2–3, the estimator's state and its
+    augmented one), eigenvalues spread over up to 10¹² and scaled by 10^k, in a random rotation; ρ in (10⁻³, 10³)."""
+    n = draw(st.integers(2, 3))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    q, _ = np.linalg.qr(rng.normal(size=(n, n)))
+    spread = draw(st.floats(0.0, 12.0))
+    lam = 10.0 ** (draw(st.integers(-8, 2)) + spread * rng.uniform(-0.5, 0.5, size=n))
+    P = q @ np.diag(lam) @ q.T
+    P = 0.5 * (P + P.T)
+    return P, draw(st.floats(1e-3, 1e3))
+
+
+@FUZZ
+@given(published_shapes())
+def test_the_covering_factor_covers_the_whole_ellipsoid_exactly(shape: tuple[np.ndarray, float]) -> None:
+    """M Mᵀ ⪰ ρP in exact arithmetic: x̂ + M z, |z| ≤ 1, reaches every point of the published set, so a certificate
+    proven over z holds on all of it (covering_factor's docstring: Cholesky's rounding bound, the scaling's)."""
+    P, rho = shape
+    M = linalg.covering_factor(P, rho)
+    assert np.all(np.triu(M, 1) == 0.0)
+    assert _exactly_positive_definite(_cover_gap(M, P, rho))
+
+
+def test_the_plain_scaled_cholesky_factor_can_fall_short() -> None:
+    """Why covering_factor widens: ρ^½ times the float Cholesky factor falls short of ρP in exact arithmetic on some
+    published shapes (so the test above can fail), and the widening is far below a width's last printed digit."""
+    rng = np.random.default_rng(7)
+    short = 0
+    for _ in range(200):
+        q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        P = q @ np.diag(10.0 ** rng.uniform(-6, 0, size=3)) @ q.T
+        P = 0.5 * (P + P.T)
+        rho = float(rng.uniform(0.1, 10.0))
+        plain = np.sqrt(rho) * linalg.cholesky(P)
+        short += not _exactly_positive_definite(_cover_gap(plain, P, rho))
+        widened = linalg.covering_factor(P, rho)
+        nz = plain != 0.0
+        assert np.all(widened[~nz] == 0.0) and np.max(np.abs(widened[nz] / plain[nz] - 1.0)) < 1e-8  # (cond ≤ 10⁶: about γ cond)
+    assert short > 0
+
+
+def test_the_covering_factor_refuses_a_shape_it_cannot_bound() -> None:
+    """A shape that is not positive definite, or so ill-conditioned that rounding could hide its smallest axis, is a
+    LinAlgError (no factor is better than a short one)."""
+    with pytest.raises(np.linalg.LinAlgError):
+        linalg.covering_factor(np.diag([1.0, -1.0]), 1.0)
+    with pytest.raises(np.linalg.LinAlgError):
+        linalg.covering_factor(np.diag([1.0, 1e-17]), 1.0)
