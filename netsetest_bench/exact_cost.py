@@ -73,7 +73,11 @@ def measure_one(topology: str, case: str, record: str, budget_s: float | None, n
     def on_step(k: int, total: int) -> None:
         rss.append(_rss_mb())
 
-    ex = exact_bounds(sc, rec, "used", progress=on_step, budget_s=budget_s) if central is None else network_limit(sc, rec, central, progress=on_step, budget_s=budget_s)
+    ex = (
+        exact_bounds(sc, rec, "used", progress=on_step, budget_s=budget_s)
+        if central is None
+        else network_limit(sc, rec, central, progress=on_step, budget_s=budget_s)
+    )
     cpu, wall = time.process_time() - t0, time.perf_counter() - w0
     rss.append(_rss_mb())
     h = ex.health
