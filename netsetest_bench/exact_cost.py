@@ -10,7 +10,9 @@ resident memory of the whole process (imports and the record included), the resi
 Topologies: ``paper6_max_faulty`` (at most 4 of 6 faulty) and rings with chords of 12 and 24 nodes with issue 34's
 two interleaved groups (netsetest_bench/topologies.py, variant ``two_groups``).  Then issue 44's target: on the 12-node
 ring with two groups, SAIM, worst-case signals, the config's seeds (``exact_network_seeds``), the central limit and each node's network
-limit (``exact --network``, docs/exact.md), each in a process of its own.
+limit (``exact --network``, docs/exact.md), each in a process of its own; the network row times the network limit as
+the command computes it, given the central limit (computed first in the same process, not timed: the central row times
+it), whose boxes each node's program imports.
 """
 
 from __future__ import annotations
@@ -55,17 +57,27 @@ def _rss_mb() -> float:
 
 
 def measure_one(topology: str, case: str, record: str, budget_s: float | None, network: bool = False) -> dict:
-    """The exact limit of one record in this process (``network``: each node's network limit): CPU, wall, peak and
-    per-step resident memory, and the search."""
-    from netsetest.analysis.exact import exact_bounds
+    """The exact limit of one record in this process (``network``: each node's network limit as ``exact --network``
+    computes it, given the central limit, which is computed first and not timed: its own row times it): CPU, wall,
+    peak and per-step resident memory, and the search."""
+    from netsetest.analysis.exact import exact_bounds, network_limit
     from netsetest.config.schema import load_topology
     from netsetest.records.record import load_record
 
     rec = load_record(record)
     sc = load_topology(topology, case, rec.meta.steps)  # type: ignore[arg-type]  # one of CASES
     rss: list[float] = []
+    central = exact_bounds(sc, rec, "used", budget_s=budget_s) if network else None
     t0, w0 = time.process_time(), time.perf_counter()
-    ex = exact_bounds(sc, rec, "used", progress=lambda k, total: rss.append(_rss_mb()), budget_s=budget_s, network=network)
+
+    def on_step(k: int, total: int) -> None:
+        rss.append(_rss_mb())
+
+    ex = (
+        exact_bounds(sc, rec, "used", progress=on_step, budget_s=budget_s)
+        if central is None
+        else network_limit(sc, rec, central, progress=on_step, budget_s=budget_s)
+    )
     cpu, wall = time.process_time() - t0, time.perf_counter() - w0
     rss.append(_rss_mb())
     h = ex.health

@@ -53,3 +53,44 @@ def test_the_targets_are_issue_34s() -> None:
     assert not any(missed.values())
     text = exact_cost_markdown({"steps": 80, "rows": [_row("ring12, two groups", "saim", 130.0, 1100.0, 94, growing)], "load": "1 before, 2 after"})
     assert "| ring12, two groups | 12 | SAIM | 600 | 130.0 (260) | 1100 | +300 | 94 of 100 | 6 | 500 |" in text and "Load average 1 before, 2 after" in text
+
+
+def test_the_network_row_times_the_limit_as_the_command_computes_it(monkeypatch) -> None:
+    """``exact --network`` computes the central limit first and hands it on (each node's program imports its boxes,
+    docs/exact.md): the benchmark's network row must time that, not the network limit without the central one."""
+    import netsetest.analysis.exact as exact
+    import netsetest.config.schema as schema
+    import netsetest.records.record as record
+    from netsetest_bench.exact_cost import measure_one
+
+    calls: list[tuple[str, object]] = []
+
+    class Meta:
+        steps = 3
+
+    class Rec:
+        meta = Meta()
+
+    class Limit:
+        health = None
+        infeasible_steps = ()
+
+    central = Limit()
+
+    def exact_bounds(sc, rec, fault_bounds, **kw):
+        calls.append(("exact_bounds", kw.get("network", False)))
+        return central if not kw.get("network") else Limit()  # (the old row: the network limit without the central one)
+
+    def network_limit(sc, rec, given, **kw):
+        calls.append(("network_limit", given))
+        return Limit()
+
+    monkeypatch.setattr(record, "load_record", lambda path: Rec())
+    monkeypatch.setattr(schema, "load_topology", lambda *a: None)
+    monkeypatch.setattr(exact, "exact_bounds", exact_bounds)
+    monkeypatch.setattr(exact, "network_limit", network_limit)
+    measure_one("topology.toml", "saim", "record.json", 600.0, network=True)
+    assert calls == [("exact_bounds", False), ("network_limit", central)]
+    calls.clear()
+    measure_one("topology.toml", "saim", "record.json", 600.0)
+    assert calls == [("exact_bounds", False)]
