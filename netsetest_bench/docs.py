@@ -105,7 +105,7 @@ PARTS: dict[str, Part] = {
         "bench/results.json",
         None,
         performance_markdown,
-        "netsetest bench --quick --only performance --json bench/results.json --markdown bench/results.md",
+        "netsetest bench --quick --only performance --baseline BEFORE_ISSUE_45 --json bench/results.json --markdown bench/results.md",  # a checkout of 16f81b4
     ),
     "node": Part(
         "A node's per-message budget",
